@@ -1,0 +1,1 @@
+"""Source-format converters: device exports -> :class:`imulog.model.Recording` (no MCAP knowledge)."""
