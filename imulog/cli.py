@@ -32,6 +32,7 @@ PROCESS_COMMANDS: dict[str, str] = {
     "align": "imulog.commands.align:process_align",
     "phases": "imulog.commands.phases:process_phases",
     "trajectory": "imulog.commands.trajectory:process_trajectory",
+    "metrics": "imulog.commands.metrics:process_metrics",
 }
 
 
