@@ -13,33 +13,33 @@ import click
 
 from imulog import __version__
 
-# command name -> "module:attribute" of a click.Command
-TOP_LEVEL_COMMANDS: dict[str, str] = {
-    "convert": "imulog.commands.convert:convert",
-    "info": "imulog.commands.archive:info",
-    "doctor": "imulog.commands.archive:doctor",
-    "export": "imulog.commands.archive:export",
-    "simulate": "imulog.commands.simulate:simulate",
-    "calibrate": "imulog.commands.calibrate:calibrate",
-    "evaluate": "imulog.commands.trajectory:evaluate",
-    "view": "imulog.commands.view:view",
-    "demo": "imulog.commands.demo:demo",
+# command name -> ("module:attribute" of a click.Command, one-line help shown by --help without importing it)
+TOP_LEVEL_COMMANDS: dict[str, tuple[str, str]] = {
+    "convert": ("imulog.commands.convert:convert", "Convert device exports (IMU text, Vicon CSV, C3D...) to a trial."),
+    "info": ("imulog.commands.archive:info", "Show a trial's channels, rates, gaps, metadata and derived runs."),
+    "doctor": ("imulog.commands.archive:doctor", "Check a trial's integrity: CRCs, summary, decoding, raw hash."),
+    "export": ("imulog.commands.archive:export", "Export one channel to Parquet or CSV."),
+    "simulate": ("imulog.commands.simulate:simulate", "Simulate trials with ground truth in raw export formats."),
+    "calibrate": ("imulog.commands.calibrate:calibrate", "Estimate an IMU calibration from static recordings."),
+    "evaluate": ("imulog.commands.trajectory:evaluate", "Compare IMU trajectories with the optical reference."),
+    "view": ("imulog.commands.view:view", "Show trials in Rerun on one synchronized timeline."),
+    "demo": ("imulog.commands.demo:demo", "Simulate, convert, process and view a trial in one command."),
 }
 
-PROCESS_COMMANDS: dict[str, str] = {
-    "calibrate": "imulog.commands.calibrate:process_calibrate",
-    "orientation": "imulog.commands.orientation:process_orientation",
-    "align": "imulog.commands.align:process_align",
-    "phases": "imulog.commands.phases:process_phases",
-    "trajectory": "imulog.commands.trajectory:process_trajectory",
-    "metrics": "imulog.commands.metrics:process_metrics",
+PROCESS_COMMANDS: dict[str, tuple[str, str]] = {
+    "calibrate": ("imulog.commands.calibrate:process_calibrate", "Apply a calibration file: calibrated IMU channels."),
+    "orientation": ("imulog.commands.orientation:process_orientation", "Sensor orientation and gravity-free acceleration."),
+    "align": ("imulog.commands.align:process_align", "IMU-to-Vicon time lag, drift and frame rotation."),
+    "phases": ("imulog.commands.phases:process_phases", "Movements, phases, repetitions and static intervals."),
+    "trajectory": ("imulog.commands.trajectory:process_trajectory", "Wrist trajectories by integration methods."),
+    "metrics": ("imulog.commands.metrics:process_metrics", "Clinical metrics: arm usage, activity, smoothness."),
 }
 
 
 class LazyGroup(click.Group):
     """A click group whose subcommands are imported only when used (or listed in --help)."""
 
-    def __init__(self, *args, lazy_commands: dict[str, str] | None = None, **kwargs):
+    def __init__(self, *args, lazy_commands: dict[str, tuple[str, str]] | None = None, **kwargs):
         super().__init__(*args, **kwargs)
         self.lazy_commands = lazy_commands or {}
 
@@ -48,9 +48,20 @@ class LazyGroup(click.Group):
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
         if cmd_name in self.lazy_commands:
-            module_name, attribute = self.lazy_commands[cmd_name].split(":")
+            module_name, attribute = self.lazy_commands[cmd_name][0].split(":")
             return getattr(importlib.import_module(module_name), attribute)
         return super().get_command(ctx, cmd_name)
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        rows = [(name, self.lazy_commands[name][1]) for name in sorted(self.lazy_commands)]
+        rows += [
+            (name, command.get_short_help_str(limit=80))
+            for name, command in sorted(self.commands.items())
+            if name not in self.lazy_commands and not command.hidden
+        ]
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(sorted(rows))
 
 
 @click.group(cls=LazyGroup, lazy_commands=TOP_LEVEL_COMMANDS, context_settings={"help_option_names": ["-h", "--help"]})
