@@ -24,6 +24,9 @@ TOP_LEVEL_COMMANDS: dict[str, tuple[str, str]] = {
     "evaluate": ("imulog.commands.trajectory:evaluate", "Compare IMU trajectories with the optical reference."),
     "view": ("imulog.commands.view:view", "Show trials in Rerun on one synchronized timeline."),
     "demo": ("imulog.commands.demo:demo", "Simulate, convert, process and view a trial in one command."),
+    "batch": ("imulog.commands.batch:batch", "Run reprocessing steps over many trials (local or Dask)."),
+    "catalog": ("imulog.commands.batch:catalog", "One Parquet row per trial: devices, runs, metrics."),
+    "report": ("imulog.commands.batch:report", "Accuracy tables and plots from a catalog."),
 }
 
 PROCESS_COMMANDS: dict[str, tuple[str, str]] = {
@@ -33,6 +36,7 @@ PROCESS_COMMANDS: dict[str, tuple[str, str]] = {
     "phases": ("imulog.commands.phases:process_phases", "Movements, phases, repetitions and static intervals."),
     "trajectory": ("imulog.commands.trajectory:process_trajectory", "Wrist trajectories by integration methods."),
     "metrics": ("imulog.commands.metrics:process_metrics", "Clinical metrics: arm usage, activity, smoothness."),
+    "kinematics": ("imulog.commands.kinematics:process_kinematics", "Shoulder and elbow angles from two IMUs (DH model)."),
 }
 
 

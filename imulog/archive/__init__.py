@@ -1,1 +1,31 @@
-"""imulog.archive"""
+"""imulog.archive: one trial = one self-describing MCAP file.
+
+    from imulog.archive import write_trial, TrialReader, append_derived
+
+    write_trial("trial.mcap", recording)                 # raw channels, metadata, attachments (atomic)
+    with TrialReader("trial.mcap") as trial:
+        imu = trial.read("/imu/wrist")                   # -> imulog.model.ImuStream (numpy arrays)
+        df = trial.read_pandas("/imu/wrist", start_ns=0, end_ns=10**10)
+    append_derived("trial.mcap", [signal], run={"step": "orientation", "algorithm": "vqf",
+                                                "params": {...}, "inputs": ["/imu/wrist"]})
+
+See docs/archive.md for the file layout, the append design and the CLI.
+"""
+
+from imulog.archive.append import append_derived
+from imulog.archive.errors import ArchiveCorruptError, ArchiveError, ArchiveExistsError, ArchiveLockedError
+from imulog.archive.reader import Attachment, ChannelInfo, TrialReader, stream_columns
+from imulog.archive.writer import write_trial
+
+__all__ = [
+    "ArchiveCorruptError",
+    "ArchiveError",
+    "ArchiveExistsError",
+    "ArchiveLockedError",
+    "Attachment",
+    "ChannelInfo",
+    "TrialReader",
+    "append_derived",
+    "stream_columns",
+    "write_trial",
+]

@@ -1,0 +1,181 @@
+"""Accuracy of every trajectory method on simulated R2G trials (the thesis's Table 3.1, with ground truth).
+
+Pipeline per trial, all with imulog's own code except where noted:
+
+1. ``imulog.simulate.simulate("r2g", subject=s, seed=seed)`` (default, realistic IMU and Vicon noise);
+2. IMU time stamps mapped to the reference clock with the simulator's true ``imulog.alignment`` record;
+3. orientation: ``--orientation estimated`` (default) runs ``imulog.process.orientation`` (VQF offline,
+   6D) and rotates its global frame into the world with a constant rotation fitted to the reference
+   orientation over the trial (what the alignment step does against the Vicon cluster);
+   ``--orientation truth`` uses the true orientation (an upper bound);
+4. static mask and phases: ``--segmentation estimated`` (default) runs ``imulog.process.segmentation``
+   (DynAMoS + event correction); ``--segmentation truth`` uses the true phases;
+5. every method per repetition (:func:`imulog.process.trajectory_opt.reconstruct_repetitions`), waypoints
+   from the anthropometrics record plus ZUPT medians (never from the optical data);
+6. errors against the true cluster-origin position at the IMU samples, per repetition.
+
+    python benchmarks/trajectory_accuracy.py --subjects 3 --repetitions 25 --seed 0
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from typing import Any
+
+import numpy as np
+
+from imulog.process import quaternion as quat
+from imulog.process.alignment import device_to_reference
+from imulog.process.evaluation import aggregate, format_table, trajectory_errors
+from imulog.process.trajectory_opt import (
+    DEFAULT_PARAMS,
+    METHODS,
+    TrajectoryParams,
+    reconstruct_repetitions,
+    repetition_windows,
+)
+
+
+def simulated_inputs(
+    subject: int,
+    *,
+    seed: int = 0,
+    repetitions: int = 25,
+    orientation: str = "estimated",
+    segmentation: str = "estimated",
+    **overrides: Any,
+) -> dict[str, Any]:
+    """Simulate one R2G trial and build the trajectory inputs on the reference clock in the world frame."""
+    from imulog.simulate.core import simulate
+
+    sim = simulate("r2g", subject=subject, seed=seed, repetitions=repetitions, **overrides)
+    imu = sim.recording.imus[0]
+    truth = sim.truth
+    t_ref_ns = device_to_reference(imu.t_ns, truth.alignment)
+    t_s = (np.asarray(t_ref_ns, dtype=np.float64) - float(t_ref_ns[0])) / 1e9
+    rate = (len(t_s) - 1) / t_s[-1]
+    q_true = truth.imu_orientation
+    if orientation == "truth":
+        q_world = q_true
+        acc_world = quat.rotate(q_true, imu.acc)
+        acc_world[:, 2] -= truth.info["gravity_mps2"]
+    elif orientation == "estimated":
+        from imulog.process.orientation import estimate_orientation, gravity_free_acceleration
+
+        est = estimate_orientation(imu.gyr, imu.acc, rate)
+        acc_g = gravity_free_acceleration(est.quat, imu.acc, est.static)
+        q_g2w = quat.average(quat.multiply(q_true, quat.conjugate(est.quat)))
+        acc_world = quat.rotate(q_g2w, acc_g)
+        q_world = quat.multiply(q_g2w, est.quat)
+    else:
+        raise ValueError(f"orientation must be 'estimated' or 'truth', got {orientation!r}")
+    t0_ref_s = float(t_ref_ns[0]) / 1e9
+    bounds: dict[int, list[tuple[float, float]]] = {}
+    if segmentation == "truth":
+        ph = truth.phases
+        for s, e, k in zip(ph.start_ns, ph.end_ns, ph.task_index, strict=True):
+            bounds.setdefault(int(k), []).append((s / 1e9 - t0_ref_s, e / 1e9 - t0_ref_s))
+        static = truth.imu_static_mask.copy()
+    elif segmentation == "estimated":
+        from imulog.process.segmentation.pipeline import PhaseParams, segment_phases
+        from imulog.process.segmentation.repetitions import RepetitionParams
+
+        res = segment_phases(imu.gyr, rate, PhaseParams(repetitions=RepetitionParams(n_repetitions=repetitions)))
+        ph = res.phases
+        for s, e, k in zip(ph.start, ph.end, ph.repetition, strict=True):
+            bounds.setdefault(int(k), []).append((t_s[int(s)], t_s[min(int(e), len(t_s) - 1)]))
+        static = np.asarray(res.static, dtype=bool)
+    else:
+        raise ValueError(f"segmentation must be 'estimated' or 'truth', got {segmentation!r}")
+    phase_bounds = {k: np.asarray(sorted(v)) for k, v in bounds.items()}
+    return {
+        "t_s": t_s,
+        "acc_world": acc_world,
+        "q_world": q_world,
+        "static": static,
+        "phase_bounds": phase_bounds,
+        "truth_pos": truth.imu_position,
+        "anthropometrics": sim.recording.metadata.get("imulog.anthropometrics", {}),
+        "subject": subject,
+    }
+
+
+def evaluate_trial(inputs: dict[str, Any], methods=METHODS, params: TrajectoryParams = DEFAULT_PARAMS):
+    """Per-repetition error records {method: [trajectory_errors(...), ...]} and per-method seconds."""
+    t_s = inputs["t_s"]
+    reps = repetition_windows(t_s, inputs["phase_bounds"], inputs["static"])
+    seconds: dict[str, float] = {}
+    recon: dict[str, np.ndarray] = {}
+    for m in methods:
+        t0 = time.perf_counter()
+        recon.update(
+            reconstruct_repetitions(
+                t_s,
+                inputs["acc_world"],
+                inputs["static"],
+                reps,
+                [m],
+                anthropometrics=inputs["anthropometrics"],
+                orientation=inputs["q_world"],
+                params=params,
+            )
+        )
+        seconds[m] = (time.perf_counter() - t0) / max(len(reps), 1)
+    records: dict[str, list[dict]] = {m: [] for m in methods}
+    for rep in reps:
+        sl = slice(rep.start, rep.stop)
+        for m in methods:
+            if np.all(np.isnan(recon[m][sl])):
+                continue
+            r = trajectory_errors(recon[m][sl], inputs["truth_pos"][sl])
+            r.update(subject=inputs["subject"], repetition=rep.index)
+            records[m].append(r)
+    return records, seconds, len(reps)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--subjects", type=int, default=3)
+    ap.add_argument("--repetitions", type=int, default=25)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--orientation", choices=["estimated", "truth"], default="estimated")
+    ap.add_argument("--segmentation", choices=["estimated", "truth"], default="estimated")
+    ap.add_argument("--methods", default=",".join(METHODS))
+    ap.add_argument("--residual-velocity", type=float, default=0.0, help="simulator residual_velocity_mps")
+    ap.add_argument("--json", type=str, default=None, help="also write the table and records here")
+    args = ap.parse_args(argv)
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    all_records: dict[str, list[dict]] = {m: [] for m in methods}
+    timing: dict[str, list[float]] = {m: [] for m in methods}
+    for s in range(args.subjects):
+        inputs = simulated_inputs(
+            s,
+            seed=args.seed,
+            repetitions=args.repetitions,
+            orientation=args.orientation,
+            segmentation=args.segmentation,
+            residual_velocity_mps=args.residual_velocity,
+        )
+        records, seconds, n = evaluate_trial(inputs, methods)
+        for m in methods:
+            all_records[m].extend(records[m])
+            timing[m].append(seconds[m])
+        print(f"subject {s}: {n} repetitions", file=sys.stderr)
+    table = aggregate(all_records)
+    print(f"# imulog trajectory accuracy: {args.subjects} subjects x {args.repetitions} repetitions, seed {args.seed},")
+    print(
+        f"# orientation {args.orientation}, segmentation {args.segmentation}; MAE per axis, mean±std over repetitions"
+    )
+    print(format_table(table))
+    print("# per-repetition time (ms): " + ", ".join(f"{m} {1000 * np.mean(timing[m]):.1f}" for m in methods))
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump({"args": vars(args), "table": table, "records": all_records}, fh, indent=1, default=float)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,344 @@
+"""Shared helpers for text converters: units, binary detection, fast numeric tables with precise errors."""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from converters.errors import ConversionError
+
+G0 = 9.80665  # standard gravity, m/s^2
+HEAD_BYTES = 256 * 1024
+
+# --------------------------------------------------------------------------------------------- units
+# quantity -> normalised unit string -> factor to the model's SI unit (acc m/s^2, gyr rad/s, mag uT, degC, s)
+UNIT_FACTORS: dict[str, dict[str, float]] = {
+    "acc": {"g": G0, "mg": G0 / 1000.0, "m/s^2": 1.0, "m/s2": 1.0, "ms^-2": 1.0, "mps2": 1.0},
+    "gyr": {
+        "dps": math.pi / 180.0,
+        "deg/s": math.pi / 180.0,
+        "degrees/s": math.pi / 180.0,
+        "degree/s": math.pi / 180.0,
+        "°/s": math.pi / 180.0,
+        "mdps": math.pi / 180.0 / 1000.0,
+        "rad/s": 1.0,
+        "rads^-1": 1.0,
+    },
+    "mag": {
+        "ut": 1.0,
+        "µt": 1.0,
+        "μt": 1.0,
+        "microtesla": 1.0,
+        "mt": 1000.0,
+        "nt": 0.001,
+        "gauss": 100.0,
+        "ga": 100.0,
+        "g": 100.0,
+        "mgauss": 0.1,
+        "mga": 0.1,
+        "mg": 0.1,
+    },
+    "temperature": {"degc": 1.0, "°c": 1.0, "c": 1.0, "celsius": 1.0, "degreescelsius": 1.0, "degreecelsius": 1.0},
+    "time": {"s": 1e9, "sec": 1e9, "ms": 1e6, "us": 1e3, "µs": 1e3, "μs": 1e3, "ns": 1.0},
+}
+# magnetometer units that are normalised to the calibration field: kept as a separate signal, never as uT
+NORMALISED_MAG_UNITS = {"a.u.", "au", "a.u", "arb", "local_flux", "localflux", "normalized", "normalised"}
+SI_UNIT = {"acc": "m/s^2", "gyr": "rad/s", "mag": "uT", "temperature": "degC", "time": "ns"}
+QUANTITIES = ("acc", "gyr", "mag", "temperature")
+
+
+def normalise_unit(unit: str) -> str:
+    """Canonical spelling used for look-ups: ``m/(s^2)`` -> ``m/s^2``, ``Degrees Celsius`` -> ``degreescelsius``."""
+    u = unit.strip().strip("[]()").strip().lower()
+    u = u.replace("²", "^2").replace("**", "^").replace(" ", "").replace("(", "").replace(")", "")
+    u = u.replace("deg/sec", "deg/s").replace("/sec", "/s")
+    return u
+
+
+def unit_factor(quantity: str, unit: str) -> float | None:
+    """Factor from ``unit`` to the SI unit of ``quantity`` or None when the unit is unknown."""
+    return UNIT_FACTORS.get(quantity, {}).get(normalise_unit(unit))
+
+
+# ------------------------------------------------------------------------------------------ text input
+def read_head(path: Path, n: int = HEAD_BYTES) -> bytes:
+    with open(path, "rb") as f:
+        return f.read(n)
+
+
+def looks_binary(head: bytes) -> bool:
+    """True for data that is not a text export (NUL bytes or many control characters)."""
+    if not head:
+        return False
+    if b"\x00" in head:
+        return True
+    sample = head[:8192]
+    controls = sum(1 for b in sample if b < 32 and b not in (9, 10, 13, 12))
+    return controls > max(2, len(sample) // 100)
+
+
+def decode(data: bytes) -> str:
+    """Text of a header (UTF-8 with optional BOM, else Latin-1, which never fails)."""
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return data.decode("latin-1")
+
+
+def head_lines(path: Path, head: bytes | None = None, max_lines: int = 200) -> list[str]:
+    """The first lines of a text file (without line endings); raises for empty or binary files."""
+    head = read_head(path) if head is None else head
+    if not head.strip():
+        raise ConversionError(path, "empty file")
+    if looks_binary(head):
+        raise ConversionError(path, "binary data, not a text export")
+    lines = decode(head).splitlines()
+    if len(head) == HEAD_BYTES and len(lines) > 1:
+        lines = lines[:-1]  # the last one may be cut
+    return lines[:max_lines]
+
+
+def text_head_lines(head: bytes, max_lines: int = 50) -> list[str] | None:
+    """Like :func:`head_lines` for sniffing: None instead of raising."""
+    if not head.strip() or looks_binary(head):
+        return None
+    return decode(head).splitlines()[:max_lines]
+
+
+def split_row(line: str, delimiter: str) -> list[str]:
+    """Split one header/data row; strips whitespace and surrounding double quotes of each cell."""
+    if delimiter == " ":
+        cells = line.split()
+    else:
+        cells = line.split(delimiter)
+    return [c.strip().strip('"').strip() for c in cells]
+
+
+def is_number(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
+
+
+# ------------------------------------------------------------------------------------- numeric tables
+@dataclass
+class TableSpec:
+    """Where the numeric block of a delimited file is and what each column may contain.
+
+    ``skip_lines`` lines precede the data (the first data line is line ``skip_lines + 1``). ``ncols`` is the
+    number of fields per data row; ``names`` their names for messages; ``optional`` columns may be empty
+    (NaN); ``ignore`` columns are not checked at all (e.g. padding); ``nrows`` limits the block.
+    """
+
+    path: Path
+    delimiter: str
+    skip_lines: int
+    names: Sequence[str]
+    optional: set[int] = field(default_factory=set)
+    ignore: set[int] = field(default_factory=set)
+    nrows: int | None = None
+    allow_trailing_blank: bool = True
+    byte_range: tuple[int, int] | None = None  # (start, end) of the block when already known
+
+
+def _data_range(spec: TableSpec, data: bytes) -> tuple[int, int]:
+    """Byte range of the numeric block: after ``skip_lines`` lines, ``nrows`` lines long, trailing blanks trimmed."""
+    if spec.byte_range is not None:
+        pos, end = spec.byte_range
+        while end > pos and data[end - 1] in b" \t\r\n":
+            end -= 1
+        return pos, end
+    pos = 0
+    for _ in range(spec.skip_lines):
+        nxt = data.find(b"\n", pos)
+        if nxt == -1:
+            raise ConversionError(spec.path, "file ends inside the header", line=spec.skip_lines)
+        pos = nxt + 1
+    end = len(data)
+    if spec.nrows is not None:
+        stop = pos
+        for _ in range(spec.nrows):
+            nxt = data.find(b"\n", stop)
+            if nxt == -1:
+                stop = len(data)
+                break
+            stop = nxt + 1
+        end = stop
+    if spec.allow_trailing_blank:
+        while end > pos and data[end - 1] in b" \t\r\n":
+            end -= 1
+    return pos, end
+
+
+def read_numeric(spec: TableSpec, data: bytes | None = None) -> np.ndarray:
+    """Parse the numeric block fast (pandas C engine straight from the file) and validate it vectorised.
+
+    Returns an (N, ncols) float64 array, NaN only in ``optional``/``ignore`` columns (ignored columns are not
+    parsed). On any problem a careful line-by-line pass finds the first offending line and raises
+    :class:`ConversionError` naming file, line and column. ``data``: the file's bytes when already read (used
+    for ``byte_range`` and for the careful pass).
+    """
+    ncols = len(spec.names)
+    nrows = spec.nrows
+    if spec.byte_range is not None:
+        if data is None:
+            data = spec.path.read_bytes()
+        start, end = _data_range(spec, data)
+        if end <= start:
+            raise ConversionError(spec.path, "no data rows", line=spec.skip_lines + 1)
+        tail = data[end:].strip(b" \t\r\n") if len(data) - end < 4096 else b"x"
+        nrows = None if not tail else data.count(b"\n", start, end) + 1
+    used = [i for i in range(ncols) if i not in spec.ignore]
+    kwargs: dict[str, Any] = dict(
+        sep=r"\s+" if spec.delimiter == " " else spec.delimiter,
+        header=None,
+        skiprows=spec.skip_lines,
+        nrows=nrows,
+        engine="c",
+        skip_blank_lines=False,
+        keep_default_na=False,
+        na_values=[""],
+        quoting=3,  # QUOTE_NONE: numbers are never quoted in these exports
+        encoding_errors="replace",  # non-UTF-8 bytes become non-numeric cells, reported by the careful pass
+    )
+    if len(used) != ncols:
+        kwargs["usecols"] = used
+    try:
+        # no dtype= here: pandas' own numeric inference is about 2x faster than a forced float64 cast
+        frame = pd.read_csv(spec.path, **kwargs)
+    except Exception:  # noqa: BLE001 - any parser failure is located precisely below
+        locate_problem(spec, data=_block(spec, data))
+        raise ConversionError(spec.path, "could not parse the numeric data") from None
+    if frame.shape[1] != len(used) or any(dt.kind not in "fiub" for dt in frame.dtypes):
+        locate_problem(spec, data=_block(spec, data))
+        raise ConversionError(spec.path, f"could not parse the numeric data ({ncols} numeric fields per row expected)")
+    part = frame.to_numpy(dtype=np.float64, copy=False)
+    if spec.allow_trailing_blank and nrows is None:
+        n = len(part)
+        while n > 0 and np.isnan(part[n - 1]).all():
+            n -= 1
+        part = part[:n]
+    if len(used) == ncols:
+        values = part
+    else:
+        values = np.full((len(part), ncols), np.nan)
+        values[:, used] = part
+    return _validate(spec, values, data)
+
+
+def _block(spec: TableSpec, data: bytes | None) -> bytes:
+    if data is None:
+        data = spec.path.read_bytes()
+    start, end = _data_range(spec, data)
+    return data[start:end]
+
+
+def _validate(spec: TableSpec, values: np.ndarray, data: bytes | None) -> np.ndarray:
+    ncols = len(spec.names)
+    if len(values) == 0:
+        raise ConversionError(spec.path, "no data rows", line=spec.skip_lines + 1)
+    check = [i for i in range(ncols) if i not in spec.optional and i not in spec.ignore]
+    sub = values[:, check] if len(check) != ncols else values
+    finite = np.isfinite(sub).all(axis=1)
+    if not finite.all():
+        locate_problem(spec, data=_block(spec, data))
+        bad_row = int(np.nonzero(~finite)[0][0])
+        raise ConversionError(spec.path, "missing or non-finite value", line=spec.skip_lines + bad_row + 1)
+    return values
+
+
+def locate_problem(spec: TableSpec, nrows: int | None = None, *, data: bytes | None = None) -> None:
+    """Careful pass over the data lines: raise ConversionError for the first bad line (returns if none).
+
+    ``data`` is the numeric block alone (its first line is line ``skip_lines + 1``); else the file is read.
+    """
+    ncols = len(spec.names)
+    if data is None:
+        raw_all = spec.path.read_bytes()
+        start, end = _data_range(spec, raw_all)
+        data = raw_all[start:end]
+    lines = data.split(b"\n")
+    for lineno, raw in enumerate(lines, start=spec.skip_lines + 1):
+        text = raw.decode("latin-1").rstrip("\r")
+        if not text.strip():
+            raise ConversionError(spec.path, "empty line inside the data", line=lineno)
+        cells = text.split() if spec.delimiter == " " else text.split(spec.delimiter)
+        if len(cells) < ncols:
+            raise ConversionError(spec.path, f"truncated line: {len(cells)} fields, expected {ncols}", line=lineno)
+        if len(cells) > ncols:
+            raise ConversionError(spec.path, f"{len(cells)} fields, expected {ncols}", line=lineno)
+        for i, cell in enumerate(cells):
+            if i in spec.ignore:
+                continue
+            c = cell.strip()
+            if "_" in c:
+                raise ConversionError(spec.path, f"{c[:20]!r} is not a number", line=lineno, column=spec.names[i])
+            if c == "":
+                if i in spec.optional:
+                    continue
+                raise ConversionError(spec.path, "empty cell", line=lineno, column=spec.names[i])
+            try:
+                v = float(c)
+            except ValueError:
+                shown = c if len(c) <= 20 else c[:17] + "..."
+                raise ConversionError(
+                    spec.path, f"{shown!r} is not a number", line=lineno, column=spec.names[i]
+                ) from None
+            if not math.isfinite(v) and i not in spec.optional:
+                raise ConversionError(spec.path, f"non-finite value {c!r}", line=lineno, column=spec.names[i])
+
+
+# ---------------------------------------------------------------------------------------------- time
+def to_ns(values: np.ndarray, factor_to_ns: float) -> np.ndarray:
+    """Times in a unit (``factor_to_ns`` ns per unit) to int64 ns, exact relative to the first sample."""
+    values = np.asarray(values, dtype=np.float64)
+    if len(values) == 0:
+        return np.zeros(0, dtype=np.int64)
+    t0 = values[0]
+    base = round(t0 * factor_to_ns)
+    if abs(base) > 9.2e18 or not np.isfinite(values).all():
+        raise ValueError("time stamps out of range")
+    rel = np.round((values - t0) * factor_to_ns)
+    if len(rel) and np.abs(rel).max() > 9.2e18:
+        raise ValueError("time stamps out of range")
+    return rel.astype(np.int64) + np.int64(base)
+
+
+def check_increasing(path: Path, t_ns: np.ndarray, first_line: int, column: str | None = None) -> None:
+    """Raise ConversionError at the first duplicated or decreasing time stamp (``first_line`` = line of row 0)."""
+    if len(t_ns) < 2:
+        return
+    d = np.diff(t_ns)
+    bad = np.nonzero(d <= 0)[0]
+    if len(bad):
+        i = int(bad[0]) + 1
+        what = "duplicated time stamp" if d[i - 1] == 0 else "time stamp goes backwards"
+        raise ConversionError(path, what, line=first_line + i, column=column)
+
+
+def estimate_rate_hz(t_ns: np.ndarray) -> float | None:
+    """Median sampling rate in Hz (None for fewer than two samples)."""
+    if len(t_ns) < 2:
+        return None
+    dt = float(np.median(np.diff(t_ns)))
+    return 1e9 / dt if dt > 0 else None
+
+
+def index_time_ns(n: int, rate_hz: float, first_index: float = 0.0) -> np.ndarray:
+    """``round((first_index + i) / rate_hz * 1e9)`` for i in 0..n-1, int64 ns."""
+    return np.round((first_index + np.arange(n, dtype=np.float64)) * (1e9 / rate_hz)).astype(np.int64)
+
+
+def sanitize_name(name: str) -> str:
+    """A topic-safe stream name: lower case, [a-z0-9_]."""
+    s = re.sub(r"[^0-9a-zA-Z]+", "_", name).strip("_").lower()
+    return s or "imu"

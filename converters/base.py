@@ -1,0 +1,51 @@
+"""What a converter is: a named object that recognises (``sniff``) and reads (``convert``) one source format.
+
+A lab adds its own device by writing a class like this and registering an instance (or the class) under the
+``imulog.converters`` entry-point group of its own package (see docs/converters.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+from imulog.model import Recording
+
+
+@dataclass(frozen=True)
+class ConvertOptions:
+    """Options the ``convert`` command passes to every converter (each uses what applies to it).
+
+    ``mapping``: a column mapping file for delimited text (else a sibling ``<stem>.mapping.json``/``.toml``).
+    ``rate_hz``: sampling rate for formats without time stamps (raw ADC text), Hz.
+    ``extra``: converter-specific settings, e.g. ``{"zero_counts": 512, "counts_per_g": 256}`` for ADC text.
+    """
+
+    mapping: Path | None = None
+    rate_hz: float | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class Converter:
+    """Base class of converters. Subclasses set ``name``/``description``/``extensions`` and implement both methods.
+
+    ``sniff(path, head)`` returns a confidence in [0, 1] that ``path`` (whose first bytes are ``head``) is in this
+    format, never raising. ``convert(path, options)`` returns an :class:`imulog.model.Recording` with SI units on
+    the device clock, ``metadata['imulog.device.<name>']`` for each device and ``sources`` = the files read;
+    it raises only :class:`converters.errors.ConversionError` for bad input.
+    """
+
+    name: ClassVar[str] = ""
+    description: ClassVar[str] = ""
+    extensions: ClassVar[tuple[str, ...]] = ()
+    example: ClassVar[str] = ""
+
+    def sniff(self, path: Path, head: bytes) -> float:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:  # pragma: no cover
+        raise NotImplementedError
+
+    def __repr__(self) -> str:
+        return f"<converter {self.name}>"

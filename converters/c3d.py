@@ -1,0 +1,202 @@
+"""C3D files (via ezc3d): points as markers, analog channels, events; units m or mm; non-integer rates.
+
+Time on the capture clock: point frame ``k`` (0-based, counting from the header's first frame) is at
+``round((first_frame + k) / point_rate * 1e9)`` ns, so a Vicon C3D and its Nexus CSV export share one clock.
+Analog sample ``j`` is at ``(first_frame + j / ratio) / point_rate``. Event times (``EVENT:TIMES``, minutes and
+seconds) are seconds on the same clock. Points listed under ``POINT:ANGLES/FORCES/MOMENTS/POWERS/SCALARS`` are
+model outputs, kept in ``/vicon/model_outputs`` with their units rather than as markers.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from converters.base import Converter, ConvertOptions
+from converters.errors import ConversionError
+from imulog.model import AnalogStream, Intervals, MarkerStream, Recording, SignalStream
+
+LENGTH_TO_M = {"mm": 1e-3, "m": 1.0, "cm": 1e-2}
+MODEL_OUTPUT_GROUPS = ("ANGLES", "FORCES", "MOMENTS", "POWERS", "SCALARS")
+
+
+def _param(params: dict, group: str, name: str, default: Any = None) -> Any:
+    try:
+        return params[group][name]["value"]
+    except KeyError:
+        return default
+
+
+def _labels(params: dict, group: str, n: int) -> list[str]:
+    labels = list(_param(params, group, "LABELS", []) or [])
+    if len(labels) < n:
+        labels += list(_param(params, group, "LABELS2", []) or [])
+    labels = [str(x).strip() for x in labels[:n]]
+    labels += [f"{group.lower()}_{i + 1}" for i in range(len(labels), n)]
+    seen: dict[str, int] = {}
+    out = []
+    for lab in labels:  # C3D allows repeated or blank labels: make them unique, keep the original order
+        lab = lab or "unnamed"
+        if lab in seen:
+            seen[lab] += 1
+            lab = f"{lab}#{seen[lab]}"
+        else:
+            seen[lab] = 1
+        out.append(lab)
+    return out
+
+
+def check_size(path: Path) -> None:
+    """Raise ConversionError when the file is shorter than its header's frame count needs (ezc3d would
+    silently return fewer frames)."""
+    import struct
+
+    with open(path, "rb") as f:
+        header = f.read(512)
+        if len(header) < 512:
+            raise ConversionError(path, "too short to be a C3D file")
+        f.seek(max(header[0] - 1, 0) * 512)
+        param = f.read(4)
+    big = len(param) == 4 and param[3] == 86  # MIPS processors write big-endian
+    e = ">" if big else "<"
+    n_points, n_analog, first, last = struct.unpack(e + "4H", header[2:10])
+    scale = struct.unpack(e + "f", header[12:16])[0]
+    data_block = struct.unpack(e + "H", header[16:18])[0]
+    frames = last - first + 1
+    if frames <= 0 or data_block < 2:
+        return
+    word = 4 if scale < 0 else 2
+    need = (data_block - 1) * 512 + frames * (n_points * 4 + n_analog) * word
+    size = path.stat().st_size
+    if size < need:
+        raise ConversionError(path, f"truncated C3D: {size} bytes, the header's {frames} frames need {need}")
+
+
+def read_c3d(path: Path, name: str = "vicon") -> Recording:
+    path = Path(path)
+    try:
+        import ezc3d
+    except ImportError:  # pragma: no cover - optional extra
+        raise ConversionError(path, "reading C3D needs ezc3d (pip install 'imulog[c3d]')") from None
+    if path.stat().st_size < 512:
+        raise ConversionError(path, "too short to be a C3D file")
+    with open(path, "rb") as f:
+        head = f.read(2)
+    if len(head) < 2 or head[1] != 0x50:
+        raise ConversionError(path, "not a C3D file (byte 2 of the header is not 0x50)")
+    check_size(path)
+    try:
+        c = ezc3d.c3d(str(path), extract_forceplat_data=False)
+    except Exception as e:  # noqa: BLE001 - ezc3d raises plain RuntimeError for corrupt files
+        raise ConversionError(path, f"corrupt C3D: {e}") from None
+    params = c["parameters"]
+    header = c["header"]
+    rate = float(header["points"]["frame_rate"])
+    rate_param = _param(params, "POINT", "RATE")
+    if rate_param is not None and len(rate_param):
+        rate = float(rate_param[0])
+    if not (rate > 0 and np.isfinite(rate)):
+        raise ConversionError(path, f"point rate {rate!r} is not positive")
+    first = int(header["points"]["first_frame"])
+    points = c["data"]["points"]  # (4, M, N)
+    n_frames = points.shape[2]
+    rec = Recording(sources=[str(path)])
+    t_ns = np.round((first + np.arange(n_frames)) * (1e9 / rate)).astype(np.int64)
+    meta: dict[str, Any] = {"format": "c3d", "source": path.name, "rate_hz": rate, "first_frame": first}
+    units_list = _param(params, "POINT", "UNITS", ["mm"]) or ["mm"]
+    unit = str(units_list[0]).strip() or "mm"
+    n_points = points.shape[1]
+    if n_points and n_frames:
+        if unit not in LENGTH_TO_M:
+            raise ConversionError(path, f"unknown POINT:UNITS {unit!r}")
+        labels = _labels(params, "POINT", n_points)
+        outputs = set()
+        for grp in MODEL_OUTPUT_GROUPS:
+            outputs.update(str(x).strip() for x in (_param(params, "POINT", grp, []) or []))
+        residuals = c["data"]["meta_points"]["residuals"][0] if "meta_points" in c["data"] else None
+        xyz = np.transpose(points[:3], (2, 1, 0)).astype(np.float64)  # (N, M, 3)
+        valid = np.isfinite(xyz).all(axis=2)
+        if residuals is not None and residuals.shape == (n_points, n_frames):
+            valid &= residuals.T >= 0
+        marker_idx = [i for i, lab in enumerate(labels) if lab not in outputs]
+        out_idx = [i for i, lab in enumerate(labels) if lab in outputs]
+        if marker_idx:
+            rec.markers.append(
+                MarkerStream(
+                    name=name,
+                    t_ns=t_ns,
+                    labels=[labels[i] for i in marker_idx],
+                    pos=xyz[:, marker_idx, :] * LENGTH_TO_M[unit],
+                    valid=valid[:, marker_idx],
+                    meta={"rate_hz": rate, "units": unit, "source": path.name},
+                )
+            )
+            meta.update(marker_units=unit, markers=len(marker_idx))
+        if out_idx:
+            cols, units, vals = [], [], []
+            for i in out_idx:
+                for k, ax in enumerate("XYZ"):
+                    cols.append(f"{labels[i]}.{ax}")
+                    units.append("")
+                    vals.append(np.where(valid[:, i], xyz[:, i, k], np.nan))
+            rec.signals.append(
+                SignalStream(topic="/vicon/model_outputs", t_ns=t_ns, columns=cols, units=units, values=np.column_stack(vals))
+            )
+    analogs = c["data"]["analogs"]  # (1, C, N*ratio)
+    if analogs.size:
+        a_rate = float((_param(params, "ANALOG", "RATE", [0.0]) or [0.0])[0]) or rate
+        n_ch = analogs.shape[1]
+        ratio = a_rate / rate
+        labels = _labels(params, "ANALOG", n_ch)
+        a_units = list(_param(params, "ANALOG", "UNITS", []) or [])
+        a_units = [str(u).strip() for u in a_units[:n_ch]] + [""] * max(0, n_ch - len(a_units))
+        n = analogs.shape[2]
+        t_a = np.round((first + np.arange(n) / ratio) * (1e9 / rate)).astype(np.int64)
+        rec.analogs.append(
+            AnalogStream(
+                name=name,
+                t_ns=t_a,
+                channel_names=labels,
+                units=a_units,
+                values=analogs[0].T.astype(np.float64),
+                meta={"rate_hz": a_rate, "source": path.name},
+            )
+        )
+        meta.update(analog_rate_hz=a_rate, analog_channels=n_ch)
+    used = int((_param(params, "EVENT", "USED", [0]) or [0])[0])
+    if used > 0:
+        times = np.asarray(_param(params, "EVENT", "TIMES"), dtype=np.float64).reshape(2, -1)[:, :used]
+        seconds = times[0] * 60.0 + times[1]
+        ev_labels = [str(x).strip() for x in (_param(params, "EVENT", "LABELS", []) or [])][:used]
+        contexts = [str(x).strip() for x in (_param(params, "EVENT", "CONTEXTS", []) or [])][:used]
+        ev_labels += [""] * (used - len(ev_labels))
+        contexts += [""] * (used - len(contexts))
+        full = [f"{ctx} {lab}".strip() for ctx, lab in zip(contexts, ev_labels, strict=True)]
+        order = np.argsort(seconds, kind="stable")
+        t_ev = np.round(seconds[order] * 1e9).astype(np.int64)
+        rec.events.append(Intervals(topic=f"/events/{name}", start_ns=t_ev, end_ns=t_ev, labels=[full[i] for i in order]))
+        meta["events"] = used
+    if not rec.streams():
+        raise ConversionError(path, "C3D file holds no points and no analog data")
+    rec.metadata[f"imulog.device.{name}"] = meta
+    return rec
+
+
+class C3dConverter(Converter):
+    name = "c3d"
+    description = "C3D motion capture (points, analogs, events; m or mm; any rate) via ezc3d"
+    extensions = (".c3d",)
+    example = "imulog convert markers_analogs.c3d -o trial.mcap"
+
+    def sniff(self, path: Path, head: bytes) -> float:
+        if len(head) >= 512 and head[1] == 0x50:
+            return 0.95 if path.suffix.lower() == ".c3d" else 0.4
+        return 0.0
+
+    def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
+        return read_c3d(Path(path), name=(options.extra.get("vicon_name", "vicon") if options else "vicon"))
+
+
+CONVERTER = C3dConverter()

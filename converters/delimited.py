@@ -1,0 +1,442 @@
+"""Generic delimited IMU text (CSV, TSV, semicolon): units from headers, a units row, or a mapping file.
+
+Understands
+* unit-bearing headers: ``Time (s),Gyroscope X (deg/s),...,Accelerometer X (g),...,Magnetometer X (uT)``;
+* Shimmer Consensys exports: a ``"sep=;"`` line, a names row (``Shimmer_40AC_Accel_LN_X_CAL``) and a units
+  row (``ms;m/(s^2);...;deg/s``);
+* two-row headers (a sensor row above an axis row, as in the gaitmap sample): one IMU stream per sensor;
+* a mapping file (``imulog.mapping/1``, see :mod:`converters.mapping`) for exports whose headers carry no units,
+  such as the BlueBuddy wrist IMU of the R2G thesis.
+
+Recognised IMU columns go to :class:`~imulog.model.ImuStream` in SI units; other numeric columns are kept,
+units as found, in a :class:`~imulog.model.SignalStream` ``/signals/<device>``.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from converters._common import (
+    NORMALISED_MAG_UNITS,
+    SI_UNIT,
+    UNIT_FACTORS,
+    TableSpec,
+    check_increasing,
+    estimate_rate_hz,
+    head_lines,
+    is_number,
+    normalise_unit,
+    read_head,
+    read_numeric,
+    sanitize_name,
+    split_row,
+    text_head_lines,
+    to_ns,
+    unit_factor,
+)
+from converters.base import Converter, ConvertOptions
+from converters.errors import ConversionError
+from converters.mapping import Mapping, load_mapping, sibling_mapping
+from imulog.model import ImuStream, Recording, SignalStream
+
+_SEP_LINE = re.compile(r'^\s*"?sep=(.)"?\s*$')
+_UNIT_IN_NAME = re.compile(r"^(.*?)\s*[\(\[]\s*([^\)\]]*)\s*[\)\]]\s*$")
+_COMPACT = re.compile(r"^(acc|accel|gyr|gyro|mag)([xyz])$")
+_ALL_UNITS = {u for table in UNIT_FACTORS.values() for u in table} | NORMALISED_MAG_UNITS
+_EXTRA_UNIT_WORDS = {"mv", "v", "no_units", "kohms", "us", "kpa", "pa", "%", "hpa", "degrees", "deg", "rad", "n", "nm"}
+
+
+@dataclass
+class Column:
+    index: int
+    name: str
+    device: str
+    quantity: str | None = None  # acc gyr mag temperature time extra index
+    axis: str | None = None
+    variant: str = ""
+    unit: str = ""
+    factor: float = 1.0
+
+
+@dataclass
+class Layout:
+    delimiter: str
+    skip_lines: int
+    names: list[str]
+    columns: list[Column] = field(default_factory=list)
+
+
+def _quantity_of(tokens: list[str]) -> tuple[str | None, str | None, str]:
+    """(quantity, axis, variant) from name tokens, e.g. ['shimmer','40ac','accel','ln','x','cal']."""
+    quantity = None
+    axis = None
+    variant: list[str] = []
+    qpos = -1
+    for i, tok in enumerate(tokens):
+        m = _COMPACT.match(tok)
+        if m and quantity is None:
+            quantity = {"acc": "acc", "accel": "acc", "gyr": "gyr", "gyro": "gyr", "mag": "mag"}[m.group(1)]
+            axis = m.group(2)
+            qpos = i
+            continue
+        if quantity is None:
+            if tok.startswith("acc") and not tok.startswith("accur"):
+                quantity, qpos = "acc", i
+            elif tok.startswith("gyr"):
+                quantity, qpos = "gyr", i
+            elif tok.startswith("magnet") or tok == "mag":
+                quantity, qpos = "mag", i
+            elif tok.startswith("temp"):
+                quantity, qpos = "temperature", i
+            elif tok in ("time", "timestamp", "timestamps") or tok.startswith("timestamp"):
+                quantity, qpos = "time", i
+    if quantity in ("acc", "gyr", "mag") and axis is None:
+        for tok in tokens[qpos + 1 :]:
+            if tok in ("x", "y", "z"):
+                axis = tok
+                break
+            if tok not in ("cal", "raw", "uncal"):
+                variant.append(tok)
+    return quantity, axis, "_".join(variant)
+
+
+def _tokens(name: str) -> list[str]:
+    return [t for t in re.split(r"[\s_\-\.:/]+", name.lower()) if t]
+
+
+def _is_units_row(cells: list[str]) -> bool:
+    nonempty = [c for c in cells if c]
+    if not nonempty or any(is_number(c) for c in nonempty):
+        return False
+    known = sum(1 for c in nonempty if normalise_unit(c) in _ALL_UNITS or normalise_unit(c) in _EXTRA_UNIT_WORDS)
+    return known * 2 >= len(nonempty)
+
+
+def detect_delimiter(line: str) -> str | None:
+    counts = {d: line.count(d) for d in (",", ";", "\t")}
+    best = max(counts, key=lambda d: counts[d])
+    return best if counts[best] > 0 else None
+
+
+def analyse_header(
+    path: Path,
+    lines: list[str],
+    *,
+    mapping: Mapping | None = None,
+    default_units: dict[str, str] | None = None,
+    device_name: str = "imu",
+) -> Layout:
+    """Find delimiter, header rows, units and the role of every column; ConversionError on problems."""
+    idx = 0
+    delimiter = mapping.delimiter if mapping and mapping.delimiter else None
+    m = _SEP_LINE.match(lines[0]) if lines else None
+    if m:
+        delimiter = delimiter or m.group(1)
+        idx = 1
+    while idx < len(lines) and (lines[idx].lstrip().startswith("#") or not lines[idx].strip()):
+        idx += 1
+    if idx >= len(lines):
+        raise ConversionError(path, "no header row found", line=idx)
+    delimiter = delimiter or detect_delimiter(lines[idx])
+    if delimiter is None:
+        raise ConversionError(path, "cannot tell the delimiter (no comma, semicolon or tab in the header)", line=idx + 1)
+    rows = [split_row(lines[idx], delimiter)]
+    header_start = idx
+    idx += 1
+    units_row: list[str] | None = None
+    groups_row: list[str] | None = None
+    while idx < len(lines):
+        cells = split_row(lines[idx], delimiter)
+        if all(c == "" or is_number(c) for c in cells):
+            break
+        if _is_units_row(cells) and units_row is None:
+            units_row = cells
+        elif groups_row is None and units_row is None and len(rows) == 1:
+            groups_row = rows[0]
+            rows = [cells]
+        else:
+            raise ConversionError(path, "unexpected non-numeric row after the header", line=idx + 1)
+        idx += 1
+    if idx >= len(lines):
+        raise ConversionError(path, "no data rows after the header", line=idx)
+    names = rows[0]
+    ncols = len(names)
+    for other, what in ((units_row, "units row"), (groups_row, "sensor row")):
+        if other is not None and len(other) != ncols:
+            raise ConversionError(path, f"{what} has {len(other)} fields, names row has {ncols}", line=header_start + 1)
+    layout = Layout(delimiter=delimiter, skip_lines=idx, names=[])
+    full_names: list[str] = []
+    for i, name in enumerate(names):
+        group = groups_row[i] if groups_row else ""
+        full = f"{group}/{name}" if group and name else (name or group)
+        full_names.append(full)
+    layout.names = full_names
+    seen: dict[str, int] = {}
+    for i, full in enumerate(full_names):
+        if full and full in seen:
+            raise ConversionError(path, f"duplicated column {full!r} (also column {seen[full] + 1})", line=header_start + 1)
+        seen[full] = i
+
+    mapped = dict(mapping.columns) if mapping else {}
+    for key in mapped:
+        if key not in seen:
+            raise ConversionError(
+                path, f"mapping file {mapping.path.name} names column {key!r}, which is not in the header"
+            )
+    time_col = mapping.time_column if mapping and mapping.has_time else None
+    if time_col is not None and time_col not in seen:
+        raise ConversionError(path, f"time column {time_col!r} of the mapping file is not in the header")
+
+    shimmer = re.match(r"^(Shimmer_[0-9A-Za-z]+)_", names[min(1, ncols - 1)] if ncols else "")
+    have_time = False
+    for i, full in enumerate(full_names):
+        name = names[i]
+        group = groups_row[i] if groups_row else ""
+        col = Column(index=i, name=full, device=device_name)
+        if groups_row is not None and group.lower() not in ("", "sensor"):
+            col.device = sanitize_name(group)
+        elif shimmer and name.startswith(shimmer.group(1)) and not (mapping and mapping.device.get("name")):
+            col.device = sanitize_name(shimmer.group(1))
+        header_unit = units_row[i] if units_row else ""
+        base = name
+        m_unit = _UNIT_IN_NAME.match(name)
+        if m_unit:
+            base, header_unit = m_unit.group(1), m_unit.group(2)
+        if not full:
+            col.quantity = "ignore"
+        elif full in mapped:
+            cm = mapped[full]
+            col.quantity, col.axis, col.unit = cm.quantity, cm.axis, cm.unit
+        elif time_col is not None and full == time_col:
+            col.quantity, col.unit = "time", str(mapping.time_unit)
+        elif groups_row is not None and i == 0 and group.lower() in ("", "sensor") and name.lower() in ("", "axis"):
+            col.quantity = "index"
+        else:
+            q, axis, variant = _quantity_of(_tokens(base))
+            if q == "time" and (have_time or time_col is not None or (mapping and mapping.has_time)):
+                q = None
+            col.quantity, col.axis, col.variant, col.unit = q, axis, variant, header_unit
+            if q in ("acc", "gyr", "mag") and axis is None:
+                col.quantity = None
+            if col.quantity is not None and not col.unit and default_units:
+                col.unit = default_units.get(col.quantity, "")
+        if col.quantity is None:
+            col.quantity = "extra"
+            col.unit = header_unit
+        if col.quantity == "time":
+            have_time = True
+        if col.quantity in ("acc", "gyr", "mag", "temperature", "time"):
+            if not col.unit:
+                raise ConversionError(
+                    path,
+                    f"no unit for this {col.quantity} column in the header; give a mapping file (--mapping)",
+                    column=full,
+                )
+            factor = unit_factor(col.quantity, col.unit)
+            if factor is None:
+                if col.quantity == "mag" and normalise_unit(col.unit) in NORMALISED_MAG_UNITS:
+                    col.quantity = "extra"  # normalised field, not uT: kept as found
+                else:
+                    raise ConversionError(path, f"unknown {col.quantity} unit {col.unit!r}", column=full)
+            else:
+                col.factor = factor
+        layout.columns.append(col)
+    return layout
+
+
+def _fit_host_clock(path: Path, t_ns: np.ndarray, first_line: int, column: str) -> np.ndarray:
+    """Uniform device clock fitted to jittery host time stamps (e.g. Shimmer ``Timestamp_Unix``, 1 ms resolution).
+
+    The sensor samples at a fixed rate; the host stamps packets on arrival, so stamps repeat and jitter. A
+    least-squares line through (sample index, stamp) gives start and period; stamps further than 1 s from the
+    line mean a real clock problem and are reported.
+    """
+    i = np.arange(len(t_ns), dtype=np.float64)
+    rel = (t_ns - t_ns[0]).astype(np.float64)
+    slope, intercept = np.polyfit(i, rel, 1)
+    if not slope > 0:
+        raise ConversionError(path, "host time stamps do not increase", column=column)
+    resid = np.abs(rel - (slope * i + intercept))
+    if resid.max() > 1e9:
+        bad = int(np.argmax(resid))
+        raise ConversionError(path, "host time stamp more than 1 s off the sample clock", line=first_line + bad, column=column)
+    return t_ns[0] + np.round(intercept + slope * i).astype(np.int64)
+
+
+def _first_data_cells(path: Path, lines: list[str], layout: Layout) -> list[str]:
+    if layout.skip_lines < len(lines):
+        return split_row(lines[layout.skip_lines], layout.delimiter)
+    return []
+
+
+def read_delimited(
+    path: Path,
+    *,
+    mapping: Mapping | None = None,
+    rate_hz: float | None = None,
+    default_units: dict[str, str] | None = None,
+    device_meta: dict[str, Any] | None = None,
+    fmt: str = "delimited",
+    head: bytes | None = None,
+) -> Recording:
+    """Read one delimited IMU text file into a Recording (see module docstring)."""
+    path = Path(path)
+    lines = head_lines(path, head)
+    device_meta = dict(device_meta or {})
+    if mapping is not None:
+        device_meta.update(mapping.device)
+    device_name = sanitize_name(str(device_meta.get("name", "imu")))
+    layout = analyse_header(path, lines, mapping=mapping, default_units=default_units, device_name=device_name)
+    first = _first_data_cells(path, lines, layout)
+    ignore = {c.index for c in layout.columns if c.quantity == "ignore"}
+    # text columns (non-numeric in the first data row) that are not IMU data are skipped, not parsed
+    for c in layout.columns:
+        if c.quantity == "extra" and c.index < len(first) and first[c.index] and not is_number(first[c.index]):
+            c.quantity = "ignore"
+            ignore.add(c.index)
+    optional = {c.index for c in layout.columns if c.quantity == "extra"}
+    spec = TableSpec(
+        path=path,
+        delimiter=layout.delimiter,
+        skip_lines=layout.skip_lines,
+        names=layout.names,
+        optional=optional,
+        ignore=ignore,
+    )
+    values = read_numeric(spec)
+    first_line = layout.skip_lines + 1
+
+    rate = rate_hz or device_meta.get("rate_hz")
+    time_cols = [c for c in layout.columns if c.quantity == "time"]
+    index_cols = [c for c in layout.columns if c.quantity == "index"]
+    if time_cols:
+        tc = time_cols[0]
+        try:
+            t_ns = to_ns(values[:, tc.index], tc.factor)
+        except ValueError:
+            raise ConversionError(path, "time stamps out of range", column=tc.name) from None
+        time_desc = {"column": tc.name, "unit": tc.unit}
+        host_clock = "unix" in _tokens(tc.name) or bool(mapping and mapping.host_clock)
+        if host_clock and len(t_ns) > 2 and np.any(np.diff(t_ns) <= 0):
+            t_ns = _fit_host_clock(path, t_ns, first_line, tc.name)
+            time_desc["clock"] = "host receive time with repeated stamps: least-squares fit of a uniform rate"
+        check_increasing(path, t_ns, first_line, tc.name)
+    elif rate:
+        if index_cols:
+            idx = values[:, index_cols[0].index]
+            check_increasing(path, idx, first_line, index_cols[0].name)
+            t_ns = np.round(idx * (1e9 / float(rate))).astype(np.int64)
+        else:
+            t_ns = np.round(np.arange(len(values)) * (1e9 / float(rate))).astype(np.int64)
+        time_desc = {"column": None, "rate_hz": float(rate)}
+    else:
+        raise ConversionError(path, "no time column in the header and no rate given (mapping device.rate_hz or --rate)")
+
+    devices: dict[str, list[Column]] = {}
+    for c in layout.columns:
+        if c.quantity not in ("ignore", "index", "time"):
+            devices.setdefault(c.device, []).append(c)
+    rec = Recording(sources=[str(path)] + ([str(mapping.path)] if mapping else []))
+    for dev, cols in devices.items():
+        streams: dict[str, np.ndarray] = {}
+        units: dict[str, str] = {}
+        extra_cols: list[Column] = []
+        chosen_variant: dict[str, str] = {}
+        slots: dict[tuple[str, str | None], Column] = {}
+        for c in cols:
+            if c.quantity in ("acc", "gyr", "mag", "temperature"):
+                v = chosen_variant.setdefault(c.quantity, c.variant)
+                if c.variant != v:
+                    extra_cols.append(c)
+                    continue
+                key = (c.quantity, c.axis)
+                if key in slots:
+                    raise ConversionError(
+                        path, f"two columns give {c.quantity} {c.axis or ''}: {slots[key].name!r} and {c.name!r}"
+                    )
+                slots[key] = c
+            else:
+                extra_cols.append(c)
+        for q in ("acc", "gyr", "mag"):
+            axes = {a: slots.get((q, a)) for a in "xyz"}
+            present = [a for a, c in axes.items() if c is not None]
+            if not present:
+                continue
+            if len(present) != 3:
+                missing = ", ".join(f"{q} {a}" for a, c in axes.items() if c is None)
+                raise ConversionError(path, f"device {dev!r}: missing column(s) for {missing}")
+            streams[q] = np.column_stack([values[:, axes[a].index] * axes[a].factor for a in "xyz"])
+            units[q] = axes["x"].unit
+        if ("temperature", None) in slots:
+            c = slots[("temperature", None)]
+            streams["temperature"] = values[:, c.index] * c.factor
+            units["temperature"] = c.unit
+        if not streams and not extra_cols:
+            continue
+        if streams:
+            meta = {
+                "format": fmt,
+                "model": device_meta.get("model", "Shimmer" if dev.startswith("shimmer") else ""),
+                "serial": device_meta.get("serial", dev.split("_", 1)[1].upper() if dev.startswith("shimmer_") else ""),
+                "rate_hz": float(rate) if rate else estimate_rate_hz(t_ns),
+                "units": units,
+                "time": time_desc,
+                "source": path.name,
+            }
+            for k, v in device_meta.items():
+                if k not in ("name",) and k not in meta:
+                    meta[k] = v
+            rec.imus.append(ImuStream(name=dev, t_ns=t_ns, meta=dict(meta), **streams))
+            rec.metadata[f"imulog.device.{dev}"] = meta
+        if extra_cols:
+            cols_out = []
+            units_out = []
+            data = []
+            for c in extra_cols:
+                conv = c.quantity in ("acc", "gyr", "mag", "temperature")
+                cols_out.append(c.name)
+                units_out.append(SI_UNIT[c.quantity] if conv else c.unit)
+                data.append(values[:, c.index] * (c.factor if conv else 1.0))
+            rec.signals.append(
+                SignalStream(topic=f"/signals/{dev}", t_ns=t_ns, columns=cols_out, units=units_out, values=np.column_stack(data))
+            )
+    if not rec.imus and not rec.signals:
+        raise ConversionError(path, "no IMU or numeric columns found")
+    return rec
+
+
+class DelimitedConverter(Converter):
+    name = "delimited"
+    description = "delimited IMU text (CSV/TSV/semicolon; units in headers, a units row, or a mapping file)"
+    extensions = (".csv", ".tsv", ".txt")
+    example = "imulog convert fusion_sensor_data.csv -o trial.mcap"
+
+    def sniff(self, path: Path, head: bytes) -> float:
+        lines = text_head_lines(head)
+        if not lines:
+            return 0.0
+        if path.suffix.lower() in (".json", ".toml", ".md"):
+            return 0.0
+        if sibling_mapping(path) is not None:
+            return 0.6
+        try:
+            layout = analyse_header(path, lines[:20])
+        except ConversionError:
+            return 0.0
+        kinds = {c.quantity for c in layout.columns}
+        return 0.5 if kinds & {"acc", "gyr"} else 0.0
+
+    def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
+        options = options or ConvertOptions()
+        path = Path(path)
+        mapping_path = options.mapping or sibling_mapping(path)
+        mapping = load_mapping(mapping_path) if mapping_path else None
+        return read_delimited(path, mapping=mapping, rate_hz=options.rate_hz, head=read_head(path))
+
+
+CONVERTER = DelimitedConverter()

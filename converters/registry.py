@@ -1,0 +1,169 @@
+"""Converter registry: entry points ``imulog.converters``, format auto-detection and trial grouping.
+
+Every converter (built-in or a lab's own) is found through the ``imulog.converters`` entry-point group; an
+entry point names a :class:`converters.base.Converter` instance or class. The built-ins are also known directly,
+so a source checkout works before ``pip install -e``.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Sequence
+from importlib import import_module
+from importlib.metadata import entry_points
+from pathlib import Path
+
+from converters._common import read_head
+from converters.base import Converter, ConvertOptions
+from converters.errors import ConversionError, UnknownFormatError
+from converters.mapping import is_mapping_file
+from imulog.model import Recording
+
+ENTRY_POINT_GROUP = "imulog.converters"
+BUILTIN: dict[str, str] = {
+    "delimited": "converters.delimited:CONVERTER",
+    "xsens": "converters.xsens:CONVERTER",
+    "adc": "converters.adc:CONVERTER",
+    "vicon-csv": "converters.vicon_csv:CONVERTER",
+    "c3d": "converters.c3d:CONVERTER",
+    "broad-hdf5": "converters.broad:CONVERTER",
+    "gaitmap": "converters.gaitmap:CONVERTER",
+}
+MIN_CONFIDENCE = 0.3
+
+
+def _load(target: str) -> Converter:
+    module, _, attr = target.partition(":")
+    obj = getattr(import_module(module), attr)
+    return obj() if isinstance(obj, type) else obj
+
+
+def available() -> dict[str, Converter]:
+    """All converters by name: entry points first (a lab's own may replace a built-in of the same name)."""
+    found: dict[str, Converter] = {}
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        try:
+            obj = ep.load()
+        except Exception:  # noqa: BLE001 - a broken plug-in must not break every conversion
+            continue
+        conv = obj() if isinstance(obj, type) else obj
+        found[ep.name] = conv
+    for name, target in BUILTIN.items():
+        if name not in found:
+            found[name] = _load(target)
+    return dict(sorted(found.items()))
+
+
+def get(name: str) -> Converter:
+    convs = available()
+    if name not in convs:
+        raise UnknownFormatError(None, f"unknown format {name!r}; known: {', '.join(convs)}")
+    return convs[name]
+
+
+def detect(path: Path) -> Converter:
+    """The converter most confident that ``path`` is its format; UnknownFormatError when none is."""
+    path = Path(path)
+    try:
+        head = read_head(path)
+    except IsADirectoryError:
+        raise ConversionError(path, "is a directory") from None
+    except OSError as e:
+        raise ConversionError(path, f"cannot read: {e.strerror}") from None
+    if not head:
+        raise ConversionError(path, "empty file")
+    best, score = None, 0.0
+    for conv in available().values():
+        try:
+            s = float(conv.sniff(path, head))
+        except Exception:  # noqa: BLE001 - sniffing must never fail a conversion
+            s = 0.0
+        if s > score:
+            best, score = conv, s
+    if best is None or score < MIN_CONFIDENCE:
+        raise UnknownFormatError(path, "unknown format (see `imulog convert --list-formats`, or pass --format)")
+    return best
+
+
+def convert_file(path: Path, fmt: str | None = None, options: ConvertOptions | None = None) -> Recording:
+    """Convert one input file (format auto-detected unless ``fmt``); raises only ConversionError."""
+    path = Path(path)
+    if not path.exists():
+        raise ConversionError(path, "no such file")
+    conv = get(fmt) if fmt else detect(path)
+    try:
+        return conv.convert(path, options or ConvertOptions())
+    except ConversionError:
+        raise
+    except MemoryError:
+        raise ConversionError(path, "out of memory while converting") from None
+    except Exception as e:  # noqa: BLE001 - last safety net: report, never crash with a traceback
+        raise ConversionError(path, f"{conv.name} converter failed: {type(e).__name__}: {e}") from None
+
+
+def convert_files(
+    paths: Sequence[Path], fmt: str | None = None, options: ConvertOptions | None = None
+) -> Recording:
+    """Convert several files of one trial (e.g. an IMU text file and a Vicon CSV) and merge them."""
+    if not paths:
+        raise ConversionError(None, "no input files")
+    rec: Recording | None = None
+    for p in paths:
+        part = convert_file(p, fmt, options)
+        if rec is None:
+            rec = part
+        else:
+            try:
+                rec = rec.merge(part)
+            except ValueError as e:
+                raise ConversionError(p, f"cannot combine with the other inputs: {e}") from None
+    assert rec is not None
+    return rec
+
+
+_ROLE_TOKENS = {
+    "imu", "vicon", "markers", "marker", "analogs", "analog", "mocap", "devices", "trajectories", "emg",
+    "stride", "strides", "borders", "events",
+}
+_SKIP_SUFFIXES = {".md", ".txt.license", ".license", ".json", ".toml", ".npz", ".npy", ".pdf", ".png", ".mcap"}
+
+
+def recording_key(path: Path) -> str:
+    """Files of one recording share a key: the stem without role words (``s01_t02_imu`` ~ ``s01_t02_vicon``).
+
+    Self-contained formats (C3D, HDF5) are always a recording of their own.
+    """
+    if path.suffix.lower() in (".c3d", ".hdf5", ".h5"):
+        return path.name
+    tokens = [t for t in re.split(r"[_\-.]+", path.stem) if t and t.lower() not in _ROLE_TOKENS]
+    return "_".join(tokens)
+
+
+def group_directory(directory: Path) -> list[tuple[str, list[Path]]]:
+    """Recordings under ``directory`` (recursively): (output name, files) per recording, convertible files only.
+
+    A file is convertible when some converter recognises it; mapping files, licences and READMEs are skipped.
+    """
+    directory = Path(directory)
+    groups: dict[tuple[Path, str], list[Path]] = {}
+    for path in sorted(p for p in directory.rglob("*") if p.is_file()):
+        if is_mapping_file(path) or path.suffix.lower() in _SKIP_SUFFIXES or path.name.startswith("."):
+            continue
+        try:
+            detect(path)
+        except ConversionError:
+            continue
+        groups.setdefault((path.parent, recording_key(path)), []).append(path)
+    out = []
+    for (parent, key), files in groups.items():
+        rel = parent.relative_to(directory)
+        base = Path(key).stem if key.endswith((".c3d", ".hdf5", ".h5")) else key
+        name = base or (parent.name if parent != directory or not rel.parts else parent.name) or "trial"
+        out.append((str(rel / name) if rel.parts else name, files))
+    return out
+
+
+def list_formats(converters: Iterable[Converter] | None = None) -> list[tuple[str, str, str]]:
+    """(name, extensions, description) of every converter, for ``--list-formats``."""
+    convs = list(converters) if converters is not None else list(available().values())
+    return [(c.name, " ".join(c.extensions), c.description) for c in convs]

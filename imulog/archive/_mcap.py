@@ -1,0 +1,526 @@
+"""Minimal, fast MCAP record layer (spec: https://mcap.dev/spec) used by the writer, reader, appender and doctor.
+
+The ``mcap`` package reads and writes files but cannot append, cannot write one channel per chunk and
+parses records one Python object at a time. This module encodes and decodes the records directly with
+``struct`` so that imulog controls the exact byte layout (needed to append after the old data section and
+to copy chunks verbatim). Files written here are ordinary MCAP files that any reader opens.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from dataclasses import dataclass, field
+from typing import BinaryIO
+
+MAGIC = b"\x89MCAP0\r\n"
+
+
+class Op:
+    HEADER = 0x01
+    FOOTER = 0x02
+    SCHEMA = 0x03
+    CHANNEL = 0x04
+    MESSAGE = 0x05
+    CHUNK = 0x06
+    MESSAGE_INDEX = 0x07
+    CHUNK_INDEX = 0x08
+    ATTACHMENT = 0x09
+    ATTACHMENT_INDEX = 0x0A
+    STATISTICS = 0x0B
+    METADATA = 0x0C
+    METADATA_INDEX = 0x0D
+    SUMMARY_OFFSET = 0x0E
+    DATA_END = 0x0F
+
+
+OP_NAMES = {v: k.lower() for k, v in vars(Op).items() if not k.startswith("_")}
+FOOTER_SIZE = 1 + 8 + 20  # opcode, length, summary_start, summary_offset_start, summary_crc
+DATA_END_SIZE = 1 + 8 + 4
+
+_Q = struct.Struct("<Q")
+_H = struct.Struct("<H")
+_I = struct.Struct("<I")
+_REC = struct.Struct("<BQ")
+_MSG_HEAD = struct.Struct("<BQHIQQ")  # opcode, length, channel_id, sequence, log_time, publish_time
+
+
+class McapFormatError(ValueError):
+    """The bytes are not a valid MCAP structure (message says where)."""
+
+
+# ----------------------------------------------------------------------------------------------- encoding
+
+
+def _s(value: str) -> bytes:
+    b = value.encode()
+    return _I.pack(len(b)) + b
+
+
+def _b4(value: bytes) -> bytes:
+    return _I.pack(len(value)) + value
+
+
+def _map(items: dict[str, str]) -> bytes:
+    body = b"".join(_s(k) + _s(v) for k, v in items.items())
+    return _I.pack(len(body)) + body
+
+
+def record(op: int, body: bytes) -> bytes:
+    return _REC.pack(op, len(body)) + body
+
+
+def header(profile: str, library: str) -> bytes:
+    return record(Op.HEADER, _s(profile) + _s(library))
+
+
+def schema(schema_id: int, name: str, encoding: str, data: bytes) -> bytes:
+    return record(Op.SCHEMA, _H.pack(schema_id) + _s(name) + _s(encoding) + _b4(data))
+
+
+def channel(channel_id: int, schema_id: int, topic: str, message_encoding: str, metadata: dict[str, str]) -> bytes:
+    return record(
+        Op.CHANNEL, _H.pack(channel_id) + _H.pack(schema_id) + _s(topic) + _s(message_encoding) + _map(metadata)
+    )
+
+
+def message_head(channel_id: int, sequence: int, log_time: int, publish_time: int, data_len: int) -> bytes:
+    return _MSG_HEAD.pack(Op.MESSAGE, 2 + 4 + 8 + 8 + data_len, channel_id, sequence, log_time, publish_time)
+
+
+def chunk(start: int, end: int, uncompressed_size: int, uncompressed_crc: int, compression: str, data: bytes) -> bytes:
+    body_head = struct.pack("<QQQI", start, end, uncompressed_size, uncompressed_crc) + _s(compression)
+    return _REC.pack(Op.CHUNK, len(body_head) + 8 + len(data)) + body_head + _Q.pack(len(data)) + data
+
+
+def message_index(channel_id: int, entries: bytes) -> bytes:
+    """``entries``: packed little-endian (log_time u64, offset u64) pairs."""
+    return record(Op.MESSAGE_INDEX, _H.pack(channel_id) + _I.pack(len(entries)) + entries)
+
+
+def attachment(log_time: int, create_time: int, name: str, media_type: str, data: bytes) -> bytes:
+    body = struct.pack("<QQ", log_time, create_time) + _s(name) + _s(media_type) + _Q.pack(len(data)) + data
+    crc = zlib.crc32(body)
+    return record(Op.ATTACHMENT, body + _I.pack(crc))
+
+
+def metadata(name: str, items: dict[str, str]) -> bytes:
+    return record(Op.METADATA, _s(name) + _map(items))
+
+
+def data_end(crc: int) -> bytes:
+    return record(Op.DATA_END, _I.pack(crc))
+
+
+# ----------------------------------------------------------------------------------------------- records
+
+
+@dataclass
+class SchemaRec:
+    id: int
+    name: str
+    encoding: str
+    data: bytes
+
+    def encode(self) -> bytes:
+        return schema(self.id, self.name, self.encoding, self.data)
+
+
+@dataclass
+class ChannelRec:
+    id: int
+    schema_id: int
+    topic: str
+    message_encoding: str
+    metadata: dict[str, str]
+
+    def encode(self) -> bytes:
+        return channel(self.id, self.schema_id, self.topic, self.message_encoding, self.metadata)
+
+
+@dataclass
+class ChunkIndexRec:
+    message_start_time: int
+    message_end_time: int
+    chunk_start_offset: int
+    chunk_length: int
+    message_index_offsets: dict[int, int]
+    message_index_length: int
+    compression: str
+    compressed_size: int
+    uncompressed_size: int
+
+    def encode(self) -> bytes:
+        offsets = b"".join(_H.pack(k) + _Q.pack(v) for k, v in self.message_index_offsets.items())
+        body = (
+            struct.pack(
+                "<QQQQ", self.message_start_time, self.message_end_time, self.chunk_start_offset, self.chunk_length
+            )
+            + _I.pack(len(offsets))
+            + offsets
+            + _Q.pack(self.message_index_length)
+            + _s(self.compression)
+            + struct.pack("<QQ", self.compressed_size, self.uncompressed_size)
+        )
+        return record(Op.CHUNK_INDEX, body)
+
+
+@dataclass
+class AttachmentIndexRec:
+    offset: int
+    length: int
+    log_time: int
+    create_time: int
+    data_size: int
+    name: str
+    media_type: str
+
+    def encode(self) -> bytes:
+        body = struct.pack("<QQQQQ", self.offset, self.length, self.log_time, self.create_time, self.data_size)
+        return record(Op.ATTACHMENT_INDEX, body + _s(self.name) + _s(self.media_type))
+
+
+@dataclass
+class MetadataIndexRec:
+    offset: int
+    length: int
+    name: str
+
+    def encode(self) -> bytes:
+        return record(Op.METADATA_INDEX, struct.pack("<QQ", self.offset, self.length) + _s(self.name))
+
+
+@dataclass
+class StatisticsRec:
+    message_count: int = 0
+    schema_count: int = 0
+    channel_count: int = 0
+    attachment_count: int = 0
+    metadata_count: int = 0
+    chunk_count: int = 0
+    message_start_time: int = 0
+    message_end_time: int = 0
+    channel_message_counts: dict[int, int] = field(default_factory=dict)
+
+    def encode(self) -> bytes:
+        counts = b"".join(_H.pack(k) + _Q.pack(v) for k, v in sorted(self.channel_message_counts.items()))
+        body = struct.pack(
+            "<QHIIIIQQ",
+            self.message_count,
+            self.schema_count,
+            self.channel_count,
+            self.attachment_count,
+            self.metadata_count,
+            self.chunk_count,
+            self.message_start_time,
+            self.message_end_time,
+        )
+        return record(Op.STATISTICS, body + _I.pack(len(counts)) + counts)
+
+
+@dataclass
+class ChunkRec:
+    message_start_time: int
+    message_end_time: int
+    uncompressed_size: int
+    uncompressed_crc: int
+    compression: str
+    data: memoryview
+
+
+@dataclass
+class AttachmentRec:
+    log_time: int
+    create_time: int
+    name: str
+    media_type: str
+    data: bytes
+    crc: int
+    computed_crc: int
+
+
+# ----------------------------------------------------------------------------------------------- decoding
+
+
+class Cursor:
+    """Reads little-endian fields from a bytes-like body, raising McapFormatError on overrun."""
+
+    __slots__ = ("buf", "pos", "end")
+
+    def __init__(self, buf: bytes | memoryview, pos: int = 0, end: int | None = None) -> None:
+        self.buf = buf
+        self.pos = pos
+        self.end = len(buf) if end is None else end
+
+    def _need(self, n: int) -> int:
+        p = self.pos
+        if n < 0 or p + n > self.end:
+            raise McapFormatError(f"record field runs past the end of its record ({p + n} > {self.end})")
+        self.pos = p + n
+        return p
+
+    def u16(self) -> int:
+        return _H.unpack_from(self.buf, self._need(2))[0]
+
+    def u32(self) -> int:
+        return _I.unpack_from(self.buf, self._need(4))[0]
+
+    def u64(self) -> int:
+        return _Q.unpack_from(self.buf, self._need(8))[0]
+
+    def raw(self, n: int) -> memoryview:
+        p = self._need(n)
+        return memoryview(self.buf)[p : p + n]
+
+    def string(self) -> str:
+        n = self.u32()
+        try:
+            return bytes(self.raw(n)).decode()
+        except UnicodeDecodeError as exc:
+            raise McapFormatError("invalid UTF-8 in a string field") from exc
+
+    def str_map(self) -> dict[str, str]:
+        n = self.u32()
+        end = self._need(n) + n
+        sub = Cursor(self.buf, end - n, end)
+        out = {}
+        while sub.pos < end:
+            key = sub.string()
+            out[key] = sub.string()
+        return out
+
+    def u16_u64_map(self) -> dict[int, int]:
+        n = self.u32()
+        end = self._need(n) + n
+        sub = Cursor(self.buf, end - n, end)
+        out = {}
+        while sub.pos < end:
+            key = sub.u16()
+            out[key] = sub.u64()
+        return out
+
+
+def parse_schema(body: bytes | memoryview) -> SchemaRec:
+    c = Cursor(body)
+    sid = c.u16()
+    name = c.string()
+    encoding = c.string()
+    return SchemaRec(sid, name, encoding, bytes(c.raw(c.u32())))
+
+
+def parse_channel(body: bytes | memoryview) -> ChannelRec:
+    c = Cursor(body)
+    cid = c.u16()
+    sid = c.u16()
+    topic = c.string()
+    enc = c.string()
+    return ChannelRec(cid, sid, topic, enc, c.str_map())
+
+
+def parse_chunk(body: bytes | memoryview) -> ChunkRec:
+    c = Cursor(body)
+    start, end, usize = c.u64(), c.u64(), c.u64()
+    crc = c.u32()
+    compression = c.string()
+    return ChunkRec(start, end, usize, crc, compression, c.raw(c.u64()))
+
+
+def parse_chunk_index(body: bytes | memoryview) -> ChunkIndexRec:
+    c = Cursor(body)
+    start, end, offset, length = c.u64(), c.u64(), c.u64(), c.u64()
+    offsets = c.u16_u64_map()
+    mi_len = c.u64()
+    compression = c.string()
+    return ChunkIndexRec(start, end, offset, length, offsets, mi_len, compression, c.u64(), c.u64())
+
+
+def parse_attachment(body: bytes | memoryview) -> AttachmentRec:
+    c = Cursor(body)
+    log_time, create_time = c.u64(), c.u64()
+    name = c.string()
+    media_type = c.string()
+    data = bytes(c.raw(c.u64()))
+    computed = zlib.crc32(memoryview(body)[: c.pos])
+    return AttachmentRec(log_time, create_time, name, media_type, data, c.u32(), computed)
+
+
+def parse_attachment_index(body: bytes | memoryview) -> AttachmentIndexRec:
+    c = Cursor(body)
+    vals = [c.u64() for _ in range(5)]
+    return AttachmentIndexRec(*vals, c.string(), c.string())
+
+
+def parse_metadata(body: bytes | memoryview) -> tuple[str, dict[str, str]]:
+    c = Cursor(body)
+    return c.string(), c.str_map()
+
+
+def parse_metadata_index(body: bytes | memoryview) -> MetadataIndexRec:
+    c = Cursor(body)
+    return MetadataIndexRec(c.u64(), c.u64(), c.string())
+
+
+def parse_statistics(body: bytes | memoryview) -> StatisticsRec:
+    c = Cursor(body)
+    mc = c.u64()
+    sc = c.u16()
+    cc, ac, mdc, chc = c.u32(), c.u32(), c.u32(), c.u32()
+    start, end = c.u64(), c.u64()
+    return StatisticsRec(mc, sc, cc, ac, mdc, chc, start, end, c.u16_u64_map())
+
+
+def iter_records(buf: bytes | memoryview, start: int = 0, end: int | None = None):
+    """Yield ``(opcode, offset, body_memoryview)`` for consecutive records in ``buf[start:end]``."""
+    view = memoryview(buf)
+    end = len(view) if end is None else end
+    pos = start
+    while pos < end:
+        if pos + 9 > end:
+            raise McapFormatError(f"truncated record header at byte {pos}")
+        op, length = _REC.unpack_from(view, pos)
+        body_start = pos + 9
+        if body_start + length > end:
+            raise McapFormatError(f"{OP_NAMES.get(op, hex(op))} record at byte {pos} runs past its section end")
+        yield op, pos, view[body_start : body_start + length]
+        pos = body_start + length
+
+
+def chunk_messages(records: bytes | memoryview, channel_id: int | None = None):
+    """Yield ``(channel_id, log_time, data_memoryview)`` for Message records in decompressed chunk bytes."""
+    view = memoryview(records)
+    end = len(view)
+    pos = 0
+    unpack = _MSG_HEAD.unpack_from
+    rec = _REC.unpack_from
+    while pos < end:
+        if pos + 9 > end:
+            raise McapFormatError("truncated record inside a chunk")
+        op, length = rec(view, pos)
+        nxt = pos + 9 + length
+        if nxt > end:
+            raise McapFormatError("record inside a chunk runs past the chunk end")
+        if op == Op.MESSAGE:
+            if length < 22:
+                raise McapFormatError("message record too short")
+            _, _, cid, _, log_time, _ = unpack(view, pos)
+            if channel_id is None or cid == channel_id:
+                yield cid, log_time, view[pos + 31 : nxt]
+        pos = nxt
+
+
+def decompress(compression: str, data: bytes | memoryview, uncompressed_size: int) -> bytes:
+    if compression == "":
+        return bytes(data)
+    if compression == "zstd":
+        import zstandard
+
+        return zstandard.ZstdDecompressor().decompress(data, max_output_size=uncompressed_size)
+    if compression == "lz4":
+        import lz4.frame
+
+        return lz4.frame.decompress(bytes(data))
+    raise McapFormatError(f"unsupported chunk compression {compression!r}")
+
+
+# ----------------------------------------------------------------------------------------------- summary
+
+
+@dataclass
+class Summary:
+    """Everything in an MCAP file's summary section plus the locations needed to append."""
+
+    file_size: int
+    summary_start: int
+    summary_offset_start: int
+    summary_crc: int
+    computed_summary_crc: int
+    data_end_offset: int  # where the DataEnd record starts (== end of the data section)
+    data_section_crc: int
+    schemas: dict[int, SchemaRec] = field(default_factory=dict)
+    channels: dict[int, ChannelRec] = field(default_factory=dict)
+    statistics: StatisticsRec | None = None
+    chunk_indexes: list[ChunkIndexRec] = field(default_factory=list)
+    attachment_indexes: list[AttachmentIndexRec] = field(default_factory=list)
+    metadata_indexes: list[MetadataIndexRec] = field(default_factory=list)
+    summary_offsets: list[tuple[int, int, int]] = field(default_factory=list)
+
+
+def read_summary(f: BinaryIO, file_size: int) -> Summary:
+    """Parse the footer and summary section; raise McapFormatError with a one-line reason."""
+    if file_size < len(MAGIC) * 2 + FOOTER_SIZE:
+        raise McapFormatError(f"too short for an MCAP file ({file_size} bytes)")
+    f.seek(0)
+    if f.read(len(MAGIC)) != MAGIC:
+        raise McapFormatError("not an MCAP file (bad magic at start)")
+    f.seek(file_size - len(MAGIC) - FOOTER_SIZE)
+    tail = f.read(FOOTER_SIZE + len(MAGIC))
+    if tail[-len(MAGIC) :] != MAGIC:
+        raise McapFormatError("truncated or unfinished MCAP file (no closing magic / footer)")
+    op, length = _REC.unpack_from(tail, 0)
+    if op != Op.FOOTER or length != 20:
+        raise McapFormatError("corrupt MCAP footer")
+    summary_start, summary_offset_start, summary_crc = struct.unpack_from("<QQI", tail, 9)
+    footer_offset = file_size - len(MAGIC) - FOOTER_SIZE
+    if summary_start == 0:
+        raise McapFormatError("MCAP file has no summary section (not written by an indexed writer)")
+    if not (len(MAGIC) < summary_start <= footer_offset) or not (
+        summary_offset_start == 0 or summary_start <= summary_offset_start <= footer_offset
+    ):
+        raise McapFormatError("corrupt MCAP footer (summary offsets outside the file)")
+    f.seek(summary_start)
+    section = f.read(footer_offset - summary_start)
+    computed = zlib.crc32(tail[: 1 + 8 + 16], zlib.crc32(section))
+    # DataEnd sits right before the summary.
+    de_off = summary_start - DATA_END_SIZE
+    f.seek(de_off)
+    de = f.read(DATA_END_SIZE)
+    if len(de) != DATA_END_SIZE or de[0] != Op.DATA_END or _Q.unpack_from(de, 1)[0] != 4:
+        raise McapFormatError("no DataEnd record before the summary section")
+    s = Summary(
+        file_size=file_size,
+        summary_start=summary_start,
+        summary_offset_start=summary_offset_start,
+        summary_crc=summary_crc,
+        computed_summary_crc=computed,
+        data_end_offset=de_off,
+        data_section_crc=_I.unpack_from(de, 9)[0],
+    )
+    if summary_crc != 0 and summary_crc != computed:
+        raise McapFormatError(f"summary CRC mismatch (stored {summary_crc:#010x}, computed {computed:#010x})")
+    for op, _, body in iter_records(section):
+        if op == Op.SCHEMA:
+            rec = parse_schema(body)
+            s.schemas[rec.id] = rec
+        elif op == Op.CHANNEL:
+            rec = parse_channel(body)
+            s.channels[rec.id] = rec
+        elif op == Op.STATISTICS:
+            s.statistics = parse_statistics(body)
+        elif op == Op.CHUNK_INDEX:
+            s.chunk_indexes.append(parse_chunk_index(body))
+        elif op == Op.ATTACHMENT_INDEX:
+            s.attachment_indexes.append(parse_attachment_index(body))
+        elif op == Op.METADATA_INDEX:
+            s.metadata_indexes.append(parse_metadata_index(body))
+        elif op == Op.SUMMARY_OFFSET:
+            if len(body) < 17:
+                raise McapFormatError("summary offset record too short")
+            s.summary_offsets.append(struct.unpack_from("<BQQ", body))
+    return s
+
+
+def read_record_at(f: BinaryIO, offset: int, expect: int, limit: int) -> memoryview:
+    """Read the body of the record starting at ``offset`` and check its opcode."""
+    f.seek(offset)
+    head = f.read(9)
+    if len(head) != 9:
+        raise McapFormatError(f"record at byte {offset} is past the end of the file")
+    op, length = _REC.unpack(head)
+    if op != expect:
+        raise McapFormatError(f"expected a {OP_NAMES.get(expect)} record at byte {offset}, found opcode {op:#04x}")
+    if offset + 9 + length > limit:
+        raise McapFormatError(f"{OP_NAMES.get(expect)} record at byte {offset} runs past the data section")
+    body = f.read(length)
+    if len(body) != length:
+        raise McapFormatError(f"{OP_NAMES.get(expect)} record at byte {offset} is truncated")
+    return memoryview(body)

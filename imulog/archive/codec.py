@@ -1,0 +1,542 @@
+"""Encode imulog.model streams as protobuf messages and decode them back, columnar and bit-exact.
+
+High-rate streams (IMU, markers, analog, signals) become one block message per ~1 s window with packed
+little-endian arrays; decoding joins the ``bytes`` fields of all blocks once and views them with
+``numpy.frombuffer``, so no per-sample Python objects are created. Intervals are one
+``imulog.IntervalEvent`` per interval; poses are one ``foxglove.PoseInFrame`` per sample (so Foxglove and
+Rerun draw them natively).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from google.protobuf import descriptor_pb2
+
+from imulog.archive._generated.foxglove import PoseInFrame_pb2
+from imulog.archive._generated.imulog import (
+    AnalogBlock_pb2,
+    ImuBlock_pb2,
+    IntervalEvent_pb2,
+    MarkerBlock_pb2,
+    SignalBlock_pb2,
+)
+from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream, Stream
+
+SCHEMA_VERSION = 1  # layout version written into every imulog block; readers accept <= this
+BLOCK_NS = 1_000_000_000  # block length: samples are grouped in windows of 1 s
+
+MESSAGE_CLASSES = {
+    "imulog.ImuBlock": ImuBlock_pb2.ImuBlock,
+    "imulog.MarkerBlock": MarkerBlock_pb2.MarkerBlock,
+    "imulog.AnalogBlock": AnalogBlock_pb2.AnalogBlock,
+    "imulog.SignalBlock": SignalBlock_pb2.SignalBlock,
+    "imulog.IntervalEvent": IntervalEvent_pb2.IntervalEvent,
+    "foxglove.PoseInFrame": PoseInFrame_pb2.PoseInFrame,
+}
+KIND_SCHEMA = {
+    "imu": "imulog.ImuBlock",
+    "markers": "imulog.MarkerBlock",
+    "analog": "imulog.AnalogBlock",
+    "signal": "imulog.SignalBlock",
+    "intervals": "imulog.IntervalEvent",
+    "pose": "foxglove.PoseInFrame",
+}
+SCHEMA_KIND = {v: k for k, v in KIND_SCHEMA.items()}
+_I8 = np.dtype("<i8")
+_F8 = np.dtype("<f8")
+_U1 = np.dtype("u1")
+_MAX_LOG_TIME = 2**64 - 1
+
+
+class DecodeError(ValueError):
+    """A message could not be decoded into the stream type its schema promises."""
+
+
+def file_descriptor_set(schema_name: str) -> bytes:
+    """Serialized ``google.protobuf.FileDescriptorSet`` for a schema: its file and all dependencies."""
+    descriptor = MESSAGE_CLASSES[schema_name].DESCRIPTOR.file
+    ordered: list[Any] = []
+    seen: set[str] = set()
+
+    def visit(fd: Any) -> None:
+        if fd.name in seen:
+            return
+        seen.add(fd.name)
+        for dep in fd.dependencies:
+            visit(dep)
+        ordered.append(fd)
+
+    visit(descriptor)
+    fds = descriptor_pb2.FileDescriptorSet()
+    for fd in ordered:
+        fds.file.add().ParseFromString(fd.serialized_pb)
+    return fds.SerializeToString(deterministic=True)
+
+
+def stream_kind(stream: Stream) -> str:
+    for kind, cls in (
+        ("imu", ImuStream),
+        ("markers", MarkerStream),
+        ("analog", AnalogStream),
+        ("signal", SignalStream),
+        ("intervals", Intervals),
+        ("pose", PoseStream),
+    ):
+        if isinstance(stream, cls):
+            return kind
+    raise TypeError(f"not an imulog.model stream: {type(stream).__name__}")
+
+
+def log_time(t_ns: int) -> int:
+    """MCAP log times are unsigned: negative device times are clamped to 0 (the payload keeps the truth)."""
+    return min(max(int(t_ns), 0), _MAX_LOG_TIME)
+
+
+def block_bounds(t_ns: np.ndarray, block_ns: int = BLOCK_NS) -> list[tuple[int, int]]:
+    """Index ranges of consecutive samples falling in the same ``block_ns`` window (from the first sample)."""
+    n = len(t_ns)
+    if n == 0:
+        return []
+    window = (t_ns - t_ns[0]) // block_ns
+    cuts = np.flatnonzero(np.diff(window)) + 1
+    edges = [0, *cuts.tolist(), n]
+    return list(zip(edges[:-1], edges[1:], strict=True))
+
+
+def _le(a: np.ndarray | None, dtype: np.dtype, rows: slice) -> bytes:
+    if a is None:
+        return b""
+    return np.ascontiguousarray(a[rows], dtype=dtype).tobytes()
+
+
+def _stats(t_ns: np.ndarray, values: list[np.ndarray | None]) -> dict[str, str]:
+    """Channel metadata describing the samples: count, span, rate, gaps (time gaps and NaN samples)."""
+    n = len(t_ns)
+    out = {"sample_count": str(n)}
+    if n:
+        out["start_ns"] = str(int(t_ns[0]))
+        out["end_ns"] = str(int(t_ns[-1]))
+    if n > 1:
+        dt = np.diff(t_ns)
+        median = float(np.median(dt))
+        out["rate_hz"] = f"{1e9 / median:.6g}" if median > 0 else "0"
+        out["time_gaps"] = str(int(np.count_nonzero(dt > 1.5 * median))) if median > 0 else "0"
+    arrays = [v for v in values if v is not None]
+    if arrays and n:
+        finite = np.ones(n, dtype=bool)
+        for v in arrays:
+            finite &= np.isfinite(v.reshape(n, -1)).all(axis=1)
+        out["nan_samples"] = str(int(n - np.count_nonzero(finite)))
+    return out
+
+
+def encode(stream: Stream) -> tuple[str, dict[str, str], list[int], list[bytes]]:
+    """-> (schema name, channel metadata, log times, serialized messages) for one stream."""
+    kind = stream_kind(stream)
+    meta: dict[str, str] = {"kind": kind, "schema_version": str(SCHEMA_VERSION)}
+    times: list[int] = []
+    payloads: list[bytes] = []
+    if kind == "imu":
+        assert isinstance(stream, ImuStream)
+        fields = [(f, getattr(stream, f)) for f in ("acc", "gyr", "mag", "temperature")]
+        present = [f for f, v in fields if v is not None]
+        units = {"acc": "m/s^2", "gyr": "rad/s", "mag": "uT", "temperature": "degC"}
+        meta.update(
+            name=stream.name,
+            frame_id=stream.frame_id,
+            columns=json.dumps(present),
+            units=json.dumps([units[f] for f in present]),
+            meta=json.dumps(stream.meta, sort_keys=True, default=str),
+            source=str(stream.meta.get("source", "")),
+        )
+        meta.update(_stats(stream.t_ns, [v for _, v in fields]))
+        for i, j in block_bounds(stream.t_ns):
+            rows = slice(i, j)
+            msg = ImuBlock_pb2.ImuBlock(
+                schema_version=SCHEMA_VERSION,
+                sensor=stream.name,
+                frame_id=stream.frame_id,
+                count=j - i,
+                t_ns=_le(stream.t_ns, _I8, rows),
+                acc=_le(stream.acc, _F8, rows),
+                gyr=_le(stream.gyr, _F8, rows),
+                mag=_le(stream.mag, _F8, rows),
+                temperature=_le(stream.temperature, _F8, rows),
+            )
+            times.append(log_time(stream.t_ns[i]))
+            payloads.append(msg.SerializeToString())
+    elif kind == "markers":
+        assert isinstance(stream, MarkerStream)
+        meta.update(
+            name=stream.name,
+            frame_id=stream.frame_id,
+            labels=json.dumps(stream.labels),
+            units="m",
+            meta=json.dumps(stream.meta, sort_keys=True, default=str),
+            source=str(stream.meta.get("source", "")),
+        )
+        meta.update(_stats(stream.t_ns, [stream.pos]))
+        valid = np.asarray(stream.valid, dtype=bool)
+        for i, j in block_bounds(stream.t_ns):
+            rows = slice(i, j)
+            msg = MarkerBlock_pb2.MarkerBlock(
+                schema_version=SCHEMA_VERSION,
+                frame_id=stream.frame_id,
+                labels=stream.labels,
+                count=j - i,
+                t_ns=_le(stream.t_ns, _I8, rows),
+                pos=_le(stream.pos, _F8, rows),
+                valid=_le(valid, _U1, rows),
+            )
+            times.append(log_time(stream.t_ns[i]))
+            payloads.append(msg.SerializeToString())
+    elif kind in ("analog", "signal"):
+        if isinstance(stream, AnalogStream):
+            names, extra = stream.channel_names, {"name": stream.name, "frame_id": ""}
+            extra.update(
+                meta=json.dumps(stream.meta, sort_keys=True, default=str), source=str(stream.meta.get("source", ""))
+            )
+        else:
+            assert isinstance(stream, SignalStream)
+            names, extra = stream.columns, {"frame_id": stream.frame_id}
+        meta.update(extra, columns=json.dumps(list(names)), units=json.dumps(list(stream.units)))
+        meta.update(_stats(stream.t_ns, [stream.values]))
+        for i, j in block_bounds(stream.t_ns):
+            rows = slice(i, j)
+            if kind == "analog":
+                msg = AnalogBlock_pb2.AnalogBlock(
+                    schema_version=SCHEMA_VERSION,
+                    device=stream.name,
+                    channel_names=names,
+                    units=stream.units,
+                    count=j - i,
+                    t_ns=_le(stream.t_ns, _I8, rows),
+                    values=_le(stream.values, _F8, rows),
+                )
+            else:
+                msg = SignalBlock_pb2.SignalBlock(
+                    schema_version=SCHEMA_VERSION,
+                    frame_id=stream.frame_id,
+                    columns=names,
+                    units=stream.units,
+                    count=j - i,
+                    t_ns=_le(stream.t_ns, _I8, rows),
+                    values=_le(stream.values, _F8, rows),
+                )
+            times.append(log_time(stream.t_ns[i]))
+            payloads.append(msg.SerializeToString())
+    elif kind == "intervals":
+        assert isinstance(stream, Intervals)
+        meta.update(frame_id="", units="ns", sample_count=str(len(stream)))
+        if len(stream):
+            meta.update(start_ns=str(int(stream.start_ns.min())), end_ns=str(int(stream.end_ns.max())))
+        for s, e, label, k in zip(
+            stream.start_ns.tolist(), stream.end_ns.tolist(), stream.labels, stream.task_index.tolist(), strict=True
+        ):
+            msg = IntervalEvent_pb2.IntervalEvent(
+                schema_version=SCHEMA_VERSION, start_ns=s, end_ns=e, label=label, task_index=k
+            )
+            times.append(log_time(s))
+            payloads.append(msg.SerializeToString())
+    else:
+        assert isinstance(stream, PoseStream)
+        meta.update(frame_id=stream.frame_id, units="m", columns=json.dumps(["x", "y", "z", "qw", "qx", "qy", "qz"]))
+        meta.update(_stats(stream.t_ns, [stream.position, stream.orientation]))
+        msg = PoseInFrame_pb2.PoseInFrame(frame_id=stream.frame_id)
+        pos, rot = msg.pose.position, msg.pose.orientation
+        for t, p, q in zip(stream.t_ns.tolist(), stream.position.tolist(), stream.orientation.tolist(), strict=True):
+            msg.timestamp.seconds, msg.timestamp.nanos = divmod(t, 1_000_000_000)
+            pos.x, pos.y, pos.z = p
+            rot.w, rot.x, rot.y, rot.z = q
+            times.append(log_time(t))
+            payloads.append(msg.SerializeToString())
+    return KIND_SCHEMA[kind], meta, times, payloads
+
+
+# --------------------------------------------------------------------------------------------- decoding
+
+
+def _join(parts: list[bytes], dtype: np.dtype, width: int, n: int, what: str) -> np.ndarray:
+    buf = bytearray().join(parts)
+    if len(buf) != n * width * dtype.itemsize:
+        raise DecodeError(f"{what}: {len(buf)} bytes for {n} samples x {width} values")
+    a = np.frombuffer(buf, dtype=dtype).astype(dtype.newbyteorder("="), copy=False)
+    return a.reshape(n, width) if width != 1 else a
+
+
+def _check_version(msg: Any, schema_name: str) -> None:
+    if msg.schema_version > SCHEMA_VERSION:
+        raise DecodeError(
+            f"{schema_name} schema_version {msg.schema_version} is newer than this imulog understands "
+            f"({SCHEMA_VERSION}); upgrade imulog"
+        )
+
+
+class _Fallback(Exception):
+    """The fast wire-format scan met something it does not handle: use the protobuf parser."""
+
+
+class _Block:
+    """Attribute bag with the fields of one block message; bytes fields are zero-copy memoryviews."""
+
+
+def _block_specs(cls: Any) -> tuple[dict[int, tuple[str, str]], dict[str, Any]]:
+    from google.protobuf.descriptor import FieldDescriptor as FD
+
+    spec, defaults = {}, {}
+    for f in cls.DESCRIPTOR.fields:
+        if f.type == FD.TYPE_BYTES:
+            kind, default = "bytes", b""
+        elif f.type == FD.TYPE_STRING:
+            kind, default = ("rstring", None) if f.is_repeated else ("string", "")
+        elif f.type in (FD.TYPE_UINT32, FD.TYPE_UINT64):
+            kind, default = "varint", 0
+        else:  # pragma: no cover - the block schemas have no other field types
+            raise TypeError(f"unexpected field type in {cls.DESCRIPTOR.full_name}.{f.name}")
+        spec[f.number] = (f.name, kind)
+        defaults[f.name] = default
+    return spec, defaults
+
+
+_BLOCK_SPECS = {
+    name: _block_specs(MESSAGE_CLASSES[name])
+    for name in ("imulog.ImuBlock", "imulog.MarkerBlock", "imulog.AnalogBlock", "imulog.SignalBlock")
+}
+
+
+def _varint(mv: memoryview, pos: int) -> tuple[int, int]:
+    result = shift = 0
+    while True:
+        b = mv[pos]
+        pos += 1
+        result |= (b & 0x7F) << shift
+        if b < 0x80:
+            return result, pos
+        shift += 7
+        if shift > 63:
+            raise _Fallback
+
+
+def _scan_block(schema_name: str, payload: bytes | memoryview) -> _Block:
+    """Parse a block message's wire format directly, keeping bytes fields as views (no copies)."""
+    spec, defaults = _BLOCK_SPECS[schema_name]
+    obj = _Block()
+    for name, default in defaults.items():
+        setattr(obj, name, [] if default is None else default)
+    mv = memoryview(payload)
+    n = len(mv)
+    pos = 0
+    try:
+        while pos < n:
+            key, pos = _varint(mv, pos)
+            number, wire = key >> 3, key & 7
+            if wire == 0:
+                value, pos = _varint(mv, pos)
+            elif wire == 2:
+                length, pos = _varint(mv, pos)
+                end = pos + length
+                if end > n:
+                    raise _Fallback
+                value, pos = mv[pos:end], end
+            elif wire == 1:
+                value, pos = None, pos + 8
+            elif wire == 5:
+                value, pos = None, pos + 4
+            else:
+                raise _Fallback
+            field = spec.get(number)
+            if field is None:
+                continue  # unknown field (a newer writer): ignored, as protobuf does
+            name, kind = field
+            if kind == "varint":
+                if wire != 0:
+                    raise _Fallback
+                setattr(obj, name, value)
+            elif wire != 2:
+                raise _Fallback
+            elif kind == "bytes":
+                setattr(obj, name, value)
+            elif kind == "string":
+                setattr(obj, name, str(value, "utf-8"))
+            else:
+                getattr(obj, name).append(str(value, "utf-8"))
+    except (IndexError, UnicodeDecodeError):
+        raise _Fallback from None
+    if pos != n:
+        raise _Fallback
+    return obj
+
+
+def _parse_all(schema_name: str, payloads: Sequence[bytes | memoryview]) -> list[Any]:
+    cls = MESSAGE_CLASSES[schema_name]
+    fast = schema_name in _BLOCK_SPECS
+    out = []
+    for p in payloads:
+        if fast:
+            try:
+                out.append(_scan_block(schema_name, p))
+                continue
+            except _Fallback:
+                pass
+        try:
+            out.append(cls.FromString(p))
+        except Exception as exc:  # protobuf raises DecodeError subclasses of Exception
+            raise DecodeError(f"message {len(out)} does not parse as {schema_name}: {exc}") from exc
+    return out
+
+
+def _json_meta(meta: dict[str, str], key: str, default: Any) -> Any:
+    try:
+        return json.loads(meta[key])
+    except (KeyError, ValueError):
+        return default
+
+
+def decode(schema_name: str, topic: str, meta: dict[str, str], payloads: Sequence[bytes | memoryview]) -> Stream:
+    """Rebuild the imulog.model stream of one channel from its messages (in log order)."""
+    if schema_name not in MESSAGE_CLASSES:
+        raise DecodeError(f"{topic}: schema {schema_name!r} is not an imulog stream type")
+    msgs = _parse_all(schema_name, payloads)
+    kind = SCHEMA_KIND[schema_name]
+    name = meta.get("name") or topic.rstrip("/").rsplit("/", 1)[-1]
+    if kind in ("imu", "markers", "analog", "signal"):
+        for msg in msgs:
+            _check_version(msg, schema_name)
+        counts = [msg.count for msg in msgs]
+        n = int(sum(counts))
+        t = _join([msg.t_ns for msg in msgs], _I8, 1, n, f"{topic} t_ns")
+    if kind == "imu":
+        columns = _json_meta(meta, "columns", None)
+        values: dict[str, np.ndarray | None] = {}
+        for f, width in (("acc", 3), ("gyr", 3), ("mag", 3), ("temperature", 1)):
+            parts = [getattr(msg, f) for msg in msgs]
+            present = any(parts) if msgs else (columns is not None and f in columns)
+            if msgs and present and not all(parts[k] or counts[k] == 0 for k in range(len(parts))):
+                raise DecodeError(f"{topic}: field {f} present in some blocks only")
+            values[f] = _join(parts, _F8, width, n, f"{topic} {f}") if present else None
+        return ImuStream(
+            name=name,
+            t_ns=t,
+            frame_id=meta.get("frame_id", ""),
+            meta=_json_meta(meta, "meta", {}),
+            **values,
+        )
+    if kind == "markers":
+        labels = list(msgs[0].labels) if msgs else _json_meta(meta, "labels", [])
+        for msg in msgs:
+            if list(msg.labels) != labels:
+                raise DecodeError(f"{topic}: marker labels change between blocks")
+        m = len(labels)
+        pos = _join([msg.pos for msg in msgs], _F8, m * 3, n, f"{topic} pos").reshape(n, m, 3)
+        valid = _join([msg.valid for msg in msgs], _U1, m, n, f"{topic} valid").reshape(n, m).astype(bool)
+        return MarkerStream(
+            name=name,
+            t_ns=t,
+            labels=labels,
+            pos=pos,
+            valid=valid,
+            frame_id=msgs[0].frame_id if msgs else meta.get("frame_id", "world"),
+            meta=_json_meta(meta, "meta", {}),
+        )
+    if kind in ("analog", "signal"):
+        if msgs:
+            names = list(msgs[0].channel_names if kind == "analog" else msgs[0].columns)
+            units = list(msgs[0].units)
+        else:
+            names, units = _json_meta(meta, "columns", []), _json_meta(meta, "units", [])
+        values = _join([msg.values for msg in msgs], _F8, len(names), n, f"{topic} values").reshape(n, len(names))
+        if kind == "analog":
+            return AnalogStream(
+                name=name, t_ns=t, channel_names=names, units=units, values=values, meta=_json_meta(meta, "meta", {})
+            )
+        frame = msgs[0].frame_id if msgs else meta.get("frame_id", "")
+        return SignalStream(topic=topic, t_ns=t, columns=names, units=units, values=values, frame_id=frame)
+    if kind == "intervals":
+        for msg in msgs:
+            _check_version(msg, schema_name)
+        return Intervals(
+            topic=topic,
+            start_ns=np.array([msg.start_ns for msg in msgs], dtype=np.int64),
+            end_ns=np.array([msg.end_ns for msg in msgs], dtype=np.int64),
+            labels=[msg.label for msg in msgs],
+            task_index=np.array([msg.task_index for msg in msgs], dtype=np.int64),
+        )
+    n = len(msgs)
+    t = np.fromiter((msg.timestamp.seconds * 1_000_000_000 + msg.timestamp.nanos for msg in msgs), np.int64, n)
+    arr = np.fromiter(
+        (
+            v
+            for msg in msgs
+            for v in (
+                msg.pose.position.x,
+                msg.pose.position.y,
+                msg.pose.position.z,
+                msg.pose.orientation.w,
+                msg.pose.orientation.x,
+                msg.pose.orientation.y,
+                msg.pose.orientation.z,
+            )
+        ),
+        np.float64,
+        n * 7,
+    ).reshape(n, 7)
+    frame = msgs[0].frame_id if msgs else meta.get("frame_id", "world")
+    return PoseStream(topic=topic, t_ns=t, position=arr[:, :3].copy(), orientation=arr[:, 3:].copy(), frame_id=frame)
+
+
+def stream_topic(stream: Stream) -> str:
+    return stream.topic
+
+
+def select_time(stream: Stream, start_ns: int | None, end_ns: int | None) -> Stream:
+    """Samples with ``start_ns <= t < end_ns`` (intervals: those overlapping that range)."""
+    if start_ns is None and end_ns is None:
+        return stream
+    lo = -(2**63) if start_ns is None else int(start_ns)
+    hi = 2**63 - 1 if end_ns is None else int(end_ns)
+    if isinstance(stream, Intervals):
+        keep = (stream.end_ns >= lo) & (stream.start_ns < hi)
+        return Intervals(
+            topic=stream.topic,
+            start_ns=stream.start_ns[keep],
+            end_ns=stream.end_ns[keep],
+            labels=[label for label, k in zip(stream.labels, keep, strict=True) if k],
+            task_index=stream.task_index[keep],
+        )
+    t = stream.t_ns
+    if len(t) < 2 or bool(np.all(t[1:] >= t[:-1])):
+        i, j = int(np.searchsorted(t, lo, "left")), int(np.searchsorted(t, hi, "left"))
+        rows: slice | np.ndarray = slice(i, j)
+    else:  # a clock that jumps back (device reset): select sample by sample
+        rows = np.flatnonzero((t >= lo) & (t < hi))
+    if isinstance(stream, ImuStream):
+        return ImuStream(
+            name=stream.name,
+            t_ns=t[rows],
+            acc=None if stream.acc is None else stream.acc[rows],
+            gyr=None if stream.gyr is None else stream.gyr[rows],
+            mag=None if stream.mag is None else stream.mag[rows],
+            temperature=None if stream.temperature is None else stream.temperature[rows],
+            frame_id=stream.frame_id,
+            meta=stream.meta,
+        )
+    if isinstance(stream, MarkerStream):
+        return MarkerStream(
+            name=stream.name,
+            t_ns=t[rows],
+            labels=stream.labels,
+            pos=stream.pos[rows],
+            valid=stream.valid[rows],
+            frame_id=stream.frame_id,
+            meta=stream.meta,
+        )
+    if isinstance(stream, AnalogStream):
+        return AnalogStream(stream.name, t[rows], stream.channel_names, stream.units, stream.values[rows], stream.meta)
+    if isinstance(stream, SignalStream):
+        return SignalStream(stream.topic, t[rows], stream.columns, stream.units, stream.values[rows], stream.frame_id)
+    assert isinstance(stream, PoseStream)
+    return PoseStream(stream.topic, t[rows], stream.position[rows], stream.orientation[rows], stream.frame_id)

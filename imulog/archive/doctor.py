@@ -1,0 +1,331 @@
+"""Validate a trial file: structure, CRCs, summary/statistics consistency, decodability, content hashes.
+
+Every byte of an MCAP file written by imulog is covered by a check: the data section by its CRC (and each
+chunk by its own), the summary and footer by the summary CRC, the magic bytes directly. So a single flipped
+byte or a truncation anywhere is reported.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import zlib
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+from imulog.archive import _mcap as m
+from imulog.archive import codec
+from imulog.archive.errors import ArchiveError
+from imulog.archive.writer import payload_hash, raw_digest
+
+
+@dataclass
+class DoctorReport:
+    path: Path
+    problems: list[str] = field(default_factory=list)
+    checks: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems
+
+    def fail(self, message: str) -> None:
+        self.problems.append(message)
+
+
+@dataclass
+class _ChunkSeen:
+    offset: int
+    length: int
+    start: int
+    end: int
+    compressed_size: int
+    uncompressed_size: int
+    compression: str
+    counts: dict[int, int]
+
+
+def _walk_data_section(f, summary: m.Summary, report: DoctorReport) -> dict | None:
+    """Read the data section record by record; check CRCs; return what was found (None on a fatal error)."""
+    found: dict = {
+        "schemas": {},
+        "channels": {},
+        "chunks": {},
+        "message_indexes": {},
+        "attachments": {},
+        "metadata": {},
+        "counts": defaultdict(int),
+    }
+    limit = summary.data_end_offset
+    f.seek(0)
+    crc = zlib.crc32(f.read(len(m.MAGIC)))
+    pos = len(m.MAGIC)
+    first = True
+    last_chunk: _ChunkSeen | None = None
+    last_chunk_msgs: dict[int, list[tuple[int, int]]] = {}
+    while pos < limit:
+        head = f.read(9)
+        if len(head) < 9 or pos + 9 > limit:
+            report.fail(f"truncated record header at byte {pos}")
+            return None
+        op, length = m._REC.unpack(head)
+        if pos + 9 + length > limit:
+            report.fail(
+                f"{m.OP_NAMES.get(op, hex(op))} record at byte {pos} claims {length} bytes, past the data section"
+            )
+            return None
+        body = f.read(length)
+        crc = zlib.crc32(body, zlib.crc32(head, crc))
+        where = f"{m.OP_NAMES.get(op, hex(op))} record at byte {pos}"
+        try:
+            if first and op != m.Op.HEADER:
+                report.fail(f"first record is not a Header (byte {pos})")
+            first = False
+            if op == m.Op.SCHEMA:
+                rec = m.parse_schema(body)
+                found["schemas"][rec.id] = rec
+            elif op == m.Op.CHANNEL:
+                rec = m.parse_channel(body)
+                found["channels"][rec.id] = rec
+            elif op == m.Op.CHUNK:
+                ch = m.parse_chunk(body)
+                try:
+                    raw = m.decompress(ch.compression, ch.data, ch.uncompressed_size)
+                except Exception as exc:
+                    report.fail(f"{where}: does not decompress ({exc})")
+                    raw = None
+                counts: dict[int, int] = defaultdict(int)
+                msgs: dict[int, list[tuple[int, int]]] = defaultdict(list)
+                if raw is not None:
+                    if len(raw) != ch.uncompressed_size:
+                        report.fail(f"{where}: uncompressed size {len(raw)} != recorded {ch.uncompressed_size}")
+                    if ch.uncompressed_crc != 0 and zlib.crc32(raw) != ch.uncompressed_crc:
+                        report.fail(f"{where}: chunk CRC mismatch")
+                    times = []
+                    for op2, off2, body2 in m.iter_records(raw):
+                        if op2 == m.Op.SCHEMA:  # other writers put schemas and channels inside chunks
+                            rec = m.parse_schema(body2)
+                            found["schemas"][rec.id] = rec
+                        elif op2 == m.Op.CHANNEL:
+                            rec = m.parse_channel(body2)
+                            found["channels"][rec.id] = rec
+                        if op2 != m.Op.MESSAGE:
+                            continue
+                        if len(body2) < 22:
+                            raise m.McapFormatError("message record too short")
+                        cid = m._H.unpack_from(body2, 0)[0]
+                        t = m._Q.unpack_from(body2, 6)[0]
+                        counts[cid] += 1
+                        times.append(t)
+                        msgs[cid].append((t, off2))
+                    if times and (min(times) != ch.message_start_time or max(times) != ch.message_end_time):
+                        report.fail(f"{where}: message times outside the chunk's recorded start/end")
+                    for cid, n in counts.items():
+                        found["counts"][cid] += n
+                last_chunk = _ChunkSeen(
+                    pos,
+                    9 + length,
+                    ch.message_start_time,
+                    ch.message_end_time,
+                    len(ch.data),
+                    ch.uncompressed_size,
+                    ch.compression,
+                    dict(counts),
+                )
+                last_chunk_msgs = msgs
+                found["chunks"][pos] = last_chunk
+            elif op == m.Op.MESSAGE_INDEX:
+                c = m.Cursor(body)
+                cid = c.u16()
+                n = c.u32()
+                entries = [(c.u64(), c.u64()) for _ in range(n // 16)]
+                found["message_indexes"][pos] = (cid, 9 + length)
+                if last_chunk is None:
+                    report.fail(f"{where}: message index without a preceding chunk")
+                elif sorted(entries) != sorted(last_chunk_msgs.get(cid, [])):
+                    report.fail(f"{where}: message index of channel {cid} disagrees with its chunk")
+            elif op == m.Op.MESSAGE:
+                found["counts"][m._H.unpack_from(body, 0)[0]] += 1
+            elif op == m.Op.ATTACHMENT:
+                rec = m.parse_attachment(body)
+                if rec.crc != 0 and rec.crc != rec.computed_crc:
+                    report.fail(f"{where}: attachment {rec.name!r} CRC mismatch")
+                found["attachments"][pos] = (rec, 9 + length)
+            elif op == m.Op.METADATA:
+                name, items = m.parse_metadata(body)
+                found["metadata"][pos] = (name, 9 + length)
+            elif op in (m.Op.DATA_END, m.Op.FOOTER):
+                report.fail(f"{where}: unexpected {m.OP_NAMES[op]} inside the data section")
+        except m.McapFormatError as exc:
+            report.fail(f"{where}: {exc}")
+        pos += 9 + length
+    if summary.data_section_crc == 0:
+        report.checks.append("data section CRC not recorded (0): skipped")
+    elif crc != summary.data_section_crc:
+        report.fail(f"data section CRC mismatch (stored {summary.data_section_crc:#010x}, computed {crc:#010x})")
+    else:
+        report.checks.append("data section CRC ok")
+    return found
+
+
+def _check_summary(summary: m.Summary, found: dict, report: DoctorReport) -> None:
+    n0 = len(report.problems)
+    for sid, s in summary.schemas.items():
+        if sid not in found["schemas"] or found["schemas"][sid] != s:
+            report.fail(f"summary schema {sid} ({s.name}) differs from the data section")
+    for cid, c in summary.channels.items():
+        if cid not in found["channels"] or found["channels"][cid] != c:
+            report.fail(f"summary channel {cid} ({c.topic}) differs from the data section")
+    for cid in found["channels"]:
+        if cid not in summary.channels:
+            report.fail(f"channel {cid} of the data section is missing from the summary")
+    indexed = {ci.chunk_start_offset: ci for ci in summary.chunk_indexes}
+    if set(indexed) != set(found["chunks"]):
+        report.fail(f"summary indexes {len(indexed)} chunks, data section has {len(found['chunks'])}")
+    for off, seen in found["chunks"].items():
+        ci = indexed.get(off)
+        if ci is None:
+            continue
+        if (ci.chunk_length, ci.message_start_time, ci.message_end_time, ci.compressed_size, ci.uncompressed_size) != (
+            seen.length,
+            seen.start,
+            seen.end,
+            seen.compressed_size,
+            seen.uncompressed_size,
+        ):
+            report.fail(f"chunk index for byte {off} disagrees with the chunk")
+        if set(ci.message_index_offsets) != set(seen.counts):
+            report.fail(
+                f"chunk index for byte {off} lists channels {sorted(ci.message_index_offsets)}, chunk has {sorted(seen.counts)}"
+            )
+        for cid, mi_off in ci.message_index_offsets.items():
+            if found["message_indexes"].get(mi_off, (None,))[0] != cid:
+                report.fail(f"chunk index for byte {off} points at no message index of channel {cid}")
+    att = found["attachments"]
+    if {(a.offset, a.length) for a in summary.attachment_indexes} != {(o, ln) for o, (_, ln) in att.items()}:
+        report.fail("attachment indexes disagree with the attachments in the data section")
+    for a in summary.attachment_indexes:
+        if a.offset in att and (att[a.offset][0].name, len(att[a.offset][0].data)) != (a.name, a.data_size):
+            report.fail(f"attachment index {a.name!r} disagrees with its attachment")
+    md = found["metadata"]
+    if {(x.offset, x.length, x.name) for x in summary.metadata_indexes} != {(o, ln, nm) for o, (nm, ln) in md.items()}:
+        report.fail("metadata indexes disagree with the metadata records in the data section")
+    st = summary.statistics
+    if st is None:
+        report.fail("summary has no statistics record")
+    else:
+        counts = {k: v for k, v in found["counts"].items()}
+        expect = {cid: counts.get(cid, 0) for cid in found["channels"]}
+        if {k: v for k, v in st.channel_message_counts.items()} != expect:
+            report.fail("statistics per-channel message counts disagree with the data")
+        checks = {
+            "message_count": sum(counts.values()),
+            "schema_count": len(found["schemas"]),
+            "channel_count": len(found["channels"]),
+            "attachment_count": len(att),
+            "metadata_count": len(md),
+            "chunk_count": len(found["chunks"]),
+        }
+        for key, value in checks.items():
+            if getattr(st, key) != value:
+                report.fail(f"statistics {key} = {getattr(st, key)}, data section has {value}")
+        if found["chunks"]:
+            start = min(c.start for c in found["chunks"].values())
+            end = max(c.end for c in found["chunks"].values())
+            if (st.message_start_time, st.message_end_time) != (start, end):
+                report.fail("statistics message start/end times disagree with the chunks")
+    if len(report.problems) == n0:
+        report.checks.append("summary, indexes and statistics consistent")
+
+
+def _generic_decode(schema: m.SchemaRec, payload: bytes) -> None:
+    """Decode one message with only the FileDescriptorSet embedded in the file (no imulog classes)."""
+    fds = descriptor_pb2.FileDescriptorSet.FromString(schema.data)
+    pool = descriptor_pool.DescriptorPool()
+    for fd in fds.file:
+        pool.Add(fd)
+    cls = message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))
+    cls.FromString(payload)
+
+
+def check_file(path: str | os.PathLike[str], *, decode: bool = True) -> DoctorReport:
+    """Run every check on ``path``; ``report.problems`` is empty when the file is sound."""
+    from imulog.archive.reader import TrialReader
+
+    path = Path(path)
+    report = DoctorReport(path)
+    try:
+        f = open(path, "rb")  # noqa: SIM115
+    except OSError as exc:
+        report.fail(f"cannot open: {exc.strerror or exc}")
+        return report
+    with f:
+        size = os.fstat(f.fileno()).st_size
+        try:
+            summary = m.read_summary(f, size)
+        except m.McapFormatError as exc:
+            report.fail(str(exc))
+            return report
+        report.checks.append("magic, footer and summary CRC ok")
+        found = _walk_data_section(f, summary, report)
+        if found is None:
+            return report
+        _check_summary(summary, found, report)
+    if report.problems or not decode:
+        return report
+    try:
+        with TrialReader(path) as trial:
+            hashes: dict[str, str] = {}
+            for info in trial.channels:
+                rec = trial.summary.channels[info.channel_id]
+                schema = trial.summary.schemas.get(rec.schema_id)
+                payloads = trial.messages(info.topic)
+                if schema is None:
+                    report.fail(f"{info.topic}: no schema")
+                    continue
+                try:
+                    if payloads and schema.encoding == "protobuf":
+                        _generic_decode(schema, bytes(payloads[0]))
+                    elif payloads and rec.message_encoding == "json":
+                        json.loads(bytes(payloads[0]))
+                    if schema.name in codec.MESSAGE_CLASSES:
+                        stream = codec.decode(schema.name, info.topic, rec.metadata, payloads)
+                        if "sample_count" in rec.metadata and len(stream) != int(rec.metadata["sample_count"]):
+                            report.fail(
+                                f"{info.topic}: {len(stream)} samples, metadata says {rec.metadata['sample_count']}"
+                            )
+                except Exception as exc:
+                    report.fail(f"{info.topic}: does not decode ({exc})")
+                    continue
+                digest = payload_hash(payloads)
+                hashes[info.topic] = digest
+                if "sha256" in rec.metadata and rec.metadata["sha256"] != digest:
+                    report.fail(f"{info.topic}: content hash differs from the one recorded at write time")
+            report.checks.append(f"{len(hashes)} channels decode")
+            raw = trial.metadata.get("imulog.raw")
+            if raw is None:
+                report.checks.append("no imulog.raw record: raw-data hash not checked")
+            else:
+                attached = {a.name: a.sha256 for a in trial.attachments()}
+                for topic, digest in raw.get("channels", {}).items():
+                    if topic not in hashes:
+                        report.fail(f"raw channel {topic} recorded at conversion is missing")
+                    elif hashes[topic] != digest:
+                        report.fail(f"raw channel {topic} changed since conversion (hash mismatch)")
+                for name, digest in raw.get("attachments", {}).items():
+                    if attached.get(name) != digest:
+                        report.fail(f"attachment {name!r} changed or missing since conversion")
+                now = raw_digest(
+                    {t: hashes.get(t, "") for t in raw.get("channels", {})},
+                    {n: attached.get(n, "") for n in raw.get("attachments", {})},
+                )
+                if now != raw.get("sha256"):
+                    report.fail("raw-data hash differs from the one recorded at conversion")
+                else:
+                    report.checks.append("raw-data hash ok")
+    except ArchiveError as exc:
+        report.fail(str(exc))
+    return report

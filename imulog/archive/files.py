@@ -1,0 +1,97 @@
+"""Atomic file replacement and the writer lock.
+
+Every write goes to a temporary file beside the target (``.NAME.PID.tmp``), is fsynced and then moved over
+the target with :func:`os.replace`, so a reader or a crash never sees a half-written archive. A lock file
+(``.NAME.lock``, held with ``flock``) refuses a second writer; the kernel releases it when the holder dies,
+so a killed writer never leaves a stale lock.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import fcntl
+import os
+from collections.abc import Iterator
+from pathlib import Path
+from typing import BinaryIO
+
+from imulog.archive.errors import ArchiveLockedError
+
+
+def lock_path(path: Path) -> Path:
+    return path.with_name(f".{path.name}.lock")
+
+
+def temp_path(path: Path) -> Path:
+    return path.with_name(f".{path.name}.{os.getpid()}.tmp")
+
+
+@contextlib.contextmanager
+def writer_lock(path: str | os.PathLike[str]) -> Iterator[None]:
+    """Hold the exclusive writer lock of ``path``; raise ArchiveLockedError if another process holds it."""
+    path = Path(path)
+    lp = lock_path(path)
+    while True:
+        fd = os.open(lp, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            os.close(fd)
+            if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                raise
+            try:
+                holder = lp.read_text().strip() or "?"
+            except OSError:
+                holder = "?"
+            raise ArchiveLockedError(
+                f"{path}: another process (pid {holder}) is writing this archive; try again when it has finished"
+            ) from None
+        # The previous holder may have unlinked the lock file between our open and flock: retry then.
+        try:
+            same = os.fstat(fd).st_ino == os.stat(lp).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, str(os.getpid()).encode())
+        # Temporary files of writers that died (SIGKILL) can be removed now: nobody else writes.
+        for stale in path.parent.glob(f".{path.name}.*.tmp"):
+            with contextlib.suppress(OSError):
+                stale.unlink()
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            lp.unlink()
+        os.close(fd)
+
+
+def fsync_dir(directory: Path) -> None:
+    with contextlib.suppress(OSError):
+        fd = os.open(directory, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+@contextlib.contextmanager
+def atomic_output(path: Path) -> Iterator[BinaryIO]:
+    """Yield a file object for ``path``'s temp file; on success fsync + os.replace, on error remove it."""
+    tmp = temp_path(path)
+    f = open(tmp, "wb")  # noqa: SIM115 - closed below on every path
+    try:
+        yield f
+        f.flush()
+        os.fsync(f.fileno())
+        f.close()
+        os.replace(tmp, path)
+        fsync_dir(path.parent)
+    except BaseException:
+        f.close()
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise

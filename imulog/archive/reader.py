@@ -1,0 +1,346 @@
+"""Read a trial: channels, metadata, attachments, and any channel as numpy / pandas / pyarrow.
+
+Only the chunks holding the requested channel (and overlapping the requested time range) are read and
+decompressed; the messages' packed arrays are joined once and viewed with ``numpy.frombuffer``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from imulog.archive import _mcap as m
+from imulog.archive import codec
+from imulog.archive.errors import ArchiveCorruptError, ArchiveError
+from imulog.archive.metadata import decode_record
+from imulog.archive.writer import payload_hash
+from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream, Stream
+
+_POOL = None
+
+
+def _pool():
+    """A small shared thread pool for chunk decompression."""
+    global _POOL
+    if _POOL is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _POOL = ThreadPoolExecutor(max_workers=min(2, os.cpu_count() or 1), thread_name_prefix="imulog-zstd")
+    return _POOL
+
+
+def _forget_pool() -> None:  # a forked child does not inherit the pool's threads
+    global _POOL
+    _POOL = None
+
+
+os.register_at_fork(after_in_child=_forget_pool)
+
+
+@dataclass
+class ChannelInfo:
+    """One channel as listed in the file's summary (no data read)."""
+
+    topic: str
+    schema_name: str
+    message_count: int
+    sample_count: int
+    start_ns: int | None
+    end_ns: int | None
+    rate_hz: float | None
+    metadata: dict[str, str] = field(default_factory=dict)
+    channel_id: int = -1
+
+    @property
+    def kind(self) -> str:
+        return self.metadata.get("kind") or codec.SCHEMA_KIND.get(self.schema_name, "unknown")
+
+    @property
+    def derived(self) -> bool:
+        return self.topic.startswith("/derived/")
+
+    @property
+    def duration_s(self) -> float | None:
+        if self.start_ns is None or self.end_ns is None:
+            return None
+        return (self.end_ns - self.start_ns) / 1e9
+
+    @property
+    def params(self) -> dict[str, Any] | None:
+        """Parsed ``params`` of a derived channel (None for raw channels)."""
+        return json.loads(self.metadata["params"]) if "params" in self.metadata else None
+
+    @property
+    def inputs(self) -> dict[str, str] | None:
+        """Parsed ``inputs`` (topic -> content hash) of a derived channel."""
+        return json.loads(self.metadata["inputs"]) if "inputs" in self.metadata else None
+
+
+@dataclass
+class Attachment:
+    name: str
+    media_type: str
+    data: bytes
+    sha256: str
+    log_time: int = 0
+
+
+def _int(meta: dict[str, str], key: str) -> int | None:
+    try:
+        return int(meta[key])
+    except (KeyError, ValueError):
+        return None
+
+
+class TrialReader:
+    """Open a trial file for reading: ``with TrialReader(path) as trial: trial.read("/imu/wrist")``."""
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = Path(path)
+        try:
+            self._f = open(self.path, "rb")  # noqa: SIM115 - closed in close()
+        except OSError as exc:
+            raise ArchiveError(f"{self.path}: {exc.strerror or exc}") from exc
+        try:
+            size = os.fstat(self._f.fileno()).st_size
+            self.summary = m.read_summary(self._f, size)
+        except m.McapFormatError as exc:
+            self._f.close()
+            raise ArchiveCorruptError(f"{self.path}: {exc}") from exc
+        self._metadata: dict[str, dict[str, Any]] | None = None
+        self._by_topic = {c.topic: c for c in self.summary.channels.values()}
+
+    # ------------------------------------------------------------------ context manager
+    def __enter__(self) -> TrialReader:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._f.close()
+
+    # ------------------------------------------------------------------ listing
+    @property
+    def channels(self) -> list[ChannelInfo]:
+        stats = self.summary.statistics
+        counts = stats.channel_message_counts if stats else {}
+        out = []
+        for c in sorted(self.summary.channels.values(), key=lambda c: c.id):
+            schema = self.summary.schemas.get(c.schema_id)
+            meta = dict(c.metadata)
+            rate = meta.get("rate_hz")
+            out.append(
+                ChannelInfo(
+                    topic=c.topic,
+                    schema_name=schema.name if schema else "",
+                    message_count=int(counts.get(c.id, 0)),
+                    sample_count=_int(meta, "sample_count") if "sample_count" in meta else int(counts.get(c.id, 0)),
+                    start_ns=_int(meta, "start_ns"),
+                    end_ns=_int(meta, "end_ns"),
+                    rate_hz=float(rate) if rate else None,
+                    metadata=meta,
+                    channel_id=c.id,
+                )
+            )
+        return out
+
+    def topics(self) -> list[str]:
+        return [c.topic for c in self.channels]
+
+    def channel(self, topic: str) -> ChannelInfo:
+        for c in self.channels:
+            if c.topic == topic:
+                return c
+        known = ", ".join(self.topics()) or "none"
+        raise ArchiveError(f"{self.path}: no channel {topic!r} (channels: {known})")
+
+    # ------------------------------------------------------------------ metadata & attachments
+    @property
+    def metadata(self) -> dict[str, dict[str, Any]]:
+        """Metadata records by name; when a name was written more than once the last record wins."""
+        if self._metadata is None:
+            out: dict[str, dict[str, Any]] = {}
+            for idx in sorted(self.summary.metadata_indexes, key=lambda i: i.offset):
+                name, items = self._read_metadata(idx)
+                out[name] = decode_record(items)
+            self._metadata = out
+        return self._metadata
+
+    def _read_metadata(self, idx: m.MetadataIndexRec) -> tuple[str, dict[str, str]]:
+        try:
+            body = m.read_record_at(self._f, idx.offset, m.Op.METADATA, self.summary.data_end_offset)
+            return m.parse_metadata(body)
+        except m.McapFormatError as exc:
+            raise ArchiveCorruptError(f"{self.path}: metadata {idx.name!r}: {exc}") from exc
+
+    def runs(self) -> dict[int, dict[str, Any]]:
+        """The ``imulog.run.<n>`` provenance records, by run number."""
+        out = {}
+        for name, rec in self.metadata.items():
+            if name.startswith("imulog.run."):
+                try:
+                    out[int(name.rsplit(".", 1)[1])] = rec
+                except ValueError:
+                    continue
+        return dict(sorted(out.items()))
+
+    def attachments(self) -> list[Attachment]:
+        out = []
+        for idx in sorted(self.summary.attachment_indexes, key=lambda i: i.offset):
+            try:
+                body = m.read_record_at(self._f, idx.offset, m.Op.ATTACHMENT, self.summary.data_end_offset)
+                rec = m.parse_attachment(body)
+            except m.McapFormatError as exc:
+                raise ArchiveCorruptError(f"{self.path}: attachment {idx.name!r}: {exc}") from exc
+            if rec.crc != 0 and rec.crc != rec.computed_crc:
+                raise ArchiveCorruptError(f"{self.path}: attachment {idx.name!r} fails its CRC")
+            out.append(
+                Attachment(rec.name, rec.media_type, rec.data, hashlib.sha256(rec.data).hexdigest(), rec.log_time)
+            )
+        return out
+
+    # ------------------------------------------------------------------ data
+    def _channel_rec(self, topic: str) -> m.ChannelRec:
+        rec = self._by_topic.get(topic)
+        if rec is None:
+            known = ", ".join(sorted(self._by_topic)) or "none"
+            raise ArchiveError(f"{self.path}: no channel {topic!r} (channels: {known})")
+        return rec
+
+    def iter_chunks(self, channel_id: int, start_ns: int | None = None, end_ns: int | None = None):
+        """Decompressed bytes of the chunks holding ``channel_id`` (time-pruned), in time order.
+
+        Chunks are read sequentially and decompressed on two threads (zstd releases the GIL).
+        """
+        # Chunks in file order = write order (kept as is, so even a non-monotonic clock round-trips).
+        idxs = [ci for ci in self.summary.chunk_indexes if channel_id in ci.message_index_offsets]
+        idxs.sort(key=lambda ci: ci.chunk_start_offset)
+        lo = None if start_ns is None else codec.log_time(start_ns)
+        hi = None if end_ns is None else codec.log_time(end_ns)
+        monotonic = all(a.message_end_time <= b.message_start_time for a, b in zip(idxs, idxs[1:], strict=False))
+        selected = []
+        for k, ci in enumerate(idxs):
+            if monotonic and hi is not None and ci.message_start_time > hi:
+                continue
+            # Blocks start at their first sample: a chunk may hold samples up to the next chunk's start.
+            if monotonic and lo is not None and k + 1 < len(idxs) and idxs[k + 1].message_start_time < lo:
+                continue
+            selected.append(ci)
+        records = [(ci, self._chunk_record(ci)) for ci in selected]
+        if len(records) > 1:
+            return list(_pool().map(lambda r: self._decompress(*r), records))
+        return [self._decompress(*r) for r in records]
+
+    def _chunk_record(self, ci: m.ChunkIndexRec) -> m.ChunkRec:
+        try:
+            body = m.read_record_at(self._f, ci.chunk_start_offset, m.Op.CHUNK, self.summary.data_end_offset)
+            return m.parse_chunk(body)
+        except m.McapFormatError as exc:
+            raise ArchiveCorruptError(f"{self.path}: chunk at byte {ci.chunk_start_offset}: {exc}") from exc
+
+    def _decompress(self, ci: m.ChunkIndexRec, chunk: m.ChunkRec) -> bytes:
+        try:
+            return m.decompress(chunk.compression, chunk.data, chunk.uncompressed_size)
+        except Exception as exc:
+            raise ArchiveCorruptError(f"{self.path}: chunk at byte {ci.chunk_start_offset}: {exc}") from exc
+
+    def messages(self, topic: str, start_ns: int | None = None, end_ns: int | None = None) -> list[memoryview]:
+        """Raw serialized messages of a channel in write order (pruned to chunks overlapping the range)."""
+        rec = self._channel_rec(topic)
+        out: list[memoryview] = []
+        try:
+            for data in self.iter_chunks(rec.id, start_ns, end_ns):
+                out.extend(payload for _, _, payload in m.chunk_messages(data, rec.id))
+        except m.McapFormatError as exc:
+            raise ArchiveCorruptError(f"{self.path}: {topic}: {exc}") from exc
+        return out
+
+    def read(self, topic: str, start_ns: int | None = None, end_ns: int | None = None) -> Stream:
+        """The channel as its imulog.model stream, restricted to ``start_ns <= t < end_ns`` when given."""
+        rec = self._channel_rec(topic)
+        schema = self.summary.schemas.get(rec.schema_id)
+        if schema is None:
+            raise ArchiveError(f"{self.path}: channel {topic!r} has no schema")
+        payloads = self.messages(topic, start_ns, end_ns)
+        try:
+            stream = codec.decode(schema.name, topic, rec.metadata, payloads)
+        except codec.DecodeError as exc:
+            raise ArchiveCorruptError(f"{self.path}: {exc}") from exc
+        return codec.select_time(stream, start_ns, end_ns)
+
+    def channel_hash(self, topic: str) -> str:
+        """Content hash of a channel (SHA-256 over its messages), as recorded in provenance."""
+        rec = self._channel_rec(topic)
+        recorded = rec.metadata.get("sha256")
+        return recorded if recorded else payload_hash(self.messages(topic))
+
+    def compute_channel_hash(self, topic: str) -> str:
+        """Recompute the content hash from the data (what ``doctor`` compares with the recorded one)."""
+        return payload_hash(self.messages(topic))
+
+    # ------------------------------------------------------------------ tables
+    def read_columns(self, topic: str, start_ns: int | None = None, end_ns: int | None = None) -> dict[str, Any]:
+        """The channel as flat named columns (``t_ns`` first): numpy arrays, labels as lists."""
+        return stream_columns(self.read(topic, start_ns, end_ns))
+
+    def read_arrow(self, topic: str, start_ns: int | None = None, end_ns: int | None = None):
+        """The channel as a ``pyarrow.Table`` (zero-copy from the numpy columns where possible)."""
+        import pyarrow as pa
+
+        cols = self.read_columns(topic, start_ns, end_ns)
+        info = self.channel(topic)
+        table = pa.table({k: pa.array(v) for k, v in cols.items()})
+        keep = ("units", "frame_id", "kind", "algorithm", "params", "inputs", "source")
+        meta = {"topic": topic, "schema": info.schema_name, **{k: info.metadata[k] for k in keep if k in info.metadata}}
+        return table.replace_schema_metadata(meta)
+
+    def read_pandas(self, topic: str, start_ns: int | None = None, end_ns: int | None = None):
+        """The channel as a ``pandas.DataFrame`` with a ``t_ns`` column (or ``start_ns``/``end_ns``)."""
+        import pandas as pd
+
+        return pd.DataFrame(self.read_columns(topic, start_ns, end_ns))
+
+
+def stream_columns(stream: Stream) -> dict[str, Any]:
+    """Flatten a stream into named 1-D columns (``acc_x``, ``O_x``, ``qw``...)."""
+    cols: dict[str, Any] = {}
+    if isinstance(stream, Intervals):
+        return {
+            "start_ns": stream.start_ns,
+            "end_ns": stream.end_ns,
+            "label": list(stream.labels),
+            "task_index": stream.task_index,
+        }
+    cols["t_ns"] = stream.t_ns
+    if isinstance(stream, ImuStream):
+        for name in ("acc", "gyr", "mag"):
+            a = getattr(stream, name)
+            if a is not None:
+                for k, axis in enumerate("xyz"):
+                    cols[f"{name}_{axis}"] = a[:, k]
+        if stream.temperature is not None:
+            cols["temperature"] = stream.temperature
+    elif isinstance(stream, MarkerStream):
+        for j, label in enumerate(stream.labels):
+            for k, axis in enumerate("xyz"):
+                cols[f"{label}_{axis}"] = stream.pos[:, j, k]
+            cols[f"{label}_valid"] = stream.valid[:, j]
+    elif isinstance(stream, AnalogStream):
+        for j, name in enumerate(stream.channel_names):
+            cols[name] = stream.values[:, j]
+    elif isinstance(stream, SignalStream):
+        for j, name in enumerate(stream.columns):
+            cols[name] = stream.values[:, j]
+    elif isinstance(stream, PoseStream):
+        for k, axis in enumerate("xyz"):
+            cols[axis] = stream.position[:, k]
+        for k, axis in enumerate(("qw", "qx", "qy", "qz")):
+            cols[axis] = stream.orientation[:, k]
+    return {k: (np.ascontiguousarray(v) if isinstance(v, np.ndarray) else v) for k, v in cols.items()}

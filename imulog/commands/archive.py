@@ -1,0 +1,183 @@
+"""``imulog info``, ``imulog doctor`` and ``imulog export``: look at, validate and export a trial file."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import click
+
+from imulog.archive import ArchiveError, TrialReader
+
+
+def _open(path: str) -> TrialReader:
+    try:
+        return TrialReader(path)
+    except ArchiveError as exc:
+        raise click.ClickException(str(exc)) from None
+
+
+def trial_summary(trial: TrialReader) -> dict[str, Any]:
+    """Everything ``imulog info`` shows, as a JSON-able dict."""
+    channels = []
+    for c in trial.channels:
+        md = c.metadata
+        channels.append(
+            {
+                "topic": c.topic,
+                "schema": c.schema_name,
+                "kind": c.kind,
+                "derived": c.derived,
+                "messages": c.message_count,
+                "samples": c.sample_count,
+                "rate_hz": c.rate_hz,
+                "start_ns": c.start_ns,
+                "end_ns": c.end_ns,
+                "duration_s": c.duration_s,
+                "time_gaps": int(md["time_gaps"]) if "time_gaps" in md else None,
+                "nan_samples": int(md["nan_samples"]) if "nan_samples" in md else None,
+                "units": md.get("units", ""),
+                "frame_id": md.get("frame_id", ""),
+                "metadata": md,
+            }
+        )
+    runs = trial.runs()
+    metadata = {k: v for k, v in trial.metadata.items() if not k.startswith("imulog.run.")}
+    atts = [
+        {"name": a.name, "media_type": a.media_type, "bytes": len(a.data), "sha256": a.sha256}
+        for a in trial.attachments()
+    ]
+    return {
+        "path": str(trial.path),
+        "bytes": trial.summary.file_size,
+        "channels": channels,
+        "metadata": metadata,
+        "attachments": atts,
+        "runs": {str(k): v for k, v in runs.items()},
+    }
+
+
+def _fmt_rate(rate: float | None) -> str:
+    return "-" if not rate else f"{rate:.6g}"
+
+
+@click.command()
+@click.argument("file", type=click.Path(exists=True, dir_okay=False))
+@click.option("--json", "as_json", is_flag=True, help="print one JSON document (for scripts)")
+def info(file: str, as_json: bool) -> None:
+    """Show a trial's channels, metadata, attachments and derived runs.
+
+    For every channel: schema, rate (Hz), sample count, duration, gaps (time gaps longer than 1.5
+    sample periods / samples with NaN), units and frame.
+
+    \b
+    Examples:
+      imulog info trial.mcap
+      imulog info trial.mcap --json | python -c "import json,sys; print(json.load(sys.stdin)['channels'][0])"
+    """
+    with _open(file) as trial:
+        try:
+            data = trial_summary(trial)
+        except ArchiveError as exc:
+            raise click.ClickException(str(exc)) from None
+    if as_json:
+        click.echo(json.dumps(data, indent=2, default=str))
+        return
+    click.echo(f"{data['path']}  ({data['bytes'] / 1e6:.2f} MB)")
+    click.echo("channels:")
+    rows = [("topic", "schema", "rate_hz", "samples", "duration_s", "gaps(t/nan)", "units")]
+    for c in data["channels"]:
+        gaps = f"{c['time_gaps'] if c['time_gaps'] is not None else '-'}/{c['nan_samples'] if c['nan_samples'] is not None else '-'}"
+        dur = "-" if c["duration_s"] is None else f"{c['duration_s']:.3f}"
+        rows.append((c["topic"], c["schema"], _fmt_rate(c["rate_hz"]), str(c["samples"]), dur, gaps, c["units"]))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    for r in rows:
+        click.echo("  " + "  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)).rstrip())
+    click.echo("metadata:")
+    for name, values in data["metadata"].items():
+        shown = ", ".join(f"{k}={v}" if isinstance(v, str) else f"{k}={json.dumps(v)}" for k, v in values.items())
+        if len(shown) > 200:
+            shown = shown[:197] + "..."
+        click.echo(f"  {name}: {shown}")
+    if data["attachments"]:
+        click.echo("attachments:")
+        for a in data["attachments"]:
+            click.echo(f"  {a['name']}  {a['media_type']}  {a['bytes']} bytes  sha256 {a['sha256'][:16]}")
+    if data["runs"]:
+        click.echo("derived runs:")
+        for n, r in data["runs"].items():
+            outputs = ", ".join(r.get("outputs", {})) or "-"
+            click.echo(
+                f"  #{n} {r.get('step', '')}: {r.get('algorithm', '')} params={json.dumps(r.get('params', {}))} "
+                f"-> {outputs} ({r.get('time', '')})"
+            )
+
+
+@click.command()
+@click.argument("file", type=click.Path(exists=True, dir_okay=False))
+@click.option("-v", "--verbose", is_flag=True, help="list every check and every problem")
+def doctor(file: str, verbose: bool) -> None:
+    """Validate a trial: CRCs, summary/statistics, decoding, raw-data hash.
+
+    Checks the MCAP magic and footer, the summary CRC, the data-section CRC and every chunk CRC,
+    that chunk/attachment/metadata indexes and statistics match the data, that every channel decodes
+    (also with only the schema embedded in the file), that every channel's content hash matches the
+    one recorded when it was written, and that the raw channels and attachments still have the
+    raw-data hash recorded at conversion. Exit status 0 when sound, 1 with a one-line reason if not.
+
+    \b
+    Examples:
+      imulog doctor trial.mcap
+      for f in archive/*.mcap; do imulog doctor "$f" || echo "$f is damaged"; done
+    """
+    from imulog.archive.doctor import check_file
+
+    report = check_file(file)
+    if verbose:
+        for line in report.checks:
+            click.echo(f"ok: {line}")
+        for line in report.problems:
+            click.echo(f"problem: {line}", err=True)
+    if report.problems:
+        more = f" (+{len(report.problems) - 1} more problems; -v lists them)" if len(report.problems) > 1 else ""
+        raise click.ClickException(f"{file}: {report.problems[0]}{more}")
+    click.echo(f"{file}: ok ({'; '.join(report.checks)})")
+
+
+@click.command()
+@click.argument("file", type=click.Path(exists=True, dir_okay=False))
+@click.option("--topic", "-t", required=True, help="channel to export, e.g. /imu/wrist")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="OUT.parquet or OUT.csv")
+@click.option("--start-ns", type=int, default=None, help="first time stamp to include (ns, inclusive)")
+@click.option("--end-ns", type=int, default=None, help="time stamp to stop at (ns, exclusive)")
+def export(file: str, topic: str, output: str, start_ns: int | None, end_ns: int | None) -> None:
+    """Export one channel as a table (Parquet or CSV): a t_ns column plus one column per value.
+
+    IMU channels give acc_x..mag_z (SI units), markers give <label>_x/_y/_z (m) and <label>_valid,
+    signals their named columns, intervals start_ns/end_ns/label/task_index. Parquet keeps the channel
+    metadata (units, frame, provenance) in the schema metadata.
+
+    \b
+    Examples:
+      imulog export trial.mcap --topic /imu/wrist -o wrist.parquet
+      imulog export trial.mcap --topic /derived/phases/wrist -o phases.csv
+    """
+    out = Path(output)
+    if out.suffix.lower() not in (".parquet", ".csv"):
+        raise click.ClickException(f"{output}: output must end in .parquet or .csv")
+    with _open(file) as trial:
+        try:
+            table = trial.read_arrow(topic, start_ns, end_ns)
+        except ArchiveError as exc:
+            raise click.ClickException(str(exc)) from None
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if out.suffix.lower() == ".parquet":
+        import pyarrow.parquet as pq
+
+        pq.write_table(table, out)
+    else:
+        import pyarrow.csv as pacsv
+
+        pacsv.write_csv(table, out)
+    click.echo(f"wrote {table.num_rows} rows x {table.num_columns} columns of {topic} to {out}")

@@ -1,0 +1,132 @@
+"""``imulog calibrate`` (estimate a calibration file) and ``imulog process calibrate`` (apply one)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import click
+
+
+@click.command("calibrate")
+@click.argument("recordings", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option(
+    "-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True, help="Calibration JSON to write."
+)
+@click.option("--imu", default=None, help="IMU name (channel /imu/NAME); default: the only IMU, else 'wrist'.")
+@click.option(
+    "--angle-deg",
+    type=float,
+    default=360.0,
+    show_default=True,
+    help="Known angle of each gyroscope rotation between static periods, degrees.",
+)
+@click.option(
+    "--static-threshold", type=float, default=0.1, show_default=True, help="Static if gyro norm < this, rad/s."
+)
+@click.option("--min-static-s", type=float, default=2.0, show_default=True, help="Shortest static period, s.")
+@click.option("--gravity", type=float, default=9.80665, show_default=True, help="Local gravity, m/s^2.")
+@click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
+def calibrate(
+    recordings: tuple[Path, ...],
+    output: Path,
+    imu: str | None,
+    angle_deg: float,
+    static_threshold: float,
+    min_static_s: float,
+    gravity: float,
+    overwrite: bool,
+) -> None:
+    """Estimate accelerometer and gyroscope calibration from calibration RECORDINGS (trial .mcap files).
+
+    Accelerometer (R2G thesis eqs. 2.1-2.3): hold the sensor still with each axis pointing up and
+    then down (six static periods of >= 2 s, any order). Gyroscope (eqs. 2.4-2.5): a static period,
+    then rotations of a known angle (--angle-deg, e.g. one turn) about each axis, separated by static
+    periods. Bias and calibration matrix C are written so that calibrated = C (raw - bias). Several
+    recordings may be given (e.g. one per sensor); each part is taken from the first recording
+    that has it.
+
+    \b
+    Examples:
+      imulog convert calib_imu.csv -o calib.mcap
+      imulog calibrate calib.mcap -o bluebuddy_cal.json
+      imulog calibrate six_positions.mcap turntable.mcap -o cal.json --angle-deg 360
+      imulog process calibrate trial.mcap --calibration cal.json
+    """
+    from imulog.archive import TrialReader
+    from imulog.process.calibration import Calibration, SegmentParams
+    from imulog.steps.calibrate import calibration_from_arrays
+    from imulog.steps.orientation import pick_imu
+
+    if output.exists() and not overwrite:
+        raise click.ClickException(f"{output} exists (use --overwrite)")
+    seg = SegmentParams(static_threshold_rad_s=static_threshold, min_static_s=min_static_s)
+    result = Calibration()
+    notes = []
+    with click.progressbar(recordings, label="calibrating") as bar:
+        for path in bar:
+            try:
+                with TrialReader(path) as reader:
+                    name = pick_imu(reader.topics(), imu)
+                    s = reader.read(f"/imu/{name}")
+                    device = reader.metadata.get(f"imulog.device.{name}", {})
+                if s.gyr is None:
+                    raise ValueError(f"/imu/{name} has no gyroscope columns")
+                c = calibration_from_arrays(
+                    s.t_ns, s.acc, s.gyr, angle_rad=math.radians(angle_deg), params=seg, g_m_s2=gravity
+                )
+            except (ValueError, KeyError, OSError) as exc:
+                notes.append(f"{path}: {exc}")
+                continue
+            if result.acc is None and c.acc is not None:
+                result.acc = c.acc
+                result.info["acc_source"] = str(path)
+            if result.gyr is None and c.gyr is not None:
+                result.gyr = c.gyr
+                result.info["gyr_source"] = str(path)
+            result.device = result.device or {k: device[k] for k in ("model", "serial") if k in device}
+            result.info.setdefault("imu", name)
+    if result.acc is None and result.gyr is None:
+        raise click.ClickException("no calibration could be estimated: " + "; ".join(notes))
+    if notes:
+        result.info["notes"] = notes
+    output.write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+    parts = [p for p in ("acc", "gyr") if getattr(result, p) is not None]
+    click.echo(f"wrote {output} ({' and '.join(parts)})" + (f"; skipped: {'; '.join(notes)}" if notes else ""))
+
+
+@click.command("calibrate")
+@click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option(
+    "--calibration",
+    "calibration_file",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    required=True,
+    help="Calibration JSON written by `imulog calibrate`.",
+)
+@click.option("--imu", default=None, help="IMU name (channel /imu/NAME); default: the only IMU, else 'wrist'.")
+@click.option("--force", is_flag=True, help="Recompute even when the same calibration is already applied.")
+def process_calibrate(trial: Path, calibration_file: Path, imu: str | None, force: bool) -> None:
+    """Apply a calibration file to TRIAL: writes /derived/calibrated/IMU (acc m/s^2, gyr rad/s).
+
+    The raw channel is never modified; `imulog process orientation` then uses the calibrated
+    channel automatically (--source auto).
+
+    \b
+    Examples:
+      imulog process calibrate trial.mcap --calibration bluebuddy_cal.json
+      imulog process orientation trial.mcap
+    """
+    from imulog.process.calibration import Calibration
+    from imulog.steps.calibrate import run_calibrate
+
+    try:
+        cal = Calibration.from_dict(json.loads(calibration_file.read_text()))
+    except (ValueError, KeyError) as exc:
+        raise click.ClickException(f"{calibration_file}: {exc}") from exc
+    try:
+        outcome = run_calibrate(trial, cal, imu=imu, force=force)
+    except (ValueError, KeyError, OSError) as exc:
+        raise click.ClickException(f"{trial}: {exc}") from exc
+    click.echo(("unchanged: " if outcome.skipped else "wrote ") + ", ".join(outcome.topics))

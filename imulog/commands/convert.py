@@ -1,0 +1,240 @@
+"""``imulog convert``: device exports (IMU text, Vicon CSV, C3D, ...) -> one self-describing MCAP trial."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sys
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import click
+
+from converters import ConversionError, ConvertOptions
+from converters.registry import available, convert_files, detect, group_directory, list_formats, recording_key
+from imulog.model import Recording
+
+TRIAL_RECORD = "imulog.trial"
+
+
+def parse_value(text: str) -> Any:
+    """``70`` -> 70, ``1.8`` -> 1.8, ``true`` -> True, ``[1,2]`` -> list; anything else stays a string."""
+    try:
+        return json.loads(text)
+    except (json.JSONDecodeError, ValueError):
+        return text
+
+
+def record_name(prefix: str) -> str:
+    """``anthropometrics`` -> ``imulog.anthropometrics``; names already starting with ``imulog.`` stay."""
+    return prefix if prefix.startswith("imulog.") else f"imulog.{prefix}"
+
+
+def parse_meta(pairs: tuple[str, ...] | list[str]) -> dict[str, dict[str, Any]]:
+    """``subject=S01`` -> imulog.trial; ``anthropometrics.forearm_m=0.27`` -> imulog.anthropometrics."""
+    out: dict[str, dict[str, Any]] = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise click.BadParameter(f"{pair!r} is not key=value", param_hint="--meta")
+        record, dot, field = key.rpartition(".")
+        name = record_name(record) if dot else TRIAL_RECORD
+        out.setdefault(name, {})[field if dot else key] = parse_value(value)
+    return out
+
+
+def load_meta_file(path: Path) -> dict[str, dict[str, Any]]:
+    """JSON or TOML: top-level scalars go to imulog.trial, tables/objects to their own record."""
+    try:
+        text = Path(path).read_text(encoding="utf-8-sig")
+        doc = tomllib.loads(text) if Path(path).suffix.lower() == ".toml" else json.loads(text)
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, tomllib.TOMLDecodeError) as e:
+        raise click.ClickException(f"{path}: cannot read metadata file: {e}") from None
+    if not isinstance(doc, dict):
+        raise click.ClickException(f"{path}: metadata file must hold an object/table")
+    out: dict[str, dict[str, Any]] = {}
+    for key, value in doc.items():
+        if isinstance(value, dict):
+            out.setdefault(record_name(key), {}).update(value)
+        else:
+            out.setdefault(TRIAL_RECORD, {})[key] = value
+    return out
+
+
+def sha256_of(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def finish_recording(rec: Recording, meta: dict[str, dict[str, Any]], formats: dict[str, str]) -> Recording:
+    """Add user metadata and the ``imulog.conversion`` record (inputs, formats, SHA-256 of each source)."""
+    for name, values in meta.items():
+        rec.metadata[name] = {**rec.metadata.get(name, {}), **values}
+    from imulog import __version__
+
+    rec.metadata["imulog.conversion"] = {
+        "imulog_version": __version__,
+        "inputs": [Path(s).name for s in rec.sources],
+        "formats": formats,
+        "sha256": {Path(s).name: sha256_of(Path(s)) for s in rec.sources},
+    }
+    return rec
+
+
+def _convert_group(files: list[Path], fmt: str | None, options: ConvertOptions) -> tuple[Recording, dict[str, str]]:
+    formats = {p.name: (fmt or detect(p).name) for p in files}
+    return convert_files(files, fmt, options), formats
+
+
+def _write(out: Path, rec: Recording, *, attach: bool, overwrite: bool) -> Path:
+    try:
+        from imulog.archive import write_trial
+    except ImportError as e:  # pragma: no cover - archive not installed yet
+        raise click.ClickException(f"the trial archive is not available: {e}") from None
+    return write_trial(out, rec, attach_sources=attach, overwrite=overwrite)
+
+
+def _kv(pairs: tuple[str, ...], option: str) -> dict[str, str]:
+    out = {}
+    for pair in pairs:
+        k, sep, v = pair.partition("=")
+        if not sep or not k.strip() or not v.strip():
+            raise click.BadParameter(f"{pair!r} is not KEY=VALUE", param_hint=option)
+        out[k.strip().upper()] = v.strip()
+    return out
+
+
+@click.command("convert")
+@click.argument("inputs", nargs=-1, type=click.Path(exists=True, path_type=Path))
+@click.option("-o", "--output", type=click.Path(path_type=Path), help="Output .mcap (or a folder when INPUT is a folder).")
+@click.option("--format", "fmt", metavar="NAME", help="Force the input format (see --list-formats).")
+@click.option("--meta", "meta_pairs", multiple=True, metavar="KEY=VALUE", help="Trial metadata (repeatable); RECORD.KEY=VALUE for other records.")
+@click.option("--meta-file", type=click.Path(exists=True, dir_okay=False, path_type=Path), help="Metadata as JSON or TOML.")
+@click.option("--no-attach", is_flag=True, help="Do not attach the original files to the trial.")
+@click.option("--mapping", type=click.Path(exists=True, dir_okay=False, path_type=Path), help="Column mapping file for delimited IMU text.")
+@click.option("--rate", "rate_hz", type=float, metavar="HZ", help="Sampling rate for files without time stamps (raw ADC text).")
+@click.option("--adc-zero", type=float, default=512.0, show_default=True, help="ADC zero-g level, counts.")
+@click.option("--adc-counts-per-g", type=float, default=256.0, show_default=True, help="ADC sensitivity, counts per g.")
+@click.option("--device-name", "device_names", multiple=True, metavar="SERIAL=NAME", help="Stream name for an Xsens serial (repeatable).")
+@click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
+@click.option("--list-formats", "list_formats_flag", is_flag=True, help="List the known input formats and exit.")
+def convert(
+    inputs: tuple[Path, ...],
+    output: Path | None,
+    fmt: str | None,
+    meta_pairs: tuple[str, ...],
+    meta_file: Path | None,
+    no_attach: bool,
+    mapping: Path | None,
+    rate_hz: float | None,
+    adc_zero: float,
+    adc_counts_per_g: float,
+    device_names: tuple[str, ...],
+    overwrite: bool,
+    list_formats_flag: bool,
+) -> None:
+    """Convert device exports into one MCAP trial (or a folder of exports into one trial per recording).
+
+    Each INPUT's format is detected from its content (override with --format); an IMU file and a Vicon file
+    given together become one trial. The original files are attached byte for byte with their SHA-256.
+
+    \b
+    Examples:
+      imulog convert --list-formats
+      imulog convert fusion_sensor_data.csv -o imu.mcap --meta subject=S01 --meta side=right
+      imulog convert s01_imu.csv s01_vicon.csv -o s01.mcap --meta-file subject.toml
+      imulog convert wrist.csv --mapping bluebuddy.mapping.json -o wrist.mcap
+      imulog convert witilt.txt --rate 50 --adc-zero 510 -o tilt.mcap
+      imulog convert exports/ -o trials/          # one trial per recording, with a progress bar
+
+    In folder mode the files of one recording share a name stem apart from role words (s01_imu.csv +
+    s01_vicon.csv), and a s01_meta.json/.toml beside them adds that trial's metadata.
+
+    Bad input stops with one line naming the file, line and column, and leaves no output file.
+    """
+    if list_formats_flag:
+        for name, exts, desc in list_formats():
+            click.echo(f"{name:12s} {exts:20s} {desc}")
+        return
+    if not inputs:
+        raise click.UsageError("give at least one INPUT (or --list-formats)")
+    if output is None:
+        raise click.UsageError("give the output with -o/--output")
+    if fmt and fmt not in available():
+        raise click.BadParameter(f"unknown format {fmt!r}; known: {', '.join(available())}", param_hint="--format")
+    meta: dict[str, dict[str, Any]] = {}
+    if meta_file:
+        meta = load_meta_file(meta_file)
+    for name, values in parse_meta(meta_pairs).items():
+        meta.setdefault(name, {}).update(values)
+    options = ConvertOptions(
+        mapping=mapping,
+        rate_hz=rate_hz,
+        extra={"zero_counts": adc_zero, "counts_per_g": adc_counts_per_g, "names": _kv(device_names, "--device-name")},
+    )
+    dirs = [p for p in inputs if p.is_dir()]
+    if dirs:
+        if len(dirs) != len(inputs):
+            raise click.UsageError("give either files (one trial) or folders (one trial per recording), not both")
+        _convert_directories(dirs, output, fmt, options, meta, attach=not no_attach, overwrite=overwrite)
+        return
+    if output.suffix.lower() != ".mcap":
+        raise click.UsageError(f"output {output} should end in .mcap")
+    try:
+        rec, formats = _convert_group(list(inputs), fmt, options)
+        finish_recording(rec, meta, formats)
+        path = _write(output, rec, attach=not no_attach, overwrite=overwrite)
+    except ConversionError as e:
+        raise click.ClickException(str(e)) from None
+    except (FileExistsError, ValueError, OSError) as e:
+        raise click.ClickException(f"{output}: {e}") from None
+    click.echo(f"wrote {path} ({', '.join(f'{s.topic} {len(s)}' for s in rec.streams())})")
+
+
+def _sibling_meta(files: list[Path]) -> dict[str, dict[str, Any]]:
+    """Per-recording metadata beside the exports: ``<key>_meta.json`` / ``<key>.meta.toml`` (as the simulator writes)."""
+    key = recording_key(files[0])
+    for suffix in ("_meta.json", "_meta.toml", ".meta.json", ".meta.toml"):
+        candidate = files[0].parent / f"{key}{suffix}"
+        if key and candidate.is_file():
+            return load_meta_file(candidate)
+    return {}
+
+
+def _convert_directories(
+    dirs: list[Path], out_dir: Path, fmt: str | None, options: ConvertOptions, meta: dict, *, attach: bool, overwrite: bool
+) -> None:
+    jobs: list[tuple[Path, list[Path]]] = []
+    for d in dirs:
+        for name, files in group_directory(d):
+            prefix = d.name if len(dirs) > 1 else ""
+            jobs.append((out_dir / prefix / f"{name}.mcap", files))
+    if not jobs:
+        raise click.ClickException(f"no convertible files under {', '.join(map(str, dirs))}")
+    failures: list[str] = []
+    written = 0
+    with click.progressbar(jobs, label="converting", item_show_func=lambda j: j[0].name if j else "", file=sys.stderr) as bar:
+        for target, files in bar:
+            try:
+                rec, formats = _convert_group(files, fmt, options)
+                trial_meta = _sibling_meta(files)
+                for name, values in meta.items():
+                    trial_meta.setdefault(name, {}).update(values)
+                finish_recording(rec, trial_meta, formats)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                _write(target, rec, attach=attach, overwrite=overwrite)
+                written += 1
+            except ConversionError as e:
+                failures.append(str(e))
+            except (FileExistsError, ValueError, OSError) as e:
+                failures.append(f"{target}: {e}")
+    click.echo(f"wrote {written} trial(s) to {out_dir}")
+    for msg in failures:
+        click.echo(f"error: {msg}", err=True)
+    if failures:
+        raise click.exceptions.Exit(1)

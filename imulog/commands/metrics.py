@@ -1,0 +1,209 @@
+"""``imulog process metrics``: arm usage, activity counts, distance histogram, timings and smoothness."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+from pathlib import Path
+from typing import Any
+
+import click
+
+
+def decode_record(record: dict[str, Any]) -> dict[str, Any]:
+    """Metadata values may come back from the archive as JSON strings: restore numbers and lists."""
+    out: dict[str, Any] = {}
+    for key, value in record.items():
+        if isinstance(value, str):
+            with contextlib.suppress(ValueError):
+                value = json.loads(value)
+        out[key] = value
+    return out
+
+
+def format_summary(record: dict[str, Any]) -> str:
+    """Human-readable summary of an ``imulog.metrics`` record."""
+    r = decode_record(record)
+    m2_axes = r.get("activity.method2.per_axis", ["?"] * 3)
+    m1_axes = r.get("activity.method1.per_axis", ["?"] * 3)
+    lines = [
+        f"{r['imu']}: {r['duration_s']:.1f} s at {r['rate_hz']:.1f} Hz",
+        f"  arm usage (> {r['arm_usage.noise_level_g']} g):  x {r['arm_usage.x_percent']:.1f} %  "
+        f"y {r['arm_usage.y_percent']:.1f} %  z {r['arm_usage.z_percent']:.1f} %  overall "
+        f"{r['arm_usage.overall_percent']:.1f} %",
+        f"  activities (method 2, m={r['activity.method2.m_samples']}, dead={r['activity.method2.dead_samples']} "
+        f"samples, floor {r['activity.method2.noise_floor_g']} g): {r['activity.method2.count']}  "
+        f"(x {m2_axes[0]}, y {m2_axes[1]}, z {m2_axes[2]}), active {r['activity.method2.total_s']:.1f} s",
+        f"  activities (method 1, sign changes): {r['activity.method1.count']}  "
+        f"(x {m1_axes[0]}, y {m1_axes[1]}, z {m1_axes[2]})",
+        f"  distance in {r['distance.window_s']} s windows: median {r['distance.window_median_cm']:.1f} cm, "
+        f"max {r['distance.window_max_cm']:.1f} cm, weighted area (> {r['distance.weight_start_cm']} cm) "
+        f"{r['distance.weighted_area']:.2f}",
+    ]
+    labels = list(dict.fromkeys(k.split(".")[1] for k in r if k.startswith("timings.") and k.endswith(".mean_s")))
+    for label in labels:
+        lines.append(
+            f"  {label:<14} n {r[f'timings.{label}.n']:>3}  mean {r[f'timings.{label}.mean_s']:.3f} s  "
+            f"sd {r[f'timings.{label}.std_s']:.3f} s"
+            + (f"  CV {r[f'timings.{label}.cv']:.2f}" if f"timings.{label}.cv" in r else "")
+        )
+    if "nhpt.n_pegs" in r:
+        lines.append(
+            f"  NHPT: {r['nhpt.n_pegs']} pegs, test time {r['nhpt.test_time_s']:.2f} s, "
+            f"mean transport {r['nhpt.transport_mean_s']:.2f} s"
+        )
+    smooth = list(dict.fromkeys(k.split(".")[1] for k in r if k.startswith("smoothness.") and k.endswith(".n")))
+    if smooth:
+        lines.append(f"  smoothness from {r.get('smoothness.source', '?')}:")
+    for label in smooth:
+        lines.append(
+            f"  {label:<14} peaks {r[f'smoothness.{label}.velocity_peaks_mean']:.2f}  "
+            f"NJ {r[f'smoothness.{label}.normalized_jerk_mean']:.1f}  LDLJ {r[f'smoothness.{label}.ldlj_mean']:.2f}  "
+            f"SPARC {r[f'smoothness.{label}.sparc_mean']:.3f}"
+        )
+    return "\n".join(lines)
+
+
+@click.command("metrics")
+@click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--imu", default=None, help="IMU name (channel /imu/NAME); default: the only IMU, else 'wrist'.")
+@click.option(
+    "--noise-level-g", type=float, default=None, help="Arm-usage threshold in g.  [default: 0.022 (Doshi 2011)]"
+)
+@click.option(
+    "--noise-floor-g", type=float, default=None, help="Activity noise floor in g.  [default: 0.09 (Doshi 2011)]"
+)
+@click.option(
+    "--static",
+    "static_trial",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    default=None,
+    help="A trial recorded with the sensor at rest: estimate the noise level and floor from it.",
+)
+@click.option(
+    "--noise-statistic",
+    type=click.Choice(["peak", "std", "diff_peak", "diff_std"]),
+    default="peak",
+    show_default=True,
+    help="Statistic of the --static recording used as arm-usage noise level (Doshi: peak).",
+)
+@click.option("--m-s", type=float, default=0.5, show_default=True, help="Moving-average half width, s (m).")
+@click.option("--dead-s", type=float, default=1.0, show_default=True, help="Dead period separating activities, s.")
+@click.option(
+    "--min-activity-s",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Drop activities shorter than this, s (imulog addition; 0 = Doshi).",
+)
+@click.option("--window-s", type=float, default=5.0, show_default=True, help="Distance-histogram window, s.")
+@click.option("--max-distance-cm", type=float, default=120.0, show_default=True, help="Last histogram bin, cm.")
+@click.option("--weight-start-cm", type=float, default=60.0, show_default=True, help="Weight-0 distance, cm.")
+@click.option(
+    "--acc-unit",
+    type=click.Choice(["g", "m/s^2"]),
+    default="g",
+    show_default=True,
+    help="Integrate distances in g (Doshi App. A.3) or SI units.",
+)
+@click.option(
+    "--trajectory",
+    default="",
+    help="Positions for smoothness: METHOD of /derived/trajectory/METHOD or 'vicon'. [default: first found]",
+)
+@click.option("--force", is_flag=True, help="Recompute even when the same parameters are already recorded.")
+@click.option("--json", "as_json", is_flag=True, help="Print the imulog.metrics record as JSON.")
+def process_metrics(
+    trial: Path,
+    imu: str | None,
+    noise_level_g: float | None,
+    noise_floor_g: float | None,
+    static_trial: Path | None,
+    noise_statistic: str,
+    m_s: float,
+    dead_s: float,
+    min_activity_s: float,
+    window_s: float,
+    max_distance_cm: float,
+    weight_start_cm: float,
+    acc_unit: str,
+    trajectory: str,
+    force: bool,
+    as_json: bool,
+) -> None:
+    """Compute clinical metrics of TRIAL's IMU, append them and print a summary.
+
+    \b
+    Metrics (formulas and references in docs/metrics.md):
+      arm usage      % of samples whose change from the previous one exceeds the noise level (Doshi 2011 4.2)
+      activities     method 1: sign changes about the mean; method 2: moving average of m samples subtracted,
+                     noise floor, activities separated by dead periods (Doshi 2011 4.2.4)
+      distance       histogram of distance traversed in 5 s windows and its linearly weighted area (Doshi ch. 5)
+      timings        per-phase durations (R2G) and peg pick-up/placement times (NHPT) from /derived/phases/IMU
+      smoothness     velocity peaks, normalised jerk, LDLJ, SPARC per phase, from a trajectory or Vicon
+
+    Writes /derived/metrics/activity/IMU (Intervals), /derived/metrics/distance/IMU (distance_cm) and the
+    metadata record imulog.metrics (shown by `imulog info --json`). Same inputs and options: no change.
+
+    \b
+    Examples:
+      imulog process metrics trial.mcap
+      imulog process metrics trial.mcap --noise-level-g 0.03 --dead-s 2 --window-s 5
+      imulog process metrics trial.mcap --static sensor_at_rest.mcap      # noise from a static recording
+      imulog process phases r2g.mcap && imulog process metrics r2g.mcap --trajectory vicon
+    """
+    from imulog.steps.metrics import MetricsParams, pick_imu, run_metrics
+
+    try:
+        if static_trial is not None:
+            level, floor = _noise_from_static(static_trial, imu, m_s, noise_statistic)
+            noise_level_g = level if noise_level_g is None else noise_level_g
+            noise_floor_g = floor if noise_floor_g is None else noise_floor_g
+            click.echo(f"noise from {static_trial}: level {level:.4f} g ({noise_statistic}), floor {floor:.4f} g")
+        params = MetricsParams(
+            noise_level_g=0.022 if noise_level_g is None else noise_level_g,
+            noise_floor_g=0.09 if noise_floor_g is None else noise_floor_g,
+            m_s=m_s,
+            dead_s=dead_s,
+            min_activity_s=min_activity_s,
+            window_s=window_s,
+            max_distance_cm=max_distance_cm,
+            weight_start_cm=weight_start_cm,
+            acc_unit=acc_unit,
+            trajectory=trajectory,
+        )
+        params.distance()  # validates the histogram and activity parameters before any I/O
+        params.activity(100.0)
+        from imulog.archive import TrialReader
+
+        with TrialReader(trial) as reader:
+            name = pick_imu(reader.topics(), imu)
+        outcome = run_metrics(trial, imu=name, params=params, force=force)
+        with TrialReader(trial) as reader:
+            record = reader.metadata.get("imulog.metrics")
+    except (ValueError, KeyError, OSError) as exc:
+        raise click.ClickException(f"{trial}: {exc}") from exc
+    if record is None:
+        raise click.ClickException(f"{trial}: no imulog.metrics record after the step")
+    if as_json:
+        click.echo(json.dumps(decode_record(record), indent=2))
+        return
+    skipped = getattr(outcome, "skipped", False)
+    click.echo(("(unchanged: same inputs and parameters) " if skipped else "") + format_summary(record))
+
+
+def _noise_from_static(path: Path, imu: str | None, m_s: float, statistic: str) -> tuple[float, float]:
+    """Arm-usage noise level and activity noise floor (g) of a trial recorded at rest."""
+    from imulog.archive import TrialReader
+    from imulog.process.metrics import ActivityCountParams, acc_to_g, estimate_noise_floor, estimate_noise_level
+    from imulog.steps.metrics import _rate_hz, pick_imu
+
+    with TrialReader(path) as reader:
+        name = pick_imu(reader.topics(), imu)
+        stream = reader.read(f"/imu/{name}")
+    if stream.acc is None:
+        raise ValueError(f"{path}: /imu/{name} has no accelerometer columns")
+    acc_g = acc_to_g(stream.acc)
+    level = estimate_noise_level(acc_g).threshold_g(statistic)  # type: ignore[arg-type]
+    floor = estimate_noise_floor(acc_g, ActivityCountParams.for_rate(_rate_hz(stream.t_ns), m_s=m_s))
+    return level, floor

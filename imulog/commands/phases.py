@@ -1,0 +1,151 @@
+"""``imulog process phases``: segment movements, R2G phases and zero-velocity intervals."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import click
+
+from imulog.process.segmentation.pipeline import METHODS
+
+
+def _threshold(value: str) -> float | str:
+    if value.lower() == "otsu":
+        return "otsu"
+    try:
+        fraction = float(value)
+    except ValueError:
+        raise click.BadParameter(f"{value!r} is neither 'otsu' nor a number") from None
+    if not 0 < fraction < 1:
+        raise click.BadParameter(f"threshold fraction must lie in (0, 1), got {value}")
+    return fraction
+
+
+def format_summary(timing: dict) -> str:
+    """Human-readable timing table (one line per phase) plus per-label mean durations."""
+    lines = [
+        f"{timing['imu']}: {timing['n_movements']} movements -> {timing['n_phases']} phases in "
+        f"{timing['n_repetitions']} repetitions ({timing['n_corrected_repetitions']} corrected), "
+        f"method {timing['method']}, {timing['clock']} clock, static {100 * timing['static_fraction']:.1f} %",
+        f"{'rep':>4} {'phase':<14} {'start s':>9} {'end s':>9} {'dur s':>7} {'peak rad/s':>10}",
+    ]
+    by_label: dict[str, list[float]] = {}
+    for row in timing["phases"]:
+        lines.append(
+            f"{row['repetition']:>4} {row['label']:<14} {row['start_s']:>9.3f} {row['end_s']:>9.3f} "
+            f"{row['duration_s']:>7.3f} {row['peak_angular_velocity_rad_s']:>10.3f}"
+        )
+        by_label.setdefault(row["label"], []).append(row["duration_s"])
+    for label, durations in by_label.items():
+        mean = sum(durations) / len(durations)
+        lines.append(f"mean {label:<14} duration {mean:.3f} s over {len(durations)}")
+    return "\n".join(lines)
+
+
+@click.command("phases")
+@click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--imu", default=None, help="IMU name (channel /imu/NAME); default: the only IMU, else 'wrist'.")
+@click.option("--method", type=click.Choice(METHODS), default="dynamos", show_default=True)
+@click.option(
+    "--threshold", default="0.11", show_default=True, help="DynAMoS threshold: 'otsu' or a fraction of the max."
+)
+@click.option("--repetitions", type=int, default=25, show_default=True, help="Repetitions in the trial (0 = infer).")
+@click.option("--phases-per-repetition", type=int, default=4, show_default=True)
+@click.option("--alpha", type=float, default=0.8, show_default=True, help="DynAMoS short-movement factor.")
+@click.option("--beta", type=float, default=1.4, show_default=True, help="DynAMoS long-movement factor.")
+@click.option("--cutoff-hz", type=float, default=1.5, show_default=True, help="Low-pass cut-off of the gyroscope.")
+@click.option("--no-refine", is_flag=True, help="Keep the raw DynAMoS threshold crossings as onsets/offsets.")
+@click.option(
+    "--static",
+    "static_method",
+    type=click.Choice(["movements", "gyro-norm"]),
+    default="movements",
+    show_default=True,
+    help="Zero-velocity mask: complement of the movements, or the gyro-norm baseline detector.",
+)
+@click.option("--static-threshold", type=float, default=0.1, show_default=True, help="gyro-norm threshold, rad/s.")
+@click.option("--force", is_flag=True, help="Recompute even when the same parameters are already recorded.")
+@click.option("--quiet", is_flag=True, help="Print only the one-line summary.")
+def process_phases(
+    trial: Path,
+    imu: str | None,
+    method: str,
+    threshold: str,
+    repetitions: int,
+    phases_per_repetition: int,
+    alpha: float,
+    beta: float,
+    cutoff_hz: float,
+    no_refine: bool,
+    static_method: str,
+    static_threshold: float,
+    force: bool,
+    quiet: bool,
+) -> None:
+    """Segment movements and R2G phases, append them to TRIAL and print the timing table.
+
+    Writes /derived/movements/IMU, /derived/phases/IMU (reach, lift, return_bottle, return_hand;
+    task_index = repetition), /derived/static/IMU (1 = zero velocity) and the metadata record
+    imulog.timing. Running twice with the same options changes nothing.
+
+    \b
+    Examples:
+      imulog process phases trial.mcap
+      imulog process phases trial.mcap --threshold otsu --repetitions 25
+      imulog process phases trial.mcap --method double-threshold --static gyro-norm
+      imulog process phases slide.mcap --method template --repetitions 30 --phases-per-repetition 1
+    """
+    from imulog.process.segmentation.dynamos import DynamosParams
+    from imulog.process.segmentation.pipeline import PhaseParams
+    from imulog.process.segmentation.repetitions import RepetitionParams
+    from imulog.process.segmentation.zero_velocity import GyroNormStaticParams
+    from imulog.steps.phases import compute_phases, pick_imu
+
+    thr = _threshold(threshold)
+    if alpha <= 0 or beta <= alpha:
+        raise click.ClickException(f"need 0 < alpha < beta, got alpha={alpha}, beta={beta}")
+    params = PhaseParams(
+        method=method,
+        dynamos=DynamosParams(
+            threshold=thr, alpha=alpha, beta=beta, cutoff_hz=cutoff_hz, refine_boundaries=not no_refine
+        ),
+        repetitions=replace(RepetitionParams(), n_repetitions=repetitions, n_phases=phases_per_repetition),
+        static=static_method,
+        gyro_norm=GyroNormStaticParams(threshold_rad_s=static_threshold),
+    )
+    try:
+        from imulog.archive import TrialReader
+        from imulog.steps.phases import run_phases
+
+        with TrialReader(trial) as reader:
+            pick_imu(reader.topics(), imu)
+        outcome = run_phases(trial, imu=imu, params=params, force=force)
+        with TrialReader(trial) as reader:
+            timing = reader.metadata.get("imulog.timing")
+            if timing is None:  # archive stored nothing readable: recompute for the printout
+                name = pick_imu(reader.topics(), imu)
+                stream = reader.read(f"/imu/{name}")
+                _, timing = compute_phases(stream.t_ns, stream.gyr, name, params)
+    except (ValueError, KeyError, OSError) as exc:
+        raise click.ClickException(f"{trial}: {exc}") from exc
+    if isinstance(timing, dict) and isinstance(timing.get("phases"), str):
+        import json
+
+        timing = {**timing, "phases": json.loads(timing["phases"])}
+    skipped = getattr(outcome, "skipped", False)
+    text = format_summary(_typed(timing))
+    if quiet:
+        text = text.splitlines()[0]
+    click.echo(("(unchanged: same inputs and parameters) " if skipped else "") + text)
+
+
+def _typed(timing: dict) -> dict:
+    """Metadata values may come back as strings: restore numbers for printing."""
+    import json
+
+    out = dict(timing)
+    for key in ("n_movements", "n_repetitions", "n_phases", "n_corrected_repetitions", "static_fraction"):
+        if isinstance(out.get(key), str):
+            out[key] = json.loads(out[key])
+    return out

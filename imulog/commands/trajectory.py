@@ -1,0 +1,160 @@
+"""``imulog process trajectory`` and ``imulog evaluate``: IMU trajectories and their error against Vicon."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import click
+
+from imulog.process.trajectory_opt import METHODS
+
+DEFAULT_METHODS = "ddi,zupt,highpass,wavelet,kalman,zupt_bias,optimized"
+
+
+def _methods(value: str) -> list[str]:
+    names = [m.strip() for m in value.split(",") if m.strip()]
+    bad = [m for m in names if m not in METHODS]
+    if bad or not names:
+        raise click.BadParameter(f"unknown method(s) {', '.join(bad) or '(none)'}; choose from {', '.join(METHODS)}")
+    return names
+
+
+@click.command("trajectory")
+@click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option(
+    "--imu", default=None, help="IMU name (uses /derived/acc_global/NAME); default: the only one, else 'wrist'."
+)
+@click.option(
+    "--method",
+    "methods",
+    default=DEFAULT_METHODS,
+    show_default=True,
+    help="Comma-separated methods: " + ", ".join(METHODS) + ".",
+)
+@click.option("--highpass-hz", type=float, default=0.3, show_default=True, help="High-pass cut-off (Bai et al.).")
+@click.option("--wavelet", default="db6", show_default=True, help="Wavelet for drift removal (Bai et al.).")
+@click.option(
+    "--wavelet-level", type=int, default=9, show_default=True, help="Decomposition level (trend: top 2 details + A)."
+)
+@click.option("--kalman-alpha", type=float, default=1.0, show_default=True, help="AR(1) coefficient (Doshi).")
+@click.option("--kalman-q", type=float, default=1e-3, show_default=True, help="AR(1) process variance, (m/s^2)^2.")
+@click.option("--no-smoother", is_flag=True, help="Kalman: forward filter only (no RTS smoother).")
+@click.option("--no-zero-velocity", is_flag=True, help="Kalman: no zero-velocity pseudo-measurements.")
+@click.option(
+    "--sigma-ref", type=float, default=0.03, show_default=True, help="Optimisation: reference distance while still, m."
+)
+@click.option(
+    "--sigma-data", type=float, default=0.02, show_default=True, help="Optimisation: trust in ZUPT velocity, m/s."
+)
+@click.option("--no-return-to-start", is_flag=True, help="Optimisation: drop the return-to-start constraint.")
+@click.option("--force", is_flag=True, help="Recompute even when the same parameters are already recorded.")
+def process_trajectory(
+    trial: Path,
+    imu: str | None,
+    methods: str,
+    highpass_hz: float,
+    wavelet: str,
+    wavelet_level: int,
+    kalman_alpha: float,
+    kalman_q: float,
+    no_smoother: bool,
+    no_zero_velocity: bool,
+    sigma_ref: float,
+    sigma_data: float,
+    no_return_to_start: bool,
+    force: bool,
+) -> None:
+    """Reconstruct the wrist trajectory with one or more methods; one /derived/trajectory/METHOD each.
+
+    Needs the orientation step (/derived/acc_global), the phases step (/derived/static, /derived/phases)
+    and, for the reference clock and the Vicon world frame, the align step. Each repetition is written as
+    the displacement from its start (m).
+
+    \b
+    Methods:
+      ddi        direct double integration (trapezoidal, window mean removed; R2G thesis)
+      zupt       zero-velocity update with linear velocity de-drift (Bai et al. 2023)
+      highpass   double integration, then 0.3 Hz zero-phase high-pass (Bai et al.)
+      wavelet    double integration, then db6 level-9 trend (D8, D9, A9) removed (Bai et al.)
+      kalman     AR(1) acceleration Kalman filter + zero-velocity updates + RTS smoother (Doshi ch. 6)
+      zupt_bias  ZUPT after compensating the rotating accelerometer bias (needs /derived/orientation)
+      optimized  R2G thesis optimisation: symmetry + smoothness + min-jerk reference, return to start
+
+    \b
+    Examples:
+      imulog process orientation trial.mcap && imulog process align trial.mcap
+      imulog process phases trial.mcap
+      imulog process trajectory trial.mcap --method ddi,zupt,optimized
+      imulog evaluate trial.mcap
+    """
+    from imulog.process.drift import HighpassParams, WaveletParams
+    from imulog.process.kalman import KalmanParams
+    from imulog.process.trajectory_opt import OptimizationParams, TrajectoryParams
+    from imulog.steps.trajectory import run_trajectory
+
+    chosen = _methods(methods)
+    base = TrajectoryParams()
+    try:
+        params = replace(
+            base,
+            highpass=HighpassParams(cutoff_hz=highpass_hz),
+            wavelet=WaveletParams(wavelet=wavelet, level=wavelet_level),
+            kalman=KalmanParams(
+                alpha=kalman_alpha,
+                process_var_m2ps4=kalman_q,
+                smoother=not no_smoother,
+                zero_velocity=not no_zero_velocity,
+            ),
+            optimized=replace(
+                OptimizationParams(),
+                sigma_ref_static_m=sigma_ref,
+                sigma_data_mps=sigma_data,
+                return_to_start=not no_return_to_start,
+            ),
+        )
+        outcome = run_trajectory(trial, imu=imu, methods=chosen, params=params, force=force)
+    except (ValueError, KeyError) as exc:
+        raise click.ClickException(f"{trial}: {exc}") from None
+    if outcome.skipped:
+        click.echo(f"{trial}: trajectories up to date (run {outcome.run}); use --force to recompute")
+        return
+    click.echo(f"{trial}: wrote {', '.join(outcome.topics)} (run {outcome.run})")
+
+
+@click.command("evaluate")
+@click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--method", "methods", default=None, help="Comma-separated methods (default: every trajectory present).")
+@click.option(
+    "--max-gap",
+    type=float,
+    default=0.05,
+    show_default=True,
+    help="Drop samples across reference gaps longer than this, s.",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the imulog.evaluation record as JSON.")
+@click.option("--force", is_flag=True, help="Recompute even when up to date.")
+def evaluate(trial: Path, methods: str | None, max_gap: float, as_json: bool, force: bool) -> None:
+    """Compare every /derived/trajectory/* with the Vicon cluster origin; print the Table-3.1 summary.
+
+    Per repetition and axis: mean absolute error (cm), error as % of the Vicon range of motion, RMSE,
+    final displacement error and Spearman correlation; the table shows mean±std over repetitions. The
+    result is stored as the imulog.evaluation metadata record.
+
+    \b
+    Examples:
+      imulog evaluate trial.mcap
+      imulog evaluate trial.mcap --method zupt,optimized --json > errors.json
+    """
+    from imulog.steps.evaluate import run_evaluate, table_from_record
+
+    try:
+        _, record = run_evaluate(trial, methods=_methods(methods) if methods else None, max_gap_s=max_gap, force=force)
+    except ValueError as exc:
+        raise click.ClickException(f"{trial}: {exc}") from None
+    if as_json:
+        click.echo(json.dumps(record, indent=1, default=float))
+        return
+    click.echo(f"{trial}: errors against {record.get('reference', '?')} (mean±std over repetitions)")
+    click.echo(table_from_record(record))

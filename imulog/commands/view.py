@@ -1,0 +1,150 @@
+"""``imulog view``: show trials in Rerun (file, native viewer or bundled web viewer)."""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+import click
+
+
+def has_display() -> bool:
+    """True when a native viewer window can open (X11/Wayland, macOS, Windows)."""
+    if sys.platform in ("darwin", "win32"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def _save_paths(files: list[Path], save: Path | None, overlay: bool, n_groups: int) -> list[Path]:
+    if save is None:  # next to the inputs
+        if overlay or not files:
+            base = files[0] if files else Path("sample.mcap")
+            return [base.with_name(base.stem + ("_overlay" if len(files) > 1 else "") + ".rrd")]
+        return [f.with_suffix(".rrd") for f in files]
+    if n_groups == 1 and save.suffix == ".rrd":
+        return [save]
+    if save.suffix == ".rrd":
+        raise click.ClickException(
+            f"--save {save}: {n_groups} trials make {n_groups} recordings; give a directory or use --overlay"
+        )
+    return [save / (f.stem + ".rrd") for f in files]
+
+
+@click.command("view")
+@click.argument("files", nargs=-1, type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--save", "save", type=click.Path(path_type=Path), help="Write .rrd file(s) (a directory for several).")
+@click.option("--spawn", is_flag=True, help="Open the native Rerun viewer (needs a display).")
+@click.option("--web", is_flag=True, help="Serve Rerun's bundled web viewer on localhost and print its URL.")
+@click.option("--port", default=9090, show_default=True, help="Web viewer HTTP port for --web (0 = any free port).")
+@click.option("--grpc-port", default=9876, show_default=True, help="Data (gRPC) port for --web (0 = any free port).")
+@click.option("--overlay", is_flag=True, help="Put all FILES in one recording, each under /<trial name>.")
+@click.option(
+    "--sample",
+    "sample_s",
+    type=float,
+    default=None,
+    metavar="SECONDS",
+    help="View a built-in analytic sample trial of this length instead of (or besides) FILES.",
+)
+@click.option(
+    "--serve-seconds",
+    type=float,
+    default=None,
+    metavar="S",
+    help="With --web: stop serving after S seconds (default: until Ctrl-C).",
+)
+def view(
+    files: tuple[Path, ...],
+    save: Path | None,
+    spawn: bool,
+    web: bool,
+    port: int,
+    grpc_port: int,
+    overlay: bool,
+    sample_s: float | None,
+    serve_seconds: float | None,
+) -> None:
+    """Show trials in Rerun: IMU, Vicon and every derived channel on one reference-clock timeline.
+
+    Each channel is logged columnarly on the `reference_time` timeline (IMU clocks mapped with the trial's
+    `imulog.alignment`), with a default layout: |ω| of the IMU gyroscope over the Vicon angular velocity,
+    acceleration, orientation, a state timeline of phases and static intervals, a 3D view of markers,
+    cluster frame and trajectories with a cursor at the current time, and the evaluation errors.
+
+    \b
+    Examples:
+      imulog view trial.mcap                      # native viewer, or trial.rrd when there is no display
+      imulog view trial.mcap --save trial.rrd     # then: rerun trial.rrd
+      imulog view trial.mcap --web --port 9090    # open the printed URL in a browser (works offline)
+      imulog view a.mcap b.mcap --save out/       # one recording per trial: out/a.rrd, out/b.rrd
+      imulog view zupt.mcap ekf.mcap --overlay    # compare two processings of one trial in the same views
+      imulog view --sample 60 --web               # a built-in analytic trial, no file needed
+    """
+    from imulog.view.session import show
+    from imulog.view.source import TrialData, from_recording, read_trial
+
+    if sum([save is not None, spawn, web]) > 1:
+        raise click.UsageError("choose one of --save, --spawn, --web")
+    if not files and sample_s is None:
+        raise click.UsageError("give at least one FILE (or --sample SECONDS)")
+    sink = "save" if save is not None else "spawn" if spawn else "web" if web else None
+    if sink is None:
+        sink = "spawn" if has_display() else "save"
+    if sink == "spawn" and not has_display():
+        raise click.ClickException("--spawn needs a display ($DISPLAY is not set); use --web or --save")
+
+    trials: list[TrialData] = []
+    with click.progressbar(list(files), label="reading trials", file=sys.stderr) as bar:
+        for f in bar:
+            try:
+                trials.append(read_trial(f))
+            except ImportError as exc:
+                raise click.ClickException(f"{f}: cannot read archives ({exc})") from exc
+            except Exception as exc:
+                raise click.ClickException(f"{f}: {exc}") from exc
+    if sample_s is not None:
+        from imulog.view.sample import SampleTrialParams, sample_recording
+
+        trials.append(from_recording(sample_recording(SampleTrialParams(duration_s=sample_s)), "sample"))
+
+    n_groups = 1 if overlay else len(trials)
+    paths: list[Path] = []
+    if sink == "save":
+        paths = _save_paths(list(files), save, overlay, n_groups)
+        if len(paths) < n_groups:  # --sample besides files
+            paths.append((paths[0].parent if paths else Path(".")) / "sample.rrd")
+        if save is None:
+            click.echo(
+                "no display found and no --save/--web given: saving "
+                + ", ".join(str(p) for p in paths)
+                + " (open with `rerun FILE.rrd`, or use --web)",
+                err=True,
+            )
+
+    result = show(trials, sink=sink, save_paths=paths, overlay=overlay, web_port=port, grpc_port=grpc_port)
+    for logged in result.logged:
+        for trial in logged:
+            if trial.unaligned_imus:
+                click.echo(
+                    f"warning: {trial.label}: no imulog.alignment for IMU(s) {', '.join(trial.unaligned_imus)}; "
+                    "shown on their device clock (run `imulog process align` first)",
+                    err=True,
+                )
+    if sink == "save":
+        for p in result.saved:
+            click.echo(f"saved {p}")
+    elif sink == "spawn":
+        click.echo("sent to the Rerun viewer")
+    else:
+        assert result.server is not None
+        click.echo(f"Rerun web viewer: {result.server.url}", err=False)
+        click.echo("serving; press Ctrl-C to stop", err=True)
+        sys.stdout.flush()
+        deadline = None if serve_seconds is None else time.monotonic() + serve_seconds
+        try:
+            while deadline is None or time.monotonic() < deadline:
+                time.sleep(0.2)
+        except KeyboardInterrupt:
+            pass

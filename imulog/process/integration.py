@@ -1,0 +1,224 @@
+"""Dead reckoning from gravity-free global acceleration: direct double integration and ZUPT.
+
+All functions are pure numpy. Inputs: acceleration ``acc_mps2`` (N,) or (N, D) in m/s^2 in a
+fixed (global) frame with gravity removed, sample times ``t_s`` (N,) in seconds (need not be
+uniform). Outputs: velocity in m/s and position in m, starting at zero.
+
+* Direct double integration (DDI): trapezoidal rule twice (MATLAB ``cumtrapz``, as in the R2G
+  thesis 3.3.4), optionally after subtracting the mean acceleration of the window (the thesis's
+  gravity removal: "removing the mean value of the acceleration during the R2G task").
+* ZUPT (Bai et al. 2023, 3.1): velocity is reset to zero in static samples; between two rests the
+  residual velocity at the next rest is assumed to come from a constant acceleration offset, so a
+  straight line from 0 (at the previous rest) to that residual is subtracted (linear de-drift).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def _as_2d(x: np.ndarray) -> tuple[np.ndarray, bool]:
+    a = np.asarray(x, dtype=np.float64)
+    if a.ndim == 1:
+        return a[:, None], True
+    if a.ndim != 2:
+        raise ValueError(f"expected (N,) or (N, D) array, got shape {a.shape}")
+    return a, False
+
+
+def _check_time(t_s: np.ndarray, n: int) -> np.ndarray:
+    t = np.asarray(t_s, dtype=np.float64)
+    if t.shape != (n,):
+        raise ValueError(f"t_s must have shape ({n},), got {t.shape}")
+    if n > 1 and np.any(np.diff(t) <= 0):
+        raise ValueError("t_s must be strictly increasing")
+    return t
+
+
+def cumtrapz(y: np.ndarray, t_s: np.ndarray, initial: float | np.ndarray = 0.0) -> np.ndarray:
+    """Cumulative trapezoidal integral of ``y`` (N,) or (N, D) over ``t_s`` (N,) s, starting at ``initial``."""
+    a, squeeze = _as_2d(y)
+    t = _check_time(t_s, len(a))
+    out = np.empty_like(a)
+    out[0] = initial
+    if len(a) > 1:
+        dt = np.diff(t)[:, None]
+        out[1:] = out[0] + np.cumsum(0.5 * (a[1:] + a[:-1]) * dt, axis=0)
+    return out[:, 0] if squeeze else out
+
+
+@dataclass(frozen=True)
+class DdiParams:
+    """Direct double integration.
+
+    remove_mean: subtract the window's mean acceleration (m/s^2) before integrating, as the R2G
+        thesis does for gravity removal. Exact for a constant offset when the window starts and
+        ends at rest (the true acceleration then integrates to zero).
+    """
+
+    remove_mean: bool = True
+
+
+def double_integrate(
+    acc_mps2: np.ndarray, t_s: np.ndarray, params: DdiParams = DdiParams()
+) -> tuple[np.ndarray, np.ndarray]:
+    """Direct double integration. Returns ``(velocity m/s, position m)``, both zero at ``t_s[0]``."""
+    a, squeeze = _as_2d(acc_mps2)
+    if params.remove_mean:
+        a = a - np.nanmean(a, axis=0)
+    vel = cumtrapz(a, t_s)
+    pos = cumtrapz(vel, t_s)
+    if squeeze:
+        return vel[:, 0], pos[:, 0]
+    return vel, pos
+
+
+@dataclass(frozen=True)
+class ZuptParams:
+    """Zero-velocity update with linear velocity de-drift (Bai et al. 2023).
+
+    dedrift: subtract, in each movement between two rests, the straight line that brings the
+        integrated velocity back to zero at the next rest (assumes a constant acceleration offset).
+    min_static_samples: static runs shorter than this many samples are ignored (treated as moving).
+    """
+
+    dedrift: bool = True
+    min_static_samples: int = 1
+
+
+def static_runs(mask: np.ndarray, min_samples: int = 1) -> np.ndarray:
+    """Runs of True in a boolean mask as an (R, 2) int array of [start, stop) indices."""
+    m = np.asarray(mask, dtype=bool)
+    if m.size == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    d = np.diff(np.concatenate([[0], m.astype(np.int8), [0]]))
+    starts = np.flatnonzero(d == 1)
+    stops = np.flatnonzero(d == -1)
+    keep = (stops - starts) >= min_samples
+    return np.stack([starts[keep], stops[keep]], axis=1).astype(np.int64)
+
+
+def zupt_velocity(
+    acc_mps2: np.ndarray, t_s: np.ndarray, static_mask: np.ndarray, params: ZuptParams = ZuptParams()
+) -> np.ndarray:
+    """Velocity (m/s) integrated from ``acc_mps2`` with zero-velocity updates in ``static_mask`` samples.
+
+    A movement (samples between two static runs) is integrated from zero at the last static sample
+    before it. With ``dedrift`` the velocity reached at the first static sample after it is removed
+    linearly in time over the movement. A movement running to the end of the window is not de-drifted
+    (no rest to observe its drift); one starting at the first sample starts from zero velocity.
+    """
+    a, squeeze = _as_2d(acc_mps2)
+    n = len(a)
+    t = _check_time(t_s, n)
+    mask = np.asarray(static_mask, dtype=bool)
+    if mask.shape != (n,):
+        raise ValueError(f"static_mask must have shape ({n},), got {mask.shape}")
+    runs = static_runs(mask, params.min_static_samples)
+    static = np.zeros(n, dtype=bool)
+    for s, e in runs:
+        static[s:e] = True
+    vel = np.zeros_like(a)
+    # movement segments: maximal runs of non-static samples, integrated from the preceding sample
+    moving = static_runs(~static)
+    for s, e in moving:
+        i0 = max(s - 1, 0)  # last static sample (zero velocity) or the first sample
+        i1 = min(e, n - 1)  # first static sample after the movement (or the last sample)
+        seg = cumtrapz(a[i0 : i1 + 1], t[i0 : i1 + 1])
+        if params.dedrift and e < n:
+            frac = (t[i0 : i1 + 1] - t[i0]) / (t[i1] - t[i0])
+            seg = seg - frac[:, None] * seg[-1]
+        vel[s:e] = seg[s - i0 : e - i0]
+    return vel[:, 0] if squeeze else vel
+
+
+def zupt(
+    acc_mps2: np.ndarray, t_s: np.ndarray, static_mask: np.ndarray, params: ZuptParams = ZuptParams()
+) -> tuple[np.ndarray, np.ndarray]:
+    """ZUPT dead reckoning. Returns ``(velocity m/s, position m)``; position starts at zero."""
+    vel = zupt_velocity(acc_mps2, t_s, static_mask, params)
+    return vel, cumtrapz(vel, t_s)
+
+
+# --------------------------------------------------------------------------------------------------
+# Rotating accelerometer bias (an imulog addition to Bai's ZUPT)
+#
+# A constant accelerometer bias b (sensor frame, m/s^2) appears in the global frame as R(t) b. At rest the
+# orientation filter absorbs it into a small tilt error, so the global acceleration is ~0 there; once the
+# sensor rotates the bias turns with it and leaves R(t) b - R(t_rest) b, which is not constant and so is
+# not removed by the linear de-drift. Each movement between rests must integrate to zero velocity; with
+# c_m the mean global acceleration in the rest just before movement m this gives, for every movement,
+#     integral_m (a_global - c_m) dt = [integral_m (R(t) - R(t_m)) dt] b,
+# three linear equations per movement in the three unknowns of b, solved by least squares over the trial.
+
+
+@dataclass(frozen=True)
+class RotatingBiasParams:
+    """Estimation of a constant sensor-frame accelerometer bias from the ZUPT closure of every movement.
+
+    rest_s: length (s) of the rest just before a movement whose mean global acceleration is c_m.
+    min_movements: fewer complete movements than this give no estimate (zero bias).
+    """
+
+    rest_s: float = 0.5
+    min_movements: int = 6
+
+
+def _movements(static: np.ndarray) -> np.ndarray:
+    runs = static_runs(~static)
+    n = len(static)
+    return runs[(runs[:, 0] > 0) & (runs[:, 1] < n)]  # rests on both sides
+
+
+def estimate_rotating_bias(
+    acc_mps2: np.ndarray,
+    rot_sensor_to_global: np.ndarray,
+    t_s: np.ndarray,
+    static_mask: np.ndarray,
+    params: RotatingBiasParams = RotatingBiasParams(),
+) -> np.ndarray:
+    """Sensor-frame accelerometer bias (3,) m/s^2 from gravity-free global acceleration (N, 3) and the
+    sensor-to-global rotation matrices (N, 3, 3) used to compute it."""
+    a = np.asarray(acc_mps2, dtype=np.float64)
+    r = np.asarray(rot_sensor_to_global, dtype=np.float64)
+    t = _check_time(t_s, len(a))
+    static = np.asarray(static_mask, dtype=bool)
+    rows, rhs = [], []
+    for s, e in _movements(static):
+        rest = np.flatnonzero(static[:s] & (t[:s] >= t[s - 1] - params.rest_s))
+        if len(rest) == 0:
+            continue
+        c = np.nanmean(a[rest], axis=0)
+        i0, i1 = s - 1, e
+        g = cumtrapz((r[i0 : i1 + 1] - r[i0]).reshape(-1, 9), t[i0 : i1 + 1])[-1].reshape(3, 3)
+        v = cumtrapz(a[i0 : i1 + 1] - c, t[i0 : i1 + 1])[-1]
+        if np.all(np.isfinite(g)) and np.all(np.isfinite(v)):
+            rows.append(g)
+            rhs.append(v)
+    if len(rows) < params.min_movements:
+        return np.zeros(3)
+    b, *_ = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)
+    return b
+
+
+def compensate_rotating_bias(
+    acc_mps2: np.ndarray,
+    rot_sensor_to_global: np.ndarray,
+    t_s: np.ndarray,
+    static_mask: np.ndarray,
+    bias_mps2: np.ndarray,
+    params: RotatingBiasParams = RotatingBiasParams(),
+) -> np.ndarray:
+    """Global acceleration with ``c_m + (R(t) - R(t_m)) b`` removed in every movement (rests unchanged)."""
+    a = np.array(acc_mps2, dtype=np.float64, copy=True)
+    r = np.asarray(rot_sensor_to_global, dtype=np.float64)
+    t = _check_time(t_s, len(a))
+    static = np.asarray(static_mask, dtype=bool)
+    b = np.asarray(bias_mps2, dtype=np.float64)
+    for s, e in _movements(static):
+        rest = np.flatnonzero(static[:s] & (t[:s] >= t[s - 1] - params.rest_s))
+        c = np.nanmean(a[rest], axis=0) if len(rest) else np.zeros(3)
+        a[s:e] = a[s:e] - c - (r[s:e] - r[s - 1]) @ b
+    return a

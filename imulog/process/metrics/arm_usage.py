@@ -1,0 +1,147 @@
+"""Impaired-arm usage from a 3-axis accelerometer (Doshi 2011, thesis chapter 4.2).
+
+A sample counts as *arm use* on an axis when its change from the previous sample exceeds the sensor's noise
+level; a sample counts as overall use when any axis does. Usage is the number of such samples divided by the
+number of samples in the recording, in percent (Appendix A.1 divides by the sample count ``N``, not ``N - 1``)::
+
+    use_j[i]   = |a_j[i] - a_j[i-1]| > noise_level          (i = 1 .. N-1, j = x, y, z; use_j[0] = False)
+    usage_j    = 100 * sum_i use_j[i] / N                    [%]
+    usage      = 100 * sum_i (use_x[i] or use_y[i] or use_z[i]) / N   [%]
+
+Reference: R. Doshi, "Wearable inertial sensor based tracking of the impaired arm of stroke survivors",
+M.S. thesis, Colorado State University, 2011, sections 4.2.2-4.2.3 and Appendix A.1 (threshold 0.022 g for the
+WiTilt v2.5 / MMA7260Q board; Table 4.1). The noise level is a property of the sensor: estimate it from a static
+recording with :func:`estimate_noise_level` (Doshi: sensor still for about 30 min, sampled at >= 10 Hz; he
+considered the standard deviation and the peak amplitude of the noise and preferred the peak amplitude).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+STANDARD_GRAVITY = 9.80665  # m/s^2 per g
+
+NoiseStatistic = Literal["peak", "std", "diff_peak", "diff_std"]
+
+
+@dataclass(frozen=True)
+class ArmUsageParams:
+    """Parameters of the arm-usage metric.
+
+    noise_level_g: threshold on the sample-to-sample change of each axis, in g. Published default 0.022 g
+        (Doshi 2011, section 4.2.3, WiTilt v2.5 in the +-2 g range at 10 Hz). Re-estimate it for another sensor
+        or sample rate with :func:`estimate_noise_level`.
+    """
+
+    noise_level_g: float = 0.022
+
+    def __post_init__(self) -> None:
+        if not np.isfinite(self.noise_level_g) or self.noise_level_g < 0:
+            raise ValueError(f"noise_level_g must be a finite value >= 0, got {self.noise_level_g}")
+
+
+@dataclass(frozen=True)
+class ArmUsage:
+    """Result of :func:`arm_usage`.
+
+    per_axis_percent: (3,) usage of x, y, z in % of all samples.
+    overall_percent: usage of any axis, in % of all samples.
+    active: (N, 3) bool, True where the axis changed by more than the noise level since the previous sample.
+    """
+
+    per_axis_percent: np.ndarray
+    overall_percent: float
+    active: np.ndarray
+
+    @property
+    def active_any(self) -> np.ndarray:
+        """(N,) bool: sample counted as arm use on at least one axis."""
+        return self.active.any(axis=1)
+
+
+def _as_acc(acc_g: np.ndarray) -> np.ndarray:
+    a = np.asarray(acc_g, dtype=np.float64)
+    if a.ndim == 1:
+        a = a[:, None]
+    if a.ndim != 2 or a.shape[0] < 2:
+        raise ValueError(f"acceleration must be (N, C) with N >= 2 samples, got shape {np.shape(acc_g)}")
+    return a
+
+
+def acc_to_g(acc_m_s2: np.ndarray) -> np.ndarray:
+    """Convert m/s^2 (the archive's unit) to g (the unit of Doshi's thresholds)."""
+    return np.asarray(acc_m_s2, dtype=np.float64) / STANDARD_GRAVITY
+
+
+def adc_to_g(counts: np.ndarray, *, zero_count: float = 512.0, counts_per_g: float = 256.0) -> np.ndarray:
+    """Raw 10-bit ADC counts of the WiTilt board to g: ``(counts - zero_count) / counts_per_g``.
+
+    Defaults: Doshi 2011 section 4.2.1 (10-bit ADC, 0-1023 counts, centred on 512, 256 counts per g at +-2 g).
+    """
+    return (np.asarray(counts, dtype=np.float64) - zero_count) / counts_per_g
+
+
+def arm_usage(acc_g: np.ndarray, params: ArmUsageParams | None = None) -> ArmUsage:
+    """Per-axis and overall arm usage (%) of an (N, 3) acceleration in g; see the module docstring."""
+    p = params or ArmUsageParams()
+    a = _as_acc(acc_g)
+    active = np.zeros(a.shape, dtype=bool)
+    with np.errstate(invalid="ignore"):
+        active[1:] = np.abs(np.diff(a, axis=0)) > p.noise_level_g  # NaN compares False: a gap is not use
+    n = a.shape[0]
+    return ArmUsage(
+        per_axis_percent=100.0 * active.sum(axis=0) / n,
+        overall_percent=float(100.0 * active.any(axis=1).sum() / n),
+        active=active,
+    )
+
+
+@dataclass(frozen=True)
+class NoiseLevel:
+    """Noise statistics of a static recording, per axis, in g.
+
+    peak: max |a - mean(a)| (Doshi's "peak amplitude" of the noise w).
+    std: standard deviation of a.
+    diff_peak: max |a[i] - a[i-1]| (the largest sample-to-sample change seen at rest: with it as threshold, the
+        static recording itself shows 0 % usage).
+    diff_std: standard deviation of a[i] - a[i-1] (sqrt(2) * std for white noise).
+    """
+
+    peak: np.ndarray
+    std: np.ndarray
+    diff_peak: np.ndarray
+    diff_std: np.ndarray
+    n_samples: int
+
+    def threshold_g(self, statistic: NoiseStatistic = "peak") -> float:
+        """One threshold for all axes: the largest per-axis value of ``statistic``, in g."""
+        values = {"peak": self.peak, "std": self.std, "diff_peak": self.diff_peak, "diff_std": self.diff_std}
+        if statistic not in values:
+            raise ValueError(f"unknown noise statistic {statistic!r}; use one of {', '.join(values)}")
+        return float(np.max(values[statistic]))
+
+
+def estimate_noise_level(static_acc_g: np.ndarray) -> NoiseLevel:
+    """Noise statistics (g) of a recording with the sensor at rest (Doshi 2011 section 4.2.2).
+
+    The static segment's mean (gravity and offset ``o`` of eq. 4.1) is removed per axis; NaN samples are
+    ignored. Use ``.threshold_g("peak")`` as :class:`ArmUsageParams` ``noise_level_g`` (Doshi's choice) or
+    ``"diff_peak"`` for a threshold that the static recording never exceeds.
+    """
+    a = _as_acc(static_acc_g)
+    finite = np.isfinite(a).all(axis=1)
+    a = a[finite]
+    if a.shape[0] < 2:
+        raise ValueError("static recording has fewer than 2 finite samples")
+    centred = a - a.mean(axis=0)
+    d = np.diff(a, axis=0)
+    return NoiseLevel(
+        peak=np.abs(centred).max(axis=0),
+        std=a.std(axis=0),
+        diff_peak=np.abs(d).max(axis=0),
+        diff_std=d.std(axis=0),
+        n_samples=int(a.shape[0]),
+    )

@@ -1,0 +1,132 @@
+"""One call from a gyroscope signal to movements, labelled phases, a zero-velocity mask and a timing table.
+
+Used by :mod:`imulog.steps.phases` and the accuracy benchmark. Methods:
+
+* ``"dynamos"``: :func:`~imulog.process.segmentation.dynamos.dynamos`;
+* ``"double-threshold"``: :func:`~imulog.process.segmentation.double_threshold.double_threshold` (Bai et al.);
+* ``"template"``: DynAMoS movements of the correct repetitions are averaged into a template (with
+  ``template_pad_s`` of context on each side) and its cross-correlation peaks become the movements.
+
+Every method is followed by repetition splitting and event correction
+(:func:`~imulog.process.segmentation.repetitions.segment_repetitions`). The static mask is the complement of
+the raw movements (``static="movements"``) or the gyro-norm baseline (``static="gyro-norm"``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from imulog.process.segmentation.double_threshold import DoubleThresholdParams, double_threshold
+from imulog.process.segmentation.dynamos import DynamosParams, dynamos, lowpass_norm
+from imulog.process.segmentation.repetitions import Phases, RepetitionParams, segment_repetitions
+from imulog.process.segmentation.template import TemplateParams, build_template, match_template
+from imulog.process.segmentation.zero_velocity import (
+    GyroNormStaticParams,
+    gyro_norm_static,
+    static_from_movements,
+)
+
+METHODS = ("dynamos", "double-threshold", "template")
+
+
+@dataclass(frozen=True)
+class PhaseParams:
+    """All parameters of :func:`segment_phases` (each sub-object documents its own defaults and units).
+
+    method: one of ``METHODS``; static: ``"movements"`` or ``"gyro-norm"``;
+    static_margin_s: movements are widened by this (s) before taking the complement as zero velocity;
+    template_pad_s: static context (s) on each side of the template (method ``"template"``).
+    """
+
+    method: str = "dynamos"
+    dynamos: DynamosParams = field(default_factory=DynamosParams)
+    double_threshold: DoubleThresholdParams = field(default_factory=DoubleThresholdParams)
+    template: TemplateParams = field(default_factory=TemplateParams)
+    repetitions: RepetitionParams = field(default_factory=RepetitionParams)
+    static: str = "movements"
+    static_margin_s: float = 0.0
+    gyro_norm: GyroNormStaticParams = field(default_factory=GyroNormStaticParams)
+    template_pad_s: float = 0.5
+
+    def to_dict(self) -> dict:
+        """JSON-able form, for provenance."""
+        d = asdict(self)
+        d["repetitions"]["labels"] = list(self.repetitions.labels)
+        return d
+
+
+@dataclass(frozen=True)
+class PhaseResult:
+    """Output of :func:`segment_phases`: sample ranges, the static mask and the filtered norm (rad/s)."""
+
+    movement_start: np.ndarray
+    movement_end: np.ndarray
+    phases: Phases
+    static: np.ndarray
+    norm: np.ndarray
+
+
+def _template_movements(gyr, rate_hz, norm, params: PhaseParams):
+    seg = dynamos(gyr, rate_hz, params.dynamos)
+    ph = segment_repetitions(seg.start, seg.end, seg.norm, rate_hz, params.repetitions)
+    pad = int(round(params.template_pad_s * rate_hz))
+    ok = (ph.start - pad >= 0) & (ph.end + pad <= len(norm))
+    if not ok.any():
+        return seg.start, seg.end
+    s, e = ph.start[ok], ph.end[ok]
+    m = int(np.median(e - s))
+    template = build_template(norm, s - pad, e + pad)
+    scale = (m + 2 * pad) / len(template)
+    marks = (int(round(pad / scale)), int(round((m + pad) / scale)))
+    start, end, _ = match_template(norm, template, params.template, marks=marks)
+    return start, end
+
+
+def segment_phases(gyr_rad_s: np.ndarray, rate_hz: float, params: PhaseParams = PhaseParams()) -> PhaseResult:
+    """Movements, corrected phases and zero-velocity mask from a gyroscope signal (N, 3) rad/s."""
+    gyr = np.asarray(gyr_rad_s, dtype=float)
+    norm = lowpass_norm(gyr, rate_hz, params.dynamos.cutoff_hz, params.dynamos.filter_order)
+    if params.method == "dynamos":
+        seg = dynamos(gyr, rate_hz, params.dynamos)
+        start, end = seg.start, seg.end
+    elif params.method == "double-threshold":
+        start, end = double_threshold(gyr, rate_hz, params.double_threshold)
+    elif params.method == "template":
+        start, end = _template_movements(gyr, rate_hz, norm, params)
+    else:
+        raise ValueError(f"unknown segmentation method {params.method!r}; choose one of {', '.join(METHODS)}")
+    phases = segment_repetitions(start, end, norm, rate_hz, params.repetitions)
+    if params.static == "movements":
+        static = static_from_movements(len(gyr), start, end, rate_hz, params.static_margin_s)
+    elif params.static == "gyro-norm":
+        static = gyro_norm_static(gyr, rate_hz, params.gyro_norm)
+    else:
+        raise ValueError(f"unknown static detector {params.static!r}; choose 'movements' or 'gyro-norm'")
+    return PhaseResult(start, end, phases, static, norm)
+
+
+def timing_table(phases: Phases, t_ns: np.ndarray, gyr_rad_s: np.ndarray) -> list[dict]:
+    """Per phase: repetition, label, start/end (ns and s from ``t_ns[0]``), duration (s), peak |gyr| (rad/s).
+
+    ``t_ns`` are the sample times (any clock) of ``gyr_rad_s``; phase end = time of its last sample.
+    """
+    t_ns = np.asarray(t_ns, dtype=np.int64)
+    raw = np.linalg.norm(np.nan_to_num(np.asarray(gyr_rad_s, dtype=float)), axis=1)
+    rows = []
+    for s, e, r, label in zip(phases.start, phases.end, phases.repetition, phases.labels, strict=True):
+        last = max(int(e) - 1, int(s))
+        rows.append(
+            {
+                "repetition": int(r),
+                "label": label,
+                "start_ns": int(t_ns[s]),
+                "end_ns": int(t_ns[last]),
+                "start_s": round(float(t_ns[s] - t_ns[0]) * 1e-9, 4),
+                "end_s": round(float(t_ns[last] - t_ns[0]) * 1e-9, 4),
+                "duration_s": round(float(t_ns[last] - t_ns[s]) * 1e-9, 4),
+                "peak_angular_velocity_rad_s": round(float(raw[s : last + 1].max()), 4),
+            }
+        )
+    return rows

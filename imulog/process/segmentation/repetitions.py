@@ -1,0 +1,338 @@
+"""Repetition splitting of a multi-task recording and event correction (R2G thesis 3.3.2 and 3.3.1).
+
+* :func:`split_repetitions` (thesis 3.3.2): samples whose angular-velocity norm exceeds 10 % of its maximum are
+  "non-static"; the ``n - 1`` longest gaps between consecutive non-static samples separate the ``n``
+  repetitions (the protocol puts a long rest between repetitions).
+* :func:`group_movements` (default, more robust): the same idea on the DynAMoS movements, see its docstring.
+* :func:`segment_repetitions` (thesis 3.3.1 event correction): in a repetition with more than ``n_phases`` movements, keep the
+  ``n_phases`` movements whose durations ``D``, heights ``H`` (peak norm) and gaps ``S`` best match the
+  subject's reference (mean over the repetitions that show exactly ``n_phases`` movements), minimising
+  ``RMS(D - D*) + RMS(H - H*) + RMS(S - S*)`` exhaustively over all combinations. A repetition with fewer
+  movements (two phases fused) is split at the local minimum of the norm that best matches the reference
+  (an imulog addition, so that a trial always yields ``n_repetitions x n_phases`` phases).
+
+Units: durations and gaps in seconds, heights in rad/s; intervals are half-open sample ranges.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import combinations
+
+import numpy as np
+
+R2G_PHASES: tuple[str, ...] = ("reach", "lift", "return_bottle", "return_hand")
+
+
+@dataclass(frozen=True)
+class RepetitionParams:
+    """Parameters of :func:`segment_repetitions`.
+
+    n_repetitions: repetitions in the recording (R2G protocol: 25); 0 = infer from movement count / n_phases.
+    n_phases: movements per repetition (R2G: 4).
+    activity_fraction: fraction of the maximum norm above which a sample is non-static (thesis: 0.10).
+    split: ``"activity"`` (thesis 3.3.2: longest gaps between non-static samples) or ``"movements"``
+        (default: longest rests between major movements, see :func:`group_movements`).
+    major_fraction: a movement is major when its height is at least this fraction of the median height.
+    extra_cut_fraction: rests at least this fraction of the median repetition border also separate groups
+        (non-task activity becomes its own group and is dropped), see :func:`group_movements`.
+    continuation_gap_s: after event correction, a dropped movement starting within this time (s) of a kept
+        phase's end (or ending this close before its start) is absorbed into it as a corrective sub-movement
+        (imulog addition; 0 = drop extras as in the thesis).
+    max_candidates: at most this many movements (the highest) enter the exhaustive search per repetition.
+    labels: phase labels in order.
+    """
+
+    n_repetitions: int = 25
+    n_phases: int = 4
+    activity_fraction: float = 0.10
+    split: str = "movements"
+    major_fraction: float = 0.5
+    extra_cut_fraction: float = 0.5
+    continuation_gap_s: float = 1.0
+    max_candidates: int = 14
+    labels: tuple[str, ...] = R2G_PHASES
+
+
+@dataclass(frozen=True)
+class Phases:
+    """Corrected phases: ``start``/``end`` sample ranges, ``repetition`` (1-based), ``phase`` (0-based)."""
+
+    start: np.ndarray
+    end: np.ndarray
+    repetition: np.ndarray
+    phase: np.ndarray
+    labels: list[str]
+    n_corrected: int  # repetitions whose movement count had to be corrected
+
+    def __len__(self) -> int:
+        return len(self.start)
+
+
+def split_repetitions(
+    norm: np.ndarray, n_repetitions: int, activity_fraction: float = 0.10
+) -> tuple[np.ndarray, np.ndarray]:
+    """Split a recording into ``n_repetitions`` tasks (thesis 3.3.2); returns ``[start, end)`` sample ranges.
+
+    ``norm`` is the angular-velocity norm (rad/s). Each repetition runs from its first to its last
+    non-static sample.
+    """
+    norm = np.asarray(norm, dtype=float)
+    active = np.flatnonzero(norm > activity_fraction * np.nanmax(norm))
+    if len(active) == 0 or n_repetitions < 1:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    gaps = np.diff(active)
+    k = min(n_repetitions - 1, len(gaps))
+    cut = np.sort(np.argsort(-gaps, kind="stable")[:k])
+    starts = np.concatenate([[active[0]], active[cut + 1]])
+    ends = np.concatenate([active[cut] + 1, [active[-1] + 1]])
+    return starts.astype(np.int64), ends.astype(np.int64)
+
+
+def _optimal_cuts(gaps: np.ndarray, n_groups: int, min_size: int, max_size_factor: int = 4) -> list[int] | None:
+    """Cuts (after item k) splitting ``len(gaps) + 1`` items into ``n_groups`` groups of ``min_size`` to
+    ``max_size_factor * min_size`` items that maximise the summed gap at the cuts (dynamic programming);
+    None when impossible."""
+    m = len(gaps) + 1
+    max_size = max_size_factor * min_size
+    if n_groups < 1 or m < n_groups * min_size:
+        return None
+    neg = -np.inf
+    best = np.full((n_groups + 1, m + 1), neg)
+    back = np.zeros((n_groups + 1, m + 1), dtype=np.int64)
+    best[0, 0] = 0.0
+    gain = np.concatenate([[0.0], np.asarray(gaps, dtype=float)])  # gain[i]: cut before item i (i >= 1)
+    for c in range(1, n_groups + 1):
+        for j in range(c * min_size, m + 1):
+            lo, hi = max(0, j - max_size), j - min_size
+            if hi < lo:
+                continue
+            i = np.arange(lo, hi + 1)
+            cand = best[c - 1, i] + np.where(i > 0, gain[i], 0.0)
+            k = int(np.argmax(cand))
+            best[c, j], back[c, j] = cand[k], i[k]
+    if not np.isfinite(best[n_groups, m]):
+        return None
+    cuts, j = [], m
+    for c in range(n_groups, 0, -1):
+        i = int(back[c, j])
+        if i > 0:
+            cuts.append(i - 1)
+        j = i
+    return sorted(cuts)
+
+
+def group_movements(
+    start: np.ndarray,
+    end: np.ndarray,
+    heights: np.ndarray,
+    n_repetitions: int,
+    n_phases: int = 4,
+    major_fraction: float = 0.5,
+    extra_cut_fraction: float = 0.5,
+) -> np.ndarray:
+    """Candidate repetition of each movement (0-based, in time order) from the longest rests.
+
+    A movement is major when its height is at least ``major_fraction`` x the median height (so small
+    adjustments inside a rest do not cut the rest in two). The ``n_repetitions - 1`` borders are the gaps
+    between consecutive major movements that maximise the summed rest with every repetition holding
+    ``n_phases`` to ``4 n_phases`` major movements (dynamic programming); further gaps at least
+    ``extra_cut_fraction`` x the median border gap are cut as well (longest first, while every group keeps
+    ``n_phases`` major movements), so that activity which is not a task (e.g. a calibration
+    wave before the first repetition) forms groups of its own; :func:`segment_repetitions` then keeps the
+    ``n_repetitions`` groups that best match the correct repetitions. Minor movements join the group whose
+    span contains (or is nearest to) their mid-point.
+    """
+    start, end, heights = np.asarray(start), np.asarray(end), np.asarray(heights, dtype=float)
+    if len(start) == 0:
+        return np.zeros(0, dtype=np.int64)
+    major = np.flatnonzero(heights >= major_fraction * np.median(heights))
+    gaps = start[major[1:]] - end[major[:-1]]
+    cuts = _optimal_cuts(gaps, n_repetitions, n_phases)
+    if cuts is None:  # too few major movements for the constraint: plain longest gaps
+        cuts = sorted(np.argsort(-gaps, kind="stable")[: n_repetitions - 1].tolist())
+    elif len(cuts):
+        floor = extra_cut_fraction * float(np.median(gaps[cuts]))
+        for k in np.argsort(-gaps, kind="stable"):  # non-task activity: more cuts at long rests
+            if gaps[k] < floor:
+                break
+            trial = sorted({*cuts, int(k)})
+            if np.diff([-1, *trial, len(major) - 1]).min() >= n_phases:
+                cuts = trial
+    bounds = np.asarray(cuts, dtype=np.int64)
+    rep_s = start[major[np.concatenate([[0], bounds + 1])]]
+    rep_e = end[major[np.concatenate([bounds, [len(major) - 1]])]]
+    return assign_to_repetitions(start, end, rep_s, rep_e)
+
+
+def assign_to_repetitions(start: np.ndarray, end: np.ndarray, rep_start: np.ndarray, rep_end: np.ndarray) -> np.ndarray:
+    """0-based repetition of each movement: the repetition containing (or nearest to) its mid-point."""
+    mid = 0.5 * (np.asarray(start) + np.asarray(end))
+    rs, re = np.asarray(rep_start, dtype=float), np.asarray(rep_end, dtype=float)
+    dist = np.maximum(rs[None, :] - mid[:, None], 0) + np.maximum(mid[:, None] - re[None, :], 0)
+    return np.argmin(dist, axis=1).astype(np.int64)
+
+
+def features(start: np.ndarray, end: np.ndarray, norm: np.ndarray, rate_hz: float):
+    """Durations (s), heights (peak norm, rad/s) and gaps to the next movement (s)."""
+    start, end = np.asarray(start), np.asarray(end)
+    d = (end - start) / rate_hz
+    h = np.array([norm[s:e].max() if e > s else 0.0 for s, e in zip(start, end, strict=True)])
+    s = (start[1:] - end[:-1]) / rate_hz
+    return d, h, s
+
+
+def _rms(a: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(a**2))) if len(a) else 0.0
+
+
+def correction_cost(d, h, s, ref_d, ref_h, ref_s) -> float:
+    """Thesis 3.3.1 criterion ``RMS(D-D*) + RMS(H-H*) + RMS(S-S*)`` (s, rad/s, s summed as published)."""
+    return _rms(d - ref_d) + _rms(h - ref_h) + _rms(s - ref_s)
+
+
+def best_subset(d, h, start, end, rate_hz, ref, n_phases: int, max_candidates: int) -> tuple[int, ...]:
+    """Indices of the ``n_phases`` movements minimising :func:`correction_cost` (exhaustive search)."""
+    ref_d, ref_h, ref_s = ref
+    idx = np.arange(len(d))
+    if len(idx) > max_candidates:
+        idx = np.sort(np.argsort(-h, kind="stable")[:max_candidates])
+    best, best_cost = tuple(idx[:n_phases]), np.inf
+    for combo in combinations(idx, n_phases):
+        c = np.array(combo)
+        gaps = (start[c[1:]] - end[c[:-1]]) / rate_hz
+        cost = correction_cost(d[c], h[c], gaps, ref_d, ref_h, ref_s)
+        if cost < best_cost:
+            best, best_cost = tuple(int(v) for v in combo), cost
+    return best
+
+
+def _split_candidates(start, end, norm, min_len: int):
+    for k in range(len(start)):
+        seg = norm[start[k] : end[k]]
+        if len(seg) < 3:
+            continue
+        m = np.flatnonzero((seg[1:-1] < seg[:-2]) & (seg[1:-1] <= seg[2:])) + 1
+        for cut in m:
+            if cut >= min_len and len(seg) - cut >= min_len:
+                yield k, int(start[k] + cut), float(seg[cut])
+
+
+def _split_to(start, end, norm, rate_hz, ref, n_phases: int):
+    """Split fused movements (fewer than ``n_phases``) at the local minima that best match the reference."""
+    start, end = list(start), list(end)
+    min_len = max(2, int(0.1 * rate_hz))
+    while 0 < len(start) < n_phases:
+        best, best_cost = None, np.inf
+        for k, cut, value in _split_candidates(start, end, norm, min_len):
+            s2 = np.array(start[: k + 1] + [cut] + start[k + 1 :])
+            e2 = np.array(end[:k] + [cut] + end[k:])
+            if ref is not None and len(s2) == n_phases:
+                d, h, gaps = features(s2, e2, norm, rate_hz)
+                cost = correction_cost(d, h, gaps, *ref)
+            else:
+                cost = value  # deepest minimum first
+            if cost < best_cost:
+                best, best_cost = (k, cut), cost
+        if best is None:
+            break
+        k, cut = best
+        start.insert(k + 1, cut)
+        end.insert(k, cut)
+    return np.asarray(start, dtype=np.int64), np.asarray(end, dtype=np.int64)
+
+
+def _reference(groups, start, end, norm, rate_hz, n_phases):
+    good = [g for g in groups if len(g) == n_phases]
+    if not good:
+        return None
+    feats = [features(start[g], end[g], norm, rate_hz) for g in good]
+    return tuple(np.mean([f[i] for f in feats], axis=0) for i in range(3))
+
+
+def _select(s, e, norm, rate_hz, ref, params: RepetitionParams) -> tuple[np.ndarray, np.ndarray, float]:
+    """Exactly ``n_phases`` movements of one repetition and their correction cost (inf without reference)."""
+    n = params.n_phases
+    if len(s) > n:
+        d, h, _ = features(s, e, norm, rate_hz)
+        if ref is None:  # no correct repetition anywhere: keep the highest movements
+            keep = np.sort(np.argsort(-h, kind="stable")[:n])
+        else:
+            keep = np.array(best_subset(d, h, s, e, rate_hz, ref, n, params.max_candidates))
+        ks, ke = s[keep], e[keep]
+        if params.continuation_gap_s > 0:  # absorb sub-movements that continue a kept phase
+            gap = int(round(params.continuation_gap_s * rate_hz))
+            for a, b in zip(s, e, strict=True):
+                if a in ks:
+                    continue
+                after = np.flatnonzero((a >= ke) & (a - ke <= gap))
+                before = np.flatnonzero((b <= ks) & (ks - b <= gap))
+                if len(after):
+                    ke[after[-1]] = max(ke[after[-1]], b)
+                elif len(before):
+                    ks[before[0]] = min(ks[before[0]], a)
+        s, e = ks, ke
+    elif len(s) < n:
+        s, e = _split_to(s, e, norm, rate_hz, ref, n)
+    cost = np.inf
+    if ref is not None and len(s) == n:
+        cost = correction_cost(*features(s, e, norm, rate_hz), *ref)
+    return s, e, cost
+
+
+def segment_repetitions(
+    start: np.ndarray,
+    end: np.ndarray,
+    norm: np.ndarray,
+    rate_hz: float,
+    params: RepetitionParams = RepetitionParams(),
+) -> Phases:
+    """Group movements into repetitions and correct each to exactly ``n_phases`` labelled phases.
+
+    ``start``/``end``: movements (sample ranges, e.g. from DynAMoS); ``norm``: filtered angular-velocity norm
+    (rad/s) used for heights, repetition splitting and fused-phase splitting. When more candidate groups than
+    ``n_repetitions`` are found, the groups with the highest correction cost (least like a correct
+    repetition: calibration waves, fidgeting) are dropped.
+    """
+    start = np.asarray(start, dtype=np.int64)
+    end = np.asarray(end, dtype=np.int64)
+    norm = np.asarray(norm, dtype=float)
+    n_rep = params.n_repetitions or max(1, int(round(len(start) / params.n_phases)))
+    empty = np.zeros(0, dtype=np.int64)
+    if len(start) == 0:
+        return Phases(empty, empty, empty, empty, [], 0)
+    if params.split == "activity":
+        rep_s, rep_e = split_repetitions(norm, n_rep, params.activity_fraction)
+        rep = assign_to_repetitions(start, end, rep_s, rep_e)
+    else:
+        heights = features(start, end, norm, rate_hz)[1]
+        rep = group_movements(
+            start, end, heights, n_rep, params.n_phases, params.major_fraction, params.extra_cut_fraction
+        )
+    groups = [np.flatnonzero(rep == r) for r in range(int(rep.max()) + 1)]
+    groups = [g for g in groups if len(g)]
+    ref = _reference(groups, start, end, norm, rate_hz, params.n_phases)
+    selected = [(*_select(start[g], end[g], norm, rate_hz, ref, params), len(g)) for g in groups]
+    if len(selected) > n_rep:  # drop the groups least like a repetition, keep time order
+        order = np.argsort([c for _, _, c, _ in selected], kind="stable")
+        keep = np.sort(order[:n_rep])
+        selected = [selected[k] for k in keep]
+    out_s, out_e, out_r, out_p = [], [], [], []
+    corrected = 0
+    for r, (s, e, _cost, count) in enumerate(selected):
+        corrected += int(count != params.n_phases)
+        out_s.extend(s)
+        out_e.extend(e)
+        out_r.extend([r + 1] * len(s))
+        out_p.extend(range(len(s)))
+    phase = np.asarray(out_p, dtype=np.int64)
+    named = len(params.labels) == params.n_phases
+    labels = [params.labels[p] if named else f"phase_{p + 1}" for p in phase]
+    return Phases(
+        start=np.asarray(out_s, dtype=np.int64),
+        end=np.asarray(out_e, dtype=np.int64),
+        repetition=np.asarray(out_r, dtype=np.int64),
+        phase=phase,
+        labels=labels,
+        n_corrected=corrected,
+    )

@@ -1,0 +1,74 @@
+"""Vicon marker cluster rigidly mounted on the IMU: geometry, marker noise and occlusion gaps.
+
+Cluster frame: origin at marker ``O`` (= the IMU's sensing origin, no lever arm), ``X`` on its
++x axis, ``Y`` on its +y axis, ``A`` an asymmetric fourth marker (so the cluster can be labelled
+unambiguously). A cluster pose computed as ``x = unit(X - O)``, ``z = unit(x × (Y - O))``,
+``y = z × x`` reproduces the cluster frame exactly. The IMU sensor frame is turned into the
+cluster frame by the constant ``rotation_imu_to_cluster`` (``v_cluster = R_ic v_imu``), so the
+cluster's orientation in the world is ``q_world_sensor * conj(q_ic)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from imulog.simulate import quat
+
+LABELS = ("O", "X", "Y", "A")
+
+
+@dataclass(frozen=True)
+class ViconParams:
+    marker_offsets_m: tuple[tuple[float, float, float], ...] = (
+        (0.0, 0.0, 0.0),
+        (0.045, 0.0, 0.0),
+        (0.0, 0.035, 0.0),
+        (0.03, 0.025, 0.012),
+    )  # O, X, Y, A in the cluster frame: a BlueBuddy-sized (~5 x 4 cm) box
+    noise_mm: float = 0.2  # per coordinate; Vicon T-series residuals are sub-millimetre
+    imu_to_cluster_sd_deg: float = 3.0  # mounting misalignment of the cluster on the IMU box
+    gap_rate_per_min: float = 1.0  # occlusions per marker per minute
+    gap_duration_s: tuple[float, float] = (0.05, 0.6)  # uniform range
+    subject_name: str = (
+        ""  # 'Subject:' prefix of the Nexus marker names ('' -> plain O, X, Y, A as the conventions name them)
+    )
+    decimals: int = 3  # mm decimals written in the CSV (1 um; Nexus writes ~6 significant digits)
+
+
+def draw_imu_to_cluster(params: ViconParams, rng: np.random.Generator) -> np.ndarray:
+    """Constant rotation IMU sensor frame -> cluster frame (a few degrees about a random axis)."""
+    rv = rng.normal(0.0, np.radians(params.imu_to_cluster_sd_deg), 3)
+    return quat.from_rotvec(rv)
+
+
+def marker_positions(
+    position_m: np.ndarray, q_world_sensor: np.ndarray, q_imu_to_cluster: np.ndarray, params: ViconParams
+) -> np.ndarray:
+    """True marker positions (N, 4, 3) m."""
+    q_cluster = quat.mul(q_world_sensor, quat.conj(q_imu_to_cluster))
+    offsets = np.asarray(params.marker_offsets_m, dtype=float)
+    out = np.empty((len(position_m), len(offsets), 3))
+    for k, off in enumerate(offsets):
+        out[:, k] = position_m + quat.rotate(q_cluster, np.broadcast_to(off, position_m.shape))
+    return out
+
+
+def add_noise_and_gaps(
+    pos_m: np.ndarray, rate_hz: float, params: ViconParams, rng: np.random.Generator, noise_free: bool
+) -> np.ndarray:
+    """Measured markers (N, M, 3) m: white noise, NaN gaps, quantised to the CSV's decimals of mm."""
+    out = pos_m.copy()
+    n, m, _ = out.shape
+    if not noise_free:
+        out += rng.normal(0.0, params.noise_mm * 1e-3, out.shape)
+        duration_min = n / rate_hz / 60.0
+        for k in range(m):
+            n_gaps = rng.poisson(params.gap_rate_per_min * duration_min)
+            for _ in range(n_gaps):
+                start = int(rng.integers(1, max(2, n - 1)))
+                length = max(1, int(round(rng.uniform(*params.gap_duration_s) * rate_hz)))
+                out[start : min(n - 1, start + length), k] = np.nan
+    scale = 10**params.decimals
+    return np.round(out * 1e3 * scale) / scale * 1e-3

@@ -1,0 +1,108 @@
+"""Run one reprocessing step on a trial: read inputs, compute, append derived channels with provenance.
+
+    outcome = run_step("trial.mcap", step="orientation", algorithm="vqf", params=VqfParams(),
+                       inputs=["/imu/wrist"], compute=lambda trial: StepResult(streams=[...]))
+
+The step is skipped (nothing written) when the latest run of the same ``step`` recorded the same
+algorithm, params and input content hashes and its output channels are still the ones it wrote.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from imulog.archive import TrialReader, append_derived
+from imulog.archive.metadata import to_json
+from imulog.model import Stream
+
+
+@dataclass
+class StepResult:
+    """What a step's ``compute`` returns: derived streams and metadata records (e.g. ``imulog.alignment``)."""
+
+    streams: list[Stream] = field(default_factory=list)
+    metadata: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+
+@dataclass
+class StepOutcome:
+    """What :func:`run_step` did: ``skipped`` (already up to date) or wrote ``topics`` as run ``run``."""
+
+    path: Path
+    step: str
+    skipped: bool
+    run: int | None
+    topics: list[str]
+    input_hashes: dict[str, str]
+    reason: str = ""
+
+
+def params_json(params: Any) -> str:
+    """Canonical JSON of a params object (frozen dataclass, dict, or None)."""
+    if dataclasses.is_dataclass(params) and not isinstance(params, type):
+        params = dataclasses.asdict(params)
+    return to_json({} if params is None else params)
+
+
+def _up_to_date(
+    trial: TrialReader, step: str, algorithm: str, pjson: str, hashes: dict[str, str]
+) -> tuple[int, dict] | None:
+    runs = [(n, r) for n, r in trial.runs().items() if r.get("step") == step]
+    if not runs:
+        return None
+    n, rec = runs[-1]
+    if rec.get("algorithm") != algorithm or to_json(rec.get("params", {})) != pjson or rec.get("inputs") != hashes:
+        return None
+    channels = {c.topic: c for c in trial.channels}
+    for topic in rec.get("outputs", {}):
+        c = channels.get(topic)
+        if c is None or c.metadata.get("run") != str(n):
+            return None
+    return n, rec
+
+
+def run_step(
+    path: str | os.PathLike[str],
+    *,
+    step: str,
+    algorithm: str,
+    params: Any,
+    inputs: Sequence[str],
+    compute: Callable[[TrialReader], StepResult],
+    force: bool = False,
+) -> StepOutcome:
+    """Run ``compute`` on the trial and append its result, unless the same run is already recorded.
+
+    ``inputs`` are the topics the step reads (their content hashes go into the provenance); ``params`` a
+    frozen dataclass or dict. ``force`` recomputes and rewrites even when up to date.
+    """
+    path = Path(path)
+    pjson = params_json(params)
+    with TrialReader(path) as trial:
+        hashes = {topic: trial.channel_hash(topic) for topic in inputs}
+        if not force:
+            done = _up_to_date(trial, step, algorithm, pjson, hashes)
+            if done is not None:
+                n, rec = done
+                return StepOutcome(
+                    path, step, True, n, sorted(rec.get("outputs", {})), hashes, "same algorithm, params and inputs"
+                )
+        result = compute(trial)
+    if not isinstance(result, StepResult):
+        raise TypeError(f"step {step!r}: compute() must return a StepResult, got {type(result).__name__}")
+    append_derived(
+        path,
+        result.streams,
+        run={"step": step, "algorithm": algorithm, "params": json.loads(pjson), "inputs": hashes},
+        metadata=result.metadata,
+        replace=True,
+    )
+    with TrialReader(path) as trial:
+        n = max(trial.runs(), default=None)
+    return StepOutcome(path, step, False, n, [s.topic for s in result.streams], hashes, "computed")

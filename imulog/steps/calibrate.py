@@ -1,0 +1,105 @@
+"""Calibration: estimate a calibration from a calibration recording, apply one to a trial.
+
+* :func:`calibration_from_arrays` segments a calibration recording (six static orientations, a
+  static period and one known rotation about each axis, in any order) and estimates accelerometer
+  and gyroscope bias and calibration matrices (R2G thesis eqs. 2.1-2.5).
+* :func:`run_calibrate` (step ``calibrate``) writes ``/derived/calibrated/{imu}`` (``ax,ay,az``
+  m/s^2, ``gx,gy,gz`` rad/s, and ``mx,my,mz`` uT passed through when present) on the IMU device
+  clock; the calibration itself is recorded in the run's params.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from imulog.model import SignalStream
+from imulog.process import calibration as cal
+from imulog.steps.orientation import pick_imu, rate_hz
+
+STEP = "calibrate"
+
+
+def calibration_from_arrays(
+    t_ns: np.ndarray,
+    acc: np.ndarray | None,
+    gyr: np.ndarray,
+    *,
+    angle_rad: float = 2 * np.pi,
+    params: cal.SegmentParams | None = None,
+    g_m_s2: float = cal.GRAVITY_M_S2,
+) -> cal.Calibration:
+    """Estimate a :class:`~imulog.process.calibration.Calibration` from one calibration recording.
+
+    Accelerometer: needs the six static orientations (skipped with a note in ``info`` when absent).
+    Gyroscope: needs rotations of ``angle_rad`` about each axis between static periods (skipped
+    likewise). Raises when neither can be estimated.
+    """
+    params = params or cal.SegmentParams()
+    fs = rate_hz(t_ns)
+    statics = cal.find_static_segments(gyr, fs, params)
+    if not statics:
+        raise ValueError("no static period found (gyro norm never stays below the threshold for long enough)")
+    out = cal.Calibration(info={"static_periods": len(statics), "rate_hz": round(fs, 4)})
+    problems = []
+    if acc is not None:
+        try:
+            ap, am = cal.six_position_means(acc, statics)
+            out.acc = cal.accelerometer_six_position(ap, am, g_m_s2)
+        except ValueError as exc:
+            problems.append(f"accelerometer: {exc}")
+    rotations = cal.find_rotation_segments(gyr, fs, statics, angle_rad, params)
+    out.info["rotations"] = len(rotations)
+    try:
+        longest = max(statics, key=lambda se: se[1] - se[0])
+        out.gyr = cal.gyroscope_from_rotations(gyr[longest[0] : longest[1]], rotations, fs)
+    except ValueError as exc:
+        problems.append(f"gyroscope: {exc}")
+    if out.acc is None and out.gyr is None:
+        raise ValueError("; ".join(problems))
+    if problems:
+        out.info["not_estimated"] = problems
+    return out
+
+
+def compute_calibrated(
+    t_ns: np.ndarray,
+    acc: np.ndarray | None,
+    gyr: np.ndarray | None,
+    mag: np.ndarray | None,
+    imu: str,
+    calibration: cal.Calibration,
+) -> SignalStream:
+    """The calibrated channel of one IMU."""
+    if acc is None or gyr is None:
+        raise ValueError(f"/imu/{imu} needs accelerometer and gyroscope columns")
+    a, g = cal.apply(calibration, acc, gyr)
+    cols, units, vals = ["ax", "ay", "az", "gx", "gy", "gz"], ["m/s^2"] * 3 + ["rad/s"] * 3, [a, g]
+    if mag is not None:
+        cols += ["mx", "my", "mz"]
+        units += ["uT"] * 3
+        vals.append(mag)
+    return SignalStream(f"/derived/calibrated/{imu}", t_ns, cols, units, np.hstack(vals), frame_id=imu)
+
+
+def run_calibrate(path, calibration: cal.Calibration, *, imu: str | None = None, force: bool = False):
+    """Apply ``calibration`` to a trial (step ``calibrate``); returns the run_step outcome."""
+    from imulog.archive import TrialReader
+    from imulog.steps.base import StepResult, run_step
+
+    with TrialReader(path) as trial:
+        name = pick_imu(trial.topics(), imu)
+    topic = f"/imu/{name}"
+
+    def compute(trial) -> StepResult:
+        s = trial.read(topic)
+        return StepResult(streams=[compute_calibrated(s.t_ns, s.acc, s.gyr, s.mag, name, calibration)])
+
+    return run_step(
+        path,
+        step=f"{STEP}:{name}",
+        algorithm="imulog.calibration.linear",
+        params={"imu": name, "calibration": calibration.to_dict()},
+        inputs=[topic],
+        compute=compute,
+        force=force,
+    )

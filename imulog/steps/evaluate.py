@@ -1,0 +1,146 @@
+"""Reprocessing step ``evaluate``: every ``/derived/trajectory/{method}`` against the optical reference.
+
+Reference: the Vicon cluster origin, ``/derived/vicon/cluster_pose`` (align step) when present, else the
+origin marker ``O`` of the trial's ``/markers/*`` channel (the cluster origin in the conventions). The
+reference is interpolated linearly onto each trajectory's time stamps (both on the reference clock; samples
+further than ``max_gap_s`` from a valid reference sample are dropped). Errors per repetition window from the
+``imulog.trajectory`` record (else over the whole channel), each trajectory and reference taken relative to
+the window's first sample (:mod:`imulog.process.evaluation`). Writes metadata ``imulog.evaluation``:
+reference topic, per method the per-repetition errors and the summary (mean, std over repetitions) per axis.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from imulog.process.evaluation import METRICS, aggregate, format_table, summarize, trajectory_errors
+from imulog.process.trajectory_opt import METHODS
+from imulog.steps.trajectory import parse_record
+
+STEP = "evaluate"
+POSE_TOPIC = "/derived/vicon/cluster_pose"
+
+
+def interpolate_reference(
+    t_ref_ns: np.ndarray, pos_m: np.ndarray, t_ns: np.ndarray, max_gap_s: float = 0.05
+) -> np.ndarray:
+    """Reference positions (N, 3) m at ``t_ns``: linear between valid samples, NaN across gaps > ``max_gap_s``."""
+    t_ref = np.asarray(t_ref_ns, dtype=np.int64)
+    pos = np.asarray(pos_m, dtype=np.float64)
+    ok = np.all(np.isfinite(pos), axis=1)
+    t_ok, p_ok = t_ref[ok], pos[ok]
+    out = np.full((len(t_ns), 3), np.nan)
+    if len(t_ok) < 2:
+        return out
+    tq = np.asarray(t_ns, dtype=np.int64)
+    base = float(t_ok[0])
+    for j in range(3):
+        out[:, j] = np.interp(tq - base, t_ok - base, p_ok[:, j], left=np.nan, right=np.nan)
+    idx = np.clip(np.searchsorted(t_ok, tq), 1, len(t_ok) - 1)
+    span = (t_ok[idx] - t_ok[idx - 1]) / 1e9
+    out[span > max_gap_s] = np.nan
+    return out
+
+
+def compute_evaluation(
+    trajectories: dict[str, tuple[np.ndarray, np.ndarray]],
+    reference: tuple[np.ndarray, np.ndarray],
+    *,
+    reference_topic: str,
+    windows: list[dict[str, Any]] | None = None,
+    max_gap_s: float = 0.05,
+) -> dict[str, Any]:
+    """The ``imulog.evaluation`` record from {method: (t_ns, (N, 3) m)} and the reference (t_ns, (M, 3) m)."""
+    per_method: dict[str, list[dict[str, Any]]] = {}
+    for method, (t_ns, pos) in trajectories.items():
+        t_ns = np.asarray(t_ns, dtype=np.int64)
+        ref = interpolate_reference(reference[0], reference[1], t_ns, max_gap_s)
+        spans = windows or [{"index": -1, "start_ns": int(t_ns[0]), "end_ns": int(t_ns[-1])}]
+        rows = []
+        for w in spans:
+            sel = (t_ns >= w["start_ns"]) & (t_ns <= w["end_ns"])
+            if np.count_nonzero(sel) < 2:
+                continue
+            try:
+                r = trajectory_errors(pos[sel], ref[sel])
+            except ValueError:
+                continue
+            r["repetition"] = int(w.get("index", -1))
+            rows.append(r)
+        per_method[method] = rows
+    return {
+        "reference": reference_topic,
+        "metrics": list(METRICS),
+        "units": {"mae_cm": "cm", "rom_pct": "%", "rmse_cm": "cm", "final_cm": "cm", "spearman": "1"},
+        "methods": {m: {"summary": summarize(rows), "repetitions": rows} for m, rows in per_method.items()},
+    }
+
+
+def table_from_record(record: dict[str, Any]) -> str:
+    """Table 3.1-shaped text (method x axis, mean±std) from an ``imulog.evaluation`` record."""
+    methods = record.get("methods", {})
+    order = sorted(methods, key=lambda m: (METHODS.index(m) if m in METHODS else len(METHODS), m))
+    return format_table(aggregate({m: methods[m]["repetitions"] for m in order}))
+
+
+def _reference_from_trial(trial, topics: list[str]) -> tuple[str, tuple[np.ndarray, np.ndarray]]:
+    if POSE_TOPIC in topics:
+        pose = trial.read(POSE_TOPIC)
+        return POSE_TOPIC, (pose.t_ns, pose.position)
+    markers = [t for t in topics if t.startswith("/markers/")]
+    for topic in markers:
+        stream = trial.read(topic)
+        labels = [label.split(":")[-1] for label in stream.labels]
+        if "O" in labels:
+            return f"{topic}:O", (stream.t_ns, stream.pos[:, labels.index("O")])
+    raise ValueError(
+        "no optical reference: neither /derived/vicon/cluster_pose (run `imulog process align`) nor a marker 'O' "
+        f"in {', '.join(markers) or 'any /markers/* channel'}"
+    )
+
+
+def run_evaluate(path, *, methods: list[str] | None = None, max_gap_s: float = 0.05, force: bool = False):
+    """Run the step on a trial file; returns ``(outcome, record)``."""
+    from imulog.archive import TrialReader
+    from imulog.steps.base import StepResult, run_step
+
+    with TrialReader(path) as trial:
+        topics = trial.topics()
+        available = sorted(t.rsplit("/", 1)[1] for t in topics if t.startswith("/derived/trajectory/"))
+        ref_topic, _ = _reference_from_trial(trial, topics)
+    if not available:
+        raise ValueError("no /derived/trajectory/* channel: run `imulog process trajectory` first")
+    chosen = available if not methods else [m for m in methods if m in available]
+    missing = sorted(set(methods or []) - set(available))
+    if missing:
+        raise ValueError(f"no trajectory for method(s) {', '.join(missing)} (available: {', '.join(available)})")
+    inputs = [f"/derived/trajectory/{m}" for m in chosen] + [ref_topic.split(":")[0]]
+    holder: dict[str, Any] = {}
+
+    def compute(trial) -> StepResult:
+        ref_name, ref = _reference_from_trial(trial, topics)
+        trajs = {}
+        for m in chosen:
+            s = trial.read(f"/derived/trajectory/{m}")
+            trajs[m] = (s.t_ns, s.values)
+        info = parse_record(trial.metadata.get("imulog.trajectory")) or {}
+        reps = info.get("repetitions")
+        record = compute_evaluation(trajs, ref, reference_topic=ref_name, windows=reps, max_gap_s=max_gap_s)
+        holder["record"] = record
+        return StepResult(streams=[], metadata={"imulog.evaluation": record})
+
+    outcome = run_step(
+        path,
+        step=STEP,
+        algorithm="imulog.evaluation",
+        params={"methods": chosen, "max_gap_s": max_gap_s},
+        inputs=inputs,
+        compute=compute,
+        force=force,
+    )
+    if "record" not in holder:
+        with TrialReader(path) as trial:
+            holder["record"] = parse_record(trial.metadata.get("imulog.evaluation")) or {}
+    return outcome, holder["record"]

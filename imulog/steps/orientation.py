@@ -1,0 +1,141 @@
+"""Reprocessing step ``orientation``: sensor orientation and gravity-free global acceleration of one IMU.
+
+Reads ``/imu/{imu}`` (or ``/derived/calibrated/{imu}`` when present, see ``source``) and writes, on
+the IMU device clock (the raw channel's ``t_ns``):
+
+* ``/derived/orientation/{imu}``: ``qw,qx,qy,qz``, sensor-to-global (z up, heading arbitrary unless
+  the magnetometer is fused);
+* ``/derived/acc_global/{imu}``: ``ax,ay,az`` m/s^2 in the global frame, gravity removed;
+* ``/derived/orientation_static/{imu}``: ``static`` (1 = gyro norm below the threshold), the mask
+  used for initialisation and gravity magnitude (``/derived/static/{imu}`` belongs to the
+  segmentation step).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from imulog.model import SignalStream
+from imulog.process.orientation import OrientationParams, estimate_orientation, gravity_free_acceleration
+
+STEP = "orientation"
+CALIBRATED_TOPIC = "/derived/calibrated/{imu}"
+
+
+def pick_imu(topics: list[str], imu: str | None) -> str:
+    """``imu`` if given (must exist), else the only ``/imu/*`` topic, else ``wrist``."""
+    imus = [t.split("/", 2)[2] for t in topics if t.startswith("/imu/")]
+    if imu is not None:
+        if imu not in imus:
+            raise ValueError(f"no channel /imu/{imu} in the trial (IMU channels: {', '.join(imus) or 'none'})")
+        return imu
+    if len(imus) == 1:
+        return imus[0]
+    if "wrist" in imus:
+        return "wrist"
+    raise ValueError(f"choose an IMU with --imu among: {', '.join(imus) or 'none (no /imu/* channel)'}")
+
+
+def rate_hz(t_ns: np.ndarray) -> float:
+    """Mean sampling rate (Hz) of a time vector in ns."""
+    t = np.asarray(t_ns, dtype=np.int64)
+    if len(t) < 2 or t[-1] <= t[0]:
+        raise ValueError("need at least two increasing time stamps to know the sampling rate")
+    return (len(t) - 1) / ((t[-1] - t[0]) * 1e-9)
+
+
+def source_topic(topics: list[str], imu: str, source: str) -> str:
+    """Input topic for ``source`` ``auto`` (calibrated if present), ``raw`` or ``calibrated``."""
+    cal = CALIBRATED_TOPIC.format(imu=imu)
+    if source == "raw":
+        return f"/imu/{imu}"
+    if source == "calibrated":
+        if cal not in topics:
+            raise ValueError(f"no {cal} in the trial: run `imulog process calibrate` first or use --source raw")
+        return cal
+    if source != "auto":
+        raise ValueError(f"source must be auto, raw or calibrated, got {source!r}")
+    return cal if cal in topics else f"/imu/{imu}"
+
+
+def read_imu_arrays(trial: Any, topic: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """``(t_ns, acc, gyr, mag)`` from a raw ImuStream or a calibrated SignalStream topic."""
+    stream = trial.read(topic)
+    if topic.startswith("/imu/"):
+        if stream.acc is None or stream.gyr is None:
+            raise ValueError(f"{topic} needs accelerometer and gyroscope columns")
+        return stream.t_ns, stream.acc, stream.gyr, stream.mag
+    cols = {c: i for i, c in enumerate(stream.columns)}
+    need = ["ax", "ay", "az", "gx", "gy", "gz"]
+    if any(c not in cols for c in need):
+        raise ValueError(f"{topic} lacks columns {', '.join(c for c in need if c not in cols)}")
+    v = stream.values
+    acc = v[:, [cols["ax"], cols["ay"], cols["az"]]]
+    gyr = v[:, [cols["gx"], cols["gy"], cols["gz"]]]
+    mag = v[:, [cols["mx"], cols["my"], cols["mz"]]] if all(c in cols for c in ("mx", "my", "mz")) else None
+    return stream.t_ns, acc, gyr, mag
+
+
+def compute_orientation(
+    t_ns: np.ndarray, acc: np.ndarray, gyr: np.ndarray, mag: np.ndarray | None, imu: str, params: OrientationParams
+) -> list[SignalStream]:
+    """Pure part of the step: the three derived streams from IMU arrays."""
+    if params.use_mag and mag is None:
+        raise ValueError(f"/imu/{imu} has no magnetometer: drop --mag")
+    res = estimate_orientation(gyr, acc, rate_hz(t_ns), mag, params, t_ns=t_ns)
+    lin = gravity_free_acceleration(res.quat, acc, res.static)
+    frame = f"{imu}_global"
+    return [
+        SignalStream(
+            f"/derived/orientation/{imu}", t_ns, ["qw", "qx", "qy", "qz"], ["1"] * 4, res.quat, frame_id=frame
+        ),
+        SignalStream(f"/derived/acc_global/{imu}", t_ns, ["ax", "ay", "az"], ["m/s^2"] * 3, lin, frame_id=frame),
+        SignalStream(
+            f"/derived/orientation_static/{imu}",
+            t_ns,
+            ["static"],
+            ["1"],
+            res.static.astype(np.float64)[:, None],
+            frame_id=imu,
+        ),
+    ]
+
+
+def params_dict(params: OrientationParams) -> dict:
+    return dataclasses.asdict(params)
+
+
+def run_orientation(
+    path,
+    *,
+    imu: str | None = None,
+    params: OrientationParams | None = None,
+    source: str = "auto",
+    force: bool = False,
+):
+    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome."""
+    params = params or OrientationParams()
+    from imulog.archive import TrialReader
+    from imulog.steps.base import StepResult, run_step
+
+    with TrialReader(path) as trial:
+        topics = trial.topics()
+        name = pick_imu(topics, imu)
+        topic = source_topic(topics, name, source)
+
+    def compute(trial) -> StepResult:
+        t_ns, acc, gyr, mag = read_imu_arrays(trial, topic)
+        return StepResult(streams=compute_orientation(t_ns, acc, gyr, mag, name, params))
+
+    return run_step(
+        path,
+        step=f"{STEP}:{name}",
+        algorithm=f"imulog.orientation.{params.backend}",
+        params={"imu": name, **params_dict(params)},
+        inputs=[topic],
+        compute=compute,
+        force=force,
+    )

@@ -1,0 +1,277 @@
+"""Reprocessing step ``trajectory``: the wrist's path from one IMU, one derived channel per method.
+
+Reads (``{imu}`` e.g. ``wrist``):
+
+* ``/derived/acc_global/{imu}`` (orientation step): gravity-free acceleration in the IMU global frame,
+  IMU device clock (required);
+* ``/derived/static/{imu}`` (phases step): zero-velocity mask (required by every method but ``ddi``,
+  ``highpass`` and ``wavelet``);
+* ``/derived/phases/{imu}`` (phases step): R2G phases with ``task_index`` = repetition; without it the whole
+  recording is one window and ``optimized`` is skipped;
+* ``/derived/orientation/{imu}`` (orientation step, optional): enables ``zupt_bias`` and the rotating-bias
+  compensation of the optimisation's initial estimate;
+* metadata ``imulog.alignment`` (optional) for the reference clock and the global-to-world rotation, and
+  ``imulog.anthropometrics`` (h1/h2/h3, for the optimisation's reference).
+
+Writes ``/derived/trajectory/{method}`` (``x,y,z`` m; reference clock and ``world`` frame when the trial is
+aligned, else IMU device clock and ``{imu}_global`` frame). Each repetition's samples are its displacement
+from the repetition's first sample (a single IMU reconstructs displacement, not absolute position); only
+samples inside repetition windows are written. Metadata ``imulog.trajectory`` records the windows, clock,
+frame, estimated rotating bias and the waypoints used.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+from typing import Any
+
+import numpy as np
+
+from imulog.model import Intervals, SignalStream
+from imulog.process import quaternion as quat
+from imulog.process.minjerk import R2GReferenceParams
+from imulog.process.trajectory_opt import (
+    DEFAULT_PARAMS,
+    DEFAULT_REFERENCE,
+    METHODS,
+    Repetition,
+    TrajectoryParams,
+    reconstruct_repetitions,
+    repetition_windows,
+)
+
+STEP = "trajectory"
+TRAJECTORY_TOPIC = "/derived/trajectory/{method}"
+NEEDS_STATIC = {"zupt", "kalman", "zupt_bias", "optimized"}
+
+
+def pick_imu(topics: list[str], imu: str | None) -> str:
+    """``imu`` if given, else the only IMU with ``/derived/acc_global/*``, else ``wrist``."""
+    names = [t.split("/", 3)[3] for t in topics if t.startswith("/derived/acc_global/")]
+    if imu is not None:
+        if imu not in names:
+            raise ValueError(
+                f"no /derived/acc_global/{imu} in the trial: run `imulog process orientation` first"
+                + (f" (found: {', '.join(names)})" if names else "")
+            )
+        return imu
+    if len(names) == 1:
+        return names[0]
+    if "wrist" in names:
+        return "wrist"
+    if not names:
+        raise ValueError("no /derived/acc_global/* channel in the trial: run `imulog process orientation` first")
+    raise ValueError(f"choose an IMU with --imu among: {', '.join(names)}")
+
+
+def parse_record(record: dict[str, Any] | None) -> dict[str, Any] | None:
+    """A metadata record with JSON-encoded string values decoded (lists, dicts, numbers)."""
+    if not record:
+        return None
+    out = dict(record)
+    for key, value in list(out.items()):
+        if isinstance(value, str) and value[:1] in "[{":
+            with contextlib.suppress(ValueError):
+                out[key] = json.loads(value)
+    return out
+
+
+def alignment_for(metadata: dict[str, Any], imu_topic: str) -> dict[str, Any] | None:
+    """The trial's ``imulog.alignment`` record if it concerns ``imu_topic`` (or names no IMU)."""
+    record = parse_record(metadata.get("imulog.alignment"))
+    if record is None or record.get("imu") not in (None, "", imu_topic):
+        return None
+    return record
+
+
+def _to_reference(t_dev_ns: np.ndarray, alignment: dict[str, Any] | None) -> np.ndarray:
+    if alignment is None:
+        return np.asarray(t_dev_ns, dtype=np.int64)
+    from imulog.process.alignment import device_to_reference
+
+    return np.asarray(np.round(device_to_reference(np.asarray(t_dev_ns, dtype=np.int64), alignment)), dtype=np.int64)
+
+
+def _sample_onto(t_src: np.ndarray, values: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
+    """Nearest-sample lookup (exact when the clocks are the same)."""
+    if len(t_src) == len(t_dst) and np.array_equal(t_src, t_dst):
+        return values
+    idx = np.clip(np.searchsorted(t_src, t_dst), 1, len(t_src) - 1)
+    left = t_dst - t_src[idx - 1] <= t_src[idx] - t_dst
+    return values[np.where(left, idx - 1, idx)]
+
+
+def phase_bounds_by_repetition(phases: Intervals, t0_ns: int) -> dict[int, np.ndarray]:
+    """{repetition: (P, 2) start/end s relative to ``t0_ns``}, phases sorted by start."""
+    out: dict[int, list[tuple[float, float]]] = {}
+    for s, e, k in zip(phases.start_ns, phases.end_ns, phases.task_index, strict=True):
+        if k < 0:
+            continue
+        out.setdefault(int(k), []).append(((s - t0_ns) / 1e9, (e - t0_ns) / 1e9))
+    return {k: np.asarray(sorted(v)) for k, v in out.items()}
+
+
+def compute_trajectories(
+    acc_t_ns: np.ndarray,
+    acc_global: np.ndarray,
+    *,
+    imu: str,
+    methods: list[str] | tuple[str, ...] = METHODS,
+    static: tuple[np.ndarray, np.ndarray] | None = None,
+    phases: Intervals | None = None,
+    phases_clock: str = "reference",
+    orientation: tuple[np.ndarray, np.ndarray] | None = None,
+    alignment: dict[str, Any] | None = None,
+    anthropometrics: dict[str, Any] | None = None,
+    params: TrajectoryParams = DEFAULT_PARAMS,
+    reference_params: R2GReferenceParams = DEFAULT_REFERENCE,
+) -> tuple[list[SignalStream], dict[str, Any]]:
+    """Pure part of the step: trajectory streams and the ``imulog.trajectory`` record (no I/O).
+
+    ``static`` and ``orientation`` are ``(t_ns, values)`` on the IMU device clock; ``phases`` on the reference
+    clock (``phases_clock="reference"``) or on the device clock (``"device"``).
+    """
+    t_dev = np.asarray(acc_t_ns, dtype=np.int64)
+    acc = np.asarray(acc_global, dtype=np.float64)
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        raise ValueError(f"unknown method(s) {', '.join(unknown)}; choose from {', '.join(METHODS)}")
+    if static is None and any(m in NEEDS_STATIC for m in methods):
+        need = ", ".join(m for m in methods if m in NEEDS_STATIC)
+        raise ValueError(f"methods {need} need /derived/static/{imu}: run `imulog process phases` first")
+    t_ref = _to_reference(t_dev, alignment)
+    frame, clock = f"{imu}_global", "device"
+    q_world = None if orientation is None else _sample_onto(orientation[0], np.asarray(orientation[1], float), t_dev)
+    if alignment is not None:
+        g2w = np.asarray(alignment.get("rotation_global_to_world", [1, 0, 0, 0]), dtype=np.float64)
+        acc = quat.rotate(g2w, acc)
+        if q_world is not None:
+            q_world = quat.multiply(g2w, q_world)
+        frame, clock = "world", "reference"
+    ok = np.all(np.isfinite(acc), axis=1)
+    if not np.all(ok):  # bridge gaps (dropped samples carry NaN) linearly
+        idx = np.arange(len(acc))
+        acc = np.column_stack([np.interp(idx, idx[ok], acc[ok, j]) for j in range(3)])
+    t_s = (t_ref - t_ref[0]) / 1e9
+    mask = (
+        np.zeros(len(t_dev), bool)
+        if static is None
+        else _sample_onto(np.asarray(static[0], np.int64), np.asarray(static[1]).reshape(-1) > 0.5, t_dev)
+    )
+    reps: list[Repetition] = []
+    if phases is not None and len(phases):
+        t_ph = phases
+        if phases_clock == "device" and alignment is not None:
+            t_ph = Intervals(
+                phases.topic,
+                _to_reference(phases.start_ns, alignment),
+                _to_reference(phases.end_ns, alignment),
+                phases.labels,
+                phases.task_index,
+            )
+        reps = repetition_windows(t_s, phase_bounds_by_repetition(t_ph, int(t_ref[0])), mask)
+    if not reps:
+        reps = [Repetition(index=-1, start=0, stop=len(t_s), phase_bounds_s=np.zeros((0, 2)))]
+        methods = [m for m in methods if m != "optimized"]
+    info: dict[str, Any] = {}
+    recon = reconstruct_repetitions(
+        t_s,
+        acc,
+        mask,
+        reps,
+        list(methods),
+        anthropometrics=anthropometrics,
+        orientation=q_world,
+        params=params,
+        reference_params=reference_params,
+        info=info,
+    )
+    streams = []
+    for m, pos in recon.items():
+        rows = np.all(np.isfinite(pos), axis=1)
+        if not np.any(rows):
+            continue
+        streams.append(
+            SignalStream(
+                topic=TRAJECTORY_TOPIC.format(method=m),
+                t_ns=t_ref[rows],
+                columns=["x", "y", "z"],
+                units=["m", "m", "m"],
+                values=pos[rows],
+                frame_id=frame,
+            )
+        )
+    record = {
+        "imu": f"/imu/{imu}",
+        "methods": [s.topic.rsplit("/", 1)[1] for s in streams],
+        "clock": clock,
+        "frame": frame,
+        "origin": "repetition_start",
+        "repetitions": [
+            {"index": r.index, "start_ns": int(t_ref[r.start]), "end_ns": int(t_ref[r.stop - 1])} for r in reps
+        ],
+        **info,
+    }
+    return streams, record
+
+
+def params_dict(methods: list[str] | tuple[str, ...], params: TrajectoryParams, reference: R2GReferenceParams) -> dict:
+    ref = dataclasses.asdict(reference)
+    ref["keys"] = {k: list(v) for k, v in reference.keys.items()}
+    return {"methods": list(methods), **dataclasses.asdict(params), "reference": ref}
+
+
+def run_trajectory(
+    path,
+    *,
+    imu: str | None = None,
+    methods: list[str] | tuple[str, ...] = METHODS,
+    params: TrajectoryParams = DEFAULT_PARAMS,
+    reference_params: R2GReferenceParams = DEFAULT_REFERENCE,
+    force: bool = False,
+):
+    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome."""
+    from imulog.archive import TrialReader
+    from imulog.steps.base import StepResult, run_step
+
+    with TrialReader(path) as trial:
+        topics = trial.topics()
+        name = pick_imu(topics, imu)
+    acc_topic = f"/derived/acc_global/{name}"
+    static_topic, phases_topic = f"/derived/static/{name}", f"/derived/phases/{name}"
+    orient_topic = f"/derived/orientation/{name}"
+    inputs = [acc_topic] + [t for t in (static_topic, phases_topic, orient_topic) if t in topics]
+
+    def compute(trial) -> StepResult:
+        acc = trial.read(acc_topic)
+        static = trial.read(static_topic) if static_topic in topics else None
+        phases = trial.read(phases_topic) if phases_topic in topics else None
+        orient = trial.read(orient_topic) if orient_topic in topics else None
+        timing = parse_record(trial.metadata.get("imulog.timing")) or {}
+        streams, record = compute_trajectories(
+            acc.t_ns,
+            acc.values,
+            imu=name,
+            methods=methods,
+            static=None if static is None else (static.t_ns, static.values[:, 0]),
+            phases=phases,
+            phases_clock=str(timing.get("clock", "reference")),
+            orientation=None if orient is None else (orient.t_ns, orient.values),
+            alignment=alignment_for(trial.metadata, f"/imu/{name}"),
+            anthropometrics=parse_record(trial.metadata.get("imulog.anthropometrics")),
+            params=params,
+            reference_params=reference_params,
+        )
+        return StepResult(streams=streams, metadata={"imulog.trajectory": record})
+
+    return run_step(
+        path,
+        step=STEP,
+        algorithm="imulog.trajectory",
+        params={"imu": name, **params_dict(methods, params, reference_params)},
+        inputs=inputs,
+        compute=compute,
+        force=force,
+    )

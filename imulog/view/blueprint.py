@@ -1,0 +1,134 @@
+"""The default Rerun blueprint of an imulog trial (or of several overlaid trials).
+
+Layout (views only appear when the trial has data for them)::
+
+    +-------------------------------------+------------------------------+
+    | |ω|: IMU gyroscope vs Vicon (rad/s) |                              |
+    | acceleration (m/s²)                 |  3D: markers, cluster frame, |
+    | orientation quaternion (1)          |  trajectories + cursors      |
+    +-------------------------------------+------------------------------+
+    | state timeline: phases, static/moving intervals, other intervals   |
+    +--------------------------------------------------------------------+
+    tabs beside the overview: raw IMU, derived signals, errors & metrics, trial info
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import rerun as rr
+import rerun.blueprint as rrb
+
+from imulog.view import layout as L
+from imulog.view.streams import LoggedTrial
+
+
+def _paths(trials: Sequence[LoggedTrial], *roles: str) -> list[str]:
+    return [e.path for t in trials for e in t.by_role(*roles)]
+
+
+def _time_axis(trials: Sequence[LoggedTrial]) -> rrb.TimeAxis | None:
+    """X axis over the whole trial, linked across all time-series views."""
+    lo = [e.t_min_ns for t in trials for e in t.entities if e.t_min_ns is not None]
+    hi = [e.t_max_ns for t in trials for e in t.entities if e.t_max_ns is not None]
+    if not lo:
+        return None
+    view = rr.TimeRange(
+        start=rr.TimeRangeBoundary.absolute(nanos=int(min(lo))), end=rr.TimeRangeBoundary.absolute(nanos=int(max(hi)))
+    )
+    return rrb.TimeAxis(view_range=view)
+
+
+def _series(name: str, paths: list[str], axis: rrb.TimeAxis | None) -> rrb.TimeSeriesView | None:
+    if not paths:
+        return None
+    return rrb.TimeSeriesView(origin="/", contents=paths, name=name, axis_x=axis)
+
+
+def _stack(views: list, kind: type = rrb.Vertical, **kwargs) -> rrb.Container | None:
+    views = [v for v in views if v is not None]
+    if not views:
+        return None
+    return kind(*views, **kwargs)
+
+
+def build_blueprint(trials: LoggedTrial | Sequence[LoggedTrial]) -> rrb.Blueprint:
+    """Default blueprint for what :func:`imulog.view.streams.log_streams` sent (one or several trials)."""
+    if isinstance(trials, LoggedTrial):
+        trials = [trials]
+    axis = _time_axis(trials)
+
+    omega = _series(
+        "|ω| IMU gyroscope vs Vicon angular velocity (rad/s)", _paths(trials, "gyr_norm", "vicon_omega_norm"), axis
+    )
+    acc_global = _paths(trials, "acc_global")  # gravity-free, global frame: preferred over raw when present
+    acc = (
+        _series("Acceleration, gravity removed, global frame (m/s²)", acc_global, axis)
+        if acc_global
+        else _series("Acceleration, sensor frame (m/s²)", _paths(trials, "imu_acc"), axis)
+    )
+    orientation = _series("Orientation quaternion w,x,y,z (1)", _paths(trials, "orientation"), axis)
+    signals = _stack([omega, acc, orientation])
+
+    spatial_paths = _paths(trials, "markers", "pose", "path", "cursor")
+    spatial = None
+    if spatial_paths:
+        contents = [f"{t.prefix}/world/**" for t in trials]
+        spatial = rrb.Spatial3DView(origin="/", contents=contents, name="3D: markers, cluster, trajectories (m)")
+
+    state_paths = _paths(trials, "phases", "static_state", "intervals")
+    states = (
+        rrb.StateTimelineView(origin="/", contents=state_paths, name="Phases and static intervals", time_view=axis)
+        if state_paths
+        else None
+    )
+
+    top = _stack([signals, spatial], rrb.Horizontal, column_shares=[3, 2] if signals and spatial else None)
+    overview = _stack([top, states], rrb.Vertical, row_shares=[3, 1.2] if top and states else None, name="Overview")
+
+    tabs: list = []
+    if overview is not None:
+        tabs.append(overview)
+    raw = [
+        _series("Accelerometer (m/s²)", _paths(trials, "imu_acc"), axis) if acc_global else None,
+        _series("Gyroscope (rad/s)", _paths(trials, "imu_gyr"), axis),
+        _series("Magnetometer (µT)", _paths(trials, "imu_mag"), axis),
+        _series("Temperature (°C)", _paths(trials, "imu_temperature"), axis),
+        _series("Analog channels", _paths(trials, "analog"), axis),
+    ]
+    raw_tab = _stack(raw, rrb.Vertical, name="Raw IMU & analog")
+    if raw_tab is not None:
+        tabs.append(raw_tab)
+    derived = [
+        _series("Vicon angular velocity (rad/s)", _paths(trials, "vicon_angular_velocity"), axis),
+        _series("Trajectories x,y,z (m)", _paths(trials, "trajectory_signal"), axis),
+        _series("Static mask (1 = static)", _paths(trials, "static_signal"), axis),
+        *[_series(e.topic, [e.path], axis) for t in trials for e in t.by_role("signal")],
+    ]
+    derived_tab = _stack(derived, rrb.Vertical, name="Derived signals")
+    if derived_tab is not None:
+        tabs.append(derived_tab)
+    error_views: list = []
+    if any(t.has_evaluation for t in trials):
+        error_views.append(rrb.TextDocumentView(origin="/", contents=_paths(trials, "evaluation"), name="Errors"))
+    error_series = [
+        _series("IMU trajectory error vs Vicon (cm)", _paths(trials, "error"), axis),
+        _series("Metrics", _paths(trials, "metric"), axis),
+    ]
+    error_views.append(_stack(error_series, rrb.Vertical))
+    error_tab = _stack(error_views, rrb.Horizontal, name="Errors & metrics")
+    if error_tab is not None:
+        tabs.append(error_tab)
+    events = _paths(trials, "events")
+    if events:
+        tabs.append(rrb.TextLogView(origin="/", contents=events, name="Events"))
+    tabs.append(rrb.TextDocumentView(origin="/", contents=_paths(trials, "info"), name="Trial info"))
+
+    return rrb.Blueprint(
+        rrb.Tabs(*tabs, active_tab=0),
+        rrb.TimePanel(timeline=L.TIMELINE),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        auto_views=False,
+        auto_layout=False,
+    )

@@ -1,0 +1,406 @@
+"""Log imulog streams to a Rerun recording with the columnar API (``send_columns``), never per sample.
+
+:func:`log_streams` takes the in-memory streams of one trial (:mod:`imulog.model`), maps every channel to the
+reference clock (:class:`imulog.view.clock.ClockMap`), and sends each channel as one columnar batch on the
+``reference_time`` timeline. It returns a :class:`LoggedTrial` describing what went where, from which
+:mod:`imulog.view.blueprint` builds the default layout.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import rerun as rr
+
+from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream
+from imulog.view import layout as L
+from imulog.view.anchor import anchor_repetitions, position_error_cm
+from imulog.view.clock import ClockMap, device_imu_of
+from imulog.view.report import evaluation_markdown, info_markdown, markdown_table
+
+
+@dataclass
+class Entity:
+    """One logged entity: ``role`` tells the blueprint where it belongs; ``rows`` temporal rows sent."""
+
+    path: str
+    role: str
+    topic: str
+    rows: int
+    t_min_ns: int | None = None
+    t_max_ns: int | None = None
+
+
+@dataclass
+class LoggedTrial:
+    """What :func:`log_streams` sent for one trial."""
+
+    label: str
+    prefix: str = ""
+    entities: list[Entity] = field(default_factory=list)
+    unaligned_imus: list[str] = field(default_factory=list)
+    has_evaluation: bool = False
+
+    def by_role(self, *roles: str) -> list[Entity]:
+        """Entities having one of ``roles``, in logging order."""
+        return [e for e in self.entities if e.role in roles]
+
+    def paths(self) -> list[str]:
+        """All entity paths logged."""
+        return [e.path for e in self.entities]
+
+
+def _time(t_ref_ns: np.ndarray) -> rr.TimeColumn:
+    return rr.TimeColumn(L.TIMELINE, duration=np.asarray(t_ref_ns, dtype=np.int64).astype("timedelta64[ns]"))
+
+
+def _rgb(c: tuple[int, int, int]) -> list[int]:
+    return [int(c[0]), int(c[1]), int(c[2])]
+
+
+class _Logger:
+    def __init__(
+        self,
+        rec: rr.RecordingStream,
+        trial: LoggedTrial,
+        clocks: ClockMap,
+        color_offset: int,
+        reference: tuple[np.ndarray, np.ndarray] | None = None,
+        trajectory_record: Mapping[str, Any] | None = None,
+    ):
+        self.rec = rec
+        self.trial = trial
+        self.clocks = clocks
+        self.prefix = trial.prefix
+        self.n_paths = color_offset  # next palette index for a trajectory / marker set
+        self.reference = reference  # Vicon cluster origin: (t_ref ns, position m)
+        self.trajectory_record = dict(trajectory_record or {})
+
+    # -- primitives -------------------------------------------------------------------------------
+    def _record(self, path: str, role: str, topic: str, t_ref: np.ndarray) -> None:
+        rows = len(t_ref)
+        self.trial.entities.append(
+            Entity(path, role, topic, rows, int(t_ref.min()) if rows else None, int(t_ref.max()) if rows else None)
+        )
+
+    def scalars(
+        self,
+        path: str,
+        role: str,
+        topic: str,
+        t_ref: np.ndarray,
+        values: np.ndarray,
+        names: list[str],
+        colors: list[tuple[int, int, int]] | None = None,
+    ) -> None:
+        values = np.asarray(values, dtype=np.float64)
+        if values.ndim == 1:
+            values = values[:, None]
+        if len(t_ref) == 0:
+            return
+        self.rec.send_columns(path, indexes=[_time(t_ref)], columns=rr.Scalars.columns(scalars=values))
+        style: dict[str, Any] = {"names": names}
+        if colors is None and values.shape[1] <= len(L.AXIS_COLORS):
+            colors = L.AXIS_COLORS[: values.shape[1]]
+        if colors is not None:
+            style["colors"] = [_rgb(c) for c in colors]
+        self.rec.log(path, rr.SeriesLines(**style), static=True)
+        self._record(path, role, topic, t_ref)
+
+    def states(self, path: str, role: str, topic: str, t_ref: np.ndarray, states: np.ndarray, lanes: int) -> None:
+        """StateChange rows: ``states`` is (rows * lanes,) strings; empty string = reset (gap)."""
+        if len(t_ref) == 0:
+            return
+        columns = rr.StateChange.columns(state=[str(s) for s in states]).partition(np.full(len(t_ref), lanes))
+        self.rec.send_columns(path, indexes=[_time(t_ref)], columns=columns)
+        values = sorted({str(s) for s in states if s and str(s) in L.PHASE_COLORS})
+        if values:
+            self.rec.log(
+                path,
+                rr.StateConfiguration(
+                    values=values, colors=np.array([L.PHASE_COLORS[v] for v in values], dtype=np.uint32)
+                ),
+                static=True,
+            )
+        self._record(path, role, topic, t_ref)
+
+    def points(
+        self,
+        path: str,
+        role: str,
+        topic: str,
+        t_ref: np.ndarray,
+        pos: np.ndarray,
+        valid: np.ndarray,
+        radius_m: float,
+        colour: tuple[int, int, int] | None,
+        labels: list[str] | None = None,
+    ) -> None:
+        """Points3D, one row per sample; ``pos`` (N, M, 3), only valid points sent (rows may be empty)."""
+        n, m = valid.shape
+        if n == 0:
+            return
+        counts = valid.sum(axis=1).astype(np.int64)
+        flat = pos[valid]
+        if labels is not None:
+            class_ids = np.nonzero(valid)[1].astype(np.uint16)
+            cols = rr.Points3D.columns(positions=flat, class_ids=class_ids)
+            self.rec.log(
+                path,
+                rr.AnnotationContext([(i, label, _rgb(L.color(i + 3))) for i, label in enumerate(labels)]),
+                static=True,
+            )
+            self.rec.log(path, rr.Points3D.from_fields(radii=[radius_m], show_labels=False), static=True)
+        else:
+            cols = rr.Points3D.columns(positions=flat)
+            self.rec.log(
+                path, rr.Points3D.from_fields(radii=[radius_m], colors=[_rgb(colour or (0, 0, 0))]), static=True
+            )
+        self.rec.send_columns(path, indexes=[_time(t_ref)], columns=cols.partition(counts))
+        self._record(path, role, topic, t_ref)
+
+    def path_strip(
+        self, topic: str, t_ref: np.ndarray, pos: np.ndarray, colour: tuple[int, int, int], label: str
+    ) -> None:
+        """The whole trajectory as static line strips, split at NaN samples and at time gaps (> 3 sample periods)."""
+        finite = np.all(np.isfinite(pos), axis=1)
+        if finite.sum() < 2:
+            return
+        idx = np.nonzero(finite)[0]
+        t = t_ref[idx]
+        dt = np.diff(t)
+        typical = float(np.median(dt)) if len(dt) else 0.0
+        breaks = (np.diff(idx) > 1) | (dt > 3 * typical)
+        bounds = np.concatenate([[0], np.nonzero(breaks)[0] + 1, [len(idx)]])
+        strips = [pos[idx[a:b]] for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b - a >= 2]
+        if not strips:
+            return
+        path = L.path_entity(topic, self.prefix)
+        self.rec.log(
+            path,
+            rr.LineStrips3D(strips, colors=[_rgb(colour)], radii=[0.002], labels=[label] if len(strips) == 1 else None),
+            static=True,
+        )
+        self.trial.entities.append(Entity(path, "path", topic, 0))
+
+    def trajectory(self, topic: str, t_ref: np.ndarray, pos: np.ndarray, label: str) -> tuple[int, int, int]:
+        colour = L.VICON_COLOR if topic == L.CLUSTER_POSE_TOPIC else L.color(self.n_paths)
+        if topic != L.CLUSTER_POSE_TOPIC:
+            self.n_paths += 1
+        self.path_strip(topic, t_ref, pos, colour, label)
+        valid = np.all(np.isfinite(pos), axis=1)[:, None]
+        self.points(L.cursor_entity(topic, self.prefix), "cursor", topic, t_ref, pos[:, None, :], valid, 0.007, colour)
+        return colour
+
+    def imu_trajectory(self, s: SignalStream, t_ref: np.ndarray) -> None:
+        """An IMU trajectory in 3D (anchored per repetition on the Vicon path) and its error vs Vicon (cm)."""
+        method = s.topic[len(L.TRAJECTORY_PREFIX) :]
+        record = self.trajectory_record
+        world = s.values[:, :3]
+        in_world = record.get("frame", s.frame_id or "world") == "world"
+        if self.reference is not None and in_world and record.get("origin") == "repetition_start":
+            starts = np.array([r["start_ns"] for r in record.get("repetitions", []) if "start_ns" in r], np.int64)
+            if record.get("clock") == "device" and record.get("imu"):
+                starts = self.clocks.to_reference(str(record["imu"]), starts)
+            world = anchor_repetitions(t_ref, world, starts, *self.reference)
+        colour = self.trajectory(s.topic, t_ref, world, f"IMU {method}")
+        if self.reference is not None and in_world:
+            error = position_error_cm(t_ref, world, *self.reference)
+            names = [f"|{method} − Vicon| (cm)"]
+            self.scalars(L.error_entity(s.topic, self.prefix), "error", s.topic, t_ref, error, names, [colour])
+
+    # -- stream types ----------------------------------------------------------------------------
+    def imu(self, s: ImuStream) -> None:
+        t_ref = self.clocks.to_reference(s.topic, s.t_ns)
+        for quantity, (_, unit, axes) in L.IMU_QUANTITIES.items():
+            values = getattr(s, quantity)
+            if values is None:
+                continue
+            names = [f"{s.name} {quantity} {a} ({unit})" for a in axes]
+            self.scalars(L.imu_entity(s.name, quantity, self.prefix), f"imu_{quantity}", s.topic, t_ref, values, names)
+        if s.gyr is not None:
+            self.scalars(
+                L.imu_gyr_norm_entity(s.name, self.prefix),
+                "gyr_norm",
+                s.topic,
+                t_ref,
+                np.linalg.norm(s.gyr, axis=1),
+                [f"IMU {s.name} |gyr| (rad/s)"],
+                [L.PALETTE[0]],
+            )
+
+    def markers(self, s: MarkerStream) -> None:
+        t_ref = self.clocks.to_reference(s.topic, s.t_ns)
+        self.points(
+            L.marker_entity(s.name, self.prefix), "markers", s.topic, t_ref, s.pos, s.valid, 0.006, None, s.labels
+        )
+
+    def analog(self, s: AnalogStream) -> None:
+        t_ref = self.clocks.to_reference(s.topic, s.t_ns)
+        names = [f"{c} ({L.pretty_unit(u)})" for c, u in zip(s.channel_names, s.units, strict=True)]
+        colors = [L.color(i) for i in range(len(names))]
+        self.scalars(L.signal_entity(s.topic, self.prefix), "analog", s.topic, t_ref, s.values, names, colors)
+
+    def signal(self, s: SignalStream) -> None:
+        topic = s.topic
+        t_ref = self.clocks.to_reference(topic, s.t_ns)
+        short = topic[len(L.DERIVED) :] if topic.startswith(L.DERIVED) else topic.strip("/")
+        names = [f"{short} {c} ({L.pretty_unit(u)})" for c, u in zip(s.columns, s.units, strict=True)]
+        if topic.startswith(L.ORIENTATION_PREFIX):
+            role = "orientation"
+        elif topic.startswith(L.ACC_GLOBAL_PREFIX):
+            role = "acc_global"
+        elif topic.startswith(L.METRICS_PREFIX):
+            role = "metric"
+        elif topic.startswith(L.TRAJECTORY_PREFIX):
+            role = "trajectory_signal"
+        elif topic == L.VICON_ANGULAR_VELOCITY_TOPIC:
+            role = "vicon_angular_velocity"
+        elif topic.startswith(L.STATIC_PREFIXES):
+            role = "static_signal"
+        else:
+            role = "signal"
+        colors = None if s.values.shape[1] <= len(L.AXIS_COLORS) else [L.color(i) for i in range(s.values.shape[1])]
+        self.scalars(L.signal_entity(topic, self.prefix), role, topic, t_ref, s.values, names, colors)
+
+        if topic == L.VICON_ANGULAR_VELOCITY_TOPIC and s.values.shape[1] >= 3:
+            self.scalars(
+                L.norm_entity(topic, self.prefix),
+                "vicon_omega_norm",
+                topic,
+                t_ref,
+                np.linalg.norm(s.values[:, :3], axis=1),
+                ["Vicon |ω| (rad/s)"],
+                [L.VICON_COLOR],
+            )
+        if topic.startswith(L.TRAJECTORY_PREFIX) and s.values.shape[1] >= 3:
+            self.imu_trajectory(s, t_ref)
+        if topic.startswith(L.STATIC_PREFIXES) and len(s):
+            self.mask_states(topic, t_ref, s.values[:, 0])
+
+    def mask_states(self, topic: str, t_ref: np.ndarray, mask: np.ndarray) -> None:
+        """A 0/1 static mask as state changes ``static``/``moving`` at its transitions (NaN = gap)."""
+        state = np.where(np.isnan(mask), 0, np.where(mask > 0.5, 1, 2)).astype(np.int8)
+        change = np.concatenate([[True], state[1:] != state[:-1]])
+        names = np.array(["", "static", "moving"])[state[change]]
+        self.states(L.state_entity(topic, self.prefix), "static_state", topic, t_ref[change], names, 1)
+
+    def intervals(self, s: Intervals) -> None:
+        t_start = self.clocks.to_reference(s.topic, s.start_ns)
+        t_end = self.clocks.to_reference(s.topic, s.end_ns)
+        labels = np.asarray(s.labels, dtype=object)
+        instant = t_end == t_start
+        role = "phases" if s.topic.startswith(L.PHASES_PREFIX) else "intervals"
+        if (~instant).any():
+            order = np.argsort(t_start[~instant], kind="stable")
+            starts, ends = t_start[~instant][order], t_end[~instant][order]
+            labs, tasks = labels[~instant][order], s.task_index[~instant][order]
+            with_task = bool((tasks >= 0).any())
+            lanes = 2 if with_task else 1
+            times: list[np.ndarray] = []
+            values: list[np.ndarray] = []
+            # a reset at each end unless the next interval starts there (or earlier)
+            next_start = np.concatenate([starts[1:], [np.iinfo(np.int64).max]])
+            needs_reset = ends < next_start
+            rep = np.array([f"rep {k}" if k >= 0 else "" for k in tasks], dtype=object)
+            start_states = np.stack([labs, rep], axis=1) if with_task else labs[:, None]
+            reset_states = np.full((int(needs_reset.sum()), lanes), "", dtype=object)
+            times = [starts, ends[needs_reset]]
+            values = [start_states, reset_states]
+            t_all = np.concatenate(times)
+            v_all = np.concatenate(values, axis=0)
+            order = np.argsort(t_all, kind="stable")
+            self.states(
+                L.signal_entity(s.topic, self.prefix), role, s.topic, t_all[order], v_all[order].reshape(-1), lanes
+            )
+        if instant.any():
+            path = L.join(self.prefix, f"{s.topic}/events")
+            t_ev = t_start[instant]
+            self.rec.send_columns(
+                path, indexes=[_time(t_ev)], columns=rr.TextLog.columns(text=[str(x) for x in labels[instant]])
+            )
+            self._record(path, "events", s.topic, t_ev)
+
+    def pose(self, s: PoseStream) -> None:
+        t_ref = self.clocks.to_reference(s.topic, s.t_ns)
+        valid = np.all(np.isfinite(s.position), axis=1) & np.all(np.isfinite(s.orientation), axis=1)
+        quat_xyzw = s.orientation[valid][:, [1, 2, 3, 0]]
+        cols = rr.Transform3D.columns(translation=s.position[valid], quaternion=quat_xyzw)
+        path = L.pose_entity(s.topic, self.prefix)
+        self.rec.log(path, rr.TransformAxes3D(0.08), static=True)
+        self.rec.send_columns(path, indexes=[_time(t_ref)], columns=cols.partition(valid.astype(np.int64)))
+        self._record(path, "pose", s.topic, t_ref)
+        label = "Vicon cluster" if s.topic == L.CLUSTER_POSE_TOPIC else s.topic
+        self.trajectory(s.topic, t_ref, s.position, label)
+
+    def log(self, stream: Any) -> None:
+        if isinstance(stream, ImuStream):
+            self.imu(stream)
+        elif isinstance(stream, MarkerStream):
+            self.markers(stream)
+        elif isinstance(stream, AnalogStream):
+            self.analog(stream)
+        elif isinstance(stream, SignalStream):
+            self.signal(stream)
+        elif isinstance(stream, Intervals):
+            self.intervals(stream)
+        elif isinstance(stream, PoseStream):
+            self.pose(stream)
+        else:  # pragma: no cover - defensive
+            raise TypeError(f"cannot view a {type(stream).__name__}")
+
+
+def log_streams(
+    streams: Iterable[Any],
+    metadata: Mapping[str, Mapping[str, Any]] | None = None,
+    *,
+    recording: rr.RecordingStream,
+    label: str = "trial",
+    prefix: str = "",
+    channel_meta: Mapping[str, Mapping[str, Any]] | None = None,
+    color_offset: int = 0,
+) -> LoggedTrial:
+    """Send every stream of one trial to ``recording`` columnarly on the reference-clock timeline.
+
+    ``metadata`` are the trial's metadata records (``imulog.alignment`` is applied to IMU-clock channels,
+    ``imulog.evaluation`` becomes the error report); ``channel_meta`` maps topic -> channel metadata (a
+    ``clock`` key overrides the default clock rule, see :mod:`imulog.view.clock`). ``prefix`` (``/label``)
+    places the whole trial under one entity subtree for overlays.
+    """
+    metadata = metadata or {}
+    trial = LoggedTrial(label=label, prefix=prefix)
+    streams = list(streams)
+    imu_names = {s.name for s in streams if isinstance(s, ImuStream)} | {
+        t.split("/")[2] for t in (channel_meta or {}) if t.startswith("/imu/")
+    }
+    clocks = ClockMap(metadata, channel_meta or {}, imu_names)
+    reference = None
+    for stream in streams:
+        if isinstance(stream, PoseStream) and stream.topic == L.CLUSTER_POSE_TOPIC:
+            reference = (clocks.to_reference(stream.topic, stream.t_ns), stream.position)
+    logger = _Logger(recording, trial, clocks, color_offset, reference, metadata.get("imulog.trajectory"))
+    recording.log(L.join(prefix, "/world"), rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    ordered = sorted(streams, key=lambda s: isinstance(s, Intervals))  # signals first, states after
+    for stream in ordered:
+        logger.log(stream)
+    if "imulog.evaluation" in metadata:
+        report = evaluation_markdown(metadata["imulog.evaluation"])
+        recording.log(
+            L.evaluation_entity(prefix), rr.TextDocument(report, media_type=rr.MediaType.MARKDOWN), static=True
+        )
+        trial.entities.append(Entity(L.evaluation_entity(prefix), "evaluation", "imulog.evaluation", 0))
+        trial.has_evaluation = True
+    recording.log(
+        L.info_entity(prefix),
+        rr.TextDocument(info_markdown(label, metadata, clocks), media_type=rr.MediaType.MARKDOWN),
+        static=True,
+    )
+    trial.entities.append(Entity(L.info_entity(prefix), "info", "", 0))
+    trial.unaligned_imus = sorted(clocks.unaligned)
+    return trial
+
+
+__all__ = ["Entity", "LoggedTrial", "device_imu_of", "log_streams", "markdown_table"]

@@ -1,0 +1,80 @@
+"""The orientation and align steps end to end: simulated trial -> MCAP archive -> CLI -> derived channels."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from imulog.archive import TrialReader, write_trial
+from imulog.cli import cli
+from imulog.process import alignment as al
+from imulog.process import quaternion as Q
+from imulog.simulate import simulate
+
+
+@pytest.fixture(scope="module")
+def trial(tmp_path_factory):
+    sim = simulate("r2g", seed=4, repetitions=8)
+    path = tmp_path_factory.mktemp("align") / "trial.mcap"
+    write_trial(path, sim.recording)
+    return path, sim
+
+
+def _ok(result):
+    assert result.exit_code == 0, result.output + repr(result.exception)
+    return result.output
+
+
+def test_orientation_then_align_cli(trial):
+    path, sim = trial
+    runner = CliRunner()
+    _ok(runner.invoke(cli, ["process", "orientation", str(path)]))
+    out = _ok(runner.invoke(cli, ["process", "align", str(path), "--window", "60", "--drift"]))
+    assert "offset" in out
+    with TrialReader(path) as t:
+        topics = set(t.topics())
+        rec = t.metadata["imulog.alignment"]
+        ori = t.read("/derived/orientation/wrist")
+        lin = t.read("/derived/acc_global/wrist")
+        pose = t.read("/derived/vicon/cluster_pose")
+        omega = t.read("/derived/vicon/angular_velocity")
+        q_ref = t.read("/derived/reference/orientation/wrist")
+        imu = t.read("/imu/wrist")
+    assert {
+        "/derived/orientation_static/wrist",
+        "/derived/reference/gyr/wrist",
+        "/derived/reference/acc_global/wrist",
+    } <= topics
+    assert "/derived/static/wrist" not in topics  # owned by the segmentation step
+    assert np.array_equal(ori.t_ns, imu.t_ns) and ori.columns == ["qw", "qx", "qy", "qz"]
+    assert lin.units == ["m/s^2"] * 3
+    assert omega.columns == ["wx", "wy", "wz"] and len(pose) > 0.9 * len(omega)
+    truth = sim.truth
+    assert rec["reference"] == "/markers/vicon" and rec["imu"] == "/imu/wrist"
+    est = al.device_to_reference(imu.t_ns, rec)
+    assert np.abs(est - truth.imu_t_ref_ns).max() < 10_000_000
+    assert abs(rec["drift_ppm"] - truth.alignment["drift_ppm"]) < 10.0
+    assert np.rad2deg(Q.angle_between(rec["rotation_imu_to_cluster"], truth.alignment["rotation_imu_to_cluster"])) < 1.0
+    # the resampled orientation is on the Vicon clock (100 Hz) and, rotated to world, matches truth
+    assert set(np.diff(q_ref.t_ns)) <= {10_000_000}
+    q_world = Q.multiply(rec["rotation_global_to_world"], q_ref.values)
+    true_q = np.array([np.interp(q_ref.t_ns, truth.t_ns, truth.orientation[:, k]) for k in range(4)]).T
+    err = np.rad2deg(Q.angle_between(q_world, Q.normalize(true_q)))
+    assert np.sqrt(np.mean(err**2)) < 3.0
+    # a second identical run writes nothing
+    out2 = _ok(runner.invoke(cli, ["process", "orientation", str(path)]))
+    assert "unchanged" in out2
+
+
+def test_madgwick_backend_and_errors(trial):
+    path, _ = trial
+    runner = CliRunner()
+    _ok(runner.invoke(cli, ["process", "orientation", str(path), "--backend", "madgwick", "--beta", "0.03"]))
+    with TrialReader(path) as t:
+        runs = [r for r in t.runs().values() if str(r.get("step", "")).startswith("orientation")]
+    assert runs[-1]["algorithm"] == "imulog.orientation.madgwick" and runs[-1]["params"]["beta"] == 0.03
+    bad = runner.invoke(cli, ["process", "orientation", str(path), "--imu", "ankle"])
+    assert bad.exit_code != 0 and "no channel /imu/ankle" in bad.output
+    bad = runner.invoke(cli, ["process", "align", str(path), "--markers", "nope"])
+    assert bad.exit_code != 0 and "/markers/nope" in bad.output

@@ -1,0 +1,314 @@
+"""Damage and interruption: doctor finds every flipped byte and truncation; a killed append changes nothing."""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from test_archive_helpers import synthetic_recording
+
+from imulog.archive import TrialReader, append_derived, write_trial
+from imulog.archive import _mcap as m
+from imulog.archive.doctor import check_file
+from imulog.cli import cli
+from imulog.model import SignalStream
+
+
+@pytest.fixture(scope="module")
+def small_trial(tmp_path_factory) -> Path:
+    """A small trial with every record type: raw chunks, attachment, metadata, an appended derived channel."""
+    tmp = tmp_path_factory.mktemp("safety")
+    src = tmp / "source.csv"
+    src.write_bytes(b"t,ax\n0,1.0\n1,2.0\n")
+    rng = np.random.default_rng(5)
+    rec = synthetic_recording(rng, n_imu=200, sources=[src])
+    rec.markers[0] = type(rec.markers[0])(
+        "vicon", rec.markers[0].t_ns[:150], ["O", "X", "Y", "A"], rec.markers[0].pos[:150]
+    )
+    rec.analogs[0] = type(rec.analogs[0])(
+        "emg", rec.analogs[0].t_ns[:150], ["a", "b"], ["V", "V"], rec.analogs[0].values[:150]
+    )
+    rec.poses[0] = type(rec.poses[0])("/poses/cluster", rec.poses[0].t_ns[:20], rec.poses[0].position[:20])
+    path = write_trial(tmp / "small.mcap", rec)
+    t = rec.imus[0].t_ns
+    append_derived(path, [SignalStream("/derived/x", t, ["v"], ["1"], rng.normal(size=len(t)))], run={"step": "x"})
+    assert check_file(path).ok
+    return path
+
+
+def _record_boundaries(data: bytes) -> list[int]:
+    """Start offset of every record in the file (data section, summary, footer) and the closing magic."""
+    offsets = []
+    pos = len(m.MAGIC)
+    while pos < len(data) - len(m.MAGIC):
+        offsets.append(pos)
+        op, length = m._REC.unpack_from(data, pos)
+        pos += 9 + length
+    return [*offsets, len(data) - len(m.MAGIC)]
+
+
+def _positions(data: bytes, n_random: int, seed: int) -> list[int]:
+    rng = random.Random(seed)
+    edges = _record_boundaries(data)
+    around = {p + d for p in edges for d in (0, 1, 8, 9) if 0 <= p + d < len(data)}  # opcode, length, first field
+    around |= set(range(8)) | set(range(len(data) - 8 - m.FOOTER_SIZE, len(data)))  # magics and footer
+    return sorted(around | {rng.randrange(len(data)) for _ in range(n_random)})
+
+
+def test_doctor_reports_every_flipped_byte(small_trial, tmp_path):
+    data = small_trial.read_bytes()
+    bad = tmp_path / "flipped.mcap"
+    positions = _positions(data, n_random=150, seed=1)
+    assert len(positions) > 250
+    missed = []
+    for pos in positions:
+        corrupted = bytearray(data)
+        corrupted[pos] ^= 1 << (pos % 8)
+        bad.write_bytes(corrupted)
+        report = check_file(bad)
+        if report.ok:
+            missed.append(pos)
+    assert not missed, f"flips at {missed[:10]} went unnoticed"
+
+
+def test_doctor_reports_every_truncation(small_trial, tmp_path):
+    data = small_trial.read_bytes()
+    bad = tmp_path / "cut.mcap"
+    rng = random.Random(2)
+    cuts = sorted(set(_record_boundaries(data)) | {rng.randrange(1, len(data)) for _ in range(60)} | {0, len(data) - 1})
+    for cut in cuts:
+        bad.write_bytes(data[:cut])
+        assert not check_file(bad).ok, cut
+
+
+def test_doctor_cli_exit_codes_and_one_line_reasons(small_trial, tmp_path):
+    runner = CliRunner()
+    res = runner.invoke(cli, ["doctor", str(small_trial)])
+    assert res.exit_code == 0 and "raw-data hash ok" in res.output
+    data = small_trial.read_bytes()
+    with TrialReader(small_trial) as tr:
+        chunk = tr.summary.chunk_indexes[0]
+    cases = {
+        # a byte inside the first chunk's compressed data
+        "chunk": (chunk.chunk_start_offset + chunk.chunk_length - 10, "chunk"),
+        # a byte of the summary section
+        "summary": (len(data) - 8 - m.FOOTER_SIZE - 5, "summary CRC mismatch"),
+    }
+    for name, (pos, reason) in cases.items():
+        corrupted = bytearray(data)
+        corrupted[pos] ^= 0xFF
+        bad = tmp_path / f"{name}.mcap"
+        bad.write_bytes(corrupted)
+        res = runner.invoke(cli, ["doctor", str(bad)])
+        assert res.exit_code == 1, name
+        lines = res.output.strip().splitlines()
+        assert len(lines) == 1 and reason in lines[0], res.output
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: chunk.chunk_start_offset + chunk.chunk_length // 2])  # mid-chunk
+    res = runner.invoke(cli, ["doctor", str(cut)])
+    assert res.exit_code == 1 and "truncated" in res.output
+
+
+def test_doctor_detects_modified_raw_data_even_with_valid_crcs(small_trial, tmp_path):
+    """A rewritten raw channel with correct CRCs (e.g. edited by another tool) fails the raw-data hash."""
+    from imulog.archive import _builder
+    from imulog.archive.writer import write_stream
+
+    with TrialReader(small_trial) as tr:
+        imu = tr.read("/imu/wrist")
+        others = [tr.read(t) for t in tr.topics() if t != "/imu/wrist"]
+        metadata = tr.metadata
+    imu.acc[0, 0] += 1e-9
+    forged = tmp_path / "forged.mcap"
+    with open(forged, "wb") as f:
+        b = _builder.McapBuilder.new(f, "forger")
+        for s in [imu, *others]:
+            write_stream(b, s)
+        from imulog.archive.metadata import encode_record
+
+        for name, values in metadata.items():
+            b.add_metadata(name, encode_record(values))
+        b.finish()
+    report = check_file(forged)
+    assert any("raw channel /imu/wrist changed" in p for p in report.problems), report.problems
+
+
+# ----------------------------------------------------------------------------------------------- killed appends
+
+
+def _derived(n: int, seed: int) -> SignalStream:
+    rng = np.random.default_rng(seed)
+    t = np.arange(n, dtype=np.int64) * 1_000_000
+    return SignalStream("/derived/killed", t, ["a", "b", "c", "d"], ["1"] * 4, rng.normal(size=(n, 4)))
+
+
+def _fork_append(path: Path, stream: SignalStream, *, kill_at: int | None = None, wait_fd: int | None = None) -> int:
+    """Fork a child that appends ``stream`` to ``path``; it SIGKILLs itself at its ``kill_at``-th I/O step."""
+    pid = os.fork()
+    if pid:
+        return pid
+    try:  # child: never returns into pytest
+        if wait_fd is not None:
+            os.read(wait_fd, 1)
+        if kill_at is not None:
+            from imulog.archive import _builder, files
+
+            counter = [0]
+
+            def tick():
+                counter[0] += 1
+                if counter[0] >= kill_at:
+                    os.kill(os.getpid(), signal.SIGKILL)
+
+            real_write, real_fsync, real_replace = _builder.McapBuilder._out, os.fsync, os.replace
+
+            def write(self, data):
+                tick()
+                real_write(self, data[: len(data) // 2])  # die half-way through a write, too
+                self.f.flush()
+                tick()
+                real_write(self, data[len(data) // 2 :])
+
+            def fsync(fd):
+                tick()
+                real_fsync(fd)
+                tick()
+
+            def replace(a, b):
+                tick()
+                real_replace(a, b)
+                tick()
+
+            _builder.McapBuilder._out = write
+            files.os.fsync = fsync
+            files.os.replace = replace
+        append_derived(path, [stream], run={"step": "kill-test", "algorithm": "none"})
+        os._exit(0)
+    except BaseException:
+        os._exit(3)
+
+
+def _check_after_kill(path: Path, original: bytes, conversion_end: int, stream: SignalStream) -> str:
+    now = path.read_bytes()
+    if now == original:
+        return "unchanged"
+    assert now[:conversion_end] == original[:conversion_end]
+    report = check_file(path)
+    assert report.ok, report.problems
+    with TrialReader(path) as tr:
+        back = tr.read("/derived/killed")
+    assert np.array_equal(back.values, stream.values)
+    return "appended"
+
+
+def _steps_of_one_append(path: Path, stream: SignalStream) -> int:
+    """How many I/O steps one append takes (run in a child that is killed at a step it never reaches)."""
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        try:
+            from imulog.archive import _builder, files
+
+            n = [0]
+            real_write, real_fsync, real_replace = _builder.McapBuilder._out, os.fsync, os.replace
+
+            def write(self, data):
+                n[0] += 2
+                real_write(self, data)
+
+            def fsync(fd):
+                n[0] += 2
+                real_fsync(fd)
+
+            def replace(a, b):
+                n[0] += 2
+                real_replace(a, b)
+
+            _builder.McapBuilder._out, files.os.fsync, files.os.replace = write, fsync, replace
+            append_derived(path, [stream], run={"step": "count"})
+            os.write(w, str(n[0]).encode())
+            os._exit(0)
+        except BaseException:
+            os._exit(3)
+    os.close(w)
+    _, status = os.waitpid(pid, 0)
+    steps = int(os.read(r, 64) or b"0")
+    os.close(r)
+    assert os.waitstatus_to_exitcode(status) == 0
+    return steps
+
+
+def test_append_killed_at_every_io_step_leaves_original_valid(small_trial, tmp_path):
+    path = tmp_path / "trial.mcap"
+    original = small_trial.read_bytes()
+    path.write_bytes(original)
+    with TrialReader(path) as tr:
+        conversion_end = tr.summary.data_end_offset
+    stream = _derived(3000, seed=1)
+    probe = tmp_path / "probe.mcap"
+    probe.write_bytes(original)
+    total = _steps_of_one_append(probe, stream)
+    assert total > 20
+    outcomes = []
+    for k in range(1, total + 2):
+        path.write_bytes(original)
+        pid = _fork_append(path, stream, kill_at=k)
+        _, status = os.waitpid(pid, 0)
+        code = os.waitstatus_to_exitcode(status)
+        assert code in (-signal.SIGKILL, 0), code
+        outcomes.append(_check_after_kill(path, original, conversion_end, stream))
+    # killed before os.replace -> unchanged; after it -> the complete new file; never anything in between
+    first_appended = outcomes.index("appended")
+    assert set(outcomes[:first_appended]) == {"unchanged"} and set(outcomes[first_appended:]) == {"appended"}
+    assert first_appended >= total - 4
+    # the lock died with the killed writers and their temp files are cleaned by the next writer
+    path.write_bytes(original)
+    append_derived(path, [stream], run={"step": "after"})
+    assert check_file(path).ok
+    assert not list(tmp_path.glob(".trial.mcap.*"))
+
+
+def _random_kills(small_trial: Path, tmp_path: Path, runs: int) -> dict[str, int]:
+    path = tmp_path / "trial.mcap"
+    original = small_trial.read_bytes()
+    with TrialReader(small_trial) as tr:
+        conversion_end = tr.summary.data_end_offset
+    stream = _derived(60_000, seed=2)
+    # time one full append in a child to spread the kills over its duration
+    path.write_bytes(original)
+    r, w = os.pipe()
+    t0 = time.perf_counter()
+    pid = _fork_append(path, stream, wait_fd=r)
+    os.write(w, b"g")
+    os.waitpid(pid, 0)
+    duration = time.perf_counter() - t0
+    rng = random.Random(3)
+    outcomes = {"unchanged": 0, "appended": 0}
+    for _ in range(runs):
+        path.write_bytes(original)
+        pid = _fork_append(path, stream, wait_fd=r)
+        os.write(w, b"g")
+        time.sleep(rng.uniform(0, duration * 1.1))
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+        outcomes[_check_after_kill(path, original, conversion_end, stream)] += 1
+    os.close(r)
+    os.close(w)
+    return outcomes
+
+
+def test_append_killed_at_random_times_leaves_original_valid(small_trial, tmp_path):
+    outcomes = _random_kills(small_trial, tmp_path, runs=25)
+    assert outcomes["unchanged"] > 0
+
+
+@pytest.mark.slow
+def test_append_killed_at_random_times_many_runs(small_trial, tmp_path):
+    outcomes = _random_kills(small_trial, tmp_path, runs=200)
+    assert outcomes["unchanged"] > 0 and outcomes["appended"] > 0

@@ -1,0 +1,99 @@
+"""R2G phases on simulated trials: exactly 100 phases, >= 97 % correct, onset/offset MAE < 0.08 s.
+
+Trials come from :mod:`imulog.simulate` (several seeds and subjects, corrective sub-movements and residual
+static velocity) and from an independent minimum-jerk gyroscope generator written here (other durations,
+rests, noise and no calibration wave), so that the methods are not fitted to one generator.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from imulog.process.segmentation.pipeline import PhaseParams, segment_phases
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from segmentation_accuracy import score  # noqa: E402
+
+simulate = pytest.importorskip("imulog.simulate").simulate
+
+
+@pytest.mark.parametrize(
+    ("seed", "subject", "extra"),
+    [(11, 0, 0.2), (12, 3, 0.2), (13, 5, 0.3), (14, 1, 0.0)],
+)
+def test_dynamos_on_simulated_r2g(seed, subject, extra):
+    sim = simulate("r2g", seed=seed, subject=subject, extra_submovement_probability=extra, residual_velocity_mps=0.01)
+    result = score(sim, PhaseParams())
+    assert result["n_phases"] == 100
+    assert result["correct"] >= 0.97
+    assert result["mae_s"] < 0.08
+
+
+def test_double_threshold_on_simulated_r2g_gives_100_phases():
+    sim = simulate("r2g", seed=21, subject=2, extra_submovement_probability=0.2, residual_velocity_mps=0.01)
+    result = score(sim, PhaseParams(method="double-threshold"))
+    assert result["n_phases"] == 100
+    assert result["correct"] >= 0.95
+
+
+def _bump(n: int) -> np.ndarray:
+    tau = np.linspace(0, 1, n)
+    return 30 * tau**2 * (1 - tau) ** 2
+
+
+def independent_trial(seed: int, rate: float = 100.0, n_rep: int = 25):
+    """Gyroscope (rad/s) of 25 x 4 minimum-jerk rotations with small fidgets and wandering static velocity."""
+    rng = np.random.default_rng(seed)
+    durations = np.array([1.0, 1.3, 1.1, 0.9]) * rng.uniform(0.8, 1.25)
+    angles = np.array([0.8, 1.4, 1.2, 0.9])
+    axes = np.array([[0, 0.3, 1], [1, 0.2, 0.1], [-1, -0.2, -0.1], [0, -0.3, -1]], float)
+    t, truth, fidgets = 3.0, [], []
+    for r in range(n_rep):
+        for p in range(4):
+            d = durations[p] * rng.uniform(0.85, 1.15)
+            truth.append((t, t + d, r + 1, p))
+            rest = rng.uniform(2.5, 4.5) if p < 3 else rng.uniform(6.0, 9.0)
+            if rng.random() < 0.15:  # a small fidget in the middle of the rest
+                a = t + d + rng.uniform(1.0, rest - 1.5)
+                fidgets.append((a, a + rng.uniform(0.3, 0.6)))
+            t += d + rest
+    n = int((t + 3) * rate)
+    gyr = np.zeros((n, 3))
+    for a, b, _, p in truth:
+        i0, i1 = int(round(a * rate)), int(round(b * rate))
+        axis = axes[p] + rng.normal(0, 0.15, 3)
+        gyr[i0:i1] += np.outer(
+            _bump(i1 - i0) / (b - a) * angles[p] * rng.uniform(0.7, 1.3), axis / np.linalg.norm(axis)
+        )
+    for a, b in fidgets:
+        i0, i1 = int(round(a * rate)), int(round(b * rate))
+        axis = rng.normal(size=3)
+        gyr[i0:i1] += np.outer(_bump(i1 - i0) / (b - a) * rng.uniform(0.05, 0.15), axis / np.linalg.norm(axis))
+    from scipy.signal import butter, sosfiltfilt
+
+    wander = sosfiltfilt(butter(2, 0.5, fs=rate, output="sos"), rng.normal(size=(n, 3)), axis=0)
+    gyr += 0.02 * wander / wander.std() + rng.normal(0, 0.01, (n, 3)) + rng.normal(0, 0.005, 3)
+    return gyr, rate, np.array(truth)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_dynamos_on_independent_minimum_jerk_trials(seed):
+    gyr, rate, truth = independent_trial(seed)
+    ph = segment_phases(gyr, rate).phases
+    assert len(ph) == 100
+    assert np.all(np.bincount(ph.repetition)[1:] == 4)
+    assert ph.labels[:4] == ["reach", "lift", "return_bottle", "return_hand"]
+    s, e = ph.start / rate, (ph.end - 1) / rate
+    correct, errors = 0, []
+    for i in range(len(ph)):
+        a, b = truth[(truth[:, 2] == ph.repetition[i]) & (truth[:, 3] == ph.phase[i])][0, :2]
+        inter = max(0.0, min(b, e[i]) - max(a, s[i]))
+        if inter / (max(b, e[i]) - min(a, s[i])) > 0.5:
+            correct += 1
+            errors += [abs(s[i] - a), abs(e[i] - b)]
+    assert correct >= 97
+    assert np.mean(errors) < 0.08

@@ -1,0 +1,187 @@
+"""Numerics of the trajectory methods on motions with known truth (no archive, no simulator)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from imulog.process.drift import HighpassParams, WaveletParams, highpass, wavelet_detrend, wavelet_effective_level
+from imulog.process.integration import (
+    DdiParams,
+    ZuptParams,
+    cumtrapz,
+    double_integrate,
+    static_runs,
+    zupt,
+    zupt_velocity,
+)
+from imulog.process.kalman import KalmanParams, kalman_track
+from imulog.process.minjerk import (
+    R2GWaypoints,
+    minimum_jerk,
+    minimum_jerk_profile,
+    piecewise_minimum_jerk,
+    r2g_reference,
+    r2g_waypoints,
+    r2g_waypoints_from_anthropometrics,
+    r2g_waypoints_from_positions,
+)
+from imulog.process.trajectory_opt import OptimizationParams, optimize_repetition
+
+RATE = 115.0
+
+
+def minjerk_acc(t, t0, t1, p0, p1):
+    """Analytic second derivative of the minimum-jerk movement (m/s^2)."""
+    T = t1 - t0
+    tau = np.clip((t - t0) / T, 0, 1)
+    inside = (t >= t0) & (t <= t1)
+    d2 = (60 * tau - 180 * tau**2 + 120 * tau**3) / T**2
+    return np.where(inside, d2, 0.0)[:, None] * (np.asarray(p1) - np.asarray(p0))[None, :]
+
+
+def r2g_truth(rng, waypoints=None, durations=(1.0, 1.2, 1.1, 0.9), rests=(4.0, 4.0, 4.0), lead=2.0, rate=RATE):
+    """One R2G-like repetition: times (s), positions (m), analytic acceleration, phase bounds, static mask."""
+    wp = (waypoints or r2g_waypoints(0.35, 0.10, 0.30)).as_array()
+    bounds, t = [], lead
+    for k, d in enumerate(durations):
+        bounds.append((t, t + d))
+        t += d + (rests[k] if k < 3 else 0.0)
+    ts = np.arange(0.0, t + lead, 1.0 / rate)
+    b = np.array(bounds)
+    pos = piecewise_minimum_jerk(ts, b, wp)
+    acc = sum(minjerk_acc(ts, *b[k], wp[k], wp[k + 1]) for k in range(4))
+    static = np.ones(len(ts), bool)
+    for t0, t1 in b:
+        static[(ts > t0) & (ts < t1)] = False
+    return ts, pos, acc, b, static
+
+
+def test_cumtrapz_exact_for_constant_acceleration():
+    t = np.sort(np.random.default_rng(0).uniform(0, 3, 200))  # non-uniform
+    a = np.full((len(t), 2), [0.5, -2.0])
+    v = cumtrapz(a, t)
+    p = cumtrapz(v, t)
+    np.testing.assert_allclose(v, (t - t[0])[:, None] * [0.5, -2.0], atol=1e-12)
+    # trapezoid of a linear velocity is exact
+    np.testing.assert_allclose(p, 0.5 * (t - t[0])[:, None] ** 2 * [0.5, -2.0], atol=1e-12)
+
+
+def test_double_integration_converges_at_second_order_on_minjerk():
+    errors = []
+    for rate in (100.0, 200.0, 400.0):
+        ts, pos, acc, _, _ = r2g_truth(None, rate=rate)
+        _, p = double_integrate(acc, ts, DdiParams(remove_mean=False))
+        errors.append(np.max(np.abs(p - pos)))
+    assert errors[0] < 5e-3  # a few mm after ~20 s at 100 Hz, noise-free
+    # trapezoidal rule: halving the step divides the error by about 4
+    assert 3.0 < errors[0] / errors[1] < 5.0 and 3.0 < errors[1] / errors[2] < 5.0
+
+
+def test_ddi_mean_removal_cancels_constant_offset_but_not_without():
+    ts, pos, acc, _, _ = r2g_truth(None)
+    biased = acc + [0.05, -0.03, 0.02]
+    _, p_mean = double_integrate(biased, ts, DdiParams(remove_mean=True))
+    _, p_clean = double_integrate(acc, ts, DdiParams(remove_mean=True))
+    _, p_raw = double_integrate(biased, ts, DdiParams(remove_mean=False))
+    np.testing.assert_allclose(p_mean, p_clean, atol=1e-12)
+    assert np.max(np.abs(p_raw - pos)) > 1.0  # 0.05 m/s^2 over 19 s: metres
+
+
+def test_zupt_linear_dedrift_removes_constant_bias():
+    ts, pos, acc, _, static = r2g_truth(None)
+    biased = acc + [0.2, -0.1, 0.15]
+    v, p = zupt(biased, ts, static, ZuptParams(dedrift=True))
+    assert np.all(v[static] == 0)
+    _, p_clean = zupt(acc, ts, static, ZuptParams(dedrift=True))
+    np.testing.assert_allclose(p, p_clean, atol=1e-9)  # a constant offset is removed exactly
+    assert np.max(np.abs(p_clean - pos)) < 5e-3
+    _, p_nodrift = zupt(biased, ts, static, ZuptParams(dedrift=False))
+    assert np.max(np.abs(p_nodrift - pos)) > 0.02
+
+
+def test_zupt_ignores_short_static_runs():
+    mask = np.zeros(100, bool)
+    mask[10:12] = True
+    mask[50:70] = True
+    assert static_runs(mask, 3).tolist() == [[50, 70]]
+    acc = np.ones(100)
+    v = zupt_velocity(acc, np.arange(100) / 100, mask, ZuptParams(dedrift=False, min_static_samples=3))
+    assert v[11] > 0 and v[60] == 0
+
+
+def test_highpass_removes_slow_drift_keeps_fast_motion():
+    t = np.arange(0, 60, 1 / RATE)
+    fast = 0.05 * np.sin(2 * np.pi * 2.0 * t)
+    drift = 0.3 * t / 60 + 0.2 * np.sin(2 * np.pi * 0.02 * t)
+    out = highpass(fast + drift, RATE, HighpassParams(cutoff_hz=0.3))
+    core = slice(len(t) // 10, -len(t) // 10)
+    assert np.sqrt(np.mean((out[core] - fast[core]) ** 2)) < 0.005
+
+
+def test_wavelet_trend_follows_drift_and_level_is_clamped():
+    t = np.arange(0, 120, 1 / RATE)  # 13800 samples: level 9 is possible for db6
+    fast = 0.05 * np.sin(2 * np.pi * 1.0 * t)
+    drift = 0.5 * (t / 120) ** 2
+    assert wavelet_effective_level(len(t)) == 9
+    out = wavelet_detrend(np.stack([fast + drift, fast], axis=1))
+    core = slice(len(t) // 10, -len(t) // 10)
+    assert np.sqrt(np.mean((out[core, 0] - fast[core]) ** 2)) < 0.01
+    assert wavelet_effective_level(1000, WaveletParams(level=9)) < 9
+
+
+def test_kalman_ar1_tracks_and_zero_velocity_updates_help():
+    rng = np.random.default_rng(3)
+    ts, pos, acc, _, static = r2g_truth(None)
+    noisy = acc + [0.04, -0.03, 0.03] + rng.normal(0, 0.02, acc.shape)
+    plain = kalman_track(noisy, ts, static, KalmanParams())
+    zv = kalman_track(noisy, ts, static, KalmanParams(zero_velocity=True, smoother=True))
+    err_plain = np.mean(np.abs(plain.position - pos))
+    err_zv = np.mean(np.abs(zv.position - zv.position[0] - pos))
+    assert err_zv < 0.01 < err_plain
+    # the filtered acceleration is a denoised measurement
+    assert np.sqrt(np.mean((zv.acceleration - acc) ** 2)) < np.sqrt(np.mean((noisy - acc) ** 2))
+    # 1D input gives 1D output equal to that axis of the 3D filter
+    kp = KalmanParams(zero_velocity=True, meas_var_m2ps4=4e-4)
+    one = kalman_track(noisy[:, 0], ts, static, kp)
+    three = kalman_track(noisy, ts, static, kp)
+    np.testing.assert_allclose(one.position, three.position[:, 0])
+
+
+def test_minimum_jerk_shape():
+    tau = np.linspace(0, 1, 1001)
+    s = minimum_jerk_profile(tau)
+    assert s[0] == 0 and s[-1] == 1 and abs(s[500] - 0.5) < 1e-12
+    v = np.gradient(s, tau)
+    assert abs(v.max() - 1.875) < 1e-3  # peak speed 15/8 of the mean
+    p = minimum_jerk(np.array([0.0, 1.0, 2.0]), 0.0, 2.0, [0, 0], [1, -2])
+    np.testing.assert_allclose(p, [[0, 0], [0.5, -1.0], [1, -2]])
+
+
+def test_r2g_waypoints_and_reference():
+    wp = r2g_waypoints(0.4, 0.1, 0.3)
+    assert wp.bottle_m == pytest.approx((0.4, 0.1, 0.0)) and wp.mouth_m[2] == pytest.approx(0.3)
+    same = r2g_waypoints_from_anthropometrics({"h1_m": 0.4, "h2_m": 0.1, "mouth_height_m": 0.3})
+    assert same == wp
+    with pytest.raises(KeyError, match="h3"):
+        r2g_waypoints_from_anthropometrics({"h1_m": 0.4, "h2_m": 0.1})
+    ts, pos, _, b, _ = r2g_truth(None, waypoints=wp)
+    ref = r2g_reference(ts, b, wp)
+    np.testing.assert_allclose(ref, pos)
+    measured = r2g_waypoints_from_positions(pos, ts, b)
+    np.testing.assert_allclose(measured.bottle_m, wp.bottle_m, atol=1e-6)
+    np.testing.assert_allclose(measured.mouth_m, wp.mouth_m, atol=1e-6)
+
+
+def test_optimization_fixed_point_and_constraints():
+    # symmetric phases: the truth has zero cost in every term, so it is the optimum
+    ts, pos, _, b, static = r2g_truth(None, durations=(1.0, 1.2, 1.2, 1.0))
+    res = optimize_repetition(ts, pos, pos, b, static)
+    np.testing.assert_allclose(res.position, pos, atol=1e-9)
+    # a drifting initial estimate: the constraint holds exactly and the error falls
+    drift = np.outer((ts - ts[0]) / (ts[-1] - ts[0]), [0.05, -0.04, 0.03])
+    wp = R2GWaypoints(bottle_m=(0.36, 0.11, 0.0), mouth_m=(0.1, 0.09, 0.31))  # 1-2 cm off the truth
+    ref = r2g_reference(ts, b, wp)
+    res = optimize_repetition(ts, pos + drift, ref, b, static, OptimizationParams())
+    np.testing.assert_allclose(res.position[[0, -1]], 0.0, atol=1e-9)
+    assert np.mean(np.abs(res.position - pos)) < 0.5 * np.mean(np.abs(drift))
