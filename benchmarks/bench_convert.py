@@ -29,7 +29,9 @@ def write_imu(path: Path, minutes: float, rate_hz: float = 100.0, seed: int = 0)
     t = np.arange(n) / rate_hz
     data = np.column_stack([t, rng.normal(0, 20, (n, 3)), rng.normal(0, 0.3, (n, 3)), rng.normal(20, 5, (n, 3))])
     header = "Time (s)," + ",".join(
-        [f"Gyroscope {a} (deg/s)" for a in "XYZ"] + [f"Accelerometer {a} (g)" for a in "XYZ"] + [f"Magnetometer {a} (uT)" for a in "XYZ"]
+        [f"Gyroscope {a} (deg/s)" for a in "XYZ"]
+        + [f"Accelerometer {a} (g)" for a in "XYZ"]
+        + [f"Magnetometer {a} (uT)" for a in "XYZ"]
     )
     np.savetxt(path, data, delimiter=",", header=header, comments="", fmt=["%.4f"] + ["%.6g"] * 9)
     return n
@@ -79,10 +81,16 @@ def main() -> None:
         n_imu = write_imu(imu, args.minutes_imu)
         n_vic = write_nexus(nexus, args.minutes_vicon)
         cases = [
-            (f"IMU text {args.minutes_imu:g} min 9-axis 100 Hz ({n_imu} rows, {imu.stat().st_size / 1e6:.0f} MB)",
-             lambda: pd.read_csv(imu), lambda: DELIMITED.convert(imu)),
-            (f"Nexus CSV {args.minutes_vicon:g} min 40 markers ({n_vic} rows, {nexus.stat().st_size / 1e6:.0f} MB)",
-             lambda: pd.read_csv(nexus, skiprows=5, header=None), lambda: VICON.convert(nexus)),
+            (
+                f"IMU text {args.minutes_imu:g} min 9-axis 100 Hz ({n_imu} rows, {imu.stat().st_size / 1e6:.0f} MB)",
+                lambda: pd.read_csv(imu),
+                lambda: DELIMITED.convert(imu),
+            ),
+            (
+                f"Nexus CSV {args.minutes_vicon:g} min 40 markers ({n_vic} rows, {nexus.stat().st_size / 1e6:.0f} MB)",
+                lambda: pd.read_csv(nexus, skiprows=5, header=None),
+                lambda: VICON.convert(nexus),
+            ),
         ]
         print(f"best of {args.repeat} runs; target: convert <= 2.0 x pandas.read_csv")
         worst = 0.0

@@ -114,10 +114,7 @@ def text_head_lines(head: bytes, max_lines: int = 50) -> list[str] | None:
 
 def split_row(line: str, delimiter: str) -> list[str]:
     """Split one header/data row; strips whitespace and surrounding double quotes of each cell."""
-    if delimiter == " ":
-        cells = line.split()
-    else:
-        cells = line.split(delimiter)
+    cells = line.split() if delimiter == " " else line.split(delimiter)
     return [c.strip().strip('"').strip() for c in cells]
 
 
@@ -331,11 +328,6 @@ def estimate_rate_hz(t_ns: np.ndarray) -> float | None:
         return None
     dt = float(np.median(np.diff(t_ns)))
     return 1e9 / dt if dt > 0 else None
-
-
-def index_time_ns(n: int, rate_hz: float, first_index: float = 0.0) -> np.ndarray:
-    """``round((first_index + i) / rate_hz * 1e9)`` for i in 0..n-1, int64 ns."""
-    return np.round((first_index + np.arange(n, dtype=np.float64)) * (1e9 / rate_hz)).astype(np.int64)
 
 
 def sanitize_name(name: str) -> str:

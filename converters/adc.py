@@ -78,7 +78,12 @@ def read_adc(
     out = (counts < 0) | (counts > top) | (counts != np.round(counts))
     if out.any():
         row, col = (int(x) for x in np.argwhere(out)[0])
-        raise ConversionError(path, f"{counts[row, col]:g} counts outside the {adc_bits}-bit range 0..{top}", line=row + 1, column="XYZ"[col])
+        raise ConversionError(
+            path,
+            f"{counts[row, col]:g} counts outside the {adc_bits}-bit range 0..{top}",
+            line=row + 1,
+            column="XYZ"[col],
+        )
     try:
         zero = np.broadcast_to(np.asarray(zero_counts, dtype=np.float64), (3,))
     except (ValueError, TypeError):

@@ -54,7 +54,11 @@ def read_broad(path: Path, name: str = "imu") -> Recording:
             raise ConversionError(path, "attribute 'sampling_rate' missing or not a number") from None
         if not (rate > 0 and np.isfinite(rate)):
             raise ConversionError(path, f"sampling_rate {rate!r} must be positive")
-        arrays = {k: np.asarray(f[k][()], dtype=np.float64) for k in ("imu_acc", "imu_gyr", "imu_mag", "opt_pos", "opt_quat") if k in f}
+        arrays = {
+            k: np.asarray(f[k][()], dtype=np.float64)
+            for k in ("imu_acc", "imu_gyr", "imu_mag", "opt_pos", "opt_quat")
+            if k in f
+        }
         movement = np.asarray(f["movement"][()], dtype=bool) if "movement" in f else None
         info = str(f.attrs.get("info", ""))
     n = len(arrays["imu_acc"])
@@ -78,15 +82,47 @@ def read_broad(path: Path, name: str = "imu") -> Recording:
         "dataset": "BROAD (Laidig et al. 2021, CC-BY-4.0)",
     }
     rec = Recording(sources=[str(path)])
-    rec.imus.append(ImuStream(name=name, t_ns=t_ns, acc=arrays["imu_acc"], gyr=arrays["imu_gyr"], mag=arrays.get("imu_mag"), meta=dict(meta)))
+    rec.imus.append(
+        ImuStream(
+            name=name,
+            t_ns=t_ns,
+            acc=arrays["imu_acc"],
+            gyr=arrays["imu_gyr"],
+            mag=arrays.get("imu_mag"),
+            meta=dict(meta),
+        )
+    )
     rec.metadata[f"imulog.device.{name}"] = meta
     if "opt_pos" in arrays:
-        rec.poses.append(PoseStream(topic="/poses/optical", t_ns=t_ns, position=arrays["opt_pos"], orientation=arrays.get("opt_quat"), frame_id="enu"))
-        rec.metadata["imulog.device.optical"] = {"format": "broad-hdf5", "model": "OptiTrack (8 Flex13)", "rate_hz": rate, "units": {"position": "m", "orientation": "w,x,y,z"}, "frame": "ENU", "source": path.name}
+        rec.poses.append(
+            PoseStream(
+                topic="/poses/optical",
+                t_ns=t_ns,
+                position=arrays["opt_pos"],
+                orientation=arrays.get("opt_quat"),
+                frame_id="enu",
+            )
+        )
+        rec.metadata["imulog.device.optical"] = {
+            "format": "broad-hdf5",
+            "model": "OptiTrack (8 Flex13)",
+            "rate_hz": rate,
+            "units": {"position": "m", "orientation": "w,x,y,z"},
+            "frame": "ENU",
+            "source": path.name,
+        }
     if movement is not None and len(movement) == n and movement.any():
         first, last = _runs(movement)
-        rec.events.append(Intervals(topic="/events/movement", start_ns=t_ns[first], end_ns=t_ns[last], labels=["movement"] * len(first)))
-    rec.metadata["imulog.trial"] = {"trial": trial, "dataset": "BROAD", "info": info.split("\n\n")[1] if "\n\n" in info else info}
+        rec.events.append(
+            Intervals(
+                topic="/events/movement", start_ns=t_ns[first], end_ns=t_ns[last], labels=["movement"] * len(first)
+            )
+        )
+    rec.metadata["imulog.trial"] = {
+        "trial": trial,
+        "dataset": "BROAD",
+        "info": info.split("\n\n")[1] if "\n\n" in info else info,
+    }
     return rec
 
 

@@ -142,7 +142,9 @@ def read_c3d(path: Path, name: str = "vicon") -> Recording:
                     units.append("")
                     vals.append(np.where(valid[:, i], xyz[:, i, k], np.nan))
             rec.signals.append(
-                SignalStream(topic="/vicon/model_outputs", t_ns=t_ns, columns=cols, units=units, values=np.column_stack(vals))
+                SignalStream(
+                    topic="/vicon/model_outputs", t_ns=t_ns, columns=cols, units=units, values=np.column_stack(vals)
+                )
             )
     analogs = c["data"]["analogs"]  # (1, C, N*ratio)
     if analogs.size:
@@ -176,7 +178,9 @@ def read_c3d(path: Path, name: str = "vicon") -> Recording:
         full = [f"{ctx} {lab}".strip() for ctx, lab in zip(contexts, ev_labels, strict=True)]
         order = np.argsort(seconds, kind="stable")
         t_ev = np.round(seconds[order] * 1e9).astype(np.int64)
-        rec.events.append(Intervals(topic=f"/events/{name}", start_ns=t_ev, end_ns=t_ev, labels=[full[i] for i in order]))
+        rec.events.append(
+            Intervals(topic=f"/events/{name}", start_ns=t_ev, end_ns=t_ev, labels=[full[i] for i in order])
+        )
         meta["events"] = used
     if not rec.streams():
         raise ConversionError(path, "C3D file holds no points and no analog data")

@@ -144,7 +144,9 @@ def analyse_header(
         raise ConversionError(path, "no header row found", line=idx)
     delimiter = delimiter or detect_delimiter(lines[idx])
     if delimiter is None:
-        raise ConversionError(path, "cannot tell the delimiter (no comma, semicolon or tab in the header)", line=idx + 1)
+        raise ConversionError(
+            path, "cannot tell the delimiter (no comma, semicolon or tab in the header)", line=idx + 1
+        )
     rows = [split_row(lines[idx], delimiter)]
     header_start = idx
     idx += 1
@@ -179,7 +181,9 @@ def analyse_header(
     seen: dict[str, int] = {}
     for i, full in enumerate(full_names):
         if full and full in seen:
-            raise ConversionError(path, f"duplicated column {full!r} (also column {seen[full] + 1})", line=header_start + 1)
+            raise ConversionError(
+                path, f"duplicated column {full!r} (also column {seen[full] + 1})", line=header_start + 1
+            )
         seen[full] = i
 
     mapped = dict(mapping.columns) if mapping else {}
@@ -264,7 +268,9 @@ def _fit_host_clock(path: Path, t_ns: np.ndarray, first_line: int, column: str) 
     resid = np.abs(rel - (slope * i + intercept))
     if resid.max() > 1e9:
         bad = int(np.argmax(resid))
-        raise ConversionError(path, "host time stamp more than 1 s off the sample clock", line=first_line + bad, column=column)
+        raise ConversionError(
+            path, "host time stamp more than 1 s off the sample clock", line=first_line + bad, column=column
+        )
     return t_ns[0] + np.round(intercept + slope * i).astype(np.int64)
 
 
@@ -403,7 +409,9 @@ def read_delimited(
                 units_out.append(SI_UNIT[c.quantity] if conv else c.unit)
                 data.append(values[:, c.index] * (c.factor if conv else 1.0))
             rec.signals.append(
-                SignalStream(topic=f"/signals/{dev}", t_ns=t_ns, columns=cols_out, units=units_out, values=np.column_stack(data))
+                SignalStream(
+                    topic=f"/signals/{dev}", t_ns=t_ns, columns=cols_out, units=units_out, values=np.column_stack(data)
+                )
             )
     if not rec.imus and not rec.signals:
         raise ConversionError(path, "no IMU or numeric columns found")

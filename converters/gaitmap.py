@@ -57,12 +57,20 @@ def read_mocap(path: Path, rate_hz: float = MOCAP_RATE_HZ, name: str = "mocap") 
     if len(set(labels)) != len(labels):
         raise ConversionError(path, "duplicated marker name", line=1)
     names = ["index"] + [f"{m}/{a}" for m in labels for a in "xyz"]
-    values = read_numeric(TableSpec(path=path, delimiter=",", skip_lines=2, names=names, optional=set(range(1, len(names)))))
+    values = read_numeric(
+        TableSpec(path=path, delimiter=",", skip_lines=2, names=names, optional=set(range(1, len(names))))
+    )
     idx = values[:, 0]
     check_increasing(path, idx, 3, "index")
     t_ns = np.round(idx * (1e9 / rate_hz)).astype(np.int64)
     pos = values[:, 1:].reshape(len(values), len(labels), 3) * 1e-3
-    meta = {"format": "gaitmap", "model": "gaitmap example mocap", "rate_hz": rate_hz, "marker_units": "mm", "source": path.name}
+    meta = {
+        "format": "gaitmap",
+        "model": "gaitmap example mocap",
+        "rate_hz": rate_hz,
+        "marker_units": "mm",
+        "source": path.name,
+    }
     rec = Recording(sources=[str(path)])
     rec.markers.append(MarkerStream(name=name, t_ns=t_ns, labels=labels, pos=pos, meta=dict(meta)))
     rec.metadata[f"imulog.device.{name}"] = meta
@@ -124,7 +132,11 @@ class GaitmapConverter(Converter):
         imu_rate = float(options.rate_hz or options.extra.get("imu_rate_hz", IMU_RATE_HZ))
         if kind == "imu":
             return read_delimited(
-                path, rate_hz=imu_rate, default_units=IMU_UNITS, device_meta={"model": "gaitmap example foot IMU"}, fmt="gaitmap"
+                path,
+                rate_hz=imu_rate,
+                default_units=IMU_UNITS,
+                device_meta={"model": "gaitmap example foot IMU"},
+                fmt="gaitmap",
             )
         if kind == "mocap":
             return read_mocap(path, float(options.extra.get("mocap_rate_hz", MOCAP_RATE_HZ)))

@@ -101,9 +101,7 @@ def convert_file(path: Path, fmt: str | None = None, options: ConvertOptions | N
         raise ConversionError(path, f"{conv.name} converter failed: {type(e).__name__}: {e}") from None
 
 
-def convert_files(
-    paths: Sequence[Path], fmt: str | None = None, options: ConvertOptions | None = None
-) -> Recording:
+def convert_files(paths: Sequence[Path], fmt: str | None = None, options: ConvertOptions | None = None) -> Recording:
     """Convert several files of one trial (e.g. an IMU text file and a Vicon CSV) and merge them."""
     if not paths:
         raise ConversionError(None, "no input files")
@@ -122,8 +120,20 @@ def convert_files(
 
 
 _ROLE_TOKENS = {
-    "imu", "vicon", "markers", "marker", "analogs", "analog", "mocap", "devices", "trajectories", "emg",
-    "stride", "strides", "borders", "events",
+    "imu",
+    "vicon",
+    "markers",
+    "marker",
+    "analogs",
+    "analog",
+    "mocap",
+    "devices",
+    "trajectories",
+    "emg",
+    "stride",
+    "strides",
+    "borders",
+    "events",
 }
 _SKIP_SUFFIXES = {".md", ".txt.license", ".license", ".json", ".toml", ".npz", ".npy", ".pdf", ".png", ".mcap"}
 

@@ -64,10 +64,14 @@ def find_sections(path: Path, data: bytes) -> list[Section]:
         if name in SECTIONS:
             starts.append((pos, name))
         elif pos == 0:
-            raise ConversionError(path, f"not a Vicon Nexus CSV: first line must be one of {', '.join(SECTIONS)}", line=1)
+            raise ConversionError(
+                path, f"not a Vicon Nexus CSV: first line must be one of {', '.join(SECTIONS)}", line=1
+            )
         elif first.strip(" ,\t\r\n"):
             line = data.count(b"\n", 0, pos) + 1
-            raise ConversionError(path, f"unexpected text after a blank line (expected a section name): {first[:30]!r}", line=line)
+            raise ConversionError(
+                path, f"unexpected text after a blank line (expected a section name): {first[:30]!r}", line=line
+            )
     sections = []
     for k, (offset, name) in enumerate(starts):
         end = starts[k + 1][0] if k + 1 < len(starts) else len(data)
@@ -184,7 +188,11 @@ def read_vicon_csv(path: Path, name: str = "vicon") -> Recording:
             if traj_rate:
                 n_sub = round(rate / traj_rate)
                 if n_sub < 1 or abs(n_sub * traj_rate - rate) > 1e-6 * rate:
-                    raise ConversionError(path, f"device rate {rate:g} Hz is not a multiple of the frame rate {traj_rate:g} Hz", line=sec.line + 2)
+                    raise ConversionError(
+                        path,
+                        f"device rate {rate:g} Hz is not a multiple of the frame rate {traj_rate:g} Hz",
+                        line=sec.line + 2,
+                    )
             else:
                 n_sub = int(np.nanmax(sub)) + 1 if len(sub) else 1
             frame_rate = rate / n_sub
@@ -200,11 +208,22 @@ def read_vicon_csv(path: Path, name: str = "vicon") -> Recording:
                     raise ConversionError(path, f"marker {label!r} must have X,Y,Z columns", line=sec.line + 4)
                 for c in cols:
                     if units[c] not in LENGTH_TO_M:
-                        raise ConversionError(path, f"unknown length unit {units[c]!r}", line=sec.line + 5, column=f"{label} {header[c]}")
+                        raise ConversionError(
+                            path, f"unknown length unit {units[c]!r}", line=sec.line + 5, column=f"{label} {header[c]}"
+                        )
             scale = np.array([LENGTH_TO_M[u] for u in units[2 : 2 + 3 * len(groups)]])
             pos = np.multiply(values[:, 2 : 2 + 3 * len(groups)], scale, order="C").reshape(len(values), len(groups), 3)
             valid = np.isfinite(pos).all(axis=2)
-            rec.markers.append(MarkerStream(name=name, t_ns=t_ns, labels=labels, pos=pos, valid=valid, meta={"rate_hz": rate, "units": units[2], "source": path.name}))
+            rec.markers.append(
+                MarkerStream(
+                    name=name,
+                    t_ns=t_ns,
+                    labels=labels,
+                    pos=pos,
+                    valid=valid,
+                    meta={"rate_hz": rate, "units": units[2], "source": path.name},
+                )
+            )
             meta.update(rate_hz=rate, marker_units=units[2], markers=len(labels), marker_source=path.name)
         elif sec.name == "Devices":
             groups = _groups(path, names, header, sec.line + 3, "device")
@@ -218,7 +237,16 @@ def read_vicon_csv(path: Path, name: str = "vicon") -> Recording:
                     cols_all.append(values[:, c] * (conv[1] if conv else 1.0))
             if len(set(ch_names)) != len(ch_names):
                 raise ConversionError(path, "duplicated device channel names", line=sec.line + 4)
-            rec.analogs.append(AnalogStream(name=name, t_ns=t_ns, channel_names=ch_names, units=ch_units, values=np.column_stack(cols_all), meta={"rate_hz": rate, "source": path.name, "devices": [g[0] for g in groups]}))
+            rec.analogs.append(
+                AnalogStream(
+                    name=name,
+                    t_ns=t_ns,
+                    channel_names=ch_names,
+                    units=ch_units,
+                    values=np.column_stack(cols_all),
+                    meta={"rate_hz": rate, "source": path.name, "devices": [g[0] for g in groups]},
+                )
+            )
             meta.update(analog_rate_hz=rate, sub_frames=n_sub, devices=[g[0] for g in groups], analog_source=path.name)
         else:
             groups = _groups(path, names, header, sec.line + 3, "output")
@@ -231,7 +259,11 @@ def read_vicon_csv(path: Path, name: str = "vicon") -> Recording:
                     data_out.append(values[:, c] * (conv[1] if conv else 1.0))
             topic = "/vicon/" + sec.name.lower().replace(" ", "_")
             meta[f"{sec.name.lower().replace(' ', '_')}_source"] = path.name
-            rec.signals.append(SignalStream(topic=topic, t_ns=t_ns, columns=cols_out, units=units_out, values=np.column_stack(data_out)))
+            rec.signals.append(
+                SignalStream(
+                    topic=topic, t_ns=t_ns, columns=cols_out, units=units_out, values=np.column_stack(data_out)
+                )
+            )
     rec.metadata[f"imulog.device.{name}"] = meta
     return rec
 

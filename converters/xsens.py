@@ -43,7 +43,15 @@ from converters.errors import ConversionError
 from imulog.model import ImuStream, Recording, SignalStream
 
 TICKS_PER_S = 10_000  # SampleTimeFine resolution
-SIGNAL_UNITS = {"quat": "1", "roll": "deg", "pitch": "deg", "yaw": "deg", "freeacc": "m/s^2", "mag": "a.u.", "pressure": "Pa"}
+SIGNAL_UNITS = {
+    "quat": "1",
+    "roll": "deg",
+    "pitch": "deg",
+    "yaw": "deg",
+    "freeacc": "m/s^2",
+    "mag": "a.u.",
+    "pressure": "Pa",
+}
 
 
 def unwrap_counter(values: np.ndarray, modulus: int) -> tuple[np.ndarray, int | None, str]:
@@ -94,16 +102,22 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
             raise ConversionError(path, f"duplicated column {c!r}", line=n_comment + 1)
         seen[c] = i
     first = split_row(lines[n_comment + 1], delimiter) if n_comment + 1 < len(lines) else []
-    ncols = max(ncols_header, len(first)) if first and len(first) == ncols_header + 1 and first[-1] == "" else ncols_header
+    ncols = (
+        max(ncols_header, len(first)) if first and len(first) == ncols_header + 1 and first[-1] == "" else ncols_header
+    )
     names_all = cols + [""] * (ncols - ncols_header)
     imu_cols = {f"{q}_{a}" for q in ("Acc", "Gyr") for a in "XYZ"}
-    text_cols = {i for i, c in enumerate(cols) if c not in imu_cols and i < len(first) and first[i] and not is_number(first[i])}
+    text_cols = {
+        i for i, c in enumerate(cols) if c not in imu_cols and i < len(first) and first[i] and not is_number(first[i])
+    }
     ignore = text_cols | set(range(ncols_header, ncols))
     required = {seen[c] for c in imu_cols if c in seen}
     if "PacketCounter" in seen:
         required.add(seen["PacketCounter"])
     optional = set(range(ncols)) - required - ignore
-    spec = TableSpec(path=path, delimiter=delimiter, skip_lines=n_comment + 1, names=names_all, optional=optional, ignore=ignore)
+    spec = TableSpec(
+        path=path, delimiter=delimiter, skip_lines=n_comment + 1, names=names_all, optional=optional, ignore=ignore
+    )
     values = read_numeric(spec)
     first_line = n_comment + 2
 
@@ -123,7 +137,9 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
             time_source = "SampleTimeFine (10 kHz ticks, unwrapped at 2^32)"
     if t_ns is None:
         if "PacketCounter" not in seen:
-            raise ConversionError(path, "SampleTimeFine has empty cells and there is no PacketCounter", column="SampleTimeFine")
+            raise ConversionError(
+                path, "SampleTimeFine has empty cells and there is no PacketCounter", column="SampleTimeFine"
+            )
         if not rate:
             raise ConversionError(path, "no '// Update Rate' line and no --rate: cannot time the PacketCounter")
         pc = values[:, seen["PacketCounter"]]
@@ -171,12 +187,22 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
     rec = Recording(sources=[str(path)])
     rec.imus.append(ImuStream(name=name, t_ns=t_ns, meta=dict(meta), **streams))
     rec.metadata[f"imulog.device.{name}"] = meta
-    skip = imu_cols | {"PacketCounter", "SampleTimeFine", "Temperature"} if "temperature" in streams else imu_cols | {"PacketCounter", "SampleTimeFine"}
+    skip = (
+        imu_cols | {"PacketCounter", "SampleTimeFine", "Temperature"}
+        if "temperature" in streams
+        else imu_cols | {"PacketCounter", "SampleTimeFine"}
+    )
     extra = [(c, i) for c, i in seen.items() if c not in skip and i not in ignore]
     if extra:
         units = [SIGNAL_UNITS.get(c.split("_")[0].lower(), "") for c, _ in extra]
         rec.signals.append(
-            SignalStream(topic=f"/signals/{name}", t_ns=t_ns, columns=[c for c, _ in extra], units=units, values=values[:, [i for _, i in extra]])
+            SignalStream(
+                topic=f"/signals/{name}",
+                t_ns=t_ns,
+                columns=[c for c, _ in extra],
+                units=units,
+                values=values[:, [i for _, i in extra]],
+            )
         )
     return rec
 

@@ -31,12 +31,18 @@ TOP_LEVEL_COMMANDS: dict[str, tuple[str, str]] = {
 
 PROCESS_COMMANDS: dict[str, tuple[str, str]] = {
     "calibrate": ("imulog.commands.calibrate:process_calibrate", "Apply a calibration file: calibrated IMU channels."),
-    "orientation": ("imulog.commands.orientation:process_orientation", "Sensor orientation and gravity-free acceleration."),
+    "orientation": (
+        "imulog.commands.orientation:process_orientation",
+        "Sensor orientation and gravity-free acceleration.",
+    ),
     "align": ("imulog.commands.align:process_align", "IMU-to-Vicon time lag, drift and frame rotation."),
     "phases": ("imulog.commands.phases:process_phases", "Movements, phases, repetitions and static intervals."),
     "trajectory": ("imulog.commands.trajectory:process_trajectory", "Wrist trajectories by integration methods."),
     "metrics": ("imulog.commands.metrics:process_metrics", "Clinical metrics: arm usage, activity, smoothness."),
-    "kinematics": ("imulog.commands.kinematics:process_kinematics", "Shoulder and elbow angles from two IMUs (DH model)."),
+    "kinematics": (
+        "imulog.commands.kinematics:process_kinematics",
+        "Shoulder and elbow angles from two IMUs (DH model).",
+    ),
 }
 
 

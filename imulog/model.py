@@ -130,7 +130,9 @@ class AnalogStream:
         self.t_ns = _as_time(self.t_ns)
         self.values = _as_columns(self.values, len(self.t_ns), len(self.channel_names), f"AnalogStream {self.name!r}")
         if len(self.units) != len(self.channel_names):
-            raise ValueError(f"AnalogStream {self.name!r}: {len(self.units)} units for {len(self.channel_names)} channels")
+            raise ValueError(
+                f"AnalogStream {self.name!r}: {len(self.units)} units for {len(self.channel_names)} channels"
+            )
 
     @property
     def topic(self) -> str:

@@ -28,10 +28,22 @@ def info_json(path: Path) -> dict:
     code, out, err = run("info", "--json", path)
     assert code == 0, err
     data = json.loads(out)
-    return {c["topic"]: c for c in data["channels"]} | {"__metadata__": data["metadata"], "__attachments__": data["attachments"]}
+    return {c["topic"]: c for c in data["channels"]} | {
+        "__metadata__": data["metadata"],
+        "__attachments__": data["attachments"],
+    }
 
 
-def check_channel(ch: dict, *, samples: int, rate_hz: float, first_ns: int, last_ns: int, units: str | None = None, rate_tol: float = 1e-3):
+def check_channel(
+    ch: dict,
+    *,
+    samples: int,
+    rate_hz: float,
+    first_ns: int,
+    last_ns: int,
+    units: str | None = None,
+    rate_tol: float = 1e-3,
+):
     assert ch["samples"] == samples
     assert ch["rate_hz"] == pytest.approx(rate_hz, rel=rate_tol)
     assert ch["start_ns"] == first_ns and ch["end_ns"] == last_ns
@@ -57,7 +69,15 @@ def test_imu_text_to_trial_with_metadata_and_attachments(tmp_path, shared_data):
     t = pd.read_csv(src)["Time (s)"].to_numpy()
     chans = info_json(out)
     n = len(t)
-    check_channel(chans["/imu/imu"], samples=n, rate_hz=(n - 1) / (t[-1] - t[0]), first_ns=0, last_ns=round(t[-1] * 1e9), units=IMU_UNITS, rate_tol=0.01)
+    check_channel(
+        chans["/imu/imu"],
+        samples=n,
+        rate_hz=(n - 1) / (t[-1] - t[0]),
+        first_ns=0,
+        last_ns=round(t[-1] * 1e9),
+        units=IMU_UNITS,
+        rate_tol=0.01,
+    )
     md = chans["__metadata__"]
     assert md["imulog.trial"] == {"subject": "S07", "task": "r2g", "side": "left", "trial": 3}
     assert md["imulog.anthropometrics"] == {"forearm_length_m": 0.27}
@@ -90,8 +110,21 @@ def test_vicon_csv_pair_and_c3d_give_the_same_channels(tmp_path, shared_data):
     frames = pd.read_csv(d / "markers.csv", skiprows=5, header=None)[0].to_numpy()
     for path in (a, b):
         chans = info_json(path)
-        check_channel(chans["/markers/vicon"], samples=len(frames), rate_hz=100.0, first_ns=0, last_ns=(len(frames) - 1) * 10_000_000, units="m")
-        check_channel(chans["/analog/vicon"], samples=20 * len(frames), rate_hz=2000.0, first_ns=0, last_ns=(20 * len(frames) - 1) * 500_000)
+        check_channel(
+            chans["/markers/vicon"],
+            samples=len(frames),
+            rate_hz=100.0,
+            first_ns=0,
+            last_ns=(len(frames) - 1) * 10_000_000,
+            units="m",
+        )
+        check_channel(
+            chans["/analog/vicon"],
+            samples=20 * len(frames),
+            rate_hz=2000.0,
+            first_ns=0,
+            last_ns=(20 * len(frames) - 1) * 500_000,
+        )
         assert json.loads(chans["/analog/vicon"]["units"]) == ["V"] * 38
     with TrialReader(a) as ta, TrialReader(b) as tb:
         ma, mb = ta.read("/markers/vicon"), tb.read("/markers/vicon")
@@ -106,7 +139,15 @@ def test_c3d_non_integer_rate_and_broad_and_gaitmap(tmp_path, shared_data):
     rate = float(ezc3d.c3d(str(ktk))["parameters"]["POINT"]["RATE"]["value"][0])
     out = tmp_path / "ktk.mcap"
     assert run("convert", ktk, "-o", out)[0] == 0
-    check_channel(info_json(out)["/markers/vicon"], samples=700, rate_hz=rate, first_ns=0, last_ns=round(699 / rate * 1e9), units="m", rate_tol=1e-5)
+    check_channel(
+        info_json(out)["/markers/vicon"],
+        samples=700,
+        rate_hz=rate,
+        first_ns=0,
+        last_ns=round(699 / rate * 1e9),
+        units="m",
+        rate_tol=1e-5,
+    )
 
     broad = shared_data / "broad/14_undisturbed_slow_translation_with_breaks_B.hdf5"
     with h5py.File(broad) as f:
@@ -114,7 +155,15 @@ def test_c3d_non_integer_rate_and_broad_and_gaitmap(tmp_path, shared_data):
     out = tmp_path / "broad.mcap"
     assert run("convert", broad, "-o", out)[0] == 0
     chans = info_json(out)
-    check_channel(chans["/imu/imu"], samples=n, rate_hz=brate, first_ns=0, last_ns=round((n - 1) / brate * 1e9), units=IMU_UNITS, rate_tol=1e-5)
+    check_channel(
+        chans["/imu/imu"],
+        samples=n,
+        rate_hz=brate,
+        first_ns=0,
+        last_ns=round((n - 1) / brate * 1e9),
+        units=IMU_UNITS,
+        rate_tol=1e-5,
+    )
     assert chans["/poses/optical"]["samples"] == n
 
     out_dir = tmp_path / "gait"
@@ -123,9 +172,18 @@ def test_c3d_non_integer_rate_and_broad_and_gaitmap(tmp_path, shared_data):
     chans = info_json(out_dir / "sample.mcap")
     idx = pd.read_csv(shared_data / "gaitmap_foot/imu_sample.csv", header=[0, 1], index_col=0).index.to_numpy()
     for side in ("left_sensor", "right_sensor"):
-        check_channel(chans[f"/imu/{side}"], samples=len(idx), rate_hz=204.8, first_ns=0, last_ns=round(idx[-1] / 204.8 * 1e9), rate_tol=1e-5)
+        check_channel(
+            chans[f"/imu/{side}"],
+            samples=len(idx),
+            rate_hz=204.8,
+            first_ns=0,
+            last_ns=round(idx[-1] / 204.8 * 1e9),
+            rate_tol=1e-5,
+        )
         assert chans[f"/imu/{side}"]["units"].startswith('["m/s^2", "rad/s"')
-    check_channel(chans["/markers/mocap"], samples=3870, rate_hz=100.0, first_ns=0, last_ns=3869 * 10_000_000, units="m")
+    check_channel(
+        chans["/markers/mocap"], samples=3870, rate_hz=100.0, first_ns=0, last_ns=3869 * 10_000_000, units="m"
+    )
 
 
 def test_xsens_and_adc_end_to_end(tmp_path):
@@ -142,7 +200,14 @@ def test_xsens_and_adc_end_to_end(tmp_path):
     assert code == 0, err
     chans = info_json(out)
     for topic in ("/imu/mt_00b41234", "/imu/wrist"):
-        check_channel(chans[topic], samples=n, rate_hz=100.0, first_ns=65500 * 10_000_000, last_ns=(65500 + n - 1) * 10_000_000, units='["m/s^2", "rad/s"]')
+        check_channel(
+            chans[topic],
+            samples=n,
+            rate_hz=100.0,
+            first_ns=65500 * 10_000_000,
+            last_ns=(65500 + n - 1) * 10_000_000,
+            units='["m/s^2", "rad/s"]',
+        )
     assert chans["__metadata__"]["imulog.device.wrist"]["serial"] == "00B45678"
 
     adc = tmp_path / "witilt.txt"
@@ -190,7 +255,9 @@ def test_folder_of_exports_one_trial_per_recording(tmp_path, shared_data):
     for trial in range(2):
         s = sim.simulate("r2g", trial=trial, repetitions=1, opening_static_s=1.0)
         sim.write_trial_files(s, exports)
-    (exports / "broken_imu.csv").write_text("Time (s),Accelerometer X (g),Accelerometer Y (g),Accelerometer Z (g)\n0,1,2,3\n0,1,2,3\n")
+    (exports / "broken_imu.csv").write_text(
+        "Time (s),Accelerometer X (g),Accelerometer Y (g),Accelerometer Z (g)\n0,1,2,3\n0,1,2,3\n"
+    )
     out = tmp_path / "trials"
     code, stdout, err = run("convert", exports, "-o", out, "--meta", "site=lab1")
     assert code == 1  # one recording is broken ...

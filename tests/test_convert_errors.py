@@ -25,7 +25,8 @@ FUSION = (
 )
 SHIMMER = (
     '"sep=;"\nS_1_Timestamp_Unix_CAL;S_1_Accel_LN_X_CAL;S_1_Accel_LN_Y_CAL;S_1_Accel_LN_Z_CAL;S_1_Gyro_X_CAL;S_1_Gyro_Y_CAL;S_1_Gyro_Z_CAL;\n'
-    "ms;m/(s^2);m/(s^2);m/(s^2);deg/s;deg/s;deg/s;\n" + "".join(f"{1000 + 20 * i};-1.4;10.0;0.5;0.1;1.8;-0.2;\n" for i in range(8))
+    "ms;m/(s^2);m/(s^2);m/(s^2);deg/s;deg/s;deg/s;\n"
+    + "".join(f"{1000 + 20 * i};-1.4;10.0;0.5;0.1;1.8;-0.2;\n" for i in range(8))
 )
 MAPPED_CSV = "timestamp,ax,ay,az,gx,gy,gz\n" + "".join(f"{i * 8.7:.3f},0.01,0.02,0.98,0.4,0.1,-0.1\n" for i in range(8))
 MAPPING = {
@@ -112,35 +113,103 @@ def _replace_line(text: str, lineno: int, new: str) -> str:
 
 CASES = [
     # key, damage, expected message (regex)
-    ("delimited-fusion", lambda s: _replace_line(s, 4, "0.02,0.1,-0.2"), r"imu\.csv: line 4: truncated line: 3 fields, expected 10"),
-    ("delimited-fusion", lambda s: _replace_line(s, 5, "0.03,0.1,abc,0.3,0.01,-0.02,0.99,15.3,0.4,-41.0"), r"line 5, column 'Gyroscope Y \(deg/s\)': 'abc' is not a number"),
-    ("delimited-fusion", lambda s: _replace_line(s, 5, "0.03,0.1,,0.3,0.01,-0.02,0.99,15.3,0.4,-41.0"), r"line 5, column 'Gyroscope Y \(deg/s\)': empty cell"),
-    ("delimited-fusion", lambda s: _replace_line(s, 6, "0.01,0.1,-0.2,0.3,0.01,-0.02,0.99,15.3,0.4,-41.0"), r"line 6, column 'Time \(s\)': time stamp goes backwards"),
-    ("delimited-fusion", lambda s: _replace_line(s, 6, "0.03,0.1,-0.2,0.3,0.01,-0.02,0.99,15.3,0.4,-41.0"), r"line 6, column 'Time \(s\)': duplicated time stamp"),
-    ("delimited-fusion", lambda s: s.replace("Accelerometer Z (g)", "Accelerometer X (g)"), r"duplicated column 'Accelerometer X \(g\)'"),
-    ("delimited-fusion", lambda s: s.replace("Accelerometer Z (g)", "Pressure (kPa)"), r"missing column\(s\) for acc z"),
-    ("delimited-fusion", lambda s: s.replace("Gyroscope X (deg/s)", "Gyroscope X (furlong/s)"), r"column 'Gyroscope X \(furlong/s\)': unknown gyr unit 'furlong/s'"),
-    ("delimited-fusion", lambda s: s.replace("0.99,15.3,0.4,-41.0\n0.05", "0.99,15.3,0.4,-41.0,7\n0.05"), r"line 6: 11 fields, expected 10"),
+    (
+        "delimited-fusion",
+        lambda s: _replace_line(s, 4, "0.02,0.1,-0.2"),
+        r"imu\.csv: line 4: truncated line: 3 fields, expected 10",
+    ),
+    (
+        "delimited-fusion",
+        lambda s: _replace_line(s, 5, "0.03,0.1,abc,0.3,0.01,-0.02,0.99,15.3,0.4,-41.0"),
+        r"line 5, column 'Gyroscope Y \(deg/s\)': 'abc' is not a number",
+    ),
+    (
+        "delimited-fusion",
+        lambda s: _replace_line(s, 5, "0.03,0.1,,0.3,0.01,-0.02,0.99,15.3,0.4,-41.0"),
+        r"line 5, column 'Gyroscope Y \(deg/s\)': empty cell",
+    ),
+    (
+        "delimited-fusion",
+        lambda s: _replace_line(s, 6, "0.01,0.1,-0.2,0.3,0.01,-0.02,0.99,15.3,0.4,-41.0"),
+        r"line 6, column 'Time \(s\)': time stamp goes backwards",
+    ),
+    (
+        "delimited-fusion",
+        lambda s: _replace_line(s, 6, "0.03,0.1,-0.2,0.3,0.01,-0.02,0.99,15.3,0.4,-41.0"),
+        r"line 6, column 'Time \(s\)': duplicated time stamp",
+    ),
+    (
+        "delimited-fusion",
+        lambda s: s.replace("Accelerometer Z (g)", "Accelerometer X (g)"),
+        r"duplicated column 'Accelerometer X \(g\)'",
+    ),
+    (
+        "delimited-fusion",
+        lambda s: s.replace("Accelerometer Z (g)", "Pressure (kPa)"),
+        r"missing column\(s\) for acc z",
+    ),
+    (
+        "delimited-fusion",
+        lambda s: s.replace("Gyroscope X (deg/s)", "Gyroscope X (furlong/s)"),
+        r"column 'Gyroscope X \(furlong/s\)': unknown gyr unit 'furlong/s'",
+    ),
+    (
+        "delimited-fusion",
+        lambda s: s.replace("0.99,15.3,0.4,-41.0\n0.05", "0.99,15.3,0.4,-41.0,7\n0.05"),
+        r"line 6: 11 fields, expected 10",
+    ),
     ("delimited-fusion", lambda s: s.split("\n")[0] + "\n", r"no data rows"),
     ("delimited-fusion", lambda s: "", r"imu\.csv: empty file"),
     ("delimited-fusion", lambda s: s.replace("Time (s)", "Time"), r"column 'Time': no unit"),
-    ("delimited-fusion", lambda s: s.replace("0.99,15.3,0.4,-41.0\n0.05", "0.99,15.3,0.4,-41.0\n\n0.05"), r"line 7: empty line inside the data"),
-    ("delimited-fusion", lambda s: s.replace("0.99,15.3", "nan,15.3", 1), r"line 2, column 'Accelerometer Z \(g\)': non-finite value 'nan'"),
-    ("delimited-shimmer", lambda s: s.replace("deg/s;deg/s;deg/s", "deg/s;deg/s;bananas"), r"unknown gyr unit 'bananas'"),
-    ("delimited-mapping", lambda s: s.replace("timestamp", "time_ms"), r"time column 'timestamp' of the mapping file is not in the header"),
-    ("gaitmap-imu", lambda s: _replace_line(s, 5, "2,0.8,2.7,9.4,-0.1,0.03"), r"line 5: truncated line: 6 fields, expected 7"),
-    ("gaitmap-imu", lambda s: _replace_line(s, 5, "1,0.8,2.7,9.4,-0.1,0.03,-0.06"), r"line 5, column 'sensor/axis': duplicated time stamp"),
+    (
+        "delimited-fusion",
+        lambda s: s.replace("0.99,15.3,0.4,-41.0\n0.05", "0.99,15.3,0.4,-41.0\n\n0.05"),
+        r"line 7: empty line inside the data",
+    ),
+    (
+        "delimited-fusion",
+        lambda s: s.replace("0.99,15.3", "nan,15.3", 1),
+        r"line 2, column 'Accelerometer Z \(g\)': non-finite value 'nan'",
+    ),
+    (
+        "delimited-shimmer",
+        lambda s: s.replace("deg/s;deg/s;deg/s", "deg/s;deg/s;bananas"),
+        r"unknown gyr unit 'bananas'",
+    ),
+    (
+        "delimited-mapping",
+        lambda s: s.replace("timestamp", "time_ms"),
+        r"time column 'timestamp' of the mapping file is not in the header",
+    ),
+    (
+        "gaitmap-imu",
+        lambda s: _replace_line(s, 5, "2,0.8,2.7,9.4,-0.1,0.03"),
+        r"line 5: truncated line: 6 fields, expected 7",
+    ),
+    (
+        "gaitmap-imu",
+        lambda s: _replace_line(s, 5, "1,0.8,2.7,9.4,-0.1,0.03,-0.06"),
+        r"line 5, column 'sensor/axis': duplicated time stamp",
+    ),
     ("xsens", lambda s: s.replace("00002\t", "00001\t"), r"line 10, column 'PacketCounter': PacketCounter duplicated"),
     ("xsens", lambda s: s.replace("\tGyr_Z", "\tGyr_Q"), r"missing column\(s\) Gyr_Z"),
     ("xsens", lambda s: s.replace("9.8", "9,8", 1), r"line 5, column 'Acc_Z': '9,8' is not a number"),
-    ("adc", lambda s: s.replace("X=513", "X=513 Q=1"), r"adc\.txt: line 4: expected 'X=<int> Y=<int> Z=<int>', got 'X=513 Q=1"),
+    (
+        "adc",
+        lambda s: s.replace("X=513", "X=513 Q=1"),
+        r"adc\.txt: line 4: expected 'X=<int> Y=<int> Z=<int>', got 'X=513 Q=1",
+    ),
     ("adc", lambda s: s.replace("X=513", "X=5130"), r"line 4, column 'X': 5130 counts outside the 10-bit range"),
     ("vicon-csv", lambda s: s.replace("mm,mm,mm,mm", "mm,mm,mm,furlong", 1), r"unknown length unit 'furlong'"),
     ("vicon-csv", lambda s: s.replace("3,0,2.5", "2,0,2.5"), r"line 8, column 'Frame': duplicated time stamp"),
     ("vicon-csv", lambda s: s.replace("5,0,4.5,2,3", "5,0,4.5,x,3"), r"line 10, column 'Y': 'x' is not a number"),
     ("vicon-csv", lambda s: s.replace("S:A,,,S:B", "S:A,,,S:A"), r"duplicated marker 'S:A'"),
     ("vicon-csv", lambda s: s.replace("Trajectories", "Trajektorien"), r"not a Vicon Nexus CSV"),
-    ("vicon-csv", lambda s: s.replace("1000,,,,", "1234,,,,"), r"device rate 1234 Hz is not a multiple of the frame rate 100 Hz"),
+    (
+        "vicon-csv",
+        lambda s: s.replace("1000,,,,", "1234,,,,"),
+        r"device rate 1234 Hz is not a multiple of the frame rate 100 Hz",
+    ),
 ]
 
 
@@ -168,7 +237,10 @@ def test_bad_mapping_files_are_named(tmp_path):
     csv = tmp_path / "wrist.csv"
     csv.write_text(MAPPED_CSV)
     for change, message in [
-        (lambda d: d["columns"]["ax"].update(unit="furlong"), r"wrist\.mapping\.json: columns\.ax\.unit 'furlong' is not a known acc unit"),
+        (
+            lambda d: d["columns"]["ax"].update(unit="furlong"),
+            r"wrist\.mapping\.json: columns\.ax\.unit 'furlong' is not a known acc unit",
+        ),
         (lambda d: d["columns"]["gx"].update(quantity="speed"), r"columns\.gx\.quantity 'speed' unknown"),
         (lambda d: d["columns"]["gx"].update(axis="w"), r"columns\.gx\.axis 'w' must be x, y or z"),
         (lambda d: d.update(format="other/2"), r"unknown mapping format 'other/2'"),
@@ -196,7 +268,7 @@ def test_corrupt_binary_formats(tmp_path, shared_data):
 
 
 # ------------------------------------------------------------------------------------- property based
-_TEXTISH = st.text(alphabet="0123456789.,;\t-+eE\n\r xyzXYZ=naNIf_\"/()abc#:", max_size=12)
+_TEXTISH = st.text(alphabet='0123456789.,;\t-+eE\n\r xyzXYZ=naNIf_"/()abc#:', max_size=12)
 _MUTATION = st.one_of(
     st.tuples(st.just("truncate"), st.floats(0, 1)),
     st.tuples(st.just("delete"), st.floats(0, 1), st.integers(1, 40)),

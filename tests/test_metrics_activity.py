@@ -115,6 +115,9 @@ def test_dead_period_rule_splits_at_exactly_dead_zeros():
     assert dead_period_intervals(sig, 7).tolist() == [[5, 10], [17, 22]]
     assert dead_period_intervals(sig, 8).tolist() == [[5, 22]]
     assert dead_period_intervals(np.zeros(10), 3).shape == (0, 2)
+    sig[30] = 1  # a one-sample spike after a dead period: an activity unless shorter ones are dropped
+    assert dead_period_intervals(sig, 7).tolist() == [[5, 10], [17, 22], [30, 31]]
+    assert dead_period_intervals(sig, 7, min_samples=2).tolist() == [[5, 10], [17, 22]]
 
 
 def test_method1_counts_sign_changes_about_the_mean():

@@ -71,7 +71,7 @@ def test_cli_errors_name_the_file_and_channel(adl_trial):
 
 @pytest.mark.slow
 def test_simulated_r2g_end_to_end_phase_durations(tmp_path):
-    """simulate -> raw files -> convert -> process phases -> process metrics -> info --json, against the truth."""
+    """simulate -> raw files -> convert -> align -> phases -> metrics -> info --json, against the truth."""
     sim_core = pytest.importorskip("imulog.simulate.core")
     files = pytest.importorskip("imulog.simulate.files")
     sim = sim_core.simulate("r2g", subject=2, seed=5)
@@ -80,12 +80,14 @@ def test_simulated_r2g_end_to_end_phase_durations(tmp_path):
     runner = CliRunner()
     for args in (
         ["convert", str(paths["imu"]), str(paths["vicon"]), "-o", str(trial)],
+        ["process", "align", str(trial)],
         ["process", "phases", str(trial), "--quiet"],
         ["process", "metrics", str(trial)],
     ):
         result = runner.invoke(cli, args)
         assert result.exit_code == 0, f"{args}: {result.output}"
     assert "reach" in result.output and "NHPT" not in result.output
+    assert "smoothness from /derived/vicon/cluster_pose" in result.output
     info = runner.invoke(cli, ["info", "--json", str(trial)])
     assert info.exit_code == 0, info.output
     record = json.loads(info.output)["metadata"]["imulog.metrics"]
@@ -106,6 +108,8 @@ def test_simulated_r2g_end_to_end_phase_durations(tmp_path):
         error = record[f"timings.{label}.mean_s"] - table.durations(label).mean()
         print(f"{label}: mean duration error of the segmentation {error:+.3f} s")
     assert record["timings.repetition.n"] == 25
+    assert record["smoothness.source"] == "/derived/vicon/cluster_pose"
+    assert all(record[f"smoothness.{label}.n"] == 25 for label in ("reach", "lift", "return_bottle", "return_hand"))
 
 
 def _write_adc_text(path, acc_g):
@@ -133,3 +137,55 @@ def test_raw_adc_text_adl_counts_through_convert(tmp_path):
         t_ns = reader.read(imu_topic).t_ns
         found = reader.read(imu_topic.replace("/imu/", "/derived/metrics/activity/"))
     np.testing.assert_allclose(found.start_ns, t_ns[truth[:, 0]], atol=1.0e9)
+
+
+@pytest.mark.parametrize("activity", [1, 2, 3, 4])
+def test_simulated_adl_raw_adc_activity_counts(tmp_path, activity):
+    """Simulated Doshi ADL (Table 5.1) written as WiTilt raw ADC text: method 2 counts the repetitions.
+
+    The sensor's noise floor comes from its own static recording (the trial's 3 min opening rest, cut out of the
+    ADC text as a separate file, as Doshi characterised his board at rest); rests between repetitions are 4 s so
+    that a dead period (Doshi's default 1 s) separates them while the pauses inside a repetition (< 0.6 s) do
+    not; activities shorter than 0.2 s (noise peaks above the static peak; no voluntary movement is that short)
+    are dropped. The alignment wave before the repetitions is not an ADL and is left out of the comparison.
+    """
+    sim_core = pytest.importorskip("imulog.simulate.core")
+    files = pytest.importorskip("imulog.simulate.files")
+    sim = sim_core.simulate(
+        "adl", subject=activity, seed=40 + activity, activity=activity, rest_s=4.0, opening_static_s=180.0
+    )
+    paths = files.write_trial_files(sim, tmp_path)
+    rate = float(sim.adc["rate_hz"])
+    events = sim.truth.events
+    index_at = lambda t_ref_ns: int(np.ceil((t_ref_ns - sim.adc["start_ref_ns"]) * 1e-9 * rate))  # noqa: E731
+    n_static = index_at(events.start_ns[events.labels.index("wave")] - 500_000_000)
+    first_adl = index_at(events.start_ns[events.labels.index("post_wave_static")])
+    lines = paths["adc"].read_text().splitlines(keepends=True)
+    (tmp_path / "rest.txt").write_text("".join(lines[:n_static]))
+    runner = CliRunner()
+    for stem, txt in (("adl", paths["adc"]), ("rest", tmp_path / "rest.txt")):
+        result = runner.invoke(cli, ["convert", str(txt), "--rate", str(rate), "-o", str(tmp_path / f"{stem}.mcap")])
+        assert result.exit_code == 0, result.output
+    args = ["process", "metrics", str(tmp_path / "adl.mcap"), "--static", str(tmp_path / "rest.mcap")]
+    result = runner.invoke(cli, [*args, "--min-activity-s", "0.2", "--json"])
+    assert result.exit_code == 0, result.output
+    record = json.loads(result.output.split("\n", 1)[1])
+    with archive.TrialReader(tmp_path / "adl.mcap") as reader:
+        t_ns = reader.read(record["imu"]).t_ns
+        found = reader.read(record["imu"].replace("/imu/", "/derived/metrics/activity/"))
+    start_idx = np.searchsorted(t_ns, found.start_ns)
+    adl = start_idx >= first_adl
+    phases = sim.truth.phases
+    reps = int(phases.task_index.max())
+    assert reps == sim.recording.metadata["imulog.trial"]["repetitions"]
+    assert adl.sum() == reps
+    # the k-th detected activity holds the middle of repetition k and of no other (reference clock -> ADC index)
+    middles = np.array(
+        [
+            index_at((phases.start_ns[phases.task_index == k].min() + phases.end_ns[phases.task_index == k].max()) // 2)
+            for k in range(1, reps + 1)
+        ]
+    )
+    for k, (s_ns, e_ns) in enumerate(zip(found.start_ns[adl], found.end_ns[adl], strict=True)):
+        d0, d1 = np.searchsorted(t_ns, [s_ns, e_ns])
+        assert np.flatnonzero((middles >= d0) & (middles < d1)).tolist() == [k]

@@ -90,6 +90,17 @@ def test_smoothness_of_simulated_r2g_phases(r2g):
         assert 15 < record[f"smoothness.{label}.normalized_jerk_mean"] < 25
 
 
+def test_step_reports_nhpt_peg_times_from_simulated_phases():
+    simulate = pytest.importorskip("imulog.simulate.core").simulate
+    sim = simulate("nhpt", subject=3, seed=2)
+    _, record = compute_metrics(sim.recording.imus[0], phases=sim.truth.phases)
+    assert record["nhpt.n_pegs"] == 9
+    assert len(record["nhpt.place_s"]) == 9 and len(record["nhpt.return_s"]) == 8
+    assert np.all(np.diff(record["nhpt.pickup_s"]) > 0)
+    assert 0 < record["nhpt.transport_mean_s"] < record["nhpt.test_time_s"] / 9
+    assert record["timings.place.n"] == 9 and record["timings.remove.n"] == 9
+
+
 def test_corrective_submovements_make_phases_less_smooth():
     simulate = pytest.importorskip("imulog.simulate.core").simulate
     records = []
@@ -134,3 +145,41 @@ def test_every_segmented_r2g_phase_duration_within_0_1_s(subject, seed):
     cmp = compare_durations(streams[1], sim.truth.phases)
     assert not cmp.missing
     assert cmp.max_abs_error_s < 0.1
+
+
+@pytest.mark.slow
+def test_adl_counts_need_rests_longer_than_the_dead_period_plus_smear():
+    """docs/metrics.md: 4 s rests -> every repetition counted; the simulator's default 1.5 s rests merge them."""
+    from imulog.process.metrics import (
+        ActivityCountParams,
+        activity_count_dead_period,
+        adc_to_g,
+        estimate_noise_floor,
+    )
+
+    simulate = pytest.importorskip("imulog.simulate.core").simulate
+    errors: dict[float, list[int]] = {4.0: [], 1.5: []}
+    for rest_s, found in errors.items():
+        for subject in range(5):
+            for activity in (1, 2, 3, 4):
+                sim = simulate(
+                    "adl",
+                    subject=subject,
+                    seed=100 + 10 * subject + activity,
+                    activity=activity,
+                    rest_s=rest_s,
+                    opening_static_s=180.0,
+                )
+                rate = float(sim.adc["rate_hz"])
+                acc = adc_to_g(sim.adc["counts"])
+                t_ref = sim.adc["start_ref_ns"] + np.round(np.arange(len(acc)) / rate * 1e9).astype(np.int64)
+                events = sim.truth.events
+                static = acc[t_ref < events.start_ns[events.labels.index("wave")] - 500_000_000]
+                floor = estimate_noise_floor(static, ActivityCountParams.for_rate(rate, noise_floor_g=0))
+                params = ActivityCountParams.for_rate(rate, noise_floor_g=floor, min_activity_s=0.2)
+                result = activity_count_dead_period(acc, params)
+                after_wave = t_ref[result.intervals[:, 0]] >= events.start_ns[events.labels.index("post_wave_static")]
+                found.append(int(after_wave.sum()) - int(sim.truth.phases.task_index.max()))
+    print(errors)
+    assert errors[4.0] == [0] * 20
+    assert all(e < 0 for e in errors[1.5])

@@ -317,8 +317,8 @@ def test_archive_and_steps_pipeline(tmp_path):
         assert summary[L.error_entity(topic)].rows == counts[topic]
         assert "LineStrips3D:strips" in summary[L.path_entity(topic)].static_components
     text = next(c for c in RrdReader(out).stream().to_chunks() if c.entity_path == L.evaluation_entity())
-    text = text.to_record_batch().column("TextDocument:text").to_pylist()[0]
-    assert all(f"| {m} |" in text for m in methods)
+    text = text.to_record_batch().column("TextDocument:text").to_pylist()[0][0]
+    assert all(f"| {m} |" in text for m in methods), text
     # every stored phase is a state on the timeline (what the segmentation found, faithfully)
     phase_t, states = read_column(out, "/derived/phases/wrist", "StateChange:state")
     started = [s[0] for s in states if s[0]]

@@ -111,16 +111,38 @@ def _kv(pairs: tuple[str, ...], option: str) -> dict[str, str]:
 
 @click.command("convert")
 @click.argument("inputs", nargs=-1, type=click.Path(exists=True, path_type=Path))
-@click.option("-o", "--output", type=click.Path(path_type=Path), help="Output .mcap (or a folder when INPUT is a folder).")
+@click.option(
+    "-o", "--output", type=click.Path(path_type=Path), help="Output .mcap (or a folder when INPUT is a folder)."
+)
 @click.option("--format", "fmt", metavar="NAME", help="Force the input format (see --list-formats).")
-@click.option("--meta", "meta_pairs", multiple=True, metavar="KEY=VALUE", help="Trial metadata (repeatable); RECORD.KEY=VALUE for other records.")
-@click.option("--meta-file", type=click.Path(exists=True, dir_okay=False, path_type=Path), help="Metadata as JSON or TOML.")
+@click.option(
+    "--meta",
+    "meta_pairs",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="Trial metadata (repeatable); RECORD.KEY=VALUE for other records.",
+)
+@click.option(
+    "--meta-file", type=click.Path(exists=True, dir_okay=False, path_type=Path), help="Metadata as JSON or TOML."
+)
 @click.option("--no-attach", is_flag=True, help="Do not attach the original files to the trial.")
-@click.option("--mapping", type=click.Path(exists=True, dir_okay=False, path_type=Path), help="Column mapping file for delimited IMU text.")
-@click.option("--rate", "rate_hz", type=float, metavar="HZ", help="Sampling rate for files without time stamps (raw ADC text).")
+@click.option(
+    "--mapping",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    help="Column mapping file for delimited IMU text.",
+)
+@click.option(
+    "--rate", "rate_hz", type=float, metavar="HZ", help="Sampling rate for files without time stamps (raw ADC text)."
+)
 @click.option("--adc-zero", type=float, default=512.0, show_default=True, help="ADC zero-g level, counts.")
 @click.option("--adc-counts-per-g", type=float, default=256.0, show_default=True, help="ADC sensitivity, counts per g.")
-@click.option("--device-name", "device_names", multiple=True, metavar="SERIAL=NAME", help="Stream name for an Xsens serial (repeatable).")
+@click.option(
+    "--device-name",
+    "device_names",
+    multiple=True,
+    metavar="SERIAL=NAME",
+    help="Stream name for an Xsens serial (repeatable).",
+)
 @click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
 @click.option("--list-formats", "list_formats_flag", is_flag=True, help="List the known input formats and exit.")
 def convert(
@@ -207,7 +229,14 @@ def _sibling_meta(files: list[Path]) -> dict[str, dict[str, Any]]:
 
 
 def _convert_directories(
-    dirs: list[Path], out_dir: Path, fmt: str | None, options: ConvertOptions, meta: dict, *, attach: bool, overwrite: bool
+    dirs: list[Path],
+    out_dir: Path,
+    fmt: str | None,
+    options: ConvertOptions,
+    meta: dict,
+    *,
+    attach: bool,
+    overwrite: bool,
 ) -> None:
     jobs: list[tuple[Path, list[Path]]] = []
     for d in dirs:
@@ -218,7 +247,9 @@ def _convert_directories(
         raise click.ClickException(f"no convertible files under {', '.join(map(str, dirs))}")
     failures: list[str] = []
     written = 0
-    with click.progressbar(jobs, label="converting", item_show_func=lambda j: j[0].name if j else "", file=sys.stderr) as bar:
+    with click.progressbar(
+        jobs, label="converting", item_show_func=lambda j: j[0].name if j else "", file=sys.stderr
+    ) as bar:
         for target, files in bar:
             try:
                 rec, formats = _convert_group(files, fmt, options)

@@ -43,6 +43,21 @@ def format_summary(timing: dict) -> str:
     return "\n".join(lines)
 
 
+def _repetitions_from_trial(trial: Path, default: int = 25) -> int:
+    """The protocol's repetition count recorded in ``imulog.trial`` (``repetitions``), else ``default``."""
+    from imulog.archive import ArchiveError, TrialReader
+
+    try:
+        with TrialReader(trial) as reader:
+            value = reader.metadata.get("imulog.trial", {}).get("repetitions", default)
+    except (ArchiveError, OSError):  # unreadable trial: run_phases reports it with its own message
+        return default
+    try:
+        return int(value)
+    except (ValueError, TypeError):
+        raise click.ClickException(f"{trial}: imulog.trial repetitions={value!r} is not a whole number") from None
+
+
 @click.command("phases")
 @click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--imu", default=None, help="IMU name (channel /imu/NAME); default: the only IMU, else 'wrist'.")
@@ -50,7 +65,12 @@ def format_summary(timing: dict) -> str:
 @click.option(
     "--threshold", default="0.11", show_default=True, help="DynAMoS threshold: 'otsu' or a fraction of the max."
 )
-@click.option("--repetitions", type=int, default=25, show_default=True, help="Repetitions in the trial (0 = infer).")
+@click.option(
+    "--repetitions",
+    type=int,
+    default=None,
+    help="Repetitions in the trial (0 = infer). Default: the trial record's 'repetitions', else 25.",
+)
 @click.option("--phases-per-repetition", type=int, default=4, show_default=True)
 @click.option("--alpha", type=float, default=0.8, show_default=True, help="DynAMoS short-movement factor.")
 @click.option("--beta", type=float, default=1.4, show_default=True, help="DynAMoS long-movement factor.")
@@ -72,7 +92,7 @@ def process_phases(
     imu: str | None,
     method: str,
     threshold: str,
-    repetitions: int,
+    repetitions: int | None,
     phases_per_repetition: int,
     alpha: float,
     beta: float,
@@ -103,6 +123,8 @@ def process_phases(
     from imulog.steps.phases import compute_phases, pick_imu
 
     thr = _threshold(threshold)
+    if repetitions is None:
+        repetitions = _repetitions_from_trial(trial)
     if alpha <= 0 or beta <= alpha:
         raise click.ClickException(f"need 0 < alpha < beta, got alpha={alpha}, beta={beta}")
     params = PhaseParams(

@@ -74,7 +74,7 @@ class OptimizationParams:
     """
 
     sigma_data_mps: float = 0.02
-    sigma_ref_static_m: float = 0.03
+    sigma_ref_static_m: float = 0.015
     sigma_ref_moving_m: float = 0.10
     sigma_symmetry_m: float | None = 0.02
     sigma_static_vel_mps: float | None = 0.005
@@ -350,7 +350,7 @@ def estimate_data_sigma(
     repetitions: Sequence[Repetition],
     waypoints: R2GWaypoints,
     sigma_ref_m: float,
-    floor_m: float = 0.003,
+    floor_m: float = 0.006,
 ) -> tuple[float, float, float]:
     """Per-axis error (m) of the initial estimate's static positions, by variance components.
 

@@ -167,5 +167,5 @@ def build(params: Params, subject_rng: np.random.Generator, rng: np.random.Gener
     anthropometrics = {k: round(v, 6) for k, v in anth.items() if k.endswith("_m")}
     anthropometrics["side"] = params.side
     return ProtocolResult(
-        plan=plan, task="r2g", anthropometrics=anthropometrics, trial_meta={"side": params.side}, end_s=plan.t
+        plan=plan, task="r2g", anthropometrics=anthropometrics, trial_meta={"side": params.side, "repetitions": params.repetitions}, end_s=plan.t
     )
