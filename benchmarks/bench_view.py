@@ -125,7 +125,8 @@ def main() -> None:
         best = min(times)
         size_mb = (Path(tmp) / "columnar0.rrd").stat().st_size / 1e6
         print(f"columnar send_columns: {best:.2f} s (runs: {', '.join(f'{t:.2f}' for t in times)}), {size_mb:.0f} MB")
-        print(f"  -> {total_rows / best / 1e6:.2f} M rows/s; target <= 3 s: {'OK' if best <= 3.0 else 'MISSED'}")
+        verdict = "OK" if max(times) <= 3.0 else "OK (best run only)" if best <= 3.0 else "MISSED"
+        print(f"  -> {total_rows / best / 1e6:.2f} M rows/s; target <= 3 s: {verdict}")
 
         base_s, base_rows = per_sample(rec, Path(tmp) / "baseline.rrd", args.baseline_seconds)
         per_row = base_s / base_rows
@@ -136,7 +137,11 @@ def main() -> None:
             f"{per_row * 1e6:.1f} us/row -> {extrapolated:.1f} s for the whole trial ({label})"
         )
         ratio = extrapolated / best
-        print(f"speed-up columnar vs per-sample: {ratio:.0f}x; target >= 50x: {'OK' if ratio >= 50 else 'MISSED'}")
+        worst = extrapolated / max(times)
+        print(
+            f"speed-up columnar vs per-sample: {ratio:.0f}x (best run), {worst:.0f}x (slowest run); "
+            f"target >= 50x: {'OK' if worst >= 50 else 'MISSED'}"
+        )
 
 
 if __name__ == "__main__":

@@ -93,7 +93,13 @@ def main() -> None:
     nb = int(args.baseline_s * args.rate)
     excerpt = acc[:nb]
     t_loop = timed(
-        loop_baseline, excerpt, args.rate, params.m_samples, params.dead_samples, params.noise_floor_g, int(5 * args.rate)
+        loop_baseline,
+        excerpt,
+        args.rate,
+        params.m_samples,
+        params.dead_samples,
+        params.noise_floor_g,
+        int(5 * args.rate),
     )
     t_vec = timed(activity_count_dead_period, excerpt, params) + timed(distance_histogram, excerpt, args.rate)
     print(f"baseline (per-sample loops, Doshi A.2/A.3) on {nb} samples: {nb / t_loop / 1e6:.3f} M samples/s")

@@ -67,6 +67,15 @@ def unwrap_counter(values: np.ndarray, modulus: int) -> tuple[np.ndarray, int | 
     return np.concatenate([[c[0]], c[0] + np.cumsum(d)]), None, ""
 
 
+def _check_counter(path: Path, values: np.ndarray, modulus: int, first_line: int, column: str) -> None:
+    bad = ~((values >= 0) & (values < modulus) & (values == np.round(values)))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ConversionError(
+            path, f"{values[i]:g} is not a counter value in 0..{modulus - 1}", line=first_line + i, column=column
+        )
+
+
 def _header_info(lines: list[str]) -> tuple[dict[str, str], int]:
     info: dict[str, str] = {}
     n = 0
@@ -130,6 +139,7 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
     if "SampleTimeFine" in seen:
         stf = values[:, seen["SampleTimeFine"]]
         if np.isfinite(stf).all():
+            _check_counter(path, stf, 2**32, first_line, "SampleTimeFine")
             ticks, bad, problem = unwrap_counter(stf, 2**32)
             if bad is not None:
                 raise ConversionError(path, f"SampleTimeFine {problem}", line=first_line + bad, column="SampleTimeFine")
@@ -143,6 +153,7 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
         if not rate:
             raise ConversionError(path, "no '// Update Rate' line and no --rate: cannot time the PacketCounter")
         pc = values[:, seen["PacketCounter"]]
+        _check_counter(path, pc, 65536, first_line, "PacketCounter")
         counts, bad, problem = unwrap_counter(pc, 65536)
         if bad is not None:
             raise ConversionError(path, f"PacketCounter {problem}", line=first_line + bad, column="PacketCounter")

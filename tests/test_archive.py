@@ -493,3 +493,14 @@ def test_append_refuses_provenance_that_no_longer_matches_the_inputs(trial, rng)
     path, rec = trial
     with pytest.raises(ArchiveError, match="input /imu/wrist changed while the step ran"):
         append_derived(path, [_orientation(rec, rng)], run={"step": "o", "inputs": {"/imu/wrist": "0" * 64}})
+
+
+def test_append_keeps_file_mode_and_follows_symlinks(trial, rng, tmp_path):
+    path, rec = trial
+    path.chmod(0o640)
+    link = tmp_path / "link.mcap"
+    link.symlink_to(path)
+    append_derived(link, [_orientation(rec, rng)], run={"step": "o"})
+    assert link.is_symlink() and (path.stat().st_mode & 0o777) == 0o640
+    with TrialReader(link) as tr:
+        assert "/derived/orientation/wrist" in tr.topics()

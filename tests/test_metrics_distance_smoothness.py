@@ -149,3 +149,34 @@ def test_sparc_is_amplitude_invariant_and_peaks_ignore_small_ripples():
     rippled = v + 0.01 * v.max() * np.sin(np.linspace(0, 40 * np.pi, len(v)))
     assert velocity_peaks(rippled) == 1
     assert velocity_peaks(rippled, VelocityPeakParams(min_prominence_fraction=0.0)) > 1  # ripple maxima near the top
+
+
+@pytest.mark.parametrize(
+    ("trial", "separable"),
+    [("05_undisturbed_slow_rotation_with_breaks_B", True), ("14_undisturbed_slow_translation_with_breaks_B", False)],
+)
+def test_real_broad_windows_in_motion_traverse_more_than_windows_at_rest(shared_data, trial, separable):
+    """BROAD (real IMU, 286 Hz): 5 s windows inside the movement blocks vs windows inside the 10 s breaks.
+
+    Rotations tilt gravity across the axes and every moving window beats every resting one; the slow
+    translations of trial 14 accelerate so little that the noise, which the slope-sign rectification
+    accumulates (Doshi 5.2.1: short windows are noise-dominated), overlaps them: only the medians differ.
+    """
+    import h5py
+
+    with h5py.File(shared_data / "broad" / f"{trial}.hdf5") as f:
+        rate = float(f.attrs["sampling_rate"])
+        acc_g = f["imu_acc"][:] / 9.80665
+        movement = f["movement"][:].astype(bool)
+    result = distance_histogram(acc_g, rate)
+    win = int(round(5.0 * rate))
+    n = len(acc_g) // win
+    blocks = movement[: n * win].reshape(n, win)
+    moving, resting = (
+        result.window_distance_cm[:n][blocks.all(axis=1)],
+        result.window_distance_cm[:n][~blocks.any(axis=1)],
+    )
+    assert len(moving) >= 10 and len(resting) >= 10
+    assert np.median(moving) > np.median(resting)
+    if separable:
+        assert moving.min() > resting.max()

@@ -90,7 +90,9 @@ def test_nhpt_peg_times():
         t += 0.2
     test_end = ends[-1] - 2.0
     move("return_hand", 1.0, 9)
-    iv = Intervals("/derived/phases/wrist", np.round(np.array(starts) * 1e9), np.round(np.array(ends) * 1e9), labels, task)
+    iv = Intervals(
+        "/derived/phases/wrist", np.round(np.array(starts) * 1e9), np.round(np.array(ends) * 1e9), labels, task
+    )
     result = nhpt_timings(iv)
     np.testing.assert_allclose(result.pickup_s, pick, atol=1e-9)
     np.testing.assert_allclose(result.place_s, place, atol=1e-9)

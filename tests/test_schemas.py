@@ -94,3 +94,35 @@ def test_older_block_without_version_field_still_decodes():
     msg = SignalBlock_pb2.SignalBlock(columns=["a"], units=["1"], count=3, t_ns=t.tobytes(), values=v.tobytes())
     s = codec.decode("imulog.SignalBlock", "/derived/a", {}, [msg.SerializeToString()])
     assert s.values[:, 0].tolist() == [0.0, 1.0, 2.0]
+
+
+def test_generated_descriptors_equal_protoc_output(repo_root: Path, tmp_path: Path):
+    """Independent of the grpcio-tools release: each generated module's descriptor is what protoc compiles."""
+    grpc_tools = pytest.importorskip("grpc_tools")
+    import importlib
+
+    from grpc_tools import protoc
+
+    include = Path(grpc_tools.__file__).parent / "_proto"
+    out = tmp_path / "set.pb"
+    files = proto_files(repo_root / "schemas")
+    assert (
+        protoc.main(["protoc", f"-I{repo_root / 'schemas'}", f"-I{include}", f"--descriptor_set_out={out}", *files])
+        == 0
+    )
+    compiled = {f.name: f for f in descriptor_pb2.FileDescriptorSet.FromString(out.read_bytes()).file}
+    assert sorted(compiled) == files
+    for name in files:
+        package, stem = name.split("/")
+        module = importlib.import_module(f"imulog.archive._generated.{package}.{stem.removesuffix('.proto')}_pb2")
+        generated = descriptor_pb2.FileDescriptorProto.FromString(module.DESCRIPTOR.serialized_pb)
+        assert _without_json_names(generated) == _without_json_names(compiled[name]), name
+
+
+def _without_json_names(fd: descriptor_pb2.FileDescriptorProto) -> descriptor_pb2.FileDescriptorProto:
+    """protoc adds derived json_name values to descriptor sets but not to generated code: compare without."""
+    fd = descriptor_pb2.FileDescriptorProto.FromString(fd.SerializeToString())
+    for message in fd.message_type:
+        for f in message.field:
+            f.ClearField("json_name")
+    return fd

@@ -231,8 +231,14 @@ def test_cli_save_default_without_display_and_errors(tmp_path, monkeypatch):
     assert (tmp_path / "sample.rrd").is_file()
     assert summarize(tmp_path / "sample.rrd")[L.imu_entity("wrist", "acc")].rows == int(9 * 115)
 
-    result = runner.invoke(cli, ["view", "--sample", "8", "--save", "x.rrd", "--web"])
+    result = runner.invoke(cli, ["view", "--sample", "8", "--spawn", "--web"])
     assert result.exit_code != 0 and "choose one of" in result.output
+    # --save combines with --web: the file is written and the viewer URL printed
+    args = ["view", "--sample", "8", "--save", "both.rrd", "--web", "--port", "0", "--grpc-port", "0"]
+    result = runner.invoke(cli, [*args, "--serve-seconds", "0"])
+    assert result.exit_code == 0, result.output
+    assert "Rerun web viewer: http://127.0.0.1:" in result.output and "saved both.rrd" in result.output
+    assert summarize(tmp_path / "both.rrd")[L.imu_entity("wrist", "acc")].rows == int(9 * 115)
     result = runner.invoke(cli, ["view", "--sample", "8", "--spawn"])
     assert result.exit_code != 0 and "needs a display" in result.output
     result = runner.invoke(cli, ["view", "missing.mcap"])
@@ -253,6 +259,20 @@ def test_cli_on_archive_when_available(tmp_path):
     assert summary[L.imu_entity("wrist", "gyr")].rows == counts["/imu/wrist"]
     assert summary[L.marker_entity("vicon")].rows == counts["/markers/vicon"]
     assert summary["/derived/trajectory/zupt"].rows == counts["/derived/trajectory/zupt"]
+
+    # several files: one recording each into a folder, or one overlaid recording
+    other = archive.write_trial(tmp_path / "u.mcap", sample_recording(SampleTrialParams(duration_s=5.0)))
+    result = CliRunner().invoke(cli, ["view", str(trial), str(other), "--save", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    assert summarize(tmp_path / "out" / "u.rrd")[L.imu_entity("wrist", "gyr")].rows == int(6 * 115)
+    result = CliRunner().invoke(cli, ["view", str(trial), str(other), "--save", str(tmp_path / "both.rrd")])
+    assert result.exit_code != 0 and "--overlay" in result.output
+    result = CliRunner().invoke(
+        cli, ["view", str(trial), str(other), "--overlay", "--save", str(tmp_path / "both.rrd")]
+    )
+    assert result.exit_code == 0, result.output
+    both = summarize(tmp_path / "both.rrd")
+    assert both["/t/imu/wrist/gyr"].rows == counts["/imu/wrist"] and both["/u/imu/wrist/gyr"].rows == int(6 * 115)
 
 
 def test_simulated_trial_imu_lands_on_true_reference_times(tmp_path):

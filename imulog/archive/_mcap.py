@@ -443,10 +443,20 @@ class Summary:
     attachment_indexes: list[AttachmentIndexRec] = field(default_factory=list)
     metadata_indexes: list[MetadataIndexRec] = field(default_factory=list)
     summary_offsets: list[tuple[int, int, int]] = field(default_factory=list)
+    summary_records: list[tuple[int, int, int]] = field(default_factory=list)  # (opcode, offset, total length)
 
 
 def read_summary(f: BinaryIO, file_size: int) -> Summary:
     """Parse the footer and summary section; raise McapFormatError with a one-line reason."""
+    try:
+        return _read_summary(f, file_size)
+    except McapFormatError:
+        raise
+    except (struct.error, ValueError, OverflowError, MemoryError) as exc:
+        raise McapFormatError(f"corrupt MCAP summary ({exc})") from exc
+
+
+def _read_summary(f: BinaryIO, file_size: int) -> Summary:
     if file_size < len(MAGIC) * 2 + FOOTER_SIZE:
         raise McapFormatError(f"too short for an MCAP file ({file_size} bytes)")
     f.seek(0)
@@ -487,7 +497,8 @@ def read_summary(f: BinaryIO, file_size: int) -> Summary:
     )
     if summary_crc != 0 and summary_crc != computed:
         raise McapFormatError(f"summary CRC mismatch (stored {summary_crc:#010x}, computed {computed:#010x})")
-    for op, _, body in iter_records(section):
+    for op, rel, body in iter_records(section):
+        s.summary_records.append((op, summary_start + rel, 9 + len(body)))
         if op == Op.SCHEMA:
             rec = parse_schema(body)
             s.schemas[rec.id] = rec
@@ -511,6 +522,8 @@ def read_summary(f: BinaryIO, file_size: int) -> Summary:
 
 def read_record_at(f: BinaryIO, offset: int, expect: int, limit: int) -> memoryview:
     """Read the body of the record starting at ``offset`` and check its opcode."""
+    if not 0 <= offset <= limit - 9:
+        raise McapFormatError(f"index points at byte {offset}, outside the data section")
     f.seek(offset)
     head = f.read(9)
     if len(head) != 9:

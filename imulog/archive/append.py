@@ -26,7 +26,7 @@ from imulog import __version__
 from imulog.archive import _mcap as m
 from imulog.archive._builder import McapBuilder
 from imulog.archive.errors import ArchiveCorruptError, ArchiveError
-from imulog.archive.files import atomic_output, writer_lock
+from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import encode_record, to_json
 from imulog.archive.writer import payload_hash, write_stream
 from imulog.model import DERIVED_PREFIX, Stream
@@ -191,7 +191,7 @@ def append_derived(
     run. An existing topic is replaced when ``replace`` (else ArchiveError). Raw channels are never touched.
     Returns the path.
     """
-    path = Path(path)
+    path = target_path(path)
     metadata = dict(metadata or {})
     topics = [s.topic for s in streams]
     for t in topics:

@@ -11,6 +11,7 @@ import json
 import os
 import zlib
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -20,6 +21,8 @@ from imulog.archive import _mcap as m
 from imulog.archive import codec
 from imulog.archive.errors import ArchiveError
 from imulog.archive.writer import payload_hash, raw_digest
+
+Progress = Callable[[int], None]
 
 
 @dataclass
@@ -46,9 +49,10 @@ class _ChunkSeen:
     uncompressed_size: int
     compression: str
     counts: dict[int, int]
+    message_index_length: int = 0
 
 
-def _walk_data_section(f, summary: m.Summary, report: DoctorReport) -> dict | None:
+def _walk_data_section(f, summary: m.Summary, report: DoctorReport, progress: Progress | None = None) -> dict | None:
     """Read the data section record by record; check CRCs; return what was found (None on a fatal error)."""
     found: dict = {
         "schemas": {},
@@ -143,6 +147,8 @@ def _walk_data_section(f, summary: m.Summary, report: DoctorReport) -> dict | No
                 n = c.u32()
                 entries = [(c.u64(), c.u64()) for _ in range(n // 16)]
                 found["message_indexes"][pos] = (cid, 9 + length)
+                if last_chunk is not None:
+                    last_chunk.message_index_length += 9 + length
                 if last_chunk is None:
                     report.fail(f"{where}: message index without a preceding chunk")
                 elif sorted(entries) != sorted(last_chunk_msgs.get(cid, [])):
@@ -159,9 +165,11 @@ def _walk_data_section(f, summary: m.Summary, report: DoctorReport) -> dict | No
                 found["metadata"][pos] = (name, 9 + length)
             elif op in (m.Op.DATA_END, m.Op.FOOTER):
                 report.fail(f"{where}: unexpected {m.OP_NAMES[op]} inside the data section")
-        except m.McapFormatError as exc:
+        except Exception as exc:  # a damaged record must give a reason, never a traceback
             report.fail(f"{where}: {exc}")
         pos += 9 + length
+        if progress is not None:
+            progress(9 + length)
     if summary.data_section_crc == 0:
         report.checks.append("data section CRC not recorded (0): skipped")
     elif crc != summary.data_section_crc:
@@ -197,6 +205,8 @@ def _check_summary(summary: m.Summary, found: dict, report: DoctorReport) -> Non
             seen.uncompressed_size,
         ):
             report.fail(f"chunk index for byte {off} disagrees with the chunk")
+        if (ci.compression, ci.message_index_length) != (seen.compression, seen.message_index_length):
+            report.fail(f"chunk index for byte {off} has the wrong compression or message index length")
         if set(ci.message_index_offsets) != set(seen.counts):
             report.fail(
                 f"chunk index for byte {off} lists channels {sorted(ci.message_index_offsets)}, chunk has {sorted(seen.counts)}"
@@ -208,8 +218,22 @@ def _check_summary(summary: m.Summary, found: dict, report: DoctorReport) -> Non
     if {(a.offset, a.length) for a in summary.attachment_indexes} != {(o, ln) for o, (_, ln) in att.items()}:
         report.fail("attachment indexes disagree with the attachments in the data section")
     for a in summary.attachment_indexes:
-        if a.offset in att and (att[a.offset][0].name, len(att[a.offset][0].data)) != (a.name, a.data_size):
+        rec = att.get(a.offset, (None,))[0]
+        if rec is not None and (rec.name, rec.media_type, len(rec.data), rec.log_time, rec.create_time) != (
+            a.name,
+            a.media_type,
+            a.data_size,
+            a.log_time,
+            a.create_time,
+        ):
             report.fail(f"attachment index {a.name!r} disagrees with its attachment")
+    starts = {off: (op, ln) for op, off, ln in summary.summary_records}
+    for op, start, length in summary.summary_offsets:
+        pos, end = start, start + length
+        while pos < end and pos in starts and starts[pos][0] == op:
+            pos += starts[pos][1]
+        if pos != end or length == 0:
+            report.fail(f"summary offset for {m.OP_NAMES.get(op, hex(op))} records does not match the summary")
     md = found["metadata"]
     if {(x.offset, x.length, x.name) for x in summary.metadata_indexes} != {(o, ln, nm) for o, (nm, ln) in md.items()}:
         report.fail("metadata indexes disagree with the metadata records in the data section")
@@ -251,8 +275,17 @@ def _generic_decode(schema: m.SchemaRec, payload: bytes) -> None:
     cls.FromString(payload)
 
 
-def check_file(path: str | os.PathLike[str], *, decode: bool = True) -> DoctorReport:
-    """Run every check on ``path``; ``report.problems`` is empty when the file is sound."""
+def check_length(path: str | os.PathLike[str]) -> int:
+    """Total of the units :func:`check_file` reports to its ``progress`` callback (for a progress bar)."""
+    return 2 * os.path.getsize(path)
+
+
+def check_file(path: str | os.PathLike[str], *, decode: bool = True, progress: Progress | None = None) -> DoctorReport:
+    """Run every check on ``path``; ``report.problems`` is empty when the file is sound.
+
+    ``progress(n)`` is called as work is done (bytes walked, then bytes of chunks decoded), adding up to
+    about :func:`check_length`.
+    """
     from imulog.archive.reader import TrialReader
 
     path = Path(path)
@@ -266,11 +299,11 @@ def check_file(path: str | os.PathLike[str], *, decode: bool = True) -> DoctorRe
         size = os.fstat(f.fileno()).st_size
         try:
             summary = m.read_summary(f, size)
-        except m.McapFormatError as exc:
-            report.fail(str(exc))
+        except Exception as exc:  # McapFormatError, or anything a damaged summary provokes
+            report.fail(str(exc) if isinstance(exc, m.McapFormatError) else f"unreadable summary ({exc})")
             return report
         report.checks.append("magic, footer and summary CRC ok")
-        found = _walk_data_section(f, summary, report)
+        found = _walk_data_section(f, summary, report, progress)
         if found is None:
             return report
         _check_summary(summary, found, report)
@@ -279,7 +312,13 @@ def check_file(path: str | os.PathLike[str], *, decode: bool = True) -> DoctorRe
     try:
         with TrialReader(path) as trial:
             hashes: dict[str, str] = {}
+            sizes: dict[int, int] = {}
+            for ci in trial.summary.chunk_indexes:
+                for cid in ci.message_index_offsets:
+                    sizes[cid] = sizes.get(cid, 0) + ci.chunk_length // len(ci.message_index_offsets)
             for info in trial.channels:
+                if progress is not None:
+                    progress(sizes.get(info.channel_id, 0))
                 rec = trial.summary.channels[info.channel_id]
                 schema = trial.summary.schemas.get(rec.schema_id)
                 payloads = trial.messages(info.topic)
@@ -328,4 +367,6 @@ def check_file(path: str | os.PathLike[str], *, decode: bool = True) -> DoctorRe
                     report.checks.append("raw-data hash ok")
     except ArchiveError as exc:
         report.fail(str(exc))
+    except Exception as exc:  # pragma: no cover - every known failure is an ArchiveError
+        report.fail(f"unexpected {type(exc).__name__}: {exc}")
     return report

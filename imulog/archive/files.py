@@ -12,11 +12,18 @@ import contextlib
 import errno
 import fcntl
 import os
+import stat
 from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
 
 from imulog.archive.errors import ArchiveLockedError
+
+
+def target_path(path: str | os.PathLike[str]) -> Path:
+    """The file to replace: a symlink is followed so that the link keeps pointing at the new file."""
+    path = Path(path)
+    return path.resolve() if path.is_symlink() else path
 
 
 def lock_path(path: Path) -> Path:
@@ -84,6 +91,8 @@ def atomic_output(path: Path) -> Iterator[BinaryIO]:
     tmp = temp_path(path)
     f = open(tmp, "wb")  # noqa: SIM115 - closed below on every path
     try:
+        with contextlib.suppress(OSError):  # keep the permissions of the file being replaced
+            os.chmod(tmp, stat.S_IMODE(os.stat(path).st_mode))
         yield f
         f.flush()
         os.fsync(f.fileno())

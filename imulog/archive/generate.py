@@ -38,7 +38,13 @@ def proto_files(schema_dir: Path = SCHEMA_DIR) -> list[str]:
 
 
 def _postprocess(source: str) -> str:
-    """Point imports at ``imulog.archive._generated`` and descriptors at the private pool."""
+    """Point imports at ``imulog.archive._generated`` and descriptors at the private pool.
+
+    The runtime-version guard protoc emits is removed: the generated code only uses the descriptor
+    builder API, so it runs on any protobuf >= 4.21 rather than only on runtimes as new as protoc.
+    """
+    source = source.replace("from google.protobuf import runtime_version as _runtime_version\n", "")
+    source = re.sub(r"_runtime_version\.ValidateProtobufRuntimeVersion\(.*?\)\n", "", source, flags=re.S)
     for package in PACKAGES:
         source = re.sub(
             rf"^from {package} import ", f"from imulog.archive._generated.{package} import ", source, flags=re.M
@@ -90,8 +96,13 @@ def stale_files(out_dir: Path = GENERATED_DIR) -> list[str]:
             for n in names
             if not (fresh / n).is_file()
             or not (out_dir / n).is_file()
-            or (fresh / n).read_text() != (out_dir / n).read_text()
+            or _normalised(fresh / n) != _normalised(out_dir / n)
         )
+
+
+def _normalised(path: Path) -> str:
+    """File text without the protoc version line (a different grpcio-tools release is not staleness)."""
+    return re.sub(r"^# Protobuf Python Version:.*$", "", path.read_text(), flags=re.M)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -91,6 +91,13 @@ class Attachment:
     log_time: int = 0
 
 
+def _float(value: str | None) -> float | None:
+    try:
+        return float(value) if value else None
+    except ValueError:
+        return None
+
+
 def _int(meta: dict[str, str], key: str) -> int | None:
     try:
         return int(meta[key])
@@ -141,10 +148,10 @@ class TrialReader:
                     topic=c.topic,
                     schema_name=schema.name if schema else "",
                     message_count=int(counts.get(c.id, 0)),
-                    sample_count=_int(meta, "sample_count") if "sample_count" in meta else int(counts.get(c.id, 0)),
+                    sample_count=_int(meta, "sample_count") or int(counts.get(c.id, 0)),
                     start_ns=_int(meta, "start_ns"),
                     end_ns=_int(meta, "end_ns"),
-                    rate_hz=float(rate) if rate else None,
+                    rate_hz=_float(rate),
                     metadata=meta,
                     channel_id=c.id,
                 )

@@ -14,7 +14,7 @@ from imulog import __version__
 from imulog.archive import codec
 from imulog.archive._builder import McapBuilder
 from imulog.archive.errors import ArchiveError, ArchiveExistsError
-from imulog.archive.files import atomic_output, writer_lock
+from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import encode_record
 from imulog.model import Recording, Stream
 
@@ -86,7 +86,7 @@ def write_trial(
     ``imulog.device.<name>`` per IMU when missing, plus ``imulog.raw`` with the raw-data hash), and the
     source files as attachments. The file appears atomically; on any error nothing is left behind.
     """
-    path = Path(path)
+    path = target_path(path)
     streams = recording.streams()
     topics = [s.topic for s in streams]
     dup = sorted({t for t in topics if topics.count(t) > 1})
@@ -114,7 +114,9 @@ def write_trial(
                 builder.add_attachment(name, media_type, data, log_time=mtime, create_time=mtime)
                 attached[name] = hashlib.sha256(data).hexdigest()
             # imulog.raw describes this file's raw data: always recomputed (e.g. when re-writing a read trial)
-            records = {k: v for k, v in {**recording.metadata, **_device_records(recording)}.items() if k != "imulog.raw"}
+            records = {
+                k: v for k, v in {**recording.metadata, **_device_records(recording)}.items() if k != "imulog.raw"
+            }
             for name, values in records.items():
                 builder.add_metadata(name, encode_record(dict(values)))
             raw = {

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -131,9 +132,13 @@ def doctor(file: str, verbose: bool) -> None:
       imulog doctor trial.mcap
       for f in archive/*.mcap; do imulog doctor "$f" || echo "$f is damaged"; done
     """
-    from imulog.archive.doctor import check_file
+    from imulog.archive.doctor import check_file, check_length
 
-    report = check_file(file)
+    if sys.stderr.isatty():  # a progress bar for people, nothing extra in logs and pipes
+        with click.progressbar(length=check_length(file), label="checking", file=sys.stderr) as bar:
+            report = check_file(file, progress=bar.update)
+    else:
+        report = check_file(file)
     if verbose:
         for line in report.checks:
             click.echo(f"ok: {line}")

@@ -92,11 +92,13 @@ def _convert_group(files: list[Path], fmt: str | None, options: ConvertOptions) 
 
 
 def _write(out: Path, rec: Recording, *, attach: bool, overwrite: bool) -> Path:
+    """``write_trial`` (atomic: nothing is left behind on failure); archive errors become ConversionError."""
+    from imulog.archive import ArchiveError, write_trial
+
     try:
-        from imulog.archive import write_trial
-    except ImportError as e:  # pragma: no cover - archive not installed yet
-        raise click.ClickException(f"the trial archive is not available: {e}") from None
-    return write_trial(out, rec, attach_sources=attach, overwrite=overwrite)
+        return write_trial(out, rec, attach_sources=attach, overwrite=overwrite)
+    except ArchiveError as e:
+        raise ConversionError(None, str(e)) from None
 
 
 def _kv(pairs: tuple[str, ...], option: str) -> dict[str, str]:

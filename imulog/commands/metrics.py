@@ -28,11 +28,11 @@ def format_summary(record: dict[str, Any]) -> str:
     m1_axes = r.get("activity.method1.per_axis", ["?"] * 3)
     lines = [
         f"{r['imu']}: {r['duration_s']:.1f} s at {r['rate_hz']:.1f} Hz",
-        f"  arm usage (> {r['arm_usage.noise_level_g']} g):  x {r['arm_usage.x_percent']:.1f} %  "
+        f"  arm usage (> {r['arm_usage.noise_level_g']:.4g} g):  x {r['arm_usage.x_percent']:.1f} %  "
         f"y {r['arm_usage.y_percent']:.1f} %  z {r['arm_usage.z_percent']:.1f} %  overall "
         f"{r['arm_usage.overall_percent']:.1f} %",
         f"  activities (method 2, m={r['activity.method2.m_samples']}, dead={r['activity.method2.dead_samples']} "
-        f"samples, floor {r['activity.method2.noise_floor_g']} g): {r['activity.method2.count']}  "
+        f"samples, floor {r['activity.method2.noise_floor_g']:.4g} g): {r['activity.method2.count']}  "
         f"(x {m2_axes[0]}, y {m2_axes[1]}, z {m2_axes[2]}), active {r['activity.method2.total_s']:.1f} s",
         f"  activities (method 1, sign changes): {r['activity.method1.count']}  "
         f"(x {m1_axes[0]}, y {m1_axes[1]}, z {m1_axes[2]})",
@@ -150,7 +150,7 @@ def process_metrics(
       imulog process metrics trial.mcap
       imulog process metrics trial.mcap --noise-level-g 0.03 --dead-s 2 --window-s 5
       imulog process metrics trial.mcap --static sensor_at_rest.mcap      # noise from a static recording
-      imulog process phases r2g.mcap && imulog process metrics r2g.mcap --trajectory vicon
+      imulog process align r2g.mcap && imulog process phases r2g.mcap && imulog process metrics r2g.mcap
     """
     from imulog.steps.metrics import MetricsParams, pick_imu, run_metrics
 

@@ -34,9 +34,13 @@ def _save_paths(files: list[Path], save: Path | None, overlay: bool, n_groups: i
 
 @click.command("view")
 @click.argument("files", nargs=-1, type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--save", "save", type=click.Path(path_type=Path), help="Write .rrd file(s) (a directory for several).")
-@click.option("--spawn", is_flag=True, help="Open the native Rerun viewer (needs a display).")
-@click.option("--web", is_flag=True, help="Serve Rerun's bundled web viewer on localhost and print its URL.")
+@click.option(
+    "--save", "save", type=click.Path(path_type=Path), help="Write .rrd file(s) (a directory for several trials)."
+)
+@click.option("--spawn", is_flag=True, help="Open the native Rerun viewer (needs a display); combines with --save.")
+@click.option(
+    "--web", is_flag=True, help="Serve Rerun's bundled web viewer on localhost, print its URL; combines with --save."
+)
 @click.option("--port", default=9090, show_default=True, help="Web viewer HTTP port for --web (0 = any free port).")
 @click.option("--grpc-port", default=9876, show_default=True, help="Data (gRPC) port for --web (0 = any free port).")
 @click.option("--overlay", is_flag=True, help="Put all FILES in one recording, each under /<trial name>.")
@@ -78,6 +82,7 @@ def view(
       imulog view trial.mcap                      # native viewer, or trial.rrd when there is no display
       imulog view trial.mcap --save trial.rrd     # then: rerun trial.rrd
       imulog view trial.mcap --web --port 9090    # open the printed URL in a browser (works offline)
+      imulog view trial.mcap --save t.rrd --spawn # keep a file and look at it now
       imulog view a.mcap b.mcap --save out/       # one recording per trial: out/a.rrd, out/b.rrd
       imulog view zupt.mcap ekf.mcap --overlay    # compare two processings of one trial in the same views
       imulog view --sample 60 --web               # a built-in analytic trial, no file needed
@@ -85,18 +90,18 @@ def view(
     from imulog.view.session import show
     from imulog.view.source import TrialData, from_recording, read_trial
 
-    if sum([save is not None, spawn, web]) > 1:
-        raise click.UsageError("choose one of --save, --spawn, --web")
+    if spawn and web:
+        raise click.UsageError("choose one of --spawn and --web (each may be combined with --save)")
     if not files and sample_s is None:
         raise click.UsageError("give at least one FILE (or --sample SECONDS)")
-    sink = "save" if save is not None else "spawn" if spawn else "web" if web else None
-    if sink is None:
-        sink = "spawn" if has_display() else "save"
-    if sink == "spawn" and not has_display():
+    sinks = [name for name, on in (("save", save is not None), ("spawn", spawn), ("web", web)) if on]
+    if not sinks:
+        sinks = ["spawn"] if has_display() else ["save"]
+    if "spawn" in sinks and not has_display():
         raise click.ClickException("--spawn needs a display ($DISPLAY is not set); use --web or --save")
 
     trials: list[TrialData] = []
-    with click.progressbar(list(files), label="reading trials", file=sys.stderr) as bar:
+    with click.progressbar(list(files), label="reading trials", file=sys.stderr, hidden=not files) as bar:
         for f in bar:
             try:
                 trials.append(read_trial(f))
@@ -111,7 +116,7 @@ def view(
 
     n_groups = 1 if overlay else len(trials)
     paths: list[Path] = []
-    if sink == "save":
+    if "save" in sinks:
         paths = _save_paths(list(files), save, overlay, n_groups)
         if len(paths) < n_groups:  # --sample besides files
             paths.append((paths[0].parent if paths else Path(".")) / "sample.rrd")
@@ -123,7 +128,10 @@ def view(
                 err=True,
             )
 
-    result = show(trials, sink=sink, save_paths=paths, overlay=overlay, web_port=port, grpc_port=grpc_port)
+    try:
+        result = show(trials, sink=sinks, save_paths=paths, overlay=overlay, web_port=port, grpc_port=grpc_port)
+    except (OSError, RuntimeError, ValueError) as exc:
+        raise click.ClickException(f"cannot open the Rerun sink(s) {', '.join(sinks)}: {exc}") from exc
     for logged in result.logged:
         for trial in logged:
             if trial.unaligned_imus:
@@ -132,12 +140,11 @@ def view(
                     "shown on their device clock (run `imulog process align` first)",
                     err=True,
                 )
-    if sink == "save":
-        for p in result.saved:
-            click.echo(f"saved {p}")
-    elif sink == "spawn":
+    for p in result.saved:
+        click.echo(f"saved {p}")
+    if "spawn" in sinks:
         click.echo("sent to the Rerun viewer")
-    else:
+    if "web" in sinks:
         assert result.server is not None
         click.echo(f"Rerun web viewer: {result.server.url}", err=False)
         click.echo("serving; press Ctrl-C to stop", err=True)
@@ -148,3 +155,6 @@ def view(
                 time.sleep(0.2)
         except KeyboardInterrupt:
             pass
+        finally:
+            for rec in result.recordings:
+                rec.disconnect()

@@ -343,6 +343,40 @@ class Repetition:
     phase_bounds_s: np.ndarray
 
 
+def reference_residuals(
+    t_s: np.ndarray,
+    initial_m: np.ndarray,
+    static_mask: np.ndarray,
+    repetitions: Sequence[Repetition],
+    waypoints: R2GWaypoints,
+) -> dict[int, np.ndarray]:
+    """Per repetition (by list position), the (initial - reference) residuals (K, 3) m at the static samples
+    after the repetition's first phase starts."""
+    t = np.asarray(t_s, dtype=np.float64)
+    out: dict[int, np.ndarray] = {}
+    for i, rep in enumerate(repetitions):
+        if len(rep.phase_bounds_s) != 4:
+            continue
+        sl = slice(rep.start, rep.stop)
+        ref = r2g_reference(t[sl], rep.phase_bounds_s, waypoints)
+        # static samples after the first phase starts (before it, both are zero by construction)
+        st = np.asarray(static_mask[sl], dtype=bool) & (t[sl] >= rep.phase_bounds_s[0, 0])
+        out[i] = (np.asarray(initial_m[sl]) - ref)[st]
+    return out
+
+
+def inconsistent_repetitions(residuals: Mapping[int, np.ndarray], factor: float = 3.0, min_m: float = 0.20) -> list[int]:
+    """Repetitions whose RMS residual against the reference exceeds ``factor`` x the trial median and
+    ``min_m`` (m; 0.2 m is about half an adult's bottle-to-mouth distance, so only a reference shifted by
+    whole waypoints exceeds it): their phases do not follow the protocol (e.g. a missed movement shifted the
+    labels), the optimisation's premise fails and they keep the initial estimate."""
+    rms = {i: float(np.sqrt(np.nanmean(np.sum(r**2, axis=1)))) for i, r in residuals.items() if len(r)}
+    if not rms:
+        return []
+    med = float(np.median(list(rms.values())))
+    return sorted(i for i, v in rms.items() if v > max(factor * med, min_m))
+
+
 def estimate_data_sigma(
     t_s: np.ndarray,
     initial_m: np.ndarray,
@@ -358,15 +392,9 @@ def estimate_data_sigma(
     the initial estimate's error variance plus the reference's (``sigma_ref_m``, assumed); the remainder
     (at least ``floor_m``) is the estimate's.
     """
-    t = np.asarray(t_s, dtype=np.float64)
-    res = []
-    for rep in repetitions:
-        if len(rep.phase_bounds_s) != 4:
-            continue
-        sl = slice(rep.start, rep.stop)
-        ref = r2g_reference(t[sl], rep.phase_bounds_s, waypoints)
-        st = np.asarray(static_mask[sl], dtype=bool)
-        res.append((np.asarray(initial_m[sl]) - ref)[st])
+    resid = reference_residuals(t_s, initial_m, static_mask, repetitions, waypoints)
+    bad = set(inconsistent_repetitions(resid))
+    res = [r for i, r in resid.items() if i not in bad and len(r)]
     if not res:
         return (sigma_ref_m,) * 3
     ms = np.nanmean(np.vstack(res) ** 2, axis=0)
@@ -500,20 +528,29 @@ def reconstruct_repetitions(
         waypoints = trial_waypoints(anthropometrics, t, z, repetitions, reference_params)
     if info is not None and waypoints is not None:
         info["waypoints_m"] = {"bottle": list(waypoints.bottle_m), "mouth": list(waypoints.mouth_m)}
-    if "optimized" in methods and params.optimized.sigma_data_static_m == "auto":
+    fallback: set[int] = set()
+    if "optimized" in methods:
         base = a if a_comp is None else a_comp
         z = np.full((len(t), 3), np.nan)
         for rep in repetitions:
             sl = slice(rep.start, rep.stop)
             z[sl] = zupt(base[sl], t[sl], static[sl], params.zupt)[1]
-        sig = estimate_data_sigma(t, z, static, repetitions, waypoints, params.optimized.sigma_ref_static_m)
-        params = replace(params, optimized=replace(params.optimized, sigma_data_static_m=sig))
+        fallback = set(inconsistent_repetitions(reference_residuals(t, z, static, repetitions, waypoints)))
+        if params.optimized.sigma_data_static_m == "auto":
+            sig = estimate_data_sigma(t, z, static, repetitions, waypoints, params.optimized.sigma_ref_static_m)
+            params = replace(params, optimized=replace(params.optimized, sigma_data_static_m=sig))
+            if info is not None:
+                info["sigma_data_static_m"] = list(sig)
         if info is not None:
-            info["sigma_data_static_m"] = list(sig)
-    for rep in repetitions:
+            info["optimized_fallback"] = [repetitions[i].index for i in sorted(fallback)]
+    for i, rep in enumerate(repetitions):
         sl = slice(rep.start, rep.stop)
         for m in methods:
             if m == "optimized" and len(rep.phase_bounds_s) != 4:
+                continue
+            if m == "optimized" and i in fallback:  # keep the initial estimate
+                base = a[sl] if a_comp is None else a_comp[sl]
+                out[m][sl] = zupt(base, t[sl], static[sl], params.zupt)[1]
                 continue
             out[m][sl] = reconstruct(
                 m,

@@ -31,24 +31,28 @@ def viewer_url(web_port: int, grpc_uri: str, host: str = "127.0.0.1") -> str:
     return f"http://{host}:{web_port}/?url={urllib.parse.quote(grpc_uri, safe='')}"
 
 
-def serve(
-    recordings: list[rr.RecordingStream],
-    *,
-    web_port: int = 9090,
-    grpc_port: int = 9876,
-    memory_limit: str = "25%",
-) -> WebServer:
-    """Host one gRPC server fed by all ``recordings`` plus the web viewer; returns immediately.
+def grpc_uri(grpc_port: int, host: str = "127.0.0.1") -> str:
+    """Rerun proxy URI of a gRPC server on ``host:grpc_port``."""
+    return f"rerun+http://{host}:{grpc_port}/proxy"
 
-    Call before logging. The servers live as long as this process (and the recordings) do.
+
+def server_sinks(
+    count: int, *, grpc_port: int = 9876, memory_limit: str = "25%"
+) -> tuple[list[rr.GrpcServerSink | rr.GrpcSink], str, int]:
+    """Sinks for ``count`` recordings sharing one gRPC server bound to 127.0.0.1 (the first hosts it).
+
+    Returns (sinks, server URI, port). Pass the sinks to ``RecordingStream.set_sinks`` before logging.
     """
-    if web_port == 0:
-        web_port = free_port()
     if grpc_port == 0:
         grpc_port = free_port()
-    first, *others = recordings
-    uri = first.serve_grpc(grpc_port=grpc_port, server_memory_limit=memory_limit)
-    for rec in others:
-        rec.connect_grpc(uri)
+    uri = grpc_uri(grpc_port)
+    host = rr.GrpcServerSink(bind_ip="127.0.0.1", port=grpc_port, server_memory_limit=memory_limit)
+    return [host, *[rr.GrpcSink(uri) for _ in range(count - 1)]], uri, grpc_port
+
+
+def serve_viewer(uri: str, grpc_port: int, web_port: int = 9090) -> WebServer:
+    """Host the bundled web viewer (HTTP on 127.0.0.1-reachable ``web_port``) connected to ``uri``."""
+    if web_port == 0:
+        web_port = free_port()
     rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=uri)
     return WebServer(url=viewer_url(web_port, uri), grpc_uri=uri, web_port=web_port, grpc_port=grpc_port)

@@ -7,7 +7,7 @@ One recording per trial, or one recording holding every trial under ``/{label}``
 from __future__ import annotations
 
 import uuid
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -15,7 +15,7 @@ import rerun as rr
 
 from imulog.view import layout as L
 from imulog.view.blueprint import build_blueprint
-from imulog.view.server import WebServer, serve
+from imulog.view.server import WebServer, grpc_uri, serve_viewer, server_sinks
 from imulog.view.source import TrialData
 from imulog.view.streams import LoggedTrial, log_streams
 
@@ -72,38 +72,51 @@ def log_trials(rec: rr.RecordingStream, trials: Sequence[TrialData], *, overlay:
 def show(
     trials: Sequence[TrialData],
     *,
-    sink: str,
+    sink: str | Sequence[str],
     save_paths: Sequence[Path] = (),
     overlay: bool = False,
     web_port: int = 9090,
     grpc_port: int = 9876,
-    on_trial: Callable[[TrialData], None] | None = None,
+    spawn_port: int = 9876,
 ) -> ViewResult:
-    """Log ``trials`` to ``sink`` (``save``/``spawn``/``web``); ``save_paths``: one per recording for ``save``."""
+    """Log ``trials`` to one or several sinks: ``save`` (``save_paths``, one per recording), ``spawn``, ``web``.
+
+    One recording per trial, or one for all when ``overlay``. ``web`` binds the gRPC server to 127.0.0.1.
+    """
+    sinks = {sink} if isinstance(sink, str) else set(sink)
+    unknown = sinks - {"save", "spawn", "web"}
+    if unknown or not sinks:
+        raise ValueError(f"unknown sink(s) {sorted(unknown)}; use save, spawn and/or web")
+    if "spawn" in sinks and "web" in sinks and spawn_port == grpc_port:
+        raise ValueError("--spawn and --web need different gRPC ports")
     groups = [list(trials)] if overlay else [[t] for t in trials]
     names = ["+".join(t.label for t in g) for g in groups]
     result = ViewResult(recordings=[new_recording(n) for n in names])
-    if sink == "save":
+    per_rec: list[list] = [[] for _ in groups]
+    if "save" in sinks:
         if len(save_paths) != len(groups):
             raise ValueError(f"{len(groups)} recording(s) but {len(save_paths)} output path(s)")
-        for rec, path in zip(result.recordings, save_paths, strict=True):
+        for sinks_of, path in zip(per_rec, save_paths, strict=True):
             Path(path).parent.mkdir(parents=True, exist_ok=True)
-            rec.save(path)
+            sinks_of.append(rr.FileSink(Path(path)))
             result.saved.append(Path(path))
-    elif sink == "spawn":
-        for rec in result.recordings:
-            rec.spawn(memory_limit="50%")
-    elif sink == "web":
-        result.server = serve(result.recordings, web_port=web_port, grpc_port=grpc_port)
-    else:
-        raise ValueError(f"unknown sink {sink!r}")
+    uri = None
+    if "web" in sinks:
+        web_sinks, uri, grpc_port = server_sinks(len(groups), grpc_port=grpc_port)
+        for sinks_of, web_sink in zip(per_rec, web_sinks, strict=True):
+            sinks_of.append(web_sink)
+    if "spawn" in sinks:
+        rr.spawn(port=spawn_port, connect=False, memory_limit="50%")
+        for sinks_of in per_rec:
+            sinks_of.append(rr.GrpcSink(grpc_uri(spawn_port)))
+    for rec, sinks_of in zip(result.recordings, per_rec, strict=True):
+        rec.set_sinks(*sinks_of)
+    if uri is not None:
+        result.server = serve_viewer(uri, grpc_port, web_port)
     for rec, group in zip(result.recordings, groups, strict=True):
         result.logged.append(log_trials(rec, group, overlay=overlay))
-        if on_trial is not None:
-            for t in group:
-                on_trial(t)
         rec.flush()
-    if sink == "save":
+    if sinks == {"save"}:
         for rec in result.recordings:
             rec.disconnect()
     return result

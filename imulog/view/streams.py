@@ -143,10 +143,15 @@ class _Logger:
         n, m = valid.shape
         if n == 0:
             return
-        counts = valid.sum(axis=1).astype(np.int64)
-        flat = pos[valid]
-        if labels is not None:
+        if valid.all():  # fast path: no gaps
+            counts = np.full(n, m, dtype=np.int64)
+            flat = np.ascontiguousarray(pos.reshape(-1, 3), dtype=np.float32)
+            class_ids = np.tile(np.arange(m, dtype=np.uint16), n)
+        else:
+            counts = valid.sum(axis=1).astype(np.int64)
+            flat = np.ascontiguousarray(pos[valid], dtype=np.float32)
             class_ids = np.nonzero(valid)[1].astype(np.uint16)
+        if labels is not None:
             cols = rr.Points3D.columns(positions=flat, class_ids=class_ids)
             self.rec.log(
                 path,

@@ -1,0 +1,314 @@
+"""The step registry: step names -> the steps' Python entry points and their options.
+
+Options are plain JSON-able dicts (so they travel to worker processes and Dask workers unchanged)::
+
+    {"phases": {"repetitions": 3, "threshold": 0.11}, "trajectory": {"methods": ["zupt", "kalman"]}}
+
+Each key is either a keyword of the step's ``run_*`` function (``imu``, ``markers``, ``methods``...) or a field
+of the step's parameter dataclass, dotted for nested ones (``dynamos.threshold``, ``static.threshold_rad_s``);
+a few short aliases exist (``repetitions`` -> ``repetitions.n_repetitions`` for ``phases``). Values given as
+strings (from the command line) are converted to the type of the field's default.
+
+:func:`run_file` runs a plan (steps in dependency order with their resolved options) on one trial and
+returns a :class:`FileResult`; it never raises, so one bad file cannot stop a batch.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import importlib
+import json
+import os
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+# Dependency order: a step may read what an earlier one wrote (align reads orientation, phases the alignment,
+# trajectory orientation + phases, evaluate and metrics the trajectories).
+STEP_ORDER = ("calibrate", "orientation", "align", "phases", "trajectory", "metrics", "evaluate")
+
+
+@dataclass(frozen=True)
+class StepSpec:
+    """How to call one step: ``function`` (``module:attr``) with keyword ``kwargs`` and a params dataclass."""
+
+    name: str
+    function: str
+    kwargs: tuple[str, ...] = ()
+    params_class: str | None = None
+    params_kwarg: str = "params"
+    aliases: dict[str, str] = field(default_factory=dict)
+    required: tuple[str, ...] = ()
+    help: str = ""
+
+
+STEPS: dict[str, StepSpec] = {
+    "calibrate": StepSpec(
+        "calibrate",
+        "imulog.steps.calibrate:run_calibrate",
+        kwargs=("imu", "calibration"),
+        required=("calibration",),
+        help="apply a calibration file (option calibration=FILE.json from `imulog calibrate`)",
+    ),
+    "orientation": StepSpec(
+        "orientation",
+        "imulog.steps.orientation:run_orientation",
+        kwargs=("imu", "source"),
+        params_class="imulog.process.orientation:OrientationParams",
+        help="orientation + gravity-free acceleration (OrientationParams: backend, beta, use_mag, ...)",
+    ),
+    "align": StepSpec(
+        "align",
+        "imulog.steps.align:run_align",
+        kwargs=("imu", "markers", "resample"),
+        params_class="imulog.process.alignment:AlignmentParams",
+        help="IMU-to-Vicon clock and frame alignment (AlignmentParams: window_s, max_lag_s, drift, ...)",
+    ),
+    "phases": StepSpec(
+        "phases",
+        "imulog.steps.phases:run_phases",
+        kwargs=("imu",),
+        params_class="imulog.process.segmentation.pipeline:PhaseParams",
+        aliases={
+            "repetitions": "repetitions.n_repetitions",
+            "n_repetitions": "repetitions.n_repetitions",
+            "phases_per_repetition": "repetitions.n_phases",
+            "threshold": "dynamos.threshold",
+            "alpha": "dynamos.alpha",
+            "beta": "dynamos.beta",
+            "cutoff_hz": "dynamos.cutoff_hz",
+        },
+        help="movements, R2G phases, zero-velocity mask (PhaseParams; alias repetitions=N)",
+    ),
+    "trajectory": StepSpec(
+        "trajectory",
+        "imulog.steps.trajectory:run_trajectory",
+        kwargs=("imu", "methods"),
+        params_class="imulog.process.trajectory_opt:TrajectoryParams",
+        help="wrist trajectories per method (methods=zupt,kalman,...; TrajectoryParams fields)",
+    ),
+    "metrics": StepSpec(
+        "metrics",
+        "imulog.steps.metrics:run_metrics",
+        kwargs=("imu",),
+        params_class="imulog.steps.metrics:MetricsParams",
+        help="clinical metrics (MetricsParams fields)",
+    ),
+    "evaluate": StepSpec(
+        "evaluate",
+        "imulog.steps.evaluate:run_evaluate",
+        kwargs=("methods", "max_gap_s"),
+        help="trajectory errors against the optical reference (methods=..., max_gap_s=0.05)",
+    ),
+}
+
+_LIST_KWARGS = {"methods"}
+
+
+def _load(ref: str) -> Any:
+    module, attr = ref.split(":")
+    return getattr(importlib.import_module(module), attr)
+
+
+def parse_steps(steps: str | list[str] | tuple[str, ...]) -> list[str]:
+    """Step names (comma-separated string or list) validated and put in dependency order."""
+    names = [s.strip() for s in steps.split(",")] if isinstance(steps, str) else [str(s).strip() for s in steps]
+    names = [s for s in names if s]
+    unknown = [s for s in names if s not in STEPS]
+    if unknown or not names:
+        raise ValueError(f"unknown step(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(STEP_ORDER)}")
+    return [s for s in STEP_ORDER if s in names]
+
+
+def _coerce(value: Any, default: Any, where: str) -> Any:
+    """Convert a command-line string to the type of ``default`` (other values pass through)."""
+    if not isinstance(value, str) or isinstance(default, str):
+        if isinstance(default, tuple) and isinstance(value, list):
+            return tuple(value)
+        return value
+    text = value.strip()
+    try:
+        if isinstance(default, bool):
+            if text.lower() in ("1", "true", "yes", "on"):
+                return True
+            if text.lower() in ("0", "false", "no", "off"):
+                return False
+            raise ValueError(f"expected true/false, got {value!r}")
+        if isinstance(default, int):
+            return int(text)
+        if isinstance(default, float):
+            return float(text)
+        if isinstance(default, tuple):
+            return tuple(x.strip() for x in text.split(",") if x.strip())
+        if default is None:
+            return json.loads(text)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+    # a union field (e.g. threshold: float | "otsu"): a number if it parses as one, else the string
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def set_field(obj: Any, dotted: str, value: Any, where: str = "") -> Any:
+    """A copy of dataclass ``obj`` with field ``a.b.c`` replaced by ``value`` (coerced to the field's type)."""
+    head, _, rest = dotted.partition(".")
+    names = {f.name for f in dataclasses.fields(obj)}
+    if head not in names:
+        raise ValueError(f"{where or type(obj).__name__}: unknown option {dotted!r} (fields: {', '.join(sorted(names))})")
+    current = getattr(obj, head)
+    if rest:
+        if not dataclasses.is_dataclass(current):
+            raise ValueError(f"{where}: {head!r} has no sub-fields")
+        return dataclasses.replace(obj, **{head: set_field(current, rest, value, where)})
+    if dataclasses.is_dataclass(current) and isinstance(value, dict):
+        sub = current
+        for k, v in value.items():
+            sub = set_field(sub, k, v, where)
+        return dataclasses.replace(obj, **{head: sub})
+    return dataclasses.replace(obj, **{head: _coerce(value, current, f"{where} {dotted}")})
+
+
+def resolve_options(step: str, options: dict[str, Any] | None) -> tuple[dict[str, Any], Any]:
+    """``(kwargs, params)`` for calling step ``step`` with the plain ``options`` dict."""
+    spec = STEPS[step]
+    options = dict(options or {})
+    missing = [k for k in spec.required if k not in options]
+    if missing:
+        raise ValueError(f"step {step}: option(s) {', '.join(missing)} required ({spec.help})")
+    kwargs: dict[str, Any] = {}
+    params = _load(spec.params_class)() if spec.params_class else None
+    for key, value in options.items():
+        key = str(key)
+        if key in spec.kwargs:
+            if key in _LIST_KWARGS and isinstance(value, str):
+                value = [m.strip() for m in value.split(",") if m.strip()]
+            elif key == "resample" and isinstance(value, str):
+                value = _coerce(value, True, f"step {step} {key}")
+            elif key == "max_gap_s" and isinstance(value, str):
+                value = float(value)
+            kwargs[key] = value
+            continue
+        if params is None:
+            raise ValueError(f"step {step}: unknown option {key!r} (options: {', '.join(spec.kwargs) or 'none'})")
+        params = set_field(params, spec.aliases.get(key, key), value, f"step {step}")
+    return kwargs, params
+
+
+def normalize_options(steps: list[str], options: dict[str, dict[str, Any]] | None) -> dict[str, dict[str, Any]]:
+    """Validate ``options`` for ``steps`` (raises ValueError early, before any file is touched)."""
+    options = {str(k): dict(v or {}) for k, v in (options or {}).items()}
+    extra = sorted(set(options) - set(STEPS))
+    if extra:
+        raise ValueError(f"options for unknown step(s) {', '.join(extra)}")
+    out = {}
+    for step in steps:
+        resolve_options(step, options.get(step))  # raises on bad keys / values
+        out[step] = options.get(step, {})
+    return out
+
+
+def plan_fingerprint(steps: list[str], options: dict[str, dict[str, Any]]) -> str:
+    """Canonical text of a plan (steps, resolved options, imulog version): the batch ledger's key.
+
+    Options are resolved first, so ``{"repetitions": "3"}`` and ``{"repetitions": 3}`` are the same plan.
+    """
+    from imulog import __version__
+    from imulog.steps.base import params_json
+
+    resolved = {}
+    for step in steps:
+        kwargs, params = resolve_options(step, options.get(step))
+        resolved[step] = {"kwargs": kwargs, "params": json.loads(params_json(params))}
+        if step == "calibrate":  # the calibration file's content, not just its name
+            try:
+                resolved[step]["calibration_sha256"] = hashlib.sha256(Path(kwargs["calibration"]).read_bytes()).hexdigest()
+            except OSError as exc:
+                raise ValueError(f"step calibrate: cannot read calibration file: {exc}") from None
+    return json.dumps(
+        {"steps": steps, "options": resolved, "imulog": __version__}, sort_keys=True, separators=(",", ":"), default=str
+    )
+
+
+# ---------------------------------------------------------------------------------------------- one file
+
+
+@dataclass
+class StepRecord:
+    """What one step did on one file."""
+
+    step: str
+    skipped: bool
+    run: int | None
+    seconds: float
+    reason: str = ""
+
+
+@dataclass
+class FileResult:
+    """What the batch did to one file. ``status``: ``processed`` (some step computed), ``up_to_date`` (nothing
+    to do: every step already recorded, or the batch ledger says so: ``prechecked``), ``failed``."""
+
+    path: str
+    status: str
+    steps: list[StepRecord] = field(default_factory=list)
+    error: str = ""
+    failed_step: str = ""
+    traceback: str = ""
+    seconds: float = 0.0
+    prechecked: bool = False
+    worker: str = ""
+
+    @property
+    def computed(self) -> int:
+        return sum(not s.skipped for s in self.steps)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+def call_step(path: str | os.PathLike[str], step: str, options: dict[str, Any] | None = None, *, force: bool = False):
+    """Run one registered step on one trial; returns the step's ``StepOutcome``."""
+    spec = STEPS[step]
+    kwargs, params = resolve_options(step, options)
+    fn = _load(spec.function)
+    if step == "calibrate":
+        from imulog.process.calibration import Calibration
+
+        cal_file = Path(kwargs.pop("calibration"))
+        calibration = Calibration.from_dict(json.loads(cal_file.read_text()))
+        return fn(path, calibration, force=force, **kwargs)
+    if params is not None:
+        kwargs[spec.params_kwarg] = params
+    out = fn(path, force=force, **kwargs)
+    return out[0] if isinstance(out, tuple) else out  # run_evaluate returns (outcome, record)
+
+
+def run_file(path: str, plan: list[tuple[str, dict[str, Any]]], force: bool = False) -> FileResult:
+    """Run ``plan`` (``[(step, options), ...]``) on one trial; never raises (errors go into the result).
+
+    Top-level and picklable: the entry point of worker processes and Dask tasks.
+    """
+    t0 = time.perf_counter()
+    result = FileResult(path=str(path), status="up_to_date", worker=f"pid {os.getpid()}")
+    for step, options in plan:
+        t = time.perf_counter()
+        try:
+            outcome = call_step(path, step, options, force=force)
+        except Exception as exc:  # isolate the file: report, do not propagate
+            result.status = "failed"
+            result.failed_step = step
+            result.error = f"{step}: {type(exc).__name__}: {exc}"
+            result.traceback = traceback.format_exc(limit=8)
+            break
+        result.steps.append(
+            StepRecord(step, bool(outcome.skipped), outcome.run, time.perf_counter() - t, outcome.reason)
+        )
+        if not outcome.skipped:
+            result.status = "processed"
+    result.seconds = time.perf_counter() - t0
+    return result
