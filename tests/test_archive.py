@@ -504,3 +504,26 @@ def test_append_keeps_file_mode_and_follows_symlinks(trial, rng, tmp_path):
     assert link.is_symlink() and (path.stat().st_mode & 0o777) == 0o640
     with TrialReader(link) as tr:
         assert "/derived/orientation/wrist" in tr.topics()
+
+
+def test_remove_derived_channel(trial, rng):
+    from imulog.archive import check_file as check
+    from imulog.archive import remove_derived
+
+    path, rec = trial
+    append_derived(path, [_orientation(rec, rng)], run={"step": "o"})
+    with TrialReader(path) as tr:
+        conversion_end = min(ci.chunk_start_offset for ci in tr.summary.chunk_indexes) + 1
+    before = path.read_bytes()
+    remove_derived(path, ["/derived/orientation/wrist"])
+    assert path.read_bytes()[:conversion_end] == before[:conversion_end]
+    assert check(path).ok
+    with TrialReader(path) as tr:
+        assert "/derived/orientation/wrist" not in tr.topics()
+        assert tr.runs()[2]["removed"] == ["/derived/orientation/wrist"]
+        for stream in rec.streams():
+            assert_stream_equal(stream, tr.read(stream.topic))
+    with pytest.raises(ArchiveError, match="only derived channels can be removed"):
+        remove_derived(path, ["/imu/wrist"])
+    with pytest.raises(ArchiveError, match="no channel"):
+        remove_derived(path, ["/derived/nothing"])

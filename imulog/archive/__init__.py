@@ -12,10 +12,18 @@
 See docs/archive.md for the file layout, the append design and the CLI.
 """
 
-from imulog.archive.append import append_derived
+from imulog.archive.append import append_derived, remove_derived
 from imulog.archive.errors import ArchiveCorruptError, ArchiveError, ArchiveExistsError, ArchiveLockedError
 from imulog.archive.reader import Attachment, ChannelInfo, TrialReader, stream_columns
 from imulog.archive.writer import write_trial
+
+
+def check_file(path, *, decode: bool = True):  # noqa: ANN001 - thin lazy wrapper
+    """Validate a trial (see imulog.archive.doctor.check_file); returns a DoctorReport."""
+    from imulog.archive.doctor import check_file as _check
+
+    return _check(path, decode=decode)
+
 
 __all__ = [
     "ArchiveCorruptError",
@@ -26,6 +34,8 @@ __all__ = [
     "ChannelInfo",
     "TrialReader",
     "append_derived",
+    "check_file",
+    "remove_derived",
     "stream_columns",
     "write_trial",
 ]

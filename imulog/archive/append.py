@@ -19,6 +19,7 @@ import json
 import os
 import time
 import zlib
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -182,14 +183,15 @@ def append_derived(
     run: dict[str, Any],
     metadata: dict[str, dict[str, Any]] | None = None,
     replace: bool = True,
+    remove: Sequence[str] = (),
 ) -> Path:
     """Append derived ``streams`` (topics under ``/derived/``) and ``metadata`` records to the trial at ``path``.
 
     ``run`` describes the provenance: ``step``, ``algorithm``, ``params`` (JSON-able), ``inputs`` ({topic:
     content hash} or a list of topics to hash). Each new channel records ``algorithm``, ``params``,
     ``inputs``, ``step``, ``run`` and ``imulog_version``; an ``imulog.run.<n>`` metadata record lists the
-    run. An existing topic is replaced when ``replace`` (else ArchiveError). Raw channels are never touched.
-    Returns the path.
+    run. An existing topic is replaced when ``replace`` (else ArchiveError); derived topics in ``remove`` are
+    deleted. Raw channels are never touched. Returns the path.
     """
     path = target_path(path)
     metadata = dict(metadata or {})
@@ -220,6 +222,12 @@ def append_derived(
                         f"{path}: {t!r} is a raw channel written at conversion; raw channels are never modified"
                     )
             drop = set()
+            for t in remove:
+                if t in raw_topics or not t.startswith(DERIVED_PREFIX):
+                    raise ArchiveError(f"{path}: only derived channels can be removed, not {t!r}")
+                if t not in existing:
+                    raise ArchiveError(f"{path}: no channel {t!r} to remove")
+                drop.add(existing[t].id)
             for t in topics:
                 if t in existing:
                     if not replace:
@@ -261,6 +269,7 @@ def append_derived(
                     "outputs": outputs,
                     "metadata": sorted(metadata),
                     "replaced": sorted(existing[t].topic for t in topics if t in existing),
+                    "removed": sorted(remove),
                     "imulog_version": __version__,
                     "time": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                 }
@@ -269,4 +278,9 @@ def append_derived(
     return path
 
 
-__all__ = ["append_derived", "payload_hash"]
+def remove_derived(path: str | os.PathLike[str], topics: Sequence[str], *, run: dict[str, Any] | None = None) -> Path:
+    """Delete derived channels (rewriting the file, untouched chunks copied verbatim); recorded as a run."""
+    return append_derived(path, [], run=run or {"step": "remove"}, remove=list(topics))
+
+
+__all__ = ["append_derived", "payload_hash", "remove_derived"]

@@ -232,7 +232,7 @@ def _check_summary(summary: m.Summary, found: dict, report: DoctorReport) -> Non
         pos, end = start, start + length
         while pos < end and pos in starts and starts[pos][0] == op:
             pos += starts[pos][1]
-        if pos != end or length == 0:
+        if pos != end:
             report.fail(f"summary offset for {m.OP_NAMES.get(op, hex(op))} records does not match the summary")
     md = found["metadata"]
     if {(x.offset, x.length, x.name) for x in summary.metadata_indexes} != {(o, ln, nm) for o, (nm, ln) in md.items()}:

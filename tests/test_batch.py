@@ -1,0 +1,155 @@
+"""imulog.batch: registry options, per-file isolation, idempotence, local processes and the CLI.
+
+Trials are simulated R2G recordings (3 repetitions, short opening rest) written with imulog.archive.write_trial.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+from click.testing import CliRunner
+
+from imulog.archive import TrialReader, write_trial
+from imulog.batch import STEP_ORDER, parse_steps, run
+from imulog.batch.registry import plan_fingerprint, resolve_options
+from imulog.batch.simulated import simulate_archive
+from imulog.batch.verify import check_archive, derived_digests
+from imulog.cli import cli
+
+STEPS = "orientation,align,phases,trajectory,evaluate"
+OPTIONS = {"phases": {"repetitions": 3}}
+N_STEPS = 5
+
+
+@pytest.fixture(scope="module")
+def raw_archive(tmp_path_factory):
+    """Three raw (unprocessed) trials; tests copy this folder before processing."""
+    root = tmp_path_factory.mktemp("raw")
+    simulate_archive(root, subjects=3, trials=1, repetitions=3, opening_static_s=5.0)
+    return root
+
+
+@pytest.fixture(scope="module")
+def serial(raw_archive, tmp_path_factory):
+    """The archive processed in this process (the reference for the other engines)."""
+    root = tmp_path_factory.mktemp("serial") / "archive"
+    shutil.copytree(raw_archive, root)
+    report = run(root, STEPS, options=OPTIONS, progress=False)
+    return root, report
+
+
+def test_parse_steps_orders_and_rejects():
+    assert parse_steps("evaluate,orientation,phases") == ["orientation", "phases", "evaluate"]
+    assert parse_steps(list(STEP_ORDER)) == list(STEP_ORDER)
+    with pytest.raises(ValueError, match="unknown step"):
+        parse_steps("orientation,smoothing")
+
+
+def test_options_resolve_to_params_objects():
+    kwargs, params = resolve_options("phases", {"repetitions": "7", "threshold": "otsu", "imu": "wrist"})
+    assert kwargs == {"imu": "wrist"}
+    assert params.repetitions.n_repetitions == 7 and params.dynamos.threshold == "otsu"
+    _, params = resolve_options("phases", {"dynamos.threshold": "0.2", "static": "gyro-norm"})
+    assert params.dynamos.threshold == 0.2 and params.static == "gyro-norm"
+    kwargs, _ = resolve_options("trajectory", {"methods": "zupt,kalman"})
+    assert kwargs["methods"] == ["zupt", "kalman"]
+    _, params = resolve_options("orientation", {"use_mag": "false", "beta": "0.1"})
+    assert params.use_mag is False and params.beta == 0.1
+    with pytest.raises(ValueError, match="unknown option"):
+        resolve_options("phases", {"repetitons": 3})
+    with pytest.raises(ValueError, match="calibration"):
+        resolve_options("calibrate", {})
+    # the ledger key is the resolved plan: "3" and 3 are the same plan, 4 is another
+    fp = plan_fingerprint(["phases"], {"phases": {"repetitions": 3}})
+    assert fp == plan_fingerprint(["phases"], {"phases": {"repetitions": "3"}})
+    assert fp != plan_fingerprint(["phases"], {"phases": {"repetitions": 4}})
+
+
+def test_serial_batch_processes_every_file_once(serial):
+    root, report = serial
+    assert report.ok and report.processed == 3 and report.failed == 0
+    assert report.steps_computed == 3 * N_STEPS
+    for f in report.files:
+        assert [s.step for s in f.steps] == ["orientation", "align", "phases", "trajectory", "evaluate"]
+        with TrialReader(f.path) as trial:
+            assert len(trial.runs()) == N_STEPS
+            ev = trial.metadata["imulog.evaluation"]
+            # against the simulator's optical reference, ZUPT stays within a few cm (ddi drifts far more)
+            zupt = ev["methods"]["zupt"]["summary"]["x"]["mae_cm"]["mean"]
+            ddi = ev["methods"]["ddi"]["summary"]["x"]["mae_cm"]["mean"]
+            assert zupt < 5.0 and ddi > 2 * zupt
+            assert trial.metadata["imulog.timing"]["n_repetitions"] == 3
+    assert check_archive(f.path for f in report.files) == {}
+
+
+def test_rerun_does_no_work(serial):
+    root, first = serial
+    before = {f.path: derived_digests(f.path) for f in first.files}
+    again = run(root, STEPS, options=OPTIONS, progress=False)
+    assert again.ok and again.up_to_date == 3 and again.prechecked == 3 and again.steps_computed == 0
+    # without the ledger every file is opened, and every step skips itself (same params and inputs)
+    opened = run(root, STEPS, options=OPTIONS, progress=False, ledger=None)
+    assert opened.up_to_date == 3 and opened.prechecked == 0
+    assert opened.steps_computed == 0 and opened.steps_skipped == 3 * N_STEPS
+    assert {f.path: derived_digests(f.path) for f in first.files} == before
+    # other parameters for one step: the ledger misses, only that step and the steps after it recompute
+    changed = run(root, STEPS, options={"phases": {"repetitions": 3, "static_margin_s": 0.05}}, progress=False)
+    assert changed.processed == 3 and changed.prechecked == 0
+    for f in changed.files:
+        computed = [s.step for s in f.steps if not s.skipped]
+        assert computed[0] == "phases" and "orientation" not in computed and "align" not in computed
+
+
+def test_bad_files_are_reported_and_the_rest_completes(raw_archive, tmp_path):
+    root = tmp_path / "archive"
+    shutil.copytree(raw_archive, root)
+    (root / "S00").mkdir()
+    (root / "S00" / "garbage.mcap").write_bytes(b"\x89MCAP0\r\n" + b"not really" * 50)
+    from imulog.simulate import simulate
+
+    rec = simulate("r2g", subject=9, repetitions=3, opening_static_s=5.0).recording
+    rec.markers = []  # an IMU-only trial cannot be aligned
+    write_trial(root / "S00" / "no_markers.mcap", rec, attach_sources=False)
+    result = CliRunner().invoke(cli, ["batch", str(root), "--steps", STEPS, "--repetitions", "3", "-q"])
+    assert result.exit_code == 1, result.output
+    assert "3 processed" in result.output and "2 failed" in result.output
+    assert "garbage.mcap" in result.output and "no_markers.mcap" in result.output
+    assert "align" in result.output  # the failing step is named
+    report = run(root, STEPS, options=OPTIONS, progress=False)
+    assert report.failed == 2 and report.up_to_date == 3 and report.steps_computed == 0
+    by_name = {f.path.rsplit("/", 1)[1]: f for f in report.files}
+    assert by_name["no_markers.mcap"].failed_step == "align"
+    assert [s.step for s in by_name["no_markers.mcap"].steps] == ["orientation"]  # done before the failure
+    # --fail-fast stops handing out files after the first failure
+    stopped = run(sorted(report.files, key=lambda f: "S00" not in f.path)[0].path, STEPS, options=OPTIONS,
+                  progress=False, continue_on_error=False)
+    assert stopped.failed == 1
+
+
+def test_local_processes_match_serial(serial, raw_archive, tmp_path):
+    root = tmp_path / "archive"
+    shutil.copytree(raw_archive, root)
+    report = run(root, STEPS, options=OPTIONS, progress=False, workers=2)
+    assert report.ok and report.processed == 3 and report.engine == "processes"
+    assert len({f.worker for f in report.files}) >= 1
+    ref_root, _ = serial
+    for f in report.files:
+        rel = f.path[len(str(root)) :]
+        assert derived_digests(f.path) == derived_digests(str(ref_root) + rel)
+
+
+def test_cli_json_report_and_errors(serial, tmp_path):
+    root, _ = serial
+    out = tmp_path / "report.json"
+    result = CliRunner().invoke(
+        cli, ["batch", f"{root}/**/*.mcap", "--steps", STEPS, "--repetitions", "3", "-q", "--json", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    assert data["counts"]["files"] == 3 and data["counts"]["failed"] == 0
+    bad = CliRunner().invoke(cli, ["batch", str(root), "--set", "phases.nonsense=1", "-q"])
+    assert bad.exit_code != 0 and "nonsense" in bad.output
+    none = CliRunner().invoke(cli, ["batch", str(tmp_path / "nothing" / "*.mcap"), "-q"])
+    assert none.exit_code != 0 and "no trial files" in none.output
