@@ -226,7 +226,11 @@ class XsensConverter(Converter):
 
     def sniff(self, path: Path, head: bytes) -> float:
         lines = text_head_lines(head, 60)
-        if not lines or not lines[0].lstrip().startswith("//"):
+        if not lines:
+            return 0.0
+        if lines[0].startswith(("PacketCounter\t", "PacketCounter,")):
+            return 0.8  # exported without the // header lines
+        if not lines[0].lstrip().startswith("//"):
             return 0.0
         for line in lines:
             if not line.lstrip().startswith("//"):

@@ -527,3 +527,11 @@ def test_remove_derived_channel(trial, rng):
         remove_derived(path, ["/imu/wrist"])
     with pytest.raises(ArchiveError, match="no channel"):
         remove_derived(path, ["/derived/nothing"])
+
+
+def test_export_to_unwritable_place_is_a_one_line_error(trial, tmp_path):
+    path, _ = trial
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    res = CliRunner().invoke(cli, ["export", str(path), "--topic", "/imu/wrist", "-o", str(blocker / "sub" / "x.csv")])
+    assert res.exit_code == 1 and len(res.output.strip().splitlines()) == 1 and "cannot write" in res.output

@@ -94,7 +94,10 @@ def test_rerun_does_no_work(serial):
     assert opened.up_to_date == 3 and opened.prechecked == 0
     assert opened.steps_computed == 0 and opened.steps_skipped == 3 * N_STEPS
     assert {f.path: derived_digests(f.path) for f in first.files} == before
-    # other parameters for one step: the ledger misses, only that step and the steps after it recompute
+
+def test_other_parameters_recompute_only_downstream(serial, tmp_path):
+    root = tmp_path / "archive"
+    shutil.copytree(serial[0], root)
     changed = run(root, STEPS, options={"phases": {"repetitions": 3, "static_margin_s": 0.05}}, progress=False)
     assert changed.processed == 3 and changed.prechecked == 0
     for f in changed.files:
@@ -122,10 +125,10 @@ def test_bad_files_are_reported_and_the_rest_completes(raw_archive, tmp_path):
     by_name = {f.path.rsplit("/", 1)[1]: f for f in report.files}
     assert by_name["no_markers.mcap"].failed_step == "align"
     assert [s.step for s in by_name["no_markers.mcap"].steps] == ["orientation"]  # done before the failure
-    # --fail-fast stops handing out files after the first failure
-    stopped = run(sorted(report.files, key=lambda f: "S00" not in f.path)[0].path, STEPS, options=OPTIONS,
-                  progress=False, continue_on_error=False)
-    assert stopped.failed == 1
+    # --fail-fast: the first file (S00/garbage.mcap) fails, the next one needing work is not started
+    stopped = run(root, STEPS, options=OPTIONS, progress=False, continue_on_error=False)
+    assert (stopped.failed, stopped.cancelled, stopped.up_to_date) == (1, 1, 3)
+    assert not stopped.ok
 
 
 def test_local_processes_match_serial(serial, raw_archive, tmp_path):

@@ -547,3 +547,35 @@ def test_a_lab_registers_its_own_converter_through_entry_points(tmp_path, monkey
     rec = convert_file(path)
     np.testing.assert_array_equal(rec.imus[0].t_ns, [0, 10_000_000, 20_000_000])
     np.testing.assert_allclose(rec.imus[0].acc[2], [0, G, 0])
+
+
+def test_nexus_csv_with_all_sections(tmp_path):
+    """Devices, Model Outputs, Segments and Trajectories in one export, blank lines between sections."""
+    text = (
+        "Devices\n1000\n,,Force Plate 1,,\nFrame,Sub Frame,Fx,Fy,Mz\n,,N,N,N.mm\n"
+        + "".join(f"{f},{s},{f + s / 10:.1f},2,{1000 * s}\n" for f in (1, 2) for s in range(10))
+        + "\nModel Outputs\n100\n,,S:LKneeAngles,,\nFrame,Sub Frame,X,Y,Z\n,,deg,deg,deg\n1,0,10,20,30\n2,0,11,21,31\n"
+        + "\nSegments\n100\n,,S:Forearm,,,,,\nFrame,Sub Frame,RX,RY,RZ,TX,TY,TZ\n,,deg,deg,deg,mm,mm,mm\n"
+        + "1,0,1,2,3,100,200,300\n2,0,1,2,3,110,210,310\n"
+        + "\nTrajectories\n100\n,,S:A,,,S:B,,\nFrame,Sub Frame,X,Y,Z,X,Y,Z\n,,mm,mm,mm,m,m,m\n"
+        + "1,0,1,2,3,,,\n2,0,4,5,6,0.5,0.25,1\n"
+    )
+    path = tmp_path / "all.csv"
+    path.write_text(text.replace("\n", "\r\n"))
+    rec = convert_file(path)
+    (m,) = rec.markers
+    assert m.labels == ["S:A", "S:B"]
+    np.testing.assert_allclose(m.pos[1], [[0.004, 0.005, 0.006], [0.5, 0.25, 1.0]])  # mm and m columns
+    np.testing.assert_array_equal(m.valid, [[True, False], [True, True]])
+    (a,) = rec.analogs
+    assert a.channel_names == ["Force Plate 1/Fx", "Force Plate 1/Fy", "Force Plate 1/Mz"]
+    assert a.units == ["N", "N", "N.m"]
+    np.testing.assert_allclose(a.values[:10, 2], np.arange(10))  # N.mm -> N.m
+    np.testing.assert_array_equal(a.t_ns[:3], [0, 1_000_000, 2_000_000])  # 10 sub frames of the 100 Hz frame
+    sig = {s.topic: s for s in rec.signals}
+    mo, seg = sig["/vicon/model_outputs"], sig["/vicon/segments"]
+    assert mo.columns == ["S:LKneeAngles.X", "S:LKneeAngles.Y", "S:LKneeAngles.Z"] and mo.units == ["deg"] * 3
+    np.testing.assert_allclose(mo.values[1], [11, 21, 31])
+    assert seg.units == ["deg", "deg", "deg", "m", "m", "m"]
+    np.testing.assert_allclose(seg.values[1, 3:], [0.11, 0.21, 0.31])
+    np.testing.assert_array_equal(seg.t_ns, [0, 10_000_000])

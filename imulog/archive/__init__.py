@@ -12,14 +12,22 @@
 See docs/archive.md for the file layout, the append design and the CLI.
 """
 
+from __future__ import annotations
+
+import os
+from typing import TYPE_CHECKING
+
 from imulog.archive.append import append_derived, remove_derived
 from imulog.archive.errors import ArchiveCorruptError, ArchiveError, ArchiveExistsError, ArchiveLockedError
 from imulog.archive.reader import Attachment, ChannelInfo, TrialReader, stream_columns
 from imulog.archive.writer import write_trial
 
+if TYPE_CHECKING:
+    from imulog.archive.doctor import DoctorReport
 
-def check_file(path, *, decode: bool = True):  # noqa: ANN001 - thin lazy wrapper
-    """Validate a trial (see imulog.archive.doctor.check_file); returns a DoctorReport."""
+
+def check_file(path: str | os.PathLike[str], *, decode: bool = True) -> DoctorReport:
+    """Validate a trial (see :func:`imulog.archive.doctor.check_file`); returns a DoctorReport."""
     from imulog.archive.doctor import check_file as _check
 
     return _check(path, decode=decode)

@@ -123,8 +123,12 @@ def parse_steps(steps: str | list[str] | tuple[str, ...]) -> list[str]:
     return [s for s in STEP_ORDER if s in names]
 
 
-def _coerce(value: Any, default: Any, where: str) -> Any:
-    """Convert a command-line string to the type of ``default`` (other values pass through)."""
+def _coerce(value: Any, default: Any, where: str, annotation: str = "") -> Any:
+    """Convert a command-line string to the type of ``default`` (other values pass through).
+
+    When the field's ``annotation`` admits ``str`` (e.g. ``float | str`` for a threshold that may be
+    ``"otsu"``), a string that does not convert is kept as it is.
+    """
     if not isinstance(value, str) or isinstance(default, str):
         if isinstance(default, tuple) and isinstance(value, list):
             return tuple(value)
@@ -146,6 +150,8 @@ def _coerce(value: Any, default: Any, where: str) -> Any:
         if default is None:
             return json.loads(text)
     except ValueError as exc:
+        if "str" in str(annotation):
+            return text
         raise ValueError(f"{where}: {exc}") from None
     # a union field (e.g. threshold: float | "otsu"): a number if it parses as one, else the string
     try:
@@ -170,7 +176,8 @@ def set_field(obj: Any, dotted: str, value: Any, where: str = "") -> Any:
         for k, v in value.items():
             sub = set_field(sub, k, v, where)
         return dataclasses.replace(obj, **{head: sub})
-    return dataclasses.replace(obj, **{head: _coerce(value, current, f"{where} {dotted}")})
+    annotation = next(f.type for f in dataclasses.fields(obj) if f.name == head)
+    return dataclasses.replace(obj, **{head: _coerce(value, current, f"{where} {dotted}", str(annotation))})
 
 
 def resolve_options(step: str, options: dict[str, Any] | None) -> tuple[dict[str, Any], Any]:

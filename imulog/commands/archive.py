@@ -21,6 +21,10 @@ def _open(path: str) -> TrialReader:
 
 def trial_summary(trial: TrialReader) -> dict[str, Any]:
     """Everything ``imulog info`` shows, as a JSON-able dict."""
+    stored: dict[int, int] = {}
+    for ci in trial.summary.chunk_indexes:
+        for cid in ci.message_index_offsets:
+            stored[cid] = stored.get(cid, 0) + ci.chunk_length // len(ci.message_index_offsets)
     channels = []
     for c in trial.channels:
         md = c.metadata
@@ -40,6 +44,7 @@ def trial_summary(trial: TrialReader) -> dict[str, Any]:
                 "nan_samples": int(md["nan_samples"]) if "nan_samples" in md else None,
                 "units": md.get("units", ""),
                 "frame_id": md.get("frame_id", ""),
+                "stored_bytes": stored.get(c.channel_id, 0),
                 "metadata": md,
             }
         )
@@ -70,7 +75,7 @@ def info(file: str, as_json: bool) -> None:
     """Show a trial's channels, metadata, attachments and derived runs.
 
     For every channel: schema, rate (Hz), sample count, duration, gaps (time gaps longer than 1.5
-    sample periods / samples with NaN), units and frame.
+    sample periods / samples with NaN), stored (compressed) size, units and frame.
 
     \b
     Examples:
@@ -87,11 +92,12 @@ def info(file: str, as_json: bool) -> None:
         return
     click.echo(f"{data['path']}  ({data['bytes'] / 1e6:.2f} MB)")
     click.echo("channels:")
-    rows = [("topic", "schema", "rate_hz", "samples", "duration_s", "gaps(t/nan)", "units")]
+    rows = [("topic", "schema", "rate_hz", "samples", "duration_s", "gaps(t/nan)", "MB", "units")]
     for c in data["channels"]:
         gaps = f"{c['time_gaps'] if c['time_gaps'] is not None else '-'}/{c['nan_samples'] if c['nan_samples'] is not None else '-'}"
         dur = "-" if c["duration_s"] is None else f"{c['duration_s']:.3f}"
-        rows.append((c["topic"], c["schema"], _fmt_rate(c["rate_hz"]), str(c["samples"]), dur, gaps, c["units"]))
+        mb = f"{c['stored_bytes'] / 1e6:.2f}"
+        rows.append((c["topic"], c["schema"], _fmt_rate(c["rate_hz"]), str(c["samples"]), dur, gaps, mb, c["units"]))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     for r in rows:
         click.echo("  " + "  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)).rstrip())
@@ -176,13 +182,16 @@ def export(file: str, topic: str, output: str, start_ns: int | None, end_ns: int
             table = trial.read_arrow(topic, start_ns, end_ns)
         except ArchiveError as exc:
             raise click.ClickException(str(exc)) from None
-    out.parent.mkdir(parents=True, exist_ok=True)
-    if out.suffix.lower() == ".parquet":
-        import pyarrow.parquet as pq
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        if out.suffix.lower() == ".parquet":
+            import pyarrow.parquet as pq
 
-        pq.write_table(table, out)
-    else:
-        import pyarrow.csv as pacsv
+            pq.write_table(table, out)
+        else:
+            import pyarrow.csv as pacsv
 
-        pacsv.write_csv(table, out)
+            pacsv.write_csv(table, out)
+    except OSError as exc:
+        raise click.ClickException(f"{output}: cannot write ({exc.strerror or exc})") from None
     click.echo(f"wrote {table.num_rows} rows x {table.num_columns} columns of {topic} to {out}")

@@ -143,27 +143,44 @@ def zupt(
 
 
 # --------------------------------------------------------------------------------------------------
-# Rotating accelerometer bias (an imulog addition to Bai's ZUPT)
+# Rotating accelerometer errors (an imulog addition to Bai's ZUPT)
 #
-# A constant accelerometer bias b (sensor frame, m/s^2) appears in the global frame as R(t) b. At rest the
-# orientation filter absorbs it into a small tilt error, so the global acceleration is ~0 there; once the
-# sensor rotates the bias turns with it and leaves R(t) b - R(t_rest) b, which is not constant and so is
-# not removed by the linear de-drift. Each movement between rests must integrate to zero velocity; with
-# c_m the mean global acceleration in the rest just before movement m this gives, for every movement,
-#     integral_m (a_global - c_m) dt = [integral_m (R(t) - R(t_m)) dt] b,
-# three linear equations per movement in the three unknowns of b, solved by least squares over the trial.
+# A constant accelerometer bias b (sensor frame, m/s^2) appears in the global frame as R(t) b; scale and
+# axis-misalignment errors E (3x3, dimensionless) add R(t) E f(t) with f ~ R(t)^T g the specific force,
+# dominated by gravity. At rest the orientation filter absorbs both into a small tilt error, so the global
+# acceleration is ~0 there; once the sensor rotates, the errors turn with it and leave
+#     e(t) - e(t_m),   e(t) = R(t) b + g R(t) E R(t)^T z,
+# which is not constant and so is not removed by the linear de-drift. Each movement between rests must
+# integrate to zero velocity; with c_m the mean global acceleration in the rest just before movement m,
+#     integral_m (a_global - c_m) dt = integral_m (e(t) - e(t_m)) dt,
+# three equations per movement, linear in the 3 (+ 9) unknowns, solved by least squares over the trial.
 
 
 @dataclass(frozen=True)
 class RotatingBiasParams:
-    """Estimation of a constant sensor-frame accelerometer bias from the ZUPT closure of every movement.
+    """Estimation of sensor-frame accelerometer errors from the ZUPT closure of every movement.
 
     rest_s: length (s) of the rest just before a movement whose mean global acceleration is c_m.
-    min_movements: fewer complete movements than this give no estimate (zero bias).
+    gravity_coupled: also fit the 3x3 scale/misalignment matrix acting on gravity (12 unknowns, else 3).
+    gravity_mps2: gravity magnitude (m/s^2) for the gravity-coupled term.
+    min_movements: fewer complete movements than this (at least 2 per unknown triple) give no estimate.
     """
 
     rest_s: float = 0.5
-    min_movements: int = 6
+    gravity_coupled: bool = True
+    gravity_mps2: float = 9.81
+    min_movements: int = 8
+
+
+@dataclass
+class AccelerometerErrors:
+    """Sensor-frame accelerometer bias (3,) m/s^2 and gravity-coupled error matrix (3, 3) (dimensionless)."""
+
+    bias_mps2: np.ndarray
+    matrix: np.ndarray
+
+    def as_dict(self) -> dict:
+        return {"bias_mps2": self.bias_mps2.tolist(), "matrix": self.matrix.tolist()}
 
 
 def _movements(static: np.ndarray) -> np.ndarray:
@@ -172,35 +189,52 @@ def _movements(static: np.ndarray) -> np.ndarray:
     return runs[(runs[:, 0] > 0) & (runs[:, 1] < n)]  # rests on both sides
 
 
+def _error_terms(rot: np.ndarray, params: RotatingBiasParams) -> np.ndarray:
+    """Regressors (n, 3, 3 or 12): d e(t) / d [b, vec(E)] at each sample."""
+    parts = [rot]
+    if params.gravity_coupled:
+        up = rot[:, 2, :]  # R^T z: the vertical in the sensor frame
+        parts.append(params.gravity_mps2 * (rot[:, :, :, None] * up[:, None, None, :]).reshape(len(rot), 3, 9))
+    return np.concatenate(parts, axis=2)
+
+
+def _rest_mean(a: np.ndarray, t: np.ndarray, static: np.ndarray, s: int, rest_s: float) -> np.ndarray | None:
+    rest = np.flatnonzero(static[:s] & (t[:s] >= t[s - 1] - rest_s))
+    return np.nanmean(a[rest], axis=0) if len(rest) else None
+
+
 def estimate_rotating_bias(
     acc_mps2: np.ndarray,
     rot_sensor_to_global: np.ndarray,
     t_s: np.ndarray,
     static_mask: np.ndarray,
     params: RotatingBiasParams = RotatingBiasParams(),
-) -> np.ndarray:
-    """Sensor-frame accelerometer bias (3,) m/s^2 from gravity-free global acceleration (N, 3) and the
+) -> AccelerometerErrors:
+    """Sensor-frame accelerometer errors from gravity-free global acceleration (N, 3) m/s^2 and the
     sensor-to-global rotation matrices (N, 3, 3) used to compute it."""
     a = np.asarray(acc_mps2, dtype=np.float64)
     r = np.asarray(rot_sensor_to_global, dtype=np.float64)
     t = _check_time(t_s, len(a))
     static = np.asarray(static_mask, dtype=bool)
+    k = 12 if params.gravity_coupled else 3
     rows, rhs = [], []
     for s, e in _movements(static):
-        rest = np.flatnonzero(static[:s] & (t[:s] >= t[s - 1] - params.rest_s))
-        if len(rest) == 0:
+        c = _rest_mean(a, t, static, s, params.rest_s)
+        if c is None:
             continue
-        c = np.nanmean(a[rest], axis=0)
         i0, i1 = s - 1, e
-        g = cumtrapz((r[i0 : i1 + 1] - r[i0]).reshape(-1, 9), t[i0 : i1 + 1])[-1].reshape(3, 3)
+        terms = _error_terms(r[i0 : i1 + 1], params)
+        g = cumtrapz((terms - terms[0]).reshape(len(terms), -1), t[i0 : i1 + 1])[-1].reshape(3, k)
         v = cumtrapz(a[i0 : i1 + 1] - c, t[i0 : i1 + 1])[-1]
         if np.all(np.isfinite(g)) and np.all(np.isfinite(v)):
             rows.append(g)
             rhs.append(v)
-    if len(rows) < params.min_movements:
-        return np.zeros(3)
-    b, *_ = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)
-    return b
+    zero = AccelerometerErrors(np.zeros(3), np.zeros((3, 3)))
+    if len(rows) < max(params.min_movements, k // 3 * 2):
+        return zero
+    x, *_ = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)
+    matrix = x[3:].reshape(3, 3) if params.gravity_coupled else np.zeros((3, 3))
+    return AccelerometerErrors(bias_mps2=x[:3], matrix=matrix)
 
 
 def compensate_rotating_bias(
@@ -208,17 +242,19 @@ def compensate_rotating_bias(
     rot_sensor_to_global: np.ndarray,
     t_s: np.ndarray,
     static_mask: np.ndarray,
-    bias_mps2: np.ndarray,
+    errors: AccelerometerErrors,
     params: RotatingBiasParams = RotatingBiasParams(),
 ) -> np.ndarray:
-    """Global acceleration with ``c_m + (R(t) - R(t_m)) b`` removed in every movement (rests unchanged)."""
+    """Global acceleration with ``c_m + e(t) - e(t_m)`` removed in every movement (rests unchanged)."""
     a = np.array(acc_mps2, dtype=np.float64, copy=True)
     r = np.asarray(rot_sensor_to_global, dtype=np.float64)
     t = _check_time(t_s, len(a))
     static = np.asarray(static_mask, dtype=bool)
-    b = np.asarray(bias_mps2, dtype=np.float64)
+    x = np.concatenate([errors.bias_mps2, errors.matrix.reshape(-1)]) if params.gravity_coupled else errors.bias_mps2
     for s, e in _movements(static):
-        rest = np.flatnonzero(static[:s] & (t[:s] >= t[s - 1] - params.rest_s))
-        c = np.nanmean(a[rest], axis=0) if len(rest) else np.zeros(3)
-        a[s:e] = a[s:e] - c - (r[s:e] - r[s - 1]) @ b
+        c = _rest_mean(a, t, static, s, params.rest_s)
+        if c is None:
+            c = np.zeros(3)
+        err = _error_terms(r[s - 1 : e], params) @ x
+        a[s:e] = a[s:e] - c - (err[1:] - err[0])
     return a

@@ -515,10 +515,10 @@ def reconstruct_repetitions(
     a_comp = None
     if orientation is not None and any(m in ("zupt_bias", "optimized") for m in methods):
         rot = quat_to_matrix(orientation)
-        bias = estimate_rotating_bias(a, rot, t, static, params.rotating_bias)
-        a_comp = compensate_rotating_bias(a, rot, t, static, bias, params.rotating_bias)
+        errors = estimate_rotating_bias(a, rot, t, static, params.rotating_bias)
+        a_comp = compensate_rotating_bias(a, rot, t, static, errors, params.rotating_bias)
         if info is not None:
-            info["rotating_bias_mps2"] = bias.tolist()
+            info["accelerometer_errors"] = errors.as_dict()
     if "optimized" in methods and waypoints is None:
         base = a if a_comp is None else a_comp
         z = np.full((len(t), 3), np.nan)

@@ -1,0 +1,118 @@
+"""From two orientation series to joint angles, joint centres and constraint masks (pure numpy).
+
+    res = estimate_kinematics(q_ua_s2g, q_fa_s2g, t_ns, KinematicsConfig(...))
+
+calibrates each series to the trunk frame in the neutral window (:mod:`.calibration`), solves the
+unconstrained and constrained problems (:mod:`.solver`) and runs the forward kinematics of both.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from imulog.process import quaternion as quat
+from imulog.process.kinematics.calibration import NeutralCalibration, fit_global_to_trunk, segment_rotations
+from imulog.process.kinematics.dh import ArmModel, ForwardKinematics, JointLimits, forward_kinematics
+from imulog.process.kinematics.errors import outside_workspace
+from imulog.process.kinematics.solver import SolveResult, SolverParams, Workspace, solve_sequence
+
+__all__ = ["KinematicsConfig", "KinematicsEstimate", "estimate_kinematics"]
+
+
+@dataclass(frozen=True)
+class KinematicsConfig:
+    """Everything the estimate depends on (model geometry, limits, boxes, calibration, solver)."""
+
+    model: ArmModel = ArmModel()
+    limits: JointLimits = JointLimits()
+    workspace: Workspace = Workspace()
+    calibration: NeutralCalibration = NeutralCalibration()
+    solver: SolverParams = SolverParams()
+
+
+@dataclass
+class KinematicsEstimate:
+    """Unconstrained and constrained solutions with their forward kinematics (trunk frame)."""
+
+    t_ns: np.ndarray
+    unconstrained: SolveResult
+    constrained: SolveResult | None
+    fk_unconstrained: ForwardKinematics
+    fk_constrained: ForwardKinematics | None
+    t_out: np.ndarray  # (N,) unconstrained elbow or wrist outside its box
+    q_global_to_trunk: dict[str, np.ndarray]
+    timing_ms_per_sample: dict[str, float] = field(default_factory=dict)
+
+
+def _fk_nan(q: np.ndarray, model: ArmModel) -> ForwardKinematics:
+    ok = np.all(np.isfinite(q), axis=1)
+    n = len(q)
+    out = ForwardKinematics(
+        np.full((n, 3, 3), np.nan), np.full((n, 3, 3), np.nan), np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+    )
+    if ok.any():
+        fk = forward_kinematics(q[ok], model)
+        out.r_upper_arm[ok], out.r_forearm[ok], out.elbow_m[ok], out.wrist_m[ok] = (
+            fk.r_upper_arm,
+            fk.r_forearm,
+            fk.elbow_m,
+            fk.wrist_m,
+        )
+    return out
+
+
+def estimate_kinematics(
+    q_upper_arm_s2g: np.ndarray,
+    q_forearm_s2g: np.ndarray,
+    t_ns: np.ndarray,
+    config: KinematicsConfig = KinematicsConfig(),
+    *,
+    constrained: bool = True,
+    q_segment_to_sensor: dict[str, np.ndarray] | None = None,
+) -> KinematicsEstimate:
+    """Joint angles from sensor-to-global quaternions (N, 4) of the upper-arm and forearm sensors
+    (or marker clusters) sampled at ``t_ns``; ``q_segment_to_sensor`` optional mounting rotations."""
+    mount = q_segment_to_sensor or {}
+    window = config.calibration.window_mask(t_ns)
+    if not window.any():
+        raise ValueError(
+            f"the neutral window {config.calibration.window_s} s holds no sample "
+            f"(recording lasts {(int(t_ns[-1]) - int(t_ns[0])) * 1e-9:.2f} s)"
+        )
+    fk_n = forward_kinematics(np.radians(config.calibration.pose_deg), config.model)
+    rots, g2t = {}, {}
+    for seg, q, r_model in (
+        ("upper_arm", q_upper_arm_s2g, fk_n.r_upper_arm),
+        ("forearm", q_forearm_s2g, fk_n.r_forearm),
+    ):
+        m = np.asarray(mount.get(seg, quat.IDENTITY), dtype=np.float64)
+        g2t[seg] = fit_global_to_trunk(np.asarray(q)[window], r_model, m, config.calibration.mode)
+        rots[seg] = segment_rotations(q, g2t[seg], m)
+    q0 = np.radians(config.calibration.pose_deg)
+    n = len(t_ns)
+    t0 = time.perf_counter()
+    un = solve_sequence(rots["upper_arm"], rots["forearm"], config.model, q0_rad=q0, params=config.solver)
+    t1 = time.perf_counter()
+    timing = {"unconstrained": (t1 - t0) * 1e3 / max(n, 1)}
+    fk_un = _fk_nan(un.q_rad, config.model)
+    t_out = outside_workspace(fk_un.elbow_m, fk_un.wrist_m, config.workspace) & np.all(np.isfinite(un.q_rad), axis=1)
+    con = fk_con = None
+    if constrained:
+        lo, hi = config.limits.as_rad()
+        t0 = time.perf_counter()
+        con = solve_sequence(
+            rots["upper_arm"],
+            rots["forearm"],
+            config.model,
+            constrained=True,
+            limits=config.limits,
+            workspace=config.workspace,
+            q0_rad=np.clip(q0, lo, hi),
+            params=config.solver,
+        )
+        timing["constrained"] = (time.perf_counter() - t0) * 1e3 / max(n, 1)
+        fk_con = _fk_nan(con.q_rad, config.model)
+    return KinematicsEstimate(np.asarray(t_ns, dtype=np.int64), un, con, fk_un, fk_con, t_out, g2t, timing)

@@ -1,0 +1,273 @@
+"""Two-segment arm: IMUs on the upper arm and forearm with known shoulder and elbow angles.
+
+The true joint angles (the five free angles of :mod:`imulog.process.kinematics.dh`) start in a static
+neutral posture, then blend (minimum-jerk, 2 s) into smooth sinusoids with per-joint frequencies
+(0.05-0.25 Hz) inside the physiological limits. Elbow flexion and pronation-supination touch their
+lower limits (0 deg) once per cycle, so the joint-limit constraint matters; the workspace boxes are
+the bounding boxes of the true elbow and wrist centres (plus ``workspace_margin_m``), so the true
+centres touch every face and any orientation error pushes the unconstrained solution outside.
+
+Segment orientations come from the same DH model; each IMU is mounted with its axes on the DH segment
+axes (optionally with a random ``mounting_error_deg``), the Vicon cluster on each IMU exactly as
+in :mod:`imulog.simulate.vicon_model` (markers ``{segment}_O/X/Y/A``). IMU signals go through the
+LSM9DS1-like error model of :mod:`imulog.simulate.imu_model` (no dropped samples). IMUs and Vicon
+share one clock (a cable-synchronised station, as in the paper), both at ``rate_hz``.
+
+The trunk is still: its frame (x lateral, y anterior, z up, origin in the shoulder centre) sits at
+``shoulder_m`` in the Vicon world, turned by ``trunk_heading_deg`` about the vertical.
+
+    python -m imulog.simulate.arm arm.mcap --seconds 60 --seed 0     # writes an MCAP trial
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from imulog.model import ImuStream, MarkerStream, Recording
+from imulog.process.kinematics.dh import JOINT_NAMES, ArmModel, JointLimits, forward_kinematics
+from imulog.simulate import imu_model, minjerk, quat, vicon_model
+
+SEGMENTS = ("upper_arm", "forearm")
+VICON_NAME = "vicon"
+
+
+@dataclass(frozen=True)
+class ArmParams:
+    """Arm trial parameters (degrees, metres, seconds)."""
+
+    duration_s: float = 60.0
+    rate_hz: float = 100.0  # Xsens MTw and Vicon Vero of the paper
+    neutral_s: float = 3.0  # static neutral posture at the start
+    blend_s: float = 2.0  # minimum-jerk blend from the posture into the movement
+    neutral_pose_deg: tuple[float, float, float, float, float] = (90.0, 30.0, 0.0, 90.0, 90.0)
+    # movement: centre and amplitude per joint (deg); centre - amplitude = 0 touches the lower limit
+    centre_deg: tuple[float, float, float, float, float] = (60.0, 55.0, 15.0, 55.0, 60.0)
+    amplitude_deg: tuple[float, float, float, float, float] = (35.0, 30.0, 35.0, 55.0, 60.0)
+    frequency_hz: tuple[float, float] = (0.05, 0.25)  # per-joint frequencies drawn in this range
+    upper_arm_length_m: float = 0.30
+    forearm_length_m: float = 0.27
+    styloid_distance_m: float = 0.06
+    carrying_angle_deg: float = 15.0
+    shoulder_m: tuple[float, float, float] = (0.2, 0.5, 1.3)  # shoulder centre in the Vicon world
+    trunk_heading_deg: float = 30.0  # trunk frame's rotation about the world vertical
+    workspace_margin_m: float = 0.0
+    mounting_error_deg: float = 0.0  # sd of the IMU-on-segment misalignment per axis
+    imu_lever_m: float = 0.04  # IMU distance from the segment's long axis
+    field_uT: float = 46.0
+    inclination_deg: float = 62.0
+    noise_free: bool = False
+    vicon_noise_mm: float = 0.2
+    imu_to_cluster_sd_deg: float = 0.0  # clusters slotted on the IMU supports (paper, Fig. 3a)
+
+
+@dataclass
+class ArmTruth:
+    """True state on the common clock: joint angles ``q_rad`` (N, 5) (:data:`JOINT_NAMES` order),
+    segment-to-trunk rotations, elbow/wrist centres (N, 3) m in the trunk frame, and the frames."""
+
+    t_ns: np.ndarray
+    q_rad: np.ndarray
+    r_upper_arm: np.ndarray
+    r_forearm: np.ndarray
+    elbow_m: np.ndarray
+    wrist_m: np.ndarray
+    q_world_trunk: np.ndarray
+    q_segment_to_sensor: dict[str, np.ndarray]
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class ArmTrial:
+    recording: Recording
+    truth: ArmTruth
+    params: ArmParams
+
+
+def _joint_law(params: ArmParams, rng: np.random.Generator):
+    lo, hi = JointLimits().as_rad()
+    qn = np.radians(params.neutral_pose_deg)
+    c = np.radians(params.centre_deg)
+    a = np.radians(params.amplitude_deg)
+    if np.any(c - a < lo - 1e-12) or np.any(c + a > hi + 1e-12) or np.any(qn < lo) or np.any(qn > hi):
+        raise ValueError("arm movement or neutral posture outside the physiological joint limits")
+    f = rng.uniform(*params.frequency_hz, 5)
+    t_move = params.neutral_s + params.blend_s
+    # phase so that the movement starts at the centre, moving (sin(0)=0) for a smooth blend
+    phi = rng.uniform(0, 2 * np.pi, 5)
+
+    def q_of_t(t_s: np.ndarray) -> np.ndarray:
+        t = np.asarray(t_s, dtype=np.float64)[:, None]
+        move = c + a * np.sin(2 * np.pi * f * (t - params.neutral_s) + phi)
+        tau = np.clip((t - params.neutral_s) / params.blend_s, 0.0, 1.0)
+        b = minjerk.profile(tau)[0]
+        return qn + b * (move - qn)
+
+    return q_of_t, {"frequency_hz": f.tolist(), "phase_rad": phi.tolist(), "movement_start_s": t_move}
+
+
+def _segment_offsets(model: ArmModel, lever_m: float) -> dict[str, np.ndarray]:
+    """IMU origin in each segment frame (m): mid upper arm / distal third of the forearm, off-axis."""
+    fk = forward_kinematics(np.zeros(5), model)
+    to_shoulder = fk.r_upper_arm.T @ (np.zeros(3) - fk.elbow_m)  # constant in frame 3
+    to_elbow = fk.r_forearm.T @ (fk.elbow_m - fk.wrist_m)  # constant in frame 6
+
+    def perp(v: np.ndarray) -> np.ndarray:
+        u = np.cross(v, [1.0, 0.0, 0.0])
+        if np.linalg.norm(u) < 1e-6 * np.linalg.norm(v):
+            u = np.cross(v, [0.0, 1.0, 0.0])
+        return u / np.linalg.norm(u)
+
+    return {
+        "upper_arm": 0.5 * to_shoulder + lever_m * perp(to_shoulder),
+        "forearm": 0.3 * to_elbow + lever_m * perp(to_elbow),
+    }
+
+
+def simulate_arm(*, seed: int = 0, imu: imu_model.ImuParams | None = None, **overrides: Any) -> ArmTrial:
+    """Simulate one arm trial; ``overrides`` set :class:`ArmParams` fields (e.g. ``duration_s=30``)."""
+    params = ArmParams(**overrides)
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xA53]))
+    model = ArmModel(
+        params.upper_arm_length_m, params.forearm_length_m, params.styloid_distance_m, params.carrying_angle_deg
+    )
+    if imu is None:
+        imu = imu_model.ImuParams.ideal() if params.noise_free else imu_model.ImuParams()
+    imu = dataclasses.replace(imu, drop_probability=0.0)
+    q_of_t, law_info = _joint_law(params, rng)
+
+    n = int(round(params.duration_s * params.rate_hz)) + 1
+    t_ns = np.round(np.arange(n) / params.rate_hz * 1e9).astype(np.int64)
+    t_s = t_ns / 1e9
+    psi = math.radians(params.trunk_heading_deg)
+    q_wt = np.array([math.cos(psi / 2), 0.0, 0.0, math.sin(psi / 2)])
+    shoulder = np.asarray(params.shoulder_m, dtype=np.float64)
+    offsets = _segment_offsets(model, params.imu_lever_m)
+    mount = {
+        s: quat.from_rotvec(rng.normal(0.0, math.radians(params.mounting_error_deg), 3)) for s in SEGMENTS
+    }
+    q_ic = {s: vicon_model.draw_imu_to_cluster(
+        vicon_model.ViconParams(imu_to_cluster_sd_deg=params.imu_to_cluster_sd_deg), rng) for s in SEGMENTS}
+    device_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xA54]))
+    noise_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xA55]))
+    vicon_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xA56]))
+    inc = math.radians(params.inclination_deg)
+    field_world = params.field_uT * np.array([math.cos(inc), 0.0, -math.sin(inc)])
+
+    def world_state(ts: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Per segment: sensor-to-world quaternion (N, 4) and IMU position (N, 3) m at times ``ts`` (s)."""
+        fk = forward_kinematics(q_of_t(ts), model)
+        out = {}
+        for seg, r_seg, origin in (
+            ("upper_arm", fk.r_upper_arm, fk.elbow_m),
+            ("forearm", fk.r_forearm, fk.wrist_m),
+        ):
+            q_ts = np.array([quat.from_matrix(r) for r in r_seg])
+            q_ws = quat.normalize(quat.mul(quat.mul(q_wt, q_ts), mount[seg]))
+            p_trunk = origin + np.einsum("nij,j->ni", r_seg, offsets[seg])
+            out[seg] = (q_ws, shoulder + quat.rotate(q_wt, p_trunk))
+        return out
+
+    h = 1e-3
+    now, plus, minus = world_state(t_s), world_state(t_s + h), world_state(t_s - h)
+    fk_true = forward_kinematics(q_of_t(t_s), model)
+    imus, marker_pos, labels = [], [], []
+    vparams = vicon_model.ViconParams(noise_mm=params.vicon_noise_mm)
+    for seg in SEGMENTS:
+        q_ws, p = now[seg]
+        qp, pp = plus[seg]
+        qm, pm = minus[seg]
+        acc_world = (pp - 2 * p + pm) / h**2
+        qp = np.where(np.sum(qp * q_ws, axis=1, keepdims=True) < 0, -qp, qp)
+        qm = np.where(np.sum(qm * q_ws, axis=1, keepdims=True) < 0, -qm, qm)
+        dq = (qp - qm) / (2 * h)
+        omega = 2.0 * quat.mul(quat.conj(q_ws), dq)[:, 1:]
+        f_sensor = quat.rotate_inverse(q_ws, acc_world + np.array([0.0, 0.0, imu_model.EARTH_G]))
+        m_sensor = quat.rotate_inverse(q_ws, np.broadcast_to(field_world, p.shape))
+        device = imu_model.draw_device(imu, device_rng)
+        ch = imu_model.measure(f_sensor, omega, m_sensor, t_s, imu, device, noise_rng)
+        meta = {
+            "model": "LSM9DS1 (simulated)",
+            "rate_hz": params.rate_hz,
+            "units": {q: c.unit for q, c in ch.items()},
+            "source": f"arm_s{seed:02d}_{seg}.csv",
+            "segment": seg,
+        }
+        imus.append(ImuStream(seg, t_ns, acc=ch["acc"].si, gyr=ch["gyr"].si, mag=ch["mag"].si, meta=meta))
+        true_markers = vicon_model.marker_positions(p, q_ws, q_ic[seg], vparams)
+        marker_pos.append(vicon_model.add_noise_and_gaps(true_markers, params.rate_hz, vparams, vicon_rng,
+                                                         params.noise_free))
+        labels += [f"{seg}_{lab}" for lab in vicon_model.LABELS]
+    markers = MarkerStream(
+        VICON_NAME, t_ns, labels, np.concatenate(marker_pos, axis=1), meta={"rate_hz": params.rate_hz, "units": "mm"}
+    )
+    m = params.workspace_margin_m
+    boxes = {
+        "workspace_elbow_m": [(fk_true.elbow_m.min(0) - m).tolist(), (fk_true.elbow_m.max(0) + m).tolist()],
+        "workspace_wrist_m": [(fk_true.wrist_m.min(0) - m).tolist(), (fk_true.wrist_m.max(0) + m).tolist()],
+    }
+    kin_meta = {
+        "upper_arm_imu": "upper_arm",
+        "forearm_imu": "forearm",
+        "markers": VICON_NAME,
+        "clusters": {s: [f"{s}_{lab}" for lab in ("O", "X", "Y")] for s in SEGMENTS},
+        "neutral_pose_deg": list(params.neutral_pose_deg),
+        "neutral_window_s": [0.5, params.neutral_s - 0.5],
+        "side": "right",
+        "frame": "trunk: origin shoulder centre, x lateral, y anterior, z up (Caruso 2024)",
+        **boxes,
+    }
+    anthropometrics = {
+        "upper_arm_length_m": params.upper_arm_length_m,
+        "forearm_length_m": params.forearm_length_m,
+        "styloid_distance_m": params.styloid_distance_m,
+        "carrying_angle_deg": params.carrying_angle_deg,
+    }
+    recording = Recording(
+        imus=imus,
+        markers=[markers],
+        metadata={
+            "imulog.trial": {"subject": f"S{seed:02d}", "trial": 0, "task": "arm", "simulated": True, "seed": int(seed)},
+            "imulog.anthropometrics": anthropometrics,
+            "imulog.kinematics": kin_meta,
+            **{f"imulog.device.{s.name}": dict(s.meta) for s in imus},
+        },
+    )
+    truth = ArmTruth(
+        t_ns=t_ns,
+        q_rad=q_of_t(t_s),
+        r_upper_arm=fk_true.r_upper_arm,
+        r_forearm=fk_true.r_forearm,
+        elbow_m=fk_true.elbow_m,
+        wrist_m=fk_true.wrist_m,
+        q_world_trunk=q_wt,
+        q_segment_to_sensor=mount,
+        info={"joint_names": list(JOINT_NAMES), **law_info, "params": dataclasses.asdict(params)},
+    )
+    return ArmTrial(recording, truth, params)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """``python -m imulog.simulate.arm OUT.mcap [--seconds S] [--seed N] [--noise-free]``."""
+    parser = argparse.ArgumentParser(description="Simulate a two-IMU arm trial and write it as an MCAP trial.")
+    parser.add_argument("out", type=Path)
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--noise-free", action="store_true")
+    parser.add_argument("--overwrite", action="store_true")
+    args = parser.parse_args(argv)
+    from imulog.archive import write_trial
+
+    sim = simulate_arm(seed=args.seed, duration_s=args.seconds, noise_free=args.noise_free)
+    path = write_trial(args.out, sim.recording, attach_sources=False, overwrite=args.overwrite)
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

@@ -1,0 +1,277 @@
+"""Reprocessing step ``kinematics``: shoulder and elbow angles from an upper-arm and a forearm IMU.
+
+Reads ``/derived/orientation/{imu}`` of both IMUs (computed in memory with the orientation step's
+default backend when absent), the model geometry from ``imulog.anthropometrics`` and the task set-up
+(IMU names, neutral posture and window, workspace boxes, joint limits, marker clusters) from
+``imulog.kinematics``; writes on the upper-arm IMU's clock:
+
+* ``/derived/kinematics/joint_angles_unconstrained`` and ``.../joint_angles_constrained``:
+  SignalStream, columns :data:`~imulog.process.kinematics.dh.JOINT_NAMES`, unit **deg**;
+* ``/derived/kinematics/elbow`` and ``/derived/kinematics/wrist``: PoseStream (frame ``trunk``,
+  origin the shoulder centre, m) of the constrained solution; orientation = upper arm / forearm;
+* ``/derived/kinematics/constraint_active``: columns ``active`` (any constraint), ``joint_limit``,
+  ``elbow_box``, ``wrist_box`` (constrained solution on a bound) and ``outside_unconstrained`` (the
+  paper's t_out), 0/1;
+* with marker clusters: ``/derived/kinematics/joint_angles_reference`` (deg, the same solver fed with
+  the cluster orientations, unconstrained) and the metadata record ``imulog.kinematics_errors``
+  (e_tot / e_out, unconstrained and constrained, deg); always ``imulog.kinematics_calibration``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from imulog.model import PoseStream, SignalStream
+from imulog.process import quaternion as quat
+from imulog.process.kinematics.calibration import NeutralCalibration
+from imulog.process.kinematics.dh import JOINT_NAMES, ArmModel, JointLimits
+from imulog.process.kinematics.errors import kinematics_errors
+from imulog.process.kinematics.pipeline import KinematicsConfig, KinematicsEstimate, estimate_kinematics
+from imulog.process.kinematics.solver import SolverParams, Workspace
+from imulog.process.orientation import OrientationParams
+
+STEP = "kinematics"
+ALGORITHM = "imulog.kinematics.caruso2024_dh"
+PREFIX = "/derived/kinematics"
+META = "imulog.kinematics"
+
+
+@dataclass(frozen=True)
+class KinematicsOptions:
+    """User overrides (``None``: take the value from the trial metadata, else the default)."""
+
+    upper_arm: str | None = None
+    forearm: str | None = None
+    neutral_pose_deg: tuple[float, ...] | None = None
+    neutral_window_s: tuple[float, float] | None = None
+    calibration_mode: str = "heading"
+    use_markers: bool = True
+    solver: SolverParams = SolverParams()
+    orientation: OrientationParams = OrientationParams()
+
+
+def resolve_config(metadata: dict[str, dict[str, Any]], options: KinematicsOptions) -> tuple[KinematicsConfig, dict]:
+    """Model, limits, boxes and calibration from metadata + options; also the JSON-able params record."""
+    kin = metadata.get(META, {}) or {}
+    model = ArmModel.from_metadata(metadata.get("imulog.anthropometrics", {}) or {})
+    limits = JointLimits.from_metadata(kin)
+    workspace = Workspace.from_metadata(kin)
+    default = NeutralCalibration()
+    pose = options.neutral_pose_deg or tuple(kin.get("neutral_pose_deg", default.pose_deg))
+    window = options.neutral_window_s or tuple(kin.get("neutral_window_s", default.window_s))
+    calib = NeutralCalibration(tuple(float(v) for v in pose), tuple(float(v) for v in window), options.calibration_mode)
+    config = KinematicsConfig(model, limits, workspace, calib, options.solver)
+    record = {
+        "model": dataclasses.asdict(model),
+        "joint_limits_deg": {n: list(getattr(limits, f"{n}_deg")) for n in JOINT_NAMES},
+        "workspace_elbow_m": workspace.elbow.as_list() if workspace.elbow else None,
+        "workspace_wrist_m": workspace.wrist.as_list() if workspace.wrist else None,
+        "calibration": dataclasses.asdict(calib),
+        "solver": dataclasses.asdict(options.solver),
+    }
+    return config, record
+
+
+def imu_names(topics: list[str], metadata: dict, options: KinematicsOptions) -> tuple[str, str]:
+    kin = metadata.get(META, {}) or {}
+    ua = options.upper_arm or kin.get("upper_arm_imu", "upper_arm")
+    fa = options.forearm or kin.get("forearm_imu", "forearm")
+    have = [t.split("/", 2)[2] for t in topics if t.startswith("/imu/")]
+    for role, name in (("upper-arm", ua), ("forearm", fa)):
+        if name not in have:
+            raise ValueError(
+                f"no channel /imu/{name} for the {role} IMU (IMU channels: {', '.join(have) or 'none'}); "
+                f"choose with --upper-arm/--forearm or set {META}.{role.replace('-', '_')}_imu"
+            )
+    if ua == fa:
+        raise ValueError(f"the upper-arm and forearm IMUs must differ (both {ua!r})")
+    return ua, fa
+
+
+def _orientation(trial: Any, imu: str, params: OrientationParams) -> tuple[np.ndarray, np.ndarray, str]:
+    """(t_ns, q_s2g, topic read): the orientation step's output when present, else computed here."""
+    from imulog.process.orientation import estimate_orientation
+    from imulog.steps.orientation import rate_hz, read_imu_arrays
+
+    topic = f"/derived/orientation/{imu}"
+    if topic in trial.topics():
+        s = trial.read(topic)
+        cols = [s.columns.index(c) for c in ("qw", "qx", "qy", "qz")]
+        return s.t_ns, s.values[:, cols], topic
+    t, acc, gyr, mag = read_imu_arrays(trial, f"/imu/{imu}")
+    res = estimate_orientation(gyr, acc, rate_hz(t), mag, params, t_ns=t)
+    return t, res.quat, f"/imu/{imu}"
+
+
+def _resample(t_src: np.ndarray, q: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
+    if len(t_src) == len(t_dst) and np.array_equal(t_src, t_dst):
+        return q
+    from imulog.process.resample import ResampleParams, resample_quaternions
+
+    return resample_quaternions(t_src, q, t_dst, ResampleParams(cutoff_ratio=0.0))
+
+
+def _cluster_orientations(trial: Any, kin: dict) -> tuple[np.ndarray, dict[str, np.ndarray]] | None:
+    """Cluster-to-world quaternions per segment from the markers named in ``imulog.kinematics``."""
+    from imulog.process.alignment import cluster_kinematics
+
+    clusters = kin.get("clusters")
+    name = kin.get("markers", "vicon")
+    topic = f"/markers/{name}"
+    if not clusters or topic not in trial.topics():
+        return None
+    ms = trial.read(topic)
+    rate = float((len(ms.t_ns) - 1) / ((ms.t_ns[-1] - ms.t_ns[0]) * 1e-9))
+    out = {}
+    for seg in ("upper_arm", "forearm"):
+        labels = clusters.get(seg)
+        if not labels or any(lab not in ms.labels for lab in labels):
+            raise ValueError(f"{META}.clusters.{seg} names markers {labels} not all in {topic} ({', '.join(ms.labels)})")
+        pos = ms.pos[:, [ms.labels.index(lab) for lab in labels]]
+        ck = cluster_kinematics(ms.t_ns, ["O", "X", "Y"], pos, rate)
+        out[seg] = ck.quat_c2w
+    return ms.t_ns, out
+
+
+def _reference_times(trial: Any, imu_topic: str, t_dev: np.ndarray) -> np.ndarray:
+    """IMU sample times on the marker clock: via ``imulog.alignment`` when it names this IMU, else equal."""
+    al = trial.metadata.get("imulog.alignment")
+    if al and al.get("imu") == imu_topic:
+        from imulog.process.alignment import device_to_reference
+
+        return np.asarray(device_to_reference(t_dev, al), dtype=np.int64)
+    return t_dev
+
+
+def _interp_angles(t_src: np.ndarray, q: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
+    out = np.full((len(t_dst), q.shape[1]), np.nan)
+    ok = np.all(np.isfinite(q), axis=1)
+    if ok.sum() < 2:
+        return out
+    ts, td = t_src[ok].astype(np.float64), np.asarray(t_dst, dtype=np.float64)
+    for k in range(q.shape[1]):
+        out[:, k] = np.interp(td, ts, np.unwrap(q[ok, k]), left=np.nan, right=np.nan)
+    # NaN where the nearest source sample is far (a long marker gap)
+    idx = np.clip(np.searchsorted(ts, td), 1, len(ts) - 1)
+    gap = np.minimum(np.abs(td - ts[idx - 1]), np.abs(ts[idx] - td))
+    period = np.median(np.diff(ts))
+    out[gap > 1.5 * period] = np.nan
+    return out
+
+
+def _streams(est: KinematicsEstimate, q_ref: np.ndarray | None) -> list:
+    t = est.t_ns
+    units = ["deg"] * len(JOINT_NAMES)
+    con = est.constrained
+    fk = est.fk_constrained
+    active = con.active
+    mask = np.column_stack([con.any_active, active[:, 0], active[:, 1], active[:, 2], est.t_out]).astype(np.float64)
+    nan_rows = ~np.all(np.isfinite(con.q_rad), axis=1)
+    mask[nan_rows] = np.nan
+    q_ua = np.full((len(t), 4), np.nan)
+    q_fa = np.full((len(t), 4), np.nan)
+    ok = ~nan_rows
+    if ok.any():
+        q_ua[ok] = quat.from_rotation_matrix(fk.r_upper_arm[ok])
+        q_fa[ok] = quat.from_rotation_matrix(fk.r_forearm[ok])
+    streams = [
+        SignalStream(
+            f"{PREFIX}/joint_angles_unconstrained", t, list(JOINT_NAMES), units, np.degrees(est.unconstrained.q_rad),
+            frame_id="trunk",
+        ),
+        SignalStream(f"{PREFIX}/joint_angles_constrained", t, list(JOINT_NAMES), units, np.degrees(con.q_rad),
+                     frame_id="trunk"),
+        PoseStream(f"{PREFIX}/elbow", t, fk.elbow_m, q_ua, frame_id="trunk"),
+        PoseStream(f"{PREFIX}/wrist", t, fk.wrist_m, q_fa, frame_id="trunk"),
+        SignalStream(
+            f"{PREFIX}/constraint_active",
+            t,
+            ["active", "joint_limit", "elbow_box", "wrist_box", "outside_unconstrained"],
+            ["1"] * 5,
+            mask,
+            frame_id="trunk",
+        ),
+    ]
+    if q_ref is not None:
+        streams.append(
+            SignalStream(f"{PREFIX}/joint_angles_reference", t, list(JOINT_NAMES), units, np.degrees(q_ref),
+                         frame_id="trunk")
+        )
+    return streams
+
+
+def compute_kinematics(trial: Any, ua: str, fa: str, options: KinematicsOptions) -> tuple[list, dict]:
+    """Pure-ish core of the step on an open trial: (streams, metadata records)."""
+    metadata = trial.metadata
+    config, record = resolve_config(metadata, options)
+    t_ua, q_ua, _ = _orientation(trial, ua, options.orientation)
+    t_fa, q_fa, _ = _orientation(trial, fa, options.orientation)
+    q_fa = _resample(t_fa, q_fa, t_ua)
+    est = estimate_kinematics(q_ua, q_fa, t_ua, config)
+    meta: dict[str, dict[str, Any]] = {
+        "imulog.kinematics_calibration": {
+            "upper_arm_imu": ua,
+            "forearm_imu": fa,
+            "mode": config.calibration.mode,
+            "neutral_pose_deg": list(config.calibration.pose_deg),
+            "neutral_window_s": list(config.calibration.window_s),
+            "q_global_to_trunk": {k: [float(x) for x in v] for k, v in est.q_global_to_trunk.items()},
+        }
+    }
+    q_ref = None
+    kin = metadata.get(META, {}) or {}
+    clusters = _cluster_orientations(trial, kin) if options.use_markers else None
+    if clusters is not None:
+        t_m, qc = clusters
+        ref = estimate_kinematics(qc["upper_arm"], qc["forearm"], t_m, config, constrained=False)
+        q_ref = _interp_angles(t_m, ref.unconstrained.q_rad, _reference_times(trial, f"/imu/{ua}", t_ua))
+        errors = kinematics_errors(est.unconstrained.q_rad, est.constrained.q_rad, q_ref, est.t_out)
+        errors["reference"] = f"/markers/{kin.get('markers', 'vicon')} clusters, same solver (unconstrained)"
+        meta["imulog.kinematics_errors"] = errors
+    active = est.constrained.any_active
+    meta["imulog.kinematics_calibration"].update(
+        {
+            "ms_per_sample": {k: float(v) for k, v in est.timing_ms_per_sample.items()},
+            "constraint_active_fraction": float(np.mean(active)),
+            "t_out_fraction": float(np.mean(est.t_out)),
+            "config": record,
+        }
+    )
+    return _streams(est, q_ref), meta
+
+
+def run_kinematics(path, *, options: KinematicsOptions = KinematicsOptions(), force: bool = False):
+    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome."""
+    from imulog.archive import TrialReader
+    from imulog.steps.base import StepResult, run_step
+
+    with TrialReader(path) as trial:
+        topics = trial.topics()
+        metadata = trial.metadata
+        ua, fa = imu_names(topics, metadata, options)
+        _, record = resolve_config(metadata, options)
+        inputs = []
+        for imu in (ua, fa):
+            o = f"/derived/orientation/{imu}"
+            inputs.append(o if o in topics else f"/imu/{imu}")
+        kin = metadata.get(META, {}) or {}
+        marker_topic = f"/markers/{kin.get('markers', 'vicon')}"
+        if options.use_markers and kin.get("clusters") and marker_topic in topics:
+            inputs.append(marker_topic)
+
+    def compute(trial) -> StepResult:
+        streams, meta = compute_kinematics(trial, ua, fa, options)
+        return StepResult(streams=streams, metadata=meta)
+
+    params = {
+        "upper_arm": ua,
+        "forearm": fa,
+        "use_markers": options.use_markers,
+        "orientation": dataclasses.asdict(options.orientation),
+        **record,
+    }
+    return run_step(path, step=STEP, algorithm=ALGORITHM, params=params, inputs=inputs, compute=compute, force=force)
