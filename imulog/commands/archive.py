@@ -64,6 +64,20 @@ def trial_summary(trial: TrialReader) -> dict[str, Any]:
     }
 
 
+def _fmt_units(units: str) -> str:
+    """A short form of a channel's units: ``V x38`` for many equal units, else the list, cut at 40 chars."""
+    try:
+        values = json.loads(units)
+    except ValueError:
+        return units
+    if not isinstance(values, list):
+        return str(values)
+    if len(values) > 1 and len(set(values)) == 1:
+        return f"{values[0]} x{len(values)}"
+    text = ",".join(str(v) for v in values)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
 def _fmt_rate(rate: float | None) -> str:
     return "-" if not rate else f"{rate:.6g}"
 
@@ -97,7 +111,9 @@ def info(file: str, as_json: bool) -> None:
         gaps = f"{c['time_gaps'] if c['time_gaps'] is not None else '-'}/{c['nan_samples'] if c['nan_samples'] is not None else '-'}"
         dur = "-" if c["duration_s"] is None else f"{c['duration_s']:.3f}"
         mb = f"{c['stored_bytes'] / 1e6:.2f}"
-        rows.append((c["topic"], c["schema"], _fmt_rate(c["rate_hz"]), str(c["samples"]), dur, gaps, mb, c["units"]))
+        rows.append(
+            (c["topic"], c["schema"], _fmt_rate(c["rate_hz"]), str(c["samples"]), dur, gaps, mb, _fmt_units(c["units"]))
+        )
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     for r in rows:
         click.echo("  " + "  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)).rstrip())

@@ -14,10 +14,11 @@ the raw movements (``static="movements"``) or the gyro-norm baseline (``static="
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
+from imulog.process.segmentation.boundaries import BoundaryParams, refine_phase_boundaries
 from imulog.process.segmentation.double_threshold import DoubleThresholdParams, double_threshold
 from imulog.process.segmentation.dynamos import DynamosParams, dynamos, lowpass_norm
 from imulog.process.segmentation.repetitions import Phases, RepetitionParams, segment_repetitions
@@ -45,6 +46,7 @@ class PhaseParams:
     double_threshold: DoubleThresholdParams = field(default_factory=DoubleThresholdParams)
     template: TemplateParams = field(default_factory=TemplateParams)
     repetitions: RepetitionParams = field(default_factory=RepetitionParams)
+    boundaries: BoundaryParams = field(default_factory=BoundaryParams)
     static: str = "movements"
     static_margin_s: float = 0.0
     gyro_norm: GyroNormStaticParams = field(default_factory=GyroNormStaticParams)
@@ -98,6 +100,9 @@ def segment_phases(gyr_rad_s: np.ndarray, rate_hz: float, params: PhaseParams = 
     else:
         raise ValueError(f"unknown segmentation method {params.method!r}; choose one of {', '.join(METHODS)}")
     phases = segment_repetitions(start, end, norm, rate_hz, params.repetitions)
+    if params.boundaries.enabled and len(phases):
+        ps, pe = refine_phase_boundaries(gyr, rate_hz, phases.start, phases.end, params.boundaries)
+        phases = replace(phases, start=ps, end=pe)
     if params.static == "movements":
         static = static_from_movements(len(gyr), start, end, rate_hz, params.static_margin_s)
     elif params.static == "gyro-norm":
