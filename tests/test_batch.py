@@ -95,6 +95,7 @@ def test_rerun_does_no_work(serial):
     assert opened.steps_computed == 0 and opened.steps_skipped == 3 * N_STEPS
     assert {f.path: derived_digests(f.path) for f in first.files} == before
 
+
 def test_other_parameters_recompute_only_downstream(serial, tmp_path):
     root = tmp_path / "archive"
     shutil.copytree(serial[0], root)

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import signal
 import subprocess
 import sys
+import threading
 import time
+
+import pytest
 
 from imulog.archive import TrialReader
 from imulog.batch import run
@@ -77,3 +81,34 @@ def test_killed_batch_resumes_without_repeating_work(tmp_path):
             assert len(trial.runs()) == N_STEPS  # one run per step, none twice
     assert check_archive(paths) == {}
     assert not list(root.rglob("*.tmp"))  # temporary files of the killed writer are gone
+
+
+@pytest.mark.slow
+def test_worker_process_killed_mid_batch_is_retried(tmp_path):
+    """A local worker process dies (SIGKILL) mid-batch: its files are retried in a fresh process, none lost."""
+    root = tmp_path / "archive"
+    paths = simulate_archive(root, subjects=4, trials=1, repetitions=3, opening_static_s=5.0)
+    killed: list[int] = []
+
+    def killer() -> None:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not killed:
+            # a worker is busy once a file has been touched by a step
+            busy = any(p.stat().st_mtime_ns != m for p, m in zip(paths, mtimes, strict=True))
+            children = multiprocessing.active_children()
+            if busy and children:
+                os.kill(children[0].pid, signal.SIGKILL)
+                killed.append(children[0].pid)
+            time.sleep(0.01)
+
+    mtimes = [p.stat().st_mtime_ns for p in paths]
+    thread = threading.Thread(target=killer, daemon=True)
+    thread.start()
+    report = run(root, STEPS, options={"phases": {"repetitions": 3}}, progress=False, workers=2)
+    thread.join(timeout=5)
+    assert killed
+    assert report.failed == 0 and report.processed == len(paths)
+    assert check_archive(paths) == {}
+    for p in paths:
+        with TrialReader(p) as trial:
+            assert len(trial.runs()) == N_STEPS

@@ -16,7 +16,6 @@ from click.testing import CliRunner
 from imulog.archive import TrialReader
 from imulog.batch import run
 from imulog.batch.catalog import build_catalog, schema
-from imulog.batch.report import write_report
 from imulog.batch.simulated import simulate_archive
 from imulog.cli import cli
 
@@ -68,9 +67,13 @@ def test_catalog_rows_and_readers(archive, tmp_path):
         f"from '{out}' group by subject order by subject"
     ).fetchall()
     assert [(s, n, r) for s, n, r, _ in got] == [("S01", 2, 3), ("S02", 2, 3)]
-    expected = df.assign(
-        zx=[json.loads(e)["methods"]["zupt"]["summary"]["x"]["mae_cm"]["mean"] for e in df["evaluation_json"]]
-    ).groupby("subject")["zx"].mean()
+    expected = (
+        df.assign(
+            zx=[json.loads(e)["methods"]["zupt"]["summary"]["x"]["mae_cm"]["mean"] for e in df["evaluation_json"]]
+        )
+        .groupby("subject")["zx"]
+        .mean()
+    )
     assert [z for *_, z in got] == pytest.approx(list(expected))
 
 

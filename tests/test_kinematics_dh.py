@@ -29,12 +29,18 @@ def test_trunk_frame_axes_and_segment_lengths():
     fk = forward_kinematics(np.zeros(5), model)
     np.testing.assert_allclose(fk.elbow_m, [0, 0, -0.31], atol=1e-12)
     # elevation 90 deg: plane 0 -> lateral (+x), plane 90 -> anterior (+y)
-    np.testing.assert_allclose(forward_kinematics(np.radians([0, 90, 0, 0, 0]), model).elbow_m, [0.31, 0, 0], atol=1e-12)
-    np.testing.assert_allclose(forward_kinematics(np.radians([90, 90, 0, 0, 0]), model).elbow_m, [0, 0.31, 0], atol=1e-12)
+    np.testing.assert_allclose(
+        forward_kinematics(np.radians([0, 90, 0, 0, 0]), model).elbow_m, [0.31, 0, 0], atol=1e-12
+    )
+    np.testing.assert_allclose(
+        forward_kinematics(np.radians([90, 90, 0, 0, 0]), model).elbow_m, [0, 0.31, 0], atol=1e-12
+    )
     q = np.random.default_rng(2).uniform(-2, 2, (50, 5))
     fk = forward_kinematics(q, model)
     np.testing.assert_allclose(np.linalg.norm(fk.elbow_m, axis=1), 0.31, atol=1e-12)
-    np.testing.assert_allclose(np.linalg.norm(fk.wrist_m - fk.elbow_m, axis=1), 0.26 / math.cos(model.delta_rad), atol=1e-12)
+    np.testing.assert_allclose(
+        np.linalg.norm(fk.wrist_m - fk.elbow_m, axis=1), 0.26 / math.cos(model.delta_rad), atol=1e-12
+    )
     for r in (fk.r_upper_arm, fk.r_forearm):
         np.testing.assert_allclose(np.einsum("nji,njk->nik", r, r), np.broadcast_to(np.eye(3), r.shape), atol=1e-12)
         np.testing.assert_allclose(np.linalg.det(r), 1.0, atol=1e-12)

@@ -212,9 +212,7 @@ def test_rotating_bias_is_estimated_from_zupt_closure():
     bounds = np.concatenate([s[3] + 25.0 * i for i, s in enumerate(segments)])
     # orientation: each phase turns the sensor between three poses (min-jerk in yaw and roll)
     poses = np.array([[0.0, 0.0], [0.4, -1.3], [0.8, -1.8], [0.4, -1.3], [0.0, 0.0]])
-    angles = np.concatenate(
-        [piecewise_minimum_jerk(s[0], s[3], poses) for s in segments]
-    )
+    angles = np.concatenate([piecewise_minimum_jerk(s[0], s[3], poses) for s in segments])
     rot = np.stack([_rotation_z_then_x(y, r) for y, r in angles])
     g = np.array([0.0, 0.0, 9.81])
     bias = np.array([0.06, -0.08, 0.05])

@@ -348,9 +348,14 @@ def build_catalog(
                     st = p.stat()
                 except OSError:
                     continue
-                if prev is not None and not prev.get("error") and (prev["file_size"], prev["mtime_ns"]) == (
-                    st.st_size,
-                    st.st_mtime_ns,
+                if (
+                    prev is not None
+                    and not prev.get("error")
+                    and (prev["file_size"], prev["mtime_ns"])
+                    == (
+                        st.st_size,
+                        st.st_mtime_ns,
+                    )
                 ):
                     row = prev
                     stats.reused += 1

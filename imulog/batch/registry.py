@@ -165,7 +165,9 @@ def set_field(obj: Any, dotted: str, value: Any, where: str = "") -> Any:
     head, _, rest = dotted.partition(".")
     names = {f.name for f in dataclasses.fields(obj)}
     if head not in names:
-        raise ValueError(f"{where or type(obj).__name__}: unknown option {dotted!r} (fields: {', '.join(sorted(names))})")
+        raise ValueError(
+            f"{where or type(obj).__name__}: unknown option {dotted!r} (fields: {', '.join(sorted(names))})"
+        )
     current = getattr(obj, head)
     if rest:
         if not dataclasses.is_dataclass(current):
@@ -233,7 +235,9 @@ def plan_fingerprint(steps: list[str], options: dict[str, dict[str, Any]]) -> st
         resolved[step] = {"kwargs": kwargs, "params": json.loads(params_json(params))}
         if step == "calibrate":  # the calibration file's content, not just its name
             try:
-                resolved[step]["calibration_sha256"] = hashlib.sha256(Path(kwargs["calibration"]).read_bytes()).hexdigest()
+                resolved[step]["calibration_sha256"] = hashlib.sha256(
+                    Path(kwargs["calibration"]).read_bytes()
+                ).hexdigest()
             except OSError as exc:
                 raise ValueError(f"step calibrate: cannot read calibration file: {exc}") from None
     return json.dumps(

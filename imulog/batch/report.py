@@ -188,7 +188,9 @@ def timing_stats(rows: list[dict[str, Any]], by_subject: bool = False) -> list[d
         items = groups[key]
         d = [float(x["duration_s"]) for x in items if x["duration_s"] is not None]
         mean, std, n = _mean_std(d)
-        peak, _, _ = _mean_std([float(x["peak_angular_velocity_rad_s"]) for x in items if x["peak_angular_velocity_rad_s"] is not None])
+        peak, _, _ = _mean_std(
+            [float(x["peak_angular_velocity_rad_s"]) for x in items if x["peak_angular_velocity_rad_s"] is not None]
+        )
         row = {"label": key[-1], "n": n, "duration_mean_s": mean, "duration_std_s": std}
         row["duration_min_s"] = min(d) if d else float("nan")
         row["duration_max_s"] = max(d) if d else float("nan")

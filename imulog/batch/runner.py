@@ -42,9 +42,7 @@ def expand_paths(items: str | os.PathLike[str] | Iterable[str | os.PathLike[str]
         if any(ch in text for ch in "*?["):
             out.extend(sorted(p for p in glob.glob(text, recursive=True) if os.path.isfile(p)))
         elif os.path.isdir(text):
-            out.extend(
-                sorted(str(p) for p in Path(text).rglob("*.mcap") if p.is_file() and not p.name.startswith("."))
-            )
+            out.extend(sorted(str(p) for p in Path(text).rglob("*.mcap") if p.is_file() and not p.name.startswith(".")))
         else:
             out.append(text)
     seen: set[str] = set()
@@ -171,47 +169,53 @@ def _run_serial(todo, plan, force, on_done, should_stop) -> None:
 
 
 def _run_processes(todo, plan, force, on_done, should_stop, workers: int) -> None:
-    """Local worker processes (spawn: safe with threads, numba and any platform)."""
+    """Local worker processes (spawn: safe with threads, numba and any platform).
+
+    If a worker process dies (killed, out of memory, a crash in native code), the pool breaks: the files that
+    were in flight are retried one at a time, each in a fresh single-worker pool, so only a file that kills its
+    worker again is reported failed; the rest of the queue then continues in a new pool.
+    """
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
     ctx = multiprocessing.get_context("spawn")
     queue = list(reversed(todo))
-    crashes: dict[int, int] = {}
-    while queue:
+
+    def finish(fut, i: int, path: str) -> bool:
+        """Report the future's result; False when the pool broke under it."""
+        try:
+            result = fut.result()
+        except BrokenProcessPool:
+            return False
+        except Exception as exc:  # e.g. a result that cannot be pickled: report the file
+            result = FileResult(path, "failed", error=f"worker error: {type(exc).__name__}: {exc}")
+        on_done(i, result)
+        return True
+
+    while queue and not should_stop():
+        suspects: list[tuple[int, str]] = []
         with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
             inflight: dict[Any, tuple[int, str]] = {}
-            broken = False
-            while (queue or inflight) and not broken:
+            while queue or inflight:
                 while queue and len(inflight) < 2 * workers and not should_stop():
                     i, path = queue.pop()
                     inflight[pool.submit(run_file, path, plan, force)] = (i, path)
                 if not inflight:
-                    return
+                    break
                 done, _ = wait(list(inflight), return_when=FIRST_COMPLETED)
                 for fut in done:
                     i, path = inflight.pop(fut)
-                    try:
-                        result = fut.result()
-                    except BrokenProcessPool:
-                        broken = True
-                        crashes[i] = crashes.get(i, 0) + 1
-                        if crashes[i] >= 2:
-                            on_done(i, FileResult(path, "failed", error="a worker process died on this file twice"))
-                        else:
-                            queue.append((i, path))
-                        continue
-                    except Exception as exc:  # e.g. a result that cannot be pickled: report the file
-                        result = FileResult(path, "failed", error=f"worker error: {type(exc).__name__}: {exc}")
-                    on_done(i, result)
-            if broken:  # a worker died (e.g. killed, out of memory): retry what was in flight once, in a new pool
-                for fut, (i, path) in inflight.items():
-                    crashes[i] = crashes.get(i, 0) + 1
-                    queue.append((i, path))
-                inflight.clear()
-        if should_stop():
-            return
+                    if not finish(fut, i, path):
+                        suspects.append((i, path))
+                if suspects:  # the pool is broken: everything still in flight is a suspect too
+                    suspects.extend(inflight.values())
+                    break
+        for i, path in sorted(suspects):
+            with ProcessPoolExecutor(max_workers=1, mp_context=ctx) as alone:
+                fut = alone.submit(run_file, path, plan, force)
+                if not finish(fut, i, path):
+                    on_done(i, FileResult(path, "failed", error="the worker process died while processing this file"))
 
 
 def _run_dask(todo, plan, force, on_done, should_stop, scheduler, workers: int) -> int:
@@ -303,7 +307,7 @@ def run(
         results[i] = result
         if result.status == "failed":
             state["failed"] += 1
-        else:
+        elif not result.prechecked:
             try:
                 book.record(result.path, pid)
             except OSError as exc:  # a read-only folder: keep going without the pre-check

@@ -1,8 +1,8 @@
 """Checks over an archive after a batch: file integrity and the content of derived results.
 
-    from imulog.batch.verify import check_archive, derived_digests
-    bad = check_archive(paths)          # {path: [problems]} for files that fail `imulog doctor`
-    derived_digests("trial.mcap")       # {topic or record: sha256} of derived channels and result records
+from imulog.batch.verify import check_archive, derived_digests
+bad = check_archive(paths)          # {path: [problems]} for files that fail `imulog doctor`
+derived_digests("trial.mcap")       # {topic or record: sha256} of derived channels and result records
 """
 
 from __future__ import annotations

@@ -16,7 +16,9 @@ def _parse_sets(values: tuple[str, ...]) -> dict[str, dict[str, str]]:
         key, eq, value = item.partition("=")
         step, dot, name = key.partition(".")
         if not eq or not dot or not name:
-            raise click.BadParameter(f"{item!r}: expected STEP.OPTION=VALUE, e.g. phases.repetitions=25", param_hint="--set")
+            raise click.BadParameter(
+                f"{item!r}: expected STEP.OPTION=VALUE, e.g. phases.repetitions=25", param_hint="--set"
+            )
         if step not in STEPS:
             raise click.BadParameter(f"{item!r}: unknown step {step!r} ({', '.join(STEP_ORDER)})", param_hint="--set")
         options.setdefault(step, {})[name.strip()] = value.strip()

@@ -21,7 +21,11 @@ def _floats(text: str | None, n: int, option: str) -> tuple[float, ...] | None:
 
 @click.command("kinematics")
 @click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--upper-arm", default=None, help="Upper-arm IMU name (/imu/NAME); default from imulog.kinematics, else 'upper_arm'.")
+@click.option(
+    "--upper-arm",
+    default=None,
+    help="Upper-arm IMU name (/imu/NAME); default from imulog.kinematics, else 'upper_arm'.",
+)
 @click.option("--forearm", default=None, help="Forearm IMU name; default from imulog.kinematics, else 'forearm'.")
 @click.option(
     "--neutral-pose",
@@ -43,7 +47,9 @@ def _floats(text: str | None, n: int, option: str) -> tuple[float, ...] | None:
     show_default=True,
     help="Fit only the heading of each IMU's global frame to the trunk (heading) or a full rotation.",
 )
-@click.option("--markers/--no-markers", default=True, show_default=True, help="Compute the Vicon-cluster reference and errors.")
+@click.option(
+    "--markers/--no-markers", default=True, show_default=True, help="Compute the Vicon-cluster reference and errors."
+)
 @click.option("--max-iterations", type=int, default=50, show_default=True, help="Solver iterations per sample.")
 @click.option("--force", is_flag=True, help="Recompute even when the same parameters are already recorded.")
 def process_kinematics(

@@ -143,7 +143,9 @@ def optimize_repetition(
         if params.align_heading and d == 3:
             raise ValueError("per-axis sigma_data_static_m cannot be combined with align_heading")
         parts = [
-            optimize_repetition(t, z[:, j], ref[:, j], phase_bounds_s, static, replace(params, sigma_data_static_m=float(v)))
+            optimize_repetition(
+                t, z[:, j], ref[:, j], phase_bounds_s, static, replace(params, sigma_data_static_m=float(v))
+            )
             for j, v in enumerate(sds)
         ]
         costs = {k: float(sum(pt.costs.get(k, 0.0) for pt in parts)) for k in parts[0].costs}
@@ -365,7 +367,9 @@ def reference_residuals(
     return out
 
 
-def inconsistent_repetitions(residuals: Mapping[int, np.ndarray], factor: float = 3.0, min_m: float = 0.20) -> list[int]:
+def inconsistent_repetitions(
+    residuals: Mapping[int, np.ndarray], factor: float = 3.0, min_m: float = 0.20
+) -> list[int]:
     """Repetitions whose RMS residual against the reference exceeds ``factor`` x the trial median and
     ``min_m`` (m; 0.2 m is about half an adult's bottle-to-mouth distance, so only a reference shifted by
     whole waypoints exceeds it): their phases do not follow the protocol (e.g. a missed movement shifted the

@@ -149,11 +149,13 @@ def simulate_arm(*, seed: int = 0, imu: imu_model.ImuParams | None = None, **ove
     q_wt = np.array([math.cos(psi / 2), 0.0, 0.0, math.sin(psi / 2)])
     shoulder = np.asarray(params.shoulder_m, dtype=np.float64)
     offsets = _segment_offsets(model, params.imu_lever_m)
-    mount = {
-        s: quat.from_rotvec(rng.normal(0.0, math.radians(params.mounting_error_deg), 3)) for s in SEGMENTS
+    mount = {s: quat.from_rotvec(rng.normal(0.0, math.radians(params.mounting_error_deg), 3)) for s in SEGMENTS}
+    q_ic = {
+        s: vicon_model.draw_imu_to_cluster(
+            vicon_model.ViconParams(imu_to_cluster_sd_deg=params.imu_to_cluster_sd_deg), rng
+        )
+        for s in SEGMENTS
     }
-    q_ic = {s: vicon_model.draw_imu_to_cluster(
-        vicon_model.ViconParams(imu_to_cluster_sd_deg=params.imu_to_cluster_sd_deg), rng) for s in SEGMENTS}
     device_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xA54]))
     noise_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xA55]))
     vicon_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xA56]))
@@ -201,8 +203,9 @@ def simulate_arm(*, seed: int = 0, imu: imu_model.ImuParams | None = None, **ove
         }
         imus.append(ImuStream(seg, t_ns, acc=ch["acc"].si, gyr=ch["gyr"].si, mag=ch["mag"].si, meta=meta))
         true_markers = vicon_model.marker_positions(p, q_ws, q_ic[seg], vparams)
-        marker_pos.append(vicon_model.add_noise_and_gaps(true_markers, params.rate_hz, vparams, vicon_rng,
-                                                         params.noise_free))
+        marker_pos.append(
+            vicon_model.add_noise_and_gaps(true_markers, params.rate_hz, vparams, vicon_rng, params.noise_free)
+        )
         labels += [f"{seg}_{lab}" for lab in vicon_model.LABELS]
     markers = MarkerStream(
         VICON_NAME, t_ns, labels, np.concatenate(marker_pos, axis=1), meta={"rate_hz": params.rate_hz, "units": "mm"}
@@ -233,7 +236,13 @@ def simulate_arm(*, seed: int = 0, imu: imu_model.ImuParams | None = None, **ove
         imus=imus,
         markers=[markers],
         metadata={
-            "imulog.trial": {"subject": f"S{seed:02d}", "trial": 0, "task": "arm", "simulated": True, "seed": int(seed)},
+            "imulog.trial": {
+                "subject": f"S{seed:02d}",
+                "trial": 0,
+                "task": "arm",
+                "simulated": True,
+                "seed": int(seed),
+            },
             "imulog.anthropometrics": anthropometrics,
             "imulog.kinematics": kin_meta,
             **{f"imulog.device.{s.name}": dict(s.meta) for s in imus},

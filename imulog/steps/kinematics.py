@@ -130,7 +130,9 @@ def _cluster_orientations(trial: Any, kin: dict) -> tuple[np.ndarray, dict[str, 
     for seg in ("upper_arm", "forearm"):
         labels = clusters.get(seg)
         if not labels or any(lab not in ms.labels for lab in labels):
-            raise ValueError(f"{META}.clusters.{seg} names markers {labels} not all in {topic} ({', '.join(ms.labels)})")
+            raise ValueError(
+                f"{META}.clusters.{seg} names markers {labels} not all in {topic} ({', '.join(ms.labels)})"
+            )
         pos = ms.pos[:, [ms.labels.index(lab) for lab in labels]]
         ck = cluster_kinematics(ms.t_ns, ["O", "X", "Y"], pos, rate)
         out[seg] = ck.quat_c2w
@@ -180,11 +182,16 @@ def _streams(est: KinematicsEstimate, q_ref: np.ndarray | None) -> list:
         q_fa[ok] = quat.from_rotation_matrix(fk.r_forearm[ok])
     streams = [
         SignalStream(
-            f"{PREFIX}/joint_angles_unconstrained", t, list(JOINT_NAMES), units, np.degrees(est.unconstrained.q_rad),
+            f"{PREFIX}/joint_angles_unconstrained",
+            t,
+            list(JOINT_NAMES),
+            units,
+            np.degrees(est.unconstrained.q_rad),
             frame_id="trunk",
         ),
-        SignalStream(f"{PREFIX}/joint_angles_constrained", t, list(JOINT_NAMES), units, np.degrees(con.q_rad),
-                     frame_id="trunk"),
+        SignalStream(
+            f"{PREFIX}/joint_angles_constrained", t, list(JOINT_NAMES), units, np.degrees(con.q_rad), frame_id="trunk"
+        ),
         PoseStream(f"{PREFIX}/elbow", t, fk.elbow_m, q_ua, frame_id="trunk"),
         PoseStream(f"{PREFIX}/wrist", t, fk.wrist_m, q_fa, frame_id="trunk"),
         SignalStream(
@@ -198,8 +205,9 @@ def _streams(est: KinematicsEstimate, q_ref: np.ndarray | None) -> list:
     ]
     if q_ref is not None:
         streams.append(
-            SignalStream(f"{PREFIX}/joint_angles_reference", t, list(JOINT_NAMES), units, np.degrees(q_ref),
-                         frame_id="trunk")
+            SignalStream(
+                f"{PREFIX}/joint_angles_reference", t, list(JOINT_NAMES), units, np.degrees(q_ref), frame_id="trunk"
+            )
         )
     return streams
 

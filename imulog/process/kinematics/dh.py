@@ -140,7 +140,9 @@ class JointLimits:
         given = record.get("joint_limits_deg", {}) or {}
         unknown = sorted(set(given) - set(JOINT_NAMES))
         if unknown:
-            raise ValueError(f"unknown joint(s) in joint_limits_deg: {', '.join(unknown)}; use {', '.join(JOINT_NAMES)}")
+            raise ValueError(
+                f"unknown joint(s) in joint_limits_deg: {', '.join(unknown)}; use {', '.join(JOINT_NAMES)}"
+            )
         return cls(**{f"{k}_deg": (float(v[0]), float(v[1])) for k, v in given.items()})
 
 

@@ -28,6 +28,7 @@ import numpy as np
 from imulog.process.kinematics.dh import N_FREE, ArmModel, JointLimits, _fk_kernel, _jac_kernel, forward_kinematics
 
 __all__ = [
+    "RealTimeSolver",
     "SolveResult",
     "SolverParams",
     "Workspace",
@@ -37,6 +38,8 @@ __all__ = [
     "solve_sequence",
 ]
 
+DEFAULT_MODEL = ArmModel()
+DEFAULT_LIMITS = JointLimits()
 N_CON = 22  # 10 joint-limit rows + 6 elbow-box rows + 6 wrist-box rows
 
 
@@ -64,7 +67,10 @@ class WorkspaceBox:
 
     def as_list(self) -> list[list[float | None]]:
         """``[[xlo, ylo, zlo], [xhi, yhi, zhi]]`` with ``None`` for open sides (JSON-friendly)."""
-        return [[None if math.isinf(v) else v for v in self.lower_m], [None if math.isinf(v) else v for v in self.upper_m]]
+        return [
+            [None if math.isinf(v) else v for v in self.lower_m],
+            [None if math.isinf(v) else v for v in self.upper_m],
+        ]
 
     @classmethod
     def from_list(cls, value) -> WorkspaceBox:
@@ -182,10 +188,7 @@ def _log_rel(r_model, r_hat, out, o):
     if w < 0.0:
         w, x, y, z = -w, -x, -y, -z
     vn = math.sqrt(x * x + y * y + z * z)
-    if vn < 1e-12:
-        k = 2.0
-    else:
-        k = 2.0 * math.atan2(vn, w) / vn
+    k = 2.0 if vn < 1e-12 else 2.0 * math.atan2(vn, w) / vn
     out[o] = x * k
     out[o + 1] = y * k
     out[o + 2] = z * k
@@ -342,8 +345,31 @@ def _build_constraints(q, lo, hi, frames_p, jp_el, jp_wr, a, b):
 
 
 @numba.njit(cache=True)
-def _solve_one(q, model, rua_hat, rfa_hat, lo, hi, constrained, max_iter, step_tol, damping0, penalty, sweeps, work_r,
-               work_p, r, jw_ua, jw_fa, jp_el, jp_wr, a, b, lam, active):
+def _solve_one(
+    q,
+    model,
+    rua_hat,
+    rfa_hat,
+    lo,
+    hi,
+    constrained,
+    max_iter,
+    step_tol,
+    damping0,
+    penalty,
+    sweeps,
+    work_r,
+    work_p,
+    r,
+    jw_ua,
+    jw_fa,
+    jp_el,
+    jp_wr,
+    a,
+    b,
+    lam,
+    active,
+):
     """Refine ``q`` (in place) for one sample; returns (cost, iterations)."""
     f, v = _evaluate(q, model, rua_hat, rfa_hat, lo, hi, work_r, work_p, r)
     if not constrained:
@@ -367,7 +393,8 @@ def _solve_one(q, model, rua_hat, rfa_hat, lo, hi, constrained, max_iter, step_t
     eye = np.eye(5)
     zero5 = np.zeros(5)
     it = 0
-    for it in range(1, max_iter + 1):
+    for _k in range(max_iter):
+        it += 1
         # frames hold the current q (re-evaluate after a rejected step is unnecessary: q unchanged)
         _fk_kernel(q, model, work_r, work_p)
         _log_rel(work_r[3], rua_hat, r, 0)
@@ -458,8 +485,24 @@ def _solve_one(q, model, rua_hat, rfa_hat, lo, hi, constrained, max_iter, step_t
 
 
 @numba.njit(cache=True)
-def _solve_sequence(rua_hat, rfa_hat, q0, model, lo, hi, constrained, max_iter, step_tol, damping0, penalty, sweeps,
-                    out_q, out_cost, out_iter, out_active):
+def _solve_sequence(
+    rua_hat,
+    rfa_hat,
+    q0,
+    model,
+    lo,
+    hi,
+    constrained,
+    max_iter,
+    step_tol,
+    damping0,
+    penalty,
+    sweeps,
+    out_q,
+    out_cost,
+    out_iter,
+    out_active,
+):
     n = rua_hat.shape[0]
     work_r = np.empty((7, 3, 3))
     work_p = np.empty((7, 3))
@@ -482,8 +525,31 @@ def _solve_sequence(rua_hat, rfa_hat, q0, model, lo, hi, constrained, max_iter, 
             for i in range(3):
                 out_active[k, i] = False
             continue
-        f, it = _solve_one(q, model, rua_hat[k], rfa_hat[k], lo, hi, constrained, max_iter, step_tol, damping0,
-                           penalty, sweeps, work_r, work_p, r, jw_ua, jw_fa, jp_el, jp_wr, a, b, lam, active)
+        f, it = _solve_one(
+            q,
+            model,
+            rua_hat[k],
+            rfa_hat[k],
+            lo,
+            hi,
+            constrained,
+            max_iter,
+            step_tol,
+            damping0,
+            penalty,
+            sweeps,
+            work_r,
+            work_p,
+            r,
+            jw_ua,
+            jw_fa,
+            jp_el,
+            jp_wr,
+            a,
+            b,
+            lam,
+            active,
+        )
         for i in range(5):
             out_q[k, i] = q[i]
         out_cost[k] = f
@@ -516,10 +582,10 @@ def _start_points(q0: np.ndarray, lo: np.ndarray, hi: np.ndarray, n: int, seed: 
 def solve_sequence(
     r_upper_arm: np.ndarray,
     r_forearm: np.ndarray,
-    model: ArmModel = ArmModel(),
+    model: ArmModel = DEFAULT_MODEL,
     *,
     constrained: bool = False,
-    limits: JointLimits = JointLimits(),
+    limits: JointLimits = DEFAULT_LIMITS,
     workspace: Workspace = Workspace(),
     q0_rad: np.ndarray | None = None,
     params: SolverParams = SolverParams(),
@@ -528,8 +594,10 @@ def solve_sequence(
 
     ``r_upper_arm``/``r_forearm``: (N, 3, 3) segment-to-trunk rotation matrices (the R_hat of eq. 2);
     NaN samples give NaN angles and keep the warm start. ``q0_rad``: starting configuration of the
-    first sample (default: the paper's neutral ``[0, 0, 0, 0, 0]`` plus ``params.restarts`` random
-    starts within the limits; the best is kept). Every later sample starts from the previous solution.
+    first sample, used as given (a warm start, e.g. the previous solution when streaming). Default: the
+    paper's neutral ``[0, 0, 0, 0, 0]``, the mid-range configuration and ``params.restarts`` random
+    starts within the limits are tried on the first sample and the best is kept. Every later sample
+    starts from the previous sample's solution.
     """
     rua = _as_matrices(r_upper_arm, "r_upper_arm")
     rfa = _as_matrices(r_forearm, "r_forearm")
@@ -554,33 +622,78 @@ def solve_sequence(
         float(params.penalty),
         int(params.qp_sweeps),
     )
-    if n:
-        first = int(np.flatnonzero(np.isfinite(rua[:, 0, 0]) & np.isfinite(rfa[:, 0, 0]))[0]) if np.any(
-            np.isfinite(rua[:, 0, 0]) & np.isfinite(rfa[:, 0, 0])
-        ) else 0
-        starts = _start_points(q_start, lo, hi, params.restarts if q0_rad is None else 0)
+    if n and q0_rad is None:
+        finite = np.flatnonzero(np.isfinite(rua[:, 0, 0]) & np.isfinite(rfa[:, 0, 0]))
+        first = int(finite[0]) if len(finite) else 0
         best, best_merit = q_start, np.inf
-        for s in starts:
-            tq = np.empty((1, N_FREE))
-            tc = np.empty(1)
-            ti = np.empty(1, dtype=np.int64)
-            ta = np.zeros((1, 3), dtype=bool)
+        for s in _start_points(q_start, lo, hi, params.restarts):
+            tq, tc = np.empty((1, N_FREE)), np.empty(1)
+            ti, ta = np.empty(1, dtype=np.int64), np.zeros((1, 3), dtype=bool)
             _solve_sequence(rua[first : first + 1], rfa[first : first + 1], s, packed, lo, hi, *args, tq, tc, ti, ta)
-            merit = tc[0] + (np.sum(np.maximum(lo[:5] - tq[0], 0) + np.maximum(tq[0] - hi[:5], 0)) if constrained else 0)
-            if merit < best_merit - 1e-12:
-                best, best_merit = tq[0].copy(), merit
+            viol = np.sum(np.maximum(lo[:5] - tq[0], 0) + np.maximum(tq[0] - hi[:5], 0)) if constrained else 0.0
+            if tc[0] + viol < best_merit - 1e-12:
+                best, best_merit = tq[0].copy(), tc[0] + viol
         q_start = best
+    if n:
         _solve_sequence(rua, rfa, q_start, packed, lo, hi, *args, out_q, out_cost, out_iter, out_active)
     return SolveResult(out_q, out_cost, out_iter, out_active, bool(constrained))
+
+
+class RealTimeSolver:
+    """Streaming use: one call per incoming sample, warm-started from the previous one.
+
+    >>> rt = RealTimeSolver(ArmModel(), constrained=True, q0_rad=np.radians([90, 30, 0, 90, 90]))
+    >>> q_rad, cost_rad2, active = rt.update(r_upper_arm, r_forearm)   # (3, 3) each, trunk frame
+    """
+
+    def __init__(
+        self,
+        model: ArmModel = DEFAULT_MODEL,
+        *,
+        constrained: bool = False,
+        limits: JointLimits = DEFAULT_LIMITS,
+        workspace: Workspace = Workspace(),
+        q0_rad: np.ndarray | None = None,
+        params: SolverParams = SolverParams(),
+    ) -> None:
+        self._packed = model.packed()
+        lo, hi = constraint_arrays(limits, workspace)
+        if not constrained:
+            lo, hi = np.full(11, -np.inf), np.full(11, np.inf)
+        self._lo, self._hi = lo, hi
+        self._args = (
+            bool(constrained),
+            int(params.max_iterations),
+            float(params.step_tol_rad),
+            float(params.initial_damping),
+            float(params.penalty),
+            int(params.qp_sweeps),
+        )
+        self.q_rad = np.zeros(N_FREE) if q0_rad is None else np.asarray(q0_rad, dtype=np.float64).reshape(N_FREE)
+        self._q = np.empty((1, N_FREE))
+        self._c = np.empty(1)
+        self._i = np.empty(1, dtype=np.int64)
+        self._a = np.zeros((1, 3), dtype=bool)
+
+    def update(self, r_upper_arm: np.ndarray, r_forearm: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
+        """Joint angles (5,) rad, cost f (rad^2) and active flags (joint limit, elbow box, wrist box)."""
+        rua = np.ascontiguousarray(r_upper_arm, dtype=np.float64).reshape(1, 3, 3)
+        rfa = np.ascontiguousarray(r_forearm, dtype=np.float64).reshape(1, 3, 3)
+        _solve_sequence(
+            rua, rfa, self.q_rad, self._packed, self._lo, self._hi, *self._args, self._q, self._c, self._i, self._a
+        )
+        if np.all(np.isfinite(self._q[0])):
+            self.q_rad = self._q[0].copy()
+        return self._q[0].copy(), float(self._c[0]), self._a[0].copy()
 
 
 def solve_sample_scipy(
     r_upper_arm: np.ndarray,
     r_forearm: np.ndarray,
-    model: ArmModel = ArmModel(),
+    model: ArmModel = DEFAULT_MODEL,
     *,
     constrained: bool = False,
-    limits: JointLimits = JointLimits(),
+    limits: JointLimits = DEFAULT_LIMITS,
     workspace: Workspace = Workspace(),
     q0_rad: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float]:
@@ -590,7 +703,7 @@ def solve_sample_scipy(
     """
     from scipy.optimize import minimize
 
-    from imulog.process.quaternion import angle, from_rotation_matrix, multiply, conjugate
+    from imulog.process.quaternion import angle, conjugate, from_rotation_matrix, multiply
 
     q_hat_ua = from_rotation_matrix(np.asarray(r_upper_arm))
     q_hat_fa = from_rotation_matrix(np.asarray(r_forearm))

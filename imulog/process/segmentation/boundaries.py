@@ -61,6 +61,7 @@ class BoundaryParams:
     n_sigma: float = 4.0
     min_level_rad_s: float = 0.002
     strong_fraction: float = 0.1
+    descend: bool = False
     continuation_s: float = 1.0
     continuation_peak_fraction: float = 0.1
 
@@ -101,21 +102,27 @@ def static_estimate(omega: np.ndarray, window: tuple[int, int], params: Boundary
     return bias, max(params.n_sigma * sigma, params.min_level_rad_s)
 
 
-def _onset(r: np.ndarray, start: int, end: int, level: float, lo: int, strong: float) -> int:
+def _onset(r: np.ndarray, start: int, end: int, level: float, lo: int, strong: float, descend: bool) -> int:
     """First sample of the run above ``level`` that leads to the phase's first strong sample."""
     above = np.flatnonzero(r[start:end] >= strong)
     i = start + int(above[0]) if len(above) else start
     while i - 1 >= lo and r[i - 1] > level:
         i -= 1
+    if descend:
+        while i - 1 >= lo and r[i - 1] < r[i]:
+            i -= 1
     return i
 
 
-def _offset(r: np.ndarray, start: int, end: int, level: float, hi: int, strong: float) -> int:
+def _offset(r: np.ndarray, start: int, end: int, level: float, hi: int, strong: float, descend: bool) -> int:
     """Exclusive end of the run above ``level`` that leaves the phase's last strong sample."""
     above = np.flatnonzero(r[start:end] >= strong)
     j = start + int(above[-1]) + 1 if len(above) else end
     while j < hi and r[j] > level:
         j += 1
+    if descend:
+        while j < hi and r[j] < r[j - 1]:
+            j += 1
     return j
 
 
@@ -162,19 +169,20 @@ def refine_phase_boundaries(
         r_post = np.linalg.norm(omega - bias_post, axis=1)
         peak = float(r_pre[a:b].max()) if b > a else 0.0
         lo = max(prev_end, pre[0] if pre is not None else prev_end)
-        new_a = _onset(r_pre, a, b, level_pre, lo, max(params.strong_fraction * peak, level_pre))
+        new_a = _onset(r_pre, a, b, level_pre, lo, max(params.strong_fraction * peak, level_pre), params.descend)
         hi = min(next_start, post[1] if post is not None else next_start)
-        new_b = _offset(r_post, a, b, level_post, hi, max(params.strong_fraction * peak, level_post))
+        new_b = _offset(r_post, a, b, level_post, hi, max(params.strong_fraction * peak, level_post), params.descend)
         while cont > 0:  # corrective sub-movements after the offset, before the next phase
             stop = min(new_b + cont, next_start)
-            moving = np.flatnonzero(r_post[new_b:stop] > level_post)
-            if len(moving) == 0:
+            big = np.flatnonzero(r_post[new_b:stop] >= params.continuation_peak_fraction * peak)
+            if len(big) == 0:
                 break
-            c0 = new_b + int(moving[0])
-            c1 = c0
+            c1 = new_b + int(big[0])
             while c1 < next_start and r_post[c1] > level_post:
                 c1 += 1
-            if c1 >= next_start or r_post[c0:c1].max() < params.continuation_peak_fraction * peak:
+            while params.descend and c1 < next_start and r_post[c1] < r_post[c1 - 1]:
+                c1 += 1
+            if c1 >= next_start:  # runs into the next phase: not a sub-movement of this one
                 break
             new_b = c1
         if new_b <= new_a:

@@ -39,6 +39,8 @@ class RepetitionParams:
     continuation_gap_s: after event correction, a dropped movement starting within this time (s) of a kept
         phase's end (or ending this close before its start) is absorbed into it as a corrective sub-movement
         (imulog addition; 0 = drop extras as in the thesis).
+    split_merged: split a group holding two repetitions (short rest between them), see
+        :func:`split_merged_groups` (imulog addition).
     max_candidates: at most this many movements (the highest) enter the exhaustive search per repetition.
     labels: phase labels in order.
     """
@@ -50,6 +52,7 @@ class RepetitionParams:
     major_fraction: float = 0.5
     extra_cut_fraction: float = 0.5
     continuation_gap_s: float = 1.0
+    split_merged: bool = True
     max_candidates: int = 14
     labels: tuple[str, ...] = R2G_PHASES
 
@@ -280,6 +283,44 @@ def _select(s, e, norm, rate_hz, ref, params: RepetitionParams) -> tuple[np.ndar
     return s, e, cost
 
 
+def split_merged_groups(groups, start, end, heights, norm, rate_hz, ref, params: RepetitionParams) -> list:
+    """Split groups that hold two (or more) repetitions separated by an unusually short rest.
+
+    A group with at least ``2 n_phases`` major movements is cut at the gap between movements where both parts
+    keep ``n_phases`` major movements and the larger of the two correction costs is smallest; the cut is
+    accepted when both parts cost no more than the worst group with exactly ``n_phases`` movements (each part
+    then looks like a correct repetition), and repeated on the parts. The repetition borders found from the
+    longest rests can miss such a pair when a calibration wave or other non-task activity takes one of the
+    ``n_repetitions`` groups; the surplus group is then dropped by cost in :func:`segment_repetitions`.
+    """
+    n = params.n_phases
+    major = heights >= params.major_fraction * np.median(heights)
+    exact = [_select(start[g], end[g], norm, rate_hz, ref, params)[2] for g in groups if len(g) == n]
+    if not exact:
+        return groups
+    accept = float(np.max(exact))
+    out, queue = [], list(groups)
+    while queue:
+        g = queue.pop(0)
+        best = None
+        if major[g].sum() >= 2 * n:
+            for cut in range(1, len(g)):
+                left, right = g[:cut], g[cut:]
+                if major[left].sum() < n or major[right].sum() < n:
+                    continue
+                cost = max(
+                    _select(start[left], end[left], norm, rate_hz, ref, params)[2],
+                    _select(start[right], end[right], norm, rate_hz, ref, params)[2],
+                )
+                if best is None or cost < best[0]:
+                    best = (cost, cut)
+        if best is not None and best[0] <= accept:
+            queue[:0] = [g[: best[1]], g[best[1] :]]
+        else:
+            out.append(g)
+    return out
+
+
 def segment_repetitions(
     start: np.ndarray,
     end: np.ndarray,
@@ -312,6 +353,9 @@ def segment_repetitions(
     groups = [np.flatnonzero(rep == r) for r in range(int(rep.max()) + 1)]
     groups = [g for g in groups if len(g)]
     ref = _reference(groups, start, end, norm, rate_hz, params.n_phases)
+    if ref is not None and params.split_merged:
+        heights = features(start, end, norm, rate_hz)[1]
+        groups = split_merged_groups(groups, start, end, heights, norm, rate_hz, ref, params)
     selected = [(*_select(start[g], end[g], norm, rate_hz, ref, params), len(g)) for g in groups]
     if len(selected) > n_rep:  # drop the groups least like a repetition, keep time order
         order = np.argsort([c for _, _, c, _ in selected], kind="stable")
