@@ -57,7 +57,7 @@ def calibrate(
     from imulog.archive import TrialReader
     from imulog.process.calibration import Calibration, SegmentParams
     from imulog.steps.calibrate import calibration_from_arrays
-    from imulog.steps.orientation import pick_imu
+    from imulog.steps.common import pick_imu
 
     if output.exists() and not overwrite:
         raise click.ClickException(f"{output} exists (use --overwrite)")

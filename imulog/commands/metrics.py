@@ -152,7 +152,8 @@ def process_metrics(
       imulog process metrics trial.mcap --static sensor_at_rest.mcap      # noise from a static recording
       imulog process align r2g.mcap && imulog process phases r2g.mcap && imulog process metrics r2g.mcap
     """
-    from imulog.steps.metrics import MetricsParams, pick_imu, run_metrics
+    from imulog.steps.common import pick_imu
+    from imulog.steps.metrics import MetricsParams, run_metrics
 
     try:
         if static_trial is not None:
@@ -196,7 +197,8 @@ def _noise_from_static(path: Path, imu: str | None, m_s: float, statistic: str) 
     """Arm-usage noise level and activity noise floor (g) of a trial recorded at rest."""
     from imulog.archive import TrialReader
     from imulog.process.metrics import ActivityCountParams, acc_to_g, estimate_noise_floor, estimate_noise_level
-    from imulog.steps.metrics import _rate_hz, pick_imu
+    from imulog.steps.common import pick_imu
+    from imulog.steps.metrics import _rate_hz
 
     with TrialReader(path) as reader:
         name = pick_imu(reader.topics(), imu)

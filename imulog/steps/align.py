@@ -22,7 +22,8 @@ import numpy as np
 from imulog.model import PoseStream, SignalStream
 from imulog.process import alignment as al
 from imulog.process.resample import resample_quaternions, resample_signal
-from imulog.steps.orientation import pick_imu, rate_hz
+from imulog.steps.common import pick_imu
+from imulog.steps.orientation import rate_hz
 
 STEP = "align"
 

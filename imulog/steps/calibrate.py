@@ -14,7 +14,8 @@ import numpy as np
 
 from imulog.model import SignalStream
 from imulog.process import calibration as cal
-from imulog.steps.orientation import pick_imu, rate_hz
+from imulog.steps.common import pick_imu
+from imulog.steps.orientation import rate_hz
 
 STEP = "calibrate"
 

@@ -17,7 +17,6 @@ import numpy as np
 
 from imulog.process.evaluation import METRICS, aggregate, format_table, summarize, trajectory_errors
 from imulog.process.trajectory_opt import METHODS
-from imulog.steps.trajectory import parse_record
 
 STEP = "evaluate"
 POSE_TOPIC = "/derived/vicon/cluster_pose"
@@ -125,7 +124,7 @@ def run_evaluate(path, *, methods: list[str] | None = None, max_gap_s: float = 0
         for m in chosen:
             s = trial.read(f"/derived/trajectory/{m}")
             trajs[m] = (s.t_ns, s.values)
-        info = parse_record(trial.metadata.get("imulog.trajectory")) or {}
+        info = trial.metadata.get("imulog.trajectory", {})
         reps = info.get("repetitions")
         record = compute_evaluation(trajs, ref, reference_topic=ref_name, windows=reps, max_gap_s=max_gap_s)
         holder["record"] = record
@@ -142,5 +141,5 @@ def run_evaluate(path, *, methods: list[str] | None = None, max_gap_s: float = 0
     )
     if "record" not in holder:
         with TrialReader(path) as trial:
-            holder["record"] = parse_record(trial.metadata.get("imulog.evaluation")) or {}
+            holder["record"] = trial.metadata.get("imulog.evaluation", {})
     return outcome, holder["record"]

@@ -14,7 +14,6 @@ intervals) and ``/derived/trajectory/{method}`` (positions on the reference cloc
 from __future__ import annotations
 
 import dataclasses
-import json
 from dataclasses import dataclass
 from typing import Any
 
@@ -36,6 +35,7 @@ from imulog.process.metrics import (
     repetition_durations,
     smoothness,
 )
+from imulog.steps.common import alignment_for, pick_imu
 
 STEP = "metrics"
 ALGORITHM = "imulog.metrics.doshi2011"
@@ -92,20 +92,6 @@ class MetricsParams:
             weight_start_cm=self.weight_start_cm,
             acc_unit=self.acc_unit,  # type: ignore[arg-type]
         )
-
-
-def pick_imu(topics: list[str], imu: str | None) -> str:
-    """IMU name: ``imu`` if given (must exist), else the only ``/imu/*`` topic, else ``wrist``."""
-    imus = [t.split("/", 2)[2] for t in topics if t.startswith("/imu/")]
-    if imu is not None:
-        if imu not in imus:
-            raise ValueError(f"no channel /imu/{imu} in the trial (IMU channels: {', '.join(imus) or 'none'})")
-        return imu
-    if len(imus) == 1:
-        return imus[0]
-    if "wrist" in imus:
-        return "wrist"
-    raise ValueError(f"choose an IMU with --imu among: {', '.join(imus) or 'none (no /imu/* channel)'}")
 
 
 VICON_POSE = "/derived/vicon/cluster_pose"
@@ -256,14 +242,6 @@ def compute_metrics(
     return [activity, distance], record
 
 
-def _alignment_for(metadata: dict[str, Any], topic: str) -> dict | None:
-    record = metadata.get("imulog.alignment")
-    if not record:
-        return None
-    record = {k: (json.loads(v) if isinstance(v, str) and v[:1] in "[{" else v) for k, v in dict(record).items()}
-    return record if record.get("imu") in (None, "", topic) else None
-
-
 def run_metrics(path, *, imu: str | None = None, params: MetricsParams | None = None, force: bool = False):
     """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome."""
     from imulog.archive import TrialReader
@@ -282,7 +260,7 @@ def run_metrics(path, *, imu: str | None = None, params: MetricsParams | None = 
         stream = trial.read(imu_topic)
         phases = trial.read(phase_topic) if phase_topic in topics else None
         trajectory = trial.read(traj_topic) if traj_topic is not None else None
-        if trajectory is not None and phases is not None and _alignment_for(trial.metadata, imu_topic) is None:
+        if trajectory is not None and phases is not None and alignment_for(trial.metadata, imu_topic) is None:
             trajectory = None  # phases on the device clock cannot be matched to a reference-clock trajectory
         streams, record = compute_metrics(stream, p, phases=phases, trajectory=trajectory)
         return StepResult(streams=streams, metadata={RECORD: record})

@@ -20,23 +20,10 @@ import numpy as np
 
 from imulog.model import SignalStream
 from imulog.process.orientation import OrientationParams, estimate_orientation, gravity_free_acceleration
+from imulog.steps.common import pick_imu
 
 STEP = "orientation"
 CALIBRATED_TOPIC = "/derived/calibrated/{imu}"
-
-
-def pick_imu(topics: list[str], imu: str | None) -> str:
-    """``imu`` if given (must exist), else the only ``/imu/*`` topic, else ``wrist``."""
-    imus = [t.split("/", 2)[2] for t in topics if t.startswith("/imu/")]
-    if imu is not None:
-        if imu not in imus:
-            raise ValueError(f"no channel /imu/{imu} in the trial (IMU channels: {', '.join(imus) or 'none'})")
-        return imu
-    if len(imus) == 1:
-        return imus[0]
-    if "wrist" in imus:
-        return "wrist"
-    raise ValueError(f"choose an IMU with --imu among: {', '.join(imus) or 'none (no /imu/* channel)'}")
 
 
 def rate_hz(t_ns: np.ndarray) -> float:

@@ -22,9 +22,7 @@ frame, estimated rotating bias and the waypoints used.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import json
 from typing import Any
 
 import numpy as np
@@ -41,49 +39,11 @@ from imulog.process.trajectory_opt import (
     reconstruct_repetitions,
     repetition_windows,
 )
+from imulog.steps.common import alignment_for, pick_imu
 
 STEP = "trajectory"
 TRAJECTORY_TOPIC = "/derived/trajectory/{method}"
 NEEDS_STATIC = {"zupt", "kalman", "zupt_bias", "optimized"}
-
-
-def pick_imu(topics: list[str], imu: str | None) -> str:
-    """``imu`` if given, else the only IMU with ``/derived/acc_global/*``, else ``wrist``."""
-    names = [t.split("/", 3)[3] for t in topics if t.startswith("/derived/acc_global/")]
-    if imu is not None:
-        if imu not in names:
-            raise ValueError(
-                f"no /derived/acc_global/{imu} in the trial: run `imulog process orientation` first"
-                + (f" (found: {', '.join(names)})" if names else "")
-            )
-        return imu
-    if len(names) == 1:
-        return names[0]
-    if "wrist" in names:
-        return "wrist"
-    if not names:
-        raise ValueError("no /derived/acc_global/* channel in the trial: run `imulog process orientation` first")
-    raise ValueError(f"choose an IMU with --imu among: {', '.join(names)}")
-
-
-def parse_record(record: dict[str, Any] | None) -> dict[str, Any] | None:
-    """A metadata record with JSON-encoded string values decoded (lists, dicts, numbers)."""
-    if not record:
-        return None
-    out = dict(record)
-    for key, value in list(out.items()):
-        if isinstance(value, str) and value[:1] in "[{":
-            with contextlib.suppress(ValueError):
-                out[key] = json.loads(value)
-    return out
-
-
-def alignment_for(metadata: dict[str, Any], imu_topic: str) -> dict[str, Any] | None:
-    """The trial's ``imulog.alignment`` record if it concerns ``imu_topic`` (or names no IMU)."""
-    record = parse_record(metadata.get("imulog.alignment"))
-    if record is None or record.get("imu") not in (None, "", imu_topic):
-        return None
-    return record
 
 
 def _to_reference(t_dev_ns: np.ndarray, alignment: dict[str, Any] | None) -> np.ndarray:
@@ -238,7 +198,9 @@ def run_trajectory(
 
     with TrialReader(path) as trial:
         topics = trial.topics()
-        name = pick_imu(topics, imu)
+        name = pick_imu(
+            topics, imu, prefix="/derived/acc_global/", missing_hint="run `imulog process orientation` first"
+        )
     acc_topic = f"/derived/acc_global/{name}"
     static_topic, phases_topic = f"/derived/static/{name}", f"/derived/phases/{name}"
     orient_topic = f"/derived/orientation/{name}"
@@ -249,7 +211,7 @@ def run_trajectory(
         static = trial.read(static_topic) if static_topic in topics else None
         phases = trial.read(phases_topic) if phases_topic in topics else None
         orient = trial.read(orient_topic) if orient_topic in topics else None
-        timing = parse_record(trial.metadata.get("imulog.timing")) or {}
+        timing = trial.metadata.get("imulog.timing", {})
         streams, record = compute_trajectories(
             acc.t_ns,
             acc.values,
@@ -260,7 +222,7 @@ def run_trajectory(
             phases_clock=str(timing.get("clock", "reference")),
             orientation=None if orient is None else (orient.t_ns, orient.values),
             alignment=alignment_for(trial.metadata, f"/imu/{name}"),
-            anthropometrics=parse_record(trial.metadata.get("imulog.anthropometrics")),
+            anthropometrics=trial.metadata.get("imulog.anthropometrics"),
             params=params,
             reference_params=reference_params,
         )

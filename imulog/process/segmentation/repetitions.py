@@ -283,42 +283,48 @@ def _select(s, e, norm, rate_hz, ref, params: RepetitionParams) -> tuple[np.ndar
     return s, e, cost
 
 
-def split_merged_groups(groups, start, end, heights, norm, rate_hz, ref, params: RepetitionParams) -> list:
+def _kept_cost(costs: list[float], n_keep: int) -> tuple[int, float]:
+    """(missing groups, summed cost of the ``n_keep`` cheapest groups): what :func:`segment_repetitions` keeps."""
+    kept = sorted(costs)[:n_keep]
+    return n_keep - len(kept), float(np.sum(kept))
+
+
+def split_merged_groups(groups, start, end, norm, rate_hz, ref, params: RepetitionParams, n_keep: int) -> list:
     """Split groups that hold two (or more) repetitions separated by an unusually short rest.
 
-    A group with at least ``2 n_phases`` major movements is cut at the gap between movements where both parts
-    keep ``n_phases`` major movements and the larger of the two correction costs is smallest; the cut is
-    accepted when both parts cost no more than the worst group with exactly ``n_phases`` movements (each part
-    then looks like a correct repetition), and repeated on the parts. The repetition borders found from the
-    longest rests can miss such a pair when a calibration wave or other non-task activity takes one of the
-    ``n_repetitions`` groups; the surplus group is then dropped by cost in :func:`segment_repetitions`.
+    The repetition borders come from the longest rests; when a calibration wave (or other non-task activity)
+    takes one of the ``n_keep`` groups, two repetitions separated by a rest no longer than the pauses between
+    phases stay in one group. Greedily, a group of at least ``2 n_phases`` movements is cut (between two
+    movements, both parts keeping ``n_phases``) where the cheaper of the two parts' correction costs is lowest,
+    and the cut is accepted when it lowers the summed correction cost of the ``n_keep`` groups
+    :func:`segment_repetitions` would keep (fewer groups than ``n_keep`` count as worse than any cost). A
+    repetition with extra sub-movements is not cut: its halves do not look like repetitions, so keeping one
+    of them instead of the whole costs more.
     """
     n = params.n_phases
-    major = heights >= params.major_fraction * np.median(heights)
-    exact = [_select(start[g], end[g], norm, rate_hz, ref, params)[2] for g in groups if len(g) == n]
-    if not exact:
-        return groups
-    accept = float(np.max(exact))
-    out, queue = [], list(groups)
-    while queue:
-        g = queue.pop(0)
+
+    def cost(g) -> float:
+        return _select(start[g], end[g], norm, rate_hz, ref, params)[2]
+
+    groups = list(groups)
+    costs = [cost(g) for g in groups]
+    while True:
+        current = _kept_cost(costs, n_keep)
         best = None
-        if major[g].sum() >= 2 * n:
-            for cut in range(1, len(g)):
-                left, right = g[:cut], g[cut:]
-                if major[left].sum() < n or major[right].sum() < n:
-                    continue
-                cost = max(
-                    _select(start[left], end[left], norm, rate_hz, ref, params)[2],
-                    _select(start[right], end[right], norm, rate_hz, ref, params)[2],
-                )
-                if best is None or cost < best[0]:
-                    best = (cost, cut)
-        if best is not None and best[0] <= accept:
-            queue[:0] = [g[: best[1]], g[best[1] :]]
-        else:
-            out.append(g)
-    return out
+        for i, g in enumerate(groups):
+            if len(g) < 2 * n:
+                continue
+            for cut in range(n, len(g) - n + 1):
+                cl, cr = cost(g[:cut]), cost(g[cut:])
+                trial = _kept_cost(costs[:i] + [cl, cr] + costs[i + 1 :], n_keep)
+                if trial < current and (best is None or trial < best[0]):
+                    best = (trial, i, cut, cl, cr)
+        if best is None:
+            return groups
+        _, i, cut, cl, cr = best
+        g = groups[i]
+        groups[i : i + 1] = [g[:cut], g[cut:]]
+        costs[i : i + 1] = [cl, cr]
 
 
 def segment_repetitions(
@@ -354,8 +360,7 @@ def segment_repetitions(
     groups = [g for g in groups if len(g)]
     ref = _reference(groups, start, end, norm, rate_hz, params.n_phases)
     if ref is not None and params.split_merged:
-        heights = features(start, end, norm, rate_hz)[1]
-        groups = split_merged_groups(groups, start, end, heights, norm, rate_hz, ref, params)
+        groups = split_merged_groups(groups, start, end, norm, rate_hz, ref, params, n_rep)
     selected = [(*_select(start[g], end[g], norm, rate_hz, ref, params), len(g)) for g in groups]
     if len(selected) > n_rep:  # drop the groups least like a repetition, keep time order
         order = np.argsort([c for _, _, c, _ in selected], kind="stable")

@@ -1,0 +1,37 @@
+"""Helpers every step shares: choosing the IMU a step works on, and the alignment record that concerns it."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+
+def pick_imu(topics: list[str], imu: str | None, *, prefix: str = "/imu/", missing_hint: str = "") -> str:
+    """The IMU name to process: ``imu`` if given (``{prefix}{imu}`` must exist), else the only one, else ``wrist``.
+
+    ``prefix`` is the channel family that must exist for the step (``/imu/`` for raw signals,
+    ``/derived/acc_global/`` for steps that need the orientation step first); ``missing_hint`` is
+    appended to the error when no such channel exists (e.g. which command to run first).
+    """
+    names = [t[len(prefix) :] for t in topics if t.startswith(prefix)]
+    hint = f": {missing_hint}" if missing_hint else ""
+    if imu is not None:
+        if imu not in names:
+            found = f" ({prefix}* channels: {', '.join(names)})" if names else hint
+            raise ValueError(f"no channel {prefix}{imu} in the trial{found}")
+        return imu
+    if len(names) == 1:
+        return names[0]
+    if "wrist" in names:
+        return "wrist"
+    if not names:
+        raise ValueError(f"no {prefix}* channel in the trial{hint}")
+    raise ValueError(f"choose an IMU with --imu among: {', '.join(names)}")
+
+
+def alignment_for(metadata: Mapping[str, Mapping[str, Any]], imu_topic: str) -> dict[str, Any] | None:
+    """The trial's ``imulog.alignment`` record if it concerns ``imu_topic`` (or names no IMU), else None."""
+    record = metadata.get("imulog.alignment")
+    if not record or record.get("imu") not in (None, "", imu_topic):
+        return None
+    return dict(record)
