@@ -7,7 +7,8 @@ Writes into the output folder:
 
 * ``accuracy.md`` / ``accuracy.csv``: method x axis, MAE (cm) and MAE as % of the reference's range of motion,
   mean ± standard deviation over every evaluated repetition of every trial (the thesis's Table 3.1 pools the
-  825 movements of 11 subjects the same way), with the number of repetitions, trials and subjects;
+  825 movements of 11 subjects the same way), with the number of repetitions, trials and subjects; the CSV adds
+  medians (a mis-segmented repetition with almost no reference motion inflates the mean % ROM);
 * ``subject_errors.csv`` and ``subject_errors.png``: mean ± std MAE per subject, method and axis (one panel per
   axis, log scale: integration methods differ by orders of magnitude);
 * ``timing.md`` / ``timing.csv``: per phase label, duration (s) and peak angular velocity (rad/s) statistics,
@@ -105,6 +106,8 @@ def accuracy_table(df) -> list[dict[str, Any]]:
                     "mae_cm_std": s["mae_cm"]["std"],
                     "rom_pct_mean": s["rom_pct"]["mean"],
                     "rom_pct_std": s["rom_pct"]["std"],
+                    "mae_cm_median": _median([r[axis]["mae_cm"] for r in per_method[method] if axis in r]),
+                    "rom_pct_median": _median([r[axis]["rom_pct"] for r in per_method[method] if axis in r]),
                     "rmse_cm_mean": s["rmse_cm"]["mean"],
                     "n_repetitions": s["mae_cm"]["n"],
                     "n_trials": len(trials.get(method, ())),
@@ -129,6 +132,14 @@ def accuracy_markdown(table: list[dict[str, Any]]) -> str:
         cells += [str(first["n_repetitions"]), str(first["n_subjects"])]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def _median(values: list[float]) -> float:
+    v = sorted(x for x in values if x is not None and math.isfinite(x))
+    if not v:
+        return float("nan")
+    k = len(v) // 2
+    return v[k] if len(v) % 2 else (v[k - 1] + v[k]) / 2
 
 
 def _mean_std(values: list[float]) -> tuple[float, float, int]:

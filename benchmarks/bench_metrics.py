@@ -1,6 +1,6 @@
 """Speed of the clinical metrics on a long wrist recording, against a per-sample loop baseline.
 
-Run: ``python benchmarks/metrics.py [--hours 1] [--rate 115]``. Prints samples/s of each metric (vectorised numpy)
+Run: ``python benchmarks/bench_metrics.py [--hours 1] [--rate 115]``. Prints samples/s of each metric (vectorised numpy)
 and of a line-by-line loop transcription of Doshi's Appendix A.2/A.3 (the published MATLAB) run in the same
 process on a shorter excerpt, and their ratio. Figures are pessimistic on a loaded machine.
 """
