@@ -100,3 +100,21 @@ def test_cli_prints_errors_and_fails_clearly(arm_trial, tmp_path):
     assert res.exit_code == 1 and "neutral window" in res.output
     res = runner.invoke(cli, ["process", "kinematics", "--help"])
     assert res.exit_code == 0 and "Examples" in res.output
+
+
+def test_step_with_a_trunk_imu(tmp_path):
+    sim = simulate_arm(seed=9, duration_s=15.0, trunk_imu=True, trunk_sway_deg=12.0)
+    path = write_trial(tmp_path / "sway.mcap", sim.recording, attach_sources=False)
+    outcome = run_kinematics(path)
+    assert "/imu/trunk" in outcome.input_hashes
+    with TrialReader(path) as trial:
+        con = trial.read("/derived/kinematics/joint_angles_constrained")
+        ref = trial.read("/derived/kinematics/joint_angles_reference")
+        assert trial.metadata["imulog.kinematics_calibration"]["trunk_imu"] == "trunk"
+    assert rms_deg(np.radians(con.values), sim.truth.q_rad).max() < 3.0
+    assert rms_deg(np.radians(ref.values), sim.truth.q_rad).max() < 1.0
+    # --trunk '' falls back to a still trunk: the shoulder angles degrade
+    run_kinematics(path, options=KinematicsOptions(trunk=""), force=True)
+    with TrialReader(path) as trial:
+        still = trial.read("/derived/kinematics/joint_angles_unconstrained")
+    assert rms_deg(np.radians(still.values[:, :3]), sim.truth.q_rad[:, :3]).max() > 2.0

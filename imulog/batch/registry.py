@@ -27,8 +27,8 @@ from pathlib import Path
 from typing import Any
 
 # Dependency order: a step may read what an earlier one wrote (align reads orientation, phases the alignment,
-# trajectory orientation + phases, evaluate and metrics the trajectories).
-STEP_ORDER = ("calibrate", "orientation", "align", "phases", "trajectory", "metrics", "evaluate")
+# trajectory orientation + phases, evaluate and metrics the trajectories, kinematics the orientations).
+STEP_ORDER = ("calibrate", "orientation", "align", "phases", "trajectory", "metrics", "evaluate", "kinematics")
 
 
 @dataclass(frozen=True)
@@ -103,6 +103,13 @@ STEPS: dict[str, StepSpec] = {
         kwargs=("methods", "max_gap_s"),
         help="trajectory errors against the optical reference (methods=..., max_gap_s=0.05)",
     ),
+    "kinematics": StepSpec(
+        "kinematics",
+        "imulog.steps.kinematics:run_kinematics",
+        params_class="imulog.steps.kinematics:KinematicsOptions",
+        params_kwarg="options",
+        help="shoulder and elbow angles from two IMUs (KinematicsOptions: upper_arm, forearm, ...)",
+    ),
 }
 
 _LIST_KWARGS = {"methods"}
@@ -148,7 +155,8 @@ def _coerce(value: Any, default: Any, where: str, annotation: str = "") -> Any:
         if isinstance(default, tuple):
             return tuple(x.strip() for x in text.split(",") if x.strip())
         if default is None:
-            return json.loads(text)
+            value = json.loads(text)
+            return tuple(value) if isinstance(value, list) and "tuple" in annotation else value
     except ValueError as exc:
         if "str" in str(annotation):
             return text

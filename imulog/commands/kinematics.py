@@ -28,6 +28,12 @@ def _floats(text: str | None, n: int, option: str) -> tuple[float, ...] | None:
 )
 @click.option("--forearm", default=None, help="Forearm IMU name; default from imulog.kinematics, else 'forearm'.")
 @click.option(
+    "--trunk",
+    default=None,
+    help="Trunk IMU name (axes on the trunk axes): follow a moving trunk; default from imulog.kinematics "
+    "(trunk_imu), else a still trunk. --trunk '' ignores the metadata's trunk IMU.",
+)
+@click.option(
     "--neutral-pose",
     default=None,
     metavar="DEG,DEG,DEG,DEG,DEG",
@@ -56,6 +62,7 @@ def process_kinematics(
     trial: Path,
     upper_arm: str | None,
     forearm: str | None,
+    trunk: str | None,
     neutral_pose: str | None,
     neutral_window: str | None,
     calibration: str,
@@ -81,6 +88,8 @@ def process_kinematics(
       imulog process kinematics arm.mcap
       imulog process kinematics arm.mcap --neutral-pose 90,30,0,90,90 --neutral-window 0.5,2.5
       imulog process kinematics trial.mcap --upper-arm ua --forearm fa --no-markers
+      python -m imulog.simulate.arm sway.mcap --trunk-imu --trunk-sway 15
+      imulog process kinematics sway.mcap                      # trunk IMU named in the metadata
       imulog info arm.mcap                                     # shows imulog.kinematics_errors
     """
     from imulog.process.kinematics.solver import SolverParams
@@ -93,6 +102,7 @@ def process_kinematics(
     options = KinematicsOptions(
         upper_arm=upper_arm,
         forearm=forearm,
+        trunk=trunk,
         neutral_pose_deg=pose,
         neutral_window_s=window,
         calibration_mode=calibration,

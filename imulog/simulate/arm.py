@@ -13,8 +13,11 @@ in :mod:`imulog.simulate.vicon_model` (markers ``{segment}_O/X/Y/A``). IMU signa
 LSM9DS1-like error model of :mod:`imulog.simulate.imu_model` (no dropped samples). IMUs and Vicon
 share one clock (a cable-synchronised station, as in the paper), both at ``rate_hz``.
 
-The trunk is still: its frame (x lateral, y anterior, z up, origin in the shoulder centre) sits at
-``shoulder_m`` in the Vicon world, turned by ``trunk_heading_deg`` about the vertical.
+The trunk frame (x lateral, y anterior, z up, origin in the shoulder centre) sits at ``shoulder_m``
+in the Vicon world, turned by ``trunk_heading_deg`` about the vertical. By default the trunk is still
+(the paper's assumption); ``trunk_sway_deg`` > 0 makes it turn about the vertical and lean forward
+and sideways (pivot ``trunk_pivot_below_m`` under the shoulder) after the neutral posture, and
+``trunk_imu=True`` adds a ``trunk`` IMU (axes on the trunk frame) with its own marker cluster.
 
     python -m imulog.simulate.arm arm.mcap --seconds 60 --seed 0     # writes an MCAP trial
 """
@@ -35,6 +38,7 @@ from imulog.process.kinematics.dh import JOINT_NAMES, ArmModel, JointLimits, for
 from imulog.simulate import imu_model, minjerk, quat, vicon_model
 
 SEGMENTS = ("upper_arm", "forearm")
+TRUNK = "trunk"
 VICON_NAME = "vicon"
 
 
@@ -65,12 +69,16 @@ class ArmParams:
     noise_free: bool = False
     vicon_noise_mm: float = 0.2
     imu_to_cluster_sd_deg: float = 0.0  # clusters slotted on the IMU supports (paper, Fig. 3a)
+    trunk_imu: bool = False  # add a trunk IMU (and cluster)
+    trunk_sway_deg: float = 0.0  # amplitude of the trunk's yaw / forward lean / side lean after the posture
+    trunk_pivot_below_m: float = 0.45  # the trunk turns about a point this far below the shoulder
 
 
 @dataclass
 class ArmTruth:
     """True state on the common clock: joint angles ``q_rad`` (N, 5) (:data:`JOINT_NAMES` order),
-    segment-to-trunk rotations, elbow/wrist centres (N, 3) m in the trunk frame, and the frames."""
+    segment-to-trunk rotations, elbow/wrist centres (N, 3) m in the trunk frame, the trunk-to-world
+    quaternions ``q_world_trunk`` (N, 4) and the IMU mounting rotations."""
 
     t_ns: np.ndarray
     q_rad: np.ndarray
@@ -112,6 +120,29 @@ def _joint_law(params: ArmParams, rng: np.random.Generator):
     return q_of_t, {"frequency_hz": f.tolist(), "phase_rad": phi.tolist(), "movement_start_s": t_move}
 
 
+def _trunk_law(params: ArmParams, rng: np.random.Generator):
+    """Trunk-to-world quaternion (N, 4) of times (s): heading, then sway blended in after the posture."""
+    psi0 = math.radians(params.trunk_heading_deg)
+    amp = math.radians(params.trunk_sway_deg)
+    f = rng.uniform(0.03, 0.12, 3)
+    phi = rng.uniform(0, 2 * np.pi, 3)
+
+    def q_of_t(t_s: np.ndarray) -> np.ndarray:
+        t = np.asarray(t_s, dtype=np.float64)
+        tau = np.clip((t - params.neutral_s) / params.blend_s, 0.0, 1.0)
+        b = minjerk.profile(tau)[0] * amp
+        yaw = psi0 + b * np.sin(2 * np.pi * f[0] * (t - params.neutral_s) + phi[0])
+        fwd = 0.5 * b * (1 - np.cos(2 * np.pi * f[1] * (t - params.neutral_s)))  # forward lean >= 0
+        side = 0.5 * b * np.sin(2 * np.pi * f[2] * (t - params.neutral_s) + phi[2])
+        z = np.zeros_like(t)
+        q_yaw = quat.from_rotvec(np.column_stack([z, z, yaw]))
+        q_fwd = quat.from_rotvec(np.column_stack([-fwd, z, z]))  # about -x (lateral): leaning toward +y
+        q_side = quat.from_rotvec(np.column_stack([z, side, z]))
+        return quat.normalize(quat.mul(quat.mul(q_yaw, q_fwd), q_side))
+
+    return q_of_t
+
+
 def _segment_offsets(model: ArmModel, lever_m: float) -> dict[str, np.ndarray]:
     """IMU origin in each segment frame (m): mid upper arm / distal third of the forearm, off-axis."""
     fk = forward_kinematics(np.zeros(5), model)
@@ -145,17 +176,18 @@ def simulate_arm(*, seed: int = 0, imu: imu_model.ImuParams | None = None, **ove
     n = int(round(params.duration_s * params.rate_hz)) + 1
     t_ns = np.round(np.arange(n) / params.rate_hz * 1e9).astype(np.int64)
     t_s = t_ns / 1e9
-    psi = math.radians(params.trunk_heading_deg)
-    q_wt = np.array([math.cos(psi / 2), 0.0, 0.0, math.sin(psi / 2)])
-    shoulder = np.asarray(params.shoulder_m, dtype=np.float64)
     offsets = _segment_offsets(model, params.imu_lever_m)
     mount = {s: quat.from_rotvec(rng.normal(0.0, math.radians(params.mounting_error_deg), 3)) for s in SEGMENTS}
     q_ic = {
         s: vicon_model.draw_imu_to_cluster(
             vicon_model.ViconParams(imu_to_cluster_sd_deg=params.imu_to_cluster_sd_deg), rng
         )
-        for s in SEGMENTS
+        for s in (*SEGMENTS, TRUNK)
     }
+    trunk_of_t = _trunk_law(params, np.random.default_rng(np.random.SeedSequence([int(seed), 0xA57])))
+    pivot = np.asarray(params.shoulder_m, dtype=np.float64) - np.array([0.0, 0.0, params.trunk_pivot_below_m])
+    up = np.array([0.0, 0.0, params.trunk_pivot_below_m])  # pivot -> shoulder, trunk frame
+    sternum = np.array([-0.18, 0.12, -0.12])  # trunk IMU on the sternum, trunk frame (right shoulder origin)
     device_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xA54]))
     noise_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xA55]))
     vicon_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xA56]))
@@ -165,7 +197,9 @@ def simulate_arm(*, seed: int = 0, imu: imu_model.ImuParams | None = None, **ove
     def world_state(ts: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Per segment: sensor-to-world quaternion (N, 4) and IMU position (N, 3) m at times ``ts`` (s)."""
         fk = forward_kinematics(q_of_t(ts), model)
-        out = {}
+        q_wt = trunk_of_t(ts)
+        shoulder = pivot + quat.rotate(q_wt, np.broadcast_to(up, (len(ts), 3)))
+        out = {TRUNK: (q_wt, shoulder + quat.rotate(q_wt, np.broadcast_to(sternum, (len(ts), 3))))}
         for seg, r_seg, origin in (
             ("upper_arm", fk.r_upper_arm, fk.elbow_m),
             ("forearm", fk.r_forearm, fk.wrist_m),
@@ -181,7 +215,8 @@ def simulate_arm(*, seed: int = 0, imu: imu_model.ImuParams | None = None, **ove
     fk_true = forward_kinematics(q_of_t(t_s), model)
     imus, marker_pos, labels = [], [], []
     vparams = vicon_model.ViconParams(noise_mm=params.vicon_noise_mm)
-    for seg in SEGMENTS:
+    wearing = (*SEGMENTS, TRUNK) if params.trunk_imu else SEGMENTS
+    for seg in wearing:
         q_ws, p = now[seg]
         qp, pp = plus[seg]
         qm, pm = minus[seg]
@@ -219,7 +254,8 @@ def simulate_arm(*, seed: int = 0, imu: imu_model.ImuParams | None = None, **ove
         "upper_arm_imu": "upper_arm",
         "forearm_imu": "forearm",
         "markers": VICON_NAME,
-        "clusters": {s: [f"{s}_{lab}" for lab in ("O", "X", "Y")] for s in SEGMENTS},
+        "clusters": {s: [f"{s}_{lab}" for lab in ("O", "X", "Y")] for s in wearing},
+        **({"trunk_imu": TRUNK} if params.trunk_imu else {}),
         "neutral_pose_deg": list(params.neutral_pose_deg),
         "neutral_window_s": [0.5, params.neutral_s - 0.5],
         "side": "right",
@@ -255,7 +291,7 @@ def simulate_arm(*, seed: int = 0, imu: imu_model.ImuParams | None = None, **ove
         r_forearm=fk_true.r_forearm,
         elbow_m=fk_true.elbow_m,
         wrist_m=fk_true.wrist_m,
-        q_world_trunk=q_wt,
+        q_world_trunk=now[TRUNK][0],
         q_segment_to_sensor=mount,
         info={"joint_names": list(JOINT_NAMES), **law_info, "params": dataclasses.asdict(params)},
     )
@@ -263,17 +299,25 @@ def simulate_arm(*, seed: int = 0, imu: imu_model.ImuParams | None = None, **ove
 
 
 def main(argv: list[str] | None = None) -> None:
-    """``python -m imulog.simulate.arm OUT.mcap [--seconds S] [--seed N] [--noise-free]``."""
+    """``python -m imulog.simulate.arm OUT.mcap [--seconds S] [--seed N] [--noise-free] [--trunk-imu] [--trunk-sway DEG]``."""
     parser = argparse.ArgumentParser(description="Simulate a two-IMU arm trial and write it as an MCAP trial.")
     parser.add_argument("out", type=Path)
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--noise-free", action="store_true")
+    parser.add_argument("--trunk-imu", action="store_true", help="add a trunk IMU and cluster")
+    parser.add_argument("--trunk-sway", type=float, default=0.0, help="trunk sway amplitude, deg (0: still trunk)")
     parser.add_argument("--overwrite", action="store_true")
     args = parser.parse_args(argv)
     from imulog.archive import write_trial
 
-    sim = simulate_arm(seed=args.seed, duration_s=args.seconds, noise_free=args.noise_free)
+    sim = simulate_arm(
+        seed=args.seed,
+        duration_s=args.seconds,
+        noise_free=args.noise_free,
+        trunk_imu=args.trunk_imu,
+        trunk_sway_deg=args.trunk_sway,
+    )
     path = write_trial(args.out, sim.recording, attach_sources=False, overwrite=args.overwrite)
     print(f"wrote {path}")
 

@@ -1,7 +1,8 @@
 """Reprocessing step ``kinematics``: shoulder and elbow angles from an upper-arm and a forearm IMU.
 
-Reads ``/derived/orientation/{imu}`` of both IMUs (computed in memory with the orientation step's
-default backend when absent), the model geometry from ``imulog.anthropometrics`` and the task set-up
+Reads ``/derived/orientation/{imu}`` of both IMUs, and of a trunk IMU when one is named (computed
+in memory with the orientation step's default backend when absent; without a trunk IMU the trunk is
+assumed still, as in the paper), the model geometry from ``imulog.anthropometrics`` and the task set-up
 (IMU names, neutral posture and window, workspace boxes, joint limits, marker clusters) from
 ``imulog.kinematics``; writes on the upper-arm IMU's clock:
 
@@ -46,6 +47,7 @@ class KinematicsOptions:
 
     upper_arm: str | None = None
     forearm: str | None = None
+    trunk: str | None = None  # "" disables a trunk IMU named in the metadata
     neutral_pose_deg: tuple[float, ...] | None = None
     neutral_window_s: tuple[float, float] | None = None
     calibration_mode: str = "heading"
@@ -92,6 +94,17 @@ def imu_names(topics: list[str], metadata: dict, options: KinematicsOptions) -> 
     return ua, fa
 
 
+def trunk_name(topics: list[str], metadata: dict, options: KinematicsOptions) -> str | None:
+    """The trunk IMU (``--trunk`` or ``imulog.kinematics.trunk_imu``), None for a still trunk."""
+    name = options.trunk if options.trunk is not None else (metadata.get(META, {}) or {}).get("trunk_imu")
+    if not name:
+        return None
+    if f"/imu/{name}" not in topics:
+        have = [t.split("/", 2)[2] for t in topics if t.startswith("/imu/")]
+        raise ValueError(f"no channel /imu/{name} for the trunk IMU (IMU channels: {', '.join(have) or 'none'})")
+    return name
+
+
 def _orientation(trial: Any, imu: str, params: OrientationParams) -> tuple[np.ndarray, np.ndarray, str]:
     """(t_ns, q_s2g, topic read): the orientation step's output when present, else computed here."""
     from imulog.process.orientation import estimate_orientation
@@ -127,7 +140,9 @@ def _cluster_orientations(trial: Any, kin: dict) -> tuple[np.ndarray, dict[str, 
     ms = trial.read(topic)
     rate = float((len(ms.t_ns) - 1) / ((ms.t_ns[-1] - ms.t_ns[0]) * 1e-9))
     out = {}
-    for seg in ("upper_arm", "forearm"):
+    for seg in ("upper_arm", "forearm", "trunk"):
+        if seg == "trunk" and not clusters.get(seg):
+            continue
         labels = clusters.get(seg)
         if not labels or any(lab not in ms.labels for lab in labels):
             raise ValueError(
@@ -212,18 +227,25 @@ def _streams(est: KinematicsEstimate, q_ref: np.ndarray | None) -> list:
     return streams
 
 
-def compute_kinematics(trial: Any, ua: str, fa: str, options: KinematicsOptions) -> tuple[list, dict]:
-    """Pure-ish core of the step on an open trial: (streams, metadata records)."""
+def compute_kinematics(
+    trial: Any, ua: str, fa: str, options: KinematicsOptions, trunk: str | None = None
+) -> tuple[list, dict]:
+    """Core of the step on an open trial: (streams, metadata records)."""
     metadata = trial.metadata
     config, record = resolve_config(metadata, options)
     t_ua, q_ua, _ = _orientation(trial, ua, options.orientation)
     t_fa, q_fa, _ = _orientation(trial, fa, options.orientation)
     q_fa = _resample(t_fa, q_fa, t_ua)
-    est = estimate_kinematics(q_ua, q_fa, t_ua, config)
+    q_tr = None
+    if trunk is not None:
+        t_tr, q_tr, _ = _orientation(trial, trunk, options.orientation)
+        q_tr = _resample(t_tr, q_tr, t_ua)
+    est = estimate_kinematics(q_ua, q_fa, t_ua, config, q_trunk_s2g=q_tr)
     meta: dict[str, dict[str, Any]] = {
         "imulog.kinematics_calibration": {
             "upper_arm_imu": ua,
             "forearm_imu": fa,
+            "trunk_imu": trunk,
             "mode": config.calibration.mode,
             "neutral_pose_deg": list(config.calibration.pose_deg),
             "neutral_window_s": list(config.calibration.window_s),
@@ -235,7 +257,9 @@ def compute_kinematics(trial: Any, ua: str, fa: str, options: KinematicsOptions)
     clusters = _cluster_orientations(trial, kin) if options.use_markers else None
     if clusters is not None:
         t_m, qc = clusters
-        ref = estimate_kinematics(qc["upper_arm"], qc["forearm"], t_m, config, constrained=False)
+        ref = estimate_kinematics(
+            qc["upper_arm"], qc["forearm"], t_m, config, constrained=False, q_trunk_s2g=qc.get("trunk")
+        )
         q_ref = _interp_angles(t_m, ref.unconstrained.q_rad, _reference_times(trial, f"/imu/{ua}", t_ua))
         errors = kinematics_errors(est.unconstrained.q_rad, est.constrained.q_rad, q_ref, est.t_out)
         errors["reference"] = f"/markers/{kin.get('markers', 'vicon')} clusters, same solver (unconstrained)"
@@ -245,6 +269,7 @@ def compute_kinematics(trial: Any, ua: str, fa: str, options: KinematicsOptions)
         {
             "ms_per_sample": {k: float(v) for k, v in est.timing_ms_per_sample.items()},
             "constraint_active_fraction": float(np.mean(active)),
+            "infeasible_samples": est.constrained.extra.get("n_infeasible", 0),
             "t_out_fraction": float(np.mean(est.t_out)),
             "config": record,
         }
@@ -261,9 +286,10 @@ def run_kinematics(path, *, options: KinematicsOptions = KinematicsOptions(), fo
         topics = trial.topics()
         metadata = trial.metadata
         ua, fa = imu_names(topics, metadata, options)
+        trunk = trunk_name(topics, metadata, options)
         _, record = resolve_config(metadata, options)
         inputs = []
-        for imu in (ua, fa):
+        for imu in (ua, fa) if trunk is None else (ua, fa, trunk):
             o = f"/derived/orientation/{imu}"
             inputs.append(o if o in topics else f"/imu/{imu}")
         kin = metadata.get(META, {}) or {}
@@ -272,12 +298,13 @@ def run_kinematics(path, *, options: KinematicsOptions = KinematicsOptions(), fo
             inputs.append(marker_topic)
 
     def compute(trial) -> StepResult:
-        streams, meta = compute_kinematics(trial, ua, fa, options)
+        streams, meta = compute_kinematics(trial, ua, fa, options, trunk)
         return StepResult(streams=streams, metadata=meta)
 
     params = {
         "upper_arm": ua,
         "forearm": fa,
+        "trunk": trunk,
         "use_markers": options.use_markers,
         "orientation": dataclasses.asdict(options.orientation),
         **record,

@@ -4,6 +4,11 @@
 
 calibrates each series to the trunk frame in the neutral window (:mod:`.calibration`), solves the
 unconstrained and constrained problems (:mod:`.solver`) and runs the forward kinematics of both.
+
+The trunk is still (the paper's assumption) unless a third, trunk orientation series is given
+(``q_trunk_s2g``, a sensor with its axes on the trunk axes): the trunk frame then follows that
+sensor's rotation since the neutral posture, expressed in its own axes, ``T(t) = R(q_Tn^-1 q_T(t))``,
+and each segment is expressed in it, ``T(t)^T R_seg(t)``.
 """
 
 from __future__ import annotations
@@ -72,9 +77,11 @@ def estimate_kinematics(
     *,
     constrained: bool = True,
     q_segment_to_sensor: dict[str, np.ndarray] | None = None,
+    q_trunk_s2g: np.ndarray | None = None,
 ) -> KinematicsEstimate:
     """Joint angles from sensor-to-global quaternions (N, 4) of the upper-arm and forearm sensors
-    (or marker clusters) sampled at ``t_ns``; ``q_segment_to_sensor`` optional mounting rotations."""
+    (or marker clusters) sampled at ``t_ns``; ``q_segment_to_sensor`` optional mounting rotations;
+    ``q_trunk_s2g`` (N, 4) an optional trunk sensor (or cluster) on the same samples."""
     mount = q_segment_to_sensor or {}
     window = config.calibration.window_mask(t_ns)
     if not window.any():
@@ -91,6 +98,14 @@ def estimate_kinematics(
         m = np.asarray(mount.get(seg, quat.IDENTITY), dtype=np.float64)
         g2t[seg] = fit_global_to_trunk(np.asarray(q)[window], r_model, m, config.calibration.mode)
         rots[seg] = segment_rotations(q, g2t[seg], m)
+    if q_trunk_s2g is not None:
+        q_t = np.asarray(q_trunk_s2g, dtype=np.float64)
+        if q_t.shape != (len(t_ns), 4):
+            raise ValueError(f"q_trunk_s2g must have shape ({len(t_ns)}, 4), got {q_t.shape}")
+        q_tn = quat.average(q_t[window][np.all(np.isfinite(q_t[window]), axis=1)])
+        trunk = quat.to_rotation_matrix(quat.multiply(quat.conjugate(q_tn), q_t))  # rotation since the posture
+        for seg in rots:
+            rots[seg] = np.einsum("nji,njk->nik", trunk, rots[seg])
     q0 = np.radians(config.calibration.pose_deg)
     n = len(t_ns)
     t0 = time.perf_counter()
@@ -115,4 +130,7 @@ def estimate_kinematics(
         )
         timing["constrained"] = (time.perf_counter() - t0) * 1e3 / max(n, 1)
         fk_con = _fk_nan(con.q_rad, config.model)
+        # samples the solver could not bring inside the boxes (an infeasible box specification)
+        outside = outside_workspace(fk_con.elbow_m, fk_con.wrist_m, config.workspace, config.solver.feasibility_tol_m)
+        con.extra["n_infeasible"] = int(np.sum(outside & np.all(np.isfinite(con.q_rad), axis=1)))
     return KinematicsEstimate(np.asarray(t_ns, dtype=np.int64), un, con, fk_un, fk_con, t_out, g2t, timing)

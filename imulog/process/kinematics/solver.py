@@ -100,7 +100,8 @@ class SolverParams:
 
     ``max_iterations``: LM/SQP iterations per sample (50).
     ``step_tol_rad``: stop when the largest joint update is below this (1e-9 rad).
-    ``feasibility_tol_m``: accepted workspace-box violation (1e-6 m, MATLAB's default constraint tolerance).
+    ``feasibility_tol_m``: accepted workspace-box violation (1e-6 m, MATLAB's default constraint
+    tolerance); a sample still further out after the iterations gets min-norm restoration steps.
     ``initial_damping``: Levenberg-Marquardt damping at the first iteration (1e-6, relative to rad^2).
     ``penalty``: weight of the L1 constraint violation in the merit function (1e4 per rad or m).
     ``qp_sweeps``: projected Gauss-Seidel sweeps on the QP dual (200).
@@ -345,6 +346,20 @@ def _build_constraints(q, lo, hi, frames_p, jp_el, jp_wr, a, b):
 
 
 @numba.njit(cache=True)
+def _box_violation(frames_p, lo, hi):
+    """Largest distance (m) of the elbow or wrist centre outside its box."""
+    worst = 0.0
+    for i in range(3):
+        for o, k in ((3, 5), (6, 8)):
+            p = frames_p[o, i]
+            if lo[k + i] - p > worst:
+                worst = lo[k + i] - p
+            if p - hi[k + i] > worst:
+                worst = p - hi[k + i]
+    return worst
+
+
+@numba.njit(cache=True)
 def _solve_one(
     q,
     model,
@@ -358,6 +373,7 @@ def _solve_one(
     damping0,
     penalty,
     sweeps,
+    feas_tol,
     work_r,
     work_p,
     r,
@@ -468,8 +484,18 @@ def _solve_one(
             elif q[c] > hi[c]:
                 q[c] = hi[c]
         f, v = _evaluate(q, model, rua_hat, rfa_hat, lo, hi, work_r, work_p, r)
+        # feasibility restoration: min-norm steps onto the linearised boxes until within feas_tol
+        for _fix in range(20):
+            if _box_violation(work_p, lo, hi) <= feas_tol:
+                break
+            _jac_kernel(work_r, work_p, jw2_ua, jw2_fa, jp2_el, jp2_wr)
+            m2 = _build_constraints(q, lo, hi, work_p, jp2_el, jp2_wr, a2, b2)
+            _solve_qp(eye, zero5, a2, b2, m2, sweeps, d2, lam2)
+            for c in range(5):
+                q[c] = min(max(q[c] + d2[c], lo[c]), hi[c])
+            f, v = _evaluate(q, model, rua_hat, rfa_hat, lo, hi, work_r, work_p, r)
         tol_q = 1e-9
-        tol_p = 1e-6
+        tol_p = max(feas_tol, 1e-9)
         active[0] = False
         active[1] = False
         active[2] = False
@@ -498,6 +524,7 @@ def _solve_sequence(
     damping0,
     penalty,
     sweeps,
+    feas_tol,
     out_q,
     out_cost,
     out_iter,
@@ -538,6 +565,7 @@ def _solve_sequence(
             damping0,
             penalty,
             sweeps,
+            feas_tol,
             work_r,
             work_p,
             r,
@@ -621,6 +649,7 @@ def solve_sequence(
         float(params.initial_damping),
         float(params.penalty),
         int(params.qp_sweeps),
+        float(params.feasibility_tol_m),
     )
     if n and q0_rad is None:
         finite = np.flatnonzero(np.isfinite(rua[:, 0, 0]) & np.isfinite(rfa[:, 0, 0]))
@@ -668,6 +697,7 @@ class RealTimeSolver:
             float(params.initial_damping),
             float(params.penalty),
             int(params.qp_sweeps),
+            float(params.feasibility_tol_m),
         )
         self.q_rad = np.zeros(N_FREE) if q0_rad is None else np.asarray(q0_rad, dtype=np.float64).reshape(N_FREE)
         self._q = np.empty((1, N_FREE))

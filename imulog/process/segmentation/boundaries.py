@@ -49,19 +49,23 @@ class BoundaryParams:
     min_level_rad_s: lower bound of the level (rad/s), for quantised, nearly noise-free signals.
     strong_fraction: the search for the onset (offset) starts at the first (last) sample of the phase whose
         ``r`` exceeds this fraction of the phase's peak ``r``: certainly inside the movement.
+    descend: after the level crossing, keep moving outward while ``r`` still decreases (down to the noise).
+    max_shift_s: an onset (offset) that would move more than this (s) outward from the DynAMoS boundary is
+        kept where DynAMoS put it: the adjacent period is not static enough to define a level.
     continuation_s: a sub-movement starting within this time (s) after the offset can extend the phase (0 = off).
     continuation_peak_fraction: ... if its peak ``r`` reaches this fraction of the phase's peak ``r``.
     """
 
     enabled: bool = True
-    cutoff_hz: float = 8.0
-    static_window_s: float = 1.0
+    cutoff_hz: float = 25.0
+    static_window_s: float = 0.0
     min_static_s: float = 0.25
     guard_s: float = 0.1
     n_sigma: float = 4.0
     min_level_rad_s: float = 0.002
     strong_fraction: float = 0.1
-    descend: bool = False
+    descend: bool = True
+    max_shift_s: float = 0.3
     continuation_s: float = 1.0
     continuation_peak_fraction: float = 0.1
 
@@ -95,10 +99,15 @@ def quietest_window(omega: np.ndarray, lo: int, hi: int, length: int) -> tuple[i
 
 
 def static_estimate(omega: np.ndarray, window: tuple[int, int], params: BoundaryParams) -> tuple[np.ndarray, float]:
-    """Bias (3,) rad/s and motion level (rad/s) from a static window of the filtered gyroscope."""
+    """Bias (3,) rad/s and motion level (rad/s) from a static stretch of the filtered gyroscope.
+
+    Bias = per-axis median; noise = per-axis robust standard deviation (1.4826 x median absolute deviation,
+    so that a short fidget in the stretch does not inflate it), rms over the axes; level = ``n_sigma`` x noise.
+    """
     w = omega[window[0] : window[1]]
     bias = np.median(w, axis=0)
-    sigma = float(np.sqrt(np.mean(np.var(w, axis=0))))
+    mad = 1.4826 * np.median(np.abs(w - bias), axis=0)
+    sigma = float(np.sqrt(np.mean(mad**2)))
     return bias, max(params.n_sigma * sigma, params.min_level_rad_s)
 
 
@@ -148,6 +157,7 @@ def refine_phase_boundaries(
     min_static = max(3, int(round(params.min_static_s * rate_hz)))
     guard = int(round(params.guard_s * rate_hz))
     cont = int(round(params.continuation_s * rate_hz))
+    shift = int(round(params.max_shift_s * rate_hz))
     order = np.argsort(s, kind="stable")
     s_sorted, e_sorted = s[order].copy(), e[order].copy()
     out_s, out_e = s_sorted.copy(), e_sorted.copy()
@@ -155,8 +165,12 @@ def refine_phase_boundaries(
         a, b = int(s_sorted[k]), int(e_sorted[k])
         prev_end = int(out_e[k - 1]) if k > 0 else 0
         next_start = int(s_sorted[k + 1]) if k + 1 < len(s_sorted) else n
-        pre = quietest_window(omega, prev_end + guard, a - guard, win)
-        post = quietest_window(omega, b + guard, next_start - guard, win)
+        if params.static_window_s > 0:
+            pre = quietest_window(omega, prev_end + guard, a - guard, win)
+            post = quietest_window(omega, b + guard, next_start - guard, win)
+        else:  # the whole gap between the phases
+            pre = (prev_end + guard, a - guard) if a - prev_end > 2 * guard else None
+            post = (b + guard, next_start - guard) if next_start - b > 2 * guard else None
         if pre is not None and pre[1] - pre[0] < min_static:
             pre = None
         if post is not None and post[1] - post[0] < min_static:
@@ -170,19 +184,24 @@ def refine_phase_boundaries(
         peak = float(r_pre[a:b].max()) if b > a else 0.0
         lo = max(prev_end, pre[0] if pre is not None else prev_end)
         new_a = _onset(r_pre, a, b, level_pre, lo, max(params.strong_fraction * peak, level_pre), params.descend)
+        if new_a < a - shift:  # no static level near the onset (drift, slow wander): keep the DynAMoS onset
+            new_a = a
         hi = min(next_start, post[1] if post is not None else next_start)
         new_b = _offset(r_post, a, b, level_post, hi, max(params.strong_fraction * peak, level_post), params.descend)
+        if new_b > b + shift:
+            new_b = b
         while cont > 0:  # corrective sub-movements after the offset, before the next phase
             stop = min(new_b + cont, next_start)
             big = np.flatnonzero(r_post[new_b:stop] >= params.continuation_peak_fraction * peak)
             if len(big) == 0:
                 break
             c1 = new_b + int(big[0])
-            while c1 < next_start and r_post[c1] > level_post:
+            bound = min(next_start, c1 + cont)
+            while c1 < bound and r_post[c1] > level_post:
                 c1 += 1
-            while params.descend and c1 < next_start and r_post[c1] < r_post[c1 - 1]:
+            while params.descend and c1 < bound and r_post[c1] < r_post[c1 - 1]:
                 c1 += 1
-            if c1 >= next_start:  # runs into the next phase: not a sub-movement of this one
+            if c1 >= bound:  # runs into the next phase or never settles: not a sub-movement of this one
                 break
             new_b = c1
         if new_b <= new_a:

@@ -41,6 +41,9 @@ class RepetitionParams:
         (imulog addition; 0 = drop extras as in the thesis).
     split_merged: split a group holding two repetitions (short rest between them), see
         :func:`split_merged_groups` (imulog addition).
+    extra_groups: besides ``n_repetitions`` groups, also try partitions into up to this many more groups
+        (non-task activity such as a calibration wave takes a group of its own) and keep the partition whose
+        ``n_repetitions`` cheapest groups have the lowest summed correction cost (imulog addition).
     max_candidates: at most this many movements (the highest) enter the exhaustive search per repetition.
     labels: phase labels in order.
     """
@@ -53,6 +56,7 @@ class RepetitionParams:
     extra_cut_fraction: float = 0.5
     continuation_gap_s: float = 1.0
     split_merged: bool = True
+    extra_groups: int = 2
     max_candidates: int = 14
     labels: tuple[str, ...] = R2G_PHASES
 
@@ -350,22 +354,32 @@ def segment_repetitions(
         return Phases(empty, empty, empty, empty, [], 0)
     if params.split == "activity":
         rep_s, rep_e = split_repetitions(norm, n_rep, params.activity_fraction)
-        rep = assign_to_repetitions(start, end, rep_s, rep_e)
+        partitions = [assign_to_repetitions(start, end, rep_s, rep_e)]
     else:
         heights = features(start, end, norm, rate_hz)[1]
-        rep = group_movements(
-            start, end, heights, n_rep, params.n_phases, params.major_fraction, params.extra_cut_fraction
-        )
-    groups = [np.flatnonzero(rep == r) for r in range(int(rep.max()) + 1)]
-    groups = [g for g in groups if len(g)]
-    ref = _reference(groups, start, end, norm, rate_hz, params.n_phases)
-    if ref is not None and params.split_merged:
-        groups = split_merged_groups(groups, start, end, norm, rate_hz, ref, params, n_rep)
-    selected = [(*_select(start[g], end[g], norm, rate_hz, ref, params), len(g)) for g in groups]
-    if len(selected) > n_rep:  # drop the groups least like a repetition, keep time order
-        order = np.argsort([c for _, _, c, _ in selected], kind="stable")
-        keep = np.sort(order[:n_rep])
-        selected = [selected[k] for k in keep]
+        partitions = [
+            group_movements(
+                start, end, heights, n_rep + j, params.n_phases, params.major_fraction, params.extra_cut_fraction
+            )
+            for j in range(params.extra_groups + 1)
+        ]
+    ref, best = None, None
+    for rep in partitions:
+        groups = [np.flatnonzero(rep == r) for r in range(int(rep.max()) + 1)]
+        groups = [g for g in groups if len(g)]
+        if ref is None:  # the subject's correct repetitions, from the first partition that has any
+            ref = _reference(groups, start, end, norm, rate_hz, params.n_phases)
+        if ref is not None and params.split_merged:
+            groups = split_merged_groups(groups, start, end, norm, rate_hz, ref, params, n_rep)
+        selected = [(*_select(start[g], end[g], norm, rate_hz, ref, params), len(g)) for g in groups]
+        if len(selected) > n_rep:  # drop the groups least like a repetition, keep time order
+            order = np.argsort([c for _, _, c, _ in selected], kind="stable")
+            keep = np.sort(order[:n_rep])
+            selected = [selected[k] for k in keep]
+        total = _kept_cost([c for _, _, c, _ in selected], n_rep)
+        if best is None or total < best[0]:
+            best = (total, selected)
+    selected = best[1]
     out_s, out_e, out_r, out_p = [], [], [], []
     corrected = 0
     for r, (s, e, _cost, count) in enumerate(selected):
