@@ -278,3 +278,14 @@ def test_resample_quaternions_follow_rotation():
     err = np.rad2deg(Q.angle_between(out, orientation_at(t_dst / NS)))
     assert np.allclose(np.linalg.norm(out, axis=1), 1.0)
     assert np.percentile(err, 99) < 0.2
+
+
+def test_lag_without_overlap_is_a_clear_error():
+    """A device recording of 3 s against a 20 s reference window: no lag overlaps half the window; a clear
+    error instead of the argmax of an all -inf correlation (which returned an arbitrary offset)."""
+    t = np.arange(0, 30 * 200) * 5_000_000
+    w = np.abs(np.sin(np.arange(len(t)) / 50.0))
+    with pytest.raises(ValueError, match="--max-lag"):
+        al.estimate_lag(t[:600], w[:600], t, w, window_s=20.0, max_lag_s=5.0)
+    est = al.estimate_lag(t + 2 * 10**9, w, t, w, window_s=120.0, max_lag_s=5.0)  # window > recording
+    assert abs(est.offset_ns + 2 * 10**9) < 5_000_000

@@ -78,3 +78,22 @@ def test_madgwick_backend_and_errors(trial):
     assert bad.exit_code != 0 and "no channel /imu/ankle" in bad.output
     bad = runner.invoke(cli, ["process", "align", str(path), "--markers", "nope"])
     assert bad.exit_code != 0 and "/markers/nope" in bad.output
+
+
+def test_align_short_real_recording_with_foot_markers(shared_data, tmp_path):
+    """gaitmap (38.7 s, IMU and mocap already synchronised, no O/X/Y markers): the default 120 s window used
+    to find no lag at all and fail with 'too few common samples'; a missing O/X/Y cluster names the channel
+    and says how to use other markers."""
+    from converters import convert_files
+
+    path = tmp_path / "gaitmap.mcap"
+    write_trial(path, convert_files(sorted((shared_data / "gaitmap_foot").glob("*_sample.csv"))))
+    runner = CliRunner()
+    bad = runner.invoke(cli, ["process", "align", str(path), "--imu", "left_sensor"])
+    assert bad.exit_code == 1 and "/markers/mocap" in bad.output and "--cluster svd" in bad.output
+    assert "Traceback" not in bad.output
+    svd = ["--cluster", "svd", "--cluster-markers", "L_FCC,L_TOE,L_FM5"]
+    _ok(runner.invoke(cli, ["process", "align", str(path), "--imu", "left_sensor", *svd]))
+    with TrialReader(path) as t:
+        rec = t.metadata["imulog.alignment"]
+    assert abs(rec["offset_ns"]) < 20_000_000 and rec["score"] > 0.8  # the data set is synchronised

@@ -343,3 +343,39 @@ def test_damaged_summary_without_crc_gives_archive_errors_not_tracebacks(small_t
             pass
         noticed += not check_file(bad).ok
     assert noticed >= 100  # the rest changed only private/unknown-opcode bytes or values equal to the old ones
+
+
+DAMAGED_ARCHIVE_COMMANDS = [
+    ["info"],
+    ["doctor"],
+    ["export", "--topic", "/imu/wrist", "-o", "{out}/x.parquet"],
+    ["process", "orientation"],
+    ["process", "align"],
+    ["process", "trajectory"],
+    ["process", "metrics"],
+    ["process", "calibrate", "--calibration", "{out}/cal.json"],
+    ["evaluate"],
+    ["calibrate", "-o", "{out}/cal2.json"],
+    ["view", "--save", "{out}/x.rrd"],
+]
+
+
+@pytest.mark.parametrize("command", DAMAGED_ARCHIVE_COMMANDS, ids=[" ".join(c[:2]) for c in DAMAGED_ARCHIVE_COMMANDS])
+def test_commands_report_a_truncated_archive_in_one_line(small_trial, tmp_path, command):
+    """Every command given a cut-off archive: exit 1 and one 'Error: FILE: ...' line, never a traceback
+    (the reprocessing commands used to let ArchiveCorruptError escape)."""
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(small_trial.read_bytes()[: small_trial.stat().st_size // 2])
+    (tmp_path / "cal.json").write_text(
+        '{"format": "imulog.calibration/1", "acc": {"bias": [0, 0, 0], "matrix": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]}}'
+    )
+    args = [a.replace("{out}", str(tmp_path)) for a in command]
+    where = 2 if args[0] == "process" else 1
+    result = CliRunner().invoke(cli, [*args[:where], str(cut), *args[where:]])
+    assert result.exit_code == 1, result.output + repr(result.exception)
+    assert not isinstance(result.exception, Exception) or isinstance(result.exception, SystemExit)
+    errors = [line for line in result.output.splitlines() if line.startswith("Error:")]
+    assert errors == [f"Error: {cut}: truncated or unfinished MCAP file (no closing magic / footer)"] or (
+        args[0] == "calibrate" and errors and str(cut) in errors[0] and "truncated" in errors[0]
+    ), result.output
+    assert f"{cut}: {cut}" not in result.output

@@ -81,8 +81,10 @@ def process_align(
       imulog process align trial.mcap --window 60 --drift
       imulog process align trial.mcap --cluster svd --cluster-markers O,X,Y,A
     """
+    from imulog.archive.errors import ArchiveError
     from imulog.process.alignment import AlignmentParams, FilterParams
     from imulog.steps.align import run_align
+    from imulog.steps.common import error_line
 
     if window_s <= 0 or max_lag_s < 0:
         raise click.ClickException("--window must be positive and --max-lag non-negative")
@@ -103,8 +105,8 @@ def process_align(
 
         with TrialReader(trial) as reader:
             rec = reader.metadata.get("imulog.alignment", {})
-    except (ValueError, KeyError, OSError) as exc:
-        raise click.ClickException(f"{trial}: {exc}") from exc
+    except (ArchiveError, ValueError, KeyError, OSError) as exc:
+        raise click.ClickException(error_line(trial, exc)) from exc
     prefix = "unchanged (same inputs and parameters): " if outcome.skipped else ""
     q = rec.get("rotation_imu_to_cluster") or [1.0, 0.0, 0.0, 0.0]
     angle_deg = math.degrees(2 * math.acos(min(1.0, abs(float(q[0])))))

@@ -55,9 +55,10 @@ def calibrate(
       imulog process calibrate trial.mcap --calibration cal.json
     """
     from imulog.archive import TrialReader
+    from imulog.archive.errors import ArchiveError
     from imulog.process.calibration import Calibration, SegmentParams
     from imulog.steps.calibrate import calibration_from_arrays
-    from imulog.steps.common import pick_imu
+    from imulog.steps.common import error_line, pick_imu
 
     if output.exists() and not overwrite:
         raise click.ClickException(f"{output} exists (use --overwrite)")
@@ -76,8 +77,8 @@ def calibrate(
                 c = calibration_from_arrays(
                     s.t_ns, s.acc, s.gyr, angle_rad=math.radians(angle_deg), params=seg, g_m_s2=gravity
                 )
-            except (ValueError, KeyError, OSError) as exc:
-                notes.append(f"{path}: {exc}")
+            except (ArchiveError, ValueError, KeyError, OSError) as exc:
+                notes.append(error_line(path, exc))
                 continue
             if result.acc is None and c.acc is not None:
                 result.acc = c.acc
@@ -118,8 +119,10 @@ def process_calibrate(trial: Path, calibration_file: Path, imu: str | None, forc
       imulog process calibrate trial.mcap --calibration bluebuddy_cal.json
       imulog process orientation trial.mcap
     """
+    from imulog.archive.errors import ArchiveError
     from imulog.process.calibration import Calibration
     from imulog.steps.calibrate import run_calibrate
+    from imulog.steps.common import error_line
 
     try:
         cal = Calibration.from_dict(json.loads(calibration_file.read_text()))
@@ -127,6 +130,6 @@ def process_calibrate(trial: Path, calibration_file: Path, imu: str | None, forc
         raise click.ClickException(f"{calibration_file}: {exc}") from exc
     try:
         outcome = run_calibrate(trial, cal, imu=imu, force=force)
-    except (ValueError, KeyError, OSError) as exc:
-        raise click.ClickException(f"{trial}: {exc}") from exc
+    except (ArchiveError, ValueError, KeyError, OSError) as exc:
+        raise click.ClickException(error_line(trial, exc)) from exc
     click.echo(("unchanged: " if outcome.skipped else "wrote ") + ", ".join(outcome.topics))

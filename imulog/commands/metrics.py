@@ -152,7 +152,8 @@ def process_metrics(
       imulog process metrics trial.mcap --static sensor_at_rest.mcap      # noise from a static recording
       imulog process align r2g.mcap && imulog process phases r2g.mcap && imulog process metrics r2g.mcap
     """
-    from imulog.steps.common import pick_imu
+    from imulog.archive.errors import ArchiveError
+    from imulog.steps.common import error_line, pick_imu
     from imulog.steps.metrics import MetricsParams, run_metrics
 
     try:
@@ -182,8 +183,8 @@ def process_metrics(
         outcome = run_metrics(trial, imu=name, params=params, force=force)
         with TrialReader(trial) as reader:
             record = reader.metadata.get("imulog.metrics")
-    except (ValueError, KeyError, OSError) as exc:
-        raise click.ClickException(f"{trial}: {exc}") from exc
+    except (ArchiveError, ValueError, KeyError, OSError) as exc:
+        raise click.ClickException(error_line(trial, exc)) from exc
     if record is None:
         raise click.ClickException(f"{trial}: no imulog.metrics record after the step")
     if as_json:

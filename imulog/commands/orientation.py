@@ -57,7 +57,9 @@ def process_orientation(
       imulog process orientation trial.mcap --backend madgwick --beta 0.03   # the thesis's setting
       imulog process orientation trial.mcap --backend vqf --mag      # causal VQF with magnetometer
     """
+    from imulog.archive.errors import ArchiveError
     from imulog.process.orientation import OrientationParams, StaticParams
+    from imulog.steps.common import error_line
     from imulog.steps.orientation import run_orientation
 
     if beta <= 0:
@@ -72,8 +74,8 @@ def process_orientation(
         with click.progressbar(length=1, label=f"orientation ({backend})") as bar:
             outcome = run_orientation(trial, imu=imu, params=params, source=source, force=force)
             bar.update(1)
-    except (ValueError, KeyError, OSError, RuntimeError) as exc:
-        raise click.ClickException(f"{trial}: {exc}") from exc
+    except (ArchiveError, ValueError, KeyError, OSError, RuntimeError) as exc:
+        raise click.ClickException(error_line(trial, exc)) from exc
     if outcome.skipped:
         click.echo(f"unchanged (same inputs and parameters): {', '.join(outcome.topics)}")
     else:

@@ -17,7 +17,8 @@ def parse_value(text: str) -> Any:
         return text
 
 
-PROTOCOL_CHOICES = ("r2g", "slide", "nhpt", "adl")
+PROTOCOL_CHOICES = ("r2g", "slide", "nhpt", "adl", "arm")
+ARM_ONLY = ("--seconds", "--trunk-imu")
 
 
 def _overrides(pairs: tuple[str, ...]) -> dict[str, Any]:
@@ -57,6 +58,12 @@ def _overrides(pairs: tuple[str, ...]) -> dict[str, Any]:
     help="Any model parameter (repeatable), e.g. --set drift_ppm=40 --set residual_velocity_mps=0.01.",
 )
 @click.option("--list-parameters", is_flag=True, help="List the parameters PROTOCOL accepts with --set and exit.")
+@click.option(
+    "--seconds",
+    type=click.FloatRange(min=5.0),
+    help="arm only: trial duration, s (default 60; at least the 3 s neutral posture + 2 s blend).",
+)
+@click.option("--trunk-imu", is_flag=True, help="arm only: add a trunk IMU and its marker cluster.")
 def simulate(
     protocol: str,
     out_dir: Path,
@@ -67,6 +74,8 @@ def simulate(
     noise_free: bool,
     settings: tuple[str, ...],
     list_parameters: bool,
+    seconds: float | None,
+    trunk_imu: bool,
 ) -> None:
     """Simulate PROTOCOL trials with known ground truth.
 
@@ -82,6 +91,8 @@ def simulate(
       slide  uniaxial cart on rails (R2G thesis ch. 2): 30 constant-acceleration slides
       nhpt   nine-hole peg test (Bai et al. 2023): 9 pegs in, 9 pegs out
       adl    repetitive activities of daily living (Doshi 2011)
+      arm    two-segment arm (Caruso et al. 2024): upper-arm and forearm IMUs (optionally trunk),
+             known shoulder and elbow angles, for `imulog process kinematics`
 
     \b
     Examples:
@@ -92,7 +103,27 @@ def simulate(
       imulog simulate slide -o sim/ --set drift_ppm=0
       imulog convert sim/r2g_s00_t00_imu.csv sim/r2g_s00_t00_vicon.csv \\
           --meta-file sim/r2g_s00_t00_meta.json -o r2g.mcap
+
+    For arm, both IMUs of the synchronised station are in <stem>_imu.csv (a sensor row names each
+    IMU's columns), both marker clusters (upper_arm_O, ..., forearm_O, ...) in <stem>_vicon.csv,
+    the imulog.kinematics record in <stem>_meta.json and the true joint angles in the truth files
+    (read them with imulog.simulate.arm.load_arm_truth):
+
+    \b
+      imulog simulate arm -o sim/ --seconds 30 --seed 2 [--trunk-imu] [--noise-free]
+      imulog convert sim/ -o trials/
+      imulog process orientation trials/arm_s00_t00.mcap --imu upper_arm
+      imulog process orientation trials/arm_s00_t00.mcap --imu forearm
+      imulog process kinematics trials/arm_s00_t00.mcap
     """
+    if protocol == "arm":
+        _simulate_arm(
+            out_dir, subjects, trials, seed, repetitions, noise_free, settings, list_parameters, seconds, trunk_imu
+        )
+        return
+    for flag, value in zip(ARM_ONLY, (seconds, trunk_imu), strict=True):
+        if value:
+            raise click.UsageError(f"{flag} applies to the arm protocol only")
     from imulog.simulate import parameter_names, simulate_to_folder
 
     if list_parameters:
@@ -113,6 +144,49 @@ def simulate(
 
             written = simulate_to_folder(
                 protocol, out_dir, subjects=subjects, trials=trials, seed=seed, progress=advance, **overrides
+            )
+    except (TypeError, ValueError) as e:
+        raise click.ClickException(str(e)) from None
+    for paths in written:
+        click.echo(
+            f"{paths['imu'].name[: -len('_imu.csv')]}: "
+            + ", ".join(p.name for k, p in paths.items() if k != "truth_npz")
+        )
+    click.echo(f"wrote {len(written)} trial(s) to {out_dir}")
+
+
+def _simulate_arm(
+    out_dir: Path,
+    subjects: int,
+    trials: int,
+    seed: int,
+    repetitions: int | None,
+    noise_free: bool,
+    settings: tuple[str, ...],
+    list_parameters: bool,
+    seconds: float | None,
+    trunk_imu: bool,
+) -> None:
+    """``imulog simulate arm``: the two-segment arm of :mod:`imulog.simulate.arm` as raw exports."""
+    from imulog.simulate.arm import arm_parameter_names, simulate_arm_to_folder
+
+    if list_parameters:
+        for group, names in arm_parameter_names().items():
+            click.echo(f"{group}: {', '.join(names)}")
+        return
+    if repetitions is not None:
+        raise click.UsageError("--repetitions does not apply to arm (use --seconds)")
+    overrides = _overrides(settings)
+    if seconds is not None:
+        overrides["duration_s"] = seconds
+    if noise_free:
+        overrides["noise_free"] = True
+    if trunk_imu:
+        overrides["trunk_imu"] = True
+    try:
+        with click.progressbar(length=subjects * trials, label="simulating arm", show_pos=True) as bar:
+            written = simulate_arm_to_folder(
+                out_dir, subjects=subjects, trials=trials, seed=seed, progress=lambda *_: bar.update(1), **overrides
             )
     except (TypeError, ValueError) as e:
         raise click.ClickException(str(e)) from None

@@ -89,9 +89,11 @@ def process_trajectory(
       imulog process trajectory trial.mcap --method ddi,zupt,optimized
       imulog evaluate trial.mcap
     """
+    from imulog.archive.errors import ArchiveError
     from imulog.process.drift import HighpassParams, WaveletParams
     from imulog.process.kalman import KalmanParams
     from imulog.process.trajectory_opt import OptimizationParams, TrajectoryParams
+    from imulog.steps.common import error_line
     from imulog.steps.trajectory import run_trajectory
 
     chosen = _methods(methods)
@@ -115,8 +117,8 @@ def process_trajectory(
             ),
         )
         outcome = run_trajectory(trial, imu=imu, methods=chosen, params=params, force=force)
-    except (ValueError, KeyError) as exc:
-        raise click.ClickException(f"{trial}: {exc}") from None
+    except (ArchiveError, ValueError, KeyError, OSError) as exc:
+        raise click.ClickException(error_line(trial, exc)) from None
     if outcome.skipped:
         click.echo(f"{trial}: trajectories up to date (run {outcome.run}); use --force to recompute")
         return
@@ -147,12 +149,14 @@ def evaluate(trial: Path, methods: str | None, max_gap: float, as_json: bool, fo
       imulog evaluate trial.mcap
       imulog evaluate trial.mcap --method zupt,optimized --json > errors.json
     """
+    from imulog.archive.errors import ArchiveError
+    from imulog.steps.common import error_line
     from imulog.steps.evaluate import run_evaluate, table_from_record
 
     try:
         _, record = run_evaluate(trial, methods=_methods(methods) if methods else None, max_gap_s=max_gap, force=force)
-    except ValueError as exc:
-        raise click.ClickException(f"{trial}: {exc}") from None
+    except (ArchiveError, ValueError, KeyError, OSError) as exc:
+        raise click.ClickException(error_line(trial, exc)) from None
     if as_json:
         click.echo(json.dumps(record, indent=1, default=float))
         return

@@ -108,7 +108,8 @@ def view(
             except ImportError as exc:
                 raise click.ClickException(f"{f}: cannot read archives ({exc})") from exc
             except Exception as exc:
-                raise click.ClickException(f"{f}: {exc}") from exc
+                message = str(exc)
+                raise click.ClickException(message if message.startswith(str(f)) else f"{f}: {message}") from exc
     if sample_s is not None:
         from imulog.view.sample import SampleTrialParams, sample_recording
 

@@ -332,6 +332,8 @@ def estimate_lag(
     t_ref_ns = np.asarray(t_ref_ns, dtype=np.int64)
     ws = int(round(window_start_s * NS))
     ref0 = int(t_ref_ns[0]) + ws
+    # a recording shorter than the window: correlate what there is (else no lag reaches min_overlap)
+    window_s = max(min(window_s, (int(t_ref_ns[-1]) - ref0) / NS), 0.0)
     na = int(window_s * grid_hz)
     a = _uniform(t_ref_ns, np.asarray(w_ref_norm, dtype=np.float64), ref0, grid_hz, na)
     dev0 = int(t_dev_ns[0]) + ws - int(round(max_lag_s * NS))
@@ -358,6 +360,11 @@ def estimate_lag(
     with np.errstate(invalid="ignore", divide="ignore"):
         ncc = c / (norm_a * np.sqrt(energy))
     ncc[~np.isfinite(ncc) | (overlap < min_overlap)] = -np.inf
+    if not np.isfinite(ncc).any():
+        raise ValueError(
+            f"no clock offset within +-{max_lag_s:g} s overlaps the {window_s:g} s reference window by "
+            f">= {min_overlap:.0%}: check --window-start, --window and --max-lag against the recording"
+        )
     k = int(np.argmax(ncc))
     frac = 0.0
     if 0 < k < len(ncc) - 1 and np.isfinite(ncc[k - 1]) and np.isfinite(ncc[k + 1]):

@@ -20,13 +20,24 @@ and sideways (pivot ``trunk_pivot_below_m`` under the shoulder) after the neutra
 ``trunk_imu=True`` adds a ``trunk`` IMU (axes on the trunk frame) with its own marker cluster.
 
     python -m imulog.simulate.arm arm.mcap --seconds 60 --seed 0     # writes an MCAP trial
+    imulog simulate arm -o sim/ --seconds 60 --seed 0               # raw export files + truth
+
+:func:`write_arm_files` writes a trial as a lab would have it (``imulog convert`` reads it back into
+the same Recording): ``<stem>_imu.csv`` + ``<stem>_imu.mapping.json`` (both IMUs of the synchronised
+station in one file, a sensor row naming each IMU's columns), ``<stem>_vicon.csv`` (Nexus CSV with
+every cluster's markers), ``<stem>_meta.json`` (``imulog.trial``, ``imulog.anthropometrics``,
+``imulog.kinematics``) and the truth ``<stem>_truth.json`` + ``<stem>_truth.npz``
+(:func:`save_arm_truth`, read back with :func:`load_arm_truth`).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import difflib
+import json
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -35,7 +46,7 @@ import numpy as np
 
 from imulog.model import ImuStream, MarkerStream, Recording
 from imulog.process.kinematics.dh import JOINT_NAMES, ArmModel, JointLimits, forward_kinematics
-from imulog.simulate import imu_model, minjerk, quat, vicon_model
+from imulog.simulate import imu_model, minjerk, quat, vicon_model, writers
 
 SEGMENTS = ("upper_arm", "forearm")
 TRUNK = "trunk"
@@ -78,7 +89,9 @@ class ArmParams:
 class ArmTruth:
     """True state on the common clock: joint angles ``q_rad`` (N, 5) (:data:`JOINT_NAMES` order),
     segment-to-trunk rotations, elbow/wrist centres (N, 3) m in the trunk frame, the trunk-to-world
-    quaternions ``q_world_trunk`` (N, 4) and the IMU mounting rotations."""
+    quaternions ``q_world_trunk`` (N, 4) and the IMU mounting rotations; per worn IMU its
+    sensor-to-world quaternion ``q_world_sensor[name]`` (N, 4, w,x,y,z) and position
+    ``imu_position_m[name]`` (N, 3) m in the Vicon world."""
 
     t_ns: np.ndarray
     q_rad: np.ndarray
@@ -89,6 +102,13 @@ class ArmTruth:
     q_world_trunk: np.ndarray
     q_segment_to_sensor: dict[str, np.ndarray]
     info: dict[str, Any] = field(default_factory=dict)
+    q_world_sensor: dict[str, np.ndarray] = field(default_factory=dict)
+    imu_position_m: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def joint_angles_deg(self) -> np.ndarray:
+        """``q_rad`` in degrees (N, 5)."""
+        return np.degrees(self.q_rad)
 
 
 @dataclass
@@ -96,6 +116,39 @@ class ArmTrial:
     recording: Recording
     truth: ArmTruth
     params: ArmParams
+    seed: int = 0
+    subject: int = 0
+    trial: int = 0
+    raw: dict[str, Any] | None = None  # exact decimal file values the writers use (see imu_model)
+
+    @property
+    def stem(self) -> str:
+        """File stem of the written trial (and of the in-memory ``source`` names)."""
+        return f"arm_s{self.subject:02d}_t{self.trial:02d}"
+
+
+def arm_parameter_names() -> dict[str, list[str]]:
+    """Names :func:`simulate_arm` accepts as ``**overrides``, grouped: arm model, IMU error model."""
+    return {
+        "arm": [f.name for f in dataclasses.fields(ArmParams)],
+        "imu": [f.name for f in dataclasses.fields(imu_model.ImuParams)],
+    }
+
+
+def _split_overrides(overrides: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(ArmParams fields, ImuParams fields); TypeError naming unknown ones (with the closest name)."""
+    names = arm_parameter_names()
+    arm = {k: v for k, v in overrides.items() if k in names["arm"]}
+    imu = {k: v for k, v in overrides.items() if k in names["imu"] and k not in arm}
+    unknown = sorted(set(overrides) - set(arm) - set(imu))
+    if unknown:
+        valid = names["arm"] + names["imu"]
+        hints = []
+        for name in unknown:
+            close = difflib.get_close_matches(name, valid, n=1)
+            hints.append(f"{name} (did you mean {close[0]}?)" if close else name)
+        raise TypeError(f"unknown arm parameter(s): {', '.join(hints)}")
+    return arm, imu
 
 
 def _joint_law(params: ArmParams, rng: np.random.Generator):
@@ -161,20 +214,38 @@ def _segment_offsets(model: ArmModel, lever_m: float) -> dict[str, np.ndarray]:
     }
 
 
-def simulate_arm(*, seed: int = 0, imu: imu_model.ImuParams | None = None, **overrides: Any) -> ArmTrial:
-    """Simulate one arm trial; ``overrides`` set :class:`ArmParams` fields (e.g. ``duration_s=30``)."""
-    params = ArmParams(**overrides)
-    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xA53]))
+def simulate_arm(
+    *,
+    seed: int = 0,
+    subject: int = 0,
+    trial: int = 0,
+    imu: imu_model.ImuParams | None = None,
+    **overrides: Any,
+) -> ArmTrial:
+    """Simulate one arm trial; ``overrides`` set :class:`ArmParams` fields (e.g. ``duration_s=30``)
+    or :class:`~imulog.simulate.imu_model.ImuParams` fields (e.g. ``gyr_noise_dps=0.01``).
+
+    ``subject`` and ``trial`` select independent draws for the same ``seed`` (subject 0, trial 0
+    gives the draws of ``seed`` alone)."""
+    arm_overrides, imu_overrides = _split_overrides(overrides)
+    params = ArmParams(**arm_overrides)
+    base = [int(seed)] if (subject, trial) == (0, 0) else [int(seed), int(subject), int(trial)]
+
+    def seeds(tag: int) -> np.random.SeedSequence:
+        return np.random.SeedSequence([*base, tag])
+
+    rng = np.random.default_rng(seeds(0xA53))
     model = ArmModel(
         params.upper_arm_length_m, params.forearm_length_m, params.styloid_distance_m, params.carrying_angle_deg
     )
     if imu is None:
         imu = imu_model.ImuParams.ideal() if params.noise_free else imu_model.ImuParams()
-    imu = dataclasses.replace(imu, drop_probability=0.0)
+    imu = dataclasses.replace(imu, **{**imu_overrides, "drop_probability": 0.0})
     q_of_t, law_info = _joint_law(params, rng)
 
     n = int(round(params.duration_s * params.rate_hz)) + 1
-    t_ns = np.round(np.arange(n) / params.rate_hz * 1e9).astype(np.int64)
+    # whole microseconds (the IMU file writes ms with 3 decimals); exact ns for 100 Hz
+    t_ns = np.round(np.arange(n) / params.rate_hz * 1e6).astype(np.int64) * 1000
     t_s = t_ns / 1e9
     offsets = _segment_offsets(model, params.imu_lever_m)
     mount = {s: quat.from_rotvec(rng.normal(0.0, math.radians(params.mounting_error_deg), 3)) for s in SEGMENTS}
@@ -184,13 +255,14 @@ def simulate_arm(*, seed: int = 0, imu: imu_model.ImuParams | None = None, **ove
         )
         for s in (*SEGMENTS, TRUNK)
     }
-    trunk_of_t = _trunk_law(params, np.random.default_rng(np.random.SeedSequence([int(seed), 0xA57])))
+    trunk_of_t = _trunk_law(params, np.random.default_rng(seeds(0xA57)))
     pivot = np.asarray(params.shoulder_m, dtype=np.float64) - np.array([0.0, 0.0, params.trunk_pivot_below_m])
     up = np.array([0.0, 0.0, params.trunk_pivot_below_m])  # pivot -> shoulder, trunk frame
     sternum = np.array([-0.18, 0.12, -0.12])  # trunk IMU on the sternum, trunk frame (right shoulder origin)
-    device_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xA54]))
-    noise_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xA55]))
-    vicon_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xA56]))
+    device_rng = np.random.default_rng(seeds(0xA54))
+    noise_rng = np.random.default_rng(seeds(0xA55))
+    vicon_rng = np.random.default_rng(seeds(0xA56))
+    stem = f"arm_s{subject:02d}_t{trial:02d}"
     inc = math.radians(params.inclination_deg)
     field_world = params.field_uT * np.array([math.cos(inc), 0.0, -math.sin(inc)])
 
@@ -213,7 +285,7 @@ def simulate_arm(*, seed: int = 0, imu: imu_model.ImuParams | None = None, **ove
     h = 1e-3
     now, plus, minus = world_state(t_s), world_state(t_s + h), world_state(t_s - h)
     fk_true = forward_kinematics(q_of_t(t_s), model)
-    imus, marker_pos, labels = [], [], []
+    imus, marker_pos, labels, channels = [], [], [], {}
     vparams = vicon_model.ViconParams(noise_mm=params.vicon_noise_mm)
     wearing = (*SEGMENTS, TRUNK) if params.trunk_imu else SEGMENTS
     for seg in wearing:
@@ -229,11 +301,12 @@ def simulate_arm(*, seed: int = 0, imu: imu_model.ImuParams | None = None, **ove
         m_sensor = quat.rotate_inverse(q_ws, np.broadcast_to(field_world, p.shape))
         device = imu_model.draw_device(imu, device_rng)
         ch = imu_model.measure(f_sensor, omega, m_sensor, t_s, imu, device, noise_rng)
+        channels[seg] = ch
         meta = {
             "model": "LSM9DS1 (simulated)",
             "rate_hz": params.rate_hz,
             "units": {q: c.unit for q, c in ch.items()},
-            "source": f"arm_s{seed:02d}_{seg}.csv",
+            "source": f"{stem}_imu.csv",
             "segment": seg,
         }
         imus.append(ImuStream(seg, t_ns, acc=ch["acc"].si, gyr=ch["gyr"].si, mag=ch["mag"].si, meta=meta))
@@ -273,8 +346,8 @@ def simulate_arm(*, seed: int = 0, imu: imu_model.ImuParams | None = None, **ove
         markers=[markers],
         metadata={
             "imulog.trial": {
-                "subject": f"S{seed:02d}",
-                "trial": 0,
+                "subject": f"S{subject:02d}",
+                "trial": int(trial),
                 "task": "arm",
                 "simulated": True,
                 "seed": int(seed),
@@ -293,9 +366,148 @@ def simulate_arm(*, seed: int = 0, imu: imu_model.ImuParams | None = None, **ove
         wrist_m=fk_true.wrist_m,
         q_world_trunk=now[TRUNK][0],
         q_segment_to_sensor=mount,
-        info={"joint_names": list(JOINT_NAMES), **law_info, "params": dataclasses.asdict(params)},
+        info={
+            "joint_names": list(JOINT_NAMES),
+            **law_info,
+            "params": dataclasses.asdict(params),
+            "imu_params": dataclasses.asdict(imu),
+            "seed": int(seed),
+            "subject": int(subject),
+            "trial": int(trial),
+            "rate_hz": params.rate_hz,
+            "clock": "IMUs and Vicon share one clock (offset 0, no drift)",
+            "rotation_imu_to_cluster": {s: [float(v) for v in q_ic[s]] for s in wearing},
+        },
+        q_world_sensor={s: now[s][0] for s in wearing},
+        imu_position_m={s: now[s][1] for s in wearing},
     )
-    return ArmTrial(recording, truth, params)
+    raw = {"t_ns": t_ns, "channels": channels, "vicon_decimals": vparams.decimals}
+    return ArmTrial(recording, truth, params, int(seed), int(subject), int(trial), raw)
+
+
+TRUTH_FORMAT = "imulog.arm_truth/1"
+_TRUTH_ARRAYS = ("t_ns", "q_rad", "r_upper_arm", "r_forearm", "elbow_m", "wrist_m", "q_world_trunk")
+_TRUTH_DICTS = ("q_segment_to_sensor", "q_world_sensor", "imu_position_m")
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+
+
+def save_arm_truth(truth: ArmTruth, stem: Path | str) -> tuple[Path, Path]:
+    """Write ``<stem>_truth.npz`` (arrays; per-IMU ones as ``<field>/<imu>``) and ``<stem>_truth.json``.
+
+    Same file pair as :func:`imulog.simulate.truth.save_truth`, format ``imulog.arm_truth/1``:
+    ``t_ns`` (common IMU/Vicon clock), ``q_rad`` (N, 5) true joint angles in
+    ``joint_names`` order (rad), segment-to-trunk rotation matrices, elbow/wrist centres (m, trunk
+    frame), trunk-to-world and per-IMU sensor-to-world quaternions (w,x,y,z), IMU positions (m)."""
+    stem = Path(stem)
+    npz = stem.with_name(stem.name + "_truth.npz")
+    js = stem.with_name(stem.name + "_truth.json")
+    arrays = {name: getattr(truth, name) for name in _TRUTH_ARRAYS}
+    for name in _TRUTH_DICTS:
+        for imu, value in getattr(truth, name).items():
+            arrays[f"{name}/{imu}"] = np.asarray(value)
+    np.savez_compressed(npz, **arrays)
+    doc = {
+        "format": TRUTH_FORMAT,
+        "protocol": "arm",
+        "arrays": npz.name,
+        "joint_names": list(JOINT_NAMES),
+        "units": {"t_ns": "ns", "q_rad": "rad", "elbow_m": "m", "wrist_m": "m", "imu_position_m": "m"},
+        "info": truth.info,
+    }
+    js.write_text(json.dumps(doc, indent=1, default=_json_default) + "\n")
+    return npz, js
+
+
+def load_arm_truth(path: Path | str) -> ArmTruth:
+    """Read :func:`save_arm_truth` files from ``<stem>_truth.json``, ``<stem>_truth.npz`` or the stem."""
+    path = Path(path)
+    for suffix in ("_truth.json", "_truth.npz"):
+        if path.name.endswith(suffix):
+            path = path.with_name(path.name[: -len(suffix)])
+            break
+    js = path.with_name(path.name + "_truth.json")
+    if not js.is_file():
+        raise FileNotFoundError(f"{js}: no ground-truth file")
+    doc = json.loads(js.read_text())
+    if doc.get("format") != TRUTH_FORMAT:
+        raise ValueError(f"{js}: not an arm truth file (format {doc.get('format')!r}, expected {TRUTH_FORMAT!r})")
+    with np.load(js.with_name(doc["arrays"])) as z:
+        data: dict[str, Any] = {name: z[name] for name in _TRUTH_ARRAYS}
+        for name in _TRUTH_DICTS:
+            data[name] = {k.split("/", 1)[1]: z[k] for k in z.files if k.startswith(name + "/")}
+    return ArmTruth(info=doc.get("info", {}), **data)
+
+
+def write_arm_files(sim: ArmTrial, out_dir: Path | str, stem: str | None = None) -> dict[str, Path]:
+    """Write the trial as raw exports + truth (module docstring); returns the paths by kind
+    (``imu``, ``mapping``, ``vicon``, ``meta``, ``truth_npz``, ``truth``); sets ``recording.sources``.
+
+    ``imulog convert`` of the folder (or of ``imu``, ``vicon`` with ``--meta-file meta``) gives
+    back ``sim.recording``'s streams exactly (same samples, values and time stamps)."""
+    if sim.raw is None:
+        raise ValueError("this ArmTrial has no raw file values (simulate it with simulate_arm)")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    stem = stem or sim.stem
+    info = sim.truth.info.get("imu_params", {})
+    device = {
+        "name": "station",
+        "model": "LSM9DS1 (simulated), cable-synchronised station",
+        "rate_hz": sim.params.rate_hz,
+        "acc_range_g": info.get("acc_range_g"),
+        "gyr_range_dps": info.get("gyr_range_dps"),
+    }
+    paths: dict[str, Path] = {}
+    paths["imu"], paths["mapping"] = writers.write_multi_imu_text(
+        out / f"{stem}_imu.csv",
+        sim.raw["t_ns"],
+        sim.raw["channels"],
+        {k: v for k, v in device.items() if v is not None},
+    )
+    vicon = sim.recording.markers[0]
+    paths["vicon"] = writers.write_nexus_csv(
+        out / f"{stem}_vicon.csv",
+        vicon.pos,
+        list(vicon.labels),
+        float(vicon.meta["rate_hz"]),
+        "",
+        sim.raw["vicon_decimals"],
+    )
+    records = ("imulog.trial", "imulog.anthropometrics", "imulog.kinematics")
+    meta = out / f"{stem}_meta.json"
+    meta.write_text(json.dumps({k: sim.recording.metadata[k] for k in records}, indent=1) + "\n")
+    paths["meta"] = meta
+    paths["truth_npz"], paths["truth"] = save_arm_truth(sim.truth, out / stem)
+    sim.recording.sources = [str(paths[k]) for k in ("imu", "mapping", "vicon")]
+    return paths
+
+
+def simulate_arm_to_folder(
+    out_dir: Path | str,
+    subjects: int = 1,
+    trials: int = 1,
+    seed: int = 0,
+    progress: Callable[[int, int, str], Any] | None = None,
+    **overrides: Any,
+) -> list[dict[str, Path]]:
+    """``subjects`` x ``trials`` arm trials written with :func:`write_arm_files`; ``progress(done,
+    total, stem)`` after each. Returns one dict of paths per trial, in (subject, trial) order."""
+    written = []
+    total = subjects * trials
+    for s in range(subjects):
+        for t in range(trials):
+            sim = simulate_arm(seed=seed, subject=s, trial=t, **overrides)
+            written.append(write_arm_files(sim, out_dir))
+            if progress is not None:
+                progress(len(written), total, sim.stem)
+    return written
 
 
 def main(argv: list[str] | None = None) -> None:

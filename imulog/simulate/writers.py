@@ -1,7 +1,8 @@
 """Writers of the raw export formats a lab would have (what ``imulog convert`` reads).
 
 * BlueBuddy-style delimited IMU text ``<stem>_imu.csv`` and its mapping file
-  ``<stem>_imu.mapping.json`` (format ``imulog.mapping/1``, conventions.md);
+  ``<stem>_imu.mapping.json`` (format ``imulog.mapping/1``, conventions.md); several synchronised
+  IMUs in one such file with a sensor row above the names row (the ``arm`` simulator);
 * Vicon Nexus trajectories CSV ``<stem>_vicon.csv`` in the layout of a real Nexus export
   (``Trajectories`` line, rate line, ``Subject:Marker`` names, ``Frame,Sub Frame,X,Y,Z``, units
   row ``mm``, rows padded to full width, empty cells for gaps, CRLF line ends);
@@ -64,6 +65,53 @@ def write_imu_text(
     mapping = {
         "format": "imulog.mapping/1",
         "device": {"name": "wrist", **device},
+        "delimiter": ",",
+        "time": {"column": "timestamp", "unit": "ms"},
+        "columns": mapping_columns,
+    }
+    mapping_path = path.with_name(path.name[: -len(path.suffix)] + ".mapping.json")
+    mapping_path.write_text(json.dumps(mapping, indent=2) + "\n")
+    return path, mapping_path
+
+
+def write_multi_imu_text(
+    path: Path,
+    t_dev_ns: np.ndarray,
+    sensors: dict[str, dict[str, QuantisedChannel]],
+    device: dict[str, Any],
+) -> tuple[Path, Path]:
+    """Several synchronised IMUs in one delimited file (a multi-sensor station's export) + mapping file.
+
+    A sensor row above the names row (``,upper_arm,upper_arm,...,forearm,...`` over
+    ``timestamp,ax,ay,...``) gives every sensor's columns; the converter makes one ImuStream per
+    sensor, named by that row. The mapping file names the columns ``<sensor>/<column>``
+    (e.g. ``upper_arm/ax``); time in ms with 3 decimals as in :func:`write_imu_text`."""
+    path = Path(path)
+    t_us = np.asarray(t_dev_ns, dtype=np.int64) // 1000
+    if np.any(np.asarray(t_dev_ns) % 1000):
+        raise ValueError("device time stamps must be whole microseconds")
+    cols = [t_us // 1000, t_us % 1000]
+    formats = ["%d.%03d"]
+    groups, names = [""], ["timestamp"]
+    mapping_columns: dict[str, dict[str, str]] = {}
+    prefix = {"acc": "a", "gyr": "g", "mag": "m"}
+    for sensor, channels in sensors.items():
+        if "," in sensor or "/" in sensor:
+            raise ValueError(f"sensor name {sensor!r} must not contain ',' or '/'")
+        for quantity, ch in channels.items():
+            values = ch.file_values
+            for k, axis in enumerate(AXES):
+                name = prefix[quantity] + axis
+                groups.append(sensor)
+                names.append(name)
+                cols.append(values[:, k])
+                formats.append(f"%.{ch.decimals}f")
+                mapping_columns[f"{sensor}/{name}"] = {"quantity": quantity, "axis": axis, "unit": ch.unit}
+    text = ",".join(groups) + "\n" + ",".join(names) + "\n" + _table(cols, formats, ",", "\n")
+    path.write_text(text)
+    mapping = {
+        "format": "imulog.mapping/1",
+        "device": dict(device),
         "delimiter": ",",
         "time": {"column": "timestamp", "unit": "ms"},
         "columns": mapping_columns,

@@ -62,7 +62,11 @@ def compute_alignment(
     if gyr is None:
         raise ValueError(f"/imu/{imu_name} has no gyroscope columns")
     vic_rate = rate_hz(t_vic_ns)
-    ck = al.cluster_kinematics(t_vic_ns, labels, pos_m, vic_rate, params)
+    try:
+        ck = al.cluster_kinematics(t_vic_ns, labels, pos_m, vic_rate, params)
+    except ValueError as exc:
+        hint = "" if params.cluster == "svd" else "; use >= 3 markers on one rigid segment: --cluster svd --cluster-markers A,B,C"
+        raise ValueError(f"{marker_topic}: {exc}{hint}") from None
     q_s2g = None
     if orientation is not None:
         t_o, q_o = orientation

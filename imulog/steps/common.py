@@ -35,3 +35,10 @@ def alignment_for(metadata: Mapping[str, Mapping[str, Any]], imu_topic: str) -> 
     if not record or record.get("imu") not in (None, "", imu_topic):
         return None
     return dict(record)
+
+
+def error_line(path: Any, exc: BaseException) -> str:
+    """``"PATH: message"`` for a step's error, without repeating the path when the message starts with it
+    (archive errors already name their file)."""
+    message, name = str(exc), str(path)
+    return message if message.startswith(name) else f"{name}: {message}"
