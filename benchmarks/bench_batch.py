@@ -4,19 +4,23 @@
     python benchmarks/bench_batch.py --small    # 4 subjects x 2 trials x 5 repetitions
 
 Steps: orientation, align, phases, trajectory, evaluate (``phases.repetitions`` = the simulated count).
-After a one-file warm-up (imports, JIT caches), every run starts from a fresh copy of the raw archive and runs in its own subprocess, which reports its own
-peak RSS (``getrusage``: the process itself, and for worker processes its children):
+After a one-file warm-up (imports, JIT caches), every run starts from a fresh copy of the raw archive and runs
+in its own subprocess, which reports its peak RSS (``getrusage`` maximum RSS of the process itself or of its
+largest worker child, i.e. per process) and its CPU time (itself + its workers): CPU/wall shows how many cores
+the run actually obtained on a shared machine.
 
 * A: the first half of the files (N), 1 worker  -> peak memory at N;
 * B: all files (2N), 1 worker                    -> wall time, files/s, and peak memory at 2N (flat: B/A ~ 1);
 * C: all files (2N), 2 worker processes          -> speed-up B/C;
 * D: B's archive again (everything up to date)   -> cost of a no-op rerun with the ledger pre-check, and
-  without it (every file opened, every step skips itself).
+  (E) without it (every file opened, every step skips itself);
+* the catalog of B's archive, built and then updated with nothing changed.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import resource
@@ -33,23 +37,35 @@ STEPS = "orientation,align,phases,trajectory,evaluate"
 def _child(args: argparse.Namespace) -> None:
     """Run one batch in this (sub)process and print its figures as JSON."""
     from imulog.batch import run
+    from imulog.batch.registry import STEPS as REGISTRY
+    from imulog.batch.registry import plan_fingerprint
 
     files = json.loads(Path(args.files).read_text())
+    options = {"phases": {"repetitions": args.repetitions}}
+    plan_fingerprint(STEPS.split(","), options)  # import the steps' modules before the clock starts
+    for name in STEPS.split(","):
+        importlib.import_module(REGISTRY[name].function.split(":")[0])
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu0 = me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
     t0 = time.perf_counter()
     report = run(
         files,
         STEPS,
         workers=args.workers,
-        options={"phases": {"repetitions": args.repetitions}},
+        options=options,
         progress=False,
         ledger=None if args.no_ledger else "auto",
     )
     wall = time.perf_counter() - t0
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime - cpu0
     self_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     children_kb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     out = {
         "files": len(files),
         "wall_s": wall,
+        "cpu_s": cpu,
+        "file_s": sum(f.seconds for f in report.files),
         "processed": report.processed,
         "up_to_date": report.up_to_date,
         "failed": report.failed,
@@ -111,8 +127,9 @@ def main() -> None:
         from imulog.batch.simulated import simulate_archive
 
         print(
-            f"archive: {subjects} subjects x {trials} trials x {reps} repetitions ({subjects * trials * reps} drinking tasks = the thesis's "
-            f"movements, {4 * subjects * trials * reps} phases); {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}"
+            f"archive: {subjects} subjects x {trials} trials x {reps} repetitions = {subjects * trials * reps} "
+            f"drinking tasks (the thesis's 'movements'), {4 * subjects * trials * reps} phases; "
+            f"{os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}"
         )
         t = time.perf_counter()
         raw_root = work / "raw"
@@ -136,8 +153,8 @@ def main() -> None:
                 f"({r['prechecked']} by the ledger), steps computed {r['computed_by_step']}"
             )
         print()
-        print("| run | files | workers | wall (s) | files/s | steps computed | peak RSS (MB) |")
-        print("|---|---|---|---|---|---|---|")
+        print("| run | files | workers | wall (s) | files/s | s per file | CPU/wall | steps computed | peak RSS (MB) |")
+        print("|---|---|---|---|---|---|---|---|---|")
         rows = [
             ("A: first half, fresh", a, 1),
             ("B: all, fresh", b, 1),
@@ -148,15 +165,27 @@ def main() -> None:
         for name, r, w in rows:
             print(
                 f"| {name} | {r['files']} | {w} | {r['wall_s']:.1f} | {r['files'] / r['wall_s']:.2f} | "
+                f"{r['file_s'] / r['files']:.2f} | {r['cpu_s'] / r['wall_s']:.2f} | "
                 f"{r['steps_computed']} | {r['peak_rss_mb']:.0f} |"
             )
         print()
-        print(f"speed-up 1 -> 2 workers (B/C): {b['wall_s'] / c['wall_s']:.2f}x")
+        print(
+            f"speed-up 1 -> 2 workers (B/C): {b['wall_s'] / c['wall_s']:.2f}x; CPU/wall {b['cpu_s'] / b['wall_s']:.2f} "
+            f"-> {c['cpu_s'] / c['wall_s']:.2f} (cores actually obtained; load average now {os.getloadavg()[0]:.1f})"
+        )
         print(
             f"peak memory at 2N / at N files (B/A, 1 worker): {b['peak_rss_mb'] / a['peak_rss_mb']:.2f} "
             f"({a['peak_rss_mb']:.0f} MB at {a['files']} files, {b['peak_rss_mb']:.0f} MB at {b['files']})"
         )
         print(f"no-op rerun: {d['wall_s']:.2f} s with the ledger, {e['wall_s']:.2f} s opening every file")
+        from imulog.batch.catalog import build_catalog
+
+        cat = build_catalog(work / "B", work / "catalog.parquet")
+        inc = build_catalog(work / "B", work / "catalog.parquet")
+        print(
+            f"catalog of {cat.rows} processed trials: {cat.seconds:.2f} s; incremental update (nothing changed): "
+            f"{inc.seconds:.2f} s ({inc.reused} rows reused)"
+        )
         total = sum(b["step_s"].values())
         print(
             "time per step (B): "

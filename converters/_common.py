@@ -253,6 +253,9 @@ def _validate(spec: TableSpec, values: np.ndarray, data: bytes | None) -> np.nda
     return values
 
 
+_INCOMPLETE_HINT = " (every sample must be complete: delete the row to record a gap in time)"
+
+
 def locate_problem(spec: TableSpec, nrows: int | None = None, *, data: bytes | None = None) -> None:
     """Careful pass over the data lines: raise ConversionError for the first bad line (returns if none).
 
@@ -282,7 +285,7 @@ def locate_problem(spec: TableSpec, nrows: int | None = None, *, data: bytes | N
             if c == "":
                 if i in spec.optional:
                     continue
-                raise ConversionError(spec.path, "empty cell", line=lineno, column=spec.names[i])
+                raise ConversionError(spec.path, f"empty cell{_INCOMPLETE_HINT}", line=lineno, column=spec.names[i])
             try:
                 v = float(c)
             except ValueError:
@@ -291,7 +294,9 @@ def locate_problem(spec: TableSpec, nrows: int | None = None, *, data: bytes | N
                     spec.path, f"{shown!r} is not a number", line=lineno, column=spec.names[i]
                 ) from None
             if not math.isfinite(v) and i not in spec.optional:
-                raise ConversionError(spec.path, f"non-finite value {c!r}", line=lineno, column=spec.names[i])
+                raise ConversionError(
+                    spec.path, f"non-finite value {c!r}{_INCOMPLETE_HINT}", line=lineno, column=spec.names[i]
+                )
 
 
 # ---------------------------------------------------------------------------------------------- time

@@ -81,7 +81,13 @@ def detect(path: Path) -> Converter:
         if s > score:
             best, score = conv, s
     if best is None or score < MIN_CONFIDENCE:
-        raise UnknownFormatError(path, "unknown format (see `imulog convert --list-formats`, or pass --format)")
+        hint = ""
+        if path.suffix.lower() in (".csv", ".tsv", ".txt"):
+            hint = (
+                "; IMU text whose header carries no units (e.g. ax,ay,gx) needs a mapping file: --mapping FILE "
+                f"or {path.stem}.mapping.json beside it"
+            )
+        raise UnknownFormatError(path, f"unknown format (see `imulog convert --list-formats`, or pass --format){hint}")
     return best
 
 
@@ -90,7 +96,12 @@ def convert_file(path: Path, fmt: str | None = None, options: ConvertOptions | N
     path = Path(path)
     if not path.exists():
         raise ConversionError(path, "no such file")
-    conv = get(fmt) if fmt else detect(path)
+    try:
+        conv = get(fmt) if fmt else detect(path)
+    except UnknownFormatError:
+        if fmt or options is None or options.mapping is None:
+            raise
+        conv = get("delimited")  # an explicit --mapping names the columns detection could not recognise
     try:
         return conv.convert(path, options or ConvertOptions())
     except ConversionError:

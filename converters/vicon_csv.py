@@ -121,7 +121,22 @@ def _header(path: Path, data: bytes, sec: Section) -> tuple[float, list[str], li
     return rate, names, header, units, first_data.count(b",") + 1
 
 
+def _check_cut_off(path: Path, data: bytes, sec: Section, ncols_file: int) -> None:
+    """A file cut off in its last row: no final line break and fewer fields than the rows above (Nexus pads
+    every row to the full width, so short rows are otherwise read as gaps and the cut goes unnoticed)."""
+    if sec.data_end != len(data) or data.endswith(b"\n"):
+        return
+    start = data.rfind(b"\n", sec.data_start, sec.data_end) + 1 or sec.data_start
+    fields = data[start : sec.data_end].count(b",") + 1
+    if fields < ncols_file:
+        line = data.count(b"\n", 0, start) + 1
+        raise ConversionError(
+            path, f"truncated line: {fields} fields, expected {ncols_file} (the file is cut off)", line=line
+        )
+
+
 def _read_block(path: Path, data: bytes, sec: Section, header: list[str], ncols_file: int) -> np.ndarray:
+    _check_cut_off(path, data, sec, ncols_file)
     spec = TableSpec(
         path=path,
         delimiter=",",

@@ -535,3 +535,12 @@ def test_export_to_unwritable_place_is_a_one_line_error(trial, tmp_path):
     blocker.write_text("x")
     res = CliRunner().invoke(cli, ["export", str(path), "--topic", "/imu/wrist", "-o", str(blocker / "sub" / "x.csv")])
     assert res.exit_code == 1 and len(res.output.strip().splitlines()) == 1 and "cannot write" in res.output
+
+
+def test_export_empty_time_range_is_refused(trial, tmp_path):
+    """--end-ns before --start-ns used to write a header-only file and report success."""
+    path, _ = trial
+    out = tmp_path / "x.csv"
+    args = ["export", str(path), "--topic", "/imu/wrist", "-o", str(out), "--start-ns", "10", "--end-ns", "5"]
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 2 and "--end-ns" in res.output and not out.exists()

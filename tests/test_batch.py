@@ -157,3 +157,29 @@ def test_cli_json_report_and_errors(serial, tmp_path):
     assert bad.exit_code != 0 and "nonsense" in bad.output
     none = CliRunner().invoke(cli, ["batch", str(tmp_path / "nothing" / "*.mcap"), "-q"])
     assert none.exit_code != 0 and "no trial files" in none.output
+
+
+def test_calibrate_step_with_a_calibration_file(raw_archive, tmp_path):
+    import numpy as np
+
+    from imulog.process.calibration import AxisCalibration, Calibration
+
+    trial = tmp_path / "t.mcap"
+    shutil.copy(next(raw_archive.rglob("*.mcap")), trial)
+    cal_file = tmp_path / "cal.json"
+    bias = np.array([0.01, -0.02, 0.005])
+    cal_file.write_text(json.dumps(Calibration(gyr=AxisCalibration(bias, np.eye(3))).to_dict()))
+    opts = {"calibrate": {"calibration": str(cal_file)}}
+    report = run(trial, "orientation,calibrate", options=opts, progress=False)
+    assert report.ok and [s.step for s in report.files[0].steps] == ["calibrate", "orientation"]
+    with TrialReader(trial) as t:
+        raw, cal = t.read("/imu/wrist"), t.read("/derived/calibrated/wrist")
+        orientation_run = [r for r in t.runs().values() if r["step"].startswith("orientation")][-1]
+    gyr = cal.values[:, [cal.columns.index(c) for c in ("gx", "gy", "gz")]]
+    np.testing.assert_allclose(gyr, raw.gyr - bias, atol=1e-12)
+    assert "/derived/calibrated/wrist" in orientation_run["inputs"]  # orientation used the calibrated channel
+    assert run(trial, "orientation,calibrate", options=opts, progress=False).prechecked == 1
+    # same file name, new content: the ledger misses and both steps recompute
+    cal_file.write_text(json.dumps(Calibration(gyr=AxisCalibration(2 * bias, np.eye(3))).to_dict()))
+    again = run(trial, "orientation,calibrate", options=opts, progress=False)
+    assert again.prechecked == 0 and again.steps_computed == 2

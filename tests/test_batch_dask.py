@@ -5,10 +5,12 @@ from __future__ import annotations
 import shutil
 
 import pytest
+from click.testing import CliRunner
 
 from imulog.batch import run
 from imulog.batch.simulated import simulate_archive
 from imulog.batch.verify import check_archive, derived_digests
+from imulog.cli import cli
 
 distributed = pytest.importorskip("distributed")
 
@@ -35,6 +37,23 @@ def test_dask_local_cluster_matches_local_run(tmp_path):
         with distributed.Client(cluster) as client:  # an existing Client works as well; nothing left to do
             again = run(remote, STEPS, options=OPTIONS, progress=False, dask_scheduler=client, ledger=None)
         assert again.up_to_date == 2 and again.steps_computed == 0
+        cli_run = CliRunner().invoke(
+            cli,
+            [
+                "batch",
+                str(remote),
+                "--steps",
+                STEPS,
+                "--repetitions",
+                "3",
+                "-q",
+                "--dask-scheduler",
+                cluster.scheduler_address,
+                "--no-ledger",
+            ],
+        )
+        assert cli_run.exit_code == 1 and "(dask, 1 worker): 0 processed, 2 up to date" in cli_run.output
+        assert "broken.mcap" in cli_run.output
     for f in ref.files:
         twin = str(remote) + f.path[len(str(local)) :]
         digests = derived_digests(f.path)

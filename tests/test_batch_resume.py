@@ -31,7 +31,7 @@ def _ledger_lines(path) -> int:
 
 def test_killed_batch_resumes_without_repeating_work(tmp_path):
     root = tmp_path / "archive"
-    paths = simulate_archive(root, subjects=6, trials=1, repetitions=3, opening_static_s=5.0)
+    paths = simulate_archive(root, subjects=4, trials=1, repetitions=3, opening_static_s=5.0)
     ledger = root / LEDGER_NAME
     mtimes = [p.stat().st_mtime_ns for p in paths]
     cmd = [sys.executable, "-c", "from imulog.cli import main; main()", "batch", f"{root}/**/*.mcap"]

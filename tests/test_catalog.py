@@ -6,6 +6,7 @@ import json
 import math
 import os
 import shutil
+import sys
 
 import numpy as np
 import pandas as pd
@@ -134,3 +135,14 @@ def test_report_tables_and_plot(archive, tmp_path):
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
     assert "subject_errors.png" in (out / "report.md").read_text()
     assert not math.isnan(cell.rom_pct_mean)
+
+
+def test_report_without_matplotlib_says_so(archive, tmp_path, monkeypatch):
+    cat = tmp_path / "catalog.parquet"
+    build_catalog(archive[0], cat)
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib -> ImportError
+    result = CliRunner().invoke(cli, ["report", str(cat), "-o", str(tmp_path / "r")])
+    assert result.exit_code != 0 and "matplotlib" in result.output and "--no-plots" in result.output
+    tables = CliRunner().invoke(cli, ["report", str(cat), "-o", str(tmp_path / "t"), "--no-plots"])
+    assert tables.exit_code == 0, tables.output
+    assert (tmp_path / "t" / "accuracy.md").is_file() and not (tmp_path / "t" / "subject_errors.png").exists()

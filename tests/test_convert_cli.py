@@ -272,3 +272,48 @@ def test_folder_of_exports_one_trial_per_recording(tmp_path, shared_data):
         assert md["imulog.trial"]["subject"] == "S00"  # from the recording's <stem>_meta.json
         assert "forearm_length_m" in md["imulog.anthropometrics"]
         assert md["imulog.device.wrist"]["rate_hz"] == pytest.approx(114.9)
+
+
+def test_implausible_accelerometer_unit_warns(tmp_path, shared_data):
+    """The x-io Fusion file's accelerometer is in g; a header that claims m/s^2 is not an error in the file,
+    but the trial would hold gravity as ~1 m/s^2: convert says so on stderr (and not for the real header)."""
+    src = (shared_data / "imu_text" / "fusion_sensor_data.csv").read_text()
+    assert src.count("(g)") == 3
+    code, _, err = run("convert", shared_data / "imu_text" / "fusion_sensor_data.csv", "-o", tmp_path / "ok.mcap")
+    assert code == 0 and "warning" not in err
+    wrong = tmp_path / "fusion_wrong_unit.csv"
+    wrong.write_text(src.replace("(g)", "(m/s^2)"))
+    code, _, err = run("convert", wrong, "-o", tmp_path / "wrong.mcap")
+    assert code == 0 and "/imu/" in err and "median |acc|" in err and "unit g rather than m/s^2" in err
+
+
+def test_explicit_mapping_converts_a_header_without_units(tmp_path):
+    """A BlueBuddy-style export (timestamp,ax,...) with its mapping file elsewhere: `--mapping FILE` used to
+    be ignored by format detection ('unknown format'); without it, the error now says a mapping is needed."""
+    from imulog.simulate import simulate, write_trial_files
+
+    paths = write_trial_files(simulate("r2g", seed=0, repetitions=1), tmp_path / "sim")
+    data = tmp_path / "wrist.csv"
+    data.write_bytes(paths["imu"].read_bytes())  # no wrist.mapping.json beside it
+    code, _, err = run("convert", data, "-o", tmp_path / "a.mcap")
+    assert code == 1 and "unknown format" in err and "--mapping FILE" in err and "wrist.mapping.json" in err
+    code, out, err = run("convert", data, paths["vicon"], "--mapping", paths["mapping"], "-o", tmp_path / "b.mcap")
+    assert code == 0, err
+    assert "/imu/wrist" in out and "/markers/vicon" in out
+    meta = info_json(tmp_path / "b.mcap")["__metadata__"]
+    assert meta["imulog.conversion"]["formats"][data.name] == "delimited"
+
+
+def test_folder_to_a_single_mcap_path(tmp_path, shared_data):
+    """`convert FOLDER -o x.mcap` used to create a *directory* named x.mcap; a folder of one recording now
+    writes that file, a folder of several is a usage error that creates nothing."""
+    out = tmp_path / "gait.mcap"
+    code, out_text, err = run("convert", shared_data / "gaitmap_foot", "-o", out)
+    assert code == 0, err
+    assert out.is_file() and "/imu/left_sensor" in info_json(out)
+    several = tmp_path / "several"
+    several.mkdir()
+    for name in ("a_imu.csv", "b_imu.csv"):
+        (several / name).write_bytes((shared_data / "imu_text" / "fusion_sensor_data.csv").read_bytes())
+    code, _, err = run("convert", several, "-o", tmp_path / "x.mcap")
+    assert code == 2 and "2 recordings" in err and not (tmp_path / "x.mcap").exists()

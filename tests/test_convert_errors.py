@@ -205,6 +205,8 @@ CASES = [
     ("vicon-csv", lambda s: s.replace("5,0,4.5,2,3", "5,0,4.5,x,3"), r"line 10, column 'Y': 'x' is not a number"),
     ("vicon-csv", lambda s: s.replace("S:A,,,S:B", "S:A,,,S:A"), r"duplicated marker 'S:A'"),
     ("vicon-csv", lambda s: s.replace("Trajectories", "Trajektorien"), r"not a Vicon Nexus CSV"),
+    # a download cut off mid-row: short rows would otherwise be read as marker gaps
+    ("vicon-csv", lambda s: s[:-5], r"line 49: truncated line: 3 fields, expected 5 \(the file is cut off\)"),
     (
         "vicon-csv",
         lambda s: s.replace("1000,,,,", "1234,,,,"),
@@ -265,6 +267,9 @@ def test_corrupt_binary_formats(tmp_path, shared_data):
     h5.write_bytes((shared_data / "broad/02_undisturbed_slow_rotation_B.hdf5").read_bytes()[:4000])
     with pytest.raises(ConversionError, match=r"cut\.hdf5: "):
         convert_file(h5, "broad-hdf5")
+    # detected too: a cut-off .hdf5 used to be reported as 'unknown format'
+    with pytest.raises(ConversionError, match=r"cut\.hdf5: corrupt HDF5: .*truncated file"):
+        convert_file(h5)
 
 
 # ------------------------------------------------------------------------------------- property based

@@ -183,3 +183,18 @@ def test_adl_counts_need_rests_longer_than_the_dead_period_plus_smear():
     print(errors)
     assert errors[4.0] == [0] * 20
     assert all(e < 0 for e in errors[1.5])
+
+
+def test_default_smoothness_trajectory_is_the_most_accurate_present():
+    """Smoothness used to come from the alphabetically first trajectory, i.e. drifting double integration
+    (ddi); the default now prefers the accurate methods, and an explicit choice still wins."""
+    from imulog.steps.metrics import VICON_POSE, pick_trajectory
+
+    methods = ["ddi", "highpass", "kalman", "optimized", "wavelet", "zupt", "zupt_bias"]
+    topics = ["/imu/wrist", VICON_POSE] + [f"/derived/trajectory/{m}" for m in methods]
+    assert pick_trajectory(topics, "") == "/derived/trajectory/optimized"
+    assert pick_trajectory([t for t in topics if "optimized" not in t], "") == "/derived/trajectory/zupt_bias"
+    assert pick_trajectory(["/derived/trajectory/ddi", "/derived/trajectory/mine"], "") == "/derived/trajectory/ddi"
+    assert pick_trajectory(topics, "ddi") == "/derived/trajectory/ddi"
+    assert pick_trajectory(topics, "vicon") == VICON_POSE
+    assert pick_trajectory(["/imu/wrist", VICON_POSE], "") == VICON_POSE

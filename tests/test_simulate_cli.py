@@ -46,3 +46,15 @@ def test_help_and_parameter_list():
     result = CliRunner().invoke(cli, ["simulate", "slide", "-o", "unused", "--list-parameters"])
     assert result.exit_code == 0
     assert "impact_frequency_hz" in result.output and "drift_ppm" in result.output
+
+
+def test_unwritable_output_and_mistyped_setting_are_one_line_errors(tmp_path):
+    """An output folder that cannot be created used to end in a traceback; a --set value of the wrong type
+    gave numpy's message without naming the setting."""
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    res = CliRunner().invoke(cli, ["simulate", "r2g", "-o", str(blocker / "sim"), "--repetitions", "1"])
+    assert res.exit_code == 1 and f"{blocker / 'sim'}: cannot write" in res.output
+    assert not isinstance(res.exception, OSError)
+    res = CliRunner().invoke(cli, ["simulate", "r2g", "-o", str(tmp_path / "s"), "--set", "drift_ppm=abc"])
+    assert res.exit_code == 1 and "drift_ppm=abc" in res.output and not isinstance(res.exception, TypeError)

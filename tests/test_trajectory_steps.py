@@ -158,3 +158,86 @@ def test_full_chain_of_steps_reproduces_thesis_ordering(tmp_path):
         ddi, zupt, opt = (np.mean([r[axis]["mae_cm"] for r in rows[m]]) for m in ("ddi", "zupt", "optimized"))
         assert ddi > zupt, (axis, ddi, zupt)
         assert opt <= 1.0, (axis, opt)
+
+
+def test_non_r2g_task_skips_optimized_instead_of_failing():
+    """A simulated slide trial (3 phases per repetition: reach, slide, return): the default method list used
+    to fail the whole step with 'no complete repetition to measure waypoints from'; now every method but
+    the R2G optimisation is written and the skip is recorded. Asking for optimized alone is a clear error."""
+    sim = simulate("slide", seed=0, repetitions=3)
+    imu, truth = sim.recording.imus[0], sim.truth
+    reps = np.asarray(truth.phases.task_index)
+    assert {int(np.sum(reps == k)) for k in set(reps.tolist())} == {3}
+    rate = (len(imu.t_ns) - 1) / ((imu.t_ns[-1] - imu.t_ns[0]) / 1e9)
+    est = estimate_orientation(imu.gyr, imu.acc, rate)
+    acc_g = gravity_free_acceleration(est.quat, imu.acc, est.static)
+    kw = dict(
+        imu="wrist",
+        static=(imu.t_ns, truth.imu_static_mask.astype(float)),
+        phases=truth.phases,
+        orientation=(imu.t_ns, est.quat),
+        alignment=dict(truth.alignment),
+    )
+    streams, record = compute_trajectories(imu.t_ns, acc_g, **kw)
+    written = [s.topic.rsplit("/", 1)[1] for s in streams]
+    assert written == [m for m in ("ddi", "zupt", "highpass", "wavelet", "kalman", "zupt_bias")]
+    assert "optimized" in record["skipped"] and len(record["repetitions"]) == 3
+    with pytest.raises(ValueError, match="R2G"):
+        compute_trajectories(imu.t_ns, acc_g, methods=["optimized"], **kw)
+
+
+def test_missing_anthropometrics_is_recorded_and_reported(sim_trial):
+    """Without h1/h2/h3 the optimisation measures its waypoints from ZUPT: the record and the CLI say so
+    (it used to fall back silently)."""
+    sim, path = sim_trial
+    with TrialReader(path) as t:
+        acc, static = t.read("/derived/acc_global/wrist"), t.read("/derived/static/wrist")
+        phases, alignment = t.read("/derived/phases/wrist"), t.metadata["imulog.alignment"]
+    kw = dict(imu="wrist", methods=["zupt", "optimized"], static=(static.t_ns, static.values[:, 0]), phases=phases)
+    _, record = compute_trajectories(acc.t_ns, acc.values, alignment=alignment, **kw)
+    assert record["waypoints_from"] == "zupt" and "no imulog.anthropometrics" in record["notes"][0]
+    anth = sim.recording.metadata["imulog.anthropometrics"]
+    _, record = compute_trajectories(acc.t_ns, acc.values, alignment=alignment, anthropometrics=anth, **kw)
+    assert record["waypoints_from"] == "anthropometrics" and "notes" not in record
+    _, record = compute_trajectories(acc.t_ns, acc.values, alignment=alignment, anthropometrics={"h1_m": 0.3}, **kw)
+    assert record["waypoints_from"] == "zupt" and "h2" in record["notes"][0]
+
+
+def test_evaluate_without_markers_says_what_is_missing(tmp_path):
+    """A BROAD-like trial (IMU + optical poses, no markers): the error used to suggest `imulog process align`,
+    which cannot run without markers; it now says the trial has no marker channel and names the pose channel."""
+    from imulog.model import ImuStream, PoseStream, Recording
+
+    t = np.arange(200, dtype=np.int64) * 10_000_000
+    rec = Recording(
+        imus=[ImuStream("imu", t, acc=np.tile([0.0, 0.0, 9.81], (200, 1)), gyr=np.zeros((200, 3)))],
+        poses=[PoseStream("/poses/optical", t, np.zeros((200, 3)), np.tile([1.0, 0, 0, 0], (200, 1)))],
+    )
+    path = tmp_path / "broad_like.mcap"
+    write_trial(path, rec)
+    result = CliRunner().invoke(cli, ["evaluate", str(path)])
+    assert result.exit_code == 1 and "no marker channel" in result.output and "/poses/optical" in result.output
+    assert "process align" in result.output and "Traceback" not in result.output
+    result = CliRunner().invoke(cli, ["process", "align", str(path)])
+    assert result.exit_code == 1 and "no /markers/* channel in the trial" in result.output
+
+
+def test_rerun_with_fewer_methods_removes_the_stale_trajectories(sim_trial, tmp_path):
+    """Re-running the step with --method ddi,zupt used to leave the other methods' channels of the earlier
+    run (computed from other inputs) in the trial, and evaluate then mixed them in."""
+    import shutil
+
+    from imulog.archive.doctor import check_file
+
+    _, src = sim_trial
+    path = tmp_path / "trial.mcap"
+    shutil.copy(src, path)
+    run_trajectory(path, methods=["ddi", "zupt", "kalman"], force=True)
+    out = run_trajectory(path, methods=["ddi", "zupt"], force=True)
+    with TrialReader(path) as t:
+        present = sorted(x for x in t.topics() if x.startswith("/derived/trajectory/"))
+    assert present == ["/derived/trajectory/ddi", "/derived/trajectory/zupt"] == sorted(out.topics)
+    assert run_trajectory(path, methods=["ddi", "zupt"]).skipped
+    _, record = run_evaluate(path)
+    assert sorted(record["methods"]) == ["ddi", "zupt"]
+    assert check_file(path).ok

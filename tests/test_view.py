@@ -379,3 +379,17 @@ def test_repetition_displacements_are_anchored_on_vicon(tmp_path):
     t_e, err = read_scalars(out, L.error_entity("/derived/trajectory/truth"))
     assert len(t_e) == len(t) and np.nanmax(err) < 1e-3  # cm
     assert logged[0].by_role("error")
+
+
+def test_cli_warning_for_unaligned_imu_without_markers(tmp_path):
+    """An IMU-only trial (e.g. x-io Fusion text): the warning used to tell the user to run `imulog process
+    align`, which cannot work without markers."""
+    from imulog.archive import write_trial
+
+    t = np.arange(300, dtype=np.int64) * 10_000_000
+    imu = ImuStream("wrist", t, acc=np.tile([0.0, 0.0, 9.81], (300, 1)), gyr=np.zeros((300, 3)))
+    path = tmp_path / "imu_only.mcap"
+    write_trial(path, Recording(imus=[imu]))
+    res = CliRunner().invoke(cli, ["view", str(path), "--save", str(tmp_path / "x.rrd")])
+    assert res.exit_code == 0, res.output
+    assert "no markers to align them with" in res.output and "process align" not in res.output

@@ -193,6 +193,10 @@ def export(file: str, topic: str, output: str, start_ns: int | None, end_ns: int
     out = Path(output)
     if out.suffix.lower() not in (".parquet", ".csv"):
         raise click.ClickException(f"{output}: output must end in .parquet or .csv")
+    if start_ns is not None and end_ns is not None and end_ns <= start_ns:
+        raise click.BadParameter(
+            f"{end_ns} is not after --start-ns {start_ns} (the range is empty)", param_hint="--end-ns"
+        )
     with _open(file) as trial:
         try:
             table = trial.read_arrow(topic, start_ns, end_ns)

@@ -11,7 +11,7 @@ from typing import Any
 
 import click
 
-from converters import ConversionError, ConvertOptions
+from converters import ConversionError, ConvertOptions, UnknownFormatError
 from converters.registry import available, convert_files, detect, group_directory, list_formats, recording_key
 from imulog.model import Recording
 
@@ -86,8 +86,46 @@ def finish_recording(rec: Recording, meta: dict[str, dict[str, Any]], formats: d
     return rec
 
 
+def unit_warnings(rec: Recording) -> list[str]:
+    """Plausibility of the declared units (a wrong unit is not an error in the file, so nothing else sees it):
+    over a recording the median accelerometer norm is close to gravity, and the median gyroscope norm is
+    well below 5 rad/s. One line per suspicious IMU channel."""
+    import numpy as np
+
+    out = []
+    for imu in rec.imus:
+        if imu.acc is not None and len(imu.acc):
+            med = float(np.nanmedian(np.linalg.norm(imu.acc, axis=1)))
+            if not 4.9 <= med <= 19.6:
+                guess = " (the numbers look like g: is the unit g rather than m/s^2?)" if 0.5 <= med <= 2.0 else ""
+                out.append(
+                    f"{imu.topic}: median |acc| is {med:.3g} m/s^2, expected about 9.81 (gravity){guess}; "
+                    "check the accelerometer unit in the header or mapping file"
+                )
+        if imu.gyr is not None and len(imu.gyr):
+            med = float(np.nanmedian(np.linalg.norm(imu.gyr, axis=1)))
+            if med > 5.0:
+                out.append(
+                    f"{imu.topic}: median |gyr| is {med:.3g} rad/s ({np.degrees(med):.0f} deg/s); "
+                    "is the unit deg/s rather than rad/s? check the gyroscope unit in the header or mapping file"
+                )
+    return out
+
+
+def _format_name(path: Path, fmt: str | None, options: ConvertOptions) -> str:
+    """The format ``convert_file`` will use: forced, detected, or delimited when --mapping names the columns."""
+    if fmt:
+        return fmt
+    try:
+        return detect(path).name
+    except UnknownFormatError:
+        if options.mapping is None:
+            raise
+        return "delimited"
+
+
 def _convert_group(files: list[Path], fmt: str | None, options: ConvertOptions) -> tuple[Recording, dict[str, str]]:
-    formats = {p.name: (fmt or detect(p).name) for p in files}
+    formats = {p.name: _format_name(p, fmt, options) for p in files}
     return convert_files(files, fmt, options), formats
 
 
@@ -218,6 +256,8 @@ def convert(
     except (FileExistsError, ValueError, OSError) as e:
         raise click.ClickException(f"{output}: {e}") from None
     click.echo(f"wrote {path} ({', '.join(f'{s.topic} {len(s)}' for s in rec.streams())})")
+    for msg in unit_warnings(rec):
+        click.echo(f"warning: {output}: {msg}", err=True)
 
 
 def _sibling_meta(files: list[Path]) -> dict[str, dict[str, Any]]:
@@ -247,7 +287,15 @@ def _convert_directories(
             jobs.append((out_dir / prefix / f"{name}.mcap", files))
     if not jobs:
         raise click.ClickException(f"no convertible files under {', '.join(map(str, dirs))}")
+    if out_dir.suffix.lower() == ".mcap":  # -o trial.mcap: fine for a folder holding one recording
+        if len(jobs) != 1:
+            raise click.UsageError(
+                f"the folder holds {len(jobs)} recordings, one trial each: give an output folder "
+                f"(e.g. -o {out_dir.with_suffix('')}/), not {out_dir}"
+            )
+        jobs = [(out_dir, jobs[0][1])]
     failures: list[str] = []
+    warnings: list[str] = []
     written = 0
     with click.progressbar(
         jobs, label="converting", item_show_func=lambda j: j[0].name if j else "", file=sys.stderr
@@ -262,11 +310,14 @@ def _convert_directories(
                 target.parent.mkdir(parents=True, exist_ok=True)
                 _write(target, rec, attach=attach, overwrite=overwrite)
                 written += 1
+                warnings.extend(f"{target}: {msg}" for msg in unit_warnings(rec))
             except ConversionError as e:
                 failures.append(str(e))
             except (FileExistsError, ValueError, OSError) as e:
                 failures.append(f"{target}: {e}")
     click.echo(f"wrote {written} trial(s) to {out_dir}")
+    for msg in warnings:
+        click.echo(f"warning: {msg}", err=True)
     for msg in failures:
         click.echo(f"error: {msg}", err=True)
     if failures:

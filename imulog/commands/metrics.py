@@ -109,7 +109,8 @@ def format_summary(record: dict[str, Any]) -> str:
 @click.option(
     "--trajectory",
     default="",
-    help="Positions for smoothness: METHOD of /derived/trajectory/METHOD or 'vicon'. [default: first found]",
+    help="Positions for smoothness: METHOD of /derived/trajectory/METHOD or 'vicon'. [default: the most "
+    "accurate trajectory present (optimized, zupt_bias, zupt, kalman, ...), else vicon]",
 )
 @click.option("--force", is_flag=True, help="Recompute even when the same parameters are already recorded.")
 @click.option("--json", "as_json", is_flag=True, help="Print the imulog.metrics record as JSON.")

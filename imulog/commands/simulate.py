@@ -17,6 +17,13 @@ def parse_value(text: str) -> Any:
         return text
 
 
+def _bad_settings(error: Exception, settings: tuple[str, ...]) -> str:
+    """The simulator's message, plus the --set values when a type error may come from one of them."""
+    if isinstance(error, TypeError) and settings:
+        return f"{error} (check the types of --set {' --set '.join(settings)}; --list-parameters names them)"
+    return str(error)
+
+
 PROTOCOL_CHOICES = ("r2g", "slide", "nhpt", "adl", "arm")
 ARM_ONLY = ("--seconds", "--trunk-imu")
 
@@ -146,7 +153,9 @@ def simulate(
                 protocol, out_dir, subjects=subjects, trials=trials, seed=seed, progress=advance, **overrides
             )
     except (TypeError, ValueError) as e:
-        raise click.ClickException(str(e)) from None
+        raise click.ClickException(_bad_settings(e, settings)) from None
+    except OSError as e:
+        raise click.ClickException(f"{out_dir}: cannot write the trial files ({e.strerror or e})") from None
     for paths in written:
         click.echo(
             f"{paths['imu'].name[: -len('_imu.csv')]}: "
@@ -189,7 +198,9 @@ def _simulate_arm(
                 out_dir, subjects=subjects, trials=trials, seed=seed, progress=lambda *_: bar.update(1), **overrides
             )
     except (TypeError, ValueError) as e:
-        raise click.ClickException(str(e)) from None
+        raise click.ClickException(_bad_settings(e, settings)) from None
+    except OSError as e:
+        raise click.ClickException(f"{out_dir}: cannot write the trial files ({e.strerror or e})") from None
     for paths in written:
         click.echo(
             f"{paths['imu'].name[: -len('_imu.csv')]}: "

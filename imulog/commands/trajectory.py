@@ -123,6 +123,14 @@ def process_trajectory(
         click.echo(f"{trial}: trajectories up to date (run {outcome.run}); use --force to recompute")
         return
     click.echo(f"{trial}: wrote {', '.join(outcome.topics)} (run {outcome.run})")
+    from imulog.archive import TrialReader
+
+    with TrialReader(trial) as reader:
+        record = reader.metadata.get("imulog.trajectory", {})
+    for method, why in (record.get("skipped") or {}).items():
+        click.echo(f"{trial}: skipped {method}: {why}")
+    for note in record.get("notes") or []:
+        click.echo(f"{trial}: note: {note}")
 
 
 @click.command("evaluate")

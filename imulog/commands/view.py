@@ -136,9 +136,11 @@ def view(
     for logged in result.logged:
         for trial in logged:
             if trial.unaligned_imus:
+                markers = any(e.topic.startswith("/markers/") for e in trial.entities)
+                hint = "run `imulog process align` first" if markers else "no markers to align them with"
                 click.echo(
                     f"warning: {trial.label}: no imulog.alignment for IMU(s) {', '.join(trial.unaligned_imus)}; "
-                    "shown on their device clock (run `imulog process align` first)",
+                    f"shown on their device clock ({hint})",
                     err=True,
                 )
     for p in result.saved:

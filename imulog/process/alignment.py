@@ -545,7 +545,8 @@ def align(
         start2 = span_s - params.drift_end_margin_s - params.window_s
         if start2 <= params.window_start_s + params.window_s:
             raise ValueError(
-                f"recording of {span_s:.0f} s too short for two {params.window_s:.0f} s windows (drift estimation)"
+                f"recording of {span_s:.0f} s too short for two {params.window_s:.0f} s windows (drift estimation): "
+                "shorten the window (--window) or leave out --drift"
             )
         second = estimate_lag(t_imu, wn_dev, cluster.t_ns, wn_ref, window_start_s=start2, **kw)
         dt = second.t_dev_center_ns - first.t_dev_center_ns

@@ -40,9 +40,9 @@ def pick_markers(topics: list[str], markers: str | None) -> str:
         return names[0]
     if "vicon" in names:
         return "vicon"
-    raise ValueError(
-        f"choose a marker channel with --markers among: {', '.join(names) or 'none (no /markers/* channel)'}"
-    )
+    if not names:
+        raise ValueError("no /markers/* channel in the trial: align needs optical markers (e.g. a Vicon export)")
+    raise ValueError(f"choose a marker channel with --markers among: {', '.join(names)}")
 
 
 def compute_alignment(
@@ -65,7 +65,11 @@ def compute_alignment(
     try:
         ck = al.cluster_kinematics(t_vic_ns, labels, pos_m, vic_rate, params)
     except ValueError as exc:
-        hint = "" if params.cluster == "svd" else "; use >= 3 markers on one rigid segment: --cluster svd --cluster-markers A,B,C"
+        hint = (
+            ""
+            if params.cluster == "svd"
+            else "; use >= 3 markers on one rigid segment: --cluster svd --cluster-markers A,B,C"
+        )
         raise ValueError(f"{marker_topic}: {exc}{hint}") from None
     q_s2g = None
     if orientation is not None:

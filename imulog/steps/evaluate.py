@@ -94,9 +94,16 @@ def _reference_from_trial(trial, topics: list[str]) -> tuple[str, tuple[np.ndarr
         labels = [label.split(":")[-1] for label in stream.labels]
         if "O" in labels:
             return f"{topic}:O", (stream.t_ns, stream.pos[:, labels.index("O")])
+    if not markers:
+        poses = [t for t in topics if t.startswith("/poses/")]
+        unused = f" ({', '.join(poses)} is not used as a reference)" if poses else ""
+        raise ValueError(
+            "no optical reference: evaluate needs Vicon markers (a /markers/* channel, aligned with "
+            f"`imulog process align`), and this trial has no marker channel{unused}"
+        )
     raise ValueError(
         "no optical reference: neither /derived/vicon/cluster_pose (run `imulog process align`) nor a marker 'O' "
-        f"in {', '.join(markers) or 'any /markers/* channel'}"
+        f"in {', '.join(markers)}"
     )
 
 

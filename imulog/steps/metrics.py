@@ -53,8 +53,8 @@ class MetricsParams:
     min_activity_s: drop shorter activities (imulog addition; 0 = keep all, as published).
     window_s: distance-histogram window (Doshi: 5 s); max_distance_cm, weight_start_cm: 120 cm and 60 cm.
     acc_unit: "g" reproduces Doshi App. A.3 distances, "m/s^2" integrates in SI units.
-    trajectory: method name under /derived/trajectory/ for smoothness ("" = the first one present, else the
-        Vicon cluster pose; "vicon" = the Vicon cluster pose).
+    trajectory: method name under /derived/trajectory/ for smoothness ("" = the most accurate one present:
+        optimized, zupt_bias, zupt, kalman, ...; else the Vicon cluster pose; "vicon" = the Vicon cluster pose).
     nhpt_pickup_movement, nhpt_place_movement: labels of the NHPT movements ending at a peg pick-up and at its
         insertion (simulator protocol ``nhpt``).
     """
@@ -97,9 +97,15 @@ class MetricsParams:
 VICON_POSE = "/derived/vicon/cluster_pose"
 
 
+# default smoothness source: IMU trajectory methods from the most to the least accurate on simulated R2G
+# (docs/trajectory.md); ddi, highpass and wavelet drift by decimetres and would make jerk meaningless
+TRAJECTORY_PREFERENCE = ("optimized", "zupt_bias", "zupt", "kalman", "wavelet", "highpass", "ddi")
+
+
 def pick_trajectory(topics: list[str], method: str) -> str | None:
-    """Positions for smoothness: ``/derived/trajectory/{method}`` (``method`` "" = the first present, "vicon" =
-    the optical ``/derived/vicon/cluster_pose``), else the Vicon cluster pose if present, else None."""
+    """Positions for smoothness: ``/derived/trajectory/{method}`` (``method`` "" = the most accurate present,
+    in :data:`TRAJECTORY_PREFERENCE` order; "vicon" = the optical ``/derived/vicon/cluster_pose``), else the
+    Vicon cluster pose if present, else None."""
     found = sorted(t for t in topics if t.startswith("/derived/trajectory/"))
     if method == "vicon":
         if VICON_POSE not in topics:
@@ -110,8 +116,9 @@ def pick_trajectory(topics: list[str], method: str) -> str | None:
         if topic not in found:
             raise ValueError(f"no channel {topic} in the trial (trajectories: {', '.join(found) or 'none'})")
         return topic
-    if found:
-        return found[0]
+    if found:  # the most accurate method present (docs/trajectory.md), never plain double integration first
+        rank = {f"/derived/trajectory/{m}": i for i, m in enumerate(TRAJECTORY_PREFERENCE)}
+        return min(found, key=lambda t: (rank.get(t, len(rank)), t))
     return VICON_POSE if VICON_POSE in topics else None
 
 

@@ -29,7 +29,7 @@ import numpy as np
 
 from imulog.model import Intervals, SignalStream
 from imulog.process import quaternion as quat
-from imulog.process.minjerk import R2GReferenceParams
+from imulog.process.minjerk import R2GReferenceParams, r2g_waypoints_from_anthropometrics
 from imulog.process.trajectory_opt import (
     DEFAULT_PARAMS,
     DEFAULT_REFERENCE,
@@ -132,10 +132,26 @@ def compute_trajectories(
                 phases.task_index,
             )
         reps = repetition_windows(t_s, phase_bounds_by_repetition(t_ph, int(t_ref[0])), mask)
+    info: dict[str, Any] = {}
     if not reps:
         reps = [Repetition(index=-1, start=0, stop=len(t_s), phase_bounds_s=np.zeros((0, 2)))]
+    if "optimized" in methods and not any(len(r.phase_bounds_s) == 4 for r in reps):
+        # the optimisation models the four R2G phases: other tasks (slide, NHPT, ADL) get every other method
+        why = f"no repetition with the 4 R2G phases in /derived/phases/{imu}"
         methods = [m for m in methods if m != "optimized"]
-    info: dict[str, Any] = {}
+        if not methods:
+            raise ValueError(f"method optimized needs R2G repetitions (reach, lift, return_bottle, return_hand): {why}")
+        info["skipped"] = {"optimized": why}
+    if "optimized" in methods:
+        info["waypoints_from"] = "anthropometrics"
+        try:
+            r2g_waypoints_from_anthropometrics(anthropometrics or {}, reference_params)
+        except KeyError as exc:  # the optimisation then measures every waypoint from the ZUPT estimate
+            info["waypoints_from"] = "zupt"
+            info["notes"] = [
+                f"optimized: {exc.args[0] if anthropometrics else 'no imulog.anthropometrics record'}; "
+                "waypoints measured from ZUPT (give h1_m, h2_m, h3_m with convert --meta anthropometrics.h1_m=...)"
+            ]
     recon = reconstruct_repetitions(
         t_s,
         acc,
@@ -228,7 +244,7 @@ def run_trajectory(
         )
         return StepResult(streams=streams, metadata={"imulog.trajectory": record})
 
-    return run_step(
+    outcome = run_step(
         path,
         step=STEP,
         algorithm="imulog.trajectory",
@@ -237,3 +253,27 @@ def run_trajectory(
         compute=compute,
         force=force,
     )
+    if not outcome.skipped:
+        _remove_stale(path, outcome.topics)
+    return outcome
+
+
+def _remove_stale(path, written: list[str]) -> None:
+    """Drop /derived/trajectory/* channels of earlier trajectory runs that this run did not rewrite (e.g. a
+    method left out of --method), so evaluate, metrics and the viewer never mix them with the new inputs."""
+    from imulog.archive import TrialReader, remove_derived
+
+    with TrialReader(path) as trial:
+        stale = [
+            c.topic
+            for c in trial.channels
+            if c.topic.startswith(TRAJECTORY_TOPIC.format(method=""))
+            and c.metadata.get("step") == STEP
+            and c.topic not in written
+        ]
+    if stale:
+        remove_derived(
+            path,
+            stale,
+            run={"step": "remove", "algorithm": f"stale outputs of step {STEP}", "params": {}, "inputs": []},
+        )

@@ -8,7 +8,10 @@ Used by :mod:`imulog.steps.phases` and the accuracy benchmark. Methods:
   ``template_pad_s`` of context on each side) and its cross-correlation peaks become the movements.
 
 Every method is followed by repetition splitting and event correction
-(:func:`~imulog.process.segmentation.repetitions.segment_repetitions`). The static mask is the complement of
+(:func:`~imulog.process.segmentation.repetitions.segment_repetitions`) and by the phase-boundary refinement
+of :mod:`~imulog.process.segmentation.boundaries` (``boundaries.enabled``; with method ``"dynamos"`` only when
+``dynamos.refine_boundaries`` is on too, so that ``--no-refine`` gives the published method). The raw
+movements (``movement_start``/``movement_end``) and the static mask keep the detector's boundaries. The static mask is the complement of
 the raw movements (``static="movements"``) or the gyro-norm baseline (``static="gyro-norm"``).
 """
 
@@ -100,7 +103,8 @@ def segment_phases(gyr_rad_s: np.ndarray, rate_hz: float, params: PhaseParams = 
     else:
         raise ValueError(f"unknown segmentation method {params.method!r}; choose one of {', '.join(METHODS)}")
     phases = segment_repetitions(start, end, norm, rate_hz, params.repetitions)
-    if params.boundaries.enabled and len(phases):
+    refine = params.boundaries.enabled and (params.method != "dynamos" or params.dynamos.refine_boundaries)
+    if refine and len(phases):  # onsets/offsets where the gyroscope leaves/reaches its static noise
         ps, pe = refine_phase_boundaries(gyr, rate_hz, phases.start, phases.end, params.boundaries)
         phases = replace(phases, start=ps, end=pe)
     if params.static == "movements":
