@@ -79,7 +79,7 @@ def test_simulated_r2g_end_to_end_phase_durations(tmp_path):
     trial = tmp_path / "r2g.mcap"
     runner = CliRunner()
     for args in (
-        ["convert", str(paths["imu"]), str(paths["vicon"]), "-o", str(trial)],
+        ["convert", str(paths["imu"]), str(paths["vicon"]), "--meta-file", str(paths["meta"]), "-o", str(trial)],
         ["process", "align", str(trial)],
         ["process", "phases", str(trial), "--quiet"],
         ["process", "metrics", str(trial)],

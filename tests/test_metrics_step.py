@@ -131,7 +131,6 @@ def test_segmented_r2g_phases_pair_with_the_truth(r2g):
     print(f"segmented phases within 0.1 s of truth: {within.mean():.0%}, max error {cmp.max_abs_error_s:.3f} s")
 
 
-@pytest.mark.xfail(reason="segmentation (imulog.steps.phases) misplaces some phase boundaries by > 0.1 s", strict=False)
 @pytest.mark.parametrize(("subject", "seed"), [(0, 0), (1, 11), (2, 5), (3, 7)])
 def test_every_segmented_r2g_phase_duration_within_0_1_s(subject, seed):
     """The issue's requirement: every R2G phase duration from the segmentation within 0.1 s of the truth."""

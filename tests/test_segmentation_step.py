@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -77,3 +79,50 @@ def test_cli_process_phases_appends_and_is_idempotent(sim, tmp_path):
     assert bad.exit_code != 0 and "/imu/ankle" in bad.output
     bad = runner.invoke(cli, ["process", "phases", str(path), "--threshold", "2"])
     assert bad.exit_code != 0
+
+
+def test_protocol_follows_the_trial_record(sim, tmp_path):
+    """R2G phases only for a trial whose record says task r2g; any other trial gets its movements as phases."""
+    from imulog.archive import TrialReader, write_trial
+    from imulog.cli import cli
+
+    r2g_trial, unknown_trial = tmp_path / "r2g.mcap", tmp_path / "unknown.mcap"
+    write_trial(r2g_trial, sim.recording, attach_sources=False)
+    metadata = {k: v for k, v in sim.recording.metadata.items() if k != "imulog.trial"}
+    stripped = dataclasses.replace(sim.recording, metadata=metadata)
+    write_trial(unknown_trial, stripped, attach_sources=False)
+
+    runner = CliRunner()
+    for trial in (r2g_trial, unknown_trial):
+        result = runner.invoke(cli, ["process", "phases", str(trial), "--quiet"])
+        assert result.exit_code == 0, result.output
+    with TrialReader(r2g_trial) as r:
+        phases = r.read("/derived/phases/wrist")
+        assert r.metadata["imulog.timing"]["protocol"] == "r2g"
+    # the record's repetition count (5, not the protocol's usual 25) is used without being told
+    assert len(phases) == 4 * N_REP and set(phases.labels) == {"reach", "lift", "return_bottle", "return_hand"}
+    with TrialReader(unknown_trial) as r:
+        phases, movements = r.read("/derived/phases/wrist"), r.read("/derived/movements/wrist")
+        assert r.metadata["imulog.timing"]["protocol"] == "movements"
+    assert set(phases.labels) == {"movement"} and len(phases) == len(movements)
+    assert phases.task_index.tolist() == list(range(1, len(phases) + 1))
+
+    # the user can still ask for R2G phases explicitly
+    result = runner.invoke(cli, ["process", "phases", str(unknown_trial), "--protocol", "r2g", "--repetitions", "5"])
+    assert result.exit_code == 0, result.output
+    with TrialReader(unknown_trial) as r:
+        assert len(r.read("/derived/phases/wrist")) == 4 * N_REP
+
+
+def test_damaged_trial_is_a_one_line_error(sim, tmp_path):
+    from imulog.archive import write_trial
+    from imulog.cli import cli
+
+    trial = tmp_path / "t.mcap"
+    write_trial(trial, sim.recording, attach_sources=False)
+    data = trial.read_bytes()
+    trial.write_bytes(data[: len(data) // 2])
+    result = CliRunner().invoke(cli, ["process", "phases", str(trial)])
+    assert result.exit_code != 0
+    assert "Traceback" not in result.output and str(trial) in result.output
+    assert len(result.output.strip().splitlines()) == 1

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from imulog.process.segmentation.pipeline import METHODS
+from imulog.process.segmentation.pipeline import METHODS, PROTOCOLS
 
 
 def _threshold(value: str) -> float | str:
@@ -24,10 +24,16 @@ def _threshold(value: str) -> float | str:
 
 def format_summary(timing: dict) -> str:
     """Human-readable timing table (one line per phase) plus per-label mean durations."""
+    if timing.get("protocol", "r2g") == "r2g":
+        found = (
+            f"{timing['n_movements']} movements -> {timing['n_phases']} phases in {timing['n_repetitions']} "
+            f"repetitions ({timing['n_corrected_repetitions']} corrected)"
+        )
+    else:
+        found = f"{timing['n_movements']} movements (no task protocol: each movement is a phase)"
     lines = [
-        f"{timing['imu']}: {timing['n_movements']} movements -> {timing['n_phases']} phases in "
-        f"{timing['n_repetitions']} repetitions ({timing['n_corrected_repetitions']} corrected), "
-        f"method {timing['method']}, {timing['clock']} clock, static {100 * timing['static_fraction']:.1f} %",
+        f"{timing['imu']}: {found}, method {timing['method']}, {timing['clock']} clock, "
+        f"static {100 * timing['static_fraction']:.1f} %",
         f"{'rep':>4} {'phase':<14} {'start s':>9} {'end s':>9} {'dur s':>7} {'peak rad/s':>10}",
     ]
     by_label: dict[str, list[float]] = {}
@@ -43,19 +49,20 @@ def format_summary(timing: dict) -> str:
     return "\n".join(lines)
 
 
-def _repetitions_from_trial(trial: Path, default: int = 25) -> int:
-    """The protocol's repetition count recorded in ``imulog.trial`` (``repetitions``), else ``default``."""
+def _protocol_from_trial(trial: Path) -> tuple[str, int]:
+    """(protocol, repetitions) from the trial's ``imulog.trial`` record (see ``steps.phases.protocol_of``)."""
     from imulog.archive import ArchiveError, TrialReader
+    from imulog.steps.phases import protocol_of
 
     try:
         with TrialReader(trial) as reader:
-            value = reader.metadata.get("imulog.trial", {}).get("repetitions", default)
+            record = reader.metadata.get("imulog.trial", {})
     except (ArchiveError, OSError):  # unreadable trial: run_phases reports it with its own message
-        return default
+        record = {}
     try:
-        return int(value)
-    except (ValueError, TypeError):
-        raise click.ClickException(f"{trial}: imulog.trial repetitions={value!r} is not a whole number") from None
+        return protocol_of(record)
+    except ValueError as exc:
+        raise click.ClickException(f"{trial}: {exc}") from None
 
 
 @click.command("phases")
@@ -69,7 +76,14 @@ def _repetitions_from_trial(trial: Path, default: int = 25) -> int:
     "--repetitions",
     type=int,
     default=None,
-    help="Repetitions in the trial (0 = infer). Default: the trial record's 'repetitions', else 25.",
+    help="R2G repetitions in the trial (0 = infer). Default: the trial record's 'repetitions', else 25.",
+)
+@click.option(
+    "--protocol",
+    type=click.Choice(PROTOCOLS),
+    default=None,
+    help="r2g: drinking-task phases per repetition; movements: every movement is a phase. "
+    "Default: r2g when the trial record's task is r2g, else movements.",
 )
 @click.option("--phases-per-repetition", type=int, default=4, show_default=True)
 @click.option("--alpha", type=float, default=0.8, show_default=True, help="DynAMoS short-movement factor.")
@@ -93,6 +107,7 @@ def process_phases(
     method: str,
     threshold: str,
     repetitions: int | None,
+    protocol: str | None,
     phases_per_repetition: int,
     alpha: float,
     beta: float,
@@ -105,9 +120,10 @@ def process_phases(
 ) -> None:
     """Segment movements and R2G phases, append them to TRIAL and print the timing table.
 
-    Writes /derived/movements/IMU, /derived/phases/IMU (reach, lift, return_bottle, return_hand;
-    task_index = repetition), /derived/static/IMU (1 = zero velocity) and the metadata record
-    imulog.timing. Running twice with the same options changes nothing.
+    Writes /derived/movements/IMU, /derived/phases/IMU (R2G trials: reach, lift, return_bottle,
+    return_hand with task_index = repetition; other tasks: one phase 'movement' per movement),
+    /derived/static/IMU (1 = zero velocity) and the metadata record imulog.timing (per phase: start,
+    end, duration s, peak angular velocity rad/s). Running twice with the same options changes nothing.
 
     \b
     Examples:
@@ -115,20 +131,25 @@ def process_phases(
       imulog process phases trial.mcap --threshold otsu --repetitions 25
       imulog process phases trial.mcap --method double-threshold --static gyro-norm
       imulog process phases slide.mcap --method template --repetitions 30 --phases-per-repetition 1
+      imulog process phases walk.mcap --protocol movements --static gyro-norm
     """
+    from imulog.archive import ArchiveError, TrialReader
     from imulog.process.segmentation.dynamos import DynamosParams
     from imulog.process.segmentation.pipeline import PhaseParams
     from imulog.process.segmentation.repetitions import RepetitionParams
     from imulog.process.segmentation.zero_velocity import GyroNormStaticParams
-    from imulog.steps.phases import compute_phases, pick_imu
+    from imulog.steps.common import error_line, pick_imu
+    from imulog.steps.phases import run_phases
 
     thr = _threshold(threshold)
-    if repetitions is None:
-        repetitions = _repetitions_from_trial(trial)
+    recorded_protocol, recorded_repetitions = _protocol_from_trial(trial)
+    protocol = protocol or recorded_protocol
+    repetitions = recorded_repetitions if repetitions is None else repetitions
     if alpha <= 0 or beta <= alpha:
         raise click.ClickException(f"need 0 < alpha < beta, got alpha={alpha}, beta={beta}")
     params = PhaseParams(
         method=method,
+        protocol=protocol,
         dynamos=DynamosParams(
             threshold=thr, alpha=alpha, beta=beta, cutoff_hz=cutoff_hz, refine_boundaries=not no_refine
         ),
@@ -137,37 +158,15 @@ def process_phases(
         gyro_norm=GyroNormStaticParams(threshold_rad_s=static_threshold),
     )
     try:
-        from imulog.archive import TrialReader
-        from imulog.steps.phases import run_phases
-
         with TrialReader(trial) as reader:
             pick_imu(reader.topics(), imu)
         outcome = run_phases(trial, imu=imu, params=params, force=force)
         with TrialReader(trial) as reader:
-            timing = reader.metadata.get("imulog.timing")
-            if timing is None:  # archive stored nothing readable: recompute for the printout
-                name = pick_imu(reader.topics(), imu)
-                stream = reader.read(f"/imu/{name}")
-                _, timing = compute_phases(stream.t_ns, stream.gyr, name, params)
-    except (ValueError, KeyError, OSError) as exc:
-        raise click.ClickException(f"{trial}: {exc}") from exc
-    if isinstance(timing, dict) and isinstance(timing.get("phases"), str):
-        import json
-
-        timing = {**timing, "phases": json.loads(timing["phases"])}
+            timing = reader.metadata["imulog.timing"]
+    except (ArchiveError, ValueError, KeyError, OSError) as exc:
+        raise click.ClickException(error_line(trial, exc)) from None
     skipped = getattr(outcome, "skipped", False)
-    text = format_summary(_typed(timing))
+    text = format_summary(timing)
     if quiet:
         text = text.splitlines()[0]
     click.echo(("(unchanged: same inputs and parameters) " if skipped else "") + text)
-
-
-def _typed(timing: dict) -> dict:
-    """Metadata values may come back as strings: restore numbers for printing."""
-    import json
-
-    out = dict(timing)
-    for key in ("n_movements", "n_repetitions", "n_phases", "n_corrected_repetitions", "static_fraction"):
-        if isinstance(out.get(key), str):
-            out[key] = json.loads(out[key])
-    return out

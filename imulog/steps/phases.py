@@ -4,7 +4,8 @@ Reads ``/imu/{imu}`` (gyroscope, device clock) and writes
 
 * ``/derived/movements/{imu}``: Intervals labelled ``movement`` (raw segmentation, before event correction);
 * ``/derived/phases/{imu}``: Intervals labelled ``reach``, ``lift``, ``return_bottle``, ``return_hand`` with
-  ``task_index`` = repetition (1-based);
+  ``task_index`` = repetition (1-based), onsets/offsets refined against the static gyroscope noise
+  (:mod:`imulog.process.segmentation.boundaries`);
 * ``/derived/static/{imu}``: SignalStream column ``static`` (1 = zero velocity), one row per IMU sample on the
   IMU device clock (the same ``t_ns`` as the raw channel, ready for ZUPT);
 * metadata ``imulog.timing``: per phase repetition, label, start/end, duration (s), peak angular velocity
@@ -17,48 +18,41 @@ Interval times (movements, phases, timing table) are on the reference clock when
 
 from __future__ import annotations
 
-import contextlib
-import json
 from typing import Any
 
 import numpy as np
 
 from imulog.model import Intervals, SignalStream
 from imulog.process.segmentation.pipeline import PhaseParams, segment_phases, timing_table
+from imulog.process.segmentation.repetitions import RepetitionParams
+from imulog.steps.common import alignment_for, pick_imu
 
 STEP = "phases"
 
 
+def protocol_of(trial_record: dict[str, Any], default_repetitions: int = 25) -> tuple[str, int]:
+    """(protocol, repetitions) of a trial from its ``imulog.trial`` record.
+
+    ``task`` ``r2g`` gives the drinking task's phases with the recorded ``repetitions`` (default 25);
+    any other or unknown task gives plain movements (labelling R2G phases there would be nonsense).
+    Raises ValueError when ``repetitions`` is not a whole number.
+    """
+    protocol = "r2g" if str(trial_record.get("task", "")).lower() == "r2g" else "movements"
+    value = trial_record.get("repetitions", default_repetitions)
+    try:
+        return protocol, int(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"imulog.trial repetitions={value!r} is not a whole number") from None
+
+
+def params_for_trial(trial_record: dict[str, Any]) -> PhaseParams:
+    """Default parameters for a trial: its protocol and repetition count (see :func:`protocol_of`)."""
+    protocol, repetitions = protocol_of(trial_record)
+    return PhaseParams(protocol=protocol, repetitions=RepetitionParams(n_repetitions=repetitions))
+
+
 def algorithm_name(params: PhaseParams) -> str:
     return f"imulog.segmentation.{params.method}"
-
-
-def pick_imu(topics: list[str], imu: str | None) -> str:
-    """IMU name to segment: ``imu`` if given (must exist), else the only ``/imu/*`` topic, else ``wrist``."""
-    imus = [t.split("/", 2)[2] for t in topics if t.startswith("/imu/")]
-    if imu is not None:
-        if imu not in imus:
-            raise ValueError(f"no channel /imu/{imu} in the trial (IMU channels: {', '.join(imus) or 'none'})")
-        return imu
-    if len(imus) == 1:
-        return imus[0]
-    if "wrist" in imus:
-        return "wrist"
-    raise ValueError(f"choose an IMU with --imu among: {', '.join(imus) or 'none (no /imu/* channel)'}")
-
-
-def _alignment_for(metadata: dict[str, Any], topic: str) -> dict | None:
-    record = metadata.get("imulog.alignment")
-    if not record:
-        return None
-    record = dict(record)
-    for key, value in list(record.items()):
-        if isinstance(value, str) and value[:1] in "[{":
-            with contextlib.suppress(ValueError):
-                record[key] = json.loads(value)
-    if record.get("imu") not in (None, "", topic):
-        return None
-    return record
 
 
 def compute_phases(
@@ -105,6 +99,7 @@ def compute_phases(
     timing = {
         "imu": f"/imu/{imu}",
         "method": params.method,
+        "protocol": params.protocol,
         "clock": clock,
         "rate_hz": round(rate_hz, 4),
         "n_movements": int(len(result.movement_start)),
@@ -118,18 +113,21 @@ def compute_phases(
 
 
 def run_phases(path, *, imu: str | None = None, params: PhaseParams | None = None, force: bool = False):
-    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome."""
-    params = params or PhaseParams()
+    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
+
+    Without ``params`` the trial's own protocol and repetition count are used (:func:`params_for_trial`).
+    """
     from imulog.archive import TrialReader
     from imulog.steps.base import StepResult, run_step
 
     with TrialReader(path) as trial:
         name = pick_imu(trial.topics(), imu)
+        params = params or params_for_trial(trial.metadata.get("imulog.trial", {}))
     topic = f"/imu/{name}"
 
     def compute(trial) -> StepResult:
         stream = trial.read(topic)
-        alignment = _alignment_for(trial.metadata, topic)
+        alignment = alignment_for(trial.metadata, topic)
         streams, timing = compute_phases(stream.t_ns, stream.gyr, name, params, alignment)
         return StepResult(streams=streams, metadata={"imulog.timing": timing})
 

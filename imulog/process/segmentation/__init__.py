@@ -1,9 +1,11 @@
 """Segmentation of IMU trials: movements, R2G phases and repetitions, zero-velocity intervals.
 
 Modules: :mod:`.dynamos` (DynAMoS), :mod:`.repetitions` (repetition splitting + event correction),
+:mod:`.boundaries` (phase onsets/offsets against the static noise),
 :mod:`.double_threshold` (Bai et al.), :mod:`.template` (template matching), :mod:`.zero_velocity`.
 """
 
+from imulog.process.segmentation.boundaries import BoundaryParams, refine_phase_boundaries
 from imulog.process.segmentation.double_threshold import DoubleThresholdParams, double_threshold
 from imulog.process.segmentation.dynamos import DynamosParams, Segmentation, dynamos, lowpass_norm, runs
 from imulog.process.segmentation.repetitions import Phases, RepetitionParams, segment_repetitions
@@ -16,6 +18,7 @@ from imulog.process.segmentation.zero_velocity import (
 )
 
 __all__ = [
+    "BoundaryParams",
     "DoubleThresholdParams",
     "DynamosParams",
     "GyroNormStaticParams",
@@ -30,6 +33,7 @@ __all__ = [
     "lowpass_norm",
     "mask_from_intervals",
     "match_template",
+    "refine_phase_boundaries",
     "runs",
     "segment_repetitions",
     "static_from_movements",

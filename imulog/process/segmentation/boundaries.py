@@ -13,17 +13,18 @@ This module places every onset and offset of the *final* phases (after event cor
 velocity leaves / returns to the sensor's own static noise:
 
 1. ``omega`` = gyroscope (rad/s) low-passed per axis at ``cutoff_hz`` (zero-phase, 2nd order; human movement
-   is below ~10 Hz, the filter only takes the white noise off);
-2. adjacent static period: in the gap between the phase and its neighbour, the ``static_window_s`` stretch
-   with the smallest gyroscope variance (so a fidget or a corrective sub-movement in the gap is avoided);
-   there, the bias ``b`` = per-axis median and the noise ``sigma`` = per-axis standard deviation (rms over the
-   axes) of ``omega``;
-3. ``r = |omega - b|`` (rad/s) and the level ``n_sigma * sigma`` (at least ``min_level_rad_s``, a quantisation
-   floor): the onset is the first sample of the run of ``r > level`` that leads into the phase's motion, the
-   offset the last sample of the run that leaves it;
-4. corrective sub-movements: motion that resumes within ``continuation_s`` after the offset, before the next
-   phase, and reaches ``continuation_peak_fraction`` of the phase's peak ``r`` belongs to the phase (a reach
-   that stops short and corrects still ends when the hand arrives); the offset moves to its end.
+   is below ~10 Hz, the filter only takes white noise off), a lower cut-off for a noisy gyroscope
+   (:func:`adaptive_cutoff_hz`);
+2. adjacent static period: the gap to the neighbouring phase (or, with ``static_window_s > 0``, its quietest
+   stretch of that length); there the bias ``b`` = per-axis median and the noise = per-axis robust standard
+   deviation (rms over the axes) of ``omega``;
+3. ``r = |omega - b|`` (rad/s) and the level ``n_sigma x noise`` (at least ``min_level_rad_s``): the onset is
+   the first sample of the run of ``r > level`` that leads into the phase's motion (then, with ``descend``,
+   further out while ``r`` keeps falling), the offset likewise at the end; a boundary that would move more than
+   ``max_shift_s`` outward stays where it was (the "static" period is not static: drift, slow wander);
+4. corrective sub-movements: motion that resumes within ``continuation_s`` after the offset, reaches
+   ``continuation_peak_fraction`` of the phase's peak ``r`` and settles before the next phase belongs to the
+   phase (a reach that stops short and corrects ends when the hand arrives); the offset moves to its end.
 
 Intervals are half-open sample ranges ``[start, end)``.
 """
@@ -41,8 +42,13 @@ class BoundaryParams:
     """Parameters of :func:`refine_phase_boundaries` (imulog defaults; units in the names).
 
     enabled: refine the phase boundaries at all (False keeps the DynAMoS/event-correction boundaries).
-    cutoff_hz: zero-phase 2nd-order Butterworth low-pass (Hz) on each gyroscope axis before the norm.
-    static_window_s: length (s) of the quietest stretch of the adjacent gap used for bias and noise.
+    cutoff_hz: zero-phase 2nd-order Butterworth low-pass (Hz) on each gyroscope axis before the norm (the
+        highest cut-off used; see :func:`adaptive_cutoff_hz`).
+    target_level_rad_s: on a noisy gyroscope the cut-off is lowered until the motion level comes down to this
+        (rad/s, ~1.7 deg/s); 0 = always ``cutoff_hz``.
+    min_cutoff_hz: lowest cut-off (Hz) the adaptation may choose (more smoothing smears the boundaries).
+    static_window_s: length (s) of the quietest stretch of the adjacent gap used for bias and noise; 0 (default)
+        uses the whole gap between the neighbouring phases (robust statistics).
     min_static_s: a shorter usable gap falls back to the static estimate of the other side of the phase.
     guard_s: the static window keeps this distance (s) from the current boundary.
     n_sigma: the motion level is ``n_sigma`` x the static noise (rms per-axis sd, rad/s).
@@ -58,6 +64,8 @@ class BoundaryParams:
 
     enabled: bool = True
     cutoff_hz: float = 25.0
+    target_level_rad_s: float = 0.03
+    min_cutoff_hz: float = 6.0
     static_window_s: float = 0.0
     min_static_s: float = 0.25
     guard_s: float = 0.1
@@ -80,6 +88,33 @@ def lowpass_axes(gyr_rad_s: np.ndarray, rate_hz: float, cutoff_hz: float, order:
         sos = butter(order, cutoff_hz, btype="low", fs=rate_hz, output="sos")
         g = sosfiltfilt(sos, g, axis=0)
     return g
+
+
+def white_noise_rad_s(gyr_rad_s: np.ndarray) -> float:
+    """Per-sample white noise (rad/s, rms over the axes) of a gyroscope: robust spread of the second
+    differences (1.4826 x MAD / sqrt 6), which smooth human motion barely changes."""
+    g = np.asarray(gyr_rad_s, dtype=float)
+    g = g[np.all(np.isfinite(g), axis=1)]
+    if len(g) < 3:
+        return 0.0
+    d2 = g[2:] - 2 * g[1:-1] + g[:-2]
+    mad = 1.4826 * np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0) / np.sqrt(6.0)
+    return float(np.sqrt(np.mean(mad**2)))
+
+
+def adaptive_cutoff_hz(gyr_rad_s: np.ndarray, rate_hz: float, params: BoundaryParams) -> float:
+    """Low-pass cut-off (Hz) for the boundary search: ``cutoff_hz``, lowered for a noisy gyroscope until the
+    motion level ``n_sigma x`` filtered noise reaches ``target_level_rad_s`` (never below ``min_cutoff_hz``).
+
+    White noise of per-sample sd ``s`` low-passed at ``f`` keeps about ``s sqrt(2 f / rate)``.
+    """
+    if params.target_level_rad_s <= 0 or not params.cutoff_hz:
+        return params.cutoff_hz
+    noise = white_noise_rad_s(gyr_rad_s)
+    if noise <= 0:
+        return params.cutoff_hz
+    f = (params.target_level_rad_s / (params.n_sigma * noise)) ** 2 * rate_hz / 2
+    return float(np.clip(f, params.min_cutoff_hz, params.cutoff_hz))
 
 
 def quietest_window(omega: np.ndarray, lo: int, hi: int, length: int) -> tuple[int, int] | None:
@@ -151,7 +186,7 @@ def refine_phase_boundaries(
     e = np.array(end, dtype=np.int64)
     if not params.enabled or len(s) == 0:
         return s, e
-    omega = lowpass_axes(gyr_rad_s, rate_hz, params.cutoff_hz)
+    omega = lowpass_axes(gyr_rad_s, rate_hz, adaptive_cutoff_hz(gyr_rad_s, rate_hz, params))
     n = len(omega)
     win = max(3, int(round(params.static_window_s * rate_hz)))
     min_static = max(3, int(round(params.min_static_s * rate_hz)))
@@ -179,31 +214,38 @@ def refine_phase_boundaries(
             continue
         bias_pre, level_pre = static_estimate(omega, pre or post, params)
         bias_post, level_post = static_estimate(omega, post or pre, params)
-        r_pre = np.linalg.norm(omega - bias_pre, axis=1)
-        r_post = np.linalg.norm(omega - bias_post, axis=1)
-        peak = float(r_pre[a:b].max()) if b > a else 0.0
-        lo = max(prev_end, pre[0] if pre is not None else prev_end)
-        new_a = _onset(r_pre, a, b, level_pre, lo, max(params.strong_fraction * peak, level_pre), params.descend)
+        # work on the stretch between the neighbouring phases, in local sample indices (offset o)
+        o = prev_end
+        sub = omega[o:next_start]
+        r_pre = np.linalg.norm(sub - bias_pre, axis=1)
+        r_post = np.linalg.norm(sub - bias_post, axis=1)
+        la, lb, end_local = a - o, b - o, next_start - o
+        peak = float(r_pre[la:lb].max()) if lb > la else 0.0
+        lo = (pre[0] if pre is not None else prev_end) - o
+        strong = max(params.strong_fraction * peak, level_pre)
+        new_a = o + _onset(r_pre, la, lb, level_pre, max(lo, 0), strong, params.descend)
         if new_a < a - shift:  # no static level near the onset (drift, slow wander): keep the DynAMoS onset
             new_a = a
-        hi = min(next_start, post[1] if post is not None else next_start)
-        new_b = _offset(r_post, a, b, level_post, hi, max(params.strong_fraction * peak, level_post), params.descend)
-        if new_b > b + shift:
-            new_b = b
+        hi = (post[1] if post is not None else next_start) - o
+        strong = max(params.strong_fraction * peak, level_post)
+        j = _offset(r_post, la, lb, level_post, min(hi, end_local), strong, params.descend)
+        if o + j > b + shift:
+            j = lb
+        big_level = max(params.continuation_peak_fraction * peak, level_post)
         while cont > 0:  # corrective sub-movements after the offset, before the next phase
-            stop = min(new_b + cont, next_start)
-            big = np.flatnonzero(r_post[new_b:stop] >= params.continuation_peak_fraction * peak)
+            big = np.flatnonzero(r_post[j : min(j + cont, end_local)] >= big_level)
             if len(big) == 0:
                 break
-            c1 = new_b + int(big[0])
-            bound = min(next_start, c1 + cont)
+            c1 = j + int(big[0])
+            bound = min(end_local, c1 + cont)
             while c1 < bound and r_post[c1] > level_post:
                 c1 += 1
             while params.descend and c1 < bound and r_post[c1] < r_post[c1 - 1]:
                 c1 += 1
-            if c1 >= bound:  # runs into the next phase or never settles: not a sub-movement of this one
+            if c1 >= bound or c1 <= j:  # runs into the next phase or never settles: not a sub-movement
                 break
-            new_b = c1
+            j = c1
+        new_b = o + j
         if new_b <= new_a:
             continue
         out_s[k], out_e[k] = new_a, new_b

@@ -33,6 +33,7 @@ from imulog.process.segmentation.zero_velocity import (
 )
 
 METHODS = ("dynamos", "double-threshold", "template")
+PROTOCOLS = ("r2g", "movements")
 
 
 @dataclass(frozen=True)
@@ -40,11 +41,15 @@ class PhaseParams:
     """All parameters of :func:`segment_phases` (each sub-object documents its own defaults and units).
 
     method: one of ``METHODS``; static: ``"movements"`` or ``"gyro-norm"``;
+    protocol: ``"r2g"`` splits repetitions and labels the four drinking-task phases (with event correction);
+    ``"movements"`` (any other task) keeps every detected movement as one phase labelled ``movement``,
+    numbered from 1 in ``repetition``;
     static_margin_s: movements are widened by this (s) before taking the complement as zero velocity;
     template_pad_s: static context (s) on each side of the template (method ``"template"``).
     """
 
     method: str = "dynamos"
+    protocol: str = "r2g"
     dynamos: DynamosParams = field(default_factory=DynamosParams)
     double_threshold: DoubleThresholdParams = field(default_factory=DoubleThresholdParams)
     template: TemplateParams = field(default_factory=TemplateParams)
@@ -89,6 +94,19 @@ def _template_movements(gyr, rate_hz, norm, params: PhaseParams):
     return start, end
 
 
+def movements_as_phases(start: np.ndarray, end: np.ndarray) -> Phases:
+    """Every movement ``[start, end)`` (samples) as its own phase ``movement``, numbered from 1 (no protocol)."""
+    n = len(start)
+    return Phases(
+        start=np.asarray(start, dtype=np.int64),
+        end=np.asarray(end, dtype=np.int64),
+        repetition=np.arange(1, n + 1, dtype=np.int64),
+        phase=np.zeros(n, dtype=np.int64),
+        labels=["movement"] * n,
+        n_corrected=0,
+    )
+
+
 def segment_phases(gyr_rad_s: np.ndarray, rate_hz: float, params: PhaseParams = PhaseParams()) -> PhaseResult:
     """Movements, corrected phases and zero-velocity mask from a gyroscope signal (N, 3) rad/s."""
     gyr = np.asarray(gyr_rad_s, dtype=float)
@@ -102,7 +120,12 @@ def segment_phases(gyr_rad_s: np.ndarray, rate_hz: float, params: PhaseParams = 
         start, end = _template_movements(gyr, rate_hz, norm, params)
     else:
         raise ValueError(f"unknown segmentation method {params.method!r}; choose one of {', '.join(METHODS)}")
-    phases = segment_repetitions(start, end, norm, rate_hz, params.repetitions)
+    if params.protocol == "r2g":
+        phases = segment_repetitions(start, end, norm, rate_hz, params.repetitions)
+    elif params.protocol == "movements":
+        phases = movements_as_phases(start, end)
+    else:
+        raise ValueError(f"unknown protocol {params.protocol!r}; choose one of {', '.join(PROTOCOLS)}")
     refine = params.boundaries.enabled and (params.method != "dynamos" or params.dynamos.refine_boundaries)
     if refine and len(phases):  # onsets/offsets where the gyroscope leaves/reaches its static noise
         ps, pe = refine_phase_boundaries(gyr, rate_hz, phases.start, phases.end, params.boundaries)
