@@ -353,6 +353,8 @@ DAMAGED_ARCHIVE_COMMANDS = [
     ["process", "align"],
     ["process", "trajectory"],
     ["process", "metrics"],
+    ["process", "phases"],
+    ["process", "kinematics"],
     ["process", "calibrate", "--calibration", "{out}/cal.json"],
     ["evaluate"],
     ["calibrate", "-o", "{out}/cal2.json"],

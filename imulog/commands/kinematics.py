@@ -92,7 +92,9 @@ def process_kinematics(
       imulog process kinematics sway.mcap                      # trunk IMU named in the metadata
       imulog info arm.mcap                                     # shows imulog.kinematics_errors
     """
+    from imulog.archive import ArchiveError
     from imulog.process.kinematics.solver import SolverParams
+    from imulog.steps.common import error_line
     from imulog.steps.kinematics import KinematicsOptions, run_kinematics
 
     pose = _floats(neutral_pose, 5, "--neutral-pose")
@@ -113,8 +115,8 @@ def process_kinematics(
         with click.progressbar(length=1, label="kinematics (DH, unconstrained + constrained)") as bar:
             outcome = run_kinematics(trial, options=options, force=force)
             bar.update(1)
-    except (ValueError, KeyError, OSError, RuntimeError) as exc:
-        raise click.ClickException(f"{trial}: {exc}") from exc
+    except (ArchiveError, ValueError, KeyError, OSError, RuntimeError) as exc:
+        raise click.ClickException(error_line(trial, exc)) from None
     if outcome.skipped:
         click.echo(f"unchanged (same inputs and parameters): {', '.join(outcome.topics)}")
         return
