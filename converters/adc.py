@@ -12,7 +12,9 @@ per axis), ``counts_per_g``, ``adc_bits`` (10: counts must lie in 0..1023), ``na
 from __future__ import annotations
 
 import io
+import json
 import re
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +23,7 @@ import pandas as pd
 from converters._common import G0, looks_binary, text_head_lines
 from converters.base import Converter, ConvertOptions
 from converters.errors import ConversionError
+from converters.mapping import sibling_mapping
 from imulog.model import ImuStream, Recording
 
 LINE = re.compile(rb"^[ \t]*X=(-?\d+)[ \t]+Y=(-?\d+)[ \t]+Z=(-?\d+)[ \t]*\r?$")
@@ -110,7 +113,9 @@ def read_adc(
 
 class AdcConverter(Converter):
     name = "adc"
-    description = "raw 3-axis ADC accelerometer text 'X=512 Y=498 Z=600' (needs --rate; zero 512, 256 counts/g)"
+    description = (
+        "raw 3-axis ADC accelerometer text 'X=512 Y=498 Z=600' (needs --rate or a sidecar; zero 512, 256 counts/g)"
+    )
     extensions = (".txt", ".log", ".dat")
     example = "imulog convert witilt.txt --rate 50 -o trial.mcap"
 
@@ -122,16 +127,41 @@ class AdcConverter(Converter):
         return 0.95 if LINE.match(first.encode("latin-1", "replace")) else 0.0
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
+        """Options on the command line win over a sibling ``<stem>.mapping.json`` ``device`` section."""
         options = options or ConvertOptions()
-        extra = options.extra
+        path = Path(path)
+        device = device_sidecar(options.mapping or sibling_mapping(path))
+        extra = {**device, **options.extra}
         return read_adc(
-            Path(path),
-            rate_hz=options.rate_hz,
+            path,
+            rate_hz=options.rate_hz if options.rate_hz is not None else extra.get("rate_hz"),
             zero_counts=extra.get("zero_counts", 512.0),
             counts_per_g=float(extra.get("counts_per_g", 256.0)),
             adc_bits=int(extra.get("adc_bits", 10)),
             name=str(extra.get("name", "acc")),
         )
+
+
+def device_sidecar(mapping_path: Path | None) -> dict:
+    """The ``device`` section (rate_hz, zero_counts, counts_per_g, adc_bits, name) of an ADC sidecar file.
+
+    Raw ADC text has no header, so a lab that records many sessions can keep the board's rate and
+    calibration beside each file (``session.mapping.json``: ``{"format": "imulog.mapping/1",
+    "device": {"name": "acc", "rate_hz": 100}}``) instead of typing ``--rate`` each time.
+    """
+    if mapping_path is None:
+        return {}
+    path = Path(mapping_path)
+    try:
+        text = path.read_text(encoding="utf-8")
+        doc = tomllib.loads(text) if path.suffix.lower() == ".toml" else json.loads(text)
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise ConversionError(path, f"cannot read the ADC sidecar file: {exc}") from None
+    device = doc.get("device", {}) if isinstance(doc, dict) else {}
+    if not isinstance(device, dict):
+        raise ConversionError(path, "'device' must be a table of rate_hz, zero_counts, counts_per_g, adc_bits, name")
+    known = {"rate_hz", "zero_counts", "counts_per_g", "adc_bits", "name"}
+    return {k: v for k, v in device.items() if k in known}
 
 
 CONVERTER = AdcConverter()

@@ -145,6 +145,7 @@ _ROLE_TOKENS = {
     "strides",
     "borders",
     "events",
+    "adc",
 }
 _SKIP_SUFFIXES = {".md", ".txt.license", ".license", ".json", ".toml", ".npz", ".npy", ".pdf", ".png", ".mcap"}
 

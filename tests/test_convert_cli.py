@@ -317,3 +317,29 @@ def test_folder_to_a_single_mcap_path(tmp_path, shared_data):
         (several / name).write_bytes((shared_data / "imu_text" / "fusion_sensor_data.csv").read_bytes())
     code, _, err = run("convert", several, "-o", tmp_path / "x.mcap")
     assert code == 2 and "2 recordings" in err and not (tmp_path / "x.mcap").exists()
+
+
+def test_adc_sidecar_gives_the_rate_so_a_simulated_adl_folder_converts_in_one_call(tmp_path):
+    """Raw ADC text has no time stamps: the board's rate comes from ``<stem>.mapping.json`` beside it."""
+    from imulog.simulate import simulate, write_trial_files
+
+    sim = simulate("adl", seed=3, repetitions=2)
+    paths = write_trial_files(sim, tmp_path / "raw")
+    assert run("convert", tmp_path / "raw", "-o", tmp_path / "out")[0] == 0
+    trials = sorted((tmp_path / "out").glob("*.mcap"))
+    assert len(trials) == 1  # IMU text, ADC text and Vicon CSV of one session: one trial
+    acc = info_json(trials[0])["/imu/acc"]
+    n = len(Path(paths["adc"]).read_text().splitlines())
+    rate = float(sim.adc["rate_hz"])
+    assert acc["samples"] == n and abs(acc["rate_hz"] - rate) < 1e-6
+    # counts -> m/s^2 with the nominal calibration (zero 512, 256 counts/g), parsed independently here
+    from converters._common import G0
+
+    counts = np.array(
+        [[int(f.split("=")[1]) for f in line.split()] for line in Path(paths["adc"]).read_text().splitlines()]
+    )
+    with TrialReader(trials[0]) as trial:
+        np.testing.assert_array_equal(trial.read("/imu/acc").acc, (counts - 512.0) / 256.0 * G0)
+    # the command line still wins over the sidecar
+    code, _, _ = run("convert", paths["adc"], "--rate", "50", "-o", tmp_path / "r50.mcap")
+    assert code == 0 and abs(info_json(tmp_path / "r50.mcap")["/imu/acc"]["rate_hz"] - 50) < 1e-6

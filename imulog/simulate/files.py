@@ -37,12 +37,17 @@ def write_trial_files(
     )
     if sim.adc is not None:
         paths["adc"] = writers.write_adc_text(out / f"{stem}_adc.txt", sim.adc["counts"])
+        # what the lab knows about its board: the sampling rate (the file has no time stamps) and the
+        # nominal calibration (the true per-axis zero levels and sensitivities stay in the truth)
+        paths["adc_mapping"] = out / f"{stem}_adc.mapping.json"
+        sidecar = {"format": "imulog.mapping/1", "device": {"name": "acc", "rate_hz": float(sim.adc["rate_hz"])}}
+        paths["adc_mapping"].write_text(json.dumps(sidecar, indent=1) + "\n")
     meta = out / f"{stem}_meta.json"
     records = {k: v for k, v in sim.recording.metadata.items() if k in ("imulog.trial", "imulog.anthropometrics")}
     meta.write_text(json.dumps(records, indent=1) + "\n")
     paths["meta"] = meta
     paths["truth_npz"], paths["truth"] = save_truth(sim.truth, out / stem, compact=compact_truth)
-    sim.recording.sources = [str(paths[k]) for k in ("imu", "mapping", "vicon", "adc") if k in paths]
+    sim.recording.sources = [str(paths[k]) for k in ("imu", "mapping", "vicon", "adc", "adc_mapping") if k in paths]
     return paths
 
 
