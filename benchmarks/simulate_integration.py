@@ -15,7 +15,8 @@ import argparse
 
 import numpy as np
 
-from imulog.simulate import quat, simulate
+from imulog.process import quaternion as quat
+from imulog.simulate import simulate
 
 
 def task_errors(sim, zupt: bool) -> list[float]:

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from imulog.process import quaternion as Q
 from imulog.simulate import load_truth, parameter_names, simulate, write_trial_files
-from imulog.simulate import quat as Q
 from imulog.simulate.imu_model import EARTH_G
 
 SHORT = {"repetitions": 3, "opening_static_s": 5.0, "post_wave_static_s": 3.0}
@@ -95,8 +95,8 @@ def test_noise_free_gyro_is_the_body_rate_and_integrates_to_orientation(ideal):
     t = tr.imu_t_ref_ns / 1e9
     worst = 0.0
     for i, j in zip(m[:-1], m[1:], strict=True):
-        q = Q.mul(q, Q.from_rotvec(0.5 * (imu.gyr[i] + imu.gyr[j]) * (t[j] - t[i])))
-        err = np.linalg.norm(Q.to_rotvec(Q.mul(Q.conj(tr.imu_orientation[j]), q)))
+        q = Q.multiply(q, Q.from_rotation_vector(0.5 * (imu.gyr[i] + imu.gyr[j]) * (t[j] - t[i])))
+        err = np.linalg.norm(Q.to_rotation_vector(Q.multiply(Q.conjugate(tr.imu_orientation[j]), q)))
         worst = max(worst, err)
     assert np.degrees(worst) < 0.5
 
@@ -162,9 +162,9 @@ def test_vicon_cluster_follows_truth(ideal):
     ey = np.cross(ez, ex)
     r_cluster = np.stack([ex, ey, ez], axis=2)  # columns: cluster axes in world
     q_ic = np.asarray(tr.alignment["rotation_imu_to_cluster"])
-    r_expected = Q.to_matrix(Q.mul(tr.orientation, Q.conj(q_ic)))
+    r_expected = Q.to_rotation_matrix(Q.multiply(tr.orientation, Q.conjugate(q_ic)))
     assert np.abs(r_cluster - r_expected).max() < 1e-3  # 0.1 um marker rounding over 35-45 mm
-    angle = np.degrees(np.linalg.norm(Q.to_rotvec(q_ic)))
+    angle = np.degrees(np.linalg.norm(Q.to_rotation_vector(q_ic)))
     assert 0.1 < angle < 15.0
 
 

@@ -12,9 +12,9 @@ from click.testing import CliRunner
 
 from imulog.archive import TrialReader, write_trial
 from imulog.cli import cli
+from imulog.process import quaternion as quat
 from imulog.process.kinematics.dh import JOINT_NAMES
 from imulog.process.kinematics.errors import rms_deg
-from imulog.simulate import quat
 from imulog.simulate.arm import load_arm_truth, main, save_arm_truth, simulate_arm
 from imulog.simulate.imu_model import EARTH_G
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from imulog.simulate import quat as Q
+from imulog.process import quaternion as Q
 from imulog.simulate import simulate, write_trial_files
 from imulog.simulate.imu_model import EARTH_G, G0
 

@@ -89,6 +89,11 @@ def rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return v + w * t + np.cross(u, t)
 
 
+def rotate_inverse(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``R(q)^T v``: a parent-frame vector expressed in the rotated (e.g. sensor) frame."""
+    return rotate(conjugate(q), v)
+
+
 def to_rotation_matrix(q: np.ndarray) -> np.ndarray:
     """Rotation matrix/matrices (..., 3, 3) with ``R @ v == rotate(q, v)``."""
     q = normalize(q)
@@ -259,3 +264,11 @@ def inclination_error(q_est: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
     """Inclination error(s) in rad: the non-heading part of ``q_est * q_ref^-1`` (BROAD definition)."""
     e = normalize(multiply(q_est, conjugate(q_ref)))
     return 2.0 * np.arccos(np.clip(np.sqrt(e[..., 0] ** 2 + e[..., 3] ** 2), 0.0, 1.0))
+
+
+def from_euler_zyx(yaw_deg: float, pitch_deg: float, roll_deg: float) -> np.ndarray:
+    """``Rz(yaw) Ry(pitch) Rx(roll)`` (intrinsic z-y'-x'') as a quaternion; angles in degrees."""
+    qz = from_rotation_vector(np.array([0.0, 0.0, np.radians(yaw_deg)]))
+    qy = from_rotation_vector(np.array([0.0, np.radians(pitch_deg), 0.0]))
+    qx = from_rotation_vector(np.array([np.radians(roll_deg), 0.0, 0.0]))
+    return multiply(multiply(qz, qy), qx)

@@ -45,8 +45,9 @@ from typing import Any
 import numpy as np
 
 from imulog.model import ImuStream, MarkerStream, Recording
+from imulog.process import quaternion as quat
 from imulog.process.kinematics.dh import JOINT_NAMES, ArmModel, JointLimits, forward_kinematics
-from imulog.simulate import imu_model, minjerk, quat, vicon_model, writers
+from imulog.simulate import imu_model, minjerk, vicon_model, writers
 
 SEGMENTS = ("upper_arm", "forearm")
 TRUNK = "trunk"
@@ -188,10 +189,10 @@ def _trunk_law(params: ArmParams, rng: np.random.Generator):
         fwd = 0.5 * b * (1 - np.cos(2 * np.pi * f[1] * (t - params.neutral_s)))  # forward lean >= 0
         side = 0.5 * b * np.sin(2 * np.pi * f[2] * (t - params.neutral_s) + phi[2])
         z = np.zeros_like(t)
-        q_yaw = quat.from_rotvec(np.column_stack([z, z, yaw]))
-        q_fwd = quat.from_rotvec(np.column_stack([-fwd, z, z]))  # about -x (lateral): leaning toward +y
-        q_side = quat.from_rotvec(np.column_stack([z, side, z]))
-        return quat.normalize(quat.mul(quat.mul(q_yaw, q_fwd), q_side))
+        q_yaw = quat.from_rotation_vector(np.column_stack([z, z, yaw]))
+        q_fwd = quat.from_rotation_vector(np.column_stack([-fwd, z, z]))  # about -x (lateral): leaning toward +y
+        q_side = quat.from_rotation_vector(np.column_stack([z, side, z]))
+        return quat.normalize(quat.multiply(quat.multiply(q_yaw, q_fwd), q_side))
 
     return q_of_t
 
@@ -248,7 +249,9 @@ def simulate_arm(
     t_ns = np.round(np.arange(n) / params.rate_hz * 1e6).astype(np.int64) * 1000
     t_s = t_ns / 1e9
     offsets = _segment_offsets(model, params.imu_lever_m)
-    mount = {s: quat.from_rotvec(rng.normal(0.0, math.radians(params.mounting_error_deg), 3)) for s in SEGMENTS}
+    mount = {
+        s: quat.from_rotation_vector(rng.normal(0.0, math.radians(params.mounting_error_deg), 3)) for s in SEGMENTS
+    }
     q_ic = {
         s: vicon_model.draw_imu_to_cluster(
             vicon_model.ViconParams(imu_to_cluster_sd_deg=params.imu_to_cluster_sd_deg), rng
@@ -276,8 +279,8 @@ def simulate_arm(
             ("upper_arm", fk.r_upper_arm, fk.elbow_m),
             ("forearm", fk.r_forearm, fk.wrist_m),
         ):
-            q_ts = np.array([quat.from_matrix(r) for r in r_seg])
-            q_ws = quat.normalize(quat.mul(quat.mul(q_wt, q_ts), mount[seg]))
+            q_ts = quat.from_rotation_matrix(np.asarray(r_seg))
+            q_ws = quat.normalize(quat.multiply(quat.multiply(q_wt, q_ts), mount[seg]))
             p_trunk = origin + np.einsum("nij,j->ni", r_seg, offsets[seg])
             out[seg] = (q_ws, shoulder + quat.rotate(q_wt, p_trunk))
         return out
@@ -296,7 +299,7 @@ def simulate_arm(
         qp = np.where(np.sum(qp * q_ws, axis=1, keepdims=True) < 0, -qp, qp)
         qm = np.where(np.sum(qm * q_ws, axis=1, keepdims=True) < 0, -qm, qm)
         dq = (qp - qm) / (2 * h)
-        omega = 2.0 * quat.mul(quat.conj(q_ws), dq)[:, 1:]
+        omega = 2.0 * quat.multiply(quat.conjugate(q_ws), dq)[:, 1:]
         f_sensor = quat.rotate_inverse(q_ws, acc_world + np.array([0.0, 0.0, imu_model.EARTH_G]))
         m_sensor = quat.rotate_inverse(q_ws, np.broadcast_to(field_world, p.shape))
         device = imu_model.draw_device(imu, device_rng)

@@ -11,7 +11,8 @@ from typing import Any
 import numpy as np
 
 from imulog.model import ImuStream, Intervals, MarkerStream, Recording
-from imulog.simulate import clocks, imu_model, protocols, quat, vicon_model
+from imulog.process import quaternion as quat
+from imulog.simulate import clocks, imu_model, protocols, vicon_model
 from imulog.simulate.truth import GroundTruth
 
 IMU_NAME = "wrist"
@@ -159,7 +160,7 @@ def simulate(protocol: str, *, subject: int = 0, trial: int = 0, seed: int = 0, 
     inc = np.radians(env.inclination_deg)
     psi = np.radians(north)
     field_world = env.field_uT * np.array([np.cos(inc) * np.cos(psi), np.cos(inc) * np.sin(psi), -np.sin(inc)])
-    q_global_to_world = quat.from_rotvec(np.array([0.0, 0.0, psi]))
+    q_global_to_world = quat.from_rotation_vector(np.array([0.0, 0.0, psi]))
 
     # clocks and sample times
     vrate = p["clock"].vicon_rate_hz

@@ -24,7 +24,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from imulog.simulate import minjerk, quat
+from imulog.process import quaternion as quat
+from imulog.simulate import minjerk
 
 
 @dataclass
@@ -97,8 +98,8 @@ class MotionPlan:
             raise ValueError("a movement needs a positive duration")
         p1 = self.p if p1 is None else np.asarray(p1, dtype=float)
         q1 = self.q if q1 is None else quat.normalize(np.asarray(q1, dtype=float))
-        rel = quat.mul(quat.conj(self.q), q1)
-        rv = quat.to_rotvec(rel)
+        rel = quat.multiply(quat.conjugate(self.q), q1)
+        rv = quat.to_rotation_vector(rel)
         start = self.t
         self.t0.append(start)
         self.duration.append(float(seconds))
@@ -109,13 +110,13 @@ class MotionPlan:
         self.lift.append(np.zeros(3) if lift is None else np.asarray(lift, dtype=float))
         self.law.append(law)
         self.p = p1.copy()
-        self.q = quat.mul(self.q, quat.from_rotvec(rv))
+        self.q = quat.multiply(self.q, quat.from_rotation_vector(rv))
         self.t = start + float(seconds)
         return start, self.t
 
     def rotate(self, seconds: float, rotvec_sensor: np.ndarray) -> tuple[float, float]:
         """Rotate by a sensor-frame rotation vector (rad) in place (no translation)."""
-        q1 = quat.mul(self.q, quat.from_rotvec(np.asarray(rotvec_sensor, dtype=float)))
+        q1 = quat.multiply(self.q, quat.from_rotation_vector(np.asarray(rotvec_sensor, dtype=float)))
         return self.move(seconds, None, q1)
 
     def mark(self, label: str, start_s: float, end_s: float, task_index: int = -1) -> None:
@@ -165,7 +166,7 @@ class MotionPlan:
         position = p0[idx] + dp[idx] * s[:, None] + lift_pos
         velocity = dp[idx] * ds[:, None] + lift_vel
         acceleration = dp[idx] * dds[:, None] + lift_acc
-        orientation = quat.mul(q0[idx], quat.from_rotvec(rv[idx] * s[:, None]))
+        orientation = quat.multiply(q0[idx], quat.from_rotation_vector(rv[idx] * s[:, None]))
         omega = rv[idx] * ds[:, None]
         return Kinematics(t_s, position, velocity, acceleration, orientation, omega, moving)
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imulog.simulate import quat
+from imulog.process import quaternion as quat
 
 LABELS = ("O", "X", "Y", "A")
 
@@ -40,14 +40,14 @@ class ViconParams:
 def draw_imu_to_cluster(params: ViconParams, rng: np.random.Generator) -> np.ndarray:
     """Constant rotation IMU sensor frame -> cluster frame (a few degrees about a random axis)."""
     rv = rng.normal(0.0, np.radians(params.imu_to_cluster_sd_deg), 3)
-    return quat.from_rotvec(rv)
+    return quat.from_rotation_vector(rv)
 
 
 def marker_positions(
     position_m: np.ndarray, q_world_sensor: np.ndarray, q_imu_to_cluster: np.ndarray, params: ViconParams
 ) -> np.ndarray:
     """True marker positions (N, 4, 3) m."""
-    q_cluster = quat.mul(q_world_sensor, quat.conj(q_imu_to_cluster))
+    q_cluster = quat.multiply(q_world_sensor, quat.conjugate(q_imu_to_cluster))
     offsets = np.asarray(params.marker_offsets_m, dtype=float)
     out = np.empty((len(position_m), len(offsets), 3))
     for k, off in enumerate(offsets):

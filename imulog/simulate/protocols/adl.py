@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imulog.simulate import quat
+from imulog.process import quaternion as quat
 from imulog.simulate.motion import MotionPlan
 from imulog.simulate.protocols.common import ProtocolResult, opening
 
@@ -92,7 +92,7 @@ def build(params: Params, subject_rng: np.random.Generator, rng: np.random.Gener
     )
 
     def q_jit(deg: float = 4.0) -> np.ndarray:
-        return quat.mul(q_rest, quat.from_euler_zyx(*rng.normal(0.0, deg, 3)))
+        return quat.multiply(q_rest, quat.from_euler_zyx(*rng.normal(0.0, deg, 3)))
 
     def phase(
         label: str, rep: int, seconds: float, p1: np.ndarray, q1: np.ndarray, lift: np.ndarray | None = None
@@ -130,8 +130,8 @@ def build(params: Params, subject_rng: np.random.Generator, rng: np.random.Gener
             mid_chord = 0.5 * (rest + top)
             arc_mid = elbow + L * np.array([np.cos(theta / 2), 0.0, np.sin(theta / 2)])
             bulge = arc_mid - mid_chord  # the bump approximates the circular arc of the wrist
-            q_top = quat.mul(
-                q_jit(), quat.from_rotvec(np.array([0.0, 0.0, -theta]))
+            q_top = quat.multiply(
+                q_jit(), quat.from_rotation_vector(np.array([0.0, 0.0, -theta]))
             )  # flexion about the sensor z (= elbow axis, world +y)
             phase("lift", rep, dur(), top, q_top, lift=bulge)
             pause()

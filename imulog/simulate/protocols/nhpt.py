@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imulog.simulate import quat
+from imulog.process import quaternion as quat
 from imulog.simulate.motion import MotionPlan
 from imulog.simulate.protocols.common import ProtocolResult, opening
 
@@ -76,7 +76,7 @@ def build(params: Params, subject_rng: np.random.Generator, rng: np.random.Gener
 
     def pose(jitter: float = 1.0) -> np.ndarray:
         d = rng.normal(0.0, params.wrist_angle_deg * jitter, 3) * [0.5, 1.0, 1.0]
-        return quat.mul(q_rest, quat.from_euler_zyx(*d))
+        return quat.multiply(q_rest, quat.from_euler_zyx(*d))
 
     def go(label: str, target: np.ndarray, index: int, arc: bool) -> None:
         t0 = plan.t

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imulog.simulate import quat
+from imulog.process import quaternion as quat
 from imulog.simulate.motion import MotionPlan
 from imulog.simulate.protocols.common import ProtocolResult, opening
 
@@ -99,7 +99,9 @@ def _phase_move(
         return
     frac = rng.uniform(0.80, 0.92)
     p_mid = plan.p + frac * (p1 - plan.p)
-    q_mid = quat.mul(plan.q, quat.from_rotvec(frac * quat.to_rotvec(quat.mul(quat.conj(plan.q), q1))))
+    q_mid = quat.multiply(
+        plan.q, quat.from_rotation_vector(frac * quat.to_rotation_vector(quat.multiply(quat.conjugate(plan.q), q1)))
+    )
     plan.move(seconds * frac, p_mid, q_mid)
     plan.wait(rng.uniform(0.25, 0.6))
     plan.move(max(0.35, seconds * 0.45), p1, q1)
@@ -167,5 +169,9 @@ def build(params: Params, subject_rng: np.random.Generator, rng: np.random.Gener
     anthropometrics = {k: round(v, 6) for k, v in anth.items() if k.endswith("_m")}
     anthropometrics["side"] = params.side
     return ProtocolResult(
-        plan=plan, task="r2g", anthropometrics=anthropometrics, trial_meta={"side": params.side, "repetitions": params.repetitions}, end_s=plan.t
+        plan=plan,
+        task="r2g",
+        anthropometrics=anthropometrics,
+        trial_meta={"side": params.side, "repetitions": params.repetitions},
+        end_s=plan.t,
     )

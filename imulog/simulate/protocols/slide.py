@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imulog.simulate import quat
+from imulog.process import quaternion as quat
 from imulog.simulate.motion import MotionPlan
 from imulog.simulate.protocols.common import ProtocolResult, opening
 
