@@ -1,8 +1,7 @@
 """Which clock a channel is on, and mapping it to the reference (Vicon) clock for the one viewer timeline.
 
-The formula (docs/conventions): ``t_ref_ns = t_dev_ns + offset_ns + drift_ppm*1e-6*(t_dev_ns - t0_ns)``. It is
-owned by :func:`imulog.process.alignment.device_to_reference`; when that module is not importable (it is
-written concurrently) :func:`_device_to_reference_local` implements the same formula.
+The formula ``t_ref_ns = t_dev_ns + offset_ns + drift_ppm*1e-6*(t_dev_ns - t0_ns)`` is
+:func:`imulog.process.alignment.device_to_reference`.
 
 Clock of a channel, decided in this order (matching what the steps in :mod:`imulog.steps` write):
 
@@ -27,38 +26,17 @@ from typing import Any
 
 import numpy as np
 
+from imulog.process.alignment import device_to_reference as _device_to_reference
+
 DEVICE_CLOCK_DERIVED = ("orientation", "acc_global", "static", "orientation_static", "movements", "phases")
 REFERENCE_CLOCK_DERIVED = ("reference", "vicon")
 #: derived kind -> metadata record whose ``clock`` (and ``imu``) say which clock the step wrote
 STEP_CLOCK_RECORDS = {"phases": "imulog.timing", "movements": "imulog.timing", "trajectory": "imulog.trajectory"}
 
 
-def _device_to_reference_local(t_dev_ns: np.ndarray, alignment: Mapping[str, Any]) -> np.ndarray:
-    """Device time (int64 ns) -> reference time (int64 ns) with offset and linear drift (ppm)."""
-    t = np.asarray(t_dev_ns, dtype=np.int64)
-    offset = int(alignment.get("offset_ns", 0) or 0)
-    drift_ppm = float(alignment.get("drift_ppm", 0.0) or 0.0)
-    t0 = int(alignment.get("t0_ns", 0) or 0)
-    out = t + np.int64(offset)
-    if drift_ppm != 0.0:
-        out = out + np.rint((t - np.int64(t0)).astype(np.float64) * (drift_ppm * 1e-6)).astype(np.int64)
-    return out
-
-
-try:  # the owner's implementation when it exists
-    from imulog.process.alignment import device_to_reference as _shared_device_to_reference  # type: ignore
-
-    USING_SHARED_ALIGNMENT = True
-except Exception:  # pragma: no cover - depends on what has landed in the tree
-    _shared_device_to_reference = None
-    USING_SHARED_ALIGNMENT = False
-
-
 def device_to_reference(t_dev_ns: np.ndarray, alignment: Mapping[str, Any]) -> np.ndarray:
     """Map IMU device time stamps (int64 ns) to the reference clock (int64 ns)."""
-    if _shared_device_to_reference is not None:
-        return np.asarray(_shared_device_to_reference(np.asarray(t_dev_ns, dtype=np.int64), dict(alignment)), np.int64)
-    return _device_to_reference_local(t_dev_ns, alignment)
+    return np.asarray(_device_to_reference(np.asarray(t_dev_ns, dtype=np.int64), dict(alignment)), np.int64)
 
 
 def imu_name(topic_or_name: str) -> str:

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from imulog.model import ImuStream, Intervals, MarkerStream, PoseStream, Recording, SignalStream
-from imulog.view.clock import _device_to_reference_local
+from imulog.process.alignment import device_to_reference
 
 G = 9.81  # m/s^2
 PHASES = ("reach", "lift", "return_bottle", "return_hand")
@@ -101,7 +101,7 @@ def _ref_to_device(t_ref_ns: np.ndarray, alignment: dict) -> np.ndarray:
     """Inverse of the alignment formula (exact to 1 ns for small drift)."""
     t = t_ref_ns - alignment["offset_ns"]
     for _ in range(2):
-        t = t_ref_ns - (_device_to_reference_local(t, alignment) - t)
+        t = t_ref_ns - (device_to_reference(t, alignment) - t)
     return t
 
 
@@ -124,7 +124,7 @@ def sample_recording(params: SampleTrialParams | None = None) -> Recording:
     t_dev0 = _ref_to_device(np.array([-500_000_000], np.int64), true_alignment)[0]
     n_imu = int((p.duration_s + 1.0) * p.imu_rate_hz)
     t_dev = t_dev0 + np.rint(np.arange(n_imu) * (1e9 / p.imu_rate_hz)).astype(np.int64)
-    t_imu_ref = _device_to_reference_local(t_dev, true_alignment)
+    t_imu_ref = device_to_reference(t_dev, true_alignment)
     phase, _, _, acc_w, angle, rate = _profile(t_imu_ref / 1e9, p.duration_s)
     q_imu = _quat(angle)
     gyr = rate[:, None] * AXIS + rng.normal(0.0, p.gyr_noise_rad_s, (n_imu, 3))
