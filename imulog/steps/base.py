@@ -10,6 +10,7 @@ algorithm, params and input content hashes and its output channels are still the
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import os
 from collections.abc import Callable, Sequence
@@ -41,6 +42,14 @@ class StepOutcome:
     topics: list[str]
     input_hashes: dict[str, str]
     reason: str = ""
+
+
+METADATA_INPUT = "metadata:"
+
+
+def metadata_hash(record: Any) -> str:
+    """Content hash of a metadata record (canonical JSON; a missing record hashes as ``null``)."""
+    return hashlib.sha256(to_json(record).encode()).hexdigest()
 
 
 def params_json(params: Any) -> str:
@@ -76,16 +85,20 @@ def run_step(
     inputs: Sequence[str],
     compute: Callable[[TrialReader], StepResult],
     force: bool = False,
+    metadata_inputs: Sequence[str] = (),
 ) -> StepOutcome:
     """Run ``compute`` on the trial and append its result, unless the same run is already recorded.
 
-    ``inputs`` are the topics the step reads (their content hashes go into the provenance); ``params`` a
-    frozen dataclass or dict. ``force`` recomputes and rewrites even when up to date.
+    ``inputs`` are the topics the step reads (their content hashes go into the provenance);
+    ``metadata_inputs`` the metadata records it reads (e.g. ``imulog.alignment``: recorded as
+    ``metadata:imulog.alignment``, so that re-aligning makes the step out of date); ``params`` a frozen
+    dataclass or dict. ``force`` recomputes and rewrites even when up to date.
     """
     path = Path(path)
     pjson = params_json(params)
     with TrialReader(path) as trial:
         hashes = {topic: trial.channel_hash(topic) for topic in inputs}
+        hashes |= {METADATA_INPUT + name: metadata_hash(trial.metadata.get(name)) for name in metadata_inputs}
         if not force:
             done = _up_to_date(trial, step, algorithm, pjson, hashes)
             if done is not None:

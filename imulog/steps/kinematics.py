@@ -309,4 +309,13 @@ def run_kinematics(path, *, options: KinematicsOptions = KinematicsOptions(), fo
         "orientation": dataclasses.asdict(options.orientation),
         **record,
     }
-    return run_step(path, step=STEP, algorithm=ALGORITHM, params=params, inputs=inputs, compute=compute, force=force)
+    return run_step(
+        path,
+        step=STEP,
+        algorithm=ALGORITHM,
+        params=params,
+        inputs=inputs,
+        metadata_inputs=("imulog.alignment", "imulog.anthropometrics", META),
+        compute=compute,
+        force=force,
+    )

@@ -278,6 +278,7 @@ def run_metrics(path, *, imu: str | None = None, params: MetricsParams | None = 
         algorithm=ALGORITHM,
         params={"imu": name, **p.to_dict()},
         inputs=inputs,
+        metadata_inputs=("imulog.alignment",),
         compute=compute,
         force=force,
     )

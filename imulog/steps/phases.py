@@ -137,6 +137,7 @@ def run_phases(path, *, imu: str | None = None, params: PhaseParams | None = Non
         algorithm=algorithm_name(params),
         params={"imu": name, **params.to_dict()},
         inputs=[topic],
+        metadata_inputs=("imulog.trial", "imulog.alignment"),
         compute=compute,
         force=force,
     )

@@ -250,6 +250,7 @@ def run_trajectory(
         algorithm="imulog.trajectory",
         params={"imu": name, **params_dict(methods, params, reference_params)},
         inputs=inputs,
+        metadata_inputs=("imulog.alignment", "imulog.anthropometrics", "imulog.timing"),
         compute=compute,
         force=force,
     )
