@@ -309,13 +309,14 @@ def test_archive_and_steps_pipeline(tmp_path):
     archive = pytest.importorskip("imulog.archive")
     from imulog.steps.align import run_align
     from imulog.steps.evaluate import run_evaluate
+    from imulog.steps.metrics import run_metrics
     from imulog.steps.orientation import run_orientation
     from imulog.steps.phases import run_phases
     from imulog.steps.trajectory import run_trajectory
 
     sim = simulate("r2g", subject=0, trial=0, seed=0, repetitions=5)
     trial = archive.write_trial(tmp_path / "sim.mcap", sim.recording)
-    for step in (run_orientation, run_align, run_phases, run_trajectory, run_evaluate):
+    for step in (run_orientation, run_align, run_phases, run_trajectory, run_evaluate, run_metrics):
         step(trial)
     out = tmp_path / "sim.rrd"
     result = CliRunner().invoke(cli, ["view", str(trial), "--save", str(out)])
@@ -339,6 +340,12 @@ def test_archive_and_steps_pipeline(tmp_path):
     text = next(c for c in RrdReader(out).stream().to_chunks() if c.entity_path == L.evaluation_entity())
     text = text.to_record_batch().column("TextDocument:text").to_pylist()[0][0]
     assert all(f"| {m} |" in text for m in methods), text
+    # the clinical metrics panel shows the imulog.metrics record
+    text = next(c for c in RrdReader(out).stream().to_chunks() if c.entity_path == L.metrics_entity())
+    text = text.to_record_batch().column("TextDocument:text").to_pylist()[0][0]
+    with archive.TrialReader(trial) as reader:
+        usage = reader.metadata["imulog.metrics"]["arm_usage.overall_percent"]
+    assert "## arm usage" in text and f"| overall_percent | {usage:g}" in text, text
     # every stored phase is a state on the timeline (what the segmentation found, faithfully)
     phase_t, states = read_column(out, "/derived/phases/wrist", "StateChange:state")
     started = [s[0] for s in states if s[0]]

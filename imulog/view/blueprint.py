@@ -111,6 +111,10 @@ def build_blueprint(trials: LoggedTrial | Sequence[LoggedTrial]) -> rrb.Blueprin
     error_views: list = []
     if any(t.has_evaluation for t in trials):
         error_views.append(rrb.TextDocumentView(origin="/", contents=_paths(trials, "evaluation"), name="Errors"))
+    if _paths(trials, "clinical_metrics"):
+        error_views.append(
+            rrb.TextDocumentView(origin="/", contents=_paths(trials, "clinical_metrics"), name="Clinical metrics")
+        )
     error_series = [
         _series("IMU trajectory error vs Vicon (cm)", _paths(trials, "error"), axis),
         _series("Metrics", _paths(trials, "metric"), axis),

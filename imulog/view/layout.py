@@ -159,6 +159,11 @@ def evaluation_entity(prefix: str = "") -> str:
     return join(prefix, "/evaluation/report")
 
 
+def metrics_entity(prefix: str = "") -> str:
+    """Entity of the clinical metrics report text document (the ``imulog.metrics`` record)."""
+    return join(prefix, "/metrics/report")
+
+
 def info_entity(prefix: str = "") -> str:
     """Entity of the trial description text document."""
     return join(prefix, "/trial/info")

@@ -95,3 +95,23 @@ def evaluation_markdown(record: Mapping[str, Any]) -> str:
             parts.append(f"| {method} | " + " | ".join(_mean_std(row.get(n, "")) for n in names) + " |")
         parts.append("")
     return "\n".join(parts)
+
+
+def metrics_markdown(record: Mapping[str, Any]) -> str:
+    """The ``imulog.metrics`` record (flat dotted keys) as Markdown, one table per group.
+
+    Groups are the first part of each key (``arm_usage``, ``activity``, ``distance``, ``timings``,
+    ``smoothness``, ``nhpt``); long lists (e.g. the distance histogram) are summarised by their length.
+    """
+    groups: dict[str, dict[str, Any]] = {}
+    for key, value in record.items():
+        group, _, rest = key.partition(".")
+        if not rest:
+            group, rest = "recording", key
+        if isinstance(value, list) and len(value) > 12:
+            value = f"{len(value)} values"
+        groups.setdefault(group, {})[rest] = value
+    parts = ["# Clinical metrics", "", "Computed by `imulog process metrics` (see docs/metrics.md)."]
+    for group, values in groups.items():
+        parts += ["", f"## {group.replace('_', ' ')}", markdown_table(values)]
+    return "\n".join(parts)

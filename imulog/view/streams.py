@@ -19,7 +19,7 @@ from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseS
 from imulog.view import layout as L
 from imulog.view.anchor import anchor_repetitions, position_error_cm
 from imulog.view.clock import ClockMap, device_imu_of
-from imulog.view.report import evaluation_markdown, info_markdown, markdown_table
+from imulog.view.report import evaluation_markdown, info_markdown, markdown_table, metrics_markdown
 
 
 @dataclass
@@ -398,6 +398,10 @@ def log_streams(
         )
         trial.entities.append(Entity(L.evaluation_entity(prefix), "evaluation", "imulog.evaluation", 0))
         trial.has_evaluation = True
+    if "imulog.metrics" in metadata:
+        report = metrics_markdown(metadata["imulog.metrics"])
+        recording.log(L.metrics_entity(prefix), rr.TextDocument(report, media_type=rr.MediaType.MARKDOWN), static=True)
+        trial.entities.append(Entity(L.metrics_entity(prefix), "clinical_metrics", "imulog.metrics", 0))
     recording.log(
         L.info_entity(prefix),
         rr.TextDocument(info_markdown(label, metadata, clocks), media_type=rr.MediaType.MARKDOWN),
