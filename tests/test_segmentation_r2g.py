@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from imulog.process.segmentation.pipeline import PhaseParams, segment_phases
+from imulog.process.segmentation.repetitions import RepetitionParams, burst_mask
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from segmentation_accuracy import score  # noqa: E402
@@ -97,3 +98,48 @@ def test_dynamos_on_independent_minimum_jerk_trials(seed):
             errors += [abs(s[i] - a), abs(e[i] - b)]
     assert correct >= 97
     assert np.mean(errors) < 0.08
+
+
+def _phases_against_truth(sim, n_rep: int):
+    """Detected phases of a simulated R2G trial, checked against ``sim.truth`` (phases and the wave event)."""
+    imu = sim.recording.imus[0]
+    rate = (len(imu.t_ns) - 1) / ((imu.t_ns[-1] - imu.t_ns[0]) * 1e-9)
+    ph = segment_phases(imu.gyr, rate, PhaseParams(repetitions=RepetitionParams(n_repetitions=n_rep))).phases
+    truth, events = sim.truth.phases, sim.truth.events
+    t_ref = np.asarray(sim.truth.imu_t_ref_ns, dtype=np.int64)
+    wave_end = events.end_ns[list(events.labels).index("wave")]
+    assert len(ph) == 4 * n_rep == len(truth)
+    assert list(ph.labels) == list(truth.labels)
+    assert ph.repetition.tolist() == np.asarray(truth.task_index).tolist()
+    assert t_ref[ph.start[0]] > wave_end  # repetition 1 is not inside the calibration wave
+    det_s, det_e = t_ref[ph.start], t_ref[ph.end - 1]
+    inter = np.minimum(det_e, truth.end_ns) - np.maximum(det_s, truth.start_ns)
+    union = np.maximum(det_e, truth.end_ns) - np.minimum(det_s, truth.start_ns)
+    assert np.all(inter / union > 0.5)
+
+
+@pytest.mark.parametrize(
+    ("n_rep", "seed", "subject", "trial", "options"),
+    [
+        (5, 0, 2, 2, {}),  # the batch engineer's report (simulate_archive demo trial S02_T2)
+        (5, 1, 1, 2, {}),  # wave raised the median height: repetition 1's lift/return were "minor"
+        (2, 0, 3, 2, {}),  # more wave movements than task movements
+        (3, 1, 1, 1, {"extra_submovement_probability": 0.2, "residual_velocity_mps": 0.01}),
+    ],
+)
+def test_calibration_wave_is_not_a_repetition(n_rep, seed, subject, trial, options):
+    sim = simulate("r2g", subject=subject, trial=trial, seed=seed, repetitions=n_rep, **options)
+    _phases_against_truth(sim, n_rep)
+
+
+def test_burst_mask_marks_runs_of_contiguous_movements_only():
+    rate = 100.0
+    # a wave: 6 movements 0.6 s long with 0.01 s gaps; then one repetition: 4 movements 1 s long, 3 s pauses,
+    # the second followed after 0.05 s by a corrective sub-movement (a run of 2 is not a burst)
+    wave = [(1000 + 61 * k, 1060 + 61 * k) for k in range(6)]
+    task = [(2000, 2100), (2400, 2500), (2505, 2540), (2840, 2940), (3240, 3340)]
+    start, end = np.array([*wave, *task]).T
+    mask = burst_mask(start, end, rate, gap_s=0.2, min_movements=5)
+    assert mask.tolist() == [True] * 6 + [False] * 5
+    assert not burst_mask(start, end, rate, min_movements=7).any()
+    assert not burst_mask(start, end, rate, min_movements=0).any()

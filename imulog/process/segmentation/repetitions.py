@@ -44,6 +44,10 @@ class RepetitionParams:
     extra_groups: besides ``n_repetitions`` groups, also try partitions into up to this many more groups
         (non-task activity such as a calibration wave takes a group of its own) and keep the partition whose
         ``n_repetitions`` cheapest groups have the lowest summed correction cost (imulog addition).
+    burst_gap_s: movements separated by gaps shorter than this (s) are contiguous, see :func:`burst_mask`.
+    burst_min_movements: a run of at least this many contiguous movements is a burst of non-task activity
+        (the calibration wave of fast alternating rotations) and is left out of the repetitions
+        (imulog addition; 0 = off).
     max_candidates: at most this many movements (the highest) enter the exhaustive search per repetition.
     labels: phase labels in order.
     """
@@ -57,6 +61,8 @@ class RepetitionParams:
     continuation_gap_s: float = 1.0
     split_merged: bool = True
     extra_groups: int = 2
+    burst_gap_s: float = 0.2
+    burst_min_movements: int = 5
     max_candidates: int = 14
     labels: tuple[str, ...] = R2G_PHASES
 
@@ -94,6 +100,34 @@ def split_repetitions(
     starts = np.concatenate([[active[0]], active[cut + 1]])
     ends = np.concatenate([active[cut] + 1, [active[-1] + 1]])
     return starts.astype(np.int64), ends.astype(np.int64)
+
+
+def burst_mask(
+    start: np.ndarray, end: np.ndarray, rate_hz: float, gap_s: float = 0.2, min_movements: int = 5
+) -> np.ndarray:
+    """True for movements in a burst: a run of at least ``min_movements`` movements whose gaps are all
+    shorter than ``gap_s`` (s).
+
+    The R2G protocol (thesis 2.2.2) opens with a "wave" of fast back-and-forth rotations about each sensor
+    axis; DynAMoS cuts it into many movements with (almost) no rest between them (simulator: 9-16 movements,
+    gaps <= 0.02 s). A drinking repetition is four movements separated by static pauses: at most a fused
+    phase split at a minimum of the norm or a phase and its corrective sub-movement follow each other that
+    closely (runs of 2), so a run of ``n_phases + 1`` cannot be one repetition's phases.
+    """
+    start, end = np.asarray(start), np.asarray(end)
+    mask = np.zeros(len(start), dtype=bool)
+    if min_movements < 1 or len(start) < min_movements:
+        return mask
+    close = (start[1:] - end[:-1]) < gap_s * rate_hz
+    i = 0
+    while i < len(start):
+        j = i
+        while j < len(close) and close[j]:
+            j += 1
+        if j - i + 1 >= min_movements:
+            mask[i : j + 1] = True
+        i = j + 1
+    return mask
 
 
 def _optimal_cuts(gaps: np.ndarray, n_groups: int, min_size: int, max_size_factor: int = 4) -> list[int] | None:
@@ -354,31 +388,49 @@ def segment_repetitions(
         return Phases(empty, empty, empty, empty, [], 0)
     if params.split == "activity":
         rep_s, rep_e = split_repetitions(norm, n_rep, params.activity_fraction)
-        partitions = [assign_to_repetitions(start, end, rep_s, rep_e)]
+        subsets = [(np.arange(len(start)), [assign_to_repetitions(start, end, rep_s, rep_e)])]
     else:
         heights = features(start, end, norm, rate_hz)[1]
-        partitions = [
-            group_movements(
-                start, end, heights, n_rep + j, params.n_phases, params.major_fraction, params.extra_cut_fraction
+        task = np.flatnonzero(~burst_mask(start, end, rate_hz, params.burst_gap_s, params.burst_min_movements))
+        subsets = [task] if len(task) == len(start) else [task, np.arange(len(start))]
+        subsets = [
+            (
+                idx,
+                [
+                    group_movements(
+                        start[idx],
+                        end[idx],
+                        heights[idx],
+                        n_rep + j,
+                        params.n_phases,
+                        params.major_fraction,
+                        params.extra_cut_fraction,
+                    )
+                    for j in range(params.extra_groups + 1)
+                ],
             )
-            for j in range(params.extra_groups + 1)
+            for idx in subsets
+            if len(idx)
         ]
     ref, best = None, None
-    for rep in partitions:
-        groups = [np.flatnonzero(rep == r) for r in range(int(rep.max()) + 1)]
-        groups = [g for g in groups if len(g)]
-        if ref is None:  # the subject's correct repetitions, from the first partition that has any
-            ref = _reference(groups, start, end, norm, rate_hz, params.n_phases)
-        if ref is not None and params.split_merged:
-            groups = split_merged_groups(groups, start, end, norm, rate_hz, ref, params, n_rep)
-        selected = [(*_select(start[g], end[g], norm, rate_hz, ref, params), len(g)) for g in groups]
-        if len(selected) > n_rep:  # drop the groups least like a repetition, keep time order
-            order = np.argsort([c for _, _, c, _ in selected], kind="stable")
-            keep = np.sort(order[:n_rep])
-            selected = [selected[k] for k in keep]
-        total = _kept_cost([c for _, _, c, _ in selected], n_rep)
-        if best is None or total < best[0]:
-            best = (total, selected)
+    for idx, partitions in subsets:  # without bursts first; with them only when a repetition would go missing
+        if best is not None and best[0][0] == 0:
+            break
+        for rep in partitions:
+            groups = [idx[rep == r] for r in range(int(rep.max()) + 1)]
+            groups = [g for g in groups if len(g)]
+            if ref is None:  # the subject's correct repetitions, from the first partition that has any
+                ref = _reference(groups, start, end, norm, rate_hz, params.n_phases)
+            if ref is not None and params.split_merged:
+                groups = split_merged_groups(groups, start, end, norm, rate_hz, ref, params, n_rep)
+            selected = [(*_select(start[g], end[g], norm, rate_hz, ref, params), len(g)) for g in groups]
+            if len(selected) > n_rep:  # drop the groups least like a repetition, keep time order
+                order = np.argsort([c for _, _, c, _ in selected], kind="stable")
+                keep = np.sort(order[:n_rep])
+                selected = [selected[k] for k in keep]
+            total = _kept_cost([c for _, _, c, _ in selected], n_rep)
+            if best is None or total < best[0]:
+                best = (total, selected)
     selected = best[1]
     out_s, out_e, out_r, out_p = [], [], [], []
     corrected = 0
