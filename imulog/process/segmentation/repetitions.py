@@ -283,8 +283,13 @@ def _split_to(start, end, norm, rate_hz, ref, n_phases: int):
     return np.asarray(start, dtype=np.int64), np.asarray(end, dtype=np.int64)
 
 
-def _reference(groups, start, end, norm, rate_hz, n_phases):
+def _reference(groups, start, end, norm, rate_hz, n_phases, major=None):
+    """Mean features (D*, H*, S*) of the groups with exactly ``n_phases`` movements; when there are none, of
+    the groups with exactly ``n_phases`` major movements (``major``: boolean mask), using those movements
+    (every repetition may carry a corrective sub-movement or a fidget); None when neither exists."""
     good = [g for g in groups if len(g) == n_phases]
+    if not good and major is not None:
+        good = [g[major[g]] for g in groups if int(major[g].sum()) == n_phases]
     if not good:
         return None
     feats = [features(start[g], end[g], norm, rate_hz) for g in good]
@@ -386,11 +391,11 @@ def segment_repetitions(
     empty = np.zeros(0, dtype=np.int64)
     if len(start) == 0:
         return Phases(empty, empty, empty, empty, [], 0)
+    heights = features(start, end, norm, rate_hz)[1]
     if params.split == "activity":
         rep_s, rep_e = split_repetitions(norm, n_rep, params.activity_fraction)
         subsets = [(np.arange(len(start)), [assign_to_repetitions(start, end, rep_s, rep_e)])]
     else:
-        heights = features(start, end, norm, rate_hz)[1]
         task = np.flatnonzero(~burst_mask(start, end, rate_hz, params.burst_gap_s, params.burst_min_movements))
         subsets = [task] if len(task) == len(start) else [task, np.arange(len(start))]
         subsets = [
@@ -420,7 +425,9 @@ def segment_repetitions(
             groups = [idx[rep == r] for r in range(int(rep.max()) + 1)]
             groups = [g for g in groups if len(g)]
             if ref is None:  # the subject's correct repetitions, from the first partition that has any
-                ref = _reference(groups, start, end, norm, rate_hz, params.n_phases)
+                major = np.zeros(len(start), dtype=bool)
+                major[idx] = heights[idx] >= params.major_fraction * np.median(heights[idx])
+                ref = _reference(groups, start, end, norm, rate_hz, params.n_phases, major)
             if ref is not None and params.split_merged:
                 groups = split_merged_groups(groups, start, end, norm, rate_hz, ref, params, n_rep)
             selected = [(*_select(start[g], end[g], norm, rate_hz, ref, params), len(g)) for g in groups]

@@ -81,15 +81,7 @@ def build(params: Params, subject_rng: np.random.Generator, rng: np.random.Gener
         q_rest = quat.from_euler_zyx(0.0, 5.0, 0.0)
         rest = np.array([0.10, 0.0, z_table])
     plan = MotionPlan(rest, q_rest)
-    opening(
-        plan,
-        params.opening_static_s,
-        params.wave_cycles,
-        params.wave_amplitude_deg,
-        params.wave_half_swing_s,
-        params.post_wave_static_s,
-        rng,
-    )
+    opening(plan, params, rng)
 
     def q_jit(deg: float = 4.0) -> np.ndarray:
         return quat.multiply(q_rest, quat.from_euler_zyx(*rng.normal(0.0, deg, 3)))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -23,16 +24,15 @@ class ProtocolResult:
 
 def opening(
     plan: MotionPlan,
-    static_s: float,
-    wave_cycles: int,
-    wave_amplitude_deg: float,
-    wave_half_swing_s: float,
-    post_static_s: float,
+    params: Any,
     rng: np.random.Generator,
     axes: tuple[np.ndarray, ...] | None = None,
 ) -> None:
     """Opening static period, then the 'wave' and a second static period (thesis section 2.2.2:
     1 min static, waving about the sensitive axis to align Vicon and IMU, 1 min static).
+
+    ``params`` is the protocol's parameter object, with ``opening_static_s``, ``wave_cycles``,
+    ``wave_amplitude_deg``, ``wave_half_swing_s`` (s) and ``post_wave_static_s``.
 
     The wave is ``wave_cycles`` back-and-forth rotations about each sensor axis in turn
     (x: pronation/supination, y: flexion/extension, z: radial/ulnar deviation), so the
@@ -40,10 +40,12 @@ def opening(
     vectors) restricts it, e.g. to the slide's sensitive axis. Intervals ``opening_static``,
     ``wave`` and ``post_wave_static`` are marked.
     """
+    static_s, post_static_s = params.opening_static_s, params.post_wave_static_s
+    wave_cycles, wave_half_swing_s = params.wave_cycles, params.wave_half_swing_s
     plan.wait(static_s)
     plan.mark("opening_static", plan.t - static_s, plan.t)
     start = plan.t
-    amp = np.radians(wave_amplitude_deg)
+    amp = np.radians(params.wave_amplitude_deg)
     for unit in axes if axes is not None else tuple(np.eye(3)):
         unit = np.asarray(unit, dtype=float)
         a = amp * rng.uniform(0.85, 1.15)

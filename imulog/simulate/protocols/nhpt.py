@@ -63,15 +63,7 @@ def build(params: Params, subject_rng: np.random.Generator, rng: np.random.Gener
     ]
     q_rest = quat.from_euler_zyx(10.0, 10.0, 0.0)
     plan = MotionPlan(rest, q_rest)
-    opening(
-        plan,
-        params.opening_static_s,
-        params.wave_cycles,
-        params.wave_amplitude_deg,
-        params.wave_half_swing_s,
-        params.post_wave_static_s,
-        rng,
-    )
+    opening(plan, params, rng)
     lift = np.array([0.0, 0.0, params.lift_m])
 
     def pose(jitter: float = 1.0) -> np.ndarray:

@@ -126,15 +126,7 @@ def build(params: Params, subject_rng: np.random.Generator, rng: np.random.Gener
     start = np.array([params.hand_start_from_edge_m, 0.0, params.table_height_m + params.wrist_rest_height_m])
     yaw0 = anth["yaw_offset_deg"]
     plan = MotionPlan(start, _pose(params.pose_rest_deg, yaw0, 0.0, rng))
-    opening(
-        plan,
-        params.opening_static_s,
-        params.wave_cycles,
-        params.wave_amplitude_deg,
-        params.wave_half_swing_s,
-        params.post_wave_static_s,
-        rng,
-    )
+    opening(plan, params, rng)
     speed = anth["speed_factor"]
     jit = params.position_jitter_m
     bottle = start + np.array([anth["h1_m"], anth["h2_m"], params.grasp_dz_m])

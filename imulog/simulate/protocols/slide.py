@@ -113,16 +113,7 @@ def build(params: Params, subject_rng: np.random.Generator, rng: np.random.Gener
     q = quat.from_euler_zyx(yaw + mis[0], mis[1], mis[2])
     home = np.array([0.60, 0.10, params.table_height_m + 0.03])  # cart against the end stopper
     plan = MotionPlan(home, q)
-    opening(
-        plan,
-        params.opening_static_s,
-        params.wave_cycles,
-        params.wave_amplitude_deg,
-        params.wave_half_swing_s,
-        params.post_wave_static_s,
-        rng,
-        axes=(sensitive,),
-    )
+    opening(plan, params, rng, axes=(sensitive,))
     g = 9.81
     m_w, m_c = params.counterweight_kg, params.cart_mass_kg
     accel = (m_w * g - params.rolling_friction * m_c * g) / (m_w + m_c)
