@@ -118,16 +118,22 @@ def _phases_against_truth(sim, n_rep: int):
     assert np.all(inter / union > 0.5)
 
 
+SUB = {"extra_submovement_probability": 0.2, "residual_velocity_mps": 0.01}
+
+
 @pytest.mark.parametrize(
     ("n_rep", "seed", "subject", "trial", "options"),
     [
         (5, 0, 2, 2, {}),  # the batch engineer's report (simulate_archive demo trial S02_T2)
         (5, 1, 1, 2, {}),  # wave raised the median height: repetition 1's lift/return were "minor"
         (2, 0, 3, 2, {}),  # more wave movements than task movements
-        (3, 1, 1, 1, {"extra_submovement_probability": 0.2, "residual_velocity_mps": 0.01}),
+        (25, 1, 5, 1, {}),  # also with the full protocol: repetition 1 was a cheap group inside the wave
+        (3, 1, 1, 1, SUB),  # no repetition with exactly 4 movements: reference from the major ones
+        (3, 0, 1, 2, SUB),  # a small corrective sub-movement was kept as a phase, a true phase dropped
+        (3, 7, 3, 1, SUB),  # slow subject: a 0.7 rad/s lift is "minor", the majors cannot fill 3 groups
     ],
 )
-def test_calibration_wave_is_not_a_repetition(n_rep, seed, subject, trial, options):
+def test_few_repetitions_match_the_truth_and_skip_the_wave(n_rep, seed, subject, trial, options):
     sim = simulate("r2g", subject=subject, trial=trial, seed=seed, repetitions=n_rep, **options)
     _phases_against_truth(sim, n_rep)
 

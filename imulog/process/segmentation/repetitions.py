@@ -11,6 +11,9 @@
   movements (two phases fused) is split at the local minimum of the norm that best matches the reference
   (an imulog addition, so that a trial always yields ``n_repetitions x n_phases`` phases).
 
+* :func:`burst_mask` (imulog addition): the calibration wave before the first task (a burst of fast
+  alternating rotations, many movements with almost no rest between them) is left out of the repetitions.
+
 Units: durations and gaps in seconds, heights in rad/s; intervals are half-open sample ranges.
 """
 
@@ -48,6 +51,9 @@ class RepetitionParams:
     burst_min_movements: a run of at least this many contiguous movements is a burst of non-task activity
         (the calibration wave of fast alternating rotations) and is left out of the repetitions
         (imulog addition; 0 = off).
+    min_height_fraction: only movements at least this fraction of the lowest reference height ``min(H*)``
+        enter the search (when at least ``n_phases`` do; the others are corrective sub-movements or fidgets
+        and may still be absorbed, see ``continuation_gap_s``) (imulog addition; 0 = all, as in the thesis).
     max_candidates: at most this many movements (the highest) enter the exhaustive search per repetition.
     labels: phase labels in order.
     """
@@ -63,6 +69,7 @@ class RepetitionParams:
     extra_groups: int = 2
     burst_gap_s: float = 0.2
     burst_min_movements: int = 5
+    min_height_fraction: float = 0.5
     max_candidates: int = 14
     labels: tuple[str, ...] = R2G_PHASES
 
@@ -175,22 +182,28 @@ def group_movements(
     """Candidate repetition of each movement (0-based, in time order) from the longest rests.
 
     A movement is major when its height is at least ``major_fraction`` x the median height (so small
-    adjustments inside a rest do not cut the rest in two). The ``n_repetitions - 1`` borders are the gaps
-    between consecutive major movements that maximise the summed rest with every repetition holding
-    ``n_phases`` to ``4 n_phases`` major movements (dynamic programming); further gaps at least
-    ``extra_cut_fraction`` x the median border gap are cut as well (longest first, while every group keeps
-    ``n_phases`` major movements), so that activity which is not a task (e.g. a calibration
-    wave before the first repetition) forms groups of its own; :func:`segment_repetitions` then keeps the
+    adjustments inside a rest do not cut the rest in two); when the major movements cannot fill
+    ``n_repetitions`` groups of ``n_phases`` (a slow subject's low phase counts as minor), every movement
+    counts. The ``n_repetitions - 1`` borders are the gaps between consecutive major movements that
+    maximise the summed rest with every repetition holding ``n_phases`` to ``4 n_phases`` major movements
+    (dynamic programming); further gaps at least ``extra_cut_fraction`` x the median border gap are cut as
+    well (longest first, while every group keeps ``n_phases`` major movements), so that activity which is not
+    a task (e.g. a calibration wave that :func:`burst_mask` did not catch) forms groups of its own; :func:`segment_repetitions` then keeps the
     ``n_repetitions`` groups that best match the correct repetitions. Minor movements join the group whose
     span contains (or is nearest to) their mid-point.
     """
     start, end, heights = np.asarray(start), np.asarray(end), np.asarray(heights, dtype=float)
     if len(start) == 0:
         return np.zeros(0, dtype=np.int64)
-    major = np.flatnonzero(heights >= major_fraction * np.median(heights))
-    gaps = start[major[1:]] - end[major[:-1]]
-    cuts = _optimal_cuts(gaps, n_repetitions, n_phases)
-    if cuts is None:  # too few major movements for the constraint: plain longest gaps
+    for fraction in (major_fraction, 0.0):  # a low phase (slow subject) can fall below major_fraction
+        major = np.flatnonzero(heights >= fraction * np.median(heights))
+        gaps = start[major[1:]] - end[major[:-1]]
+        cuts = _optimal_cuts(gaps, n_repetitions, n_phases)
+        if cuts is not None:
+            break
+    if cuts is None:  # too few movements for the constraint: plain longest gaps between major movements
+        major = np.flatnonzero(heights >= major_fraction * np.median(heights))
+        gaps = start[major[1:]] - end[major[:-1]]
         cuts = sorted(np.argsort(-gaps, kind="stable")[: n_repetitions - 1].tolist())
     elif len(cuts):
         floor = extra_cut_fraction * float(np.median(gaps[cuts]))
@@ -303,8 +316,12 @@ def _select(s, e, norm, rate_hz, ref, params: RepetitionParams) -> tuple[np.ndar
         d, h, _ = features(s, e, norm, rate_hz)
         if ref is None:  # no correct repetition anywhere: keep the highest movements
             keep = np.sort(np.argsort(-h, kind="stable")[:n])
-        else:
-            keep = np.array(best_subset(d, h, s, e, rate_hz, ref, n, params.max_candidates))
+        else:  # sub-movements and fidgets far below the subject's lowest phase are no candidates
+            cand = np.flatnonzero(h >= params.min_height_fraction * float(np.min(ref[1])))
+            if len(cand) < n:
+                cand = np.arange(len(s))
+            sub = best_subset(d[cand], h[cand], s[cand], e[cand], rate_hz, ref, n, params.max_candidates)
+            keep = cand[np.array(sub)]
         ks, ke = s[keep], e[keep]
         if params.continuation_gap_s > 0:  # absorb sub-movements that continue a kept phase
             gap = int(round(params.continuation_gap_s * rate_hz))
