@@ -102,16 +102,9 @@ def _json(value: Any) -> str | None:
     return json.dumps(value, sort_keys=True, default=str, allow_nan=True)
 
 
-def _decoded(record: Any) -> dict[str, Any]:
-    """A metadata record with JSON-looking string values decoded (older writers stored some as text)."""
-    if not isinstance(record, dict):
-        return {}
-    out = dict(record)
-    for k, v in out.items():
-        if isinstance(v, str) and v[:1] in "[{":
-            with contextlib.suppress(ValueError):
-                out[k] = json.loads(v)
-    return out
+def _record(record: Any) -> dict[str, Any]:
+    """A metadata record as a dict (``{}`` when absent); values are already typed by the archive reader."""
+    return dict(record) if isinstance(record, dict) else {}
 
 
 def _num(value: Any, kind=float):
@@ -147,8 +140,8 @@ def trial_row(path: str | os.PathLike[str]) -> dict[str, Any]:
         meta = trial.metadata
         runs = trial.runs()
         n_att = len(trial.summary.attachment_indexes)
-    info = _decoded(meta.get("imulog.trial"))
-    raw = _decoded(meta.get("imulog.raw"))
+    info = _record(meta.get("imulog.trial"))
+    raw = _record(meta.get("imulog.raw"))
     row.update(
         raw_sha256=raw.get("sha256"),
         subject=None if info.get("subject") is None else str(info.get("subject")),
@@ -160,10 +153,10 @@ def trial_row(path: str | os.PathLike[str]) -> dict[str, Any]:
         simulated=bool(info["simulated"]) if "simulated" in info else None,
         imulog_version=__version__,
         trial_json=_json(info),
-        anthropometrics_json=_json(_decoded(meta.get("imulog.anthropometrics")) or None),
+        anthropometrics_json=_json(_record(meta.get("imulog.anthropometrics")) or None),
         n_attachments=n_att,
     )
-    devices = {k.split(".", 2)[2]: _decoded(v) for k, v in meta.items() if k.startswith("imulog.device.")}
+    devices = {k.split(".", 2)[2]: _record(v) for k, v in meta.items() if k.startswith("imulog.device.")}
     row["devices"] = sorted(devices)
     row["device_json"] = _json(devices)
     raw_ch = [c for c in channels if not c.derived]
@@ -198,7 +191,7 @@ def trial_row(path: str | os.PathLike[str]) -> dict[str, Any]:
     row["markers_rate_hz"] = mk.rate_hz if mk else None
     run_rows = []
     for n, rec in runs.items():
-        rec = _decoded(rec)
+        rec = _record(rec)
         run_rows.append(
             {
                 "run": n,
@@ -217,14 +210,14 @@ def trial_row(path: str | os.PathLike[str]) -> dict[str, Any]:
         latest[str(r["step"])] = r
     row["steps"] = sorted(latest)
     row["runs_json"] = _json(run_rows)
-    al = _decoded(meta.get("imulog.alignment"))
+    al = _record(meta.get("imulog.alignment"))
     if al:
         row["alignment_offset_ns"] = _num(al.get("offset_ns"), int)
         row["alignment_drift_ppm"] = _num(al.get("drift_ppm"))
         row["alignment_score"] = _num(al.get("score"))
         row["alignment_method"] = None if al.get("method") is None else str(al.get("method"))
         row["alignment_json"] = _json(al)
-    timing = _decoded(meta.get("imulog.timing"))
+    timing = _record(meta.get("imulog.timing"))
     if timing:
         row["n_repetitions"] = _num(timing.get("n_repetitions"), int)
         row["n_phases"] = _num(timing.get("n_phases"), int)
@@ -240,12 +233,12 @@ def trial_row(path: str | os.PathLike[str]) -> dict[str, Any]:
         if spans:
             row["repetition_mean_s"] = sum(e - s for s, e in spans.values()) / len(spans)
         row["timing_json"] = _json(timing)
-    ev = _decoded(meta.get("imulog.evaluation"))
+    ev = _record(meta.get("imulog.evaluation"))
     if ev:
         row["eval_methods"] = sorted((ev.get("methods") or {}).keys())
         row["best_mae_cm"] = _best_mae(ev)
         row["evaluation_json"] = _json(ev)
-    mt = _decoded(meta.get("imulog.metrics"))
+    mt = _record(meta.get("imulog.metrics"))
     if mt:
         row["metrics_json"] = _json(mt)
     return row

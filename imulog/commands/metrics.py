@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import json
 from pathlib import Path
 from typing import Any
@@ -10,20 +9,8 @@ from typing import Any
 import click
 
 
-def decode_record(record: dict[str, Any]) -> dict[str, Any]:
-    """Metadata values may come back from the archive as JSON strings: restore numbers and lists."""
-    out: dict[str, Any] = {}
-    for key, value in record.items():
-        if isinstance(value, str):
-            with contextlib.suppress(ValueError):
-                value = json.loads(value)
-        out[key] = value
-    return out
-
-
-def format_summary(record: dict[str, Any]) -> str:
-    """Human-readable summary of an ``imulog.metrics`` record."""
-    r = decode_record(record)
+def format_summary(r: dict[str, Any]) -> str:
+    """Human-readable summary of an ``imulog.metrics`` record ``r``."""
     m2_axes = r.get("activity.method2.per_axis", ["?"] * 3)
     m1_axes = r.get("activity.method1.per_axis", ["?"] * 3)
     lines = [
@@ -189,7 +176,7 @@ def process_metrics(
     if record is None:
         raise click.ClickException(f"{trial}: no imulog.metrics record after the step")
     if as_json:
-        click.echo(json.dumps(decode_record(record), indent=2))
+        click.echo(json.dumps(record, indent=2))
         return
     skipped = getattr(outcome, "skipped", False)
     click.echo(("(unchanged: same inputs and parameters) " if skipped else "") + format_summary(record))
