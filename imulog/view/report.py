@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from typing import Any
 
@@ -26,11 +25,6 @@ def _fmt(value: Any) -> str:
         return f"{value:.4g}"
     if isinstance(value, list | tuple):
         return ", ".join(_fmt(v) for v in value)
-    if isinstance(value, str) and value[:1] in "[{":
-        try:
-            return _fmt(json.loads(value))
-        except (ValueError, TypeError):
-            return value
     return str(value)
 
 
