@@ -11,6 +11,7 @@ reference topic, per method the per-repetition errors and the summary (mean, std
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import numpy as np
@@ -84,16 +85,18 @@ def table_from_record(record: dict[str, Any]) -> str:
     return format_table(aggregate({m: methods[m]["repetitions"] for m in order}))
 
 
-def _reference_from_trial(trial, topics: list[str]) -> tuple[str, tuple[np.ndarray, np.ndarray]]:
+def reference_source(trial, topics: list[str]) -> str:
+    """The optical reference to compare with, from channel metadata only (no data read).
+
+    ``/derived/vicon/cluster_pose`` when the align step ran, else ``{markers topic}:O`` (the cluster origin).
+    """
     if POSE_TOPIC in topics:
-        pose = trial.read(POSE_TOPIC)
-        return POSE_TOPIC, (pose.t_ns, pose.position)
+        return POSE_TOPIC
     markers = [t for t in topics if t.startswith("/markers/")]
     for topic in markers:
-        stream = trial.read(topic)
-        labels = [label.split(":")[-1] for label in stream.labels]
+        labels = [label.split(":")[-1] for label in json.loads(trial.channel(topic).metadata.get("labels", "[]"))]
         if "O" in labels:
-            return f"{topic}:O", (stream.t_ns, stream.pos[:, labels.index("O")])
+            return f"{topic}:O"
     if not markers:
         poses = [t for t in topics if t.startswith("/poses/")]
         unused = f" ({', '.join(poses)} is not used as a reference)" if poses else ""
@@ -107,6 +110,17 @@ def _reference_from_trial(trial, topics: list[str]) -> tuple[str, tuple[np.ndarr
     )
 
 
+def read_reference(trial, source: str) -> tuple[np.ndarray, np.ndarray]:
+    """(t_ns, position (N, 3) m) of a :func:`reference_source`."""
+    if source == POSE_TOPIC:
+        pose = trial.read(POSE_TOPIC)
+        return pose.t_ns, pose.position
+    topic, _, marker = source.partition(":")
+    stream = trial.read(topic)
+    labels = [label.split(":")[-1] for label in stream.labels]
+    return stream.t_ns, stream.pos[:, labels.index(marker)]
+
+
 def run_evaluate(path, *, methods: list[str] | None = None, max_gap_s: float = 0.05, force: bool = False):
     """Run the step on a trial file; returns ``(outcome, record)``."""
     from imulog.archive import TrialReader
@@ -115,7 +129,7 @@ def run_evaluate(path, *, methods: list[str] | None = None, max_gap_s: float = 0
     with TrialReader(path) as trial:
         topics = trial.topics()
         available = sorted(t.rsplit("/", 1)[1] for t in topics if t.startswith("/derived/trajectory/"))
-        ref_topic, _ = _reference_from_trial(trial, topics)
+        ref_topic = reference_source(trial, topics)
     if not available:
         raise ValueError("no /derived/trajectory/* channel: run `imulog process trajectory` first")
     chosen = available if not methods else [m for m in methods if m in available]
@@ -126,7 +140,7 @@ def run_evaluate(path, *, methods: list[str] | None = None, max_gap_s: float = 0
     holder: dict[str, Any] = {}
 
     def compute(trial) -> StepResult:
-        ref_name, ref = _reference_from_trial(trial, topics)
+        ref_name, ref = ref_topic, read_reference(trial, ref_topic)
         trajs = {}
         for m in chosen:
             s = trial.read(f"/derived/trajectory/{m}")
