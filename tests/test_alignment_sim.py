@@ -15,7 +15,7 @@ from imulog.process import quaternion as Q
 from imulog.process.orientation import estimate_orientation
 from imulog.process.resample import resample_quaternions
 from imulog.simulate import simulate
-from imulog.steps.orientation import rate_hz
+from imulog.steps.common import mean_rate_hz as rate_hz
 
 VICON_SAMPLE_NS = 10_000_000
 

@@ -186,8 +186,7 @@ def _noise_from_static(path: Path, imu: str | None, m_s: float, statistic: str) 
     """Arm-usage noise level and activity noise floor (g) of a trial recorded at rest."""
     from imulog.archive import TrialReader
     from imulog.process.metrics import ActivityCountParams, acc_to_g, estimate_noise_floor, estimate_noise_level
-    from imulog.steps.common import pick_imu
-    from imulog.steps.metrics import _rate_hz
+    from imulog.steps.common import nominal_rate_hz, pick_imu
 
     with TrialReader(path) as reader:
         name = pick_imu(reader.topics(), imu)
@@ -196,5 +195,5 @@ def _noise_from_static(path: Path, imu: str | None, m_s: float, statistic: str) 
         raise ValueError(f"{path}: /imu/{name} has no accelerometer columns")
     acc_g = acc_to_g(stream.acc)
     level = estimate_noise_level(acc_g).threshold_g(statistic)  # type: ignore[arg-type]
-    floor = estimate_noise_floor(acc_g, ActivityCountParams.for_rate(_rate_hz(stream.t_ns), m_s=m_s))
+    floor = estimate_noise_floor(acc_g, ActivityCountParams.for_rate(nominal_rate_hz(stream.t_ns), m_s=m_s))
     return level, floor

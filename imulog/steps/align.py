@@ -22,8 +22,7 @@ import numpy as np
 from imulog.model import PoseStream, SignalStream
 from imulog.process import alignment as al
 from imulog.process.resample import resample_quaternions, resample_signal
-from imulog.steps.common import pick_imu
-from imulog.steps.orientation import rate_hz
+from imulog.steps.common import mean_rate_hz, pick_imu
 
 STEP = "align"
 
@@ -61,7 +60,7 @@ def compute_alignment(
     """Pure part of the step: streams and the ``imulog.alignment`` record (no I/O)."""
     if gyr is None:
         raise ValueError(f"/imu/{imu_name} has no gyroscope columns")
-    vic_rate = rate_hz(t_vic_ns)
+    vic_rate = mean_rate_hz(t_vic_ns)
     try:
         ck = al.cluster_kinematics(t_vic_ns, labels, pos_m, vic_rate, params)
     except ValueError as exc:

@@ -14,8 +14,7 @@ import numpy as np
 
 from imulog.model import SignalStream
 from imulog.process import calibration as cal
-from imulog.steps.common import pick_imu
-from imulog.steps.orientation import rate_hz
+from imulog.steps.common import mean_rate_hz, pick_imu
 
 STEP = "calibrate"
 
@@ -36,7 +35,7 @@ def calibration_from_arrays(
     likewise). Raises when neither can be estimated.
     """
     params = params or cal.SegmentParams()
-    fs = rate_hz(t_ns)
+    fs = mean_rate_hz(t_ns)
     statics = cal.find_static_segments(gyr, fs, params)
     if not statics:
         raise ValueError("no static period found (gyro norm never stays below the threshold for long enough)")

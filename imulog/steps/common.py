@@ -5,6 +5,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
+
 
 def pick_imu(topics: list[str], imu: str | None, *, prefix: str = "/imu/", missing_hint: str = "") -> str:
     """The IMU name to process: ``imu`` if given (``{prefix}{imu}`` must exist), else the only one, else ``wrist``.
@@ -42,3 +44,19 @@ def error_line(path: Any, exc: BaseException) -> str:
     (archive errors already name their file)."""
     message, name = str(exc), str(path)
     return message if message.startswith(name) else f"{name}: {message}"
+
+
+def mean_rate_hz(t_ns: np.ndarray) -> float:
+    """Mean sampling rate (Hz) over the recording: (N - 1) / duration. Dropped samples lower it."""
+    t = np.asarray(t_ns, dtype=np.int64)
+    if len(t) < 2 or t[-1] <= t[0]:
+        raise ValueError("need at least two increasing time stamps to know the sampling rate")
+    return (len(t) - 1) / ((t[-1] - t[0]) * 1e-9)
+
+
+def nominal_rate_hz(t_ns: np.ndarray) -> float:
+    """Nominal sampling rate (Hz) from the median sample interval: insensitive to dropped samples."""
+    dt = np.diff(np.asarray(t_ns, dtype=np.int64))
+    if len(dt) == 0 or np.median(dt) <= 0:
+        raise ValueError("need at least 2 samples with increasing time stamps")
+    return 1e9 / float(np.median(dt))

@@ -108,7 +108,8 @@ def trunk_name(topics: list[str], metadata: dict, options: KinematicsOptions) ->
 def _orientation(trial: Any, imu: str, params: OrientationParams) -> tuple[np.ndarray, np.ndarray, str]:
     """(t_ns, q_s2g, topic read): the orientation step's output when present, else computed here."""
     from imulog.process.orientation import estimate_orientation
-    from imulog.steps.orientation import rate_hz, read_imu_arrays
+    from imulog.steps.common import mean_rate_hz
+    from imulog.steps.orientation import read_imu_arrays
 
     topic = f"/derived/orientation/{imu}"
     if topic in trial.topics():
@@ -116,7 +117,7 @@ def _orientation(trial: Any, imu: str, params: OrientationParams) -> tuple[np.nd
         cols = [s.columns.index(c) for c in ("qw", "qx", "qy", "qz")]
         return s.t_ns, s.values[:, cols], topic
     t, acc, gyr, mag = read_imu_arrays(trial, f"/imu/{imu}")
-    res = estimate_orientation(gyr, acc, rate_hz(t), mag, params, t_ns=t)
+    res = estimate_orientation(gyr, acc, mean_rate_hz(t), mag, params, t_ns=t)
     return t, res.quat, f"/imu/{imu}"
 
 

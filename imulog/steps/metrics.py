@@ -35,7 +35,7 @@ from imulog.process.metrics import (
     repetition_durations,
     smoothness,
 )
-from imulog.steps.common import alignment_for, pick_imu
+from imulog.steps.common import alignment_for, nominal_rate_hz, pick_imu
 
 STEP = "metrics"
 ALGORITHM = "imulog.metrics.doshi2011"
@@ -122,13 +122,6 @@ def pick_trajectory(topics: list[str], method: str) -> str | None:
     return VICON_POSE if VICON_POSE in topics else None
 
 
-def _rate_hz(t_ns: np.ndarray) -> float:
-    dt = np.diff(np.asarray(t_ns, dtype=np.int64))
-    if len(dt) == 0 or np.median(dt) <= 0:
-        raise ValueError("need at least 2 samples with increasing time stamps")
-    return 1e9 / float(np.median(dt))
-
-
 def _r(x: float, digits: int = 6) -> float:
     return float(round(float(x), digits))
 
@@ -143,7 +136,7 @@ def _smoothness_per_phase(trajectory: SignalStream | PoseStream, phases: Interva
     """Mean smoothness indicators per phase label over the phases that lie inside the trajectory."""
     t = trajectory.t_ns
     pos = _positions(trajectory)
-    rate = _rate_hz(t)
+    rate = nominal_rate_hz(t)
     vel = np.gradient(pos, 1.0 / rate, axis=0, edge_order=2)
     per_label: dict[str, list] = {}
     for start, end, label in zip(phases.start_ns, phases.end_ns, phases.labels, strict=True):
@@ -175,7 +168,7 @@ def compute_metrics(
         raise ValueError(f"/imu/{imu.name} has no accelerometer columns")
     if len(imu) < 3:
         raise ValueError(f"/imu/{imu.name} has only {len(imu)} samples")
-    rate = _rate_hz(imu.t_ns)
+    rate = nominal_rate_hz(imu.t_ns)
     acc_g = acc_to_g(imu.acc)
     usage = arm_usage(acc_g, ArmUsageParams(p.noise_level_g))
     m1 = activity_count_sign(acc_g)

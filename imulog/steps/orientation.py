@@ -20,18 +20,10 @@ import numpy as np
 
 from imulog.model import SignalStream
 from imulog.process.orientation import OrientationParams, estimate_orientation, gravity_free_acceleration
-from imulog.steps.common import pick_imu
+from imulog.steps.common import mean_rate_hz, pick_imu
 
 STEP = "orientation"
 CALIBRATED_TOPIC = "/derived/calibrated/{imu}"
-
-
-def rate_hz(t_ns: np.ndarray) -> float:
-    """Mean sampling rate (Hz) of a time vector in ns."""
-    t = np.asarray(t_ns, dtype=np.int64)
-    if len(t) < 2 or t[-1] <= t[0]:
-        raise ValueError("need at least two increasing time stamps to know the sampling rate")
-    return (len(t) - 1) / ((t[-1] - t[0]) * 1e-9)
 
 
 def source_topic(topics: list[str], imu: str, source: str) -> str:
@@ -72,7 +64,7 @@ def compute_orientation(
     """Pure part of the step: the three derived streams from IMU arrays."""
     if params.use_mag and mag is None:
         raise ValueError(f"/imu/{imu} has no magnetometer: drop --mag")
-    res = estimate_orientation(gyr, acc, rate_hz(t_ns), mag, params, t_ns=t_ns)
+    res = estimate_orientation(gyr, acc, mean_rate_hz(t_ns), mag, params, t_ns=t_ns)
     lin = gravity_free_acceleration(res.quat, acc, res.static)
     frame = f"{imu}_global"
     return [

@@ -25,7 +25,7 @@ import numpy as np
 from imulog.model import Intervals, SignalStream
 from imulog.process.segmentation.pipeline import PhaseParams, segment_phases, timing_table
 from imulog.process.segmentation.repetitions import RepetitionParams
-from imulog.steps.common import alignment_for, pick_imu
+from imulog.steps.common import alignment_for, mean_rate_hz, pick_imu
 
 STEP = "phases"
 
@@ -64,7 +64,7 @@ def compute_phases(
         raise ValueError(f"/imu/{imu} has only {len(t_ns)} samples")
     if gyr is None:
         raise ValueError(f"/imu/{imu} has no gyroscope columns")
-    rate_hz = (len(t_ns) - 1) / ((t_ns[-1] - t_ns[0]) * 1e-9)
+    rate_hz = mean_rate_hz(t_ns)
     result = segment_phases(gyr, rate_hz, params)
     t_iv, clock = t_ns, "device"
     if alignment is not None:
