@@ -183,3 +183,27 @@ def test_calibrate_step_with_a_calibration_file(raw_archive, tmp_path):
     cal_file.write_text(json.dumps(Calibration(gyr=AxisCalibration(2 * bias, np.eye(3))).to_dict()))
     again = run(trial, "orientation,calibrate", options=opts, progress=False)
     assert again.prechecked == 0 and again.steps_computed == 2
+
+
+def test_phases_options_apply_onto_the_trials_own_protocol(tmp_path):
+    """Batch options change a trial's phase defaults; they do not reset them to R2G with 25 repetitions."""
+    import dataclasses
+
+    from imulog.archive import TrialReader, write_trial
+    from imulog.batch.registry import call_step
+    from imulog.simulate import simulate
+
+    sim = simulate("r2g", seed=2, repetitions=3, opening_static_s=5.0)
+    r2g = write_trial(tmp_path / "r2g.mcap", sim.recording, attach_sources=False)
+    no_task = {k: v for k, v in sim.recording.metadata.items() if k != "imulog.trial"}
+    other = write_trial(
+        tmp_path / "other.mcap", dataclasses.replace(sim.recording, metadata=no_task), attach_sources=False
+    )
+    for trial in (r2g, other):
+        call_step(trial, "phases", {"alpha": 0.75})
+    with TrialReader(r2g) as reader:
+        phases = reader.read("/derived/phases/wrist")
+        assert reader.runs()[max(reader.runs())]["params"]["dynamos"]["alpha"] == 0.75
+    assert len(phases) == 12 and phases.labels[:4] == ["reach", "lift", "return_bottle", "return_hand"]
+    with TrialReader(other) as reader:
+        assert set(reader.read("/derived/phases/wrist").labels) == {"movement"}

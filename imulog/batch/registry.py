@@ -43,6 +43,9 @@ class StepSpec:
     aliases: dict[str, str] = field(default_factory=dict)
     required: tuple[str, ...] = ()
     help: str = ""
+    # ``module:attr`` of a function ``imulog.trial record -> params``: the per-trial defaults that options
+    # are applied onto (e.g. the phases step's protocol and repetition count come from the trial)
+    trial_defaults: str | None = None
 
 
 STEPS: dict[str, StepSpec] = {
@@ -72,6 +75,7 @@ STEPS: dict[str, StepSpec] = {
         "imulog.steps.phases:run_phases",
         kwargs=("imu",),
         params_class="imulog.process.segmentation.pipeline:PhaseParams",
+        trial_defaults="imulog.steps.phases:params_for_trial",
         aliases={
             "repetitions": "repetitions.n_repetitions",
             "n_repetitions": "repetitions.n_repetitions",
@@ -190,15 +194,18 @@ def set_field(obj: Any, dotted: str, value: Any, where: str = "") -> Any:
     return dataclasses.replace(obj, **{head: _coerce(value, current, f"{where} {dotted}", str(annotation))})
 
 
-def resolve_options(step: str, options: dict[str, Any] | None) -> tuple[dict[str, Any], Any]:
-    """``(kwargs, params)`` for calling step ``step`` with the plain ``options`` dict."""
+def resolve_options(step: str, options: dict[str, Any] | None, base: Any = None) -> tuple[dict[str, Any], Any]:
+    """``(kwargs, params)`` for calling step ``step`` with the plain ``options`` dict.
+
+    ``base`` is the params object the options are applied onto (default: the params class's defaults).
+    """
     spec = STEPS[step]
     options = dict(options or {})
     missing = [k for k in spec.required if k not in options]
     if missing:
         raise ValueError(f"step {step}: option(s) {', '.join(missing)} required ({spec.help})")
     kwargs: dict[str, Any] = {}
-    params = _load(spec.params_class)() if spec.params_class else None
+    params = base if base is not None else (_load(spec.params_class)() if spec.params_class else None)
     for key, value in options.items():
         key = str(key)
         if key in spec.kwargs:
@@ -293,7 +300,13 @@ class FileResult:
 def call_step(path: str | os.PathLike[str], step: str, options: dict[str, Any] | None = None, *, force: bool = False):
     """Run one registered step on one trial; returns the step's ``StepOutcome``."""
     spec = STEPS[step]
-    kwargs, params = resolve_options(step, options)
+    base = None
+    if spec.trial_defaults:
+        from imulog.archive import TrialReader
+
+        with TrialReader(path) as trial:
+            base = _load(spec.trial_defaults)(trial.metadata.get("imulog.trial", {}))
+    kwargs, params = resolve_options(step, options, base)
     fn = _load(spec.function)
     if step == "calibrate":
         from imulog.process.calibration import Calibration
