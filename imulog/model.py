@@ -232,6 +232,9 @@ class Recording:
     poses: list[PoseStream] = field(default_factory=list)
     metadata: dict[str, dict[str, Any]] = field(default_factory=dict)
     sources: list[str] = field(default_factory=list)
+    # one-line notes for the user: rows dropped, units assumed, implausible values (``imulog convert`` prints them
+    # and records them in ``imulog.conversion``); never errors, which are raised as ConversionError
+    warnings: list[str] = field(default_factory=list)
 
     def streams(self) -> list[Stream]:
         return [*self.imus, *self.markers, *self.analogs, *self.signals, *self.events, *self.poses]
@@ -247,6 +250,7 @@ class Recording:
             poses=[*self.poses, *other.poses],
             metadata={**self.metadata},
             sources=[*self.sources, *other.sources],
+            warnings=[*self.warnings, *other.warnings],
         )
         for key, value in other.metadata.items():
             merged.metadata[key] = {**merged.metadata.get(key, {}), **value}
