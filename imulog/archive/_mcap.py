@@ -408,18 +408,77 @@ def chunk_messages(records: bytes | memoryview, channel_id: int | None = None):
         pos = nxt
 
 
+MAX_CHUNK_BYTES = 256 * 1024 * 1024  # refuse chunks declaring more than this uncompressed (bytes)
+MAX_CHUNK_RATIO = 1024  # ... or more than this many times their compressed size, above RATIO_FREE_BYTES
+RATIO_FREE_BYTES = 4 * 1024 * 1024  # chunks up to this uncompressed size may have any ratio
+
+
+def check_chunk_size(compressed_size: int, uncompressed_size: int) -> None:
+    """Refuse a chunk whose declared uncompressed size is implausible (huge, or a decompression bomb)."""
+    if uncompressed_size > MAX_CHUNK_BYTES:
+        raise McapFormatError(
+            f"chunk declares {uncompressed_size} bytes uncompressed, above the {MAX_CHUNK_BYTES >> 20} MiB limit"
+        )
+    if uncompressed_size > RATIO_FREE_BYTES and uncompressed_size > MAX_CHUNK_RATIO * max(compressed_size, 1):
+        raise McapFormatError(
+            f"chunk declares {uncompressed_size} bytes from {compressed_size} compressed "
+            f"(ratio above {MAX_CHUNK_RATIO}: a decompression bomb?)"
+        )
+
+
+def _read_bounded(reader, limit: int) -> bytes:
+    """Read at most ``limit`` bytes from a decompressing reader (stops early at its end)."""
+    parts, total = [], 0
+    while total < limit:
+        block = reader.read(limit - total)
+        if not block:
+            break
+        parts.append(block)
+        total += len(block)
+    return parts[0] if len(parts) == 1 else b"".join(parts)
+
+
 def decompress(compression: str, data: bytes | memoryview, uncompressed_size: int) -> bytes:
+    """Decompress chunk data, never producing more than ``uncompressed_size`` + 1 bytes.
+
+    Raises McapFormatError when the declared size is implausible (:func:`check_chunk_size`) or the output
+    is not exactly ``uncompressed_size`` bytes.
+    """
+    check_chunk_size(len(data), uncompressed_size)
     if compression == "":
-        return bytes(data)
-    if compression == "zstd":
+        out = bytes(data)
+    elif compression == "zstd":
         import zstandard
 
-        return zstandard.ZstdDecompressor().decompress(data, max_output_size=uncompressed_size)
-    if compression == "lz4":
+        try:
+            reader = zstandard.ZstdDecompressor().stream_reader(bytes(data), read_across_frames=True)
+            out = _read_bounded(reader, uncompressed_size + 1)
+        except zstandard.ZstdError as exc:
+            raise McapFormatError(f"zstd data does not decompress ({exc})") from None
+    elif compression == "lz4":
         import lz4.frame
 
-        return lz4.frame.decompress(bytes(data))
-    raise McapFormatError(f"unsupported chunk compression {compression!r}")
+        try:
+            d = lz4.frame.LZ4FrameDecompressor()
+            out = d.decompress(bytes(data), max_length=uncompressed_size + 1)
+        except RuntimeError as exc:
+            raise McapFormatError(f"lz4 data does not decompress ({exc})") from None
+        if len(out) <= uncompressed_size and not d.eof:
+            raise McapFormatError("lz4 data ends before its frame does (truncated)")
+    else:
+        raise McapFormatError(f"unsupported chunk compression {compression!r}")
+    if len(out) != uncompressed_size:
+        more = "more than" if len(out) > uncompressed_size else f"{len(out)}, not"
+        raise McapFormatError(f"chunk decompresses to {more} the declared {uncompressed_size} bytes")
+    return out
+
+
+def decompress_chunk(chunk: ChunkRec) -> bytes:
+    """Decompress a chunk record and verify its uncompressed CRC (when recorded); McapFormatError if damaged."""
+    out = decompress(chunk.compression, chunk.data, chunk.uncompressed_size)
+    if chunk.uncompressed_crc != 0 and zlib.crc32(out) != chunk.uncompressed_crc:
+        raise McapFormatError("chunk CRC mismatch (damaged data)")
+    return out
 
 
 # ----------------------------------------------------------------------------------------------- summary
@@ -444,6 +503,7 @@ class Summary:
     metadata_indexes: list[MetadataIndexRec] = field(default_factory=list)
     summary_offsets: list[tuple[int, int, int]] = field(default_factory=list)
     summary_records: list[tuple[int, int, int]] = field(default_factory=list)  # (opcode, offset, total length)
+    duplicate_chunk_indexes: int = 0  # chunk index entries dropped because an earlier one names the same chunk
 
 
 def read_summary(f: BinaryIO, file_size: int) -> Summary:
@@ -497,6 +557,7 @@ def _read_summary(f: BinaryIO, file_size: int) -> Summary:
     )
     if summary_crc != 0 and summary_crc != computed:
         raise McapFormatError(f"summary CRC mismatch (stored {summary_crc:#010x}, computed {computed:#010x})")
+    seen_chunks: set[int] = set()
     for op, rel, body in iter_records(section):
         s.summary_records.append((op, summary_start + rel, 9 + len(body)))
         if op == Op.SCHEMA:
@@ -508,7 +569,12 @@ def _read_summary(f: BinaryIO, file_size: int) -> Summary:
         elif op == Op.STATISTICS:
             s.statistics = parse_statistics(body)
         elif op == Op.CHUNK_INDEX:
-            s.chunk_indexes.append(parse_chunk_index(body))
+            ci = parse_chunk_index(body)
+            if ci.chunk_start_offset in seen_chunks:  # a chunk is read once, however often it is indexed
+                s.duplicate_chunk_indexes += 1
+                continue
+            seen_chunks.add(ci.chunk_start_offset)
+            s.chunk_indexes.append(ci)
         elif op == Op.ATTACHMENT_INDEX:
             s.attachment_indexes.append(parse_attachment_index(body))
         elif op == Op.METADATA_INDEX:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -18,7 +19,7 @@ import numpy as np
 from imulog.archive import _mcap as m
 from imulog.archive import codec
 from imulog.archive.errors import ArchiveCorruptError, ArchiveError
-from imulog.archive.metadata import decode_record
+from imulog.archive.metadata import MAX_RECORD_BYTES, MetadataError, check_depth, decode_record, validate_record
 from imulog.archive.writer import payload_hash
 from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream, Stream
 
@@ -122,6 +123,15 @@ class TrialReader:
             raise ArchiveCorruptError(f"{self.path}: {exc}") from exc
         self._metadata: dict[str, dict[str, Any]] | None = None
         self._by_topic = {c.topic: c for c in self.summary.channels.values()}
+        try:  # channel metadata is parsed as JSON in many places: refuse hostile nesting once, here
+            for c in self.summary.channels.values():
+                for key, value in c.metadata.items():
+                    check_depth(value, f"channel {c.topic} metadata {key!r}")
+        except MetadataError as exc:
+            self._f.close()
+            raise ArchiveCorruptError(f"{self.path}: {exc}") from None
+        t0 = [ci.message_start_time for ci in self.summary.chunk_indexes]
+        self._t0 = min(t0) if t0 else 0
 
     # ------------------------------------------------------------------ context manager
     def __enter__(self) -> TrialReader:
@@ -176,11 +186,20 @@ class TrialReader:
             out: dict[str, dict[str, Any]] = {}
             for idx in sorted(self.summary.metadata_indexes, key=lambda i: i.offset):
                 name, items = self._read_metadata(idx)
-                out[name] = decode_record(items)
+                try:
+                    values = decode_record(items, name)
+                    validate_record(name, values)
+                except MetadataError as exc:
+                    raise ArchiveCorruptError(f"{self.path}: {exc}") from None
+                out[name] = values
             self._metadata = out
         return self._metadata
 
     def _read_metadata(self, idx: m.MetadataIndexRec) -> tuple[str, dict[str, str]]:
+        if idx.length > MAX_RECORD_BYTES:
+            raise ArchiveCorruptError(
+                f"{self.path}: metadata {idx.name!r} is {idx.length} bytes, above the {MAX_RECORD_BYTES >> 20} MiB limit"
+            )
         try:
             body = m.read_record_at(self._f, idx.offset, m.Op.METADATA, self.summary.data_end_offset)
             return m.parse_metadata(body)
@@ -198,7 +217,19 @@ class TrialReader:
                     continue
         return dict(sorted(out.items()))
 
+    def attachment_infos(self) -> list[dict[str, Any]]:
+        """Name, media type and size of every attachment, from the summary (no attachment is read).
+
+        ``sha256`` comes from the ``imulog.raw`` record (None for attachments it does not list).
+        """
+        raw = self.metadata.get("imulog.raw", {}).get("attachments", {})
+        return [
+            {"name": a.name, "media_type": a.media_type, "bytes": a.data_size, "sha256": raw.get(a.name)}
+            for a in sorted(self.summary.attachment_indexes, key=lambda i: i.offset)
+        ]
+
     def attachments(self) -> list[Attachment]:
+        """Every attachment with its data (CRC-checked) and SHA-256."""
         out = []
         for idx in sorted(self.summary.attachment_indexes, key=lambda i: i.offset):
             try:
@@ -221,11 +252,8 @@ class TrialReader:
             raise ArchiveError(f"{self.path}: no channel {topic!r} (channels: {known})")
         return rec
 
-    def iter_chunks(self, channel_id: int, start_ns: int | None = None, end_ns: int | None = None):
-        """Decompressed bytes of the chunks holding ``channel_id`` (time-pruned), in time order.
-
-        Chunks are read sequentially and decompressed on two threads (zstd releases the GIL).
-        """
+    def _select_chunks(self, channel_id: int, start_ns: int | None, end_ns: int | None) -> list[m.ChunkIndexRec]:
+        """Chunk indexes holding ``channel_id`` that may overlap ``[start_ns, end_ns)``, in file order."""
         # Chunks in file order = write order (kept as is, so even a non-monotonic clock round-trips).
         idxs = [ci for ci in self.summary.chunk_indexes if channel_id in ci.message_index_offsets]
         idxs.sort(key=lambda ci: ci.chunk_start_offset)
@@ -240,34 +268,99 @@ class TrialReader:
             if monotonic and lo is not None and k + 1 < len(idxs) and idxs[k + 1].message_start_time < lo:
                 continue
             selected.append(ci)
-        records = [(ci, self._chunk_record(ci)) for ci in selected]
-        if len(records) > 1:
-            return list(_pool().map(lambda r: self._decompress(*r), records))
-        return [self._decompress(*r) for r in records]
+        return selected
 
-    def _chunk_record(self, ci: m.ChunkIndexRec) -> m.ChunkRec:
+    def _where(self, ci: m.ChunkIndexRec, topic: str | None) -> str:
+        """``PATH: TOPIC: chunk at byte N (t = a-b s)``: the chunk's place, time relative to the file's first."""
+        t0 = self._t0
+        span = f"{(ci.message_start_time - t0) / 1e9:.3f}-{(ci.message_end_time - t0) / 1e9:.3f} s"
+        who = f"{topic}: " if topic else ""
+        return f"{self.path}: {who}chunk at byte {ci.chunk_start_offset} (t = {span} into the file)"
+
+    def iter_chunks(
+        self, channel_id: int, start_ns: int | None = None, end_ns: int | None = None, *, topic: str | None = None
+    ) -> list[bytes]:
+        """Decompressed, CRC-checked bytes of the chunks holding ``channel_id`` (time-pruned), in time order.
+
+        Chunks are read sequentially and decompressed on two threads (zstd releases the GIL). A damaged
+        chunk raises ArchiveCorruptError naming the channel and the chunk's time range.
+        """
+        records = [(ci, self._chunk_record(ci, topic)) for ci in self._select_chunks(channel_id, start_ns, end_ns)]
+        if len(records) > 1:
+            return list(_pool().map(lambda r: self._decompress(*r, topic), records))
+        return [self._decompress(*r, topic) for r in records]
+
+    def _chunk_record(self, ci: m.ChunkIndexRec, topic: str | None = None) -> m.ChunkRec:
         try:
+            m.check_chunk_size(ci.compressed_size, ci.uncompressed_size)
             body = m.read_record_at(self._f, ci.chunk_start_offset, m.Op.CHUNK, self.summary.data_end_offset)
             return m.parse_chunk(body)
         except m.McapFormatError as exc:
-            raise ArchiveCorruptError(f"{self.path}: chunk at byte {ci.chunk_start_offset}: {exc}") from exc
+            raise ArchiveCorruptError(f"{self._where(ci, topic)}: {exc}") from None
 
-    def _decompress(self, ci: m.ChunkIndexRec, chunk: m.ChunkRec) -> bytes:
+    def _decompress(self, ci: m.ChunkIndexRec, chunk: m.ChunkRec, topic: str | None = None) -> bytes:
         try:
-            return m.decompress(chunk.compression, chunk.data, chunk.uncompressed_size)
+            return m.decompress_chunk(chunk)
         except Exception as exc:
-            raise ArchiveCorruptError(f"{self.path}: chunk at byte {ci.chunk_start_offset}: {exc}") from exc
+            raise ArchiveCorruptError(
+                f"{self._where(ci, topic)} is damaged: {exc}; nothing was computed from it (imulog doctor {self.path})"
+            ) from None
 
     def messages(self, topic: str, start_ns: int | None = None, end_ns: int | None = None) -> list[memoryview]:
         """Raw serialized messages of a channel in write order (pruned to chunks overlapping the range)."""
         rec = self._channel_rec(topic)
         out: list[memoryview] = []
         try:
-            for data in self.iter_chunks(rec.id, start_ns, end_ns):
+            for data in self.iter_chunks(rec.id, start_ns, end_ns, topic=topic):
                 out.extend(payload for _, _, payload in m.chunk_messages(data, rec.id))
         except m.McapFormatError as exc:
             raise ArchiveCorruptError(f"{self.path}: {topic}: {exc}") from exc
         return out
+
+    def iter_chunk_messages(
+        self, topic: str, start_ns: int | None = None, end_ns: int | None = None
+    ) -> Iterator[list[memoryview]]:
+        """The channel's raw messages one chunk at a time (each chunk read, CRC-checked, then dropped).
+
+        Memory is bounded by the largest chunk, not the channel; the next chunk is decompressed on a
+        second thread while the caller works on the current one.
+        """
+        rec = self._channel_rec(topic)
+        selected = self._select_chunks(rec.id, start_ns, end_ns)
+        pending = None
+        for k in range(len(selected)):
+            if pending is None:
+                ci = selected[k]
+                current = self._decompress(ci, self._chunk_record(ci, topic), topic)
+            else:
+                current = pending.result()
+            pending = None
+            if k + 1 < len(selected):
+                nxt = selected[k + 1]
+                pending = _pool().submit(self._decompress, nxt, self._chunk_record(nxt, topic), topic)
+            try:
+                payloads = [payload for _, _, payload in m.chunk_messages(current, rec.id)]
+            except m.McapFormatError as exc:
+                raise ArchiveCorruptError(f"{self._where(selected[k], topic)}: {exc}") from None
+            yield payloads
+
+    def iter_blocks(self, topic: str, start_ns: int | None = None, end_ns: int | None = None) -> Iterator[Stream]:
+        """The channel as a sequence of imulog.model streams, one per chunk (each about 2 MiB of samples).
+
+        Concatenated, the pieces equal ``read(topic, start_ns, end_ns)``; every chunk is CRC-checked
+        before it is decoded, so a damaged chunk raises ArchiveCorruptError (channel and time range in the
+        message) before its samples are yielded. Empty pieces (outside the range) are skipped.
+        """
+        rec = self._channel_rec(topic)
+        schema = self.summary.schemas.get(rec.schema_id)
+        if schema is None:
+            raise ArchiveError(f"{self.path}: channel {topic!r} has no schema")
+        for payloads in self.iter_chunk_messages(topic, start_ns, end_ns):
+            if not payloads:
+                continue
+            stream = codec.select_time(self._decode(schema.name, topic, rec, payloads), start_ns, end_ns)
+            if len(stream):
+                yield stream
 
     def read(self, topic: str, start_ns: int | None = None, end_ns: int | None = None) -> Stream:
         """The channel as its imulog.model stream, restricted to ``start_ns <= t < end_ns`` when given."""
@@ -276,11 +369,17 @@ class TrialReader:
         if schema is None:
             raise ArchiveError(f"{self.path}: channel {topic!r} has no schema")
         payloads = self.messages(topic, start_ns, end_ns)
+        return codec.select_time(self._decode(schema.name, topic, rec, payloads), start_ns, end_ns)
+
+    def _decode(self, schema_name: str, topic: str, rec: m.ChannelRec, payloads: list[memoryview]) -> Stream:
         try:
-            stream = codec.decode(schema.name, topic, rec.metadata, payloads)
+            return codec.decode(schema_name, topic, rec.metadata, payloads)
         except codec.DecodeError as exc:
             raise ArchiveCorruptError(f"{self.path}: {exc}") from exc
-        return codec.select_time(stream, start_ns, end_ns)
+        except MemoryError:
+            raise
+        except Exception as exc:  # a hostile file with valid CRCs must still give one line, not a traceback
+            raise ArchiveCorruptError(f"{self.path}: {topic}: does not decode ({type(exc).__name__}: {exc})") from None
 
     def channel_hash(self, topic: str) -> str:
         """Content hash of a channel (SHA-256 over its messages), as recorded in provenance."""
