@@ -43,6 +43,12 @@ def _save_paths(files: list[Path], save: Path | None, overlay: bool, n_groups: i
 )
 @click.option("--port", default=9090, show_default=True, help="Web viewer HTTP port for --web (0 = any free port).")
 @click.option("--grpc-port", default=9876, show_default=True, help="Data (gRPC) port for --web (0 = any free port).")
+@click.option(
+    "--bind",
+    default="127.0.0.1",
+    show_default=True,
+    help="Address the --web servers listen on; 0.0.0.0 shares the trial with your whole network.",
+)
 @click.option("--overlay", is_flag=True, help="Put all FILES in one recording, each under /<trial name>.")
 @click.option(
     "--sample",
@@ -66,6 +72,7 @@ def view(
     web: bool,
     port: int,
     grpc_port: int,
+    bind: str,
     overlay: bool,
     sample_s: float | None,
     serve_seconds: float | None,
@@ -129,8 +136,14 @@ def view(
                 err=True,
             )
 
+    from imulog.view.server import PortInUseError
+
     try:
-        result = show(trials, sink=sinks, save_paths=paths, overlay=overlay, web_port=port, grpc_port=grpc_port)
+        result = show(
+            trials, sink=sinks, save_paths=paths, overlay=overlay, web_port=port, grpc_port=grpc_port, bind=bind
+        )
+    except PortInUseError as exc:
+        raise click.ClickException(str(exc)) from exc
     except (OSError, RuntimeError, ValueError) as exc:
         raise click.ClickException(f"cannot open the Rerun sink(s) {', '.join(sinks)}: {exc}") from exc
     for logged in result.logged:
@@ -161,3 +174,4 @@ def view(
         finally:
             for rec in result.recordings:
                 rec.disconnect()
+            result.server.stop()

@@ -39,10 +39,20 @@ def _time_axis(trials: Sequence[LoggedTrial]) -> rrb.TimeAxis | None:
     return rrb.TimeAxis(view_range=view)
 
 
-def _series(name: str, paths: list[str], axis: rrb.TimeAxis | None) -> rrb.TimeSeriesView | None:
+def _series(
+    name: str, paths: list[str], axis: rrb.TimeAxis | None, axis_y: rrb.ScalarAxis | None = None
+) -> rrb.TimeSeriesView | None:
     if not paths:
         return None
-    return rrb.TimeSeriesView(origin="/", contents=paths, name=name, axis_x=axis)
+    return rrb.TimeSeriesView(origin="/", contents=paths, name=name, axis_x=axis, axis_y=axis_y)
+
+
+def large_error_topics_of(trials: Sequence[LoggedTrial]) -> set[str]:
+    """Trajectory topics whose error would flatten the centimetre methods (see :func:`layout.large_error_topics`)."""
+    hidden: set[str] = set()
+    for t in trials:
+        hidden |= L.large_error_topics({e.topic: e.scale for e in t.by_role("error") if e.scale is not None})
+    return hidden
 
 
 def _stack(views: list, kind: type = rrb.Vertical, **kwargs) -> rrb.Container | None:
@@ -70,11 +80,25 @@ def build_blueprint(trials: LoggedTrial | Sequence[LoggedTrial]) -> rrb.Blueprin
     orientation = _series("Orientation quaternion w,x,y,z (1)", _paths(trials, "orientation"), axis)
     signals = _stack([omega, acc, orientation])
 
+    hidden = large_error_topics_of(trials)
     spatial_paths = _paths(trials, "markers", "pose", "path", "cursor")
     spatial = None
     if spatial_paths:
         contents = [f"{t.prefix}/world/**" for t in trials]
-        spatial = rrb.Spatial3DView(origin="/", contents=contents, name="3D: markers, cluster, trajectories (m)")
+        overrides = {
+            e.path: rrb.EntityBehavior(visible=False)
+            for t in trials
+            for e in t.by_role("path", "cursor")
+            if e.topic in hidden
+        }
+        spatial = rrb.Spatial3DView(
+            origin="/", contents=contents, name="3D: markers, cluster, trajectories (m)", overrides=overrides or None
+        )
+        legend = _paths(trials, "legend")
+        if legend:
+            spatial = rrb.Vertical(
+                spatial, rrb.TextDocumentView(origin="/", contents=legend, name="Legend"), row_shares=[4, 1]
+            )
 
     state_paths = _paths(trials, "phases", "static_state", "intervals")
     states = (
@@ -115,8 +139,17 @@ def build_blueprint(trials: LoggedTrial | Sequence[LoggedTrial]) -> rrb.Blueprin
         error_views.append(
             rrb.TextDocumentView(origin="/", contents=_paths(trials, "clinical_metrics"), name="Clinical metrics")
         )
+    errors = [e for t in trials for e in t.by_role("error")]
+    readable = [e for e in errors if e.topic not in hidden]
+    top_cm = max((e.scale for e in readable if e.scale is not None), default=None)
     error_series = [
-        _series("IMU trajectory error vs Vicon (cm)", _paths(trials, "error"), axis),
+        _series(
+            "IMU trajectory error vs Vicon (cm)",
+            [e.path for e in readable],
+            axis,
+            rrb.ScalarAxis(range=(0.0, 1.25 * top_cm)) if top_cm else None,
+        ),
+        _series("Uncorrected methods: error vs Vicon (cm)", [e.path for e in errors if e.topic in hidden], axis),
         _series("Metrics", _paths(trials, "metric"), axis),
     ]
     error_views.append(_stack(error_series, rrb.Vertical))

@@ -167,3 +167,28 @@ def metrics_entity(prefix: str = "") -> str:
 def info_entity(prefix: str = "") -> str:
     """Entity of the trial description text document."""
     return join(prefix, "/trial/info")
+
+
+#: An error series counts as "large" (drawn on its own axis and hidden in 3D by default) when its 95th percentile
+#: exceeds both this many times the best method's and :data:`LARGE_ERROR_MIN_CM`.
+LARGE_ERROR_FACTOR = 10.0
+LARGE_ERROR_MIN_CM = 10.0
+
+
+def large_error_topics(scales_cm: dict[str, float]) -> set[str]:
+    """Topics whose error (95th percentile, cm) would flatten the others' plot: e.g. DDI's metres of drift.
+
+    The centimetre methods (ZUPT, optimized, ...) stay on one readable axis; uncorrected double integration, whose
+    error grows without bound, goes to its own plot and is hidden in the 3D view until toggled on.
+    """
+    finite = {t: v for t, v in scales_cm.items() if v == v}
+    if len(finite) < 2:
+        return set()
+    best = min(finite.values())
+    limit = max(LARGE_ERROR_FACTOR * best, LARGE_ERROR_MIN_CM)
+    return {t for t, v in finite.items() if v > limit}
+
+
+def legend_entity(prefix: str = "") -> str:
+    """Markdown legend of the 3D view: colour, error and default visibility of every trajectory."""
+    return join(prefix, "/legend")

@@ -15,7 +15,7 @@ import rerun as rr
 
 from imulog.view import layout as L
 from imulog.view.blueprint import build_blueprint
-from imulog.view.server import WebServer, grpc_uri, serve_viewer, server_sinks
+from imulog.view.server import LOCALHOST, WebServer, grpc_uri, start_web_server
 from imulog.view.source import TrialData
 from imulog.view.streams import LoggedTrial, log_streams
 
@@ -78,10 +78,12 @@ def show(
     web_port: int = 9090,
     grpc_port: int = 9876,
     spawn_port: int = 9876,
+    bind: str = LOCALHOST,
 ) -> ViewResult:
     """Log ``trials`` to one or several sinks: ``save`` (``save_paths``, one per recording), ``spawn``, ``web``.
 
-    One recording per trial, or one for all when ``overlay``. ``web`` binds the gRPC server to 127.0.0.1.
+    One recording per trial, or one for all when ``overlay``. ``web`` starts Rerun's web viewer and gRPC proxy
+    bound to ``bind`` (127.0.0.1 unless asked); stop it with ``result.server.stop()``.
     """
     sinks = {sink} if isinstance(sink, str) else set(sink)
     unknown = sinks - {"save", "spawn", "web"}
@@ -100,22 +102,24 @@ def show(
             Path(path).parent.mkdir(parents=True, exist_ok=True)
             sinks_of.append(rr.FileSink(Path(path)))
             result.saved.append(Path(path))
-    uri = None
     if "web" in sinks:
-        web_sinks, uri, grpc_port = server_sinks(len(groups), grpc_port=grpc_port)
-        for sinks_of, web_sink in zip(per_rec, web_sinks, strict=True):
-            sinks_of.append(web_sink)
+        result.server = start_web_server(web_port=web_port, grpc_port=grpc_port, host=bind)
+        for sinks_of in per_rec:
+            sinks_of.append(rr.GrpcSink(result.server.grpc_uri))
     if "spawn" in sinks:
         rr.spawn(port=spawn_port, connect=False, memory_limit="50%")
         for sinks_of in per_rec:
             sinks_of.append(rr.GrpcSink(grpc_uri(spawn_port)))
     for rec, sinks_of in zip(result.recordings, per_rec, strict=True):
         rec.set_sinks(*sinks_of)
-    if uri is not None:
-        result.server = serve_viewer(uri, grpc_port, web_port)
-    for rec, group in zip(result.recordings, groups, strict=True):
-        result.logged.append(log_trials(rec, group, overlay=overlay))
-        rec.flush()
+    try:
+        for rec, group in zip(result.recordings, groups, strict=True):
+            result.logged.append(log_trials(rec, group, overlay=overlay))
+            rec.flush()
+    except BaseException:
+        if result.server is not None:
+            result.server.stop()
+        raise
     if sinks == {"save"}:
         for rec in result.recordings:
             rec.disconnect()

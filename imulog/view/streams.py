@@ -32,6 +32,8 @@ class Entity:
     rows: int
     t_min_ns: int | None = None
     t_max_ns: int | None = None
+    scale: float | None = None  # typical magnitude (95th percentile) of an error series, its unit
+    color: tuple[int, int, int] | None = None
 
 
 @dataclass
@@ -184,12 +186,12 @@ class _Logger:
         if not strips:
             return
         path = L.path_entity(topic, self.prefix)
+        self.trial.entities.append(Entity(path, "path", topic, 0, color=colour))
         self.rec.log(
             path,
             rr.LineStrips3D(strips, colors=[_rgb(colour)], radii=[0.002], labels=[label] if len(strips) == 1 else None),
             static=True,
         )
-        self.trial.entities.append(Entity(path, "path", topic, 0))
 
     def trajectory(self, topic: str, t_ref: np.ndarray, pos: np.ndarray, label: str) -> tuple[int, int, int]:
         colour = L.VICON_COLOR if topic == L.CLUSTER_POSE_TOPIC else L.color(self.n_paths)
@@ -216,6 +218,11 @@ class _Logger:
             error = position_error_cm(t_ref, world, *self.reference)
             names = [f"|{method} − Vicon| (cm)"]
             self.scalars(L.error_entity(s.topic, self.prefix), "error", s.topic, t_ref, error, names, [colour])
+            finite = np.asarray(error, dtype=np.float64)
+            finite = finite[np.isfinite(finite)]
+            if len(finite) and self.trial.entities and self.trial.entities[-1].role == "error":
+                self.trial.entities[-1].scale = float(np.percentile(finite, 95))
+                self.trial.entities[-1].color = colour
 
     # -- stream types ----------------------------------------------------------------------------
     def imu(self, s: ImuStream) -> None:
@@ -358,6 +365,33 @@ class _Logger:
             raise TypeError(f"cannot view a {type(stream).__name__}")
 
 
+def _log_legend(recording: rr.RecordingStream, trial: LoggedTrial, prefix: str) -> None:
+    """A markdown legend for the 3D view: which colour is which method, its error, whether it starts hidden."""
+    errors = trial.by_role("error")
+    paths = [e for e in trial.by_role("path")]
+    if not paths:
+        return
+    hidden = L.large_error_topics({e.topic: e.scale for e in errors if e.scale is not None})
+    scale_of = {e.topic: e.scale for e in errors}
+    rows = []
+    for e in paths:
+        colour = e.color or L.VICON_COLOR
+        swatch = f"#{colour[0]:02x}{colour[1]:02x}{colour[2]:02x}"
+        name = "Vicon cluster (reference)" if e.topic == L.CLUSTER_POSE_TOPIC else L.path_source(e.topic)
+        err = scale_of.get(e.topic)
+        rows.append(
+            f"| {name} | `{swatch}` | {'' if err is None else f'{err:.1f}'} | {'hidden' if e.topic in hidden else 'shown'} |"
+        )
+    text = (
+        "| trajectory | colour | error p95 (cm) | 3D view |\n|---|---|---|---|\n"
+        + "\n".join(rows)
+        + "\n\nHidden methods drift by metres (uncorrected double integration); show them with the eye icon in"
+        " the blueprint panel (left, collapsed by default). Their error has its own plot in *Errors & metrics*."
+    )
+    recording.log(L.legend_entity(prefix), rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN), static=True)
+    trial.entities.append(Entity(L.legend_entity(prefix), "legend", "", 0))
+
+
 def log_streams(
     streams: Iterable[Any],
     metadata: Mapping[str, Mapping[str, Any]] | None = None,
@@ -391,6 +425,7 @@ def log_streams(
     ordered = sorted(streams, key=lambda s: isinstance(s, Intervals))  # signals first, states after
     for stream in ordered:
         logger.log(stream)
+    _log_legend(recording, trial, prefix)
     if "imulog.evaluation" in metadata:
         report = evaluation_markdown(metadata["imulog.evaluation"])
         recording.log(
