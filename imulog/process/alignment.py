@@ -24,7 +24,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 from imulog.process import quaternion as quat
 
@@ -155,6 +154,8 @@ def lowpass_markers(
     n, m, _ = p.shape
     out = np.full_like(p, np.nan)
     missing = np.zeros((n, m), dtype=bool)
+    from scipy import signal  # imported here: the viewer's clock map must not pay for scipy.signal
+
     sos = signal.butter(params.order, params.cutoff_hz, btype="low", fs=rate_hz, output="sos")
     max_gap = int(round(params.max_gap_s * rate_hz))
     for j in range(m):
@@ -347,6 +348,8 @@ def estimate_lag(
     if b_ok.sum() < 10:
         raise ValueError("device angular velocity has no samples in the alignment window")
     b = np.where(b_ok, b - np.nanmean(b), 0.0)
+    from scipy import signal
+
     c = signal.correlate(b, a, mode="full", method="fft")
     lags = signal.correlation_lags(len(b), len(a), mode="full")
     # local energy of b under the template, and overlap fraction

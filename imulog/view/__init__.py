@@ -2,23 +2,41 @@
 
 from imulog.view import read_trial, show
 show([read_trial("trial.mcap")], sink="save", save_paths=["trial.rrd"])
+
+The names below are imported on first use, so ``import imulog.view.clock`` (used by exports) does not
+import Rerun.
 """
 
-from imulog.view.blueprint import build_blueprint
-from imulog.view.session import ViewResult, log_trials, new_recording, show
-from imulog.view.source import TrialData, from_recording, read_trial
-from imulog.view.streams import Entity, LoggedTrial, log_streams
+from __future__ import annotations
 
-__all__ = [
-    "Entity",
-    "LoggedTrial",
-    "TrialData",
-    "ViewResult",
-    "build_blueprint",
-    "from_recording",
-    "log_streams",
-    "log_trials",
-    "new_recording",
-    "read_trial",
-    "show",
-]
+import importlib
+from typing import Any
+
+_LAZY = {
+    "build_blueprint": "imulog.view.blueprint",
+    "ViewResult": "imulog.view.session",
+    "log_trials": "imulog.view.session",
+    "new_recording": "imulog.view.session",
+    "show": "imulog.view.session",
+    "TrialData": "imulog.view.source",
+    "from_recording": "imulog.view.source",
+    "read_trial": "imulog.view.source",
+    "Entity": "imulog.view.streams",
+    "LoggedTrial": "imulog.view.streams",
+    "log_streams": "imulog.view.streams",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'imulog.view' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_LAZY})

@@ -34,7 +34,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
 
 
 @dataclass(frozen=True)
@@ -85,6 +84,8 @@ def lowpass_axes(gyr_rad_s: np.ndarray, rate_hz: float, cutoff_hz: float, order:
         g = g[:, None]
     g = np.where(np.isfinite(g), g, 0.0)
     if cutoff_hz and cutoff_hz < rate_hz / 2 and len(g) > 3 * (2 * order + 1):
+        from scipy.signal import butter, sosfiltfilt  # lazy: scipy.signal costs ~0.5 s to import
+
         sos = butter(order, cutoff_hz, btype="low", fs=rate_hz, output="sos")
         g = sosfiltfilt(sos, g, axis=0)
     return g

@@ -23,7 +23,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
 
 
 @dataclass(frozen=True)
@@ -95,6 +94,8 @@ def lowpass_norm(gyr_rad_s: np.ndarray, rate_hz: float, cutoff_hz: float = 1.5, 
         gyr = gyr[:, None]
     gyr = np.where(np.isfinite(gyr), gyr, 0.0)
     if cutoff_hz and cutoff_hz < rate_hz / 2:
+        from scipy.signal import butter, sosfiltfilt  # lazy: scipy.signal costs ~0.5 s to import
+
         sos = butter(order, cutoff_hz, btype="low", fs=rate_hz, output="sos")
         padlen = min(3 * (2 * len(sos) + 1), len(gyr) - 1)
         if padlen > 0:
