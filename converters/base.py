@@ -47,5 +47,10 @@ class Converter:
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:  # pragma: no cover
         raise NotImplementedError
 
+    def recording_key(self, path: Path) -> str | None:
+        """The recording ``path`` belongs to when the format names it (e.g. Xsens ``MT_<master>_<trial>-000_<id>``:
+        one file per sensor); None lets the registry group by the file name without role words."""
+        return None
+
     def __repr__(self) -> str:
         return f"<converter {self.name}>"

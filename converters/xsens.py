@@ -22,27 +22,29 @@ The stream is named ``mt_<serial>`` unless ``options.extra["names"]`` maps the s
 from __future__ import annotations
 
 import re
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from converters._common import (
-    TableSpec,
     check_increasing,
     estimate_rate_hz,
     head_lines,
     is_number,
-    read_numeric,
     sanitize_name,
     split_row,
     text_head_lines,
 )
+from converters._lab import ORIENTATION_TOPIC, orientation_stream, read_table, trial_start
 from converters.base import Converter, ConvertOptions
 from converters.errors import ConversionError
 from imulog.model import ImuStream, Recording, SignalStream
+from imulog.process import quaternion
 
 TICKS_PER_S = 10_000  # SampleTimeFine resolution
+DEFAULT_RATE_HZ = 100.0  # used (and recorded as assumed) when neither the header nor SampleTimeFine times a file
 SIGNAL_UNITS = {
     "quat": "1",
     "roll": "deg",
@@ -89,6 +91,78 @@ def _header_info(lines: list[str]) -> tuple[dict[str, str], int]:
     return info, n
 
 
+def _delimiter(header_line: str) -> str:
+    """Tab, semicolon, comma or (literal, never collapsed) space: the first one the column header uses."""
+    for d in ("\t", ";", ","):
+        if d in header_line:
+            return d
+    return " "
+
+
+_FILE_SERIAL = re.compile(r"[_-]([0-9A-Fa-f]{8})$")
+_FILE_KEY = re.compile(r"^(.*?)(?:-\d{3})?[_-][0-9A-Fa-f]{8}$")
+
+
+def serial_from_name(path: Path) -> str:
+    """DeviceId from an MT Manager file name ``MT_<master>_<trial>-000_<DeviceId>.txt`` (the last 8 hex digits)."""
+    m = _FILE_SERIAL.search(Path(path).stem)
+    return m.group(1).upper() if m else ""
+
+
+def orientation_wxyz(values: np.ndarray, seen: dict[str, int]) -> tuple[np.ndarray | None, str]:
+    """The sensor's orientation (sensor to global, w first) from Quat_q0..q3 (q0 = w), else the rotation matrix
+    ``Mat[r][c]`` (exported column-major, read by name), else Roll/Pitch/Yaw (deg, Rz(yaw) Ry(pitch) Rx(roll))."""
+    quat = [f"Quat_q{i}" for i in range(4)]
+    if all(c in seen for c in quat):
+        q = values[:, [seen[c] for c in quat]]
+        return q, "Quat_q0..q3 (q0 = w)"
+    mat = [f"Mat[{r}][{c}]" for r in (1, 2, 3) for c in (1, 2, 3)]
+    if all(c in seen for c in mat):
+        r = values[:, [seen[c] for c in mat]].reshape(-1, 3, 3)
+        q = np.full((len(r), 4), np.nan)
+        ok = np.isfinite(r).all(axis=(1, 2))
+        if ok.any():
+            q[ok] = quaternion.from_rotation_matrix(r[ok])
+        return q, "Mat[r][c] (rotation matrix sensor to global, by element name)"
+    euler = ["Roll", "Pitch", "Yaw"]
+    if all(c in seen for c in euler):
+        rad = np.radians(values[:, [seen[c] for c in euler]])
+        half = rad / 2
+        cr, cp, cy = np.cos(half).T
+        sr, sp, sy = np.sin(half).T
+        q = np.stack(
+            [cy * cp * cr + sy * sp * sr, cy * cp * sr - sy * sp * cr, cy * sp * cr + sy * cp * sr, sy * cp * cr - cy * sp * sr],
+            axis=1,
+        )
+        return q, "Roll/Pitch/Yaw (deg, Rz(yaw) Ry(pitch) Rx(roll))"
+    return None, ""
+
+
+_UTC = ["UTC_Year", "UTC_Month", "UTC_Day", "UTC_Hour", "UTC_Minute", "UTC_Second"]
+
+
+def utc_start(values: np.ndarray, seen: dict[str, int], t_ns: np.ndarray) -> datetime | None:
+    """The UTC time of the first sample from the UTC_* columns (first row with a valid, fully resolved UTC time,
+    minus its offset on the device clock); None when the columns are absent or empty."""
+    if not all(c in seen for c in _UTC):
+        return None
+    cols = values[:, [seen[c] for c in _UTC]]
+    ok = np.isfinite(cols).all(axis=1)
+    if "UTC_Valid" in seen:
+        flags = values[:, seen["UTC_Valid"]]
+        ok &= np.isfinite(flags) & ((np.nan_to_num(flags).astype(np.int64) & 0x04) != 0)
+    rows = np.flatnonzero(ok)
+    for i in rows[:10]:
+        y, mo, d, h, mi, sec = (int(v) for v in cols[i])
+        nano = values[i, seen["UTC_Nano"]] if "UTC_Nano" in seen and np.isfinite(values[i, seen["UTC_Nano"]]) else 0
+        try:
+            when = datetime(y, mo, d, h, mi, sec, tzinfo=UTC) + timedelta(microseconds=float(nano) / 1000)
+        except ValueError:
+            continue
+        return when - timedelta(microseconds=int(t_ns[i] - t_ns[0]) / 1000)
+    return None
+
+
 def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: float | None = None) -> Recording:
     path = Path(path)
     lines = head_lines(path)
@@ -96,11 +170,11 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
     if n_comment >= len(lines):
         raise ConversionError(path, "no column header after the // lines", line=n_comment)
     header_line = lines[n_comment]
-    delimiter = "\t" if "\t" in header_line else ","
-    cols = split_row(header_line, delimiter)
+    delimiter = _delimiter(header_line)
+    cols = header_line.split(delimiter) if delimiter != " " else header_line.strip().split(" ")
+    cols = [c.strip().strip('"').strip() for c in cols]
     while cols and cols[-1] == "":
         cols.pop()
-    ncols_header = len(cols)
     if "PacketCounter" not in cols and "SampleTimeFine" not in cols:
         raise ConversionError(path, "no PacketCounter or SampleTimeFine column", line=n_comment + 1)
     seen: dict[str, int] = {}
@@ -110,27 +184,24 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
         if c in seen:
             raise ConversionError(path, f"duplicated column {c!r}", line=n_comment + 1)
         seen[c] = i
-    first = split_row(lines[n_comment + 1], delimiter) if n_comment + 1 < len(lines) else []
-    ncols = (
-        max(ncols_header, len(first)) if first and len(first) == ncols_header + 1 and first[-1] == "" else ncols_header
-    )
-    names_all = cols + [""] * (ncols - ncols_header)
+    first = split_row(lines[n_comment + 1], delimiter) if n_comment + 1 < len(lines) and delimiter != " " else []
     imu_cols = {f"{q}_{a}" for q in ("Acc", "Gyr") for a in "XYZ"}
-    text_cols = {
+    text_cols = [
         i for i, c in enumerate(cols) if c not in imu_cols and i < len(first) and first[i] and not is_number(first[i])
-    }
-    ignore = text_cols | set(range(ncols_header, ncols))
-    required = {seen[c] for c in imu_cols if c in seen}
-    if "PacketCounter" in seen:
-        required.add(seen["PacketCounter"])
-    optional = set(range(ncols)) - required - ignore
-    spec = TableSpec(
-        path=path, delimiter=delimiter, skip_lines=n_comment + 1, names=names_all, optional=optional, ignore=ignore
+    ]
+    time_col = "PacketCounter" if "PacketCounter" in seen else "SampleTimeFine"
+    values = read_table(
+        path,
+        delimiter=delimiter,
+        skip_lines=n_comment + 1,
+        names=cols,
+        required=[seen[time_col]],
+        skip_columns=text_cols,
     )
-    values = read_numeric(spec)
     first_line = n_comment + 2
 
     rate = rate_hz
+    assumed: list[str] = []
     m = re.search(r"([0-9]+(?:\.[0-9]+)?)", info.get("Update Rate", info.get("Sample rate", "")))
     if rate is None and m:
         rate = float(m.group(1))
@@ -151,22 +222,23 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
                 path, "SampleTimeFine has empty cells and there is no PacketCounter", column="SampleTimeFine"
             )
         if not rate:
-            raise ConversionError(path, "no '// Update Rate' line and no --rate: cannot time the PacketCounter")
+            rate = DEFAULT_RATE_HZ
+            assumed.append(
+                f"{path.name}: no '// Update Rate' line and no SampleTimeFine: assumed {DEFAULT_RATE_HZ:g} Hz "
+                "for the PacketCounter; pass --rate HZ if the recording used another rate"
+            )
         pc = values[:, seen["PacketCounter"]]
         _check_counter(path, pc, 65536, first_line, "PacketCounter")
         counts, bad, problem = unwrap_counter(pc, 65536)
         if bad is not None:
             raise ConversionError(path, f"PacketCounter {problem}", line=first_line + bad, column="PacketCounter")
         t_ns = np.round(counts * (1e9 / rate)).astype(np.int64)
-        time_source = "PacketCounter / update rate (unwrapped at 65535)"
+        time_source = f"PacketCounter / {rate:g} Hz (unwrapped at 65535)"
     check_increasing(path, t_ns, first_line)
 
-    serial = info.get("DeviceId") or info.get("Device ID") or ""
-    if not serial:
-        fm = re.search(r"MT_([0-9A-Fa-f]{8})", path.name)
-        serial = fm.group(1) if fm else ""
+    serial = info.get("DeviceId") or info.get("Device ID") or serial_from_name(path)
     serial = serial.split()[0].upper() if serial else ""
-    names = names or {}
+    names = {k.upper(): v for k, v in (names or {}).items()}
     name = sanitize_name(names.get(serial, f"mt_{serial}" if serial else "xsens"))
     streams: dict[str, np.ndarray] = {}
     for q, key in (("Acc", "acc"), ("Gyr", "gyr")):
@@ -178,7 +250,7 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
             streams[key] = values[:, [seen[f"{q}_{a}"] for a in "XYZ"]]
     if "Temperature" in seen:
         temp = values[:, seen["Temperature"]]
-        if np.isfinite(temp).all():
+        if np.isfinite(temp).any():
             streams["temperature"] = temp
     if not streams:
         raise ConversionError(path, "no Acc_X/Y/Z or Gyr_X/Y/Z columns", line=n_comment + 1)
@@ -191,29 +263,41 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
         "time": time_source,
         "source": path.name,
         "header": info,
+        "delimiter": {"\t": "tab", ";": "semicolon", ",": "comma", " ": "space"}[delimiter],
     }
+    if assumed:
+        meta["assumed"] = assumed
     for key in ("Filter Profile", "Firmware Version", "Firmware revision", "Start Time", "Option Flags"):
         if key in info:
             meta[key.lower().replace(" ", "_")] = info[key]
+    if "Coordinate system" in info:
+        meta["coordinate_system"] = info["Coordinate system"]
+    n_gaps = int((~np.isfinite(np.hstack([streams[k] for k in ("acc", "gyr") if k in streams]))).any(axis=1).sum())
+    if n_gaps:
+        meta["samples_with_gaps"] = n_gaps
     rec = Recording(sources=[str(path)])
     rec.imus.append(ImuStream(name=name, t_ns=t_ns, meta=dict(meta), **streams))
+    q, q_source = orientation_wxyz(values, seen)
+    if q is not None:
+        rec.signals.append(orientation_stream(name, t_ns, q))
+        meta["orientation"] = {"topic": ORIENTATION_TOPIC.format(name=name), "from": q_source}
     rec.metadata[f"imulog.device.{name}"] = meta
-    skip = (
-        imu_cols | {"PacketCounter", "SampleTimeFine", "Temperature"}
-        if "temperature" in streams
-        else imu_cols | {"PacketCounter", "SampleTimeFine"}
-    )
-    extra = [(c, i) for c, i in seen.items() if c not in skip and i not in ignore]
+    start = utc_start(values, seen, t_ns)
+    if start is not None:
+        rec.metadata["imulog.trial"] = trial_start(start, f"{path.name}: UTC_* columns")
+    skip = imu_cols | {"PacketCounter", "SampleTimeFine"} | ({"Temperature"} if "temperature" in streams else set())
+    extra = [(c, i) for c, i in seen.items() if c not in skip and i not in text_cols and np.isfinite(values[:, i]).any()]
     if extra:
         units = [SIGNAL_UNITS.get(c.split("_")[0].lower(), "") for c, _ in extra]
-        rec.signals.append(
+        rec.signals.insert(
+            0,
             SignalStream(
                 topic=f"/signals/{name}",
                 t_ns=t_ns,
                 columns=[c for c, _ in extra],
                 units=units,
                 values=values[:, [i for _, i in extra]],
-            )
+            ),
         )
     return rec
 
@@ -240,6 +324,11 @@ class XsensConverter(Converter):
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         options = options or ConvertOptions()
         return read_xsens(Path(path), names=options.extra.get("names"), rate_hz=options.rate_hz)
+
+    def recording_key(self, path: Path) -> str | None:
+        """``MT_012005D6_031-000_00B421AF.txt`` -> ``MT_012005D6_031``: the per-sensor files of one recording."""
+        m = _FILE_KEY.match(Path(path).stem)
+        return m.group(1) if m and m.group(1) else None
 
 
 CONVERTER = XsensConverter()

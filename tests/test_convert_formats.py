@@ -57,7 +57,8 @@ def test_non_recordings_are_not_claimed(shared_data, rel):
 
 
 def test_every_recording_in_shared_data_converts(shared_data):
-    groups = group_directory(shared_data)
+    # devices/ (issue 14's device exports) has its own tests: tests/test_convert_{xsens,apdm,...}.py
+    groups = [(n, fs) for n, fs in group_directory(shared_data) if not n.startswith("devices/")]
     converted = {name: convert_files(files) for name, files in groups}
     # every data file of the README is in exactly one trial
     files = sorted(p.name for _, fs in groups for p in fs)
@@ -449,8 +450,10 @@ def test_xsens_packet_counter_wraps_and_empty_sample_time_fine(tmp_path):
     np.testing.assert_allclose(imu.acc, data[:, 0:3], rtol=1e-15)  # m/s^2 already
     np.testing.assert_allclose(imu.gyr, data[:, 3:6], rtol=1e-15)  # rad/s already
     assert imu.mag is None  # arbitrary units, kept as a signal
-    (sig,) = rec.signals
+    sig, orient = rec.signals  # columns as found, and the device's quaternion as /orientation/<name>
     assert sig.columns[:3] == ["Mag_X", "Mag_Y", "Mag_Z"] and sig.units[0] == "a.u."
+    assert orient.topic == "/orientation/mt_00b41234" and orient.columns == ["qw", "qx", "qy", "qz"]
+    np.testing.assert_allclose(orient.values, data[:, 9:13], rtol=1e-15)
     np.testing.assert_allclose(sig.values[:, 3:7], data[:, 9:13], rtol=1e-15)
     meta = rec.metadata["imulog.device.mt_00b41234"]
     assert (meta["serial"], meta["rate_hz"], meta["model"]) == ("00B41234", 100.0, "MTW2-3A7G6")

@@ -1,0 +1,159 @@
+"""Helpers shared by the lab-system converters (Xsens, APDM, MVN, OpenSense, Motive, Qualisys, Delsys).
+
+* :func:`read_table`: a delimited numeric block with empty/NaN cells kept as NaN (gaps), every line's field count
+  checked vectorised (a truncated line is an error naming it, never silently padded) and the first non-numeric
+  cell named by line and column;
+* :func:`orientation_stream`: a device's own orientation estimate as ``/orientation/{name}`` (``qw,qx,qy,qz``);
+* :func:`iso_start`: an absolute start time for ``imulog.trial`` (the contract: ISO-8601 and a time-zone rule).
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from converters.errors import ConversionError
+from imulog.model import SignalStream
+
+NA_CELLS = ("", "NaN", "nan", "NAN", "-NaN", "-nan", "NA", "N/A", "null")
+ORIENTATION_TOPIC = "/orientation/{name}"
+
+
+def line_offsets(data: bytes, n_lines: int) -> int:
+    """Byte offset of line ``n_lines + 1`` (after ``n_lines`` lines); raises ValueError when the file is shorter."""
+    pos = 0
+    for _ in range(n_lines):
+        nxt = data.find(b"\n", pos)
+        if nxt == -1:
+            raise ValueError("file ends inside the header")
+        pos = nxt + 1
+    return pos
+
+
+def read_table(
+    path: Path,
+    *,
+    delimiter: str,
+    skip_lines: int,
+    names: Sequence[str],
+    data: bytes | None = None,
+    required: Sequence[int] = (),
+    skip_columns: Sequence[int] = (),
+    ragged: bool = False,
+) -> np.ndarray:
+    """The numeric block after ``skip_lines`` lines as an (N, len(names)) float64 array; empty/``NaN`` cells -> NaN.
+
+    ``delimiter`` is literal (a space delimiter keeps runs of spaces as empty fields). A line with another field
+    count than ``len(names)`` (one trailing empty field allowed) is an error naming it, unless ``ragged`` (shorter
+    lines are padded with NaN: slower channels of a Delsys export end early). ``required`` columns must be finite
+    on every row; ``skip_columns`` are not parsed (text). Raises :class:`ConversionError` (file, line, column).
+    """
+    path = Path(path)
+    data = path.read_bytes() if data is None else data
+    ncols = len(names)
+    try:
+        start = line_offsets(data, skip_lines)
+    except ValueError:
+        raise ConversionError(path, "file ends inside the header", line=skip_lines) from None
+    block = data[start:].rstrip(b" \t\r\n\x00") if delimiter != " " else data[start:].rstrip(b"\r\n\x00")
+    while block.endswith((b"\r", b"\n")):
+        block = block.rstrip(b"\r\n")
+    first_line = skip_lines + 1
+    if not block.strip():
+        raise ConversionError(path, "no data rows", line=first_line)
+    buf = np.frombuffer(block, dtype=np.uint8)
+    nl = np.flatnonzero(buf == 10)
+    starts = np.concatenate([[0], nl + 1])
+    ends = np.concatenate([nl, [len(buf)]])
+    cr = (ends > starts) & (buf[np.maximum(ends - 1, 0)] == 13)
+    ends_text = ends - cr
+    cum = np.concatenate([[0], np.cumsum(buf == ord(delimiter), dtype=np.int64)])
+    fields = cum[ends_text] - cum[starts] + 1
+    empty = ends_text <= starts
+    if np.any(empty):
+        i = int(np.argmax(empty))
+        raise ConversionError(path, "empty line inside the data", line=first_line + i)
+    last = buf[np.maximum(ends_text - 1, 0)]
+    trailing = (fields == ncols + 1) & (last == ord(delimiter))
+    ok = (fields == ncols) | trailing | ((fields < ncols) if ragged else False)
+    if not ok.all():
+        i = int(np.argmax(~ok))
+        what = "truncated line" if fields[i] < ncols else "too many fields"
+        raise ConversionError(path, f"{what}: {int(fields[i])} fields, expected {ncols}", line=first_line + i)
+    width = ncols + 1 if trailing.any() else ncols
+    use = [i for i in range(ncols) if i not in set(skip_columns)]
+    try:
+        frame = pd.read_csv(
+            io.BytesIO(block),
+            sep=delimiter,
+            header=None,
+            names=list(range(width)),
+            usecols=use,
+            index_col=False,
+            engine="c",
+            skip_blank_lines=False,
+            keep_default_na=False,
+            na_values=list(NA_CELLS),
+            quoting=3,
+            encoding_errors="replace",
+            low_memory=False,
+        )
+    except Exception as e:  # noqa: BLE001 - report, never a traceback
+        raise ConversionError(path, f"could not parse the numeric data: {e}", line=first_line) from None
+    values = np.full((len(frame), ncols), np.nan)
+    for j in use:
+        col = frame[j]
+        if col.dtype.kind in "fiub":
+            values[:, j] = col.to_numpy(dtype=np.float64)
+            continue
+        num = pd.to_numeric(col.astype(str).str.strip().str.strip('"'), errors="coerce")
+        bad = num.isna().to_numpy() & col.notna().to_numpy()
+        if bad.any():
+            i = int(np.argmax(bad))
+            cell = str(col.iloc[i])
+            cell = cell if len(cell) <= 20 else cell[:17] + "..."
+            raise ConversionError(path, f"{cell!r} is not a number", line=first_line + i, column=names[j])
+        values[:, j] = num.to_numpy(dtype=np.float64)
+    for j in required:
+        finite = np.isfinite(values[:, j])
+        if not finite.all():
+            i = int(np.argmax(~finite))
+            raise ConversionError(path, "missing value", line=first_line + i, column=names[j])
+    return values
+
+
+def orientation_stream(name: str, t_ns: np.ndarray, q_wxyz: np.ndarray, frame_id: str = "") -> SignalStream:
+    """The device's own orientation estimate (sensor to its global frame), scalar first, NaN rows = gaps."""
+    q = np.asarray(q_wxyz, dtype=np.float64)
+    return SignalStream(
+        topic=ORIENTATION_TOPIC.format(name=name),
+        t_ns=t_ns,
+        columns=["qw", "qx", "qy", "qz"],
+        units=["1", "1", "1", "1"],
+        values=q,
+        frame_id=frame_id or name,
+    )
+
+
+def iso_start(when: datetime) -> tuple[str, str]:
+    """(``start_time``, ``time_zone``) for ``imulog.trial``: aware datetimes keep their offset, naive ones are
+    device local time without a zone (the contract in docs/converters.md)."""
+    if when.tzinfo is None:
+        return when.isoformat(), "unknown (device local time)"
+    off = when.utcoffset() or timedelta(0)
+    if off == timedelta(0):
+        return when.astimezone(UTC).isoformat(), "UTC"
+    minutes = int(off.total_seconds() // 60)
+    sign = "+" if minutes >= 0 else "-"
+    return when.isoformat(), f"{sign}{abs(minutes) // 60:02d}:{abs(minutes) % 60:02d}"
+
+
+def trial_start(when: datetime, source: str) -> dict[str, str]:
+    """The ``imulog.trial`` entries for a start time read from a file (``start_time_source`` names where)."""
+    start, zone = iso_start(when)
+    return {"start_time": start, "time_zone": zone, "start_time_source": source}
