@@ -28,7 +28,7 @@ from imulog.archive import _mcap as m
 from imulog.archive._builder import McapBuilder
 from imulog.archive.errors import ArchiveCorruptError, ArchiveError
 from imulog.archive.files import atomic_output, target_path, writer_lock
-from imulog.archive.metadata import encode_record, to_json
+from imulog.archive.metadata import MetadataError, decode_record, encode_record, record_hash, to_json
 from imulog.archive.writer import payload_hash, write_stream
 from imulog.model import DERIVED_PREFIX, Stream
 
@@ -62,25 +62,33 @@ def _copy_prefix(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int],
 
 
 def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int], path: Path) -> McapBuilder:
-    """Copy the data section leaving out the records of channels ``drop``; shift the kept indexes."""
+    """Copy the data section leaving out the records of channels ``drop``; shift the kept indexes.
+
+    One pass: every byte of the old data section is read once, counted in the data-section CRC (checked
+    against the recorded one before the file is finished: a damaged input is refused, nothing written)
+    and, unless dropped, written once.
+    """
     chunk_by_offset = {ci.chunk_start_offset: ci for ci in summary.chunk_indexes}
     limit = summary.data_end_offset
-    keep: list[tuple[int, int]] = []  # kept byte ranges [start, end) in the old file
     shift: list[tuple[int, int]] = []  # (old offset of a kept record, bytes removed before it)
     removed = 0
     dropped_chunks: set[int] = set()
     in_dropped_chunk = False
+    builder = McapBuilder(out, 0, 0, summary)
+    f.seek(0)
+    magic = f.read(len(m.MAGIC))
+    crc = zlib.crc32(magic)
+    builder.write(magic)
     pos = len(m.MAGIC)
-    keep.append((0, pos))
     while pos < limit:
-        f.seek(pos)
-        head = f.read(11)
-        if len(head) < 9:
-            raise ArchiveCorruptError(f"{path}: truncated record at byte {pos}")
+        head = f.read(9)
+        if len(head) < 9 or pos + 9 > limit:
+            raise ArchiveCorruptError(f"{path}: truncated record at byte {pos}; nothing was written")
         op, length = m._REC.unpack_from(head, 0)
         end = pos + 9 + length
         if end > limit:
-            raise ArchiveCorruptError(f"{path}: record at byte {pos} runs past the data section")
+            raise ArchiveCorruptError(f"{path}: record at byte {pos} runs past the data section; nothing was written")
+        first = f.read(min(length, COPY_BLOCK))
         drop_it = False
         if op == m.Op.CHUNK:
             ci = chunk_by_offset.get(pos)
@@ -100,17 +108,29 @@ def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int]
             drop_it = in_dropped_chunk  # message indexes follow their chunk
         else:
             in_dropped_chunk = False
-            if op in (m.Op.CHANNEL, m.Op.MESSAGE):
-                drop_it = m._H.unpack_from(head, 9)[0] in drop
+            if op in (m.Op.CHANNEL, m.Op.MESSAGE) and len(first) >= 2:
+                drop_it = m._H.unpack_from(first, 0)[0] in drop
+        crc = zlib.crc32(first, zlib.crc32(head, crc))
         if drop_it:
             removed += end - pos
         else:
             shift.append((pos, removed))
-            if keep and keep[-1][1] == pos:
-                keep[-1] = (keep[-1][0], end)
-            else:
-                keep.append((pos, end))
+            builder.write(head)
+            builder.write(first)
+        remaining = length - len(first)
+        while remaining > 0:
+            block = f.read(min(COPY_BLOCK, remaining))
+            if not block:
+                raise ArchiveCorruptError(f"{path}: unexpected end of file at byte {end - remaining}")
+            crc = zlib.crc32(block, crc)
+            if not drop_it:
+                builder.write(block)
+            remaining -= len(block)
         pos = end
+    if summary.data_section_crc not in (0, crc):
+        raise ArchiveCorruptError(
+            f"{path}: data section CRC mismatch (file damaged?); run 'imulog doctor {path}' - nothing was written"
+        )
     new_offset = {old: old - rem for old, rem in shift}
 
     def moved(offset: int) -> int:
@@ -118,9 +138,6 @@ def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int]
             raise ArchiveCorruptError(f"{path}: summary points at byte {offset}, which is not a record start")
         return new_offset[offset]
 
-    builder = McapBuilder(out, 0, 0, summary)
-    for a, b in keep:
-        _copy_range(f, builder, a, b)
     for cid in drop:
         builder.channels.pop(cid, None)
         builder.channel_counts.pop(cid, None)
@@ -151,6 +168,21 @@ def _raw_topics(f: BinaryIO, summary: m.Summary) -> set[str]:
             except (m.McapFormatError, ValueError) as exc:
                 raise ArchiveCorruptError(f"unreadable imulog.raw record: {exc}") from exc
     return set()
+
+
+METADATA_INPUT = "metadata:"  # provenance key prefix of a metadata record a step read
+
+
+def _metadata_record(f: BinaryIO, summary: m.Summary, name: str, path: Path) -> dict[str, Any] | None:
+    """The last metadata record called ``name`` (typed), or None when there is none."""
+    for idx in reversed(summary.metadata_indexes):
+        if idx.name == name:
+            try:
+                _, items = m.parse_metadata(m.read_record_at(f, idx.offset, m.Op.METADATA, summary.data_end_offset))
+                return decode_record(items, name)
+            except (m.McapFormatError, MetadataError) as exc:
+                raise ArchiveCorruptError(f"{path}: unreadable metadata record {name!r}: {exc}") from None
+    return None
 
 
 def _run_number(f: BinaryIO, summary: m.Summary) -> int:
@@ -184,6 +216,7 @@ def append_derived(
     metadata: dict[str, dict[str, Any]] | None = None,
     replace: bool = True,
     remove: Sequence[str] = (),
+    wait_s: float = 0.0,
 ) -> Path:
     """Append derived ``streams`` (topics under ``/derived/``) and ``metadata`` records to the trial at ``path``.
 
@@ -191,7 +224,10 @@ def append_derived(
     content hash} or a list of topics to hash). Each new channel records ``algorithm``, ``params``,
     ``inputs``, ``step``, ``run`` and ``imulog_version``; an ``imulog.run.<n>`` metadata record lists the
     run. An existing topic is replaced when ``replace`` (else ArchiveError); derived topics in ``remove`` are
-    deleted. Raw channels are never touched. Returns the path.
+    deleted. Raw channels are never touched. ``inputs`` keys ``metadata:NAME`` give the hash of a metadata
+    record the step read (:func:`imulog.archive.metadata.record_hash`): the append is refused when that
+    record, or an input channel, changed meanwhile. ``wait_s``: how long to wait for another writer's lock.
+    Returns the path.
     """
     path = target_path(path)
     metadata = dict(metadata or {})
@@ -204,7 +240,7 @@ def append_derived(
     for name in metadata:
         if name in ("imulog.raw",) or name.startswith("imulog.run."):
             raise ArchiveError(f"{path}: metadata record {name!r} is reserved")
-    with writer_lock(path):
+    with writer_lock(path, wait_s=wait_s):
         try:
             f = open(path, "rb")  # noqa: SIM115
         except OSError as exc:
@@ -236,6 +272,14 @@ def append_derived(
             n = _run_number(f, summary)
             inputs = _input_hashes(f, summary, run.get("inputs"), path)
             for topic, digest in inputs.items():  # provenance must describe the file being written
+                if topic.startswith(METADATA_INPUT):
+                    name = topic[len(METADATA_INPUT) :]
+                    if record_hash(_metadata_record(f, summary, name, path)) != digest:
+                        raise ArchiveError(
+                            f"{path}: metadata record {name} changed while the step ran (another writer?); "
+                            "nothing was written, run the step again"
+                        )
+                    continue
                 recorded = existing[topic].metadata.get("sha256") if topic in existing else None
                 if recorded and recorded != digest:
                     raise ArchiveError(

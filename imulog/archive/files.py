@@ -12,7 +12,9 @@ import contextlib
 import errno
 import fcntl
 import os
+import re
 import stat
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
@@ -34,11 +36,40 @@ def temp_path(path: Path) -> Path:
     return path.with_name(f".{path.name}.{os.getpid()}.tmp")
 
 
+def step_lock_path(path: Path, step: str) -> Path:
+    safe = re.sub(r"[^A-Za-z0-9_.-]", "_", step)[:80]
+    return path.with_name(f".{path.name}.step-{safe}.lock")
+
+
 @contextlib.contextmanager
-def writer_lock(path: str | os.PathLike[str]) -> Iterator[None]:
-    """Hold the exclusive writer lock of ``path``; raise ArchiveLockedError if another process holds it."""
+def step_lock(path: str | os.PathLike[str], step: str, timeout_s: float = 3600.0) -> Iterator[None]:
+    """Hold the lock of one step on one trial, waiting (up to ``timeout_s``) while another process runs it.
+
+    A second run of the same step thus starts after the first has written, and finds its result up to
+    date instead of computing it again. The kernel releases the lock if the holder dies.
+    """
     path = Path(path)
-    lp = lock_path(path)
+    with _flock(step_lock_path(path, step), path, timeout_s, what=f"step {step!r} of"):
+        yield
+
+
+@contextlib.contextmanager
+def writer_lock(path: str | os.PathLike[str], wait_s: float = 0.0) -> Iterator[None]:
+    """Hold the exclusive writer lock of ``path``; raise ArchiveLockedError if another process holds it
+    (after waiting up to ``wait_s`` seconds for it to finish)."""
+    path = Path(path)
+    with _flock(lock_path(path), path, wait_s, what="writing"):
+        # Temporary files of writers that died (SIGKILL) can be removed now: nobody else writes.
+        for stale in path.parent.glob(f".{path.name}.*.tmp"):
+            with contextlib.suppress(OSError):
+                stale.unlink()
+        yield
+
+
+@contextlib.contextmanager
+def _flock(lp: Path, path: Path, wait_s: float, what: str) -> Iterator[None]:
+    """Hold an flock on lock file ``lp`` (unlinked on release), waiting up to ``wait_s`` for it."""
+    deadline = time.monotonic() + wait_s
     while True:
         fd = os.open(lp, os.O_RDWR | os.O_CREAT, 0o644)
         try:
@@ -47,13 +78,18 @@ def writer_lock(path: str | os.PathLike[str]) -> Iterator[None]:
             os.close(fd)
             if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
                 raise
+            if time.monotonic() < deadline:
+                time.sleep(0.05)
+                continue
             try:
                 holder = lp.read_text().strip() or "?"
             except OSError:
                 holder = "?"
-            raise ArchiveLockedError(
-                f"{path}: another process (pid {holder}) is writing this archive; try again when it has finished"
-            ) from None
+            if what == "writing":
+                message = f"{path}: another process (pid {holder}) is writing this archive"
+            else:
+                message = f"{path}: another process (pid {holder}) is running {what} this archive"
+            raise ArchiveLockedError(f"{message}; try again when it has finished") from None
         # The previous holder may have unlinked the lock file between our open and flock: retry then.
         try:
             same = os.fstat(fd).st_ino == os.stat(lp).st_ino
@@ -65,10 +101,6 @@ def writer_lock(path: str | os.PathLike[str]) -> Iterator[None]:
     try:
         os.ftruncate(fd, 0)
         os.write(fd, str(os.getpid()).encode())
-        # Temporary files of writers that died (SIGKILL) can be removed now: nobody else writes.
-        for stale in path.parent.glob(f".{path.name}.*.tmp"):
-            with contextlib.suppress(OSError):
-                stale.unlink()
         yield
     finally:
         with contextlib.suppress(OSError):

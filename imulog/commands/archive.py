@@ -19,8 +19,22 @@ def _open(path: str) -> TrialReader:
         raise click.ClickException(str(exc)) from None
 
 
+def rerun_command(step: str) -> str:
+    """The command that reruns a recorded step (``orientation:wrist`` -> ``imulog process orientation``)."""
+    from imulog.cli import PROCESS_COMMANDS, TOP_LEVEL_COMMANDS
+
+    base = step.split(":", 1)[0]
+    if base in PROCESS_COMMANDS:
+        return f"imulog process {base}"
+    if base in TOP_LEVEL_COMMANDS:
+        return f"imulog {base}"
+    return f"the step {step!r}"
+
+
 def trial_summary(trial: TrialReader) -> dict[str, Any]:
-    """Everything ``imulog info`` shows, as a JSON-able dict."""
+    """Everything ``imulog info`` shows, as a JSON-able dict (summary and metadata only: no channel or
+    attachment data is read)."""
+    stale = trial.stale_channels()
     stored: dict[int, int] = {}
     for ci in trial.summary.chunk_indexes:
         for cid in ci.message_index_offsets:
@@ -45,15 +59,15 @@ def trial_summary(trial: TrialReader) -> dict[str, Any]:
                 "units": md.get("units", ""),
                 "frame_id": md.get("frame_id", ""),
                 "stored_bytes": stored.get(c.channel_id, 0),
+                "out_of_date": (
+                    {**stale[c.topic], "rerun": rerun_command(stale[c.topic]["step"])} if c.topic in stale else None
+                ),
                 "metadata": md,
             }
         )
     runs = trial.runs()
     metadata = {k: v for k, v in trial.metadata.items() if not k.startswith("imulog.run.")}
-    atts = [
-        {"name": a.name, "media_type": a.media_type, "bytes": len(a.data), "sha256": a.sha256}
-        for a in trial.attachments()
-    ]
+    atts = trial.attachment_infos()  # sizes from the index, hashes from imulog.raw: nothing re-read
     return {
         "path": str(trial.path),
         "bytes": trial.summary.file_size,
@@ -61,6 +75,7 @@ def trial_summary(trial: TrialReader) -> dict[str, Any]:
         "metadata": metadata,
         "attachments": atts,
         "runs": {str(k): v for k, v in runs.items()},
+        "out_of_date": sorted(stale),
     }
 
 
@@ -89,7 +104,10 @@ def info(file: str, as_json: bool) -> None:
     """Show a trial's channels, metadata, attachments and derived runs.
 
     For every channel: schema, rate (Hz), sample count, duration, gaps (time gaps longer than 1.5
-    sample periods / samples with NaN), stored (compressed) size, units and frame.
+    sample periods / samples with NaN), stored (compressed) size, units and frame. Derived channels
+    whose inputs (channels or metadata records such as imulog.alignment) changed since they were
+    computed are marked out of date, with the command that recomputes them. Reads only the summary and
+    the metadata records (fast on any trial size).
 
     \b
     Examples:
@@ -112,7 +130,16 @@ def info(file: str, as_json: bool) -> None:
         dur = "-" if c["duration_s"] is None else f"{c['duration_s']:.3f}"
         mb = f"{c['stored_bytes'] / 1e6:.2f}"
         rows.append(
-            (c["topic"], c["schema"], _fmt_rate(c["rate_hz"]), str(c["samples"]), dur, gaps, mb, _fmt_units(c["units"]))
+            (
+                c["topic"] + (" [out of date]" if c["out_of_date"] else ""),
+                c["schema"],
+                _fmt_rate(c["rate_hz"]),
+                str(c["samples"]),
+                dur,
+                gaps,
+                mb,
+                _fmt_units(c["units"]),
+            )
         )
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     for r in rows:
@@ -126,7 +153,8 @@ def info(file: str, as_json: bool) -> None:
     if data["attachments"]:
         click.echo("attachments:")
         for a in data["attachments"]:
-            click.echo(f"  {a['name']}  {a['media_type']}  {a['bytes']} bytes  sha256 {a['sha256'][:16]}")
+            digest = (a["sha256"] or "-")[:16]
+            click.echo(f"  {a['name']}  {a['media_type']}  {a['bytes']} bytes  sha256 {digest}")
     if data["runs"]:
         click.echo("derived runs:")
         for n, r in data["runs"].items():
@@ -135,6 +163,15 @@ def info(file: str, as_json: bool) -> None:
                 f"  #{n} {r.get('step', '')}: {r.get('algorithm', '')} params={json.dumps(r.get('params', {}))} "
                 f"-> {outputs} ({r.get('time', '')})"
             )
+    if data["out_of_date"]:
+        click.echo("out of date (inputs changed since they were computed):")
+        by_step: dict[str, list[str]] = {}
+        for c in data["channels"]:
+            if c["out_of_date"]:
+                by_step.setdefault(c["out_of_date"]["step"], []).append(c["topic"])
+        for step, topics in by_step.items():
+            reasons = next(c["out_of_date"]["reasons"] for c in data["channels"] if c["topic"] == topics[0])
+            click.echo(f"  {', '.join(topics)}: {'; '.join(reasons)} -> rerun {rerun_command(step)}")
 
 
 @click.command()

@@ -5,12 +5,15 @@
 
 The step is skipped (nothing written) when the latest run of the same ``step`` recorded the same
 algorithm, params and input content hashes and its output channels are still the ones it wrote.
+
+Races: a run holds the trial's lock for its step (a second run of the same step waits, then finds the
+result up to date), and the append refuses to write when an input channel or a metadata record the step
+read changed while it computed (another process re-aligned, say).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import os
 from collections.abc import Callable, Sequence
@@ -19,7 +22,9 @@ from pathlib import Path
 from typing import Any
 
 from imulog.archive import TrialReader, append_derived
-from imulog.archive.metadata import to_json
+from imulog.archive.append import METADATA_INPUT
+from imulog.archive.files import step_lock, target_path
+from imulog.archive.metadata import record_hash, to_json
 from imulog.model import Stream
 
 
@@ -44,12 +49,8 @@ class StepOutcome:
     reason: str = ""
 
 
-METADATA_INPUT = "metadata:"
-
-
-def metadata_hash(record: Any) -> str:
-    """Content hash of a metadata record (canonical JSON; a missing record hashes as ``null``)."""
-    return hashlib.sha256(to_json(record).encode()).hexdigest()
+WRITER_WAIT_S = 60.0  # how long a step waits for another step's append to finish before giving up
+metadata_hash = record_hash  # content hash of a metadata record (canonical JSON; a missing one is ``null``)
 
 
 def params_json(params: Any) -> str:
@@ -95,6 +96,20 @@ def run_step(
     dataclass or dict. ``force`` recomputes and rewrites even when up to date.
     """
     path = Path(path)
+    with step_lock(target_path(path), step):
+        return _run_locked(path, step, algorithm, params, inputs, compute, force, metadata_inputs)
+
+
+def _run_locked(
+    path: Path,
+    step: str,
+    algorithm: str,
+    params: Any,
+    inputs: Sequence[str],
+    compute: Callable[[TrialReader], StepResult],
+    force: bool,
+    metadata_inputs: Sequence[str],
+) -> StepOutcome:
     pjson = params_json(params)
     with TrialReader(path) as trial:
         hashes = {topic: trial.channel_hash(topic) for topic in inputs}
@@ -115,6 +130,7 @@ def run_step(
         run={"step": step, "algorithm": algorithm, "params": json.loads(pjson), "inputs": hashes},
         metadata=result.metadata,
         replace=True,
+        wait_s=WRITER_WAIT_S,
     )
     with TrialReader(path) as trial:
         n = max(trial.runs(), default=None)
