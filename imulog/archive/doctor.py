@@ -7,8 +7,10 @@ byte or a truncation anywhere is reported.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import struct
 import zlib
 from collections import defaultdict
 from collections.abc import Callable
@@ -20,7 +22,7 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from imulog.archive import _mcap as m
 from imulog.archive import codec
 from imulog.archive.errors import ArchiveError
-from imulog.archive.writer import payload_hash, raw_digest
+from imulog.archive.writer import raw_digest
 
 Progress = Callable[[int], None]
 
@@ -275,6 +277,35 @@ def _generic_decode(schema: m.SchemaRec, payload: bytes) -> None:
     cls.FromString(payload)
 
 
+def _check_channel(trial, topic: str, rec: m.ChannelRec, schema: m.SchemaRec, report: DoctorReport) -> str | None:
+    """Decode a channel chunk by chunk (memory: one chunk); return its content hash, None if it fails."""
+    h = hashlib.sha256()
+    samples = 0
+    first = True
+    try:
+        for payloads in trial.iter_chunk_messages(topic):
+            if first and payloads:
+                first = False
+                if schema.encoding == "protobuf":
+                    _generic_decode(schema, bytes(payloads[0]))
+                elif rec.message_encoding == "json":
+                    json.loads(bytes(payloads[0]))
+            if schema.name in codec.MESSAGE_CLASSES and payloads:
+                samples += len(codec.decode(schema.name, topic, rec.metadata, payloads))
+            for p in payloads:
+                h.update(struct.pack("<Q", len(p)))
+                h.update(p)
+    except ArchiveError as exc:
+        report.fail(str(exc))
+        return None
+    except Exception as exc:
+        report.fail(f"{topic}: does not decode ({exc})")
+        return None
+    if schema.name in codec.MESSAGE_CLASSES and rec.metadata.get("sample_count", str(samples)) != str(samples):
+        report.fail(f"{topic}: {samples} samples, metadata says {rec.metadata['sample_count']}")
+    return h.hexdigest()
+
+
 def check_length(path: str | os.PathLike[str]) -> int:
     """Total of the units :func:`check_file` reports to its ``progress`` callback (for a progress bar)."""
     return 2 * os.path.getsize(path)
@@ -303,6 +334,8 @@ def check_file(path: str | os.PathLike[str], *, decode: bool = True, progress: P
             report.fail(str(exc) if isinstance(exc, m.McapFormatError) else f"unreadable summary ({exc})")
             return report
         report.checks.append("magic, footer and summary CRC ok")
+        if summary.duplicate_chunk_indexes:
+            report.fail(f"summary indexes the same chunk more than once ({summary.duplicate_chunk_indexes} extra entries)")
         found = _walk_data_section(f, summary, report, progress)
         if found is None:
             return report
@@ -321,25 +354,12 @@ def check_file(path: str | os.PathLike[str], *, decode: bool = True, progress: P
                     progress(sizes.get(info.channel_id, 0))
                 rec = trial.summary.channels[info.channel_id]
                 schema = trial.summary.schemas.get(rec.schema_id)
-                payloads = trial.messages(info.topic)
                 if schema is None:
                     report.fail(f"{info.topic}: no schema")
                     continue
-                try:
-                    if payloads and schema.encoding == "protobuf":
-                        _generic_decode(schema, bytes(payloads[0]))
-                    elif payloads and rec.message_encoding == "json":
-                        json.loads(bytes(payloads[0]))
-                    if schema.name in codec.MESSAGE_CLASSES:
-                        stream = codec.decode(schema.name, info.topic, rec.metadata, payloads)
-                        if "sample_count" in rec.metadata and len(stream) != int(rec.metadata["sample_count"]):
-                            report.fail(
-                                f"{info.topic}: {len(stream)} samples, metadata says {rec.metadata['sample_count']}"
-                            )
-                except Exception as exc:
-                    report.fail(f"{info.topic}: does not decode ({exc})")
+                digest = _check_channel(trial, info.topic, rec, schema, report)
+                if digest is None:
                     continue
-                digest = payload_hash(payloads)
                 hashes[info.topic] = digest
                 if "sha256" in rec.metadata and rec.metadata["sha256"] != digest:
                     report.fail(f"{info.topic}: content hash differs from the one recorded at write time")
@@ -348,7 +368,7 @@ def check_file(path: str | os.PathLike[str], *, decode: bool = True, progress: P
             if raw is None:
                 report.checks.append("no imulog.raw record: raw-data hash not checked")
             else:
-                attached = {a.name: a.sha256 for a in trial.attachments()}
+                attached = {a.name: a.sha256 for a in trial.iter_attachments()}
                 for topic, digest in raw.get("channels", {}).items():
                     if topic not in hashes:
                         report.fail(f"raw channel {topic} recorded at conversion is missing")

@@ -19,7 +19,14 @@ import numpy as np
 from imulog.archive import _mcap as m
 from imulog.archive import codec
 from imulog.archive.errors import ArchiveCorruptError, ArchiveError
-from imulog.archive.metadata import MAX_RECORD_BYTES, MetadataError, check_depth, decode_record, validate_record
+from imulog.archive.metadata import (
+    MAX_RECORD_BYTES,
+    MetadataError,
+    check_depth,
+    decode_record,
+    record_hash,
+    validate_record,
+)
 from imulog.archive.writer import payload_hash
 from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream, Stream
 
@@ -217,6 +224,55 @@ class TrialReader:
                     continue
         return dict(sorted(out.items()))
 
+    def stale_channels(self) -> dict[str, dict[str, Any]]:
+        """Derived channels out of date against the trial's current inputs, by topic (no data read).
+
+        A channel is stale when an input channel's recorded content hash or a metadata record it read
+        (``metadata:NAME`` in its ``inputs``) differs from what its provenance recorded, when an input is
+        gone, or when an input is itself stale. Values: ``{"step": ..., "reasons": [one line each]}``.
+        """
+        chans = {c.topic: c for c in self.summary.channels.values()}
+        metadata = self.metadata
+        stale: dict[str, dict[str, Any]] = {}
+        deps: dict[str, list[str]] = {}
+        for topic, c in chans.items():
+            if not topic.startswith("/derived/") or "inputs" not in c.metadata:
+                continue
+            try:
+                inputs = json.loads(c.metadata["inputs"])
+            except ValueError:
+                inputs = None
+            if not isinstance(inputs, dict):
+                stale[topic] = {"step": c.metadata.get("step", ""), "reasons": ["unreadable inputs in its provenance"]}
+                continue
+            reasons = []
+            for key, digest in inputs.items():
+                if key.startswith("metadata:"):
+                    name = key[len("metadata:") :]
+                    if record_hash(metadata.get(name)) != digest:
+                        reasons.append(f"metadata record {name} changed")
+                elif key not in chans:
+                    reasons.append(f"input {key} is gone")
+                else:
+                    deps.setdefault(topic, []).append(key)
+                    recorded = chans[key].metadata.get("sha256")
+                    if recorded and recorded != digest:
+                        reasons.append(f"input {key} changed")
+            if reasons:
+                stale[topic] = {"step": c.metadata.get("step", ""), "reasons": reasons}
+        changed = True
+        while changed:  # an input that is itself out of date makes its users out of date
+            changed = False
+            for topic, used in deps.items():
+                if topic in stale:
+                    continue
+                late = [t for t in used if t in stale]
+                if late:
+                    step = chans[topic].metadata.get("step", "")
+                    stale[topic] = {"step": step, "reasons": [f"input {t} is out of date" for t in late]}
+                    changed = True
+        return dict(sorted(stale.items()))
+
     def attachment_infos(self) -> list[dict[str, Any]]:
         """Name, media type and size of every attachment, from the summary (no attachment is read).
 
@@ -230,7 +286,10 @@ class TrialReader:
 
     def attachments(self) -> list[Attachment]:
         """Every attachment with its data (CRC-checked) and SHA-256."""
-        out = []
+        return list(self.iter_attachments())
+
+    def iter_attachments(self) -> Iterator[Attachment]:
+        """The attachments one at a time (each read and CRC-checked when reached)."""
         for idx in sorted(self.summary.attachment_indexes, key=lambda i: i.offset):
             try:
                 body = m.read_record_at(self._f, idx.offset, m.Op.ATTACHMENT, self.summary.data_end_offset)
@@ -239,10 +298,7 @@ class TrialReader:
                 raise ArchiveCorruptError(f"{self.path}: attachment {idx.name!r}: {exc}") from exc
             if rec.crc != 0 and rec.crc != rec.computed_crc:
                 raise ArchiveCorruptError(f"{self.path}: attachment {idx.name!r} fails its CRC")
-            out.append(
-                Attachment(rec.name, rec.media_type, rec.data, hashlib.sha256(rec.data).hexdigest(), rec.log_time)
-            )
-        return out
+            yield Attachment(rec.name, rec.media_type, rec.data, hashlib.sha256(rec.data).hexdigest(), rec.log_time)
 
     # ------------------------------------------------------------------ data
     def _channel_rec(self, topic: str) -> m.ChannelRec:
