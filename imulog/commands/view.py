@@ -59,6 +59,22 @@ def _save_paths(files: list[Path], save: Path | None, overlay: bool, n_groups: i
     help="View a built-in analytic sample trial of this length instead of (or besides) FILES.",
 )
 @click.option(
+    "--start",
+    "start_s",
+    type=float,
+    default=None,
+    metavar="SECONDS",
+    help="Full resolution from here (seconds from the trial's start on the viewer's timeline); the rest as an overview.",
+)
+@click.option("--end", "end_s", type=float, default=None, metavar="SECONDS", help="End of the full-resolution window.")
+@click.option(
+    "--full-resolution/--overview",
+    "full_resolution",
+    default=None,
+    help="Force every sample (memory grows with length) or the min/max overview. Default: overview for trials "
+    "longer than 2 h or when --start/--end is given.",
+)
+@click.option(
     "--serve-seconds",
     type=float,
     default=None,
@@ -75,6 +91,9 @@ def view(
     bind: str,
     overlay: bool,
     sample_s: float | None,
+    start_s: float | None,
+    end_s: float | None,
+    full_resolution: bool | None,
     serve_seconds: float | None,
 ) -> None:
     """Show trials in Rerun: IMU, Vicon and every derived channel on one reference-clock timeline.
@@ -93,9 +112,20 @@ def view(
       imulog view a.mcap b.mcap --save out/       # one recording per trial: out/a.rrd, out/b.rrd
       imulog view zupt.mcap ekf.mcap --overlay    # compare two processings of one trial in the same views
       imulog view --sample 60 --web               # a built-in analytic trial, no file needed
+      imulog view week.mcap --save week.rrd       # > 2 h: min/max overview, small .rrd, bounded memory
+      imulog view week.mcap --start 3600 --end 4200 --save hour2.rrd   # full resolution in that window
     """
+    from imulog.view.overview import OverviewParams, read_trial_overview
     from imulog.view.session import show
     from imulog.view.source import TrialData, from_recording, read_trial
+
+    if start_s is not None and end_s is not None and end_s <= start_s:
+        raise click.UsageError(f"--end ({end_s:g} s) must be after --start ({start_s:g} s)")
+    overview = OverviewParams(
+        start_s=start_s,
+        end_s=end_s,
+        full_resolution_max_s=0.0 if full_resolution is False else OverviewParams.full_resolution_max_s,
+    )
 
     if spawn and web:
         raise click.UsageError("choose one of --spawn and --web (each may be combined with --save)")
@@ -111,7 +141,21 @@ def view(
     with click.progressbar(list(files), label="reading trials", file=sys.stderr, hidden=not files) as bar:
         for f in bar:
             try:
-                trials.append(read_trial(f))
+                if full_resolution:
+                    trials.append(read_trial(f))
+                else:
+                    data, reduced = read_trial_overview(f, overview)
+                    if reduced:
+                        click.echo(
+                            f"{f}: long recording shown as a min/max overview ({overview.buckets} buckets per channel)"
+                            + (
+                                f", full resolution from {start_s or 0:g} s to {'the end' if end_s is None else f'{end_s:g} s'}"
+                                if overview.has_window
+                                else "; use --start/--end for full resolution in a window"
+                            ),
+                            err=True,
+                        )
+                    trials.append(data)
             except ImportError as exc:
                 raise click.ClickException(f"{f}: cannot read archives ({exc})") from exc
             except Exception as exc:
