@@ -28,6 +28,9 @@ BUILTIN: dict[str, str] = {
     "c3d": "converters.c3d:CONVERTER",
     "broad-hdf5": "converters.broad:CONVERTER",
     "gaitmap": "converters.gaitmap:CONVERTER",
+    "axivity": "converters.axivity:CONVERTER",
+    "actigraph": "converters.actigraph:CONVERTER",
+    "actilife-csv": "converters.actilife_csv:CONVERTER",
 }
 MIN_CONFIDENCE = 0.3
 

@@ -1,0 +1,125 @@
+"""Helpers shared by the binary wearable readers (Axivity, ActiGraph): civil dates, ISO start times, chunk assembly.
+
+The readers decode their files in bounded batches behind ``iter_chunks(path) -> Iterator[Recording]``; every chunk
+holds the same streams (same names, topics, columns) on one time origin, so :func:`concat_chunks` can assemble
+them into one :class:`imulog.model.Recording` (and a streaming writer can consume them one by one).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from datetime import UTC, datetime, timedelta
+
+import numpy as np
+
+from imulog.model import ImuStream, Intervals, Recording, SignalStream
+
+NS_PER_S = 1_000_000_000
+UNKNOWN_ZONE = "unknown (device local time)"
+
+
+def days_from_civil(year: np.ndarray, month: np.ndarray, day: np.ndarray) -> np.ndarray:
+    """Days since 1970-01-01 of proleptic Gregorian dates (vectorised; H. Hinnant's algorithm), int64."""
+    y = np.asarray(year, dtype=np.int64) - (np.asarray(month) <= 2)
+    m = np.asarray(month, dtype=np.int64)
+    d = np.asarray(day, dtype=np.int64)
+    era = np.floor_divide(y, 400)
+    yoe = y - era * 400
+    doy = (153 * (m + np.where(m > 2, -3, 9)) + 2) // 5 + d - 1
+    doe = yoe * 365 + yoe // 4 - yoe // 100 + doy
+    return era * 146097 + doe - 719468
+
+
+def iso_from_epoch_ns(epoch_ns: int, utc_offset_s: int | None = None) -> str:
+    """ISO-8601 of ``epoch_ns`` (ns since 1970 on the clock's own wall time), millisecond precision.
+
+    ``utc_offset_s`` None gives a naive local time (``2020-02-12T09:03:38.000``); otherwise the wall time is
+    written with its offset (``2019-02-14T08:58:00.000-05:00``).
+    """
+    wall = datetime(1970, 1, 1) + timedelta(microseconds=int(epoch_ns) // 1000)
+    text = wall.isoformat(timespec="milliseconds")
+    if utc_offset_s is None:
+        return text
+    return wall.replace(tzinfo=UTC).isoformat(timespec="milliseconds").replace("+00:00", format_offset(utc_offset_s))
+
+
+def format_offset(utc_offset_s: int) -> str:
+    """``-18000`` -> ``-05:00``; 0 -> ``+00:00``."""
+    sign = "-" if utc_offset_s < 0 else "+"
+    minutes = abs(int(utc_offset_s)) // 60
+    return f"{sign}{minutes // 60:02d}:{minutes % 60:02d}"
+
+
+def time_zone_label(utc_offset_s: int | None) -> str:
+    """The ``imulog.trial`` ``time_zone`` value: ``UTC``, ``+HH:MM``/``-HH:MM`` or the unknown-zone label."""
+    if utc_offset_s is None:
+        return UNKNOWN_ZONE
+    return "UTC" if utc_offset_s == 0 else format_offset(utc_offset_s)
+
+
+def _cat(parts: list[np.ndarray | None]) -> np.ndarray | None:
+    if any(p is None for p in parts):
+        return None
+    return np.concatenate(parts)  # type: ignore[arg-type]
+
+
+def concat_chunks(chunks: Iterable[Recording]) -> Recording:
+    """One Recording from the chunks of one file (streams joined by name/topic; metadata of the first chunk).
+
+    A stream missing from some chunks is joined from the chunks that have it. Raises ValueError when no chunk.
+    """
+    chunks = list(chunks)
+    if not chunks:
+        raise ValueError("no chunks")
+    first = chunks[0]
+    out = Recording(metadata={k: dict(v) for k, v in first.metadata.items()}, sources=list(first.sources))
+    for later in chunks[1:]:
+        for key, value in later.metadata.items():
+            out.metadata[key] = {**out.metadata.get(key, {}), **value}
+    imus: dict[str, list[ImuStream]] = {}
+    signals: dict[str, list[SignalStream]] = {}
+    events: dict[str, list[Intervals]] = {}
+    for c in chunks:
+        for s in c.imus:
+            imus.setdefault(s.name, []).append(s)
+        for s in c.signals:
+            signals.setdefault(s.topic, []).append(s)
+        for s in c.events:
+            events.setdefault(s.topic, []).append(s)
+    for parts in imus.values():
+        p0 = parts[0]
+        out.imus.append(
+            ImuStream(
+                name=p0.name,
+                t_ns=np.concatenate([p.t_ns for p in parts]),
+                acc=_cat([p.acc for p in parts]),
+                gyr=_cat([p.gyr for p in parts]),
+                mag=_cat([p.mag for p in parts]),
+                temperature=_cat([p.temperature for p in parts]),
+                frame_id=p0.frame_id,
+                meta=dict(p0.meta),
+            )
+        )
+    for parts in signals.values():
+        p0 = parts[0]
+        out.signals.append(
+            SignalStream(
+                topic=p0.topic,
+                t_ns=np.concatenate([p.t_ns for p in parts]),
+                columns=list(p0.columns),
+                units=list(p0.units),
+                values=np.concatenate([p.values for p in parts]),
+                frame_id=p0.frame_id,
+            )
+        )
+    for parts in events.values():
+        out.events.append(
+            Intervals(
+                topic=parts[0].topic,
+                start_ns=np.concatenate([p.start_ns for p in parts]),
+                end_ns=np.concatenate([p.end_ns for p in parts]),
+                labels=[label for p in parts for label in p.labels],
+                task_index=np.concatenate([p.task_index for p in parts]),
+            )
+        )
+    return out

@@ -1,0 +1,634 @@
+"""ActiGraph ``.gt3x`` recordings (GT3X+, wGT3X, GT9X Link, ...): a ZIP of ``info.txt`` and ``log.bin``, or of
+``info.txt`` and the older NEO/MRA ``activity.bin``.
+
+``info.txt``: ``Key: Value`` lines; ``Start Date`` etc. are .NET ticks (100 ns since 0001-01-01) of the device's
+**local** time; ``TimeZone`` (``-05:00:00``) gives its UTC offset when ActiLife recorded one.
+
+``log.bin``: records ``0x1E, type u8, timestamp u32 (local seconds since 1970), size u16, payload, checksum u8``
+(checksum = one's complement of the XOR of header and payload; zero bytes between records are allowed). Read here:
+
+* ACTIVITY2 (0x1A): one second of primary accelerometer samples, int16 LE X,Y,Z / ``ACCEL_SCALE`` (LSB/g) ->
+  ``/imu/<name>``; a 1-byte payload is a USB connection event (ignored). ACTIVITY (0x00): the same, 12-bit packed.
+* SENSOR_SCHEMA (0x18) + SENSOR_DATA (0x19): the built-in IMU (accelerometer g, gyroscope deg/s, magnetometer uT,
+  temperature degC = value / scale + IMU_TEMP_OFFSET) with the columns, bit offsets, endianness and scales the
+  schema declares -> ``/imu/<name>_imu``; the n samples of a record are spread evenly over its second.
+* BATTERY (0x02, mV), LUX (0x05), CAPSENSE (0x0D: signal, reference, state, bursts) -> ``/signals/<name>_*``.
+* PARAMETERS (0x15) and METADATA (0x06, JSON) -> ``imulog.device.<name>``. Other records are skipped.
+
+Idle sleep: the device writes no ACTIVITY2 record while asleep (ActiLife fills those seconds with the last sample).
+Here those seconds stay missing samples (a jump in ``t_ns``), never zeros or copies; their count and length are in
+the device record (``idle_sleep_gaps``, ``idle_sleep_s``).
+
+``activity.bin`` (NEO/MRA, firmware <= 2.5): a continuous stream of 12-bit two's-complement samples in Y,X,Z order
+(4.5 bytes per sample, big-endian nibbles), 341 LSB/g, starting at ``Start Date`` at ``Sample Rate``.
+
+``t_ns`` counts from ``Start Date`` (the trial's ``start_time``, with the ``TimeZone`` offset when known). Every
+record checksum is verified: a damaged record stops with the file and record index. ``log.bin`` is read from the ZIP
+in bounded batches (:func:`iter_chunks`), so memory does not grow with the recording.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import struct
+import zipfile
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from converters._binary import NS_PER_S, concat_chunks, iso_from_epoch_ns, time_zone_label
+from converters._common import G0, sanitize_name
+from converters.base import Converter, ConvertOptions
+from converters.errors import ConversionError
+from imulog.model import ImuStream, Recording, SignalStream
+
+TICKS_PER_S = 10_000_000
+TICKS_AT_1970 = 621_355_968_000_000_000  # .NET ticks of 1970-01-01T00:00:00
+BATCH_BYTES = 8 << 20
+SEPARATOR = 0x1E
+ACTIVITY, BATTERY, LUX, METADATA, CAPSENSE, PARAMETERS = 0x00, 0x02, 0x05, 0x06, 0x0D, 0x15
+SENSOR_SCHEMA, SENSOR_DATA, ACTIVITY2 = 0x18, 0x19, 0x1A
+NEO_SCALE = 341.0  # LSB/g of NEO, CLE and MRA devices
+PARAMETER_NAMES = {
+    (0, 6): "battery_state",
+    (0, 7): "battery_voltage",
+    (0, 8): "board_revision",
+    (0, 9): "calibration_time",
+    (0, 13): "firmware_version",
+    (0, 49): "imu_accel_scale",
+    (0, 50): "imu_gyro_scale",
+    (0, 51): "imu_mag_scale",
+    (0, 55): "accel_scale",
+    (0, 57): "imu_temp_scale",
+    (0, 58): "imu_temp_offset",
+    (1, 10): "sample_rate",
+    (1, 12): "target_start_time",
+    (1, 13): "target_stop_time",
+    (1, 40): "utc_offset",
+    (1, 44): "sensor_configuration",
+}
+FLOAT_PARAMETERS = {"battery_voltage", "imu_accel_scale", "imu_gyro_scale", "imu_mag_scale", "accel_scale"}
+FLOAT_PARAMETERS |= {"imu_temp_scale", "imu_temp_offset"}
+SIGNED_PARAMETERS = {"utc_offset"}
+
+
+# ----------------------------------------------------------------------------------------------- pure decoders
+def ssp_decode(value: int) -> float:
+    """ActiGraph's SSP float: 24-bit two's-complement fraction (/2^23) times 2^(signed 8-bit exponent)."""
+    if value == 0x007FFFFF:
+        return float("inf")
+    if value == 0x00800000:
+        return float("-inf")
+    exponent = (value >> 24) & 0xFF
+    exponent = exponent - 256 if exponent & 0x80 else exponent
+    significand = value & 0x00FFFFFF
+    significand = significand - (1 << 24) if significand & 0x00800000 else significand
+    return significand / 8388608.0 * 2.0**exponent
+
+
+def unpack_12bit_yxz(data: bytes | np.ndarray) -> np.ndarray:
+    """NEO ``activity.bin`` / ACTIVITY bytes -> (N, 3) int16 counts in X, Y, Z order (stored Y, X, Z, 12 bits each).
+
+    Two samples take 9 bytes; an odd last sample uses 5 bytes (its last nibble is unused).
+    """
+    b = np.frombuffer(bytes(data), dtype=np.uint8) if not isinstance(data, np.ndarray) else data.astype(np.uint8)
+    nibbles = np.empty(2 * len(b), dtype=np.int32)
+    nibbles[0::2] = b >> 4
+    nibbles[1::2] = b & 0x0F
+    n = len(nibbles) // 9
+    v = nibbles[: 9 * n].reshape(n, 3, 3)
+    values = (v[:, :, 0] << 8) | (v[:, :, 1] << 4) | v[:, :, 2]
+    values = np.where(values > 2047, values - 4096, values).astype(np.int16)
+    return values[:, [1, 0, 2]]
+
+
+def ticks_to_epoch_ns(ticks: int) -> int:
+    """.NET ticks (100 ns since 0001-01-01, wall time) -> ns since 1970 of the same wall time."""
+    return (int(ticks) - TICKS_AT_1970) * 100
+
+
+def parse_info(path: Path, text: str) -> dict[str, str]:
+    """``info.txt`` ``Key: Value`` lines (keys as written)."""
+    out: dict[str, str] = {}
+    for line in text.splitlines():
+        key, sep, value = line.partition(":")
+        if sep and key.strip():
+            out[key.strip()] = value.strip()
+    if "Serial Number" not in out:
+        raise ConversionError(path, "info.txt has no 'Serial Number' line: not an ActiGraph .gt3x")
+    return out
+
+
+def parse_offset_s(text: str | None) -> int | None:
+    """``-05:00:00`` -> -18000 s; None when absent or unreadable."""
+    if not text:
+        return None
+    m = re.fullmatch(r"([+-])?(\d{1,2}):(\d{2})(?::(\d{2}))?", text.strip())
+    if not m:
+        return None
+    s = int(m.group(2)) * 3600 + int(m.group(3)) * 60 + int(m.group(4) or 0)
+    return -s if m.group(1) == "-" else s
+
+
+def parse_parameters(payload: bytes) -> dict[str, Any]:
+    """PARAMETERS payload (8-byte address/id/value triples) -> the known parameters by name."""
+    out: dict[str, Any] = {}
+    for k in range(0, len(payload) - 7, 8):
+        space, ident, value = struct.unpack_from("<HHI", payload, k)
+        name = PARAMETER_NAMES.get((space, ident))
+        if name is None:
+            continue
+        if name in FLOAT_PARAMETERS:
+            out[name] = round(ssp_decode(value), 6)
+        elif name in SIGNED_PARAMETERS:
+            out[name] = value - (1 << 32) if value & 0x80000000 else value
+        else:
+            out[name] = value
+    return out
+
+
+@dataclass(frozen=True)
+class SensorColumn:
+    label: str
+    big_endian: bool
+    signed: bool
+    bit_offset: int
+    bits: int
+    scale: float
+
+
+@dataclass(frozen=True)
+class SensorSchema:
+    ident: int
+    columns: tuple[SensorColumn, ...]
+
+    @property
+    def bytes_per_sample(self) -> int:
+        return max(c.bit_offset + c.bits for c in self.columns) // 8
+
+
+def parse_schema(path: Path, payload: bytes, index: int) -> SensorSchema:
+    """SENSOR_SCHEMA payload: id, column count, then 23 bytes per column (flags, bit offset, bits, SSP scale, label)."""
+    if len(payload) < 6:
+        raise ConversionError(path, f"record {index}: SENSOR_SCHEMA too short")
+    ident, ncols, _ = struct.unpack_from("<hhh", payload, 0)
+    if ncols <= 0 or len(payload) < 6 + 23 * ncols:
+        raise ConversionError(path, f"record {index}: SENSOR_SCHEMA declares {ncols} columns in {len(payload)} bytes")
+    cols = []
+    for i in range(ncols):
+        o = 6 + 23 * i
+        flags, offset, bits, scale = struct.unpack_from("<BBBI", payload, o)
+        if bits not in (8, 16) or offset % 8:
+            raise ConversionError(path, f"record {index}: SENSOR_SCHEMA column {i} has {bits} bits at bit {offset}")
+        label = payload[o + 7 : o + 23].decode("ascii", "replace").strip()
+        cols.append(SensorColumn(label, bool(flags & 1), bool(flags & 2), offset, bits, round(ssp_decode(scale), 6)))
+    return SensorSchema(ident, tuple(cols))
+
+
+def decode_sensor_samples(schema: SensorSchema, raw: np.ndarray) -> dict[str, np.ndarray]:
+    """(N, bytes_per_sample) uint8 -> {label: scaled float64 (N,)} for the labelled columns."""
+    out = {}
+    for c in schema.columns:
+        if not c.label:
+            continue
+        b = raw[:, c.bit_offset // 8 : (c.bit_offset + c.bits) // 8].astype(np.int64)
+        if c.bits == 16:
+            v = (b[:, 0] << 8 | b[:, 1]) if c.big_endian else (b[:, 1] << 8 | b[:, 0])
+            if c.signed:
+                v = np.where(v >= 32768, v - 65536, v)
+        else:
+            v = b[:, 0]
+            if c.signed:
+                v = np.where(v >= 128, v - 256, v)
+        out[c.label] = v / c.scale if c.scale else v.astype(np.float64)
+    return out
+
+
+def even_times_ns(seconds: np.ndarray, counts: np.ndarray, spacing_ns: np.ndarray) -> np.ndarray:
+    """Times of the samples of per-second records: record r's k-th sample at ``seconds[r] + k * spacing_ns[r]``."""
+    counts = np.asarray(counts, dtype=np.int64)
+    total = int(counts.sum())
+    first = np.repeat(np.cumsum(counts) - counts, counts)
+    k = np.arange(total, dtype=np.int64) - first
+    return np.repeat(seconds.astype(np.int64) * NS_PER_S, counts) + k * np.repeat(spacing_ns, counts)
+
+
+# ---------------------------------------------------------------------------------------------- record reading
+@dataclass
+class RecordBatch:
+    """Complete records found in ``buf``: types, timestamps (s), payload offsets and sizes; ``first`` = index."""
+
+    buf: bytes
+    first: int
+    byte0: int
+    types: np.ndarray
+    seconds: np.ndarray
+    starts: np.ndarray
+    sizes: np.ndarray
+
+    def payload(self, i: int) -> bytes:
+        s = int(self.starts[i])
+        return self.buf[s : s + int(self.sizes[i])]
+
+
+def iter_record_batches(stream: IO[bytes], path: Path, batch_bytes: int = BATCH_BYTES) -> Iterator[RecordBatch]:
+    """Split ``log.bin`` into batches of complete, checksum-verified records with bounded reads."""
+    leftover = b""
+    index = 0
+    byte0 = 0
+    eof = False
+    while not eof:
+        data = stream.read(batch_bytes)
+        eof = not data
+        buf = leftover + data
+        pos = 0
+        heads: list[int] = []
+        types: list[int] = []
+        secs: list[int] = []
+        sizes: list[int] = []
+        n = len(buf)
+        while pos < n:
+            b = buf[pos]
+            if b != SEPARATOR:
+                if b == 0:
+                    pos += 1
+                    continue
+                raise ConversionError(
+                    path, f"log.bin record {index + len(heads)} (byte {byte0 + pos}): no record separator (0x{b:02X})"
+                )
+            if pos + 8 > n:
+                break
+            typ, sec, size = struct.unpack_from("<BIH", buf, pos + 1)
+            if pos + 9 + size > n:
+                break
+            heads.append(pos)
+            types.append(typ)
+            secs.append(sec)
+            sizes.append(size)
+            pos += 9 + size
+        if eof and pos < n:
+            raise ConversionError(
+                path,
+                f"log.bin record {index + len(heads)} (byte {byte0 + pos}): truncated ({n - pos} bytes at the end)",
+            )
+        if heads:
+            h = np.asarray(heads, dtype=np.int64)
+            arr = np.frombuffer(buf, dtype=np.uint8, count=pos)
+            xor = np.bitwise_xor.reduceat(arr, h)  # header ^ payload ^ checksum (^ zero padding) == 0xFF
+            bad = np.nonzero(xor != 0xFF)[0]
+            if len(bad):
+                i = int(bad[0])
+                raise ConversionError(
+                    path,
+                    f"log.bin record {index + i} (byte {byte0 + heads[i]}, type 0x{types[i]:02X}): checksum mismatch "
+                    "(the record is damaged)",
+                )
+            yield RecordBatch(
+                buf=buf,
+                first=index,
+                byte0=byte0,
+                types=np.asarray(types, dtype=np.int64),
+                seconds=np.asarray(secs, dtype=np.int64),
+                starts=h + 8,
+                sizes=np.asarray(sizes, dtype=np.int64),
+            )
+        index += len(heads)
+        leftover = buf[pos:]
+        byte0 += pos
+
+
+# ------------------------------------------------------------------------------------------------- conversion
+@dataclass
+class _State:
+    """What carries over between batches of one log.bin."""
+
+    origin_ns: int
+    rate_hz: float
+    accel_scale: float
+    name: str
+    meta: dict[str, Any]
+    schemas: dict[int, SensorSchema] = field(default_factory=dict)
+    last_activity_s: int | None = None
+    last_sensor_s: int | None = None
+    gaps: int = 0
+    gap_s: int = 0
+
+
+def _concat_payloads(batch: RecordBatch, idx: np.ndarray, skip: int = 0) -> bytes:
+    return b"".join(batch.buf[int(batch.starts[i]) + skip : int(batch.starts[i] + batch.sizes[i])] for i in idx)
+
+
+def _check_order(path: Path, batch: RecordBatch, idx: np.ndarray, last: int | None, what: str) -> None:
+    secs = batch.seconds[idx]
+    prev = np.concatenate([[last if last is not None else secs[0] - 1], secs[:-1]])
+    bad = np.nonzero(secs <= prev)[0]
+    if len(bad):
+        i = int(idx[bad[0]])
+        raise ConversionError(
+            path, f"log.bin record {batch.first + i}: {what} time stamp does not increase ({int(batch.seconds[i])})"
+        )
+
+
+def _activity(path: Path, batch: RecordBatch, st: _State) -> ImuStream | None:
+    is_act2 = (batch.types == ACTIVITY2) & (batch.sizes > 1)
+    is_act = batch.types == ACTIVITY
+    idx = np.nonzero(is_act2 | is_act)[0]
+    if len(idx) == 0:
+        return None
+    _check_order(path, batch, idx, st.last_activity_s, "activity")
+    counts, parts = [], []
+    for i in idx:
+        payload = batch.payload(int(i))
+        if batch.types[i] == ACTIVITY2:
+            if len(payload) % 6:
+                raise ConversionError(
+                    path, f"log.bin record {batch.first + int(i)}: ACTIVITY2 payload of {len(payload)} bytes"
+                )
+            xyz = np.frombuffer(payload, dtype="<i2").reshape(-1, 3)
+        else:
+            xyz = unpack_12bit_yxz(payload)
+        parts.append(xyz)
+        counts.append(len(xyz))
+    secs = batch.seconds[idx]
+    prev = np.concatenate([[st.last_activity_s if st.last_activity_s is not None else secs[0] - 1], secs[:-1]])
+    jump = secs - prev - 1
+    st.gaps += int(np.count_nonzero(jump > 0))
+    st.gap_s += int(jump[jump > 0].sum())
+    st.last_activity_s = int(secs[-1])
+    counts_a = np.asarray(counts, dtype=np.int64)
+    spacing = np.round(NS_PER_S / np.maximum(st.rate_hz, counts_a)).astype(np.int64)
+    t = even_times_ns(secs, counts_a, spacing) - st.origin_ns
+    acc = np.concatenate(parts).astype(np.float64) / st.accel_scale * G0
+    return ImuStream(name=st.name, t_ns=t, acc=acc, meta=dict(st.meta))
+
+
+def _sensor(path: Path, batch: RecordBatch, st: _State) -> ImuStream | None:
+    idx = np.nonzero(batch.types == SENSOR_DATA)[0]
+    if len(idx) == 0:
+        return None
+    _check_order(path, batch, idx, st.last_sensor_s, "SENSOR_DATA")
+    st.last_sensor_s = int(batch.seconds[idx[-1]])
+    schema_ids = [struct.unpack_from("<h", batch.buf, int(batch.starts[i]))[0] for i in idx]
+    if len(set(schema_ids)) != 1:
+        raise ConversionError(path, f"log.bin record {batch.first + int(idx[0])}: several sensor schemas interleaved")
+    schema = st.schemas.get(schema_ids[0])
+    if schema is None:
+        raise ConversionError(
+            path, f"log.bin record {batch.first + int(idx[0])}: SENSOR_DATA before its SENSOR_SCHEMA {schema_ids[0]}"
+        )
+    bps = schema.bytes_per_sample
+    body = batch.sizes[idx] - 2
+    bad = np.nonzero(body % bps)[0]
+    if len(bad):
+        i = int(idx[bad[0]])
+        raise ConversionError(
+            path, f"log.bin record {batch.first + i}: SENSOR_DATA of {int(batch.sizes[i])} bytes is not whole samples"
+        )
+    counts = body // bps
+    raw = np.frombuffer(_concat_payloads(batch, idx, skip=2), dtype=np.uint8).reshape(-1, bps)
+    cols = decode_sensor_samples(schema, raw)
+    t = even_times_ns(batch.seconds[idx], counts, np.round(NS_PER_S / np.maximum(counts, 1)).astype(np.int64))
+
+    def trio(prefix: str) -> np.ndarray | None:
+        names = [f"{prefix} {a}" for a in "XYZ"]
+        return np.column_stack([cols[n] for n in names]) if all(n in cols for n in names) else None
+
+    acc, gyr, mag = trio("Accelerometer"), trio("Gyroscope"), trio("Magnetometer")
+    temp = cols.get("Temperature")
+    if temp is not None:
+        temp = temp + float(st.meta.get("imu_temp_offset", 21.0))
+    meta = {**st.meta, "rate_hz": float(np.median(counts)), "columns": [c.label for c in schema.columns if c.label]}
+    return ImuStream(
+        name=f"{st.name}_imu",
+        t_ns=t - st.origin_ns,
+        acc=None if acc is None else acc * G0,
+        gyr=None if gyr is None else np.radians(gyr),
+        mag=mag,
+        temperature=temp,
+        meta=meta,
+    )
+
+
+def _scalar_signals(batch: RecordBatch, st: _State) -> list[SignalStream]:
+    out = []
+    specs = [
+        (BATTERY, "battery", "<u2", ["battery"], ["V"], 1e-3),
+        (LUX, "lux", "<u2", ["lux"], ["lux"], 1.0),
+        (
+            CAPSENSE,
+            "capsense",
+            "<u2,<u2,u1,u1",
+            ["signal", "reference", "state", "bursts"],
+            ["counts"] * 2 + ["1"] * 2,
+            1.0,
+        ),
+    ]
+    for typ, suffix, fmt, columns, units, scale in specs:
+        idx = np.nonzero(batch.types == typ)[0]
+        dt = (
+            np.dtype(fmt)
+            if "," not in fmt
+            else np.dtype([(c, f) for c, f in zip(columns, fmt.split(","), strict=True)])
+        )
+        idx = idx[batch.sizes[idx] >= dt.itemsize]
+        if len(idx) == 0:
+            continue
+        rows = np.frombuffer(b"".join(batch.payload(int(i))[: dt.itemsize] for i in idx), dtype=dt)
+        values = (
+            np.column_stack([rows[c].astype(np.float64) for c in columns])
+            if rows.dtype.names
+            else rows.astype(np.float64)[:, None] * scale
+        )
+        t = batch.seconds[idx] * NS_PER_S - st.origin_ns
+        keep = np.concatenate([[True], np.diff(t) > 0])  # a repeated second keeps its first record
+        out.append(
+            SignalStream(
+                topic=f"/signals/{st.name}_{suffix}", t_ns=t[keep], columns=columns, units=units, values=values[keep]
+            )
+        )
+    return out
+
+
+def _open_gt3x(path: Path) -> tuple[zipfile.ZipFile, dict[str, str]]:
+    try:
+        z = zipfile.ZipFile(path)
+    except (zipfile.BadZipFile, OSError) as e:
+        raise ConversionError(path, f"not a readable .gt3x (ZIP) file: {e}") from None
+    names = set(z.namelist())
+    if "info.txt" not in names:
+        z.close()
+        raise ConversionError(path, "no info.txt inside: not an ActiGraph .gt3x")
+    try:
+        info = parse_info(path, z.read("info.txt").decode("utf-8-sig", "replace"))
+    except (zipfile.BadZipFile, OSError, EOFError) as e:
+        z.close()
+        raise ConversionError(path, f"info.txt cannot be read: {e}") from None
+    except ConversionError:
+        z.close()
+        raise
+    return z, info
+
+
+def _base_state(path: Path, info: dict[str, str], options: ConvertOptions) -> tuple[_State, int | None]:
+    serial = info["Serial Number"]
+    names = {str(k).upper(): v for k, v in (options.extra.get("names") or {}).items()}
+    name = sanitize_name(names.get(serial.upper(), serial))
+    try:
+        rate = float(info.get("Sample Rate", "nan"))
+        start_ticks = int(info["Start Date"])
+    except (KeyError, ValueError):
+        raise ConversionError(path, "info.txt needs a numeric 'Sample Rate' and 'Start Date'") from None
+    if not rate > 0:
+        raise ConversionError(path, f"info.txt: bad Sample Rate {info.get('Sample Rate')!r}")
+    scale_text = info.get("Acceleration Scale")
+    default_scale = NEO_SCALE if serial[:3].upper() in ("NEO", "CLE", "MRA") else 256.0
+    scale = float(scale_text) if scale_text else default_scale
+    offset = parse_offset_s(info.get("TimeZone"))
+    meta: dict[str, Any] = {
+        "format": "actigraph-gt3x",
+        "model": f"ActiGraph {info.get('Device Type', '')}".strip(),
+        "serial": serial,
+        "firmware": info.get("Firmware", ""),
+        "rate_hz": rate,
+        "accel_scale_lsb_per_g": scale,
+        "time_base": "ns from start_time (info.txt Start Date, device local time)",
+        "source": path.name,
+    }
+    for key in ("Acceleration Min", "Acceleration Max", "Limb", "Subject Name", "Board Revision", "TimeZone"):
+        if key in info:
+            meta[sanitize_name(key)] = info[key]
+    st = _State(origin_ns=ticks_to_epoch_ns(start_ticks), rate_hz=rate, accel_scale=scale, name=name, meta=meta)
+    return st, offset
+
+
+def _trial(st: _State, offset: int | None) -> dict[str, Any]:
+    return {"start_time": iso_from_epoch_ns(st.origin_ns, offset), "time_zone": time_zone_label(offset)}
+
+
+def _iter_log(path: Path, z: zipfile.ZipFile, st: _State, offset: int | None) -> Iterator[Recording]:
+    trial = _trial(st, offset)
+    found = False
+    with z.open("log.bin") as stream:
+        for batch in iter_record_batches(stream, path):
+            for i in np.nonzero(batch.types == PARAMETERS)[0]:
+                params = parse_parameters(batch.payload(int(i)))
+                st.meta.update(params)
+                if params.get("accel_scale"):
+                    st.accel_scale = float(params["accel_scale"])
+                    st.meta["accel_scale_lsb_per_g"] = st.accel_scale
+            for i in np.nonzero(batch.types == METADATA)[0]:
+                try:
+                    doc = json.loads(batch.payload(int(i)).decode("utf-8", "replace"))
+                except ValueError:
+                    continue
+                if isinstance(doc, dict) and doc.get("MetadataType"):
+                    kind = sanitize_name(str(doc["MetadataType"]))
+                    st.meta[f"metadata_{kind}"] = {k: v for k, v in doc.items() if k not in ("JSON", "Parsed")}
+            for i in np.nonzero(batch.types == SENSOR_SCHEMA)[0]:
+                schema = parse_schema(path, batch.payload(int(i)), batch.first + int(i))
+                st.schemas[schema.ident] = schema
+            imus = [s for s in (_activity(path, batch, st), _sensor(path, batch, st)) if s is not None]
+            signals = _scalar_signals(batch, st)
+            st.meta.update(idle_sleep_gaps=st.gaps, idle_sleep_s=st.gap_s)
+            for s in imus:
+                s.meta.update(idle_sleep_gaps=st.gaps, idle_sleep_s=st.gap_s)
+            if not imus and not signals:
+                continue
+            found = found or bool(imus)
+            rec = Recording(imus=imus, signals=signals, sources=[str(path)])
+            rec.metadata[f"imulog.device.{st.name}"] = dict(st.meta)
+            if st.schemas:
+                rec.metadata[f"imulog.device.{st.name}_imu"] = {**st.meta, "model": f"{st.meta['model']} IMU"}
+            rec.metadata["imulog.trial"] = dict(trial)
+            yield rec
+    if not found:
+        raise ConversionError(path, "log.bin holds no ACTIVITY2, ACTIVITY or SENSOR_DATA samples")
+
+
+def _iter_activity_bin(path: Path, z: zipfile.ZipFile, st: _State, offset: int | None) -> Iterator[Recording]:
+    """NEO/MRA activity.bin: 9 bytes per two samples, read in bounded batches."""
+    st.meta["format"] = "actigraph-gt3x (NEO activity.bin)"
+    trial = _trial(st, offset)
+    step = 9 * (BATCH_BYTES // 9)
+    spacing = NS_PER_S / st.rate_hz
+    done = 0
+    with z.open("activity.bin") as stream:
+        while True:
+            data = stream.read(step)
+            if not data:
+                break
+            xyz = unpack_12bit_yxz(data)
+            if len(data) % 9 >= 5:  # an odd last sample (its last nibble unused)
+                tail = unpack_12bit_yxz(data[-(len(data) % 9) :] + b"\x00" * 4)
+                xyz = np.concatenate([xyz, tail[:1]])
+            if len(xyz) == 0:
+                break
+            k = np.arange(done, done + len(xyz), dtype=np.float64)
+            done += len(xyz)
+            imu = ImuStream(
+                name=st.name,
+                t_ns=np.round(k * spacing).astype(np.int64),
+                acc=xyz / st.accel_scale * G0,
+                meta=dict(st.meta),
+            )
+            rec = Recording(imus=[imu], sources=[str(path)])
+            rec.metadata[f"imulog.device.{st.name}"] = dict(st.meta)
+            rec.metadata["imulog.trial"] = dict(trial)
+            yield rec
+    if done == 0:
+        raise ConversionError(path, "activity.bin holds no samples")
+
+
+def iter_chunks(path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+    """Decode a .gt3x batch by batch (same streams in every chunk, times from the trial's start_time)."""
+    path = Path(path)
+    z, info = _open_gt3x(path)
+    with z:
+        st, offset = _base_state(path, info, options or ConvertOptions())
+        names = set(z.namelist())
+        try:
+            if "log.bin" in names:
+                yield from _iter_log(path, z, st, offset)
+            elif "activity.bin" in names:
+                yield from _iter_activity_bin(path, z, st, offset)
+            else:
+                raise ConversionError(path, "neither log.bin nor activity.bin inside the .gt3x")
+        except (zipfile.BadZipFile, EOFError, OSError) as e:  # e.g. a CRC error of the ZIP member
+            raise ConversionError(path, f"damaged ZIP content: {e}") from None
+
+
+def read_gt3x(path: Path, options: ConvertOptions | None = None) -> Recording:
+    """The whole .gt3x as one Recording (assembled from :func:`iter_chunks`)."""
+    return concat_chunks(iter_chunks(path, options))
+
+
+class ActiGraphConverter(Converter):
+    name = "actigraph"
+    description = "ActiGraph .gt3x (log.bin: ACTIVITY2 accel + IMU gyro/mag/temp, battery; NEO activity.bin)"
+    extensions = (".gt3x",)
+    example = "imulog convert ../shared/data/devices/actigraph_gt3x/example.gt3x -o gt3x.mcap"
+
+    def sniff(self, path: Path, head: bytes) -> float:
+        if head[:4] != b"PK\x03\x04":
+            return 0.0
+        try:
+            with zipfile.ZipFile(path) as z:
+                names = set(z.namelist())
+        except (zipfile.BadZipFile, OSError):
+            return 0.5 if Path(path).suffix.lower() == ".gt3x" else 0.0  # damaged: convert() says what is wrong
+        if "info.txt" in names and names & {"log.bin", "activity.bin"}:
+            return 0.95
+        return 0.0
+
+    def recording_key(self, path: Path) -> str | None:
+        return Path(path).name
+
+    def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
+        return read_gt3x(Path(path), options)
+
+
+CONVERTER = ActiGraphConverter()

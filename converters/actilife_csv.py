@@ -1,0 +1,197 @@
+"""ActiLife CSV exports of ActiGraph raw data (the ``RAW`` accelerometer file and the ``IMU`` file).
+
+Layout: a 10-line banner, then a names row, then one row per sample::
+
+    ------------ Data File Created By ActiGraph GT3X+ ActiLife v6.13.3 Firmware v1.7.2 date format M/d/yyyy at 90 Hz ...
+    Serial Number: TAS1E31150129
+    Start Time 08:58:00
+    Start Date 2/14/2019
+    Epoch Period (hh:mm:ss) 00:00:00
+    Download Time 09:03:03
+    Download Date 2/14/2019
+    Current Memory Address: 0
+    Current Battery Voltage: 4.15     Mode = 12
+    --------------------------------------------------
+    Accelerometer X,Accelerometer Y,Accelerometer Z            (RAW: no time column)
+    Timestamp,Accelerometer X,...,Temperature,Gyroscope X,...,Magnetometer X,...   (IMU file)
+
+Banner lines may carry padding commas. Units as ActiLife writes them: accelerometer g, gyroscope deg/s, magnetometer
+uT, temperature degC. Time: the ``Timestamp`` column (local ISO time) when present, else ``Start Date`` +
+``Start Time`` + row / rate (the banner's ``at N Hz``). The start is local time without a zone. Streams are named as
+the .gt3x converter names them: ``/imu/<serial>`` (RAW), ``/imu/<serial>_imu`` (IMU file). Epoch (count) exports
+(``Epoch Period`` other than 00:00:00) are refused: they hold activity counts, not samples.
+"""
+
+from __future__ import annotations
+
+import re
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from converters._binary import UNKNOWN_ZONE
+from converters._common import G0, TableSpec, head_lines, read_numeric, sanitize_name, text_head_lines
+from converters.base import Converter, ConvertOptions
+from converters.errors import ConversionError
+from imulog.model import ImuStream, Recording, SignalStream
+
+BANNER_LINES = 10
+BANNER_START = "------------ Data File Created By ActiGraph"
+TRIOS = {"acc": "Accelerometer", "gyr": "Gyroscope", "mag": "Magnetometer"}
+
+
+def _field(path: Path, lines: list[str], pattern: str, what: str, line_hint: int) -> re.Match:
+    for line in lines[:BANNER_LINES]:
+        m = re.search(pattern, line)
+        if m:
+            return m
+    raise ConversionError(path, f"ActiLife banner has no {what}", line=line_hint)
+
+
+def parse_banner(path: Path, lines: list[str]) -> dict:
+    """Rate (Hz), serial, device line, local start (datetime), date format and epoch period from the banner."""
+    if len(lines) < BANNER_LINES + 1 or not lines[0].startswith(BANNER_START):
+        raise ConversionError(path, "not an ActiLife CSV export (no 'Data File Created By ActiGraph' banner)", line=1)
+    rate = float(_field(path, lines, r" at (\d+(?:\.\d+)?) Hz", "'at N Hz'", 1).group(1))
+    fmt = _field(path, lines, r"date format (\S+)", "'date format'", 1).group(1)
+    serial = _field(path, lines, r"Serial Number:\s*([^,\s]+)", "Serial Number", 2).group(1)
+    start_time = _field(path, lines, r"Start Time\s+(\d{1,2}:\d{2}:\d{2})", "Start Time", 3).group(1)
+    start_date = _field(path, lines, r"Start Date\s+([\d/.\-]+)", "Start Date", 4).group(1)
+    epoch = _field(path, lines, r"Epoch Period \(hh:mm:ss\)\s+(\d{2}:\d{2}:\d{2})", "Epoch Period", 5).group(1)
+    py_fmt = fmt.replace("yyyy", "%Y").replace("MM", "%m").replace("M", "%m").replace("dd", "%d").replace("d", "%d")
+    try:
+        start = datetime.strptime(f"{start_date} {start_time}", f"{py_fmt} %H:%M:%S")
+    except ValueError:
+        raise ConversionError(path, f"Start Date {start_date!r} does not match date format {fmt}", line=4) from None
+    device = re.search(r"Created By (.+?) ActiLife", lines[0])
+    return {
+        "rate_hz": rate,
+        "serial": serial,
+        "start": start,
+        "epoch": epoch,
+        "device": device.group(1).strip() if device else "ActiGraph",
+        "date_format": fmt,
+    }
+
+
+def read_actilife_csv(path: Path, options: ConvertOptions | None = None) -> Recording:
+    options = options or ConvertOptions()
+    path = Path(path)
+    lines = head_lines(path, max_lines=BANNER_LINES + 2)
+    banner = parse_banner(path, lines)
+    if banner["epoch"] != "00:00:00":
+        raise ConversionError(
+            path, f"epoch export (Epoch Period {banner['epoch']}): activity counts, not raw samples", line=5
+        )
+    names_row = [c.strip() for c in lines[BANNER_LINES].split(",")]
+    while names_row and not names_row[-1]:
+        names_row.pop()
+    has_time = bool(names_row) and names_row[0].lower() == "timestamp"
+    cols = names_row[1:] if has_time else names_row
+    if not cols or f"{TRIOS['acc']} X" not in cols:
+        raise ConversionError(path, "names row has no 'Accelerometer X' column", line=BANNER_LINES + 1)
+    spec_names = (["Timestamp"] if has_time else []) + cols
+    spec = TableSpec(
+        path=path,
+        delimiter=",",
+        skip_lines=BANNER_LINES + 1,
+        names=spec_names,
+        ignore={0} if has_time else set(),
+    )
+    values = read_numeric(spec)
+    if has_time:
+        values = values[:, 1:]
+        stamps = pd.read_csv(
+            path, skiprows=BANNER_LINES + 1, header=None, usecols=[0], nrows=len(values), dtype=str, engine="c"
+        )[0]
+        try:
+            t_abs = pd.to_datetime(stamps, format="ISO8601").to_numpy().astype("datetime64[ns]")
+        except (ValueError, TypeError):
+            bad = next((i for i, s in enumerate(stamps) if pd.isna(pd.to_datetime(s, errors="coerce"))), 0)
+            raise ConversionError(
+                path,
+                f"{str(stamps.iloc[bad])[:30]!r} is not a time stamp",
+                line=BANNER_LINES + 2 + bad,
+                column="Timestamp",
+            ) from None
+        t_ns = (t_abs - np.datetime64(banner["start"], "ns")).astype(np.int64)
+        d = np.diff(t_ns)
+        if len(d) and (d <= 0).any():
+            i = int(np.nonzero(d <= 0)[0][0]) + 1
+            raise ConversionError(path, "time stamp does not increase", line=BANNER_LINES + 2 + i, column="Timestamp")
+    else:
+        t_ns = np.round(np.arange(len(values)) * (1e9 / banner["rate_hz"])).astype(np.int64)
+    index = {c: i for i, c in enumerate(cols)}
+
+    def trio(prefix: str) -> np.ndarray | None:
+        names = [f"{prefix} {a}" for a in "XYZ"]
+        return values[:, [index[n] for n in names]] if all(n in index for n in names) else None
+
+    acc, gyr, mag = trio(TRIOS["acc"]), trio(TRIOS["gyr"]), trio(TRIOS["mag"])
+    temp = values[:, index["Temperature"]] if "Temperature" in index else None
+    is_imu = gyr is not None or "IMU" in banner["device"]
+    serial = banner["serial"]
+    names_map = {str(k).upper(): v for k, v in (options.extra.get("names") or {}).items()}
+    base = sanitize_name(names_map.get(serial.upper(), serial))
+    name = f"{base}_imu" if is_imu else base
+    meta = {
+        "format": "actilife-csv",
+        "model": banner["device"],
+        "serial": serial,
+        "rate_hz": banner["rate_hz"],
+        "units": "accelerometer g, gyroscope deg/s, magnetometer uT, temperature degC (ActiLife)",
+        "time_base": "ns from start_time (banner Start Date/Time, device local time)",
+        "source": path.name,
+    }
+    rec = Recording(sources=[str(path)])
+    rec.imus.append(
+        ImuStream(
+            name=name,
+            t_ns=t_ns,
+            acc=None if acc is None else acc * G0,
+            gyr=None if gyr is None else np.radians(gyr),
+            mag=mag,
+            temperature=temp,
+            meta=dict(meta),
+        )
+    )
+    known = {f"{p} {a}" for p in TRIOS.values() for a in "XYZ"} | {"Temperature"}
+    extra = [c for c in cols if c not in known]
+    if extra:
+        rec.signals.append(
+            SignalStream(
+                topic=f"/signals/{name}",
+                t_ns=t_ns,
+                columns=[sanitize_name(c) for c in extra],
+                units=[""] * len(extra),
+                values=values[:, [index[c] for c in extra]],
+            )
+        )
+    rec.metadata[f"imulog.device.{name}"] = meta
+    rec.metadata["imulog.trial"] = {
+        "start_time": banner["start"].isoformat(timespec="milliseconds"),
+        "time_zone": UNKNOWN_ZONE,
+    }
+    return rec
+
+
+class ActiLifeCsvConverter(Converter):
+    name = "actilife-csv"
+    description = "ActiLife CSV export of ActiGraph raw data (RAW accel or IMU file; 10-line banner; g, deg/s, uT)"
+    extensions = (".csv",)
+    example = "imulog convert ../shared/data/devices/actigraph_gt3x/example-IMU.csv -o actilife.mcap"
+
+    def sniff(self, path: Path, head: bytes) -> float:
+        lines = text_head_lines(head, 1)
+        return 0.97 if lines and lines[0].startswith(BANNER_START) else 0.0
+
+    def recording_key(self, path: Path) -> str | None:
+        return Path(path).name
+
+    def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
+        return read_actilife_csv(Path(path), options)
+
+
+CONVERTER = ActiLifeCsvConverter()

@@ -1,0 +1,389 @@
+"""Axivity AX3 / AX6 ``.cwa`` binary recordings (OpenMovement continuous wave accelerometer format).
+
+Layout: a 1024-byte ``MD`` header, then 512-byte ``AX`` data blocks, each::
+
+    0  'AX'  u16 length (508)  u16 deviceFractional  u32 sessionId  u32 sequenceId  u32 RTC timestamp
+    18 u16 light (AAAGGGLLLLLLLLLL)  u16 temperature  u8 events  u8 battery  u8 rate code  u8 numAxesBPS
+    26 i16 timestampOffset  u16 sampleCount  30 480 bytes of samples  510 u16 checksum (word sum of block = 0)
+
+Samples: ``numAxesBPS`` 0x30 = 3 axes packed in 32 bits (3 x 10-bit signed + 2-bit exponent, value << e; 1 g = 256),
+0x32 = 3 x int16, 0x62/0x92 = int16 gyro X,Y,Z then accel X,Y,Z (then mag X,Y,Z, 1 uT = 16). Accelerometer LSB
+1/2^(8+n) g with n the top 3 bits of ``light``; gyro range 8000/2^m deg/s with m the next 3 bits (32768 = range).
+
+Time: the RTC (``YYYYYYMM MMDDDDDh hhhhmmmm mmssssss``, year + 2000) is the device's **local** time with no zone.
+A set top bit of ``deviceFractional`` gives 15 bits of fraction of that second; the device then lowered
+``timestampOffset`` (the sample index where the RTC second applies) by ``fraction * rate``, which is added back.
+Block start = RTC + fraction - timestampOffset / rate; sample times are interpolated between consecutive block
+starts (nominal rate for the last block and across gaps). ``t_ns`` counts from the first sample, whose local time
+is the trial's ``start_time`` (zone unknown). Light (raw 10-bit counts), temperature (degC = (raw - 171) / 3.142,
+as scikit-digital-health) and battery (V = (raw + 512) * 6 / 1024) become one row per block in ``/signals/<name>``.
+
+Every block's checksum is verified: a bad or truncated block stops the conversion with the file and block index
+(a silently skipped block would turn damaged data into a time gap nobody sees). Blocks are decoded in batches from
+a memory map, so memory does not grow with the recording (:func:`iter_chunks`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from converters._binary import NS_PER_S, concat_chunks, days_from_civil, iso_from_epoch_ns, time_zone_label
+from converters._common import G0, sanitize_name
+from converters.base import Converter, ConvertOptions
+from converters.errors import ConversionError
+from imulog.model import ImuStream, Recording, SignalStream
+
+HEADER_BYTES = 1024
+BLOCK_BYTES = 512
+BLOCKS_PER_CHUNK = 8192  # 4 MiB of blocks per decoded batch
+BLOCK_DTYPE = np.dtype(
+    [
+        ("magic", "<u2"),
+        ("length", "<u2"),
+        ("fractional", "<u2"),
+        ("session", "<u4"),
+        ("sequence", "<u4"),
+        ("rtc", "<u4"),
+        ("light", "<u2"),
+        ("temperature", "<u2"),
+        ("events", "u1"),
+        ("battery", "u1"),
+        ("rate_code", "u1"),
+        ("axes_bps", "u1"),
+        ("offset", "<i2"),
+        ("count", "<u2"),
+        ("data", "u1", (480,)),
+        ("checksum", "<u2"),
+    ]
+)
+assert BLOCK_DTYPE.itemsize == BLOCK_BYTES
+MAGIC_AX = 0x5841  # b"AX"
+OTHER_BLOCKS = {0x444D, 0x4255, 0x4953}  # "MD" (repeated metadata), "UB" (usage), "SI" (session info): skipped
+HARDWARE = {0x00: "AX3", 0xFF: "AX3", 0x17: "AX3", 0x64: "AX6"}
+
+
+@dataclass(frozen=True)
+class CwaHeader:
+    """The ``MD`` header's fields (rate in Hz, accelerometer range in g)."""
+
+    hardware_type: int
+    device_id: int
+    session_id: int
+    sensor_config: int
+    rate_code: int
+    firmware: int
+    annotation: str
+
+    @property
+    def rate_hz(self) -> float:
+        return rate_from_code(self.rate_code)
+
+    @property
+    def accel_range_g(self) -> int:
+        return 16 >> (self.rate_code >> 6)
+
+    @property
+    def model(self) -> str:
+        return HARDWARE.get(self.hardware_type, f"Axivity (hardware 0x{self.hardware_type:02X})")
+
+
+def rate_from_code(code: int | np.ndarray) -> float | np.ndarray:
+    """Sampling rate in Hz of a CWA rate code: 3200 / 2^(15 - (code & 15))."""
+    return 3200.0 / np.left_shift(1, 15 - (np.asarray(code, dtype=np.int64) & 0x0F))
+
+
+def parse_header(path: Path, data: bytes) -> CwaHeader:
+    """The 1024-byte ``MD`` header; ConversionError when it is not one."""
+    if len(data) < HEADER_BYTES or data[:2] != b"MD":
+        raise ConversionError(path, "not an Axivity .cwa file (no 'MD' header block)")
+    h = np.frombuffer(data, dtype=np.uint8, count=HEADER_BYTES)
+    device = int(h[5]) | int(h[6]) << 8
+    upper = int(h[11]) | int(h[12]) << 8
+    if upper != 0xFFFF:
+        device |= upper << 16
+    annotation = bytes(h[64:512]).rstrip(b"\xff\x00 ").decode("latin-1").strip()
+    return CwaHeader(
+        hardware_type=int(h[4]),
+        device_id=device,
+        session_id=int.from_bytes(bytes(h[7:11]), "little"),
+        sensor_config=int(h[35]),
+        rate_code=int(h[36]),
+        firmware=int(h[41]),
+        annotation=annotation,
+    )
+
+
+def rtc_to_epoch_s(rtc: np.ndarray) -> np.ndarray:
+    """Packed CWA RTC values -> int64 seconds since 1970 of the device's local wall time."""
+    v = np.asarray(rtc, dtype=np.int64)
+    year = ((v >> 26) & 0x3F) + 2000
+    month = (v >> 22) & 0x0F
+    day = (v >> 17) & 0x1F
+    hour = (v >> 12) & 0x1F
+    minute = (v >> 6) & 0x3F
+    second = v & 0x3F
+    return days_from_civil(year, month, day) * 86400 + hour * 3600 + minute * 60 + second
+
+
+def block_word_sums(raw: np.ndarray) -> np.ndarray:
+    """16-bit sum of the 256 little-endian words of each 512-byte block (0 for an intact block)."""
+    words = raw.view("<u2").reshape(len(raw), BLOCK_BYTES // 2)
+    return (words.sum(axis=1, dtype=np.uint64) & 0xFFFF).astype(np.uint16)
+
+
+def block_start_ns(blocks: np.ndarray) -> np.ndarray:
+    """Start time of each block (its sample 0), int64 ns since 1970 on the device's local clock."""
+    rate = rate_from_code(blocks["rate_code"])
+    frac = blocks["fractional"].astype(np.int64)
+    has_frac = (frac & 0x8000) != 0
+    frac16 = np.where(has_frac, (frac & 0x7FFF) << 1, 0)  # 1/65536 s
+    offset = blocks["offset"].astype(np.int64) + np.where(has_frac, (frac16 * rate.astype(np.int64)) // 65536, 0)
+    secs = rtc_to_epoch_s(blocks["rtc"])
+    return secs * NS_PER_S + (frac16 * NS_PER_S) // 65536 - np.round(offset * (NS_PER_S / rate)).astype(np.int64)
+
+
+def unpack_packed(data: np.ndarray, count: int) -> np.ndarray:
+    """AX3 packed samples (N, 480) bytes -> (N, count, 3) int32 counts (1 g = 256)."""
+    v = np.ascontiguousarray(data[:, : 4 * count]).view("<u4").astype(np.int64)
+    e = v >> 30
+    out = np.empty((*v.shape, 3), dtype=np.int32)
+    for k in range(3):
+        x = (v >> (10 * k)) & 0x3FF
+        x = np.where(x >= 512, x - 1024, x)
+        out[..., k] = x << e
+    return out
+
+
+def unpack_int16(data: np.ndarray, count: int, axes: int) -> np.ndarray:
+    """Unpacked samples (N, 480) bytes -> (N, count, axes) int16."""
+    return np.ascontiguousarray(data[:, : 2 * axes * count]).view("<i2").reshape(len(data), count, axes)
+
+
+@dataclass(frozen=True)
+class _Layout:
+    axes: int
+    packed: bool
+    count: int
+
+
+def _layout(path: Path, blocks: np.ndarray, first_index: int) -> _Layout:
+    """The (single) sample layout of a batch of blocks; ConversionError naming the first odd block."""
+    axes_bps = blocks["axes_bps"]
+    counts = blocks["count"]
+    a0, c0 = int(axes_bps[0]), int(counts[0])
+    odd = np.nonzero((axes_bps != a0) | (counts != c0))[0]
+    if len(odd):
+        i = int(odd[0])
+        raise ConversionError(
+            path,
+            f"data block {first_index + i}: sample layout changes (numAxesBPS 0x{int(axes_bps[i]):02X}, "
+            f"{int(counts[i])} samples; the file started with 0x{a0:02X}, {c0})",
+        )
+    axes, bps = a0 >> 4, a0 & 0x0F
+    if bps == 0 and axes == 3:
+        packed, size = True, 4
+    elif bps == 2 and axes in (3, 6, 9):
+        packed, size = False, 2 * axes
+    else:
+        raise ConversionError(path, f"data block {first_index}: unsupported sample format numAxesBPS 0x{a0:02X}")
+    if c0 == 0 or c0 * size > 480:
+        raise ConversionError(path, f"data block {first_index}: impossible sample count {c0}")
+    return _Layout(axes=axes, packed=packed, count=c0)
+
+
+def _check_blocks(path: Path, raw: np.ndarray, blocks: np.ndarray, first_index: int) -> np.ndarray:
+    """Indices (in the batch) of the AX blocks to decode; ConversionError for a damaged one."""
+    sums = block_word_sums(raw)
+    magic = blocks["magic"]
+    bad_magic = (magic != MAGIC_AX) & ~np.isin(magic, list(OTHER_BLOCKS))
+    if bad_magic.any():
+        i = int(np.nonzero(bad_magic)[0][0])
+        raise ConversionError(
+            path,
+            f"data block {first_index + i} (byte {HEADER_BYTES + (first_index + i) * BLOCK_BYTES}): "
+            f"not an 'AX' data block (starts {bytes(raw[i, :2])!r})",
+        )
+    is_ax = magic == MAGIC_AX
+    bad = is_ax & ((sums != 0) | (blocks["length"] != 508))
+    if bad.any():
+        i = int(np.nonzero(bad)[0][0])
+        raise ConversionError(
+            path,
+            f"data block {first_index + i} (byte {HEADER_BYTES + (first_index + i) * BLOCK_BYTES}): checksum "
+            "mismatch (the block is damaged)",
+        )
+    return np.nonzero(is_ax)[0]
+
+
+def _decode(blocks: np.ndarray, layout: _Layout) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """(acc g, gyr deg/s or None, mag uT or None), each (N, count, 3) float64."""
+    accel_lsb = np.left_shift(1, 8 + ((blocks["light"].astype(np.int64) >> 13) & 7)).astype(np.float64)
+    if layout.packed:
+        return unpack_packed(blocks["data"], layout.count) / accel_lsb[:, None, None], None, None
+    raw = unpack_int16(blocks["data"], layout.count, layout.axes).astype(np.float64)
+    if layout.axes == 3:
+        return raw / accel_lsb[:, None, None], None, None
+    gyro_range = 8000.0 / np.left_shift(1, (blocks["light"].astype(np.int64) >> 10) & 7)
+    gyr = raw[..., 0:3] * (gyro_range / 32768.0)[:, None, None]
+    acc = raw[..., 3:6] / accel_lsb[:, None, None]
+    mag = raw[..., 6:9] / 16.0 if layout.axes == 9 else None
+    return acc, gyr, mag
+
+
+def sample_times_ns(starts: np.ndarray, next_start: int | None, count: int, rate_hz: np.ndarray) -> np.ndarray:
+    """Per-sample times (N, count) int64 ns from block starts: interpolated to the next block's start when it
+    follows within twice the nominal block duration, else at the nominal rate."""
+    nominal = np.round(count * NS_PER_S / rate_hz).astype(np.int64)
+    nxt = np.append(starts[1:], next_start if next_start is not None else starts[-1] + nominal[-1])
+    span = nxt - starts
+    ok = (span > 0) & (span < 2 * nominal)
+    span = np.where(ok, span, nominal)
+    k = np.arange(count, dtype=np.int64)
+    return starts[:, None] + (span[:, None] * k[None, :]) // count
+
+
+def iter_chunks(
+    path: Path, options: ConvertOptions | None = None, blocks_per_chunk: int = BLOCKS_PER_CHUNK
+) -> Iterator[Recording]:
+    """Decode ``path`` batch by batch: one Recording per ``blocks_per_chunk`` blocks, same streams, one time origin.
+
+    Memory is bounded by the batch (the file is memory-mapped). Raises ConversionError for damaged input.
+    """
+    options = options or ConvertOptions()
+    path = Path(path)
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        head = f.read(HEADER_BYTES)
+    header = parse_header(path, head)
+    n_blocks, rest = divmod(size - HEADER_BYTES, BLOCK_BYTES)
+    if rest:
+        raise ConversionError(
+            path,
+            f"data block {n_blocks} (byte {HEADER_BYTES + n_blocks * BLOCK_BYTES}): truncated ({rest} of 512 bytes)",
+        )
+    if n_blocks <= 0:
+        raise ConversionError(path, "no data blocks after the header")
+    mm = np.memmap(path, dtype=np.uint8, mode="r", offset=HEADER_BYTES, shape=(n_blocks, BLOCK_BYTES))
+    serial = str(header.device_id)
+    names = {str(k).upper(): v for k, v in (options.extra.get("names") or {}).items()}
+    name = sanitize_name(names.get(serial.upper(), f"{header.model.lower()}_{serial}"))
+    layout: _Layout | None = None
+    origin: int | None = None
+    meta: dict = {}
+    prev_end: int | None = None
+    for first in range(0, n_blocks, blocks_per_chunk):
+        stop = min(n_blocks, first + blocks_per_chunk)
+        raw = np.array(mm[first : min(n_blocks, stop + 1)])  # one block ahead: the next block's start time
+        blocks_all = raw.view(BLOCK_DTYPE).reshape(len(raw))
+        keep = _check_blocks(path, raw[: stop - first], blocks_all[: stop - first], first)
+        ahead = None
+        if stop < n_blocks and blocks_all[-1]["magic"] == MAGIC_AX:
+            _check_blocks(path, raw[-1:], blocks_all[-1:], stop)
+            ahead = int(block_start_ns(blocks_all[-1:])[0])
+        if len(keep) == 0:
+            continue
+        blocks = blocks_all[keep]
+        index = first + keep  # block indices in the file
+        lay = _layout(path, blocks, int(index[0]))
+        if layout is None:
+            layout = lay
+        elif lay != layout:
+            raise ConversionError(path, f"data block {int(index[0])}: sample layout changes within the recording")
+        rate = rate_from_code(blocks["rate_code"])
+        starts = block_start_ns(blocks)
+        t = sample_times_ns(starts, ahead, layout.count, rate).ravel()
+        if origin is None:
+            origin = int(t[0])
+            meta = _device_meta(path, header, layout, name, blocks)
+        d = np.diff(np.concatenate([[origin - 1 if prev_end is None else prev_end], t]))
+        if (d <= 0).any():
+            i = int(np.nonzero(d <= 0)[0][0]) // layout.count
+            raise ConversionError(path, f"data block {int(index[i])}: time stamp goes backwards")
+        prev_end = int(t[-1])
+        acc, gyr, mag = _decode(blocks, layout)
+        n = len(t)
+        imu = ImuStream(
+            name=name,
+            t_ns=t - origin,
+            acc=acc.reshape(n, 3) * G0,
+            gyr=None if gyr is None else np.radians(gyr.reshape(n, 3)),
+            mag=None if mag is None else mag.reshape(n, 3),
+            meta=dict(meta),
+        )
+        signals = SignalStream(
+            topic=f"/signals/{name}",
+            t_ns=starts - origin,
+            columns=["light", "temperature", "battery"],
+            units=["counts", "degC", "V"],
+            values=np.column_stack(
+                [
+                    (blocks["light"] & 0x3FF).astype(np.float64),
+                    ((blocks["temperature"] & 0x3FF).astype(np.float64) - 171.0) / 3.142,
+                    (blocks["battery"].astype(np.float64) + 512.0) * 6.0 / 1024.0,
+                ]
+            ),
+        )
+        rec = Recording(imus=[imu], signals=[signals], sources=[str(path)])
+        rec.metadata[f"imulog.device.{name}"] = meta
+        rec.metadata["imulog.trial"] = {
+            "start_time": iso_from_epoch_ns(origin),
+            "time_zone": time_zone_label(None),
+        }
+        yield rec
+    if origin is None:
+        raise ConversionError(path, "no 'AX' data blocks")
+
+
+def _device_meta(path: Path, header: CwaHeader, layout: _Layout, name: str, blocks: np.ndarray) -> dict:
+    light = int(blocks["light"][0])
+    meta = {
+        "format": "axivity-cwa",
+        "model": f"Axivity {header.model}",
+        "serial": str(header.device_id),
+        "session_id": header.session_id,
+        "firmware": header.firmware,
+        "rate_hz": float(rate_from_code(int(blocks["rate_code"][0]))),
+        "accel_range_g": header.accel_range_g,
+        "accel_lsb_per_g": 1 << (8 + ((light >> 13) & 7)),
+        "sample_format": "packed 3x10-bit + exponent" if layout.packed else f"{layout.axes} x int16",
+        "samples_per_block": layout.count,
+        "time_base": "ns from start_time; device RTC in local time without a zone",
+        "source": path.name,
+    }
+    if layout.axes >= 6:
+        meta["gyro_range_dps"] = 8000 >> ((light >> 10) & 7)
+    if header.annotation:
+        meta["annotation"] = header.annotation
+    return meta
+
+
+def read_cwa(path: Path, options: ConvertOptions | None = None) -> Recording:
+    """The whole file as one Recording (assembled from :func:`iter_chunks`)."""
+    return concat_chunks(iter_chunks(path, options))
+
+
+class AxivityConverter(Converter):
+    name = "axivity"
+    description = "Axivity AX3/AX6 .cwa (accel, gyro; light, temperature, battery as signals); local start time"
+    extensions = (".cwa",)
+    example = "imulog convert ../shared/data/devices/axivity_cwa/ax6_sample.cwa -o ax6.mcap"
+
+    def sniff(self, path: Path, head: bytes) -> float:
+        if len(head) >= HEADER_BYTES + 2 and head[:2] == b"MD" and head[HEADER_BYTES : HEADER_BYTES + 2] == b"AX":
+            return 0.99
+        if head[:2] == b"MD" and Path(path).suffix.lower() == ".cwa":
+            return 0.9
+        return 0.0
+
+    def recording_key(self, path: Path) -> str | None:
+        return Path(path).name
+
+    def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
+        return read_cwa(Path(path), options)
+
+
+CONVERTER = AxivityConverter()

@@ -1,0 +1,131 @@
+"""Axivity .cwa: the real AX3 and AX6 samples (scikit-digital-health, MIT) against skdh's reference decodes,
+block checksums, fractional block time stamps, chunked reading, and clean failures on damaged files."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from converters import ConversionError, detect
+from converters._common import G0
+from converters.axivity import BLOCK_BYTES, HEADER_BYTES, block_start_ns, iter_chunks, read_cwa
+from imulog.archive import TrialReader
+from imulog.cli import cli
+
+
+@pytest.fixture(scope="module")
+def cwa_dir(shared_data: Path) -> Path:
+    return shared_data / "devices" / "axivity_cwa"
+
+
+def _abs_times_s(rec) -> np.ndarray:
+    start = np.datetime64(rec.metadata["imulog.trial"]["start_time"], "ns")
+    origin = (start - np.datetime64("1970-01-01T00:00:00", "ns")).astype(np.int64)
+    return (origin + rec.imus[0].t_ns) / 1e9
+
+
+@pytest.mark.parametrize("kind", ["ax3", "ax6"])
+def test_values_match_skdh_reference(cwa_dir: Path, kind: str):
+    rec = read_cwa(cwa_dir / f"{kind}_sample.cwa")
+    ref = np.load(cwa_dir / f"{kind}_data.npz")
+    imu = rec.imus[0]
+    assert len(imu) == len(ref["time"])
+    np.testing.assert_allclose(imu.acc / G0, ref["accel"], atol=5e-5, rtol=0)  # skdh's own tolerance, g
+    if kind == "ax6":
+        np.testing.assert_allclose(np.degrees(imu.gyr), ref["gyro"], atol=1e-4, rtol=0)
+        np.testing.assert_allclose(np.degrees(imu.gyr[0]), [-66.223145, -27.221678, 104.73632], atol=1e-4)
+    else:
+        assert imu.gyr is None
+        np.testing.assert_allclose(imu.acc[0] / G0, [-0.09375, -0.203125, 0.953125], atol=1e-12)
+    # skdh ignores the 15-bit fraction of the block time stamp; ours uses it, so times agree within ~3 samples
+    rate = float(ref["fs"][0])
+    d = _abs_times_s(rec) - ref["time"]
+    assert np.abs(d).max() < 3.2 / rate
+    assert np.all(np.diff(imu.t_ns) > 0)
+    # one signal row per block: temperature as skdh computes it, light counts, battery volts
+    sig = rec.signals[0]
+    per_block = len(imu) // len(sig)
+    np.testing.assert_allclose(sig.values[:, 1], ref["temperature"][::per_block], atol=1e-5)
+    assert sig.columns == ["light", "temperature", "battery"] and sig.units == ["counts", "degC", "V"]
+    assert np.all((sig.values[:, 2] > 3.0) & (sig.values[:, 2] < 4.4))
+
+
+def test_fractional_time_stamps_make_blocks_regular(cwa_dir: Path):
+    """With the fraction (and the offset it implies) block starts are regular to < 1 ms; without, to 1/rate."""
+    data = np.fromfile(cwa_dir / "ax3_sample.cwa", dtype=np.uint8)[HEADER_BYTES:].reshape(-1, BLOCK_BYTES)
+    from converters.axivity import BLOCK_DTYPE
+
+    blocks = data.view(BLOCK_DTYPE).ravel()
+    d_ms = np.diff(block_start_ns(blocks)) / 1e6
+    assert d_ms.std() < 1.0
+    assert abs(np.median(d_ms) - 608.4) < 0.5  # 120 samples at the device's real ~197.2 Hz
+
+
+def test_metadata_and_start_time(cwa_dir: Path):
+    rec = read_cwa(cwa_dir / "ax3_sample.cwa")
+    trial = rec.metadata["imulog.trial"]
+    assert trial["start_time"].startswith("2020-02-12T09:03:3")
+    assert trial["time_zone"] == "unknown (device local time)"
+    dev = rec.metadata["imulog.device.ax3_51888"]
+    assert dev["rate_hz"] == 200.0 and dev["accel_range_g"] == 8 and dev["serial"] == "51888"
+    rec6 = read_cwa(cwa_dir / "ax6_sample.cwa")
+    dev6 = rec6.metadata[f"imulog.device.{rec6.imus[0].name}"]
+    assert dev6["model"] == "Axivity AX6" and dev6["gyro_range_dps"] == 2000 and dev6["accel_lsb_per_g"] == 2048
+    assert rec6.metadata["imulog.trial"]["start_time"].startswith("2019-10-29T09:03:0")
+
+
+def test_chunks_assemble_to_the_whole_file(cwa_dir: Path):
+    path = cwa_dir / "ax3_sample.cwa"
+    whole = read_cwa(path)
+    chunks = list(iter_chunks(path, blocks_per_chunk=64))
+    assert len(chunks) == 8  # 490 blocks
+    t = np.concatenate([c.imus[0].t_ns for c in chunks])
+    acc = np.concatenate([c.imus[0].acc for c in chunks])
+    np.testing.assert_array_equal(t, whole.imus[0].t_ns)
+    np.testing.assert_array_equal(acc, whole.imus[0].acc)
+
+
+def test_detected_and_converted_by_the_cli(cwa_dir: Path, tmp_path: Path):
+    for kind in ("ax3", "ax6"):
+        src = cwa_dir / f"{kind}_sample.cwa"
+        assert detect(src).name == "axivity"
+        out = tmp_path / f"{kind}.mcap"
+        r = CliRunner().invoke(cli, ["convert", str(src), "-o", str(out)])
+        assert r.exit_code == 0, r.output
+        r = CliRunner().invoke(cli, ["doctor", str(out)])
+        assert r.exit_code == 0, r.output
+        with TrialReader(out) as trial:
+            topics = trial.topics()
+            imu_topic = next(t for t in topics if t.startswith("/imu/"))
+            assert trial.read(imu_topic).acc.shape[0] == (58800 if kind == "ax3" else 10360)
+            assert any(t.startswith("/signals/") for t in topics)
+            assert trial.metadata["imulog.trial"]["time_zone"] == "unknown (device local time)"
+
+
+def _damaged(tmp_path: Path, src: Path, how: str) -> Path:
+    data = bytearray(src.read_bytes())
+    if how == "truncate":
+        data = data[: HEADER_BYTES + 17 * BLOCK_BYTES + 100]
+    else:  # one flipped bit in a sample of data block 17
+        data[HEADER_BYTES + 17 * BLOCK_BYTES + 200] ^= 0x04
+    out = tmp_path / f"{how}.cwa"
+    out.write_bytes(bytes(data))
+    return out
+
+
+@pytest.mark.parametrize("how", ["truncate", "flip"])
+def test_damaged_file_one_line_error_and_no_output(cwa_dir: Path, tmp_path: Path, how: str):
+    bad = _damaged(tmp_path, cwa_dir / "ax6_sample.cwa", how)
+    with pytest.raises(ConversionError) as e:
+        read_cwa(bad)
+    msg = str(e.value)
+    assert "\n" not in msg and bad.name in msg
+    assert "data block 17" in msg
+    assert ("truncated" in msg) if how == "truncate" else ("checksum" in msg)
+    out = tmp_path / "out.mcap"
+    r = CliRunner().invoke(cli, ["convert", str(bad), "-o", str(out)])
+    assert r.exit_code != 0 and "data block 17" in r.output
+    assert not out.exists() and not list(tmp_path.glob("*.mcap*"))
