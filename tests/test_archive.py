@@ -68,7 +68,7 @@ def test_round_trip_every_schema_is_bit_identical(trial):
             "imulog.AnalogBlock",
             "imulog.SignalBlock",
             "imulog.IntervalEvent",
-            "foxglove.PoseInFrame",
+            "imulog.PoseBlock",
         }
         for stream in rec.streams():
             assert_stream_equal(stream, tr.read(stream.topic))
@@ -392,7 +392,7 @@ def test_cli_info_doctor_export(trial, tmp_path, rng):
     for text in (
         "/imu/wrist",
         "imulog.ImuBlock",
-        "foxglove.PoseInFrame",
+        "imulog.PoseBlock",
         "imulog.trial",
         "derived runs",
         "#1 orientation",

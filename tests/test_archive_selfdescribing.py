@@ -34,6 +34,9 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from google.protobuf.json_format import MessageToDict
 from mcap.reader import make_reader
 
+from google.protobuf.descriptor import FieldDescriptor as FD
+
+PACK = {FD.TYPE_SFIXED64: "q", FD.TYPE_DOUBLE: "d", FD.TYPE_BOOL: "?"}
 classes = {}
 out = {}
 with open(sys.argv[1], "rb") as f:
@@ -54,9 +57,12 @@ with open(sys.argv[1], "rb") as f:
             d["messages"].append({"t": t, "v": struct.pack("<7d", p.x, p.y, p.z, q.w, q.x, q.y, q.z).hex()})
         elif schema.name == "imulog.IntervalEvent":
             d["messages"].append(MessageToDict(msg, preserving_proto_field_name=True))
-        else:
+        else:  # packed repeated numbers arrive as Python numbers: pack them back to compare bit for bit
             fields = {}
             for fd, value in msg.ListFields():
+                fmt = PACK.get(fd.type) if fd.is_repeated else None
+                if fmt:
+                    value = struct.pack(f"<{len(value)}{fmt}", *value)
                 fields[fd.name] = value.hex() if isinstance(value, bytes) else (list(value) if fd.is_repeated else value)
             d["messages"].append(fields)
 json.dump(out, sys.stdout)
@@ -117,7 +123,7 @@ def test_marker_analog_signal_blocks_are_bit_identical(decoded):
     assert_bit_identical(_cat(msgs, "values", "<f8").reshape(-1, 4), sig.values, "signal")
 
 
-def test_intervals_and_foxglove_poses(decoded):
+def test_intervals_and_pose_blocks(decoded):
     out, rec = decoded
     ev = rec.events[0]
     msgs = out["/events/c3d"]["messages"]
@@ -127,11 +133,10 @@ def test_intervals_and_foxglove_poses(decoded):
     assert [int(m.get("task_index", 0)) for m in msgs] == ev.task_index.tolist()
     ps = rec.poses[0]
     msgs = out["/poses/cluster"]["messages"]
-    assert out["/poses/cluster"]["schema"] == "foxglove.PoseInFrame"
-    assert [m["t"] for m in msgs] == ps.t_ns.tolist()
-    values = np.frombuffer(bytes.fromhex("".join(m["v"] for m in msgs)), "<f8").reshape(-1, 7)
-    assert_bit_identical(values[:, :3], ps.position, "position")
-    assert_bit_identical(values[:, 3:], ps.orientation, "orientation")
+    assert out["/poses/cluster"]["schema"] == "imulog.PoseBlock"
+    assert_bit_identical(_cat(msgs, "t_ns", "<i8"), ps.t_ns, "pose t")
+    assert_bit_identical(_cat(msgs, "position", "<f8").reshape(-1, 3), ps.position, "position")
+    assert_bit_identical(_cat(msgs, "orientation", "<f8").reshape(-1, 4), ps.orientation, "orientation")
 
 
 def test_mcap_protobuf_support_decoder_reads_it_too(tmp_path: Path):

@@ -6,6 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from google.protobuf import descriptor_pb2
 
@@ -85,15 +86,141 @@ def test_newer_schema_version_is_refused_with_a_clear_message():
 
 def test_older_block_without_version_field_still_decodes():
     """Version 0 (field absent, as a reader meets a message from before versioning) decodes."""
-    import numpy as np
-
     from imulog.archive._generated.imulog import SignalBlock_pb2
 
     t = np.arange(3, dtype="<i8")
     v = np.arange(3, dtype="<f8")
-    msg = SignalBlock_pb2.SignalBlock(columns=["a"], units=["1"], count=3, t_ns=t.tobytes(), values=v.tobytes())
+    msg = SignalBlock_pb2.SignalBlock(columns=["a"], units=["1"], count=3, t_ns=t.tolist(), values=v.tolist())
     s = codec.decode("imulog.SignalBlock", "/derived/a", {}, [msg.SerializeToString()])
     assert s.values[:, 0].tolist() == [0.0, 1.0, 2.0]
+
+
+# ------------------------------------------------------------------ packed repeated numbers (issue 16 item 1)
+
+
+def _random_streams(rng):
+    from imulog.model import AnalogStream, ImuStream, MarkerStream, PoseStream, SignalStream
+
+    n = 230
+    t = np.cumsum(rng.integers(5_000_000, 15_000_000, n)).astype(np.int64) - 10**9
+    acc = rng.normal(size=(n, 3))
+    acc[5] = [np.nan, -0.0, np.inf]
+    valid = rng.random((n, 3)) > 0.2
+    pos = np.where(valid[..., None], rng.normal(size=(n, 3, 3)), np.nan)
+    q = rng.normal(size=(n, 4))
+    return [
+        ImuStream("wrist", t, acc=acc, gyr=rng.normal(size=(n, 3)), temperature=rng.normal(30, 1, n)),
+        ImuStream("chest", t, acc=acc),
+        MarkerStream("vicon", t, ["O", "", "Y"], pos, valid),
+        AnalogStream("emg", t, ["a", "b"], ["V", ""], rng.normal(size=(n, 2))),
+        SignalStream("/derived/x", t, ["v"], ["1"], rng.normal(size=(n, 1)), frame_id="world"),
+        PoseStream("/derived/vicon/cluster_pose", t, rng.normal(size=(n, 3)), q / np.linalg.norm(q, axis=1)[:, None]),
+    ]
+
+
+def _as_protobuf(schema_name: str, payload: bytes):
+    """The same block built field by field with protobuf's own classes (Python lists for the arrays)."""
+    parsed = codec.MESSAGE_CLASSES[schema_name].FromString(payload)
+    rebuilt = codec.MESSAGE_CLASSES[schema_name]()
+    for fd, value in parsed.ListFields():
+        if fd.is_repeated:
+            getattr(rebuilt, fd.name).extend(list(value))
+        else:
+            setattr(rebuilt, fd.name, value)
+    return parsed, rebuilt
+
+
+def test_block_writer_bytes_equal_protobufs_own_serialization():
+    """imulog joins numpy bytes; protobuf serializing the same numbers gives the very same bytes."""
+    for stream in _random_streams(np.random.default_rng(5)):
+        schema, _, _, payloads = codec.encode(stream)
+        assert schema in codec.BLOCK_SCHEMAS and len(payloads) > 1
+        for payload in payloads:
+            parsed, rebuilt = _as_protobuf(schema, payload)
+            assert rebuilt.SerializeToString() == payload, schema
+        # any protobuf reader gets numbers, not bytes
+        assert isinstance(parsed.t_ns[0], int)
+
+
+def test_packed_bool_is_one_byte_per_value_on_the_wire():
+    from imulog.archive._generated.imulog import MarkerBlock_pb2
+
+    flags = [True, False, True, True, False]
+    msg = MarkerBlock_pb2.MarkerBlock(valid=flags)
+    assert msg.SerializeToString() == b"\x3a\x05" + bytes([1, 0, 1, 1, 0])  # tag 7/LEN, length 5, 0/1 each
+
+
+def test_unpacked_repeated_fields_from_another_writer_decode_through_protobuf():
+    """Protobuf readers must accept unpacked repeated numbers: the fast scan falls back and agrees."""
+    from imulog.archive import wire
+
+    stream = _random_streams(np.random.default_rng(9))[2]  # markers: sfixed64, double and bool arrays
+    schema, meta, _, payloads = codec.encode(stream)
+    unpacked = []
+    for payload in payloads:
+        out = b""
+        for number, wire_type, value in wire.scan(payload):
+            if number in (5, 6, 7):  # t_ns, pos, valid: one tagged value each
+                width, wt = (1, wire.WIRE_VARINT) if number == 7 else (8, wire.WIRE_I64)
+                raw = bytes(value)
+                out += b"".join(wire.tag(number, wt) + raw[k : k + width] for k in range(0, len(raw), width))
+            elif wire_type == wire.WIRE_VARINT:
+                out += wire.tag(number, wire_type) + wire.varint(value)
+            else:
+                out += wire.len_field(number, value) if len(value) else wire.tag(number, 2) + b"\x00"
+        unpacked.append(out)
+    assert unpacked[0] != payloads[0]
+    a = codec.decode(schema, "/markers/vicon", meta, payloads)
+    b = codec.decode(schema, "/markers/vicon", meta, unpacked)
+    assert np.array_equal(a.t_ns, b.t_ns) and np.array_equal(a.valid, b.valid)
+    assert np.array_equal(a.pos.view(np.uint64), b.pos.view(np.uint64))  # NaN bits too
+
+
+def test_files_written_with_bytes_fields_still_read(repo_root: Path):
+    """tests/data/layout_v1_bytes.mcap was written by imulog before the change (bytes fields, PoseInFrame)."""
+    from imulog.archive import TrialReader, check_file
+
+    path = repo_root / "tests/data/layout_v1_bytes.mcap"
+    ref = np.load(repo_root / "tests/data/layout_v1_bytes.npz")
+    assert check_file(path).ok
+    with TrialReader(path) as tr:
+        schemas = {c.topic: c.schema_name for c in tr.channels}
+        assert schemas["/poses/optical"] == "foxglove.PoseInFrame"
+        embedded = {s.name: s.data for s in tr.summary.schemas.values()}
+        old = descriptor_pb2.FileDescriptorSet.FromString(embedded["imulog.ImuBlock"])
+        imu_fields = {f.name: f.type for f in old.file[-1].message_type[0].field}
+        assert imu_fields["acc"] == descriptor_pb2.FieldDescriptorProto.TYPE_BYTES  # really the old layout
+        imu = tr.read("/imu/wrist")
+        mk = tr.read("/markers/vicon")
+        pose = tr.read("/poses/optical")
+        sig = tr.read("/signals/x")
+        an = tr.read("/analog/emg")
+        ev = tr.read("/events/e")
+    assert np.array_equal(imu.t_ns, ref["t"]) and np.array_equal(mk.t_ns, ref["t"] + 123)
+    for got, want in ((imu.acc, "acc"), (imu.gyr, "gyr"), (imu.temperature, "temp"), (mk.pos, "pos")):
+        assert np.array_equal(got.view(np.uint64), ref[want].view(np.uint64)), want
+    assert np.array_equal(mk.valid, ref["valid"])
+    assert np.array_equal(an.values, ref["an"]) and np.array_equal(sig.values, ref["sig"])
+    assert np.array_equal(pose.position, ref["ppos"]) and np.array_equal(pose.orientation, ref["pq"])
+    assert ev.labels == ["reach", "foot"]
+
+
+def test_appending_to_an_old_file_keeps_its_raw_bytes(repo_root: Path, tmp_path: Path):
+    import shutil
+
+    from imulog.archive import TrialReader, append_derived, check_file
+    from imulog.model import SignalStream
+
+    path = tmp_path / "old.mcap"
+    shutil.copy(repo_root / "tests/data/layout_v1_bytes.mcap", path)
+    with TrialReader(path) as tr:
+        before = {t: tr.compute_channel_hash(t) for t in tr.topics()}
+        t = tr.read("/imu/wrist").t_ns
+    append_derived(path, [SignalStream("/derived/y", t, ["v"], ["1"], np.ones(len(t)))], run={"step": "test"})
+    assert check_file(path).ok
+    with TrialReader(path) as tr:
+        assert {t: tr.compute_channel_hash(t) for t in before} == before
+        assert np.array_equal(tr.read("/derived/y", start_ns=int(t[10]), end_ns=int(t[20])).t_ns, t[10:20])
 
 
 def test_generated_descriptors_equal_protoc_output(repo_root: Path, tmp_path: Path):

@@ -1,10 +1,14 @@
 """Encode imulog.model streams as protobuf messages and decode them back, columnar and bit-exact.
 
-High-rate streams (IMU, markers, analog, signals) become one block message per ~1 s window with packed
-little-endian arrays; decoding joins the ``bytes`` fields of all blocks once and views them with
-``numpy.frombuffer``, so no per-sample Python objects are created. Intervals are one
-``imulog.IntervalEvent`` per interval; poses are one ``foxglove.PoseInFrame`` per sample (so Foxglove and
-Rerun draw them natively).
+High-rate streams (IMU, markers, analog, signals, poses) become one block message per ~1 s window whose
+arrays are packed repeated numeric fields (``repeated sfixed64 t_ns``, ``repeated double``, ``repeated
+bool``): any protobuf reader gets numbers, and the packed bytes are little-endian arrays, so blocks are
+written by joining array bytes (:mod:`imulog.archive.wire`) and decoded by joining the raw field bytes of
+all blocks once and viewing them with ``numpy.frombuffer`` (no per-sample Python objects). The wire bytes
+equal those of the older ``bytes`` fields, so files written before the change read unchanged. Intervals
+are one ``imulog.IntervalEvent`` per interval. Poses written by older imulog (one ``foxglove.PoseInFrame``
+per sample) still decode. Message log times come from a :class:`~imulog.archive.timeline.LogMap` (the
+trial's one time axis); the payload keeps the samples' own clock.
 """
 
 from __future__ import annotations
@@ -16,14 +20,17 @@ from typing import Any
 import numpy as np
 from google.protobuf import descriptor_pb2
 
+from imulog.archive import wire
 from imulog.archive._generated.foxglove import PoseInFrame_pb2
 from imulog.archive._generated.imulog import (
     AnalogBlock_pb2,
     ImuBlock_pb2,
     IntervalEvent_pb2,
     MarkerBlock_pb2,
+    PoseBlock_pb2,
     SignalBlock_pb2,
 )
+from imulog.archive.timeline import IDENTITY, LogMap
 from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream, Stream
 
 SCHEMA_VERSION = 1  # layout version written into every imulog block; readers accept <= this
@@ -35,7 +42,8 @@ MESSAGE_CLASSES = {
     "imulog.AnalogBlock": AnalogBlock_pb2.AnalogBlock,
     "imulog.SignalBlock": SignalBlock_pb2.SignalBlock,
     "imulog.IntervalEvent": IntervalEvent_pb2.IntervalEvent,
-    "foxglove.PoseInFrame": PoseInFrame_pb2.PoseInFrame,
+    "imulog.PoseBlock": PoseBlock_pb2.PoseBlock,
+    "foxglove.PoseInFrame": PoseInFrame_pb2.PoseInFrame,  # poses of files written before PoseBlock
 }
 KIND_SCHEMA = {
     "imu": "imulog.ImuBlock",
@@ -43,9 +51,10 @@ KIND_SCHEMA = {
     "analog": "imulog.AnalogBlock",
     "signal": "imulog.SignalBlock",
     "intervals": "imulog.IntervalEvent",
-    "pose": "foxglove.PoseInFrame",
+    "pose": "imulog.PoseBlock",
 }
-SCHEMA_KIND = {v: k for k, v in KIND_SCHEMA.items()}
+SCHEMA_KIND = {**{v: k for k, v in KIND_SCHEMA.items()}, "foxglove.PoseInFrame": "pose"}
+BLOCK_SCHEMAS = ("imulog.ImuBlock", "imulog.MarkerBlock", "imulog.AnalogBlock", "imulog.SignalBlock", "imulog.PoseBlock")
 _I8 = np.dtype("<i8")
 _F8 = np.dtype("<f8")
 _U1 = np.dtype("u1")
@@ -96,6 +105,11 @@ def log_time(t_ns: int) -> int:
     return min(max(int(t_ns), 0), _MAX_LOG_TIME)
 
 
+def channel_log_time(channel_meta: dict[str, str], t_ns: int) -> int:
+    """The log time at which a channel's sample time ``t_ns`` sits (its ``log_time`` map; identity for old files)."""
+    return LogMap.from_meta(channel_meta).one(t_ns)
+
+
 def block_bounds(t_ns: np.ndarray, block_ns: int = BLOCK_NS) -> list[tuple[int, int]]:
     """Index ranges of consecutive samples falling in the same ``block_ns`` window (from the first sample)."""
     n = len(t_ns)
@@ -107,10 +121,8 @@ def block_bounds(t_ns: np.ndarray, block_ns: int = BLOCK_NS) -> list[tuple[int, 
     return list(zip(edges[:-1], edges[1:], strict=True))
 
 
-def _le(a: np.ndarray | None, dtype: np.dtype, rows: slice) -> bytes:
-    if a is None:
-        return b""
-    return np.ascontiguousarray(a[rows], dtype=dtype).tobytes()
+def _rows(a: np.ndarray | None, rows: slice) -> np.ndarray | None:
+    return None if a is None else a[rows]
 
 
 def _stats(t_ns: np.ndarray, values: list[np.ndarray | None]) -> dict[str, str]:
@@ -134,16 +146,28 @@ def _stats(t_ns: np.ndarray, values: list[np.ndarray | None]) -> dict[str, str]:
     return out
 
 
-def encode(stream: Stream) -> tuple[str, dict[str, str], list[int], list[bytes]]:
-    """-> (schema name, channel metadata, log times, serialized messages) for one stream."""
+def _block(*fields: bytes) -> bytes:
+    return b"".join(fields)
+
+
+def encode(stream: Stream, log_map: LogMap = IDENTITY) -> tuple[str, dict[str, str], list[int], list[bytes]]:
+    """-> (schema name, channel metadata, log times, serialized messages) for one stream.
+
+    ``log_map`` places the messages on the trial's time axis (:mod:`imulog.archive.timeline`); the
+    default keeps log time = sample time (clamped at 0), the layout of files written before the axis.
+    """
     kind = stream_kind(stream)
     meta: dict[str, str] = {"kind": kind, "schema_version": str(SCHEMA_VERSION)}
-    times: list[int] = []
+    if log_map is not IDENTITY:
+        meta["log_time"] = log_map.to_meta()
+    starts: list[int] = []
     payloads: list[bytes] = []
+    u, st, pk = wire.uint_field, wire.string_field, wire.packed
+    v = SCHEMA_VERSION
     if kind == "imu":
         assert isinstance(stream, ImuStream)
         fields = [(f, getattr(stream, f)) for f in ("acc", "gyr", "mag", "temperature")]
-        present = [f for f, v in fields if v is not None]
+        present = [f for f, a in fields if a is not None]
         units = {"acc": "m/s^2", "gyr": "rad/s", "mag": "uT", "temperature": "degC"}
         meta.update(
             name=stream.name,
@@ -153,22 +177,22 @@ def encode(stream: Stream) -> tuple[str, dict[str, str], list[int], list[bytes]]
             meta=json.dumps(stream.meta, sort_keys=True, default=str),
             source=str(stream.meta.get("source", "")),
         )
-        meta.update(_stats(stream.t_ns, [v for _, v in fields]))
+        meta.update(_stats(stream.t_ns, [a for _, a in fields]))
+        head = u(1, v) + st(2, stream.name) + st(3, stream.frame_id)
         for i, j in block_bounds(stream.t_ns):
-            rows = slice(i, j)
-            msg = ImuBlock_pb2.ImuBlock(
-                schema_version=SCHEMA_VERSION,
-                sensor=stream.name,
-                frame_id=stream.frame_id,
-                count=j - i,
-                t_ns=_le(stream.t_ns, _I8, rows),
-                acc=_le(stream.acc, _F8, rows),
-                gyr=_le(stream.gyr, _F8, rows),
-                mag=_le(stream.mag, _F8, rows),
-                temperature=_le(stream.temperature, _F8, rows),
+            r = slice(i, j)
+            payloads.append(
+                _block(
+                    head,
+                    u(4, j - i),
+                    pk(5, stream.t_ns[r], _I8),
+                    pk(6, _rows(stream.acc, r), _F8),
+                    pk(7, _rows(stream.gyr, r), _F8),
+                    pk(8, _rows(stream.mag, r), _F8),
+                    pk(9, _rows(stream.temperature, r), _F8),
+                )
             )
-            times.append(log_time(stream.t_ns[i]))
-            payloads.append(msg.SerializeToString())
+            starts.append(i)
     elif kind == "markers":
         assert isinstance(stream, MarkerStream)
         meta.update(
@@ -181,54 +205,31 @@ def encode(stream: Stream) -> tuple[str, dict[str, str], list[int], list[bytes]]
         )
         meta.update(_stats(stream.t_ns, [stream.pos]))
         valid = np.asarray(stream.valid, dtype=bool)
+        head = u(1, v) + st(2, stream.frame_id) + _strings(3, stream.labels)
         for i, j in block_bounds(stream.t_ns):
-            rows = slice(i, j)
-            msg = MarkerBlock_pb2.MarkerBlock(
-                schema_version=SCHEMA_VERSION,
-                frame_id=stream.frame_id,
-                labels=stream.labels,
-                count=j - i,
-                t_ns=_le(stream.t_ns, _I8, rows),
-                pos=_le(stream.pos, _F8, rows),
-                valid=_le(valid, _U1, rows),
+            r = slice(i, j)
+            payloads.append(
+                _block(head, u(4, j - i), pk(5, stream.t_ns[r], _I8), pk(6, stream.pos[r], _F8), pk(7, valid[r], _U1))
             )
-            times.append(log_time(stream.t_ns[i]))
-            payloads.append(msg.SerializeToString())
+            starts.append(i)
     elif kind in ("analog", "signal"):
         if isinstance(stream, AnalogStream):
             names, extra = stream.channel_names, {"name": stream.name, "frame_id": ""}
             extra.update(
                 meta=json.dumps(stream.meta, sort_keys=True, default=str), source=str(stream.meta.get("source", ""))
             )
+            second = st(2, stream.name)
         else:
             assert isinstance(stream, SignalStream)
             names, extra = stream.columns, {"frame_id": stream.frame_id}
+            second = st(2, stream.frame_id)
         meta.update(extra, columns=json.dumps(list(names)), units=json.dumps(list(stream.units)))
         meta.update(_stats(stream.t_ns, [stream.values]))
+        head = u(1, v) + second + _strings(3, names) + _strings(4, stream.units)
         for i, j in block_bounds(stream.t_ns):
-            rows = slice(i, j)
-            if kind == "analog":
-                msg = AnalogBlock_pb2.AnalogBlock(
-                    schema_version=SCHEMA_VERSION,
-                    device=stream.name,
-                    channel_names=names,
-                    units=stream.units,
-                    count=j - i,
-                    t_ns=_le(stream.t_ns, _I8, rows),
-                    values=_le(stream.values, _F8, rows),
-                )
-            else:
-                msg = SignalBlock_pb2.SignalBlock(
-                    schema_version=SCHEMA_VERSION,
-                    frame_id=stream.frame_id,
-                    columns=names,
-                    units=stream.units,
-                    count=j - i,
-                    t_ns=_le(stream.t_ns, _I8, rows),
-                    values=_le(stream.values, _F8, rows),
-                )
-            times.append(log_time(stream.t_ns[i]))
-            payloads.append(msg.SerializeToString())
+            r = slice(i, j)
+            payloads.append(_block(head, u(5, j - i), pk(6, stream.t_ns[r], _I8), pk(7, stream.values[r], _F8)))
+            starts.append(i)
     elif kind == "intervals":
         assert isinstance(stream, Intervals)
         meta.update(frame_id="", units="ns", sample_count=str(len(stream)))
@@ -240,21 +241,37 @@ def encode(stream: Stream) -> tuple[str, dict[str, str], list[int], list[bytes]]
             msg = IntervalEvent_pb2.IntervalEvent(
                 schema_version=SCHEMA_VERSION, start_ns=s, end_ns=e, label=label, task_index=k
             )
-            times.append(log_time(s))
             payloads.append(msg.SerializeToString())
+        times = log_map(stream.start_ns).tolist()
+        return KIND_SCHEMA[kind], meta, times, payloads
     else:
         assert isinstance(stream, PoseStream)
         meta.update(frame_id=stream.frame_id, units="m", columns=json.dumps(["x", "y", "z", "qw", "qx", "qy", "qz"]))
         meta.update(_stats(stream.t_ns, [stream.position, stream.orientation]))
-        msg = PoseInFrame_pb2.PoseInFrame(frame_id=stream.frame_id)
-        pos, rot = msg.pose.position, msg.pose.orientation
-        for t, p, q in zip(stream.t_ns.tolist(), stream.position.tolist(), stream.orientation.tolist(), strict=True):
-            msg.timestamp.seconds, msg.timestamp.nanos = divmod(t, 1_000_000_000)
-            pos.x, pos.y, pos.z = p
-            rot.w, rot.x, rot.y, rot.z = q
-            times.append(log_time(t))
-            payloads.append(msg.SerializeToString())
+        head = u(1, v) + st(2, stream.frame_id)
+        for i, j in block_bounds(stream.t_ns):
+            r = slice(i, j)
+            payloads.append(
+                _block(
+                    head,
+                    u(3, j - i),
+                    pk(4, stream.t_ns[r], _I8),
+                    pk(5, stream.position[r], _F8),
+                    pk(6, stream.orientation[r], _F8),
+                )
+            )
+            starts.append(i)
+    times = log_map(stream.t_ns[starts]).tolist() if starts else []
     return KIND_SCHEMA[kind], meta, times, payloads
+
+
+def _strings(number: int, values: Sequence[str]) -> bytes:
+    """A repeated string field (each value its own length-delimited entry, empty strings included)."""
+    out = b""
+    for value in values:
+        data = str(value).encode("utf-8")
+        out += wire.tag(number, wire.WIRE_LEN) + wire.varint(len(data)) + data
+    return out
 
 
 # --------------------------------------------------------------------------------------------- decoding
@@ -276,21 +293,22 @@ def _check_version(msg: Any, schema_name: str) -> None:
         )
 
 
-class _Fallback(Exception):
-    """The fast wire-format scan met something it does not handle: use the protobuf parser."""
-
-
 class _Block:
-    """Attribute bag with the fields of one block message; bytes fields are zero-copy memoryviews."""
+    """Attribute bag with the fields of one block message; array fields are zero-copy memoryviews."""
+
+
+_PACKED = {}  # protobuf field type -> numpy dtype of its packed wire form
 
 
 def _block_specs(cls: Any) -> tuple[dict[int, tuple[str, str]], dict[str, Any]]:
     from google.protobuf.descriptor import FieldDescriptor as FD
 
+    if not _PACKED:
+        _PACKED.update({FD.TYPE_SFIXED64: _I8, FD.TYPE_DOUBLE: _F8, FD.TYPE_BOOL: _U1})
     spec, defaults = {}, {}
     for f in cls.DESCRIPTOR.fields:
-        if f.type == FD.TYPE_BYTES:
-            kind, default = "bytes", b""
+        if f.type == FD.TYPE_BYTES or (f.is_repeated and f.type in _PACKED):
+            kind, default = ("bool" if f.type == FD.TYPE_BOOL else "array"), b""
         elif f.type == FD.TYPE_STRING:
             kind, default = ("rstring", None) if f.is_repeated else ("string", "")
         elif f.type in (FD.TYPE_UINT32, FD.TYPE_UINT64):
@@ -302,72 +320,58 @@ def _block_specs(cls: Any) -> tuple[dict[int, tuple[str, str]], dict[str, Any]]:
     return spec, defaults
 
 
-_BLOCK_SPECS = {
-    name: _block_specs(MESSAGE_CLASSES[name])
-    for name in ("imulog.ImuBlock", "imulog.MarkerBlock", "imulog.AnalogBlock", "imulog.SignalBlock")
-}
-
-
-def _varint(mv: memoryview, pos: int) -> tuple[int, int]:
-    result = shift = 0
-    while True:
-        b = mv[pos]
-        pos += 1
-        result |= (b & 0x7F) << shift
-        if b < 0x80:
-            return result, pos
-        shift += 7
-        if shift > 63:
-            raise _Fallback
+_BLOCK_SPECS = {name: _block_specs(MESSAGE_CLASSES[name]) for name in BLOCK_SCHEMAS}
 
 
 def _scan_block(schema_name: str, payload: bytes | memoryview) -> _Block:
-    """Parse a block message's wire format directly, keeping bytes fields as views (no copies)."""
+    """Parse a block message's wire format directly, keeping packed arrays as views (no copies).
+
+    Raises :class:`wire.Fallback` for what it does not handle: unpacked repeated values (legal protobuf
+    from another writer), bools that are not one byte 0/1, malformed input.
+    """
     spec, defaults = _BLOCK_SPECS[schema_name]
     obj = _Block()
     for name, default in defaults.items():
         setattr(obj, name, [] if default is None else default)
-    mv = memoryview(payload)
-    n = len(mv)
-    pos = 0
     try:
-        while pos < n:
-            key, pos = _varint(mv, pos)
-            number, wire = key >> 3, key & 7
-            if wire == 0:
-                value, pos = _varint(mv, pos)
-            elif wire == 2:
-                length, pos = _varint(mv, pos)
-                end = pos + length
-                if end > n:
-                    raise _Fallback
-                value, pos = mv[pos:end], end
-            elif wire == 1:
-                value, pos = None, pos + 8
-            elif wire == 5:
-                value, pos = None, pos + 4
-            else:
-                raise _Fallback
+        for number, wire_type, value in wire.scan(payload):
             field = spec.get(number)
             if field is None:
                 continue  # unknown field (a newer writer): ignored, as protobuf does
             name, kind = field
             if kind == "varint":
-                if wire != 0:
-                    raise _Fallback
+                if wire_type != wire.WIRE_VARINT:
+                    raise wire.Fallback
                 setattr(obj, name, value)
-            elif wire != 2:
-                raise _Fallback
-            elif kind == "bytes":
+            elif wire_type != wire.WIRE_LEN:
+                raise wire.Fallback
+            elif kind == "array":
+                setattr(obj, name, value)
+            elif kind == "bool":
+                if len(value) and int(np.frombuffer(value, _U1).max()) > 1:
+                    raise wire.Fallback
                 setattr(obj, name, value)
             elif kind == "string":
                 setattr(obj, name, str(value, "utf-8"))
             else:
                 getattr(obj, name).append(str(value, "utf-8"))
-    except (IndexError, UnicodeDecodeError):
-        raise _Fallback from None
-    if pos != n:
-        raise _Fallback
+    except UnicodeDecodeError:
+        raise wire.Fallback from None
+    return obj
+
+
+def _as_block(schema_name: str, msg: Any) -> _Block:
+    """A block parsed by protobuf (the slow path) as a :class:`_Block` with packed array bytes."""
+    from google.protobuf.descriptor import FieldDescriptor as FD
+
+    obj = _Block()
+    for f in msg.DESCRIPTOR.fields:
+        value = getattr(msg, f.name)
+        if f.is_repeated and f.type in _PACKED:
+            value = np.asarray(list(value), dtype=_PACKED[f.type]).tobytes()
+        elif f.type == FD.TYPE_STRING and f.is_repeated:
+            value = list(value)
+        setattr(obj, f.name, value)
     return obj
 
 
@@ -380,12 +384,13 @@ def _parse_all(schema_name: str, payloads: Sequence[bytes | memoryview]) -> list
             try:
                 out.append(_scan_block(schema_name, p))
                 continue
-            except _Fallback:
+            except wire.Fallback:
                 pass
         try:
-            out.append(cls.FromString(p))
+            msg = cls.FromString(bytes(p))
         except Exception as exc:  # protobuf raises DecodeError subclasses of Exception
             raise DecodeError(f"message {len(out)} does not parse as {schema_name}: {exc}") from exc
+        out.append(_as_block(schema_name, msg) if fast else msg)
     return out
 
 
@@ -403,7 +408,7 @@ def decode(schema_name: str, topic: str, meta: dict[str, str], payloads: Sequenc
     msgs = _parse_all(schema_name, payloads)
     kind = SCHEMA_KIND[schema_name]
     name = meta.get("name") or topic.rstrip("/").rsplit("/", 1)[-1]
-    if kind in ("imu", "markers", "analog", "signal"):
+    if schema_name in BLOCK_SCHEMAS:
         for msg in msgs:
             _check_version(msg, schema_name)
         counts = [msg.count for msg in msgs]
@@ -465,6 +470,16 @@ def decode(schema_name: str, topic: str, meta: dict[str, str], payloads: Sequenc
             labels=[msg.label for msg in msgs],
             task_index=np.array([msg.task_index for msg in msgs], dtype=np.int64),
         )
+    frame = msgs[0].frame_id if msgs else meta.get("frame_id", "world")
+    if schema_name == "imulog.PoseBlock":
+        position = _join([msg.position for msg in msgs], _F8, 3, n, f"{topic} position")
+        orientation = _join([msg.orientation for msg in msgs], _F8, 4, n, f"{topic} orientation")
+        return PoseStream(topic=topic, t_ns=t, position=position, orientation=orientation, frame_id=frame)
+    return _decode_pose_in_frame(topic, msgs, frame)
+
+
+def _decode_pose_in_frame(topic: str, msgs: list[Any], frame: str) -> PoseStream:
+    """Poses of files written before PoseBlock: one ``foxglove.PoseInFrame`` per sample."""
     n = len(msgs)
     t = np.fromiter((msg.timestamp.seconds * 1_000_000_000 + msg.timestamp.nanos for msg in msgs), np.int64, n)
     arr = np.fromiter(
@@ -484,7 +499,6 @@ def decode(schema_name: str, topic: str, meta: dict[str, str], payloads: Sequenc
         np.float64,
         n * 7,
     ).reshape(n, 7)
-    frame = msgs[0].frame_id if msgs else meta.get("frame_id", "world")
     return PoseStream(topic=topic, t_ns=t, position=arr[:, :3].copy(), orientation=arr[:, 3:].copy(), frame_id=frame)
 
 
