@@ -19,6 +19,7 @@ TOP_LEVEL_COMMANDS: dict[str, tuple[str, str]] = {
     "info": ("imulog.commands.archive:info", "Show a trial's channels, rates, gaps, metadata and derived runs."),
     "doctor": ("imulog.commands.archive:doctor", "Check a trial's integrity: CRCs, summary, decoding, raw hash."),
     "export": ("imulog.commands.archive:export", "Export one channel to Parquet or CSV."),
+    "salvage": ("imulog.commands.archive:salvage", "Recover the intact channels of a damaged or truncated trial."),
     "simulate": ("imulog.commands.simulate:simulate", "Simulate trials with ground truth in raw export formats."),
     "calibrate": ("imulog.commands.calibrate:calibrate", "Estimate an IMU calibration from static recordings."),
     "evaluate": ("imulog.commands.trajectory:evaluate", "Compare IMU trajectories with the optical reference."),

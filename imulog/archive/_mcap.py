@@ -516,6 +516,13 @@ def read_summary(f: BinaryIO, file_size: int) -> Summary:
         raise McapFormatError(f"corrupt MCAP summary ({exc})") from exc
 
 
+def read_summary_from_bytes(data: bytes) -> Summary:
+    """:func:`read_summary` of a file held in memory."""
+    import io
+
+    return read_summary(io.BytesIO(data), len(data))
+
+
 def _read_summary(f: BinaryIO, file_size: int) -> Summary:
     if file_size < len(MAGIC) * 2 + FOOTER_SIZE:
         raise McapFormatError(f"too short for an MCAP file ({file_size} bytes)")

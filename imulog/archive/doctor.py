@@ -335,7 +335,9 @@ def check_file(path: str | os.PathLike[str], *, decode: bool = True, progress: P
             return report
         report.checks.append("magic, footer and summary CRC ok")
         if summary.duplicate_chunk_indexes:
-            report.fail(f"summary indexes the same chunk more than once ({summary.duplicate_chunk_indexes} extra entries)")
+            report.fail(
+                f"summary indexes the same chunk more than once ({summary.duplicate_chunk_indexes} extra entries)"
+            )
         found = _walk_data_section(f, summary, report, progress)
         if found is None:
             return report

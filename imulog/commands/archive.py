@@ -211,44 +211,147 @@ def doctor(file: str, verbose: bool) -> None:
 
 @click.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False))
-@click.option("--topic", "-t", required=True, help="channel to export, e.g. /imu/wrist")
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="OUT.parquet or OUT.csv")
-@click.option("--start-ns", type=int, default=None, help="first time stamp to include (ns, inclusive)")
-@click.option("--end-ns", type=int, default=None, help="time stamp to stop at (ns, exclusive)")
-def export(file: str, topic: str, output: str, start_ns: int | None, end_ns: int | None) -> None:
-    """Export one channel as a table (Parquet or CSV): a t_ns column plus one column per value.
+@click.option(
+    "-o", "--output", required=True, type=click.Path(), help="OUT.parquet, .csv, .sto, .c3d, or a folder for --to bids"
+)
+@click.option(
+    "--to",
+    "target",
+    type=click.Choice(["parquet", "csv", "sto", "bids", "c3d"]),
+    default=None,
+    help="what to write (default: from OUTPUT's suffix; no suffix means bids)",
+)
+@click.option("--topic", "-t", default=None, help="channel for parquet/csv, e.g. /imu/wrist")
+@click.option(
+    "--clock",
+    type=click.Choice(["device", "reference"]),
+    default=None,
+    help="device: every channel on the IMU's clock; reference: on the Vicon clock through imulog.alignment "
+    "(default: device; c3d: reference)",
+)
+@click.option("--imu", default=None, help="which IMU's device clock --clock device means (default: the only one)")
+@click.option("--start-ns", type=int, default=None, help="parquet/csv: first stored time stamp to include (ns)")
+@click.option("--end-ns", type=int, default=None, help="parquet/csv: stored time stamp to stop at (ns, exclusive)")
+@click.option("--name", "names", multiple=True, metavar="IMU=COLUMN", help="sto: column of an IMU (wrist=hand_r_imu)")
+@click.option("--rate", type=float, default=None, help="sto: rate of the uniform grid in Hz (default: the IMU's)")
+@click.option("--no-imu", is_flag=True, help="c3d: markers, analogs and events only")
+@click.option("--overwrite", is_flag=True, help="bids: replace an existing folder")
+@click.option("--json", "as_json", is_flag=True, help="print what was written as one JSON document")
+def export(
+    file: str,
+    output: str,
+    target: str | None,
+    topic: str | None,
+    clock: str | None,
+    imu: str | None,
+    start_ns: int | None,
+    end_ns: int | None,
+    names: tuple[str, ...],
+    rate: float | None,
+    no_imu: bool,
+    overwrite: bool,
+    as_json: bool,
+) -> None:
+    """Export a trial to the files other tools read (docs/export.md).
 
-    IMU channels give acc_x..mag_z (SI units), markers give <label>_x/_y/_z (m) and <label>_valid,
-    signals their named columns, intervals start_ns/end_ns/label/task_index. Parquet keeps the channel
-    metadata (units, frame, provenance) in the schema metadata.
+    \b
+    parquet/csv  one channel: time (timestamp with the trial's time zone), t[s], t_ns, then
+                 columns with units in their names (acc_x[m/s^2]); Parquet also keeps units
+                 and provenance in field and schema metadata
+    sto          OpenSense orientation file from /derived/orientation/* (w,x,y,z per IMU)
+    bids         a BIDS-motion folder: *_motion.tsv, *_channels.tsv, *_motion.json, *_events.tsv
+    c3d          markers (mm), IMU and analog channels as analogs, phases as events
+
+    Every export puts all channels on one clock; --clock reference needs an alignment
+    (imulog process align). Files are written to a temporary name and renamed.
 
     \b
     Examples:
       imulog export trial.mcap --topic /imu/wrist -o wrist.parquet
-      imulog export trial.mcap --topic /derived/phases/wrist -o phases.csv
+      imulog export trial.mcap --topic /derived/phases/wrist -o phases.csv --clock reference
+      imulog export trial.mcap -o trial.sto --name wrist=hand_r_imu
+      imulog export trial.mcap --to bids -o bids/
+      imulog export trial.mcap -o trial.c3d
     """
-    out = Path(output)
-    if out.suffix.lower() not in (".parquet", ".csv"):
-        raise click.ClickException(f"{output}: output must end in .parquet or .csv")
+    from imulog.export import ClockError, ExportError
+
+    suffix = Path(output).suffix.lower().lstrip(".")
+    target = target or (suffix if suffix in ("parquet", "csv", "sto", "c3d") else "bids" if not suffix else None)
+    if target is None:
+        raise click.BadParameter(f"{output}: cannot tell the format from .{suffix}; give --to", param_hint="--to")
     if start_ns is not None and end_ns is not None and end_ns <= start_ns:
         raise click.BadParameter(
             f"{end_ns} is not after --start-ns {start_ns} (the range is empty)", param_hint="--end-ns"
         )
+    if target in ("parquet", "csv") and not topic:
+        raise click.UsageError(f"--to {target} exports one channel: give --topic (imulog info {file} lists them)")
+    rename = {}
+    for item in names:
+        key, sep, value = item.partition("=")
+        if not sep or not key or not value:
+            raise click.BadParameter(f"{item!r} is not IMU=COLUMN", param_hint="--name")
+        rename[key] = value
     with _open(file) as trial:
         try:
-            table = trial.read_arrow(topic, start_ns, end_ns)
-        except ArchiveError as exc:
+            if target in ("parquet", "csv"):
+                from imulog.export.table import export_table
+
+                result = export_table(
+                    trial, topic, output, fmt=target, clock=clock or "device", imu=imu, start_ns=start_ns, end_ns=end_ns
+                )
+            elif target == "sto":
+                from imulog.export.sto import export_sto
+
+                result = export_sto(trial, output, clock=clock or "device", imu=imu, names=rename, rate_hz=rate)
+            elif target == "bids":
+                from imulog.export.bids import export_bids
+
+                result = export_bids(trial, output, clock=clock or "device", imu=imu, overwrite=overwrite)
+            else:
+                from imulog.export.c3d import export_c3d
+
+                result = export_c3d(trial, output, clock=clock or "reference", imu=imu, include_imu=not no_imu)
+        except (ArchiveError, ClockError, ExportError) as exc:
             raise click.ClickException(str(exc)) from None
+    if as_json:
+        click.echo(json.dumps(result.to_dict(), indent=2))
+        return
+    for note in result.notes:
+        click.echo(f"note: {note}", err=True)
+    what = f"{result.rows} rows x {len(result.columns)} columns of {topic}" if topic else f"{result.rows} samples"
+    if target == "bids":
+        what += f" in {len(result.files)} files"
+    click.echo(f"wrote {what} to {output} ({target}, {result.clock} clock)")
+
+
+@click.command()
+@click.argument("file", type=click.Path(exists=True, dir_okay=False))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="FIXED.mcap to write")
+@click.option("--overwrite", is_flag=True, help="replace OUTPUT if it exists")
+@click.option("--json", "as_json", is_flag=True, help="print the report as one JSON document")
+def salvage(file: str, output: str, overwrite: bool, as_json: bool) -> None:
+    """Recover every intact channel, attachment and metadata record of a damaged or truncated MCAP file.
+
+    Scans the records from the start (the summary may be missing: a writer that died, an interrupted
+    copy, another MCAP writer), keeps every chunk that passes its CRC and every attachment that passes
+    its own, and writes them to OUTPUT (atomically) with an imulog.salvage record of what was lost.
+    FILE is never modified. Exit status 0 when something was recovered (the report lists any losses),
+    1 when nothing could be.
+
+    \b
+    Examples:
+      imulog salvage broken.mcap -o fixed.mcap
+      imulog salvage broken.mcap -o fixed.mcap --json | python -c "import json,sys; print(json.load(sys.stdin)['lost'])"
+    """
+    from imulog.archive.salvage import lines
+    from imulog.archive.salvage import salvage as run_salvage
+
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        if out.suffix.lower() == ".parquet":
-            import pyarrow.parquet as pq
-
-            pq.write_table(table, out)
-        else:
-            import pyarrow.csv as pacsv
-
-            pacsv.write_csv(table, out)
-    except OSError as exc:
-        raise click.ClickException(f"{output}: cannot write ({exc.strerror or exc})") from None
-    click.echo(f"wrote {table.num_rows} rows x {table.num_columns} columns of {topic} to {out}")
+        report = run_salvage(file, output, overwrite=overwrite)
+    except ArchiveError as exc:
+        raise click.ClickException(str(exc)) from None
+    if as_json:
+        click.echo(json.dumps(report.to_dict(), indent=2))
+        return
+    for line in lines(report):
+        click.echo(line)

@@ -1,0 +1,179 @@
+"""imulog salvage: recover every intact chunk of a truncated or damaged MCAP file (imulog's or the mcap library's)."""
+
+from __future__ import annotations
+
+import hashlib
+import random
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from test_archive_helpers import synthetic_recording
+
+from imulog.archive import TrialReader, _builder, append_derived, write_trial
+from imulog.archive import _mcap as m
+from imulog.archive.doctor import check_file
+from imulog.archive.errors import ArchiveError
+from imulog.archive.salvage import salvage
+from imulog.cli import cli
+from imulog.model import SignalStream
+
+
+def _chunks_with_messages(data: bytes) -> list[tuple[int, int, list[tuple[int, bytes]]]]:
+    """(record start, record end, [(channel id, payload)]) of every chunk, read from the intact file."""
+    out = []
+    for op, pos, body in m.iter_records(data, len(m.MAGIC), m.read_summary_from_bytes(data).data_end_offset):
+        if op == m.Op.CHUNK:
+            raw = m.decompress_chunk(m.parse_chunk(body))
+            out.append((pos, pos + 9 + len(body), [(cid, bytes(p)) for cid, _, p in m.chunk_messages(raw)]))
+    return out
+
+
+@pytest.fixture(scope="module")
+def many_chunks(tmp_path_factory) -> Path:
+    """A trial with ~25 small chunks over 6 channels (raw and derived), an attachment and metadata."""
+    tmp = tmp_path_factory.mktemp("salvage")
+    src = tmp / "export.csv"
+    src.write_bytes(b"t,ax\n" + b"".join(b"%d,1.5\n" % k for k in range(2000)))
+    mp = pytest.MonkeyPatch()
+    mp.setattr(_builder, "CHUNK_TARGET_BYTES", 24_000)
+    try:
+        rng = np.random.default_rng(2)
+        rec = synthetic_recording(rng, n_imu=3000, sources=[src])
+        path = write_trial(tmp / "trial.mcap", rec)
+        t = rec.imus[0].t_ns
+        append_derived(path, [SignalStream("/derived/x", t, ["v"], ["1"], rng.normal(size=len(t)))], run={"step": "x"})
+    finally:
+        mp.undo()
+    assert check_file(path).ok
+    return path
+
+
+def _recovered(path: Path) -> dict[str, list[bytes]]:
+    with TrialReader(path) as tr:
+        return {t: [bytes(p) for p in tr.messages(t)] for t in tr.topics()}
+
+
+def _expected_prefix(data: bytes, cut: int) -> dict[int, list[bytes]]:
+    """Per channel id of the intact file: messages of the chunks that end at or before ``cut``."""
+    out: dict[int, list[bytes]] = {}
+    for _, end, msgs in _chunks_with_messages(data):
+        if end <= cut:
+            for cid, p in msgs:
+                out.setdefault(cid, []).append(p)
+    return out
+
+
+def test_intact_file_salvages_to_an_identical_sound_trial(many_chunks, tmp_path):
+    before = hashlib.sha256(many_chunks.read_bytes()).hexdigest()
+    report = salvage(many_chunks, tmp_path / "fixed.mcap")
+    assert report.complete and report.summary_found
+    assert hashlib.sha256(many_chunks.read_bytes()).hexdigest() == before  # input untouched
+    assert check_file(tmp_path / "fixed.mcap").ok  # raw-data hash recorded at conversion still holds
+    assert _recovered(tmp_path / "fixed.mcap") == _recovered(many_chunks)
+    with TrialReader(tmp_path / "fixed.mcap") as a, TrialReader(many_chunks) as b:
+        assert [x.data for x in a.attachments()] == [x.data for x in b.attachments()]
+        assert {k: v for k, v in a.metadata.items() if k != "imulog.salvage"} == b.metadata
+
+
+def test_every_chunk_before_a_random_cut_is_recovered(many_chunks, tmp_path):
+    data = many_chunks.read_bytes()
+    with TrialReader(many_chunks) as tr:
+        topic_of = {c.id: c.topic for c in tr.summary.channels.values()}
+    chunks = _chunks_with_messages(data)
+    assert len(chunks) >= 20
+    rng = random.Random(7)
+    cuts = sorted({rng.randrange(200, len(data)) for _ in range(30)} | {chunks[3][1], chunks[3][1] - 1})
+    out = tmp_path / "fixed.mcap"
+    for cut in cuts:
+        broken = tmp_path / "cut.mcap"
+        broken.write_bytes(data[:cut])
+        try:
+            salvage(broken, out, overwrite=True)
+        except ArchiveError as exc:  # only when not even the first channel record survived
+            assert cut < chunks[0][0], f"cut at {cut}: {exc}"
+            continue
+        got = _recovered(out)
+        for cid, payloads in _expected_prefix(data, cut).items():
+            assert got.get(topic_of[cid], [])[: len(payloads)] == payloads, f"cut at {cut}: {topic_of[cid]}"
+            assert len(got[topic_of[cid]]) == len(payloads), f"cut at {cut}: extra messages in {topic_of[cid]}"
+        assert check_file(out, decode=False).ok
+
+
+def test_a_damaged_chunk_is_dropped_and_everything_else_kept(many_chunks, tmp_path):
+    data = bytearray(many_chunks.read_bytes())
+    chunks = _chunks_with_messages(bytes(data))
+    start, end, msgs = chunks[5]
+    data[start + (end - start) // 2] ^= 0x10  # inside the compressed data
+    broken = tmp_path / "flipped.mcap"
+    broken.write_bytes(bytes(data))
+    report = salvage(broken, tmp_path / "fixed.mcap")
+    assert any(f"chunk at byte {start}" in line for line in report.lost)
+    with TrialReader(many_chunks) as tr:
+        topic = tr.summary.channels[msgs[0][0]].topic
+    assert report.channels[topic]["chunks_lost"] == 1
+    got = _recovered(tmp_path / "fixed.mcap")
+    want: dict[int, list[bytes]] = {}
+    for k, (_, _, ms) in enumerate(chunks):
+        if k != 5:
+            for cid, p in ms:
+                want.setdefault(cid, []).append(p)
+    with TrialReader(many_chunks) as tr:
+        for cid, payloads in want.items():
+            assert got[tr.summary.channels[cid].topic] == payloads
+    report2 = check_file(tmp_path / "fixed.mcap")  # the output is internally sound, but no longer the raw data
+    assert any("raw" in p for p in report2.problems)
+    assert not any("CRC" in p for p in report2.problems)
+
+
+def test_mcap_library_file_without_summary(tmp_path):
+    """Another writer: schemas and channels inside chunks, several channels per chunk, cut before the summary."""
+    from mcap.writer import Writer
+
+    path = tmp_path / "other.mcap"
+    expected: dict[str, list[bytes]] = {"/a": [], "/b": []}
+    with open(path, "wb") as f:
+        w = Writer(f, chunk_size=2000)
+        w.start(profile="", library="test")
+        sid = w.register_schema("S", "jsonschema", b"{}")
+        ids = {t: w.register_channel(t, "json", sid) for t in expected}
+        for k in range(600):
+            t = "/a" if k % 3 else "/b"
+            payload = b'{"k": %d}' % k
+            w.add_message(ids[t], log_time=k * 1000, data=payload, publish_time=k * 1000)
+            expected[t].append(payload)
+        w.finish()
+    data = path.read_bytes()
+    summary_start = m.read_summary_from_bytes(data).summary_start
+    chunks = [(s, e) for s, e, _ in _chunks_with_messages(data)]
+    assert len(chunks) > 10
+    rng = random.Random(3)
+    for cut in sorted({rng.randrange(chunks[0][1], summary_start) for _ in range(12)} | {summary_start}):
+        broken = tmp_path / "cut.mcap"
+        broken.write_bytes(data[:cut])
+        report = salvage(broken, tmp_path / "fixed.mcap", overwrite=True)
+        got = _recovered(tmp_path / "fixed.mcap")
+        n_whole = sum(1 for _, e in chunks if e <= cut)
+        want = _expected_prefix(data, cut)
+        with TrialReader(path) as tr:
+            for cid, payloads in want.items():
+                topic = tr.summary.channels[cid].topic
+                assert got[topic] == payloads, f"cut at {cut}"
+        assert sum(c["chunks_kept"] for c in report.channels.values()) >= n_whole
+
+
+def test_cli_salvage_refuses_its_input_as_output_and_reports_losses(many_chunks, tmp_path):
+    runner = CliRunner()
+    res = runner.invoke(cli, ["salvage", str(many_chunks), "-o", str(many_chunks)])
+    assert res.exit_code == 1 and "must not be the input" in res.output
+    broken = tmp_path / "cut.mcap"
+    broken.write_bytes(many_chunks.read_bytes()[: many_chunks.stat().st_size // 2])
+    res = runner.invoke(cli, ["salvage", str(broken), "-o", str(tmp_path / "fixed.mcap")])
+    assert res.exit_code == 0, res.output
+    assert "recovered" in res.output and "lost:" in res.output
+    not_mcap = tmp_path / "junk.mcap"
+    not_mcap.write_bytes(b"hello world" * 10)
+    res = runner.invoke(cli, ["salvage", str(not_mcap), "-o", str(tmp_path / "x.mcap")])
+    assert res.exit_code == 1 and "not an MCAP file" in res.output and "Traceback" not in res.output
+    assert not (tmp_path / "x.mcap").exists()
