@@ -208,13 +208,14 @@ def decode_sensor_samples(schema: SensorSchema, raw: np.ndarray) -> dict[str, np
     return out
 
 
-def even_times_ns(seconds: np.ndarray, counts: np.ndarray, spacing_ns: np.ndarray) -> np.ndarray:
-    """Times of the samples of per-second records: record r's k-th sample at ``seconds[r] + k * spacing_ns[r]``."""
+def even_times_ns(seconds: np.ndarray, counts: np.ndarray, rate_hz: np.ndarray) -> np.ndarray:
+    """Times of the samples of per-second records: record r's k-th sample at ``seconds[r] + k / rate_hz[r]``."""
     counts = np.asarray(counts, dtype=np.int64)
     total = int(counts.sum())
     first = np.repeat(np.cumsum(counts) - counts, counts)
     k = np.arange(total, dtype=np.int64) - first
-    return np.repeat(seconds.astype(np.int64) * NS_PER_S, counts) + k * np.repeat(spacing_ns, counts)
+    step = np.repeat(NS_PER_S / np.asarray(rate_hz, dtype=np.float64), counts)
+    return np.repeat(seconds.astype(np.int64) * NS_PER_S, counts) + np.round(k * step).astype(np.int64)
 
 
 # ---------------------------------------------------------------------------------------------- record reading
@@ -360,8 +361,7 @@ def _activity(path: Path, batch: RecordBatch, st: _State) -> ImuStream | None:
     st.gap_s += int(jump[jump > 0].sum())
     st.last_activity_s = int(secs[-1])
     counts_a = np.asarray(counts, dtype=np.int64)
-    spacing = np.round(NS_PER_S / np.maximum(st.rate_hz, counts_a)).astype(np.int64)
-    t = even_times_ns(secs, counts_a, spacing) - st.origin_ns
+    t = even_times_ns(secs, counts_a, np.maximum(st.rate_hz, counts_a)) - st.origin_ns
     acc = np.concatenate(parts).astype(np.float64) / st.accel_scale * G0
     return ImuStream(name=st.name, t_ns=t, acc=acc, meta=dict(st.meta))
 
@@ -391,7 +391,7 @@ def _sensor(path: Path, batch: RecordBatch, st: _State) -> ImuStream | None:
     counts = body // bps
     raw = np.frombuffer(_concat_payloads(batch, idx, skip=2), dtype=np.uint8).reshape(-1, bps)
     cols = decode_sensor_samples(schema, raw)
-    t = even_times_ns(batch.seconds[idx], counts, np.round(NS_PER_S / np.maximum(counts, 1)).astype(np.int64))
+    t = even_times_ns(batch.seconds[idx], counts, np.maximum(counts, 1))
 
     def trio(prefix: str) -> np.ndarray | None:
         names = [f"{prefix} {a}" for a in "XYZ"]
@@ -453,6 +453,44 @@ def _scalar_signals(batch: RecordBatch, st: _State) -> list[SignalStream]:
     return out
 
 
+class _StoredMember:
+    """Bounded reader over a stored (uncompressed) ZIP member's bytes: the record checksums verify every byte, so a
+    damaged byte is reported with its record (zipfile would only say the member's CRC is wrong, at its end)."""
+
+    def __init__(self, path: Path, info: zipfile.ZipInfo):
+        self._f = open(path, "rb")  # noqa: SIM115 - closed by __exit__/close
+        self._f.seek(info.header_offset)
+        local = self._f.read(30)
+        if len(local) < 30 or local[:4] != b"PK\x03\x04":
+            self._f.close()
+            raise ConversionError(path, f"damaged ZIP: no local header for {info.filename}")
+        name_len, extra_len = struct.unpack_from("<HH", local, 26)
+        self._f.seek(info.header_offset + 30 + name_len + extra_len)
+        self._left = info.file_size
+
+    def read(self, n: int = -1) -> bytes:
+        n = self._left if n < 0 else min(n, self._left)
+        data = self._f.read(n)
+        self._left -= len(data)
+        return data
+
+    def close(self) -> None:
+        self._f.close()
+
+    def __enter__(self) -> _StoredMember:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _open_member(path: Path, z: zipfile.ZipFile, name: str) -> IO[bytes] | _StoredMember:
+    info = z.getinfo(name)
+    if info.compress_type == zipfile.ZIP_STORED and not info.flag_bits & 0x1:
+        return _StoredMember(path, info)
+    return z.open(name)
+
+
 def _open_gt3x(path: Path) -> tuple[zipfile.ZipFile, dict[str, str]]:
     try:
         z = zipfile.ZipFile(path)
@@ -512,7 +550,7 @@ def _trial(st: _State, offset: int | None) -> dict[str, Any]:
 def _iter_log(path: Path, z: zipfile.ZipFile, st: _State, offset: int | None) -> Iterator[Recording]:
     trial = _trial(st, offset)
     found = False
-    with z.open("log.bin") as stream:
+    with _open_member(path, z, "log.bin") as stream:
         for batch in iter_record_batches(stream, path):
             for i in np.nonzero(batch.types == PARAMETERS)[0]:
                 params = parse_parameters(batch.payload(int(i)))
@@ -556,15 +594,12 @@ def _iter_activity_bin(path: Path, z: zipfile.ZipFile, st: _State, offset: int |
     step = 9 * (BATCH_BYTES // 9)
     spacing = NS_PER_S / st.rate_hz
     done = 0
-    with z.open("activity.bin") as stream:
+    with _open_member(path, z, "activity.bin") as stream:
         while True:
             data = stream.read(step)
             if not data:
                 break
-            xyz = unpack_12bit_yxz(data)
-            if len(data) % 9 >= 5:  # an odd last sample (its last nibble unused)
-                tail = unpack_12bit_yxz(data[-(len(data) % 9) :] + b"\x00" * 4)
-                xyz = np.concatenate([xyz, tail[:1]])
+            xyz = unpack_12bit_yxz(data)  # batches are whole sample pairs; an odd last sample ends on a nibble
             if len(xyz) == 0:
                 break
             k = np.arange(done, done + len(xyz), dtype=np.float64)
