@@ -28,6 +28,10 @@ BUILTIN: dict[str, str] = {
     "c3d": "converters.c3d:CONVERTER",
     "broad-hdf5": "converters.broad:CONVERTER",
     "gaitmap": "converters.gaitmap:CONVERTER",
+    "apdm": "converters.apdm:CONVERTER",
+    "opensim-sto": "converters.opensim_sto:CONVERTER",
+    "motive": "converters.motive:CONVERTER",
+    "delsys": "converters.delsys:CONVERTER",
     "axivity": "converters.axivity:CONVERTER",
     "actigraph": "converters.actigraph:CONVERTER",
     "actilife-csv": "converters.actilife_csv:CONVERTER",
@@ -153,11 +157,21 @@ _ROLE_TOKENS = {
 _SKIP_SUFFIXES = {".md", ".txt.license", ".license", ".json", ".toml", ".npz", ".npy", ".pdf", ".png", ".mcap"}
 
 
-def recording_key(path: Path) -> str:
+def recording_key(path: Path, conv: Converter | None = None) -> str:
     """Files of one recording share a key: the stem without role words (``s01_t02_imu`` ~ ``s01_t02_vicon``).
 
-    Self-contained formats (C3D, HDF5) are always a recording of their own.
+    A converter that knows its format's file names decides first (``conv.recording_key``: Xsens per-sensor files
+    ``MT_012005D6_031-000_00B421AF.txt`` ~ ``..._00B4227B.txt``). Self-contained formats (C3D, HDF5) are always a
+    recording of their own.
     """
+    path = Path(path)
+    if conv is not None:
+        try:
+            key = conv.recording_key(path)
+        except Exception:  # noqa: BLE001 - a plug-in's naming rule must not break grouping
+            key = None
+        if key:
+            return key
     if path.suffix.lower() in (".c3d", ".hdf5", ".h5"):
         return path.name
     tokens = [t for t in re.split(r"[_\-.]+", path.stem) if t and t.lower() not in _ROLE_TOKENS]
@@ -175,10 +189,10 @@ def group_directory(directory: Path) -> list[tuple[str, list[Path]]]:
         if is_mapping_file(path) or path.suffix.lower() in _SKIP_SUFFIXES or path.name.startswith("."):
             continue
         try:
-            detect(path)
+            conv = detect(path)
         except ConversionError:
             continue
-        groups.setdefault((path.parent, recording_key(path)), []).append(path)
+        groups.setdefault((path.parent, recording_key(path, conv)), []).append(path)
     out = []
     for (parent, key), files in groups.items():
         rel = parent.relative_to(directory)

@@ -131,7 +131,12 @@ def orientation_wxyz(values: np.ndarray, seen: dict[str, int]) -> tuple[np.ndarr
         cr, cp, cy = np.cos(half).T
         sr, sp, sy = np.sin(half).T
         q = np.stack(
-            [cy * cp * cr + sy * sp * sr, cy * cp * sr - sy * sp * cr, cy * sp * cr + sy * cp * sr, sy * cp * cr - cy * sp * sr],
+            [
+                cy * cp * cr + sy * sp * sr,
+                cy * cp * sr - sy * sp * cr,
+                cy * sp * cr + sy * cp * sr,
+                sy * cp * cr - cy * sp * sr,
+            ],
             axis=1,
         )
         return q, "Roll/Pitch/Yaw (deg, Rz(yaw) Ry(pitch) Rx(roll))"
@@ -286,7 +291,9 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
     if start is not None:
         rec.metadata["imulog.trial"] = trial_start(start, f"{path.name}: UTC_* columns")
     skip = imu_cols | {"PacketCounter", "SampleTimeFine"} | ({"Temperature"} if "temperature" in streams else set())
-    extra = [(c, i) for c, i in seen.items() if c not in skip and i not in text_cols and np.isfinite(values[:, i]).any()]
+    extra = [
+        (c, i) for c, i in seen.items() if c not in skip and i not in text_cols and np.isfinite(values[:, i]).any()
+    ]
     if extra:
         units = [SIGNAL_UNITS.get(c.split("_")[0].lower(), "") for c, _ in extra]
         rec.signals.insert(

@@ -1,0 +1,131 @@
+"""OpenSim Storage (``.sto``) files from OpenSense: one orientation stream per ``<body>_imu`` column.
+
+Layout (OpenSim 4.x)::
+
+    <name line, may be empty>            (absent in OpenSim 4.2 files)
+    DataRate=100.000000
+    DataType=Quaternion
+    version=3
+    OpenSimVersion=4.1
+    endheader
+    time<TAB>torso_imu<TAB>pelvis_imu...
+    678<TAB>0.51,0.45,-0.66,0.28<TAB>...        each cell w,x,y,z
+
+Time is in seconds as written (it need not start at 0: OpenSense keeps the trial's own times) and is kept as the
+clock. Each ``<body>_imu`` column becomes ``/orientation/<body>_imu`` (``qw,qx,qy,qz``, the sensor's orientation in
+OpenSim's ground frame). ``DataType=Vec3`` files (e.g. accelerations) become ``/signals/<column>`` with x,y,z, and
+plain scalar storage files one ``/signals/sto`` stream, columns as named.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+from converters._common import check_increasing, estimate_rate_hz, head_lines, sanitize_name, text_head_lines, to_ns
+from converters._lab import orientation_stream, read_table
+from converters.base import Converter, ConvertOptions
+from converters.errors import ConversionError
+from imulog.model import Recording, SignalStream
+
+WIDTH = {"quaternion": 4, "vec3": 3, "double": 1, "": 1}
+
+
+def _header(path: Path, lines: list[str]) -> tuple[dict[str, str], str, int]:
+    """(key=value header, name line, index of the column-names line)."""
+    info: dict[str, str] = {}
+    name = ""
+    for i, line in enumerate(lines):
+        text = line.strip()
+        if text.lower() == "endheader":
+            if i + 1 >= len(lines):
+                raise ConversionError(path, "no column names after 'endheader'", line=i + 1)
+            return info, name, i + 1
+        if "=" in text:
+            k, _, v = text.partition("=")
+            info[k.strip()] = v.strip()
+        elif i == 0:
+            name = text
+    raise ConversionError(path, "no 'endheader' line: not an OpenSim storage file (or its header is cut off)")
+
+
+def read_sto(path: Path) -> Recording:
+    path = Path(path)
+    lines = head_lines(path, max_lines=200)
+    info, title, ni = _header(path, lines)
+    cols = [c.strip() for c in lines[ni].split("\t")]
+    while cols and cols[-1] == "":
+        cols.pop()
+    if not cols or cols[0].lower() != "time":
+        raise ConversionError(path, "the first column must be 'time'", line=ni + 1)
+    dtype = info.get("DataType", "").lower()
+    width = WIDTH.get(dtype)
+    if width is None:
+        raise ConversionError(path, f"DataType={info['DataType']} is not supported (Quaternion, Vec3, double)")
+    names = ["time"] + [f"{c}[{k}]" for c in cols[1:] for k in range(width)]
+    data = path.read_bytes()
+    start = 0
+    for _ in range(ni + 1):
+        start = data.index(b"\n", start) + 1
+    body = data[:start] + data[start:].replace(b"\t", b",")
+    values = read_table(path, delimiter=",", skip_lines=ni + 1, names=names, data=body, required=[0])
+    first_line = ni + 2
+    try:
+        t_ns = to_ns(values[:, 0], 1e9)
+    except ValueError as e:
+        raise ConversionError(path, str(e), column="time") from None
+    check_increasing(path, t_ns, first_line, "time")
+    rate = None
+    m = re.match(r"^\s*([0-9.]+)", info.get("DataRate", ""))
+    if m:
+        rate = float(m.group(1))
+    meta: dict[str, Any] = {
+        "format": "opensim-sto",
+        "data_type": info.get("DataType", ""),
+        "rate_hz": rate or estimate_rate_hz(t_ns),
+        "header": info,
+        "time": "time column (s) as written",
+        "source": path.name,
+    }
+    if title:
+        meta["name"] = title
+    rec = Recording(sources=[str(path)])
+    if width == 1:
+        rec.signals.append(SignalStream("/signals/sto", t_ns, cols[1:], [""] * (len(cols) - 1), values[:, 1:]))
+    for j, c in enumerate(cols[1:]):
+        block = values[:, 1 + j * width : 1 + (j + 1) * width]
+        name = sanitize_name(c)
+        if width == 4:
+            rec.signals.append(orientation_stream(name, t_ns, block, frame_id="ground"))
+        elif width == 3:
+            rec.signals.append(SignalStream(f"/signals/{name}", t_ns, ["x", "y", "z"], ["", "", ""], block))
+    rec.metadata["imulog.device.opensense"] = {**meta, "columns": cols[1:]}
+    return rec
+
+
+class OpenSimStoConverter(Converter):
+    name = "opensim-sto"
+    description = "OpenSim/OpenSense storage (.sto): DataType=Quaternion columns -> /orientation/<body>_imu (w,x,y,z)"
+    extensions = (".sto", ".mot")
+    example = (
+        "imulog convert ../shared/data/devices/opensense_sto/myComplexTasksTrial_orientations.sto -o orientations.mcap"
+    )
+
+    def sniff(self, path: Path, head: bytes) -> float:
+        lines = text_head_lines(head, 40)
+        if not lines:
+            return 0.0
+        for i, line in enumerate(lines):
+            if line.strip().lower() == "endheader":
+                nxt = lines[i + 1] if i + 1 < len(lines) else ""
+                return 0.95 if nxt.lower().startswith("time") else 0.5
+            if i > 0 and "=" not in line:
+                return 0.0
+        return 0.0
+
+    def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
+        return read_sto(Path(path))
+
+
+CONVERTER = OpenSimStoConverter()
