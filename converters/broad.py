@@ -30,6 +30,29 @@ def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.nonzero(d == 1)[0], np.nonzero(d == -1)[0] - 1
 
 
+def _read_datasets(f, path: Path) -> tuple[float, dict[str, np.ndarray], np.ndarray | None, str]:
+    """Rate (Hz), float arrays, movement mask and info text of an open BROAD file."""
+    missing = [k for k in REQUIRED if k not in f]
+    if missing:
+        raise ConversionError(path, f"not a BROAD trial: missing dataset(s) {', '.join(missing)}")
+    rate = f.attrs.get("sampling_rate")
+    try:
+        rate = float(np.asarray(rate).item())
+    except (TypeError, ValueError):
+        raise ConversionError(path, "attribute 'sampling_rate' missing or not a number") from None
+    if not (rate > 0 and np.isfinite(rate)):
+        raise ConversionError(path, f"sampling_rate {rate!r} must be positive")
+    arrays = {
+        k: np.asarray(f[k][()], dtype=np.float64)
+        for k in ("imu_acc", "imu_gyr", "imu_mag", "opt_pos", "opt_quat")
+        if k in f
+    }
+    movement = np.asarray(f["movement"][()], dtype=bool) if "movement" in f else None
+    info = f.attrs.get("info", "")
+    info = info.decode(errors="replace") if isinstance(info, bytes) else str(info)
+    return rate, arrays, movement, info
+
+
 def read_broad(path: Path, name: str = "imu") -> Recording:
     path = Path(path)
     try:
@@ -43,24 +66,14 @@ def read_broad(path: Path, name: str = "imu") -> Recording:
         f = h5py.File(path, "r")
     except Exception as e:  # noqa: BLE001 - h5py raises OSError variants for corrupt files
         raise ConversionError(path, f"corrupt HDF5: {e}") from None
-    with f:
-        missing = [k for k in REQUIRED if k not in f]
-        if missing:
-            raise ConversionError(path, f"not a BROAD trial: missing dataset(s) {', '.join(missing)}")
-        rate = f.attrs.get("sampling_rate")
-        try:
-            rate = float(np.asarray(rate).item())
-        except (TypeError, ValueError):
-            raise ConversionError(path, "attribute 'sampling_rate' missing or not a number") from None
-        if not (rate > 0 and np.isfinite(rate)):
-            raise ConversionError(path, f"sampling_rate {rate!r} must be positive")
-        arrays = {
-            k: np.asarray(f[k][()], dtype=np.float64)
-            for k in ("imu_acc", "imu_gyr", "imu_mag", "opt_pos", "opt_quat")
-            if k in f
-        }
-        movement = np.asarray(f["movement"][()], dtype=bool) if "movement" in f else None
-        info = str(f.attrs.get("info", ""))
+    try:
+        with f:
+            rate, arrays, movement, info = _read_datasets(f, path)
+    except ConversionError:
+        raise
+    except (OSError, RuntimeError, KeyError, ValueError, TypeError, IndexError) as e:
+        # h5py reports damaged b-trees, heaps and chunks as any of these, often only when data is read
+        raise ConversionError(path, f"damaged HDF5 file ({type(e).__name__}: {e})") from None
     n = len(arrays["imu_acc"])
     for key, a in arrays.items():
         width = 4 if key == "opt_quat" else 3

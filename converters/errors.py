@@ -2,7 +2,28 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
+
+EXCERPT_CHARS = 40  # a quoted cell, value or column name is cut to this many characters in error lines
+MAX_PROBLEM_CHARS = 300  # and the whole problem text to this many
+_REPEAT = "{%d,}" % (EXCERPT_CHARS + 1)  # noqa: UP031 - braces of a regex
+_QUOTED = re.compile(r"'(?:[^'\\]|\\.)" + _REPEAT + r"'|" + r'"(?:[^"\\]|\\.)' + _REPEAT + '"')
+
+
+def excerpt(value: object, limit: int = EXCERPT_CHARS) -> str:
+    """``value`` as text of at most ``limit`` characters (``...`` and the full length when cut)."""
+    text = str(value)
+    return text if len(text) <= limit else f"{text[: limit - 3]}... ({len(text)} chars)"
+
+
+def _short(problem: str) -> str:
+    """One line; quoted excerpts longer than EXCERPT_CHARS cut, the whole at most MAX_PROBLEM_CHARS."""
+    text = " ".join(str(problem)[:20_000].split())  # bounded work on a hostile megabyte cell
+    text = _QUOTED.sub(lambda q: f"{q.group(0)[: EXCERPT_CHARS - 3]}...{q.group(0)[0]} ({len(q.group(0))} chars)", text)
+    if len(text) > MAX_PROBLEM_CHARS:
+        text = f"{text[: MAX_PROBLEM_CHARS - 3]}..."
+    return text
 
 
 class ConversionError(ValueError):
@@ -16,12 +37,12 @@ class ConversionError(ValueError):
         self.path = str(path) if path is not None else None
         self.line = line
         self.column = column
-        self.problem = " ".join(str(problem).split())  # one line, always
+        self.problem = _short(problem)  # one line, always; a huge offending cell is quoted as an excerpt
         where = []
         if line is not None:
             where.append(f"line {line}")
         if column is not None:
-            where.append(f"column {column!r}")
+            where.append(f"column {excerpt(column)!r}")
         prefix = f"{self.path}: " if self.path else ""
         location = ", ".join(where)
         super().__init__(f"{prefix}{location + ': ' if location else ''}{self.problem}")
