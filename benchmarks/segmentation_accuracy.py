@@ -32,7 +32,7 @@ def score(sim, params: PhaseParams) -> dict:
     imu = sim.recording.imus[0]
     t_ref = np.asarray(sim.truth.imu_t_ref_ns, dtype=np.int64)
     rate = (len(imu.t_ns) - 1) / ((imu.t_ns[-1] - imu.t_ns[0]) * 1e-9)
-    result = segment_phases(imu.gyr, rate, params)
+    result = segment_phases(imu.gyr, rate, params, imu.acc)
     ph, truth = result.phases, sim.truth.phases
     det_s = t_ref[ph.start] * 1e-9
     det_e = t_ref[np.maximum(ph.end - 1, ph.start)] * 1e-9

@@ -32,6 +32,9 @@ class ImuParams:
     gyr_bias_sd_dps: float = 0.5  # constant bias per axis
     acc_bias_rw_mps2_per_sqrt_s: float = 2e-4  # bias random walk
     gyr_bias_rw_dps_per_sqrt_s: float = 5e-3
+    acc_bias_drift_mps2: float = 0.0  # warm-up drift of the bias per axis (sd of its final change), 0 = none
+    gyr_bias_drift_dps: float = 0.0  # ... of the gyroscope bias
+    bias_drift_tau_s: float = 300.0  # time constant of the warm-up drift (exponential approach)
     scale_sd: float = 0.005  # scale factor error per axis (0.5 %)
     misalignment_sd_deg: float = 0.3  # non-orthogonality of the axes
     mag_hard_iron_sd_uT: float = 8.0  # per axis
@@ -51,6 +54,8 @@ class ImuParams:
             gyr_bias_sd_dps=0.0,
             acc_bias_rw_mps2_per_sqrt_s=0.0,
             gyr_bias_rw_dps_per_sqrt_s=0.0,
+            acc_bias_drift_mps2=0.0,
+            gyr_bias_drift_dps=0.0,
             scale_sd=0.0,
             misalignment_sd_deg=0.0,
             mag_hard_iron_sd_uT=0.0,
@@ -149,6 +154,11 @@ def measure(
     gyr = omega_rads @ device.gyr_matrix.T + device.gyr_bias_rads
     gyr += random_walk(n, dt, np.radians(params.gyr_bias_rw_dps_per_sqrt_s), rng)
     gyr += rng.normal(0.0, 1.0, (n, 3)) * np.radians(params.gyr_noise_dps)
+    if params.acc_bias_drift_mps2 > 0 or params.gyr_bias_drift_dps > 0:  # thermal warm-up (own stream)
+        drift_rng = np.random.default_rng(rng.bit_generator.seed_seq.spawn(1)[0])
+        shape = (1.0 - np.exp(-(t_s - (t_s[0] if n else 0.0)) / params.bias_drift_tau_s))[:, None]
+        acc += shape * drift_rng.normal(0.0, params.acc_bias_drift_mps2, 3)
+        gyr += shape * np.radians(drift_rng.normal(0.0, params.gyr_bias_drift_dps, 3))
     mag = mag_uT @ device.mag_soft_iron.T + device.mag_hard_iron_uT
     mag += rng.normal(0.0, 1.0, (n, 3)) * params.mag_noise_uT
 

@@ -56,16 +56,23 @@ def algorithm_name(params: PhaseParams) -> str:
 
 
 def compute_phases(
-    t_ns: np.ndarray, gyr: np.ndarray, imu: str, params: PhaseParams, alignment: dict | None = None
+    t_ns: np.ndarray,
+    gyr: np.ndarray,
+    imu: str,
+    params: PhaseParams,
+    alignment: dict | None = None,
+    acc: np.ndarray | None = None,
 ) -> tuple[list, dict]:
-    """Pure part of the step: streams and the ``imulog.timing`` record from IMU samples (no I/O)."""
+    """Pure part of the step: streams and the ``imulog.timing`` record from IMU samples (no I/O).
+
+    ``acc`` (m/s^2, optional): phase boundaries then also follow the hand's translation."""
     t_ns = np.asarray(t_ns, dtype=np.int64)
     if len(t_ns) < 10:
         raise ValueError(f"/imu/{imu} has only {len(t_ns)} samples")
     if gyr is None:
         raise ValueError(f"/imu/{imu} has no gyroscope columns")
     rate_hz = mean_rate_hz(t_ns)
-    result = segment_phases(gyr, rate_hz, params)
+    result = segment_phases(gyr, rate_hz, params, acc)
     t_iv, clock = t_ns, "device"
     if alignment is not None:
         from imulog.process.alignment import device_to_reference
@@ -128,7 +135,7 @@ def run_phases(path, *, imu: str | None = None, params: PhaseParams | None = Non
     def compute(trial) -> StepResult:
         stream = trial.read(topic)
         alignment = alignment_for(trial.metadata, topic)
-        streams, timing = compute_phases(stream.t_ns, stream.gyr, name, params, alignment)
+        streams, timing = compute_phases(stream.t_ns, stream.gyr, name, params, alignment, stream.acc)
         return StepResult(streams=streams, metadata={"imulog.timing": timing})
 
     return run_step(

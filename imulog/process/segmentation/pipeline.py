@@ -24,6 +24,7 @@ import numpy as np
 from imulog.process.segmentation.boundaries import BoundaryParams, refine_phase_boundaries
 from imulog.process.segmentation.double_threshold import DoubleThresholdParams, double_threshold
 from imulog.process.segmentation.dynamos import DynamosParams, dynamos, lowpass_norm
+from imulog.process.segmentation.hand import HandParams, refine_with_accelerometer
 from imulog.process.segmentation.repetitions import Phases, RepetitionParams, segment_repetitions
 from imulog.process.segmentation.template import TemplateParams, build_template, match_template
 from imulog.process.segmentation.zero_velocity import (
@@ -55,6 +56,7 @@ class PhaseParams:
     template: TemplateParams = field(default_factory=TemplateParams)
     repetitions: RepetitionParams = field(default_factory=RepetitionParams)
     boundaries: BoundaryParams = field(default_factory=BoundaryParams)
+    hand: HandParams = field(default_factory=HandParams)
     static: str = "movements"
     static_margin_s: float = 0.0
     gyro_norm: GyroNormStaticParams = field(default_factory=GyroNormStaticParams)
@@ -107,8 +109,17 @@ def movements_as_phases(start: np.ndarray, end: np.ndarray) -> Phases:
     )
 
 
-def segment_phases(gyr_rad_s: np.ndarray, rate_hz: float, params: PhaseParams = PhaseParams()) -> PhaseResult:
-    """Movements, corrected phases and zero-velocity mask from a gyroscope signal (N, 3) rad/s."""
+def segment_phases(
+    gyr_rad_s: np.ndarray,
+    rate_hz: float,
+    params: PhaseParams = PhaseParams(),
+    acc_mps2: np.ndarray | None = None,
+) -> PhaseResult:
+    """Movements, corrected phases and zero-velocity mask from a gyroscope signal (N, 3) rad/s.
+
+    With the accelerometer ``acc_mps2`` (N, 3) m/s^2 (same samples) the phase boundaries also follow the
+    hand's translation (:mod:`~imulog.process.segmentation.hand`), and the static mask excludes the refined
+    phases as well as the movements."""
     gyr = np.asarray(gyr_rad_s, dtype=float)
     norm = lowpass_norm(gyr, rate_hz, params.dynamos.cutoff_hz, params.dynamos.filter_order)
     if params.method == "dynamos":
@@ -129,9 +140,13 @@ def segment_phases(gyr_rad_s: np.ndarray, rate_hz: float, params: PhaseParams = 
     refine = params.boundaries.enabled and (params.method != "dynamos" or params.dynamos.refine_boundaries)
     if refine and len(phases):  # onsets/offsets where the gyroscope leaves/reaches its static noise
         ps, pe = refine_phase_boundaries(gyr, rate_hz, phases.start, phases.end, params.boundaries)
+        if acc_mps2 is not None and params.hand.enabled:  # ... and where the hand leaves/reaches its rest
+            ps, pe = refine_with_accelerometer(acc_mps2, gyr, rate_hz, ps, pe, params.hand)
         phases = replace(phases, start=ps, end=pe)
     if params.static == "movements":
         static = static_from_movements(len(gyr), start, end, rate_hz, params.static_margin_s)
+        if refine and len(phases):  # zero velocity only where neither a movement nor a refined phase is
+            static &= static_from_movements(len(gyr), phases.start, phases.end, rate_hz, params.static_margin_s)
     elif params.static == "gyro-norm":
         static = gyro_norm_static(gyr, rate_hz, params.gyro_norm)
     else:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from imulog.process import quaternion as quat
-from imulog.simulate.motion import MotionPlan
+from imulog.simulate.motion import MotionPlan, submovement_law
 from imulog.simulate.protocols.common import ProtocolResult, opening
 
 PHASES = ("reach", "lift", "return_bottle", "return_hand")
@@ -63,6 +63,19 @@ class Params:
     pose_grasp_deg: tuple[float, float, float] = (20.0, 5.0, -75.0)  # neutral (thumb up) at the bottle
     pose_mouth_deg: tuple[float, float, float] = (45.0, -55.0, -100.0)  # forearm raised, bottle tilted
     side: str = "right"
+    # variability of real (and stroke) drinking movements; every default is off, so the default trial is
+    # unchanged; sources in docs/simulate.md ("Conditions of the accuracy grid")
+    rotation_onset_frac: tuple[float, float] = (0.0, 0.0)  # wrist rotation starts this fraction into the phase
+    rotation_end_frac: tuple[float, float] = (1.0, 1.0)  # ... and ends here (< 1: before the hand stops)
+    curve_m: tuple[float, float] = (0.0, 0.0)  # bow of the hand path (m) across the straight line, uniform range
+    curve_peak: tuple[float, float] = (0.5, 0.5)  # path fraction of the bow's peak (skew), uniform in [0.3, 0.7]
+    placement_jitter_m: float = 0.0  # per-trial bottle placement shift sd in x and y (m), written as h1/bottle_dy_m
+    mouth_jitter_m: float = 0.0  # per-trial shift sd of the cup-to-mouth position in x, y, z (m)
+    submovements: tuple[int, int] = (1, 1)  # submovements per phase (inclusive range): several velocity peaks
+    submovement_overlap: tuple[float, float] = (0.4, 0.8)  # next submovement starts at this fraction of the last
+    pause_probability: float = 0.0  # chance that a phase pauses (hand still) between two submovements
+    pause_s: tuple[float, float] = (0.15, 0.45)  # length of such a pause (s)
+    slowness: float = 1.0  # duration factor on every phase (stroke survivors: 1.5-2.5)
 
 
 def _subject(params: Params, rng: np.random.Generator) -> dict:
@@ -87,6 +100,52 @@ def _pose(
 ) -> np.ndarray:
     y, p, r = np.asarray(base) + rng.normal(0.0, jitter_deg, 3)
     return quat.from_euler_zyx(y + yaw_offset, p, r)
+
+
+def _varied(params: Params) -> bool:
+    return (
+        params.rotation_onset_frac != (0.0, 0.0)
+        or params.rotation_end_frac != (1.0, 1.0)
+        or params.curve_m != (0.0, 0.0)
+        or params.submovements != (1, 1)
+        or params.pause_probability > 0
+    )
+
+
+def _varied_move(plan: MotionPlan, seconds: float, p1: np.ndarray, q1: np.ndarray, params: Params, rng) -> None:
+    """One phase with its own time laws: translation as 1..n overlapping minimum-jerk submovements (optionally
+    a pause between two), rotation over a sub-window of the phase, the path bowed across the straight line."""
+    k = int(rng.integers(params.submovements[0], params.submovements[1] + 1))
+    durations = rng.uniform(0.35, 0.7, k)  # relative to the primary submovement's
+    durations[0] = 1.0
+    onsets = np.zeros(k)
+    pause_at = int(rng.integers(1, k)) if k > 1 and rng.random() < params.pause_probability else -1
+    if k == 1 and rng.random() < params.pause_probability:  # a pause needs two submovements
+        k, pause_at = 2, 1
+        durations, onsets = np.array([1.0, rng.uniform(0.4, 0.8)]), np.zeros(2)
+    for i in range(1, k):
+        onsets[i] = onsets[i - 1] + durations[i - 1] * rng.uniform(*params.submovement_overlap)
+    onsets, durations = onsets * seconds, durations * seconds  # the primary takes the nominal phase duration
+    if pause_at > 0:  # the hand stops: the later submovements start after the earlier ones end, plus a pause
+        ends = onsets[:pause_at] + durations[:pause_at]
+        onsets[pause_at:] += max(0.0, float(ends.max()) - onsets[pause_at]) + rng.uniform(*params.pause_s)
+    T = float(np.max(onsets + durations))
+    weights = np.r_[1.0, rng.uniform(0.15, 0.5, k - 1)] if k > 1 else np.ones(1)
+    law = submovement_law(T, onsets, durations, weights) if k > 1 else None
+    a = rng.uniform(*params.rotation_onset_frac)
+    b = max(a + 0.2, rng.uniform(*params.rotation_end_frac))
+    rot_law = None if (a, b) == (0.0, 1.0) else submovement_law(T, [a * T], [(min(b, 1.0) - a) * T], [1.0])
+    if rot_law is None and law is not None:
+        rot_law = submovement_law(T, [0.0], [T], [1.0])  # the wrist turns smoothly; only the hand corrects
+    dp = p1 - plan.p
+    bow = rng.uniform(*params.curve_m)
+    curve = None
+    if bow > 0 and np.linalg.norm(dp) > 1e-6:
+        u = dp / np.linalg.norm(dp)
+        d = rng.normal(0.0, 1.0, 3)
+        d -= u * (d @ u)
+        curve = bow * d / np.linalg.norm(d)
+    plan.move(T, p1, q1, law=law, rot_law=rot_law, curve=curve, curve_peak=float(rng.uniform(*params.curve_peak)))
 
 
 def _phase_move(
@@ -130,10 +189,23 @@ def build(params: Params, subject_rng: np.random.Generator, rng: np.random.Gener
     speed = anth["speed_factor"]
     jit = params.position_jitter_m
     bottle = start + np.array([anth["h1_m"], anth["h2_m"], params.grasp_dz_m])
+    mouth0 = np.array([anth["mouth_dx_m"], anth["h2_m"], anth["h3_m"]])
+    # variation draws come from child streams, so the default trial's own draws never change
+    vary_rng = np.random.default_rng(rng.bit_generator.seed_seq.spawn(1)[0]) if _varied(params) else None
+    if params.placement_jitter_m > 0 or params.mouth_jitter_m > 0:
+        place_rng = np.random.default_rng(rng.bit_generator.seed_seq.spawn(1)[0])
+        shift = place_rng.normal(0.0, params.placement_jitter_m, 2)
+        bottle = bottle + np.r_[shift, 0.0]
+        mouth0 = mouth0 + place_rng.normal(0.0, params.mouth_jitter_m, 3)
+        anth["h1_m"] = float(bottle[0] - start[0])  # what the user measures for this trial
+        anth["bottle_dy_m"] = float(bottle[1] - start[1])
+        anth["h2_m"], anth["h3_m"], anth["mouth_dx_m"] = float(mouth0[1]), float(mouth0[2]), float(mouth0[0])
     for rep in range(1, params.repetitions + 1):
-        durations = [d * speed * max(0.5, rng.normal(1.0, params.duration_jitter)) for d in params.durations_s]
+        durations = [
+            d * speed * params.slowness * max(0.5, rng.normal(1.0, params.duration_jitter)) for d in params.durations_s
+        ]
         grasp = bottle + rng.normal(0.0, jit, 3) * [1.0, 1.0, 0.3]
-        mouth = start + np.array([anth["mouth_dx_m"], anth["h2_m"], anth["h3_m"]]) + rng.normal(0.0, jit, 3)
+        mouth = start + mouth0 + rng.normal(0.0, jit, 3)
         put_back = grasp + rng.normal(0.0, jit * 0.5, 3) * [1.0, 1.0, 0.2]
         home = start + rng.normal(0.0, jit, 3) * [1.0, 1.0, 0.1]
         targets = [
@@ -144,7 +216,10 @@ def build(params: Params, subject_rng: np.random.Generator, rng: np.random.Gener
         ]
         for k, (label, (p1, q1), seconds) in enumerate(zip(PHASES, targets, durations, strict=True)):
             t_start = plan.t
-            _phase_move(plan, seconds, p1, q1, params.extra_submovement_probability, rng)
+            if vary_rng is not None:
+                _varied_move(plan, seconds, p1, q1, params, vary_rng)
+            else:
+                _phase_move(plan, seconds, p1, q1, params.extra_submovement_probability, rng)
             plan.mark(label, t_start, plan.t, rep)
             if k < 3:
                 _static(

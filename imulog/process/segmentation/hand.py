@@ -1,0 +1,253 @@
+"""Phase boundaries that follow the hand, not only the wrist's rotation (an imulog addition, issue 19).
+
+The R2G thesis defines the phases by what the hand does: reach and grasp the bottle, lift it to the mouth,
+return it to the table, return the hand to its start (3.2.1), with a static period of about four seconds
+between them. DynAMoS and :mod:`~imulog.process.segmentation.boundaries` see only the gyroscope, so a phase
+ends when the wrist stops *rotating*. In real reaching the forearm's rotation (pronation to a side grasp,
+tilting the bottle) often finishes before the hand arrives, and a slow or corrective approach barely rotates
+at all; the phase then ends early (the thesis's subject 6: "a residual velocity before and after DynAMoS
+identified phases").
+
+After the gyroscope refinement, every onset (offset) is moved further out while the *hand* still moves:
+
+1. the accelerometer is low-passed per axis (zero-phase, 2nd order, ``cutoff_hz``, lowered for a noisy
+   sensor like the gyroscope's, :func:`~imulog.process.segmentation.boundaries.adaptive_cutoff_hz`);
+2. a rest window of ``rest_window_s`` in the adjacent gap (at its middle, or ``rest_distance_s`` from the phase
+   in a long rest) gives the static
+   specific force ``f_rest`` (per-axis median, the sensor's gravity reading and bias) and the noise
+   (per-axis 1.4826 MAD, rms over the axes);
+3. between the boundary and the rest window the specific force is rotated into the rest window's sensor
+   frame with the bias-corrected gyroscope integrated from the window (small angles: the wrist barely turns
+   there) and ``a = R f - f_rest`` is the gravity-free acceleration (m/s^2; a sensor bias cancels, a slow tilt
+   is compensated);
+4. the velocity ``v`` (m/s) is ``a`` integrated from the rest window (where the hand is still: a
+   zero-velocity update), so it is consistent with ZUPT;
+5. the hand moves where ``|a| > n_sigma x noise`` (at least ``min_level_mps2``), or where
+   ``|v| > velocity_level_mps`` while ``|a|`` is above half that level (a slow tail still decelerating; a rest's
+   slow drift, the thesis's residual velocity, barely accelerates and is not taken); runs shorter than
+   ``min_run_s`` are noise; from the gyroscope
+   boundary the onset (offset) walks outward over moving samples and stops at the first run of
+   ``quiet_s`` without motion; a move beyond ``max_shift_s`` is not trusted (the "rest" is not a rest) and
+   the gyroscope boundary stays;
+6. motion that resumes within ``continuation_s`` after the offset with ``|a|`` of at least
+   ``continuation_fraction`` of the phase's peak and settles before the rest window (a translation-only
+   correction after a pause) extends the phase, as :mod:`boundaries` does for rotations.
+
+Pure numpy/scipy; intervals are half-open sample ranges ``[start, end)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
+
+
+@dataclass(frozen=True)
+class HandParams:
+    """Parameters of :func:`refine_with_accelerometer` (imulog defaults; units in the names).
+
+    enabled: use the accelerometer at all (off: boundaries follow the gyroscope only).
+    cutoff_hz: highest low-pass cut-off (Hz) of the accelerometer; target_level_mps2 and min_cutoff_hz lower
+        it for a noisy sensor (see :func:`~imulog.process.segmentation.boundaries.adaptive_cutoff_hz`).
+    rest_window_s: length (s) of the rest window that gives ``f_rest`` and the noise.
+    rest_distance_s: the rest window is centred this far (s) from the phase, or at the gap's middle when the
+        gap is shorter than twice this.
+    guard_s: the rest window keeps this distance (s) from the neighbouring phases.
+    n_sigma: acceleration level = ``n_sigma`` x the rest noise (rms of per-axis robust sd, m/s^2).
+    min_level_mps2: lower bound of that level (quantised, nearly noise-free sensors).
+    velocity_level_mps: the hand moves where the velocity integrated from the rest exceeds this (m/s).
+    quiet_s: the walk stops at the first run this long (s) without motion.
+    min_run_s: shorter runs above the level are noise, not motion (s).
+    max_shift_s: a boundary moving further than this (s) beyond the gyroscope boundary is not trusted.
+    continuation_s: a translation resuming within this time (s) after the offset can extend the phase.
+    continuation_fraction: ... when its ``|a|`` reaches this fraction of the phase's peak ``|a|``.
+    """
+
+    enabled: bool = True
+    cutoff_hz: float = 25.0
+    target_level_mps2: float = 0.08
+    min_cutoff_hz: float = 4.0
+    rest_window_s: float = 0.5
+    rest_distance_s: float = 1.5
+    guard_s: float = 0.05
+    n_sigma: float = 5.0
+    min_level_mps2: float = 0.02
+    velocity_level_mps: float = 0.03
+    quiet_s: float = 0.05
+    min_run_s: float = 0.03
+    max_shift_s: float = 1.5
+    continuation_s: float = 1.0
+    continuation_fraction: float = 0.1
+
+
+def fill_gaps(x: np.ndarray) -> np.ndarray:
+    """Per-axis linear interpolation over NaN samples (missing samples of a stream with gaps)."""
+    x = np.array(x, dtype=float)
+    for j in range(x.shape[1]):
+        bad = ~np.isfinite(x[:, j])
+        if bad.any() and not bad.all():
+            x[bad, j] = np.interp(np.flatnonzero(bad), np.flatnonzero(~bad), x[~bad, j])
+    return x
+
+
+def _rest_window(lo: int, hi: int, length: int, reach: int, from_end: bool):
+    """``[a, a + length)`` in the gap ``[lo, hi)``: centred at the gap's middle or, in a longer gap, ``reach``
+    samples from the phase (``lo`` side; the ``hi`` side when ``from_end``); None below 3 samples.
+    The middle of a rest is farthest from both phases (the hand is most surely still there); a nearer window
+    in a long rest keeps the velocity integrated from it accurate."""
+    lo, hi = max(0, int(lo)), int(hi)
+    length = min(int(length), hi - lo)
+    if length < 3:
+        return None
+    centre = (lo + hi) // 2
+    if hi - lo > 2 * reach:
+        centre = hi - reach if from_end else lo + reach
+    a = int(np.clip(centre - length // 2, lo, hi - length))
+    return a, a + length
+
+
+def gravity_free(
+    acc: np.ndarray, gyr: np.ndarray, dt_s: float, window: tuple[int, int], lo: int, hi: int
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Gravity-free acceleration (m/s^2) and velocity (m/s) over ``[lo, hi)`` relative to a rest ``window``.
+
+    Specific force rotated into the window's sensor frame (bias-corrected gyroscope integrated from the window,
+    small-angle), minus the window's median; velocity integrated from zero at the window (ZUPT). Also returns
+    the rest noise (m/s^2, rms over the axes of the per-axis robust sd)."""
+    w0, w1 = window
+    f_rest = np.mean(acc[w0:w1], axis=0)  # the mean: a median of quantised samples is off by up to LSB/2
+    noise = float(np.sqrt(np.mean((1.4826 * np.median(np.abs(acc[w0:w1] - f_rest), axis=0)) ** 2)))
+    bias = np.median(gyr[w0:w1], axis=0)
+    w = (gyr - bias) * dt_s
+    if hi <= w0:  # stretch before the window (an offset): integrate backwards from the window's start
+        idx = np.arange(lo, w0)
+        theta = -np.cumsum(w[idx][::-1], axis=0)[::-1]
+        f = acc[idx] + np.cross(theta, acc[idx])
+        a = f - f_rest
+        v = -np.cumsum(a[::-1], axis=0)[::-1] * dt_s
+    else:  # stretch after the window (an onset): integrate forwards from the window's end
+        idx = np.arange(w1, hi)
+        theta = np.cumsum(w[idx], axis=0)
+        f = acc[idx] + np.cross(theta, acc[idx])
+        a = f - f_rest
+        v = np.cumsum(a, axis=0) * dt_s
+    return a, v, noise
+
+
+def sustained(mask: np.ndarray, min_run: int) -> np.ndarray:
+    """``mask`` without its True runs shorter than ``min_run`` samples (isolated noise exceedances)."""
+    mask = np.asarray(mask, dtype=bool)
+    if min_run <= 1 or not mask.any():
+        return mask
+    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
+    starts, ends = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    out = mask.copy()
+    for a, b in zip(starts, ends, strict=True):
+        if b - a < min_run:
+            out[a:b] = False
+    return out
+
+
+def _walk(moving: np.ndarray, start: int, quiet: int) -> int:
+    """Index one past the last moving sample reachable from ``start`` without a quiet run of ``quiet``."""
+    last = start - 1
+    for i in range(start, len(moving)):
+        if moving[i]:
+            last = i
+        elif i - last > quiet:
+            break
+    return last + 1
+
+
+def _extend_offset(a_norm, v_norm, b_local, level, vlevel, quiet, cont, cont_level, min_run) -> int:
+    """Offset (exclusive, local index) after walking out of the phase and over translation-only corrections."""
+    moving = a_norm > level
+    if vlevel > 0:  # a tail at speed that still decelerates; a rest's slow drift barely accelerates
+        moving |= (v_norm > vlevel) & (a_norm > 0.5 * level)
+    moving = sustained(moving, min_run)
+    j = _walk(moving, b_local, quiet)
+    while cont > 0:
+        big = np.flatnonzero(a_norm[j : j + cont] >= cont_level)
+        if len(big) == 0:
+            break
+        k = _walk(moving, j + int(big[0]), quiet)
+        if k >= len(moving):  # never settles before the rest: not a correction of this phase
+            break
+        j = k
+    return j
+
+
+def refine_with_accelerometer(
+    acc_mps2: np.ndarray,
+    gyr_rad_s: np.ndarray,
+    rate_hz: float,
+    start: np.ndarray,
+    end: np.ndarray,
+    params: HandParams = HandParams(),
+) -> tuple[np.ndarray, np.ndarray]:
+    """Onsets/offsets of time-ordered, non-overlapping phases moved outward while the hand still moves.
+
+    ``acc_mps2`` (N, 3) specific force m/s^2 and ``gyr_rad_s`` (N, 3) rad/s in the sensor frame at
+    ``rate_hz``; ``start``/``end`` the (gyroscope-refined) phases. A boundary never crosses the neighbouring
+    phase nor the rest window between them. See the module docstring.
+    """
+    s = np.array(start, dtype=np.int64)
+    e = np.array(end, dtype=np.int64)
+    if not params.enabled or len(s) == 0 or acc_mps2 is None:
+        return s, e
+    raw = fill_gaps(acc_mps2)  # a missing sample must not look like a jump to 0 m/s^2
+    cut = adaptive_cutoff_hz(
+        raw,
+        rate_hz,
+        BoundaryParams(
+            cutoff_hz=params.cutoff_hz,
+            target_level_rad_s=params.target_level_mps2,
+            min_cutoff_hz=params.min_cutoff_hz,
+            n_sigma=params.n_sigma,
+        ),
+    )
+    acc = lowpass_axes(raw, rate_hz, cut)
+    gyr = lowpass_axes(fill_gaps(gyr_rad_s), rate_hz, min(25.0, 0.45 * rate_hz))
+    n, dt = len(acc), 1.0 / rate_hz
+    length = max(3, int(round(params.rest_window_s * rate_hz)))
+    guard = int(round(params.guard_s * rate_hz))
+    quiet = max(1, int(round(params.quiet_s * rate_hz)))
+    min_run = max(1, int(round(params.min_run_s * rate_hz)))
+    reach = int(round(params.rest_distance_s * rate_hz))
+    shift = int(round(params.max_shift_s * rate_hz))
+    cont = int(round(params.continuation_s * rate_hz))
+    order = np.argsort(s, kind="stable")
+    ss, ee = s[order].copy(), e[order].copy()
+    out_s, out_e = ss.copy(), ee.copy()
+    for k in range(len(ss)):
+        a0, b0 = int(ss[k]), int(ee[k])
+        prev_end = int(out_e[k - 1]) if k > 0 else 0
+        next_start = int(ss[k + 1]) if k + 1 < len(ss) else n
+        # the phase's peak |a| against the nearer rest, for the continuation level
+        post = _rest_window(b0 + guard, min(next_start, n) - guard, length, reach, from_end=False)
+        pre = _rest_window(prev_end + guard, a0 - guard, length, reach, from_end=True)
+        if post is not None and post[0] > b0:
+            a, v, noise = gravity_free(acc, gyr, dt, post, b0, post[0])
+            level = max(params.n_sigma * noise, params.min_level_mps2)
+            an, vn = np.linalg.norm(a, axis=1), np.linalg.norm(v, axis=1)
+            inside = np.linalg.norm(acc[a0:b0] - np.median(acc[post[0] : post[1]], axis=0), axis=1)
+            cont_level = max(params.continuation_fraction * float(inside.max(initial=0.0)), 3 * level)
+            j = _extend_offset(an, vn, 0, level, params.velocity_level_mps, quiet, cont, cont_level, min_run)
+            if 0 < j <= shift:
+                out_e[k] = b0 + j
+        if pre is not None and pre[1] < a0:
+            a, v, noise = gravity_free(acc, gyr, dt, pre, pre[1], a0)
+            level = max(params.n_sigma * noise, params.min_level_mps2)
+            an, vn = np.linalg.norm(a, axis=1)[::-1], np.linalg.norm(v, axis=1)[::-1]
+            moving = an > level
+            if params.velocity_level_mps > 0:
+                moving |= (vn > params.velocity_level_mps) & (an > 0.5 * level)
+            moving = sustained(moving, min_run)
+            i = _walk(moving, 0, quiet)
+            if 0 < i <= shift:
+                out_s[k] = a0 - i
+    s[order], e[order] = out_s, out_e
+    return s, e
