@@ -22,3 +22,28 @@ def shared_data() -> Path:
 @pytest.fixture(scope="session")
 def repo_root() -> Path:
     return REPO_ROOT
+
+
+@pytest.fixture(scope="session")
+def processed_r2g(tmp_path_factory) -> Path:
+    """recordings/sim's R2G trial converted and processed (orientation, align, phases); do not modify it.
+
+    Tests that change a trial copy it first (``shutil.copy``).
+    """
+    from click.testing import CliRunner
+
+    from imulog.cli import cli
+    from imulog.steps.align import run_align
+    from imulog.steps.orientation import run_orientation
+    from imulog.steps.phases import run_phases
+
+    sim = REPO_ROOT / "recordings" / "sim"
+    out = tmp_path_factory.mktemp("processed_r2g") / "r2g.mcap"
+    args = ["convert", str(sim / "r2g_s00_t00_imu.csv"), str(sim / "r2g_s00_t00_vicon.csv"),
+            "--meta-file", str(sim / "r2g_s00_t00_meta.json"), "-o", str(out)]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    run_orientation(out)
+    run_align(out)
+    run_phases(out)
+    return out

@@ -97,6 +97,27 @@ def _fmt_rate(rate: float | None) -> str:
     return "-" if not rate else f"{rate:.6g}"
 
 
+def _echo_periods(metrics: dict) -> None:
+    """Daily-life summaries of long recordings (``imulog.metrics`` by_day, else by_hour) as a small table."""
+    key = "by_day" if isinstance(metrics.get("by_day"), list) else "by_hour"
+    rows = metrics.get(key)
+    if not isinstance(rows, list) or not rows:
+        return
+    click.echo(f"daily life ({'per day' if key == 'by_day' else 'per hour'}, from imulog.metrics):")
+    click.echo("  start                      valid_h  arm_use_%  activities  distance_area")
+    for r in rows[:48]:
+        if not isinstance(r, dict):
+            continue
+        use = r.get("arm_use_percent")
+        click.echo(
+            f"  {str(r.get('start') or r.get('start_ns')):<26} {float(r.get('valid_s') or 0) / 3600:7.2f}  "
+            f"{'-' if use is None else f'{float(use):9.2f}'}  {r.get('activity_count', ''):>10}  "
+            f"{float(r.get('distance_weighted_area') or 0):13.1f}"
+        )
+    if len(rows) > 48:
+        click.echo(f"  ... {len(rows) - 48} more (info --json lists all)")
+
+
 @click.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="print one JSON document (for scripts)")
@@ -150,6 +171,7 @@ def info(file: str, as_json: bool) -> None:
         if len(shown) > 200:
             shown = shown[:197] + "..."
         click.echo(f"  {name}: {shown}")
+    _echo_periods(data["metadata"].get("imulog.metrics") or {})
     if data["attachments"]:
         click.echo("attachments:")
         for a in data["attachments"]:

@@ -1,0 +1,181 @@
+"""Which clock an export is on, and the trial's time origin and wall-clock start.
+
+Every export puts all of a trial's channels on one clock:
+
+* ``device``: the device clock of one IMU (``imu=``, or the trial's only / aligned IMU); channels
+  recorded on the reference (Vicon) clock are mapped back with ``imulog.alignment``;
+* ``reference``: the reference (Vicon) clock; IMU-clock channels are mapped with
+  :func:`imulog.process.alignment.device_to_reference` (the mapping the viewer uses).
+
+Which clock a channel was written on follows the viewer's rules (:mod:`imulog.view.clock`).
+Seconds from start (``t[s]``) count from the trial's first raw sample on the chosen clock; the
+wall-clock column ``time`` adds them to ``imulog.trial["start_time"]`` (ISO 8601).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from datetime import UTC, datetime, timedelta
+from typing import Any
+
+import numpy as np
+
+from imulog.process.alignment import device_to_reference, reference_to_device
+from imulog.view.clock import STEP_CLOCK_RECORDS, alignments_from_metadata, device_imu_of, imu_name
+
+CLOCKS = ("device", "reference")
+
+
+class ClockError(ValueError):
+    """The requested clock cannot be applied (no alignment, ambiguous IMU...): one line, names the file."""
+
+
+def seconds_from(t_ns: np.ndarray, origin_ns: int) -> np.ndarray:
+    """Seconds (float64) of int64-ns time stamps after ``origin_ns``."""
+    return (np.asarray(t_ns, dtype=np.int64) - np.int64(origin_ns)).astype(np.float64) / 1e9
+
+
+def parse_start_time(value: Any) -> datetime | None:
+    """``imulog.trial["start_time"]`` as a datetime (aware when the string has an offset), else None."""
+    if not value or not isinstance(value, str):
+        return None
+    text = value.strip().replace("Z", "+00:00") if value.strip().endswith("Z") else value.strip()
+    try:
+        return datetime.fromisoformat(text)
+    except ValueError:
+        return None
+
+
+def wall_clock_ns(t_ns: np.ndarray, origin_ns: int, start: datetime) -> np.ndarray:
+    """int64 ns since the Unix epoch (UTC for aware starts, local wall time for naive ones) of each sample."""
+    base = start.replace(tzinfo=None) if start.tzinfo is None else start.astimezone(UTC).replace(tzinfo=None)
+    epoch_ns = (base - datetime(1970, 1, 1)) // timedelta(microseconds=1) * 1000
+    return np.asarray(t_ns, dtype=np.int64) - np.int64(origin_ns) + np.int64(epoch_ns)
+
+
+def tz_name(start: datetime | None) -> str | None:
+    """Arrow/pandas time zone of a start time: ``UTC``, ``+HH:MM``, or None (naive local time)."""
+    if start is None or start.tzinfo is None:
+        return None
+    off = start.utcoffset() or timedelta(0)
+    if off == timedelta(0):
+        return "UTC"
+    sign = "+" if off >= timedelta(0) else "-"
+    minutes = abs(int(off.total_seconds())) // 60
+    return f"{sign}{minutes // 60:02d}:{minutes % 60:02d}"
+
+
+@dataclass
+class TrialClock:
+    """Maps any channel of one trial onto the chosen clock (int64 ns) and gives its origin."""
+
+    path: str
+    clock: str
+    imu: str | None
+    alignments: dict[str, dict[str, Any]]
+    channel_meta: dict[str, dict[str, str]]
+    imu_names: set[str]
+    step_records: dict[str, dict[str, Any]]
+    start_time: datetime | None = None
+    time_zone: str | None = None  # Arrow time zone of ``time``: "UTC", "+HH:MM", or None for naive local time
+    time_zone_label: str = ""  # imulog.trial["time_zone"] as recorded
+    origin_ns: int = 0
+    notes: list[str] = field(default_factory=list)
+
+    def source_imu(self, topic: str) -> str | None:
+        """IMU whose device clock ``topic`` was written on (None: the reference clock)."""
+        return device_imu_of(topic, self.channel_meta.get(topic), self.imu_names, self.step_records)
+
+    def _note(self, text: str) -> None:
+        if text not in self.notes:
+            self.notes.append(text)
+
+    def times(self, topic: str, t_ns: np.ndarray) -> np.ndarray:
+        """``topic``'s time stamps (int64 ns as stored) on this clock."""
+        t = np.asarray(t_ns, dtype=np.int64)
+        src = self.source_imu(topic)
+        if self.clock == "reference":
+            if src is None:
+                return t
+            alignment = self.alignments.get(src)
+            if alignment is None:
+                raise ClockError(
+                    f"{self.path}: {topic} is on the device clock of IMU {src!r} and the trial has no "
+                    f"imulog.alignment for it: run `imulog process align {self.path}` first (or export --clock device)"
+                )
+            return device_to_reference(t, alignment)
+        if src == self.imu:
+            return t
+        if src is not None:
+            alignment = self.alignments.get(src)
+            if alignment is None:
+                self._note(f"{topic}: IMU {src!r} is not aligned; its time stamps are exported as recorded")
+                return t
+            t = device_to_reference(t, alignment)
+        target = self.alignments.get(self.imu or "")
+        if target is None:
+            self._note(
+                f"{topic}: on the reference clock and the trial has no alignment; exported as recorded "
+                f"(run `imulog process align {self.path}` to put it on the IMU clock)"
+            )
+            return t
+        return reference_to_device(t, target)
+
+    def record(self) -> dict[str, str]:
+        """The clock's description, as string metadata for exported files."""
+        out = {"clock": self.clock, "origin_ns": str(self.origin_ns)}
+        if self.imu:
+            out["device_imu"] = self.imu
+        if self.start_time is not None:
+            out["start_time"] = self.start_time.isoformat()
+            out["time_zone"] = self.time_zone_label or self.time_zone or "unknown (device local time)"
+        return out
+
+
+def trial_clock(trial, clock: str = "device", imu: str | None = None) -> TrialClock:
+    """The :class:`TrialClock` of an open :class:`~imulog.archive.TrialReader`.
+
+    ``clock``: ``device`` or ``reference``; ``imu``: which IMU's device clock (default: the only IMU,
+    else the one ``imulog.alignment`` names, else the first).
+    """
+    if clock not in CLOCKS:
+        raise ClockError(f"{trial.path}: clock must be one of {', '.join(CLOCKS)}, not {clock!r}")
+    channels = trial.channels
+    metadata = trial.metadata
+    imu_names = {c.topic.split("/", 2)[2] for c in channels if c.topic.startswith("/imu/") and c.topic.count("/") == 2}
+    alignments = alignments_from_metadata(metadata)
+    if imu is not None:
+        imu = imu_name(imu)
+        if imu not in imu_names:
+            raise ClockError(f"{trial.path}: no IMU {imu!r} (IMUs: {', '.join(sorted(imu_names)) or 'none'})")
+    elif len(imu_names) == 1:
+        imu = next(iter(imu_names))
+    elif imu_names:
+        aligned = sorted(n for n in alignments if n in imu_names)
+        imu = aligned[0] if aligned else sorted(imu_names)[0]
+    step_records = {n: metadata[n] for n in set(STEP_CLOCK_RECORDS.values()) if n in metadata}
+    trial_rec = metadata.get("imulog.trial", {})
+    start = parse_start_time(trial_rec.get("start_time"))
+    tc = TrialClock(
+        path=str(trial.path),
+        clock=clock,
+        imu=imu,
+        alignments=alignments,
+        channel_meta={c.topic: c.metadata for c in channels},
+        imu_names=imu_names,
+        step_records=step_records,
+        start_time=start,
+        time_zone=tz_name(start) if start is not None else None,
+    )
+    tc.time_zone_label = str(trial_rec.get("time_zone") or "")
+    starts = []
+    for c in channels:
+        if c.derived or c.start_ns is None:
+            continue
+        try:
+            starts.append(int(tc.times(c.topic, np.array([c.start_ns], dtype=np.int64))[0]))
+        except ClockError:
+            continue
+    tc.notes.clear()
+    tc.origin_ns = min(starts) if starts else 0
+    return tc

@@ -1,0 +1,123 @@
+"""OpenSim/OpenSense orientation files (``.sto``, Storage version 3, ``DataType=Quaternion``).
+
+Layout (as OpenSim 4.x writes it, e.g. ``../shared/data/devices/opensense_sto/``)::
+
+    DataRate=100.000000
+    DataType=Quaternion
+    version=3
+    OpenSimVersion=4.5
+    endheader
+    time<TAB>pelvis_imu<TAB>...
+    0<TAB>w,x,y,z<TAB>...
+
+One column per IMU (OpenSense matches them to model frames by name, e.g. ``radius_r_imu``); each
+cell holds the sensor-to-global quaternion ``w,x,y,z`` of ``/derived/orientation/{imu}``. Rows are on a
+uniform grid (``DataRate``): several IMUs are slerped onto the first one's grid on the chosen clock;
+samples across a time gap longer than 1.5 periods are ``nan,nan,nan,nan``. The global frame is imulog's
+(z up); OpenSense's IMU placer turns it to OpenSim's y-up ground with ``sensor_to_opensim_rotations``
+(-90 deg about x).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from imulog.export._atomic import ExportError, atomic_file
+from imulog.export.clock import seconds_from, trial_clock
+from imulog.export.table import ExportResult
+from imulog.process import quaternion as quat
+
+ORIENTATION_PREFIX = "/derived/orientation/"
+
+
+def format_sto(time_s: np.ndarray, names: Sequence[str], quats_wxyz: Sequence[np.ndarray], rate_hz: float,
+               *, opensim_version: str = "4.5") -> str:
+    """The text of a quaternion ``.sto`` file: ``time_s`` (N,), one (N, 4) w,x,y,z array per name."""
+    if len(names) != len(quats_wxyz):
+        raise ValueError("one quaternion array per name")
+    header = (
+        f"DataRate={rate_hz:.6f}\nDataType=Quaternion\nversion=3\nOpenSimVersion={opensim_version}\nendheader\n"
+    )
+    lines = [header + "\t".join(["time", *names])]
+    cells = [np.char.mod("%.17g", np.asarray(q, np.float64)) for q in quats_wxyz]
+    times = np.char.mod("%.17g", np.asarray(time_s, np.float64))
+    for i in range(len(times)):
+        lines.append("\t".join([times[i], *(",".join(c[i]) for c in cells)]))
+    return "\n".join(lines) + "\n"
+
+
+def resample_orientation(t_ns: np.ndarray, q: np.ndarray, grid_ns: np.ndarray, period_ns: float) -> np.ndarray:
+    """Slerp unit quaternions (N, 4) from ``t_ns`` onto ``grid_ns``; NaN outside the data and in gaps
+    longer than 1.5 ``period_ns``."""
+    t = np.asarray(t_ns, np.int64)
+    q = quat.normalize(np.asarray(q, np.float64))
+    out = np.full((len(grid_ns), 4), np.nan)
+    if len(t) == 0:
+        return out
+    # hemisphere-continuous so slerp takes the short way
+    dots = np.einsum("ij,ij->i", q[1:], q[:-1])
+    flips = np.concatenate([[1.0], np.cumprod(np.where(dots < 0, -1.0, 1.0))])
+    q = q * flips[:, None]
+    k = np.searchsorted(t, grid_ns, side="right") - 1
+    inside = (k >= 0) & (grid_ns <= t[-1])
+    k = np.clip(k, 0, max(len(t) - 2, 0))
+    if len(t) == 1:
+        out[inside] = q[0]
+        return out
+    t0, t1 = t[k], t[k + 1]
+    exact = grid_ns == t0
+    ok = inside & ((t1 - t0) <= 1.5 * period_ns) | (inside & exact)
+    frac = np.clip((grid_ns - t0) / np.maximum(t1 - t0, 1), 0.0, 1.0)
+    res = quat.slerp(q[k], q[k + 1], frac)
+    out[ok] = res[ok]
+    return out
+
+
+def default_name(imu: str) -> str:
+    """OpenSense column name of an IMU: ``wrist`` -> ``wrist_imu`` (kept if it already ends in ``_imu``)."""
+    return imu if imu.endswith("_imu") else f"{imu}_imu"
+
+
+def export_sto(trial, out: str | Path, *, clock: str = "device", imu: str | None = None,
+               imus: Sequence[str] | None = None, names: Mapping[str, str] | None = None,
+               rate_hz: float | None = None) -> ExportResult:
+    """Write the trial's ``/derived/orientation/*`` channels as one OpenSense ``.sto`` file.
+
+    ``imus``: which IMUs (default: every IMU with an orientation channel); ``names``: IMU -> column name
+    (default ``{imu}_imu``); ``rate_hz``: the grid's rate (default: the first IMU's ``rate_hz``).
+    """
+    available = [t[len(ORIENTATION_PREFIX):] for t in trial.topics() if t.startswith(ORIENTATION_PREFIX)]
+    chosen = list(imus) if imus else available
+    if not chosen:
+        raise ExportError(f"{trial.path}: no /derived/orientation/* channel: run `imulog process orientation {trial.path}` first")
+    missing = [i for i in chosen if i not in available]
+    if missing:
+        raise ExportError(
+            f"{trial.path}: no /derived/orientation/{missing[0]} (orientation channels: {', '.join(available) or 'none'})"
+        )
+    tc = trial_clock(trial, clock, imu)
+    streams = []
+    for name in chosen:
+        topic = ORIENTATION_PREFIX + name
+        s = trial.read(topic)
+        streams.append((name, tc.times(topic, s.t_ns), s.values))
+    first_info = trial.channel(ORIENTATION_PREFIX + chosen[0])
+    rate = float(rate_hz or first_info.rate_hz or 0.0)
+    if rate <= 0:
+        raise ExportError(f"{trial.path}: cannot tell the orientation rate; give --rate")
+    t_first = streams[0][1]
+    period = 1e9 / rate
+    n = int(np.floor((t_first[-1] - t_first[0]) / period + 1e-9)) + 1 if len(t_first) else 0
+    grid = t_first[0] + np.round(np.arange(n) * period).astype(np.int64) if n else np.zeros(0, np.int64)
+    columns = [(names or {}).get(name, default_name(name)) for name in chosen]
+    if len(set(columns)) != len(columns):
+        raise ExportError(f"{out}: two IMUs get the same column name ({', '.join(columns)})")
+    quats = [resample_orientation(t, q, grid, period) for _, t, q in streams]
+    text = format_sto(seconds_from(grid, tc.origin_ns), columns, quats, rate)
+    with atomic_file(out) as tmp:
+        tmp.write_text(text)
+    return ExportResult(path=str(out), format="sto", clock=clock, rows=n, columns=["time", *columns],
+                        topics=[ORIENTATION_PREFIX + c for c in chosen], files=[str(out)], notes=list(tc.notes))
