@@ -35,6 +35,7 @@ from imulog.process.metrics import (
     repetition_durations,
     smoothness,
 )
+from imulog.process.metrics.periods import DAY_S, HOUR_S, period_summaries, wall_clock_origin_ns
 from imulog.steps.common import alignment_for, nominal_rate_hz, pick_imu
 
 STEP = "metrics"
@@ -155,14 +156,43 @@ def _smoothness_per_phase(trajectory: SignalStream | PoseStream, phases: Interva
     return out
 
 
+def _period_records(t_ns, acc_g, usage, m2, dist, p: MetricsParams, start_time: str | None) -> dict[str, Any]:
+    """``by_hour`` / ``by_day`` lists (see :mod:`imulog.process.metrics.periods`) for recordings long enough."""
+    span_s = (int(t_ns[-1]) - int(t_ns[0])) / 1e9
+    out: dict[str, Any] = {}
+    for key, period_s in (("by_hour", HOUR_S), ("by_day", DAY_S)):
+        if span_s <= period_s:
+            continue
+        origin_ns, origin_time = wall_clock_origin_ns(int(t_ns[0]), start_time, period_s)
+        rows = period_summaries(
+            t_ns,
+            np.isfinite(acc_g).all(axis=1),
+            usage.active_any,
+            m2.intervals[:, 0] if len(m2.intervals) else np.zeros(0, np.int64),
+            dist.distance_cm,
+            dist.bin_centres_cm,
+            period_s=period_s,
+            origin_ns=origin_ns,
+            origin_time=origin_time,
+            weight_start_cm=p.weight_start_cm,
+        )
+        out[key] = [r.to_dict() for r in rows]
+    return out
+
+
 def compute_metrics(
     imu: ImuStream,
     params: MetricsParams | None = None,
     *,
     phases: Intervals | None = None,
     trajectory: SignalStream | PoseStream | None = None,
+    start_time: str | None = None,
 ) -> tuple[list, dict[str, Any]]:
-    """Pure part of the step: derived streams and the ``imulog.metrics`` record from in-memory streams."""
+    """Pure part of the step: derived streams and the ``imulog.metrics`` record from in-memory streams.
+
+    Recordings longer than an hour also get ``by_hour`` (and longer than a day ``by_day``) summaries, aligned to
+    the wall clock when ``start_time`` (the trial's ``imulog.trial.start_time``) is known.
+    """
     p = params or MetricsParams()
     if imu.acc is None:
         raise ValueError(f"/imu/{imu.name} has no accelerometer columns")
@@ -220,6 +250,7 @@ def compute_metrics(
         "distance.window_median_cm": _r(np.median(dist.window_distance_cm), 4),
         "distance.window_max_cm": _r(np.max(dist.window_distance_cm), 4),
     }
+    record.update(_period_records(imu.t_ns, acc_g, usage, m2, dist, p, start_time))
     if phases is not None and len(phases):
         for label, stats in phase_summary(phases).items():
             for key, value in stats.items():
@@ -262,7 +293,10 @@ def run_metrics(path, *, imu: str | None = None, params: MetricsParams | None = 
         trajectory = trial.read(traj_topic) if traj_topic is not None else None
         if trajectory is not None and phases is not None and alignment_for(trial.metadata, imu_topic) is None:
             trajectory = None  # phases on the device clock cannot be matched to a reference-clock trajectory
-        streams, record = compute_metrics(stream, p, phases=phases, trajectory=trajectory)
+        start_time = (trial.metadata.get("imulog.trial") or {}).get("start_time")
+        streams, record = compute_metrics(
+            stream, p, phases=phases, trajectory=trajectory, start_time=str(start_time) if start_time else None
+        )
         return StepResult(streams=streams, metadata={RECORD: record})
 
     return run_step(
@@ -271,7 +305,7 @@ def run_metrics(path, *, imu: str | None = None, params: MetricsParams | None = 
         algorithm=ALGORITHM,
         params={"imu": name, **p.to_dict()},
         inputs=inputs,
-        metadata_inputs=("imulog.alignment",),
+        metadata_inputs=("imulog.alignment", "imulog.trial"),
         compute=compute,
         force=force,
     )

@@ -98,7 +98,10 @@ def metrics_markdown(record: Mapping[str, Any]) -> str:
     ``smoothness``, ``nhpt``); long lists (e.g. the distance histogram) are summarised by their length.
     """
     groups: dict[str, dict[str, Any]] = {}
+    periods = {k: record[k] for k in ("by_day", "by_hour") if isinstance(record.get(k), list)}
     for key, value in record.items():
+        if key in periods:
+            continue
         group, _, rest = key.partition(".")
         if not rest:
             group, rest = "recording", key
@@ -108,4 +111,21 @@ def metrics_markdown(record: Mapping[str, Any]) -> str:
     parts = ["# Clinical metrics", "", "Computed by `imulog process metrics` (see docs/metrics.md)."]
     for group, values in groups.items():
         parts += ["", f"## {group.replace('_', ' ')}", markdown_table(values)]
+    for key, rows in periods.items():
+        parts += ["", f"## {'per day' if key == 'by_day' else 'per hour'}", period_table(rows)]
     return "\n".join(parts)
+
+
+def period_table(rows: list[Any]) -> str:
+    """Per-hour or per-day summaries (``imulog.metrics`` ``by_hour``/``by_day``) as one Markdown table."""
+    lines = ["| start | valid (h) | arm use (%) | activities | distance area (% cm) |", "|---|---|---|---|---|"]
+    for r in rows:
+        if not isinstance(r, Mapping):
+            continue
+        use = r.get("arm_use_percent")
+        lines.append(
+            f"| {r.get('start') or r.get('start_ns')} | {float(r.get('valid_s') or 0) / 3600:.2f} | "
+            f"{'-' if use is None else f'{float(use):.1f}'} | {r.get('activity_count', '')} | "
+            f"{float(r.get('distance_weighted_area') or 0):.1f} |"
+        )
+    return "\n".join(lines)
