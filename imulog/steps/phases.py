@@ -9,7 +9,9 @@ Reads ``/imu/{imu}`` (gyroscope, device clock) and writes
 * ``/derived/static/{imu}``: SignalStream column ``static`` (1 = zero velocity), one row per IMU sample on the
   IMU device clock (the same ``t_ns`` as the raw channel, ready for ZUPT);
 * metadata ``imulog.timing``: per phase repetition, label, start/end, duration (s), peak angular velocity
-  (rad/s).
+  (rad/s), ``forced`` and the repetition's ``confidence``; per repetition what event correction did
+  (``repetition_quality``: movements, merged, dropped, split, missing, forced, cost, confidence), with
+  ``n_forced_phases``, ``mean_confidence`` and ``low_confidence_repetitions`` (confidence < 0.5).
 
 Interval times (movements, phases, timing table) are on the reference clock when the trial has an
 ``imulog.alignment`` record for this IMU (so they line up with Vicon), otherwise on the IMU device clock;
@@ -28,6 +30,7 @@ from imulog.process.segmentation.repetitions import RepetitionParams
 from imulog.steps.common import alignment_for, mean_rate_hz, pick_imu
 
 STEP = "phases"
+LOW_CONFIDENCE = 0.5  # repetitions below this confidence are listed in imulog.timing["low_confidence_repetitions"]
 
 
 def protocol_of(trial_record: dict[str, Any], default_repetitions: int = 25) -> tuple[str, int]:
@@ -113,6 +116,10 @@ def compute_phases(
         "n_repetitions": n_rep,
         "n_phases": int(len(ph)),
         "n_corrected_repetitions": int(ph.n_corrected),
+        "n_forced_phases": int(np.sum(ph.forced)) if ph.forced is not None else 0,
+        "mean_confidence": round(float(np.mean([q["confidence"] for q in ph.quality])), 3) if ph.quality else None,
+        "low_confidence_repetitions": [q["repetition"] for q in ph.quality if q["confidence"] < LOW_CONFIDENCE],
+        "repetition_quality": list(ph.quality),
         "static_fraction": round(float(result.static.mean()), 4),
         "phases": rows,
     }

@@ -155,14 +155,17 @@ def segment_phases(
 
 
 def timing_table(phases: Phases, t_ns: np.ndarray, gyr_rad_s: np.ndarray) -> list[dict]:
-    """Per phase: repetition, label, start/end (ns and s from ``t_ns[0]``), duration (s), peak |gyr| (rad/s).
+    """Per phase: repetition, label, start/end (ns and s from ``t_ns[0]``), duration (s), peak |gyr| (rad/s),
+    ``forced`` (made by cutting a movement: no movement of its own) and its repetition's ``confidence``.
 
     ``t_ns`` are the sample times (any clock) of ``gyr_rad_s``; phase end = time of its last sample.
     """
     t_ns = np.asarray(t_ns, dtype=np.int64)
     raw = np.linalg.norm(np.nan_to_num(np.asarray(gyr_rad_s, dtype=float)), axis=1)
+    forced = phases.forced if phases.forced is not None else np.zeros(len(phases), dtype=bool)
+    confidence = {q["repetition"]: q["confidence"] for q in phases.quality}
     rows = []
-    for s, e, r, label in zip(phases.start, phases.end, phases.repetition, phases.labels, strict=True):
+    for i, (s, e, r, label) in enumerate(zip(phases.start, phases.end, phases.repetition, phases.labels, strict=True)):
         last = max(int(e) - 1, int(s))
         rows.append(
             {
@@ -174,6 +177,8 @@ def timing_table(phases: Phases, t_ns: np.ndarray, gyr_rad_s: np.ndarray) -> lis
                 "end_s": round(float(t_ns[last] - t_ns[0]) * 1e-9, 4),
                 "duration_s": round(float(t_ns[last] - t_ns[s]) * 1e-9, 4),
                 "peak_angular_velocity_rad_s": round(float(raw[s : last + 1].max()), 4),
+                "forced": bool(forced[i]) if i < len(forced) else False,
+                "confidence": confidence.get(int(r), 1.0),
             }
         )
     return rows

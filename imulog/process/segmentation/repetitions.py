@@ -84,6 +84,8 @@ class Phases:
     phase: np.ndarray
     labels: list[str]
     n_corrected: int  # repetitions whose movement count had to be corrected
+    forced: np.ndarray | None = None  # per phase: True when made by cutting a movement (no movement of its own)
+    quality: tuple = ()  # per repetition: what event correction did and a confidence, see repetition_quality
 
     def __len__(self) -> int:
         return len(self.start)
@@ -309,9 +311,13 @@ def _reference(groups, start, end, norm, rate_hz, n_phases, major=None):
     return tuple(np.mean([f[i] for f in feats], axis=0) for i in range(3))
 
 
-def _select(s, e, norm, rate_hz, ref, params: RepetitionParams) -> tuple[np.ndarray, np.ndarray, float]:
-    """Exactly ``n_phases`` movements of one repetition and their correction cost (inf without reference)."""
+def _select(s, e, norm, rate_hz, ref, params: RepetitionParams) -> tuple[np.ndarray, np.ndarray, float, dict]:
+    """Exactly ``n_phases`` movements of one repetition, their correction cost (inf without reference) and what
+    the correction did: ``{"movements", "merged", "dropped", "split", "missing", "forced"}`` (counts; forced:
+    per kept phase, True when it was made by cutting a movement)."""
     n = params.n_phases
+    info = {"movements": len(s), "merged": 0, "dropped": 0, "split": 0, "missing": 0}
+    forced = np.zeros(min(len(s), n), dtype=bool)
     if len(s) > n:
         d, h, _ = features(s, e, norm, rate_hz)
         if ref is None:  # no correct repetition anywhere: keep the highest movements
@@ -323,6 +329,8 @@ def _select(s, e, norm, rate_hz, ref, params: RepetitionParams) -> tuple[np.ndar
             sub = best_subset(d[cand], h[cand], s[cand], e[cand], rate_hz, ref, n, params.max_candidates)
             keep = cand[np.array(sub)]
         ks, ke = s[keep], e[keep]
+        if ref is not None:  # the selection's own cost, before sub-movements lengthen the kept phases
+            info["cost"] = correction_cost(*features(ks, ke, norm, rate_hz), *ref)
         if params.continuation_gap_s > 0:  # absorb sub-movements that continue a kept phase
             gap = int(round(params.continuation_gap_s * rate_hz))
             for a, b in zip(s, e, strict=True):
@@ -332,15 +340,24 @@ def _select(s, e, norm, rate_hz, ref, params: RepetitionParams) -> tuple[np.ndar
                 before = np.flatnonzero((b <= ks) & (ks - b <= gap))
                 if len(after):
                     ke[after[-1]] = max(ke[after[-1]], b)
+                    info["merged"] += 1
                 elif len(before):
                     ks[before[0]] = min(ks[before[0]], a)
+                    info["merged"] += 1
+        info["dropped"] = len(s) - n - info["merged"]
         s, e = ks, ke
     elif len(s) < n:
+        original = set(np.asarray(s).tolist()) | set(np.asarray(e).tolist())
         s, e = _split_to(s, e, norm, rate_hz, ref, n)
+        info["split"] = len(s) - info["movements"]
+        info["missing"] = n - len(s)
+        forced = np.array([int(a) not in original or int(b) not in original for a, b in zip(s, e, strict=True)])
     cost = np.inf
     if ref is not None and len(s) == n:
         cost = correction_cost(*features(s, e, norm, rate_hz), *ref)
-    return s, e, cost
+    info["forced"] = forced
+    info.setdefault("cost", cost)
+    return s, e, cost, info
 
 
 def _kept_cost(costs: list[float], n_keep: int) -> tuple[int, float]:
@@ -447,7 +464,7 @@ def segment_repetitions(
                 ref = _reference(groups, start, end, norm, rate_hz, params.n_phases, major)
             if ref is not None and params.split_merged:
                 groups = split_merged_groups(groups, start, end, norm, rate_hz, ref, params, n_rep)
-            selected = [(*_select(start[g], end[g], norm, rate_hz, ref, params), len(g)) for g in groups]
+            selected = [_select(start[g], end[g], norm, rate_hz, ref, params) for g in groups]
             if len(selected) > n_rep:  # drop the groups least like a repetition, keep time order
                 order = np.argsort([c for _, _, c, _ in selected], kind="stable")
                 keep = np.sort(order[:n_rep])
@@ -456,10 +473,12 @@ def segment_repetitions(
             if best is None or total < best[0]:
                 best = (total, selected)
     selected = best[1]
-    out_s, out_e, out_r, out_p = [], [], [], []
+    out_s, out_e, out_r, out_p, out_f = [], [], [], [], []
     corrected = 0
-    for r, (s, e, _cost, count) in enumerate(selected):
-        corrected += int(count != params.n_phases)
+    quality = repetition_quality([(c, info) for _, _, c, info in selected], params.n_phases)
+    for r, (s, e, _cost, info) in enumerate(selected):
+        corrected += int(info["movements"] != params.n_phases)
+        out_f.extend(np.resize(np.asarray(info["forced"], dtype=bool), len(s)) if len(s) else [])
         out_s.extend(s)
         out_e.extend(e)
         out_r.extend([r + 1] * len(s))
@@ -474,4 +493,48 @@ def segment_repetitions(
         phase=phase,
         labels=labels,
         n_corrected=corrected,
+        forced=np.asarray(out_f, dtype=bool),
+        quality=tuple(quality),
     )
+
+
+def repetition_quality(selected: list[tuple[float, dict]], n_phases: int) -> list[dict]:
+    """Per repetition (time order, 1-based ``repetition``): what event correction did and a confidence.
+
+    ``selected``: (correction cost, info of :func:`_select`) per kept repetition. Counts: ``movements`` detected
+    in the repetition, ``merged`` (sub-movements absorbed into a kept phase), ``dropped`` (extra movements
+    removed), ``split`` (phases made by cutting a fused movement at a minimum of the norm: invented
+    boundaries), ``missing`` (phases that could not be made); ``forced`` = phases of the repetition with no
+    movement of their own; ``cost`` = the thesis's criterion ``RMS(D-D*) + RMS(H-H*) + RMS(S-S*)`` of the kept
+    movements (before absorbed sub-movements lengthen them) against the subject's reference (None without
+    reference).
+
+    ``confidence`` (0..1, a documented heuristic, not a calibrated probability) =
+    ``0.5^split x 0.5^missing x 0.8^dropped x 0.95^merged x min(1, sqrt(c_typ / cost))``, with ``c_typ`` the median
+    cost of the repetitions that needed no correction (the spread of correct repetitions): a repetition that
+    looks like the subject's correct ones and needed nothing scores ~1, every correction lowers it.
+    """
+    selected = [(info.get("cost", c), info) for c, info in selected]
+    costs = [c for c, info in selected if info["movements"] == n_phases and np.isfinite(c)]
+    c_typ = float(np.median(costs)) if costs else None
+    out = []
+    for r, (cost, info) in enumerate(selected):
+        conf = 0.5 ** (info["split"] + info["missing"]) * 0.8 ** info["dropped"] * 0.95 ** info["merged"]
+        if c_typ is not None and np.isfinite(cost) and cost > c_typ > 0:
+            conf *= float(np.sqrt(c_typ / cost))
+        elif not np.isfinite(cost):
+            conf *= 0.5
+        out.append(
+            {
+                "repetition": r + 1,
+                "movements": int(info["movements"]),
+                "merged": int(info["merged"]),
+                "dropped": int(info["dropped"]),
+                "split": int(info["split"]),
+                "missing": int(info["missing"]),
+                "forced": int(np.sum(info["forced"])),
+                "cost": round(float(cost), 4) if np.isfinite(cost) else None,
+                "confidence": round(float(conf), 3),
+            }
+        )
+    return out
