@@ -12,7 +12,7 @@ from datetime import UTC, datetime, timedelta
 
 import numpy as np
 
-from imulog.model import ImuStream, Intervals, Recording, SignalStream
+from imulog.model import ImuStream, Intervals, MarkerStream, Recording, SignalStream
 
 NS_PER_S = 1_000_000_000
 UNKNOWN_ZONE = "unknown (device local time)"
@@ -79,7 +79,10 @@ def concat_chunks(chunks: Iterable[Recording]) -> Recording:
     imus: dict[str, list[ImuStream]] = {}
     signals: dict[str, list[SignalStream]] = {}
     events: dict[str, list[Intervals]] = {}
+    markers: dict[str, list[MarkerStream]] = {}
     for c in chunks:
+        for s in c.markers:
+            markers.setdefault(s.name, []).append(s)
         for s in c.imus:
             imus.setdefault(s.name, []).append(s)
         for s in c.signals:
@@ -110,6 +113,19 @@ def concat_chunks(chunks: Iterable[Recording]) -> Recording:
                 units=list(p0.units),
                 values=np.concatenate([p.values for p in parts]),
                 frame_id=p0.frame_id,
+            )
+        )
+    for parts in markers.values():
+        p0 = parts[0]
+        out.markers.append(
+            MarkerStream(
+                name=p0.name,
+                t_ns=np.concatenate([p.t_ns for p in parts]),
+                labels=list(p0.labels),
+                pos=np.concatenate([p.pos for p in parts]),
+                valid=np.concatenate([p.valid for p in parts]),
+                frame_id=p0.frame_id,
+                meta=dict(p0.meta),
             )
         )
     for parts in events.values():

@@ -32,9 +32,12 @@ BUILTIN: dict[str, str] = {
     "opensim-sto": "converters.opensim_sto:CONVERTER",
     "motive": "converters.motive:CONVERTER",
     "delsys": "converters.delsys:CONVERTER",
+    "mvnx": "converters.mvnx:CONVERTER",
+    "qualisys": "converters.qualisys:CONVERTER",
     "axivity": "converters.axivity:CONVERTER",
     "actigraph": "converters.actigraph:CONVERTER",
     "actilife-csv": "converters.actilife_csv:CONVERTER",
+    "xdf": "converters.xdf:CONVERTER",
 }
 MIN_CONFIDENCE = 0.3
 

@@ -280,7 +280,7 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
     n_gaps = int((~np.isfinite(np.hstack([streams[k] for k in ("acc", "gyr") if k in streams]))).any(axis=1).sum())
     if n_gaps:
         meta["samples_with_gaps"] = n_gaps
-    rec = Recording(sources=[str(path)])
+    rec = Recording(sources=[str(path)], warnings=list(assumed))
     rec.imus.append(ImuStream(name=name, t_ns=t_ns, meta=dict(meta), **streams))
     q, q_source = orientation_wxyz(values, seen)
     if q is not None:

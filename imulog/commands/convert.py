@@ -181,7 +181,8 @@ def _kv(pairs: tuple[str, ...], option: str) -> dict[str, str]:
     "device_names",
     multiple=True,
     metavar="SERIAL=NAME",
-    help="Stream name for an Xsens serial (repeatable).",
+    help="Stream name for a sensor (repeatable): Xsens DeviceId, APDM case ID or label, Delsys sensor number, MVN "
+    "sensor label, e.g. 00B421AF=left_forearm.",
 )
 @click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
 @click.option("--list-formats", "list_formats_flag", is_flag=True, help="List the known input formats and exit.")
@@ -262,7 +263,11 @@ def convert(
 
 def _sibling_meta(files: list[Path]) -> dict[str, dict[str, Any]]:
     """Per-recording metadata beside the exports: ``<key>_meta.json`` / ``<key>.meta.toml`` (as the simulator writes)."""
-    key = recording_key(files[0])
+    try:
+        conv = detect(files[0])
+    except ConversionError:
+        conv = None
+    key = recording_key(files[0], conv)  # the format's own key (Xsens: MT_<master>_<trial>) when it has one
     for suffix in ("_meta.json", "_meta.toml", ".meta.json", ".meta.toml"):
         candidate = files[0].parent / f"{key}{suffix}"
         if key and candidate.is_file():

@@ -1,0 +1,353 @@
+"""XDF recordings (Lab Streaming Layer, LabRecorder), read with pyxdf (BSD-2-Clause).
+
+Every stream becomes channels of its own, named from the stream's ``name`` (topic-safe; the stream id is appended
+when two streams share a name):
+
+* numeric streams -> ``/signals/<stream>`` with the declared channel labels and units (``desc/channels/channel``;
+  ``ch0``.. and no unit when the header declares none). When the channel labels or types name an accelerometer /
+  gyroscope / magnetometer (``AccX``, ``acc_x``, ``Gyro Z`` or type ``Accelerometer``...) with a unit imulog knows,
+  those three-axis groups become ``/imu/<stream>`` in SI units and the remaining channels stay in the signal stream;
+  without units they stay signals (no unit is guessed). A stream of type ``MoCap``/``Mocap`` whose channels are
+  ``<marker>_X/_Y/_Z`` in m, cm or mm becomes ``/markers/<stream>`` (NaN = occluded).
+* string streams (markers) -> ``/events/<stream>``: one instantaneous interval (start == end) per sample, the
+  label being the string (channels joined with ``|``).
+* empty streams are kept as empty channels.
+
+Time: each stream's time stamps on the recording host's LSL clock after applying the stream's ClockOffset
+measurements (pyxdf ``synchronize_clocks``, with host clock resets handled as separate clock segments); stamps are
+not dejittered (raw data keeps what was recorded). ``t_ns`` = LSL seconds x 1e9 (the host clock's own origin, the
+same for all streams of a file). The file header's ``datetime`` (when LabRecorder started) is the trial's
+``start_time``. XDF has no checksums: the chunk structure (magic, chunk lengths, tags) is verified before parsing,
+so truncated files and damaged chunk headers are reported with their chunk index; a flipped byte inside sample
+values cannot be detected by any reader.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from collections.abc import Iterator
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from converters._binary import concat_chunks, format_offset
+from converters._common import sanitize_name, unit_factor
+from converters.base import Converter, ConvertOptions
+from converters.errors import ConversionError
+from imulog.model import ImuStream, Intervals, MarkerStream, Recording, SignalStream
+
+MAGIC = b"XDF:"
+CHUNK_TAGS = {1: "FileHeader", 2: "StreamHeader", 3: "Samples", 4: "ClockOffset", 5: "Boundary", 6: "StreamFooter"}
+PER_STREAM_BYTES = 64 << 20  # files larger than this are loaded one stream at a time
+_AXIS = r"[ _\-.:]?([xyz])"
+IMU_LABELS = {
+    "acc": re.compile(r"^(?:acc|accel|accelerometer|acceleration)" + _AXIS + "$", re.I),
+    "gyr": re.compile(r"^(?:gyr|gyro|gyroscope|angularvelocity|angular_velocity)" + _AXIS + "$", re.I),
+    "mag": re.compile(r"^(?:mag|magn|magnetometer|magneticfield)" + _AXIS + "$", re.I),
+}
+IMU_TYPES = {"accelerometer": "acc", "acc": "acc", "gyroscope": "gyr", "gyro": "gyr", "magnetometer": "mag"}
+LENGTH_UNITS = {"m": 1.0, "meters": 1.0, "cm": 0.01, "mm": 0.001, "millimeters": 0.001}
+
+
+# --------------------------------------------------------------------------------------------- chunk structure
+def _varlen(f, path: Path, index: int, at: int) -> int | None:
+    n = f.read(1)
+    if not n:
+        return None
+    size = {1: 1, 4: 4, 8: 8}.get(n[0])
+    if size is None:
+        raise ConversionError(path, f"chunk {index} (byte {at}): bad chunk length width {n[0]} (damaged chunk header)")
+    data = f.read(size)
+    if len(data) < size:
+        raise ConversionError(path, f"chunk {index} (byte {at}): truncated chunk header")
+    return int.from_bytes(data, "little")
+
+
+def scan_chunks(path: Path) -> dict[str, int]:
+    """Walk the chunk headers (lengths and tags, seeking over contents): counts per chunk type.
+
+    ConversionError naming the chunk for a missing magic, a bad length or tag, or a chunk cut by the file's end.
+    """
+    size = path.stat().st_size
+    counts: dict[str, int] = {}
+    with open(path, "rb") as f:
+        if f.read(4) != MAGIC:
+            raise ConversionError(path, "not an XDF file (no 'XDF:' magic)")
+        index = 0
+        while True:
+            at = f.tell()
+            length = _varlen(f, path, index, at)
+            if length is None:
+                break
+            start = f.tell()
+            if length < 2 or start + length > size:
+                what = "truncated" if start + length > size and length >= 2 else "bad length"
+                raise ConversionError(
+                    path, f"chunk {index} (byte {at}): {what} ({length} bytes declared, {size - start} left)"
+                )
+            tag = int.from_bytes(f.read(2), "little")
+            if tag not in CHUNK_TAGS:
+                raise ConversionError(
+                    path, f"chunk {index} (byte {at}): unknown chunk tag {tag} (damaged chunk header)"
+                )
+            if index == 0 and tag != 1:
+                raise ConversionError(path, "chunk 0 is not the FileHeader")
+            counts[CHUNK_TAGS[tag]] = counts.get(CHUNK_TAGS[tag], 0) + 1
+            f.seek(start + length)
+            index += 1
+    if not counts:
+        raise ConversionError(path, "no chunks after the 'XDF:' magic")
+    return counts
+
+
+# --------------------------------------------------------------------------------------------- stream mapping
+def _first(d: Any, key: str, default: Any = None) -> Any:
+    if not isinstance(d, dict):
+        return default
+    v = d.get(key)
+    if isinstance(v, list):
+        return v[0] if v else default
+    return v if v is not None else default
+
+
+def channel_info(info: dict, n: int) -> tuple[list[str], list[str], list[str]]:
+    """(labels, units, types) of a stream's channels from ``desc/channels/channel`` (``ch<i>`` / "" when absent)."""
+    labels, units, types = [f"ch{i}" for i in range(n)], [""] * n, [""] * n
+    desc = _first(info, "desc")
+    channels = _first(desc, "channels")
+    entries = channels.get("channel", []) if isinstance(channels, dict) else []
+    for i, ch in enumerate(entries[:n]):
+        labels[i] = str(_first(ch, "label", labels[i]) or labels[i]).strip()
+        units[i] = str(_first(ch, "unit", "") or "").strip()
+        types[i] = str(_first(ch, "type", "") or "").strip()
+    return labels, units, types
+
+
+def _imu_groups(labels: list[str], units: list[str], types: list[str]) -> dict[str, tuple[list[int], float, str]]:
+    """quantity -> (x, y, z channel indices, factor to SI, unit as declared) for complete groups with known units."""
+    found: dict[str, dict[str, int]] = {}
+    for i, (label, ctype) in enumerate(zip(labels, types, strict=True)):
+        for q, rx in IMU_LABELS.items():
+            m = rx.match(label.replace(" ", ""))
+            if m:
+                found.setdefault(q, {})[m.group(1).lower()] = i
+                break
+        else:
+            q = IMU_TYPES.get(ctype.lower())
+            m = re.search(r"([xyz])$", label, re.I)
+            if q and m:
+                found.setdefault(q, {})[m.group(1).lower()] = i
+    out = {}
+    for q, axes in found.items():
+        if set(axes) != {"x", "y", "z"}:
+            continue
+        idx = [axes["x"], axes["y"], axes["z"]]
+        declared = {units[i] for i in idx}
+        if len(declared) != 1:
+            continue
+        unit = declared.pop()
+        factor = unit_factor(q, unit) if unit else None
+        if factor is not None:
+            out[q] = (idx, factor, unit)
+    return out
+
+
+def _marker_groups(labels: list[str], units: list[str]) -> tuple[list[str], list[list[int]], float] | None:
+    if len(labels) % 3 or not labels:
+        return None
+    names, groups = [], []
+    for j in range(0, len(labels), 3):
+        trio = labels[j : j + 3]
+        m = [re.match(r"^(.*?)[ _\-.:]?([xyz])$", lab, re.I) for lab in trio]
+        if not all(m) or [x.group(2).lower() for x in m] != ["x", "y", "z"] or len({x.group(1) for x in m}) != 1:
+            return None
+        names.append(m[0].group(1) or f"marker{j // 3}")
+        groups.append(list(range(j, j + 3)))
+    declared = {u.lower() for u in units}
+    if len(declared) != 1 or declared.pop() not in LENGTH_UNITS or len(set(names)) != len(names):
+        return None
+    return names, groups, LENGTH_UNITS[units[0].lower()]
+
+
+def stream_to_recording(path: Path, stream: dict, name: str) -> Recording:
+    """One pyxdf stream -> a Recording with its channel(s) and an ``imulog.device.<name>`` record."""
+    info = stream["info"]
+    fmt = str(_first(info, "channel_format", "float32"))
+    n_ch = int(float(_first(info, "channel_count", 1) or 1))
+    srate = float(_first(info, "nominal_srate", 0) or 0)
+    stype = str(_first(info, "type", "") or "")
+    t_ns = np.round(np.asarray(stream["time_stamps"], dtype=np.float64) * 1e9).astype(np.int64)
+    meta: dict[str, Any] = {
+        "format": "xdf",
+        "stream_name": str(_first(info, "name", name)),
+        "stream_type": stype,
+        "stream_id": int(_first(info, "stream_id", 0) or 0),
+        "channel_format": fmt,
+        "channel_count": n_ch,
+        "nominal_srate_hz": srate,
+        "samples": int(len(t_ns)),
+        "time_base": "ns of the recording host's LSL clock, stream clock offsets applied",
+        "source": path.name,
+    }
+    for key in ("source_id", "hostname", "created_at", "uid"):
+        v = _first(info, key)
+        if v:
+            meta[key] = str(v)
+    manufacturer = _first(_first(info, "desc"), "manufacturer")
+    if manufacturer:
+        meta["manufacturer"] = str(manufacturer)
+    footer = (stream.get("footer") or {}).get("info") or {}
+    if footer:
+        meta["footer_sample_count"] = int(float(_first(footer, "sample_count", 0) or 0))
+    segments = info.get("clock_segments") or []
+    meta["clock_segments"] = len(segments)  # > 1: the host clock was reset during the recording
+    rec = Recording(sources=[str(path)])
+    rec.metadata[f"imulog.device.{name}"] = meta
+    if len(np.unique(t_ns)) != len(t_ns) or (len(t_ns) > 1 and np.any(np.diff(t_ns) < 0)):
+        bad = int(np.nonzero(np.diff(t_ns) <= 0)[0][0]) + 1
+        raise ConversionError(
+            path, f"stream {meta['stream_id']} ({meta['stream_name']!r}): sample {bad} time stamp does not increase"
+        )
+    if fmt == "string":
+        series = stream["time_series"]
+        labels = ["|".join(str(v) for v in row) if isinstance(row, list | tuple) else str(row) for row in series]
+        rec.events.append(Intervals(topic=f"/events/{name}", start_ns=t_ns, end_ns=t_ns.copy(), labels=labels))
+        return rec
+    values = np.asarray(stream["time_series"], dtype=np.float64).reshape(len(t_ns), n_ch)
+    labels, units, types = channel_info(info, n_ch)
+    used: set[int] = set()
+    if stype.lower() in ("mocap", "motion capture"):
+        markers = _marker_groups(labels, units)
+        if markers is not None:
+            marker_names, groups, scale = markers
+            pos = np.stack([values[:, g] for g in groups], axis=1) * scale
+            rec.markers.append(MarkerStream(name=name, t_ns=t_ns, labels=marker_names, pos=pos, meta=dict(meta)))
+            meta["marker_units"] = units[0]
+            return rec
+    groups = _imu_groups(labels, units, types)
+    if "acc" in groups or "gyr" in groups:
+        parts = {q: values[:, idx] * factor for q, (idx, factor, _) in groups.items()}
+        for idx, _, _ in groups.values():
+            used.update(idx)
+        meta["imu_units_declared"] = {q: u for q, (_, _, u) in groups.items()}
+        rec.imus.append(
+            ImuStream(
+                name=name, t_ns=t_ns, acc=parts.get("acc"), gyr=parts.get("gyr"), mag=parts.get("mag"), meta=dict(meta)
+            )
+        )
+    rest = [i for i in range(n_ch) if i not in used]
+    if rest or not rec.imus:
+        cols = [labels[i] for i in rest]
+        if len(set(cols)) != len(cols):
+            cols = [f"{c}_{i}" for c, i in zip(cols, rest, strict=True)]
+        rec.signals.append(
+            SignalStream(
+                topic=f"/signals/{name}",
+                t_ns=t_ns,
+                columns=cols,
+                units=[units[i] for i in rest],
+                values=values[:, rest],
+            )
+        )
+    return rec
+
+
+def header_start_time(header: dict) -> dict[str, str]:
+    """``imulog.trial`` start fields from the FileHeader ``datetime`` (``2025-01-31T00:21:17+0000``), else {}."""
+    text = _first(header.get("info", {}), "datetime")
+    if not text:
+        return {}
+    try:
+        when = datetime.fromisoformat(str(text).strip())
+    except ValueError:
+        return {}
+    if when.tzinfo is None:
+        return {"start_time": when.isoformat(timespec="milliseconds"), "time_zone": "unknown (device local time)"}
+    offset = int(when.utcoffset().total_seconds())  # type: ignore[union-attr]
+    zone = "UTC" if offset == 0 else format_offset(offset)
+    return {"start_time": when.isoformat(timespec="milliseconds"), "time_zone": zone}
+
+
+def _stream_names(infos: list[dict]) -> dict[int, str]:
+    names = {int(i["stream_id"]): sanitize_name(str(i.get("name") or "stream")) for i in infos}
+    taken = list(names.values())
+    return {sid: (n if taken.count(n) == 1 else f"{n}_{sid}") for sid, n in names.items()}
+
+
+def _load(path: Path, **kwargs: Any) -> tuple[list[dict], dict]:
+    import pyxdf
+
+    level = logging.getLogger("pyxdf.pyxdf").level
+    logging.getLogger("pyxdf.pyxdf").setLevel(logging.ERROR)  # pyxdf warns about clock segments on resets
+    try:
+        return pyxdf.load_xdf(
+            str(path), synchronize_clocks=True, handle_clock_resets=True, dejitter_timestamps=False, **kwargs
+        )
+    except Exception as e:  # noqa: BLE001 - any parser failure becomes one line naming the file
+        raise ConversionError(path, f"XDF content cannot be parsed: {type(e).__name__}: {e}") from None
+    finally:
+        logging.getLogger("pyxdf.pyxdf").setLevel(level)
+
+
+def iter_chunks(
+    path: Path, options: ConvertOptions | None = None, per_stream: bool | None = None
+) -> Iterator[Recording]:
+    """One Recording per stream. ``per_stream`` (default: files over 64 MiB) loads one stream at a time, so memory
+    holds the largest stream, not the file; otherwise the file is parsed once."""
+    path = Path(path)
+    scan_chunks(path)
+    import pyxdf
+
+    try:
+        infos = pyxdf.resolve_streams(str(path))
+    except Exception as e:  # noqa: BLE001
+        raise ConversionError(path, f"XDF stream headers cannot be parsed: {type(e).__name__}: {e}") from None
+    names = _stream_names(infos)
+    if per_stream is None:
+        per_stream = path.stat().st_size > PER_STREAM_BYTES
+    if per_stream:
+        header: dict = {}
+        for sid in sorted(names):
+            streams, header = _load(path, select_streams=[sid])
+            for s in streams:
+                rec = stream_to_recording(path, s, names[int(s["info"]["stream_id"])])
+                rec.metadata["imulog.trial"] = header_start_time(header)
+                yield rec
+        return
+    streams, header = _load(path)
+    trial = header_start_time(header)
+    for s in sorted(streams, key=lambda s: int(s["info"]["stream_id"])):
+        rec = stream_to_recording(path, s, names[int(s["info"]["stream_id"])])
+        rec.metadata["imulog.trial"] = dict(trial)
+        yield rec
+
+
+def read_xdf(path: Path, options: ConvertOptions | None = None) -> Recording:
+    rec = concat_chunks(iter_chunks(path, options))
+    if not rec.metadata.get("imulog.trial"):
+        rec.metadata.pop("imulog.trial", None)
+    return rec
+
+
+class XdfConverter(Converter):
+    name = "xdf"
+    description = (
+        "XDF (Lab Streaming Layer / LabRecorder): every stream with its units, clock offsets applied, via pyxdf"
+    )
+    extensions = (".xdf",)
+    example = "imulog convert ../shared/data/devices/xdf/clock_resets.xdf -o lsl.mcap"
+
+    def sniff(self, path: Path, head: bytes) -> float:
+        return 0.99 if head[:4] == MAGIC else 0.0
+
+    def recording_key(self, path: Path) -> str | None:
+        return Path(path).name
+
+    def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
+        return read_xdf(Path(path), options)
+
+
+CONVERTER = XdfConverter()

@@ -1,0 +1,115 @@
+"""Several sensors of one recording are one trial: folders and lists of per-sensor exports (real files in
+../shared/data/devices), one /imu/<name> per sensor, --device-name SERIAL=NAME, and doctor on every trial."""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+from click.testing import CliRunner
+
+from converters import ConvertOptions, convert_files
+from converters.registry import group_directory
+from imulog.archive import TrialReader, check_file
+from imulog.cli import cli
+
+XSENS = "devices/xsens_mtmanager"
+
+
+def run(*args) -> tuple[int, str]:
+    result = CliRunner().invoke(cli, [str(a) for a in args])
+    return result.exit_code, result.output
+
+
+def test_xsens_folder_is_one_trial_per_recording(shared_data, tmp_path):
+    groups = dict(group_directory(shared_data / XSENS))
+    assert sorted(p.name for p in groups["MT_012005D6_031"]) == [
+        "MT_012005D6_031-000_00B421AF.txt",
+        "MT_012005D6_031-000_00B4227B.txt",
+    ]
+    assert sorted(p.name for p in groups["MT46_01"]) == ["MT46_01-000_00B42D4D.txt", "MT46_01-000_00B42D4E.txt"]
+    assert len(groups) == 10  # the six MT2022 exports are different files of their own, never merged
+
+    out = tmp_path / "trials"
+    code, output = run("convert", shared_data / XSENS, "-o", out)
+    assert code == 0, output
+    trials = sorted(p.name for p in out.glob("*.mcap"))
+    assert len(trials) == 10 and "MT_012005D6_031.mcap" in trials
+    for path in out.glob("*.mcap"):
+        report = check_file(path)
+        assert report.ok, (path.name, report.problems)
+    with TrialReader(out / "MT_012005D6_031.mcap") as trial:
+        imus = [t for t in trial.topics() if t.startswith("/imu/")]
+        assert sorted(imus) == ["/imu/mt_00b421af", "/imu/mt_00b4227b"]
+        a = trial.read("/imu/mt_00b421af")
+        b = trial.read("/imu/mt_00b4227b")
+        np.testing.assert_array_equal(a.t_ns, b.t_ns)  # PacketCounter 03583..06951 in both: sample aligned
+        assert a.acc[0].tolist() == [3.030769, 5.254238, -7.714005]
+        assert b.acc[0].tolist() == [0.015173, 9.109743, -3.736056]
+        assert len(trial.attachments()) == 2
+
+
+def test_files_given_together_with_device_names(shared_data, tmp_path):
+    files = sorted((shared_data / XSENS).glob("MT46_01-000_*.txt"))
+    out = tmp_path / "mt46.mcap"
+    code, output = run(
+        "convert",
+        *files,
+        "-o",
+        out,
+        "--device-name",
+        "00B42D4D=left_forearm",
+        "--device-name",
+        "00b42d4e=left_upper_arm",
+    )
+    assert code == 0, output
+    with TrialReader(out) as trial:
+        assert {t for t in trial.topics() if t.startswith("/imu/")} == {"/imu/left_forearm", "/imu/left_upper_arm"}
+        assert trial.metadata["imulog.device.left_forearm"]["serial"] == "00B42D4D"
+        assert {"/orientation/left_forearm", "/orientation/left_upper_arm"} <= set(trial.topics())
+
+
+def test_same_sensor_twice_is_refused(shared_data, tmp_path):
+    d = shared_data / XSENS
+    files = [d / "MT2022_ACC_00B42D4B.txt", d / "MT2022_ACC_GYRO_ROT_MAT_COMMA_00B42D4B.txt"]
+    out = tmp_path / "twice.mcap"
+    code, output = run("convert", *files, "-o", out)
+    assert code == 1 and "same channel(s): /imu/mt_00b42d4b" in output and not out.exists()
+
+
+def test_one_file_many_sensors_apdm_and_delsys_with_names(shared_data):
+    rec = convert_files(
+        [shared_data / "devices/apdm_csv/apdm_format7.csv"],
+        options=ConvertOptions(extra={"names": {"5718": "pelvis", "CHEST": "sternum"}}),
+    )
+    names = [i.name for i in rec.imus]
+    assert names == ["pelvis", "right_ankle", "left_ankle", "left_foot", "sternum", "right_foot"]
+    assert rec.metadata["imulog.device.pelvis"]["serial"] == "5718"
+    rec = convert_files(
+        [shared_data / "devices/delsys_trigno/truncated_trigno_sample.csv"],
+        options=ConvertOptions(extra={"names": {"10": "wrist"}}),
+    )
+    assert [i.name for i in rec.imus] == ["wrist", "mini_sensor_11"]
+    assert [a.name for a in rec.analogs] == ["wrist", "mini_sensor_11"]
+
+
+def test_every_lab_device_folder_converts_and_passes_doctor(shared_data, tmp_path):
+    """Every file of the lab-system folders converts with no --format, one trial per recording, doctor ok."""
+    folders = ["xsens_mtmanager", "apdm_csv", "opensense_sto", "optitrack_motive", "delsys_trigno"]
+    data = tmp_path / "devices"
+    for f in folders:
+        shutil.copytree(shared_data / "devices" / f, data / f)
+    out = tmp_path / "out"
+    code, output = run("convert", data, "-o", out)
+    assert code == 0, output
+    trials = sorted(str(p.relative_to(out)) for p in out.rglob("*.mcap"))
+    assert len(trials) == 10 + 2 + 2 + 1 + 2, trials
+    for path in out.rglob("*.mcap"):
+        assert check_file(path).ok, path
+    # every data file is attached to exactly one trial
+    attached = []
+    for path in out.rglob("*.mcap"):
+        with TrialReader(path) as trial:
+            attached += [a.name for a in trial.attachments()]
+    expected = [p.name for f in folders for p in (data / f).iterdir() if not p.name.startswith(("LICENSE", "NOTICE"))]
+    assert sorted(attached) == sorted(expected)

@@ -1,0 +1,205 @@
+"""XDF: the xdf-modules example files (MIT) against the values their README documents (clock offsets, host clock
+reset, empty streams, string markers), IMU and mocap streams in a file the test writes, and damaged files."""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from converters import ConversionError, detect
+from converters._common import G0
+from converters.xdf import iter_chunks, read_xdf, scan_chunks
+from imulog.archive import TrialReader
+from imulog.cli import cli
+
+
+@pytest.fixture(scope="module")
+def xdf_dir(shared_data: Path) -> Path:
+    return shared_data / "devices" / "xdf"
+
+
+def test_clock_reset_file_matches_the_readme(xdf_dir: Path):
+    rec = read_xdf(xdf_dir / "clock_resets.xdf")
+    eeg = next(s for s in rec.signals if s.topic == "/signals/biosemi")
+    markers = next(e for e in rec.events if e.topic == "/events/mymarkerstream")
+    assert eeg.values.shape == (27815, 8) and len(markers) == 175
+    t = eeg.t_ns / 1e9
+    # footer first/last time stamps + first/last clock offsets (README_example-files.md), both sides of the reset
+    assert t[0] == pytest.approx(653150.379117 - 652340.28383985, abs=1e-3)
+    assert t[-1] == pytest.approx(261.9267033 + 1121.1656319, abs=1e-3)
+    m = markers.start_ns / 1e9
+    assert m[0] == pytest.approx(653153.2121885 - 652340.2838639501, abs=1e-3)
+    assert m[-1] == pytest.approx(259.6538279 + 1121.165595, abs=1e-3)
+    assert np.all(np.diff(eeg.t_ns) > 0) and np.all(np.diff(markers.start_ns) > 0)  # one axis across the reset
+    assert np.array_equal(markers.start_ns, markers.end_ns)
+    assert markers.labels[:5] == ["XXX", "Test", "Blah", "Test", "Test-1-2-3"] and markers.labels[-1] == "XXX"
+    np.testing.assert_allclose(eeg.values[0], [0.142, 0.463, 0.354, 0.220, 0.761, 0.323, 0.312, 0.861], atol=5e-4)
+    dev = rec.metadata["imulog.device.biosemi"]
+    assert dev["nominal_srate_hz"] == 100.0 and dev["clock_segments"] == 2 and dev["stream_type"] == "EEG"
+
+
+def test_minimal_and_empty_streams(xdf_dir: Path):
+    rec = read_xdf(xdf_dir / "minimal.xdf")
+    data = rec.signals[0]
+    assert data.topic == "/signals/senddatac" and data.values.shape == (9, 3)
+    np.testing.assert_array_equal(data.values[:2], [[192, 255, 238], [12, 22, 32]])
+    np.testing.assert_allclose(data.t_ns / 1e9, np.arange(5.1, 5.95, 0.1) - 0.1, atol=1e-9)  # offsets of -0.1 s
+    strings = rec.events[0]
+    np.testing.assert_allclose(strings.start_ns / 1e9, np.arange(5.1, 5.95, 0.1), atol=1e-9)  # no offsets
+    assert strings.labels[1:5] == ["Hello", "World", "from", "LSL"]
+    assert "imulog.trial" not in rec.metadata  # minimal.xdf's header has no datetime
+
+    rec = read_xdf(xdf_dir / "empty_streams.xdf")
+    topics = {s.topic: len(s) for s in rec.streams()}
+    assert topics == {
+        "/signals/empty_data_stream_test_stream_0_counter": 0,
+        "/signals/data_stream_test_stream_0_counter": 10,
+        "/events/ctrl": 1,
+        "/events/empty_marker_stream_test_stream_0_counter": 0,
+    }
+    assert rec.events[0].labels == ['{"state": 2}']
+    assert rec.metadata["imulog.trial"] == {"start_time": "2025-01-31T00:21:17.000+00:00", "time_zone": "UTC"}
+    assert rec.metadata["imulog.device.ctrl"]["manufacturer"] == "pylsltools"
+
+
+def test_per_stream_loading_gives_the_same_streams(xdf_dir: Path):
+    once = list(iter_chunks(xdf_dir / "clock_resets.xdf", per_stream=False))
+    each = list(iter_chunks(xdf_dir / "clock_resets.xdf", per_stream=True))
+    assert len(once) == len(each) == 2
+    for a, b in zip(once, each, strict=True):
+        sa, sb = a.streams()[0], b.streams()[0]
+        assert sa.topic == sb.topic
+        np.testing.assert_array_equal(getattr(sa, "t_ns", None), getattr(sb, "t_ns", None))
+
+
+# ---------------------------------------------------------------------------------------- a file written here
+def _chunk(tag: int, content: bytes) -> bytes:
+    body = struct.pack("<H", tag) + content
+    n = len(body)
+    return (bytes([1, n]) if n < 256 else bytes([4]) + struct.pack("<I", n)) + body
+
+
+def _header(sid: int, name: str, stype: str, channels: list[tuple[str, str, str]], srate: float) -> bytes:
+    ch = "".join(f"<channel><label>{lab}</label><unit>{u}</unit><type>{t}</type></channel>" for lab, u, t in channels)
+    xml = (
+        f'<?xml version="1.0"?><info><name>{name}</name><type>{stype}</type><channel_count>{len(channels)}'
+        f"</channel_count><nominal_srate>{srate}</nominal_srate><channel_format>float32</channel_format>"
+        f"<source_id>{name}-1</source_id><desc><channels>{ch}</channels></desc></info>"
+    )
+    return _chunk(2, struct.pack("<I", sid) + xml.encode())
+
+
+def _samples(sid: int, t: np.ndarray, values: np.ndarray) -> bytes:
+    body = struct.pack("<I", sid) + bytes([4]) + struct.pack("<I", len(t))
+    for ti, row in zip(t, values, strict=True):
+        body += bytes([8]) + struct.pack("<d", ti) + row.astype("<f4").tobytes()
+    return _chunk(3, body)
+
+
+def _write_lab_xdf(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(3)
+    n = 50
+    t = 1000.0 + np.arange(n) / 100.0
+    imu = np.column_stack(
+        [rng.normal(0, 0.05, (n, 2)), 1 + rng.normal(0, 0.05, n), rng.normal(0, 20, (n, 3)), rng.normal(0, 1, n)]
+    )
+    mocap = rng.normal(500, 100, (n, 6))
+    imu_ch = [(f"Acc{a}", "g", "Accelerometer") for a in "XYZ"] + [(f"Gyro{a}", "deg/s", "Gyroscope") for a in "XYZ"]
+    imu_ch.append(("Battery", "V", "misc"))
+    mocap_ch = [(f"{m}_{a}", "mm", "Position") for m in ("wrist", "elbow") for a in "XYZ"]
+    data = (
+        b"XDF:"
+        + _chunk(
+            1, b'<?xml version="1.0"?><info><version>1.0</version><datetime>2024-05-06T10:11:12+0200</datetime></info>'
+        )
+        + _header(1, "WristIMU", "IMU", imu_ch, 100)
+        + _header(2, "Qualisys", "MoCap", mocap_ch, 100)
+        + _samples(1, t[:25], imu[:25])
+        + _samples(2, t[:25], mocap[:25])
+        + _chunk(4, struct.pack("<Idd", 1, 1000.2, -0.5))
+        + _chunk(4, struct.pack("<Idd", 2, 1000.2, -0.25))
+        + _samples(1, t[25:], imu[25:])
+        + _samples(2, t[25:], mocap[25:])
+        + _chunk(4, struct.pack("<Idd", 1, 1000.6, -0.5))
+        + _chunk(4, struct.pack("<Idd", 2, 1000.6, -0.25))
+    )
+    path.write_bytes(data)
+    return t, imu.astype(np.float32).astype(np.float64), mocap.astype(np.float32).astype(np.float64)
+
+
+def test_imu_and_mocap_streams_by_channel_labels_and_units(tmp_path: Path):
+    path = tmp_path / "lab.xdf"
+    t, imu_values, mocap_values = _write_lab_xdf(path)
+    assert detect(path).name == "xdf"
+    rec = read_xdf(path)
+    imu = rec.imus[0]
+    assert imu.topic == "/imu/wristimu"
+    np.testing.assert_allclose(imu.acc, imu_values[:, :3] * G0, rtol=1e-12)
+    np.testing.assert_allclose(imu.gyr, np.radians(imu_values[:, 3:6]), rtol=1e-12)
+    np.testing.assert_allclose(imu.t_ns / 1e9, t - 0.5, atol=1e-6)  # clock offset applied
+    rest = next(s for s in rec.signals if s.topic == "/signals/wristimu")
+    assert rest.columns == ["Battery"] and rest.units == ["V"]
+    markers = rec.markers[0]
+    assert markers.topic == "/markers/qualisys" and markers.labels == ["wrist", "elbow"]
+    np.testing.assert_allclose(markers.pos, mocap_values.reshape(-1, 2, 3) / 1000.0, rtol=1e-12)
+    np.testing.assert_allclose(markers.t_ns / 1e9, t - 0.25, atol=1e-6)
+    assert rec.metadata["imulog.trial"] == {"start_time": "2024-05-06T10:11:12.000+02:00", "time_zone": "+02:00"}
+
+
+def test_imu_labels_without_units_stay_signals(tmp_path: Path):
+    path = tmp_path / "nounits.xdf"
+    t = np.arange(5) / 10.0
+    path.write_bytes(
+        b"XDF:"
+        + _chunk(1, b"<info><version>1.0</version></info>")
+        + _header(1, "imu", "IMU", [(f"Acc{a}", "", "") for a in "XYZ"], 10)
+        + _samples(1, t, np.ones((5, 3)))
+    )
+    rec = read_xdf(path)
+    assert not rec.imus and rec.signals[0].columns == ["AccX", "AccY", "AccZ"] and rec.signals[0].units == [""] * 3
+
+
+# --------------------------------------------------------------------------------------------- damage and CLI
+@pytest.mark.parametrize("how", ["truncate", "flip"])
+def test_damaged_file_one_line_error_naming_the_chunk(xdf_dir: Path, tmp_path: Path, how: str):
+    data = bytearray((xdf_dir / "clock_resets.xdf").read_bytes())
+    # walk to chunk 40 independently of the converter
+    pos, index = 4, 0
+    while index < 40:
+        width = data[pos]
+        length = int.from_bytes(data[pos + 1 : pos + 1 + width], "little")
+        pos += 1 + width + length
+        index += 1
+    if how == "truncate":
+        width = data[pos]
+        data = data[: pos + 1 + width + 5]
+    else:
+        data[pos] = 3  # chunk-length width byte must be 1, 4 or 8
+    bad = tmp_path / f"{how}.xdf"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(ConversionError) as e:
+        scan_chunks(bad)
+    msg = str(e.value)
+    assert "\n" not in msg and bad.name in msg and f"chunk 40 (byte {pos})" in msg
+    out = tmp_path / "out.mcap"
+    r = CliRunner().invoke(cli, ["convert", str(bad), "-o", str(out)])
+    assert r.exit_code != 0 and "chunk 40" in r.output
+    assert not list(tmp_path.glob("*.mcap*"))
+
+
+def test_cli_converts_every_example_and_doctor_passes(xdf_dir: Path, tmp_path: Path):
+    for src in sorted(xdf_dir.glob("*.xdf")):
+        out = tmp_path / f"{src.stem}.mcap"
+        r = CliRunner().invoke(cli, ["convert", str(src), "-o", str(out)])
+        assert r.exit_code == 0, r.output
+        r = CliRunner().invoke(cli, ["doctor", str(out)])
+        assert r.exit_code == 0, r.output
+        with TrialReader(out) as trial:
+            assert trial.topics()
+            if src.stem == "empty_streams":
+                assert "/events/empty_marker_stream_test_stream_0_counter" in trial.topics()
+                assert "/signals/empty_data_stream_test_stream_0_counter" in trial.topics()
