@@ -277,8 +277,16 @@ def _stream_names(infos: list[dict]) -> dict[int, str]:
     return {sid: (n if taken.count(n) == 1 else f"{n}_{sid}") for sid, n in names.items()}
 
 
+def _pyxdf(path: Path) -> Any:
+    try:
+        import pyxdf
+    except ImportError:
+        raise ConversionError(path, "reading XDF needs pyxdf: pip install 'imulog[xdf]'") from None
+    return pyxdf
+
+
 def _load(path: Path, **kwargs: Any) -> tuple[list[dict], dict]:
-    import pyxdf
+    pyxdf = _pyxdf(path)
 
     level = logging.getLogger("pyxdf.pyxdf").level
     logging.getLogger("pyxdf.pyxdf").setLevel(logging.ERROR)  # pyxdf warns about clock segments on resets
@@ -299,7 +307,7 @@ def iter_chunks(
     holds the largest stream, not the file; otherwise the file is parsed once."""
     path = Path(path)
     scan_chunks(path)
-    import pyxdf
+    pyxdf = _pyxdf(path)
 
     try:
         infos = pyxdf.resolve_streams(str(path))
