@@ -81,19 +81,28 @@ def test_madgwick_backend_and_errors(trial):
 
 
 def test_align_short_real_recording_with_foot_markers(shared_data, tmp_path):
-    """gaitmap (38.7 s, IMU and mocap already synchronised, no O/X/Y markers): the default 120 s window used
-    to find no lag at all and fail with 'too few common samples'; a missing O/X/Y cluster names the channel
-    and says how to use other markers."""
+    """gaitmap (38.7 s, IMU and mocap already synchronised, foot markers L_/R_TOE, FCC, FM5, no O/X/Y): the
+    default align finds each IMU's own foot by itself (the other foot is the runner-up), the lag is ~0, and
+    a one-window recording is flagged (no drift); explicit markers still override and name missing ones."""
     from converters import convert_files
 
     path = tmp_path / "gaitmap.mcap"
     write_trial(path, convert_files(sorted((shared_data / "gaitmap_foot").glob("*_sample.csv"))))
     runner = CliRunner()
-    bad = runner.invoke(cli, ["process", "align", str(path), "--imu", "left_sensor"])
-    assert bad.exit_code == 1 and "/markers/mocap" in bad.output and "--cluster svd" in bad.output
+    for imu, side, other in (("left_sensor", "L_", "R_"), ("right_sensor", "R_", "L_")):
+        out = _ok(runner.invoke(cli, ["process", "align", str(path), "--imu", imu]))
+        with TrialReader(path) as t:
+            rec = t.metadata["imulog.alignment"]
+        chosen = rec["cluster"]["markers"]
+        assert len(chosen) >= 3 and all(m.startswith(side) for m in chosen), out
+        assert all(m.startswith(other) for m in rec["cluster"]["runner_up"]["markers"])
+        assert abs(rec["offset_ns"]) < 20_000_000 and rec["score"] > 0.8  # the data set is synchronised
+        assert rec["quality"] == "poor" and not rec["drift_estimated"] and "runner-up" in out
+    bad = runner.invoke(cli, ["process", "align", str(path), "--imu", "left_sensor", "--cluster-markers", "A,B,C"])
+    assert bad.exit_code == 1 and "/markers/mocap" in bad.output and "A, B, C" in bad.output
     assert "Traceback" not in bad.output
-    svd = ["--cluster", "svd", "--cluster-markers", "L_FCC,L_TOE,L_FM5"]
+    svd = ["--cluster-markers", "L_FCC,L_TOE,L_FM5"]
     _ok(runner.invoke(cli, ["process", "align", str(path), "--imu", "left_sensor", *svd]))
     with TrialReader(path) as t:
         rec = t.metadata["imulog.alignment"]
-    assert abs(rec["offset_ns"]) < 20_000_000 and rec["score"] > 0.8  # the data set is synchronised
+    assert rec["cluster"]["selection"] == "given" and abs(rec["offset_ns"]) < 20_000_000

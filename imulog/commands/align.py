@@ -2,46 +2,59 @@
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
 import click
+
+from imulog.process.alignment import AlignmentParams, FilterParams
+
+_D = AlignmentParams()
 
 
 @click.command("align")
 @click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--imu", default=None, help="IMU name (channel /imu/NAME); default: the only IMU, else 'wrist'.")
 @click.option("--markers", default=None, help="Marker channel /markers/NAME; default: the only one, else 'vicon'.")
-@click.option("--window", "window_s", type=float, default=120.0, show_default=True, help="Correlation window, s.")
+@click.option("--window", "window_s", type=float, default=_D.window_s, show_default=True, help="Lag window length, s.")
 @click.option(
     "--window-start",
     "window_start_s",
     type=float,
-    default=0.0,
+    default=_D.window_start_s,
     show_default=True,
-    help="Window start after the first Vicon frame, s.",
+    help="Windows start this long after the first Vicon frame, s.",
 )
-@click.option("--max-lag", "max_lag_s", type=float, default=60.0, show_default=True, help="Search range +-, s.")
+@click.option("--max-lag", "max_lag_s", type=float, default=_D.max_lag_s, show_default=True, help="Search range +-, s.")
 @click.option(
     "--drift/--no-drift",
-    default=False,
+    default=_D.drift,
     show_default=True,
-    help="Also estimate clock drift from a second window at the end of the recording.",
+    help="Fit clock drift to the lags of the windows across the trial (--no-drift: one offset).",
 )
 @click.option(
     "--cluster",
-    type=click.Choice(["oxy", "svd"]),
-    default="oxy",
+    type=click.Choice(["auto", "oxy", "svd"]),
+    default=_D.cluster,
     show_default=True,
-    help="Cluster frame: markers O, X, Y (thesis) or an SVD fit of all --cluster-markers.",
+    help="auto: find the rigid markers that move with the IMU; oxy: markers O, X, Y (thesis); "
+    "svd: fit the --cluster-markers.",
 )
-@click.option("--cluster-markers", default="O,X,Y,A", show_default=True, help="Markers of the SVD fit (>= 3).")
-@click.option("--cutoff", "cutoff_hz", type=float, default=6.0, show_default=True, help="Marker low-pass, Hz.")
+@click.option(
+    "--cluster-markers",
+    default=None,
+    help="Markers on the IMU (comma-separated, with or without the Subject: prefix); overrides the search. "
+    "One marker aligns on its acceleration.",
+)
+@click.option(
+    "--cutoff", "cutoff_hz", type=float, default=_D.filter.cutoff_hz, show_default=True, help="Marker low-pass, Hz."
+)
 @click.option(
     "--max-gap",
     "max_gap_s",
     type=float,
-    default=0.1,
+    default=_D.filter.max_gap_s,
     show_default=True,
     help="Marker gaps up to this are interpolated; longer stay missing, s.",
 )
@@ -51,6 +64,7 @@ import click
     show_default=True,
     help="Write IMU-derived channels on the Vicon clock and rate under /derived/reference/.",
 )
+@click.option("--json", "as_json", is_flag=True, help="Print the imulog.alignment record as JSON.")
 @click.option("--force", is_flag=True, help="Recompute even when the same parameters are already recorded.")
 def process_align(
     trial: Path,
@@ -61,57 +75,63 @@ def process_align(
     max_lag_s: float,
     drift: bool,
     cluster: str,
-    cluster_markers: str,
+    cluster_markers: str | None,
     cutoff_hz: float,
     max_gap_s: float,
     resample: bool,
+    as_json: bool,
     force: bool,
 ) -> None:
-    """Align the IMU with the Vicon marker cluster of TRIAL (clock and frames).
+    """Align the IMU with the Vicon markers of TRIAL (clock and frames).
 
-    Cross-correlates the angular-velocity norms of the gyroscope and of the cluster (from filtered
-    markers) over the first WINDOW seconds to find the clock offset, optionally the drift, then the
-    constant IMU-to-cluster rotation (and IMU-global-to-world when the orientation step has run).
-    Stores imulog.alignment, /derived/vicon/cluster_pose, /derived/vicon/angular_velocity and the
-    resampled /derived/reference/... channels.
+    Finds the rigid marker set that moves with the IMU (marker triads ranked by rigidity and by how well
+    their angular velocity matches the gyroscope), cross-correlates the angular-velocity norms over
+    WINDOW-second windows across the trial and fits the clock offset and drift to their lags, then the
+    constant IMU-to-cluster rotation (and IMU-global-to-world when the orientation step has run). With
+    no rigid cluster on the IMU, aligns on one marker's acceleration (flagged less certain). Stores
+    imulog.alignment, /derived/vicon/cluster_pose, /derived/vicon/angular_velocity and the resampled
+    /derived/reference/... channels.
 
     \b
     Examples:
       imulog process align trial.mcap
-      imulog process align trial.mcap --window 60 --drift
-      imulog process align trial.mcap --cluster svd --cluster-markers O,X,Y,A
+      imulog process align trial.mcap --window 60 --no-drift
+      imulog process align trial.mcap --cluster-markers Subject:O,Subject:X,Subject:Y
+      imulog process align trial.mcap --cluster-markers WRIST        # one marker: its acceleration
     """
     from imulog.archive.errors import ArchiveError
-    from imulog.process.alignment import AlignmentParams, FilterParams
-    from imulog.steps.align import run_align
+    from imulog.steps.align import alignment_summary, run_align
     from imulog.steps.common import error_line
 
     if window_s <= 0 or max_lag_s < 0:
         raise click.ClickException("--window must be positive and --max-lag non-negative")
+    names = tuple(m.strip() for m in (cluster_markers or "").split(",") if m.strip())
     params = AlignmentParams(
         window_s=window_s,
         window_start_s=window_start_s,
         max_lag_s=max_lag_s,
         drift=drift,
         filter=FilterParams(cutoff_hz=cutoff_hz, max_gap_s=max_gap_s),
-        cluster=cluster,
-        markers=tuple(m.strip() for m in cluster_markers.split(",") if m.strip()),
+        cluster="svd" if names and cluster == "auto" and len(names) > 1 else cluster,
+        markers=names,
     )
     try:
-        with click.progressbar(length=1, label="align") as bar:
-            outcome = run_align(trial, imu=imu, markers=markers, params=params, resample=resample, force=force)
-            bar.update(1)
+        outcome = run_align(trial, imu=imu, markers=markers, params=params, resample=resample, force=force)
         from imulog.archive import TrialReader
 
         with TrialReader(trial) as reader:
             rec = reader.metadata.get("imulog.alignment", {})
     except (ArchiveError, ValueError, KeyError, OSError) as exc:
         raise click.ClickException(error_line(trial, exc)) from exc
+    if as_json:
+        click.echo(json.dumps(rec, indent=1, default=str))
+        return
     prefix = "unchanged (same inputs and parameters): " if outcome.skipped else ""
-    q = rec.get("rotation_imu_to_cluster") or [1.0, 0.0, 0.0, 0.0]
-    angle_deg = math.degrees(2 * math.acos(min(1.0, abs(float(q[0])))))
-    click.echo(
-        f"{prefix}offset {int(rec.get('offset_ns', 0)) / 1e9:.4f} s, drift {float(rec.get('drift_ppm', 0)):.1f} ppm, "
-        f"score {float(rec.get('score', float('nan'))):.3f}, IMU-to-cluster "
-        f"[{', '.join(f'{float(v):.5f}' for v in q)}] ({angle_deg:.2f} deg)"
-    )
+    q = rec.get("rotation_imu_to_cluster")
+    lines = alignment_summary(rec)
+    if q:
+        angle_deg = math.degrees(2 * math.acos(min(1.0, abs(float(q[0])))))
+        lines.insert(1, f"IMU-to-cluster [{', '.join(f'{float(v):.5f}' for v in q)}] ({angle_deg:.2f} deg)")
+    click.echo(f"{trial}: {prefix}{lines[0]}")
+    for line in lines[1:]:
+        click.echo(f"  {line}")

@@ -26,12 +26,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from imulog.process import quaternion as quat
+from imulog.process.alignment_search import SearchParams, base_name, resolve_markers
 
 __all__ = [
     "AlignmentParams",
     "FilterParams",
     "LagEstimate",
     "align",
+    "align_marker",
+    "assess_quality",
+    "fit_clock",
     "angular_velocity_from_rotations",
     "cluster_frame_oxy",
     "cluster_frame_svd",
@@ -41,6 +45,7 @@ __all__ = [
     "lowpass_markers",
     "reference_to_device",
     "rotation_global_to_world",
+    "vector_match",
 ]
 
 NS = 1_000_000_000
@@ -320,12 +325,14 @@ def estimate_lag(
     max_lag_s: float = 60.0,
     grid_hz: float = 200.0,
     min_overlap: float = 0.5,
+    prior_offset_ns: int | None = None,
 ) -> LagEstimate:
     """Clock offset by normalised cross-correlation of angular-velocity norms.
 
     The reference window is ``[t_ref[0] + window_start_s, + window_s]`` (default the first two
     minutes, the R2G protocol's static period and wave). The device signal is searched over the
-    same stretch of its own clock +- ``max_lag_s``. Both are put on a ``grid_hz`` grid, mean-removed
+    same stretch of its own clock +- ``max_lag_s`` (``prior_offset_ns`` given: of the reference window shifted
+    by that offset, t_dev = t_ref - prior). Both are put on a ``grid_hz`` grid, mean-removed
     and correlated (normalised by the local energy of the overlapping device stretch, so a loud
     movement elsewhere does not win); the peak is refined to sub-sample precision by a parabola.
     """
@@ -337,7 +344,8 @@ def estimate_lag(
     window_s = max(min(window_s, (int(t_ref_ns[-1]) - ref0) / NS), 0.0)
     na = int(window_s * grid_hz)
     a = _uniform(t_ref_ns, np.asarray(w_ref_norm, dtype=np.float64), ref0, grid_hz, na)
-    dev0 = int(t_dev_ns[0]) + ws - int(round(max_lag_s * NS))
+    prior = int(t_ref_ns[0]) - int(t_dev_ns[0]) if prior_offset_ns is None else int(prior_offset_ns)
+    dev0 = ref0 - prior - int(round(max_lag_s * NS))
     nb = int((window_s + 2 * max_lag_s) * grid_hz)
     b = _uniform(t_dev_ns, np.asarray(w_dev_norm, dtype=np.float64), dev0, grid_hz, nb)
     a_ok = np.isfinite(a)
@@ -424,32 +432,225 @@ def rotation_global_to_world(
 
 
 # --------------------------------------------------------------------------------------------
-# the whole alignment
+# clock fit over windows across the trial
 
 
 @dataclass(frozen=True)
 class AlignmentParams:
     """IMU-to-Vicon alignment settings.
 
-    ``window_s`` 120 (the thesis's first two minutes) starting ``window_start_s`` after the
-    reference's first sample; ``max_lag_s`` 60 the search range; ``drift``: estimate clock drift
-    from a second window of the same length ending ``drift_end_margin_s`` before the reference's
-    last sample; ``filter``: marker low-pass (6 Hz, 2nd order); ``cluster``: ``oxy`` (markers
-    O, X, Y as in the thesis) or ``svd`` (all markers in ``markers``, >= 3); ``grid_hz`` the
-    correlation grid; ``bias_min_static_s``: static periods (gyro norm < 0.1 rad/s) at least this
-    long give the gyroscope bias removed before the rotation fit.
+    Clock: a coarse lag over the whole recording (``coarse_hz`` grid, +-``max_lag_s``), then one lag per
+    ``window_s`` (30 s) window across the trial, starting ``window_start_s`` after the reference's first
+    sample, each searched +-``fine_lag_s`` around the coarse lag on a ``grid_hz`` grid; windows scoring under
+    ``min_window_score`` or without movement (reference signal sd under ``min_window_activity``, in the
+    signal's unit) are left out; with ``drift`` (default) a straight line offset + drift x time is fitted
+    to the windows (outliers beyond ``outlier_k`` robust sd and ``outlier_floor_s`` rejected), else their
+    median offset is used. ``filter``: marker low-pass (6 Hz, 2nd order); ``cluster``: ``auto`` (search the
+    rigid marker set that moves with the IMU, :mod:`imulog.process.alignment_search`), ``oxy`` (markers
+    O, X, Y as in the thesis) or ``svd`` (the ``markers`` given, >= 3; one marker aligns on its
+    acceleration); ``markers`` names with or without the ``Subject:`` prefix; ``bias_min_static_s``: static
+    periods (gyro norm < 0.1 rad/s) at least this long give the gyroscope bias removed before the rotation
+    fit. ``poor_*`` thresholds flag a poor alignment (``quality``).
     """
 
-    window_s: float = 120.0
+    window_s: float = 30.0
     window_start_s: float = 0.0
     max_lag_s: float = 60.0
-    drift: bool = False
+    drift: bool = True
     drift_end_margin_s: float = 0.0
     filter: FilterParams = FilterParams()
-    cluster: str = "oxy"
-    markers: tuple[str, ...] = ("O", "X", "Y", "A")
+    cluster: str = "auto"
+    markers: tuple[str, ...] = ()
     grid_hz: float = 200.0
+    coarse_hz: float = 50.0
+    fine_lag_s: float = 0.5
+    min_window_score: float = 0.5
+    min_window_activity: float = 0.05
+    outlier_k: float = 4.0
+    outlier_floor_s: float = 0.002
     bias_min_static_s: float = 1.0
+    search: SearchParams = SearchParams()
+    poor_score: float = 0.8
+    poor_spread_s: float = 0.003
+    poor_min_windows: int = 3
+    poor_vector_match: float = 0.9
+
+
+def _fit_line(t_s: np.ndarray, y_s: np.ndarray) -> tuple[float, float, float, float, float]:
+    """Least-squares ``y = a + b t`` with ``t`` centred: (a, b, se_a, se_b, residual sd) (NaN se when n < 3)."""
+    n = len(t_s)
+    b = float(np.polyfit(t_s, y_s, 1)[0]) if n >= 2 and np.ptp(t_s) > 0 else 0.0
+    a = float(np.mean(y_s - b * t_s))
+    r = y_s - a - b * t_s
+    if n < 3:
+        return a, b, float("nan"), float("nan"), float(np.std(r)) if n else float("nan")
+    sd = float(np.sqrt(np.sum(r**2) / (n - 2)))
+    return a, b, sd / np.sqrt(n), sd / np.sqrt(np.sum(t_s**2)), sd
+
+
+def fit_clock(
+    t_dev_ns: np.ndarray,
+    x_dev: np.ndarray,
+    t_ref_ns: np.ndarray,
+    x_ref: np.ndarray,
+    params: AlignmentParams = AlignmentParams(),
+    coarse_offset_ns: int | None = None,
+) -> dict:
+    """Clock offset and drift from two signals that should match (e.g. angular-velocity norms).
+
+    ``x_dev`` on the device clock, ``x_ref`` on the reference clock. Returns the clock fields of
+    ``imulog.alignment``: ``offset_ns`` (at ``t0_ns``), ``drift_ppm``, ``t0_ns`` (device time of the mean
+    window centre, so offset and drift are uncorrelated), ``offset_uncertainty_ns`` and
+    ``drift_uncertainty_ppm`` (standard errors of the line fit, None with fewer than 3 windows),
+    ``drift_estimated``, ``score`` (median peak correlation of the windows used), ``coarse_score``,
+    ``residual_spread_ns`` (sd of the used windows' residual lag) and ``windows`` (per window: device-time
+    centre, offset, score, residual_ns, used, and why not).
+    """
+    t_dev = np.asarray(t_dev_ns, dtype=np.int64)
+    t_ref = np.asarray(t_ref_ns, dtype=np.int64)
+    span_s = (int(t_ref[-1]) - int(t_ref[0])) / NS
+    coarse = estimate_lag(
+        t_dev,
+        x_dev,
+        t_ref,
+        x_ref,
+        window_start_s=params.window_start_s,
+        window_s=span_s,
+        max_lag_s=params.max_lag_s,
+        grid_hz=params.coarse_hz,
+        prior_offset_ns=None,
+    )
+    prior = coarse.offset_ns if coarse_offset_ns is None else int(coarse_offset_ns)
+    usable = span_s - params.window_start_s - params.drift_end_margin_s
+    n_win = max(1, int(np.floor(usable / params.window_s + 0.5)))
+    width = usable / n_win
+    windows = []
+    x_ref = np.asarray(x_ref, dtype=np.float64)
+    for k in range(n_win):
+        start = params.window_start_s + k * width
+        w = {"start_s": round(start, 3), "used": False}
+        sel = (t_ref >= t_ref[0] + start * NS) & (t_ref <= t_ref[0] + (start + width) * NS)
+        activity = float(np.nanstd(x_ref[sel])) if np.isfinite(x_ref[sel]).sum() > 10 else 0.0
+        try:
+            est = estimate_lag(
+                t_dev,
+                x_dev,
+                t_ref,
+                x_ref,
+                window_start_s=start,
+                window_s=width,
+                max_lag_s=params.fine_lag_s,
+                grid_hz=params.grid_hz,
+                min_overlap=0.8,
+                prior_offset_ns=prior,
+            )
+        except ValueError:
+            w["why"] = "no overlap"
+            windows.append(w)
+            continue
+        w.update(t_dev_center_ns=est.t_dev_center_ns, offset_ns=est.offset_ns, score=round(est.score, 4))
+        if activity < params.min_window_activity:
+            w["why"] = "no movement"
+        elif est.score < params.min_window_score:
+            w["why"] = "low score"
+        elif abs(est.offset_ns - prior) >= 0.98 * params.fine_lag_s * NS:
+            w["why"] = "lag at the search limit"
+        else:
+            w["used"] = True
+        windows.append(w)
+    used = [w for w in windows if w["used"]]
+    result: dict = {"coarse_offset_ns": int(coarse.offset_ns), "coarse_score": round(coarse.score, 4)}
+    if not used:
+        # nothing better than the coarse lag over the whole recording
+        result.update(
+            offset_ns=int(coarse.offset_ns),
+            drift_ppm=0.0,
+            t0_ns=int(coarse.t_dev_center_ns),
+            offset_uncertainty_ns=None,
+            drift_uncertainty_ppm=None,
+            drift_estimated=False,
+            score=float(coarse.score),
+            residual_spread_ns=None,
+            windows=windows,
+        )
+        return result
+    keep = np.ones(len(used), dtype=bool)
+    tc = np.array([w["t_dev_center_ns"] for w in used], dtype=np.int64)
+    off = np.array([w["offset_ns"] for w in used], dtype=np.int64)
+    t0 = int(np.round(np.mean(tc)))
+    ts = (tc - t0) / NS
+    ys = (off - off[0]) / NS  # s, relative (float precision)
+    can_drift = params.drift and len(used) >= 3 and np.ptp(ts) >= 1.5 * width
+    for _ in range(3):
+        if can_drift and keep.sum() >= 3:
+            a, b, se_a, se_b, _ = _fit_line(ts[keep], ys[keep])
+        else:
+            a, b = float(np.median(ys[keep])), 0.0
+        r = ys - a - b * ts
+        mad = 1.4826 * float(np.median(np.abs(r[keep] - np.median(r[keep]))))
+        new = np.abs(r) <= max(params.outlier_k * mad, params.outlier_floor_s)
+        if new.sum() < 2 or np.array_equal(new, keep):
+            break
+        keep = new
+    t0 = int(np.round(np.mean(tc[keep])))
+    ts = (tc - t0) / NS
+    drift_ok = can_drift and keep.sum() >= 3
+    if drift_ok:
+        a, b, se_a, se_b, _ = _fit_line(ts[keep], ys[keep])
+    else:
+        a, b = float(np.median(ys[keep])), 0.0
+        n = int(keep.sum())
+        sd = float(np.std(ys[keep], ddof=1)) if n >= 3 else float("nan")
+        se_a, se_b = sd / np.sqrt(n) if n >= 3 else float("nan"), float("nan")
+    r = ys - a - b * ts
+    for w, ri, ki in zip(used, r, keep, strict=True):
+        w["residual_ns"] = int(round(ri * NS))
+        if not ki:
+            w["used"] = False
+            w["why"] = "outlier"
+    scores = [w["score"] for w in used if w["used"]]
+    spread = float(np.std(r[keep], ddof=1)) if keep.sum() >= 3 else float("nan")
+    result.update(
+        offset_ns=int(off[0] + round(a * NS)),
+        drift_ppm=float(b * 1e6),
+        t0_ns=t0,
+        offset_uncertainty_ns=None if not np.isfinite(se_a) else int(round(se_a * NS)),
+        drift_uncertainty_ppm=None if not np.isfinite(se_b) else float(se_b * 1e6),
+        drift_estimated=bool(drift_ok),
+        score=float(np.median(scores)),
+        residual_spread_ns=None if not np.isfinite(spread) else int(round(spread * NS)),
+        windows=windows,
+    )
+    return result
+
+
+def assess_quality(record: dict, params: AlignmentParams = AlignmentParams()) -> tuple[str, list[str]]:
+    """``("good" | "poor", reasons)`` of an ``imulog.alignment`` record: low score, large residual spread,
+    few windows, a cluster that does not reproduce the gyroscope, or a single-marker alignment."""
+    reasons = []
+    score = float(record.get("score") or 0.0)
+    if score < params.poor_score:
+        reasons.append(f"low correlation score {score:.2f} (< {params.poor_score:g})")
+    spread = record.get("residual_spread_ns")
+    if spread is not None and spread > params.poor_spread_s * NS:
+        reasons.append(
+            f"residual lag spread {spread / 1e6:.1f} ms over the windows (> {params.poor_spread_s * 1e3:g} ms)"
+        )
+    used = sum(1 for w in record.get("windows") or [] if w.get("used"))
+    if used < params.poor_min_windows:
+        reasons.append(f"only {used} usable window(s) (< {params.poor_min_windows}): drift not estimated")
+    vm = (record.get("cluster") or {}).get("vector_match")
+    if vm is not None and vm < params.poor_vector_match:
+        reasons.append(
+            f"the markers reproduce the gyroscope poorly (vector match {vm:.2f} < {params.poor_vector_match:g})"
+        )
+    if record.get("signal") == "marker-acceleration":
+        reasons.append("single marker: aligned on its acceleration, less certain than a rigid cluster")
+    return ("poor" if reasons else "good"), reasons
+
+
+# --------------------------------------------------------------------------------------------
+# the whole alignment
 
 
 @dataclass
@@ -461,14 +662,16 @@ class ClusterKinematics:
     quat_c2w: np.ndarray
     omega_local_rad_s: np.ndarray
     missing: np.ndarray  # (N,) True where the pose could not be computed
+    markers: tuple[str, ...] = ()
 
 
 def _oxy_local(names: list[str], pos: np.ndarray) -> np.ndarray | None:
     """Marker coordinates in the thesis's O/X/Y cluster frame (mean over complete frames), so that
     the SVD fit reports the same frame as the O/X/Y construction; None without O, X and Y."""
-    if not all(m in names for m in ("O", "X", "Y")):
+    base = [base_name(m) for m in names]
+    if not all(m in base for m in ("O", "X", "Y")):
         return None
-    o, x, y = (pos[:, names.index(m)] for m in ("O", "X", "Y"))
+    o, x, y = (pos[:, base.index(m)] for m in ("O", "X", "Y"))
     full = np.all(np.isfinite(pos.reshape(len(pos), -1)), axis=1)
     if not full.any():
         return None
@@ -476,34 +679,61 @@ def _oxy_local(names: list[str], pos: np.ndarray) -> np.ndarray | None:
     return np.einsum("nji,nmj->mi", r, pos[full] - o[full][:, None]) / full.sum()
 
 
+def _first_three_local(pos: np.ndarray) -> np.ndarray | None:
+    """Marker coordinates in the frame of the first three markers (origin the first, x towards the second,
+    z normal to the three): the cluster frame when the markers have no O/X/Y names."""
+    full = np.all(np.isfinite(pos.reshape(len(pos), -1)), axis=1)
+    if not full.any():
+        return None
+    r = cluster_frame_oxy(pos[full, 0], pos[full, 1], pos[full, 2])
+    return np.einsum("nji,nmj->mi", r, pos[full] - pos[full, 0][:, None]) / full.sum()
+
+
 def cluster_kinematics(
     t_ns: np.ndarray, labels: list[str], pos_m: np.ndarray, rate_hz: float, params: AlignmentParams = AlignmentParams()
 ) -> ClusterKinematics:
-    """Filter the markers, build the cluster pose and its angular velocity (cluster frame)."""
+    """Filter the markers, build the cluster pose and its angular velocity (cluster frame).
+
+    ``cluster="oxy"`` uses markers O, X, Y; ``"svd"`` the ``params.markers`` (all given when empty); ``"auto"`` (the search is done
+    by the caller) every marker given: with three markers the O/X/Y construction (on O, X, Y when so named,
+    else on the markers in the order given), with more the SVD fit (in the O/X/Y frame when those names are
+    among them, else in the frame of the first three markers).
+    Names match with or without the ``Subject:`` prefix.
+    """
+    labels = list(labels)
     if params.cluster == "oxy":
         need = ["O", "X", "Y"]
     elif params.cluster == "svd":
-        need = [m for m in params.markers if m in labels]
+        need = list(params.markers) or list(labels)
         if len(need) < 3:
-            raise ValueError(f"the SVD cluster fit needs >= 3 of the markers {params.markers}, found {need}")
+            raise ValueError(f"the SVD cluster fit needs >= 3 markers, got {', '.join(need) or 'none'}")
+    elif params.cluster == "auto":
+        need = list(labels)
+        if len(need) < 3:
+            raise ValueError(f"a cluster needs >= 3 markers, got {', '.join(need) or 'none'}")
     else:
-        raise ValueError(f"cluster method must be 'oxy' or 'svd', got {params.cluster!r}")
-    missing_labels = [m for m in need if m not in labels]
-    if missing_labels:
-        raise ValueError(f"marker(s) {', '.join(missing_labels)} not in the marker stream (have {', '.join(labels)})")
-    idx = [labels.index(m) for m in need]
+        raise ValueError(f"cluster method must be 'auto', 'oxy' or 'svd', got {params.cluster!r}")
+    idx = resolve_markers(labels, need)
+    names = [labels[i] for i in idx]
     filt, gaps = lowpass_markers(np.asarray(pos_m)[:, idx], rate_hz, params.filter)
-    if params.cluster == "oxy":
+    oxy_names = sorted(base_name(n) for n in names) == ["O", "X", "Y"]
+    if params.cluster == "oxy" or (params.cluster == "auto" and len(names) == 3):
+        order = [[base_name(n) for n in names].index(m) for m in ("O", "X", "Y")] if oxy_names else [0, 1, 2]
+        filt = filt[:, order]
+        names = [names[i] for i in order]
         r = cluster_frame_oxy(filt[:, 0], filt[:, 1], filt[:, 2])
         origin = filt[:, 0]
     else:
-        r, origin = cluster_frame_svd(filt, _oxy_local(need, filt))
+        local = _oxy_local(names, filt)
+        if local is None:
+            local = _first_three_local(filt)
+        r, origin = cluster_frame_svd(filt, local)
     missing = ~np.all(np.isfinite(r.reshape(len(r), 9)), axis=1)
     q = np.full((len(r), 4), np.nan)
     if (~missing).any():
         q[~missing] = quat.from_rotation_matrix(r[~missing])
     omega = angular_velocity_from_rotations(r, rate_hz)
-    return ClusterKinematics(np.asarray(t_ns, dtype=np.int64), origin, q, omega, missing)
+    return ClusterKinematics(np.asarray(t_ns, dtype=np.int64), origin, q, omega, missing, tuple(names))
 
 
 def _interp_rows(t_src: np.ndarray, x: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
@@ -515,64 +745,60 @@ def _interp_rows(t_src: np.ndarray, x: np.ndarray, t_dst: np.ndarray) -> np.ndar
     return out
 
 
-def align(
-    t_imu_ns: np.ndarray,
-    gyr_rad_s: np.ndarray,
-    cluster: ClusterKinematics,
-    params: AlignmentParams = AlignmentParams(),
-    q_imu_s2g: np.ndarray | None = None,
-) -> dict:
-    """Full alignment of one IMU with one marker cluster; returns the ``imulog.alignment`` fields.
-
-    ``t_imu_ns``/``gyr_rad_s`` on the device clock; ``cluster`` from :func:`cluster_kinematics` on
-    the reference clock; ``q_imu_s2g`` (optional, the IMU orientation on the device clock) enables
-    ``rotation_global_to_world``. Keys: offset_ns, drift_ppm, t0_ns, rotation_imu_to_cluster,
-    rotation_global_to_world (None without ``q_imu_s2g``), method, score, plus diagnostics
-    (rotation_residual_rad_s, windows).
-    """
-    t_imu = np.asarray(t_imu_ns, dtype=np.int64)
-    gyr = np.asarray(gyr_rad_s, dtype=np.float64)
-    wn_dev = np.linalg.norm(gyr, axis=1)
-    wn_ref = np.linalg.norm(cluster.omega_local_rad_s, axis=1)
-    kw = dict(window_s=params.window_s, max_lag_s=params.max_lag_s, grid_hz=params.grid_hz)
-    first = estimate_lag(t_imu, wn_dev, cluster.t_ns, wn_ref, window_start_s=params.window_start_s, **kw)
-    result = {
-        "offset_ns": int(first.offset_ns),
-        "drift_ppm": 0.0,
-        "t0_ns": int(first.t_dev_center_ns),
-        "score": first.score,
-        "windows": [{"t_dev_center_ns": first.t_dev_center_ns, "offset_ns": first.offset_ns, "score": first.score}],
-    }
-    if params.drift:
-        span_s = (cluster.t_ns[-1] - cluster.t_ns[0]) / NS
-        start2 = span_s - params.drift_end_margin_s - params.window_s
-        if start2 <= params.window_start_s + params.window_s:
-            raise ValueError(
-                f"recording of {span_s:.0f} s too short for two {params.window_s:.0f} s windows (drift estimation): "
-                "shorten the window (--window) or leave out --drift"
-            )
-        second = estimate_lag(t_imu, wn_dev, cluster.t_ns, wn_ref, window_start_s=start2, **kw)
-        dt = second.t_dev_center_ns - first.t_dev_center_ns
-        result["drift_ppm"] = (second.offset_ns - first.offset_ns) / dt * 1e6
-        result["score"] = min(first.score, second.score)
-        result["windows"].append(
-            {"t_dev_center_ns": second.t_dev_center_ns, "offset_ns": second.offset_ns, "score": second.score}
-        )
-    # IMU samples on the reference clock, gyro resampled at the Vicon times
-    t_imu_ref = device_to_reference(t_imu, result)
-    # gyroscope bias from the IMU's static periods (it would tilt the least-squares rotation)
+def _gyro_bias(t_imu: np.ndarray, gyr: np.ndarray, params: AlignmentParams) -> np.ndarray:
+    """Gyroscope bias (rad/s) from the IMU's static periods (zeros without any)."""
     from imulog.process.orientation import StaticParams, detect_static
 
     imu_rate = (len(t_imu) - 1) / ((t_imu[-1] - t_imu[0]) * 1e-9)
     still = detect_static(
         np.nan_to_num(gyr, nan=np.inf), imu_rate, StaticParams(min_duration_s=params.bias_min_static_s)
     )
-    bias = np.nanmean(gyr[still], axis=0) if still.sum() > 0 else np.zeros(3)
+    return np.nanmean(gyr[still], axis=0) if still.sum() > 0 else np.zeros(3)
+
+
+def vector_match(w_imu_rad_s: np.ndarray, w_cluster_rad_s: np.ndarray, q_imu_to_cluster: np.ndarray) -> float:
+    """R^2 of the cluster's angular velocity explained by the rotated gyroscope: 1 - |w_c - R w_i|^2 / |w_c|^2."""
+    a = np.asarray(w_imu_rad_s, dtype=np.float64)
+    b = np.asarray(w_cluster_rad_s, dtype=np.float64)
+    ok = np.all(np.isfinite(a), axis=1) & np.all(np.isfinite(b), axis=1)
+    if ok.sum() < 10:
+        return float("nan")
+    pred = quat.rotate(np.asarray(q_imu_to_cluster, dtype=np.float64), a[ok])
+    den = float(np.sum(b[ok] ** 2))
+    return float(1.0 - np.sum((b[ok] - pred) ** 2) / den) if den > 0 else float("nan")
+
+
+def align(
+    t_imu_ns: np.ndarray,
+    gyr_rad_s: np.ndarray,
+    cluster: ClusterKinematics,
+    params: AlignmentParams = AlignmentParams(),
+    q_imu_s2g: np.ndarray | None = None,
+    coarse_offset_ns: int | None = None,
+) -> dict:
+    """Full alignment of one IMU with one marker cluster; returns the ``imulog.alignment`` fields.
+
+    ``t_imu_ns``/``gyr_rad_s`` on the device clock; ``cluster`` from :func:`cluster_kinematics` on
+    the reference clock; ``q_imu_s2g`` (optional, the IMU orientation on the device clock) enables
+    ``rotation_global_to_world``. Keys: offset_ns, drift_ppm, t0_ns and their uncertainties (see
+    :func:`fit_clock`), rotation_imu_to_cluster, rotation_global_to_world (None without ``q_imu_s2g``),
+    method, signal, score, vector_match, plus diagnostics (rotation_residual_rad_s, windows, gyr_bias_rad_s).
+    """
+    t_imu = np.asarray(t_imu_ns, dtype=np.int64)
+    gyr = np.asarray(gyr_rad_s, dtype=np.float64)
+    wn_dev = np.linalg.norm(gyr, axis=1)
+    wn_ref = np.linalg.norm(cluster.omega_local_rad_s, axis=1)
+    result = fit_clock(t_imu, wn_dev, cluster.t_ns, wn_ref, params, coarse_offset_ns)
+    result["signal"] = "angular-velocity-norm"
+    # IMU samples on the reference clock, gyro resampled at the Vicon times
+    t_imu_ref = device_to_reference(t_imu, result)
+    bias = _gyro_bias(t_imu, gyr, params)
     result["gyr_bias_rad_s"] = [float(v) for v in bias]
     gyr_at_ref = _interp_rows(t_imu_ref, gyr - bias, cluster.t_ns)
     q_i2c, resid = estimate_rotation_imu_to_cluster(gyr_at_ref, cluster.omega_local_rad_s)
     result["rotation_imu_to_cluster"] = [float(v) for v in q_i2c]
     result["rotation_residual_rad_s"] = resid
+    result["vector_match"] = vector_match(gyr_at_ref, cluster.omega_local_rad_s, q_i2c)
     result["rotation_global_to_world"] = None
     if q_imu_s2g is not None:
         from imulog.process.resample import resample_quaternions
@@ -582,7 +808,65 @@ def align(
         q_g2w = rotation_global_to_world(q_at_ref[ok], cluster.quat_c2w[ok], q_i2c)
         result["rotation_global_to_world"] = [float(v) for v in q_g2w]
     result["method"] = (
-        f"xcorr-angular-velocity-norm(window={params.window_s:g}s{', drift' if params.drift else ''})"
+        f"xcorr-angular-velocity-norm(windows={params.window_s:g}s{', drift' if params.drift else ''})"
         f"+wahba-angular-velocity;cluster={params.cluster}"
+    )
+    return result
+
+
+def align_marker(
+    t_imu_ns: np.ndarray,
+    acc_mps2: np.ndarray,
+    t_ref_ns: np.ndarray,
+    marker_m: np.ndarray,
+    rate_hz: float,
+    params: AlignmentParams = AlignmentParams(),
+    *,
+    vertical: tuple[float, float, float] | None = (0.0, 0.0, 1.0),
+    acc_global: tuple[np.ndarray, np.ndarray] | None = None,
+    coarse_offset_ns: int | None = None,
+) -> dict:
+    """Clock alignment on one marker's acceleration (no rigid cluster in view).
+
+    ``acc_mps2`` the accelerometer (specific force, sensor frame) on the device clock and ``marker_m``
+    (N, 3) the raw marker positions on the reference clock. Compared: ``|a_marker + g up|`` with the
+    accelerometer norm (``vertical`` = up in the marker frame), or, with ``acc_global`` = (t_dev_ns,
+    gravity-free acceleration in the IMU global frame), the gravity-free norms; both low-passed alike
+    (``params.filter``). With ``acc_global`` the constant rotation global-to-world is also fitted (Wahba on
+    the accelerations). No IMU-to-cluster rotation. Keys as :func:`align` plus ``vertical``.
+    """
+    from imulog.process.alignment_search import acceleration_norm, away_from_gaps, lowpass_vector
+
+    t_imu = np.asarray(t_imu_ns, dtype=np.int64)
+    filt, gaps = lowpass_markers(np.asarray(marker_m, dtype=np.float64), rate_hz, params.filter)
+    trusted = away_from_gaps(gaps, rate_hz)
+    imu_rate = (len(t_imu) - 1) / ((t_imu[-1] - t_imu[0]) * 1e-9)
+    if acc_global is not None:
+        t_src = np.asarray(acc_global[0], dtype=np.int64)
+        a_dev = lowpass_vector(acc_global[1], imu_rate, params.filter.cutoff_hz, params.filter.order)
+        n_ref = acceleration_norm(filt, rate_hz, None)
+    else:
+        t_src = t_imu
+        a_dev = lowpass_vector(acc_mps2, imu_rate, params.filter.cutoff_hz, params.filter.order)
+        n_ref = acceleration_norm(filt, rate_hz, None if vertical is None else np.asarray(vertical, dtype=np.float64))
+    n_ref[~trusted] = np.nan
+    result = fit_clock(t_src, np.linalg.norm(a_dev, axis=1), t_ref_ns, n_ref, params, coarse_offset_ns)
+    result["signal"] = "marker-acceleration"
+    result["vertical"] = None if acc_global is not None or vertical is None else [float(v) for v in vertical]
+    result["rotation_imu_to_cluster"] = None
+    result["rotation_global_to_world"] = None
+    if acc_global is not None:
+        dt = 1.0 / rate_hz
+        a_ref = np.full_like(filt, np.nan)
+        a_ref[1:-1] = (filt[2:] - 2 * filt[1:-1] + filt[:-2]) / dt**2
+        a_at = _interp_rows(device_to_reference(t_src, result), a_dev, np.asarray(t_ref_ns, dtype=np.int64))
+        ok = np.all(np.isfinite(a_at), axis=1) & np.all(np.isfinite(a_ref), axis=1) & trusted
+        if ok.sum() > 10:
+            result["rotation_global_to_world"] = [
+                float(v) for v in quat.from_rotation_matrix(_wahba(a_at[ok], a_ref[ok]))
+            ]
+    result["method"] = (
+        f"xcorr-marker-acceleration-norm(windows={params.window_s:g}s{', drift' if params.drift else ''})"
+        f";{'gravity-free' if acc_global is not None else 'specific-force'}"
     )
     return result

@@ -35,6 +35,8 @@ class ViconParams:
         ""  # 'Subject:' prefix of the Nexus marker names ('' -> plain O, X, Y, A as the conventions name them)
     )
     decimals: int = 3  # mm decimals written in the CSV (1 um; Nexus writes ~6 significant digits)
+    marker_names: tuple[str, ...] = LABELS  # names of the cluster markers; fewer names keep the first offsets
+    extra_segments: tuple[str, ...] = ()  # markers on other segments too: "trunk", "upper_arm" (extra_markers)
 
 
 def draw_imu_to_cluster(params: ViconParams, rng: np.random.Generator) -> np.ndarray:
@@ -53,6 +55,30 @@ def marker_positions(
     for k, off in enumerate(offsets):
         out[:, k] = position_m + quat.rotate(q_cluster, np.broadcast_to(off, position_m.shape))
     return out
+
+
+def all_markers(
+    t_s: np.ndarray,
+    position_m: np.ndarray,
+    q_world_sensor: np.ndarray,
+    q_imu_to_cluster: np.ndarray,
+    params: ViconParams,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, list[str]]:
+    """True positions (N, M, 3) m and names of the cluster markers (``marker_names``) and of the markers on
+    the ``extra_segments`` (:mod:`imulog.simulate.extra_markers`)."""
+    names = list(params.marker_names)
+    if not 1 <= len(names) <= len(params.marker_offsets_m) or len(set(names)) != len(names):
+        raise ValueError(f"marker_names must be 1 to {len(params.marker_offsets_m)} distinct names, got {names}")
+    pos = marker_positions(position_m, q_world_sensor, q_imu_to_cluster, params)[:, : len(names)]
+    if params.extra_segments:
+        from imulog.simulate.extra_markers import segment_markers
+
+        rate = (len(t_s) - 1) / (t_s[-1] - t_s[0]) if len(t_s) > 1 else 100.0
+        extra = segment_markers(t_s, position_m, tuple(params.extra_segments), rng, rate_hz=rate)
+        pos = np.concatenate([pos, np.stack(list(extra.values()), axis=1)], axis=1)
+        names += list(extra)
+    return pos, names
 
 
 def add_noise_and_gaps(

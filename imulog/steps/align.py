@@ -44,6 +44,74 @@ def pick_markers(topics: list[str], markers: str | None) -> str:
     raise ValueError(f"choose a marker channel with --markers among: {', '.join(names)}")
 
 
+def _search_summary(res, chosen: tuple[str, ...]) -> tuple[dict | None, dict | None]:
+    """(best, runner-up) candidate dicts of a cluster search; the runner-up shares < 2 markers with the choice."""
+    best = next((c for c in res.candidates if tuple(c.markers) == tuple(chosen)), None)
+    runner = next((c for c in res.candidates if len(set(c.markers) & set(chosen)) < 2), None)
+    return (None if best is None else best.as_dict()), (None if runner is None else runner.as_dict())
+
+
+def _marker_alignment(
+    t_imu_ns: np.ndarray,
+    acc: np.ndarray | None,
+    t_vic_ns: np.ndarray,
+    labels: list[str],
+    pos_m: np.ndarray,
+    vic_rate: float,
+    params: al.AlignmentParams,
+    acc_global: tuple[np.ndarray, np.ndarray] | None,
+    only: list[int] | None = None,
+) -> tuple[dict, dict]:
+    """Align on the acceleration of the marker (among ``only``, default all) that matches the IMU best."""
+    from imulog.process import alignment_search as search
+
+    if acc is None and acc_global is None:
+        raise ValueError("no rigid marker cluster moves with the IMU, and the IMU has no accelerometer to align on")
+    idx = list(range(len(labels))) if only is None else only
+    filt, missing = al.lowpass_markers(np.asarray(pos_m, dtype=np.float64)[:, idx], vic_rate, params.filter)
+    if acc_global is not None:
+        t_a, a = np.asarray(acc_global[0], dtype=np.int64), acc_global[1]
+    else:
+        t_a, a = np.asarray(t_imu_ns, dtype=np.int64), acc
+    rate_a = mean_rate_hz(t_a)
+    a_norm = np.linalg.norm(search.lowpass_vector(a, rate_a, params.filter.cutoff_hz, params.filter.order), axis=1)
+    ranked = search.rank_markers(
+        t_a,
+        a_norm,
+        t_vic_ns,
+        filt,
+        [labels[i] for i in idx],
+        vic_rate,
+        gravity_free=acc_global is not None,
+        max_lag_s=params.max_lag_s,
+        params=params.search,
+        missing=missing,
+    )
+    if not ranked:
+        raise ValueError("no marker is visible long enough to align on its acceleration")
+    best = ranked[0]
+    j = labels.index(best.markers[0])
+    vertical = None if acc_global is not None else search.VERTICALS[best.extra["vertical"]]
+    record = al.align_marker(
+        t_imu_ns,
+        acc,
+        t_vic_ns,
+        np.asarray(pos_m)[:, j],
+        vic_rate,
+        params,
+        vertical=vertical,
+        acc_global=acc_global,
+        coarse_offset_ns=best.offset_ns,
+    )
+    info = {
+        "markers": [best.markers[0]],
+        "ncc": round(float(best.ncc), 4),
+        "vector_match": None,
+        "runner_up": ranked[1].as_dict() if len(ranked) > 1 else None,
+    }
+    return record, info
+
+
 def compute_alignment(
     imu_name: str,
     t_imu_ns: np.ndarray,
@@ -56,42 +124,83 @@ def compute_alignment(
     orientation: tuple[np.ndarray, np.ndarray] | None = None,
     acc_global: tuple[np.ndarray, np.ndarray] | None = None,
     resample: bool = True,
+    acc: np.ndarray | None = None,
 ) -> tuple[list, dict]:
-    """Pure part of the step: streams and the ``imulog.alignment`` record (no I/O)."""
+    """Pure part of the step: streams and the ``imulog.alignment`` record (no I/O).
+
+    ``params.cluster="auto"`` without ``params.markers`` searches the rigid marker set that moves with the
+    IMU (:func:`imulog.process.alignment_search.find_cluster`); when none reproduces the gyroscope, the
+    marker whose acceleration matches the accelerometer (``acc``, or ``acc_global`` when the orientation
+    step has run) is used instead. One marker in ``params.markers`` aligns on that marker's acceleration.
+    """
+    from imulog.process import alignment_search as search
+
     if gyr is None:
         raise ValueError(f"/imu/{imu_name} has no gyroscope columns")
+    labels = list(labels)
     vic_rate = mean_rate_hz(t_vic_ns)
-    try:
-        ck = al.cluster_kinematics(t_vic_ns, labels, pos_m, vic_rate, params)
-    except ValueError as exc:
-        hint = (
-            ""
-            if params.cluster == "svd"
-            else "; use >= 3 markers on one rigid segment: --cluster svd --cluster-markers A,B,C"
-        )
-        raise ValueError(f"{marker_topic}: {exc}{hint}") from None
     q_s2g = None
     if orientation is not None:
         t_o, q_o = orientation
         q_s2g = q_o if np.array_equal(t_o, t_imu_ns) else resample_quaternions(t_o, q_o, t_imu_ns)
-    record = al.align(t_imu_ns, gyr, ck, params, q_imu_s2g=q_s2g)
-    record = {"reference": marker_topic, "imu": f"/imu/{imu_name}", **record}
-    ok = ~ck.missing
-    streams: list = [
-        PoseStream("/derived/vicon/cluster_pose", ck.t_ns[ok], ck.origin_m[ok], ck.quat_c2w[ok], frame_id="world"),
-        SignalStream(
-            "/derived/vicon/angular_velocity",
-            ck.t_ns,
-            ["wx", "wy", "wz"],
-            ["rad/s"] * 3,
-            ck.omega_local_rad_s,
-            frame_id="cluster",
-        ),
-    ]
+    ck = None
+    try:
+        if params.cluster == "auto" and not params.markers:
+            res, ck, record = search.find_cluster(t_imu_ns, gyr, t_vic_ns, labels, pos_m, vic_rate, params)
+            if record is not None and record["vector_match"] >= params.search.min_vector_match:
+                best, runner = _search_summary(res, ck.markers)
+                info = {**(best or {}), "markers": list(ck.markers), "runner_up": runner}
+                if q_s2g is not None:
+                    record = al.align(t_imu_ns, gyr, ck, params, q_imu_s2g=q_s2g, coarse_offset_ns=record["offset_ns"])
+            else:
+                ck = None
+                rejected = res.candidates[0].as_dict() if res.candidates else None
+                record, info = _marker_alignment(t_imu_ns, acc, t_vic_ns, labels, pos_m, vic_rate, params, acc_global)
+                info["rejected_cluster"] = rejected
+            info.update(selection="search", triads_found=res.n_triads, triads_scored=res.n_scored)
+            info["search_s"] = round(res.seconds, 3)
+        elif params.cluster != "oxy" and len(params.markers) == 1:
+            only = search.resolve_markers(labels, params.markers)
+            record, info = _marker_alignment(
+                t_imu_ns, acc, t_vic_ns, labels, pos_m, vic_rate, params, acc_global, only=only
+            )
+            info.update(selection="given", runner_up=None)
+        else:
+            fixed = params if params.cluster != "auto" else dataclasses.replace(params, cluster="svd")
+            ck = al.cluster_kinematics(t_vic_ns, labels, pos_m, vic_rate, fixed)
+            record = al.align(t_imu_ns, gyr, ck, params, q_imu_s2g=q_s2g)
+            info = {"markers": list(ck.markers), "selection": "given", "runner_up": None}
+            info["vector_match"] = round(float(record["vector_match"]), 4)
+    except ValueError as exc:
+        hint = (
+            "; name the IMU's markers: --cluster-markers A,B,C (or one marker)"
+            if params.cluster != "auto" or params.markers
+            else ""
+        )
+        raise ValueError(f"{marker_topic}: {exc}{hint}") from None
+    if ck is None:
+        record["reference_marker"] = info["markers"][0]
+    record = {"reference": marker_topic, "imu": f"/imu/{imu_name}", **record, "cluster": info}
+    record["quality"], record["quality_reasons"] = al.assess_quality(record, params)
+    streams: list = []
+    if ck is not None:
+        ok = ~ck.missing
+        streams += [
+            PoseStream("/derived/vicon/cluster_pose", ck.t_ns[ok], ck.origin_m[ok], ck.quat_c2w[ok], frame_id="world"),
+            SignalStream(
+                "/derived/vicon/angular_velocity",
+                ck.t_ns,
+                ["wx", "wy", "wz"],
+                ["rad/s"] * 3,
+                ck.omega_local_rad_s,
+                frame_id="cluster",
+            ),
+        ]
     if resample:
+        t_vic = np.asarray(t_vic_ns, dtype=np.int64)
         t_ref_imu = al.device_to_reference(t_imu_ns, record)
-        inside = (ck.t_ns >= t_ref_imu[0]) & (ck.t_ns <= t_ref_imu[-1])
-        t_dst = ck.t_ns[inside]
+        inside = (t_vic >= t_ref_imu[0]) & (t_vic <= t_ref_imu[-1])
+        t_dst = t_vic[inside]
         streams.append(
             SignalStream(
                 f"/derived/reference/gyr/{imu_name}",
@@ -126,7 +235,20 @@ def compute_alignment(
                     frame_id=f"{imu_name}_global",
                 )
             )
-    return streams, record
+    return streams, _jsonable(record)
+
+
+def _jsonable(value):
+    """Numpy scalars and tuples in the record as plain JSON types; NaN as None."""
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
 
 
 def params_dict(params: al.AlignmentParams) -> dict:
@@ -179,6 +301,7 @@ def run_align(
             orientation,
             acc_global,
             resample,
+            acc=imu_stream.acc,
         )
         return StepResult(streams=streams, metadata={"imulog.alignment": record})
 
@@ -191,3 +314,78 @@ def run_align(
         compute=compute,
         force=force,
     )
+
+
+def alignment_problem(metadata: dict, imu_topic: str | None = None) -> str | None:
+    """Why the trial has no usable ``imulog.alignment`` record (for ``imu_topic`` when given), else None."""
+    record = metadata.get("imulog.alignment")
+    if not record or "offset_ns" not in record:
+        return "no IMU-to-Vicon alignment"
+    if imu_topic is not None and record.get("imu") not in (None, "", imu_topic):
+        return f"the alignment is for {record.get('imu')}, not {imu_topic}"
+    if record.get("quality") == "failed":
+        return "the alignment failed"
+    return None
+
+
+def require_alignment(metadata: dict, path, imu_topic: str | None = None, *, needed_for: str = "this step") -> dict:
+    """The trial's valid ``imulog.alignment`` record, else a one-line ValueError naming the command to run."""
+    problem = alignment_problem(metadata, imu_topic)
+    if problem is not None:
+        imu = f" --imu {imu_topic.rsplit('/', 1)[-1]}" if imu_topic else ""
+        raise ValueError(
+            f"{problem}: {needed_for} needs the IMU on the Vicon clock; run `imulog process align {path}{imu}` first"
+        )
+    return dict(metadata["imulog.alignment"])
+
+
+def alignment_summary(record: dict) -> list[str]:
+    """Human-readable lines about an ``imulog.alignment`` record (``imulog info``, ``process align``)."""
+    if not record:
+        return []
+    lines = []
+    unc = record.get("offset_uncertainty_ns")
+    dunc = record.get("drift_uncertainty_ppm")
+    off = int(record.get("offset_ns", 0)) / 1e9
+    drift = float(record.get("drift_ppm") or 0.0)
+    lines.append(
+        f"offset {off:.4f} s{f' ± {unc / 1e6:.2f} ms' if unc is not None else ''}, drift {drift:.1f} ppm"
+        f"{f' ± {dunc:.1f}' if dunc is not None else ''}"
+        f"{'' if record.get('drift_estimated', True) else ' (not estimated)'}, score {float(record.get('score') or 0):.3f}"
+        f", signal {record.get('signal', 'angular-velocity-norm')}"
+    )
+    c = record.get("cluster") or {}
+    if c.get("markers"):
+        vm, rig = c.get("vector_match"), c.get("rigidity_mm")
+        lines.append(
+            f"markers {','.join(c['markers'])} ({c.get('selection', 'given')}"
+            f"{f', vector match {vm:.3f}' if vm is not None else ''}"
+            f"{f', rigid to {rig:.2f} mm' if rig is not None else ''})"
+        )
+        ru = c.get("runner_up")
+        if ru:
+            vm2 = ru.get("vector_match")
+            lines.append(
+                f"runner-up {','.join(ru['markers'])} (ncc {ru.get('ncc')}"
+                f"{f', vector match {vm2:.3f}' if vm2 is not None else ''})"
+            )
+        rej = c.get("rejected_cluster")
+        if rej:
+            lines.append(
+                f"best rigid set {','.join(rej['markers'])} rejected (vector match {rej.get('vector_match')}): "
+                "aligned on one marker's acceleration"
+            )
+    wins = record.get("windows") or []
+    used = [w for w in wins if w.get("used")]
+    if wins:
+        res = [abs(w.get("residual_ns", 0)) / 1e6 for w in used]
+        spread = record.get("residual_spread_ns")
+        lines.append(
+            f"windows {len(used)}/{len(wins)} used, residual lag max {max(res) if res else float('nan'):.2f} ms"
+            f"{f', spread {spread / 1e6:.2f} ms' if spread is not None else ''}"
+        )
+    quality = record.get("quality")
+    if quality:
+        reasons = record.get("quality_reasons") or []
+        lines.append(f"quality {quality}{': ' + '; '.join(reasons) if reasons else ''}")
+    return lines
