@@ -60,6 +60,9 @@ def interp_gapped(t_src_ns: np.ndarray, values: np.ndarray, t_dst_ns: np.ndarray
     res = v[k] * (1.0 - frac) + v[k + 1] * frac
     ok = inside & gap_ok
     out[ok] = res[ok]
+    j = np.clip(np.searchsorted(t, t_dst_ns), 0, len(t) - 1)
+    exact = t[j] == t_dst_ns  # on a sample: its value, also beside a gap
+    out[exact] = v[j[exact]]
     return out
 
 

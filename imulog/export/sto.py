@@ -68,11 +68,13 @@ def resample_orientation(t_ns: np.ndarray, q: np.ndarray, grid_ns: np.ndarray, p
         out[inside] = q[0]
         return out
     t0, t1 = t[k], t[k + 1]
-    exact = grid_ns == t0
-    ok = inside & ((t1 - t0) <= 1.5 * period_ns) | (inside & exact)
+    ok = inside & ((t1 - t0) <= 1.5 * period_ns)
     frac = np.clip((grid_ns - t0) / np.maximum(t1 - t0, 1), 0.0, 1.0)
     res = quat.slerp(q[k], q[k + 1], frac)
     out[ok] = res[ok]
+    j = np.clip(np.searchsorted(t, grid_ns), 0, len(t) - 1)
+    exact = t[j] == grid_ns  # a grid point on a sample takes it as it is, also beside a gap
+    out[exact] = q[j[exact]]
     return out
 
 

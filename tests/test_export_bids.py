@@ -1,0 +1,143 @@
+"""BIDS-motion export, checked against the BIDS schema with bidsschematools."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from imulog.archive import TrialReader
+from imulog.cli import cli
+
+bst_schema = pytest.importorskip("bidsschematools.schema")
+bst_validator = pytest.importorskip("bidsschematools.validator")
+
+
+def _rows(path):
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f, delimiter="\t"))
+
+
+def _matching(rules, datatype, suffix, extension):
+    """The schema rules whose selectors are all plain ==-tests met by this file."""
+    env = {"datatype": datatype, "suffix": suffix, "extension": extension}
+    out = []
+    for name, rule in rules.items():
+        ok = True
+        for sel in rule.get("selectors", []):
+            left, op, right = sel.partition(" == ")
+            if not op or left not in env or env[left] != right.strip('"'):
+                ok = False
+                break
+        if ok:
+            out.append((name, rule))
+    return out
+
+
+@pytest.fixture(scope="module")
+def bids_folder(processed_r2g, tmp_path_factory):
+    out = tmp_path_factory.mktemp("bids") / "r2g_bids"
+    result = CliRunner().invoke(cli, ["export", str(processed_r2g), "--to", "bids", "-o", str(out), "--json"])
+    assert result.exit_code == 0, result.output
+    return out, json.loads(result.output)
+
+
+def test_every_file_name_is_valid_bids(bids_folder):
+    out, report = bids_folder
+    result = bst_validator.validate_bids(str(out))
+    assert result["path_tracking"] == [], result["path_tracking"]  # every file matched a BIDS rule
+    names = {p.name for p in out.rglob("*") if p.is_file()}
+    assert {"dataset_description.json", "sub-S00_task-r2g_tracksys-wrist_run-0_motion.tsv",
+            "sub-S00_task-r2g_tracksys-vicon_run-0_channels.tsv", "sub-S00_task-r2g_run-0_events.tsv"} <= names
+    assert len(report["files"]) == 8
+
+
+def test_sidecars_and_tables_meet_the_schema(bids_folder):
+    out, _ = bids_folder
+    schema = bst_schema.load_schema()
+    motion = out / "sub-S00" / "motion"
+    columns_obj = schema.objects.columns
+    for system in ("wrist", "vicon"):
+        sidecar = json.loads((motion / f"sub-S00_task-r2g_tracksys-{system}_run-0_motion.json").read_text())
+        rules = _matching(schema.rules.sidecars.motion, "motion", "motion", ".json")
+        assert len(rules) >= 3
+        for _, rule in rules:
+            for key, level in rule.fields.items():
+                level = level if isinstance(level, str) else level["level"]
+                if level == "required":
+                    assert key in sidecar, (system, key)
+        assert sidecar["TaskName"] == "r2g"
+        channels = _rows(motion / f"sub-S00_task-r2g_tracksys-{system}_run-0_channels.tsv")
+        (_, table_rule), = _matching(schema.rules.tabular_data.motion, "motion", "channels", ".tsv")
+        for col, level in table_rule.columns.items():
+            level = level if isinstance(level, str) else level["level"]
+            name = columns_obj[col]["name"]
+            if level == "required":
+                assert name in channels[0], (system, name)
+            enum = columns_obj[col].get("enum")
+            if enum and name in channels[0]:
+                allowed = {e if isinstance(e, str) else e.get("value") for e in enum} | {"n/a"}
+                assert {row[name] for row in channels} <= allowed, (system, name)
+        # the data file has one column per channel row and no header
+        data = np.genfromtxt(motion / f"sub-S00_task-r2g_tracksys-{system}_run-0_motion.tsv", delimiter="\t",
+                             missing_values="n/a", filling_values=np.nan)
+        assert data.shape[1] == len(channels)
+        counts = {}
+        for row in channels:
+            counts[row["type"]] = counts.get(row["type"], 0) + 1
+        for typ, n in counts.items():
+            assert sidecar[f"{typ}ChannelCount"] == n
+    events = _rows(motion / "sub-S00_task-r2g_run-0_events.tsv")
+    (_, ev_rule), = [r for r in _matching(schema.rules.tabular_data.events, "motion", "events", ".tsv")
+                     if r[0] == "Events"]
+    for col, level in ev_rule.columns.items():
+        level = level if isinstance(level, str) else level["level"]
+        if level == "required":
+            assert columns_obj[col]["name"] in events[0]
+    description = json.loads((out / "dataset_description.json").read_text())
+    assert {"Name", "BIDSVersion"} <= set(description)
+
+
+def test_values_and_times_equal_the_archive(bids_folder, processed_r2g):
+    out, _ = bids_folder
+    motion = out / "sub-S00" / "motion"
+    with TrialReader(processed_r2g) as trial:
+        imu = trial.read("/imu/wrist")
+        mk = trial.read("/markers/vicon")
+        phases = trial.read("/derived/phases/wrist")
+        alignment = trial.metadata["imulog.alignment"]
+    wrist = np.genfromtxt(motion / "sub-S00_task-r2g_tracksys-wrist_run-0_motion.tsv", delimiter="\t")
+    names = [r["name"] for r in _rows(motion / "sub-S00_task-r2g_tracksys-wrist_run-0_channels.tsv")]
+    np.testing.assert_array_equal(wrist[:, names.index("wrist_gyr_y")], imu.gyr[:, 1])
+    np.testing.assert_array_equal(wrist[:, names.index("wrist_acc_z")], imu.acc[:, 2])
+    assert "wrist_quat_w" in names  # the orientation channel rides along as ORNT
+    vicon = np.genfromtxt(motion / "sub-S00_task-r2g_tracksys-vicon_run-0_motion.tsv", delimiter="\t",
+                          missing_values="n/a", filling_values=np.nan)
+    vnames = [r["name"] for r in _rows(motion / "sub-S00_task-r2g_tracksys-vicon_run-0_channels.tsv")]
+    ox = np.where(mk.valid[:, 0], mk.pos[:, 0, 0], np.nan)
+    np.testing.assert_array_equal(vicon[:, vnames.index("O_x")], ox)  # gaps as n/a
+    # one time axis: latency of the IMU and Vicon files and the event onsets all count from one origin
+    lat_imu = wrist[:, names.index("latency")]
+    lat_vicon = vicon[:, vnames.index("latency")]
+    offset_s = (imu.t_ns[0] - mk.t_ns[0] + alignment["offset_ns"]) / 1e9  # IMU start on the Vicon clock
+    assert lat_imu[0] == pytest.approx(offset_s, abs=1e-3) and lat_vicon[0] == 0.0
+    events = _rows(motion / "sub-S00_task-r2g_run-0_events.tsv")
+    phase_events = [e for e in events if e["source"] == "/derived/phases/wrist"]
+    assert [e["trial_type"] for e in phase_events] == list(phases.labels)
+    np.testing.assert_allclose([float(e["onset"]) for e in phase_events],
+                               (phases.start_ns - mk.t_ns[0]) / 1e9, atol=2e-3)  # device clock vs Vicon: drift only
+
+
+def test_existing_folder_needs_overwrite(bids_folder, processed_r2g):
+    out, _ = bids_folder
+    result = CliRunner().invoke(cli, ["export", str(processed_r2g), "--to", "bids", "-o", str(out)])
+    assert result.exit_code == 1 and "--overwrite" in result.output
+    result = CliRunner().invoke(cli, ["export", str(processed_r2g), "--to", "bids", "-o", str(out), "--overwrite",
+                                      "--clock", "reference"])
+    assert result.exit_code == 0, result.output
+    sidecar = json.loads((out / "sub-S00/motion/sub-S00_task-r2g_tracksys-wrist_run-0_motion.json").read_text())
+    assert sidecar["imulog"]["clock"] == "reference"
+    assert not list(out.parent.glob(".r2g_bids.*"))  # no temporary folder left
