@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +25,7 @@ def _bad_settings(error: Exception, settings: tuple[str, ...]) -> str:
     return str(error)
 
 
-PROTOCOL_CHOICES = ("r2g", "slide", "nhpt", "adl", "arm")
+PROTOCOL_CHOICES = ("r2g", "slide", "nhpt", "adl", "arm", "home")
 ARM_ONLY = ("--seconds", "--trunk-imu")
 
 
@@ -71,6 +72,11 @@ def _overrides(pairs: tuple[str, ...]) -> dict[str, Any]:
     help="arm only: trial duration, s (default 60; at least the 3 s neutral posture + 2 s blend).",
 )
 @click.option("--trunk-imu", is_flag=True, help="arm only: add a trunk IMU and its marker cluster.")
+@click.option(
+    "--days",
+    type=click.FloatRange(min=1 / 1440),
+    help="home only: recording length in days (default 1; a week at 100 Hz is a 770 MB .cwa, written chunk by chunk).",
+)
 def simulate(
     protocol: str,
     out_dir: Path,
@@ -83,6 +89,7 @@ def simulate(
     list_parameters: bool,
     seconds: float | None,
     trunk_imu: bool,
+    days: float | None,
 ) -> None:
     """Simulate PROTOCOL trials with known ground truth.
 
@@ -100,6 +107,7 @@ def simulate(
       adl    repetitive activities of daily living (Doshi 2011)
       arm    two-segment arm (Caruso et al. 2024): upper-arm and forearm IMUs (optionally trunk),
              known shoulder and elbow angles, for `imulog process kinematics`
+      home   days of wrist data at home (Doshi 2011 ch. 5) as an Axivity AX6 .cwa, --days 7 for a week
 
     \b
     Examples:
@@ -123,6 +131,11 @@ def simulate(
       imulog process orientation trials/arm_s00_t00.mcap --imu forearm
       imulog process kinematics trials/arm_s00_t00.mcap
     """
+    if protocol == "home":
+        _simulate_home(out_dir, subjects, trials, seed, settings, list_parameters, days)
+        return
+    if days is not None:
+        raise click.UsageError("--days applies to the home protocol only")
     if protocol == "arm":
         _simulate_arm(
             out_dir, subjects, trials, seed, repetitions, noise_free, settings, list_parameters, seconds, trunk_imu
@@ -207,3 +220,44 @@ def _simulate_arm(
             + ", ".join(p.name for k, p in paths.items() if k != "truth_npz")
         )
     click.echo(f"wrote {len(written)} trial(s) to {out_dir}")
+
+
+def _simulate_home(
+    out_dir: Path,
+    subjects: int,
+    trials: int,
+    seed: int,
+    settings: tuple[str, ...],
+    list_parameters: bool,
+    days: float | None,
+) -> None:
+    """``imulog simulate home``: :mod:`imulog.simulate.home` written as ``.cwa`` files, chunk by chunk."""
+    import dataclasses
+
+    from imulog.simulate.home import HomeParams, simulate_home_to_folder
+
+    if list_parameters:
+        click.echo("home: " + ", ".join(f.name for f in dataclasses.fields(HomeParams)))
+        return
+    overrides = _overrides(settings)
+    if days is not None:
+        overrides["days"] = days
+    total = subjects * trials * HomeParams(**{k: v for k, v in overrides.items() if k == "days"}).minutes
+    try:
+        with click.progressbar(length=total, label="simulating home (minutes)", file=sys.stderr) as bar:
+            done = {"n": 0}
+
+            def advance(minutes: int, _total: int) -> None:
+                bar.update(minutes - done["n"] if minutes > done["n"] else minutes)
+                done["n"] = minutes
+
+            written = simulate_home_to_folder(
+                out_dir, subjects=subjects, trials=trials, seed=seed, progress=advance, **overrides
+            )
+    except (TypeError, ValueError) as e:
+        raise click.ClickException(_bad_settings(e, settings)) from None
+    except OSError as e:
+        raise click.ClickException(f"{out_dir}: cannot write the trial files ({e.strerror or e})") from None
+    for paths in written:
+        click.echo(f"{paths['cwa'].name}: {paths['cwa'].stat().st_size / 1e6:.1f} MB, truth {paths['truth_npz'].name}")
+    click.echo(f"wrote {len(written)} recording(s) to {out_dir}")
