@@ -42,6 +42,8 @@ out = {}
 with open(sys.argv[1], "rb") as f:
     reader = make_reader(f, validate_crcs=True)
     for schema, channel, message in reader.iter_messages():
+        if channel.topic.startswith("/derived/viewer/"):  # viewer twins: tests/test_interop_viewers.py
+            continue
         assert schema.encoding == "protobuf" and channel.message_encoding == "protobuf"
         if schema.id not in classes:
             fds = descriptor_pb2.FileDescriptorSet.FromString(schema.data)
@@ -141,14 +143,18 @@ def test_intervals_and_pose_blocks(decoded):
 
 def test_mcap_protobuf_support_decoder_reads_it_too(tmp_path: Path):
     pytest.importorskip("mcap_protobuf")
+    pytest.importorskip("mcap_ros2")
     from mcap.reader import make_reader
     from mcap_protobuf.decoder import DecoderFactory
+    from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
 
     rec = synthetic_recording(np.random.default_rng(3))
     path = write_trial(tmp_path / "t.mcap", rec)
     counts: dict[str, int] = {}
     with open(path, "rb") as f:
-        for _, channel, _, msg in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+        for _, channel, _, msg in make_reader(
+            f, decoder_factories=[DecoderFactory(), Ros2DecoderFactory()]
+        ).iter_decoded_messages():
             counts[channel.topic] = counts.get(channel.topic, 0) + (msg.count if hasattr(msg, "count") else 1)
     assert counts["/imu/wrist"] == len(rec.imus[0])
     assert counts["/poses/cluster"] == len(rec.poses[0])

@@ -29,7 +29,7 @@ from imulog.archive._builder import McapBuilder
 from imulog.archive.errors import ArchiveCorruptError, ArchiveError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import MetadataError, decode_record, encode_record, record_hash, to_json
-from imulog.archive.writer import payload_hash, write_stream
+from imulog.archive.writer import payload_hash, plan_append, write_stream, write_twin
 from imulog.model import DERIVED_PREFIX, Stream
 
 COPY_BLOCK = 8 * 1024 * 1024
@@ -269,6 +269,10 @@ def append_derived(
                     if not replace:
                         raise ArchiveError(f"{path}: channel {t!r} exists (use replace=True)")
                     drop.add(existing[t].id)
+            axis, twins, twins_removed = plan_append(path, streams, metadata, remove)  # time axis, viewer twins
+            for t in [tw.topic for tw in twins] + twins_removed:
+                if t in existing and t not in raw_topics:
+                    drop.add(existing[t].id)
             n = _run_number(f, summary)
             inputs = _input_hashes(f, summary, run.get("inputs"), path)
             for topic, digest in inputs.items():  # provenance must describe the file being written
@@ -300,8 +304,10 @@ def append_derived(
                 builder = copy(f, summary, out, drop, path)
                 outputs = {}
                 for stream in streams:
-                    topic, digest = write_stream(builder, stream, provenance)
+                    topic, digest = write_stream(builder, stream, provenance, log_map=axis.map_for(stream.topic))
                     outputs[topic] = digest
+                for twin in twins:
+                    write_twin(builder, twin, provenance)
                 for name, values in metadata.items():
                     builder.add_metadata(name, encode_record(dict(values)))
                 record = {

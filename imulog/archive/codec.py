@@ -54,7 +54,13 @@ KIND_SCHEMA = {
     "pose": "imulog.PoseBlock",
 }
 SCHEMA_KIND = {**{v: k for k, v in KIND_SCHEMA.items()}, "foxglove.PoseInFrame": "pose"}
-BLOCK_SCHEMAS = ("imulog.ImuBlock", "imulog.MarkerBlock", "imulog.AnalogBlock", "imulog.SignalBlock", "imulog.PoseBlock")
+BLOCK_SCHEMAS = (
+    "imulog.ImuBlock",
+    "imulog.MarkerBlock",
+    "imulog.AnalogBlock",
+    "imulog.SignalBlock",
+    "imulog.PoseBlock",
+)
 _I8 = np.dtype("<i8")
 _F8 = np.dtype("<f8")
 _U1 = np.dtype("u1")
@@ -65,9 +71,21 @@ class DecodeError(ValueError):
     """A message could not be decoded into the stream type its schema promises."""
 
 
+def _twin_classes() -> dict[str, Any]:
+    """Foxglove schemas of the viewer twins (:mod:`imulog.archive.twins`): embedded, never decoded to streams."""
+    from imulog.archive._generated.foxglove import FrameTransform_pb2, Log_pb2, PointCloud_pb2
+
+    return {
+        "foxglove.PointCloud": PointCloud_pb2.PointCloud,
+        "foxglove.FrameTransform": FrameTransform_pb2.FrameTransform,
+        "foxglove.Log": Log_pb2.Log,
+    }
+
+
 def file_descriptor_set(schema_name: str) -> bytes:
     """Serialized ``google.protobuf.FileDescriptorSet`` for a schema: its file and all dependencies."""
-    descriptor = MESSAGE_CLASSES[schema_name].DESCRIPTOR.file
+    cls = MESSAGE_CLASSES.get(schema_name) or _twin_classes()[schema_name]
+    descriptor = cls.DESCRIPTOR.file
     ordered: list[Any] = []
     seen: set[str] = set()
 

@@ -176,7 +176,8 @@ class TrialReader:
         return out
 
     def topics(self) -> list[str]:
-        return [c.topic for c in self.channels]
+        """Topics of the imulog channels (viewer twins under ``/derived/viewer/`` are in ``channels`` only)."""
+        return [c.topic for c in self.channels if not c.metadata.get("twin_of")]
 
     def channel(self, topic: str) -> ChannelInfo:
         for c in self.channels:
@@ -313,8 +314,9 @@ class TrialReader:
         # Chunks in file order = write order (kept as is, so even a non-monotonic clock round-trips).
         idxs = [ci for ci in self.summary.chunk_indexes if channel_id in ci.message_index_offsets]
         idxs.sort(key=lambda ci: ci.chunk_start_offset)
-        lo = None if start_ns is None else codec.log_time(start_ns)
-        hi = None if end_ns is None else codec.log_time(end_ns)
+        meta = self.summary.channels[channel_id].metadata  # its log_time map: t_ns -> the trial's time axis
+        lo = None if start_ns is None else codec.channel_log_time(meta, start_ns)
+        hi = None if end_ns is None else codec.channel_log_time(meta, end_ns)
         monotonic = all(a.message_end_time <= b.message_start_time for a, b in zip(idxs, idxs[1:], strict=False))
         selected = []
         for k, ci in enumerate(idxs):

@@ -16,10 +16,13 @@ from imulog.archive._builder import McapBuilder
 from imulog.archive.errors import ArchiveError, ArchiveExistsError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import encode_record
+from imulog.archive.timeline import IDENTITY, TIMELINE_RECORD, LogMap, TimelineError, TrialAxis, timeline_record
+from imulog.archive.twins import Twin, twin_topic, twins_for
 from imulog.model import Recording, Stream
 
 LIBRARY = f"imulog {__version__}"
 PROFILE = ""  # plain MCAP profile: Foxglove and Rerun treat the protobuf channels generically
+WRITE_TWINS = os.environ.get("IMULOG_VIEWER_TWINS", "1") != "0"  # viewer twins next to block channels
 
 
 def payload_hash(payloads: Iterable[bytes | memoryview]) -> str:
@@ -41,9 +44,17 @@ def raw_digest(channels: dict[str, str], attachments: dict[str, str]) -> str:
     return h.hexdigest()
 
 
-def write_stream(builder: McapBuilder, stream: Stream, extra_meta: dict[str, str] | None = None) -> tuple[str, str]:
-    """Encode and write one stream as a channel; return (topic, content hash)."""
-    schema_name, meta, times, payloads = codec.encode(stream)
+def write_stream(
+    builder: McapBuilder,
+    stream: Stream,
+    extra_meta: dict[str, str] | None = None,
+    log_map: LogMap = IDENTITY,
+) -> tuple[str, str]:
+    """Encode and write one stream as a channel; return (topic, content hash).
+
+    ``log_map`` places its messages on the trial's time axis (:class:`imulog.archive.timeline.TrialAxis`).
+    """
+    schema_name, meta, times, payloads = codec.encode(stream, log_map)
     digest = payload_hash(payloads)
     meta["sha256"] = digest
     if extra_meta:
@@ -52,6 +63,56 @@ def write_stream(builder: McapBuilder, stream: Stream, extra_meta: dict[str, str
     channel_id = builder.add_channel(stream.topic, schema_id, meta)
     builder.add_messages(channel_id, times, payloads)
     return stream.topic, digest
+
+
+def write_twin(builder: McapBuilder, twin: Twin, extra_meta: dict[str, str] | None = None) -> tuple[str, str]:
+    """Write one viewer twin channel (:mod:`imulog.archive.twins`); return (topic, content hash)."""
+    meta = dict(twin.metadata)
+    meta["sha256"] = payload_hash(twin.payloads)
+    if extra_meta:
+        meta.update(extra_meta)
+    schema_id = builder.add_schema(twin.schema_name, twin.schema_encoding, twin.schema_data)
+    channel_id = builder.add_channel(twin.topic, schema_id, meta, encoding=twin.message_encoding)
+    builder.add_messages(channel_id, twin.log_times, twin.payloads)
+    return twin.topic, meta["sha256"]
+
+
+def stream_twins(stream: Stream, axis: TrialAxis, metadata: dict[str, Any] | None = None) -> list[Twin]:
+    """The viewer twins of ``stream`` on ``axis`` (empty when twins are switched off or the kind has none)."""
+    if not WRITE_TWINS:
+        return []
+    clock = axis.clock_of(stream.topic)
+    return twins_for(stream, axis.map_for(stream.topic), clock, metadata)
+
+
+def plan_append(
+    path: Path, streams: list[Stream], metadata: dict[str, dict[str, Any]], remove: Iterable[str] = ()
+) -> tuple[TrialAxis, list[Twin], list[str]]:
+    """For ``append_derived``: the trial's time axis and the viewer twins to write, and twin topics to drop.
+
+    The axis comes from the file's ``imulog.timeline`` (none: a file from before it, log time = t_ns) with
+    the records being written now taking precedence (a new ``imulog.alignment``). Each new stream gets its
+    twins; when the alignment changes, the twins of the raw reference-clock channels (markers, events) and
+    of the orientations are rewritten on the aligned axis. Twins of removed channels are removed.
+    """
+    from imulog.archive.reader import TrialReader
+
+    with TrialReader(path) as trial:
+        records = {**trial.metadata, **metadata}
+        channels = {c.topic: c for c in trial.channels}
+        imu_names = {t.split("/")[2] for t in channels if t.startswith("/imu/") and t.count("/") == 2}
+        axis = TrialAxis(records, imu_names)
+        twins = [tw for stream in streams for tw in stream_twins(stream, axis, records)]
+        if "imulog.alignment" in metadata and axis.known:
+            new = {s.topic for s in streams}
+            for topic, info in channels.items():
+                if topic in new or info.metadata.get("twin_of") or info.schema_name not in codec.SCHEMA_KIND:
+                    continue
+                retwin = axis.clock_of(topic, info.metadata) == "reference" and not topic.startswith("/derived/")
+                if retwin and info.kind in ("markers", "intervals") or topic.startswith("/derived/orientation/"):
+                    twins.extend(stream_twins(trial.read(topic), axis, records))
+        dropped = [twin_topic(t) for t in remove if twin_topic(t) in channels]
+    return axis, twins, dropped
 
 
 def _attachment_names(sources: list[str]) -> list[tuple[Path, str]]:
@@ -83,8 +144,9 @@ def write_trial(
     """Write ``recording`` to ``path`` as an MCAP trial; return the path.
 
     Raw channels (one per stream, topics from the streams), metadata records (the recording's, plus an
-    ``imulog.device.<name>`` per IMU when missing, plus ``imulog.raw`` with the raw-data hash), and the
-    source files as attachments. The file appears atomically; on any error nothing is left behind.
+    ``imulog.device.<name>`` per IMU when missing, ``imulog.timeline`` with the trial's time axis and
+    ``imulog.raw`` with the raw-data hash), and the source files as attachments. Message log times start
+    at ``imulog.trial["start_time"]`` (see :mod:`imulog.archive.timeline`). The file appears atomically; on any error nothing is left behind.
     """
     path = target_path(path)
     streams = recording.streams()
@@ -92,6 +154,11 @@ def write_trial(
     dup = sorted({t for t in topics if topics.count(t) > 1})
     if dup:
         raise ArchiveError(f"{path}: two streams share the topic(s) {', '.join(dup)}")
+    try:
+        timeline = timeline_record(recording.metadata.get("imulog.trial"), streams)
+    except TimelineError as exc:
+        raise ArchiveError(f"{path}: {exc}") from None
+    axis = TrialAxis({TIMELINE_RECORD: timeline}, {s.name for s in recording.imus})
     sources = _attachment_names(recording.sources) if attach_sources else []
     for src, _ in sources:
         if not src.is_file():
@@ -104,8 +171,11 @@ def write_trial(
             builder = McapBuilder.new(f, LIBRARY, PROFILE)
             hashes: dict[str, str] = {}
             for stream in streams:
-                topic, digest = write_stream(builder, stream)
+                topic, digest = write_stream(builder, stream, log_map=axis.map_for(stream.topic))
                 hashes[topic] = digest
+            for stream in streams:  # after every raw channel: raw data stays a prefix of the file
+                for twin in stream_twins(stream, axis, recording.metadata):
+                    write_twin(builder, twin)
             attached: dict[str, str] = {}
             for src, name in sources:
                 data = src.read_bytes()
@@ -113,10 +183,14 @@ def write_trial(
                 mtime = max(src.stat().st_mtime_ns, 0)
                 builder.add_attachment(name, media_type, data, log_time=mtime, create_time=mtime)
                 attached[name] = hashlib.sha256(data).hexdigest()
-            # imulog.raw describes this file's raw data: always recomputed (e.g. when re-writing a read trial)
+            # imulog.raw and imulog.timeline describe this file's raw data: always recomputed (e.g. when
+            # re-writing a read trial)
             records = {
-                k: v for k, v in {**recording.metadata, **_device_records(recording)}.items() if k != "imulog.raw"
+                k: v
+                for k, v in {**recording.metadata, **_device_records(recording)}.items()
+                if k not in ("imulog.raw", TIMELINE_RECORD)
             }
+            records[TIMELINE_RECORD] = timeline
             for name, values in records.items():
                 builder.add_metadata(name, encode_record(dict(values)))
             raw = {

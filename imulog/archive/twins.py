@@ -1,0 +1,291 @@
+"""Viewer twins: well-known-schema copies of block channels that Foxglove and Rerun's MCAP loader draw as is.
+
+The block channels stay the canonical store; next to them the writer puts, under ``/derived/viewer/``, a
+reduced-rate copy in a schema both tools understand without imulog (docs/schemas.md has the table):
+
+==================================  ====================================  ===========================
+canonical channel                   twin                                  Rerun archetype
+==================================  ====================================  ===========================
+``/imu/{name}`` (ImuBlock)          ``sensor_msgs/msg/Imu`` (ROS 2, CDR)  Scalars (plotted)
+``/markers/{name}`` (MarkerBlock)   ``foxglove.PointCloud``               Points3D
+``/derived/orientation/{imu}``      ``foxglove.FrameTransform``           Transform3D (world -> imu)
+pose channels (PoseBlock)           ``foxglove.FrameTransform``           Transform3D (frame -> name)
+interval channels (IntervalEvent)   ``foxglove.Log``                      TextLog
+==================================  ====================================  ===========================
+
+Twins are at most :data:`TWIN_RATE_HZ` (every k-th sample, no filtering) and at most
+:data:`MAX_TWIN_MESSAGES` messages per channel (long recordings get a lower rate). Their log time is the
+trial's time axis (:mod:`imulog.archive.timeline`), and so is the timestamp inside the message.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from imulog.archive.timeline import LogMap
+from imulog.model import ImuStream, Intervals, MarkerStream, PoseStream, SignalStream, Stream
+
+TWIN_PREFIX = "/derived/viewer"
+TWIN_RATE_HZ = 50.0  # at most this rate (every k-th sample of the canonical channel)
+MAX_TWIN_MESSAGES = 360_000  # 2 h at 50 Hz; longer recordings get a proportionally lower twin rate
+ORIENTATION_COLUMNS = ["qw", "qx", "qy", "qz"]
+
+ROS_IMU_SCHEMA = """std_msgs/Header header
+geometry_msgs/Quaternion orientation
+float64[9] orientation_covariance
+geometry_msgs/Vector3 angular_velocity
+float64[9] angular_velocity_covariance
+geometry_msgs/Vector3 linear_acceleration
+float64[9] linear_acceleration_covariance
+================================================================================
+MSG: std_msgs/Header
+builtin_interfaces/Time stamp
+string frame_id
+================================================================================
+MSG: builtin_interfaces/Time
+int32 sec
+uint32 nanosec
+================================================================================
+MSG: geometry_msgs/Quaternion
+float64 x
+float64 y
+float64 z
+float64 w
+================================================================================
+MSG: geometry_msgs/Vector3
+float64 x
+float64 y
+float64 z
+"""
+
+
+@dataclass
+class Twin:
+    """One viewer channel, ready to write: schema, channel metadata, log times and payloads."""
+
+    topic: str
+    schema_name: str
+    schema_encoding: str  # "protobuf" or "ros2msg"
+    schema_data: bytes
+    message_encoding: str  # "protobuf" or "cdr"
+    metadata: dict[str, str] = field(default_factory=dict)
+    log_times: list[int] = field(default_factory=list)
+    payloads: list[bytes] = field(default_factory=list)
+
+
+def twin_topic(topic: str) -> str:
+    """``/markers/vicon`` -> ``/derived/viewer/markers/vicon``; ``/derived/x/y`` -> ``/derived/viewer/x/y``."""
+    rest = topic[len("/derived") :] if topic.startswith("/derived/") else topic
+    return TWIN_PREFIX + rest
+
+
+def is_twin(topic: str, channel_meta: Mapping[str, str] | None = None) -> bool:
+    return bool((channel_meta or {}).get("twin_of")) or topic.startswith(TWIN_PREFIX + "/")
+
+
+def decimation(t_ns: np.ndarray, rate_hz: float = TWIN_RATE_HZ, max_messages: int = MAX_TWIN_MESSAGES) -> np.ndarray:
+    """Indices of the samples a twin keeps: every k-th, k chosen for <= ``rate_hz`` and <= ``max_messages``."""
+    n = len(t_ns)
+    if n < 2:
+        return np.arange(n)
+    dt = np.diff(t_ns)
+    median = float(np.median(dt)) if len(dt) else 0.0
+    src_rate = 1e9 / median if median > 0 else rate_hz
+    k = max(1, math.ceil(src_rate / rate_hz - 1e-9), math.ceil(n / max_messages))
+    return np.arange(0, n, k)
+
+
+def _stamp(msg: Any, t: int) -> None:
+    msg.timestamp.seconds, msg.timestamp.nanos = divmod(int(t), 1_000_000_000)
+
+
+def _meta(stream: Stream, canonical: str, clock: str, keep: np.ndarray, t: np.ndarray) -> dict[str, str]:
+    out = {"twin_of": canonical, "clock": clock, "kind": "viewer", "sample_count": str(len(keep))}
+    if len(keep):
+        out.update(start_ns=str(int(t[keep[0]])), end_ns=str(int(t[keep[-1]])))
+        if len(keep) > 1:
+            out["rate_hz"] = f"{1e9 * (len(keep) - 1) / max(1, int(t[keep[-1]] - t[keep[0]])):.6g}"
+    return out
+
+
+def _protobuf_twin(topic: str, schema_name: str, meta: dict[str, str]) -> Twin:
+    from imulog.archive import codec
+
+    return Twin(topic, schema_name, "protobuf", codec.file_descriptor_set(schema_name), "protobuf", meta)
+
+
+def ros_imu_payloads(stamps: np.ndarray, frame_id: str, gyr: np.ndarray, acc: np.ndarray) -> list[bytes]:
+    """CDR (little-endian) ``sensor_msgs/msg/Imu`` messages, built as one numpy record array.
+
+    ``stamps`` int64 ns (the header stamp), ``gyr`` rad/s and ``acc`` m/s^2, (N, 3). The orientation is
+    marked unknown (``orientation_covariance[0] = -1``, the ROS convention).
+    """
+    name = frame_id.encode("utf-8") + b"\0"
+    head = 12 + len(name)
+    pad = (-head) % 8
+    dtype = np.dtype(
+        [
+            ("enc", "u1", 4),
+            ("sec", "<i4"),
+            ("nsec", "<u4"),
+            ("slen", "<u4"),
+            ("name", f"S{len(name) + pad}"),
+            ("f", "<f8", 37),
+        ]
+    )
+    n = len(stamps)
+    rec = np.zeros(n, dtype=dtype)
+    rec["enc"] = [0, 1, 0, 0]  # CDR_LE encapsulation header
+    sec, nsec = np.divmod(np.asarray(stamps, dtype=np.int64), 1_000_000_000)
+    rec["sec"], rec["nsec"], rec["slen"] = sec, nsec, len(name)
+    rec["name"] = name
+    f = rec["f"]
+    f[:, 3] = 1.0  # orientation (x, y, z, w) = identity, unknown:
+    f[:, 4] = -1.0  # orientation_covariance[0] = -1
+    f[:, 13:16] = gyr
+    f[:, 25:28] = acc
+    raw = rec.view(np.uint8).reshape(n, dtype.itemsize)
+    return [row.tobytes() for row in raw]
+
+
+def imu_twin(stream: ImuStream, log_map: LogMap) -> Twin | None:
+    if stream.acc is None and stream.gyr is None:
+        return None
+    keep = decimation(stream.t_ns)
+    stamps = log_map(stream.t_ns[keep]).astype(np.int64)
+    nan = np.full((len(keep), 3), np.nan)
+    gyr = stream.gyr[keep] if stream.gyr is not None else nan
+    acc = stream.acc[keep] if stream.acc is not None else nan
+    meta = _meta(stream, stream.topic, stream.name, keep, stream.t_ns)
+    meta.update(units=f"angular_velocity rad/s, linear_acceleration m/s^2 ({stream.frame_id} frame)")
+    twin = Twin(twin_topic(stream.topic), "sensor_msgs/msg/Imu", "ros2msg", ROS_IMU_SCHEMA.encode(), "cdr", meta)
+    twin.log_times = stamps.astype(np.uint64).tolist()
+    twin.payloads = ros_imu_payloads(stamps, stream.frame_id, gyr, acc)
+    return twin
+
+
+def marker_twin(stream: MarkerStream, log_map: LogMap) -> Twin:
+    from imulog.archive._generated.foxglove import PackedElementField_pb2, PointCloud_pb2
+
+    keep = decimation(stream.t_ns)
+    twin = _protobuf_twin(
+        twin_topic(stream.topic), "foxglove.PointCloud", _meta(stream, stream.topic, "reference", keep, stream.t_ns)
+    )
+    twin.metadata["units"] = "m"
+    fld = PackedElementField_pb2.PackedElementField
+    fields = [fld(name=axis, offset=8 * k, type=fld.FLOAT64) for k, axis in enumerate("xyz")]
+    stamps = log_map(stream.t_ns[keep])
+    msg = PointCloud_pb2.PointCloud(frame_id=stream.frame_id, point_stride=24, fields=fields)
+    msg.pose.orientation.w = 1.0
+    ok = np.asarray(stream.valid, dtype=bool) & np.isfinite(stream.pos).all(axis=2)
+    for i, stamp in zip(keep.tolist(), stamps.tolist(), strict=True):
+        _stamp(msg, stamp)
+        msg.data = np.ascontiguousarray(stream.pos[i][ok[i]], dtype="<f8").tobytes()
+        twin.log_times.append(int(stamp))
+        twin.payloads.append(msg.SerializeToString())
+    return twin
+
+
+def frame_twin(
+    stream: SignalStream | PoseStream,
+    log_map: LogMap,
+    *,
+    parent: str,
+    child: str,
+    clock: str,
+    rotation: list[float] | None = None,
+) -> Twin:
+    """``foxglove.FrameTransform`` parent -> child from a pose stream or an orientation (qw..qz) stream.
+
+    ``rotation`` (w, x, y, z) is applied in front of every orientation (e.g. the alignment's global-to-world).
+    """
+    from imulog.archive._generated.foxglove import FrameTransform_pb2
+
+    keep = decimation(stream.t_ns)
+    if isinstance(stream, PoseStream):
+        q, p = stream.orientation[keep], stream.position[keep]
+    else:
+        q, p = stream.values[keep][:, :4], np.zeros((len(keep), 3))
+    if rotation is not None and len(rotation) == 4:
+        from imulog.process import quaternion as quat
+
+        q = quat.multiply(np.asarray(rotation, dtype=np.float64)[None, :], q)
+    twin = _protobuf_twin(
+        twin_topic(stream.topic), "foxglove.FrameTransform", _meta(stream, stream.topic, clock, keep, stream.t_ns)
+    )
+    twin.metadata.update(parent_frame_id=parent, child_frame_id=child)
+    stamps = log_map(stream.t_ns[keep])
+    msg = FrameTransform_pb2.FrameTransform(parent_frame_id=parent, child_frame_id=child)
+    tr, rot = msg.translation, msg.rotation
+    good = np.isfinite(q).all(axis=1) & np.isfinite(p).all(axis=1)
+    for k, stamp in enumerate(stamps.tolist()):
+        if not good[k]:
+            continue
+        _stamp(msg, stamp)
+        tr.x, tr.y, tr.z = p[k].tolist()
+        rot.w, rot.x, rot.y, rot.z = q[k].tolist()
+        twin.log_times.append(int(stamp))
+        twin.payloads.append(msg.SerializeToString())
+    return twin
+
+
+def log_twin(stream: Intervals, log_map: LogMap, clock: str) -> Twin:
+    """One ``foxglove.Log`` per interval, at its start: ``reach #3 (1.24 s)``."""
+    from imulog.archive._generated.foxglove import Log_pb2
+
+    twin = _protobuf_twin(
+        twin_topic(stream.topic), "foxglove.Log", {"twin_of": stream.topic, "clock": clock, "kind": "viewer"}
+    )
+    twin.metadata["sample_count"] = str(len(stream))
+    if len(stream):
+        twin.metadata.update(start_ns=str(int(stream.start_ns.min())), end_ns=str(int(stream.end_ns.max())))
+    stamps = log_map(stream.start_ns)
+    name = stream.topic.rsplit("/", 1)[-1]
+    for s, e, label, k, stamp in zip(
+        stream.start_ns.tolist(),
+        stream.end_ns.tolist(),
+        stream.labels,
+        stream.task_index.tolist(),
+        stamps.tolist(),
+        strict=True,
+    ):
+        rep = f" #{k}" if k >= 0 else ""
+        msg = Log_pb2.Log(level=Log_pb2.Log.INFO, message=f"{label}{rep} ({(e - s) / 1e9:.2f} s)", name=name)
+        _stamp(msg, stamp)
+        twin.log_times.append(int(stamp))
+        twin.payloads.append(msg.SerializeToString())
+    return twin
+
+
+def twins_for(
+    stream: Stream, log_map: LogMap, clock: str, metadata: Mapping[str, Mapping[str, Any]] | None = None
+) -> list[Twin]:
+    """The viewer twins of one canonical stream (none for kinds without one, e.g. trajectories).
+
+    ``clock``: ``"reference"`` or the IMU name whose device clock the stream is on; ``metadata``: the
+    trial's records (``imulog.alignment`` rotates the IMU frames into the Vicon world).
+    """
+    if isinstance(stream, ImuStream):
+        twin = imu_twin(stream, log_map)
+        return [twin] if twin is not None else []
+    if isinstance(stream, MarkerStream):
+        return [marker_twin(stream, log_map)] if len(stream) else []
+    name = stream.topic.rstrip("/").rsplit("/", 1)[-1]
+    if isinstance(stream, PoseStream):
+        return [frame_twin(stream, log_map, parent=stream.frame_id or "world", child=name, clock=clock)]
+    if (
+        isinstance(stream, SignalStream)
+        and stream.columns[:4] == ORIENTATION_COLUMNS
+        and "/orientation/" in stream.topic
+    ):
+        alignment = (metadata or {}).get("imulog.alignment") or {}
+        rotation = alignment.get("rotation_global_to_world")
+        return [frame_twin(stream, log_map, parent="world", child=name, clock=clock, rotation=rotation)]
+    if isinstance(stream, Intervals) and len(stream):
+        return [log_twin(stream, log_map, clock)]
+    return []
