@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -52,6 +52,28 @@ UNIT_FACTORS: dict[str, dict[str, float]] = {
 NORMALISED_MAG_UNITS = {"a.u.", "au", "a.u", "arb", "local_flux", "localflux", "normalized", "normalised"}
 SI_UNIT = {"acc": "m/s^2", "gyr": "rad/s", "mag": "uT", "temperature": "degC", "time": "ns"}
 QUANTITIES = ("acc", "gyr", "mag", "temperature")
+
+
+LENGTH_TO_M = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
+# quantities a user may give a unit for (``--unit acc=g``, ``ConvertOptions.extra["units"]``)
+UNIT_QUANTITIES = ("acc", "gyr", "mag", "temperature", "time", "markers")
+
+
+def check_unit(quantity: str, unit: str) -> str | None:
+    """None when ``unit`` is a known unit of ``quantity`` (``markers``: a length), else the problem in one line."""
+    if quantity == "markers":
+        return None if unit.strip().lower() in LENGTH_TO_M else f"unknown length unit {unit!r} (use m, cm or mm)"
+    if quantity not in UNIT_FACTORS:
+        return f"unknown quantity {quantity!r}; use {', '.join(UNIT_QUANTITIES)}"
+    if unit_factor(quantity, unit) is None and not (quantity == "mag" and normalise_unit(unit) in NORMALISED_MAG_UNITS):
+        return f"unknown {quantity} unit {unit!r} (known: {', '.join(sorted(UNIT_FACTORS[quantity]))})"
+    return None
+
+
+def unit_overrides(extra: dict[str, Any] | None) -> dict[str, str]:
+    """The user's units by quantity (``ConvertOptions.extra["units"]``, from ``--unit QUANTITY=UNIT``)."""
+    units = (extra or {}).get("units") or {}
+    return {str(k).lower(): str(v) for k, v in units.items()}
 
 
 def normalise_unit(unit: str) -> str:
@@ -126,6 +148,106 @@ def is_number(cell: str) -> bool:
     return True
 
 
+# ------------------------------------------------------------------------------------ a cut final row
+TAIL_BYTES = 64 * 1024  # enough for the last row and the rows above it that it is compared with
+_REFERENCE_ROWS = 50
+
+
+def _cells(line: bytes, delimiter: str) -> list[bytes]:
+    text = line.rstrip(b"\r")
+    return text.split() if delimiter == " " else text.split(delimiter.encode())
+
+
+def final_row_cut(block: bytes, delimiter: str, *, at_eof: bool) -> tuple[int, str] | None:
+    """Is the last row of a numeric block cut short? ``(offset of that row in block, reason)`` or None.
+
+    ``block``: the end of the block (its last row and, where available, up to 50 rows above it), trailing blank
+    lines allowed; ``at_eof``: the block ends the file. A row is cut when it has fewer fields than the rows above
+    above, or, when the file ends without a line break after it, when one of its cells lacks the decimal point or
+    exponent that every cell of that column above carries (``-31.25`` cut to ``-3``; ``1.5e-05`` cut to ``1.5``),
+    is a whole number shorter than every one above (``600`` cut to ``60``), or has at least two decimals fewer
+    than every cell above (``-40.62421`` cut to ``-40.6``; one decimal fewer is normal for numbers printed
+    without trailing zeros). A cut that removes only the last decimal or two of a number that had more than the
+    column's fewest cannot be told from a complete row: it changes the value by less than those decimals.
+    """
+    body = block.rstrip(b" \t\r\n")
+    if not body:
+        return None
+    start = body.rfind(b"\n") + 1
+    last = body[start:]
+    newline_after = len(body) < len(block) and b"\n" in block[len(body) :]
+    above = body[:start].split(b"\n")
+    if start and len(block) >= TAIL_BYTES:
+        above = above[1:]  # the first one may be a partial line of the tail window
+    above = [ln for ln in above if ln.strip(b" \t\r")][-_REFERENCE_ROWS:]
+    if not above:
+        return None
+    rows = [_cells(ln, delimiter) for ln in above]
+    cells = _cells(last, delimiter)
+    width = min(len(r) for r in rows)
+    if len(cells) < width:
+        return start, f"{len(cells)} fields where the rows above have {width}"
+    if not at_eof or newline_after:
+        return None
+    for j, cell in enumerate(cells):
+        column = [r[j].strip().strip(b'"') for r in rows if j < len(r)]
+        if len(column) < len(rows) or not all(column):
+            continue  # a column with empty cells (gaps, padding) says nothing about the length of its numbers
+        c = cell.strip().strip(b'"')
+        for mark, what in ((b".", "decimal point"), (b"e", "exponent")):
+            if all(mark in x.lower() for x in column) and mark not in c.lower():
+                return start, f"field {j + 1} {c.decode('latin-1')!r} has no {what} where every row above has one"
+        if not any(b"." in x for x in column):  # whole numbers (counts): a shorter one lost digits
+            shortest = min(len(x) for x in column)
+            if len(c) < shortest:
+                return start, f"field {j + 1} has {len(c)} characters where the rows above have at least {shortest}"
+        else:  # %g-style numbers drop trailing zeros: only two decimals fewer than every row above count
+            fewest = min(len(x) - x.index(b".") - 1 for x in column if b"." in x)
+            decimals = len(c) - c.index(b".") - 1 if b"." in c else 0
+            if decimals <= fewest - 2:
+                return start, f"field {j + 1} has {decimals} decimals where the rows above have at least {fewest}"
+    return None
+
+
+def drop_cut_final_row(
+    path: Path, data: bytes, delimiter: str, *, start: int = 0, end: int | None = None
+) -> tuple[int, str | None]:
+    """The end of the numeric block ``data[start:end]`` without a cut final row, and the one-line warning.
+
+    The shared check every text converter calls before parsing (see :func:`final_row_cut` for what "cut"
+    means): returns ``(end, None)`` for a complete block, else ``(offset where the cut row starts, warning)``.
+    Dropping is always safe for a final row: it needs rows above it to be recognised as cut, so at least one
+    complete row remains.
+    """
+    end = len(data) if end is None else end
+    lo = max(start, end - TAIL_BYTES)
+    after = data[end : end + 4096]
+    blank_after = after[: len(after) - len(after.lstrip(b" \t\r\n"))]  # the line break a trimmed block lost
+    at_eof = len(blank_after) == len(data) - end
+    found = final_row_cut(data[lo:end] + blank_after, delimiter, at_eof=at_eof)
+    if found is None:
+        return end, None
+    offset, reason = found
+    row_start = lo + offset
+    line = data.count(b"\n", 0, row_start) + 1
+    return row_start, cut_row_warning(path, line, reason)
+
+
+def cut_row_warning(path: Path | str, line: int, reason: str) -> str:
+    """The one-line warning for a dropped cut row (the same wording in every converter)."""
+    return f"{Path(path).name}: line {line}: last row cut short ({reason}; the file was probably truncated): dropped"
+
+
+def file_tail(path: Path, n: int = TAIL_BYTES) -> tuple[bytes, int]:
+    """The last ``n`` bytes of a file and their offset in it."""
+    with open(path, "rb") as f:
+        f.seek(0, 2)
+        size = f.tell()
+        offset = max(0, size - n)
+        f.seek(offset)
+        return f.read(), offset
+
+
 # ------------------------------------------------------------------------------------- numeric tables
 @dataclass
 class TableSpec:
@@ -145,6 +267,9 @@ class TableSpec:
     nrows: int | None = None
     allow_trailing_blank: bool = True
     byte_range: tuple[int, int] | None = None  # (start, end) of the block when already known
+    check_final_row: bool = True  # drop a cut final row (see drop_cut_final_row) instead of storing it
+    short_rows_are_errors: bool = True  # a row with fewer fields is damage (else its missing cells are gaps)
+    warnings: list[str] = field(default_factory=list)  # filled by read_numeric: one line per dropped row
 
 
 def _data_range(spec: TableSpec, data: bytes) -> tuple[int, int]:
@@ -185,6 +310,8 @@ def read_numeric(spec: TableSpec, data: bytes | None = None) -> np.ndarray:
     for ``byte_range`` and for the careful pass).
     """
     ncols = len(spec.names)
+    if spec.check_final_row:
+        spec, data = _without_cut_final_row(spec, data)
     nrows = spec.nrows
     if spec.byte_range is not None:
         if data is None:
@@ -203,7 +330,7 @@ def read_numeric(spec: TableSpec, data: bytes | None = None) -> np.ndarray:
         engine="c",
         skip_blank_lines=False,
         keep_default_na=False,
-        na_values=[""],
+        na_values=["", "NaN", "nan", "NAN", "-NaN", "-nan"],  # gaps: empty or NaN cells
         quoting=3,  # QUOTE_NONE: numbers are never quoted in these exports
         encoding_errors="replace",  # non-UTF-8 bytes become non-numeric cells, reported by the careful pass
     )
@@ -232,6 +359,28 @@ def read_numeric(spec: TableSpec, data: bytes | None = None) -> np.ndarray:
     return _validate(spec, values, data)
 
 
+def _without_cut_final_row(spec: TableSpec, data: bytes | None) -> tuple[TableSpec, bytes | None]:
+    """``spec`` limited so that a cut final row is not parsed (its warning added to ``spec.warnings``).
+
+    Only the file's last 64 KiB are read unless the last row is cut (then the whole file, to number the line).
+    """
+    if spec.nrows is not None and spec.byte_range is None:
+        return spec, data  # a block bounded by a row count does not end the file
+    if data is None:
+        tail, offset = file_tail(spec.path)
+        if offset > 0 and final_row_cut(tail, spec.delimiter, at_eof=True) is None:
+            return spec, data
+        data = tail if offset == 0 else spec.path.read_bytes()
+    start, end = _data_range(replace(spec, allow_trailing_blank=False), data)
+    new_end, warning = drop_cut_final_row(spec.path, data, spec.delimiter, start=start, end=end)
+    if warning is None:
+        return spec, data
+    spec.warnings.append(warning)
+    if spec.byte_range is not None:
+        return replace(spec, byte_range=(spec.byte_range[0], new_end)), data
+    return replace(spec, nrows=data.count(b"\n", start, new_end)), data
+
+
 def _block(spec: TableSpec, data: bytes | None) -> bytes:
     if data is None:
         data = spec.path.read_bytes()
@@ -250,7 +399,31 @@ def _validate(spec: TableSpec, values: np.ndarray, data: bytes | None) -> np.nda
         locate_problem(spec, data=_block(spec, data))
         bad_row = int(np.nonzero(~finite)[0][0])
         raise ConversionError(spec.path, "missing or non-finite value", line=spec.skip_lines + bad_row + 1)
+    if spec.short_rows_are_errors and len(check) != ncols and np.isnan(values).any():
+        _check_field_counts(spec, data)
     return values
+
+
+def _check_field_counts(spec: TableSpec, data: bytes | None) -> None:
+    """Rows with fewer fields than the header: the parser fills them with NaN, but a short row is damage, not a gap
+    (an empty cell is a gap). Vectorised (delimiter counts per line); space-delimited tables use the careful pass."""
+    block = _block(spec, data)
+    if spec.delimiter == " ":
+        locate_problem(spec, data=block)
+        return
+    raw = np.frombuffer(block, dtype=np.uint8)
+    ends = np.flatnonzero(raw == 10)
+    delims = np.cumsum(raw == ord(spec.delimiter))
+    at_end = np.concatenate([delims[ends], [delims[-1]]]) if len(raw) else np.zeros(1, dtype=np.int64)
+    fields = np.diff(np.concatenate([[0], at_end])) + 1
+    short = np.flatnonzero(fields < len(spec.names))
+    if len(short) and block.split(b"\n")[short[0]].strip(b" \t\r"):
+        i = int(short[0])
+        raise ConversionError(
+            spec.path,
+            f"truncated line: {int(fields[i])} fields, expected {len(spec.names)}",
+            line=spec.skip_lines + i + 1,
+        )
 
 
 _INCOMPLETE_HINT = " (every sample must be complete: delete the row to record a gap in time)"

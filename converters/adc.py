@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from converters._common import G0, looks_binary, text_head_lines
+from converters._common import G0, drop_cut_final_row, looks_binary, text_head_lines
 from converters.base import Converter, ConvertOptions
 from converters.errors import ConversionError
 from converters.mapping import sibling_mapping
@@ -62,6 +62,8 @@ def read_adc(
         raise ConversionError(path, "raw ADC text has no time stamps: give the sampling rate with --rate HZ")
     if not counts_per_g > 0:
         raise ConversionError(path, f"counts_per_g must be positive, got {counts_per_g}")
+    end, cut_warning = drop_cut_final_row(path, data, " ")  # a logger that lost power mid-line
+    data = data[:end]
     body = data.rstrip(b" \t\r\n") + b"\n"
     n = body.count(b"\n")
     # structural check at C speed: with digits, signs, blanks and '=' removed every line must read 'XYZ'
@@ -105,7 +107,7 @@ def read_adc(
         "units": {"acc": "counts"},
         "source": path.name,
     }
-    rec = Recording(sources=[str(path)])
+    rec = Recording(sources=[str(path)], warnings=[cut_warning] if cut_warning else [])
     rec.imus.append(ImuStream(name=name, t_ns=t_ns, acc=acc, meta=dict(meta)))
     rec.metadata[f"imulog.device.{name}"] = meta
     return rec

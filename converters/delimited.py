@@ -38,6 +38,7 @@ from converters._common import (
     text_head_lines,
     to_ns,
     unit_factor,
+    unit_overrides,
 )
 from converters.base import Converter, ConvertOptions
 from converters.errors import ConversionError
@@ -46,7 +47,7 @@ from imulog.model import ImuStream, Recording, SignalStream
 
 _SEP_LINE = re.compile(r'^\s*"?sep=(.)"?\s*$')
 _UNIT_IN_NAME = re.compile(r"^(.*?)\s*[\(\[]\s*([^\)\]]*)\s*[\)\]]\s*$")
-_COMPACT = re.compile(r"^(acc|accel|gyr|gyro|mag)([xyz])$")
+_COMPACT = re.compile(r"^(acc|accel|gyr|gyro|mag|a|g|m)([xyz])$")  # accx, gyroz; ax, gy, mz
 _ALL_UNITS = {u for table in UNIT_FACTORS.values() for u in table} | NORMALISED_MAG_UNITS
 _EXTRA_UNIT_WORDS = {"mv", "v", "no_units", "kohms", "us", "kpa", "pa", "%", "hpa", "degrees", "deg", "rad", "n", "nm"}
 
@@ -80,7 +81,15 @@ def _quantity_of(tokens: list[str]) -> tuple[str | None, str | None, str]:
     for i, tok in enumerate(tokens):
         m = _COMPACT.match(tok)
         if m and quantity is None:
-            quantity = {"acc": "acc", "accel": "acc", "gyr": "gyr", "gyro": "gyr", "mag": "mag"}[m.group(1)]
+            quantity = {
+                "acc": "acc",
+                "accel": "acc",
+                "gyr": "gyr",
+                "gyro": "gyr",
+                "mag": "mag",
+                "a": "acc",
+                "g": "gyr",
+            }.get(m.group(1), "mag")
             axis = m.group(2)
             qpos = i
             continue
@@ -117,6 +126,40 @@ def _is_units_row(cells: list[str]) -> bool:
     return known * 2 >= len(nonempty)
 
 
+INFER = "?"  # unit placeholder: not in the header, to be inferred from the values
+
+
+def _bare_axis(name: str) -> str | None:
+    """``X`` / ``y`` / ``attr_z`` / ``axis X`` -> the axis; anything naming more than an axis -> None."""
+    tokens = _tokens(name)
+    if (
+        tokens
+        and tokens[-1] in ("x", "y", "z")
+        and len(tokens) <= 2
+        and (len(tokens) == 1 or tokens[0] in _AXIS_PREFIX)
+    ):
+        return tokens[-1]
+    return None
+
+
+_AXIS_PREFIX = {"attr", "axis", "value", "values", "data", "raw"}
+
+
+def _group_quantity(label: str) -> str | None:
+    """``acc`` / ``Gyroscope`` / ``Magnetometer`` group labels -> the quantity (None for sensor names)."""
+    q, axis, _ = _quantity_of(_tokens(label))
+    return q if q in ("acc", "gyr", "mag") and axis is None else None
+
+
+def _span_labels(labels: list[str]) -> list[str]:
+    """A group label spans the empty cells to its right until the next label (``acc,,,gyr,,``)."""
+    out, current = [], ""
+    for cell in labels:
+        current = cell or current
+        out.append(current)
+    return out
+
+
 def detect_delimiter(line: str) -> str | None:
     counts = {d: line.count(d) for d in (",", ";", "\t")}
     best = max(counts, key=lambda d: counts[d])
@@ -130,8 +173,15 @@ def analyse_header(
     mapping: Mapping | None = None,
     default_units: dict[str, str] | None = None,
     device_name: str = "imu",
+    units: dict[str, str] | None = None,
 ) -> Layout:
-    """Find delimiter, header rows, units and the role of every column; ConversionError on problems."""
+    """Find delimiter, header rows, units and the role of every column; ConversionError on problems.
+
+    ``units``: the user's unit per quantity (``--unit gyr=deg/s``), replacing the header's. Columns whose unit
+    the header does not give get unit :data:`INFER`; bare ``X``/``Y``/``Z`` columns without a quantity word get
+    quantity ``auto``: both are resolved from the values by :func:`resolve_inferred`.
+    """
+    overrides = dict(units or {})
     idx = 0
     delimiter = mapping.delimiter if mapping and mapping.delimiter else None
     m = _SEP_LINE.match(lines[0]) if lines else None
@@ -172,19 +222,24 @@ def analyse_header(
         if other is not None and len(other) != ncols:
             raise ConversionError(path, f"{what} has {len(other)} fields, names row has {ncols}", line=header_start + 1)
     layout = Layout(delimiter=delimiter, skip_lines=idx, names=[])
+    if groups_row is not None:
+        groups_row = _span_labels(groups_row)
     full_names: list[str] = []
     for i, name in enumerate(names):
         group = groups_row[i] if groups_row else ""
         full = f"{group}/{name}" if group and name else (name or group)
         full_names.append(full)
-    layout.names = full_names
     seen: dict[str, int] = {}
     for i, full in enumerate(full_names):
         if full and full in seen:
-            raise ConversionError(
-                path, f"duplicated column {full!r} (also column {seen[full] + 1})", line=header_start + 1
-            )
+            if _bare_axis(names[i]) is None:
+                raise ConversionError(
+                    path, f"duplicated column {full!r} (also column {seen[full] + 1})", line=header_start + 1
+                )
+            full_names[i] = f"{full} (column {i + 1})"  # X,Y,Z,X,Y,Z: told apart by position
+            continue
         seen[full] = i
+    layout.names = full_names
 
     mapped = dict(mapping.columns) if mapping else {}
     for key in mapped:
@@ -202,7 +257,8 @@ def analyse_header(
         name = names[i]
         group = groups_row[i] if groups_row else ""
         col = Column(index=i, name=full, device=device_name)
-        if groups_row is not None and group.lower() not in ("", "sensor"):
+        group_quantity = _group_quantity(group)
+        if groups_row is not None and group.lower() not in ("", "sensor") and group_quantity is None:
             col.device = sanitize_name(group)
         elif shimmer and name.startswith(shimmer.group(1)) and not (mapping and mapping.device.get("name")):
             col.device = sanitize_name(shimmer.group(1))
@@ -224,11 +280,16 @@ def analyse_header(
             q, axis, variant = _quantity_of(_tokens(base))
             if q == "time" and (have_time or time_col is not None or (mapping and mapping.has_time)):
                 q = None
+            if q is None and _bare_axis(base) is not None:
+                # X, Y, Z under an acc/gyr/mag group label, or a unit-less axis whose quantity the values tell
+                q, axis = group_quantity or "auto", _bare_axis(base)
             col.quantity, col.axis, col.variant, col.unit = q, axis, variant, header_unit
             if q in ("acc", "gyr", "mag") and axis is None:
                 col.quantity = None
             if col.quantity is not None and not col.unit and default_units:
                 col.unit = default_units.get(col.quantity, "")
+        if col.quantity in overrides:
+            col.unit = overrides[col.quantity]
         if col.quantity is None:
             col.quantity = "extra"
             col.unit = header_unit
@@ -236,11 +297,12 @@ def analyse_header(
             have_time = True
         if col.quantity in ("acc", "gyr", "mag", "temperature", "time"):
             if not col.unit:
-                raise ConversionError(
-                    path,
-                    f"no unit for this {col.quantity} column in the header; give a mapping file (--mapping)",
-                    column=full,
-                )
+                if col.quantity == "temperature":
+                    col.unit = "degC"  # the only temperature unit IMUs export
+                else:
+                    col.unit = INFER  # no unit in the header: inferred from the values (read_delimited says so)
+                    layout.columns.append(col)
+                    continue
             factor = unit_factor(col.quantity, col.unit)
             if factor is None:
                 if col.quantity == "mag" and normalise_unit(col.unit) in NORMALISED_MAG_UNITS:
@@ -251,6 +313,136 @@ def analyse_header(
                 col.factor = factor
         layout.columns.append(col)
     return layout
+
+
+def _check_infinite(path: Path, layout: Layout, values: np.ndarray, first_line: int) -> None:
+    """NaN and empty cells are gaps; +-inf is not a missing sample but a broken number: refuse it."""
+    for c in layout.columns:
+        if c.quantity in ("acc", "gyr", "mag", "temperature", "auto"):
+            bad = np.isinf(values[:, c.index])
+            if bad.any():
+                raise ConversionError(
+                    path,
+                    "infinite value (empty or NaN cells are gaps)",
+                    line=first_line + int(np.argmax(bad)),
+                    column=c.name,
+                )
+
+
+TIME_UNITS = ("s", "ms", "us", "ns")
+PLAUSIBLE_RATE_HZ = (5.0, 5000.0)
+
+
+def _infer_time_unit(path: Path, col: Column, t: np.ndarray) -> str:
+    """The unit (s, ms, us, ns) that gives a wearable's sampling rate (5-5000 Hz); sets ``col.unit/factor``."""
+    dt = np.diff(t[np.isfinite(t)])
+    dt = float(np.median(dt)) if len(dt) else 0.0
+    fits = [
+        u
+        for u in TIME_UNITS
+        if dt > 0 and PLAUSIBLE_RATE_HZ[0] <= 1e9 / (dt * unit_factor("time", u)) <= PLAUSIBLE_RATE_HZ[1]
+    ]
+    if len(fits) != 1:
+        raise ConversionError(
+            path,
+            f"no time unit in the header and a step of {dt:g} fits {', '.join(fits) or 'no unit'} "
+            "at 5-5000 Hz: give --unit time=s (or ms, us) or a mapping file",
+            column=col.name,
+        )
+    col.unit, col.factor = fits[0], float(unit_factor("time", fits[0]))
+    return f"time in {fits[0]} ({1e9 / (dt * col.factor):.4g} Hz)"
+
+
+def _triples(cols: list[Column]) -> list[list[Column]]:
+    """Consecutive x, y, z columns (any order) of one device, in file order."""
+    out: list[list[Column]] = []
+    current: list[Column] = []
+    for c in cols:
+        if current and (c.axis in {x.axis for x in current} or c.device != current[0].device):
+            out.append(current)
+            current = []
+        current.append(c)
+        if len(current) == 3:
+            out.append(current)
+            current = []
+    if current:
+        out.append(current)
+    return out
+
+
+def resolve_inferred(
+    path: Path, layout: Layout, values: np.ndarray, t_ns: np.ndarray, overrides: dict[str, str]
+) -> list[str]:
+    """Give ``auto`` columns a quantity and :data:`INFER` units a unit from physical plausibility.
+
+    Bare X,Y,Z triples: the quantity named by the file name (``wrist_gyro.csv``) when there is one triple, else
+    the triple with a constant non-zero norm at rest near 1 g / 9.81 m/s^2 / 1000 mg is the accelerometer, one
+    near 20-80 uT the magnetometer, the rest gyroscopes. Units: see :mod:`converters.plausibility`. Returns the
+    assumptions, one phrase each; ConversionError naming the column and the option when the values cannot tell.
+    """
+    from converters import plausibility as plaus
+
+    notes: list[str] = []
+    auto = [c for c in layout.columns if c.quantity == "auto"]
+    name_q = _group_quantity(path.stem) or _quantity_of(_tokens(path.stem))[0]
+    triples = _triples(auto)
+    for tri in triples:
+        if len(tri) != 3:
+            raise ConversionError(
+                path, "an axis column without its x, y, z neighbours and no quantity", column=tri[0].name
+            )
+        raw = values[:, [c.index for c in sorted(tri, key=lambda c: c.axis or "")]]
+        if name_q in ("acc", "gyr", "mag") and len(triples) == 1:
+            q, why = name_q, "the file name"
+        elif plaus.rest_windows(raw, t_ns) and plaus.infer_acc_unit(raw, t_ns).unit:
+            q, why = "acc", "its norm at rest is gravity"
+        elif plaus.rest_windows(raw, t_ns) and 20 <= plaus.rest_acc_norm(raw, t_ns)[0] <= 80:
+            q, why = "mag", "its norm at rest is the Earth's field in uT"
+        else:
+            q, why = "gyr", "its norm is not constant at rest"
+        for c in tri:
+            c.quantity = q
+            c.unit = overrides.get(q) or c.unit or INFER
+            if c.unit != INFER:
+                factor = unit_factor(q, c.unit)
+                if factor is None:
+                    raise ConversionError(path, f"unknown {q} unit {c.unit!r}", column=c.name)
+                c.factor = float(factor)
+        notes.append(f"columns {', '.join(c.name for c in tri)} are {q} ({why})")
+    acc_raw: dict[str, np.ndarray] = {}
+    for q in ("acc", "mag", "gyr"):  # acc first: the gyroscope's unit is judged against it
+        groups: dict[str, list[Column]] = {}
+        for c in layout.columns:
+            if c.quantity == q and c.unit == INFER:
+                groups.setdefault(c.device, []).append(c)
+        for c in layout.columns:
+            if c.quantity == "acc" and c.axis in ("x", "y", "z"):
+                acc_raw.setdefault(c.device, np.zeros((len(values), 3)))[:, "xyz".index(c.axis)] = values[:, c.index]
+        for dev, cols in groups.items():
+            if sorted(c.axis or "" for c in cols) != ["x", "y", "z"]:
+                found = ", ".join(repr(c.name) for c in cols)
+                raise ConversionError(path, f"device {dev!r}: {q} needs one x, y and z column, found {found}")
+            raw = values[:, [c.index for c in sorted(cols, key=lambda c: c.axis or "")]]
+            if q == "acc":
+                guess = plaus.infer_acc_unit(raw, t_ns)
+            elif q == "gyr":
+                acc = acc_raw.get(dev)
+                guess = plaus.infer_gyr_unit(raw, acc if acc is not None and np.isfinite(acc).any() else None, t_ns)
+            else:
+                norm = plaus.rest_acc_norm(raw, t_ns)[0]
+                unit = "uT" if 15 <= norm <= 100 else "gauss" if 0.15 <= norm <= 1.0 else None
+                guess = plaus.UnitGuess(unit, f"field norm {norm:.3g}")
+            if guess.unit is None:
+                raise ConversionError(
+                    path,
+                    f"no {q} unit in the header and the values cannot tell ({guess.evidence}): "
+                    f"give --unit {q}=UNIT or a mapping file",
+                    column=cols[0].name,
+                )
+            for c in cols:
+                c.unit, c.factor = guess.unit, float(unit_factor(q, guess.unit) or 1.0)
+            notes.append(f"{q} in {guess.unit} ({guess.evidence})")
+    return notes
 
 
 def _fit_host_clock(path: Path, t_ns: np.ndarray, first_line: int, column: str) -> np.ndarray:
@@ -289,15 +481,23 @@ def read_delimited(
     device_meta: dict[str, Any] | None = None,
     fmt: str = "delimited",
     head: bytes | None = None,
+    units: dict[str, str] | None = None,
 ) -> Recording:
-    """Read one delimited IMU text file into a Recording (see module docstring)."""
+    """Read one delimited IMU text file into a Recording (see module docstring).
+
+    Empty or NaN cells in IMU columns are gaps (NaN in the stream); ``units`` replaces the header's unit per
+    quantity (``{"gyr": "deg/s"}``); units the header does not give are inferred from the values and said in
+    ``Recording.warnings``.
+    """
     path = Path(path)
     lines = head_lines(path, head)
     device_meta = dict(device_meta or {})
     if mapping is not None:
         device_meta.update(mapping.device)
     device_name = sanitize_name(str(device_meta.get("name", "imu")))
-    layout = analyse_header(path, lines, mapping=mapping, default_units=default_units, device_name=device_name)
+    layout = analyse_header(
+        path, lines, mapping=mapping, default_units=default_units, device_name=device_name, units=units
+    )
     first = _first_data_cells(path, lines, layout)
     ignore = {c.index for c in layout.columns if c.quantity == "ignore"}
     # text columns (non-numeric in the first data row) that are not IMU data are skipped, not parsed
@@ -305,7 +505,8 @@ def read_delimited(
         if c.quantity == "extra" and c.index < len(first) and first[c.index] and not is_number(first[c.index]):
             c.quantity = "ignore"
             ignore.add(c.index)
-    optional = {c.index for c in layout.columns if c.quantity == "extra"}
+    # IMU and extra columns may be empty or NaN (gaps); time and index columns may not
+    optional = {c.index for c in layout.columns if c.quantity not in ("time", "index", "ignore")}
     spec = TableSpec(
         path=path,
         delimiter=layout.delimiter,
@@ -316,9 +517,14 @@ def read_delimited(
     )
     values = read_numeric(spec)
     first_line = layout.skip_lines + 1
+    warnings = list(spec.warnings)
+    _check_infinite(path, layout, values, first_line)
 
     rate = rate_hz or device_meta.get("rate_hz")
+    assumed: list[str] = []
     time_cols = [c for c in layout.columns if c.quantity == "time"]
+    if time_cols and time_cols[0].unit == INFER:
+        assumed.append(_infer_time_unit(path, time_cols[0], values[:, time_cols[0].index]))
     index_cols = [c for c in layout.columns if c.quantity == "index"]
     if time_cols:
         tc = time_cols[0]
@@ -342,12 +548,18 @@ def read_delimited(
         time_desc = {"column": None, "rate_hz": float(rate)}
     else:
         raise ConversionError(path, "no time column in the header and no rate given (mapping device.rate_hz or --rate)")
+    assumed.extend(resolve_inferred(path, layout, values, t_ns, units or {}))
+    if assumed:
+        warnings.append(
+            f"{path.name}: no units in the header: assumed {'; '.join(assumed)}; "
+            "if wrong, give --unit QUANTITY=UNIT or a mapping file"
+        )
 
     devices: dict[str, list[Column]] = {}
     for c in layout.columns:
         if c.quantity not in ("ignore", "index", "time"):
             devices.setdefault(c.device, []).append(c)
-    rec = Recording(sources=[str(path)] + ([str(mapping.path)] if mapping else []))
+    rec = Recording(sources=[str(path)] + ([str(mapping.path)] if mapping else []), warnings=warnings)
     for dev, cols in devices.items():
         streams: dict[str, np.ndarray] = {}
         units: dict[str, str] = {}
@@ -437,14 +649,20 @@ class DelimitedConverter(Converter):
         except ConversionError:
             return 0.0
         kinds = {c.quantity for c in layout.columns}
-        return 0.5 if kinds & {"acc", "gyr"} else 0.0
+        if kinds & {"acc", "gyr"}:
+            return 0.5
+        axes = [c for c in layout.columns if c.quantity == "auto"]
+        # bare X,Y,Z columns (units and quantity from the values): below every format that knows its layout
+        return 0.35 if len(axes) >= 3 and {c.axis for c in axes} == {"x", "y", "z"} else 0.0
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         options = options or ConvertOptions()
         path = Path(path)
         mapping_path = options.mapping or sibling_mapping(path)
         mapping = load_mapping(mapping_path) if mapping_path else None
-        return read_delimited(path, mapping=mapping, rate_hz=options.rate_hz, head=read_head(path))
+        return read_delimited(
+            path, mapping=mapping, rate_hz=options.rate_hz, head=read_head(path), units=unit_overrides(options.extra)
+        )
 
 
 CONVERTER = DelimitedConverter()

@@ -24,6 +24,7 @@ from converters._common import (
     read_numeric,
     split_row,
     text_head_lines,
+    unit_overrides,
 )
 from converters.base import Converter, ConvertOptions
 from converters.errors import ConversionError
@@ -121,22 +122,11 @@ def _header(path: Path, data: bytes, sec: Section) -> tuple[float, list[str], li
     return rate, names, header, units, first_data.count(b",") + 1
 
 
-def _check_cut_off(path: Path, data: bytes, sec: Section, ncols_file: int) -> None:
-    """A file cut off in its last row: no final line break and fewer fields than the rows above (Nexus pads
-    every row to the full width, so short rows are otherwise read as gaps and the cut goes unnoticed)."""
-    if sec.data_end != len(data) or data.endswith(b"\n"):
-        return
-    start = data.rfind(b"\n", sec.data_start, sec.data_end) + 1 or sec.data_start
-    fields = data[start : sec.data_end].count(b",") + 1
-    if fields < ncols_file:
-        line = data.count(b"\n", 0, start) + 1
-        raise ConversionError(
-            path, f"truncated line: {fields} fields, expected {ncols_file} (the file is cut off)", line=line
-        )
-
-
-def _read_block(path: Path, data: bytes, sec: Section, header: list[str], ncols_file: int) -> np.ndarray:
-    _check_cut_off(path, data, sec, ncols_file)
+def _read_block(
+    path: Path, data: bytes, sec: Section, header: list[str], ncols_file: int, warnings: list[str]
+) -> np.ndarray:
+    """The section's numbers; a final row cut off by a truncated file is dropped with a warning (Nexus pads every
+    row to the full width, so a short row would otherwise be read as gaps and the cut go unnoticed)."""
     spec = TableSpec(
         path=path,
         delimiter=",",
@@ -145,6 +135,8 @@ def _read_block(path: Path, data: bytes, sec: Section, header: list[str], ncols_
         optional=set(range(2, ncols_file)),
         ignore=set(range(len(header), ncols_file)),
         byte_range=(sec.data_start, sec.data_end),
+        warnings=warnings,
+        short_rows_are_errors=False,
     )
     return read_numeric(spec, data)[:, : len(header)]
 
@@ -175,8 +167,10 @@ def _time(path: Path, frame: np.ndarray, sub: np.ndarray, frame_rate: float, n_s
     return t
 
 
-def read_vicon_csv(path: Path, name: str = "vicon") -> Recording:
-    """Read every section of a Nexus CSV export into one Recording (markers, analogs, model outputs)."""
+def read_vicon_csv(path: Path, name: str = "vicon", user_units: dict[str, str] | None = None) -> Recording:
+    """Read every section of a Nexus CSV export into one Recording (markers, analogs, model outputs).
+
+    ``user_units={"markers": "mm"}`` replaces the units row of the Trajectories section (``--unit markers=mm``)."""
     path = Path(path)
     head = read_head(path, 4096)
     if not head.strip():
@@ -186,15 +180,16 @@ def read_vicon_csv(path: Path, name: str = "vicon") -> Recording:
     data = path.read_bytes()
     sections = find_sections(path, data)
     parsed = []
+    warnings: list[str] = []
     for sec in sections:
         rate, names, header, units, first_width = _header(path, data, sec)
         # width of the data rows (may carry padding commas beyond the header)
         ncols_file = max(len(header), first_width)
-        values = _read_block(path, data, sec, header, ncols_file)
+        values = _read_block(path, data, sec, header, ncols_file, warnings)
         parsed.append((sec, rate, names, header, units, values))
     traj_rate = next((p[1] for p in parsed if p[0].name == "Trajectories"), None)
 
-    rec = Recording(sources=[str(path)])
+    rec = Recording(sources=[str(path)], warnings=warnings)
     meta: dict = {"format": "vicon-csv", "model": "Vicon Nexus"}
     for sec, rate, names, header, units, values in parsed:
         first_line = sec.line + 6
@@ -218,6 +213,8 @@ def read_vicon_csv(path: Path, name: str = "vicon") -> Recording:
         if sec.name == "Trajectories":
             groups = _groups(path, names, header, sec.line + 3, "marker")
             labels = [g[0] for g in groups]
+            if user_units and "markers" in user_units:
+                units = [*units[:2], *[user_units["markers"].strip().lower()] * (len(units) - 2)]  # the user's unit
             for label, cols in groups:
                 if len(cols) != 3 or [header[c].upper() for c in cols] != ["X", "Y", "Z"]:
                     raise ConversionError(path, f"marker {label!r} must have X,Y,Z columns", line=sec.line + 4)
@@ -299,7 +296,8 @@ class ViconCsvConverter(Converter):
         return 0.0
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
-        return read_vicon_csv(Path(path), name=(options.extra.get("vicon_name", "vicon") if options else "vicon"))
+        extra = options.extra if options else {}
+        return read_vicon_csv(Path(path), name=extra.get("vicon_name", "vicon"), user_units=unit_overrides(extra))
 
 
 CONVERTER = ViconCsvConverter()

@@ -289,14 +289,15 @@ def test_implausible_accelerometer_unit_warns(tmp_path, shared_data):
 
 def test_explicit_mapping_converts_a_header_without_units(tmp_path):
     """A BlueBuddy-style export (timestamp,ax,...) with its mapping file elsewhere: `--mapping FILE` used to
-    be ignored by format detection ('unknown format'); without it, the error now says a mapping is needed."""
+    be ignored by format detection ('unknown format'); without it, the units are inferred from the values
+    (issue 14 item 4) and the assumption is said in one line."""
     from imulog.simulate import simulate, write_trial_files
 
     paths = write_trial_files(simulate("r2g", seed=0, repetitions=1), tmp_path / "sim")
     data = tmp_path / "wrist.csv"
     data.write_bytes(paths["imu"].read_bytes())  # no wrist.mapping.json beside it
     code, _, err = run("convert", data, "-o", tmp_path / "a.mcap")
-    assert code == 1 and "unknown format" in err and "--mapping FILE" in err and "wrist.mapping.json" in err
+    assert code == 0 and "no units in the header: assumed time in ms" in err and "gyr in deg/s" in err
     code, out, err = run("convert", data, paths["vicon"], "--mapping", paths["mapping"], "-o", tmp_path / "b.mcap")
     assert code == 0, err
     assert "/imu/wrist" in out and "/markers/vicon" in out

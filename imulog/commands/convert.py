@@ -83,33 +83,23 @@ def finish_recording(rec: Recording, meta: dict[str, dict[str, Any]], formats: d
         "formats": formats,
         "sha256": {Path(s).name: sha256_of(Path(s)) for s in rec.sources},
     }
+    notes = unit_warnings(rec)
+    if notes:
+        rec.metadata["imulog.conversion"]["warnings"] = notes
     return rec
 
 
 def unit_warnings(rec: Recording) -> list[str]:
-    """Plausibility of the declared units (a wrong unit is not an error in the file, so nothing else sees it):
-    over a recording the median accelerometer norm is close to gravity, and the median gyroscope norm is
-    well below 5 rad/s. One line per suspicious IMU channel."""
-    import numpy as np
+    """The converters' own notes (rows dropped, units assumed) and the plausibility of the declared units (a wrong
+    unit is not an error in the file, so nothing else sees it; see ``converters.plausibility``). One line each."""
+    from converters.plausibility import recording_warnings
 
-    out = []
-    for imu in rec.imus:
-        if imu.acc is not None and len(imu.acc):
-            med = float(np.nanmedian(np.linalg.norm(imu.acc, axis=1)))
-            if not 4.9 <= med <= 19.6:
-                guess = " (the numbers look like g: is the unit g rather than m/s^2?)" if 0.5 <= med <= 2.0 else ""
-                out.append(
-                    f"{imu.topic}: median |acc| is {med:.3g} m/s^2, expected about 9.81 (gravity){guess}; "
-                    "check the accelerometer unit in the header or mapping file"
-                )
-        if imu.gyr is not None and len(imu.gyr):
-            med = float(np.nanmedian(np.linalg.norm(imu.gyr, axis=1)))
-            if med > 5.0:
-                out.append(
-                    f"{imu.topic}: median |gyr| is {med:.3g} rad/s ({np.degrees(med):.0f} deg/s); "
-                    "is the unit deg/s rather than rad/s? check the gyroscope unit in the header or mapping file"
-                )
-    return out
+    return [*rec.warnings, *recording_warnings(rec)]
+
+
+def conversion_warnings(rec: Recording) -> list[str]:
+    """The warnings ``finish_recording`` recorded in ``imulog.conversion``."""
+    return list(rec.metadata.get("imulog.conversion", {}).get("warnings", []))
 
 
 def _format_name(path: Path, fmt: str | None, options: ConvertOptions) -> str:
@@ -149,6 +139,25 @@ def _kv(pairs: tuple[str, ...], option: str) -> dict[str, str]:
     return out
 
 
+def _units(pairs: tuple[str, ...]) -> dict[str, str]:
+    """``("acc=g", "gyr=deg/s")`` -> ``{"acc": "g", "gyr": "deg/s"}``, each unit checked against its quantity."""
+    from converters._common import UNIT_QUANTITIES, check_unit
+
+    out = {}
+    for pair in pairs:
+        q, sep, u = pair.partition("=")
+        q, u = q.strip().lower(), u.strip()
+        if not sep or not u:
+            raise click.BadParameter(f"{pair!r} is not QUANTITY=UNIT", param_hint="--unit")
+        if q not in UNIT_QUANTITIES:
+            raise click.BadParameter(f"unknown quantity {q!r}; use {', '.join(UNIT_QUANTITIES)}", param_hint="--unit")
+        problem = check_unit(q, u)
+        if problem:
+            raise click.BadParameter(problem, param_hint="--unit")
+        out[q] = u
+    return out
+
+
 @click.command("convert")
 @click.argument("inputs", nargs=-1, type=click.Path(exists=True, path_type=Path))
 @click.option(
@@ -184,6 +193,13 @@ def _kv(pairs: tuple[str, ...], option: str) -> dict[str, str]:
     help="Stream name for a sensor (repeatable): Xsens DeviceId, APDM case ID or label, Delsys sensor number, MVN "
     "sensor label, e.g. 00B421AF=left_forearm.",
 )
+@click.option(
+    "--unit",
+    "unit_pairs",
+    multiple=True,
+    metavar="QUANTITY=UNIT",
+    help="Unit of a quantity whose header is missing or wrong (repeatable): acc=g, gyr=deg/s, mag=uT, markers=mm.",
+)
 @click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
 @click.option("--list-formats", "list_formats_flag", is_flag=True, help="List the known input formats and exit.")
 def convert(
@@ -198,6 +214,7 @@ def convert(
     adc_zero: float,
     adc_counts_per_g: float,
     device_names: tuple[str, ...],
+    unit_pairs: tuple[str, ...],
     overwrite: bool,
     list_formats_flag: bool,
 ) -> None:
@@ -213,6 +230,7 @@ def convert(
       imulog convert s01_imu.csv s01_vicon.csv -o s01.mcap --meta-file subject.toml
       imulog convert wrist.csv --mapping bluebuddy.mapping.json -o wrist.mcap
       imulog convert witilt.txt --rate 50 --adc-zero 510 -o tilt.mcap
+      imulog convert wrist_acc.csv --unit acc=g --unit gyr=deg/s -o wrist.mcap   # header without units
       imulog convert exports/ -o trials/          # one trial per recording, with a progress bar
 
     In folder mode the files of one recording share a name stem apart from role words (s01_imu.csv +
@@ -238,7 +256,12 @@ def convert(
     options = ConvertOptions(
         mapping=mapping,
         rate_hz=rate_hz,
-        extra={"zero_counts": adc_zero, "counts_per_g": adc_counts_per_g, "names": _kv(device_names, "--device-name")},
+        extra={
+            "zero_counts": adc_zero,
+            "counts_per_g": adc_counts_per_g,
+            "names": _kv(device_names, "--device-name"),
+            "units": _units(unit_pairs),
+        },
     )
     dirs = [p for p in inputs if p.is_dir()]
     if dirs:
@@ -257,7 +280,7 @@ def convert(
     except (FileExistsError, ValueError, OSError) as e:
         raise click.ClickException(f"{output}: {e}") from None
     click.echo(f"wrote {path} ({', '.join(f'{s.topic} {len(s)}' for s in rec.streams())})")
-    for msg in unit_warnings(rec):
+    for msg in conversion_warnings(rec):
         click.echo(f"warning: {output}: {msg}", err=True)
 
 
@@ -315,7 +338,7 @@ def _convert_directories(
                 target.parent.mkdir(parents=True, exist_ok=True)
                 _write(target, rec, attach=attach, overwrite=overwrite)
                 written += 1
-                warnings.extend(f"{target}: {msg}" for msg in unit_warnings(rec))
+                warnings.extend(f"{target}: {msg}" for msg in conversion_warnings(rec))
             except ConversionError as e:
                 failures.append(str(e))
             except (FileExistsError, ValueError, OSError) as e:

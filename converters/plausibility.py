@@ -1,0 +1,244 @@
+"""Physical plausibility of IMU and marker units: what a human limb and a lab can produce (pure numpy, no I/O).
+
+Two uses:
+
+* :func:`recording_warnings`: after conversion, one line per channel whose values do not fit its declared unit
+  (a deg/s gyroscope under a rad/s header, an accelerometer in g declared m/s^2, markers in mm declared m),
+  naming the likely unit and the option that fixes it (``--unit gyr=deg/s`` or the mapping file);
+* :func:`infer_acc_unit` / :func:`infer_gyr_unit`: the unit of a unit-less column group, with the evidence.
+
+What the checks see (all on the converted SI values):
+
+* accelerometer: the norm at rest is gravity (9.81 m/s^2): ~1 means g, ~1000 mg. Rest = windows of about 1 s
+  where every axis varies by less than 2 % of the norm (unit-free, so it also works before the unit is known);
+  without rest windows the median norm over the recording is used.
+* gyroscope, peaks: a human limb in rehabilitation tasks turns at most a few rad/s (wrist ADL under 10 rad/s) and
+  nearly every wearable gyroscope saturates at +-2000 deg/s = 34.9 rad/s, so values above 40 rad/s (99.9th
+  percentile of the norm) cannot be rad/s: they are deg/s.
+* gyroscope, at rest: while the accelerometer shows the sensor still, the gyroscope component perpendicular to
+  gravity must be near zero (a real rotation about a horizontal axis would turn gravity in the accelerometer).
+  Its mean over a rest window above 0.15 rad/s (8.6 deg/s: larger than the bias of MEMS gyroscopes) means the
+  numbers are deg/s, whose bias of a few tenths of a degree per second reads as tenths of a rad/s.
+* gyroscope, moving: during slow movements (accelerometer norm within 10 % of gravity) the rate at which the
+  gravity direction turns in the sensor frame equals the gyroscope component perpendicular to it; their ratio is
+  1 for rad/s and 57.3 for deg/s read as rad/s. Dynamic acceleration adds apparent tilt, so measured ratios are
+  lower (0.2-0.8 for rad/s and 12-48 for deg/s on the real files in ../shared/data): up to 4 is rad/s, from 8
+  deg/s.
+
+What they cannot see: a calibrated deg/s gyroscope (bias under 0.15 deg/s) declared rad/s in a recording that
+never turns faster than 40 deg/s and never tilts slowly enough for the ratio test (e.g. a sensor lying still, or
+spinning only about the vertical); an accelerometer whose unit error is a factor near 1; markers in cm vs mm
+(a factor 10 inside the range of plausible lab coordinates).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+G0 = 9.80665  # m/s^2
+DEG = math.pi / 180.0
+GYRO_PEAK_MAX_RAD_S = 40.0  # above the +-2000 deg/s range of wearable gyroscopes and any human limb
+GYRO_REST_MAX_RAD_S = 0.15  # perpendicular-to-gravity rate allowed while the accelerometer is still
+RATIO_RAD_MAX, RATIO_DEG_MIN = 4.0, 8.0  # tilt ratio: rad/s up to 4, deg/s from 8 (57.3 nominal)
+REST_WINDOW_S = 1.0
+REST_REL_STD = 0.02
+MARKER_MAX_M = 50.0  # lab coordinates beyond this are mm (or another small unit) declared m
+MARKER_MIN_SPAN_M = 0.01  # every marker within 1 cm of the origin for the whole trial: m declared mm
+
+ACC_UNITS = {"g": 1.0, "m/s^2": G0, "mg": 1000.0}  # the norm of gravity in each unit
+
+
+@dataclass(frozen=True)
+class UnitGuess:
+    """An inferred unit with the evidence in one phrase (``unit`` None: the data cannot tell)."""
+
+    unit: str | None
+    evidence: str
+
+
+def _rate_hz(t_ns: np.ndarray) -> float:
+    dt = np.diff(np.asarray(t_ns, dtype=np.int64))
+    dt = dt[dt > 0]
+    return 1e9 / float(np.median(dt)) if len(dt) else 100.0
+
+
+def rest_windows(acc: np.ndarray, t_ns: np.ndarray, window_s: float = REST_WINDOW_S) -> list[slice]:
+    """Windows of about ``window_s`` where every accelerometer axis varies by under 2 % of the norm (any unit)."""
+    a = np.asarray(acc, dtype=np.float64)
+    n = max(3, int(round(window_s * _rate_hz(t_ns))))
+    out = []
+    for i in range(0, len(a) - n + 1, n):
+        w = a[i : i + n]
+        if not np.isfinite(w).all():
+            continue
+        norm = float(np.linalg.norm(w.mean(axis=0)))
+        if norm > 0 and float(w.std(axis=0).max()) < REST_REL_STD * norm:
+            out.append(slice(i, i + n))
+    return out
+
+
+def rest_acc_norm(acc: np.ndarray, t_ns: np.ndarray) -> tuple[float, bool]:
+    """(median accelerometer norm at rest, True if rest windows were found) in the array's own unit."""
+    a = np.asarray(acc, dtype=np.float64)
+    windows = rest_windows(a, t_ns)
+    if windows:
+        return float(np.median([np.linalg.norm(a[w].mean(axis=0)) for w in windows])), True
+    return float(np.nanmedian(np.linalg.norm(a, axis=1))), False
+
+
+def infer_acc_unit(acc: np.ndarray, t_ns: np.ndarray) -> UnitGuess:
+    """g, m/s^2 or mg from the norm at rest (gravity), or None when it is within 30 % of none of them."""
+    norm, at_rest = rest_acc_norm(acc, t_ns)
+    where = "at rest" if at_rest else "median over the recording (no rest found)"
+    for unit, g in ACC_UNITS.items():
+        if abs(norm / g - 1.0) < 0.3:
+            return UnitGuess(unit, f"norm {where} {norm:.3g} = {norm / g:.2f} g")
+    return UnitGuess(None, f"norm {where} {norm:.3g} fits neither g (1), m/s^2 (9.81) nor mg (1000)")
+
+
+def gyro_peak(gyr: np.ndarray) -> float:
+    """99.9th percentile of the gyroscope norm (array's unit)."""
+    norm = np.linalg.norm(np.asarray(gyr, dtype=np.float64), axis=1)
+    norm = norm[np.isfinite(norm)]
+    return float(np.quantile(norm, 0.999)) if len(norm) else 0.0
+
+
+def gyro_rate_at_rest(gyr: np.ndarray, acc: np.ndarray, t_ns: np.ndarray) -> float | None:
+    """Median over rest windows of |mean gyroscope component perpendicular to gravity| (gyro's unit), or None."""
+    windows = rest_windows(acc, t_ns)
+    if not windows:
+        return None
+    out = []
+    for w in windows:
+        u = np.asarray(acc[w], dtype=np.float64).mean(axis=0)
+        u = u / np.linalg.norm(u)
+        g = np.asarray(gyr[w], dtype=np.float64).mean(axis=0)
+        if np.isfinite(g).all():
+            out.append(float(np.linalg.norm(g - (g @ u) * u)))
+    return float(np.median(out)) if out else None
+
+
+def gyro_tilt_ratio(gyr: np.ndarray, acc: np.ndarray, t_ns: np.ndarray, min_tilt_rad_s: float = 0.15) -> float | None:
+    """Gyroscope-perpendicular rate over the turning rate of the gravity direction seen by the accelerometer.
+
+    Samples where the accelerometer norm is within 10 % of its rest value (slow movement) and gravity turns
+    faster than ``min_tilt_rad_s``; a 0.1 s moving average on both. ~1 for a rad/s gyroscope, ~57.3 for deg/s
+    numbers; None with fewer than 0.5 s of such samples.
+    """
+    a = np.asarray(acc, dtype=np.float64)
+    w = np.asarray(gyr, dtype=np.float64)
+    if len(a) < 8:
+        return None
+    rate = _rate_hz(t_ns)
+    k = max(1, int(round(0.1 * rate)))
+    kernel = np.ones(k) / k
+    a_s = np.column_stack([np.convolve(a[:, j], kernel, mode="same") for j in range(3)])
+    w_s = np.column_stack([np.convolve(w[:, j], kernel, mode="same") for j in range(3)])
+    norm = np.linalg.norm(a_s, axis=1)
+    ref, _ = rest_acc_norm(a, t_ns)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = a_s / norm[:, None]
+        du = np.gradient(u, axis=0) * rate
+        tilt = np.linalg.norm(du, axis=1)
+        perp = np.linalg.norm(w_s - np.sum(w_s * u, axis=1)[:, None] * u, axis=1)
+    ok = np.isfinite(tilt) & np.isfinite(perp) & (np.abs(norm / ref - 1.0) < 0.1) & (tilt > min_tilt_rad_s)
+    ok[: k + 1] = False
+    ok[-k - 1 :] = False
+    if ok.sum() < 0.5 * rate:
+        return None
+    return float(np.sum(perp[ok] * tilt[ok]) / np.sum(tilt[ok] ** 2))
+
+
+def infer_gyr_unit(gyr: np.ndarray, acc: np.ndarray | None, t_ns: np.ndarray) -> UnitGuess:
+    """rad/s or deg/s for unit-less gyroscope numbers (peaks, rest bias vs the accelerometer, tilt ratio)."""
+    peak = gyro_peak(gyr)
+    if peak > GYRO_PEAK_MAX_RAD_S:
+        return UnitGuess("deg/s", f"peaks of {peak:.3g}: beyond a human limb in rad/s")
+    if acc is not None:
+        ratio = gyro_tilt_ratio(gyr, acc, t_ns)
+        if ratio is not None:
+            if 0.5 * DEG * RATIO_DEG_MIN < ratio <= RATIO_RAD_MAX:
+                return UnitGuess("rad/s", f"it turns as fast as gravity turns in the accelerometer (ratio {ratio:.2f})")
+            if RATIO_DEG_MIN <= ratio < 2.5 / DEG:
+                return UnitGuess("deg/s", f"it reads {ratio:.0f}x the rate gravity turns in the accelerometer")
+        rest = gyro_rate_at_rest(gyr, acc, t_ns)
+        if rest is not None and rest > GYRO_REST_MAX_RAD_S:
+            return UnitGuess("deg/s", f"it reads {rest:.2g} at rest: a bias in deg/s, impossible in rad/s")
+    return UnitGuess(None, f"peaks of {peak:.3g} fit both rad/s and deg/s and no slow tilt to compare with")
+
+
+# --------------------------------------------------------------------------------- checks after conversion
+def imu_warnings(topic: str, acc: np.ndarray | None, gyr: np.ndarray | None, t_ns: np.ndarray) -> list[str]:
+    """One line per implausible IMU channel (values already in m/s^2 and rad/s)."""
+    out = []
+    if acc is not None and len(acc) > 2 and np.isfinite(acc).any():
+        norm, at_rest = rest_acc_norm(acc, t_ns)
+        if not 0.5 * G0 <= norm <= 2.0 * G0:
+            guess = ""
+            if 0.5 <= norm <= 2.0:
+                guess = " (the numbers look like g: is the unit g rather than m/s^2? --unit acc=g)"
+            elif 500 <= norm <= 2000:
+                guess = " (the numbers look like mg: --unit acc=mg)"
+            out.append(
+                f"{topic}: median |acc| {'at rest ' if at_rest else ''}is {norm:.3g} m/s^2, expected about 9.81 "
+                f"(gravity){guess}; check the accelerometer unit in the header or mapping file"
+            )
+    if gyr is not None and len(gyr) > 2 and np.isfinite(gyr).any():
+        fix = "is the unit deg/s rather than rad/s? --unit gyr=deg/s or the column's unit in the mapping file"
+        peak = gyro_peak(gyr)
+        rest = gyro_rate_at_rest(gyr, acc, t_ns) if acc is not None else None
+        ratio = gyro_tilt_ratio(gyr, acc, t_ns) if acc is not None else None
+        if peak > GYRO_PEAK_MAX_RAD_S:
+            out.append(
+                f"{topic}: gyroscope peaks of {peak:.3g} rad/s ({peak / DEG:.0f} deg/s), beyond a human limb and "
+                f"the +-2000 deg/s range of wearable gyroscopes; {fix}"
+            )
+        elif ratio is not None and RATIO_DEG_MIN <= ratio < 2.5 / DEG:
+            out.append(
+                f"{topic}: the gyroscope reads {ratio:.0f}x the rate at which gravity turns in the accelerometer "
+                f"(1x expected in rad/s); {fix}"
+            )
+        elif rest is not None and rest > GYRO_REST_MAX_RAD_S:
+            out.append(
+                f"{topic}: while the accelerometer shows the sensor at rest the gyroscope reads {rest:.2g} rad/s "
+                f"about a horizontal axis (gravity would turn {rest / DEG:.0f} deg/s); {fix}"
+            )
+        elif ratio is not None and ratio < RATIO_RAD_MAX * DEG:
+            out.append(
+                f"{topic}: the gyroscope reads 1/{1 / ratio:.0f} of the rate at which gravity turns in the "
+                "accelerometer; is the unit rad/s rather than deg/s? --unit gyr=rad/s"
+            )
+    return out
+
+
+def marker_warnings(topic: str, pos_m: np.ndarray) -> list[str]:
+    """One line when marker positions (m) are too large for a lab (mm declared m) or all within 1 cm (m as mm)."""
+    p = np.asarray(pos_m, dtype=np.float64)
+    finite = p[np.isfinite(p)]
+    if finite.size == 0:
+        return []
+    big = float(np.quantile(np.abs(finite), 0.99))
+    if big > MARKER_MAX_M:
+        return [
+            f"{topic}: marker coordinates reach {big:.3g} m, larger than any lab: are they mm declared m? "
+            "--unit markers=mm"
+        ]
+    if big < MARKER_MIN_SPAN_M:
+        return [
+            f"{topic}: every marker stays within {big * 1000:.2g} mm of the origin: are the numbers m declared mm? "
+            "--unit markers=m"
+        ]
+    return []
+
+
+def recording_warnings(rec) -> list[str]:  # noqa: ANN001 - imulog.model.Recording (no import cycle)
+    """Plausibility warnings for every IMU and marker stream of a converted Recording."""
+    out = []
+    for imu in rec.imus:
+        out.extend(imu_warnings(imu.topic, imu.acc, imu.gyr, imu.t_ns))
+    for markers in rec.markers:
+        out.extend(marker_warnings(markers.topic, markers.pos))
+    return out
