@@ -121,8 +121,9 @@ class OpenSimStoConverter(Converter):
                 nxt = lines[i + 1] if i + 1 < len(lines) else ""
                 return 0.95 if nxt.lower().startswith("time") else 0.5
             if i > 0 and "=" not in line:
-                return 0.0
-        return 0.0
+                break
+        # an OpenSim key=value header without its end (cut off): claim it so the converter names the problem
+        return 0.5 if any(x.startswith(("DataRate=", "DataType=", "OpenSimVersion=")) for x in lines[:3]) else 0.0
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_sto(Path(path))
