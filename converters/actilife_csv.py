@@ -76,6 +76,22 @@ def parse_banner(path: Path, lines: list[str]) -> dict:
     }
 
 
+def _check_complete(path: Path) -> None:
+    """ActiLife ends every row with a line break: a file that does not was cut inside its last row."""
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        f.seek(max(0, size - 1))
+        last = f.read(1)
+    if last not in (b"\n", b"\r"):
+        with open(path, "rb") as f:
+            lines = sum(block.count(b"\n") for block in iter(lambda: f.read(1 << 20), b"")) + 1
+        raise ConversionError(
+            path,
+            "the file ends inside a row (truncated copy?); if the row is complete, end it with a line break",
+            line=lines,
+        )
+
+
 def read_actilife_csv(path: Path, options: ConvertOptions | None = None) -> Recording:
     options = options or ConvertOptions()
     path = Path(path)
@@ -100,6 +116,7 @@ def read_actilife_csv(path: Path, options: ConvertOptions | None = None) -> Reco
         names=spec_names,
         ignore={0} if has_time else set(),
     )
+    _check_complete(path)
     values = read_numeric(spec)
     if has_time:
         values = values[:, 1:]

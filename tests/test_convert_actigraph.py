@@ -248,5 +248,14 @@ def test_actilife_csv_errors(gt3x_dir: Path, tmp_path: Path):
     bad.write_text("\n".join(lines) + "\n")
     with pytest.raises(ConversionError, match=r"bad\.csv: line 16, column 'Accelerometer Y': 'oops' is not a number"):
         read_actilife_csv(bad)
+    data = (gt3x_dir / "exampleRAW.csv").read_bytes()
+    cut = tmp_path / "cut.csv"
+    cut.write_bytes(data[: len(data) // 2])
+    n_lines = data[: len(data) // 2].count(b"\n") + 1
+    with pytest.raises(ConversionError, match=rf"cut\.csv: line {n_lines}: the file ends inside a row"):
+        read_actilife_csv(cut)
+    out = tmp_path / "cut.mcap"
+    r = CliRunner().invoke(cli, ["convert", str(cut), "-o", str(out)])
+    assert r.exit_code != 0 and f"line {n_lines}" in r.output and not out.exists()
     frame = pd.read_csv(io.StringIO("\n".join(lines[10:12])))
     assert list(frame.columns) == ["Accelerometer X", "Accelerometer Y", "Accelerometer Z"]
