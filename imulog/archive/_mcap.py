@@ -576,10 +576,11 @@ def _read_summary(f: BinaryIO, file_size: int) -> Summary:
         elif op == Op.STATISTICS:
             s.statistics = parse_statistics(body)
         elif op == Op.CHUNK_INDEX:
-            ci = parse_chunk_index(body)
-            if ci.chunk_start_offset in seen_chunks:  # a chunk is read once, however often it is indexed
+            offset = _Q.unpack_from(body, 16)[0] if len(body) >= 24 else -1
+            if offset in seen_chunks:  # a chunk is read once, however often it is indexed
                 s.duplicate_chunk_indexes += 1
                 continue
+            ci = parse_chunk_index(body)
             seen_chunks.add(ci.chunk_start_offset)
             s.chunk_indexes.append(ci)
         elif op == Op.ATTACHMENT_INDEX:
