@@ -311,9 +311,9 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
 
 class XsensConverter(Converter):
     name = "xsens"
-    description = "Xsens MT Manager text export (// header, comma or tab; one sensor per file, named by serial)"
+    description = "Xsens MT Manager text export (// header; tab, comma, semicolon or space; one file per sensor)"
     extensions = (".txt", ".csv")
-    example = "imulog convert MT_00B41234_000.txt MT_00B45678_000.txt -o trial.mcap"
+    example = "imulog convert ../shared/data/devices/xsens_mtmanager/ -o xsens/"
 
     def sniff(self, path: Path, head: bytes) -> float:
         lines = text_head_lines(head, 60)
