@@ -385,5 +385,9 @@ class AxivityConverter(Converter):
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_cwa(Path(path), options)
 
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """Bounded-memory pieces for the streaming convert (see the module's :func:`iter_chunks`)."""
+        return iter_chunks(Path(path), options)
+
 
 CONVERTER = AxivityConverter()
