@@ -239,20 +239,17 @@ def cluster_frame_svd(pos_m: np.ndarray, local_m: np.ndarray | None = None) -> t
         cl = (w @ local) / cnt[:, None]
     a = (local[None] - cl[:, None]) * w[..., None]  # (N, M, 3)
     b = (p - cw[:, None]) * w[..., None]
-    h = np.einsum("nmi,nmj->nij", a, b)  # sum local_i * world_j
+    h = np.matmul(a.transpose(0, 2, 1), b)  # sum local_i * world_j
     ok = cnt >= 3
     r = np.full((n, 3, 3), np.nan)
     if ok.any():
         u, _, vt = np.linalg.svd(h[ok])
-        d = np.sign(np.linalg.det(np.einsum("nij,njk->nik", u, vt)))
-        dm = np.zeros((ok.sum(), 3, 3))
-        dm[:, 0, 0] = 1
-        dm[:, 1, 1] = 1
-        dm[:, 2, 2] = d
+        d = np.sign(np.linalg.det(np.matmul(u, vt)))
+        vt[:, 2, :] *= d[:, None]
         # R = V D U^T maps local to world
-        r[ok] = np.einsum("nji,njk,nlk->nil", vt, dm, u)
+        r[ok] = np.matmul(vt.transpose(0, 2, 1), u.transpose(0, 2, 1))
     origin = np.full((n, 3), np.nan)
-    origin[ok] = cw[ok] - np.einsum("nij,nj->ni", r[ok], cl[ok])
+    origin[ok] = cw[ok] - np.matmul(r[ok], cl[ok][:, :, None])[:, :, 0]
     return r, origin
 
 
@@ -715,9 +712,17 @@ def cluster_kinematics(
         raise ValueError(f"cluster method must be 'auto', 'oxy' or 'svd', got {params.cluster!r}")
     idx = resolve_markers(labels, need)
     names = [labels[i] for i in idx]
-    filt, gaps = lowpass_markers(np.asarray(pos_m)[:, idx], rate_hz, params.filter)
+    filt, _ = lowpass_markers(np.asarray(pos_m)[:, idx], rate_hz, params.filter)
+    return kinematics_from_filtered(t_ns, names, filt, rate_hz, params.cluster)
+
+
+def kinematics_from_filtered(
+    t_ns: np.ndarray, names: list[str], filt: np.ndarray, rate_hz: float, cluster: str = "auto"
+) -> ClusterKinematics:
+    """:func:`cluster_kinematics` on markers already low-passed (``filt`` (N, M, 3) m, ``names`` M labels)."""
+    names = list(names)
     oxy_names = sorted(base_name(n) for n in names) == ["O", "X", "Y"]
-    if params.cluster == "oxy" or (params.cluster == "auto" and len(names) == 3):
+    if cluster == "oxy" or (cluster == "auto" and len(names) == 3):
         order = [[base_name(n) for n in names].index(m) for m in ("O", "X", "Y")] if oxy_names else [0, 1, 2]
         filt = filt[:, order]
         names = [names[i] for i in order]

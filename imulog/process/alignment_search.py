@@ -289,21 +289,19 @@ def rank_markers(
     """Markers ranked by the coarse peak correlation of their acceleration norm with the IMU's.
 
     ``acc_norm_imu``: the (low-passed) accelerometer norm (specific force) or, with ``gravity_free``, the
-    norm of the gravity-free acceleration. Without ``gravity_free`` every axis direction is tried as the
-    vertical and the best kept (``extra["vertical"]``). Markers visible in under ``min_visible`` of the
-    frames are skipped.
+    norm of the gravity-free acceleration. Without ``gravity_free`` the markers are ranked with +z up, then
+    every axis direction is tried as the vertical for the best three and the best kept
+    (``extra["vertical"]``). Markers visible in under ``min_visible`` of the frames are skipped.
     """
     from imulog.process.alignment import estimate_lag
 
     step = max(1, int(round(rate_hz / params.coarse_hz)))
     t_c = np.asarray(t_ref_ns)[::step]
-    out = []
-    for j, lab in enumerate(labels):
+
+    def score(j: int, verticals: dict) -> Candidate | None:
         p = pos_filtered_m[:, j]
-        if np.mean(np.all(np.isfinite(p), axis=1)) < params.min_visible:
-            continue
         best = None
-        for key, up in {"none": None}.items() if gravity_free else VERTICALS.items():
+        for key, up in verticals.items():
             an = acceleration_norm(p, rate_hz, None if up is None else np.asarray(up))
             if missing is not None:
                 an[~away_from_gaps(missing[:, j], rate_hz)] = np.nan
@@ -316,11 +314,25 @@ def rank_markers(
                 continue
             if best is None or est.score > best[0].score:
                 best = (est, key)
-        if best is not None:
-            c = Candidate((lab,), 0.0, ncc=best[0].score, offset_ns=best[0].offset_ns)
-            c.extra["vertical"] = best[1]
-            out.append(c)
+        if best is None:
+            return None
+        c = Candidate((labels[j],), 0.0, ncc=best[0].score, offset_ns=best[0].offset_ns)
+        c.extra["vertical"], c.extra["index"] = best[1], j
+        return c
+
+    visible = [
+        j
+        for j in range(len(labels))
+        if np.mean(np.all(np.isfinite(pos_filtered_m[:, j]), axis=1)) >= params.min_visible
+    ]
+    # rank with the usual vertical (+z, Vicon and most labs) or gravity-free, then try every axis on the best few
+    first = {"none": None} if gravity_free else {"+z": VERTICALS["+z"]}
+    out = [c for c in (score(j, first) for j in visible) if c is not None]
     out.sort(key=lambda c: -c.ncc)
+    if not gravity_free:
+        for k, c in enumerate(out[:3]):
+            out[k] = score(c.extra["index"], VERTICALS) or c
+        out.sort(key=lambda c: -c.ncc)
     return out
 
 
@@ -339,7 +351,6 @@ def find_cluster(
     best first), and for the best refined candidate its :class:`ClusterKinematics` and alignment record
     (None, None when no triad exists).
     """
-    import dataclasses
     import time
 
     from imulog.process import alignment as al
@@ -370,12 +381,11 @@ def find_cluster(
             c.ncc = -1.0
         cands.append(c)
     cands.sort(key=lambda c: -c.ncc)
-    auto = dataclasses.replace(params, cluster="auto", markers=())
     best = None
     for c in cands[: max(1, sp.refine)]:
         idx = list(c.extra["index"])
         try:
-            ck = al.cluster_kinematics(t_ref, [labels[i] for i in idx], pos[:, idx], rate_hz, auto)
+            ck = al.kinematics_from_filtered(t_ref, [labels[i] for i in idx], filt[:, idx], rate_hz)
             rec = al.align(t_imu, gyr_rad_s, ck, params, coarse_offset_ns=c.extra.get("coarse_offset_ns"))
         except ValueError:
             continue
@@ -392,7 +402,7 @@ def find_cluster(
     ext = extend_cluster(filt, c.extra["index"], c.rigidity_m, sp)
     if len(ext) > 3:
         try:
-            ck2 = al.cluster_kinematics(t_ref, [labels[i] for i in ext], pos[:, ext], rate_hz, auto)
+            ck2 = al.kinematics_from_filtered(t_ref, [labels[i] for i in ext], filt[:, ext], rate_hz)
             rec2 = al.align(t_imu, gyr_rad_s, ck2, params, coarse_offset_ns=rec["offset_ns"])
             if np.nan_to_num(rec2["vector_match"], nan=-1.0) >= c.vector_match - 0.005:
                 ext_c = Candidate(tuple(labels[i] for i in ext), c.rigidity_m, c.ncc, float(rec2["vector_match"]))

@@ -1,8 +1,13 @@
 """IMU orientation: static periods, Valenti's algebraic initial quaternion, filter backends.
 
 All quaternions are scalar-first and rotate sensor-frame vectors into the IMU's global frame
-(z up; heading arbitrary without a magnetometer, x = magnetic north with one). Accelerations in
-m/s^2, angular rates in rad/s, magnetic field in any unit (only its direction is used).
+(z up; heading arbitrary without a magnetometer). With the magnetometer fused (9D) every backend
+returns the same global frame, **ENU** (:data:`GLOBAL_FRAME_9D`: x east, y magnetic north, z up): VQF
+works in ENU natively, Fusion is asked for ENU, Madgwick's NWU result (x north) is turned by 90 deg
+about the vertical (:func:`nwu_to_enu`). ENU is the convention of ROS (REP 103) and of geodesy, and the
+default backend's own, so the default output needs no conversion. :attr:`OrientationResult.global_frame`
+names the frame (``ENU``, or ``z-up, arbitrary heading`` in 6D). Accelerations in m/s^2, angular rates
+in rad/s, magnetic field in any unit (only its direction is used).
 
 Backends (:data:`BACKENDS`, chosen by :class:`OrientationParams.backend`):
 
@@ -31,6 +36,8 @@ from imulog.process import quaternion as quat
 __all__ = [
     "BACKENDS",
     "DEFAULT_BACKEND",
+    "GLOBAL_FRAME_6D",
+    "GLOBAL_FRAME_9D",
     "GRAVITY_M_S2",
     "OrientationParams",
     "OrientationResult",
@@ -42,11 +49,21 @@ __all__ = [
     "fit_frame_offsets",
     "gravity_free_acceleration",
     "initial_orientation",
+    "nwu_to_enu",
     "orientation_errors",
 ]
 
 GRAVITY_M_S2 = 9.80665
 DEFAULT_BACKEND = "vqf_offline"
+GLOBAL_FRAME_9D = "ENU"  # x east, y magnetic north, z up: every backend with the magnetometer fused
+GLOBAL_FRAME_6D = "z-up, arbitrary heading"
+#: rotation of the NWU global frame into ENU (90 deg about the vertical): q_s2enu = Q_NWU_TO_ENU * q_s2nwu
+Q_NWU_TO_ENU = np.array([np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5)])
+
+
+def nwu_to_enu(q_s2nwu: np.ndarray) -> np.ndarray:
+    """Sensor-to-NWU quaternions (x north, y west, z up) as sensor-to-ENU (x east, y north, z up)."""
+    return quat.multiply(Q_NWU_TO_ENU, np.asarray(q_s2nwu, dtype=np.float64))
 
 
 # --------------------------------------------------------------------------------------------
@@ -173,11 +190,13 @@ class OrientationParams:
 
 @dataclass
 class OrientationResult:
-    """Output of :func:`estimate_orientation`: ``quat`` (N, 4) sensor-to-global, ``static`` (N,) bool."""
+    """Output of :func:`estimate_orientation`: ``quat`` (N, 4) sensor-to-global, ``static`` (N,) bool,
+    ``global_frame`` :data:`GLOBAL_FRAME_9D` (magnetometer fused) or :data:`GLOBAL_FRAME_6D`."""
 
     quat: np.ndarray
     static: np.ndarray
     backend: str
+    global_frame: str = GLOBAL_FRAME_6D
 
 
 Backend = Callable[[np.ndarray, np.ndarray, "np.ndarray | None", float, OrientationParams, np.ndarray], np.ndarray]
@@ -189,7 +208,7 @@ def _madgwick(gyr, acc, mag, rate_hz, params, static):
     q0 = initial_orientation(_first_static_mean(acc, static), None if mag is None else _first_static_mean(mag, static))
     if mag is None:
         return madgwick_imu(gyr, acc, 1.0 / rate_hz, params.beta, q0)
-    return madgwick_marg(gyr, acc, mag, 1.0 / rate_hz, params.beta, q0)
+    return nwu_to_enu(madgwick_marg(gyr, acc, mag, 1.0 / rate_hz, params.beta, q0))  # Madgwick's frame is NWU
 
 
 def _vqf_online(gyr, acc, mag, rate_hz, params, static):
@@ -216,9 +235,12 @@ def _imufusion(gyr, acc, mag, rate_hz, params, static):
             "the imufusion backend needs the optional package 'imufusion' (pip install imufusion)"
         ) from exc
     ahrs = imufusion.Ahrs()
-    settings = imufusion.AhrsSettings(
-        sample_rate=float(rate_hz), convention=imufusion.CONVENTION_NWU, gain=float(params.imufusion_gain)
-    )
+    # imufusion 1.3 ignores AhrsSettings(...) keyword arguments (convention and gain stayed at NWU, 0.5):
+    # set the attributes instead
+    settings = imufusion.AhrsSettings()
+    settings.convention = imufusion.CONVENTION_ENU
+    settings.gain = float(params.imufusion_gain)
+    settings.sample_rate = float(rate_hz)
     ahrs.set_settings(settings)
     if hasattr(ahrs, "set_sample_period"):
         ahrs.set_sample_period(1.0 / rate_hz)
@@ -298,7 +320,7 @@ def _on_uniform_grid(
     res = estimate_orientation(interp(gyr), interp(acc), nominal_hz, None if mag is None else interp(mag), params)
     q = resample_quaternions(grid, res.quat, t, ResampleParams(cutoff_ratio=0.0))
     idx = np.clip(np.searchsorted(grid, t), 0, len(grid) - 1)
-    return OrientationResult(quat=q, static=res.static[idx], backend=res.backend)
+    return OrientationResult(quat=q, static=res.static[idx], backend=res.backend, global_frame=res.global_frame)
 
 
 def estimate_orientation(
@@ -326,7 +348,8 @@ def estimate_orientation(
     static = detect_static(gyr, rate_hz, params.static)
     q = np.asarray(BACKENDS[params.backend](gyr, acc, m, float(rate_hz), params, static), dtype=np.float64)
     # every backend returns unit quaternions; their sign is kept continuous (no w >= 0 flips)
-    return OrientationResult(quat=q, static=static, backend=params.backend)
+    frame = GLOBAL_FRAME_9D if m is not None else GLOBAL_FRAME_6D
+    return OrientationResult(quat=q, static=static, backend=params.backend, global_frame=frame)
 
 
 def gravity_free_acceleration(

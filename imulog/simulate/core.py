@@ -160,7 +160,8 @@ def simulate(protocol: str, *, subject: int = 0, trial: int = 0, seed: int = 0, 
     inc = np.radians(env.inclination_deg)
     psi = np.radians(north)
     field_world = env.field_uT * np.array([np.cos(inc) * np.cos(psi), np.cos(inc) * np.sin(psi), -np.sin(inc)])
-    q_global_to_world = quat.from_rotation_vector(np.array([0.0, 0.0, psi]))
+    # the 9D orientation's global frame is ENU (y = magnetic north, imulog.process.orientation.GLOBAL_FRAME_9D)
+    q_global_to_world = quat.from_rotation_vector(np.array([0.0, 0.0, psi - np.pi / 2]))
 
     # clocks and sample times
     vrate = p["clock"].vicon_rate_hz

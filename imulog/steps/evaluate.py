@@ -88,8 +88,13 @@ def table_from_record(record: dict[str, Any]) -> str:
 def reference_source(trial, topics: list[str]) -> str:
     """The optical reference to compare with, from channel metadata only (no data read).
 
-    ``/derived/vicon/cluster_pose`` when the align step ran, else ``{markers topic}:O`` (the cluster origin).
+    ``/derived/vicon/cluster_pose`` when the align step ran on a cluster, ``{markers topic}:{marker}`` when it
+    aligned on one marker (``reference_marker``), else ``{markers topic}:O`` (the cluster origin).
     """
+    record = trial.metadata.get("imulog.alignment") or {}
+    marker = record.get("reference_marker")
+    if marker and str(record.get("reference", "")).startswith("/markers/") and record["reference"] in topics:
+        return f"{record['reference']}:{marker}"
     if POSE_TOPIC in topics:
         return POSE_TOPIC
     markers = [t for t in topics if t.startswith("/markers/")]
@@ -117,8 +122,32 @@ def read_reference(trial, source: str) -> tuple[np.ndarray, np.ndarray]:
         return pose.t_ns, pose.position
     topic, _, marker = source.partition(":")
     stream = trial.read(topic)
+    if marker in stream.labels:
+        return stream.t_ns, stream.pos[:, stream.labels.index(marker)]
     labels = [label.split(":")[-1] for label in stream.labels]
-    return stream.t_ns, stream.pos[:, labels.index(marker)]
+    return stream.t_ns, stream.pos[:, labels.index(marker.split(":")[-1])]
+
+
+def check_clock(path, metadata: dict[str, Any]) -> dict[str, Any]:
+    """The alignment the trajectories were put on the reference clock with; a one-line ValueError naming
+    the command to run when there is none, or when the trajectories are still on the IMU device clock."""
+    from imulog.steps.align import require_alignment
+
+    info = metadata.get("imulog.trajectory") or {}
+    imu = info.get("imu")
+    record = require_alignment(metadata, path, imu, needed_for="evaluate (IMU trajectories against Vicon)")
+    if info.get("clock") == "device":
+        raise ValueError(
+            "the trajectories are on the IMU device clock (computed before the alignment): "
+            f"run `imulog process trajectory {path}` again"
+        )
+    return record
+
+
+def alignment_note(record: dict[str, Any]) -> dict[str, Any]:
+    """What the evaluation record keeps of the alignment: quality, reasons, score, offset, drift."""
+    keys = ("quality", "quality_reasons", "score", "offset_ns", "drift_ppm", "signal", "residual_spread_ns")
+    return {k: record[k] for k in keys if k in record}
 
 
 def run_evaluate(path, *, methods: list[str] | None = None, max_gap_s: float = 0.05, force: bool = False):
@@ -130,6 +159,8 @@ def run_evaluate(path, *, methods: list[str] | None = None, max_gap_s: float = 0
         topics = trial.topics()
         available = sorted(t.rsplit("/", 1)[1] for t in topics if t.startswith("/derived/trajectory/"))
         ref_topic = reference_source(trial, topics)
+        metadata = trial.metadata
+    alignment = check_clock(path, metadata)
     if not available:
         raise ValueError("no /derived/trajectory/* channel: run `imulog process trajectory` first")
     chosen = available if not methods else [m for m in methods if m in available]
@@ -148,6 +179,7 @@ def run_evaluate(path, *, methods: list[str] | None = None, max_gap_s: float = 0
         info = trial.metadata.get("imulog.trajectory", {})
         reps = info.get("repetitions")
         record = compute_evaluation(trajs, ref, reference_topic=ref_name, windows=reps, max_gap_s=max_gap_s)
+        record["alignment"] = alignment_note(alignment)
         holder["record"] = record
         return StepResult(streams=[], metadata={"imulog.evaluation": record})
 
@@ -157,6 +189,7 @@ def run_evaluate(path, *, methods: list[str] | None = None, max_gap_s: float = 0
         algorithm="imulog.evaluation",
         params={"methods": chosen, "max_gap_s": max_gap_s},
         inputs=inputs,
+        metadata_inputs=("imulog.alignment",),
         compute=compute,
         force=force,
     )
