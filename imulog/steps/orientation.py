@@ -87,6 +87,13 @@ def params_dict(params: OrientationParams) -> dict:
     return dataclasses.asdict(params)
 
 
+def global_frame(params: OrientationParams) -> str:
+    """The orientation's global frame: ENU when the magnetometer is fused, else z-up with arbitrary heading."""
+    from imulog.process.orientation import GLOBAL_FRAME_6D, GLOBAL_FRAME_9D
+
+    return GLOBAL_FRAME_9D if params.use_mag else GLOBAL_FRAME_6D
+
+
 def run_orientation(
     path,
     *,
@@ -113,7 +120,8 @@ def run_orientation(
         path,
         step=f"{STEP}:{name}",
         algorithm=f"imulog.orientation.{params.backend}",
-        params={"imu": name, **params_dict(params)},
+        # the global frame (ENU with the magnetometer fused) is recorded in every output channel's params
+        params={"imu": name, **params_dict(params), "global_frame": global_frame(params)},
         inputs=[topic],
         compute=compute,
         force=force,
