@@ -118,6 +118,17 @@ def _echo_periods(metrics: dict) -> None:
         click.echo(f"  ... {len(rows) - 48} more (info --json lists all)")
 
 
+def _echo_alignment(record: dict) -> None:
+    """The IMU-to-Vicon alignment: offset and drift with uncertainty, markers, windows, quality flag."""
+    from imulog.steps.align import alignment_summary
+
+    lines = alignment_summary(record)
+    if lines:
+        click.echo(f"alignment ({record.get('imu', '?')} on {record.get('reference', '?')}): {lines[0]}")
+        for line in lines[1:]:
+            click.echo(f"  {line}")
+
+
 @click.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="print one JSON document (for scripts)")
@@ -172,6 +183,7 @@ def info(file: str, as_json: bool) -> None:
             shown = shown[:197] + "..."
         click.echo(f"  {name}: {shown}")
     _echo_periods(data["metadata"].get("imulog.metrics") or {})
+    _echo_alignment(data["metadata"].get("imulog.alignment") or {})
     if data["attachments"]:
         click.echo("attachments:")
         for a in data["attachments"]:
