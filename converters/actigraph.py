@@ -579,8 +579,10 @@ def _iter_log(path: Path, z: zipfile.ZipFile, st: _State, offset: int | None) ->
             found = found or bool(imus)
             rec = Recording(imus=imus, signals=signals, sources=[str(path)])
             rec.metadata[f"imulog.device.{st.name}"] = dict(st.meta)
-            if st.schemas:
-                rec.metadata[f"imulog.device.{st.name}_imu"] = {**st.meta, "model": f"{st.meta['model']} IMU"}
+            imu_stream = next((s for s in imus if s.name == f"{st.name}_imu"), None)
+            if imu_stream is not None:
+                imu_meta = {k: v for k, v in imu_stream.meta.items() if k != "accel_scale_lsb_per_g"}
+                rec.metadata[f"imulog.device.{st.name}_imu"] = {**imu_meta, "model": f"{st.meta['model']} IMU"}
             rec.metadata["imulog.trial"] = dict(trial)
             yield rec
     if not found:

@@ -64,7 +64,9 @@ def test_streams_rates_and_start_time(rec):
     assert trial == {"start_time": "2019-02-14T08:58:00.000-05:00", "time_zone": "-05:00"}
     dev = rec.metadata["imulog.device.tas1e31150129"]
     assert dev["accel_scale"] == 256.0 and dev["imu_gyro_scale"] == pytest.approx(16.384, abs=1e-5)
-    assert dev["idle_sleep_gaps"] == 0 and dev["serial"] == "TAS1E31150129"
+    assert dev["idle_sleep_gaps"] == 0 and dev["serial"] == "TAS1E31150129" and dev["rate_hz"] == 90.0
+    dev_imu = rec.metadata["imulog.device.tas1e31150129_imu"]
+    assert dev_imu["rate_hz"] == 100.0 and dev_imu["model"] == "ActiGraph Link IMU"
     # at rest on a waist: |acc| near 1 g in both accelerometers
     assert np.median(np.linalg.norm(acc.acc, axis=1)) == pytest.approx(G0, rel=0.05)
     assert np.median(np.linalg.norm(imu.acc, axis=1)) == pytest.approx(G0, rel=0.05)
