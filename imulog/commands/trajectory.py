@@ -170,3 +170,6 @@ def evaluate(trial: Path, methods: str | None, max_gap: float, as_json: bool, fo
         return
     click.echo(f"{trial}: errors against {record.get('reference', '?')} (mean±std over repetitions)")
     click.echo(table_from_record(record))
+    aligned = record.get("alignment") or {}
+    if aligned.get("quality") == "poor":  # flagged by imulog process align (docs/alignment.md)
+        click.echo(f"{trial}: warning: poor alignment: {'; '.join(aligned.get('quality_reasons') or [])}")
