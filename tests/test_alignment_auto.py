@@ -152,6 +152,8 @@ def test_cluster_markers_override_with_or_without_prefix(tmp_path):
         assert rec["cluster"]["selection"] == "given" and all(m.startswith("S3:") for m in rec["cluster"]["markers"])
         assert np.abs(al.device_to_reference(imu.t_ns, rec) - sim.truth.imu_t_ref_ns).max() < 2 * MS
     assert "markers S3:O,S3:X,S3:Y,S3:A (given" in res.output and "windows" in res.output and "quality" in res.output
+    info = runner.invoke(cli, ["info", str(path)]).output
+    assert "alignment (/imu/wrist on /markers/vicon): offset" in info and "ppm ±" in info and "\n  quality " in info
     bad = runner.invoke(cli, ["process", "align", str(path), "--cluster-markers", "O,X,Q"])
     assert bad.exit_code == 1 and "marker(s) Q not in the marker stream" in bad.output
     assert len(bad.output.strip().splitlines()) == 1
@@ -176,6 +178,16 @@ def test_evaluate_refuses_without_a_valid_alignment(tmp_path):
     append_derived(path, [], run=run, metadata={"imulog.alignment": {**sim.truth.alignment, "quality": "good"}})
     res = runner.invoke(cli, ["evaluate", str(path)])
     assert res.exit_code == 1 and "device clock" in res.output and "imulog process trajectory" in res.output
+    # on the reference clock with a poor alignment: the table, then the flag
+    poor = {**sim.truth.alignment, "quality": "poor", "quality_reasons": ["only 1 usable window(s) (< 3)"]}
+    reference = {"imulog.trajectory": {"imu": "/imu/wrist", "clock": "reference"}, "imulog.alignment": poor}
+    append_derived(path, [], run=run, metadata=reference)
+    res = runner.invoke(cli, ["evaluate", str(path)])
+    assert res.exit_code == 0, res.output
+    assert res.output.splitlines()[1].startswith("method")
+    assert res.output.splitlines()[-1].endswith("warning: poor alignment: only 1 usable window(s) (< 3)")
+    with TrialReader(path) as t:
+        assert t.metadata["imulog.evaluation"]["alignment"]["quality"] == "poor"
 
 
 def test_9d_backends_agree_on_enu_heading():
