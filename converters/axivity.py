@@ -167,21 +167,20 @@ def unpack_int16(data: np.ndarray, count: int, axes: int) -> np.ndarray:
 class _Layout:
     axes: int
     packed: bool
-    count: int
+    capacity: int  # samples a block can hold; each block says how many it holds (sampleCount)
 
 
 def _layout(path: Path, blocks: np.ndarray, first_index: int) -> _Layout:
-    """The (single) sample layout of a batch of blocks; ConversionError naming the first odd block."""
+    """The (single) sample format of a batch of blocks; ConversionError naming the first odd block."""
     axes_bps = blocks["axes_bps"]
-    counts = blocks["count"]
-    a0, c0 = int(axes_bps[0]), int(counts[0])
-    odd = np.nonzero((axes_bps != a0) | (counts != c0))[0]
+    a0 = int(axes_bps[0])
+    odd = np.nonzero(axes_bps != a0)[0]
     if len(odd):
         i = int(odd[0])
         raise ConversionError(
             path,
-            f"data block {first_index + i}: sample layout changes (numAxesBPS 0x{int(axes_bps[i]):02X}, "
-            f"{int(counts[i])} samples; the file started with 0x{a0:02X}, {c0})",
+            f"data block {first_index + i}: sample format changes (numAxesBPS 0x{int(axes_bps[i]):02X}; "
+            f"the file started with 0x{a0:02X})",
         )
     axes, bps = a0 >> 4, a0 & 0x0F
     if bps == 0 and axes == 3:
@@ -190,9 +189,15 @@ def _layout(path: Path, blocks: np.ndarray, first_index: int) -> _Layout:
         packed, size = False, 2 * axes
     else:
         raise ConversionError(path, f"data block {first_index}: unsupported sample format numAxesBPS 0x{a0:02X}")
-    if c0 == 0 or c0 * size > 480:
-        raise ConversionError(path, f"data block {first_index}: impossible sample count {c0}")
-    return _Layout(axes=axes, packed=packed, count=c0)
+    capacity = 480 // size
+    too_many = np.nonzero(blocks["count"] > capacity)[0]
+    if len(too_many):
+        i = int(too_many[0])
+        raise ConversionError(
+            path,
+            f"data block {first_index + i}: impossible sample count {int(blocks['count'][i])} (at most {capacity})",
+        )
+    return _Layout(axes=axes, packed=packed, capacity=capacity)
 
 
 def _check_blocks(path: Path, raw: np.ndarray, blocks: np.ndarray, first_index: int) -> np.ndarray:
@@ -223,8 +228,8 @@ def _decode(blocks: np.ndarray, layout: _Layout) -> tuple[np.ndarray, np.ndarray
     """(acc g, gyr deg/s or None, mag uT or None), each (N, count, 3) float64."""
     accel_lsb = np.left_shift(1, 8 + ((blocks["light"].astype(np.int64) >> 13) & 7)).astype(np.float64)
     if layout.packed:
-        return unpack_packed(blocks["data"], layout.count) / accel_lsb[:, None, None], None, None
-    raw = unpack_int16(blocks["data"], layout.count, layout.axes).astype(np.float64)
+        return unpack_packed(blocks["data"], layout.capacity) / accel_lsb[:, None, None], None, None
+    raw = unpack_int16(blocks["data"], layout.capacity, layout.axes).astype(np.float64)
     if layout.axes == 3:
         return raw / accel_lsb[:, None, None], None, None
     gyro_range = 8000.0 / np.left_shift(1, (blocks["light"].astype(np.int64) >> 10) & 7)
@@ -234,16 +239,18 @@ def _decode(blocks: np.ndarray, layout: _Layout) -> tuple[np.ndarray, np.ndarray
     return acc, gyr, mag
 
 
-def sample_times_ns(starts: np.ndarray, next_start: int | None, count: int, rate_hz: np.ndarray) -> np.ndarray:
-    """Per-sample times (N, count) int64 ns from block starts: interpolated to the next block's start when it
-    follows within twice the nominal block duration, else at the nominal rate."""
-    nominal = np.round(count * NS_PER_S / rate_hz).astype(np.int64)
+def sample_times_ns(starts: np.ndarray, next_start: int | None, counts: np.ndarray, rate_hz: np.ndarray) -> np.ndarray:
+    """Per-sample times (N, max count) int64 ns from block starts (entries past a block's count are meaningless):
+    spread to the next block's start when it follows within twice the nominal block duration, else at the
+    nominal rate."""
+    counts = np.maximum(np.asarray(counts, dtype=np.int64), 1)
+    nominal = np.round(counts * NS_PER_S / rate_hz).astype(np.int64)
     nxt = np.append(starts[1:], next_start if next_start is not None else starts[-1] + nominal[-1])
     span = nxt - starts
     ok = (span > 0) & (span < 2 * nominal)
     span = np.where(ok, span, nominal)
-    k = np.arange(count, dtype=np.int64)
-    return starts[:, None] + (span[:, None] * k[None, :]) // count
+    k = np.arange(int(counts.max()), dtype=np.int64)
+    return starts[:, None] + (span[:, None] * k[None, :]) // counts[:, None]
 
 
 def iter_chunks(
@@ -286,6 +293,9 @@ def iter_chunks(
             ahead = int(block_start_ns(blocks_all[-1:])[0])
         if len(keep) == 0:
             continue
+        keep = keep[blocks_all["count"][keep] > 0]  # a block without samples adds nothing
+        if len(keep) == 0:
+            continue
         blocks = blocks_all[keep]
         index = first + keep  # block indices in the file
         lay = _layout(path, blocks, int(index[0]))
@@ -295,23 +305,25 @@ def iter_chunks(
             raise ConversionError(path, f"data block {int(index[0])}: sample layout changes within the recording")
         rate = rate_from_code(blocks["rate_code"])
         starts = block_start_ns(blocks)
-        t = sample_times_ns(starts, ahead, layout.count, rate).ravel()
+        counts = blocks["count"].astype(np.int64)
+        filled = np.arange(layout.capacity)[None, :] < counts[:, None]  # (N, capacity): the samples each block holds
+        t = sample_times_ns(starts, ahead, counts, rate)
+        t = np.pad(t, ((0, 0), (0, layout.capacity - t.shape[1])))[filled]
         if origin is None:
             origin = int(t[0])
             meta = _device_meta(path, header, layout, name, blocks)
         d = np.diff(np.concatenate([[origin - 1 if prev_end is None else prev_end], t]))
         if (d <= 0).any():
-            i = int(np.nonzero(d <= 0)[0][0]) // layout.count
+            i = int(np.repeat(np.arange(len(counts)), counts)[int(np.nonzero(d <= 0)[0][0])])
             raise ConversionError(path, f"data block {int(index[i])}: time stamp goes backwards")
         prev_end = int(t[-1])
         acc, gyr, mag = _decode(blocks, layout)
-        n = len(t)
         imu = ImuStream(
             name=name,
             t_ns=t - origin,
-            acc=acc.reshape(n, 3) * G0,
-            gyr=None if gyr is None else np.radians(gyr.reshape(n, 3)),
-            mag=None if mag is None else mag.reshape(n, 3),
+            acc=acc[filled] * G0,
+            gyr=None if gyr is None else np.radians(gyr[filled]),
+            mag=None if mag is None else mag[filled],
             meta=dict(meta),
         )
         signals = SignalStream(
@@ -350,7 +362,7 @@ def _device_meta(path: Path, header: CwaHeader, layout: _Layout, name: str, bloc
         "accel_range_g": header.accel_range_g,
         "accel_lsb_per_g": 1 << (8 + ((light >> 13) & 7)),
         "sample_format": "packed 3x10-bit + exponent" if layout.packed else f"{layout.axes} x int16",
-        "samples_per_block": layout.count,
+        "samples_per_block": int(blocks["count"][0]),
         "time_base": "ns from start_time; device RTC in local time without a zone",
         "source": path.name,
     }

@@ -6,6 +6,7 @@ A lab adds its own device by writing a class like this and registering an instan
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
@@ -46,6 +47,11 @@ class Converter:
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:  # pragma: no cover
         raise NotImplementedError
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording] | None:
+        """Consecutive pieces of the recording in bounded memory (same streams, time order, one time origin), or
+        None when the format is read whole. ``imulog convert`` streams large files of formats that have it."""
+        return None
 
     def recording_key(self, path: Path) -> str | None:
         """The recording ``path`` belongs to when the format names it (e.g. Xsens ``MT_<master>_<trial>-000_<id>``:

@@ -139,6 +139,25 @@ class TrialReader:
             raise ArchiveCorruptError(f"{self.path}: {exc}") from None
         t0 = [ci.message_start_time for ci in self.summary.chunk_indexes]
         self._t0 = min(t0) if t0 else 0
+        self._merge_channel_stats()
+
+    def _merge_channel_stats(self) -> None:
+        """Channels written piece by piece (:mod:`imulog.archive.streaming`) keep their sample count, time span,
+        rate, gaps and content hash in one closing metadata record: merge it into their metadata here, so every
+        reader sees them as if they were in the Channel record."""
+        names = {c.metadata.get("stats_record") for c in self.summary.channels.values()} - {None, ""}
+        for name in names:
+            try:
+                record = self.metadata.get(name) or {}
+            except ArchiveError:
+                self._f.close()
+                raise
+            for c in self.summary.channels.values():
+                if c.metadata.get("stats_record") != name:
+                    continue
+                stats = record.get(c.topic)
+                if isinstance(stats, dict):
+                    c.metadata.update({k: str(v) for k, v in stats.items() if k not in c.metadata})
 
     # ------------------------------------------------------------------ context manager
     def __enter__(self) -> TrialReader:

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
+import os
 import sys
 import tomllib
 from pathlib import Path
@@ -12,7 +14,16 @@ from typing import Any
 import click
 
 from converters import ConversionError, ConvertOptions, UnknownFormatError
-from converters.registry import available, convert_files, detect, group_directory, list_formats, recording_key
+from converters.base import Converter
+from converters.registry import (
+    available,
+    convert_files,
+    detect,
+    get,
+    group_directory,
+    list_formats,
+    recording_key,
+)
 from imulog.model import Recording
 
 TRIAL_RECORD = "imulog.trial"
@@ -127,6 +138,104 @@ def _write(out: Path, rec: Recording, *, attach: bool, overwrite: bool) -> Path:
         return write_trial(out, rec, attach_sources=attach, overwrite=overwrite)
     except ArchiveError as e:
         raise ConversionError(None, str(e)) from None
+
+
+#: files at least this large are converted piece by piece when their format can (memory stays bounded)
+STREAM_MIN_BYTES = int(os.environ.get("IMULOG_STREAM_MIN_BYTES", 32 * 1024 * 1024))
+
+
+def _streams(path: Path, fmt: str | None, options: ConvertOptions) -> bool:
+    """True when ``path`` is large and its format reads piece by piece (``Converter.iter_chunks``)."""
+    if not path.is_file() or path.stat().st_size < STREAM_MIN_BYTES:
+        return False
+    try:
+        conv = get(_format_name(path, fmt, options))
+    except (ConversionError, UnknownFormatError):
+        return False
+    return type(conv).iter_chunks is not Converter.iter_chunks
+
+
+def _convert_streaming(
+    path: Path, output: Path, fmt: str | None, options: ConvertOptions, meta: dict, *, attach: bool, overwrite: bool
+) -> None:
+    """Convert one large file piece by piece (memory bounded by a piece, not by the recording)."""
+    from converters.plausibility import recording_warnings
+    from imulog import __version__
+    from imulog.archive import ArchiveError
+    from imulog.archive.streaming import StreamingTrialWriter
+
+    name = _format_name(path, fmt, options)
+    conv = get(name)
+    size = path.stat().st_size
+    notes: list[str] = []
+    counts: dict[str, int] = {}
+    try:
+        pieces = conv.iter_chunks(path, options)
+        first = next(pieces, None)
+        if first is None:
+            raise ConversionError(path, "no samples")
+        records = {k: {**first.metadata.get(k, {}), **v} for k, v in meta.items()}
+        records["imulog.conversion"] = {
+            "imulog_version": __version__,
+            "inputs": [path.name],
+            "formats": {path.name: name},
+            "sha256": {path.name: sha256_of(path)},
+            "streamed": True,
+        }
+        expected = _expected_duration_s(first, size)
+        with (
+            StreamingTrialWriter(
+                output,
+                metadata=records,
+                sources=[path] if attach else [],
+                overwrite=overwrite,
+                expected_duration_s=expected,
+            ) as writer,
+            click.progressbar(
+                length=max(1, int(expected or 1)), label=f"converting {path.name} (s of recording)", file=sys.stderr
+            ) as bar,
+        ):
+            covered, shown = 0.0, 0
+            for piece in itertools.chain([first], pieces):
+                writer.write(piece)
+                for stream in piece.streams():
+                    counts[stream.topic] = counts.get(stream.topic, 0) + len(stream)
+                # the converter's own notes for every piece; unit plausibility on the first piece (an hour or
+                # more of data: a wrong unit shows there as anywhere, and the check is costly on a week)
+                checks = recording_warnings(piece) if piece is first else []
+                for note in [*piece.warnings, *checks]:
+                    if note not in notes:
+                        notes.append(note)
+                covered += _span_s(piece)
+                target = min(bar.length - 1, int(covered))  # an estimate: the bar closes when the file ends
+                bar.update(max(0, target - shown))
+                shown = max(shown, target)
+            bar.update(bar.length - shown)
+            if notes:
+                writer.metadata["imulog.conversion"]["warnings"] = notes
+    except ConversionError as e:
+        raise click.ClickException(str(e)) from None
+    except ArchiveError as e:
+        raise click.ClickException(str(e)) from None
+    except (FileExistsError, ValueError, OSError) as e:
+        raise click.ClickException(f"{output}: {e}") from None
+    click.echo(f"wrote {output} ({', '.join(f'{t} {n}' for t, n in counts.items())}; converted piece by piece)")
+    for msg in notes:
+        click.echo(f"warning: {output}: {msg}", err=True)
+
+
+def _span_s(piece: Recording) -> float:
+    """Seconds covered by a piece (its longest stream)."""
+    spans = [(s.t_ns[-1] - s.t_ns[0]) / 1e9 for s in piece.streams() if getattr(s, "t_ns", None) is not None and len(s)]
+    return max(spans, default=0.0)
+
+
+def _expected_duration_s(first: Recording, size: int) -> float | None:
+    """About how long the file's recording is (s), assuming ~12 bytes per IMU sample as the wearables' binary
+    formats store them; for the progress bar and the viewer twins' message budget only."""
+    span = _span_s(first)
+    rate = sum(len(s) for s in first.imus) / span if span > 0 else 0.0
+    return size / (12.0 * rate) if rate > 0 else None
 
 
 def _kv(pairs: tuple[str, ...], option: str) -> dict[str, str]:
@@ -271,6 +380,9 @@ def convert(
         return
     if output.suffix.lower() != ".mcap":
         raise click.UsageError(f"output {output} should end in .mcap")
+    if len(inputs) == 1 and _streams(inputs[0], fmt, options):
+        _convert_streaming(inputs[0], output, fmt, options, meta, attach=not no_attach, overwrite=overwrite)
+        return
     try:
         rec, formats = _convert_group(list(inputs), fmt, options)
         finish_recording(rec, meta, formats)

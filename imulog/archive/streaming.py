@@ -1,0 +1,384 @@
+"""Write a trial piece by piece, in bounded memory: a week of wrist data converts without holding it.
+
+:class:`StreamingTrialWriter` takes consecutive pieces of one recording (``Recording`` objects with the same
+streams, in time order, as the binary readers' ``iter_chunks`` yield them), encodes each piece's blocks at once,
+and writes a chunk whenever a channel has gathered ``CHUNK_TARGET_BYTES``: memory is bounded by one piece plus
+one pending chunk per channel, not by the recording.
+
+What a whole-file writer puts in each Channel record but only the end of a recording knows (sample count, first
+and last time, rate, gaps, NaN samples, content hash) goes into one metadata record written last,
+``imulog.channel_stats`` (topic -> those fields), and the channel's metadata says ``stats_record`` so readers
+merge it back (:class:`imulog.archive.TrialReader` does; to any other MCAP reader the channels are ordinary).
+The file layout is otherwise the one :func:`imulog.archive.write_trial` makes: raw channels first, viewer twins
+after them (in the same chunks order), attachments, metadata records, ``imulog.timeline`` and ``imulog.raw``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import mimetypes
+import os
+import struct
+import zlib
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from imulog.archive import _mcap as m
+from imulog.archive import codec
+from imulog.archive._builder import CHUNK_TARGET_BYTES, McapBuilder
+from imulog.archive.errors import ArchiveError, ArchiveExistsError
+from imulog.archive.files import atomic_output, target_path, writer_lock
+from imulog.archive.metadata import encode_record
+from imulog.archive.timeline import TIMELINE_RECORD, TimelineError, TrialAxis, timeline_record
+from imulog.model import Recording, Stream
+
+STATS_RECORD = "imulog.channel_stats"
+STATS_KEYS = ("sample_count", "start_ns", "end_ns", "rate_hz", "time_gaps", "nan_samples", "sha256")
+
+
+class ChannelStats:
+    """Running statistics of one channel, the same fields :mod:`imulog.archive.codec` computes at once."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.start: int | None = None
+        self.end: int | None = None
+        self.median_dt: float | None = None
+        self.gaps = 0
+        self.nan = 0
+        self.has_values = False
+        self._hash = hashlib.sha256()
+
+    def add_samples(self, t_ns: np.ndarray, values: Iterable[np.ndarray | None]) -> None:
+        t = np.asarray(t_ns, dtype=np.int64)
+        if not len(t):
+            return
+        if self.median_dt is None and len(t) > 1:
+            self.median_dt = float(np.median(np.diff(t)))
+        t_all = np.concatenate([[self.end], t]) if self.end is not None else t
+        if self.median_dt and len(t_all) > 1:
+            self.gaps += int(np.count_nonzero(np.diff(t_all) > 1.5 * self.median_dt))
+        arrays = [v for v in values if v is not None]
+        if arrays:
+            self.has_values = True
+            finite = np.ones(len(t), dtype=bool)
+            for v in arrays:
+                finite &= np.isfinite(np.asarray(v).reshape(len(t), -1)).all(axis=1)
+            self.nan += int(len(t) - np.count_nonzero(finite))
+        self.start = int(t[0]) if self.start is None else self.start
+        self.end = int(t[-1])
+        self.count += len(t)
+
+    def add_payloads(self, payloads: Iterable[bytes]) -> None:
+        """Continue the content hash (as :func:`imulog.archive.writer.payload_hash`)."""
+        for p in payloads:
+            self._hash.update(struct.pack("<Q", len(p)))
+            self._hash.update(p)
+
+    @property
+    def sha256(self) -> str:
+        return self._hash.hexdigest()
+
+    def to_meta(self) -> dict[str, str]:
+        out = {"sample_count": str(self.count), "sha256": self.sha256}
+        if self.count:
+            out["start_ns"], out["end_ns"] = str(self.start), str(self.end)
+        if self.count > 1 and self.median_dt:
+            out["rate_hz"] = f"{1e9 / self.median_dt:.6g}"
+            out["time_gaps"] = str(self.gaps)
+        if self.has_values:
+            out["nan_samples"] = str(self.nan)
+        return out
+
+
+def _sample_arrays(stream: Stream) -> tuple[np.ndarray, list[np.ndarray | None]]:
+    """(times, value arrays) of a piece, for the statistics; intervals count their starts."""
+    t = getattr(stream, "t_ns", None)
+    if t is None:
+        return np.asarray(stream.start_ns), []
+    names = ("acc", "gyr", "mag", "temperature", "pos", "values", "position")
+    return np.asarray(t), [getattr(stream, n) for n in names if getattr(stream, n, None) is not None]
+
+
+class _Channel:
+    def __init__(self, channel_id: int, topic: str) -> None:
+        self.id = channel_id
+        self.topic = topic
+        self.stats = ChannelStats()
+        self.times: list[int] = []
+        self.payloads: list[bytes] = []
+        self.pending = 0
+
+
+class StreamingTrialWriter:
+    """``with StreamingTrialWriter(path, metadata=...) as w: for piece in pieces: w.write(piece)``.
+
+    ``metadata``: the trial's records (``imulog.trial`` with ``start_time`` sets the time axis); ``sources``: files
+    to attach (read in 1 MiB blocks at the end); ``expected_duration_s``: about how long the recording is, so its
+    viewer twins keep within their message budget (without it they are written at their full rate). The file appears atomically when the block exits without an
+    error; on an error nothing is left behind. Every piece must carry the same streams, in time order.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        metadata: dict[str, dict[str, Any]] | None = None,
+        sources: Iterable[str | os.PathLike[str]] = (),
+        overwrite: bool = False,
+        expected_duration_s: float | None = None,
+    ) -> None:
+        self.path = target_path(path)
+        self.expected_duration_s = expected_duration_s
+        self._twins: dict[str, _Channel] = {}
+        self._twin_k: dict[str, int] = {}
+        self._twin_seen: dict[str, int] = {}
+        self._imus: list[Any] = []
+        self.metadata = {k: dict(v) for k, v in (metadata or {}).items()}
+        self.sources = [Path(s) for s in sources]
+        self.overwrite = overwrite
+        self._builder: McapBuilder | None = None
+        self._channels: dict[str, _Channel] = {}
+        self._axis: TrialAxis | None = None
+        self._timeline: dict[str, Any] | None = None
+        self._topics: list[str] | None = None
+        self._stack: list[Any] = []
+
+    # ------------------------------------------------------------------ context
+    def __enter__(self) -> StreamingTrialWriter:
+        for src in self.sources:
+            if not src.is_file():
+                raise ArchiveError(f"{self.path}: source file to attach not found: {src}")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        lock = writer_lock(self.path)
+        lock.__enter__()
+        self._stack.append(lock)
+        if self.path.exists() and not self.overwrite:
+            self._unwind(None)
+            raise ArchiveExistsError(f"{self.path} exists (use overwrite=True / --overwrite)")
+        out = atomic_output(self.path)
+        f = out.__enter__()
+        self._stack.append(out)
+        from imulog.archive.writer import LIBRARY, PROFILE
+
+        self._builder = McapBuilder.new(f, LIBRARY, PROFILE)
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            try:
+                self._finish()
+            except BaseException as error:
+                self._unwind(error)
+                raise
+            self._unwind(None)
+        else:
+            self._unwind(exc)
+
+    def _unwind(self, exc: BaseException | None) -> None:
+        while self._stack:
+            ctx = self._stack.pop()
+            if exc is None:
+                ctx.__exit__(None, None, None)
+            else:
+                ctx.__exit__(type(exc), exc, exc.__traceback__)
+
+    # ------------------------------------------------------------------ writing
+    def write(self, piece: Recording) -> None:
+        """Append one piece (the next samples of every stream) to the trial."""
+        assert self._builder is not None, "use StreamingTrialWriter as a context manager"
+        streams = piece.streams()
+        topics = [s.topic for s in streams]
+        dup = sorted({t for t in topics if topics.count(t) > 1})
+        if dup:
+            raise ArchiveError(f"{self.path}: two streams share the topic(s) {', '.join(dup)}")
+        if self._topics is None:
+            self._start(piece, streams)
+        for key, values in piece.metadata.items():  # a reader may learn records (e.g. the device) as it goes
+            self.metadata[key] = {**self.metadata.get(key, {}), **values}
+        for stream in streams:
+            self._write_piece(stream)
+            self._write_twins(stream)
+
+    def _start(self, piece: Recording, streams: list[Stream]) -> None:
+        """Time axis from the first piece (its first samples are the trial's origin) and the channel records."""
+        trial = {**piece.metadata.get("imulog.trial", {}), **self.metadata.get("imulog.trial", {})}
+        try:
+            self._timeline = timeline_record(trial, streams)
+        except TimelineError as exc:
+            raise ArchiveError(f"{self.path}: {exc}") from None
+        self._axis = TrialAxis({TIMELINE_RECORD: self._timeline}, {s.name for s in piece.imus})
+        self._topics = [s.topic for s in streams]
+        self._imus = list(piece.imus)
+
+    def _open(self, stream: Stream) -> _Channel:
+        """The channel record of a stream, on its first piece (a stream may start in a later piece)."""
+        schema_name, meta, _, _ = codec.encode(stream, self._axis.map_for(stream.topic))
+        for key in STATS_KEYS:
+            meta.pop(key, None)
+        meta["stats_record"] = STATS_RECORD
+        schema_id = self._builder.add_schema(schema_name, "protobuf", codec.file_descriptor_set(schema_name))
+        ch = self._channels[stream.topic] = _Channel(self._builder.add_channel(stream.topic, schema_id, meta), stream.topic)
+        if stream.topic not in self._topics:
+            self._topics.append(stream.topic)
+        if hasattr(stream, "acc") and all(i.name != stream.name for i in self._imus):
+            self._imus.append(stream)
+        return ch
+
+    def _write_twins(self, stream: Stream) -> None:
+        """The viewer twins of this piece (:mod:`imulog.archive.twins`), every ``k``-th sample of the recording."""
+        from imulog.archive.twins import twins_for
+        from imulog.archive.writer import WRITE_TWINS
+
+        t = getattr(stream, "t_ns", None)
+        if not WRITE_TWINS or t is None or not len(t):
+            return
+        k = self._twin_step(stream)
+        first = self._twin_seen.get(stream.topic, 0)
+        keep = np.flatnonzero((first + np.arange(len(t))) % k == 0)
+        self._twin_seen[stream.topic] = first + len(t)
+        if not len(keep):
+            return
+        clock = self._axis.clock_of(stream.topic)
+        for twin in twins_for(_take(stream, keep), self._axis.map_for(stream.topic), clock, self.metadata):
+            ch = self._twins.get(twin.topic)
+            if ch is None:
+                meta = {k_: v for k_, v in twin.metadata.items() if k_ not in STATS_KEYS}
+                meta["stats_record"] = STATS_RECORD
+                schema_id = self._builder.add_schema(twin.schema_name, twin.schema_encoding, twin.schema_data)
+                cid = self._builder.add_channel(twin.topic, schema_id, meta, encoding=twin.message_encoding)
+                ch = self._twins[twin.topic] = _Channel(cid, twin.topic)
+            ch.stats.add_samples(np.asarray(stream.t_ns)[keep], [])
+            ch.stats.add_payloads(twin.payloads)
+            ch.times.extend(int(x) for x in twin.log_times)
+            ch.payloads.extend(twin.payloads)
+            ch.pending += sum(len(p) for p in twin.payloads)
+            if ch.pending >= CHUNK_TARGET_BYTES:
+                self._flush(ch)
+
+    def _twin_step(self, stream: Stream) -> int:
+        """Every k-th sample: at most the twins' rate, and at most their message budget over the expected length."""
+        from imulog.archive.twins import MAX_TWIN_MESSAGES, TWIN_RATE_HZ
+
+        if stream.topic not in self._twin_k:
+            t = np.asarray(stream.t_ns)
+            rate = 1e9 / float(np.median(np.diff(t))) if len(t) > 1 and np.median(np.diff(t)) > 0 else TWIN_RATE_HZ
+            k = max(1, int(np.ceil(rate / TWIN_RATE_HZ - 1e-9)))
+            if self.expected_duration_s:
+                k = max(k, int(np.ceil(rate * self.expected_duration_s / MAX_TWIN_MESSAGES)))
+            self._twin_k[stream.topic] = k
+        return self._twin_k[stream.topic]
+
+    def _write_piece(self, stream: Stream) -> None:
+        ch = self._channels.get(stream.topic) or self._open(stream)
+        _, _, times, payloads = codec.encode(stream, self._axis.map_for(stream.topic))
+        t, arrays = _sample_arrays(stream)
+        ch.stats.add_samples(t, arrays)
+        ch.stats.add_payloads(payloads)
+        ch.times.extend(int(x) for x in times)
+        ch.payloads.extend(payloads)
+        ch.pending += sum(len(p) for p in payloads)
+        if ch.pending >= CHUNK_TARGET_BYTES:
+            self._flush(ch)
+
+    def _flush(self, ch: _Channel) -> None:
+        if ch.payloads:
+            self._builder.add_messages(ch.id, ch.times, ch.payloads)
+        ch.times, ch.payloads, ch.pending = [], [], 0
+
+    def _finish(self) -> None:
+        from imulog import __version__
+        from imulog.archive.writer import _device_records, raw_digest
+
+        if self._topics is None:
+            raise ArchiveError(f"{self.path}: nothing to write (the source gave no samples)")
+        for ch in [*self._channels.values(), *self._twins.values()]:
+            self._flush(ch)
+        attached: dict[str, str] = {}
+        for src in self.sources:
+            attached[src.name] = self._attach(src)
+        stats = {topic: ch.stats.to_meta() for topic, ch in self._channels.items()}
+        hashes = {topic: s["sha256"] for topic, s in stats.items()}
+        for topic, ch in self._twins.items():
+            stats[topic] = {k: v for k, v in ch.stats.to_meta().items() if k != "nan_samples"}
+        device = _device_records(Recording(imus=self._imus, metadata=self.metadata))
+        records = {k: v for k, v in {**self.metadata, **device}.items() if k not in ("imulog.raw", TIMELINE_RECORD)}
+        records[TIMELINE_RECORD] = self._timeline or {}
+        for name, values in records.items():
+            self._builder.add_metadata(name, encode_record(dict(values)))
+        self._builder.add_metadata(STATS_RECORD, encode_record(stats))
+        raw = {
+            "sha256": raw_digest(hashes, attached),
+            "channels": hashes,
+            "attachments": attached,
+            "sources": [str(s) for s in self.sources],
+            "imulog_version": __version__,
+        }
+        self._builder.add_metadata("imulog.raw", encode_record(raw))
+        self._builder.finish()
+
+    def _attach(self, src: Path) -> str:
+        """Attach ``src`` read in 1 MiB blocks (a week's .cwa is 770 MB: never held at once); its SHA-256."""
+        return write_attachment_from_file(self._builder, src)
+
+
+def write_attachment_from_file(builder: McapBuilder, src: Path, block: int = 1 << 20) -> str:
+    """An MCAP Attachment record of the file ``src``, written block by block; returns the file's SHA-256."""
+    size = src.stat().st_size
+    media_type = mimetypes.guess_type(src.name)[0] or "application/octet-stream"
+    mtime = max(src.stat().st_mtime_ns, 0)
+    head = struct.pack("<QQ", mtime, mtime) + m._s(src.name) + m._s(media_type) + struct.pack("<Q", size)
+    body_len = len(head) + size + 4
+    offset = builder.offset
+    builder.write(struct.pack("<BQ", m.Op.ATTACHMENT, body_len))
+    builder.write(head)
+    crc = zlib.crc32(head)
+    digest = hashlib.sha256()
+    done = 0
+    with open(src, "rb") as f:
+        while data := f.read(block):
+            builder.write(data)
+            crc = zlib.crc32(data, crc)
+            digest.update(data)
+            done += len(data)
+    if done != size:
+        raise ArchiveError(f"{src}: the file changed size while it was attached ({size} -> {done} bytes)")
+    builder.write(struct.pack("<I", crc))
+    builder.attachment_indexes.append(
+        m.AttachmentIndexRec(offset, builder.offset - offset, mtime, mtime, size, src.name, media_type)
+    )
+    return digest.hexdigest()
+
+
+def _take(stream: Any, index: np.ndarray) -> Any:
+    """The samples ``index`` of a block stream (a copy with the same type and metadata)."""
+    import dataclasses
+
+    fields = {}
+    for f in dataclasses.fields(stream):
+        value = getattr(stream, f.name)
+        if isinstance(value, np.ndarray) and value.ndim >= 1 and len(value) == len(stream.t_ns):
+            value = value[index]
+        fields[f.name] = value
+    return type(stream)(**fields)
+
+
+def write_trial_streaming(
+    path: str | os.PathLike[str],
+    pieces: Iterable[Recording],
+    *,
+    metadata: dict[str, dict[str, Any]] | None = None,
+    sources: Iterable[str | os.PathLike[str]] = (),
+    overwrite: bool = False,
+    expected_duration_s: float | None = None,
+) -> Path:
+    """Write ``pieces`` (consecutive parts of one recording) as a trial in bounded memory; return the path."""
+    with StreamingTrialWriter(
+        path, metadata=metadata, sources=sources, overwrite=overwrite, expected_duration_s=expected_duration_s
+    ) as writer:
+        for piece in pieces:
+            writer.write(piece)
+    return writer.path
