@@ -88,6 +88,29 @@ def test_chunks_assemble_to_the_whole_file(cwa_dir: Path):
     np.testing.assert_array_equal(acc, whole.imus[0].acc)
 
 
+def _with_fixed_checksum(block: np.ndarray) -> np.ndarray:
+    words = block.view("<u2").copy()
+    words[-1] = 0
+    words[-1] = (-int(words.sum(dtype=np.uint64))) & 0xFFFF
+    return words.view(np.uint8)
+
+
+def test_partly_filled_last_block(cwa_dir: Path, tmp_path: Path):
+    """A block may hold fewer samples than it can (``sampleCount``): only those are read."""
+    src = cwa_dir / "ax6_sample.cwa"
+    data = np.frombuffer(src.read_bytes(), dtype=np.uint8).copy()
+    last = data[-BLOCK_BYTES:].copy()
+    last[28:30] = np.frombuffer(np.uint16(25).tobytes(), dtype=np.uint8)  # sampleCount 40 -> 25
+    data[-BLOCK_BYTES:] = _with_fixed_checksum(last)
+    path = tmp_path / "partial.cwa"
+    path.write_bytes(data.tobytes())
+    whole = read_cwa(src).imus[0]
+    part = read_cwa(path).imus[0]
+    assert len(part) == len(whole) - 15
+    np.testing.assert_array_equal(part.acc, whole.acc[: len(part)])
+    np.testing.assert_array_equal(part.t_ns, whole.t_ns[: len(part)])
+
+
 def test_detected_and_converted_by_the_cli(cwa_dir: Path, tmp_path: Path):
     for kind in ("ax3", "ax6"):
         src = cwa_dir / f"{kind}_sample.cwa"
