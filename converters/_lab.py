@@ -35,6 +35,30 @@ def line_offsets(data: bytes, n_lines: int) -> int:
     return pos
 
 
+def _line_fields(block: bytes, delimiter: str, chunk_bytes: int = 8 << 20):
+    """Per line of ``block``, in slices of about ``chunk_bytes`` (memory stays bounded): (index of the slice's first
+    line, fields per line, last byte before the line end, line is empty)."""
+    buf = np.frombuffer(block, dtype=np.uint8)
+    nl_all = np.flatnonzero(buf == 10)
+    ends_all = np.concatenate([nl_all, [len(buf)]])
+    starts_all = np.concatenate([[0], nl_all + 1])
+    delim = ord(delimiter)
+    lo = 0
+    while lo < len(ends_all):
+        hi = int(np.searchsorted(ends_all, ends_all[lo] + chunk_bytes, side="right"))
+        hi = max(hi, lo + 1)
+        starts, ends = starts_all[lo:hi], ends_all[lo:hi]
+        a, b = int(starts[0]), int(ends[-1])
+        part = buf[a:b]
+        cr = (ends > starts) & (buf[np.maximum(ends - 1, 0)] == 13)
+        ends_text = ends - cr
+        pos = np.flatnonzero(part == delim) + a
+        fields = np.searchsorted(pos, ends_text) - np.searchsorted(pos, starts) + 1
+        last = buf[np.maximum(ends_text - 1, 0)]
+        yield lo, fields, last, ends_text <= starts
+        lo = hi
+
+
 def read_table(
     path: Path,
     *,
@@ -60,32 +84,28 @@ def read_table(
         start = line_offsets(data, skip_lines)
     except ValueError:
         raise ConversionError(path, "file ends inside the header", line=skip_lines) from None
-    block = data[start:].rstrip(b" \t\r\n\x00") if delimiter != " " else data[start:].rstrip(b"\r\n\x00")
-    while block.endswith((b"\r", b"\n")):
-        block = block.rstrip(b"\r\n")
+    block = data[start:].rstrip(b"\r\n\x00")
+    while True:  # trailing blank lines (whitespace only) are not data; trailing empty fields of a row are
+        cut = block.rfind(b"\n")
+        if cut < 0 or block[cut + 1 :].strip():
+            break
+        block = block[:cut].rstrip(b"\r\n")
     first_line = skip_lines + 1
     if not block.strip():
         raise ConversionError(path, "no data rows", line=first_line)
-    buf = np.frombuffer(block, dtype=np.uint8)
-    nl = np.flatnonzero(buf == 10)
-    starts = np.concatenate([[0], nl + 1])
-    ends = np.concatenate([nl, [len(buf)]])
-    cr = (ends > starts) & (buf[np.maximum(ends - 1, 0)] == 13)
-    ends_text = ends - cr
-    cum = np.concatenate([[0], np.cumsum(buf == ord(delimiter), dtype=np.int64)])
-    fields = cum[ends_text] - cum[starts] + 1
-    empty = ends_text <= starts
-    if np.any(empty):
-        i = int(np.argmax(empty))
-        raise ConversionError(path, "empty line inside the data", line=first_line + i)
-    last = buf[np.maximum(ends_text - 1, 0)]
-    trailing = (fields == ncols + 1) & (last == ord(delimiter))
-    ok = (fields == ncols) | trailing | ((fields < ncols) if ragged else False)
-    if not ok.all():
-        i = int(np.argmax(~ok))
-        what = "truncated line" if fields[i] < ncols else "too many fields"
-        raise ConversionError(path, f"{what}: {int(fields[i])} fields, expected {ncols}", line=first_line + i)
-    width = ncols + 1 if trailing.any() else ncols
+    any_trailing = False
+    for lo, fields, last, empty in _line_fields(block, delimiter):
+        if np.any(empty):
+            i = int(np.argmax(empty))
+            raise ConversionError(path, "empty line inside the data", line=first_line + lo + i)
+        trailing = (fields == ncols + 1) & (last == ord(delimiter))
+        ok = (fields == ncols) | trailing | ((fields < ncols) if ragged else False)
+        if not ok.all():
+            i = int(np.argmax(~ok))
+            what = "truncated line" if fields[i] < ncols else "too many fields"
+            raise ConversionError(path, f"{what}: {int(fields[i])} fields, expected {ncols}", line=first_line + lo + i)
+        any_trailing |= bool(trailing.any())
+    width = ncols + 1 if any_trailing else ncols
     use = [i for i in range(ncols) if i not in set(skip_columns)]
     try:
         frame = pd.read_csv(

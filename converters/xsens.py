@@ -1,22 +1,28 @@
-"""Xsens MT Manager text exports (one file per sensor; several files = several sensors, named by serial).
+"""Xsens MT Manager text exports (one file per sensor; several files of one recording = one trial, one stream each).
 
-Layout::
+Layout (new headers; old ones have ``// Start Time``, ``// Update Rate``, ... and no ``DeviceId``)::
 
     // General information:
-    //  MT Manager version: 2022.0.0
+    //  MT Manager version: 2022.2.0
     // Device information:
-    //  DeviceId: 00B41234
+    //  DeviceId: 00B42D4B
+    //  ProductCode: MTW2-3A7G6
     // Device settings:
-    //  Filter Profile: human (46.1)
-    // Update Rate: 100.0Hz
-    PacketCounter<TAB>SampleTimeFine<TAB>Acc_X<TAB>Acc_Y<TAB>Acc_Z<TAB>Gyr_X<TAB>...<TAB>Mag_X<TAB>...<TAB>Quat_q0...
+    //  Filter Profile: human(46.1)
+    // Coordinate system: ENU
+    PacketCounter<TAB>SampleTimeFine<TAB>...<TAB>Acc_X<TAB>...<TAB>Gyr_X<TAB>...<TAB>Mag_X<TAB>...<TAB>Quat_q0...
 
-comma or tab delimited. Units: ``Acc_*`` m/s^2, ``Gyr_*`` rad/s, ``Mag_*`` arbitrary units normalised to the
-calibration field (kept as a signal, not uT), ``Temperature`` degC.
+Delimiters: tab, semicolon, comma or single spaces (a space export marks an empty field by one more space, so runs
+are never collapsed). ``NaN`` and empty cells are gaps (NaN). Units: ``Acc_*`` m/s^2, ``Gyr_*`` rad/s,
+``Mag_*`` arbitrary units normalised to the calibration field (kept as a signal, not uT), ``Temperature`` degC.
+The device's orientation (``Quat_q0..3`` with q0 = w, else ``Mat[r][c]`` read by name, else Roll/Pitch/Yaw) goes
+to ``/orientation/<name>``; ``UTC_*`` columns date the trial.
 
 Time: ``SampleTimeFine`` (10 kHz ticks, unsigned 32 bit, unwrapped) when every row has it; otherwise the
-``PacketCounter`` (16 bit, wraps from 65535 to 0, unwrapped; lost packets leave gaps) divided by the update rate.
-The stream is named ``mt_<serial>`` unless ``options.extra["names"]`` maps the serial to a name.
+``PacketCounter`` (16 bit, wraps from 65535 to 0, unwrapped; lost packets leave gaps) divided by the update rate
+(100 Hz, said out loud, when the file gives none and ``--rate`` is not set). The serial is the header's
+``DeviceId``, else the last 8 hex digits of ``MT_<master>_<trial>-000_<DeviceId>.txt``; the stream is named
+``mt_<serial>`` unless ``options.extra["names"]`` maps the serial to a name.
 """
 
 from __future__ import annotations
