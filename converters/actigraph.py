@@ -17,7 +17,8 @@
 
 Idle sleep: the device writes no ACTIVITY2 record while asleep (ActiLife fills those seconds with the last sample).
 Here those seconds stay missing samples (a jump in ``t_ns``), never zeros or copies; their count and length are in
-the device record (``idle_sleep_gaps``, ``idle_sleep_s``).
+the device record (``idle_sleep_gaps``, ``idle_sleep_s``), counting a sleep that lasts until ``Last Sample Time``
+(``recording_end``), after which no record follows.
 
 ``activity.bin`` (NEO/MRA, firmware <= 2.5): a continuous stream of 12-bit two's-complement samples in Y,X,Z order
 (4.5 bytes per sample, big-endian nibbles), 341 LSB/g, starting at ``Start Date`` at ``Sample Rate``.
@@ -317,6 +318,16 @@ class _State:
     last_sensor_s: int | None = None
     gaps: int = 0
     gap_s: int = 0
+    end_ns: int | None = None  # info.txt Last Sample Time (else Stop Date): the device recorded until then
+
+    def idle_sleep(self) -> dict[str, int]:
+        """Idle-sleep counts so far, including the tail between the last ACTIVITY record and the recording's end."""
+        gaps, total = self.gaps, self.gap_s
+        if self.end_ns is not None and self.last_activity_s is not None:
+            tail = (self.end_ns - self.origin_ns) // NS_PER_S - (self.last_activity_s - self.origin_ns // NS_PER_S + 1)
+            if tail > 0:
+                gaps, total = gaps + 1, total + int(tail)
+        return {"idle_sleep_gaps": gaps, "idle_sleep_s": total}
 
 
 def _concat_payloads(batch: RecordBatch, idx: np.ndarray, skip: int = 0) -> bytes:
@@ -540,6 +551,12 @@ def _base_state(path: Path, info: dict[str, str], options: ConvertOptions) -> tu
         if key in info:
             meta[sanitize_name(key)] = info[key]
     st = _State(origin_ns=ticks_to_epoch_ns(start_ticks), rate_hz=rate, accel_scale=scale, name=name, meta=meta)
+    for key in ("Last Sample Time", "Stop Date"):
+        text = info.get(key, "").strip()
+        if text.isdigit() and int(text) > 0:
+            st.end_ns = ticks_to_epoch_ns(int(text))
+            meta["recording_end"] = iso_from_epoch_ns(st.end_ns, offset)
+            break
     return st, offset
 
 
@@ -571,9 +588,9 @@ def _iter_log(path: Path, z: zipfile.ZipFile, st: _State, offset: int | None) ->
                 st.schemas[schema.ident] = schema
             imus = [s for s in (_activity(path, batch, st), _sensor(path, batch, st)) if s is not None]
             signals = _scalar_signals(batch, st)
-            st.meta.update(idle_sleep_gaps=st.gaps, idle_sleep_s=st.gap_s)
+            st.meta.update(st.idle_sleep())
             for s in imus:
-                s.meta.update(idle_sleep_gaps=st.gaps, idle_sleep_s=st.gap_s)
+                s.meta.update(st.idle_sleep())
             if not imus and not signals:
                 continue
             found = found or bool(imus)

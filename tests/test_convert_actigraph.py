@@ -124,6 +124,13 @@ def test_idle_sleep_seconds_are_missing_samples_not_zeros(gt3x_dir: Path, tmp_pa
     assert np.count_nonzero(np.all(acc.acc == 0, axis=1)) == 0
     dev = rec.metadata["imulog.device.tas1e31150129"]
     assert dev["idle_sleep_gaps"] == 1 and dev["idle_sleep_s"] == 5
+    # asleep until the end: no records after second 170, but info.txt's Last Sample Time is second 180
+    tail = b"".join(log[o : o + 9 + size] for o, typ, sec, size in recs if not (typ == 0x1A and sec >= t0 + 170))
+    rec = read_gt3x(_rezip(src, tmp_path / "tail.gt3x", tail))
+    assert len(rec.imus[0]) == 170 * 90
+    dev = rec.metadata["imulog.device.tas1e31150129"]
+    assert dev["idle_sleep_gaps"] == 1 and dev["idle_sleep_s"] == 10
+    assert dev["recording_end"] == "2019-02-14T09:01:00.000-05:00"
 
 
 # ------------------------------------------------------------------------------------------ NEO activity.bin
