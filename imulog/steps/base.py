@@ -30,10 +30,15 @@ from imulog.model import Stream
 
 @dataclass
 class StepResult:
-    """What a step's ``compute`` returns: derived streams and metadata records (e.g. ``imulog.alignment``)."""
+    """What a step's ``compute`` returns: derived streams and metadata records (e.g. ``imulog.alignment``).
+
+    ``provenance``: extra keys of the run's ``imulog.run.<n>`` record, e.g. ``{"gaps": {...}}`` (how many
+    missing input samples were bridged, how many runs the input was split into; see ``imulog.process.gaps``).
+    """
 
     streams: list[Stream] = field(default_factory=list)
     metadata: dict[str, dict[str, Any]] = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass
@@ -127,7 +132,13 @@ def _run_locked(
     append_derived(
         path,
         result.streams,
-        run={"step": step, "algorithm": algorithm, "params": json.loads(pjson), "inputs": hashes},
+        run={
+            **result.provenance,
+            "step": step,
+            "algorithm": algorithm,
+            "params": json.loads(pjson),
+            "inputs": hashes,
+        },
         metadata=result.metadata,
         replace=True,
         wait_s=WRITER_WAIT_S,

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from imulog.model import ImuStream, Intervals, PoseStream, SignalStream
+from imulog.process.gaps import GapParams, prepare
 from imulog.process.metrics import (
     ActivityCountParams,
     ArmUsageParams,
@@ -34,7 +35,9 @@ from imulog.process.metrics import (
     phase_summary,
     repetition_durations,
     smoothness,
+    weighted_area,
 )
+from imulog.process.metrics.distance import histogram_percent
 from imulog.process.metrics.periods import DAY_S, HOUR_S, period_summaries, wall_clock_origin_ns
 from imulog.steps.common import alignment_for, nominal_rate_hz, pick_imu
 
@@ -58,6 +61,8 @@ class MetricsParams:
         optimized, zupt_bias, zupt, kalman, ...; else the Vicon cluster pose; "vicon" = the Vicon cluster pose).
     nhpt_pickup_movement, nhpt_place_movement: labels of the NHPT movements ending at a peg pick-up and at its
         insertion (simulator protocol ``nhpt``).
+    arm_usage_rate_hz: the rate at which ``noise_level_g`` applies (Doshi: 10 Hz); faster recordings are averaged
+        to it first, so arm usage does not depend on the sampling rate (docs/metrics.md).
     """
 
     noise_level_g: float = 0.022
@@ -72,6 +77,7 @@ class MetricsParams:
     trajectory: str = ""
     nhpt_pickup_movement: str = "to_container"
     nhpt_place_movement: str = "place"
+    arm_usage_rate_hz: float = 10.0
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -187,11 +193,16 @@ def compute_metrics(
     phases: Intervals | None = None,
     trajectory: SignalStream | PoseStream | None = None,
     start_time: str | None = None,
+    gaps: GapParams | None = None,
 ) -> tuple[list, dict[str, Any]]:
     """Pure part of the step: derived streams and the ``imulog.metrics`` record from in-memory streams.
 
     Recordings longer than an hour also get ``by_hour`` (and longer than a day ``by_day``) summaries, aligned to
     the wall clock when ``start_time`` (the trial's ``imulog.trial.start_time``) is known.
+
+    Missing samples (NaN) follow :mod:`imulog.process.gaps`: short gaps are bridged; in longer ones there is no
+    arm use or activity, the distance is NaN and left out of the histogram, and percentages are of the recorded
+    samples; ``gaps`` in the record says what was done.
     """
     p = params or MetricsParams()
     if imu.acc is None:
@@ -199,11 +210,21 @@ def compute_metrics(
     if len(imu) < 3:
         raise ValueError(f"/imu/{imu.name} has only {len(imu)} samples")
     rate = nominal_rate_hz(imu.t_ns)
-    acc_g = acc_to_g(imu.acc)
-    usage = arm_usage(acc_g, ArmUsageParams(p.noise_level_g))
+    (acc_g,), gap_report = prepare([acc_to_g(imu.acc)], gaps)
+    unknown = ~np.isfinite(acc_g).all(axis=1)
+    usage = arm_usage(acc_g, ArmUsageParams(p.noise_level_g, p.arm_usage_rate_hz), t_ns=imu.t_ns)
     m1 = activity_count_sign(acc_g)
     m2 = activity_count_dead_period(acc_g, p.activity(rate))
     dist = distance_histogram(acc_g, rate, p.distance())
+    if unknown.any():  # the distance is unknown inside long gaps: NaN there and not in the histogram
+        d_cm = np.where(unknown, np.nan, dist.distance_cm)
+        hist = histogram_percent(d_cm, p.distance())
+        dist = dataclasses.replace(
+            dist,
+            distance_cm=d_cm,
+            histogram_percent=hist,
+            weighted_area=weighted_area(hist, dist.bin_centres_cm, p.weight_start_cm),
+        )
     last = len(imu) - 1
     iv = m2.intervals
     activity = Intervals(
@@ -227,6 +248,7 @@ def compute_metrics(
         "rate_hz": _r(rate, 4),
         "duration_s": _r((imu.t_ns[-1] - imu.t_ns[0]) / 1e9, 4),
         "arm_usage.noise_level_g": p.noise_level_g,
+        "arm_usage.rate_hz": usage.rate_hz,
         "arm_usage.x_percent": _r(usage.per_axis_percent[0], 4),
         "arm_usage.y_percent": _r(usage.per_axis_percent[1], 4),
         "arm_usage.z_percent": _r(usage.per_axis_percent[2], 4),
@@ -250,6 +272,8 @@ def compute_metrics(
         "distance.window_median_cm": _r(np.median(dist.window_distance_cm), 4),
         "distance.window_max_cm": _r(np.max(dist.window_distance_cm), 4),
     }
+    if gap_report.missing:
+        record["gaps"] = gap_report.as_dict()
     record.update(_period_records(imu.t_ns, acc_g, usage, m2, dist, p, start_time))
     if phases is not None and len(phases):
         for label, stats in phase_summary(phases).items():
@@ -297,7 +321,8 @@ def run_metrics(path, *, imu: str | None = None, params: MetricsParams | None = 
         streams, record = compute_metrics(
             stream, p, phases=phases, trajectory=trajectory, start_time=str(start_time) if start_time else None
         )
-        return StepResult(streams=streams, metadata={RECORD: record})
+        provenance = {"gaps": record["gaps"]} if "gaps" in record else {}
+        return StepResult(streams=streams, metadata={RECORD: record}, provenance=provenance)
 
     return run_step(
         path,

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from imulog.model import SignalStream
+from imulog.process.gaps import GapParams, GapReport, per_run, prepare
 from imulog.process.orientation import OrientationParams, estimate_orientation, gravity_free_acceleration
 from imulog.steps.common import mean_rate_hz, pick_imu
 
@@ -59,28 +60,61 @@ def read_imu_arrays(trial: Any, topic: str) -> tuple[np.ndarray, np.ndarray, np.
 
 
 def compute_orientation(
-    t_ns: np.ndarray, acc: np.ndarray, gyr: np.ndarray, mag: np.ndarray | None, imu: str, params: OrientationParams
+    t_ns: np.ndarray,
+    acc: np.ndarray,
+    gyr: np.ndarray,
+    mag: np.ndarray | None,
+    imu: str,
+    params: OrientationParams,
+    gaps: GapParams | None = None,
 ) -> list[SignalStream]:
-    """Pure part of the step: the three derived streams from IMU arrays."""
+    """Pure part of the step: the three derived streams from IMU arrays (see :func:`orientation_with_gaps`)."""
+    return orientation_with_gaps(t_ns, acc, gyr, mag, imu, params, gaps)[0]
+
+
+def orientation_with_gaps(
+    t_ns: np.ndarray,
+    acc: np.ndarray,
+    gyr: np.ndarray,
+    mag: np.ndarray | None,
+    imu: str,
+    params: OrientationParams,
+    gaps: GapParams | None = None,
+) -> tuple[list[SignalStream], GapReport]:
+    """The three derived streams and the gap report: missing samples (NaN) follow :mod:`imulog.process.gaps`
+    (short gaps bridged, the filter restarted after long ones, NaN outputs inside them)."""
     if params.use_mag and mag is None:
         raise ValueError(f"/imu/{imu} has no magnetometer: drop --mag")
-    res = estimate_orientation(gyr, acc, mean_rate_hz(t_ns), mag, params, t_ns=t_ns)
-    lin = gravity_free_acceleration(res.quat, acc, res.static)
+    (acc, gyr, mag_used), report = prepare([acc, gyr, mag if params.use_mag else None], gaps)
+
+    def run(t, a, g, m):
+        res = estimate_orientation(g, a, mean_rate_hz(t), m, params, t_ns=t)
+        return res.quat, gravity_free_acceleration(res.quat, a, res.static), res.static.astype(np.float64)
+
+    try:
+        quat, lin, static = per_run(run, report, t_ns, acc, gyr, mag_used)
+    except ValueError as exc:
+        raise ValueError(f"/imu/{imu}: {exc}") from None
+    if not params.use_mag:
+        _continue_heading(quat, lin, report.runs)
     frame = f"{imu}_global"
     return [
-        SignalStream(
-            f"/derived/orientation/{imu}", t_ns, ["qw", "qx", "qy", "qz"], ["1"] * 4, res.quat, frame_id=frame
-        ),
+        SignalStream(f"/derived/orientation/{imu}", t_ns, ["qw", "qx", "qy", "qz"], ["1"] * 4, quat, frame_id=frame),
         SignalStream(f"/derived/acc_global/{imu}", t_ns, ["ax", "ay", "az"], ["m/s^2"] * 3, lin, frame_id=frame),
-        SignalStream(
-            f"/derived/orientation_static/{imu}",
-            t_ns,
-            ["static"],
-            ["1"],
-            res.static.astype(np.float64)[:, None],
-            frame_id=imu,
-        ),
-    ]
+        SignalStream(f"/derived/orientation_static/{imu}", t_ns, ["static"], ["1"], static[:, None], frame_id=imu),
+    ], report
+
+
+def _continue_heading(quat: np.ndarray, lin: np.ndarray, runs: tuple[tuple[int, int], ...]) -> None:
+    """Without a magnetometer each restarted run has its own arbitrary heading: turn each run about the global z
+    axis so that its first sample has the heading of the previous run's last one (in place). This assumes the
+    heading did not change during the gap; the steps record ``gaps.runs`` so the assumption is visible."""
+    from imulog.process import quaternion as qmath
+
+    for (_, b0), (a1, b1) in zip(runs, runs[1:], strict=False):
+        r = np.tile(qmath.heading_offset(quat[a1 : a1 + 1], quat[b0 - 1 : b0]), (b1 - a1, 1))
+        quat[a1:b1] = qmath.multiply(r, quat[a1:b1])
+        lin[a1:b1] = qmath.rotate(r, lin[a1:b1])
 
 
 def params_dict(params: OrientationParams) -> dict:
@@ -101,8 +135,13 @@ def run_orientation(
     params: OrientationParams | None = None,
     source: str = "auto",
     force: bool = False,
+    gaps: GapParams | None = None,
 ):
-    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome."""
+    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
+
+    ``gaps``: how missing IMU samples are treated (default :class:`~imulog.process.gaps.GapParams`); what was
+    bridged or split is recorded in the run's ``gaps`` entry.
+    """
     params = params or OrientationParams()
     from imulog.archive import TrialReader
     from imulog.steps.base import StepResult, run_step
@@ -114,7 +153,8 @@ def run_orientation(
 
     def compute(trial) -> StepResult:
         t_ns, acc, gyr, mag = read_imu_arrays(trial, topic)
-        return StepResult(streams=compute_orientation(t_ns, acc, gyr, mag, name, params))
+        streams, report = orientation_with_gaps(t_ns, acc, gyr, mag, name, params, gaps)
+        return StepResult(streams=streams, provenance={"gaps": report.as_dict()} if report.missing else {})
 
     return run_step(
         path,

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from imulog.model import Intervals, SignalStream
+from imulog.process.gaps import GapParams, prepare
 from imulog.process.segmentation.pipeline import PhaseParams, segment_phases, timing_table
 from imulog.process.segmentation.repetitions import RepetitionParams
 from imulog.steps.common import alignment_for, mean_rate_hz, pick_imu
@@ -65,16 +66,34 @@ def compute_phases(
     params: PhaseParams,
     alignment: dict | None = None,
     acc: np.ndarray | None = None,
+    gaps: GapParams | None = None,
 ) -> tuple[list, dict]:
     """Pure part of the step: streams and the ``imulog.timing`` record from IMU samples (no I/O).
 
-    ``acc`` (m/s^2, optional): phase boundaries then also follow the hand's translation."""
+    ``acc`` (m/s^2, optional): phase boundaries then also follow the hand's translation.
+
+    Missing samples (NaN) follow :mod:`imulog.process.gaps`: short gaps are bridged; inside longer ones the
+    gyroscope reads as zero (no movement is detected there, so a movement interrupted by a gap ends at it and a new
+    one starts after it; repetition grouping still sees the whole trial) and ``/derived/static`` is NaN (unknown,
+    never zero velocity). ``imulog.timing["gaps"]`` records what was done."""
     t_ns = np.asarray(t_ns, dtype=np.int64)
     if len(t_ns) < 10:
         raise ValueError(f"/imu/{imu} has only {len(t_ns)} samples")
     if gyr is None:
         raise ValueError(f"/imu/{imu} has no gyroscope columns")
     rate_hz = mean_rate_hz(t_ns)
+    (gyr, acc), gap_report = prepare([gyr, acc], gaps)
+    unknown = np.ones(len(t_ns), dtype=bool)
+    for a, b in gap_report.runs:
+        unknown[a:b] = False
+    if unknown.all():
+        raise ValueError(f"/imu/{imu}: no valid run of samples ({gap_report.missing} of {len(t_ns)} missing)")
+    if unknown.any():
+        gyr = np.where(unknown[:, None], 0.0, gyr)
+        if acc is not None:  # only for boundary refinement near the gap edges: bridged, the gap itself is not used
+            ok = ~unknown
+            idx = np.arange(len(acc))
+            acc = np.column_stack([np.interp(idx, idx[ok], acc[ok, j]) for j in range(3)])
     result = segment_phases(gyr, rate_hz, params, acc)
     t_iv, clock = t_ns, "device"
     if alignment is not None:
@@ -101,7 +120,7 @@ def compute_phases(
         t_ns=t_ns,
         columns=["static"],
         units=["1"],
-        values=result.static.astype(np.float64)[:, None],
+        values=np.where(unknown, np.nan, result.static.astype(np.float64))[:, None],
         frame_id=imu,
     )
     rows = timing_table(ph, t_iv, gyr)
@@ -120,16 +139,26 @@ def compute_phases(
         "mean_confidence": round(float(np.mean([q["confidence"] for q in ph.quality])), 3) if ph.quality else None,
         "low_confidence_repetitions": [q["repetition"] for q in ph.quality if q["confidence"] < LOW_CONFIDENCE],
         "repetition_quality": list(ph.quality),
-        "static_fraction": round(float(result.static.mean()), 4),
+        "static_fraction": round(float(result.static[~unknown].mean()), 4),
         "phases": rows,
     }
+    if gap_report.missing:
+        timing["gaps"] = gap_report.as_dict()
     return [movements, phases, static], timing
 
 
-def run_phases(path, *, imu: str | None = None, params: PhaseParams | None = None, force: bool = False):
+def run_phases(
+    path,
+    *,
+    imu: str | None = None,
+    params: PhaseParams | None = None,
+    force: bool = False,
+    gaps: GapParams | None = None,
+):
     """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
 
-    Without ``params`` the trial's own protocol and repetition count are used (:func:`params_for_trial`).
+    Without ``params`` the trial's own protocol and repetition count are used (:func:`params_for_trial`);
+    ``gaps``: how missing IMU samples are treated (:mod:`imulog.process.gaps`).
     """
     from imulog.archive import TrialReader
     from imulog.steps.base import StepResult, run_step
@@ -142,8 +171,9 @@ def run_phases(path, *, imu: str | None = None, params: PhaseParams | None = Non
     def compute(trial) -> StepResult:
         stream = trial.read(topic)
         alignment = alignment_for(trial.metadata, topic)
-        streams, timing = compute_phases(stream.t_ns, stream.gyr, name, params, alignment, stream.acc)
-        return StepResult(streams=streams, metadata={"imulog.timing": timing})
+        streams, timing = compute_phases(stream.t_ns, stream.gyr, name, params, alignment, stream.acc, gaps)
+        provenance = {"gaps": timing["gaps"]} if "gaps" in timing else {}
+        return StepResult(streams=streams, metadata={"imulog.timing": timing}, provenance=provenance)
 
     return run_step(
         path,

@@ -19,6 +19,7 @@ from imulog.process.metrics.arm_usage import (
     adc_to_g,
     arm_usage,
     estimate_noise_level,
+    to_reference_rate,
 )
 from imulog.process.metrics.distance import (
     DistanceHistogram,
@@ -81,6 +82,7 @@ __all__ = [
     "repetition_durations",
     "smoothness",
     "sparc",
+    "to_reference_rate",
     "velocity_peaks",
     "weighted_area",
 ]

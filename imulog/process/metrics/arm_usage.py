@@ -13,6 +13,14 @@ M.S. thesis, Colorado State University, 2011, sections 4.2.2-4.2.3 and Appendix 
 WiTilt v2.5 / MMA7260Q board; Table 4.1). The noise level is a property of the sensor: estimate it from a static
 recording with :func:`estimate_noise_level` (Doshi: sensor still for about 30 min, sampled at >= 10 Hz; he
 considered the standard deviation and the peak amplitude of the noise and preferred the peak amplitude).
+
+Any sampling rate: the threshold is on the change between samples 0.1 s apart (Doshi's board sampled at 10 Hz),
+so a change per sample means ten times less at 100 Hz and the same movement counts as ~10x less use (the
+115 Hz demo trial: 1.3 % instead of 19 %). With the time stamps given, :func:`arm_usage` first brings the signal
+to the threshold's rate (``ArmUsageParams.reference_rate_hz``, 10 Hz): the mean of each 0.1 s window of the
+recording (a low-pass and decimation in one), then the rule above on consecutive windows; each sample takes its
+window's result. A window counts when at least half its samples are valid (NaN = gap); percentages are of the
+valid windows, i.e. of the recorded time. Recordings at or below the reference rate are used as they are.
 """
 
 from __future__ import annotations
@@ -31,30 +39,38 @@ NoiseStatistic = Literal["peak", "std", "diff_peak", "diff_std"]
 class ArmUsageParams:
     """Parameters of the arm-usage metric.
 
-    noise_level_g: threshold on the sample-to-sample change of each axis, in g. Published default 0.022 g
-        (Doshi 2011, section 4.2.3, WiTilt v2.5 in the +-2 g range at 10 Hz). Re-estimate it for another sensor
-        or sample rate with :func:`estimate_noise_level`.
+    noise_level_g: threshold on the change of each axis between consecutive samples at ``reference_rate_hz``, in g.
+        Published default 0.022 g (Doshi 2011, section 4.2.3, WiTilt v2.5 in the +-2 g range at 10 Hz).
+        Re-estimate it for another sensor with :func:`estimate_noise_level`.
+    reference_rate_hz: the rate at which ``noise_level_g`` applies (Doshi: 10 Hz); faster recordings are averaged
+        to it before thresholding (module docstring).
     """
 
     noise_level_g: float = 0.022
+    reference_rate_hz: float = 10.0
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.noise_level_g) or self.noise_level_g < 0:
             raise ValueError(f"noise_level_g must be a finite value >= 0, got {self.noise_level_g}")
+        if not np.isfinite(self.reference_rate_hz) or self.reference_rate_hz <= 0:
+            raise ValueError(f"reference_rate_hz must be positive, got {self.reference_rate_hz}")
 
 
 @dataclass(frozen=True)
 class ArmUsage:
     """Result of :func:`arm_usage`.
 
-    per_axis_percent: (3,) usage of x, y, z in % of all samples.
-    overall_percent: usage of any axis, in % of all samples.
-    active: (N, 3) bool, True where the axis changed by more than the noise level since the previous sample.
+    per_axis_percent: (3,) usage of x, y, z in % of the valid samples (windows at the reference rate).
+    overall_percent: usage of any axis, in the same %.
+    active: (N, 3) bool per input sample, True where the axis changed by more than the noise level since the
+        previous sample (or, resampled, where the sample's window changed since the previous window).
+    rate_hz: the rate the threshold was applied at (the reference rate, or the input's when not resampled).
     """
 
     per_axis_percent: np.ndarray
     overall_percent: float
     active: np.ndarray
+    rate_hz: float | None = None
 
     @property
     def active_any(self) -> np.ndarray:
@@ -84,18 +100,58 @@ def adc_to_g(counts: np.ndarray, *, zero_count: float = 512.0, counts_per_g: flo
     return (np.asarray(counts, dtype=np.float64) - zero_count) / counts_per_g
 
 
-def arm_usage(acc_g: np.ndarray, params: ArmUsageParams | None = None) -> ArmUsage:
-    """Per-axis and overall arm usage (%) of an (N, 3) acceleration in g; see the module docstring."""
+def to_reference_rate(acc_g: np.ndarray, t_ns: np.ndarray, rate_hz: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
+    """Means of consecutive ``1 / rate_hz`` windows (by time stamp) and each sample's window index.
+
+    Returns ``(windows (M, C), index (N,))``; a window with fewer than half its expected samples valid is NaN
+    (a gap), and windows without any sample (a time gap) are NaN rows too.
+    """
+    a = _as_acc(acc_g)
+    t = np.asarray(t_ns, dtype=np.int64)
+    if len(t) != len(a):
+        raise ValueError(f"t_ns has {len(t)} samples, acceleration {len(a)}")
+    width_ns = 1e9 / rate_hz
+    index = ((t - t[0]) // width_ns).astype(np.int64)
+    m = int(index[-1]) + 1
+    finite = np.isfinite(a).all(axis=1)
+    counts = np.bincount(index, minlength=m).astype(np.float64)
+    valid = np.bincount(index[finite], minlength=m).astype(np.float64)
+    sums = np.column_stack([np.bincount(index[finite], a[finite, j], minlength=m) for j in range(a.shape[1])])
+    expected = np.median(counts[counts > 0]) if np.any(counts > 0) else 1.0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        windows = sums / valid[:, None]
+    windows[valid < 0.5 * expected] = np.nan
+    return windows, index
+
+
+def arm_usage(acc_g: np.ndarray, params: ArmUsageParams | None = None, *, t_ns: np.ndarray | None = None) -> ArmUsage:
+    """Per-axis and overall arm usage (%) of an (N, 3) acceleration in g; see the module docstring.
+
+    With ``t_ns`` (int64 ns) the signal is first averaged to ``params.reference_rate_hz`` when it is faster, so the
+    result does not depend on the sampling rate; without, the samples are taken as being at the reference rate.
+    NaN samples are gaps: never use, and not counted in the percentages.
+    """
     p = params or ArmUsageParams()
     a = _as_acc(acc_g)
+    index = None
+    rate = None
+    if t_ns is not None:
+        dt = np.diff(np.asarray(t_ns, dtype=np.int64))
+        if len(dt) == 0 or np.median(dt) <= 0:
+            raise ValueError("t_ns must increase")
+        rate = 1e9 / float(np.median(dt))  # nominal rate: insensitive to dropped samples
+        if rate > 1.5 * p.reference_rate_hz:
+            a, index = to_reference_rate(a, t_ns, p.reference_rate_hz)
+            rate = p.reference_rate_hz
     active = np.zeros(a.shape, dtype=bool)
     with np.errstate(invalid="ignore"):
         active[1:] = np.abs(np.diff(a, axis=0)) > p.noise_level_g  # NaN compares False: a gap is not use
-    n = a.shape[0]
+    n = max(1, int(np.isfinite(a).all(axis=1).sum()))
     return ArmUsage(
         per_axis_percent=100.0 * active.sum(axis=0) / n,
         overall_percent=float(100.0 * active.any(axis=1).sum() / n),
-        active=active,
+        active=active if index is None else active[index],
+        rate_hz=rate,
     )
 
 
