@@ -29,6 +29,7 @@ import numpy as np
 
 from imulog.model import Intervals, SignalStream
 from imulog.process import quaternion as quat
+from imulog.process.gaps import GapParams, prepare, runs_of
 from imulog.process.minjerk import R2GReferenceParams, r2g_waypoints_from_anthropometrics
 from imulog.process.trajectory_opt import (
     DEFAULT_PARAMS,
@@ -87,8 +88,14 @@ def compute_trajectories(
     anthropometrics: dict[str, Any] | None = None,
     params: TrajectoryParams = DEFAULT_PARAMS,
     reference_params: R2GReferenceParams = DEFAULT_REFERENCE,
+    gaps: GapParams | None = None,
 ) -> tuple[list[SignalStream], dict[str, Any]]:
     """Pure part of the step: trajectory streams and the ``imulog.trajectory`` record (no I/O).
+
+    Missing samples (NaN in ``acc_global``) follow :mod:`imulog.process.gaps`: short gaps are bridged linearly; a
+    repetition that contains a longer gap is not reconstructed (its motion inside the gap is unknown, and
+    integrating across it would be a guess), and without phases the recording is integrated per valid run.
+    ``imulog.trajectory["gaps"]`` lists what was bridged and which repetitions were left out.
 
     ``static`` and ``orientation`` are ``(t_ns, values)`` on the IMU device clock; ``phases`` on the reference
     clock (``phases_clock="reference"``) or on the device clock (``"device"``).
@@ -110,10 +117,11 @@ def compute_trajectories(
         if q_world is not None:
             q_world = quat.multiply(g2w, q_world)
         frame, clock = "world", "reference"
-    ok = np.all(np.isfinite(acc), axis=1)
-    if not np.all(ok):  # bridge gaps (dropped samples carry NaN) linearly
-        idx = np.arange(len(acc))
-        acc = np.column_stack([np.interp(idx, idx[ok], acc[ok, j]) for j in range(3)])
+    (acc,), gap_report = prepare([acc], gaps)
+    unknown = ~np.all(np.isfinite(acc), axis=1)  # long gaps, after bridging the short ones
+    if unknown.all():
+        raise ValueError(f"/derived/acc_global/{imu}: no valid samples ({gap_report.missing} missing)")
+    acc = np.where(unknown[:, None], 0.0, acc)  # never integrated: repetitions across long gaps are left out
     t_s = (t_ref - t_ref[0]) / 1e9
     mask = (
         np.zeros(len(t_dev), bool)
@@ -133,8 +141,18 @@ def compute_trajectories(
             )
         reps = repetition_windows(t_s, phase_bounds_by_repetition(t_ph, int(t_ref[0])), mask)
     info: dict[str, Any] = {}
-    if not reps:
-        reps = [Repetition(index=-1, start=0, stop=len(t_s), phase_bounds_s=np.zeros((0, 2)))]
+    if not reps:  # no phases: the whole recording, or each valid run when long gaps split it
+        runs = runs_of(~unknown) if unknown.any() else [(0, len(t_s))]
+        reps = [Repetition(index=-1, start=a, stop=b, phase_bounds_s=np.zeros((0, 2))) for a, b in runs]
+    if gap_report.missing:
+        left_out = [r.index for r in reps if unknown[r.start : r.stop].any()]
+        reps = [r for r in reps if not unknown[r.start : r.stop].any()]
+        info["gaps"] = {**gap_report.as_dict(), "repetitions_left_out": left_out}
+        if not reps:
+            raise ValueError(
+                f"/derived/acc_global/{imu}: every repetition contains a gap longer than "
+                f"{gap_report.params.max_bridge_samples} samples"
+            )
     if "optimized" in methods and not any(len(r.phase_bounds_s) == 4 for r in reps):
         # the optimisation models the four R2G phases: other tasks (slide, NHPT, ADL) get every other method
         why = f"no repetition with the 4 R2G phases in /derived/phases/{imu}"
@@ -242,7 +260,8 @@ def run_trajectory(
             params=params,
             reference_params=reference_params,
         )
-        return StepResult(streams=streams, metadata={"imulog.trajectory": record})
+        provenance = {"gaps": record["gaps"]} if "gaps" in record else {}
+        return StepResult(streams=streams, metadata={"imulog.trajectory": record}, provenance=provenance)
 
     outcome = run_step(
         path,
