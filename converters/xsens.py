@@ -283,6 +283,9 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
             meta[key.lower().replace(" ", "_")] = info[key]
     if "Coordinate system" in info:
         meta["coordinate_system"] = info["Coordinate system"]
+    master = re.match(r"^MT_([0-9A-Fa-f]{8})_", path.name)
+    if master and master.group(1).upper() != serial:
+        meta["master"] = master.group(1).upper()  # the Awinda station / master of this sensor (file name)
     n_gaps = int((~np.isfinite(np.hstack([streams[k] for k in ("acc", "gyr") if k in streams]))).any(axis=1).sum())
     if n_gaps:
         meta["samples_with_gaps"] = n_gaps

@@ -113,3 +113,29 @@ def test_every_lab_device_folder_converts_and_passes_doctor(shared_data, tmp_pat
             attached += [a.name for a in trial.attachments()]
     expected = [p.name for f in folders for p in (data / f).iterdir() if not p.name.startswith(("LICENSE", "NOTICE"))]
     assert sorted(attached) == sorted(expected)
+
+
+LAB_FORMATS = {
+    "xsens": ".txt",
+    "apdm": ".h5",
+    "mvnx": ".mvnx",
+    "opensim-sto": ".sto",
+    "motive": ".csv",
+    "qualisys": ".tsv",
+    "delsys": ".csv",
+}
+
+
+def test_lab_formats_are_plugins_and_listed(repo_root):
+    import tomllib
+
+    from converters.registry import BUILTIN
+
+    eps = tomllib.loads((repo_root / "pyproject.toml").read_text())["project"]["entry-points"]["imulog.converters"]
+    for name in LAB_FORMATS:
+        assert eps[name] == BUILTIN[name], name  # the same plug-in whether installed or from a source checkout
+    code, output = run("convert", "--list-formats")
+    assert code == 0
+    lines = {line.split()[0]: line for line in output.splitlines() if line.strip()}
+    for name, ext in LAB_FORMATS.items():
+        assert ext in lines[name].split() and len(lines[name]) > 40, lines.get(name)

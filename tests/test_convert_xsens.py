@@ -107,12 +107,14 @@ def test_old_header_zero_padded_counter_and_mag_as_signal(shared_data):
     np.testing.assert_array_equal(sig.values[:, sig.columns.index("Mag_Z")], column(path, "Mag_Z"))
     meta = rec.metadata["imulog.device.mt_00b421af"]
     assert meta["rate_hz"] == 100.0 and "assumed" not in meta and meta["firmware_version"] == "4.0.2"
+    assert meta["master"] == "012005D6" and not rec.warnings
 
 
 def test_missing_rate_is_assumed_out_loud_and_rate_option_wins(shared_data):
     path = shared_data / XSENS / "MT_01200454_000-000_00B40DE4.txt"  # no Update Rate, no SampleTimeFine
     meta = convert_file(path).metadata["imulog.device.mt_00b40de4"]
     assert "assumed 100 Hz" in meta["assumed"][0]
+    assert convert_file(path).warnings == meta["assumed"]  # printed by imulog convert, kept in imulog.conversion
     rec = convert_file(path, options=ConvertOptions(rate_hz=60.0))
     assert "assumed" not in rec.metadata["imulog.device.mt_00b40de4"]
     assert np.diff(rec.imus[0].t_ns).tolist() == [16_666_667, 16_666_666, 16_666_667]
