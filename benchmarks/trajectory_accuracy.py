@@ -83,7 +83,9 @@ def simulated_inputs(
         from imulog.process.segmentation.pipeline import PhaseParams, segment_phases
         from imulog.process.segmentation.repetitions import RepetitionParams
 
-        res = segment_phases(imu.gyr, rate, PhaseParams(repetitions=RepetitionParams(n_repetitions=repetitions)))
+        res = segment_phases(
+            imu.gyr, rate, PhaseParams(repetitions=RepetitionParams(n_repetitions=repetitions)), imu.acc
+        )
         ph = res.phases
         for s, e, k in zip(ph.start, ph.end, ph.repetition, strict=True):
             bounds.setdefault(int(k), []).append((t_s[int(s)], t_s[min(int(e), len(t_s) - 1)]))

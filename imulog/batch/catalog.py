@@ -54,6 +54,8 @@ INT_COLUMNS = (
     "alignment_offset_ns",
     "n_repetitions",
     "n_phases",
+    "n_forced_phases",
+    "n_low_confidence_repetitions",
 )
 FLOAT_COLUMNS = (
     "duration_s",
@@ -64,6 +66,7 @@ FLOAT_COLUMNS = (
     "alignment_drift_ppm",
     "alignment_score",
     "repetition_mean_s",
+    "phases_confidence",
     "best_mae_cm",
 )
 BOOL_COLUMNS = ("simulated",)
@@ -223,6 +226,10 @@ def trial_row(path: str | os.PathLike[str]) -> dict[str, Any]:
         row["n_phases"] = _num(timing.get("n_phases"), int)
         row["phases_method"] = timing.get("method")
         row["phases_clock"] = timing.get("clock")
+        if "repetition_quality" in timing:  # what event correction did (issue 19)
+            row["n_forced_phases"] = _num(timing.get("n_forced_phases"), int)
+            row["n_low_confidence_repetitions"] = len(timing.get("low_confidence_repetitions") or [])
+            row["phases_confidence"] = _num(timing.get("mean_confidence"))
         spans = {}
         for ph in timing.get("phases") or []:
             with contextlib.suppress(KeyError, TypeError, ValueError):

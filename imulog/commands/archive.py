@@ -118,6 +118,23 @@ def _echo_periods(metrics: dict) -> None:
         click.echo(f"  ... {len(rows) - 48} more (info --json lists all)")
 
 
+def _echo_phase_quality(timing: dict) -> None:
+    """One line on what event correction did to the phases (imulog.timing, issue 19): forced phases are
+    visible as forced."""
+    quality = timing.get("repetition_quality") or []
+    if not quality:
+        return
+    total = {k: sum(int(q.get(k) or 0) for q in quality) for k in ("merged", "dropped", "split", "missing")}
+    corrected = sum(1 for q in quality if any(int(q.get(k) or 0) for k in total))
+    low = timing.get("low_confidence_repetitions") or []
+    click.echo(
+        f"phases: {timing.get('n_phases', 0)} in {len(quality)} repetitions from {timing.get('n_movements', 0)} "
+        f"movements; event correction changed {corrected} (merged {total['merged']}, dropped {total['dropped']}, "
+        f"split {total['split']}, missing {total['missing']}), {timing.get('n_forced_phases', 0)} forced phases; "
+        f"confidence mean {timing.get('mean_confidence')}, low in repetitions {', '.join(map(str, low)) or '-'}"
+    )
+
+
 def _echo_alignment(record: dict) -> None:
     """The IMU-to-Vicon alignment: offset and drift with uncertainty, markers, windows, quality flag."""
     from imulog.steps.align import alignment_summary
@@ -184,6 +201,7 @@ def info(file: str, as_json: bool) -> None:
         click.echo(f"  {name}: {shown}")
     _echo_periods(data["metadata"].get("imulog.metrics") or {})
     _echo_alignment(data["metadata"].get("imulog.alignment") or {})
+    _echo_phase_quality(data["metadata"].get("imulog.timing") or {})
     if data["attachments"]:
         click.echo("attachments:")
         for a in data["attachments"]:

@@ -165,11 +165,18 @@ def evaluate(trial: Path, methods: str | None, max_gap: float, as_json: bool, fo
         _, record = run_evaluate(trial, methods=_methods(methods) if methods else None, max_gap_s=max_gap, force=force)
     except (ArchiveError, ValueError, KeyError, OSError) as exc:
         raise click.ClickException(error_line(trial, exc)) from None
+    from imulog.archive import TrialReader
+    from imulog.steps.trajectory import format_phase_quality, phase_quality_summary
+
+    with TrialReader(trial) as reader:  # forced phases stay visible as forced next to the errors
+        quality = phase_quality_summary(record, reader.metadata.get("imulog.timing") or {})
     if as_json:
-        click.echo(json.dumps(record, indent=1, default=float))
+        click.echo(json.dumps({**record, "phase_quality": quality} if quality else record, indent=1, default=float))
         return
     click.echo(f"{trial}: errors against {record.get('reference', '?')} (mean±std over repetitions)")
     click.echo(table_from_record(record))
     aligned = record.get("alignment") or {}
     if aligned.get("quality") == "poor":  # flagged by imulog process align (docs/alignment.md)
         click.echo(f"{trial}: warning: poor alignment: {'; '.join(aligned.get('quality_reasons') or [])}")
+    if quality:
+        click.echo(format_phase_quality(quality))

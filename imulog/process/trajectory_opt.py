@@ -455,7 +455,8 @@ def trial_waypoints(
     repetitions: Sequence[Repetition],
     params: R2GReferenceParams = DEFAULT_REFERENCE,
 ) -> R2GWaypoints:
-    """Waypoints for a trial: h1, h2, h3 (and ``mouth_dx_m`` when present) from the anthropometrics; every
+    """Waypoints for a trial: h1, h2, h3 (and ``mouth_dx_m``, the mouth's x, and ``bottle_dy_m``, the bottle's
+    lateral offset from the start when it is not h2, when present) from the anthropometrics; every
     other coordinate is the median over repetitions of the ZUPT displacement at the phase ends (no optical
     data involved). Without anthropometrics all coordinates come from ZUPT."""
     t = np.asarray(t_s, dtype=np.float64)
@@ -487,6 +488,8 @@ def trial_waypoints(
             mt[1], mt[2] = at_m[1], at_m[2]  # h2, h3
             if "mouth_dx_m" in anthropometrics:
                 mt[0] = float(anthropometrics["mouth_dx_m"])
+            if anthropometrics.get("bottle_dy_m") is not None:  # bottle not in front of the shoulder: measured
+                bt[1] = float(anthropometrics["bottle_dy_m"])
             bottle, mouth = rot @ bt, rot @ mt
     return R2GWaypoints(bottle_m=tuple(bottle.tolist()), mouth_m=tuple(mouth.tolist()))
 

@@ -297,3 +297,54 @@ def _remove_stale(path, written: list[str]) -> None:
             stale,
             run={"step": "remove", "algorithm": f"stale outputs of step {STEP}", "params": {}, "inputs": []},
         )
+
+
+def phase_quality_summary(evaluation: dict[str, Any], timing: dict[str, Any], low: float = 0.5) -> dict[str, Any]:
+    """How the trajectory errors depend on how much event correction forced the phases (issue 19).
+
+    ``evaluation``: the ``imulog.evaluation`` record; ``timing``: the ``imulog.timing`` record of the phases step
+    (``repetition_quality``). Returns the repetitions with forced phases, those below confidence ``low`` and,
+    per method, the mean MAE over the axes (cm) on confident and on low-confidence repetitions. Empty when the
+    phases carry no quality record (phases step of an older imulog)."""
+    quality = {int(q["repetition"]): q for q in timing.get("repetition_quality") or []}
+    if not quality:
+        return {}
+    forced = sorted(k for k, q in quality.items() if int(q.get("forced") or 0) > 0)
+    low_reps = sorted(k for k, q in quality.items() if float(q.get("confidence", 1.0)) < low)
+    per_method: dict[str, dict[str, Any]] = {}
+    for method, rec in (evaluation.get("methods") or {}).items():
+        groups: dict[str, list[float]] = {"confident": [], "low_confidence": []}
+        for row in rec.get("repetitions") or []:
+            values = [row[a]["mae_cm"] for a in ("x", "y", "z") if isinstance(row.get(a), dict) and "mae_cm" in row[a]]
+            if not values:
+                continue
+            key = "low_confidence" if int(row.get("repetition", -1)) in low_reps else "confident"
+            groups[key].append(float(np.mean(values)))
+        per_method[method] = {
+            k: {"n": len(v), "mae_cm": round(float(np.mean(v)), 3) if v else None} for k, v in groups.items()
+        }
+    return {
+        "forced_repetitions": forced,
+        "low_confidence_repetitions": low_reps,
+        "threshold": low,
+        "methods": per_method,
+    }
+
+
+def format_phase_quality(summary: dict[str, Any]) -> str:
+    """Lines for ``imulog evaluate``: which repetitions' phases were forced and their errors apart."""
+    if not summary:
+        return ""
+    lines = [
+        "phases forced by event correction in repetitions "
+        f"{', '.join(map(str, summary['forced_repetitions'])) or '-'}; confidence < {summary['threshold']} in "
+        f"{', '.join(map(str, summary['low_confidence_repetitions'])) or '-'}"
+    ]
+    for method, groups in summary["methods"].items():
+        c, lo = groups["confident"], groups["low_confidence"]
+        if lo["n"]:
+            lines.append(
+                f"  {method}: mean MAE {c['mae_cm']} cm on {c['n']} confident, {lo['mae_cm']} cm on {lo['n']} "
+                "low-confidence repetitions"
+            )
+    return "\n".join(lines)

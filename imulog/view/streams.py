@@ -59,6 +59,10 @@ def _time(t_ref_ns: np.ndarray) -> rr.TimeColumn:
     return rr.TimeColumn(L.TIMELINE, duration=np.asarray(t_ref_ns, dtype=np.int64).astype("timedelta64[ns]"))
 
 
+FORCED = " (forced)"  # suffix of a phase label event correction made by cutting a movement
+FORCED_COLOR = 0x7F7F7FFF  # forced phases are grey, not their phase's colour
+
+
 def _rgb(c: tuple[int, int, int]) -> list[int]:
     return [int(c[0]), int(c[1]), int(c[2])]
 
@@ -72,6 +76,7 @@ class _Logger:
         color_offset: int,
         reference: tuple[np.ndarray, np.ndarray] | None = None,
         trajectory_record: Mapping[str, Any] | None = None,
+        timing_record: Mapping[str, Any] | None = None,
     ):
         self.rec = rec
         self.trial = trial
@@ -80,6 +85,7 @@ class _Logger:
         self.n_paths = color_offset  # next palette index for a trajectory / marker set
         self.reference = reference  # Vicon cluster origin: (t_ref ns, position m)
         self.trajectory_record = dict(trajectory_record or {})
+        self.timing_record = dict(timing_record or {})  # imulog.timing: forced phases, repetition confidence
 
     # -- primitives -------------------------------------------------------------------------------
     def _record(self, path: str, role: str, topic: str, t_ref: np.ndarray) -> None:
@@ -118,12 +124,13 @@ class _Logger:
             return
         columns = rr.StateChange.columns(state=[str(s) for s in states]).partition(np.full(len(t_ref), lanes))
         self.rec.send_columns(path, indexes=[_time(t_ref)], columns=columns)
-        values = sorted({str(s) for s in states if s and str(s) in L.PHASE_COLORS})
+        values = sorted({str(s) for s in states if s and (str(s) in L.PHASE_COLORS or str(s).endswith(FORCED))})
         if values:
             self.rec.log(
                 path,
                 rr.StateConfiguration(
-                    values=values, colors=np.array([L.PHASE_COLORS[v] for v in values], dtype=np.uint32)
+                    values=values,
+                    colors=np.array([L.PHASE_COLORS.get(v, FORCED_COLOR) for v in values], dtype=np.uint32),
                 ),
                 static=True,
             )
@@ -318,6 +325,8 @@ class _Logger:
             next_start = np.concatenate([starts[1:], [np.iinfo(np.int64).max]])
             needs_reset = ends < next_start
             rep = np.array([f"rep {k}" if k >= 0 else "" for k in tasks], dtype=object)
+            if role == "phases":  # forced phases and low-confidence repetitions visible as such (imulog.timing)
+                labs, rep = self.phase_quality_labels(starts, labs, tasks, rep)
             start_states = np.stack([labs, rep], axis=1) if with_task else labs[:, None]
             reset_states = np.full((int(needs_reset.sum()), lanes), "", dtype=object)
             times = [starts, ends[needs_reset]]
@@ -335,6 +344,28 @@ class _Logger:
                 path, indexes=[_time(t_ev)], columns=rr.TextLog.columns(text=[str(x) for x in labels[instant]])
             )
             self._record(path, "events", s.topic, t_ev)
+
+    def phase_quality_labels(self, starts, labs, tasks, rep):
+        """Phase labels ``"<label> (forced)"`` for phases event correction made by cutting a movement, and the
+        repetition lane ``"rep k (confidence c)"`` below confidence 0.5, from ``imulog.timing``."""
+        rows = self.timing_record.get("phases") or []
+        forced = {(int(r["repetition"]), str(r["label"])) for r in rows if r.get("forced")}
+        low = {
+            int(q["repetition"]): float(q["confidence"])
+            for q in self.timing_record.get("repetition_quality") or []
+            if float(q.get("confidence", 1.0)) < 0.5
+        }
+        if not forced and not low:
+            return labs, rep
+        labs = np.array(
+            [f"{lab}{FORCED}" if (int(k), str(lab)) in forced else lab for lab, k in zip(labs, tasks, strict=True)],
+            dtype=object,
+        )
+        rep = np.array(
+            [f"{r} (confidence {low[int(k)]:.2f})" if int(k) in low else r for r, k in zip(rep, tasks, strict=True)],
+            dtype=object,
+        )
+        return labs, rep
 
     def pose(self, s: PoseStream) -> None:
         t_ref = self.clocks.to_reference(s.topic, s.t_ns)
@@ -420,7 +451,15 @@ def log_streams(
     for stream in streams:
         if isinstance(stream, PoseStream) and stream.topic == L.CLUSTER_POSE_TOPIC:
             reference = (clocks.to_reference(stream.topic, stream.t_ns), stream.position)
-    logger = _Logger(recording, trial, clocks, color_offset, reference, metadata.get("imulog.trajectory"))
+    logger = _Logger(
+        recording,
+        trial,
+        clocks,
+        color_offset,
+        reference,
+        metadata.get("imulog.trajectory"),
+        metadata.get("imulog.timing"),
+    )
     recording.log(L.join(prefix, "/world"), rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     ordered = sorted(streams, key=lambda s: isinstance(s, Intervals))  # signals first, states after
     for stream in ordered:

@@ -55,6 +55,9 @@ class RepetitionParams:
         enter the search (when at least ``n_phases`` do; the others are corrective sub-movements or fidgets
         and may still be absorbed, see ``continuation_gap_s``) (imulog addition; 0 = all, as in the thesis).
     max_candidates: at most this many movements (the highest) enter the exhaustive search per repetition.
+    fused_groups: also try the partition whose repetitions may hold ``n_phases - 1`` movements (two phases fused
+        into one movement: the repetition's borders then stay at the longest rests instead of moving a movement
+        across a rest to make up the count; imulog addition, issue 19).
     labels: phase labels in order.
     """
 
@@ -71,6 +74,7 @@ class RepetitionParams:
     burst_min_movements: int = 5
     min_height_fraction: float = 0.5
     max_candidates: int = 14
+    fused_groups: bool = True
     labels: tuple[str, ...] = R2G_PHASES
 
 
@@ -180,6 +184,7 @@ def group_movements(
     n_phases: int = 4,
     major_fraction: float = 0.5,
     extra_cut_fraction: float = 0.5,
+    min_size: int | None = None,
 ) -> np.ndarray:
     """Candidate repetition of each movement (0-based, in time order) from the longest rests.
 
@@ -197,10 +202,11 @@ def group_movements(
     start, end, heights = np.asarray(start), np.asarray(end), np.asarray(heights, dtype=float)
     if len(start) == 0:
         return np.zeros(0, dtype=np.int64)
+    size = n_phases if min_size is None else int(min_size)
     for fraction in (major_fraction, 0.0):  # a low phase (slow subject) can fall below major_fraction
         major = np.flatnonzero(heights >= fraction * np.median(heights))
         gaps = start[major[1:]] - end[major[:-1]]
-        cuts = _optimal_cuts(gaps, n_repetitions, n_phases)
+        cuts = _optimal_cuts(gaps, n_repetitions, size, max(1, 4 * n_phases // size))
         if cuts is not None:
             break
     if cuts is None:  # too few movements for the constraint: plain longest gaps between major movements
@@ -213,7 +219,7 @@ def group_movements(
             if gaps[k] < floor:
                 break
             trial = sorted({*cuts, int(k)})
-            if np.diff([-1, *trial, len(major) - 1]).min() >= n_phases:
+            if np.diff([-1, *trial, len(major) - 1]).min() >= size:
                 cuts = trial
     bounds = np.asarray(cuts, dtype=np.int64)
     rep_s = start[major[np.concatenate([[0], bounds + 1])]]
@@ -444,8 +450,11 @@ def segment_repetitions(
                         params.n_phases,
                         params.major_fraction,
                         params.extra_cut_fraction,
+                        size,
                     )
-                    for j in range(params.extra_groups + 1)
+                    for size in ([params.n_phases] + ([params.n_phases - 1] if params.fused_groups else []))
+                    for j in range(params.extra_groups + 1 if size == params.n_phases else 1)
+                    if size >= 1
                 ],
             )
             for idx in subsets

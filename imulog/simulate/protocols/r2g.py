@@ -70,6 +70,8 @@ class Params:
     curve_m: tuple[float, float] = (0.0, 0.0)  # bow of the hand path (m) across the straight line, uniform range
     curve_peak: tuple[float, float] = (0.5, 0.5)  # path fraction of the bow's peak (skew), uniform in [0.3, 0.7]
     placement_jitter_m: float = 0.0  # per-trial bottle placement shift sd in x and y (m), written as h1/bottle_dy_m
+    bottle_offset_m: tuple[float, float] = (0.0, 0.0)  # bottle moved by this (x, y) from its protocol place (m)
+    mouth_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  # cup-at-mouth position moved by this (m)
     mouth_jitter_m: float = 0.0  # per-trial shift sd of the cup-to-mouth position in x, y, z (m)
     submovements: tuple[int, int] = (1, 1)  # submovements per phase (inclusive range): several velocity peaks
     submovement_overlap: tuple[float, float] = (0.4, 0.8)  # next submovement starts at this fraction of the last
@@ -192,11 +194,12 @@ def build(params: Params, subject_rng: np.random.Generator, rng: np.random.Gener
     mouth0 = np.array([anth["mouth_dx_m"], anth["h2_m"], anth["h3_m"]])
     # variation draws come from child streams, so the default trial's own draws never change
     vary_rng = np.random.default_rng(rng.bit_generator.seed_seq.spawn(1)[0]) if _varied(params) else None
-    if params.placement_jitter_m > 0 or params.mouth_jitter_m > 0:
+    moved = params.bottle_offset_m != (0.0, 0.0) or params.mouth_offset_m != (0.0, 0.0, 0.0)
+    if params.placement_jitter_m > 0 or params.mouth_jitter_m > 0 or moved:
         place_rng = np.random.default_rng(rng.bit_generator.seed_seq.spawn(1)[0])
-        shift = place_rng.normal(0.0, params.placement_jitter_m, 2)
+        shift = place_rng.normal(0.0, params.placement_jitter_m, 2) + np.asarray(params.bottle_offset_m)
         bottle = bottle + np.r_[shift, 0.0]
-        mouth0 = mouth0 + place_rng.normal(0.0, params.mouth_jitter_m, 3)
+        mouth0 = mouth0 + place_rng.normal(0.0, params.mouth_jitter_m, 3) + np.asarray(params.mouth_offset_m)
         anth["h1_m"] = float(bottle[0] - start[0])  # what the user measures for this trial
         anth["bottle_dy_m"] = float(bottle[1] - start[1])
         anth["h2_m"], anth["h3_m"], anth["mouth_dx_m"] = float(mouth0[1]), float(mouth0[2]), float(mouth0[0])
