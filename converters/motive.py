@@ -116,7 +116,7 @@ def read_motive(path: Path) -> Recording:
         kind, name, prop = key
         cols = groups[key]
         xyz = [cols.get(a) for a in "XYZ"]
-        if kind == "Rigid Body":
+        if kind in ("Rigid Body", "Bone"):  # Motive 2+ skeleton bones are rigid bodies too
             body = bodies.setdefault(name, {"extra": []})
             if prop == "Rotation":
                 if rot_type.lower() != "quaternion":
@@ -130,7 +130,7 @@ def read_motive(path: Path) -> Recording:
                 body["position"] = xyz
             else:
                 body["extra"].extend((f"{prop} {a}".strip() if a != "VALUE" else prop, j) for a, j in cols.items())
-        elif kind == "Rigid Body Marker":
+        elif kind in ("Rigid Body Marker", "Bone Marker"):
             if prop == "Position" and None not in xyz:
                 model_markers.append((name, xyz))
             elif prop == "Marker Quality":

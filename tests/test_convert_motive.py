@@ -119,3 +119,12 @@ def test_damaged_motive_file(tmp_path, damage, message):
     bad.write_bytes(damage(good.read_bytes().decode()).encode())
     with pytest.raises(ConversionError, match=message):
         convert_file(bad)
+
+
+def test_skeleton_bones_are_poses_too(tmp_path):
+    path = tmp_path / "skeleton.csv"
+    truth = write_motive_123(path)
+    path.write_bytes(path.read_bytes().replace(b",Type,Rigid Body", b",Type,Bone").replace(b",Rigid Body", b",Bone"))
+    (pose,) = convert_file(path).poses
+    assert pose.topic == "/poses/wrist"
+    np.testing.assert_allclose(pose.position, truth["pos_m"], rtol=1e-12)
