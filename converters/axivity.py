@@ -15,8 +15,8 @@ A set top bit of ``deviceFractional`` gives 15 bits of fraction of that second; 
 ``timestampOffset`` (the sample index where the RTC second applies) by ``fraction * rate``, which is added back.
 Block start = RTC + fraction - timestampOffset / rate; sample times are interpolated between consecutive block
 starts (nominal rate for the last block and across gaps). ``t_ns`` counts from the first sample, whose local time
-is the trial's ``start_time`` (zone unknown). Light (raw 10-bit counts), temperature (degC = (raw - 171) / 3.142,
-as scikit-digital-health) and battery (V = (raw + 512) * 6 / 1024) become one row per block in ``/signals/<name>``.
+is the trial's ``start_time`` (zone unknown). Light (raw 10-bit counts), temperature (degC = raw * 75 / 256 - 50,
+OpenMovement's conversion; scikit-digital-health's (raw - 171) / 3.142 reads ~2 degC higher at skin temperature) and battery (V = (raw + 512) * 6 / 1024) become one row per block in ``/signals/<name>``.
 
 Every block's checksum is verified: a bad or truncated block stops the conversion with the file and block index
 (a silently skipped block would turn damaged data into a time gap nobody sees). Blocks are decoded in batches from
@@ -146,6 +146,19 @@ def block_start_ns(blocks: np.ndarray) -> np.ndarray:
     return secs * NS_PER_S + (frac16 * NS_PER_S) // 65536 - np.round(offset * (NS_PER_S / rate)).astype(np.int64)
 
 
+def gyro_range_dps(light: np.ndarray) -> np.ndarray:
+    """Gyroscope range (deg/s, 32768 LSB) from the block's ``light`` word: 8000 / 2^m, 2000 when m = 0 (older
+    firmware leaves the bits clear)."""
+    m = (np.asarray(light, dtype=np.int64) >> 10) & 7
+    return np.where(m == 0, 2000.0, 8000.0 / np.left_shift(1, m))
+
+
+def temperature_degc(raw: np.ndarray) -> np.ndarray:
+    """Block temperature in degC from its 10-bit raw value (OpenMovement: raw * 75 / 256 - 50, an MCP9700 on a
+    3 V 10-bit ADC)."""
+    return (np.asarray(raw, dtype=np.int64) & 0x3FF) * (75.0 / 256.0) - 50.0
+
+
 def unpack_packed(data: np.ndarray, count: int) -> np.ndarray:
     """AX3 packed samples (N, 480) bytes -> (N, count, 3) int32 counts (1 g = 256)."""
     v = np.ascontiguousarray(data[:, : 4 * count]).view("<u4").astype(np.int64)
@@ -232,7 +245,7 @@ def _decode(blocks: np.ndarray, layout: _Layout) -> tuple[np.ndarray, np.ndarray
     raw = unpack_int16(blocks["data"], layout.capacity, layout.axes).astype(np.float64)
     if layout.axes == 3:
         return raw / accel_lsb[:, None, None], None, None
-    gyro_range = 8000.0 / np.left_shift(1, (blocks["light"].astype(np.int64) >> 10) & 7)
+    gyro_range = gyro_range_dps(blocks["light"])
     gyr = raw[..., 0:3] * (gyro_range / 32768.0)[:, None, None]
     acc = raw[..., 3:6] / accel_lsb[:, None, None]
     mag = raw[..., 6:9] / 16.0 if layout.axes == 9 else None
@@ -334,7 +347,7 @@ def iter_chunks(
             values=np.column_stack(
                 [
                     (blocks["light"] & 0x3FF).astype(np.float64),
-                    ((blocks["temperature"] & 0x3FF).astype(np.float64) - 171.0) / 3.142,
+                    temperature_degc(blocks["temperature"]),
                     (blocks["battery"].astype(np.float64) + 512.0) * 6.0 / 1024.0,
                 ]
             ),
@@ -367,7 +380,7 @@ def _device_meta(path: Path, header: CwaHeader, layout: _Layout, name: str, bloc
         "source": path.name,
     }
     if layout.axes >= 6:
-        meta["gyro_range_dps"] = 8000 >> ((light >> 10) & 7)
+        meta["gyro_range_dps"] = int(gyro_range_dps(np.array([light]))[0])
     if header.annotation:
         meta["annotation"] = header.annotation
     return meta

@@ -48,7 +48,12 @@ def test_values_match_skdh_reference(cwa_dir: Path, kind: str):
     # one signal row per block: temperature as skdh computes it, light counts, battery volts
     sig = rec.signals[0]
     per_block = len(imu) // len(sig)
-    np.testing.assert_allclose(sig.values[:, 1], ref["temperature"][::per_block], atol=1e-5)
+    # temperature: OpenMovement's raw * 75 / 256 - 50; skdh's reference uses (raw - 171) / 3.142: same raw values
+    raw_ours = (sig.values[:, 1] + 50.0) * 256.0 / 75.0
+    raw_skdh = ref["temperature"][::per_block] * 3.142 + 171.0
+    np.testing.assert_allclose(raw_ours, raw_skdh, atol=1e-4)
+    np.testing.assert_array_equal(raw_ours, np.round(raw_ours))
+    assert 20.0 < np.median(sig.values[:, 1]) < 35.0
     assert sig.columns == ["light", "temperature", "battery"] and sig.units == ["counts", "degC", "V"]
     assert np.all((sig.values[:, 2] > 3.0) & (sig.values[:, 2] < 4.4))
 
