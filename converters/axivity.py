@@ -16,7 +16,8 @@ A set top bit of ``deviceFractional`` gives 15 bits of fraction of that second; 
 Block start = RTC + fraction - timestampOffset / rate; sample times are interpolated between consecutive block
 starts (nominal rate for the last block and across gaps). ``t_ns`` counts from the first sample, whose local time
 is the trial's ``start_time`` (zone unknown). Light (raw 10-bit counts), temperature (degC = raw * 75 / 256 - 50,
-OpenMovement's conversion; scikit-digital-health's (raw - 171) / 3.142 reads ~2 degC higher at skin temperature) and battery (V = (raw + 512) * 6 / 1024) become one row per block in ``/signals/<name>``.
+OpenMovement's conversion; scikit-digital-health's (raw - 171) / 3.142 reads ~2 degC higher at skin temperature)
+and battery (V = (raw + 512) * 6 / 1024) become one row per block in ``/signals/<name>``.
 
 Every block's checksum is verified: a bad or truncated block stops the conversion with the file and block index
 (a silently skipped block would turn damaged data into a time gap nobody sees). Blocks are decoded in batches from
