@@ -65,7 +65,9 @@ def test_four_delimiters_give_the_same_numbers(shared_data):
     assert "SampleTimeFine" not in comma.signals[0].columns and "Year" not in comma.signals[0].columns
 
 
-def test_nan_cell_is_a_gap_in_the_stream(shared_data):
+def test_nan_cell_is_a_gap_in_the_stream(shared_data, tmp_path):
+    from imulog.archive import TrialReader, write_trial
+
     d = shared_data / XSENS
     nan = convert_file(d / "MT2022_ACC_GYRO_ROT_ALL_TAB_NAN_00B42D4B.txt")
     comma = convert_file(d / "MT2022_ACC_GYRO_ROT_MAT_COMMA_00B42D4B.txt")
@@ -73,6 +75,10 @@ def test_nan_cell_is_a_gap_in_the_stream(shared_data):
     assert math.isnan(acc[0, 0]) and np.isfinite(acc[0, 1:]).all()  # the one NaN cell of the file
     np.testing.assert_array_equal(acc[1:], comma.imus[0].acc[1:])
     assert nan.metadata["imulog.device.mt_00b42d4b"]["samples_with_gaps"] == 1
+    write_trial(tmp_path / "nan.mcap", nan)
+    with TrialReader(tmp_path / "nan.mcap") as trial:  # the gap survives the archive as NaN, not 0
+        stored = trial.read("/imu/mt_00b42d4b").acc
+    assert math.isnan(stored[0, 0]) and np.array_equal(stored[1:], acc[1:])
 
 
 def test_quaternion_rotation_matrix_and_euler_agree(shared_data):
