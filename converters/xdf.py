@@ -17,9 +17,10 @@ Time: each stream's time stamps on the recording host's LSL clock after applying
 measurements (pyxdf ``synchronize_clocks``, with host clock resets handled as separate clock segments); stamps are
 not dejittered (raw data keeps what was recorded). ``t_ns`` = LSL seconds x 1e9 (the host clock's own origin, the
 same for all streams of a file). The file header's ``datetime`` (when LabRecorder started) is the trial's
-``start_time``. XDF has no checksums: the chunk structure (magic, chunk lengths, tags) is verified before parsing,
-so truncated files and damaged chunk headers are reported with their chunk index; a flipped byte inside sample
-values cannot be detected by any reader.
+``start_time``. XDF has no checksums: the chunk structure (magic, chunk lengths, tags) and every Samples chunk's
+layout (time-stamp flags, string lengths, samples filling the chunk exactly) are verified before parsing, so
+truncated files and damaged chunks are reported with their chunk index (pyxdf would read misaligned values or skip
+data with a log message); a flipped bit inside a sample value cannot be detected by any reader.
 """
 
 from __future__ import annotations
@@ -66,13 +67,12 @@ def _varlen(f, path: Path, index: int, at: int) -> int | None:
     return int.from_bytes(data, "little")
 
 
-def scan_chunks(path: Path) -> dict[str, int]:
-    """Walk the chunk headers (lengths and tags, seeking over contents): counts per chunk type.
+def iter_chunk_headers(path: Path) -> Iterator[tuple[int, int, int, int, int]]:
+    """(index, byte of the chunk, tag, byte of its content after the tag, content length) of every chunk.
 
     ConversionError naming the chunk for a missing magic, a bad length or tag, or a chunk cut by the file's end.
     """
     size = path.stat().st_size
-    counts: dict[str, int] = {}
     with open(path, "rb") as f:
         if f.read(4) != MAGIC:
             raise ConversionError(path, "not an XDF file (no 'XDF:' magic)")
@@ -95,12 +95,92 @@ def scan_chunks(path: Path) -> dict[str, int]:
                 )
             if index == 0 and tag != 1:
                 raise ConversionError(path, "chunk 0 is not the FileHeader")
-            counts[CHUNK_TAGS[tag]] = counts.get(CHUNK_TAGS[tag], 0) + 1
+            yield index, at, tag, start + 2, length - 2
             f.seek(start + length)
             index += 1
+
+
+def scan_chunks(path: Path) -> dict[str, int]:
+    """Walk the chunk headers (lengths and tags, seeking over contents): counts per chunk type."""
+    counts: dict[str, int] = {}
+    for _, _, tag, _, _ in iter_chunk_headers(path):
+        counts[CHUNK_TAGS[tag]] = counts.get(CHUNK_TAGS[tag], 0) + 1
     if not counts:
         raise ConversionError(path, "no chunks after the 'XDF:' magic")
     return counts
+
+
+VALUE_BYTES = {"int8": 1, "int16": 2, "int32": 4, "int64": 8, "float32": 4, "double64": 8}
+
+
+def _samples_problem(data: bytes, fmt: str, n_ch: int) -> str | None:
+    """Why a Samples chunk's content (after the stream id) does not hold whole samples, or None."""
+    mv = memoryview(data)
+
+    def varlen(pos: int) -> tuple[int, int]:
+        width = mv[pos] if pos < len(mv) else 0
+        if width not in (1, 4, 8) or pos + 1 + width > len(mv):
+            raise ValueError(f"bad length field at content byte {pos}")
+        return int.from_bytes(mv[pos + 1 : pos + 1 + width], "little"), pos + 1 + width
+
+    try:
+        count, pos = varlen(0)
+        if fmt != "string":  # fast path: every sample stamped (LabRecorder's usual layout), checked vectorised
+            stride = 9 + VALUE_BYTES.get(fmt, 4) * n_ch
+            if pos + count * stride == len(mv):
+                flags = np.frombuffer(data, dtype=np.uint8)[pos : pos + count * stride : stride]
+                if np.all(flags == 8):
+                    return None
+        for k in range(count):
+            if pos >= len(mv) or mv[pos] not in (0, 8):
+                return f"sample {k}: bad time stamp flag"
+            pos += 1 + mv[pos]
+            if fmt == "string":
+                for _ in range(n_ch):
+                    n, pos = varlen(pos)
+                    pos += n
+            else:
+                pos += VALUE_BYTES.get(fmt, 4) * n_ch
+            if pos > len(mv):
+                return f"sample {k} of {count} runs past the chunk's end"
+    except ValueError as e:
+        return str(e)
+    return None if pos == len(mv) else f"{len(mv) - pos} bytes left after {count} samples"
+
+
+def locate_damaged_samples(path: Path) -> None:
+    """Raise ConversionError naming the first Samples chunk whose samples do not fit its length (returns if none).
+
+    pyxdf reads past such damage silently (misaligned values) or skips it with a log message, so every file is
+    checked; numeric chunks whose samples all carry a time stamp are checked vectorised, others sample by sample.
+    """
+    import xml.etree.ElementTree as ET
+
+    formats: dict[int, tuple[str, int]] = {}
+    with open(path, "rb") as f:
+        for index, at, tag, start, length in iter_chunk_headers(path):
+            if tag not in (2, 3) or length < 4:
+                continue
+            f.seek(start)
+            content = f.read(length)
+            sid = int.from_bytes(content[:4], "little")
+            if tag == 2:
+                try:
+                    root = ET.fromstring(content[4:].decode("utf-8", "replace"))
+                    formats[sid] = (
+                        root.findtext("channel_format", "float32"),
+                        int(root.findtext("channel_count", "1")),
+                    )
+                except (ET.ParseError, ValueError):
+                    raise ConversionError(path, f"chunk {index} (byte {at}): stream header is not valid XML") from None
+                continue
+            if sid not in formats:
+                raise ConversionError(path, f"chunk {index} (byte {at}): samples of stream {sid} before its header")
+            problem = _samples_problem(content[4:], *formats[sid])
+            if problem:
+                raise ConversionError(
+                    path, f"chunk {index} (byte {at}): damaged Samples chunk of stream {sid}: {problem}"
+                )
 
 
 # --------------------------------------------------------------------------------------------- stream mapping
@@ -285,19 +365,40 @@ def _pyxdf(path: Path) -> Any:
     return pyxdf
 
 
-def _load(path: Path, **kwargs: Any) -> tuple[list[dict], dict]:
-    pyxdf = _pyxdf(path)
+class _Collect(logging.Handler):
+    def __init__(self) -> None:
+        super().__init__(logging.ERROR)
+        self.messages: list[str] = []
 
-    level = logging.getLogger("pyxdf.pyxdf").level
-    logging.getLogger("pyxdf.pyxdf").setLevel(logging.ERROR)  # pyxdf warns about clock segments on resets
+    def emit(self, record: logging.LogRecord) -> None:
+        self.messages.append(record.getMessage())
+
+
+def _load(path: Path, **kwargs: Any) -> tuple[list[dict], dict]:
+    """pyxdf.load_xdf without dejittering; pyxdf's recoveries from damaged chunks (logged, data skipped) become
+    a ConversionError naming the chunk."""
+    pyxdf = _pyxdf(path)
+    logger = logging.getLogger("pyxdf.pyxdf")
+    level, propagate = logger.level, logger.propagate
+    collect = _Collect()
+    logger.setLevel(logging.ERROR)  # pyxdf warns about clock segments on resets
+    logger.propagate = False
+    logger.addHandler(collect)
     try:
-        return pyxdf.load_xdf(
+        result = pyxdf.load_xdf(
             str(path), synchronize_clocks=True, handle_clock_resets=True, dejitter_timestamps=False, **kwargs
         )
     except Exception as e:  # noqa: BLE001 - any parser failure becomes one line naming the file
+        locate_damaged_samples(path)
         raise ConversionError(path, f"XDF content cannot be parsed: {type(e).__name__}: {e}") from None
     finally:
-        logging.getLogger("pyxdf.pyxdf").setLevel(level)
+        logger.removeHandler(collect)
+        logger.setLevel(level)
+        logger.propagate = propagate
+    if collect.messages:
+        locate_damaged_samples(path)
+        raise ConversionError(path, f"pyxdf skipped damaged data: {collect.messages[0]}")
+    return result
 
 
 def iter_chunks(
@@ -307,6 +408,7 @@ def iter_chunks(
     holds the largest stream, not the file; otherwise the file is parsed once."""
     path = Path(path)
     scan_chunks(path)
+    locate_damaged_samples(path)
     pyxdf = _pyxdf(path)
 
     try:

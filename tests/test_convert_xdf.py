@@ -191,6 +191,21 @@ def test_damaged_file_one_line_error_naming_the_chunk(xdf_dir: Path, tmp_path: P
     assert not list(tmp_path.glob("*.mcap*"))
 
 
+def test_damaged_samples_chunk_is_named_not_misread(xdf_dir: Path, tmp_path: Path):
+    """A bad time-stamp flag inside a Samples chunk: pyxdf would read misaligned values silently."""
+    from converters.xdf import iter_chunk_headers
+
+    src = xdf_dir / "clock_resets.xdf"
+    data = bytearray(src.read_bytes())
+    index, at, _, start, _ = [c for c in iter_chunk_headers(src) if c[2] == 3][10]
+    width = data[start + 4]
+    data[start + 4 + 1 + width] = 0x07  # first sample's time-stamp flag must be 0 or 8
+    bad = tmp_path / "flag.xdf"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(ConversionError, match=rf"flag\.xdf: chunk {index} \(byte {at}\): damaged Samples chunk"):
+        read_xdf(bad)
+
+
 def test_cli_converts_every_example_and_doctor_passes(xdf_dir: Path, tmp_path: Path):
     for src in sorted(xdf_dir.glob("*.xdf")):
         out = tmp_path / f"{src.stem}.mcap"
