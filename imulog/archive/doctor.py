@@ -161,7 +161,8 @@ def _walk_data_section(f, summary: m.Summary, report: DoctorReport, progress: Pr
                 rec = m.parse_attachment(body)
                 if rec.crc != 0 and rec.crc != rec.computed_crc:
                     report.fail(f"{where}: attachment {rec.name!r} CRC mismatch")
-                found["attachments"][pos] = (rec, 9 + length)
+                seen = (rec.name, rec.media_type, len(rec.data), rec.log_time, rec.create_time)
+                found["attachments"][pos] = (seen, 9 + length)  # not the data: memory stays one record
             elif op == m.Op.METADATA:
                 name, items = m.parse_metadata(body)
                 found["metadata"][pos] = (name, 9 + length)
@@ -220,8 +221,8 @@ def _check_summary(summary: m.Summary, found: dict, report: DoctorReport) -> Non
     if {(a.offset, a.length) for a in summary.attachment_indexes} != {(o, ln) for o, (_, ln) in att.items()}:
         report.fail("attachment indexes disagree with the attachments in the data section")
     for a in summary.attachment_indexes:
-        rec = att.get(a.offset, (None,))[0]
-        if rec is not None and (rec.name, rec.media_type, len(rec.data), rec.log_time, rec.create_time) != (
+        seen = att.get(a.offset, (None,))[0]
+        if seen is not None and seen != (
             a.name,
             a.media_type,
             a.data_size,
