@@ -461,7 +461,7 @@ def decompress(compression: str, data: bytes | memoryview, uncompressed_size: in
         try:
             d = lz4.frame.LZ4FrameDecompressor()
             out = d.decompress(bytes(data), max_length=uncompressed_size + 1)
-        except RuntimeError as exc:
+        except (RuntimeError, ValueError, TypeError) as exc:
             raise McapFormatError(f"lz4 data does not decompress ({exc})") from None
         if len(out) <= uncompressed_size and not d.eof:
             raise McapFormatError("lz4 data ends before its frame does (truncated)")
