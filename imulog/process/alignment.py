@@ -442,7 +442,8 @@ class AlignmentParams:
     ``min_window_score`` or without movement (reference signal sd under ``min_window_activity``, in the
     signal's unit) are left out; with ``drift`` (default) a straight line offset + drift x time is fitted
     to the windows (outliers beyond ``outlier_k`` robust sd and ``outlier_floor_s`` rejected), else their
-    median offset is used. ``filter``: marker low-pass (6 Hz, 2nd order); ``cluster``: ``auto`` (search the
+    median offset is used. The uncertainties pool the windows' scatter with ``window_lag_sd_s`` (0.5 ms, the
+    per-window lag scatter of simulated trials) counted as two windows. ``filter``: marker low-pass (6 Hz, 2nd order); ``cluster``: ``auto`` (search the
     rigid marker set that moves with the IMU, :mod:`imulog.process.alignment_search`), ``oxy`` (markers
     O, X, Y as in the thesis) or ``svd`` (the ``markers`` given, >= 3; one marker aligns on its
     acceleration); ``markers`` names with or without the ``Subject:`` prefix; ``bias_min_static_s``: static
@@ -465,6 +466,7 @@ class AlignmentParams:
     min_window_activity: float = 0.05
     outlier_k: float = 4.0
     outlier_floor_s: float = 0.002
+    window_lag_sd_s: float = 0.0005
     bias_min_static_s: float = 1.0
     search: SearchParams = SearchParams()
     poor_score: float = 0.8
@@ -473,15 +475,21 @@ class AlignmentParams:
     poor_vector_match: float = 0.9
 
 
-def _fit_line(t_s: np.ndarray, y_s: np.ndarray) -> tuple[float, float, float, float, float]:
-    """Least-squares ``y = a + b t`` with ``t`` centred: (a, b, se_a, se_b, residual sd) (NaN se when n < 3)."""
+def _fit_line(
+    t_s: np.ndarray, y_s: np.ndarray, prior_sd_s: float = 0.0, prior_n: float = 0.0
+) -> tuple[float, float, float, float, float]:
+    """Least-squares ``y = a + b t`` with ``t`` centred: (a, b, se_a, se_b, residual sd) (NaN se when n < 3).
+
+    The residual variance is pooled with a prior ``prior_sd_s`` counted as ``prior_n`` observations, so that
+    three or four windows that happen to line up do not claim a precision their scatter cannot show.
+    """
     n = len(t_s)
     b = float(np.polyfit(t_s, y_s, 1)[0]) if n >= 2 and np.ptp(t_s) > 0 else 0.0
     a = float(np.mean(y_s - b * t_s))
     r = y_s - a - b * t_s
     if n < 3:
         return a, b, float("nan"), float("nan"), float(np.std(r)) if n else float("nan")
-    sd = float(np.sqrt(np.sum(r**2) / (n - 2)))
+    sd = float(np.sqrt((np.sum(r**2) + prior_n * prior_sd_s**2) / (n - 2 + prior_n)))
     return a, b, sd / np.sqrt(n), sd / np.sqrt(np.sum(t_s**2)), sd
 
 
@@ -593,11 +601,15 @@ def fit_clock(
     ts = (tc - t0) / NS
     drift_ok = can_drift and keep.sum() >= 3
     if drift_ok:
-        a, b, se_a, se_b, _ = _fit_line(ts[keep], ys[keep])
+        a, b, se_a, se_b, _ = _fit_line(ts[keep], ys[keep], params.window_lag_sd_s, 2.0)
     else:
         a, b = float(np.median(ys[keep])), 0.0
         n = int(keep.sum())
-        sd = float(np.std(ys[keep], ddof=1)) if n >= 3 else float("nan")
+        sd = (
+            float(np.sqrt((np.sum((ys[keep] - a) ** 2) + 2 * params.window_lag_sd_s**2) / (n + 1)))
+            if n >= 3
+            else float("nan")
+        )
         se_a, se_b = sd / np.sqrt(n) if n >= 3 else float("nan"), float("nan")
     r = ys - a - b * ts
     for w, ri, ki in zip(used, r, keep, strict=True):
