@@ -116,6 +116,42 @@ def test_partly_filled_last_block(cwa_dir: Path, tmp_path: Path):
     np.testing.assert_array_equal(part.t_ns, whole.t_ns[: len(part)])
 
 
+def _synthetic_cwa(tmp_path: Path, src: Path, axes_bps: int, count: int, values: np.ndarray, light: int) -> Path:
+    """The real file's header and first two blocks, re-encoded with another sample format (checksums fixed)."""
+    data = np.frombuffer(src.read_bytes(), dtype=np.uint8)
+    head, blocks = (
+        data[:HEADER_BYTES],
+        data[HEADER_BYTES : HEADER_BYTES + 2 * BLOCK_BYTES].reshape(2, BLOCK_BYTES).copy(),
+    )
+    for b, vals in zip(blocks, np.array_split(values, 2), strict=True):
+        b[25] = axes_bps
+        b[28:30] = np.frombuffer(np.uint16(count).tobytes(), dtype=np.uint8)
+        b[18:20] = np.frombuffer(np.uint16(light).tobytes(), dtype=np.uint8)
+        raw = vals.astype("<i2").tobytes()
+        b[30 : 30 + len(raw)] = np.frombuffer(raw, dtype=np.uint8)
+        b[:] = _with_fixed_checksum(b)
+    path = tmp_path / f"synthetic_{axes_bps:02x}.cwa"
+    path.write_bytes(head.tobytes() + blocks.tobytes())
+    return path
+
+
+def test_unpacked_3_axis_and_9_axis_blocks(cwa_dir: Path, tmp_path: Path):
+    rng = np.random.default_rng(5)
+    # AX3 unpacked int16 (0x32): 80 samples per block, 1 g = 256 (light scale bits 0)
+    v3 = rng.integers(-4096, 4096, size=(160, 3))
+    rec = read_cwa(_synthetic_cwa(tmp_path, cwa_dir / "ax3_sample.cwa", 0x32, 80, v3, light=0x0100))
+    np.testing.assert_allclose(rec.imus[0].acc / G0, v3 / 256.0, rtol=1e-12)
+    # AX6 with magnetometer (0x92): gyro, accel, mag; 26 samples per block; accel 1/2^(8+3) g, gyro 8000/2^2 dps
+    v9 = rng.integers(-30000, 30000, size=(52, 9))
+    light = (3 << 13) | (2 << 10) | 0x40
+    rec = read_cwa(_synthetic_cwa(tmp_path, cwa_dir / "ax6_sample.cwa", 0x92, 26, v9, light=light))
+    imu = rec.imus[0]
+    np.testing.assert_allclose(np.degrees(imu.gyr), v9[:, 0:3] * 2000.0 / 32768.0, rtol=1e-12)
+    np.testing.assert_allclose(imu.acc / G0, v9[:, 3:6] / 2048.0, rtol=1e-12)
+    np.testing.assert_allclose(imu.mag, v9[:, 6:9] / 16.0, rtol=1e-12)
+    assert rec.signals[0].values[0, 0] == 0x40  # light counts: the low 10 bits only
+
+
 def test_detected_and_converted_by_the_cli(cwa_dir: Path, tmp_path: Path):
     for kind in ("ax3", "ax6"):
         src = cwa_dir / f"{kind}_sample.cwa"
