@@ -72,7 +72,11 @@ def concat_chunks(chunks: Iterable[Recording]) -> Recording:
     if not chunks:
         raise ValueError("no chunks")
     first = chunks[0]
-    out = Recording(metadata={k: dict(v) for k, v in first.metadata.items()}, sources=list(first.sources))
+    out = Recording(
+        metadata={k: dict(v) for k, v in first.metadata.items()},
+        sources=list(first.sources),
+        warnings=[w for c in chunks for w in c.warnings],
+    )
     for later in chunks[1:]:
         for key, value in later.metadata.items():
             out.metadata[key] = {**out.metadata.get(key, {}), **value}

@@ -162,7 +162,7 @@ def read_actilife_csv(path: Path, options: ConvertOptions | None = None) -> Reco
         "time_base": "ns from start_time (banner Start Date/Time, device local time)",
         "source": path.name,
     }
-    rec = Recording(sources=[str(path)])
+    rec = Recording(sources=[str(path)], warnings=list(spec.warnings))
     rec.imus.append(
         ImuStream(
             name=name,
