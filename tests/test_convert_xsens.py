@@ -181,3 +181,18 @@ def test_damaged_export_is_one_line_naming_the_line_and_leaves_no_output(shared_
     result = CliRunner().invoke(cli, ["convert", str(bad), "-o", str(out)])
     assert result.exit_code == 1 and len(result.output.strip().splitlines()) == 1
     assert not out.exists() and not list(tmp_path.glob("*.mcap*"))
+
+
+def test_device_orientation_agrees_with_our_filter_on_the_real_trial(shared_data):
+    """The matrix read as Mat[r][c] = R[r][c] (sensor to global) must tilt like the IMU: VQF on the raw acc/gyr of
+    the real two-sensor trial gives the same inclination as the device's own estimate (transposed, it would not)."""
+    from imulog.process.orientation import estimate_orientation
+
+    for serial in ("00B421AF", "00B4227B"):
+        rec = convert_file(shared_data / XSENS / f"MT_012005D6_031-000_{serial}.txt")
+        imu, device = rec.imus[0], rec.signals[1].values
+        ours = estimate_orientation(imu.gyr, imu.acc, 100.0).quat
+        err = np.degrees(Q.inclination_error(ours, device))
+        assert np.median(err) < 1.0, serial
+        transposed = Q.conjugate(device)  # R^T: the other reading of the matrix
+        assert np.median(np.degrees(Q.inclination_error(ours, transposed))) > 10, serial
