@@ -193,6 +193,6 @@ def test_device_orientation_agrees_with_our_filter_on_the_real_trial(shared_data
         imu, device = rec.imus[0], rec.signals[1].values
         ours = estimate_orientation(imu.gyr, imu.acc, 100.0).quat
         err = np.degrees(Q.inclination_error(ours, device))
-        assert np.median(err) < 1.0, serial
+        assert np.median(err) < 2.0, serial  # measured 0.11 and 0.87 deg
         transposed = Q.conjugate(device)  # R^T: the other reading of the matrix
         assert np.median(np.degrees(Q.inclination_error(ours, transposed))) > 10, serial
