@@ -124,7 +124,8 @@ def test_a_damaged_chunk_is_dropped_and_everything_else_kept(many_chunks, tmp_pa
             assert got[tr.summary.channels[cid].topic] == payloads
     report2 = check_file(tmp_path / "fixed.mcap")  # the output is internally sound, but no longer the raw data
     assert any("raw" in p for p in report2.problems)
-    assert not any("CRC" in p for p in report2.problems)
+    assert not any("chunk CRC" in p for p in report2.problems)  # every chunk kept is intact
+    assert any("cannot be trusted" in p for p in report2.problems)  # the data CRC of the input did not match
 
 
 def test_mcap_library_file_without_summary(tmp_path):
@@ -177,3 +178,18 @@ def test_cli_salvage_refuses_its_input_as_output_and_reports_losses(many_chunks,
     res = runner.invoke(cli, ["salvage", str(not_mcap), "-o", str(tmp_path / "x.mcap")])
     assert res.exit_code == 1 and "not an MCAP file" in res.output and "Traceback" not in res.output
     assert not (tmp_path / "x.mcap").exists()
+
+
+def test_salvage_does_not_launder_a_damaged_metadata_record(many_chunks, tmp_path):
+    """Metadata records have no CRC of their own: after a data-CRC mismatch doctor must still reject the output."""
+    data = bytearray(many_chunks.read_bytes())
+    with TrialReader(many_chunks) as tr:
+        idx = next(i for i in tr.summary.metadata_indexes if i.name == "imulog.trial")
+    data[idx.offset + idx.length - 3] ^= 0x01  # inside the last value of the record
+    broken = tmp_path / "meta.mcap"
+    broken.write_bytes(bytes(data))
+    assert not check_file(broken).ok
+    report = salvage(broken, tmp_path / "fixed.mcap")
+    assert report.data_crc == "mismatch" and "imulog.trial" in report.metadata
+    problems = check_file(tmp_path / "fixed.mcap").problems
+    assert any("cannot be trusted" in p for p in problems), problems

@@ -388,6 +388,12 @@ def check_file(path: str | os.PathLike[str], *, decode: bool = True, progress: P
                     report.fail("raw-data hash differs from the one recorded at conversion")
                 else:
                     report.checks.append("raw-data hash ok")
+            salvaged = trial.metadata.get("imulog.salvage")
+            if salvaged is not None and salvaged.get("data_crc") == "mismatch":
+                report.fail(
+                    "salvaged from a file whose data-section CRC did not match: its metadata, schema and channel "
+                    "records (which have no CRC of their own) cannot be trusted (imulog.salvage)"
+                )
     except ArchiveError as exc:
         report.fail(str(exc))
     except Exception as exc:  # pragma: no cover - every known failure is an ArchiveError

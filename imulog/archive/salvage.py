@@ -10,7 +10,8 @@ is decompressed within its declared size and checked against its CRC before any 
 attachments are checked against their CRC. Schemas and channels may sit at top level (imulog) or inside
 chunks (the ``mcap`` library's writer). The output is written like every imulog file (temporary file,
 fsync, rename): raw and derived channels, attachments and metadata records in their original order, plus
-an ``imulog.salvage`` record listing what was lost. Channels that lost chunks keep only their intact
+an ``imulog.salvage`` record listing what was lost (``data_crc`` "mismatch" there makes ``imulog doctor`` reject
+the output: its schema, channel and metadata records, which have no CRC of their own, may be damaged). Channels that lost chunks keep only their intact
 messages; their ``sha256`` (and ``sample_count`` for imulog schemas) are recomputed and ``salvaged`` says
 how many chunks were lost, so ``imulog doctor`` on the output then reports the raw-data hash recorded at
 conversion as changed: the recording is no longer complete.
@@ -61,6 +62,7 @@ class SalvageReport:
     lost: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     summary_found: bool = False
+    data_crc: str = "truncated"  # "ok", "mismatch", "not recorded", or "truncated" (no DataEnd reached)
 
     @property
     def complete(self) -> bool:
@@ -72,6 +74,7 @@ class SalvageReport:
             "source": str(self.source),
             "output": str(self.output) if self.output else None,
             "summary_found": self.summary_found,
+            "data_crc": self.data_crc,
             "channels": self.channels,
             "attachments": self.attachments,
             "metadata": self.metadata,
@@ -264,10 +267,13 @@ class _Scan:
             return
         stored = m._I.unpack_from(self.buf, pos + 9)[0]
         if stored == 0:
+            self.report.data_crc = "not recorded"
             self.report.notes.append("the data section CRC was not recorded")
         elif zlib.crc32(self.buf[:pos]) == stored:
+            self.report.data_crc = "ok"
             self.report.notes.append("data section CRC ok: every record was read as written")
         else:
+            self.report.data_crc = "mismatch"
             self.report.notes.append(
                 "data section CRC mismatch: chunks and attachments were checked by their own CRCs; "
                 "schema, channel and metadata records have none, so a damaged one cannot be ruled out"
@@ -385,6 +391,7 @@ def _write(scan: _Scan, dst: Path, report: SalvageReport, overwrite: bool) -> No
             record = {
                 "source": str(report.source),
                 "summary_found": report.summary_found,
+                "data_crc": report.data_crc,
                 "lost": report.lost[:1000],
                 "partial_channels": sorted(t for t, c in report.channels.items() if c["chunks_lost"]),
                 "imulog_version": __version__,
