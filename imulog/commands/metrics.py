@@ -8,6 +8,10 @@ from typing import Any
 
 import click
 
+from imulog.steps.metrics import MetricsParams
+
+_D = MetricsParams()  # the one source of defaults (tests/test_cli_defaults.py)
+
 
 def format_summary(r: dict[str, Any]) -> str:
     """Human-readable summary of an ``imulog.metrics`` record ``r``."""
@@ -55,10 +59,26 @@ def format_summary(r: dict[str, Any]) -> str:
 @click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--imu", default=None, help="IMU name (channel /imu/NAME); default: the only IMU, else 'wrist'.")
 @click.option(
-    "--noise-level-g", type=float, default=None, help="Arm-usage threshold in g.  [default: 0.022 (Doshi 2011)]"
+    "--noise-level-g",
+    type=float,
+    default=_D.noise_level_g,
+    show_default=True,
+    help="Arm-usage threshold in g, on changes between samples at --arm-usage-rate-hz (Doshi 2011); "
+    "with --static: measured unless given.",
 )
 @click.option(
-    "--noise-floor-g", type=float, default=None, help="Activity noise floor in g.  [default: 0.09 (Doshi 2011)]"
+    "--arm-usage-rate-hz",
+    type=float,
+    default=_D.arm_usage_rate_hz,
+    show_default=True,
+    help="Rate the arm-usage threshold applies at (Doshi: 10 Hz); faster recordings are averaged to it first.",
+)
+@click.option(
+    "--noise-floor-g",
+    type=float,
+    default=_D.noise_floor_g,
+    show_default=True,
+    help="Activity noise floor in g (Doshi 2011); with --static: measured unless given.",
 )
 @click.option(
     "--static",
@@ -74,28 +94,34 @@ def format_summary(r: dict[str, Any]) -> str:
     show_default=True,
     help="Statistic of the --static recording used as arm-usage noise level (Doshi: peak).",
 )
-@click.option("--m-s", type=float, default=0.5, show_default=True, help="Moving-average half width, s (m).")
-@click.option("--dead-s", type=float, default=1.0, show_default=True, help="Dead period separating activities, s.")
+@click.option("--m-s", type=float, default=_D.m_s, show_default=True, help="Moving-average half width, s (m).")
+@click.option(
+    "--dead-s", type=float, default=_D.dead_s, show_default=True, help="Dead period separating activities, s."
+)
 @click.option(
     "--min-activity-s",
     type=float,
-    default=0.0,
+    default=_D.min_activity_s,
     show_default=True,
     help="Drop activities shorter than this, s (imulog addition; 0 = Doshi).",
 )
-@click.option("--window-s", type=float, default=5.0, show_default=True, help="Distance-histogram window, s.")
-@click.option("--max-distance-cm", type=float, default=120.0, show_default=True, help="Last histogram bin, cm.")
-@click.option("--weight-start-cm", type=float, default=60.0, show_default=True, help="Weight-0 distance, cm.")
+@click.option("--window-s", type=float, default=_D.window_s, show_default=True, help="Distance-histogram window, s.")
+@click.option(
+    "--max-distance-cm", type=float, default=_D.max_distance_cm, show_default=True, help="Last histogram bin, cm."
+)
+@click.option(
+    "--weight-start-cm", type=float, default=_D.weight_start_cm, show_default=True, help="Weight-0 distance, cm."
+)
 @click.option(
     "--acc-unit",
     type=click.Choice(["g", "m/s^2"]),
-    default="g",
+    default=_D.acc_unit,
     show_default=True,
     help="Integrate distances in g (Doshi App. A.3) or SI units.",
 )
 @click.option(
     "--trajectory",
-    default="",
+    default=_D.trajectory,
     help="Positions for smoothness: METHOD of /derived/trajectory/METHOD or 'vicon'. [default: the most "
     "accurate trajectory present (optimized, zupt_bias, zupt, kalman, ...), else vicon]",
 )
@@ -104,8 +130,9 @@ def format_summary(r: dict[str, Any]) -> str:
 def process_metrics(
     trial: Path,
     imu: str | None,
-    noise_level_g: float | None,
-    noise_floor_g: float | None,
+    noise_level_g: float,
+    arm_usage_rate_hz: float,
+    noise_floor_g: float,
     static_trial: Path | None,
     noise_statistic: str,
     m_s: float,
@@ -140,19 +167,27 @@ def process_metrics(
       imulog process metrics trial.mcap --static sensor_at_rest.mcap      # noise from a static recording
       imulog process align r2g.mcap && imulog process phases r2g.mcap && imulog process metrics r2g.mcap
     """
+    from dataclasses import replace
+
+    from click.core import ParameterSource
+
     from imulog.archive.errors import ArchiveError
     from imulog.steps.common import error_line, pick_imu
-    from imulog.steps.metrics import MetricsParams, run_metrics
+    from imulog.steps.metrics import run_metrics
 
+    ctx = click.get_current_context()
+    given = {n for n in ("noise_level_g", "noise_floor_g") if ctx.get_parameter_source(n) != ParameterSource.DEFAULT}
     try:
         if static_trial is not None:
-            level, floor = _noise_from_static(static_trial, imu, m_s, noise_statistic)
-            noise_level_g = level if noise_level_g is None else noise_level_g
-            noise_floor_g = floor if noise_floor_g is None else noise_floor_g
+            level, floor = _noise_from_static(static_trial, imu, m_s, noise_statistic, arm_usage_rate_hz)
+            noise_level_g = noise_level_g if "noise_level_g" in given else level
+            noise_floor_g = noise_floor_g if "noise_floor_g" in given else floor
             click.echo(f"noise from {static_trial}: level {level:.4f} g ({noise_statistic}), floor {floor:.4f} g")
-        params = MetricsParams(
-            noise_level_g=0.022 if noise_level_g is None else noise_level_g,
-            noise_floor_g=0.09 if noise_floor_g is None else noise_floor_g,
+        params = replace(
+            _D,
+            noise_level_g=noise_level_g,
+            arm_usage_rate_hz=arm_usage_rate_hz,
+            noise_floor_g=noise_floor_g,
             m_s=m_s,
             dead_s=dead_s,
             min_activity_s=min_activity_s,
@@ -182,10 +217,21 @@ def process_metrics(
     click.echo(("(unchanged: same inputs and parameters) " if skipped else "") + format_summary(record))
 
 
-def _noise_from_static(path: Path, imu: str | None, m_s: float, statistic: str) -> tuple[float, float]:
-    """Arm-usage noise level and activity noise floor (g) of a trial recorded at rest."""
+def _noise_from_static(
+    path: Path, imu: str | None, m_s: float, statistic: str, arm_usage_rate_hz: float = _D.arm_usage_rate_hz
+) -> tuple[float, float]:
+    """Arm-usage noise level and activity noise floor (g) of a trial recorded at rest.
+
+    The noise level is measured at the rate the arm-usage threshold applies at (0.1 s window means at 10 Hz),
+    the noise floor at the recording's own rate (activity counts work on every sample)."""
     from imulog.archive import TrialReader
-    from imulog.process.metrics import ActivityCountParams, acc_to_g, estimate_noise_floor, estimate_noise_level
+    from imulog.process.metrics import (
+        ActivityCountParams,
+        acc_to_g,
+        estimate_noise_floor,
+        estimate_noise_level,
+        to_reference_rate,
+    )
     from imulog.steps.common import nominal_rate_hz, pick_imu
 
     with TrialReader(path) as reader:
@@ -194,6 +240,9 @@ def _noise_from_static(path: Path, imu: str | None, m_s: float, statistic: str) 
     if stream.acc is None:
         raise ValueError(f"{path}: /imu/{name} has no accelerometer columns")
     acc_g = acc_to_g(stream.acc)
-    level = estimate_noise_level(acc_g).threshold_g(statistic)  # type: ignore[arg-type]
+    slow = acc_g
+    if nominal_rate_hz(stream.t_ns) > 1.5 * arm_usage_rate_hz:
+        slow = to_reference_rate(acc_g, stream.t_ns, arm_usage_rate_hz)[0]
+    level = estimate_noise_level(slow).threshold_g(statistic)  # type: ignore[arg-type]
     floor = estimate_noise_floor(acc_g, ActivityCountParams.for_rate(nominal_rate_hz(stream.t_ns), m_s=m_s))
     return level, floor

@@ -6,7 +6,10 @@ from pathlib import Path
 
 import click
 
+from imulog.process.orientation import OrientationParams
+
 BACKEND_CHOICES = ["vqf_offline", "vqf", "madgwick", "imufusion"]
+_D = OrientationParams()  # the one source of defaults (tests/test_cli_defaults.py)
 
 
 @click.command("orientation")
@@ -15,17 +18,23 @@ BACKEND_CHOICES = ["vqf_offline", "vqf", "madgwick", "imufusion"]
 @click.option(
     "--backend",
     type=click.Choice(BACKEND_CHOICES),
-    default="vqf_offline",
+    default=_D.backend,
     show_default=True,
     help="vqf_offline: acausal VQF (most accurate on BROAD); vqf: causal VQF; madgwick: the R2G thesis "
     "setting (AQUA init + Madgwick, numba); imufusion: x-io Fusion (optional package).",
 )
-@click.option("--beta", type=float, default=0.03, show_default=True, help="Madgwick gain, rad/s (madgwick backend).")
-@click.option("--mag/--no-mag", "use_mag", default=False, show_default=True, help="Fuse the magnetometer (9D).")
+@click.option("--beta", type=float, default=_D.beta, show_default=True, help="Madgwick gain, rad/s (madgwick backend).")
+@click.option("--mag/--no-mag", "use_mag", default=_D.use_mag, show_default=True, help="Fuse the magnetometer (9D).")
 @click.option(
-    "--static-threshold", type=float, default=0.1, show_default=True, help="Static if gyro norm < this, rad/s."
+    "--static-threshold",
+    type=float,
+    default=_D.static.threshold_rad_s,
+    show_default=True,
+    help="Static if gyro norm < this, rad/s.",
 )
-@click.option("--static-min-s", type=float, default=0.1, show_default=True, help="Shortest static period, s.")
+@click.option(
+    "--static-min-s", type=float, default=_D.static.min_duration_s, show_default=True, help="Shortest static period, s."
+)
 @click.option(
     "--source",
     type=click.Choice(["auto", "raw", "calibrated"]),
@@ -57,18 +66,20 @@ def process_orientation(
       imulog process orientation trial.mcap --backend madgwick --beta 0.03   # the thesis's setting
       imulog process orientation trial.mcap --backend vqf --mag      # causal VQF with magnetometer
     """
+    from dataclasses import replace
+
     from imulog.archive.errors import ArchiveError
-    from imulog.process.orientation import OrientationParams, StaticParams
     from imulog.steps.common import error_line
     from imulog.steps.orientation import run_orientation
 
     if beta <= 0:
         raise click.ClickException(f"--beta must be positive, got {beta}")
-    params = OrientationParams(
+    params = replace(
+        _D,
         backend=backend,
         beta=beta,
         use_mag=use_mag,
-        static=StaticParams(threshold_rad_s=static_threshold, min_duration_s=static_min_s),
+        static=replace(_D.static, threshold_rad_s=static_threshold, min_duration_s=static_min_s),
     )
     try:
         with click.progressbar(length=1, label=f"orientation ({backend})") as bar:

@@ -7,7 +7,9 @@ from pathlib import Path
 
 import click
 
-from imulog.process.segmentation.pipeline import METHODS, PROTOCOLS
+from imulog.process.segmentation.pipeline import METHODS, PROTOCOLS, PhaseParams
+
+_D = PhaseParams()  # the one source of defaults (tests/test_cli_defaults.py); protocol/repetitions: the trial's
 
 
 def _threshold(value: str) -> float | str:
@@ -68,9 +70,12 @@ def _protocol_from_trial(trial: Path) -> tuple[str, int]:
 @click.command("phases")
 @click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--imu", default=None, help="IMU name (channel /imu/NAME); default: the only IMU, else 'wrist'.")
-@click.option("--method", type=click.Choice(METHODS), default="dynamos", show_default=True)
+@click.option("--method", type=click.Choice(METHODS), default=_D.method, show_default=True)
 @click.option(
-    "--threshold", default="0.11", show_default=True, help="DynAMoS threshold: 'otsu' or a fraction of the max."
+    "--threshold",
+    default=str(_D.dynamos.threshold),
+    show_default=True,
+    help="DynAMoS threshold: 'otsu' or a fraction of the max.",
 )
 @click.option(
     "--repetitions",
@@ -85,20 +90,32 @@ def _protocol_from_trial(trial: Path) -> tuple[str, int]:
     help="r2g: drinking-task phases per repetition; movements: every movement is a phase. "
     "Default: r2g when the trial record's task is r2g, else movements.",
 )
-@click.option("--phases-per-repetition", type=int, default=4, show_default=True)
-@click.option("--alpha", type=float, default=0.8, show_default=True, help="DynAMoS short-movement factor.")
-@click.option("--beta", type=float, default=1.4, show_default=True, help="DynAMoS long-movement factor.")
-@click.option("--cutoff-hz", type=float, default=1.5, show_default=True, help="Low-pass cut-off of the gyroscope.")
+@click.option("--phases-per-repetition", type=int, default=_D.repetitions.n_phases, show_default=True)
+@click.option("--alpha", type=float, default=_D.dynamos.alpha, show_default=True, help="DynAMoS short-movement factor.")
+@click.option("--beta", type=float, default=_D.dynamos.beta, show_default=True, help="DynAMoS long-movement factor.")
+@click.option(
+    "--cutoff-hz",
+    type=float,
+    default=_D.dynamos.cutoff_hz,
+    show_default=True,
+    help="Low-pass cut-off of the gyroscope.",
+)
 @click.option("--no-refine", is_flag=True, help="Keep the raw DynAMoS threshold crossings as onsets/offsets.")
 @click.option(
     "--static",
     "static_method",
     type=click.Choice(["movements", "gyro-norm"]),
-    default="movements",
+    default=_D.static,
     show_default=True,
     help="Zero-velocity mask: complement of the movements, or the gyro-norm baseline detector.",
 )
-@click.option("--static-threshold", type=float, default=0.1, show_default=True, help="gyro-norm threshold, rad/s.")
+@click.option(
+    "--static-threshold",
+    type=float,
+    default=_D.gyro_norm.threshold_rad_s,
+    show_default=True,
+    help="gyro-norm threshold, rad/s.",
+)
 @click.option("--force", is_flag=True, help="Recompute even when the same parameters are already recorded.")
 @click.option("--quiet", is_flag=True, help="Print only the one-line summary.")
 def process_phases(
@@ -134,10 +151,6 @@ def process_phases(
       imulog process phases walk.mcap --protocol movements --static gyro-norm
     """
     from imulog.archive import ArchiveError, TrialReader
-    from imulog.process.segmentation.dynamos import DynamosParams
-    from imulog.process.segmentation.pipeline import PhaseParams
-    from imulog.process.segmentation.repetitions import RepetitionParams
-    from imulog.process.segmentation.zero_velocity import GyroNormStaticParams
     from imulog.steps.common import error_line, pick_imu
     from imulog.steps.phases import run_phases
 
@@ -147,15 +160,16 @@ def process_phases(
     repetitions = recorded_repetitions if repetitions is None else repetitions
     if alpha <= 0 or beta <= alpha:
         raise click.ClickException(f"need 0 < alpha < beta, got alpha={alpha}, beta={beta}")
-    params = PhaseParams(
+    params = replace(
+        _D,
         method=method,
         protocol=protocol,
-        dynamos=DynamosParams(
-            threshold=thr, alpha=alpha, beta=beta, cutoff_hz=cutoff_hz, refine_boundaries=not no_refine
+        dynamos=replace(
+            _D.dynamos, threshold=thr, alpha=alpha, beta=beta, cutoff_hz=cutoff_hz, refine_boundaries=not no_refine
         ),
-        repetitions=replace(RepetitionParams(), n_repetitions=repetitions, n_phases=phases_per_repetition),
+        repetitions=replace(_D.repetitions, n_repetitions=repetitions, n_phases=phases_per_repetition),
         static=static_method,
-        gyro_norm=GyroNormStaticParams(threshold_rad_s=static_threshold),
+        gyro_norm=replace(_D.gyro_norm, threshold_rad_s=static_threshold),
     )
     try:
         with TrialReader(trial) as reader:

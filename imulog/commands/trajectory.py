@@ -8,9 +8,10 @@ from pathlib import Path
 
 import click
 
-from imulog.process.trajectory_opt import METHODS
+from imulog.process.trajectory_opt import METHODS, TrajectoryParams
 
-DEFAULT_METHODS = "ddi,zupt,highpass,wavelet,kalman,zupt_bias,optimized"
+DEFAULT_METHODS = ",".join(METHODS)
+_D = TrajectoryParams()  # the one source of defaults (tests/test_cli_defaults.py)
 
 
 def _methods(value: str) -> list[str]:
@@ -33,20 +34,48 @@ def _methods(value: str) -> list[str]:
     show_default=True,
     help="Comma-separated methods: " + ", ".join(METHODS) + ".",
 )
-@click.option("--highpass-hz", type=float, default=0.3, show_default=True, help="High-pass cut-off (Bai et al.).")
-@click.option("--wavelet", default="db6", show_default=True, help="Wavelet for drift removal (Bai et al.).")
 @click.option(
-    "--wavelet-level", type=int, default=9, show_default=True, help="Decomposition level (trend: top 2 details + A)."
+    "--highpass-hz",
+    type=float,
+    default=_D.highpass.cutoff_hz,
+    show_default=True,
+    help="High-pass cut-off (Bai et al.).",
 )
-@click.option("--kalman-alpha", type=float, default=1.0, show_default=True, help="AR(1) coefficient (Doshi).")
-@click.option("--kalman-q", type=float, default=1e-3, show_default=True, help="AR(1) process variance, (m/s^2)^2.")
+@click.option(
+    "--wavelet", default=_D.wavelet.wavelet, show_default=True, help="Wavelet for drift removal (Bai et al.)."
+)
+@click.option(
+    "--wavelet-level",
+    type=int,
+    default=_D.wavelet.level,
+    show_default=True,
+    help="Decomposition level (trend: top 2 details + A).",
+)
+@click.option(
+    "--kalman-alpha", type=float, default=_D.kalman.alpha, show_default=True, help="AR(1) coefficient (Doshi)."
+)
+@click.option(
+    "--kalman-q",
+    type=float,
+    default=_D.kalman.process_var_m2ps4,
+    show_default=True,
+    help="AR(1) process variance, (m/s^2)^2.",
+)
 @click.option("--no-smoother", is_flag=True, help="Kalman: forward filter only (no RTS smoother).")
 @click.option("--no-zero-velocity", is_flag=True, help="Kalman: no zero-velocity pseudo-measurements.")
 @click.option(
-    "--sigma-ref", type=float, default=0.03, show_default=True, help="Optimisation: reference distance while still, m."
+    "--sigma-ref",
+    type=float,
+    default=_D.optimized.sigma_ref_static_m,
+    show_default=True,
+    help="Optimisation: reference distance while still, m.",
 )
 @click.option(
-    "--sigma-data", type=float, default=0.02, show_default=True, help="Optimisation: trust in ZUPT velocity, m/s."
+    "--sigma-data",
+    type=float,
+    default=_D.optimized.sigma_data_mps,
+    show_default=True,
+    help="Optimisation: trust in ZUPT velocity, m/s.",
 )
 @click.option("--no-return-to-start", is_flag=True, help="Optimisation: drop the return-to-start constraint.")
 @click.option("--force", is_flag=True, help="Recompute even when the same parameters are already recorded.")
@@ -90,27 +119,25 @@ def process_trajectory(
       imulog evaluate trial.mcap
     """
     from imulog.archive.errors import ArchiveError
-    from imulog.process.drift import HighpassParams, WaveletParams
-    from imulog.process.kalman import KalmanParams
-    from imulog.process.trajectory_opt import OptimizationParams, TrajectoryParams
     from imulog.steps.common import error_line
     from imulog.steps.trajectory import run_trajectory
 
     chosen = _methods(methods)
-    base = TrajectoryParams()
+    base = _D
     try:
         params = replace(
             base,
-            highpass=HighpassParams(cutoff_hz=highpass_hz),
-            wavelet=WaveletParams(wavelet=wavelet, level=wavelet_level),
-            kalman=KalmanParams(
+            highpass=replace(base.highpass, cutoff_hz=highpass_hz),
+            wavelet=replace(base.wavelet, wavelet=wavelet, level=wavelet_level),
+            kalman=replace(
+                base.kalman,
                 alpha=kalman_alpha,
                 process_var_m2ps4=kalman_q,
                 smoother=not no_smoother,
                 zero_velocity=not no_zero_velocity,
             ),
             optimized=replace(
-                OptimizationParams(),
+                base.optimized,
                 sigma_ref_static_m=sigma_ref,
                 sigma_data_mps=sigma_data,
                 return_to_start=not no_return_to_start,
