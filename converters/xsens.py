@@ -328,7 +328,7 @@ class XsensConverter(Converter):
         lines = text_head_lines(head, 60)
         if not lines:
             return 0.0
-        if lines[0].startswith(("PacketCounter\t", "PacketCounter,")):
+        if lines[0].startswith(("PacketCounter\t", "PacketCounter,", "PacketCounter;", "PacketCounter ")):
             return 0.8  # exported without the // header lines
         if not lines[0].lstrip().startswith("//"):
             return 0.0

@@ -49,7 +49,7 @@ def test_every_real_export_is_detected_and_matches_the_file(shared_data):
         np.testing.assert_array_equal(imu.t_ns, np.round(counter * 1e7).astype(np.int64))  # 100 Hz
 
 
-def test_four_delimiters_give_the_same_numbers(shared_data):
+def test_four_delimiters_give_the_same_numbers(shared_data, tmp_path):
     """Tab (NaN cells), comma, semicolon (;;) and space (runs of spaces = empty fields, not collapsed)."""
     d = shared_data / XSENS
     comma = convert_file(d / "MT2022_ACC_GYRO_ROT_MAT_COMMA_00B42D4B.txt")
@@ -61,6 +61,11 @@ def test_four_delimiters_give_the_same_numbers(shared_data):
         np.testing.assert_array_equal(other.signals[1].values, comma.signals[1].values)
         assert other.metadata["imulog.device.mt_00b42d4b"]["delimiter"] == variant.lower()
     assert comma.imus[0].acc[0].tolist() == [0.074225, -0.040975, 9.922524]
+    # exported without the // lines: still Xsens (serial from the file name), same numbers
+    bare = tmp_path / "MT2022_BARE_00B42D4B.txt"
+    bare.write_text("\n".join((d / "MT2022_ACC_GYRO_ROT_MAT_SPACE_00B42D4B.txt").read_text().splitlines()[12:]) + "\n")
+    assert detect(bare).name == "xsens"
+    np.testing.assert_array_equal(convert_file(bare).imus[0].acc, comma.imus[0].acc)
     # the empty SampleTimeFine/Year/... columns carry nothing and are not kept
     assert "SampleTimeFine" not in comma.signals[0].columns and "Year" not in comma.signals[0].columns
 
