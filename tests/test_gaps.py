@@ -174,7 +174,7 @@ def test_trajectory_step_records_the_left_out_repetition(processed):
 def test_metrics_leave_the_gap_out_of_usage_and_distance(processed):
     (clean, meta0, _), (gapped, meta, runs), (g0, g1), short_at = processed
     rec, rec0 = meta["imulog.metrics"], meta0["imulog.metrics"]
-    assert rec["gaps"]["missing_samples"] == g1 - g0 and _gaps_of(runs, "metrics")["runs"][1][0] == g1
+    assert rec["gaps.missing_samples"] == g1 - g0 and _gaps_of(runs, "metrics")["runs"][1][0] == g1
     assert rec["arm_usage.overall_percent"] == pytest.approx(rec0["arm_usage.overall_percent"], abs=1.0)
     d = gapped["/derived/metrics/distance/wrist"].values[:, 0]
     assert np.isnan(d[g0:g1]).all() and np.isfinite(d[:g0]).all()

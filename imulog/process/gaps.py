@@ -10,7 +10,9 @@ or NaN cells and dropped packets as NaN, never as zeros). The rule:
    (nothing is carried across a gap whose motion is unknown) and the outputs are NaN inside the gap;
 3. runs shorter than ``min_run_samples`` are left out (NaN outputs): too short to initialise a filter.
 
-Never interpolated silently: :class:`GapReport` says what was bridged and split, and the steps record it.
+Never interpolated silently: :class:`GapReport` says what was bridged and split, and the steps record it in the
+run's provenance (with the :class:`GapParams` used). The steps take ``gaps=GapParams(...)`` from Python only; the
+parameters are not part of a step's up-to-date check, so rerun with ``force=True`` after changing them.
 Gaps at the start or end of a recording are never bridged (there is no sample on one side).
 """
 

@@ -202,7 +202,7 @@ def compute_metrics(
 
     Missing samples (NaN) follow :mod:`imulog.process.gaps`: short gaps are bridged; in longer ones there is no
     arm use or activity, the distance is NaN and left out of the histogram, and percentages are of the recorded
-    samples; ``gaps`` in the record says what was done.
+    samples; ``gaps.*`` keys in the record say what was done.
     """
     p = params or MetricsParams()
     if imu.acc is None:
@@ -272,8 +272,8 @@ def compute_metrics(
         "distance.window_median_cm": _r(np.median(dist.window_distance_cm), 4),
         "distance.window_max_cm": _r(np.max(dist.window_distance_cm), 4),
     }
-    if gap_report.missing:
-        record["gaps"] = gap_report.as_dict()
+    if gap_report.missing:  # flat keys, as every key of the record
+        record.update({f"gaps.{k}": v for k, v in gap_report.as_dict().items()})
     record.update(_period_records(imu.t_ns, acc_g, usage, m2, dist, p, start_time))
     if phases is not None and len(phases):
         for label, stats in phase_summary(phases).items():
@@ -321,7 +321,8 @@ def run_metrics(path, *, imu: str | None = None, params: MetricsParams | None = 
         streams, record = compute_metrics(
             stream, p, phases=phases, trajectory=trajectory, start_time=str(start_time) if start_time else None
         )
-        provenance = {"gaps": record["gaps"]} if "gaps" in record else {}
+        gaps_done = {k[5:]: v for k, v in record.items() if k.startswith("gaps.")}
+        provenance = {"gaps": gaps_done} if gaps_done else {}
         return StepResult(streams=streams, metadata={RECORD: record}, provenance=provenance)
 
     return run_step(
