@@ -390,7 +390,8 @@ REAL_SAMPLES = {
     "delimited": ("imu_text/fusion_sensor_data.csv", 6000),
     "vicon-csv": ("vicon_nexus/analogs.csv", 20000),
     "gaitmap": ("gaitmap_foot/imu_sample.csv", 6000),
-}
+    "xsens": ("devices/xsens_mtmanager/MT2022_ACC_GYRO_ROT_ALL_TAB_NAN_00B42D4B.txt", None),
+}  # converter engineers: add one real sample per new converter here
 
 
 def _cut_text(data: bytes, keep: int | None) -> bytes:
