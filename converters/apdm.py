@@ -19,10 +19,12 @@ Time in microseconds since the Unix epoch (UTC) -> the trial's start time. No un
 rad/s, uT, kPa). The Barometer column of these exports holds the IEEE-754 bit pattern of the double printed as an
 integer (``4636858284341460992.000000`` is 101.72 kPa); it is reinterpreted.
 
-HDF5 (``.h5``, the layout scikit-digital-health and APDM's documentation read): ``/Sensors/<case ID>/``
+HDF5 (``.h5``, the layouts scikit-digital-health and APDM's documentation read): format 5 ``/Sensors/<case ID>/``
 ``Accelerometer`` (N, 3) m/s^2, ``Gyroscope`` rad/s, ``Magnetometer`` uT, ``Temperature`` degC, ``Barometer`` kPa,
 ``Time`` (N,) microseconds since the Unix epoch (UTC), ``Configuration`` attributes ``Label 0``, ``Sample Rate`` and
-``Timezone Offset`` (hours); ``/Processed/<case ID>/Orientation`` (N, 4) scalar first.
+``Timezone Offset`` (hours); ``/Processed/<case ID>/Orientation`` (N, 4) scalar first. Formats 3-4: root
+attributes ``CaseIdList``/``MonitorLabelList``, ``/<case ID>/Time`` and ``/<case ID>/Calibrated/{Accelerometers,
+Gyroscopes, Magnetometers, Temperature, Orientation}``, group attribute ``SampleRate``.
 
 Streams are named from the sensor label (``Right Ankle`` -> ``/imu/right_ankle``), else ``opal_<case ID>``;
 ``--device-name 5718=pelvis`` renames by case ID (or by label). Orientation estimates go to
@@ -305,52 +307,114 @@ def read_format7(path: Path, lines: list[str], names: dict[str, str]) -> Recordi
 
 
 # ------------------------------------------------------------------------------------------------ HDF5
+def _text(value: Any) -> str:
+    if isinstance(value, bytes | np.bytes_):
+        return bytes(value).decode("utf-8", "replace").strip("\x00 ")
+    return str(value).strip("\x00 ")
+
+
+@dataclass
+class H5Sensor:
+    """Where one sensor's data sets are in an APDM HDF5 file (``paths``: quantity -> data set path)."""
+
+    case_id: str
+    label: str
+    rate: Any
+    tz_hours: Any
+    paths: dict[str, str]
+
+
+def h5_sensors(f: Any) -> tuple[str, list[H5Sensor]]:
+    """The sensors of an APDM HDF5 file, in either layout: (layout name, sensors).
+
+    * format 5 (Mobility Lab 2): ``/Sensors/<id>/{Time, Accelerometer, Gyroscope, Magnetometer, Temperature,
+      Barometer}``, ``/Sensors/<id>/Configuration`` attributes ``Label 0``, ``Sample Rate``, ``Timezone Offset``,
+      ``/Processed/<id>/Orientation``;
+    * formats 3-4 (Motion Studio, Mobility Lab 1): root attributes ``CaseIdList``, ``MonitorLabelList``,
+      ``/<id>/Time``, ``/<id>/Calibrated/{Accelerometers, Gyroscopes, Magnetometers, Temperature, Orientation}``,
+      group attribute ``SampleRate``.
+    """
+    if "Sensors" in f:
+        out = []
+        for cid in sorted(f["Sensors"]):
+            g = f["Sensors"][cid]
+            cfg = dict(g["Configuration"].attrs) if "Configuration" in g else {}
+            base = f"/Sensors/{cid}"
+            paths = {
+                q: f"{base}/{k}"
+                for k, q in (
+                    ("Time", "time"),
+                    ("Accelerometer", "acc"),
+                    ("Gyroscope", "gyr"),
+                    ("Magnetometer", "mag"),
+                    ("Temperature", "temperature"),
+                    ("Barometer", "pressure"),
+                )
+            }
+            paths["orientation"] = f"/Processed/{cid}/Orientation"
+            label = _text(cfg.get("Label 0", b""))
+            out.append(H5Sensor(str(cid), label, cfg.get("Sample Rate"), cfg.get("Timezone Offset"), paths))
+        return "apdm-h5 (format 5: /Sensors)", out
+    ids = [_text(x) for x in np.atleast_1d(f.attrs.get("CaseIdList", []))]
+    labels = [_text(x) for x in np.atleast_1d(f.attrs.get("MonitorLabelList", []))]
+    if not ids:
+        ids = sorted(k for k in f if hasattr(f[k], "keys") and "Calibrated" in f[k])
+    out = []
+    for i, cid in enumerate(ids):
+        base = f"/{cid}"
+        paths = {"time": f"{base}/Time"}
+        for k, q in (
+            ("Accelerometers", "acc"),
+            ("Gyroscopes", "gyr"),
+            ("Magnetometers", "mag"),
+            ("Temperature", "temperature"),
+            ("Barometer", "pressure"),
+            ("Orientation", "orientation"),
+        ):
+            paths[q] = f"{base}/Calibrated/{k}"
+        rate = f[base].attrs.get("SampleRate") if base in f else None
+        out.append(H5Sensor(cid, labels[i] if i < len(labels) else "", rate, None, paths))
+    return "apdm-h5 (format 3-4: /<case ID>/Calibrated)", out
+
+
 def read_apdm_h5(path: Path, names: dict[str, str]) -> Recording:
-    """``/Sensors/<case ID>/{Accelerometer,Gyroscope,Magnetometer,Temperature,Barometer,Time,Configuration}``."""
+    """An APDM HDF5 file (see :func:`h5_sensors` for both layouts): one IMU per sensor, its orientation estimate."""
     import h5py
 
     try:
         f = h5py.File(path, "r")
     except OSError as e:
         raise ConversionError(path, f"not a readable HDF5 file (cut off or damaged?): {e}") from None
+    widths = {"acc": 3, "gyr": 3, "mag": 3, "orientation": 4, "temperature": 1, "pressure": 1}
     with f:
-        if "Sensors" not in f:
-            raise ConversionError(path, "no /Sensors group: not an APDM HDF5 file")
+        try:
+            layout, sensors = h5_sensors(f)
+        except (KeyError, OSError, TypeError, ValueError) as e:
+            raise ConversionError(path, f"cannot read the sensor list ({type(e).__name__}: {e})") from None
+        if not sensors:
+            raise ConversionError(path, "no sensors (/Sensors/<id> or CaseIdList): not an APDM HDF5 file")
         rec = Recording(sources=[str(path)])
         starts = []
-        for case_id in sorted(f["Sensors"]):
-            where = f"/Sensors/{case_id}"
-            g = f["Sensors"][case_id]
+        for sensor in sensors:
+            where = sensor.paths["time"].rsplit("/", 1)[0]
+            data: dict[str, np.ndarray] = {}
             try:
-                cfg = dict(g["Configuration"].attrs) if "Configuration" in g else {}
-                label = cfg.get("Label 0", b"")
-                label = (label.decode("utf-8", "replace") if isinstance(label, bytes) else str(label)).strip("\x00 ")
-                if "Time" not in g:
-                    raise ConversionError(path, f"{where}/Time is missing")
-                us = np.asarray(g["Time"][()], dtype=np.int64).reshape(-1)
+                if sensor.paths["time"] not in f:
+                    raise ConversionError(path, f"{sensor.paths['time']} is missing")
+                us = np.asarray(f[sensor.paths["time"]][()], dtype=np.int64).reshape(-1)
                 n = len(us)
                 if n == 0:
-                    raise ConversionError(path, f"{where}/Time is empty")
-                sensor_data: dict[str, np.ndarray] = {}
-                for key, q in (("Accelerometer", "acc"), ("Gyroscope", "gyr"), ("Magnetometer", "mag")):
-                    if key in g:
-                        a = np.asarray(g[key][()], dtype=np.float64)
-                        if a.shape != (n, 3):
-                            raise ConversionError(path, f"{where}/{key} has shape {a.shape}, Time has {n} samples")
-                        sensor_data[q] = a
-                for key, q in (("Temperature", "temperature"), ("Barometer", "pressure")):
-                    if key in g:
-                        a = np.asarray(g[key][()], dtype=np.float64).reshape(-1)
-                        if a.shape != (n,):
-                            raise ConversionError(path, f"{where}/{key} has {a.shape[0]} samples, Time has {n}")
-                        sensor_data[q] = a
-                orient = None
-                if "Processed" in f and case_id in f["Processed"] and "Orientation" in f["Processed"][case_id]:
-                    orient = np.asarray(f["Processed"][case_id]["Orientation"][()], dtype=np.float64)
-                    if orient.shape != (n, 4):
-                        raise ConversionError(
-                            path, f"/Processed/{case_id}/Orientation has shape {orient.shape}, Time has {n} samples"
-                        )
+                    raise ConversionError(path, f"{sensor.paths['time']} is empty")
+                for q, width in widths.items():
+                    p = sensor.paths.get(q)
+                    if p is None or p not in f:
+                        continue
+                    a = np.asarray(f[p][()], dtype=np.float64)
+                    if width == 1:
+                        a = a.reshape(-1)
+                    if a.shape != ((n,) if width == 1 else (n, width)):
+                        raise ConversionError(path, f"{p} has shape {a.shape}, Time has {n} samples")
+                    data[q] = a
             except (KeyError, OSError, TypeError, ValueError) as e:
                 if isinstance(e, ConversionError):
                     raise
@@ -358,44 +422,47 @@ def read_apdm_h5(path: Path, names: dict[str, str]) -> Recording:
             bad = np.nonzero(np.diff(us) <= 0)[0]
             if len(bad):
                 raise ConversionError(path, f"{where}/Time does not increase at sample {int(bad[0]) + 1}")
-            if "acc" not in sensor_data and "gyr" not in sensor_data:
-                raise ConversionError(path, f"{where}: no Accelerometer or Gyroscope data set")
+            if "acc" not in data and "gyr" not in data:
+                raise ConversionError(path, f"{where}: no accelerometer or gyroscope data set")
             t_ns = us * 1000
-            name = _name(Sensor(label=label, case_id=str(case_id)), names)
-            rate = cfg.get("Sample Rate")
+            name = _name(Sensor(label=sensor.label, case_id=sensor.case_id), names)
+            if f"imulog.device.{name}" in rec.metadata:
+                raise ConversionError(path, f"two sensors are both named {name!r} (give --device-name CASEID=NAME)")
             meta: dict[str, Any] = {
-                "format": "apdm-h5",
+                "format": layout,
                 "model": "APDM Opal",
-                "serial": str(case_id),
-                "label": label,
-                "rate_hz": float(rate) if rate is not None else estimate_rate_hz(t_ns),
+                "serial": sensor.case_id,
+                "label": sensor.label,
+                "rate_hz": float(np.asarray(sensor.rate).reshape(-1)[0])
+                if sensor.rate is not None
+                else estimate_rate_hz(t_ns),
                 "units": {"acc": "m/s^2", "gyr": "rad/s", "mag": "uT", "temperature": "degC", "pressure": "kPa"},
                 "time": "Time data set: microseconds since the Unix epoch (UTC), kept as the device clock",
                 "source": path.name,
             }
-            tz_hours = cfg.get("Timezone Offset")
             rec.imus.append(
                 ImuStream(
                     name=name,
                     t_ns=t_ns,
-                    acc=sensor_data.get("acc"),
-                    gyr=sensor_data.get("gyr"),
-                    mag=sensor_data.get("mag"),
-                    temperature=sensor_data.get("temperature"),
+                    acc=data.get("acc"),
+                    gyr=data.get("gyr"),
+                    mag=data.get("mag"),
+                    temperature=data.get("temperature"),
                     meta=dict(meta),
                 )
             )
-            if "pressure" in sensor_data:
+            if "pressure" in data:
                 rec.signals.append(
-                    SignalStream(f"/signals/{name}", t_ns, ["pressure"], ["kPa"], sensor_data["pressure"][:, None])
+                    SignalStream(f"/signals/{name}", t_ns, ["pressure"], ["kPa"], data["pressure"][:, None])
                 )
-            if orient is not None:
-                rec.signals.append(orientation_stream(name, t_ns, orient))
-                meta["orientation"] = {"topic": ORIENTATION_TOPIC.format(name=name), "from": "/Processed Orientation"}
+            if "orientation" in data:
+                rec.signals.append(orientation_stream(name, t_ns, data["orientation"]))
+                meta["orientation"] = {
+                    "topic": ORIENTATION_TOPIC.format(name=name),
+                    "from": sensor.paths["orientation"],
+                }
             rec.metadata[f"imulog.device.{name}"] = meta
-            starts.append((int(us[0]), tz_hours))
-        if not rec.imus:
-            raise ConversionError(path, "/Sensors holds no sensor")
+            starts.append((int(us[0]), sensor.tz_hours))
     us0, tz_hours = min(starts, key=lambda s: s[0])
     zone = UTC
     if tz_hours is not None:
@@ -406,7 +473,8 @@ def read_apdm_h5(path: Path, names: dict[str, str]) -> Recording:
     start = (datetime.fromtimestamp(us0 // 1_000_000, tz=UTC) + timedelta(microseconds=us0 % 1_000_000)).astimezone(
         zone
     )
-    rec.metadata["imulog.trial"] = trial_start(start, f"{path.name}: /Sensors/*/Time (UTC) and Timezone Offset")
+    source = "Time (UTC) and Timezone Offset" if tz_hours is not None else "Time (UTC)"
+    rec.metadata["imulog.trial"] = trial_start(start, f"{path.name}: {source}")
     return rec
 
 
@@ -414,9 +482,9 @@ def _is_apdm_h5(path: Path) -> bool:
     import h5py
 
     with h5py.File(path, "r") as f:
-        if "Sensors" not in f:
-            return False
-        return any("Time" in f["Sensors"][k] for k in f["Sensors"])
+        if "Sensors" in f:
+            return any("Time" in f["Sensors"][k] for k in f["Sensors"])
+        return "CaseIdList" in f.attrs
 
 
 class ApdmConverter(Converter):

@@ -196,3 +196,36 @@ def test_orientation_is_scalar_first_sensor_to_global(shared_data):
         device = next(s for s in rec.signals if s.topic == f"/orientation/{imu.name}").values
         up = Q.rotate(device, imu.acc)
         assert np.all(up[:, 2] / np.linalg.norm(up, axis=1) > 0.85), imu.name  # walking: measured >= 0.89
+
+
+def test_hdf5_format_3_layout(tmp_path):
+    """The older layout (Motion Studio / Mobility Lab 1): CaseIdList/MonitorLabelList root attributes and
+    /<case ID>/Calibrated/... data sets, as the MATLAB and Python readers of those files address them."""
+    import h5py
+
+    rng = np.random.default_rng(9)
+    n = 100
+    time = 1_390_000_000_000_000 + np.arange(n, dtype=np.uint64) * 7812  # 128 Hz, us since 1970
+    acc, gyr, q = rng.normal(0, 1, (n, 3)), rng.normal(0, 1, (n, 3)), rng.normal(0, 1, (n, 4))
+    path = tmp_path / "20140126-134055-Base.h5"
+    with h5py.File(path, "w") as f:
+        f.attrs["FileFormatVersion"] = 3
+        f.attrs["CaseIdList"] = np.array([b"SI-001007"])
+        f.attrs["MonitorLabelList"] = np.array([b"Left Wrist"])
+        g = f.create_group("SI-001007")
+        g.attrs["SampleRate"] = np.uint16(128)
+        g["Time"] = time
+        g["Calibrated/Accelerometers"] = acc
+        g["Calibrated/Gyroscopes"] = gyr
+        g["Calibrated/Orientation"] = q
+    assert detect(path).name == "apdm"
+    rec = convert_file(path)
+    (imu,) = rec.imus
+    assert imu.name == "left_wrist" and imu.mag is None
+    np.testing.assert_array_equal(imu.acc, acc)
+    np.testing.assert_array_equal(imu.gyr, gyr)
+    np.testing.assert_array_equal(imu.t_ns, time.astype(np.int64) * 1000)
+    np.testing.assert_array_equal(rec.signals[0].values, q)
+    meta = rec.metadata["imulog.device.left_wrist"]
+    assert meta["serial"] == "SI-001007" and meta["rate_hz"] == 128.0 and "format 3-4" in meta["format"]
+    assert rec.metadata["imulog.trial"]["start_time"] == "2014-01-17T23:06:40+00:00"
