@@ -29,6 +29,7 @@ from imulog.archive._builder import McapBuilder
 from imulog.archive.errors import ArchiveCorruptError, ArchiveError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import MetadataError, decode_record, encode_record, record_hash, to_json
+from imulog.archive.streaming import STATS_RECORD, StreamPieces, write_pieces
 from imulog.archive.writer import payload_hash, plan_append, write_stream, write_twin
 from imulog.model import DERIVED_PREFIX, Stream
 
@@ -231,7 +232,7 @@ def append_derived(
     """
     path = target_path(path)
     metadata = dict(metadata or {})
-    topics = [s.topic for s in streams]
+    topics = [t for s in streams for t in (s.topics if isinstance(s, StreamPieces) else [s.topic])]
     for t in topics:
         if not t.startswith(DERIVED_PREFIX):
             raise ArchiveError(f"{path}: derived topics must start with {DERIVED_PREFIX!r}, got {t!r}")
@@ -269,7 +270,8 @@ def append_derived(
                     if not replace:
                         raise ArchiveError(f"{path}: channel {t!r} exists (use replace=True)")
                     drop.add(existing[t].id)
-            axis, twins, twins_removed = plan_append(path, streams, metadata, remove)  # time axis, viewer twins
+            whole = [s for s in streams if not isinstance(s, StreamPieces)]  # pieces write their own twins
+            axis, twins, twins_removed = plan_append(path, whole, metadata, remove)  # time axis, viewer twins
             for t in [tw.topic for tw in twins] + twins_removed:
                 if t in existing and t not in raw_topics:
                     drop.add(existing[t].id)
@@ -303,9 +305,18 @@ def append_derived(
                 copy = _copy_without if drop else _copy_prefix
                 builder = copy(f, summary, out, drop, path)
                 outputs = {}
+                piece_stats: dict[str, dict[str, str]] = {}
                 for stream in streams:
+                    if isinstance(stream, StreamPieces):  # produced and written piece by piece (long recordings)
+                        stats_name = f"{STATS_RECORD}.{n}"
+                        digests, stats = write_pieces(builder, stream, provenance, axis, metadata, stats_name)
+                        outputs.update(digests)
+                        piece_stats.update(stats)
+                        continue
                     topic, digest = write_stream(builder, stream, provenance, log_map=axis.map_for(stream.topic))
                     outputs[topic] = digest
+                if piece_stats:
+                    builder.add_metadata(f"{STATS_RECORD}.{n}", encode_record(piece_stats))
                 for twin in twins:
                     write_twin(builder, twin, provenance)
                 for name, values in metadata.items():

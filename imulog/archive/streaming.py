@@ -20,7 +20,8 @@ import mimetypes
 import os
 import struct
 import zlib
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -137,6 +138,8 @@ class StreamingTrialWriter:
         self._twin_k: dict[str, int] = {}
         self._twin_seen: dict[str, int] = {}
         self._imus: list[Any] = []
+        self._extra: dict[str, str] = {}  # provenance of appended channels
+        self._stats_record = STATS_RECORD
         self.metadata = {k: dict(v) for k, v in (metadata or {}).items()}
         self.sources = [Path(s) for s in sources]
         self.overwrite = overwrite
@@ -219,7 +222,8 @@ class StreamingTrialWriter:
         schema_name, meta, _, _ = codec.encode(stream, self._axis.map_for(stream.topic))
         for key in STATS_KEYS:
             meta.pop(key, None)
-        meta["stats_record"] = STATS_RECORD
+        meta.update(self._extra)
+        meta["stats_record"] = self._stats_record
         schema_id = self._builder.add_schema(schema_name, "protobuf", codec.file_descriptor_set(schema_name))
         ch = self._channels[stream.topic] = _Channel(self._builder.add_channel(stream.topic, schema_id, meta), stream.topic)
         if stream.topic not in self._topics:
@@ -247,7 +251,8 @@ class StreamingTrialWriter:
             ch = self._twins.get(twin.topic)
             if ch is None:
                 meta = {k_: v for k_, v in twin.metadata.items() if k_ not in STATS_KEYS}
-                meta["stats_record"] = STATS_RECORD
+                meta.update(self._extra)
+                meta["stats_record"] = self._stats_record
                 schema_id = self._builder.add_schema(twin.schema_name, twin.schema_encoding, twin.schema_data)
                 cid = self._builder.add_channel(twin.topic, schema_id, meta, encoding=twin.message_encoding)
                 ch = self._twins[twin.topic] = _Channel(cid, twin.topic)
@@ -382,3 +387,68 @@ def write_trial_streaming(
         for piece in pieces:
             writer.write(piece)
     return writer.path
+
+
+# ---------------------------------------------------------------------------------------------------------
+# derived channels appended piece by piece
+
+
+@dataclass
+class StreamPieces:
+    """Derived channels given as consecutive pieces, produced while the trial is being appended to.
+
+    ``pieces()`` is called once, during :func:`imulog.archive.append_derived`, and yields streams of the
+    ``topics`` (interleaved, each topic in time order: e.g. a week's orientation, acceleration and static mask,
+    window by window); memory is bounded by a piece.
+    """
+
+    topics: list[str]
+    pieces: Callable[[], Iterator[Stream]]
+    expected_duration_s: float | None = None
+
+
+def write_pieces(
+    builder: McapBuilder,
+    source: StreamPieces,
+    extra_meta: dict[str, str],
+    axis: TrialAxis,
+    metadata: dict[str, dict[str, Any]],
+    stats_record: str,
+) -> tuple[dict[str, str], dict[str, dict[str, str]]]:
+    """Write the channels of one :class:`StreamPieces` (and their viewer twins) into ``builder``.
+
+    Returns ({topic: content hash}, {topic: stats}) for the closing stats record named ``stats_record``.
+    """
+    writer = _PieceChannels(builder, axis, metadata, extra_meta, stats_record, source.expected_duration_s)
+    for piece in source.pieces():
+        if piece.topic not in source.topics:
+            raise ArchiveError(f"a piece of topic {piece.topic} is not one of {', '.join(source.topics)}")
+        writer.write(piece)
+    return writer.finish(source.topics)
+
+
+class _PieceChannels(StreamingTrialWriter):
+    """The channel-writing half of :class:`StreamingTrialWriter`, on a builder that an append owns."""
+
+    def __init__(self, builder, axis, metadata, extra_meta, stats_record, expected_duration_s) -> None:
+        super().__init__(Path("."), metadata=metadata, expected_duration_s=expected_duration_s)
+        self._builder = builder
+        self._axis = axis
+        self._topics = []
+        self._extra = dict(extra_meta)
+        self._stats_record = stats_record
+
+    def write(self, piece: Stream) -> None:  # type: ignore[override]
+        self._write_piece(piece)
+        self._write_twins(piece)
+
+    def finish(self, topics: list[str]) -> tuple[dict[str, str], dict[str, dict[str, str]]]:
+        for ch in [*self._channels.values(), *self._twins.values()]:
+            self._flush(ch)
+        missing = [t for t in topics if t not in self._channels]
+        if missing:
+            raise ArchiveError(f"{', '.join(missing)}: the step produced no samples")
+        stats = {t: ch.stats.to_meta() for t, ch in self._channels.items()}
+        for t, ch in self._twins.items():
+            stats[t] = {k: v for k, v in ch.stats.to_meta().items() if k != "nan_samples"}
+        return {t: stats[t]["sha256"] for t in topics}, stats

@@ -145,4 +145,5 @@ def _run_locked(
     )
     with TrialReader(path) as trial:
         n = max(trial.runs(), default=None)
-    return StepOutcome(path, step, False, n, [s.topic for s in result.streams], hashes, "computed")
+    outputs = [t for s in result.streams for t in (s.topics if hasattr(s, "topics") else [s.topic])]
+    return StepOutcome(path, step, False, n, outputs, hashes, "computed")

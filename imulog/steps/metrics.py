@@ -40,6 +40,7 @@ from imulog.process.metrics import (
 from imulog.process.metrics.distance import histogram_percent
 from imulog.process.metrics.periods import DAY_S, HOUR_S, period_summaries, wall_clock_origin_ns
 from imulog.steps.common import alignment_for, nominal_rate_hz, pick_imu
+from imulog.steps.long_metrics import LONG_SAMPLES, MetricCores, long_metrics_pieces
 
 STEP = "metrics"
 ALGORITHM = "imulog.metrics.doshi2011"
@@ -297,9 +298,21 @@ def compute_metrics(
     return [activity, distance], record
 
 
-def run_metrics(path, *, imu: str | None = None, params: MetricsParams | None = None, force: bool = False):
-    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome."""
+def run_metrics(
+    path,
+    *,
+    imu: str | None = None,
+    params: MetricsParams | None = None,
+    force: bool = False,
+    cores: MetricCores | None = None,
+):
+    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
+
+    Recordings longer than :data:`~imulog.steps.long_metrics.LONG_SAMPLES` samples without phases (daily life),
+    or any with ``cores``, are processed core by core in bounded memory (:mod:`imulog.steps.long_metrics`).
+    """
     from imulog.archive import TrialReader
+    from imulog.archive.streaming import StreamPieces
     from imulog.steps.base import StepResult, run_step
 
     p = params or MetricsParams()
@@ -307,17 +320,34 @@ def run_metrics(path, *, imu: str | None = None, params: MetricsParams | None = 
         topics = trial.topics()
         name = pick_imu(topics, imu)
         traj_topic = pick_trajectory(topics, p.trajectory)
+        total = trial.channel(f"/imu/{name}").sample_count
     imu_topic = f"/imu/{name}"
     phase_topic = f"/derived/phases/{name}"
     inputs = [imu_topic] + [t for t in (phase_topic, traj_topic) if t is not None and t in topics]
+    long = cores is not None or (total > LONG_SAMPLES and phase_topic not in topics)
+    step_params = {"imu": name, **p.to_dict()}
+    if long:
+        cores = cores or MetricCores()
+        step_params["cores"] = cores.to_dict()
+        inputs = [imu_topic]
 
     def compute(trial) -> StepResult:
+        start_time = (trial.metadata.get("imulog.trial") or {}).get("start_time")
+        if long:  # daily life over days: core by core while the result is written; the record fills at the end
+            record: dict[str, Any] = {}
+            pieces = StreamPieces(
+                topics=[f"/derived/metrics/distance/{name}", f"/derived/metrics/activity/{name}"],
+                pieces=lambda: long_metrics_pieces(
+                    path, imu_topic, name, p, total, record, start_time=str(start_time) if start_time else None,
+                    cores=cores,
+                ),
+            )
+            return StepResult(streams=[pieces], metadata={RECORD: record})
         stream = trial.read(imu_topic)
         phases = trial.read(phase_topic) if phase_topic in topics else None
         trajectory = trial.read(traj_topic) if traj_topic is not None else None
         if trajectory is not None and phases is not None and alignment_for(trial.metadata, imu_topic) is None:
             trajectory = None  # phases on the device clock cannot be matched to a reference-clock trajectory
-        start_time = (trial.metadata.get("imulog.trial") or {}).get("start_time")
         streams, record = compute_metrics(
             stream, p, phases=phases, trajectory=trajectory, start_time=str(start_time) if start_time else None
         )
@@ -329,7 +359,7 @@ def run_metrics(path, *, imu: str | None = None, params: MetricsParams | None = 
         path,
         step=STEP,
         algorithm=ALGORITHM,
-        params={"imu": name, **p.to_dict()},
+        params=step_params,
         inputs=inputs,
         metadata_inputs=("imulog.alignment", "imulog.trial"),
         compute=compute,

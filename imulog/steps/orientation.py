@@ -22,6 +22,7 @@ from imulog.model import SignalStream
 from imulog.process.gaps import GapParams, GapReport, per_run, prepare
 from imulog.process.orientation import OrientationParams, estimate_orientation, gravity_free_acceleration
 from imulog.steps.common import mean_rate_hz, pick_imu
+from imulog.steps.long_orientation import LONG_SAMPLES, WindowParams, windowed_pieces
 
 STEP = "orientation"
 CALIBRATED_TOPIC = "/derived/calibrated/{imu}"
@@ -136,22 +137,38 @@ def run_orientation(
     source: str = "auto",
     force: bool = False,
     gaps: GapParams | None = None,
+    windowed: WindowParams | None = None,
 ):
     """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
+
+    Recordings longer than :data:`~imulog.steps.long_orientation.LONG_SAMPLES` samples (or any, with
+    ``windowed``) are processed in overlapping windows in bounded memory (:mod:`imulog.steps.long_orientation`).
 
     ``gaps``: how missing IMU samples are treated (default :class:`~imulog.process.gaps.GapParams`); what was
     bridged or split is recorded in the run's ``gaps`` entry.
     """
     params = params or OrientationParams()
     from imulog.archive import TrialReader
+    from imulog.archive.streaming import StreamPieces
     from imulog.steps.base import StepResult, run_step
 
     with TrialReader(path) as trial:
         topics = trial.topics()
         name = pick_imu(topics, imu)
         topic = source_topic(topics, name, source)
+        total = trial.channel(topic).sample_count
+    windows = windowed if windowed is not None else (WindowParams() if total > LONG_SAMPLES else None)
+    step_params = {"imu": name, **params_dict(params), "global_frame": global_frame(params)}
+    if windows is not None:
+        step_params["windows"] = windows.to_dict()
 
     def compute(trial) -> StepResult:
+        if windows is not None:  # long recording: window by window while the result is written
+            pieces = StreamPieces(
+                topics=[f"/derived/{kind}/{name}" for kind in ("orientation", "acc_global", "orientation_static")],
+                pieces=lambda: windowed_pieces(path, topic, name, params, gaps, windows, total),
+            )
+            return StepResult(streams=[pieces])
         t_ns, acc, gyr, mag = read_imu_arrays(trial, topic)
         streams, report = orientation_with_gaps(t_ns, acc, gyr, mag, name, params, gaps)
         return StepResult(streams=streams, provenance={"gaps": report.as_dict()} if report.missing else {})
@@ -161,7 +178,7 @@ def run_orientation(
         step=f"{STEP}:{name}",
         algorithm=f"imulog.orientation.{params.backend}",
         # the global frame (ENU with the magnetometer fused) is recorded in every output channel's params
-        params={"imu": name, **params_dict(params), "global_frame": global_frame(params)},
+        params=step_params,
         inputs=[topic],
         compute=compute,
         force=force,

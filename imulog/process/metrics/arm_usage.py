@@ -100,18 +100,25 @@ def adc_to_g(counts: np.ndarray, *, zero_count: float = 512.0, counts_per_g: flo
     return (np.asarray(counts, dtype=np.float64) - zero_count) / counts_per_g
 
 
-def to_reference_rate(acc_g: np.ndarray, t_ns: np.ndarray, rate_hz: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
+def to_reference_rate(
+    acc_g: np.ndarray, t_ns: np.ndarray, rate_hz: float = 10.0, origin_ns: int | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Means of consecutive ``1 / rate_hz`` windows (by time stamp) and each sample's window index.
 
-    Returns ``(windows (M, C), index (N,))``; a window with fewer than half its expected samples valid is NaN
-    (a gap), and windows without any sample (a time gap) are NaN rows too.
+    Windows start at ``origin_ns`` (default: the first sample; a part of a longer recording passes the window
+    edge at or before its first sample so that its windows are the recording's). Returns ``(windows (M, C),
+    index (N,))``; a window with fewer than half its expected samples valid is NaN (a gap), and windows without
+    any sample (a time gap) are NaN rows too.
     """
     a = _as_acc(acc_g)
     t = np.asarray(t_ns, dtype=np.int64)
     if len(t) != len(a):
         raise ValueError(f"t_ns has {len(t)} samples, acceleration {len(a)}")
     width_ns = 1e9 / rate_hz
-    index = ((t - t[0]) // width_ns).astype(np.int64)
+    origin = int(t[0]) if origin_ns is None else int(origin_ns)
+    if origin > t[0]:
+        raise ValueError("origin_ns must be at or before the first sample")
+    index = ((t - origin) // width_ns).astype(np.int64)
     m = int(index[-1]) + 1
     finite = np.isfinite(a).all(axis=1)
     counts = np.bincount(index, minlength=m).astype(np.float64)
@@ -124,11 +131,18 @@ def to_reference_rate(acc_g: np.ndarray, t_ns: np.ndarray, rate_hz: float = 10.0
     return windows, index
 
 
-def arm_usage(acc_g: np.ndarray, params: ArmUsageParams | None = None, *, t_ns: np.ndarray | None = None) -> ArmUsage:
+def arm_usage(
+    acc_g: np.ndarray,
+    params: ArmUsageParams | None = None,
+    *,
+    t_ns: np.ndarray | None = None,
+    origin_ns: int | None = None,
+) -> ArmUsage:
     """Per-axis and overall arm usage (%) of an (N, 3) acceleration in g; see the module docstring.
 
     With ``t_ns`` (int64 ns) the signal is first averaged to ``params.reference_rate_hz`` when it is faster, so the
     result does not depend on the sampling rate; without, the samples are taken as being at the reference rate.
+    ``origin_ns``: where the averaging windows start (see :func:`to_reference_rate`).
     NaN samples are gaps: never use, and not counted in the percentages.
     """
     p = params or ArmUsageParams()
@@ -141,7 +155,7 @@ def arm_usage(acc_g: np.ndarray, params: ArmUsageParams | None = None, *, t_ns: 
             raise ValueError("t_ns must increase")
         rate = 1e9 / float(np.median(dt))  # nominal rate: insensitive to dropped samples
         if rate > 1.5 * p.reference_rate_hz:
-            a, index = to_reference_rate(a, t_ns, p.reference_rate_hz)
+            a, index = to_reference_rate(a, t_ns, p.reference_rate_hz, origin_ns)
             rate = p.reference_rate_hz
     active = np.zeros(a.shape, dtype=bool)
     with np.errstate(invalid="ignore"):

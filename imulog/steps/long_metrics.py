@@ -1,0 +1,349 @@
+"""Clinical metrics of long recordings (a week of wrist data) in bounded memory.
+
+Above :data:`LONG_SAMPLES` the metrics step reads the accelerometer chunk by chunk and evaluates the same
+definitions as :func:`imulog.steps.metrics.compute_metrics` on cores of about an hour, each extended by an
+overlap that covers every filter's reach (the moving averages of activity method 2 and of the distance, the 0.1 s
+windows of arm usage); the cores are cut at multiples of the distance window, so every distance window lies in one
+core. What spans cores is carried over:
+
+* arm use: the 0.1 s windows are numbered from the recording's first sample and each is counted in the core that
+  holds its first sample;
+* activity method 1 (sign changes about the mean): the mean comes from a first pass over the recording;
+* activity method 2 (dead periods): an activity still open at the end of a core continues into the next;
+* the distance histogram, its windows and the per-hour / per-day summaries add up counts.
+
+The record has the keys of the whole-recording computation (``activity.method1`` keeps counts only: with noise
+its intervals number in the millions over a week). Memory: one core and its overlaps.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from imulog.model import Intervals, SignalStream
+
+#: recordings with more IMU samples than this (about 8 h at 100 Hz) get their metrics core by core
+LONG_SAMPLES = 3_000_000
+
+
+@dataclass(frozen=True)
+class MetricCores:
+    """Core length and overlap on each side, seconds (rounded up to whole distance windows)."""
+
+    core_s: float = 3600.0
+    overlap_s: float = 10.0
+
+    def to_dict(self) -> dict[str, float]:
+        return {"core_s": self.core_s, "overlap_s": self.overlap_s}
+
+
+class DeadPeriodStitcher:
+    """:func:`imulog.process.metrics.activity.dead_period_intervals` over consecutive pieces of one signal."""
+
+    def __init__(self, dead_samples: int, min_samples: int = 1) -> None:
+        self.dead = dead_samples
+        self.min = min_samples
+        self.start: int | None = None  # global index of the open activity's first non-zero sample
+        self.last: int | None = None  # and of its last one so far
+        self.closed: list[tuple[int, int]] = []
+
+    def add(self, nonzero_index: np.ndarray) -> None:
+        """Global indices (sorted) of the next piece's non-zero samples."""
+        idx = np.asarray(nonzero_index, np.int64)
+        if not len(idx):
+            return
+        if self.last is not None:
+            idx_all = np.concatenate([[self.last], idx])
+        else:
+            self.start = int(idx[0])
+            idx_all = idx
+        split = np.flatnonzero(np.diff(idx_all) - 1 >= self.dead)
+        for k in split:  # an activity ends at idx_all[k]; the next starts at idx_all[k + 1]
+            self._close(int(idx_all[k]))
+            self.start = int(idx_all[k + 1])
+        self.last = int(idx_all[-1])
+
+    def _close(self, last: int) -> None:
+        if self.start is not None and last + 1 - self.start >= self.min:
+            self.closed.append((self.start, last + 1))
+
+    def finish(self) -> np.ndarray:
+        if self.last is not None:
+            self._close(self.last)
+            self.start = self.last = None
+        return np.array(self.closed, dtype=np.int64).reshape(-1, 2)
+
+
+def long_metrics_pieces(
+    path: str | Path,
+    imu_topic: str,
+    imu: str,
+    params: Any,
+    total: int,
+    record: dict[str, Any],
+    *,
+    start_time: str | None = None,
+    gaps: Any = None,
+    cores: MetricCores | None = None,
+) -> Iterator[Any]:
+    """Yield the distance channel core by core, then the activity intervals; fill ``record`` at the end."""
+    from imulog.archive import TrialReader
+    from imulog.process.gaps import prepare
+    from imulog.process.metrics import ArmUsageParams, acc_to_g, arm_usage
+    from imulog.process.metrics.activity import high_passed_noise_removed
+    from imulog.process.metrics.arm_usage import to_reference_rate
+    from imulog.process.metrics.distance import histogram_percent, weighted_area, windowed_distance
+    from imulog.process.metrics.periods import DAY_S, HOUR_S, PeriodSummary
+    from imulog.steps.common import nominal_rate_hz
+    from imulog.steps.long_orientation import _Buffer
+
+    p = params
+    c = cores or MetricCores()
+    with TrialReader(path) as trial:
+        # pass 1: the mean of each axis (activity method 1) and the first samples (rate, origin)
+        sums, counts, first_t, rate = np.zeros(3), np.zeros(3), None, None
+        for piece in trial.iter_blocks(imu_topic):
+            a = acc_to_g(piece.acc)
+            ok = np.isfinite(a)
+            sums += np.where(ok, a, 0.0).sum(axis=0)
+            counts += ok.sum(axis=0)
+            if first_t is None:
+                first_t = int(piece.t_ns[0])
+                rate = nominal_rate_hz(piece.t_ns)
+        mean = sums / np.maximum(counts, 1)
+        act = p.activity(rate)
+        dist_p = p.distance()
+        win = max(1, int(round(dist_p.window_s * rate)))
+        core = win * max(1, int(np.ceil(c.core_s * rate / win)))
+        overlap = win * max(1, int(np.ceil(max(c.overlap_s * rate, 2 * act.m_samples + 2) / win)))
+        usage_p = ArmUsageParams(p.noise_level_g, p.arm_usage_rate_hz)
+        decimated = rate > 1.5 * usage_p.reference_rate_hz  # as arm_usage decides
+        width_ns = 1e9 / usage_p.reference_rate_hz
+        stitchers = [DeadPeriodStitcher(act.dead_samples, act.min_activity_samples) for _ in range(4)]
+        centres = dist_p.bin_centres_cm
+        hist = np.zeros(len(centres))
+        window_ends: list[np.ndarray] = []
+        active_windows = np.zeros(3)
+        active_any_windows = 0
+        valid_windows = 0
+        m1_axis = np.zeros(3, np.int64)
+        m1_any = 0
+        last_sign: np.ndarray | None = None
+        missing = 0
+        periods = {
+            key: _PeriodAccumulator(first_t, start_time, period_s, len(centres))
+            for key, period_s in (("by_hour", HOUR_S), ("by_day", DAY_S))
+        }
+        buf = _Buffer()
+        blocks = trial.iter_blocks(imu_topic)
+        core_start, last_t = 0, first_t
+        while core_start < total:
+            core_end = min(total, core_start + core)
+            hi = min(total, core_end + overlap)
+            while buf.start + buf.size < hi:
+                piece = next(blocks)
+                buf.add((piece.t_ns, piece.acc))
+            lo = max(0, core_start - overlap)
+            t, acc = buf.take(lo, hi)
+            raw_g = acc_to_g(acc)
+            (acc_g,), _ = prepare([raw_g], gaps)
+            k0, k1 = core_start - lo, core_end - lo
+            unknown = ~np.isfinite(acc_g).all(axis=1)
+            missing += int((~np.isfinite(raw_g).all(axis=1))[k0:k1].sum())
+            # arm use: the recording's 0.1 s windows (numbered from its first sample), each counted in the core that
+            # holds its first sample; at or below the reference rate, samples are the windows
+            if decimated:
+                origin = first_t + int((int(t[0]) - first_t) // width_ns * width_ns)
+                usage = arm_usage(acc_g, usage_p, t_ns=t, origin_ns=origin)
+                windows, index = to_reference_rate(acc_g, t, usage_p.reference_rate_hz, origin)
+                starts = np.flatnonzero(np.concatenate([[True], index[1:] != index[:-1]]))
+                in_core = starts[(starts >= k0) & (starts < k1)]
+                valid = np.isfinite(windows[index[in_core]]).all(axis=1)
+                counted = usage.active[in_core][valid]
+            else:
+                usage = arm_usage(acc_g, usage_p, t_ns=t)
+                counted = usage.active[k0:k1][np.isfinite(acc_g[k0:k1]).all(axis=1)]
+            active = usage.active
+            active_windows += counted.sum(axis=0)
+            active_any_windows += int(counted.any(axis=1).sum())
+            valid_windows += len(counted)
+            # activity method 1: sign changes about the recording's mean
+            sign = np.where(acc_g[k0:k1] > mean, 1, -1)
+            previous = sign[:-1] if last_sign is None else np.concatenate([last_sign[None, :], sign[:-1]])
+            change = sign[1:] != previous if last_sign is None else sign != previous
+            m1_axis += change.sum(axis=0)
+            m1_any += int(change.any(axis=1).sum())
+            last_sign = sign[-1]
+            # activity method 2: non-zero samples of each column, stitched across cores
+            h = high_passed_noise_removed(acc_g, act)[k0:k1]
+            h[unknown[k0:k1]] = 0.0
+            for j, stitcher in enumerate(stitchers):
+                stitcher.add(core_start + np.flatnonzero(h[:, j] != 0))
+            # distance: every window inside this core (cores start at multiples of the window)
+            d_all = 100.0 * np.sqrt((windowed_distance(acc_g, rate, dist_p) ** 2).sum(axis=1))[k0:k1]
+            ends = np.arange(win - 1, len(d_all), win)
+            if core_end == total and (not len(ends) or ends[-1] != len(d_all) - 1):
+                ends = np.append(ends, len(d_all) - 1)  # the recording's last, partial window
+            window_ends.append(d_all[ends])
+            d_cm = np.where(unknown[k0:k1], np.nan, d_all)
+            finite_d = d_cm[np.isfinite(d_cm)]
+            if len(finite_d):
+                hist += histogram_percent(finite_d, dist_p) * len(finite_d) / 100.0
+            tc = t[k0:k1]
+            for acc_ in periods.values():
+                acc_.add(tc, ~unknown[k0:k1], active[k0:k1].any(axis=1), d_cm, dist_p)
+            last_t = int(t[k1 - 1])
+            yield SignalStream(
+                f"/derived/metrics/distance/{imu}",
+                tc,
+                ["distance_cm"],
+                ["cm" if p.acc_unit == "m/s^2" else "cm (Doshi A.3, integrated in g)"],
+                d_cm[:, None],
+                frame_id=imu,
+            )
+            core_start = core_end
+    per_axis = [s.finish() for s in stitchers[:3]]
+    overall = stitchers[3].finish()
+    starts_t, ends_t = _interval_times(path, imu_topic, overall, total, last_t)
+    for acc_ in periods.values():
+        acc_.add_activity_starts(starts_t)
+    yield Intervals(
+        topic=f"/derived/metrics/activity/{imu}",
+        start_ns=starts_t,
+        end_ns=ends_t,
+        labels=["activity"] * len(overall),
+        task_index=np.arange(1, len(overall) + 1),
+    )
+    n_hist = hist.sum()
+    hist_percent = 100.0 * hist / n_hist if n_hist else hist
+    windows_cm = np.concatenate(window_ends) if window_ends else np.zeros(0)
+    durations = (overall[:, 1] - overall[:, 0]) / rate
+    r = _round
+    record.update(
+        {
+            "imu": imu_topic,
+            "rate_hz": r(rate, 4),
+            "duration_s": r((last_t - first_t) / 1e9, 4),
+            "arm_usage.noise_level_g": p.noise_level_g,
+            "arm_usage.rate_hz": usage_p.reference_rate_hz if rate > 1.5 * usage_p.reference_rate_hz else rate,
+            "arm_usage.x_percent": r(100 * active_windows[0] / max(valid_windows, 1), 4),
+            "arm_usage.y_percent": r(100 * active_windows[1] / max(valid_windows, 1), 4),
+            "arm_usage.z_percent": r(100 * active_windows[2] / max(valid_windows, 1), 4),
+            "arm_usage.overall_percent": r(100 * active_any_windows / max(valid_windows, 1), 4),
+            "activity.method1.count": m1_any,
+            "activity.method1.per_axis": m1_axis.tolist(),
+            "activity.method2.count": len(overall),
+            "activity.method2.per_axis": [len(iv) for iv in per_axis],
+            "activity.method2.m_samples": act.m_samples,
+            "activity.method2.dead_samples": act.dead_samples,
+            "activity.method2.noise_floor_g": p.noise_floor_g,
+            "activity.method2.min_activity_samples": act.min_activity_samples,
+            "activity.method2.total_s": r(durations.sum(), 4),
+            "activity.method2.mean_s": r(durations.mean(), 4) if len(durations) else None,
+            "distance.window_s": p.window_s,
+            "distance.acc_unit": p.acc_unit,
+            "distance.weighted_area": r(weighted_area(hist_percent, centres, p.weight_start_cm), 4),
+            "distance.weight_start_cm": p.weight_start_cm,
+            "distance.bin_width_cm": dist_p.bin_width_cm,
+            "distance.histogram_percent": [r(v, 4) for v in hist_percent],
+            "distance.window_median_cm": r(np.median(windows_cm), 4) if len(windows_cm) else None,
+            "distance.window_max_cm": r(np.max(windows_cm), 4) if len(windows_cm) else None,
+            "computed": f"core by core ({c.core_s:g} s cores, bounded memory)",
+        }
+    )
+    span = (last_t - first_t) / 1e9
+    for key, acc_ in periods.items():
+        if span > acc_.period_s:
+            record[key] = [row.to_dict() for row in acc_.rows(centres, p.weight_start_cm, PeriodSummary)]
+    if missing:
+        record["gaps"] = {"missing_samples": missing}
+
+
+def _round(x: float, digits: int = 6) -> float:
+    return float(round(float(x), digits))
+
+
+def _interval_times(path, topic: str, intervals: np.ndarray, total: int, last_t: int) -> tuple[np.ndarray, np.ndarray]:
+    """Times of ``[start, end)`` sample indices: start sample's time, and the end sample's (or the last one's)."""
+    from imulog.archive import TrialReader
+
+    if not len(intervals):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    wanted = np.unique(np.concatenate([intervals[:, 0], np.minimum(intervals[:, 1], total - 1)]))
+    times = np.empty(len(wanted), np.int64)
+    seen = 0
+    with TrialReader(path) as trial:
+        for piece in trial.iter_blocks(topic):
+            lo, hi = seen, seen + len(piece)
+            a, b = np.searchsorted(wanted, [lo, hi])
+            times[a:b] = np.asarray(piece.t_ns)[wanted[a:b] - lo]
+            seen = hi
+    lookup = dict(zip(wanted.tolist(), times.tolist(), strict=True))
+    start = np.array([lookup[int(i)] for i in intervals[:, 0]], np.int64)
+    end = np.array([lookup[int(min(i, total - 1))] for i in intervals[:, 1]], np.int64)
+    return start, end
+
+
+class _PeriodAccumulator:
+    """Per-period sums for :mod:`imulog.process.metrics.periods`, added core by core."""
+
+    def __init__(self, first_t: int, start_time: str | None, period_s: float, bins: int) -> None:
+        from imulog.process.metrics.periods import wall_clock_origin_ns
+
+        self.period_s = period_s
+        self.period_ns = int(round(period_s * 1e9))
+        self.origin_ns, self.origin_time = wall_clock_origin_ns(first_t, start_time, period_s)
+        self.valid: dict[int, int] = {}
+        self.active: dict[int, int] = {}
+        self.starts: dict[int, int] = {}
+        self.hist: dict[int, np.ndarray] = {}
+        self.bins = bins
+        self.dt_s: float | None = None
+
+    def add(self, t: np.ndarray, valid: np.ndarray, active: np.ndarray, d_cm: np.ndarray, dist_p: Any) -> None:
+        if self.dt_s is None and len(t) > 1:
+            self.dt_s = float(np.median(np.diff(t))) / 1e9
+        which = (np.asarray(t, np.int64) - self.origin_ns) // self.period_ns
+        for k in np.unique(which):
+            inside = which == k
+            v = inside & valid
+            self.valid[int(k)] = self.valid.get(int(k), 0) + int(v.sum())
+            self.active[int(k)] = self.active.get(int(k), 0) + int((v & active).sum())
+            d = d_cm[v & np.isfinite(d_cm)]
+            counts = self.hist.setdefault(int(k), np.zeros(self.bins))
+            if len(d):
+                idx = np.clip(np.floor(d / dist_p.bin_width_cm + 0.5).astype(np.int64) - 1, 0, self.bins - 1)
+                counts += np.bincount(idx, minlength=self.bins)
+
+    def add_activity_starts(self, starts_t: np.ndarray) -> None:
+        which = (np.asarray(starts_t, np.int64) - self.origin_ns) // self.period_ns
+        for k in which.tolist():
+            self.starts[int(k)] = self.starts.get(int(k), 0) + 1
+
+    def rows(self, centres: np.ndarray, weight_start_cm: float, row_type: Any) -> list[Any]:
+        from datetime import timedelta
+
+        from imulog.process.metrics.distance import weighted_area
+
+        out = []
+        for k in range(max(self.valid, default=-1) + 1):
+            n = self.valid.get(k, 0)
+            counts = self.hist.get(k, np.zeros(self.bins))
+            area = weighted_area(100.0 * counts / counts.sum(), centres, weight_start_cm) if counts.sum() else 0.0
+            label = "" if self.origin_time is None else (self.origin_time + timedelta(seconds=k * self.period_s)).isoformat()
+            out.append(
+                row_type(
+                    start_ns=int(self.origin_ns + k * self.period_ns),
+                    start=label,
+                    valid_s=n * (self.dt_s or 0.0),
+                    arm_use_percent=100.0 * self.active.get(k, 0) / n if n else float("nan"),
+                    activity_count=self.starts.get(k, 0),
+                    distance_weighted_area=float(area),
+                )
+            )
+        return out
