@@ -156,7 +156,15 @@ def _streams(path: Path, fmt: str | None, options: ConvertOptions) -> bool:
 
 
 def _convert_streaming(
-    path: Path, output: Path, fmt: str | None, options: ConvertOptions, meta: dict, *, attach: bool, overwrite: bool
+    path: Path,
+    output: Path,
+    fmt: str | None,
+    options: ConvertOptions,
+    meta: dict,
+    *,
+    attach: bool,
+    overwrite: bool,
+    as_json: bool = False,
 ) -> None:
     """Convert one large file piece by piece (memory bounded by a piece, not by the recording)."""
     from converters.plausibility import recording_warnings
@@ -219,9 +227,19 @@ def _convert_streaming(
         raise click.ClickException(str(e)) from None
     except (FileExistsError, ValueError, OSError) as e:
         raise click.ClickException(f"{output}: {e}") from None
+    if as_json:
+        _echo_json([{"path": str(output), "channels": counts, "warnings": notes, "streamed": True}], [])
+        return
     click.echo(f"wrote {output} ({', '.join(f'{t} {n}' for t, n in counts.items())}; converted piece by piece)")
     for msg in notes:
         click.echo(f"warning: {output}: {msg}", err=True)
+
+
+def _echo_json(trials: list[dict[str, Any]], failures: list[str]) -> None:
+    """``--json``: the trials written (path, samples per channel, warnings) and the failures."""
+    import json
+
+    click.echo(json.dumps({"trials": trials, "failures": failures}, indent=2))
 
 
 def _span_s(piece: Recording) -> float:
@@ -311,6 +329,9 @@ def _units(pairs: tuple[str, ...]) -> dict[str, str]:
 )
 @click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
 @click.option("--list-formats", "list_formats_flag", is_flag=True, help="List the known input formats and exit.")
+@click.option(
+    "--json", "as_json", is_flag=True, help="Print what was written (paths, channels, warnings) as one JSON document."
+)
 def convert(
     inputs: tuple[Path, ...],
     output: Path | None,
@@ -326,6 +347,7 @@ def convert(
     unit_pairs: tuple[str, ...],
     overwrite: bool,
     list_formats_flag: bool,
+    as_json: bool = False,
 ) -> None:
     """Convert device exports into one MCAP trial (or a folder of exports into one trial per recording).
 
@@ -376,12 +398,16 @@ def convert(
     if dirs:
         if len(dirs) != len(inputs):
             raise click.UsageError("give either files (one trial) or folders (one trial per recording), not both")
-        _convert_directories(dirs, output, fmt, options, meta, attach=not no_attach, overwrite=overwrite)
+        _convert_directories(
+            dirs, output, fmt, options, meta, attach=not no_attach, overwrite=overwrite, as_json=as_json
+        )
         return
     if output.suffix.lower() != ".mcap":
         raise click.UsageError(f"output {output} should end in .mcap")
     if len(inputs) == 1 and _streams(inputs[0], fmt, options):
-        _convert_streaming(inputs[0], output, fmt, options, meta, attach=not no_attach, overwrite=overwrite)
+        _convert_streaming(
+            inputs[0], output, fmt, options, meta, attach=not no_attach, overwrite=overwrite, as_json=as_json
+        )
         return
     try:
         rec, formats = _convert_group(list(inputs), fmt, options)
@@ -391,6 +417,18 @@ def convert(
         raise click.ClickException(str(e)) from None
     except (FileExistsError, ValueError, OSError) as e:
         raise click.ClickException(f"{output}: {e}") from None
+    if as_json:
+        _echo_json(
+            [
+                {
+                    "path": str(path),
+                    "channels": {s.topic: len(s) for s in rec.streams()},
+                    "warnings": conversion_warnings(rec),
+                }
+            ],
+            [],
+        )
+        return
     click.echo(f"wrote {path} ({', '.join(f'{s.topic} {len(s)}' for s in rec.streams())})")
     for msg in conversion_warnings(rec):
         click.echo(f"warning: {output}: {msg}", err=True)
@@ -419,6 +457,7 @@ def _convert_directories(
     *,
     attach: bool,
     overwrite: bool,
+    as_json: bool = False,
 ) -> None:
     jobs: list[tuple[Path, list[Path]]] = []
     for d in dirs:
@@ -437,6 +476,7 @@ def _convert_directories(
     failures: list[str] = []
     warnings: list[str] = []
     written = 0
+    trials: list[dict[str, Any]] = []
     with click.progressbar(
         jobs, label="converting", item_show_func=lambda j: j[0].name if j else "", file=sys.stderr
     ) as bar:
@@ -451,10 +491,22 @@ def _convert_directories(
                 _write(target, rec, attach=attach, overwrite=overwrite)
                 written += 1
                 warnings.extend(f"{target}: {msg}" for msg in conversion_warnings(rec))
+                trials.append(
+                    {
+                        "path": str(target),
+                        "channels": {s.topic: len(s) for s in rec.streams()},
+                        "warnings": conversion_warnings(rec),
+                    }
+                )
             except ConversionError as e:
                 failures.append(str(e))
             except (FileExistsError, ValueError, OSError) as e:
                 failures.append(f"{target}: {e}")
+    if as_json:
+        _echo_json(trials, failures)
+        if failures:
+            raise click.exceptions.Exit(1)
+        return
     click.echo(f"wrote {written} trial(s) to {out_dir}")
     for msg in warnings:
         click.echo(f"warning: {msg}", err=True)
