@@ -2,8 +2,8 @@
 
 Each page runs in its own temporary folder laid out like a clone: ``recordings/`` copied, ``benchmarks/``,
 ``schemas/`` and ``docs/`` linked, ``../shared/data`` reachable, the venv's ``imulog`` and ``python``
-first on PATH, and ``trial.mcap`` (recordings/sim's R2G trial, converted: what ``imulog convert
-recordings/sim/... -o trial.mcap`` makes) ready, since most pages start from it. A page's blocks run
+first on PATH, and, unless the page makes its own, ``trial.mcap`` (recordings/sim's R2G trial, converted:
+what ``imulog convert recordings/sim/... -o trial.mcap`` makes), since most pages start from it. A page's blocks run
 in order in one process: python blocks share one namespace, bash blocks run with ``set -e``.
 
 A block is skipped only when the line before its fence is ``<!-- no-run: reason -->`` (servers, the
@@ -59,7 +59,7 @@ def blocks_of(text: str) -> list[Block]:
             j += 1
         prev = next((lines[k] for k in range(i - 1, -1, -1) if lines[k].strip()), "")
         marker = _NO_RUN.match(prev)
-        body = [ln[len(indent):] if ln.startswith(indent) else ln for ln in lines[i + 1 : j]]
+        body = [ln[len(indent) :] if ln.startswith(indent) else ln for ln in lines[i + 1 : j]]
         out.append(Block(lang, "\n".join(body) + "\n", i + 1, marker.group(1) if marker else None))
         i = j + 1
     return out
@@ -69,12 +69,19 @@ def runnable(page: str) -> list[Block]:
     return [b for b in blocks_of((REPO / page).read_text()) if b.lang in RUN_LANGS]
 
 
+def makes_own_trial(page: str) -> bool:
+    """Whether the page's blocks write ``trial.mcap`` themselves (then the workspace has none)."""
+    return any(re.search(r"-o\s+trial\.mcap\b|write_trial\(\s*[\"']trial\.mcap", b.code) for b in runnable(page))
+
+
 def make_workspace(root: Path, trial: Path | None) -> Path:
     """A folder laid out like a fresh clone, with ``../shared/data`` beside it."""
     clone = root / "clone"
     clone.mkdir(parents=True)
     shutil.copytree(REPO / "recordings", clone / "recordings")
-    for name in ("benchmarks", "schemas", "docs", "converters", "imulog", "tests", "pyproject.toml", ".venv"):
+    # the package itself comes from the editable install; no pyproject.toml or .venv here, so a stray
+    # `pip install -e .` or `python -m venv .venv` in a block fails instead of touching the real venv
+    for name in ("benchmarks", "schemas", "docs", "tests"):
         if (REPO / name).exists():
             (clone / name).symlink_to(REPO / name)
     (root / "shared").mkdir()
@@ -111,8 +118,13 @@ def run_page(page: str, workdir: Path, verbose: bool = False) -> list[str]:
             except BaseException:  # noqa: BLE001 - report any failure of the block
                 error = traceback.format_exc(limit=3).strip().splitlines()[-1]
         else:
-            proc = subprocess.run(["bash", "-e", "-o", "pipefail", "-c", block.code], cwd=workdir,
-                                  capture_output=True, text=True, timeout=PAGE_TIMEOUT_S)
+            proc = subprocess.run(
+                ["bash", "-e", "-o", "pipefail", "-c", block.code],
+                cwd=workdir,
+                capture_output=True,
+                text=True,
+                timeout=PAGE_TIMEOUT_S,
+            )
             error = None
             if proc.returncode != 0:
                 tail = (proc.stderr.strip() or proc.stdout.strip()).splitlines()[-3:]
@@ -129,9 +141,19 @@ def converted_trial(tmp_path_factory) -> Path:
     sim = REPO / "recordings" / "sim"
     out = tmp_path_factory.mktemp("docs_trial") / "trial.mcap"
     proc = subprocess.run(
-        [str(Path(sys.executable).parent / "imulog"), "convert", str(sim / "r2g_s00_t00_imu.csv"),
-         str(sim / "r2g_s00_t00_vicon.csv"), "--meta-file", str(sim / "r2g_s00_t00_meta.json"), "-o", str(out)],
-        capture_output=True, text=True, env=page_env(),
+        [
+            str(Path(sys.executable).parent / "imulog"),
+            "convert",
+            str(sim / "r2g_s00_t00_imu.csv"),
+            str(sim / "r2g_s00_t00_vicon.csv"),
+            "--meta-file",
+            str(sim / "r2g_s00_t00_meta.json"),
+            "-o",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        env=page_env(),
     )
     assert proc.returncode == 0, proc.stderr
     return out
@@ -156,10 +178,16 @@ def test_docs_have_no_paths_of_a_development_machine():
 
 @pytest.mark.parametrize("page", [p for p in PAGES if any(not b.skip for b in runnable(p))])
 def test_page_blocks_run(page, converted_trial, tmp_path):
-    workdir = make_workspace(tmp_path, converted_trial)
-    proc = subprocess.run([sys.executable, __file__, page, "--workdir", str(workdir)], capture_output=True,
-                          text=True, env=page_env(), timeout=PAGE_TIMEOUT_S, cwd=workdir)
-    failures = [ln[len("FAIL "):] for ln in proc.stdout.splitlines() if ln.startswith("FAIL ")]
+    workdir = make_workspace(tmp_path, None if makes_own_trial(page) else converted_trial)
+    proc = subprocess.run(
+        [sys.executable, __file__, page, "--workdir", str(workdir)],
+        capture_output=True,
+        text=True,
+        env=page_env(),
+        timeout=PAGE_TIMEOUT_S,
+        cwd=workdir,
+    )
+    failures = [ln[len("FAIL ") :] for ln in proc.stdout.splitlines() if ln.startswith("FAIL ")]
     assert proc.returncode == 0 and not failures, "\n".join(failures) or proc.stderr[-2000:]
 
 
@@ -170,6 +198,9 @@ def main(argv: list[str]) -> int:
     ap.add_argument("page")
     ap.add_argument("--workdir", type=Path, default=None, help="run there (default: a fresh temporary clone)")
     args = ap.parse_args(argv)
+    env = page_env()
+    os.environ.clear()
+    os.environ.update(env)
     page = str(Path(args.page).resolve().relative_to(REPO)) if Path(args.page).is_absolute() else args.page
     if args.workdir is None:
         import tempfile
@@ -177,10 +208,22 @@ def main(argv: list[str]) -> int:
         root = Path(tempfile.mkdtemp(prefix="imulog-docs-"))
         sim = REPO / "recordings" / "sim"
         trial = root / "trial.mcap"
-        subprocess.run(["imulog", "convert", str(sim / "r2g_s00_t00_imu.csv"), str(sim / "r2g_s00_t00_vicon.csv"),
-                        "--meta-file", str(sim / "r2g_s00_t00_meta.json"), "-o", str(trial)], check=True,
-                       env=page_env(), capture_output=True)
-        args.workdir = make_workspace(root / "ws", trial)
+        subprocess.run(
+            [
+                "imulog",
+                "convert",
+                str(sim / "r2g_s00_t00_imu.csv"),
+                str(sim / "r2g_s00_t00_vicon.csv"),
+                "--meta-file",
+                str(sim / "r2g_s00_t00_meta.json"),
+                "-o",
+                str(trial),
+            ],
+            check=True,
+            env=page_env(),
+            capture_output=True,
+        )
+        args.workdir = make_workspace(root / "ws", None if makes_own_trial(page) else trial)
         print(f"working folder: {args.workdir}")
     failures = run_page(page, args.workdir, verbose=True)
     for f in failures:

@@ -29,8 +29,9 @@ def test_to_gaitmap_gives_back_gaitmaps_own_numbers(gaitmap_trial, shared_data):
         with pytest.raises(ExportError, match="name the IMU"):
             to_gaitmap(trial)
     assert list(df.columns) == list(GAITMAP_COLUMNS)
-    np.testing.assert_allclose(df.to_numpy(), src["right_sensor"][list(GAITMAP_COLUMNS)].to_numpy(), rtol=1e-9,
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        df.to_numpy(), src["right_sensor"][list(GAITMAP_COLUMNS)].to_numpy(), rtol=1e-9, atol=1e-12
+    )
     assert df.attrs["units"]["gyr"] == "deg/s"
     np.testing.assert_allclose(np.diff(df.index.to_numpy()), 1 / 204.8, rtol=1e-6)
 

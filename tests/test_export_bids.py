@@ -50,8 +50,12 @@ def test_every_file_name_is_valid_bids(bids_folder):
     result = bst_validator.validate_bids(str(out))
     assert result["path_tracking"] == [], result["path_tracking"]  # every file matched a BIDS rule
     names = {p.name for p in out.rglob("*") if p.is_file()}
-    assert {"dataset_description.json", "sub-S00_task-r2g_tracksys-wrist_run-0_motion.tsv",
-            "sub-S00_task-r2g_tracksys-vicon_run-0_channels.tsv", "sub-S00_task-r2g_run-0_events.tsv"} <= names
+    assert {
+        "dataset_description.json",
+        "sub-S00_task-r2g_tracksys-wrist_run-0_motion.tsv",
+        "sub-S00_task-r2g_tracksys-vicon_run-0_channels.tsv",
+        "sub-S00_task-r2g_run-0_events.tsv",
+    } <= names
     assert len(report["files"]) == 8
 
 
@@ -71,7 +75,7 @@ def test_sidecars_and_tables_meet_the_schema(bids_folder):
                     assert key in sidecar, (system, key)
         assert sidecar["TaskName"] == "r2g"
         channels = _rows(motion / f"sub-S00_task-r2g_tracksys-{system}_run-0_channels.tsv")
-        (_, table_rule), = _matching(schema.rules.tabular_data.motion, "motion", "channels", ".tsv")
+        ((_, table_rule),) = _matching(schema.rules.tabular_data.motion, "motion", "channels", ".tsv")
         for col, level in table_rule.columns.items():
             level = level if isinstance(level, str) else level["level"]
             name = columns_obj[col]["name"]
@@ -82,8 +86,12 @@ def test_sidecars_and_tables_meet_the_schema(bids_folder):
                 allowed = {e if isinstance(e, str) else e.get("value") for e in enum} | {"n/a"}
                 assert {row[name] for row in channels} <= allowed, (system, name)
         # the data file has one column per channel row and no header
-        data = np.genfromtxt(motion / f"sub-S00_task-r2g_tracksys-{system}_run-0_motion.tsv", delimiter="\t",
-                             missing_values="n/a", filling_values=np.nan)
+        data = np.genfromtxt(
+            motion / f"sub-S00_task-r2g_tracksys-{system}_run-0_motion.tsv",
+            delimiter="\t",
+            missing_values="n/a",
+            filling_values=np.nan,
+        )
         assert data.shape[1] == len(channels)
         counts = {}
         for row in channels:
@@ -91,8 +99,9 @@ def test_sidecars_and_tables_meet_the_schema(bids_folder):
         for typ, n in counts.items():
             assert sidecar[f"{typ}ChannelCount"] == n
     events = _rows(motion / "sub-S00_task-r2g_run-0_events.tsv")
-    (_, ev_rule), = [r for r in _matching(schema.rules.tabular_data.events, "motion", "events", ".tsv")
-                     if r[0] == "Events"]
+    ((_, ev_rule),) = [
+        r for r in _matching(schema.rules.tabular_data.events, "motion", "events", ".tsv") if r[0] == "Events"
+    ]
     for col, level in ev_rule.columns.items():
         level = level if isinstance(level, str) else level["level"]
         if level == "required":
@@ -114,8 +123,12 @@ def test_values_and_times_equal_the_archive(bids_folder, processed_r2g):
     np.testing.assert_array_equal(wrist[:, names.index("wrist_gyr_y")], imu.gyr[:, 1])
     np.testing.assert_array_equal(wrist[:, names.index("wrist_acc_z")], imu.acc[:, 2])
     assert "wrist_quat_w" in names  # the orientation channel rides along as ORNT
-    vicon = np.genfromtxt(motion / "sub-S00_task-r2g_tracksys-vicon_run-0_motion.tsv", delimiter="\t",
-                          missing_values="n/a", filling_values=np.nan)
+    vicon = np.genfromtxt(
+        motion / "sub-S00_task-r2g_tracksys-vicon_run-0_motion.tsv",
+        delimiter="\t",
+        missing_values="n/a",
+        filling_values=np.nan,
+    )
     vnames = [r["name"] for r in _rows(motion / "sub-S00_task-r2g_tracksys-vicon_run-0_channels.tsv")]
     ox = np.where(mk.valid[:, 0], mk.pos[:, 0, 0], np.nan)
     np.testing.assert_array_equal(vicon[:, vnames.index("O_x")], ox)  # gaps as n/a
@@ -127,16 +140,18 @@ def test_values_and_times_equal_the_archive(bids_folder, processed_r2g):
     events = _rows(motion / "sub-S00_task-r2g_run-0_events.tsv")
     phase_events = [e for e in events if e["source"] == "/derived/phases/wrist"]
     assert [e["trial_type"] for e in phase_events] == list(phases.labels)
-    np.testing.assert_allclose([float(e["onset"]) for e in phase_events],
-                               (phases.start_ns - mk.t_ns[0]) / 1e9, atol=2e-3)  # device clock vs Vicon: drift only
+    np.testing.assert_allclose(
+        [float(e["onset"]) for e in phase_events], (phases.start_ns - mk.t_ns[0]) / 1e9, atol=2e-3
+    )  # device clock vs Vicon: drift only
 
 
 def test_existing_folder_needs_overwrite(bids_folder, processed_r2g):
     out, _ = bids_folder
     result = CliRunner().invoke(cli, ["export", str(processed_r2g), "--to", "bids", "-o", str(out)])
     assert result.exit_code == 1 and "--overwrite" in result.output
-    result = CliRunner().invoke(cli, ["export", str(processed_r2g), "--to", "bids", "-o", str(out), "--overwrite",
-                                      "--clock", "reference"])
+    result = CliRunner().invoke(
+        cli, ["export", str(processed_r2g), "--to", "bids", "-o", str(out), "--overwrite", "--clock", "reference"]
+    )
     assert result.exit_code == 0, result.output
     sidecar = json.loads((out / "sub-S00/motion/sub-S00_task-r2g_tracksys-wrist_run-0_motion.json").read_text())
     assert sidecar["imulog"]["clock"] == "reference"

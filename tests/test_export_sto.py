@@ -37,10 +37,12 @@ def _two_imu_trial(path):
     for k, name in enumerate(("radius_r", "humerus_r")):
         rv = np.cumsum(rng.normal(0, 0.02, (n, 3)), axis=0)
         q = quat.from_rotation_vector(rv)
-        imus.append(ImuStream(name, t + k * 3_000_000, acc=np.zeros((n, 3)), gyr=np.zeros((n, 3)),
-                              meta={"rate_hz": rate}))
-        streams.append(SignalStream(f"/derived/orientation/{name}", t + k * 3_000_000, ["qw", "qx", "qy", "qz"],
-                                    ["1"] * 4, q))
+        imus.append(
+            ImuStream(name, t + k * 3_000_000, acc=np.zeros((n, 3)), gyr=np.zeros((n, 3)), meta={"rate_hz": rate})
+        )
+        streams.append(
+            SignalStream(f"/derived/orientation/{name}", t + k * 3_000_000, ["qw", "qx", "qy", "qz"], ["1"] * 4, q)
+        )
     write_trial(path, Recording(imus=imus), overwrite=True)
     append_derived(path, streams, run={"step": "orientation", "algorithm": "test", "params": {}, "inputs": []})
     return t, [s.values for s in streams]
@@ -100,7 +102,9 @@ def test_format_and_resample_are_pure():
     t = np.array([0, 10, 20, 60], dtype=np.int64)
     q = np.tile([1.0, 0, 0, 0], (4, 1))
     out = resample_orientation(t, q, np.array([5, 15, 40, 60, 70]), period_ns=10)
-    assert np.isfinite(out[:2]).all() and np.isnan(out[2]).all() and np.isfinite(out[3]).all() and np.isnan(out[4]).all()
+    assert (
+        np.isfinite(out[:2]).all() and np.isnan(out[2]).all() and np.isfinite(out[3]).all() and np.isnan(out[4]).all()
+    )
 
 
 def test_no_orientation_is_a_one_line_error(tmp_path):

@@ -98,7 +98,11 @@ def test_reference_clock_without_alignment_is_refused(tmp_path):
 
 @pytest.mark.parametrize(
     ("start", "tz"),
-    [("2026-03-04T10:20:30.250+01:00", "+01:00"), ("2026-03-04T10:20:30.250Z", "UTC"), ("2026-03-04T10:20:30.250", None)],
+    [
+        ("2026-03-04T10:20:30.250+01:00", "+01:00"),
+        ("2026-03-04T10:20:30.250Z", "UTC"),
+        ("2026-03-04T10:20:30.250", None),
+    ],
 )
 def test_time_column_is_a_typed_timestamp_from_the_start_time(tmp_path, start, tz):
     path = tmp_path / "t.mcap"
@@ -121,7 +125,8 @@ def test_time_column_is_a_typed_timestamp_from_the_start_time(tmp_path, start, t
 def test_csv_export_reads_back_in_pandas(processed_r2g, tmp_path):
     out = tmp_path / "phases.csv"
     result = CliRunner().invoke(
-        cli, ["export", str(processed_r2g), "-t", "/derived/phases/wrist", "-o", str(out), "--clock", "reference", "--json"]
+        cli,
+        ["export", str(processed_r2g), "-t", "/derived/phases/wrist", "-o", str(out), "--clock", "reference", "--json"],
     )
     assert result.exit_code == 0, result.output
     report = json.loads(result.output)

@@ -63,8 +63,15 @@ def matrix_tsv(columns: list[np.ndarray]) -> str:
     return "\n".join("\t".join(r) for r in text) + "\n"
 
 
-def _system(name: str, kind: str, t_s: np.ndarray, chans: list[tuple[str, str, str, str, str, np.ndarray]],
-            rate: float, meta: dict[str, Any], task: str) -> dict[str, Any]:
+def _system(
+    name: str,
+    kind: str,
+    t_s: np.ndarray,
+    chans: list[tuple[str, str, str, str, str, np.ndarray]],
+    rate: float,
+    meta: dict[str, Any],
+    task: str,
+) -> dict[str, Any]:
     """One tracking system: channel rows (name, component, type, tracked_point, units) and columns."""
     return {"name": name, "kind": kind, "t_s": t_s, "channels": chans, "rate": rate, "meta": meta, "task": task}
 
@@ -73,8 +80,9 @@ def _effective_rate(t_s: np.ndarray) -> float | str:
     return float((len(t_s) - 1) / (t_s[-1] - t_s[0])) if len(t_s) > 1 and t_s[-1] > t_s[0] else "n/a"
 
 
-def export_bids(trial, out: str | Path, *, clock: str = "device", imu: str | None = None,
-                overwrite: bool = False) -> ExportResult:
+def export_bids(
+    trial, out: str | Path, *, clock: str = "device", imu: str | None = None, overwrite: bool = False
+) -> ExportResult:
     """Write the trial as a BIDS-motion dataset folder ``out`` (atomically: a temporary folder renamed)."""
     tc = trial_clock(trial, clock, imu)
     md = trial.metadata
@@ -104,19 +112,40 @@ def export_bids(trial, out: str | Path, *, clock: str = "device", imu: str | Non
                 for k, comp in enumerate(("quat_w", "quat_x", "quat_y", "quat_z")):
                     chans.append((f"{name}_{comp}", comp, "ORNT", name, "n/a", q.values[:, k]))
         dev = md.get(f"imulog.device.{name}", {})
-        systems.append(_system(bids_label(name, "imu"), "imu", seconds_from(t, tc.origin_ns), chans,
-                               float(dev.get("rate_hz") or info.rate_hz or 0.0), dev, task))
+        systems.append(
+            _system(
+                bids_label(name, "imu"),
+                "imu",
+                seconds_from(t, tc.origin_ns),
+                chans,
+                float(dev.get("rate_hz") or info.rate_hz or 0.0),
+                dev,
+                task,
+            )
+        )
     for topic in [t for t in topics if t.startswith("/markers/")]:
         name = topic.rsplit("/", 1)[1]
         mk = trial.read(topic)
         info = trial.channel(topic)
         t = tc.times(topic, mk.t_ns)
         pos = np.where(mk.valid[:, :, None], mk.pos, np.nan)
-        chans = [(f"{label}_{a}", a, "POS", label, "m", pos[:, j, k])
-                 for j, label in enumerate(mk.labels) for k, a in enumerate(_AXES)]
+        chans = [
+            (f"{label}_{a}", a, "POS", label, "m", pos[:, j, k])
+            for j, label in enumerate(mk.labels)
+            for k, a in enumerate(_AXES)
+        ]
         dev = md.get(f"imulog.device.{name}", {})
-        systems.append(_system(bids_label(name, "markers"), "markers", seconds_from(t, tc.origin_ns), chans,
-                               float(dev.get("rate_hz") or info.rate_hz or 0.0), dev, task))
+        systems.append(
+            _system(
+                bids_label(name, "markers"),
+                "markers",
+                seconds_from(t, tc.origin_ns),
+                chans,
+                float(dev.get("rate_hz") or info.rate_hz or 0.0),
+                dev,
+                task,
+            )
+        )
     if not systems:
         raise ExportError(f"{trial.path}: no IMU or marker channel to export to BIDS-motion")
     events = []
@@ -125,8 +154,9 @@ def export_bids(trial, out: str | Path, *, clock: str = "device", imu: str | Non
         a = seconds_from(tc.times(topic, iv.start_ns), tc.origin_ns)
         b = seconds_from(tc.times(topic, iv.end_ns), tc.origin_ns)
         for k in range(len(iv)):
-            events.append([round(float(a[k]), 9), round(float(b[k] - a[k]), 9), str(iv.labels[k]),
-                           int(iv.task_index[k]), topic])
+            events.append(
+                [round(float(a[k]), 9), round(float(b[k] - a[k]), 9), str(iv.labels[k]), int(iv.task_index[k]), topic]
+            )
     events.sort(key=lambda r: r[0])
     files: list[str] = []
     rows = 0
@@ -178,13 +208,27 @@ def export_bids(trial, out: str | Path, *, clock: str = "device", imu: str | Non
         (folder / f"{stem}_events.tsv").write_text(
             tsv(events, ["onset", "duration", "trial_type", "repetition", "source"])
         )
-        (folder / f"{stem}_events.json").write_text(json.dumps({
-            "onset": {"Description": "seconds from the trial's start on the chosen clock", "Units": "s"},
-            "duration": {"Description": "phase or event duration", "Units": "s"},
-            "trial_type": {"Description": "phase label (reach, lift, return_bottle, return_hand, movement...)"},
-            "repetition": {"Description": "task repetition (task_index), 0 = none"},
-            "source": {"Description": "imulog channel the event comes from"},
-        }, indent=2) + "\n")
+        (folder / f"{stem}_events.json").write_text(
+            json.dumps(
+                {
+                    "onset": {"Description": "seconds from the trial's start on the chosen clock", "Units": "s"},
+                    "duration": {"Description": "phase or event duration", "Units": "s"},
+                    "trial_type": {"Description": "phase label (reach, lift, return_bottle, return_hand, movement...)"},
+                    "repetition": {"Description": "task repetition (task_index), 0 = none"},
+                    "source": {"Description": "imulog channel the event comes from"},
+                },
+                indent=2,
+            )
+            + "\n"
+        )
         files += [f"{stem}_events.tsv", f"{stem}_events.json"]
-    return ExportResult(path=str(out), format="bids", clock=clock, rows=rows,
-                        columns=[], topics=[], files=[f"sub-{sub}/motion/{f}" for f in files], notes=list(tc.notes))
+    return ExportResult(
+        path=str(out),
+        format="bids",
+        clock=clock,
+        rows=rows,
+        columns=[],
+        topics=[],
+        files=[f"sub-{sub}/motion/{f}" for f in files],
+        notes=list(tc.notes),
+    )

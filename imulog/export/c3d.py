@@ -170,22 +170,31 @@ def trial_c3d(trial, *, clock: str = "reference", imu: str | None = None, includ
         content.analog_rate_hz = rate * ratio
     for topic in [t for t in infos if t.startswith("/derived/phases/") or t.startswith("/events/")]:
         iv = trial.read(topic)
-        for a, b, label, task in zip(tc.times(topic, iv.start_ns), tc.times(topic, iv.end_ns), iv.labels,
-                                     iv.task_index, strict=True):
+        for a, b, label, task in zip(
+            tc.times(topic, iv.start_ns), tc.times(topic, iv.end_ns), iv.labels, iv.task_index, strict=True
+        ):
             desc = f"repetition {int(task)}" if int(task) > 0 else topic
             content.events.append(((int(a) - g0) / 1e9, str(label), desc))
             content.events.append(((int(b) - g0) / 1e9, f"{label}_end", desc))
     return content, notes + tc.notes
 
 
-def export_c3d(trial, out: str | Path, *, clock: str = "reference", imu: str | None = None,
-               include_imu: bool = True) -> ExportResult:
+def export_c3d(
+    trial, out: str | Path, *, clock: str = "reference", imu: str | None = None, include_imu: bool = True
+) -> ExportResult:
     """Write the trial as a C3D file (atomically)."""
     content, notes = trial_c3d(trial, clock=clock, imu=imu, include_imu=include_imu)
     c = build_c3d(content)
     with atomic_file(out) as tmp:
         c.write(str(tmp.with_suffix(".c3d")))
         tmp.with_suffix(".c3d").replace(tmp)
-    return ExportResult(path=str(out), format="c3d", clock=clock, rows=content.points_mm.shape[0],
-                        columns=content.point_labels + content.analog_labels,
-                        topics=[], files=[str(out)], notes=notes)
+    return ExportResult(
+        path=str(out),
+        format="c3d",
+        clock=clock,
+        rows=content.points_mm.shape[0],
+        columns=content.point_labels + content.analog_labels,
+        topics=[],
+        files=[str(out)],
+        notes=notes,
+    )

@@ -33,14 +33,18 @@ from imulog.process import quaternion as quat
 ORIENTATION_PREFIX = "/derived/orientation/"
 
 
-def format_sto(time_s: np.ndarray, names: Sequence[str], quats_wxyz: Sequence[np.ndarray], rate_hz: float,
-               *, opensim_version: str = "4.5") -> str:
+def format_sto(
+    time_s: np.ndarray,
+    names: Sequence[str],
+    quats_wxyz: Sequence[np.ndarray],
+    rate_hz: float,
+    *,
+    opensim_version: str = "4.5",
+) -> str:
     """The text of a quaternion ``.sto`` file: ``time_s`` (N,), one (N, 4) w,x,y,z array per name."""
     if len(names) != len(quats_wxyz):
         raise ValueError("one quaternion array per name")
-    header = (
-        f"DataRate={rate_hz:.6f}\nDataType=Quaternion\nversion=3\nOpenSimVersion={opensim_version}\nendheader\n"
-    )
+    header = f"DataRate={rate_hz:.6f}\nDataType=Quaternion\nversion=3\nOpenSimVersion={opensim_version}\nendheader\n"
     lines = [header + "\t".join(["time", *names])]
     cells = [np.char.mod("%.17g", np.asarray(q, np.float64)) for q in quats_wxyz]
     times = np.char.mod("%.17g", np.asarray(time_s, np.float64))
@@ -83,18 +87,27 @@ def default_name(imu: str) -> str:
     return imu if imu.endswith("_imu") else f"{imu}_imu"
 
 
-def export_sto(trial, out: str | Path, *, clock: str = "device", imu: str | None = None,
-               imus: Sequence[str] | None = None, names: Mapping[str, str] | None = None,
-               rate_hz: float | None = None) -> ExportResult:
+def export_sto(
+    trial,
+    out: str | Path,
+    *,
+    clock: str = "device",
+    imu: str | None = None,
+    imus: Sequence[str] | None = None,
+    names: Mapping[str, str] | None = None,
+    rate_hz: float | None = None,
+) -> ExportResult:
     """Write the trial's ``/derived/orientation/*`` channels as one OpenSense ``.sto`` file.
 
     ``imus``: which IMUs (default: every IMU with an orientation channel); ``names``: IMU -> column name
     (default ``{imu}_imu``); ``rate_hz``: the grid's rate (default: the first IMU's ``rate_hz``).
     """
-    available = [t[len(ORIENTATION_PREFIX):] for t in trial.topics() if t.startswith(ORIENTATION_PREFIX)]
+    available = [t[len(ORIENTATION_PREFIX) :] for t in trial.topics() if t.startswith(ORIENTATION_PREFIX)]
     chosen = list(imus) if imus else available
     if not chosen:
-        raise ExportError(f"{trial.path}: no /derived/orientation/* channel: run `imulog process orientation {trial.path}` first")
+        raise ExportError(
+            f"{trial.path}: no /derived/orientation/* channel: run `imulog process orientation {trial.path}` first"
+        )
     missing = [i for i in chosen if i not in available]
     if missing:
         raise ExportError(
@@ -121,5 +134,13 @@ def export_sto(trial, out: str | Path, *, clock: str = "device", imu: str | None
     text = format_sto(seconds_from(grid, tc.origin_ns), columns, quats, rate)
     with atomic_file(out) as tmp:
         tmp.write_text(text)
-    return ExportResult(path=str(out), format="sto", clock=clock, rows=n, columns=["time", *columns],
-                        topics=[ORIENTATION_PREFIX + c for c in chosen], files=[str(out)], notes=list(tc.notes))
+    return ExportResult(
+        path=str(out),
+        format="sto",
+        clock=clock,
+        rows=n,
+        columns=["time", *columns],
+        topics=[ORIENTATION_PREFIX + c for c in chosen],
+        files=[str(out)],
+        notes=list(tc.notes),
+    )

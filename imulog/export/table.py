@@ -97,7 +97,11 @@ def stream_table(stream: Stream, meta: dict[str, str], topic: str, tc: TrialCloc
         if tc.start_time is not None:
             wall = wall_clock_ns(t, tc.origin_ns, tc.start_time)
             fields.append(
-                (f"{prefix}_time" if prefix else "time", pa.array(wall, pa.timestamp("ns", tz=tc.time_zone)), {"unit": "ns"})
+                (
+                    f"{prefix}_time" if prefix else "time",
+                    pa.array(wall, pa.timestamp("ns", tz=tc.time_zone)),
+                    {"unit": "ns"},
+                )
             )
         fields.append((f"{stem}[s]", pa.array(seconds_from(t, tc.origin_ns)), {"unit": "s", "name": stem}))
         fields.append((f"{stem}_ns", pa.array(t), {"unit": "ns", "name": f"{stem}_ns"}))
@@ -117,14 +121,19 @@ def stream_table(stream: Stream, meta: dict[str, str], topic: str, tc: TrialCloc
         for name, values in cols.items():
             fields.append((labelled(name, units[name]), pa.array(values), {"unit": units[name], "name": name}))
     schema_meta = {"topic": topic, **{k: meta[k] for k in _KEEP if k in meta}, **tc.record()}
-    schema = pa.schema(
-        [pa.field(n, a.type, metadata=m) for n, a, m in fields], metadata=schema_meta
-    )
+    schema = pa.schema([pa.field(n, a.type, metadata=m) for n, a, m in fields], metadata=schema_meta)
     return pa.Table.from_arrays([a for _, a, _ in fields], schema=schema)
 
 
-def channel_table(trial, topic: str, *, clock: str = "device", imu: str | None = None,
-                  start_ns: int | None = None, end_ns: int | None = None):
+def channel_table(
+    trial,
+    topic: str,
+    *,
+    clock: str = "device",
+    imu: str | None = None,
+    start_ns: int | None = None,
+    end_ns: int | None = None,
+):
     """The whole channel (optionally ``start_ns <= t < end_ns`` on its stored clock) as one table."""
     tc = trial_clock(trial, clock, imu)
     stream = trial.read(topic, start_ns, end_ns)
@@ -139,8 +148,17 @@ def format_of(path: str | Path, fmt: str | None = None) -> str:
     return fmt
 
 
-def export_table(trial, topic: str, out: str | Path, *, fmt: str | None = None, clock: str = "device",
-                 imu: str | None = None, start_ns: int | None = None, end_ns: int | None = None) -> ExportResult:
+def export_table(
+    trial,
+    topic: str,
+    out: str | Path,
+    *,
+    fmt: str | None = None,
+    clock: str = "device",
+    imu: str | None = None,
+    start_ns: int | None = None,
+    end_ns: int | None = None,
+) -> ExportResult:
     """Write one channel to Parquet or CSV, block by block (memory bounded by one chunk), atomically."""
     import pyarrow.csv as pacsv
     import pyarrow.parquet as pq
@@ -159,7 +177,9 @@ def export_table(trial, topic: str, out: str | Path, *, fmt: str | None = None, 
             for stream in pieces:
                 table = stream_table(stream, meta, topic, tc)
                 if writer is None:
-                    writer = pq.ParquetWriter(tmp, table.schema) if fmt == "parquet" else pacsv.CSVWriter(tmp, table.schema)
+                    writer = (
+                        pq.ParquetWriter(tmp, table.schema) if fmt == "parquet" else pacsv.CSVWriter(tmp, table.schema)
+                    )
                     result.columns = table.column_names
                 writer.write_table(table)
                 result.rows += table.num_rows
