@@ -272,7 +272,7 @@ def iter_chunks(
 ) -> Iterator[Recording]:
     """Decode ``path`` batch by batch: one Recording per ``blocks_per_chunk`` blocks, same streams, one time origin.
 
-    Memory is bounded by the batch (the file is memory-mapped). Raises ConversionError for damaged input.
+    Memory is bounded by the batch (read with plain reads). Raises ConversionError for damaged input.
     """
     options = options or ConvertOptions()
     path = Path(path)
@@ -288,17 +288,34 @@ def iter_chunks(
         )
     if n_blocks <= 0:
         raise ConversionError(path, "no data blocks after the header")
-    mm = np.memmap(path, dtype=np.uint8, mode="r", offset=HEADER_BYTES, shape=(n_blocks, BLOCK_BYTES))
+    source = open(path, "rb")  # noqa: SIM115 - closed in the finally below, when the generator ends
     serial = str(header.device_id)
     names = {str(k).upper(): v for k, v in (options.extra.get("names") or {}).items()}
     name = sanitize_name(names.get(serial.upper(), f"{header.model.lower()}_{serial}"))
+    try:
+        yield from _decode_batches(path, source, header, n_blocks, blocks_per_chunk, name)
+    finally:
+        source.close()
+
+
+def _read_blocks(source, first: int, count: int) -> np.ndarray:
+    """``count`` blocks from block index ``first`` as (count, 512) bytes: plain reads, so the pages of a week's
+    file do not stay resident as a memory map's would (RSS would grow with the file)."""
+    source.seek(HEADER_BYTES + first * BLOCK_BYTES)
+    data = source.read(count * BLOCK_BYTES)
+    return np.frombuffer(data, dtype=np.uint8).reshape(-1, BLOCK_BYTES).copy()
+
+
+def _decode_batches(
+    path: Path, source, header: CwaHeader, n_blocks: int, blocks_per_chunk: int, name: str
+) -> Iterator[Recording]:
     layout: _Layout | None = None
     origin: int | None = None
     meta: dict = {}
     prev_end: int | None = None
     for first in range(0, n_blocks, blocks_per_chunk):
         stop = min(n_blocks, first + blocks_per_chunk)
-        raw = np.array(mm[first : min(n_blocks, stop + 1)])  # one block ahead: the next block's start time
+        raw = _read_blocks(source, first, min(n_blocks, stop + 1) - first)  # one block ahead: its start time
         blocks_all = raw.view(BLOCK_DTYPE).reshape(len(raw))
         keep = _check_blocks(path, raw[: stop - first], blocks_all[: stop - first], first)
         ahead = None
