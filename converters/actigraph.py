@@ -16,9 +16,10 @@
 * PARAMETERS (0x15) and METADATA (0x06, JSON) -> ``imulog.device.<name>``. Other records are skipped.
 
 Idle sleep: the device writes no ACTIVITY2 record while asleep (ActiLife fills those seconds with the last sample).
-Here those seconds stay missing samples (a jump in ``t_ns``), never zeros or copies; their count and length are in
-the device record (``idle_sleep_gaps``, ``idle_sleep_s``), counting a sleep that lasts until ``Last Sample Time``
-(``recording_end``), after which no record follows.
+Here those seconds are NaN samples on the sample grid (the project's gap rule, :mod:`imulog.process.gaps`), never
+zeros or copies, from ``Start Date`` to ``Last Sample Time``; a long sleep comes as separate pieces of at most
+``FILL_PIECE`` samples. Their count and length are in the device record (``idle_sleep_gaps``, ``idle_sleep_s``,
+``recording_end``). Seconds without a SENSOR_DATA record between two of them are NaN IMU samples likewise.
 
 ``activity.bin`` (NEO/MRA, firmware <= 2.5): a continuous stream of 12-bit two's-complement samples in Y,X,Z order
 (4.5 bytes per sample, big-endian nibbles), 341 LSB/g, starting at ``Start Date`` at ``Sample Rate``.
@@ -219,6 +220,77 @@ def even_times_ns(seconds: np.ndarray, counts: np.ndarray, rate_hz: np.ndarray) 
     return np.repeat(seconds.astype(np.int64) * NS_PER_S, counts) + np.round(k * step).astype(np.int64)
 
 
+INLINE_FILL = 1 << 16  # NaN samples a gap may add to its own piece; longer gaps become pieces of their own
+FILL_PIECE = 1 << 20  # samples per NaN piece of a long gap
+
+
+def fill_times_ns(first_s: int, n: int, rate: int) -> np.ndarray:
+    """Times of ``n`` samples at ``rate`` Hz from the whole second ``first_s`` (k-th at ``first_s + k / rate``)."""
+    k = np.arange(n, dtype=np.int64)
+    return (first_s + k // rate) * NS_PER_S + np.round((k % rate) * (NS_PER_S / rate)).astype(np.int64)
+
+
+def with_gaps(
+    t: np.ndarray,
+    values: dict[str, np.ndarray | None],
+    first_sample: np.ndarray,
+    gap_first_s: np.ndarray,
+    gap_seconds: np.ndarray,
+    rate: int,
+    origin_ns: int,
+) -> Iterator[tuple[np.ndarray, dict[str, np.ndarray | None]]]:
+    """The samples of a batch with its missing seconds as NaN samples, in time order, in bounded pieces.
+
+    ``first_sample[r]``: index in ``t`` of record r's first sample; ``gap_seconds[r]`` whole seconds are missing
+    before it, from second ``gap_first_s[r]`` (absolute, like the record time stamps); ``t`` is relative to
+    ``origin_ns``. A gap of more than ``INLINE_FILL`` samples is yielded as pieces of ``FILL_PIECE`` samples.
+    """
+    pending_t: list[np.ndarray] = []
+    pending_v: dict[str, list[np.ndarray]] = {k: [] for k, v in values.items() if v is not None}
+
+    def nan_block(n: int) -> dict[str, np.ndarray]:
+        return {k: np.full((n, *values[k].shape[1:]), np.nan) for k in pending_v}  # type: ignore[union-attr]
+
+    def flush() -> tuple[np.ndarray, dict[str, np.ndarray | None]] | None:
+        if not pending_t:
+            return None
+        out_t = np.concatenate(pending_t)
+        out_v: dict[str, np.ndarray | None] = {k: np.concatenate(v) for k, v in pending_v.items()}
+        out_v.update({k: None for k, v in values.items() if v is None})
+        pending_t.clear()
+        for v in pending_v.values():
+            v.clear()
+        return out_t, out_v
+
+    cursor = 0
+    for r in np.nonzero(gap_seconds > 0)[0]:
+        stop = int(first_sample[r])
+        pending_t.append(t[cursor:stop])
+        for k in pending_v:
+            pending_v[k].append(values[k][cursor:stop])  # type: ignore[index]
+        cursor = stop
+        n = int(gap_seconds[r]) * rate
+        first_s = int(gap_first_s[r])
+        if n <= INLINE_FILL:
+            pending_t.append(fill_times_ns(first_s, n, rate) - origin_ns)
+            for k, block in nan_block(n).items():
+                pending_v[k].append(block)
+            continue
+        piece = flush()
+        if piece is not None:
+            yield piece
+        for a in range(0, n, FILL_PIECE):
+            m = min(FILL_PIECE, n - a)
+            ft = fill_times_ns(first_s, a + m, rate)[a:] - origin_ns
+            yield ft, {**nan_block(m), **{k: None for k, v in values.items() if v is None}}
+    pending_t.append(t[cursor:])
+    for k in pending_v:
+        pending_v[k].append(values[k][cursor:])  # type: ignore[index]
+    piece = flush()
+    if piece is not None:
+        yield piece
+
+
 # ---------------------------------------------------------------------------------------------- record reading
 @dataclass
 class RecordBatch:
@@ -319,6 +391,7 @@ class _State:
     gaps: int = 0
     gap_s: int = 0
     end_ns: int | None = None  # info.txt Last Sample Time (else Stop Date): the device recorded until then
+    imu_rate_hz: int | None = None  # samples per SENSOR_DATA record (median of the first batch)
 
     def idle_sleep(self) -> dict[str, int]:
         """Idle-sleep counts so far, including the tail between the last ACTIVITY record and the recording's end."""
@@ -345,12 +418,13 @@ def _check_order(path: Path, batch: RecordBatch, idx: np.ndarray, last: int | No
         )
 
 
-def _activity(path: Path, batch: RecordBatch, st: _State) -> ImuStream | None:
+def _activity(path: Path, batch: RecordBatch, st: _State) -> list[ImuStream]:
+    """The batch's primary-accelerometer samples, idle-sleep seconds as NaN samples (one or more pieces)."""
     is_act2 = (batch.types == ACTIVITY2) & (batch.sizes > 1)
     is_act = batch.types == ACTIVITY
     idx = np.nonzero(is_act2 | is_act)[0]
     if len(idx) == 0:
-        return None
+        return []
     _check_order(path, batch, idx, st.last_activity_s, "activity")
     counts, parts = [], []
     for i in idx:
@@ -366,23 +440,47 @@ def _activity(path: Path, batch: RecordBatch, st: _State) -> ImuStream | None:
         parts.append(xyz)
         counts.append(len(xyz))
     secs = batch.seconds[idx]
-    prev = np.concatenate([[st.last_activity_s if st.last_activity_s is not None else secs[0] - 1], secs[:-1]])
-    jump = secs - prev - 1
-    st.gaps += int(np.count_nonzero(jump > 0))
-    st.gap_s += int(jump[jump > 0].sum())
+    first_prev = st.last_activity_s if st.last_activity_s is not None else st.origin_ns // NS_PER_S - 1
+    prev = np.concatenate([[first_prev], secs[:-1]])
+    jump = np.maximum(secs - prev - 1, 0)
+    st.gaps += int(np.count_nonzero(jump))
+    st.gap_s += int(jump.sum())
     st.last_activity_s = int(secs[-1])
     counts_a = np.asarray(counts, dtype=np.int64)
     t = even_times_ns(secs, counts_a, np.maximum(st.rate_hz, counts_a)) - st.origin_ns
     acc = np.concatenate(parts).astype(np.float64) / st.accel_scale * G0
-    return ImuStream(name=st.name, t_ns=t, acc=acc, meta=dict(st.meta))
+    first = np.cumsum(counts_a) - counts_a
+    pieces = with_gaps(t, {"acc": acc}, first, prev + 1, jump, round(st.rate_hz), st.origin_ns)
+    return [ImuStream(name=st.name, t_ns=pt, acc=pv["acc"], meta=dict(st.meta)) for pt, pv in pieces]
 
 
-def _sensor(path: Path, batch: RecordBatch, st: _State) -> ImuStream | None:
+def _activity_tail(st: _State) -> list[ImuStream]:
+    """NaN samples for an idle sleep that lasted until the recording's end (no record follows it)."""
+    if st.end_ns is None or st.last_activity_s is None:
+        return []
+    first_s = st.last_activity_s + 1
+    seconds = st.end_ns // NS_PER_S - first_s
+    if seconds <= 0:
+        return []
+    n_all = seconds * round(st.rate_hz)
+    out = []
+    for a in range(0, n_all, FILL_PIECE):
+        m = min(FILL_PIECE, n_all - a)
+        t = fill_times_ns(first_s, a + m, round(st.rate_hz))[a:] - st.origin_ns
+        out.append(ImuStream(name=st.name, t_ns=t, acc=np.full((m, 3), np.nan), meta=dict(st.meta)))
+    return out
+
+
+def _sensor(path: Path, batch: RecordBatch, st: _State) -> list[ImuStream]:
+    """The batch's IMU samples; seconds without a SENSOR_DATA record between two records become NaN samples."""
     idx = np.nonzero(batch.types == SENSOR_DATA)[0]
     if len(idx) == 0:
-        return None
+        return []
     _check_order(path, batch, idx, st.last_sensor_s, "SENSOR_DATA")
-    st.last_sensor_s = int(batch.seconds[idx[-1]])
+    secs = batch.seconds[idx]
+    prev = np.concatenate([[st.last_sensor_s if st.last_sensor_s is not None else secs[0] - 1], secs[:-1]])
+    jump = np.maximum(secs - prev - 1, 0)
+    st.last_sensor_s = int(secs[-1])
     schema_ids = [struct.unpack_from("<h", batch.buf, int(batch.starts[i]))[0] for i in idx]
     if len(set(schema_ids)) != 1:
         raise ConversionError(path, f"log.bin record {batch.first + int(idx[0])}: several sensor schemas interleaved")
@@ -412,16 +510,19 @@ def _sensor(path: Path, batch: RecordBatch, st: _State) -> ImuStream | None:
     temp = cols.get("Temperature")
     if temp is not None:
         temp = temp + float(st.meta.get("imu_temp_offset", 21.0))
-    meta = {**st.meta, "rate_hz": float(np.median(counts)), "columns": [c.label for c in schema.columns if c.label]}
-    return ImuStream(
-        name=f"{st.name}_imu",
-        t_ns=t - st.origin_ns,
-        acc=None if acc is None else acc * G0,
-        gyr=None if gyr is None else np.radians(gyr),
-        mag=mag,
-        temperature=temp,
-        meta=meta,
-    )
+    rate = int(np.median(counts))
+    if st.imu_rate_hz is None:
+        st.imu_rate_hz = rate
+    meta = {**st.meta, "rate_hz": float(st.imu_rate_hz), "columns": [c.label for c in schema.columns if c.label]}
+    values = {
+        "acc": None if acc is None else acc * G0,
+        "gyr": None if gyr is None else np.radians(gyr),
+        "mag": mag,
+        "temperature": temp,
+    }
+    first = np.cumsum(counts) - counts
+    pieces = with_gaps(t - st.origin_ns, values, first, prev + 1, jump, st.imu_rate_hz, st.origin_ns)
+    return [ImuStream(name=f"{st.name}_imu", t_ns=pt, meta=dict(meta), **pv) for pt, pv in pieces]
 
 
 def _scalar_signals(batch: RecordBatch, st: _State) -> list[SignalStream]:
@@ -586,24 +687,37 @@ def _iter_log(path: Path, z: zipfile.ZipFile, st: _State, offset: int | None) ->
             for i in np.nonzero(batch.types == SENSOR_SCHEMA)[0]:
                 schema = parse_schema(path, batch.payload(int(i)), batch.first + int(i))
                 st.schemas[schema.ident] = schema
-            imus = [s for s in (_activity(path, batch, st), _sensor(path, batch, st)) if s is not None]
+            acts, sens = _activity(path, batch, st), _sensor(path, batch, st)
             signals = _scalar_signals(batch, st)
-            st.meta.update(st.idle_sleep())
-            for s in imus:
-                s.meta.update(st.idle_sleep())
-            if not imus and not signals:
+            if not acts and not sens and not signals:
                 continue
-            found = found or bool(imus)
-            rec = Recording(imus=imus, signals=signals, sources=[str(path)])
-            rec.metadata[f"imulog.device.{st.name}"] = dict(st.meta)
-            imu_stream = next((s for s in imus if s.name == f"{st.name}_imu"), None)
-            if imu_stream is not None:
-                imu_meta = {k: v for k, v in imu_stream.meta.items() if k != "accel_scale_lsb_per_g"}
-                rec.metadata[f"imulog.device.{st.name}_imu"] = {**imu_meta, "model": f"{st.meta['model']} IMU"}
-            rec.metadata["imulog.trial"] = dict(trial)
-            yield rec
+            found = found or bool(acts or sens)
+            first = [p[0] for p in (acts, sens) if p]
+            later = [*acts[1:], *sens[1:]]  # NaN pieces of long gaps (each stream's pieces stay in time order)
+            for i, imus in enumerate([first, *[[p] for p in later]]):
+                yield _piece(path, st, trial, imus, signals if i == 0 else [])
+    for piece in _activity_tail(st):
+        yield _piece(path, st, trial, [piece], [])
     if not found:
         raise ConversionError(path, "log.bin holds no ACTIVITY2, ACTIVITY or SENSOR_DATA samples")
+
+
+def _piece(
+    path: Path, st: _State, trial: dict[str, Any], imus: list[ImuStream], signals: list[SignalStream]
+) -> Recording:
+    """One piece of a log.bin with the device records as known so far (idle-sleep counts included)."""
+    sleep = st.idle_sleep()
+    st.meta.update(sleep)
+    for s in imus:
+        s.meta.update(sleep)
+    rec = Recording(imus=imus, signals=signals, sources=[str(path)])
+    rec.metadata[f"imulog.device.{st.name}"] = dict(st.meta)
+    imu_stream = next((s for s in imus if s.name == f"{st.name}_imu"), None)
+    if imu_stream is not None:
+        imu_meta = {k: v for k, v in imu_stream.meta.items() if k != "accel_scale_lsb_per_g"}
+        rec.metadata[f"imulog.device.{st.name}_imu"] = {**imu_meta, "model": f"{st.meta['model']} IMU"}
+    rec.metadata["imulog.trial"] = dict(trial)
+    return rec
 
 
 def _iter_activity_bin(path: Path, z: zipfile.ZipFile, st: _State, offset: int | None) -> Iterator[Recording]:

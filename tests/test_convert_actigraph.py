@@ -106,31 +106,58 @@ def test_accelerometer_matches_actilife_raw_csv(rec, gt3x_dir: Path):
     np.testing.assert_array_equal(acc.t_ns[:n], raw.t_ns)
 
 
-def test_idle_sleep_seconds_are_missing_samples_not_zeros(gt3x_dir: Path, tmp_path: Path):
+def test_idle_sleep_seconds_are_nan_samples_not_zeros(gt3x_dir: Path, tmp_path: Path):
+    """While the device sleeps it writes no ACTIVITY2 records: those seconds become NaN samples on the sample grid
+    (the project's gap rule, imulog.process.gaps), never zeros or repeated values."""
     src = gt3x_dir / "example.gt3x"
+    whole = read_gt3x(src).imus[0]
     with zipfile.ZipFile(src) as z:
         log = z.read("log.bin")
     recs = _records(log)
     t0 = next(sec for _, typ, sec, _ in recs if typ == 0x1A)
-    asleep = set(range(t0 + 60, t0 + 65))  # 5 s of idle sleep: the device writes no ACTIVITY2 records
+    asleep = set(range(t0 + 60, t0 + 65))  # 5 s of idle sleep
     kept = b"".join(log[o : o + 9 + size] for o, typ, sec, size in recs if not (typ == 0x1A and sec in asleep))
-    rec = read_gt3x(_rezip(src, tmp_path / "sleep.gt3x", kept))
-    acc = rec.imus[0]
-    assert len(acc) == (180 - 5) * 90
-    d = np.diff(acc.t_ns)
-    jump = int(np.argmax(d))
-    assert d[jump] == 6 * 10**9 - round(89 * 1e9 / 90)  # last sample of second 59 -> first of second 65
-    assert acc.t_ns[jump + 1] == 65 * 10**9
+    acc = read_gt3x(_rezip(src, tmp_path / "sleep.gt3x", kept)).imus[0]
+    np.testing.assert_array_equal(acc.t_ns, whole.t_ns)  # the same regular 90 Hz grid
+    missing = np.isnan(acc.acc).any(axis=1)
+    assert np.array_equal(np.nonzero(missing)[0], np.arange(60 * 90, 65 * 90))
+    np.testing.assert_array_equal(acc.acc[~missing], whole.acc[~missing])
     assert np.count_nonzero(np.all(acc.acc == 0, axis=1)) == 0
+    rec = read_gt3x(tmp_path / "sleep.gt3x")
     dev = rec.metadata["imulog.device.tas1e31150129"]
     assert dev["idle_sleep_gaps"] == 1 and dev["idle_sleep_s"] == 5
     # asleep until the end: no records after second 170, but info.txt's Last Sample Time is second 180
     tail = b"".join(log[o : o + 9 + size] for o, typ, sec, size in recs if not (typ == 0x1A and sec >= t0 + 170))
     rec = read_gt3x(_rezip(src, tmp_path / "tail.gt3x", tail))
-    assert len(rec.imus[0]) == 170 * 90
+    acc = rec.imus[0]
+    np.testing.assert_array_equal(acc.t_ns, whole.t_ns)
+    assert np.array_equal(np.nonzero(np.isnan(acc.acc).any(axis=1))[0], np.arange(170 * 90, 180 * 90))
     dev = rec.metadata["imulog.device.tas1e31150129"]
     assert dev["idle_sleep_gaps"] == 1 and dev["idle_sleep_s"] == 10
     assert dev["recording_end"] == "2019-02-14T09:01:00.000-05:00"
+
+
+def test_long_idle_sleep_comes_in_bounded_pieces(monkeypatch, gt3x_dir: Path, tmp_path: Path):
+    import converters.actigraph as ag
+
+    monkeypatch.setattr(ag, "INLINE_FILL", 900)  # 10 s at 90 Hz
+    monkeypatch.setattr(ag, "FILL_PIECE", 1000)
+    src = gt3x_dir / "example.gt3x"
+    with zipfile.ZipFile(src) as z:
+        log = z.read("log.bin")
+    recs = _records(log)
+    t0 = next(sec for _, typ, sec, _ in recs if typ == 0x1A)
+    kept = b"".join(
+        log[o : o + 9 + size] for o, typ, sec, size in recs if not (typ == 0x1A and t0 + 50 <= sec < t0 + 80)
+    )
+    path = _rezip(src, tmp_path / "long_sleep.gt3x", kept)
+    pieces = [p.imus for p in ag.iter_chunks(path)]
+    acc_pieces = [s for imus in pieces for s in imus if s.name == "tas1e31150129"]
+    assert len(acc_pieces) == 1 + 3 + 1  # samples before, 2700 NaN samples in pieces of <= 1000, samples after
+    assert [len(s) for s in acc_pieces[1:4]] == [1000, 1000, 700]
+    assert all(np.isnan(s.acc).all() for s in acc_pieces[1:4])
+    t = np.concatenate([s.t_ns for s in acc_pieces])
+    np.testing.assert_array_equal(t, read_gt3x(src).imus[0].t_ns)
 
 
 # ------------------------------------------------------------------------------------------ NEO activity.bin
