@@ -94,7 +94,10 @@ def read_delsys(path: Path, *, names: dict[str, str] | None = None) -> Recording
         lab = labels.get(name, {})
         ch = Channel(name=name, time_col=j, value_col=j + 1, unit=lab.get("unit", "").strip())
         if lab:
-            ch.rate_hz = float(lab["fs"])
+            try:
+                ch.rate_hz = float(lab["fs"])
+            except ValueError:
+                raise ConversionError(path, f"{name}: sampling frequency {lab['fs']!r} is not a number") from None
             ch.points = int(lab["n"])
         channels.append(ch)
         m = _CHANNEL.match(name)

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from converters._common import check_increasing, estimate_rate_hz, head_lines, sanitize_name, text_head_lines, to_ns
-from converters._lab import orientation_stream, read_table
+from converters._lab import line_offsets, orientation_stream, read_table
 from converters.base import Converter, ConvertOptions
 from converters.errors import ConversionError
 from imulog.model import Recording, SignalStream
@@ -65,9 +65,10 @@ def read_sto(path: Path) -> Recording:
         raise ConversionError(path, f"DataType={info['DataType']} is not supported (Quaternion, Vec3, double)")
     names = ["time"] + [f"{c}[{k}]" for c in cols[1:] for k in range(width)]
     data = path.read_bytes()
-    start = 0
-    for _ in range(ni + 1):
-        start = data.index(b"\n", start) + 1
+    try:
+        start = line_offsets(data, ni + 1)
+    except ValueError:
+        raise ConversionError(path, "no data rows after the column names", line=ni + 1) from None
     body = data[:start] + data[start:].replace(b"\t", b",")
     values = read_table(path, delimiter=",", skip_lines=ni + 1, names=names, data=body, required=[0])
     first_line = ni + 2

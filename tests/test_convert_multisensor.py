@@ -139,3 +139,60 @@ def test_lab_formats_are_plugins_and_listed(repo_root):
     lines = {line.split()[0]: line for line in output.splitlines() if line.strip()}
     for name, ext in LAB_FORMATS.items():
         assert ext in lines[name].split() and len(lines[name]) > 40, lines.get(name)
+
+
+def _mutate(rng, data: bytes) -> bytes:
+    """One random damage: cut, flipped bytes, a line deleted, duplicated, stripped of a delimiter or replaced."""
+    kind = rng.integers(6)
+    if kind == 0:
+        return data[: rng.integers(len(data))]
+    if kind == 1:
+        b = bytearray(data)
+        for i in rng.integers(len(b), size=rng.integers(1, 5)):
+            b[i] = rng.integers(256)
+        return bytes(b)
+    lines = data.split(b"\n")
+    i = int(rng.integers(len(lines)))
+    if kind == 2 and len(lines) > 2:
+        del lines[i]
+    elif kind == 3:
+        lines.insert(i, lines[int(rng.integers(len(lines)))])
+    elif kind == 4:
+        lines[i] = lines[i].replace([b",", b"\t", b" ", b";", b"."][int(rng.integers(5))], b"", 1)
+    else:
+        lines[i] = [b"", b"nan", b"-1e400", b"\x00", b"NaN\tNaN", b'<frame time="1">', b"0" * 40][int(rng.integers(7))]
+    return b"\n".join(lines)
+
+
+def test_damaged_lab_exports_raise_only_conversion_errors(shared_data, tmp_path):
+    """Seeded fuzzing of every lab format (cut files, flipped bytes, lost/duplicated/garbled lines): the converter
+    either reads the file or raises ConversionError with a one-line message, never another exception."""
+    from test_convert_mvnx import write_mvnx  # tests/ is on sys.path (rootdir import mode)
+    from test_convert_qualisys import write_qtm
+
+    from converters import ConversionError
+    from converters.registry import get
+
+    d = shared_data / "devices"
+    write_mvnx(tmp_path / "m.mvnx", n=6)
+    write_qtm(tmp_path / "q.tsv", n=10)
+    cases = [
+        ("xsens", shared_data / XSENS / "MT2022_ACC_GYRO_ROT_ALL_TAB_NAN_00B42D4B.txt"),
+        ("xsens", shared_data / XSENS / "MT2022_ACC_GYRO_ROT_MAT_SPACE_00B42D4B.txt"),
+        ("apdm", d / "apdm_csv/apdm_format7.csv"),
+        ("opensim-sto", d / "opensense_sto/myComplexTasksTrial_orientations.sto"),
+        ("motive", d / "optitrack_motive/sample_optitrack_take.csv"),
+        ("delsys", d / "delsys_trigno/trigno_sample_header.csv"),
+        ("mvnx", tmp_path / "m.mvnx"),
+        ("qualisys", tmp_path / "q.tsv"),
+    ]
+    rng = np.random.default_rng(14)
+    for fmt, src in cases:
+        conv, data = get(fmt), src.read_bytes()
+        target = tmp_path / f"damaged{src.suffix}"
+        for _ in range(25):
+            target.write_bytes(_mutate(rng, data))
+            try:
+                conv.convert(target)
+            except ConversionError as e:
+                assert "\n" not in str(e) and str(target) in str(e), (fmt, str(e))
