@@ -80,6 +80,10 @@ class LazyGroup(click.Group):
 def cli() -> None:
     """imulog: wearable-IMU trials as self-describing MCAP archives.
 
+    Reports take --json; NO_COLOR=1 turns colour off; progress bars appear only on a terminal
+    (plain lines in logs). Shell completion: eval "$(_IMULOG_COMPLETE=bash_source imulog)"
+    (zsh_source, fish_source for those shells; docs/cli.md).
+
     \b
     Typical session:
       imulog demo                                   # simulate, convert, process, view
@@ -101,8 +105,11 @@ def process() -> None:
 
 
 def main() -> None:
+    """The ``imulog`` script and ``python -m imulog``; honours ``NO_COLOR`` (no ANSI colour at all)."""
+    from imulog.console import no_color
+
     try:
-        cli(standalone_mode=True)
+        cli.main(prog_name="imulog", standalone_mode=True, color=False if no_color() else None)
     except KeyboardInterrupt:  # pragma: no cover - interactive only
         click.echo("interrupted", err=True)
         sys.exit(130)

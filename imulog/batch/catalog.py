@@ -20,7 +20,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import sys
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -327,9 +326,9 @@ def build_catalog(
     stamp = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     bar = None
     if progress and files:
-        from tqdm import tqdm
+        from imulog.console import progress_bar  # tqdm on a terminal, plain lines in logs
 
-        bar = tqdm(total=len(files), unit="file", desc="catalog", file=sys.stderr, dynamic_ncols=True)
+        bar = progress_bar(len(files), "catalog", unit="file")
     seen = set()
     try:
         with pq.ParquetWriter(tmp, sch) as writer:

@@ -298,9 +298,9 @@ def run(
     t0 = time.perf_counter()
     bar = None
     if progress and files:
-        from tqdm import tqdm
+        from imulog.console import progress_bar  # tqdm on a terminal, plain lines in logs
 
-        bar = tqdm(total=len(files), unit="file", desc="batch", file=sys.stderr, dynamic_ncols=True)
+        bar = progress_bar(len(files), "batch", unit="file")
     state = {"failed": 0}
 
     def on_done(i: int, result: FileResult) -> None:

@@ -231,7 +231,8 @@ def info(file: str, as_json: bool) -> None:
 @click.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False))
 @click.option("-v", "--verbose", is_flag=True, help="list every check and every problem")
-def doctor(file: str, verbose: bool) -> None:
+@click.option("--json", "as_json", is_flag=True, help="print the report (ok, problems, checks) as one JSON document")
+def doctor(file: str, verbose: bool, as_json: bool) -> None:
     """Validate a trial: CRCs, summary/statistics, decoding, raw-data hash.
 
     Checks the MCAP magic and footer, the summary CRC, the data-section CRC and every chunk CRC,
@@ -247,11 +248,26 @@ def doctor(file: str, verbose: bool) -> None:
     """
     from imulog.archive.doctor import check_file, check_length
 
-    if sys.stderr.isatty():  # a progress bar for people, nothing extra in logs and pipes
+    if sys.stderr.isatty() and not as_json:  # a progress bar for people, nothing extra in logs and pipes
         with click.progressbar(length=check_length(file), label="checking", file=sys.stderr) as bar:
             report = check_file(file, progress=bar.update)
     else:
         report = check_file(file)
+    if as_json:
+        click.echo(
+            json.dumps(
+                {
+                    "path": file,
+                    "ok": not report.problems,
+                    "problems": list(report.problems),
+                    "checks": list(report.checks),
+                },
+                indent=2,
+            )
+        )
+        if report.problems:
+            raise click.exceptions.Exit(1)
+        return
     if verbose:
         for line in report.checks:
             click.echo(f"ok: {line}")

@@ -154,7 +154,8 @@ def batch(
 )
 @click.option("--full", is_flag=True, help="Re-read every trial (default: only new or changed files).")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
-def catalog(inputs: tuple[str, ...], output: Path, full: bool, quiet: bool) -> None:
+@click.option("--json", "as_json", is_flag=True, help="Print the counts (rows, read, unchanged, removed...) as JSON.")
+def catalog(inputs: tuple[str, ...], output: Path, full: bool, quiet: bool, as_json: bool = False) -> None:
     """One Parquet row per trial: subject, task, devices, durations, channels, runs, metrics.
 
     INPUTS are folders (every *.mcap below), files or quoted glob patterns. The catalog is updated
@@ -172,9 +173,15 @@ def catalog(inputs: tuple[str, ...], output: Path, full: bool, quiet: bool) -> N
     if not discover(inputs):
         raise click.ClickException(f"no trial files (*.mcap) in {' '.join(inputs)}")
     try:
-        stats = build_catalog(list(inputs), output, progress=not quiet, full=full)
+        stats = build_catalog(list(inputs), output, progress=not quiet and not as_json, full=full)
     except OSError as exc:
         raise click.ClickException(f"{output}: {exc}") from None
+    if as_json:
+        import dataclasses
+        import json
+
+        click.echo(json.dumps({k: str(v) if isinstance(v, Path) else v for k, v in dataclasses.asdict(stats).items()}))
+        return
     click.echo(stats.summary())
 
 

@@ -112,9 +112,7 @@ def process_kinematics(
         solver=SolverParams(max_iterations=max_iterations),
     )
     try:
-        with click.progressbar(length=1, label="kinematics (DH, unconstrained + constrained)") as bar:
-            outcome = run_kinematics(trial, options=options, force=force)
-            bar.update(1)
+        outcome = run_kinematics(trial, options=options, force=force)
     except (ArchiveError, ValueError, KeyError, OSError, RuntimeError) as exc:
         raise click.ClickException(error_line(trial, exc)) from None
     if outcome.skipped:

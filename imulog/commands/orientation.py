@@ -82,9 +82,7 @@ def process_orientation(
         static=replace(_D.static, threshold_rad_s=static_threshold, min_duration_s=static_min_s),
     )
     try:
-        with click.progressbar(length=1, label=f"orientation ({backend})") as bar:
-            outcome = run_orientation(trial, imu=imu, params=params, source=source, force=force)
-            bar.update(1)
+        outcome = run_orientation(trial, imu=imu, params=params, source=source, force=force)
     except (ArchiveError, ValueError, KeyError, OSError, RuntimeError) as exc:
         raise click.ClickException(error_line(trial, exc)) from exc
     if outcome.skipped:

@@ -81,6 +81,7 @@ def _save_paths(files: list[Path], save: Path | None, overlay: bool, n_groups: i
     metavar="S",
     help="With --web: stop serving after S seconds (default: until Ctrl-C).",
 )
+@click.option("--json", "as_json", is_flag=True, help="Print what was made (saved files, web URL, warnings) as JSON.")
 def view(
     files: tuple[Path, ...],
     save: Path | None,
@@ -95,6 +96,7 @@ def view(
     end_s: float | None,
     full_resolution: bool | None,
     serve_seconds: float | None,
+    as_json: bool = False,
 ) -> None:
     """Show trials in Rerun: IMU, Vicon and every derived channel on one reference-clock timeline.
 
@@ -190,23 +192,32 @@ def view(
         raise click.ClickException(str(exc)) from exc
     except (OSError, RuntimeError, ValueError) as exc:
         raise click.ClickException(f"cannot open the Rerun sink(s) {', '.join(sinks)}: {exc}") from exc
+    warnings = []
     for logged in result.logged:
         for trial in logged:
             if trial.unaligned_imus:
                 markers = any(e.topic.startswith("/markers/") for e in trial.entities)
                 hint = "run `imulog process align` first" if markers else "no markers to align them with"
-                click.echo(
-                    f"warning: {trial.label}: no imulog.alignment for IMU(s) {', '.join(trial.unaligned_imus)}; "
-                    f"shown on their device clock ({hint})",
-                    err=True,
+                warnings.append(
+                    f"{trial.label}: no imulog.alignment for IMU(s) {', '.join(trial.unaligned_imus)}; "
+                    f"shown on their device clock ({hint})"
                 )
-    for p in result.saved:
+                click.echo(f"warning: {warnings[-1]}", err=True)
+    if as_json:
+        import json
+
+        url = result.server.url if "web" in sinks and result.server is not None else None
+        report = {"sinks": sinks, "saved": [str(p) for p in result.saved], "url": url, "warnings": warnings}
+        click.echo(json.dumps(report, indent=2))
+        sys.stdout.flush()
+    for p in [] if as_json else result.saved:
         click.echo(f"saved {p}")
-    if "spawn" in sinks:
+    if "spawn" in sinks and not as_json:
         click.echo("sent to the Rerun viewer")
     if "web" in sinks:
         assert result.server is not None
-        click.echo(f"Rerun web viewer: {result.server.url}", err=False)
+        if not as_json:
+            click.echo(f"Rerun web viewer: {result.server.url}", err=False)
         click.echo("serving; press Ctrl-C to stop", err=True)
         sys.stdout.flush()
         deadline = None if serve_seconds is None else time.monotonic() + serve_seconds

@@ -1,0 +1,69 @@
+"""Terminal habits shared by the commands: colour only when wanted, progress that suits the output.
+
+* ``NO_COLOR`` (https://no-color.org): any non-empty value turns colour off (``imulog.cli.main``
+  passes ``color=False`` to click, so ``click.secho`` prints plain text).
+* Progress: a live bar (tqdm) on a terminal; on a log file or pipe, plain lines at every 10 % and at
+  the end, never ``\\r`` redraws.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from typing import Any, TextIO
+
+
+def no_color() -> bool:
+    """True when the user asked for no colour (``NO_COLOR`` set and not empty)."""
+    return bool(os.environ.get("NO_COLOR"))
+
+
+class LineProgress:
+    """A tqdm-compatible progress reporter for non-terminals: one plain line per 10 % step."""
+
+    def __init__(self, total: int, desc: str, unit: str = "it", file: TextIO | None = None, step: float = 0.1):
+        self.total = max(0, int(total))
+        self.desc = desc
+        self.unit = unit
+        self.file = file if file is not None else sys.stderr
+        self.n = 0
+        self.step = step
+        self._next = step
+        self._postfix = ""
+        self._closed = False
+
+    def _line(self) -> None:
+        pct = 100.0 * self.n / self.total if self.total else 100.0
+        extra = f" {self._postfix}" if self._postfix else ""
+        print(f"{self.desc}: {self.n}/{self.total} {self.unit} ({pct:.0f} %){extra}", file=self.file, flush=True)
+
+    def update(self, n: int = 1) -> None:
+        self.n += n
+        while self.total and self.n / self.total >= self._next - 1e-12 and self._next <= 1.0 + 1e-12:
+            if self.n < self.total:
+                self._line()
+            self._next += self.step
+
+    def set_postfix(self, refresh: bool = True, **values: Any) -> None:
+        self._postfix = " ".join(f"{k}={v}" for k, v in values.items())
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self._line()
+
+    def __enter__(self) -> LineProgress:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def progress_bar(total: int, desc: str, unit: str = "it", file: TextIO | None = None):
+    """tqdm on a terminal, :class:`LineProgress` otherwise (same ``update``/``set_postfix``/``close``)."""
+    stream = file if file is not None else sys.stderr
+    if stream.isatty():
+        from tqdm import tqdm
+
+        return tqdm(total=total, unit=unit, desc=desc, file=stream, dynamic_ncols=True)
+    return LineProgress(total, desc, unit, stream)
