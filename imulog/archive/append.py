@@ -28,7 +28,7 @@ from imulog.archive import _mcap as m
 from imulog.archive._builder import McapBuilder
 from imulog.archive.errors import ArchiveCorruptError, ArchiveError
 from imulog.archive.files import atomic_output, target_path, writer_lock
-from imulog.archive.metadata import MetadataError, decode_record, encode_record, record_hash, to_json
+from imulog.archive.metadata import MetadataError, decode_record, encode_record, loads, record_hash, to_json
 from imulog.archive.streaming import STATS_RECORD, StreamPieces, write_pieces
 from imulog.archive.writer import payload_hash, plan_append, write_stream, write_twin
 from imulog.model import DERIVED_PREFIX, Stream
@@ -165,9 +165,12 @@ def _raw_topics(f: BinaryIO, summary: m.Summary) -> set[str]:
         if idx.name == "imulog.raw":
             try:
                 _, items = m.parse_metadata(m.read_record_at(f, idx.offset, m.Op.METADATA, summary.data_end_offset))
-                return set(json.loads(items.get("channels", "{}")))
-            except (m.McapFormatError, ValueError) as exc:
-                raise ArchiveCorruptError(f"unreadable imulog.raw record: {exc}") from exc
+                channels = loads(items.get("channels", "{}"), "imulog.raw: 'channels'")
+                if not isinstance(channels, dict | list):
+                    raise ValueError("'channels' is not an object")
+                return {str(t) for t in channels}
+            except (m.McapFormatError, ValueError) as exc:  # (MetadataError is a ValueError)
+                raise ArchiveCorruptError(f"unreadable imulog.raw record: {exc}") from None
     return set()
 
 
