@@ -379,6 +379,15 @@ def h5_sensors(f: Any) -> tuple[str, list[H5Sensor]]:
 
 def read_apdm_h5(path: Path, names: dict[str, str]) -> Recording:
     """An APDM HDF5 file (see :func:`h5_sensors` for both layouts): one IMU per sensor, its orientation estimate."""
+    try:
+        return _read_apdm_h5(path, names)
+    except ConversionError:
+        raise
+    except (OSError, RuntimeError, KeyError, TypeError, ValueError) as e:  # h5py on a damaged file
+        raise ConversionError(path, f"damaged HDF5 file: {type(e).__name__}: {e}") from None
+
+
+def _read_apdm_h5(path: Path, names: dict[str, str]) -> Recording:
     import h5py
 
     try:
@@ -389,7 +398,7 @@ def read_apdm_h5(path: Path, names: dict[str, str]) -> Recording:
     with f:
         try:
             layout, sensors = h5_sensors(f)
-        except (KeyError, OSError, TypeError, ValueError) as e:
+        except (KeyError, OSError, RuntimeError, TypeError, ValueError) as e:
             raise ConversionError(path, f"cannot read the sensor list ({type(e).__name__}: {e})") from None
         if not sensors:
             raise ConversionError(path, "no sensors (/Sensors/<id> or CaseIdList): not an APDM HDF5 file")
@@ -415,7 +424,7 @@ def read_apdm_h5(path: Path, names: dict[str, str]) -> Recording:
                     if a.shape != ((n,) if width == 1 else (n, width)):
                         raise ConversionError(path, f"{p} has shape {a.shape}, Time has {n} samples")
                     data[q] = a
-            except (KeyError, OSError, TypeError, ValueError) as e:
+            except (KeyError, OSError, RuntimeError, TypeError, ValueError) as e:
                 if isinstance(e, ConversionError):
                     raise
                 raise ConversionError(path, f"{where}: cannot read ({type(e).__name__}: {e})") from None

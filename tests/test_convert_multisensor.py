@@ -167,7 +167,8 @@ def _mutate(rng, data: bytes) -> bytes:
 def test_damaged_lab_exports_raise_only_conversion_errors(shared_data, tmp_path):
     """Seeded fuzzing of every lab format (cut files, flipped bytes, lost/duplicated/garbled lines): the converter
     either reads the file or raises ConversionError with a one-line message, never another exception."""
-    from test_convert_mvnx import write_mvnx  # tests/ is on sys.path (rootdir import mode)
+    from test_convert_apdm import write_apdm_h5  # tests/ is on sys.path (rootdir import mode)
+    from test_convert_mvnx import write_mvnx
     from test_convert_qualisys import write_qtm
 
     from converters import ConversionError
@@ -176,6 +177,7 @@ def test_damaged_lab_exports_raise_only_conversion_errors(shared_data, tmp_path)
     d = shared_data / "devices"
     write_mvnx(tmp_path / "m.mvnx", n=6)
     write_qtm(tmp_path / "q.tsv", n=10)
+    write_apdm_h5(tmp_path / "a.h5", n=50)
     cases = [
         ("xsens", shared_data / XSENS / "MT2022_ACC_GYRO_ROT_ALL_TAB_NAN_00B42D4B.txt"),
         ("xsens", shared_data / XSENS / "MT2022_ACC_GYRO_ROT_MAT_SPACE_00B42D4B.txt"),
@@ -185,6 +187,7 @@ def test_damaged_lab_exports_raise_only_conversion_errors(shared_data, tmp_path)
         ("delsys", d / "delsys_trigno/trigno_sample_header.csv"),
         ("mvnx", tmp_path / "m.mvnx"),
         ("qualisys", tmp_path / "q.tsv"),
+        ("apdm", tmp_path / "a.h5"),  # h5py's own errors on a damaged file become ConversionError too
     ]
     rng = np.random.default_rng(14)
     for fmt, src in cases:
