@@ -159,7 +159,7 @@ def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int]
     return builder
 
 
-def _raw_topics(f: BinaryIO, summary: m.Summary) -> set[str]:
+def _raw_topics(f: BinaryIO, summary: m.Summary, path: Path | None = None) -> set[str]:
     """Topics recorded as raw in the ``imulog.raw`` metadata record (empty when there is none)."""
     for idx in reversed(summary.metadata_indexes):
         if idx.name == "imulog.raw":
@@ -170,7 +170,7 @@ def _raw_topics(f: BinaryIO, summary: m.Summary) -> set[str]:
                     raise ValueError("'channels' is not an object")
                 return {str(t) for t in channels}
             except (m.McapFormatError, ValueError) as exc:  # (MetadataError is a ValueError)
-                raise ArchiveCorruptError(f"unreadable imulog.raw record: {exc}") from None
+                raise ArchiveCorruptError(f"{path}: unreadable imulog.raw record: {exc}") from None
     return set()
 
 
@@ -255,7 +255,7 @@ def append_derived(
             except m.McapFormatError as exc:
                 raise ArchiveCorruptError(f"{path}: {exc}") from exc
             existing = {c.topic: c for c in summary.channels.values()}
-            raw_topics = _raw_topics(f, summary)
+            raw_topics = _raw_topics(f, summary, path)
             for t in topics:
                 if t in raw_topics:
                     raise ArchiveError(
