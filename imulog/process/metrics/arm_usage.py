@@ -15,8 +15,8 @@ recording with :func:`estimate_noise_level` (Doshi: sensor still for about 30 mi
 considered the standard deviation and the peak amplitude of the noise and preferred the peak amplitude).
 
 Any sampling rate: the threshold is on the change between samples 0.1 s apart (Doshi's board sampled at 10 Hz),
-so a change per sample means ten times less at 100 Hz and the same movement counts as ~10x less use (the
-115 Hz demo trial: 1.3 % instead of 19 %). With the time stamps given, :func:`arm_usage` first brings the signal
+so a change per sample means ten times less at 100 Hz and the same movement counts as ~10x less use (a
+simulated 115 Hz drinking trial: 1.3 % instead of 19 %). With the time stamps given, :func:`arm_usage` first brings the signal
 to the threshold's rate (``ArmUsageParams.reference_rate_hz``, 10 Hz): the mean of each 0.1 s window of the
 recording (a low-pass and decimation in one), then the rule above on consecutive windows; each sample takes its
 window's result. A window counts when at least half its samples are valid (NaN = gap); percentages are of the
