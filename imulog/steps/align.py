@@ -158,7 +158,6 @@ def compute_alignment(
                 record, info = _marker_alignment(t_imu_ns, acc, t_vic_ns, labels, pos_m, vic_rate, params, acc_global)
                 info["rejected_cluster"] = rejected
             info.update(selection="search", triads_found=res.n_triads, triads_scored=res.n_scored)
-            info["search_s"] = round(res.seconds, 3)
         elif params.cluster != "oxy" and len(params.markers) == 1:
             only = search.resolve_markers(labels, params.markers)
             record, info = _marker_alignment(
