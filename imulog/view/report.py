@@ -42,7 +42,8 @@ def info_markdown(label: str, metadata: Mapping[str, Mapping[str, Any]], clocks:
     parts += ["## Timeline", f"`{L.TIMELINE}`: reference (Vicon) clock, ns."]
     if clocks.alignments:
         for imu, record in clocks.alignments.items():
-            keep = {k: record[k] for k in ("offset_ns", "drift_ppm", "t0_ns", "method", "score") if k in record}
+            shown = ("offset_ns", "drift_ppm", "t0_ns", "method", "score", "drift_uncertainty_ppm", "quality")
+            keep = {k: record[k] for k in shown if k in record}
             parts += [f"IMU `{imu}` mapped with `imulog.alignment`:", "", markdown_table(keep), ""]
     if clocks.unaligned:
         parts += [f"**No alignment for IMU(s) {', '.join(sorted(clocks.unaligned))}: shown on their device clock.**"]
