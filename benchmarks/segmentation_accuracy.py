@@ -11,6 +11,12 @@ over all true phases (issue 9: within 0.1 s). Also prints the segmentation time 
 baseline (gyro-norm detector) run in the same process.
 
     python benchmarks/segmentation_accuracy.py --first-seed 40 --first-subject 20 --seeds 6 --subjects 3
+
+Accuracy grid (issue 19): every condition of :mod:`imulog.simulate.grid` (rotation ending before the hand stops,
+curved paths, placements, pauses, stroke-like submovements, uncalibrated sensors, clock drift, other rates),
+one table row per condition and method, over ``--seeds`` x ``--subjects`` trials of ``--repetitions``:
+
+    python benchmarks/segmentation_accuracy.py --grid all --seeds 3 --subjects 1 --repetitions 10
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ import numpy as np
 
 from imulog.process.segmentation.boundaries import BoundaryParams
 from imulog.process.segmentation.dynamos import DynamosParams
+from imulog.process.segmentation.hand import HandParams
 from imulog.process.segmentation.pipeline import METHODS, PhaseParams, segment_phases
 from imulog.process.segmentation.zero_velocity import gyro_norm_static
 from imulog.simulate import simulate
@@ -104,6 +111,69 @@ def table(trials, methods, variants) -> None:
         )
 
 
+GRID_METHODS = {
+    "hand (default)": PhaseParams(),
+    "gyroscope only": PhaseParams(hand=HandParams(enabled=False)),
+    "published (--no-refine)": PhaseParams(
+        dynamos=DynamosParams(refine_boundaries=False), boundaries=BoundaryParams(enabled=False)
+    ),
+}
+
+
+def grid_rows(conditions, seeds, subjects, repetitions: int, methods=GRID_METHODS) -> list[dict]:
+    """One record per (condition, method) with the means over the trials (see :func:`score`)."""
+    from dataclasses import replace
+
+    from imulog.process.segmentation.repetitions import RepetitionParams
+    from imulog.simulate.grid import grid
+
+    rows: dict[tuple[str, str], list[dict]] = {}
+    for name, seed, subject, options in grid(conditions, seeds, subjects):
+        sim = simulate("r2g", seed=seed, subject=subject, repetitions=repetitions, **options)
+        for label, params in methods.items():
+            params = replace(params, repetitions=RepetitionParams(n_repetitions=repetitions))
+            rows.setdefault((name, label), []).append(score(sim, params))
+    out = []
+    for (name, label), rs in rows.items():
+        out.append(
+            {
+                "condition": name,
+                "method": label,
+                "trials": len(rs),
+                "correct": float(np.mean([r["correct"] for r in rs])),
+                "within_0_1_s": float(np.mean([r["duration_within_0_1_s"] for r in rs])),
+                "onset_mae_s": float(np.nanmean([r["onset_mae_s"] for r in rs])),
+                "offset_mae_s": float(np.nanmean([r["offset_mae_s"] for r in rs])),
+                "mean_duration_error_s": float(np.mean([r["mean_duration_error_s"] for r in rs])),
+                "max_duration_error_s": float(np.max([r["max_duration_error_s"] for r in rs])),
+            }
+        )
+    return out
+
+
+def print_grid(rows: list[dict]) -> None:
+    print(
+        "| condition | method | trials | correct phases % | durations within 0.1 s % | onset MAE s | offset MAE s "
+        "| mean duration error s | max duration error s |"
+    )
+    print("|" + "---|" * 9)
+    for r in rows:
+        print(
+            f"| {r['condition']} | {r['method']} | {r['trials']} | {100 * r['correct']:.1f} | "
+            f"{100 * r['within_0_1_s']:.1f} | {r['onset_mae_s']:.3f} | {r['offset_mae_s']:.3f} | "
+            f"{r['mean_duration_error_s']:+.3f} | {r['max_duration_error_s']:.2f} |"
+        )
+    for label in dict.fromkeys(r["method"] for r in rows):
+        mine = [r for r in rows if r["method"] == label]
+        print(
+            f"| **all conditions** | {label} | {sum(r['trials'] for r in mine)} | "
+            f"{100 * np.mean([r['correct'] for r in mine]):.1f} | {100 * np.mean([r['within_0_1_s'] for r in mine]):.1f} | "
+            f"{np.mean([r['onset_mae_s'] for r in mine]):.3f} | {np.mean([r['offset_mae_s'] for r in mine]):.3f} | "
+            f"{np.mean([r['mean_duration_error_s'] for r in mine]):+.3f} | "
+            f"{np.max([r['max_duration_error_s'] for r in mine]):.2f} |"
+        )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", type=int, default=4)
@@ -112,7 +182,23 @@ def main() -> None:
     ap.add_argument("--first-subject", type=int, default=0)
     ap.add_argument("--scenarios", nargs="+", default=list(SCENARIOS), choices=list(SCENARIOS))
     ap.add_argument("--methods", nargs="+", default=[*METHODS, "dynamos-otsu", "dynamos-no-boundaries", "dynamos-raw"])
+    ap.add_argument("--grid", nargs="+", default=None, help="accuracy-grid conditions (names or 'all')")
+    ap.add_argument("--repetitions", type=int, default=10, help="repetitions per grid trial")
     args = ap.parse_args()
+    if args.grid:
+        from imulog.simulate.grid import CONDITIONS
+
+        conditions = list(CONDITIONS) if args.grid == ["all"] else args.grid
+        t0 = time.perf_counter()
+        rows = grid_rows(
+            conditions,
+            range(args.first_seed, args.first_seed + args.seeds),
+            range(args.first_subject, args.first_subject + args.subjects),
+            args.repetitions,
+        )
+        print_grid(rows)
+        print(f"\n{time.perf_counter() - t0:.0f} s wall")
+        return
     variants = {
         "dynamos": PhaseParams(method="dynamos"),
         "dynamos-otsu": PhaseParams(method="dynamos", dynamos=DynamosParams(threshold="otsu")),

@@ -15,6 +15,11 @@ Pipeline per trial, all with imulog's own code except where noted:
 6. errors against the true cluster-origin position at the IMU samples, per repetition.
 
     python benchmarks/trajectory_accuracy.py --subjects 3 --repetitions 25 --seed 0
+
+Accuracy grid (issue 19): the conditions of :mod:`imulog.simulate.grid`, one row per condition (MAE per axis of
+``zupt``, ``zupt_bias`` and ``optimized``, mean over repetitions of ``--subjects`` trials, subject k with seed k):
+
+    python benchmarks/trajectory_accuracy.py --grid all --subjects 2 --repetitions 8
 """
 
 from __future__ import annotations
@@ -39,6 +44,15 @@ from imulog.process.trajectory_opt import (
 )
 
 
+def _static_for_anchor(imu, rate: float, repetitions: int) -> np.ndarray:
+    """The phases step's zero-velocity mask (what the trajectory step anchors the orientation to)."""
+    from imulog.process.segmentation.pipeline import PhaseParams, segment_phases
+    from imulog.process.segmentation.repetitions import RepetitionParams
+
+    params = PhaseParams(repetitions=RepetitionParams(n_repetitions=repetitions))
+    return np.asarray(segment_phases(imu.gyr, rate, params, imu.acc).static, dtype=bool)
+
+
 def simulated_inputs(
     subject: int,
     *,
@@ -46,6 +60,7 @@ def simulated_inputs(
     repetitions: int = 25,
     orientation: str = "estimated",
     segmentation: str = "estimated",
+    anchor: bool = True,
     **overrides: Any,
 ) -> dict[str, Any]:
     """Simulate one R2G trial and build the trajectory inputs on the reference clock in the world frame."""
@@ -66,10 +81,15 @@ def simulated_inputs(
         from imulog.process.orientation import estimate_orientation, gravity_free_acceleration
 
         est = estimate_orientation(imu.gyr, imu.acc, rate)
-        acc_g = gravity_free_acceleration(est.quat, imu.acc, est.static)
-        q_g2w = quat.average(quat.multiply(q_true, quat.conjugate(est.quat)))
+        q_est = est.quat
+        if anchor:  # what the trajectory step does with the gyroscope (TrajectoryParams.anchor)
+            from imulog.process.integration import rest_anchored_orientation
+
+            q_est = rest_anchored_orientation(q_est, imu.gyr, t_s, _static_for_anchor(imu, rate, repetitions))
+        acc_g = gravity_free_acceleration(q_est, imu.acc, est.static)
+        q_g2w = quat.average(quat.multiply(q_true, quat.conjugate(q_est)))
         acc_world = quat.rotate(q_g2w, acc_g)
-        q_world = quat.multiply(q_g2w, est.quat)
+        q_world = quat.multiply(q_g2w, q_est)
     else:
         raise ValueError(f"orientation must be 'estimated' or 'truth', got {orientation!r}")
     t0_ref_s = float(t_ref_ns[0]) / 1e9
@@ -138,6 +158,49 @@ def evaluate_trial(inputs: dict[str, Any], methods=METHODS, params: TrajectoryPa
     return records, seconds, len(reps)
 
 
+GRID_METHODS = ("zupt", "zupt_bias", "optimized")
+
+
+def grid_rows(conditions, subjects: range, repetitions: int, methods=GRID_METHODS) -> list[dict[str, Any]]:
+    """Per condition and method: mean MAE per axis (cm) over every repetition of the trials (subject k, seed k)."""
+    from imulog.simulate.grid import condition
+
+    rows = []
+    for name in conditions:
+        recs: dict[str, list[dict]] = {m: [] for m in methods}
+        for s in subjects:
+            inputs = simulated_inputs(s, seed=s, repetitions=repetitions, **condition(name))
+            records, _, _ = evaluate_trial(inputs, methods)
+            for m in methods:
+                recs[m].extend(records[m])
+        for m in methods:
+            mae = np.array([[r[a]["mae_cm"] for a in "xyz"] for r in recs[m]])
+            rows.append({"condition": name, "method": m, "n": len(mae), "mae_cm": mae.mean(axis=0).tolist()})
+    return rows
+
+
+def print_grid(rows: list[dict[str, Any]]) -> None:
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    print(
+        "| condition | reps | " + " | ".join(f"{m} x/y/z (cm)" for m in methods) + " | optimized <= 1 cm and <= zupt |"
+    )
+    print("|" + "---|" * (len(methods) + 3))
+    by = {(r["condition"], r["method"]): r for r in rows}
+    for name in dict.fromkeys(r["condition"] for r in rows):
+        cells = [" / ".join(f"{v:.2f}" for v in by[(name, m)]["mae_cm"]) for m in methods]
+        ok = ""
+        if "optimized" in methods and "zupt" in methods:
+            o, z = np.array(by[(name, "optimized")]["mae_cm"]), np.array(by[(name, "zupt")]["mae_cm"])
+            ok = "yes" if np.all(o <= 1.0) and np.all(o <= z) else ("<= zupt only" if np.all(o <= z) else "no")
+        print(f"| {name} | {by[(name, methods[0])]['n']} | " + " | ".join(cells) + f" | {ok} |")
+    means = {m: np.mean([r["mae_cm"] for r in rows if r["method"] == m], axis=0) for m in methods}
+    print(
+        "| **mean over conditions** | | "
+        + " | ".join(" / ".join(f"{v:.2f}" for v in means[m]) for m in methods)
+        + " | |"
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--subjects", type=int, default=3)
@@ -148,7 +211,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--methods", default=",".join(METHODS))
     ap.add_argument("--residual-velocity", type=float, default=0.0, help="simulator residual_velocity_mps")
     ap.add_argument("--json", type=str, default=None, help="also write the table and records here")
+    ap.add_argument("--grid", nargs="+", default=None, help="accuracy-grid conditions (names or 'all')")
     args = ap.parse_args(argv)
+    if args.grid:
+        from imulog.simulate.grid import CONDITIONS
+
+        t0 = time.perf_counter()
+        rows = grid_rows(
+            list(CONDITIONS) if args.grid == ["all"] else args.grid, range(args.subjects), args.repetitions
+        )
+        print_grid(rows)
+        print(f"\n{time.perf_counter() - t0:.0f} s wall")
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump({"args": vars(args), "grid": rows}, fh, indent=1)
+        return 0
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     all_records: dict[str, list[dict]] = {m: [] for m in methods}
     timing: dict[str, list[float]] = {m: [] for m in methods}

@@ -258,3 +258,74 @@ def compensate_rotating_bias(
         err = _error_terms(r[s - 1 : e], params) @ x
         a[s:e] = a[s:e] - c - (err[1:] - err[0])
     return a
+
+
+@dataclass(frozen=True)
+class AnchorParams:
+    """Parameters of :func:`rest_anchored_orientation` (imulog addition, issue 19).
+
+    enabled: re-integrate the orientation through every movement from the gyroscope (in the trajectory step).
+    bias_window_s: the gyroscope bias is the mean over at most this much (s) of the rest before a movement.
+    max_movement_s: longer movements (continuous motion: no rest to anchor to) keep the filter's orientation.
+    spread: how the end discrepancy is spread over the movement: ``"time"`` (linear in time, right for a
+        gyroscope bias), ``"angle"`` (in proportion to the angle turned so far, right for a scale error) or
+        ``"mixed"`` (their mean: neither error is known to dominate).
+    """
+
+    enabled: bool = True
+    bias_window_s: float = 0.5
+    max_movement_s: float = 15.0
+    spread: str = "mixed"
+
+
+def rest_anchored_orientation(
+    q_s2g: np.ndarray,
+    gyr_rad_s: np.ndarray,
+    t_s: np.ndarray,
+    static_mask: np.ndarray,
+    params: AnchorParams = AnchorParams(),
+) -> np.ndarray:
+    """Orientation (N, 4) w,x,y,z sensor-to-global re-integrated through every movement and anchored at its rests.
+
+    A 6-axis filter corrects its tilt towards the accelerometer also while the hand accelerates, so its
+    orientation is worst exactly when the position integral needs it most. At rest it is right (the
+    accelerometer then measures gravity only). Each movement between two rests is therefore integrated from the
+    gyroscope (``gyr_rad_s`` rad/s, bias = mean over the preceding rest, trapezoidal increments) starting at the
+    filter's orientation at the last static sample, and the discrepancy with the filter's orientation at the
+    next rest (a world-frame rotation ``delta``) is spread linearly in time over the movement, the way ZUPT's
+    de-drift spreads the velocity error. Static samples keep ``q_s2g``. ``t_s`` seconds, ``static_mask`` (N,) True
+    at zero velocity; samples with NaN gyroscope keep the filter's orientation.
+    """
+    from imulog.process import quaternion as quat
+
+    q = np.asarray(q_s2g, dtype=np.float64)
+    gyr = np.asarray(gyr_rad_s, dtype=np.float64)
+    t = np.asarray(t_s, dtype=np.float64)
+    static = np.asarray(static_mask, dtype=bool)
+    out = q.copy()
+    if not params.enabled or len(q) < 3:
+        return out
+    for a, b in _movements(static):
+        a, b = int(a), int(b)
+        if a == 0 or b >= len(q) or t[b] - t[a - 1] > params.max_movement_s:
+            continue
+        w = gyr[a - 1 : b + 1]
+        if not np.all(np.isfinite(w)):
+            continue
+        lo = a - 1
+        while lo > 0 and static[lo - 1] and t[a - 1] - t[lo - 1] <= params.bias_window_s:
+            lo -= 1
+        bias = np.mean(gyr[lo:a], axis=0)
+        steps = quat.from_rotation_vector(0.5 * ((w[1:] - bias) + (w[:-1] - bias)) * np.diff(t[a - 1 : b + 1])[:, None])
+        qs = np.empty((len(w), 4))
+        qs[0] = cur = q[a - 1]
+        for k, step in enumerate(steps, start=1):
+            cur = quat.multiply(cur, step)
+            qs[k] = cur
+        delta = quat.to_rotation_vector(quat.multiply(q[b], quat.conjugate(qs[-1])))
+        by_time = (t[a - 1 : b + 1] - t[a - 1]) / max(t[b] - t[a - 1], 1e-9)
+        turned = np.concatenate([[0.0], np.cumsum(np.linalg.norm(w[1:] + w[:-1] - 2 * bias, axis=1))])
+        by_angle = turned / max(turned[-1], 1e-12)
+        alpha = {"time": by_time, "angle": by_angle, "mixed": 0.5 * (by_time + by_angle)}[params.spread][:, None]
+        out[a - 1 : b + 1] = quat.normalize(quat.multiply(quat.from_rotation_vector(alpha * delta), qs))
+    return out

@@ -36,6 +36,7 @@ from scipy.sparse.linalg import splu
 
 from imulog.process.drift import HighpassParams, WaveletParams, highpass, wavelet_detrend
 from imulog.process.integration import (
+    AnchorParams,
     DdiParams,
     RotatingBiasParams,
     ZuptParams,
@@ -278,6 +279,7 @@ class TrajectoryParams:
     kalman: KalmanParams = KalmanParams(zero_velocity=True, smoother=True)
     rotating_bias: RotatingBiasParams = RotatingBiasParams()
     optimized: OptimizationParams = OptimizationParams()
+    anchor: AnchorParams = AnchorParams()
 
 
 def reconstruct(

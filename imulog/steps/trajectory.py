@@ -30,6 +30,7 @@ import numpy as np
 from imulog.model import Intervals, SignalStream
 from imulog.process import quaternion as quat
 from imulog.process.gaps import GapParams, prepare, runs_of
+from imulog.process.integration import rest_anchored_orientation
 from imulog.process.minjerk import R2GReferenceParams, r2g_waypoints_from_anthropometrics
 from imulog.process.trajectory_opt import (
     DEFAULT_PARAMS,
@@ -89,6 +90,7 @@ def compute_trajectories(
     params: TrajectoryParams = DEFAULT_PARAMS,
     reference_params: R2GReferenceParams = DEFAULT_REFERENCE,
     gaps: GapParams | None = None,
+    gyr: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[list[SignalStream], dict[str, Any]]:
     """Pure part of the step: trajectory streams and the ``imulog.trajectory`` record (no I/O).
 
@@ -98,7 +100,11 @@ def compute_trajectories(
     ``imulog.trajectory["gaps"]`` lists what was bridged and which repetitions were left out.
 
     ``static`` and ``orientation`` are ``(t_ns, values)`` on the IMU device clock; ``phases`` on the reference
-    clock (``phases_clock="reference"``) or on the device clock (``"device"``).
+    clock (``phases_clock="reference"``) or on the device clock (``"device"``). With the gyroscope ``gyr``
+    (``(t_ns, (N, 3) rad/s)``, device clock) and the orientation, the orientation is re-integrated through every
+    movement and anchored at its rests (:func:`imulog.process.integration.rest_anchored_orientation`,
+    ``params.anchor``) and the gravity-free acceleration rotated accordingly (``imulog.trajectory["orientation"]``
+    says which was used).
     """
     t_dev = np.asarray(acc_t_ns, dtype=np.int64)
     acc = np.asarray(acc_global, dtype=np.float64)
@@ -111,6 +117,14 @@ def compute_trajectories(
     t_ref = _to_reference(t_dev, alignment)
     frame, clock = f"{imu}_global", "device"
     q_world = None if orientation is None else _sample_onto(orientation[0], np.asarray(orientation[1], float), t_dev)
+    orientation_used = "filter" if q_world is not None else None
+    if q_world is not None and gyr is not None and params.anchor.enabled and static is not None:
+        rest = _sample_onto(np.asarray(static[0], np.int64), np.asarray(static[1]).reshape(-1) > 0.5, t_dev)
+        w = _sample_onto(np.asarray(gyr[0], np.int64), np.asarray(gyr[1], float), t_dev)
+        q_anchored = rest_anchored_orientation(q_world, w, (t_dev - t_dev[0]) / 1e9, rest, params.anchor)
+        g_up = np.array([0.0, 0.0, 9.81])  # (any g: the correction rotations are small, its error ~1e-4 m/s^2)
+        acc = quat.rotate(quat.multiply(q_anchored, quat.conjugate(q_world)), acc + g_up) - g_up
+        q_world, orientation_used = q_anchored, "rest_anchored"
     if alignment is not None:
         g2w = np.asarray(alignment.get("rotation_global_to_world", [1, 0, 0, 0]), dtype=np.float64)
         acc = quat.rotate(g2w, acc)
@@ -203,6 +217,7 @@ def compute_trajectories(
         "clock": clock,
         "frame": frame,
         "origin": "repetition_start",
+        **({"orientation": orientation_used} if orientation_used else {}),
         "repetitions": [
             {"index": r.index, "start_ns": int(t_ref[r.start]), "end_ns": int(t_ref[r.stop - 1])} for r in reps
         ],
@@ -238,13 +253,17 @@ def run_trajectory(
     acc_topic = f"/derived/acc_global/{name}"
     static_topic, phases_topic = f"/derived/static/{name}", f"/derived/phases/{name}"
     orient_topic = f"/derived/orientation/{name}"
+    imu_topic = f"/imu/{name}"  # the gyroscope, to re-integrate the orientation through movements
+    use_gyr = params.anchor.enabled and orient_topic in topics and imu_topic in topics
     inputs = [acc_topic] + [t for t in (static_topic, phases_topic, orient_topic) if t in topics]
+    inputs += [imu_topic] if use_gyr else []
 
     def compute(trial) -> StepResult:
         acc = trial.read(acc_topic)
         static = trial.read(static_topic) if static_topic in topics else None
         phases = trial.read(phases_topic) if phases_topic in topics else None
         orient = trial.read(orient_topic) if orient_topic in topics else None
+        raw = trial.read(imu_topic) if use_gyr else None
         timing = trial.metadata.get("imulog.timing", {})
         streams, record = compute_trajectories(
             acc.t_ns,
@@ -259,6 +278,7 @@ def run_trajectory(
             anthropometrics=trial.metadata.get("imulog.anthropometrics"),
             params=params,
             reference_params=reference_params,
+            gyr=None if raw is None or raw.gyr is None else (raw.t_ns, raw.gyr),
         )
         provenance = {"gaps": record["gaps"]} if "gaps" in record else {}
         return StepResult(streams=streams, metadata={"imulog.trajectory": record}, provenance=provenance)
