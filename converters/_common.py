@@ -10,7 +10,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
 from converters.errors import ConversionError
 
@@ -336,6 +335,8 @@ def read_numeric(spec: TableSpec, data: bytes | None = None) -> np.ndarray:
     )
     if len(used) != ncols:
         kwargs["usecols"] = used
+    import pandas as pd  # here, not at module top: `imulog convert --help` must not pay ~0.5 s for pandas
+
     try:
         # no dtype= here: pandas' own numeric inference is about 2x faster than a forced float64 cast
         frame = pd.read_csv(spec.path, **kwargs)

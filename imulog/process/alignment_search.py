@@ -30,7 +30,6 @@ from dataclasses import dataclass, field
 from itertools import combinations
 
 import numpy as np
-from scipy import signal
 
 __all__ = [
     "Candidate",
@@ -257,6 +256,8 @@ def lowpass_vector(x: np.ndarray, rate_hz: float, cutoff_hz: float, order: int =
         return np.full_like(a, np.nan)
     idx = np.arange(len(a))
     filled = np.column_stack([np.interp(idx, idx[ok], a[ok, j]) for j in range(a.shape[1])])
+    from scipy import signal  # lazy: `imulog info` and the viewer import this module, not the filter
+
     sos = signal.butter(order, min(cutoff_hz, 0.45 * rate_hz), fs=rate_hz, output="sos")
     out = signal.sosfiltfilt(sos, filled, axis=0)
     out[~ok] = np.nan

@@ -12,7 +12,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 from imulog.process import quaternion as quat
 
@@ -47,6 +46,8 @@ def _lowpass(values: np.ndarray, src_rate: float, dst_rate: float, params: Resam
     cutoff = params.cutoff_ratio * dst_rate / 2.0
     if cutoff >= src_rate / 2.0 * 0.999:
         return values
+    from scipy import signal  # lazy: `imulog info` imports the align step for its summary, not the filter
+
     sos = signal.butter(params.order, cutoff, fs=src_rate, output="sos")
     out = values.copy()
     ok = np.all(np.isfinite(values), axis=1)
