@@ -2,9 +2,11 @@
 
 Each page runs in its own temporary folder laid out like a clone: ``recordings/`` copied, ``benchmarks/``,
 ``schemas/`` and ``docs/`` linked, ``../shared/data`` reachable, the venv's ``imulog`` and ``python``
-first on PATH, and, unless the page makes its own, ``trial.mcap`` (recordings/sim's R2G trial, converted:
-what ``imulog convert recordings/sim/... -o trial.mcap`` makes), since most pages start from it. A page's blocks run
-in order in one process: python blocks share one namespace, bash blocks run with ``set -e``.
+first on PATH, and, unless the page makes its own, ``trial.mcap``: recordings/sim's R2G trial converted
+(what ``imulog convert recordings/sim/... -o trial.mcap`` makes) and processed by orientation, align,
+phases and trajectory, since most pages start from it. ``imulog view ... --web`` gets
+``--serve-seconds 1`` and free ports. A page's blocks run in order in one process: python blocks share
+one namespace, bash blocks run with ``set -e``. Pages run two at a time (CI has two cores).
 
 A block is skipped only when the line before its fence is ``<!-- no-run: reason -->`` (servers, the
 test suite itself, benchmarks of minutes); docs/cli.md lists the conventions.
@@ -69,9 +71,23 @@ def runnable(page: str) -> list[Block]:
     return [b for b in blocks_of((REPO / page).read_text()) if b.lang in RUN_LANGS]
 
 
+RUN_PAGES = [p for p in PAGES if any(not b.skip for b in runnable(p))]
+
+
 def makes_own_trial(page: str) -> bool:
     """Whether the page's blocks write ``trial.mcap`` themselves (then the workspace has none)."""
     return any(re.search(r"-o\s+trial\.mcap\b|write_trial\(\s*[\"']trial\.mcap", b.code) for b in runnable(page))
+
+
+def bounded_servers(code: str) -> str:
+    """``imulog view ... --web`` stops after a second, on free ports (the servers start, then stop)."""
+    out = []
+    for line in code.splitlines():
+        cmd, hash_, comment = line.partition(" #")
+        if re.search(r"\bimulog view\b.*--web\b", cmd):
+            cmd = cmd.rstrip() + " --serve-seconds 1 --port 0 --grpc-port 0"
+        out.append(cmd + hash_ + comment)
+    return "\n".join(out) + "\n"
 
 
 def make_workspace(root: Path, trial: Path | None) -> Path:
@@ -119,7 +135,7 @@ def run_page(page: str, workdir: Path, verbose: bool = False) -> list[str]:
                 error = traceback.format_exc(limit=3).strip().splitlines()[-1]
         else:
             proc = subprocess.run(
-                ["bash", "-e", "-o", "pipefail", "-c", block.code],
+                ["bash", "-e", "-o", "pipefail", "-c", bounded_servers(block.code)],
                 cwd=workdir,
                 capture_output=True,
                 text=True,
@@ -136,27 +152,42 @@ def run_page(page: str, workdir: Path, verbose: bool = False) -> list[str]:
     return failures
 
 
-@pytest.fixture(scope="session")
-def converted_trial(tmp_path_factory) -> Path:
+def make_docs_trial(out: Path) -> Path:
+    """recordings/sim's trial converted and processed (orientation, align, phases, trajectory)."""
+    from imulog.steps.align import run_align
+    from imulog.steps.orientation import run_orientation
+    from imulog.steps.phases import run_phases
+    from imulog.steps.trajectory import run_trajectory
+
     sim = REPO / "recordings" / "sim"
-    out = tmp_path_factory.mktemp("docs_trial") / "trial.mcap"
-    proc = subprocess.run(
-        [
-            str(Path(sys.executable).parent / "imulog"),
-            "convert",
-            str(sim / "r2g_s00_t00_imu.csv"),
-            str(sim / "r2g_s00_t00_vicon.csv"),
-            "--meta-file",
-            str(sim / "r2g_s00_t00_meta.json"),
-            "-o",
-            str(out),
-        ],
-        capture_output=True,
-        text=True,
-        env=page_env(),
-    )
-    assert proc.returncode == 0, proc.stderr
+    imulog = str(Path(sys.executable).parent / "imulog")
+    inputs = [str(sim / "r2g_s00_t00_imu.csv"), str(sim / "r2g_s00_t00_vicon.csv")]
+    meta = ["--meta-file", str(sim / "r2g_s00_t00_meta.json")]
+    subprocess.run([imulog, "convert", *inputs, *meta, "-o", str(out)], check=True, capture_output=True, env=page_env())
+    run_orientation(out)
+    run_align(out)
+    run_phases(out)
+    run_trajectory(out)
     return out
+
+
+@pytest.fixture(scope="session")
+def page_runs(tmp_path_factory):
+    """Every page started at once on two workers (CI has two cores): page -> future of its process."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    trial = make_docs_trial(tmp_path_factory.mktemp("docs_trial") / "trial.mcap")
+    pool = ThreadPoolExecutor(max_workers=2)
+
+    def run(page: str) -> subprocess.CompletedProcess:
+        root = tmp_path_factory.mktemp("docs_" + re.sub(r"\W", "_", page))
+        workdir = make_workspace(root, None if makes_own_trial(page) else trial)
+        cmd = [sys.executable, __file__, page, "--workdir", str(workdir)]
+        return subprocess.run(cmd, capture_output=True, text=True, env=page_env(), timeout=PAGE_TIMEOUT_S, cwd=workdir)
+
+    futures = {page: pool.submit(run, page) for page in RUN_PAGES}
+    yield futures
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def test_blocks_are_found_and_markers_have_reasons():
@@ -176,17 +207,9 @@ def test_docs_have_no_paths_of_a_development_machine():
     assert not found, "machine paths in the docs:\n" + "\n".join(found)
 
 
-@pytest.mark.parametrize("page", [p for p in PAGES if any(not b.skip for b in runnable(p))])
-def test_page_blocks_run(page, converted_trial, tmp_path):
-    workdir = make_workspace(tmp_path, None if makes_own_trial(page) else converted_trial)
-    proc = subprocess.run(
-        [sys.executable, __file__, page, "--workdir", str(workdir)],
-        capture_output=True,
-        text=True,
-        env=page_env(),
-        timeout=PAGE_TIMEOUT_S,
-        cwd=workdir,
-    )
+@pytest.mark.parametrize("page", RUN_PAGES)
+def test_page_blocks_run(page, page_runs):
+    proc = page_runs[page].result()
     failures = [ln[len("FAIL ") :] for ln in proc.stdout.splitlines() if ln.startswith("FAIL ")]
     assert proc.returncode == 0 and not failures, "\n".join(failures) or proc.stderr[-2000:]
 
@@ -206,23 +229,7 @@ def main(argv: list[str]) -> int:
         import tempfile
 
         root = Path(tempfile.mkdtemp(prefix="imulog-docs-"))
-        sim = REPO / "recordings" / "sim"
-        trial = root / "trial.mcap"
-        subprocess.run(
-            [
-                "imulog",
-                "convert",
-                str(sim / "r2g_s00_t00_imu.csv"),
-                str(sim / "r2g_s00_t00_vicon.csv"),
-                "--meta-file",
-                str(sim / "r2g_s00_t00_meta.json"),
-                "-o",
-                str(trial),
-            ],
-            check=True,
-            env=page_env(),
-            capture_output=True,
-        )
+        trial = make_docs_trial(root / "trial.mcap")
         args.workdir = make_workspace(root / "ws", None if makes_own_trial(page) else trial)
         print(f"working folder: {args.workdir}")
     failures = run_page(page, args.workdir, verbose=True)
