@@ -220,6 +220,7 @@ def even_times_ns(seconds: np.ndarray, counts: np.ndarray, rate_hz: np.ndarray) 
     return np.repeat(seconds.astype(np.int64) * NS_PER_S, counts) + np.round(k * step).astype(np.int64)
 
 
+MAX_GAP_S = 31 * 86400  # a longer silence is a clock or file problem, not idle sleep: refused
 INLINE_FILL = 1 << 16  # NaN samples a gap may add to its own piece; longer gaps become pieces of their own
 FILL_PIECE = 1 << 20  # samples per NaN piece of a long gap
 
@@ -397,8 +398,8 @@ class _State:
         """Idle-sleep counts so far, including the tail between the last ACTIVITY record and the recording's end."""
         gaps, total = self.gaps, self.gap_s
         if self.end_ns is not None and self.last_activity_s is not None:
-            tail = (self.end_ns - self.origin_ns) // NS_PER_S - (self.last_activity_s - self.origin_ns // NS_PER_S + 1)
-            if tail > 0:
+            tail = self.end_ns // NS_PER_S - (self.last_activity_s + 1)
+            if 0 < tail <= MAX_GAP_S:
                 gaps, total = gaps + 1, total + int(tail)
         return {"idle_sleep_gaps": gaps, "idle_sleep_s": total}
 
@@ -415,6 +416,17 @@ def _check_order(path: Path, batch: RecordBatch, idx: np.ndarray, last: int | No
         i = int(idx[bad[0]])
         raise ConversionError(
             path, f"log.bin record {batch.first + i}: {what} time stamp does not increase ({int(batch.seconds[i])})"
+        )
+
+
+def _check_gaps(path: Path, batch: RecordBatch, idx: np.ndarray, jump: np.ndarray, what: str) -> None:
+    long = np.nonzero(jump > MAX_GAP_S)[0]
+    if len(long):
+        i = int(idx[long[0]])
+        raise ConversionError(
+            path,
+            f"log.bin record {batch.first + i}: {what} resumes {int(jump[long[0]]) / 86400:.0f} days after the "
+            "previous one (or after Start Date): a device clock or file problem, not idle sleep",
         )
 
 
@@ -443,6 +455,7 @@ def _activity(path: Path, batch: RecordBatch, st: _State) -> list[ImuStream]:
     first_prev = st.last_activity_s if st.last_activity_s is not None else st.origin_ns // NS_PER_S - 1
     prev = np.concatenate([[first_prev], secs[:-1]])
     jump = np.maximum(secs - prev - 1, 0)
+    _check_gaps(path, batch, idx, jump, "ACTIVITY")
     st.gaps += int(np.count_nonzero(jump))
     st.gap_s += int(jump.sum())
     st.last_activity_s = int(secs[-1])
@@ -460,7 +473,7 @@ def _activity_tail(st: _State) -> list[ImuStream]:
         return []
     first_s = st.last_activity_s + 1
     seconds = st.end_ns // NS_PER_S - first_s
-    if seconds <= 0:
+    if seconds <= 0 or seconds > MAX_GAP_S:  # an implausible Last Sample Time adds nothing
         return []
     n_all = seconds * round(st.rate_hz)
     out = []
@@ -480,6 +493,7 @@ def _sensor(path: Path, batch: RecordBatch, st: _State) -> list[ImuStream]:
     secs = batch.seconds[idx]
     prev = np.concatenate([[st.last_sensor_s if st.last_sensor_s is not None else secs[0] - 1], secs[:-1]])
     jump = np.maximum(secs - prev - 1, 0)
+    _check_gaps(path, batch, idx, jump, "SENSOR_DATA")
     st.last_sensor_s = int(secs[-1])
     schema_ids = [struct.unpack_from("<h", batch.buf, int(batch.starts[i]))[0] for i in idx]
     if len(set(schema_ids)) != 1:

@@ -137,6 +137,29 @@ def test_idle_sleep_seconds_are_nan_samples_not_zeros(gt3x_dir: Path, tmp_path: 
     assert dev["recording_end"] == "2019-02-14T09:01:00.000-05:00"
 
 
+def _record(typ: int, sec: int, payload: bytes) -> bytes:
+    head = struct.pack("<BBIH", 0x1E, typ, sec, len(payload))
+    x = 0
+    for b in head + payload:
+        x ^= b
+    return head + payload + bytes([~x & 0xFF])
+
+
+def test_a_clock_jump_is_not_idle_sleep(gt3x_dir: Path, tmp_path: Path):
+    src = gt3x_dir / "example.gt3x"
+    with zipfile.ZipFile(src) as z:
+        log = z.read("log.bin")
+    recs = _records(log)
+    k = next(i for i, (_, typ, _, _) in enumerate(recs) if typ == 0x1A) + 100  # the 101st ACTIVITY2 record
+    out = b""
+    for i, (o, typ, sec, size) in enumerate(recs):
+        late = i >= k and typ == 0x1A
+        out += _record(typ, sec + 40 * 86400, log[o + 8 : o + 8 + size]) if late else log[o : o + 9 + size]
+    bad = _rezip(src, tmp_path / "jump.gt3x", out)
+    with pytest.raises(ConversionError, match=rf"jump\.gt3x: log\.bin record {k}: ACTIVITY resumes 40 days after"):
+        read_gt3x(bad)
+
+
 def test_long_idle_sleep_comes_in_bounded_pieces(monkeypatch, gt3x_dir: Path, tmp_path: Path):
     import converters.actigraph as ag
 
