@@ -170,7 +170,10 @@ def test_utc_columns_give_the_trial_start_time(tmp_path):
 @pytest.mark.parametrize(
     "damage, message",
     [
-        (lambda s: s.rstrip()[: s.rstrip().rindex(",")], r"line 18: truncated line: 20 fields, expected 21"),
+        (  # a short row inside the data (a cut last row is dropped instead: tests/test_convert_validation.py)
+            lambda s: "\n".join(ln[: ln.rindex(",")] if i == 16 else ln for i, ln in enumerate(s.split("\n"))),
+            r"line 17: truncated line: 20 fields, expected 21",
+        ),
         (lambda s: s.replace("0.045482", "0.04x5482"), r"line 17, column 'Acc_X': '0.04x5482' is not a number"),
         (lambda s: s.replace("51403,", ",", 1), r"line 17, column 'PacketCounter': missing value"),
         (lambda s: s.replace("51403,", "51401,", 1), r"line 17, column 'PacketCounter': PacketCounter"),
