@@ -69,6 +69,7 @@ def read_table(
     required: Sequence[int] = (),
     skip_columns: Sequence[int] = (),
     ragged: bool = False,
+    warnings: list[str] | None = None,
 ) -> np.ndarray:
     """The numeric block after ``skip_lines`` lines as an (N, len(names)) float64 array; empty/``NaN`` cells -> NaN.
 
@@ -76,6 +77,9 @@ def read_table(
     count than ``len(names)`` (one trailing empty field allowed) is an error naming it, unless ``ragged`` (shorter
     lines are padded with NaN: slower channels of a Delsys export end early). ``required`` columns must be finite
     on every row; ``skip_columns`` are not parsed (text). Raises :class:`ConversionError` (file, line, column).
+    With a ``warnings`` list, a final row cut short (a truncated file, see ``converters._common.final_row_cut``) is
+    dropped and its one-line warning appended (pass it on as ``Recording.warnings``); without, such a row is read
+    (or refused when it has too few fields). Ragged tables are not checked (their short last rows are normal).
     """
     path = Path(path)
     data = path.read_bytes() if data is None else data
@@ -90,6 +94,13 @@ def read_table(
         if cut < 0 or block[cut + 1 :].strip():
             break
         block = block[:cut].rstrip(b"\r\n")
+    if warnings is not None and not ragged and block.strip():
+        from converters._common import drop_cut_final_row
+
+        end, cut_warning = drop_cut_final_row(path, data, delimiter, start=start, end=start + len(block))
+        if cut_warning:
+            block = data[start:end].rstrip(b"\r\n")
+            warnings.append(cut_warning)
     first_line = skip_lines + 1
     if not block.strip():
         raise ConversionError(path, "no data rows", line=first_line)

@@ -201,6 +201,7 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
         i for i, c in enumerate(cols) if c not in imu_cols and i < len(first) and first[i] and not is_number(first[i])
     ]
     time_col = "PacketCounter" if "PacketCounter" in seen else "SampleTimeFine"
+    notes: list[str] = []  # a cut final row dropped
     values = read_table(
         path,
         delimiter=delimiter,
@@ -208,6 +209,7 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
         names=cols,
         required=[seen[time_col]],
         skip_columns=text_cols,
+        warnings=notes,
     )
     first_line = n_comment + 2
 
@@ -289,7 +291,7 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
     n_gaps = int((~np.isfinite(np.hstack([streams[k] for k in ("acc", "gyr") if k in streams]))).any(axis=1).sum())
     if n_gaps:
         meta["samples_with_gaps"] = n_gaps
-    rec = Recording(sources=[str(path)], warnings=list(assumed))
+    rec = Recording(sources=[str(path)], warnings=[*notes, *assumed])
     rec.imus.append(ImuStream(name=name, t_ns=t_ns, meta=dict(meta), **streams))
     q, q_source = orientation_wxyz(values, seen)
     if q is not None:

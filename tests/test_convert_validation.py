@@ -97,6 +97,18 @@ def test_cut_marker_z_of_a_real_nexus_export_is_dropped(tmp_path, shared_data):
     assert rec.warnings and "markers.csv: line 585: last row cut short" in rec.warnings[0]
 
 
+def test_cut_last_row_of_a_real_xsens_export_is_dropped(tmp_path, shared_data):
+    name = "devices/xsens_mtmanager/MT_012005D6_031-000_00B421AF.txt"  # tab-separated, 3369 samples
+    cut = tmp_path / Path(name).name
+    cut.write_bytes(_cut_inside_last_number((shared_data / name).read_bytes(), 2))  # -0.814863 -> -0
+    full = convert_file(shared_data / name)
+    rec = convert_file(cut)
+    assert len(rec.imus[0]) == len(full.imus[0]) - 1 == 3368
+    for a, b in zip(rec.signals, full.signals, strict=True):
+        np.testing.assert_array_equal(a.values, b.values[:-1])
+    assert any(w.startswith(f"{cut.name}: line 3375: last row cut short") for w in rec.warnings)
+
+
 def test_cut_adc_line_is_dropped(tmp_path):
     path = tmp_path / "witilt.txt"
     path.write_text("".join(f"X={510 + i % 7}\tY=498\tZ={600 + i % 5}\n" for i in range(40)) + "X=512\tY=498\tZ=6")
