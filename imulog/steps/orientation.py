@@ -157,6 +157,7 @@ def run_orientation(
         name = pick_imu(topics, imu)
         topic = source_topic(topics, name, source)
         total = trial.channel(topic).sample_count
+        duration_s = total / (trial.channel(topic).rate_hz or 100.0)
     windows = windowed if windowed is not None else (WindowParams() if total > LONG_SAMPLES else None)
     step_params = {"imu": name, **params_dict(params), "global_frame": global_frame(params)}
     if windows is not None:
@@ -167,6 +168,7 @@ def run_orientation(
             pieces = StreamPieces(
                 topics=[f"/derived/{kind}/{name}" for kind in ("orientation", "acc_global", "orientation_static")],
                 pieces=lambda: windowed_pieces(path, topic, name, params, gaps, windows, total),
+                expected_duration_s=duration_s,  # the viewer twins keep their message budget
             )
             return StepResult(streams=[pieces])
         t_ns, acc, gyr, mag = read_imu_arrays(trial, topic)

@@ -272,8 +272,11 @@ def read_trial_overview(path: str | Path, params: OverviewParams | None = None) 
             )
         streams: list[Any] = []
         counts: dict[str, int] = {}
+        shown = set(trial.topics())  # imulog channels; the viewer twins are for other tools
         for info in channels:
             topic = info.topic
+            if topic not in shown:
+                continue
             counts[topic] = int(info.sample_count)
             if info.message_count == 0:
                 streams.append(trial.read(topic))
