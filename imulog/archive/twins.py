@@ -9,6 +9,7 @@ canonical channel                   twin                                  Rerun 
 ``/imu/{name}`` (ImuBlock)          ``sensor_msgs/msg/Imu`` (ROS 2, CDR)  Scalars (plotted)
 ``/markers/{name}`` (MarkerBlock)   ``foxglove.PointCloud``               Points3D
 ``/derived/orientation/{imu}``      ``foxglove.FrameTransform``           Transform3D (world -> imu)
+``/derived/orientation/{imu}``      ``foxglove.PointCloud`` (axes/{imu})  Points3D (the IMU frame)
 pose channels (PoseBlock)           ``foxglove.FrameTransform``           Transform3D (frame -> name)
 interval channels (IntervalEvent)   ``foxglove.Log``                      TextLog
 ==================================  ====================================  ===========================
@@ -199,22 +200,16 @@ def frame_twin(
     child: str,
     clock: str,
     rotation: list[float] | None = None,
+    origin: Origin | None = None,
 ) -> Twin:
     """``foxglove.FrameTransform`` parent -> child from a pose stream or an orientation (qw..qz) stream.
 
-    ``rotation`` (w, x, y, z) is applied in front of every orientation (e.g. the alignment's global-to-world).
+    ``rotation`` (w, x, y, z) is applied in front of every orientation (e.g. the alignment's global-to-world);
+    ``origin`` places an orientation stream's frame (else at the parent's origin).
     """
     from imulog.archive._generated.foxglove import FrameTransform_pb2
 
-    keep = decimation(stream.t_ns)
-    if isinstance(stream, PoseStream):
-        q, p = stream.orientation[keep], stream.position[keep]
-    else:
-        q, p = stream.values[keep][:, :4], np.zeros((len(keep), 3))
-    if rotation is not None and len(rotation) == 4:
-        from imulog.process import quaternion as quat
-
-        q = quat.multiply(np.asarray(rotation, dtype=np.float64)[None, :], q)
+    keep, q, p = _frame_samples(stream, rotation, origin)
     twin = _protobuf_twin(
         twin_topic(stream.topic), "foxglove.FrameTransform", _meta(stream, stream.topic, clock, keep, stream.t_ns)
     )
@@ -229,6 +224,72 @@ def frame_twin(
         _stamp(msg, stamp)
         tr.x, tr.y, tr.z = p[k].tolist()
         rot.w, rot.x, rot.y, rot.z = q[k].tolist()
+        twin.log_times.append(int(stamp))
+        twin.payloads.append(msg.SerializeToString())
+    return twin
+
+
+Origin = tuple[np.ndarray, np.ndarray]  # (t_ns on the stream's clock, (N, 3) positions in m)
+AXIS_LENGTH_M = 0.12
+AXIS_POINTS = 12
+_AXIS_RGBA = ((230, 40, 40, 255), (40, 190, 40, 255), (40, 90, 230, 255))  # x red, y green, z blue
+
+
+def _frame_samples(
+    stream: SignalStream | PoseStream, rotation: list[float] | None, origin: Origin | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Kept indices, orientations (w, x, y, z) and positions of a frame twin."""
+    keep = decimation(stream.t_ns)
+    if isinstance(stream, PoseStream):
+        q, p = stream.orientation[keep], stream.position[keep]
+    else:
+        q, p = stream.values[keep][:, :4], np.zeros((len(keep), 3))
+        if origin is not None and len(origin[0]) > 1:
+            t = stream.t_ns[keep].astype(np.float64)
+            src_t = origin[0].astype(np.float64)
+            p = np.column_stack([np.interp(t, src_t, origin[1][:, k]) for k in range(3)])
+    if rotation is not None and len(rotation) == 4:
+        from imulog.process import quaternion as quat
+
+        q = quat.multiply(np.asarray(rotation, dtype=np.float64)[None, :], q)
+    return keep, q, p
+
+
+def axes_twin(
+    stream: SignalStream, log_map: LogMap, *, clock: str, rotation: list[float] | None, origin: Origin | None
+) -> Twin:
+    """The IMU frame as coloured points along its axes (``foxglove.PointCloud``, x red, y green, z blue).
+
+    Rerun's loader draws PointCloud without any blueprint (a FrameTransform needs an axes visualizer added
+    by hand), so this is the form in which the moving IMU frame shows up as is.
+    """
+    from imulog.archive._generated.foxglove import PackedElementField_pb2, PointCloud_pb2
+    from imulog.process import quaternion as quat
+
+    keep, q, p = _frame_samples(stream, rotation, origin)
+    name = stream.topic.rsplit("/", 1)[-1]
+    twin = _protobuf_twin(
+        f"{TWIN_PREFIX}/axes/{name}", "foxglove.PointCloud", _meta(stream, stream.topic, clock, keep, stream.t_ns)
+    )
+    twin.metadata.update(units="m", axis_length_m=str(AXIS_LENGTH_M))
+    fld = PackedElementField_pb2.PackedElementField
+    fields = [fld(name=axis, offset=8 * k, type=fld.FLOAT64) for k, axis in enumerate("xyz")]
+    fields += [fld(name=c, offset=24 + k, type=fld.UINT8) for k, c in enumerate(("red", "green", "blue", "alpha"))]
+    point = np.dtype([("xyz", "<f8", 3), ("rgba", "u1", 4), ("pad", "u1", 4)])
+    s = np.linspace(AXIS_LENGTH_M / AXIS_POINTS, AXIS_LENGTH_M, AXIS_POINTS)
+    local = np.concatenate([np.outer(s, np.eye(3)[k]) for k in range(3)])  # (3P, 3) points in the IMU frame
+    cloud = np.zeros(len(local), dtype=point)
+    cloud["rgba"] = np.repeat(np.array(_AXIS_RGBA, dtype=np.uint8), AXIS_POINTS, axis=0)
+    msg = PointCloud_pb2.PointCloud(frame_id="world", point_stride=point.itemsize, fields=fields)
+    msg.pose.orientation.w = 1.0
+    good = np.isfinite(q).all(axis=1) & np.isfinite(p).all(axis=1)
+    stamps = log_map(stream.t_ns[keep])
+    for k, stamp in enumerate(stamps.tolist()):
+        if not good[k]:
+            continue
+        cloud["xyz"] = p[k] + quat.rotate(q[k], local)
+        _stamp(msg, stamp)
+        msg.data = cloud.tobytes()
         twin.log_times.append(int(stamp))
         twin.payloads.append(msg.SerializeToString())
     return twin
@@ -263,12 +324,17 @@ def log_twin(stream: Intervals, log_map: LogMap, clock: str) -> Twin:
 
 
 def twins_for(
-    stream: Stream, log_map: LogMap, clock: str, metadata: Mapping[str, Mapping[str, Any]] | None = None
+    stream: Stream,
+    log_map: LogMap,
+    clock: str,
+    metadata: Mapping[str, Mapping[str, Any]] | None = None,
+    origin: Origin | None = None,
 ) -> list[Twin]:
     """The viewer twins of one canonical stream (none for kinds without one, e.g. trajectories).
 
     ``clock``: ``"reference"`` or the IMU name whose device clock the stream is on; ``metadata``: the
-    trial's records (``imulog.alignment`` rotates the IMU frames into the Vicon world).
+    trial's records (``imulog.alignment`` rotates the IMU frames into the Vicon world); ``origin``: where an
+    IMU frame sits (the Vicon cluster's position on the IMU's clock), else at the world origin.
     """
     if isinstance(stream, ImuStream):
         twin = imu_twin(stream, log_map)
@@ -281,11 +347,14 @@ def twins_for(
     if (
         isinstance(stream, SignalStream)
         and stream.columns[:4] == ORIENTATION_COLUMNS
-        and "/orientation/" in stream.topic
+        and stream.topic.startswith("/derived/orientation/")
     ):
         alignment = (metadata or {}).get("imulog.alignment") or {}
         rotation = alignment.get("rotation_global_to_world")
-        return [frame_twin(stream, log_map, parent="world", child=name, clock=clock, rotation=rotation)]
+        return [
+            frame_twin(stream, log_map, parent="world", child=name, clock=clock, rotation=rotation, origin=origin),
+            axes_twin(stream, log_map, clock=clock, rotation=rotation, origin=origin),
+        ]
     if isinstance(stream, Intervals) and len(stream):
         return [log_twin(stream, log_map, clock)]
     return []

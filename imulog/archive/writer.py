@@ -10,6 +10,8 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from imulog import __version__
 from imulog.archive import codec
 from imulog.archive._builder import McapBuilder
@@ -17,7 +19,7 @@ from imulog.archive.errors import ArchiveError, ArchiveExistsError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import encode_record
 from imulog.archive.timeline import IDENTITY, TIMELINE_RECORD, LogMap, TimelineError, TrialAxis, timeline_record
-from imulog.archive.twins import Twin, twin_topic, twins_for
+from imulog.archive.twins import Origin, Twin, twin_topic, twins_for
 from imulog.model import Recording, Stream
 
 LIBRARY = f"imulog {__version__}"
@@ -77,12 +79,32 @@ def write_twin(builder: McapBuilder, twin: Twin, extra_meta: dict[str, str] | No
     return twin.topic, meta["sha256"]
 
 
-def stream_twins(stream: Stream, axis: TrialAxis, metadata: dict[str, Any] | None = None) -> list[Twin]:
+def stream_twins(
+    stream: Stream, axis: TrialAxis, metadata: dict[str, Any] | None = None, origin: Origin | None = None
+) -> list[Twin]:
     """The viewer twins of ``stream`` on ``axis`` (empty when twins are switched off or the kind has none)."""
     if not WRITE_TWINS:
         return []
     clock = axis.clock_of(stream.topic)
-    return twins_for(stream, axis.map_for(stream.topic), clock, metadata)
+    return twins_for(stream, axis.map_for(stream.topic), clock, metadata, origin)
+
+
+CLUSTER_TOPIC = "/derived/vicon/cluster_pose"
+
+
+def _imu_origin(trial: Any, streams: list[Stream], records: dict[str, Any]) -> Origin | None:
+    """Where the IMU frames sit in the viewer: the Vicon cluster's position on the device clock, once aligned."""
+    alignment = records.get("imulog.alignment")
+    if not alignment:
+        return None
+    pose = next((s for s in streams if s.topic == CLUSTER_TOPIC), None)
+    if pose is None and CLUSTER_TOPIC in trial.topics():
+        pose = trial.read(CLUSTER_TOPIC)
+    if pose is None or not len(pose):
+        return None
+    from imulog.process.alignment import reference_to_device
+
+    return np.asarray(reference_to_device(pose.t_ns, dict(alignment)), np.int64), pose.position
 
 
 def plan_append(
@@ -102,7 +124,8 @@ def plan_append(
         channels = {c.topic: c for c in trial.channels}
         imu_names = {t.split("/")[2] for t in channels if t.startswith("/imu/") and t.count("/") == 2}
         axis = TrialAxis(records, imu_names)
-        twins = [tw for stream in streams for tw in stream_twins(stream, axis, records)]
+        origin = _imu_origin(trial, streams, records)
+        twins = [tw for stream in streams for tw in stream_twins(stream, axis, records, origin)]
         if "imulog.alignment" in metadata and axis.known:
             new = {s.topic for s in streams}
             for topic, info in channels.items():
@@ -110,7 +133,7 @@ def plan_append(
                     continue
                 retwin = axis.clock_of(topic, info.metadata) == "reference" and not topic.startswith("/derived/")
                 if retwin and info.kind in ("markers", "intervals") or topic.startswith("/derived/orientation/"):
-                    twins.extend(stream_twins(trial.read(topic), axis, records))
+                    twins.extend(stream_twins(trial.read(topic), axis, records, origin))
         dropped = [twin_topic(t) for t in remove if twin_topic(t) in channels]
     return axis, twins, dropped
 

@@ -1,0 +1,223 @@
+"""Trials as other tools see them (issue 16 items 1-3): one time axis, numbers, and viewer twins.
+
+Opened with Rerun's own MCAP loader (``rerun.chunk.McapReader``, the Rust importer, no imulog code) and
+decoded with the ``mcap`` package + ``foxglove-schemas-protobuf`` + ``mcap-ros2-support``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from imulog.archive import TrialReader, append_derived, check_file, write_trial
+from imulog.model import ImuStream, Intervals, MarkerStream, PoseStream, Recording, SignalStream
+from imulog.process.alignment import reference_to_device
+
+rr_chunk = pytest.importorskip("rerun.chunk")
+
+START = "2019-02-14T08:58:00-05:00"
+START_NS = 1_550_152_680 * 10**9  # the same instant, ns since the Unix epoch
+DEV0 = 2_775 * 10**9  # IMU device clock at its first sample (46 min after the Vicon clock's zero)
+LAG_NS = 1_500_000_000  # Vicon started 1.5 s before the IMU
+ALIGNMENT = {"imu": "/imu/wrist", "offset_ns": LAG_NS - DEV0, "drift_ppm": 0.0, "t0_ns": DEV0}
+
+
+def _quat_z(angle: np.ndarray) -> np.ndarray:
+    return np.column_stack([np.cos(angle / 2), np.zeros_like(angle), np.zeros_like(angle), np.sin(angle / 2)])
+
+
+@pytest.fixture(scope="module")
+def processed(tmp_path_factory):
+    """A converted then 'processed' trial: IMU on its device clock, Vicon on its own, then aligned."""
+    rng = np.random.default_rng(4)
+    n = 2000  # 20 s at 100 Hz
+    t_dev = DEV0 + np.arange(n, dtype=np.int64) * 10_000_000
+    t_ref = np.arange(n, dtype=np.int64) * 10_000_000  # Vicon clock from 0
+    gyr = rng.normal(0, 1, (n, 3))
+    acc = rng.normal(0, 9.81, (n, 3))
+    imu = ImuStream("wrist", t_dev, acc=acc, gyr=gyr)
+    pos = np.stack([rng.normal(0, 0.02, (n, 3)) + [0.4 + 0.05 * k, 0.2, 0.9] for k in range(4)], axis=1)
+    valid = np.ones((n, 4), dtype=bool)
+    valid[100:110, 2] = False
+    pos[~valid] = np.nan
+    markers = MarkerStream("vicon", t_ref, ["O", "X", "Y", "A"], pos, valid)
+    rec = Recording(imus=[imu], markers=[markers], metadata={"imulog.trial": {"task": "r2g", "start_time": START}})
+    path = write_trial(tmp_path_factory.mktemp("interop") / "trial.mcap", rec)
+    q = _quat_z(np.linspace(0, 3, n))
+    orientation = SignalStream("/derived/orientation/wrist", t_dev, ["qw", "qx", "qy", "qz"], ["1"] * 4, q)
+    append_derived(path, [orientation], run={"step": "orientation", "algorithm": "test"})
+    cluster = PoseStream("/derived/vicon/cluster_pose", t_ref, pos[:, 0], _quat_z(np.linspace(0, 1, n)))
+    append_derived(
+        path, [cluster], run={"step": "align", "algorithm": "test"}, metadata={"imulog.alignment": ALIGNMENT}
+    )
+    phases = Intervals("/derived/phases/wrist", t_dev[[200, 900]], t_dev[[600, 1500]], ["reach", "lift"], [1, 1])
+    append_derived(path, [phases], run={"step": "phases", "algorithm": "test"})
+    return path, imu, markers, q, cluster
+
+
+def _rerun_entities(path) -> dict[str, list]:
+    out: dict[str, list] = {}
+    for chunk in rr_chunk.McapReader(path).stream():
+        out.setdefault(str(chunk.entity_path), []).append(chunk.to_record_batch())
+    return out
+
+
+def _log_times(batches) -> np.ndarray:
+    t = [
+        rb.column("message_log_time").to_numpy().astype("datetime64[ns]").astype(np.int64)
+        for rb in batches
+        if "message_log_time" in rb.schema.names
+    ]
+    return np.sort(np.concatenate([x for x in t if len(x)]))
+
+
+def _column(batches, name: str) -> list:
+    return [row for rb in batches if name in rb.schema.names for row in rb.column(name).to_pylist()]
+
+
+def test_one_time_axis_from_the_trial_start(processed):
+    path, imu, markers, _, _ = processed
+    assert check_file(path).ok
+    with TrialReader(path) as tr:
+        timeline = tr.metadata["imulog.timeline"]
+        assert timeline["epoch_ns"] == START_NS and timeline["time_zone"] == "-05:00"
+        assert timeline["clocks"] == "separate"
+        starts = {
+            c.topic: min(
+                ci.message_start_time for ci in tr.summary.chunk_indexes if c.channel_id in ci.message_index_offsets
+            )
+            for c in tr.channels
+        }
+        # raw channels never move: each clock from its own first sample at the trial start
+        assert starts["/imu/wrist"] == START_NS and starts["/markers/vicon"] == START_NS
+        # written after align: through the alignment, on the IMU's axis (Vicon started LAG_NS earlier)
+        assert starts["/derived/vicon/cluster_pose"] == START_NS - LAG_NS
+        assert starts["/derived/viewer/markers/vicon"] == START_NS - LAG_NS
+        # payloads keep the device and capture clocks; time-range reads still prune correctly
+        assert tr.read("/imu/wrist").t_ns[0] == DEV0
+        part = tr.read("/imu/wrist", start_ns=DEV0 + 7 * 10**9, end_ns=DEV0 + 9 * 10**9)
+        assert np.array_equal(part.t_ns, imu.t_ns[700:900])
+        part = tr.read("/derived/vicon/cluster_pose", start_ns=12 * 10**9, end_ns=13 * 10**9)
+        assert np.array_equal(part.t_ns, markers.t_ns[1200:1300])
+
+
+def test_rerun_loader_puts_imu_and_vicon_in_one_window(processed):
+    path, imu, markers, _, _ = processed
+    ents = _rerun_entities(path)
+    imu_t = _log_times(ents["/derived/viewer/imu/wrist"])
+    vicon_t = _log_times(ents["/derived/viewer/markers/vicon"])
+    # the same 20 s window, shifted by the measured lag only (before: 46 minutes apart)
+    assert abs(int(imu_t[0]) - START_NS) < 10**6 and abs(int(vicon_t[0]) - (START_NS - LAG_NS)) < 10**6
+    assert abs(int(imu_t[-1]) - int(vicon_t[-1]) - LAG_NS) < 50_000_000
+    assert (min(imu_t[-1], vicon_t[-1]) - max(imu_t[0], vicon_t[0])) / 1e9 > 18
+
+
+def test_rerun_loader_plots_imu_draws_markers_and_moves_the_imu_frame(processed):
+    path, imu, markers, q, cluster = processed
+    ents = _rerun_entities(path)
+    # IMU: ROS 2 sensor_msgs/Imu twin -> Scalars, which Rerun plots as time series without a blueprint
+    scalars = np.array(_column(ents["/derived/viewer/imu/wrist"], "Scalars:scalars"), dtype=np.float64)
+    assert scalars.shape == (1000, 6)  # 100 Hz -> 50 Hz
+    cols = _column(ents["/derived/viewer/imu/wrist"], "SeriesLines:names")[0]  # one static row of 6 names
+    gyr_cols = [cols.index(f"gyroscope/{a}") for a in "xyz"]
+    acc_cols = [cols.index(f"accelerometer/{a}") for a in "xyz"]
+    assert np.allclose(scalars[:, gyr_cols], imu.gyr[::2]) and np.allclose(scalars[:, acc_cols], imu.acc[::2])
+    # markers: foxglove.PointCloud -> Points3D, only the markers seen
+    points = _column(ents["/derived/viewer/markers/vicon"], "Points3D:positions")
+    assert len(points) == 1000 and len(points[0]) == 4 and len(points[50]) == 3  # sample 100: marker Y hidden
+    assert np.allclose(np.array(points[0]), markers.pos[0], atol=1e-6)
+    # the IMU frame: FrameTransform -> Transform3D world -> wrist, placed at the cluster, rotating
+    tf = ents["/derived/viewer/orientation/wrist"]
+    assert {v for row in _column(tf, "Transform3D:child_frame") for v in row} == {"wrist"}
+    quats = np.array(_column(tf, "Transform3D:quaternion"), dtype=np.float64).reshape(-1, 4)  # x, y, z, w
+    assert np.allclose(quats[:, [3, 0, 1, 2]], q[::2], atol=1e-6)
+    translation = np.array(_column(tf, "Transform3D:translation"), dtype=np.float64).reshape(-1, 3)
+    shift = LAG_NS // 10_000_000  # the IMU's sample k is Vicon sample k + 150
+    assert np.allclose(translation[:100], cluster.position[shift : shift + 200 : 2], atol=1e-6)
+    # ... and as coloured points along its axes, which Rerun draws without any blueprint
+    axes = _column(ents["/derived/viewer/axes/wrist"], "Points3D:positions")
+    first, last = np.array(axes[0]), np.array(axes[-1])
+    assert first.shape == (36, 3) and not np.allclose(first, last)
+    # phases: foxglove.Log -> TextLog
+    texts = [v for row in _column(ents["/derived/viewer/phases/wrist"], "TextLog:text") for v in row]
+    assert texts == ["reach #1 (4.00 s)", "lift #1 (6.00 s)"]
+
+
+def test_every_channel_decodes_as_numbers_with_mcap_and_foxglove_schemas(processed):
+    pytest.importorskip("foxglove_schemas_protobuf")
+    pytest.importorskip("mcap_ros2")
+    from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
+    from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
+    from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
+
+    path, imu, markers, q, _ = processed
+    got: dict[str, list] = {}
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory(), Ros2DecoderFactory()])
+        for schema, channel, message, decoded in reader.iter_decoded_messages():
+            got.setdefault(channel.topic, []).append((schema.name, message.log_time, decoded))
+    # canonical blocks: packed repeated doubles come out as floats
+    blocks = [d for _, _, d in got["/imu/wrist"]]
+    assert isinstance(blocks[0].gyr[0], float)
+    assert np.array_equal(np.concatenate([np.array(b.gyr) for b in blocks]).reshape(-1, 3), imu.gyr)
+    assert np.array_equal(np.concatenate([np.array(b.t_ns, dtype=np.int64) for b in blocks]), imu.t_ns)
+    # the twins decode with Foxglove's published schemas (field numbers identical to ours)
+    clouds = got["/derived/viewer/markers/vicon"]
+    assert clouds[0][0] == "foxglove.PointCloud"
+    cloud = PointCloud.FromString(clouds[0][2].SerializeToString())
+    assert [fld.name for fld in cloud.fields] == ["x", "y", "z"] and cloud.point_stride == 24
+    assert np.array_equal(np.frombuffer(cloud.data, "<f8").reshape(-1, 3), markers.pos[0])
+    assert cloud.timestamp.ToNanoseconds() == clouds[0][1]  # in-message stamp = log time = one axis
+    frames = got["/derived/viewer/orientation/wrist"]
+    tf = FrameTransform.FromString(frames[10][2].SerializeToString())
+    assert (tf.parent_frame_id, tf.child_frame_id) == ("world", "wrist")
+    assert np.allclose([tf.rotation.w, tf.rotation.x, tf.rotation.y, tf.rotation.z], q[20])
+    ros = got["/derived/viewer/imu/wrist"]
+    assert ros[0][0] == "sensor_msgs/msg/Imu"
+    m = ros[3][2]
+    assert [m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z] == imu.gyr[6].tolist()
+    assert m.header.stamp.sec * 10**9 + m.header.stamp.nanosec == ros[3][1]
+
+
+def test_realigning_moves_the_viewer_twins_but_never_the_raw_channels(processed, tmp_path):
+    import shutil
+
+    path, _, markers, _, _ = processed
+    copy = tmp_path / "t.mcap"
+    shutil.copy(path, copy)
+    with TrialReader(copy) as tr:
+        raw_before = {t: tr.compute_channel_hash(t) for t in ("/imu/wrist", "/markers/vicon")}
+    moved = {**ALIGNMENT, "offset_ns": ALIGNMENT["offset_ns"] - 250_000_000}  # Vicon 0.25 s later
+    append_derived(copy, [], run={"step": "align", "algorithm": "test"}, metadata={"imulog.alignment": moved})
+    with TrialReader(copy) as tr:
+        assert {t: tr.compute_channel_hash(t) for t in raw_before} == raw_before
+        ch = tr.channel("/derived/viewer/markers/vicon")
+        first = min(
+            ci.message_start_time for ci in tr.summary.chunk_indexes if ch.channel_id in ci.message_index_offsets
+        )
+    expected = START_NS + int(reference_to_device(np.int64(markers.t_ns[0]), moved)) - DEV0
+    assert first == expected == START_NS - LAG_NS + 250_000_000
+
+
+def test_real_broad_recording_keeps_imu_and_optical_together(shared_data, tmp_path):
+    """BROAD: IMU and optical share one clock in the file, so they share one origin on the axis."""
+    from converters.registry import convert_file
+
+    rec = convert_file(shared_data / "broad/02_undisturbed_slow_rotation_B.hdf5")
+    path = write_trial(tmp_path / "broad.mcap", rec, attach_sources=False)
+    with TrialReader(path) as tr:
+        timeline = tr.metadata["imulog.timeline"]
+        assert timeline["clocks"] == "shared"
+        imu, optical = tr.channel("/imu/" + rec.imus[0].name), tr.channel(rec.poses[0].topic)
+        firsts = {}
+        for c in (imu, optical):
+            firsts[c.topic] = min(
+                ci.message_start_time for ci in tr.summary.chunk_indexes if c.channel_id in ci.message_index_offsets
+            )
+    # same distance on the axis as in the file
+    assert firsts[imu.topic] - firsts[optical.topic] == int(rec.imus[0].t_ns[0]) - int(rec.poses[0].t_ns[0])
+    ents = _rerun_entities(path)
+    assert _column(ents["/derived/viewer" + rec.poses[0].topic], "Transform3D:translation")
+    assert _column(ents["/derived/viewer/imu/" + rec.imus[0].name], "Scalars:scalars")
