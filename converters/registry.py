@@ -132,12 +132,27 @@ def convert_files(paths: Sequence[Path], fmt: str | None = None, options: Conver
         if rec is None:
             rec = part
         else:
+            kept = _start_of(rec)
             try:
                 rec = rec.merge(part)
             except ValueError as e:
                 raise ConversionError(p, f"cannot combine with the other inputs: {e}") from None
+            other = _start_of(part)
+            if kept and other and kept != other:  # the first input's start time stays, and the user hears of it
+                rec.metadata["imulog.trial"].update(kept)
+                rec.warnings.append(
+                    f"{Path(p).name}: start time {other['start_time']} ({other.get('time_zone', '?')}) differs from "
+                    f"{kept['start_time']} ({kept.get('time_zone', '?')}) of an earlier input; kept the earlier one "
+                    "(--meta start_time=... sets it)"
+                )
     assert rec is not None
     return rec
+
+
+def _start_of(rec: Recording) -> dict[str, str]:
+    """The start-time entries of a recording's ``imulog.trial`` record (empty when it has none)."""
+    trial = rec.metadata.get("imulog.trial", {})
+    return {k: trial[k] for k in ("start_time", "time_zone", "start_time_source") if k in trial}
 
 
 _ROLE_TOKENS = {

@@ -199,3 +199,20 @@ def test_damaged_lab_exports_raise_only_conversion_errors(shared_data, tmp_path)
                 conv.convert(target)
             except ConversionError as e:
                 assert "\n" not in str(e) and str(target) in str(e), (fmt, str(e))
+
+
+def test_inputs_with_different_start_times_keep_the_first_and_say_so(shared_data, tmp_path):
+    """Motive (capture PC local time) and APDM Format=7 (UTC) of 'one session': the first input's start time is
+    kept and the other one is named in a warning, never silently replaced."""
+    files = [
+        shared_data / "devices/optitrack_motive/sample_optitrack_take.csv",
+        shared_data / "devices/apdm_csv/apdm_format7.csv",
+    ]
+    rec = convert_files(files)
+    assert rec.metadata["imulog.trial"]["start_time"] == "2016-01-05T15:49:50.755000"
+    assert rec.metadata["imulog.trial"]["time_zone"] == "unknown (device local time)"
+    (warning,) = [w for w in rec.warnings if "start time" in w]
+    assert warning.startswith("apdm_format7.csv: start time 2019-02-22T23:51:44.438281+00:00 (UTC) differs")
+    # inputs without a start time (the two files of one old-header Xsens recording) say nothing about it
+    quiet = convert_files(sorted((shared_data / XSENS).glob("MT46_01-000_*.txt")))
+    assert "imulog.trial" not in quiet.metadata and not [w for w in quiet.warnings if "start time" in w]
