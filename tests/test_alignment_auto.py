@@ -222,3 +222,28 @@ def test_9d_backends_agree_on_enu_heading():
     ):
         d = (headings[a] - headings[b] + 180) % 360 - 180
         assert abs(np.median(d)) < limit, (a, b, np.median(d))
+
+
+def test_each_imu_of_an_arm_trial_finds_its_own_segment_and_a_still_one_fails(tmp_path):
+    """Two-segment arm (imulog.simulate.arm): upper-arm, forearm and trunk IMUs, each with its own cluster
+    (``upper_arm_O`` ...). Each moving IMU picks its own segment, the neighbouring segment is the runner-up;
+    the trunk barely turns (gyro norm sd 0.01 rad/s): no marker moves like it, so align fails in one line and
+    writes no alignment (evaluate would then refuse)."""
+    from imulog.simulate.arm import simulate_arm
+
+    path = tmp_path / "arm.mcap"
+    write_trial(path, simulate_arm(seed=0, trunk_imu=True).recording)
+    runner = CliRunner()
+    for imu, other in (("forearm", "upper_arm"), ("upper_arm", "forearm")):
+        res = runner.invoke(cli, ["process", "align", str(path), "--imu", imu])
+        assert res.exit_code == 0, res.output
+        with TrialReader(path) as t:
+            rec = t.metadata["imulog.alignment"]
+        assert all(m.startswith(f"{imu}_") for m in rec["cluster"]["markers"]) and len(rec["cluster"]["markers"]) == 4
+        assert all(m.startswith(f"{other}_") for m in rec["cluster"]["runner_up"]["markers"])
+        assert abs(rec["offset_ns"]) < 2 * MS  # one cable-synchronised station
+    res = runner.invoke(cli, ["process", "align", str(path), "--imu", "trunk"])
+    assert res.exit_code == 1 and "no marker moves like /imu/trunk" in res.output
+    assert len(res.output.strip().splitlines()) == 1
+    with TrialReader(path) as t:
+        assert t.metadata["imulog.alignment"]["imu"] == "/imu/upper_arm"  # the failed run wrote nothing

@@ -448,7 +448,8 @@ class AlignmentParams:
     O, X, Y as in the thesis) or ``svd`` (the ``markers`` given, >= 3; one marker aligns on its
     acceleration); ``markers`` names with or without the ``Subject:`` prefix; ``bias_min_static_s``: static
     periods (gyro norm < 0.1 rad/s) at least this long give the gyroscope bias removed before the rotation
-    fit. ``poor_*`` thresholds flag a poor alignment (``quality``).
+    fit. ``poor_*`` thresholds flag a poor alignment (``quality``); under ``min_valid_score`` there is no
+    alignment at all (the step fails and writes nothing).
     """
 
     window_s: float = 30.0
@@ -469,6 +470,7 @@ class AlignmentParams:
     window_lag_sd_s: float = 0.0005
     bias_min_static_s: float = 1.0
     search: SearchParams = SearchParams()
+    min_valid_score: float = 0.5
     poor_score: float = 0.8
     poor_spread_s: float = 0.003
     poor_min_windows: int = 3

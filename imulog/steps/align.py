@@ -177,6 +177,16 @@ def compute_alignment(
             else ""
         )
         raise ValueError(f"{marker_topic}: {exc}{hint}") from None
+    if float(record.get("score") or 0.0) < params.min_valid_score:
+        best = info.get("rejected_cluster") or {}
+        tried = (
+            f"best rigid set {','.join(best['markers'])} (vector match {best.get('vector_match')}), " if best else ""
+        )
+        raise ValueError(
+            f"{marker_topic}: no marker moves like /imu/{imu_name} ({tried}{','.join(info['markers'])}: correlation "
+            f"{float(record.get('score') or 0):.2f} < {params.min_valid_score:g}); did the IMU move? "
+            "name its markers with --cluster-markers"
+        )
     if ck is None:
         record["reference_marker"] = info["markers"][0]
     record = {"reference": marker_topic, "imu": f"/imu/{imu_name}", **record, "cluster": info}
