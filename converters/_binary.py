@@ -7,7 +7,7 @@ them into one :class:`imulog.model.Recording` (and a streaming writer can consum
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from datetime import UTC, datetime, timedelta
 
 import numpy as np
@@ -55,6 +55,81 @@ def time_zone_label(utc_offset_s: int | None) -> str:
     if utc_offset_s is None:
         return UNKNOWN_ZONE
     return "UTC" if utc_offset_s == 0 else format_offset(utc_offset_s)
+
+
+INLINE_FILL = 1 << 16  # NaN samples a gap may add to its own piece; longer gaps become pieces of their own
+FILL_PIECE = 1 << 20  # samples per NaN piece of a long gap
+
+
+def with_fills(
+    t: np.ndarray,
+    values: dict[str, np.ndarray | None],
+    positions: np.ndarray,
+    fill_t0: np.ndarray,
+    fill_n: np.ndarray,
+    step_ns: float,
+    *,
+    inline: int | None = None,
+    piece: int | None = None,
+) -> Iterator[tuple[np.ndarray, dict[str, np.ndarray | None]]]:
+    """Samples ``(t, values)`` with runs of NaN samples inserted, in time order, in bounded pieces.
+
+    Before sample ``positions[j]`` come ``fill_n[j]`` NaN samples at ``fill_t0[j] + round(k * step_ns)`` (the
+    caller makes them fit between the samples around them). A run of more than ``inline`` samples (default
+    ``INLINE_FILL``) is yielded as pieces of ``piece`` (``FILL_PIECE``) samples of its own, so memory stays
+    bounded whatever the gap; ``values`` entries that are None stay None.
+    """
+    inline = INLINE_FILL if inline is None else inline
+    piece = FILL_PIECE if piece is None else piece
+    keys = [k for k, v in values.items() if v is not None]
+    nones = {k: None for k, v in values.items() if v is None}
+    pending_t: list[np.ndarray] = []
+    pending_v: dict[str, list[np.ndarray]] = {k: [] for k in keys}
+
+    def nan_block(n: int) -> dict[str, np.ndarray]:
+        return {k: np.full((n, *values[k].shape[1:]), np.nan) for k in keys}  # type: ignore[union-attr]
+
+    def flush() -> tuple[np.ndarray, dict[str, np.ndarray | None]] | None:
+        if not pending_t:
+            return None
+        out = np.concatenate(pending_t), {**{k: np.concatenate(pending_v[k]) for k in keys}, **nones}
+        pending_t.clear()
+        for v in pending_v.values():
+            v.clear()
+        return out
+
+    cursor = 0
+    for j in range(len(positions)):
+        n = int(fill_n[j])
+        if n <= 0:
+            continue
+        stop = int(positions[j])
+        pending_t.append(t[cursor:stop])
+        for k in keys:
+            pending_v[k].append(values[k][cursor:stop])  # type: ignore[index]
+        cursor = stop
+        t0 = int(fill_t0[j])
+
+        def times(a: int, m: int, t0: int = t0) -> np.ndarray:
+            return t0 + np.round(np.arange(a, a + m, dtype=np.float64) * step_ns).astype(np.int64)
+
+        if n <= inline:
+            pending_t.append(times(0, n))
+            for k, block in nan_block(n).items():
+                pending_v[k].append(block)
+            continue
+        done = flush()
+        if done is not None:
+            yield done
+        for a in range(0, n, piece):
+            m = min(piece, n - a)
+            yield times(a, m), {**nan_block(m), **nones}
+    pending_t.append(t[cursor:])
+    for k in keys:
+        pending_v[k].append(values[k][cursor:])  # type: ignore[index]
+    done = flush()
+    if done is not None:
+        yield done
 
 
 def _cat(parts: list[np.ndarray | None]) -> np.ndarray | None:

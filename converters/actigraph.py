@@ -42,7 +42,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from converters._binary import NS_PER_S, concat_chunks, iso_from_epoch_ns, time_zone_label
+from converters._binary import NS_PER_S, concat_chunks, iso_from_epoch_ns, time_zone_label, with_fills
 from converters._common import G0, sanitize_name
 from converters.base import Converter, ConvertOptions
 from converters.errors import ConversionError
@@ -246,50 +246,16 @@ def with_gaps(
     before it, from second ``gap_first_s[r]`` (absolute, like the record time stamps); ``t`` is relative to
     ``origin_ns``. A gap of more than ``INLINE_FILL`` samples is yielded as pieces of ``FILL_PIECE`` samples.
     """
-    pending_t: list[np.ndarray] = []
-    pending_v: dict[str, list[np.ndarray]] = {k: [] for k, v in values.items() if v is not None}
-
-    def nan_block(n: int) -> dict[str, np.ndarray]:
-        return {k: np.full((n, *values[k].shape[1:]), np.nan) for k in pending_v}  # type: ignore[union-attr]
-
-    def flush() -> tuple[np.ndarray, dict[str, np.ndarray | None]] | None:
-        if not pending_t:
-            return None
-        out_t = np.concatenate(pending_t)
-        out_v: dict[str, np.ndarray | None] = {k: np.concatenate(v) for k, v in pending_v.items()}
-        out_v.update({k: None for k, v in values.items() if v is None})
-        pending_t.clear()
-        for v in pending_v.values():
-            v.clear()
-        return out_t, out_v
-
-    cursor = 0
-    for r in np.nonzero(gap_seconds > 0)[0]:
-        stop = int(first_sample[r])
-        pending_t.append(t[cursor:stop])
-        for k in pending_v:
-            pending_v[k].append(values[k][cursor:stop])  # type: ignore[index]
-        cursor = stop
-        n = int(gap_seconds[r]) * rate
-        first_s = int(gap_first_s[r])
-        if n <= INLINE_FILL:
-            pending_t.append(fill_times_ns(first_s, n, rate) - origin_ns)
-            for k, block in nan_block(n).items():
-                pending_v[k].append(block)
-            continue
-        piece = flush()
-        if piece is not None:
-            yield piece
-        for a in range(0, n, FILL_PIECE):
-            m = min(FILL_PIECE, n - a)
-            ft = fill_times_ns(first_s, a + m, rate)[a:] - origin_ns
-            yield ft, {**nan_block(m), **{k: None for k, v in values.items() if v is None}}
-    pending_t.append(t[cursor:])
-    for k in pending_v:
-        pending_v[k].append(values[k][cursor:])  # type: ignore[index]
-    piece = flush()
-    if piece is not None:
-        yield piece
+    return with_fills(
+        t,
+        values,
+        first_sample,
+        np.asarray(gap_first_s, dtype=np.int64) * NS_PER_S - origin_ns,
+        np.asarray(gap_seconds, dtype=np.int64) * rate,
+        NS_PER_S / rate,
+        inline=INLINE_FILL,
+        piece=FILL_PIECE,
+    )
 
 
 # ---------------------------------------------------------------------------------------------- record reading

@@ -14,7 +14,9 @@ Time: the RTC (``YYYYYYMM MMDDDDDh hhhhmmmm mmssssss``, year + 2000) is the devi
 A set top bit of ``deviceFractional`` gives 15 bits of fraction of that second; the device then lowered
 ``timestampOffset`` (the sample index where the RTC second applies) by ``fraction * rate``, which is added back.
 Block start = RTC + fraction - timestampOffset / rate; sample times are interpolated between consecutive block
-starts (nominal rate for the last block and across gaps). ``t_ns`` counts from the first sample, whose local time
+starts (nominal rate for the last block and across gaps); where the device paused (the next block more than two
+block durations later) the samples that would fit are NaN on the nominal grid (``gaps``, ``gap_samples`` in the
+device record), in bounded pieces. ``t_ns`` counts from the first sample, whose local time
 is the trial's ``start_time`` (zone unknown). Light (raw 10-bit counts), temperature (degC = raw * 75 / 256 - 50,
 OpenMovement's conversion; scikit-digital-health's (raw - 171) / 3.142 reads ~2 degC higher at skin temperature)
 and battery (V = (raw + 512) * 6 / 1024) become one row per block in ``/signals/<name>``.
@@ -32,7 +34,14 @@ from pathlib import Path
 
 import numpy as np
 
-from converters._binary import NS_PER_S, concat_chunks, days_from_civil, iso_from_epoch_ns, time_zone_label
+from converters._binary import (
+    NS_PER_S,
+    concat_chunks,
+    days_from_civil,
+    iso_from_epoch_ns,
+    time_zone_label,
+    with_fills,
+)
 from converters._common import G0, sanitize_name
 from converters.base import Converter, ConvertOptions
 from converters.errors import ConversionError
@@ -267,6 +276,36 @@ def sample_times_ns(starts: np.ndarray, next_start: int | None, counts: np.ndarr
     return starts[:, None] + (span[:, None] * k[None, :]) // counts[:, None]
 
 
+MAX_GAP_NS = 31 * 86400 * NS_PER_S  # a longer pause is a clock or file problem: refused
+
+
+def _gaps(
+    path: Path, starts: np.ndarray, next_start: int | None, counts: np.ndarray, rate_hz: np.ndarray, index: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the recording paused: (sample positions, first NaN time, NaN count) per block, as ``with_fills`` takes.
+
+    A block followed by the next one more than twice its nominal duration later ends a run; the samples that
+    would fit between its nominal end and the next block's start are missing (NaN on the nominal grid).
+    """
+    counts = np.asarray(counts, dtype=np.int64)
+    nominal = np.round(counts * NS_PER_S / rate_hz).astype(np.int64)
+    has_next = np.ones(len(starts), dtype=bool)
+    nxt = np.append(starts[1:], next_start if next_start is not None else 0)
+    has_next[-1] = next_start is not None
+    end = starts + nominal
+    pause = has_next & (nxt - starts >= 2 * nominal)
+    long = np.nonzero(pause & (nxt - end > MAX_GAP_NS))[0]
+    if len(long):
+        i = int(long[0])
+        raise ConversionError(
+            path,
+            f"data block {int(index[i]) + 1}: starts {int(nxt[i] - end[i]) / 86400e9:.0f} days after the previous "
+            "block: a device clock or file problem",
+        )
+    fill_n = np.where(pause, np.ceil((nxt - end) * rate_hz / NS_PER_S - 1e-9), 0).astype(np.int64)
+    return np.cumsum(counts), end, fill_n
+
+
 def iter_chunks(
     path: Path, options: ConvertOptions | None = None, blocks_per_chunk: int = BLOCKS_PER_CHUNK
 ) -> Iterator[Recording]:
@@ -313,6 +352,7 @@ def _decode_batches(
     origin: int | None = None
     meta: dict = {}
     prev_end: int | None = None
+    n_gaps = gap_samples = 0
     for first in range(0, n_blocks, blocks_per_chunk):
         stop = min(n_blocks, first + blocks_per_chunk)
         raw = _read_blocks(source, first, min(n_blocks, stop + 1) - first)  # one block ahead: its start time
@@ -349,14 +389,18 @@ def _decode_batches(
             raise ConversionError(path, f"data block {int(index[i])}: time stamp goes backwards")
         prev_end = int(t[-1])
         acc, gyr, mag = _decode(blocks, layout)
-        imu = ImuStream(
-            name=name,
-            t_ns=t - origin,
-            acc=acc[filled] * G0,
-            gyr=None if gyr is None else np.radians(gyr[filled]),
-            mag=None if mag is None else mag[filled],
-            meta=dict(meta),
-        )
+        values = {
+            "acc": acc[filled] * G0,
+            "gyr": None if gyr is None else np.radians(gyr[filled]),
+            "mag": None if mag is None else mag[filled],
+        }
+        positions, fill_t0, fill_n = _gaps(path, starts, ahead, counts, rate, index)
+        n_gaps += int(np.count_nonzero(fill_n))
+        gap_samples += int(fill_n.sum())
+        meta.update(gaps=n_gaps, gap_samples=gap_samples)
+        step_ns = NS_PER_S / float(rate[0])
+        pieces = with_fills(t - origin, values, positions, fill_t0 - origin, fill_n, step_ns)
+        imus = [ImuStream(name=name, t_ns=pt, meta=dict(meta), **pv) for pt, pv in pieces]
         signals = SignalStream(
             topic=f"/signals/{name}",
             t_ns=starts - origin,
@@ -370,13 +414,12 @@ def _decode_batches(
                 ]
             ),
         )
-        rec = Recording(imus=[imu], signals=[signals], sources=[str(path)])
-        rec.metadata[f"imulog.device.{name}"] = meta
-        rec.metadata["imulog.trial"] = {
-            "start_time": iso_from_epoch_ns(origin),
-            "time_zone": time_zone_label(None),
-        }
-        yield rec
+        trial = {"start_time": iso_from_epoch_ns(origin), "time_zone": time_zone_label(None)}
+        for i, part in enumerate(imus):
+            rec = Recording(imus=[part], signals=[signals] if i == 0 else [], sources=[str(path)])
+            rec.metadata[f"imulog.device.{name}"] = dict(meta)
+            rec.metadata["imulog.trial"] = dict(trial)
+            yield rec
     if origin is None:
         raise ConversionError(path, "no 'AX' data blocks")
 

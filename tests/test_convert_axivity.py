@@ -116,6 +116,29 @@ def test_partly_filled_last_block(cwa_dir: Path, tmp_path: Path):
     np.testing.assert_array_equal(part.t_ns, whole.t_ns[: len(part)])
 
 
+def test_a_pause_becomes_nan_samples(cwa_dir: Path, tmp_path: Path):
+    """Blocks missing from the middle (the device stopped for 20 s): the samples that would fit are NaN on the
+    nominal grid (the project's gap rule), the recorded samples are untouched."""
+    src = cwa_dir / "ax6_sample.cwa"
+    data = src.read_bytes()
+    cut = HEADER_BYTES + 100 * BLOCK_BYTES
+    path = tmp_path / "pause.cwa"
+    path.write_bytes(data[:cut] + data[cut + 50 * BLOCK_BYTES :])
+    whole = read_cwa(src).imus[0]
+    rec = read_cwa(path)
+    imu = rec.imus[0]
+    missing = np.isnan(imu.acc).any(axis=1)
+    run = np.nonzero(missing)[0]
+    assert len(run) and np.array_equal(run, np.arange(run[0], run[-1] + 1))  # one contiguous run
+    assert run[0] == 100 * 40 and abs(len(run) - 50 * 40) <= 40  # ~ the 2000 samples of 50 blocks at 100 Hz
+    assert np.all(np.diff(imu.t_ns) > 0)
+    np.testing.assert_array_equal(imu.acc[~missing], np.concatenate([whole.acc[:4000], whole.acc[6000:]]))
+    np.testing.assert_array_equal(imu.t_ns[~missing][4000:], whole.t_ns[6000:])
+    np.testing.assert_allclose(np.diff(imu.t_ns[run]), 1e7, atol=1)  # 100 Hz
+    dev = rec.metadata[f"imulog.device.{imu.name}"]
+    assert dev["gaps"] == 1 and dev["gap_samples"] == len(run)
+
+
 def _synthetic_cwa(tmp_path: Path, src: Path, axes_bps: int, count: int, values: np.ndarray, light: int) -> Path:
     """The real file's header and first two blocks, re-encoded with another sample format (checksums fixed)."""
     data = np.frombuffer(src.read_bytes(), dtype=np.uint8)
