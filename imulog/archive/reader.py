@@ -484,11 +484,32 @@ class TrialReader:
         meta = {"topic": topic, "schema": info.schema_name, **{k: info.metadata[k] for k in keep if k in info.metadata}}
         return table.replace_schema_metadata(meta)
 
-    def read_pandas(self, topic: str, start_ns: int | None = None, end_ns: int | None = None):
-        """The channel as a ``pandas.DataFrame`` with a ``t_ns`` column (or ``start_ns``/``end_ns``)."""
+    def read_pandas(
+        self, topic: str, start_ns: int | None = None, end_ns: int | None = None, *, clock: str | None = None
+    ):
+        """The channel as a ``pandas.DataFrame`` with a ``t_ns`` column (or ``start_ns``/``end_ns``).
+
+        ``clock="device"`` or ``"reference"``: indexed by time on that clock instead (wall-clock
+        ``time`` when the trial records a start time, else a TimedeltaIndex ``t`` from the trial's
+        start), through ``imulog.alignment``; see :func:`imulog.archive.display.frame_on_clock`.
+        """
+        if clock is not None:
+            from imulog.archive.display import frame_on_clock
+
+            return frame_on_clock(self, topic, clock, start_ns, end_ns)
         import pandas as pd
 
         return pd.DataFrame(self.read_columns(topic, start_ns, end_ns))
+
+    def __repr__(self) -> str:
+        from imulog.archive.display import trial_repr
+
+        return trial_repr(self)
+
+    def _repr_html_(self) -> str:
+        from imulog.archive.display import trial_html
+
+        return trial_html(self)
 
 
 def stream_columns(stream: Stream) -> dict[str, Any]:
