@@ -111,6 +111,11 @@ def test_quality_is_stored_and_shown_in_info_catalog_and_evaluate(processed):
     assert timing["low_confidence_repetitions"] == [q["repetition"] for q in quality if q["confidence"] < 0.5]
     assert all("forced" in row and "confidence" in row for row in timing["phases"])
 
+    from imulog.commands.phases import format_summary
+
+    summary = format_summary(timing)
+    assert f"{timing['n_forced_phases']} forced phases" in summary and str(timing["mean_confidence"]) in summary
+
     info = CliRunner().invoke(main, ["info", str(path)])
     assert info.exit_code == 0, info.output
     merged = sum(q["merged"] for q in quality)

@@ -43,11 +43,18 @@ def format_summary(timing: dict) -> str:
         lines.append(
             f"{row['repetition']:>4} {row['label']:<14} {row['start_s']:>9.3f} {row['end_s']:>9.3f} "
             f"{row['duration_s']:>7.3f} {row['peak_angular_velocity_rad_s']:>10.3f}"
+            + ("  forced" if row.get("forced") else "")
         )
         by_label.setdefault(row["label"], []).append(row["duration_s"])
     for label, durations in by_label.items():
         mean = sum(durations) / len(durations)
         lines.append(f"mean {label:<14} duration {mean:.3f} s over {len(durations)}")
+    low = timing.get("low_confidence_repetitions")
+    if timing.get("repetition_quality"):  # what event correction did (issue 19)
+        lines.append(
+            f"event correction: {timing.get('n_forced_phases', 0)} forced phases, confidence mean "
+            f"{timing.get('mean_confidence')}, below 0.5 in repetitions {', '.join(map(str, low)) or '-'}"
+        )
     return "\n".join(lines)
 
 
