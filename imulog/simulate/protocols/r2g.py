@@ -105,11 +105,12 @@ def _pose(
 
 
 def _varied(params: Params) -> bool:
+    """Any time-law or path variation on (ranges may arrive as lists, e.g. from ``--set name=[a,b]``)."""
     return (
-        params.rotation_onset_frac != (0.0, 0.0)
-        or params.rotation_end_frac != (1.0, 1.0)
-        or params.curve_m != (0.0, 0.0)
-        or params.submovements != (1, 1)
+        tuple(params.rotation_onset_frac) != (0.0, 0.0)
+        or tuple(params.rotation_end_frac) != (1.0, 1.0)
+        or tuple(params.curve_m) != (0.0, 0.0)
+        or tuple(params.submovements) != (1, 1)
         or params.pause_probability > 0
     )
 
@@ -194,7 +195,7 @@ def build(params: Params, subject_rng: np.random.Generator, rng: np.random.Gener
     mouth0 = np.array([anth["mouth_dx_m"], anth["h2_m"], anth["h3_m"]])
     # variation draws come from child streams, so the default trial's own draws never change
     vary_rng = np.random.default_rng(rng.bit_generator.seed_seq.spawn(1)[0]) if _varied(params) else None
-    moved = params.bottle_offset_m != (0.0, 0.0) or params.mouth_offset_m != (0.0, 0.0, 0.0)
+    moved = tuple(params.bottle_offset_m) != (0.0, 0.0) or tuple(params.mouth_offset_m) != (0.0, 0.0, 0.0)
     if params.placement_jitter_m > 0 or params.mouth_jitter_m > 0 or moved:
         place_rng = np.random.default_rng(rng.bit_generator.seed_seq.spawn(1)[0])
         shift = place_rng.normal(0.0, params.placement_jitter_m, 2) + np.asarray(params.bottle_offset_m)
