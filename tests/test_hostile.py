@@ -244,6 +244,7 @@ def craft(
     *,
     chunk: tuple[str, int, bytes] | None = None,
     duplicate_index: int = 0,
+    duplicate_metadata: int = 0,
     records: dict[str, dict[str, str]] | None = None,
     channel_meta: dict[str, str] | None = None,
 ) -> Path:
@@ -266,6 +267,7 @@ def craft(
         b.add_metadata("imulog.trial", encode_record({"subject": "S01", "task": "r2g", "repetitions": 2}))
         for name, items in (records or {}).items():
             b.add_metadata(name, items)
+        b.metadata_indexes += [b.metadata_indexes[-1]] * duplicate_metadata
         b.finish()
     return path
 
@@ -294,6 +296,9 @@ def crafted(tmp_path_factory) -> dict[str, Path]:
         "lz4 chunk declaring 1 KiB, holding 256 MiB": craft(tmp / "lz4lie.mcap", chunk=("lz4", 1024, zeros_256m)),
         "uncompressed chunk declaring 1 TiB": craft(tmp / "huge.mcap", chunk=("", 1 << 40, b"\0" * 64)),
         "100,000 index entries for one chunk": craft(tmp / "dup.mcap", duplicate_index=100_000),
+        "100,000 index entries for one 1 MB metadata record": craft(
+            tmp / "dupmeta.mcap", records={"imulog.notes": {"text": "x" * 1_000_000}}, duplicate_metadata=100_000
+        ),
         "deep JSON in a metadata record": craft(
             tmp / "deepmeta.mcap", records={"imulog.anthropometrics": {"_json": '["arm"]', "arm": DEEP}}
         ),

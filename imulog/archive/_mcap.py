@@ -504,6 +504,7 @@ class Summary:
     summary_offsets: list[tuple[int, int, int]] = field(default_factory=list)
     summary_records: list[tuple[int, int, int]] = field(default_factory=list)  # (opcode, offset, total length)
     duplicate_chunk_indexes: int = 0  # chunk index entries dropped because an earlier one names the same chunk
+    duplicate_record_indexes: int = 0  # attachment/metadata index entries dropped (same record indexed again)
 
 
 def read_summary(f: BinaryIO, file_size: int) -> Summary:
@@ -565,6 +566,7 @@ def _read_summary(f: BinaryIO, file_size: int) -> Summary:
     if summary_crc != 0 and summary_crc != computed:
         raise McapFormatError(f"summary CRC mismatch (stored {summary_crc:#010x}, computed {computed:#010x})")
     seen_chunks: set[int] = set()
+    seen_records: set[tuple[int, int]] = set()
     for op, rel, body in iter_records(section):
         s.summary_records.append((op, summary_start + rel, 9 + len(body)))
         if op == Op.SCHEMA:
@@ -583,10 +585,16 @@ def _read_summary(f: BinaryIO, file_size: int) -> Summary:
             ci = parse_chunk_index(body)
             seen_chunks.add(ci.chunk_start_offset)
             s.chunk_indexes.append(ci)
-        elif op == Op.ATTACHMENT_INDEX:
-            s.attachment_indexes.append(parse_attachment_index(body))
-        elif op == Op.METADATA_INDEX:
-            s.metadata_indexes.append(parse_metadata_index(body))
+        elif op in (Op.ATTACHMENT_INDEX, Op.METADATA_INDEX):
+            offset = _Q.unpack_from(body, 0)[0] if len(body) >= 8 else -1
+            if (op, offset) in seen_records:  # each attachment / metadata record is read once
+                s.duplicate_record_indexes += 1
+                continue
+            seen_records.add((op, offset))
+            if op == Op.ATTACHMENT_INDEX:
+                s.attachment_indexes.append(parse_attachment_index(body))
+            else:
+                s.metadata_indexes.append(parse_metadata_index(body))
         elif op == Op.SUMMARY_OFFSET:
             if len(body) < 17:
                 raise McapFormatError("summary offset record too short")

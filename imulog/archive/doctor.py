@@ -335,6 +335,11 @@ def check_file(path: str | os.PathLike[str], *, decode: bool = True, progress: P
             report.fail(str(exc) if isinstance(exc, m.McapFormatError) else f"unreadable summary ({exc})")
             return report
         report.checks.append("magic, footer and summary CRC ok")
+        if summary.duplicate_record_indexes:
+            report.fail(
+                f"summary indexes the same attachment or metadata record more than once "
+                f"({summary.duplicate_record_indexes} extra entries)"
+            )
         if summary.duplicate_chunk_indexes:
             report.fail(
                 f"summary indexes the same chunk more than once ({summary.duplicate_chunk_indexes} extra entries)"
