@@ -1,7 +1,7 @@
 """Screenshot of a trial opened by Rerun's own MCAP loader (no imulog code in the viewer path).
 
     imulog demo -o demo-output
-    python docs/loader_screenshot.py demo-output/trial.mcap -o docs/rerun_mcap_loader.png
+    python docs/loader_screenshot.py demo-output/trial.mcap --start 100 --seconds 40 -o docs/rerun_mcap_loader.png
 
 Converts the trial with the ``rerun`` executable shipped in rerun-sdk (``rerun mcap convert``: Rerun's own
 MCAP loader; the viewer twins under ``/derived/viewer/`` become Scalars plots, Points3D, Transform3D and
@@ -61,13 +61,33 @@ async def _shoot(ws_url: str, png: Path, wait_s: float) -> None:
     ws.close()
 
 
+def _log_time_range(trial: Path, start_s: float, seconds: float | None) -> list[str]:
+    """``--start-time/--end-time`` for ``rerun mcap convert``: a window of the file's log times (mcap summary)."""
+    if seconds is None:
+        return []
+    from mcap.reader import make_reader
+
+    with open(trial, "rb") as f:
+        stats = make_reader(f).get_summary().statistics
+    t0 = stats.message_start_time + int(start_s * 1e9)
+    return ["--start-time", f"{t0}ns", "--end-time", f"{t0 + int(seconds * 1e9)}ns"]
+
+
 def screenshot(
-    trial: Path, png: Path, *, topics: str = "^/derived/viewer/", wait_s: float = 30.0, size: str = "1600,1000"
+    trial: Path,
+    png: Path,
+    *,
+    topics: str = "^/derived/viewer/",
+    start_s: float = 0.0,
+    seconds: float | None = None,
+    wait_s: float = 30.0,
+    size: str = "1600,1000",
 ) -> Path:
     """Open ``trial`` with ``rerun --web-viewer`` in headless chromium and save a PNG of the page.
 
     ``topics``: a regex of the MCAP topics Rerun imports (``rerun mcap convert -y``; "" for all); the
-    default is the viewer twins, what a Rerun user opens (docs/schemas.md).
+    default is the viewer twins, what a Rerun user opens (docs/schemas.md). ``start_s``/``seconds``: import
+    only that window of log time (the whole file when ``seconds`` is None).
     """
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if chromium is None:
@@ -75,7 +95,7 @@ def screenshot(
     web, grpc, devtools = _free_port(), _free_port(), _free_port()
     work = Path(tempfile.mkdtemp())
     rrd = work / "trial.rrd"  # Rerun's own MCAP import, done once ahead (the page then loads in seconds)
-    select = ["-y", topics] if topics else []
+    select = (["-y", topics] if topics else []) + _log_time_range(trial, start_s, seconds)
     subprocess.run(
         [_rerun_exe(), "mcap", "convert", str(trial), *select, "-o", str(rrd)], check=True, capture_output=True
     )
@@ -129,9 +149,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("trial", type=Path, help="a processed trial, e.g. demo-output/trial.mcap (imulog demo)")
     parser.add_argument("-o", "--output", type=Path, default=Path("docs/rerun_mcap_loader.png"))
     parser.add_argument("--topics", default="^/derived/viewer/", help='regex of topics to import ("" for all)')
+    parser.add_argument("--start", type=float, default=0.0, help="window start, s after the file's first message")
+    parser.add_argument("--seconds", type=float, default=None, help="window length in s (default: the whole file)")
     parser.add_argument("--wait", type=float, default=30.0, help="seconds to let the viewer load before the shot")
     args = parser.parse_args(argv)
-    print(screenshot(args.trial, args.output, topics=args.topics, wait_s=args.wait))
+    print(
+        screenshot(
+            args.trial, args.output, topics=args.topics, start_s=args.start, seconds=args.seconds, wait_s=args.wait
+        )
+    )
     return 0
 
 

@@ -43,12 +43,19 @@ def test_rerun_summary_lists_every_channel_with_schema_and_count(trial):
         "imulog.ImuBlock",
         int(np.ceil((rec.imus[0].t_ns[-1] - rec.imus[0].t_ns[0]) / 1e9 + 1e-9)),
     )
-    assert seen["/poses/cluster"] == ("foxglove.PoseInFrame", len(rec.poses[0]))
+    assert seen["/poses/cluster"] == (
+        "imulog.PoseBlock",
+        int(np.ceil((rec.poses[0].t_ns[-1] - rec.poses[0].t_ns[0]) / 1e9 + 1e-9)),
+    )
+    assert seen["/derived/viewer/poses/cluster"][0] == "foxglove.FrameTransform"
     assert seen["/events/c3d"] == ("imulog.IntervalEvent", 3)
     assert seen["/derived/orientation/wrist"][0] == "imulog.SignalBlock"
-    assert set(seen) == {s.topic for s in rec.streams()} | {"/derived/orientation/wrist"}
-    # imulog.trial, imulog.anthropometrics, imulog.device.wrist, imulog.device.chest, imulog.raw, imulog.run.1
-    assert info.metadata_count == 6
+    assert {t for t in seen if not t.startswith("/derived/viewer/")} == {s.topic for s in rec.streams()} | {
+        "/derived/orientation/wrist"
+    }
+    # imulog.trial, imulog.anthropometrics, imulog.device.wrist, imulog.device.chest, imulog.timeline, imulog.raw,
+    # imulog.run.1
+    assert info.metadata_count == 7
     assert info.attachment_count == 0
 
 
@@ -66,18 +73,21 @@ def test_rerun_decodes_blocks_and_draws_foxglove_poses(trial):
         for row in rb.column("imulog.ImuBlock:message").to_pylist()
     ]
     assert sum(b[0]["count"] for b in blocks) == len(rec.imus[0])
-    t = np.frombuffer(b"".join(b[0]["t_ns"] for b in blocks), "<i8")
+    # packed repeated numbers: Rerun's protobuf reflection gives lists of numbers, not Binary
+    t = np.concatenate([np.asarray(b[0]["t_ns"], dtype=np.int64) for b in blocks])
     assert np.array_equal(t, rec.imus[0].t_ns)
-    # foxglove.PoseInFrame is recognised and drawn as a 3D pose (Rerun stores float32)
+    # the pose channel's viewer twin (foxglove.FrameTransform) is drawn as a Transform3D (float32)
     translations = [
         row
-        for rb in ents["/poses/cluster"]
-        if "InstancePoses3D:translations" in rb.schema.names
-        for row in rb.column("InstancePoses3D:translations").to_pylist()
+        for rb in ents["/derived/viewer/poses/cluster"]
+        if "Transform3D:translation" in rb.schema.names
+        for row in rb.column("Transform3D:translation").to_pylist()
     ]
-    assert len(translations) == len(rec.poses[0])
+    keep = np.arange(0, len(rec.poses[0]), 2)  # 100 Hz -> the twins' 50 Hz
+    good = np.isfinite(rec.poses[0].position[keep]).all(axis=1)
+    assert len(translations) == int(good.sum())
     got = np.array([r[0] for r in translations], dtype=np.float64)
-    want = rec.poses[0].position.astype(np.float32).astype(np.float64)
+    want = rec.poses[0].position[keep][good].astype(np.float32).astype(np.float64)
     assert np.array_equal(np.isnan(got), np.isnan(want))
     assert np.allclose(got[~np.isnan(got)], want[~np.isnan(want)])
     meta_cols = {n for rb in ents["/__mcap_metadata"] for n in rb.schema.names}

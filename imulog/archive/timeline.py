@@ -222,10 +222,11 @@ class TrialAxis:
     def describe(self) -> str:
         """One line for ``imulog info``."""
         if not self.timeline:
-            return "log time = device time (file written before imulog.timeline)"
-        aligned = (
-            "aligned (reference channels written after align follow the alignment)"
-            if self.alignment
-            else ("not aligned (each clock from its own first sample)")
-        )
-        return f"starts {self.timeline.get('epoch')} ({self.timeline.get('source')}); clocks {self.timeline.get('clocks')}, {aligned}"
+            return "log time = sample time (file written before imulog.timeline)"
+        if self.timeline.get("clocks") == "shared":
+            how = "IMU and reference share one clock and one origin"
+        elif self.alignment:
+            how = "IMU clock from its first sample; reference channels written after align follow the alignment"
+        else:
+            how = "not aligned: IMU and reference clocks each from their own first sample"
+        return f"starts {self.timeline.get('epoch')} ({self.timeline.get('source')}); {how}"

@@ -182,6 +182,7 @@ def marker_twin(stream: MarkerStream, log_map: LogMap) -> Twin:
     fields = [fld(name=axis, offset=8 * k, type=fld.FLOAT64) for k, axis in enumerate("xyz")]
     stamps = log_map(stream.t_ns[keep])
     msg = PointCloud_pb2.PointCloud(frame_id=stream.frame_id, point_stride=24, fields=fields)
+    msg.pose.position.SetInParent()  # an empty Pose makes Rerun 0.41 write null translations
     msg.pose.orientation.w = 1.0
     ok = np.asarray(stream.valid, dtype=bool) & np.isfinite(stream.pos).all(axis=2)
     for i, stamp in zip(keep.tolist(), stamps.tolist(), strict=True):
@@ -281,6 +282,7 @@ def axes_twin(
     cloud = np.zeros(len(local), dtype=point)
     cloud["rgba"] = np.repeat(np.array(_AXIS_RGBA, dtype=np.uint8), AXIS_POINTS, axis=0)
     msg = PointCloud_pb2.PointCloud(frame_id="world", point_stride=point.itemsize, fields=fields)
+    msg.pose.position.SetInParent()  # an empty Pose makes Rerun 0.41 write null translations
     msg.pose.orientation.w = 1.0
     good = np.isfinite(q).all(axis=1) & np.isfinite(p).all(axis=1)
     stamps = log_map(stream.t_ns[keep])

@@ -195,6 +195,9 @@ def info(file: str, as_json: bool) -> None:
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     for r in rows:
         click.echo("  " + "  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)).rstrip())
+    from imulog.archive.timeline import TrialAxis
+
+    click.echo(f"time axis (MCAP log time): {TrialAxis(data['metadata']).describe()}")
     click.echo("metadata:")
     for name, values in data["metadata"].items():
         shown = ", ".join(f"{k}={v}" if isinstance(v, str) else f"{k}={json.dumps(v)}" for k, v in values.items())
