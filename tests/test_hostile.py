@@ -329,9 +329,13 @@ def test_crafted_files_stay_bounded_and_give_one_line_errors(crafted, tmp_path):
             jobs.append(["view", str(path), "--save", str(tmp_path / f"{path.stem}.rrd")])
         if kind.startswith(("deep JSON in a run", "run outputs")):
             jobs.append(["info", "--json", str(path)])
+        jobs.append(["salvage", str(path), "-o", str(tmp_path / f"salvaged_{path.name}")])
+    jobs.append(["catalog", str(next(iter(crafted.values())).parent), "-o", str(tmp_path / "catalog.parquet"), "-q"])
     results, rss = run_commands(jobs, tmp_path)
     by_file = {str(p): k for k, p in crafted.items()}
     crafted_dir = next(iter(crafted.values())).parent
+    *results, catalog = results
+    assert_clean(catalog)  # one bad trial must not stop (or crash) the catalog of the others
     for r in results:
         assert_clean(r)
         kind = by_file[next(str(crafted_dir / Path(a).name) for a in r["args"] if a.endswith(".mcap"))]
