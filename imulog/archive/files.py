@@ -49,7 +49,15 @@ def step_lock(path: str | os.PathLike[str], step: str, timeout_s: float = 3600.0
     date instead of computing it again. The kernel releases the lock if the holder dies.
     """
     path = Path(path)
-    with _flock(step_lock_path(path, step), path, timeout_s, what=f"step {step!r} of"):
+    lp = step_lock_path(path, step)
+    try:
+        os.close(os.open(lp, os.O_RDWR | os.O_CREAT, 0o644))
+    except OSError as exc:
+        if exc.errno not in (errno.EACCES, errno.EPERM, errno.EROFS):
+            raise
+        yield  # a read-only folder: nothing can be written anyway, so there is no race to prevent
+        return
+    with _flock(lp, path, timeout_s, what=f"step {step!r} of"):
         yield
 
 
