@@ -440,7 +440,8 @@ class AlignmentParams:
     ``window_s`` (30 s) window across the trial, starting ``window_start_s`` after the reference's first
     sample, each searched +-``fine_lag_s`` around the coarse lag on a ``grid_hz`` grid; windows scoring under
     ``min_window_score`` or without movement (reference signal sd under ``min_window_activity``, in the
-    signal's unit) are left out; with ``drift`` (default) a straight line offset + drift x time is fitted
+    signal's unit: ``min_window_activity`` rad/s for angular velocity, ``min_window_activity_mps2`` m/s^2 for
+    a marker's acceleration) are left out; with ``drift`` (default) a straight line offset + drift x time is fitted
     to the windows (outliers beyond ``outlier_k`` robust sd and ``outlier_floor_s`` rejected), else their
     median offset is used. The uncertainties pool the windows' scatter with ``window_lag_sd_s`` (0.5 ms, the
     per-window lag scatter of simulated trials) counted as two windows. ``filter``: marker low-pass (6 Hz, 2nd order); ``cluster``: ``auto`` (search the
@@ -465,6 +466,7 @@ class AlignmentParams:
     fine_lag_s: float = 0.5
     min_window_score: float = 0.5
     min_window_activity: float = 0.05
+    min_window_activity_mps2: float = 0.1
     outlier_k: float = 4.0
     outlier_floor_s: float = 0.002
     window_lag_sd_s: float = 0.0005
@@ -495,6 +497,15 @@ def _fit_line(
     return a, b, sd / np.sqrt(n), sd / np.sqrt(np.sum(t_s**2)), sd
 
 
+def _theil_sen(t_s: np.ndarray, y_s: np.ndarray) -> tuple[float, float]:
+    """Robust line ``y = a + b t``: b the median of the pairwise slopes, a the median of ``y - b t``."""
+    i, j = np.triu_indices(len(t_s), k=1)
+    dt = t_s[j] - t_s[i]
+    ok = dt != 0
+    b = float(np.median((y_s[j] - y_s[i])[ok] / dt[ok])) if ok.any() else 0.0
+    return float(np.median(y_s - b * t_s)), b
+
+
 def fit_clock(
     t_dev_ns: np.ndarray,
     x_dev: np.ndarray,
@@ -502,8 +513,12 @@ def fit_clock(
     x_ref: np.ndarray,
     params: AlignmentParams = AlignmentParams(),
     coarse_offset_ns: int | None = None,
+    min_activity: float | None = None,
 ) -> dict:
     """Clock offset and drift from two signals that should match (e.g. angular-velocity norms).
+
+    ``min_activity`` (default ``params.min_window_activity``): windows whose reference signal varies less
+    (sd, the signal's unit) are left out.
 
     ``x_dev`` on the device clock, ``x_ref`` on the reference clock. Returns the clock fields of
     ``imulog.alignment``: ``offset_ns`` (at ``t0_ns``), ``drift_ppm``, ``t0_ns`` (device time of the mean
@@ -556,7 +571,7 @@ def fit_clock(
             windows.append(w)
             continue
         w.update(t_dev_center_ns=est.t_dev_center_ns, offset_ns=est.offset_ns, score=round(est.score, 4))
-        if activity < params.min_window_activity:
+        if activity < (params.min_window_activity if min_activity is None else min_activity):
             w["why"] = "no movement"
         elif est.score < params.min_window_score:
             w["why"] = "low score"
@@ -588,9 +603,11 @@ def fit_clock(
     ts = (tc - t0) / NS
     ys = (off - off[0]) / NS  # s, relative (float precision)
     can_drift = params.drift and len(used) >= 3 and np.ptp(ts) >= 1.5 * width
-    for _ in range(3):
+    for it in range(3):
         if can_drift and keep.sum() >= 3:
-            a, b, se_a, se_b, _ = _fit_line(ts[keep], ys[keep])
+            # first pass Theil-Sen (median of pairwise slopes): one bad window at an end of the trial has the
+            # leverage to tilt a least-squares line towards itself and hide from the outlier test
+            a, b = _theil_sen(ts[keep], ys[keep]) if it == 0 else _fit_line(ts[keep], ys[keep])[:2]
         else:
             a, b = float(np.median(ys[keep])), 0.0
         r = ys - a - b * ts
@@ -756,11 +773,19 @@ def kinematics_from_filtered(
 
 
 def _interp_rows(t_src: np.ndarray, x: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
+    """Linear interpolation of the finite rows of ``x`` at ``t_dst``; NaN outside and across gaps longer
+    than three median sample intervals (missing samples are not bridged)."""
     out = np.full((len(t_dst), x.shape[1]), np.nan)
     ok = np.all(np.isfinite(x), axis=1)
+    if ok.sum() < 2:
+        return out
     ts = t_src[ok].astype(np.float64)
+    td = np.asarray(t_dst, dtype=np.float64)
     for c in range(x.shape[1]):
-        out[:, c] = np.interp(t_dst.astype(np.float64), ts, x[ok, c], left=np.nan, right=np.nan)
+        out[:, c] = np.interp(td, ts, x[ok, c], left=np.nan, right=np.nan)
+    step = np.diff(ts)
+    k = np.clip(np.searchsorted(ts, td), 1, len(ts) - 1)
+    out[(ts[k] - ts[k - 1]) > 3 * np.median(step)] = np.nan
     return out
 
 
@@ -833,6 +858,37 @@ def align(
     return result
 
 
+def fit_norm_correction(
+    a_dev: np.ndarray,
+    t_dev_on_ref_ns: np.ndarray,
+    norm_ref: np.ndarray,
+    t_ref_ns: np.ndarray,
+    max_samples: int = 20000,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Per-axis bias (m/s^2) and scale of an accelerometer such that ``|scale * (a - bias)|`` matches the
+    marker's specific-force norm ``norm_ref`` on the time-aligned samples (least squares; bias within
+    +-3 m/s^2, scale 0.8-1.2). None when there are too few samples or the fit does not reduce the misfit
+    by at least 10 %."""
+    from scipy.optimize import least_squares
+
+    at = _interp_rows(np.asarray(t_dev_on_ref_ns, dtype=np.int64), np.asarray(a_dev, dtype=np.float64), t_ref_ns)
+    ok = np.all(np.isfinite(at), axis=1) & np.isfinite(norm_ref)
+    idx = np.flatnonzero(ok)
+    if len(idx) < 100:
+        return None
+    idx = idx[np.unique(np.linspace(0, len(idx) - 1, min(len(idx), max_samples)).astype(int))]
+    a, m = at[idx], norm_ref[idx]
+
+    def resid(p: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(p[3:] * (a - p[:3]), axis=1) - m
+
+    x0 = np.array([0.0, 0.0, 0.0, 1.0, 1.0, 1.0])
+    fit = least_squares(resid, x0, bounds=([-3, -3, -3, 0.8, 0.8, 0.8], [3, 3, 3, 1.2, 1.2, 1.2]))
+    if not fit.success or np.sum(fit.fun**2) > 0.81 * np.sum(resid(x0) ** 2):
+        return None
+    return fit.x[:3], fit.x[3:]
+
+
 def align_marker(
     t_imu_ns: np.ndarray,
     acc_mps2: np.ndarray,
@@ -869,7 +925,17 @@ def align_marker(
         a_dev = lowpass_vector(acc_mps2, imu_rate, params.filter.cutoff_hz, params.filter.order)
         n_ref = acceleration_norm(filt, rate_hz, None if vertical is None else np.asarray(vertical, dtype=np.float64))
     n_ref[~trusted] = np.nan
-    result = fit_clock(t_src, np.linalg.norm(a_dev, axis=1), t_ref_ns, n_ref, params, coarse_offset_ns)
+    act = params.min_window_activity_mps2
+    result = fit_clock(t_src, np.linalg.norm(a_dev, axis=1), t_ref_ns, n_ref, params, coarse_offset_ns, act)
+    if acc_global is None:
+        # the accelerometer's bias and scale errors change |acc| with the orientation, in step with the
+        # movement: fit them to the marker's specific force on the aligned samples, then align again
+        fix = fit_norm_correction(a_dev, device_to_reference(t_src, result), n_ref, np.asarray(t_ref_ns, np.int64))
+        if fix is not None:
+            bias, scale = fix
+            corrected = np.linalg.norm(scale * (a_dev - bias), axis=1)
+            result = fit_clock(t_src, corrected, t_ref_ns, n_ref, params, result["offset_ns"], act)
+            result["acc_correction"] = {"bias_mps2": [float(v) for v in bias], "scale": [float(v) for v in scale]}
     result["signal"] = "marker-acceleration"
     result["vertical"] = None if acc_global is not None or vertical is None else [float(v) for v in vertical]
     result["rotation_imu_to_cluster"] = None

@@ -249,7 +249,8 @@ def away_from_gaps(missing: np.ndarray, rate_hz: float, margin_s: float = 0.2) -
 
 
 def lowpass_vector(x: np.ndarray, rate_hz: float, cutoff_hz: float, order: int = 2) -> np.ndarray:
-    """Zero-phase Butterworth low-pass of (N, D) samples, NaN rows bridged linearly (for the IMU side)."""
+    """Zero-phase Butterworth low-pass of (N, D) samples (the IMU side); NaN rows are bridged linearly for the
+    filter, and the output is NaN there and 0.2 s around them."""
     a = np.asarray(x, dtype=np.float64)
     ok = np.all(np.isfinite(a), axis=1)
     if ok.sum() < 10:
@@ -260,7 +261,7 @@ def lowpass_vector(x: np.ndarray, rate_hz: float, cutoff_hz: float, order: int =
 
     sos = signal.butter(order, min(cutoff_hz, 0.45 * rate_hz), fs=rate_hz, output="sos")
     out = signal.sosfiltfilt(sos, filled, axis=0)
-    out[~ok] = np.nan
+    out[~away_from_gaps(~ok, rate_hz)] = np.nan  # the bridge and the filter's response to it
     return out
 
 
