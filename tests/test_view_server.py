@@ -46,3 +46,31 @@ def test_busy_port_is_a_one_line_error(tmp_path, monkeypatch):
     message = result.output.strip().splitlines()
     assert message[-1].startswith("Error: web viewer port") and "--port" in message[-1], result.output
     assert "Traceback" not in result.output
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="PR_SET_PDEATHSIG is Linux's")
+def test_killed_viewer_leaves_no_server(tmp_path):
+    """SIGKILL of `imulog view --web` (a timeout, a closed terminal) takes its Rerun server with it."""
+    import os
+    import signal
+    import time
+
+    web, grpc = free_port(), free_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "imulog", "view", "--sample", "2", "--web", "--port", str(web), "--grpc-port", str(grpc)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+        cwd=tmp_path,
+    )
+    try:
+        line = proc.stdout.readline()
+        assert line.startswith("Rerun web viewer:"), line
+        assert _listening_addresses(web)
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(10)
+    deadline = time.monotonic() + 10
+    while _listening_addresses(web) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not _listening_addresses(web) and not _listening_addresses(grpc)

@@ -83,6 +83,17 @@ def grpc_uri(grpc_port: int, host: str = LOCALHOST) -> str:
     return f"rerun+http://{host}:{grpc_port}/proxy"
 
 
+def _die_with_parent() -> None:
+    """In the server's child process (Linux): be sent SIGTERM when imulog exits, even when it is killed, so a
+    killed ``imulog view --web`` never leaves a server running."""
+    import contextlib
+    import ctypes
+    import signal
+
+    with contextlib.suppress(OSError):
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
+
+
 def rerun_executable() -> Path:
     """The ``rerun`` binary shipped inside the rerun-sdk wheel (``RERUN_CLI_PATH`` overrides)."""
     if "RERUN_CLI_PATH" in os.environ:
@@ -129,7 +140,14 @@ def start_web_server(
     ]
     env = {**os.environ, "RERUN_ANALYTICS": "0"}
     log = tempfile.TemporaryFile()  # noqa: SIM115 - lives as long as the server; a pipe could fill and block it
-    process = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=log, env=env)
+    process = subprocess.Popen(
+        cmd,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=log,
+        env=env,
+        preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,
+    )
     deadline = time.monotonic() + timeout_s
     while not (_port_open(host, web_port) and _port_open(host, grpc_port)):
         if process.poll() is not None:
