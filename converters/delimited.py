@@ -383,6 +383,7 @@ def resolve_inferred(
     from converters import plausibility as plaus
 
     notes: list[str] = []
+    t_ns, (values,) = plaus.excerpts(t_ns, values)  # long recordings: judged on evenly spread excerpts
     auto = [c for c in layout.columns if c.quantity == "auto"]
     name_q = _group_quantity(path.stem) or _quantity_of(_tokens(path.stem))[0]
     triples = _triples(auto)

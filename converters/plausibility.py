@@ -65,27 +65,67 @@ def _rate_hz(t_ns: np.ndarray) -> float:
     return 1e9 / float(np.median(dt)) if len(dt) else 100.0
 
 
-def rest_windows(acc: np.ndarray, t_ns: np.ndarray, window_s: float = REST_WINDOW_S) -> list[slice]:
-    """Windows of about ``window_s`` where every accelerometer axis varies by under 2 % of the norm (any unit)."""
+def _rest_index(acc: np.ndarray, t_ns: np.ndarray, window_s: float) -> tuple[int, np.ndarray]:
+    """(window length in samples, indices of the rest windows) of consecutive windows of about ``window_s``."""
     a = np.asarray(acc, dtype=np.float64)
     n = max(3, int(round(window_s * _rate_hz(t_ns))))
-    out = []
-    for i in range(0, len(a) - n + 1, n):
-        w = a[i : i + n]
-        if not np.isfinite(w).all():
+    m = len(a) // n
+    if m == 0:
+        return n, np.zeros(0, dtype=np.int64)
+    w = a[: m * n].reshape(m, n, a.shape[1])
+    with np.errstate(invalid="ignore"):
+        norm = np.linalg.norm(w.mean(axis=1), axis=1)
+        ok = np.isfinite(w).all(axis=(1, 2)) & (norm > 0) & (w.std(axis=1).max(axis=1) < REST_REL_STD * norm)
+    return n, np.flatnonzero(ok)
+
+
+def _window_means(x: np.ndarray, n: int, index: np.ndarray) -> np.ndarray:
+    """(len(index), C) means of the windows ``index`` of length ``n``."""
+    a = np.asarray(x, dtype=np.float64)
+    m = len(a) // n
+    return a[: m * n].reshape(m, n, a.shape[1])[index].mean(axis=1)
+
+
+def rest_windows(acc: np.ndarray, t_ns: np.ndarray, window_s: float = REST_WINDOW_S) -> list[slice]:
+    """Windows of about ``window_s`` where every accelerometer axis varies by under 2 % of the norm (any unit)."""
+    n, index = _rest_index(acc, t_ns, window_s)
+    return [slice(int(i) * n, (int(i) + 1) * n) for i in index]
+
+
+MAX_CHECK_SAMPLES = 300_000  # longer recordings are checked on evenly spread excerpts (cost, memory)
+EXCERPT_S = 60.0
+
+
+def excerpts(t_ns: np.ndarray, *arrays: np.ndarray | None) -> tuple[np.ndarray, list[np.ndarray | None]]:
+    """At most :data:`MAX_CHECK_SAMPLES` samples of long recordings: evenly spread 60 s excerpts, each followed
+    by a NaN row (so no window, gradient or moving average spans two excerpts). Short recordings as they are."""
+    n = len(t_ns)
+    if n <= MAX_CHECK_SAMPLES:
+        return np.asarray(t_ns), list(arrays)
+    block = max(10, int(EXCERPT_S * _rate_hz(t_ns[: min(n, 10_000)])))
+    k = max(1, MAX_CHECK_SAMPLES // (block + 1))
+    starts = np.linspace(0, n - block, k).astype(np.int64)
+    idx = np.concatenate([np.arange(s0, s0 + block) for s0 in starts])
+    gap = np.cumsum(np.r_[0, np.diff(idx) > 1])  # excerpt number of each index
+    cut = np.flatnonzero(np.diff(gap)) + 1
+    t = np.insert(np.asarray(t_ns)[idx], cut, 0)
+    t[cut + np.arange(len(cut))] = t[cut + np.arange(len(cut)) - 1] + 1  # keeps time increasing at the NaN rows
+    out: list[np.ndarray | None] = []
+    for a in arrays:
+        if a is None:
+            out.append(None)
             continue
-        norm = float(np.linalg.norm(w.mean(axis=0)))
-        if norm > 0 and float(w.std(axis=0).max()) < REST_REL_STD * norm:
-            out.append(slice(i, i + n))
-    return out
+        x = np.asarray(a, dtype=np.float64)[idx]
+        out.append(np.insert(x, cut, np.nan, axis=0))
+    return t, out
 
 
 def rest_acc_norm(acc: np.ndarray, t_ns: np.ndarray) -> tuple[float, bool]:
     """(median accelerometer norm at rest, True if rest windows were found) in the array's own unit."""
     a = np.asarray(acc, dtype=np.float64)
-    windows = rest_windows(a, t_ns)
-    if windows:
-        return float(np.median([np.linalg.norm(a[w].mean(axis=0)) for w in windows])), True
+    n, index = _rest_index(a, t_ns, REST_WINDOW_S)
+    if len(index):
+        return float(np.median(np.linalg.norm(_window_means(a, n, index), axis=1))), True
     return float(np.nanmedian(np.linalg.norm(a, axis=1))), False
 
 
@@ -108,17 +148,15 @@ def gyro_peak(gyr: np.ndarray) -> float:
 
 def gyro_rate_at_rest(gyr: np.ndarray, acc: np.ndarray, t_ns: np.ndarray) -> float | None:
     """Median over rest windows of |mean gyroscope component perpendicular to gravity| (gyro's unit), or None."""
-    windows = rest_windows(acc, t_ns)
-    if not windows:
+    n, index = _rest_index(acc, t_ns, REST_WINDOW_S)
+    if not len(index):
         return None
-    out = []
-    for w in windows:
-        u = np.asarray(acc[w], dtype=np.float64).mean(axis=0)
-        u = u / np.linalg.norm(u)
-        g = np.asarray(gyr[w], dtype=np.float64).mean(axis=0)
-        if np.isfinite(g).all():
-            out.append(float(np.linalg.norm(g - (g @ u) * u)))
-    return float(np.median(out)) if out else None
+    u = _window_means(acc, n, index)
+    u = u / np.linalg.norm(u, axis=1)[:, None]
+    g = _window_means(gyr, n, index)
+    perp = np.linalg.norm(g - np.sum(g * u, axis=1)[:, None] * u, axis=1)
+    perp = perp[np.isfinite(perp)]
+    return float(np.median(perp)) if len(perp) else None
 
 
 def gyro_tilt_ratio(gyr: np.ndarray, acc: np.ndarray, t_ns: np.ndarray, min_tilt_rad_s: float = 0.15) -> float | None:
@@ -172,7 +210,8 @@ def infer_gyr_unit(gyr: np.ndarray, acc: np.ndarray | None, t_ns: np.ndarray) ->
 
 # --------------------------------------------------------------------------------- checks after conversion
 def imu_warnings(topic: str, acc: np.ndarray | None, gyr: np.ndarray | None, t_ns: np.ndarray) -> list[str]:
-    """One line per implausible IMU channel (values already in m/s^2 and rad/s)."""
+    """One line per implausible IMU channel (values already in m/s^2 and rad/s; long recordings on excerpts)."""
+    t_ns, (acc, gyr) = excerpts(t_ns, acc, gyr)
     out = []
     if acc is not None and len(acc) > 2 and np.isfinite(acc).any():
         norm, at_rest = rest_acc_norm(acc, t_ns)

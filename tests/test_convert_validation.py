@@ -332,3 +332,19 @@ def test_unit_option_is_checked(tmp_path, shared_data):
     )
     assert res.exit_code == 2 and "unknown gyr unit 'furlong/s'" in res.output
     assert not (tmp_path / "x.mcap").exists()
+
+
+def test_plausibility_of_a_long_recording_is_judged_on_excerpts():
+    """A day at 25 Hz (2.16 M samples) is checked on evenly spread 60 s excerpts: bounded cost, same verdict."""
+    from converters.plausibility import MAX_CHECK_SAMPLES, excerpts
+
+    n = 2_160_000
+    t = np.arange(n, dtype=np.int64) * 40_000_000
+    rng = np.random.default_rng(0)
+    acc = np.tile([0.0, 0.0, 9.81], (n, 1)) + rng.normal(0, 0.02, (n, 3))
+    gyr_dps = rng.normal(0, 0.05, (n, 3)) + [0.6, -0.4, 0.2]  # an uncalibrated gyroscope at rest, deg/s
+    t_x, (a_x,) = excerpts(t, acc)
+    assert len(t_x) <= MAX_CHECK_SAMPLES + 300 and np.all(np.diff(t_x) > 0) and np.isnan(a_x[:, 0]).sum() > 100
+    (line,) = imu_warnings("/imu/day", acc, gyr_dps, t)  # declared rad/s
+    assert "at rest the gyroscope reads 0.72 rad/s" in line  # |(0.6, -0.4)|: about the horizontal axes
+    assert imu_warnings("/imu/day", acc, gyr_dps * DEG, t) == []
