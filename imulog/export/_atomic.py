@@ -20,7 +20,7 @@ def atomic_file(path: str | os.PathLike[str]) -> Iterator[Path]:
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise ExportError(f"{out}: cannot create its folder ({exc.strerror or exc})") from None
+        raise ExportError(f"{out}: cannot write (cannot create its folder: {exc.strerror or exc})") from None
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
     try:
         yield tmp
@@ -45,7 +45,7 @@ def atomic_folder(path: str | os.PathLike[str], *, overwrite: bool = False) -> I
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise ExportError(f"{out}: cannot create its folder ({exc.strerror or exc})") from None
+        raise ExportError(f"{out}: cannot write (cannot create its folder: {exc.strerror or exc})") from None
     tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir()
