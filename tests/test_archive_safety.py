@@ -14,7 +14,7 @@ import pytest
 from click.testing import CliRunner
 from test_archive_helpers import synthetic_recording
 
-from imulog.archive import TrialReader, append_derived, write_trial
+from imulog.archive import ArchiveCorruptError, TrialReader, append_derived, write_trial
 from imulog.archive import _mcap as m
 from imulog.archive.doctor import check_file
 from imulog.cli import cli
@@ -381,3 +381,75 @@ def test_commands_report_a_truncated_archive_in_one_line(small_trial, tmp_path, 
         args[0] == "calibrate" and errors and str(cut) in errors[0] and "truncated" in errors[0]
     ), result.output
     assert f"{cut}: {cut}" not in result.output
+
+
+# ---------------------------------------------------------------------------------------------- streaming reads
+
+
+@pytest.fixture(scope="module")
+def chunked_trial(tmp_path_factory) -> Path:
+    """Every stream type written in small chunks (many per channel)."""
+    from imulog.archive import _builder
+
+    mp = pytest.MonkeyPatch()
+    mp.setattr(_builder, "CHUNK_TARGET_BYTES", 16_000)
+    try:
+        path = write_trial(tmp_path_factory.mktemp("chunked") / "t.mcap", synthetic_recording(np.random.default_rng(8)))
+    finally:
+        mp.undo()
+    return path
+
+
+def test_iter_blocks_pieces_concatenate_to_read(chunked_trial):
+    from imulog.archive.reader import stream_columns
+
+    rng = np.random.default_rng(4)
+    with TrialReader(chunked_trial) as tr:
+        for info in (tr.channel(t) for t in tr.topics()):  # imulog's channels (not the viewer twins)
+            whole = stream_columns(tr.read(info.topic))
+            n_chunks = sum(info.channel_id in ci.message_index_offsets for ci in tr.summary.chunk_indexes)
+            pieces = [stream_columns(p) for p in tr.iter_blocks(info.topic)]
+            if n_chunks > 1 and len(whole[next(iter(whole))]):
+                assert len(pieces) > 1, info.topic  # really one piece per chunk, not one piece
+            for key, col in whole.items():
+                joined = (
+                    [v for p in pieces for v in p[key]]
+                    if isinstance(col, list)
+                    else (np.concatenate([p[key] for p in pieces]) if pieces else col[:0])
+                )
+                assert np.array_equal(
+                    np.asarray(joined),
+                    np.asarray(col),
+                    equal_nan=col.dtype.kind == "f" if isinstance(col, np.ndarray) else False,
+                ), f"{info.topic} {key}"
+            t = whole.get("t_ns", whole.get("start_ns"))
+            if len(t) > 2:
+                lo, hi = sorted(int(x) for x in rng.choice(np.asarray(t), 2, replace=False))
+                part = stream_columns(tr.read(info.topic, lo, hi))
+                got = [stream_columns(p) for p in tr.iter_blocks(info.topic, lo, hi)]
+                key = "t_ns" if "t_ns" in part else "start_ns"
+                joined = np.concatenate([p[key] for p in got]) if got else np.asarray(part[key])[:0]
+                assert np.array_equal(joined, part[key]), f"{info.topic} [{lo}, {hi})"
+
+
+def test_iter_blocks_yields_intact_chunks_then_refuses_the_damaged_one(chunked_trial, tmp_path):
+    with TrialReader(chunked_trial) as tr:
+        cid = next(c.id for c in tr.summary.channels.values() if c.topic == "/imu/wrist")
+        chunks = sorted(
+            (ci for ci in tr.summary.chunk_indexes if cid in ci.message_index_offsets),
+            key=lambda ci: ci.chunk_start_offset,
+        )
+        good = [p.t_ns for p in tr.iter_blocks("/imu/wrist")][:2]
+    assert len(chunks) >= 4
+    data = bytearray(chunked_trial.read_bytes())
+    data[chunks[2].chunk_start_offset + chunks[2].chunk_length - 5] ^= 0x08  # compressed data of the 3rd chunk
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    seen = []
+    with (
+        TrialReader(bad) as tr,
+        pytest.raises(ArchiveCorruptError, match=rf"/imu/wrist: chunk at byte {chunks[2].chunk_start_offset} "),
+    ):
+        for piece in tr.iter_blocks("/imu/wrist"):
+            seen.append(piece.t_ns)
+    assert len(seen) == 2 and all(np.array_equal(a, b) for a, b in zip(seen, good, strict=True))
