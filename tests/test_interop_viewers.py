@@ -134,10 +134,13 @@ def test_rerun_loader_plots_imu_draws_markers_and_moves_the_imu_frame(processed)
     translation = np.array(_column(tf, "Transform3D:translation"), dtype=np.float64).reshape(-1, 3)
     shift = LAG_NS // 10_000_000  # the IMU's sample k is Vicon sample k + 150
     assert np.allclose(translation[:100], cluster.position[shift : shift + 200 : 2], atol=1e-6)
-    # ... and as coloured points along its axes, which Rerun draws without any blueprint
-    axes = _column(ents["/derived/viewer/axes/wrist"], "Points3D:positions")
-    first, last = np.array(axes[0]), np.array(axes[-1])
-    assert first.shape == (36, 3) and not np.allclose(first, last)
+    # ... and as coloured points along its axes in its own frame, which the transform moves: drawn as is
+    axes = ents["/derived/viewer/axes/wrist"]
+    assert {v for row in _column(axes, "CoordinateFrame:frame") for v in row} == {"wrist"}
+    points = np.array(_column(axes, "Points3D:positions")[0], dtype=np.float64)
+    assert points.shape == (36, 3) and np.allclose(points.max(axis=0), [0.12, 0.12, 0.12], atol=1e-6)
+    assert len(_column(axes, "Points3D:positions")) == 100  # 5 Hz: constant points, a few bytes
+    assert not np.allclose(translation[0], translation[-1]) and not np.allclose(quats[0], quats[-1])
     # phases: foxglove.Log -> TextLog
     texts = [v for row in _column(ents["/derived/viewer/phases/wrist"], "TextLog:text") for v in row]
     assert texts == ["reach #1 (4.00 s)", "lift #1 (6.00 s)"]

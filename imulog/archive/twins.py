@@ -233,6 +233,7 @@ def frame_twin(
 Origin = tuple[np.ndarray, np.ndarray]  # (t_ns on the stream's clock, (N, 3) positions in m)
 AXIS_LENGTH_M = 0.12
 AXIS_POINTS = 12
+AXES_RATE_HZ = 5.0  # the axis points are constant (the transform moves them): a few repeats per second
 _AXIS_RGBA = ((230, 40, 40, 255), (40, 190, 40, 255), (40, 90, 230, 255))  # x red, y green, z blue
 
 
@@ -256,42 +257,35 @@ def _frame_samples(
     return keep, q, p
 
 
-def axes_twin(
-    stream: SignalStream, log_map: LogMap, *, clock: str, rotation: list[float] | None, origin: Origin | None
-) -> Twin:
+def axes_twin(stream: SignalStream, log_map: LogMap, *, clock: str, rate_hz: float = AXES_RATE_HZ) -> Twin:
     """The IMU frame as coloured points along its axes (``foxglove.PointCloud``, x red, y green, z blue).
 
-    Rerun's loader draws PointCloud without any blueprint (a FrameTransform needs an axes visualizer added
-    by hand), so this is the form in which the moving IMU frame shows up as is.
+    The points are constant, in the IMU's own frame (``frame_id`` = the IMU name): the ``FrameTransform``
+    twin world -> IMU moves them, in Rerun (named coordinate frames) as in Foxglove. Rerun's loader draws a
+    PointCloud without any blueprint (a transform alone needs an axes visualizer added by hand), so this is
+    the form in which the moving IMU frame shows up as is. Repeated at ``rate_hz`` (bytes: almost nothing).
     """
     from imulog.archive._generated.foxglove import PackedElementField_pb2, PointCloud_pb2
-    from imulog.process import quaternion as quat
 
-    keep, q, p = _frame_samples(stream, rotation, origin)
+    keep = decimation(stream.t_ns, rate_hz)
     name = stream.topic.rsplit("/", 1)[-1]
     twin = _protobuf_twin(
         f"{TWIN_PREFIX}/axes/{name}", "foxglove.PointCloud", _meta(stream, stream.topic, clock, keep, stream.t_ns)
     )
-    twin.metadata.update(units="m", axis_length_m=str(AXIS_LENGTH_M))
+    twin.metadata.update(units="m", axis_length_m=str(AXIS_LENGTH_M), frame_id=name)
     fld = PackedElementField_pb2.PackedElementField
-    fields = [fld(name=axis, offset=8 * k, type=fld.FLOAT64) for k, axis in enumerate("xyz")]
-    fields += [fld(name=c, offset=24 + k, type=fld.UINT8) for k, c in enumerate(("red", "green", "blue", "alpha"))]
-    point = np.dtype([("xyz", "<f8", 3), ("rgba", "u1", 4), ("pad", "u1", 4)])
+    fields = [fld(name=axis, offset=4 * k, type=fld.FLOAT32) for k, axis in enumerate("xyz")]
+    fields += [fld(name=c, offset=12 + k, type=fld.UINT8) for k, c in enumerate(("red", "green", "blue", "alpha"))]
+    point = np.dtype([("xyz", "<f4", 3), ("rgba", "u1", 4)])
     s = np.linspace(AXIS_LENGTH_M / AXIS_POINTS, AXIS_LENGTH_M, AXIS_POINTS)
-    local = np.concatenate([np.outer(s, np.eye(3)[k]) for k in range(3)])  # (3P, 3) points in the IMU frame
-    cloud = np.zeros(len(local), dtype=point)
+    cloud = np.zeros(3 * AXIS_POINTS, dtype=point)
+    cloud["xyz"] = np.concatenate([np.outer(s, np.eye(3)[k]) for k in range(3)])  # along x, y, z of the IMU
     cloud["rgba"] = np.repeat(np.array(_AXIS_RGBA, dtype=np.uint8), AXIS_POINTS, axis=0)
-    msg = PointCloud_pb2.PointCloud(frame_id="world", point_stride=point.itemsize, fields=fields)
+    msg = PointCloud_pb2.PointCloud(frame_id=name, point_stride=point.itemsize, fields=fields, data=cloud.tobytes())
     msg.pose.position.SetInParent()  # an empty Pose makes Rerun 0.41 write null translations
     msg.pose.orientation.w = 1.0
-    good = np.isfinite(q).all(axis=1) & np.isfinite(p).all(axis=1)
-    stamps = log_map(stream.t_ns[keep])
-    for k, stamp in enumerate(stamps.tolist()):
-        if not good[k]:
-            continue
-        cloud["xyz"] = p[k] + quat.rotate(q[k], local)
+    for stamp in log_map(stream.t_ns[keep]).tolist():
         _stamp(msg, stamp)
-        msg.data = cloud.tobytes()
         twin.log_times.append(int(stamp))
         twin.payloads.append(msg.SerializeToString())
     return twin
@@ -355,7 +349,7 @@ def twins_for(
         rotation = alignment.get("rotation_global_to_world")
         return [
             frame_twin(stream, log_map, parent="world", child=name, clock=clock, rotation=rotation, origin=origin),
-            axes_twin(stream, log_map, clock=clock, rotation=rotation, origin=origin),
+            axes_twin(stream, log_map, clock=clock),
         ]
     if isinstance(stream, Intervals) and len(stream):
         return [log_twin(stream, log_map, clock)]
