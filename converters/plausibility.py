@@ -22,8 +22,9 @@ What the checks see (all on the converted SI values):
 * gyroscope, moving: during slow movements (accelerometer norm within 10 % of gravity) the rate at which the
   gravity direction turns in the sensor frame equals the gyroscope component perpendicular to it; their ratio is
   1 for rad/s and 57.3 for deg/s read as rad/s. Dynamic acceleration adds apparent tilt, so measured ratios are
-  lower (0.2-0.8 for rad/s and 12-48 for deg/s on the real files in ../shared/data): up to 4 is rad/s, from 8
-  deg/s.
+  lower (0.5-1.0 for rad/s and 28-56 for deg/s on the real files in ../shared/data): up to 4 is rad/s, from 8
+  deg/s. (The reverse, rad/s declared deg/s, is not warned about: vibration reads as tilt when the gyroscope is
+  still, so a small ratio is no evidence.)
 
 What they cannot see: a calibrated deg/s gyroscope (bias under 0.15 deg/s) declared rad/s in a recording that
 never turns faster than 40 deg/s and never tilts slowly enough for the ratio test (e.g. a sensor lying still, or
@@ -163,15 +164,16 @@ def gyro_tilt_ratio(gyr: np.ndarray, acc: np.ndarray, t_ns: np.ndarray, min_tilt
     """Gyroscope-perpendicular rate over the turning rate of the gravity direction seen by the accelerometer.
 
     Samples where the accelerometer norm is within 10 % of its rest value (slow movement) and gravity turns
-    faster than ``min_tilt_rad_s``; a 0.1 s moving average on both. ~1 for a rad/s gyroscope, ~57.3 for deg/s
+    faster than ``min_tilt_rad_s``; a 0.1 s moving average on both, and the turning rate from directions 0.2 s
+    apart (so that accelerometer noise does not read as tilt). ~1 for a rad/s gyroscope, ~57.3 for deg/s
     numbers; None with fewer than 0.5 s of such samples.
     """
     a = np.asarray(acc, dtype=np.float64)
     w = np.asarray(gyr, dtype=np.float64)
-    if len(a) < 8:
-        return None
     rate = _rate_hz(t_ns)
     k = max(1, int(round(0.1 * rate)))
+    if len(a) < 4 * k + 4:
+        return None
     kernel = np.ones(k) / k
     a_s = np.column_stack([np.convolve(a[:, j], kernel, mode="same") for j in range(3)])
     w_s = np.column_stack([np.convolve(w[:, j], kernel, mode="same") for j in range(3)])
@@ -179,7 +181,8 @@ def gyro_tilt_ratio(gyr: np.ndarray, acc: np.ndarray, t_ns: np.ndarray, min_tilt
     ref, _ = rest_acc_norm(a, t_ns)
     with np.errstate(invalid="ignore", divide="ignore"):
         u = a_s / norm[:, None]
-        du = np.gradient(u, axis=0) * rate
+        du = np.full_like(u, np.nan)
+        du[k:-k] = (u[2 * k :] - u[: -2 * k]) * (rate / (2 * k))  # over 0.2 s
         tilt = np.linalg.norm(du, axis=1)
         perp = np.linalg.norm(w_s - np.sum(w_s * u, axis=1)[:, None] * u, axis=1)
     ok = np.isfinite(tilt) & np.isfinite(perp) & (np.abs(norm / ref - 1.0) < 0.1) & (tilt > min_tilt_rad_s)
@@ -209,8 +212,14 @@ def infer_gyr_unit(gyr: np.ndarray, acc: np.ndarray | None, t_ns: np.ndarray) ->
 
 
 # --------------------------------------------------------------------------------- checks after conversion
-def imu_warnings(topic: str, acc: np.ndarray | None, gyr: np.ndarray | None, t_ns: np.ndarray) -> list[str]:
-    """One line per implausible IMU channel (values already in m/s^2 and rad/s; long recordings on excerpts)."""
+def imu_warnings(
+    topic: str, acc: np.ndarray | None, gyr: np.ndarray | None, t_ns: np.ndarray, gyr_unit: str | None = None
+) -> list[str]:
+    """One line per implausible IMU channel (values already in m/s^2 and rad/s; long recordings on excerpts).
+
+    ``gyr_unit``: the unit the file declared for the gyroscope, when known; a deg/s-declared gyroscope that still
+    reads too fast is not told to be deg/s (it already is): the warning then asks to check the unit or the bias.
+    """
     t_ns, (acc, gyr) = excerpts(t_ns, acc, gyr)
     out = []
     if acc is not None and len(acc) > 2 and np.isfinite(acc).any():
@@ -226,10 +235,16 @@ def imu_warnings(topic: str, acc: np.ndarray | None, gyr: np.ndarray | None, t_n
                 f"(gravity){guess}; check the accelerometer unit in the header or mapping file"
             )
     if gyr is not None and len(gyr) > 2 and np.isfinite(gyr).any():
-        fix = "is the unit deg/s rather than rad/s? --unit gyr=deg/s or the column's unit in the mapping file"
+        declared_rad = gyr_unit is None or _is_rad_s(gyr_unit)
+        fix = (
+            "is the unit deg/s rather than rad/s? --unit gyr=deg/s or the column's unit in the mapping file"
+            if declared_rad
+            else f"declared {gyr_unit}: check the gyroscope's unit and bias"
+        )
         peak = gyro_peak(gyr)
         rest = gyro_rate_at_rest(gyr, acc, t_ns) if acc is not None else None
         ratio = gyro_tilt_ratio(gyr, acc, t_ns) if acc is not None else None
+        rad_ok = ratio is not None and 0.5 * DEG * RATIO_DEG_MIN < ratio <= RATIO_RAD_MAX  # motion agrees
         if peak > GYRO_PEAK_MAX_RAD_S:
             out.append(
                 f"{topic}: gyroscope peaks of {peak:.3g} rad/s ({peak / DEG:.0f} deg/s), beyond a human limb and "
@@ -240,15 +255,11 @@ def imu_warnings(topic: str, acc: np.ndarray | None, gyr: np.ndarray | None, t_n
                 f"{topic}: the gyroscope reads {ratio:.0f}x the rate at which gravity turns in the accelerometer "
                 f"(1x expected in rad/s); {fix}"
             )
-        elif rest is not None and rest > GYRO_REST_MAX_RAD_S:
+        elif not rad_ok and rest is not None and rest > GYRO_REST_MAX_RAD_S:
+            bias = "" if gyr_unit is not None else " (or a large gyroscope bias)"
             out.append(
                 f"{topic}: while the accelerometer shows the sensor at rest the gyroscope reads {rest:.2g} rad/s "
-                f"about a horizontal axis (gravity would turn {rest / DEG:.0f} deg/s); {fix}"
-            )
-        elif ratio is not None and ratio < RATIO_RAD_MAX * DEG:
-            out.append(
-                f"{topic}: the gyroscope reads 1/{1 / ratio:.0f} of the rate at which gravity turns in the "
-                "accelerometer; is the unit rad/s rather than deg/s? --unit gyr=rad/s"
+                f"about a horizontal axis (gravity would turn {rest / DEG:.0f} deg/s){bias}; {fix}"
             )
     return out
 
@@ -273,11 +284,18 @@ def marker_warnings(topic: str, pos_m: np.ndarray) -> list[str]:
     return []
 
 
+def _is_rad_s(unit: str) -> bool:
+    from converters._common import unit_factor
+
+    return unit_factor("gyr", unit) == 1.0
+
+
 def recording_warnings(rec) -> list[str]:  # noqa: ANN001 - imulog.model.Recording (no import cycle)
     """Plausibility warnings for every IMU and marker stream of a converted Recording."""
     out = []
     for imu in rec.imus:
-        out.extend(imu_warnings(imu.topic, imu.acc, imu.gyr, imu.t_ns))
+        declared = (imu.meta.get("units") or {}).get("gyr") if isinstance(imu.meta.get("units"), dict) else None
+        out.extend(imu_warnings(imu.topic, imu.acc, imu.gyr, imu.t_ns, declared))
     for markers in rec.markers:
         out.extend(marker_warnings(markers.topic, markers.pos))
     return out
