@@ -3,7 +3,7 @@
     report = salvage("broken.mcap", "fixed.mcap")
     print(report.lines())            # what was recovered, what was lost
 
-The input is only read (memory-mapped). Its records are scanned linearly from the start, so a missing or
+The input is only read (memory-mapped, pages handed back as the scan passes them: memory about one chunk). Its records are scanned linearly from the start, so a missing or
 damaged summary does not matter; after a damaged record the scan resynchronises on the next record that
 the summary (when readable) indexes, or on the next plausible Chunk / Metadata record header. Every chunk
 is decompressed within its declared size and checked against its CRC before any of its messages is kept;
@@ -19,6 +19,8 @@ conversion as changed: the recording is no longer complete.
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import mmap
 import os
 import struct
@@ -30,24 +32,44 @@ from typing import Any
 from imulog import __version__
 from imulog.archive import _mcap as m
 from imulog.archive import codec
-from imulog.archive._builder import McapBuilder
+from imulog.archive._builder import CHUNK_TARGET_BYTES, McapBuilder
 from imulog.archive.errors import ArchiveError, ArchiveExistsError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import encode_record
-from imulog.archive.writer import payload_hash
 
 _KNOWN_OPS = set(range(m.Op.HEADER, m.Op.DATA_END + 1))
+RELEASE_BYTES = 32 << 20  # hand mapped pages back to the kernel every this many bytes
+
+
+def release(buf: memoryview, start: int, end: int) -> None:
+    """Drop the mapped pages of ``buf[start:end]`` from this process's RSS (they are re-read if touched)."""
+    page = mmap.PAGESIZE
+    lo, hi = -(-start // page) * page, end // page * page
+    if hi > lo:
+        with contextlib.suppress(AttributeError, OSError, ValueError):  # not a map, or no madvise here
+            buf.obj.madvise(mmap.MADV_DONTNEED, lo, hi - lo)
+
+
 _CHUNK_FIXED = 8 + 8 + 8 + 4  # start, end, uncompressed size, crc before the compression string
 
 
 @dataclass
 class _Channel:
+    """A channel found in the scan: where its intact messages are (not the messages: memory stays small)."""
+
     rec: m.ChannelRec
-    log_times: list[int] = field(default_factory=list)
-    payloads: list[bytes | memoryview] = field(default_factory=list)
+    sources: list[tuple[int, int, memoryview | None]] = field(default_factory=list)  # (chunk pos, end, None)
+    # or (log time, -1, payload view into the map) for a message outside chunks
+    messages: int = 0
+    hasher: Any = field(default_factory=hashlib.sha256)  # content hash of the intact messages, in order
     chunks_kept: int = 0
     chunks_lost: int = 0
     messages_lost: int = 0
+
+    def add(self, payload: memoryview) -> None:
+        self.messages += 1
+        self.hasher.update(struct.pack("<Q", len(payload)))
+        self.hasher.update(payload)
 
 
 @dataclass
@@ -93,8 +115,12 @@ class _Scan:
         self.hints = sorted(set(hints))
         self.schemas: dict[int, m.SchemaRec] = {}
         self.channels: dict[int, _Channel] = {}
-        self.order: list[tuple[str, Any]] = []  # ("channel", id) / ("attachment", rec) / ("metadata", (name, items))
+        # ("channel", id) / ("attachment", (record start, end)) / ("metadata", (name, items)), in file order
+        self.order: list[tuple[str, Any]] = []
         self.header: tuple[str, str] = ("", "")
+        self.crc = zlib.crc32(buf[: len(m.MAGIC)])  # data-section CRC of the bytes read contiguously so far
+        self.crc_upto = len(m.MAGIC)
+        self.released = 0  # pages before this offset were handed back (madvise): RSS stays small
         self.failed_chunk: int | None = None  # offset of the last chunk that could not be used
         self.failed_channels: set[int] = set()
 
@@ -128,16 +154,17 @@ class _Scan:
             return
         self.failed_chunk = None
         kept: set[int] = set()
-        for cid, log_time, payload in found:
+        for cid, _, payload in found:
             ch = self.channels.get(cid)
             if ch is None:
                 self.report.lost.append(f"chunk at byte {pos}: message of unknown channel {cid} dropped")
                 continue
-            ch.log_times.append(log_time)
-            ch.payloads.append(payload)
+            ch.add(payload)
             kept.add(cid)
         for cid in kept:
-            self.channels[cid].chunks_kept += 1
+            ch = self.channels[cid]
+            ch.chunks_kept += 1
+            ch.sources.append((pos, pos + 9 + len(body), None))
 
     def _message_index(self, body: memoryview) -> None:
         """Message indexes follow their chunk: they tell which channels a damaged chunk held."""
@@ -173,8 +200,8 @@ class _Scan:
             if ch is None:
                 self.report.lost.append(f"message at byte {pos}: unknown channel {cid}")
             else:
-                ch.log_times.append(m._Q.unpack_from(body, 6)[0])
-                ch.payloads.append(body[22:])
+                ch.add(body[22:])
+                ch.sources.append((m._Q.unpack_from(body, 6)[0], -1, body[22:]))
         elif op == m.Op.CHUNK:
             self._chunk(pos, body)
             return
@@ -186,7 +213,7 @@ class _Scan:
             if rec.crc != 0 and rec.crc != rec.computed_crc:
                 self.report.lost.append(f"attachment {rec.name!r} at byte {pos}: CRC mismatch (damaged), dropped")
             else:
-                self.order.append(("attachment", rec))
+                self.order.append(("attachment", (pos, pos + 9 + len(body))))  # data read again when written
         elif op == m.Op.METADATA:
             c = m.Cursor(body)
             name, items = c.string(), c.str_map()
@@ -260,6 +287,12 @@ class _Scan:
                 if nxt is None:
                     break
                 end = nxt
+            elif self.crc_upto == pos:
+                self.crc = zlib.crc32(self.buf[pos:end], self.crc)
+                self.crc_upto = end
+            if end - self.released > RELEASE_BYTES:
+                release(self.buf, self.released, end)
+                self.released = end
             pos = end
 
     def _data_end(self, pos: int, op: int) -> None:
@@ -269,7 +302,7 @@ class _Scan:
         if stored == 0:
             self.report.data_crc = "not recorded"
             self.report.notes.append("the data section CRC was not recorded")
-        elif zlib.crc32(self.buf[:pos]) == stored:
+        elif self.crc_upto == pos and self.crc == stored:
             self.report.data_crc = "ok"
             self.report.notes.append("data section CRC ok: every record was read as written")
         else:
@@ -304,7 +337,20 @@ def _summary_hints(f, size: int, report: SalvageReport) -> list[int]:
     )
 
 
-def _channel_meta(ch: _Channel, schema: m.SchemaRec | None) -> dict[str, str]:
+def _messages(buf: memoryview, ch: _Channel):
+    """The channel's intact (log time, payload) pairs, one source chunk decompressed at a time."""
+    for first, end, payload in ch.sources:
+        if end < 0:
+            yield first, payload
+            continue
+        data = m.decompress_chunk(m.parse_chunk(buf[first + 9 : end]))  # checked in the scan: same bytes
+        release(buf, first, end)
+        for cid, log_time, p in m.chunk_messages(data, ch.rec.id):
+            if cid == ch.rec.id:
+                yield log_time, p
+
+
+def _channel_meta(buf: memoryview, ch: _Channel, schema: m.SchemaRec | None) -> dict[str, str]:
     """Channel metadata for the output: as found, or recomputed where chunks were lost."""
     meta = dict(ch.rec.metadata)
     if not ch.chunks_lost:
@@ -312,13 +358,29 @@ def _channel_meta(ch: _Channel, schema: m.SchemaRec | None) -> dict[str, str]:
     meta["salvaged"] = f"partial: {ch.chunks_lost} chunk(s), {ch.messages_lost} message(s) lost"
     if "sha256" in meta:
         meta["salvaged_original_sha256"] = meta["sha256"]
-        meta["sha256"] = payload_hash(ch.payloads)
+        meta["sha256"] = ch.hasher.hexdigest()
     if schema is not None and schema.name in codec.MESSAGE_CLASSES and "sample_count" in meta:
         try:
-            meta["sample_count"] = str(len(codec.decode(schema.name, ch.rec.topic, ch.rec.metadata, ch.payloads)))
+            n = 0
+            for batch in _batches(_messages(buf, ch), 1 << 20):
+                n += len(codec.decode(schema.name, ch.rec.topic, ch.rec.metadata, [p for _, p in batch]))
+            meta["sample_count"] = str(n)
         except Exception:  # noqa: BLE001 - the count is informative; keep the data even if it will not decode
             meta.pop("sample_count")
     return meta
+
+
+def _batches(pairs, target_bytes: int):
+    """Group (log time, payload) pairs into lists of about ``target_bytes`` of payload."""
+    batch, size = [], 0
+    for pair in pairs:
+        batch.append(pair)
+        size += len(pair[1])
+        if size >= target_bytes:
+            yield batch
+            batch, size = [], 0
+    if batch:
+        yield batch
 
 
 def salvage(src: str | os.PathLike[str], dst: str | os.PathLike[str], *, overwrite: bool = False) -> SalvageReport:
@@ -341,19 +403,15 @@ def salvage(src: str | os.PathLike[str], dst: str | os.PathLike[str], *, overwri
         if head != m.MAGIC:
             raise ArchiveError(f"{src_path}: not an MCAP file (no magic at the start): nothing to salvage")
         hints = _summary_hints(f, size, report)
-        with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
-            buf = memoryview(mm)
-            try:
-                scan = _Scan(buf, size, report, hints)
-                scan.run()
-                _write(scan, dst_path, report, overwrite)
-            finally:
-                del buf
-                scan = None  # release every view into the map before it closes
+        mm = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
+        scan = _Scan(memoryview(mm), size, report, hints)
+        scan.run()
+        _write(scan, scan.buf, dst_path, report, overwrite)
+        del scan  # views into the map go with it; the map itself is unmapped when collected
     return report
 
 
-def _write(scan: _Scan, dst: Path, report: SalvageReport, overwrite: bool) -> None:
+def _write(scan: _Scan, buf: memoryview, dst: Path, report: SalvageReport, overwrite: bool) -> None:
     if not scan.order:
         raise ArchiveError(f"{report.source}: no intact channel, attachment or metadata record found")
     for ch in scan.channels.values():
@@ -373,17 +431,19 @@ def _write(scan: _Scan, dst: Path, report: SalvageReport, overwrite: bool) -> No
                     if ch.rec.schema_id != 0 and schema is None:
                         continue
                     sid = b.add_schema(schema.name, schema.encoding, schema.data) if schema is not None else 0
-                    meta = _channel_meta(ch, schema)
+                    meta = _channel_meta(buf, ch, schema)
                     new_id = b.add_channel(ch.rec.topic, sid, meta, ch.rec.message_encoding)
-                    b.add_messages(new_id, ch.log_times, [bytes(p) for p in ch.payloads])
+                    for batch in _batches(_messages(buf, ch), CHUNK_TARGET_BYTES):  # memory: about one chunk
+                        b.add_messages(new_id, [t for t, _ in batch], [bytes(p) for _, p in batch])
                     report.channels[ch.rec.topic] = {
-                        "messages": len(ch.payloads),
+                        "messages": ch.messages,
                         "chunks_kept": ch.chunks_kept,
                         "chunks_lost": ch.chunks_lost,
                     }
                 elif kind == "attachment":
-                    b.add_attachment(item.name, item.media_type, item.data, item.log_time, item.create_time)
-                    report.attachments.append(item.name)
+                    a = m.parse_attachment(buf[item[0] + 9 : item[1]])  # CRC-checked in the scan
+                    b.add_attachment(a.name, a.media_type, a.data, a.log_time, a.create_time)
+                    report.attachments.append(a.name)
                 else:
                     name, items = item
                     b.add_metadata(name, dict(items))
