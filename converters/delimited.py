@@ -236,7 +236,8 @@ def analyse_header(
                 raise ConversionError(
                     path, f"duplicated column {full!r} (also column {seen[full] + 1})", line=header_start + 1
                 )
-            full_names[i] = f"{full} (column {i + 1})"  # X,Y,Z,X,Y,Z: told apart by position
+            full_names[i] = f"{full} (column {i + 1})"  # X,Y,Z,X,Y,Z: told apart by position (a mapping
+            seen[full_names[i]] = i  # file names the second one "Y (column 6)")
             continue
         seen[full] = i
     layout.names = full_names

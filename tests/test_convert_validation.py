@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
@@ -261,6 +262,28 @@ def test_unit_option_replaces_the_inferred_unit(tmp_path, shared_data):
     np.testing.assert_allclose(rec.imus[0].gyr, gyr_dps)
     np.testing.assert_allclose(rec.imus[0].acc, acc_g)
     assert "gyr in" not in rec.warnings[0] and "acc in" not in rec.warnings[0]
+
+
+def test_mapping_file_names_duplicated_columns_by_position(tmp_path, shared_data):
+    t, acc_g, gyr_dps = _fusion_columns(shared_data)
+    path = _write(tmp_path / "wrist.csv", "Time,X,Y,Z,X,Y,Z", [t, gyr_dps, acc_g])
+    mapping = {
+        "format": "imulog.mapping/1",
+        "time": {"column": "Time", "unit": "s"},
+        "columns": {
+            **{a: {"quantity": "gyr", "axis": a.lower(), "unit": "deg/s"} for a in "XYZ"},
+            **{
+                f"{a} (column {i})": {"quantity": "acc", "axis": a.lower(), "unit": "g"}
+                for i, a in zip((5, 6, 7), "XYZ", strict=True)
+            },
+        },
+    }
+    (tmp_path / "wrist.mapping.json").write_text(json.dumps(mapping))
+    rec = convert_file(path)
+    ref = convert_file(shared_data / FUSION).imus[0]
+    np.testing.assert_allclose(rec.imus[0].acc, ref.acc, rtol=1e-7)
+    np.testing.assert_allclose(rec.imus[0].gyr, ref.gyr, rtol=1e-7)
+    assert rec.warnings == []  # nothing assumed: the mapping said it
 
 
 @pytest.mark.parametrize(
