@@ -159,3 +159,20 @@ def test_info_marks_out_of_date_channels_and_the_step_to_rerun(tmp_path: Path) -
     assert set(stale()) == {"/derived/b"} and stale()["/derived/b"]["reasons"] == ["input /derived/a changed"]
     step_b(1.0)
     assert stale() == {}
+    # a step that writes only a metadata record is tracked by its run record
+    run_step(
+        trial,
+        step="evaluate",
+        algorithm="x",
+        params={},
+        inputs=["/derived/b"],
+        compute=lambda r: StepResult(metadata={"imulog.evaluation": {"n": 1}}),
+        metadata_inputs=["imulog.alignment"],
+    )
+    steps = json.loads(CliRunner().invoke(cli, ["info", "--json", str(trial)]).output)["out_of_date_steps"]
+    assert steps == {}
+    append_derived(trial, [], run={"step": "test-align"}, metadata={"imulog.alignment": {"offset_ns": 11}})
+    steps = json.loads(CliRunner().invoke(cli, ["info", "--json", str(trial)]).output)["out_of_date_steps"]
+    assert steps["evaluate"]["reasons"][0] == "metadata record imulog.alignment changed"
+    assert steps["evaluate"]["rerun"] == "imulog evaluate" and set(steps) == {"evaluate", "phases", "orientation:wrist"}
+    assert "step evaluate (run #" in CliRunner().invoke(cli, ["info", str(trial)]).output

@@ -262,22 +262,9 @@ class TrialReader:
                 inputs = json.loads(c.metadata["inputs"])
             except ValueError:
                 inputs = None
-            if not isinstance(inputs, dict):
-                stale[topic] = {"step": c.metadata.get("step", ""), "reasons": ["unreadable inputs in its provenance"]}
-                continue
-            reasons = []
-            for key, digest in inputs.items():
-                if key.startswith("metadata:"):
-                    name = key[len("metadata:") :]
-                    if record_hash(metadata.get(name)) != digest:
-                        reasons.append(f"metadata record {name} changed")
-                elif key not in chans:
-                    reasons.append(f"input {key} is gone")
-                else:
-                    deps.setdefault(topic, []).append(key)
-                    recorded = chans[key].metadata.get("sha256")
-                    if recorded and recorded != digest:
-                        reasons.append(f"input {key} changed")
+            reasons = _changed_inputs(inputs, chans, metadata)
+            if isinstance(inputs, dict):
+                deps[topic] = [k for k in inputs if k in chans]
             if reasons:
                 stale[topic] = {"step": c.metadata.get("step", ""), "reasons": reasons}
         changed = True
@@ -292,6 +279,26 @@ class TrialReader:
                     stale[topic] = {"step": step, "reasons": [f"input {t} is out of date" for t in late]}
                     changed = True
         return dict(sorted(stale.items()))
+
+    def stale_steps(self) -> dict[str, dict[str, Any]]:
+        """Steps whose latest run is out of date (its recorded inputs changed, or an output is stale), by step.
+
+        Covers steps that write only metadata records (``evaluate``: ``imulog.evaluation``) as well as
+        channels. Values: ``{"run": n, "reasons": [...]}``. No data is read.
+        """
+        chans = {c.topic: c for c in self.summary.channels.values()}
+        stale_topics = self.stale_channels()
+        latest: dict[str, tuple[int, dict[str, Any]]] = {}
+        for n, rec in self.runs().items():
+            if rec.get("step"):
+                latest[rec["step"]] = (n, rec)
+        out = {}
+        for step, (n, rec) in latest.items():
+            reasons = _changed_inputs(rec.get("inputs", {}), chans, self.metadata)
+            reasons += [f"input {t} is out of date" for t in rec.get("inputs", {}) if t in stale_topics]
+            if reasons:
+                out[step] = {"run": n, "reasons": reasons}
+        return dict(sorted(out.items()))
 
     def attachment_infos(self) -> list[dict[str, Any]]:
         """Name, media type and size of every attachment, from the summary (no attachment is read).
@@ -510,6 +517,25 @@ class TrialReader:
         from imulog.archive.display import trial_html
 
         return trial_html(self)
+
+
+def _changed_inputs(inputs: Any, chans: dict[str, m.ChannelRec], metadata: dict[str, Any]) -> list[str]:
+    """Why recorded provenance ``inputs`` ({topic or metadata:NAME: hash}) no longer match the trial."""
+    if not isinstance(inputs, dict):
+        return ["unreadable inputs in its provenance"]
+    reasons = []
+    for key, digest in inputs.items():
+        if key.startswith("metadata:"):
+            name = key[len("metadata:") :]
+            if record_hash(metadata.get(name)) != digest:
+                reasons.append(f"metadata record {name} changed")
+        elif key not in chans:
+            reasons.append(f"input {key} is gone")
+        else:
+            recorded = chans[key].metadata.get("sha256")
+            if recorded and recorded != digest:
+                reasons.append(f"input {key} changed")
+    return reasons
 
 
 def stream_columns(stream: Stream) -> dict[str, Any]:

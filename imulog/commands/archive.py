@@ -76,6 +76,7 @@ def trial_summary(trial: TrialReader) -> dict[str, Any]:
         "attachments": atts,
         "runs": {str(k): v for k, v in runs.items()},
         "out_of_date": sorted(stale),
+        "out_of_date_steps": {step: {**v, "rerun": rerun_command(step)} for step, v in trial.stale_steps().items()},
     }
 
 
@@ -220,7 +221,7 @@ def info(file: str, as_json: bool) -> None:
                 f"  #{n} {r.get('step', '')}: {r.get('algorithm', '')} params={json.dumps(r.get('params', {}))} "
                 f"-> {outputs} ({r.get('time', '')})"
             )
-    if data["out_of_date"]:
+    if data["out_of_date"] or data["out_of_date_steps"]:
         click.echo("out of date (inputs changed since they were computed):")
         by_step: dict[str, list[str]] = {}
         for c in data["channels"]:
@@ -229,6 +230,9 @@ def info(file: str, as_json: bool) -> None:
         for step, topics in by_step.items():
             reasons = next(c["out_of_date"]["reasons"] for c in data["channels"] if c["topic"] == topics[0])
             click.echo(f"  {', '.join(topics)}: {'; '.join(reasons)} -> rerun {rerun_command(step)}")
+        for step, v in data["out_of_date_steps"].items():
+            if step not in by_step:  # steps that wrote only metadata records (evaluate, ...)
+                click.echo(f"  step {step} (run #{v['run']}): {'; '.join(v['reasons'])} -> rerun {v['rerun']}")
 
 
 @click.command()
