@@ -129,6 +129,8 @@ def test_rerun_loader_plots_imu_draws_markers_and_moves_the_imu_frame(processed)
     # the IMU frame: FrameTransform -> Transform3D world -> wrist, placed at the cluster, rotating
     tf = ents["/derived/viewer/orientation/wrist"]
     assert {v for row in _column(tf, "Transform3D:child_frame") for v in row} == {"wrist"}
+    cluster_tf = ents["/derived/viewer/vicon/cluster_pose"]  # pose twins get frame names unique in the trial
+    assert {v for row in _column(cluster_tf, "Transform3D:child_frame") for v in row} == {"vicon_cluster_pose"}
     quats = np.array(_column(tf, "Transform3D:quaternion"), dtype=np.float64).reshape(-1, 4)  # x, y, z, w
     assert np.allclose(quats[:, [3, 0, 1, 2]], q[::2], atol=1e-6)
     translation = np.array(_column(tf, "Transform3D:translation"), dtype=np.float64).reshape(-1, 3)

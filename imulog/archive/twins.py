@@ -339,7 +339,9 @@ def twins_for(
         return [marker_twin(stream, log_map)] if len(stream) else []
     name = stream.topic.rstrip("/").rsplit("/", 1)[-1]
     if isinstance(stream, PoseStream):
-        return [frame_twin(stream, log_map, parent=stream.frame_id or "world", child=name, clock=clock)]
+        # a frame name unique in the trial (kinematics' "wrist" joint centre is not the IMU frame "wrist")
+        child = "_".join(p for p in stream.topic.strip("/").split("/") if p != "derived")
+        return [frame_twin(stream, log_map, parent=stream.frame_id or "world", child=child, clock=clock)]
     if (
         isinstance(stream, SignalStream)
         and stream.columns[:4] == ORIENTATION_COLUMNS
