@@ -247,3 +247,27 @@ def test_each_imu_of_an_arm_trial_finds_its_own_segment_and_a_still_one_fails(tm
     assert len(res.output.strip().splitlines()) == 1
     with TrialReader(path) as t:
         assert t.metadata["imulog.alignment"]["imu"] == "/imu/upper_arm"  # the failed run wrote nothing
+
+
+def test_imu_started_minutes_before_the_vicon():
+    """The IMU logged 200 s before the Vicon started: outside the usual +-60 s of the recordings' starts, so
+    the lag is searched again over every overlap of the two recordings."""
+    sim = simulate("r2g", seed=4, repetitions=12, subject_name="L", extra_segments=EXTRA)
+    imu, mk = sim.recording.imus[0], sim.recording.markers[0]
+    cut = mk.t_ns >= 200_000_000_000
+    _, rec = compute_alignment(
+        "wrist",
+        imu.t_ns,
+        imu.gyr,
+        mk.topic,
+        mk.t_ns[cut],
+        mk.labels,
+        mk.pos[cut],
+        al.AlignmentParams(),
+        acc=imu.acc,
+        resample=False,
+    )
+    err = np.abs(al.device_to_reference(imu.t_ns, rec) - sim.truth.imu_t_ref_ns)
+    inside = sim.truth.imu_t_ref_ns >= mk.t_ns[cut][0]
+    assert rec["max_lag_s_used"] > 200 and set(rec["cluster"]["markers"]) == {"L:O", "L:X", "L:Y", "L:A"}
+    assert err[inside].max() < 2 * MS and rec["quality"] == "good"

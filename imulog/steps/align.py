@@ -126,7 +126,61 @@ def compute_alignment(
     resample: bool = True,
     acc: np.ndarray | None = None,
 ) -> tuple[list, dict]:
-    """Pure part of the step: streams and the ``imulog.alignment`` record (no I/O).
+    """Pure part of the step: streams and the ``imulog.alignment`` record (no I/O); see :func:`_compute`.
+
+    The lag is first searched within +-``params.max_lag_s`` of the recordings' starts (the usual case: both
+    started within a minute); when nothing matches there or the score is poor, once more over every overlap
+    of the two recordings (an IMU that logged minutes before the Vicon started), and the more convincing
+    result is kept (the wide one records ``max_lag_s_used``).
+    """
+    args = (imu_name, t_imu_ns, gyr, marker_topic, t_vic_ns, labels, pos_m)
+    first, error = None, None
+    try:
+        first = _compute(*args, params, orientation, acc_global, resample, acc)
+    except ValueError as exc:
+        error = exc
+    if first is not None and _rank(first[1], params) >= 1.0:  # a correlation score that is not poor
+        return first
+    t_i, t_v = np.asarray(t_imu_ns, dtype=np.int64), np.asarray(t_vic_ns, dtype=np.int64)
+    wide = float(np.ceil(((t_i[-1] - t_i[0]) + (t_v[-1] - t_v[0])) / al.NS)) if len(t_i) > 1 and len(t_v) > 1 else 0
+    if gyr is None or wide <= params.max_lag_s:
+        if first is None:
+            raise error
+        return first
+    try:
+        second = _compute(*args, dataclasses.replace(params, max_lag_s=wide), orientation, acc_global, resample, acc)
+    except ValueError:
+        if first is None:
+            raise error from None
+        return first
+    second[1]["max_lag_s_used"] = wide
+    return second if first is None or _rank(second[1], params) > _rank(first[1], params) else first
+
+
+def _rank(record: dict, params: al.AlignmentParams) -> float:
+    """How convincing an alignment is: 2 + score for a cluster that reproduces the gyroscope with a good
+    correlation, 1 + score for a good single-marker one, the score alone otherwise."""
+    score = float(record.get("score") or 0.0)
+    if score < params.poor_score:
+        return score
+    return (2.0 if record.get("signal") != "marker-acceleration" else 1.0) + score
+
+
+def _compute(
+    imu_name: str,
+    t_imu_ns: np.ndarray,
+    gyr: np.ndarray,
+    marker_topic: str,
+    t_vic_ns: np.ndarray,
+    labels: list[str],
+    pos_m: np.ndarray,
+    params: al.AlignmentParams,
+    orientation: tuple[np.ndarray, np.ndarray] | None = None,
+    acc_global: tuple[np.ndarray, np.ndarray] | None = None,
+    resample: bool = True,
+    acc: np.ndarray | None = None,
+) -> tuple[list, dict]:
+    """Streams and the ``imulog.alignment`` record for one lag search range.
 
     ``params.cluster="auto"`` without ``params.markers`` searches the rigid marker set that moves with the
     IMU (:func:`imulog.process.alignment_search.find_cluster`); when none reproduces the gyroscope, the
