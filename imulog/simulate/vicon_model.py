@@ -67,7 +67,10 @@ def all_markers(
 ) -> tuple[np.ndarray, list[str]]:
     """True positions (N, M, 3) m and names of the cluster markers (``marker_names``) and of the markers on
     the ``extra_segments`` (:mod:`imulog.simulate.extra_markers`)."""
-    names = list(params.marker_names)
+    def as_list(v) -> list[str]:  # "--set marker_names=WRIST" or "A,B,C" arrive as one string
+        return [x.strip() for x in v.split(",") if x.strip()] if isinstance(v, str) else list(v)
+
+    names = as_list(params.marker_names)
     if not 1 <= len(names) <= len(params.marker_offsets_m) or len(set(names)) != len(names):
         raise ValueError(f"marker_names must be 1 to {len(params.marker_offsets_m)} distinct names, got {names}")
     pos = marker_positions(position_m, q_world_sensor, q_imu_to_cluster, params)[:, : len(names)]
@@ -75,7 +78,7 @@ def all_markers(
         from imulog.simulate.extra_markers import segment_markers
 
         rate = (len(t_s) - 1) / (t_s[-1] - t_s[0]) if len(t_s) > 1 else 100.0
-        extra = segment_markers(t_s, position_m, tuple(params.extra_segments), rng, rate_hz=rate)
+        extra = segment_markers(t_s, position_m, tuple(as_list(params.extra_segments)), rng, rate_hz=rate)
         pos = np.concatenate([pos, np.stack(list(extra.values()), axis=1)], axis=1)
         names += list(extra)
     return pos, names
