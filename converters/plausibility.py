@@ -256,7 +256,7 @@ def imu_warnings(
                 f"(1x expected in rad/s); {fix}"
             )
         elif not rad_ok and rest is not None and rest > GYRO_REST_MAX_RAD_S:
-            bias = "" if gyr_unit is not None else " (or a large gyroscope bias)"
+            bias = " (the file declares it: a large gyroscope bias?)" if gyr_unit is not None else " (or a large gyroscope bias)"
             out.append(
                 f"{topic}: while the accelerometer shows the sensor at rest the gyroscope reads {rest:.2g} rad/s "
                 f"about a horizontal axis (gravity would turn {rest / DEG:.0f} deg/s){bias}; {fix}"
@@ -294,7 +294,8 @@ def recording_warnings(rec) -> list[str]:  # noqa: ANN001 - imulog.model.Recordi
     """Plausibility warnings for every IMU and marker stream of a converted Recording."""
     out = []
     for imu in rec.imus:
-        declared = (imu.meta.get("units") or {}).get("gyr") if isinstance(imu.meta.get("units"), dict) else None
+        units = next((u for u in (imu.meta.get("units"), imu.meta.get("units_in_file")) if isinstance(u, dict)), {})
+        declared = units.get("gyr")  # the unit the file itself gave (delimited, Xsens, APDM: units; Delsys: units_in_file)
         out.extend(imu_warnings(imu.topic, imu.acc, imu.gyr, imu.t_ns, declared))
     for markers in rec.markers:
         out.extend(marker_warnings(markers.topic, markers.pos))
