@@ -95,11 +95,18 @@ def make_workspace(root: Path, trial: Path | None) -> Path:
     clone = root / "clone"
     clone.mkdir(parents=True)
     shutil.copytree(REPO / "recordings", clone / "recordings")
-    # the package itself comes from the editable install; no pyproject.toml or .venv here, so a stray
-    # `pip install -e .` or `python -m venv .venv` in a block fails instead of touching the real venv
+    # the package itself comes from the editable install; no pyproject.toml here and only links to the
+    # venv's programs, so a stray `pip install -e .` in a block fails instead of touching the real venv
     for name in ("benchmarks", "schemas", "docs", "tests"):
         if (REPO / name).exists():
             (clone / name).symlink_to(REPO / name)
+    venv_bin = clone / ".venv" / "bin"  # `.venv/bin/imulog` as after the README's setup; no pip, no site-packages
+    venv_bin.mkdir(parents=True)
+    for tool in ("python", "python3", "imulog", "rerun", "pytest", "ruff"):
+        real = Path(sys.executable).parent / tool
+        if real.exists():  # a wrapper, not a link: a linked python would not find the venv's packages
+            (venv_bin / tool).write_text(f'#!/bin/sh\nexec "{real}" "$@"\n')
+            (venv_bin / tool).chmod(0o755)
     (root / "shared").mkdir()
     (root / "shared" / "data").symlink_to(SHARED)
     if trial is not None:
@@ -115,6 +122,14 @@ def page_env() -> dict[str, str]:
     return env
 
 
+def _cpu_s() -> float:
+    """CPU seconds of this process and its finished children (what the page costs on a quiet machine)."""
+    import resource
+
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
 def run_page(page: str, workdir: Path, verbose: bool = False) -> list[str]:
     """Run a page's blocks in ``workdir`` (in this process); return one message per failing block."""
     os.chdir(workdir)
@@ -127,6 +142,7 @@ def run_page(page: str, workdir: Path, verbose: bool = False) -> list[str]:
                 print(f"--- {where}: skipped: {block.skip}", flush=True)
             continue
         t0 = time.perf_counter()
+        cpu0 = _cpu_s()
         if block.lang == "python":
             try:
                 exec(compile(block.code, where, "exec"), namespace)  # noqa: S102 - the docs' own code
@@ -146,7 +162,8 @@ def run_page(page: str, workdir: Path, verbose: bool = False) -> list[str]:
                 tail = (proc.stderr.strip() or proc.stdout.strip()).splitlines()[-3:]
                 error = f"exit {proc.returncode}: " + " | ".join(tail)
         if verbose:
-            print(f"--- {where}: {'ok' if error is None else 'FAILED'} ({time.perf_counter() - t0:.1f} s)", flush=True)
+            wall, cpu = time.perf_counter() - t0, _cpu_s() - cpu0
+            print(f"--- {where}: {'ok' if error is None else 'FAILED'} ({wall:.1f} s, cpu {cpu:.1f} s)", flush=True)
         if error is not None:
             failures.append(f"{where}: {error}")
     return failures
