@@ -89,8 +89,12 @@ def test_json_outputs_parse(processed_r2g, tmp_path):
 
 
 def test_view_json_reports_the_saved_file(tmp_path):
-    proc = subprocess.run([*IMULOG, "view", "--sample", "5", "--save", str(tmp_path / "s.rrd"), "--json"],
-                          capture_output=True, text=True, env=_env())
+    proc = subprocess.run(
+        [*IMULOG, "view", "--sample", "5", "--save", str(tmp_path / "s.rrd"), "--json"],
+        capture_output=True,
+        text=True,
+        env=_env(),
+    )
     assert proc.returncode == 0, proc.stderr
     report = json.loads(proc.stdout)
     assert report["saved"] == [str(tmp_path / "s.rrd")] and (tmp_path / "s.rrd").stat().st_size > 0
@@ -154,15 +158,20 @@ def test_progress_in_a_log_is_plain_lines():
 
 
 def test_catalog_progress_goes_to_the_log_without_carriage_returns(processed_r2g, tmp_path):
-    proc = subprocess.run([*IMULOG, "catalog", str(processed_r2g), "-o", str(tmp_path / "c.parquet")],
-                          capture_output=True, text=True, env=_env())
+    proc = subprocess.run(
+        [*IMULOG, "catalog", str(processed_r2g), "-o", str(tmp_path / "c.parquet")],
+        capture_output=True,
+        text=True,
+        env=_env(),
+    )
     assert proc.returncode == 0, proc.stderr
     assert "\r" not in proc.stderr and "catalog: 1/1 file (100 %)" in proc.stderr
 
 
 def test_shell_completion_script():
-    proc = subprocess.run([sys.executable, "-m", "imulog"], capture_output=True, text=True,
-                          env=_env(_IMULOG_COMPLETE="bash_source"))
+    proc = subprocess.run(
+        [sys.executable, "-m", "imulog"], capture_output=True, text=True, env=_env(_IMULOG_COMPLETE="bash_source")
+    )
     assert proc.returncode == 0 and "_imulog_completion" in proc.stdout and "complete " in proc.stdout
     docs = (Path(__file__).resolve().parents[1] / "docs" / "cli.md").read_text()
     assert "_IMULOG_COMPLETE=bash_source imulog" in docs
