@@ -143,12 +143,20 @@ def burst_mask(
     return mask
 
 
-def _optimal_cuts(gaps: np.ndarray, n_groups: int, min_size: int, max_size_factor: int = 4) -> list[int] | None:
+def _optimal_cuts(
+    gaps: np.ndarray,
+    n_groups: int,
+    min_size: int,
+    max_size_factor: int = 4,
+    soft_size: int = 0,
+    short_penalty: float = 0.0,
+) -> list[int] | None:
     """Cuts (after item k) splitting ``len(gaps) + 1`` items into ``n_groups`` groups of ``min_size`` to
     ``max_size_factor * min_size`` items that maximise the summed gap at the cuts (dynamic programming);
-    None when impossible."""
+    None when impossible. A group smaller than ``soft_size`` costs ``short_penalty`` (gap units): a
+    repetition with a fused phase is allowed, but only where the rests demand it."""
     m = len(gaps) + 1
-    max_size = max_size_factor * min_size
+    max_size = max_size_factor * max(min_size, soft_size)
     if n_groups < 1 or m < n_groups * min_size:
         return None
     neg = -np.inf
@@ -162,7 +170,7 @@ def _optimal_cuts(gaps: np.ndarray, n_groups: int, min_size: int, max_size_facto
             if hi < lo:
                 continue
             i = np.arange(lo, hi + 1)
-            cand = best[c - 1, i] + np.where(i > 0, gain[i], 0.0)
+            cand = best[c - 1, i] + np.where(i > 0, gain[i], 0.0) - np.where(j - i < soft_size, short_penalty, 0.0)
             k = int(np.argmax(cand))
             best[c, j], back[c, j] = cand[k], i[k]
     if not np.isfinite(best[n_groups, m]):
@@ -206,14 +214,18 @@ def group_movements(
     for fraction in (major_fraction, 0.0):  # a low phase (slow subject) can fall below major_fraction
         major = np.flatnonzero(heights >= fraction * np.median(heights))
         gaps = start[major[1:]] - end[major[:-1]]
-        cuts = _optimal_cuts(gaps, n_repetitions, size, max(1, 4 * n_phases // size))
+        if size < n_phases:  # fused partition: short groups allowed at a price of the median gap between majors
+            penalty = float(np.sort(gaps)[-max(1, n_repetitions - 1) :].mean()) if len(gaps) else 0.0
+            cuts = _optimal_cuts(gaps, n_repetitions, size, 4, n_phases, penalty)
+        else:
+            cuts = _optimal_cuts(gaps, n_repetitions, size, max(1, 4 * n_phases // size))
         if cuts is not None:
             break
     if cuts is None:  # too few movements for the constraint: plain longest gaps between major movements
         major = np.flatnonzero(heights >= major_fraction * np.median(heights))
         gaps = start[major[1:]] - end[major[:-1]]
         cuts = sorted(np.argsort(-gaps, kind="stable")[: n_repetitions - 1].tolist())
-    elif len(cuts):
+    elif len(cuts) and size >= n_phases:  # (a fused partition only moves borders, it adds no groups)
         floor = extra_cut_fraction * float(np.median(gaps[cuts]))
         for k in np.argsort(-gaps, kind="stable"):  # non-task activity: more cuts at long rests
             if gaps[k] < floor:
@@ -368,8 +380,9 @@ def _select(s, e, norm, rate_hz, ref, params: RepetitionParams) -> tuple[np.ndar
 
 def _kept_cost(costs: list[float], n_keep: int) -> tuple[int, float]:
     """(missing groups, summed cost of the ``n_keep`` cheapest groups): what :func:`segment_repetitions` keeps."""
-    kept = sorted(costs)[:n_keep]
-    return n_keep - len(kept), float(np.sum(kept))
+    kept = np.asarray(sorted(costs)[:n_keep], dtype=float)
+    finite = np.isfinite(kept)  # a group that could not be made into n_phases phases counts as missing
+    return n_keep - int(finite.sum()), float(np.sum(kept[finite]))
 
 
 def split_merged_groups(groups, start, end, norm, rate_hz, ref, params: RepetitionParams, n_keep: int) -> list:
