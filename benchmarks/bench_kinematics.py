@@ -1,6 +1,6 @@
 """Per-sample cost of the constrained DH kinematics (issue 10), against SciPy in the same process.
 
-    /work/venv/bin/python benchmarks/bench_kinematics.py [--seconds 120] [--scipy-samples 200] [--seed 0]
+    python benchmarks/bench_kinematics.py [--seconds 120] [--scipy-samples 200] [--seed 0]
 
 Input: a simulated two-IMU arm trial (:func:`imulog.simulate.arm.simulate_arm`, LSM9DS1-like noise,
 100 Hz), orientations by VQF offline, calibrated to the trunk frame in the neutral window (as the

@@ -1,6 +1,6 @@
 """Orientation throughput (samples/s) on 3.6 M samples, all backends and baselines in one run.
 
-    /work/venv/bin/python benchmarks/bench_orientation.py [--samples 3600000] [--ahrs-samples 30000]
+    python benchmarks/bench_orientation.py [--samples 3600000] [--ahrs-samples 30000]
 
 Input: BROAD trial 02 (real IMU data, 285.7 Hz) tiled to ``--samples`` rows. Timed:
 

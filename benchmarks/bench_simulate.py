@@ -1,6 +1,6 @@
 """Simulator speed: a full 25-repetition R2G trial (issue 4: "simulates in a few seconds").
 
-    /work/venv/bin/python benchmarks/bench_simulate.py
+    python benchmarks/bench_simulate.py
 
 Prints the time to simulate one trial in memory, to write its raw files + truth, and the speed-up of
 the vectorised analytic evaluation over a per-sample Python loop (the baseline, measured on a slice

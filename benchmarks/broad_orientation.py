@@ -1,6 +1,6 @@
 """Orientation accuracy on the BROAD trials in ../shared/data/broad, per trial and per backend.
 
-    /work/venv/bin/python benchmarks/broad_orientation.py [--mag] [--no-ahrs]
+    python benchmarks/broad_orientation.py [--mag] [--no-ahrs]
 
 Prints a Markdown table of inclination and heading-free orientation RMSE (degrees) against BROAD's
 optical quaternion ``opt_quat`` over the ``movement`` samples (rows with lost optical tracking

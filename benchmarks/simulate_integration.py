@@ -1,6 +1,6 @@
 """How exactly do the noise-free simulated IMU signals integrate back to the true positions?
 
-    /work/venv/bin/python benchmarks/simulate_integration.py
+    python benchmarks/simulate_integration.py
 
 Strapdown double integration (trapezoid, true orientation, true initial state) over every R2G task
 (from 1 s before the reach to 1 s after the return of the hand, ~20 s) of 4 noise-free 25-task trials,
