@@ -52,6 +52,14 @@ def processed(tmp_path_factory):
     )
     phases = Intervals("/derived/phases/wrist", t_dev[[200, 900]], t_dev[[600, 1500]], ["reach", "lift"], [1, 1])
     append_derived(path, [phases], run={"step": "phases", "algorithm": "test"})
+    path_xyz = np.cumsum(rng.normal(0, 0.001, (n, 3)), axis=0)
+    trajectory = SignalStream("/derived/trajectory/zupt", t_ref, ["x", "y", "z"], ["m"] * 3, path_xyz, "world")
+    reps = [
+        {"index": 1, "start_ns": int(t_ref[100]), "end_ns": int(t_ref[699])},
+        {"index": 2, "start_ns": int(t_ref[800]), "end_ns": int(t_ref[1799])},
+    ]
+    record = {"imu": "/imu/wrist", "clock": "reference", "repetitions": reps}
+    append_derived(path, [trajectory], run={"step": "trajectory"}, metadata={"imulog.trajectory": record})
     return path, imu, markers, q, cluster
 
 
@@ -179,6 +187,17 @@ def test_every_channel_decodes_as_numbers_with_mcap_and_foxglove_schemas(process
     tf = FrameTransform.FromString(frames[10][2].SerializeToString())
     assert (tf.parent_frame_id, tf.child_frame_id) == ("world", "wrist")
     assert np.allclose([tf.rotation.w, tf.rotation.x, tf.rotation.y, tf.rotation.z], q[20])
+    # trajectories: one foxglove.PosesInFrame per repetition, its path at 10 Hz, on the aligned axis
+    from foxglove_schemas_protobuf.PosesInFrame_pb2 import PosesInFrame
+
+    paths = got["/derived/viewer/trajectory/zupt"]
+    assert [schema for schema, _, _ in paths] == ["foxglove.PosesInFrame"] * 2
+    second = PosesInFrame.FromString(paths[1][2].SerializeToString())
+    with TrialReader(path) as tr:
+        xyz = tr.read("/derived/trajectory/zupt").values
+    got_xyz = np.array([[p.position.x, p.position.y, p.position.z] for p in second.poses])
+    assert np.array_equal(got_xyz, xyz[800:1800:10])
+    assert paths[1][1] == START_NS + int(reference_to_device(np.int64(8 * 10**9), ALIGNMENT)) - DEV0
     ros = got["/derived/viewer/imu/wrist"]
     assert ros[0][0] == "sensor_msgs/msg/Imu"
     m = ros[3][2]

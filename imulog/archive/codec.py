@@ -73,9 +73,10 @@ class DecodeError(ValueError):
 
 def _twin_classes() -> dict[str, Any]:
     """Foxglove schemas of the viewer twins (:mod:`imulog.archive.twins`): embedded, never decoded to streams."""
-    from imulog.archive._generated.foxglove import FrameTransform_pb2, Log_pb2, PointCloud_pb2
+    from imulog.archive._generated.foxglove import FrameTransform_pb2, Log_pb2, PointCloud_pb2, PosesInFrame_pb2
 
     return {
+        "foxglove.PosesInFrame": PosesInFrame_pb2.PosesInFrame,
         "foxglove.PointCloud": PointCloud_pb2.PointCloud,
         "foxglove.FrameTransform": FrameTransform_pb2.FrameTransform,
         "foxglove.Log": Log_pb2.Log,

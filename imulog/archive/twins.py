@@ -12,6 +12,7 @@ canonical channel                   twin                                  Rerun 
 ``/derived/orientation/{imu}``      ``foxglove.PointCloud`` (axes/{imu})  Points3D (the IMU frame)
 pose channels (PoseBlock)           ``foxglove.FrameTransform``           Transform3D (frame -> name)
 interval channels (IntervalEvent)   ``foxglove.Log``                      TextLog
+``/derived/trajectory/{method}``    ``foxglove.PosesInFrame`` (per rep.)  InstancePoses3D
 ==================================  ====================================  ===========================
 
 Twins are at most :data:`TWIN_RATE_HZ` (every k-th sample, no filtering) and at most
@@ -291,6 +292,49 @@ def axes_twin(stream: SignalStream, log_map: LogMap, *, clock: str, rate_hz: flo
     return twin
 
 
+TRAJECTORY_RATE_HZ = 10.0  # poses per second of a trajectory path twin
+
+
+def trajectory_twin(
+    stream: SignalStream, log_map: LogMap, clock: str, repetitions: list[Mapping[str, Any]] | None
+) -> Twin:
+    """``foxglove.PosesInFrame``: one message per repetition (at its start) holding its whole path (x, y, z).
+
+    ``repetitions``: ``imulog.trajectory["repetitions"]`` (``start_ns``/``end_ns`` on the stream's clock);
+    without them one message holds the whole channel. Poses at most :data:`TRAJECTORY_RATE_HZ`, orientation
+    identity. Foxglove's 3D panel draws it as a path; Rerun 0.41 makes InstancePoses3D (not drawn by default).
+    """
+    from imulog.archive._generated.foxglove import PosesInFrame_pb2
+
+    t = stream.t_ns
+    spans = [(int(r["start_ns"]), int(r["end_ns"])) for r in repetitions or [] if "start_ns" in r and "end_ns" in r]
+    if not spans and len(t):
+        spans = [(int(t[0]), int(t[-1]))]
+    twin = _protobuf_twin(
+        twin_topic(stream.topic), "foxglove.PosesInFrame", {"twin_of": stream.topic, "clock": clock, "kind": "viewer"}
+    )
+    twin.metadata.update(sample_count=str(len(spans)), units="m", frame_id=stream.frame_id or "world")
+    if len(t):
+        twin.metadata.update(start_ns=str(int(t[0])), end_ns=str(int(t[-1])))
+    xyz = stream.values[:, :3]
+    for lo, hi in spans:
+        i, j = int(np.searchsorted(t, lo)), int(np.searchsorted(t, hi, "right"))
+        rows = np.arange(i, j)[decimation(t[i:j], TRAJECTORY_RATE_HZ)] if j > i else np.arange(0)
+        rows = rows[np.isfinite(xyz[rows]).all(axis=1)]
+        if not len(rows):
+            continue
+        msg = PosesInFrame_pb2.PosesInFrame(frame_id=stream.frame_id or "world")
+        for x, y, z in xyz[rows].tolist():
+            pose = msg.poses.add()
+            pose.position.x, pose.position.y, pose.position.z = x, y, z
+            pose.orientation.w = 1.0
+        stamp = log_map.one(int(t[rows[0]]))
+        _stamp(msg, stamp)
+        twin.log_times.append(stamp)
+        twin.payloads.append(msg.SerializeToString())
+    return twin
+
+
 def log_twin(stream: Intervals, log_map: LogMap, clock: str) -> Twin:
     """One ``foxglove.Log`` per interval, at its start: ``reach #3 (1.24 s)``."""
     from imulog.archive._generated.foxglove import Log_pb2
@@ -355,4 +399,12 @@ def twins_for(
         ]
     if isinstance(stream, Intervals) and len(stream):
         return [log_twin(stream, log_map, clock)]
+    parts = stream.topic.strip("/").split("/")
+    if (
+        isinstance(stream, SignalStream)
+        and parts[:2] == ["derived", "trajectory"]
+        and stream.columns[:3] == ["x", "y", "z"]
+    ):
+        repetitions = ((metadata or {}).get("imulog.trajectory") or {}).get("repetitions")
+        return [trajectory_twin(stream, log_map, clock, repetitions if isinstance(repetitions, list) else None)]
     return []
