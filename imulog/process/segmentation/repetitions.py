@@ -378,11 +378,12 @@ def _select(s, e, norm, rate_hz, ref, params: RepetitionParams) -> tuple[np.ndar
     return s, e, cost, info
 
 
-def _kept_cost(costs: list[float], n_keep: int) -> tuple[int, float]:
-    """(missing groups, summed cost of the ``n_keep`` cheapest groups): what :func:`segment_repetitions` keeps."""
+def _kept_cost(costs: list[float], n_keep: int) -> tuple[int, int, float]:
+    """(missing groups, groups without a correction cost, summed finite cost of the ``n_keep`` cheapest
+    groups): what :func:`segment_repetitions` keeps, compared in that order."""
     kept = np.asarray(sorted(costs)[:n_keep], dtype=float)
-    finite = np.isfinite(kept)  # a group that could not be made into n_phases phases counts as missing
-    return n_keep - int(finite.sum()), float(np.sum(kept[finite]))
+    finite = np.isfinite(kept)  # a group that could not be made into n_phases phases ranks after every made one
+    return n_keep - len(kept), int((~finite).sum()), float(np.sum(kept[finite]))
 
 
 def split_merged_groups(groups, start, end, norm, rate_hz, ref, params: RepetitionParams, n_keep: int) -> list:
