@@ -45,9 +45,11 @@ class MetricCores:
 class DeadPeriodStitcher:
     """:func:`imulog.process.metrics.activity.dead_period_intervals` over consecutive pieces of one signal."""
 
-    def __init__(self, dead_samples: int, min_samples: int = 1) -> None:
+    def __init__(self, dead_samples: int, min_samples: int = 1, keep: bool = True) -> None:
         self.dead = dead_samples
         self.min = min_samples
+        self.keep = keep  # False: count the intervals only (a week's per-axis activities are many)
+        self.count = 0
         self.start: int | None = None  # global index of the open activity's first non-zero sample
         self.last: int | None = None  # and of its last one so far
         self.closed: list[tuple[int, int]] = []
@@ -70,7 +72,9 @@ class DeadPeriodStitcher:
 
     def _close(self, last: int) -> None:
         if self.start is not None and last + 1 - self.start >= self.min:
-            self.closed.append((self.start, last + 1))
+            self.count += 1
+            if self.keep:
+                self.closed.append((self.start, last + 1))
 
     def finish(self) -> np.ndarray:
         if self.last is not None:
@@ -124,7 +128,7 @@ def long_metrics_pieces(
         usage_p = ArmUsageParams(p.noise_level_g, p.arm_usage_rate_hz)
         decimated = rate > 1.5 * usage_p.reference_rate_hz  # as arm_usage decides
         width_ns = 1e9 / usage_p.reference_rate_hz
-        stitchers = [DeadPeriodStitcher(act.dead_samples, act.min_activity_samples) for _ in range(4)]
+        stitchers = [DeadPeriodStitcher(act.dead_samples, act.min_activity_samples, keep=j == 3) for j in range(4)]
         centres = dist_p.bin_centres_cm
         hist = np.zeros(len(centres))
         window_ends: list[np.ndarray] = []
@@ -207,7 +211,9 @@ def long_metrics_pieces(
                 frame_id=imu,
             )
             core_start = core_end
-    per_axis = [s.finish() for s in stitchers[:3]]
+    for stitcher in stitchers[:3]:
+        stitcher.finish()
+    per_axis = [s.count for s in stitchers[:3]]
     overall = stitchers[3].finish()
     starts_t, ends_t = _interval_times(path, imu_topic, overall, total, last_t)
     for acc_ in periods.values():
@@ -238,7 +244,7 @@ def long_metrics_pieces(
             "activity.method1.count": m1_any,
             "activity.method1.per_axis": m1_axis.tolist(),
             "activity.method2.count": len(overall),
-            "activity.method2.per_axis": [len(iv) for iv in per_axis],
+            "activity.method2.per_axis": per_axis,
             "activity.method2.m_samples": act.m_samples,
             "activity.method2.dead_samples": act.dead_samples,
             "activity.method2.noise_floor_g": p.noise_floor_g,
