@@ -169,3 +169,24 @@ def test_bad_output_suffix_is_one_line(processed_r2g, tmp_path):
     assert result.exit_code == 2 and "give --to" in result.output
     result = CliRunner().invoke(cli, ["export", str(copy), "-o", str(tmp_path / "x.csv")])
     assert result.exit_code == 2 and "--topic" in result.output
+
+
+def test_real_actigraph_time_column_matches_actilifes_own_export(shared_data, tmp_path):
+    """A real .gt3x (start time with its UTC offset) -> archive -> Parquet: the wall clock ActiLife prints."""
+    folder = shared_data / "devices" / "actigraph_gt3x"
+    mcap = tmp_path / "ag.mcap"
+    result = CliRunner().invoke(cli, ["convert", str(folder / "example.gt3x"), "-o", str(mcap)])
+    assert result.exit_code == 0, result.output
+    with TrialReader(mcap) as trial:
+        topic = next(t for t in trial.topics() if t.startswith("/imu/") and not t.endswith("_imu"))
+    out = tmp_path / "ag.parquet"
+    assert CliRunner().invoke(cli, ["export", str(mcap), "-t", topic, "-o", str(out)]).exit_code == 0
+    table = pq.read_table(out)
+    assert table.schema.field("time").type == pa.timestamp("ns", tz="-05:00")
+    times = table["time"].to_pandas()
+    # ActiLife's CSV of the same recording: "Start Time 08:58:00", "Start Date 2/14/2019" (local time, -05:00)
+    assert times.iloc[0] == pd.Timestamp("2019-02-14T08:58:00-05:00")
+    np.testing.assert_allclose(np.diff(table["t[s]"].to_numpy()), 1 / 90, rtol=1e-6)  # 90 Hz
+    raw = pd.read_csv(folder / "exampleRAW.csv", skiprows=10)  # g, 3 decimals
+    acc_g = np.column_stack([table[f"acc_{a}[m/s^2]"].to_numpy() for a in "xyz"])[: len(raw)] / 9.80665
+    np.testing.assert_allclose(acc_g, raw.to_numpy(), atol=5.01e-4)
