@@ -48,7 +48,15 @@ for args in json.loads(sys.argv[1]):
     exc = res.exception if res.exception is not None and not isinstance(res.exception, SystemExit) else None
     out.append({"args": args, "code": res.exit_code, "s": time.perf_counter() - t, "output": res.output[-2000:],
                 "exception": None if exc is None else f"{type(exc).__name__}: {exc}"[:300]})
-out.append({"rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024})
+def peak_rss_mb():
+    # VmHWM: the peak of this process's own memory since exec; ru_maxrss would also count the parent's RSS at
+    # fork (a test process grown to 1 GB over a whole suite made every child look 1 GB big)
+    try:
+        with open("/proc/self/status") as f:
+            return next(int(line.split()[1]) for line in f if line.startswith("VmHWM:")) / 1024
+    except (OSError, StopIteration):
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+out.append({"rss_mb": peak_rss_mb()})
 print(json.dumps(out))
 """
 
