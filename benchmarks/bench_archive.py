@@ -2,6 +2,7 @@
 
     python benchmarks/bench_archive.py                    # 1 h of 1 kHz 9-axis IMU = 3.6 M samples
     python benchmarks/bench_archive.py --samples 600000   # quicker
+    python benchmarks/bench_archive.py --no-twins         # the canonical block store alone
 
 The peer is what a user of the `mcap` Python library would write for the same data (issue 17): the very same
 imulog block messages (about 1 s of samples each, encoded by ``imulog.archive.codec``) written with
@@ -100,7 +101,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--samples", type=int, default=3_600_000, help="IMU samples (default: 1 h at 1 kHz)")
     ap.add_argument("--repeat", type=int, default=3, help="repetitions; the best time of each side is reported")
     ap.add_argument("--dir", default=None, help="where to write the temporary files (default: system temp)")
+    ap.add_argument(
+        "--no-twins",
+        action="store_true",
+        help="leave out the viewer twins (the canonical block store alone, what the peer writes)",
+    )
     args = ap.parse_args(argv)
+    if args.no_twins:
+        import imulog.archive.writer as writer
+
+        writer.WRITE_TWINS = False
 
     imu = make_imu(args.samples)
     n = len(imu)
@@ -140,7 +150,8 @@ def main(argv: list[str] | None = None) -> int:
     from importlib.metadata import version
 
     print(f"imulog archive vs the mcap library ({version('mcap')}) on the same blocks: {n:,} samples of 9-axis IMU")
-    print(f"best of {args.repeat}; load average {load_average()}")
+    twins = "without viewer twins" if args.no_twins else "with viewer twins (/derived/viewer/..., Foxglove/Rerun forms)"
+    print(f"best of {args.repeat}; load average {load_average()}; imulog {twins}")
     print(f"file size: imulog {size / 1e6:.1f} MB, peer {peer_size / 1e6:.1f} MB -> {size / peer_size:.3f}x (target <= 1.1x)")
     rows = [
         ("write", best["write"], best["peer_write"], best["peer_write"] / best["write"], ">= 1.0x", 1.0),
