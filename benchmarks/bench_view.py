@@ -17,7 +17,6 @@ Target (issue 17): imulog's time at most 1.5x the peer's.
 from __future__ import annotations
 
 import argparse
-import os
 import tempfile
 import time
 import uuid
@@ -92,15 +91,9 @@ def peer_view(path: Path, out: Path) -> float:
     return time.perf_counter() - t0
 
 
-def load_average() -> str:
-    try:
-        one, five, _ = os.getloadavg()
-    except OSError:
-        return "unknown"
-    return f"{one:.2f} (1 min), {five:.2f} (5 min) on {os.cpu_count()} cores"
-
-
 def main(argv: list[str] | None = None) -> int:
+    from bench_archive import load_average  # benchmarks/ is on sys.path when this script runs
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=3600.0, help="trial length, s (default 3600)")
     ap.add_argument("--repeat", type=int, default=3, help="runs of each side; the best is reported")
