@@ -14,6 +14,7 @@ Conventions
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -259,3 +260,15 @@ class Recording:
         if clashes:
             raise ValueError(f"two inputs provide the same channel(s): {', '.join(clashes)}")
         return merged
+
+
+def take_samples(stream: Any, index: np.ndarray) -> Any:
+    """The samples ``index`` of a stream with per-sample ``t_ns`` (every per-sample array indexed; the same type,
+    names and metadata), e.g. to decimate a channel or keep part of it."""
+    fields = {}
+    for f in dataclasses.fields(stream):
+        value = getattr(stream, f.name)
+        if isinstance(value, np.ndarray) and value.ndim >= 1 and len(value) == len(stream.t_ns):
+            value = value[index]
+        fields[f.name] = value
+    return type(stream)(**fields)

@@ -34,7 +34,7 @@ from imulog.archive.errors import ArchiveError, ArchiveExistsError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import encode_record
 from imulog.archive.timeline import TIMELINE_RECORD, TimelineError, TrialAxis, timeline_record
-from imulog.model import Recording, Stream
+from imulog.model import Recording, Stream, take_samples
 
 STATS_RECORD = "imulog.channel_stats"
 STATS_KEYS = ("sample_count", "start_ns", "end_ns", "rate_hz", "time_gaps", "nan_samples", "sha256")
@@ -234,11 +234,10 @@ class StreamingTrialWriter:
 
     def _write_twins(self, stream: Stream) -> None:
         """The viewer twins of this piece (:mod:`imulog.archive.twins`), every ``k``-th sample of the recording."""
-        from imulog.archive.twins import twins_for
-        from imulog.archive.writer import WRITE_TWINS
+        from imulog.archive import writer
 
         t = getattr(stream, "t_ns", None)
-        if not WRITE_TWINS or t is None or not len(t):
+        if not writer.WRITE_TWINS or t is None or not len(t):
             return
         k = self._twin_step(stream)
         first = self._twin_seen.get(stream.topic, 0)
@@ -246,8 +245,7 @@ class StreamingTrialWriter:
         self._twin_seen[stream.topic] = first + len(t)
         if not len(keep):
             return
-        clock = self._axis.clock_of(stream.topic)
-        for twin in twins_for(_take(stream, keep), self._axis.map_for(stream.topic), clock, self.metadata):
+        for twin in writer.stream_twins(take_samples(stream, keep), self._axis, self.metadata):
             ch = self._twins.get(twin.topic)
             if ch is None:
                 meta = {k_: v for k_, v in twin.metadata.items() if k_ not in STATS_KEYS}
@@ -257,12 +255,7 @@ class StreamingTrialWriter:
                 cid = self._builder.add_channel(twin.topic, schema_id, meta, encoding=twin.message_encoding)
                 ch = self._twins[twin.topic] = _Channel(cid, twin.topic)
             ch.stats.add_samples(np.asarray(stream.t_ns)[keep], [])
-            ch.stats.add_payloads(twin.payloads)
-            ch.times.extend(int(x) for x in twin.log_times)
-            ch.payloads.extend(twin.payloads)
-            ch.pending += sum(len(p) for p in twin.payloads)
-            if ch.pending >= CHUNK_TARGET_BYTES:
-                self._flush(ch)
+            self._add_messages(ch, twin.log_times, twin.payloads)
 
     def _twin_step(self, stream: Stream) -> int:
         """Every k-th sample: at most the twins' rate, and at most their message budget over the expected length."""
@@ -282,8 +275,12 @@ class StreamingTrialWriter:
         _, _, times, payloads = codec.encode(stream, self._axis.map_for(stream.topic))
         t, arrays = _sample_arrays(stream)
         ch.stats.add_samples(t, arrays)
+        self._add_messages(ch, times, payloads)
+
+    def _add_messages(self, ch: _Channel, log_times: Iterable[int], payloads: list[bytes]) -> None:
+        """Hash and buffer a channel's messages; write a chunk once it has gathered CHUNK_TARGET_BYTES."""
         ch.stats.add_payloads(payloads)
-        ch.times.extend(int(x) for x in times)
+        ch.times.extend(int(x) for x in log_times)
         ch.payloads.extend(payloads)
         ch.pending += sum(len(p) for p in payloads)
         if ch.pending >= CHUNK_TARGET_BYTES:
@@ -356,19 +353,6 @@ def write_attachment_from_file(builder: McapBuilder, src: Path, block: int = 1 <
         m.AttachmentIndexRec(offset, builder.offset - offset, mtime, mtime, size, src.name, media_type)
     )
     return digest.hexdigest()
-
-
-def _take(stream: Any, index: np.ndarray) -> Any:
-    """The samples ``index`` of a block stream (a copy with the same type and metadata)."""
-    import dataclasses
-
-    fields = {}
-    for f in dataclasses.fields(stream):
-        value = getattr(stream, f.name)
-        if isinstance(value, np.ndarray) and value.ndim >= 1 and len(value) == len(stream.t_ns):
-            value = value[index]
-        fields[f.name] = value
-    return type(stream)(**fields)
 
 
 def write_trial_streaming(

@@ -82,18 +82,23 @@ def sha256_of(path: Path) -> str:
     return h.hexdigest()
 
 
+def conversion_record(sources: list[str] | list[Path], formats: dict[str, str]) -> dict[str, Any]:
+    """The ``imulog.conversion`` record: imulog version, input names, their formats and SHA-256."""
+    from imulog import __version__
+
+    return {
+        "imulog_version": __version__,
+        "inputs": [Path(s).name for s in sources],
+        "formats": formats,
+        "sha256": {Path(s).name: sha256_of(Path(s)) for s in sources},
+    }
+
+
 def finish_recording(rec: Recording, meta: dict[str, dict[str, Any]], formats: dict[str, str]) -> Recording:
     """Add user metadata and the ``imulog.conversion`` record (inputs, formats, SHA-256 of each source)."""
     for name, values in meta.items():
         rec.metadata[name] = {**rec.metadata.get(name, {}), **values}
-    from imulog import __version__
-
-    rec.metadata["imulog.conversion"] = {
-        "imulog_version": __version__,
-        "inputs": [Path(s).name for s in rec.sources],
-        "formats": formats,
-        "sha256": {Path(s).name: sha256_of(Path(s)) for s in rec.sources},
-    }
+    rec.metadata["imulog.conversion"] = conversion_record(rec.sources, formats)
     notes = unit_warnings(rec)
     if notes:
         rec.metadata["imulog.conversion"]["warnings"] = notes
@@ -168,7 +173,6 @@ def _convert_streaming(
 ) -> None:
     """Convert one large file piece by piece (memory bounded by a piece, not by the recording)."""
     from converters.plausibility import recording_warnings
-    from imulog import __version__
     from imulog.archive import ArchiveError
     from imulog.archive.streaming import StreamingTrialWriter
 
@@ -183,13 +187,7 @@ def _convert_streaming(
         if first is None:
             raise ConversionError(path, "no samples")
         records = {k: {**first.metadata.get(k, {}), **v} for k, v in meta.items()}
-        records["imulog.conversion"] = {
-            "imulog_version": __version__,
-            "inputs": [path.name],
-            "formats": {path.name: name},
-            "sha256": {path.name: sha256_of(path)},
-            "streamed": True,
-        }
+        records["imulog.conversion"] = {**conversion_record([path], {path.name: name}), "streamed": True}
         expected = _expected_duration_s(first, size)
         with (
             StreamingTrialWriter(

@@ -104,7 +104,7 @@ def long_metrics_pieces(
     from imulog.process.metrics.distance import histogram_percent, weighted_area, windowed_distance
     from imulog.process.metrics.periods import DAY_S, HOUR_S, PeriodSummary
     from imulog.steps.common import nominal_rate_hz
-    from imulog.steps.long_orientation import _Buffer
+    from imulog.steps.long_orientation import SampleBuffer
 
     p = params
     c = cores or MetricCores()
@@ -143,7 +143,7 @@ def long_metrics_pieces(
             key: _PeriodAccumulator(first_t, start_time, period_s, len(centres))
             for key, period_s in (("by_hour", HOUR_S), ("by_day", DAY_S))
         }
-        buf = _Buffer()
+        buf = SampleBuffer()
         blocks = trial.iter_blocks(imu_topic)
         core_start, last_t = 0, first_t
         while core_start < total:

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from imulog.model import ImuStream, SignalStream
+from imulog.model import SignalStream
 
 #: recordings with more IMU samples than this (about 8 h at 100 Hz) get their orientation window by window
 LONG_SAMPLES = 3_000_000
@@ -37,21 +37,7 @@ class WindowParams:
         return {"window_s": self.window_s, "overlap_s": self.overlap_s}
 
 
-def _arrays(stream: Any, topic: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
-    """(t_ns, acc, gyr, mag) of one piece of a raw ImuStream or a calibrated SignalStream."""
-    if isinstance(stream, ImuStream):
-        if stream.acc is None or stream.gyr is None:
-            raise ValueError(f"{topic} needs accelerometer and gyroscope columns")
-        return stream.t_ns, stream.acc, stream.gyr, stream.mag
-    cols = {c: i for i, c in enumerate(stream.columns)}
-    v = stream.values
-    acc = v[:, [cols["ax"], cols["ay"], cols["az"]]]
-    gyr = v[:, [cols["gx"], cols["gy"], cols["gz"]]]
-    mag = v[:, [cols["mx"], cols["my"], cols["mz"]]] if all(c in cols for c in ("mx", "my", "mz")) else None
-    return stream.t_ns, acc, gyr, mag
-
-
-class _Buffer:
+class SampleBuffer:
     """Samples read so far that a window still needs, with the global index of the first one."""
 
     def __init__(self) -> None:
@@ -89,15 +75,15 @@ def windowed_pieces(
     from imulog.archive import TrialReader
     from imulog.process import quaternion as qmath
     from imulog.steps.common import mean_rate_hz
-    from imulog.steps.orientation import orientation_with_gaps
+    from imulog.steps.orientation import imu_arrays, orientation_with_gaps
 
-    buf = _Buffer()
+    buf = SampleBuffer()
     core_start = 0
     join_quat: np.ndarray | None = None  # the previous window's orientation at this window's first core sample
     with TrialReader(path) as trial:
         blocks = trial.iter_blocks(topic)
         first = next(blocks)
-        buf.add(_arrays(first, topic))
+        buf.add(imu_arrays(first, topic))
         rate = mean_rate_hz(first.t_ns)
         core = max(1, int(round(window.window_s * rate)))
         overlap = int(round(window.overlap_s * rate))
@@ -105,7 +91,7 @@ def windowed_pieces(
             core_end = min(total, core_start + core)
             hi = min(total, core_end + overlap)
             while buf.start + buf.size < hi:
-                buf.add(_arrays(next(blocks), topic))
+                buf.add(imu_arrays(next(blocks), topic))
             lo = max(0, core_start - overlap)
             t, acc, gyr, mag = buf.take(lo, hi)
             streams, _ = orientation_with_gaps(t, acc, gyr, mag, imu, params, gaps)

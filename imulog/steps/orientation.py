@@ -44,7 +44,11 @@ def source_topic(topics: list[str], imu: str, source: str) -> str:
 
 def read_imu_arrays(trial: Any, topic: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
     """``(t_ns, acc, gyr, mag)`` from a raw ImuStream or a calibrated SignalStream topic."""
-    stream = trial.read(topic)
+    return imu_arrays(trial.read(topic), topic)
+
+
+def imu_arrays(stream: Any, topic: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """``(t_ns, acc, gyr, mag)`` of a raw ImuStream or a calibrated SignalStream (or a piece of either)."""
     if topic.startswith("/imu/"):
         if stream.acc is None or stream.gyr is None:
             raise ValueError(f"{topic} needs accelerometer and gyroscope columns")

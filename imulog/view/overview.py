@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from imulog.model import AnalogStream, ImuStream, MarkerStream, PoseStream, SignalStream
+from imulog.model import AnalogStream, ImuStream, MarkerStream, PoseStream, SignalStream, take_samples
 from imulog.view.clock import ClockMap
 from imulog.view.source import TrialData, read_trial
 
@@ -169,21 +169,6 @@ def _concat(pieces: list[Any]) -> Any:
     return PoseStream(first.topic, t, np.concatenate([p.position for p in pieces]), orientation, first.frame_id)
 
 
-def _take(stream: Any, index: np.ndarray) -> Any:
-    if isinstance(stream, MarkerStream):
-        return MarkerStream(
-            stream.name,
-            stream.t_ns[index],
-            list(stream.labels),
-            stream.pos[index],
-            stream.valid[index],
-            stream.frame_id,
-            dict(stream.meta),
-        )
-    orientation = None if stream.orientation is None else stream.orientation[index]
-    return PoseStream(stream.topic, stream.t_ns[index], stream.position[index], orientation, stream.frame_id)
-
-
 def reduce_channel(
     pieces: Iterable[Any], bucket_ns: int, origin_ns: int, window: tuple[int, int] | None
 ) -> Any | None:
@@ -204,7 +189,7 @@ def reduce_channel(
         inside = np.zeros(len(t), bool) if window is None else (t >= window[0]) & (t < window[1])
         if isinstance(piece, MarkerStream | PoseStream):
             index = np.union1d(first_per_bucket(t, bucket_ns, origin_ns), np.flatnonzero(inside))
-            decimated.append(_take(piece, index))
+            decimated.append(take_samples(piece, index))
             continue
         values, layout = _columns(piece)
         if (~inside).any():
