@@ -102,7 +102,7 @@ def long_metrics_pieces(
     from imulog.process.metrics.activity import high_passed_noise_removed
     from imulog.process.metrics.arm_usage import to_reference_rate
     from imulog.process.metrics.distance import histogram_percent, weighted_area, windowed_distance
-    from imulog.process.metrics.periods import DAY_S, HOUR_S, PeriodSummary
+    from imulog.process.metrics.periods import DAY_S, HOUR_S, PeriodAccumulator, wall_clock_origin_ns
     from imulog.steps.common import nominal_rate_hz
     from imulog.steps.long_orientation import SampleBuffer
 
@@ -140,7 +140,7 @@ def long_metrics_pieces(
         last_sign: np.ndarray | None = None
         missing = 0
         periods = {
-            key: _PeriodAccumulator(first_t, start_time, period_s, len(centres))
+            key: PeriodAccumulator(*wall_clock_origin_ns(first_t, start_time, period_s), period_s, centres)
             for key, period_s in (("by_hour", HOUR_S), ("by_day", DAY_S))
         }
         buf = SampleBuffer()
@@ -200,7 +200,7 @@ def long_metrics_pieces(
                 hist += histogram_percent(finite_d, dist_p) * len(finite_d) / 100.0
             tc = t[k0:k1]
             for acc_ in periods.values():
-                acc_.add(tc, ~unknown[k0:k1], active[k0:k1].any(axis=1), d_cm, dist_p)
+                acc_.add(tc, ~unknown[k0:k1], active[k0:k1].any(axis=1), d_cm)
             last_t = int(t[k1 - 1])
             yield SignalStream(
                 f"/derived/metrics/distance/{imu}",
@@ -265,7 +265,7 @@ def long_metrics_pieces(
     span = (last_t - first_t) / 1e9
     for key, acc_ in periods.items():
         if span > acc_.period_s:
-            record[key] = [row.to_dict() for row in acc_.rows(centres, p.weight_start_cm, PeriodSummary)]
+            record[key] = [row.to_dict() for row in acc_.rows(p.weight_start_cm)]
     if missing:
         record["gaps"] = {"missing_samples": missing}
 
@@ -293,63 +293,3 @@ def _interval_times(path, topic: str, intervals: np.ndarray, total: int, last_t:
     start = np.array([lookup[int(i)] for i in intervals[:, 0]], np.int64)
     end = np.array([lookup[int(min(i, total - 1))] for i in intervals[:, 1]], np.int64)
     return start, end
-
-
-class _PeriodAccumulator:
-    """Per-period sums for :mod:`imulog.process.metrics.periods`, added core by core."""
-
-    def __init__(self, first_t: int, start_time: str | None, period_s: float, bins: int) -> None:
-        from imulog.process.metrics.periods import wall_clock_origin_ns
-
-        self.period_s = period_s
-        self.period_ns = int(round(period_s * 1e9))
-        self.origin_ns, self.origin_time = wall_clock_origin_ns(first_t, start_time, period_s)
-        self.valid: dict[int, int] = {}
-        self.active: dict[int, int] = {}
-        self.starts: dict[int, int] = {}
-        self.hist: dict[int, np.ndarray] = {}
-        self.bins = bins
-        self.dt_s: float | None = None
-
-    def add(self, t: np.ndarray, valid: np.ndarray, active: np.ndarray, d_cm: np.ndarray, dist_p: Any) -> None:
-        if self.dt_s is None and len(t) > 1:
-            self.dt_s = float(np.median(np.diff(t))) / 1e9
-        which = (np.asarray(t, np.int64) - self.origin_ns) // self.period_ns
-        for k in np.unique(which):
-            inside = which == k
-            v = inside & valid
-            self.valid[int(k)] = self.valid.get(int(k), 0) + int(v.sum())
-            self.active[int(k)] = self.active.get(int(k), 0) + int((v & active).sum())
-            d = d_cm[v & np.isfinite(d_cm)]
-            counts = self.hist.setdefault(int(k), np.zeros(self.bins))
-            if len(d):
-                idx = np.clip(np.floor(d / dist_p.bin_width_cm + 0.5).astype(np.int64) - 1, 0, self.bins - 1)
-                counts += np.bincount(idx, minlength=self.bins)
-
-    def add_activity_starts(self, starts_t: np.ndarray) -> None:
-        which = (np.asarray(starts_t, np.int64) - self.origin_ns) // self.period_ns
-        for k in which.tolist():
-            self.starts[int(k)] = self.starts.get(int(k), 0) + 1
-
-    def rows(self, centres: np.ndarray, weight_start_cm: float, row_type: Any) -> list[Any]:
-        from datetime import timedelta
-
-        from imulog.process.metrics.distance import weighted_area
-
-        out = []
-        for k in range(max(self.valid, default=-1) + 1):
-            n = self.valid.get(k, 0)
-            counts = self.hist.get(k, np.zeros(self.bins))
-            area = weighted_area(100.0 * counts / counts.sum(), centres, weight_start_cm) if counts.sum() else 0.0
-            label = "" if self.origin_time is None else (self.origin_time + timedelta(seconds=k * self.period_s)).isoformat()
-            out.append(
-                row_type(
-                    start_ns=int(self.origin_ns + k * self.period_ns),
-                    start=label,
-                    valid_s=n * (self.dt_s or 0.0),
-                    arm_use_percent=100.0 * self.active.get(k, 0) / n if n else float("nan"),
-                    activity_count=self.starts.get(k, 0),
-                    distance_weighted_area=float(area),
-                )
-            )
-        return out

@@ -65,6 +65,76 @@ def wall_clock_origin_ns(t0_ns: int, start_time: str | None, period_s: float) ->
     return int(t0_ns - round(back_s * 1e9)), start - timedelta(seconds=back_s)
 
 
+class PeriodAccumulator:
+    """Per-period sums (valid and arm-use samples, activity starts, distance-bin counts), added piece by piece.
+
+    Periods of ``period_s`` start at ``origin_ns`` (device clock; :func:`wall_clock_origin_ns`), labelled from
+    ``origin_time`` when known. ``bin_centres_cm``: the distance histogram's (uniform) bins.
+    """
+
+    def __init__(
+        self, origin_ns: int, origin_time: datetime | None, period_s: float, bin_centres_cm: np.ndarray
+    ) -> None:
+        self.origin_ns, self.origin_time, self.period_s = int(origin_ns), origin_time, period_s
+        self.period_ns = int(round(period_s * 1e9))
+        self.centres = np.asarray(bin_centres_cm, np.float64)
+        self.bin_width = float(self.centres[1] - self.centres[0]) if len(self.centres) > 1 else 1.0
+        self.valid: dict[int, int] = {}
+        self.active: dict[int, int] = {}
+        self.starts: dict[int, int] = {}
+        self.hist: dict[int, np.ndarray] = {}
+        self.dt_s: float | None = None
+
+    def _period(self, t_ns: np.ndarray) -> np.ndarray:
+        return (np.asarray(t_ns, np.int64) - self.origin_ns) // self.period_ns
+
+    def add(self, t_ns: np.ndarray, valid: np.ndarray, active: np.ndarray, distance_cm: np.ndarray) -> None:
+        """Samples ``t_ns`` (sorted), their validity, arm use and windowed distance (cm, NaN = unknown)."""
+        t = np.asarray(t_ns, np.int64)
+        if self.dt_s is None and len(t) > 1:
+            self.dt_s = float(np.median(np.diff(t))) / 1e9
+        which = self._period(t)
+        valid = np.asarray(valid, bool)
+        d = np.asarray(distance_cm, np.float64)
+        bins = len(self.centres)
+        for k in np.unique(which).tolist():
+            v = (which == k) & valid
+            self.valid[k] = self.valid.get(k, 0) + int(v.sum())
+            self.active[k] = self.active.get(k, 0) + int((v & np.asarray(active, bool)).sum())
+            counts = self.hist.setdefault(k, np.zeros(bins))
+            dk = d[v & np.isfinite(d)]
+            if len(dk) and bins:
+                idx = np.clip(np.floor((dk - self.centres[0]) / self.bin_width + 0.5).astype(np.int64), 0, bins - 1)
+                counts += np.bincount(idx, minlength=bins)
+
+    def add_activity_starts(self, starts_ns: np.ndarray) -> None:
+        """Times at which activities start (each counted in its period)."""
+        for k in self._period(starts_ns).tolist():
+            self.starts[k] = self.starts.get(k, 0) + 1
+
+    def rows(self, weight_start_cm: float = 60.0) -> list[PeriodSummary]:
+        """One summary per period from the first to the last with samples (empty ones between included)."""
+        out = []
+        for k in range(max(self.valid, default=-1) + 1):
+            n = self.valid.get(k, 0)
+            counts = self.hist.get(k)
+            area = 0.0
+            if counts is not None and counts.sum():
+                area = weighted_area(100.0 * counts / counts.sum(), self.centres, weight_start_cm)
+            label = "" if self.origin_time is None else (self.origin_time + timedelta(seconds=k * self.period_s)).isoformat()
+            out.append(
+                PeriodSummary(
+                    start_ns=self.origin_ns + k * self.period_ns,
+                    start=label,
+                    valid_s=n * (self.dt_s or 0.0),
+                    arm_use_percent=100.0 * self.active.get(k, 0) / n if n else float("nan"),
+                    activity_count=self.starts.get(k, 0),
+                    distance_weighted_area=float(area),
+                )
+            )
+        return out
+
+
 def period_summaries(
     t_ns: np.ndarray,
     valid: np.ndarray,
@@ -82,42 +152,13 @@ def period_summaries(
 
     ``t_ns`` (N,) sample times; ``valid`` (N,) bool; ``active`` (N,) bool arm use; ``activity_starts`` (K,) sample
     indices where activities start; ``distance_cm`` (N,) windowed distance; ``bin_centres_cm`` (B,) the histogram
-    bins of the whole recording (uniform).
+    bins of the whole recording (uniform). The long-recording path adds the same sums piece by piece
+    (:class:`PeriodAccumulator`).
     """
     t = np.asarray(t_ns, np.int64)
     if len(t) == 0:
         return []
-    period_ns = int(round(period_s * 1e9))
-    which = (t - origin_ns) // period_ns
-    n_periods = int(which[-1]) + 1
-    valid = np.asarray(valid, bool)
-    dt_s = float(np.median(np.diff(t))) / 1e9 if len(t) > 1 else 0.0
-    n_valid = np.bincount(which[valid], minlength=n_periods)
-    n_active = np.bincount(which[valid & np.asarray(active, bool)], minlength=n_periods)
-    starts = np.asarray(activity_starts, np.int64)
-    n_activity = np.bincount(which[starts], minlength=n_periods) if len(starts) else np.zeros(n_periods, np.int64)
-
-    centres = np.asarray(bin_centres_cm, np.float64)
-    width = float(centres[1] - centres[0]) if len(centres) > 1 else 1.0
-    edges = np.concatenate([centres - width / 2, [centres[-1] + width / 2]]) if len(centres) else np.zeros(0)
-    d = np.asarray(distance_cm, np.float64)
-    ok = valid & np.isfinite(d)
-    out: list[PeriodSummary] = []
-    for k in range(n_periods):
-        inside = (which == k) & ok
-        area = 0.0
-        if len(edges) and inside.any():
-            hist, _ = np.histogram(np.clip(d[inside], edges[0], edges[-1]), bins=edges)
-            area = weighted_area(100.0 * hist / inside.sum(), centres, weight_start_cm)
-        label = "" if origin_time is None else (origin_time + timedelta(seconds=k * period_s)).isoformat()
-        out.append(
-            PeriodSummary(
-                start_ns=int(origin_ns + k * period_ns),
-                start=label,
-                valid_s=float(n_valid[k]) * dt_s,
-                arm_use_percent=100.0 * n_active[k] / n_valid[k] if n_valid[k] else float("nan"),
-                activity_count=int(n_activity[k]),
-                distance_weighted_area=float(area),
-            )
-        )
-    return out
+    periods = PeriodAccumulator(origin_ns, origin_time, period_s, bin_centres_cm)
+    periods.add(t, valid, active, distance_cm)
+    periods.add_activity_starts(t[np.asarray(activity_starts, np.int64)])
+    return periods.rows(weight_start_cm)
