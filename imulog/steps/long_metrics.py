@@ -43,7 +43,11 @@ class MetricCores:
 
 
 class DeadPeriodStitcher:
-    """:func:`imulog.process.metrics.activity.dead_period_intervals` over consecutive pieces of one signal."""
+    """:func:`imulog.process.metrics.activity.dead_period_intervals` over consecutive pieces of one signal.
+
+    Given each piece's sample times, it also keeps every kept interval's start time and end time (the time of
+    the sample after its last non-zero one, or of that one at the recording's end, as the step stores them).
+    """
 
     def __init__(self, dead_samples: int, min_samples: int = 1, keep: bool = True) -> None:
         self.dead = dead_samples
@@ -52,35 +56,58 @@ class DeadPeriodStitcher:
         self.count = 0
         self.start: int | None = None  # global index of the open activity's first non-zero sample
         self.last: int | None = None  # and of its last one so far
+        self.start_t: int | None = None
+        self.end_t: int | None = None  # time the open activity would end at (sample after ``last``, or ``last``)
         self.closed: list[tuple[int, int]] = []
+        self.closed_t: list[tuple[int | None, int | None]] = []
 
-    def add(self, nonzero_index: np.ndarray) -> None:
-        """Global indices (sorted) of the next piece's non-zero samples."""
+    def add(self, nonzero_index: np.ndarray, t_ns: np.ndarray | None = None, t_first: int = 0) -> None:
+        """Global indices (sorted) of the next piece's non-zero samples; ``t_ns``: times of the global samples
+        ``t_first ...`` (the piece with its overlaps)."""
         idx = np.asarray(nonzero_index, np.int64)
         if not len(idx):
             return
+
+        def time(i: int) -> int | None:
+            k = i - t_first
+            return int(t_ns[k]) if t_ns is not None and 0 <= k < len(t_ns) else None
+
         if self.last is not None:
             idx_all = np.concatenate([[self.last], idx])
         else:
-            self.start = int(idx[0])
+            self.start, self.start_t = int(idx[0]), time(int(idx[0]))
             idx_all = idx
         split = np.flatnonzero(np.diff(idx_all) - 1 >= self.dead)
         for k in split:  # an activity ends at idx_all[k]; the next starts at idx_all[k + 1]
-            self._close(int(idx_all[k]))
+            last = int(idx_all[k])
+            end_t = time(last + 1)
+            self._close(last, self.end_t if end_t is None else end_t)
             self.start = int(idx_all[k + 1])
+            self.start_t = time(self.start)
         self.last = int(idx_all[-1])
+        self.end_t = time(self.last + 1)
+        if self.end_t is None:  # the recording's last sample
+            self.end_t = time(self.last)
 
-    def _close(self, last: int) -> None:
+    def _close(self, last: int, end_t: int | None) -> None:
         if self.start is not None and last + 1 - self.start >= self.min:
             self.count += 1
             if self.keep:
                 self.closed.append((self.start, last + 1))
+                self.closed_t.append((self.start_t, end_t))
 
     def finish(self) -> np.ndarray:
         if self.last is not None:
-            self._close(self.last)
+            self._close(self.last, self.end_t)
             self.start = self.last = None
         return np.array(self.closed, dtype=np.int64).reshape(-1, 2)
+
+    def times(self) -> tuple[np.ndarray, np.ndarray]:
+        """(start ns, end ns) of the kept intervals (from the times given to :meth:`add`)."""
+        if not self.closed_t:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        t = np.array(self.closed_t, dtype=np.int64)
+        return t[:, 0], t[:, 1]
 
 
 def long_metrics_pieces(
@@ -187,7 +214,7 @@ def long_metrics_pieces(
             h = high_passed_noise_removed(acc_g, act)[k0:k1]
             h[unknown[k0:k1]] = 0.0
             for j, stitcher in enumerate(stitchers):
-                stitcher.add(core_start + np.flatnonzero(h[:, j] != 0))
+                stitcher.add(core_start + np.flatnonzero(h[:, j] != 0), t if j == 3 else None, lo)
             # distance: every window inside this core (cores start at multiples of the window)
             d_all = 100.0 * np.sqrt((windowed_distance(acc_g, rate, dist_p) ** 2).sum(axis=1))[k0:k1]
             ends = np.arange(win - 1, len(d_all), win)
@@ -215,7 +242,7 @@ def long_metrics_pieces(
         stitcher.finish()
     per_axis = [s.count for s in stitchers[:3]]
     overall = stitchers[3].finish()
-    starts_t, ends_t = _interval_times(path, imu_topic, overall, total, last_t)
+    starts_t, ends_t = stitchers[3].times()
     for acc_ in periods.values():
         acc_.add_activity_starts(starts_t)
     yield Intervals(
@@ -272,24 +299,3 @@ def long_metrics_pieces(
 
 def _round(x: float, digits: int = 6) -> float:
     return float(round(float(x), digits))
-
-
-def _interval_times(path, topic: str, intervals: np.ndarray, total: int, last_t: int) -> tuple[np.ndarray, np.ndarray]:
-    """Times of ``[start, end)`` sample indices: start sample's time, and the end sample's (or the last one's)."""
-    from imulog.archive import TrialReader
-
-    if not len(intervals):
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    wanted = np.unique(np.concatenate([intervals[:, 0], np.minimum(intervals[:, 1], total - 1)]))
-    times = np.empty(len(wanted), np.int64)
-    seen = 0
-    with TrialReader(path) as trial:
-        for piece in trial.iter_blocks(topic):
-            lo, hi = seen, seen + len(piece)
-            a, b = np.searchsorted(wanted, [lo, hi])
-            times[a:b] = np.asarray(piece.t_ns)[wanted[a:b] - lo]
-            seen = hi
-    lookup = dict(zip(wanted.tolist(), times.tolist(), strict=True))
-    start = np.array([lookup[int(i)] for i in intervals[:, 0]], np.int64)
-    end = np.array([lookup[int(min(i, total - 1))] for i in intervals[:, 1]], np.int64)
-    return start, end
