@@ -14,7 +14,7 @@ the recording.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -82,11 +82,10 @@ class EnvelopeBuilder:
         if not len(part[0]):
             return
         if self._parts and self._parts[-1][0][-1] == part[0][0]:  # the previous piece's last bucket goes on
-            prev = [a.copy() for a in self._parts[-1]]
-            prev[2][-1] = part[2][0]
-            prev[3][-1] = np.fmin(prev[3][-1], part[3][0])
-            prev[4][-1] = np.fmax(prev[4][-1], part[4][0])
-            self._parts[-1] = tuple(prev)
+            _, _, last, lo, hi = self._parts[-1]  # arrays of our own: updated in place
+            last[-1] = part[2][0]
+            lo[-1] = np.fmin(lo[-1], part[3][0])
+            hi[-1] = np.fmax(hi[-1], part[4][0])
             part = tuple(a[1:] for a in part)
         if len(part[0]):
             self._parts.append(part)
@@ -274,7 +273,7 @@ def read_trial_overview(path: str | Path, params: OverviewParams | None = None) 
             if window_ref is not None:
                 lo, hi = _reference_to_channel(clocks, topic, np.array(window_ref))
                 window = (int(lo), int(hi))
-            reduced = reduce_channel(_pieces(trial, topic), bucket_ns, origin, window)
+            reduced = reduce_channel(trial.iter_blocks(topic), bucket_ns, origin, window)
             if reduced is not None:
                 streams.append(reduced)
     label = path.stem
@@ -289,7 +288,3 @@ def read_trial_overview(path: str | Path, params: OverviewParams | None = None) 
         ),
         True,
     )
-
-
-def _pieces(trial: Any, topic: str) -> Iterator[Any]:
-    yield from trial.iter_blocks(topic)
