@@ -33,11 +33,13 @@ def format_summary(timing: dict) -> str:
         )
     else:
         found = f"{timing['n_movements']} movements (no task protocol: each movement is a phase)"
-    lines = [
+    head = (
         f"{timing['imu']}: {found}, method {timing['method']}, {timing['clock']} clock, "
-        f"static {100 * timing['static_fraction']:.1f} %",
-        f"{'rep':>4} {'phase':<14} {'start s':>9} {'end s':>9} {'dur s':>7} {'peak rad/s':>10}",
-    ]
+        f"static {100 * timing['static_fraction']:.1f} %"
+    )
+    if "phases" not in timing:  # a long recording segmented core by core: summaries, no row per phase
+        return "\n".join([head, *format_long_summary(timing)])
+    lines = [head, f"{'rep':>4} {'phase':<14} {'start s':>9} {'end s':>9} {'dur s':>7} {'peak rad/s':>10}"]
     by_label: dict[str, list[float]] = {}
     for row in timing["phases"]:
         lines.append(
@@ -56,6 +58,31 @@ def format_summary(timing: dict) -> str:
             f"{timing.get('mean_confidence')}, below 0.5 in repetitions {', '.join(map(str, low)) or '-'}"
         )
     return "\n".join(lines)
+
+
+def format_long_summary(timing: dict) -> list[str]:
+    """Lines for a record computed core by core: durations, their histogram, phases per hour and per day."""
+    d = timing.get("phase_durations") or {}
+    lines = [f"computed {timing.get('computed', 'core by core')}"]
+    if d.get("n"):
+        lines.append(
+            f"phase durations: median {d['median_s']:.2f} s (10-90 %: {d['p10_s']:.2f}-{d['p90_s']:.2f} s), "
+            f"longest {d['max_s']:.1f} s, total {d['total_s'] / 60:.1f} min"
+        )
+        hist = d.get("histogram") or {}
+        edges, counts = hist.get("bin_edges_s") or [], hist.get("counts") or []
+        cells = [
+            f"{lo:g}-{hi:g} s: {n}" if hi is not None else f">{lo:g} s: {n}"
+            for lo, hi, n in zip(edges[:-1], edges[1:], counts, strict=False)
+            if n
+        ]
+        lines.append("durations: " + ", ".join(cells))
+    for key, name in (("by_day", "day"), ("by_hour", "hour")):
+        rows = timing.get(key) or []
+        if rows and (key == "by_day" or len(rows) <= 48):
+            per = ", ".join(f"{(r['start'] or str(r['start_s']) + ' s')[:16]}: {r['phases']}" for r in rows)
+            lines.append(f"phases per {name}: {per}")
+    return lines
 
 
 def _protocol_from_trial(trial: Path) -> tuple[str, int]:

@@ -29,6 +29,7 @@ from imulog.process.gaps import GapParams, prepare
 from imulog.process.segmentation.pipeline import PhaseParams, segment_phases, timing_table
 from imulog.process.segmentation.repetitions import RepetitionParams
 from imulog.steps.common import alignment_for, mean_rate_hz, pick_imu
+from imulog.steps.long_phases import LONG_SAMPLES, PhaseCores, long_phase_pieces, long_unsupported
 
 STEP = "phases"
 LOW_CONFIDENCE = 0.5  # repetitions below this confidence are listed in imulog.timing["low_confidence_repetitions"]
@@ -154,23 +155,55 @@ def run_phases(
     params: PhaseParams | None = None,
     force: bool = False,
     gaps: GapParams | None = None,
+    cores: PhaseCores | None = None,
 ):
     """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
 
     Without ``params`` the trial's own protocol and repetition count are used (:func:`params_for_trial`);
-    ``gaps``: how missing IMU samples are treated (:mod:`imulog.process.gaps`).
+    ``gaps``: how missing IMU samples are treated (:mod:`imulog.process.gaps`). Recordings longer than
+    :data:`~imulog.steps.long_phases.LONG_SAMPLES` samples, or any with ``cores``, are segmented core by core in
+    bounded memory (:mod:`imulog.steps.long_phases`; ``imulog.timing`` then holds summaries, not a row per phase).
     """
     from imulog.archive import TrialReader
+    from imulog.archive.streaming import StreamPieces
     from imulog.steps.base import StepResult, run_step
 
     with TrialReader(path) as trial:
         name = pick_imu(trial.topics(), imu)
         params = params or params_for_trial(trial.metadata.get("imulog.trial", {}))
+        channel = trial.channel(f"/imu/{name}")
+        total = int(channel.sample_count or 0)
+        span_ns = (channel.end_ns or 0) - (channel.start_ns or 0)
     topic = f"/imu/{name}"
+    long = cores is not None or total > LONG_SAMPLES
+    step_params = {"imu": name, **params.to_dict()}
+    if long:
+        reason = long_unsupported(params)
+        if reason is not None:
+            raise ValueError(
+                f"{topic} has {total:,} samples (more than {LONG_SAMPLES:,}: processed core by core): {reason}"
+            )
+        cores = cores or PhaseCores()
+        step_params["cores"] = cores.to_dict()
 
     def compute(trial) -> StepResult:
-        stream = trial.read(topic)
         alignment = alignment_for(trial.metadata, topic)
+        if long:  # days of daily life: core by core while the result is written; the record fills at the end
+            if total < 10 or span_ns <= 0:
+                raise ValueError(f"{topic} has only {total} samples")
+            rate = (total - 1) / (span_ns * 1e-9)  # mean_rate_hz of the whole channel
+            start_time = (trial.metadata.get("imulog.trial") or {}).get("start_time")
+            record: dict[str, Any] = {}
+            pieces = StreamPieces(
+                topics=[f"/derived/static/{name}", f"/derived/movements/{name}", f"/derived/phases/{name}"],
+                pieces=lambda: long_phase_pieces(
+                    path, topic, name, params, gaps, total, rate, record, alignment=alignment,
+                    start_time=str(start_time) if start_time else None, cores=cores,
+                ),
+                expected_duration_s=span_ns * 1e-9,
+            )
+            return StepResult(streams=[pieces], metadata={"imulog.timing": record})
+        stream = trial.read(topic)
         streams, timing = compute_phases(stream.t_ns, stream.gyr, name, params, alignment, stream.acc, gaps)
         provenance = {"gaps": timing["gaps"]} if "gaps" in timing else {}
         return StepResult(streams=streams, metadata={"imulog.timing": timing}, provenance=provenance)
@@ -179,7 +212,7 @@ def run_phases(
         path,
         step=STEP,
         algorithm=algorithm_name(params),
-        params={"imu": name, **params.to_dict()},
+        params=step_params,
         inputs=[topic],
         metadata_inputs=("imulog.trial", "imulog.alignment"),
         compute=compute,

@@ -177,18 +177,27 @@ def refine_phase_boundaries(
     start: np.ndarray,
     end: np.ndarray,
     params: BoundaryParams = BoundaryParams(),
+    *,
+    cutoff_hz: float | None = None,
+    bounds: tuple[int, int] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Refined ``[start, end)`` sample ranges of time-ordered, non-overlapping phases (see module docstring).
 
     ``gyr_rad_s`` (N, 3) rad/s sampled at ``rate_hz``; ``start``/``end`` the phases to refine (e.g. after event
     correction). A boundary never crosses the neighbouring phase.
+
+    For a piece of a longer recording (:mod:`imulog.steps.long_phases`): ``cutoff_hz`` is the recording's
+    :func:`adaptive_cutoff_hz` (Hz), and ``bounds`` (samples of the piece, default ``(0, N)``) the end of the
+    phase before the first and the start of the phase after the last, so the piece's filter margins lie outside.
     """
     s = np.array(start, dtype=np.int64)
     e = np.array(end, dtype=np.int64)
     if not params.enabled or len(s) == 0:
         return s, e
-    omega = lowpass_axes(gyr_rad_s, rate_hz, adaptive_cutoff_hz(gyr_rad_s, rate_hz, params))
-    n = len(omega)
+    if cutoff_hz is None:
+        cutoff_hz = adaptive_cutoff_hz(gyr_rad_s, rate_hz, params)
+    omega = lowpass_axes(gyr_rad_s, rate_hz, cutoff_hz)
+    first, n = bounds if bounds is not None else (0, len(omega))
     win = max(3, int(round(params.static_window_s * rate_hz)))
     min_static = max(3, int(round(params.min_static_s * rate_hz)))
     guard = int(round(params.guard_s * rate_hz))
@@ -199,7 +208,7 @@ def refine_phase_boundaries(
     out_s, out_e = s_sorted.copy(), e_sorted.copy()
     for k in range(len(s_sorted)):
         a, b = int(s_sorted[k]), int(e_sorted[k])
-        prev_end = int(out_e[k - 1]) if k > 0 else 0
+        prev_end = int(out_e[k - 1]) if k > 0 else first
         next_start = int(s_sorted[k + 1]) if k + 1 < len(s_sorted) else n
         if params.static_window_s > 0:
             pre = quietest_window(omega, prev_end + guard, a - guard, win)

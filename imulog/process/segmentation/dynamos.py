@@ -218,14 +218,17 @@ def refine_boundaries(
     continuation_samples: int = 0,
     continuation_level: float = 0.3,
     continuation_peak_fraction: float = 0.15,
+    noise: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Move each onset back (offset forward) while the norm keeps falling and stays above a stop level.
 
     The stop level is ``noise + level * (threshold - noise)`` with ``noise`` the median norm below the
-    threshold (rad/s). Boundaries never cross the neighbouring movement.
+    threshold (rad/s; given as ``noise`` when ``norm`` is a piece of a longer recording whose median it is).
+    Boundaries never cross the neighbouring movement.
     """
-    below = norm[norm < threshold]
-    noise = float(np.median(below)) if len(below) else 0.0
+    if noise is None:
+        below = norm[norm < threshold]
+        noise = float(np.median(below)) if len(below) else 0.0
     stop = noise + level * (threshold - noise)
     s = np.array(start, dtype=np.int64)
     e = np.array(end, dtype=np.int64)

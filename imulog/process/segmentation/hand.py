@@ -180,6 +180,21 @@ def _extend_offset(a_norm, v_norm, b_local, level, vlevel, quiet, cont, cont_lev
     return j
 
 
+def cutoff_params(params: HandParams) -> BoundaryParams:
+    """The accelerometer's cut-off adaptation expressed as :class:`BoundaryParams` (levels in m/s^2)."""
+    return BoundaryParams(
+        cutoff_hz=params.cutoff_hz,
+        target_level_rad_s=params.target_level_mps2,
+        min_cutoff_hz=params.min_cutoff_hz,
+        n_sigma=params.n_sigma,
+    )
+
+
+def accelerometer_cutoff_hz(acc_mps2: np.ndarray, rate_hz: float, params: HandParams) -> float:
+    """Low-pass cut-off (Hz) of the accelerometer, lowered for a noisy sensor (see ``adaptive_cutoff_hz``)."""
+    return adaptive_cutoff_hz(acc_mps2, rate_hz, cutoff_params(params))
+
+
 def refine_with_accelerometer(
     acc_mps2: np.ndarray,
     gyr_rad_s: np.ndarray,
@@ -187,31 +202,30 @@ def refine_with_accelerometer(
     start: np.ndarray,
     end: np.ndarray,
     params: HandParams = HandParams(),
+    *,
+    cutoff_hz: float | None = None,
+    bounds: tuple[int, int] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Onsets/offsets of time-ordered, non-overlapping phases moved outward while the hand still moves.
 
     ``acc_mps2`` (N, 3) specific force m/s^2 and ``gyr_rad_s`` (N, 3) rad/s in the sensor frame at
     ``rate_hz``; ``start``/``end`` the (gyroscope-refined) phases. A boundary never crosses the neighbouring
     phase nor the rest window between them. See the module docstring.
+
+    For a piece of a longer recording: ``cutoff_hz`` is the recording's accelerometer cut-off (Hz,
+    :func:`accelerometer_cutoff_hz`) and ``bounds`` as in
+    :func:`~imulog.process.segmentation.boundaries.refine_phase_boundaries`.
     """
     s = np.array(start, dtype=np.int64)
     e = np.array(end, dtype=np.int64)
     if not params.enabled or len(s) == 0 or acc_mps2 is None:
         return s, e
     raw = fill_gaps(acc_mps2)  # a missing sample must not look like a jump to 0 m/s^2
-    cut = adaptive_cutoff_hz(
-        raw,
-        rate_hz,
-        BoundaryParams(
-            cutoff_hz=params.cutoff_hz,
-            target_level_rad_s=params.target_level_mps2,
-            min_cutoff_hz=params.min_cutoff_hz,
-            n_sigma=params.n_sigma,
-        ),
-    )
+    cut = accelerometer_cutoff_hz(raw, rate_hz, params) if cutoff_hz is None else cutoff_hz
     acc = lowpass_axes(raw, rate_hz, cut)
     gyr = lowpass_axes(fill_gaps(gyr_rad_s), rate_hz, min(25.0, 0.45 * rate_hz))
-    n, dt = len(acc), 1.0 / rate_hz
+    dt = 1.0 / rate_hz
+    first, n = bounds if bounds is not None else (0, len(acc))
     length = max(3, int(round(params.rest_window_s * rate_hz)))
     guard = int(round(params.guard_s * rate_hz))
     quiet = max(1, int(round(params.quiet_s * rate_hz)))
@@ -224,7 +238,7 @@ def refine_with_accelerometer(
     out_s, out_e = ss.copy(), ee.copy()
     for k in range(len(ss)):
         a0, b0 = int(ss[k]), int(ee[k])
-        prev_end = int(out_e[k - 1]) if k > 0 else 0
+        prev_end = int(out_e[k - 1]) if k > 0 else first
         next_start = int(ss[k + 1]) if k + 1 < len(ss) else n
         # the phase's peak |a| against the nearer rest, for the continuation level
         post = _rest_window(b0 + guard, min(next_start, n) - guard, length, reach, from_end=False)

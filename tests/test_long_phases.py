@@ -1,0 +1,169 @@
+"""Phases of long recordings core by core: the movements, phases and static mask of the whole computation."""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pytest
+
+from converters import axivity
+from imulog.archive import TrialReader
+from imulog.archive.streaming import write_trial_streaming
+from imulog.process.segmentation.boundaries import white_noise_rad_s
+from imulog.process.segmentation.dynamos import runs
+from imulog.simulate.home import HomeParams, write_home_cwa
+from imulog.steps.long_phases import (
+    NoiseHistogram,
+    NormFile,
+    PhaseCores,
+    exact_median_below,
+    second_differences,
+    threshold_runs,
+)
+from imulog.steps.phases import run_phases
+
+IMU = "ax6_4321"
+
+
+def test_threshold_runs_join_across_chunks():
+    rng = np.random.default_rng(1)
+    x = rng.random(5000)
+    x[1000:2600] = 2.0  # one run across several chunks
+    x[2999] = 2.0  # a run ending exactly at a chunk's end
+    x[3000:3004] = 2.0  # ... continued by the next chunk
+    x[-1] = 2.0  # the recording's last sample
+    whole = runs(x > 0.9)
+    cuts = [0, 700, 1200, 1201, 1900, 3000, 4999, 5000]
+    chunks = [(a, x[a:b]) for a, b in zip(cuts[:-1], cuts[1:], strict=True)] + [(5000, np.zeros(0))]
+    got = threshold_runs(iter(chunks), 0.9)
+    np.testing.assert_array_equal(got[0], whole[0])
+    np.testing.assert_array_equal(got[1], whole[1])
+
+
+def test_noise_histogram_matches_white_noise():
+    rng = np.random.default_rng(2)
+    lsb = 0.061 * np.pi / 180  # a quantised gyroscope (AX6 at 2000 deg/s): the medians are exact
+    g = np.round((rng.normal(0, 0.004, (30_000, 3)) + 0.3 * np.sin(np.arange(30_000) / 300)[:, None]) / lsb) * lsb
+    h = NoiseHistogram(0.5)
+    for a, b in [(0, 7000), (7000, 7001), (7001, 30_000)]:  # pieces, each centre counted once
+        h.add(second_differences(g, a, b, a == 0, b == 30_000))
+    assert h.white_noise() == pytest.approx(white_noise_rad_s(g), rel=1e-9)
+    cont = rng.normal(0, 0.003, (20_000, 3))  # continuous values: within a bin width
+    h = NoiseHistogram(0.5)
+    h.add(second_differences(cont, 0, 20_000, True, True))
+    assert abs(h.white_noise() - white_noise_rad_s(cont)) < 2 * h.width
+
+
+def test_exact_median_below(tmp_path):
+    rng = np.random.default_rng(3)
+    x = np.abs(rng.normal(0, 1, 100_001))
+    f = NormFile(tmp_path)
+    for a in range(0, len(x), 30_000):
+        f.append(x[a : a + 30_000])
+    np.testing.assert_array_equal(f[500:900], x[500:900])
+    for thr in (0.7, 5.0):
+        assert exact_median_below(f, thr) == np.median(x[x < thr])
+    f.close()
+
+
+@pytest.fixture(scope="module")
+def trial(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("longphases")
+    cwa = folder / "home.cwa"
+    write_home_cwa(cwa, HomeParams(days=0.03, seed=4, start="2024-03-04T09:40:00"))  # 43 min at 100 Hz
+    return write_trial_streaming(folder / "home.mcap", axivity.iter_chunks(cwa, blocks_per_chunk=300))
+
+
+@pytest.fixture(scope="module")
+def whole(trial, tmp_path_factory):
+    path = tmp_path_factory.mktemp("whole") / "whole.mcap"
+    shutil.copy(trial, path)
+    run_phases(path)
+    return path
+
+
+def _read(path):
+    with TrialReader(path) as t:
+        return (
+            t.read(f"/derived/movements/{IMU}"),
+            t.read(f"/derived/phases/{IMU}"),
+            t.read(f"/derived/static/{IMU}"),
+            t.metadata["imulog.timing"],
+        )
+
+
+def test_cores_equal_the_whole(trial, whole, tmp_path):
+    """Small cores (7 min) give the whole computation's movements, phases and static mask to the sample: the norm
+    filtered core by core differs from the whole filtering by rounding only (the overlap covers the filters'
+    reach), and every statistic the whole computation takes over the recording comes from a first pass."""
+    cored = tmp_path / "cored.mcap"
+    shutil.copy(trial, cored)
+    run_phases(cored, cores=PhaseCores(core_s=420.0, overlap_s=30.0, context_s=600.0))
+    mw, pw, sw, tw = _read(whole)
+    mc, pc, sc, tc = _read(cored)
+    assert len(mw) > 100
+    for a, b in ((mw, mc), (pw, pc)):
+        np.testing.assert_array_equal(a.start_ns, b.start_ns)
+        np.testing.assert_array_equal(a.end_ns, b.end_ns)
+    np.testing.assert_array_equal(sw.t_ns, sc.t_ns)
+    np.testing.assert_array_equal(sw.values, sc.values)
+    assert tc["n_movements"] == tw["n_movements"] and tc["static_fraction"] == tw["static_fraction"]
+    # the record: counts and summaries instead of a row per phase
+    assert "phases" not in tc
+    durations = np.array([row["duration_s"] for row in tw["phases"]])
+    assert tc["phase_durations"]["n"] == len(durations)
+    assert tc["phase_durations"]["median_s"] == pytest.approx(np.median(durations), abs=1e-3)
+    assert sum(tc["phase_durations"]["histogram"]["counts"]) == len(durations)
+    assert sum(row["phases"] for row in tc["by_hour"]) == tc["n_phases"]
+    assert [row["start"] for row in tc["by_hour"]] == ["2024-03-04T09:00:00", "2024-03-04T10:00:00"]
+    assert sum(row["recorded_s"] for row in tc["by_hour"]) == pytest.approx(len(sw.t_ns) / tc["rate_hz"], abs=0.1)
+
+
+def test_movement_across_a_core_boundary_is_found_once(trial, whole, tmp_path):
+    mw, pw, sw, _ = _read(whole)
+    t0 = int(sw.t_ns[0])
+    dur = mw.end_ns - mw.start_ns
+    k = int(np.argmax(np.where(mw.start_ns - t0 > 300e9, dur, 0)))  # a long movement after 5 min
+    assert dur[k] > 2e9
+    boundary = int(np.searchsorted(sw.t_ns, (mw.start_ns[k] + mw.end_ns[k]) // 2))  # a core boundary inside it
+    rate = (len(sw.t_ns) - 1) / ((sw.t_ns[-1] - t0) * 1e-9)
+    cored = tmp_path / "boundary.mcap"
+    shutil.copy(trial, cored)
+    run_phases(cored, cores=PhaseCores(core_s=boundary / rate, overlap_s=30.0))
+    mc, pc, _, _ = _read(cored)
+    inside = (mc.start_ns <= sw.t_ns[boundary]) & (mc.end_ns >= sw.t_ns[boundary])
+    assert inside.sum() == 1
+    assert (mc.start_ns[inside][0], mc.end_ns[inside][0]) == (mw.start_ns[k], mw.end_ns[k])
+    assert len(mc) == len(mw) and len(pc) == len(pw)
+    assert np.all(np.diff(pc.start_ns) > 0)
+
+
+def test_unsupported_choices_are_refused(trial, tmp_path):
+    from dataclasses import replace
+
+    from imulog.process.segmentation.pipeline import PhaseParams
+
+    cored = tmp_path / "refused.mcap"
+    shutil.copy(trial, cored)
+    with pytest.raises(ValueError, match="protocol r2g .*--protocol movements"):
+        run_phases(cored, params=PhaseParams(protocol="r2g"), cores=PhaseCores())
+    with pytest.raises(ValueError, match="method template .*--method dynamos"):
+        run_phases(cored, params=replace(PhaseParams(), protocol="movements", method="template"), cores=PhaseCores())
+    with TrialReader(cored) as t:
+        assert f"/derived/phases/{IMU}" not in t.topics()
+
+
+def test_cli_prints_the_summary_of_a_long_recording(trial, tmp_path, monkeypatch):
+    from click.testing import CliRunner
+
+    import imulog.steps.phases as step
+    from imulog.cli import cli
+
+    cored = tmp_path / "cli.mcap"
+    shutil.copy(trial, cored)
+    monkeypatch.setattr(step, "LONG_SAMPLES", 10_000)  # this 43-min trial counts as long
+    result = CliRunner().invoke(cli, ["process", "phases", str(cored)])
+    assert result.exit_code == 0, result.output
+    assert "core by core" in result.output and "phases per hour" in result.output
+    assert len(result.output.splitlines()) < 20  # no line per phase
