@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import pyarrow as pa
 import rerun as rr
 
 from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream
@@ -55,8 +56,19 @@ class LoggedTrial:
         return [e.path for e in self.entities]
 
 
-def _time(t_ref_ns: np.ndarray) -> rr.TimeColumn:
-    return rr.TimeColumn(L.TIMELINE, duration=np.asarray(t_ref_ns, dtype=np.int64).astype("timedelta64[ns]"))
+class _TimeIndex:
+    """The ``reference_time`` column of a batch (rerun's ``TimeColumnLike``): an arrow view of int64 ns, no copy."""
+
+    def __init__(self, t_ref_ns: np.ndarray) -> None:
+        t = np.ascontiguousarray(t_ref_ns, dtype=np.int64)
+        self._times = pa.Array.from_buffers(pa.duration("ns"), len(t), [None, pa.py_buffer(t)])
+        self._keep = t  # the buffer the arrow array points into
+
+    def timeline_name(self) -> str:
+        return L.TIMELINE
+
+    def as_arrow_array(self) -> pa.Array:
+        return self._times
 
 
 FORCED = " (forced)"  # suffix of a phase label event correction made by cutting a movement
@@ -86,6 +98,13 @@ class _Logger:
         self.reference = reference  # Vicon cluster origin: (t_ref ns, position m)
         self.trajectory_record = dict(trajectory_record or {})
         self.timing_record = dict(timing_record or {})  # imulog.timing: forced phases, repetition confidence
+        self._index: tuple[np.ndarray, _TimeIndex] | None = None  # last time column, reused for the same array
+
+    def _time(self, t_ref: np.ndarray) -> _TimeIndex:
+        """Time column of ``t_ref``; the same array sent again (IMU quantities, cursor, error) reuses it."""
+        if self._index is None or self._index[0] is not t_ref:
+            self._index = (t_ref, _TimeIndex(t_ref))
+        return self._index[1]
 
     # -- primitives -------------------------------------------------------------------------------
     def _record(self, path: str, role: str, topic: str, t_ref: np.ndarray) -> None:
@@ -109,7 +128,7 @@ class _Logger:
             values = values[:, None]
         if len(t_ref) == 0:
             return
-        self.rec.send_columns(path, indexes=[_time(t_ref)], columns=rr.Scalars.columns(scalars=values))
+        self.rec.send_columns(path, indexes=[self._time(t_ref)], columns=rr.Scalars.columns(scalars=values))
         style: dict[str, Any] = {"names": names}
         if colors is None and values.shape[1] <= len(L.AXIS_COLORS):
             colors = L.AXIS_COLORS[: values.shape[1]]
@@ -123,7 +142,7 @@ class _Logger:
         if len(t_ref) == 0:
             return
         columns = rr.StateChange.columns(state=[str(s) for s in states]).partition(np.full(len(t_ref), lanes))
-        self.rec.send_columns(path, indexes=[_time(t_ref)], columns=columns)
+        self.rec.send_columns(path, indexes=[self._time(t_ref)], columns=columns)
         values = sorted({str(s) for s in states if s and (str(s) in L.PHASE_COLORS or str(s).endswith(FORCED))})
         if values:
             self.rec.log(
@@ -148,48 +167,66 @@ class _Logger:
         colour: tuple[int, int, int] | None,
         labels: list[str] | None = None,
     ) -> None:
-        """Points3D, one row per sample; ``pos`` (N, M, 3), only valid points sent (rows may be empty)."""
+        """Points3D, one row per sample; ``pos`` (N, M, 3), only valid points sent (rows may be empty).
+
+        Without gaps every row holds the same M points in order, so the marker class ids (labels, colours) are
+        sent once as a static column instead of once per point; with gaps they go with every point.
+        """
         n, m = valid.shape
         if n == 0:
             return
-        if valid.all():  # fast path: no gaps
-            counts = np.full(n, m, dtype=np.int64)
-            flat = np.ascontiguousarray(pos.reshape(-1, 3), dtype=np.float32)
-            class_ids = np.tile(np.arange(m, dtype=np.uint16), n)
+        complete = bool(valid.all())
+        if complete:  # fast path: no gaps, M points per row
+            flat = np.ascontiguousarray(pos, dtype=np.float32).reshape(-1, 3)
+            class_ids = None
         else:
-            counts = valid.sum(axis=1).astype(np.int64)
             flat = np.ascontiguousarray(pos[valid], dtype=np.float32)
             class_ids = np.nonzero(valid)[1].astype(np.uint16)
         if labels is not None:
-            cols = rr.Points3D.columns(positions=flat, class_ids=class_ids)
             self.rec.log(
                 path,
                 rr.AnnotationContext([(i, label, _rgb(L.color(i + 3))) for i, label in enumerate(labels)]),
                 static=True,
             )
-            self.rec.log(path, rr.Points3D.from_fields(radii=[radius_m], show_labels=False), static=True)
+            static_ids = np.arange(m, dtype=np.uint16) if complete else None
+            self.rec.log(
+                path, rr.Points3D.from_fields(radii=[radius_m], show_labels=False, class_ids=static_ids), static=True
+            )
+            cols = rr.Points3D.columns(positions=flat, class_ids=class_ids)
         else:
             cols = rr.Points3D.columns(positions=flat)
             self.rec.log(
                 path, rr.Points3D.from_fields(radii=[radius_m], colors=[_rgb(colour or (0, 0, 0))]), static=True
             )
-        self.rec.send_columns(path, indexes=[_time(t_ref)], columns=cols.partition(counts))
+        if not (complete and m == 1):  # one point per row is the default partition
+            cols = cols.partition(np.full(n, m, dtype=np.int64) if complete else valid.sum(axis=1))
+        self.rec.send_columns(path, indexes=[self._time(t_ref)], columns=cols)
         self._record(path, role, topic, t_ref)
 
     def path_strip(
-        self, topic: str, t_ref: np.ndarray, pos: np.ndarray, colour: tuple[int, int, int], label: str
+        self,
+        topic: str,
+        t_ref: np.ndarray,
+        pos: np.ndarray,
+        colour: tuple[int, int, int],
+        label: str,
+        finite: np.ndarray | None = None,
     ) -> None:
-        """The whole trajectory as static line strips, split at NaN samples and at time gaps (> 3 sample periods)."""
-        finite = np.all(np.isfinite(pos), axis=1)
-        if finite.sum() < 2:
+        """The whole trajectory as static line strips, split at NaN samples and at time gaps (> 3 sample periods).
+
+        ``finite`` (N,) is the mask of finite rows of ``pos`` when the caller has it already.
+        """
+        if finite is None:
+            finite = np.all(np.isfinite(pos), axis=1)
+        idx = np.flatnonzero(finite)
+        if len(idx) < 2:
             return
-        idx = np.nonzero(finite)[0]
-        t = t_ref[idx]
-        dt = np.diff(t)
-        typical = float(np.median(dt)) if len(dt) else 0.0
-        breaks = (np.diff(idx) > 1) | (dt > 3 * typical)
-        bounds = np.concatenate([[0], np.nonzero(breaks)[0] + 1, [len(idx)]])
-        strips = [pos[idx[a:b]] for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b - a >= 2]
+        dt = np.diff(t_ref[idx])
+        typical = float(np.median(dt))
+        breaks = np.flatnonzero((np.diff(idx) > 1) | (dt > 3 * typical)) + 1
+        points = np.ascontiguousarray(pos[idx] if len(idx) < len(pos) else pos, dtype=np.float32)
+        bounds = np.concatenate([[0], breaks, [len(idx)]])
+        strips = [points[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b - a >= 2]
         if not strips:
             return
         path = L.path_entity(topic, self.prefix)
@@ -204,9 +241,10 @@ class _Logger:
         colour = L.VICON_COLOR if topic == L.CLUSTER_POSE_TOPIC else L.color(self.n_paths)
         if topic != L.CLUSTER_POSE_TOPIC:
             self.n_paths += 1
-        self.path_strip(topic, t_ref, pos, colour, label)
-        valid = np.all(np.isfinite(pos), axis=1)[:, None]
-        self.points(L.cursor_entity(topic, self.prefix), "cursor", topic, t_ref, pos[:, None, :], valid, 0.007, colour)
+        finite = np.isfinite(pos).all(axis=1)
+        self.path_strip(topic, t_ref, pos, colour, label, finite)
+        cursor = L.cursor_entity(topic, self.prefix)
+        self.points(cursor, "cursor", topic, t_ref, pos[:, None, :], finite[:, None], 0.007, colour)
         return colour
 
     def imu_trajectory(self, s: SignalStream, t_ref: np.ndarray) -> None:
@@ -341,7 +379,7 @@ class _Logger:
             path = L.join(self.prefix, f"{s.topic}/events")
             t_ev = t_start[instant]
             self.rec.send_columns(
-                path, indexes=[_time(t_ev)], columns=rr.TextLog.columns(text=[str(x) for x in labels[instant]])
+                path, indexes=[self._time(t_ev)], columns=rr.TextLog.columns(text=[str(x) for x in labels[instant]])
             )
             self._record(path, "events", s.topic, t_ev)
 
@@ -374,7 +412,7 @@ class _Logger:
         cols = rr.Transform3D.columns(translation=s.position[valid], quaternion=quat_xyzw)
         path = L.pose_entity(s.topic, self.prefix)
         self.rec.log(path, rr.TransformAxes3D(0.08), static=True)
-        self.rec.send_columns(path, indexes=[_time(t_ref)], columns=cols.partition(valid.astype(np.int64)))
+        self.rec.send_columns(path, indexes=[self._time(t_ref)], columns=cols.partition(valid.astype(np.int64)))
         self._record(path, "pose", s.topic, t_ref)
         label = "Vicon cluster" if s.topic == L.CLUSTER_POSE_TOPIC else s.topic
         self.trajectory(s.topic, t_ref, s.position, label)
