@@ -10,7 +10,10 @@ from __future__ import annotations
 
 import os
 import struct
+import threading
 import zlib
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import BinaryIO
 
 import numpy as np
@@ -19,27 +22,89 @@ from imulog.archive import _mcap as m
 
 CHUNK_TARGET_BYTES = 2 * 1024 * 1024  # uncompressed size at which a chunk is closed
 ZSTD_LEVEL = 3  # the mcap library's level: on IMU blocks both smaller and faster than 1 here (bench_archive)
-ZSTD_THREADS = min(2, os.cpu_count() or 1)  # zstd's own worker threads (the GIL is released)
+PIPELINE = os.environ.get("IMULOG_COMPRESS_THREAD", "1") != "0"  # compress chunks on a second thread
+MAX_PENDING = 2  # chunks compressed ahead at most (memory: about this many raw chunks)
+
+_HEAD = np.dtype(
+    [("op", "u1"), ("len", "<u8"), ("channel", "<u2"), ("seq", "<u4"), ("log", "<u8"), ("publish", "<u8")]
+)  # an MCAP Message record's 31-byte head, packed
+assert _HEAD.itemsize == 31
+
+_local = threading.local()
+_EXECUTOR: ThreadPoolExecutor | None = None
+
+
+def _executor() -> ThreadPoolExecutor:
+    """One worker thread per process that compresses chunks (zstd and crc32 release the GIL)."""
+    global _EXECUTOR
+    if _EXECUTOR is None:
+        _EXECUTOR = ThreadPoolExecutor(max_workers=1, thread_name_prefix="imulog-chunk")
+    return _EXECUTOR
+
+
+def _forget_executor() -> None:  # a forked child does not inherit the worker thread
+    global _EXECUTOR
+    _EXECUTOR = None
+
+
+os.register_at_fork(after_in_child=_forget_executor)
+
+
+def _compressor():
+    """This thread's zstd compressor (a ZstdCompressor must not be shared between threads)."""
+    c = getattr(_local, "zstd", None)
+    if c is None or getattr(_local, "level", None) != ZSTD_LEVEL:
+        import zstandard
+
+        c = _local.zstd = zstandard.ZstdCompressor(level=ZSTD_LEVEL)
+        _local.level = ZSTD_LEVEL
+    return c
+
+
+def build_chunk(start: int, end: int, raw: bytes | memoryview) -> tuple[bytes, int]:
+    """A zstd Chunk record of the message records ``raw`` (CRC of the uncompressed bytes); (record, compressed size).
+
+    Pure function of its input: runs on the compression thread.
+    """
+    compressed = _compressor().compress(raw)
+    record = m.chunk(start, end, len(raw), zlib.crc32(raw), "zstd", compressed)
+    return record, len(compressed)
+
+
+def message_heads(channel_id: int, first_seq: int, log_times: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """(N, 31) uint8: the Message record heads of N messages (sequence numbers from ``first_seq``)."""
+    n = len(log_times)
+    heads = np.empty(n, dtype=_HEAD)
+    heads["op"] = m.Op.MESSAGE
+    heads["len"] = np.asarray(lengths, dtype=np.uint64) + (2 + 4 + 8 + 8)
+    heads["channel"] = channel_id
+    heads["seq"] = (np.arange(n, dtype=np.int64) + first_seq).astype(np.uint32)
+    heads["log"] = heads["publish"] = np.asarray(log_times, dtype=np.uint64)
+    return heads.view(np.uint8).reshape(n, 31)
 
 
 class McapBuilder:
-    def __init__(self, f: BinaryIO, offset: int, crc: int, summary: m.Summary | None = None) -> None:
-        import zstandard
+    """Writes records in file order; chunks are compressed on a worker thread while the caller encodes the next.
 
+    Every record reaches the file in the order it was added: a non-chunk record (or reading ``offset``,
+    ``crc``, ``chunk_indexes``) first writes out the chunks still being compressed.
+    """
+
+    def __init__(self, f: BinaryIO, offset: int, crc: int, summary: m.Summary | None = None) -> None:
         self.f = f
-        self.offset = offset
-        self.crc = crc
-        self._zstd = zstandard.ZstdCompressor(level=ZSTD_LEVEL, threads=ZSTD_THREADS if ZSTD_THREADS > 1 else 0)
+        self._offset = offset
+        self._crc = crc
+        self._pending: deque[tuple[Future | tuple[bytes, int], int, int, int, bytes, int]] = deque()
         self.schemas: dict[int, m.SchemaRec] = {}
         self.channels: dict[int, m.ChannelRec] = {}
-        self.chunk_indexes: list[m.ChunkIndexRec] = []
+        self._chunk_indexes: list[m.ChunkIndexRec] = []
         self.attachment_indexes: list[m.AttachmentIndexRec] = []
         self.metadata_indexes: list[m.MetadataIndexRec] = []
         self.channel_counts: dict[int, int] = {}
         if summary is not None:
             self.schemas = dict(summary.schemas)
             self.channels = dict(summary.channels)
-            self.chunk_indexes = list(summary.chunk_indexes)
+            self._chunk_indexes = list(summary.chunk_indexes)
             self.attachment_indexes = list(summary.attachment_indexes)
             self.metadata_indexes = list(summary.metadata_indexes)
             stats = summary.statistics
@@ -53,11 +118,38 @@ class McapBuilder:
         b.write(m.header(profile, library))
         return b
 
+    @property
+    def offset(self) -> int:
+        """File offset of the next record (after every pending chunk)."""
+        self._drain()
+        return self._offset
+
+    @property
+    def crc(self) -> int:
+        """Data-section CRC so far (after every pending chunk)."""
+        self._drain()
+        return self._crc
+
+    @property
+    def chunk_indexes(self) -> list[m.ChunkIndexRec]:
+        self._drain()
+        return self._chunk_indexes
+
+    @chunk_indexes.setter
+    def chunk_indexes(self, value: list[m.ChunkIndexRec]) -> None:
+        self._drain()
+        self._chunk_indexes = value
+
     def write(self, data: bytes | memoryview) -> None:
-        """Write data-section bytes (counted in the data CRC)."""
+        """Write data-section bytes (counted in the data CRC), after any chunk still being compressed."""
+        if self._pending:
+            self._drain()
+        self._write(data)
+
+    def _write(self, data: bytes | memoryview) -> None:
         self._out(data)
-        self.offset += len(data)
-        self.crc = zlib.crc32(data, self.crc)
+        self._offset += len(data)
+        self._crc = zlib.crc32(data, self._crc)
 
     def _out(self, data: bytes | memoryview) -> None:
         """Every byte of the file goes through here (one place to instrument)."""
@@ -104,31 +196,78 @@ class McapBuilder:
             self._flush_chunk(channel_id, parts, index, size)
         self.channel_counts[channel_id] = self.channel_counts.get(channel_id, 0) + len(payloads)
 
+    def add_message_rows(
+        self, channel_id: int, log_times: np.ndarray, rows: np.ndarray, mask: np.ndarray | None = None
+    ) -> None:
+        """:meth:`add_messages` for messages given as an (N, W) uint8 array, one message per row.
+
+        ``mask`` (N, W) bool, when given, says which bytes of each row belong to its message (the rest is
+        left out, order kept); without it every message is the whole row. The records are assembled with
+        numpy (no per-message Python), in the same chunks and bytes :meth:`add_messages` would write.
+        """
+        n = len(rows)
+        if len(log_times) != n or (mask is not None and mask.shape != rows.shape):
+            raise ValueError("log_times, rows and mask must have one entry per message")
+        log_times = np.asarray(log_times, dtype=np.uint64)
+        lengths = mask.sum(axis=1) if mask is not None else np.full(n, rows.shape[1], dtype=np.int64)
+        sizes = lengths + 31
+        ends = np.cumsum(sizes)
+        start = 0
+        while start < n:
+            # messages up to and including the one that reaches CHUNK_TARGET_BYTES, as add_messages does
+            base = ends[start - 1] if start else 0
+            stop = int(np.searchsorted(ends, base + CHUNK_TARGET_BYTES, "left")) + 1
+            stop = min(max(stop, start + 1), n)
+            sl = slice(start, stop)
+            heads = message_heads(channel_id, start, log_times[sl], lengths[sl])
+            records = np.concatenate([heads, rows[sl]], axis=1)
+            if mask is None:
+                raw = records.tobytes()
+            else:
+                keep = np.concatenate([np.ones((stop - start, 31), dtype=bool), mask[sl]], axis=1)
+                raw = records[keep].tobytes()
+            offsets = np.concatenate([[0], np.cumsum(sizes[sl])[:-1]]).astype(np.uint64)
+            entries = np.column_stack([log_times[sl], offsets]).astype("<u8").tobytes()
+            t = log_times[sl]
+            self._submit(channel_id, int(t.min()), int(t.max()), raw, entries)
+            start = stop
+        self.channel_counts[channel_id] = self.channel_counts.get(channel_id, 0) + n
+
     def _flush_chunk(self, channel_id: int, parts: list[bytes], index: list[tuple[int, int]], size: int) -> None:
         raw = b"".join(parts)
-        compressed = self._zstd.compress(raw)
         times = [t for t, _ in index]
-        start, end = min(times), max(times)
-        chunk_offset = self.offset
-        record = m.chunk(start, end, len(raw), zlib.crc32(raw), "zstd", compressed)
-        self.write(record)
-        mi_offset = self.offset
         entries = np.asarray(index, dtype="<u8").reshape(-1, 2).tobytes()
-        mi = m.message_index(channel_id, entries)
-        self.write(mi)
-        self.chunk_indexes.append(
-            m.ChunkIndexRec(
-                message_start_time=start,
-                message_end_time=end,
-                chunk_start_offset=chunk_offset,
-                chunk_length=len(record),
-                message_index_offsets={channel_id: mi_offset},
-                message_index_length=len(mi),
-                compression="zstd",
-                compressed_size=len(compressed),
-                uncompressed_size=len(raw),
+        self._submit(channel_id, min(times), max(times), raw, entries)
+
+    def _submit(self, channel_id: int, start: int, end: int, raw: bytes, entries: bytes) -> None:
+        """Queue a chunk: compressed on the worker thread, written in order by :meth:`_drain`."""
+        job = _executor().submit(build_chunk, start, end, raw) if PIPELINE else build_chunk(start, end, raw)
+        self._pending.append((job, channel_id, start, end, entries, len(raw)))
+        self._drain(keep=MAX_PENDING)
+
+    def _drain(self, keep: int = 0) -> None:
+        """Write the pending chunks (oldest first) until at most ``keep`` are left."""
+        while len(self._pending) > keep:
+            job, channel_id, start, end, entries, raw_size = self._pending.popleft()
+            record, compressed_size = job.result() if isinstance(job, Future) else job
+            chunk_offset = self._offset
+            self._write(record)
+            mi_offset = self._offset
+            mi = m.message_index(channel_id, entries)
+            self._write(mi)
+            self._chunk_indexes.append(
+                m.ChunkIndexRec(
+                    message_start_time=start,
+                    message_end_time=end,
+                    chunk_start_offset=chunk_offset,
+                    chunk_length=len(record),
+                    message_index_offsets={channel_id: mi_offset},
+                    message_index_length=len(mi),
+                    compression="zstd",
+                    compressed_size=compressed_size,
+                    uncompressed_size=raw_size,
+                )
             )
-        )
 
     def add_attachment(self, name: str, media_type: str, data: bytes, log_time: int = 0, create_time: int = 0) -> None:
         offset = self.offset
@@ -161,9 +300,10 @@ class McapBuilder:
 
     def finish(self) -> None:
         """Write DataEnd (with the data CRC), the summary, summary offsets, footer and closing magic."""
-        self._out(m.data_end(self.crc))
-        self.offset += m.DATA_END_SIZE
-        summary_start = self.offset
+        self._drain()
+        self._out(m.data_end(self._crc))
+        self._offset += m.DATA_END_SIZE
+        summary_start = self._offset
         groups: list[tuple[int, list[bytes]]] = [
             (m.Op.SCHEMA, [s.encode() for s in sorted(self.schemas.values(), key=lambda s: s.id)]),
             (m.Op.CHANNEL, [c.encode() for c in sorted(self.channels.values(), key=lambda c: c.id)]),
@@ -191,4 +331,4 @@ class McapBuilder:
         self._out(bytes(body))
         self._out(footer_head + struct.pack("<I", summary_crc))
         self._out(m.MAGIC)
-        self.offset += len(body) + m.FOOTER_SIZE + len(m.MAGIC)
+        self._offset += len(body) + m.FOOTER_SIZE + len(m.MAGIC)

@@ -65,10 +65,7 @@ class ChannelStats:
         arrays = [v for v in values if v is not None]
         if arrays:
             self.has_values = True
-            finite = np.ones(len(t), dtype=bool)
-            for v in arrays:
-                finite &= np.isfinite(np.asarray(v).reshape(len(t), -1)).all(axis=1)
-            self.nan += int(len(t) - np.count_nonzero(finite))
+            self.nan += codec.nan_samples(len(t), arrays)
         self.start = int(t[0]) if self.start is None else self.start
         self.end = int(t[-1])
         self.count += len(t)
@@ -255,7 +252,7 @@ class StreamingTrialWriter:
                 cid = self._builder.add_channel(twin.topic, schema_id, meta, encoding=twin.message_encoding)
                 ch = self._twins[twin.topic] = _Channel(cid, twin.topic)
             ch.stats.add_samples(np.asarray(stream.t_ns)[keep], [])
-            self._add_messages(ch, twin.log_times, twin.payloads)
+            self._add_messages(ch, twin.log_times, twin.payload_list())
 
     def _twin_step(self, stream: Stream) -> int:
         """Every k-th sample: at most the twins' rate, and at most their message budget over the expected length."""

@@ -78,6 +78,24 @@ class Twin:
     metadata: dict[str, str] = field(default_factory=dict)
     log_times: list[int] = field(default_factory=list)
     payloads: list[bytes] = field(default_factory=list)
+    rows: np.ndarray | None = None  # or: the messages as (N, W) uint8 rows (imulog.archive.wire.Rows) ...
+    mask: np.ndarray | None = None  # ... with the bytes each message uses (None: whole rows)
+
+    def set_rows(self, log_times: np.ndarray, rows: np.ndarray, mask: np.ndarray | None = None) -> None:
+        """Hold the messages as rows (written and hashed with numpy, no per-message Python)."""
+        self.log_times = np.asarray(log_times, dtype=np.uint64)
+        self.rows, self.mask, self.payloads = rows, mask, []
+
+    def __len__(self) -> int:
+        return len(self.rows) if self.rows is not None else len(self.payloads)
+
+    def payload_list(self) -> list[bytes]:
+        """The messages as one ``bytes`` each, whichever form the twin holds."""
+        if self.rows is None:
+            return self.payloads
+        from imulog.archive.wire import row_messages
+
+        return row_messages(self.rows, self.mask)
 
 
 def twin_topic(topic: str) -> str:
@@ -121,11 +139,11 @@ def _protobuf_twin(topic: str, schema_name: str, meta: dict[str, str]) -> Twin:
     return Twin(topic, schema_name, "protobuf", codec.file_descriptor_set(schema_name), "protobuf", meta)
 
 
-def ros_imu_payloads(stamps: np.ndarray, frame_id: str, gyr: np.ndarray, acc: np.ndarray) -> list[bytes]:
+def ros_imu_rows(stamps: np.ndarray, frame_id: str, gyr: np.ndarray, acc: np.ndarray) -> np.ndarray:
     """CDR (little-endian) ``sensor_msgs/msg/Imu`` messages, built as one numpy record array.
 
     ``stamps`` int64 ns (the header stamp), ``gyr`` rad/s and ``acc`` m/s^2, (N, 3). The orientation is
-    marked unknown (``orientation_covariance[0] = -1``, the ROS convention).
+    marked unknown (``orientation_covariance[0] = -1``, the ROS convention). (N, message size) uint8.
     """
     name = frame_id.encode("utf-8") + b"\0"
     head = 12 + len(name)
@@ -151,8 +169,20 @@ def ros_imu_payloads(stamps: np.ndarray, frame_id: str, gyr: np.ndarray, acc: np
     f[:, 4] = -1.0  # orientation_covariance[0] = -1
     f[:, 13:16] = gyr
     f[:, 25:28] = acc
-    raw = rec.view(np.uint8).reshape(n, dtype.itemsize)
-    return [row.tobytes() for row in raw]
+    return rec.view(np.uint8).reshape(n, dtype.itemsize)
+
+
+def ros_imu_payloads(stamps: np.ndarray, frame_id: str, gyr: np.ndarray, acc: np.ndarray) -> list[bytes]:
+    """:func:`ros_imu_rows` as one ``bytes`` per message."""
+    return [row.tobytes() for row in ros_imu_rows(stamps, frame_id, gyr, acc)]
+
+
+def _timestamp(stamps: np.ndarray) -> Any:
+    """``google.protobuf.Timestamp`` sub-messages of int64 ns stamps, as :class:`imulog.archive.wire.Rows`."""
+    from imulog.archive.wire import Rows
+
+    sec, nsec = np.divmod(np.asarray(stamps, dtype=np.int64), 1_000_000_000)
+    return Rows(len(sec)).varint(1, sec).varint(2, nsec)
 
 
 def imu_twin(stream: ImuStream, log_map: LogMap) -> Twin | None:
@@ -166,8 +196,7 @@ def imu_twin(stream: ImuStream, log_map: LogMap) -> Twin | None:
     meta = _meta(stream, stream.topic, stream.name, keep, stream.t_ns)
     meta.update(units=f"angular_velocity rad/s, linear_acceleration m/s^2 ({stream.frame_id} frame)")
     twin = Twin(twin_topic(stream.topic), "sensor_msgs/msg/Imu", "ros2msg", ROS_IMU_SCHEMA.encode(), "cdr", meta)
-    twin.log_times = stamps.astype(np.uint64).tolist()
-    twin.payloads = ros_imu_payloads(stamps, stream.frame_id, gyr, acc)
+    twin.set_rows(stamps.astype(np.uint64), ros_imu_rows(stamps, stream.frame_id, gyr, acc))
     return twin
 
 
@@ -181,16 +210,18 @@ def marker_twin(stream: MarkerStream, log_map: LogMap) -> Twin:
     twin.metadata["units"] = "m"
     fld = PackedElementField_pb2.PackedElementField
     fields = [fld(name=axis, offset=8 * k, type=fld.FLOAT64) for k, axis in enumerate("xyz")]
-    stamps = log_map(stream.t_ns[keep])
+    from imulog.archive.wire import Rows
+
+    stamps = np.asarray(log_map(stream.t_ns[keep]), dtype=np.int64)
     msg = PointCloud_pb2.PointCloud(frame_id=stream.frame_id, point_stride=24, fields=fields)
     msg.pose.position.SetInParent()  # an empty Pose makes Rerun 0.41 write null translations
     msg.pose.orientation.w = 1.0
-    ok = np.asarray(stream.valid, dtype=bool) & np.isfinite(stream.pos).all(axis=2)
-    for i, stamp in zip(keep.tolist(), stamps.tolist(), strict=True):
-        _stamp(msg, stamp)
-        msg.data = np.ascontiguousarray(stream.pos[i][ok[i]], dtype="<f8").tobytes()
-        twin.log_times.append(int(stamp))
-        twin.payloads.append(msg.SerializeToString())
+    ok = (np.asarray(stream.valid, dtype=bool) & np.isfinite(stream.pos).all(axis=2))[keep]  # (K, M)
+    n, m_ = ok.shape
+    pos = np.ascontiguousarray(stream.pos[keep], dtype="<f8").view(np.uint8).reshape(n, m_ * 24)
+    rows = Rows(n).message(1, _timestamp(stamps)).raw(msg.SerializeToString())  # fields 2-5: the same each time
+    rows.data(6, pos, np.repeat(ok, 24, axis=1))  # the valid markers' x, y, z
+    twin.set_rows(stamps.astype(np.uint64), *rows.build())
     return twin
 
 
@@ -216,18 +247,17 @@ def frame_twin(
         twin_topic(stream.topic), "foxglove.FrameTransform", _meta(stream, stream.topic, clock, keep, stream.t_ns)
     )
     twin.metadata.update(parent_frame_id=parent, child_frame_id=child)
-    stamps = log_map(stream.t_ns[keep])
-    msg = FrameTransform_pb2.FrameTransform(parent_frame_id=parent, child_frame_id=child)
-    tr, rot = msg.translation, msg.rotation
+    from imulog.archive.wire import Rows
+
+    stamps = np.asarray(log_map(stream.t_ns[keep]), dtype=np.int64)
     good = np.isfinite(q).all(axis=1) & np.isfinite(p).all(axis=1)
-    for k, stamp in enumerate(stamps.tolist()):
-        if not good[k]:
-            continue
-        _stamp(msg, stamp)
-        tr.x, tr.y, tr.z = p[k].tolist()
-        rot.w, rot.x, rot.y, rot.z = q[k].tolist()
-        twin.log_times.append(int(stamp))
-        twin.payloads.append(msg.SerializeToString())
+    stamps, q, p = stamps[good], q[good], p[good]
+    n = len(stamps)
+    names = FrameTransform_pb2.FrameTransform(parent_frame_id=parent, child_frame_id=child).SerializeToString()
+    translation = Rows(n).double(1, p[:, 0]).double(2, p[:, 1]).double(3, p[:, 2])
+    rotation = Rows(n).double(1, q[:, 1]).double(2, q[:, 2]).double(3, q[:, 3]).double(4, q[:, 0])  # x, y, z, w
+    rows = Rows(n).message(1, _timestamp(stamps)).raw(names).message(4, translation).message(5, rotation)
+    twin.set_rows(stamps.astype(np.uint64), *rows.build())
     return twin
 
 
@@ -285,10 +315,11 @@ def axes_twin(stream: SignalStream, log_map: LogMap, *, clock: str, rate_hz: flo
     msg = PointCloud_pb2.PointCloud(frame_id=name, point_stride=point.itemsize, fields=fields, data=cloud.tobytes())
     msg.pose.position.SetInParent()  # an empty Pose makes Rerun 0.41 write null translations
     msg.pose.orientation.w = 1.0
-    for stamp in log_map(stream.t_ns[keep]).tolist():
-        _stamp(msg, stamp)
-        twin.log_times.append(int(stamp))
-        twin.payloads.append(msg.SerializeToString())
+    from imulog.archive.wire import Rows
+
+    stamps = np.asarray(log_map(stream.t_ns[keep]), dtype=np.int64)
+    rows = Rows(len(stamps)).message(1, _timestamp(stamps)).raw(msg.SerializeToString())  # the rest never changes
+    twin.set_rows(stamps.astype(np.uint64), *rows.build())
     return twin
 
 

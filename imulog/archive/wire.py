@@ -104,3 +104,114 @@ def scan(payload: bytes | memoryview) -> list[tuple[int, int, Any]]:
     if pos != n:
         raise Fallback
     return out
+
+
+# ------------------------------------------------------------------------------------- many messages at once
+
+
+def varint_rows(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """LEB128 varints of N integers at once: (N, 10) uint8 bytes and (N, 10) bool mask of the bytes used.
+
+    Negative values are encoded as protobuf encodes int64 (two's complement, 10 bytes).
+    """
+    v = np.asarray(values).astype(np.int64, copy=False).view(np.uint64)
+    shifts = np.arange(10, dtype=np.uint64) * np.uint64(7)
+    length = 1 + np.count_nonzero(v[:, None] >= (np.uint64(1) << shifts[1:])[None, :], axis=1)
+    col = np.arange(10)
+    mask = col[None, :] < length[:, None]
+    cont = (col[None, :] < (length - 1)[:, None]).astype(np.uint64) << np.uint64(7)
+    out = (((v[:, None] >> shifts[None, :]) & np.uint64(0x7F)) | cont).astype(np.uint8)
+    return out, mask
+
+
+class Rows:
+    """N protobuf messages built field by field as columns: bytes (N, W) and a mask of the bytes each uses.
+
+    Every field method appends a fixed-width column block; a message is its row's masked bytes in order.
+    Fields must be added in field-number order (as protobuf serializes them). Scalars follow proto3: a zero
+    value is left out (``omit_zero``); sub-messages are always present, as protobuf writes a set sub-message.
+    """
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self._cols: list[np.ndarray] = []
+        self._masks: list[np.ndarray | None] = []
+
+    def raw(self, data: bytes) -> Rows:
+        """The same bytes in every message."""
+        if data:
+            self._cols.append(np.broadcast_to(np.frombuffer(data, np.uint8), (self.n, len(data))))
+            self._masks.append(None)
+        return self
+
+    def _add(self, cols: np.ndarray, mask: np.ndarray | None) -> None:
+        self._cols.append(cols)
+        self._masks.append(mask)
+
+    def varint(self, number: int, values: np.ndarray, omit_zero: bool = True) -> Rows:
+        v = np.asarray(values).astype(np.int64, copy=False)
+        body, mask = varint_rows(v)
+        key = np.broadcast_to(np.frombuffer(tag(number, WIRE_VARINT), np.uint8), (self.n, len(tag(number, 0))))
+        present = (v != 0) if omit_zero else np.ones(self.n, dtype=bool)
+        self._add(np.concatenate([key, body], axis=1), np.concatenate([np.repeat(present[:, None], key.shape[1], 1), mask & present[:, None]], axis=1))
+        return self
+
+    def double(self, number: int, values: np.ndarray, omit_zero: bool = True) -> Rows:
+        v = np.ascontiguousarray(values, dtype="<f8")
+        key = np.frombuffer(tag(number, WIRE_I64), np.uint8)
+        cols = np.concatenate([np.broadcast_to(key, (self.n, len(key))), v.view(np.uint8).reshape(self.n, 8)], axis=1)
+        if omit_zero:
+            present = v.view(np.uint64) != 0  # +0.0 is left out, -0.0 is not (protobuf compares the bits)
+            self._add(cols, np.repeat(present[:, None], cols.shape[1], 1))
+        else:
+            self._add(cols, None)
+        return self
+
+    def message(self, number: int, sub: Rows) -> Rows:
+        """A length-delimited field holding ``sub``'s messages (a sub-message, or ``bytes`` built as Rows)."""
+        cols, mask = sub.build()
+        lengths = mask.sum(axis=1) if mask is not None else np.full(self.n, cols.shape[1])
+        head, head_mask = varint_rows(lengths)
+        key = np.broadcast_to(np.frombuffer(tag(number, WIRE_LEN), np.uint8), (self.n, len(tag(number, 2))))
+        full = np.ones(cols.shape, dtype=bool) if mask is None else mask
+        self._add(
+            np.concatenate([key, head, cols], axis=1),
+            np.concatenate([np.ones(key.shape, dtype=bool), head_mask, full], axis=1),
+        )
+        return self
+
+    def data(self, number: int, values: np.ndarray, mask: np.ndarray | None = None) -> Rows:
+        """A ``bytes`` field from (N, K) uint8 (``mask`` keeps some of them), left out when empty (proto3)."""
+        sub = Rows(self.n)
+        sub._add(np.asarray(values, dtype=np.uint8).reshape(self.n, -1), mask)
+        cols, used = sub.build()
+        lengths = used.sum(axis=1) if used is not None else np.full(self.n, cols.shape[1])
+        self.message(number, sub)
+        present = lengths > 0
+        if not present.all():
+            last = self._masks[-1]
+            self._masks[-1] = last & present[:, None]
+        return self
+
+    def build(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """(N, W) uint8 and the (N, W) mask (None when every byte is used)."""
+        if not self._cols:
+            return np.zeros((self.n, 0), dtype=np.uint8), None
+        cols = np.concatenate(self._cols, axis=1)
+        if all(m is None for m in self._masks):
+            return cols, None
+        mask = np.concatenate(
+            [np.ones(c.shape, dtype=bool) if m is None else m for c, m in zip(self._cols, self._masks, strict=True)],
+            axis=1,
+        )
+        return cols, mask
+
+
+def row_messages(rows: np.ndarray, mask: np.ndarray | None) -> list[bytes]:
+    """The messages of :meth:`Rows.build` as one ``bytes`` each."""
+    if mask is None:
+        return [r.tobytes() for r in rows]
+    flat = rows[mask].tobytes()
+    ends = np.cumsum(mask.sum(axis=1)).tolist()
+    starts = [0, *ends[:-1]]
+    return [flat[a:b] for a, b in zip(starts, ends, strict=True)]

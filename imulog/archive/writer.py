@@ -36,6 +36,23 @@ def payload_hash(payloads: Iterable[bytes | memoryview]) -> str:
     return h.hexdigest()
 
 
+def rows_hash(rows: np.ndarray, mask: np.ndarray | None = None, block: int = 65536) -> str:
+    """:func:`payload_hash` of messages held as (N, W) uint8 rows (``mask``: the bytes each uses), with numpy."""
+    h = hashlib.sha256()
+    n, width = rows.shape
+    for i in range(0, n, block):
+        part = rows[i : i + block]
+        k = len(part)
+        lengths = np.full(k, width, dtype="<u8") if mask is None else mask[i : i + block].sum(axis=1).astype("<u8")
+        joined = np.concatenate([lengths.view(np.uint8).reshape(k, 8), part], axis=1)
+        if mask is None:
+            h.update(joined.tobytes())
+        else:
+            keep = np.concatenate([np.ones((k, 8), dtype=bool), mask[i : i + block]], axis=1)
+            h.update(joined[keep].tobytes())
+    return h.hexdigest()
+
+
 def raw_digest(channels: dict[str, str], attachments: dict[str, str]) -> str:
     """The trial's raw-data hash: SHA-256 over the sorted raw channel hashes and attachment hashes."""
     h = hashlib.sha256()
@@ -70,12 +87,15 @@ def write_stream(
 def write_twin(builder: McapBuilder, twin: Twin, extra_meta: dict[str, str] | None = None) -> tuple[str, str]:
     """Write one viewer twin channel (:mod:`imulog.archive.twins`); return (topic, content hash)."""
     meta = dict(twin.metadata)
-    meta["sha256"] = payload_hash(twin.payloads)
+    meta["sha256"] = payload_hash(twin.payloads) if twin.rows is None else rows_hash(twin.rows, twin.mask)
     if extra_meta:
         meta.update(extra_meta)
     schema_id = builder.add_schema(twin.schema_name, twin.schema_encoding, twin.schema_data)
     channel_id = builder.add_channel(twin.topic, schema_id, meta, encoding=twin.message_encoding)
-    builder.add_messages(channel_id, twin.log_times, twin.payloads)
+    if twin.rows is None:
+        builder.add_messages(channel_id, twin.log_times, twin.payloads)
+    else:
+        builder.add_message_rows(channel_id, np.asarray(twin.log_times), twin.rows, twin.mask)
     return twin.topic, meta["sha256"]
 
 
@@ -228,4 +248,4 @@ def write_trial(
     return path
 
 
-__all__ = ["write_trial", "payload_hash", "raw_digest"]
+__all__ = ["write_trial", "payload_hash", "rows_hash", "raw_digest"]
