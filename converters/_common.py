@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import hashlib
 import math
+import os
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -92,6 +94,35 @@ def unit_factor(quantity: str, unit: str) -> float | None:
 def read_head(path: Path, n: int = HEAD_BYTES) -> bytes:
     with open(path, "rb") as f:
         return f.read(n)
+
+
+_DIGESTS: dict[tuple[str, int, int], str] = {}  # (resolved path, size, mtime ns) -> SHA-256 of the bytes read
+_DIGESTS_KEPT = 256
+
+
+def _stat_key(path: Path, st: os.stat_result) -> tuple[str, int, int]:
+    return str(Path(path).resolve()), st.st_size, st.st_mtime_ns
+
+
+def read_source(path: Path) -> bytes:
+    """A source file's bytes, read once; their SHA-256 is computed from them and remembered (size and mtime
+    checked) so that the conversion record does not read and hash the file a second time (:func:`known_sha256`)."""
+    with open(path, "rb") as f:
+        data = f.read()
+        st = os.fstat(f.fileno())
+    if st.st_size == len(data):
+        if len(_DIGESTS) >= _DIGESTS_KEPT:
+            _DIGESTS.pop(next(iter(_DIGESTS)))
+        _DIGESTS[_stat_key(path, st)] = hashlib.sha256(data).hexdigest()
+    return data
+
+
+def known_sha256(path: Path) -> str | None:
+    """The SHA-256 :func:`read_source` computed for ``path`` when the file has not changed since (else None)."""
+    try:
+        return _DIGESTS.get(_stat_key(path, os.stat(path)))
+    except OSError:
+        return None
 
 
 def looks_binary(head: bytes) -> bool:
@@ -300,13 +331,19 @@ def _data_range(spec: TableSpec, data: bytes) -> tuple[int, int]:
     return pos, end
 
 
+NA_CELLS = ["", "NaN", "nan", "NAN", "-NaN", "-nan"]  # gaps: empty or NaN cells
+ARROW_BLOCK_BYTES = 4 << 20  # pyarrow parses blocks of this size in parallel
+
+
 def read_numeric(spec: TableSpec, data: bytes | None = None) -> np.ndarray:
-    """Parse the numeric block fast (pandas C engine straight from the file) and validate it vectorised.
+    """Parse the numeric block fast and validate it vectorised.
 
     Returns an (N, ncols) float64 array, NaN only in ``optional``/``ignore`` columns (ignored columns are not
-    parsed). On any problem a careful line-by-line pass finds the first offending line and raises
-    :class:`ConversionError` naming file, line and column. ``data``: the file's bytes when already read (used
-    for ``byte_range`` and for the careful pass).
+    parsed). The block is parsed by pyarrow's multithreaded CSV reader from the file's bytes in memory (read
+    once, see :func:`read_source`); a block that reader does not take as plainly numeric (other spellings,
+    ragged or blank rows, whitespace-delimited tables) goes to the pandas C parser, which accepts exactly what
+    it accepted before. On any problem a careful line-by-line pass finds the first offending line and raises
+    :class:`ConversionError` naming file, line and column. ``data``: the file's bytes when already read.
     """
     ncols = len(spec.names)
     if spec.check_final_row:
@@ -314,13 +351,31 @@ def read_numeric(spec: TableSpec, data: bytes | None = None) -> np.ndarray:
     nrows = spec.nrows
     if spec.byte_range is not None:
         if data is None:
-            data = spec.path.read_bytes()
+            data = read_source(spec.path)
         start, end = _data_range(spec, data)
         if end <= start:
             raise ConversionError(spec.path, "no data rows", line=spec.skip_lines + 1)
         tail = data[end:].strip(b" \t\r\n") if len(data) - end < 4096 else b"x"
         nrows = None if not tail else data.count(b"\n", start, end) + 1
     used = [i for i in range(ncols) if i not in spec.ignore]
+    values = None
+    if spec.delimiter != " ":
+        if data is None:
+            data = read_source(spec.path)
+        values = _parse_arrow(spec, data, nrows, used)
+    if values is None:
+        values = _parse_pandas(spec, data, nrows, used)
+    if spec.allow_trailing_blank and nrows is None:
+        n = len(values)
+        while n > 0 and np.isnan(values[n - 1, used]).all():
+            n -= 1
+        values = values[:n]
+    return _validate(spec, values, data)
+
+
+def _parse_pandas(spec: TableSpec, data: bytes | None, nrows: int | None, used: list[int]) -> np.ndarray:
+    """The block parsed by the pandas C engine straight from the file (any parser problem located and raised)."""
+    ncols = len(spec.names)
     kwargs: dict[str, Any] = dict(
         sep=r"\s+" if spec.delimiter == " " else spec.delimiter,
         header=None,
@@ -329,7 +384,7 @@ def read_numeric(spec: TableSpec, data: bytes | None = None) -> np.ndarray:
         engine="c",
         skip_blank_lines=False,
         keep_default_na=False,
-        na_values=["", "NaN", "nan", "NAN", "-NaN", "-nan"],  # gaps: empty or NaN cells
+        na_values=NA_CELLS,
         quoting=3,  # QUOTE_NONE: numbers are never quoted in these exports
         encoding_errors="replace",  # non-UTF-8 bytes become non-numeric cells, reported by the careful pass
     )
@@ -347,17 +402,80 @@ def read_numeric(spec: TableSpec, data: bytes | None = None) -> np.ndarray:
         locate_problem(spec, data=_block(spec, data))
         raise ConversionError(spec.path, f"could not parse the numeric data ({ncols} numeric fields per row expected)")
     part = frame.to_numpy(dtype=np.float64, copy=False)
-    if spec.allow_trailing_blank and nrows is None:
-        n = len(part)
-        while n > 0 and np.isnan(part[n - 1]).all():
-            n -= 1
-        part = part[:n]
     if len(used) == ncols:
-        values = part
-    else:
-        values = np.full((len(part), ncols), np.nan)
-        values[:, used] = part
-    return _validate(spec, values, data)
+        return part
+    values = np.full((len(part), ncols), np.nan)
+    values[:, used] = part
+    return values
+
+
+def _parse_arrow(spec: TableSpec, data: bytes, nrows: int | None, used: list[int]) -> np.ndarray | None:
+    """The block parsed by ``pyarrow.csv`` (threads, no copy of the bytes) into an (N, ncols) column-major array,
+    or None when the pandas path must decide: a first row of another width, a header region whose line count
+    pandas could read differently (a lone CR), a row of another width or a blank row inside the block, a cell
+    that is not a plain number, a NaN or infinity spelled otherwise than :data:`NA_CELLS` (pandas refuses
+    ``Nan``), or ``-0`` in a whole-number column (pandas reads those as integers: +0).
+    """
+    ncols = len(spec.names)
+    try:
+        lo, hi = _data_range(replace(spec, allow_trailing_blank=spec.byte_range is not None or nrows is None), data)
+    except ConversionError:
+        return None
+    if hi <= lo or data.count(b"\r", 0, lo) != data.count(b"\r\n", 0, lo):
+        return None
+    first_end = data.find(b"\n", lo, hi)
+    first = data[lo : first_end if first_end != -1 else hi].rstrip(b"\r")
+    if first.count(spec.delimiter.encode()) + 1 != ncols:
+        return None
+    try:
+        import pyarrow as pa
+        import pyarrow.csv as pacsv
+    except ImportError:  # pragma: no cover - pyarrow is a base dependency
+        return None
+    names = [f"c{i}" for i in range(ncols)]
+    try:
+        table = pacsv.read_csv(
+            pa.py_buffer(memoryview(data)[lo:hi]),
+            read_options=pacsv.ReadOptions(column_names=names, block_size=ARROW_BLOCK_BYTES),
+            parse_options=pacsv.ParseOptions(
+                delimiter=spec.delimiter,
+                quote_char=False,
+                double_quote=False,
+                escape_char=False,
+                newlines_in_values=False,
+                ignore_empty_lines=False,
+            ),
+            convert_options=pacsv.ConvertOptions(
+                column_types={names[i]: pa.float64() for i in used},
+                include_columns=[names[i] for i in used],
+                null_values=NA_CELLS,
+                strings_can_be_null=False,
+                quoted_strings_can_be_null=False,
+            ),
+        )
+    except (pa.ArrowInvalid, pa.ArrowNotImplementedError, pa.ArrowTypeError, ValueError):
+        return None
+    if nrows is not None and table.num_rows != nrows:
+        return None
+    values = np.empty((table.num_rows, ncols), dtype=np.float64, order="F")
+    for i in range(ncols):
+        if i not in spec.ignore:
+            continue
+        values[:, i] = np.nan
+    for i, column in zip(used, table.columns, strict=True):
+        row = 0
+        for chunk in column.chunks:
+            values[row : row + len(chunk), i] = chunk.to_numpy(zero_copy_only=False)  # nulls become NaN
+            row += len(chunk)
+        col = values[:, i]
+        if len(col) - np.count_nonzero(np.isfinite(col)) != column.null_count:
+            return None  # a NaN or infinity from a cell itself (nulls are the gaps)
+        zeros = col == 0
+        if zeros.any() and np.signbit(col[zeros]).any():
+            finite = col[np.isfinite(col)]
+            if np.array_equal(finite, np.round(finite)):
+                return None
+    return values
 
 
 def _without_cut_final_row(spec: TableSpec, data: bytes | None) -> tuple[TableSpec, bytes | None]:

@@ -33,6 +33,7 @@ from converters._common import (
     normalise_unit,
     read_head,
     read_numeric,
+    read_source,
     sanitize_name,
     split_row,
     text_head_lines,
@@ -318,6 +319,8 @@ def analyse_header(
 
 def _check_infinite(path: Path, layout: Layout, values: np.ndarray, first_line: int) -> None:
     """NaN and empty cells are gaps; +-inf is not a missing sample but a broken number: refuse it."""
+    if not np.isinf(values).any():  # one pass over the table; the column and line are found only when needed
+        return
     for c in layout.columns:
         if c.quantity in ("acc", "gyr", "mag", "temperature", "auto"):
             bad = np.isinf(values[:, c.index])
@@ -384,6 +387,8 @@ def resolve_inferred(
     from converters import plausibility as plaus
 
     notes: list[str] = []
+    if not any(c.quantity == "auto" or c.unit == INFER for c in layout.columns):
+        return notes  # every quantity and unit is known: nothing to judge from the values
     t_ns, (values,) = plaus.excerpts(t_ns, values)  # long recordings: judged on evenly spread excerpts
     auto = [c for c in layout.columns if c.quantity == "auto"]
     name_q = _group_quantity(path.stem) or _quantity_of(_tokens(path.stem))[0]
@@ -492,7 +497,8 @@ def read_delimited(
     ``Recording.warnings``.
     """
     path = Path(path)
-    lines = head_lines(path, head)
+    lines = head_lines(path, head)  # empty or binary files are refused before the whole file is read
+    data = read_source(path)  # read once: parsed from memory, its SHA-256 computed from these bytes
     device_meta = dict(device_meta or {})
     if mapping is not None:
         device_meta.update(mapping.device)
@@ -517,7 +523,8 @@ def read_delimited(
         optional=optional,
         ignore=ignore,
     )
-    values = read_numeric(spec)
+    values = read_numeric(spec, data)
+    del data
     first_line = layout.skip_lines + 1
     warnings = list(spec.warnings)
     _check_infinite(path, layout, values, first_line)

@@ -66,10 +66,14 @@ def _rate_hz(t_ns: np.ndarray) -> float:
     return 1e9 / float(np.median(dt)) if len(dt) else 100.0
 
 
-def _rest_index(acc: np.ndarray, t_ns: np.ndarray, window_s: float) -> tuple[int, np.ndarray]:
-    """(window length in samples, indices of the rest windows) of consecutive windows of about ``window_s``."""
+def _rest_index(
+    acc: np.ndarray, t_ns: np.ndarray, window_s: float, rate_hz: float | None = None
+) -> tuple[int, np.ndarray]:
+    """(window length in samples, indices of the rest windows) of consecutive windows of about ``window_s``.
+
+    ``rate_hz``: the sampling rate of ``t_ns`` when already known (else the median from ``t_ns``)."""
     a = np.asarray(acc, dtype=np.float64)
-    n = max(3, int(round(window_s * _rate_hz(t_ns))))
+    n = max(3, int(round(window_s * (_rate_hz(t_ns) if rate_hz is None else rate_hz))))
     m = len(a) // n
     if m == 0:
         return n, np.zeros(0, dtype=np.int64)
@@ -109,22 +113,39 @@ def excerpts(t_ns: np.ndarray, *arrays: np.ndarray | None) -> tuple[np.ndarray, 
     idx = np.concatenate([np.arange(s0, s0 + block) for s0 in starts])
     gap = np.cumsum(np.r_[0, np.diff(idx) > 1])  # excerpt number of each index
     cut = np.flatnonzero(np.diff(gap)) + 1
-    t = np.insert(np.asarray(t_ns)[idx], cut, 0)
+    t = _with_separators(np.asarray(t_ns), idx, cut, 0)
     t[cut + np.arange(len(cut))] = t[cut + np.arange(len(cut)) - 1] + 1  # keeps time increasing at the NaN rows
     out: list[np.ndarray | None] = []
     for a in arrays:
-        if a is None:
-            out.append(None)
-            continue
-        x = np.asarray(a, dtype=np.float64)[idx]
-        out.append(np.insert(x, cut, np.nan, axis=0))
+        out.append(None if a is None else _with_separators(np.asarray(a, dtype=np.float64), idx, cut, np.nan))
     return t, out
 
 
-def rest_acc_norm(acc: np.ndarray, t_ns: np.ndarray) -> tuple[float, bool]:
-    """(median accelerometer norm at rest, True if rest windows were found) in the array's own unit."""
+def _with_separators(a: np.ndarray, idx: np.ndarray, cut: np.ndarray, fill: float) -> np.ndarray:
+    """``np.insert(a[idx], cut, fill, axis=0)`` copying each excerpt once, as a slice, when ``idx`` is a run of
+    consecutive indices between the cuts (as :func:`excerpts` makes it)."""
+    bounds = np.concatenate([[0], cut, [len(idx)]])
+    runs = np.diff(idx)
+    runs[cut - 1] = 1  # the steps across a cut are not inside an excerpt
+    if not np.all(runs == 1):
+        return np.insert(a[idx], cut, fill, axis=0)
+    out = np.empty((len(idx) + len(cut), *a.shape[1:]), dtype=a.dtype)
+    for j in range(len(bounds) - 1):
+        lo, hi = int(bounds[j]), int(bounds[j + 1])
+        out[lo + j : hi + j] = a[idx[lo] : idx[lo] + hi - lo]
+        if j < len(cut):
+            out[hi + j] = fill
+    return out
+
+
+def rest_acc_norm(
+    acc: np.ndarray, t_ns: np.ndarray, *, rest: tuple[int, np.ndarray] | None = None
+) -> tuple[float, bool]:
+    """(median accelerometer norm at rest, True if rest windows were found) in the array's own unit.
+
+    ``rest``: :func:`_rest_index` of ``acc`` when already computed."""
     a = np.asarray(acc, dtype=np.float64)
-    n, index = _rest_index(a, t_ns, REST_WINDOW_S)
+    n, index = _rest_index(a, t_ns, REST_WINDOW_S) if rest is None else rest
     if len(index):
         return float(np.median(np.linalg.norm(_window_means(a, n, index), axis=1))), True
     return float(np.nanmedian(np.linalg.norm(a, axis=1))), False
@@ -147,9 +168,13 @@ def gyro_peak(gyr: np.ndarray) -> float:
     return float(np.quantile(norm, 0.999)) if len(norm) else 0.0
 
 
-def gyro_rate_at_rest(gyr: np.ndarray, acc: np.ndarray, t_ns: np.ndarray) -> float | None:
-    """Median over rest windows of |mean gyroscope component perpendicular to gravity| (gyro's unit), or None."""
-    n, index = _rest_index(acc, t_ns, REST_WINDOW_S)
+def gyro_rate_at_rest(
+    gyr: np.ndarray, acc: np.ndarray, t_ns: np.ndarray, *, rest: tuple[int, np.ndarray] | None = None
+) -> float | None:
+    """Median over rest windows of |mean gyroscope component perpendicular to gravity| (gyro's unit), or None.
+
+    ``rest``: :func:`_rest_index` of ``acc`` when already computed."""
+    n, index = _rest_index(acc, t_ns, REST_WINDOW_S) if rest is None else rest
     if not len(index):
         return None
     u = _window_means(acc, n, index)
@@ -160,17 +185,26 @@ def gyro_rate_at_rest(gyr: np.ndarray, acc: np.ndarray, t_ns: np.ndarray) -> flo
     return float(np.median(perp)) if len(perp) else None
 
 
-def gyro_tilt_ratio(gyr: np.ndarray, acc: np.ndarray, t_ns: np.ndarray, min_tilt_rad_s: float = 0.15) -> float | None:
+def gyro_tilt_ratio(
+    gyr: np.ndarray,
+    acc: np.ndarray,
+    t_ns: np.ndarray,
+    min_tilt_rad_s: float = 0.15,
+    *,
+    rest: tuple[int, np.ndarray] | None = None,
+    rate_hz: float | None = None,
+) -> float | None:
     """Gyroscope-perpendicular rate over the turning rate of the gravity direction seen by the accelerometer.
 
     Samples where the accelerometer norm is within 10 % of its rest value (slow movement) and gravity turns
     faster than ``min_tilt_rad_s``; a 0.1 s moving average on both, and the turning rate from directions 0.2 s
     apart (so that accelerometer noise does not read as tilt). ~1 for a rad/s gyroscope, ~57.3 for deg/s
-    numbers; None with fewer than 0.5 s of such samples.
+    numbers; None with fewer than 0.5 s of such samples. ``rest`` / ``rate_hz``: :func:`_rest_index` of ``acc``
+    and the rate of ``t_ns`` when already computed.
     """
     a = np.asarray(acc, dtype=np.float64)
     w = np.asarray(gyr, dtype=np.float64)
-    rate = _rate_hz(t_ns)
+    rate = _rate_hz(t_ns) if rate_hz is None else rate_hz
     k = max(1, int(round(0.1 * rate)))
     if len(a) < 4 * k + 4:
         return None
@@ -178,7 +212,7 @@ def gyro_tilt_ratio(gyr: np.ndarray, acc: np.ndarray, t_ns: np.ndarray, min_tilt
     a_s = np.column_stack([np.convolve(a[:, j], kernel, mode="same") for j in range(3)])
     w_s = np.column_stack([np.convolve(w[:, j], kernel, mode="same") for j in range(3)])
     norm = np.linalg.norm(a_s, axis=1)
-    ref, _ = rest_acc_norm(a, t_ns)
+    ref, _ = rest_acc_norm(a, t_ns, rest=rest)
     with np.errstate(invalid="ignore", divide="ignore"):
         u = a_s / norm[:, None]
         du = np.full_like(u, np.nan)
@@ -222,8 +256,10 @@ def imu_warnings(
     """
     t_ns, (acc, gyr) = excerpts(t_ns, acc, gyr)
     out = []
+    rate = _rate_hz(t_ns)
+    rest = _rest_index(acc, t_ns, REST_WINDOW_S, rate) if acc is not None else None  # shared by every check
     if acc is not None and len(acc) > 2 and np.isfinite(acc).any():
-        norm, at_rest = rest_acc_norm(acc, t_ns)
+        norm, at_rest = rest_acc_norm(acc, t_ns, rest=rest)
         if not 0.5 * G0 <= norm <= 2.0 * G0:
             guess = ""
             if 0.5 <= norm <= 2.0:
@@ -242,8 +278,8 @@ def imu_warnings(
             else f"declared {gyr_unit}: check the gyroscope's unit and bias"
         )
         peak = gyro_peak(gyr)
-        rest = gyro_rate_at_rest(gyr, acc, t_ns) if acc is not None else None
-        ratio = gyro_tilt_ratio(gyr, acc, t_ns) if acc is not None else None
+        at_rest = gyro_rate_at_rest(gyr, acc, t_ns, rest=rest) if acc is not None else None
+        ratio = gyro_tilt_ratio(gyr, acc, t_ns, rest=rest, rate_hz=rate) if acc is not None else None
         rad_ok = ratio is not None and 0.5 * DEG * RATIO_DEG_MIN < ratio <= RATIO_RAD_MAX  # motion agrees
         if peak > GYRO_PEAK_MAX_RAD_S:
             out.append(
@@ -255,11 +291,11 @@ def imu_warnings(
                 f"{topic}: the gyroscope reads {ratio:.0f}x the rate at which gravity turns in the accelerometer "
                 f"(1x expected in rad/s); {fix}"
             )
-        elif not rad_ok and rest is not None and rest > GYRO_REST_MAX_RAD_S:
+        elif not rad_ok and at_rest is not None and at_rest > GYRO_REST_MAX_RAD_S:
             bias = " (the file declares it: a large gyroscope bias?)" if gyr_unit is not None else " (or a large gyroscope bias)"
             out.append(
-                f"{topic}: while the accelerometer shows the sensor at rest the gyroscope reads {rest:.2g} rad/s "
-                f"about a horizontal axis (gravity would turn {rest / DEG:.0f} deg/s){bias}; {fix}"
+                f"{topic}: while the accelerometer shows the sensor at rest the gyroscope reads {at_rest:.2g} rad/s "
+                f"about a horizontal axis (gravity would turn {at_rest / DEG:.0f} deg/s){bias}; {fix}"
             )
     return out
 
@@ -267,10 +303,17 @@ def imu_warnings(
 def marker_warnings(topic: str, pos_m: np.ndarray) -> list[str]:
     """One line when marker positions (m) are too large for a lab (mm declared m) or all within 1 cm (m as mm)."""
     p = np.asarray(pos_m, dtype=np.float64)
-    finite = p[np.isfinite(p)]
-    if finite.size == 0:
+    n = int(np.count_nonzero(np.isfinite(p)))
+    if n == 0:
         return []
-    big = float(np.quantile(np.abs(finite), 0.99))
+    # the 99th percentile lies between the sorted values k and k + 1: counts alone show it is well inside
+    # (MARKER_MIN_SPAN_M, MARKER_MAX_M) in one pass, without copying and partly sorting every coordinate
+    k = int(np.floor(0.99 * (n - 1)))
+    beyond = int(np.count_nonzero(p > 0.98 * MARKER_MAX_M) + np.count_nonzero(p < -0.98 * MARKER_MAX_M))
+    near = int(np.count_nonzero((p < 1.02 * MARKER_MIN_SPAN_M) & (p > -1.02 * MARKER_MIN_SPAN_M)))
+    if beyond <= n - k - 2 and near <= k:
+        return []
+    big = float(np.quantile(np.abs(p[np.isfinite(p)]), 0.99))
     if big > MARKER_MAX_M:
         return [
             f"{topic}: marker coordinates reach {big:.3g} m, larger than any lab: are they mm declared m? "

@@ -22,6 +22,7 @@ from converters._common import (
     looks_binary,
     read_head,
     read_numeric,
+    read_source,
     split_row,
     text_head_lines,
     unit_overrides,
@@ -177,7 +178,7 @@ def read_vicon_csv(path: Path, name: str = "vicon", user_units: dict[str, str] |
         raise ConversionError(path, "empty file")
     if looks_binary(head):
         raise ConversionError(path, "binary data, not a text export")
-    data = path.read_bytes()
+    data = read_source(path)
     sections = find_sections(path, data)
     parsed = []
     warnings: list[str] = []
