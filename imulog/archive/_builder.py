@@ -22,8 +22,9 @@ from imulog.archive import _mcap as m
 
 CHUNK_TARGET_BYTES = 2 * 1024 * 1024  # uncompressed size at which a chunk is closed
 ZSTD_LEVEL = 3  # the mcap library's level: on IMU blocks both smaller and faster than 1 here (bench_archive)
-PIPELINE = os.environ.get("IMULOG_COMPRESS_THREAD", "1") != "0"  # compress chunks on a second thread
-MAX_PENDING = 2  # chunks compressed ahead at most (memory: about this many raw chunks)
+PIPELINE = os.environ.get("IMULOG_COMPRESS_THREADS", "1") != "0"  # compress chunks on worker threads
+COMPRESS_THREADS = min(2, os.cpu_count() or 1)  # chunks compressed at once (each thread one chunk)
+MAX_PENDING = 2 * COMPRESS_THREADS  # chunks compressed ahead at most (memory: about this many raw chunks)
 
 _HEAD = np.dtype(
     [("op", "u1"), ("len", "<u8"), ("channel", "<u2"), ("seq", "<u4"), ("log", "<u8"), ("publish", "<u8")]
@@ -35,10 +36,10 @@ _EXECUTOR: ThreadPoolExecutor | None = None
 
 
 def _executor() -> ThreadPoolExecutor:
-    """One worker thread per process that compresses chunks (zstd and crc32 release the GIL)."""
+    """Worker threads that compress chunks (zstd and crc32 release the GIL), shared by every builder."""
     global _EXECUTOR
     if _EXECUTOR is None:
-        _EXECUTOR = ThreadPoolExecutor(max_workers=1, thread_name_prefix="imulog-chunk")
+        _EXECUTOR = ThreadPoolExecutor(max_workers=COMPRESS_THREADS, thread_name_prefix="imulog-chunk")
     return _EXECUTOR
 
 
@@ -64,7 +65,7 @@ def _compressor():
 def build_chunk(start: int, end: int, raw: bytes | memoryview) -> tuple[bytes, int]:
     """A zstd Chunk record of the message records ``raw`` (CRC of the uncompressed bytes); (record, compressed size).
 
-    Pure function of its input: runs on the compression thread.
+    Pure function of its input: runs on a compression thread.
     """
     compressed = _compressor().compress(raw)
     record = m.chunk(start, end, len(raw), zlib.crc32(raw), "zstd", compressed)
@@ -84,7 +85,7 @@ def message_heads(channel_id: int, first_seq: int, log_times: np.ndarray, length
 
 
 class McapBuilder:
-    """Writes records in file order; chunks are compressed on a worker thread while the caller encodes the next.
+    """Writes records in file order; chunks are compressed on worker threads while the caller encodes the next.
 
     Every record reaches the file in the order it was added: a non-chunk record (or reading ``offset``,
     ``crc``, ``chunk_indexes``) first writes out the chunks still being compressed.
@@ -209,7 +210,7 @@ class McapBuilder:
         if len(log_times) != n or (mask is not None and mask.shape != rows.shape):
             raise ValueError("log_times, rows and mask must have one entry per message")
         log_times = np.asarray(log_times, dtype=np.uint64)
-        lengths = mask.sum(axis=1) if mask is not None else np.full(n, rows.shape[1], dtype=np.int64)
+        lengths = np.count_nonzero(mask, axis=1) if mask is not None else np.full(n, rows.shape[1], dtype=np.int64)
         sizes = lengths + 31
         ends = np.cumsum(sizes)
         start = 0
@@ -240,7 +241,7 @@ class McapBuilder:
         self._submit(channel_id, min(times), max(times), raw, entries)
 
     def _submit(self, channel_id: int, start: int, end: int, raw: bytes, entries: bytes) -> None:
-        """Queue a chunk: compressed on the worker thread, written in order by :meth:`_drain`."""
+        """Queue a chunk: compressed on a worker thread, written in file order by :meth:`_drain`."""
         job = _executor().submit(build_chunk, start, end, raw) if PIPELINE else build_chunk(start, end, raw)
         self._pending.append((job, channel_id, start, end, entries, len(raw)))
         self._drain(keep=MAX_PENDING)

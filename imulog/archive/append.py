@@ -52,14 +52,75 @@ def _copy_range(src: BinaryIO, dst: McapBuilder, start: int, end: int, crc: int 
 
 
 def _copy_prefix(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int], path: Path) -> McapBuilder:
-    """Copy the whole old data section verbatim, verifying its CRC."""
-    builder = McapBuilder(out, 0, 0, summary)
-    _copy_range(f, builder, 0, summary.data_end_offset)
+    """Copy the whole old data section verbatim, verifying its CRC.
+
+    The bytes are copied by the kernel (``os.copy_file_range``, on a second thread) while this thread
+    computes their CRC from a read-only memory map: no byte goes through a Python buffer. A mismatch raises
+    (the temporary output is then removed: nothing is written).
+    """
+    end = summary.data_end_offset
+    out.flush()
+    start = out.tell()
+    copier = _executor().submit(_kernel_copy, f.fileno(), out.fileno(), start, end)
+    try:
+        crc = _crc_of(f, end)
+    finally:
+        copied = copier.result()
+    if not copied:  # no in-kernel copy here (another file system, an old kernel): through Python buffers
+        builder = McapBuilder(out, start, 0, summary)
+        _copy_range(f, builder, 0, end)
+    else:
+        out.seek(start + end)
+        builder = McapBuilder(out, start + end, crc, summary)
     if summary.data_section_crc not in (0, builder.crc):
         raise ArchiveCorruptError(
             f"{path}: data section CRC mismatch (file damaged?); run 'imulog doctor {path}' - nothing was written"
         )
     return builder
+
+
+def _executor():
+    from imulog.archive._builder import _executor as shared
+
+    return shared()
+
+
+def _kernel_copy(src: int, dst: int, dst_offset: int, length: int) -> bool:
+    """Copy ``length`` bytes from the start of ``src`` to ``dst`` at ``dst_offset`` in the kernel; False if
+    the system cannot (then nothing is relied on: the caller copies the bytes itself, from the start)."""
+    copy = getattr(os, "copy_file_range", None)
+    if copy is None:
+        return False
+    done = 0
+    try:
+        while done < length:
+            n = copy(src, dst, length - done, done, dst_offset + done)
+            if n == 0:
+                raise ArchiveCorruptError(f"unexpected end of file at byte {done}")
+            done += n
+    except OSError:
+        os.ftruncate(dst, dst_offset)
+        return False
+    return True
+
+
+def _crc_of(f: BinaryIO, end: int) -> int:
+    """CRC-32 of the first ``end`` bytes of ``f`` (memory-mapped, in blocks: zlib releases the GIL)."""
+    import mmap
+
+    if end == 0:
+        return 0
+    crc = 0
+    with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+        if len(mm) < end:
+            raise ArchiveCorruptError(f"unexpected end of file at byte {len(mm)}")
+        view = memoryview(mm)
+        try:
+            for a in range(0, end, COPY_BLOCK):
+                crc = zlib.crc32(view[a : min(end, a + COPY_BLOCK)], crc)
+        finally:
+            view.release()
+    return crc
 
 
 def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int], path: Path) -> McapBuilder:

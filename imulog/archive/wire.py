@@ -80,25 +80,41 @@ def scan(payload: bytes | memoryview) -> list[tuple[int, int, Any]]:
     n = len(mv)
     pos = 0
     out = []
+    append = out.append
     try:
         while pos < n:
-            key, pos = read_varint(mv, pos)
-            number, wire = key >> 3, key & 7
-            if wire == WIRE_VARINT:
-                value, pos = read_varint(mv, pos)
-            elif wire == WIRE_LEN:
-                length, pos = read_varint(mv, pos)
+            key = mv[pos]  # one-byte keys and lengths are the common case: no call for them
+            if key < 0x80:
+                pos += 1
+            else:
+                key, pos = read_varint(mv, pos)
+            wire = key & 7
+            if wire == WIRE_LEN:
+                length = mv[pos]
+                if length < 0x80:
+                    pos += 1
+                else:
+                    length, pos = read_varint(mv, pos)
                 end = pos + length
                 if end > n:
                     raise Fallback
-                value, pos = mv[pos:end], end
+                append((key >> 3, wire, mv[pos:end]))
+                pos = end
+            elif wire == WIRE_VARINT:
+                value = mv[pos]
+                if value < 0x80:
+                    pos += 1
+                else:
+                    value, pos = read_varint(mv, pos)
+                append((key >> 3, wire, value))
             elif wire == WIRE_I64:
-                value, pos = None, pos + 8
+                append((key >> 3, wire, None))
+                pos += 8
             elif wire == WIRE_I32:
-                value, pos = None, pos + 4
+                append((key >> 3, wire, None))
+                pos += 4
             else:
                 raise Fallback
-            out.append((number, wire, value))
     except IndexError:
         raise Fallback from None
     if pos != n:
@@ -110,17 +126,22 @@ def scan(payload: bytes | memoryview) -> list[tuple[int, int, Any]]:
 
 
 def varint_rows(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """LEB128 varints of N integers at once: (N, 10) uint8 bytes and (N, 10) bool mask of the bytes used.
+    """LEB128 varints of N integers at once: (N, W) uint8 bytes and (N, W) bool mask of the bytes used.
 
-    Negative values are encoded as protobuf encodes int64 (two's complement, 10 bytes).
+    W is the longest varint among the values (at most 10); negative values are encoded as protobuf encodes
+    int64 (two's complement, 10 bytes).
     """
     v = np.asarray(values).astype(np.int64, copy=False).view(np.uint64)
-    shifts = np.arange(10, dtype=np.uint64) * np.uint64(7)
-    length = 1 + np.count_nonzero(v[:, None] >= (np.uint64(1) << shifts[1:])[None, :], axis=1)
-    col = np.arange(10)
+    top = int(v.max()) if len(v) else 0
+    width = max(1, (top.bit_length() + 6) // 7)
+    shifts = np.arange(width, dtype=np.uint64) * np.uint64(7)
+    length = np.ones(len(v), dtype=np.int64)
+    for k in range(1, width):
+        length += v >= np.uint64(1 << (7 * k))
+    col = np.arange(width)
     mask = col[None, :] < length[:, None]
-    cont = (col[None, :] < (length - 1)[:, None]).astype(np.uint64) << np.uint64(7)
-    out = (((v[:, None] >> shifts[None, :]) & np.uint64(0x7F)) | cont).astype(np.uint8)
+    out = ((v[:, None] >> shifts[None, :]) & np.uint64(0x7F)).astype(np.uint8)
+    out |= (col[None, :] < (length - 1)[:, None]).view(np.uint8) << np.uint8(7)
     return out, mask
 
 
@@ -170,7 +191,7 @@ class Rows:
     def message(self, number: int, sub: Rows) -> Rows:
         """A length-delimited field holding ``sub``'s messages (a sub-message, or ``bytes`` built as Rows)."""
         cols, mask = sub.build()
-        lengths = mask.sum(axis=1) if mask is not None else np.full(self.n, cols.shape[1])
+        lengths = np.count_nonzero(mask, axis=1) if mask is not None else np.full(self.n, cols.shape[1])
         head, head_mask = varint_rows(lengths)
         key = np.broadcast_to(np.frombuffer(tag(number, WIRE_LEN), np.uint8), (self.n, len(tag(number, 2))))
         full = np.ones(cols.shape, dtype=bool) if mask is None else mask
@@ -185,7 +206,7 @@ class Rows:
         sub = Rows(self.n)
         sub._add(np.asarray(values, dtype=np.uint8).reshape(self.n, -1), mask)
         cols, used = sub.build()
-        lengths = used.sum(axis=1) if used is not None else np.full(self.n, cols.shape[1])
+        lengths = np.count_nonzero(used, axis=1) if used is not None else np.full(self.n, cols.shape[1])
         self.message(number, sub)
         present = lengths > 0
         if not present.all():
@@ -212,6 +233,6 @@ def row_messages(rows: np.ndarray, mask: np.ndarray | None) -> list[bytes]:
     if mask is None:
         return [r.tobytes() for r in rows]
     flat = rows[mask].tobytes()
-    ends = np.cumsum(mask.sum(axis=1)).tolist()
+    ends = np.cumsum(np.count_nonzero(mask, axis=1)).tolist()
     starts = [0, *ends[:-1]]
     return [flat[a:b] for a, b in zip(starts, ends, strict=True)]

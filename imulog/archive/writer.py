@@ -43,7 +43,7 @@ def rows_hash(rows: np.ndarray, mask: np.ndarray | None = None, block: int = 655
     for i in range(0, n, block):
         part = rows[i : i + block]
         k = len(part)
-        lengths = np.full(k, width, dtype="<u8") if mask is None else mask[i : i + block].sum(axis=1).astype("<u8")
+        lengths = np.full(k, width, dtype="<u8") if mask is None else np.count_nonzero(mask[i : i + block], axis=1).astype("<u8")
         joined = np.concatenate([lengths.view(np.uint8).reshape(k, 8), part], axis=1)
         if mask is None:
             h.update(joined.tobytes())
