@@ -2,6 +2,9 @@
 
     imulog demo -o demo-output
     python docs/loader_screenshot.py demo-output/trial.mcap --start 100 --seconds 40 -o docs/rerun_mcap_loader.png
+    python docs/loader_screenshot.py demo-output/trial.rrd -o docs/viewer_r2g.png   # imulog's own .rrd
+
+A ``.rrd`` (e.g. written by ``imulog view --save``) is served as it is, with its blueprint.
 
 Converts the trial with the ``rerun`` executable shipped in rerun-sdk (``rerun mcap convert``: Rerun's own
 MCAP loader; the viewer twins under ``/derived/viewer/`` become Scalars plots, Points3D, Transform3D and
@@ -83,7 +86,8 @@ def screenshot(
     wait_s: float = 30.0,
     size: str = "1600,1000",
 ) -> Path:
-    """Open ``trial`` with ``rerun --web-viewer`` in headless chromium and save a PNG of the page.
+    """Open ``trial`` (an MCAP archive, or a ``.rrd`` served as it is) with ``rerun --web-viewer`` in headless
+    chromium and save a PNG of the page.
 
     ``topics``: a regex of the MCAP topics Rerun imports (``rerun mcap convert -y``; "" for all); the
     default is the viewer twins, what a Rerun user opens (docs/schemas.md). ``start_s``/``seconds``: import
@@ -95,10 +99,13 @@ def screenshot(
     web, grpc, devtools = _free_port(), _free_port(), _free_port()
     work = Path(tempfile.mkdtemp())
     rrd = work / "trial.rrd"  # Rerun's own MCAP import, done once ahead (the page then loads in seconds)
-    select = (["-y", topics] if topics else []) + _log_time_range(trial, start_s, seconds)
-    subprocess.run(
-        [_rerun_exe(), "mcap", "convert", str(trial), *select, "-o", str(rrd)], check=True, capture_output=True
-    )
+    if trial.suffix == ".rrd":
+        rrd = trial
+    else:
+        select = (["-y", topics] if topics else []) + _log_time_range(trial, start_s, seconds)
+        subprocess.run(
+            [_rerun_exe(), "mcap", "convert", str(trial), *select, "-o", str(rrd)], check=True, capture_output=True
+        )
     viewer = subprocess.Popen(
         [_rerun_exe(), "--web-viewer", "--web-viewer-port", str(web), "--port", str(grpc)]
         + ["--bind", "127.0.0.1", "--hide-welcome-screen", str(rrd)],
@@ -146,7 +153,7 @@ def screenshot(
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("trial", type=Path, help="a processed trial, e.g. demo-output/trial.mcap (imulog demo)")
+    parser.add_argument("trial", type=Path, help="a processed trial, e.g. demo-output/trial.mcap (imulog demo), or an .rrd")
     parser.add_argument("-o", "--output", type=Path, default=Path("docs/rerun_mcap_loader.png"))
     parser.add_argument("--topics", default="^/derived/viewer/", help='regex of topics to import ("" for all)')
     parser.add_argument("--start", type=float, default=0.0, help="window start, s after the file's first message")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ from imulog.model import ImuStream, Intervals, PoseStream, Recording, SignalStre
 from imulog.view import build_blueprint, from_recording, show
 from imulog.view import layout as L
 from imulog.view.clock import device_imu_of
+from imulog.view.layout import PHASE_COLORS
 from imulog.view.rrd import read_column, read_scalars, summarize
 from imulog.view.sample import SampleTrialParams, _ref_to_device, phase_intervals_ref_ns, sample_recording
 
@@ -87,14 +89,34 @@ def test_phases_and_static_states_on_reference_clock(sample_rrd):
     t, states = read_column(out, L.signal_entity("/derived/phases/wrist"), "StateChange:state")
     phases = rec.events[0]
     starts = [(ti, s) for ti, s in zip(t, states, strict=True) if s[0]]
-    assert {s[0] for _, s in starts} == PHASE_LABELS
+    assert {s[0].rsplit(" ", 1)[0] for _, s in starts} == PHASE_LABELS
     assert len(starts) == len(phases)
     # phases were written on the IMU device clock; shown on the reference clock they match the truth
-    true_start, _, true_labels, true_tasks = phase_intervals_ref_ns(30.0)
+    true_start, true_end, true_labels, true_tasks = phase_intervals_ref_ns(30.0)
     got_t = np.array([ti for ti, _ in starts])
     assert np.max(np.abs(got_t - true_start)) <= 2  # ns (rounding of the inverse clock map)
-    assert [s[0] for _, s in starts] == true_labels
+    # lane 1 reads on its own when zoomed in: "reach 3"; lane 2 spans the repetition: "rep 3"
+    assert [s[0] for _, s in starts] == [f"{lab} {k}" for lab, k in zip(true_labels, true_tasks, strict=True)]
     assert [s[1] for _, s in starts] == [f"rep {k}" for k in true_tasks]
+    # every numbered label keeps its phase's colour; repetitions alternate two greys
+    config = next(
+        c.to_record_batch()
+        for c in RrdReader(out).stream().to_chunks()
+        if c.entity_path == "/derived/phases/wrist" and c.is_static
+    )
+    values = config.column("StateConfiguration:values").to_pylist()[0]
+    colours = dict(zip(values, config.column("StateConfiguration:colors").to_pylist()[0], strict=True))
+    for lab, k in zip(true_labels, true_tasks, strict=True):
+        assert colours[f"{lab} {k}"] == PHASE_COLORS[lab]
+    assert colours["rep 1"] != colours["rep 2"] == colours["rep 4"]
+    # the phase log: one row per phase at its start, coloured like the lane, with repetition and duration
+    t_log, text = read_column(out, L.phase_log_entity("/derived/phases/wrist"), "TextLog:text")
+    np.testing.assert_array_equal(t_log, got_t)
+    first = text[0][0] if isinstance(text[0], list) else text[0]
+    assert first == f"rep {true_tasks[0]} · {true_labels[0]} · {(true_end[0] - true_start[0]) / 1e9:.2f} s"
+    _, log_colours = read_column(out, L.phase_log_entity("/derived/phases/wrist"), "TextLog:color")
+    flat = [c[0] if isinstance(c, list) else c for c in log_colours]
+    assert flat == [PHASE_COLORS[lab] for lab in true_labels]
     # static/moving lane: "moving" starts exactly when the first reach starts
     t_s, st = read_column(out, L.state_entity("/derived/static/wrist"), "StateChange:state")
     first_moving = t_s[[s == ["moving"] for s in st].index(True)]
@@ -350,7 +372,14 @@ def test_archive_and_steps_pipeline(tmp_path):
     phase_t, states = read_column(out, "/derived/phases/wrist", "StateChange:state")
     started = [s[0] for s in states if s[0]]
     assert len(started) == len(stored_phases) > 0
-    assert set(started) == set(stored_phases.labels) <= PHASE_LABELS
+    # "reach 3": the stored label and repetition, in time order; a forced phase keeps its " (forced)" suffix
+    parsed = [re.fullmatch(r"(\w+) (\d+)( \(forced\))?", s) for s in started]
+    assert all(parsed), started
+    order = np.argsort(stored_phases.start_ns, kind="stable")
+    assert [(m[1], int(m[2])) for m in parsed] == [
+        (str(stored_phases.labels[i]), int(stored_phases.task_index[i])) for i in order
+    ]
+    assert {m[1] for m in parsed} == set(stored_phases.labels) <= PHASE_LABELS
     # the phases step wrote them on the reference clock (imulog.timing): shown unchanged
     np.testing.assert_array_equal(phase_t[[bool(s[0]) for s in states]], np.sort(stored_phases.start_ns))
     imu, vicon = summary[L.imu_gyr_norm_entity("wrist")], summary[L.norm_entity(L.VICON_ANGULAR_VELOCITY_TOPIC)]

@@ -7,8 +7,9 @@ Layout (views only appear when the trial has data for them)::
     | acceleration (m/s²)                 |  3D: markers, cluster frame, |
     | orientation quaternion (1)          |  trajectories + cursors      |
     +-------------------------------------+------------------------------+
-    | state timeline: phases, static/moving intervals, other intervals   |
-    +--------------------------------------------------------------------+
+    | state timeline: phases (reach 3, rep 3)               | phase log  |
+    | state timeline: static/moving, movements, activity    | (coloured) |
+    +-------------------------------------------------------+------------+
     tabs beside the overview: raw IMU, derived signals, errors & metrics, trial info
 """
 
@@ -62,6 +63,34 @@ def _stack(views: list, kind: type = rrb.Vertical, **kwargs) -> rrb.Container | 
     return kind(*views, **kwargs)
 
 
+def _state_views(trials: Sequence[LoggedTrial], axis: rrb.TimeAxis | None) -> rrb.Container | rrb.View | None:
+    """Phases in their own state timeline (lanes ``reach 3`` and ``rep 3``) beside the phase log, above the
+    static/moving, movement and activity lanes, so phases are never scrolled out of sight."""
+    phases = _paths(trials, "phases")
+    others = _paths(trials, "static_state", "intervals")
+    logs = _paths(trials, "phase_log")
+    if not phases:
+        return (
+            rrb.StateTimelineView(origin="/", contents=others, name="Static intervals", time_view=axis)
+            if others
+            else None
+        )
+    lanes: list = [
+        rrb.StateTimelineView(origin="/", contents=phases, name="Phases: label and repetition", time_view=axis)
+    ]
+    if others:
+        lanes.append(
+            rrb.StateTimelineView(
+                origin="/", contents=others, name="Static intervals, movements, activity", time_view=axis
+            )
+        )
+    left = lanes[0] if len(lanes) == 1 else rrb.Vertical(*lanes, row_shares=[1, 1])
+    if not logs:
+        return left
+    log = rrb.TextLogView(origin="/", contents=logs, name="Phase log (colour = phase)")
+    return rrb.Horizontal(left, log, column_shares=[4, 1])
+
+
 def build_blueprint(trials: LoggedTrial | Sequence[LoggedTrial]) -> rrb.Blueprint:
     """Default blueprint for what :func:`imulog.view.streams.log_streams` sent (one or several trials)."""
     if isinstance(trials, LoggedTrial):
@@ -100,15 +129,10 @@ def build_blueprint(trials: LoggedTrial | Sequence[LoggedTrial]) -> rrb.Blueprin
                 spatial, rrb.TextDocumentView(origin="/", contents=legend, name="Legend"), row_shares=[4, 1]
             )
 
-    state_paths = _paths(trials, "phases", "static_state", "intervals")
-    states = (
-        rrb.StateTimelineView(origin="/", contents=state_paths, name="Phases and static intervals", time_view=axis)
-        if state_paths
-        else None
-    )
+    states = _state_views(trials, axis)
 
     top = _stack([signals, spatial], rrb.Horizontal, column_shares=[3, 2] if signals and spatial else None)
-    overview = _stack([top, states], rrb.Vertical, row_shares=[3, 1.2] if top and states else None, name="Overview")
+    overview = _stack([top, states], rrb.Vertical, row_shares=[3, 1.6] if top and states else None, name="Overview")
 
     tabs: list = []
     if overview is not None:

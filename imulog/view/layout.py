@@ -154,6 +154,11 @@ def error_entity(topic: str, prefix: str = "") -> str:
     return join(prefix, f"/errors/{path_source(topic)}")
 
 
+def phase_log_entity(topic: str, prefix: str = "") -> str:
+    """Entity of the text log of a phases channel: one coloured row per phase, e.g. ``/derived/phases/wrist/log``."""
+    return join(prefix, f"{topic}/log")
+
+
 def evaluation_entity(prefix: str = "") -> str:
     """Entity of the evaluation (error) report text document."""
     return join(prefix, "/evaluation/report")

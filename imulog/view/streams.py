@@ -73,6 +73,41 @@ class _TimeIndex:
 
 FORCED = " (forced)"  # suffix of a phase label event correction made by cutting a movement
 FORCED_COLOR = 0x7F7F7FFF  # forced phases are grey, not their phase's colour
+REP_COLORS = (0xD5D9DFFF, 0xAEB5BFFF)  # the repetition lane alternates two greys: repetitions countable
+LOW_CONFIDENCE_COLOR = 0xE8B730FF  # a repetition the segmentation is unsure of (confidence < 0.5)
+MAX_NUMBERED_REPETITIONS = 1000  # phase lane labels "reach 3" up to this many repetitions, plain "reach" beyond
+MAX_LOGGED_PHASES = 20_000  # the phase log lists every phase up to this many
+
+
+def phase_color(label: str) -> int:
+    """RGBA of a phase lane value: ``reach``, ``reach 3`` -> reach's colour; ``... (forced)`` -> grey."""
+    if label.endswith(FORCED):
+        return FORCED_COLOR
+    base, _, number = label.rpartition(" ")
+    return L.PHASE_COLORS.get(label, L.PHASE_COLORS.get(base, FORCED_COLOR) if number.isdigit() else FORCED_COLOR)
+
+
+def numbered_phase_labels(labs: np.ndarray, tasks: np.ndarray, rep: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
+    """Phase labels with their repetition (``reach 3``, ``lift 3 (forced)``) and the colour of every lane value.
+
+    A zoomed-in state lane then reads on its own; the repetition lane alternates two greys (amber where the
+    repetition's confidence is low) so repetitions can be counted when zoomed out.
+    """
+    out = []
+    for lab, k in zip(labs.tolist(), tasks.tolist(), strict=True):
+        lab = str(lab)
+        if k < 0:
+            out.append(lab)
+        elif lab.endswith(FORCED):
+            out.append(f"{lab[: -len(FORCED)]} {k}{FORCED}")
+        else:
+            out.append(f"{lab} {k}")
+    numbered = np.array(out, dtype=object)
+    colors = {v: phase_color(v) for v in set(out) if v}
+    for r, k in zip(rep.tolist(), tasks.tolist(), strict=True):
+        if r:
+            colors[str(r)] = LOW_CONFIDENCE_COLOR if "confidence" in str(r) else REP_COLORS[int(k) % 2]
+    return numbered, colors
 
 
 def _rgb(c: tuple[int, int, int]) -> list[int]:
@@ -137,20 +172,36 @@ class _Logger:
         self.rec.log(path, rr.SeriesLines(**style), static=True)
         self._record(path, role, topic, t_ref)
 
-    def states(self, path: str, role: str, topic: str, t_ref: np.ndarray, states: np.ndarray, lanes: int) -> None:
-        """StateChange rows: ``states`` is (rows * lanes,) strings; empty string = reset (gap)."""
+    def states(
+        self,
+        path: str,
+        role: str,
+        topic: str,
+        t_ref: np.ndarray,
+        states: np.ndarray,
+        lanes: int,
+        colors: Mapping[str, int] | None = None,
+    ) -> None:
+        """StateChange rows: ``states`` is (rows * lanes,) strings; empty string = reset (gap).
+
+        ``colors`` maps state values to RGBA; by default the R2G phase colours (:data:`layout.PHASE_COLORS`) and
+        grey for forced phases.
+        """
         if len(t_ref) == 0:
             return
-        columns = rr.StateChange.columns(state=[str(s) for s in states]).partition(np.full(len(t_ref), lanes))
+        text = [str(v) for v in states]
+        columns = rr.StateChange.columns(state=text).partition(np.full(len(t_ref), lanes))
         self.rec.send_columns(path, indexes=[self._time(t_ref)], columns=columns)
-        values = sorted({str(s) for s in states if s and (str(s) in L.PHASE_COLORS or str(s).endswith(FORCED))})
-        if values:
+        if colors is None:
+            present = {v for v in text if v}
+            colors = {
+                v: L.PHASE_COLORS.get(v, FORCED_COLOR) for v in present if v in L.PHASE_COLORS or v.endswith(FORCED)
+            }
+        if colors:
+            values = sorted(colors)
             self.rec.log(
                 path,
-                rr.StateConfiguration(
-                    values=values,
-                    colors=np.array([L.PHASE_COLORS.get(v, FORCED_COLOR) for v in values], dtype=np.uint32),
-                ),
+                rr.StateConfiguration(values=values, colors=np.array([colors[v] for v in values], dtype=np.uint32)),
                 static=True,
             )
         self._record(path, role, topic, t_ref)
@@ -363,8 +414,12 @@ class _Logger:
             next_start = np.concatenate([starts[1:], [np.iinfo(np.int64).max]])
             needs_reset = ends < next_start
             rep = np.array([f"rep {k}" if k >= 0 else "" for k in tasks], dtype=object)
+            colors = None
             if role == "phases":  # forced phases and low-confidence repetitions visible as such (imulog.timing)
                 labs, rep = self.phase_quality_labels(starts, labs, tasks, rep)
+                self.phase_log(s.topic, starts, ends, labs, rep)
+                if with_task and len(np.unique(tasks)) <= MAX_NUMBERED_REPETITIONS:
+                    labs, colors = numbered_phase_labels(labs, tasks, rep)
             start_states = np.stack([labs, rep], axis=1) if with_task else labs[:, None]
             reset_states = np.full((int(needs_reset.sum()), lanes), "", dtype=object)
             times = [starts, ends[needs_reset]]
@@ -373,7 +428,13 @@ class _Logger:
             v_all = np.concatenate(values, axis=0)
             order = np.argsort(t_all, kind="stable")
             self.states(
-                L.signal_entity(s.topic, self.prefix), role, s.topic, t_all[order], v_all[order].reshape(-1), lanes
+                L.signal_entity(s.topic, self.prefix),
+                role,
+                s.topic,
+                t_all[order],
+                v_all[order].reshape(-1),
+                lanes,
+                colors,
             )
         if instant.any():
             path = L.join(self.prefix, f"{s.topic}/events")
@@ -404,6 +465,19 @@ class _Logger:
             dtype=object,
         )
         return labs, rep
+
+    def phase_log(self, topic: str, starts: np.ndarray, ends: np.ndarray, labs: np.ndarray, rep: np.ndarray) -> None:
+        """One TextLog row per phase at its start, ``rep 3 · reach · 0.74 s``, coloured like its state lane."""
+        if len(starts) > MAX_LOGGED_PHASES:
+            return
+        lines = [
+            f"{r} · {lab} · {(e - b) / 1e9:.2f} s" if r else f"{lab} · {(e - b) / 1e9:.2f} s"
+            for r, lab, b, e in zip(rep.tolist(), labs.tolist(), starts.tolist(), ends.tolist(), strict=True)
+        ]
+        colours = np.array([phase_color(str(lab)) for lab in labs.tolist()], dtype=np.uint32)
+        path = L.phase_log_entity(topic, self.prefix)
+        self.rec.send_columns(path, indexes=[self._time(starts)], columns=rr.TextLog.columns(text=lines, color=colours))
+        self._record(path, "phase_log", topic, starts)
 
     def pose(self, s: PoseStream) -> None:
         t_ref = self.clocks.to_reference(s.topic, s.t_ns)
