@@ -17,13 +17,35 @@ from __future__ import annotations
 import os
 from typing import TYPE_CHECKING
 
-from imulog.archive.append import append_derived, remove_derived
 from imulog.archive.errors import ArchiveCorruptError, ArchiveError, ArchiveExistsError, ArchiveLockedError
-from imulog.archive.reader import Attachment, ChannelInfo, TrialReader, stream_columns
-from imulog.archive.writer import write_trial
 
 if TYPE_CHECKING:
+    from imulog.archive.append import append_derived, remove_derived
     from imulog.archive.doctor import DoctorReport
+    from imulog.archive.reader import Attachment, ChannelInfo, TrialReader, stream_columns
+    from imulog.archive.writer import write_trial
+
+# Imported when first used: `imulog info` needs the reader only, not the writer, appender and twins.
+_LAZY = {
+    "append_derived": "append",
+    "remove_derived": "append",
+    "Attachment": "reader",
+    "ChannelInfo": "reader",
+    "TrialReader": "reader",
+    "stream_columns": "reader",
+    "write_trial": "writer",
+}
+
+
+def __getattr__(name: str):
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'imulog.archive' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(f"imulog.archive.{module}"), name)
+    globals()[name] = value
+    return value
 
 
 def check_file(path: str | os.PathLike[str], *, decode: bool = True) -> DoctorReport:

@@ -325,7 +325,33 @@ def parse_chunk(body: bytes | memoryview) -> ChunkRec:
     return ChunkRec(start, end, usize, crc, compression, c.raw(c.u64()))
 
 
+_CI_HEAD = struct.Struct("<QQQQI")  # message start/end time, chunk offset, chunk length, offsets-map byte length
+_CI_ENTRY = struct.Struct("<HQ")
+_CI_MID = struct.Struct("<QI")  # message index length, compression string length
+_CI_TAIL = struct.Struct("<QQ")
+
+
 def parse_chunk_index(body: bytes | memoryview) -> ChunkIndexRec:
+    """A ChunkIndex record (one ``struct`` call per field group: a week's summary holds thousands)."""
+    try:
+        start, end, offset, length, map_len = _CI_HEAD.unpack_from(body, 0)
+        pos = _CI_HEAD.size
+        if map_len % _CI_ENTRY.size or pos + map_len > len(body):
+            raise ValueError
+        offsets = dict(_CI_ENTRY.iter_unpack(body[pos : pos + map_len]))
+        pos += map_len
+        mi_len, name_len = _CI_MID.unpack_from(body, pos)
+        pos += _CI_MID.size
+        compression = bytes(body[pos : pos + name_len]).decode()
+        if len(compression) != name_len:
+            raise ValueError
+        compressed, uncompressed = _CI_TAIL.unpack_from(body, pos + name_len)
+    except (struct.error, ValueError):  # malformed: the field-by-field parse says where
+        return _parse_chunk_index_fields(body)
+    return ChunkIndexRec(start, end, offset, length, offsets, mi_len, compression, compressed, uncompressed)
+
+
+def _parse_chunk_index_fields(body: bytes | memoryview) -> ChunkIndexRec:
     c = Cursor(body)
     start, end, offset, length = c.u64(), c.u64(), c.u64(), c.u64()
     offsets = c.u16_u64_map()

@@ -17,7 +17,6 @@ from typing import Any
 import numpy as np
 
 from imulog.archive import _mcap as m
-from imulog.archive import codec
 from imulog.archive.errors import ArchiveCorruptError, ArchiveError
 from imulog.archive.metadata import (
     MAX_RECORD_BYTES,
@@ -27,10 +26,17 @@ from imulog.archive.metadata import (
     record_hash,
     validate_record,
 )
-from imulog.archive.writer import payload_hash
 from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream, Stream
 
 _POOL = None
+
+
+def _codec():
+    """:mod:`imulog.archive.codec`, imported when data is first decoded (listing a trial needs no protobuf)."""
+    from imulog.archive import codec
+
+    return codec
+
 
 
 def _pool():
@@ -67,7 +73,7 @@ class ChannelInfo:
 
     @property
     def kind(self) -> str:
-        return self.metadata.get("kind") or codec.SCHEMA_KIND.get(self.schema_name, "unknown")
+        return self.metadata.get("kind") or _codec().SCHEMA_KIND.get(self.schema_name, "unknown")
 
     @property
     def derived(self) -> bool:
@@ -137,8 +143,6 @@ class TrialReader:
         except MetadataError as exc:
             self._f.close()
             raise ArchiveCorruptError(f"{self.path}: {exc}") from None
-        t0 = [ci.message_start_time for ci in self.summary.chunk_indexes]
-        self._t0 = min(t0) if t0 else 0
         self._merge_channel_stats()
 
     def _merge_channel_stats(self) -> None:
@@ -341,8 +345,8 @@ class TrialReader:
         idxs = [ci for ci in self.summary.chunk_indexes if channel_id in ci.message_index_offsets]
         idxs.sort(key=lambda ci: ci.chunk_start_offset)
         meta = self.summary.channels[channel_id].metadata  # its log_time map: t_ns -> the trial's time axis
-        lo = None if start_ns is None else codec.channel_log_time(meta, start_ns)
-        hi = None if end_ns is None else codec.channel_log_time(meta, end_ns)
+        lo = None if start_ns is None else _codec().channel_log_time(meta, start_ns)
+        hi = None if end_ns is None else _codec().channel_log_time(meta, end_ns)
         monotonic = all(a.message_end_time <= b.message_start_time for a, b in zip(idxs, idxs[1:], strict=False))
         selected = []
         for k, ci in enumerate(idxs):
@@ -356,7 +360,7 @@ class TrialReader:
 
     def _where(self, ci: m.ChunkIndexRec, topic: str | None) -> str:
         """``PATH: TOPIC: chunk at byte N (t = a-b s)``: the chunk's place, time relative to the file's first."""
-        t0 = self._t0
+        t0 = min((c.message_start_time for c in self.summary.chunk_indexes), default=0)
         span = f"{(ci.message_start_time - t0) / 1e9:.3f}-{(ci.message_end_time - t0) / 1e9:.3f} s"
         who = f"{topic}: " if topic else ""
         return f"{self.path}: {who}chunk at byte {ci.chunk_start_offset} (t = {span} into the file)"
@@ -442,7 +446,7 @@ class TrialReader:
         for payloads in self.iter_chunk_messages(topic, start_ns, end_ns):
             if not payloads:
                 continue
-            stream = codec.select_time(self._decode(schema.name, topic, rec, payloads), start_ns, end_ns)
+            stream = _codec().select_time(self._decode(schema.name, topic, rec, payloads), start_ns, end_ns)
             if len(stream):
                 yield stream
 
@@ -453,12 +457,12 @@ class TrialReader:
         if schema is None:
             raise ArchiveError(f"{self.path}: channel {topic!r} has no schema")
         payloads = self.messages(topic, start_ns, end_ns)
-        return codec.select_time(self._decode(schema.name, topic, rec, payloads), start_ns, end_ns)
+        return _codec().select_time(self._decode(schema.name, topic, rec, payloads), start_ns, end_ns)
 
     def _decode(self, schema_name: str, topic: str, rec: m.ChannelRec, payloads: list[memoryview]) -> Stream:
         try:
-            return codec.decode(schema_name, topic, rec.metadata, payloads)
-        except codec.DecodeError as exc:
+            return _codec().decode(schema_name, topic, rec.metadata, payloads)
+        except _codec().DecodeError as exc:
             raise ArchiveCorruptError(f"{self.path}: {exc}") from exc
         except MemoryError:
             raise
@@ -469,10 +473,16 @@ class TrialReader:
         """Content hash of a channel (SHA-256 over its messages), as recorded in provenance."""
         rec = self._channel_rec(topic)
         recorded = rec.metadata.get("sha256")
-        return recorded if recorded else payload_hash(self.messages(topic))
+        if recorded:
+            return recorded
+        from imulog.archive.writer import payload_hash
+
+        return payload_hash(self.messages(topic))
 
     def compute_channel_hash(self, topic: str) -> str:
         """Recompute the content hash from the data (what ``doctor`` compares with the recorded one)."""
+        from imulog.archive.writer import payload_hash
+
         return payload_hash(self.messages(topic))
 
     # ------------------------------------------------------------------ tables
