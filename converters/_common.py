@@ -409,6 +409,15 @@ def _parse_pandas(spec: TableSpec, data: bytes | None, nrows: int | None, used: 
     return values
 
 
+def _fill_column(out: np.ndarray, chunk: Any) -> None:
+    """Copy a float64 pyarrow array into ``out`` once, its nulls (empty cells: gaps) as NaN."""
+    validity, buffer = chunk.buffers()[:2]
+    out[:] = np.frombuffer(buffer, dtype=np.float64, count=len(chunk), offset=chunk.offset * 8)
+    if chunk.null_count:
+        bits = np.unpackbits(np.frombuffer(validity, dtype=np.uint8), bitorder="little")
+        out[bits[chunk.offset : chunk.offset + len(chunk)] == 0] = np.nan
+
+
 def _parse_arrow(spec: TableSpec, data: bytes, nrows: int | None, used: list[int]) -> np.ndarray | None:
     """The block parsed by ``pyarrow.csv`` (threads, no copy of the bytes) into an (N, ncols) column-major array,
     or None when the pandas path must decide: a first row of another width, a header region whose line count
@@ -465,7 +474,7 @@ def _parse_arrow(spec: TableSpec, data: bytes, nrows: int | None, used: list[int
     for i, column in zip(used, table.columns, strict=True):
         row = 0
         for chunk in column.chunks:
-            values[row : row + len(chunk), i] = chunk.to_numpy(zero_copy_only=False)  # nulls become NaN
+            _fill_column(values[row : row + len(chunk), i], chunk)
             row += len(chunk)
         col = values[:, i]
         if len(col) - np.count_nonzero(np.isfinite(col)) != column.null_count:

@@ -15,7 +15,6 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from converters.errors import ConversionError
 from imulog.model import SignalStream
@@ -81,6 +80,8 @@ def read_table(
     dropped and its one-line warning appended (pass it on as ``Recording.warnings``); without, such a row is read
     (or refused when it has too few fields). Ragged tables are not checked (their short last rows are normal).
     """
+    import pandas as pd  # here, not at module top: detecting a format must not import pandas
+
     path = Path(path)
     data = path.read_bytes() if data is None else data
     ncols = len(names)

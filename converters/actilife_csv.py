@@ -29,7 +29,6 @@ from datetime import datetime
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from converters._binary import UNKNOWN_ZONE
 from converters._common import G0, TableSpec, head_lines, read_numeric, sanitize_name, text_head_lines
@@ -93,6 +92,8 @@ def _check_complete(path: Path) -> None:
 
 
 def read_actilife_csv(path: Path, options: ConvertOptions | None = None) -> Recording:
+    import pandas as pd  # here, not at module top: detecting a format must not import pandas
+
     options = options or ConvertOptions()
     path = Path(path)
     lines = head_lines(path, max_lines=BANNER_LINES + 2)

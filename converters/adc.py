@@ -18,7 +18,6 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from converters._common import G0, drop_cut_final_row, looks_binary, text_head_lines
 from converters.base import Converter, ConvertOptions
@@ -52,6 +51,8 @@ def read_adc(
     adc_bits: int = 10,
     name: str = "acc",
 ) -> Recording:
+    import pandas as pd  # here, not at module top: detecting a format must not import pandas
+
     path = Path(path)
     data = path.read_bytes()
     if not data.strip():
