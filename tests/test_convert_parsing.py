@@ -1,0 +1,284 @@
+"""The fast text path of ``converters._common.read_numeric`` (issue 17: convert within 1.5x its floor).
+
+* pyarrow's CSV reader parses the numeric block from the bytes in memory; whatever it would read differently from
+  the pandas C parser (other NaN spellings, ``-0`` in whole-number columns, ragged or blank rows, quotes, spaces,
+  line endings) goes to the pandas path, so every value, gap, warning and error message is what it was;
+* the source is read once and its SHA-256 computed from those bytes (the conversion record does not re-read it);
+* the plausibility checks' shortcuts (shared rest windows, excerpts copied as slices, the marker percentile
+  settled by counts) give exactly what the direct computation gives.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import converters._common as common
+from converters import ConversionError, convert_file
+from converters import plausibility as plaus
+from imulog.commands.convert import conversion_record
+
+REPO = Path(__file__).resolve().parents[1]
+TEXT_SAMPLES = [  # (path under ../shared/data or the repository, whether the fast path must take it)
+    "imu_text/fusion_sensor_data.csv",
+    "imu_text/shimmer_consensys_export.csv",
+    "vicon_nexus/markers.csv",
+    "vicon_nexus/analogs.csv",
+    "gaitmap_foot/imu_sample.csv",
+    "gaitmap_foot/mocap_sample.csv",
+    "devices/actigraph_gt3x/exampleRAW.csv",
+]
+HEADER = "Time (s)," + ",".join(
+    [f"Gyroscope {a} (deg/s)" for a in "XYZ"] + [f"Accelerometer {a} (g)" for a in "XYZ"] + ["Count"]
+)
+
+
+def _arrays(rec) -> dict[str, np.ndarray]:
+    out = {}
+    for s in rec.streams():
+        for f in dataclasses.fields(s):
+            v = getattr(s, f.name)
+            if isinstance(v, np.ndarray):
+                out[f"{s.topic}.{f.name}"] = v
+    return out
+
+
+def _outcome(path: Path, monkeypatch, *, arrow: bool):
+    """(arrays, warnings) or the error message of converting ``path`` with or without the pyarrow path."""
+    with monkeypatch.context() as m:
+        if not arrow:
+            m.setattr(common, "_parse_arrow", lambda *a: None)
+        try:
+            rec = convert_file(path)
+        except ConversionError as e:
+            return str(e)
+    return _arrays(rec), rec.warnings
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, str) or isinstance(b, str):
+        return a == b
+    (xa, wa), (xb, wb) = a, b
+    if wa != wb or set(xa) != set(xb):
+        return False
+    for k in xa:  # bit for bit: the sign of zero and the place of every NaN included
+        x, y = xa[k], xb[k]
+        if x.dtype != y.dtype or x.shape != y.shape or x.tobytes() != y.tobytes():
+            return False
+    return True
+
+
+def _spy_arrow(monkeypatch) -> list[bool]:
+    """Record whether each ``_parse_arrow`` call returned values (True) or left the block to pandas (False)."""
+    taken: list[bool] = []
+    real = common._parse_arrow
+
+    def spy(*args):
+        out = real(*args)
+        taken.append(out is not None)
+        return out
+
+    monkeypatch.setattr(common, "_parse_arrow", spy)
+    return taken
+
+
+@pytest.mark.parametrize("rel", TEXT_SAMPLES)
+def test_real_text_exports_parse_identically_and_take_the_fast_path(rel, shared_data, monkeypatch):
+    path = shared_data / rel
+    slow = _outcome(path, monkeypatch, arrow=False)
+    taken = _spy_arrow(monkeypatch)
+    fast = _outcome(path, monkeypatch, arrow=True)
+    assert not isinstance(fast, str)
+    assert _same(fast, slow)
+    assert taken and all(taken)  # the fast path really parsed it (it did not silently fall back)
+
+
+def _imu_text(rows: int = 300, seed: int = 0) -> list[str]:
+    rng = np.random.default_rng(seed)
+    lines = [HEADER]
+    for i in range(rows):
+        g = rng.normal(0, 20, 3)
+        a = rng.normal(0, 0.3, 3) + [0, 0, 1]
+        lines.append(f"{i / 100:.2f}," + ",".join(f"{v:.4f}" for v in [*g, *a]) + f",{i}")
+    return lines
+
+
+def _damage(lines: list[str], row: int, col: int, cell: str) -> list[str]:
+    out = list(lines)
+    cells = out[row].split(",")
+    cells[col] = cell
+    out[row] = ",".join(cells)
+    return out
+
+
+CASES = {
+    "plain": lambda L: L,
+    "NaN gap": lambda L: _damage(L, 50, 2, "NaN"),
+    "empty gap": lambda L: _damage(L, 50, 5, ""),
+    "'Nan' (pandas refuses it)": lambda L: _damage(L, 50, 2, "Nan"),
+    "'+nan'": lambda L: _damage(L, 50, 2, "+nan"),
+    "inf": lambda L: _damage(L, 50, 3, "inf"),
+    "'Infinity' in the time column": lambda L: _damage(L, 50, 0, "Infinity"),
+    "-0 in the whole-number column": lambda L: _damage(L, 50, 7, "-0"),
+    "-0.0000 in a float column": lambda L: _damage(L, 50, 1, "-0.0000"),
+    "leading space": lambda L: _damage(L, 50, 1, " 1.5"),
+    "trailing space": lambda L: _damage(L, 50, 1, "1.5 "),
+    "quoted number": lambda L: _damage(L, 50, 1, '"1.5"'),
+    "underscore": lambda L: _damage(L, 50, 1, "1_5"),
+    "text cell": lambda L: _damage(L, 50, 4, "abc"),
+    "short row inside": lambda L: L[:50] + [",".join(L[50].split(",")[:5])] + L[51:],
+    "long row inside": lambda L: L[:50] + [L[50] + ",7"] + L[51:],
+    "blank line inside": lambda L: L[:50] + [""] + L[50:],
+    "empty-cells row at the end": lambda L: L + [",,,,,,,"],
+    "time goes backwards": lambda L: _damage(L, 60, 0, "0.01"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+@pytest.mark.parametrize("ending", ["\n", "\r\n", "\r"])
+def test_damaged_imu_text_gives_the_same_values_or_error_on_both_paths(case, ending, tmp_path, monkeypatch):
+    path = tmp_path / "wrist.csv"
+    path.write_bytes((ending.join(CASES[case](_imu_text())) + ending).encode())
+    slow = _outcome(path, monkeypatch, arrow=False)
+    fast = _outcome(path, monkeypatch, arrow=True)
+    assert _same(fast, slow), (fast if isinstance(fast, str) else "values", slow if isinstance(slow, str) else "values")
+
+
+def test_cut_final_row_and_trailing_blank_lines_on_the_fast_path(tmp_path, monkeypatch):
+    lines = _imu_text()
+    path = tmp_path / "wrist.csv"
+    path.write_text("\n".join(lines[:-1]) + "\n" + lines[-1][:12])  # the last row cut inside a number
+    taken = _spy_arrow(monkeypatch)
+    fast = _outcome(path, monkeypatch, arrow=True)
+    assert taken == [True]
+    arrays, warnings = fast
+    assert len(arrays["/imu/imu.t_ns"]) == len(lines) - 2 and "last row cut short" in warnings[0]
+    path.write_text("\n".join(lines) + "\n\n \n\t\n")
+    arrays, warnings = _outcome(path, monkeypatch, arrow=True)
+    assert len(arrays["/imu/imu.t_ns"]) == len(lines) - 1 and warnings == []
+
+
+def _nexus(rows: int = 120, markers: int = 3, seed: int = 2) -> list[str]:
+    rng = np.random.default_rng(seed)
+    width = 2 + 3 * markers
+    lines = [
+        "Trajectories" + "," * (width - 1),
+        "100" + "," * (width - 1),
+        ",," + ",".join(f"S:M{m},," for m in range(markers))[:-1],
+        "Frame,Sub Frame," + ",".join(["X,Y,Z"] * markers),
+        ",," + ",".join(["mm"] * 3 * markers),
+    ]
+    for i in range(rows):
+        cells = [f"{v:.3f}" for v in rng.normal(500, 300, 3 * markers)]
+        if i % 17 == 5:
+            cells[3:6] = ["", "", ""]  # an occluded marker: a gap
+        lines.append(f"{i + 1},0," + ",".join(cells))
+    return lines
+
+
+NEXUS_CASES = {
+    "plain": lambda L: L,
+    "short row inside (its cells are gaps)": lambda L: L[:40] + [",".join(L[40].split(",")[:6])] + L[41:],
+    "'Nan' marker cell": lambda L: _damage(L, 40, 4, "Nan"),
+    "padding comma on every row": lambda L: L[:5] + [x + "," for x in L[5:]],
+    "Devices section after a blank line": lambda L: L
+    + ["", "Devices,,", "1000,,", ",,Force", "Frame,Sub Frame,Fz", ",,N"]
+    + [f"{i // 10 + 1},{i % 10},{i * 0.5:.1f}" for i in range(1200)],
+}
+
+
+@pytest.mark.parametrize("case", sorted(NEXUS_CASES))
+def test_nexus_csv_gives_the_same_values_or_error_on_both_paths(case, tmp_path, monkeypatch):
+    path = tmp_path / "markers.csv"
+    path.write_bytes(("\r\n".join(NEXUS_CASES[case](_nexus())) + "\r\n").encode())
+    slow = _outcome(path, monkeypatch, arrow=False)
+    fast = _outcome(path, monkeypatch, arrow=True)
+    assert not isinstance(slow, str) or case.startswith("'Nan'"), slow
+    assert _same(fast, slow)
+
+
+# ------------------------------------------------------------------------------------------- source hash
+def test_source_is_hashed_once_from_the_bytes_parsed(tmp_path, monkeypatch):
+    path = tmp_path / "wrist.csv"
+    path.write_text("\n".join(_imu_text()) + "\n")
+    rec = convert_file(path)
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    assert common.known_sha256(path) == digest
+    calls = []
+    real = hashlib.sha256
+    monkeypatch.setattr(hashlib, "sha256", lambda *a: calls.append(1) or real(*a))
+    assert conversion_record(rec.sources, {path.name: "delimited"})["sha256"] == {path.name: digest}
+    assert calls == []  # not read and hashed a second time
+    with open(path, "a") as f:  # the file changed since: hashed again, from the file
+        f.write("3.00,1,2,3,0,0,1,300\n")
+    assert common.known_sha256(path) is None
+    new = conversion_record(rec.sources, {path.name: "delimited"})["sha256"][path.name]
+    assert new == real(path.read_bytes()).hexdigest() != digest and calls
+
+
+# ----------------------------------------------------------------------------------- plausibility shortcuts
+def _marker_warnings_direct(topic: str, p: np.ndarray) -> list[str]:
+    """The check as written before the shortcut: the 99th percentile of |finite coordinates|."""
+    finite = p[np.isfinite(p)]
+    if finite.size == 0:
+        return []
+    big = float(np.quantile(np.abs(finite), 0.99))
+    if big > plaus.MARKER_MAX_M:
+        return [
+            f"{topic}: marker coordinates reach {big:.3g} m, larger than any lab: are they mm declared m? "
+            "--unit markers=mm"
+        ]
+    if big < plaus.MARKER_MIN_SPAN_M:
+        return [
+            f"{topic}: every marker stays within {big * 1000:.2g} mm of the origin: are the numbers m declared mm? "
+            "--unit markers=m"
+        ]
+    return []
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_marker_check_shortcut_matches_the_percentile(seed):
+    rng = np.random.default_rng(seed)
+    n, m = int(rng.integers(1, 400)), int(rng.integers(1, 5))
+    scale = [0.004, 0.0099, 0.0101, 0.5, 49.5, 50.0, 50.5, 600.0][seed % 8]
+    pos = rng.normal(0, 1, (n, m, 3)) * scale * rng.choice([0.9, 1.0, 1.1])
+    if seed % 3 == 0:
+        pos[rng.random((n, m)) < 0.3] = np.nan
+    if seed % 5 == 0:
+        pos[0, 0, 0] = np.inf
+    if seed % 7 == 0:  # exactly 1 % of the coordinates far away: the percentile sits on the boundary
+        k = max(1, pos.size // 100)
+        pos.reshape(-1)[rng.choice(pos.size, k, replace=False)] = 60.0
+    assert plaus.marker_warnings("/markers/x", pos) == _marker_warnings_direct("/markers/x", pos)
+
+
+def test_marker_check_of_all_nan_positions_says_nothing():
+    assert plaus.marker_warnings("/markers/x", np.full((10, 2, 3), np.nan)) == []
+
+
+@pytest.mark.parametrize("n", [plaus.MAX_CHECK_SAMPLES + 1, 360_000, 1_000_003])
+def test_excerpts_copied_as_slices_equal_the_inserted_form(n):
+    t = np.arange(n, dtype=np.int64) * 10_000_000 + 123
+    x = np.random.default_rng(n).normal(size=(n, 3))
+    t_ex, (x_ex, none) = plaus.excerpts(t, x, None)
+    block = int(plaus.EXCERPT_S * 100)
+    k = max(1, plaus.MAX_CHECK_SAMPLES // (block + 1))
+    starts = np.linspace(0, n - block, k).astype(np.int64)
+    idx = np.concatenate([np.arange(s0, s0 + block) for s0 in starts])
+    cut = np.flatnonzero(np.diff(np.cumsum(np.r_[0, np.diff(idx) > 1]))) + 1
+    ref_x = np.insert(x[idx], cut, np.nan, axis=0)
+    ref_t = np.insert(t[idx], cut, 0)
+    ref_t[cut + np.arange(len(cut))] = ref_t[cut + np.arange(len(cut)) - 1] + 1
+    assert none is None and len(cut) > 0
+    assert np.array_equal(x_ex, ref_x, equal_nan=True) and np.array_equal(t_ex, ref_t)
+
+
+def test_separators_of_overlapping_excerpts_fall_back_to_insert():
+    a = np.arange(20.0)
+    idx = np.array([0, 1, 2, 1, 2, 3, 10, 11])  # overlapping runs: not one slice each
+    cut = np.array([6])
+    assert np.array_equal(plaus._with_separators(a, idx, cut, np.nan), np.insert(a[idx], cut, np.nan), equal_nan=True)
