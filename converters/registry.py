@@ -122,13 +122,23 @@ def convert_file(path: Path, fmt: str | None = None, options: ConvertOptions | N
         raise ConversionError(path, f"{conv.name} converter failed: {type(e).__name__}: {e}") from None
 
 
-def convert_files(paths: Sequence[Path], fmt: str | None = None, options: ConvertOptions | None = None) -> Recording:
-    """Convert several files of one trial (e.g. an IMU text file and a Vicon CSV) and merge them."""
+def convert_files(
+    paths: Sequence[Path],
+    fmt: str | None = None,
+    options: ConvertOptions | None = None,
+    *,
+    formats: Sequence[str] | None = None,
+) -> Recording:
+    """Convert several files of one trial (e.g. an IMU text file and a Vicon CSV) and merge them.
+
+    ``formats``: the format of each path when already detected (one per path; detection is not repeated)."""
     if not paths:
         raise ConversionError(None, "no input files")
+    if formats is not None and len(formats) != len(paths):
+        raise ValueError(f"{len(formats)} formats for {len(paths)} paths")
     rec: Recording | None = None
-    for p in paths:
-        part = convert_file(p, fmt, options)
+    for k, p in enumerate(paths):
+        part = convert_file(p, formats[k] if formats is not None else fmt, options)
         if rec is None:
             rec = part
         else:

@@ -137,8 +137,8 @@ def _format_name(path: Path, fmt: str | None, options: ConvertOptions) -> str:
 
 
 def _convert_group(files: list[Path], fmt: str | None, options: ConvertOptions) -> tuple[Recording, dict[str, str]]:
-    formats = {p.name: _format_name(p, fmt, options) for p in files}
-    return convert_files(files, fmt, options), formats
+    names = [_format_name(p, fmt, options) for p in files]  # detected once, here
+    return convert_files(files, fmt, options, formats=names), {p.name: n for p, n in zip(files, names, strict=True)}
 
 
 def _write(out: Path, rec: Recording, *, attach: bool, overwrite: bool) -> Path:
