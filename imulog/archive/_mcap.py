@@ -8,6 +8,7 @@ to copy chunks verbatim). Files written here are ordinary MCAP files that any re
 
 from __future__ import annotations
 
+import contextlib
 import struct
 import zlib
 from dataclasses import dataclass, field
@@ -477,8 +478,13 @@ def decompress(compression: str, data: bytes | memoryview, uncompressed_size: in
         import zstandard
 
         try:
-            reader = zstandard.ZstdDecompressor().stream_reader(bytes(data), read_across_frames=True)
-            out = _read_bounded(reader, uncompressed_size + 1)
+            out = b""
+            if zstandard.frame_content_size(data) == uncompressed_size:  # one frame says its exact size (imulog,
+                with contextlib.suppress(zstandard.ZstdError):  # the mcap library): decompress at once
+                    out = zstandard.ZstdDecompressor().decompress(data, allow_extra_data=False)
+            if len(out) != uncompressed_size:  # several frames, no size in the header, or a lie: bounded reads
+                reader = zstandard.ZstdDecompressor().stream_reader(bytes(data), read_across_frames=True)
+                out = _read_bounded(reader, uncompressed_size + 1)
         except zstandard.ZstdError as exc:
             raise McapFormatError(f"zstd data does not decompress ({exc})") from None
     elif compression == "lz4":
