@@ -20,7 +20,9 @@ import argparse
 import asyncio
 import base64
 import json
+import os
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -111,6 +113,7 @@ def screenshot(
         + ["--bind", "127.0.0.1", "--hide-welcome-screen", str(rrd)],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
+        start_new_session=True,  # .venv/bin/rerun is a Python wrapper: stop its viewer child with it (killpg)
     )
     browser = None
     try:
@@ -143,10 +146,11 @@ def screenshot(
         png.parent.mkdir(parents=True, exist_ok=True)
         asyncio.run(_shoot(targets[0]["webSocketDebuggerUrl"], png, wait_s))
     finally:
-        for proc in (browser, viewer):
-            if proc is not None:
-                proc.terminate()
-                proc.wait(10)
+        if browser is not None:
+            browser.terminate()
+            browser.wait(10)
+        os.killpg(viewer.pid, signal.SIGTERM)  # the wrapper and the viewer it started
+        viewer.wait(10)
         shutil.rmtree(work, ignore_errors=True)
     return png
 

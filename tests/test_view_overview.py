@@ -111,3 +111,60 @@ def test_cli_long_trial_small_rrd(long_trial, tmp_path):
     assert out.stat().st_size < full.stat().st_size / 5
     bad = CliRunner().invoke(cli, ["view", str(path), "--start", "10", "--end", "5"])
     assert bad.exit_code != 0 and "--end" in bad.output
+
+
+def test_interval_share_exact():
+    from imulog.view.overview import interval_share
+
+    edges = np.array([0, 10, 20, 30, 40], np.int64)
+    # [5, 15) covers half of buckets 0 and 1; [20, 40) all of 2 and 3; [22, 24) overlaps it (clipped to 1)
+    share = interval_share(np.array([5, 20, 22]), np.array([15, 40, 24]), edges)
+    np.testing.assert_allclose(share, [0.5, 0.5, 1.0, 1.0])
+    rng = np.random.default_rng(3)  # against a brute-force sum over disjoint random intervals
+    cuts = np.sort(rng.choice(np.arange(1, 100_000), 400, replace=False)).reshape(-1, 2)
+    edges = np.arange(0, 100_001, 1000)
+    brute = [
+        np.clip(np.minimum(cuts[:, 1], b) - np.maximum(cuts[:, 0], a), 0, None).sum() / (b - a)
+        for a, b in zip(edges[:-1], edges[1:], strict=True)
+    ]
+    np.testing.assert_allclose(interval_share(cuts[:, 0], cuts[:, 1], edges), brute, atol=1e-12)
+    with pytest.raises(ValueError, match="starts but"):
+        interval_share(np.array([1, 2]), np.array([3]), edges)
+
+
+def test_thousands_of_movements_become_a_share_and_window_lanes(tmp_path):
+    """A long recording's movement lane is its share per bucket, with the movements kept only in the window."""
+    from imulog.archive import write_trial
+    from imulog.model import Intervals
+    from imulog.view.session import show
+
+    rate, hours = 10.0, 3.0
+    n = int(rate * 3600 * hours)
+    t = np.arange(n, dtype=np.int64) * int(1e9 / rate)
+    imu = ImuStream("wrist", t, acc=np.tile([0.0, 0.0, 9.81], (n, 1)), gyr=np.zeros((n, 3)))
+    starts = np.arange(5000, dtype=np.int64) * 2_000_000_000 + 1_000_000_000  # a 0.5 s movement every 2 s
+    movements = Intervals("/derived/movements/wrist", starts, starts + 500_000_000, ["movement"] * 5000)
+    path = write_trial(tmp_path / "home.mcap", Recording(imus=[imu], events=[movements]))
+    params = OverviewParams(buckets=1000, start_s=3600.0, end_s=3660.0)
+    data, reduced = read_trial_overview(path, params)
+    assert reduced
+    kept = next(s for s in data.streams if isinstance(s, Intervals))
+    share = next(s for s in data.streams if s.topic == "/derived/movements/wrist/share")
+    inside = (movements.end_ns >= 3600e9) & (movements.start_ns < 3660e9)
+    np.testing.assert_array_equal(kept.start_ns, movements.start_ns[inside])
+    assert 30 <= len(kept) <= 31 < params.max_intervals
+    # each bucket (a row at its start) holds the % of it the movements cover: 25 % on average while they last
+    width = int(np.diff(share.t_ns)[0])
+    brute = [
+        100 * np.clip(np.minimum(movements.end_ns, a + width) - np.maximum(movements.start_ns, a), 0, None).sum() / width
+        for a in share.t_ns[:200]
+    ]
+    np.testing.assert_allclose(share.values[:200, 0], brute, atol=1e-9)
+    assert np.mean(share.values[share.t_ns < 9_900e9, 0]) == pytest.approx(25.0, abs=0.2)
+    assert np.all(share.values[share.t_ns > 10_010e9, 0] == 0.0)
+    out = tmp_path / "home.rrd"
+    logged = show([data], sink="save", save_paths=[out]).logged[0][0]
+    assert [e.path for e in logged.by_role("interval_share")] == ["/derived/movements/wrist/share"]
+    summary = summarize(out)
+    assert summary["/derived/movements/wrist"].rows <= 2 * len(kept)
+    assert summary["/derived/movements/wrist/share"].rows == len(share)

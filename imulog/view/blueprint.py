@@ -69,6 +69,19 @@ def _state_views(trials: Sequence[LoggedTrial], axis: rrb.TimeAxis | None) -> rr
     phases = _paths(trials, "phases")
     others = _paths(trials, "static_state", "intervals")
     logs = _paths(trials, "phase_log")
+    shares = _series(
+        "Time in intervals per bucket (%): long recording overview", _paths(trials, "interval_share"), axis
+    )
+    if shares is not None:  # thousands of intervals: their share per bucket, lanes only inside the window
+        lanes = [v for v in (_state_views_of(phases, others, logs, axis), shares) if v is not None]
+        return lanes[0] if len(lanes) == 1 else rrb.Vertical(*lanes)
+    return _state_views_of(phases, others, logs, axis)
+
+
+def _state_views_of(
+    phases: list[str], others: list[str], logs: list[str], axis: rrb.TimeAxis | None
+) -> rrb.Container | rrb.View | None:
+    """The state lanes: phases (and their log) above the other interval lanes; only the others without phases."""
     if not phases:
         return (
             rrb.StateTimelineView(origin="/", contents=others, name="Static intervals", time_view=axis)

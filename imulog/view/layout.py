@@ -33,6 +33,7 @@ STATIC_PREFIX = "/derived/static/"
 STATIC_PREFIXES = (STATIC_PREFIX, "/derived/orientation_static/")
 DERIVED = "/derived/"
 
+INTERVAL_SHARE_SUFFIX = "/share"  # overview of a long interval channel: % of each time bucket it covers
 PHASES_PREFIX = "/derived/phases/"
 MOVEMENTS_PREFIX = "/derived/movements/"
 METRICS_PREFIX = "/derived/metrics/"

@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from imulog.model import AnalogStream, ImuStream, MarkerStream, PoseStream, SignalStream, take_samples
-from imulog.view.clock import ClockMap
+from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream, take_samples
+from imulog.view.clock import ClockMap, device_imu_of
 from imulog.view.source import TrialData, read_trial
 
 IMU_FIELDS = ("acc", "gyr", "mag", "temperature")
@@ -33,12 +33,15 @@ class OverviewParams:
     """When and how long recordings are reduced.
 
     buckets: envelope buckets over the whole trial for each channel (2 rows each).
+    max_intervals: an interval channel with more intervals (thousands of movements at home) is shown as the
+        share of each bucket it covers, its intervals only inside the window: no lane of unreadable slivers.
     full_resolution_max_s: trials up to this long (s, on the viewer's timeline) are shown at full resolution.
     start_s / end_s: the window kept at full resolution, seconds on the viewer's timeline (None: open end).
     """
 
     buckets: int = 10_000
     full_resolution_max_s: float = 2 * 3600.0
+    max_intervals: int = 2_000
     start_s: float | None = None
     end_s: float | None = None
 
@@ -100,6 +103,50 @@ class EnvelopeBuilder:
         v = np.empty((2 * len(first), lo.shape[1]))
         v[0::2], v[1::2] = lo, hi
         return t, v
+
+
+def interval_share(start_ns: np.ndarray, end_ns: np.ndarray, edges_ns: np.ndarray) -> np.ndarray:
+    """Fraction (0-1) of each bucket ``[edges[k], edges[k+1])`` covered by the intervals ``[start, end)`` (ns).
+
+    Covered time up to x is sum(max(x - start, 0)) - sum(max(x - end, 0)); overlapping intervals are clipped to 1.
+    """
+    edges = np.asarray(edges_ns, np.int64)
+    if len(edges) < 2:
+        return np.zeros(0)
+    starts = np.sort(np.asarray(start_ns, np.int64))
+    ends = np.sort(np.asarray(end_ns, np.int64))
+    if len(starts) != len(ends):
+        raise ValueError(f"interval_share: {len(starts)} starts but {len(ends)} ends")
+
+    def covered(x: np.ndarray) -> np.ndarray:
+        x = x.astype(np.float64)
+        prefix_s = np.concatenate([[0.0], np.cumsum(starts, dtype=np.float64)])
+        prefix_e = np.concatenate([[0.0], np.cumsum(ends, dtype=np.float64)])
+        ks = np.searchsorted(starts, x, side="right")
+        ke = np.searchsorted(ends, x, side="right")
+        return (ks * x - prefix_s[ks]) - (ke * x - prefix_e[ke])
+
+    c = covered(edges)
+    width = np.diff(edges).astype(np.float64)
+    return np.clip(np.diff(c) / np.where(width > 0, width, 1.0), 0.0, 1.0)
+
+
+def reduce_intervals(
+    s: Intervals, bucket_ns: int, origin_ns: int, n_buckets: int, window: tuple[int, int] | None
+) -> tuple[Intervals, SignalStream]:
+    """A long interval channel -> (its intervals overlapping ``window`` only, share of each bucket covered).
+
+    Times on the channel's own clock (ns); the share series has one row at each bucket's start, in percent.
+    """
+    edges = origin_ns + bucket_ns * np.arange(n_buckets + 2, dtype=np.int64)
+    share = interval_share(s.start_ns, s.end_ns, edges) * 100.0
+    keep = np.zeros(len(s), bool) if window is None else (s.end_ns >= window[0]) & (s.start_ns < window[1])
+    index = np.flatnonzero(keep)
+    kept = Intervals(s.topic, s.start_ns[index], s.end_ns[index], [s.labels[i] for i in index], s.task_index[index])
+    name = s.topic.rstrip("/").rsplit("/", 2)
+    label = "/".join(name[-2:]) if len(name) >= 2 else s.topic
+    series = SignalStream(f"{s.topic}/share", edges[:-1], [f"{label} time share"], ["%"], share[:, None])
+    return kept, series
 
 
 def first_per_bucket(t_ns: np.ndarray, bucket_ns: int, origin_ns: int = 0) -> np.ndarray:
@@ -265,14 +312,24 @@ def read_trial_overview(path: str | Path, params: OverviewParams | None = None) 
             if info.message_count == 0:
                 streams.append(trial.read(topic))
                 continue
-            if info.schema_name == "imulog.IntervalEvent" or info.sample_count <= 4 * p.buckets:
-                streams.append(trial.read(topic))
-                continue
             origin = int(_reference_to_channel(clocks, topic, np.array([t0]))[0])
             window = None
             if window_ref is not None:
                 lo, hi = _reference_to_channel(clocks, topic, np.array(window_ref))
                 window = (int(lo), int(hi))
+            if info.schema_name == "imulog.IntervalEvent":
+                intervals = trial.read(topic)
+                if isinstance(intervals, Intervals) and len(intervals) > p.max_intervals:
+                    kept, share = reduce_intervals(intervals, bucket_ns, origin, p.buckets, window)
+                    imu = device_imu_of(topic, channel_meta.get(topic), imu_names, metadata)
+                    channel_meta[share.topic] = {"clock": imu or "reference"}  # the intervals' own clock
+                    streams.extend([kept, share])
+                else:
+                    streams.append(intervals)
+                continue
+            if info.sample_count <= 4 * p.buckets:
+                streams.append(trial.read(topic))
+                continue
             reduced = reduce_channel(trial.iter_blocks(topic), bucket_ns, origin, window)
             if reduced is not None:
                 streams.append(reduced)

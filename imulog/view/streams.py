@@ -357,7 +357,9 @@ class _Logger:
         t_ref = self.clocks.to_reference(topic, s.t_ns)
         short = topic[len(L.DERIVED) :] if topic.startswith(L.DERIVED) else topic.strip("/")
         names = [f"{short} {c} ({L.pretty_unit(u)})" for c, u in zip(s.columns, s.units, strict=True)]
-        if topic.startswith(L.ORIENTATION_PREFIX):
+        if topic.endswith(L.INTERVAL_SHARE_SUFFIX) and s.units == ["%"]:
+            role = "interval_share"
+        elif topic.startswith(L.ORIENTATION_PREFIX):
             role = "orientation"
         elif topic.startswith(L.ACC_GLOBAL_PREFIX):
             role = "acc_global"
@@ -573,7 +575,8 @@ def log_streams(
         metadata.get("imulog.timing"),
     )
     recording.log(L.join(prefix, "/world"), rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    ordered = sorted(streams, key=lambda s: isinstance(s, Intervals))  # signals first, states after
+    # intervals (small) first: a viewer still loading a long trial's signals already shows the phases
+    ordered = sorted(streams, key=lambda s: not isinstance(s, Intervals))
     for stream in ordered:
         logger.log(stream)
     _log_legend(recording, trial, prefix)
