@@ -111,10 +111,15 @@ def read_source(path: Path) -> bytes:
         data = f.read()
         st = os.fstat(f.fileno())
     if st.st_size == len(data):
-        if len(_DIGESTS) >= _DIGESTS_KEPT:
-            _DIGESTS.pop(next(iter(_DIGESTS)))
-        _DIGESTS[_stat_key(path, st)] = hashlib.sha256(data).hexdigest()
+        remember_sha256(path, st, hashlib.sha256(data).hexdigest())
     return data
+
+
+def remember_sha256(path: Path, st: os.stat_result, digest: str) -> None:
+    """Remember the SHA-256 of ``path`` as read while it had the size and mtime of ``st`` (:func:`known_sha256`)."""
+    if len(_DIGESTS) >= _DIGESTS_KEPT:
+        _DIGESTS.pop(next(iter(_DIGESTS)))
+    _DIGESTS[_stat_key(path, st)] = digest
 
 
 def known_sha256(path: Path) -> str | None:
@@ -240,14 +245,14 @@ def final_row_cut(block: bytes, delimiter: str, *, at_eof: bool) -> tuple[int, s
 
 
 def drop_cut_final_row(
-    path: Path, data: bytes, delimiter: str, *, start: int = 0, end: int | None = None
+    path: Path, data: bytes, delimiter: str, *, start: int = 0, end: int | None = None, line_offset: int = 0
 ) -> tuple[int, str | None]:
     """The end of the numeric block ``data[start:end]`` without a cut final row, and the one-line warning.
 
     The shared check every text converter calls before parsing (see :func:`final_row_cut` for what "cut"
     means): returns ``(end, None)`` for a complete block, else ``(offset where the cut row starts, warning)``.
     Dropping is always safe for a final row: it needs rows above it to be recognised as cut, so at least one
-    complete row remains.
+    complete row remains. ``line_offset``: lines of the file before ``data`` (when ``data`` is its last piece).
     """
     end = len(data) if end is None else end
     lo = max(start, end - TAIL_BYTES)
@@ -259,7 +264,7 @@ def drop_cut_final_row(
         return end, None
     offset, reason = found
     row_start = lo + offset
-    line = data.count(b"\n", 0, row_start) + 1
+    line = line_offset + data.count(b"\n", 0, row_start) + 1
     return row_start, cut_row_warning(path, line, reason)
 
 
@@ -299,6 +304,7 @@ class TableSpec:
     byte_range: tuple[int, int] | None = None  # (start, end) of the block when already known
     check_final_row: bool = True  # drop a cut final row (see drop_cut_final_row) instead of storing it
     short_rows_are_errors: bool = True  # a row with fewer fields is damage (else its missing cells are gaps)
+    in_memory: bool = False  # ``data`` is one piece of the file (``skip_lines`` lines before it): parse only it
     warnings: list[str] = field(default_factory=list)  # filled by read_numeric: one line per dropped row
 
 
@@ -306,7 +312,7 @@ def _data_range(spec: TableSpec, data: bytes) -> tuple[int, int]:
     """Byte range of the numeric block: after ``skip_lines`` lines, ``nrows`` lines long, trailing blanks trimmed."""
     if spec.byte_range is not None:
         pos, end = spec.byte_range
-        while end > pos and data[end - 1] in b" \t\r\n":
+        while end > pos and data[end - 1] in b" \t\r\n" and (spec.allow_trailing_blank or not spec.in_memory):
             end -= 1
         return pos, end
     pos = 0
@@ -376,11 +382,18 @@ def read_numeric(spec: TableSpec, data: bytes | None = None) -> np.ndarray:
 def _parse_pandas(spec: TableSpec, data: bytes | None, nrows: int | None, used: list[int]) -> np.ndarray:
     """The block parsed by the pandas C engine straight from the file (any parser problem located and raised)."""
     ncols = len(spec.names)
+    source: Any = spec.path
+    if spec.in_memory:  # a piece of the file: pandas reads that piece, not the file
+        assert data is not None and spec.byte_range is not None
+        import io
+
+        start, end = _data_range(spec, data)
+        source = io.BytesIO(memoryview(data)[start:end])
     kwargs: dict[str, Any] = dict(
         sep=r"\s+" if spec.delimiter == " " else spec.delimiter,
         header=None,
-        skiprows=spec.skip_lines,
-        nrows=nrows,
+        skiprows=0 if spec.in_memory else spec.skip_lines,
+        nrows=None if spec.in_memory else nrows,
         engine="c",
         skip_blank_lines=False,
         keep_default_na=False,
@@ -394,7 +407,7 @@ def _parse_pandas(spec: TableSpec, data: bytes | None, nrows: int | None, used: 
 
     try:
         # no dtype= here: pandas' own numeric inference is about 2x faster than a forced float64 cast
-        frame = pd.read_csv(spec.path, **kwargs)
+        frame = pd.read_csv(source, **kwargs)
     except Exception:  # noqa: BLE001 - any parser failure is located precisely below
         locate_problem(spec, data=_block(spec, data))
         raise ConversionError(spec.path, "could not parse the numeric data") from None
@@ -427,7 +440,8 @@ def _parse_arrow(spec: TableSpec, data: bytes, nrows: int | None, used: list[int
     """
     ncols = len(spec.names)
     try:
-        lo, hi = _data_range(replace(spec, allow_trailing_blank=spec.byte_range is not None or nrows is None), data)
+        trim = spec.allow_trailing_blank if spec.in_memory else spec.byte_range is not None or nrows is None
+        lo, hi = _data_range(replace(spec, allow_trailing_blank=trim), data)
     except ConversionError:
         return None
     if hi <= lo or data.count(b"\r", 0, lo) != data.count(b"\r\n", 0, lo):
@@ -601,12 +615,15 @@ def locate_problem(spec: TableSpec, nrows: int | None = None, *, data: bytes | N
 
 
 # ---------------------------------------------------------------------------------------------- time
-def to_ns(values: np.ndarray, factor_to_ns: float) -> np.ndarray:
-    """Times in a unit (``factor_to_ns`` ns per unit) to int64 ns, exact relative to the first sample."""
+def to_ns(values: np.ndarray, factor_to_ns: float, origin: float | None = None) -> np.ndarray:
+    """Times in a unit (``factor_to_ns`` ns per unit) to int64 ns, exact relative to the first sample.
+
+    ``origin``: the recording's first time value when ``values`` are a later piece of it (same ns as converting
+    the whole recording at once)."""
     values = np.asarray(values, dtype=np.float64)
     if len(values) == 0:
         return np.zeros(0, dtype=np.int64)
-    t0 = values[0]
+    t0 = values[0] if origin is None else np.float64(origin)
     base = round(t0 * factor_to_ns)
     if abs(base) > 9.2e18 or not np.isfinite(values).all():
         raise ValueError("time stamps out of range")

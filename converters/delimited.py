@@ -14,8 +14,11 @@ units as found, in a :class:`~imulog.model.SignalStream` ``/signals/<device>``.
 
 from __future__ import annotations
 
+import hashlib
+import os
 import re
-from dataclasses import dataclass, field
+from collections.abc import Iterator
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +30,7 @@ from converters._common import (
     UNIT_FACTORS,
     TableSpec,
     check_increasing,
+    drop_cut_final_row,
     estimate_rate_hz,
     head_lines,
     is_number,
@@ -34,6 +38,7 @@ from converters._common import (
     read_head,
     read_numeric,
     read_source,
+    remember_sha256,
     sanitize_name,
     split_row,
     text_head_lines,
@@ -479,26 +484,32 @@ def _first_data_cells(path: Path, lines: list[str], layout: Layout) -> list[str]
     return []
 
 
-def read_delimited(
-    path: Path,
-    *,
-    mapping: Mapping | None = None,
-    rate_hz: float | None = None,
-    default_units: dict[str, str] | None = None,
-    device_meta: dict[str, Any] | None = None,
-    fmt: str = "delimited",
-    head: bytes | None = None,
-    units: dict[str, str] | None = None,
-) -> Recording:
-    """Read one delimited IMU text file into a Recording (see module docstring).
+@dataclass
+class _Plan:
+    """What the header says, shared by the whole-file and the piece-by-piece reader."""
 
-    Empty or NaN cells in IMU columns are gaps (NaN in the stream); ``units`` replaces the header's unit per
-    quantity (``{"gyr": "deg/s"}``); units the header does not give are inferred from the values and said in
-    ``Recording.warnings``.
-    """
-    path = Path(path)
+    path: Path
+    mapping: Mapping | None
+    layout: Layout
+    spec: TableSpec
+    device_meta: dict[str, Any]
+    rate: float | None
+    fmt: str
+    units: dict[str, str]
+
+
+def _plan(
+    path: Path,
+    head: bytes | None,
+    *,
+    mapping: Mapping | None,
+    rate_hz: float | None,
+    default_units: dict[str, str] | None,
+    device_meta: dict[str, Any] | None,
+    fmt: str,
+    units: dict[str, str] | None,
+) -> _Plan:
     lines = head_lines(path, head)  # empty or binary files are refused before the whole file is read
-    data = read_source(path)  # read once: parsed from memory, its SHA-256 computed from these bytes
     device_meta = dict(device_meta or {})
     if mapping is not None:
         device_meta.update(mapping.device)
@@ -523,49 +534,274 @@ def read_delimited(
         optional=optional,
         ignore=ignore,
     )
-    values = read_numeric(spec, data)
-    del data
-    first_line = layout.skip_lines + 1
-    warnings = list(spec.warnings)
-    _check_infinite(path, layout, values, first_line)
-
     rate = rate_hz or device_meta.get("rate_hz")
-    assumed: list[str] = []
-    time_cols = [c for c in layout.columns if c.quantity == "time"]
-    if time_cols and time_cols[0].unit == INFER:
-        assumed.append(_infer_time_unit(path, time_cols[0], values[:, time_cols[0].index]))
-    index_cols = [c for c in layout.columns if c.quantity == "index"]
+    return _Plan(path, mapping, layout, spec, device_meta, rate, fmt, dict(units or {}))
+
+
+def _is_host_clock(plan: _Plan, column: Column) -> bool:
+    return "unix" in _tokens(column.name) or bool(plan.mapping and plan.mapping.host_clock)
+
+
+def _times(
+    plan: _Plan,
+    values: np.ndarray,
+    first_line: int,
+    *,
+    first_row: int = 0,
+    origin: float | None = None,
+    before: float | None = None,
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Sample times (int64 ns) of the rows ``values`` and how they were found; ConversionError naming the line.
+
+    For a later piece of the file: ``first_row`` its first row's index in the recording, ``origin`` the recording's
+    first time value, ``before`` the last time (or index) value of the piece before it.
+    """
+    path = plan.path
+    time_cols = [c for c in plan.layout.columns if c.quantity == "time"]
+    index_cols = [c for c in plan.layout.columns if c.quantity == "index"]
     if time_cols:
         tc = time_cols[0]
         try:
-            t_ns = to_ns(values[:, tc.index], tc.factor)
+            t_ns = to_ns(values[:, tc.index], tc.factor, origin)
         except ValueError:
             raise ConversionError(path, "time stamps out of range", column=tc.name) from None
-        time_desc = {"column": tc.name, "unit": tc.unit}
-        host_clock = "unix" in _tokens(tc.name) or bool(mapping and mapping.host_clock)
-        if host_clock and len(t_ns) > 2 and np.any(np.diff(t_ns) <= 0):
+        time_desc: dict[str, Any] = {"column": tc.name, "unit": tc.unit}
+        if _is_host_clock(plan, tc) and len(t_ns) > 2 and np.any(np.diff(t_ns) <= 0):
             t_ns = _fit_host_clock(path, t_ns, first_line, tc.name)
             time_desc["clock"] = "host receive time with repeated stamps: least-squares fit of a uniform rate"
-        check_increasing(path, t_ns, first_line, tc.name)
-    elif rate:
+        _check_increasing(path, t_ns, first_line, tc.name, before)
+    elif plan.rate:
+        rate = float(plan.rate)
         if index_cols:
             idx = values[:, index_cols[0].index]
-            check_increasing(path, idx, first_line, index_cols[0].name)
-            t_ns = np.round(idx * (1e9 / float(rate))).astype(np.int64)
+            _check_increasing(path, idx, first_line, index_cols[0].name, before)
+            t_ns = np.round(idx * (1e9 / rate)).astype(np.int64)
         else:
-            t_ns = np.round(np.arange(len(values)) * (1e9 / float(rate))).astype(np.int64)
-        time_desc = {"column": None, "rate_hz": float(rate)}
+            t_ns = np.round(np.arange(first_row, first_row + len(values)) * (1e9 / rate)).astype(np.int64)
+        time_desc = {"column": None, "rate_hz": rate}
     else:
         raise ConversionError(path, "no time column in the header and no rate given (mapping device.rate_hz or --rate)")
-    assumed.extend(resolve_inferred(path, layout, values, t_ns, units or {}))
-    if assumed:
-        warnings.append(
-            f"{path.name}: no units in the header: assumed {'; '.join(assumed)}; "
-            "if wrong, give --unit QUANTITY=UNIT or a mapping file"
-        )
+    return t_ns, time_desc
 
+
+def _check_increasing(path: Path, t: np.ndarray, first_line: int, column: str, before: float | None) -> None:
+    """:func:`check_increasing` of ``t``, continuing from ``before`` (the previous piece's last value)."""
+    if before is None:
+        check_increasing(path, t, first_line, column)
+    else:
+        check_increasing(path, np.concatenate([[before], t]), first_line - 1, column)
+
+
+def _assumed_units(plan: _Plan, values: np.ndarray) -> list[str]:
+    """Infer the units the header does not give (time first, then quantities); the assumptions, one phrase each."""
+    assumed: list[str] = []
+    time_cols = [c for c in plan.layout.columns if c.quantity == "time"]
+    if time_cols and time_cols[0].unit == INFER:
+        assumed.append(_infer_time_unit(plan.path, time_cols[0], values[:, time_cols[0].index]))
+    return assumed
+
+
+def _units_warning(path: Path, assumed: list[str]) -> list[str]:
+    if not assumed:
+        return []
+    return [
+        f"{path.name}: no units in the header: assumed {'; '.join(assumed)}; "
+        "if wrong, give --unit QUANTITY=UNIT or a mapping file"
+    ]
+
+
+def read_delimited(
+    path: Path,
+    *,
+    mapping: Mapping | None = None,
+    rate_hz: float | None = None,
+    default_units: dict[str, str] | None = None,
+    device_meta: dict[str, Any] | None = None,
+    fmt: str = "delimited",
+    head: bytes | None = None,
+    units: dict[str, str] | None = None,
+) -> Recording:
+    """Read one delimited IMU text file into a Recording (see module docstring).
+
+    Empty or NaN cells in IMU columns are gaps (NaN in the stream); ``units`` replaces the header's unit per
+    quantity (``{"gyr": "deg/s"}``); units the header does not give are inferred from the values and said in
+    ``Recording.warnings``.
+    """
+    path = Path(path)
+    plan = _plan(
+        path,
+        head,
+        mapping=mapping,
+        rate_hz=rate_hz,
+        default_units=default_units,
+        device_meta=device_meta,
+        fmt=fmt,
+        units=units,
+    )
+    data = read_source(path)  # read once: parsed from memory, its SHA-256 computed from these bytes
+    values = read_numeric(plan.spec, data)
+    del data
+    first_line = plan.layout.skip_lines + 1
+    warnings = list(plan.spec.warnings)
+    _check_infinite(path, plan.layout, values, first_line)
+    assumed = _assumed_units(plan, values)
+    t_ns, time_desc = _times(plan, values, first_line)
+    assumed.extend(resolve_inferred(path, plan.layout, values, t_ns, plan.units))
+    warnings.extend(_units_warning(path, assumed))
+    rate_meta = float(plan.rate) if plan.rate else estimate_rate_hz(t_ns)
+    return _recording(plan, values, t_ns, time_desc, rate_meta, warnings)
+
+
+#: bytes of text per piece when a large file is converted piece by piece (``iter_delimited``)
+PIECE_BYTES = 16 * 1024 * 1024
+
+
+def iter_delimited(
+    path: Path,
+    *,
+    mapping: Mapping | None = None,
+    rate_hz: float | None = None,
+    units: dict[str, str] | None = None,
+    piece_bytes: int = PIECE_BYTES,
+) -> Iterator[Recording]:
+    """The Recording of :func:`read_delimited` as consecutive pieces of about ``piece_bytes`` of text each.
+
+    Every value, time stamp, gap and error (file, line, column) is what the whole-file reader gives; the units the
+    header lacks are inferred from the first piece (an hour or more), a cut final row is dropped from the last.
+    Host-clock time stamps that repeat need a least-squares fit over the whole recording: such a file comes
+    whole, as one piece. While reading, the file's SHA-256 is computed (the conversion record reuses it).
+    """
+    path = Path(path)
+    head = read_head(path)
+    plan = _plan(
+        path, head, mapping=mapping, rate_hz=rate_hz, default_units=None, device_meta=None, fmt="delimited", units=units
+    )
+    time_cols = [c for c in plan.layout.columns if c.quantity == "time"]
+    if time_cols and _is_host_clock(plan, time_cols[0]):
+        yield read_delimited(path, mapping=mapping, rate_hz=rate_hz, head=head, units=units)
+        return
+    index_cols = [c for c in plan.layout.columns if c.quantity == "index"]
+    digest = hashlib.sha256()
+    total = 0
+    with open(path, "rb") as f:
+        for _ in range(plan.layout.skip_lines):
+            line = f.readline()
+            if not line.endswith(b"\n"):
+                raise ConversionError(path, "file ends inside the header", line=plan.layout.skip_lines)
+            digest.update(line)
+            total += len(line)
+        lines_before = plan.layout.skip_lines
+        first_row = 0
+        origin: float | None = None  # the recording's first time value: every piece's ns are relative to it
+        before: float | None = None  # the previous piece's last time (ns) or index: time must keep increasing
+        rate_meta: float | None = None
+        started = False
+        steps = _StepCounts() if time_cols and not plan.rate else None  # the exact median step, piece by piece
+        buf = f.read(piece_bytes)
+        digest.update(buf)
+        total += len(buf)
+        last = False
+        while not last:
+            nxt = f.read(piece_bytes)
+            digest.update(nxt)
+            total += len(nxt)
+            if len(nxt) < piece_bytes:  # the file ends in this read: the rest is the last piece (never a sliver)
+                piece, buf, last = buf + nxt, b"", True
+            else:
+                cut = buf.rfind(b"\n") + 1
+                if cut == 0:  # a line longer than a piece: read on
+                    buf += nxt
+                    continue
+                piece, buf = buf[:cut], buf[cut:] + nxt
+            spec = replace(
+                plan.spec,
+                skip_lines=lines_before,
+                byte_range=(0, len(piece)),
+                in_memory=True,
+                check_final_row=False,
+                allow_trailing_blank=last,
+                warnings=[],
+            )
+            warnings: list[str] = []
+            if last:
+                end, warning = drop_cut_final_row(path, piece, spec.delimiter, line_offset=lines_before)
+                if warning is not None:
+                    spec = replace(spec, byte_range=(0, end))
+                    warnings.append(warning)
+                if first_row and not piece[:end].strip(b" \t\r\n"):
+                    break  # nothing but blank lines after the previous piece
+            values = read_numeric(spec, piece)
+            first_line = lines_before + 1
+            _check_infinite(path, plan.layout, values, first_line)
+            if not started:
+                assumed = _assumed_units(plan, values)
+                if time_cols:
+                    origin = float(values[0, time_cols[0].index])
+            t_ns, time_desc = _times(plan, values, first_line, first_row=first_row, origin=origin, before=before)
+            if not started:
+                assumed.extend(resolve_inferred(path, plan.layout, values, t_ns, plan.units))
+                warnings.extend(_units_warning(path, assumed))
+                rate_meta = float(plan.rate) if plan.rate else estimate_rate_hz(t_ns)
+                started = True
+            if steps is not None:
+                steps.add(np.diff(t_ns) if before is None else np.diff(np.concatenate([[before], t_ns])))
+                rate_meta = steps.rate_hz() if steps.exact else rate_meta  # the last piece's: the whole recording's
+            if time_cols:
+                before = int(t_ns[-1])
+            elif index_cols:
+                before = float(values[-1, index_cols[0].index])
+            yield _recording(plan, values, t_ns, time_desc, rate_meta, warnings)
+            lines_before += piece.count(b"\n")
+            first_row += len(values)
+        st = os.fstat(f.fileno())
+    if st.st_size == total:
+        remember_sha256(path, st, digest.hexdigest())
+
+
+class _StepCounts:
+    """How often each time step (ns) occurs, to give the whole recording's median rate (as
+    :func:`estimate_rate_hz` of all time stamps) from its pieces; gives up beyond a million distinct steps."""
+
+    MAX_DISTINCT = 1_000_000
+
+    def __init__(self) -> None:
+        self.counts: dict[int, int] = {}
+        self.exact = True
+
+    def add(self, steps: np.ndarray) -> None:
+        if not self.exact or not len(steps):
+            return
+        values, counts = np.unique(steps, return_counts=True)
+        for v, c in zip(values.tolist(), counts.tolist(), strict=True):
+            self.counts[v] = self.counts.get(v, 0) + c
+        if len(self.counts) > self.MAX_DISTINCT:
+            self.exact, self.counts = False, {}
+
+    def rate_hz(self) -> float | None:
+        """1e9 / the median step (the mean of the two middle steps for an even count), None without steps."""
+        if not self.counts:
+            return None
+        values = np.array(sorted(self.counts), dtype=np.int64)
+        cum = np.cumsum([self.counts[int(v)] for v in values])
+        n = int(cum[-1])
+        lo, hi = (n - 1) // 2, n // 2
+        pick = values[np.searchsorted(cum, [lo + 1, hi + 1])]
+        dt = float(np.mean(pick)) if n % 2 == 0 else float(pick[1])
+        return 1e9 / dt if dt > 0 else None
+
+
+def _recording(
+    plan: _Plan,
+    values: np.ndarray,
+    t_ns: np.ndarray,
+    time_desc: dict[str, Any],
+    rate_meta: float | None,
+    warnings: list[str],
+) -> Recording:
+    """The IMU streams (SI units) and the other numeric columns of ``values``, device by device."""
+    path, mapping, device_meta, fmt = plan.path, plan.mapping, plan.device_meta, plan.fmt
     devices: dict[str, list[Column]] = {}
-    for c in layout.columns:
+    for c in plan.layout.columns:
         if c.quantity not in ("ignore", "index", "time"):
             devices.setdefault(c.device, []).append(c)
     rec = Recording(sources=[str(path)] + ([str(mapping.path)] if mapping else []), warnings=warnings)
@@ -610,7 +846,7 @@ def read_delimited(
                 "format": fmt,
                 "model": device_meta.get("model", "Shimmer" if dev.startswith("shimmer") else ""),
                 "serial": device_meta.get("serial", dev.split("_", 1)[1].upper() if dev.startswith("shimmer_") else ""),
-                "rate_hz": float(rate) if rate else estimate_rate_hz(t_ns),
+                "rate_hz": rate_meta,
                 "units": units,
                 "time": time_desc,
                 "source": path.name,
@@ -671,6 +907,16 @@ class DelimitedConverter(Converter):
         mapping = load_mapping(mapping_path) if mapping_path else None
         return read_delimited(
             path, mapping=mapping, rate_hz=options.rate_hz, head=read_head(path), units=unit_overrides(options.extra)
+        )
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """Pieces of about 16 MB of text each (``imulog convert`` streams text files of 32 MB and more)."""
+        options = options or ConvertOptions()
+        path = Path(path)
+        mapping_path = options.mapping or sibling_mapping(path)
+        mapping = load_mapping(mapping_path) if mapping_path else None
+        return iter_delimited(
+            path, mapping=mapping, rate_hz=options.rate_hz, units=unit_overrides(options.extra), piece_bytes=PIECE_BYTES
         )
 
 

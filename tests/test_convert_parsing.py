@@ -282,3 +282,113 @@ def test_separators_of_overlapping_excerpts_fall_back_to_insert():
     idx = np.array([0, 1, 2, 1, 2, 3, 10, 11])  # overlapping runs: not one slice each
     cut = np.array([6])
     assert np.array_equal(plaus._with_separators(a, idx, cut, np.nan), np.insert(a[idx], cut, np.nan), equal_nan=True)
+
+
+# --------------------------------------------------------------------------------- text piece by piece
+def _pieces_or_error(path: Path, piece_bytes: int, **kw):
+    from converters.delimited import iter_delimited
+
+    try:
+        return list(iter_delimited(path, piece_bytes=piece_bytes, **kw))
+    except ConversionError as e:
+        return str(e)
+
+
+def _whole_or_error(path: Path, **kw):
+    from converters.delimited import read_delimited
+
+    try:
+        return read_delimited(path, **kw)
+    except ConversionError as e:
+        return str(e)
+
+
+def _assert_pieces_equal_whole(pieces, whole) -> None:
+    assert len(pieces) > 1
+    for stream in whole.streams():
+        parts = [next(s for s in p.streams() if s.topic == stream.topic) for p in pieces]
+        for f in dataclasses.fields(stream):
+            value = getattr(stream, f.name)
+            if isinstance(value, np.ndarray):
+                joined = np.concatenate([getattr(p, f.name) for p in parts])
+                assert joined.dtype == value.dtype and joined.tobytes() == value.tobytes(), (stream.topic, f.name)
+    assert [w for p in pieces for w in p.warnings] == whole.warnings
+    assert pieces[-1].metadata == whole.metadata  # the device record (rate from the median step of every piece)
+
+
+@pytest.mark.parametrize("piece_bytes", [3000, 65536])
+def test_text_pieces_join_to_the_whole_file_conversion(piece_bytes, shared_data, tmp_path):
+    from converters.mapping import load_mapping
+
+    _assert_pieces_equal_whole(
+        _pieces_or_error(shared_data / "imu_text/fusion_sensor_data.csv", piece_bytes),
+        _whole_or_error(shared_data / "imu_text/fusion_sensor_data.csv"),
+    )
+    sim = REPO / "recordings/sim/r2g_s00_t00_imu.csv"  # no time column: a rate and a mapping file
+    mapping = load_mapping(sim.with_name("r2g_s00_t00_imu.mapping.json"))
+    _assert_pieces_equal_whole(_pieces_or_error(sim, piece_bytes, mapping=mapping), _whole_or_error(sim, mapping=mapping))
+    lines = _imu_text(8000)
+    cut = tmp_path / "cut.csv"  # gaps, CRLF, a cut final row
+    lines = _damage(_damage(lines, 700, 3, ""), 1500, 2, "NaN")
+    cut.write_bytes(("\r\n".join(lines[:-1]) + "\r\n" + lines[-1][:14]).encode())
+    pieces, whole = _pieces_or_error(cut, piece_bytes), _whole_or_error(cut)
+    assert "last row cut short" in whole.warnings[0]
+    _assert_pieces_equal_whole(pieces, whole)
+
+
+def _damaged(case: str, lines: list[str], row: int) -> list[str]:
+    if case == "text cell":
+        return _damage(lines, row, 4, "abc")
+    if case == "time goes backwards":
+        return _damage(lines, row, 0, "0.01")
+    if case == "blank line inside":
+        return lines[:row] + [""] + lines[row:]
+    if case == "short row inside":
+        return lines[:row] + [",".join(lines[row].split(",")[:4])] + lines[row + 1 :]
+    return _damage(lines, row, 2, "Infinity")
+
+
+@pytest.mark.parametrize(
+    "case", ["text cell", "time goes backwards", "blank line inside", "short row inside", "Infinity"]
+)
+def test_damage_in_a_later_piece_names_the_same_line(case, tmp_path):
+    lines = _imu_text(1200)
+    for row in (233, 700, 1101):  # in different pieces, some next to a piece border
+        damaged = _damaged(case, lines, row)
+        path = tmp_path / f"wrist_{row}.csv"
+        path.write_text("\n".join(damaged) + "\n")
+        whole = _whole_or_error(path)
+        assert isinstance(whole, str) and f"line {row + 1}" in whole, whole
+        for piece_bytes in (1500, 4096, 10_000):
+            assert _pieces_or_error(path, piece_bytes) == whole
+
+
+def test_imulog_convert_streams_large_text_files(tmp_path, monkeypatch):
+    from click.testing import CliRunner
+
+    import imulog.commands.convert as convert_command
+    from imulog.archive import TrialReader
+    from imulog.cli import cli
+
+    path = tmp_path / "wrist.csv"
+    path.write_text("\n".join(_imu_text(30_000)) + "\n")
+    runner = CliRunner()
+    whole = runner.invoke(cli, ["convert", str(path), "-o", str(tmp_path / "whole.mcap")])
+    assert whole.exit_code == 0 and "piece by piece" not in whole.output
+    monkeypatch.setattr(convert_command, "STREAM_MIN_BYTES", 100_000)
+    monkeypatch.setattr("converters.delimited.PIECE_BYTES", 200_000)
+    streamed = runner.invoke(cli, ["convert", str(path), "-o", str(tmp_path / "streamed.mcap")])
+    assert streamed.exit_code == 0 and "piece by piece" in streamed.output, streamed.output
+    with TrialReader(tmp_path / "whole.mcap") as a, TrialReader(tmp_path / "streamed.mcap") as b:
+        assert a.topics() == b.topics() == ["/imu/imu", "/signals/imu"]
+        for topic in a.topics():
+            x, y = a.read(topic), b.read(topic)
+            for f in dataclasses.fields(x):
+                if isinstance(getattr(x, f.name), np.ndarray):
+                    assert getattr(x, f.name).tobytes() == getattr(y, f.name).tobytes(), (topic, f.name)
+        assert b.channels[0].message_count > 8  # pieces of 200 kB: several pieces, not one
+        # (the channels' content hashes may differ: pieces of 200 kB end blocks early, so the messages differ)
+        assert a.metadata["imulog.device.imu"] == b.metadata["imulog.device.imu"]
+        assert a.metadata["imulog.conversion"]["sha256"] == b.metadata["imulog.conversion"]["sha256"]
+        assert b.metadata["imulog.conversion"]["streamed"] is True
+    assert runner.invoke(cli, ["doctor", str(tmp_path / "streamed.mcap")]).exit_code == 0

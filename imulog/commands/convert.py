@@ -193,8 +193,7 @@ def _convert_streaming(
         if first is None:
             raise ConversionError(path, "no samples")
         records = {k: {**first.metadata.get(k, {}), **v} for k, v in meta.items()}
-        records["imulog.conversion"] = {**conversion_record([path], {path.name: name}), "streamed": True}
-        expected = _expected_duration_s(first, size)
+        expected = _expected_duration_s(first, size, _bytes_per_sample(path))
         with (
             StreamingTrialWriter(
                 output,
@@ -223,6 +222,8 @@ def _convert_streaming(
                 bar.update(max(0, target - shown))
                 shown = max(shown, target)
             bar.update(bar.length - shown)
+            # after the pieces: a reader that hashed the file while reading it spares a second pass over it
+            writer.metadata["imulog.conversion"] = {**conversion_record([path], {path.name: name}), "streamed": True}
             if notes:
                 writer.metadata["imulog.conversion"]["warnings"] = notes
     except ConversionError as e:
@@ -252,12 +253,22 @@ def _span_s(piece: Recording) -> float:
     return max(spans, default=0.0)
 
 
-def _expected_duration_s(first: Recording, size: int) -> float | None:
-    """About how long the file's recording is (s), assuming ~12 bytes per IMU sample as the wearables' binary
-    formats store them; for the progress bar and the viewer twins' message budget only."""
+def _bytes_per_sample(path: Path) -> float:
+    """About how many bytes of the file one sample takes: ~12 in the wearables' binary formats, one line of text
+    (the mean line length of the file's first 256 KiB) in text exports."""
+    from converters._common import looks_binary, read_head
+
+    head = read_head(path)
+    lines = head.count(b"\n")
+    return 12.0 if looks_binary(head) or lines < 2 else len(head) / lines
+
+
+def _expected_duration_s(first: Recording, size: int, bytes_per_sample: float = 12.0) -> float | None:
+    """About how long the file's recording is (s), from the first piece's rate and ``bytes_per_sample``; for the
+    progress bar and the viewer twins' message budget only."""
     span = _span_s(first)
     rate = sum(len(s) for s in first.imus) / span if span > 0 else 0.0
-    return size / (12.0 * rate) if rate > 0 else None
+    return size / (bytes_per_sample * rate) if rate > 0 else None
 
 
 def _kv(pairs: tuple[str, ...], option: str) -> dict[str, str]:
