@@ -100,8 +100,16 @@ def _state_views_of(
     left = lanes[0] if len(lanes) == 1 else rrb.Vertical(*lanes, row_shares=[1, 1])
     if not logs:
         return left
-    log = rrb.TextLogView(origin="/", contents=logs, name="Phase log (colour = phase)")
-    return rrb.Horizontal(left, log, column_shares=[4, 1])
+    columns = rrb.TextLogColumns(
+        timeline_columns=[rrb.encodings.TimelineColumn(timeline=L.TIMELINE)],
+        text_log_columns=[
+            rrb.encodings.TextLogColumn("body"),
+            rrb.encodings.TextLogColumn("entitypath", visible=False),
+            rrb.encodings.TextLogColumn("loglevel", visible=False),
+        ],
+    )
+    log = rrb.TextLogView(origin="/", contents=logs, name="Phase log (colour = phase)", columns=columns)
+    return rrb.Horizontal(left, log, column_shares=[3, 1])
 
 
 def build_blueprint(trials: LoggedTrial | Sequence[LoggedTrial]) -> rrb.Blueprint:

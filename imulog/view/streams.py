@@ -104,10 +104,16 @@ def numbered_phase_labels(labs: np.ndarray, tasks: np.ndarray, rep: np.ndarray) 
             out.append(f"{lab} {k}")
     numbered = np.array(out, dtype=object)
     colors = {v: phase_color(v) for v in set(out) if v}
+    return numbered, colors | repetition_colors(tasks, rep)
+
+
+def repetition_colors(tasks: np.ndarray, rep: np.ndarray) -> dict[str, int]:
+    """Colours of the repetition lane: two alternating greys, amber where a repetition's confidence is low."""
+    colors: dict[str, int] = {}
     for r, k in zip(rep.tolist(), tasks.tolist(), strict=True):
         if r:
             colors[str(r)] = LOW_CONFIDENCE_COLOR if "confidence" in str(r) else REP_COLORS[int(k) % 2]
-    return numbered, colors
+    return colors
 
 
 def _rgb(c: tuple[int, int, int]) -> list[int]:
@@ -422,6 +428,10 @@ class _Logger:
                 self.phase_log(s.topic, starts, ends, labs, rep)
                 if with_task and len(np.unique(tasks)) <= MAX_NUMBERED_REPETITIONS:
                     labs, colors = numbered_phase_labels(labs, tasks, rep)
+            if colors is None and with_task:  # e.g. numbered activities: the number lane in greys, not rainbow
+                present = {str(v) for v in labs.tolist()}
+                colors = {v: phase_color(v) for v in present if v in L.PHASE_COLORS or v.endswith(FORCED)}
+                colors |= repetition_colors(tasks, rep)
             start_states = np.stack([labs, rep], axis=1) if with_task else labs[:, None]
             reset_states = np.full((int(needs_reset.sum()), lanes), "", dtype=object)
             times = [starts, ends[needs_reset]]
