@@ -705,8 +705,8 @@ def iter_delimited(
             nxt = f.read(piece_bytes)
             digest.update(nxt)
             total += len(nxt)
-            if len(nxt) < piece_bytes:  # the file ends in this read: the rest is the last piece (never a sliver)
-                piece, buf, last = buf + nxt, b"", True
+            if len(nxt) < min(piece_bytes, 1 << 20):  # the file ends: a last piece of at least 1 MiB (or a piece)
+                piece, buf, last = buf + nxt, b"", True  # so the cut-row check sees the rows above the last one
             else:
                 cut = buf.rfind(b"\n") + 1
                 if cut == 0:  # a line longer than a piece: read on
