@@ -116,6 +116,12 @@ def repetition_colors(tasks: np.ndarray, rep: np.ndarray) -> dict[str, int]:
     return colors
 
 
+def _norm(v: np.ndarray) -> np.ndarray:
+    """Euclidean norm of each row of ``v`` (N, 3), same unit (NaN rows stay NaN)."""
+    v = np.asarray(v, dtype=np.float64)
+    return np.sqrt(np.einsum("ij,ij->i", v, v))
+
+
 def _rgb(c: tuple[int, int, int]) -> list[int]:
     return [int(c[0]), int(c[1]), int(c[2])]
 
@@ -237,8 +243,9 @@ class _Logger:
             flat = np.ascontiguousarray(pos, dtype=np.float32).reshape(-1, 3)
             class_ids = None
         else:
-            flat = np.ascontiguousarray(pos[valid], dtype=np.float32)
-            class_ids = np.nonzero(valid)[1].astype(np.uint16)
+            mask = valid.reshape(-1)
+            flat = np.compress(mask, pos.reshape(-1, 3), axis=0).astype(np.float32)
+            class_ids = np.tile(np.arange(m, dtype=np.uint16), n)[mask]
         if labels is not None:
             self.rec.log(
                 path,
@@ -341,7 +348,7 @@ class _Logger:
                 "gyr_norm",
                 s.topic,
                 t_ref,
-                np.linalg.norm(s.gyr, axis=1),
+                _norm(s.gyr),
                 [f"IMU {s.name} |gyr| (rad/s)"],
                 [L.PALETTE[0]],
             )
@@ -388,7 +395,7 @@ class _Logger:
                 "vicon_omega_norm",
                 topic,
                 t_ref,
-                np.linalg.norm(s.values[:, :3], axis=1),
+                _norm(s.values[:, :3]),
                 ["Vicon |ω| (rad/s)"],
                 [L.VICON_COLOR],
             )
