@@ -60,3 +60,25 @@ def test_readable_axis_covers_centimetre_methods_only(tmp_path):
     ddi = next(e.scale for e in logged.by_role("error") if e.topic in hidden)
     assert 1.25 * top < ddi / 10
     assert np.isfinite(top)
+
+
+def test_numbered_phase_labels_and_colours():
+    from imulog.view.streams import (
+        FORCED,
+        FORCED_COLOR,
+        LOW_CONFIDENCE_COLOR,
+        REP_COLORS,
+        numbered_phase_labels,
+        phase_color,
+    )
+
+    labs = np.array(["reach", "lift" + FORCED, "reach", "return_hand"], dtype=object)
+    tasks = np.array([3, 3, 4, -1])
+    rep = np.array(["rep 3", "rep 3", "rep 4 (confidence 0.20)", ""], dtype=object)
+    numbered, colours = numbered_phase_labels(labs, tasks, rep)
+    assert numbered.tolist() == ["reach 3", "lift 3" + FORCED, "reach 4", "return_hand"]
+    assert colours["reach 3"] == colours["reach 4"] == L.PHASE_COLORS["reach"]
+    assert colours["lift 3" + FORCED] == FORCED_COLOR
+    assert colours["return_hand"] == L.PHASE_COLORS["return_hand"]
+    assert colours["rep 3"] == REP_COLORS[1] and colours["rep 4 (confidence 0.20)"] == LOW_CONFIDENCE_COLOR
+    assert phase_color("lift 12") == L.PHASE_COLORS["lift"] and phase_color("unknown 2") == FORCED_COLOR

@@ -94,17 +94,22 @@ def numbered_phase_labels(labs: np.ndarray, tasks: np.ndarray, rep: np.ndarray) 
     repetition's confidence is low) so repetitions can be counted when zoomed out.
     """
     out = []
+    colors: dict[str, int] = {}
+    base_color: dict[str, int] = {}
     for lab, k in zip(labs.tolist(), tasks.tolist(), strict=True):
         lab = str(lab)
         if k < 0:
-            out.append(lab)
+            value = lab
         elif lab.endswith(FORCED):
-            out.append(f"{lab[: -len(FORCED)]} {k}{FORCED}")
+            value = f"{lab[: -len(FORCED)]} {k}{FORCED}"
         else:
-            out.append(f"{lab} {k}")
-    numbered = np.array(out, dtype=object)
-    colors = {v: phase_color(v) for v in set(out) if v}
-    return numbered, colors | repetition_colors(tasks, rep)
+            value = f"{lab} {k}"
+        out.append(value)
+        if value:
+            if lab not in base_color:
+                base_color[lab] = phase_color(lab)
+            colors[value] = base_color[lab]
+    return np.array(out, dtype=object), colors | repetition_colors(tasks, rep)
 
 
 def repetition_colors(tasks: np.ndarray, rep: np.ndarray) -> dict[str, int]:
@@ -493,7 +498,8 @@ class _Logger:
             f"{r} · {lab} · {(e - b) / 1e9:.2f} s" if r else f"{lab} · {(e - b) / 1e9:.2f} s"
             for r, lab, b, e in zip(rep.tolist(), labs.tolist(), starts.tolist(), ends.tolist(), strict=True)
         ]
-        colours = np.array([phase_color(str(lab)) for lab in labs.tolist()], dtype=np.uint32)
+        palette = {lab: phase_color(lab) for lab in {str(x) for x in labs.tolist()}}
+        colours = np.array([palette[str(lab)] for lab in labs.tolist()], dtype=np.uint32)
         path = L.phase_log_entity(topic, self.prefix)
         self.rec.send_columns(path, indexes=[self._time(starts)], columns=rr.TextLog.columns(text=lines, color=colours))
         self._record(path, "phase_log", topic, starts)
