@@ -12,7 +12,8 @@ write: a single ``read_csv`` of the file -- the faster of ``pandas.read_csv`` (C
 ``pyarrow.csv.read_csv`` (multithreaded), each timed -- plus the `mcap` library writing the same block messages
 (``bench_archive.peer_write``: zstd, same chunk target). To show where the rest of the time goes, the same run
 also times imulog's stages (convert, finish, write with and without the viewer twins, which the floor does not
-write). Runs alternate in one process; best of ``--repeat``; the load average is printed.
+write). Runs alternate in one process; best of ``--repeat`` for the wall time and, in brackets, for the process CPU
+time (all threads: steadier than wall time when other work shares the cores); the load average is printed.
 
 Target (issue 17): convert (without attachment, like the floor) at most 1.5x the floor.
 
@@ -68,14 +69,20 @@ def write_nexus(path: Path, minutes: float, markers: int = 40, rate_hz: float = 
     return n
 
 
-def best_of_interleaved(fns, repeat: int) -> list[float]:
-    """Best time of each function, runs alternating so that load changes on a shared machine hit all alike."""
+def best_of_interleaved(fns, repeat: int, cpu: list[float] | None = None) -> list[float]:
+    """Best wall time of each function, runs alternating so that load changes on a shared machine hit all alike.
+
+    ``cpu``: filled with the best process CPU time of each (all threads; less sensitive to other users' load)."""
     times: list[list[float]] = [[] for _ in fns]
+    cpus: list[list[float]] = [[] for _ in fns]
     for _ in range(repeat):
-        for fn, out in zip(fns, times, strict=True):
-            t0 = time.perf_counter()
+        for fn, out, out_cpu in zip(fns, times, cpus, strict=True):
+            t0, c0 = time.perf_counter(), time.process_time()
             fn()
             out.append(time.perf_counter() - t0)
+            out_cpu.append(time.process_time() - c0)
+    if cpu is not None:
+        cpu[:] = [min(c) for c in cpus]
     return [min(t) for t in times]
 
 
@@ -156,19 +163,26 @@ def main() -> int:
                     tmp / f"{src.stem}_w.mcap", rec, attach_sources=False, overwrite=True
                 ),
             }
-            times = dict(zip(fns, best_of_interleaved(list(fns.values()), args.repeat), strict=True))
+            cpu_list: list[float] = []
+            times = dict(zip(fns, best_of_interleaved(list(fns.values()), args.repeat, cpu_list), strict=True))
+            cpu = dict(zip(fns, cpu_list, strict=True))
             bare = min(times["pandas.read_csv"], times["pyarrow.csv.read_csv"])
             floor = bare + times["peer write"]
+            floor_cpu = min(cpu["pandas.read_csv"], cpu["pyarrow.csv.read_csv"]) + cpu["peer write"]
             ratio = times["imulog convert"] / floor
             worst = max(worst, ratio)
             print(label)
             print(
                 f"    floor {floor:7.3f} s = read_csv {bare:.3f} s (pandas {times['pandas.read_csv']:.3f}, pyarrow "
                 f"{times['pyarrow.csv.read_csv']:.3f}) + mcap library writing the blocks {times['peer write']:.3f} s"
+                f"   [CPU {floor_cpu:.3f} s]"
             )
             for name in list(fns)[3:]:
                 t = times[name]
-                print(f"    {name:51s} {t:7.3f} s ({t / floor:4.2f}x the floor)")
+                print(
+                    f"    {name:51s} {t:7.3f} s ({t / floor:4.2f}x the floor)   [CPU {cpu[name]:.3f} s, "
+                    f"{cpu[name] / floor_cpu:4.2f}x]"
+                )
             no_twins = times["imulog convert without viewer twins"]
             converter = times["  stage: converter (parse, validate, units)"]
             print(
