@@ -11,6 +11,7 @@ import pytest
 from test_archive_helpers import synthetic_recording
 
 from imulog.archive import append_derived, write_trial
+from imulog.archive.twins import TWIN_RATE_HZ
 from imulog.model import SignalStream
 
 rr_chunk = pytest.importorskip("rerun.chunk")
@@ -83,7 +84,7 @@ def test_rerun_decodes_blocks_and_draws_foxglove_poses(trial):
         if "Transform3D:translation" in rb.schema.names
         for row in rb.column("Transform3D:translation").to_pylist()
     ]
-    keep = np.arange(0, len(rec.poses[0]), 2)  # 100 Hz -> the twins' 50 Hz
+    keep = np.arange(0, len(rec.poses[0]), int(np.ceil(100.0 / TWIN_RATE_HZ)))  # 100 Hz -> the twins' rate
     good = np.isfinite(rec.poses[0].position[keep]).all(axis=1)
     assert len(translations) == int(good.sum())
     got = np.array([r[0] for r in translations], dtype=np.float64)

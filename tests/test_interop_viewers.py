@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from imulog.archive import TrialReader, append_derived, check_file, write_trial
+from imulog.archive.twins import TWIN_RATE_HZ
 from imulog.model import ImuStream, Intervals, MarkerStream, PoseStream, Recording, SignalStream
 from imulog.process.alignment import reference_to_device
 
@@ -19,6 +20,7 @@ START = "2019-02-14T08:58:00-05:00"
 START_NS = 1_550_152_680 * 10**9  # the same instant, ns since the Unix epoch
 DEV0 = 2_775 * 10**9  # IMU device clock at its first sample (46 min after the Vicon clock's zero)
 LAG_NS = 1_500_000_000  # Vicon started 1.5 s before the IMU
+K = int(np.ceil(100.0 / TWIN_RATE_HZ))  # the twins keep every K-th sample of these 100 Hz channels
 ALIGNMENT = {"imu": "/imu/wrist", "offset_ns": LAG_NS - DEV0, "drift_ppm": 0.0, "t0_ns": DEV0}
 
 
@@ -125,14 +127,14 @@ def test_rerun_loader_plots_imu_draws_markers_and_moves_the_imu_frame(processed)
     ents = _rerun_entities(path)
     # IMU: ROS 2 sensor_msgs/Imu twin -> Scalars, which Rerun plots as time series without a blueprint
     scalars = np.array(_column(ents["/derived/viewer/imu/wrist"], "Scalars:scalars"), dtype=np.float64)
-    assert scalars.shape == (1000, 6)  # 100 Hz -> 50 Hz
+    assert scalars.shape == (2000 // K, 6)  # 100 Hz -> the twins' rate
     cols = _column(ents["/derived/viewer/imu/wrist"], "SeriesLines:names")[0]  # one static row of 6 names
     gyr_cols = [cols.index(f"gyroscope/{a}") for a in "xyz"]
     acc_cols = [cols.index(f"accelerometer/{a}") for a in "xyz"]
-    assert np.allclose(scalars[:, gyr_cols], imu.gyr[::2]) and np.allclose(scalars[:, acc_cols], imu.acc[::2])
+    assert np.allclose(scalars[:, gyr_cols], imu.gyr[::K]) and np.allclose(scalars[:, acc_cols], imu.acc[::K])
     # markers: foxglove.PointCloud -> Points3D, only the markers seen
     points = _column(ents["/derived/viewer/markers/vicon"], "Points3D:positions")
-    assert len(points) == 1000 and len(points[0]) == 4 and len(points[50]) == 3  # sample 100: marker Y hidden
+    assert len(points) == 2000 // K and len(points[0]) == 4 and len(points[100 // K]) == 3  # sample 100: Y hidden
     assert np.allclose(np.array(points[0]), markers.pos[0], atol=1e-6)
     # the IMU frame: FrameTransform -> Transform3D world -> wrist, placed at the cluster, rotating
     tf = ents["/derived/viewer/orientation/wrist"]
@@ -140,10 +142,10 @@ def test_rerun_loader_plots_imu_draws_markers_and_moves_the_imu_frame(processed)
     cluster_tf = ents["/derived/viewer/vicon/cluster_pose"]  # pose twins get frame names unique in the trial
     assert {v for row in _column(cluster_tf, "Transform3D:child_frame") for v in row} == {"vicon_cluster_pose"}
     quats = np.array(_column(tf, "Transform3D:quaternion"), dtype=np.float64).reshape(-1, 4)  # x, y, z, w
-    assert np.allclose(quats[:, [3, 0, 1, 2]], q[::2], atol=1e-6)
+    assert np.allclose(quats[:, [3, 0, 1, 2]], q[::K], atol=1e-6)
     translation = np.array(_column(tf, "Transform3D:translation"), dtype=np.float64).reshape(-1, 3)
     shift = LAG_NS // 10_000_000  # the IMU's sample k is Vicon sample k + 150
-    assert np.allclose(translation[:100], cluster.position[shift : shift + 200 : 2], atol=1e-6)
+    assert np.allclose(translation[:100], cluster.position[shift : shift + 100 * K : K], atol=1e-6)
     # ... and as coloured points along its axes in its own frame, which the transform moves: drawn as is
     axes = ents["/derived/viewer/axes/wrist"]
     assert {v for row in _column(axes, "CoordinateFrame:frame") for v in row} == {"wrist"}
@@ -186,7 +188,7 @@ def test_every_channel_decodes_as_numbers_with_mcap_and_foxglove_schemas(process
     frames = got["/derived/viewer/orientation/wrist"]
     tf = FrameTransform.FromString(frames[10][2].SerializeToString())
     assert (tf.parent_frame_id, tf.child_frame_id) == ("world", "wrist")
-    assert np.allclose([tf.rotation.w, tf.rotation.x, tf.rotation.y, tf.rotation.z], q[20])
+    assert np.allclose([tf.rotation.w, tf.rotation.x, tf.rotation.y, tf.rotation.z], q[10 * K])
     # trajectories: one foxglove.PosesInFrame per repetition, its path at 10 Hz, on the aligned axis
     from foxglove_schemas_protobuf.PosesInFrame_pb2 import PosesInFrame
 
@@ -201,7 +203,7 @@ def test_every_channel_decodes_as_numbers_with_mcap_and_foxglove_schemas(process
     ros = got["/derived/viewer/imu/wrist"]
     assert ros[0][0] == "sensor_msgs/msg/Imu"
     m = ros[3][2]
-    assert [m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z] == imu.gyr[6].tolist()
+    assert [m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z] == imu.gyr[3 * K].tolist()
     assert m.header.stamp.sec * 10**9 + m.header.stamp.nanosec == ros[3][1]
 
 
