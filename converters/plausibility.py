@@ -193,14 +193,15 @@ def gyro_tilt_ratio(
     *,
     rest: tuple[int, np.ndarray] | None = None,
     rate_hz: float | None = None,
+    ref_norm: float | None = None,
 ) -> float | None:
     """Gyroscope-perpendicular rate over the turning rate of the gravity direction seen by the accelerometer.
 
     Samples where the accelerometer norm is within 10 % of its rest value (slow movement) and gravity turns
     faster than ``min_tilt_rad_s``; a 0.1 s moving average on both, and the turning rate from directions 0.2 s
     apart (so that accelerometer noise does not read as tilt). ~1 for a rad/s gyroscope, ~57.3 for deg/s
-    numbers; None with fewer than 0.5 s of such samples. ``rest`` / ``rate_hz``: :func:`_rest_index` of ``acc``
-    and the rate of ``t_ns`` when already computed.
+    numbers; None with fewer than 0.5 s of such samples. ``rest`` / ``rate_hz`` / ``ref_norm``: :func:`_rest_index`
+    of ``acc``, the rate of ``t_ns`` and :func:`rest_acc_norm` of ``acc`` when already computed.
     """
     a = np.asarray(acc, dtype=np.float64)
     w = np.asarray(gyr, dtype=np.float64)
@@ -212,7 +213,7 @@ def gyro_tilt_ratio(
     a_s = np.column_stack([np.convolve(a[:, j], kernel, mode="same") for j in range(3)])
     w_s = np.column_stack([np.convolve(w[:, j], kernel, mode="same") for j in range(3)])
     norm = np.linalg.norm(a_s, axis=1)
-    ref, _ = rest_acc_norm(a, t_ns, rest=rest)
+    ref = rest_acc_norm(a, t_ns, rest=rest)[0] if ref_norm is None else ref_norm
     with np.errstate(invalid="ignore", divide="ignore"):
         u = a_s / norm[:, None]
         du = np.full_like(u, np.nan)
@@ -258,8 +259,10 @@ def imu_warnings(
     out = []
     rate = _rate_hz(t_ns)
     rest = _rest_index(acc, t_ns, REST_WINDOW_S, rate) if acc is not None else None  # shared by every check
+    ref_norm = None
     if acc is not None and len(acc) > 2 and np.isfinite(acc).any():
         norm, at_rest = rest_acc_norm(acc, t_ns, rest=rest)
+        ref_norm = norm
         if not 0.5 * G0 <= norm <= 2.0 * G0:
             guess = ""
             if 0.5 <= norm <= 2.0:
@@ -279,7 +282,7 @@ def imu_warnings(
         )
         peak = gyro_peak(gyr)
         at_rest = gyro_rate_at_rest(gyr, acc, t_ns, rest=rest) if acc is not None else None
-        ratio = gyro_tilt_ratio(gyr, acc, t_ns, rest=rest, rate_hz=rate) if acc is not None else None
+        ratio = gyro_tilt_ratio(gyr, acc, t_ns, rest=rest, rate_hz=rate, ref_norm=ref_norm) if acc is not None else None
         rad_ok = ratio is not None and 0.5 * DEG * RATIO_DEG_MIN < ratio <= RATIO_RAD_MAX  # motion agrees
         if peak > GYRO_PEAK_MAX_RAD_S:
             out.append(
