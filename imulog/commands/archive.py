@@ -66,7 +66,9 @@ def trial_summary(trial: TrialReader) -> dict[str, Any]:
             }
         )
     runs = trial.runs()
-    metadata = {k: v for k, v in trial.metadata.items() if not k.startswith("imulog.run.")}
+    # runs are listed on their own; the closing statistics of streamed channels (imulog.channel_stats[.N]) are
+    # already merged into those channels' metadata above, and the records of replaced channels are history
+    metadata = {k: v for k, v in trial.metadata.items() if not k.startswith(("imulog.run.", "imulog.channel_stats"))}
     atts = trial.attachment_infos()  # sizes from the index, hashes from imulog.raw: nothing re-read
     return {
         "path": str(trial.path),
