@@ -2,10 +2,12 @@
 
     python benchmarks/bench_long.py                    # 1 and 7 days at 100 Hz (a 774 MB .cwa; ~10 min)
     python benchmarks/bench_long.py --days 0.25 1      # quicker
+    python benchmarks/bench_long.py --trials day.mcap week.mcap --commands phases   # copies of processed trials
 
 For each length: ``imulog simulate home --days D`` writes an Axivity AX6 .cwa (accelerometer + gyroscope,
-100 Hz), then ``imulog convert``, ``imulog process orientation``, ``imulog process metrics``, ``imulog info`` and
-``imulog view --save`` run as separate processes; the peak resident memory of each (``ru_maxrss`` of the child)
+100 Hz), then ``imulog convert``, ``imulog process orientation``, ``imulog process phases``, ``imulog process
+metrics``, ``imulog info`` and ``imulog view --save`` run as separate processes (``--trials``: on copies of
+trials already converted, one per length, for the commands named by ``--commands``); the peak resident memory of each (``ru_maxrss`` of the child)
 and its wall time are printed, with the ratio of the longest to the shortest length. The machine's load average
 is printed too: times are only comparable within one run.
 
@@ -17,6 +19,7 @@ from __future__ import annotations
 import argparse
 import os
 import resource
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -26,6 +29,7 @@ from pathlib import Path
 COMMANDS = [
     ("convert", ["convert", "{cwa}", "-o", "{mcap}"]),
     ("orientation", ["process", "orientation", "{mcap}"]),
+    ("phases", ["process", "phases", "{mcap}"]),
     ("metrics", ["process", "metrics", "{mcap}"]),
     ("info", ["info", "{mcap}"]),
     ("view", ["view", "{mcap}", "--save", "{rrd}"]),
@@ -48,23 +52,33 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--days", type=float, nargs="+", default=[1.0, 7.0], help="recording lengths, days")
     ap.add_argument("--dir", default=None, help="scratch folder (needs ~3 GB per simulated week)")
+    ap.add_argument("--trials", nargs="+", default=None, help="converted trials, one per --days value (copied)")
+    ap.add_argument("--commands", nargs="+", default=[n for n, _ in COMMANDS], choices=[n for n, _ in COMMANDS])
     args = ap.parse_args(argv)
+    if args.trials and len(args.trials) != len(args.days):
+        ap.error(f"--trials needs one trial per --days value ({len(args.days)})")
+    commands = [(n, t) for n, t in COMMANDS if n in args.commands and not (args.trials and n == "convert")]
     imulog = [sys.executable, "-m", "imulog"]
     results: dict[float, dict[str, tuple[float, float]]] = {}
     with tempfile.TemporaryDirectory(dir=args.dir) as tmp:
-        for days in args.days:
+        for i, days in enumerate(args.days):
             folder = Path(tmp) / f"d{days:g}"
-            subprocess.run([*imulog, "simulate", "home", "-o", str(folder), "--days", str(days)], check=True,
-                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            folder.mkdir()
             paths = {"cwa": folder / "home_s00_t00.cwa", "mcap": folder / "home.mcap", "rrd": folder / "home.rrd"}
+            if args.trials:
+                shutil.copy(args.trials[i], paths["mcap"])
+            else:
+                subprocess.run([*imulog, "simulate", "home", "-o", str(folder), "--days", str(days)], check=True,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
             results[days] = {}
-            for name, template in COMMANDS:
+            for name, template in commands:
                 results[days][name] = run([*imulog, *[a.format(**paths) for a in template]])
-            sizes = {k: p.stat().st_size / 1e6 for k, p in paths.items()}
-            print(f"{days:g} d: .cwa {sizes['cwa']:.0f} MB, trial {sizes['mcap']:.0f} MB, .rrd {sizes['rrd']:.1f} MB",
-                  flush=True)
+                print(f"{days:g} d {name}: {results[days][name][0]:.1f} s, {results[days][name][1]:.0f} MB, "
+                      f"load {os.getloadavg()[0]:.1f}", flush=True)
+            sizes = {k: p.stat().st_size / 1e6 for k, p in paths.items() if p.exists()}
+            print(f"{days:g} d: " + ", ".join(f"{k} {v:.0f} MB" for k, v in sizes.items()), flush=True)
             for p in paths.values():
-                p.unlink()
+                p.unlink(missing_ok=True)
     one, five, _ = os.getloadavg()
     print(f"load average {one:.1f} (1 min), {five:.1f} (5 min) on {os.cpu_count()} cores; "
           f"self peak {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
@@ -72,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'command':12s}" + "".join(f"{f'{d:g} d s':>10s}{f'{d:g} d MB':>11s}" for d in args.days)
           + f"{'RSS ratio':>11s}  verdict")
     ok_all = True
-    for name, _ in COMMANDS:
+    for name, _ in commands:
         row = "".join(f"{results[d][name][0]:10.1f}{results[d][name][1]:11.0f}" for d in args.days)
         ratio = results[hi][name][1] / results[lo][name][1]
         ok = max(results[d][name][1] for d in args.days) <= 1024 and ratio <= 1.10

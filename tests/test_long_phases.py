@@ -167,3 +167,50 @@ def test_cli_prints_the_summary_of_a_long_recording(trial, tmp_path, monkeypatch
     assert result.exit_code == 0, result.output
     assert "core by core" in result.output and "phases per hour" in result.output
     assert len(result.output.splitlines()) < 20  # no line per phase
+
+
+def test_trajectory_and_kinematics_refuse_long_recordings(trial, tmp_path, monkeypatch):
+    """Both steps hold the trial in memory: above the threshold they stop with one line saying what to do."""
+    from click.testing import CliRunner
+
+    import imulog.steps.long_phases as long_phases
+    from imulog.archive import write_trial
+    from imulog.cli import cli
+    from imulog.simulate.arm import simulate_arm
+    from imulog.steps.kinematics import run_kinematics
+    from imulog.steps.orientation import run_orientation
+    from imulog.steps.trajectory import run_trajectory
+
+    path = tmp_path / "traj.mcap"
+    shutil.copy(trial, path)
+    run_orientation(path)
+    arm = write_trial(tmp_path / "arm.mcap", simulate_arm(seed=7, duration_s=10.0).recording, attach_sources=False)
+    monkeypatch.setattr(long_phases, "LONG_SAMPLES", 5_000)
+    with pytest.raises(ValueError, match=r"process trajectory holds the whole trial .*more than 5,000.*imulog process metrics"):
+        run_trajectory(path)
+    monkeypatch.setattr(long_phases, "LONG_SAMPLES", 500)  # the 10-s arm trial counts as long
+    with pytest.raises(ValueError, match=r"process kinematics holds the whole trial .* lab-length"):
+        run_kinematics(arm)
+    monkeypatch.setattr(long_phases, "LONG_SAMPLES", 5_000)
+    result = CliRunner().invoke(cli, ["process", "trajectory", str(path)])
+    assert result.exit_code != 0
+    assert len(result.output.strip().splitlines()) == 1 and "more than 5,000" in result.output
+    with TrialReader(path) as t:
+        assert not [topic for topic in t.topics() if topic.startswith("/derived/trajectory/")]
+    monkeypatch.setattr(long_phases, "LONG_SAMPLES", 3_000_000)
+    run_kinematics(arm)  # a lab trial below the threshold still runs
+
+
+def test_exact_median_below_narrows_to_few_values(tmp_path):
+    """The values near the median are gathered in bounded memory: many close values, a run of equal zeros."""
+    rng = np.random.default_rng(5)
+    x = np.concatenate([np.zeros(40_000), 0.01 + 1e-7 * rng.random(150_000), rng.random(30_000)])
+    rng.shuffle(x)
+    f = NormFile(tmp_path)
+    f.append(x)
+    assert exact_median_below(f, 0.9, max_values=1000) == np.median(x[x < 0.9])
+    f2 = NormFile(tmp_path)
+    f2.append(np.concatenate([np.zeros(5000), [0.5, 0.7]]))  # the median is one of many equal values
+    assert exact_median_below(f2, 0.9, max_values=10) == 0.0
+    f.close()
+    f2.close()

@@ -24,7 +24,9 @@ daily-life trials, the phase-boundary refinements, the static mask), in passes:
    end (a few intervals per minute of daily life).
 
 ``imulog.timing`` keeps counts and summaries, not a row per phase: phase durations (median, deciles, total) and
-their histogram, and per hour and per day the phases, the time moving and the static fraction.
+their histogram, per hour (and per day beyond a day) the phases, the time moving and the static percentage, the
+threshold, the boundary filters' cut-offs and how many merges and splits DynAMoS made (``postprocess_changes``;
+``max_iterations`` bounds them, in the whole computation too).
 
 Supported: method ``dynamos`` with protocol ``movements`` (daily life) and ``static="movements"``; other choices
 hold the recording and are refused above the threshold with a one-line error.
@@ -32,6 +34,7 @@ hold the recording and are refused above the threshold with a one-line error.
 
 from __future__ import annotations
 
+import itertools
 import os
 import tempfile
 from collections.abc import Iterator
@@ -59,6 +62,16 @@ class PhaseCores:
 
     def to_dict(self) -> dict[str, float]:
         return {"core_s": self.core_s, "overlap_s": self.overlap_s, "context_s": self.context_s}
+
+
+def refuse_long(step: str, topic: str, samples: int, hint: str) -> None:
+    """Raise a one-line ValueError when ``topic`` has more than :data:`LONG_SAMPLES` samples: ``step`` holds the
+    whole trial in memory; ``hint`` says what to do instead."""
+    if samples > LONG_SAMPLES:
+        raise ValueError(
+            f"{step} holds the whole trial in memory and {topic} has {samples:,} samples (more than {LONG_SAMPLES:,}): "
+            f"{hint}"
+        )
 
 
 def long_unsupported(params: Any) -> str | None:
@@ -233,27 +246,50 @@ class NormFile:
         self._f.close()
 
 
-def exact_median_below(norm: NormFile, threshold: float, bins: int = 4096) -> float:
-    """``np.median(norm[norm < threshold])`` of a non-negative signal in two passes over the file (exact)."""
-    counts = np.zeros(bins, dtype=np.int64)
-    width = threshold / bins if threshold > 0 else 1.0
+def exact_median_below(norm: NormFile, threshold: float, bins: int = 4096, max_values: int = 200_000) -> float:
+    """``np.median(norm[norm < threshold])`` over the file, exactly, in memory bounded by ``max_values``.
+
+    Each pass histograms the values in the current range ``[lo, hi)`` and narrows it to the bins holding the two
+    middle ranks, until at most ``max_values`` values remain (or they are all equal: the zeros of a long gap);
+    those are sorted."""
+    n, lo = 0, np.inf
     for _, x in norm.chunks():
         x = x[x < threshold]
-        counts += np.bincount(np.clip((x / width).astype(np.int64), 0, bins - 1), minlength=bins)
-    n = int(counts.sum())
+        n += len(x)
+        if len(x):
+            lo = min(lo, float(x.min()))
     if n == 0:
         return 0.0
     ranks = ((n - 1) // 2, n // 2)
-    cum = np.cumsum(counts)
-    wanted = sorted({int(np.searchsorted(cum, r + 1)) for r in ranks})
+    hi = float(threshold)
+    for _ in range(16):
+        width = (hi - lo) / bins
+        counts = np.zeros(bins, dtype=np.int64)
+        below, vmin, vmax = 0, np.inf, -np.inf
+        for _, x in norm.chunks():
+            x = x[x < threshold]
+            below += int(np.count_nonzero(x < lo))
+            y = x[(x >= lo) & (x < hi)]
+            if len(y):
+                vmin, vmax = min(vmin, float(y.min())), max(vmax, float(y.max()))
+                k = np.clip(((y - lo) / width).astype(np.int64), 0, bins - 1) if width > 0 else np.zeros(len(y), int)
+                counts += np.bincount(k, minlength=bins)
+        if vmin == vmax:  # every value left is the same (both middle ranks are in the range)
+            return vmin
+        if counts.sum() <= max_values or width <= 0:
+            break
+        cum = below + np.cumsum(counts)
+        b1, b2 = (int(np.searchsorted(cum, r + 1)) for r in ranks)
+        new_lo, new_hi = lo + b1 * width, min(hi, lo + (b2 + 1) * width)
+        if (new_lo, new_hi) == (lo, hi):
+            break
+        lo, hi = new_lo, new_hi
     picked = []
     for _, x in norm.chunks():
         x = x[x < threshold]
-        k = np.clip((x / width).astype(np.int64), 0, bins - 1)
-        picked.append(x[np.isin(k, wanted)])
+        picked.append(x[(x >= lo) & (x < hi)])
     values = np.sort(np.concatenate(picked))
-    before = int(cum[wanted[0] - 1]) if wanted[0] > 0 else 0
-    return float(0.5 * (values[ranks[0] - before] + values[ranks[1] - before]))
+    return float(0.5 * (values[ranks[0] - below] + values[ranks[1] - below]))
 
 
 class Samples:
@@ -375,11 +411,12 @@ def long_phase_pieces(
         # pass 2 (on the norm file): DynAMoS with the recording's threshold, median duration and noise level
         vmax = max((float(np.max(x)) for _, x in norm.chunks() if len(x)), default=0.0)
         thr = threshold_value(np.array([vmax]), dp.threshold)
-        ms, me = threshold_runs(iter([*norm.chunks(), (total, np.zeros(0))]), thr)
+        ms, me = threshold_runs(itertools.chain(norm.chunks(), [(total, np.zeros(0))]), thr)  # chunk by chunk
         if dp.min_movement_s > 0:
             keep = (me - ms) >= dp.min_movement_s * rate
             ms, me = ms[keep], me[keep]
-        ms, me = postprocess(ms, me, norm, dp.alpha, dp.beta, dp.max_iterations)
+        post: dict[str, int] = {}
+        ms, me = postprocess(ms, me, norm, dp.alpha, dp.beta, dp.max_iterations, stats=post)
         if dp.refine_boundaries and len(ms):
             noise = exact_median_below(norm, thr)
             out_s, out_e = ms.copy(), me.copy()
@@ -543,6 +580,7 @@ def long_phase_pieces(
             "static_fraction": round(static_sum / max(known_sum, 1), 4),
             "phase_durations": duration_summary(durations),
             "threshold_rad_s": round(float(thr), 6),
+            "postprocess_changes": int(post.get("changes", 0)),
             "cutoff_hz": {
                 "gyroscope": round(gyr_cut, 4),
                 "accelerometer": None if acc_cut is None else round(acc_cut, 4),

@@ -308,8 +308,9 @@ def run_metrics(
 ):
     """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
 
-    Recordings longer than :data:`~imulog.steps.long_metrics.LONG_SAMPLES` samples without phases (daily life),
-    or any with ``cores``, are processed core by core in bounded memory (:mod:`imulog.steps.long_metrics`).
+    Recordings longer than :data:`~imulog.steps.long_metrics.LONG_SAMPLES` samples (daily life; per-phase metrics
+    are left out, phases found core by core included), or any with ``cores``, are processed core by core in bounded
+    memory (:mod:`imulog.steps.long_metrics`).
     """
     from imulog.archive import TrialReader
     from imulog.archive.streaming import StreamPieces
@@ -324,7 +325,7 @@ def run_metrics(
     imu_topic = f"/imu/{name}"
     phase_topic = f"/derived/phases/{name}"
     inputs = [imu_topic] + [t for t in (phase_topic, traj_topic) if t is not None and t in topics]
-    long = cores is not None or (total > LONG_SAMPLES and phase_topic not in topics)
+    long = cores is not None or total > LONG_SAMPLES  # with phases too: a week's phases must not make it whole
     step_params = {"imu": name, **p.to_dict()}
     if long:
         cores = cores or MetricCores()

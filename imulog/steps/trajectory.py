@@ -244,13 +244,21 @@ def run_trajectory(
     """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome."""
     from imulog.archive import TrialReader
     from imulog.steps.base import StepResult, run_step
+    from imulog.steps.long_phases import refuse_long
 
     with TrialReader(path) as trial:
         topics = trial.topics()
         name = pick_imu(
             topics, imu, prefix="/derived/acc_global/", missing_hint="run `imulog process orientation` first"
         )
-    acc_topic = f"/derived/acc_global/{name}"
+        acc_topic = f"/derived/acc_global/{name}"
+        refuse_long(
+            "process trajectory",
+            acc_topic,
+            int(trial.channel(acc_topic).sample_count or 0),
+            "trajectories integrate the repetitions of a lab trial; for daily life use `imulog process metrics` "
+            "(distance per window, per hour and per day)",
+        )
     static_topic, phases_topic = f"/derived/static/{name}", f"/derived/phases/{name}"
     orient_topic = f"/derived/orientation/{name}"
     imu_topic = f"/imu/{name}"  # the gyroscope, to re-integrate the orientation through movements

@@ -158,10 +158,15 @@ def postprocess(
     alpha: float = 0.8,
     beta: float = 1.4,
     max_iterations: int = 10_000,
+    stats: dict | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """DynAMoS iterative merge/split of outlier durations (see module docstring); returns new ``start, end``."""
+    """DynAMoS iterative merge/split of outlier durations (see module docstring); returns new ``start, end``.
+
+    ``norm`` needs only slicing (``norm[a:b]``); ``stats`` (optional dict) receives ``changes``: the merges and
+    splits made (``max_iterations`` bounds them)."""
     s = [int(v) for v in start]
     e = [int(v) for v in end]
+    changes = 0
     for _ in range(max_iterations):
         if len(s) < 2:
             break
@@ -188,6 +193,7 @@ def postprocess(
             if changed:
                 break
         if changed:
+            changes += 1
             continue
         # long movements: split at local minima of the norm, lowest first
         for i in np.argsort(-dur, kind="stable"):
@@ -206,6 +212,9 @@ def postprocess(
                 break
         if not changed:
             break
+        changes += 1
+    if stats is not None:
+        stats["changes"] = changes
     return np.asarray(s, dtype=np.int64), np.asarray(e, dtype=np.int64)
 
 
