@@ -107,9 +107,7 @@ def process() -> None:
 def main() -> None:
     """The ``imulog`` script and ``python -m imulog``; honours ``NO_COLOR`` (no ANSI colour at all)."""
     from imulog.console import no_color
-    from imulog.heap import bound_heap
 
-    bound_heap()  # long recordings: the heap must not creep up core after core (see imulog.heap)
     try:
         cli.main(prog_name="imulog", standalone_mode=True, color=False if no_color() else None)
     except KeyboardInterrupt:  # pragma: no cover - interactive only

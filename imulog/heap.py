@@ -8,7 +8,9 @@ as :func:`bound_heap` does, turns the dynamic adjustment off (``mallopt(3)``): e
 mapped on allocation and returned to the system when freed. Measured on ``imulog process metrics`` of a
 simulated 1-day and 7-day recording (``benchmarks/bench_long.py``): peak RSS 261 and 309 MB (1.18x) with glibc's
 default, 234 and 257 MB (1.10x) with the fixed threshold, and the step was no slower (34 s against 46 s for the
-day, on a loaded machine).
+day, on a loaded machine). The core-by-core paths (metrics, orientation, phases of long recordings) call it; short
+trials do not, because mapping every temporary afresh costs system time (about 0.4 s on a whole-file Nexus
+conversion, measured by the convert benchmark).
 """
 
 from __future__ import annotations

@@ -179,8 +179,6 @@ def _run_processes(todo, plan, force, on_done, should_stop, workers: int) -> Non
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
-    from imulog.heap import bound_heap
-
     ctx = multiprocessing.get_context("spawn")
     queue = list(reversed(todo))
 
@@ -197,7 +195,7 @@ def _run_processes(todo, plan, force, on_done, should_stop, workers: int) -> Non
 
     while queue and not should_stop():
         suspects: list[tuple[int, str]] = []
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=bound_heap) as pool:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
             inflight: dict[Any, tuple[int, str]] = {}
             while queue or inflight:
                 while queue and len(inflight) < 2 * workers and not should_stop():
@@ -214,7 +212,7 @@ def _run_processes(todo, plan, force, on_done, should_stop, workers: int) -> Non
                     suspects.extend(inflight.values())
                     break
         for i, path in sorted(suspects):
-            with ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=bound_heap) as alone:
+            with ProcessPoolExecutor(max_workers=1, mp_context=ctx) as alone:
                 fut = alone.submit(run_file, path, plan, force)
                 if not finish(fut, i, path):
                     on_done(i, FileResult(path, "failed", error="the worker process died while processing this file"))

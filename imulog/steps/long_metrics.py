@@ -124,6 +124,7 @@ def long_metrics_pieces(
 ) -> Iterator[Any]:
     """Yield the distance channel core by core, then the activity intervals; fill ``record`` at the end."""
     from imulog.archive import TrialReader
+    from imulog.heap import bound_heap
     from imulog.process.gaps import prepare
     from imulog.process.metrics import ArmUsageParams, acc_to_g, arm_usage
     from imulog.process.metrics.activity import high_passed_noise_removed
@@ -135,6 +136,7 @@ def long_metrics_pieces(
 
     p = params
     c = cores or MetricCores()
+    bound_heap()  # the same temporaries core after core: keep them out of the heap (imulog.heap)
     with TrialReader(path) as trial:
         # pass 1: the mean of each axis (activity method 1) and the first samples (rate, origin)
         sums, counts, first_t, rate = np.zeros(3), np.zeros(3), None, None

@@ -73,6 +73,7 @@ def windowed_pieces(
 ) -> Iterator[SignalStream]:
     """The orientation step's three streams of ``topic`` (``total`` samples), window by window."""
     from imulog.archive import TrialReader
+    from imulog.heap import bound_heap
     from imulog.process import quaternion as qmath
     from imulog.steps.common import mean_rate_hz
     from imulog.steps.orientation import imu_arrays, orientation_with_gaps
@@ -80,6 +81,7 @@ def windowed_pieces(
     buf = SampleBuffer()
     core_start = 0
     join_quat: np.ndarray | None = None  # the previous window's orientation at this window's first core sample
+    bound_heap()  # the same temporaries core after core: keep them out of the heap (imulog.heap)
     with TrialReader(path) as trial:
         blocks = trial.iter_blocks(topic)
         first = next(blocks)
