@@ -365,12 +365,14 @@ def long_phase_pieces(
 ) -> Iterator[Any]:
     """Yield ``/derived/static/{imu}`` core by core, then the movements and phases; fill ``record`` at the end."""
     from imulog.archive import TrialReader
+    from imulog.heap import bound_heap
     from imulog.process.metrics.periods import DAY_S, HOUR_S, wall_clock_origin_ns
     from imulog.process.segmentation.boundaries import refine_phase_boundaries
     from imulog.process.segmentation.dynamos import lowpass_norm, postprocess, refine_boundaries, threshold_value
     from imulog.process.segmentation.hand import cutoff_params, refine_with_accelerometer
     from imulog.process.segmentation.zero_velocity import mask_from_intervals
 
+    bound_heap()  # the same temporaries core after core: keep them out of the heap (imulog.heap)
     c = cores or PhaseCores()
     p, dp = params, params.dynamos
     rate = float(rate_hz)
