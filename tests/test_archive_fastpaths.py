@@ -168,3 +168,30 @@ def test_append_refuses_a_damaged_data_section(tmp_path, monkeypatch, kernel):
         append_derived(path, [_derived(imu)], run={"step": "t", "algorithm": "none", "params": {}})
     assert path.read_bytes() == bytes(data)
     assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_data_section_crc_keeps_resident_memory_small(tmp_path):
+    """The append's CRC pass maps the trial; its pages are handed back as it goes (a week's trial is GBs)."""
+    import subprocess
+    import sys
+    import zlib
+
+    big = tmp_path / "big.bin"
+    block = np.random.default_rng(1).integers(0, 256, 1 << 20, dtype=np.uint8).tobytes()
+    with open(big, "wb") as f:
+        for _ in range(256):  # 256 MiB
+            f.write(block)
+    probe = (
+        "import sys\n"
+        "from imulog.archive.append import _crc_of\n"
+        "def hwm():\n"
+        "    return next(int(x.split()[1]) for x in open('/proc/self/status') if x.startswith('VmHWM'))\n"
+        "before = hwm()\n"
+        "with open(sys.argv[1], 'rb') as f:\n"
+        "    crc = _crc_of(f, 256 << 20)\n"
+        "print(crc, hwm() - before)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", probe, str(big)], capture_output=True, text=True, check=True)
+    crc, grown_kb = map(int, out.stdout.split())
+    assert crc == zlib.crc32(block * 256)
+    assert grown_kb < 64 * 1024  # a fraction of the 256 MiB read
