@@ -18,7 +18,9 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
+from imulog._lazy import LazyModule
+
+np = LazyModule("numpy", __name__)  # imported on first use: imulog info never needs numpy
 
 SCHEMA_VERSION = 1
 

@@ -10,7 +10,9 @@ import dataclasses
 import json
 from typing import Any
 
-import numpy as np
+from imulog._lazy import LazyModule
+
+np = LazyModule("numpy", __name__)  # imported on first use: imulog info never needs numpy
 
 JSON_KEYS = "_json"
 MAX_JSON_DEPTH = 32  # nesting levels allowed in a JSON value of a metadata record or channel metadata

@@ -14,8 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from imulog._lazy import LazyModule
 from imulog.archive import _mcap as m
 from imulog.archive.errors import ArchiveCorruptError, ArchiveError
 from imulog.archive.metadata import (
@@ -27,6 +26,8 @@ from imulog.archive.metadata import (
     validate_record,
 )
 from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream, Stream
+
+np = LazyModule("numpy", __name__)  # imported on first use: imulog info never needs numpy
 
 _POOL = None
 

@@ -27,7 +27,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
+from imulog._lazy import LazyModule
+
+np = LazyModule("numpy", __name__)  # imported on first use: imulog info never needs numpy
 
 DEFAULT_EPOCH = "2000-01-01T00:00:00+00:00"  # axis start when the trial's start time is unknown
 _MAX = 2**64 - 1

@@ -141,8 +141,8 @@ def _echo_phase_quality(timing: dict) -> None:
 def _echo_alignment(record: dict) -> None:
     """The IMU-to-Vicon alignment: offset and drift with uncertainty, markers, windows, quality flag."""
     if not record:
-        return  # (before importing the alignment step: it pulls in scipy, seconds for every `info`)
-    from imulog.steps.align import alignment_summary
+        return
+    from imulog.steps.align_summary import alignment_summary
 
     lines = alignment_summary(record)
     if lines:

@@ -1,0 +1,55 @@
+"""Human-readable lines about an ``imulog.alignment`` record: plain formatting, no numpy (``imulog info``)."""
+
+from __future__ import annotations
+
+
+def alignment_summary(record: dict) -> list[str]:
+    """Human-readable lines about an ``imulog.alignment`` record (``imulog info``, ``process align``)."""
+    if not record:
+        return []
+    lines = []
+    unc = record.get("offset_uncertainty_ns")
+    dunc = record.get("drift_uncertainty_ppm")
+    off = int(record.get("offset_ns", 0)) / 1e9
+    drift = float(record.get("drift_ppm") or 0.0)
+    lines.append(
+        f"offset {off:.4f} s{f' ± {unc / 1e6:.2f} ms' if unc is not None else ''}, drift {drift:.1f} ppm"
+        f"{f' ± {dunc:.1f}' if dunc is not None else ''}"
+        f"{'' if record.get('drift_estimated', True) else ' (not estimated)'}, score {float(record.get('score') or 0):.3f}"
+        f", signal {record.get('signal', 'angular-velocity-norm')}"
+    )
+    c = record.get("cluster") or {}
+    if c.get("markers"):
+        vm, rig = c.get("vector_match"), c.get("rigidity_mm")
+        lines.append(
+            f"markers {','.join(c['markers'])} ({c.get('selection', 'given')}"
+            f"{f', vector match {vm:.3f}' if vm is not None else ''}"
+            f"{f', rigid to {rig:.2f} mm' if rig is not None else ''})"
+        )
+        ru = c.get("runner_up")
+        if ru:
+            vm2 = ru.get("vector_match")
+            lines.append(
+                f"runner-up {','.join(ru['markers'])} (ncc {ru.get('ncc')}"
+                f"{f', vector match {vm2:.3f}' if vm2 is not None else ''})"
+            )
+        rej = c.get("rejected_cluster")
+        if rej:
+            lines.append(
+                f"best rigid set {','.join(rej['markers'])} rejected (vector match {rej.get('vector_match')}): "
+                "aligned on one marker's acceleration"
+            )
+    wins = record.get("windows") or []
+    used = [w for w in wins if w.get("used")]
+    if wins:
+        res = [abs(w.get("residual_ns", 0)) / 1e6 for w in used]
+        spread = record.get("residual_spread_ns")
+        lines.append(
+            f"windows {len(used)}/{len(wins)} used, residual lag max {max(res) if res else float('nan'):.2f} ms"
+            f"{f', spread {spread / 1e6:.2f} ms' if spread is not None else ''}"
+        )
+    quality = record.get("quality")
+    if quality:
+        reasons = record.get("quality_reasons") or []
+        lines.append(f"quality {quality}{': ' + '; '.join(reasons) if reasons else ''}")
+    return lines
