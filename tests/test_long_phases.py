@@ -93,10 +93,13 @@ def _read(path):
         )
 
 
-def test_cores_equal_the_whole(trial, whole, tmp_path):
-    """Small cores (7 min) give the whole computation's movements, phases and static mask to the sample: the norm
+def test_cores_equal_the_whole(trial, whole, tmp_path, monkeypatch):
+    """Small cores (7 min), and intervals written in pieces of 37, give the whole computation's movements, phases and static mask to the sample: the norm
     filtered core by core differs from the whole filtering by rounding only (the overlap covers the filters'
     reach), and every statistic the whole computation takes over the recording comes from a first pass."""
+    import imulog.steps.long_phases as long_phases
+
+    monkeypatch.setattr(long_phases, "INTERVAL_PIECE", 37)
     cored = tmp_path / "cored.mcap"
     shutil.copy(trial, cored)
     run_phases(cored, cores=PhaseCores(core_s=420.0, overlap_s=30.0, context_s=600.0))
@@ -106,6 +109,8 @@ def test_cores_equal_the_whole(trial, whole, tmp_path):
     for a, b in ((mw, mc), (pw, pc)):
         np.testing.assert_array_equal(a.start_ns, b.start_ns)
         np.testing.assert_array_equal(a.end_ns, b.end_ns)
+        np.testing.assert_array_equal(a.task_index, b.task_index)
+        assert a.labels == b.labels
     np.testing.assert_array_equal(sw.t_ns, sc.t_ns)
     np.testing.assert_array_equal(sw.values, sc.values)
     assert tc["n_movements"] == tw["n_movements"] and tc["static_fraction"] == tw["static_fraction"]

@@ -52,6 +52,18 @@ LONG_SAMPLES = 3_000_000
 DURATION_BINS_S = (0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 20.0, 60.0)
 
 
+INTERVAL_PIECE = 4096  # intervals per written piece: a week's ~50,000 movements are never encoded at once
+
+
+def interval_pieces(
+    topic: str, start_ns: np.ndarray, end_ns: np.ndarray, task_index: np.ndarray, label: str = "movement"
+) -> Iterator[Intervals]:
+    """``Intervals`` of ``topic`` in consecutive pieces of at most :data:`INTERVAL_PIECE` (one, empty, if none)."""
+    for k in range(0, max(len(start_ns), 1), INTERVAL_PIECE):
+        r = slice(k, k + INTERVAL_PIECE)
+        yield Intervals(topic, start_ns[r], end_ns[r], [label] * len(start_ns[r]), task_index=task_index[r])
+
+
 @dataclass(frozen=True)
 class PhaseCores:
     """Core length, filter margin on each side and the most rest used on each side of a phase, seconds."""
@@ -557,10 +569,8 @@ def long_phase_pieces(
             t_ms, t_me, t_fs, t_fe = (
                 np.asarray(device_to_reference(a, alignment), dtype=np.int64) for a in (t_ms, t_me, t_fs, t_fe)
             )
-        yield Intervals(f"/derived/movements/{imu}", t_ms, t_me, ["movement"] * len(ms))
-        yield Intervals(
-            f"/derived/phases/{imu}", t_fs, t_fe, ["movement"] * len(fs), task_index=np.arange(1, len(fs) + 1)
-        )
+        yield from interval_pieces(f"/derived/movements/{imu}", t_ms, t_me, np.full(len(ms), -1, np.int64))
+        yield from interval_pieces(f"/derived/phases/{imu}", t_fs, t_fe, np.arange(1, len(fs) + 1))
     finally:
         norm.close()
     durations = (t_fe - t_fs) * 1e-9
