@@ -15,7 +15,6 @@ offsets. Raw channels always precede derived ones, so the raw bytes stay identic
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import time
@@ -109,6 +108,8 @@ def _crc_of(f: BinaryIO, end: int) -> int:
     """CRC-32 of the first ``end`` bytes of ``f`` (memory-mapped, in blocks: zlib releases the GIL)."""
     import mmap
 
+    from imulog.archive.salvage import release
+
     if end == 0:
         return 0
     crc = 0
@@ -120,19 +121,10 @@ def _crc_of(f: BinaryIO, end: int) -> int:
             for a in range(0, end, COPY_BLOCK):
                 b = min(end, a + COPY_BLOCK)
                 crc = zlib.crc32(view[a:b], crc)
-                _release(mm, a, b)
+                release(view, a, b)  # mapped file pages count as resident memory: a week's trial is GBs
         finally:
             view.release()
     return crc
-
-
-def _release(mm: Any, a: int, b: int) -> None:
-    """Unmap the pages of bytes ``a:b`` that were read (the page cache keeps them): mapped file pages count as the
-    process's resident memory, and a week's trial is several GB."""
-    import mmap
-
-    with contextlib.suppress(AttributeError, OSError, ValueError):  # no madvise on this system
-        mm.madvise(mmap.MADV_DONTNEED, a, b - a)
 
 
 def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int], path: Path) -> McapBuilder:
