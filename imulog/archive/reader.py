@@ -39,7 +39,6 @@ def _codec():
     return codec
 
 
-
 def _pool():
     """A small shared thread pool for chunk decompression."""
     global _POOL

@@ -203,15 +203,13 @@ class Rows:
 
     def data(self, number: int, values: np.ndarray, mask: np.ndarray | None = None) -> Rows:
         """A ``bytes`` field from (N, K) uint8 (``mask`` keeps some of them), left out when empty (proto3)."""
+        values = np.asarray(values, dtype=np.uint8).reshape(self.n, -1)
         sub = Rows(self.n)
-        sub._add(np.asarray(values, dtype=np.uint8).reshape(self.n, -1), mask)
-        cols, used = sub.build()
-        lengths = np.count_nonzero(used, axis=1) if used is not None else np.full(self.n, cols.shape[1])
+        sub._add(values, mask)
         self.message(number, sub)
-        present = lengths > 0
+        present = mask.any(axis=1) if mask is not None else np.full(self.n, values.shape[1] > 0)
         if not present.all():
-            last = self._masks[-1]
-            self._masks[-1] = last & present[:, None]
+            self._masks[-1] = self._masks[-1] & present[:, None]  # message() always leaves a mask
         return self
 
     def build(self) -> tuple[np.ndarray, np.ndarray | None]:
