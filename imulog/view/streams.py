@@ -87,6 +87,12 @@ def phase_color(label: str) -> int:
     return L.PHASE_COLORS.get(label, L.PHASE_COLORS.get(base, FORCED_COLOR) if number.isdigit() else FORCED_COLOR)
 
 
+def known_phase_colors(values: Iterable[Any]) -> dict[str, int]:
+    """Colours of the values that are R2G phases or forced phases (other lane values keep Rerun's colours)."""
+    present = {str(v) for v in values if v}
+    return {v: phase_color(v) for v in present if v in L.PHASE_COLORS or v.endswith(FORCED)}
+
+
 def numbered_phase_labels(labs: np.ndarray, tasks: np.ndarray, rep: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
     """Phase labels with their repetition (``reach 3``, ``lift 3 (forced)``) and the colour of every lane value.
 
@@ -210,10 +216,7 @@ class _Logger:
         columns = rr.StateChange.columns(state=text).partition(np.full(len(t_ref), lanes))
         self.rec.send_columns(path, indexes=[self._time(t_ref)], columns=columns)
         if colors is None:
-            present = {v for v in text if v}
-            colors = {
-                v: L.PHASE_COLORS.get(v, FORCED_COLOR) for v in present if v in L.PHASE_COLORS or v.endswith(FORCED)
-            }
+            colors = known_phase_colors(text)
         if colors:
             values = sorted(colors)
             self.rec.log(
@@ -441,9 +444,7 @@ class _Logger:
                 if with_task and len(np.unique(tasks)) <= MAX_NUMBERED_REPETITIONS:
                     labs, colors = numbered_phase_labels(labs, tasks, rep)
             if colors is None and with_task:  # e.g. numbered activities: the number lane in greys, not rainbow
-                present = {str(v) for v in labs.tolist()}
-                colors = {v: phase_color(v) for v in present if v in L.PHASE_COLORS or v.endswith(FORCED)}
-                colors |= repetition_colors(tasks, rep)
+                colors = known_phase_colors(labs.tolist()) | repetition_colors(tasks, rep)
             start_states = np.stack([labs, rep], axis=1) if with_task else labs[:, None]
             reset_states = np.full((int(needs_reset.sum()), lanes), "", dtype=object)
             times = [starts, ends[needs_reset]]
