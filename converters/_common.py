@@ -7,6 +7,7 @@ import math
 import os
 import re
 from collections.abc import Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -96,27 +97,44 @@ def read_head(path: Path, n: int = HEAD_BYTES) -> bytes:
         return f.read(n)
 
 
-_DIGESTS: dict[tuple[str, int, int], str] = {}  # (resolved path, size, mtime ns) -> SHA-256 of the bytes read
+_DIGESTS: dict[tuple[str, int, int], str | Future[str]] = {}  # (resolved path, size, mtime ns) -> SHA-256
 _DIGESTS_KEPT = 256
+_HASHER: ThreadPoolExecutor | None = None
+BACKGROUND_HASH_BYTES = 1 << 20  # smaller sources are hashed at once
 
 
 def _stat_key(path: Path, st: os.stat_result) -> tuple[str, int, int]:
     return str(Path(path).resolve()), st.st_size, st.st_mtime_ns
 
 
+def _sha256_hex(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
 def read_source(path: Path) -> bytes:
     """A source file's bytes, read once; their SHA-256 is computed from them and remembered (size and mtime
-    checked) so that the conversion record does not read and hash the file a second time (:func:`known_sha256`)."""
+    checked) so that the conversion record does not read and hash the file a second time (:func:`known_sha256`).
+
+    Sources of 1 MiB and more are hashed on a worker thread while the caller parses them (hashlib releases the
+    GIL): the SHA-256 of a 57 MB export takes ~45 ms, which then overlaps the parse.
+    """
+    global _HASHER
     with open(path, "rb") as f:
         data = f.read()
         st = os.fstat(f.fileno())
     if st.st_size == len(data):
-        remember_sha256(path, st, hashlib.sha256(data).hexdigest())
+        if len(data) < BACKGROUND_HASH_BYTES:
+            remember_sha256(path, st, _sha256_hex(data))
+        else:
+            if _HASHER is None:
+                _HASHER = ThreadPoolExecutor(max_workers=1, thread_name_prefix="imulog-sha256")
+            remember_sha256(path, st, _HASHER.submit(_sha256_hex, data))
     return data
 
 
-def remember_sha256(path: Path, st: os.stat_result, digest: str) -> None:
-    """Remember the SHA-256 of ``path`` as read while it had the size and mtime of ``st`` (:func:`known_sha256`)."""
+def remember_sha256(path: Path, st: os.stat_result, digest: str | Future[str]) -> None:
+    """Remember the SHA-256 of ``path`` as read while it had the size and mtime of ``st`` (:func:`known_sha256`);
+    ``digest`` may still be being computed (a Future)."""
     if len(_DIGESTS) >= _DIGESTS_KEPT:
         _DIGESTS.pop(next(iter(_DIGESTS)))
     _DIGESTS[_stat_key(path, st)] = digest
@@ -125,9 +143,10 @@ def remember_sha256(path: Path, st: os.stat_result, digest: str) -> None:
 def known_sha256(path: Path) -> str | None:
     """The SHA-256 :func:`read_source` computed for ``path`` when the file has not changed since (else None)."""
     try:
-        return _DIGESTS.get(_stat_key(path, os.stat(path)))
+        digest = _DIGESTS.get(_stat_key(path, os.stat(path)))
     except OSError:
         return None
+    return digest.result() if isinstance(digest, Future) else digest
 
 
 def looks_binary(head: bytes) -> bool:

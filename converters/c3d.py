@@ -17,6 +17,7 @@ import numpy as np
 from converters.base import Converter, ConvertOptions
 from converters.errors import ConversionError
 from imulog.model import AnalogStream, Intervals, MarkerStream, Recording, SignalStream
+from imulog.numeric import finite_rows
 
 LENGTH_TO_M = {"mm": 1e-3, "m": 1.0, "cm": 1e-2}
 MODEL_OUTPUT_GROUPS = ("ANGLES", "FORCES", "MOMENTS", "POWERS", "SCALARS")
@@ -117,7 +118,7 @@ def read_c3d(path: Path, name: str = "vicon") -> Recording:
             outputs.update(str(x).strip() for x in (_param(params, "POINT", grp, []) or []))
         residuals = c["data"]["meta_points"]["residuals"][0] if "meta_points" in c["data"] else None
         xyz = np.transpose(points[:3], (2, 1, 0)).astype(np.float64)  # (N, M, 3)
-        valid = np.isfinite(xyz).all(axis=2)
+        valid = finite_rows(xyz)
         if residuals is not None and residuals.shape == (n_points, n_frames):
             valid &= residuals.T >= 0
         marker_idx = [i for i, lab in enumerate(labels) if lab not in outputs]

@@ -48,16 +48,33 @@ def _load(target: str) -> Converter:
     return obj() if isinstance(obj, type) else obj
 
 
+_DISCOVERED: dict[object, dict[str, Converter]] = {}  # entry_points function -> converters it named
+
+
+def _plugins() -> dict[str, Converter]:
+    """The converters named by installed entry points, discovered once per process.
+
+    Scanning every installed distribution's metadata takes ~15 ms, as long as parsing a 5 MB file; a process
+    converting many files (batch, tests) pays it once. The cache is keyed by the ``entry_points`` function, so
+    a test that replaces it sees its own plug-ins.
+    """
+    key = entry_points
+    if key not in _DISCOVERED:
+        found: dict[str, Converter] = {}
+        for ep in entry_points(group=ENTRY_POINT_GROUP):
+            try:
+                obj = ep.load()
+            except Exception:  # noqa: BLE001 - a broken plug-in must not break every conversion
+                continue
+            found[ep.name] = obj() if isinstance(obj, type) else obj
+        _DISCOVERED.clear()
+        _DISCOVERED[key] = found
+    return _DISCOVERED[key]
+
+
 def available() -> dict[str, Converter]:
     """All converters by name: entry points first (a lab's own may replace a built-in of the same name)."""
-    found: dict[str, Converter] = {}
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            obj = ep.load()
-        except Exception:  # noqa: BLE001 - a broken plug-in must not break every conversion
-            continue
-        conv = obj() if isinstance(obj, type) else obj
-        found[ep.name] = conv
+    found = dict(_plugins())
     for name, target in BUILTIN.items():
         if name not in found:
             found[name] = _load(target)

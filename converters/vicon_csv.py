@@ -30,6 +30,7 @@ from converters._common import (
 from converters.base import Converter, ConvertOptions
 from converters.errors import ConversionError
 from imulog.model import AnalogStream, MarkerStream, Recording, SignalStream
+from imulog.numeric import finite_rows
 
 _BLANK_LINE = re.compile(rb"\n[ \t]*\r?(?=\n)")
 SECTIONS = ("Trajectories", "Devices", "Model Outputs", "Segments", "Joints")
@@ -226,7 +227,7 @@ def read_vicon_csv(path: Path, name: str = "vicon", user_units: dict[str, str] |
                         )
             scale = np.array([LENGTH_TO_M[u] for u in units[2 : 2 + 3 * len(groups)]])
             pos = np.multiply(values[:, 2 : 2 + 3 * len(groups)], scale, order="C").reshape(len(values), len(groups), 3)
-            valid = np.isfinite(pos).all(axis=2)
+            valid = finite_rows(pos)
             rec.markers.append(
                 MarkerStream(
                     name=name,

@@ -75,8 +75,8 @@ def test_marker_and_axes_twin_rows_equal_protobuf():
     stream = MarkerStream("vicon", t, [f"M{i}" for i in range(m)], pos, valid)
     twin = marker_twin(stream, IDENTITY)
     fld = PackedElementField_pb2.PackedElementField
-    fields = [fld(name=axis, offset=8 * k, type=fld.FLOAT64) for k, axis in enumerate("xyz")]
-    msg = PointCloud_pb2.PointCloud(frame_id=stream.frame_id, point_stride=24, fields=fields)
+    fields = [fld(name=axis, offset=4 * k, type=fld.FLOAT32) for k, axis in enumerate("xyz")]
+    msg = PointCloud_pb2.PointCloud(frame_id=stream.frame_id, point_stride=12, fields=fields)
     msg.pose.position.SetInParent()
     msg.pose.orientation.w = 1.0
     ok = valid & np.isfinite(pos).all(axis=2)
@@ -84,7 +84,7 @@ def test_marker_and_axes_twin_rows_equal_protobuf():
     keep = decimation(t)
     for i, stamp in zip(keep.tolist(), IDENTITY(t[keep]).tolist(), strict=True):
         _stamp(msg, stamp)
-        msg.data = np.ascontiguousarray(pos[i][ok[i]], dtype="<f8").tobytes()
+        msg.data = np.ascontiguousarray(pos[i][ok[i]], dtype="<f4").tobytes()
         want.append(msg.SerializeToString())
     assert twin.payload_list() == want
 

@@ -182,8 +182,9 @@ def test_every_channel_decodes_as_numbers_with_mcap_and_foxglove_schemas(process
     clouds = got["/derived/viewer/markers/vicon"]
     assert clouds[0][0] == "foxglove.PointCloud"
     cloud = PointCloud.FromString(clouds[0][2].SerializeToString())
-    assert [fld.name for fld in cloud.fields] == ["x", "y", "z"] and cloud.point_stride == 24
-    assert np.array_equal(np.frombuffer(cloud.data, "<f8").reshape(-1, 3), markers.pos[0])
+    assert [fld.name for fld in cloud.fields] == ["x", "y", "z"] and cloud.point_stride == 12
+    assert [fld.type for fld in cloud.fields] == [cloud.fields[0].FLOAT32] * 3
+    assert np.array_equal(np.frombuffer(cloud.data, "<f4").reshape(-1, 3), markers.pos[0].astype(np.float32))
     assert cloud.timestamp.ToNanoseconds() == clouds[0][1]  # in-message stamp = log time = one axis
     frames = got["/derived/viewer/orientation/wrist"]
     tf = FrameTransform.FromString(frames[10][2].SerializeToString())

@@ -40,16 +40,19 @@ def rows_hash(rows: np.ndarray, mask: np.ndarray | None = None, block: int = 655
     """:func:`payload_hash` of messages held as (N, W) uint8 rows (``mask``: the bytes each uses), with numpy."""
     h = hashlib.sha256()
     n, width = rows.shape
+    joined = np.empty((min(n, block), 8 + width), dtype=np.uint8)  # each message: 8-byte length, then its bytes
+    keep = None if mask is None else np.ones((min(n, block), 8 + width), dtype=bool)
     for i in range(0, n, block):
         part = rows[i : i + block]
         k = len(part)
         lengths = np.full(k, width, dtype="<u8") if mask is None else np.count_nonzero(mask[i : i + block], axis=1).astype("<u8")
-        joined = np.concatenate([lengths.view(np.uint8).reshape(k, 8), part], axis=1)
-        if mask is None:
-            h.update(joined.tobytes())
+        joined[:k, :8] = lengths.view(np.uint8).reshape(k, 8)
+        joined[:k, 8:] = part
+        if keep is None:
+            h.update(joined[:k])  # hashlib reads the contiguous buffer: no copy to bytes
         else:
-            keep = np.concatenate([np.ones((k, 8), dtype=bool), mask[i : i + block]], axis=1)
-            h.update(joined[keep].tobytes())
+            keep[:k, 8:] = mask[i : i + block]
+            h.update(joined[:k][keep[:k]])
     return h.hexdigest()
 
 
