@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import struct
 import zlib
+from array import array
 from dataclasses import dataclass, field
 from typing import BinaryIO
 
@@ -352,6 +353,18 @@ def parse_chunk_index(body: bytes | memoryview) -> ChunkIndexRec:
     return ChunkIndexRec(start, end, offset, length, offsets, mi_len, compression, compressed, uncompressed)
 
 
+def _chunk_index_is_plain(body: bytes | memoryview) -> bool:
+    """True when :func:`parse_chunk_index` reads ``body`` on its fast path (every length inside the record)."""
+    if len(body) < _CI_HEAD.size:
+        return False
+    map_len = _CI_HEAD.unpack_from(body, 0)[4]
+    pos = _CI_HEAD.size + map_len
+    if map_len % _CI_ENTRY.size or pos + _CI_MID.size > len(body):
+        return False
+    name_len = _CI_MID.unpack_from(body, pos)[1]
+    return pos + _CI_MID.size + name_len + _CI_TAIL.size <= len(body)
+
+
 def _parse_chunk_index_fields(body: bytes | memoryview) -> ChunkIndexRec:
     c = Cursor(body)
     start, end, offset, length = c.u64(), c.u64(), c.u64(), c.u64()
@@ -530,13 +543,56 @@ class Summary:
     schemas: dict[int, SchemaRec] = field(default_factory=dict)
     channels: dict[int, ChannelRec] = field(default_factory=dict)
     statistics: StatisticsRec | None = None
-    chunk_indexes: list[ChunkIndexRec] = field(default_factory=list)
     attachment_indexes: list[AttachmentIndexRec] = field(default_factory=list)
     metadata_indexes: list[MetadataIndexRec] = field(default_factory=list)
     summary_offsets: list[tuple[int, int, int]] = field(default_factory=list)
-    summary_records: list[tuple[int, int, int]] = field(default_factory=list)  # (opcode, offset, total length)
     duplicate_chunk_indexes: int = 0  # chunk index entries dropped because an earlier one names the same chunk
     duplicate_record_indexes: int = 0  # attachment/metadata index entries dropped (same record indexed again)
+    # A week's summary indexes ~6000 chunks: as Python objects ~800 bytes each, as kept here 16 (the section's
+    # bytes are kept and each ChunkIndex is parsed when ``chunk_indexes`` is first used; ``info`` never is).
+    _section: bytes = field(default=b"", repr=False)
+    _chunk_spans: array = field(default_factory=lambda: array("Q"), repr=False)  # (start, length) in _section
+    _records: array = field(default_factory=lambda: array("Q"), repr=False)  # (opcode, offset, length) triples
+    _chunk_indexes: list[ChunkIndexRec] | None = field(default=None, repr=False)
+
+    @property
+    def chunk_indexes(self) -> list[ChunkIndexRec]:
+        """Every ChunkIndex record (duplicates dropped), in summary order; parsed on first use."""
+        if self._chunk_indexes is None:
+            spans, section = self._chunk_spans, memoryview(self._section)
+            self._chunk_indexes = [
+                parse_chunk_index(section[spans[i] : spans[i] + spans[i + 1]]) for i in range(0, len(spans), 2)
+            ]
+        return self._chunk_indexes
+
+    @chunk_indexes.setter
+    def chunk_indexes(self, value: list[ChunkIndexRec]) -> None:
+        self._chunk_indexes = list(value)
+
+    @property
+    def summary_records(self) -> list[tuple[int, int, int]]:
+        """(opcode, file offset, total length) of every record of the summary section, in order."""
+        r = self._records
+        return [(r[i], r[i + 1], r[i + 2]) for i in range(0, len(r), 3)]
+
+    def stored_bytes_by_channel(self) -> dict[int, int]:
+        """Compressed chunk bytes per channel id (a chunk's length shared evenly among its channels), read
+        straight from the ChunkIndex records without building them."""
+        if self._chunk_indexes is not None:
+            pairs = [(ci.chunk_length, list(ci.message_index_offsets)) for ci in self._chunk_indexes]
+        else:
+            pairs = []
+            spans, section = self._chunk_spans, self._section
+            for i in range(0, len(spans), 2):
+                lo = spans[i]
+                length, map_len = struct.unpack_from("<QI", section, lo + 24)
+                entries = section[lo + 36 : lo + 36 + map_len]
+                pairs.append((length, [cid for cid, _ in _CI_ENTRY.iter_unpack(entries)]))
+        out: dict[int, int] = {}
+        for length, ids in pairs:
+            for cid in ids:
+                out[cid] = out.get(cid, 0) + length // len(ids)
+        return out
 
 
 def read_summary(f: BinaryIO, file_size: int) -> Summary:
@@ -599,8 +655,9 @@ def _read_summary(f: BinaryIO, file_size: int) -> Summary:
         raise McapFormatError(f"summary CRC mismatch (stored {summary_crc:#010x}, computed {computed:#010x})")
     seen_chunks: set[int] = set()
     seen_records: set[tuple[int, int]] = set()
+    s._section = section
     for op, rel, body in iter_records(section):
-        s.summary_records.append((op, summary_start + rel, 9 + len(body)))
+        s._records.extend((op, summary_start + rel, 9 + len(body)))
         if op == Op.SCHEMA:
             rec = parse_schema(body)
             s.schemas[rec.id] = rec
@@ -614,9 +671,10 @@ def _read_summary(f: BinaryIO, file_size: int) -> Summary:
             if offset in seen_chunks:  # a chunk is read once, however often it is indexed
                 s.duplicate_chunk_indexes += 1
                 continue
-            ci = parse_chunk_index(body)
-            seen_chunks.add(ci.chunk_start_offset)
-            s.chunk_indexes.append(ci)
+            if not _chunk_index_is_plain(body):
+                _parse_chunk_index_fields(body)  # raises, naming what is malformed, like the eager parse did
+            seen_chunks.add(offset)
+            s._chunk_spans.extend((rel + 9, len(body)))
         elif op in (Op.ATTACHMENT_INDEX, Op.METADATA_INDEX):
             offset = _Q.unpack_from(body, 0)[0] if len(body) >= 8 else -1
             if (op, offset) in seen_records:  # each attachment / metadata record is read once

@@ -353,10 +353,7 @@ def check_file(path: str | os.PathLike[str], *, decode: bool = True, progress: P
     try:
         with TrialReader(path) as trial:
             hashes: dict[str, str] = {}
-            sizes: dict[int, int] = {}
-            for ci in trial.summary.chunk_indexes:
-                for cid in ci.message_index_offsets:
-                    sizes[cid] = sizes.get(cid, 0) + ci.chunk_length // len(ci.message_index_offsets)
+            sizes = trial.summary.stored_bytes_by_channel()
             for info in trial.channels:
                 if progress is not None:
                     progress(sizes.get(info.channel_id, 0))

@@ -35,10 +35,7 @@ def trial_summary(trial: TrialReader) -> dict[str, Any]:
     """Everything ``imulog info`` shows, as a JSON-able dict (summary and metadata only: no channel or
     attachment data is read)."""
     stale = trial.stale_channels()
-    stored: dict[int, int] = {}
-    for ci in trial.summary.chunk_indexes:
-        for cid in ci.message_index_offsets:
-            stored[cid] = stored.get(cid, 0) + ci.chunk_length // len(ci.message_index_offsets)
+    stored = trial.summary.stored_bytes_by_channel()
     channels = []
     for c in trial.channels:
         md = c.metadata
