@@ -12,7 +12,7 @@ from rerun.chunk import RrdReader
 
 from imulog.cli import cli
 from imulog.model import ImuStream, Intervals, PoseStream, Recording, SignalStream
-from imulog.view import build_blueprint, from_recording, show
+from imulog.view import build_blueprint, from_recording, rates, show
 from imulog.view import layout as L
 from imulog.view.clock import device_imu_of
 from imulog.view.layout import PHASE_COLORS
@@ -44,6 +44,21 @@ def _best_lag_s(t_a_ns, a, t_b_ns, b, max_lag_s: float, step_s: float = 0.002) -
     return float(lags[int(np.argmax(scores))])
 
 
+def _assert_display_rate(out: Path, cursor: str, series: str) -> np.ndarray:
+    """The cursor ``cursor`` moves at the display's rate along the time series ``series`` (same samples):
+    rows at sample times, from its first sample to its last; at every sample the cursor shown (latest row at
+    or before it) is less than one frame old; no more rows than frames. Returns the cursor's row times."""
+    t_cursor, _ = read_column(out, cursor, "Points3D:positions")
+    t_samples, _ = read_scalars(out, series)
+    assert np.isin(t_cursor, t_samples).all()
+    assert t_cursor[0] == t_samples[0] and t_cursor[-1] == t_samples[-1]
+    shown = t_cursor[np.searchsorted(t_cursor, t_samples, side="right") - 1]
+    assert np.max(t_samples - shown) < 1e9 / rates.DISPLAY_RATE_HZ
+    assert len(t_cursor) <= (t_samples[-1] - t_samples[0]) / 1e9 * rates.DISPLAY_RATE_HZ + 2
+    assert len(t_cursor) < len(t_samples)  # every stream here is faster than the display
+    return t_cursor
+
+
 @pytest.fixture(scope="module")
 def sample_rrd(tmp_path_factory) -> tuple[Path, Recording, list]:
     rec = sample_recording(SampleTrialParams(duration_s=30.0))
@@ -62,14 +77,17 @@ def test_rrd_entities_rows_timeline_and_blueprint(sample_rrd):
         L.imu_gyr_norm_entity("wrist"): len(imu),
         L.marker_entity("vicon"): len(rec.markers[0]),
         L.pose_entity(L.CLUSTER_POSE_TOPIC): len(rec.poses[0]),
-        L.cursor_entity(L.CLUSTER_POSE_TOPIC): len(rec.poses[0]),
         L.norm_entity(L.VICON_ANGULAR_VELOCITY_TOPIC): len(rec.signals[2]),
     }
     for s in rec.signals:
         expected_rows[L.signal_entity(s.topic)] = len(s)
         if s.topic.startswith(L.TRAJECTORY_PREFIX):
-            expected_rows[L.cursor_entity(s.topic)] = len(s)
+            _assert_display_rate(out, L.cursor_entity(s.topic), L.signal_entity(s.topic))
             assert "LineStrips3D:strips" in summary[L.path_entity(s.topic)].static_components
+    assert summary[L.cursor_entity(L.CLUSTER_POSE_TOPIC)].timelines == {L.TIMELINE}
+    t_vicon_cursor, _ = read_column(out, L.cursor_entity(L.CLUSTER_POSE_TOPIC), "Points3D:positions")
+    assert np.isin(t_vicon_cursor, rec.poses[0].t_ns).all()
+    assert len(t_vicon_cursor) <= len(rec.poses[0]) / 100 * rates.DISPLAY_RATE_HZ + 2  # the pose is at 100 Hz
     for entity, rows in expected_rows.items():
         assert entity in summary, entity
         assert summary[entity].rows == rows, entity
@@ -211,8 +229,8 @@ def test_overlay_puts_trials_side_by_side(tmp_path):
     result = show([a, b], sink="save", save_paths=[out], overlay=True)
     summary = summarize(out)
     assert len(RrdReader(out).recordings()) == 1
-    assert summary["/run/world/cursors/trajectory/zupt"].rows == 1000
-    assert summary["/run_2/world/cursors/trajectory/ekf"].rows == 1000
+    _assert_display_rate(out, "/run/world/cursors/trajectory/zupt", "/run/derived/trajectory/zupt")
+    _assert_display_rate(out, "/run_2/world/cursors/trajectory/ekf", "/run_2/derived/trajectory/ekf")
     assert "/run/imu/wrist/gyr_norm" in summary and "/run_2/imu/wrist/gyr_norm" in summary
     # one colour per method across the overlaid trials
     colours = [
@@ -356,7 +374,7 @@ def test_archive_and_steps_pipeline(tmp_path):
     assert summary[L.pose_entity(L.CLUSTER_POSE_TOPIC)].rows == counts[L.CLUSTER_POSE_TOPIC]
     for method in methods:  # every IMU reconstruction: a coloured path, a cursor and an error series
         topic = f"/derived/trajectory/{method}"
-        assert summary[L.cursor_entity(topic)].rows == counts[topic]
+        _assert_display_rate(out, L.cursor_entity(topic), L.signal_entity(topic))
         assert summary[L.error_entity(topic)].rows == counts[topic]
         assert "LineStrips3D:strips" in summary[L.path_entity(topic)].static_components
     text = next(c for c in RrdReader(out).stream().to_chunks() if c.entity_path == L.evaluation_entity())
@@ -410,8 +428,9 @@ def test_repetition_displacements_are_anchored_on_vicon(tmp_path):
     }
     out, logged = _save(tmp_path, rec, "anchored")
     t_c, cursor = read_column(out, L.cursor_entity("/derived/trajectory/truth"), "Points3D:positions")
-    assert len(t_c) == len(t)
-    np.testing.assert_allclose(np.array([c[0] for c in cursor]), pose.position[inside], atol=1e-6)
+    _assert_display_rate(out, L.cursor_entity("/derived/trajectory/truth"), "/derived/trajectory/truth")
+    at = np.searchsorted(t, t_c)  # the cursor's rows are samples of the trajectory: on the true path there
+    np.testing.assert_allclose(np.array([c[0] for c in cursor]), pose.position[inside][at], atol=1e-6)
     t_e, err = read_scalars(out, L.error_entity("/derived/trajectory/truth"))
     assert len(t_e) == len(t) and np.nanmax(err) < 1e-3  # cm
     assert logged[0].by_role("error")

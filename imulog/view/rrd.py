@@ -14,14 +14,22 @@ from imulog.view.layout import TIMELINE
 
 @dataclass
 class EntitySummary:
-    """Temporal rows of one entity on ``reference_time``, its time range (ns) and component columns."""
+    """Temporal rows of one entity on ``reference_time``, its time range (ns) and component columns.
 
-    rows: int = 0
+    ``component_rows`` counts, per component, the rows that carry it; ``rows`` is the largest of them (a
+    component sent only where it changes, such as the class ids of markers with gaps, adds no rows).
+    """
+
     t_min_ns: int | None = None
     t_max_ns: int | None = None
     timelines: set[str] = field(default_factory=set)
     components: set[str] = field(default_factory=set)
     static_components: set[str] = field(default_factory=set)
+    component_rows: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def rows(self) -> int:
+        return max(self.component_rows.values(), default=0)
 
 
 def _times_ns(column: pa.Array) -> np.ndarray:
@@ -42,7 +50,9 @@ def summarize(path: str | Path) -> dict[str, EntitySummary]:
         entry.timelines |= set(chunk.timeline_names)
         if TIMELINE in batch.schema.names:
             t = _times_ns(batch.column(TIMELINE))
-            entry.rows += len(t)
+            for name in components:
+                column = batch.column(name)
+                entry.component_rows[name] = entry.component_rows.get(name, 0) + len(column) - column.null_count
             if len(t):
                 lo, hi = int(t.min()), int(t.max())
                 entry.t_min_ns = lo if entry.t_min_ns is None else min(entry.t_min_ns, lo)

@@ -18,6 +18,7 @@ import rerun as rr
 
 from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream
 from imulog.view import layout as L
+from imulog.view import rates
 from imulog.view.anchor import anchor_repetitions, position_error_cm
 from imulog.view.clock import ClockMap, device_imu_of
 from imulog.view.report import evaluation_markdown, info_markdown, markdown_table, metrics_markdown
@@ -241,7 +242,8 @@ class _Logger:
         """Points3D, one row per sample; ``pos`` (N, M, 3), only valid points sent (rows may be empty).
 
         Without gaps every row holds the same M points in order, so the marker class ids (labels, colours) are
-        sent once as a static column instead of once per point; with gaps they go with every point.
+        sent once as a static column; with gaps they are sent only at the rows where the set of visible markers
+        changes (:func:`rates.pattern_changes`), which latest-at carries forward to the rows in between.
         """
         n, m = valid.shape
         if n == 0:
@@ -249,11 +251,8 @@ class _Logger:
         complete = bool(valid.all())
         if complete:  # fast path: no gaps, M points per row
             flat = np.ascontiguousarray(pos, dtype=np.float32).reshape(-1, 3)
-            class_ids = None
         else:
-            mask = valid.reshape(-1)
-            flat = np.compress(mask, pos.reshape(-1, 3), axis=0).astype(np.float32)
-            class_ids = np.tile(np.arange(m, dtype=np.uint16), n)[mask]
+            flat = np.compress(valid.reshape(-1), pos.reshape(-1, 3), axis=0).astype(np.float32, copy=False)
         if labels is not None:
             self.rec.log(
                 path,
@@ -264,16 +263,25 @@ class _Logger:
             self.rec.log(
                 path, rr.Points3D.from_fields(radii=[radius_m], show_labels=False, class_ids=static_ids), static=True
             )
-            cols = rr.Points3D.columns(positions=flat, class_ids=class_ids)
         else:
-            cols = rr.Points3D.columns(positions=flat)
             self.rec.log(
                 path, rr.Points3D.from_fields(radii=[radius_m], colors=[_rgb(colour or (0, 0, 0))]), static=True
             )
+        cols = rr.Points3D.columns(positions=flat)
         if not (complete and m == 1):  # one point per row is the default partition
             cols = cols.partition(np.full(n, m, dtype=np.int64) if complete else valid.sum(axis=1))
         self.rec.send_columns(path, indexes=[self._time(t_ref)], columns=cols)
+        if labels is not None and not complete:
+            self.class_id_changes(path, t_ref, valid)
         self._record(path, role, topic, t_ref)
+
+    def class_id_changes(self, path: str, t_ref: np.ndarray, valid: np.ndarray) -> None:
+        """The class ids of the visible markers, at the rows where the set of visible markers changes."""
+        rows = rates.pattern_changes(valid)
+        shown = valid[rows]
+        ids = np.nonzero(shown)[1].astype(np.uint16)
+        cols = rr.Points3D.columns(class_ids=ids).partition(shown.sum(axis=1))
+        self.rec.send_columns(path, indexes=[_TimeIndex(t_ref[rows])], columns=cols)
 
     def path_strip(
         self,
@@ -316,7 +324,8 @@ class _Logger:
         finite = np.isfinite(pos).all(axis=1)
         self.path_strip(topic, t_ref, pos, colour, label, finite)
         cursor = L.cursor_entity(topic, self.prefix)
-        self.points(cursor, "cursor", topic, t_ref, pos[:, None, :], finite[:, None], 0.007, colour)
+        rows = rates.display_rows(t_ref)  # a cursor is only seen at the display's rate
+        self.points(cursor, "cursor", topic, t_ref[rows], pos[rows, None, :], finite[rows, None], 0.007, colour)
         return colour
 
     def imu_trajectory(self, s: SignalStream, t_ref: np.ndarray) -> None:

@@ -1,0 +1,69 @@
+"""What the viewer sends at less than the full rate: cursors at the display's rate, marker labels where they change."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from imulog.view import from_recording, rates, show
+from imulog.view import layout as L
+from imulog.view.rrd import read_column, summarize
+from imulog.view.sample import SampleTrialParams, sample_recording
+
+FRAME_NS = 1e9 / rates.DISPLAY_RATE_HZ
+
+
+def _latest_at(t_rows: np.ndarray, t_query: np.ndarray) -> np.ndarray:
+    """Index of the latest row at or before each query time (-1: none)."""
+    return np.searchsorted(t_rows, t_query, side="right") - 1
+
+
+def test_display_rows_keep_one_sample_per_frame():
+    t = np.arange(1000, dtype=np.int64) * 10_000_000 + 123  # 10 s at 100 Hz
+    rows = rates.display_rows(t)
+    assert rows[0] == 0 and rows[-1] == len(t) - 1 and np.all(np.diff(rows) > 0)
+    assert len(rows) <= 10 * rates.DISPLAY_RATE_HZ + 2
+    shown = rows[_latest_at(t[rows], t)]  # what the viewer draws at each sample's time
+    assert np.max(t - t[shown]) < FRAME_NS
+
+
+def test_display_rows_slow_streams_and_gaps():
+    slow = np.arange(50, dtype=np.int64) * 50_000_000  # 20 Hz: below the display rate, nothing dropped
+    np.testing.assert_array_equal(rates.display_rows(slow), np.arange(50))
+    t = np.concatenate([np.arange(100), np.arange(400, 500)]).astype(np.int64) * 10_000_000  # a 3-s gap
+    rows = rates.display_rows(t)
+    assert 100 in rows  # the first sample after the gap is drawn at once
+    assert np.max(t - t[rows[_latest_at(t[rows], t)]]) < FRAME_NS
+    assert list(rates.display_rows(np.array([5, 7], np.int64))) == [0, 1]
+    assert len(rates.display_rows(np.zeros(0, np.int64))) == 0
+
+
+def test_pattern_changes_against_a_loop():
+    rng = np.random.default_rng(3)
+    valid = rng.random((500, 4)) > 0.05
+    valid[100:140] = True
+    expected = [k for k in range(len(valid)) if k == 0 or not np.array_equal(valid[k], valid[k - 1])]
+    np.testing.assert_array_equal(rates.pattern_changes(valid), expected)
+    assert list(rates.pattern_changes(np.ones((30, 3), bool))) == [0]
+    assert len(rates.pattern_changes(np.zeros((0, 3), bool))) == 0
+
+
+def test_marker_class_ids_follow_the_visible_markers(tmp_path):
+    """With an occluded marker the labels (class ids) are sent where the visible set changes; carried forward
+    (latest-at, as the viewer queries) they name every point of every frame correctly."""
+    rec = sample_recording(SampleTrialParams(duration_s=10.0))
+    markers = rec.markers[0]
+    assert not markers.valid.all()  # the sample trial occludes a marker for a while
+    out = tmp_path / "m.rrd"
+    show([from_recording(rec, "m")], sink="save", save_paths=[out])
+    entity = L.marker_entity(markers.name)
+    t_pos, points = read_column(out, entity, "Points3D:positions")
+    t_ids, ids = read_column(out, entity, "Points3D:class_ids")
+    assert len(t_pos) == len(markers) == summarize(out)[entity].rows
+    assert 1 < len(t_ids) < len(markers) // 10  # only where the set changes, not at every frame
+    carried = _latest_at(t_ids, t_pos)
+    assert carried.min() >= 0
+    for k in range(len(markers)):
+        visible = np.flatnonzero(markers.valid[k])
+        assert ids[carried[k]] == visible.tolist()
+        assert len(points[k]) == len(visible)
+        np.testing.assert_allclose(points[k], markers.pos[k, visible], atol=1e-5)
