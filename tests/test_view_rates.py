@@ -1,13 +1,16 @@
-"""What the viewer sends at less than the full rate: cursors at the display's rate, marker labels where they change."""
+"""What the viewer sends at less than the full rate, and channels read while they are logged."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from imulog.model import Intervals, PoseStream
 from imulog.view import from_recording, rates, show
 from imulog.view import layout as L
 from imulog.view.rrd import read_column, summarize
 from imulog.view.sample import SampleTrialParams, sample_recording
+from imulog.view.source import ArchiveStreams, open_trial, read_trial
 
 FRAME_NS = 1e9 / rates.DISPLAY_RATE_HZ
 
@@ -67,3 +70,67 @@ def test_marker_class_ids_follow_the_visible_markers(tmp_path):
         assert ids[carried[k]] == visible.tolist()
         assert len(points[k]) == len(visible)
         np.testing.assert_allclose(points[k], markers.pos[k, visible], atol=1e-5)
+
+
+@pytest.fixture(scope="module")
+def archived(tmp_path_factory):
+    from imulog.archive import write_trial
+
+    tmp = tmp_path_factory.mktemp("rates")
+    return write_trial(tmp / "t.mcap", sample_recording(SampleTrialParams(duration_s=10.0)))
+
+
+def test_open_trial_reads_each_channel_when_reached(archived, monkeypatch):
+    from imulog.archive import TrialReader
+
+    data = open_trial(archived)
+    with TrialReader(archived) as tr:
+        assert isinstance(data.streams, ArchiveStreams) and sorted(data.streams.topics) == sorted(tr.topics())
+    reads: list[str] = []
+    real_read = TrialReader.read
+    monkeypatch.setattr(TrialReader, "read", lambda self, topic, *a, **k: reads.append(topic) or real_read(self, topic))
+    it = iter(data.streams)
+    first = next(it)
+    assert reads == [first.topic]  # nothing else read yet
+    rest = list(it)
+    kinds = [isinstance(s, Intervals) for s in [first, *rest]]
+    assert kinds == sorted(kinds, reverse=True)  # intervals first
+    topics = [s.topic for s in [first, *rest]]
+    pose = topics.index(L.CLUSTER_POSE_TOPIC)
+    assert isinstance([first, *rest][pose], PoseStream)
+    assert all(pose < topics.index(t) for t in topics if t.startswith(L.TRAJECTORY_PREFIX))
+
+
+def test_open_trial_and_read_trial_give_the_same_recording(archived, tmp_path):
+    lazy, eager = tmp_path / "lazy.rrd", tmp_path / "eager.rrd"
+    show([open_trial(archived)], sink="save", save_paths=[lazy])
+    show([read_trial(archived)], sink="save", save_paths=[eager])
+    a, b = summarize(lazy), summarize(eager)
+    assert a.keys() == b.keys()
+    for entity in a:
+        assert (a[entity].rows, a[entity].t_min_ns, a[entity].t_max_ns) == (
+            b[entity].rows,
+            b[entity].t_min_ns,
+            b[entity].t_max_ns,
+        ), entity
+        assert a[entity].components == b[entity].components, entity
+    _, err_lazy = read_column(lazy, L.error_entity("/derived/trajectory/zupt"), "Scalars:scalars")
+    _, err_eager = read_column(eager, L.error_entity("/derived/trajectory/zupt"), "Scalars:scalars")
+    assert err_lazy == err_eager and len(err_lazy) > 0  # anchored on the Vicon pose read before it
+
+
+def test_a_damaged_chunk_met_while_logging_leaves_no_rrd(archived, tmp_path):
+    from imulog.archive import ArchiveCorruptError, TrialReader
+
+    with TrialReader(archived) as tr:
+        cid = next(c.id for c in tr.summary.channels.values() if c.topic == "/imu/wrist")
+        chunk = next(ci for ci in tr.summary.chunk_indexes if cid in ci.message_index_offsets)
+    bad = bytearray(archived.read_bytes())
+    bad[chunk.chunk_start_offset + chunk.chunk_length // 2] ^= 0x10
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(bad))
+    data = open_trial(damaged)  # the summary is intact: the damage is met when the IMU channel is read
+    out = tmp_path / "damaged.rrd"
+    with pytest.raises(ArchiveCorruptError, match="/imu/wrist"):
+        show([data], sink="save", save_paths=[out])
+    assert not out.exists()

@@ -56,12 +56,12 @@ def show_trial(
         raise ImportError("the notebook viewer needs rerun-notebook: pip install 'imulog[notebook]'") from exc
     from imulog.view.overview import OverviewParams, read_trial_overview
     from imulog.view.session import log_trials, new_recording
-    from imulog.view.source import read_trial
+    from imulog.view.source import open_trial
 
-    if full_resolution:
-        data, reduced = read_trial(path), False
+    if full_resolution:  # channels read while they are logged: the widget receives the first ones sooner
+        data, reduced = open_trial(path), False
     else:
-        data, reduced = read_trial_overview(path, OverviewParams(start_s=start_s, end_s=end_s))
+        data, reduced = read_trial_overview(path, OverviewParams(start_s=start_s, end_s=end_s), lazy=True)
     rec = new_recording(data.label)
     if viewer is None:
         viewer = Viewer(width=width, height=height, recording=rec)

@@ -23,7 +23,7 @@ import numpy as np
 
 from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream, take_samples
 from imulog.view.clock import ClockMap, device_imu_of
-from imulog.view.source import TrialData, read_trial
+from imulog.view.source import TrialData, open_trial, read_trial
 
 IMU_FIELDS = ("acc", "gyr", "mag", "temperature")
 
@@ -190,7 +190,12 @@ def _rebuild(template: Any, t_ns: np.ndarray, values: np.ndarray, layout: list[t
         )
     if isinstance(template, AnalogStream):
         return AnalogStream(
-            template.name, t_ns, list(template.channel_names), list(template.units), pieces["values"], dict(template.meta)
+            template.name,
+            t_ns,
+            list(template.channel_names),
+            list(template.units),
+            pieces["values"],
+            dict(template.meta),
         )
     return SignalStream(
         template.topic, t_ns, list(template.columns), list(template.units), pieces["values"], template.frame_id
@@ -215,9 +220,7 @@ def _concat(pieces: list[Any]) -> Any:
     return PoseStream(first.topic, t, np.concatenate([p.position for p in pieces]), orientation, first.frame_id)
 
 
-def reduce_channel(
-    pieces: Iterable[Any], bucket_ns: int, origin_ns: int, window: tuple[int, int] | None
-) -> Any | None:
+def reduce_channel(pieces: Iterable[Any], bucket_ns: int, origin_ns: int, window: tuple[int, int] | None) -> Any | None:
     """One channel's pieces (in time order, on the channel's own clock) -> its overview stream.
 
     Samples inside ``window`` ([start, end) ns on the channel's clock) are kept; the rest is reduced.
@@ -276,10 +279,13 @@ def trial_span_ns(channels: Iterable[Any], clocks: ClockMap) -> tuple[int, int]:
     return (min(lo), max(hi)) if lo else (0, 0)
 
 
-def read_trial_overview(path: str | Path, params: OverviewParams | None = None) -> tuple[TrialData, bool]:
+def read_trial_overview(
+    path: str | Path, params: OverviewParams | None = None, *, lazy: bool = False
+) -> tuple[TrialData, bool]:
     """The trial as the viewer should load it, and whether it was reduced.
 
-    Trials no longer than ``params.full_resolution_max_s`` with no window are read whole (:func:`read_trial`).
+    Trials no longer than ``params.full_resolution_max_s`` with no window are read whole (:func:`read_trial`),
+    or, when ``lazy``, opened with :func:`open_trial` (each channel read when it is logged).
     """
     from imulog.archive import TrialReader
 
@@ -293,7 +299,7 @@ def read_trial_overview(path: str | Path, params: OverviewParams | None = None) 
         clocks = ClockMap(metadata, channel_meta, imu_names)
         t0, t1 = trial_span_ns(channels, clocks)
         if (t1 - t0) / 1e9 <= p.full_resolution_max_s and not p.has_window:
-            return read_trial(path), False
+            return (open_trial(path) if lazy else read_trial(path)), False
         bucket_ns = max(1, (t1 - t0) // max(1, p.buckets))
         window_ref = None
         if p.has_window:

@@ -69,6 +69,16 @@ def log_trials(rec: rr.RecordingStream, trials: Sequence[TrialData], *, overlay:
     return logged
 
 
+def _discard(result: ViewResult) -> None:
+    """Stop the web server, close the recordings and remove the ``.rrd`` files they were writing."""
+    if result.server is not None:
+        result.server.stop()
+    for rec in result.recordings:
+        rec.disconnect()
+    for path in result.saved:
+        path.unlink(missing_ok=True)
+
+
 def show(
     trials: Sequence[TrialData],
     *,
@@ -83,7 +93,9 @@ def show(
     """Log ``trials`` to one or several sinks: ``save`` (``save_paths``, one per recording), ``spawn``, ``web``.
 
     One recording per trial, or one for all when ``overlay``. ``web`` starts Rerun's web viewer and gRPC proxy
-    bound to ``bind`` (127.0.0.1 unless asked); stop it with ``result.server.stop()``.
+    bound to ``bind`` (127.0.0.1 unless asked); stop it with ``result.server.stop()``. Trials from
+    :func:`imulog.view.source.open_trial` are read while they are logged; if reading fails, the error is raised
+    after the server is stopped and the ``.rrd`` files being written are removed.
     """
     sinks = {sink} if isinstance(sink, str) else set(sink)
     unknown = sinks - {"save", "spawn", "web"}
@@ -116,9 +128,8 @@ def show(
         for rec, group in zip(result.recordings, groups, strict=True):
             result.logged.append(log_trials(rec, group, overlay=overlay))
             rec.flush()
-    except BaseException:
-        if result.server is not None:
-            result.server.stop()
+    except BaseException:  # e.g. a damaged chunk reached while reading (open_trial): no partial .rrd is left
+        _discard(result)
         raise
     if sinks == {"save"}:
         for rec in result.recordings:

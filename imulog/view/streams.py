@@ -22,6 +22,7 @@ from imulog.view import rates
 from imulog.view.anchor import anchor_repetitions, position_error_cm
 from imulog.view.clock import ClockMap, device_imu_of
 from imulog.view.report import evaluation_markdown, info_markdown, markdown_table, metrics_markdown
+from imulog.view.source import logging_rank
 
 
 @dataclass
@@ -154,7 +155,7 @@ class _Logger:
         self.clocks = clocks
         self.prefix = trial.prefix
         self.n_paths = color_offset  # next palette index for a trajectory / marker set
-        self.reference = reference  # Vicon cluster origin: (t_ref ns, position m)
+        self.reference = reference  # Vicon cluster origin (t_ref ns, position m); set when the cluster pose is logged
         self.trajectory_record = dict(trajectory_record or {})
         self.timing_record = dict(timing_record or {})  # imulog.timing: forced phases, repetition confidence
         self._index: tuple[np.ndarray, _TimeIndex] | None = None  # last time column, reused for the same array
@@ -519,6 +520,8 @@ class _Logger:
         valid = np.all(np.isfinite(s.position), axis=1) & np.all(np.isfinite(s.orientation), axis=1)
         quat_xyzw = s.orientation[valid][:, [1, 2, 3, 0]]
         cols = rr.Transform3D.columns(translation=s.position[valid], quaternion=quat_xyzw)
+        if s.topic == L.CLUSTER_POSE_TOPIC:  # logged before the trajectories anchored on it (logging_rank)
+            self.reference = (t_ref, s.position)
         path = L.pose_entity(s.topic, self.prefix)
         self.rec.log(path, rr.TransformAxes3D(0.08), static=True)
         self.rec.send_columns(path, indexes=[self._time(t_ref)], columns=cols.partition(valid.astype(np.int64)))
@@ -541,6 +544,11 @@ class _Logger:
             self.pose(stream)
         else:  # pragma: no cover - defensive
             raise TypeError(f"cannot view a {type(stream).__name__}")
+
+
+def _logging_rank(stream: Any) -> int:
+    """:func:`imulog.view.source.logging_rank` of an in-memory stream."""
+    return logging_rank("intervals" if isinstance(stream, Intervals) else "", stream.topic)
 
 
 def _log_legend(recording: rr.RecordingStream, trial: LoggedTrial, prefix: str) -> None:
@@ -589,28 +597,24 @@ def log_streams(
     """
     metadata = metadata or {}
     trial = LoggedTrial(label=label, prefix=prefix)
-    streams = list(streams)
-    imu_names = {s.name for s in streams if isinstance(s, ImuStream)} | {
-        t.split("/")[2] for t in (channel_meta or {}) if t.startswith("/imu/")
-    }
+    imu_names = {t.split("/")[2] for t in (channel_meta or {}) if t.startswith("/imu/")}
+    if getattr(streams, "ordered_for_viewer", False):  # read while logged (source.ArchiveStreams): keep it lazy
+        ordered: Iterable[Any] = streams
+    else:
+        ordered = sorted(streams, key=_logging_rank)
+        imu_names |= {s.name for s in ordered if isinstance(s, ImuStream)}
     clocks = ClockMap(metadata, channel_meta or {}, imu_names)
-    reference = None
-    for stream in streams:
-        if isinstance(stream, PoseStream) and stream.topic == L.CLUSTER_POSE_TOPIC:
-            reference = (clocks.to_reference(stream.topic, stream.t_ns), stream.position)
     logger = _Logger(
         recording,
         trial,
         clocks,
         color_offset,
-        reference,
+        None,
         metadata.get("imulog.trajectory"),
         metadata.get("imulog.timing"),
     )
     recording.log(L.join(prefix, "/world"), rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    # intervals (small) first: a viewer still loading a long trial's signals already shows the phases
-    ordered = sorted(streams, key=lambda s: not isinstance(s, Intervals))
-    for stream in ordered:
+    for stream in ordered:  # intervals, then the cluster pose (the trajectories' reference), then the rest
         logger.log(stream)
     _log_legend(recording, trial, prefix)
     if "imulog.evaluation" in metadata:
