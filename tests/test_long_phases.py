@@ -93,6 +93,22 @@ def _read(path):
         )
 
 
+def _logs(path, kind):
+    """(log time, text) of the foxglove.Log twin of /derived/{kind}/{IMU}; the channel must exist once."""
+    from mcap.reader import make_reader
+
+    topic = f"/derived/viewer/{kind}/{IMU}"
+    with TrialReader(path) as t:
+        assert [c.topic for c in t.channels].count(topic) == 1
+    from imulog.archive._generated.foxglove import Log_pb2
+
+    with open(path, "rb") as f:
+        return [
+            (m.log_time, Log_pb2.Log.FromString(m.data).message)
+            for _, _, m in make_reader(f).iter_messages(topics=[topic])
+        ]
+
+
 def test_cores_equal_the_whole(trial, whole, tmp_path, monkeypatch):
     """Small cores (7 min), and intervals written in pieces of 37, give the whole computation's movements, phases and static mask to the sample: the norm
     filtered core by core differs from the whole filtering by rounding only (the overlap covers the filters'
@@ -114,6 +130,10 @@ def test_cores_equal_the_whole(trial, whole, tmp_path, monkeypatch):
     np.testing.assert_array_equal(sw.t_ns, sc.t_ns)
     np.testing.assert_array_equal(sw.values, sc.values)
     assert tc["n_movements"] == tw["n_movements"] and tc["static_fraction"] == tw["static_fraction"]
+    # intervals written in pieces get the foxglove.Log twins the whole writes, once each, also after a rerun
+    run_phases(cored, cores=PhaseCores(core_s=420.0, overlap_s=30.0, context_s=600.0), force=True)
+    for kind in ("movements", "phases"):
+        assert _logs(cored, kind) == _logs(whole, kind) and len(_logs(whole, kind)) == len(mw if kind == "movements" else pw)
     # the record: counts and summaries instead of a row per phase
     assert "phases" not in tc
     durations = np.array([row["duration_s"] for row in tw["phases"]])

@@ -343,6 +343,10 @@ def append_derived(
             for t in [tw.topic for tw in twins] + twins_removed:
                 if t in existing and t not in raw_topics:
                     drop.add(existing[t].id)
+            pieces = {t for s in streams if isinstance(s, StreamPieces) for t in s.topics}
+            for info in existing.values():  # twins of channels written piece by piece: rewritten with them
+                if info.metadata.get("twin_of") in pieces and info.topic not in raw_topics:
+                    drop.add(info.id)
             n = _run_number(f, summary)
             inputs = _input_hashes(f, summary, run.get("inputs"), path)
             for topic, digest in inputs.items():  # provenance must describe the file being written

@@ -34,7 +34,7 @@ from imulog.archive.errors import ArchiveError, ArchiveExistsError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import encode_record
 from imulog.archive.timeline import TIMELINE_RECORD, TimelineError, TrialAxis, timeline_record
-from imulog.model import Recording, Stream, take_samples
+from imulog.model import Intervals, Recording, Stream, take_samples
 
 STATS_RECORD = "imulog.channel_stats"
 STATS_KEYS = ("sample_count", "start_ns", "end_ns", "rate_hz", "time_gaps", "nan_samples", "sha256")
@@ -233,8 +233,14 @@ class StreamingTrialWriter:
         """The viewer twins of this piece (:mod:`imulog.archive.twins`), every ``k``-th sample of the recording."""
         from imulog.archive import writer
 
+        if not writer.WRITE_TWINS:
+            return
+        if isinstance(stream, Intervals):  # every interval, as when written whole: one foxglove.Log at its start
+            if len(stream):
+                self._add_twins(writer.stream_twins(stream, self._axis, self.metadata), stream.start_ns)
+            return
         t = getattr(stream, "t_ns", None)
-        if not writer.WRITE_TWINS or t is None or not len(t):
+        if t is None or not len(t):
             return
         k = self._twin_step(stream)
         first = self._twin_seen.get(stream.topic, 0)
@@ -242,7 +248,13 @@ class StreamingTrialWriter:
         self._twin_seen[stream.topic] = first + len(t)
         if not len(keep):
             return
-        for twin in writer.stream_twins(take_samples(stream, keep), self._axis, self.metadata):
+        twins = writer.stream_twins(take_samples(stream, keep), self._axis, self.metadata)
+        self._add_twins(twins, np.asarray(stream.t_ns)[keep])
+
+    def _add_twins(self, twins: list[Any], sample_times: np.ndarray) -> None:
+        """Write this piece's ``twins`` (their channels opened on the first piece); ``sample_times``: the canonical
+        samples (or interval starts) they show."""
+        for twin in twins:
             ch = self._twins.get(twin.topic)
             if ch is None:
                 meta = {k_: v for k_, v in twin.metadata.items() if k_ not in STATS_KEYS}
@@ -253,7 +265,7 @@ class StreamingTrialWriter:
                     twin.topic, schema_id, meta, encoding=twin.message_encoding, zstd_level=TWIN_ZSTD_LEVEL
                 )
                 ch = self._twins[twin.topic] = _Channel(cid, twin.topic)
-            ch.stats.add_samples(np.asarray(stream.t_ns)[keep], [])
+            ch.stats.add_samples(sample_times, [])
             self._add_messages(ch, twin.log_times, twin.payload_list())
 
     def _twin_step(self, stream: Stream) -> int:
