@@ -132,7 +132,7 @@ def long_metrics_pieces(
     from imulog.process.metrics.distance import histogram_percent, weighted_area, windowed_distance
     from imulog.process.metrics.periods import DAY_S, HOUR_S, PeriodAccumulator, wall_clock_origin_ns
     from imulog.steps.common import nominal_rate_hz
-    from imulog.steps.long_orientation import SampleBuffer
+    from imulog.steps.sample_window import SampleWindow
 
     p = params
     c = cores or MetricCores()
@@ -172,15 +172,11 @@ def long_metrics_pieces(
             key: PeriodAccumulator(*wall_clock_origin_ns(first_t, start_time, period_s), period_s, centres)
             for key, period_s in (("by_hour", HOUR_S), ("by_day", DAY_S))
         }
-        buf = SampleBuffer()
-        blocks = trial.iter_blocks(imu_topic)
+        buf = SampleWindow(((piece.t_ns, piece.acc) for piece in trial.iter_blocks(imu_topic)), total)
         core_start, last_t = 0, first_t
         while core_start < total:
             core_end = min(total, core_start + core)
             hi = min(total, core_end + overlap)
-            while buf.start + buf.size < hi:
-                piece = next(blocks)
-                buf.add((piece.t_ns, piece.acc))
             lo = max(0, core_start - overlap)
             t, acc = buf.take(lo, hi)
             raw_g = acc_to_g(acc)

@@ -13,6 +13,7 @@ Memory: one window plus its overlaps, whatever the recording's length.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from imulog.model import SignalStream
+from imulog.steps.sample_window import SampleWindow
 
 #: recordings with more IMU samples than this (about 8 h at 100 Hz) get their orientation window by window
 LONG_SAMPLES = 3_000_000
@@ -35,31 +37,6 @@ class WindowParams:
 
     def to_dict(self) -> dict[str, float]:
         return {"window_s": self.window_s, "overlap_s": self.overlap_s}
-
-
-class SampleBuffer:
-    """Samples read so far that a window still needs, with the global index of the first one."""
-
-    def __init__(self) -> None:
-        self.start = 0
-        self.parts: list[tuple[np.ndarray, ...]] = []
-        self.size = 0
-
-    def add(self, arrays: tuple[np.ndarray | None, ...]) -> None:
-        self.parts.append(arrays)
-        self.size += len(arrays[0])
-
-    def take(self, lo: int, hi: int) -> tuple[np.ndarray | None, ...]:
-        """Samples [lo, hi) (global indices) and drop everything before ``lo``."""
-        joined = tuple(
-            None if self.parts[0][k] is None else np.concatenate([p[k] for p in self.parts])
-            for k in range(len(self.parts[0]))
-        )
-        a, b = lo - self.start, hi - self.start
-        window = tuple(None if x is None else x[a:b] for x in joined)
-        self.parts = [tuple(None if x is None else x[a:] for x in joined)]
-        self.start, self.size = lo, self.size - a
-        return window
 
 
 def windowed_pieces(
@@ -78,22 +55,19 @@ def windowed_pieces(
     from imulog.steps.common import mean_rate_hz
     from imulog.steps.orientation import imu_arrays, orientation_with_gaps
 
-    buf = SampleBuffer()
     core_start = 0
     join_quat: np.ndarray | None = None  # the previous window's orientation at this window's first core sample
     bound_heap()  # the same temporaries core after core: keep them out of the heap (imulog.heap)
     with TrialReader(path) as trial:
         blocks = trial.iter_blocks(topic)
         first = next(blocks)
-        buf.add(imu_arrays(first, topic))
+        buf = SampleWindow(itertools.chain([imu_arrays(first, topic)], (imu_arrays(b, topic) for b in blocks)), total)
         rate = mean_rate_hz(first.t_ns)
         core = max(1, int(round(window.window_s * rate)))
         overlap = int(round(window.overlap_s * rate))
         while core_start < total:
             core_end = min(total, core_start + core)
             hi = min(total, core_end + overlap)
-            while buf.start + buf.size < hi:
-                buf.add(imu_arrays(next(blocks), topic))
             lo = max(0, core_start - overlap)
             t, acc, gyr, mag = buf.take(lo, hi)
             streams, _ = orientation_with_gaps(t, acc, gyr, mag, imu, params, gaps)

@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from imulog.model import Intervals, SignalStream
+from imulog.steps.sample_window import SampleWindow
 
 #: recordings with more IMU samples than this (about 8 h at 100 Hz) get their phases core by core
 LONG_SAMPLES = 3_000_000
@@ -304,43 +305,10 @@ def exact_median_below(norm: NormFile, threshold: float, bins: int = 4096, max_v
     return float(0.5 * (values[ranks[0] - below] + values[ranks[1] - below]))
 
 
-class Samples:
-    """IMU samples read so far, addressed by global index; ``drop_before`` frees what no window needs."""
-
-    def __init__(self, blocks: Iterator[Any], total: int) -> None:
-        self.blocks = blocks
-        self.total = total
-        self.start = 0
-        self.parts: list[tuple[np.ndarray, np.ndarray | None, np.ndarray | None]] = []
-        self.end = 0
-
-    def get(self, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-        """(t_ns, gyr, acc) of samples ``[lo, hi)`` (clipped to the recording)."""
-        lo, hi = max(0, lo), min(self.total, hi)
-        if lo < self.start:
-            raise RuntimeError(f"samples before {self.start} were dropped (asked from {lo})")
-        while self.end < hi:
-            b = next(self.blocks)
-            self.parts.append((np.asarray(b.t_ns, np.int64), b.gyr, b.acc))
-            self.end += len(b.t_ns)
-        out = []
-        for k in range(3):
-            if self.parts[0][k] is None:
-                out.append(None)
-                continue
-            pieces, pos = [], self.start
-            for p in self.parts:
-                n = len(p[0])
-                a, b = max(lo, pos), min(hi, pos + n)
-                if b > a:
-                    pieces.append(p[k][a - pos : b - pos])
-                pos += n
-            out.append(np.concatenate(pieces) if len(pieces) != 1 else pieces[0])
-        return out[0], out[1], out[2]
-
-    def drop_before(self, index: int) -> None:
-        while self.parts and self.start + len(self.parts[0][0]) <= index:
-            self.start += len(self.parts.pop(0)[0])
+def imu_windows(trial: Any, topic: str, total: int) -> SampleWindow:
+    """(t_ns, gyr, acc) of ``topic``'s samples, block by block (:class:`imulog.steps.sample_window.SampleWindow`)."""
+    blocks = ((np.asarray(b.t_ns, np.int64), b.gyr, b.acc) for b in trial.iter_blocks(topic))
+    return SampleWindow(blocks, total)
 
 
 def prepared(gyr: np.ndarray, acc: np.ndarray | None, gaps: Any) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
@@ -401,7 +369,7 @@ def long_phase_pieces(
         has_acc = False
         missing, first_t, last_t = 0, 0, 0
         with TrialReader(path) as trial:
-            buf = Samples(trial.iter_blocks(topic), total)
+            buf = imu_windows(trial, topic, total)
             for cs, ce in bounds_list:
                 lo, hi = max(0, cs - over), min(total, ce + over)
                 t, gyr, acc = buf.get(lo, hi)
@@ -455,7 +423,7 @@ def long_phase_pieces(
         acc_cut = acc_noise.cutoff_hz(rate, cutoff_params(p.hand)) if has_acc else None
         ps, pe = ms.copy(), me.copy()  # protocol "movements": one phase per movement
 
-        def refine_core(trial_buf: Samples, cs: int, ce: int, prev_end: int, starts, ends, nxt_of, hand: bool):
+        def refine_core(trial_buf: SampleWindow, cs: int, ce: int, prev_end: int, starts, ends, nxt_of, hand: bool):
             sl = in_range(starts, cs, ce)
             if sl.stop <= sl.start:
                 return sl, None, None
@@ -479,7 +447,7 @@ def long_phase_pieces(
         if refine and len(ps):
             gs, ge = ps.copy(), pe.copy()
             with TrialReader(path) as trial:
-                buf = Samples(trial.iter_blocks(topic), total)
+                buf = imu_windows(trial, topic, total)
                 prev_end = 0
                 for cs, ce in bounds_list:
                     sl, a, b = refine_core(
@@ -513,7 +481,7 @@ def long_phase_pieces(
             old[: len(k)] += k
             acc_[name] = old
 
-        def static_piece(trial_buf: Samples, cs: int, ce: int, final_upto: int) -> SignalStream:
+        def static_piece(trial_buf: SampleWindow, cs: int, ce: int, final_upto: int) -> SignalStream:
             nonlocal static_sum, known_sum
             lo, hi = max(0, cs - over), min(total, ce + over)
             t, gyr, acc = trial_buf.get(lo, hi)
@@ -544,7 +512,7 @@ def long_phase_pieces(
             return SignalStream(f"/derived/static/{imu}", t, ["static"], ["1"], values, frame_id=imu)
 
         with TrialReader(path) as trial:
-            buf = Samples(trial.iter_blocks(topic), total)
+            buf = imu_windows(trial, topic, total)
             prev_end = 0
             pending: tuple[int, int] | None = None
             for cs, ce in bounds_list:
