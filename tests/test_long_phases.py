@@ -134,6 +134,9 @@ def test_cores_equal_the_whole(trial, whole, tmp_path, monkeypatch):
     run_phases(cored, cores=PhaseCores(core_s=420.0, overlap_s=30.0, context_s=600.0), force=True)
     for kind in ("movements", "phases"):
         assert _logs(cored, kind) == _logs(whole, kind) and len(_logs(whole, kind)) == len(mw if kind == "movements" else pw)
+    with TrialReader(cored) as t:  # the replaced channels' closing statistics went with them
+        stats = [x.name for x in t.summary.metadata_indexes if x.name.startswith("imulog.channel_stats.")]
+        assert len(stats) == 1 and stats[0] == t.channel(f"/derived/static/{IMU}").metadata["stats_record"]
     # the record: counts and summaries instead of a row per phase
     assert "phases" not in tc
     durations = np.array([row["duration_s"] for row in tw["phases"]])

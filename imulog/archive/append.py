@@ -135,6 +135,12 @@ def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int]
     and, unless dropped, written once.
     """
     chunk_by_offset = {ci.chunk_start_offset: ci for ci in summary.chunk_indexes}
+    # closing statistics of streamed channels (imulog.channel_stats.N) that no kept channel refers to any more
+    referenced = {c.metadata.get("stats_record") for cid, c in summary.channels.items() if cid not in drop}
+    orphaned = {
+        x.name for x in summary.metadata_indexes if x.name.startswith(f"{STATS_RECORD}.") and x.name not in referenced
+    }
+    dropped_records: set[int] = set()
     limit = summary.data_end_offset
     shift: list[tuple[int, int]] = []  # (old offset of a kept record, bytes removed before it)
     removed = 0
@@ -176,6 +182,9 @@ def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int]
             in_dropped_chunk = False
             if op in (m.Op.CHANNEL, m.Op.MESSAGE) and len(first) >= 2:
                 drop_it = m._H.unpack_from(first, 0)[0] in drop
+            elif op == m.Op.METADATA and orphaned and _record_name(first) in orphaned:
+                drop_it = True
+                dropped_records.add(pos)
         crc = zlib.crc32(first, zlib.crc32(head, crc))
         if drop_it:
             removed += end - pos
@@ -218,10 +227,22 @@ def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int]
     builder.attachment_indexes = [m.AttachmentIndexRec(**vars(a)) for a in summary.attachment_indexes]
     for ai in builder.attachment_indexes:
         ai.offset = moved(ai.offset)
-    builder.metadata_indexes = [m.MetadataIndexRec(**vars(x)) for x in summary.metadata_indexes]
+    builder.metadata_indexes = [
+        m.MetadataIndexRec(**vars(x)) for x in summary.metadata_indexes if x.offset not in dropped_records
+    ]
     for mi in builder.metadata_indexes:
         mi.offset = moved(mi.offset)
     return builder
+
+
+def _record_name(body_start: bytes) -> str | None:
+    """The name of a Metadata record from the first bytes of its body (None when they do not hold it)."""
+    if len(body_start) < 4:
+        return None
+    n = m._I.unpack_from(body_start, 0)[0]
+    if len(body_start) < 4 + n:
+        return None
+    return bytes(body_start[4 : 4 + n]).decode("utf-8", "replace")
 
 
 def _raw_topics(f: BinaryIO, summary: m.Summary, path: Path | None = None) -> set[str]:
