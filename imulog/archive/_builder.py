@@ -237,11 +237,10 @@ class McapBuilder:
             sl = slice(start, stop)
             heads = message_heads(channel_id, start, log_times[sl], lengths[sl])
             records = np.concatenate([heads, rows[sl]], axis=1)
-            if mask is None:
-                raw = records.tobytes()
-            else:
+            if mask is not None:
                 keep = np.concatenate([np.ones((stop - start, 31), dtype=bool), mask[sl]], axis=1)
-                raw = records[keep].tobytes()
+                records = records[keep]
+            raw = records.reshape(-1).data  # a fresh array: handed to the compressor without a copy to bytes
             offsets = np.concatenate([[0], np.cumsum(sizes[sl])[:-1]]).astype(np.uint64)
             entries = np.column_stack([log_times[sl], offsets]).astype("<u8").tobytes()
             t = log_times[sl]
@@ -255,7 +254,7 @@ class McapBuilder:
         entries = np.asarray(index, dtype="<u8").reshape(-1, 2).tobytes()
         self._submit(channel_id, min(times), max(times), raw, entries)
 
-    def _submit(self, channel_id: int, start: int, end: int, raw: bytes, entries: bytes) -> None:
+    def _submit(self, channel_id: int, start: int, end: int, raw: bytes | memoryview, entries: bytes) -> None:
         """Queue a chunk: compressed on a worker thread, written in file order by :meth:`_drain`."""
         level = self._levels.get(channel_id, ZSTD_LEVEL)
         job = _executor().submit(build_chunk, start, end, raw, level) if PIPELINE else build_chunk(start, end, raw, level)
