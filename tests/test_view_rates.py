@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import rerun as rr
 
 from imulog.model import Intervals, PoseStream
 from imulog.view import from_recording, rates, show
@@ -11,6 +12,7 @@ from imulog.view import layout as L
 from imulog.view.rrd import read_column, summarize
 from imulog.view.sample import SampleTrialParams, sample_recording
 from imulog.view.source import ArchiveStreams, open_trial, read_trial
+from imulog.view.streams import scalar_column
 
 FRAME_NS = 1e9 / rates.DISPLAY_RATE_HZ
 
@@ -48,6 +50,18 @@ def test_pattern_changes_against_a_loop():
     np.testing.assert_array_equal(rates.pattern_changes(valid), expected)
     assert list(rates.pattern_changes(np.ones((30, 3), bool))) == [0]
     assert len(rates.pattern_changes(np.zeros((0, 3), bool))) == 0
+
+
+def test_scalar_column_is_the_arrays_own_buffer():
+    """The time series are sent as arrow views of the float64 arrays: the same column as rr.Scalars.columns
+    builds, without its copy."""
+    values = np.random.default_rng(0).normal(size=(1000, 3))
+    column = scalar_column(values).as_arrow_array()
+    expected = next(iter(rr.Scalars.columns(scalars=values))).as_arrow_array()
+    assert column.equals(expected) and len(column) == 1000
+    assert column.values.buffers()[1].address == values.ctypes.data  # no copy
+    one = scalar_column(values[:, 0]).as_arrow_array()  # a strided column: copied once, one value per row
+    assert one.equals(next(iter(rr.Scalars.columns(scalars=values[:, 0]))).as_arrow_array())
 
 
 def test_marker_class_ids_follow_the_visible_markers(tmp_path):

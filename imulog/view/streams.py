@@ -73,6 +73,28 @@ class _TimeIndex:
         return self._times
 
 
+class _ArrowBatch:
+    """A component batch (rerun's ``ComponentBatchLike``) over an arrow array built here."""
+
+    def __init__(self, array: pa.Array) -> None:
+        self._array = array
+
+    def as_arrow_array(self) -> pa.Array:
+        return self._array
+
+
+def scalar_column(values: np.ndarray) -> rr.ComponentColumn:
+    """``Scalars:scalars`` of ``values`` (N, C), one row of C per sample: arrow views of the float64 array.
+
+    ``rr.Scalars.columns`` flattens (copies) the array first; this sends the array's own buffer.
+    """
+    v = np.ascontiguousarray(values, dtype=np.float64)
+    width = v.shape[1] if v.ndim == 2 else 1
+    flat = pa.Array.from_buffers(pa.float64(), v.size, [None, pa.py_buffer(v)])
+    offsets = np.arange(0, v.size + 1, width, dtype=np.int32)
+    return rr.ComponentColumn(rr.Scalars.descriptor_scalars(), _ArrowBatch(flat), offsets=offsets)
+
+
 FORCED = " (forced)"  # suffix of a phase label event correction made by cutting a movement
 FORCED_COLOR = 0x7F7F7FFF  # forced phases are grey, not their phase's colour
 REP_COLORS = (0xD5D9DFFF, 0xAEB5BFFF)  # the repetition lane alternates two greys: repetitions countable
@@ -186,9 +208,9 @@ class _Logger:
         values = np.asarray(values, dtype=np.float64)
         if values.ndim == 1:
             values = values[:, None]
-        if len(t_ref) == 0:
+        if len(t_ref) == 0 or values.shape[1] == 0:
             return
-        self.rec.send_columns(path, indexes=[self._time(t_ref)], columns=rr.Scalars.columns(scalars=values))
+        self.rec.send_columns(path, indexes=[self._time(t_ref)], columns=[scalar_column(values)])
         style: dict[str, Any] = {"names": names}
         if colors is None and values.shape[1] <= len(L.AXIS_COLORS):
             colors = L.AXIS_COLORS[: values.shape[1]]
