@@ -22,9 +22,6 @@ from imulog.archive import _mcap as m
 
 CHUNK_TARGET_BYTES = 2 * 1024 * 1024  # uncompressed size at which a chunk is closed
 ZSTD_LEVEL = 3  # the mcap library's level: on IMU blocks both smaller and faster than 1 here (bench_archive)
-# viewer twins (fixed-layout messages, mostly constant bytes): level 1 compresses them 1.4-2x faster than 3, to
-# the same size within 1 %
-TWIN_ZSTD_LEVEL = 1
 PIPELINE = os.environ.get("IMULOG_COMPRESS_THREADS", "1") != "0"  # compress chunks on worker threads
 COMPRESS_THREADS = min(2, os.cpu_count() or 1)  # chunks compressed at once (each thread one chunk)
 MAX_PENDING = 2 * COMPRESS_THREADS  # chunks compressed ahead at most (memory: about this many raw chunks)
@@ -54,25 +51,23 @@ def _forget_executor() -> None:  # a forked child does not inherit the worker th
 os.register_at_fork(after_in_child=_forget_executor)
 
 
-def _compressor(level: int = ZSTD_LEVEL):
-    """This thread's zstd compressor at ``level`` (a ZstdCompressor must not be shared between threads)."""
-    cache = getattr(_local, "zstd", None)
-    if cache is None:
-        cache = _local.zstd = {}
-    c = cache.get(level)
-    if c is None:
+def _compressor():
+    """This thread's zstd compressor (a ZstdCompressor must not be shared between threads)."""
+    c = getattr(_local, "zstd", None)
+    if c is None or getattr(_local, "level", None) != ZSTD_LEVEL:
         import zstandard
 
-        c = cache[level] = zstandard.ZstdCompressor(level=level)
+        c = _local.zstd = zstandard.ZstdCompressor(level=ZSTD_LEVEL)
+        _local.level = ZSTD_LEVEL
     return c
 
 
-def build_chunk(start: int, end: int, raw: bytes | memoryview, level: int = ZSTD_LEVEL) -> tuple[bytes, int]:
+def build_chunk(start: int, end: int, raw: bytes | memoryview) -> tuple[bytes, int]:
     """A zstd Chunk record of the message records ``raw`` (CRC of the uncompressed bytes); (record, compressed size).
 
     Pure function of its input: runs on a compression thread.
     """
-    compressed = _compressor(level).compress(raw)
+    compressed = _compressor().compress(raw)
     record = m.chunk(start, end, len(raw), zlib.crc32(raw), "zstd", compressed)
     return record, len(compressed)
 
@@ -107,7 +102,6 @@ class McapBuilder:
         self.attachment_indexes: list[m.AttachmentIndexRec] = []
         self.metadata_indexes: list[m.MetadataIndexRec] = []
         self.channel_counts: dict[int, int] = {}
-        self._levels: dict[int, int] = {}  # channel id -> zstd level of its chunks (default ZSTD_LEVEL)
         if summary is not None:
             self.schemas = dict(summary.schemas)
             self.channels = dict(summary.channels)
@@ -175,22 +169,13 @@ class McapBuilder:
         self.write(rec.encode())
         return sid
 
-    def add_channel(
-        self,
-        topic: str,
-        schema_id: int,
-        metadata: dict[str, str],
-        encoding: str = "protobuf",
-        zstd_level: int = ZSTD_LEVEL,
-    ) -> int:
-        """A Channel record; its chunks are compressed at ``zstd_level``."""
+    def add_channel(self, topic: str, schema_id: int, metadata: dict[str, str], encoding: str = "protobuf") -> int:
         cid = max(self.channels, default=-1) + 1
         if cid > 0xFFFF:
             raise ValueError("too many channels in one MCAP file")
         rec = m.ChannelRec(cid, schema_id, topic, encoding, dict(metadata))
         self.channels[cid] = rec
         self.channel_counts.setdefault(cid, 0)
-        self._levels[cid] = zstd_level
         self.write(rec.encode())
         return cid
 
@@ -256,8 +241,7 @@ class McapBuilder:
 
     def _submit(self, channel_id: int, start: int, end: int, raw: bytes | memoryview, entries: bytes) -> None:
         """Queue a chunk: compressed on a worker thread, written in file order by :meth:`_drain`."""
-        level = self._levels.get(channel_id, ZSTD_LEVEL)
-        job = _executor().submit(build_chunk, start, end, raw, level) if PIPELINE else build_chunk(start, end, raw, level)
+        job = _executor().submit(build_chunk, start, end, raw) if PIPELINE else build_chunk(start, end, raw)
         self._pending.append((job, channel_id, start, end, entries, len(raw)))
         self._drain(keep=MAX_PENDING)
 

@@ -29,7 +29,7 @@ import numpy as np
 
 from imulog.archive import _mcap as m
 from imulog.archive import codec
-from imulog.archive._builder import CHUNK_TARGET_BYTES, TWIN_ZSTD_LEVEL, McapBuilder
+from imulog.archive._builder import CHUNK_TARGET_BYTES, McapBuilder
 from imulog.archive.errors import ArchiveError, ArchiveExistsError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import encode_record
@@ -261,9 +261,7 @@ class StreamingTrialWriter:
                 meta.update(self._extra)
                 meta["stats_record"] = self._stats_record
                 schema_id = self._builder.add_schema(twin.schema_name, twin.schema_encoding, twin.schema_data)
-                cid = self._builder.add_channel(
-                    twin.topic, schema_id, meta, encoding=twin.message_encoding, zstd_level=TWIN_ZSTD_LEVEL
-                )
+                cid = self._builder.add_channel(twin.topic, schema_id, meta, encoding=twin.message_encoding)
                 ch = self._twins[twin.topic] = _Channel(cid, twin.topic)
             ch.stats.add_samples(sample_times, [])
             self._add_messages(ch, twin.log_times, twin.payload_list())

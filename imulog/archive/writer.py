@@ -14,7 +14,7 @@ import numpy as np
 
 from imulog import __version__
 from imulog.archive import codec
-from imulog.archive._builder import TWIN_ZSTD_LEVEL, McapBuilder
+from imulog.archive._builder import McapBuilder
 from imulog.archive.errors import ArchiveError, ArchiveExistsError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import encode_record
@@ -94,9 +94,7 @@ def write_twin(builder: McapBuilder, twin: Twin, extra_meta: dict[str, str] | No
     if extra_meta:
         meta.update(extra_meta)
     schema_id = builder.add_schema(twin.schema_name, twin.schema_encoding, twin.schema_data)
-    channel_id = builder.add_channel(
-        twin.topic, schema_id, meta, encoding=twin.message_encoding, zstd_level=TWIN_ZSTD_LEVEL
-    )
+    channel_id = builder.add_channel(twin.topic, schema_id, meta, encoding=twin.message_encoding)
     if twin.rows is None:
         builder.add_messages(channel_id, twin.log_times, twin.payloads)
     else:
