@@ -181,11 +181,16 @@ def head_lines(path: Path, head: bytes | None = None, max_lines: int = 200) -> l
     return lines[:max_lines]
 
 
+_SNIFFED: list[Any] = [None, None]  # [head, its lines or None]: detection hands the same head to every converter
+
+
 def text_head_lines(head: bytes, max_lines: int = 50) -> list[str] | None:
-    """Like :func:`head_lines` for sniffing: None instead of raising."""
-    if not head.strip() or looks_binary(head):
-        return None
-    return decode(head).splitlines()[:max_lines]
+    """Like :func:`head_lines` for sniffing: None instead of raising. The head's lines are computed once for all
+    the converters sniffing the same head (decoding 256 KiB and testing for binary data takes ~0.7 ms each)."""
+    if _SNIFFED[0] is not head:
+        _SNIFFED[:] = [head, None if not head.strip() or looks_binary(head) else decode(head).splitlines()]
+    lines = _SNIFFED[1]
+    return None if lines is None else lines[:max_lines]
 
 
 def split_row(line: str, delimiter: str) -> list[str]:

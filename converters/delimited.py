@@ -833,7 +833,9 @@ def _recording(
             if len(present) != 3:
                 missing = ", ".join(f"{q} {a}" for a, c in axes.items() if c is None)
                 raise ConversionError(path, f"device {dev!r}: missing column(s) for {missing}")
-            streams[q] = np.column_stack([values[:, axes[a].index] * axes[a].factor for a in "xyz"])
+            vec = streams[q] = np.empty((len(values), 3))
+            for k, a in enumerate("xyz"):  # scaled straight into the (N, 3) array: no temporary per axis
+                np.multiply(values[:, axes[a].index], axes[a].factor, out=vec[:, k])
             units[q] = axes["x"].unit
         if ("temperature", None) in slots:
             c = slots[("temperature", None)]
