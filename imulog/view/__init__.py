@@ -1,7 +1,7 @@
 """Rerun viewer of imulog trials: columnar logging, default blueprint, web viewer.
 
-from imulog.view import read_trial, show
-show([read_trial("trial.mcap")], sink="save", save_paths=["trial.rrd"])
+from imulog.view import open_trial, show
+show([open_trial("trial.mcap")], sink="save", save_paths=["trial.rrd"])   # channels read while logged
 
 The names below are imported on first use, so ``import imulog.view.clock`` (used by exports) does not
 import Rerun.
@@ -20,6 +20,7 @@ _LAZY = {
     "show": "imulog.view.session",
     "TrialData": "imulog.view.source",
     "from_recording": "imulog.view.source",
+    "open_trial": "imulog.view.source",
     "read_trial": "imulog.view.source",
     "Entity": "imulog.view.streams",
     "LoggedTrial": "imulog.view.streams",

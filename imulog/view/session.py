@@ -70,13 +70,13 @@ def log_trials(rec: rr.RecordingStream, trials: Sequence[TrialData], *, overlay:
 
 
 def _discard(result: ViewResult) -> None:
-    """Stop the web server, close the recordings and remove the ``.rrd`` files they were writing."""
-    if result.server is not None:
-        result.server.stop()
+    """Close the recordings, remove the ``.rrd`` files they were writing and stop the web server."""
     for rec in result.recordings:
         rec.disconnect()
     for path in result.saved:
         path.unlink(missing_ok=True)
+    if result.server is not None:
+        result.server.stop()
 
 
 def show(
