@@ -13,12 +13,15 @@ import struct
 import threading
 import zlib
 from collections import deque
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
-from typing import BinaryIO
+from typing import Any, BinaryIO, TypeVar
 
 import numpy as np
 
 from imulog.archive import _mcap as m
+
+T = TypeVar("T")
 
 CHUNK_TARGET_BYTES = 2 * 1024 * 1024  # uncompressed size at which a chunk is closed
 ZSTD_LEVEL = 3  # the mcap library's level: on IMU blocks both smaller and faster than 1 here (bench_archive)
@@ -35,12 +38,21 @@ _local = threading.local()
 _EXECUTOR: ThreadPoolExecutor | None = None
 
 
-def _executor() -> ThreadPoolExecutor:
+def worker_pool() -> ThreadPoolExecutor:
     """Worker threads that compress chunks (zstd and crc32 release the GIL), shared by every builder."""
     global _EXECUTOR
     if _EXECUTOR is None:
         _EXECUTOR = ThreadPoolExecutor(max_workers=COMPRESS_THREADS, thread_name_prefix="imulog-chunk")
     return _EXECUTOR
+
+
+def in_background(fn: Callable[..., T], *args: Any) -> Future[T]:
+    """``fn(*args)`` on the worker threads, or at once when they are switched off (``IMULOG_COMPRESS_THREADS=0``)."""
+    if PIPELINE:
+        return worker_pool().submit(fn, *args)
+    done: Future[T] = Future()
+    done.set_result(fn(*args))
+    return done
 
 
 def _forget_executor() -> None:  # a forked child does not inherit the worker thread
@@ -241,7 +253,7 @@ class McapBuilder:
 
     def _submit(self, channel_id: int, start: int, end: int, raw: bytes | memoryview, entries: bytes) -> None:
         """Queue a chunk: compressed on a worker thread, written in file order by :meth:`_drain`."""
-        job = _executor().submit(build_chunk, start, end, raw) if PIPELINE else build_chunk(start, end, raw)
+        job = worker_pool().submit(build_chunk, start, end, raw) if PIPELINE else build_chunk(start, end, raw)
         self._pending.append((job, channel_id, start, end, entries, len(raw)))
         self._drain(keep=MAX_PENDING)
 

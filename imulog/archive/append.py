@@ -80,7 +80,7 @@ def _copy_prefix(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int],
 
 
 def _executor():
-    from imulog.archive._builder import _executor as shared
+    from imulog.archive._builder import worker_pool as shared
 
     return shared()
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from imulog import __version__
 from imulog.archive import codec
-from imulog.archive._builder import McapBuilder
+from imulog.archive._builder import McapBuilder, in_background
 from imulog.archive.errors import ArchiveError, ArchiveExistsError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import encode_record
@@ -87,10 +87,19 @@ def write_stream(
     return stream.topic, digest
 
 
-def write_twin(builder: McapBuilder, twin: Twin, extra_meta: dict[str, str] | None = None) -> tuple[str, str]:
-    """Write one viewer twin channel (:mod:`imulog.archive.twins`); return (topic, content hash)."""
+def twin_hash(twin: Twin) -> str:
+    """Content hash of a viewer twin's messages (:func:`payload_hash`, with numpy for twins held as rows)."""
+    return payload_hash(twin.payloads) if twin.rows is None else rows_hash(twin.rows, twin.mask)
+
+
+def write_twin(
+    builder: McapBuilder, twin: Twin, extra_meta: dict[str, str] | None = None, sha256: str | None = None
+) -> tuple[str, str]:
+    """Write one viewer twin channel (:mod:`imulog.archive.twins`); return (topic, content hash).
+
+    ``sha256``: the twin's :func:`twin_hash` when already computed."""
     meta = dict(twin.metadata)
-    meta["sha256"] = payload_hash(twin.payloads) if twin.rows is None else rows_hash(twin.rows, twin.mask)
+    meta["sha256"] = sha256 or twin_hash(twin)
     if extra_meta:
         meta.update(extra_meta)
     schema_id = builder.add_schema(twin.schema_name, twin.schema_encoding, twin.schema_data)
@@ -215,13 +224,15 @@ def write_trial(
             raise ArchiveExistsError(f"{path} exists (use overwrite=True / --overwrite)")
         with atomic_output(path) as f:
             builder = McapBuilder.new(f, LIBRARY, PROFILE)
+            twins = [tw for stream in streams for tw in stream_twins(stream, axis, recording.metadata)]
+            # the twins' hashes on a worker thread (hashlib releases the GIL) while the raw channels are encoded
+            twin_hashes = [in_background(twin_hash, tw) for tw in twins]
             hashes: dict[str, str] = {}
             for stream in streams:
                 topic, digest = write_stream(builder, stream, log_map=axis.map_for(stream.topic))
                 hashes[topic] = digest
-            for stream in streams:  # after every raw channel: raw data stays a prefix of the file
-                for twin in stream_twins(stream, axis, recording.metadata):
-                    write_twin(builder, twin)
+            for twin, digest in zip(twins, twin_hashes, strict=True):  # after every raw channel: raw data first
+                write_twin(builder, twin, sha256=digest.result())
             attached: dict[str, str] = {}
             for src, name in sources:
                 data = src.read_bytes()
