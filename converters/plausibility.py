@@ -318,6 +318,61 @@ def imu_warnings(
     return out
 
 
+class PieceExcerpts:
+    """Excerpts of the IMU streams of a recording converted piece by piece, spread over all of it, for
+    :func:`imu_warnings` at the end (the whole recording is never held: at most :data:`MAX_CHECK_SAMPLES` per IMU).
+
+    Each piece gives its first :data:`EXCERPT_S` seconds; when an IMU's excerpts exceed the budget every other one
+    is dropped, so those kept stay evenly spread over the pieces seen (one per 2^k pieces).
+    """
+
+    def __init__(self) -> None:
+        self._kept: dict[str, list[tuple[np.ndarray, np.ndarray | None, np.ndarray | None]]] = {}
+        self._stride: dict[str, int] = {}
+        self._seen: dict[str, int] = {}
+        self._declared: dict[str, str | None] = {}
+
+    def add(self, imu) -> None:  # noqa: ANN001 - imulog.model.ImuStream (no import cycle)
+        """Take the excerpt of this piece of ``imu`` (when its turn comes at the current spacing)."""
+        topic, t = imu.topic, np.asarray(imu.t_ns)
+        if not len(t):
+            return
+        self._declared.setdefault(topic, _declared_gyr_unit(imu))
+        k = self._seen.get(topic, 0)
+        self._seen[topic] = k + 1
+        stride = self._stride.setdefault(topic, 1)
+        if k % stride:
+            return
+        n = min(len(t), max(10, int(EXCERPT_S * _rate_hz(t[: min(len(t), 10_000)]))))
+        cut = [None if a is None else np.array(a[:n], dtype=np.float64) for a in (imu.acc, imu.gyr)]
+        kept = self._kept.setdefault(topic, [])
+        kept.append((t[:n].copy(), cut[0], cut[1]))
+        while sum(len(e[0]) + 1 for e in kept) > MAX_CHECK_SAMPLES and len(kept) > 1:
+            kept[:] = kept[::2]  # excerpts of pieces 0, 2s, 4s, ...: still evenly spread
+            self._stride[topic] *= 2
+
+    def warnings(self) -> list[str]:
+        """:func:`imu_warnings` of every IMU on its excerpts (each followed by a NaN row, as :func:`excerpts` does)."""
+        out = []
+        for topic, kept in self._kept.items():
+            t = np.concatenate([np.r_[e[0], e[0][-1] + 1] for e in kept])[:-1]
+            arrays = []
+            for j in (1, 2):
+                if kept[0][j] is None:
+                    arrays.append(None)
+                    continue
+                gap = np.full((1, kept[0][j].shape[1]), np.nan)
+                arrays.append(np.concatenate([x for e in kept for x in (e[j], gap)])[:-1])
+            out.extend(imu_warnings(topic, arrays[0], arrays[1], t, self._declared[topic]))
+        return out
+
+
+def _declared_gyr_unit(imu) -> str | None:  # noqa: ANN001 - imulog.model.ImuStream
+    """The gyroscope unit the file itself declared (delimited, Xsens, APDM: ``units``; Delsys: ``units_in_file``)."""
+    units = next((u for u in (imu.meta.get("units"), imu.meta.get("units_in_file")) if isinstance(u, dict)), {})
+    return units.get("gyr")
+
+
 def marker_warnings(topic: str, pos_m: np.ndarray) -> list[str]:
     """One line when marker positions (m) are too large for a lab (mm declared m) or all within 1 cm (m as mm)."""
     p = np.asarray(pos_m, dtype=np.float64)
@@ -355,9 +410,7 @@ def recording_warnings(rec) -> list[str]:  # noqa: ANN001 - imulog.model.Recordi
     """Plausibility warnings for every IMU and marker stream of a converted Recording."""
     out = []
     for imu in rec.imus:
-        units = next((u for u in (imu.meta.get("units"), imu.meta.get("units_in_file")) if isinstance(u, dict)), {})
-        declared = units.get("gyr")  # the unit the file itself gave (delimited, Xsens, APDM: units; Delsys: units_in_file)
-        out.extend(imu_warnings(imu.topic, imu.acc, imu.gyr, imu.t_ns, declared))
+        out.extend(imu_warnings(imu.topic, imu.acc, imu.gyr, imu.t_ns, _declared_gyr_unit(imu)))
     for markers in rec.markers:
         out.extend(marker_warnings(markers.topic, markers.pos))
     return out

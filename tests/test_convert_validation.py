@@ -375,3 +375,32 @@ def test_plausibility_of_a_long_recording_is_judged_on_excerpts():
     (line,) = imu_warnings("/imu/day", acc, gyr_dps, t)  # declared rad/s
     assert "at rest the gyroscope reads 0.72 rad/s" in line  # |(0.6, -0.4)|: about the horizontal axes
     assert imu_warnings("/imu/day", acc, gyr_dps * DEG, t) == []
+
+
+def test_streamed_text_is_judged_on_excerpts_from_every_piece(tmp_path, monkeypatch):
+    """A long text file converted piece by piece: a gyroscope in deg/s declared rad/s that only turns after the first
+    piece is still warned about (the checks see excerpts spread over all pieces, not the first piece alone)."""
+    from converters import delimited
+    from imulog.archive import TrialReader
+    from imulog.commands import convert as convert_command
+
+    rng = np.random.default_rng(5)
+    n = 60_000  # 10 min at 100 Hz, ~4 pieces of 1.5 MB
+    t = np.arange(n) / 100.0
+    gyr = rng.normal(0, 0.002, (n, 3))
+    gyr[n // 2 :, 2] += 180.0 * np.sin(t[n // 2 :])  # deg/s numbers under a rad/s header, after the first piece
+    acc = np.tile([0.0, 0.0, 9.81], (n, 1)) + rng.normal(0, 0.01, (n, 3))
+    header = "Time (s)," + ",".join(
+        [f"Gyroscope {a} (rad/s)" for a in "XYZ"] + [f"Accelerometer {a} (m/s^2)" for a in "XYZ"]
+    )
+    path = tmp_path / "long.csv"
+    np.savetxt(path, np.column_stack([t, gyr, acc]), delimiter=",", header=header, comments="", fmt="%.6f")
+    monkeypatch.setattr(convert_command, "STREAM_MIN_BYTES", 0)
+    monkeypatch.setattr(delimited, "PIECE_BYTES", 1_500_000)
+    assert len(list(delimited.CONVERTER.iter_chunks(path))) >= 3
+    out = tmp_path / "long.mcap"
+    res = CliRunner().invoke(main, ["convert", str(path), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "converted piece by piece" in res.output and "gyroscope peaks of" in res.output
+    with TrialReader(out) as trial:
+        assert any("gyroscope peaks of" in w for w in trial.metadata["imulog.conversion"]["warnings"])

@@ -178,7 +178,7 @@ def _convert_streaming(
     as_json: bool = False,
 ) -> None:
     """Convert one large file piece by piece (memory bounded by a piece, not by the recording)."""
-    from converters.plausibility import recording_warnings
+    from converters.plausibility import PieceExcerpts, marker_warnings
     from imulog.archive import ArchiveError
     from imulog.archive.streaming import StreamingTrialWriter
 
@@ -207,14 +207,15 @@ def _convert_streaming(
             ) as bar,
         ):
             covered, shown = 0.0, 0
+            spread = PieceExcerpts()  # unit plausibility on excerpts from the whole recording, judged at the end
             for piece in itertools.chain([first], pieces):
                 writer.write(piece)
                 for stream in piece.streams():
                     counts[stream.topic] = counts.get(stream.topic, 0) + len(stream)
-                # the converter's own notes for every piece; unit plausibility on the first piece (an hour or
-                # more of data: a wrong unit shows there as anywhere, and the check is costly on a week)
-                checks = recording_warnings(piece) if piece is first else []
-                for note in [*piece.warnings, *checks]:
+                for imu in piece.imus:
+                    spread.add(imu)
+                checks = [w for m in piece.markers for w in marker_warnings(m.topic, m.pos)] if piece is first else []
+                for note in [*piece.warnings, *checks]:  # the converter's own notes for every piece
                     if note not in notes:
                         notes.append(note)
                 covered += _span_s(piece)
@@ -222,6 +223,7 @@ def _convert_streaming(
                 bar.update(max(0, target - shown))
                 shown = max(shown, target)
             bar.update(bar.length - shown)
+            notes.extend(w for w in spread.warnings() if w not in notes)
             # after the pieces: a reader that hashed the file while reading it spares a second pass over it
             writer.metadata["imulog.conversion"] = {**conversion_record([path], {path.name: name}), "streamed": True}
             if notes:
