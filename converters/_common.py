@@ -181,15 +181,19 @@ def head_lines(path: Path, head: bytes | None = None, max_lines: int = 200) -> l
     return lines[:max_lines]
 
 
-_SNIFFED: list[Any] = [None, None]  # [head, its lines or None]: detection hands the same head to every converter
+# (head, its lines or None): detection hands the same head to every converter; one tuple, replaced whole, so
+# that threads detecting at once never pair one head with another's lines
+_SNIFFED: tuple[bytes | None, list[str] | None] = (None, None)
 
 
 def text_head_lines(head: bytes, max_lines: int = 50) -> list[str] | None:
     """Like :func:`head_lines` for sniffing: None instead of raising. The head's lines are computed once for all
     the converters sniffing the same head (decoding 256 KiB and testing for binary data takes ~0.7 ms each)."""
-    if _SNIFFED[0] is not head:
-        _SNIFFED[:] = [head, None if not head.strip() or looks_binary(head) else decode(head).splitlines()]
-    lines = _SNIFFED[1]
+    global _SNIFFED
+    cached, lines = _SNIFFED
+    if cached is not head:
+        lines = None if not head.strip() or looks_binary(head) else decode(head).splitlines()
+        _SNIFFED = (head, lines)
     return None if lines is None else lines[:max_lines]
 
 
