@@ -103,6 +103,15 @@ _HASHER: ThreadPoolExecutor | None = None
 BACKGROUND_HASH_BYTES = 1 << 20  # smaller sources are hashed at once
 
 
+def _forget_hasher() -> None:  # a forked child (batch workers) does not inherit the worker thread
+    global _HASHER
+    _HASHER = None
+    _DIGESTS.clear()  # digests still being computed belong to the parent's thread
+
+
+os.register_at_fork(after_in_child=_forget_hasher)
+
+
 def _stat_key(path: Path, st: os.stat_result) -> tuple[str, int, int]:
     return str(Path(path).resolve()), st.st_size, st.st_mtime_ns
 

@@ -392,3 +392,28 @@ def test_imulog_convert_streams_large_text_files(tmp_path, monkeypatch):
         assert a.metadata["imulog.conversion"]["sha256"] == b.metadata["imulog.conversion"]["sha256"]
         assert b.metadata["imulog.conversion"]["streamed"] is True
     assert runner.invoke(cli, ["doctor", str(tmp_path / "streamed.mcap")]).exit_code == 0
+
+
+def test_source_hash_on_a_worker_thread_survives_fork(tmp_path):
+    """read_source hashes large sources on a worker thread; a forked batch worker must not wait for the parent's."""
+    import hashlib
+    import os
+
+    from converters._common import BACKGROUND_HASH_BYTES, known_sha256, read_source
+
+    path = tmp_path / "big.bin"
+    path.write_bytes(os.urandom(BACKGROUND_HASH_BYTES + 1))
+    want = hashlib.sha256(path.read_bytes()).hexdigest()
+    read_source(path)
+    assert known_sha256(path) == want
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: hash again on its own (new) worker thread, report, exit at once
+        os.close(r)
+        read_source(path)
+        os.write(w, (known_sha256(path) or "").encode())
+        os._exit(0)
+    os.close(w)
+    got = os.read(r, 100).decode()
+    os.waitpid(pid, 0)
+    assert got == want
