@@ -28,9 +28,10 @@ from pathlib import Path
 
 COMMANDS = [
     ("convert", ["convert", "{cwa}", "-o", "{mcap}"]),
-    ("orientation", ["process", "orientation", "{mcap}"]),
-    ("phases", ["process", "phases", "{mcap}"]),
-    ("metrics", ["process", "metrics", "{mcap}"]),
+    # --force: on copies of processed trials (--trials) a step already up to date would do nothing
+    ("orientation", ["process", "orientation", "{mcap}", "--force"]),
+    ("phases", ["process", "phases", "{mcap}", "--force"]),
+    ("metrics", ["process", "metrics", "{mcap}", "--force"]),
     ("info", ["info", "{mcap}"]),
     ("view", ["view", "{mcap}", "--save", "{rrd}"]),
 ]
