@@ -119,7 +119,7 @@ def view(
     """
     from imulog.view.overview import OverviewParams, read_trial_overview
     from imulog.view.session import show
-    from imulog.view.source import TrialData, from_recording, read_trial
+    from imulog.view.source import TrialData, from_recording, open_trial
 
     if start_s is not None and end_s is not None and end_s <= start_s:
         raise click.UsageError(f"--end ({end_s:g} s) must be after --start ({start_s:g} s)")
@@ -143,10 +143,11 @@ def view(
     with click.progressbar(list(files), label="reading trials", file=sys.stderr, hidden=not files) as bar:
         for f in bar:
             try:
+                # each channel is read when the viewer reaches it, so Rerun encodes one while the next is read
                 if full_resolution:
-                    trials.append(read_trial(f))
+                    trials.append(open_trial(f))
                 else:
-                    data, reduced = read_trial_overview(f, overview)
+                    data, reduced = read_trial_overview(f, overview, lazy=True)
                     if reduced:
                         click.echo(
                             f"{f}: long recording shown as a min/max overview ({overview.buckets} buckets per channel)"
@@ -182,6 +183,7 @@ def view(
                 err=True,
             )
 
+    from imulog.archive.errors import ArchiveError
     from imulog.view.server import PortInUseError
 
     try:
@@ -190,6 +192,8 @@ def view(
         )
     except PortInUseError as exc:
         raise click.ClickException(str(exc)) from exc
+    except ArchiveError as exc:  # a channel read while logging was damaged: show() removed the partial .rrd files
+        raise click.ClickException(str(exc)) from exc  # the reader's messages start with the file's path
     except (OSError, RuntimeError, ValueError) as exc:
         raise click.ClickException(f"cannot open the Rerun sink(s) {', '.join(sinks)}: {exc}") from exc
     warnings = []
