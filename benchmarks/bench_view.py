@@ -7,8 +7,8 @@ The trial (IMU at 115 Hz with acc, gyr and mag; 4 markers at 100 Hz; 3 trajector
 written once as an MCAP archive. imulog's side is its viewer saving an ``.rrd``: open the trial, map every channel
 to the reference clock, log it with the default layout (norms, cursors, paths, errors, states, blueprint). It runs
 two ways: ``open_trial`` (each channel read when the viewer reaches it, so Rerun encodes one channel while the
-next is read; the target is measured on this one) and ``read_trial`` (every channel read before anything is
-logged: what ``imulog view`` does until ``imulog/commands/view.py`` asks ``read_trial_overview(..., lazy=True)``).
+next is read; what ``imulog view`` does, and the target is measured on it) and ``read_trial`` (every channel read
+before anything is logged, for comparison).
 The peer (issue 17) is what a user of Rerun who already has the arrays would write: read the same
 channels with ``TrialReader.read`` and send each as one ``rr.send_columns`` batch (scalars, marker points,
 state changes) to an ``.rrd`` file — the read is included on both sides. One process, interleaved, best of
