@@ -585,8 +585,8 @@ class Summary:
             spans, section = self._chunk_spans, self._section
             for i in range(0, len(spans), 2):
                 lo = spans[i]
-                length, map_len = struct.unpack_from("<QI", section, lo + 24)
-                entries = section[lo + 36 : lo + 36 + map_len]
+                *_, length, map_len = _CI_HEAD.unpack_from(section, lo)
+                entries = section[lo + _CI_HEAD.size : lo + _CI_HEAD.size + map_len]
                 pairs.append((length, [cid for cid, _ in _CI_ENTRY.iter_unpack(entries)]))
         out: dict[int, int] = {}
         for length, ids in pairs:

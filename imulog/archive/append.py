@@ -25,7 +25,7 @@ from typing import Any, BinaryIO
 
 from imulog import __version__
 from imulog.archive import _mcap as m
-from imulog.archive._builder import McapBuilder
+from imulog.archive._builder import McapBuilder, worker_pool
 from imulog.archive.errors import ArchiveCorruptError, ArchiveError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import MetadataError, decode_record, encode_record, loads, record_hash, to_json
@@ -61,7 +61,7 @@ def _copy_prefix(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int],
     end = summary.data_end_offset
     out.flush()
     start = out.tell()
-    copier = _executor().submit(_kernel_copy, f.fileno(), out.fileno(), start, end)
+    copier = worker_pool().submit(_kernel_copy, f.fileno(), out.fileno(), start, end)
     try:
         crc = _crc_of(f, end)
     finally:
@@ -77,12 +77,6 @@ def _copy_prefix(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int],
             f"{path}: data section CRC mismatch (file damaged?); run 'imulog doctor {path}' - nothing was written"
         )
     return builder
-
-
-def _executor():
-    from imulog.archive._builder import worker_pool as shared
-
-    return shared()
 
 
 def _kernel_copy(src: int, dst: int, dst_offset: int, length: int) -> bool:
@@ -138,9 +132,10 @@ def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int]
     # closing statistics of streamed channels (imulog.channel_stats.N) that no kept channel refers to any more
     referenced = {c.metadata.get("stats_record") for cid, c in summary.channels.items() if cid not in drop}
     orphaned = {
-        x.name for x in summary.metadata_indexes if x.name.startswith(f"{STATS_RECORD}.") and x.name not in referenced
+        x.offset
+        for x in summary.metadata_indexes
+        if x.name.startswith(f"{STATS_RECORD}.") and x.name not in referenced
     }
-    dropped_records: set[int] = set()
     limit = summary.data_end_offset
     shift: list[tuple[int, int]] = []  # (old offset of a kept record, bytes removed before it)
     removed = 0
@@ -182,9 +177,8 @@ def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int]
             in_dropped_chunk = False
             if op in (m.Op.CHANNEL, m.Op.MESSAGE) and len(first) >= 2:
                 drop_it = m._H.unpack_from(first, 0)[0] in drop
-            elif op == m.Op.METADATA and orphaned and _record_name(first) in orphaned:
-                drop_it = True
-                dropped_records.add(pos)
+            elif op == m.Op.METADATA:
+                drop_it = pos in orphaned
         crc = zlib.crc32(first, zlib.crc32(head, crc))
         if drop_it:
             removed += end - pos
@@ -228,21 +222,11 @@ def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int]
     for ai in builder.attachment_indexes:
         ai.offset = moved(ai.offset)
     builder.metadata_indexes = [
-        m.MetadataIndexRec(**vars(x)) for x in summary.metadata_indexes if x.offset not in dropped_records
+        m.MetadataIndexRec(**vars(x)) for x in summary.metadata_indexes if x.offset not in orphaned
     ]
     for mi in builder.metadata_indexes:
         mi.offset = moved(mi.offset)
     return builder
-
-
-def _record_name(body_start: bytes) -> str | None:
-    """The name of a Metadata record from the first bytes of its body (None when they do not hold it)."""
-    if len(body_start) < 4:
-        return None
-    n = m._I.unpack_from(body_start, 0)[0]
-    if len(body_start) < 4 + n:
-        return None
-    return bytes(body_start[4 : 4 + n]).decode("utf-8", "replace")
 
 
 def _raw_topics(f: BinaryIO, summary: m.Summary, path: Path | None = None) -> set[str]:
