@@ -7,7 +7,7 @@ import math
 import os
 import re
 from collections.abc import Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -99,17 +99,10 @@ def read_head(path: Path, n: int = HEAD_BYTES) -> bytes:
 
 _DIGESTS: dict[tuple[str, int, int], str | Future[str]] = {}  # (resolved path, size, mtime ns) -> SHA-256
 _DIGESTS_KEPT = 256
-_HASHER: ThreadPoolExecutor | None = None
 BACKGROUND_HASH_BYTES = 1 << 20  # smaller sources are hashed at once
 
-
-def _forget_hasher() -> None:  # a forked child (batch workers) does not inherit the worker thread
-    global _HASHER
-    _HASHER = None
-    _DIGESTS.clear()  # digests still being computed belong to the parent's thread
-
-
-os.register_at_fork(after_in_child=_forget_hasher)
+# a forked child (batch workers) gets its own worker threads; digests still being computed by the parent's never end
+os.register_at_fork(after_in_child=_DIGESTS.clear)
 
 
 def _stat_key(path: Path, st: os.stat_result) -> tuple[str, int, int]:
@@ -124,10 +117,9 @@ def read_source(path: Path) -> bytes:
     """A source file's bytes, read once; their SHA-256 is computed from them and remembered (size and mtime
     checked) so that the conversion record does not read and hash the file a second time (:func:`known_sha256`).
 
-    Sources of 1 MiB and more are hashed on a worker thread while the caller parses them (hashlib releases the
-    GIL): the SHA-256 of a 57 MB export takes ~45 ms, which then overlaps the parse.
+    Sources of 1 MiB and more are hashed on the archive writer's worker threads while the caller parses them
+    (hashlib releases the GIL): the SHA-256 of a 57 MB export takes ~45 ms, which then overlaps the parse.
     """
-    global _HASHER
     with open(path, "rb") as f:
         data = f.read()
         st = os.fstat(f.fileno())
@@ -135,9 +127,9 @@ def read_source(path: Path) -> bytes:
         if len(data) < BACKGROUND_HASH_BYTES:
             remember_sha256(path, st, _sha256_hex(data))
         else:
-            if _HASHER is None:
-                _HASHER = ThreadPoolExecutor(max_workers=1, thread_name_prefix="imulog-sha256")
-            remember_sha256(path, st, _HASHER.submit(_sha256_hex, data))
+            from imulog.archive._builder import in_background
+
+            remember_sha256(path, st, in_background(_sha256_hex, data))
     return data
 
 
