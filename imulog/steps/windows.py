@@ -1,0 +1,126 @@
+"""Bounded windows over a channel: the one way every step iterates over a trial (docs/architecture.md,
+"Step windows").
+
+A window owns the samples ``[core_lo, core_hi)`` of a channel and reads ``[lo, hi)``, its core plus margins for
+filters and smoothers. A recording no longer than one core is a single window without margins, so a lab trial is
+computed exactly as a whole. Pure bookkeeping: no I/O, no numerics.
+
+    for w in plan_windows(total=n, rate_hz=100.0, core_s=3600.0, margin_s=60.0):
+        arrays = samples.take(w.lo, w.hi)          # imulog.steps.sample_window.SampleWindow
+        out = compute(arrays)                      # the step's one implementation
+        yield w.core(out)                          # the rows this window owns
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from typing import TypeVar
+
+import numpy as np
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class Window:
+    """One window of a channel, in sample indices of the whole channel.
+
+    ``[lo, hi)`` is read; ``[core_lo, core_hi)`` is owned (its outputs are written by this window alone).
+    """
+
+    index: int
+    lo: int
+    hi: int
+    core_lo: int
+    core_hi: int
+
+    def __post_init__(self) -> None:
+        if not (0 <= self.lo <= self.core_lo <= self.core_hi <= self.hi):
+            raise ValueError(f"window {self.index}: need lo <= core_lo <= core_hi <= hi, got {self}")
+
+    @property
+    def core_slice(self) -> slice:
+        """The owned samples as a slice of the read arrays (``arrays[w.core_slice]``)."""
+        return slice(self.core_lo - self.lo, self.core_hi - self.lo)
+
+    def core(self, array: np.ndarray) -> np.ndarray:
+        """The owned rows of an array computed on the read samples (``len(array) == hi - lo``)."""
+        if len(array) != self.hi - self.lo:
+            raise ValueError(f"window {self.index}: array has {len(array)} rows, the window read {self.hi - self.lo}")
+        return array[self.core_slice]
+
+
+def plan_windows(total: int, rate_hz: float, *, core_s: float = 3600.0, margin_s: float = 60.0) -> list[Window]:
+    """Consecutive windows covering ``total`` samples at ``rate_hz``: cores of ``core_s`` seconds, each read with
+    ``margin_s`` seconds more on both sides (clipped to the recording). ``total`` within one core: one window,
+    no margins. Raises ValueError for a non-positive rate or core."""
+    if total < 0:
+        raise ValueError(f"total must be >= 0 samples, got {total}")
+    if not (rate_hz > 0 and np.isfinite(rate_hz)):
+        raise ValueError(f"rate must be a positive number of Hz, got {rate_hz}")
+    if not core_s > 0 or margin_s < 0:
+        raise ValueError(f"need core_s > 0 and margin_s >= 0, got {core_s} and {margin_s}")
+    core = max(1, int(round(core_s * rate_hz)))
+    margin = int(round(margin_s * rate_hz))
+    if total <= core:
+        return [Window(0, 0, total, 0, total)]
+    windows = []
+    for k, start in enumerate(range(0, total, core)):
+        end = min(total, start + core)
+        windows.append(Window(k, max(0, start - margin), min(total, end + margin), start, end))
+    return windows
+
+
+@dataclass(frozen=True)
+class EventWindow:
+    """A stretch between two rests for methods that reset at rests (trajectory): samples ``[lo, hi)``, the rest
+    before ending at ``move_lo`` and the one after starting at ``move_hi``; ``split`` when the stretch was longer
+    than the longest allowed and cut without a rest (dead reckoning cannot bound its drift)."""
+
+    index: int
+    lo: int
+    move_lo: int
+    move_hi: int
+    hi: int
+    split: bool = False
+
+
+def event_windows(
+    rests: Sequence[tuple[int, int]], total: int, rate_hz: float, *, max_s: float = 600.0
+) -> list[EventWindow]:
+    """One window per movement between consecutive rests (``rests``: sorted, non-overlapping ``(start, end)``
+    sample intervals), each holding the rest before and after it; a movement longer than ``max_s`` seconds is cut
+    into pieces of at most ``max_s`` marked ``split``. Stretches before the first and after the last rest have
+    only one rest and are included (they are what a user will ask about)."""
+    if not (rate_hz > 0 and np.isfinite(rate_hz)):
+        raise ValueError(f"rate must be a positive number of Hz, got {rate_hz}")
+    longest = max(1, int(round(max_s * rate_hz)))
+    bounds = [(0, 0), *[(int(a), int(b)) for a, b in rests], (total, total)]
+    out: list[EventWindow] = []
+    for (r0a, r0b), (r1a, r1b) in zip(bounds[:-1], bounds[1:], strict=True):
+        if r1a < r0b:
+            raise ValueError(f"rests overlap or are not sorted near sample {r1a}")
+        if r1a == r0b:
+            continue  # two touching rests: no movement between them
+        cuts = list(range(r0b, r1a, longest)) + [r1a]
+        split = len(cuts) > 2
+        for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+            lo = r0a if a == r0b else a
+            hi = r1b if b == r1a else b
+            out.append(EventWindow(len(out), lo, a, b, hi, split))
+    return out
+
+
+def owned(windows: Sequence[Window], items: Sequence[T], starts: Sequence[int]) -> Iterator[tuple[Window, list[T]]]:
+    """Each window with the items whose start sample lies in its core (intervals are emitted by the window that
+    holds their start, so none is written twice)."""
+    order = np.argsort(np.asarray(starts, dtype=np.int64), kind="stable")
+    k = 0
+    for w in windows:
+        mine: list[T] = []
+        while k < len(order) and starts[order[k]] < w.core_hi:
+            if starts[order[k]] >= w.core_lo:
+                mine.append(items[order[k]])
+            k += 1
+        yield w, mine
