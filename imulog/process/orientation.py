@@ -258,17 +258,26 @@ def _imufusion(gyr, acc, mag, rate_hz, params, static):
     return out
 
 
+def _rts(gyr, acc, mag, rate_hz, params, static):
+    from imulog.process.orientation_smoother import SmootherParams, smooth_orientation
+
+    if mag is not None:
+        raise ValueError("the rts backend is 6D only (no magnetometer): use --backend vqf_offline with --mag")
+    return smooth_orientation(gyr, acc, rate_hz, SmootherParams())[0]
+
+
 BACKENDS: dict[str, Backend] = {
     "madgwick": _madgwick,
     "vqf": _vqf_online,
     "vqf_offline": _vqf_offline,
     "imufusion": _imufusion,
+    "rts": _rts,
 }
 
 
 def available_backends() -> list[str]:
     """Backend names usable in this environment (``imufusion`` only when installed)."""
-    names = ["madgwick", "vqf", "vqf_offline"]
+    names = ["madgwick", "vqf", "vqf_offline", "rts"]
     try:
         import imufusion  # noqa: F401
 
