@@ -143,7 +143,7 @@ def parse_tals(raw: bytes) -> list[tuple[float, float, str]]:
 def _sensor_key(label: str) -> tuple[str, str | None]:
     """(sensor name, axis) from a label like ``Acc X``, ``ACC_Y``, ``Sensor 1: Acc.Z``."""
     m = _AXIS.search(label)
-    if m and m.start() > 0:
+    if m:
         return label[: m.start()].strip(" :_-."), m.group(1).lower()
     return label, None
 
@@ -249,7 +249,7 @@ def read_edf(path: Path, options: ConvertOptions | None = None) -> Recording:
         parts = {k: v for k, v in kinds.items() if sorted(v) == ["x", "y", "z"]}
         if not parts:
             continue
-        name = sanitize_name(sensor).lower() or "edf"
+        name = sanitize_name(sensor).lower() or "imu"
         while name in names:
             name += "_"
         names.add(name)

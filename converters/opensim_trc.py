@@ -65,7 +65,14 @@ def read_trc(path: Path, options: ConvertOptions | None = None) -> Recording:
     skip = HEADER_LINES + (1 if len(lines) > HEADER_LINES and not lines[HEADER_LINES].strip(" \t,\r\n") else 0)
     cols = ["Frame#", "Time"] + [f"{m}.{a}" for m in labels for a in "XYZ"]
     warnings: list[str] = []
-    values = read_table(path, delimiter=delim, skip_lines=skip, names=cols, ragged=True, warnings=warnings)
+    data = path.read_bytes()
+    widest = max((line.rstrip(b"\r").count(delim.encode()) + 1 for line in data.splitlines()[skip:]), default=0)
+    use = min(len(cols), max(widest, 2))  # every row short (trailing markers never recorded): pad them
+    part = read_table(
+        path, delimiter=delim, skip_lines=skip, names=cols[:use], data=data, ragged=True, warnings=warnings
+    )
+    values = np.full((len(part), len(cols)), np.nan)
+    values[:, :use] = part
     n, m = len(values), len(labels)
     try:
         rate = float(info.get("DataRate", "nan"))
