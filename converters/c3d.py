@@ -283,7 +283,7 @@ def read_c3d(path: Path, name: str = "vicon", options: ConvertOptions | None = N
 
 class C3dConverter(Converter):
     name = "c3d"
-    description = "C3D motion capture (points, analogs, events; m or mm; any rate) via ezc3d"
+    description = "C3D motion capture (points, analogs, events; Intel, DEC, MIPS; m or mm) via ezc3d, guarded"
     extensions = (".c3d",)
     example = "imulog convert markers_analogs.c3d -o trial.mcap"
 

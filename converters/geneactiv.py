@@ -268,7 +268,7 @@ def read_bin(path: Path, options: ConvertOptions | None = None) -> Recording:
 
 class GeneactivConverter(Converter):
     name = "geneactiv"
-    description = "GENEActiv .bin (hex pages): accel in g calibrated by the header; light, button, temperature"
+    description = "GENEActiv .bin (hex pages): accel calibrated by the header (m/s^2); light lux, button, temperature"
     extensions = (".bin",)
     example = "imulog convert ../shared/data/devices/geneactiv_bin/GENEActiv_testfile.bin -o geneactiv.mcap"
 
