@@ -41,6 +41,7 @@ BUILTIN: dict[str, str] = {
     "geneactiv": "converters.geneactiv:CONVERTER",
     "opensim-trc": "converters.opensim_trc:CONVERTER",
     "edf": "converters.edf:CONVERTER",
+    "nilspod": "converters.nilspod:CONVERTER",
 }
 MIN_CONFIDENCE = 0.3
 
