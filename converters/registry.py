@@ -42,6 +42,7 @@ BUILTIN: dict[str, str] = {
     "opensim-trc": "converters.opensim_trc:CONVERTER",
     "edf": "converters.edf:CONVERTER",
     "nilspod": "converters.nilspod:CONVERTER",
+    "bids-motion": "converters.bids:CONVERTER",
 }
 MIN_CONFIDENCE = 0.3
 
