@@ -128,7 +128,7 @@ def load(path: Path, options: ConvertOptions | None = None) -> tuple[dict[str, A
         proc = processor_type(data)
         intel = to_intel(data)
         params = parameters(intel)
-    except (C3dLayoutError, struct_error) as e:
+    except (C3dLayoutError, struct_error, ValueError, IndexError) as e:
         raise ConversionError(path, f"corrupt C3D: {e}") from None
     _, warnings = _frames_needed(path, intel, params)
     try:

@@ -179,6 +179,8 @@ def parameters(data: bytes) -> dict[str, list | str]:
             start = body + 2 + ndim
             count = int(np.prod(dims)) if ndim else 1
             chunk = data[start : start + count * abs(ptype)]
+            if len(chunk) < count * abs(ptype):
+                raise C3dLayoutError(f"parameter {name} at byte {pos} runs past the end of the file")
             if ptype == -1:
                 value: list | str = chunk.decode("latin-1")
             elif ptype in (1, 2, 4):
