@@ -111,3 +111,18 @@ def test_cli_convert_and_doctor(shared_data: Path, tmp_path: Path):
     assert r.exit_code == 0, r.output
     r = CliRunner().invoke(cli, ["doctor", str(out)])
     assert r.exit_code == 0, r.output
+
+
+def test_equals_nilspodlib_reader(shared_data: Path):
+    nilspodlib = pytest.importorskip("nilspodlib")
+    path = shared_data / f"{STEM}.bin"
+    ds = nilspodlib.Dataset.from_bin_file(path)
+    rec = read_bin(path)
+    imu = rec.imus[0]
+    np.testing.assert_allclose(imu.acc, ds.acc.data, atol=1e-12, rtol=0)
+    np.testing.assert_allclose(np.degrees(imu.gyr), ds.gyro.data, atol=1e-12, rtol=0)
+    np.testing.assert_allclose(imu.temperature, ds.temperature.data[:, 0], atol=1e-12)
+    np.testing.assert_allclose(rec.signals[0].values[:, 3], ds.baro.data[:, 0], atol=1e-9)
+    np.testing.assert_allclose(imu.t_ns / 1e9, ds.utc_counter - ds.utc_counter[0], atol=1e-9)
+    start = np.datetime64(rec.metadata["imulog.trial"]["start_time"][:26], "us").astype(np.int64) / 1e6
+    assert start == pytest.approx(ds.utc_counter[0], abs=1e-6)
