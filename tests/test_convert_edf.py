@@ -38,6 +38,21 @@ def test_shared_trigno_edf(shared_data: Path):
     assert rec.analogs[1].units[0] == "A /s"
 
 
+def test_shared_trigno_edf_equals_mne(shared_data: Path):
+    """MNE (BSD-3) reads the file pyedflib refuses; its EMG channels (V) equal ours. MNE resamples the 148 Hz
+    channels to the file's highest rate, so only the full-rate channels are compared."""
+    mne = pytest.importorskip("mne")
+    path = shared_data / EDF
+    raw = mne.io.read_raw_edf(path, preload=True, verbose="error")
+    rec = read_edf(path)
+    emg = rec.analogs[0]
+    data = raw.get_data()
+    assert raw.info["sfreq"] == 1259 and data.shape[1] == len(emg)
+    np.testing.assert_allclose(emg.values[:, 0], data[0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(emg.values[:, 1], data[7], rtol=0, atol=1e-12)
+    assert raw.info["meas_date"].replace(tzinfo=None).isoformat() == rec.metadata["imulog.trial"]["start_time"]
+
+
 def _write(path: Path, bdf: bool) -> tuple[list[np.ndarray], list[tuple[float, float, str]]]:
     pyedflib = pytest.importorskip("pyedflib")
     kind = pyedflib.FILETYPE_BDFPLUS if bdf else pyedflib.FILETYPE_EDFPLUS
