@@ -17,12 +17,14 @@ Channels are classified by label, transducer and physical dimension:
   first time-keeping annotation of each record gives its onset, so EDF+D (discontinuous) files keep their gaps.
 
 Time: ns from the header's start date and time (device local time, zone unknown; EDF+ sub-second start from the
-first record's onset). The whole file is memory-mapped; each channel is decoded straight from the records.
+first record's onset). The file is memory-mapped and each channel decoded straight from the records; large files
+convert piece by piece (:func:`iter_chunks`, whole records of about 4 M samples).
 """
 
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from datetime import datetime
 from pathlib import Path
 
@@ -160,7 +162,13 @@ def _kind(s: dict) -> str:
     return "other"
 
 
-def read_edf(path: Path, options: ConvertOptions | None = None) -> Recording:
+CHUNK_SAMPLES = 4_000_000  # samples (all channels) per piece of the streaming convert
+
+
+def iter_chunks(
+    path: Path, options: ConvertOptions | None = None, max_samples: int | None = CHUNK_SAMPLES
+) -> Iterator[Recording]:
+    """The recording in pieces of whole data records of about ``max_samples`` samples (None: one piece)."""
     path = Path(path)
     size = path.stat().st_size
     with open(path, "rb") as f:
@@ -209,21 +217,6 @@ def read_edf(path: Path, options: ConvertOptions | None = None) -> Recording:
         r = int(np.argmax(np.diff(record_ns) <= 0)) + 1
         raise ConversionError(path, f"data record {r}: onset does not increase")
 
-    def values(i: int) -> tuple[np.ndarray, np.ndarray]:
-        s = sigs[i]
-        block = np.ascontiguousarray(mm[:, offsets[i] : offsets[i + 1]])
-        if width == 2:
-            dig = block.view("<i2").astype(np.float64).reshape(-1)
-        else:
-            b = block.reshape(-1, 3).astype(np.int32)
-            v = b[:, 0] | (b[:, 1] << 8) | (b[:, 2] << 16)
-            dig = np.where(v >= 1 << 23, v - (1 << 24), v).astype(np.float64)
-        gain = (s["pmax"] - s["pmin"]) / (s["dmax"] - s["dmin"])
-        phys = s["pmin"] + (dig - s["dmin"]) * gain
-        k = s["samples"]
-        t = (record_ns[:, None] + np.round(np.arange(k) * (duration * 1e9 / k)).astype(np.int64)[None, :]).reshape(-1)
-        return t, phys
-
     data_idx = [i for i, s in enumerate(sigs) if not s["annotations"] and s["samples"] > 0]
     for i in data_idx:
         if sigs[i]["pmin"] == sigs[i]["pmax"]:
@@ -231,91 +224,132 @@ def read_edf(path: Path, options: ConvertOptions | None = None) -> Recording:
                 f"{path.name}: signal {i + 1} ({sigs[i]['label']!r}, {sigs[i]['transducer'] or 'no transducer'}) "
                 f"has physical min == max ({sigs[i]['pmin']:g}): every value reads as {sigs[i]['pmin']:g}"
             )
-    rec = Recording(sources=[str(path)])
-    used: set[int] = set()
-    # IMUs: acc/gyr channels grouped by sensor name and rate, three axes each
-    groups: dict[tuple[str, int], dict[str, dict[str, int]]] = {}
-    for i in data_idx:
-        kind = _kind(sigs[i])
-        if kind in ("acc", "gyr"):
-            sensor, axis = _sensor_key(sigs[i]["label"])
-            g = groups.setdefault((sensor, sigs[i]["samples"]), {}).setdefault(kind, {})
-            if axis is None or axis in g:
-                axis = "xyz"[len(g)] if len(g) < 3 else None
-            if axis is not None:
-                g[axis] = i
-    names: set[str] = set()
-    for (sensor, _), kinds in groups.items():
-        parts = {k: v for k, v in kinds.items() if sorted(v) == ["x", "y", "z"]}
-        if not parts:
-            continue
-        name = sanitize_name(sensor).lower() or "imu"
-        while name in names:
-            name += "_"
-        names.add(name)
-        kw, t_ns, meta = {}, None, {"format": "edf", "source": path.name, "channels": {}}
-        for kind, axes in parts.items():
-            cols = []
-            for a in "xyz":
-                t_ns, v = values(axes[a])
-                cols.append(v * unit_factor(kind, sigs[axes[a]]["dimension"]))
-                used.add(axes[a])
-                meta["channels"][f"{kind}.{a}"] = f"signal {axes[a] + 1}: {sigs[axes[a]]['label']}"
-            kw[kind] = np.column_stack(cols)
-        meta["rate_hz"] = sigs[next(iter(next(iter(parts.values())).values()))]["samples"] / duration
-        rec.imus.append(ImuStream(name=name, t_ns=t_ns - 0, meta=meta, **kw))
-    by_rate: dict[int, list[int]] = {}
-    for i in data_idx:
-        if i not in used:
-            by_rate.setdefault(sigs[i]["samples"], []).append(i)
-    labels_seen: dict[str, int] = {}
-    for k, (spr, idx) in enumerate(sorted(by_rate.items(), key=lambda kv: -kv[0])):
-        chans, units, cols, t_ns = [], [], [], None
-        for i in idx:
-            s = sigs[i]
-            t_ns, v = values(i)
-            label = s["label"] or f"signal {i + 1}"
-            if label in labels_seen or sum(x["label"] == s["label"] for x in sigs) > 1:
-                label = f"{label} {s['transducer']} #{i + 1}".strip()
-            labels_seen[label] = i
-            if _kind(s) == "emg":
-                v = v * EMG_TO_V[s["dimension"].strip().lower()]
-                unit = "V"
-            else:
-                unit = s["dimension"]
-            chans.append(label)
-            units.append(unit)
-            cols.append(v)
-        name = "edf" if k == 0 else f"edf_{spr / duration:g}hz".replace(".", "_")
-        rec.analogs.append(
-            AnalogStream(name, t_ns, chans, units, np.column_stack(cols), meta={"rate_hz": spr / duration})
-        )
-    if events:
-        ev = sorted(events)
-        on = np.round((np.array([e[0] for e in ev]) - sub) * 1e9).astype(np.int64)
-        end = on + np.round(np.array([e[1] for e in ev]) * 1e9).astype(np.int64)
-        rec.events.append(Intervals("/events/edf", on, end, [e[2] for e in ev]))
-    from datetime import timedelta
 
-    rec.metadata["imulog.trial"] = trial_start(start + timedelta(seconds=sub), "EDF header start date/time")
-    rec.metadata["imulog.device.edf"] = {
-        "format": "bdf" if info["bdf"] else ("edf+" if edf_plus else "edf"),
-        "variant": info["reserved"],
-        "patient": info["patient"],
-        "recording": info["recording"],
-        "records": n_rec,
-        "record_duration_s": duration,
-        "signals": [
-            {
-                k: s[k]
-                for k in ("label", "transducer", "dimension", "pmin", "pmax", "dmin", "dmax", "prefilter", "samples")
-            }
-            for s in sigs
-        ],
-        "source": path.name,
-    }
-    rec.warnings.extend(warnings)
-    return rec
+    def build(r0: int, r1: int) -> Recording:
+        """Records r0..r1 as one Recording (events and warnings with the first)."""
+
+        def values(i: int) -> tuple[np.ndarray, np.ndarray]:
+            s = sigs[i]
+            block = np.ascontiguousarray(mm[r0:r1, offsets[i] : offsets[i + 1]])
+            if width == 2:
+                dig = block.view("<i2").astype(np.float64).reshape(-1)
+            else:
+                b = block.reshape(-1, 3).astype(np.int32)
+                v = b[:, 0] | (b[:, 1] << 8) | (b[:, 2] << 16)
+                dig = np.where(v >= 1 << 23, v - (1 << 24), v).astype(np.float64)
+            gain = (s["pmax"] - s["pmin"]) / (s["dmax"] - s["dmin"])
+            phys = s["pmin"] + (dig - s["dmin"]) * gain
+            k = s["samples"]
+            t = (
+                record_ns[r0:r1, None] + np.round(np.arange(k) * (duration * 1e9 / k)).astype(np.int64)[None, :]
+            ).reshape(-1)
+            return t, phys
+
+        rec = Recording(sources=[str(path)])
+        used: set[int] = set()
+        # IMUs: acc/gyr channels grouped by sensor name and rate, three axes each
+        groups: dict[tuple[str, int], dict[str, dict[str, int]]] = {}
+        for i in data_idx:
+            kind = _kind(sigs[i])
+            if kind in ("acc", "gyr"):
+                sensor, axis = _sensor_key(sigs[i]["label"])
+                g = groups.setdefault((sensor, sigs[i]["samples"]), {}).setdefault(kind, {})
+                if axis is None or axis in g:
+                    axis = "xyz"[len(g)] if len(g) < 3 else None
+                if axis is not None:
+                    g[axis] = i
+        names: set[str] = set()
+        for (sensor, _), kinds in groups.items():
+            parts = {k: v for k, v in kinds.items() if sorted(v) == ["x", "y", "z"]}
+            if not parts:
+                continue
+            name = sanitize_name(sensor).lower() or "imu"
+            while name in names:
+                name += "_"
+            names.add(name)
+            kw, t_ns, meta = {}, None, {"format": "edf", "source": path.name, "channels": {}}
+            for kind, axes in parts.items():
+                cols = []
+                for a in "xyz":
+                    t_ns, v = values(axes[a])
+                    cols.append(v * unit_factor(kind, sigs[axes[a]]["dimension"]))
+                    used.add(axes[a])
+                    meta["channels"][f"{kind}.{a}"] = f"signal {axes[a] + 1}: {sigs[axes[a]]['label']}"
+                kw[kind] = np.column_stack(cols)
+            meta["rate_hz"] = sigs[next(iter(next(iter(parts.values())).values()))]["samples"] / duration
+            rec.imus.append(ImuStream(name=name, t_ns=t_ns - 0, meta=meta, **kw))
+        by_rate: dict[int, list[int]] = {}
+        for i in data_idx:
+            if i not in used:
+                by_rate.setdefault(sigs[i]["samples"], []).append(i)
+        labels_seen: dict[str, int] = {}
+        for k, (spr, idx) in enumerate(sorted(by_rate.items(), key=lambda kv: -kv[0])):
+            chans, units, cols, t_ns = [], [], [], None
+            for i in idx:
+                s = sigs[i]
+                t_ns, v = values(i)
+                label = s["label"] or f"signal {i + 1}"
+                if label in labels_seen or sum(x["label"] == s["label"] for x in sigs) > 1:
+                    label = f"{label} {s['transducer']} #{i + 1}".strip()
+                labels_seen[label] = i
+                if _kind(s) == "emg":
+                    v = v * EMG_TO_V[s["dimension"].strip().lower()]
+                    unit = "V"
+                else:
+                    unit = s["dimension"]
+                chans.append(label)
+                units.append(unit)
+                cols.append(v)
+            name = "edf" if k == 0 else f"edf_{spr / duration:g}hz".replace(".", "_")
+            rec.analogs.append(
+                AnalogStream(name, t_ns, chans, units, np.column_stack(cols), meta={"rate_hz": spr / duration})
+            )
+        if events and r0 == 0:
+            ev = sorted(events)
+            on = np.round((np.array([e[0] for e in ev]) - sub) * 1e9).astype(np.int64)
+            end = on + np.round(np.array([e[1] for e in ev]) * 1e9).astype(np.int64)
+            rec.events.append(Intervals("/events/edf", on, end, [e[2] for e in ev]))
+        from datetime import timedelta
+
+        rec.metadata["imulog.trial"] = trial_start(start + timedelta(seconds=sub), "EDF header start date/time")
+        rec.metadata["imulog.device.edf"] = {
+            "format": "bdf" if info["bdf"] else ("edf+" if edf_plus else "edf"),
+            "variant": info["reserved"],
+            "patient": info["patient"],
+            "recording": info["recording"],
+            "records": n_rec,
+            "record_duration_s": duration,
+            "signals": [
+                {
+                    k: s[k]
+                    for k in (
+                        "label",
+                        "transducer",
+                        "dimension",
+                        "pmin",
+                        "pmax",
+                        "dmin",
+                        "dmax",
+                        "prefilter",
+                        "samples",
+                    )
+                }
+                for s in sigs
+            ],
+            "source": path.name,
+        }
+        if r0 == 0:
+            rec.warnings.extend(warnings)
+        return rec
+
+    per = n_rec if max_samples is None else max(1, max_samples // rec_samples)
+    for r0 in range(0, n_rec, per):
+        yield build(r0, min(n_rec, r0 + per))
+
+
+def read_edf(path: Path, options: ConvertOptions | None = None) -> Recording:
+    """The whole file as one Recording."""
+    return next(iter_chunks(path, options, max_samples=None))
 
 
 class EdfConverter(Converter):
@@ -339,6 +373,10 @@ class EdfConverter(Converter):
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_edf(Path(path), options)
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """Pieces of whole data records for the streaming convert of large files."""
+        return iter_chunks(Path(path), options)
 
 
 CONVERTER = EdfConverter()

@@ -184,3 +184,20 @@ def test_cli_convert_and_doctor(shared_data: Path, tmp_path: Path):
     assert r.exit_code == 0, r.output
     r = CliRunner().invoke(cli, ["doctor", str(out)])
     assert r.exit_code == 0, r.output
+
+
+def test_pieces_equal_the_whole(tmp_path: Path):
+    from converters.edf import iter_chunks
+
+    path = tmp_path / "walk.bdf"
+    _write(path, True)
+    whole = read_edf(path)
+    per_record = sum(s["samples"] for s in whole.metadata["imulog.device.edf"]["signals"])
+    pieces = list(iter_chunks(path, max_samples=2 * per_record))  # 5 records of 1 s: pieces of 2, 2 and 1
+    assert [len(p.imus[0]) for p in pieces] == [200, 200, 100]
+    np.testing.assert_array_equal(np.concatenate([p.imus[0].acc for p in pieces]), whole.imus[0].acc)
+    np.testing.assert_array_equal(np.concatenate([p.imus[0].t_ns for p in pieces]), whole.imus[0].t_ns)
+    for j, a in enumerate(whole.analogs):
+        np.testing.assert_array_equal(np.concatenate([p.analogs[j].values for p in pieces]), a.values)
+        np.testing.assert_array_equal(np.concatenate([p.analogs[j].t_ns for p in pieces]), a.t_ns)
+    assert len(pieces[0].events) == 1 and not pieces[1].events
