@@ -22,7 +22,17 @@ OpenMovement's conversion; scikit-digital-health's (raw - 171) / 3.142 reads ~2 
 and battery (V = (raw + 512) * 6 / 1024) become one row per block in ``/signals/<name>``.
 
 Every block's checksum is verified: a bad or truncated block stops the conversion with the file and block index
-(a silently skipped block would turn damaged data into a time gap nobody sees). Blocks are decoded in batches from
+(a silently skipped block would turn damaged data into a time gap nobody sees). With
+``ConvertOptions.extra["skip_damaged"]`` damaged blocks (bad checksum, length or block type) are skipped instead:
+each run of them is a gap (NaN samples on the nominal grid, counted in ``gaps``/``gap_samples``), one warning per
+run names its blocks (the warnings go to the conversion record), and ``skipped_damaged_blocks`` in the device
+record counts them.
+
+Times follow OpenMovement's definition (``cwa-convert``, ``openmovement-python``; GGIRread computes the same block
+start). scikit-digital-health reads times ~10 ms earlier on the shared AX3/AX6 samples: its reader ignores the
+fraction and the offset shim (block start = RTC - timestampOffset / rate, quantised to whole samples) and starts
+each block at the previous block's nominal end; ``tests/test_convert_axivity_time.py`` reproduces its times from
+that rule within 0.1 ms. Blocks are decoded in batches from
 a memory map, so memory does not grow with the recording (:func:`iter_chunks`).
 """
 
@@ -223,28 +233,36 @@ def _layout(path: Path, blocks: np.ndarray, first_index: int) -> _Layout:
     return _Layout(axes=axes, packed=packed, capacity=capacity)
 
 
-def _check_blocks(path: Path, raw: np.ndarray, blocks: np.ndarray, first_index: int) -> np.ndarray:
-    """Indices (in the batch) of the AX blocks to decode; ConversionError for a damaged one."""
+def _damage(raw: np.ndarray, blocks: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """Per block of a batch: damaged?, and why ("" when intact)."""
     sums = block_word_sums(raw)
     magic = blocks["magic"]
     bad_magic = (magic != MAGIC_AX) & ~np.isin(magic, list(OTHER_BLOCKS))
-    if bad_magic.any():
-        i = int(np.nonzero(bad_magic)[0][0])
-        raise ConversionError(
-            path,
-            f"data block {first_index + i} (byte {HEADER_BYTES + (first_index + i) * BLOCK_BYTES}): "
-            f"not an 'AX' data block (starts {bytes(raw[i, :2])!r})",
-        )
-    is_ax = magic == MAGIC_AX
-    bad = is_ax & ((sums != 0) | (blocks["length"] != 508))
-    if bad.any():
+    bad_sum = (magic == MAGIC_AX) & ((sums != 0) | (blocks["length"] != 508))
+    why = [
+        f"not an 'AX' data block (starts {bytes(raw[i, :2])!r})"
+        if bad_magic[i]
+        else "checksum mismatch"
+        if bad_sum[i]
+        else ""
+        for i in range(len(raw))
+    ]
+    return bad_magic | bad_sum, why
+
+
+def _check_blocks(
+    path: Path, raw: np.ndarray, blocks: np.ndarray, first_index: int, skip_damaged: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """(indices in the batch of the AX blocks to decode, indices of damaged blocks). A damaged block is an error
+    naming it unless ``skip_damaged``."""
+    bad, why = _damage(raw, blocks)
+    if bad.any() and not skip_damaged:
         i = int(np.nonzero(bad)[0][0])
+        what = why[i] if why[i] != "checksum mismatch" else "checksum mismatch (the block is damaged)"
         raise ConversionError(
-            path,
-            f"data block {first_index + i} (byte {HEADER_BYTES + (first_index + i) * BLOCK_BYTES}): checksum "
-            "mismatch (the block is damaged)",
+            path, f"data block {first_index + i} (byte {HEADER_BYTES + (first_index + i) * BLOCK_BYTES}): {what}"
         )
-    return np.nonzero(is_ax)[0]
+    return np.nonzero((blocks["magic"] == MAGIC_AX) & ~bad)[0], np.nonzero(bad)[0]
 
 
 def _decode(blocks: np.ndarray, layout: _Layout) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
@@ -262,15 +280,23 @@ def _decode(blocks: np.ndarray, layout: _Layout) -> tuple[np.ndarray, np.ndarray
     return acc, gyr, mag
 
 
-def sample_times_ns(starts: np.ndarray, next_start: int | None, counts: np.ndarray, rate_hz: np.ndarray) -> np.ndarray:
+def sample_times_ns(
+    starts: np.ndarray,
+    next_start: int | None,
+    counts: np.ndarray,
+    rate_hz: np.ndarray,
+    breaks: np.ndarray | None = None,
+) -> np.ndarray:
     """Per-sample times (N, max count) int64 ns from block starts (entries past a block's count are meaningless):
-    spread to the next block's start when it follows within twice the nominal block duration, else at the
-    nominal rate."""
+    spread to the next block's start when it follows within twice the nominal block duration (and no skipped
+    damaged block lies between them: ``breaks``), else at the nominal rate."""
     counts = np.maximum(np.asarray(counts, dtype=np.int64), 1)
     nominal = np.round(counts * NS_PER_S / rate_hz).astype(np.int64)
     nxt = np.append(starts[1:], next_start if next_start is not None else starts[-1] + nominal[-1])
     span = nxt - starts
     ok = (span > 0) & (span < 2 * nominal)
+    if breaks is not None:
+        ok &= ~breaks
     span = np.where(ok, span, nominal)
     k = np.arange(int(counts.max()), dtype=np.int64)
     return starts[:, None] + (span[:, None] * k[None, :]) // counts[:, None]
@@ -280,7 +306,13 @@ MAX_GAP_NS = 31 * 86400 * NS_PER_S  # a longer pause is a clock or file problem:
 
 
 def _gaps(
-    path: Path, starts: np.ndarray, next_start: int | None, counts: np.ndarray, rate_hz: np.ndarray, index: np.ndarray
+    path: Path,
+    starts: np.ndarray,
+    next_start: int | None,
+    counts: np.ndarray,
+    rate_hz: np.ndarray,
+    index: np.ndarray,
+    breaks: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Where the recording paused: (sample positions, first NaN time, NaN count) per block, as ``with_fills`` takes.
 
@@ -294,6 +326,8 @@ def _gaps(
     has_next[-1] = next_start is not None
     end = starts + nominal
     pause = has_next & (nxt - starts >= 2 * nominal)
+    if breaks is not None:  # skipped damaged blocks: a gap whatever its length
+        pause |= has_next & breaks & (nxt > end)
     long = np.nonzero(pause & (nxt - end > MAX_GAP_NS))[0]
     if len(long):
         i = int(long[0])
@@ -332,7 +366,8 @@ def iter_chunks(
     names = {str(k).upper(): v for k, v in (options.extra.get("names") or {}).items()}
     name = sanitize_name(names.get(serial.upper(), f"{header.model.lower()}_{serial}"))
     try:
-        yield from _decode_batches(path, source, header, n_blocks, blocks_per_chunk, name)
+        skip = bool(options.extra.get("skip_damaged"))
+        yield from _decode_batches(path, source, header, n_blocks, blocks_per_chunk, name, skip)
     finally:
         source.close()
 
@@ -345,30 +380,80 @@ def _read_blocks(source, first: int, count: int) -> np.ndarray:
     return np.frombuffer(data, dtype=np.uint8).reshape(-1, BLOCK_BYTES).copy()
 
 
+def _skipped_warning(path: Path, run: tuple[int, int]) -> str:
+    return (
+        f"{path.name}: data blocks {run[0]}-{run[1]} damaged (checksum or block header); skipped, a gap in the samples"
+    )
+
+
+def _runs(idx: np.ndarray) -> list[tuple[int, int]]:
+    """Consecutive runs of sorted block indices as (first, last)."""
+    out: list[tuple[int, int]] = []
+    for i in map(int, idx):
+        if out and out[-1][1] == i - 1:
+            out[-1] = (out[-1][0], i)
+        else:
+            out.append((i, i))
+    return out
+
+
 def _decode_batches(
-    path: Path, source, header: CwaHeader, n_blocks: int, blocks_per_chunk: int, name: str
+    path: Path,
+    source,
+    header: CwaHeader,
+    n_blocks: int,
+    blocks_per_chunk: int,
+    name: str,
+    skip_damaged: bool = False,
 ) -> Iterator[Recording]:
     layout: _Layout | None = None
     origin: int | None = None
     meta: dict = {}
     prev_end: int | None = None
-    n_gaps = gap_samples = 0
+    n_gaps = gap_samples = skipped = 0
+    warnings: list[str] = []
+    pending: tuple[int, int] | None = None  # the last run of damaged blocks, reported when it ends
     for first in range(0, n_blocks, blocks_per_chunk):
         stop = min(n_blocks, first + blocks_per_chunk)
         raw = _read_blocks(source, first, min(n_blocks, stop + 1) - first)  # one block ahead: its start time
         blocks_all = raw.view(BLOCK_DTYPE).reshape(len(raw))
-        keep = _check_blocks(path, raw[: stop - first], blocks_all[: stop - first], first)
-        ahead = None
-        if stop < n_blocks and blocks_all[-1]["magic"] == MAGIC_AX:
-            _check_blocks(path, raw[-1:], blocks_all[-1:], stop)
-            ahead = int(block_start_ns(blocks_all[-1:])[0])
-        if len(keep) == 0:
-            continue
+        keep, bad = _check_blocks(path, raw[: stop - first], blocks_all[: stop - first], first, skip_damaged)
+        damaged = list(first + bad)
+        ahead, ahead_index = None, n_blocks
+        if stop < n_blocks:
+            nxt_raw, j = raw[-1:], stop
+            while True:  # the next intact block gives this batch's end time (damaged ones on the way skipped)
+                nxt = nxt_raw.view(BLOCK_DTYPE).reshape(1)
+                if nxt[0]["magic"] != MAGIC_AX and not _damage(nxt_raw, nxt)[0][0]:
+                    break
+                good, _ = _check_blocks(path, nxt_raw, nxt, j, skip_damaged)
+                if len(good):
+                    ahead, ahead_index = int(block_start_ns(nxt)[0]), j
+                    break
+                damaged.append(j)
+                j += 1
+                if j >= n_blocks:
+                    break
+                nxt_raw = _read_blocks(source, j, 1)
+        if bad.size:
+            skipped += len(bad)
+            for a, b in _runs(first + bad):
+                if pending and a == pending[1] + 1:  # a run continued across batches
+                    pending = (pending[0], b)
+                    continue
+                if pending:
+                    warnings.append(_skipped_warning(path, pending))
+                pending = (a, b)
         keep = keep[blocks_all["count"][keep] > 0]  # a block without samples adds nothing
         if len(keep) == 0:
             continue
         blocks = blocks_all[keep]
         index = first + keep  # block indices in the file
+        breaks = None
+        if damaged:
+            following = np.append(index[1:], ahead_index)
+            dmg = np.sort(np.asarray(damaged))
+            breaks = np.searchsorted(dmg, following) > np.searchsorted(dmg, index, side="right")
         lay = _layout(path, blocks, int(index[0]))
         if layout is None:
             layout = lay
@@ -378,7 +463,7 @@ def _decode_batches(
         starts = block_start_ns(blocks)
         counts = blocks["count"].astype(np.int64)
         filled = np.arange(layout.capacity)[None, :] < counts[:, None]  # (N, capacity): the samples each block holds
-        t = sample_times_ns(starts, ahead, counts, rate)
+        t = sample_times_ns(starts, ahead, counts, rate, breaks)
         t = np.pad(t, ((0, 0), (0, layout.capacity - t.shape[1])))[filled]
         if origin is None:
             origin = int(t[0])
@@ -394,10 +479,12 @@ def _decode_batches(
             "gyr": None if gyr is None else np.radians(gyr[filled]),
             "mag": None if mag is None else mag[filled],
         }
-        positions, fill_t0, fill_n = _gaps(path, starts, ahead, counts, rate, index)
+        positions, fill_t0, fill_n = _gaps(path, starts, ahead, counts, rate, index, breaks)
         n_gaps += int(np.count_nonzero(fill_n))
         gap_samples += int(fill_n.sum())
         meta.update(gaps=n_gaps, gap_samples=gap_samples)
+        if skip_damaged:
+            meta["skipped_damaged_blocks"] = skipped
         step_ns = NS_PER_S / float(rate[0])
         pieces = with_fills(t - origin, values, positions, fill_t0 - origin, fill_n, step_ns)
         imus = [ImuStream(name=name, t_ns=pt, meta=dict(meta), **pv) for pt, pv in pieces]
@@ -419,9 +506,18 @@ def _decode_batches(
             rec = Recording(imus=[part], signals=[signals] if i == 0 else [], sources=[str(path)])
             rec.metadata[f"imulog.device.{name}"] = dict(meta)
             rec.metadata["imulog.trial"] = dict(trial)
+            if i == 0:
+                rec.warnings.extend(warnings)
+                warnings = []
             yield rec
     if origin is None:
         raise ConversionError(path, "no 'AX' data blocks")
+    if pending:
+        warnings.append(_skipped_warning(path, pending))
+    if warnings:  # runs of damaged blocks not yet reported
+        rec = Recording(sources=[str(path)], warnings=warnings)
+        rec.metadata[f"imulog.device.{name}"] = dict(meta, skipped_damaged_blocks=skipped)
+        yield rec
 
 
 def _device_meta(path: Path, header: CwaHeader, layout: _Layout, name: str, blocks: np.ndarray) -> dict:

@@ -1,5 +1,14 @@
 """C3D files (via ezc3d): points as markers, analog channels, events; units m or mm; non-integer rates.
 
+Every processor type is read: Intel and DEC (VAX floats) files go to ezc3d as they are, MIPS (SGI, big-endian)
+files are rewritten as Intel first (:mod:`converters.c3d_format`; ezc3d refuses MIPS). ezc3d runs in a child
+process under a time and memory limit (``extra["reader_timeout_s"]``, default 60 s; ``reader_memory_bytes``,
+1 GiB, :mod:`converters._guard`); when it fails, crashes or hangs, imulog's own reader
+(:mod:`converters.c3d_data`) reads the points and analogs, with a warning naming what ezc3d did. The frame count is
+``POINT:FRAMES`` (warned when the header's count disagrees; the header's 16-bit count wraps on long trials), the
+point scale ``POINT:SCALE`` (warned when the header's copy disagrees). A marker set without one valid sample, or
+markers that are never valid, are warned about per marker set.
+
 Time on the capture clock: point frame ``k`` (0-based, counting from the header's first frame) is at
 ``round((first_frame + k) / point_rate * 1e9)`` ns, so a Vicon C3D and its Nexus CSV export share one clock.
 Analog sample ``j`` is at ``(first_frame + j / ratio) / point_rate``. Event times (``EVENT:TIMES``, minutes and
@@ -10,6 +19,7 @@ model outputs, kept in ``/vicon/model_outputs`` with their units rather than as 
 from __future__ import annotations
 
 from pathlib import Path
+from struct import error as struct_error
 from typing import Any
 
 import numpy as np
@@ -49,49 +59,130 @@ def _labels(params: dict, group: str, n: int) -> list[str]:
     return out
 
 
-def check_size(path: Path) -> None:
-    """Raise ConversionError when the file is shorter than its header's frame count needs (ezc3d would
-    silently return fewer frames)."""
+def _frames_needed(path: Path, intel: bytes, params: dict) -> tuple[int, list[str]]:
+    """Frames to read (``POINT:FRAMES``, else the header's count) and a warning when the two disagree; raises
+    ConversionError when the file is shorter than those frames need (ezc3d would silently return fewer)."""
     import struct
 
-    with open(path, "rb") as f:
-        header = f.read(512)
-        if len(header) < 512:
-            raise ConversionError(path, "too short to be a C3D file")
-        f.seek(max(header[0] - 1, 0) * 512)
-        param = f.read(4)
-    big = len(param) == 4 and param[3] == 86  # MIPS processors write big-endian
-    e = ">" if big else "<"
-    n_points, n_analog, first, last = struct.unpack(e + "4H", header[2:10])
-    scale = struct.unpack(e + "f", header[12:16])[0]
-    data_block = struct.unpack(e + "H", header[16:18])[0]
-    frames = last - first + 1
+    n_points, n_analog, first, last = struct.unpack_from("<4H", intel, 2)
+    (scale,) = struct.unpack_from("<f", intel, 12)
+    (data_block,) = struct.unpack_from("<H", intel, 16)
+    hdr = last - first + 1
+    warnings = []
+    pf = params.get("POINT:FRAMES")
+    frames = hdr
+    if isinstance(pf, list) and pf:
+        frames = int(pf[0]) + (65536 if int(pf[0]) < 0 else 0)
+        if frames != hdr:
+            warnings.append(
+                f"{path.name}: the header's frame count {hdr} disagrees with POINT:FRAMES {frames}; read POINT:FRAMES"
+            )
+    pscale = params.get("POINT:SCALE")
+    if isinstance(pscale, list) and pscale:
+        if not np.isclose(float(pscale[0]), scale, rtol=1e-6) and n_points:
+            warnings.append(
+                f"{path.name}: the header's scale {scale:g} disagrees with POINT:SCALE {float(pscale[0]):g}; "
+                "used POINT:SCALE (the C3D standard's rule)"
+            )
+        scale = float(pscale[0])
     if frames <= 0 or data_block < 2:
-        return
+        return frames, warnings
     word = 4 if scale < 0 else 2
     need = (data_block - 1) * 512 + frames * (n_points * 4 + n_analog) * word
-    size = path.stat().st_size
-    if size < need:
-        raise ConversionError(path, f"truncated C3D: {size} bytes, the header's {frames} frames need {need}")
+    if len(intel) < need:
+        raise ConversionError(path, f"truncated C3D: {len(intel)} bytes, its {frames} frames need {need}")
+    return frames, warnings
 
 
-def read_c3d(path: Path, name: str = "vicon") -> Recording:
-    path = Path(path)
+def _ezc3d_read(path: str) -> dict[str, Any]:
+    """ezc3d's reading of ``path`` as plain dicts and arrays (runs in a guarded child process)."""
+    import ezc3d
+
+    c = ezc3d.c3d(path, extract_forceplat_data=False)
+    params = {
+        g: {n: {"value": v["value"]} for n, v in grp.items() if isinstance(v, dict) and "value" in v}
+        for g, grp in c["parameters"].items()
+        if isinstance(grp, dict)
+    }
+    data = c["data"]
+    meta = {"residuals": np.asarray(data["meta_points"]["residuals"])} if "meta_points" in data else {}
+    return {
+        "header": {"points": dict(c["header"]["points"])},
+        "parameters": params,
+        "data": {"points": np.asarray(data["points"]), "analogs": np.asarray(data["analogs"]), "meta_points": meta},
+    }
+
+
+def load(path: Path, options: ConvertOptions | None = None) -> tuple[dict[str, Any], list[str]]:
+    """The file's content (ezc3d under a time and memory guard; imulog's own reader when ezc3d cannot) and
+    warnings. DEC files go to ezc3d as they are, MIPS files rewritten as Intel (ezc3d refuses them)."""
+    import tempfile
+
+    from converters import c3d_data
+    from converters._guard import DEFAULT_MEMORY_BYTES, DEFAULT_TIMEOUT_S, GuardError, guarded
+    from converters.c3d_format import DEC, INTEL, PROCESSORS, C3dLayoutError, parameters, processor_type, to_intel
+
+    extra = options.extra if options else {}
+    data = path.read_bytes()
     try:
-        import ezc3d
+        proc = processor_type(data)
+        intel = to_intel(data)
+        params = parameters(intel)
+    except (C3dLayoutError, struct_error, ValueError, IndexError) as e:
+        raise ConversionError(path, f"corrupt C3D: {e}") from None
+    _, warnings = _frames_needed(path, intel, params)
+    try:
+        import ezc3d  # noqa: F401
     except ImportError:  # pragma: no cover - optional extra
         raise ConversionError(path, "reading C3D needs ezc3d (pip install 'imulog[c3d]')") from None
+    timeout = float(extra.get("reader_timeout_s", DEFAULT_TIMEOUT_S))
+    memory = int(extra.get("reader_memory_bytes", DEFAULT_MEMORY_BYTES))
+    tmp = None
+    try:
+        source = str(path)
+        if proc not in (INTEL, DEC):
+            fd, tmp = tempfile.mkstemp(suffix=".c3d")
+            with open(fd, "wb") as f:
+                f.write(intel)
+            source = tmp
+        try:
+            return guarded(_ezc3d_read, source, timeout_s=timeout, memory_bytes=memory), warnings
+        except GuardError as e:
+            if e.kind == "error" and "RuntimeError" in str(e) and proc == INTEL and "support" not in str(e):
+                why = f"ezc3d: {str(e).partition(': ')[2]}"
+            else:
+                why = f"ezc3d {e}"
+            try:
+                content = c3d_data.read(intel)
+            except (C3dLayoutError, ValueError, IndexError, struct_error) as e2:
+                raise ConversionError(path, f"corrupt C3D ({PROCESSORS[proc]}): {why}; imulog's reader: {e2}") from None
+            warnings.append(f"{path.name}: {why}; read with imulog's own C3D reader (points, analogs, events)")
+            return content, warnings
+    finally:
+        if tmp:
+            Path(tmp).unlink(missing_ok=True)
+
+
+def invalid_marker_warnings(path: Path, name: str, labels: list[str], valid: np.ndarray) -> list[str]:
+    """One warning for a marker set without a single valid sample, else one listing its never-valid markers."""
+    never = [lab for j, lab in enumerate(labels) if not valid[:, j].any()]
+    if not never:
+        return []
+    if len(never) == len(labels):
+        return [f"{path.name}: marker set {name!r}: all {len(labels)} markers are invalid in every frame"]
+    shown = ", ".join(never[:5]) + (" ..." if len(never) > 5 else "")
+    return [f"{path.name}: marker set {name!r}: {len(never)} of {len(labels)} markers never valid ({shown})"]
+
+
+def read_c3d(path: Path, name: str = "vicon", options: ConvertOptions | None = None) -> Recording:
+    path = Path(path)
     if path.stat().st_size < 512:
         raise ConversionError(path, "too short to be a C3D file")
     with open(path, "rb") as f:
         head = f.read(2)
     if len(head) < 2 or head[1] != 0x50:
         raise ConversionError(path, "not a C3D file (byte 2 of the header is not 0x50)")
-    check_size(path)
-    try:
-        c = ezc3d.c3d(str(path), extract_forceplat_data=False)
-    except Exception as e:  # noqa: BLE001 - ezc3d raises plain RuntimeError for corrupt files
-        raise ConversionError(path, f"corrupt C3D: {e}") from None
+    c, warnings = load(path, options)
     params = c["parameters"]
     header = c["header"]
     rate = float(header["points"]["frame_rate"])
@@ -103,11 +194,11 @@ def read_c3d(path: Path, name: str = "vicon") -> Recording:
     first = int(header["points"]["first_frame"])
     points = c["data"]["points"]  # (4, M, N)
     n_frames = points.shape[2]
-    rec = Recording(sources=[str(path)])
+    rec = Recording(sources=[str(path)], warnings=list(warnings))
     t_ns = np.round((first + np.arange(n_frames)) * (1e9 / rate)).astype(np.int64)
     meta: dict[str, Any] = {"format": "c3d", "source": path.name, "rate_hz": rate, "first_frame": first}
     units_list = _param(params, "POINT", "UNITS", ["mm"]) or ["mm"]
-    unit = str(units_list[0]).strip() or "mm"
+    unit = str(units_list[0]).strip(" \x00") or "mm"
     n_points = points.shape[1]
     if n_points and n_frames:
         if unit not in LENGTH_TO_M:
@@ -135,6 +226,7 @@ def read_c3d(path: Path, name: str = "vicon") -> Recording:
                 )
             )
             meta.update(marker_units=unit, markers=len(marker_idx))
+            rec.warnings.extend(invalid_marker_warnings(path, name, rec.markers[-1].labels, rec.markers[-1].valid))
         if out_idx:
             cols, units, vals = [], [], []
             for i in out_idx:
@@ -191,7 +283,7 @@ def read_c3d(path: Path, name: str = "vicon") -> Recording:
 
 class C3dConverter(Converter):
     name = "c3d"
-    description = "C3D motion capture (points, analogs, events; m or mm; any rate) via ezc3d"
+    description = "C3D motion capture (points, analogs, events; Intel, DEC, MIPS; m or mm) via ezc3d, guarded"
     extensions = (".c3d",)
     example = "imulog convert markers_analogs.c3d -o trial.mcap"
 
@@ -201,7 +293,8 @@ class C3dConverter(Converter):
         return 0.0
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
-        return read_c3d(Path(path), name=(options.extra.get("vicon_name", "vicon") if options else "vicon"))
+        name = options.extra.get("vicon_name", "vicon") if options else "vicon"
+        return read_c3d(Path(path), name=name, options=options)
 
 
 CONVERTER = C3dConverter()

@@ -13,8 +13,15 @@ Layout (OpenSim 4.x)::
 
 Time is in seconds as written (it need not start at 0: OpenSense keeps the trial's own times) and is kept as the
 clock. Each ``<body>_imu`` column becomes ``/orientation/<body>_imu`` (``qw,qx,qy,qz``, the sensor's orientation in
-OpenSim's ground frame). ``DataType=Vec3`` files (e.g. accelerations) become ``/signals/<column>`` with x,y,z, and
-plain scalar storage files one ``/signals/sto`` stream, columns as named.
+OpenSim's ground frame). ``DataType=Vec3`` files (e.g. accelerations) become ``/signals/<column>`` with x,y,z.
+
+Scalar storage files (``version=1`` ``.mot`` from inverse kinematics, ``.sto`` from inverse dynamics, static
+optimisation or ground reaction forces; no ``DataType`` or ``DataType=double``) become one ``/signals/<name>``
+stream (``<name>`` from the first header line, e.g. ``Coordinates`` -> ``/signals/coordinates``; else
+``/signals/sto``), values as written. Units by OpenSim's column naming: ``*_moment``/``*_torque*`` N*m,
+``*_force``/``*_v[xyz]`` N, ``*_p[xyz]``/``*_tx``/``*_ty``/``*_tz`` m, other coordinates deg when ``inDegrees=yes``
+and rad when ``inDegrees=no``, otherwise ``""`` (unknown). Header and data may be tab- or comma-separated (a
+storage file re-saved as CSV pads each header line with commas).
 """
 
 from __future__ import annotations
@@ -37,7 +44,7 @@ def _header(path: Path, lines: list[str]) -> tuple[dict[str, str], str, int]:
     info: dict[str, str] = {}
     name = ""
     for i, line in enumerate(lines):
-        text = line.strip()
+        text = line.strip().rstrip(",\t").strip()
         if text.lower() == "endheader":
             if i + 1 >= len(lines):
                 raise ConversionError(path, "no column names after 'endheader'", line=i + 1)
@@ -50,26 +57,47 @@ def _header(path: Path, lines: list[str]) -> tuple[dict[str, str], str, int]:
     raise ConversionError(path, "no 'endheader' line: not an OpenSim storage file (or its header is cut off)")
 
 
+def _in_degrees(info: dict[str, str]) -> bool | None:
+    """``inDegrees=yes`` -> True, ``no`` -> False, absent -> None."""
+    v = info.get("inDegrees", "").strip().lower()
+    return True if v in ("yes", "true", "1") else False if v in ("no", "false", "0") else None
+
+
+def column_unit(name: str, in_degrees: bool | None) -> str:
+    """The unit of a scalar storage column from OpenSim's naming (see the module docstring); "" when unknown."""
+    n = name.lower()
+    if n.endswith("_moment") or "_torque" in n:
+        return "N*m"
+    if n.endswith("_force") or re.search(r"_v[xyz]$", n):
+        return "N"
+    if re.search(r"_(p[xyz]|t[xyz])$", n):
+        return "m"
+    if in_degrees is None:
+        return ""
+    return "deg" if in_degrees else "rad"
+
+
 def read_sto(path: Path) -> Recording:
     path = Path(path)
     lines = head_lines(path, max_lines=200)
     info, title, ni = _header(path, lines)
-    cols = [c.strip() for c in lines[ni].split("\t")]
-    while cols and cols[-1] == "":
-        cols.pop()
-    if not cols or cols[0].lower() != "time":
-        raise ConversionError(path, "the first column must be 'time'", line=ni + 1)
     dtype = info.get("DataType", "").lower()
     width = WIDTH.get(dtype)
     if width is None:
         raise ConversionError(path, f"DataType={info['DataType']} is not supported (Quaternion, Vec3, double)")
+    delim = "\t" if width > 1 or "\t" in lines[ni] else ","
+    cols = [c.strip() for c in lines[ni].split(delim)]
+    while cols and cols[-1] == "":
+        cols.pop()
+    if not cols or cols[0].lower() != "time":
+        raise ConversionError(path, "the first column must be 'time'", line=ni + 1)
     names = ["time"] + [f"{c}[{k}]" for c in cols[1:] for k in range(width)]
     data = path.read_bytes()
     try:
         start = line_offsets(data, ni + 1)
     except ValueError:
         raise ConversionError(path, "no data rows after the column names", line=ni + 1) from None
-    body = data[:start] + data[start:].replace(b"\t", b",")
+    body = data[:start] + data[start:].replace(b"\t", b",") if delim == "\t" else data
     values = read_table(path, delimiter=",", skip_lines=ni + 1, names=names, data=body, required=[0])
     first_line = ni + 2
     try:
@@ -93,7 +121,12 @@ def read_sto(path: Path) -> Recording:
         meta["name"] = title
     rec = Recording(sources=[str(path)])
     if width == 1:
-        rec.signals.append(SignalStream("/signals/sto", t_ns, cols[1:], [""] * (len(cols) - 1), values[:, 1:]))
+        degrees = _in_degrees(info)
+        units = [column_unit(c, degrees) for c in cols[1:]]
+        topic = f"/signals/{sanitize_name(title).lower()}" if title else "/signals/sto"
+        rec.signals.append(SignalStream(topic, t_ns, cols[1:], units, values[:, 1:]))
+        meta["in_degrees"] = degrees
+        meta["units"] = dict(zip(cols[1:], units, strict=True))
     for j, c in enumerate(cols[1:]):
         block = values[:, 1 + j * width : 1 + (j + 1) * width]
         name = sanitize_name(c)
@@ -101,13 +134,19 @@ def read_sto(path: Path) -> Recording:
             rec.signals.append(orientation_stream(name, t_ns, block, frame_id="ground"))
         elif width == 3:
             rec.signals.append(SignalStream(f"/signals/{name}", t_ns, ["x", "y", "z"], ["", "", ""], block))
+    declared = info.get("nRows", "")
+    if declared.isdigit() and int(declared) != len(t_ns):
+        rec.warnings.append(f"{path.name}: header nRows={declared} but the file holds {len(t_ns)} rows; read them all")
     rec.metadata["imulog.device.opensense"] = {**meta, "columns": cols[1:]}
     return rec
 
 
 class OpenSimStoConverter(Converter):
     name = "opensim-sto"
-    description = "OpenSim/OpenSense storage (.sto): DataType=Quaternion columns -> /orientation/<body>_imu (w,x,y,z)"
+    description = (
+        "OpenSim storage (.sto/.mot): quaternion columns -> /orientation/<body>_imu; joint angles, moments, forces "
+        "-> /signals/<name> with units"
+    )
     extensions = (".sto", ".mot")
     example = (
         "imulog convert ../shared/data/devices/opensense_sto/myComplexTasksTrial_orientations.sto -o orientations.mcap"
@@ -118,10 +157,10 @@ class OpenSimStoConverter(Converter):
         if not lines:
             return 0.0
         for i, line in enumerate(lines):
-            if line.strip().lower() == "endheader":
+            if line.strip().rstrip(",\t").strip().lower() == "endheader":
                 nxt = lines[i + 1] if i + 1 < len(lines) else ""
                 return 0.95 if nxt.lower().startswith("time") else 0.5
-            if i > 0 and "=" not in line:
+            if i > 0 and "=" not in line and i > 12:
                 break
         # an OpenSim key=value header without its end (cut off): claim it so the converter names the problem
         return 0.5 if any(x.startswith(("DataRate=", "DataType=", "OpenSimVersion=")) for x in lines[:3]) else 0.0

@@ -38,6 +38,11 @@ BUILTIN: dict[str, str] = {
     "actigraph": "converters.actigraph:CONVERTER",
     "actilife-csv": "converters.actilife_csv:CONVERTER",
     "xdf": "converters.xdf:CONVERTER",
+    "geneactiv": "converters.geneactiv:CONVERTER",
+    "opensim-trc": "converters.opensim_trc:CONVERTER",
+    "edf": "converters.edf:CONVERTER",
+    "nilspod": "converters.nilspod:CONVERTER",
+    "bids-motion": "converters.bids:CONVERTER",
 }
 MIN_CONFIDENCE = 0.3
 

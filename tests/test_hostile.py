@@ -408,6 +408,12 @@ REAL_SAMPLES = {
     "vicon-csv": ("vicon_nexus/analogs.csv", 20000),
     "gaitmap": ("gaitmap_foot/imu_sample.csv", 6000),
     "xsens": ("devices/xsens_mtmanager/MT2022_ACC_GYRO_ROT_ALL_TAB_NAN_00B42D4B.txt", None),
+    "geneactiv": ("devices/geneactiv_bin/GENEActiv_testfile.bin", None),
+    "edf": ("devices/edf/trigno_emg.edf", None),
+    "nilspod": ("devices/nilspod/NilsPodX-6F13_20210109_162824.bin", None),
+    "opensim-trc": ("devices/opensim_trc/markers.trc", 20000),
+    "opensim-sto": ("devices/opensim_mot/inverse_kin.mot", 6000),
+    "axivity": ("devices/axivity_cwa/ax6_sample.cwa", None),
 }  # converter engineers: add one real sample per new converter here
 
 

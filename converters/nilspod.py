@@ -1,0 +1,284 @@
+"""NilsPod (Portabiles) ``.bin`` sessions, and the ``_data.csv`` + ``_header.json`` pair that NilsPodLib writes.
+
+Binary layout (NilsPodLib ``header.py``/``dataset.py``, firmware 0.14 and later): byte 0 is the header size ``H``;
+bytes 1..H-1 hold, in order: sample size, two bytes of enabled-sensor flags (gyro 0x02, acc 0x01, mag 0x04, baro
+0x08, analog 0x10, ecg 0x20, ppg 0x40, temperature 0x80; samples carry them in the order gyro, acc, mag, baro,
+analog, ecg, ppg, temperature), sampling-rate code (1: 1024 Hz ... 10: 102.4 Hz ... 160: 6.4 Hz), session
+termination, sync role, sync distance (x 100 ms), acc range (g), gyro range (x 125 deg/s), sensor position,
+operation mode, 3 bytes of custom metadata, Unix start and stop (uint32 LE), sample count, sync indices, MAC
+address, sync address and channel, hardware version (2 bytes) and the firmware version (last 3 bytes). Then
+fixed-size little-endian samples: int16 x3 gyro, acc, mag; int16 baro; uint16 x3 analog; int32 ecg, ppg; int16
+temperature; uint32 counter last.
+
+Units as NilsPodLib's factory calibration: acc raw / (2^16 / range / 2 / 9.81) m/s^2 (NilsPodLib's g = 9.81),
+gyro raw / (2^16 / range / 2) deg/s (-> rad/s), baro (raw + 101325) / 100 mbar, temperature raw / 512 + 23 degC;
+mag, analog, ecg and ppg stay raw counts (``/signals/<name>``). Time: the counter (samples since the device's
+midnight) over the rate, ``t_ns`` from the first sample; ``start_time`` = midnight of ``utc_start``'s day + counter
+/ rate, in UTC (the sensor clock is set to UTC by its app; NilsPodLib warns it may not be). A counter step above 1
+is missing samples (a gap), a step <= 0 is an error naming the sample.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+
+import numpy as np
+
+from converters._lab import trial_start
+from converters.base import Converter, ConvertOptions
+from converters.errors import ConversionError
+from imulog.model import ImuStream, Recording, SignalStream
+
+SENSORS = (  # name, flag byte index (0/1), flag, channels, bytes per channel, dtype
+    ("gyro", 0, 0x02, 3, 2, "<i2"),
+    ("acc", 0, 0x01, 3, 2, "<i2"),
+    ("mag", 0, 0x04, 3, 2, "<i2"),
+    ("baro", 0, 0x08, 1, 2, "<i2"),
+    ("analog", 0, 0x10, 3, 2, "<u2"),
+    ("ecg", 0, 0x20, 1, 4, "<i4"),
+    ("ppg", 0, 0x40, 1, 4, "<i4"),
+    ("temperature", 0, 0x80, 1, 2, "<i2"),
+)
+RATES = {1: 1024.0, 2: 512.0, 4: 256.0, 5: 204.8, 10: 102.4, 20: 51.2, 40: 25.6, 80: 12.8, 160: 6.4}
+TERMINATION = {0x10: "no memory", 0x20: "BLE", 0x40: "dock", 0x80: "low battery"}
+SYNC_ROLE = {0: "disabled", 1: "slave", 2: "master"}
+GRAV = 9.81  # NilsPodLib's factory calibration
+MIN_FIRMWARE = (0, 14, 0)
+
+
+def parse_header(path: Path, data: bytes) -> dict:
+    """The session header as NilsPodLib's ``Header`` fields (see the module docstring)."""
+    if len(data) < 1 or data[0] < 49:
+        raise ConversionError(path, "not a NilsPod session (header size byte < 49)")
+    size = data[0]
+    if len(data) < size:
+        raise ConversionError(path, f"file ends inside the {size}-byte NilsPod header")
+    h = np.frombuffer(data, dtype=np.uint8, count=size)[1:].astype(np.int64)
+    version = tuple(int(x) for x in h[-3:])
+    if version < MIN_FIRMWARE:
+        raise ConversionError(
+            path,
+            f"NilsPod firmware v{'.'.join(map(str, version))}: the header layout before v0.14 is not supported; "
+            "convert it with NilsPodLib (legacy_support='resolve') and export a CSV",
+        )
+
+    def le(lo: int, hi: int) -> int:
+        return int(sum(int(v) << (8 * i) for i, v in enumerate(h[lo:hi])))
+
+    if int(h[3]) not in RATES:
+        raise ConversionError(path, f"header: unknown sampling-rate code {int(h[3])}")
+    enabled = [s[0] for s in SENSORS if int(h[1 + s[1]]) & s[2]]
+    return {
+        "sample_size": int(h[0]),
+        "enabled_sensors": enabled,
+        "sampling_rate_hz": RATES[int(h[3])],
+        "session_termination": next((v for k, v in TERMINATION.items() if int(h[4]) & k), "unknown"),
+        "sync_role": SYNC_ROLE.get(int(h[5]), str(int(h[5]))),
+        "sync_distance_ms": float(h[6] * 100),
+        "acc_range_g": float(h[7]),
+        "gyro_range_dps": float(h[8] * 125),
+        "utc_start": le(14, 18),
+        "utc_stop": le(18, 22),
+        "n_samples": le(22, 26),
+        "sync_index_start": le(26, 30),
+        "sync_index_stop": le(30, 34),
+        "mac_address": ":".join(f"{int(x):02x}" for x in h[34:40][::-1]),
+        "version_hardware": "".join(str(int(x)) for x in h[46:48]),
+        "version_firmware": "v{}.{}.{}".format(*version),
+        "header_size": size,
+    }
+
+
+def _units(sensor: str, raw: np.ndarray, hdr: dict) -> np.ndarray:
+    """NilsPodLib's factory calibration of one sensor's raw values."""
+    if sensor == "acc":
+        return raw / (2**16 / hdr["acc_range_g"] / 2 / GRAV)
+    if sensor == "gyro":
+        return raw / (2**16 / hdr["gyro_range_dps"] / 2)
+    if sensor == "baro":
+        return (raw + 101325) / 100.0
+    if sensor == "temperature":
+        return raw * 2.0**-9 + 23
+    return raw
+
+
+def read_bin(path: Path, options: ConvertOptions | None = None) -> Recording:
+    path = Path(path)
+    data = path.read_bytes()
+    hdr = parse_header(path, data)
+    size = hdr["sample_size"]
+    widths = {s[0]: s[3] * s[4] for s in SENSORS}
+    need = sum(widths[s] for s in hdr["enabled_sensors"]) + 4
+    if size != need:
+        raise ConversionError(path, f"header: sample size {size} bytes, the enabled sensors need {need}")
+    body = data[hdr["header_size"] :]
+    n, rest = divmod(len(body), size)
+    warnings = []
+    if rest:
+        warnings.append(f"{path.name}: {rest} bytes after the last whole sample (a cut sample); ignored")
+    if n != hdr["n_samples"]:
+        warnings.append(f"{path.name}: header says {hdr['n_samples']} samples, the file holds {n}; read them")
+    if n == 0:
+        raise ConversionError(path, "no samples after the header")
+    rows = np.frombuffer(body, dtype=np.uint8, count=n * size).reshape(n, size)
+    values: dict[str, np.ndarray] = {}
+    pos = 0
+    for name, _, _, ch, width, dt in SENSORS:
+        if name in hdr["enabled_sensors"]:
+            raw = np.ascontiguousarray(rows[:, pos : pos + ch * width]).view(dt).reshape(n, ch).astype(np.float64)
+            values[name] = _units(name, raw, hdr)
+            pos += ch * width
+    counter = np.ascontiguousarray(rows[:, pos : pos + 4]).view("<u4").reshape(n).astype(np.int64)
+    return _recording(path, hdr, counter, values, warnings)
+
+
+def _recording(path: Path, hdr: dict, counter: np.ndarray, values: dict, warnings: list[str]) -> Recording:
+    """The Recording of decoded NilsPod values (shared by the binary and the CSV + JSON reader)."""
+    rate = float(hdr["sampling_rate_hz"])
+    step = np.diff(counter)
+    if (step <= 0).any():
+        i = int(np.argmax(step <= 0)) + 1
+        raise ConversionError(path, f"sample {i}: the counter does not increase ({counter[i - 1]} -> {counter[i]})")
+    missing = int((step - 1).sum())
+    if missing:
+        warnings.append(f"{path.name}: the counter skips {missing} samples in {int((step > 1).sum())} places (gaps)")
+    t_ns = np.round((counter - counter[0]) * (1e9 / rate)).astype(np.int64)
+    sid = "".join(hdr.get("mac_address", "")[-5:].split(":")) or "nilspod"
+    name = f"nilspod_{sid}"
+    meta = {
+        "format": "nilspod",
+        "model": f"NilsPod (hardware {hdr.get('version_hardware', '?')})",
+        "serial": hdr.get("mac_address", ""),
+        "firmware": hdr.get("version_firmware", ""),
+        "rate_hz": rate,
+        "acc_range_g": hdr.get("acc_range_g"),
+        "gyro_range_dps": hdr.get("gyro_range_dps"),
+        "sync_role": hdr.get("sync_role"),
+        "session_termination": hdr.get("session_termination"),
+        "missing_samples": missing,
+        "units": "NilsPodLib factory calibration (acc with g = 9.81)",
+        "source": path.name,
+    }
+    rec = Recording(sources=[str(path)], warnings=warnings)
+    imu = {
+        "acc": values.get("acc"),
+        "gyr": np.radians(values["gyro"]) if "gyro" in values else None,
+        "temperature": values["temperature"][:, 0] if "temperature" in values else None,
+    }
+    if imu["acc"] is not None or imu["gyr"] is not None:
+        rec.imus.append(ImuStream(name=name, t_ns=t_ns, meta=meta, **imu))
+    cols, units, vals = [], [], []
+    for key, labels, unit in (
+        ("mag", ["mag_x", "mag_y", "mag_z"], "counts"),
+        ("baro", ["baro"], "mbar"),
+        ("analog", ["analog_0", "analog_1", "analog_2"], "counts"),
+        ("ecg", ["ecg"], "counts"),
+        ("ppg", ["ppg"], "counts"),
+    ):
+        if key in values:
+            cols += labels
+            units += [unit] * len(labels)
+            vals.append(values[key])
+    if cols:
+        rec.signals.append(SignalStream(f"/signals/{name}", t_ns, cols, units, np.column_stack(vals)))
+    if not rec.streams():
+        raise ConversionError(path, "no sensor enabled")
+    start = hdr.get("utc_start")
+    if start:
+        midnight = datetime.fromtimestamp(int(start), tz=UTC).replace(hour=0, minute=0, second=0)
+        when = midnight + timedelta(seconds=float(counter[0]) / rate)
+        rec.metadata["imulog.trial"] = trial_start(when, "NilsPod header utc_start (midnight) + counter / rate")
+    rec.metadata[f"imulog.device.{name}"] = meta
+    return rec
+
+
+CSV_SENSORS = {
+    "gyro": ["gyr_x", "gyr_y", "gyr_z"],
+    "acc": ["acc_x", "acc_y", "acc_z"],
+    "mag": ["mag_x", "mag_y", "mag_z"],
+    "baro": ["baro"],
+    "analog": ["analog_0", "analog_1", "analog_2"],
+    "ecg": ["ecg"],
+    "ppg": ["ppg"],
+    "temperature": ["temp"],
+}
+
+
+def header_json_for(path: Path) -> Path | None:
+    """``X_header.json`` beside ``X_data.csv`` (NilsPodLib's names), else None."""
+    m = re.match(r"(.*)_data$", Path(path).stem)
+    if not m:
+        return None
+    p = Path(path).with_name(f"{m.group(1)}_header.json")
+    return p if p.is_file() else None
+
+
+def read_csv(path: Path, options: ConvertOptions | None = None) -> Recording:
+    """NilsPodLib's ``data_as_csv`` export (``t`` in s from the first sample, columns as its legends) and the
+    ``_header.json`` it writes beside it (rate, ranges, start)."""
+    from converters._lab import read_table
+
+    path = Path(path)
+    hj = header_json_for(path)
+    if hj is None:
+        raise ConversionError(path, "a NilsPodLib CSV needs its <name>_header.json beside it (rate, start time)")
+    try:
+        hdr = json.loads(hj.read_text())
+    except (OSError, ValueError) as e:
+        raise ConversionError(hj, f"not a NilsPodLib header JSON: {e}") from None
+    if "sampling_rate_hz" not in hdr:
+        raise ConversionError(hj, "no 'sampling_rate_hz'")
+    with open(path, encoding="utf-8", errors="replace") as f:
+        names = [c.strip() for c in f.readline().strip().split(",")]
+    if not names or names[0] != "t":
+        raise ConversionError(path, "the first column must be 't'", line=1)
+    table = read_table(path, delimiter=",", skip_lines=1, names=names, required=[0])
+    rate = float(hdr["sampling_rate_hz"])
+    counter = np.round(table[:, 0] * rate).astype(np.int64)
+    values = {}
+    for sensor, cols in CSV_SENSORS.items():
+        if all(c in names for c in cols):
+            values[sensor] = table[:, [names.index(c) for c in cols]]
+    warnings: list[str] = []
+    if hdr.get("n_samples") not in (None, len(counter)):
+        warnings.append(f"{path.name}: header says {hdr['n_samples']} samples, the CSV holds {len(counter)}")
+    rec = _recording(path, hdr, counter, values, warnings)
+    rec.sources.append(str(hj))
+    if "imulog.trial" in rec.metadata:  # the CSV's t starts at 0: the start is utc_start's second, as written
+        rec.metadata["imulog.trial"] = trial_start(
+            datetime.fromtimestamp(int(hdr["utc_start"]), tz=UTC), "NilsPodLib header JSON utc_start"
+        )
+    return rec
+
+
+class NilsPodConverter(Converter):
+    name = "nilspod"
+    description = "NilsPod .bin session (fw >= 0.14) and NilsPodLib's _data.csv + _header.json: acc, gyro, baro, ..."
+    extensions = (".bin", ".csv")
+    example = "imulog convert ../shared/data/devices/nilspod/NilsPodX-6F13_20210109_162824.bin -o nilspod.mcap"
+
+    def sniff(self, path: Path, head: bytes) -> float:
+        p = Path(path)
+        if p.suffix.lower() == ".csv":
+            return 0.9 if head.startswith(b"t,") and header_json_for(p) is not None else 0.0
+        if p.suffix.lower() != ".bin" or len(head) < 60 or not 49 <= head[0] <= 128:
+            return 0.0
+        size = head[0]
+        if head[1] < 6 or head[4] not in RATES or not head[2] & 0xFF:
+            return 0.0
+        name_hint = p.name.lower().startswith("nilspod")
+        return 0.9 if name_hint else (0.5 if (head[size - 3], head[size - 2]) >= (0, 14) else 0.0)
+
+    def recording_key(self, path: Path) -> str | None:
+        return Path(path).stem  # the .bin and NilsPodLib's _data.csv of it are two decodes, never one trial
+
+    def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
+        if Path(path).suffix.lower() == ".csv":
+            return read_csv(Path(path), options)
+        return read_bin(Path(path), options)
+
+
+CONVERTER = NilsPodConverter()

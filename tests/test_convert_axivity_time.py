@@ -1,0 +1,114 @@
+"""Axivity .cwa sample times against scikit-digital-health's decode (../shared/data/devices/axivity_cwa/*_data.npz),
+and skipping damaged blocks as gaps."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from converters import ConversionError, ConvertOptions
+from converters.axivity import (
+    BLOCK_BYTES,
+    BLOCK_DTYPE,
+    HEADER_BYTES,
+    MAGIC_AX,
+    rate_from_code,
+    read_cwa,
+    rtc_to_epoch_s,
+)
+
+
+@pytest.fixture(scope="module")
+def cwa_dir(shared_data: Path) -> Path:
+    return shared_data / "devices" / "axivity_cwa"
+
+
+def _blocks(path: Path) -> np.ndarray:
+    b = np.fromfile(path, dtype=BLOCK_DTYPE, offset=HEADER_BYTES)
+    return b[b["magic"] == MAGIC_AX]
+
+
+def _abs_s(rec) -> np.ndarray:
+    start = np.datetime64(rec.metadata["imulog.trial"]["start_time"], "ns").astype(np.int64)
+    return (start + rec.imus[0].t_ns) / 1e9
+
+
+def skdh_rule_s(b: np.ndarray) -> np.ndarray:
+    """scikit-digital-health's sample times (read_axivity.f95 get_time): block start RTC - timestampOffset / rate
+    (no fraction, no shim), moved to the previous block's nominal end when that is less than 1 s before."""
+    f = rate_from_code(b["rate_code"])
+    n = b["count"].astype(np.float64)
+    t0 = rtc_to_epoch_s(b["rtc"]).astype(np.float64) - b["offset"] / f
+    t1 = t0 + n / f
+    s = t0.copy()
+    s[1:] = np.where(t0[1:] - t1[:-1] < 1.0, t1[:-1], t0[1:])
+    return np.concatenate([s[k] + np.arange(int(n[k])) * (t1[k] - s[k]) / n[k] for k in range(len(b))])
+
+
+def openmovement_block_start_s(b: np.ndarray) -> np.ndarray:
+    """OpenMovement's block start: RTC + fraction - (timestampOffset + shim) / rate, shim = fraction * int(rate)."""
+    f = rate_from_code(b["rate_code"])
+    frac = (b["fractional"].astype(np.int64) & 0x7FFF) << 1
+    shim = (frac * f.astype(np.int64)) >> 16
+    return rtc_to_epoch_s(b["rtc"]) + frac / 65536 - (b["offset"] + shim) / f
+
+
+@pytest.mark.parametrize("kind", ["ax3", "ax6"])
+def test_time_difference_to_skdh_is_its_rule(cwa_dir: Path, kind: str):
+    """The ~10 ms between imulog and skdh: skdh's own rule reproduces its decode to 0.1 ms; imulog's block starts
+    are OpenMovement's (and GGIRread's) to 1 us. The difference is skdh dropping the fractional time stamp."""
+    path = cwa_dir / f"{kind}_sample.cwa"
+    ref = np.load(cwa_dir / f"{kind}_data.npz")
+    b = _blocks(path)
+    assert np.abs(skdh_rule_s(b) - ref["time"]).max() < 1e-4
+    rec = read_cwa(path)
+    t = _abs_s(rec)
+    first = np.concatenate([[0], np.cumsum(b["count"].astype(np.int64))[:-1]])
+    om = openmovement_block_start_s(b)
+    rel = rec.imus[0].t_ns[first] / 1e9
+    np.testing.assert_allclose(rel, om - om[0], atol=1e-6, rtol=0)
+    assert 0 <= om[0] - t[0] < 1e-3  # start_time is written to the millisecond
+    d = t - ref["time"]
+    rate = float(ref["fs"][0])
+    assert 0.5 / rate < np.median(d) < 2.5 / rate  # the published gap, explained above
+
+
+def _flip(src: Path, tmp_path: Path, blocks: list[int]) -> Path:
+    data = bytearray(src.read_bytes())
+    for k in blocks:
+        data[HEADER_BYTES + k * BLOCK_BYTES + 200] ^= 0x04
+    out = tmp_path / "damaged.cwa"
+    out.write_bytes(bytes(data))
+    return out
+
+
+@pytest.mark.parametrize("chunk", [None, 17, 18])
+def test_skip_damaged_blocks_as_gaps(cwa_dir: Path, tmp_path: Path, chunk):
+    from converters._binary import concat_chunks
+    from converters.axivity import iter_chunks
+
+    src = cwa_dir / "ax6_sample.cwa"
+    good = read_cwa(src).imus[0]
+    bad = _flip(src, tmp_path, [17, 18, 40])
+    with pytest.raises(ConversionError, match="data block 17"):
+        read_cwa(bad)
+    opts = ConvertOptions(extra={"skip_damaged": True})
+    rec = read_cwa(bad, opts) if chunk is None else concat_chunks(iter_chunks(bad, opts, blocks_per_chunk=chunk))
+    imu = rec.imus[0]
+    meta = rec.metadata[next(k for k in rec.metadata if k.startswith("imulog.device."))]
+    assert meta["skipped_damaged_blocks"] == 3
+    assert meta["gaps"] == 2
+    runs = sorted(w for w in rec.warnings if "damaged" in w)
+    assert any("data blocks 17-18" in w for w in runs) and any("data blocks 40-40" in w for w in runs)
+    # the intact samples keep their values; the skipped ones are NaN rows on the nominal grid
+    n = 40  # samples per AX6 block
+    finite = np.isfinite(imu.acc[:, 0])
+    np.testing.assert_array_equal(imu.acc[finite], np.delete(good.acc, np.r_[17 * n : 19 * n, 40 * n : 41 * n], 0))
+    # 3 blocks of 40 samples at the device's real ~98.4 Hz, on the nominal 100 Hz grid: 120 + ~2 per skipped block
+    assert (~finite).sum() == meta["gap_samples"] and 120 <= meta["gap_samples"] <= 126
+    # the block after the skipped run keeps its own start time
+    after = np.nonzero(finite)[0][17 * n]
+    assert imu.t_ns[after] == good.t_ns[19 * n]
+    assert np.all(np.diff(imu.t_ns) > 0)

@@ -1,0 +1,141 @@
+"""C3D variants built from the c3d.org samples (../shared/data/devices/c3d_samples): DEC and MIPS processor types,
+a header frame count that disagrees with POINT:FRAMES, all-invalid markers, and a reader that hangs or crashes."""
+
+from __future__ import annotations
+
+import os
+import struct
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from converters import ConversionError, convert_file
+from converters._guard import GuardError, guarded
+from converters.c3d_format import DEC, MIPS, from_intel, ieee_to_vax, parameters, to_intel, vax_to_ieee
+
+SAMPLES = "devices/c3d_samples"
+
+
+@pytest.fixture(scope="module")
+def pc_int(shared_data: Path) -> Path:
+    return shared_data / SAMPLES / "pc_int.c3d"
+
+
+def test_vax_floats_known_values():
+    # VAX-F 1.0 is stored as 80 40 00 00; -2.5 as 20 C1 00 00 (sign in the first word)
+    raw = np.array([[0x80, 0x40, 0, 0], [0x20, 0xC1, 0, 0]], dtype=np.uint8)
+    np.testing.assert_array_equal(vax_to_ieee(raw), [1.0, -2.5])
+    np.testing.assert_array_equal(ieee_to_vax(np.array([1.0, -2.5], np.float32)), raw)
+
+
+@pytest.mark.parametrize("proc", [DEC, MIPS])
+def test_dec_and_mips_variants_read_like_the_intel_file(pc_int: Path, tmp_path: Path, proc: int):
+    data = pc_int.read_bytes()
+    variant = from_intel(data, proc)
+    assert variant[(data[0] - 1) * 512 + 3] == proc and variant != data
+    assert to_intel(variant) == data  # the rewrite is exact both ways
+    path = tmp_path / f"walk_{proc}.c3d"
+    path.write_bytes(variant)
+    ref = convert_file(pc_int)
+    rec = convert_file(path)
+    assert not any("imulog's own" in w for w in rec.warnings)  # DEC: ezc3d itself; MIPS: ezc3d on the rewrite
+    np.testing.assert_array_equal(rec.markers[0].pos, ref.markers[0].pos)
+    np.testing.assert_array_equal(rec.markers[0].t_ns, ref.markers[0].t_ns)
+    np.testing.assert_array_equal(rec.analogs[0].values, ref.analogs[0].values)
+
+
+def test_mips_sample_reads_with_own_reader(shared_data: Path):
+    """MACsample.c3d (MIPS): ezc3d refuses MIPS and crashes on its Intel rewrite; imulog's reader reads it."""
+    path = shared_data / SAMPLES / "MACsample.c3d"
+    data = path.read_bytes()
+    rec = convert_file(path)
+    (m,) = rec.markers
+    p = parameters(data)
+    assert len(m) == p["POINT:FRAMES"][0] == 180 and len(m.labels) == 33
+    assert rec.analogs[0].values.shape == (180 * 17, 16)
+    assert any("POINT:SCALE" in w for w in rec.warnings)  # header 0.0551 vs parameter 0.0215
+    assert any("never valid" in w for w in rec.warnings)
+    # the raw integers of frame 1, marker 1 times POINT:SCALE (mm -> m), read by hand from the MIPS bytes
+    start = (struct.unpack(">H", data[16:18])[0] - 1) * 512
+    x, y, z, r = struct.unpack(">4h", data[start + 4 * 2 * 1 : start + 4 * 2 * 2])  # marker 2 (RHIP), frame 1
+    if r >= 0:
+        np.testing.assert_allclose(m.pos[0, 1], np.array([x, y, z]) * p["POINT:SCALE"][0] / 1000, rtol=1e-12)
+    else:
+        assert not m.valid[0, 1]
+
+
+def test_header_frame_count_disagrees_with_point_frames(pc_int: Path, tmp_path: Path):
+    data = bytearray(pc_int.read_bytes())
+    first, last = struct.unpack_from("<HH", data, 6)
+    struct.pack_into("<H", data, 8, last + 500)  # the header claims 500 frames more than the file holds
+    path = tmp_path / "long_header.c3d"
+    path.write_bytes(bytes(data))
+    rec = convert_file(path)
+    assert len(rec.markers[0]) == last - first + 1
+    assert any("disagrees with POINT:FRAMES" in w for w in rec.warnings)
+
+
+def test_truncated_file_still_refused(pc_int: Path, tmp_path: Path):
+    path = tmp_path / "cut.c3d"
+    path.write_bytes(pc_int.read_bytes()[:-4000])
+    with pytest.raises(ConversionError, match=r"cut\.c3d: truncated C3D"):
+        convert_file(path)
+
+
+def test_all_invalid_marker_set_is_warned(pc_int: Path, tmp_path: Path):
+    data = bytearray(pc_int.read_bytes())
+    n_points, n_analog = struct.unpack_from("<2H", data, 2)
+    start = (struct.unpack_from("<H", data, 16)[0] - 1) * 512
+    frames = parameters(bytes(data))["POINT:FRAMES"][0]
+    words = np.frombuffer(bytes(data), "<i2", count=frames * (4 * n_points + n_analog), offset=start).copy()
+    words = words.reshape(frames, -1)
+    words[:, 3 : 4 * n_points : 4] = -1  # every point's residual word: invalid
+    data[start : start + words.nbytes] = words.tobytes()
+    path = tmp_path / "invalid.c3d"
+    path.write_bytes(bytes(data))
+    rec = convert_file(path)
+    assert not rec.markers[0].valid.any()
+    assert any(f"all {n_points} markers are invalid in every frame" in w for w in rec.warnings)
+
+
+def _sleep(s: float) -> int:
+    time.sleep(s)
+    return 1
+
+
+def _hog() -> int:
+    return len(bytearray(3 << 30))
+
+
+def _crash() -> None:
+    os.abort()
+
+
+def test_guard_time_memory_crash():
+    assert guarded(_sleep, 0.0, timeout_s=10) == 1
+    t0 = time.monotonic()
+    with pytest.raises(GuardError, match=r"did not finish within 0.5 s") as e:
+        guarded(_sleep, 30.0, timeout_s=0.5)
+    assert e.value.kind == "timeout" and time.monotonic() - t0 < 5
+    with pytest.raises(GuardError, match="GiB of memory") as e:
+        guarded(_hog, memory_bytes=256 << 20)
+    assert e.value.kind == "memory"
+    with pytest.raises(GuardError, match=r"crashed \(SIGABRT\)"):
+        guarded(_crash)
+
+
+def test_hanging_reader_falls_back_with_one_line(pc_int: Path, monkeypatch):
+    import converters.c3d as c3d
+
+    ref = convert_file(pc_int).markers[0].pos
+    monkeypatch.setattr(c3d, "_ezc3d_read", lambda path: _sleep(30.0))
+    from converters import ConvertOptions
+
+    t0 = time.monotonic()
+    rec = c3d.read_c3d(pc_int, options=ConvertOptions(extra={"reader_timeout_s": 0.5}))
+    assert time.monotonic() - t0 < 10
+    (w,) = [w for w in rec.warnings if "imulog's own" in w]
+    assert "did not finish within 0.5 s" in w and "\n" not in w
+    np.testing.assert_array_equal(rec.markers[0].pos, ref)
