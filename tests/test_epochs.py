@@ -183,3 +183,38 @@ def test_simulated_removals_are_still():
     acc, _, moving = minute_signals(p, a + 1, datetime.fromisoformat(p.start))
     assert moving == 0 and acc.std(axis=0).max() < 0.006
     assert replace(p, removals_per_day=0) != p and removals(replace(p, removals_per_day=0)) == []
+
+
+def _shared_counts(name: str, topic: str, rate: int, tmp_path) -> tuple[np.ndarray, np.ndarray]:
+    from imulog.archive import TrialReader
+
+    src = Path(__file__).parent.parent / ".." / "shared" / "data" / "devices" / name
+    if not src.exists():
+        pytest.skip(f"{src} not available")
+    trial = tmp_path / "t.mcap"
+    _convert(src, trial)
+    with TrialReader(trial) as t:
+        g = np.asarray(t.read(topic).acc, dtype=np.float64) / G0
+    ours = ep.counts_per_epoch(ep.CountsFilter()(ep.to_30hz(g, rate)), 10.0)
+    import csv
+
+    with open(Path(__file__).parent / "data" / "agcounts_10s.csv", newline="") as f:
+        rows = [r for r in csv.DictReader(f) if r["file"] == name]
+    ref = np.array([[float(r[c]) for c in ("counts_x", "counts_y", "counts_z")] for r in rows])
+    return ours, ref
+
+
+def test_counts_equal_agcounts_on_the_actigraph_sample(tmp_path):
+    """90 Hz ActiGraph GT9X: every 10-s epoch within 1 count of agcounts (ActiGraph's reference)."""
+    ours, ref = _shared_counts("actigraph_gt3x/example.gt3x", "/imu/tas1e31150129", 90, tmp_path)
+    assert len(ref) == 18 and len(ours) >= len(ref)
+    assert np.abs(ours[: len(ref)] - ref).max() <= 1.0
+
+
+def test_counts_on_the_axivity_sample_within_the_documented_gap(tmp_path):
+    """100 Hz AX6: our polyphase resampler is not ActiLife's; docs/epochs.md publishes the gap measured here
+    (total within 5 %, each 10-s epoch within 110 counts); the 1-count target is not met at 100 Hz."""
+    ours, ref = _shared_counts("axivity_cwa/ax6_sample.cwa", "/imu/ax6_6011802", 100, tmp_path)
+    k = len(ref)
+    assert abs(ours[:k].sum() - ref.sum()) <= 0.05 * ref.sum()
+    assert np.abs(ours[:k] - ref).max() <= 110

@@ -247,13 +247,16 @@ def counts_factors(rate_hz: float) -> tuple[int, int]:
 
 
 def to_30hz(acc_g: np.ndarray, rate_hz: float) -> np.ndarray:
-    """Acceleration resampled to 30 Hz (polyphase, anti-aliased; identity at 30 Hz), (M, 3) g."""
+    """Acceleration at 30 Hz, (M, 3) g: every k-th sample at 30 k Hz (30, 60, 90 Hz: what ActiLife does, and
+    what makes the counts equal agcounts' at those rates), else polyphase resampling (anti-aliased; at 100 Hz this
+    differs from ActiLife's own resampler, see docs/epochs.md)."""
     from scipy.signal import resample_poly
 
     up, down = counts_factors(rate_hz)
-    if up == down == 1:
-        return np.asarray(acc_g, dtype=np.float64)
-    return resample_poly(np.asarray(acc_g, dtype=np.float64), up, down, axis=0)
+    a = np.asarray(acc_g, dtype=np.float64)
+    if up == 1:
+        return a[::down]
+    return resample_poly(a, up, down, axis=0)
 
 
 class CountsFilter:
@@ -280,9 +283,10 @@ class CountsFilter:
 
 def counts_per_epoch(trimmed30: np.ndarray, epoch_s: float) -> np.ndarray:
     """Counts per epoch per axis from :class:`CountsFilter` output starting at an epoch boundary: 10 Hz as the mean
-    of each 3 samples, summed per epoch (a partial 10 Hz sample at the end is dropped), (E, 3)."""
+    of each 3 samples floored to an integer (the device's 10 Hz values are integers), summed per epoch (a partial
+    10 Hz sample at the end is dropped), (E, 3)."""
     n10 = len(trimmed30) // 3
-    ten = trimmed30[: 3 * n10].reshape(n10, 3, -1).mean(axis=1)
+    ten = np.floor(trimmed30[: 3 * n10].reshape(n10, 3, -1).mean(axis=1))
     per = int(round(epoch_s * 10))
     k = -(-n10 // per)
     pad = np.zeros((k * per, ten.shape[1]))
