@@ -218,3 +218,30 @@ def test_counts_on_the_axivity_sample_within_the_documented_gap(tmp_path):
     k = len(ref)
     assert abs(ours[:k].sum() - ref.sum()) <= 0.05 * ref.sum()
     assert np.abs(ours[:k] - ref).max() <= 110
+
+
+def test_catalog_gathers_epochs_into_one_study_table(half_day, tmp_path):
+    import shutil
+
+    import pyarrow.parquet as pq
+    from click.testing import CliRunner
+
+    from imulog.cli import cli as main
+
+    trial, _, _ = half_day
+    run_epochs(trial, params=EpochParams(), force=False)
+    folder = tmp_path / "study"
+    folder.mkdir()
+    for k in range(2):
+        shutil.copy(trial, folder / f"s{k}.mcap")
+    out, cat = tmp_path / "epochs.parquet", tmp_path / "catalog.parquet"
+    r = CliRunner().invoke(main, ["catalog", str(folder), "-o", str(cat), "-q", "--epochs", str(out)])
+    assert r.exit_code == 0, r.output
+    table = pq.read_table(out).to_pandas()
+    one, record = _epochs(trial, "/derived/epochs/ax6_4321/60s")
+    assert len(table) == 2 * len(one) and table["path"].nunique() == 2
+    assert {"time", "t[s]", "t_ns", "enmo_g[g]", "nonwear"} <= set(table.columns)
+    np.testing.assert_array_equal(table["t_ns"].to_numpy()[: len(one)], one.t_ns)
+    rows = pq.read_table(cat).to_pandas()
+    assert (rows["valid_days"] == record["valid_days"]).all()
+    assert rows["wear_h"].iloc[0] == pytest.approx(sum(d["wear_h"] for d in record["by_day"]))
