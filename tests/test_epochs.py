@@ -55,7 +55,7 @@ def test_enmo_mad_equal_numpy_and_nonwear_finds_each_removal(half_day):
         imu = t.read("/imu/ax6_4321")
     g = np.asarray(imu.acc, dtype=np.float64) / G0
     for e_s in (5, 60):
-        stream, record = _epochs(trial, f"/derived/epochs/ax6_4321/{e_s}s")
+        stream, record = _epochs(trial, f"/derived/epochs/{e_s}s/ax6_4321")
         per = int(e_s * 25)
         k = len(g) // per
         r = np.linalg.norm(g[: k * per].reshape(k, per, 3), axis=2)
@@ -78,9 +78,9 @@ def test_windows_give_the_whole_computation(half_day):
     """Cores of 1 h (12 windows) and one 12-h window: the same epochs (the step-window contract)."""
     trial, _, _ = half_day
     run_epochs(trial, params=EpochParams(), force=True)
-    many, rec_many = _epochs(trial, "/derived/epochs/ax6_4321/60s")
+    many, rec_many = _epochs(trial, "/derived/epochs/60s/ax6_4321")
     run_epochs(trial, params=EpochParams(core_s=43200.0), force=True)
-    one, rec_one = _epochs(trial, "/derived/epochs/ax6_4321/60s")
+    one, rec_one = _epochs(trial, "/derived/epochs/60s/ax6_4321")
     assert np.array_equal(many.t_ns, one.t_ns)
     np.testing.assert_allclose(many.values[:, :2], one.values[:, :2], atol=1e-12)
     counts = many.columns.index("counts_x")
@@ -158,7 +158,7 @@ def test_cli_json_and_export(half_day, tmp_path):
     rec = json.loads(r.output)
     assert rec["epochs_s"] == [60.0] and len(rec["by_hour"]) >= 12
     out = tmp_path / "e.csv"
-    r = CliRunner().invoke(main, ["export", str(trial), "-t", "/derived/epochs/ax6_4321/60s", "-o", str(out)])
+    r = CliRunner().invoke(main, ["export", str(trial), "-t", "/derived/epochs/60s/ax6_4321", "-o", str(out)])
     assert r.exit_code == 0, r.output
     assert "enmo_g" in out.read_text().splitlines()[0]
 
@@ -238,7 +238,7 @@ def test_catalog_gathers_epochs_into_one_study_table(half_day, tmp_path):
     r = CliRunner().invoke(main, ["catalog", str(folder), "-o", str(cat), "-q", "--epochs", str(out)])
     assert r.exit_code == 0, r.output
     table = pq.read_table(out).to_pandas()
-    one, record = _epochs(trial, "/derived/epochs/ax6_4321/60s")
+    one, record = _epochs(trial, "/derived/epochs/60s/ax6_4321")
     assert len(table) == 2 * len(one) and table["path"].nunique() == 2
     assert {"time", "t[s]", "t_ns", "enmo_g[g]", "nonwear"} <= set(table.columns)
     np.testing.assert_array_equal(table["t_ns"].to_numpy()[: len(one)], one.t_ns)

@@ -222,7 +222,9 @@ class StreamingTrialWriter:
         meta.update(self._extra)
         meta["stats_record"] = self._stats_record
         schema_id = self._builder.add_schema(schema_name, "protobuf", codec.file_descriptor_set(schema_name))
-        ch = self._channels[stream.topic] = _Channel(self._builder.add_channel(stream.topic, schema_id, meta), stream.topic)
+        ch = self._channels[stream.topic] = _Channel(
+            self._builder.add_channel(stream.topic, schema_id, meta), stream.topic
+        )
         if stream.topic not in self._topics:
             self._topics.append(stream.topic)
         if hasattr(stream, "acc") and all(i.name != stream.name for i in self._imus):

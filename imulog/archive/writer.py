@@ -45,7 +45,11 @@ def rows_hash(rows: np.ndarray, mask: np.ndarray | None = None, block: int = 655
     for i in range(0, n, block):
         part = rows[i : i + block]
         k = len(part)
-        lengths = np.full(k, width, dtype="<u8") if mask is None else np.count_nonzero(mask[i : i + block], axis=1).astype("<u8")
+        lengths = (
+            np.full(k, width, dtype="<u8")
+            if mask is None
+            else np.count_nonzero(mask[i : i + block], axis=1).astype("<u8")
+        )
         joined[:k, :8] = lengths.view(np.uint8).reshape(k, 8)
         joined[:k, 8:] = part
         if keep is None:

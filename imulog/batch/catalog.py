@@ -276,7 +276,7 @@ def build_epoch_table(
     *,
     epoch_s: float = 60.0,
 ) -> CatalogStats:
-    """One study table of every trial's ``/derived/epochs/{imu}/{epoch_s}s`` rows (``imulog process epochs``).
+    """One study table of every trial's ``/derived/epochs/{epoch_s}s/{imu}`` rows (``imulog process epochs``).
 
     Columns: ``path``, ``subject``, ``trial``, ``imu``, then the export's time columns (``time`` as UTC
     instants, ``t[s]``, ``t_ns``; docs/export.md) and the epoch columns. Trials without the channel are skipped
@@ -297,14 +297,13 @@ def build_epoch_table(
     tmp = output.with_name(f".{output.name}.{os.getpid()}.tmp")
     output.parent.mkdir(parents=True, exist_ok=True)
     writer = None
-    suffix = f"/{epoch_s:g}s"
+    prefix = f"/derived/epochs/{epoch_s:g}s/"
     try:
         for p in discover(root):
             if p.resolve() == output.resolve():
                 continue
             with TrialReader(p) as trial:
-                topics = [c.topic for c in trial.channels if c.topic.startswith("/derived/epochs/")]
-                topics = [t for t in topics if t.endswith(suffix)]
+                topics = [c.topic for c in trial.channels if c.topic.startswith(prefix)]
                 if not topics:
                     stats.dropped += 1
                     continue
@@ -322,7 +321,7 @@ def build_epoch_table(
                         "path": str(p.resolve()),
                         "subject": None if info.get("subject") is None else str(info["subject"]),
                         "trial": None if info.get("trial") is None else str(info["trial"]),
-                        "imu": topic.split("/")[3],
+                        "imu": topic[len(prefix) :],
                     }
                     for k, (name, value) in enumerate(ident.items()):
                         table = table.add_column(k, name, pa.array([value] * n, pa.string()))
@@ -338,7 +337,7 @@ def build_epoch_table(
                     stats.rows += n
                 stats.read += 1
         if writer is None:
-            raise ValueError(f"no trial has /derived/epochs/*{suffix} (run imulog process epochs first)")
+            raise ValueError(f"no trial has {prefix}* (run imulog process epochs first)")
         writer.close()
         writer = None
         os.replace(tmp, output)

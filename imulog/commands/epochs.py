@@ -65,7 +65,7 @@ def process_epochs(
     force: bool,
     as_json: bool,
 ) -> None:
-    """Epoch summaries of TRIAL's accelerometer, appended as /derived/epochs/IMU/Es (docs/epochs.md).
+    """Epoch summaries of TRIAL's accelerometer, appended as /derived/epochs/Es/IMU (docs/epochs.md).
 
     \b
     Per epoch (default 5 s and 60 s): ENMO and MAD in g after auto-calibration to local gravity (van Hees 2014),
@@ -77,7 +77,7 @@ def process_epochs(
     Examples:
       imulog process epochs week.mcap
       imulog process epochs week.mcap --epoch-s 30 --valid-day-hours 10 --json
-      imulog export week.mcap -t /derived/epochs/ax6_4321/60s -o epochs.csv
+      imulog export week.mcap -t /derived/epochs/60s/ax6_4321 -o epochs.csv
     """
     from dataclasses import replace
 

@@ -256,7 +256,7 @@ def to_30hz(acc_g: np.ndarray, rate_hz: float) -> np.ndarray:
     a = np.asarray(acc_g, dtype=np.float64)
     if up == 1:
         return a[::down]
-    return resample_poly(a, up, down, axis=0)
+    return resample_poly(a, up, down, axis=0, padtype="line")  # no step at the edges
 
 
 class CountsFilter:

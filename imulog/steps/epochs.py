@@ -4,7 +4,7 @@ Follows the step-window contract (docs/architecture.md, "Step windows"): pass 1 
 window and keeps bounded summaries (means of still 10-s epochs for the calibration, per-axis statistics of 15-min
 blocks for non-wear); the reduce fits the calibration and flags non-wear blocks; pass 2 computes the epochs core by
 core (cores of whole hours, margins for the counts' resampler) and yields them through ``StreamPieces``. A lab
-trial is one window. Outputs (docs/epochs.md): ``/derived/epochs/{imu}/{E}s`` (SignalStream, one row per epoch,
+trial is one window. Outputs (docs/epochs.md): ``/derived/epochs/{E}s/{imu}`` (SignalStream, one row per epoch,
 stamped at its start) and the record ``imulog.epochs`` (calibration, non-wear periods, hourly and daily totals).
 """
 
@@ -145,7 +145,7 @@ def epoch_pieces(
                 flag = nonwear[first_index // per_block].astype(np.float64)
                 t_start = tc[np.arange(k) * per]
                 yield SignalStream(
-                    f"/derived/epochs/{imu}/{e_s:g}s",
+                    f"/derived/epochs/{e_s:g}s/{imu}",
                     t_start,
                     COLUMNS,
                     UNITS,
@@ -233,7 +233,7 @@ def run_epochs(path, *, imu: str | None = None, params: EpochParams | None = Non
         start_time = (trial.metadata.get("imulog.trial") or {}).get("start_time")
         record: dict[str, Any] = {}
         pieces = StreamPieces(
-            topics=[f"/derived/epochs/{name}/{e:g}s" for e in p.epochs_s],
+            topics=[f"/derived/epochs/{e:g}s/{name}" for e in p.epochs_s],
             pieces=lambda: epoch_pieces(path, imu_topic, name, p, record, str(start_time) if start_time else None),
         )
         return StepResult(streams=[pieces], metadata={RECORD: record})
