@@ -48,7 +48,9 @@ def format_summary(r: dict[str, Any]) -> str:
     "epochs_s",
     type=float,
     multiple=True,
-    help=f"Epoch length in seconds, repeatable (default {', '.join(f'{e:g}' for e in _D.epochs_s)}).",
+    default=_D.epochs_s,
+    show_default=True,
+    help="Epoch length in seconds, repeatable (given ones replace the default).",
 )
 @click.option("--no-calibrate", is_flag=True, help="Do not fit the auto-calibration to local gravity.")
 @click.option(
