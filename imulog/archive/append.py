@@ -132,7 +132,9 @@ def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int]
     # closing statistics of streamed channels (imulog.channel_stats.N) that no kept channel refers to any more
     referenced = {c.metadata.get("stats_record") for cid, c in summary.channels.items() if cid not in drop}
     orphaned = {
-        x.offset for x in summary.metadata_indexes if x.name.startswith(f"{STATS_RECORD}.") and x.name not in referenced
+        x.offset
+        for x in summary.metadata_indexes
+        if x.name.startswith(f"{STATS_RECORD}.") and x.name not in referenced
     }
     limit = summary.data_end_offset
     shift: list[tuple[int, int]] = []  # (old offset of a kept record, bytes removed before it)

@@ -174,10 +174,7 @@ class Rows:
         body, mask = varint_rows(v)
         key = np.broadcast_to(np.frombuffer(tag(number, WIRE_VARINT), np.uint8), (self.n, len(tag(number, 0))))
         present = (v != 0) if omit_zero else np.ones(self.n, dtype=bool)
-        self._add(
-            np.concatenate([key, body], axis=1),
-            np.concatenate([np.repeat(present[:, None], key.shape[1], 1), mask & present[:, None]], axis=1),
-        )
+        self._add(np.concatenate([key, body], axis=1), np.concatenate([np.repeat(present[:, None], key.shape[1], 1), mask & present[:, None]], axis=1))
         return self
 
     def double(self, number: int, values: np.ndarray, omit_zero: bool = True) -> Rows:

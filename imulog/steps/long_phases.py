@@ -411,14 +411,8 @@ def long_phase_pieces(
                 lo = max(prev_end, int(ms[sl.start]) - ctx)
                 hi = min(nxt, int(me[sl.stop - 1]) + ctx)
                 a, b = refine_boundaries(
-                    ms[sl] - lo,
-                    me[sl] - lo,
-                    norm[lo:hi],
-                    thr,
-                    dp.refine_level,
-                    int(round(dp.continuation_s * rate)),
-                    dp.continuation_level,
-                    dp.continuation_peak_fraction,
+                    ms[sl] - lo, me[sl] - lo, norm[lo:hi], thr, dp.refine_level,
+                    int(round(dp.continuation_s * rate)), dp.continuation_level, dp.continuation_peak_fraction,
                     noise=noise,
                 )
                 out_s[sl], out_e[sl] = a + lo, b + lo
@@ -580,14 +574,7 @@ def long_phase_pieces(
             continue
         origin_ns, origin_time = origins[key]
         rows = period_rows(
-            t_fs_device,
-            durations,
-            per[key]["known"],
-            per[key]["static"],
-            origin_ns,
-            origin_time,
-            period_s,
-            rate,
+            t_fs_device, durations, per[key]["known"], per[key]["static"], origin_ns, origin_time, period_s, rate,
             first_t,
         )
         record[key] = rows

@@ -339,13 +339,7 @@ def run_metrics(
             pieces = StreamPieces(
                 topics=[f"/derived/metrics/distance/{name}", f"/derived/metrics/activity/{name}"],
                 pieces=lambda: long_metrics_pieces(
-                    path,
-                    imu_topic,
-                    name,
-                    p,
-                    total,
-                    record,
-                    start_time=str(start_time) if start_time else None,
+                    path, imu_topic, name, p, total, record, start_time=str(start_time) if start_time else None,
                     cores=cores,
                 ),
             )

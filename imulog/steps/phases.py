@@ -197,17 +197,8 @@ def run_phases(
             pieces = StreamPieces(
                 topics=[f"/derived/static/{name}", f"/derived/movements/{name}", f"/derived/phases/{name}"],
                 pieces=lambda: long_phase_pieces(
-                    path,
-                    topic,
-                    name,
-                    params,
-                    gaps,
-                    total,
-                    rate,
-                    record,
-                    alignment=alignment,
-                    start_time=str(start_time) if start_time else None,
-                    cores=cores,
+                    path, topic, name, params, gaps, total, rate, record, alignment=alignment,
+                    start_time=str(start_time) if start_time else None, cores=cores,
                 ),
                 expected_duration_s=span_ns * 1e-9,
             )
