@@ -245,3 +245,27 @@ def test_catalog_gathers_epochs_into_one_study_table(half_day, tmp_path):
     rows = pq.read_table(cat).to_pandas()
     assert (rows["valid_days"] == record["valid_days"]).all()
     assert rows["wear_h"].iloc[0] == pytest.approx(sum(d["wear_h"] for d in record["by_day"]))
+
+
+def test_missing_samples_are_left_out(tmp_path):
+    """NaN samples (lost packets): ENMO over the recorded samples, valid_fraction says how many, counts finite."""
+    from imulog.archive import write_trial
+    from imulog.model import ImuStream, Recording
+
+    rate, n = 25.0, 25 * 60 * 90  # 90 min
+    rng = np.random.default_rng(4)
+    t = np.arange(n, dtype=np.int64) * 40_000_000
+    g = np.column_stack([np.sin(np.arange(n) / 40) * 0.3, np.zeros(n), np.ones(n)]) + rng.normal(0, 0.01, (n, 3))
+    g[3000:3100] = np.nan  # 4 s missing inside one 60-s epoch
+    trial = tmp_path / "gap.mcap"
+    write_trial(trial, Recording(imus=[ImuStream("w", t, acc=g * G0, meta={"rate_hz": rate})]))
+    run_epochs(trial, params=EpochParams(epochs_s=(60.0,), calibrate=False))
+    stream, _ = _epochs(trial, "/derived/epochs/60s/w")
+    c = stream.columns
+    per = 1500
+    e = 3000 // per
+    r = np.linalg.norm(g[e * per : (e + 1) * per], axis=1)
+    assert stream.values[e, c.index("valid_fraction")] == pytest.approx(1 - 100 / per)
+    assert stream.values[e, c.index("enmo_g")] == pytest.approx(np.nanmean(np.clip(r - 1, 0, None)), abs=1e-12)
+    assert np.isfinite(stream.values[:, c.index("counts_vm")]).all()
+    assert (stream.values[np.arange(len(stream)) != e, c.index("valid_fraction")] == 1).all()
