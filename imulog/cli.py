@@ -40,6 +40,7 @@ PROCESS_COMMANDS: dict[str, tuple[str, str]] = {
     "phases": ("imulog.commands.phases:process_phases", "Movements, phases, repetitions and static intervals."),
     "trajectory": ("imulog.commands.trajectory:process_trajectory", "Wrist trajectories by integration methods."),
     "metrics": ("imulog.commands.metrics:process_metrics", "Clinical metrics: arm usage, activity, smoothness."),
+    "epochs": ("imulog.commands.epochs:process_epochs", "ENMO, MAD, ActiGraph counts, wear per epoch; daily totals."),
     "kinematics": (
         "imulog.commands.kinematics:process_kinematics",
         "Shoulder and elbow angles from two IMUs (DH model).",

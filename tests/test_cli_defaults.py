@@ -104,6 +104,14 @@ DEFAULTS: dict[tuple[str, ...], tuple[str, dict[str, Any]]] = {
             "arm_usage_rate_hz": lambda kw, p: p.arm_usage_rate_hz,
         },
     ),
+    ("process", "epochs"): (
+        "epochs",
+        {
+            "epochs_s": lambda kw, p: p.epochs_s,
+            "no_calibrate": lambda kw, p: not p.calibrate,
+            "valid_day_hours": lambda kw, p: p.valid_day_hours,
+        },
+    ),
     ("process", "kinematics"): (
         "kinematics",
         {

@@ -401,3 +401,39 @@ def check_file(path: str | os.PathLike[str], *, decode: bool = True, progress: P
     except Exception as exc:  # pragma: no cover - every known failure is an ArchiveError
         report.fail(f"unexpected {type(exc).__name__}: {exc}")
     return report
+
+
+def check_original(path: str | os.PathLike[str], original: str | os.PathLike[str]) -> tuple[bool, str]:
+    """Whether the file ``original`` is one the trial was converted from: (ok, one line saying which or why not).
+
+    Compares its SHA-256 with the attachments' hashes and with the originals recorded by name, size and SHA-256
+    (``imulog.raw["originals"]``, written for files not attached: ``--attach-original never`` or above 64 MB).
+    """
+    from pathlib import Path
+
+    from imulog.archive import TrialReader
+    from imulog.archive.writer import original_record
+
+    src = Path(original)
+    mine = original_record(src, src.name)
+    with TrialReader(path) as trial:
+        raw = trial.metadata.get("imulog.raw") or {}
+    known = [dict(o) for o in raw.get("originals") or []]
+    known += [{"name": n, "sha256": h, "size": None} for n, h in (raw.get("attachments") or {}).items()]
+    for o in known:
+        if o.get("sha256") == mine["sha256"]:
+            how = "attached" if o.get("size") is None else "recorded"
+            return (
+                True,
+                f"{src} is the original {o['name']!r} ({mine['size']} bytes, SHA-256 {mine['sha256'][:12]}…, {how})",
+            )
+    if not known:
+        return False, f"{path} records no original files (converted without them?)"
+    same_name = [o for o in known if o.get("name") == src.name]
+    if same_name:
+        o = same_name[0]
+        size = f"{o['size']} bytes" if o.get("size") is not None else "attached"
+        return False, (
+            f"{src} differs from the original {src.name!r} of {path} ({mine['size']} bytes vs {size}; SHA-256 differs)"
+        )
+    return False, f"{src} is none of the originals of {path} ({', '.join(o['name'] for o in known)})"

@@ -115,7 +115,8 @@ class StreamingTrialWriter:
     """``with StreamingTrialWriter(path, metadata=...) as w: for piece in pieces: w.write(piece)``.
 
     ``metadata``: the trial's records (``imulog.trial`` with ``start_time`` sets the time axis); ``sources``: files
-    to attach (read in 1 MiB blocks at the end); ``expected_duration_s``: about how long the recording is, so its
+    to attach (read in 1 MiB blocks at the end; ``attach``: ``always``, ``never`` or ``auto``, see
+    :func:`imulog.archive.writer.write_trial`); ``expected_duration_s``: about how long the recording is, so its
     viewer twins keep within their message budget (without it they are written at their full rate). The file appears atomically when the block exits without an
     error; on an error nothing is left behind. Every piece must carry the same streams, in time order.
     """
@@ -128,8 +129,12 @@ class StreamingTrialWriter:
         sources: Iterable[str | os.PathLike[str]] = (),
         overwrite: bool = False,
         expected_duration_s: float | None = None,
+        attach: str = "auto",
     ) -> None:
+        from imulog.archive.writer import attach_mode
+
         self.path = target_path(path)
+        self.attach = attach_mode(attach)  # always | never | auto (originals above 64 MB recorded, not attached)
         self.expected_duration_s = expected_duration_s
         self._twins: dict[str, _Channel] = {}
         self._twin_k: dict[str, int] = {}
@@ -222,7 +227,9 @@ class StreamingTrialWriter:
         meta.update(self._extra)
         meta["stats_record"] = self._stats_record
         schema_id = self._builder.add_schema(schema_name, "protobuf", codec.file_descriptor_set(schema_name))
-        ch = self._channels[stream.topic] = _Channel(self._builder.add_channel(stream.topic, schema_id, meta), stream.topic)
+        ch = self._channels[stream.topic] = _Channel(
+            self._builder.add_channel(stream.topic, schema_id, meta), stream.topic
+        )
         if stream.topic not in self._topics:
             self._topics.append(stream.topic)
         if hasattr(stream, "acc") and all(i.name != stream.name for i in self._imus):
@@ -308,9 +315,15 @@ class StreamingTrialWriter:
             raise ArchiveError(f"{self.path}: nothing to write (the source gave no samples)")
         for ch in [*self._channels.values(), *self._twins.values()]:
             self._flush(ch)
+        from imulog.archive.writer import attached_here, original_record
+
         attached: dict[str, str] = {}
+        originals = []
         for src in self.sources:
-            attached[src.name] = self._attach(src)
+            if attached_here(src, self.attach):
+                attached[src.name] = self._attach(src)
+            else:
+                originals.append(original_record(src, src.name))
         stats = {topic: ch.stats.to_meta() for topic, ch in self._channels.items()}
         hashes = {topic: s["sha256"] for topic, s in stats.items()}
         for topic, ch in self._twins.items():
@@ -328,6 +341,8 @@ class StreamingTrialWriter:
             "sources": [str(s) for s in self.sources],
             "imulog_version": __version__,
         }
+        if originals:
+            raw["originals"] = originals
         self._builder.add_metadata("imulog.raw", encode_record(raw))
         self._builder.finish()
 
@@ -372,10 +387,16 @@ def write_trial_streaming(
     sources: Iterable[str | os.PathLike[str]] = (),
     overwrite: bool = False,
     expected_duration_s: float | None = None,
+    attach: str = "auto",
 ) -> Path:
     """Write ``pieces`` (consecutive parts of one recording) as a trial in bounded memory; return the path."""
     with StreamingTrialWriter(
-        path, metadata=metadata, sources=sources, overwrite=overwrite, expected_duration_s=expected_duration_s
+        path,
+        metadata=metadata,
+        sources=sources,
+        overwrite=overwrite,
+        expected_duration_s=expected_duration_s,
+        attach=attach,
     ) as writer:
         for piece in pieces:
             writer.write(piece)

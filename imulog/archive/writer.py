@@ -45,7 +45,11 @@ def rows_hash(rows: np.ndarray, mask: np.ndarray | None = None, block: int = 655
     for i in range(0, n, block):
         part = rows[i : i + block]
         k = len(part)
-        lengths = np.full(k, width, dtype="<u8") if mask is None else np.count_nonzero(mask[i : i + block], axis=1).astype("<u8")
+        lengths = (
+            np.full(k, width, dtype="<u8")
+            if mask is None
+            else np.count_nonzero(mask[i : i + block], axis=1).astype("<u8")
+        )
         joined[:k, :8] = lengths.view(np.uint8).reshape(k, 8)
         joined[:k, 8:] = part
         if keep is None:
@@ -170,6 +174,38 @@ def plan_append(
     return axis, twins, dropped
 
 
+#: ``--attach-original auto`` attaches originals up to this size; larger ones are recorded by name, size, SHA-256
+ATTACH_MAX_BYTES = 64 * 1024 * 1024
+ATTACH_MODES = ("always", "never", "auto")
+
+
+def attach_mode(value: bool | str) -> str:
+    """``always``, ``never`` or ``auto`` from a mode name or the older bool (True: auto, False: never)."""
+    if value is True:
+        return "auto"
+    if value is False or value is None:
+        return "never"
+    if value not in ATTACH_MODES:
+        raise ArchiveError(f"attach-original must be one of {', '.join(ATTACH_MODES)}, got {value!r}")
+    return str(value)
+
+
+def attached_here(src: Path, mode: str, max_bytes: int | None = None) -> bool:
+    """Whether ``src`` is attached under ``mode`` (``auto``: when at most ``max_bytes``, default
+    :data:`ATTACH_MAX_BYTES`)."""
+    limit = ATTACH_MAX_BYTES if max_bytes is None else max_bytes
+    return mode == "always" or (mode == "auto" and src.stat().st_size <= limit)
+
+
+def original_record(src: Path, name: str, block: int = 1 << 20) -> dict[str, Any]:
+    """What identifies an original that is not attached: file name, size in bytes and SHA-256 (read in blocks)."""
+    h = hashlib.sha256()
+    with open(src, "rb") as f:
+        while chunk := f.read(block):
+            h.update(chunk)
+    return {"name": name, "size": src.stat().st_size, "sha256": h.hexdigest()}
+
+
 def _attachment_names(sources: list[str]) -> list[tuple[Path, str]]:
     out, used = [], set()
     for src in sources:
@@ -194,13 +230,19 @@ def _device_records(recording: Recording) -> dict[str, dict[str, Any]]:
 
 
 def write_trial(
-    path: str | os.PathLike[str], recording: Recording, *, attach_sources: bool = True, overwrite: bool = False
+    path: str | os.PathLike[str],
+    recording: Recording,
+    *,
+    attach_sources: bool | str = True,
+    overwrite: bool = False,
 ) -> Path:
     """Write ``recording`` to ``path`` as an MCAP trial; return the path.
 
     Raw channels (one per stream, topics from the streams), metadata records (the recording's, plus an
     ``imulog.device.<name>`` per IMU when missing, ``imulog.timeline`` with the trial's time axis and
-    ``imulog.raw`` with the raw-data hash), and the source files as attachments. Message log times start
+    ``imulog.raw`` with the raw-data hash), and the source files as attachments (``attach_sources``: ``always``,
+    ``never`` or ``auto``, True meaning auto: files above :data:`ATTACH_MAX_BYTES` are recorded in
+    ``imulog.raw["originals"]`` by name, size and SHA-256 instead, for ``imulog doctor --original``). Message log times start
     at ``imulog.trial["start_time"]`` (see :mod:`imulog.archive.timeline`). The file appears atomically; on any error nothing is left behind.
     """
     path = target_path(path)
@@ -214,10 +256,15 @@ def write_trial(
     except TimelineError as exc:
         raise ArchiveError(f"{path}: {exc}") from None
     axis = TrialAxis({TIMELINE_RECORD: timeline}, {s.name for s in recording.imus})
-    sources = _attachment_names(recording.sources) if attach_sources else []
+    mode = attach_mode(attach_sources)
+    sources = _attachment_names(recording.sources)
+    if mode == "never":  # recorded by name, size and hash where the file is at hand
+        sources = [(src, name) for src, name in sources if src.is_file()]
     for src, _ in sources:
         if not src.is_file():
             raise ArchiveError(f"{path}: source file to attach not found: {src}")
+    originals = [original_record(src, name) for src, name in sources if not attached_here(src, mode)]
+    sources = [(src, name) for src, name in sources if attached_here(src, mode)]
     path.parent.mkdir(parents=True, exist_ok=True)
     with writer_lock(path):
         if path.exists() and not overwrite:
@@ -254,12 +301,22 @@ def write_trial(
                 "sha256": raw_digest(hashes, attached),
                 "channels": hashes,
                 "attachments": attached,
-                "sources": [str(src) for src, _ in sources],
+                "sources": [str(src) for src, _ in sources] + [o["name"] for o in originals],
                 "imulog_version": __version__,
             }
+            if originals:
+                raw["originals"] = originals
             builder.add_metadata("imulog.raw", encode_record(raw))
             builder.finish()
     return path
 
 
-__all__ = ["write_trial", "payload_hash", "rows_hash", "raw_digest"]
+__all__ = [
+    "ATTACH_MAX_BYTES",
+    "attach_mode",
+    "original_record",
+    "write_trial",
+    "payload_hash",
+    "rows_hash",
+    "raw_digest",
+]

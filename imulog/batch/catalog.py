@@ -55,6 +55,7 @@ INT_COLUMNS = (
     "n_phases",
     "n_forced_phases",
     "n_low_confidence_repetitions",
+    "valid_days",
 )
 FLOAT_COLUMNS = (
     "duration_s",
@@ -67,6 +68,8 @@ FLOAT_COLUMNS = (
     "repetition_mean_s",
     "phases_confidence",
     "best_mae_cm",
+    "wear_h",
+    "enmo_mean_mg",
 )
 BOOL_COLUMNS = ("simulated",)
 LIST_COLUMNS = ("devices", "imus", "markers", "channels", "derived_channels", "steps", "eval_methods")
@@ -78,6 +81,7 @@ JSON_COLUMNS = (
     "timing_json",
     "evaluation_json",
     "metrics_json",
+    "epochs_json",
     "anthropometrics_json",
     "trial_json",
 )
@@ -247,7 +251,104 @@ def trial_row(path: str | os.PathLike[str]) -> dict[str, Any]:
     mt = _record(meta.get("imulog.metrics"))
     if mt:
         row["metrics_json"] = _json(mt)
+    row.update(_epoch_columns(_record(meta.get("imulog.epochs"))))
     return row
+
+
+def _epoch_columns(ep: dict[str, Any]) -> dict[str, Any]:
+    """Catalog columns of an ``imulog.epochs`` record: valid days, hours worn, wear-weighted mean ENMO (mg)."""
+    if not ep:
+        return {}
+    days = [d for d in ep.get("by_day") or [] if isinstance(d, dict)]
+    wear = sum(float(d.get("wear_h") or 0) for d in days)
+    enmo = [(float(d["enmo_mean_mg"]), float(d.get("wear_h") or 0)) for d in days if d.get("enmo_mean_mg") is not None]
+    return {
+        "valid_days": _num(ep.get("valid_days"), int),
+        "wear_h": wear,
+        "enmo_mean_mg": sum(v * w for v, w in enmo) / wear if enmo and wear > 0 else None,
+        "epochs_json": _json(ep),
+    }
+
+
+def build_epoch_table(
+    root: str | os.PathLike[str] | Iterable[str | os.PathLike[str]],
+    output: str | os.PathLike[str],
+    *,
+    epoch_s: float = 60.0,
+) -> CatalogStats:
+    """One study table of every trial's ``/derived/epochs/{epoch_s}s/{imu}`` rows (``imulog process epochs``).
+
+    Columns: ``path``, ``subject``, ``trial``, ``imu``, then the export's time columns (``time`` as UTC
+    instants, ``t[s]``, ``t_ns``; docs/export.md) and the epoch columns. Trials without the channel are skipped
+    (counted in ``dropped``). Written trial by trial to a temporary file, then renamed (Parquet or CSV by suffix).
+    """
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+    import pyarrow.parquet as pq
+
+    from imulog.archive import TrialReader
+    from imulog.export.clock import trial_clock
+    from imulog.export.table import format_of, stream_table
+
+    t0 = time.perf_counter()
+    output = Path(output)
+    fmt = format_of(output)
+    stats = CatalogStats(output)
+    tmp = output.with_name(f".{output.name}.{os.getpid()}.tmp")
+    output.parent.mkdir(parents=True, exist_ok=True)
+    writer = None
+    prefix = f"/derived/epochs/{epoch_s:g}s/"
+    try:
+        for p in discover(root):
+            if p.resolve() == output.resolve():
+                continue
+            with TrialReader(p) as trial:
+                topics = [c.topic for c in trial.channels if c.topic.startswith(prefix)]
+                if not topics:
+                    stats.dropped += 1
+                    continue
+                info = _record(trial.metadata.get("imulog.trial"))
+                tc = trial_clock(trial, "device", None)
+                for topic in topics:
+                    table = stream_table(trial.read(topic), trial.channel(topic).metadata, topic, tc)
+                    table = table.replace_schema_metadata(None)
+                    n = table.num_rows
+                    if "time" in table.column_names:
+                        table = table.set_column(0, "time", table.column("time").cast(pa.timestamp("ns", tz="UTC")))
+                    else:
+                        table = table.add_column(0, "time", pa.nulls(n, pa.timestamp("ns", tz="UTC")))
+                    ident = {
+                        "path": str(p.resolve()),
+                        "subject": None if info.get("subject") is None else str(info["subject"]),
+                        "trial": None if info.get("trial") is None else str(info["trial"]),
+                        "imu": topic[len(prefix) :],
+                    }
+                    for k, (name, value) in enumerate(ident.items()):
+                        table = table.add_column(k, name, pa.array([value] * n, pa.string()))
+                    table = pa.Table.from_arrays(table.columns, names=table.column_names)  # plain field metadata
+                    if writer is None:
+                        writer = (
+                            pq.ParquetWriter(tmp, table.schema)
+                            if fmt == "parquet"
+                            else pacsv.CSVWriter(tmp, table.schema)
+                        )
+                        schema_ = table.schema
+                    writer.write_table(table.cast(schema_))
+                    stats.rows += n
+                stats.read += 1
+        if writer is None:
+            raise ValueError(f"no trial has {prefix}* (run imulog process epochs first)")
+        writer.close()
+        writer = None
+        os.replace(tmp, output)
+    except BaseException:
+        if writer is not None:
+            writer.close()
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+    stats.seconds = time.perf_counter() - t0
+    return stats
 
 
 def _error_row(path: Path, error: str) -> dict[str, Any]:

@@ -28,7 +28,17 @@ from typing import Any
 
 # Dependency order: a step may read what an earlier one wrote (align reads orientation, phases the alignment,
 # trajectory orientation + phases, evaluate and metrics the trajectories, kinematics the orientations).
-STEP_ORDER = ("calibrate", "orientation", "align", "phases", "trajectory", "metrics", "evaluate", "kinematics")
+STEP_ORDER = (
+    "calibrate",
+    "orientation",
+    "align",
+    "phases",
+    "trajectory",
+    "metrics",
+    "epochs",
+    "evaluate",
+    "kinematics",
+)
 
 
 @dataclass(frozen=True)
@@ -100,6 +110,13 @@ STEPS: dict[str, StepSpec] = {
         kwargs=("imu",),
         params_class="imulog.steps.metrics:MetricsParams",
         help="clinical metrics (MetricsParams fields)",
+    ),
+    "epochs": StepSpec(
+        "epochs",
+        "imulog.steps.epochs:run_epochs",
+        kwargs=("imu",),
+        params_class="imulog.steps.epochs:EpochParams",
+        help="ENMO, MAD, ActiGraph counts, non-wear per epoch; hourly/daily totals (EpochParams fields)",
     ),
     "evaluate": StepSpec(
         "evaluate",

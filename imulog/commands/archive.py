@@ -238,7 +238,13 @@ def info(file: str, as_json: bool) -> None:
 @click.argument("file", type=click.Path(exists=True, dir_okay=False))
 @click.option("-v", "--verbose", is_flag=True, help="list every check and every problem")
 @click.option("--json", "as_json", is_flag=True, help="print the report (ok, problems, checks) as one JSON document")
-def doctor(file: str, verbose: bool, as_json: bool) -> None:
+@click.option(
+    "--original",
+    type=click.Path(exists=True, dir_okay=False),
+    default=None,
+    help="also check that this file is one the trial was converted from (its SHA-256 against the recorded one)",
+)
+def doctor(file: str, verbose: bool, as_json: bool, original: str | None = None) -> None:
     """Validate a trial: CRCs, summary/statistics, decoding, raw-data hash.
 
     Checks the MCAP magic and footer, the summary CRC, the data-section CRC and every chunk CRC,
@@ -251,14 +257,18 @@ def doctor(file: str, verbose: bool, as_json: bool) -> None:
     Examples:
       imulog doctor trial.mcap
       for f in archive/*.mcap; do imulog doctor "$f" || echo "$f is damaged"; done
+      imulog doctor week.mcap --original week.cwa     # the .cwa kept apart is the one it was converted from
     """
-    from imulog.archive.doctor import check_file, check_length
+    from imulog.archive.doctor import check_file, check_length, check_original
 
     if sys.stderr.isatty() and not as_json:  # a progress bar for people, nothing extra in logs and pipes
         with click.progressbar(length=check_length(file), label="checking", file=sys.stderr) as bar:
             report = check_file(file, progress=bar.update)
     else:
         report = check_file(file)
+    if original is not None:
+        ok, line = check_original(file, original)
+        (report.checks.append if ok else report.fail)(line)
     if as_json:
         click.echo(
             json.dumps(

@@ -155,7 +155,23 @@ def batch(
 @click.option("--full", is_flag=True, help="Re-read every trial (default: only new or changed files).")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the counts (rows, read, unchanged, removed...) as JSON.")
-def catalog(inputs: tuple[str, ...], output: Path, full: bool, quiet: bool, as_json: bool = False) -> None:
+@click.option(
+    "--epochs",
+    "epochs_out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Also gather every trial's epoch rows (imulog process epochs) into one study table (.parquet or .csv).",
+)
+@click.option("--epoch-s", type=float, default=60.0, show_default=True, help="Which epoch length --epochs gathers.")
+def catalog(
+    inputs: tuple[str, ...],
+    output: Path,
+    full: bool,
+    quiet: bool,
+    as_json: bool = False,
+    epochs_out: Path | None = None,
+    epoch_s: float = 60.0,
+) -> None:
     """One Parquet row per trial: subject, task, devices, durations, channels, runs, metrics.
 
     INPUTS are folders (every *.mcap below), files or quoted glob patterns. The catalog is updated
@@ -167,8 +183,9 @@ def catalog(inputs: tuple[str, ...], output: Path, full: bool, quiet: bool, as_j
       imulog catalog archive/ -o catalog.parquet
       python -c "import pandas as pd; print(pd.read_parquet('catalog.parquet')[['subject','trial','best_mae_cm']])"
       duckdb -c "select subject, avg(best_mae_cm) from 'catalog.parquet' group by subject"
+      imulog catalog weeks/ -o catalog.parquet --epochs study_epochs.parquet --epoch-s 60
     """
-    from imulog.batch.catalog import build_catalog, discover
+    from imulog.batch.catalog import build_catalog, build_epoch_table, discover
 
     if not discover(inputs):
         raise click.ClickException(f"no trial files (*.mcap) in {' '.join(inputs)}")
@@ -176,6 +193,12 @@ def catalog(inputs: tuple[str, ...], output: Path, full: bool, quiet: bool, as_j
         stats = build_catalog(list(inputs), output, progress=not quiet and not as_json, full=full)
     except OSError as exc:
         raise click.ClickException(f"{output}: {exc}") from None
+    epoch_stats = None
+    if epochs_out is not None:
+        try:
+            epoch_stats = build_epoch_table(list(inputs), epochs_out, epoch_s=epoch_s)
+        except (OSError, ValueError) as exc:
+            raise click.ClickException(f"{epochs_out}: {exc}") from None
     if as_json:
         import dataclasses
         import json
@@ -183,6 +206,11 @@ def catalog(inputs: tuple[str, ...], output: Path, full: bool, quiet: bool, as_j
         click.echo(json.dumps({k: str(v) if isinstance(v, Path) else v for k, v in dataclasses.asdict(stats).items()}))
         return
     click.echo(stats.summary())
+    if epoch_stats is not None:
+        click.echo(
+            f"{epochs_out}: {epoch_stats.rows} epochs of {epoch_s:g} s from {epoch_stats.read} trials "
+            f"({epoch_stats.dropped} without epochs)"
+        )
 
 
 @click.command("report")

@@ -141,7 +141,7 @@ def _convert_group(files: list[Path], fmt: str | None, options: ConvertOptions) 
     return convert_files(files, fmt, options, formats=names), {p.name: n for p, n in zip(files, names, strict=True)}
 
 
-def _write(out: Path, rec: Recording, *, attach: bool, overwrite: bool) -> Path:
+def _write(out: Path, rec: Recording, *, attach: str, overwrite: bool) -> Path:
     """``write_trial`` (atomic: nothing is left behind on failure); archive errors become ConversionError."""
     from imulog.archive import ArchiveError, write_trial
 
@@ -173,7 +173,7 @@ def _convert_streaming(
     options: ConvertOptions,
     meta: dict,
     *,
-    attach: bool,
+    attach: str,
     overwrite: bool,
     as_json: bool = False,
 ) -> None:
@@ -198,7 +198,8 @@ def _convert_streaming(
             StreamingTrialWriter(
                 output,
                 metadata=records,
-                sources=[path] if attach else [],
+                sources=[path],
+                attach=attach,
                 overwrite=overwrite,
                 expected_duration_s=expected,
             ) as writer,
@@ -318,7 +319,15 @@ def _units(pairs: tuple[str, ...]) -> dict[str, str]:
 @click.option(
     "--meta-file", type=click.Path(exists=True, dir_okay=False, path_type=Path), help="Metadata as JSON or TOML."
 )
-@click.option("--no-attach", is_flag=True, help="Do not attach the original files to the trial.")
+@click.option("--no-attach", is_flag=True, help="Do not attach the original files (same as --attach-original never).")
+@click.option(
+    "--attach-original",
+    type=click.Choice(["auto", "always", "never"]),
+    default="auto",
+    show_default=True,
+    help="Attach the original files byte for byte; auto: up to 64 MB, larger ones are recorded by name, size and "
+    "SHA-256 (check them later with imulog doctor TRIAL --original FILE).",
+)
 @click.option(
     "--mapping",
     type=click.Path(exists=True, dir_okay=False, path_type=Path),
@@ -356,6 +365,7 @@ def convert(
     meta_pairs: tuple[str, ...],
     meta_file: Path | None,
     no_attach: bool,
+    attach_original: str,
     mapping: Path | None,
     rate_hz: float | None,
     adc_zero: float,
@@ -369,7 +379,8 @@ def convert(
     """Convert device exports into one MCAP trial (or a folder of exports into one trial per recording).
 
     Each INPUT's format is detected from its content (override with --format); an IMU file and a Vicon file
-    given together become one trial. The original files are attached byte for byte with their SHA-256.
+    given together become one trial. The original files are attached byte for byte with their SHA-256; above
+    64 MB (--attach-original auto) they are recorded by name, size and SHA-256 instead.
 
     \b
     Examples:
@@ -380,6 +391,7 @@ def convert(
       imulog convert witilt.txt --rate 50 --adc-zero 510 -o tilt.mcap
       imulog convert wrist_acc.csv --unit acc=g --unit gyr=deg/s -o wrist.mcap   # header without units
       imulog convert exports/ -o trials/          # one trial per recording, with a progress bar
+      imulog convert week.cwa -o week.mcap --attach-original never   # record the .cwa's hash, keep it apart
 
     In folder mode the files of one recording share a name stem apart from role words (s01_imu.csv +
     s01_vicon.csv), and a s01_meta.json/.toml beside them adds that trial's metadata.
@@ -396,6 +408,7 @@ def convert(
         raise click.UsageError("give the output with -o/--output")
     if fmt and fmt not in available():
         raise click.BadParameter(f"unknown format {fmt!r}; known: {', '.join(available())}", param_hint="--format")
+    attach_mode = "never" if no_attach else attach_original
     meta: dict[str, dict[str, Any]] = {}
     if meta_file:
         meta = load_meta_file(meta_file)
@@ -415,21 +428,19 @@ def convert(
     if dirs:
         if len(dirs) != len(inputs):
             raise click.UsageError("give either files (one trial) or folders (one trial per recording), not both")
-        _convert_directories(
-            dirs, output, fmt, options, meta, attach=not no_attach, overwrite=overwrite, as_json=as_json
-        )
+        _convert_directories(dirs, output, fmt, options, meta, attach=attach_mode, overwrite=overwrite, as_json=as_json)
         return
     if output.suffix.lower() != ".mcap":
         raise click.UsageError(f"output {output} should end in .mcap")
     if len(inputs) == 1 and _streams(inputs[0], fmt, options):
         _convert_streaming(
-            inputs[0], output, fmt, options, meta, attach=not no_attach, overwrite=overwrite, as_json=as_json
+            inputs[0], output, fmt, options, meta, attach=attach_mode, overwrite=overwrite, as_json=as_json
         )
         return
     try:
         rec, formats = _convert_group(list(inputs), fmt, options)
         finish_recording(rec, meta, formats)
-        path = _write(output, rec, attach=not no_attach, overwrite=overwrite)
+        path = _write(output, rec, attach=attach_mode, overwrite=overwrite)
     except ConversionError as e:
         raise click.ClickException(str(e)) from None
     except (FileExistsError, ValueError, OSError) as e:
@@ -472,7 +483,7 @@ def _convert_directories(
     options: ConvertOptions,
     meta: dict,
     *,
-    attach: bool,
+    attach: str,
     overwrite: bool,
     as_json: bool = False,
 ) -> None:

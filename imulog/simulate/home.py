@@ -50,6 +50,9 @@ class HomeParams:
     night_end_h: float = 7.0
     noise_acc_g: float = 0.004
     noise_gyr_dps: float = 0.2
+    removals_per_day: int = 0
+    removal_min_minutes: int = 60
+    removal_max_minutes: int = 180
 
     @property
     def samples_per_minute(self) -> int:
@@ -58,6 +61,39 @@ class HomeParams:
     @property
     def minutes(self) -> int:
         return int(round(self.days * 24 * 60))
+
+
+def removals(p: HomeParams) -> list[tuple[int, int]]:
+    """Device-removal periods as (first minute, end minute) of the recording, sorted and non-overlapping.
+
+    ``removals_per_day`` per whole or partial day, each starting between 08:00 and 20:00 of the recording's
+    days (minutes from the start), lasting ``removal_min_minutes``-``removal_max_minutes``; the device lies
+    still on a table in a fixed orientation (the ground truth of non-wear detection).
+    """
+    out: list[tuple[int, int]] = []
+    if p.removals_per_day <= 0:
+        return out
+    start = datetime.fromisoformat(p.start)
+    first_midnight = -(start.hour * 60 + start.minute)
+    for day in range(int(np.ceil(p.days)) + 1):
+        rng = np.random.default_rng([p.seed, day, 2])
+        for _ in range(p.removals_per_day):
+            onset = first_midnight + day * 1440 + int(rng.integers(8 * 60, 20 * 60))
+            length = int(rng.integers(p.removal_min_minutes, p.removal_max_minutes + 1))
+            a, b = max(0, onset), min(p.minutes, onset + length)
+            if b - a < p.removal_min_minutes or any(a < e + 60 and b > s - 60 for s, e in out):
+                continue  # cut by the recording's ends, or too close to another removal
+            out.append((a, b))
+    return sorted(out)
+
+
+def _removal_pose(p: HomeParams, removal: int) -> np.ndarray:
+    """Gravity in the sensor frame while the device lies on a table (nearly flat, either face up)."""
+    rng = np.random.default_rng([p.seed, removal, 3])
+    tilt = rng.normal(0.0, 0.05, 2)
+    z = 1.0 if rng.random() < 0.7 else -1.0
+    v = np.array([tilt[0], tilt[1], z])
+    return v / np.linalg.norm(v)
 
 
 def _minute_plan(p: HomeParams, minute: int, start: datetime) -> tuple[np.ndarray, float, float, np.ndarray]:
@@ -96,9 +132,30 @@ def minute_signals(p: HomeParams, minute: int, start: datetime) -> tuple[np.ndar
     rate = np.gradient(angles, 1.0 / p.rate_hz, axis=0)
     gyr = np.column_stack([rate[:, 0], rate[:, 1] * np.cos(roll), -rate[:, 1] * np.sin(roll)])
     rng = np.random.default_rng([p.seed, minute, 1])
+    removal = _removal_at(p, minute)
+    if removal is not None:  # off the wrist: still, only the sensor's noise
+        acc = np.repeat(_removal_pose(p, removal)[None, :], n, axis=0)
+        gyr = np.zeros_like(acc)
+        moving_s = 0.0
     acc = acc + rng.normal(0, p.noise_acc_g, acc.shape)
     gyr = np.degrees(gyr) + rng.normal(0, p.noise_gyr_dps, gyr.shape)
     return acc, gyr, moving_s
+
+
+_REMOVALS: dict[HomeParams, list[tuple[int, int]]] = {}
+
+
+def _removal_at(p: HomeParams, minute: int) -> int | None:
+    """Index of the removal holding ``minute``, or None."""
+    if p.removals_per_day <= 0:
+        return None
+    if p not in _REMOVALS:
+        _REMOVALS.clear()
+        _REMOVALS[p] = removals(p)
+    for k, (a, b) in enumerate(_REMOVALS[p]):
+        if a <= minute < b:
+            return k
+    return None
 
 
 def iter_minutes(p: HomeParams) -> Iterator[tuple[int, np.ndarray, np.ndarray, float]]:
@@ -226,7 +283,8 @@ def write_home_cwa(
 def simulate_home_to_folder(
     out_dir: str | Path, *, subjects: int = 1, trials: int = 1, seed: int = 0, progress=None, **overrides
 ) -> list[dict[str, Path]]:
-    """``imulog simulate home``: one ``.cwa`` per subject and trial plus ``<stem>_truth.npz`` (moving s/minute)."""
+    """``imulog simulate home``: one ``.cwa`` per subject and trial plus ``<stem>_truth.npz`` (moving s/minute,
+    ``removal_minutes``: (first, end) minute of each device removal)."""
     import dataclasses
     import json
 
@@ -244,6 +302,9 @@ def simulate_home_to_folder(
             cwa = out / f"{stem}.cwa"
             truth = write_home_cwa(cwa, params, progress=progress)
             npz = out / f"{stem}_truth.npz"
-            np.savez_compressed(npz, moving_s_per_minute=truth, params=json.dumps(dataclasses.asdict(params)))
+            off = np.array(removals(params), dtype=np.int64).reshape(-1, 2)
+            np.savez_compressed(
+                npz, moving_s_per_minute=truth, removal_minutes=off, params=json.dumps(dataclasses.asdict(params))
+            )
             written.append({"cwa": cwa, "truth_npz": npz})
     return written

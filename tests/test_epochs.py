@@ -1,0 +1,271 @@
+"""Epoch summaries (imulog process epochs): ENMO and MAD against an independent numpy computation, non-wear
+against the home simulator's removal truth, window independence, calibration, counts' published behaviour."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from imulog.process import epochs as ep
+from imulog.steps.epochs import EpochParams, run_epochs
+
+G0 = 9.80665
+
+
+@pytest.fixture(scope="module")
+def half_day(tmp_path_factory) -> tuple[Path, np.ndarray, dict]:
+    """12 h at 25 Hz with two device removals, converted; returns (trial, removal minutes, sim params)."""
+    from imulog.simulate.home import HomeParams, removals, write_home_cwa
+
+    out = tmp_path_factory.mktemp("home")
+    p = HomeParams(days=0.5, rate_hz=25.0, removals_per_day=2, seed=3, removal_min_minutes=60)
+    write_home_cwa(out / "h.cwa", p)
+    trial = out / "h.mcap"
+    _convert(out / "h.cwa", trial)
+    return trial, np.array(removals(p)), p
+
+
+def _convert(src: Path, dst: Path) -> None:
+    from click.testing import CliRunner
+
+    from imulog.cli import cli as main
+
+    r = CliRunner().invoke(main, ["convert", str(src), "-o", str(dst)])
+    assert r.exit_code == 0, r.output
+
+
+def _epochs(trial: Path, name: str):
+    from imulog.archive import TrialReader
+
+    with TrialReader(trial) as t:
+        return t.read(name), t.metadata["imulog.epochs"]
+
+
+def test_enmo_mad_equal_numpy_and_nonwear_finds_each_removal(half_day):
+    trial, truth, p = half_day
+    assert len(truth) >= 1
+    run_epochs(trial, params=EpochParams(calibrate=False), force=True)
+    from imulog.archive import TrialReader
+
+    with TrialReader(trial) as t:
+        imu = t.read("/imu/ax6_4321")
+    g = np.asarray(imu.acc, dtype=np.float64) / G0
+    for e_s in (5, 60):
+        stream, record = _epochs(trial, f"/derived/epochs/{e_s}s/ax6_4321")
+        per = int(e_s * 25)
+        k = len(g) // per
+        r = np.linalg.norm(g[: k * per].reshape(k, per, 3), axis=2)
+        enmo = np.clip(r - 1, 0, None).mean(axis=1)
+        mad = np.abs(r - r.mean(axis=1, keepdims=True)).mean(axis=1)
+        col = stream.columns
+        np.testing.assert_allclose(stream.values[:k, col.index("enmo_g")], enmo, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(stream.values[:k, col.index("mad_g")], mad, rtol=0, atol=1e-9)
+        assert np.array_equal(stream.t_ns[:k], imu.t_ns[: k * per : per])
+    # non-wear: each removal found within one 15-min block at both ends, nothing else flagged
+    found = np.array(record["nonwear"], dtype=np.int64) / 60e9
+    assert len(found) == len(truth), (found, truth)
+    np.testing.assert_allclose(found, truth, atol=15.0)
+    assert record["by_day"][0]["wear_h"] == pytest.approx(
+        record["by_day"][0]["recorded_h"] - (found[:, 1] - found[:, 0]).sum() / 60, abs=1e-3
+    )
+
+
+def test_windows_give_the_whole_computation(half_day):
+    """Cores of 1 h (12 windows) and one 12-h window: the same epochs (the step-window contract)."""
+    trial, _, _ = half_day
+    run_epochs(trial, params=EpochParams(), force=True)
+    many, rec_many = _epochs(trial, "/derived/epochs/60s/ax6_4321")
+    run_epochs(trial, params=EpochParams(core_s=43200.0), force=True)
+    one, rec_one = _epochs(trial, "/derived/epochs/60s/ax6_4321")
+    assert np.array_equal(many.t_ns, one.t_ns)
+    np.testing.assert_allclose(many.values[:, :2], one.values[:, :2], atol=1e-12)
+    counts = many.columns.index("counts_x")
+    assert np.abs(many.values[:, counts : counts + 3] - one.values[:, counts : counts + 3]).max() <= 1.0
+    assert rec_many["nonwear"] == rec_one["nonwear"]
+    assert rec_many["calibration"] == rec_one["calibration"]
+
+
+def test_calibration_recovers_offset_and_scale():
+    rng = np.random.default_rng(1)
+    d = rng.normal(size=(300, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    offset, scale = np.array([0.02, -0.015, 0.03]), np.array([1.01, 0.98, 1.02])
+    raw = d / scale - offset + rng.normal(0, 0.001, d.shape)  # so that (raw + offset) * scale = d
+    cal = ep.fit_calibration(raw)
+    assert cal.applied
+    np.testing.assert_allclose(cal.offset, offset, atol=2e-3)
+    np.testing.assert_allclose(cal.scale, scale, atol=2e-3)
+    assert cal.error_after_mg < cal.error_before_mg / 5
+    flat = ep.fit_calibration(np.tile([0.0, 0.0, 1.0], (200, 1)))
+    assert not flat.applied and "reach" in flat.reason
+
+
+def test_nonwear_rule_sd_and_range():
+    rng = np.random.default_rng(0)
+    per = 100
+    still = rng.normal(0, 0.003, (8 * per, 3)) + [0, 0, 1]
+    moving = still.copy()
+    moving[4 * per :, 0] += np.sin(np.arange(4 * per) / 3)  # blocks 4..7 move on one axis only
+    assert ep.nonwear_blocks(ep.AxisStats.of_blocks(still, per)).all()
+    assert ep.nonwear_blocks(ep.AxisStats.of_blocks(moving, per)).all()  # 2 of 3 axes still: non-wear
+    moving[4 * per :, 1] += np.cos(np.arange(4 * per) / 3)
+    flags = ep.nonwear_blocks(ep.AxisStats.of_blocks(moving, per))
+    assert flags[:4].all() and not flags[4:].any()
+
+
+def test_block_statistics_combine_exactly():
+    rng = np.random.default_rng(2)
+    a = rng.normal(size=(1000, 3))
+    sd, span = ep.AxisStats.of_blocks(a, 100).windows(4)
+    np.testing.assert_allclose(sd[3], a[300:700].std(axis=0, ddof=1), rtol=1e-12)
+    np.testing.assert_allclose(span[3], np.ptp(a[300:700], axis=0), rtol=0)
+
+
+def test_counts_published_behaviour():
+    """Neishabouri 2022: still data gives 0 counts; a step in gravity is not counted after the first sample's state;
+    counts are capped at 128 per 30 Hz sample (so at most 1280 per second per axis)."""
+    f = ep.CountsFilter()
+    assert ep.counts_per_epoch(f(np.tile([0.1, -0.2, 0.97], (900, 1))), 1.0).sum() == 0
+    t = np.arange(30 * 60) / 30
+    big = np.column_stack([8 * np.sin(2 * np.pi * 1.0 * t)] * 3)
+    c = ep.counts_per_epoch(ep.CountsFilter()(big), 60.0)
+    assert c.max() <= 128 * 10 * 60 and c.min() > 0
+    # a 1 Hz wave is in the pass band: counts grow with amplitude
+    small = ep.counts_per_epoch(ep.CountsFilter()(big / 40), 60.0)
+    assert 0 < small.max() < c.max()
+
+
+def test_counts_resampling_factors():
+    assert ep.counts_factors(100) == (3, 10)
+    assert ep.counts_factors(30) == (1, 1)
+    assert ep.counts_factors(25) == (6, 5)
+    with pytest.raises(ValueError, match="30 Hz"):
+        ep.counts_factors(102.4001)
+
+
+def test_cli_json_and_export(half_day, tmp_path):
+    from click.testing import CliRunner
+
+    from imulog.cli import cli as main
+
+    trial, _, _ = half_day
+    r = CliRunner().invoke(main, ["process", "epochs", str(trial), "--epoch-s", "60", "--json"])
+    assert r.exit_code == 0, r.output
+    rec = json.loads(r.output)
+    assert rec["epochs_s"] == [60.0] and len(rec["by_hour"]) >= 12
+    out = tmp_path / "e.csv"
+    r = CliRunner().invoke(main, ["export", str(trial), "-t", "/derived/epochs/60s/ax6_4321", "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "enmo_g" in out.read_text().splitlines()[0]
+
+
+def test_epoch_not_whole_samples_is_one_line(half_day):
+    from click.testing import CliRunner
+
+    from imulog.cli import cli as main
+
+    trial, _, _ = half_day
+    r = CliRunner().invoke(main, ["process", "epochs", str(trial), "--epoch-s", "0.01"])
+    assert r.exit_code != 0 and "whole number of samples" in r.output and len(r.output.strip().splitlines()) == 1
+
+
+def test_simulated_removals_are_still():
+    from datetime import datetime
+
+    from imulog.simulate.home import HomeParams, minute_signals, removals
+
+    p = HomeParams(days=1.0, rate_hz=25.0, removals_per_day=1, seed=5)
+    (a, b), *_ = removals(p)
+    acc, _, moving = minute_signals(p, a + 1, datetime.fromisoformat(p.start))
+    assert moving == 0 and acc.std(axis=0).max() < 0.006
+    assert replace(p, removals_per_day=0) != p and removals(replace(p, removals_per_day=0)) == []
+
+
+def _shared_counts(name: str, topic: str, rate: int, tmp_path) -> tuple[np.ndarray, np.ndarray]:
+    from imulog.archive import TrialReader
+
+    src = Path(__file__).parent.parent / ".." / "shared" / "data" / "devices" / name
+    if not src.exists():
+        pytest.skip(f"{src} not available")
+    trial = tmp_path / "t.mcap"
+    _convert(src, trial)
+    with TrialReader(trial) as t:
+        g = np.asarray(t.read(topic).acc, dtype=np.float64) / G0
+    ours = ep.counts_per_epoch(ep.CountsFilter()(ep.to_30hz(g, rate)), 10.0)
+    import csv
+
+    with open(Path(__file__).parent / "data" / "agcounts_10s.csv", newline="") as f:
+        rows = [r for r in csv.DictReader(f) if r["file"] == name]
+    ref = np.array([[float(r[c]) for c in ("counts_x", "counts_y", "counts_z")] for r in rows])
+    return ours, ref
+
+
+def test_counts_equal_agcounts_on_the_actigraph_sample(tmp_path):
+    """90 Hz ActiGraph GT9X: every 10-s epoch within 1 count of agcounts (ActiGraph's reference)."""
+    ours, ref = _shared_counts("actigraph_gt3x/example.gt3x", "/imu/tas1e31150129", 90, tmp_path)
+    assert len(ref) == 18 and len(ours) >= len(ref)
+    assert np.abs(ours[: len(ref)] - ref).max() <= 1.0
+
+
+def test_counts_on_the_axivity_sample_within_the_documented_gap(tmp_path):
+    """100 Hz AX6: our polyphase resampler is not ActiLife's; docs/epochs.md publishes the gap measured here
+    (total within 5 %, each 10-s epoch within 110 counts); the 1-count target is not met at 100 Hz."""
+    ours, ref = _shared_counts("axivity_cwa/ax6_sample.cwa", "/imu/ax6_6011802", 100, tmp_path)
+    k = len(ref)
+    assert abs(ours[:k].sum() - ref.sum()) <= 0.05 * ref.sum()
+    assert np.abs(ours[:k] - ref).max() <= 110
+
+
+def test_catalog_gathers_epochs_into_one_study_table(half_day, tmp_path):
+    import shutil
+
+    import pyarrow.parquet as pq
+    from click.testing import CliRunner
+
+    from imulog.cli import cli as main
+
+    trial, _, _ = half_day
+    run_epochs(trial, params=EpochParams(), force=False)
+    folder = tmp_path / "study"
+    folder.mkdir()
+    for k in range(2):
+        shutil.copy(trial, folder / f"s{k}.mcap")
+    out, cat = tmp_path / "epochs.parquet", tmp_path / "catalog.parquet"
+    r = CliRunner().invoke(main, ["catalog", str(folder), "-o", str(cat), "-q", "--epochs", str(out)])
+    assert r.exit_code == 0, r.output
+    table = pq.read_table(out).to_pandas()
+    one, record = _epochs(trial, "/derived/epochs/60s/ax6_4321")
+    assert len(table) == 2 * len(one) and table["path"].nunique() == 2
+    assert {"time", "t[s]", "t_ns", "enmo_g[g]", "nonwear"} <= set(table.columns)
+    np.testing.assert_array_equal(table["t_ns"].to_numpy()[: len(one)], one.t_ns)
+    rows = pq.read_table(cat).to_pandas()
+    assert (rows["valid_days"] == record["valid_days"]).all()
+    assert rows["wear_h"].iloc[0] == pytest.approx(sum(d["wear_h"] for d in record["by_day"]))
+
+
+def test_missing_samples_are_left_out(tmp_path):
+    """NaN samples (lost packets): ENMO over the recorded samples, valid_fraction says how many, counts finite."""
+    from imulog.archive import write_trial
+    from imulog.model import ImuStream, Recording
+
+    rate, n = 25.0, 25 * 60 * 90  # 90 min
+    rng = np.random.default_rng(4)
+    t = np.arange(n, dtype=np.int64) * 40_000_000
+    g = np.column_stack([np.sin(np.arange(n) / 40) * 0.3, np.zeros(n), np.ones(n)]) + rng.normal(0, 0.01, (n, 3))
+    g[3000:3100] = np.nan  # 4 s missing inside one 60-s epoch
+    trial = tmp_path / "gap.mcap"
+    write_trial(trial, Recording(imus=[ImuStream("w", t, acc=g * G0, meta={"rate_hz": rate})]))
+    run_epochs(trial, params=EpochParams(epochs_s=(60.0,), calibrate=False))
+    stream, _ = _epochs(trial, "/derived/epochs/60s/w")
+    c = stream.columns
+    per = 1500
+    e = 3000 // per
+    r = np.linalg.norm(g[e * per : (e + 1) * per], axis=1)
+    assert stream.values[e, c.index("valid_fraction")] == pytest.approx(1 - 100 / per)
+    assert stream.values[e, c.index("enmo_g")] == pytest.approx(np.nanmean(np.clip(r - 1, 0, None)), abs=1e-12)
+    assert np.isfinite(stream.values[:, c.index("counts_vm")]).all()
+    assert (stream.values[np.arange(len(stream)) != e, c.index("valid_fraction")] == 1).all()
