@@ -11,7 +11,7 @@ from click.testing import CliRunner
 from rerun.chunk import RrdReader
 
 from imulog.cli import cli
-from imulog.model import ImuStream, Intervals, PoseStream, Recording, SignalStream
+from imulog.model import ImuStream, Intervals, MarkerStream, PoseStream, Recording, SignalStream
 from imulog.view import build_blueprint, from_recording, rates, show
 from imulog.view import layout as L
 from imulog.view.clock import device_imu_of
@@ -436,9 +436,9 @@ def test_repetition_displacements_are_anchored_on_vicon(tmp_path):
     assert logged[0].by_role("error")
 
 
-def test_cli_warning_for_unaligned_imu_without_markers(tmp_path):
-    """An IMU-only trial (e.g. x-io Fusion text): the warning used to tell the user to run `imulog process
-    align`, which cannot work without markers."""
+def test_cli_no_alignment_warning_for_imu_only_trials(tmp_path):
+    """An IMU-only trial (e.g. x-io Fusion text, a home recording): nothing to align with, so no warning (it
+    used to tell the user to run `imulog process align`, which cannot work without markers)."""
     from imulog.archive import write_trial
 
     t = np.arange(300, dtype=np.int64) * 10_000_000
@@ -447,7 +447,12 @@ def test_cli_warning_for_unaligned_imu_without_markers(tmp_path):
     write_trial(path, Recording(imus=[imu]))
     res = CliRunner().invoke(cli, ["view", str(path), "--save", str(tmp_path / "x.rrd")])
     assert res.exit_code == 0, res.output
-    assert "no markers to align them with" in res.output and "process align" not in res.output
+    assert "warning:" not in res.output and "imulog.alignment" not in res.output
+    # with markers and no alignment the warning stays
+    markers = MarkerStream("vicon", t, ["O"], np.zeros((300, 1, 3)))
+    write_trial(tmp_path / "lab.mcap", Recording(imus=[imu], markers=[markers]))
+    res = CliRunner().invoke(cli, ["view", str(tmp_path / "lab.mcap"), "--save", str(tmp_path / "y.rrd")])
+    assert res.exit_code == 0 and "warning:" in res.output and "imulog process align" in res.output
 
 
 def test_every_orientation_is_a_moving_frame_beside_the_cluster(sample_rrd, tmp_path):

@@ -10,6 +10,7 @@ from typing import Any
 import click
 
 from imulog.archive import ArchiveError, TrialReader
+from imulog.commands.outputs import overwrite_option, refuse_existing
 
 
 def _open(path: str) -> TrialReader:
@@ -311,7 +312,7 @@ def doctor(file: str, verbose: bool, as_json: bool) -> None:
 @click.option("--name", "names", multiple=True, metavar="IMU=COLUMN", help="sto: column of an IMU (wrist=hand_r_imu)")
 @click.option("--rate", type=float, default=None, help="sto: rate of the uniform grid in Hz (default: the IMU's)")
 @click.option("--no-imu", is_flag=True, help="c3d: markers, analogs and events only")
-@click.option("--overwrite", is_flag=True, help="bids: replace an existing folder")
+@overwrite_option("replace OUTPUT (a file, or the bids folder) if it exists; refused otherwise")
 @click.option("--json", "as_json", is_flag=True, help="print what was written as one JSON document")
 def export(
     file: str,
@@ -339,7 +340,8 @@ def export(
     c3d          markers (mm), IMU and analog channels as analogs, phases as events
 
     Every export puts all channels on one clock; --clock reference needs an alignment
-    (imulog process align). Files are written to a temporary name and renamed.
+    (imulog process align). Files are written to a temporary name and renamed; an existing
+    OUTPUT is refused unless --overwrite. c3d needs the c3d extra: pip install 'imulog[c3d]'.
 
     \b
     Examples:
@@ -361,6 +363,7 @@ def export(
         )
     if target in ("parquet", "csv") and not topic:
         raise click.UsageError(f"--to {target} exports one channel: give --topic (imulog info {file} lists them)")
+    refuse_existing(output, overwrite=overwrite)
     rename = {}
     for item in names:
         key, sep, value = item.partition("=")
@@ -382,7 +385,8 @@ def export(
             elif target == "bids":
                 from imulog.export.bids import export_bids
 
-                result = export_bids(trial, output, clock=clock or "device", imu=imu, overwrite=overwrite)
+                # an empty folder is free to use (refuse_existing above)
+                result = export_bids(trial, output, clock=clock or "device", imu=imu, overwrite=True)
             else:
                 from imulog.export.c3d import export_c3d
 
@@ -403,7 +407,7 @@ def export(
 @click.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="FIXED.mcap to write")
-@click.option("--overwrite", is_flag=True, help="replace OUTPUT if it exists")
+@overwrite_option("replace OUTPUT if it exists; refused otherwise")
 @click.option("--json", "as_json", is_flag=True, help="print the report as one JSON document")
 def salvage(file: str, output: str, overwrite: bool, as_json: bool) -> None:
     """Recover every intact channel, attachment and metadata record of a damaged or truncated MCAP file.
@@ -422,6 +426,8 @@ def salvage(file: str, output: str, overwrite: bool, as_json: bool) -> None:
     from imulog.archive.salvage import lines
     from imulog.archive.salvage import salvage as run_salvage
 
+    if not (Path(output).exists() and Path(output).resolve() == Path(file).resolve()):  # salvage names that one
+        refuse_existing(output, overwrite=overwrite)
     try:
         report = run_salvage(file, output, overwrite=overwrite)
     except ArchiveError as exc:
