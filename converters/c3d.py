@@ -80,7 +80,7 @@ def read_c3d(path: Path, name: str = "vicon") -> Recording:
     try:
         import ezc3d
     except ImportError:  # pragma: no cover - optional extra
-        raise ConversionError(path, "reading C3D needs ezc3d (pip install 'imulog[c3d]')") from None
+        raise ConversionError(path, "reading C3D needs ezc3d: pip install 'imulog[c3d]'") from None
     if path.stat().st_size < 512:
         raise ConversionError(path, "too short to be a C3D file")
     with open(path, "rb") as f:
