@@ -16,11 +16,11 @@ interval channels (IntervalEvent)   ``foxglove.Log``                      TextLo
 ==================================  ====================================  ===========================
 
 Twins are at most :data:`TWIN_RATE_HZ` (every k-th sample) and at most :data:`MAX_TWIN_MESSAGES` messages per
-channel (long recordings get a lower rate). IMU axes and marker positions are low-passed before decimation
+channel (long recordings get a lower rate). IMU axes are low-passed before decimation
 (:mod:`imulog.archive.twin_filter`: zero-phase FIR, flat to 0.8x the twin's Nyquist, >= 60 dB down from it), so
-what a twin shows is the signal below its Nyquist frequency, not aliases of the content above it; orientations,
-poses and trajectories are the canonical samples (they change slowly, and a quaternion is not filtered
-component-wise). Their log time is the
+what an IMU twin shows is the signal below its Nyquist frequency, not aliases of the content above it; marker
+positions, orientations, poses and trajectories are the canonical samples (their content above the twin's
+Nyquist is 46-60 dB down already on a real Nexus capture; a quaternion is not filtered component-wise). Their log time is the
 trial's time axis (:mod:`imulog.archive.timeline`), and so is the timestamp inside the message.
 """
 
@@ -128,7 +128,7 @@ def decimation(t_ns: np.ndarray, rate_hz: float = TWIN_RATE_HZ, max_messages: in
     return np.arange(0, n, k)
 
 
-def decimated(stream: ImuStream | MarkerStream) -> tuple[np.ndarray, ImuStream | MarkerStream]:
+def decimated(stream: ImuStream) -> tuple[np.ndarray, ImuStream]:
     """The kept indices of a twin and the stream at them, low-passed first (:mod:`imulog.archive.twin_filter`)."""
     from imulog.archive.twin_filter import lowpassed
 
@@ -220,7 +220,7 @@ def imu_twin(stream: ImuStream, log_map: LogMap) -> Twin | None:
 def marker_twin(stream: MarkerStream, log_map: LogMap) -> Twin:
     from imulog.archive._generated.foxglove import PackedElementField_pb2, PointCloud_pb2
 
-    keep, low = decimated(stream)
+    keep = decimation(stream.t_ns)  # positions as sampled: their content above the twin's Nyquist is < -46 dB
     twin = _protobuf_twin(
         twin_topic(stream.topic), "foxglove.PointCloud", _meta(stream, stream.topic, "reference", keep, stream.t_ns)
     )
@@ -234,9 +234,9 @@ def marker_twin(stream: MarkerStream, log_map: LogMap) -> Twin:
     msg = PointCloud_pb2.PointCloud(frame_id=stream.frame_id, point_stride=12, fields=fields)
     msg.pose.position.SetInParent()  # an empty Pose makes Rerun 0.41 write null translations
     msg.pose.orientation.w = 1.0
-    ok = np.asarray(stream.valid, dtype=bool)[keep] & finite_rows(low.pos)  # (K, M)
+    ok = np.asarray(stream.valid, dtype=bool)[keep] & finite_rows(stream.pos[keep])  # (K, M)
     n, m_ = ok.shape
-    pos = np.ascontiguousarray(low.pos, dtype="<f4").view(np.uint8).reshape(n, m_ * 12)
+    pos = np.ascontiguousarray(stream.pos[keep], dtype="<f4").view(np.uint8).reshape(n, m_ * 12)
     rows = Rows(n).message(1, _timestamp(stamps)).raw(msg.SerializeToString())  # fields 2-5: the same each time
     rows.data(6, pos, np.repeat(ok, 12, axis=1))  # the valid markers' x, y, z
     twin.set_rows(stamps.astype(np.uint64), *rows.build())
