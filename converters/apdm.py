@@ -388,7 +388,10 @@ def read_apdm_h5(path: Path, names: dict[str, str]) -> Recording:
 
 
 def _read_apdm_h5(path: Path, names: dict[str, str]) -> Recording:
-    import h5py
+    try:
+        import h5py
+    except ImportError:  # pragma: no cover - h5py is in the hdf5 extra
+        raise ConversionError(path, "reading APDM HDF5 needs h5py: pip install 'imulog[hdf5]'") from None
 
     try:
         f = h5py.File(path, "r")

@@ -58,7 +58,7 @@ def read_broad(path: Path, name: str = "imu") -> Recording:
     try:
         import h5py
     except ImportError:  # pragma: no cover - optional extra
-        raise ConversionError(path, "reading BROAD HDF5 needs h5py (pip install 'imulog[hdf5]')") from None
+        raise ConversionError(path, "reading BROAD HDF5 needs h5py: pip install 'imulog[hdf5]'") from None
     with open(path, "rb") as f:
         if f.read(8) != HDF5_MAGIC:
             raise ConversionError(path, "not an HDF5 file")

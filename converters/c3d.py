@@ -134,7 +134,7 @@ def load(path: Path, options: ConvertOptions | None = None) -> tuple[dict[str, A
     try:
         import ezc3d  # noqa: F401
     except ImportError:  # pragma: no cover - optional extra
-        raise ConversionError(path, "reading C3D needs ezc3d (pip install 'imulog[c3d]')") from None
+        raise ConversionError(path, "reading C3D needs ezc3d: pip install 'imulog[c3d]'") from None
     timeout = float(extra.get("reader_timeout_s", DEFAULT_TIMEOUT_S))
     memory = int(extra.get("reader_memory_bytes", DEFAULT_MEMORY_BYTES))
     tmp = None

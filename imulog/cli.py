@@ -18,7 +18,7 @@ TOP_LEVEL_COMMANDS: dict[str, tuple[str, str]] = {
     "convert": ("imulog.commands.convert:convert", "Convert device exports (IMU text, Vicon CSV, C3D...) to a trial."),
     "info": ("imulog.commands.archive:info", "Show a trial's channels, rates, gaps, metadata and derived runs."),
     "doctor": ("imulog.commands.archive:doctor", "Check a trial's integrity: CRCs, summary, decoding, raw hash."),
-    "export": ("imulog.commands.archive:export", "Export one channel to Parquet or CSV."),
+    "export": ("imulog.commands.archive:export", "Export to Parquet/CSV tables, OpenSense .sto, BIDS-motion or C3D."),
     "salvage": ("imulog.commands.archive:salvage", "Recover the intact channels of a damaged or truncated trial."),
     "simulate": ("imulog.commands.simulate:simulate", "Simulate trials with ground truth in raw export formats."),
     "calibrate": ("imulog.commands.calibrate:calibrate", "Estimate an IMU calibration from static recordings."),
@@ -26,8 +26,8 @@ TOP_LEVEL_COMMANDS: dict[str, tuple[str, str]] = {
     "view": ("imulog.commands.view:view", "Show trials in Rerun on one synchronized timeline."),
     "demo": ("imulog.commands.demo:demo", "Simulate, convert, process and view a trial in one command."),
     "batch": ("imulog.commands.batch:batch", "Run reprocessing steps over many trials (local or Dask)."),
-    "catalog": ("imulog.commands.batch:catalog", "One Parquet row per trial: devices, runs, metrics."),
-    "report": ("imulog.commands.batch:report", "Accuracy tables and plots from a catalog."),
+    "catalog": ("imulog.commands.batch:catalog", "A Parquet catalog, one row per trial: devices, runs, metrics."),
+    "report": ("imulog.commands.batch:report", "Accuracy tables and plots (Markdown, CSV, PNG) from a catalog."),
 }
 
 PROCESS_COMMANDS: dict[str, tuple[str, str]] = {
@@ -82,7 +82,8 @@ def cli() -> None:
     """imulog: wearable-IMU trials as self-describing MCAP archives.
 
     Reports take --json; NO_COLOR=1 turns colour off; progress bars appear only on a terminal
-    (plain lines in logs). Shell completion: eval "$(_IMULOG_COMPLETE=bash_source imulog)"
+    (plain lines in logs). Commands that write a file or folder refuse an existing one unless
+    --overwrite. Shell completion: eval "$(_IMULOG_COMPLETE=bash_source imulog)"
     (zsh_source, fish_source for those shells; docs/cli.md).
 
     \b

@@ -425,7 +425,7 @@ def test_cli_info_doctor_export(trial, tmp_path, rng):
     res = runner.invoke(cli, ["export", str(path), "--topic", "/events/c3d", "-o", str(out_csv)])
     assert res.exit_code == 0
     assert pd.read_csv(out_csv)["label"].tolist() == ["Foot Strike", "x", "reach"]
-    res = runner.invoke(cli, ["export", str(path), "--topic", "/nope", "-o", str(out_csv)])
+    res = runner.invoke(cli, ["export", str(path), "--topic", "/nope", "-o", str(tmp_path / "nope.csv")])
     assert res.exit_code == 1 and "no channel '/nope'" in res.output
     res = runner.invoke(cli, ["export", str(path), "--topic", "/imu/wrist", "-o", str(tmp_path / "x.xlsx")])
     assert res.exit_code == 2 and "--to" in res.output  # a usage error: unknown format

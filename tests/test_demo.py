@@ -45,5 +45,8 @@ def test_demo_refuses_to_wipe_a_foreign_folder(tmp_path: Path) -> None:
     (tmp_path / "precious.txt").write_text("keep me")
     result = CliRunner().invoke(cli, ["demo", "-o", str(tmp_path), "--no-view"])
     assert result.exit_code != 0
-    assert "does not hold an earlier demo" in result.output
+    assert f"{tmp_path} exists; add --overwrite to replace it" in result.output  # the overwrite rule first
+    result = CliRunner().invoke(cli, ["demo", "-o", str(tmp_path), "--no-view", "--overwrite"])
+    assert result.exit_code != 0
+    assert "does not hold an earlier demo" in result.output  # ... and --overwrite never removes another folder
     assert (tmp_path / "precious.txt").read_text() == "keep me"

@@ -1,4 +1,4 @@
-"""C3D export read back by ezc3d (and kineticstoolkit when installed) equal to the source."""
+"""C3D export read back by ezc3d and by the independent `c3d` package (and kineticstoolkit when installed)."""
 
 from __future__ import annotations
 
@@ -8,10 +8,19 @@ from click.testing import CliRunner
 
 from imulog.archive import TrialReader
 from imulog.cli import cli
-from imulog.export.c3d import interp_gapped
+from imulog.export.c3d_grid import interp_gapped, plan_grid, whole_multiple
 from imulog.process.alignment import device_to_reference
 
 ezc3d = pytest.importorskip("ezc3d")
+c3d = pytest.importorskip("c3d")
+
+
+def read_with_c3d(path):
+    """(points (F, M, 5): x, y, z, residual, cameras; analogs (F * k, A)) as the `c3d` package reads them."""
+    with open(path, "rb") as f:
+        reader = c3d.Reader(f)
+        frames = [(p, a) for _, p, a in reader.read_frames()]
+    return np.array([p for p, _ in frames]), np.concatenate([a.T for _, a in frames], axis=0)
 
 
 @pytest.fixture(scope="module")
@@ -19,76 +28,132 @@ def r2g_c3d(processed_r2g, tmp_path_factory):
     out = tmp_path_factory.mktemp("c3d") / "r2g.c3d"
     result = CliRunner().invoke(cli, ["export", str(processed_r2g), "-o", str(out)])
     assert result.exit_code == 0, result.output
+    assert "points of /markers/vicon interpolated" in result.output  # 115 Hz IMU, 100 Hz markers: said so
     return out
 
 
-def test_points_analogs_and_events_equal_the_trial(r2g_c3d, processed_r2g):
+@pytest.fixture(scope="module")
+def nexus(shared_data, tmp_path_factory):
+    """pyomeca's real Vicon Nexus C3D -> archive -> C3D."""
+    src = shared_data / "vicon_nexus" / "markers_analogs.c3d"
+    tmp = tmp_path_factory.mktemp("nexus")
+    assert CliRunner().invoke(cli, ["convert", str(src), "-o", str(tmp / "nexus.mcap")]).exit_code == 0
+    result = CliRunner().invoke(cli, ["export", str(tmp / "nexus.mcap"), "-o", str(tmp / "nexus.c3d")])
+    assert result.exit_code == 0, result.output
+    return src, tmp / "nexus.c3d"
+
+
+def test_simulated_trial_holds_the_imu_at_its_own_rate(r2g_c3d, processed_r2g):
     c = ezc3d.c3d(str(r2g_c3d))
     with TrialReader(processed_r2g) as trial:
         mk = trial.read("/markers/vicon")
         imu = trial.read("/imu/wrist")
-        phases = trial.read("/derived/phases/wrist")
         alignment = trial.metadata["imulog.alignment"]
+        device_rate = trial.channel("/imu/wrist").rate_hz  # 114.9 Hz on the IMU's clock (ms time stamps)
     params = c["parameters"]
-    assert params["POINT"]["LABELS"]["value"] == list(mk.labels)
-    assert params["POINT"]["UNITS"]["value"] == ["mm"] and params["POINT"]["RATE"]["value"][0] == 100.0
-    pts = c["data"]["points"][:3].transpose(2, 1, 0) / 1000.0  # (F, M, 3) m
-    src = np.where(mk.valid[:, :, None], mk.pos, np.nan)
-    assert pts.shape == src.shape  # the Vicon trial has no dropped frames
-    np.testing.assert_array_equal(np.isnan(pts), np.isnan(src))
-    np.testing.assert_allclose(pts, src, rtol=1e-6, atol=1e-7)  # C3D stores float32
-    # IMU as analogs, interpolated onto the frames on the reference clock
+    t_ref = device_to_reference(imu.t_ns, alignment)
+    imu_rate = device_rate * (imu.t_ns[-1] - imu.t_ns[0]) / (t_ref[-1] - t_ref[0])  # on the reference clock
+    assert params["ANALOG"]["RATE"]["value"][0] == pytest.approx(imu_rate, rel=1e-7)  # float32 in the file
+    assert params["POINT"]["RATE"]["value"][0] == pytest.approx(imu_rate, rel=1e-7)  # float32 in the file  # ratio 1
     labels = params["ANALOG"]["LABELS"]["value"]
     assert labels[:3] == ["wrist_acc_x", "wrist_acc_y", "wrist_acc_z"] and "wrist_gyr_z" in labels
     assert params["ANALOG"]["UNITS"]["value"][labels.index("wrist_gyr_z")] == "rad/s"
-    analogs = c["data"]["analogs"][0]  # (A, F)
-    gyr_z = analogs[labels.index("wrist_gyr_z")]
-    t_ref = device_to_reference(imu.t_ns, alignment)
-    expected = np.interp(mk.t_ns, t_ref, imu.gyr[:, 2], left=np.nan, right=np.nan)
-    ok = np.isfinite(gyr_z)
-    assert ok.mean() > 0.9
-    np.testing.assert_allclose(gyr_z[ok], expected[ok], rtol=1e-5, atol=1e-6)
-    # events: every phase start and end, in seconds from the first frame
-    ev = params["EVENT"]
+    gyr_z = c["data"]["analogs"][0][labels.index("wrist_gyr_z")]
+    # every IMU sample, in order, as is (float32): no interpolated value
+    np.testing.assert_array_equal(gyr_z[np.isfinite(gyr_z)], imu.gyr[:, 2].astype(np.float32))
+    # points interpolated onto the IMU's frames; residual -1 exactly where a point is missing
+    pts = c["data"]["points"][:3].transpose(2, 1, 0) / 1000.0
+    res = c["data"]["meta_points"]["residuals"][0].T
+    np.testing.assert_array_equal(res == -1, np.isnan(pts).any(axis=2))
+    assert (res[np.isfinite(pts).all(axis=2)] == 0).all()
+    period = 1e9 / imu_rate
+    g0 = t_ref[0] - np.flatnonzero(np.isfinite(gyr_z))[0] * period  # frames in the phase of the IMU's samples ...
+    assert -period < g0 - mk.t_ns[0] <= 0  # ... from the markers' start (the IMU starts 2.3 s later)
+    frame_t = g0 + np.arange(pts.shape[0]) * period
+    x = np.interp(frame_t, mk.t_ns, mk.pos[:, 0, 0], left=np.nan, right=np.nan)
+    good = np.isfinite(x) & np.isfinite(pts[:, 0, 0])
+    assert good.mean() > 0.85
+    np.testing.assert_allclose(pts[good, 0, 0], x[good], atol=2e-6)
+
+
+def test_second_reader_sees_the_same(r2g_c3d):
+    ours = ezc3d.c3d(str(r2g_c3d))
+    points, analogs = read_with_c3d(r2g_c3d)
+    res = ours["data"]["meta_points"]["residuals"][0].T  # (F, M)
+    np.testing.assert_array_equal(points[:, :, 3] == -1, res == -1)
+    assert (points[:, :, 3] == -1).any()
+    valid = res >= 0
+    np.testing.assert_allclose(points[valid][:, :3], ours["data"]["points"][:3].transpose(2, 1, 0)[valid], rtol=1e-6)
+    np.testing.assert_array_equal(analogs, ours["data"]["analogs"][0].T.astype(np.float32))
+
+
+def test_events_are_the_phases(r2g_c3d, processed_r2g):
+    c = ezc3d.c3d(str(r2g_c3d))
+    with TrialReader(processed_r2g) as trial:
+        phases = trial.read("/derived/phases/wrist")
+        alignment = trial.metadata["imulog.alignment"]
+        imu = trial.read("/imu/wrist")
+    t0 = device_to_reference(imu.t_ns[:1], alignment)[0]
+    rate = c["parameters"]["POINT"]["RATE"]["value"][0]
+    g0 = t0 - np.ceil(t0 * rate / 1e9 - 1e-6) * 1e9 / rate  # the first frame: at or before the markers' start (0)
+    ev = c["parameters"]["EVENT"]
     times = ev["TIMES"]["value"][0] * 60 + ev["TIMES"]["value"][1]
     starts = [t for t, label in zip(times, ev["LABELS"]["value"], strict=True) if label == "reach"]
-    expected_reach = (phases.start_ns[np.asarray(phases.labels) == "reach"] - mk.t_ns[0]) / 1e9
-    np.testing.assert_allclose(starts, expected_reach, atol=1e-5)
+    expected = (phases.start_ns[np.asarray(phases.labels) == "reach"] - g0) / 1e9  # phases on the reference clock
+    np.testing.assert_allclose(starts, expected, atol=2e-5)
     assert ev["USED"]["value"][0] == 2 * len(phases)
 
 
 def test_kineticstoolkit_reads_the_same(r2g_c3d, processed_r2g):
     ktk = pytest.importorskip("kineticstoolkit")  # not a declared dependency: it requires PyQt5 (GPL)
     data = ktk.read_c3d(str(r2g_c3d), convert_point_unit=True)
-    with TrialReader(processed_r2g) as trial:
-        mk = trial.read("/markers/vicon")
-        phases = trial.read("/derived/phases/wrist")
-    o = data["Points"].data["O"][:, :3]
-    np.testing.assert_allclose(o, np.where(mk.valid[:, :1], mk.pos[:, 0], np.nan), rtol=1e-6, atol=1e-7)
-    np.testing.assert_allclose(data["Points"].time, (mk.t_ns - mk.t_ns[0]) / 1e9, atol=1e-9)
-    names = [e.name for e in data["Points"].events]
-    assert names.count("lift") == list(phases.labels).count("lift") == 5
+    ours = ezc3d.c3d(str(r2g_c3d))
+    np.testing.assert_allclose(data["Points"].data["O"][:, :3], ours["data"]["points"][:3, 0].T / 1000, rtol=1e-6)
     assert "wrist_gyr_x" in data["Analogs"].data
 
 
-def test_real_nexus_c3d_round_trips(shared_data, tmp_path):
-    """pyomeca's real Vicon Nexus C3D -> archive -> C3D: the same markers and EMG analogs."""
-    src_path = shared_data / "vicon_nexus" / "markers_analogs.c3d"
-    mcap = tmp_path / "nexus.mcap"
-    assert CliRunner().invoke(cli, ["convert", str(src_path), "-o", str(mcap)]).exit_code == 0
-    out = tmp_path / "nexus.c3d"
-    result = CliRunner().invoke(cli, ["export", str(mcap), "-o", str(out)])
-    assert result.exit_code == 0, result.output
+def test_real_nexus_c3d_residuals_masks_and_analogs_are_the_source(nexus):
+    src_path, out = nexus
     src, ours = ezc3d.c3d(str(src_path)), ezc3d.c3d(str(out))
     labels = src["parameters"]["POINT"]["LABELS"]["value"]
-    ours_labels = ours["parameters"]["POINT"]["LABELS"]["value"]
-    assert [lbl.split(":")[-1] for lbl in labels] == [lbl.split(":")[-1] for lbl in ours_labels]
+    assert [lbl.split(":")[-1] for lbl in labels] == [
+        lbl.split(":")[-1] for lbl in ours["parameters"]["POINT"]["LABELS"]["value"]
+    ]
     a, b = src["data"]["points"][:3], ours["data"]["points"][:3]
     assert a.shape == b.shape
     np.testing.assert_array_equal(np.isnan(a), np.isnan(b))
     np.testing.assert_allclose(b, a, rtol=1e-6, atol=1e-4)  # mm, float32 both sides
+    src_res = src["data"]["meta_points"]["residuals"]
+    assert (src_res == -1).sum() == 305  # the Nexus file's occluded points
+    np.testing.assert_array_equal(ours["data"]["meta_points"]["residuals"], src_res)
+    np.testing.assert_array_equal(
+        ours["data"]["meta_points"]["camera_masks"], src["data"]["meta_points"]["camera_masks"]
+    )
+    assert ours["parameters"]["POINT"]["RATE"]["value"][0] == 100.0
     assert ours["parameters"]["ANALOG"]["RATE"]["value"][0] == 2000.0
-    np.testing.assert_allclose(ours["data"]["analogs"], src["data"]["analogs"], rtol=1e-6, atol=1e-9)
+    np.testing.assert_array_equal(ours["data"]["analogs"], src["data"]["analogs"])  # sample for sample
+    analog = ours["parameters"]["ANALOG"]
+    assert list(analog["SCALE"]["value"]) == [1.0] * 38 and list(analog["OFFSET"]["value"]) == [0] * 38
+    assert analog["GEN_SCALE"]["value"][0] == 1.0
+
+
+def test_real_nexus_export_read_by_the_second_reader(nexus):
+    src_path, out = nexus
+    src_pts, src_an = read_with_c3d(src_path)
+    pts, an = read_with_c3d(out)
+    np.testing.assert_array_equal(pts[:, :, 3], src_pts[:, :, 3])  # residuals, -1 for the occluded points
+    np.testing.assert_array_equal(an, src_an)
+    np.testing.assert_allclose(pts[:, :, :3], src_pts[:, :, :3], rtol=1e-6, atol=1e-4)
+
+
+def test_grid_keeps_whole_multiples_and_follows_the_analog_otherwise():
+    g = plan_grid((0, 5_790_000_000), (100.0, 0), (2000.0, 0))
+    assert (g.point_rate_hz, g.ratio, g.frames, g.points_resampled) == (100.0, 20, 580, False)
+    g = plan_grid((0, 10_000_000_000), (100.0, 0), (115.0, 3_000_000))
+    assert g.points_resampled and g.ratio == 1 and g.point_rate_hz == 115.0
+    assert (3_000_000 - g.g0_ns) % round(1e9 / 115) < 2 and g.g0_ns <= 0  # phase of the IMU, covers the markers
+    assert whole_multiple(200.001, 100.0, 60.0) == 2  # 0.06 samples of drift over a minute: placed
+    assert whole_multiple(200.02, 100.0, 60.0) == 0  # 1.2 samples: not
 
 
 def test_interp_gapped_leaves_gaps_empty():

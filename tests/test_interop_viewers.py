@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from imulog.archive import TrialReader, append_derived, check_file, write_trial
+from imulog.archive.twin_filter import lowpass_at
 from imulog.archive.twins import TWIN_RATE_HZ
 from imulog.model import ImuStream, Intervals, MarkerStream, PoseStream, Recording, SignalStream
 from imulog.process.alignment import reference_to_device
@@ -131,11 +132,14 @@ def test_rerun_loader_plots_imu_draws_markers_and_moves_the_imu_frame(processed)
     cols = _column(ents["/derived/viewer/imu/wrist"], "SeriesLines:names")[0]  # one static row of 6 names
     gyr_cols = [cols.index(f"gyroscope/{a}") for a in "xyz"]
     acc_cols = [cols.index(f"accelerometer/{a}") for a in "xyz"]
-    assert np.allclose(scalars[:, gyr_cols], imu.gyr[::K]) and np.allclose(scalars[:, acc_cols], imu.acc[::K])
+    keep = np.arange(0, 2000, K)  # every K-th sample of the low-passed signal (imulog.archive.twin_filter)
+    gyr, acc = (lowpass_at(x, keep, K, imu.t_ns) for x in (imu.gyr, imu.acc))
+    assert np.allclose(scalars[:, gyr_cols], gyr) and np.allclose(scalars[:, acc_cols], acc)
+    assert not np.allclose(scalars[:, gyr_cols], imu.gyr[::K], atol=0.1)  # white noise: filtered, not sampled
     # markers: foxglove.PointCloud -> Points3D, only the markers seen
     points = _column(ents["/derived/viewer/markers/vicon"], "Points3D:positions")
     assert len(points) == 2000 // K and len(points[0]) == 4 and len(points[100 // K]) == 3  # sample 100: Y hidden
-    assert np.allclose(np.array(points[0]), markers.pos[0], atol=1e-6)
+    assert np.allclose(np.array(points[0]), markers.pos[0], atol=1e-6)  # positions as sampled (not filtered)
     # the IMU frame: FrameTransform -> Transform3D world -> wrist, placed at the cluster, rotating
     tf = ents["/derived/viewer/orientation/wrist"]
     assert {v for row in _column(tf, "Transform3D:child_frame") for v in row} == {"wrist"}
@@ -204,7 +208,8 @@ def test_every_channel_decodes_as_numbers_with_mcap_and_foxglove_schemas(process
     ros = got["/derived/viewer/imu/wrist"]
     assert ros[0][0] == "sensor_msgs/msg/Imu"
     m = ros[3][2]
-    assert [m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z] == imu.gyr[3 * K].tolist()
+    gyr3 = lowpass_at(imu.gyr, np.arange(0, len(imu.t_ns), K), K, imu.t_ns)[3]  # the 4th twin sample, low-passed
+    assert [m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z] == gyr3.tolist()
     assert m.header.stamp.sec * 10**9 + m.header.stamp.nanosec == ros[3][1]
 
 

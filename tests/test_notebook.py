@@ -10,16 +10,22 @@ from imulog.archive import TrialReader
 from imulog.process.alignment import device_to_reference
 
 
-def test_repr_lists_channels_rates_runs_and_alignment(processed_r2g):
+def test_repr_is_a_few_lines_and_the_html_keeps_the_table(processed_r2g):
     with TrialReader(processed_r2g) as trial:
         text = repr(trial)
         page = trial._repr_html_()
         n_runs = len(trial.runs())
+        channels = trial.channels
     assert text.startswith(f"<TrialReader {processed_r2g} (subject=S00")
-    assert "/imu/wrist" in text and "imulog.ImuBlock" in text and "114.9" in text
-    assert "runs: #1 orientation:wrist" in text and text.count("#") == n_runs
+    lines = text.splitlines()
+    assert len(lines) == 4 and max(len(line) for line in lines[1:]) <= 110  # was 40 lines (issue 30)
+    assert "raw (2): /imu/wrist 114.903 Hz" in text and "/markers/vicon 100 Hz" in text
+    derived = [c for c in channels if c.derived and not c.metadata.get("twin_of")]
+    assert f"derived ({len(derived)} channels, {n_runs} runs): acc_global, movements, orientation" in text
     assert "alignment: /imu/wrist on /markers/vicon, offset " in text
-    assert page.startswith("<div") and "<table>" in page and page.count("<tr>") == 1 + len(text.splitlines()) - 4
+    # the HTML repr (Jupyter) keeps the full table: one row per channel, viewer twins included, and the runs
+    assert page.startswith("<div") and "<table>" in page and page.count("<tr>") == 1 + len(channels)
+    assert page.count("<li>") == n_runs and "orientation:wrist" in page
     assert "<TrialReader" not in page  # HTML of its own, not the text repr
 
 

@@ -60,7 +60,9 @@ def test_cli_writes_and_converts(tmp_path):
     assert len(truth) == round(0.01 * 1440)
     result = CliRunner().invoke(cli, ["convert", str(cwa), "-o", str(tmp_path / "home.mcap")])
     assert result.exit_code == 0, result.output
-    bad = CliRunner().invoke(cli, ["simulate", "home", "-o", str(out), "--set", "rate_hz=30"])
+    again = CliRunner().invoke(cli, ["simulate", "home", "-o", str(out), "--days", "0.01"])
+    assert again.exit_code != 0 and "exists; add --overwrite to replace it" in again.output  # the trial is there
+    bad = CliRunner().invoke(cli, ["simulate", "home", "-o", str(tmp_path / "other"), "--set", "rate_hz=30"])
     assert bad.exit_code != 0 and "not a CWA rate" in bad.output
     bad = CliRunner().invoke(cli, ["simulate", "r2g", "-o", str(out), "--days", "1"])
     assert bad.exit_code != 0 and "--days applies to the home protocol only" in bad.output

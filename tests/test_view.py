@@ -11,7 +11,7 @@ from click.testing import CliRunner
 from rerun.chunk import RrdReader
 
 from imulog.cli import cli
-from imulog.model import ImuStream, Intervals, PoseStream, Recording, SignalStream
+from imulog.model import ImuStream, Intervals, MarkerStream, PoseStream, Recording, SignalStream
 from imulog.view import build_blueprint, from_recording, rates, show
 from imulog.view import layout as L
 from imulog.view.clock import device_imu_of
@@ -436,9 +436,9 @@ def test_repetition_displacements_are_anchored_on_vicon(tmp_path):
     assert logged[0].by_role("error")
 
 
-def test_cli_warning_for_unaligned_imu_without_markers(tmp_path):
-    """An IMU-only trial (e.g. x-io Fusion text): the warning used to tell the user to run `imulog process
-    align`, which cannot work without markers."""
+def test_cli_no_alignment_warning_for_imu_only_trials(tmp_path):
+    """An IMU-only trial (e.g. x-io Fusion text, a home recording): nothing to align with, so no warning (it
+    used to tell the user to run `imulog process align`, which cannot work without markers)."""
     from imulog.archive import write_trial
 
     t = np.arange(300, dtype=np.int64) * 10_000_000
@@ -447,4 +447,44 @@ def test_cli_warning_for_unaligned_imu_without_markers(tmp_path):
     write_trial(path, Recording(imus=[imu]))
     res = CliRunner().invoke(cli, ["view", str(path), "--save", str(tmp_path / "x.rrd")])
     assert res.exit_code == 0, res.output
-    assert "no markers to align them with" in res.output and "process align" not in res.output
+    assert "warning:" not in res.output and "imulog.alignment" not in res.output
+    # with markers and no alignment the warning stays
+    markers = MarkerStream("vicon", t, ["O"], np.zeros((300, 1, 3)))
+    write_trial(tmp_path / "lab.mcap", Recording(imus=[imu], markers=[markers]))
+    res = CliRunner().invoke(cli, ["view", str(tmp_path / "lab.mcap"), "--save", str(tmp_path / "y.rrd")])
+    assert res.exit_code == 0 and "warning:" in res.output and "imulog process align" in res.output
+
+
+def test_every_orientation_is_a_moving_frame_beside_the_cluster(sample_rrd, tmp_path):
+    """Derived orientations (and a device's own, /orientation/*) as Transform3D + axes in the 3D view."""
+    from imulog.process import quaternion as quat
+    from imulog.view.frames import BESIDE_CLUSTER_M
+
+    out, rec, logged = sample_rrd
+    orientation = next(s for s in rec.signals if s.topic == "/derived/orientation/wrist")
+    entity = L.imu_frame_entity(orientation.topic)
+    summary = summarize(out)
+    assert summary[entity].rows == len(orientation) and summary[entity].timelines == {L.TIMELINE}
+    assert "TransformAxes3D:axis_length" in summary[entity].static_components
+    t, xyzw = read_column(out, entity, "Transform3D:quaternion")
+    _, shift = read_column(out, entity, "Transform3D:translation")
+    q = np.array([r[0] for r in xyzw], dtype=np.float64)[:, [3, 0, 1, 2]]
+    rot = rec.metadata["imulog.alignment"]["rotation_global_to_world"]
+    want = quat.multiply(np.asarray(rot, np.float64)[None], orientation.values)
+    assert np.allclose(np.abs(np.sum(q * want, axis=1)), 1.0, atol=1e-6)  # the same rotation (sign free)
+    pose = rec.poses[0]  # the Vicon cluster: the IMU frame sits beside it at every instant
+    pos = np.array([r[0] for r in shift], dtype=np.float64)
+    beside = np.column_stack([np.interp(t, pose.t_ns, pose.position[:, k]) for k in range(3)]) + BESIDE_CLUSTER_M
+    np.testing.assert_allclose(pos, beside, atol=1e-5)
+    assert np.ptp(pos, axis=0).max() > 0.05 and np.ptp(q, axis=0).max() > 0.1  # it moves and turns
+    assert [e.path for e in logged[0].by_role("imu_frame")] == [entity]
+    # a device's own orientation (an Xsens export's quaternions), IMU-only: at the world origin, drawn as is
+    t_dev = np.arange(200, dtype=np.int64) * 10_000_000
+    angle = np.linspace(0, 2, 200)
+    q_dev = np.column_stack([np.cos(angle / 2), np.zeros(200), np.zeros(200), np.sin(angle / 2)])
+    device = SignalStream("/orientation/shank", t_dev, ["qw", "qx", "qy", "qz"], ["1"] * 4, q_dev)
+    imu = ImuStream("shank", t_dev, acc=np.zeros((200, 3)), gyr=np.zeros((200, 3)))
+    out2, logged2 = _save(tmp_path, Recording(imus=[imu], signals=[device]), "device")
+    t2, xyzw2 = read_column(out2, L.imu_frame_entity("/orientation/shank"), "Transform3D:quaternion")
+    np.testing.assert_allclose(np.array([r[0] for r in xyzw2])[:, [3, 0, 1, 2]], q_dev, atol=1e-6)
+    assert [e.role for e in logged2[0].entities if e.topic == "/orientation/shank"] == ["orientation", "imu_frame"]

@@ -1,7 +1,8 @@
 """How a :class:`~imulog.archive.TrialReader` shows itself in a REPL or a notebook, and its pandas time index.
 
-``repr(trial)`` and ``trial._repr_html_()`` list the channels (schema, rate, samples, duration), the
-derived runs and the alignment; they read only the file's summary and metadata records. ``frame_on_clock``
+``repr(trial)`` is a few lines (the raw channels with their rates, how many derived channels and runs, the
+alignment); ``trial._repr_html_()`` (Jupyter) keeps the full table of channels (schema, rate, samples,
+duration), the derived runs and the alignment. Both read only the file's summary and metadata records. ``frame_on_clock``
 is what ``TrialReader.read_pandas(topic, clock=...)`` returns: a DataFrame indexed by time on one clock.
 """
 
@@ -40,17 +41,32 @@ def _runs(trial) -> list[str]:
     return [f"#{n} {r.get('step', '')}: {r.get('algorithm', '')}" for n, r in trial.runs().items()]
 
 
-def trial_repr(trial) -> str:
-    """Plain-text summary: file, trial record, channels table, runs, alignment."""
+def trial_repr(trial, width: int = 110) -> str:
+    """A few lines: file and trial record, raw channels (rate, duration), derived channels and runs, alignment.
+
+    ``trial.channels`` (or ``imulog info``) has the full table; in Jupyter the HTML repr shows it.
+    """
     rec = trial.metadata.get("imulog.trial", {})
     who = ", ".join(f"{k}={rec[k]}" for k in ("subject", "trial", "task", "start_time") if k in rec)
     lines = [f"<TrialReader {trial.path}{' (' + who + ')' if who else ''}>"]
-    rows = [("topic", "schema", "rate_hz", "samples", "duration_s"), *_rows(trial)]
-    widths = [max(len(r[i]) for r in rows) for i in range(5)]
-    lines += ["  " + "  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)).rstrip() for r in rows]
-    runs = _runs(trial)
-    lines.append("runs: " + ("; ".join(runs) if runs else "none"))
-    lines.append("alignment: " + _alignment(trial))
+    chans = [c for c in trial.channels if not (c.metadata.get("twin_of") or c.topic.startswith("/derived/viewer/"))]
+    raw = [c for c in chans if not c.derived]
+    derived = [c for c in chans if c.derived]
+
+    def short(c) -> str:
+        rate = f" {c.rate_hz:.6g} Hz" if c.rate_hz else ""
+        dur = f" {c.duration_s:.1f} s" if c.duration_s else ""
+        return f"{c.topic}{rate}{dur}" if c.sample_count else f"{c.topic} (empty)"
+
+    def joined(label: str, items: list[str]) -> str:
+        text = f"  {label}: " + (", ".join(items) or "none")
+        return text if len(text) <= width else text[: width - 3] + "..."
+
+    lines.append(joined(f"raw ({len(raw)})", [short(c) for c in raw]))
+    groups = sorted({c.topic.split("/")[2] for c in derived if c.topic.count("/") >= 2})
+    runs = trial.runs()
+    lines.append(joined(f"derived ({len(derived)} channels, {len(runs)} runs)", groups))
+    lines.append("  alignment: " + _alignment(trial))
     return "\n".join(lines)
 
 

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from imulog.archive import _mcap as m
-from imulog.archive import codec
+from imulog.archive import codec, twin_filter
 from imulog.archive._builder import CHUNK_TARGET_BYTES, McapBuilder
 from imulog.archive.errors import ArchiveError, ArchiveExistsError
 from imulog.archive.files import atomic_output, target_path, writer_lock
@@ -139,6 +139,7 @@ class StreamingTrialWriter:
         self._twins: dict[str, _Channel] = {}
         self._twin_k: dict[str, int] = {}
         self._twin_seen: dict[str, int] = {}
+        self._twin_filters: dict[str, twin_filter.PieceFilter] = {}
         self._imus: list[Any] = []
         self._extra: dict[str, str] = {}  # provenance of appended channels
         self._stats_record = STATS_RECORD
@@ -250,6 +251,10 @@ class StreamingTrialWriter:
         if t is None or not len(t):
             return
         k = self._twin_step(stream)
+        if twin_filter.filtered(stream):  # low-passed before decimation, seamless across pieces
+            pf = self._twin_filters.setdefault(stream.topic, twin_filter.PieceFilter(k))
+            self._add_filtered(pf.push(stream))
+            return
         first = self._twin_seen.get(stream.topic, 0)
         keep = np.flatnonzero((first + np.arange(len(t))) % k == 0)
         self._twin_seen[stream.topic] = first + len(t)
@@ -257,6 +262,19 @@ class StreamingTrialWriter:
             return
         twins = writer.stream_twins(take_samples(stream, keep), self._axis, self.metadata)
         self._add_twins(twins, np.asarray(stream.t_ns)[keep])
+
+    def _add_filtered(self, kept: Stream | None) -> None:
+        """Write the twins of the decimated, low-passed samples a :class:`twin_filter.PieceFilter` gave."""
+        from imulog.archive import writer
+
+        if kept is not None and len(kept.t_ns):
+            self._add_twins(writer.stream_twins(kept, self._axis, self.metadata), np.asarray(kept.t_ns))
+
+    def _flush_twin_filters(self) -> None:
+        """The last samples the twin filters held back (the end of each filtered channel)."""
+        for pf in self._twin_filters.values():
+            self._add_filtered(pf.flush())
+        self._twin_filters.clear()
 
     def _add_twins(self, twins: list[Any], sample_times: np.ndarray) -> None:
         """Write this piece's ``twins`` (their channels opened on the first piece); ``sample_times``: the canonical
@@ -313,6 +331,7 @@ class StreamingTrialWriter:
 
         if self._topics is None:
             raise ArchiveError(f"{self.path}: nothing to write (the source gave no samples)")
+        self._flush_twin_filters()
         for ch in [*self._channels.values(), *self._twins.values()]:
             self._flush(ch)
         from imulog.archive.writer import attached_here, original_record
@@ -457,6 +476,7 @@ class _PieceChannels(StreamingTrialWriter):
         self._write_twins(piece)
 
     def finish(self, topics: list[str]) -> tuple[dict[str, str], dict[str, dict[str, str]]]:
+        self._flush_twin_filters()
         for ch in [*self._channels.values(), *self._twins.values()]:
             self._flush(ch)
         missing = [t for t in topics if t not in self._channels]

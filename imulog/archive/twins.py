@@ -15,8 +15,12 @@ interval channels (IntervalEvent)   ``foxglove.Log``                      TextLo
 ``/derived/trajectory/{method}``    ``foxglove.PosesInFrame`` (per rep.)  InstancePoses3D
 ==================================  ====================================  ===========================
 
-Twins are at most :data:`TWIN_RATE_HZ` (every k-th sample, no filtering) and at most
-:data:`MAX_TWIN_MESSAGES` messages per channel (long recordings get a lower rate). Their log time is the
+Twins are at most :data:`TWIN_RATE_HZ` (every k-th sample) and at most :data:`MAX_TWIN_MESSAGES` messages per
+channel (long recordings get a lower rate). IMU axes are low-passed before decimation
+(:mod:`imulog.archive.twin_filter`: zero-phase FIR, flat to 0.8x the twin's Nyquist, >= 60 dB down from it), so
+what an IMU twin shows is the signal below its Nyquist frequency, not aliases of the content above it; marker
+positions, orientations, poses and trajectories are the canonical samples (their content above the twin's
+Nyquist is 46-60 dB down already on a real Nexus capture; a quaternion is not filtered component-wise). Their log time is the
 trial's time axis (:mod:`imulog.archive.timeline`), and so is the timestamp inside the message.
 """
 
@@ -124,6 +128,15 @@ def decimation(t_ns: np.ndarray, rate_hz: float = TWIN_RATE_HZ, max_messages: in
     return np.arange(0, n, k)
 
 
+def decimated(stream: ImuStream) -> tuple[np.ndarray, ImuStream]:
+    """The kept indices of a twin and the stream at them, low-passed first (:mod:`imulog.archive.twin_filter`)."""
+    from imulog.archive.twin_filter import lowpassed
+
+    keep = decimation(stream.t_ns)
+    k = int(keep[1] - keep[0]) if len(keep) > 1 else 1
+    return keep, lowpassed(stream, keep, k)
+
+
 def _stamp(msg: Any, t: int) -> None:
     msg.timestamp.seconds, msg.timestamp.nanos = divmod(int(t), 1_000_000_000)
 
@@ -192,11 +205,11 @@ def _timestamp(stamps: np.ndarray) -> Any:
 def imu_twin(stream: ImuStream, log_map: LogMap) -> Twin | None:
     if stream.acc is None and stream.gyr is None:
         return None
-    keep = decimation(stream.t_ns)
+    keep, low = decimated(stream)
     stamps = log_map(stream.t_ns[keep]).astype(np.int64)
     nan = np.full((len(keep), 3), np.nan)
-    gyr = stream.gyr[keep] if stream.gyr is not None else nan
-    acc = stream.acc[keep] if stream.acc is not None else nan
+    gyr = low.gyr if low.gyr is not None else nan
+    acc = low.acc if low.acc is not None else nan
     meta = _meta(stream, stream.topic, stream.name, keep, stream.t_ns)
     meta.update(units=f"angular_velocity rad/s, linear_acceleration m/s^2 ({stream.frame_id} frame)")
     twin = Twin(twin_topic(stream.topic), "sensor_msgs/msg/Imu", "ros2msg", ROS_IMU_SCHEMA.encode(), "cdr", meta)
@@ -207,7 +220,7 @@ def imu_twin(stream: ImuStream, log_map: LogMap) -> Twin | None:
 def marker_twin(stream: MarkerStream, log_map: LogMap) -> Twin:
     from imulog.archive._generated.foxglove import PackedElementField_pb2, PointCloud_pb2
 
-    keep = decimation(stream.t_ns)
+    keep = decimation(stream.t_ns)  # positions as sampled: their content above the twin's Nyquist is < -46 dB
     twin = _protobuf_twin(
         twin_topic(stream.topic), "foxglove.PointCloud", _meta(stream, stream.topic, "reference", keep, stream.t_ns)
     )

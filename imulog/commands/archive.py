@@ -10,6 +10,7 @@ from typing import Any
 import click
 
 from imulog.archive import ArchiveError, TrialReader
+from imulog.commands.outputs import overwrite_option, refuse_existing
 
 
 def _open(path: str) -> TrialReader:
@@ -39,6 +40,29 @@ def trial_summary(trial: TrialReader) -> dict[str, Any]:
     channels = []
     for c in trial.channels:
         md = c.metadata
+        if c.message_count == 0:  # nothing stored (salvaged, interrupted): the recorded statistics do not hold
+            channels.append(
+                {
+                    "topic": c.topic,
+                    "schema": c.schema_name,
+                    "kind": c.kind,
+                    "derived": c.derived,
+                    "messages": 0,
+                    "samples": 0,
+                    "rate_hz": None,
+                    "start_ns": None,
+                    "end_ns": None,
+                    "duration_s": None,
+                    "time_gaps": None,
+                    "nan_samples": None,
+                    "units": md.get("units", ""),
+                    "frame_id": md.get("frame_id", ""),
+                    "stored_bytes": 0,
+                    "out_of_date": None,
+                    "metadata": md,
+                }
+            )
+            continue
         channels.append(
             {
                 "topic": c.topic,
@@ -130,8 +154,12 @@ def _echo_phase_quality(timing: dict) -> None:
     click.echo(
         f"phases: {timing.get('n_phases', 0)} in {len(quality)} repetitions from {timing.get('n_movements', 0)} "
         f"movements; event correction changed {corrected} (merged {total['merged']}, dropped {total['dropped']}, "
-        f"split {total['split']}, missing {total['missing']}), {timing.get('n_forced_phases', 0)} forced phases; "
-        f"confidence mean {timing.get('mean_confidence')}, low in repetitions {', '.join(map(str, low)) or '-'}"
+        f"split {total['split']}, missing {total['missing']})"
+    )
+    low_text = ", ".join(map(str, low[:20])) + (f" +{len(low) - 20} more" if len(low) > 20 else "")
+    click.echo(
+        f"  {timing.get('n_forced_phases', 0)} forced phases; confidence mean {timing.get('mean_confidence')}, "
+        f"low in repetitions {low_text or '-'}"
     )
 
 
@@ -148,21 +176,59 @@ def _echo_alignment(record: dict) -> None:
             click.echo(f"  {line}")
 
 
+def _echo_wrapped(text: str, width: int | None) -> None:
+    """``text`` on lines of at most ``width`` characters (continuations indented); as is when None."""
+    import textwrap
+
+    click.echo(text if width is None else textwrap.fill(text, width, subsequent_indent="    "))
+
+
+def _cut(text: str, width: int | None) -> str:
+    return text if width is None or len(text) <= width else text[: width - 3] + "..."
+
+
+def _channel_row(c: dict[str, Any]) -> tuple[str, ...]:
+    """One row of the channels table; a channel without samples (salvaged, interrupted) shows only that."""
+    salvaged = str(c["metadata"].get("salvaged", ""))
+    topic = c["topic"] + (" [out of date]" if c["out_of_date"] else "")
+    if salvaged:
+        topic += f" [{salvaged.split(':', 1)[0]}]"
+    if not c["samples"]:
+        return (topic + " [empty]", c["schema"], "-", "0", "-", "-", f"{c['stored_bytes'] / 1e6:.2f}", "-")
+    gaps = f"{c['time_gaps'] if c['time_gaps'] is not None else '-'}/{c['nan_samples'] if c['nan_samples'] is not None else '-'}"
+    dur = "-" if c["duration_s"] is None else f"{c['duration_s']:.3f}"
+    return (
+        topic,
+        c["schema"],
+        _fmt_rate(c["rate_hz"]),
+        str(c["samples"]),
+        dur,
+        gaps,
+        f"{c['stored_bytes'] / 1e6:.2f}",
+        _fmt_units(c["units"]),
+    )
+
+
 @click.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False))
+@click.option("-v", "--verbose", is_flag=True, help="also every run's parameters, the viewer twins, full metadata")
 @click.option("--json", "as_json", is_flag=True, help="print one JSON document (for scripts)")
-def info(file: str, as_json: bool) -> None:
-    """Show a trial's channels, metadata, attachments and derived runs.
+def info(file: str, verbose: bool, as_json: bool) -> None:
+    """Show a trial's channels, metadata, attachments and derived runs (compact; -v for everything).
 
     For every channel: schema, rate (Hz), sample count, duration, gaps (time gaps longer than 1.5
-    sample periods / samples with NaN), stored (compressed) size, units and frame. Derived channels
-    whose inputs (channels or metadata records such as imulog.alignment) changed since they were
-    computed are marked out of date, with the command that recomputes them. Reads only the summary and
-    the metadata records (fast on any trial size).
+    sample periods / samples with NaN), stored (compressed) size, units and frame. A salvaged channel
+    says [partial] (chunks were lost) and a channel with no samples [empty] (no rate, duration or
+    gaps). Derived channels whose inputs (channels or metadata records such as imulog.alignment)
+    changed since they were computed are marked out of date, with the command that recomputes them.
+    By default the viewer twins (/derived/viewer/...) are one line, metadata records one line each
+    (cut at 110 characters) and runs one line without their parameters; -v lists them all in full.
+    Reads only the summary and the metadata records (fast on any trial size).
 
     \b
     Examples:
       imulog info trial.mcap
+      imulog info trial.mcap -v          # every run's parameters, the viewer twins
       imulog info trial.mcap --json | python -c "import json,sys; print(json.load(sys.stdin)['channels'][0])"
     """
     with _open(file) as trial:
@@ -173,37 +239,26 @@ def info(file: str, as_json: bool) -> None:
     if as_json:
         click.echo(json.dumps(data, indent=2, default=str))
         return
+    width = None if verbose else 110
     click.echo(f"{data['path']}  ({data['bytes'] / 1e6:.2f} MB)")
     click.echo("channels:")
+    twins = [c for c in data["channels"] if c["metadata"].get("twin_of") or c["topic"].startswith("/derived/viewer/")]
+    shown = data["channels"] if verbose else [c for c in data["channels"] if c not in twins]
     rows = [("topic", "schema", "rate_hz", "samples", "duration_s", "gaps(t/nan)", "MB", "units")]
-    for c in data["channels"]:
-        gaps = f"{c['time_gaps'] if c['time_gaps'] is not None else '-'}/{c['nan_samples'] if c['nan_samples'] is not None else '-'}"
-        dur = "-" if c["duration_s"] is None else f"{c['duration_s']:.3f}"
-        mb = f"{c['stored_bytes'] / 1e6:.2f}"
-        rows.append(
-            (
-                c["topic"] + (" [out of date]" if c["out_of_date"] else ""),
-                c["schema"],
-                _fmt_rate(c["rate_hz"]),
-                str(c["samples"]),
-                dur,
-                gaps,
-                mb,
-                _fmt_units(c["units"]),
-            )
-        )
+    rows += [_channel_row(c) for c in shown]
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     for r in rows:
         click.echo("  " + "  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)).rstrip())
+    if twins and not verbose:
+        mb = sum(c["stored_bytes"] for c in twins) / 1e6
+        click.echo(f"  + {len(twins)} viewer twins under /derived/viewer/ ({mb:.2f} MB; -v lists them)")
     from imulog.archive.timeline import TrialAxis
 
-    click.echo(f"time axis (MCAP log time): {TrialAxis(data['metadata']).describe()}")
+    _echo_wrapped(f"time axis (MCAP log time): {TrialAxis(data['metadata']).describe()}", width)
     click.echo("metadata:")
     for name, values in data["metadata"].items():
-        shown = ", ".join(f"{k}={v}" if isinstance(v, str) else f"{k}={json.dumps(v)}" for k, v in values.items())
-        if len(shown) > 200:
-            shown = shown[:197] + "..."
-        click.echo(f"  {name}: {shown}")
+        text = ", ".join(f"{k}={v}" if isinstance(v, str) else f"{k}={json.dumps(v)}" for k, v in values.items())
+        click.echo(_cut(f"  {name}: {text}", width))
     _echo_periods(data["metadata"].get("imulog.metrics") or {})
     _echo_alignment(data["metadata"].get("imulog.alignment") or {})
     _echo_phase_quality(data["metadata"].get("imulog.timing") or {})
@@ -213,13 +268,15 @@ def info(file: str, as_json: bool) -> None:
             digest = (a["sha256"] or "-")[:16]
             click.echo(f"  {a['name']}  {a['media_type']}  {a['bytes']} bytes  sha256 {digest}")
     if data["runs"]:
-        click.echo("derived runs:")
+        click.echo("derived runs:" + ("" if verbose else " (-v: their parameters)"))
         for n, r in data["runs"].items():
-            outputs = ", ".join(r.get("outputs", {})) or "-"
-            click.echo(
-                f"  #{n} {r.get('step', '')}: {r.get('algorithm', '')} params={json.dumps(r.get('params', {}))} "
-                f"-> {outputs} ({r.get('time', '')})"
-            )
+            outputs = list(r.get("outputs", {}))
+            out = ", ".join(outputs) or "-"
+            if not verbose and len(outputs) > 3:
+                out = f"{', '.join(outputs[:3])} +{len(outputs) - 3} more"
+            params = f" params={json.dumps(r.get('params', {}))}" if verbose else ""
+            line = f"  #{n} {r.get('step', '')}: {r.get('algorithm', '')}{params} -> {out} ({r.get('time', '')})"
+            click.echo(_cut(line, None if verbose else 160))
     if data["out_of_date"] or data["out_of_date_steps"]:
         click.echo("out of date (inputs changed since they were computed):")
         by_step: dict[str, list[str]] = {}
@@ -321,7 +378,7 @@ def doctor(file: str, verbose: bool, as_json: bool, original: str | None = None)
 @click.option("--name", "names", multiple=True, metavar="IMU=COLUMN", help="sto: column of an IMU (wrist=hand_r_imu)")
 @click.option("--rate", type=float, default=None, help="sto: rate of the uniform grid in Hz (default: the IMU's)")
 @click.option("--no-imu", is_flag=True, help="c3d: markers, analogs and events only")
-@click.option("--overwrite", is_flag=True, help="bids: replace an existing folder")
+@overwrite_option("replace OUTPUT (a file, or the bids folder) if it exists; refused otherwise")
 @click.option("--json", "as_json", is_flag=True, help="print what was written as one JSON document")
 def export(
     file: str,
@@ -349,7 +406,8 @@ def export(
     c3d          markers (mm), IMU and analog channels as analogs, phases as events
 
     Every export puts all channels on one clock; --clock reference needs an alignment
-    (imulog process align). Files are written to a temporary name and renamed.
+    (imulog process align). Files are written to a temporary name and renamed; an existing
+    OUTPUT is refused unless --overwrite. c3d needs the c3d extra: pip install 'imulog[c3d]'.
 
     \b
     Examples:
@@ -371,6 +429,7 @@ def export(
         )
     if target in ("parquet", "csv") and not topic:
         raise click.UsageError(f"--to {target} exports one channel: give --topic (imulog info {file} lists them)")
+    refuse_existing(output, overwrite=overwrite)
     rename = {}
     for item in names:
         key, sep, value = item.partition("=")
@@ -392,7 +451,8 @@ def export(
             elif target == "bids":
                 from imulog.export.bids import export_bids
 
-                result = export_bids(trial, output, clock=clock or "device", imu=imu, overwrite=overwrite)
+                # an empty folder is free to use (refuse_existing above)
+                result = export_bids(trial, output, clock=clock or "device", imu=imu, overwrite=True)
             else:
                 from imulog.export.c3d import export_c3d
 
@@ -413,7 +473,7 @@ def export(
 @click.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="FIXED.mcap to write")
-@click.option("--overwrite", is_flag=True, help="replace OUTPUT if it exists")
+@overwrite_option("replace OUTPUT if it exists; refused otherwise")
 @click.option("--json", "as_json", is_flag=True, help="print the report as one JSON document")
 def salvage(file: str, output: str, overwrite: bool, as_json: bool) -> None:
     """Recover every intact channel, attachment and metadata record of a damaged or truncated MCAP file.
@@ -432,6 +492,8 @@ def salvage(file: str, output: str, overwrite: bool, as_json: bool) -> None:
     from imulog.archive.salvage import lines
     from imulog.archive.salvage import salvage as run_salvage
 
+    if not (Path(output).exists() and Path(output).resolve() == Path(file).resolve()):  # salvage names that one
+        refuse_existing(output, overwrite=overwrite)
     try:
         report = run_salvage(file, output, overwrite=overwrite)
     except ArchiveError as exc:

@@ -8,6 +8,18 @@ from pathlib import Path
 import click
 
 from imulog.batch.registry import STEP_ORDER, STEPS
+from imulog.commands.outputs import exists_message, occupied, overwrite_option, refuse_existing
+
+
+def _is_catalog(path: Path) -> bool:
+    """True when ``path`` is a Parquet catalog imulog wrote (one row per trial, keyed by ``path``)."""
+    try:
+        import pyarrow.parquet as pq
+
+        names = set(pq.ParquetFile(path).schema_arrow.names)
+    except Exception:  # noqa: BLE001 - not Parquet, unreadable: not a catalog
+        return False
+    return {"path", "raw_sha256", "subject"} <= names
 
 
 def _parse_sets(values: tuple[str, ...]) -> dict[str, dict[str, str]]:
@@ -154,6 +166,7 @@ def batch(
 )
 @click.option("--full", is_flag=True, help="Re-read every trial (default: only new or changed files).")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
+@overwrite_option("Replace OUTPUT when it is not a catalog (an existing catalog is updated, never replaced).")
 @click.option("--json", "as_json", is_flag=True, help="Print the counts (rows, read, unchanged, removed...) as JSON.")
 @click.option(
     "--epochs",
@@ -168,6 +181,7 @@ def catalog(
     output: Path,
     full: bool,
     quiet: bool,
+    overwrite: bool = False,
     as_json: bool = False,
     epochs_out: Path | None = None,
     epoch_s: float = 60.0,
@@ -176,7 +190,8 @@ def catalog(
 
     INPUTS are folders (every *.mcap below), files or quoted glob patterns. The catalog is updated
     incrementally: files whose size and mtime did not change keep their row without being opened.
-    Read it with pandas, pyarrow or DuckDB; nested content is in the *_json columns.
+    Read it with pandas, pyarrow or DuckDB; nested content is in the *_json columns. An existing
+    OUTPUT that is not a catalog is refused unless --overwrite.
 
     \b
     Examples:
@@ -189,6 +204,10 @@ def catalog(
 
     if not discover(inputs):
         raise click.ClickException(f"no trial files (*.mcap) in {' '.join(inputs)}")
+    if occupied(output) and not overwrite and not _is_catalog(output):  # updating a catalog is what this is for
+        raise click.ClickException(exists_message(output) + " (it is not an imulog catalog)")
+    if epochs_out is not None:
+        refuse_existing(epochs_out, overwrite=overwrite)
     try:
         stats = build_catalog(list(inputs), output, progress=not quiet and not as_json, full=full)
     except OSError as exc:
@@ -224,16 +243,19 @@ def catalog(
     help="Folder for the tables (Markdown, CSV) and plots (PNG).",
 )
 @click.option("--no-plots", is_flag=True, help="Tables only (no matplotlib needed).")
-def report(catalog_file: Path, output: Path, no_plots: bool) -> None:
+@overwrite_option("Write into OUTPUT even when it holds files (replacing the report's own).")
+def report(catalog_file: Path, output: Path, no_plots: bool, overwrite: bool = False) -> None:
     """Accuracy table (method x axis, mean ± std, cm and % ROM), per-subject error plots, phase timings.
 
     \b
     Examples:
       imulog report catalog.parquet -o report/
       imulog report catalog.parquet -o report/ --no-plots
+      imulog report catalog.parquet -o report/ --overwrite   # again, into the same folder
     """
     from imulog.batch.report import write_report
 
+    refuse_existing(output, overwrite=overwrite)  # an empty or missing folder is fine
     try:
         files = write_report(catalog_file, output, plots=not no_plots)
     except (RuntimeError, OSError, ValueError, KeyError) as exc:

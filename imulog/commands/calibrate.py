@@ -8,6 +8,8 @@ from pathlib import Path
 
 import click
 
+from imulog.commands.outputs import overwrite_option, refuse_existing
+
 
 @click.command("calibrate")
 @click.argument("recordings", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False, path_type=Path))
@@ -27,7 +29,7 @@ import click
 )
 @click.option("--min-static-s", type=float, default=2.0, show_default=True, help="Shortest static period, s.")
 @click.option("--gravity", type=float, default=9.80665, show_default=True, help="Local gravity, m/s^2.")
-@click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
+@overwrite_option()
 def calibrate(
     recordings: tuple[Path, ...],
     output: Path,
@@ -60,8 +62,7 @@ def calibrate(
     from imulog.steps.calibrate import calibration_from_arrays
     from imulog.steps.common import error_line, pick_imu
 
-    if output.exists() and not overwrite:
-        raise click.ClickException(f"{output} exists (use --overwrite)")
+    refuse_existing(output, overwrite=overwrite)
     seg = SegmentParams(static_threshold_rad_s=static_threshold, min_static_s=min_static_s)
     result = Calibration()
     notes = []

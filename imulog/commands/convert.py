@@ -24,6 +24,7 @@ from converters.registry import (
     list_formats,
     recording_key,
 )
+from imulog.commands.outputs import overwrite_option, refuse_existing
 from imulog.model import Recording
 
 TRIAL_RECORD = "imulog.trial"
@@ -144,9 +145,13 @@ def _convert_group(files: list[Path], fmt: str | None, options: ConvertOptions) 
 def _write(out: Path, rec: Recording, *, attach: str, overwrite: bool) -> Path:
     """``write_trial`` (atomic: nothing is left behind on failure); archive errors become ConversionError."""
     from imulog.archive import ArchiveError, write_trial
+    from imulog.archive.errors import ArchiveExistsError
+    from imulog.commands.outputs import exists_message
 
     try:
         return write_trial(out, rec, attach_sources=attach, overwrite=overwrite)
+    except ArchiveExistsError:
+        raise ConversionError(None, exists_message(out)) from None
     except ArchiveError as e:
         raise ConversionError(None, str(e)) from None
 
@@ -353,7 +358,7 @@ def _units(pairs: tuple[str, ...]) -> dict[str, str]:
     metavar="QUANTITY=UNIT",
     help="Unit of a quantity whose header is missing or wrong (repeatable): acc=g, gyr=deg/s, mag=uT, markers=mm.",
 )
-@click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
+@overwrite_option("Replace an existing output trial (without it, an existing output is refused).")
 @click.option("--list-formats", "list_formats_flag", is_flag=True, help="List the known input formats and exit.")
 @click.option(
     "--json", "as_json", is_flag=True, help="Print what was written (paths, channels, warnings) as one JSON document."
@@ -432,6 +437,7 @@ def convert(
         return
     if output.suffix.lower() != ".mcap":
         raise click.UsageError(f"output {output} should end in .mcap")
+    refuse_existing(output, overwrite=overwrite)  # before any reading
     if len(inputs) == 1 and _streams(inputs[0], fmt, options):
         _convert_streaming(
             inputs[0], output, fmt, options, meta, attach=attach_mode, overwrite=overwrite, as_json=as_json

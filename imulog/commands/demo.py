@@ -14,6 +14,8 @@ from pathlib import Path
 
 import click
 
+from imulog.commands.outputs import exists_message, occupied, overwrite_option
+
 DEFAULT_OUTPUT = Path("demo-output")
 STEM = "r2g_s00_t00"
 
@@ -70,7 +72,7 @@ def has_display() -> bool:
     type=click.Path(file_okay=False, path_type=Path),
     default=DEFAULT_OUTPUT,
     show_default=True,
-    help="Folder for everything the demo writes (replaced if it holds an earlier demo).",
+    help="Folder for everything the demo writes (created; an existing one is refused unless --overwrite).",
 )
 @click.option("--repetitions", type=click.IntRange(1, 25), default=25, show_default=True, help="Drinking tasks.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Simulation seed.")
@@ -81,7 +83,10 @@ def has_display() -> bool:
     default=None,
     help="Open the native Rerun viewer (default: only when a display is available).",
 )
-def demo(out_dir: Path, repetitions: int, seed: int, no_view: bool, open_viewer: bool | None) -> None:
+@overwrite_option("Replace an earlier demo in OUTPUT (a folder that does not hold one is never removed).")
+def demo(
+    out_dir: Path, repetitions: int, seed: int, no_view: bool, open_viewer: bool | None, overwrite: bool = False
+) -> None:
     """Simulate, convert, process and view one trial, printing each command it runs.
 
     A new user's first command: it simulates a seated subject drinking from a bottle (the R2G
@@ -93,13 +98,17 @@ def demo(out_dir: Path, repetitions: int, seed: int, no_view: bool, open_viewer:
     Examples:
       imulog demo                       # everything under ./demo-output
       imulog demo -o /tmp/demo --repetitions 5 --seed 3
+      imulog demo --overwrite           # run it again into ./demo-output
       rerun demo-output/trial.rrd       # look at the result
     """
     from imulog.cli import cli
 
-    if out_dir.exists():
-        if not (out_dir / "raw").is_dir() and any(out_dir.iterdir()):
+    if occupied(out_dir):
+        if not overwrite:
+            raise click.ClickException(exists_message(out_dir))
+        if not (out_dir / "raw").is_dir():  # --overwrite removes an earlier demo, never another folder
             raise click.ClickException(f"{out_dir}: exists and does not hold an earlier demo; choose another -o")
+    if out_dir.exists():
         shutil.rmtree(out_dir)
     out_dir.mkdir(parents=True)
     spawn = has_display() if open_viewer is None else open_viewer

@@ -24,8 +24,13 @@ def _threshold(value: str) -> float | str:
     return fraction
 
 
+MAX_ROWS = 40  # phases printed one per line up to this; beyond, the first and last ones and a count
+TAIL_ROWS = 10
+
+
 def format_summary(timing: dict) -> str:
-    """Human-readable timing table (one line per phase) plus per-label mean durations."""
+    """Human-readable timing table (one line per phase, the first and last ones beyond :data:`MAX_ROWS`) plus
+    per-label mean durations (over every phase)."""
     if timing.get("protocol", "r2g") == "r2g":
         found = (
             f"{timing['n_movements']} movements -> {timing['n_phases']} phases in {timing['n_repetitions']} "
@@ -41,21 +46,30 @@ def format_summary(timing: dict) -> str:
         return "\n".join([head, *format_long_summary(timing)])
     lines = [head, f"{'rep':>4} {'phase':<14} {'start s':>9} {'end s':>9} {'dur s':>7} {'peak rad/s':>10}"]
     by_label: dict[str, list[float]] = {}
-    for row in timing["phases"]:
-        lines.append(
-            f"{row['repetition']:>4} {row['label']:<14} {row['start_s']:>9.3f} {row['end_s']:>9.3f} "
-            f"{row['duration_s']:>7.3f} {row['peak_angular_velocity_rad_s']:>10.3f}"
-            + ("  forced" if row.get("forced") else "")
-        )
+    rows = timing["phases"]
+    head_rows = rows if len(rows) <= MAX_ROWS else rows[: MAX_ROWS - TAIL_ROWS]
+    for k, row in enumerate(rows):
         by_label.setdefault(row["label"], []).append(row["duration_s"])
+        if k < len(head_rows) or k >= len(rows) - TAIL_ROWS:
+            if len(rows) > MAX_ROWS and k == len(rows) - TAIL_ROWS:
+                lines.append(
+                    f"   ... {len(rows) - len(head_rows) - TAIL_ROWS} more phases (all of them: imulog export TRIAL "
+                    f"--topic /derived/phases/{timing['imu'].rsplit('/', 1)[-1]} -o phases.csv)"
+                )
+            lines.append(
+                f"{row['repetition']:>4} {row['label']:<14} {row['start_s']:>9.3f} {row['end_s']:>9.3f} "
+                f"{row['duration_s']:>7.3f} {row['peak_angular_velocity_rad_s']:>10.3f}"
+                + ("  forced" if row.get("forced") else "")
+            )
     for label, durations in by_label.items():
         mean = sum(durations) / len(durations)
         lines.append(f"mean {label:<14} duration {mean:.3f} s over {len(durations)}")
-    low = timing.get("low_confidence_repetitions")
+    low = timing.get("low_confidence_repetitions") or []
     if timing.get("repetition_quality"):  # what event correction did (issue 19)
+        shown = ", ".join(map(str, low[:20])) + (f" +{len(low) - 20} more" if len(low) > 20 else "")
         lines.append(
             f"event correction: {timing.get('n_forced_phases', 0)} forced phases, confidence mean "
-            f"{timing.get('mean_confidence')}, below 0.5 in repetitions {', '.join(map(str, low)) or '-'}"
+            f"{timing.get('mean_confidence')}, below 0.5 in repetitions {shown or '-'}"
         )
     return "\n".join(lines)
 

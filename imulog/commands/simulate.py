@@ -9,6 +9,8 @@ from typing import Any
 
 import click
 
+from imulog.commands.outputs import overwrite_option, refuse_existing
+
 
 def parse_value(text: str) -> Any:
     """``3`` -> 3, ``0.01`` -> 0.01, ``true`` -> True, ``[0.1, 0.5]`` -> list; anything else stays a string."""
@@ -27,6 +29,14 @@ def _bad_settings(error: Exception, settings: tuple[str, ...]) -> str:
 
 PROTOCOL_CHOICES = ("r2g", "slide", "nhpt", "adl", "arm", "home")
 ARM_ONLY = ("--seconds", "--trunk-imu")
+
+
+def _planned(out_dir: Path, protocol: str, subjects: int, trials: int) -> list[Path]:
+    """The existing files a run would replace: every ``<protocol>_sSS_tTT*`` of the planned trials in ``out_dir``."""
+    if not out_dir.is_dir():
+        return []
+    stems = {f"{protocol}_s{s:02d}_t{t:02d}" for s in range(subjects) for t in range(trials)}
+    return sorted(p for p in out_dir.iterdir() if any(p.name.startswith((st + "_", st + ".")) for st in stems))
 
 
 def _overrides(pairs: tuple[str, ...]) -> dict[str, Any]:
@@ -77,6 +87,7 @@ def _overrides(pairs: tuple[str, ...]) -> dict[str, Any]:
     type=click.FloatRange(min=1 / 1440),
     help="home only: recording length in days (default 1; a week at 100 Hz is a 770 MB .cwa, written chunk by chunk).",
 )
+@overwrite_option("Replace trial files of the same names in OUTPUT (without it, they are refused).")
 def simulate(
     protocol: str,
     out_dir: Path,
@@ -90,6 +101,7 @@ def simulate(
     seconds: float | None,
     trunk_imu: bool,
     days: float | None,
+    overwrite: bool = False,
 ) -> None:
     """Simulate PROTOCOL trials with known ground truth.
 
@@ -131,6 +143,8 @@ def simulate(
       imulog process orientation trials/arm_s00_t00.mcap --imu forearm
       imulog process kinematics trials/arm_s00_t00.mcap
     """
+    if not list_parameters:
+        refuse_existing(_planned(out_dir, protocol, subjects, trials), overwrite=overwrite)
     if protocol == "home":
         _simulate_home(out_dir, subjects, trials, seed, settings, list_parameters, days)
         return

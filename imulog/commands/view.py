@@ -9,6 +9,8 @@ from pathlib import Path
 
 import click
 
+from imulog.commands.outputs import overwrite_option, refuse_existing
+
 
 def has_display() -> bool:
     """True when a native viewer window can open (X11/Wayland, macOS, Windows)."""
@@ -81,6 +83,7 @@ def _save_paths(files: list[Path], save: Path | None, overlay: bool, n_groups: i
     metavar="S",
     help="With --web: stop serving after S seconds (default: until Ctrl-C).",
 )
+@overwrite_option("Replace existing .rrd file(s) (without it, an existing .rrd is refused).")
 @click.option("--json", "as_json", is_flag=True, help="Print what was made (saved files, web URL, warnings) as JSON.")
 def view(
     files: tuple[Path, ...],
@@ -96,6 +99,7 @@ def view(
     end_s: float | None,
     full_resolution: bool | None,
     serve_seconds: float | None,
+    overwrite: bool = False,
     as_json: bool = False,
 ) -> None:
     """Show trials in Rerun: IMU, Vicon and every derived channel on one reference-clock timeline.
@@ -108,7 +112,7 @@ def view(
     \b
     Examples:
       imulog view trial.mcap                      # native viewer, or trial.rrd when there is no display
-      imulog view trial.mcap --save trial.rrd     # then: rerun trial.rrd
+      imulog view trial.mcap --save trial.rrd     # then: rerun trial.rrd (--overwrite to replace it)
       imulog view trial.mcap --web --port 9090    # open the printed URL in a browser (works offline)
       imulog view trial.mcap --save t.rrd --spawn # keep a file and look at it now
       imulog view a.mcap b.mcap --save out/       # one recording per trial: out/a.rrd, out/b.rrd
@@ -175,6 +179,7 @@ def view(
         paths = _save_paths(list(files), save, overlay, n_groups)
         if len(paths) < n_groups:  # --sample besides files
             paths.append((paths[0].parent if paths else Path(".")) / "sample.rrd")
+        refuse_existing(paths, overwrite=overwrite)
         if save is None:
             click.echo(
                 "no display found and no --save/--web given: saving "
@@ -199,12 +204,11 @@ def view(
     warnings = []
     for logged in result.logged:
         for trial in logged:
-            if trial.unaligned_imus:
-                markers = any(e.topic.startswith("/markers/") for e in trial.entities)
-                hint = "run `imulog process align` first" if markers else "no markers to align them with"
+            markers = any(e.topic.startswith("/markers/") for e in trial.entities)
+            if trial.unaligned_imus and markers:  # IMU-only trials have nothing to align with: no warning
                 warnings.append(
                     f"{trial.label}: no imulog.alignment for IMU(s) {', '.join(trial.unaligned_imus)}; "
-                    f"shown on their device clock ({hint})"
+                    "shown on their device clock (run `imulog process align` first)"
                 )
                 click.echo(f"warning: {warnings[-1]}", err=True)
     if as_json:

@@ -231,9 +231,7 @@ def _imufusion(gyr, acc, mag, rate_hz, params, static):
     try:
         import imufusion
     except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise RuntimeError(
-            "the imufusion backend needs the optional package 'imufusion' (pip install imufusion)"
-        ) from exc
+        raise RuntimeError("the imufusion backend needs imufusion: pip install 'imulog[fusion]'") from exc
     ahrs = imufusion.Ahrs()
     # imufusion 1.3 ignores AhrsSettings(...) keyword arguments (convention and gain stayed at NWU, 0.5):
     # set the attributes instead

@@ -131,7 +131,7 @@ def build_blueprint(trials: LoggedTrial | Sequence[LoggedTrial]) -> rrb.Blueprin
     signals = _stack([omega, acc, orientation])
 
     hidden = large_error_topics_of(trials)
-    spatial_paths = _paths(trials, "markers", "pose", "path", "cursor")
+    spatial_paths = _paths(trials, "markers", "pose", "imu_frame", "path", "cursor")
     spatial = None
     if spatial_paths:
         contents = [f"{t.prefix}/world/**" for t in trials]
@@ -142,7 +142,10 @@ def build_blueprint(trials: LoggedTrial | Sequence[LoggedTrial]) -> rrb.Blueprin
             if e.topic in hidden
         }
         spatial = rrb.Spatial3DView(
-            origin="/", contents=contents, name="3D: markers, cluster, trajectories (m)", overrides=overrides or None
+            origin="/",
+            contents=contents,
+            name="3D: markers, cluster, IMU frames, trajectories (m)",
+            overrides=overrides or None,
         )
         legend = _paths(trials, "legend")
         if legend:

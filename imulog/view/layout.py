@@ -8,6 +8,7 @@ z up, metres):
 ========================================  ===================================================================
 ``/world/markers/{name}``                  marker positions (Points3D, one row per sample, labelled markers)
 ``/world/derived/vicon/cluster_pose``      cluster frame (Transform3D + axes, one row per sample)
+``/world/imu_frames/{orientation topic}``  each orientation as a moving frame beside the cluster (Transform3D)
 ``/world/paths/{source}``                  whole trajectory as a line strip (static)
 ``/world/cursors/{source}``                current-sample cursor (Points3D, one row per sample)
 ========================================  ===================================================================
@@ -129,6 +130,11 @@ def marker_entity(name: str, prefix: str = "") -> str:
 def pose_entity(topic: str, prefix: str = "") -> str:
     """Entity of a rigid pose (Transform3D) in the 3D view, e.g. ``/world/derived/vicon/cluster_pose``."""
     return join(prefix, f"/world{topic}")
+
+
+def imu_frame_entity(topic: str, prefix: str = "") -> str:
+    """Entity of an orientation drawn as a moving frame, e.g. ``/world/imu_frames/derived/orientation/wrist``."""
+    return join(prefix, f"/world/imu_frames{topic}")
 
 
 def path_source(topic: str) -> str:

@@ -21,6 +21,8 @@ from imulog.view import layout as L
 from imulog.view import rates
 from imulog.view.anchor import anchor_repetitions, position_error_cm
 from imulog.view.clock import ClockMap, device_imu_of
+from imulog.view.frames import AXIS_LENGTH_M as FRAME_AXIS_M
+from imulog.view.frames import imu_frame, is_orientation
 from imulog.view.report import evaluation_markdown, info_markdown, markdown_table, metrics_markdown
 from imulog.view.source import logging_rank
 
@@ -412,7 +414,7 @@ class _Logger:
         names = [f"{short} {c} ({L.pretty_unit(u)})" for c, u in zip(s.columns, s.units, strict=True)]
         if topic.endswith(L.INTERVAL_SHARE_SUFFIX) and s.units == ["%"]:
             role = "interval_share"
-        elif topic.startswith(L.ORIENTATION_PREFIX):
+        elif is_orientation(topic, s.columns) or topic.startswith(L.ORIENTATION_PREFIX):
             role = "orientation"
         elif topic.startswith(L.ACC_GLOBAL_PREFIX):
             role = "acc_global"
@@ -429,6 +431,8 @@ class _Logger:
         colors = None if s.values.shape[1] <= len(L.AXIS_COLORS) else [L.color(i) for i in range(s.values.shape[1])]
         self.scalars(L.signal_entity(topic, self.prefix), role, topic, t_ref, s.values, names, colors)
 
+        if is_orientation(topic, s.columns) and len(s):
+            self.orientation_frame(s, t_ref)
         if topic == L.VICON_ANGULAR_VELOCITY_TOPIC and s.values.shape[1] >= 3:
             self.scalars(
                 L.norm_entity(topic, self.prefix),
@@ -443,6 +447,21 @@ class _Logger:
             self.imu_trajectory(s, t_ref)
         if topic.startswith(L.STATIC_PREFIXES) and len(s):
             self.mask_states(topic, t_ref, s.values[:, 0])
+
+    def orientation_frame(self, s: SignalStream, t_ref: np.ndarray) -> None:
+        """The orientation as a moving frame (x red, y green, z blue) in 3D, beside the Vicon cluster."""
+        name = s.topic.rstrip("/").rsplit("/", 1)[-1]
+        derived = s.topic.startswith(L.ORIENTATION_PREFIX)
+        rotation = (self.clocks.alignments.get(name) or {}).get("rotation_global_to_world") if derived else None
+        index = sum(1 for e in self.trial.entities if e.role == "imu_frame")
+        valid, pos, quat_xyzw = imu_frame(t_ref, s.values, rotation=rotation, cluster=self.reference, index=index)
+        if not valid.any():
+            return
+        path = L.imu_frame_entity(s.topic, self.prefix)
+        self.rec.log(path, rr.TransformAxes3D(FRAME_AXIS_M), static=True)
+        cols = rr.Transform3D.columns(translation=pos, quaternion=quat_xyzw)
+        self.rec.send_columns(path, indexes=[self._time(t_ref[valid])], columns=cols)
+        self._record(path, "imu_frame", s.topic, t_ref[valid])
 
     def mask_states(self, topic: str, t_ref: np.ndarray, mask: np.ndarray) -> None:
         """A 0/1 static mask as state changes ``static``/``moving`` at its transitions (NaN = gap)."""

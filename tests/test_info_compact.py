@@ -1,0 +1,61 @@
+"""imulog info: compact by default (-v for every run's parameters and the twins); empty channels show that."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+from click.testing import CliRunner
+
+from imulog.archive import TrialReader, write_trial
+from imulog.cli import cli
+from imulog.model import ImuStream, Recording, SignalStream
+
+
+def run(*args) -> str:
+    result = CliRunner().invoke(cli, [str(a) for a in args])
+    assert result.exit_code == 0, result.output
+    return result.output
+
+
+def test_compact_by_default_everything_with_v(processed_r2g):
+    short, full = run("info", processed_r2g), run("info", processed_r2g, "-v")
+    with TrialReader(processed_r2g) as trial:
+        twins = [c.topic for c in trial.channels if c.metadata.get("twin_of")]
+        n_runs = len(trial.runs())
+    assert twins and all(t not in short for t in twins) and all(t in full for t in twins)
+    assert f"+ {len(twins)} viewer twins under /derived/viewer/" in short
+    assert "params=" not in short and full.count("params=") == n_runs
+    assert max(len(line) for line in short.splitlines()) <= 160  # no 1-2 kB line per run
+    assert len(short) < 0.5 * len(full)
+    assert "#1 orientation:wrist" in short and "/derived/phases/wrist" in short
+
+
+def test_a_channel_without_samples_shows_no_rate_duration_or_gaps(tmp_path):
+    t = np.arange(100, dtype=np.int64) * 10_000_000
+    imu = ImuStream("wrist", t, acc=np.zeros((100, 3)), gyr=np.zeros((100, 3)))
+    empty = SignalStream("/derived/x", np.zeros(0, np.int64), ["a"], ["1"], np.zeros((0, 1)))
+    path = write_trial(tmp_path / "e.mcap", Recording(imus=[imu], signals=[empty]))
+    row = next(line for line in run("info", path).splitlines() if "/derived/x" in line)
+    assert row.split()[:7] == ["/derived/x", "[empty]", "imulog.SignalBlock", "-", "0", "-", "-"]
+
+
+def test_salvaged_trial_channel_lost_at_the_cut_is_empty(processed_r2g, tmp_path):
+    """Half a processed trial, salvaged: the channels whose chunks were past the cut hold nothing, and info says
+    so (it used to print their recorded rate, samples and duration)."""
+    cut = tmp_path / "cut.mcap"
+    data = processed_r2g.read_bytes()
+    cut.write_bytes(data[: len(data) // 2])
+    shutil.copy(cut, tmp_path / "keep.mcap")
+    run("salvage", cut, "-o", tmp_path / "fixed.mcap")
+    text = run("info", tmp_path / "fixed.mcap")
+    doc = json.loads(run("info", tmp_path / "fixed.mcap", "--json"))
+    empty = [c for c in doc["channels"] if c["messages"] == 0]
+    assert empty, "the cut should leave a channel without messages"
+    for c in empty:
+        assert c["samples"] == 0 and c["rate_hz"] is None and c["duration_s"] is None
+        row = next(line for line in text.splitlines() if line.strip().startswith(c["topic"] + " "))
+        assert "[empty]" in row and " 0 " in row
+    kept = [c for c in doc["channels"] if c["messages"] and c["topic"] == "/imu/wrist"]
+    assert kept and kept[0]["samples"] > 0
