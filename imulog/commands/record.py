@@ -1,0 +1,174 @@
+"""``imulog record`` and ``imulog replay``: live capture from Lab Streaming Layer, and a trial sent as LSL outlets."""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+from pathlib import Path
+
+import click
+
+from imulog.commands.convert import load_meta_file, parse_meta
+
+CONTEXT = {"help_option_names": ["-h", "--help"]}
+
+
+def _stop_on_signals(stop: threading.Event) -> None:
+    """Ctrl-C (SIGINT) and SIGTERM set ``stop``: the loop finishes the file and prints its summary."""
+
+    def handler(signum, frame) -> None:  # noqa: ARG001
+        if stop.is_set():  # a second Ctrl-C: the user insists
+            raise KeyboardInterrupt
+        stop.set()
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
+
+
+@click.command(context_settings=CONTEXT)
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), help="Trial file.")
+@click.option(
+    "--stream",
+    "filters",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="Record the streams with this name=, type= or source_id= (repeatable; default: every visible stream).",
+)
+@click.option(
+    "--wait",
+    "wait_s",
+    type=click.FloatRange(min=0.0),
+    default=5.0,
+    show_default=True,
+    help="Seconds to wait for the streams (without --stream: the whole wait, then every stream found).",
+)
+@click.option("--duration", "duration_s", type=click.FloatRange(min=0.0, min_open=True), help="Stop after this many s.")
+@click.option("--meta", multiple=True, metavar="KEY=VALUE", help="Trial metadata, as for imulog convert (repeatable).")
+@click.option("--meta-file", type=click.Path(exists=True, dir_okay=False, path_type=Path), help="JSON/TOML metadata.")
+@click.option("--list", "list_only", is_flag=True, help="List the streams found and exit (nothing is recorded).")
+@click.option("--overwrite", is_flag=True, help="Replace an existing OUTPUT (or the .part of a killed recording).")
+def record(
+    output: Path,
+    filters: tuple[str, ...],
+    wait_s: float,
+    duration_s: float | None,
+    meta: tuple[str, ...],
+    meta_file: Path | None,
+    list_only: bool,
+    overwrite: bool,
+) -> None:
+    """Record Lab Streaming Layer streams into a trial, crash-safe, until Ctrl-C / SIGTERM (or --duration).
+
+    Each stream is written as it arrives into the channels imulog convert makes for the same stream in
+    an XDF file: IMU streams (channel labels acc_x.., gyro_x.. with units) as /imu/<stream>, MoCap
+    streams as /markers/<stream>, other numeric streams as /signals/<stream>, string streams as
+    /events/<stream>; the streams' XML headers, the clock offsets (time_correction) applied and the raw
+    LSL stamps (/signals/<stream>_lsl_clock) are kept. Until it stops the file is OUTPUT.part, with every
+    chunk flushed at least every second: after a kill, `imulog salvage OUTPUT.part -o OUTPUT` recovers all
+    but the last second. Then `imulog process ...` as for a converted trial.
+
+    \b
+    Examples:
+      imulog record -o trial.mcap                                  # every stream, until Ctrl-C
+      imulog record -o trial.mcap --stream type=IMU --stream name=Mocap --meta subject=S01
+      imulog record -o trial.mcap --duration 60 --meta-file trial_meta.json
+      imulog record -o x.mcap --list                               # what is on the network
+      imulog replay trial.mcap                                     # (another terminal) a trial as outlets
+    """
+    from imulog.archive.errors import ArchiveError
+    from imulog.live.lsl import LslError, StreamFilter, describe, resolve
+
+    try:
+        wanted = [StreamFilter.parse(f) for f in filters]
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="--stream") from None
+    metadata = load_meta_file(meta_file) if meta_file else {}
+    for name, values in parse_meta(meta).items():
+        metadata[name] = {**metadata.get(name, {}), **values}
+    try:
+        infos = resolve(wanted, wait_s)
+    except LslError as exc:
+        raise click.ClickException(str(exc)) from None
+    click.echo(f"found {len(infos)} stream(s):", err=True)
+    for info in infos:
+        click.echo(f"  {describe(info)}", err=True)
+    if list_only:
+        return
+    stop = threading.Event()
+    _stop_on_signals(stop)
+    try:
+        _record(output, infos, metadata, overwrite, stop, duration_s)
+    except (ArchiveError, LslError) as exc:
+        raise click.ClickException(str(exc)) from None
+
+
+def _record(output, infos, metadata, overwrite, stop, duration_s) -> None:
+    from imulog.live.recorder import Recorder, open_streams, summary_lines
+    from imulog.live.writer import LiveTrialWriter
+
+    streams = open_streams(infos)
+    metadata = {
+        **metadata,
+        "imulog.conversion": {"format": "lsl", "recorder": "imulog record", "streams": [s.name for s in streams]},
+    }
+    began = time.monotonic()
+    with LiveTrialWriter(output, metadata=metadata, overwrite=overwrite, expected_duration_s=duration_s) as writer:
+        click.echo(f"recording into {writer.part} (Ctrl-C to stop)", err=True)
+        recorder = Recorder(streams, writer, stop=stop, duration_s=duration_s)
+        recorder.run()
+        recorder.finish()
+    for line in summary_lines(streams, time.monotonic() - began):
+        click.echo(line)
+    click.echo(f"wrote {writer.path}")
+
+
+@click.command(context_settings=CONTEXT)
+@click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--speed", type=click.FloatRange(min=0.01), default=1.0, show_default=True, help="Playback speed.")
+@click.option("--start", "start_s", type=click.FloatRange(min=0.0), default=0.0, help="Skip this many s first.")
+@click.option("--duration", "duration_s", type=click.FloatRange(min=0.0, min_open=True), help="Send this many s.")
+@click.option(
+    "--wait-consumers",
+    "wait_s",
+    type=click.FloatRange(min=0.0),
+    default=0.0,
+    show_default=True,
+    help="Wait up to this many s until a recorder has connected to every outlet before sending.",
+)
+@click.option("--source-id", default="imulog-replay", show_default=True, help="Prefix of the outlets' source_id.")
+def replay(trial: Path, speed: float, start_s: float, duration_s: float | None, wait_s: float, source_id: str) -> None:
+    """Publish TRIAL's raw channels as LSL outlets in real time (a recording demonstrated without hardware).
+
+    One outlet per channel, named after it (/imu/wrist -> wrist, type IMU; /markers/vicon -> vicon,
+    type MoCap; signals; events as a string stream), with channel labels and units that imulog record
+    and LabRecorder + imulog convert map back to the same channels. Ctrl-C stops.
+
+    \b
+    Examples:
+      imulog replay trial.mcap                              # real time, until the trial ends
+      imulog replay trial.mcap --speed 2 --duration 30      # the first 30 s of the trial, twice as fast
+      imulog replay trial.mcap --wait-consumers 30          # start once a recorder is connected
+    """
+    from imulog.archive.errors import ArchiveError
+    from imulog.live.lsl import LslError
+    from imulog.live.replay import load_plans
+    from imulog.live.replay import replay as run_replay
+
+    try:
+        plans = load_plans(trial, start_s, duration_s)
+    except (ArchiveError, LslError) as exc:
+        raise click.ClickException(str(exc)) from None
+    stop = threading.Event()
+    _stop_on_signals(stop)
+
+    def ready(outlets) -> None:
+        for p in plans:
+            rate = f"{p.srate:g} Hz" if p.srate else "irregular"
+            click.echo(f"outlet {p.name} (type {p.type}, {len(p.labels)} channels, {rate}, {len(p.log_ns)} samples)")
+
+    try:
+        sent = run_replay(plans, speed=speed, source_id=source_id, wait_consumers_s=wait_s, stop=stop, on_ready=ready)
+    except LslError as exc:
+        raise click.ClickException(str(exc)) from None
+    click.echo("sent " + ", ".join(f"{name} {n}" for name, n in sent.items()))
