@@ -86,6 +86,13 @@ def record(
     metadata = load_meta_file(meta_file) if meta_file else {}
     for name, values in parse_meta(meta).items():
         metadata[name] = {**metadata.get(name, {}), **values}
+    if not list_only and not overwrite:  # refused before waiting for streams (the writer checks again, locked)
+        from imulog.live.writer import part_path
+
+        for existing in (output, part_path(output)):
+            if existing.exists():
+                hint = f"; recover it with: imulog salvage {existing} -o OUT.mcap" if existing != output else ""
+                raise click.ClickException(f"{existing} exists (use --overwrite){hint}")
     try:
         infos = resolve(wanted, wait_s)
     except LslError as exc:
