@@ -157,6 +157,19 @@ def replay(trial: Path, speed: float, start_s: float, duration_s: float | None, 
       imulog replay trial.mcap --speed 2 --duration 30      # the first 30 s of the trial, twice as fast
       imulog replay trial.mcap --wait-consumers 30          # start once a recorder is connected
     """
+    stream_trial(trial, speed=speed, start_s=start_s, duration_s=duration_s, wait_s=wait_s, source_id=source_id)
+
+
+def stream_trial(
+    trial: Path,
+    *,
+    speed: float = 1.0,
+    start_s: float = 0.0,
+    duration_s: float | None = None,
+    wait_s: float = 0.0,
+    source_id: str = "imulog-replay",
+) -> None:
+    """``imulog replay`` (and ``imulog simulate --lsl``): TRIAL's raw channels as outlets until sent or Ctrl-C."""
     from imulog.archive.errors import ArchiveError
     from imulog.live.lsl import LslError
     from imulog.live.replay import load_plans
