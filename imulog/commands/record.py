@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import signal
 import threading
-import time
 from pathlib import Path
 
 import click
@@ -119,13 +118,12 @@ def _record(output, infos, metadata, overwrite, stop, duration_s) -> None:
         **metadata,
         "imulog.conversion": {"format": "lsl", "recorder": "imulog record", "streams": [s.name for s in streams]},
     }
-    began = time.monotonic()
     with LiveTrialWriter(output, metadata=metadata, overwrite=overwrite, expected_duration_s=duration_s) as writer:
         click.echo(f"recording into {writer.part} (Ctrl-C to stop)", err=True)
         recorder = Recorder(streams, writer, stop=stop, duration_s=duration_s)
         recorder.run()
         recorder.finish()
-    for line in summary_lines(streams, time.monotonic() - began):
+    for line in summary_lines(streams):
         click.echo(line)
     click.echo(f"wrote {writer.path}")
 

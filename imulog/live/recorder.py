@@ -265,9 +265,12 @@ class Recorder:
             s.inlet.close_stream()
 
 
-def summary_lines(streams: list[LiveStream], seconds: float | None) -> list[str]:
-    """The summary printed when a recording stops."""
-    lines = [f"{len(streams)} stream(s)" + (f", {seconds:.1f} s" if seconds is not None else "")]
+def summary_lines(streams: list[LiveStream]) -> list[str]:
+    """The summary printed when a recording stops: streams, samples, gaps, dropped and rejected samples."""
+    firsts = [s.first_s for s in streams if s.first_s is not None]
+    lasts = [s.last_s for s in streams if s.last_s is not None]
+    span = f", {max(lasts) - min(firsts):.1f} s recorded" if firsts else ", nothing recorded"
+    lines = [f"{len(streams)} stream(s){span}"]
     for s in streams:
         lines.append(
             f"  {s.name}: {s.samples} samples, {s.gaps} gap(s), {s.dropped} dropped, {s.rejected} rejected"
