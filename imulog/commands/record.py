@@ -47,6 +47,10 @@ def _stop_on_signals(stop: threading.Event) -> None:
 @click.option("--meta-file", type=click.Path(exists=True, dir_okay=False, path_type=Path), help="JSON/TOML metadata.")
 @click.option("--list", "list_only", is_flag=True, help="List the streams found and exit (nothing is recorded).")
 @click.option("--overwrite", is_flag=True, help="Replace an existing OUTPUT (or the .part of a killed recording).")
+@click.option("--view", is_flag=True, help="Show the streams live in Rerun (native viewer), with VQF orientation.")
+@click.option("--web", is_flag=True, help="With --view: serve the viewer in the browser, on localhost.")
+@click.option("--port", "web_port", type=click.IntRange(0, 65535), default=9090, show_default=True, help="--web port.")
+@click.option("--grpc-port", type=click.IntRange(0, 65535), default=9876, show_default=True, help="Rerun gRPC port.")
 def record(
     output: Path,
     filters: tuple[str, ...],
@@ -56,6 +60,10 @@ def record(
     meta_file: Path | None,
     list_only: bool,
     overwrite: bool,
+    view: bool,
+    web: bool,
+    web_port: int,
+    grpc_port: int,
 ) -> None:
     """Record Lab Streaming Layer streams into a trial, crash-safe, until Ctrl-C / SIGTERM (or --duration).
 
@@ -72,6 +80,7 @@ def record(
       imulog record -o trial.mcap                                  # every stream, until Ctrl-C
       imulog record -o trial.mcap --stream type=IMU --stream name=Mocap --meta subject=S01
       imulog record -o trial.mcap --duration 60 --meta-file trial_meta.json
+      imulog record -o trial.mcap --view --web                     # and watch it in the browser
       imulog record -o x.mcap --list                               # what is on the network
       imulog replay trial.mcap                                     # (another terminal) a trial as outlets
     """
@@ -101,15 +110,28 @@ def record(
         click.echo(f"  {describe(info)}", err=True)
     if list_only:
         return
+    if web and not view:
+        raise click.UsageError("--web goes with --view")
     stop = threading.Event()
     _stop_on_signals(stop)
+    live = None
     try:
-        _record(output, infos, metadata, overwrite, stop, duration_s)
-    except (ArchiveError, LslError) as exc:
+        if view:
+            from imulog.live.view import LiveView
+
+            live = LiveView(web=web, web_port=web_port, grpc_port=grpc_port, spawn_port=grpc_port)
+            if live.url:
+                click.echo(f"live view: {live.url}", err=True)
+        _record(output, infos, metadata, overwrite, stop, duration_s, live)
+    except (ArchiveError, LslError, OSError, RuntimeError) as exc:
         raise click.ClickException(str(exc)) from None
+    finally:
+        if live is not None:
+            click.echo(f"live view: {live.rows} rows sent", err=True)
+            live.close()
 
 
-def _record(output, infos, metadata, overwrite, stop, duration_s) -> None:
+def _record(output, infos, metadata, overwrite, stop, duration_s, live=None) -> None:
     from imulog.live.recorder import Recorder, open_streams, summary_lines
     from imulog.live.writer import LiveTrialWriter
 
@@ -120,7 +142,8 @@ def _record(output, infos, metadata, overwrite, stop, duration_s) -> None:
     }
     with LiveTrialWriter(output, metadata=metadata, overwrite=overwrite, expected_duration_s=duration_s) as writer:
         click.echo(f"recording into {writer.part} (Ctrl-C to stop)", err=True)
-        recorder = Recorder(streams, writer, stop=stop, duration_s=duration_s)
+        show = (lambda piece: live.show(piece, writer.metadata)) if live is not None else None
+        recorder = Recorder(streams, writer, stop=stop, duration_s=duration_s, on_piece=show)
         recorder.run()
         recorder.finish()
     for line in summary_lines(streams):

@@ -1,0 +1,99 @@
+"""``imulog record --view``: the streams in Rerun while they are recorded, in the layout of ``imulog view``.
+
+Every piece the recorder writes is sent to one Rerun recording with :func:`imulog.view.streams.log_streams` (the
+columnar logging ``imulog view`` uses, so the entities and the blueprint are the same), plus each IMU's orientation
+from VQF's online filter (``/derived/orientation/<imu>``, updated sample by sample with the filter's state kept
+between pieces: the orientation ``imulog process orientation`` computes offline, by the same algorithm but
+without its backward pass). The view is not written to the archive: the trial is the same with or without it.
+``web`` serves the viewer on localhost (:func:`imulog.view.server.start_web_server`); otherwise a native viewer
+is spawned.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from imulog.model import ImuStream, Recording, SignalStream
+
+
+class OnlineOrientation:
+    """VQF, one filter per IMU, fed piece by piece (its state carries over): sensor-to-global quaternions."""
+
+    def __init__(self) -> None:
+        self._filters: dict[str, Any] = {}
+
+    def update(self, imu: ImuStream, rate_hz: float) -> SignalStream | None:
+        if imu.gyr is None or imu.acc is None or not len(imu.t_ns):
+            return None
+        from vqf import VQF
+
+        f = self._filters.get(imu.name)
+        if f is None:
+            if len(imu.t_ns) > 1 and rate_hz <= 0:
+                rate_hz = 1e9 / float(np.median(np.diff(imu.t_ns)))
+            f = self._filters[imu.name] = VQF(1.0 / (rate_hz if rate_hz > 0 else 100.0))
+        gyr, acc = np.ascontiguousarray(imu.gyr), np.ascontiguousarray(imu.acc)
+        out = f.updateBatch(gyr, acc)
+        return SignalStream(
+            f"/derived/orientation/{imu.name}", imu.t_ns, ["qw", "qx", "qy", "qz"], ["1"] * 4, out["quat6D"]
+        )
+
+
+class LiveView:
+    """A Rerun recording fed with every recorded piece; ``url`` is the web viewer's address (``web``)."""
+
+    def __init__(self, *, web: bool, web_port: int = 9090, grpc_port: int = 9876, spawn_port: int = 9876) -> None:
+        import rerun as rr
+
+        from imulog.view.server import grpc_uri, start_web_server
+        from imulog.view.session import new_recording
+
+        self.rec = new_recording("imulog record (live)")
+        self.server = None
+        if web:
+            self.server = start_web_server(web_port=web_port, grpc_port=grpc_port)
+            self.rec.set_sinks(rr.GrpcSink(self.server.grpc_uri))
+        else:
+            rr.spawn(port=spawn_port, connect=False, memory_limit="50%")
+            self.rec.set_sinks(rr.GrpcSink(grpc_uri(spawn_port)))
+        self.orientation = OnlineOrientation()
+        self.rates: dict[str, float] = {}
+        self.metadata: dict[str, dict[str, Any]] = {}
+        from imulog.view.streams import LoggedTrial
+
+        self.logged = LoggedTrial(label="live", prefix="")  # every entity sent so far, for the blueprint
+        self.rows = 0  # temporal rows sent (all entities)
+
+    @property
+    def url(self) -> str | None:
+        return self.server.url if self.server is not None else None
+
+    def show(self, piece: Recording, metadata: dict[str, dict[str, Any]]) -> None:
+        """Send one piece (its channels and the online orientation); the blueprint when new entities appear."""
+        from imulog.view.blueprint import build_blueprint
+        from imulog.view.streams import log_streams
+
+        streams = [s for s in piece.streams() if not s.topic.endswith("_lsl_clock")]
+        for imu in piece.imus:
+            rate = float((metadata.get(f"imulog.device.{imu.name}") or {}).get("nominal_srate_hz") or 0.0)
+            q = self.orientation.update(imu, rate)
+            if q is not None:
+                streams.append(q)
+        if not streams:
+            return
+        logged = log_streams(streams, metadata, recording=self.rec, label="live")
+        self.rows += sum(e.rows for e in logged.entities)
+        known = set(self.logged.paths())
+        new = [e for e in logged.entities if e.path not in known]
+        if new:
+            self.logged.entities.extend(new)
+            self.rec.send_blueprint(build_blueprint(self.logged), make_active=True, make_default=True)
+        self.rec.flush()
+
+    def close(self) -> None:
+        self.rec.flush()
+        self.rec.disconnect()  # nothing is sent after the server stops
+        if self.server is not None:
+            self.server.stop()

@@ -1,0 +1,73 @@
+"""``imulog record --view --web``, headless: a Rerun client connected to the recorder's gRPC proxy (the one the
+browser viewer uses) receives the IMU, the markers and the online VQF orientation while the trial is recorded, and
+the archive is the same as without the view."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pylsl")
+
+import test_record as base  # noqa: E402
+
+from imulog.archive import TrialReader  # noqa: E402
+from imulog.view.rrd import read_scalars, summarize  # noqa: E402
+from imulog.view.server import free_port, rerun_executable  # noqa: E402
+
+trial, lsl_env = base.trial, base.lsl_env  # the fixtures
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(sys.platform != "linux", reason="Rerun's server binary, Linux CI")
+def test_record_view_web_streams_to_the_viewer(trial, lsl_env, tmp_path):
+    out, got = tmp_path / "viewed.mcap", tmp_path / "received.rrd"
+    web, grpc = free_port(), free_port()
+    rec = base.imulog(
+        lsl_env, "record", "-o", out, "--stream", "name=wrist", "--stream", "name=vicon", "--duration", "6",
+        "--view", "--web", "--port", web, "--grpc-port", grpc,
+    )  # fmt: skip
+    play = base.imulog(lsl_env, "replay", trial["mcap"], "--duration", "8", "--wait-consumers", "30")
+    client = None
+    try:
+        lines = base.wait_for_line(rec, "recording into")
+        assert any(f"http://127.0.0.1:{web}" in line for line in lines), lines
+        client = subprocess.Popen(
+            [str(rerun_executable()), f"rerun+http://127.0.0.1:{grpc}/proxy", "--save", str(got)]
+            + ["--bind", "127.0.0.1", "--port", str(free_port())],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            env={**lsl_env, "RERUN_ANALYTICS": "0"},
+        )
+        time.sleep(3.0)  # mid-recording: the client has been receiving
+        assert rec.poll() is None and got.exists() and got.stat().st_size > 0, (
+            "no data reached the viewer while recording"
+        )
+        rec_out, rec_err = rec.communicate(timeout=60)
+        assert rec.returncode == 0, rec_err
+        client.wait(timeout=30)  # the stream ends with the recording: the client saves and exits
+    finally:
+        for p in (rec, play, client):
+            if p is not None and p.poll() is None:
+                p.kill()
+                p.wait()
+    entities = summarize(got)
+    acc, orientation = entities["/imu/wrist/acc"], entities["/derived/orientation/wrist"]
+    markers = entities["/world/markers/vicon"]
+    with TrialReader(out) as t:
+        n_imu = t.channel("/imu/wrist").sample_count
+        n_mk = t.channel("/markers/vicon").sample_count
+        topics = t.topics()
+    # every recorded sample reached the viewer (plotted as recorded: one row per sample)
+    assert acc.component_rows["Scalars:scalars"] == n_imu
+    assert markers.component_rows["Points3D:positions"] == n_mk
+    assert orientation.component_rows["Scalars:scalars"] == n_imu
+    t_q, q = read_scalars(got, "/derived/orientation/wrist")
+    np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-6)  # unit quaternions from VQF
+    # the view is not written to the archive
+    assert not [x for x in topics if x.startswith("/derived/orientation")]
+    assert {"/imu/wrist", "/markers/vicon"} <= set(topics)
