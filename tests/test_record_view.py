@@ -66,8 +66,21 @@ def test_record_view_web_streams_to_the_viewer(trial, lsl_env, tmp_path):
     assert acc.component_rows["Scalars:scalars"] == n_imu
     assert markers.component_rows["Points3D:positions"] == n_mk
     assert orientation.component_rows["Scalars:scalars"] == n_imu
-    t_q, q = read_scalars(got, "/derived/orientation/wrist")
+    _, q = read_scalars(got, "/derived/orientation/wrist")
     np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-6)  # unit quaternions from VQF
     # the view is not written to the archive
     assert not [x for x in topics if x.startswith("/derived/orientation")]
     assert {"/imu/wrist", "/markers/vicon"} <= set(topics)
+    # the live orientation is VQF's: its inclination agrees with `process orientation` (VQF offline) on the trial
+    base.run_cli("process", "orientation", out)
+    with TrialReader(out) as t:
+        q_off = t.read("/derived/orientation/wrist").values
+    assert len(q_off) == len(q)
+    angle = np.degrees(np.arccos(np.clip(np.sum(_up(q) * _up(q_off), axis=1), -1.0, 1.0)))
+    assert np.max(angle) < 2.0, np.max(angle)  # measured: 0.13 deg median, 0.41 deg max
+
+
+def _up(q: np.ndarray) -> np.ndarray:
+    """The global z axis in the sensor frame, from sensor-to-global quaternions (w, x, y, z)."""
+    w, x, y, z = q.T
+    return np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1)
