@@ -56,16 +56,18 @@ def trial(tmp_path_factory) -> dict[str, Path]:
 
 
 @pytest.fixture
-def lsl_env(tmp_path, monkeypatch) -> dict[str, str]:
-    """Environment of an LSL session of its own, on this machine only."""
-    cfg = tmp_path / "lsl_api.cfg"
+def lsl_env(tmp_path_factory, monkeypatch) -> dict[str, str]:
+    """Environment of an LSL session of this test process's own, on this machine only.
+
+    One session id per process: liblsl reads its configuration once, so outlets made in the test process itself
+    must share the session of the commands it starts."""
+    cfg = tmp_path_factory.getbasetemp() / "lsl_api.cfg"
     cfg.write_text(
         "[ports]\nIPv6 = disable\n[multicast]\nResolveScope = machine\n"
-        f"[lab]\nSessionID = imulog-test-{os.getpid()}-{tmp_path.name}\n[log]\nlevel = -3\n"
+        f"[lab]\nSessionID = imulog-test-{os.getpid()}\n[log]\nlevel = -3\n"
     )
     monkeypatch.setenv("LSLAPICFG", str(cfg))
-    env = dict(os.environ, LSLAPICFG=str(cfg), PYTHONPATH=str(ROOT), NO_COLOR="1")
-    return env
+    return dict(os.environ, LSLAPICFG=str(cfg), PYTHONPATH=str(ROOT), NO_COLOR="1")
 
 
 def imulog(env: dict[str, str], *args: str, **kwargs) -> subprocess.Popen:
@@ -199,3 +201,60 @@ def test_no_matching_stream_names_what_is_visible(lsl_env):
     bad = imulog(lsl_env, "record", "-o", "never.mcap", "--stream", "colour=red")
     _, err = bad.communicate(timeout=30)
     assert bad.returncode == 2 and "name=, type=, source_id=VALUE" in err
+
+
+def test_every_stream_events_and_signals_sigterm(lsl_env, tmp_path):
+    """Without --stream every visible stream is recorded: an EMG stream as a signal, string markers as events;
+    SIGTERM stops cleanly with the summary."""
+    import threading
+
+    import pylsl
+
+    emg_info = pylsl.StreamInfo("EMG", "EMG", 2, 200, "double64", "emg-test")
+    chans = emg_info.desc().append_child("channels")
+    for label in ("biceps", "triceps"):
+        ch = chans.append_child("channel")
+        ch.append_child_value("label", label)
+        ch.append_child_value("unit", "mV")
+    emg = pylsl.StreamOutlet(emg_info)
+    cues = pylsl.StreamOutlet(pylsl.StreamInfo("Cues", "Markers", 1, 0, "string", "cues-test"))
+    stop = threading.Event()
+    sent = {"emg": 0, "cues": []}
+
+    def push() -> None:
+        while not stop.is_set() and sent["emg"] < 2000:
+            emg.push_chunk([[0.001 * (sent["emg"] + j), -1.0] for j in range(10)])
+            sent["emg"] += 10
+            if sent["emg"] % 200 == 0:
+                label = f"cue {len(sent['cues'])}"
+                cues.push_sample([label])
+                sent["cues"].append(label)
+            time.sleep(0.05)
+
+    out = tmp_path / "all.mcap"
+    rec = imulog(lsl_env, "record", "-o", out, "--wait", "2")
+    pusher = threading.Thread(target=push)
+    try:
+        head = "".join(wait_for_line(rec, "recording into"))
+        pusher.start()
+        time.sleep(4.0)
+        rec.send_signal(signal.SIGTERM)
+        rec_out, rec_err = rec.communicate(timeout=30)
+    finally:
+        stop.set()
+        if pusher.is_alive():
+            pusher.join()
+        if rec.poll() is None:
+            rec.kill()
+    assert rec.returncode == 0, rec_err
+    assert "found 2 stream(s)" in head and "Cues (type Markers, 1 x string, irregular" in head
+    assert "2 stream(s)," in rec_out and "emg:" in rec_out and "wrote" in rec_out
+    with TrialReader(out) as t:
+        signals = t.read("/signals/emg")
+        events = t.read("/events/cues")
+        assert t.metadata["imulog.device.emg"]["stream_type"] == "EMG"
+    assert signals.columns == ["biceps", "triceps"] and signals.units == ["mV", "mV"]
+    assert len(signals.t_ns) >= 200
+    np.testing.assert_array_equal(signals.values[:, 1], -1.0)
+    np.testing.assert_allclose(np.diff(signals.values[:, 0]), 0.001, atol=1e-9)  # consecutive, none lost
+    assert events.labels == sent["cues"][: len(events.labels)] and len(events.labels) >= 2
