@@ -4,6 +4,7 @@ the archive is the same as without the view."""
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 import time
@@ -49,6 +50,8 @@ def test_record_view_web_streams_to_the_viewer(trial, lsl_env, tmp_path):
         )
         rec_out, rec_err = rec.communicate(timeout=60)
         assert rec.returncode == 0, rec_err
+        latency = re.search(r"sample-to-viewer latency median (\d+) ms, max (\d+) ms", rec_err)
+        assert latency and int(latency.group(2)) < 500, rec_err  # the issue: sample-to-screen under 0.5 s
         client.wait(timeout=30)  # the stream ends with the recording: the client saves and exits
     finally:
         for p in (rec, play, client):

@@ -127,7 +127,7 @@ def record(
         raise click.ClickException(str(exc)) from None
     finally:
         if live is not None:
-            click.echo(f"live view: {live.rows} rows sent", err=True)
+            click.echo(live.summary(), err=True)
             live.close()
 
 

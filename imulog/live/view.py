@@ -65,6 +65,8 @@ class LiveView:
 
         self.logged = LoggedTrial(label="live", prefix="")  # every entity sent so far, for the blueprint
         self.rows = 0  # temporal rows sent (all entities)
+        self.latencies_s: list[float] = []  # per piece after the first: its oldest sample's age when sent, s
+        self._pieces = 0
 
     @property
     def url(self) -> str | None:
@@ -91,6 +93,22 @@ class LiveView:
             self.logged.entities.extend(new)
             self.rec.send_blueprint(build_blueprint(self.logged), make_active=True, make_default=True)
         self.rec.flush()
+        self._pieces += 1
+        oldest = min((int(s.t_ns[0]) for s in streams if len(getattr(s, "t_ns", ()))), default=None)
+        if oldest is not None and self._pieces > 1:  # the first piece waited for every stream (START_WAIT_S)
+            from imulog.live.lsl import pylsl
+
+            self.latencies_s.append(pylsl().local_clock() - oldest / 1e9)
+
+    def summary(self) -> str:
+        """One line: rows sent, and how old the oldest sample of a piece was when it was sent (sample-to-viewer)."""
+        if not self.latencies_s:
+            return f"live view: {self.rows} rows sent"
+        lat = np.asarray(self.latencies_s)
+        return (
+            f"live view: {self.rows} rows sent; sample-to-viewer latency median {np.median(lat) * 1e3:.0f} ms, "
+            f"max {lat.max() * 1e3:.0f} ms"
+        )
 
     def close(self) -> None:
         self.rec.flush()
