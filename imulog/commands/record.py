@@ -127,8 +127,11 @@ def record(
         raise click.ClickException(str(exc)) from None
     finally:
         if live is not None:
+            try:
+                live.close()
+            except RuntimeError as exc:  # the trial is written all the same
+                click.echo(f"warning: {exc}", err=True)
             click.echo(live.summary(), err=True)
-            live.close()
 
 
 def _record(output, infos, metadata, overwrite, stop, duration_s, live=None) -> None:
@@ -142,7 +145,9 @@ def _record(output, infos, metadata, overwrite, stop, duration_s, live=None) -> 
     }
     with LiveTrialWriter(output, metadata=metadata, overwrite=overwrite, expected_duration_s=duration_s) as writer:
         click.echo(f"recording into {writer.part} (Ctrl-C to stop)", err=True)
-        show = (lambda piece: live.show(piece, writer.metadata)) if live is not None else None
+        show = (lambda piece: live.submit(piece, writer.metadata)) if live is not None else None
+        if live is not None:
+            live.start()
         recorder = Recorder(streams, writer, stop=stop, duration_s=duration_s, on_piece=show)
         recorder.run()
         recorder.finish()
