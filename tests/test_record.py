@@ -258,3 +258,26 @@ def test_every_stream_events_and_signals_sigterm(lsl_env, tmp_path):
     np.testing.assert_array_equal(signals.values[:, 1], -1.0)
     np.testing.assert_allclose(np.diff(signals.values[:, 0]), 0.001, atol=1e-9)  # consecutive, none lost
     assert events.labels == sent["cues"][: len(events.labels)] and len(events.labels) >= 2
+
+
+def test_simulate_lsl_streams_the_trial_live(lsl_env, tmp_path):
+    """``imulog simulate ... --lsl`` writes the trial files, then streams the trial: record receives it."""
+    sim = imulog(lsl_env, "simulate", "r2g", "-o", tmp_path / "sim", *SHORT_TRIAL, "--lsl")
+    out = tmp_path / "sim_live.mcap"
+    try:
+        rec = imulog(lsl_env, "record", "-o", out, "--stream", "name=wrist", "--stream", "name=vicon", "--wait", "30",
+                     "--duration", "2")  # fmt: skip
+        rec_out, rec_err = rec.communicate(timeout=60)
+        assert rec.returncode == 0, rec_err
+    finally:
+        sim.send_signal(signal.SIGINT)  # Ctrl-C ends the stream
+        sim_out, _ = sim.communicate(timeout=30)
+    assert sim.returncode == 0 and "streaming r2g_s00_t00 live" in sim_out and "sent wrist" in sim_out
+    assert (tmp_path / "sim" / "r2g_s00_t00_meta.json").exists()
+    with TrialReader(out) as t:
+        # 2 s from the first sample of either stream (the trial's IMU and Vicon do not start at the same moment)
+        assert 100 <= t.channel("/imu/wrist").sample_count <= 231
+        assert 100 <= t.channel("/markers/vicon").sample_count <= 201
+    bad = imulog(lsl_env, "simulate", "home", "-o", tmp_path / "home", "--lsl")
+    _, err = bad.communicate(timeout=60)
+    assert bad.returncode == 2 and "--lsl streams a lab trial" in err
