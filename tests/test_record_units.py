@@ -111,9 +111,17 @@ def test_flushed_part_file_salvages_at_every_moment(tmp_path):
     assert ": ok" in runner.invoke(cli, ["doctor", str(out)]).output
 
 
-def test_an_error_leaves_no_file(tmp_path):
+def test_an_error_keeps_the_part_file_only_with_samples(tmp_path):
     out = tmp_path / "trial.mcap"
+    with pytest.raises(RuntimeError), LiveTrialWriter(out):
+        raise RuntimeError("no stream answered")
+    assert not out.exists() and not part_path(out).exists()  # nothing was recorded: nothing is left
     with pytest.raises(RuntimeError), LiveTrialWriter(out) as w:
         w.write(_piece(0))
+        w.write(_piece(1))  # written, not flushed yet: the error flushes it
         raise RuntimeError("device unplugged")
-    assert not out.exists() and not part_path(out).exists()
+    assert not out.exists() and w.kept_part and part_path(out).exists()
+    fixed = tmp_path / "fixed.mcap"
+    assert CliRunner().invoke(cli, ["salvage", str(part_path(out)), "-o", str(fixed)]).exit_code == 0
+    with TrialReader(fixed) as t:
+        assert len(t.read("/imu/wrist").t_ns) == 100

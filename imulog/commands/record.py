@@ -26,7 +26,7 @@ def _stop_on_signals(stop: threading.Event) -> None:
 
 
 @click.command(context_settings=CONTEXT)
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), help="Trial file.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), help="Trial file (required).")
 @click.option(
     "--stream",
     "filters",
@@ -81,12 +81,14 @@ def record(
       imulog record -o trial.mcap --stream type=IMU --stream name=Mocap --meta subject=S01
       imulog record -o trial.mcap --duration 60 --meta-file trial_meta.json
       imulog record -o trial.mcap --view --web                     # and watch it in the browser
-      imulog record -o x.mcap --list                               # what is on the network
+      imulog record --list                                         # what is on the network
       imulog replay trial.mcap                                     # (another terminal) a trial as outlets
     """
     from imulog.archive.errors import ArchiveError
     from imulog.live.lsl import LslError, StreamFilter, describe, resolve
 
+    if output is None and not list_only:
+        raise click.UsageError("Missing option '-o' / '--output' (only --list needs none).")
     try:
         wanted = [StreamFilter.parse(f) for f in filters]
     except ValueError as exc:
@@ -123,8 +125,14 @@ def record(
             if live.url:
                 click.echo(f"live view: {live.url}", err=True)
         _record(output, infos, metadata, overwrite, stop, duration_s, live)
-    except (ArchiveError, LslError, OSError, RuntimeError) as exc:
-        raise click.ClickException(str(exc)) from None
+    except (ArchiveError, LslError, OSError, RuntimeError, KeyboardInterrupt) as exc:
+        from imulog.live.writer import part_path
+
+        part = part_path(output)
+        message = "interrupted" if isinstance(exc, KeyboardInterrupt) else str(exc)
+        if part.exists():
+            message += f"; the recording so far is in {part}: imulog salvage {part} -o {output}"
+        raise click.ClickException(message) from None
     finally:
         if live is not None:
             try:

@@ -36,7 +36,8 @@ class LiveTrialWriter(StreamingTrialWriter):
     """``with LiveTrialWriter(path, metadata=...) as w: w.write(piece); w.flush()``.
 
     Refuses an existing ``path`` (or a ``.part`` left by a killed recording) unless ``overwrite``. On a clean
-    exit the ``.part`` file is finished, fsynced and renamed to ``path``; on an exception it is removed.
+    exit the ``.part`` file is finished, fsynced and renamed to ``path``; on an exception it is flushed and kept
+    for ``imulog salvage`` when it holds samples (``kept_part``), else removed.
     """
 
     def __init__(self, path: str | os.PathLike[str], **kwargs: Any) -> None:
@@ -44,6 +45,7 @@ class LiveTrialWriter(StreamingTrialWriter):
         self.part = part_path(self.path)
         self._file: Any = None
         self._written: set[str] = set()
+        self.kept_part = False  # an error stopped the recording: what it had is in ``part``
 
     def __enter__(self) -> LiveTrialWriter:
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -62,20 +64,32 @@ class LiveTrialWriter(StreamingTrialWriter):
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is not None:
+            self._abandon()
+            self._unwind(None)
+            return
         try:
-            if exc_type is None:
-                self._finish()
-                self._sync()
-                self._file.close()
-                os.replace(self.part, self.path)
-                fsync_dir(self.path.parent)
+            self._finish()
+            self._sync()
+            self._file.close()
+            os.replace(self.part, self.path)
+            fsync_dir(self.path.parent)
         except BaseException:
-            self._discard()
+            self._abandon()
             self._unwind(None)
             raise
-        if exc_type is not None:
-            self._discard()
         self._unwind(None)
+
+    def _abandon(self) -> None:
+        """On an error: a recording that has samples keeps its ``.part`` (flushed, for salvage); else it goes."""
+        if self.started:
+            with contextlib.suppress(Exception):
+                self.flush()
+            with contextlib.suppress(OSError):
+                self._file.close()
+            self.kept_part = True
+        else:
+            self._discard()
 
     def _discard(self) -> None:
         with contextlib.suppress(OSError):
