@@ -20,6 +20,8 @@ TOP_LEVEL_COMMANDS: dict[str, tuple[str, str]] = {
     "doctor": ("imulog.commands.archive:doctor", "Check a trial's integrity: CRCs, summary, decoding, raw hash."),
     "export": ("imulog.commands.archive:export", "Export to Parquet/CSV tables, OpenSense .sto, BIDS-motion or C3D."),
     "salvage": ("imulog.commands.archive:salvage", "Recover the intact channels of a damaged or truncated trial."),
+    "record": ("imulog.commands.record:record", "Record Lab Streaming Layer streams into a crash-safe trial."),
+    "replay": ("imulog.commands.record:replay", "Publish a trial's raw channels as live LSL outlets."),
     "simulate": ("imulog.commands.simulate:simulate", "Simulate trials with ground truth in raw export formats."),
     "calibrate": ("imulog.commands.calibrate:calibrate", "Estimate an IMU calibration from static recordings."),
     "evaluate": ("imulog.commands.trajectory:evaluate", "Compare IMU trajectories with the optical reference."),

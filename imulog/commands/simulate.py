@@ -88,6 +88,11 @@ def _overrides(pairs: tuple[str, ...]) -> dict[str, Any]:
     help="home only: recording length in days (default 1; a week at 100 Hz is a 770 MB .cwa, written chunk by chunk).",
 )
 @overwrite_option("Replace trial files of the same names in OUTPUT (without it, they are refused).")
+@click.option(
+    "--lsl",
+    is_flag=True,
+    help="Then stream the first trial live as Lab Streaming Layer outlets, in real time (imulog record records it).",
+)
 def simulate(
     protocol: str,
     out_dir: Path,
@@ -102,6 +107,7 @@ def simulate(
     trunk_imu: bool,
     days: float | None,
     overwrite: bool = False,
+    lsl: bool = False,
 ) -> None:
     """Simulate PROTOCOL trials with known ground truth.
 
@@ -142,18 +148,28 @@ def simulate(
       imulog process orientation trials/arm_s00_t00.mcap --imu upper_arm
       imulog process orientation trials/arm_s00_t00.mcap --imu forearm
       imulog process kinematics trials/arm_s00_t00.mcap
+
+    With --lsl the first trial is then streamed live as LSL outlets (docs/record.md):
+
+    \b
+      imulog simulate r2g -o sim/ --repetitions 5 --lsl     # terminal 1
+      imulog record -o live.mcap --meta-file sim/r2g_s00_t00_meta.json   # terminal 2
     """
     if not list_parameters:
         refuse_existing(_planned(out_dir, protocol, subjects, trials), overwrite=overwrite)
+    if lsl and protocol == "home":
+        raise click.UsageError("--lsl streams a lab trial (IMU + Vicon); not the home protocol")
     if protocol == "home":
         _simulate_home(out_dir, subjects, trials, seed, settings, list_parameters, days)
         return
     if days is not None:
         raise click.UsageError("--days applies to the home protocol only")
     if protocol == "arm":
-        _simulate_arm(
+        written = _simulate_arm(
             out_dir, subjects, trials, seed, repetitions, noise_free, settings, list_parameters, seconds, trunk_imu
         )
+        if lsl and written:
+            _stream_live(written[0], out_dir)
         return
     for flag, value in zip(ARM_ONLY, (seconds, trunk_imu), strict=True):
         if value:
@@ -189,6 +205,26 @@ def simulate(
             + ", ".join(p.name for k, p in paths.items() if k != "truth_npz")
         )
     click.echo(f"wrote {len(written)} trial(s) to {out_dir}")
+    if lsl and written:
+        _stream_live(written[0], out_dir)
+
+
+def _stream_live(paths: dict[str, Path], out_dir: Path) -> None:
+    """``--lsl``: the trial converted (IMU and Vicon files) into OUT_DIR/<stem>_lsl.mcap, then replayed live."""
+    from converters import ConversionError
+    from converters.registry import convert_files
+    from imulog.archive import write_trial
+    from imulog.commands.record import stream_trial
+
+    stem = paths["imu"].name[: -len("_imu.csv")]
+    trial = out_dir / f"{stem}_lsl.mcap"
+    try:
+        rec = convert_files([paths["imu"], paths["vicon"]])
+        write_trial(trial, rec, attach_sources=False, overwrite=True)
+    except ConversionError as e:
+        raise click.ClickException(str(e)) from None
+    click.echo(f"streaming {stem} live (Ctrl-C stops)")
+    stream_trial(trial)
 
 
 def _simulate_arm(
@@ -202,14 +238,14 @@ def _simulate_arm(
     list_parameters: bool,
     seconds: float | None,
     trunk_imu: bool,
-) -> None:
+) -> list[dict[str, Path]]:
     """``imulog simulate arm``: the two-segment arm of :mod:`imulog.simulate.arm` as raw exports."""
     from imulog.simulate.arm import arm_parameter_names, simulate_arm_to_folder
 
     if list_parameters:
         for group, names in arm_parameter_names().items():
             click.echo(f"{group}: {', '.join(names)}")
-        return
+        return []
     if repetitions is not None:
         raise click.UsageError("--repetitions does not apply to arm (use --seconds)")
     overrides = _overrides(settings)
@@ -234,6 +270,7 @@ def _simulate_arm(
             + ", ".join(p.name for k, p in paths.items() if k != "truth_npz")
         )
     click.echo(f"wrote {len(written)} trial(s) to {out_dir}")
+    return written
 
 
 def _simulate_home(

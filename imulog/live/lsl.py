@@ -1,0 +1,103 @@
+"""pylsl, imported on demand, and resolving the streams to record."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+FILTER_KEYS = ("name", "type", "source_id")
+
+
+class LslError(RuntimeError):
+    """LSL is missing or a stream cannot be resolved / opened (one line for the command)."""
+
+
+def pylsl() -> Any:
+    """The pylsl module (its wheels bundle liblsl); LslError naming the extra when it is not installed."""
+    try:
+        import pylsl as module
+    except (ImportError, RuntimeError) as exc:  # pylsl raises RuntimeError when liblsl cannot be loaded
+        raise LslError(f"live capture needs pylsl with liblsl: pip install 'imulog[lsl]' ({exc})") from None
+    return module
+
+
+@dataclass(frozen=True)
+class StreamFilter:
+    """``name=EMG``, ``type=IMU`` or ``source_id=xio-1234``: which stream(s) to record."""
+
+    key: str
+    value: str
+
+    @classmethod
+    def parse(cls, text: str) -> StreamFilter:
+        key, sep, value = text.partition("=")
+        key = key.strip()
+        if not sep or key not in FILTER_KEYS or not value.strip():
+            raise ValueError(f"{text!r} is not {'=, '.join(FILTER_KEYS)}=VALUE")
+        return cls(key, value.strip())
+
+    def matches(self, info: Any) -> bool:
+        return str(getattr(info, self.key)()) == self.value
+
+    def __str__(self) -> str:
+        return f"{self.key}={self.value}"
+
+
+def describe(info: Any) -> str:
+    """One line for the listing of a resolved stream."""
+    rate = info.nominal_srate()
+    rate_text = f"{rate:g} Hz" if rate > 0 else "irregular"
+    return (
+        f"{info.name()} (type {info.type() or '-'}, {info.channel_count()} x {_format_name(info)}, {rate_text}, "
+        f"source_id {info.source_id() or '-'}, host {info.hostname() or '-'})"
+    )
+
+
+def _format_name(info: Any) -> str:
+    names = {1: "float32", 2: "double64", 3: "string", 4: "int32", 5: "int16", 6: "int8", 7: "int64"}
+    return names.get(info.channel_format(), str(info.channel_format()))
+
+
+def resolve(filters: list[StreamFilter], wait_s: float, poll_s: float = 0.25) -> list[Any]:
+    """The streams to record (StreamInfo objects, by uid, in order of discovery).
+
+    Without filters: every stream visible within ``wait_s`` seconds (the full wait: LSL cannot know that no more
+    will appear). With filters: every stream that matches one, returned as soon as each filter has matched at
+    least one stream; LslError naming the filters still unmatched when ``wait_s`` passes.
+    """
+    lsl = pylsl()
+    deadline = time.monotonic() + max(wait_s, 0.0)
+    if not filters:
+        found = lsl.resolve_streams(max(wait_s, 0.5))
+        if not found:
+            raise LslError(f"no LSL stream found within {wait_s:g} s (is the source running on this network?)")
+        return _unique(found)
+    resolver = lsl.ContinuousResolver(forget_after=max(wait_s, 5.0))
+    try:
+        while True:
+            found = [i for i in resolver.results() if any(f.matches(i) for f in filters)]
+            missing = [f for f in filters if not any(f.matches(i) for i in found)]
+            if not missing:
+                time.sleep(min(poll_s, max(deadline - time.monotonic(), 0.0)))  # late siblings of a match
+                found = [i for i in resolver.results() if any(f.matches(i) for f in filters)]
+                return _unique(found)
+            if time.monotonic() >= deadline:
+                seen = resolver.results()
+                listing = "; ".join(describe(i) for i in seen) or "none"
+                raise LslError(
+                    f"no LSL stream matches {', '.join(map(str, missing))} within {wait_s:g} s (visible: {listing})"
+                )
+            time.sleep(poll_s)
+    finally:
+        del resolver
+
+
+def _unique(infos: list[Any]) -> list[Any]:
+    seen: set[str] = set()
+    out = []
+    for info in infos:
+        if info.uid() not in seen:
+            seen.add(info.uid())
+            out.append(info)
+    return out
