@@ -158,6 +158,10 @@ def process_trajectory(
         click.echo(f"{trial}: skipped {method}: {why}")
     for note in record.get("notes") or []:
         click.echo(f"{trial}: note: {note}")
+    from imulog.steps.trajectory import check_lines
+
+    for line in check_lines(record):  # assumptions that do not hold, one line each (issue 32)
+        click.echo(f"{trial}: {line}")
 
 
 @click.command("evaluate")
