@@ -206,6 +206,14 @@ def evaluate(trial: Path, methods: str | None, max_gap: float, as_json: bool, fo
         return
     click.echo(f"{trial}: errors against {record.get('reference', '?')} (mean±std over repetitions)")
     click.echo(table_from_record(record))
+    from imulog.steps.evaluate import robust_from_record, warning_lines
+
+    robust = robust_from_record(record)
+    if robust:
+        click.echo("robust figures (mean over windows; ROM = the reference's range of motion):")
+        click.echo(robust)
+    for line in warning_lines(record):
+        click.echo(f"{trial}: warning: {line}")
     aligned = record.get("alignment") or {}
     if aligned.get("quality") == "poor":  # flagged by imulog process align (docs/alignment.md)
         click.echo(f"{trial}: warning: poor alignment: {'; '.join(aligned.get('quality_reasons') or [])}")

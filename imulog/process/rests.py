@@ -40,7 +40,7 @@ class RestParams:
     long_window_s: float | None = 1.0
     k_noise: float = 3.0
     min_std_mps2: float = 0.06
-    max_mean_mps2: float | None = None
+    max_mean_mps2: float | None = 0.6
     min_rest_s: float = 0.0
 
 
@@ -106,9 +106,9 @@ def accelerometer_still(
         # a slow translation (a glide while the wrist stops turning) varies little within window_s but much
         # within a second; the longer window is cut to each candidate rest, so short rests (a foot's stance,
         # a 0.3 s pause) are judged on their own samples
-        cand = np.asarray(candidates, dtype=bool) & still
+        cand = np.asarray(candidates, dtype=bool)
         wl = max(int(round(params.long_window_s * rate_hz)), 1)
-        still = cand & (_run_std(a0, cand, wl) <= limit)
+        still &= cand & (_run_std(a0, cand & ok, wl) <= limit)
     return still
 
 

@@ -657,7 +657,7 @@ def method_checks(
                     if m == "highpass"
                     else wavelet_detrend(before, params.wavelet)
                 )
-                shares.append(removed_share(before, after))
+                shares.append(removed_share(before, after - after[0]))
             share = np.nanmedian(np.asarray(shares, dtype=float), axis=0).round(4).tolist() if shares else None
             out[m] = assess(m, rests=summary, share=share, params=params.checks)
             continue
