@@ -218,13 +218,28 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--residual-velocity", type=float, default=0.0, help="simulator residual_velocity_mps")
     ap.add_argument("--json", type=str, default=None, help="also write the table and records here")
     ap.add_argument("--grid", nargs="+", default=None, help="accuracy-grid conditions (names or 'all')")
+    ap.add_argument(
+        "--no-rest-gate",
+        action="store_true",
+        help="rests from the segmentation alone (before issue 32's accelerometer gate)",
+    )
     args = ap.parse_args(argv)
+    params = DEFAULT_PARAMS
+    if args.no_rest_gate:
+        from dataclasses import replace
+
+        from imulog.process.rests import RestParams
+
+        params = replace(DEFAULT_PARAMS, rests=RestParams(enabled=False))
     if args.grid:
         from imulog.simulate.grid import CONDITIONS
 
         t0 = time.perf_counter()
         rows = grid_rows(
-            list(CONDITIONS) if args.grid == ["all"] else args.grid, range(args.subjects), args.repetitions
+            list(CONDITIONS) if args.grid == ["all"] else args.grid,
+            range(args.subjects),
+            args.repetitions,
+            params=params,
         )
         print_grid(rows)
         print(f"\n{time.perf_counter() - t0:.0f} s wall")
@@ -244,7 +259,7 @@ def main(argv: list[str] | None = None) -> int:
             segmentation=args.segmentation,
             residual_velocity_mps=args.residual_velocity,
         )
-        records, seconds, n = evaluate_trial(inputs, methods)
+        records, seconds, n = evaluate_trial(inputs, methods, params)
         for m in methods:
             all_records[m].extend(records[m])
             timing[m].append(seconds[m])

@@ -37,13 +37,19 @@ def test_a_still_gyroscope_during_translation_is_not_a_rest():
     assert rests[(t < 1.5) | (t > 8.5)].all()  # the true rests stay rests (but for the long window's half
     assert rests[(t < 1.8) | (t > 8.2)].mean() > 0.9  # width next to the movement)
     assert rests[(t > 2.3) & (t < 7.7)].mean() < 0.1  # the translation is no rest
-    # a slow glide (0.2 Hz, 0.8 m/s^2) varies little in 0.25 s; the second, longer window cut to the
+    # a slow glide (0.4 Hz, 0.5 m/s^2) varies little within 0.25 s; the second, longer window cut to the
     # candidate rest sees it
     slow = _noise(len(t), seed=1)
-    slow[moving, 1] += 0.8 * np.sin(2 * np.pi * 0.2 * (t[moving] - 2))
-    assert true_rests(gyro_static, slow, RATE)[(t > 3) & (t < 7)].mean() < 0.2
+    slow[moving, 1] += 0.5 * np.sin(2 * np.pi * 0.4 * (t[moving] - 2))
+    assert true_rests(gyro_static, slow, RATE)[(t > 3) & (t < 7)].mean() < 0.1
     short = dataclasses.replace(RestParams(), long_window_s=None)
-    assert true_rests(gyro_static, slow, RATE, short)[(t > 3) & (t < 7)].mean() > 0.2  # what it adds
+    assert true_rests(gyro_static, slow, RATE, short)[(t > 3) & (t < 7)].mean() > 0.3  # what it adds
+    # a constant acceleration has no variation: only the (optional) mean limit tells it from a tilted rest
+    push = _noise(len(t), seed=4)
+    push[moving, 0] += 1.0
+    assert true_rests(gyro_static, push, RATE)[(t > 3) & (t < 7)].mean() > 0.9
+    with_mean = dataclasses.replace(RestParams(), max_mean_mps2=0.6)
+    assert not true_rests(gyro_static, push, RATE, with_mean)[(t > 3) & (t < 7)].any()
     # a short true rest (0.3 s, a foot's stance) inside motion survives
     stance = _noise(len(t), seed=2)
     stance[:, 2] += 2.0 * np.sin(2 * np.pi * 1.0 * t)

@@ -245,5 +245,5 @@ def test_rerun_with_fewer_methods_removes_the_stale_trajectories(sim_trial, tmp_
     assert present == ["/derived/trajectory/ddi", "/derived/trajectory/zupt"] == written
     assert run_trajectory(path, methods=["ddi", "zupt"]).skipped
     _, record = run_evaluate(path)
-    assert sorted(record["methods"]) == ["ddi", "zupt"]
+    assert sorted(record["methods"]) == ["ddi", "dedrift", "zupt"] and record["baseline"] == "dedrift"
     assert check_file(path).ok

@@ -182,7 +182,9 @@ def info(file: str, as_json: bool) -> None:
         mb = f"{c['stored_bytes'] / 1e6:.2f}"
         rows.append(
             (
-                c["topic"] + (" [out of date]" if c["out_of_date"] else ""),
+                c["topic"]
+                + (" [out of date]" if c["out_of_date"] else "")
+                + (" [assumptions failed]" if c["metadata"].get("assumptions") == "failed" else ""),
                 c["schema"],
                 _fmt_rate(c["rate_hz"]),
                 str(c["samples"]),
@@ -207,6 +209,11 @@ def info(file: str, as_json: bool) -> None:
     _echo_periods(data["metadata"].get("imulog.metrics") or {})
     _echo_alignment(data["metadata"].get("imulog.alignment") or {})
     _echo_phase_quality(data["metadata"].get("imulog.timing") or {})
+    failed = [c for c in data["channels"] if c["metadata"].get("assumptions") == "failed"]
+    if failed:  # trajectories whose method does not apply to this recording (issue 32)
+        click.echo("assumptions failed:")
+        for c in failed:
+            click.echo(f"  {c['topic']}: {c['metadata'].get('assumptions_why', '')}")
     if data["attachments"]:
         click.echo("attachments:")
         for a in data["attachments"]:

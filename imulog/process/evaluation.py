@@ -110,7 +110,8 @@ def summarize(
     for axis in axes:
         out[axis] = {}
         for metric in METRICS:
-            v = np.array([r[axis][metric] for r in rows if axis in r], dtype=np.float64)
+            # (records of an older imulog lack the robust figures: those metrics are then empty)
+            v = np.array([r[axis][metric] for r in rows if axis in r and metric in r[axis]], dtype=np.float64)
             v = v[np.isfinite(v)]
             out[axis][metric] = {
                 "mean": float(np.mean(v)) if len(v) else float("nan"),

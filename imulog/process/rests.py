@@ -40,7 +40,7 @@ class RestParams:
     long_window_s: float | None = 1.0
     k_noise: float = 3.0
     min_std_mps2: float = 0.06
-    max_mean_mps2: float | None = 0.6
+    max_mean_mps2: float | None = None
     min_rest_s: float = 0.0
 
 

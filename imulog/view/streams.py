@@ -362,7 +362,9 @@ class _Logger:
             if record.get("clock") == "device" and record.get("imu"):
                 starts = self.clocks.to_reference(str(record["imu"]), starts)
             world = anchor_repetitions(t_ref, world, starts, *self.reference)
-        colour = self.trajectory(s.topic, t_ref, world, f"IMU {method}")
+        check = (record.get("checks") or {}).get(method) or {}
+        flag = f" (assumptions failed: {', '.join(check.get('failed', []))})" if check.get("ok") is False else ""
+        colour = self.trajectory(s.topic, t_ref, world, f"IMU {method}{flag}")
         if self.reference is not None and in_world:
             error = position_error_cm(t_ref, world, *self.reference)
             names = [f"|{method} − Vicon| (cm)"]
