@@ -54,16 +54,7 @@ from imulog.process.minjerk import (
     r2g_waypoints_from_positions,
 )
 from imulog.process.rests import RestParams
-from imulog.process.trajectory_checks import (
-    FILTER_METHODS,
-    CheckParams,
-    assess,
-    bias_check,
-    dedrift_check,
-    dedrift_offsets,
-    removed_share,
-    rest_summary,
-)
+from imulog.process.trajectory_checks import CheckParams, bias_check
 
 
 @dataclass(frozen=True)
@@ -619,62 +610,7 @@ def reconstruct_repetitions(
                 params=params,
             )
     if info is not None:
+        from imulog.process.trajectory_checks import method_checks
+
         info["checks"] = method_checks(t, a, a_comp, static, repetitions, out, params, bias)
-    return out
-
-
-def method_checks(
-    t_s: np.ndarray,
-    acc_mps2: np.ndarray,
-    acc_compensated_mps2: np.ndarray | None,
-    rests: np.ndarray,
-    repetitions: Sequence[Repetition],
-    positions: Mapping[str, np.ndarray],
-    params: TrajectoryParams = TrajectoryParams(),
-    bias: Mapping[str, Any] | None = None,
-) -> dict[str, dict[str, Any]]:
-    """Per method in ``positions``, :func:`imulog.process.trajectory_checks.assess` on the windows it ran on:
-    rests (every dead-reckoning method), the implied de-drift offset (ZUPT-based methods), the rotating-bias
-    estimate's range (``zupt_bias``) and the share of the motion's range a filter removes (``highpass``,
-    ``wavelet``: the filter applied to ZUPT, or to the baseline in a window without rests)."""
-    t = np.asarray(t_s, dtype=np.float64)
-    windows = [(r.start, r.stop) for r in repetitions]
-    summary = rest_summary(t, rests, windows)
-    offsets = np.concatenate(
-        [dedrift_offsets(t[r.start : r.stop], acc_mps2[r.start : r.stop], rests[r.start : r.stop]) for r in repetitions]
-        or [np.zeros(0)]
-    )
-    out: dict[str, dict[str, Any]] = {}
-    for m in positions:
-        if m in FILTER_METHODS:
-            shares = []
-            for r in repetitions:
-                sl = slice(r.start, r.stop)
-                base = BASELINE if not rests[sl].any() else "zupt"
-                before = reconstruct(base, t[sl], acc_mps2[sl], rests[sl], params=params)
-                after = (
-                    highpass(before, (len(t[sl]) - 1) / (t[sl][-1] - t[sl][0]), params.highpass)
-                    if m == "highpass"
-                    else wavelet_detrend(before, params.wavelet)
-                )
-                shares.append(removed_share(before, after - after[0]))
-            share = np.nanmedian(np.asarray(shares, dtype=float), axis=0).round(4).tolist() if shares else None
-            out[m] = assess(m, rests=summary, share=share, params=params.checks)
-            continue
-        kwargs: dict[str, Any] = {"rests": summary}
-        if m in ("zupt", "kalman", "optimized"):
-            kwargs["dedrift"] = dedrift_check(offsets, params.checks)
-        if m == "zupt_bias":
-            comp = acc_mps2 if acc_compensated_mps2 is None else acc_compensated_mps2
-            off = np.concatenate(
-                [
-                    dedrift_offsets(t[r.start : r.stop], comp[r.start : r.stop], rests[r.start : r.stop])
-                    for r in repetitions
-                ]
-                or [np.zeros(0)]
-            )
-            kwargs["dedrift"] = dedrift_check(off, params.checks)
-            if bias is not None:
-                kwargs["bias"] = bias
-        out[m] = assess(m, params=params.checks, **kwargs)
     return out
