@@ -280,3 +280,23 @@ def test_wrong_alignment_of_a_short_trial_is_still_poor_and_a_correct_one_good()
     except ValueError:
         return  # refused outright: no marker moves like the IMU
     assert bad["quality"] == "poor", bad
+
+
+def test_no_rest_at_all_says_so_in_one_line(tmp_path):
+    """The held-out chain: still only at the start and the end. Every rest-based method says that the rests
+    are missing and what would work; the baseline is reported beside them."""
+    from imulog.steps.align import run_align
+    from imulog.steps.orientation import run_orientation
+    from imulog.steps.phases import run_phases
+
+    path = tmp_path / "chain.mcap"
+    write_trial(path, simulate("continuous", seed=3, rests=0, duration_s=40.0, glides=4).recording)
+    run_orientation(path)
+    run_align(path)
+    run_phases(path)
+    res = CliRunner().invoke(cli, ["process", "trajectory", str(path), "--method", "zupt,kalman,highpass"])
+    assert res.exit_code == 0, res.output
+    lines = [x for x in res.output.splitlines() if "assumption failed: zupt:" in x]
+    assert len(lines) == 1, res.output
+    longest = float(lines[0].split("no rest boundary for ")[1].split(" s")[0])
+    assert longest >= 30 and "reconstruct between rests or use a reference" in lines[0]

@@ -31,7 +31,11 @@ class RestParams:
     long_window_s: a second, longer centred window (s) cut to each candidate rest (None: off).
     k_noise: allowed windowed standard deviation in units of the white-noise level (per axis).
     min_std_mps2: floor of that threshold (m/s^2).
-    max_mean_mps2: largest windowed mean of the gravity-free acceleration (m/s^2) at a rest.
+    max_mean_mps2: largest windowed mean of the gravity-free acceleration (m/s^2) at a rest (None: off; the
+        residual gravity of an uncalibrated sensor reaches 0.5 m/s^2 at true rests).
+    short_max_mean_mps2: the same limit for candidate rests shorter than ``short_s`` (s) only (None: off): a
+        tenth of a second of nearly constant acceleration mid-movement is no rest (a foot's 0.3 s stance with
+        the residual gravity of a 6D filter during gait is not judged by it).
     min_rest_s: rests shorter than this (s) are not rests.
     """
 
@@ -41,6 +45,8 @@ class RestParams:
     k_noise: float = 3.0
     min_std_mps2: float = 0.06
     max_mean_mps2: float | None = None
+    short_max_mean_mps2: float | None = 0.6
+    short_s: float = 0.2
     min_rest_s: float = 0.0
 
 
@@ -83,6 +89,18 @@ def _run_std(a: np.ndarray, mask: np.ndarray, w: int) -> np.ndarray:
     return out
 
 
+def _short_and_accelerating(mean: np.ndarray, cand: np.ndarray, w: int, limit: float) -> np.ndarray:
+    """Samples of candidate runs shorter than ``w`` whose windowed mean acceleration exceeds ``limit`` (m/s^2)
+    anywhere in the run (the whole run is then no rest)."""
+    out = np.zeros(len(cand), dtype=bool)
+    d = np.diff(np.concatenate([[0], cand.astype(np.int8), [0]]))
+    norm = np.linalg.norm(mean, axis=1)
+    for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True):
+        if e - s < w and norm[s:e].max() > limit:
+            out[s:e] = True
+    return out
+
+
 def accelerometer_still(
     acc_global_mps2: np.ndarray, rate_hz: float, params: RestParams = RestParams(), candidates: np.ndarray | None = None
 ) -> np.ndarray:
@@ -109,6 +127,11 @@ def accelerometer_still(
         cand = np.asarray(candidates, dtype=bool)
         wl = max(int(round(params.long_window_s * rate_hz)), 1)
         still &= cand & (_run_std(a0, cand & ok, wl) <= limit)
+        if params.short_max_mean_mps2 is not None:
+            # a very short candidate is judged on few samples: a tenth of a second of nearly constant
+            # acceleration mid-movement passes the variation tests, so it must also be near zero
+            ws = max(int(round(params.short_s * rate_hz)), 1)
+            still &= ~_short_and_accelerating(mean, cand, ws, params.short_max_mean_mps2)
     return still
 
 

@@ -12,7 +12,8 @@ number in centimetres then hides that it measures nothing. These pure functions 
 * drift correction (:func:`dedrift_check`): the linear velocity de-drift assumes a constant acceleration
   offset; the offset each movement implies (velocity reached at the next rest / duration) must be small;
 * filtering (:func:`removed_share`): high-pass and wavelet remove everything slow, drift and motion alike;
-  applied to a drift-controlled estimate they show what share of the motion's range they remove.
+  applied to the ZUPT estimate of windows whose rests control its drift they show what share of the motion's
+  range they remove; without such windows the share cannot be known and the check fails for want of rests.
 
 :func:`assess` turns these into one verdict per method with a one-line reason and what would work instead.
 Times in s, accelerations in m/s^2, positions in m.
@@ -43,6 +44,7 @@ class CheckParams:
     max_offset_mps2: largest constant acceleration offset (m/s^2) the de-drift may imply for a movement
         (0.35 m/s^2 is the gravity left by a 2 deg tilt error).
     max_removed_share: largest share of the motion's range a filter may remove.
+    min_motion_m: windows whose motion range is below this (m) do not count for the share.
     """
 
     max_without_rest_s: float = 15.0
@@ -50,6 +52,7 @@ class CheckParams:
     max_matrix: float = 0.05
     max_offset_mps2: float = 0.35
     max_removed_share: float = 0.10
+    min_motion_m: float = 0.02
 
 
 DEFAULT_CHECKS = CheckParams()
@@ -158,14 +161,23 @@ def assess(
     out: dict[str, Any] = {}
     if rests is not None:
         out["rests"] = dict(rests)
-        stretch = float(rests["longest_window_s"] if method == "ddi" else rests["longest_without_s"])
-        if method != "ddi" and method not in FILTER_METHODS and int(rests["count"]) == 0:
+        ends_only = method in ("ddi", "dedrift")
+        stretch = float(rests["longest_window_s"] if ends_only else rests["longest_without_s"])
+        if method in FILTER_METHODS:
+            if share is None and (int(rests["count"]) == 0 or stretch > params.max_without_rest_s):
+                failed.append("no_rest")
+                why.append(
+                    f"no rest for {stretch:.0f} s: what the filter removes cannot be told from drift, and it "
+                    "removes slow motion with it"
+                )
+                suggest = "use a reference, or reconstruct between rests"
+        elif not ends_only and int(rests["count"]) == 0:
             failed.append("no_rest")
             why.append(f"no rest in {rests['longest_window_s']:.0f} s: dead reckoning drifts")
             suggest = "reconstruct between rests or use a reference"
-        elif method not in FILTER_METHODS and stretch > params.max_without_rest_s:
+        elif stretch > params.max_without_rest_s:
             failed.append("no_rest")
-            what = "window" if method == "ddi" else "rest"
+            what = "window" if ends_only else "rest"
             why.append(f"no {what} boundary for {stretch:.0f} s: dead reckoning drifts")
             suggest = "reconstruct between rests or use a reference"
     if bias is not None:
@@ -236,7 +248,7 @@ def method_checks(
     estimate's range (``zupt_bias``) and the share of the motion's range a filter removes (``highpass``,
     ``wavelet``: the filter applied to ZUPT, or to the baseline in a window without rests)."""
     from imulog.process.drift import highpass, wavelet_detrend
-    from imulog.process.trajectory_opt import BASELINE, TrajectoryParams, reconstruct
+    from imulog.process.trajectory_opt import TrajectoryParams, reconstruct
 
     params = params or TrajectoryParams()
     t = np.asarray(t_s, dtype=np.float64)
@@ -252,8 +264,12 @@ def method_checks(
             shares = []
             for r in repetitions:
                 sl = slice(r.start, r.stop)
-                base = BASELINE if not rests[sl].any() else "zupt"
-                before = reconstruct(base, t[sl], acc_mps2[sl], rests[sl], params=params)
+                own = rest_summary(t, rests, [(r.start, r.stop)])
+                if not own["count"] or own["longest_without_s"] > params.checks.max_without_rest_s:
+                    continue  # ZUPT drifts here too: what the filter removes cannot be told from drift
+                before = reconstruct("zupt", t[sl], acc_mps2[sl], rests[sl], params=params)
+                if np.nanmax(np.ptp(before, axis=0)) < params.checks.min_motion_m:
+                    continue  # hardly any motion (the alignment wave): no share to speak of
                 after = (
                     highpass(before, (len(t[sl]) - 1) / (t[sl][-1] - t[sl][0]), params.highpass)
                     if m == "highpass"
