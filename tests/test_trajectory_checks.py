@@ -300,3 +300,22 @@ def test_no_rest_at_all_says_so_in_one_line(tmp_path):
     assert len(lines) == 1, res.output
     longest = float(lines[0].split("no rest boundary for ")[1].split(" s")[0])
     assert longest >= 30 and "reconstruct between rests or use a reference" in lines[0]
+
+
+def test_viewer_labels_a_trajectory_whose_assumptions_fail(continuous_trial, tmp_path):
+    from rerun.chunk import RrdReader
+
+    from imulog.view import layout as L
+
+    _, path = continuous_trial
+    runner = CliRunner()
+    assert runner.invoke(cli, ["process", "trajectory", str(path), "--method", "zupt,highpass"]).exit_code == 0
+    out = tmp_path / "continuous.rrd"
+    res = runner.invoke(cli, ["view", str(path), "--save", str(out)])
+    assert res.exit_code == 0, res.output
+    # the error series' name in the plot says so (and the path's label when it is one strip)
+    entity = L.error_entity("/derived/trajectory/highpass")
+    text = [
+        str(c.to_record_batch().to_pylist()) for c in RrdReader(out).stream().to_chunks() if c.entity_path == entity
+    ]
+    assert any("assumptions failed: removes_motion" in t for t in text), text[:1]

@@ -367,7 +367,7 @@ class _Logger:
         colour = self.trajectory(s.topic, t_ref, world, f"IMU {method}{flag}")
         if self.reference is not None and in_world:
             error = position_error_cm(t_ref, world, *self.reference)
-            names = [f"|{method} − Vicon| (cm)"]
+            names = [f"|{method} − Vicon| (cm){flag}"]
             self.scalars(L.error_entity(s.topic, self.prefix), "error", s.topic, t_ref, error, names, [colour])
             finite = np.asarray(error, dtype=np.float64)
             finite = finite[np.isfinite(finite)]
