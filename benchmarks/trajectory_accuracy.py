@@ -35,10 +35,12 @@ import numpy as np
 from imulog.process import quaternion as quat
 from imulog.process.alignment import device_to_reference
 from imulog.process.evaluation import aggregate, format_table, trajectory_errors
+from imulog.process.rests import true_rests
 from imulog.process.trajectory_opt import (
     DEFAULT_PARAMS,
     METHODS,
     TrajectoryParams,
+    merge_overlapping,
     reconstruct_repetitions,
     repetition_windows,
 )
@@ -128,7 +130,9 @@ def simulated_inputs(
 def evaluate_trial(inputs: dict[str, Any], methods=METHODS, params: TrajectoryParams = DEFAULT_PARAMS):
     """Per-repetition error records {method: [trajectory_errors(...), ...]} and per-method seconds."""
     t_s = inputs["t_s"]
-    reps = repetition_windows(t_s, inputs["phase_bounds"], inputs["static"])
+    # velocity resets only at true rests (the accelerometer agrees), as the trajectory step does
+    static = true_rests(inputs["static"], inputs["acc_world"], (len(t_s) - 1) / (t_s[-1] - t_s[0]), params.rests)
+    reps, _ = merge_overlapping(repetition_windows(t_s, inputs["phase_bounds"], static))
     seconds: dict[str, float] = {}
     recon: dict[str, np.ndarray] = {}
     for m in methods:
@@ -137,7 +141,7 @@ def evaluate_trial(inputs: dict[str, Any], methods=METHODS, params: TrajectoryPa
             reconstruct_repetitions(
                 t_s,
                 inputs["acc_world"],
-                inputs["static"],
+                static,
                 reps,
                 [m],
                 anthropometrics=inputs["anthropometrics"],
@@ -161,7 +165,9 @@ def evaluate_trial(inputs: dict[str, Any], methods=METHODS, params: TrajectoryPa
 GRID_METHODS = ("zupt", "zupt_bias", "optimized")
 
 
-def grid_rows(conditions, subjects: range, repetitions: int, methods=GRID_METHODS) -> list[dict[str, Any]]:
+def grid_rows(
+    conditions, subjects: range, repetitions: int, methods=GRID_METHODS, params: TrajectoryParams = DEFAULT_PARAMS
+) -> list[dict[str, Any]]:
     """Per condition and method: mean MAE per axis (cm) over every repetition of the trials (subject k, seed k)."""
     from imulog.simulate.grid import condition
 
@@ -170,7 +176,7 @@ def grid_rows(conditions, subjects: range, repetitions: int, methods=GRID_METHOD
         recs: dict[str, list[dict]] = {m: [] for m in methods}
         for s in subjects:
             inputs = simulated_inputs(s, seed=s, repetitions=repetitions, **condition(name))
-            records, _, _ = evaluate_trial(inputs, methods)
+            records, _, _ = evaluate_trial(inputs, methods, params)
             for m in methods:
                 recs[m].extend(records[m])
         for m in methods:
@@ -212,13 +218,28 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--residual-velocity", type=float, default=0.0, help="simulator residual_velocity_mps")
     ap.add_argument("--json", type=str, default=None, help="also write the table and records here")
     ap.add_argument("--grid", nargs="+", default=None, help="accuracy-grid conditions (names or 'all')")
+    ap.add_argument(
+        "--no-rest-gate",
+        action="store_true",
+        help="rests from the segmentation alone (before issue 32's accelerometer gate)",
+    )
     args = ap.parse_args(argv)
+    params = DEFAULT_PARAMS
+    if args.no_rest_gate:
+        from dataclasses import replace
+
+        from imulog.process.rests import RestParams
+
+        params = replace(DEFAULT_PARAMS, rests=RestParams(enabled=False))
     if args.grid:
         from imulog.simulate.grid import CONDITIONS
 
         t0 = time.perf_counter()
         rows = grid_rows(
-            list(CONDITIONS) if args.grid == ["all"] else args.grid, range(args.subjects), args.repetitions
+            list(CONDITIONS) if args.grid == ["all"] else args.grid,
+            range(args.subjects),
+            args.repetitions,
+            params=params,
         )
         print_grid(rows)
         print(f"\n{time.perf_counter() - t0:.0f} s wall")
@@ -238,7 +259,7 @@ def main(argv: list[str] | None = None) -> int:
             segmentation=args.segmentation,
             residual_velocity_mps=args.residual_velocity,
         )
-        records, seconds, n = evaluate_trial(inputs, methods)
+        records, seconds, n = evaluate_trial(inputs, methods, params)
         for m in methods:
             all_records[m].extend(records[m])
             timing[m].append(seconds[m])

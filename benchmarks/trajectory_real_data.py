@@ -76,8 +76,12 @@ def _gaitmap_tables(root: Path):
     return imu, mocap, strides
 
 
-def gaitmap_stride_lengths(root: Path, foot: str = "left", gyro_threshold_rad_s: float = 0.6) -> dict:
-    """IMU (ZUPT) and marker stride lengths (m) for one foot of the gaitmap sample."""
+def gaitmap_stride_lengths(
+    root: Path, foot: str = "left", gyro_threshold_rad_s: float = 0.6, rest_gate: bool = True
+) -> dict:
+    """IMU (ZUPT) and marker stride lengths (m) for one foot of the gaitmap sample. ``rest_gate``: keep only the
+    still-gyroscope samples the accelerometer confirms (:func:`imulog.process.rests.true_rests`, as the trajectory
+    step does)."""
     imu, mocap, strides = _gaitmap_tables(root)
     rate_imu, rate_mocap = 204.8, 100.0
     sensor = f"{foot}_sensor"
@@ -88,6 +92,10 @@ def gaitmap_stride_lengths(root: Path, foot: str = "left", gyro_threshold_rad_s:
     gnorm = np.linalg.norm(gyr, axis=1)
     k = max(int(round(0.05 * rate_imu)), 1)
     static = np.convolve(gnorm < gyro_threshold_rad_s, np.ones(k) / k, mode="same") > 0.999
+    if rest_gate:
+        from imulog.process.rests import true_rests
+
+        static = true_rests(static, acc_g, rate_imu)
     _, pos = zupt(acc_g, t, static, ZuptParams())
     heel = mocap[f"{foot[0].upper()}_FCC"][["x", "y", "z"]].to_numpy(float) / 1000.0
     t_m = np.arange(len(heel)) / rate_mocap

@@ -155,6 +155,7 @@ class SignalStream:
     units: list[str]
     values: np.ndarray
     frame_id: str = ""
+    attrs: dict[str, str] = field(default_factory=dict)  # extra channel metadata (e.g. a trajectory's checks)
 
     def __post_init__(self) -> None:
         self.t_ns = _as_time(self.t_ns)

@@ -135,7 +135,10 @@ def test_real_nexus_export_search_picks_one_segment_fast(shared_data):
     assert len(c["markers"]) >= 3 and all(m.startswith("Daphnee:") and m.split(":")[1] in hand for m in c["markers"])
     assert c["triads_found"] > 50 and seconds < 10.0
     assert abs(rec["offset_ns"] - offset) < 2 * MS
-    assert not rec["drift_estimated"] and rec["quality"] == "poor"  # 5.8 s: one window, drift unknown
+    # 5.8 s: one window, drift unknown, but at 50 ppm it moves the ends by 0.15 ms: a correct alignment of a
+    # short trial is not poor (issue 32); the unknown drift is a note
+    assert not rec["drift_estimated"] and rec["quality"] == "good", rec["quality_reasons"]
+    assert any("drift not estimated" in n for n in rec["quality_notes"])
 
 
 def test_cluster_markers_override_with_or_without_prefix(tmp_path):

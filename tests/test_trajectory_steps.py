@@ -101,8 +101,12 @@ def test_compute_trajectories_without_phases_or_alignment(sim_trial):
     streams, record = compute_trajectories(
         imu.t_ns, acc, imu="wrist", methods=["ddi", "zupt", "optimized"], static=(imu.t_ns, static)
     )
-    assert [s.topic for s in streams] == ["/derived/trajectory/ddi", "/derived/trajectory/zupt"]
-    assert record["clock"] == "device" and record["frame"] == "wrist_global"
+    assert [s.topic for s in streams] == [
+        "/derived/trajectory/ddi",
+        "/derived/trajectory/zupt",
+        "/derived/trajectory_baseline/dedrift",  # the baseline every method must beat (issue 32)
+    ]
+    assert record["clock"] == "device" and record["frame"] == "wrist_global" and record["methods"] == ["ddi", "zupt"]
     assert all(np.all(s.values == 0) for s in streams)
     with pytest.raises(ValueError, match="process phases"):
         compute_trajectories(imu.t_ns, acc, imu="wrist", methods=["zupt"])
@@ -180,7 +184,8 @@ def test_non_r2g_task_skips_optimized_instead_of_failing():
     )
     streams, record = compute_trajectories(imu.t_ns, acc_g, **kw)
     written = [s.topic.rsplit("/", 1)[1] for s in streams]
-    assert written == [m for m in ("ddi", "zupt", "highpass", "wavelet", "kalman", "zupt_bias")]
+    assert written == [m for m in ("ddi", "zupt", "highpass", "wavelet", "kalman", "zupt_bias", "dedrift")]
+    assert record["methods"] == written[:-1]
     assert "optimized" in record["skipped"] and len(record["repetitions"]) == 3
     with pytest.raises(ValueError, match="R2G"):
         compute_trajectories(imu.t_ns, acc_g, methods=["optimized"], **kw)
@@ -236,8 +241,9 @@ def test_rerun_with_fewer_methods_removes_the_stale_trajectories(sim_trial, tmp_
     out = run_trajectory(path, methods=["ddi", "zupt"], force=True)
     with TrialReader(path) as t:
         present = sorted(x for x in t.topics() if x.startswith("/derived/trajectory/"))
-    assert present == ["/derived/trajectory/ddi", "/derived/trajectory/zupt"] == sorted(out.topics)
+    written = sorted(x for x in out.topics if x.startswith("/derived/trajectory/"))
+    assert present == ["/derived/trajectory/ddi", "/derived/trajectory/zupt"] == written
     assert run_trajectory(path, methods=["ddi", "zupt"]).skipped
     _, record = run_evaluate(path)
-    assert sorted(record["methods"]) == ["ddi", "zupt"]
+    assert sorted(record["methods"]) == ["ddi", "dedrift", "zupt"] and record["baseline"] == "dedrift"
     assert check_file(path).ok

@@ -249,7 +249,7 @@ def encode(stream: Stream, log_map: LogMap = IDENTITY) -> tuple[str, dict[str, s
             second = st(2, stream.name)
         else:
             assert isinstance(stream, SignalStream)
-            names, extra = stream.columns, {"frame_id": stream.frame_id}
+            names, extra = stream.columns, {**stream.attrs, "frame_id": stream.frame_id}
             second = st(2, stream.frame_id)
         meta.update(extra, columns=json.dumps(list(names)), units=json.dumps(list(stream.units)))
         meta.update(_stats(stream.t_ns, [stream.values]))

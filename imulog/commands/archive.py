@@ -190,7 +190,11 @@ def _cut(text: str, width: int | None) -> str:
 def _channel_row(c: dict[str, Any]) -> tuple[str, ...]:
     """One row of the channels table; a channel without samples (salvaged, interrupted) shows only that."""
     salvaged = str(c["metadata"].get("salvaged", ""))
-    topic = c["topic"] + (" [out of date]" if c["out_of_date"] else "")
+    topic = (
+        c["topic"]
+        + (" [out of date]" if c["out_of_date"] else "")
+        + (" [assumptions failed]" if c["metadata"].get("assumptions") == "failed" else "")
+    )
     if salvaged:
         topic += f" [{salvaged.split(':', 1)[0]}]"
     if not c["samples"]:
@@ -262,6 +266,11 @@ def info(file: str, verbose: bool, as_json: bool) -> None:
     _echo_periods(data["metadata"].get("imulog.metrics") or {})
     _echo_alignment(data["metadata"].get("imulog.alignment") or {})
     _echo_phase_quality(data["metadata"].get("imulog.timing") or {})
+    failed = [c for c in data["channels"] if c["metadata"].get("assumptions") == "failed"]
+    if failed:  # trajectories whose method does not apply to this recording (issue 32)
+        click.echo("assumptions failed:")
+        for c in failed:
+            click.echo(f"  {c['topic']}: {c['metadata'].get('assumptions_why', '')}")
     if data["attachments"]:
         click.echo("attachments:")
         for a in data["attachments"]:

@@ -27,7 +27,7 @@ def _bad_settings(error: Exception, settings: tuple[str, ...]) -> str:
     return str(error)
 
 
-PROTOCOL_CHOICES = ("r2g", "slide", "nhpt", "adl", "arm", "home")
+PROTOCOL_CHOICES = ("r2g", "slide", "nhpt", "adl", "continuous", "arm", "home")
 ARM_ONLY = ("--seconds", "--trunk-imu")
 
 
@@ -123,6 +123,8 @@ def simulate(
       slide  uniaxial cart on rails (R2G thesis ch. 2): 30 constant-acceleration slides
       nhpt   nine-hole peg test (Bai et al. 2023): 9 pegs in, 9 pegs out
       adl    repetitive activities of daily living (Doshi 2011)
+      continuous  60 s of continuous motion with one 0.3 s rest and glides where the wrist stops
+             turning while it translates (a hand-moved chain; tests rest detection, issue 32)
       arm    two-segment arm (Caruso et al. 2024): upper-arm and forearm IMUs (optionally trunk),
              known shoulder and elbow angles, for `imulog process kinematics`
       home   days of wrist data at home (Doshi 2011 ch. 5) as an Axivity AX6 .cwa, --days 7 for a week

@@ -99,7 +99,11 @@ def process_trajectory(
 
     Needs the orientation step (/derived/acc_global), the phases step (/derived/static, /derived/phases)
     and, for the reference clock and the Vicon world frame, the align step. Each repetition is written as
-    the displacement from its start (m).
+    the displacement from its start (m). Velocity resets happen only at true rests (the still-gyroscope
+    samples the accelerometer confirms); every method checks its own assumptions (rests, bias range,
+    de-drift, motion removed by filtering) and a failure is printed in one line and kept in the channel's
+    metadata. The baseline /derived/trajectory_baseline/dedrift (linear velocity de-drift between each
+    window's ends) is written with every run for `imulog evaluate`.
 
     \b
     Methods:
@@ -158,6 +162,10 @@ def process_trajectory(
         click.echo(f"{trial}: skipped {method}: {why}")
     for note in record.get("notes") or []:
         click.echo(f"{trial}: note: {note}")
+    from imulog.steps.trajectory import check_lines
+
+    for line in check_lines(record):  # assumptions that do not hold, one line each (issue 32)
+        click.echo(f"{trial}: {line}")
 
 
 @click.command("evaluate")
@@ -176,8 +184,10 @@ def evaluate(trial: Path, methods: str | None, max_gap: float, as_json: bool, fo
     """Compare every /derived/trajectory/* with the Vicon cluster origin; print the Table-3.1 summary.
 
     Per repetition and axis: mean absolute error (cm), error as % of the Vicon range of motion, RMSE,
-    final displacement error and Spearman correlation; the table shows mean±std over repetitions. The
-    result is stored as the imulog.evaluation metadata record.
+    final displacement error and Spearman correlation; the table shows mean±std over repetitions. A second
+    table gives the median and 90th percentile per axis, the reference's range of motion, the windows whose
+    error exceeds the motion itself, and whether each method beats the dedrift baseline; warnings name the
+    methods whose assumptions failed. The result is stored as the imulog.evaluation metadata record.
 
     \b
     Examples:
@@ -202,6 +212,14 @@ def evaluate(trial: Path, methods: str | None, max_gap: float, as_json: bool, fo
         return
     click.echo(f"{trial}: errors against {record.get('reference', '?')} (mean±std over repetitions)")
     click.echo(table_from_record(record))
+    from imulog.steps.evaluate import robust_from_record, warning_lines
+
+    robust = robust_from_record(record)
+    if robust:
+        click.echo("robust figures (mean over windows; ROM = the reference's range of motion):")
+        click.echo(robust)
+    for line in warning_lines(record):
+        click.echo(f"{trial}: warning: {line}")
     aligned = record.get("alignment") or {}
     if aligned.get("quality") == "poor":  # flagged by imulog process align (docs/alignment.md)
         click.echo(f"{trial}: warning: poor alignment: {'; '.join(aligned.get('quality_reasons') or [])}")

@@ -550,7 +550,7 @@ def fit_clock(
     x_ref = np.asarray(x_ref, dtype=np.float64)
     for k in range(n_win):
         start = params.window_start_s + k * width
-        w = {"start_s": round(start, 3), "used": False}
+        w = {"start_s": round(start, 3), "width_s": round(width, 3), "used": False}
         sel = (t_ref >= t_ref[0] + start * NS) & (t_ref <= t_ref[0] + (start + width) * NS)
         activity = float(np.nanstd(x_ref[sel])) if np.isfinite(x_ref[sel]).sum() > 10 else 0.0
         try:
@@ -653,28 +653,20 @@ def fit_clock(
 
 
 def assess_quality(record: dict, params: AlignmentParams = AlignmentParams()) -> tuple[str, list[str]]:
-    """``("good" | "poor", reasons)`` of an ``imulog.alignment`` record: low score, large residual spread,
-    few windows, a cluster that does not reproduce the gyroscope, or a single-marker alignment."""
-    reasons = []
-    score = float(record.get("score") or 0.0)
-    if score < params.poor_score:
-        reasons.append(f"low correlation score {score:.2f} (< {params.poor_score:g})")
-    spread = record.get("residual_spread_ns")
-    if spread is not None and spread > params.poor_spread_s * NS:
-        reasons.append(
-            f"residual lag spread {spread / 1e6:.1f} ms over the windows (> {params.poor_spread_s * 1e3:g} ms)"
-        )
-    used = sum(1 for w in record.get("windows") or [] if w.get("used"))
-    if used < params.poor_min_windows:
-        reasons.append(f"only {used} usable window(s) (< {params.poor_min_windows}): drift not estimated")
-    vm = (record.get("cluster") or {}).get("vector_match")
-    if vm is not None and vm < params.poor_vector_match:
-        reasons.append(
-            f"the markers reproduce the gyroscope poorly (vector match {vm:.2f} < {params.poor_vector_match:g})"
-        )
-    if record.get("signal") == "marker-acceleration":
-        reasons.append("single marker: aligned on its acceleration, less certain than a rigid cluster")
-    return ("poor" if reasons else "good"), reasons
+    """``("good" | "poor", reasons)`` of an ``imulog.alignment`` record, graded from its residuals and their
+    uncertainty (:func:`imulog.process.alignment_quality.grade`; caveats that do not make it poor, such as a
+    drift not estimated on a short trial, go into ``record["quality_notes"]``)."""
+    from imulog.process.alignment_quality import grade
+
+    quality, reasons, notes = grade(
+        record,
+        poor_score=params.poor_score,
+        poor_spread_s=params.poor_spread_s,
+        poor_vector_match=params.poor_vector_match,
+    )
+    if notes:
+        record["quality_notes"] = notes
+    return quality, reasons
 
 
 # --------------------------------------------------------------------------------------------

@@ -7,7 +7,13 @@ first valid sample (a single IMU reconstructs displacement, not absolute positio
 * ``rom_pct``: that error as % of the reference's range of motion (max - min) on the axis;
 * ``rmse_cm``: root mean square error (cm);
 * ``final_cm``: absolute error of the final displacement (cm), plus its 3D norm ``final_norm_cm``;
-* ``spearman``: Spearman rank correlation between estimate and reference.
+* ``spearman``: Spearman rank correlation between estimate and reference;
+* ``median_cm``, ``p90_cm``: median and 90th percentile of the absolute error (cm), robust to a few bad
+  samples; ``rom_cm``: the reference's range of motion (max - min) on the axis.
+
+Per window also ``reach_cm`` (the reference's largest distance from its start, the motion itself),
+``rmse_norm_cm`` (3D) and ``exceeds_motion``: the 3D RMS error is larger than the reach, so the estimate
+says less about the motion than staying at the start would.
 
 Rows where either trajectory is NaN are ignored. :func:`aggregate` pools per-repetition results into
 the thesis's table: method x axis, mean +- standard deviation over repetitions.
@@ -22,7 +28,7 @@ import numpy as np
 from scipy import stats
 
 AXES = ("x", "y", "z")
-METRICS = ("mae_cm", "rom_pct", "rmse_cm", "final_cm", "spearman")
+METRICS = ("mae_cm", "rom_pct", "rmse_cm", "final_cm", "spearman", "median_cm", "p90_cm", "rom_cm")
 
 
 def relative_to_start(pos: np.ndarray) -> np.ndarray:
@@ -60,9 +66,14 @@ def trajectory_errors(estimate_m: np.ndarray, reference_m: np.ndarray, *, align_
             "final_cm": float(100 * abs(err[-1, j])),
             "spearman": float(rho),
             "rom_cm": float(100 * rom[j]),
+            "median_cm": float(100 * np.median(np.abs(err[:, j]))),
+            "p90_cm": float(100 * np.percentile(np.abs(err[:, j]), 90)),
         }
     out["final_norm_cm"] = float(100 * np.linalg.norm(err[-1]))
     out["mae_norm_cm"] = float(100 * np.mean(np.linalg.norm(err, axis=1)))
+    out["rmse_norm_cm"] = float(100 * np.sqrt(np.mean(np.sum(err**2, axis=1))))
+    out["reach_cm"] = float(100 * np.max(np.linalg.norm(ref - ref[0], axis=1)))
+    out["exceeds_motion"] = bool(out["rmse_norm_cm"] > out["reach_cm"])
     return out
 
 
@@ -99,7 +110,8 @@ def summarize(
     for axis in axes:
         out[axis] = {}
         for metric in METRICS:
-            v = np.array([r[axis][metric] for r in rows if axis in r], dtype=np.float64)
+            # (records of an older imulog lack the robust figures: those metrics are then empty)
+            v = np.array([r[axis][metric] for r in rows if axis in r and metric in r[axis]], dtype=np.float64)
             v = v[np.isfinite(v)]
             out[axis][metric] = {
                 "mean": float(np.mean(v)) if len(v) else float("nan"),
@@ -136,6 +148,49 @@ def format_table(
         cells += [_fmt(summ[a]["mae_cm"]["mean"], summ[a]["mae_cm"]["std"]) for a in axes]
         cells += [_fmt(summ[a]["rom_pct"]["mean"], summ[a]["rom_pct"]["std"]) for a in axes]
         cells.append(str(summ[axes[0]]["mae_cm"]["n"]))
+        lines.append(cells)
+    widths = [max(len(r[i]) for r in [head, *lines]) for i in range(len(head))]
+    fmt = "  ".join(f"{{:<{w}}}" for w in widths)
+    return "\n".join([fmt.format(*head), fmt.format(*["-" * w for w in widths])] + [fmt.format(*r) for r in lines])
+
+
+def format_robust(
+    table: Mapping[str, Mapping[str, Mapping[str, Mapping[str, float]]]],
+    exceeding: Mapping[str, tuple[int, int]],
+    baseline: str | None = None,
+    axes: Sequence[str] = AXES,
+) -> str:
+    """Robust figures per method: mean over windows of the median and 90th-percentile absolute error per axis
+    (cm), the reference's range of motion per window (cm), windows whose error exceeds the motion (of all),
+    and whether the method's MAE beats ``baseline``'s on every axis."""
+    head = (
+        ["method"] + [f"median {a}" for a in axes] + [f"p90 {a}" for a in axes] + ["ROM x/y/z (cm)", "error > motion"]
+    )
+    if baseline:
+        head.append(f"beats {baseline}")
+    base = table.get(baseline) if baseline else None
+
+    def f(v: float) -> str:
+        return (
+            "nan" if not np.isfinite(v) else f"{v:.2f}" if abs(v) < 10 else f"{v:.1f}" if abs(v) < 100 else f"{v:.0f}"
+        )
+
+    lines = []
+    for method, summ in table.items():
+        cells = [method]
+        cells += [f(summ[a]["median_cm"]["mean"]) for a in axes]
+        cells += [f(summ[a]["p90_cm"]["mean"]) for a in axes]
+        cells.append("/".join(f"{summ[a]['rom_cm']['mean']:.0f}" for a in axes))
+        k, n = exceeding.get(method, (0, 0))
+        cells.append(f"{k} of {n}")
+        if baseline:
+            if method == baseline or base is None:
+                cells.append("-")
+            else:
+                better = [summ[a]["mae_cm"]["mean"] < base[a]["mae_cm"]["mean"] for a in axes]
+                cells.append(
+                    "yes" if all(better) else "no" if not any(better) else f"{sum(better)} of {len(axes)} axes"
+                )
         lines.append(cells)
     widths = [max(len(r[i]) for r in [head, *lines]) for i in range(len(head))]
     fmt = "  ".join(f"{{:<{w}}}" for w in widths)

@@ -53,6 +53,8 @@ from imulog.process.minjerk import (
     r2g_waypoints_from_anthropometrics,
     r2g_waypoints_from_positions,
 )
+from imulog.process.rests import RestParams
+from imulog.process.trajectory_checks import CheckParams, bias_check
 
 
 @dataclass(frozen=True)
@@ -266,6 +268,7 @@ def coupled_symmetry_cost(t_s: np.ndarray, pos: np.ndarray, phase_bounds_s: np.n
 # All methods on one window (a repetition, or a whole trial without repetitions)
 
 METHODS = ("ddi", "zupt", "highpass", "wavelet", "kalman", "zupt_bias", "optimized")
+BASELINE = "dedrift"  # double integration with linear velocity de-drift between the window's boundaries
 
 
 @dataclass(frozen=True)
@@ -280,6 +283,8 @@ class TrajectoryParams:
     rotating_bias: RotatingBiasParams = RotatingBiasParams()
     optimized: OptimizationParams = OptimizationParams()
     anchor: AnchorParams = AnchorParams()
+    rests: RestParams = RestParams()
+    checks: CheckParams = CheckParams()
 
 
 def reconstruct(
@@ -304,6 +309,10 @@ def reconstruct(
     a = np.asarray(acc_mps2, dtype=np.float64)
     if method == "ddi":
         return double_integrate(a, t, params.ddi)[1]
+    if method == BASELINE:  # zero velocity at the window's first and last sample only
+        ends = np.zeros(len(t), dtype=bool)
+        ends[[0, -1]] = True
+        return zupt(a, t, ends, params.zupt)[1]
     if method in ("highpass", "wavelet"):
         pos = double_integrate(a, t, params.ddi)[1]
         if method == "highpass":
@@ -330,7 +339,7 @@ def reconstruct(
         initial = zupt(base, t, static_mask, params.zupt)[1]
         reference = r2g_reference(t, phase_bounds_s, waypoints)
         return optimize_repetition(t, initial, reference, phase_bounds_s, static_mask, params.optimized).position
-    raise ValueError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
+    raise ValueError(f"unknown method {method!r}; choose from {', '.join((*METHODS, BASELINE))}")
 
 
 DEFAULT_PARAMS = TrajectoryParams()
@@ -450,6 +459,24 @@ def repetition_windows(
     return reps
 
 
+def merge_overlapping(repetitions: Sequence[Repetition]) -> tuple[list[Repetition], list[list[int]]]:
+    """Windows that overlap (no true rest between two movements, so both widened to the same rests) merged
+    into one, in time order: ``(windows, [[indices merged], ...])``. A merged window keeps the first index and
+    every phase bound (so it is not a 4-phase R2G repetition any more)."""
+    out: list[Repetition] = []
+    groups: list[list[int]] = []
+    for rep in sorted(repetitions, key=lambda r: r.start):
+        if out and rep.start < out[-1].stop:
+            last = out[-1]
+            bounds = np.vstack([last.phase_bounds_s.reshape(-1, 2), rep.phase_bounds_s.reshape(-1, 2)])
+            out[-1] = Repetition(last.index, last.start, max(last.stop, rep.stop), bounds)
+            groups[-1].append(rep.index)
+        else:
+            out.append(rep)
+            groups.append([rep.index])
+    return out, [g for g in groups if len(g) > 1]
+
+
 def trial_waypoints(
     anthropometrics: Mapping[str, Any] | None,
     t_s: np.ndarray,
@@ -509,12 +536,17 @@ def reconstruct_repetitions(
     params: TrajectoryParams = TrajectoryParams(),
     reference_params: R2GReferenceParams = DEFAULT_REFERENCE,
     info: dict[str, Any] | None = None,
+    baseline: bool = False,
 ) -> dict[str, np.ndarray]:
     """Every method on every repetition: {method: (N, 3) m relative to each repetition's start, NaN outside}.
 
     orientation: (N, 4) w,x,y,z sensor-to-frame-of-``acc_mps2`` quaternions; enables ``zupt_bias`` and the
     rotating-bias compensation of the optimisation's initial estimate. ``info``, when given, receives the
-    estimated bias (m/s^2), the waypoints and the per-repetition heading corrections.
+    estimated bias (m/s^2), the waypoints, the per-repetition heading corrections and ``checks``: per method
+    the verdict of :func:`imulog.process.trajectory_checks.assess` on its assumptions. A rotating-bias estimate
+    outside the sensor's physical range (``params.checks``) is refused: ``zupt_bias`` is then ZUPT and the
+    optimisation starts from ZUPT. ``baseline``: also return :data:`BASELINE` (linear velocity de-drift
+    between each window's first and last sample), the figure every method must beat.
     """
     t = np.asarray(t_s, dtype=np.float64)
     a = np.asarray(acc_mps2, dtype=np.float64)
@@ -522,12 +554,14 @@ def reconstruct_repetitions(
     methods = [m for m in methods if m != "zupt_bias" or orientation is not None]
     out = {m: np.full((len(t), 3), np.nan) for m in methods}
     a_comp = None
+    bias: dict[str, Any] | None = None
     if orientation is not None and any(m in ("zupt_bias", "optimized") for m in methods):
         rot = quat_to_matrix(orientation)
         errors = estimate_rotating_bias(a, rot, t, static, params.rotating_bias)
-        a_comp = compensate_rotating_bias(a, rot, t, static, errors, params.rotating_bias)
+        bias = bias_check(errors.as_dict(), params.checks)
+        a_comp = compensate_rotating_bias(a, rot, t, static, errors, params.rotating_bias) if bias["ok"] else None
         if info is not None:
-            info["accelerometer_errors"] = errors.as_dict()
+            info["accelerometer_errors"] = {**errors.as_dict(), "applied": bool(bias["ok"])}
     if "optimized" in methods and waypoints is None:
         base = a if a_comp is None else a_comp
         z = np.full((len(t), 3), np.nan)
@@ -552,6 +586,9 @@ def reconstruct_repetitions(
                 info["sigma_data_static_m"] = list(sig)
         if info is not None:
             info["optimized_fallback"] = [repetitions[i].index for i in sorted(fallback)]
+    if baseline:
+        methods = [*methods, BASELINE]
+        out[BASELINE] = np.full((len(t), 3), np.nan)
     for i, rep in enumerate(repetitions):
         sl = slice(rep.start, rep.stop)
         for m in methods:
@@ -568,7 +605,12 @@ def reconstruct_repetitions(
                 static[sl],
                 phase_bounds_s=rep.phase_bounds_s,
                 waypoints=waypoints,
-                acc_compensated_mps2=None if a_comp is None else a_comp[sl],
+                # a refused (unphysical) estimate: zupt_bias is ZUPT on the uncompensated acceleration
+                acc_compensated_mps2=a_comp[sl] if a_comp is not None else a[sl] if bias is not None else None,
                 params=params,
             )
+    if info is not None:
+        from imulog.process.trajectory_checks import method_checks
+
+        info["checks"] = method_checks(t, a, a_comp, static, repetitions, out, params, bias)
     return out

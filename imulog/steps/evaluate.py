@@ -16,8 +16,16 @@ from typing import Any
 
 import numpy as np
 
-from imulog.process.evaluation import METRICS, aggregate, format_table, summarize, trajectory_errors
-from imulog.process.trajectory_opt import METHODS
+from imulog.process.evaluation import (
+    AXES,
+    METRICS,
+    aggregate,
+    format_robust,
+    format_table,
+    summarize,
+    trajectory_errors,
+)
+from imulog.process.trajectory_opt import BASELINE, METHODS
 
 STEP = "evaluate"
 POSE_TOPIC = "/derived/vicon/cluster_pose"
@@ -51,8 +59,12 @@ def compute_evaluation(
     reference_topic: str,
     windows: list[dict[str, Any]] | None = None,
     max_gap_s: float = 0.05,
+    baseline: str | None = None,
 ) -> dict[str, Any]:
-    """The ``imulog.evaluation`` record from {method: (t_ns, (N, 3) m)} and the reference (t_ns, (M, 3) m)."""
+    """The ``imulog.evaluation`` record from {method: (t_ns, (N, 3) m)} and the reference (t_ns, (M, 3) m).
+
+    Per method also ``exceeds_motion`` (windows whose 3D RMS error exceeds the reference's reach) and, with
+    ``baseline`` (a key of ``trajectories``: the de-drift baseline), ``beats_baseline`` per axis (mean MAE)."""
     per_method: dict[str, list[dict[str, Any]]] = {}
     for method, (t_ns, pos) in trajectories.items():
         t_ns = np.asarray(t_ns, dtype=np.int64)
@@ -70,19 +82,78 @@ def compute_evaluation(
             r["repetition"] = int(w.get("index", -1))
             rows.append(r)
         per_method[method] = rows
+    methods = {m: {"summary": summarize(rows), "repetitions": rows} for m, rows in per_method.items()}
+    for rec in methods.values():  # windows where the error is larger than the motion itself (issue 32)
+        rec["exceeds_motion"] = [int(r["repetition"]) for r in rec["repetitions"] if r.get("exceeds_motion")]
+    if baseline and baseline in methods:
+        base = methods[baseline]["summary"]
+        for m, rec in methods.items():
+            if m != baseline:
+                rec["beats_baseline"] = {
+                    a: bool(rec["summary"][a]["mae_cm"]["mean"] < base[a]["mae_cm"]["mean"]) for a in AXES
+                }
     return {
         "reference": reference_topic,
         "metrics": list(METRICS),
-        "units": {"mae_cm": "cm", "rom_pct": "%", "rmse_cm": "cm", "final_cm": "cm", "spearman": "1"},
-        "methods": {m: {"summary": summarize(rows), "repetitions": rows} for m, rows in per_method.items()},
+        "units": {
+            "mae_cm": "cm",
+            "rom_pct": "%",
+            "rmse_cm": "cm",
+            "final_cm": "cm",
+            "spearman": "1",
+            "median_cm": "cm",
+            "p90_cm": "cm",
+            "rom_cm": "cm",
+        },
+        **({"baseline": baseline} if baseline and baseline in methods else {}),
+        "methods": methods,
     }
+
+
+def _order(methods: dict[str, Any]) -> list[str]:
+    return sorted(methods, key=lambda m: (METHODS.index(m) if m in METHODS else len(METHODS), m))
 
 
 def table_from_record(record: dict[str, Any]) -> str:
     """Table 3.1-shaped text (method x axis, mean±std) from an ``imulog.evaluation`` record."""
     methods = record.get("methods", {})
-    order = sorted(methods, key=lambda m: (METHODS.index(m) if m in METHODS else len(METHODS), m))
-    return format_table(aggregate({m: methods[m]["repetitions"] for m in order}))
+    return format_table(aggregate({m: methods[m]["repetitions"] for m in _order(methods)}))
+
+
+def robust_from_record(record: dict[str, Any]) -> str:
+    """The robust table (median, 90th percentile, ROM per window, windows with error > motion, beats the
+    baseline) from an ``imulog.evaluation`` record; empty for records of an older imulog."""
+    methods = record.get("methods", {})
+    rows = {m: methods[m]["repetitions"] for m in _order(methods)}
+    if not rows or not all("median_cm" in r.get("x", {}) for v in rows.values() for r in v):
+        return ""
+    exceeding = {m: (len(methods[m].get("exceeds_motion") or []), len(rows[m])) for m in rows}
+    return format_robust(aggregate(rows), exceeding, record.get("baseline"))
+
+
+def warning_lines(record: dict[str, Any]) -> list[str]:
+    """One line per method whose assumptions failed (from its channel) or whose error exceeds the motion in
+    some windows, and per method that does not beat the baseline on any axis."""
+    lines = []
+    base = record.get("baseline")
+    for m in _order(record.get("methods", {})):
+        rec = record["methods"][m]
+        why = rec.get("assumptions_why")
+        if why:
+            lines.append(f"{m}: assumptions fail: {why}")
+        bad = rec.get("exceeds_motion") or []
+        if bad:
+            n = len(rec.get("repetitions") or [])
+            lines.append(f"{m}: the error exceeds the motion itself in {len(bad)} of {n} windows ({_list(bad)})")
+        beats = rec.get("beats_baseline")
+        if beats is not None and not any(beats.values()):
+            lines.append(f"{m}: no better than the {base} baseline on any axis")
+    return lines
+
+
+def _list(values: list[int], most: int = 8) -> str:
+    text = ", ".join(map(str, values[:most]))
+    return text + (f", ... ({len(values) - most} more)" if len(values) > most else "")
 
 
 def reference_source(trial, topics: list[str]) -> str:
@@ -167,18 +238,31 @@ def run_evaluate(path, *, methods: list[str] | None = None, max_gap_s: float = 0
     missing = sorted(set(methods or []) - set(available))
     if missing:
         raise ValueError(f"no trajectory for method(s) {', '.join(missing)} (available: {', '.join(available)})")
+    baseline_topic = f"/derived/trajectory_baseline/{BASELINE}"
     inputs = [f"/derived/trajectory/{m}" for m in chosen] + [ref_topic.split(":")[0]]
+    inputs += [baseline_topic] if baseline_topic in topics else []
     holder: dict[str, Any] = {}
 
     def compute(trial) -> StepResult:
         ref_name, ref = ref_topic, read_reference(trial, ref_topic)
-        trajs = {}
+        trajs, checks = {}, {}
         for m in chosen:
             s = trial.read(f"/derived/trajectory/{m}")
             trajs[m] = (s.t_ns, s.values)
+            checks[m] = trial.channel(f"/derived/trajectory/{m}").metadata
+        if baseline_topic in topics:  # the de-drift baseline every method must beat
+            s = trial.read(baseline_topic)
+            trajs[BASELINE] = (s.t_ns, s.values)
         info = trial.metadata.get("imulog.trajectory", {})
         reps = info.get("repetitions")
-        record = compute_evaluation(trajs, ref, reference_topic=ref_name, windows=reps, max_gap_s=max_gap_s)
+        record = compute_evaluation(
+            trajs, ref, reference_topic=ref_name, windows=reps, max_gap_s=max_gap_s, baseline=BASELINE
+        )
+        for m, meta in checks.items():  # the trajectory step's verdict on each method's assumptions
+            if meta.get("assumptions"):
+                record["methods"][m]["assumptions"] = meta["assumptions"]
+            if meta.get("assumptions") == "failed":
+                record["methods"][m]["assumptions_why"] = meta.get("assumptions_why", "")
         record["alignment"] = alignment_note(alignment)
         holder["record"] = record
         return StepResult(streams=[], metadata={"imulog.evaluation": record})

@@ -32,12 +32,16 @@ from imulog.process import quaternion as quat
 from imulog.process.gaps import GapParams, prepare, runs_of
 from imulog.process.integration import rest_anchored_orientation
 from imulog.process.minjerk import R2GReferenceParams, r2g_waypoints_from_anthropometrics
+from imulog.process.rests import rest_report, true_rests
+from imulog.process.trajectory_checks import check_attrs
 from imulog.process.trajectory_opt import (
+    BASELINE,
     DEFAULT_PARAMS,
     DEFAULT_REFERENCE,
     METHODS,
     Repetition,
     TrajectoryParams,
+    merge_overlapping,
     reconstruct_repetitions,
     repetition_windows,
 )
@@ -45,6 +49,7 @@ from imulog.steps.common import alignment_for, pick_imu
 
 STEP = "trajectory"
 TRAJECTORY_TOPIC = "/derived/trajectory/{method}"
+BASELINE_TOPIC = "/derived/trajectory_baseline/{method}"  # what every method must beat (imulog evaluate)
 NEEDS_STATIC = {"zupt", "kalman", "zupt_bias", "optimized"}
 
 
@@ -118,8 +123,15 @@ def compute_trajectories(
     frame, clock = f"{imu}_global", "device"
     q_world = None if orientation is None else _sample_onto(orientation[0], np.asarray(orientation[1], float), t_dev)
     orientation_used = "filter" if q_world is not None else None
+    rest_info: dict[str, Any] = {}
+    if static is not None:  # velocity resets only at true rests: the accelerometer must agree (issue 32)
+        given = _sample_onto(np.asarray(static[0], np.int64), np.asarray(static[1]).reshape(-1) > 0.5, t_dev)
+        rate = (len(t_dev) - 1) / max((t_dev[-1] - t_dev[0]) / 1e9, 1e-9)
+        rest_mask = true_rests(given, acc, rate, params.rests)
+        rest_info = rest_report(given, rest_mask, rate)
+        static = (t_dev, rest_mask)
     if q_world is not None and gyr is not None and params.anchor.enabled and static is not None:
-        rest = _sample_onto(np.asarray(static[0], np.int64), np.asarray(static[1]).reshape(-1) > 0.5, t_dev)
+        rest = static[1]
         w = _sample_onto(np.asarray(gyr[0], np.int64), np.asarray(gyr[1], float), t_dev)
         q_anchored = rest_anchored_orientation(q_world, w, (t_dev - t_dev[0]) / 1e9, rest, params.anchor)
         g_up = np.array([0.0, 0.0, 9.81])  # (any g: the correction rotations are small, its error ~1e-4 m/s^2)
@@ -154,7 +166,10 @@ def compute_trajectories(
                 phases.task_index,
             )
         reps = repetition_windows(t_s, phase_bounds_by_repetition(t_ph, int(t_ref[0])), mask)
-    info: dict[str, Any] = {}
+    info: dict[str, Any] = {"rests": rest_info} if rest_info else {}
+    reps, merged = merge_overlapping(reps)
+    if merged:  # movements without a true rest between them are one window (one velocity reset each side)
+        info["merged_repetitions"] = merged
     if not reps:  # no phases: the whole recording, or each valid run when long gaps split it
         runs = runs_of(~unknown) if unknown.any() else [(0, len(t_s))]
         reps = [Repetition(index=-1, start=a, stop=b, phase_bounds_s=np.zeros((0, 2))) for a, b in runs]
@@ -195,25 +210,32 @@ def compute_trajectories(
         params=params,
         reference_params=reference_params,
         info=info,
+        baseline=True,
     )
     streams = []
+    checks = info.get("checks", {})
     for m, pos in recon.items():
         rows = np.all(np.isfinite(pos), axis=1)
         if not np.any(rows):
             continue
+        check = checks.get(m, {})
         streams.append(
             SignalStream(
-                topic=TRAJECTORY_TOPIC.format(method=m),
+                topic=(BASELINE_TOPIC if m == BASELINE else TRAJECTORY_TOPIC).format(method=m),
                 t_ns=t_ref[rows],
                 columns=["x", "y", "z"],
                 units=["m", "m", "m"],
                 values=pos[rows],
                 frame_id=frame,
+                attrs=check_attrs(check),
             )
         )
     record = {
         "imu": f"/imu/{imu}",
-        "methods": [s.topic.rsplit("/", 1)[1] for s in streams],
+        "methods": [
+            s.topic.rsplit("/", 1)[1] for s in streams if s.topic.startswith(TRAJECTORY_TOPIC.format(method=""))
+        ],
+        "baseline": BASELINE,
         "clock": clock,
         "frame": frame,
         "origin": "repetition_start",
@@ -325,6 +347,25 @@ def _remove_stale(path, written: list[str]) -> None:
             stale,
             run={"step": "remove", "algorithm": f"stale outputs of step {STEP}", "params": {}, "inputs": []},
         )
+
+
+def check_lines(record: dict[str, Any]) -> list[str]:
+    """Lines for ``process trajectory``: what the accelerometer removed from the rests, then one line per
+    method whose assumptions fail (``imulog.trajectory["checks"]``), with what would work instead."""
+    from imulog.process.trajectory_checks import format_check
+
+    lines = []
+    rests = record.get("rests") or {}
+    if rests.get("static_runs_not_rests"):
+        lines.append(
+            f"rests: {rests['static_runs_not_rests']} of {rests['static_runs']} still-gyroscope intervals are not "
+            f"rests (the accelerometer moves): {rests['rest_s']:g} of {rests['static_s']:g} s kept for velocity resets"
+        )
+    for method, check in (record.get("checks") or {}).items():
+        line = format_check(method, check)
+        if line:
+            lines.append(f"assumption failed: {line}")
+    return lines
 
 
 def phase_quality_summary(evaluation: dict[str, Any], timing: dict[str, Any], low: float = 0.5) -> dict[str, Any]:

@@ -364,10 +364,12 @@ class _Logger:
             if record.get("clock") == "device" and record.get("imu"):
                 starts = self.clocks.to_reference(str(record["imu"]), starts)
             world = anchor_repetitions(t_ref, world, starts, *self.reference)
-        colour = self.trajectory(s.topic, t_ref, world, f"IMU {method}")
+        check = (record.get("checks") or {}).get(method) or {}
+        flag = f" (assumptions failed: {', '.join(check.get('failed', []))})" if check.get("ok") is False else ""
+        colour = self.trajectory(s.topic, t_ref, world, f"IMU {method}{flag}")
         if self.reference is not None and in_world:
             error = position_error_cm(t_ref, world, *self.reference)
-            names = [f"|{method} − Vicon| (cm)"]
+            names = [f"|{method} − Vicon| (cm){flag}"]
             self.scalars(L.error_entity(s.topic, self.prefix), "error", s.topic, t_ref, error, names, [colour])
             finite = np.asarray(error, dtype=np.float64)
             finite = finite[np.isfinite(finite)]

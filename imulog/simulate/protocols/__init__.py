@@ -9,7 +9,7 @@ from __future__ import annotations
 import importlib
 from types import ModuleType
 
-PROTOCOL_NAMES = ("r2g", "slide", "nhpt", "adl")
+PROTOCOL_NAMES = ("r2g", "slide", "nhpt", "adl", "continuous")
 
 
 def get(name: str) -> ModuleType:

@@ -1,0 +1,173 @@
+"""True rests for velocity resets: the gyroscope's stillness confirmed by the accelerometer (issue 32).
+
+A segmentation's static mask comes from the angular rate: a hand that stops turning while it still translates
+(a chain pushed along a table, an arm sliding) looks static to it. A velocity reset there is wrong by the
+whole velocity of the translation. A sample is a *true rest* when, in addition, the gravity-free acceleration
+agrees, within a centred window of ``window_s``:
+
+* its variation is at the accelerometer's noise: the windowed standard deviation (3D, ``sqrt`` of the summed
+  per-axis variances) is below ``k_noise`` x the white-noise level (estimated from first differences) x
+  ``sqrt(3)``, and at least ``min_std_mps2`` (quantisation and tremor of a resting hand);
+* its mean is zero within ``max_mean_mps2``: the specific force equals gravity (a resting sensor measures
+  gravity only; a 1 deg tilt error of the orientation leaves 0.17 m/s^2).
+
+A constant-velocity translation has neither a variation nor a mean; hand motion does not keep one for long,
+and the window sees its start and end. All functions are pure numpy; accelerations in m/s^2, times in s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class RestParams:
+    """Parameters of :func:`true_rests`.
+
+    enabled: gate the static mask with the accelerometer (off: the mask as given).
+    window_s: centred window (s) over which the acceleration must stay still.
+    long_window_s: a second, longer centred window (s) cut to each candidate rest (None: off).
+    k_noise: allowed windowed standard deviation in units of the white-noise level (per axis).
+    min_std_mps2: floor of that threshold (m/s^2).
+    max_mean_mps2: largest windowed mean of the gravity-free acceleration (m/s^2) at a rest (None: off; the
+        residual gravity of an uncalibrated sensor reaches 0.5 m/s^2 at true rests).
+    short_max_mean_mps2: the same limit for candidate rests shorter than ``short_s`` (s) only (None: off): a
+        tenth of a second of nearly constant acceleration mid-movement is no rest (a foot's 0.3 s stance with
+        the residual gravity of a 6D filter during gait is not judged by it).
+    min_rest_s: rests shorter than this (s) are not rests.
+    """
+
+    enabled: bool = True
+    window_s: float = 0.25
+    long_window_s: float | None = 1.0
+    k_noise: float = 3.0
+    min_std_mps2: float = 0.06
+    max_mean_mps2: float | None = None
+    short_max_mean_mps2: float | None = 0.6
+    short_s: float = 0.2
+    min_rest_s: float = 0.0
+
+
+def white_noise_mps2(acc_mps2: np.ndarray) -> float:
+    """Per-axis white-noise standard deviation (m/s^2) from first differences (robust: median absolute
+    deviation / sqrt 2, median over axes); smooth motion hardly contributes at IMU rates."""
+    a = np.asarray(acc_mps2, dtype=np.float64).reshape(len(acc_mps2), -1)
+    d = np.diff(a, axis=0)
+    d = d[np.all(np.isfinite(d), axis=1)]
+    if len(d) < 3:
+        return 0.0
+    mad = np.median(np.abs(d - np.median(d, axis=0)), axis=0) * 1.4826
+    return float(np.median(mad) / np.sqrt(2.0))
+
+
+def _moving_mean(x: np.ndarray, w: int) -> np.ndarray:
+    """Centred moving mean of (N, D) over ``w`` samples (shrinking at the ends)."""
+    n = len(x)
+    c = np.vstack([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])
+    lo = np.clip(np.arange(n) - w // 2, 0, n)
+    hi = np.clip(np.arange(n) - w // 2 + w, 0, n)
+    return (c[hi] - c[lo]) / np.maximum(hi - lo, 1)[:, None]
+
+
+def _run_std(a: np.ndarray, mask: np.ndarray, w: int) -> np.ndarray:
+    """3D standard deviation of ``a`` (N, D) over a centred window of ``w`` samples cut to the True run of
+    ``mask`` that holds each sample (inf outside runs)."""
+    n = len(a)
+    out = np.full(n, np.inf)
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    c1 = np.vstack([np.zeros((1, a.shape[1])), np.cumsum(a, axis=0)])
+    c2 = np.vstack([np.zeros((1, a.shape[1])), np.cumsum(a**2, axis=0)])
+    for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True):
+        i = np.arange(s, e)
+        lo = np.clip(i - w // 2, s, e)
+        hi = np.clip(i - w // 2 + w, s, e)
+        k = np.maximum(hi - lo, 1)[:, None]
+        m = (c1[hi] - c1[lo]) / k
+        out[s:e] = np.sqrt(np.maximum((c2[hi] - c2[lo]) / k - m**2, 0.0).sum(axis=1))
+    return out
+
+
+def _short_and_accelerating(mean: np.ndarray, cand: np.ndarray, w: int, limit: float) -> np.ndarray:
+    """Samples of candidate runs shorter than ``w`` whose windowed mean acceleration exceeds ``limit`` (m/s^2)
+    anywhere in the run (the whole run is then no rest)."""
+    out = np.zeros(len(cand), dtype=bool)
+    d = np.diff(np.concatenate([[0], cand.astype(np.int8), [0]]))
+    norm = np.linalg.norm(mean, axis=1)
+    for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True):
+        if e - s < w and norm[s:e].max() > limit:
+            out[s:e] = True
+    return out
+
+
+def accelerometer_still(
+    acc_global_mps2: np.ndarray, rate_hz: float, params: RestParams = RestParams(), candidates: np.ndarray | None = None
+) -> np.ndarray:
+    """(N,) bool: the gravity-free acceleration (N, 3) m/s^2 is still (variation at noise, mean near zero)
+    within the centred window. NaN samples are never still."""
+    a = np.asarray(acc_global_mps2, dtype=np.float64).reshape(len(acc_global_mps2), -1)
+    ok = np.all(np.isfinite(a), axis=1)
+    a0 = np.where(ok[:, None], a, 0.0)
+    w = max(int(round(params.window_s * rate_hz)), 1)
+    mean = _moving_mean(a0, w)
+    var = np.maximum(_moving_mean(a0**2, w) - mean**2, 0.0).sum(axis=1)
+    sigma = white_noise_mps2(a[ok]) if ok.any() else 0.0
+    limit = max(params.k_noise * sigma * np.sqrt(a.shape[1]), params.min_std_mps2)
+    still = np.sqrt(var) <= limit
+    if params.max_mean_mps2 is not None:
+        still &= np.linalg.norm(mean, axis=1) <= params.max_mean_mps2
+    still &= _moving_mean((~ok).astype(float)[:, None], w)[:, 0] == 0
+    # every sample of a still window is still (the centred test alone would cut w/2 off each end of a rest)
+    still = _moving_mean(still.astype(float)[:, None], w)[:, 0] > 0
+    if params.long_window_s and candidates is not None:
+        # a slow translation (a glide while the wrist stops turning) varies little within window_s but much
+        # within a second; the longer window is cut to each candidate rest, so short rests (a foot's stance,
+        # a 0.3 s pause) are judged on their own samples
+        cand = np.asarray(candidates, dtype=bool)
+        wl = max(int(round(params.long_window_s * rate_hz)), 1)
+        still &= cand & (_run_std(a0, cand & ok, wl) <= limit)
+        if params.short_max_mean_mps2 is not None:
+            # a very short candidate is judged on few samples: a tenth of a second of nearly constant
+            # acceleration mid-movement passes the variation tests, so it must also be near zero
+            ws = max(int(round(params.short_s * rate_hz)), 1)
+            still &= ~_short_and_accelerating(mean, cand, ws, params.short_max_mean_mps2)
+    return still
+
+
+def _drop_short(mask: np.ndarray, min_samples: int) -> np.ndarray:
+    out = mask.copy()
+    if min_samples <= 1 or not out.any():
+        return out
+    d = np.diff(np.concatenate([[0], out.astype(np.int8), [0]]))
+    for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True):
+        if e - s < min_samples:
+            out[s:e] = False
+    return out
+
+
+def true_rests(
+    static_mask: np.ndarray, acc_global_mps2: np.ndarray, rate_hz: float, params: RestParams = RestParams()
+) -> np.ndarray:
+    """The static mask (N,) bool restricted to samples where the accelerometer agrees
+    (:func:`accelerometer_still`), rests shorter than ``min_rest_s`` dropped."""
+    static = np.asarray(static_mask, dtype=bool)
+    if not params.enabled:
+        return static.copy()
+    rest = static & accelerometer_still(acc_global_mps2, rate_hz, params, candidates=static)
+    return _drop_short(rest, int(round(params.min_rest_s * rate_hz)))
+
+
+def rest_report(static_mask: np.ndarray, rests: np.ndarray, rate_hz: float) -> dict:
+    """What the accelerometer gate removed: static samples (s) before and after, and static runs that lost
+    every sample (a turning pause during translation)."""
+    s0, s1 = np.asarray(static_mask, bool), np.asarray(rests, bool)
+    d = np.diff(np.concatenate([[0], s0.astype(np.int8), [0]]))
+    runs = list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True))
+    lost = sum(1 for a, b in runs if not s1[a:b].any())
+    return {
+        "static_s": round(float(s0.sum() / rate_hz), 3),
+        "rest_s": round(float(s1.sum() / rate_hz), 3),
+        "static_runs": len(runs),
+        "static_runs_not_rests": int(lost),
+    }
