@@ -38,6 +38,9 @@ BUILTIN: dict[str, str] = {
     "actigraph": "converters.actigraph:CONVERTER",
     "actilife-csv": "converters.actilife_csv:CONVERTER",
     "xdf": "converters.xdf:CONVERTER",
+    "axivity-csv": "converters.axivity_csv:CONVERTER",
+    "movella-dot": "converters.movella_dot:CONVERTER",
+    "empatica-e4": "converters.empatica_e4:CONVERTER",
 }
 MIN_CONFIDENCE = 0.3
 

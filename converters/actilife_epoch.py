@@ -1,0 +1,176 @@
+"""ActiLife epoch (activity count) CSV exports: counts per epoch and axis, steps, lux, inclinometer.
+
+Same 10-line banner as the raw export (see :mod:`converters.actilife_csv`) with ``Epoch Period (hh:mm:ss)``
+other than ``00:00:00`` and no ``at N Hz``. Then, as ActiLife writes it (and GGIRread's ``readActiGraphCount``
+reads it), either a names row::
+
+    Date,Time,Axis1,Axis2,Axis3,Steps,Lux,Inclinometer Off,Inclinometer Standing,Inclinometer Sitting,
+    Inclinometer Lying,Vector Magnitude
+
+(``Date``/``Time`` optional, any subset of the rest) or no names row, the columns then being in ActiLife's fixed
+order ``Axis1, Axis2, Axis3, Steps, Lux, Inclinometer Off, Standing, Sitting, Lying`` (as many as there are).
+Axis1 is the vertical axis (the device's Y), Axis2 horizontal (X), Axis3 perpendicular (Z).
+
+Each row is one epoch: it becomes one sample of the signal stream ``/signals/<serial>_counts`` at the epoch's
+start (``Start Date``/``Start Time`` + row x epoch, or the row's ``Date``/``Time``), with the epoch length in the
+device metadata (``epoch_s``). Counts are ActiGraph's device-specific activity counts (unit ``counts``), steps
+``steps``, lux ``lx``, inclinometer columns ``s`` of the epoch in that posture (ActiLife writes seconds).
+"""
+
+from __future__ import annotations
+
+import re
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+
+from converters._binary import UNKNOWN_ZONE
+from converters._common import TableSpec, read_numeric, sanitize_name
+from converters.errors import ConversionError
+from imulog.model import Recording, SignalStream
+
+BANNER_LINES = 10
+ORDER = (
+    "Axis1",
+    "Axis2",
+    "Axis3",
+    "Steps",
+    "Lux",
+    "Inclinometer Off",
+    "Inclinometer Standing",
+    "Inclinometer Sitting",
+    "Inclinometer Lying",
+)
+UNITS = {"axis1": "counts", "axis2": "counts", "axis3": "counts", "vector_magnitude": "counts", "vm": "counts"}
+UNITS |= {"steps": "steps", "lux": "lx", "activity": "counts"}
+TIME_NAMES = {"date", "time", "timestamp"}
+
+
+def epoch_seconds(text: str) -> float:
+    """``00:00:15`` -> 15.0 (s)."""
+    h, m, s = (int(p) for p in text.split(":"))
+    return float(h * 3600 + m * 60 + s)
+
+
+def _unit(column: str) -> str:
+    key = sanitize_name(column)
+    if key.startswith("inclinometer"):
+        return "s"
+    return UNITS.get(key, "")
+
+
+def _is_names_row(cells: list[str]) -> bool:
+    return any(re.search(r"[A-Za-z]", c) for c in cells)
+
+
+def _parse_dates(path: Path, date: list[str], time: list[str] | None, fmt: str, first_line: int) -> np.ndarray:
+    """Date (banner ``date format``) and time cells -> datetime64[ns] per row."""
+    import pandas as pd
+
+    py_fmt = fmt.replace("yyyy", "%Y").replace("MM", "%m").replace("M", "%m").replace("dd", "%d").replace("d", "%d")
+    text = pd.Series(date) if time is None else pd.Series(date) + " " + pd.Series(time)
+    for f in (f"{py_fmt} %H:%M:%S", "ISO8601") if time is not None else ("ISO8601",):
+        parsed = pd.to_datetime(text, format=f, errors="coerce")
+        if not parsed.isna().any():
+            return parsed.to_numpy().astype("datetime64[ns]")
+    bad = int(np.nonzero(pd.to_datetime(text, format="mixed", errors="coerce").isna().to_numpy())[0][0])
+    raise ConversionError(
+        path, f"{text.iloc[bad][:30]!r} is not a date/time in format {fmt}", line=first_line + bad, column="Date"
+    )
+
+
+def read_epoch_csv(path: Path, lines: list[str], banner: dict, options: object = None) -> Recording:
+    """An ActiLife epoch CSV (``banner`` from :func:`converters.actilife_csv.parse_banner`) as epoch signals."""
+    import pandas as pd
+
+    epoch_s = epoch_seconds(banner["epoch"])
+    if epoch_s <= 0:
+        raise ConversionError(path, f"Epoch Period {banner['epoch']} is not an epoch length", line=5)
+    if len(lines) <= BANNER_LINES:
+        raise ConversionError(path, "no epochs after the banner", line=BANNER_LINES + 1)
+    first = [c.strip().strip('"').strip() for c in lines[BANNER_LINES].split(",")]
+    while first and not first[-1]:
+        first.pop()
+    has_names = _is_names_row(first)
+    skip = BANNER_LINES + (1 if has_names else 0)
+    if has_names:
+        names = first
+    else:
+        if len(first) > len(ORDER):
+            raise ConversionError(
+                path,
+                f"{len(first)} columns without a names row: ActiLife's order names only {len(ORDER)} "
+                "(export with column headers, or pass a mapping file)",
+                line=BANNER_LINES + 1,
+            )
+        names = list(ORDER[: len(first)])
+    lower = [n.lower() for n in names]
+    time_idx = [i for i, n in enumerate(lower) if n in TIME_NAMES]
+    value_idx = [i for i in range(len(names)) if i not in time_idx]
+    if not value_idx:
+        raise ConversionError(path, "names row has no count columns", line=BANNER_LINES + 1)
+    spec = TableSpec(path=path, delimiter=",", skip_lines=skip, names=names, ignore=set(time_idx))
+    values = read_numeric(spec)
+    if values.ndim == 1:
+        values = values[:, None]
+    n = len(values)
+    if n == 0:
+        raise ConversionError(path, "no epochs after the banner", line=skip + 1)
+    start = np.datetime64(banner["start"], "ns")
+    if time_idx:
+        cells = pd.read_csv(
+            path, skiprows=skip, header=None, usecols=time_idx, nrows=n, dtype=str, engine="c", skipinitialspace=True
+        )
+        by_name = {lower[i]: cells[i].str.strip().tolist() for i in time_idx}
+        if "timestamp" in by_name:
+            stamps = _parse_dates(path, by_name["timestamp"], None, banner["date_format"], skip + 1)
+        elif "date" in by_name:
+            stamps = _parse_dates(path, by_name["date"], by_name.get("time"), banner["date_format"], skip + 1)
+        else:
+            raise ConversionError(path, "a 'Time' column without a 'Date' column", line=skip)
+        t_ns = (stamps - start).astype(np.int64)
+        d = np.diff(t_ns)
+        if len(d) and (d <= 0).any():
+            i = int(np.nonzero(d <= 0)[0][0]) + 1
+            raise ConversionError(path, "epoch time does not increase", line=skip + 1 + i, column="Date")
+        if len(d) and not np.allclose(d, epoch_s * 1e9):
+            spec.warnings.append(
+                f"{path.name}: epoch times are not {epoch_s:g} s apart everywhere (gaps or a changed epoch)"
+            )
+    else:
+        t_ns = np.arange(n, dtype=np.int64) * np.int64(round(epoch_s * 1e9))
+    serial = banner["serial"]
+    name = sanitize_name(f"{serial}_counts")
+    columns = [sanitize_name(names[i]) for i in value_idx]
+    meta = {
+        "format": "actilife-csv (epoch counts)",
+        "model": banner["device"],
+        "serial": serial,
+        "epoch_s": epoch_s,
+        "columns": dict(zip(columns, [names[i] for i in value_idx], strict=True)),
+        "column_source": "names row" if has_names else "no names row: ActiLife's column order " + ", ".join(ORDER),
+        "time_base": "ns from start_time (banner Start Date/Time, device local time); one sample per epoch start",
+        "source": path.name,
+    }
+    warnings = list(spec.warnings)
+    if not has_names:
+        warnings.append(
+            f"{path.name}: no names row; {len(names)} columns taken in ActiLife's order ({', '.join(names)})"
+        )
+    rec = Recording(sources=[str(path)], warnings=warnings)
+    rec.signals.append(
+        SignalStream(
+            topic=f"/signals/{name}",
+            t_ns=t_ns,
+            columns=columns,
+            units=[_unit(names[i]) for i in value_idx],
+            values=values[:, value_idx],
+        )
+    )
+    rec.metadata[f"imulog.device.{name}"] = meta
+    rec.metadata["imulog.trial"] = {
+        "start_time": datetime.fromisoformat(str(banner["start"])).isoformat(timespec="milliseconds"),
+        "time_zone": UNKNOWN_ZONE,
+    }
+    return rec
