@@ -105,6 +105,13 @@ def read_epoch_csv(path: Path, lines: list[str], banner: dict, options: object =
                 line=BANNER_LINES + 1,
             )
         names = list(ORDER[: len(first)])
+    if any(n.lower().startswith(("accelerometer", "gyroscope")) for n in names):
+        raise ConversionError(
+            path,
+            f"epoch export (Epoch Period {banner['epoch']}) whose names row holds raw sample columns "
+            f"({names[0]}, ...): banner and data disagree; a raw export has Epoch Period 00:00:00",
+            line=5,
+        )
     lower = [n.lower() for n in names]
     time_idx = [i for i, n in enumerate(lower) if n in TIME_NAMES]
     value_idx = [i for i in range(len(names)) if i not in time_idx]

@@ -51,6 +51,7 @@ from converters.errors import ConversionError
 from converters.mapping import Mapping, load_mapping, sibling_mapping
 from imulog.model import ImuStream, Recording, SignalStream
 
+_SHIMMER_DEVICE = re.compile(r"^(Shimmer_[0-9A-Za-z]+)_")
 _SEP_LINE = re.compile(r'^\s*"?sep=(.)"?\s*$')
 _UNIT_IN_NAME = re.compile(r"^(.*?)\s*[\(\[]\s*([^\)\]]*)\s*[\)\]]\s*$")
 _COMPACT = re.compile(r"^(acc|accel|gyr|gyro|mag|a|g|m)([xyz])$")  # accx, gyroz; ax, gy, mz
@@ -180,12 +181,14 @@ def analyse_header(
     default_units: dict[str, str] | None = None,
     device_name: str = "imu",
     units: dict[str, str] | None = None,
+    raw: set[int] | None = None,
 ) -> Layout:
     """Find delimiter, header rows, units and the role of every column; ConversionError on problems.
 
     ``units``: the user's unit per quantity (``--unit gyr=deg/s``), replacing the header's. Columns whose unit
     the header does not give get unit :data:`INFER`; bare ``X``/``Y``/``Z`` columns without a quantity word get
-    quantity ``auto``: both are resolved from the values by :func:`resolve_inferred`.
+    quantity ``auto``: both are resolved from the values by :func:`resolve_inferred`. ``raw``: indexes of
+    uncalibrated columns (ADC counts, e.g. Shimmer ``RAW``): kept as found in the signals, never as IMU data.
     """
     overrides = dict(units or {})
     idx = 0
@@ -258,7 +261,6 @@ def analyse_header(
     if time_col is not None and time_col not in seen:
         raise ConversionError(path, f"time column {time_col!r} of the mapping file is not in the header")
 
-    shimmer = re.match(r"^(Shimmer_[0-9A-Za-z]+)_", names[min(1, ncols - 1)] if ncols else "")
     have_time = False
     for i, full in enumerate(full_names):
         name = names[i]
@@ -267,8 +269,8 @@ def analyse_header(
         group_quantity = _group_quantity(group)
         if groups_row is not None and group.lower() not in ("", "sensor") and group_quantity is None:
             col.device = sanitize_name(group)
-        elif shimmer and name.startswith(shimmer.group(1)) and not (mapping and mapping.device.get("name")):
-            col.device = sanitize_name(shimmer.group(1))
+        elif (shimmer := _SHIMMER_DEVICE.match(name)) and not (mapping and mapping.device.get("name")):
+            col.device = sanitize_name(shimmer.group(1))  # per column: a Consensys file may hold several Shimmers
         header_unit = units_row[i] if units_row else ""
         base = name
         m_unit = _UNIT_IN_NAME.match(name)
@@ -276,6 +278,8 @@ def analyse_header(
             base, header_unit = m_unit.group(1), m_unit.group(2)
         if not full:
             col.quantity = "ignore"
+        elif raw and i in raw:
+            col.quantity, col.unit = "extra", header_unit or "counts"
         elif full in mapped:
             cm = mapped[full]
             col.quantity, col.axis, col.unit = cm.quantity, cm.axis, cm.unit
@@ -508,14 +512,17 @@ def _plan(
     device_meta: dict[str, Any] | None,
     fmt: str,
     units: dict[str, str] | None,
+    header_lines: list[str] | None = None,
+    raw: set[int] | None = None,
 ) -> _Plan:
-    lines = head_lines(path, head)  # empty or binary files are refused before the whole file is read
+    # empty or binary files are refused before the whole file is read
+    lines = header_lines if header_lines is not None else head_lines(path, head)
     device_meta = dict(device_meta or {})
     if mapping is not None:
         device_meta.update(mapping.device)
     device_name = sanitize_name(str(device_meta.get("name", "imu")))
     layout = analyse_header(
-        path, lines, mapping=mapping, default_units=default_units, device_name=device_name, units=units
+        path, lines, mapping=mapping, default_units=default_units, device_name=device_name, units=units, raw=raw
     )
     first = _first_data_cells(path, lines, layout)
     ignore = {c.index for c in layout.columns if c.quantity == "ignore"}
@@ -620,12 +627,15 @@ def read_delimited(
     fmt: str = "delimited",
     head: bytes | None = None,
     units: dict[str, str] | None = None,
+    header_lines: list[str] | None = None,
+    raw: set[int] | None = None,
 ) -> Recording:
     """Read one delimited IMU text file into a Recording (see module docstring).
 
     Empty or NaN cells in IMU columns are gaps (NaN in the stream); ``units`` replaces the header's unit per
     quantity (``{"gyr": "deg/s"}``); units the header does not give are inferred from the values and said in
-    ``Recording.warnings``.
+    ``Recording.warnings``. ``header_lines``: the file's first lines as a format reader normalised them (same
+    number of lines, e.g. Shimmer's four header rows as a names and a units row); ``raw``: see :func:`analyse_header`.
     """
     path = Path(path)
     plan = _plan(
@@ -637,6 +647,8 @@ def read_delimited(
         device_meta=device_meta,
         fmt=fmt,
         units=units,
+        header_lines=header_lines,
+        raw=raw,
     )
     data = read_source(path)  # read once: parsed from memory, its SHA-256 computed from these bytes
     values = read_numeric(plan.spec, data)
@@ -649,7 +661,42 @@ def read_delimited(
     assumed.extend(resolve_inferred(path, plan.layout, values, t_ns, plan.units))
     warnings.extend(_units_warning(path, assumed))
     rate_meta = float(plan.rate) if plan.rate else estimate_rate_hz(t_ns)
-    return _recording(plan, values, t_ns, time_desc, rate_meta, warnings)
+    rec = _recording(plan, values, t_ns, time_desc, rate_meta, warnings)
+    start = unix_start(plan.layout, values, t_ns)
+    if start is not None:
+        rec.metadata["imulog.trial"] = start
+    return rec
+
+
+UNIX_S_RANGE = (9.0e8, 4.2e9)  # 1998 .. 2103: a first stamp in this range (s since 1970) is a Unix time
+
+
+def unix_start(layout: Layout, values: np.ndarray, t_ns: np.ndarray) -> dict[str, str] | None:
+    """``imulog.trial`` start (UTC) from a Unix time column (``Timestamp_Unix``, ``System_Timestamp``): the time
+    column itself when it is one (its first, fitted, stamp), else a Unix column beside the device's clock (its
+    first cell, the host time of the first sample). None when the file has no Unix time."""
+    from datetime import UTC, datetime
+
+    cols = [c for c in layout.columns if c.quantity == "time"] + [c for c in layout.columns if c.quantity == "extra"]
+    for c in cols:
+        tokens = _tokens(c.name)
+        is_unix = "unix" in tokens or ("system" in tokens and any(t.startswith("timestamp") for t in tokens))
+        if not is_unix or len(values) == 0:
+            continue
+        if c.quantity == "time":
+            first_s = float(t_ns[0]) / 1e9
+        else:
+            factor = unit_factor("time", c.unit or "ms") or 1e6
+            first_s = float(values[0, c.index]) * factor / 1e9
+        if not UNIX_S_RANGE[0] < first_s < UNIX_S_RANGE[1]:
+            continue
+        when = datetime.fromtimestamp(first_s, tz=UTC)
+        return {
+            "start_time": when.isoformat(timespec="milliseconds"),
+            "time_zone": "UTC",
+            "start_time_source": f"column {c.name!r} (Unix time of the first sample)",
+        }
+    return None
 
 
 #: bytes of text per piece when a large file is converted piece by piece (``iter_delimited``)

@@ -43,6 +43,8 @@ from imulog.model import ImuStream, Recording, SignalStream
 WRAP = 1 << 32  # SampleTimeFine counts microseconds in an unsigned 32-bit register
 FIRST = ("PacketCounter", "SampleTimeFine")
 _START = re.compile(r"(\d{4})-(\d{2})-(\d{2})_(\d{2}):(\d{2}):(\d{2})_(\d{3})(?:\s*GMT([+-]\d{1,2})(?::?(\d{2}))?)?")
+DOT_ONLY = {"Euler_X", "Quat_W", "dq_W", "dv_X"}
+_DOT_NAME = re.compile(r"^[^_]+_[0-9A-Fa-f]{12}_\d{8}_\d{6}$")
 UNITS = {"FreeAcc": "m/s^2", "Mag": "a.u.", "dq": "1", "dv": "m/s", "Euler": "deg", "Quat": "1"}
 
 
@@ -186,7 +188,18 @@ class MovellaDotConverter(Converter):
         lines = text_head_lines(head, 25)
         if not lines:
             return 0.0
-        return 0.95 if find_header(lines) else 0.0
+        found = find_header(lines)
+        if found is None:
+            return 0.0
+        row, banner = found
+        if banner:
+            return 0.95
+        # no banner: Xsens MT Manager files also start with PacketCounter,SampleTimeFine (in 10 kHz ticks); only
+        # DOT-only names (Euler_X, Quat_W, dq_W, dv_X) or a DOT file name (<tag>_<MAC>_<date>_<time>) tell them apart
+        names = {c.strip() for c in lines[row].split(",")}
+        if names & DOT_ONLY or _DOT_NAME.match(Path(path).stem):
+            return 0.85
+        return 0.0
 
     def recording_key(self, path: Path) -> str | None:
         return Path(path).name

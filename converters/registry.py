@@ -41,6 +41,8 @@ BUILTIN: dict[str, str] = {
     "axivity-csv": "converters.axivity_csv:CONVERTER",
     "movella-dot": "converters.movella_dot:CONVERTER",
     "empatica-e4": "converters.empatica_e4:CONVERTER",
+    "shimmer-csv": "converters.shimmer:CONVERTER",
+    "compressed": "converters.compressed:CONVERTER",
 }
 MIN_CONFIDENCE = 0.3
 
