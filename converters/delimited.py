@@ -46,6 +46,7 @@ from converters._common import (
     unit_factor,
     unit_overrides,
 )
+from converters._lab import orientation_stream
 from converters.base import Converter, ConvertOptions
 from converters.errors import ConversionError
 from converters.mapping import Mapping, load_mapping, sibling_mapping
@@ -167,6 +168,33 @@ def _span_labels(labels: list[str]) -> list[str]:
     return out
 
 
+_QUAT_AXES = {"w": "w", "x": "x", "y": "y", "z": "z", "qw": "w", "qx": "x", "qy": "y", "qz": "z"}
+_QUAT_AXES |= {"q0": "w", "q1": "x", "q2": "y", "q3": "z"}
+_ORIENTATION_WORDS = ("orientation", "quaternion", "quat", "rotation")
+
+
+def _orientation_group(label: str) -> bool:
+    """``Vicon Orientation`` / ``Reference quaternion``: a group of w, x, y, z quaternion columns."""
+    return any(t in _ORIENTATION_WORDS for t in _tokens(label))
+
+
+def _orientation_device(label: str) -> str:
+    """``Vicon Orientation`` -> ``vicon`` (the group label without the orientation word)."""
+    rest = [t for t in _tokens(label) if t not in _ORIENTATION_WORDS]
+    return sanitize_name("_".join(rest) or "reference")
+
+
+def _fit_width(row: list[str], data_cells: list[str]) -> list[str]:
+    """A header row fitted to the data rows' field count where only trailing delimiters differ: empty cells past
+    the data's last field are dropped, empty data fields past the header's last cell get an empty name."""
+    row = list(row)
+    while len(row) > len(data_cells) and row and not row[-1]:
+        row.pop()
+    while len(row) < len(data_cells) and not data_cells[len(row)]:
+        row.append("")
+    return row
+
+
 def detect_delimiter(line: str) -> str | None:
     counts = {d: line.count(d) for d in (",", ";", "\t")}
     best = max(counts, key=lambda d: counts[d])
@@ -225,17 +253,23 @@ def analyse_header(
         idx += 1
     if idx >= len(lines):
         raise ConversionError(path, "no data rows after the header", line=idx)
-    names = rows[0]
+    data_cells = split_row(lines[idx], delimiter)
+    names = _fit_width(rows[0], data_cells)
+    units_row = _fit_width(units_row, data_cells) if units_row is not None else None
+    groups_row = _fit_width(groups_row, data_cells) if groups_row is not None else None
     ncols = len(names)
     for other, what in ((units_row, "units row"), (groups_row, "sensor row")):
         if other is not None and len(other) != ncols:
             raise ConversionError(path, f"{what} has {len(other)} fields, names row has {ncols}", line=header_start + 1)
     layout = Layout(delimiter=delimiter, skip_lines=idx, names=[])
+    own_groups = list(groups_row) if groups_row is not None else None  # each group label where it is written
     if groups_row is not None:
         groups_row = _span_labels(groups_row)
     full_names: list[str] = []
     for i, name in enumerate(names):
         group = groups_row[i] if groups_row else ""
+        if not name and own_groups is not None and not own_groups[i]:
+            group = ""  # an empty cell under a spanned group label (a trailing delimiter): no column
         full = f"{group}/{name}" if group and name else (name or group)
         full_names.append(full)
     seen: dict[str, int] = {}
@@ -266,18 +300,24 @@ def analyse_header(
         name = names[i]
         group = groups_row[i] if groups_row else ""
         col = Column(index=i, name=full, device=device_name)
+        group_unit = ""
+        if (m_group := _UNIT_IN_NAME.match(group)) and name:  # `IMU Gyroscope (deg/s)`: the unit of its columns
+            group, group_unit = m_group.group(1), m_group.group(2)
         group_quantity = _group_quantity(group)
         if groups_row is not None and group.lower() not in ("", "sensor") and group_quantity is None:
             col.device = sanitize_name(group)
         elif (shimmer := _SHIMMER_DEVICE.match(name)) and not (mapping and mapping.device.get("name")):
             col.device = sanitize_name(shimmer.group(1))  # per column: a Consensys file may hold several Shimmers
-        header_unit = units_row[i] if units_row else ""
-        base = name
-        m_unit = _UNIT_IN_NAME.match(name)
+        header_unit = (units_row[i] if units_row else "") or group_unit
+        base = name or (own_groups[i] if own_groups is not None else "")  # `Time (s)` in the group row, no axis
+        m_unit = _UNIT_IN_NAME.match(base)
         if m_unit:
             base, header_unit = m_unit.group(1), m_unit.group(2)
         if not full:
             col.quantity = "ignore"
+        elif _orientation_group(group) and name.lower() in _QUAT_AXES and not (mapping and full in mapped):
+            col.quantity, col.axis = "quat", _QUAT_AXES[name.lower()]
+            col.device = _orientation_device(group)
         elif raw and i in raw:
             col.quantity, col.unit = "extra", header_unit or "counts"
         elif full in mapped:
@@ -858,7 +898,22 @@ def _recording(
         extra_cols: list[Column] = []
         chosen_variant: dict[str, str] = {}
         slots: dict[tuple[str, str | None], Column] = {}
+        quat = {c.axis: c for c in cols if c.quantity == "quat"}
+        if quat:
+            if set(quat) != set("wxyz"):
+                missing = ", ".join(a for a in "wxyz" if a not in quat)
+                raise ConversionError(path, f"orientation group {dev!r}: no quaternion column {missing}")
+            q = np.column_stack([values[:, quat[a].index] for a in "wxyz"])
+            rec.signals.append(orientation_stream(dev, t_ns, q, frame_id="reference"))
+            rec.metadata[f"imulog.device.{dev}"] = {
+                "format": fmt,
+                "kind": "reference orientation (quaternion w, x, y, z as exported)",
+                "orientation": {"topic": f"/orientation/{dev}", "columns": [quat[a].name for a in "wxyz"]},
+                "source": path.name,
+            }
         for c in cols:
+            if c.quantity == "quat":
+                continue
             if c.quantity in ("acc", "gyr", "mag", "temperature"):
                 v = chosen_variant.setdefault(c.quantity, c.variant)
                 if c.variant != v:
