@@ -113,6 +113,11 @@ def detect(path: Path) -> Converter:
         if s > score:
             best, score = conv, s
     if best is None or score < MIN_CONFIDENCE:
+        from converters.known_formats import recognise
+
+        named = recognise(path, head)
+        if named:
+            raise UnknownFormatError(path, f"{named} (see `imulog convert --list-formats`)")
         hint = ""
         if path.suffix.lower() in (".csv", ".tsv", ".txt"):
             hint = (
