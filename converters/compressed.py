@@ -130,7 +130,7 @@ def convert_compressed(path: Path, options: ConvertOptions | None = None) -> Rec
     """Convert the inner file of ``path`` with the converter its content names; sources = the compressed file."""
     from dataclasses import replace
 
-    from converters.registry import detect
+    from converters.registry import detect, get
 
     options = options or ConvertOptions()
     path = Path(path)
@@ -142,7 +142,9 @@ def convert_compressed(path: Path, options: ConvertOptions | None = None) -> Rec
         try:
             conv = detect(inner)
         except ConversionError as e:
-            raise ConversionError(path, f"inside: {e.problem}") from None
+            if options.mapping is None:
+                raise ConversionError(path, f"inside: {e.problem}") from None
+            conv = get("delimited")  # a mapping names the columns detection could not recognise
         try:
             rec = conv.convert(inner, options)
         except ConversionError as e:
