@@ -43,6 +43,7 @@ BUILTIN: dict[str, str] = {
     "empatica-e4": "converters.empatica_e4:CONVERTER",
     "shimmer-csv": "converters.shimmer:CONVERTER",
     "compressed": "converters.compressed:CONVERTER",
+    "opensignals": "converters.opensignals:CONVERTER",
 }
 MIN_CONFIDENCE = 0.3
 
