@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from converters._common import (
+    LENGTH_TO_M,
     NORMALISED_MAG_UNITS,
     SI_UNIT,
     UNIT_FACTORS,
@@ -48,9 +49,9 @@ from converters._common import (
 )
 from converters._lab import orientation_stream
 from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
+from converters.errors import ConversionError, excerpt
 from converters.mapping import Mapping, load_mapping, sibling_mapping
-from imulog.model import ImuStream, Recording, SignalStream
+from imulog.model import ImuStream, MarkerStream, Recording, SignalStream
 
 _SHIMMER_DEVICE = re.compile(r"^(Shimmer_[0-9A-Za-z]+)_")
 _SEP_LINE = re.compile(r'^\s*"?sep=(.)"?\s*$')
@@ -323,6 +324,16 @@ def analyse_header(
         elif full in mapped:
             cm = mapped[full]
             col.quantity, col.axis, col.unit = cm.quantity, cm.axis, cm.unit
+            if cm.sensor:
+                col.device = sanitize_name(cm.sensor)
+            if cm.quantity == "marker":
+                col.variant = str(cm.marker)
+                col.factor = LENGTH_TO_M[cm.unit]
+                col.device = sanitize_name(cm.sensor) if cm.sensor else "markers"
+                layout.columns.append(col)
+                continue
+        elif mapping is not None and mapping.unmapped == "ignore" and not (time_col is not None and full == time_col):
+            col.quantity = "ignore"
         elif time_col is not None and full == time_col:
             col.quantity, col.unit = "time", str(mapping.time_unit)
         elif groups_row is not None and i == 0 and group.lower() in ("", "sensor") and name.lower() in ("", "axis"):
@@ -371,7 +382,7 @@ def _check_infinite(path: Path, layout: Layout, values: np.ndarray, first_line: 
     if not np.isinf(values).any():  # one pass over the table; the column and line are found only when needed
         return
     for c in layout.columns:
-        if c.quantity in ("acc", "gyr", "mag", "temperature", "auto"):
+        if c.quantity in ("acc", "gyr", "mag", "temperature", "auto", "marker"):
             bad = np.isinf(values[:, c.index])
             if bad.any():
                 raise ConversionError(
@@ -421,6 +432,19 @@ def _triples(cols: list[Column]) -> list[list[Column]]:
     if current:
         out.append(current)
     return out
+
+
+def _axes_problem(dev: str, q: str, cols: list[Column]) -> str:
+    """A readable reason why ``cols`` are not one x, y, z triple (short even for a file of many sensors)."""
+    counts = {a: sum(1 for c in cols if c.axis == a) for a in "xyz"}
+    shown = ", ".join(repr(excerpt(c.name, 24)) for c in cols[:3]) + (", ..." if len(cols) > 3 else "")
+    what = f"{len(cols)} {q} columns ({counts['x']} x, {counts['y']} y, {counts['z']} z: {shown})"
+    if max(counts.values()) > 1:
+        return (
+            f"device {dev!r}: {what}: several sensors in one file; a mapping file names the sensor of each column "
+            '("sensor": "seg1", docs/converters.md)'
+        )
+    return f"device {dev!r}: {what}: {q} needs one x, one y and one z column"
 
 
 def resolve_inferred(
@@ -476,8 +500,7 @@ def resolve_inferred(
                 acc_raw.setdefault(c.device, np.zeros((len(values), 3)))[:, "xyz".index(c.axis)] = values[:, c.index]
         for dev, cols in groups.items():
             if sorted(c.axis or "" for c in cols) != ["x", "y", "z"]:
-                found = ", ".join(repr(c.name) for c in cols)
-                raise ConversionError(path, f"device {dev!r}: {q} needs one x, y and z column, found {found}")
+                raise ConversionError(path, _axes_problem(dev, q, cols))
             raw = values[:, [c.index for c in sorted(cols, key=lambda c: c.axis or "")]]
             if q == "acc":
                 guess = plaus.infer_acc_unit(raw, t_ns)
@@ -898,6 +921,12 @@ def _recording(
         extra_cols: list[Column] = []
         chosen_variant: dict[str, str] = {}
         slots: dict[tuple[str, str | None], Column] = {}
+        marks = [c for c in cols if c.quantity == "marker"]
+        if marks:
+            rec.markers.append(_marker_stream(path, dev, marks, values, t_ns))
+            rec.metadata.setdefault(
+                f"imulog.device.{dev}", {"format": fmt, "kind": "markers (mapping file)", "source": path.name}
+            )
         quat = {c.axis: c for c in cols if c.quantity == "quat"}
         if quat:
             if set(quat) != set("wxyz"):
@@ -912,7 +941,7 @@ def _recording(
                 "source": path.name,
             }
         for c in cols:
-            if c.quantity == "quat":
+            if c.quantity in ("quat", "marker"):
                 continue
             if c.quantity in ("acc", "gyr", "mag", "temperature"):
                 v = chosen_variant.setdefault(c.quantity, c.variant)
@@ -974,9 +1003,35 @@ def _recording(
                     topic=f"/signals/{dev}", t_ns=t_ns, columns=cols_out, units=units_out, values=np.column_stack(data)
                 )
             )
-    if not rec.imus and not rec.signals:
+    if not rec.imus and not rec.signals and not rec.markers:
         raise ConversionError(path, "no IMU or numeric columns found")
     return rec
+
+
+def _marker_stream(path: Path, dev: str, cols: list[Column], values: np.ndarray, t_ns: np.ndarray) -> MarkerStream:
+    """Marker columns (one per marker axis, from a mapping file) as one marker set, in m."""
+    labels: list[str] = []
+    axes: dict[tuple[str, str], Column] = {}
+    for c in cols:
+        if c.variant not in labels:
+            labels.append(c.variant)
+        if (c.variant, str(c.axis)) in axes:
+            raise ConversionError(
+                path,
+                f"marker {c.variant!r} axis {c.axis}: two columns ({axes[(c.variant, str(c.axis))].name!r}, {c.name!r})",
+            )
+        axes[(c.variant, str(c.axis))] = c
+    pos = np.full((len(values), len(labels), 3), np.nan)
+    for m, label in enumerate(labels):
+        missing = [a for a in "xyz" if (label, a) not in axes]
+        if missing:
+            raise ConversionError(
+                path, f"marker {label!r}: no column for axis {', '.join(missing)} in the mapping file"
+            )
+        for k, a in enumerate("xyz"):
+            c = axes[(label, a)]
+            pos[:, m, k] = values[:, c.index] * c.factor
+    return MarkerStream(name=dev, t_ns=t_ns, labels=labels, pos=pos, meta={"source": path.name})
 
 
 class DelimitedConverter(Converter):
