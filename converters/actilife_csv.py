@@ -50,6 +50,14 @@ def _field(path: Path, lines: list[str], pattern: str, what: str, line_hint: int
     raise ConversionError(path, f"ActiLife banner has no {what}", line=line_hint)
 
 
+_DATE_TOKENS = {"yyyy": "%Y", "yy": "%y", "MM": "%m", "M": "%m", "dd": "%d", "d": "%d"}
+
+
+def strptime_format(fmt: str) -> str:
+    """ActiLife's (.NET) ``date format`` -> strptime: ``M/d/yyyy`` -> ``%m/%d/%Y``, ``dd.MM.yyyy`` -> ``%d.%m.%Y``."""
+    return re.sub(r"yyyy|yy|MM|M|dd|d", lambda m: _DATE_TOKENS[m.group(0)], fmt)
+
+
 def parse_banner(path: Path, lines: list[str]) -> dict:
     """Rate (Hz), serial, device line, local start (datetime), date format and epoch period from the banner."""
     if len(lines) < BANNER_LINES + 1 or not lines[0].startswith(BANNER_START):
@@ -63,7 +71,7 @@ def parse_banner(path: Path, lines: list[str]) -> dict:
     serial = _field(path, lines, r"Serial Number:\s*([^,\s]+)", "Serial Number", 2).group(1)
     start_time = _field(path, lines, r"Start Time\s+(\d{1,2}:\d{2}:\d{2})", "Start Time", 3).group(1)
     start_date = _field(path, lines, r"Start Date\s+([\d/.\-]+)", "Start Date", 4).group(1)
-    py_fmt = fmt.replace("yyyy", "%Y").replace("MM", "%m").replace("M", "%m").replace("dd", "%d").replace("d", "%d")
+    py_fmt = strptime_format(fmt)
     try:
         start = datetime.strptime(f"{start_date} {start_time}", f"{py_fmt} %H:%M:%S")
     except ValueError:

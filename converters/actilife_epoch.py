@@ -68,7 +68,9 @@ def _parse_dates(path: Path, date: list[str], time: list[str] | None, fmt: str, 
     """Date (banner ``date format``) and time cells -> datetime64[ns] per row."""
     import pandas as pd
 
-    py_fmt = fmt.replace("yyyy", "%Y").replace("MM", "%m").replace("M", "%m").replace("dd", "%d").replace("d", "%d")
+    from converters.actilife_csv import strptime_format
+
+    py_fmt = strptime_format(fmt)
     text = pd.Series(date) if time is None else pd.Series(date) + " " + pd.Series(time)
     for f in (f"{py_fmt} %H:%M:%S", "ISO8601") if time is not None else ("ISO8601",):
         parsed = pd.to_datetime(text, format=f, errors="coerce")

@@ -327,3 +327,13 @@ def test_shimmer_consensys_unix_column_dates_the_trial():
     start = datetime.fromisoformat(rec.metadata["imulog.trial"]["start_time"])
     assert abs(start.timestamp() * 1000 - first_ms) < 40  # the fitted first stamp, within the host jitter
     assert rec.metadata["imulog.trial"]["time_zone"] == "UTC"
+
+
+def test_actilife_epoch_csv_day_first_date_format(tmp_path):
+    from converters.actilife_csv import strptime_format
+
+    assert strptime_format("dd.MM.yyyy") == "%d.%m.%Y" and strptime_format("M/d/yyyy") == "%m/%d/%Y"
+    rows = ["Date,Time,Axis1", "01.03.2020,10:00:00,5", "01.03.2020,10:01:00,6", "01.03.2020,10:02:00,7"]
+    rec = convert_file(_epoch_file(tmp_path, rows, date_format="dd.MM.yyyy"))
+    assert rec.metadata["imulog.trial"]["start_time"] == "2020-03-01T10:00:00.000"
+    np.testing.assert_array_equal(rec.signals[0].t_ns, np.array([0, 60, 120]) * 1_000_000_000)
