@@ -106,6 +106,95 @@ def _read_block(path: Path, skip: int, names: list[str]) -> tuple[np.ndarray, li
     return values, warnings
 
 
+def device_streams(
+    rec: Recording,
+    path: Path,
+    key: str,
+    dev: dict,
+    cols: list[str],
+    bits: list[int],
+    rate: float,
+    block: np.ndarray,
+    first_line: int | None,
+    fmt: str = "opensignals-txt",
+) -> None:
+    """Add one device's streams (counts; BITalino physical units), metadata and start time to ``rec``.
+
+    ``first_line``: the text line of the first sample (for the lost-sample warning), None for ``.h5``."""
+    if not 0 < rate <= 1e6:
+        raise ConversionError(path, f"device {key}: 'sampling rate' {rate!r} is not a rate in Hz")
+    name = sanitize_name(f"opensignals_{key}")
+    t_ns = np.round(np.arange(len(block)) * (1e9 / rate)).astype(np.int64)
+    if "nSeq" in cols and len(block) > 1:
+        seq = block[:, cols.index("nSeq")]
+        jumps = np.nonzero((np.diff(seq) % 16) != 1)[0]
+        if len(jumps):
+            where = (
+                f"line {first_line + 1 + int(jumps[0])}" if first_line is not None else f"sample {int(jumps[0]) + 1}"
+            )
+            rec.warnings.append(
+                f"{path.name}: device {key}: nSeq jumps at {len(jumps)} row(s) (first {where}): "
+                "samples were lost there; times assume none were"
+            )
+    rec.signals.append(
+        SignalStream(
+            topic=f"/signals/{name}",
+            t_ns=t_ns,
+            columns=[sanitize_name(c) for c in cols],
+            units=["counts"] * len(cols),
+            values=block,
+        )
+    )
+    analog = [c for c in cols if c.startswith("A")]
+    sensors = dev.get("sensor") or []
+    labels = dev.get("label") or analog
+    kind = str(dev.get("device", "")).lower()
+    conv_names, conv_units, conv_vals, raw_acc = [], [], [], []
+    for k, c in enumerate(analog):
+        sensor = str(sensors[k]).upper() if k < len(sensors) else ""
+        i = cols.index(c)
+        if kind.startswith("bitalino") and sensor in TRANSFER and bits[i] > 0:
+            unit, fn = TRANSFER[sensor]
+            conv_names.append(sanitize_name(f"{labels[k] if k < len(labels) else c}_{sensor}"))
+            conv_units.append(unit)
+            conv_vals.append(fn(block[:, i], bits[i]))
+        elif sensor in ("ACC", "XYZ"):
+            raw_acc.append(c)
+    if conv_vals:
+        rec.analogs.append(
+            AnalogStream(
+                name=name, t_ns=t_ns, channel_names=conv_names, units=conv_units, values=np.column_stack(conv_vals)
+            )
+        )
+    if raw_acc:
+        rec.warnings.append(
+            f"{path.name}: device {key}: accelerometer channel(s) {', '.join(raw_acc)} kept as ADC counts: the "
+            "file has no calibration (Cmin/Cmax) to convert them to g"
+        )
+    rec.metadata[f"imulog.device.{name}"] = {
+        "format": fmt,
+        "model": dev.get("device", ""),
+        "serial": key,
+        "rate_hz": rate,
+        "firmware": dev.get("firmware version"),
+        "sensors": dict(zip(analog, [str(s) for s in sensors], strict=False)),
+        "resolution_bits": dict(zip(cols, bits, strict=True)),
+        "transfer": "PLUX BITalino datasheets (VCC 3.3 V)" if conv_vals else "none (counts)",
+        "source": path.name,
+    }
+    if "imulog.trial" not in rec.metadata and dev.get("date") and dev.get("time"):
+        try:
+            start = datetime.strptime(f"{dev['date']} {dev['time']}", "%Y-%m-%d %H:%M:%S.%f")
+        except ValueError:
+            rec.warnings.append(f"{path.name}: date/time {dev['date']!r} {dev['time']!r} not understood")
+            return
+        rec.metadata["imulog.trial"] = {
+            "start_time": start.isoformat(timespec="milliseconds"),
+            "time_zone": UNKNOWN_ZONE,
+            "start_time_source": "OpenSignals header date + time (acquiring PC's local time)",
+        }
+
+
 def read_opensignals(path: Path, options: ConvertOptions | None = None) -> Recording:
     path = Path(path)
     with open(path, "rb") as f:
@@ -119,78 +208,10 @@ def read_opensignals(path: Path, options: ConvertOptions | None = None) -> Recor
         raise ConversionError(path, "no samples after the header", line=skip + 1)
     rec = Recording(sources=[str(path)], warnings=warnings)
     offset = 0
-    start = None
     for key, dev, cols, bits, rate in layout:
         block = values[:, offset : offset + len(cols)]
         offset += len(cols)
-        name = sanitize_name(f"opensignals_{key}")
-        t_ns = np.round(np.arange(len(block)) * (1e9 / rate)).astype(np.int64)
-        if "nSeq" in cols:
-            seq = block[:, cols.index("nSeq")]
-            jumps = np.nonzero((np.diff(seq) % 16) != 1)[0]
-            if len(jumps):
-                rec.warnings.append(
-                    f"{path.name}: device {key}: nSeq jumps at {len(jumps)} row(s) (first line {skip + 2 + int(jumps[0])}): "
-                    "samples were lost there; times assume none were"
-                )
-        rec.signals.append(
-            SignalStream(
-                topic=f"/signals/{name}",
-                t_ns=t_ns,
-                columns=[sanitize_name(c) for c in cols],
-                units=["counts"] * len(cols),
-                values=block,
-            )
-        )
-        analog = [c for c in cols if c.startswith("A")]
-        sensors = dev.get("sensor") or []
-        labels = dev.get("label") or analog
-        kind = str(dev.get("device", "")).lower()
-        conv_names, conv_units, conv_vals, raw_acc = [], [], [], []
-        for k, c in enumerate(analog):
-            sensor = str(sensors[k]).upper() if k < len(sensors) else ""
-            i = cols.index(c)
-            if kind.startswith("bitalino") and sensor in TRANSFER and bits[i] > 0:
-                unit, fn = TRANSFER[sensor]
-                conv_names.append(sanitize_name(f"{labels[k] if k < len(labels) else c}_{sensor}"))
-                conv_units.append(unit)
-                conv_vals.append(fn(block[:, i], bits[i]))
-            elif sensor in ("ACC", "XYZ"):
-                raw_acc.append(c)
-        if conv_vals:
-            rec.analogs.append(
-                AnalogStream(
-                    name=name, t_ns=t_ns, channel_names=conv_names, units=conv_units, values=np.column_stack(conv_vals)
-                )
-            )
-        if raw_acc:
-            rec.warnings.append(
-                f"{path.name}: device {key}: accelerometer channel(s) {', '.join(raw_acc)} kept as ADC counts: the "
-                "file has no calibration (Cmin/Cmax) to convert them to g"
-            )
-        meta = {
-            "format": "opensignals-txt",
-            "model": dev.get("device", ""),
-            "serial": key,
-            "rate_hz": rate,
-            "firmware": dev.get("firmware version"),
-            "sensors": dict(zip(analog, [str(s) for s in sensors], strict=False)),
-            "resolution_bits": dict(zip(cols, bits, strict=True)),
-            "transfer": "PLUX BITalino datasheets (VCC 3.3 V)" if conv_vals else "none (counts)",
-            "source": path.name,
-        }
-        rec.metadata[f"imulog.device.{name}"] = meta
-        if start is None and dev.get("date") and dev.get("time"):
-            try:
-                start = datetime.strptime(f"{dev['date']} {dev['time']}", "%Y-%m-%d %H:%M:%S.%f")
-            except ValueError:
-                rec.warnings.append(f"{path.name}: date/time {dev['date']!r} {dev['time']!r} not understood")
-    if start is not None:
-        rec.metadata["imulog.trial"] = {
-            "start_time": start.isoformat(timespec="milliseconds"),
-            "time_zone": UNKNOWN_ZONE,
-            "start_time_source": "OpenSignals header date + time (acquiring PC's local time)",
-        }
+        device_streams(rec, path, key, dev, cols, bits, rate, block, first_line=skip + 1)
     return rec
 
 

@@ -44,6 +44,7 @@ BUILTIN: dict[str, str] = {
     "shimmer-csv": "converters.shimmer:CONVERTER",
     "compressed": "converters.compressed:CONVERTER",
     "opensignals": "converters.opensignals:CONVERTER",
+    "opensignals-h5": "converters.opensignals_h5:CONVERTER",
 }
 MIN_CONFIDENCE = 0.3
 

@@ -81,3 +81,27 @@ def test_header_errors(tmp_path):
     good.write_text("\n".join(lines[:100] + [lines[101][:5]]) + "\n")
     rec = convert_file(good)
     assert len(rec.signals[0]) == 97 and any("last row cut short" in w for w in rec.warnings)
+
+
+def test_opensignals_h5_matches_the_text_file(tmp_path):
+    h5py = pytest.importorskip("h5py")
+    txt, a = _write(tmp_path)
+    h5 = tmp_path / "opensignals_000780.h5"
+    with h5py.File(h5, "w") as f:  # the layout biosignalsnotebooks reads: <MAC>/raw/{nSeq, channel_N}
+        g = f.create_group("00:07:80:3B:46:61")
+        g.attrs["sampling rate"] = 1000
+        g.attrs["nsamples"] = len(a)
+        g.attrs["resolution"] = [4, 1, 1, 1, 1, 10, 10, 10]
+        g.attrs["device"] = "bitalino_rev"
+        g.attrs["date"] = "2017-1-20"
+        g.attrs["time"] = "14:40:49.587"
+        raw = g.create_group("raw")
+        raw["nSeq"] = (np.arange(len(a)) % 16).reshape(-1, 1)
+        for k, sensor in enumerate(["EMG", "EDA", "ACC"]):
+            raw[f"channel_{k + 1}"] = a[:, k : k + 1]
+            raw[f"channel_{k + 1}"].attrs["sensor"] = sensor
+    assert detect(h5).name == "opensignals-h5"
+    from_h5, from_txt = convert_file(h5), convert_file(txt)
+    np.testing.assert_allclose(from_h5.analogs[0].values, from_txt.analogs[0].values, rtol=1e-15)
+    np.testing.assert_array_equal(from_h5.signals[0].values[:, 1:], a)
+    assert from_h5.metadata["imulog.trial"]["start_time"] == from_txt.metadata["imulog.trial"]["start_time"]
