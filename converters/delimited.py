@@ -51,7 +51,7 @@ from converters._lab import orientation_stream
 from converters.base import Converter, ConvertOptions
 from converters.errors import ConversionError, excerpt
 from converters.mapping import Mapping, load_mapping, sibling_mapping
-from imulog.model import ImuStream, MarkerStream, Recording, SignalStream
+from imulog.model import ImuStream, MarkerStream, PoseStream, Recording, SignalStream
 
 _SHIMMER_DEVICE = re.compile(r"^(Shimmer_[0-9A-Za-z]+)_")
 _SEP_LINE = re.compile(r'^\s*"?sep=(.)"?\s*$')
@@ -179,9 +179,17 @@ def _orientation_group(label: str) -> bool:
     return any(t in _ORIENTATION_WORDS for t in _tokens(label))
 
 
-def _orientation_device(label: str) -> str:
-    """``Vicon Orientation`` -> ``vicon`` (the group label without the orientation word)."""
-    rest = [t for t in _tokens(label) if t not in _ORIENTATION_WORDS]
+_POSITION_WORDS = ("position", "translation", "pos")
+
+
+def _position_group(label: str) -> bool:
+    """``Vicon Position (mm)``: a group of X, Y, Z position columns of a reference system."""
+    return any(t in _POSITION_WORDS for t in _tokens(label))
+
+
+def _orientation_device(label: str, words: tuple[str, ...] = _ORIENTATION_WORDS) -> str:
+    """``Vicon Orientation`` -> ``vicon`` (the group label without the orientation or position word)."""
+    rest = [t for t in _tokens(label) if t not in words]
     return sanitize_name("_".join(rest) or "reference")
 
 
@@ -319,6 +327,13 @@ def analyse_header(
         elif _orientation_group(group) and name.lower() in _QUAT_AXES and not (mapping and full in mapped):
             col.quantity, col.axis = "quat", _QUAT_AXES[name.lower()]
             col.device = _orientation_device(group)
+        elif _position_group(group) and _bare_axis(name) and not (mapping and full in mapped):
+            unit = (overrides.get("markers") or header_unit or "").strip().lower()
+            col.device = _orientation_device(group, _POSITION_WORDS)
+            col.quantity, col.axis, col.unit = "marker", _bare_axis(name), unit  # unit checked by _plan
+            col.variant, col.factor = col.device, LENGTH_TO_M.get(unit, float("nan"))
+            layout.columns.append(col)
+            continue
         elif raw and i in raw:
             col.quantity, col.unit = "extra", header_unit or "counts"
         elif full in mapped:
@@ -587,6 +602,15 @@ def _plan(
     layout = analyse_header(
         path, lines, mapping=mapping, default_units=default_units, device_name=device_name, units=units, raw=raw
     )
+    for c in layout.columns:
+        if c.quantity == "marker" and c.unit not in LENGTH_TO_M:
+            group = c.name.rsplit("/", 1)[0]
+            raise ConversionError(
+                path,
+                f"position group {group!r} has no length unit: write it in the label ({group} (mm)) or give "
+                "--unit markers=mm (or m, cm)",
+                column=c.name,
+            )
     first = _first_data_cells(path, lines, layout)
     ignore = {c.index for c in layout.columns if c.quantity == "ignore"}
     # text columns (non-numeric in the first data row) that are not IMU data are skipped, not parsed
@@ -922,6 +946,20 @@ def _recording(
         chosen_variant: dict[str, str] = {}
         slots: dict[tuple[str, str | None], Column] = {}
         marks = [c for c in cols if c.quantity == "marker"]
+        quat_cols = {c.axis: c for c in cols if c.quantity == "quat"}
+        if marks and set(quat_cols) == set("wxyz") and {c.variant for c in marks} == {dev}:
+            pos = _marker_stream(path, dev, marks, values, t_ns).pos[:, 0]
+            q = np.column_stack([values[:, quat_cols[a].index] for a in "wxyz"])
+            rec.poses.append(
+                PoseStream(topic=f"/poses/{dev}", t_ns=t_ns, position=pos, orientation=q, frame_id="world")
+            )
+            rec.metadata[f"imulog.device.{dev}"] = {
+                "format": fmt,
+                "kind": "reference pose (position m, quaternion w, x, y, z as exported)",
+                "columns": [c.name for c in marks] + [quat_cols[a].name for a in "wxyz"],
+                "source": path.name,
+            }
+            continue
         if marks:
             rec.markers.append(_marker_stream(path, dev, marks, values, t_ns))
             rec.metadata.setdefault(

@@ -141,3 +141,25 @@ def test_inspect_json_and_errors(tmp_path):
     result = CliRunner().invoke(cli, ["convert", "--inspect", str(bad)])
     assert result.exit_code == 1
     assert "bad.csv: line 2: truncated line" in result.output
+
+
+def test_grouped_position_and_orientation_become_a_reference_pose(tmp_path):
+    n = 300
+    t = np.arange(n) / 100
+    ang = 0.8 * np.sin(2 * np.pi * 0.5 * t)
+    q = np.round(np.column_stack([np.cos(ang / 2), np.sin(ang / 2), 0 * t, 0 * t]), 6)
+    p = np.round(np.column_stack([100 + 50 * np.sin(t), 200 + 0 * t, 900 + 10 * np.cos(t)]), 6)
+    acc = np.round(np.column_stack([0 * t, 9.81 * np.sin(ang), 9.81 * np.cos(ang)]), 6)
+    lines = ["Time (s);Vicon Position (mm);;;Vicon Orientation;;;;IMU Acceleration (m/s^2);;;", ";X;Y;Z;W;X;Y;Z;X;Y;Z;"]
+    lines += [";".join(f"{v:.6f}" for v in [t[i], *p[i], *q[i], *acc[i]]) for i in range(n)]
+    path = tmp_path / "pose.csv"
+    path.write_text("\n".join(lines) + "\n")
+    rec = convert_file(path)
+    (pose,) = rec.poses
+    assert pose.topic == "/poses/vicon"
+    np.testing.assert_allclose(pose.position, p / 1000, rtol=1e-12)  # mm -> m
+    np.testing.assert_allclose(pose.orientation, q, rtol=1e-15)
+    assert not rec.signals and not rec.markers
+    path.write_text("\n".join([lines[0].replace(" (mm)", ""), *lines[1:]]) + "\n")
+    with pytest.raises(ConversionError, match=r"position group 'Vicon Position' has no length unit"):
+        convert_file(path)

@@ -77,6 +77,8 @@ def column_roles(path: Path, fmt: str, options: ConvertOptions) -> list[str]:
             target = "time"
         elif c.quantity == "index":
             target = "sample index"
+        elif c.quantity == "marker":
+            target = f"{c.device}: marker {c.variant!r} {c.axis} (/poses/{c.device} with an orientation group, else /markers)"
         elif c.quantity == "quat":
             target = f"/orientation/{c.device} q{c.axis}"
         elif c.quantity == "extra":
