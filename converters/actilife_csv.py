@@ -32,7 +32,7 @@ import numpy as np
 
 from converters._binary import UNKNOWN_ZONE
 from converters._common import G0, TableSpec, head_lines, read_numeric, sanitize_name, text_head_lines
-from converters.actilife_epoch import read_epoch_csv
+from converters.actilife_epoch import bannerless_banner, is_bannerless, read_epoch_csv
 from converters.base import Converter, ConvertOptions
 from converters.errors import ConversionError
 from imulog.model import ImuStream, Recording, SignalStream
@@ -109,6 +109,8 @@ def read_actilife_csv(path: Path, options: ConvertOptions | None = None) -> Reco
     options = options or ConvertOptions()
     path = Path(path)
     lines = head_lines(path, max_lines=BANNER_LINES + 2)
+    if is_bannerless(lines):
+        return read_epoch_csv(path, lines, bannerless_banner(path, lines), options, banner_lines=0)
     banner = parse_banner(path, lines)
     if banner["epoch"] != "00:00:00":
         return read_epoch_csv(path, lines, banner, options)
@@ -215,8 +217,10 @@ class ActiLifeCsvConverter(Converter):
     example = "imulog convert ../shared/data/devices/actigraph_gt3x/example-IMU.csv -o actilife.mcap"
 
     def sniff(self, path: Path, head: bytes) -> float:
-        lines = text_head_lines(head, 1)
-        return 0.97 if lines and lines[0].startswith(BANNER_START) else 0.0
+        lines = text_head_lines(head, 2)
+        if lines and lines[0].startswith(BANNER_START):
+            return 0.97
+        return 0.8 if lines and is_bannerless(lines) else 0.0
 
     def recording_key(self, path: Path) -> str | None:
         return Path(path).name

@@ -82,9 +82,15 @@ def _parse_dates(path: Path, date: list[str], time: list[str] | None, fmt: str, 
     )
 
 
-def read_epoch_csv(path: Path, lines: list[str], banner: dict, options: object = None) -> Recording:
-    """An ActiLife epoch CSV (``banner`` from :func:`converters.actilife_csv.parse_banner`) as epoch signals."""
+def read_epoch_csv(
+    path: Path, lines: list[str], banner: dict, options: object = None, *, banner_lines: int = BANNER_LINES
+) -> Recording:
+    """An ActiLife epoch CSV (``banner`` from :func:`converters.actilife_csv.parse_banner`) as epoch signals.
+
+    ``banner_lines`` 0: an export without the banner (``banner`` then comes from :func:`bannerless_banner`)."""
     import pandas as pd
+
+    BANNER_LINES = banner_lines  # noqa: N806 - the banner's length in this file
 
     epoch_s = epoch_seconds(banner["epoch"])
     if epoch_s <= 0:
@@ -112,7 +118,7 @@ def read_epoch_csv(path: Path, lines: list[str], banner: dict, options: object =
             path,
             f"epoch export (Epoch Period {banner['epoch']}) whose names row holds raw sample columns "
             f"({names[0]}, ...): banner and data disagree; a raw export has Epoch Period 00:00:00",
-            line=5,
+            line=5 if BANNER_LINES else 1,
         )
     lower = [n.lower() for n in names]
     time_idx = [i for i, n in enumerate(lower) if n in TIME_NAMES]
@@ -150,7 +156,7 @@ def read_epoch_csv(path: Path, lines: list[str], banner: dict, options: object =
     else:
         t_ns = np.arange(n, dtype=np.int64) * np.int64(round(epoch_s * 1e9))
     serial = banner["serial"]
-    name = sanitize_name(f"{serial}_counts")
+    name = sanitize_name(f"{serial}_counts" if serial else "actigraph_counts")
     columns = [sanitize_name(names[i]) for i in value_idx]
     meta = {
         "format": "actilife-csv (epoch counts)",
@@ -163,6 +169,11 @@ def read_epoch_csv(path: Path, lines: list[str], banner: dict, options: object =
         "source": path.name,
     }
     warnings = list(spec.warnings)
+    if not BANNER_LINES:
+        warnings.append(
+            f"{path.name}: no ActiLife banner: start and epoch ({epoch_s:g} s) from the first rows, dates read as "
+            f"{banner['date_format']}, serial unknown"
+        )
     if not has_names:
         warnings.append(
             f"{path.name}: no names row; {len(names)} columns taken in ActiLife's order ({', '.join(names)})"
@@ -183,3 +194,52 @@ def read_epoch_csv(path: Path, lines: list[str], banner: dict, options: object =
         "time_zone": UNKNOWN_ZONE,
     }
     return rec
+
+
+BANNERLESS_FORMATS = ("M/d/yyyy", "d/M/yyyy", "yyyy-MM-dd", "d.M.yyyy", "d-M-yyyy")
+
+
+def is_bannerless(lines: list[str]) -> bool:
+    """An epoch export without its banner: a names row with ``Axis1`` (and usually ``Date``, ``Time``) first."""
+    if not lines:
+        return False
+    cells = [c.strip().strip('"').strip().lower() for c in lines[0].split(",")]
+    return "axis1" in cells and all(c in TIME_NAMES or c.replace(" ", "_") in _KNOWN for c in cells if c)
+
+
+_KNOWN = {sanitize_name(n) for n in ORDER} | {"vector_magnitude", "vm", "activity"}
+
+
+def bannerless_banner(path: Path, lines: list[str]) -> dict:
+    """The banner fields an export without banner implies: start and epoch from its first Date/Time rows, the date
+    format the first of :data:`BANNERLESS_FORMATS` under which they parse and step evenly (said in a warning)."""
+    cells = [c.strip().strip('"').strip().lower() for c in lines[0].split(",")]
+    if "date" not in cells or "time" not in cells:
+        raise ConversionError(
+            path,
+            "ActiLife epoch export without its banner and without Date/Time columns: the epoch length and start "
+            "are unknown (export with the header, or with Date and Time columns)",
+            line=1,
+        )
+    di, ti = cells.index("date"), cells.index("time")
+    rows = [[c.strip().strip('"') for c in ln.split(",")] for ln in lines[1:4] if ln.strip()]
+    if len(rows) < 2:
+        raise ConversionError(path, "fewer than two epochs: the epoch length is unknown", line=2)
+    from converters.actilife_csv import strptime_format
+
+    for fmt in BANNERLESS_FORMATS:
+        try:
+            times = [datetime.strptime(f"{r[di]} {r[ti]}", f"{strptime_format(fmt)} %H:%M:%S") for r in rows]
+        except (ValueError, IndexError):
+            continue
+        steps = {(b - a).total_seconds() for a, b in zip(times, times[1:], strict=False)}
+        if len(steps) == 1 and (step := steps.pop()) > 0:
+            h, rem = divmod(int(step), 3600)
+            return {
+                "epoch": f"{h:02d}:{rem // 60:02d}:{rem % 60:02d}",
+                "start": times[0],
+                "serial": "",
+                "device": "ActiGraph (no banner)",
+                "date_format": fmt,
+            }
+    raise ConversionError(path, f"Date/Time {rows[0][di]!r} {rows[0][ti]!r} in no known date format", line=2)

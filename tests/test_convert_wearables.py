@@ -337,3 +337,21 @@ def test_actilife_epoch_csv_day_first_date_format(tmp_path):
     rec = convert_file(_epoch_file(tmp_path, rows, date_format="dd.MM.yyyy"))
     assert rec.metadata["imulog.trial"]["start_time"] == "2020-03-01T10:00:00.000"
     np.testing.assert_array_equal(rec.signals[0].t_ns, np.array([0, 60, 120]) * 1_000_000_000)
+
+
+def test_actilife_epoch_csv_without_banner(tmp_path):
+    path = tmp_path / "nobanner.csv"
+    path.write_text(
+        "Date,Time,Axis1,Axis2,Axis3,Steps\n"
+        "26/08/2013,09:00:00,10,0,3,1\n26/08/2013,09:00:15,0,5,0,0\n26/08/2013,09:00:30,7,7,7,2\n"
+    )
+    assert detect(path).name == "actilife-csv"
+    rec = convert_file(path)
+    (sig,) = rec.signals
+    np.testing.assert_array_equal(sig.t_ns, np.array([0, 15, 30]) * 1_000_000_000)
+    np.testing.assert_array_equal(sig.values, [[10, 0, 3, 1], [0, 5, 0, 0], [7, 7, 7, 2]])
+    assert rec.metadata["imulog.trial"]["start_time"] == "2013-08-26T09:00:00.000"  # 26 > 12: day first
+    assert any("no ActiLife banner" in w and "d/M/yyyy" in w for w in rec.warnings)
+    path.write_text("Axis1,Axis2,Axis3\n1,2,3\n4,5,6\n")
+    with pytest.raises(ConversionError, match=r"without its banner and without Date/Time columns"):
+        convert_file(path)
