@@ -133,9 +133,7 @@ def test_cores_equal_the_whole(trial, whole, tmp_path, monkeypatch):
     # intervals written in pieces get the foxglove.Log twins the whole writes, once each, also after a rerun
     run_phases(cored, cores=PhaseCores(core_s=420.0, overlap_s=30.0, context_s=600.0), force=True)
     for kind in ("movements", "phases"):
-        assert _logs(cored, kind) == _logs(whole, kind) and len(_logs(whole, kind)) == len(
-            mw if kind == "movements" else pw
-        )
+        assert _logs(cored, kind) == _logs(whole, kind) and len(_logs(whole, kind)) == len(mw if kind == "movements" else pw)
     with TrialReader(cored) as t:  # the replaced channels' closing statistics went with them
         stats = [x.name for x in t.summary.metadata_indexes if x.name.startswith("imulog.channel_stats.")]
         assert len(stats) == 1 and stats[0] == t.channel(f"/derived/static/{IMU}").metadata["stats_record"]
@@ -216,9 +214,7 @@ def test_trajectory_and_kinematics_refuse_long_recordings(trial, tmp_path, monke
     run_orientation(path)
     arm = write_trial(tmp_path / "arm.mcap", simulate_arm(seed=7, duration_s=10.0).recording, attach_sources=False)
     monkeypatch.setattr(long_phases, "LONG_SAMPLES", 5_000)
-    with pytest.raises(
-        ValueError, match=r"process trajectory holds the whole trial .*more than 5,000.*imulog process metrics"
-    ):
+    with pytest.raises(ValueError, match=r"process trajectory holds the whole trial .*more than 5,000.*imulog process metrics"):
         run_trajectory(path)
     monkeypatch.setattr(long_phases, "LONG_SAMPLES", 500)  # the 10-s arm trial counts as long
     with pytest.raises(ValueError, match=r"process kinematics holds the whole trial .* lab-length"):
