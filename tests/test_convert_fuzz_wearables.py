@@ -52,6 +52,21 @@ SEEDS = {
         "mSecs,m/(sec^2),m/(sec^2),m/(sec^2),deg/sec,deg/sec,deg/sec,\n"
         + "".join(f"{i * 19.53125:.5f},0.1,0.2,9.8,{i % 9},1.5,-2,\n" for i in range(40)),
     ),
+    "opensignals": (
+        "opensignals",
+        "os.txt",
+        '# OpenSignals Text File Format\n# {"00:07:80:3B:46:61": {"device": "bitalino_rev", "sampling rate": 100, '
+        '"column": ["nSeq", "I1", "A1", "A2"], "sensor": ["EMG", "ACC"], "resolution": [4, 1, 10, 10], '
+        '"date": "2017-1-20", "time": "14:40:49.587"}}\n# EndOfHeader\n'
+        + "".join(f"{i % 16}\t0\t{500 + i % 9}\t{300 + i % 4}\t\n" for i in range(40)),
+    ),
+    "delimited-grouped": (
+        "delimited",
+        "grouped.csv",
+        "Time (s);Vicon Position (mm);;;Vicon Orientation;;;;IMU Acceleration (m/s^2);;;IMU Gyroscope (rad/s);;;\n"
+        ";X;Y;Z;W;X;Y;Z;X;Y;Z;X;Y;Z;\n"
+        + "".join(f"{i / 100:.2f};1;2;3;1;0;0;0;0.1;0.2;9.8;0.01;0.02;{i / 1000:.3f}\n" for i in range(40)),
+    ),
 }
 _MUTATION = st.one_of(
     st.tuples(st.just("truncate"), st.floats(0, 1)),
