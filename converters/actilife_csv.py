@@ -19,7 +19,7 @@ Banner lines may carry padding commas. Units as ActiLife writes them: accelerome
 uT, temperature degC. Time: the ``Timestamp`` column (local ISO time) when present, else ``Start Date`` +
 ``Start Time`` + row / rate (the banner's ``at N Hz``). The start is local time without a zone. Streams are named as
 the .gt3x converter names them: ``/imu/<serial>`` (RAW), ``/imu/<serial>_imu`` (IMU file). Epoch (count) exports
-(``Epoch Period`` other than 00:00:00) are refused: they hold activity counts, not samples.
+(``Epoch Period`` other than 00:00:00) are read by :mod:`converters.actilife_epoch` as epoch signals.
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ import numpy as np
 
 from converters._binary import UNKNOWN_ZONE
 from converters._common import G0, TableSpec, head_lines, read_numeric, sanitize_name, text_head_lines
+from converters.actilife_epoch import bannerless_banner, is_bannerless, read_epoch_csv
 from converters.base import Converter, ConvertOptions
 from converters.errors import ConversionError
 from imulog.model import ImuStream, Recording, SignalStream
@@ -49,17 +50,28 @@ def _field(path: Path, lines: list[str], pattern: str, what: str, line_hint: int
     raise ConversionError(path, f"ActiLife banner has no {what}", line=line_hint)
 
 
+_DATE_TOKENS = {"yyyy": "%Y", "yy": "%y", "MM": "%m", "M": "%m", "dd": "%d", "d": "%d"}
+
+
+def strptime_format(fmt: str) -> str:
+    """ActiLife's (.NET) ``date format`` -> strptime: ``M/d/yyyy`` -> ``%m/%d/%Y``, ``dd.MM.yyyy`` -> ``%d.%m.%Y``."""
+    return re.sub(r"yyyy|yy|MM|M|dd|d", lambda m: _DATE_TOKENS[m.group(0)], fmt)
+
+
 def parse_banner(path: Path, lines: list[str]) -> dict:
     """Rate (Hz), serial, device line, local start (datetime), date format and epoch period from the banner."""
     if len(lines) < BANNER_LINES + 1 or not lines[0].startswith(BANNER_START):
         raise ConversionError(path, "not an ActiLife CSV export (no 'Data File Created By ActiGraph' banner)", line=1)
-    rate = float(_field(path, lines, r" at (\d+(?:\.\d+)?) Hz", "'at N Hz'", 1).group(1))
+    epoch = _field(path, lines, r"Epoch Period \(hh:mm:ss\)\s+(\d{2}:\d{2}:\d{2})", "Epoch Period", 5).group(1)
+    rate_m = re.search(r" at (\d+(?:\.\d+)?) Hz", lines[0])
+    if rate_m is None and epoch == "00:00:00":
+        raise ConversionError(path, "ActiLife banner of a raw export has no 'at N Hz'", line=1)
+    rate = float(rate_m.group(1)) if rate_m else None
     fmt = _field(path, lines, r"date format (\S+)", "'date format'", 1).group(1)
     serial = _field(path, lines, r"Serial Number:\s*([^,\s]+)", "Serial Number", 2).group(1)
     start_time = _field(path, lines, r"Start Time\s+(\d{1,2}:\d{2}:\d{2})", "Start Time", 3).group(1)
     start_date = _field(path, lines, r"Start Date\s+([\d/.\-]+)", "Start Date", 4).group(1)
-    epoch = _field(path, lines, r"Epoch Period \(hh:mm:ss\)\s+(\d{2}:\d{2}:\d{2})", "Epoch Period", 5).group(1)
-    py_fmt = fmt.replace("yyyy", "%Y").replace("MM", "%m").replace("M", "%m").replace("dd", "%d").replace("d", "%d")
+    py_fmt = strptime_format(fmt)
     try:
         start = datetime.strptime(f"{start_date} {start_time}", f"{py_fmt} %H:%M:%S")
     except ValueError:
@@ -97,11 +109,11 @@ def read_actilife_csv(path: Path, options: ConvertOptions | None = None) -> Reco
     options = options or ConvertOptions()
     path = Path(path)
     lines = head_lines(path, max_lines=BANNER_LINES + 2)
+    if is_bannerless(lines):
+        return read_epoch_csv(path, lines, bannerless_banner(path, lines), options, banner_lines=0)
     banner = parse_banner(path, lines)
     if banner["epoch"] != "00:00:00":
-        raise ConversionError(
-            path, f"epoch export (Epoch Period {banner['epoch']}): activity counts, not raw samples", line=5
-        )
+        return read_epoch_csv(path, lines, banner, options)
     names_row = [c.strip() for c in lines[BANNER_LINES].split(",")]
     while names_row and not names_row[-1]:
         names_row.pop()
@@ -197,13 +209,18 @@ def read_actilife_csv(path: Path, options: ConvertOptions | None = None) -> Reco
 
 class ActiLifeCsvConverter(Converter):
     name = "actilife-csv"
-    description = "ActiLife CSV export of ActiGraph raw data (RAW accel or IMU file; 10-line banner; g, deg/s, uT)"
+    description = (
+        "ActiLife CSV export of ActiGraph data (RAW accel or IMU file: g, deg/s, uT; epoch count file: counts, "
+        "steps, lux, inclinometer per epoch)"
+    )
     extensions = (".csv",)
     example = "imulog convert ../shared/data/devices/actigraph_gt3x/example-IMU.csv -o actilife.mcap"
 
     def sniff(self, path: Path, head: bytes) -> float:
-        lines = text_head_lines(head, 1)
-        return 0.97 if lines and lines[0].startswith(BANNER_START) else 0.0
+        lines = text_head_lines(head, 2)
+        if lines and lines[0].startswith(BANNER_START):
+            return 0.97
+        return 0.8 if lines and is_bannerless(lines) else 0.0
 
     def recording_key(self, path: Path) -> str | None:
         return Path(path).name

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from converters._common import (
+    LENGTH_TO_M,
     NORMALISED_MAG_UNITS,
     SI_UNIT,
     UNIT_FACTORS,
@@ -46,11 +47,13 @@ from converters._common import (
     unit_factor,
     unit_overrides,
 )
+from converters._lab import orientation_stream
 from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
+from converters.errors import ConversionError, excerpt
 from converters.mapping import Mapping, load_mapping, sibling_mapping
-from imulog.model import ImuStream, Recording, SignalStream
+from imulog.model import ImuStream, MarkerStream, PoseStream, Recording, SignalStream
 
+_SHIMMER_DEVICE = re.compile(r"^(Shimmer_[0-9A-Za-z]+)_")
 _SEP_LINE = re.compile(r'^\s*"?sep=(.)"?\s*$')
 _UNIT_IN_NAME = re.compile(r"^(.*?)\s*[\(\[]\s*([^\)\]]*)\s*[\)\]]\s*$")
 _COMPACT = re.compile(r"^(acc|accel|gyr|gyro|mag|a|g|m)([xyz])$")  # accx, gyroz; ax, gy, mz
@@ -166,6 +169,41 @@ def _span_labels(labels: list[str]) -> list[str]:
     return out
 
 
+_QUAT_AXES = {"w": "w", "x": "x", "y": "y", "z": "z", "qw": "w", "qx": "x", "qy": "y", "qz": "z"}
+_QUAT_AXES |= {"q0": "w", "q1": "x", "q2": "y", "q3": "z"}
+_ORIENTATION_WORDS = ("orientation", "quaternion", "quat", "rotation")
+
+
+def _orientation_group(label: str) -> bool:
+    """``Vicon Orientation`` / ``Reference quaternion``: a group of w, x, y, z quaternion columns."""
+    return any(t in _ORIENTATION_WORDS for t in _tokens(label))
+
+
+_POSITION_WORDS = ("position", "translation", "pos")
+
+
+def _position_group(label: str) -> bool:
+    """``Vicon Position (mm)``: a group of X, Y, Z position columns of a reference system."""
+    return any(t in _POSITION_WORDS for t in _tokens(label))
+
+
+def _orientation_device(label: str, words: tuple[str, ...] = _ORIENTATION_WORDS) -> str:
+    """``Vicon Orientation`` -> ``vicon`` (the group label without the orientation or position word)."""
+    rest = [t for t in _tokens(label) if t not in words]
+    return sanitize_name("_".join(rest) or "reference")
+
+
+def _fit_width(row: list[str], data_cells: list[str]) -> list[str]:
+    """A header row fitted to the data rows' field count where only trailing delimiters differ: empty cells past
+    the data's last field are dropped, empty data fields past the header's last cell get an empty name."""
+    row = list(row)
+    while len(row) > len(data_cells) and row and not row[-1]:
+        row.pop()
+    while len(row) < len(data_cells) and not data_cells[len(row)]:
+        row.append("")
+    return row
+
+
 def detect_delimiter(line: str) -> str | None:
     counts = {d: line.count(d) for d in (",", ";", "\t")}
     best = max(counts, key=lambda d: counts[d])
@@ -180,12 +218,14 @@ def analyse_header(
     default_units: dict[str, str] | None = None,
     device_name: str = "imu",
     units: dict[str, str] | None = None,
+    raw: set[int] | None = None,
 ) -> Layout:
     """Find delimiter, header rows, units and the role of every column; ConversionError on problems.
 
     ``units``: the user's unit per quantity (``--unit gyr=deg/s``), replacing the header's. Columns whose unit
     the header does not give get unit :data:`INFER`; bare ``X``/``Y``/``Z`` columns without a quantity word get
-    quantity ``auto``: both are resolved from the values by :func:`resolve_inferred`.
+    quantity ``auto``: both are resolved from the values by :func:`resolve_inferred`. ``raw``: indexes of
+    uncalibrated columns (ADC counts, e.g. Shimmer ``RAW``): kept as found in the signals, never as IMU data.
     """
     overrides = dict(units or {})
     idx = 0
@@ -222,17 +262,23 @@ def analyse_header(
         idx += 1
     if idx >= len(lines):
         raise ConversionError(path, "no data rows after the header", line=idx)
-    names = rows[0]
+    data_cells = split_row(lines[idx], delimiter)
+    names = _fit_width(rows[0], data_cells)
+    units_row = _fit_width(units_row, data_cells) if units_row is not None else None
+    groups_row = _fit_width(groups_row, data_cells) if groups_row is not None else None
     ncols = len(names)
     for other, what in ((units_row, "units row"), (groups_row, "sensor row")):
         if other is not None and len(other) != ncols:
             raise ConversionError(path, f"{what} has {len(other)} fields, names row has {ncols}", line=header_start + 1)
     layout = Layout(delimiter=delimiter, skip_lines=idx, names=[])
+    own_groups = list(groups_row) if groups_row is not None else None  # each group label where it is written
     if groups_row is not None:
         groups_row = _span_labels(groups_row)
     full_names: list[str] = []
     for i, name in enumerate(names):
         group = groups_row[i] if groups_row else ""
+        if not name and own_groups is not None and not own_groups[i]:
+            group = ""  # an empty cell under a spanned group label (a trailing delimiter): no column
         full = f"{group}/{name}" if group and name else (name or group)
         full_names.append(full)
     seen: dict[str, int] = {}
@@ -258,27 +304,51 @@ def analyse_header(
     if time_col is not None and time_col not in seen:
         raise ConversionError(path, f"time column {time_col!r} of the mapping file is not in the header")
 
-    shimmer = re.match(r"^(Shimmer_[0-9A-Za-z]+)_", names[min(1, ncols - 1)] if ncols else "")
     have_time = False
     for i, full in enumerate(full_names):
         name = names[i]
         group = groups_row[i] if groups_row else ""
         col = Column(index=i, name=full, device=device_name)
+        group_unit = ""
+        if (m_group := _UNIT_IN_NAME.match(group)) and name:  # `IMU Gyroscope (deg/s)`: the unit of its columns
+            group, group_unit = m_group.group(1), m_group.group(2)
         group_quantity = _group_quantity(group)
         if groups_row is not None and group.lower() not in ("", "sensor") and group_quantity is None:
             col.device = sanitize_name(group)
-        elif shimmer and name.startswith(shimmer.group(1)) and not (mapping and mapping.device.get("name")):
-            col.device = sanitize_name(shimmer.group(1))
-        header_unit = units_row[i] if units_row else ""
-        base = name
-        m_unit = _UNIT_IN_NAME.match(name)
+        elif (shimmer := _SHIMMER_DEVICE.match(name)) and not (mapping and mapping.device.get("name")):
+            col.device = sanitize_name(shimmer.group(1))  # per column: a Consensys file may hold several Shimmers
+        header_unit = (units_row[i] if units_row else "") or group_unit
+        base = name or (own_groups[i] if own_groups is not None else "")  # `Time (s)` in the group row, no axis
+        m_unit = _UNIT_IN_NAME.match(base)
         if m_unit:
             base, header_unit = m_unit.group(1), m_unit.group(2)
         if not full:
             col.quantity = "ignore"
+        elif _orientation_group(group) and name.lower() in _QUAT_AXES and not (mapping and full in mapped):
+            col.quantity, col.axis = "quat", _QUAT_AXES[name.lower()]
+            col.device = _orientation_device(group)
+        elif _position_group(group) and _bare_axis(name) and not (mapping and full in mapped):
+            unit = (overrides.get("markers") or header_unit or "").strip().lower()
+            col.device = _orientation_device(group, _POSITION_WORDS)
+            col.quantity, col.axis, col.unit = "marker", _bare_axis(name), unit  # unit checked by _plan
+            col.variant, col.factor = col.device, LENGTH_TO_M.get(unit, float("nan"))
+            layout.columns.append(col)
+            continue
+        elif raw and i in raw:
+            col.quantity, col.unit = "extra", header_unit or "counts"
         elif full in mapped:
             cm = mapped[full]
             col.quantity, col.axis, col.unit = cm.quantity, cm.axis, cm.unit
+            if cm.sensor:
+                col.device = sanitize_name(cm.sensor)
+            if cm.quantity == "marker":
+                col.variant = str(cm.marker)
+                col.factor = LENGTH_TO_M[cm.unit]
+                col.device = sanitize_name(cm.sensor) if cm.sensor else "markers"
+                layout.columns.append(col)
+                continue
+        elif mapping is not None and mapping.unmapped == "ignore" and not (time_col is not None and full == time_col):
+            col.quantity = "ignore"
         elif time_col is not None and full == time_col:
             col.quantity, col.unit = "time", str(mapping.time_unit)
         elif groups_row is not None and i == 0 and group.lower() in ("", "sensor") and name.lower() in ("", "axis"):
@@ -327,7 +397,7 @@ def _check_infinite(path: Path, layout: Layout, values: np.ndarray, first_line: 
     if not np.isinf(values).any():  # one pass over the table; the column and line are found only when needed
         return
     for c in layout.columns:
-        if c.quantity in ("acc", "gyr", "mag", "temperature", "auto"):
+        if c.quantity in ("acc", "gyr", "mag", "temperature", "auto", "marker"):
             bad = np.isinf(values[:, c.index])
             if bad.any():
                 raise ConversionError(
@@ -377,6 +447,19 @@ def _triples(cols: list[Column]) -> list[list[Column]]:
     if current:
         out.append(current)
     return out
+
+
+def _axes_problem(dev: str, q: str, cols: list[Column]) -> str:
+    """A readable reason why ``cols`` are not one x, y, z triple (short even for a file of many sensors)."""
+    counts = {a: sum(1 for c in cols if c.axis == a) for a in "xyz"}
+    shown = ", ".join(repr(excerpt(c.name, 24)) for c in cols[:3]) + (", ..." if len(cols) > 3 else "")
+    what = f"{len(cols)} {q} columns ({counts['x']} x, {counts['y']} y, {counts['z']} z: {shown})"
+    if max(counts.values()) > 1:
+        return (
+            f"device {dev!r}: {what}: several sensors in one file; a mapping file names the sensor of each column "
+            '("sensor": "seg1", docs/converters.md)'
+        )
+    return f"device {dev!r}: {what}: {q} needs one x, one y and one z column"
 
 
 def resolve_inferred(
@@ -432,8 +515,7 @@ def resolve_inferred(
                 acc_raw.setdefault(c.device, np.zeros((len(values), 3)))[:, "xyz".index(c.axis)] = values[:, c.index]
         for dev, cols in groups.items():
             if sorted(c.axis or "" for c in cols) != ["x", "y", "z"]:
-                found = ", ".join(repr(c.name) for c in cols)
-                raise ConversionError(path, f"device {dev!r}: {q} needs one x, y and z column, found {found}")
+                raise ConversionError(path, _axes_problem(dev, q, cols))
             raw = values[:, [c.index for c in sorted(cols, key=lambda c: c.axis or "")]]
             if q == "acc":
                 guess = plaus.infer_acc_unit(raw, t_ns)
@@ -508,15 +590,27 @@ def _plan(
     device_meta: dict[str, Any] | None,
     fmt: str,
     units: dict[str, str] | None,
+    header_lines: list[str] | None = None,
+    raw: set[int] | None = None,
 ) -> _Plan:
-    lines = head_lines(path, head)  # empty or binary files are refused before the whole file is read
+    # empty or binary files are refused before the whole file is read
+    lines = header_lines if header_lines is not None else head_lines(path, head)
     device_meta = dict(device_meta or {})
     if mapping is not None:
         device_meta.update(mapping.device)
     device_name = sanitize_name(str(device_meta.get("name", "imu")))
     layout = analyse_header(
-        path, lines, mapping=mapping, default_units=default_units, device_name=device_name, units=units
+        path, lines, mapping=mapping, default_units=default_units, device_name=device_name, units=units, raw=raw
     )
+    for c in layout.columns:
+        if c.quantity == "marker" and c.unit not in LENGTH_TO_M:
+            group = c.name.rsplit("/", 1)[0]
+            raise ConversionError(
+                path,
+                f"position group {group!r} has no length unit: write it in the label ({group} (mm)) or give "
+                "--unit markers=mm (or m, cm)",
+                column=c.name,
+            )
     first = _first_data_cells(path, lines, layout)
     ignore = {c.index for c in layout.columns if c.quantity == "ignore"}
     # text columns (non-numeric in the first data row) that are not IMU data are skipped, not parsed
@@ -620,12 +714,15 @@ def read_delimited(
     fmt: str = "delimited",
     head: bytes | None = None,
     units: dict[str, str] | None = None,
+    header_lines: list[str] | None = None,
+    raw: set[int] | None = None,
 ) -> Recording:
     """Read one delimited IMU text file into a Recording (see module docstring).
 
     Empty or NaN cells in IMU columns are gaps (NaN in the stream); ``units`` replaces the header's unit per
     quantity (``{"gyr": "deg/s"}``); units the header does not give are inferred from the values and said in
-    ``Recording.warnings``.
+    ``Recording.warnings``. ``header_lines``: the file's first lines as a format reader normalised them (same
+    number of lines, e.g. Shimmer's four header rows as a names and a units row); ``raw``: see :func:`analyse_header`.
     """
     path = Path(path)
     plan = _plan(
@@ -637,6 +734,8 @@ def read_delimited(
         device_meta=device_meta,
         fmt=fmt,
         units=units,
+        header_lines=header_lines,
+        raw=raw,
     )
     data = read_source(path)  # read once: parsed from memory, its SHA-256 computed from these bytes
     values = read_numeric(plan.spec, data)
@@ -649,7 +748,42 @@ def read_delimited(
     assumed.extend(resolve_inferred(path, plan.layout, values, t_ns, plan.units))
     warnings.extend(_units_warning(path, assumed))
     rate_meta = float(plan.rate) if plan.rate else estimate_rate_hz(t_ns)
-    return _recording(plan, values, t_ns, time_desc, rate_meta, warnings)
+    rec = _recording(plan, values, t_ns, time_desc, rate_meta, warnings)
+    start = unix_start(plan.layout, values, t_ns)
+    if start is not None:
+        rec.metadata["imulog.trial"] = start
+    return rec
+
+
+UNIX_S_RANGE = (9.0e8, 4.2e9)  # 1998 .. 2103: a first stamp in this range (s since 1970) is a Unix time
+
+
+def unix_start(layout: Layout, values: np.ndarray, t_ns: np.ndarray) -> dict[str, str] | None:
+    """``imulog.trial`` start (UTC) from a Unix time column (``Timestamp_Unix``, ``System_Timestamp``): the time
+    column itself when it is one (its first, fitted, stamp), else a Unix column beside the device's clock (its
+    first cell, the host time of the first sample). None when the file has no Unix time."""
+    from datetime import UTC, datetime
+
+    cols = [c for c in layout.columns if c.quantity == "time"] + [c for c in layout.columns if c.quantity == "extra"]
+    for c in cols:
+        tokens = _tokens(c.name)
+        is_unix = "unix" in tokens or ("system" in tokens and any(t.startswith("timestamp") for t in tokens))
+        if not is_unix or len(values) == 0:
+            continue
+        if c.quantity == "time":
+            first_s = float(t_ns[0]) / 1e9
+        else:
+            factor = unit_factor("time", c.unit or "ms") or 1e6
+            first_s = float(values[0, c.index]) * factor / 1e9
+        if not UNIX_S_RANGE[0] < first_s < UNIX_S_RANGE[1]:
+            continue
+        when = datetime.fromtimestamp(first_s, tz=UTC)
+        return {
+            "start_time": when.isoformat(timespec="milliseconds"),
+            "time_zone": "UTC",
+            "start_time_source": f"column {c.name!r} (Unix time of the first sample)",
+        }
+    return None
 
 
 #: bytes of text per piece when a large file is converted piece by piece (``iter_delimited``)
@@ -811,7 +945,42 @@ def _recording(
         extra_cols: list[Column] = []
         chosen_variant: dict[str, str] = {}
         slots: dict[tuple[str, str | None], Column] = {}
+        marks = [c for c in cols if c.quantity == "marker"]
+        quat_cols = {c.axis: c for c in cols if c.quantity == "quat"}
+        if marks and set(quat_cols) == set("wxyz") and {c.variant for c in marks} == {dev}:
+            pos = _marker_stream(path, dev, marks, values, t_ns).pos[:, 0]
+            q = np.column_stack([values[:, quat_cols[a].index] for a in "wxyz"])
+            rec.poses.append(
+                PoseStream(topic=f"/poses/{dev}", t_ns=t_ns, position=pos, orientation=q, frame_id="world")
+            )
+            rec.metadata[f"imulog.device.{dev}"] = {
+                "format": fmt,
+                "kind": "reference pose (position m, quaternion w, x, y, z as exported)",
+                "columns": [c.name for c in marks] + [quat_cols[a].name for a in "wxyz"],
+                "source": path.name,
+            }
+            continue
+        if marks:
+            rec.markers.append(_marker_stream(path, dev, marks, values, t_ns))
+            rec.metadata.setdefault(
+                f"imulog.device.{dev}", {"format": fmt, "kind": "markers (mapping file)", "source": path.name}
+            )
+        quat = {c.axis: c for c in cols if c.quantity == "quat"}
+        if quat:
+            if set(quat) != set("wxyz"):
+                missing = ", ".join(a for a in "wxyz" if a not in quat)
+                raise ConversionError(path, f"orientation group {dev!r}: no quaternion column {missing}")
+            q = np.column_stack([values[:, quat[a].index] for a in "wxyz"])
+            rec.signals.append(orientation_stream(dev, t_ns, q, frame_id="reference"))
+            rec.metadata[f"imulog.device.{dev}"] = {
+                "format": fmt,
+                "kind": "reference orientation (quaternion w, x, y, z as exported)",
+                "orientation": {"topic": f"/orientation/{dev}", "columns": [quat[a].name for a in "wxyz"]},
+                "source": path.name,
+            }
         for c in cols:
+            if c.quantity in ("quat", "marker"):
+                continue
             if c.quantity in ("acc", "gyr", "mag", "temperature"):
                 v = chosen_variant.setdefault(c.quantity, c.variant)
                 if c.variant != v:
@@ -872,9 +1041,35 @@ def _recording(
                     topic=f"/signals/{dev}", t_ns=t_ns, columns=cols_out, units=units_out, values=np.column_stack(data)
                 )
             )
-    if not rec.imus and not rec.signals:
+    if not rec.imus and not rec.signals and not rec.markers:
         raise ConversionError(path, "no IMU or numeric columns found")
     return rec
+
+
+def _marker_stream(path: Path, dev: str, cols: list[Column], values: np.ndarray, t_ns: np.ndarray) -> MarkerStream:
+    """Marker columns (one per marker axis, from a mapping file) as one marker set, in m."""
+    labels: list[str] = []
+    axes: dict[tuple[str, str], Column] = {}
+    for c in cols:
+        if c.variant not in labels:
+            labels.append(c.variant)
+        if (c.variant, str(c.axis)) in axes:
+            raise ConversionError(
+                path,
+                f"marker {c.variant!r} axis {c.axis}: two columns ({axes[(c.variant, str(c.axis))].name!r}, {c.name!r})",
+            )
+        axes[(c.variant, str(c.axis))] = c
+    pos = np.full((len(values), len(labels), 3), np.nan)
+    for m, label in enumerate(labels):
+        missing = [a for a in "xyz" if (label, a) not in axes]
+        if missing:
+            raise ConversionError(
+                path, f"marker {label!r}: no column for axis {', '.join(missing)} in the mapping file"
+            )
+        for k, a in enumerate("xyz"):
+            c = axes[(label, a)]
+            pos[:, m, k] = values[:, c.index] * c.factor
+    return MarkerStream(name=dev, t_ns=t_ns, labels=labels, pos=pos, meta={"source": path.name})
 
 
 class DelimitedConverter(Converter):

@@ -12,7 +12,12 @@ Example (``wrist_imu.mapping.json`` beside ``wrist_imu.csv``)::
                  "mx": {"quantity": "mag", "axis": "x", "unit": "uT"}}}
 
 ``time.host_clock: true`` marks jittery host receive stamps (a uniform clock is fitted when they repeat).
-``time.column`` may be null when the file has no time column (then ``device.rate_hz`` is required).
+``time.column`` may be null when the file has no time column (then ``device.rate_hz`` or ``--rate`` gives the rate).
+
+Several sensors in one file: a column's ``"sensor": "seg1"`` puts it in ``/imu/seg1`` (default: ``device.name``).
+Markers, one column per marker axis: ``{"quantity": "marker", "marker": "seg1_marker1", "axis": "x", "unit": "mm"}``
+(``/markers/<sensor or "markers">``, m). ``"unmapped": "ignore"`` reads only the columns the mapping names (default
+``"keep"``: the others are still recognised from their headers).
 """
 
 from __future__ import annotations
@@ -31,9 +36,11 @@ MAPPING_FORMAT = "imulog.mapping/1"
 
 @dataclass(frozen=True)
 class ColumnMap:
-    quantity: str  # acc | gyr | mag | temperature
+    quantity: str  # acc | gyr | mag | temperature | marker
     axis: str | None  # x | y | z (None for temperature)
     unit: str
+    sensor: str | None = None  # the IMU (or marker set) the column belongs to; None = device.name
+    marker: str | None = None  # the marker's label (quantity marker)
 
 
 @dataclass
@@ -46,6 +53,7 @@ class Mapping:
     has_time: bool = False
     host_clock: bool = False
     columns: dict[str, ColumnMap] = field(default_factory=dict)
+    unmapped: str = "keep"  # keep: other columns recognised from their headers; ignore: not read
 
 
 def sibling_mapping(data_path: Path) -> Path | None:
@@ -107,8 +115,11 @@ def load_mapping(path: Path) -> Mapping:
                 raise ConversionError(path, "time.column must be a column name or null")
             if mapping.time_unit is None or unit_factor("time", str(mapping.time_unit)) is None:
                 raise ConversionError(path, f"time.unit {mapping.time_unit!r} unknown (use s, ms, us or ns)")
-        elif rate is None:
-            raise ConversionError(path, "time.column is null: device.rate_hz is required")
+        # time.column null: the rate comes from device.rate_hz or --rate (checked when converting)
+    unmapped = doc.get("unmapped", "keep")
+    if unmapped not in ("keep", "ignore"):
+        raise ConversionError(path, f'\'unmapped\' must be "keep" or "ignore", got {unmapped!r}')
+    mapping.unmapped = unmapped
     columns = doc.get("columns", {})
     if not isinstance(columns, dict):
         raise ConversionError(path, "'columns' must be an object: column name -> {quantity, axis, unit}")
@@ -116,8 +127,16 @@ def load_mapping(path: Path) -> Mapping:
         if not isinstance(spec, dict):
             raise ConversionError(path, f"columns.{name} must be an object")
         q = spec.get("quantity")
+        sensor = spec.get("sensor")
+        if sensor is not None and (not isinstance(sensor, str) or not sensor.strip()):
+            raise ConversionError(path, f"columns.{name}.sensor must be a name, got {sensor!r}")
+        if q == "marker":
+            mapping.columns[str(name)] = _marker_column(path, str(name), spec, sensor)
+            continue
         if q not in QUANTITIES:
-            raise ConversionError(path, f"columns.{name}.quantity {q!r} unknown (use {', '.join(QUANTITIES)})")
+            raise ConversionError(
+                path, f"columns.{name}.quantity {q!r} unknown (use {', '.join(QUANTITIES)} or marker)"
+            )
         axis = spec.get("axis")
         if q != "temperature":
             axis = str(axis).lower() if axis is not None else None
@@ -128,5 +147,21 @@ def load_mapping(path: Path) -> Mapping:
             unit_factor(q, unit) is None and not (q == "mag" and normalise_unit(unit) in NORMALISED_MAG_UNITS)
         ):
             raise ConversionError(path, f"columns.{name}.unit {unit!r} is not a known {q} unit")
-        mapping.columns[str(name)] = ColumnMap(q, axis, unit)
+        mapping.columns[str(name)] = ColumnMap(q, axis, unit, sensor=sensor)
     return mapping
+
+
+def _marker_column(path: Path, name: str, spec: dict, sensor: str | None) -> ColumnMap:
+    """A ``quantity: marker`` column: its marker label, axis and length unit."""
+    from converters._common import LENGTH_TO_M
+
+    marker = spec.get("marker")
+    if not isinstance(marker, str) or not marker.strip():
+        raise ConversionError(path, f'columns.{name}.marker must name the marker (e.g. "seg1_marker1")')
+    axis = str(spec.get("axis", "")).lower()
+    if axis not in ("x", "y", "z"):
+        raise ConversionError(path, f"columns.{name}.axis {spec.get('axis')!r} must be x, y or z")
+    unit = spec.get("unit")
+    if not isinstance(unit, str) or unit.strip().lower() not in LENGTH_TO_M:
+        raise ConversionError(path, f"columns.{name}.unit {unit!r} is not a length unit (m, cm or mm)")
+    return ColumnMap("marker", axis, unit.strip().lower(), sensor=sensor, marker=marker.strip())

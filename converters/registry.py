@@ -43,6 +43,13 @@ BUILTIN: dict[str, str] = {
     "edf": "converters.edf:CONVERTER",
     "nilspod": "converters.nilspod:CONVERTER",
     "bids-motion": "converters.bids:CONVERTER",
+    "axivity-csv": "converters.axivity_csv:CONVERTER",
+    "movella-dot": "converters.movella_dot:CONVERTER",
+    "empatica-e4": "converters.empatica_e4:CONVERTER",
+    "shimmer-csv": "converters.shimmer:CONVERTER",
+    "compressed": "converters.compressed:CONVERTER",
+    "opensignals": "converters.opensignals:CONVERTER",
+    "opensignals-h5": "converters.opensignals_h5:CONVERTER",
 }
 MIN_CONFIDENCE = 0.3
 
@@ -113,6 +120,11 @@ def detect(path: Path) -> Converter:
         if s > score:
             best, score = conv, s
     if best is None or score < MIN_CONFIDENCE:
+        from converters.known_formats import recognise
+
+        named = recognise(path, head)
+        if named:
+            raise UnknownFormatError(path, f"{named} (see `imulog convert --list-formats`)")
         hint = ""
         if path.suffix.lower() in (".csv", ".tsv", ".txt"):
             hint = (

@@ -361,6 +361,11 @@ def _units(pairs: tuple[str, ...]) -> dict[str, str]:
 @overwrite_option("Replace an existing output trial (without it, an existing output is refused).")
 @click.option("--list-formats", "list_formats_flag", is_flag=True, help="List the known input formats and exit.")
 @click.option(
+    "--inspect",
+    is_flag=True,
+    help="Print what would be made (format, columns to channels, units, rate, start time, warnings); write nothing.",
+)
+@click.option(
     "--json", "as_json", is_flag=True, help="Print what was written (paths, channels, warnings) as one JSON document."
 )
 def convert(
@@ -380,6 +385,7 @@ def convert(
     overwrite: bool,
     list_formats_flag: bool,
     as_json: bool = False,
+    inspect: bool = False,
 ) -> None:
     """Convert device exports into one MCAP trial (or a folder of exports into one trial per recording).
 
@@ -397,6 +403,7 @@ def convert(
       imulog convert wrist_acc.csv --unit acc=g --unit gyr=deg/s -o wrist.mcap   # header without units
       imulog convert exports/ -o trials/          # one trial per recording, with a progress bar
       imulog convert week.cwa -o week.mcap --attach-original never   # record the .cwa's hash, keep it apart
+      imulog convert --inspect odd_export.csv     # what would be made, nothing written
 
     In folder mode the files of one recording share a name stem apart from role words (s01_imu.csv +
     s01_vicon.csv), and a s01_meta.json/.toml beside them adds that trial's metadata.
@@ -409,6 +416,9 @@ def convert(
         return
     if not inputs:
         raise click.UsageError("give at least one INPUT (or --list-formats)")
+    if inspect:
+        _inspect(inputs, fmt, mapping, rate_hz, device_names, unit_pairs, as_json)
+        return
     if output is None:
         raise click.UsageError("give the output with -o/--output")
     if fmt and fmt not in available():
@@ -466,6 +476,57 @@ def convert(
     click.echo(f"wrote {path} ({', '.join(f'{s.topic} {len(s)}' for s in rec.streams())})")
     for msg in conversion_warnings(rec):
         click.echo(f"warning: {output}: {msg}", err=True)
+
+
+def _inspect(
+    inputs: tuple[Path, ...],
+    fmt: str | None,
+    mapping: Path | None,
+    rate_hz: float | None,
+    device_names: tuple[str, ...],
+    unit_pairs: tuple[str, ...],
+    as_json: bool,
+) -> None:
+    """``--inspect``: convert in memory and describe the result (files as one trial, folders per recording)."""
+    from imulog.commands.convert_inspect import describe, render
+
+    options = ConvertOptions(
+        mapping=mapping,
+        rate_hz=rate_hz,
+        extra={"names": _kv(device_names, "--device-name"), "units": _units(unit_pairs)},
+    )
+    groups: list[list[Path]] = []
+    for p in inputs:
+        if p.is_dir():
+            groups.extend(files for _, files in group_directory(p))
+        else:
+            groups.append([p])
+    if all(not p.is_dir() for p in inputs):
+        groups = [list(inputs)]
+    if not groups:
+        raise click.ClickException(f"no convertible files under {', '.join(map(str, inputs))}")
+    reports, failures = [], []
+    for files in groups:
+        try:
+            formats = [_format_name(p, fmt, options) for p in files]
+            rec = convert_files(files, options=options, formats=formats)
+            reports.append(describe(files, formats, rec, unit_warnings(rec), options))
+        except ConversionError as e:
+            failures.append(str(e))
+    if as_json:
+        click.echo(json.dumps({"inspect": reports, "errors": failures}, indent=2, default=str))
+    else:
+        for k, report in enumerate(reports):
+            if k:
+                click.echo("")
+            for line in render(report):
+                click.echo(line)
+    if failures:
+        if not as_json:
+            for msg in failures[:-1]:
+                click.echo(f"error: {msg}", err=True)
+            raise click.ClickException(failures[-1])
+        raise click.exceptions.Exit(1)
 
 
 def _sibling_meta(files: list[Path]) -> dict[str, dict[str, Any]]:

@@ -1,0 +1,245 @@
+"""ActiLife epoch (activity count) CSV exports: counts per epoch and axis, steps, lux, inclinometer.
+
+Same 10-line banner as the raw export (see :mod:`converters.actilife_csv`) with ``Epoch Period (hh:mm:ss)``
+other than ``00:00:00`` and no ``at N Hz``. Then, as ActiLife writes it (and GGIRread's ``readActiGraphCount``
+reads it), either a names row::
+
+    Date,Time,Axis1,Axis2,Axis3,Steps,Lux,Inclinometer Off,Inclinometer Standing,Inclinometer Sitting,
+    Inclinometer Lying,Vector Magnitude
+
+(``Date``/``Time`` optional, any subset of the rest) or no names row, the columns then being in ActiLife's fixed
+order ``Axis1, Axis2, Axis3, Steps, Lux, Inclinometer Off, Standing, Sitting, Lying`` (as many as there are).
+Axis1 is the vertical axis (the device's Y), Axis2 horizontal (X), Axis3 perpendicular (Z).
+
+Each row is one epoch: it becomes one sample of the signal stream ``/signals/<serial>_counts`` at the epoch's
+start (``Start Date``/``Start Time`` + row x epoch, or the row's ``Date``/``Time``), with the epoch length in the
+device metadata (``epoch_s``). Counts are ActiGraph's device-specific activity counts (unit ``counts``), steps
+``steps``, lux ``lx``, inclinometer columns ``s`` of the epoch in that posture (ActiLife writes seconds).
+"""
+
+from __future__ import annotations
+
+import re
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+
+from converters._binary import UNKNOWN_ZONE
+from converters._common import TableSpec, read_numeric, sanitize_name
+from converters.errors import ConversionError
+from imulog.model import Recording, SignalStream
+
+BANNER_LINES = 10
+ORDER = (
+    "Axis1",
+    "Axis2",
+    "Axis3",
+    "Steps",
+    "Lux",
+    "Inclinometer Off",
+    "Inclinometer Standing",
+    "Inclinometer Sitting",
+    "Inclinometer Lying",
+)
+UNITS = {"axis1": "counts", "axis2": "counts", "axis3": "counts", "vector_magnitude": "counts", "vm": "counts"}
+UNITS |= {"steps": "steps", "lux": "lx", "activity": "counts"}
+TIME_NAMES = {"date", "time", "timestamp"}
+
+
+def epoch_seconds(text: str) -> float:
+    """``00:00:15`` -> 15.0 (s)."""
+    h, m, s = (int(p) for p in text.split(":"))
+    return float(h * 3600 + m * 60 + s)
+
+
+def _unit(column: str) -> str:
+    key = sanitize_name(column)
+    if key.startswith("inclinometer"):
+        return "s"
+    return UNITS.get(key, "")
+
+
+def _is_names_row(cells: list[str]) -> bool:
+    return any(re.search(r"[A-Za-z]", c) for c in cells)
+
+
+def _parse_dates(path: Path, date: list[str], time: list[str] | None, fmt: str, first_line: int) -> np.ndarray:
+    """Date (banner ``date format``) and time cells -> datetime64[ns] per row."""
+    import pandas as pd
+
+    from converters.actilife_csv import strptime_format
+
+    py_fmt = strptime_format(fmt)
+    text = pd.Series(date) if time is None else pd.Series(date) + " " + pd.Series(time)
+    for f in (f"{py_fmt} %H:%M:%S", "ISO8601") if time is not None else ("ISO8601",):
+        parsed = pd.to_datetime(text, format=f, errors="coerce")
+        if not parsed.isna().any():
+            return parsed.to_numpy().astype("datetime64[ns]")
+    bad = int(np.nonzero(pd.to_datetime(text, format="mixed", errors="coerce").isna().to_numpy())[0][0])
+    raise ConversionError(
+        path, f"{text.iloc[bad][:30]!r} is not a date/time in format {fmt}", line=first_line + bad, column="Date"
+    )
+
+
+def read_epoch_csv(
+    path: Path, lines: list[str], banner: dict, options: object = None, *, banner_lines: int = BANNER_LINES
+) -> Recording:
+    """An ActiLife epoch CSV (``banner`` from :func:`converters.actilife_csv.parse_banner`) as epoch signals.
+
+    ``banner_lines`` 0: an export without the banner (``banner`` then comes from :func:`bannerless_banner`)."""
+    import pandas as pd
+
+    BANNER_LINES = banner_lines  # noqa: N806 - the banner's length in this file
+
+    epoch_s = epoch_seconds(banner["epoch"])
+    if epoch_s <= 0:
+        raise ConversionError(path, f"Epoch Period {banner['epoch']} is not an epoch length", line=5)
+    if len(lines) <= BANNER_LINES:
+        raise ConversionError(path, "no epochs after the banner", line=BANNER_LINES + 1)
+    first = [c.strip().strip('"').strip() for c in lines[BANNER_LINES].split(",")]
+    while first and not first[-1]:
+        first.pop()
+    has_names = _is_names_row(first)
+    skip = BANNER_LINES + (1 if has_names else 0)
+    if has_names:
+        names = first
+    else:
+        if len(first) > len(ORDER):
+            raise ConversionError(
+                path,
+                f"{len(first)} columns without a names row: ActiLife's order names only {len(ORDER)} "
+                "(export with column headers, or pass a mapping file)",
+                line=BANNER_LINES + 1,
+            )
+        names = list(ORDER[: len(first)])
+    if any(n.lower().startswith(("accelerometer", "gyroscope")) for n in names):
+        raise ConversionError(
+            path,
+            f"epoch export (Epoch Period {banner['epoch']}) whose names row holds raw sample columns "
+            f"({names[0]}, ...): banner and data disagree; a raw export has Epoch Period 00:00:00",
+            line=5 if BANNER_LINES else 1,
+        )
+    lower = [n.lower() for n in names]
+    time_idx = [i for i, n in enumerate(lower) if n in TIME_NAMES]
+    value_idx = [i for i in range(len(names)) if i not in time_idx]
+    if not value_idx:
+        raise ConversionError(path, "names row has no count columns", line=BANNER_LINES + 1)
+    spec = TableSpec(path=path, delimiter=",", skip_lines=skip, names=names, ignore=set(time_idx))
+    values = read_numeric(spec)
+    if values.ndim == 1:
+        values = values[:, None]
+    n = len(values)
+    if n == 0:
+        raise ConversionError(path, "no epochs after the banner", line=skip + 1)
+    start = np.datetime64(banner["start"], "ns")
+    if time_idx:
+        cells = pd.read_csv(
+            path, skiprows=skip, header=None, usecols=time_idx, nrows=n, dtype=str, engine="c", skipinitialspace=True
+        )
+        by_name = {lower[i]: cells[i].str.strip().tolist() for i in time_idx}
+        if "timestamp" in by_name:
+            stamps = _parse_dates(path, by_name["timestamp"], None, banner["date_format"], skip + 1)
+        elif "date" in by_name:
+            stamps = _parse_dates(path, by_name["date"], by_name.get("time"), banner["date_format"], skip + 1)
+        else:
+            raise ConversionError(path, "a 'Time' column without a 'Date' column", line=skip)
+        t_ns = (stamps - start).astype(np.int64)
+        d = np.diff(t_ns)
+        if len(d) and (d <= 0).any():
+            i = int(np.nonzero(d <= 0)[0][0]) + 1
+            raise ConversionError(path, "epoch time does not increase", line=skip + 1 + i, column="Date")
+        if len(d) and not np.allclose(d, epoch_s * 1e9):
+            spec.warnings.append(
+                f"{path.name}: epoch times are not {epoch_s:g} s apart everywhere (gaps or a changed epoch)"
+            )
+    else:
+        t_ns = np.arange(n, dtype=np.int64) * np.int64(round(epoch_s * 1e9))
+    serial = banner["serial"]
+    name = sanitize_name(f"{serial}_counts" if serial else "actigraph_counts")
+    columns = [sanitize_name(names[i]) for i in value_idx]
+    meta = {
+        "format": "actilife-csv (epoch counts)",
+        "model": banner["device"],
+        "serial": serial,
+        "epoch_s": epoch_s,
+        "columns": dict(zip(columns, [names[i] for i in value_idx], strict=True)),
+        "column_source": "names row" if has_names else "no names row: ActiLife's column order " + ", ".join(ORDER),
+        "time_base": "ns from start_time (banner Start Date/Time, device local time); one sample per epoch start",
+        "source": path.name,
+    }
+    warnings = list(spec.warnings)
+    if not BANNER_LINES:
+        warnings.append(
+            f"{path.name}: no ActiLife banner: start and epoch ({epoch_s:g} s) from the first rows, dates read as "
+            f"{banner['date_format']}, serial unknown"
+        )
+    if not has_names:
+        warnings.append(
+            f"{path.name}: no names row; {len(names)} columns taken in ActiLife's order ({', '.join(names)})"
+        )
+    rec = Recording(sources=[str(path)], warnings=warnings)
+    rec.signals.append(
+        SignalStream(
+            topic=f"/signals/{name}",
+            t_ns=t_ns,
+            columns=columns,
+            units=[_unit(names[i]) for i in value_idx],
+            values=values[:, value_idx],
+        )
+    )
+    rec.metadata[f"imulog.device.{name}"] = meta
+    rec.metadata["imulog.trial"] = {
+        "start_time": datetime.fromisoformat(str(banner["start"])).isoformat(timespec="milliseconds"),
+        "time_zone": UNKNOWN_ZONE,
+    }
+    return rec
+
+
+BANNERLESS_FORMATS = ("M/d/yyyy", "d/M/yyyy", "yyyy-MM-dd", "d.M.yyyy", "d-M-yyyy")
+
+
+def is_bannerless(lines: list[str]) -> bool:
+    """An epoch export without its banner: a names row with ``Axis1`` (and usually ``Date``, ``Time``) first."""
+    if not lines:
+        return False
+    cells = [c.strip().strip('"').strip().lower() for c in lines[0].split(",")]
+    return "axis1" in cells and all(c in TIME_NAMES or c.replace(" ", "_") in _KNOWN for c in cells if c)
+
+
+_KNOWN = {sanitize_name(n) for n in ORDER} | {"vector_magnitude", "vm", "activity"}
+
+
+def bannerless_banner(path: Path, lines: list[str]) -> dict:
+    """The banner fields an export without banner implies: start and epoch from its first Date/Time rows, the date
+    format the first of :data:`BANNERLESS_FORMATS` under which they parse and step evenly (said in a warning)."""
+    cells = [c.strip().strip('"').strip().lower() for c in lines[0].split(",")]
+    if "date" not in cells or "time" not in cells:
+        raise ConversionError(
+            path,
+            "ActiLife epoch export without its banner and without Date/Time columns: the epoch length and start "
+            "are unknown (export with the header, or with Date and Time columns)",
+            line=1,
+        )
+    di, ti = cells.index("date"), cells.index("time")
+    rows = [[c.strip().strip('"') for c in ln.split(",")] for ln in lines[1:4] if ln.strip()]
+    if len(rows) < 2:
+        raise ConversionError(path, "fewer than two epochs: the epoch length is unknown", line=2)
+    from converters.actilife_csv import strptime_format
+
+    for fmt in BANNERLESS_FORMATS:
+        try:
+            times = [datetime.strptime(f"{r[di]} {r[ti]}", f"{strptime_format(fmt)} %H:%M:%S") for r in rows]
+        except (ValueError, IndexError):
+            continue
+        steps = {(b - a).total_seconds() for a, b in zip(times, times[1:], strict=False)}
+        if len(steps) == 1 and (step := steps.pop()) > 0:
+            h, rem = divmod(int(step), 3600)
+            return {
+                "epoch": f"{h:02d}:{rem // 60:02d}:{rem % 60:02d}",
+                "start": times[0],
+                "serial": "",
+                "device": "ActiGraph (no banner)",
+                "date_format": fmt,
+            }
+    raise ConversionError(path, f"Date/Time {rows[0][di]!r} {rows[0][ti]!r} in no known date format", line=2)
