@@ -82,8 +82,6 @@ def _blocks(t, acc, gyr, size):
         yield t[a : a + size], acc[a : a + size], gyr[a : a + size], None
 
 
-
-
 def test_windows_join_headings_and_hold_them_across_a_gap_at_the_join():
     """Several windows on synthetic blocks: tilt as the whole, no heading jump at a join, also when the join
     falls inside a long gap (the heading is held across it, as within one window)."""
