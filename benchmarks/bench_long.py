@@ -4,6 +4,7 @@
     python benchmarks/bench_long.py --days 0.25 1      # quicker
     python benchmarks/bench_long.py --trials day.mcap week.mcap --commands phases   # copies of processed trials
     python benchmarks/bench_long.py --orientation-peer 1     # windowed orientation vs VQF offline, a day, in-process
+    python benchmarks/bench_long.py --dynamos 12500 25000 50000   # DynAMoS merge/split time vs movements
 
 For each length: ``imulog simulate home --days D`` writes an Axivity AX6 .cwa (accelerometer + gyroscope,
 100 Hz), then ``imulog convert``, ``imulog process orientation``, ``imulog process phases``, ``imulog process
@@ -93,6 +94,32 @@ def orientation_peer(days: float, rate: float = 100.0, repeats: int = 1) -> int:
     return 0 if ratio >= 0.9 else 1
 
 
+def dynamos_scaling(counts: list[int]) -> int:
+    """Time of DynAMoS's merge/split (imulog.process.segmentation.dynamos.postprocess) to convergence on the first
+    K of 50,000 synthetic daily-life movements (log-normal durations, median 1.5 s at 100 Hz, rests of 0.5-30 s);
+    target: a week's movements (tens of thousands) in well under a minute, about linear in K."""
+    import numpy as np
+
+    from imulog.process.segmentation.dynamos import postprocess
+
+    rng = np.random.default_rng(0)
+    k = max(counts)
+    durs = np.maximum(5, rng.lognormal(np.log(150), 0.7, k).astype(int))
+    start = np.cumsum(rng.integers(50, 3000, k) + np.r_[0, durs[:-1]])
+    end = start + durs
+    n = int(end[-1]) + 10
+    norm = np.abs(np.sin(np.arange(n) / 17.0)) + rng.normal(0.0, 0.05, n)
+    worst = 0.0
+    for count in sorted(counts):
+        stats: dict = {}
+        t0 = time.perf_counter()
+        postprocess(start[:count], end[:count], norm, 0.8, 1.4, 10**9, stats)
+        elapsed = time.perf_counter() - t0
+        worst = max(worst, elapsed)
+        print(f"{count:7d} movements: {elapsed:6.2f} s, {stats['changes']} changes; load {os.getloadavg()[0]:.1f}")
+    return 0 if worst < 60.0 else 1
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument(
@@ -102,11 +129,21 @@ def main(argv: list[str] | None = None) -> int:
         metavar="DAYS",
         help="only compare the windowed orientation with VQF offline on DAYS of samples, in-process",
     )
+    ap.add_argument(
+        "--dynamos",
+        type=int,
+        nargs="+",
+        default=None,
+        metavar="K",
+        help="only time DynAMoS's merge/split on K synthetic movements (several K: scaling)",
+    )
     ap.add_argument("--days", type=float, nargs="+", default=[1.0, 7.0], help="recording lengths, days")
     ap.add_argument("--dir", default=None, help="scratch folder (needs ~3 GB per simulated week)")
     ap.add_argument("--trials", nargs="+", default=None, help="converted trials, one per --days value (copied)")
     ap.add_argument("--commands", nargs="+", default=[n for n, _ in COMMANDS], choices=[n for n, _ in COMMANDS])
     args = ap.parse_args(argv)
+    if args.dynamos:
+        return dynamos_scaling(args.dynamos)
     if args.orientation_peer is not None:
         return orientation_peer(args.orientation_peer)
     if args.trials and len(args.trials) != len(args.days):
