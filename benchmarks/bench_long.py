@@ -3,6 +3,8 @@
     python benchmarks/bench_long.py                    # 1 and 7 days at 100 Hz (a 774 MB .cwa; ~10 min)
     python benchmarks/bench_long.py --days 0.25 1      # quicker
     python benchmarks/bench_long.py --trials day.mcap week.mcap --commands phases   # copies of processed trials
+    python benchmarks/bench_long.py --orientation-peer 1     # windowed orientation vs VQF offline, a day, in-process
+    python benchmarks/bench_long.py --dynamos 12500 25000 50000   # DynAMoS merge/split time vs movements
 
 For each length: ``imulog simulate home --days D`` writes an Axivity AX6 .cwa (accelerometer + gyroscope,
 100 Hz), then ``imulog convert``, ``imulog process orientation``, ``imulog process phases``, ``imulog process
@@ -49,13 +51,101 @@ def run(args: list[str]) -> tuple[float, float]:
     return elapsed, usage.ru_maxrss / 1024.0  # kB on Linux
 
 
+def orientation_peer(days: float, rate: float = 100.0, repeats: int = 1) -> int:
+    """The orientation step's windowed computation (imulog.steps.orientation.orientation_windows, default windows)
+    against VQF's offline filter (``vqf.offlineVQF``) on the same in-memory samples of a simulated wrist, in this
+    process; prints samples/s of each and the ratio (target >= 0.9). The step also gives the gravity-free
+    acceleration and static mask and handles gaps; the peer only the quaternions."""
+    import numpy as np
+    from vqf import offlineVQF
+
+    from imulog.process.orientation import OrientationParams
+    from imulog.steps.orientation import orientation_windows
+    from imulog.steps.windows import WindowParams
+
+    n = int(days * 86400 * rate)
+    rng = np.random.default_rng(0)
+    k = np.arange(n, dtype=np.float64)
+    gyr = np.column_stack([0.5 * np.sin(k / 97.0), 0.4 * np.cos(k / 131.0), 0.3 * np.sin(k / 1700.0)])
+    gyr += rng.normal(0.0, 0.01, (n, 3))
+    acc = np.column_stack([np.sin(k / 5000.0), np.cos(k / 7000.0), np.full(n, 9.7)]) + rng.normal(0, 0.05, (n, 3))
+    t = (k * (1e9 / rate)).astype(np.int64)
+    block = 20_000  # about the samples of one 2 MiB ImuBlock chunk
+
+    def blocks():
+        for a in range(0, n, block):
+            yield t[a : a + block], acc[a : a + block], gyr[a : a + block], None
+
+    plan = WindowParams().plan(n, rate)
+    best_step = best_peer = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _piece in orientation_windows(blocks(), n, plan, "wrist", OrientationParams()):
+            pass
+        best_step = min(best_step, time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        offlineVQF(gyr, acc, None, 1.0 / rate)
+        best_peer = min(best_peer, time.perf_counter() - t0)
+    ratio = best_peer / best_step
+    print(f"{n / 1e6:.2f} M samples ({days:g} d at {rate:g} Hz), {len(plan)} windows; load {os.getloadavg()[0]:.1f}")
+    print(f"imulog orientation (windowed): {best_step:.1f} s, {n / best_step / 1e6:.2f} M samples/s")
+    print(f"vqf.offlineVQF (whole):        {best_peer:.1f} s, {n / best_peer / 1e6:.2f} M samples/s")
+    print(f"speed ratio {ratio:.2f}x: {'meets target' if ratio >= 0.9 else 'MISSES'} (>= 0.9x)")
+    return 0 if ratio >= 0.9 else 1
+
+
+def dynamos_scaling(counts: list[int]) -> int:
+    """Time of DynAMoS's merge/split (imulog.process.segmentation.dynamos.postprocess) to convergence on the first
+    K of 50,000 synthetic daily-life movements (log-normal durations, median 1.5 s at 100 Hz, rests of 0.5-30 s);
+    target: a week's movements (tens of thousands) in well under a minute, about linear in K."""
+    import numpy as np
+
+    from imulog.process.segmentation.dynamos import postprocess
+
+    rng = np.random.default_rng(0)
+    k = max(counts)
+    durs = np.maximum(5, rng.lognormal(np.log(150), 0.7, k).astype(int))
+    start = np.cumsum(rng.integers(50, 3000, k) + np.r_[0, durs[:-1]])
+    end = start + durs
+    n = int(end[-1]) + 10
+    norm = np.abs(np.sin(np.arange(n) / 17.0)) + rng.normal(0.0, 0.05, n)
+    worst = 0.0
+    for count in sorted(counts):
+        stats: dict = {}
+        t0 = time.perf_counter()
+        postprocess(start[:count], end[:count], norm, 0.8, 1.4, 10**9, stats)
+        elapsed = time.perf_counter() - t0
+        worst = max(worst, elapsed)
+        print(f"{count:7d} movements: {elapsed:6.2f} s, {stats['changes']} changes; load {os.getloadavg()[0]:.1f}")
+    return 0 if worst < 60.0 else 1
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument(
+        "--orientation-peer",
+        type=float,
+        default=None,
+        metavar="DAYS",
+        help="only compare the windowed orientation with VQF offline on DAYS of samples, in-process",
+    )
+    ap.add_argument(
+        "--dynamos",
+        type=int,
+        nargs="+",
+        default=None,
+        metavar="K",
+        help="only time DynAMoS's merge/split on K synthetic movements (several K: scaling)",
+    )
     ap.add_argument("--days", type=float, nargs="+", default=[1.0, 7.0], help="recording lengths, days")
     ap.add_argument("--dir", default=None, help="scratch folder (needs ~3 GB per simulated week)")
     ap.add_argument("--trials", nargs="+", default=None, help="converted trials, one per --days value (copied)")
     ap.add_argument("--commands", nargs="+", default=[n for n, _ in COMMANDS], choices=[n for n, _ in COMMANDS])
     args = ap.parse_args(argv)
+    if args.dynamos:
+        return dynamos_scaling(args.dynamos)
+    if args.orientation_peer is not None:
+        return orientation_peer(args.orientation_peer)
     if args.trials and len(args.trials) != len(args.days):
         ap.error(f"--trials needs one trial per --days value ({len(args.days)})")
     commands = [(n, t) for n, t in COMMANDS if n in args.commands and not (args.trials and n == "convert")]
@@ -69,23 +159,35 @@ def main(argv: list[str] | None = None) -> int:
             if args.trials:
                 shutil.copy(args.trials[i], paths["mcap"])
             else:
-                subprocess.run([*imulog, "simulate", "home", "-o", str(folder), "--days", str(days)], check=True,
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                subprocess.run(
+                    [*imulog, "simulate", "home", "-o", str(folder), "--days", str(days)],
+                    check=True,
+                    stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL,
+                )
             results[days] = {}
             for name, template in commands:
                 results[days][name] = run([*imulog, *[a.format(**paths) for a in template]])
-                print(f"{days:g} d {name}: {results[days][name][0]:.1f} s, {results[days][name][1]:.0f} MB, "
-                      f"load {os.getloadavg()[0]:.1f}", flush=True)
+                print(
+                    f"{days:g} d {name}: {results[days][name][0]:.1f} s, {results[days][name][1]:.0f} MB, "
+                    f"load {os.getloadavg()[0]:.1f}",
+                    flush=True,
+                )
             sizes = {k: p.stat().st_size / 1e6 for k, p in paths.items() if p.exists()}
             print(f"{days:g} d: " + ", ".join(f"{k} {v:.0f} MB" for k, v in sizes.items()), flush=True)
             for p in paths.values():
                 p.unlink(missing_ok=True)
     one, five, _ = os.getloadavg()
-    print(f"load average {one:.1f} (1 min), {five:.1f} (5 min) on {os.cpu_count()} cores; "
-          f"self peak {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
+    print(
+        f"load average {one:.1f} (1 min), {five:.1f} (5 min) on {os.cpu_count()} cores; "
+        f"self peak {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB"
+    )
     lo, hi = min(args.days), max(args.days)
-    print(f"{'command':12s}" + "".join(f"{f'{d:g} d s':>10s}{f'{d:g} d MB':>11s}" for d in args.days)
-          + f"{'RSS ratio':>11s}  verdict")
+    print(
+        f"{'command':12s}"
+        + "".join(f"{f'{d:g} d s':>10s}{f'{d:g} d MB':>11s}" for d in args.days)
+        + f"{'RSS ratio':>11s}  verdict"
+    )
     ok_all = True
     for name, _ in commands:
         row = "".join(f"{results[d][name][0]:10.1f}{results[d][name][1]:11.0f}" for d in args.days)

@@ -475,13 +475,13 @@ class TrialReader:
         recorded = rec.metadata.get("sha256")
         if recorded:
             return recorded
-        from imulog.archive.writer import payload_hash
+        from imulog.archive.hashing import payload_hash
 
         return payload_hash(self.messages(topic))
 
     def compute_channel_hash(self, topic: str) -> str:
         """Recompute the content hash from the data (what ``doctor`` compares with the recorded one)."""
-        from imulog.archive.writer import payload_hash
+        from imulog.archive.hashing import payload_hash
 
         return payload_hash(self.messages(topic))
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import hashlib
 import mimetypes
 import os
-import struct
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -17,6 +16,7 @@ from imulog.archive import codec
 from imulog.archive._builder import McapBuilder, in_background
 from imulog.archive.errors import ArchiveError, ArchiveExistsError
 from imulog.archive.files import atomic_output, target_path, writer_lock
+from imulog.archive.hashing import payload_hash, rows_hash  # noqa: F401  (re-exported: callers import them here)
 from imulog.archive.metadata import encode_record
 from imulog.archive.timeline import IDENTITY, TIMELINE_RECORD, LogMap, TimelineError, TrialAxis, timeline_record
 from imulog.archive.twins import Origin, Twin, twin_topic, twins_for
@@ -25,39 +25,6 @@ from imulog.model import Recording, Stream
 LIBRARY = f"imulog {__version__}"
 PROFILE = ""  # plain MCAP profile: Foxglove and Rerun treat the protobuf channels generically
 WRITE_TWINS = os.environ.get("IMULOG_VIEWER_TWINS", "1") != "0"  # viewer twins next to block channels
-
-
-def payload_hash(payloads: Iterable[bytes | memoryview]) -> str:
-    """Content hash of a channel: SHA-256 over its messages (8-byte length + bytes each, in log order)."""
-    h = hashlib.sha256()
-    for p in payloads:
-        h.update(struct.pack("<Q", len(p)))
-        h.update(p)
-    return h.hexdigest()
-
-
-def rows_hash(rows: np.ndarray, mask: np.ndarray | None = None, block: int = 65536) -> str:
-    """:func:`payload_hash` of messages held as (N, W) uint8 rows (``mask``: the bytes each uses), with numpy."""
-    h = hashlib.sha256()
-    n, width = rows.shape
-    joined = np.empty((min(n, block), 8 + width), dtype=np.uint8)  # each message: 8-byte length, then its bytes
-    keep = None if mask is None else np.ones((min(n, block), 8 + width), dtype=bool)
-    for i in range(0, n, block):
-        part = rows[i : i + block]
-        k = len(part)
-        lengths = (
-            np.full(k, width, dtype="<u8")
-            if mask is None
-            else np.count_nonzero(mask[i : i + block], axis=1).astype("<u8")
-        )
-        joined[:k, :8] = lengths.view(np.uint8).reshape(k, 8)
-        joined[:k, 8:] = part
-        if keep is None:
-            h.update(joined[:k])  # hashlib reads the contiguous buffer: no copy to bytes
-        else:
-            keep[:k, 8:] = mask[i : i + block]
-            h.update(joined[:k][keep[:k]])
-    return h.hexdigest()
 
 
 def raw_digest(channels: dict[str, str], attachments: dict[str, str]) -> str:

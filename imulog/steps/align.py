@@ -184,10 +184,11 @@ def _compute(
     """Streams and the ``imulog.alignment`` record for one lag search range.
 
     ``params.cluster="auto"`` without ``params.markers`` searches the rigid marker set that moves with the
-    IMU (:func:`imulog.process.alignment_search.find_cluster`); when none reproduces the gyroscope, the
+    IMU (:func:`imulog.process.alignment_find.find_cluster`); when none reproduces the gyroscope, the
     marker whose acceleration matches the accelerometer (``acc``, or ``acc_global`` when the orientation
     step has run) is used instead. One marker in ``params.markers`` aligns on that marker's acceleration.
     """
+    from imulog.process import alignment_find as find
     from imulog.process import alignment_search as search
 
     if gyr is None:
@@ -201,7 +202,7 @@ def _compute(
     ck = None
     try:
         if params.cluster == "auto" and not params.markers:
-            res, ck, record = search.find_cluster(t_imu_ns, gyr, t_vic_ns, labels, pos_m, vic_rate, params)
+            res, ck, record = find.find_cluster(t_imu_ns, gyr, t_vic_ns, labels, pos_m, vic_rate, params)
             if record is not None and record["vector_match"] >= params.search.min_vector_match:
                 best, runner = _search_summary(res, ck.markers)
                 info = {**(best or {}), "markers": list(ck.markers), "runner_up": runner}

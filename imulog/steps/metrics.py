@@ -20,27 +20,19 @@ from typing import Any
 import numpy as np
 
 from imulog.model import ImuStream, Intervals, PoseStream, SignalStream
-from imulog.process.gaps import GapParams, prepare
+from imulog.process.gaps import GapParams
 from imulog.process.metrics import (
     ActivityCountParams,
-    ArmUsageParams,
     DistanceHistogramParams,
     NhptParams,
-    acc_to_g,
-    activity_count_dead_period,
-    activity_count_sign,
-    arm_usage,
-    distance_histogram,
     nhpt_timings,
     phase_summary,
     repetition_durations,
     smoothness,
-    weighted_area,
 )
-from imulog.process.metrics.distance import histogram_percent
-from imulog.process.metrics.periods import DAY_S, HOUR_S, period_summaries, wall_clock_origin_ns
 from imulog.steps.common import alignment_for, nominal_rate_hz, pick_imu
-from imulog.steps.long_metrics import LONG_SAMPLES, MetricCores, long_metrics_pieces
+from imulog.steps.metrics_windows import metric_pieces, metric_plan
+from imulog.steps.windows import WindowParams, channel_rate_hz
 
 STEP = "metrics"
 ALGORITHM = "imulog.metrics.doshi2011"
@@ -163,30 +155,6 @@ def _smoothness_per_phase(trajectory: SignalStream | PoseStream, phases: Interva
     return out
 
 
-def _period_records(t_ns, acc_g, usage, m2, dist, p: MetricsParams, start_time: str | None) -> dict[str, Any]:
-    """``by_hour`` / ``by_day`` lists (see :mod:`imulog.process.metrics.periods`) for recordings long enough."""
-    span_s = (int(t_ns[-1]) - int(t_ns[0])) / 1e9
-    out: dict[str, Any] = {}
-    for key, period_s in (("by_hour", HOUR_S), ("by_day", DAY_S)):
-        if span_s <= period_s:
-            continue
-        origin_ns, origin_time = wall_clock_origin_ns(int(t_ns[0]), start_time, period_s)
-        rows = period_summaries(
-            t_ns,
-            np.isfinite(acc_g).all(axis=1),
-            usage.active_any,
-            m2.intervals[:, 0] if len(m2.intervals) else np.zeros(0, np.int64),
-            dist.distance_cm,
-            dist.bin_centres_cm,
-            period_s=period_s,
-            origin_ns=origin_ns,
-            origin_time=origin_time,
-            weight_start_cm=p.weight_start_cm,
-        )
-        out[key] = [r.to_dict() for r in rows]
-    return out
-
-
 def compute_metrics(
     imu: ImuStream,
     params: MetricsParams | None = None,
@@ -210,72 +178,37 @@ def compute_metrics(
         raise ValueError(f"/imu/{imu.name} has no accelerometer columns")
     if len(imu) < 3:
         raise ValueError(f"/imu/{imu.name} has only {len(imu)} samples")
-    rate = nominal_rate_hz(imu.t_ns)
-    (acc_g,), gap_report = prepare([acc_to_g(imu.acc)], gaps)
-    unknown = ~np.isfinite(acc_g).all(axis=1)
-    usage = arm_usage(acc_g, ArmUsageParams(p.noise_level_g, p.arm_usage_rate_hz), t_ns=imu.t_ns)
-    m1 = activity_count_sign(acc_g)
-    m2 = activity_count_dead_period(acc_g, p.activity(rate))
-    dist = distance_histogram(acc_g, rate, p.distance())
-    if unknown.any():  # the distance is unknown inside long gaps: NaN there and not in the histogram
-        d_cm = np.where(unknown, np.nan, dist.distance_cm)
-        hist = histogram_percent(d_cm, p.distance())
-        dist = dataclasses.replace(
-            dist,
-            distance_cm=d_cm,
-            histogram_percent=hist,
-            weighted_area=weighted_area(hist, dist.bin_centres_cm, p.weight_start_cm),
-        )
-    last = len(imu) - 1
-    iv = m2.intervals
-    activity = Intervals(
-        topic=f"/derived/metrics/activity/{imu.name}",
-        start_ns=imu.t_ns[iv[:, 0]] if len(iv) else np.zeros(0, np.int64),
-        end_ns=imu.t_ns[np.minimum(iv[:, 1], last)] if len(iv) else np.zeros(0, np.int64),
-        labels=["activity"] * len(iv),
-        task_index=np.arange(1, len(iv) + 1),
+    record: dict[str, Any] = {}
+    pieces = metric_pieces(
+        lambda: iter([(imu.t_ns, imu.acc)]), len(imu), imu.topic, imu.name, p, record, start_time=start_time, gaps=gaps
     )
+    activity, distance = whole_streams(pieces)
+    return [activity, distance], phase_records(record, p, phases, trajectory)
+
+
+def whole_streams(pieces) -> tuple[Intervals, SignalStream]:
+    """The activity intervals and the distance channel from :func:`metric_pieces` (distance pieces joined)."""
+    parts = list(pieces)
+    activity = parts[-1]
+    d = parts[:-1]
     distance = SignalStream(
-        topic=f"/derived/metrics/distance/{imu.name}",
-        t_ns=imu.t_ns,
-        columns=["distance_cm"],
-        units=["cm" if p.acc_unit == "m/s^2" else "cm (Doshi A.3, integrated in g)"],
-        values=dist.distance_cm[:, None],
-        frame_id=imu.name,
+        d[0].topic,
+        np.concatenate([s.t_ns for s in d]),
+        d[0].columns,
+        d[0].units,
+        np.concatenate([s.values for s in d]),
+        frame_id=d[0].frame_id,
     )
-    durations = m2.durations_s(rate)
-    record: dict[str, Any] = {
-        "imu": imu.topic,
-        "rate_hz": _r(rate, 4),
-        "duration_s": _r((imu.t_ns[-1] - imu.t_ns[0]) / 1e9, 4),
-        "arm_usage.noise_level_g": p.noise_level_g,
-        "arm_usage.rate_hz": usage.rate_hz,
-        "arm_usage.x_percent": _r(usage.per_axis_percent[0], 4),
-        "arm_usage.y_percent": _r(usage.per_axis_percent[1], 4),
-        "arm_usage.z_percent": _r(usage.per_axis_percent[2], 4),
-        "arm_usage.overall_percent": _r(usage.overall_percent, 4),
-        "activity.method1.count": m1.count,
-        "activity.method1.per_axis": m1.per_axis.tolist(),
-        "activity.method2.count": m2.count,
-        "activity.method2.per_axis": m2.per_axis.tolist(),
-        "activity.method2.m_samples": p.activity(rate).m_samples,
-        "activity.method2.dead_samples": p.activity(rate).dead_samples,
-        "activity.method2.noise_floor_g": p.noise_floor_g,
-        "activity.method2.min_activity_samples": p.activity(rate).min_activity_samples,
-        "activity.method2.total_s": _r(durations.sum(), 4),
-        "activity.method2.mean_s": _r(durations.mean(), 4) if len(durations) else None,
-        "distance.window_s": p.window_s,
-        "distance.acc_unit": p.acc_unit,
-        "distance.weighted_area": _r(dist.weighted_area, 4),
-        "distance.weight_start_cm": p.weight_start_cm,
-        "distance.bin_width_cm": p.distance().bin_width_cm,
-        "distance.histogram_percent": [_r(v, 4) for v in dist.histogram_percent],
-        "distance.window_median_cm": _r(np.median(dist.window_distance_cm), 4),
-        "distance.window_max_cm": _r(np.max(dist.window_distance_cm), 4),
-    }
-    if gap_report.missing:  # flat keys, as every key of the record
-        record.update({f"gaps.{k}": v for k, v in gap_report.as_dict().items()})
-    record.update(_period_records(imu.t_ns, acc_g, usage, m2, dist, p, start_time))
+    return activity, distance
+
+
+def phase_records(
+    record: dict[str, Any],
+    p: MetricsParams,
+    phases: Intervals | None,
+    trajectory: SignalStream | PoseStream | None,
+) -> dict[str, Any]:
+    """``record`` with the per-phase keys (timings, NHPT, smoothness) added, when there are phases."""
     if phases is not None and len(phases):
         for label, stats in phase_summary(phases).items():
             for key, value in stats.items():
@@ -295,7 +228,7 @@ def compute_metrics(
         if trajectory is not None:
             record["smoothness.source"] = trajectory.topic
             record.update(_smoothness_per_phase(trajectory, phases))
-    return [activity, distance], record
+    return record
 
 
 def run_metrics(
@@ -304,57 +237,63 @@ def run_metrics(
     imu: str | None = None,
     params: MetricsParams | None = None,
     force: bool = False,
-    cores: MetricCores | None = None,
+    windows: WindowParams | None = None,
 ):
     """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
 
-    Recordings longer than :data:`~imulog.steps.long_metrics.LONG_SAMPLES` samples (daily life; per-phase metrics
-    are left out, phases found core by core included), or any with ``cores``, are processed core by core in bounded
-    memory (:mod:`imulog.steps.long_metrics`).
+    One implementation at any length (:mod:`imulog.steps.metrics_windows`): ``windows`` (default an hour with
+    10 s margins) cuts the accelerometer into cores. A recording within one core is computed at once with its
+    per-phase metrics; a longer one (daily life) is written core by core and leaves the per-phase metrics out
+    (its phases are daily-life movements, summarised by ``imulog.timing``).
     """
     from imulog.archive import TrialReader
     from imulog.archive.streaming import StreamPieces
     from imulog.steps.base import StepResult, run_step
 
     p = params or MetricsParams()
+    windows = windows or WindowParams(core_s=3600.0, margin_s=10.0)
+    imu_topic_of = "/imu/{}".format
     with TrialReader(path) as trial:
         topics = trial.topics()
         name = pick_imu(topics, imu)
         traj_topic = pick_trajectory(topics, p.trajectory)
-        total = trial.channel(f"/imu/{name}").sample_count
-    imu_topic = f"/imu/{name}"
+        info = trial.channel(imu_topic_of(name))
+        total = info.sample_count
+        rate = channel_rate_hz(total, info.start_ns, info.end_ns, info.rate_hz)
+    imu_topic = imu_topic_of(name)
     phase_topic = f"/derived/phases/{name}"
     inputs = [imu_topic] + [t for t in (phase_topic, traj_topic) if t is not None and t in topics]
-    long = cores is not None or total > LONG_SAMPLES  # with phases too: a week's phases must not make it whole
+    long = len(metric_plan(total, rate, p, windows)) > 1
     step_params = {"imu": name, **p.to_dict()}
-    if long:
-        cores = cores or MetricCores()
-        step_params["cores"] = cores.to_dict()
+    if long:  # the result depends on the windows only then; a week's phases must not make it whole
+        step_params["windows"] = windows.to_dict()
         inputs = [imu_topic]
 
     def compute(trial) -> StepResult:
         start_time = (trial.metadata.get("imulog.trial") or {}).get("start_time")
+        start = str(start_time) if start_time else None
+        record: dict[str, Any] = {}
+
+        def pieces():
+            with TrialReader(path) as source:
+
+                def blocks():
+                    return ((b.t_ns, _acc_of(b, imu_topic)) for b in source.iter_blocks(imu_topic))
+
+                yield from metric_pieces(blocks, total, imu_topic, name, p, record, start_time=start, windows=windows)
+
         if long:  # daily life over days: core by core while the result is written; the record fills at the end
-            record: dict[str, Any] = {}
-            pieces = StreamPieces(
-                topics=[f"/derived/metrics/distance/{name}", f"/derived/metrics/activity/{name}"],
-                pieces=lambda: long_metrics_pieces(
-                    path, imu_topic, name, p, total, record, start_time=str(start_time) if start_time else None,
-                    cores=cores,
-                ),
-            )
-            return StepResult(streams=[pieces], metadata={RECORD: record})
-        stream = trial.read(imu_topic)
+            topics_out = [f"/derived/metrics/distance/{name}", f"/derived/metrics/activity/{name}"]
+            return StepResult(streams=[StreamPieces(topics=topics_out, pieces=pieces)], metadata={RECORD: record})
+        activity, distance = whole_streams(pieces())
         phases = trial.read(phase_topic) if phase_topic in topics else None
         trajectory = trial.read(traj_topic) if traj_topic is not None else None
         if trajectory is not None and phases is not None and alignment_for(trial.metadata, imu_topic) is None:
             trajectory = None  # phases on the device clock cannot be matched to a reference-clock trajectory
-        streams, record = compute_metrics(
-            stream, p, phases=phases, trajectory=trajectory, start_time=str(start_time) if start_time else None
-        )
+        record = phase_records(record, p, phases, trajectory)
         gaps_done = {k[5:]: v for k, v in record.items() if k.startswith("gaps.")}
         provenance = {"gaps": gaps_done} if gaps_done else {}
-        return StepResult(streams=streams, metadata={RECORD: record}, provenance=provenance)
+        return StepResult(streams=[activity, distance], metadata={RECORD: record}, provenance=provenance)
 
     return run_step(
         path,
@@ -366,3 +305,9 @@ def run_metrics(
         compute=compute,
         force=force,
     )
+
+
+def _acc_of(block: ImuStream, topic: str) -> np.ndarray:
+    if block.acc is None:
+        raise ValueError(f"{topic} has no accelerometer columns")
+    return block.acc

@@ -14,6 +14,8 @@ the IMU device clock (the raw channel's ``t_ns``):
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -22,7 +24,8 @@ from imulog.model import SignalStream
 from imulog.process.gaps import GapParams, GapReport, per_run, prepare
 from imulog.process.orientation import OrientationParams, estimate_orientation, gravity_free_acceleration
 from imulog.steps.common import mean_rate_hz, pick_imu
-from imulog.steps.long_orientation import LONG_SAMPLES, WindowParams, windowed_pieces
+from imulog.steps.sample_window import SampleWindow
+from imulog.steps.windows import Window, WindowParams, channel_rate_hz
 
 STEP = "orientation"
 CALIBRATED_TOPIC = "/derived/calibrated/{imu}"
@@ -133,6 +136,74 @@ def global_frame(params: OrientationParams) -> str:
     return GLOBAL_FRAME_9D if params.use_mag else GLOBAL_FRAME_6D
 
 
+def orientation_windows(
+    blocks: Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]],
+    total: int,
+    plan: list[Window],
+    imu: str,
+    params: OrientationParams,
+    gaps: GapParams | None = None,
+    reports: list[tuple[Window, GapReport]] | None = None,
+) -> Iterator[SignalStream]:
+    """The three derived streams of an IMU given as ``(t_ns, acc, gyr, mag)`` blocks (``total`` samples), core
+    by core over ``plan``; each window's gap report is appended to ``reports``. One window: exactly
+    :func:`orientation_with_gaps` on the whole."""
+    from imulog.process import quaternion as qmath
+
+    buf = SampleWindow(blocks, total)
+    join: tuple[int, np.ndarray] | None = None  # (global sample, orientation there) the next window continues
+    for w in plan:
+        t, acc, gyr, mag = buf.take(w.lo, w.hi)
+        streams, report = orientation_with_gaps(t, acc, gyr, mag, imu, params, gaps)
+        if reports is not None:
+            reports.append((w, report))
+        if len(plan) == 1:
+            yield from streams
+            return
+        core = w.core_slice
+        whole = streams[0].values
+        quat, lin, static = (s.values[core] for s in streams)
+        ok = np.isfinite(quat).all(axis=1)
+        turn = None
+        if join is not None and not params.use_mag and ok.any():
+            at = join[0] - w.core_lo  # the join sample in this window's core; else its first valid sample
+            k = at if 0 <= at < len(quat) and ok[at] else int(np.argmax(ok))
+            turn = qmath.heading_offset(quat[k : k + 1], join[1])
+            quat, lin = (
+                qmath.multiply(np.tile(turn, (len(quat), 1)), quat),
+                qmath.rotate(np.tile(turn, (len(lin), 1)), lin),
+            )
+        k1 = w.core_hi - w.lo  # the next core's first sample, in this window's margin
+        if k1 < len(whole) and np.isfinite(whole[k1]).all():
+            join = (w.core_hi, whole[k1 : k1 + 1] if turn is None else qmath.multiply(turn, whole[k1 : k1 + 1]))
+        elif ok.any():  # a gap at the join: the next window holds this core's last valid heading across it
+            last = int(len(ok) - 1 - np.argmax(ok[::-1]))
+            join = (w.core_lo + last, quat[last : last + 1].copy())
+        for stream, values in zip(streams, (quat, lin, static), strict=True):
+            yield SignalStream(stream.topic, t[core], stream.columns, stream.units, values, frame_id=stream.frame_id)
+
+
+def read_orientation_windows(
+    path: str | Path,
+    topic: str,
+    imu: str,
+    params: OrientationParams,
+    gaps: GapParams | None,
+    plan: list[Window],
+    total: int,
+    reports: list[tuple[Window, GapReport]] | None = None,
+) -> Iterator[SignalStream]:
+    """:func:`orientation_windows` on ``topic`` of the trial at ``path``, read chunk by chunk."""
+    from imulog.archive import TrialReader
+    from imulog.heap import bound_heap
+
+    if len(plan) > 1:
+        bound_heap()  # the same temporaries core after core: keep them out of the heap (imulog.heap)
+    with TrialReader(path) as trial:
+        blocks = (imu_arrays(b, topic) for b in trial.iter_blocks(topic))
+        yield from orientation_windows(blocks, total, plan, imu, params, gaps, reports)
+
+
 def run_orientation(
     path,
     *,
@@ -141,17 +212,19 @@ def run_orientation(
     source: str = "auto",
     force: bool = False,
     gaps: GapParams | None = None,
-    windowed: WindowParams | None = None,
+    windows: WindowParams | None = None,
 ):
     """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
 
-    Recordings longer than :data:`~imulog.steps.long_orientation.LONG_SAMPLES` samples (or any, with
-    ``windowed``) are processed in overlapping windows in bounded memory (:mod:`imulog.steps.long_orientation`).
+    ``windows``: core and margin of the windows (default :class:`~imulog.steps.windows.WindowParams`, an hour
+    with a minute each side); a recording within one core is computed at once, and only longer ones record the
+    windows in the run's params (the result depends on them only then).
 
     ``gaps``: how missing IMU samples are treated (default :class:`~imulog.process.gaps.GapParams`); what was
-    bridged or split is recorded in the run's ``gaps`` entry.
+    bridged or split is recorded in the run's ``gaps`` entry (one window: as a whole; several: per window core).
     """
     params = params or OrientationParams()
+    windows = windows or WindowParams()
     from imulog.archive import TrialReader
     from imulog.archive.streaming import StreamPieces
     from imulog.steps.base import StepResult, run_step
@@ -160,24 +233,26 @@ def run_orientation(
         topics = trial.topics()
         name = pick_imu(topics, imu)
         topic = source_topic(topics, name, source)
-        total = trial.channel(topic).sample_count
-        duration_s = total / (trial.channel(topic).rate_hz or 100.0)
-    windows = windowed if windowed is not None else (WindowParams() if total > LONG_SAMPLES else None)
+        info = trial.channel(topic)
+        total = info.sample_count
+        rate = channel_rate_hz(total, info.start_ns, info.end_ns, info.rate_hz)
+    plan = windows.plan(total, rate)
     step_params = {"imu": name, **params_dict(params), "global_frame": global_frame(params)}
-    if windows is not None:
+    if len(plan) > 1:
         step_params["windows"] = windows.to_dict()
 
     def compute(trial) -> StepResult:
-        if windows is not None:  # long recording: window by window while the result is written
-            pieces = StreamPieces(
-                topics=[f"/derived/{kind}/{name}" for kind in ("orientation", "acc_global", "orientation_static")],
-                pieces=lambda: windowed_pieces(path, topic, name, params, gaps, windows, total),
-                expected_duration_s=duration_s,  # the viewer twins keep their message budget
-            )
-            return StepResult(streams=[pieces])
-        t_ns, acc, gyr, mag = read_imu_arrays(trial, topic)
-        streams, report = orientation_with_gaps(t_ns, acc, gyr, mag, name, params, gaps)
-        return StepResult(streams=streams, provenance={"gaps": report.as_dict()} if report.missing else {})
+        reports: list[tuple[Window, GapReport]] = []
+        if len(plan) == 1:  # one window: the streams at once, and the gap report with them
+            streams = list(read_orientation_windows(path, topic, name, params, gaps, plan, total, reports))
+            report = reports[0][1]
+            return StepResult(streams=streams, provenance={"gaps": report.as_dict()} if report.missing else {})
+        pieces = StreamPieces(
+            topics=[f"/derived/{kind}/{name}" for kind in ("orientation", "acc_global", "orientation_static")],
+            pieces=lambda: read_orientation_windows(path, topic, name, params, gaps, plan, total),
+            expected_duration_s=total / rate,  # the viewer twins keep their message budget
+        )
+        return StepResult(streams=[pieces])
 
     return run_step(
         path,

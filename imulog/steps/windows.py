@@ -73,6 +73,30 @@ def plan_windows(total: int, rate_hz: float, *, core_s: float = 3600.0, margin_s
 
 
 @dataclass(frozen=True)
+class WindowParams:
+    """Core length and margin on each side, seconds, of the windows a step reads (:func:`plan_windows`)."""
+
+    core_s: float = 3600.0
+    margin_s: float = 60.0
+
+    def plan(self, total: int, rate_hz: float) -> list[Window]:
+        """The windows over ``total`` samples at ``rate_hz`` (one window when the recording fits one core)."""
+        return plan_windows(total, rate_hz, core_s=self.core_s, margin_s=self.margin_s)
+
+    def to_dict(self) -> dict[str, float]:
+        return {"core_s": self.core_s, "margin_s": self.margin_s}
+
+
+def channel_rate_hz(sample_count: int, start_ns: int | None, end_ns: int | None, rate_hz: float | None) -> float:
+    """A channel's mean rate (Hz) from its summary (samples over span), for planning windows before reading it;
+    the recorded ``rate_hz`` when the span is unknown, else 100 Hz (planning only: no result depends on it when
+    the recording is one window)."""
+    if start_ns is not None and end_ns is not None and end_ns > start_ns and sample_count > 1:
+        return (sample_count - 1) / ((end_ns - start_ns) * 1e-9)
+    return float(rate_hz) if rate_hz and rate_hz > 0 else 100.0
+
+
+@dataclass(frozen=True)
 class EventWindow:
     """A stretch between two rests for methods that reset at rests (trajectory): samples ``[lo, hi)``, the rest
     before ending at ``move_lo`` and the one after starting at ``move_hi``; ``split`` when the stretch was longer

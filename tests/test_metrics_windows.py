@@ -11,8 +11,9 @@ from converters import axivity
 from imulog.archive import TrialReader
 from imulog.archive.streaming import write_trial_streaming
 from imulog.simulate.home import HomeParams, write_home_cwa
-from imulog.steps.long_metrics import DeadPeriodStitcher, MetricCores
 from imulog.steps.metrics import run_metrics
+from imulog.steps.metrics_windows import DeadPeriodStitcher
+from imulog.steps.windows import WindowParams
 
 
 def test_stitcher_equals_dead_period_intervals():
@@ -40,8 +41,8 @@ def test_cores_equal_the_whole(trial, tmp_path):
     whole, cored = tmp_path / "whole.mcap", tmp_path / "cored.mcap"
     shutil.copy(trial, whole)
     shutil.copy(trial, cored)
-    run_metrics(whole)
-    run_metrics(cored, cores=MetricCores(core_s=1500.0, overlap_s=10.0))
+    run_metrics(whole, windows=WindowParams(core_s=86400.0))  # one window: the whole recording at once
+    run_metrics(cored, windows=WindowParams(core_s=1500.0, margin_s=10.0))
     with TrialReader(whole) as a, TrialReader(cored) as b:
         ra, rb = a.metadata["imulog.metrics"], b.metadata["imulog.metrics"]
         for key in (
@@ -68,4 +69,55 @@ def test_cores_equal_the_whole(trial, tmp_path):
         ia, ib = a.read("/derived/metrics/activity/ax6_4321"), b.read("/derived/metrics/activity/ax6_4321")
         np.testing.assert_array_equal(ia.start_ns, ib.start_ns)
         np.testing.assert_array_equal(ia.end_ns, ib.end_ns)
-        assert b.runs()[max(b.runs())]["params"]["cores"] == {"core_s": 1500.0, "overlap_s": 10.0}
+        assert b.runs()[max(b.runs())]["params"]["windows"] == {"core_s": 1500.0, "margin_s": 10.0}
+
+
+def test_one_window_equals_the_published_functions_on_the_whole():
+    """A lab-length recording is one window: the record equals Doshi's functions applied to the whole signal
+    (what the step computed before it had windows), with a long gap and a bridged one in it."""
+    from imulog.model import ImuStream
+    from imulog.process.gaps import prepare
+    from imulog.process.metrics import (
+        ArmUsageParams,
+        acc_to_g,
+        activity_count_dead_period,
+        activity_count_sign,
+        arm_usage,
+        distance_histogram,
+    )
+    from imulog.process.metrics.distance import histogram_percent
+    from imulog.steps.metrics import MetricsParams, compute_metrics
+
+    rate, n = 100.0, 60_000
+    rng = np.random.default_rng(5)
+    k = np.arange(n)
+    acc = np.column_stack([np.sin(k / 40.0) * (k % 3000 < 1500), np.cos(k / 70.0), np.full(n, 9.81)])
+    acc = acc + rng.normal(0, 0.05, (n, 3))
+    acc[20_000:20_003] = np.nan  # bridged
+    acc[40_000:40_500] = np.nan  # a long gap
+    t = (k * 1e7).astype(np.int64) + 1_700_000_000 * 10**9
+    imu = ImuStream(name="wrist", t_ns=t, acc=acc, gyr=np.zeros((n, 3)))
+    p = MetricsParams()
+    streams, record = compute_metrics(imu, p)
+    (acc_g,), report = prepare([acc_to_g(acc)], None)
+    usage = arm_usage(acc_g, ArmUsageParams(p.noise_level_g, p.arm_usage_rate_hz), t_ns=t)
+    m1 = activity_count_sign(acc_g)
+    m2 = activity_count_dead_period(acc_g, p.activity(rate))
+    dist = distance_histogram(acc_g, rate, p.distance())
+    unknown = ~np.isfinite(acc_g).all(axis=1)
+    d_cm = np.where(unknown, np.nan, dist.distance_cm)
+    assert record["arm_usage.overall_percent"] == pytest.approx(usage.overall_percent, abs=1e-4)
+    assert record["arm_usage.x_percent"] == pytest.approx(usage.per_axis_percent[0], abs=1e-4)
+    assert record["activity.method1.count"] == m1.count
+    assert record["activity.method1.per_axis"] == m1.per_axis.tolist()
+    assert record["activity.method2.count"] == m2.count and record["activity.method2.per_axis"] == m2.per_axis.tolist()
+    hist = histogram_percent(d_cm, p.distance())
+    assert record["distance.histogram_percent"] == pytest.approx(hist, abs=1e-4)
+    assert record["distance.window_median_cm"] == pytest.approx(np.median(dist.window_distance_cm), abs=1e-4)
+    assert record["gaps.missing_samples"] == report.missing == 503 and record["gaps.runs"] == [
+        list(r) for r in report.runs
+    ]
+    activity, distance = streams
+    np.testing.assert_allclose(distance.values[:, 0], d_cm, rtol=1e-9, atol=1e-9)
+    np.testing.assert_array_equal(activity.start_ns, t[m2.intervals[:, 0]])
+    assert "computed" not in record  # one window
