@@ -29,9 +29,8 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-
-from converters.delimited import CONVERTER as DELIMITED
-from converters.vicon_csv import CONVERTER as VICON
+from imulog.converters.delimited import CONVERTER as DELIMITED
+from imulog.converters.vicon_csv import CONVERTER as VICON
 
 
 def write_imu(path: Path, minutes: float, rate_hz: float = 100.0, seed: int = 0) -> int:
@@ -90,10 +89,10 @@ def main() -> int:
     import pyarrow as pa
     import pyarrow.csv as pacsv
     from bench_archive import load_average, peer_write
+    from imulog.converters.base import ConvertOptions
+    from imulog.converters.registry import convert_files
 
     import imulog.archive.writer as writer
-    from converters.base import ConvertOptions
-    from converters.registry import convert_files
     from imulog.archive import write_trial
     from imulog.commands.convert import _format_name, finish_recording
 

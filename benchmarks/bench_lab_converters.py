@@ -23,8 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-
-from converters import convert_file
+from imulog.converters import convert_file
 
 XSENS_HEADER = [
     "// Start Time: Unknown",

@@ -35,7 +35,7 @@ def _pack_rtc(epoch_s: np.ndarray) -> np.ndarray:
 
 
 def make_cwa(out: Path, hours: float) -> int:
-    from converters.axivity import BLOCK_DTYPE, HEADER_BYTES, rtc_to_epoch_s
+    from imulog.converters.axivity import BLOCK_DTYPE, HEADER_BYTES, rtc_to_epoch_s
 
     data = (DATA / "axivity_cwa" / "ax6_sample.cwa").read_bytes()
     head, blocks = data[:HEADER_BYTES], np.frombuffer(data[HEADER_BYTES:], dtype=BLOCK_DTYPE).copy()
@@ -91,7 +91,7 @@ def _measure(kind: str, path: str, mode: str) -> dict:
     code = f"""
 import json, resource, time
 from pathlib import Path
-from converters.{kind} import iter_chunks, {"read_cwa" if kind == "axivity" else "read_gt3x"} as read_all
+from imulog.converters.{kind} import iter_chunks, {"read_cwa" if kind == "axivity" else "read_gt3x"} as read_all
 base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 t0 = time.perf_counter()
 n = 0

@@ -6,9 +6,9 @@
 Formats are plug-ins found through the ``imulog.converters`` entry-point group (see docs/converters.md).
 """
 
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError, UnknownFormatError
-from converters.registry import available, convert_file, convert_files, detect, get, group_directory
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError, UnknownFormatError
+from imulog.converters.registry import available, convert_file, convert_files, detect, get, group_directory
 
 __all__ = [
     "ConversionError",

@@ -13,8 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from converters.errors import ConversionError
+from imulog.converters.errors import ConversionError
 
 G0 = 9.80665  # standard gravity, m/s^2
 HEAD_BYTES = 256 * 1024

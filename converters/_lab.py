@@ -15,8 +15,8 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import numpy as np
+from imulog.converters.errors import ConversionError
 
-from converters.errors import ConversionError
 from imulog.model import SignalStream
 
 NA_CELLS = ("", "NaN", "nan", "NAN", "-NaN", "-nan", "NA", "N/A", "null")
@@ -76,7 +76,7 @@ def read_table(
     count than ``len(names)`` (one trailing empty field allowed) is an error naming it, unless ``ragged`` (shorter
     lines are padded with NaN: slower channels of a Delsys export end early). ``required`` columns must be finite
     on every row; ``skip_columns`` are not parsed (text). Raises :class:`ConversionError` (file, line, column).
-    With a ``warnings`` list, a final row cut short (a truncated file, see ``converters._common.final_row_cut``) is
+    With a ``warnings`` list, a final row cut short (a truncated file, see ``imulog.converters._common.final_row_cut``) is
     dropped and its one-line warning appended (pass it on as ``Recording.warnings``); without, such a row is read
     (or refused when it has too few fields). Ragged tables are not checked (their short last rows are normal).
     """
@@ -96,7 +96,7 @@ def read_table(
             break
         block = block[:cut].rstrip(b"\r\n")
     if warnings is not None and not ragged and block.strip():
-        from converters._common import drop_cut_final_row
+        from imulog.converters._common import drop_cut_final_row
 
         end, cut_warning = drop_cut_final_row(path, data, delimiter, start=start, end=start + len(block))
         if cut_warning:

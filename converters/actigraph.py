@@ -41,11 +41,11 @@ from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
+from imulog.converters._binary import NS_PER_S, concat_chunks, iso_from_epoch_ns, time_zone_label, with_fills
+from imulog.converters._common import G0, sanitize_name
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
 
-from converters._binary import NS_PER_S, concat_chunks, iso_from_epoch_ns, time_zone_label, with_fills
-from converters._common import G0, sanitize_name
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
 from imulog.model import ImuStream, Recording, SignalStream
 
 TICKS_PER_S = 10_000_000

@@ -19,7 +19,7 @@ Banner lines may carry padding commas. Units as ActiLife writes them: accelerome
 uT, temperature degC. Time: the ``Timestamp`` column (local ISO time) when present, else ``Start Date`` +
 ``Start Time`` + row / rate (the banner's ``at N Hz``). The start is local time without a zone. Streams are named as
 the .gt3x converter names them: ``/imu/<serial>`` (RAW), ``/imu/<serial>_imu`` (IMU file). Epoch (count) exports
-(``Epoch Period`` other than 00:00:00) are read by :mod:`converters.actilife_epoch` as epoch signals.
+(``Epoch Period`` other than 00:00:00) are read by :mod:`imulog.converters.actilife_epoch` as epoch signals.
 """
 
 from __future__ import annotations
@@ -29,12 +29,12 @@ from datetime import datetime
 from pathlib import Path
 
 import numpy as np
+from imulog.converters._binary import UNKNOWN_ZONE
+from imulog.converters._common import G0, TableSpec, head_lines, read_numeric, sanitize_name, text_head_lines
+from imulog.converters.actilife_epoch import bannerless_banner, is_bannerless, read_epoch_csv
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
 
-from converters._binary import UNKNOWN_ZONE
-from converters._common import G0, TableSpec, head_lines, read_numeric, sanitize_name, text_head_lines
-from converters.actilife_epoch import bannerless_banner, is_bannerless, read_epoch_csv
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
 from imulog.model import ImuStream, Recording, SignalStream
 
 BANNER_LINES = 10

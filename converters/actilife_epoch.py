@@ -1,6 +1,6 @@
 """ActiLife epoch (activity count) CSV exports: counts per epoch and axis, steps, lux, inclinometer.
 
-Same 10-line banner as the raw export (see :mod:`converters.actilife_csv`) with ``Epoch Period (hh:mm:ss)``
+Same 10-line banner as the raw export (see :mod:`imulog.converters.actilife_csv`) with ``Epoch Period (hh:mm:ss)``
 other than ``00:00:00`` and no ``at N Hz``. Then, as ActiLife writes it (and GGIRread's ``readActiGraphCount``
 reads it), either a names row::
 
@@ -24,10 +24,10 @@ from datetime import datetime
 from pathlib import Path
 
 import numpy as np
+from imulog.converters._binary import UNKNOWN_ZONE
+from imulog.converters._common import TableSpec, read_numeric, sanitize_name
+from imulog.converters.errors import ConversionError
 
-from converters._binary import UNKNOWN_ZONE
-from converters._common import TableSpec, read_numeric, sanitize_name
-from converters.errors import ConversionError
 from imulog.model import Recording, SignalStream
 
 BANNER_LINES = 10
@@ -67,8 +67,7 @@ def _is_names_row(cells: list[str]) -> bool:
 def _parse_dates(path: Path, date: list[str], time: list[str] | None, fmt: str, first_line: int) -> np.ndarray:
     """Date (banner ``date format``) and time cells -> datetime64[ns] per row."""
     import pandas as pd
-
-    from converters.actilife_csv import strptime_format
+    from imulog.converters.actilife_csv import strptime_format
 
     py_fmt = strptime_format(fmt)
     text = pd.Series(date) if time is None else pd.Series(date) + " " + pd.Series(time)
@@ -85,7 +84,7 @@ def _parse_dates(path: Path, date: list[str], time: list[str] | None, fmt: str, 
 def read_epoch_csv(
     path: Path, lines: list[str], banner: dict, options: object = None, *, banner_lines: int = BANNER_LINES
 ) -> Recording:
-    """An ActiLife epoch CSV (``banner`` from :func:`converters.actilife_csv.parse_banner`) as epoch signals.
+    """An ActiLife epoch CSV (``banner`` from :func:`imulog.converters.actilife_csv.parse_banner`) as epoch signals.
 
     ``banner_lines`` 0: an export without the banner (``banner`` then comes from :func:`bannerless_banner`)."""
     import pandas as pd
@@ -225,7 +224,7 @@ def bannerless_banner(path: Path, lines: list[str]) -> dict:
     rows = [[c.strip().strip('"') for c in ln.split(",")] for ln in lines[1:4] if ln.strip()]
     if len(rows) < 2:
         raise ConversionError(path, "fewer than two epochs: the epoch length is unknown", line=2)
-    from converters.actilife_csv import strptime_format
+    from imulog.converters.actilife_csv import strptime_format
 
     for fmt in BANNERLESS_FORMATS:
         try:

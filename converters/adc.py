@@ -18,11 +18,11 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
+from imulog.converters._common import G0, drop_cut_final_row, looks_binary, text_head_lines
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
+from imulog.converters.mapping import sibling_mapping
 
-from converters._common import G0, drop_cut_final_row, looks_binary, text_head_lines
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
-from converters.mapping import sibling_mapping
 from imulog.model import ImuStream, Recording
 
 LINE = re.compile(rb"^[ \t]*X=(-?\d+)[ \t]+Y=(-?\d+)[ \t]+Z=(-?\d+)[ \t]*\r?$")

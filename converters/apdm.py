@@ -40,8 +40,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from converters._common import (
+from imulog.converters._common import (
     check_increasing,
     estimate_rate_hz,
     head_lines,
@@ -49,9 +48,10 @@ from converters._common import (
     text_head_lines,
     unit_factor,
 )
-from converters._lab import ORIENTATION_TOPIC, orientation_stream, read_table, trial_start
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
+from imulog.converters._lab import ORIENTATION_TOPIC, orientation_stream, read_table, trial_start
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
+
 from imulog.model import ImuStream, Recording, SignalStream
 
 HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"

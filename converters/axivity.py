@@ -43,8 +43,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
-from converters._binary import (
+from imulog.converters._binary import (
     NS_PER_S,
     concat_chunks,
     days_from_civil,
@@ -52,9 +51,10 @@ from converters._binary import (
     time_zone_label,
     with_fills,
 )
-from converters._common import G0, sanitize_name
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
+from imulog.converters._common import G0, sanitize_name
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
+
 from imulog.model import ImuStream, Recording, SignalStream
 
 HEADER_BYTES = 1024

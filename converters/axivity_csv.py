@@ -17,11 +17,11 @@ import re
 from pathlib import Path
 
 import numpy as np
+from imulog.converters._binary import UNKNOWN_ZONE, iso_from_epoch_ns
+from imulog.converters._common import G0, TableSpec, check_increasing, estimate_rate_hz, read_numeric, text_head_lines
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
 
-from converters._binary import UNKNOWN_ZONE, iso_from_epoch_ns
-from converters._common import G0, TableSpec, check_increasing, estimate_rate_hz, read_numeric, text_head_lines
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
 from imulog.model import ImuStream, Recording
 
 _UNIX = re.compile(r"^\d{9,10}(\.\d+)?$")

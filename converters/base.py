@@ -34,7 +34,7 @@ class Converter:
     ``sniff(path, head)`` returns a confidence in [0, 1] that ``path`` (whose first bytes are ``head``) is in this
     format, never raising. ``convert(path, options)`` returns an :class:`imulog.model.Recording` with SI units on
     the device clock, ``metadata['imulog.device.<name>']`` for each device and ``sources`` = the files read;
-    it raises only :class:`converters.errors.ConversionError` for bad input.
+    it raises only :class:`imulog.converters.errors.ConversionError` for bad input.
     """
 
     name: ClassVar[str] = ""

@@ -25,11 +25,11 @@ import re
 from pathlib import Path
 
 import numpy as np
+from imulog.converters._common import LENGTH_TO_M, check_increasing, sanitize_name, unit_factor
+from imulog.converters._lab import orientation_stream
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
 
-from converters._common import LENGTH_TO_M, check_increasing, sanitize_name, unit_factor
-from converters._lab import orientation_stream
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
 from imulog.model import ImuStream, Intervals, MarkerStream, Recording, SignalStream
 
 MOTION = re.compile(

@@ -1,10 +1,10 @@
 """C3D files (via ezc3d): points as markers, analog channels, events; units m or mm; non-integer rates.
 
 Every processor type is read: Intel and DEC (VAX floats) files go to ezc3d as they are, MIPS (SGI, big-endian)
-files are rewritten as Intel first (:mod:`converters.c3d_format`; ezc3d refuses MIPS). ezc3d runs in a child
+files are rewritten as Intel first (:mod:`imulog.converters.c3d_format`; ezc3d refuses MIPS). ezc3d runs in a child
 process under a time and memory limit (``extra["reader_timeout_s"]``, default 60 s; ``reader_memory_bytes``,
-1 GiB, :mod:`converters._guard`); when it fails, crashes or hangs, imulog's own reader
-(:mod:`converters.c3d_data`) reads the points and analogs, with a warning naming what ezc3d did. The frame count is
+1 GiB, :mod:`imulog.converters._guard`); when it fails, crashes or hangs, imulog's own reader
+(:mod:`imulog.converters.c3d_data`) reads the points and analogs, with a warning naming what ezc3d did. The frame count is
 ``POINT:FRAMES`` (warned when the header's count disagrees; the header's 16-bit count wraps on long trials), the
 point scale ``POINT:SCALE`` (warned when the header's copy disagrees). A marker set without one valid sample, or
 markers that are never valid, are warned about per marker set.
@@ -23,9 +23,9 @@ from struct import error as struct_error
 from typing import Any
 
 import numpy as np
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
 
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
 from imulog.model import AnalogStream, Intervals, MarkerStream, Recording, SignalStream
 from imulog.numeric import finite_rows
 
@@ -118,9 +118,17 @@ def load(path: Path, options: ConvertOptions | None = None) -> tuple[dict[str, A
     warnings. DEC files go to ezc3d as they are, MIPS files rewritten as Intel (ezc3d refuses them)."""
     import tempfile
 
-    from converters import c3d_data
-    from converters._guard import DEFAULT_MEMORY_BYTES, DEFAULT_TIMEOUT_S, GuardError, guarded
-    from converters.c3d_format import DEC, INTEL, PROCESSORS, C3dLayoutError, parameters, processor_type, to_intel
+    from imulog.converters import c3d_data
+    from imulog.converters._guard import DEFAULT_MEMORY_BYTES, DEFAULT_TIMEOUT_S, GuardError, guarded
+    from imulog.converters.c3d_format import (
+        DEC,
+        INTEL,
+        PROCESSORS,
+        C3dLayoutError,
+        parameters,
+        processor_type,
+        to_intel,
+    )
 
     extra = options.extra if options else {}
     data = path.read_bytes()

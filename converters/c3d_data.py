@@ -1,7 +1,7 @@
-"""imulog's own reader of C3D point and analog data (Intel layout, see :mod:`converters.c3d_format`).
+"""imulog's own reader of C3D point and analog data (Intel layout, see :mod:`imulog.converters.c3d_format`).
 
 Used when the C3D library cannot read a file (ezc3d refuses MIPS files and crashes on some old ones). It returns
-the same structure as ezc3d's ``c3d()`` for the fields :mod:`converters.c3d` uses: ``header.points``
+the same structure as ezc3d's ``c3d()`` for the fields :mod:`imulog.converters.c3d` uses: ``header.points``
 (``frame_rate``, ``first_frame``), ``parameters[GROUP][NAME]["value"]``, ``data.points`` (4, M, N),
 ``data.meta_points.residuals`` (1, M, N; -1 = invalid) and ``data.analogs`` (1, C, N * ratio).
 
@@ -18,8 +18,7 @@ import struct
 from typing import Any
 
 import numpy as np
-
-from converters.c3d_format import C3dLayoutError, parameters
+from imulog.converters.c3d_format import C3dLayoutError, parameters
 
 
 def _nested(params: dict[str, Any]) -> dict[str, dict[str, dict[str, Any]]]:

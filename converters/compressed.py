@@ -25,9 +25,10 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import IO
 
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
-from converters.mapping import sibling_mapping
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
+from imulog.converters.mapping import sibling_mapping
+
 from imulog.model import Recording
 
 MAGIC = {"gzip": b"\x1f\x8b", "bzip2": b"BZh", "xz": b"\xfd7zXZ\x00", "zip": b"PK\x03\x04"}
@@ -130,7 +131,7 @@ def convert_compressed(path: Path, options: ConvertOptions | None = None) -> Rec
     """Convert the inner file of ``path`` with the converter its content names; sources = the compressed file."""
     from dataclasses import replace
 
-    from converters.registry import detect, get
+    from imulog.converters.registry import detect, get
 
     options = options or ConvertOptions()
     path = Path(path)

@@ -5,7 +5,7 @@ Understands
 * Shimmer Consensys exports: a ``"sep=;"`` line, a names row (``Shimmer_40AC_Accel_LN_X_CAL``) and a units
   row (``ms;m/(s^2);...;deg/s``);
 * two-row headers (a sensor row above an axis row, as in the gaitmap sample): one IMU stream per sensor;
-* a mapping file (``imulog.mapping/1``, see :mod:`converters.mapping`) for exports whose headers carry no units,
+* a mapping file (``imulog.mapping/1``, see :mod:`imulog.converters.mapping`) for exports whose headers carry no units,
   such as the BlueBuddy wrist IMU of the R2G thesis.
 
 Recognised IMU columns go to :class:`~imulog.model.ImuStream` in SI units; other numeric columns are kept,
@@ -23,8 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from converters._common import (
+from imulog.converters._common import (
     LENGTH_TO_M,
     NORMALISED_MAG_UNITS,
     SI_UNIT,
@@ -47,10 +46,11 @@ from converters._common import (
     unit_factor,
     unit_overrides,
 )
-from converters._lab import orientation_stream
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError, excerpt
-from converters.mapping import Mapping, load_mapping, sibling_mapping
+from imulog.converters._lab import orientation_stream
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError, excerpt
+from imulog.converters.mapping import Mapping, load_mapping, sibling_mapping
+
 from imulog.model import ImuStream, MarkerStream, PoseStream, Recording, SignalStream
 
 _SHIMMER_DEVICE = re.compile(r"^(Shimmer_[0-9A-Za-z]+)_")
@@ -469,10 +469,10 @@ def resolve_inferred(
 
     Bare X,Y,Z triples: the quantity named by the file name (``wrist_gyro.csv``) when there is one triple, else
     the triple with a constant non-zero norm at rest near 1 g / 9.81 m/s^2 / 1000 mg is the accelerometer, one
-    near 20-80 uT the magnetometer, the rest gyroscopes. Units: see :mod:`converters.plausibility`. Returns the
+    near 20-80 uT the magnetometer, the rest gyroscopes. Units: see :mod:`imulog.converters.plausibility`. Returns the
     assumptions, one phrase each; ConversionError naming the column and the option when the values cannot tell.
     """
-    from converters import plausibility as plaus
+    from imulog.converters import plausibility as plaus
 
     notes: list[str] = []
     if not any(c.quantity == "auto" or c.unit == INFER for c in layout.columns):

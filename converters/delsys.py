@@ -27,11 +27,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from imulog.converters._common import head_lines, sanitize_name, text_head_lines, unit_factor
+from imulog.converters._lab import read_table
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
 
-from converters._common import head_lines, sanitize_name, text_head_lines, unit_factor
-from converters._lab import read_table
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
 from imulog.model import AnalogStream, ImuStream, Recording, SignalStream
 
 _LABEL = re.compile(

@@ -29,11 +29,11 @@ from datetime import datetime
 from pathlib import Path
 
 import numpy as np
+from imulog.converters._common import sanitize_name, unit_factor
+from imulog.converters._lab import trial_start
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
 
-from converters._common import sanitize_name, unit_factor
-from converters._lab import trial_start
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
 from imulog.model import AnalogStream, ImuStream, Intervals, Recording
 
 FIELDS = (

@@ -22,11 +22,11 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
+from imulog.converters._common import G0, TableSpec, read_numeric, text_head_lines
+from imulog.converters._lab import trial_start
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
 
-from converters._common import G0, TableSpec, read_numeric, text_head_lines
-from converters._lab import trial_start
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
 from imulog.model import ImuStream, Intervals, Recording, SignalStream
 
 SIGNALS = {

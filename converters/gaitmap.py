@@ -16,11 +16,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from imulog.converters._common import TableSpec, check_increasing, head_lines, read_numeric, split_row, text_head_lines
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.delimited import read_delimited
+from imulog.converters.errors import ConversionError
 
-from converters._common import TableSpec, check_increasing, head_lines, read_numeric, split_row, text_head_lines
-from converters.base import Converter, ConvertOptions
-from converters.delimited import read_delimited
-from converters.errors import ConversionError
 from imulog.model import Intervals, MarkerStream, Recording
 
 IMU_RATE_HZ = 204.8

@@ -35,12 +35,12 @@ from datetime import UTC, datetime, timedelta, timezone
 from pathlib import Path
 
 import numpy as np
+from imulog.converters._binary import NS_PER_S, concat_chunks
+from imulog.converters._common import G0
+from imulog.converters._lab import trial_start
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
 
-from converters._binary import NS_PER_S, concat_chunks
-from converters._common import G0
-from converters._lab import trial_start
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
 from imulog.model import ImuStream, Recording, SignalStream
 
 PAGE_MARK = b"Recorded Data"

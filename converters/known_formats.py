@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from converters._common import text_head_lines
+from imulog.converters._common import text_head_lines
 
 
 @dataclass(frozen=True)

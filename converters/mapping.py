@@ -28,8 +28,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from converters._common import NORMALISED_MAG_UNITS, QUANTITIES, normalise_unit, unit_factor
-from converters.errors import ConversionError
+from imulog.converters._common import NORMALISED_MAG_UNITS, QUANTITIES, normalise_unit, unit_factor
+from imulog.converters.errors import ConversionError
 
 MAPPING_FORMAT = "imulog.mapping/1"
 
@@ -153,7 +153,7 @@ def load_mapping(path: Path) -> Mapping:
 
 def _marker_column(path: Path, name: str, spec: dict, sensor: str | None) -> ColumnMap:
     """A ``quantity: marker`` column: its marker label, axis and length unit."""
-    from converters._common import LENGTH_TO_M
+    from imulog.converters._common import LENGTH_TO_M
 
     marker = spec.get("marker")
     if not isinstance(marker, str) or not marker.strip():

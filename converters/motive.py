@@ -29,11 +29,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from imulog.converters._common import check_increasing, head_lines, sanitize_name, text_head_lines, to_ns
+from imulog.converters._lab import read_table, trial_start
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
 
-from converters._common import check_increasing, head_lines, sanitize_name, text_head_lines, to_ns
-from converters._lab import read_table, trial_start
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
 from imulog.model import MarkerStream, PoseStream, Recording, SignalStream
 
 LENGTH = {"meters": 1.0, "meter": 1.0, "m": 1.0, "centimeters": 0.01, "cm": 0.01, "millimeters": 0.001, "mm": 0.001}

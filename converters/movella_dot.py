@@ -32,12 +32,12 @@ from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
 import numpy as np
+from imulog.converters._common import TableSpec, estimate_rate_hz, read_numeric, sanitize_name, text_head_lines
+from imulog.converters._lab import orientation_stream, trial_start
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
+from imulog.converters.xsens import orientation_wxyz
 
-from converters._common import TableSpec, estimate_rate_hz, read_numeric, sanitize_name, text_head_lines
-from converters._lab import orientation_stream, trial_start
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
-from converters.xsens import orientation_wxyz
 from imulog.model import ImuStream, Recording, SignalStream
 
 WRAP = 1 << 32  # SampleTimeFine counts microseconds in an unsigned 32-bit register

@@ -37,11 +37,11 @@ from datetime import UTC, datetime, timedelta, timezone
 from pathlib import Path
 
 import numpy as np
+from imulog.converters._common import sanitize_name
+from imulog.converters._lab import orientation_stream, trial_start
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
 
-from converters._common import sanitize_name
-from converters._lab import orientation_stream, trial_start
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
 from imulog.model import PoseStream, Recording, SignalStream
 
 # frame element -> (per what, width)

@@ -26,10 +26,10 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import numpy as np
+from imulog.converters._lab import trial_start
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
 
-from converters._lab import trial_start
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
 from imulog.model import ImuStream, Recording, SignalStream
 
 SENSORS = (  # name, flag byte index (0/1), flag, channels, bytes per channel, dtype
@@ -219,7 +219,7 @@ def header_json_for(path: Path) -> Path | None:
 def read_csv(path: Path, options: ConvertOptions | None = None) -> Recording:
     """NilsPodLib's ``data_as_csv`` export (``t`` in s from the first sample, columns as its legends) and the
     ``_header.json`` it writes beside it (rate, ranges, start)."""
-    from converters._lab import read_table
+    from imulog.converters._lab import read_table
 
     path = Path(path)
     hj = header_json_for(path)

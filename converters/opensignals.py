@@ -26,11 +26,11 @@ from datetime import datetime
 from pathlib import Path
 
 import numpy as np
+from imulog.converters._binary import UNKNOWN_ZONE
+from imulog.converters._common import sanitize_name, text_head_lines
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
 
-from converters._binary import UNKNOWN_ZONE
-from converters._common import sanitize_name, text_head_lines
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
 from imulog.model import AnalogStream, Recording, SignalStream
 
 MAGIC = "# OpenSignals Text File Format"

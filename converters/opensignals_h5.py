@@ -3,7 +3,7 @@
 Layout: one root group per device, named by its MAC address (``00:07:80:3B:46:61``), with attributes as in the
 text header (``sampling rate``, ``nsamples``, ``resolution``, ``device``, ``date``, ``time``, ...) and a ``raw``
 group holding ``nSeq`` and one dataset per analog channel ``channel_1``, ``channel_2``, ... (attribute ``sensor``).
-The channels become the same streams as the text file's (:mod:`converters.opensignals`): counts in
+The channels become the same streams as the text file's (:mod:`imulog.converters.opensignals`): counts in
 ``/signals/opensignals_<device>``, BITalino EMG/ECG/EDA in physical units in ``/analog/opensignals_<device>``.
 """
 
@@ -13,10 +13,10 @@ import re
 from pathlib import Path
 
 import numpy as np
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
+from imulog.converters.opensignals import device_streams
 
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
-from converters.opensignals import device_streams
 from imulog.model import Recording
 
 _MAC = re.compile(r"^[0-9A-Fa-f]{2}(:[0-9A-Fa-f]{2}){5}$")

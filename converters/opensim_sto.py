@@ -30,10 +30,18 @@ import re
 from pathlib import Path
 from typing import Any
 
-from converters._common import check_increasing, estimate_rate_hz, head_lines, sanitize_name, text_head_lines, to_ns
-from converters._lab import line_offsets, orientation_stream, read_table
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
+from imulog.converters._common import (
+    check_increasing,
+    estimate_rate_hz,
+    head_lines,
+    sanitize_name,
+    text_head_lines,
+    to_ns,
+)
+from imulog.converters._lab import line_offsets, orientation_stream, read_table
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
+
 from imulog.model import Recording, SignalStream
 
 WIDTH = {"quaternion": 4, "vec3": 3, "double": 1, "": 1}

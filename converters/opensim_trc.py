@@ -22,11 +22,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from imulog.converters._common import LENGTH_TO_M, check_increasing, head_lines, text_head_lines
+from imulog.converters._lab import read_table
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
 
-from converters._common import LENGTH_TO_M, check_increasing, head_lines, text_head_lines
-from converters._lab import read_table
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
 from imulog.model import MarkerStream, Recording
 
 HEADER_LINES = 5

@@ -401,7 +401,7 @@ def marker_warnings(topic: str, pos_m: np.ndarray) -> list[str]:
 
 
 def _is_rad_s(unit: str) -> bool:
-    from converters._common import unit_factor
+    from imulog.converters._common import unit_factor
 
     return unit_factor("gyr", unit) == 1.0
 

@@ -30,11 +30,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from imulog.converters._common import check_increasing, head_lines, is_number, text_head_lines, to_ns
+from imulog.converters._lab import read_table, trial_start
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
 
-from converters._common import check_increasing, head_lines, is_number, text_head_lines, to_ns
-from converters._lab import read_table, trial_start
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
 from imulog.model import MarkerStream, Recording
 
 _KEY = re.compile(r"^[A-Z][A-Z0-9_]+$")

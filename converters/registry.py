@@ -1,7 +1,7 @@
 """Converter registry: entry points ``imulog.converters``, format auto-detection and trial grouping.
 
 Every converter (built-in or a lab's own) is found through the ``imulog.converters`` entry-point group; an
-entry point names a :class:`converters.base.Converter` instance or class. The built-ins are also known directly,
+entry point names a :class:`imulog.converters.base.Converter` instance or class. The built-ins are also known directly,
 so a source checkout works before ``pip install -e``.
 """
 
@@ -13,43 +13,44 @@ from importlib import import_module
 from importlib.metadata import entry_points
 from pathlib import Path
 
-from converters._common import read_head
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError, UnknownFormatError
-from converters.mapping import is_mapping_file
+from imulog.converters._common import read_head
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError, UnknownFormatError
+from imulog.converters.mapping import is_mapping_file
+
 from imulog.model import Recording
 
 ENTRY_POINT_GROUP = "imulog.converters"
 BUILTIN: dict[str, str] = {
-    "delimited": "converters.delimited:CONVERTER",
-    "xsens": "converters.xsens:CONVERTER",
-    "adc": "converters.adc:CONVERTER",
-    "vicon-csv": "converters.vicon_csv:CONVERTER",
-    "c3d": "converters.c3d:CONVERTER",
-    "broad-hdf5": "converters.broad:CONVERTER",
-    "gaitmap": "converters.gaitmap:CONVERTER",
-    "apdm": "converters.apdm:CONVERTER",
-    "opensim-sto": "converters.opensim_sto:CONVERTER",
-    "motive": "converters.motive:CONVERTER",
-    "delsys": "converters.delsys:CONVERTER",
-    "mvnx": "converters.mvnx:CONVERTER",
-    "qualisys": "converters.qualisys:CONVERTER",
-    "axivity": "converters.axivity:CONVERTER",
-    "actigraph": "converters.actigraph:CONVERTER",
-    "actilife-csv": "converters.actilife_csv:CONVERTER",
-    "xdf": "converters.xdf:CONVERTER",
-    "geneactiv": "converters.geneactiv:CONVERTER",
-    "opensim-trc": "converters.opensim_trc:CONVERTER",
-    "edf": "converters.edf:CONVERTER",
-    "nilspod": "converters.nilspod:CONVERTER",
-    "bids-motion": "converters.bids:CONVERTER",
-    "axivity-csv": "converters.axivity_csv:CONVERTER",
-    "movella-dot": "converters.movella_dot:CONVERTER",
-    "empatica-e4": "converters.empatica_e4:CONVERTER",
-    "shimmer-csv": "converters.shimmer:CONVERTER",
-    "compressed": "converters.compressed:CONVERTER",
-    "opensignals": "converters.opensignals:CONVERTER",
-    "opensignals-h5": "converters.opensignals_h5:CONVERTER",
+    "delimited": "imulog.converters.delimited:CONVERTER",
+    "xsens": "imulog.converters.xsens:CONVERTER",
+    "adc": "imulog.converters.adc:CONVERTER",
+    "vicon-csv": "imulog.converters.vicon_csv:CONVERTER",
+    "c3d": "imulog.converters.c3d:CONVERTER",
+    "broad-hdf5": "imulog.converters.broad:CONVERTER",
+    "gaitmap": "imulog.converters.gaitmap:CONVERTER",
+    "apdm": "imulog.converters.apdm:CONVERTER",
+    "opensim-sto": "imulog.converters.opensim_sto:CONVERTER",
+    "motive": "imulog.converters.motive:CONVERTER",
+    "delsys": "imulog.converters.delsys:CONVERTER",
+    "mvnx": "imulog.converters.mvnx:CONVERTER",
+    "qualisys": "imulog.converters.qualisys:CONVERTER",
+    "axivity": "imulog.converters.axivity:CONVERTER",
+    "actigraph": "imulog.converters.actigraph:CONVERTER",
+    "actilife-csv": "imulog.converters.actilife_csv:CONVERTER",
+    "xdf": "imulog.converters.xdf:CONVERTER",
+    "geneactiv": "imulog.converters.geneactiv:CONVERTER",
+    "opensim-trc": "imulog.converters.opensim_trc:CONVERTER",
+    "edf": "imulog.converters.edf:CONVERTER",
+    "nilspod": "imulog.converters.nilspod:CONVERTER",
+    "bids-motion": "imulog.converters.bids:CONVERTER",
+    "axivity-csv": "imulog.converters.axivity_csv:CONVERTER",
+    "movella-dot": "imulog.converters.movella_dot:CONVERTER",
+    "empatica-e4": "imulog.converters.empatica_e4:CONVERTER",
+    "shimmer-csv": "imulog.converters.shimmer:CONVERTER",
+    "compressed": "imulog.converters.compressed:CONVERTER",
+    "opensignals": "imulog.converters.opensignals:CONVERTER",
+    "opensignals-h5": "imulog.converters.opensignals_h5:CONVERTER",
 }
 MIN_CONFIDENCE = 0.3
 
@@ -120,7 +121,7 @@ def detect(path: Path) -> Converter:
         if s > score:
             best, score = conv, s
     if best is None or score < MIN_CONFIDENCE:
-        from converters.known_formats import recognise
+        from imulog.converters.known_formats import recognise
 
         named = recognise(path, head)
         if named:

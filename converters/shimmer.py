@@ -26,11 +26,12 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from converters._common import head_lines, is_number, read_head, split_row, text_head_lines, unit_overrides
-from converters.base import Converter, ConvertOptions
-from converters.delimited import detect_delimiter, read_delimited
-from converters.errors import ConversionError
-from converters.mapping import load_mapping, sibling_mapping
+from imulog.converters._common import head_lines, is_number, read_head, split_row, text_head_lines, unit_overrides
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.delimited import detect_delimiter, read_delimited
+from imulog.converters.errors import ConversionError
+from imulog.converters.mapping import load_mapping, sibling_mapping
+
 from imulog.model import Recording
 
 _SEP = re.compile(r'^\s*"?sep=(.)"?\s*$')

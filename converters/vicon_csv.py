@@ -14,8 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
-from converters._common import (
+from imulog.converters._common import (
     TableSpec,
     check_increasing,
     decode,
@@ -27,8 +26,9 @@ from converters._common import (
     text_head_lines,
     unit_overrides,
 )
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
+
 from imulog.model import AnalogStream, MarkerStream, Recording, SignalStream
 from imulog.numeric import finite_rows
 

@@ -33,11 +33,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from imulog.converters._binary import concat_chunks, format_offset
+from imulog.converters._common import sanitize_name, unit_factor
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
 
-from converters._binary import concat_chunks, format_offset
-from converters._common import sanitize_name, unit_factor
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
 from imulog.model import ImuStream, Intervals, MarkerStream, Recording, SignalStream
 
 MAGIC = b"XDF:"

@@ -33,8 +33,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from converters._common import (
+from imulog.converters._common import (
     check_increasing,
     estimate_rate_hz,
     head_lines,
@@ -43,9 +42,10 @@ from converters._common import (
     split_row,
     text_head_lines,
 )
-from converters._lab import ORIENTATION_TOPIC, orientation_stream, read_table, trial_start
-from converters.base import Converter, ConvertOptions
-from converters.errors import ConversionError
+from imulog.converters._lab import ORIENTATION_TOPIC, orientation_stream, read_table, trial_start
+from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.errors import ConversionError
+
 from imulog.model import ImuStream, Recording, SignalStream
 from imulog.process import quaternion
 

@@ -112,7 +112,7 @@ def test_real_nexus_export_search_picks_one_segment_fast(shared_data):
     a gyroscope made from the hand markers, on its own clock 37 ms off and sampled at 148 Hz with noise and a
     mounting rotation: the search keeps a rigid set of hand markers (not the box, which is 20x more rigid)
     and finds the lag, in seconds."""
-    from converters import convert_files
+    from imulog.converters import convert_files
 
     mk = convert_files([shared_data / "vicon_nexus" / "markers.csv"]).markers[0]
     hand = ("INDEX", "LASTC", "MEDH", "LATH")

@@ -86,7 +86,7 @@ def test_align_short_real_recording_with_foot_markers(shared_data, tmp_path):
     the one window is no reason to grade it poor (its unknown drift moves its ends by < 1 ms at 50 ppm; a
     foot whose markers reproduce the gyroscope at 0.89 is still poor for that); explicit markers still override
     and name missing ones."""
-    from converters import convert_files
+    from imulog.converters import convert_files
 
     path = tmp_path / "gaitmap.mcap"
     write_trial(path, convert_files(sorted((shared_data / "gaitmap_foot").glob("*_sample.csv"))))

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from imulog.converters import axivity
 
-from converters import axivity
 from imulog.archive import TrialReader, write_trial
 from imulog.archive.doctor import check_file
 from imulog.archive.streaming import STATS_RECORD, write_trial_streaming

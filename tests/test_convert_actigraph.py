@@ -12,11 +12,11 @@ import numpy as np
 import pandas as pd
 import pytest
 from click.testing import CliRunner
+from imulog.converters import ConversionError, detect
+from imulog.converters._common import G0
+from imulog.converters.actigraph import iter_record_batches, read_gt3x, unpack_12bit_yxz
+from imulog.converters.actilife_csv import read_actilife_csv
 
-from converters import ConversionError, detect
-from converters._common import G0
-from converters.actigraph import iter_record_batches, read_gt3x, unpack_12bit_yxz
-from converters.actilife_csv import read_actilife_csv
 from imulog.archive import TrialReader
 from imulog.cli import cli
 
@@ -161,7 +161,7 @@ def test_a_clock_jump_is_not_idle_sleep(gt3x_dir: Path, tmp_path: Path):
 
 
 def test_long_idle_sleep_comes_in_bounded_pieces(monkeypatch, gt3x_dir: Path, tmp_path: Path):
-    import converters.actigraph as ag
+    import imulog.converters.actigraph as ag
 
     monkeypatch.setattr(ag, "INLINE_FILL", 900)  # 10 s at 90 Hz
     monkeypatch.setattr(ag, "FILL_PIECE", 1000)

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from imulog.converters import ConversionError, convert_file, detect
 
-from converters import ConversionError, convert_file, detect
 from imulog.archive import TrialReader, check_file
 from imulog.cli import cli
 

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from imulog.converters import ConversionError, detect
+from imulog.converters._common import G0
+from imulog.converters.axivity import BLOCK_BYTES, HEADER_BYTES, block_start_ns, iter_chunks, read_cwa
 
-from converters import ConversionError, detect
-from converters._common import G0
-from converters.axivity import BLOCK_BYTES, HEADER_BYTES, block_start_ns, iter_chunks, read_cwa
 from imulog.archive import TrialReader
 from imulog.cli import cli
 
@@ -61,7 +61,7 @@ def test_values_match_skdh_reference(cwa_dir: Path, kind: str):
 def test_fractional_time_stamps_make_blocks_regular(cwa_dir: Path):
     """With the fraction (and the offset it implies) block starts are regular to < 1 ms; without, to 1/rate."""
     data = np.fromfile(cwa_dir / "ax3_sample.cwa", dtype=np.uint8)[HEADER_BYTES:].reshape(-1, BLOCK_BYTES)
-    from converters.axivity import BLOCK_DTYPE
+    from imulog.converters.axivity import BLOCK_DTYPE
 
     blocks = data.view(BLOCK_DTYPE).ravel()
     d_ms = np.diff(block_start_ns(blocks)) / 1e6

@@ -7,9 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from converters import ConversionError, ConvertOptions
-from converters.axivity import (
+from imulog.converters import ConversionError, ConvertOptions
+from imulog.converters.axivity import (
     BLOCK_BYTES,
     BLOCK_DTYPE,
     HEADER_BYTES,
@@ -86,8 +85,8 @@ def _flip(src: Path, tmp_path: Path, blocks: list[int]) -> Path:
 
 @pytest.mark.parametrize("chunk", [None, 17, 18])
 def test_skip_damaged_blocks_as_gaps(cwa_dir: Path, tmp_path: Path, chunk):
-    from converters._binary import concat_chunks
-    from converters.axivity import iter_chunks
+    from imulog.converters._binary import concat_chunks
+    from imulog.converters.axivity import iter_chunks
 
     src = cwa_dir / "ax6_sample.cwa"
     good = read_cwa(src).imus[0]

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from imulog.converters import ConversionError, convert_file, detect
+from imulog.converters.registry import group_directory
 
-from converters import ConversionError, convert_file, detect
-from converters.registry import group_directory
 from imulog.archive import TrialReader
 from imulog.cli import cli
 

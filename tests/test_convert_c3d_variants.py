@@ -10,10 +10,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from converters import ConversionError, convert_file
-from converters._guard import GuardError, guarded
-from converters.c3d_format import DEC, MIPS, from_intel, ieee_to_vax, parameters, to_intel, vax_to_ieee
+from imulog.converters import ConversionError, convert_file
+from imulog.converters._guard import GuardError, guarded
+from imulog.converters.c3d_format import DEC, MIPS, from_intel, ieee_to_vax, parameters, to_intel, vax_to_ieee
 
 SAMPLES = "devices/c3d_samples"
 
@@ -127,11 +126,11 @@ def test_guard_time_memory_crash():
 
 
 def test_hanging_reader_falls_back_with_one_line(pc_int: Path, monkeypatch):
-    import converters.c3d as c3d
+    import imulog.converters.c3d as c3d
 
     ref = convert_file(pc_int).markers[0].pos
     monkeypatch.setattr(c3d, "_ezc3d_read", lambda path: _sleep(30.0))
-    from converters import ConvertOptions
+    from imulog.converters import ConvertOptions
 
     t0 = time.monotonic()
     rec = c3d.read_c3d(pc_int, options=ConvertOptions(extra={"reader_timeout_s": 0.5}))

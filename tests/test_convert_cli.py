@@ -334,7 +334,7 @@ def test_adc_sidecar_gives_the_rate_so_a_simulated_adl_folder_converts_in_one_ca
     rate = float(sim.adc["rate_hz"])
     assert acc["samples"] == n and abs(acc["rate_hz"] - rate) < 1e-6
     # counts -> m/s^2 with the nominal calibration (zero 512, 256 counts/g), parsed independently here
-    from converters._common import G0
+    from imulog.converters._common import G0
 
     counts = np.array(
         [[int(f.split("=")[1]) for f in line.split()] for line in Path(paths["adc"]).read_text().splitlines()]

@@ -9,11 +9,10 @@ import lzma
 import zipfile
 from pathlib import Path
 
+import imulog.converters.compressed as compressed
 import numpy as np
 import pytest
-
-import converters.compressed as compressed
-from converters import ConversionError, convert_file, detect
+from imulog.converters import ConversionError, convert_file, detect
 
 DEVICES = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "devices"
 DOT = DEVICES / "movella_dot_csv/bei_D4CA6EF17860_20210830_170505.csv"

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from imulog.converters import ConversionError, detect
+from imulog.converters._common import G0
+from imulog.converters.edf import read_edf
 
-from converters import ConversionError, detect
-from converters._common import G0
-from converters.edf import read_edf
 from imulog.cli import cli
 
 EDF = "devices/edf/trigno_emg.edf"
@@ -187,7 +187,7 @@ def test_cli_convert_and_doctor(shared_data: Path, tmp_path: Path):
 
 
 def test_pieces_equal_the_whole(tmp_path: Path):
-    from converters.edf import iter_chunks
+    from imulog.converters.edf import iter_chunks
 
     path = tmp_path / "walk.bdf"
     _write(path, True)

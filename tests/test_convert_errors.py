@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from imulog.converters import ConversionError, ConvertOptions, UnknownFormatError, convert_file, get
 
-from converters import ConversionError, ConvertOptions, UnknownFormatError, convert_file, get
 from imulog.model import Recording
 
 FUSION = (

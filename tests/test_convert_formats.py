@@ -15,9 +15,8 @@ import h5py
 import numpy as np
 import pandas as pd
 import pytest
-
-from converters import ConversionError, ConvertOptions, available, convert_file, convert_files, detect
-from converters.registry import ENTRY_POINT_GROUP, group_directory
+from imulog.converters import ConversionError, ConvertOptions, available, convert_file, convert_files, detect
+from imulog.converters.registry import ENTRY_POINT_GROUP, group_directory
 
 G = 9.80665
 DEG = math.pi / 180.0
@@ -539,7 +538,7 @@ class LabConverter:
 def test_a_lab_registers_its_own_converter_through_entry_points(tmp_path, monkeypatch):
     from importlib.metadata import EntryPoint
 
-    import converters.registry as registry
+    import imulog.converters.registry as registry
 
     ep = EntryPoint(name="lab-device", value="test_convert_formats:LabConverter", group=ENTRY_POINT_GROUP)
     real = registry.entry_points

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from imulog.converters import ConversionError, ConvertOptions, get
 
-from converters import ConversionError, ConvertOptions, get
 from imulog.model import Recording
 
 BANNER = (

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from imulog.converters import ConversionError, detect
+from imulog.converters._common import G0
+from imulog.converters.geneactiv import PAGE_MARK, iter_chunks, read_bin
 
-from converters import ConversionError, detect
-from converters._common import G0
-from converters.geneactiv import PAGE_MARK, iter_chunks, read_bin
 from imulog.cli import cli
 
 BIN = "devices/geneactiv_bin/GENEActiv_testfile.bin"
@@ -73,7 +73,7 @@ def test_matches_scikit_digital_health(src: Path, tmp_path: Path):
 
 
 def test_chunks_assemble_to_the_whole_file(src: Path, monkeypatch):
-    import converters.geneactiv as ga
+    import imulog.converters.geneactiv as ga
 
     whole = read_bin(src)
     monkeypatch.setattr(ga, "PAGES_PER_CHUNK", 5)

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from imulog.converters import ConversionError, UnknownFormatError, convert_file, detect
 
-from converters import ConversionError, UnknownFormatError, convert_file, detect
 from imulog.cli import cli
 
 DEVICES = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "devices"

@@ -8,9 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from converters import ConversionError, ConvertOptions, convert_file
-from converters.mapping import load_mapping
+from imulog.converters import ConversionError, ConvertOptions, convert_file
+from imulog.converters.mapping import load_mapping
 
 G = 9.80665
 DEG = np.pi / 180

@@ -9,8 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from converters import ConversionError, convert_file, detect
+from imulog.converters import ConversionError, convert_file, detect
 
 MOTIVE = "devices/optitrack_motive/sample_optitrack_take.csv"
 

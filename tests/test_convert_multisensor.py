@@ -7,9 +7,9 @@ import shutil
 
 import numpy as np
 from click.testing import CliRunner
+from imulog.converters import ConvertOptions, convert_files
+from imulog.converters.registry import group_directory
 
-from converters import ConvertOptions, convert_files
-from converters.registry import group_directory
 from imulog.archive import TrialReader, check_file
 from imulog.cli import cli
 
@@ -129,7 +129,7 @@ LAB_FORMATS = {
 def test_lab_formats_are_plugins_and_listed(repo_root):
     import tomllib
 
-    from converters.registry import BUILTIN
+    from imulog.converters.registry import BUILTIN
 
     eps = tomllib.loads((repo_root / "pyproject.toml").read_text())["project"]["entry-points"]["imulog.converters"]
     for name in LAB_FORMATS:
@@ -167,12 +167,11 @@ def _mutate(rng, data: bytes) -> bytes:
 def test_damaged_lab_exports_raise_only_conversion_errors(shared_data, tmp_path):
     """Seeded fuzzing of every lab format (cut files, flipped bytes, lost/duplicated/garbled lines): the converter
     either reads the file or raises ConversionError with a one-line message, never another exception."""
+    from imulog.converters import ConversionError
+    from imulog.converters.registry import get
     from test_convert_apdm import write_apdm_h5  # tests/ is on sys.path (rootdir import mode)
     from test_convert_mvnx import write_mvnx
     from test_convert_qualisys import write_qtm
-
-    from converters import ConversionError
-    from converters.registry import get
 
     d = shared_data / "devices"
     write_mvnx(tmp_path / "m.mvnx", n=6)

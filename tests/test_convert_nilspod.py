@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from imulog.converters import ConversionError, convert_file, detect
+from imulog.converters.nilspod import parse_header, read_bin
 
-from converters import ConversionError, convert_file, detect
-from converters.nilspod import parse_header, read_bin
 from imulog.cli import cli
 
 STEM = "devices/nilspod/NilsPodX-6F13_20210109_162824"

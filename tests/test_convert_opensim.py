@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from imulog.converters import ConversionError, convert_file, detect
 
-from converters import ConversionError, convert_file, detect
 from imulog.cli import cli
 
 TRC = "devices/opensim_trc/markers.trc"

@@ -1,4 +1,4 @@
-"""The fast text path of ``converters._common.read_numeric`` (issue 17: convert within 1.5x its floor).
+"""The fast text path of ``imulog.converters._common.read_numeric`` (issue 17: convert within 1.5x its floor).
 
 * pyarrow's CSV reader parses the numeric block from the bytes in memory; whatever it would read differently from
   the pandas C parser (other NaN spellings, ``-0`` in whole-number columns, ragged or blank rows, quotes, spaces,
@@ -14,12 +14,12 @@ import dataclasses
 import hashlib
 from pathlib import Path
 
+import imulog.converters._common as common
 import numpy as np
 import pytest
+from imulog.converters import ConversionError, convert_file
+from imulog.converters import plausibility as plaus
 
-import converters._common as common
-from converters import ConversionError, convert_file
-from converters import plausibility as plaus
 from imulog.commands.convert import conversion_record
 
 REPO = Path(__file__).resolve().parents[1]
@@ -286,7 +286,7 @@ def test_separators_of_overlapping_excerpts_fall_back_to_insert():
 
 # --------------------------------------------------------------------------------- text piece by piece
 def _pieces_or_error(path: Path, piece_bytes: int, **kw):
-    from converters.delimited import iter_delimited
+    from imulog.converters.delimited import iter_delimited
 
     try:
         return list(iter_delimited(path, piece_bytes=piece_bytes, **kw))
@@ -295,7 +295,7 @@ def _pieces_or_error(path: Path, piece_bytes: int, **kw):
 
 
 def _whole_or_error(path: Path, **kw):
-    from converters.delimited import read_delimited
+    from imulog.converters.delimited import read_delimited
 
     try:
         return read_delimited(path, **kw)
@@ -318,7 +318,7 @@ def _assert_pieces_equal_whole(pieces, whole) -> None:
 
 @pytest.mark.parametrize("piece_bytes", [3000, 65536])
 def test_text_pieces_join_to_the_whole_file_conversion(piece_bytes, shared_data, tmp_path):
-    from converters.mapping import load_mapping
+    from imulog.converters.mapping import load_mapping
 
     _assert_pieces_equal_whole(
         _pieces_or_error(shared_data / "imu_text/fusion_sensor_data.csv", piece_bytes),
@@ -376,7 +376,7 @@ def test_imulog_convert_streams_large_text_files(tmp_path, monkeypatch):
     whole = runner.invoke(cli, ["convert", str(path), "-o", str(tmp_path / "whole.mcap")])
     assert whole.exit_code == 0 and "piece by piece" not in whole.output
     monkeypatch.setattr(convert_command, "STREAM_MIN_BYTES", 100_000)
-    monkeypatch.setattr("converters.delimited.PIECE_BYTES", 200_000)
+    monkeypatch.setattr("imulog.converters.delimited.PIECE_BYTES", 200_000)
     streamed = runner.invoke(cli, ["convert", str(path), "-o", str(tmp_path / "streamed.mcap")])
     assert streamed.exit_code == 0 and "piece by piece" in streamed.output, streamed.output
     with TrialReader(tmp_path / "whole.mcap") as a, TrialReader(tmp_path / "streamed.mcap") as b:
@@ -399,7 +399,7 @@ def test_source_hash_on_a_worker_thread_survives_fork(tmp_path):
     import hashlib
     import os
 
-    from converters._common import BACKGROUND_HASH_BYTES, known_sha256, read_source
+    from imulog.converters._common import BACKGROUND_HASH_BYTES, known_sha256, read_source
 
     path = tmp_path / "big.bin"
     path.write_bytes(os.urandom(BACKGROUND_HASH_BYTES + 1))

@@ -7,8 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from converters import ConversionError, convert_file, detect
+from imulog.converters import ConversionError, convert_file, detect
 
 MARKERS = ["RSHO", "RELB", "RWRA"]
 

@@ -6,8 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from converters import ConversionError, convert_file, detect
+from imulog.converters import ConversionError, convert_file, detect
 
 STO = "devices/opensense_sto"
 

@@ -18,10 +18,10 @@ import numpy as np
 import pandas as pd
 import pytest
 from click.testing import CliRunner
+from imulog.converters import ConversionError, ConvertOptions, convert_file
+from imulog.converters._common import drop_cut_final_row, final_row_cut
+from imulog.converters.plausibility import DEG, imu_warnings, infer_acc_unit, infer_gyr_unit
 
-from converters import ConversionError, ConvertOptions, convert_file
-from converters._common import drop_cut_final_row, final_row_cut
-from converters.plausibility import DEG, imu_warnings, infer_acc_unit, infer_gyr_unit
 from imulog.cli import cli as main
 
 REPO = Path(__file__).resolve().parents[1]
@@ -194,7 +194,7 @@ def test_accelerometer_in_g_and_markers_in_mm_declared_otherwise_warn(tmp_path, 
 
 
 def _convert_warnings(path: Path) -> list[str]:
-    from converters.plausibility import recording_warnings
+    from imulog.converters.plausibility import recording_warnings
 
     rec = convert_file(path)
     return [*rec.warnings, *recording_warnings(rec)]
@@ -361,7 +361,7 @@ def test_unit_option_is_checked(tmp_path, shared_data):
 
 def test_plausibility_of_a_long_recording_is_judged_on_excerpts():
     """A day at 25 Hz (2.16 M samples) is checked on evenly spread 60 s excerpts: bounded cost, same verdict."""
-    from converters.plausibility import MAX_CHECK_SAMPLES, excerpts
+    from imulog.converters.plausibility import MAX_CHECK_SAMPLES, excerpts
 
     n = 2_160_000
     t = np.arange(n, dtype=np.int64) * 40_000_000
@@ -380,7 +380,8 @@ def test_plausibility_of_a_long_recording_is_judged_on_excerpts():
 def test_streamed_text_is_judged_on_excerpts_from_every_piece(tmp_path, monkeypatch):
     """A long text file converted piece by piece: a gyroscope in deg/s declared rad/s that only turns after the first
     piece is still warned about (the checks see excerpts spread over all pieces, not the first piece alone)."""
-    from converters import delimited
+    from imulog.converters import delimited
+
     from imulog.archive import TrialReader
     from imulog.commands import convert as convert_command
 

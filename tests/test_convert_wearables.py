@@ -14,10 +14,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-
-from converters import ConversionError, ConvertOptions, convert_file, convert_files, detect
-from converters.movella_dot import unwrap_sample_time_fine
-from converters.registry import group_directory
+from imulog.converters import ConversionError, ConvertOptions, convert_file, convert_files, detect
+from imulog.converters.movella_dot import unwrap_sample_time_fine
+from imulog.converters.registry import group_directory
 
 G = 9.80665
 DEG = math.pi / 180.0
@@ -330,7 +329,7 @@ def test_shimmer_consensys_unix_column_dates_the_trial():
 
 
 def test_actilife_epoch_csv_day_first_date_format(tmp_path):
-    from converters.actilife_csv import strptime_format
+    from imulog.converters.actilife_csv import strptime_format
 
     assert strptime_format("dd.MM.yyyy") == "%d.%m.%Y" and strptime_format("M/d/yyyy") == "%m/%d/%Y"
     rows = ["Date,Time,Axis1", "01.03.2020,10:00:00,5", "01.03.2020,10:01:00,6", "01.03.2020,10:02:00,7"]

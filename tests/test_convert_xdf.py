@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from imulog.converters import ConversionError, detect
+from imulog.converters._common import G0
+from imulog.converters.xdf import iter_chunks, read_xdf, scan_chunks
 
-from converters import ConversionError, detect
-from converters._common import G0
-from converters.xdf import iter_chunks, read_xdf, scan_chunks
 from imulog.archive import TrialReader
 from imulog.cli import cli
 
@@ -193,7 +193,7 @@ def test_damaged_file_one_line_error_naming_the_chunk(xdf_dir: Path, tmp_path: P
 
 def test_damaged_samples_chunk_is_named_not_misread(xdf_dir: Path, tmp_path: Path):
     """A bad time-stamp flag inside a Samples chunk: pyxdf would read misaligned values silently."""
-    from converters.xdf import iter_chunk_headers
+    from imulog.converters.xdf import iter_chunk_headers
 
     src = xdf_dir / "clock_resets.xdf"
     data = bytearray(src.read_bytes())

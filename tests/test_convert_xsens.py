@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from imulog.converters import ConversionError, ConvertOptions, convert_file, detect
 
-from converters import ConversionError, ConvertOptions, convert_file, detect
 from imulog.cli import cli
 from imulog.process import quaternion as Q
 
@@ -89,7 +89,7 @@ def test_nan_cell_is_a_gap_in_the_stream(shared_data, tmp_path):
 def test_quaternion_rotation_matrix_and_euler_agree(shared_data):
     """The ALL file has Quat_q0..3 (q0 = w), Roll/Pitch/Yaw and Mat[r][c] listed column-major: read by name, the
     matrix and the angles give the quaternion's rotation to within the 6 printed decimals."""
-    from converters.xsens import orientation_wxyz
+    from imulog.converters.xsens import orientation_wxyz
 
     rec = convert_file(shared_data / XSENS / "MT2022_ACC_GYRO_ROT_ALL_TAB_NAN_00B42D4B.txt")
     sig, orient = rec.signals

@@ -20,8 +20,8 @@ import pytest
 from click.testing import CliRunner
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from imulog.converters import ConversionError, get
 
-from converters import ConversionError, get
 from imulog.archive import ArchiveError, TrialReader, append_derived
 from imulog.archive import _mcap as m
 from imulog.archive._builder import McapBuilder

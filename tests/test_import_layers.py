@@ -13,6 +13,7 @@ ROOT = Path(__file__).resolve().parents[1] / "imulog"
 LAYERS = {
     "imulog": 0,  # the package's own small helpers: _lazy, heap, numeric, model, console
     "imulog.process": 1,
+    "imulog.converters": 1,  # the top-level converters/ folder, installed as imulog.converters
     "imulog.archive": 2,
     "imulog.steps": 3,
     "imulog.simulate": 3,
@@ -38,6 +39,9 @@ def module_names() -> dict[str, Path]:
     out = {}
     for p in ROOT.rglob("*.py"):
         parts = p.relative_to(ROOT.parent).with_suffix("").parts
+        out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = p
+    for p in (ROOT.parent / "converters").rglob("*.py"):  # package-dir: converters/ is imulog.converters
+        parts = ("imulog", *p.relative_to(ROOT.parent).with_suffix("").parts)
         out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = p
     return out
 

@@ -235,7 +235,7 @@ def test_realigning_moves_the_viewer_twins_but_never_the_raw_channels(processed,
 
 def test_real_broad_recording_keeps_imu_and_optical_together(shared_data, tmp_path):
     """BROAD: IMU and optical share one clock in the file, so they share one origin on the axis."""
-    from converters.registry import convert_file
+    from imulog.converters.registry import convert_file
 
     rec = convert_file(shared_data / "broad/02_undisturbed_slow_rotation_B.hdf5")
     path = write_trial(tmp_path / "broad.mcap", rec, attach_sources=False)

@@ -6,8 +6,8 @@ import shutil
 
 import numpy as np
 import pytest
+from imulog.converters import axivity
 
-from converters import axivity
 from imulog.archive import TrialReader
 from imulog.archive.streaming import write_trial_streaming
 from imulog.simulate.home import HomeParams, write_home_cwa

@@ -31,9 +31,9 @@ def _assert_same_imu(a, b):
 
 
 def test_converters_read_back_the_in_memory_recording(written):
-    converters = pytest.importorskip("converters.registry")
+    converters = pytest.importorskip("imulog.converters.registry")
     sim, paths = written
-    rec = converters.convert_files([Path(paths["imu"]), Path(paths["vicon"])])
+    rec = imulog.converters.convert_files([Path(paths["imu"]), Path(paths["vicon"])])
     _assert_same_imu(rec.imus[0], sim.recording.imus[0])
     assert rec.imus[0].meta == sim.recording.imus[0].meta
     mk, ref = rec.markers[0], sim.recording.markers[0]
@@ -84,8 +84,8 @@ def test_archive_has_the_truths_counts_rates_and_offsets(written, tmp_path):
 
 
 def test_adc_text_converts_to_the_boards_counts(tmp_path):
-    adc_mod = pytest.importorskip("converters.adc")
-    from converters.base import ConvertOptions
+    adc_mod = pytest.importorskip("imulog.converters.adc")
+    from imulog.converters.base import ConvertOptions
 
     sim = simulate("adl", seed=6, activity=1, repetitions=2)
     paths = write_trial_files(sim, tmp_path)
@@ -143,9 +143,9 @@ def test_bundled_recording_is_reproducible_and_converts(repo_root, tmp_path):
                     assert all(np.array_equal(a[k], b[k]) for k in a.files)
             else:
                 assert path.read_bytes() == ref.read_bytes(), f"{ref} is stale: run recordings/make_recordings.py"
-    converters = pytest.importorskip("converters.registry")
+    converters = pytest.importorskip("imulog.converters.registry")
     truth = load_truth(bundled / "r2g_s00_t00_truth.json")
-    rec = converters.convert_files([bundled / "r2g_s00_t00_imu.csv", bundled / "r2g_s00_t00_vicon.csv"])
+    rec = imulog.converters.convert_files([bundled / "r2g_s00_t00_imu.csv", bundled / "r2g_s00_t00_vicon.csv"])
     assert len(rec.imus[0]) == len(truth.imu_t_ref_ns) and len(rec.markers[0]) == len(truth.t_ns)
     assert sorted(set(truth.phases.labels)) == ["lift", "reach", "return_bottle", "return_hand"]
     assert int(truth.phases.task_index.max()) == 5

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from imulog.converters.axivity import CONVERTER as AXIVITY
+from imulog.converters.registry import detect
 
-from converters.axivity import CONVERTER as AXIVITY
-from converters.registry import detect
 from imulog.cli import cli
 from imulog.simulate.home import HomeParams, iter_minutes, minute_signals, write_home_cwa
 

@@ -28,7 +28,7 @@ def above(x: np.ndarray, rate_hz: float, cut_hz: float) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def gaitmap_foot(shared_data):
-    from converters.registry import convert_files
+    from imulog.converters.registry import convert_files
 
     rec = convert_files([shared_data / "gaitmap_foot" / "imu_sample.csv"])
     return rec.imus[0]

@@ -13,9 +13,10 @@ from typing import Any
 
 import click
 
-from converters import ConversionError, ConvertOptions, UnknownFormatError
-from converters.base import Converter
-from converters.registry import (
+from imulog.commands.outputs import overwrite_option, refuse_existing
+from imulog.converters import ConversionError, ConvertOptions, UnknownFormatError
+from imulog.converters.base import Converter
+from imulog.converters.registry import (
     available,
     convert_files,
     detect,
@@ -24,7 +25,6 @@ from converters.registry import (
     list_formats,
     recording_key,
 )
-from imulog.commands.outputs import overwrite_option, refuse_existing
 from imulog.model import Recording
 
 TRIAL_RECORD = "imulog.trial"
@@ -77,7 +77,7 @@ def load_meta_file(path: Path) -> dict[str, dict[str, Any]]:
 
 def sha256_of(path: Path) -> str:
     """SHA-256 of a file (hex); the digest a converter computed from the bytes it parsed when it read them whole."""
-    from converters._common import known_sha256
+    from imulog.converters._common import known_sha256
 
     known = known_sha256(path)
     if known is not None:
@@ -114,8 +114,8 @@ def finish_recording(rec: Recording, meta: dict[str, dict[str, Any]], formats: d
 
 def unit_warnings(rec: Recording) -> list[str]:
     """The converters' own notes (rows dropped, units assumed) and the plausibility of the declared units (a wrong
-    unit is not an error in the file, so nothing else sees it; see ``converters.plausibility``). One line each."""
-    from converters.plausibility import recording_warnings
+    unit is not an error in the file, so nothing else sees it; see ``imulog.converters.plausibility``). One line each."""
+    from imulog.converters.plausibility import recording_warnings
 
     return [*rec.warnings, *recording_warnings(rec)]
 
@@ -183,9 +183,9 @@ def _convert_streaming(
     as_json: bool = False,
 ) -> None:
     """Convert one large file piece by piece (memory bounded by a piece, not by the recording)."""
-    from converters.plausibility import PieceExcerpts, marker_warnings
     from imulog.archive import ArchiveError
     from imulog.archive.streaming import StreamingTrialWriter
+    from imulog.converters.plausibility import PieceExcerpts, marker_warnings
 
     name = _format_name(path, fmt, options)
     conv = get(name)
@@ -264,7 +264,7 @@ def _span_s(piece: Recording) -> float:
 def _bytes_per_sample(path: Path) -> float:
     """About how many bytes of the file one sample takes: ~12 in the wearables' binary formats, one line of text
     (the mean line length of the file's first 256 KiB) in text exports."""
-    from converters._common import looks_binary, read_head
+    from imulog.converters._common import looks_binary, read_head
 
     head = read_head(path)
     lines = head.count(b"\n")
@@ -291,7 +291,7 @@ def _kv(pairs: tuple[str, ...], option: str) -> dict[str, str]:
 
 def _units(pairs: tuple[str, ...]) -> dict[str, str]:
     """``("acc=g", "gyr=deg/s")`` -> ``{"acc": "g", "gyr": "deg/s"}``, each unit checked against its quantity."""
-    from converters._common import UNIT_QUANTITIES, check_unit
+    from imulog.converters._common import UNIT_QUANTITIES, check_unit
 
     out = {}
     for pair in pairs:

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from converters import ConversionError, ConvertOptions
+from imulog.converters import ConversionError, ConvertOptions
 from imulog.model import Recording
 
 
@@ -47,17 +47,17 @@ def column_roles(path: Path, fmt: str, options: ConvertOptions) -> list[str]:
     """``column -> channel field (unit)`` lines for delimited text; empty for other formats."""
     if fmt not in ("delimited", "shimmer-csv"):
         return []
-    from converters._common import read_head, unit_overrides
-    from converters.delimited import analyse_header
-    from converters.mapping import load_mapping, sibling_mapping
+    from imulog.converters._common import read_head, unit_overrides
+    from imulog.converters.delimited import analyse_header
+    from imulog.converters.mapping import load_mapping, sibling_mapping
 
     head = read_head(path)
-    from converters._common import head_lines
+    from imulog.converters._common import head_lines
 
     lines = head_lines(path, head)
     raw: set[int] | None = None
     if fmt == "shimmer-csv":
-        from converters.shimmer import header, normalised_lines
+        from imulog.converters.shimmer import header, normalised_lines
 
         found = header(lines)
         if found is None:

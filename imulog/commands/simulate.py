@@ -213,10 +213,10 @@ def simulate(
 
 def _stream_live(paths: dict[str, Path], out_dir: Path) -> None:
     """``--lsl``: the trial converted (IMU and Vicon files) into OUT_DIR/<stem>_lsl.mcap, then replayed live."""
-    from converters import ConversionError
-    from converters.registry import convert_files
     from imulog.archive import write_trial
     from imulog.commands.record import stream_trial
+    from imulog.converters import ConversionError
+    from imulog.converters.registry import convert_files
 
     stem = paths["imu"].name[: -len("_imu.csv")]
     trial = out_dir / f"{stem}_lsl.mcap"

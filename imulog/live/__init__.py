@@ -2,7 +2,7 @@
 
 * :mod:`imulog.live.lsl`: pylsl import, stream resolution by ``name=``/``type=``/``source_id=``;
 * :mod:`imulog.live.mapping`: an LSL stream's XML header and samples -> the channels ``imulog convert`` makes
-  for the same stream in an XDF file (one mapping: :func:`converters.xdf.stream_to_recording`);
+  for the same stream in an XDF file (one mapping: :func:`imulog.converters.xdf.stream_to_recording`);
 * :mod:`imulog.live.writer`: :class:`LiveTrialWriter`, the streaming trial writer with chunks flushed every second
   into a visible ``.part`` file (a killed recorder leaves it for ``imulog salvage``);
 * :mod:`imulog.live.recorder`: the recording loop (clock offsets, gaps, dropped samples, summary);

@@ -2,7 +2,7 @@
 
 The XML header of a live stream is the one LabRecorder writes into an XDF StreamHeader chunk, so it is parsed
 into pyxdf's dictionary layout and handed, with each pulled chunk of samples, to
-:func:`converters.xdf.stream_to_recording`: IMU streams by their channel labels and units (``/imu/<stream>``),
+:func:`imulog.converters.xdf.stream_to_recording`: IMU streams by their channel labels and units (``/imu/<stream>``),
 MoCap streams as markers, other numeric streams as signals, string streams as events, and the same
 ``imulog.device.<stream>`` record. Pure functions, no LSL.
 """
@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from converters._common import sanitize_name
-from converters.xdf import stream_to_recording
+from imulog.converters._common import sanitize_name
+from imulog.converters.xdf import stream_to_recording
 from imulog.model import Recording
 
 

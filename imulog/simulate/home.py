@@ -15,7 +15,7 @@ Model, per minute of wall-clock time:
   the forearm's axes; gravity rotates with the sensor; tremor-free sensor noise (0.004 g, 0.2 deg/s) is added.
 
 Ground truth is the number of moving seconds per minute (``truth_moving_s``), small enough to keep for a week.
-The ``.cwa`` layout is the one :mod:`converters.axivity` reads (AX6: gyro then accel, int16, 40 samples per
+The ``.cwa`` layout is the one :mod:`imulog.converters.axivity` reads (AX6: gyro then accel, int16, 40 samples per
 512-byte block; accelerometer +-8 g, gyroscope +-2000 deg/s; device local time, no zone).
 """
 
