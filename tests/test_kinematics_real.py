@@ -30,7 +30,7 @@ from imulog.process.kinematics import (
 @pytest.fixture(scope="module")
 def clusters(shared_data: Path):
     converters = pytest.importorskip("imulog.converters.c3d")
-    rec = imulog.converters.read_c3d(shared_data / "c3d" / "ktk_sample_propulsion_upperlimb.c3d")
+    rec = converters.read_c3d(shared_data / "c3d" / "ktk_sample_propulsion_upperlimb.c3d")
     m = rec.markers[0]
 
     def q(prefix: str) -> np.ndarray:

@@ -33,7 +33,7 @@ def _assert_same_imu(a, b):
 def test_converters_read_back_the_in_memory_recording(written):
     converters = pytest.importorskip("imulog.converters.registry")
     sim, paths = written
-    rec = imulog.converters.convert_files([Path(paths["imu"]), Path(paths["vicon"])])
+    rec = converters.convert_files([Path(paths["imu"]), Path(paths["vicon"])])
     _assert_same_imu(rec.imus[0], sim.recording.imus[0])
     assert rec.imus[0].meta == sim.recording.imus[0].meta
     mk, ref = rec.markers[0], sim.recording.markers[0]
@@ -145,7 +145,7 @@ def test_bundled_recording_is_reproducible_and_converts(repo_root, tmp_path):
                 assert path.read_bytes() == ref.read_bytes(), f"{ref} is stale: run recordings/make_recordings.py"
     converters = pytest.importorskip("imulog.converters.registry")
     truth = load_truth(bundled / "r2g_s00_t00_truth.json")
-    rec = imulog.converters.convert_files([bundled / "r2g_s00_t00_imu.csv", bundled / "r2g_s00_t00_vicon.csv"])
+    rec = converters.convert_files([bundled / "r2g_s00_t00_imu.csv", bundled / "r2g_s00_t00_vicon.csv"])
     assert len(rec.imus[0]) == len(truth.imu_t_ref_ns) and len(rec.markers[0]) == len(truth.t_ns)
     assert sorted(set(truth.phases.labels)) == ["lift", "reach", "return_bottle", "return_hand"]
     assert int(truth.phases.task_index.max()) == 5
