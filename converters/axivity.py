@@ -260,7 +260,9 @@ def _check_blocks(
         i = int(np.nonzero(bad)[0][0])
         what = why[i] if why[i] != "checksum mismatch" else "checksum mismatch (the block is damaged)"
         raise ConversionError(
-            path, f"data block {first_index + i} (byte {HEADER_BYTES + (first_index + i) * BLOCK_BYTES}): {what}"
+            path,
+            f"data block {first_index + i} (byte {HEADER_BYTES + (first_index + i) * BLOCK_BYTES}): {what}; "
+            "--skip-damaged converts the rest with the damaged blocks as gaps",
         )
     return np.nonzero((blocks["magic"] == MAGIC_AX) & ~bad)[0], np.nonzero(bad)[0]
 

@@ -111,3 +111,18 @@ def test_skip_damaged_blocks_as_gaps(cwa_dir: Path, tmp_path: Path, chunk):
     after = np.nonzero(finite)[0][17 * n]
     assert imu.t_ns[after] == good.t_ns[19 * n]
     assert np.all(np.diff(imu.t_ns) > 0)
+
+
+def test_skip_damaged_from_the_command_line(cwa_dir: Path, tmp_path: Path):
+    from click.testing import CliRunner
+
+    from imulog.cli import cli
+
+    bad = _flip(cwa_dir / "ax6_sample.cwa", tmp_path, [17])
+    out = tmp_path / "t.mcap"
+    refused = CliRunner().invoke(cli, ["convert", str(bad), "-o", str(out)])
+    assert refused.exit_code != 0 and "data block 17" in refused.output and "--skip-damaged" in refused.output
+    assert not out.exists()
+    done = CliRunner().invoke(cli, ["convert", str(bad), "-o", str(out), "--skip-damaged"])
+    assert done.exit_code == 0, done.output
+    assert out.exists() and "damaged" in done.output

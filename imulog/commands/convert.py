@@ -361,6 +361,12 @@ def _units(pairs: tuple[str, ...]) -> dict[str, str]:
 @overwrite_option("Replace an existing output trial (without it, an existing output is refused).")
 @click.option("--list-formats", "list_formats_flag", is_flag=True, help="List the known input formats and exit.")
 @click.option(
+    "--skip-damaged",
+    is_flag=True,
+    help="Axivity .cwa: skip blocks that fail their checksum, each run of them a gap with a warning "
+    "(default: the first damaged block is an error naming it).",
+)
+@click.option(
     "--inspect",
     is_flag=True,
     help="Print what would be made (format, columns to channels, units, rate, start time, warnings); write nothing.",
@@ -385,6 +391,7 @@ def convert(
     overwrite: bool,
     list_formats_flag: bool,
     as_json: bool = False,
+    skip_damaged: bool = False,
     inspect: bool = False,
 ) -> None:
     """Convert device exports into one MCAP trial (or a folder of exports into one trial per recording).
@@ -437,6 +444,7 @@ def convert(
             "counts_per_g": adc_counts_per_g,
             "names": _kv(device_names, "--device-name"),
             "units": _units(unit_pairs),
+            "skip_damaged": skip_damaged,
         },
     )
     dirs = [p for p in inputs if p.is_dir()]
