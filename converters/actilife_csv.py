@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 from imulog.converters._binary import UNKNOWN_ZONE
 from imulog.converters._common import G0, TableSpec, head_lines, read_numeric, sanitize_name, text_head_lines
-from imulog.converters.actilife_epoch import bannerless_banner, is_bannerless, read_epoch_csv
+from imulog.converters.actilife_epoch import bannerless_banner, is_bannerless, read_epoch_csv, strptime_format
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
 
@@ -48,14 +48,6 @@ def _field(path: Path, lines: list[str], pattern: str, what: str, line_hint: int
         if m:
             return m
     raise ConversionError(path, f"ActiLife banner has no {what}", line=line_hint)
-
-
-_DATE_TOKENS = {"yyyy": "%Y", "yy": "%y", "MM": "%m", "M": "%m", "dd": "%d", "d": "%d"}
-
-
-def strptime_format(fmt: str) -> str:
-    """ActiLife's (.NET) ``date format`` -> strptime: ``M/d/yyyy`` -> ``%m/%d/%Y``, ``dd.MM.yyyy`` -> ``%d.%m.%Y``."""
-    return re.sub(r"yyyy|yy|MM|M|dd|d", lambda m: _DATE_TOKENS[m.group(0)], fmt)
 
 
 def parse_banner(path: Path, lines: list[str]) -> dict:

@@ -47,6 +47,14 @@ UNITS |= {"steps": "steps", "lux": "lx", "activity": "counts"}
 TIME_NAMES = {"date", "time", "timestamp"}
 
 
+_DATE_TOKENS = {"yyyy": "%Y", "yy": "%y", "MM": "%m", "M": "%m", "dd": "%d", "d": "%d"}
+
+
+def strptime_format(fmt: str) -> str:
+    """ActiLife's (.NET) ``date format`` -> strptime: ``M/d/yyyy`` -> ``%m/%d/%Y``, ``dd.MM.yyyy`` -> ``%d.%m.%Y``."""
+    return re.sub(r"yyyy|yy|MM|M|dd|d", lambda m: _DATE_TOKENS[m.group(0)], fmt)
+
+
 def epoch_seconds(text: str) -> float:
     """``00:00:15`` -> 15.0 (s)."""
     h, m, s = (int(p) for p in text.split(":"))
@@ -67,7 +75,6 @@ def _is_names_row(cells: list[str]) -> bool:
 def _parse_dates(path: Path, date: list[str], time: list[str] | None, fmt: str, first_line: int) -> np.ndarray:
     """Date (banner ``date format``) and time cells -> datetime64[ns] per row."""
     import pandas as pd
-    from imulog.converters.actilife_csv import strptime_format
 
     py_fmt = strptime_format(fmt)
     text = pd.Series(date) if time is None else pd.Series(date) + " " + pd.Series(time)
@@ -224,7 +231,6 @@ def bannerless_banner(path: Path, lines: list[str]) -> dict:
     rows = [[c.strip().strip('"') for c in ln.split(",")] for ln in lines[1:4] if ln.strip()]
     if len(rows) < 2:
         raise ConversionError(path, "fewer than two epochs: the epoch length is unknown", line=2)
-    from imulog.converters.actilife_csv import strptime_format
 
     for fmt in BANNERLESS_FORMATS:
         try:

@@ -18,6 +18,7 @@ LAYERS = {
     "imulog.steps": 3,
     "imulog.simulate": 3,
     "imulog.view": 4,
+    "imulog.live": 4,  # live capture: converters' stream mapping, the streaming writer, the viewer
     "imulog.export": 4,
     "imulog.batch": 5,
     "imulog.commands": 5,
@@ -32,6 +33,10 @@ KNOWN: dict[tuple[str, str], str] = {
     # the typed table live in export (and the clock reads view.clock); moving them below the archive is open
     ("imulog.archive.display", "imulog.export.clock"): "read_pandas on a clock (issue 24, open)",
     ("imulog.archive.display", "imulog.export.table"): "read_pandas on a clock (issue 24, open)",
+    # the source's SHA-256 runs on the archive builder's worker threads while a converter parses (issue 17)
+    ("imulog.converters._common", "imulog.archive._builder"): "source hash on the writer's threads (open)",
+    # reconstruct_all runs every method's assumption checks, which re-run methods (a cycle inside process/)
+    ("imulog.process.trajectory_opt", "imulog.process.trajectory_checks"): "assumption checks (issue 32, open)",
 }
 
 

@@ -411,7 +411,7 @@ def check_original(path: str | os.PathLike[str], original: str | os.PathLike[str
     """
     from pathlib import Path
 
-    from imulog.archive import TrialReader
+    from imulog.archive.reader import TrialReader
     from imulog.archive.writer import original_record
 
     src = Path(original)

@@ -37,6 +37,8 @@ class SampleWindow:
             arrays = next(self.blocks)
             self.parts.append(arrays)
             self.end += len(arrays[0])
+        if self.end >= self.total:
+            self._drain()
         out: list[np.ndarray | None] = []
         for k in range(len(self.parts[0])):
             if self.parts[0][k] is None:
@@ -51,6 +53,13 @@ class SampleWindow:
                 pos += n
             out.append(np.concatenate(pieces) if len(pieces) != 1 else pieces[0])
         return tuple(out)
+
+    def _drain(self) -> None:
+        """Read the blocks after the last counted sample: every chunk of the channel is read (and so CRC- and
+        size-checked) even when the counted samples end earlier, and samples beyond the count are an error."""
+        for arrays in self.blocks:
+            if len(arrays[0]):
+                raise RuntimeError(f"the channel holds more samples than the {self.total:,} its statistics count")
 
     def drop_before(self, index: int) -> None:
         """Free every block whose samples all lie before global index ``index``."""
