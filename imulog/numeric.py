@@ -19,3 +19,15 @@ def finite_rows(a: np.ndarray) -> np.ndarray:
     for k in range(1, width):
         out &= np.isfinite(a[..., k])
     return out
+
+
+def moving_mean(x: np.ndarray, w: int) -> np.ndarray:
+    """Centred moving mean along the first axis over ``w`` samples (at least 1), shrinking at the ends: sample i
+    averages ``x[i - w // 2 : i - w // 2 + w]`` clipped to the array. Same shape as ``x`` (1-D or (N, D))."""
+    x = np.asarray(x, dtype=np.float64)
+    n, w = len(x), max(1, int(w))
+    c = np.concatenate([np.zeros((1, *x.shape[1:])), np.cumsum(x, axis=0)])
+    lo = np.clip(np.arange(n) - w // 2, 0, n)
+    hi = np.clip(np.arange(n) - w // 2 + w, 0, n)
+    count = np.maximum(hi - lo, 1).reshape(-1, *([1] * (x.ndim - 1)))
+    return (c[hi] - c[lo]) / count

@@ -18,6 +18,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from imulog.numeric import moving_mean
+from imulog.process.integration import static_runs
+
 GRAVITY_M_S2 = 9.81
 
 
@@ -50,31 +53,18 @@ class SmootherParams:
     lin_tau_s: float = 0.1
 
 
-def _moving_mean(x: np.ndarray, n: int) -> np.ndarray:
-    """Centred moving mean over ``n`` samples (edges use the samples available)."""
-    n = max(1, int(n))
-    c = np.concatenate([[0.0], np.cumsum(x)])
-    i = np.arange(len(x))
-    lo = np.clip(i - n // 2, 0, len(x))
-    hi = np.clip(i + n - n // 2, 0, len(x))
-    return (c[hi] - c[lo]) / np.maximum(hi - lo, 1)
-
-
 def rest_mask(gyr: np.ndarray, acc: np.ndarray, rate_hz: float, params: SmootherParams) -> np.ndarray:
     """Samples where the sensor is at rest: the gyroscope norm and the accelerometer vector's deviation from its
     local mean (over ``rest_s``; a translation moves it even when |a| stays near g) under their thresholds for at
     least ``rest_s`` (bool, N)."""
     n = max(1, int(round(params.rest_s * rate_hz)))
-    local = np.stack([_moving_mean(acc[:, i], n) for i in range(3)], axis=1)
+    local = moving_mean(acc, n)
     still = (np.linalg.norm(gyr, axis=1) < params.rest_gyr_rad_s) & (
         np.linalg.norm(acc - local, axis=1) < params.rest_acc_m_s2
     )
-    # keep runs of at least n samples
     out = np.zeros(len(still), dtype=bool)
-    d = np.diff(np.concatenate([[0], still.astype(np.int8), [0]]))
-    for a, b in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True):
-        if b - a >= n:
-            out[a:b] = True
+    for a, b in static_runs(still, n):  # runs of at least n samples
+        out[a:b] = True
     return out
 
 
@@ -83,8 +73,8 @@ def acc_direction_noise(acc: np.ndarray, rate_hz: float, params: SmootherParams)
     acceleration, per sample: white noise plus the disturbance (relative to g) times its gain."""
     an = np.linalg.norm(acc, axis=1)
     n = max(1, int(round(params.smooth_s * rate_hz)))
-    disturbance = np.abs(an - GRAVITY_M_S2) / GRAVITY_M_S2 + np.abs(an - _moving_mean(an, n)) / GRAVITY_M_S2
-    return params.acc_noise + params.disturbance_gain * GRAVITY_M_S2 * _moving_mean(disturbance, n)
+    disturbance = np.abs(an - GRAVITY_M_S2) / GRAVITY_M_S2 + np.abs(an - moving_mean(an, n)) / GRAVITY_M_S2
+    return params.acc_noise + params.disturbance_gain * GRAVITY_M_S2 * moving_mean(disturbance, n)
 
 
 @njit(cache=True)

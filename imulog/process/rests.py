@@ -21,6 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imulog.numeric import moving_mean
+
 
 @dataclass(frozen=True)
 class RestParams:
@@ -62,15 +64,6 @@ def white_noise_mps2(acc_mps2: np.ndarray) -> float:
     return float(np.median(mad) / np.sqrt(2.0))
 
 
-def _moving_mean(x: np.ndarray, w: int) -> np.ndarray:
-    """Centred moving mean of (N, D) over ``w`` samples (shrinking at the ends)."""
-    n = len(x)
-    c = np.vstack([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])
-    lo = np.clip(np.arange(n) - w // 2, 0, n)
-    hi = np.clip(np.arange(n) - w // 2 + w, 0, n)
-    return (c[hi] - c[lo]) / np.maximum(hi - lo, 1)[:, None]
-
-
 def _run_std(a: np.ndarray, mask: np.ndarray, w: int) -> np.ndarray:
     """3D standard deviation of ``a`` (N, D) over a centred window of ``w`` samples cut to the True run of
     ``mask`` that holds each sample (inf outside runs)."""
@@ -110,16 +103,16 @@ def accelerometer_still(
     ok = np.all(np.isfinite(a), axis=1)
     a0 = np.where(ok[:, None], a, 0.0)
     w = max(int(round(params.window_s * rate_hz)), 1)
-    mean = _moving_mean(a0, w)
-    var = np.maximum(_moving_mean(a0**2, w) - mean**2, 0.0).sum(axis=1)
+    mean = moving_mean(a0, w)
+    var = np.maximum(moving_mean(a0**2, w) - mean**2, 0.0).sum(axis=1)
     sigma = white_noise_mps2(a[ok]) if ok.any() else 0.0
     limit = max(params.k_noise * sigma * np.sqrt(a.shape[1]), params.min_std_mps2)
     still = np.sqrt(var) <= limit
     if params.max_mean_mps2 is not None:
         still &= np.linalg.norm(mean, axis=1) <= params.max_mean_mps2
-    still &= _moving_mean((~ok).astype(float)[:, None], w)[:, 0] == 0
+    still &= moving_mean((~ok).astype(float)[:, None], w)[:, 0] == 0
     # every sample of a still window is still (the centred test alone would cut w/2 off each end of a rest)
-    still = _moving_mean(still.astype(float)[:, None], w)[:, 0] > 0
+    still = moving_mean(still.astype(float)[:, None], w)[:, 0] > 0
     if params.long_window_s and candidates is not None:
         # a slow translation (a glide while the wrist stops turning) varies little within window_s but much
         # within a second; the longer window is cut to each candidate rest, so short rests (a foot's stance,

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imulog.numeric import moving_mean
 from imulog.process.segmentation.dynamos import runs
 
 
@@ -68,11 +69,7 @@ def _moving(x: np.ndarray, w: int, metric: str) -> np.ndarray:
     if w <= 1:
         return x
     if metric == "mean":
-        c = np.concatenate([[0.0], np.cumsum(x)])
-        half = w // 2
-        lo = np.clip(np.arange(len(x)) - half, 0, len(x))
-        hi = np.clip(np.arange(len(x)) - half + w, 0, len(x))
-        return (c[hi] - c[lo]) / np.maximum(hi - lo, 1)
+        return moving_mean(x, w)
     if metric == "max":
         from scipy.ndimage import maximum_filter1d
 
