@@ -401,7 +401,7 @@ def chunked_trial(tmp_path_factory) -> Path:
 
 
 def test_iter_blocks_pieces_concatenate_to_read(chunked_trial):
-    from imulog.archive.reader import stream_columns
+    from imulog.archive.tables import stream_columns
 
     rng = np.random.default_rng(4)
     with TrialReader(chunked_trial) as tr:

@@ -29,10 +29,6 @@ LAYERS = {
 #: imports that still break the rules, each with its reason; the test fails when one of them is gone (remove it
 #: here) or when a new one appears. Issue 24 asks for this list to be empty.
 KNOWN: dict[tuple[str, str], str] = {
-    # TrialReader.read_pandas(clock=...) indexes a channel on the device or reference clock: the trial clock and
-    # the typed table live in export (and the clock reads view.clock); moving them below the archive is open
-    ("imulog.archive.display", "imulog.export.clock"): "read_pandas on a clock (issue 24, open)",
-    ("imulog.archive.display", "imulog.export.table"): "read_pandas on a clock (issue 24, open)",
     # the source's SHA-256 runs on the archive builder's worker threads while a converter parses (issue 17)
     ("imulog.converters._common", "imulog.archive._builder"): "source hash on the writer's threads (open)",
     # reconstruct_all runs every method's assumption checks, which re-run methods (a cycle inside process/)

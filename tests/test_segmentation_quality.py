@@ -138,7 +138,7 @@ def test_quality_is_stored_and_shown_in_info_catalog_and_evaluate(processed):
 def test_viewer_labels_forced_phases_and_low_confidence_repetitions():
     import rerun as rr
 
-    from imulog.view.clock import ClockMap
+    from imulog.archive.clocks import ClockMap
     from imulog.view.streams import FORCED, LoggedTrial, _Logger
 
     timing = {

@@ -10,11 +10,11 @@ import pytest
 from click.testing import CliRunner
 from rerun.chunk import RrdReader
 
+from imulog.archive.clocks import device_imu_of
 from imulog.cli import cli
 from imulog.model import ImuStream, Intervals, MarkerStream, PoseStream, Recording, SignalStream
 from imulog.view import build_blueprint, from_recording, rates, show
 from imulog.view import layout as L
-from imulog.view.clock import device_imu_of
 from imulog.view.layout import PHASE_COLORS
 from imulog.view.rrd import read_column, read_scalars, summarize
 from imulog.view.sample import SampleTrialParams, _ref_to_device, phase_intervals_ref_ns, sample_recording

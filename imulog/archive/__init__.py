@@ -22,7 +22,8 @@ from imulog.archive.errors import ArchiveCorruptError, ArchiveError, ArchiveExis
 if TYPE_CHECKING:
     from imulog.archive.append import append_derived, remove_derived
     from imulog.archive.doctor import DoctorReport
-    from imulog.archive.reader import Attachment, ChannelInfo, TrialReader, stream_columns
+    from imulog.archive.reader import Attachment, ChannelInfo, TrialReader
+    from imulog.archive.tables import stream_columns
     from imulog.archive.writer import write_trial
 
 # Imported when first used: `imulog info` needs the reader only, not the writer, appender and twins.
@@ -32,7 +33,7 @@ _LAZY = {
     "Attachment": "reader",
     "ChannelInfo": "reader",
     "TrialReader": "reader",
-    "stream_columns": "reader",
+    "stream_columns": "tables",
     "write_trial": "writer",
 }
 

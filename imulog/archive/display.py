@@ -101,8 +101,8 @@ def frame_on_clock(
     """
     import pandas as pd
 
-    from imulog.export.clock import trial_clock
-    from imulog.export.table import stream_table
+    from imulog.archive.tables import stream_table
+    from imulog.archive.trial_clock import trial_clock
 
     tc = trial_clock(trial, clock, imu)
     table = stream_table(trial.read(topic, start_ns, end_ns), trial.channel(topic).metadata, topic, tc)

@@ -25,7 +25,8 @@ from imulog.archive.metadata import (
     record_hash,
     validate_record,
 )
-from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream, Stream
+from imulog.archive.tables import stream_columns
+from imulog.model import Stream
 
 np = LazyModule("numpy", __name__)  # imported on first use: imulog info never needs numpy
 
@@ -546,41 +547,3 @@ def _changed_inputs(inputs: Any, chans: dict[str, m.ChannelRec], metadata: dict[
             if recorded and recorded != digest:
                 reasons.append(f"input {key} changed")
     return reasons
-
-
-def stream_columns(stream: Stream) -> dict[str, Any]:
-    """Flatten a stream into named 1-D columns (``acc_x``, ``O_x``, ``qw``...)."""
-    cols: dict[str, Any] = {}
-    if isinstance(stream, Intervals):
-        return {
-            "start_ns": stream.start_ns,
-            "end_ns": stream.end_ns,
-            "label": list(stream.labels),
-            "task_index": stream.task_index,
-        }
-    cols["t_ns"] = stream.t_ns
-    if isinstance(stream, ImuStream):
-        for name in ("acc", "gyr", "mag"):
-            a = getattr(stream, name)
-            if a is not None:
-                for k, axis in enumerate("xyz"):
-                    cols[f"{name}_{axis}"] = a[:, k]
-        if stream.temperature is not None:
-            cols["temperature"] = stream.temperature
-    elif isinstance(stream, MarkerStream):
-        for j, label in enumerate(stream.labels):
-            for k, axis in enumerate("xyz"):
-                cols[f"{label}_{axis}"] = stream.pos[:, j, k]
-            cols[f"{label}_valid"] = stream.valid[:, j]
-    elif isinstance(stream, AnalogStream):
-        for j, name in enumerate(stream.channel_names):
-            cols[name] = stream.values[:, j]
-    elif isinstance(stream, SignalStream):
-        for j, name in enumerate(stream.columns):
-            cols[name] = stream.values[:, j]
-    elif isinstance(stream, PoseStream):
-        for k, axis in enumerate("xyz"):
-            cols[axis] = stream.position[:, k]
-        for k, axis in enumerate(("qw", "qx", "qy", "qz")):
-            cols[axis] = stream.orientation[:, k]
-    return {k: (np.ascontiguousarray(v) if isinstance(v, np.ndarray) else v) for k, v in cols.items()}

@@ -34,7 +34,7 @@ np = LazyModule("numpy", __name__)  # imported on first use: imulog info never n
 DEFAULT_EPOCH = "2000-01-01T00:00:00+00:00"  # axis start when the trial's start time is unknown
 _MAX = 2**64 - 1
 TIMELINE_RECORD = "imulog.timeline"
-#: derived topic families on the device clock of the IMU named last in the topic (as imulog.view.clock)
+#: derived topic families on the device clock of the IMU named last in the topic (as imulog.archive.clocks)
 DEVICE_DERIVED = ("orientation", "acc_global", "static", "orientation_static", "calibrated", "metrics")
 #: derived topic families on the reference clock
 REFERENCE_DERIVED = ("reference", "vicon", "kinematics", "viewer")
@@ -161,7 +161,7 @@ def channel_clock(
     step_records: Mapping[str, Mapping[str, Any]] | None = None,
     imu_names: set[str] | None = None,
 ) -> str:
-    """``"device"`` or ``"reference"``: the clock of a channel, by the rules of :mod:`imulog.view.clock`."""
+    """``"device"`` or ``"reference"``: the clock of a channel, by the rules of :mod:`imulog.archive.clocks`."""
     clock = (channel_meta or {}).get("clock")
     if clock:
         return "reference" if str(clock) in ("reference", "ref", "vicon") else "device"

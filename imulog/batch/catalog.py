@@ -287,8 +287,9 @@ def build_epoch_table(
     import pyarrow.parquet as pq
 
     from imulog.archive import TrialReader
-    from imulog.export.clock import trial_clock
-    from imulog.export.table import format_of, stream_table
+    from imulog.archive.tables import stream_table
+    from imulog.archive.trial_clock import trial_clock
+    from imulog.export.table import format_of
 
     t0 = time.perf_counter()
     output = Path(output)

@@ -1,12 +1,12 @@
 """Exports the field reads: typed tables (Parquet/CSV), OpenSense ``.sto``, BIDS-motion, C3D, and adapters.
 
-Every export puts the trial on one clock (``device`` or ``reference``, :mod:`imulog.export.clock`) and
+Every export puts the trial on one clock (``device`` or ``reference``, :mod:`imulog.archive.trial_clock`) and
 writes atomically (temporary name, then rename). One module per target; ``imulog export`` is a thin
 click layer over these functions (docs/export.md).
 """
 
+from imulog.archive.trial_clock import CLOCKS, ClockError, TrialClock, trial_clock
 from imulog.export._atomic import ExportError
-from imulog.export.clock import CLOCKS, ClockError, TrialClock, trial_clock
 from imulog.export.table import ExportResult, channel_table, export_table
 
 TARGETS = ("parquet", "csv", "sto", "bids", "c3d")

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from imulog.archive.trial_clock import seconds_from, trial_clock
 from imulog.export._atomic import ExportError
-from imulog.export.clock import seconds_from, trial_clock
 from imulog.export.table import column_units
 
 RAD_TO_DEG = 180.0 / np.pi
@@ -65,7 +65,7 @@ def to_kineticstoolkit(trial, topic: str, *, clock: str = "device", imu: str | N
         import kineticstoolkit as ktk
     except ImportError:
         raise ExportError("kineticstoolkit is not installed (pip install kineticstoolkit)") from None
-    from imulog.archive.reader import stream_columns
+    from imulog.archive.tables import stream_columns
     from imulog.model import ImuStream, Intervals, MarkerStream
 
     tc = trial_clock(trial, clock, imu)

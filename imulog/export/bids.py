@@ -24,8 +24,8 @@ from typing import Any
 import numpy as np
 
 from imulog import __version__
+from imulog.archive.trial_clock import seconds_from, trial_clock
 from imulog.export._atomic import ExportError, atomic_folder
-from imulog.export.clock import seconds_from, trial_clock
 from imulog.export.table import ExportResult
 
 BIDS_VERSION = "1.10.0"

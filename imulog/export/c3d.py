@@ -25,9 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
+from imulog.archive.trial_clock import trial_clock
 from imulog.export._atomic import ExportError, atomic_file
 from imulog.export.c3d_grid import Grid, interp_gapped, place_on_grid, placed, plan_grid, whole_multiple
-from imulog.export.clock import trial_clock
 from imulog.export.table import ExportResult
 
 MM_PER_M = 1000.0

@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from imulog.archive.trial_clock import seconds_from, trial_clock
 from imulog.export._atomic import ExportError, atomic_file
-from imulog.export.clock import seconds_from, trial_clock
 from imulog.export.table import ExportResult
 from imulog.process import quaternion as quat
 

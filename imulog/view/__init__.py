@@ -3,7 +3,7 @@
 from imulog.view import open_trial, show
 show([open_trial("trial.mcap")], sink="save", save_paths=["trial.rrd"])   # channels read while logged
 
-The names below are imported on first use, so ``import imulog.view.clock`` (used by exports) does not
+The names below are imported on first use, so ``import imulog.archive.clocks`` (used by exports) does not
 import Rerun.
 """
 

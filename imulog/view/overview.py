@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from imulog.archive.clocks import ClockMap, device_imu_of
 from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream, take_samples
-from imulog.view.clock import ClockMap, device_imu_of
 from imulog.view.source import TrialData, open_trial, read_trial
 
 IMU_FIELDS = ("acc", "gyr", "mag", "temperature")

@@ -5,8 +5,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from imulog.archive.clocks import ClockMap
 from imulog.view import layout as L
-from imulog.view.clock import ClockMap
 
 
 def _flatten(record: Mapping[str, Any], parent: str = "") -> list[tuple[str, Any]]:

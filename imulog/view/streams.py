@@ -1,7 +1,7 @@
 """Log imulog streams to a Rerun recording with the columnar API (``send_columns``), never per sample.
 
 :func:`log_streams` takes the in-memory streams of one trial (:mod:`imulog.model`), maps every channel to the
-reference clock (:class:`imulog.view.clock.ClockMap`), and sends each channel as one columnar batch on the
+reference clock (:class:`imulog.archive.clocks.ClockMap`), and sends each channel as one columnar batch on the
 ``reference_time`` timeline. It returns a :class:`LoggedTrial` describing what went where, from which
 :mod:`imulog.view.blueprint` builds the default layout.
 """
@@ -16,11 +16,11 @@ import numpy as np
 import pyarrow as pa
 import rerun as rr
 
+from imulog.archive.clocks import ClockMap, device_imu_of
 from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream
 from imulog.view import layout as L
 from imulog.view import rates
 from imulog.view.anchor import anchor_repetitions, position_error_cm
-from imulog.view.clock import ClockMap, device_imu_of
 from imulog.view.frames import AXIS_LENGTH_M as FRAME_AXIS_M
 from imulog.view.frames import imu_frame, is_orientation
 from imulog.view.report import evaluation_markdown, info_markdown, markdown_table, metrics_markdown
@@ -635,7 +635,7 @@ def log_streams(
 
     ``metadata`` are the trial's metadata records (``imulog.alignment`` is applied to IMU-clock channels,
     ``imulog.evaluation`` becomes the error report); ``channel_meta`` maps topic -> channel metadata (a
-    ``clock`` key overrides the default clock rule, see :mod:`imulog.view.clock`). ``prefix`` (``/label``)
+    ``clock`` key overrides the default clock rule, see :mod:`imulog.archive.clocks`). ``prefix`` (``/label``)
     places the whole trial under one entity subtree for overlays.
     """
     metadata = metadata or {}

@@ -7,7 +7,7 @@ Every export puts all of a trial's channels on one clock:
 * ``reference``: the reference (Vicon) clock; IMU-clock channels are mapped with
   :func:`imulog.process.alignment.device_to_reference` (the mapping the viewer uses).
 
-Which clock a channel was written on follows the viewer's rules (:mod:`imulog.view.clock`).
+Which clock a channel was written on follows the viewer's rules (:mod:`imulog.archive.clocks`).
 Seconds from start (``t[s]``) count from the trial's first raw sample on the chosen clock; the
 wall-clock column ``time`` adds them to ``imulog.trial["start_time"]`` (ISO 8601).
 """
@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from imulog.archive.clocks import STEP_CLOCK_RECORDS, alignments_from_metadata, device_imu_of, imu_name
 from imulog.process.alignment import device_to_reference, reference_to_device
-from imulog.view.clock import STEP_CLOCK_RECORDS, alignments_from_metadata, device_imu_of, imu_name
 
 CLOCKS = ("device", "reference")
 
