@@ -116,7 +116,7 @@ def read_source(path: Path) -> bytes:
     """A source file's bytes, read once; their SHA-256 is computed from them and remembered (size and mtime
     checked) so that the conversion record does not read and hash the file a second time (:func:`known_sha256`).
 
-    Sources of 1 MiB and more are hashed on the archive writer's worker threads while the caller parses them
+    Sources of 1 MiB and more are hashed on the package's worker threads (:mod:`imulog.workers`, shared with the archive writer) while the caller parses them
     (hashlib releases the GIL): the SHA-256 of a 57 MB export takes ~45 ms, which then overlaps the parse.
     """
     with open(path, "rb") as f:
@@ -126,7 +126,7 @@ def read_source(path: Path) -> bytes:
         if len(data) < BACKGROUND_HASH_BYTES:
             remember_sha256(path, st, _sha256_hex(data))
         else:
-            from imulog.archive._builder import in_background
+            from imulog.workers import in_background
 
             remember_sha256(path, st, in_background(_sha256_hex, data))
     return data

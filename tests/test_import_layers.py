@@ -29,8 +29,6 @@ LAYERS = {
 #: imports that still break the rules, each with its reason; the test fails when one of them is gone (remove it
 #: here) or when a new one appears. Issue 24 asks for this list to be empty.
 KNOWN: dict[tuple[str, str], str] = {
-    # the source's SHA-256 runs on the archive builder's worker threads while a converter parses (issue 17)
-    ("imulog.converters._common", "imulog.archive._builder"): "source hash on the writer's threads (open)",
     # reconstruct_all runs every method's assumption checks, which re-run methods (a cycle inside process/)
     ("imulog.process.trajectory_opt", "imulog.process.trajectory_checks"): "assumption checks (issue 32, open)",
 }

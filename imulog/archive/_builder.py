@@ -8,25 +8,20 @@ would have produced.
 
 from __future__ import annotations
 
-import os
 import struct
 import threading
 import zlib
 from collections import deque
-from collections.abc import Callable
-from concurrent.futures import Future, ThreadPoolExecutor
-from typing import Any, BinaryIO, TypeVar
+from concurrent.futures import Future
+from typing import BinaryIO
 
 import numpy as np
 
 from imulog.archive import _mcap as m
-
-T = TypeVar("T")
+from imulog.workers import COMPRESS_THREADS, PIPELINE, worker_pool
 
 CHUNK_TARGET_BYTES = 2 * 1024 * 1024  # uncompressed size at which a chunk is closed
 ZSTD_LEVEL = 3  # the mcap library's level: on IMU blocks both smaller and faster than 1 here (bench_archive)
-PIPELINE = os.environ.get("IMULOG_COMPRESS_THREADS", "1") != "0"  # compress chunks on worker threads
-COMPRESS_THREADS = min(2, os.cpu_count() or 1)  # chunks compressed at once (each thread one chunk)
 MAX_PENDING = 2 * COMPRESS_THREADS  # chunks compressed ahead at most (memory: about this many raw chunks)
 
 _HEAD = np.dtype(
@@ -35,32 +30,6 @@ _HEAD = np.dtype(
 assert _HEAD.itemsize == 31
 
 _local = threading.local()
-_EXECUTOR: ThreadPoolExecutor | None = None
-
-
-def worker_pool() -> ThreadPoolExecutor:
-    """Worker threads that compress chunks (zstd and crc32 release the GIL), shared by every builder."""
-    global _EXECUTOR
-    if _EXECUTOR is None:
-        _EXECUTOR = ThreadPoolExecutor(max_workers=COMPRESS_THREADS, thread_name_prefix="imulog-chunk")
-    return _EXECUTOR
-
-
-def in_background(fn: Callable[..., T], *args: Any) -> Future[T]:
-    """``fn(*args)`` on the worker threads, or at once when they are switched off (``IMULOG_COMPRESS_THREADS=0``)."""
-    if PIPELINE:
-        return worker_pool().submit(fn, *args)
-    done: Future[T] = Future()
-    done.set_result(fn(*args))
-    return done
-
-
-def _forget_executor() -> None:  # a forked child does not inherit the worker thread
-    global _EXECUTOR
-    _EXECUTOR = None
-
-
-os.register_at_fork(after_in_child=_forget_executor)
 
 
 def _compressor():

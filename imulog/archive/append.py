@@ -25,13 +25,14 @@ from typing import Any, BinaryIO
 
 from imulog import __version__
 from imulog.archive import _mcap as m
-from imulog.archive._builder import McapBuilder, worker_pool
+from imulog.archive._builder import McapBuilder
 from imulog.archive.errors import ArchiveCorruptError, ArchiveError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import MetadataError, decode_record, encode_record, loads, record_hash, to_json
 from imulog.archive.streaming import STATS_RECORD, StreamPieces, write_pieces
 from imulog.archive.writer import payload_hash, plan_append, write_stream, write_twin
 from imulog.model import DERIVED_PREFIX, Stream
+from imulog.workers import worker_pool
 
 COPY_BLOCK = 8 * 1024 * 1024
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from imulog import __version__
 from imulog.archive import codec
-from imulog.archive._builder import McapBuilder, in_background
+from imulog.archive._builder import McapBuilder
 from imulog.archive.errors import ArchiveError, ArchiveExistsError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.hashing import payload_hash, rows_hash  # noqa: F401  (re-exported: callers import them here)
@@ -21,6 +21,7 @@ from imulog.archive.metadata import encode_record
 from imulog.archive.timeline import IDENTITY, TIMELINE_RECORD, LogMap, TimelineError, TrialAxis, timeline_record
 from imulog.archive.twins import Origin, Twin, twin_topic, twins_for
 from imulog.model import Recording, Stream
+from imulog.workers import in_background
 
 LIBRARY = f"imulog {__version__}"
 PROFILE = ""  # plain MCAP profile: Foxglove and Rerun treat the protobuf channels generically
