@@ -124,3 +124,29 @@ def test_windows_join_headings_and_hold_them_across_a_gap_at_the_join():
     yaw = np.degrees(np.unwrap(2 * np.arctan2(rel[:, 3], rel[:, 0])))
     assert np.ptp(yaw) < 3.0, np.ptp(yaw)
     assert np.nanmedian(np.linalg.norm(lin - whole[1].values, axis=1)) < 0.05
+
+
+def test_several_windows_record_the_gap_report_of_each_window_with_a_gap(tmp_path):
+    """With several windows the gap report is known only once the pieces are written: the run record still
+    carries it, per window that had missing samples, with runs in whole-channel sample indices."""
+    from imulog.archive import write_trial
+    from imulog.model import ImuStream, Recording
+
+    rate, n = 50.0, 9000
+    rng = np.random.default_rng(5)
+    t = (np.arange(n) * 1e9 / rate).astype(np.int64)
+    gyr = rng.normal(0, 0.01, (n, 3))
+    acc = np.tile([0.0, 0.0, 9.81], (n, 1)) + rng.normal(0, 0.02, (n, 3))
+    acc[7000:7100] = np.nan  # a 2 s gap inside the third window's core (no other window reads it): not bridged
+    gyr[7000:7100] = np.nan
+    path = write_trial(tmp_path / "gap.mcap", Recording(imus=[ImuStream("wrist", t, acc=acc, gyr=gyr)]))
+    run_orientation(path, windows=WindowParams(core_s=60.0, margin_s=10.0))
+    with TrialReader(path) as trial:
+        run = trial.runs()[max(trial.runs())]
+        quat = trial.read("/derived/orientation/wrist").values
+    assert run["params"]["windows"] == {"core_s": 60.0, "margin_s": 10.0}
+    gapped = run["gaps"]["windows"]
+    assert [w["core"] for w in gapped] == [[6000, 9000]]  # only the window whose read span holds the gap
+    assert gapped[0]["missing_samples"] == 100
+    assert gapped[0]["read"] == [5500, 9000] and gapped[0]["runs"] == [[5500, 7000], [7100, 9000]]  # whole-channel
+    assert np.isnan(quat[7000:7100]).all() and np.isfinite(quat[:7000]).all() and np.isfinite(quat[7100:]).all()

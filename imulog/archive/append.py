@@ -384,12 +384,14 @@ def append_derived(
                 builder = copy(f, summary, out, drop, path)
                 outputs = {}
                 piece_stats: dict[str, dict[str, str]] = {}
+                late: dict[str, Any] = {}  # run-record keys the pieces filled while they were written
                 for stream in streams:
                     if isinstance(stream, StreamPieces):  # produced and written piece by piece (long recordings)
                         stats_name = f"{STATS_RECORD}.{n}"
                         digests, stats = write_pieces(builder, stream, provenance, axis, metadata, stats_name)
                         outputs.update(digests)
                         piece_stats.update(stats)
+                        late.update(stream.provenance)
                         continue
                     topic, digest = write_stream(builder, stream, provenance, log_map=axis.map_for(stream.topic))
                     outputs[topic] = digest
@@ -401,6 +403,7 @@ def append_derived(
                     builder.add_metadata(name, encode_record(dict(values)))
                 record = {
                     **{k: v for k, v in run.items() if k not in ("inputs", "params")},
+                    **late,
                     "step": provenance["step"],
                     "algorithm": provenance["algorithm"],
                     "params": json.loads(params_json),

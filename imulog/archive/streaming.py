@@ -21,7 +21,7 @@ import os
 import struct
 import zlib
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -438,6 +438,9 @@ class StreamPieces:
     topics: list[str]
     pieces: Callable[[], Iterator[Stream]]
     expected_duration_s: float | None = None
+    #: run-record keys known only once the pieces are produced (e.g. the gap report over every window): the
+    #: producer fills it while yielding; the append merges it into ``imulog.run.<n>`` after the last piece
+    provenance: dict[str, Any] = field(default_factory=dict)
 
 
 def write_pieces(

@@ -183,6 +183,22 @@ def orientation_windows(
             yield SignalStream(stream.topic, t[core], stream.columns, stream.units, values, frame_id=stream.frame_id)
 
 
+def windowed_gap_report(reports: list[tuple[Window, GapReport]]) -> dict[str, Any]:
+    """The run's ``gaps`` entry of a recording computed in several windows: the windows that had missing
+    samples, each with its read span and core (sample indices in the whole channel) and its own report, whose
+    ``runs`` are shifted to whole-channel indices; ``{}`` when no window had a missing sample."""
+    windows = []
+    for w, report in reports:
+        if not report.missing:
+            continue
+        entry = report.as_dict()
+        entry["runs"] = [[a + w.lo, b + w.lo] for a, b in report.runs]
+        windows.append({"read": [w.lo, w.hi], "core": [w.core_lo, w.core_hi], **entry})
+    if not windows:
+        return {}
+    return {"counted_over": "each window read (core plus margins)", "windows": windows}
+
+
 def read_orientation_windows(
     path: str | Path,
     topic: str,
@@ -221,7 +237,8 @@ def run_orientation(
     windows in the run's params (the result depends on them only then).
 
     ``gaps``: how missing IMU samples are treated (default :class:`~imulog.process.gaps.GapParams`); what was
-    bridged or split is recorded in the run's ``gaps`` entry (one window: as a whole; several: per window core).
+    bridged or split is recorded in the run's ``gaps`` entry (one window: as a whole; several: per window with
+    missing samples, :func:`windowed_gap_report`, filled by the pieces once written).
     """
     params = params or OrientationParams()
     windows = windows or WindowParams()
@@ -247,9 +264,15 @@ def run_orientation(
             streams = list(read_orientation_windows(path, topic, name, params, gaps, plan, total, reports))
             report = reports[0][1]
             return StepResult(streams=streams, provenance={"gaps": report.as_dict()} if report.missing else {})
+        def produce() -> Iterator[SignalStream]:
+            yield from read_orientation_windows(path, topic, name, params, gaps, plan, total, reports)
+            gapped = windowed_gap_report(reports)
+            if gapped:
+                pieces.provenance["gaps"] = gapped
+
         pieces = StreamPieces(
             topics=[f"/derived/{kind}/{name}" for kind in ("orientation", "acc_global", "orientation_static")],
-            pieces=lambda: read_orientation_windows(path, topic, name, params, gaps, plan, total),
+            pieces=produce,
             expected_duration_s=total / rate,  # the viewer twins keep their message budget
         )
         return StepResult(streams=[pieces])
