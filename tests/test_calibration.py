@@ -151,3 +151,32 @@ def test_calibrate_cli_round_trip(sensor, tmp_path):
     bad.write_text('{"format": "other"}')
     r = runner.invoke(cli, ["process", "calibrate", str(trial), "--calibration", str(bad)])
     assert r.exit_code != 0 and "not an imulog calibration file" in r.output
+
+
+def test_calibrate_in_windows_equals_at_once(sensor, tmp_path):
+    """A recording longer than one window is calibrated block by block as it is read: the same values as the
+    whole channel at once (the map is per sample)."""
+    import shutil
+
+    from imulog.archive.doctor import check_file
+    from imulog.steps.calibrate import calibration_from_arrays, run_calibrate
+    from imulog.steps.windows import WindowParams
+
+    acc_true, gyr_true = calibration_session(sensor)
+    acc, gyr = _measure(sensor, acc_true, gyr_true)
+    t = np.arange(len(acc)) * int(1e9 / RATE)
+    calibration = calibration_from_arrays(t, acc, gyr)
+    whole = write_trial(tmp_path / "whole.mcap", Recording(imus=[ImuStream("wrist", t, acc=acc, gyr=gyr)]))
+    blocks = tmp_path / "blocks.mcap"
+    shutil.copy(whole, blocks)
+    run_calibrate(whole, calibration)
+    run_calibrate(blocks, calibration, windows=WindowParams(core_s=10.0, margin_s=0.0))
+    with TrialReader(whole) as a, TrialReader(blocks) as b:
+        sa, sb = a.read("/derived/calibrated/wrist"), b.read("/derived/calibrated/wrist")
+        np.testing.assert_array_equal(sa.t_ns, sb.t_ns)
+        np.testing.assert_array_equal(sa.values, sb.values)
+        assert (
+            b.channel("/derived/calibrated/wrist").metadata["sha256"]
+            == a.channel("/derived/calibrated/wrist").metadata["sha256"]
+        )
+    assert not check_file(blocks).problems

@@ -10,11 +10,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 
 from imulog.model import SignalStream
 from imulog.process import calibration as cal
 from imulog.steps.common import mean_rate_hz, pick_imu
+from imulog.steps.windows import WindowParams, channel_rate_hz
 
 STEP = "calibrate"
 
@@ -81,16 +84,48 @@ def compute_calibrated(
     return SignalStream(f"/derived/calibrated/{imu}", t_ns, cols, units, np.hstack(vals), frame_id=imu)
 
 
-def run_calibrate(path, calibration: cal.Calibration, *, imu: str | None = None, force: bool = False):
-    """Apply ``calibration`` to a trial (step ``calibrate``); returns the run_step outcome."""
+def calibrated_pieces(path, topic: str, imu: str, calibration: cal.Calibration) -> Iterator[SignalStream]:
+    """The calibrated channel of ``topic`` block by block (a per-sample map: no margins, no carry)."""
     from imulog.archive import TrialReader
-    from imulog.steps.base import StepResult, run_step
 
     with TrialReader(path) as trial:
+        for s in trial.iter_blocks(topic):
+            yield compute_calibrated(s.t_ns, s.acc, s.gyr, s.mag, imu, calibration)
+
+
+def run_calibrate(
+    path,
+    calibration: cal.Calibration,
+    *,
+    imu: str | None = None,
+    force: bool = False,
+    windows: WindowParams | None = None,
+):
+    """Apply ``calibration`` to a trial (step ``calibrate``); returns the run_step outcome.
+
+    A recording within one window (``windows``, default an hour) is calibrated at once; a longer one block by
+    block as it is read, in bounded memory (the same values: the map is per sample).
+    """
+    from imulog.archive import TrialReader
+    from imulog.archive.streaming import StreamPieces
+    from imulog.steps.base import StepResult, run_step
+
+    windows = windows or WindowParams()
+    with TrialReader(path) as trial:
         name = pick_imu(trial.topics(), imu)
-    topic = f"/imu/{name}"
+        topic = f"/imu/{name}"
+        info = trial.channel(topic)
+        rate = channel_rate_hz(info.sample_count, info.start_ns, info.end_ns, info.rate_hz)
+    several = len(windows.plan(info.sample_count, rate)) > 1
 
     def compute(trial) -> StepResult:
+        if several:
+            pieces = StreamPieces(
+                topics=[f"/derived/calibrated/{name}"],
+                pieces=lambda: calibrated_pieces(path, topic, name, calibration),
+                expected_duration_s=info.sample_count / rate,
+            )
+            return StepResult(streams=[pieces])
         s = trial.read(topic)
         return StepResult(streams=[compute_calibrated(s.t_ns, s.acc, s.gyr, s.mag, name, calibration)])
 
