@@ -269,3 +269,37 @@ def test_missing_samples_are_left_out(tmp_path):
     assert stream.values[e, c.index("enmo_g")] == pytest.approx(np.nanmean(np.clip(r - 1, 0, None)), abs=1e-12)
     assert np.isfinite(stream.values[:, c.index("counts_vm")]).all()
     assert (stream.values[np.arange(len(stream)) != e, c.index("valid_fraction")] == 1).all()
+
+
+def test_choi_rule_on_built_minute_counts():
+    """Choi 2011: >= 90 zero minutes, interruptions of <= 2 min allowed with 30 zero minutes on each side."""
+    worn = np.full(60, 50.0)
+    c = np.concatenate([worn, np.zeros(89), worn])  # 89 min: too short
+    assert not ep.choi_nonwear(c).any()
+    c = np.concatenate([worn, np.zeros(90), worn])
+    assert ep.choi_nonwear(c).sum() == 90 and ep.choi_nonwear(c)[60:150].all()
+    # a 2-min interruption with 40 and 50 zero minutes around it: one 92-min period
+    c = np.concatenate([worn, np.zeros(40), [5.0, 7.0], np.zeros(50), worn])
+    flags = ep.choi_nonwear(c)
+    assert flags.sum() == 92 and flags[60:152].all()
+    # a 3-min interruption, or one with only 20 zero minutes before it, splits the run: nothing reaches 90
+    for before, burst, after in ((45, 3, 45), (20, 2, 69)):
+        c = np.concatenate([worn, np.zeros(before), np.full(burst, 5.0), np.zeros(after), worn])
+        assert not ep.choi_nonwear(c).any(), (before, burst, after)
+    # missing minutes count as zero; an empty input is no non-wear
+    c = np.concatenate([worn, np.full(100, np.nan), worn])
+    assert ep.choi_nonwear(c).sum() == 100
+    assert ep.choi_nonwear(np.zeros(0)).shape == (0,)
+
+
+def test_choi_nonwear_finds_each_simulated_removal(half_day):
+    trial, truth, _ = half_day
+    run_epochs(trial, params=EpochParams(), force=True)
+    _, record = _epochs(trial, "/derived/epochs/60s/ax6_4321")
+    minutes = np.array(record["nonwear_choi"], dtype=np.int64).reshape(-1, 2) / 60e9
+    # Choi's rule needs 90 zero minutes: each removal at least that long is one period, within one 60-s epoch at
+    # each end; a shorter removal is (by the rule) worn; nothing else is flagged
+    long_ones = [(a, b) for a, b in truth if b - a >= 90]
+    assert long_ones and len(long_ones) < len(truth), truth  # the fixture holds both kinds
+    assert len(minutes) == len(long_ones), (minutes, truth)
+    np.testing.assert_allclose(minutes, np.array(long_ones, dtype=float), atol=1.0)

@@ -148,6 +148,36 @@ def nonwear_blocks(
     return flags & (stats.n.sum(axis=1) > 0)
 
 
+def choi_nonwear(
+    counts_per_min: np.ndarray, *, window_min: int = 90, allowance_min: int = 2, stream_min: int = 30
+) -> np.ndarray:
+    """Non-wear flag per 60-s epoch from its counts (Choi et al. 2011, MSSE 43(2):357-364).
+
+    Non-wear is a run of at least ``window_min`` minutes of zero counts, which may hold interruptions of at most
+    ``allowance_min`` minutes of non-zero counts when the ``stream_min`` minutes on each side of the interruption
+    are zero. ``counts_per_min`` is (M,) (the vector magnitude or one axis); a missing minute (NaN) counts as zero.
+    scikit-digital-health's ``CountWearDetection`` applies the same rule with runs of more than (not at least)
+    90 minutes.
+    """
+    c = np.nan_to_num(np.asarray(counts_per_min, dtype=np.float64), nan=0.0)
+    active = c > 0
+    edges = np.flatnonzero(np.diff(np.concatenate([[-1], active.astype(np.int8), [-1]])))
+    starts, ends = edges[:-1], edges[1:]  # runs of equal activity: [starts[i], ends[i])
+    values = active[starts] if len(starts) else np.zeros(0, bool)
+    lengths = ends - starts
+    candidate = ~active
+    for i in range(1, len(starts) - 1):  # an allowed interruption: short, zero runs of stream_min around it
+        if values[i] and lengths[i] <= allowance_min and lengths[i - 1] >= stream_min and lengths[i + 1] >= stream_min:
+            candidate[starts[i] : ends[i]] = True
+    flags = np.zeros(len(c), dtype=bool)
+    padded = np.concatenate([[False], candidate, [False]]).astype(np.int8)
+    e = np.flatnonzero(np.diff(padded))
+    for a, b in zip(e[::2], e[1::2], strict=True):
+        if b - a >= window_min:
+            flags[a:b] = True
+    return flags
+
+
 # ------------------------------------------------------------------------------------------- calibration
 @dataclass(frozen=True)
 class Calibration:

@@ -39,6 +39,7 @@ class EpochParams:
     nonwear_sd_g: float = 0.013
     nonwear_range_g: float = 0.050
     valid_day_hours: float = 16.0
+    choi: bool = True  # also Choi et al. 2011 non-wear from the 60-s counts (vector magnitude), in the record
     core_s: float = 3600.0
     margin_s: float = 60.0
 
@@ -119,6 +120,8 @@ def epoch_pieces(
         day0, day_label = wall_clock_origin_ns(t0, start_time, DAY_S)
         hourly: dict[int, list[float]] = {}
         daily: dict[int, list[float]] = {}
+        minute_counts: list[np.ndarray] = []  # 60-s vector-magnitude counts for Choi's rule (a week: 10,080)
+        minute_starts: list[np.ndarray] = []
         dt_ns = 1e9 / rate
         buf = SampleWindow(((b.t_ns, b.acc) for b in trial.iter_blocks(imu_topic)), total)
         for w in plan_windows(total, rate, core_s=core_s, margin_s=p.margin_s):
@@ -144,6 +147,9 @@ def epoch_pieces(
                 first_index = w.core_lo + np.arange(k) * per
                 flag = nonwear[first_index // per_block].astype(np.float64)
                 t_start = tc[np.arange(k) * per]
+                if counts_ok and e_s == 60.0:
+                    minute_counts.append(vm)
+                    minute_starts.append(t_start)
                 yield SignalStream(
                     f"/derived/epochs/{e_s:g}s/{imu}",
                     t_start,
@@ -179,8 +185,24 @@ def epoch_pieces(
         }
     )
     record["valid_days"] = sum(1 for r in record["by_day"] if r["valid"])
+    if p.choi:
+        record["nonwear_choi"] = _choi_record(minute_counts, minute_starts, counts_ok, 60.0 in p.epochs_s)
     if day_label is not None:
         record["first_day"] = day_label.date().isoformat()
+
+
+def _choi_record(counts: list[np.ndarray], starts: list[np.ndarray], counts_ok: bool, has_minutes: bool) -> Any:
+    """Choi 2011 non-wear periods ``[start ns, end ns]`` from the 60-s counts, or why they were not computed."""
+    from imulog.process.epochs import choi_nonwear
+
+    if not has_minutes:
+        return "not computed: needs a 60 s epoch"
+    if not counts_ok:
+        return "not computed: no counts at this rate"
+    vm, t = (np.concatenate(x) if x else np.zeros(0) for x in (counts, starts))
+    flags = choi_nonwear(vm)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], flags.astype(np.int8), [0]])))
+    return [[int(t[a]), int(t[b - 1]) + 60_000_000_000] for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
 def _periods(flags: np.ndarray, t0: int, block_s: float, rate: float, per_block: int, total: int) -> list[list[int]]:
