@@ -159,20 +159,19 @@ def choi_nonwear(
     scikit-digital-health's ``CountWearDetection`` applies the same rule with runs of more than (not at least)
     90 minutes.
     """
+    from imulog.process.gaps import runs_of
+
     c = np.nan_to_num(np.asarray(counts_per_min, dtype=np.float64), nan=0.0)
     active = c > 0
-    edges = np.flatnonzero(np.diff(np.concatenate([[-1], active.astype(np.int8), [-1]])))
-    starts, ends = edges[:-1], edges[1:]  # runs of equal activity: [starts[i], ends[i])
-    values = active[starts] if len(starts) else np.zeros(0, bool)
-    lengths = ends - starts
     candidate = ~active
-    for i in range(1, len(starts) - 1):  # an allowed interruption: short, zero runs of stream_min around it
-        if values[i] and lengths[i] <= allowance_min and lengths[i - 1] >= stream_min and lengths[i + 1] >= stream_min:
-            candidate[starts[i] : ends[i]] = True
+    bursts = runs_of(active)
+    for k, (a, b) in enumerate(bursts):  # an allowed interruption: short, with zero runs of stream_min around it
+        zeros_before = a - (bursts[k - 1][1] if k else 0)
+        zeros_after = (bursts[k + 1][0] if k + 1 < len(bursts) else len(c)) - b
+        if b - a <= allowance_min and zeros_before >= stream_min and zeros_after >= stream_min:
+            candidate[a:b] = True
     flags = np.zeros(len(c), dtype=bool)
-    padded = np.concatenate([[False], candidate, [False]]).astype(np.int8)
-    e = np.flatnonzero(np.diff(padded))
-    for a, b in zip(e[::2], e[1::2], strict=True):
+    for a, b in runs_of(candidate):
         if b - a >= window_min:
             flags[a:b] = True
     return flags

@@ -194,15 +194,14 @@ def epoch_pieces(
 def _choi_record(counts: list[np.ndarray], starts: list[np.ndarray], counts_ok: bool, has_minutes: bool) -> Any:
     """Choi 2011 non-wear periods ``[start ns, end ns]`` from the 60-s counts, or why they were not computed."""
     from imulog.process.epochs import choi_nonwear
+    from imulog.process.gaps import runs_of
 
     if not has_minutes:
         return "not computed: needs a 60 s epoch"
     if not counts_ok:
         return "not computed: no counts at this rate"
     vm, t = (np.concatenate(x) if x else np.zeros(0) for x in (counts, starts))
-    flags = choi_nonwear(vm)
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], flags.astype(np.int8), [0]])))
-    return [[int(t[a]), int(t[b - 1]) + 60_000_000_000] for a, b in zip(edges[::2], edges[1::2], strict=True)]
+    return [[int(t[a]), int(t[b - 1]) + 60_000_000_000] for a, b in runs_of(choi_nonwear(vm))]
 
 
 def _periods(flags: np.ndarray, t0: int, block_s: float, rate: float, per_block: int, total: int) -> list[list[int]]:

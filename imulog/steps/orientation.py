@@ -264,6 +264,7 @@ def run_orientation(
             streams = list(read_orientation_windows(path, topic, name, params, gaps, plan, total, reports))
             report = reports[0][1]
             return StepResult(streams=streams, provenance={"gaps": report.as_dict()} if report.missing else {})
+
         def produce() -> Iterator[SignalStream]:
             yield from read_orientation_windows(path, topic, name, params, gaps, plan, total, reports)
             gapped = windowed_gap_report(reports)
