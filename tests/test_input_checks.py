@@ -22,18 +22,23 @@ def repetitions(bottle, mouth, spread_m=0.01, n=10, seed=0):
 def test_values_that_match_the_imu_are_not_flagged():
     bottles, mouths = repetitions([0.30, 0.15, 0.0], [0.09, 0.15, 0.35])
     checks = waypoint_checks({"h1_m": 0.31, "h2_m": 0.16, "h3_m": 0.34}, bottles, mouths, KEYS)
-    assert [c.name for c in checks] == ["h1_m", "h2_m", "h3_m"]
+    assert [(c.name, c.waypoint) for c in checks] == [
+        ("h1_m", "bottle"), ("h2_m", "mouth"), ("h3_m", "mouth"), ("h2_m", "bottle")
+    ]  # fmt: skip
     assert not any(c.disagrees for c in checks)
 
 
 def test_a_wrong_h2_is_named_with_both_figures():
     bottles, mouths = repetitions([0.30, 0.01, 0.0], [0.09, 0.01, 0.35])  # the table set up in front of the sternum
-    checks = {c.name: c for c in waypoint_checks({"h1_m": 0.30, "h2_m": 0.15, "h3_m": 0.35}, bottles, mouths, KEYS)}
-    h2 = checks["h2_m"]
+    anthro = {"h1_m": 0.30, "h2_m": 0.15, "h3_m": 0.35}
+    checks = {(c.name, c.waypoint): c for c in waypoint_checks(anthro, bottles, mouths, KEYS)}
+    h2 = checks[("h2_m", "mouth")]
     assert h2.disagrees and not h2.replaced and h2.status == "measured"
-    assert not checks["h1_m"].disagrees and not checks["h3_m"].disagrees
+    assert checks[("h2_m", "bottle")].disagrees  # the bottle's y is placed from h2 too
+    assert not checks[("h1_m", "bottle")].disagrees and not checks[("h3_m", "mouth")].disagrees
     line = h2.line()
     assert "h2_m = 15.0 cm" in line and "mouth's y" in line and "kept as measured" in line and "\n" not in line
+    assert checks[("h2_m", "bottle")].line().startswith("h2_m x 1 (the bottle's y) = 15.0 cm")
 
 
 def test_the_threshold_grows_with_the_spread_of_the_repetitions():
@@ -49,13 +54,13 @@ def test_the_threshold_grows_with_the_spread_of_the_repetitions():
 
 
 def test_an_approximate_value_that_disagrees_is_replaced_by_the_estimate():
-    bottles, mouths = repetitions([0.30, 0.02, 0.0], [0.09, 0.02, 0.35], spread_m=0.002)
+    bottles, mouths = repetitions([0.30, 0.15, 0.0], [0.09, 0.02, 0.35], spread_m=0.002)  # only the mouth moved
     anthro = {"h1_m": 0.30, "h2_m": 0.15, "h3_m": 0.35, "h2_m_status": "approximate"}
     checks = waypoint_checks(anthro, bottles, mouths, KEYS)
     (h2,) = [c for c in checks if c.replaced]
-    assert h2.name == "h2_m" and "IMU's estimate is used" in h2.line()
+    assert (h2.name, h2.waypoint) == ("h2_m", "mouth") and "IMU's estimate is used" in h2.line()
     bottle, mouth = apply_checks(np.array([0.30, 0.15, 0.0]), np.array([0.09, 0.15, 0.35]), checks)
-    assert mouth[1] == pytest.approx(h2.estimated_m) and bottle[1] == pytest.approx(h2.estimated_m)
+    assert mouth[1] == pytest.approx(h2.estimated_m) and bottle[1] == 0.15
     assert bottle[0] == 0.30 and mouth[2] == 0.35  # the measured, agreeing values stay
 
 

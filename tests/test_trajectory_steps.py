@@ -28,7 +28,13 @@ def sim_trial(tmp_path_factory):
     simulator's true phases, static mask and alignment (independent of the other steps)."""
     sim = simulate("r2g", subject=2, seed=0, repetitions=4)
     path = tmp_path_factory.mktemp("traj") / "trial.mcap"
-    write_trial(path, sim.recording)
+    _write_with_inputs(path, sim)
+    return sim, path
+
+
+def _write_with_inputs(path, sim, recording=None):
+    """Write ``recording`` (default: the simulated one) with the trajectory step's inputs appended."""
+    write_trial(path, recording or sim.recording)
     imu = sim.recording.imus[0]
     rate = (len(imu.t_ns) - 1) / ((imu.t_ns[-1] - imu.t_ns[0]) / 1e9)
     est = estimate_orientation(imu.gyr, imu.acc, rate)
@@ -58,7 +64,6 @@ def sim_trial(tmp_path_factory):
         run={"step": "test-inputs", "algorithm": "test", "params": {}, "inputs": ["/imu/wrist"]},
         metadata={"imulog.alignment": alignment, "imulog.timing": {"clock": "reference"}},
     )
-    return sim, path
 
 
 def test_step_writes_every_method_on_reference_clock_and_world_frame(sim_trial):
@@ -206,6 +211,39 @@ def test_missing_anthropometrics_is_recorded_and_reported(sim_trial):
     assert record["waypoints_from"] == "anthropometrics" and "notes" not in record
     _, record = compute_trajectories(acc.t_ns, acc.values, alignment=alignment, anthropometrics={"h1_m": 0.3}, **kw)
     assert record["waypoints_from"] == "zupt" and "h2" in record["notes"][0]
+
+
+def test_anthropometrics_are_checked_against_the_imu(sim_trial, tmp_path):
+    """Issue 31, point 4: a given h1 that is 10 cm off where the hand goes is named in one line by the CLI and
+    recorded; the right values raise nothing; marked approximate, the IMU's estimate replaces it."""
+    import dataclasses
+
+    sim, path = sim_trial
+    anth = sim.recording.metadata["imulog.anthropometrics"]
+    with TrialReader(path) as t:
+        acc, static = t.read("/derived/acc_global/wrist"), t.read("/derived/static/wrist")
+        phases, alignment = t.read("/derived/phases/wrist"), t.metadata["imulog.alignment"]
+    kw = dict(imu="wrist", methods=["zupt", "optimized"], static=(static.t_ns, static.values[:, 0]), phases=phases)
+    _, record = compute_trajectories(acc.t_ns, acc.values, alignment=alignment, anthropometrics=anth, **kw)
+    assert record["input_checks"] and not record.get("input_warnings")  # the simulator's own values agree
+    wrong = {**anth, "h1_m": anth["h1_m"] - 0.10}
+    _, record = compute_trajectories(acc.t_ns, acc.values, alignment=alignment, anthropometrics=wrong, **kw)
+    (line,) = record["input_warnings"]
+    assert line.startswith(f"h1_m = {wrong['h1_m'] * 100:.1f} cm, but the IMU puts the bottle's x at")
+    approx = {**wrong, "h1_m_status": "approximate"}
+    _, rec2 = compute_trajectories(acc.t_ns, acc.values, alignment=alignment, anthropometrics=approx, **kw)
+    (h1,) = [c for c in rec2["input_checks"] if c["name"] == "h1_m"]
+    assert h1["replaced"] and rec2["waypoints_m"]["bottle"][0] == pytest.approx(h1["estimated_m"], abs=0.03)
+    assert abs(h1["estimated_m"] - anth["h1_m"]) < 0.03  # the IMU's estimate is near the true value
+
+    # through the CLI: the warning is printed on stderr, one line
+    meta = {**sim.recording.metadata, "imulog.anthropometrics": wrong}
+    wrong_path = tmp_path / "wrong.mcap"
+    _write_with_inputs(wrong_path, sim, dataclasses.replace(sim.recording, metadata=meta))
+    result = CliRunner().invoke(cli, ["process", "trajectory", str(wrong_path), "--method", "zupt,optimized"])
+    assert result.exit_code == 0, result.output
+    warnings = [ln for ln in result.stderr.splitlines() if "warning: h1_m" in ln]
+    assert len(warnings) == 1 and "h1_m_status=approximate" in warnings[0]
 
 
 def test_evaluate_without_markers_says_what_is_missing(tmp_path):

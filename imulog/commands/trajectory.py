@@ -162,6 +162,8 @@ def process_trajectory(
         click.echo(f"{trial}: skipped {method}: {why}")
     for note in record.get("notes") or []:
         click.echo(f"{trial}: note: {note}")
+    for warning in record.get("input_warnings") or []:  # given anthropometrics the IMU disagrees with (issue 31)
+        click.echo(f"{trial}: warning: {warning}", err=True)
     from imulog.steps.trajectory import check_lines
 
     for line in check_lines(record):  # assumptions that do not hold, one line each (issue 32)

@@ -23,8 +23,9 @@ import numpy as np
 
 STATUSES = ("measured", "approximate")
 
-# anthropometric value -> (waypoint, task-frame axis) it sets; h2 also sets the bottle's y (bottle_y_fraction)
-# unless bottle_dy_m is given, but it is checked where the thesis defines it: the mouth's lateral offset
+# anthropometric value -> (waypoint, task-frame axis) it sets; h2 also sets the bottle's y (bottle_y_fraction x
+# h2) unless bottle_dy_m is given, which is checked as a coordinate of its own (a table set up differently moves
+# the bottle, not the mouth)
 COORDINATES: dict[str, tuple[str, int]] = {
     "h1": ("bottle", 0),
     "bottle_dy": ("bottle", 1),
@@ -49,6 +50,9 @@ class InputCheckParams:
     floor_sigma_m: float = 0.015
 
 
+DEFAULT_INPUT_CHECKS = InputCheckParams()
+
+
 @dataclass(frozen=True)
 class InputCheck:
     """One given value against the IMU's estimate of the same coordinate (m, task frame)."""
@@ -62,6 +66,7 @@ class InputCheck:
     threshold_m: float
     status: str  # "measured" or "approximate"
     repetitions: int
+    label: str = ""  # how the line names the value when it is not the key alone
 
     @property
     def disagrees(self) -> bool:
@@ -82,7 +87,7 @@ class InputCheck:
             "to use the IMU's estimate, or correct it)"
         )
         return (
-            f"{self.name} = {self.given_m * 100:.1f} cm, but the IMU puts the {self.waypoint}'s {axis} at "
+            f"{self.label or self.name} = {self.given_m * 100:.1f} cm, but the IMU puts the {self.waypoint}'s {axis} at "
             f"{self.estimated_m * 100:.1f} ± {self.uncertainty_m * 100:.1f} cm over {self.repetitions} repetitions: "
             f"{what}"
         )
@@ -139,22 +144,32 @@ def waypoint_checks(
     mouths_task_m: np.ndarray,
     keys: Mapping[str, tuple[str, ...]],
     params: InputCheckParams = InputCheckParams(),
+    bottle_y_fraction: float = 1.0,
 ) -> list[InputCheck]:
     """Every given coordinate against the per-repetition ZUPT waypoints.
 
     bottles_task_m, mouths_task_m: (R, 3) waypoints of R complete repetitions, relative to each repetition's
     start, in the task frame (m). keys: anthropometrics names tried for h1/h2/h3
     (:class:`imulog.process.minjerk.R2GReferenceParams.keys`); ``mouth_dx`` and ``bottle_dy`` are read from
-    ``mouth_dx_m`` and ``bottle_dy_m``. Values the record does not give are not checked.
+    ``mouth_dx_m`` and ``bottle_dy_m``. Values the record does not give are not checked. Without
+    ``bottle_dy_m`` the bottle's y is ``bottle_y_fraction`` x h2 and is checked as h2's second coordinate.
     """
     waypoints = {"bottle": np.asarray(bottles_task_m, dtype=np.float64), "mouth": np.asarray(mouths_task_m)}
     names = {**{k: tuple(v) for k, v in keys.items()}, "mouth_dx": ("mouth_dx_m",), "bottle_dy": ("bottle_dy_m",)}
-    out = []
+    coordinates: list[tuple[str, str, int, float, str]] = []  # (what, waypoint, axis, factor, label)
     for what, (waypoint, axis) in COORDINATES.items():
+        coordinates.append((what, waypoint, axis, 1.0, ""))
+    if _given(anthro, names["bottle_dy"]) is None:
+        found = _given(anthro, names.get("h2", ()))
+        label = f"{found[0]} x {bottle_y_fraction:g} (the bottle's y)" if found else ""
+        coordinates.append(("h2", "bottle", 1, bottle_y_fraction, label))
+    out = []
+    for what, waypoint, axis, factor, label in coordinates:
         found = _given(anthro, names.get(what, ()))
         if found is None:
             continue
         name, given = found
+        given *= factor
         values = waypoints[waypoint][:, axis]
         values = values[np.isfinite(values)]
         if len(values) == 0:
@@ -171,6 +186,7 @@ def waypoint_checks(
                 threshold_m=max(params.min_disagreement_m, params.k_sigma * sigma),
                 status=value_status(anthro, name),
                 repetitions=len(values),
+                label=label,
             )
         )
     return out
@@ -179,17 +195,10 @@ def waypoint_checks(
 def apply_checks(
     bottle_task_m: np.ndarray, mouth_task_m: np.ndarray, checks: list[InputCheck]
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The waypoints (task frame, m) with every replaced value's coordinate set to the IMU's estimate.
-
-    A replaced ``h2`` moves the bottle's y with the mouth's, as the reference places both from h2, unless the
-    bottle's y was given on its own (``bottle_dy_m``)."""
+    """The waypoints (task frame, m) with every replaced value's coordinate set to the IMU's estimate (h2's two
+    coordinates, the mouth's y and the bottle's, are checked and replaced each on its own)."""
     bottle, mouth = np.array(bottle_task_m, dtype=np.float64), np.array(mouth_task_m, dtype=np.float64)
-    own_bottle_y = any(c.waypoint == "bottle" and c.axis == 1 for c in checks)
     for c in checks:
-        if not c.replaced:
-            continue
-        target = bottle if c.waypoint == "bottle" else mouth
-        if c.waypoint == "mouth" and c.axis == 1 and not own_bottle_y and c.given_m != 0.0:
-            bottle[1] *= c.estimated_m / c.given_m  # keep bottle_y_fraction
-        target[c.axis] = c.estimated_m
+        if c.replaced:
+            (bottle if c.waypoint == "bottle" else mouth)[c.axis] = c.estimated_m
     return bottle, mouth

@@ -35,6 +35,13 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from imulog.process.drift import HighpassParams, WaveletParams, highpass, wavelet_detrend
+from imulog.process.input_checks import (
+    DEFAULT_INPUT_CHECKS,
+    InputCheck,
+    InputCheckParams,
+    apply_checks,
+    waypoint_checks,
+)
 from imulog.process.integration import (
     AnchorParams,
     DdiParams,
@@ -483,11 +490,17 @@ def trial_waypoints(
     zupt_m: np.ndarray,
     repetitions: Sequence[Repetition],
     params: R2GReferenceParams = DEFAULT_REFERENCE,
+    checks: list[InputCheck] | None = None,
+    check_params: InputCheckParams = DEFAULT_INPUT_CHECKS,
 ) -> R2GWaypoints:
     """Waypoints for a trial: h1, h2, h3 (and ``mouth_dx_m``, the mouth's x, and ``bottle_dy_m``, the bottle's
     lateral offset from the start when it is not h2, when present) from the anthropometrics; every
     other coordinate is the median over repetitions of the ZUPT displacement at the phase ends (no optical
-    data involved). Without anthropometrics all coordinates come from ZUPT."""
+    data involved). Without anthropometrics all coordinates come from ZUPT.
+
+    Every given value is checked against the same ZUPT medians (:mod:`imulog.process.input_checks`): ``checks``,
+    when given, receives one :class:`InputCheck` per value; a disagreeing value marked approximate is replaced
+    by the estimate."""
     t = np.asarray(t_s, dtype=np.float64)
     bottles, mouths = [], []
     for rep in repetitions:
@@ -519,6 +532,17 @@ def trial_waypoints(
                 mt[0] = float(anthropometrics["mouth_dx_m"])
             if anthropometrics.get("bottle_dy_m") is not None:  # bottle not in front of the shoulder: measured
                 bt[1] = float(anthropometrics["bottle_dy_m"])
+            found = waypoint_checks(
+                anthropometrics,
+                np.asarray(bottles) @ rot,  # each row into the task frame
+                np.asarray(mouths) @ rot,
+                params.keys,
+                check_params,
+                bottle_y_fraction=params.bottle_y_fraction,
+            )
+            bt, mt = apply_checks(bt, mt, found)
+            if checks is not None:
+                checks.extend(found)
             bottle, mouth = rot @ bt, rot @ mt
     return R2GWaypoints(bottle_m=tuple(bottle.tolist()), mouth_m=tuple(mouth.tolist()))
 
@@ -568,7 +592,11 @@ def reconstruct_repetitions(
         for rep in repetitions:
             sl = slice(rep.start, rep.stop)
             z[sl] = zupt(base[sl], t[sl], static[sl], params.zupt)[1]
-        waypoints = trial_waypoints(anthropometrics, t, z, repetitions, reference_params)
+        input_checks: list[InputCheck] = []
+        waypoints = trial_waypoints(anthropometrics, t, z, repetitions, reference_params, input_checks)
+        if info is not None and input_checks:
+            info["input_checks"] = [c.as_dict() for c in input_checks]
+            info["input_warnings"] = [c.line() for c in input_checks if c.disagrees]
     if info is not None and waypoints is not None:
         info["waypoints_m"] = {"bottle": list(waypoints.bottle_m), "mouth": list(waypoints.mouth_m)}
     fallback: set[int] = set()
