@@ -1,0 +1,143 @@
+"""Which repetitions of a drinking trial to distrust, and why (issue 31, point 3).
+
+The phases step's confidence (:func:`imulog.process.segmentation.repetitions.repetition_quality`) ranks what
+event correction did to a repetition; on the accuracy grid most repetitions with a large error need no
+correction at all: their trajectory drifts. The trajectory step sees that drift, so the flag combines both:
+per repetition, the phases step's counts and a few figures of the dead reckoning itself (all without optical
+data):
+
+- ``drift_mps``: the speed (m/s) plain integration of the gravity-free acceleration reaches at the end of the
+  repetition's window, which starts and ends at rest: what ZUPT has to remove;
+- ``zupt_bias_optimized_cm`` (``zupt_optimized_cm`` without an orientation): RMS distance (cm) between the
+  optimisation's initial estimate and its result: how far the optimisation had to pull the dead reckoning
+  towards the reference (on the grid the best single predictor of a large error);
+- ``rest_before_s`` / ``rest_after_s``: the rest (s) at each end of the window that the velocity is reset on.
+
+:func:`flag_repetition` turns them into reasons (``merged``, ``split``, ``missing``, ``drift``, ``weak rest``);
+thresholds are :class:`FlagParams`, calibrated on the grid by ``benchmarks/confidence_calibration.py``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class FlagParams:
+    """Thresholds of :func:`flag_repetition` (units in the names)."""
+
+    min_confidence: float = 0.7  # the phases step's confidence (0..1)
+    max_pull_cm: float = 3.0  # RMS distance between the initial estimate and the optimised trajectory (cm)
+    min_rest_s: float = 0.1  # the shorter of the two rests around the repetition (s)
+
+
+def repetition_features(
+    t_s: np.ndarray,
+    acc_mps2: np.ndarray,
+    static_mask: np.ndarray,
+    repetitions: Sequence[Any],
+    trajectories_m: Mapping[str, np.ndarray],
+    quality: Sequence[Mapping[str, Any]] = (),
+) -> dict[int, dict[str, Any]]:
+    """Per repetition (by its ``index``): the phases step's counts and the dead-reckoning figures above.
+
+    t_s (N,) s; acc_mps2 (N, 3) gravity-free, world frame; static_mask (N,) true rests; repetitions: objects
+    with ``index``, ``start``, ``stop`` (sample slice); trajectories_m: {method: (N, 3) m} with ``zupt`` and,
+    when computed, ``optimized``; quality: the phases step's per-repetition records (``repetition`` 1-based).
+    """
+    t = np.asarray(t_s, dtype=np.float64)
+    acc = np.asarray(acc_mps2, dtype=np.float64)
+    static = np.asarray(static_mask, dtype=bool)
+    by_rep = {int(q["repetition"]): q for q in quality}
+    out: dict[int, dict[str, Any]] = {}
+    for rep in repetitions:
+        sl = slice(rep.start, rep.stop)
+        tt, a, st = t[sl], acc[sl], static[sl]
+        if len(tt) < 3:
+            continue
+        dt = np.diff(tt)
+        v_end = np.sum(0.5 * (a[1:] + a[:-1]) * dt[:, None], axis=0)
+        f: dict[str, Any] = {
+            "duration_s": float(tt[-1] - tt[0]),
+            "drift_mps": float(np.linalg.norm(v_end)),
+            "rest_before_s": _edge_run_s(tt, st),
+            "rest_after_s": _edge_run_s(tt[::-1], st[::-1]),
+        }
+        o = trajectories_m.get("optimized")
+        for name in ("zupt", "zupt_bias"):
+            z = trajectories_m.get(name)
+            if z is not None and o is not None:
+                f[f"{name}_optimized_cm"] = _rms_distance_cm(o[sl], z[sl])
+        q = by_rep.get(int(rep.index), {})
+        for key in ("merged", "dropped", "split", "missing", "forced", "confidence"):
+            if key in q:
+                f[key] = q[key]
+        out[int(rep.index)] = f
+    return out
+
+
+def _rms_distance_cm(a: np.ndarray, b: np.ndarray) -> float | None:
+    """RMS 3D distance (cm) between two (N, 3) m trajectories over the samples where both are finite."""
+    d = np.asarray(a) - np.asarray(b)
+    d = d[np.all(np.isfinite(d), axis=1)]
+    return float(100 * np.sqrt(np.mean(np.sum(d**2, axis=1)))) if len(d) else None
+
+
+def _edge_run_s(t: np.ndarray, static: np.ndarray) -> float:
+    """Length (s) of the run of static samples at the start of ``static``."""
+    if not len(static) or not static[0]:
+        return 0.0
+    moving = np.flatnonzero(~static)
+    end = moving[0] if len(moving) else len(static)
+    return float(abs(t[end - 1] - t[0]))
+
+
+def flag_repetition(features: Mapping[str, Any], params: FlagParams = FlagParams()) -> list[str]:
+    """The reasons to distrust one repetition (empty: trusted)."""
+    reasons = []
+    if features.get("split"):
+        reasons.append("split")
+    if features.get("missing"):
+        reasons.append("missing")
+    if features.get("merged") and (features.get("confidence", 1.0) < params.min_confidence):
+        reasons.append("merged")
+    elif features.get("confidence", 1.0) < params.min_confidence:
+        reasons.append("low confidence")
+    pull = features.get("zupt_bias_optimized_cm", features.get("zupt_optimized_cm"))
+    if pull is not None and pull > params.max_pull_cm:
+        reasons.append("drift")
+    if min(features.get("rest_before_s", 1.0), features.get("rest_after_s", 1.0)) < params.min_rest_s:
+        reasons.append("weak rest")
+    return list(dict.fromkeys(reasons))
+
+
+def flagged_repetitions(
+    features: Mapping[int, Mapping[str, Any]],
+    params: FlagParams = FlagParams(),
+    alignment_quality: str | None = None,
+) -> list[dict[str, Any]]:
+    """``[{"repetition": k, "reasons": [...]}]`` for every flagged repetition, in repetition order.
+
+    ``alignment_quality``: the ``imulog.alignment`` quality grade; ``poor`` adds the reason ``poor alignment``
+    to every repetition (the errors against the reference cannot be trusted then either)."""
+    out = []
+    for k in sorted(features):
+        reasons = flag_repetition(features[k], params)
+        if alignment_quality == "poor":
+            reasons.append("poor alignment")
+        if reasons:
+            out.append({"repetition": int(k), "reasons": reasons})
+    return out
+
+
+def flag_line(flagged: Sequence[Mapping[str, Any]], total: int, limit: int = 12) -> str:
+    """One line: how many repetitions are flagged, which and why (empty when none is)."""
+    if not flagged:
+        return ""
+    shown = ", ".join(f"{f['repetition']} ({', '.join(f['reasons'])})" for f in flagged[:limit])
+    more = f" +{len(flagged) - limit} more" if len(flagged) > limit else ""
+    return f"{len(flagged)} of {total} repetitions flagged: {shown}{more}"
