@@ -279,27 +279,15 @@ def compute_kinematics(
 
 
 def run_kinematics(path, *, options: KinematicsOptions = KinematicsOptions(), force: bool = False):
-    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
-
-    Refused (ValueError) above :data:`~imulog.steps.long_phases.LONG_SAMPLES` samples: it holds the trial."""
+    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome."""
     from imulog.archive import TrialReader
     from imulog.steps.base import StepResult, run_step
-    from imulog.steps.long_phases import refuse_long
 
     with TrialReader(path) as trial:
         topics = trial.topics()
         metadata = trial.metadata
         ua, fa = imu_names(topics, metadata, options)
         trunk = trunk_name(topics, metadata, options)
-        for imu in (ua, fa):
-            topic = next((t for t in (f"/derived/orientation/{imu}", f"/imu/{imu}") if t in topics), None)
-            if topic is not None:
-                refuse_long(
-                    "process kinematics",
-                    topic,
-                    int(trial.channel(topic).sample_count or 0),
-                    "joint angles are solved for lab trials; process a lab-length recording",
-                )
         _, record = resolve_config(metadata, options)
         inputs = []
         for imu in (ua, fa) if trunk is None else (ua, fa, trunk):

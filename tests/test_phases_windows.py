@@ -1,4 +1,5 @@
-"""Phases of long recordings core by core: the movements, phases and static mask of the whole computation."""
+"""The phases step window by window: a recording cut into windows gives the movements, phases, static mask and
+timing rows of the same recording computed as one window (every method and protocol that runs beyond one)."""
 
 from __future__ import annotations
 
@@ -12,16 +13,16 @@ from imulog.archive import TrialReader
 from imulog.archive.streaming import write_trial_streaming
 from imulog.process.segmentation.boundaries import white_noise_rad_s
 from imulog.process.segmentation.dynamos import runs
-from imulog.simulate.home import HomeParams, write_home_cwa
-from imulog.steps.long_phases import (
+from imulog.process.segmentation.reduce import (
     NoiseHistogram,
-    NormFile,
-    PhaseCores,
     exact_median_below,
     second_differences,
     threshold_runs,
 )
+from imulog.simulate.home import HomeParams, write_home_cwa
 from imulog.steps.phases import run_phases
+from imulog.steps.phases_store import NormFile
+from imulog.steps.phases_windows import PhaseWindows
 
 IMU = "ax6_4321"
 
@@ -113,12 +114,12 @@ def test_cores_equal_the_whole(trial, whole, tmp_path, monkeypatch):
     """Small cores (7 min), and intervals written in pieces of 37, give the whole computation's movements, phases and static mask to the sample: the norm
     filtered core by core differs from the whole filtering by rounding only (the overlap covers the filters'
     reach), and every statistic the whole computation takes over the recording comes from a first pass."""
-    import imulog.steps.long_phases as long_phases
+    import imulog.steps.phases_windows as phases_windows
 
-    monkeypatch.setattr(long_phases, "INTERVAL_PIECE", 37)
+    monkeypatch.setattr(phases_windows, "INTERVAL_PIECE", 37)
     cored = tmp_path / "cored.mcap"
     shutil.copy(trial, cored)
-    run_phases(cored, cores=PhaseCores(core_s=420.0, overlap_s=30.0, context_s=600.0))
+    run_phases(cored, windows=PhaseWindows(core_s=420.0, margin_s=30.0, context_s=600.0))
     mw, pw, sw, tw = _read(whole)
     mc, pc, sc, tc = _read(cored)
     assert len(mw) > 100
@@ -131,14 +132,17 @@ def test_cores_equal_the_whole(trial, whole, tmp_path, monkeypatch):
     np.testing.assert_array_equal(sw.values, sc.values)
     assert tc["n_movements"] == tw["n_movements"] and tc["static_fraction"] == tw["static_fraction"]
     # intervals written in pieces get the foxglove.Log twins the whole writes, once each, also after a rerun
-    run_phases(cored, cores=PhaseCores(core_s=420.0, overlap_s=30.0, context_s=600.0), force=True)
+    run_phases(cored, windows=PhaseWindows(core_s=420.0, margin_s=30.0, context_s=600.0), force=True)
     for kind in ("movements", "phases"):
-        assert _logs(cored, kind) == _logs(whole, kind) and len(_logs(whole, kind)) == len(mw if kind == "movements" else pw)
+        assert _logs(cored, kind) == _logs(whole, kind) and len(_logs(whole, kind)) == len(
+            mw if kind == "movements" else pw
+        )
     with TrialReader(cored) as t:  # the replaced channels' closing statistics went with them
         stats = [x.name for x in t.summary.metadata_indexes if x.name.startswith("imulog.channel_stats.")]
         assert len(stats) == 1 and stats[0] == t.channel(f"/derived/static/{IMU}").metadata["stats_record"]
-    # the record: counts and summaries instead of a row per phase
-    assert "phases" not in tc
+    # the record: the same row per phase, and the summaries
+    assert tc["phases"] == tw["phases"] and tc["repetition_quality"] == tw["repetition_quality"]
+    assert "window by window" in tc["computed"] and "computed" not in tw
     durations = np.array([row["duration_s"] for row in tw["phases"]])
     assert tc["phase_durations"]["n"] == len(durations)
     assert tc["phase_durations"]["median_s"] == pytest.approx(np.median(durations), abs=1e-3)
@@ -158,7 +162,7 @@ def test_movement_across_a_core_boundary_is_found_once(trial, whole, tmp_path):
     rate = (len(sw.t_ns) - 1) / ((sw.t_ns[-1] - t0) * 1e-9)
     cored = tmp_path / "boundary.mcap"
     shutil.copy(trial, cored)
-    run_phases(cored, cores=PhaseCores(core_s=boundary / rate, overlap_s=30.0))
+    run_phases(cored, windows=PhaseWindows(core_s=boundary / rate, margin_s=30.0))
     mc, pc, _, _ = _read(cored)
     inside = (mc.start_ns <= sw.t_ns[boundary]) & (mc.end_ns >= sw.t_ns[boundary])
     assert inside.sum() == 1
@@ -167,22 +171,77 @@ def test_movement_across_a_core_boundary_is_found_once(trial, whole, tmp_path):
     assert np.all(np.diff(pc.start_ns) > 0)
 
 
-def test_unsupported_choices_are_refused(trial, tmp_path):
+def test_whole_signal_methods_are_refused_beyond_one_window(trial, tmp_path):
     from dataclasses import replace
 
     from imulog.process.segmentation.pipeline import PhaseParams
 
     cored = tmp_path / "refused.mcap"
     shutil.copy(trial, cored)
-    with pytest.raises(ValueError, match="protocol r2g .*--protocol movements"):
-        run_phases(cored, params=PhaseParams(protocol="r2g"), cores=PhaseCores())
-    with pytest.raises(ValueError, match="method template .*--method dynamos"):
-        run_phases(cored, params=replace(PhaseParams(), protocol="movements", method="template"), cores=PhaseCores())
+    for method in ("template", "double-threshold"):
+        params = replace(PhaseParams(), protocol="movements", method=method)
+        with pytest.raises(
+            ValueError, match=f"method {method} detects movements on the whole signal .*--method dynamos"
+        ):
+            run_phases(cored, params=params, windows=PhaseWindows(core_s=600.0))
     with TrialReader(cored) as t:
         assert f"/derived/phases/{IMU}" not in t.topics()
 
 
-def test_cli_prints_the_summary_of_a_long_recording(trial, tmp_path, monkeypatch):
+@pytest.fixture(scope="module")
+def r2g_trial(tmp_path_factory):
+    from imulog.archive import write_trial
+    from imulog.simulate import simulate
+
+    sim = simulate("r2g", seed=3, subject=2, repetitions=6, extra_submovement_probability=0.3)
+    return write_trial(tmp_path_factory.mktemp("r2g") / "r2g.mcap", sim.recording, attach_sources=False)
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        {},
+        {"dynamos": {"threshold": "otsu"}},
+        {"static": "gyro-norm"},
+        {"repetitions": {"split": "activity"}},
+        {"protocol": "movements", "static_margin_s": 0.1},
+    ],
+    ids=["r2g", "otsu", "gyro-norm", "activity-split", "movements"],
+)
+def test_windows_equal_one_window_for_every_protocol(r2g_trial, tmp_path, change):
+    """A drinking-task trial cut into 20-s cores gives the event-corrected phases, their
+    confidence, the movements and the static mask of the trial computed as one window."""
+    from dataclasses import replace
+
+    from imulog.process.segmentation.dynamos import DynamosParams
+    from imulog.process.segmentation.pipeline import PhaseParams
+    from imulog.process.segmentation.repetitions import RepetitionParams
+
+    reps = RepetitionParams(n_repetitions=6, **change.get("repetitions", {}))
+    params = replace(PhaseParams(), repetitions=reps, dynamos=DynamosParams(**change.get("dynamos", {})))
+    params = replace(params, **{k: v for k, v in change.items() if k not in ("repetitions", "dynamos")})
+    one, cut = tmp_path / "one.mcap", tmp_path / "cut.mcap"
+    shutil.copy(r2g_trial, one)
+    shutil.copy(r2g_trial, cut)
+    run_phases(one, imu="wrist", params=params)
+    run_phases(cut, imu="wrist", params=params, windows=PhaseWindows(core_s=20.0, margin_s=10.0))
+    with TrialReader(one) as t1, TrialReader(cut) as t2:
+        assert "windows" in t2.runs()[max(t2.runs())]["params"] and "windows" not in t1.runs()[max(t1.runs())]["params"]
+        for kind in ("movements", "phases"):
+            a, b = t1.read(f"/derived/{kind}/wrist"), t2.read(f"/derived/{kind}/wrist")
+            np.testing.assert_array_equal(a.start_ns, b.start_ns)
+            np.testing.assert_array_equal(a.end_ns, b.end_ns)
+            assert a.labels == b.labels and a.task_index.tolist() == b.task_index.tolist()
+        s1, s2 = t1.read("/derived/static/wrist"), t2.read("/derived/static/wrist")
+        np.testing.assert_array_equal(s1.values, s2.values)
+        r1, r2 = t1.metadata["imulog.timing"], t2.metadata["imulog.timing"]
+    assert r1["phases"] == r2["phases"] and r1["repetition_quality"] == r2["repetition_quality"]
+    assert r1["n_phases"] == r2["n_phases"] > 0 and r1["static_fraction"] == r2["static_fraction"]
+    if params.protocol == "r2g":
+        assert r1["n_phases"] == 24 and r1["mean_confidence"] == r2["mean_confidence"]
+
+
+def test_cli_prints_the_summary_of_a_recording_in_windows(trial, tmp_path, monkeypatch):
     from click.testing import CliRunner
 
     import imulog.steps.phases as step
@@ -190,43 +249,59 @@ def test_cli_prints_the_summary_of_a_long_recording(trial, tmp_path, monkeypatch
 
     cored = tmp_path / "cli.mcap"
     shutil.copy(trial, cored)
-    monkeypatch.setattr(step, "LONG_SAMPLES", 10_000)  # this 43-min trial counts as long
+    monkeypatch.setattr(step, "PhaseWindows", lambda: PhaseWindows(core_s=600.0))  # this 43-min trial: 5 windows
     result = CliRunner().invoke(cli, ["process", "phases", str(cored)])
     assert result.exit_code == 0, result.output
-    assert "core by core" in result.output and "phases per hour" in result.output
+    assert "window by window" in result.output and "phases per hour" in result.output
     assert len(result.output.splitlines()) < 20  # no line per phase
 
 
-def test_trajectory_and_kinematics_refuse_long_recordings(trial, tmp_path, monkeypatch):
-    """Both steps hold the trial in memory: above the threshold they stop with one line saying what to do."""
-    from click.testing import CliRunner
+def test_rest_windows_cut_at_rests_keep_repetitions_and_flag_long_stretches():
+    from imulog.steps.windows import RestWindow, rest_windows
 
-    import imulog.steps.long_phases as long_phases
-    from imulog.archive import write_trial
-    from imulog.cli import cli
-    from imulog.simulate.arm import simulate_arm
-    from imulog.steps.kinematics import run_kinematics
+    rests = [(0, 100), (300, 400), (700, 800), (1500, 1600)]
+    assert rest_windows(rests, 2000, 1.0, core_s=3000) == [RestWindow(0, 0, 2000, 0, 2000)]  # one core: whole
+    w = rest_windows(rests, 2000, 1.0, core_s=500, max_s=300)
+    assert [(x.lo, x.hi, x.core_lo, x.core_hi, x.split) for x in w[:2]] == [
+        (0, 400, 0, 350, False),  # read to the end of the rest after, own to its middle
+        (300, 800, 350, 750, False),
+    ]
+    assert all(x.split for x in w[2:])  # 700 s without a rest (max 300 s): cut and flagged
+    assert [x.core_lo for x in w[1:]] == [x.core_hi for x in w[:-1]] and w[-1].core_hi == 2000
+    kept = rest_windows(rests, 2000, 1.0, core_s=500, max_s=300, keep_together=[(250, 750)])
+    assert (kept[0].lo, kept[0].hi) == (0, 800)  # a repetition over the rest at 300-400: not cut there
+
+
+def test_trajectory_window_by_window_equals_the_whole(trial, tmp_path):
+    """A daily-life recording cut at rests into 10-min windows gives the whole computation's trajectories (each
+    movement is reconstructed from its own rests), every sample once; no step refuses for length."""
     from imulog.steps.orientation import run_orientation
     from imulog.steps.trajectory import run_trajectory
+    from imulog.steps.trajectory_windows import TrajectoryWindows
 
     path = tmp_path / "traj.mcap"
     shutil.copy(trial, path)
     run_orientation(path)
-    arm = write_trial(tmp_path / "arm.mcap", simulate_arm(seed=7, duration_s=10.0).recording, attach_sources=False)
-    monkeypatch.setattr(long_phases, "LONG_SAMPLES", 5_000)
-    with pytest.raises(ValueError, match=r"process trajectory holds the whole trial .*more than 5,000.*imulog process metrics"):
-        run_trajectory(path)
-    monkeypatch.setattr(long_phases, "LONG_SAMPLES", 500)  # the 10-s arm trial counts as long
-    with pytest.raises(ValueError, match=r"process kinematics holds the whole trial .* lab-length"):
-        run_kinematics(arm)
-    monkeypatch.setattr(long_phases, "LONG_SAMPLES", 5_000)
-    result = CliRunner().invoke(cli, ["process", "trajectory", str(path)])
-    assert result.exit_code != 0
-    assert len(result.output.strip().splitlines()) == 1 and "more than 5,000" in result.output
-    with TrialReader(path) as t:
-        assert not [topic for topic in t.topics() if topic.startswith("/derived/trajectory/")]
-    monkeypatch.setattr(long_phases, "LONG_SAMPLES", 3_000_000)
-    run_kinematics(arm)  # a lab trial below the threshold still runs
+    run_phases(path)
+    cut = tmp_path / "cut.mcap"
+    shutil.copy(path, cut)
+    methods = ("zupt", "ddi")
+    run_trajectory(path, methods=methods)
+    run_trajectory(cut, methods=methods, windows=TrajectoryWindows(core_s=600.0))
+    with TrialReader(path) as a, TrialReader(cut) as b:
+        ra, rb = a.metadata["imulog.trajectory"], b.metadata["imulog.trajectory"]
+        assert rb["windows"]["count"] >= 4 and "windows" not in ra and not rb["windows"]["skipped"]
+        assert [r["start_ns"] for r in ra["repetitions"]] == [r["start_ns"] for r in rb["repetitions"]]
+        for topic in ("/derived/trajectory/zupt", "/derived/trajectory/ddi", "/derived/trajectory_baseline/dedrift"):
+            x, y = a.read(topic), b.read(topic)
+            assert len(x.t_ns) > 10_000
+            np.testing.assert_array_equal(x.t_ns, y.t_ns)  # every sample once, none lost at a cut
+            np.testing.assert_allclose(x.values, y.values, atol=1e-6)
+    short = tmp_path / "short.mcap"
+    shutil.copy(path, short)
+    run_trajectory(short, methods=methods, windows=TrajectoryWindows(core_s=600.0, max_s=5.0), force=True)
+    with TrialReader(short) as t:
+        assert t.metadata["imulog.trajectory"]["windows"]["split"]  # stretches over 5 s without a rest, flagged
 
 
 def test_exact_median_below_narrows_to_few_values(tmp_path):
