@@ -46,7 +46,7 @@ from imulog.process.trajectory_opt import (
     repetition_windows,
 )
 from imulog.steps.common import alignment_for, pick_imu
-from imulog.steps.trajectory_windows import TrajectoryWindows, trajectory_pieces
+from imulog.steps.trajectory_windows import TrajectoryWindows, has_r2g, trajectory_pieces
 from imulog.steps.trajectory_windows import plan as window_plan
 
 STEP = "trajectory"
@@ -70,14 +70,6 @@ def _sample_onto(t_src: np.ndarray, values: np.ndarray, t_dst: np.ndarray) -> np
     idx = np.clip(np.searchsorted(t_src, t_dst), 1, len(t_src) - 1)
     left = t_dst - t_src[idx - 1] <= t_src[idx] - t_dst
     return values[np.where(left, idx - 1, idx)]
-
-
-def _has_r2g(phases: Intervals | None) -> bool:
-    """Whether some repetition of ``phases`` has the four R2G phases (what ``optimized`` models)."""
-    if phases is None or not len(phases):
-        return False
-    k = np.asarray(phases.task_index)
-    return bool((np.unique(k[k >= 0], return_counts=True)[1] == 4).any())
 
 
 def phase_bounds_by_repetition(phases: Intervals, t0_ns: int) -> dict[int, np.ndarray]:
@@ -369,7 +361,7 @@ def run_trajectory(
         plan_ = window_plan(
             trial, static_topic if static_topic in topics else None, phases, t_first, total, rate, windows, to_device
         )
-        used = [m for m in methods if m != "optimized" or _has_r2g(phases)]
+        used = [m for m in methods if m != "optimized" or has_r2g(phases)]
         out_topics = [TRAJECTORY_TOPIC.format(method=m) for m in used] + [BASELINE_TOPIC.format(method=BASELINE)]
         record: dict[str, Any] = {}
         pieces = StreamPieces(

@@ -37,6 +37,14 @@ class TrajectoryWindows:
         return {"core_s": self.core_s, "max_s": self.max_s, "min_rest_s": self.min_rest_s}
 
 
+def has_r2g(phases: Intervals | None) -> bool:
+    """Whether some repetition of ``phases`` has the four R2G phases (what ``optimized`` models)."""
+    if phases is None or not len(phases):
+        return False
+    k = np.asarray(phases.task_index)
+    return bool((np.unique(k[k >= 0], return_counts=True)[1] == 4).any())
+
+
 def _blocks(trial: Any, topic: str, kind: str) -> Iterator[tuple]:
     for b in trial.iter_blocks(topic):
         if kind == "imu":
