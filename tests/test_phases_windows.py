@@ -317,3 +317,27 @@ def test_exact_median_below_narrows_to_few_values(tmp_path):
     assert exact_median_below(f2, 0.9, max_values=10) == 0.0
     f.close()
     f2.close()
+
+
+def test_trajectory_windows_records_merge_into_one():
+    """Repetitions concatenated, rests summed, a method's failed checks kept with their reason and window count
+    (what `imulog process trajectory` prints)."""
+    from imulog.steps.trajectory import check_lines
+    from imulog.steps.trajectory_windows import TrajectoryWindows, merge_records
+
+    ok = {"ok": True, "failed": []}
+    windows = [
+        {"repetitions": [{"index": 1}], "rests": {"static_s": 2.0, "static_runs": 3}, "checks": {"zupt": ok}},
+        {
+            "repetitions": [{"index": 2}, {"index": 3}],
+            "rests": {"static_s": 1.5, "static_runs": 1},
+            "checks": {"zupt": {"ok": False, "failed": ["rests"], "why": "no rest", "suggest": "use ddi"}},
+        },
+    ]
+    skipped = [{"start_ns": 0, "end_ns": 1, "why": "every repetition contains a gap"}]
+    rec = merge_records(windows, skipped, [], TrajectoryWindows())
+    assert [r["index"] for r in rec["repetitions"]] == [1, 2, 3]
+    assert rec["rests"] == {"static_s": 3.5, "static_runs": 4}
+    assert rec["windows"]["count"] == 3 and rec["windows"]["skipped"] == skipped
+    assert rec["checks"]["zupt"]["windows_failed"] == 1
+    assert check_lines(rec) == ["assumption failed: zupt: no rest; use ddi"]

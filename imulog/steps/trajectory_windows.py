@@ -133,9 +133,15 @@ def merge_records(records: list[dict[str, Any]], skipped: list[dict], split: lis
                 merged["ok"] = False
                 merged["windows_failed"] += 1
                 merged["failed"] += [f for f in check.get("failed", []) if f not in merged["failed"]]
+                merged.setdefault("why", check.get("why", ", ".join(check.get("failed", []))))
+                if check.get("suggest"):
+                    merged.setdefault("suggest", check["suggest"])
         for key in ("skipped", "notes", "waypoints_from"):
             if key in rec:
                 out[key] = rec[key]
+    for check in (out.get("checks") or {}).values():
+        if check["windows_failed"] > 1:
+            check["why"] = f"{check['why']} (in {check['windows_failed']} of {len(records)} windows)"
     out["windows"] = {**windows.to_dict(), "count": len(records) + len(skipped), "split": split, "skipped": skipped}
     return out
 
