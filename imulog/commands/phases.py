@@ -42,7 +42,7 @@ def format_summary(timing: dict) -> str:
         f"{timing['imu']}: {found}, method {timing['method']}, {timing['clock']} clock, "
         f"static {100 * timing['static_fraction']:.1f} %"
     )
-    if "phases" not in timing:  # a long recording segmented core by core: summaries, no row per phase
+    if "phases" not in timing or "computed" in timing:  # read window by window: summaries, no row per phase
         return "\n".join([head, *format_long_summary(timing)])
     lines = [head, f"{'rep':>4} {'phase':<14} {'start s':>9} {'end s':>9} {'dur s':>7} {'peak rad/s':>10}"]
     by_label: dict[str, list[float]] = {}

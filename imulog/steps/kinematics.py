@@ -34,6 +34,7 @@ from imulog.process.kinematics.errors import kinematics_errors
 from imulog.process.kinematics.pipeline import KinematicsConfig, KinematicsEstimate, estimate_kinematics
 from imulog.process.kinematics.solver import SolverParams, Workspace
 from imulog.process.orientation import OrientationParams
+from imulog.steps.windows import WindowParams, channel_rate_hz
 
 STEP = "kinematics"
 ALGORITHM = "imulog.kinematics.caruso2024_dh"
@@ -278,28 +279,125 @@ def compute_kinematics(
     return _streams(est, q_ref), meta
 
 
-def run_kinematics(path, *, options: KinematicsOptions = KinematicsOptions(), force: bool = False):
+class _TimeCursor:
+    """Samples ``(t_ns, q)`` of a channel read block by block, handed out by time range (forward only)."""
+
+    def __init__(self, blocks) -> None:
+        self.blocks = blocks
+        self.parts: list[tuple[np.ndarray, np.ndarray]] = []
+        self.done = False
+
+    def get(self, t_lo: int, t_hi: int) -> tuple[np.ndarray, np.ndarray]:
+        while not self.done and (not self.parts or self.parts[-1][0][-1] < t_hi):
+            try:
+                t, q = next(self.blocks)
+            except StopIteration:
+                self.done = True
+                break
+            if len(t):
+                self.parts.append((t, q))
+        while len(self.parts) > 1 and self.parts[0][0][-1] < t_lo:
+            self.parts.pop(0)
+        if not self.parts:
+            return np.zeros(0, np.int64), np.zeros((0, 4))
+        t = np.concatenate([p[0] for p in self.parts])
+        q = np.concatenate([p[1] for p in self.parts])
+        keep = (t >= t_lo) & (t <= t_hi)
+        return t[keep], q[keep]
+
+
+def _quaternion_blocks(trial: Any, topic: str):
+    for b in trial.iter_blocks(topic):
+        cols = [b.columns.index(c) for c in ("qw", "qx", "qy", "qz")]
+        yield np.asarray(b.t_ns, np.int64), np.asarray(b.values[:, cols], dtype=np.float64)
+
+
+def _last_finite(q: np.ndarray) -> np.ndarray | None:
+    ok = np.flatnonzero(np.all(np.isfinite(q), axis=1))
+    return None if len(ok) == 0 else q[ok[-1]].copy()
+
+
+def kinematics_pieces(path, ua: str, fa: str, trunk: str | None, options: KinematicsOptions, plan, record: dict):
+    """The step window by window (``plan``: :class:`~imulog.steps.windows.Window` s over the upper-arm IMU's
+    orientation samples): the neutral-posture calibration from the first window, every later window warm-started
+    from the previous one's last solution, so each sample's angles are the whole computation's. Yields the
+    streams of each window; fills ``record`` (``imulog.kinematics_calibration``) at the end."""
+    from imulog.archive import TrialReader
+    from imulog.process.kinematics.pipeline import calibrate_kinematics
+    from imulog.steps.sample_window import SampleWindow
+
+    margin_ns = 1_000_000_000  # forearm/trunk samples this far beyond the window, for the resampling
+    sums = {"n": 0, "active": 0.0, "t_out": 0.0, "infeasible": 0, "ms": {}}
+    with TrialReader(path) as trial:
+        config, cfg_record = resolve_config(trial.metadata, options)
+        total = plan[-1].hi
+        ua_buf = SampleWindow(_quaternion_blocks(trial, f"/derived/orientation/{ua}"), total)
+        others = {
+            k: _TimeCursor(_quaternion_blocks(trial, f"/derived/orientation/{n}"))
+            for k, n in (("fa", fa), ("tr", trunk))
+            if n
+        }
+        calibrated, warm = None, {}
+        for w in plan:
+            t, q_ua = ua_buf.take(w.lo, w.hi)
+            t_fa, q_fa = others["fa"].get(int(t[0]) - margin_ns, int(t[-1]) + margin_ns)
+            q_fa = _resample(t_fa, q_fa, t)
+            q_tr = None
+            if "tr" in others:
+                t_tr, q_tr = others["tr"].get(int(t[0]) - margin_ns, int(t[-1]) + margin_ns)
+                q_tr = _resample(t_tr, q_tr, t)
+            if calibrated is None:
+                calibrated = calibrate_kinematics(q_ua, q_fa, t, config, q_trunk_s2g=q_tr)
+            est = estimate_kinematics(q_ua, q_fa, t, config, q_trunk_s2g=q_tr, calibrated=calibrated, warm_start=warm)
+            for key, res in (("unconstrained", est.unconstrained), ("constrained", est.constrained)):
+                last = _last_finite(res.q_rad)
+                if last is not None:
+                    warm[key] = last
+            n = len(t)
+            sums["n"] += n
+            sums["active"] += float(np.sum(est.constrained.any_active))
+            sums["t_out"] += float(np.sum(est.t_out))
+            sums["infeasible"] += int(est.constrained.extra.get("n_infeasible", 0))
+            for k, v in est.timing_ms_per_sample.items():
+                sums["ms"][k] = sums["ms"].get(k, 0.0) + float(v) * n
+            yield from _streams(est, None)
+    n = max(sums["n"], 1)
+    record.update(
+        {
+            "upper_arm_imu": ua,
+            "forearm_imu": fa,
+            "trunk_imu": trunk,
+            "mode": config.calibration.mode,
+            "neutral_pose_deg": list(config.calibration.pose_deg),
+            "neutral_window_s": list(config.calibration.window_s),
+            "q_global_to_trunk": {k: [float(x) for x in v] for k, v in calibrated[0].items()},
+            "ms_per_sample": {k: v / n for k, v in sums["ms"].items()},
+            "constraint_active_fraction": sums["active"] / n,
+            "infeasible_samples": sums["infeasible"],
+            "t_out_fraction": sums["t_out"] / n,
+            "config": cfg_record,
+            "windows": len(plan),
+            "reference": "marker reference angles are computed for recordings of one window (lab trials)",
+        }
+    )
+
+
+def run_kinematics(
+    path, *, options: KinematicsOptions = KinematicsOptions(), force: bool = False, windows: WindowParams | None = None
+):
     """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
 
-    Refused (ValueError) above :data:`~imulog.steps.long_phases.LONG_SAMPLES` samples: it holds the trial."""
+    A recording longer than one window (``windows``, default one-hour cores) is solved window by window while
+    the result is written (:func:`kinematics_pieces`: the same angles per sample, bounded memory); it needs the
+    orientation step's channels of its IMUs."""
     from imulog.archive import TrialReader
     from imulog.steps.base import StepResult, run_step
-    from imulog.steps.long_phases import refuse_long
 
     with TrialReader(path) as trial:
         topics = trial.topics()
         metadata = trial.metadata
         ua, fa = imu_names(topics, metadata, options)
         trunk = trunk_name(topics, metadata, options)
-        for imu in (ua, fa):
-            topic = next((t for t in (f"/derived/orientation/{imu}", f"/imu/{imu}") if t in topics), None)
-            if topic is not None:
-                refuse_long(
-                    "process kinematics",
-                    topic,
-                    int(trial.channel(topic).sample_count or 0),
-                    "joint angles are solved for lab trials; process a lab-length recording",
-                )
         _, record = resolve_config(metadata, options)
         inputs = []
         for imu in (ua, fa) if trunk is None else (ua, fa, trunk):
@@ -310,7 +408,40 @@ def run_kinematics(path, *, options: KinematicsOptions = KinematicsOptions(), fo
         if options.use_markers and kin.get("clusters") and marker_topic in topics:
             inputs.append(marker_topic)
 
+    windows = windows or WindowParams(margin_s=0.0)
+    ua_topic = f"/derived/orientation/{ua}" if f"/derived/orientation/{ua}" in topics else f"/imu/{ua}"
+    with TrialReader(path) as trial:
+        ch = trial.channel(ua_topic)
+        total = int(ch.sample_count or 0)
+        plan = windows.plan(total, channel_rate_hz(total, ch.start_ns, ch.end_ns, ch.rate_hz))
+    if len(plan) > 1:
+        missing = [i for i in (ua, fa, trunk) if i and f"/derived/orientation/{i}" not in topics]
+        if missing:
+            raise ValueError(
+                f"/imu/{ua} spans {len(plan)} windows: kinematics reads the orientation step's channels window by "
+                f"window; run `imulog process orientation --imu {missing[0]}` first"
+            )
+
     def compute(trial) -> StepResult:
+        if len(plan) > 1:
+            from imulog.archive.streaming import StreamPieces
+
+            record: dict[str, Any] = {}
+            pieces = StreamPieces(
+                topics=[
+                    f"{PREFIX}/{k}"
+                    for k in (
+                        "joint_angles_unconstrained",
+                        "joint_angles_constrained",
+                        "elbow",
+                        "wrist",
+                        "constraint_active",
+                    )
+                ],
+                pieces=lambda: kinematics_pieces(path, ua, fa, trunk, options, plan, record),
+                expected_duration_s=((ch.end_ns or 0) - (ch.start_ns or 0)) * 1e-9,
+            )
+            return StepResult(streams=[pieces], metadata={"imulog.kinematics_calibration": record})
         streams, meta = compute_kinematics(trial, ua, fa, options, trunk)
         return StepResult(streams=streams, metadata=meta)
 
@@ -322,6 +453,8 @@ def run_kinematics(path, *, options: KinematicsOptions = KinematicsOptions(), fo
         "orientation": dataclasses.asdict(options.orientation),
         **record,
     }
+    if len(plan) > 1:  # a trial within one core does not depend on the window sizes
+        params["windows"] = windows.to_dict()
     return run_step(
         path,
         step=STEP,

@@ -24,15 +24,17 @@ from typing import Any
 
 import numpy as np
 
-from imulog.model import Intervals, SignalStream
-from imulog.process.gaps import GapParams, prepare
-from imulog.process.segmentation.pipeline import PhaseParams, segment_phases, timing_table
+from imulog.process.gaps import GapParams
+from imulog.process.segmentation.pipeline import PhaseParams
 from imulog.process.segmentation.repetitions import RepetitionParams
-from imulog.steps.common import alignment_for, mean_rate_hz, pick_imu
-from imulog.steps.long_phases import LONG_SAMPLES, PhaseCores, long_phase_pieces, long_unsupported
+from imulog.steps.common import mean_rate_hz, pick_imu
+from imulog.steps.phases_record import LOW_CONFIDENCE
+from imulog.steps.phases_store import array_source, trial_source
+from imulog.steps.phases_windows import PhaseWindows, phase_pieces, unsupported
+
+__all__ = ["LOW_CONFIDENCE", "PhaseWindows", "compute_phases", "params_for_trial", "pick_imu", "run_phases"]
 
 STEP = "phases"
-LOW_CONFIDENCE = 0.5  # repetitions below this confidence are listed in imulog.timing["low_confidence_repetitions"]
 
 
 def protocol_of(trial_record: dict[str, Any], default_repetitions: int = 25) -> tuple[str, int]:
@@ -60,6 +62,43 @@ def algorithm_name(params: PhaseParams) -> str:
     return f"imulog.segmentation.{params.method}"
 
 
+def collect(pieces, topics: list[str]) -> list:
+    """Whole streams of ``topics`` from their pieces, in the order of ``topics`` (a one-window recording)."""
+    from imulog.model import Intervals, SignalStream
+
+    parts: dict[str, list] = {t: [] for t in topics}
+    for piece in pieces:
+        parts[piece.topic].append(piece)
+    out = []
+    for topic in topics:
+        got = parts[topic]
+        if len(got) == 1:
+            out.append(got[0])
+        elif isinstance(got[0], Intervals):
+            out.append(
+                Intervals(
+                    topic,
+                    np.concatenate([x.start_ns for x in got]),
+                    np.concatenate([x.end_ns for x in got]),
+                    [label for x in got for label in x.labels],
+                    task_index=np.concatenate([x.task_index for x in got]),
+                )
+            )
+        else:
+            first: SignalStream = got[0]
+            out.append(
+                SignalStream(
+                    topic,
+                    np.concatenate([x.t_ns for x in got]),
+                    first.columns,
+                    first.units,
+                    np.concatenate([x.values for x in got]),
+                    frame_id=first.frame_id,
+                )
+            )
+    return out
+
+
 def compute_phases(
     t_ns: np.ndarray,
     gyr: np.ndarray,
@@ -69,9 +108,11 @@ def compute_phases(
     acc: np.ndarray | None = None,
     gaps: GapParams | None = None,
 ) -> tuple[list, dict]:
-    """Pure part of the step: streams and the ``imulog.timing`` record from IMU samples (no I/O).
+    """The step on samples in memory: ``[movements, phases, static]`` and the ``imulog.timing`` record.
 
-    ``acc`` (m/s^2, optional): phase boundaries then also follow the hand's translation.
+    One window of :func:`imulog.steps.phases_windows.phase_pieces` (the step's one implementation, which reads
+    longer recordings window by window). ``acc`` (m/s^2, optional): phase boundaries then also follow the hand's
+    translation.
 
     Missing samples (NaN) follow :mod:`imulog.process.gaps`: short gaps are bridged; inside longer ones the
     gyroscope reads as zero (no movement is detected there, so a movement interrupted by a gap ends at it and a new
@@ -83,69 +124,13 @@ def compute_phases(
     if gyr is None:
         raise ValueError(f"/imu/{imu} has no gyroscope columns")
     rate_hz = mean_rate_hz(t_ns)
-    (gyr, acc), gap_report = prepare([gyr, acc], gaps)
-    unknown = np.ones(len(t_ns), dtype=bool)
-    for a, b in gap_report.runs:
-        unknown[a:b] = False
-    if unknown.all():
-        raise ValueError(f"/imu/{imu}: no valid run of samples ({gap_report.missing} of {len(t_ns)} missing)")
-    if unknown.any():
-        gyr = np.where(unknown[:, None], 0.0, gyr)
-        if acc is not None:  # only for boundary refinement near the gap edges: bridged, the gap itself is not used
-            ok = ~unknown
-            idx = np.arange(len(acc))
-            acc = np.column_stack([np.interp(idx, idx[ok], acc[ok, j]) for j in range(3)])
-    result = segment_phases(gyr, rate_hz, params, acc)
-    t_iv, clock = t_ns, "device"
-    if alignment is not None:
-        from imulog.process.alignment import device_to_reference
-
-        t_iv, clock = np.asarray(device_to_reference(t_ns, alignment), dtype=np.int64), "reference"
-    last = len(t_ns) - 1
-    ph = result.phases
-    movements = Intervals(
-        topic=f"/derived/movements/{imu}",
-        start_ns=t_iv[result.movement_start],
-        end_ns=t_iv[np.minimum(np.maximum(result.movement_end - 1, result.movement_start), last)],
-        labels=["movement"] * len(result.movement_start),
+    record: dict[str, Any] = {}
+    one = PhaseWindows(core_s=float("inf"))
+    pieces = phase_pieces(
+        array_source(t_ns, gyr, acc), len(t_ns), rate_hz, imu, params, gaps, record, windows=one, alignment=alignment
     )
-    phases = Intervals(
-        topic=f"/derived/phases/{imu}",
-        start_ns=t_iv[ph.start],
-        end_ns=t_iv[np.minimum(np.maximum(ph.end - 1, ph.start), last)],
-        labels=list(ph.labels),
-        task_index=ph.repetition,
-    )
-    static = SignalStream(
-        topic=f"/derived/static/{imu}",
-        t_ns=t_ns,
-        columns=["static"],
-        units=["1"],
-        values=np.where(unknown, np.nan, result.static.astype(np.float64))[:, None],
-        frame_id=imu,
-    )
-    rows = timing_table(ph, t_iv, gyr)
-    n_rep = int(ph.repetition.max()) if len(ph) else 0
-    timing = {
-        "imu": f"/imu/{imu}",
-        "method": params.method,
-        "protocol": params.protocol,
-        "clock": clock,
-        "rate_hz": round(rate_hz, 4),
-        "n_movements": int(len(result.movement_start)),
-        "n_repetitions": n_rep,
-        "n_phases": int(len(ph)),
-        "n_corrected_repetitions": int(ph.n_corrected),
-        "n_forced_phases": int(np.sum(ph.forced)) if ph.forced is not None else 0,
-        "mean_confidence": round(float(np.mean([q["confidence"] for q in ph.quality])), 3) if ph.quality else None,
-        "low_confidence_repetitions": [q["repetition"] for q in ph.quality if q["confidence"] < LOW_CONFIDENCE],
-        "repetition_quality": list(ph.quality),
-        "static_fraction": round(float(result.static[~unknown].mean()), 4),
-        "phases": rows,
-    }
-    if gap_report.missing:
-        timing["gaps"] = gap_report.as_dict()
-    return [movements, phases, static], timing
+    streams = collect(pieces, [f"/derived/movements/{imu}", f"/derived/phases/{imu}", f"/derived/static/{imu}"])
+    return streams, record
 
 
 def run_phases(
@@ -155,50 +140,61 @@ def run_phases(
     params: PhaseParams | None = None,
     force: bool = False,
     gaps: GapParams | None = None,
-    cores: PhaseCores | None = None,
+    windows: PhaseWindows | None = None,
 ):
     """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
 
     Without ``params`` the trial's own protocol and repetition count are used (:func:`params_for_trial`);
-    ``gaps``: how missing IMU samples are treated (:mod:`imulog.process.gaps`). Recordings longer than
-    :data:`~imulog.steps.long_phases.LONG_SAMPLES` samples, or any with ``cores``, are segmented core by core in
-    bounded memory (:mod:`imulog.steps.long_phases`; ``imulog.timing`` then holds summaries, not a row per phase).
+    ``gaps``: how missing IMU samples are treated (:mod:`imulog.process.gaps`). The recording is read in
+    ``windows`` (default one-hour cores, :class:`~imulog.steps.phases_windows.PhaseWindows`): a lab trial is one
+    window and computed at once; a longer one window by window while the result is written, in bounded memory.
     """
+    from pathlib import Path
+
     from imulog.archive import TrialReader
     from imulog.archive.streaming import StreamPieces
     from imulog.steps.base import StepResult, run_step
+    from imulog.steps.common import alignment_for
+    from imulog.steps.windows import channel_rate_hz
 
+    windows = windows or PhaseWindows()
     with TrialReader(path) as trial:
         name = pick_imu(trial.topics(), imu)
         params = params or params_for_trial(trial.metadata.get("imulog.trial", {}))
         channel = trial.channel(f"/imu/{name}")
         total = int(channel.sample_count or 0)
         span_ns = (channel.end_ns or 0) - (channel.start_ns or 0)
+        rate = channel_rate_hz(total, channel.start_ns, channel.end_ns, channel.rate_hz)
     topic = f"/imu/{name}"
-    long = cores is not None or total > LONG_SAMPLES
+    n_windows = len(windows.plan(total, rate))
+    reason = unsupported(params, n_windows)
+    if reason is not None:
+        raise ValueError(f"{topic}: {reason}")
     step_params = {"imu": name, **params.to_dict()}
-    if long:
-        reason = long_unsupported(params)
-        if reason is not None:
-            raise ValueError(
-                f"{topic} has {total:,} samples (more than {LONG_SAMPLES:,}: processed core by core): {reason}"
-            )
-        cores = cores or PhaseCores()
-        step_params["cores"] = cores.to_dict()
+    if n_windows > 1:  # a trial within one core does not depend on the window sizes
+        step_params["windows"] = windows.to_dict()
 
     def compute(trial) -> StepResult:
         alignment = alignment_for(trial.metadata, topic)
-        if long:  # days of daily life: core by core while the result is written; the record fills at the end
+        if n_windows > 1:  # days of daily life: window by window while the result is written
             if total < 10 or span_ns <= 0:
                 raise ValueError(f"{topic} has only {total} samples")
-            rate = (total - 1) / (span_ns * 1e-9)  # mean_rate_hz of the whole channel
             start_time = (trial.metadata.get("imulog.trial") or {}).get("start_time")
             record: dict[str, Any] = {}
             pieces = StreamPieces(
                 topics=[f"/derived/static/{name}", f"/derived/movements/{name}", f"/derived/phases/{name}"],
-                pieces=lambda: long_phase_pieces(
-                    path, topic, name, params, gaps, total, rate, record, alignment=alignment,
-                    start_time=str(start_time) if start_time else None, cores=cores,
+                pieces=lambda: phase_pieces(
+                    trial_source(path, topic, total),
+                    total,
+                    rate,
+                    name,
+                    params,
+                    gaps,
+                    record,
+                    windows=windows,
+                    alignment=alignment,
+                    start_time=str(start_time) if start_time else None,
+                    temp_dir=Path(path).resolve().parent,
                 ),
                 expected_duration_s=span_ns * 1e-9,
             )

@@ -46,6 +46,8 @@ from imulog.process.trajectory_opt import (
     repetition_windows,
 )
 from imulog.steps.common import alignment_for, pick_imu
+from imulog.steps.trajectory_windows import TrajectoryWindows, has_r2g, trajectory_pieces
+from imulog.steps.trajectory_windows import plan as window_plan
 
 STEP = "trajectory"
 TRAJECTORY_TOPIC = "/derived/trajectory/{method}"
@@ -262,25 +264,28 @@ def run_trajectory(
     params: TrajectoryParams = DEFAULT_PARAMS,
     reference_params: R2GReferenceParams = DEFAULT_REFERENCE,
     force: bool = False,
+    windows: TrajectoryWindows | None = None,
 ):
-    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome."""
-    from imulog.archive import TrialReader
-    from imulog.steps.base import StepResult, run_step
-    from imulog.steps.long_phases import refuse_long
+    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
 
+    A recording longer than one window (``windows``, default one-hour cores) is reconstructed window by window,
+    each window the movements between two rests (:mod:`imulog.steps.trajectory_windows`), in bounded memory."""
+    from imulog.archive import TrialReader
+    from imulog.archive.streaming import StreamPieces
+    from imulog.steps.base import StepResult, run_step
+    from imulog.steps.windows import channel_rate_hz
+
+    windows = windows or TrajectoryWindows()
     with TrialReader(path) as trial:
         topics = trial.topics()
         name = pick_imu(
             topics, imu, prefix="/derived/acc_global/", missing_hint="run `imulog process orientation` first"
         )
         acc_topic = f"/derived/acc_global/{name}"
-        refuse_long(
-            "process trajectory",
-            acc_topic,
-            int(trial.channel(acc_topic).sample_count or 0),
-            "trajectories integrate the repetitions of a lab trial; for daily life use `imulog process metrics` "
-            "(distance per window, per hour and per day)",
-        )
+        ch = trial.channel(acc_topic)
+        total = int(ch.sample_count or 0)
+        rate = channel_rate_hz(total, ch.start_ns, ch.end_ns, ch.rate_hz)
+    one_window = total <= max(1, int(round(windows.core_s * rate)))
     static_topic, phases_topic = f"/derived/static/{name}", f"/derived/phases/{name}"
     orient_topic = f"/derived/orientation/{name}"
     imu_topic = f"/imu/{name}"  # the gyroscope, to re-integrate the orientation through movements
@@ -288,36 +293,109 @@ def run_trajectory(
     inputs = [acc_topic] + [t for t in (static_topic, phases_topic, orient_topic) if t in topics]
     inputs += [imu_topic] if use_gyr else []
 
-    def compute(trial) -> StepResult:
-        acc = trial.read(acc_topic)
-        static = trial.read(static_topic) if static_topic in topics else None
-        phases = trial.read(phases_topic) if phases_topic in topics else None
-        orient = trial.read(orient_topic) if orient_topic in topics else None
-        raw = trial.read(imu_topic) if use_gyr else None
+    def window_compute(trial, phases):
         timing = trial.metadata.get("imulog.timing", {})
-        streams, record = compute_trajectories(
-            acc.t_ns,
-            acc.values,
-            imu=name,
-            methods=methods,
-            static=None if static is None else (static.t_ns, static.values[:, 0]),
-            phases=phases,
-            phases_clock=str(timing.get("clock", "reference")),
-            orientation=None if orient is None else (orient.t_ns, orient.values),
-            alignment=alignment_for(trial.metadata, f"/imu/{name}"),
-            anthropometrics=trial.metadata.get("imulog.anthropometrics"),
-            params=params,
-            reference_params=reference_params,
-            gyr=None if raw is None or raw.gyr is None else (raw.t_ns, raw.gyr),
-        )
-        provenance = {"gaps": record["gaps"]} if "gaps" in record else {}
-        return StepResult(streams=streams, metadata={"imulog.trajectory": record}, provenance=provenance)
+        alignment = alignment_for(trial.metadata, f"/imu/{name}")
+        phases_clock = str(timing.get("clock", "reference"))
 
+        def one(acc, static, orient, raw):
+            mine = phases
+            if phases is not None and not one_window:  # the repetitions inside this window only
+                t = np.asarray(acc[0][[0, -1]], dtype=np.int64)
+                lo, hi = _to_reference(t, alignment) if phases_clock == "reference" else t
+                inside = (phases.start_ns >= lo) & (phases.end_ns <= hi)
+                mine = Intervals(
+                    phases.topic,
+                    phases.start_ns[inside],
+                    phases.end_ns[inside],
+                    [label for label, k in zip(phases.labels, inside, strict=True) if k],
+                    phases.task_index[inside],
+                )
+            return compute_trajectories(
+                acc[0],
+                acc[1],
+                imu=name,
+                methods=methods,
+                static=None if static is None else (static[0], static[1][:, 0]),
+                phases=mine,
+                phases_clock=str(timing.get("clock", "reference")),
+                orientation=orient,
+                alignment=alignment,
+                anthropometrics=trial.metadata.get("imulog.anthropometrics"),
+                params=params,
+                reference_params=reference_params,
+                gyr=None if raw is None or raw[1] is None else raw,
+            )
+
+        return one, alignment, str(timing.get("clock", "reference"))
+
+    def compute(trial) -> StepResult:
+        phases = trial.read(phases_topic) if phases_topic in topics else None
+        one, alignment, phases_clock = window_compute(trial, phases)
+        if one_window:  # a lab trial: the whole recording at once
+            acc = trial.read(acc_topic)
+            static = trial.read(static_topic) if static_topic in topics else None
+            orient = trial.read(orient_topic) if orient_topic in topics else None
+            raw = trial.read(imu_topic) if use_gyr else None
+            streams, record = one(
+                (acc.t_ns, acc.values),
+                None if static is None else (static.t_ns, static.values),
+                None if orient is None else (orient.t_ns, orient.values),
+                None if raw is None else (raw.t_ns, raw.gyr),
+            )
+            provenance = {"gaps": record["gaps"]} if "gaps" in record else {}
+            return StepResult(streams=streams, metadata={"imulog.trajectory": record}, provenance=provenance)
+        return _windowed(trial, phases, one, alignment, phases_clock)
+
+    def _windowed(trial, phases, one, alignment, phases_clock) -> StepResult:
+        from imulog.process.alignment_clock import reference_to_device
+
+        if static_topic not in topics and any(m in NEEDS_STATIC for m in methods):
+            need = ", ".join(m for m in methods if m in NEEDS_STATIC)
+            raise ValueError(f"methods {need} need /derived/static/{name}: run `imulog process phases` first")
+        t_first = int(trial.channel(acc_topic).start_ns or 0)
+        if alignment is not None and phases_clock == "reference":
+            to_device = lambda t: np.asarray(reference_to_device(t, alignment), dtype=np.int64)  # noqa: E731
+        else:
+            to_device = lambda t: np.asarray(t, dtype=np.int64)  # noqa: E731
+        plan_ = window_plan(
+            trial, static_topic if static_topic in topics else None, phases, t_first, total, rate, windows, to_device
+        )
+        used = [m for m in methods if m != "optimized" or has_r2g(phases)]
+        out_topics = [TRAJECTORY_TOPIC.format(method=m) for m in used] + [BASELINE_TOPIC.format(method=BASELINE)]
+        record: dict[str, Any] = {}
+        pieces = StreamPieces(
+            topics=out_topics,
+            pieces=lambda: trajectory_pieces(
+                path,
+                name,
+                {
+                    "acc": acc_topic,
+                    "static": static_topic if static_topic in topics else None,
+                    "orientation": orient_topic if orient_topic in topics else None,
+                    "imu": imu_topic if use_gyr else None,
+                },
+                plan_,
+                one,
+                record,
+                out_topics,
+                windows,
+                lambda t: _to_reference(t, alignment),
+                total,
+                "world" if alignment is not None else f"{name}_global",
+            ),
+            expected_duration_s=total / rate,
+        )
+        return StepResult(streams=[pieces], metadata={"imulog.trajectory": record})
+
+    step_params = {"imu": name, **params_dict(methods, params, reference_params)}
+    if not one_window:
+        step_params["windows"] = windows.to_dict()
     outcome = run_step(
         path,
         step=STEP,
         algorithm="imulog.trajectory",
-        params={"imu": name, **params_dict(methods, params, reference_params)},
+        params=step_params,
         inputs=inputs,
         metadata_inputs=("imulog.alignment", "imulog.anthropometrics", "imulog.timing"),
         compute=compute,

@@ -148,3 +148,60 @@ def owned(windows: Sequence[Window], items: Sequence[T], starts: Sequence[int]) 
                 mine.append(items[order[k]])
             k += 1
         yield w, mine
+
+
+@dataclass(frozen=True)
+class RestWindow(Window):
+    """A window of consecutive movements between rests (:func:`rest_windows`): ``[lo, hi)`` read, from the start of
+    the rest before its first movement to the end of the rest after its last; ``[core_lo, core_hi)`` owned, from
+    the middle of the rest it shares with the previous window to the middle of the next; ``split``: it holds a
+    stretch longer than ``max_s`` that was cut without a rest."""
+
+    split: bool = False
+
+
+def rest_windows(
+    rests: Sequence[tuple[int, int]],
+    total: int,
+    rate_hz: float,
+    *,
+    core_s: float = 3600.0,
+    max_s: float = 600.0,
+    keep_together: Sequence[tuple[int, int]] = (),
+) -> list[RestWindow]:
+    """The movements between rests (:func:`event_windows`) grouped into windows of at most ``core_s`` seconds,
+    cut only at a rest (or where a stretch longer than ``max_s`` was split, flagged) and never inside a span of
+    ``keep_together`` (sample intervals, e.g. a repetition's phases). A recording within one core is one window
+    (nothing split). A stretch of movements longer than ``core_s`` without an allowed cut stays one window."""
+    if not (rate_hz > 0 and np.isfinite(rate_hz)):
+        raise ValueError(f"rate must be a positive number of Hz, got {rate_hz}")
+    core = max(1, int(round(core_s * rate_hz)))
+    if total <= core:
+        return [RestWindow(0, 0, total, 0, total)]
+    units = event_windows(rests, total, rate_hz, max_s=max_s)
+    if not units:
+        return [RestWindow(0, 0, total, 0, total)]
+    spans = sorted((int(a), int(b)) for a, b in keep_together)
+    span_lo = np.array([a for a, _ in spans], dtype=np.int64)
+    span_hi = np.array([b for _, b in spans], dtype=np.int64)
+
+    def allowed(cut_lo: int, cut_hi: int) -> bool:
+        """No kept-together span holds the whole cut ``[cut_lo, cut_hi]`` (a rest, or one split point)."""
+        k = int(np.searchsorted(span_lo, cut_lo, side="right"))  # spans starting at or before the cut
+        return not (k and (span_hi[:k] > cut_hi).any())
+
+    groups: list[list[EventWindow]] = [[units[0]]]
+    for u in units[1:]:
+        g = groups[-1]
+        prev = g[-1]
+        if u.hi - g[0].lo > core and allowed(prev.move_hi, u.move_lo):
+            groups.append([u])
+        else:
+            g.append(u)
+    out: list[RestWindow] = []
+    for k, g in enumerate(groups):
+        own_lo = 0 if k == 0 else (groups[k - 1][-1].move_hi + g[0].move_lo) // 2
+        own_hi = total if k == len(groups) - 1 else (g[-1].move_hi + groups[k + 1][0].move_lo) // 2
+        lo, hi = min(g[0].lo, own_lo), max(g[-1].hi, own_hi)
+        out.append(RestWindow(k, lo, hi, own_lo, own_hi, any(u.split for u in g)))
+    return out

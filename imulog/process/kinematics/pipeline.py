@@ -69,6 +69,39 @@ def _fk_nan(q: np.ndarray, model: ArmModel) -> ForwardKinematics:
     return out
 
 
+def calibrate_kinematics(
+    q_upper_arm_s2g: np.ndarray,
+    q_forearm_s2g: np.ndarray,
+    t_ns: np.ndarray,
+    config: KinematicsConfig = KinematicsConfig(),
+    *,
+    q_segment_to_sensor: dict[str, np.ndarray] | None = None,
+    q_trunk_s2g: np.ndarray | None = None,
+) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
+    """The neutral-posture calibration: (global-to-trunk quaternion per segment, the trunk sensor's mean neutral
+    orientation or None), from the samples of the neutral window (relative to ``t_ns[0]``)."""
+    mount = q_segment_to_sensor or {}
+    window = config.calibration.window_mask(t_ns)
+    if not window.any():
+        raise ValueError(
+            f"the neutral window {config.calibration.window_s} s holds no sample "
+            f"(recording lasts {(int(t_ns[-1]) - int(t_ns[0])) * 1e-9:.2f} s)"
+        )
+    fk_n = forward_kinematics(np.radians(config.calibration.pose_deg), config.model)
+    g2t = {}
+    for seg, q, r_model in (
+        ("upper_arm", q_upper_arm_s2g, fk_n.r_upper_arm),
+        ("forearm", q_forearm_s2g, fk_n.r_forearm),
+    ):
+        m = np.asarray(mount.get(seg, quat.IDENTITY), dtype=np.float64)
+        g2t[seg] = fit_global_to_trunk(np.asarray(q)[window], r_model, m, config.calibration.mode)
+    q_tn = None
+    if q_trunk_s2g is not None:
+        q_t = np.asarray(q_trunk_s2g, dtype=np.float64)
+        q_tn = quat.average(q_t[window][np.all(np.isfinite(q_t[window]), axis=1)])
+    return g2t, q_tn
+
+
 def estimate_kinematics(
     q_upper_arm_s2g: np.ndarray,
     q_forearm_s2g: np.ndarray,
@@ -78,38 +111,40 @@ def estimate_kinematics(
     constrained: bool = True,
     q_segment_to_sensor: dict[str, np.ndarray] | None = None,
     q_trunk_s2g: np.ndarray | None = None,
+    calibrated: tuple[dict[str, np.ndarray], np.ndarray | None] | None = None,
+    warm_start: dict[str, np.ndarray] | None = None,
 ) -> KinematicsEstimate:
     """Joint angles from sensor-to-global quaternions (N, 4) of the upper-arm and forearm sensors
     (or marker clusters) sampled at ``t_ns``; ``q_segment_to_sensor`` optional mounting rotations;
-    ``q_trunk_s2g`` (N, 4) an optional trunk sensor (or cluster) on the same samples."""
+    ``q_trunk_s2g`` (N, 4) an optional trunk sensor (or cluster) on the same samples.
+
+    A recording in windows: ``calibrated`` is :func:`calibrate_kinematics` of its first window, ``warm_start``
+    the previous window's last solutions (rad, keys ``unconstrained``/``constrained``): the windows then give
+    the angles of the whole, sample by sample."""
     mount = q_segment_to_sensor or {}
-    window = config.calibration.window_mask(t_ns)
-    if not window.any():
-        raise ValueError(
-            f"the neutral window {config.calibration.window_s} s holds no sample "
-            f"(recording lasts {(int(t_ns[-1]) - int(t_ns[0])) * 1e-9:.2f} s)"
+    if calibrated is None:
+        calibrated = calibrate_kinematics(
+            q_upper_arm_s2g, q_forearm_s2g, t_ns, config, q_segment_to_sensor=mount, q_trunk_s2g=q_trunk_s2g
         )
-    fk_n = forward_kinematics(np.radians(config.calibration.pose_deg), config.model)
-    rots, g2t = {}, {}
-    for seg, q, r_model in (
-        ("upper_arm", q_upper_arm_s2g, fk_n.r_upper_arm),
-        ("forearm", q_forearm_s2g, fk_n.r_forearm),
-    ):
+    g2t, q_tn = calibrated
+    rots = {}
+    for seg, q in (("upper_arm", q_upper_arm_s2g), ("forearm", q_forearm_s2g)):
         m = np.asarray(mount.get(seg, quat.IDENTITY), dtype=np.float64)
-        g2t[seg] = fit_global_to_trunk(np.asarray(q)[window], r_model, m, config.calibration.mode)
         rots[seg] = segment_rotations(q, g2t[seg], m)
     if q_trunk_s2g is not None:
         q_t = np.asarray(q_trunk_s2g, dtype=np.float64)
         if q_t.shape != (len(t_ns), 4):
             raise ValueError(f"q_trunk_s2g must have shape ({len(t_ns)}, 4), got {q_t.shape}")
-        q_tn = quat.average(q_t[window][np.all(np.isfinite(q_t[window]), axis=1)])
         trunk = quat.to_rotation_matrix(quat.multiply(quat.conjugate(q_tn), q_t))  # rotation since the posture
         for seg in rots:
             rots[seg] = np.einsum("nji,njk->nik", trunk, rots[seg])
+    warm = warm_start or {}
     q0 = np.radians(config.calibration.pose_deg)
     n = len(t_ns)
     t0 = time.perf_counter()
-    un = solve_sequence(rots["upper_arm"], rots["forearm"], config.model, q0_rad=q0, params=config.solver)
+    un = solve_sequence(
+        rots["upper_arm"], rots["forearm"], config.model, q0_rad=warm.get("unconstrained", q0), params=config.solver
+    )
     t1 = time.perf_counter()
     timing = {"unconstrained": (t1 - t0) * 1e3 / max(n, 1)}
     fk_un = _fk_nan(un.q_rad, config.model)
@@ -125,7 +160,7 @@ def estimate_kinematics(
             constrained=True,
             limits=config.limits,
             workspace=config.workspace,
-            q0_rad=np.clip(q0, lo, hi),
+            q0_rad=warm.get("constrained", np.clip(q0, lo, hi)),
             params=config.solver,
         )
         timing["constrained"] = (time.perf_counter() - t0) * 1e3 / max(n, 1)

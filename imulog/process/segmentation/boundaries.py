@@ -186,7 +186,7 @@ def refine_phase_boundaries(
     ``gyr_rad_s`` (N, 3) rad/s sampled at ``rate_hz``; ``start``/``end`` the phases to refine (e.g. after event
     correction). A boundary never crosses the neighbouring phase.
 
-    For a piece of a longer recording (:mod:`imulog.steps.long_phases`): ``cutoff_hz`` is the recording's
+    For a piece of a longer recording (:mod:`imulog.steps.phases_windows`): ``cutoff_hz`` is the recording's
     :func:`adaptive_cutoff_hz` (Hz), and ``bounds`` (samples of the piece, default ``(0, N)``) the end of the
     phase before the first and the start of the phase after the last, so the piece's filter margins lie outside.
     """

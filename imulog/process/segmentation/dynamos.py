@@ -111,6 +111,11 @@ def otsu_threshold(values: np.ndarray, bins: int = 256) -> float:
     if len(v) == 0 or v.max() == v.min():
         return float(v.max()) if len(v) else 0.0
     hist, edges = np.histogram(v, bins=bins)
+    return otsu_from_histogram(hist, edges)
+
+
+def otsu_from_histogram(hist: np.ndarray, edges: np.ndarray) -> float:
+    """Otsu's threshold from a histogram (counts per bin and the bin edges): maximal between-class variance."""
     centres = 0.5 * (edges[:-1] + edges[1:])
     w0 = np.cumsum(hist).astype(float)
     w1 = w0[-1] - w0

@@ -80,7 +80,8 @@ class PhaseResult:
     norm: np.ndarray
 
 
-def _template_movements(gyr, rate_hz, norm, params: PhaseParams):
+def template_movements(gyr, rate_hz, norm, params: PhaseParams):
+    """Movements of method ``template``: DynAMoS repetitions averaged into a template, matched over ``norm``."""
     seg = dynamos(gyr, rate_hz, params.dynamos)
     ph = segment_repetitions(seg.start, seg.end, seg.norm, rate_hz, params.repetitions)
     pad = int(round(params.template_pad_s * rate_hz))
@@ -128,7 +129,7 @@ def segment_phases(
     elif params.method == "double-threshold":
         start, end = double_threshold(gyr, rate_hz, params.double_threshold)
     elif params.method == "template":
-        start, end = _template_movements(gyr, rate_hz, norm, params)
+        start, end = template_movements(gyr, rate_hz, norm, params)
     else:
         raise ValueError(f"unknown segmentation method {params.method!r}; choose one of {', '.join(METHODS)}")
     if params.protocol == "r2g":

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from itertools import combinations
+from typing import Any
 
 import numpy as np
 
@@ -95,24 +96,40 @@ class Phases:
         return len(self.start)
 
 
-def split_repetitions(
-    norm: np.ndarray, n_repetitions: int, activity_fraction: float = 0.10
-) -> tuple[np.ndarray, np.ndarray]:
+def split_repetitions(norm: Any, n_repetitions: int, activity_fraction: float = 0.10) -> tuple[np.ndarray, np.ndarray]:
     """Split a recording into ``n_repetitions`` tasks (thesis 3.3.2); returns ``[start, end)`` sample ranges.
 
-    ``norm`` is the angular-velocity norm (rad/s). Each repetition runs from its first to its last
-    non-static sample.
+    ``norm`` is the angular-velocity norm (rad/s): an array, or a store read piece by piece (``chunks()``, see
+    :mod:`imulog.process.segmentation.reduce`). Each repetition runs from its first to its last non-static sample;
+    the cuts are the longest gaps between non-static samples (the earliest among equal ones).
     """
-    norm = np.asarray(norm, dtype=float)
-    active = np.flatnonzero(norm > activity_fraction * np.nanmax(norm))
-    if len(active) == 0 or n_repetitions < 1:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    gaps = np.diff(active)
-    k = min(n_repetitions - 1, len(gaps))
-    cut = np.sort(np.argsort(-gaps, kind="stable")[:k])
-    starts = np.concatenate([[active[0]], active[cut + 1]])
-    ends = np.concatenate([active[cut] + 1, [active[-1] + 1]])
-    return starts.astype(np.int64), ends.astype(np.int64)
+    from imulog.process.segmentation.reduce import ArrayStore, store_max, threshold_runs
+
+    store = norm if hasattr(norm, "chunks") else ArrayStore(np.asarray(norm, dtype=float))
+    level = activity_fraction * store_max(store)
+    rs, re = threshold_runs(iter([*store.chunks(), (len(store), np.zeros(0))]), level)
+    empty = np.zeros(0, dtype=np.int64)
+    if len(rs) == 0 or n_repetitions < 1:
+        return empty, empty
+    n_active = int((re - rs).sum())
+    k = min(n_repetitions - 1, n_active - 1)
+    pos_end = np.cumsum(re - rs) - 1  # position (among the active samples) of each run's last sample
+    gaps = rs[1:] - (re[:-1] - 1)  # the gap after each run but the last (>= 2); inside a run every gap is 1
+    inter = np.argsort(-gaps, kind="stable")[:k]
+    cuts = [(int(pos_end[i]), int(re[i]), int(rs[i + 1])) for i in inter]
+    taken = {int(pos_end[i]) for i in inter}
+    p, j = 0, 0
+    while len(cuts) < k:  # fewer gaps between runs than cuts: the earliest gaps of 1 inside the runs
+        while p > pos_end[j]:
+            j += 1
+        if p not in taken and p != pos_end[j]:
+            sample = int(rs[j] + p - (pos_end[j] - (re[j] - rs[j]) + 1))
+            cuts.append((p, sample + 1, sample + 1))
+        p += 1
+    cuts.sort()
+    starts = np.array([int(rs[0])] + [c[2] for c in cuts], dtype=np.int64)
+    ends = np.array([c[1] for c in cuts] + [int(re[-1])], dtype=np.int64)
+    return starts, ends
 
 
 def burst_mask(
@@ -440,7 +457,7 @@ def segment_repetitions(
     """
     start = np.asarray(start, dtype=np.int64)
     end = np.asarray(end, dtype=np.int64)
-    norm = np.asarray(norm, dtype=float)
+    norm = norm if hasattr(norm, "chunks") else np.asarray(norm, dtype=float)  # an array or a store
     n_rep = params.n_repetitions or max(1, int(round(len(start) / params.n_phases)))
     empty = np.zeros(0, dtype=np.int64)
     if len(start) == 0:
