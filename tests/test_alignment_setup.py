@@ -146,3 +146,16 @@ def test_gaitmap_feet_each_get_their_own_markers_and_one_clock(shared_data, tmp_
     assert left["drift_uncertainty_ppm"] is not None  # estimated on 38 s, or said why not
     assert left["drift_estimated"] or "not estimable" in left["drift_note"]
     assert "/derived/vicon/cluster_pose/left_sensor" in topics and "/derived/vicon/cluster_pose/right_sensor" in topics
+
+
+def test_cluster_markers_need_one_imu_named(tmp_path):
+    from click.testing import CliRunner
+
+    from imulog.cli import cli
+
+    sim = simulate_setup(seed=2, duration_s=20.0)
+    path = write_trial(tmp_path / "s.mcap", sim.recording)
+    res = CliRunner().invoke(
+        cli, ["process", "align", str(path), "--cluster-markers", "upper_arm_O,upper_arm_X,upper_arm_Y"]
+    )
+    assert res.exit_code == 1 and "choose it with --imu" in res.output and "Traceback" not in res.output

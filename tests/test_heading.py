@@ -96,3 +96,18 @@ def test_corrected_headings_agree_with_the_truth(oriented_setup, tmp_path):
             diffs.append(np.degrees(np.angle(np.mean(np.exp(1j * np.radians(d))))))
         print(f"\n{rec['source']}: heading offsets from the truth {', '.join(f'{x:.1f}' for x in diffs)} deg")
         assert all(abs(d) < 5.0 for d in diffs)  # both in the one (optical) world frame
+
+
+def test_info_says_whether_the_headings_relate(oriented_setup, tmp_path):
+    from click.testing import CliRunner
+
+    from imulog.cli import cli
+
+    _, src = oriented_setup
+    path = shutil.copy(src, tmp_path / "t.mcap")
+    res = CliRunner().invoke(cli, ["process", "heading", str(path), "--imu", "upper_arm", "--imu", "forearm"])
+    assert res.exit_code == 0 and "no common heading" in res.output and "not used: magnetometer" in res.output
+    info = CliRunner().invoke(cli, ["info", str(path)])
+    assert "heading: not related between" in info.output
+    bad = CliRunner().invoke(cli, ["process", "heading", str(path), "--static-pose", "3,1"])
+    assert bad.exit_code != 0 and "END must be after START" in bad.output

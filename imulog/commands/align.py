@@ -132,6 +132,10 @@ def process_align(
 
         with TrialReader(trial) as reader:
             n_imus = sum(t.startswith("/imu/") for t in reader.topics())
+        if names and len(imus) != 1 and n_imus > 1:
+            raise click.ClickException(
+                f"{trial}: --cluster-markers names the markers of one IMU: choose it with --imu (the trial has {n_imus})"
+            )
         if len(imus) > 1 or (not imus and n_imus > 1):
             from imulog.steps.align_setup import run_align_setup
 
