@@ -39,6 +39,7 @@ PROCESS_COMMANDS: dict[str, tuple[str, str]] = {
         "Sensor orientation and gravity-free acceleration.",
     ),
     "align": ("imulog.commands.align:process_align", "IMU-to-Vicon time lag, drift and frame rotation."),
+    "heading": ("imulog.commands.heading:process_heading", "One heading frame for the IMUs of a trial."),
     "phases": ("imulog.commands.phases:process_phases", "Movements, phases, repetitions and static intervals."),
     "trajectory": ("imulog.commands.trajectory:process_trajectory", "Wrist trajectories by integration methods."),
     "metrics": ("imulog.commands.metrics:process_metrics", "Clinical metrics: arm usage, activity, smoothness."),

@@ -66,3 +66,67 @@ def test_gaitmap_zupt_per_stride(shared_data, foot):
     assert 1.0 < r["stride_time_s"] < 1.3
     assert max(r["mean_abs_cm"].values()) < 4.0
     assert r["length_error_cm"] < 6.0
+
+
+def test_walking_period_finds_the_stride_and_not_a_drinking_task(shared_data):
+    from imulog.process.gait import walking_period
+    from imulog.simulate import simulate
+    from imulog.steps.common import mean_rate_hz
+
+    imu = pd.read_csv(shared_data / "gaitmap_foot" / "imu_sample.csv", header=[0, 1], index_col=0)["left_sensor"]
+    period, strength = walking_period(np.radians(imu[["gyr_x", "gyr_y", "gyr_z"]].to_numpy(float)), RATE_IMU)
+    assert 1.0 < period < 1.3 and strength > 0.5
+    drink = simulate("r2g", seed=0).recording.imus[0]
+    assert walking_period(drink.gyr, mean_rate_hz(drink.t_ns))[1] < 0.5
+
+
+def test_lever_arm_of_a_point_on_a_turning_body():
+    from imulog.process import quaternion as Q
+    from imulog.process.gait import lever_arm
+
+    rate, n = 100.0, 3000
+    t = np.arange(n) / rate
+    q = Q.from_rotation_vector(np.column_stack([0.6 * np.sin(2.1 * t), 0.4 * np.sin(1.3 * t + 1), 0.3 * np.sin(t)]))
+    origin = np.column_stack([0.3 * np.sin(0.9 * t), 0.2 * np.cos(1.7 * t), 0.05 * np.sin(3 * t)])
+    r_true = np.array([0.12, -0.03, 0.05])
+    p = origin + Q.rotate(q, np.tile(r_true, (n, 1)))
+    a = np.gradient(np.gradient(p, 1 / rate, axis=0), 1 / rate, axis=0) + [0, 0, 9.80665]
+    r, _ = lever_arm(Q.rotate_inverse(q, a), q, origin, q, rate)  # sensor axes on the body's
+    np.testing.assert_allclose(r, r_true, atol=2e-3)
+
+
+def test_evaluate_walks_per_stride_by_default(shared_data, tmp_path):
+    """The real gaitmap trial: `imulog process align` then `imulog evaluate` with no options find the walking
+    by the gyroscope, each foot's own cluster, and give the per-stride errors docs/gait.md publishes."""
+    from click.testing import CliRunner
+
+    from imulog.archive import TrialReader
+    from imulog.cli import cli
+
+    root = shared_data / "gaitmap_foot"
+    path = tmp_path / "gait.mcap"
+    run = CliRunner()
+    assert (
+        run.invoke(
+            cli, ["convert", str(root / "imu_sample.csv"), str(root / "mocap_sample.csv"), "-o", str(path)]
+        ).exit_code
+        == 0
+    )
+    assert run.invoke(cli, ["process", "align", str(path), "--no-resample"]).exit_code == 0
+    res = run.invoke(cli, ["evaluate", str(path)])
+    assert res.exit_code == 0, res.output
+    assert "walking (gyroscope period" in res.output
+    with TrialReader(path) as trial:
+        rec = trial.metadata["imulog.evaluation"]
+    assert rec["kind"] == "strides" and set(rec["feet"]) == {"left_sensor", "right_sensor"}
+    for foot, r in rec["feet"].items():
+        side = foot[0].upper()
+        assert all(m.startswith(f"{side}_") for m in r["markers"])
+        m = r["mean_abs_cm"]
+        print(
+            f"\n{foot}: {r['count']} strides, x/y/z {m['x']:.2f}/{m['y']:.2f}/{m['z']:.2f} cm, "
+            f"length {r['length_error_cm']:.2f} cm, lever arm {r['lever_arm_m']} m"
+        )
+        assert r["count"] >= 28 and 1.0 < r["stride_time_s"] < 1.3
+        assert max(m.values()) <= 3.0  # issue 27: at most 3 cm per axis, mean over strides, on both feet
+        assert r["length_error_cm"] < 6.0

@@ -15,7 +15,13 @@ _D = AlignmentParams()
 
 @click.command("align")
 @click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--imu", default=None, help="IMU name (channel /imu/NAME); default: the only IMU, else 'wrist'.")
+@click.option(
+    "--imu",
+    "imus",
+    multiple=True,
+    help="IMU name (channel /imu/NAME), repeatable; default: every IMU of the trial, each paired with its own "
+    "rigid marker cluster.",
+)
 @click.option("--markers", default=None, help="Marker channel /markers/NAME; default: the only one, else 'vicon'.")
 @click.option("--window", "window_s", type=float, default=_D.window_s, show_default=True, help="Lag window length, s.")
 @click.option(
@@ -68,7 +74,7 @@ _D = AlignmentParams()
 @click.option("--force", is_flag=True, help="Recompute even when the same parameters are already recorded.")
 def process_align(
     trial: Path,
-    imu: str | None,
+    imus: tuple[str, ...],
     markers: str | None,
     window_s: float,
     window_start_s: float,
@@ -82,7 +88,12 @@ def process_align(
     as_json: bool,
     force: bool,
 ) -> None:
-    """Align the IMU with the Vicon markers of TRIAL (clock and frames).
+    """Align the IMUs with the Vicon markers of TRIAL (clock and frames).
+
+    Every IMU of the trial by default: each is paired one to one with its own rigid marker cluster, searched
+    among all markers (any naming); markers not rigid with the rest of a cluster are dropped; the IMUs of one
+    recording get one clock offset and drift fitted to all of them together, and an IMU without a cluster
+    gets that clock and is flagged as having no frame alignment. Per IMU, as below:
 
     Finds the rigid marker set that moves with the IMU (marker triads ranked by rigidity and by how well
     their angular velocity matches the gyroscope), cross-correlates the angular-velocity norms over
@@ -94,7 +105,8 @@ def process_align(
 
     \b
     Examples:
-      imulog process align trial.mcap
+      imulog process align trial.mcap                  # every IMU
+      imulog process align trial.mcap --imu left_foot --imu right_foot
       imulog process align trial.mcap --window 60 --no-drift
       imulog process align trial.mcap --cluster-markers Subject:O,Subject:X,Subject:Y
       imulog process align trial.mcap --cluster-markers WRIST        # one marker: its acceleration
@@ -116,9 +128,24 @@ def process_align(
         markers=names,
     )
     try:
-        outcome = run_align(trial, imu=imu, markers=markers, params=params, resample=resample, force=force)
         from imulog.archive import TrialReader
 
+        with TrialReader(trial) as reader:
+            n_imus = sum(t.startswith("/imu/") for t in reader.topics())
+        if names and len(imus) != 1 and n_imus > 1:
+            raise click.ClickException(
+                f"{trial}: --cluster-markers names the markers of one IMU: choose it with --imu (the trial has {n_imus})"
+            )
+        if len(imus) > 1 or (not imus and n_imus > 1):
+            from imulog.steps.align_setup import run_align_setup
+
+            outcome = run_align_setup(
+                trial, imus=list(imus) or None, markers=markers, params=params, resample=resample, force=force
+            )
+        else:
+            outcome = run_align(
+                trial, imu=imus[0] if imus else None, markers=markers, params=params, resample=resample, force=force
+            )
         with TrialReader(trial) as reader:
             rec = reader.metadata.get("imulog.alignment", {})
     except (ArchiveError, ValueError, KeyError, OSError) as exc:
@@ -127,6 +154,13 @@ def process_align(
         click.echo(json.dumps(rec, indent=1, default=str))
         return
     prefix = "unchanged (same inputs and parameters): " if outcome.skipped else ""
+    if rec.get("setup") and outcome.step == "align" and (len(imus) != 1):
+        from imulog.steps.align_summary import setup_lines
+
+        click.echo(f"{trial}: {prefix}{len(rec['setup'])} IMUs aligned")
+        for line in setup_lines(rec):
+            click.echo(f"  {line}")
+        return
     q = rec.get("rotation_imu_to_cluster")
     lines = alignment_summary(rec)
     if q:

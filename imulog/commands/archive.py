@@ -167,13 +167,29 @@ def _echo_alignment(record: dict) -> None:
     """The IMU-to-Vicon alignment: offset and drift with uncertainty, markers, windows, quality flag."""
     if not record:
         return
-    from imulog.steps.align_summary import alignment_summary
+    from imulog.steps.align_summary import alignment_summary, setup_lines
 
+    if record.get("setup"):  # several IMUs aligned together: one line per IMU, then the clocks
+        click.echo(f"alignment ({len(record['setup'])} IMUs on {record.get('reference', '?')}):")
+        for line in setup_lines(record):
+            click.echo(f"  {line}")
+        return
     lines = alignment_summary(record)
     if lines:
         click.echo(f"alignment ({record.get('imu', '?')} on {record.get('reference', '?')}): {lines[0]}")
         for line in lines[1:]:
             click.echo(f"  {line}")
+
+
+def _echo_heading(record: dict) -> None:
+    """Whether the oriented IMUs share one heading frame (``imulog process heading``)."""
+    if not record:
+        return
+    names = ", ".join(record.get("imus") or {})
+    if record.get("source") == "none":
+        click.echo(f"heading: not related between {names}: " + "; ".join(record.get("rejected") or []))
+    else:
+        click.echo(f"heading: one frame for {names}: {record.get('source')} ({record.get('frame')})")
 
 
 def _echo_wrapped(text: str, width: int | None) -> None:
@@ -265,6 +281,7 @@ def info(file: str, verbose: bool, as_json: bool) -> None:
         click.echo(_cut(f"  {name}: {text}", width))
     _echo_periods(data["metadata"].get("imulog.metrics") or {})
     _echo_alignment(data["metadata"].get("imulog.alignment") or {})
+    _echo_heading(data["metadata"].get("imulog.heading") or {})
     _echo_phase_quality(data["metadata"].get("imulog.timing") or {})
     failed = [c for c in data["channels"] if c["metadata"].get("assumptions") == "failed"]
     if failed:  # trajectories whose method does not apply to this recording (issue 32)

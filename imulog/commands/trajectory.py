@@ -180,9 +180,25 @@ def process_trajectory(
     show_default=True,
     help="Drop samples across reference gaps longer than this, s.",
 )
+@click.option(
+    "--strides/--windows",
+    "strides",
+    default=None,
+    help="Per stride and foot (a walking trial; default when the task or the gyroscope says walking) or over "
+    "the trajectory step's windows (default otherwise).",
+)
+@click.option("--imu", "imus", multiple=True, help="With --strides: the foot IMUs (repeatable; default: every one).")
 @click.option("--json", "as_json", is_flag=True, help="Print the imulog.evaluation record as JSON.")
 @click.option("--force", is_flag=True, help="Recompute even when up to date.")
-def evaluate(trial: Path, methods: str | None, max_gap: float, as_json: bool, force: bool) -> None:
+def evaluate(
+    trial: Path,
+    methods: str | None,
+    max_gap: float,
+    strides: bool | None,
+    imus: tuple[str, ...],
+    as_json: bool,
+    force: bool,
+) -> None:
     """Compare every /derived/trajectory/* with the Vicon cluster origin; print the Table-3.1 summary.
 
     Per repetition and axis: mean absolute error (cm), error as % of the Vicon range of motion, RMSE,
@@ -191,16 +207,37 @@ def evaluate(trial: Path, methods: str | None, max_gap: float, as_json: bool, fo
     error exceeds the motion itself, and whether each method beats the dedrift baseline; warnings name the
     methods whose assumptions failed. The result is stored as the imulog.evaluation metadata record.
 
+    A walking trial (task walk/gait in imulog.trial, or a gyroscope repeating at a stride's period) is
+    evaluated per stride and per foot instead, like gaitmap: each foot IMU aligned with its cluster
+    (imulog process align) gets a ZUPT trajectory between its zero-velocity intervals, compared stride by
+    stride with the point of its cluster where the IMU sits: stride length, time, foot clearance and the
+    position error per axis (docs/gait.md).
+
     \b
     Examples:
       imulog evaluate trial.mcap
       imulog evaluate trial.mcap --method zupt,optimized --json > errors.json
+      imulog evaluate walk.mcap --strides --imu left_foot
     """
     from imulog.archive.errors import ArchiveError
     from imulog.steps.common import error_line
     from imulog.steps.evaluate import run_evaluate, table_from_record
 
     try:
+        from imulog.steps.evaluate import walking_of
+
+        walking = walking_of(trial) if strides is None else ({"source": "asked"} if strides else None)
+        if walking is not None:
+            from imulog.steps.gait_evaluate import run_gait_evaluate, stride_table
+
+            _, record = run_gait_evaluate(trial, imus=list(imus) or None, walking=walking, force=force)
+            if as_json:
+                click.echo(json.dumps(record, indent=1, default=float))
+                return
+            why = walking.get("task") or f"gyroscope period {walking.get('period_s')} s"
+            click.echo(f"{trial}: walking ({why}): per stride, against each foot's cluster (mean over strides)")
+            click.echo(stride_table(record))
+            return
         _, record = run_evaluate(trial, methods=_methods(methods) if methods else None, max_gap_s=max_gap, force=force)
     except (ArchiveError, ValueError, KeyError, OSError) as exc:
         raise click.ClickException(error_line(trial, exc)) from None

@@ -48,9 +48,11 @@ __all__ = [
     "FilterParams",
     "LagEstimate",
     "align",
+    "align_frames",
     "align_marker",
     "assess_quality",
     "fit_clock",
+    "fit_window_lags",
     "angular_velocity_from_rotations",
     "cluster_frame_oxy",
     "cluster_frame_svd",
@@ -83,7 +85,9 @@ class AlignmentParams:
     O, X, Y as in the thesis) or ``svd`` (the ``markers`` given, >= 3; one marker aligns on its
     acceleration); ``markers`` names with or without the ``Subject:`` prefix; ``bias_min_static_s``: static
     periods (gyro norm < 0.1 rad/s) at least this long give the gyroscope bias removed before the rotation
-    fit. ``poor_*`` thresholds flag a poor alignment (``quality``); under ``min_valid_score`` there is no
+    fit. A trial too short for three windows is cut into up to ``short_windows`` windows of at least
+    ``short_window_s`` (5 s) for the drift, which is applied only when its standard error is at most
+    ``max_drift_uncertainty_ppm`` (20 ppm), else reported as not estimable. ``poor_*`` thresholds flag a poor alignment (``quality``); under ``min_valid_score`` there is no
     alignment at all (the step fails and writes nothing).
     """
 
@@ -111,6 +115,9 @@ class AlignmentParams:
     poor_spread_s: float = 0.003
     poor_min_windows: int = 3
     poor_vector_match: float = 0.9
+    short_window_s: float = 5.0
+    short_windows: int = 6
+    max_drift_uncertainty_ppm: float = 20.0
 
 
 def _fit_line(
@@ -178,7 +185,7 @@ def fit_clock(
     )
     prior = coarse.offset_ns if coarse_offset_ns is None else int(coarse_offset_ns)
     usable = span_s - params.window_start_s - params.drift_end_margin_s
-    n_win = max(1, int(np.floor(usable / params.window_s + 0.5)))
+    n_win = _n_windows(usable, params)
     width = usable / n_win
     windows = []
     x_ref = np.asarray(x_ref, dtype=np.float64)
@@ -214,9 +221,10 @@ def fit_clock(
         else:
             w["used"] = True
         windows.append(w)
-    used = [w for w in windows if w["used"]]
     result: dict = {"coarse_offset_ns": int(coarse.offset_ns), "coarse_score": round(coarse.score, 4)}
-    if not used:
+    if n_win > 1 and n_win * params.window_s > usable + 1e-9:
+        result["short_trial_windows_s"] = round(width, 3)
+    if not any(w["used"] for w in windows):
         # nothing better than the coarse lag over the whole recording
         result.update(
             offset_ns=int(coarse.offset_ns),
@@ -230,13 +238,41 @@ def fit_clock(
             windows=windows,
         )
         return result
+    result.update(fit_window_lags(windows, width, params))
+    result["windows"] = windows
+    return result
+
+
+def _n_windows(usable_s: float, params: AlignmentParams) -> int:
+    """Windows across ``usable_s`` seconds: about ``window_s`` each; a trial too short for three of them
+    (with ``drift``) is cut into windows of at least ``short_window_s`` so that the drift is estimated from
+    the whole trial (at most ``short_windows``), its uncertainty deciding whether it is applied."""
+    n = max(1, int(np.floor(usable_s / params.window_s + 0.5)))
+    if params.drift and n < 3 and usable_s >= 3 * params.short_window_s:
+        n = max(n, min(params.short_windows, int(usable_s // params.short_window_s)))
+    return n
+
+
+def fit_window_lags(windows: list[dict], width_s: float, params: AlignmentParams = AlignmentParams()) -> dict:
+    """Offset and drift fitted to the lags of the ``used`` windows (dicts with ``t_dev_center_ns``,
+    ``offset_ns``, ``score``; from one IMU, or pooled from every IMU of one recording, which share a clock).
+
+    Robust line (Theil-Sen, then least squares without outliers beyond ``outlier_k`` robust sd and
+    ``outlier_floor_s``); windows found outliers get ``used = False, why = "outlier"`` and every used one its
+    ``residual_ns`` (in place). The drift is fitted with at least 3 windows spanning 1.5 widths; when its
+    standard error exceeds ``max_drift_uncertainty_ppm`` it is not estimable: drift 0, ``drift_estimated``
+    False, the uncertainty kept and ``drift_note`` saying why. Returns the clock fields of :func:`fit_clock`.
+    """
+    used = [w for w in windows if w.get("used")]
+    if not used:
+        raise ValueError("no usable window to fit the clock")
     keep = np.ones(len(used), dtype=bool)
     tc = np.array([w["t_dev_center_ns"] for w in used], dtype=np.int64)
     off = np.array([w["offset_ns"] for w in used], dtype=np.int64)
     t0 = int(np.round(np.mean(tc)))
     ts = (tc - t0) / NS
     ys = (off - off[0]) / NS  # s, relative (float precision)
-    can_drift = params.drift and len(used) >= 3 and np.ptp(ts) >= 1.5 * width
+    can_drift = params.drift and len(used) >= 3 and np.ptp(ts) >= 1.5 * width_s
     for it in range(3):
         if can_drift and keep.sum() >= 3:
             # first pass Theil-Sen (median of pairwise slopes): one bad window at an end of the trial has the
@@ -253,8 +289,16 @@ def fit_clock(
     t0 = int(np.round(np.mean(tc[keep])))
     ts = (tc - t0) / NS
     drift_ok = can_drift and keep.sum() >= 3
+    note = None
     if drift_ok:
         a, b, se_a, se_b, _ = _fit_line(ts[keep], ys[keep], params.window_lag_sd_s, 2.0)
+        if np.isfinite(se_b) and se_b * 1e6 > params.max_drift_uncertainty_ppm:
+            note = (
+                f"drift not estimable: {b * 1e6:.0f} ± {se_b * 1e6:.0f} ppm over {np.ptp(ts[keep]):.0f} s "
+                f"(uncertainty > {params.max_drift_uncertainty_ppm:g} ppm)"
+            )
+            drift_ok, b = False, 0.0
+            a = float(np.mean(ys[keep]))
     else:
         a, b = float(np.median(ys[keep])), 0.0
         n = int(keep.sum())
@@ -272,18 +316,19 @@ def fit_clock(
             w["why"] = "outlier"
     scores = [w["score"] for w in used if w["used"]]
     spread = float(np.std(r[keep], ddof=1)) if keep.sum() >= 3 else float("nan")
-    result.update(
-        offset_ns=int(off[0] + round(a * NS)),
-        drift_ppm=float(b * 1e6),
-        t0_ns=t0,
-        offset_uncertainty_ns=None if not np.isfinite(se_a) else int(round(se_a * NS)),
-        drift_uncertainty_ppm=None if not np.isfinite(se_b) else float(se_b * 1e6),
-        drift_estimated=bool(drift_ok),
-        score=float(np.median(scores)),
-        residual_spread_ns=None if not np.isfinite(spread) else int(round(spread * NS)),
-        windows=windows,
-    )
-    return result
+    out = {
+        "offset_ns": int(off[0] + round(a * NS)),
+        "drift_ppm": float(b * 1e6),
+        "t0_ns": t0,
+        "offset_uncertainty_ns": None if not np.isfinite(se_a) else int(round(se_a * NS)),
+        "drift_uncertainty_ppm": None if not np.isfinite(se_b) else float(se_b * 1e6),
+        "drift_estimated": bool(drift_ok),
+        "score": float(np.median(scores)),
+        "residual_spread_ns": None if not np.isfinite(spread) else int(round(spread * NS)),
+    }
+    if note:
+        out["drift_note"] = note
+    return out
 
 
 def assess_quality(record: dict, params: AlignmentParams = AlignmentParams()) -> tuple[str, list[str]]:
@@ -459,6 +504,23 @@ def align(
     wn_dev = np.linalg.norm(gyr, axis=1)
     wn_ref = np.linalg.norm(cluster.omega_local_rad_s, axis=1)
     result = fit_clock(t_imu, wn_dev, cluster.t_ns, wn_ref, params, coarse_offset_ns)
+    return align_frames(t_imu, gyr, cluster, result, params, q_imu_s2g)
+
+
+def align_frames(
+    t_imu_ns: np.ndarray,
+    gyr_rad_s: np.ndarray,
+    cluster: ClusterKinematics,
+    clock: dict,
+    params: AlignmentParams = AlignmentParams(),
+    q_imu_s2g: np.ndarray | None = None,
+) -> dict:
+    """The frame part of :func:`align` on a given clock (``clock``: the fields of :func:`fit_clock`, e.g. the
+    clock shared by the IMUs of one recording): the record with ``rotation_imu_to_cluster``, ``vector_match``
+    and, with ``q_imu_s2g``, ``rotation_global_to_world``."""
+    t_imu = np.asarray(t_imu_ns, dtype=np.int64)
+    gyr = np.asarray(gyr_rad_s, dtype=np.float64)
+    result = dict(clock)
     result["signal"] = "angular-velocity-norm"
     # IMU samples on the reference clock, gyro resampled at the Vicon times
     t_imu_ref = device_to_reference(t_imu, result)

@@ -106,3 +106,74 @@ def stride_errors(est_m: np.ndarray, ref_m: np.ndarray, t_s: np.ndarray, strides
         "clearance_error_cm": float(np.mean(np.abs(p_est["clearance_m"] - p_ref["clearance_m"])) * 100),
         "stride_time_s": float(np.mean(p_est["time_s"])),
     }
+
+
+def zero_velocity(
+    gyr_rad_s: np.ndarray, rate_hz: float, threshold_rad_s: float = 0.6, min_s: float = 0.05
+) -> np.ndarray:
+    """Foot at rest (N,) bool: the gyroscope norm stays under ``threshold_rad_s`` for ``min_s`` around the
+    sample (a moving window entirely under it); NaN samples are not at rest."""
+    g = np.linalg.norm(np.asarray(gyr_rad_s, dtype=float), axis=1)
+    under = np.nan_to_num(g, nan=np.inf) < threshold_rad_s
+    k = max(1, int(round(min_s * rate_hz)))
+    return np.convolve(under.astype(float), np.ones(k) / k, mode="same") > 1 - 1e-9
+
+
+def walking_period(
+    gyr_rad_s: np.ndarray, rate_hz: float, min_s: float = 0.7, max_s: float = 2.5, span_s: float = 120.0
+) -> tuple[float, float]:
+    """Stride period (s) and its strength: the highest autocorrelation of the gyroscope norm at a lag between
+    ``min_s`` and ``max_s`` (a stride of walking), over at most ``span_s`` from the middle of the recording at
+    about 25 Hz. Strength near 1 for steady walking; a drinking task or a still sensor stays well under 0.5."""
+    g = np.linalg.norm(np.asarray(gyr_rad_s, dtype=float), axis=1)
+    step = max(1, int(rate_hz // 25))
+    g, rate = g[::step], rate_hz / step
+    n = min(len(g), int(span_s * rate))
+    mid = (len(g) - n) // 2
+    x = np.nan_to_num(g[mid : mid + n], nan=0.0)
+    x = x - x.mean()
+    lo, hi = int(min_s * rate), int(max_s * rate)
+    if n < 2 * hi or not np.any(x):
+        return float("nan"), 0.0
+    den = float(np.dot(x, x))
+    ac = np.array([np.dot(x[:-k], x[k:]) / den * n / (n - k) for k in range(lo, hi + 1)])
+    k = int(np.argmax(ac))
+    return (lo + k) / rate, float(ac[k])
+
+
+def lever_arm(
+    acc_sensor_mps2: np.ndarray,
+    q_world_sensor: np.ndarray,
+    origin_m: np.ndarray,
+    q_world_cluster: np.ndarray,
+    rate_hz: float,
+    cutoff_hz: float = 6.0,
+) -> tuple[np.ndarray, float]:
+    """Where the IMU sits in its marker cluster's frame (m), from accelerations alone.
+
+    On common samples (``rate_hz``): the accelerometer rotated into the world (``q_world_sensor``, i.e. the
+    cluster orientation times the IMU-to-cluster rotation) plus gravity is the IMU's acceleration, which equals
+    the cluster origin's acceleration plus the second derivative of ``R_world_cluster(t) r``: linear in ``r``,
+    solved by least squares over the trial (both sides low-passed at ``cutoff_hz``). Independent of any
+    integrated trajectory. Returns ``(r (3,), rms residual m/s^2)``."""
+    from imulog.process import quaternion as quat
+    from imulog.process.alignment_search import lowpass_vector
+
+    a_w = quat.rotate(np.asarray(q_world_sensor, dtype=float), np.asarray(acc_sensor_mps2, dtype=float))
+    a_w = lowpass_vector(a_w - np.array([0.0, 0.0, 9.80665]), rate_hz, cutoff_hz)
+    dt = 1.0 / rate_hz
+
+    def second(x: np.ndarray) -> np.ndarray:
+        y = np.full_like(x, np.nan)
+        y[1:-1] = (x[2:] - 2 * x[1:-1] + x[:-2]) / dt**2
+        return y
+
+    a_o = second(np.asarray(origin_m, dtype=float))
+    r_wc = quat.to_rotation_matrix(np.asarray(q_world_cluster, dtype=float)).reshape(-1, 9)
+    r_dd = second(r_wc).reshape(-1, 3, 3)
+    ok = np.all(np.isfinite(a_w), 1) & np.all(np.isfinite(a_o), 1) & np.all(np.isfinite(r_dd.reshape(-1, 9)), 1)
+    if ok.sum() < 50:
+        raise ValueError("too few samples with both the IMU and the cluster to place the IMU on the cluster")
+    a_mat, b = r_dd[ok].reshape(-1, 3), (a_w[ok] - a_o[ok]).reshape(-1)
+    r, *_ = np.linalg.lstsq(a_mat, b, rcond=None)
+    return r, float(np.sqrt(np.mean((a_mat @ r - b) ** 2)))

@@ -247,13 +247,37 @@ def _compute(
         record["reference_marker"] = info["markers"][0]
     record = {"reference": marker_topic, "imu": f"/imu/{imu_name}", **record, "cluster": info}
     record["quality"], record["quality_reasons"] = al.assess_quality(record, params)
+    streams = alignment_streams(
+        imu_name, ck, record, t_imu_ns, gyr, t_vic_ns, vic_rate, orientation, acc_global, resample
+    )
+    return streams, _jsonable(record)
+
+
+def alignment_streams(
+    imu_name: str,
+    ck,
+    record: dict,
+    t_imu_ns: np.ndarray,
+    gyr: np.ndarray,
+    t_vic_ns: np.ndarray,
+    vic_rate: float,
+    orientation: tuple[np.ndarray, np.ndarray] | None,
+    acc_global: tuple[np.ndarray, np.ndarray] | None,
+    resample: bool,
+    suffix: str = "",
+) -> list:
+    """The step's streams for one IMU: its cluster's pose and angular velocity (``/derived/vicon/cluster_pose``
+    and ``/derived/vicon/angular_velocity``, plus ``suffix``, e.g. ``/left_foot`` in a trial of several IMUs)
+    when it has a cluster, and with ``resample`` the IMU-derived channels on the reference clock."""
     streams: list = []
     if ck is not None:
         ok = ~ck.missing
         streams += [
-            PoseStream("/derived/vicon/cluster_pose", ck.t_ns[ok], ck.origin_m[ok], ck.quat_c2w[ok], frame_id="world"),
+            PoseStream(
+                "/derived/vicon/cluster_pose" + suffix, ck.t_ns[ok], ck.origin_m[ok], ck.quat_c2w[ok], frame_id="world"
+            ),
             SignalStream(
-                "/derived/vicon/angular_velocity",
+                "/derived/vicon/angular_velocity" + suffix,
                 ck.t_ns,
                 ["wx", "wy", "wz"],
                 ["rad/s"] * 3,
@@ -300,7 +324,7 @@ def _compute(
                     frame_id=f"{imu_name}_global",
                 )
             )
-    return streams, _jsonable(record)
+    return streams
 
 
 def _jsonable(value):
@@ -331,15 +355,16 @@ def run_align(
     resample: bool = True,
     force: bool = False,
 ):
-    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome."""
+    """Run the step for one IMU of a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
+    Every IMU of a trial at once: :func:`imulog.steps.align_setup.run_align_setup`."""
     params = params or al.AlignmentParams()
     from imulog.archive import TrialReader
     from imulog.steps.base import StepResult, run_step
 
     with TrialReader(path) as trial:
         topics = trial.topics()
-        name = pick_imu(topics, imu)
-        mname = pick_markers(topics, markers)
+    name = pick_imu(topics, imu)
+    mname = pick_markers(topics, markers)
     imu_topic, marker_topic = f"/imu/{name}", f"/markers/{mname}"
     o_topic, a_topic = f"/derived/orientation/{name}", f"/derived/acc_global/{name}"
     inputs = [imu_topic, marker_topic] + [t for t in (o_topic, a_topic) if t in topics]
@@ -383,7 +408,11 @@ def run_align(
 
 def alignment_problem(metadata: dict, imu_topic: str | None = None) -> str | None:
     """Why the trial has no usable ``imulog.alignment`` record (for ``imu_topic`` when given), else None."""
+    from imulog.steps.common import alignment_for
+
     record = metadata.get("imulog.alignment")
+    if imu_topic is not None:
+        record = alignment_for(metadata, imu_topic) or record
     if not record or "offset_ns" not in record:
         return "no IMU-to-Vicon alignment"
     if imu_topic is not None and record.get("imu") not in (None, "", imu_topic):
@@ -401,4 +430,7 @@ def require_alignment(metadata: dict, path, imu_topic: str | None = None, *, nee
         raise ValueError(
             f"{problem}: {needed_for} needs the IMU on the Vicon clock; run `imulog process align {path}{imu}` first"
         )
-    return dict(metadata["imulog.alignment"])
+    from imulog.steps.common import alignment_for
+
+    own = alignment_for(metadata, imu_topic) if imu_topic else None
+    return dict(own or metadata["imulog.alignment"])

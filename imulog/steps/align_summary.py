@@ -53,3 +53,33 @@ def alignment_summary(record: dict) -> list[str]:
         reasons = record.get("quality_reasons") or []
         lines.append(f"quality {quality}{': ' + '; '.join(reasons) if reasons else ''}")
     return lines
+
+
+def setup_lines(record: dict) -> list[str]:
+    """Lines about a whole setup's alignment (``imulog.alignment["setup"]``): one per IMU, then the clocks."""
+    setup = record.get("setup") or {}
+    lines = []
+    for name, r in setup.items():
+        off = r.get("offset_ms")
+        own = r.get("own_offset_ms")
+        markers = ",".join(r.get("markers") or []) or "no cluster"
+        vm = r.get("vector_match")
+        rej = r.get("rejected_markers")
+        lines.append(
+            f"{name}: offset {'-' if off is None else f'{off:.2f} ms'} ({r.get('clock') or '-'} clock"
+            f"{'' if own is None else f', own windows {own:.2f} ms'}), {markers}"
+            f"{'' if vm is None else f' (vector match {vm:.3f})'}"
+            f"{(', dropped ' + ','.join(rej)) if rej else ''}"
+            f"{'' if r.get('frame_alignment') else ', no frame alignment'}, quality {r.get('quality')}"
+        )
+    drift = record.get("drift_ppm")
+    unc = record.get("drift_uncertainty_ppm")
+    note = record.get("drift_note")
+    lines.append(
+        f"drift {float(drift or 0):.1f} ppm{f' ± {unc:.1f}' if unc is not None else ''}"
+        f"{'' if record.get('drift_estimated') else ' (not estimated)'}" + (f": {note}" if note else "")
+    )
+    groups = (record.get("search") or {}).get("recordings") or []
+    if groups:
+        lines.append("recordings (one clock each): " + "; ".join(", ".join(g) for g in groups))
+    return lines

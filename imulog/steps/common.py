@@ -32,10 +32,12 @@ def pick_imu(topics: list[str], imu: str | None, *, prefix: str = "/imu/", missi
 
 
 def alignment_for(metadata: Mapping[str, Mapping[str, Any]], imu_topic: str) -> dict[str, Any] | None:
-    """The trial's ``imulog.alignment`` record if it concerns ``imu_topic`` (or names no IMU), else None."""
+    """The alignment record of ``imu_topic``: ``imulog.alignment`` if it concerns ``imu_topic`` (or names no
+    IMU), else ``imulog.alignment.{imu}`` (written when several IMUs are aligned together), else None."""
     record = metadata.get("imulog.alignment")
     if not record or record.get("imu") not in (None, "", imu_topic):
-        return None
+        own = metadata.get(f"imulog.alignment.{imu_topic.rsplit('/', 1)[-1]}")
+        return dict(own) if own and "offset_ns" in own else None
     return dict(record)
 
 

@@ -221,6 +221,26 @@ def alignment_note(record: dict[str, Any]) -> dict[str, Any]:
     return {k: record[k] for k in keys if k in record}
 
 
+def walking_of(path) -> dict[str, Any] | None:
+    """Why the trial at ``path`` is a walking trial (evaluated per stride), else None
+    (:func:`imulog.steps.gait_evaluate.walking_trial`)."""
+    from imulog.archive import TrialReader
+    from imulog.steps.common import mean_rate_hz
+    from imulog.steps.gait_evaluate import WALK_TASKS, walking_trial
+
+    with TrialReader(path) as trial:
+        metadata = trial.metadata
+        if str((metadata.get("imulog.trial") or {}).get("task", "")).lower() in WALK_TASKS:
+            return walking_trial(metadata, {})
+        gyros = {}
+        for topic in trial.topics():
+            if topic.startswith("/imu/"):
+                s = trial.read(topic)
+                if s.gyr is not None and len(s.t_ns) > 10:
+                    gyros[topic[5:]] = (s.gyr, mean_rate_hz(s.t_ns))
+    return walking_trial(metadata, gyros)
+
+
 def run_evaluate(path, *, methods: list[str] | None = None, max_gap_s: float = 0.05, force: bool = False):
     """Run the step on a trial file; returns ``(outcome, record)``."""
     from imulog.archive import TrialReader

@@ -1,0 +1,255 @@
+"""Step ``align`` on a whole setup: every IMU of the trial against every marker (issue 27).
+
+Run by ``imulog process align`` when the trial has several IMUs and none is named (or several are). Each IMU
+is paired one to one with its rigid marker cluster (:func:`imulog.process.alignment_setup.find_setup_clusters`),
+the IMUs of one recording get one clock fitted to all their windows together, and an IMU without a cluster
+gets its recording's clock and is flagged ``frame_alignment: false``. Writes
+
+* ``imulog.alignment.{imu}`` per IMU (the single-IMU record's keys, plus ``clock`` = ``shared`` or ``own``,
+  ``clock_group``, ``own_clock`` (what its windows alone give) and ``frame_alignment``);
+* ``imulog.alignment``: the record of the first paired IMU with ``setup`` (every IMU's offset, markers,
+  quality), so that readers of one alignment keep working;
+* per paired IMU ``/derived/vicon/cluster_pose/{imu}``, ``/derived/vicon/angular_velocity/{imu}`` and, with
+  ``resample``, ``/derived/reference/{gyr,orientation,acc_global}/{imu}``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from imulog.process import alignment as al
+from imulog.process.resample import resample_quaternions
+from imulog.steps.align import STEP, _jsonable, alignment_streams, compute_alignment, params_dict
+from imulog.steps.common import mean_rate_hz
+
+CLOCK_KEYS = (
+    "offset_ns",
+    "drift_ppm",
+    "t0_ns",
+    "offset_uncertainty_ns",
+    "drift_uncertainty_ppm",
+    "drift_estimated",
+    "drift_note",
+    "residual_spread_ns",
+    "score",
+)
+
+
+def _own_clock(record: dict) -> dict:
+    return {k: record.get(k) for k in ("offset_ns", "drift_ppm", "offset_uncertainty_ns", "score") if k in record}
+
+
+def compute_setup_alignment(
+    imus: dict[str, dict],
+    marker_topic: str,
+    t_vic_ns: np.ndarray,
+    labels: list[str],
+    pos_m: np.ndarray,
+    params: al.AlignmentParams,
+    device_meta: dict[str, dict],
+    resample: bool = True,
+) -> tuple[list, dict[str, dict], dict]:
+    """Pure part: ``imus`` name -> {t_ns, gyr, acc, orientation, acc_global} (the last two (t_ns, values) or
+    None). Returns (streams, records by IMU name, search summary)."""
+    from imulog.process.alignment_setup import find_setup_clusters, pooled_clock, recording_groups
+
+    vic_rate = mean_rate_hz(t_vic_ns)
+    usable = {n: d for n, d in imus.items() if d.get("gyr") is not None}
+    matches, summary = find_setup_clusters(
+        {n: (d["t_ns"], d["gyr"]) for n, d in usable.items()}, t_vic_ns, labels, pos_m, vic_rate, params
+    )
+    groups = recording_groups(list(imus), device_meta, {n: d["t_ns"] for n, d in imus.items()})
+    summary["recordings"] = groups
+    records: dict[str, dict] = {}
+    streams: list = []
+    for group in groups:
+        paired = [n for n in group if n in matches]
+        clock = None
+        if paired:
+            clock = pooled_clock([{**matches[n].record, "imu": n} for n in paired], params)
+        for name in group:
+            d = imus[name]
+            q_s2g = None
+            if d.get("orientation") is not None:
+                t_o, q_o = d["orientation"]
+                q_s2g = q_o if np.array_equal(t_o, d["t_ns"]) else resample_quaternions(t_o, q_o, d["t_ns"])
+            base = {"reference": marker_topic, "imu": f"/imu/{name}", "clock_group": list(group)}
+            if clock is None:
+                # no IMU of this recording has a cluster: each aligns on its own (a marker's acceleration)
+                try:
+                    s, rec = compute_alignment(
+                        name,
+                        d["t_ns"],
+                        d["gyr"],
+                        marker_topic,
+                        t_vic_ns,
+                        labels,
+                        pos_m,
+                        params,
+                        d.get("orientation"),
+                        d.get("acc_global"),
+                        resample,
+                        acc=d.get("acc"),
+                    )
+                except ValueError as exc:
+                    records[name] = {**base, "quality": "failed", "quality_reasons": [str(exc)]}
+                    continue
+                rec.update(
+                    clock="own", clock_group=list(group), frame_alignment=rec.get("rotation_imu_to_cluster") is not None
+                )
+                records[name] = rec
+                streams += [_renamed(x, name) for x in s]
+                continue
+            clock_fields = {k: clock[k] for k in CLOCK_KEYS if k in clock}
+            if name in matches:
+                m = matches[name]
+                rec = al.align_frames(d["t_ns"], d["gyr"], m.kinematics, clock_fields, params, q_imu_s2g=q_s2g)
+                rec.update(
+                    base,
+                    windows=[w for w in clock["windows"] if w.get("imu") == name],
+                    own_clock=_own_clock(m.record),
+                    clock="shared" if len(paired) > 1 else "own",
+                    frame_alignment=True,
+                    cluster={**m.info, "vector_match": round(float(rec["vector_match"]), 4)},
+                )
+                rec["method"] = m.record.get("method", "") + ";setup"
+                ck = m.kinematics
+            else:
+                rec = {
+                    **base,
+                    **clock_fields,
+                    "signal": "clock of the recording",
+                    "clock": "shared",
+                    "frame_alignment": False,
+                    "rotation_imu_to_cluster": None,
+                    "rotation_global_to_world": None,
+                    "cluster": None,
+                    "windows": [],
+                    "method": f"clock shared with {', '.join(paired)}",
+                }
+                ck = None
+            rec = {**base, **rec}
+            if ck is not None:
+                rec["quality"], rec["quality_reasons"] = al.assess_quality(rec, params)
+            else:
+                rec["quality"] = "poor"
+                rec["quality_reasons"] = [
+                    "no rigid marker cluster moves with this IMU: its clock is its recording's "
+                    f"({', '.join(paired)}), no frame alignment"
+                ]
+            records[name] = _jsonable(rec)
+            streams += alignment_streams(
+                name,
+                ck,
+                rec,
+                d["t_ns"],
+                d["gyr"],
+                t_vic_ns,
+                vic_rate,
+                d.get("orientation"),
+                d.get("acc_global"),
+                resample,
+                suffix=f"/{name}",
+            )
+    return streams, records, summary
+
+
+def _renamed(stream, name: str):
+    """A single-IMU stream under the per-IMU topic (``/derived/vicon/cluster_pose`` -> ``.../{name}``)."""
+    if stream.topic in ("/derived/vicon/cluster_pose", "/derived/vicon/angular_velocity"):
+        stream.topic = f"{stream.topic}/{name}"
+    return stream
+
+
+def setup_summary(records: dict[str, dict]) -> dict:
+    """Per IMU: offset (ms), drift, clock, markers, vector match, quality: the ``setup`` table."""
+    out = {}
+    for name, r in records.items():
+        c = r.get("cluster") or {}
+        out[name] = {
+            "offset_ms": None if r.get("offset_ns") is None else round(int(r["offset_ns"]) / 1e6, 3),
+            "own_offset_ms": None
+            if not (r.get("own_clock") or {}).get("offset_ns")
+            else round(int(r["own_clock"]["offset_ns"]) / 1e6, 3),
+            "drift_ppm": r.get("drift_ppm"),
+            "drift_estimated": r.get("drift_estimated"),
+            "clock": r.get("clock"),
+            "markers": c.get("markers"),
+            "rejected_markers": c.get("rejected_markers"),
+            "vector_match": c.get("vector_match"),
+            "frame_alignment": r.get("frame_alignment"),
+            "quality": r.get("quality"),
+        }
+    return out
+
+
+def run_align_setup(
+    path,
+    *,
+    imus: list[str] | None = None,
+    markers: str | None = None,
+    params: al.AlignmentParams | None = None,
+    resample: bool = True,
+    force: bool = False,
+):
+    """Align every IMU of the trial (or those named) with the markers; returns the run_step outcome."""
+    params = params or al.AlignmentParams()
+    from imulog.archive import TrialReader
+    from imulog.steps.align import pick_markers
+    from imulog.steps.base import StepResult, run_step
+
+    with TrialReader(path) as trial:
+        topics = trial.topics()
+    all_imus = [t[len("/imu/") :] for t in topics if t.startswith("/imu/")]
+    names = list(imus) if imus else all_imus
+    missing = [n for n in names if n not in all_imus]
+    if missing:
+        raise ValueError(f"no channel /imu/{missing[0]} in the trial (IMUs: {', '.join(all_imus) or 'none'})")
+    if not names:
+        raise ValueError("no /imu/* channel in the trial")
+    mname = pick_markers(topics, markers)
+    marker_topic = f"/markers/{mname}"
+    inputs = [f"/imu/{n}" for n in names] + [marker_topic]
+    inputs += [
+        f"/derived/{k}/{n}" for n in names for k in ("orientation", "acc_global") if f"/derived/{k}/{n}" in topics
+    ]
+
+    def compute(trial) -> StepResult:
+        mk = trial.read(marker_topic)
+        data = {}
+        device_meta = {}
+        for n in names:
+            s = trial.read(f"/imu/{n}")
+            d = {"t_ns": s.t_ns, "gyr": s.gyr, "acc": s.acc, "orientation": None, "acc_global": None}
+            for k, key in (("orientation", "orientation"), ("acc_global", "acc_global")):
+                topic = f"/derived/{k}/{n}"
+                if topic in inputs:
+                    x = trial.read(topic)
+                    d[key] = (x.t_ns, x.values)
+            data[n] = d
+            device_meta[n] = dict(trial.metadata.get(f"imulog.device.{n}") or {})
+        streams, records, summary = compute_setup_alignment(
+            data, marker_topic, mk.t_ns, mk.labels, mk.pos, params, device_meta, resample
+        )
+        ok = [n for n in names if records[n].get("quality") != "failed"]
+        if not ok:
+            raise ValueError(
+                f"{marker_topic}: no IMU could be aligned ("
+                + "; ".join(f"{n}: {records[n]['quality_reasons'][0]}" for n in names)
+                + ")"
+            )
+        primary = next((n for n in ok if records[n].get("frame_alignment")), ok[0])
+        table = setup_summary(records)
+        main = {**records[primary], "setup": table, "search": _jsonable(summary)}
+        metadata = {"imulog.alignment": main, **{f"imulog.alignment.{n}": records[n] for n in names}}
+        return StepResult(streams=streams, metadata=metadata)
+
+    return run_step(
+        path,
+        step=STEP,
+        algorithm="imulog.alignment.xcorr_wahba.setup",
+        params={"imus": names, "markers": mname, "resample": resample, **params_dict(params)},
+        inputs=inputs,
+        compute=compute,
+        force=force,
+    )

@@ -1,0 +1,170 @@
+"""Step ``heading``: one heading frame for the oriented IMUs of a trial (:mod:`imulog.process.heading`).
+
+Reads ``/derived/orientation/{imu}`` (and its ``global_frame`` param), ``/imu/{imu}`` for the magnetometer and
+the alignment records (``rotation_global_to_world``). Writes metadata ``imulog.heading``: ``source``
+(``magnetometer``, ``optical``, ``static pose`` or ``none``), ``frame`` (what the common frame is), per IMU its
+``correction`` (quaternion w,x,y,z, the IMU's global frame to the common one: ``q_common = correction *
+q_s2g``) and ``global_frame``, and ``rejected`` (why each better source did not apply). With one IMU there is
+nothing to relate and the step says so. :func:`common_heading` is what exports that combine IMUs read.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+STEP = "heading"
+
+
+def common_heading(metadata: dict[str, Any], imus: list[str]) -> tuple[dict[str, list[float]] | None, str]:
+    """Per IMU the correction into the trial's common heading frame, or None and a one-line warning (no
+    ``imulog.heading`` record, source ``none``, or an IMU it does not cover)."""
+    rec = metadata.get("imulog.heading") or {}
+    if not rec:
+        return None, "the IMUs' headings are not related (run `imulog process heading`)"
+    if rec.get("source") == "none":
+        return None, "the IMUs' headings are not related: " + "; ".join(rec.get("rejected") or [])
+    missing = [n for n in imus if n not in (rec.get("imus") or {})]
+    if missing:
+        return None, f"no common heading for {', '.join(missing)} (run `imulog process heading` again)"
+    return {n: rec["imus"][n]["correction"] for n in imus}, ""
+
+
+def compute_heading(
+    orientations: dict[str, tuple[np.ndarray, np.ndarray, str]],
+    mags: dict[str, tuple[np.ndarray, np.ndarray] | None],
+    alignments: dict[str, dict | None],
+    static_s: tuple[float, float] | None = None,
+    declared_deg: dict[str, float] | None = None,
+) -> dict[str, Any]:
+    """The ``imulog.heading`` record. ``orientations``: name -> (t_ns, q_s2g, global_frame); ``mags``: name ->
+    (t_ns, field uT) or None; ``alignments``: name -> alignment record or None; ``static_s``: a declared pose
+    (s from each IMU's first sample)."""
+    from imulog.process import heading as hd
+    from imulog.process.orientation import GLOBAL_FRAME_9D
+    from imulog.process.resample import resample_quaternions
+
+    names = list(orientations)
+    rejected: list[str] = []
+    frames = {n: orientations[n][2] for n in names}
+
+    def record(source: str, frame: str, corr: dict[str, np.ndarray] | None, **extra) -> dict[str, Any]:
+        imus = {
+            n: {
+                "global_frame": frames[n],
+                **({"correction": [float(v) for v in corr[n]]} if corr is not None else {}),
+            }
+            for n in names
+        }
+        return {"source": source, "frame": frame, "imus": imus, "rejected": rejected, **extra}
+
+    fields = {}
+    if all(mags.get(n) is not None for n in names):
+        try:
+            for n in names:
+                t_o, q, _ = orientations[n]
+                t_m, m = mags[n]
+                qm = q if np.array_equal(t_o, t_m) else resample_quaternions(t_o, q, t_m)
+                fields[n] = hd.field_in_global(qm, m)
+            corr, why = hd.magnetic_corrections(fields)
+        except ValueError as exc:
+            corr, why = None, str(exc)
+        if corr is not None and all(frames[n] == GLOBAL_FRAME_9D for n in names):
+            return record("magnetometer", "ENU (magnetic north; every orientation fused the field)", corr, field=fields)
+        if corr is None:
+            rejected.append(f"magnetometer: {why}")
+    else:
+        rejected.append("magnetometer: not every IMU has one")
+        corr = None
+    g2w = {n: (alignments.get(n) or {}).get("rotation_global_to_world") for n in names}
+    if all(v is not None for v in g2w.values()):
+        return record("optical", "the optical world (markers' frame)", {n: np.asarray(v) for n, v in g2w.items()})
+    no = [n for n, v in g2w.items() if v is None]
+    rejected.append(f"optical: no rotation global-to-world for {', '.join(no)} (align after orientation)")
+    if corr is not None:
+        return record("magnetometer", "ENU (magnetic north, from each IMU's field)", corr, field=fields)
+    if static_s is not None:
+        a, b = static_s
+        in_pose = {}
+        for n in names:
+            t, q, _ = orientations[n]
+            ts = (t - t[0]) / 1e9
+            in_pose[n] = q[(ts >= a) & (ts <= b)]
+        corr = hd.static_pose_corrections(in_pose, declared_deg)
+        return record(
+            "static pose",
+            f"sensor x headings in the pose {a:g}-{b:g} s set to "
+            + ("the declared ones" if declared_deg else f"{names[0]}'s"),
+            corr,
+        )
+    rejected.append("static pose: none declared (--static-pose START,END)")
+    return record("none", "none: each IMU keeps its own heading", None)
+
+
+def run_heading(
+    path,
+    *,
+    imus: list[str] | None = None,
+    static_s: tuple[float, float] | None = None,
+    declared_deg: dict[str, float] | None = None,
+    force: bool = False,
+):
+    """Run the step on a trial file; returns ``(outcome, record)``."""
+    from imulog.archive import TrialReader
+    from imulog.steps.base import StepResult, run_step
+    from imulog.steps.common import alignment_for
+
+    with TrialReader(path) as trial:
+        topics = trial.topics()
+        oriented = [t.rsplit("/", 1)[1] for t in topics if t.startswith("/derived/orientation/")]
+        metadata = trial.metadata
+    names = list(imus) if imus else oriented
+    missing = [n for n in names if n not in oriented]
+    if missing:
+        raise ValueError(
+            f"no /derived/orientation/{missing[0]}: run `imulog process orientation {path} --imu {missing[0]}` first"
+        )
+    if not names:
+        raise ValueError(f"no /derived/orientation/* channel: run `imulog process orientation {path}` first")
+    inputs = [f"/derived/orientation/{n}" for n in names] + [f"/imu/{n}" for n in names if f"/imu/{n}" in topics]
+    meta_inputs = tuple(k for k in metadata if k == "imulog.alignment" or k.startswith("imulog.alignment."))
+    holder: dict[str, Any] = {}
+
+    def compute(trial) -> StepResult:
+        orientations, mags, aligns = {}, {}, {}
+        for n in names:
+            ch = trial.channel(f"/derived/orientation/{n}")
+            params = ch.metadata.get("params") or {}
+            if isinstance(params, str):
+                import json
+
+                params = json.loads(params)
+            s = trial.read(f"/derived/orientation/{n}")
+            orientations[n] = (s.t_ns, s.values, str(params.get("global_frame", "")))
+            mags[n] = None
+            if f"/imu/{n}" in topics:
+                imu = trial.read(f"/imu/{n}")
+                if imu.mag is not None and np.isfinite(imu.mag).any():
+                    mags[n] = (imu.t_ns, imu.mag)
+            aligns[n] = alignment_for(trial.metadata, f"/imu/{n}")
+        record = compute_heading(orientations, mags, aligns, static_s, declared_deg)
+        if len(names) == 1:
+            record["note"] = "one IMU: nothing to relate"
+        holder["record"] = record
+        return StepResult(streams=[], metadata={"imulog.heading": record})
+
+    outcome = run_step(
+        path,
+        step=STEP,
+        algorithm="imulog.heading",
+        params={"imus": names, "static_s": list(static_s) if static_s else None, "declared_deg": declared_deg},
+        inputs=inputs,
+        metadata_inputs=meta_inputs,
+        compute=compute,
+        force=force,
+    )
+    if "record" not in holder:
+        with TrialReader(path) as trial:
+            holder["record"] = trial.metadata.get("imulog.heading", {})
+    return outcome, holder["record"]

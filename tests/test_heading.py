@@ -1,0 +1,113 @@
+"""One heading frame per trial (issue 27): magnetometer, optical clusters, a declared static pose, or none."""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pytest
+
+from imulog.archive import TrialReader, write_trial
+from imulog.process import heading as hd
+from imulog.process import quaternion as Q
+from imulog.simulate.setup import simulate_setup
+from imulog.steps.align_setup import run_align_setup
+from imulog.steps.heading import common_heading, run_heading
+from imulog.steps.orientation import run_orientation
+
+
+def _heading_of(q):
+    return np.degrees(np.arctan2(*Q.rotate(q, np.array([1.0, 0, 0]))[..., [1, 0]].T))
+
+
+def test_magnetic_correction_turns_a_known_heading_onto_north():
+    rng = np.random.default_rng(0)
+    q = Q.from_rotation_vector(rng.normal(scale=0.5, size=(400, 3)))  # sensor to its global frame
+    field_global = np.array([0.0, 20.0, -40.0])  # north and down, in a frame whose north is at 30 deg
+    turn = hd.yaw_quaternion(np.radians(-30.0))  # the IMU's global frame is turned by -30 deg from ENU
+    mag = Q.rotate_inverse(q, np.tile(Q.rotate(turn, field_global), (len(q), 1)))
+    f = hd.field_in_global(q, mag)
+    corr, why = hd.magnetic_corrections(
+        {"a": f, "b": hd.field_in_global(q, Q.rotate_inverse(q, np.tile(field_global, (400, 1))))}
+    )
+    assert not why
+    np.testing.assert_allclose(Q.rotate(corr["a"], Q.rotate(turn, field_global)), field_global, atol=1e-9)
+    np.testing.assert_allclose(corr["b"], [1, 0, 0, 0], atol=1e-9)
+    disturbed = dict(f, norm_cv=0.3)
+    assert hd.magnetic_corrections({"a": disturbed})[0] is None
+
+
+def test_static_pose_makes_the_headings_equal():
+    qa = np.tile(hd.yaw_quaternion(np.radians(40.0)), (50, 1))
+    qb = np.tile(hd.yaw_quaternion(np.radians(-75.0)), (50, 1))
+    corr = hd.static_pose_corrections({"a": qa, "b": qb})
+    ha = hd.heading_deg(hd.apply_correction(corr["a"], qa))
+    hb = hd.heading_deg(hd.apply_correction(corr["b"], qb))
+    np.testing.assert_allclose(ha, hb, atol=1e-9)
+
+
+@pytest.fixture(scope="module")
+def oriented_setup(tmp_path_factory):
+    sim = simulate_setup(seed=0, duration_s=40.0)
+    path = write_trial(tmp_path_factory.mktemp("heading") / "setup.mcap", sim.recording)
+    for imu in ("upper_arm", "forearm", "trunk"):
+        run_orientation(path, imu=imu)  # 6D: arbitrary headings
+    return sim, path
+
+
+def test_six_d_imus_without_anything_to_relate_them_say_so(oriented_setup, tmp_path):
+    """6D orientations, magnetometers with the simulator's device errors (bias, scale: the field's norm and dip
+    change with the orientation), no alignment yet: no common frame, and every reason is given."""
+    _, src = oriented_setup
+    path = shutil.copy(src, tmp_path / "t.mcap")
+    _, rec = run_heading(path, imus=["upper_arm", "forearm"])
+    assert rec["source"] == "none"
+    assert [r.split(":")[0] for r in rec["rejected"]] == ["magnetometer", "optical", "static pose"]
+    assert all("correction" not in v for v in rec["imus"].values())
+    corr, warn = common_heading({"imulog.heading": rec}, ["upper_arm", "forearm"])
+    assert corr is None and "not related" in warn and "magnetometer" in warn
+    assert "not related" in common_heading({}, ["upper_arm"])[1]
+    # a declared static pose relates them: the still neutral posture of the first 3 s
+    _, pose = run_heading(path, imus=["upper_arm", "forearm"], static_s=(0.5, 2.5))
+    assert pose["source"] == "static pose" and common_heading({"imulog.heading": pose}, ["forearm"])[0]
+
+
+def test_corrected_headings_agree_with_the_truth(oriented_setup, tmp_path):
+    """Optical (align after orientation): each IMU in the common frame has the true heading up to one
+    rotation shared by all IMUs (the markers' world is the truth's world here: offsets near 0)."""
+    sim, src = oriented_setup
+    path = shutil.copy(src, tmp_path / "t.mcap")
+    names = ["upper_arm", "forearm"]
+    run_align_setup(path, imus=names)
+    with TrialReader(path) as t:
+        meta = t.metadata
+        q = {n: t.read(f"/derived/orientation/{n}") for n in names}
+    _, opt_rec = run_heading(path, imus=names, force=True)
+    with TrialReader(path) as t:
+        meta = t.metadata
+    assert opt_rec["source"] == "optical"
+    for rec in (opt_rec,):
+        diffs = []
+        for n in names:
+            qc = hd.apply_correction(np.asarray(rec["imus"][n]["correction"]), q[n].values)
+            k = np.searchsorted(sim.arm.truth.t_ns, q[n].t_ns + meta[f"imulog.alignment.{n}"]["offset_ns"])
+            k = np.clip(k, 0, len(sim.arm.truth.t_ns) - 1)
+            d = _heading_of(qc) - _heading_of(sim.arm.truth.q_world_sensor[n][k])
+            diffs.append(np.degrees(np.angle(np.mean(np.exp(1j * np.radians(d))))))
+        print(f"\n{rec['source']}: heading offsets from the truth {', '.join(f'{x:.1f}' for x in diffs)} deg")
+        assert all(abs(d) < 5.0 for d in diffs)  # both in the one (optical) world frame
+
+
+def test_info_says_whether_the_headings_relate(oriented_setup, tmp_path):
+    from click.testing import CliRunner
+
+    from imulog.cli import cli
+
+    _, src = oriented_setup
+    path = shutil.copy(src, tmp_path / "t.mcap")
+    res = CliRunner().invoke(cli, ["process", "heading", str(path), "--imu", "upper_arm", "--imu", "forearm"])
+    assert res.exit_code == 0 and "no common heading" in res.output and "not used: magnetometer" in res.output
+    info = CliRunner().invoke(cli, ["info", str(path)])
+    assert "heading: not related between" in info.output
+    bad = CliRunner().invoke(cli, ["process", "heading", str(path), "--static-pose", "3,1"])
+    assert bad.exit_code != 0 and "END must be after START" in bad.output
