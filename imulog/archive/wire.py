@@ -174,7 +174,10 @@ class Rows:
         body, mask = varint_rows(v)
         key = np.broadcast_to(np.frombuffer(tag(number, WIRE_VARINT), np.uint8), (self.n, len(tag(number, 0))))
         present = (v != 0) if omit_zero else np.ones(self.n, dtype=bool)
-        self._add(np.concatenate([key, body], axis=1), np.concatenate([np.repeat(present[:, None], key.shape[1], 1), mask & present[:, None]], axis=1))
+        self._add(
+            np.concatenate([key, body], axis=1),
+            np.concatenate([np.repeat(present[:, None], key.shape[1], 1), mask & present[:, None]], axis=1),
+        )
         return self
 
     def double(self, number: int, values: np.ndarray, omit_zero: bool = True) -> Rows:
@@ -234,3 +237,59 @@ def row_messages(rows: np.ndarray, mask: np.ndarray | None) -> list[bytes]:
     ends = np.cumsum(np.count_nonzero(mask, axis=1)).tolist()
     starts = [0, *ends[:-1]]
     return [flat[a:b] for a, b in zip(starts, ends, strict=True)]
+
+
+# ------------------------------------------------------------------------- packed varints as numpy arrays
+
+
+def zigzag_varints(values: np.ndarray) -> tuple[bytes, np.ndarray]:
+    """Packed ``sint64`` bytes of ``values`` (zigzag LEB128, row-major) and the byte length of each value.
+
+    One pass of numpy over the whole array: the bytes of any run of values are the slice between the
+    cumulative sums of the lengths (how :mod:`imulog.archive.codec` cuts blocks without a per-block encode).
+    """
+    v = np.ascontiguousarray(values, dtype=np.int64).reshape(-1)
+    z = ((v << np.int64(1)) ^ (v >> np.int64(63))).view(np.uint64)
+    if not len(z):
+        return b"", np.zeros(0, dtype=np.int64)
+    top = int(z.max())
+    width = max(1, (top.bit_length() + 6) // 7)
+    length = np.ones(len(z), dtype=np.int64)
+    for k in range(1, width):
+        length += z >= np.uint64(1 << (7 * k))
+    if width == 1:
+        return z.astype(np.uint8).tobytes(), length
+    shifts = np.arange(width, dtype=np.uint64) * np.uint64(7)
+    out = ((z[:, None] >> shifts[None, :]) & np.uint64(0x7F)).astype(np.uint8)
+    col = np.arange(width)
+    out |= (col[None, :] < (length - 1)[:, None]).view(np.uint8) << np.uint8(7)
+    return out[col[None, :] < length[:, None]].tobytes(), length
+
+
+def read_zigzag_varints(data: bytes | bytearray | memoryview, n: int, what: str) -> np.ndarray:
+    """int64 array of the ``n`` packed ``sint64`` varints in ``data`` (the inverse of :func:`zigzag_varints`).
+
+    Raises ValueError naming ``what`` when the bytes do not hold exactly ``n`` varints of at most 10 bytes.
+    """
+    b = np.frombuffer(data, dtype=np.uint8)
+    if n == 0:
+        if len(b):
+            raise ValueError(f"{what}: {len(b)} bytes for 0 values")
+        return np.zeros(0, dtype=np.int64)
+    ends = np.flatnonzero(b < 0x80)
+    if len(ends) != n or ends[-1] != len(b) - 1:
+        raise ValueError(f"{what}: {len(ends)} varints in {len(b)} bytes for {n} values")
+    starts = np.empty(n, dtype=np.int64)
+    starts[0] = 0
+    starts[1:] = ends[:-1] + 1
+    lengths = ends - starts + 1
+    top = int(lengths.max())
+    if top > 10:
+        raise ValueError(f"{what}: a varint longer than 10 bytes")
+    if top == 1:
+        z = b.astype(np.uint64)
+    else:
+        pos = np.arange(len(b), dtype=np.int64) - np.repeat(starts, lengths)
+        parts = (b & np.uint8(0x7F)).astype(np.uint64) << (pos.astype(np.uint64) * np.uint64(7))
+        z = np.add.reduceat(parts, starts)
+    return ((z >> np.uint64(1)).view(np.int64)) ^ -((z & np.uint64(1)).view(np.int64))

@@ -1,0 +1,317 @@
+"""Block arrays at their source's resolution (``imulog.Numbers``) and block times as start plus span (issue 28).
+
+Writing, for a whole stream at once (numpy, no per-sample Python):
+
+- :func:`plan_numbers` picks how an (N, C) float64 array is stored: integer counts with per-column
+  ``shift``, ``divisor``, ``scale``, ``offset`` (from the converter's ``resolution`` hint, or decimal text found
+  in the numbers: ``counts / 10**k``), float32 when every value is a float32 (or the stream asks for float32:
+  derived channels whose accuracy is far coarser), else None (the float64 field, as before). Counts are kept
+  only where they give every value back exactly (compared as numbers: ``-0.0`` reads as ``0.0``); a block with
+  a row that does not (a NaN gap) keeps float64.
+- :func:`plan_times` gives each block its start and span when the times are evenly spread, with residuals
+  where they are not, and keeps explicit times when that is not smaller.
+
+Reading joins the fields of all blocks and decodes them with one numpy pass each (:func:`decode_numbers`,
+:func:`decode_times`). The formula a generic reader applies is in ``schemas/imulog/Numbers.proto`` and
+docs/schemas.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from imulog.archive import wire
+
+PARAMS = ("shift", "divisor", "scale", "offset")
+_SKIP = {"shift": 0.0, "divisor": 1.0, "scale": 1.0, "offset": 0.0}  # a parameter with these values is left out
+_MAX_DECIMALS = 9
+_EXACT_INT = 2.0**53
+_RESID_BYTES = 3  # residual varints longer than this make a block's times explicit
+
+
+def apply(counts: np.ndarray, params: dict[str, np.ndarray | None]) -> np.ndarray:
+    """float64 values of (N, C) counts: ``((counts + shift) / divisor) * scale + offset``, absent steps skipped."""
+    v = counts.astype(np.float64)
+    if params.get("shift") is not None:
+        v += params["shift"]
+    if params.get("divisor") is not None:
+        v /= params["divisor"]
+    if params.get("scale") is not None:
+        v *= params["scale"]
+    if params.get("offset") is not None:
+        v += params["offset"]
+    return v
+
+
+def _params(hint: dict[str, Any], width: int) -> dict[str, np.ndarray | None]:
+    out: dict[str, np.ndarray | None] = {}
+    for p in PARAMS:
+        value = hint.get(p)
+        if value is None:
+            out[p] = None
+            continue
+        a = np.broadcast_to(np.asarray(value, dtype=np.float64).reshape(-1), (width,)).copy()
+        out[p] = None if bool(np.all(a == _SKIP[p])) else a
+    return out
+
+
+@dataclass
+class NumbersPlan:
+    """How one (N, C) array is stored: ``kind`` "counts" or "f32"; ``ok`` rows that the encoding gives back."""
+
+    kind: str
+    width: int
+    ok: np.ndarray
+    data: bytes = b""  # counts: the varints of every row (rows not ok as 0); f32: the float32 bytes
+    row_bytes: np.ndarray | None = None  # bytes of each row in ``data``
+    params: dict[str, np.ndarray | None] = field(default_factory=dict)
+    head: bytes = b""  # the parameter fields, the same in every block
+
+    def cumulative(self) -> np.ndarray:
+        """Byte offset of each row's start in ``data`` (N + 1 entries)."""
+        assert self.row_bytes is not None
+        return np.concatenate([[0], np.cumsum(self.row_bytes)])
+
+
+def _from_counts(values: np.ndarray, counts: np.ndarray, params: dict[str, np.ndarray | None]) -> NumbersPlan:
+    ok = np.all(apply(counts, params) == values, axis=1)  # NaN never equals: a gap row keeps float64
+    counts = np.where(ok[:, None], counts, 0)
+    data, lengths = wire.zigzag_varints(counts)
+    head = b"".join(
+        wire.packed(k + 2, params[p], np.dtype("<f8")) for k, p in enumerate(PARAMS) if params[p] is not None
+    )
+    width = values.shape[1]
+    return NumbersPlan("counts", width, ok, data, lengths.reshape(-1, width).sum(axis=1), params, head)
+
+
+def _counts_of(values: np.ndarray, params: dict[str, np.ndarray | None]) -> np.ndarray | None:
+    """Integer counts that the parameters map to ``values`` (inverse formula, rounded), or None when out of range."""
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        c = values.copy()
+        if params.get("offset") is not None:
+            c -= params["offset"]
+        if params.get("scale") is not None:
+            c /= params["scale"]
+        if params.get("divisor") is not None:
+            c *= params["divisor"]
+        if params.get("shift") is not None:
+            c -= params["shift"]
+        c = np.rint(c)
+        finite = np.isfinite(c)
+        if np.any(np.abs(c[finite]) >= _EXACT_INT):
+            return None
+        return np.where(finite, c, 0).astype(np.int64)
+
+
+def _decimals(values: np.ndarray) -> np.ndarray | None:
+    """Per column the fewest decimals k <= 9 with ``rint(v * 10**k) / 10**k == v`` on a sample, or None."""
+    sample = values[: min(len(values), 4096)]
+    ks = []
+    for col in sample.T:
+        col = col[np.isfinite(col)]
+        if not len(col):
+            ks.append(0)
+            continue
+        for k in range(_MAX_DECIMALS + 1):
+            d = 10.0**k
+            if np.max(np.abs(col)) * d >= _EXACT_INT:
+                return None
+            if np.array_equal(np.rint(col * d) / d, col):
+                ks.append(k)
+                break
+        else:
+            return None
+    return np.asarray(ks)
+
+
+def plan_numbers(values: np.ndarray | None, hint: dict[str, Any] | None, precision: str = "") -> NumbersPlan | None:
+    """How to store ``values`` (N, C) or (N,) float64; None: as float64 (the field of schema_version 1)."""
+    if values is None or len(values) == 0:
+        return None
+    v = np.asarray(values, dtype=np.float64)
+    v = v.reshape(len(v), -1)
+    width = v.shape[1]
+    if precision == "float32":
+        f = v.astype("<f4")
+        return NumbersPlan("f32", width, np.ones(len(v), dtype=bool), f.tobytes(), np.full(len(v), 4 * width))
+    candidates: list[dict[str, np.ndarray | None]] = []
+    if hint:
+        candidates.append(_params(hint, width))
+    ks = _decimals(v)
+    if ks is not None:
+        candidates.append(_params({"divisor": 10.0 ** ks.astype(np.float64)}, width))
+    for params in candidates:
+        counts = _counts_of(v, params)
+        if counts is None:
+            continue
+        plan = _from_counts(v, counts, params)
+        if plan.ok.mean() > 0.5:
+            return plan
+    f = v.astype("<f4")
+    ok = np.all(f.astype(np.float64) == v, axis=1)
+    if ok.mean() > 0.5:
+        return NumbersPlan("f32", width, ok, f.tobytes(), np.full(len(v), 4 * width))
+    return None
+
+
+def numbers_field(number: int, plan: NumbersPlan, starts: np.ndarray, i: int, j: int) -> bytes:
+    """The ``Numbers`` sub-message field of rows [i, j) (``starts``: :meth:`NumbersPlan.cumulative`)."""
+    body = plan.data[int(starts[i]) : int(starts[j])]
+    # fields in number order, as protobuf writes them: counts 1, parameters 2-5; or f32 6
+    inner = wire.len_field(1, body) + plan.head if plan.kind == "counts" else wire.len_field(6, body)
+    return wire.tag(number, wire.WIRE_LEN) + wire.varint(len(inner)) + inner
+
+
+# --------------------------------------------------------------------------------------------- times
+
+
+@dataclass
+class TimesPlan:
+    """Per block: compact (start, span, residual bytes) or explicit ``t_ns``."""
+
+    compact: np.ndarray  # (blocks,) bool
+    t0: np.ndarray
+    span: np.ndarray
+    resid: bytes
+    resid_starts: np.ndarray  # byte offset of each sample's residual, N + 1
+    has_resid: np.ndarray  # (blocks,) bool
+
+
+def predicted(t0: np.ndarray, span: np.ndarray, k: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Times spread evenly: ``t0 + (2 k span + n - 1) // (2 (n - 1))`` (``t0`` for one-sample blocks)."""
+    den = np.maximum(n - 1, 1)
+    return t0 + (2 * k * span + den) // (2 * den)
+
+
+def plan_times(t_ns: np.ndarray, bounds: list[tuple[int, int]]) -> TimesPlan:
+    """Which blocks store start + span instead of explicit sfixed64 times.
+
+    A block is compact when its times are the span spread evenly, or differ from that by less than 2**20 ns
+    (about 1 ms) each: residuals of at most 3 bytes, less than half the 8 of an explicit time (an Axivity
+    block clock's 1/65536 s steps give residuals up to about 12 us). Larger jitter or a gap inside a block
+    keeps explicit times.
+    """
+    i = np.asarray([b[0] for b in bounds], dtype=np.int64)
+    j = np.asarray([b[1] for b in bounds], dtype=np.int64)
+    n = j - i
+    t = np.asarray(t_ns, dtype=np.int64)
+    t0, span = t[i], t[j - 1] - t[i]
+    k = np.arange(len(t), dtype=np.int64) - np.repeat(i, n)
+    resid = t - predicted(np.repeat(t0, n), np.repeat(span, n), k, np.repeat(n, n))
+    data, lengths = wire.zigzag_varints(resid)
+    nonzero = np.add.reduceat(resid != 0, i) > 0
+    small = np.add.reduceat(lengths > _RESID_BYTES, i) == 0  # |r| < 2**20 ns: a device clock's rounding
+    compact = (~nonzero) | small
+    return TimesPlan(compact, t0, span, data, np.concatenate([[0], np.cumsum(lengths)]), nonzero)
+
+
+def decode_times(blocks: list[Any], counts: np.ndarray, what: str) -> np.ndarray:
+    """int64 times of all blocks: explicit ``t_ns`` joined, compact blocks expanded (one numpy pass)."""
+    total = int(counts.sum())
+    explicit = np.array([len(b.t_ns) > 0 for b in blocks], dtype=bool)
+    if explicit.all() or total == 0:
+        buf = bytearray().join([b.t_ns for b in blocks])
+        if len(buf) != total * 8:
+            raise ValueError(f"{what} t_ns: {len(buf)} bytes for {total} samples")
+        return np.frombuffer(buf, dtype="<i8").astype(np.int64)
+    out = np.empty(total, dtype=np.int64)
+    rows_explicit = np.repeat(explicit, counts)
+    if explicit.any():
+        buf = bytearray().join([b.t_ns for b, e in zip(blocks, explicit, strict=True) if e])
+        if len(buf) != int(rows_explicit.sum()) * 8:
+            raise ValueError(f"{what} t_ns: {len(buf)} bytes for {int(rows_explicit.sum())} samples")
+        out[rows_explicit] = np.frombuffer(buf, dtype="<i8")
+    comp = ~explicit
+    n = counts[comp]
+    t0 = np.array([b.t0_ns for b, c in zip(blocks, comp, strict=True) if c], dtype=np.int64)
+    span = np.array([b.t_span_ns for b, c in zip(blocks, comp, strict=True) if c], dtype=np.int64)
+    starts = np.concatenate([[0], np.cumsum(n)[:-1]]) if len(n) else np.zeros(0, np.int64)
+    k = np.arange(int(n.sum()), dtype=np.int64) - np.repeat(starts, n)
+    t = predicted(np.repeat(t0, n), np.repeat(span, n), k, np.repeat(n, n))
+    has = np.array([len(b.t_residual_ns) > 0 for b, c in zip(blocks, comp, strict=True) if c], dtype=bool)
+    if has.any():
+        parts = [b.t_residual_ns for b, c in zip(blocks, comp, strict=True) if c and len(b.t_residual_ns)]
+        rows = np.repeat(has, n)
+        t[rows] += wire.read_zigzag_varints(bytearray().join(parts), int(rows.sum()), f"{what} t_residual_ns")
+    out[~rows_explicit] = t
+    return out
+
+
+# ------------------------------------------------------------------------------------------- reading
+
+
+def scan_numbers(payload: memoryview | bytes) -> dict[str, Any]:
+    """The fields of one ``imulog.Numbers`` message (views); raises wire.Fallback on anything unexpected."""
+    out: dict[str, Any] = {"counts": b"", "f32": b"", **{p: None for p in PARAMS}}
+    names = {1: "counts", 2: "shift", 3: "divisor", 4: "scale", 5: "offset", 6: "f32"}
+    for number, wire_type, value in wire.scan(payload):
+        name = names.get(number)
+        if name is None:
+            continue
+        if wire_type != wire.WIRE_LEN:
+            raise wire.Fallback
+        out[name] = value
+    return out
+
+
+def decode_numbers(sources: list[tuple[str, Any]], counts: np.ndarray, width: int, what: str) -> np.ndarray:
+    """(N, width) float64 from each block's source: ("f64", bytes), ("q", scanned Numbers) or ("none", None)."""
+    total = int(counts.sum())
+    kinds = [k for k, _ in sources]
+    out = np.empty((total, width), dtype=np.float64)
+    groups = {"f64": [], "counts": [], "f32": []}
+    for b, (kind, src) in enumerate(sources):
+        if kind == "q":
+            kind = "counts" if len(src["counts"]) or not len(src["f32"]) else "f32"
+        if kind in groups:
+            groups[kind].append(b)
+    row_block = np.repeat(np.arange(len(sources)), counts)
+    if len(groups["f64"]) + len(groups["counts"]) + len(groups["f32"]) != sum(1 for k in kinds if k != "none"):
+        raise ValueError(f"{what}: unknown block layout")
+    covered = 0
+    for kind, blocks in groups.items():
+        if not blocks:
+            continue
+        n = int(counts[blocks].sum())
+        covered += n
+        if len(blocks) == len(sources):
+            rows: slice | np.ndarray = slice(None)
+        else:
+            mask = np.zeros(len(sources), dtype=bool)
+            mask[blocks] = True
+            rows = mask[row_block]
+        if kind == "f64":
+            buf = bytearray().join([sources[b][1] for b in blocks])
+            if len(buf) != n * width * 8:
+                raise ValueError(f"{what}: {len(buf)} bytes for {n} samples x {width} values")
+            out[rows] = np.frombuffer(buf, dtype="<f8").reshape(n, width)
+        elif kind == "f32":
+            buf = bytearray().join([sources[b][1]["f32"] for b in blocks])
+            if len(buf) != n * width * 4:
+                raise ValueError(f"{what}: {len(buf)} float32 bytes for {n} samples x {width} values")
+            out[rows] = np.frombuffer(buf, dtype="<f4").reshape(n, width)
+        else:
+            srcs = [sources[b][1] for b in blocks]
+            c = wire.read_zigzag_varints(bytearray().join([s["counts"] for s in srcs]), n * width, what)
+            c = c.reshape(n, width)
+            params = {}
+            for p in PARAMS:
+                raw = [bytes(s[p]) if s[p] is not None else b"" for s in srcs]
+                if not any(raw):
+                    params[p] = None
+                    continue
+                if any(len(r) not in (0, 8 * width) for r in raw):
+                    raise ValueError(f"{what}: {p} does not have {width} values")
+                if len(set(raw)) == 1:
+                    params[p] = np.frombuffer(raw[0], dtype="<f8").astype(np.float64)
+                    continue
+                default = np.full(width, _SKIP[p]).tobytes()
+                per = np.frombuffer(b"".join(r or default for r in raw), dtype="<f8").reshape(len(srcs), width)
+                params[p] = np.repeat(per, counts[blocks], axis=0)
+            out[rows] = apply(c, params)
+    if covered != total:
+        raise ValueError(f"{what}: present in some blocks only")
+    return out
