@@ -292,15 +292,12 @@ class _Layout:
         self.arrays, self.precision, self.extra = arrays, precision, extra or []
 
 
-def _sint_field(number: int, value: int) -> bytes:
-    """A singular sint64 field (zigzag varint), b"" for 0 (proto3)."""
-    if not value:
-        return b""
-    return wire.tag(number, wire.WIRE_VARINT) + wire.varint((value << 1) ^ (value >> 63))
-
-
 def _encode_blocks(t_ns: np.ndarray, layout: _Layout) -> tuple[list[int], list[bytes]]:
-    """The block messages of one stream: numpy plans for the whole stream, then byte slices per block."""
+    """The block messages of one stream: numpy plans for the whole stream, then byte slices per block.
+
+    Fields go out in number order without sorting: layout-1 fields (``t_ns``, float64 arrays, extras) come
+    before the version-2 ones (compact times, then the ``_q`` arrays), as their numbers do.
+    """
     bounds = block_bounds(t_ns)
     if not bounds:
         return [], []
@@ -313,37 +310,49 @@ def _encode_blocks(t_ns: np.ndarray, layout: _Layout) -> tuple[list[int], list[b
         v = np.asarray(values).reshape(len(t_ns), -1)
         plan = numbers.plan_numbers(v, hint, layout.precision)
         if plan is None:
-            plans.append((f64_no, q_no, v, None, None, None))
+            plans.append((f64_no, v, None, None, None, None))
         else:
-            ok = np.logical_and.reduceat(plan.ok, first) if len(plan.ok) else np.zeros(0, bool)
-            plans.append((f64_no, q_no, v, plan, plan.cumulative(), ok))
+            ok = np.logical_and.reduceat(plan.ok, first).tolist()
+            q_tag = wire.tag(q_no, wire.WIRE_LEN)
+            inner_tag = b"\x0a" if plan.kind == "counts" else b"\x32"
+            cum = plan.cumulative()
+            edges = cum[np.append(first, len(t_ns))].tolist()  # byte offsets of the blocks in plan.data
+            plans.append((f64_no, v, plan, edges, ok, (q_tag, inner_tag, plan.head)))
     heads = {v: wire.uint_field(1, v) + layout.head for v in (SCHEMA_VERSION_V1, SCHEMA_VERSION)}
     t0_no, span_no, resid_no = layout.time_fields
+    t0_tag, span_tag = wire.tag(t0_no, wire.WIRE_VARINT), wire.tag(span_no, wire.WIRE_VARINT)
+    resid_tag = wire.tag(resid_no, wire.WIRE_LEN)
+    count_tag = wire.tag(layout.count, wire.WIRE_VARINT)
+    varint, packed = wire.varint, wire.packed
+    compact, has_resid = tp.compact.tolist(), tp.has_resid.tolist()
+    t0s, spans = tp.t0.tolist(), tp.span.tolist()
+    rstarts = tp.resid_starts[np.append(first, len(t_ns))].tolist()  # residual bytes of each block
     payloads = []
     for b, (i, j) in enumerate(bounds):
-        low: list[tuple[int, bytes]] = []  # fields of schema_version 1, in number order below
-        high: list[tuple[int, bytes]] = []
-        if tp.compact[b]:
-            high.append((t0_no, _sint_field(t0_no, int(tp.t0[b])) + _sint_field(span_no, int(tp.span[b]))))
-            if tp.has_resid[b]:
-                high.append((resid_no, wire.len_field(resid_no, tp.resid[tp.resid_starts[i] : tp.resid_starts[j]])))
+        low: list[bytes] = [count_tag + varint(j - i)]
+        high: list[bytes] = []
+        if compact[b]:
+            t0, span = t0s[b], spans[b]
+            if t0:
+                high.append(t0_tag + varint((t0 << 1) ^ (t0 >> 63)))
+            if span:
+                high.append(span_tag + varint((span << 1) ^ (span >> 63)))
+            if has_resid[b]:
+                body = tp.resid[rstarts[b] : rstarts[b + 1]]
+                high.append(resid_tag + varint(len(body)) + body)
         else:
-            low.append((layout.t_field, wire.packed(layout.t_field, t_ns[i:j], _I8)))
-        for f64_no, q_no, v, plan, cum, ok in plans:
+            low.append(packed(layout.t_field, t_ns[i:j], _I8))
+        for f64_no, v, plan, cum, ok, tags in plans:
             if plan is not None and ok[b]:
-                high.append((q_no, numbers.numbers_field(q_no, plan, cum, i, j)))
+                body = plan.data[cum[b] : cum[b + 1]]
+                inner = tags[1] + varint(len(body)) + body + tags[2] if body else b""
+                high.append(tags[0] + varint(len(inner)) + inner)
             else:
-                low.append((f64_no, wire.packed(f64_no, v[i:j], _F8)))
+                low.append(packed(f64_no, v[i:j], _F8))
         for number, a, dtype in layout.extra:
-            low.append((number, wire.packed(number, a[i:j], dtype)))
-        low.sort(key=lambda x: x[0])
-        high.sort(key=lambda x: x[0])
-        version = SCHEMA_VERSION if high else SCHEMA_VERSION_V1
-        payloads.append(
-            b"".join(
-                [heads[version], wire.uint_field(layout.count, j - i), *(x for _, x in low), *(x for _, x in high)]
-            )
-        )
+            low.append(packed(number, a[i:j], dtype))
+        head = heads[SCHEMA_VERSION if high else SCHEMA_VERSION_V1]
+        payloads.append(b"".join([head, *low, *high]))
     return first.tolist(), payloads
 
 
@@ -408,6 +417,11 @@ def _block_specs(cls: Any) -> tuple[dict[int, tuple[str, str]], dict[str, Any]]:
 
 
 _BLOCK_SPECS = {name: _block_specs(MESSAGE_CLASSES[name]) for name in BLOCK_SCHEMAS}
+_SCALAR_DEFAULTS = {
+    name: {k: (None if d is _NO_MESSAGE else d) for k, d in spec[1].items() if d is not None}
+    for name, spec in _BLOCK_SPECS.items()
+}
+_LIST_FIELDS = {name: [k for k, d in spec[1].items() if d is None] for name, spec in _BLOCK_SPECS.items()}
 
 
 def _scan_block(schema_name: str, payload: bytes | memoryview) -> _Block:
@@ -418,8 +432,10 @@ def _scan_block(schema_name: str, payload: bytes | memoryview) -> _Block:
     """
     spec, defaults = _BLOCK_SPECS[schema_name]
     obj = _Block()
-    for name, default in defaults.items():
-        setattr(obj, name, [] if default is None else (None if default is _NO_MESSAGE else default))
+    fields = obj.__dict__
+    fields.update(_SCALAR_DEFAULTS[schema_name])  # one call: the blocks have up to 16 fields
+    for name in _LIST_FIELDS[schema_name]:
+        fields[name] = []
     try:
         for number, wire_type, value in wire.scan(payload):
             field = spec.get(number)
@@ -502,7 +518,7 @@ def _numbers_fields(payload: Any) -> dict[str, Any]:
             msg = Numbers_pb2.Numbers.FromString(bytes(payload))
         except Exception as exc:  # protobuf raises DecodeError subclasses of Exception
             raise DecodeError(f"a Numbers field does not parse: {exc}") from exc
-        out: dict[str, Any] = {"counts": wire.zigzag_varints(np.asarray(list(msg.counts), dtype=np.int64))[0]}
+        out: dict[str, Any] = {"counts": np.asarray(list(msg.counts), dtype="<i4").tobytes()}
         out["f32"] = np.asarray(list(msg.f32), dtype="<f4").tobytes()
         for p in numbers.PARAMS:
             values = list(getattr(msg, p))
@@ -514,6 +530,14 @@ def _array(
     msgs: list[Any], f: str, counts: np.ndarray, width: int, topic: str, *, required: bool = False
 ) -> np.ndarray | None:
     """(N, width) float64 of field ``f`` over all blocks: float64 bytes or ``f_q`` Numbers, mixed per block."""
+    qs = [getattr(msg, f + "_q", None) for msg in msgs]
+    if all(q is not None for q in qs):  # every block at the same resolution: its parameters parsed once
+        fast = numbers.numbers_sources(qs)
+        if fast is not None and not any(len(getattr(msg, f)) for msg in msgs):
+            try:
+                return numbers.decode_numbers([("q", x) for x in fast], counts, width, f"{topic} {f}")
+            except ValueError as exc:
+                raise DecodeError(str(exc)) from None
     sources: list[tuple[str, Any]] = []
     for msg, c in zip(msgs, counts.tolist(), strict=True):
         raw = getattr(msg, f)

@@ -2,7 +2,7 @@
 
 Writing, for a whole stream at once (numpy, no per-sample Python):
 
-- :func:`plan_numbers` picks how an (N, C) float64 array is stored: integer counts with per-column
+- :func:`plan_numbers` picks how an (N, C) float64 array is stored: integer counts (sfixed32) with per-column
   ``shift``, ``divisor``, ``scale``, ``offset`` (from the converter's ``resolution`` hint, or decimal text found
   in the numbers: ``counts / 10**k``), float32 when every value is a float32 (or the stream asks for float32:
   derived channels whose accuracy is far coarser), else None (the float64 field, as before). Counts are kept
@@ -29,6 +29,7 @@ PARAMS = ("shift", "divisor", "scale", "offset")
 _SKIP = {"shift": 0.0, "divisor": 1.0, "scale": 1.0, "offset": 0.0}  # a parameter with these values is left out
 _MAX_DECIMALS = 9
 _EXACT_INT = 2.0**53
+_MAX_COUNT = 2.0**31  # counts are sfixed32
 _RESID_BYTES = 3  # residual varints longer than this make a block's times explicit
 
 
@@ -77,33 +78,32 @@ class NumbersPlan:
 
 
 def _from_counts(values: np.ndarray, counts: np.ndarray, params: dict[str, np.ndarray | None]) -> NumbersPlan:
-    ok = np.all(apply(counts, params) == values, axis=1)  # NaN never equals: a gap row keeps float64
-    counts = np.where(ok[:, None], counts, 0)
-    data, lengths = wire.zigzag_varints(counts)
+    """The plan for ``counts`` (float64, whole numbers or not): each value kept where the formula gives it back."""
+    eq = apply(counts, params) == values  # NaN never equals: a gap row keeps float64
+    ok = eq.all(axis=1)
+    counts[~eq] = 0
+    data = counts.astype("<i4").tobytes()  # |counts| < 2**31 (checked by _counts_of): one pass, no varints
     head = b"".join(
         wire.packed(k + 2, params[p], np.dtype("<f8")) for k, p in enumerate(PARAMS) if params[p] is not None
     )
     width = values.shape[1]
-    return NumbersPlan("counts", width, ok, data, lengths.reshape(-1, width).sum(axis=1), params, head)
+    return NumbersPlan("counts", width, ok, data, np.full(len(values), 4 * width), params, head)
 
 
-def _counts_of(values: np.ndarray, params: dict[str, np.ndarray | None]) -> np.ndarray | None:
-    """Integer counts that the parameters map to ``values`` (inverse formula, rounded), or None when out of range."""
+def _counts_of(values: np.ndarray, params: dict[str, np.ndarray | None]) -> np.ndarray:
+    """Whole numbers (float64) that the parameters map to ``values``: the inverse formula, rounded; values
+    out of the exact integer range become 0 (and then fail the check)."""
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        c = values.copy()
-        if params.get("offset") is not None:
-            c -= params["offset"]
+        c = values - params["offset"] if params.get("offset") is not None else values.copy()
         if params.get("scale") is not None:
             c /= params["scale"]
         if params.get("divisor") is not None:
             c *= params["divisor"]
         if params.get("shift") is not None:
             c -= params["shift"]
-        c = np.rint(c)
-        finite = np.isfinite(c)
-        if np.any(np.abs(c[finite]) >= _EXACT_INT):
-            return None
-        return np.where(finite, c, 0).astype(np.int64)
+        np.rint(c, out=c)
+        c[~(np.abs(c) < _MAX_COUNT)] = 0  # NaN, inf and beyond sfixed32
+    return c
 
 
 def _decimals(values: np.ndarray) -> np.ndarray | None:
@@ -117,7 +117,7 @@ def _decimals(values: np.ndarray) -> np.ndarray | None:
             continue
         for k in range(_MAX_DECIMALS + 1):
             d = 10.0**k
-            if np.max(np.abs(col)) * d >= _EXACT_INT:
+            if np.max(np.abs(col)) * d >= _MAX_COUNT:
                 return None
             if np.array_equal(np.rint(col * d) / d, col):
                 ks.append(k)
@@ -144,10 +144,7 @@ def plan_numbers(values: np.ndarray | None, hint: dict[str, Any] | None, precisi
     if ks is not None:
         candidates.append(_params({"divisor": 10.0 ** ks.astype(np.float64)}, width))
     for params in candidates:
-        counts = _counts_of(v, params)
-        if counts is None:
-            continue
-        plan = _from_counts(v, counts, params)
+        plan = _from_counts(v, _counts_of(v, params), params)
         if plan.ok.mean() > 0.5:
             return plan
     f = v.astype("<f4")
@@ -186,6 +183,15 @@ def predicted(t0: np.ndarray, span: np.ndarray, k: np.ndarray, n: np.ndarray) ->
     return t0 + (2 * k * span + den) // (2 * den)
 
 
+def spread(t0: np.ndarray, span: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """:func:`predicted` times of whole blocks, concatenated: a padded (blocks, max n) grid, no per-sample repeat."""
+    if not len(n):
+        return np.zeros(0, dtype=np.int64)
+    k = np.arange(int(n.max()), dtype=np.int64)[None, :]
+    grid = predicted(t0[:, None], span[:, None], k, n[:, None])
+    return grid[k < n[:, None]] if bool((n != n.max()).any()) else grid.reshape(-1)
+
+
 def plan_times(t_ns: np.ndarray, bounds: list[tuple[int, int]]) -> TimesPlan:
     """Which blocks store start + span instead of explicit sfixed64 times.
 
@@ -199,8 +205,7 @@ def plan_times(t_ns: np.ndarray, bounds: list[tuple[int, int]]) -> TimesPlan:
     n = j - i
     t = np.asarray(t_ns, dtype=np.int64)
     t0, span = t[i], t[j - 1] - t[i]
-    k = np.arange(len(t), dtype=np.int64) - np.repeat(i, n)
-    resid = t - predicted(np.repeat(t0, n), np.repeat(span, n), k, np.repeat(n, n))
+    resid = t - spread(t0, span, n)
     data, lengths = wire.zigzag_varints(resid)
     nonzero = np.add.reduceat(resid != 0, i) > 0
     small = np.add.reduceat(lengths > _RESID_BYTES, i) == 0  # |r| < 2**20 ns: a device clock's rounding
@@ -217,8 +222,12 @@ def decode_times(blocks: list[Any], counts: np.ndarray, what: str) -> np.ndarray
         if len(buf) != total * 8:
             raise ValueError(f"{what} t_ns: {len(buf)} bytes for {total} samples")
         return np.frombuffer(buf, dtype="<i8").astype(np.int64)
-    out = np.empty(total, dtype=np.int64)
-    rows_explicit = np.repeat(explicit, counts)
+    if not explicit.any():
+        rows_explicit = np.zeros(total, dtype=bool)
+        out = np.empty(0, dtype=np.int64)
+    else:
+        rows_explicit = np.repeat(explicit, counts)
+        out = np.empty(total, dtype=np.int64)
     if explicit.any():
         buf = bytearray().join([b.t_ns for b, e in zip(blocks, explicit, strict=True) if e])
         if len(buf) != int(rows_explicit.sum()) * 8:
@@ -228,19 +237,64 @@ def decode_times(blocks: list[Any], counts: np.ndarray, what: str) -> np.ndarray
     n = counts[comp]
     t0 = np.array([b.t0_ns for b, c in zip(blocks, comp, strict=True) if c], dtype=np.int64)
     span = np.array([b.t_span_ns for b, c in zip(blocks, comp, strict=True) if c], dtype=np.int64)
-    starts = np.concatenate([[0], np.cumsum(n)[:-1]]) if len(n) else np.zeros(0, np.int64)
-    k = np.arange(int(n.sum()), dtype=np.int64) - np.repeat(starts, n)
-    t = predicted(np.repeat(t0, n), np.repeat(span, n), k, np.repeat(n, n))
+    t = spread(t0, span, n)
     has = np.array([len(b.t_residual_ns) > 0 for b, c in zip(blocks, comp, strict=True) if c], dtype=bool)
     if has.any():
         parts = [b.t_residual_ns for b, c in zip(blocks, comp, strict=True) if c and len(b.t_residual_ns)]
-        rows = np.repeat(has, n)
-        t[rows] += wire.read_zigzag_varints(bytearray().join(parts), int(rows.sum()), f"{what} t_residual_ns")
+        res = wire.read_zigzag_varints(bytearray().join(parts), int(has.astype(np.int64) @ n), f"{what} t_residual_ns")
+        if has.all():
+            t += res
+        else:
+            t[np.repeat(has, n)] += res
+    if not explicit.any():
+        return t
     out[~rows_explicit] = t
     return out
 
 
 # ------------------------------------------------------------------------------------------- reading
+
+
+def split_counts(payload: memoryview | bytes) -> tuple[memoryview, bytes] | None:
+    """(counts bytes, the rest) of a Numbers message that starts with its counts field, else None (cheap: the
+    rest is the same parameters in every block of a channel, compared as bytes by :func:`numbers_sources`)."""
+    mv = memoryview(payload)
+    if len(mv) < 2 or mv[0] != 0x0A:
+        return None
+    length, pos, shift = 0, 1, 0
+    while True:
+        if pos >= len(mv) or shift > 63:
+            return None
+        b = mv[pos]
+        pos += 1
+        length |= (b & 0x7F) << shift
+        if b < 0x80:
+            break
+        shift += 7
+    end = pos + length
+    if end > len(mv):
+        return None
+    return mv[pos:end], bytes(mv[end:])
+
+
+def numbers_sources(payloads: list[Any]) -> list[dict[str, Any]] | None:
+    """Scanned Numbers of blocks that all hold counts with the same parameters (the common case), or None."""
+    first = split_counts(payloads[0]) if payloads else None
+    if first is None:
+        return None
+    try:
+        common = scan_numbers(first[1])
+    except wire.Fallback:
+        return None
+    if len(common["counts"]) or len(common["f32"]):
+        return None
+    out = []
+    for p in payloads:
+        part = split_counts(p)
+        if part is None or part[1] != first[1]:
+            return None
+        out.append({**common, "counts": part[0]})
+    return out
 
 
 def scan_numbers(payload: memoryview | bytes) -> dict[str, Any]:
@@ -295,8 +349,10 @@ def decode_numbers(sources: list[tuple[str, Any]], counts: np.ndarray, width: in
             out[rows] = np.frombuffer(buf, dtype="<f4").reshape(n, width)
         else:
             srcs = [sources[b][1] for b in blocks]
-            c = wire.read_zigzag_varints(bytearray().join([s["counts"] for s in srcs]), n * width, what)
-            c = c.reshape(n, width)
+            buf = bytearray().join([s["counts"] for s in srcs])
+            if len(buf) != n * width * 4:
+                raise ValueError(f"{what}: {len(buf)} count bytes for {n} samples x {width} values")
+            c = np.frombuffer(buf, dtype="<i4").reshape(n, width)
             params = {}
             for p in PARAMS:
                 raw = [bytes(s[p]) if s[p] is not None else b"" for s in srcs]
