@@ -171,13 +171,16 @@ def nan_samples(n: int, arrays: list[np.ndarray]) -> int:
     return int(n - np.count_nonzero(finite))
 
 
-def encode(stream: Stream, log_map: LogMap = IDENTITY) -> tuple[str, dict[str, str], list[int], list[bytes]]:
+def encode(
+    stream: Stream, log_map: LogMap = IDENTITY, *, compact: bool = True
+) -> tuple[str, dict[str, str], list[int], list[bytes]]:
     """-> (schema name, channel metadata, log times, serialized messages) for one stream.
 
     ``log_map`` places the messages on the trial's time axis (:mod:`imulog.archive.timeline`); the
     default keeps log time = sample time (clamped at 0), the layout of files written before the axis.
     Arrays are stored at their source's resolution and evenly spread times as start plus span where that
     gives the values back exactly (:mod:`imulog.archive.numbers`); such blocks carry schema_version 2.
+    ``compact=False`` writes the layout of schema_version 1 (float64 arrays, explicit times: the benchmarks' peer).
     """
     kind = stream_kind(stream)
     meta: dict[str, str] = {"kind": kind, "schema_version": str(SCHEMA_VERSION)}
@@ -264,6 +267,7 @@ def encode(stream: Stream, log_map: LogMap = IDENTITY) -> tuple[str, dict[str, s
         precision = ""
         arrays = [(5, 10, stream.position, None), (6, 11, stream.orientation, None)]
         layout = _Layout(st(2, stream.frame_id), 3, 4, (7, 8, 9), arrays, precision)
+    layout.compact = compact
     starts, payloads = _encode_blocks(stream.t_ns, layout)
     times = log_map(stream.t_ns[starts]).tolist() if starts else []
     return KIND_SCHEMA[kind], meta, times, payloads
@@ -290,6 +294,7 @@ class _Layout:
     ) -> None:
         self.head, self.count, self.t_field, self.time_fields = head, count, t_field, time_fields
         self.arrays, self.precision, self.extra = arrays, precision, extra or []
+        self.compact = True
 
 
 def _encode_blocks(t_ns: np.ndarray, layout: _Layout) -> tuple[list[int], list[bytes]]:
@@ -303,12 +308,14 @@ def _encode_blocks(t_ns: np.ndarray, layout: _Layout) -> tuple[list[int], list[b
         return [], []
     first = np.asarray([b[0] for b in bounds], dtype=np.int64)
     tp = numbers.plan_times(t_ns, bounds)
+    if not layout.compact:
+        tp.compact[:] = False
     plans = []
     for f64_no, q_no, values, hint in layout.arrays:
         if values is None:
             continue
         v = np.asarray(values).reshape(len(t_ns), -1)
-        plan = numbers.plan_numbers(v, hint, layout.precision)
+        plan = numbers.plan_numbers(v, hint, layout.precision) if layout.compact else None
         if plan is None:
             plans.append((f64_no, v, None, None, None, None))
         else:
