@@ -324,7 +324,10 @@ def _encode_blocks(t_ns: np.ndarray, layout: _Layout) -> tuple[list[int], list[b
             inner_tag = b"\x0a" if plan.kind == "counts" else b"\x32"
             cum = plan.cumulative()
             edges = cum[np.append(first, len(t_ns))].tolist()  # byte offsets of the blocks in plan.data
-            plans.append((f64_no, v, plan, edges, ok, (q_tag, inner_tag, plan.head)))
+            dec = None
+            if plan.decimal_starts is not None:
+                dec = plan.decimal_starts[np.append(first, len(t_ns))].tolist()
+            plans.append((f64_no, v, plan, edges, ok, (q_tag, inner_tag, plan.head, dec)))
     heads = {v: wire.uint_field(1, v) + layout.head for v in (SCHEMA_VERSION_V1, SCHEMA_VERSION)}
     t0_no, span_no, resid_no = layout.time_fields
     t0_tag, span_tag = wire.tag(t0_no, wire.WIRE_VARINT), wire.tag(span_no, wire.WIRE_VARINT)
@@ -353,6 +356,9 @@ def _encode_blocks(t_ns: np.ndarray, layout: _Layout) -> tuple[list[int], list[b
             if plan is not None and ok[b]:
                 body = plan.data[cum[b] : cum[b + 1]]
                 inner = tags[1] + varint(len(body)) + body + tags[2] if body else b""
+                if tags[3] is not None:  # per-value decimals, field 7
+                    d = plan.decimals[tags[3][b] : tags[3][b + 1]]
+                    inner += b"\x3a" + varint(len(d)) + d
                 high.append(tags[0] + varint(len(inner)) + inner)
             else:
                 low.append(packed(f64_no, v[i:j], _F8))
@@ -527,6 +533,7 @@ def _numbers_fields(payload: Any) -> dict[str, Any]:
             raise DecodeError(f"a Numbers field does not parse: {exc}") from exc
         out: dict[str, Any] = {"counts": np.asarray(list(msg.counts), dtype="<i4").tobytes()}
         out["f32"] = np.asarray(list(msg.f32), dtype="<f4").tobytes()
+        out["decimals"] = wire.zigzag_varints(np.asarray(list(msg.decimals), dtype=np.int64))[0]
         for p in numbers.PARAMS:
             values = list(getattr(msg, p))
             out[p] = np.asarray(values, dtype="<f8").tobytes() if values else None

@@ -70,6 +70,8 @@ class NumbersPlan:
     row_bytes: np.ndarray | None = None  # bytes of each row in ``data``
     params: dict[str, np.ndarray | None] = field(default_factory=dict)
     head: bytes = b""  # the parameter fields, the same in every block
+    decimals: bytes = b""  # per-value decimals (varints), when the text's numbers have varying decimals
+    decimal_starts: np.ndarray | None = None  # byte offset of each row's decimals, N + 1
 
     def cumulative(self) -> np.ndarray:
         """Byte offset of each row's start in ``data`` (N + 1 entries)."""
@@ -127,6 +129,36 @@ def _decimals(values: np.ndarray) -> np.ndarray | None:
     return np.asarray(ks)
 
 
+_POW10 = 10.0 ** np.arange(_MAX_DECIMALS + 1)
+
+
+def _value_decimals(v: np.ndarray) -> NumbersPlan | None:
+    """Counts with each value's own decimals (``counts / 10**k``, k <= 9): text such as ``%.6g``."""
+    k = np.full(v.shape, -1, dtype=np.int8)
+    counts = np.zeros(v.shape)
+    with np.errstate(invalid="ignore", over="ignore"):
+        for d in range(_MAX_DECIMALS + 1):
+            todo = k < 0
+            if not todo.any():
+                break
+            c = np.rint(v[todo] * _POW10[d])
+            hit = (np.abs(c) < _MAX_COUNT) & (c / _POW10[d] == v[todo])
+            idx = np.flatnonzero(todo.reshape(-1))[hit]
+            k.reshape(-1)[idx] = d
+            counts.reshape(-1)[idx] = c[hit]
+    eq = k >= 0
+    ok = eq.all(axis=1)
+    if ok.mean() <= 0.5:
+        return None
+    k[~eq] = 0
+    width = v.shape[1]
+    dec, lengths = wire.zigzag_varints(k.astype(np.int64))
+    plan = NumbersPlan("counts", width, ok, counts.astype("<i4").tobytes(), np.full(len(v), 4 * width))
+    plan.decimals = dec
+    plan.decimal_starts = np.concatenate([[0], np.cumsum(lengths.reshape(-1, width).sum(axis=1))])
+    return plan
+
+
 def plan_numbers(values: np.ndarray | None, hint: dict[str, Any] | None, precision: str = "") -> NumbersPlan | None:
     """How to store ``values`` (N, C) or (N,) float64; None: as float64 (the field of schema_version 1)."""
     if values is None or len(values) == 0:
@@ -151,7 +183,7 @@ def plan_numbers(values: np.ndarray | None, hint: dict[str, Any] | None, precisi
     ok = np.all(f.astype(np.float64) == v, axis=1)
     if ok.mean() > 0.5:
         return NumbersPlan("f32", width, ok, f.tobytes(), np.full(len(v), 4 * width))
-    return None
+    return _value_decimals(v)
 
 
 def numbers_field(number: int, plan: NumbersPlan, starts: np.ndarray, i: int, j: int) -> bytes:
@@ -299,8 +331,8 @@ def numbers_sources(payloads: list[Any]) -> list[dict[str, Any]] | None:
 
 def scan_numbers(payload: memoryview | bytes) -> dict[str, Any]:
     """The fields of one ``imulog.Numbers`` message (views); raises wire.Fallback on anything unexpected."""
-    out: dict[str, Any] = {"counts": b"", "f32": b"", **{p: None for p in PARAMS}}
-    names = {1: "counts", 2: "shift", 3: "divisor", 4: "scale", 5: "offset", 6: "f32"}
+    out: dict[str, Any] = {"counts": b"", "f32": b"", "decimals": b"", **{p: None for p in PARAMS}}
+    names = {1: "counts", 2: "shift", 3: "divisor", 4: "scale", 5: "offset", 6: "f32", 7: "decimals"}
     for number, wire_type, value in wire.scan(payload):
         name = names.get(number)
         if name is None:
@@ -353,6 +385,17 @@ def decode_numbers(sources: list[tuple[str, Any]], counts: np.ndarray, width: in
             if len(buf) != n * width * 4:
                 raise ValueError(f"{what}: {len(buf)} count bytes for {n} samples x {width} values")
             c = np.frombuffer(buf, dtype="<i4").reshape(n, width)
+            with_dec = [len(s.get("decimals") or b"") > 0 for s in srcs]
+            if any(with_dec):
+                if not all(with_dec):
+                    raise ValueError(f"{what}: decimals in some blocks only")
+                dec = wire.read_zigzag_varints(
+                    bytearray().join([s["decimals"] for s in srcs]), n * width, f"{what} decimals"
+                )
+                if dec.min() < 0 or dec.max() > _MAX_DECIMALS:
+                    raise ValueError(f"{what}: decimals outside 0..{_MAX_DECIMALS}")
+                out[rows] = c / _POW10[dec.reshape(n, width)]
+                continue
             params = {}
             for p in PARAMS:
                 raw = [bytes(s[p]) if s[p] is not None else b"" for s in srcs]

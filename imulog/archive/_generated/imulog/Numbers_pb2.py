@@ -16,7 +16,7 @@ _sym_db = _symbol_database.Default()
 
 
 
-DESCRIPTOR = _POOL.AddSerializedFile(b'\n\x14imulog/Numbers.proto\x12\x06imulog\"e\n\x07Numbers\x12\x0e\n\x06\x63ounts\x18\x01 \x03(\x0f\x12\r\n\x05shift\x18\x02 \x03(\x01\x12\x0f\n\x07\x64ivisor\x18\x03 \x03(\x01\x12\r\n\x05scale\x18\x04 \x03(\x01\x12\x0e\n\x06offset\x18\x05 \x03(\x01\x12\x0b\n\x03\x66\x33\x32\x18\x06 \x03(\x02\x62\x06proto3')
+DESCRIPTOR = _POOL.AddSerializedFile(b'\n\x14imulog/Numbers.proto\x12\x06imulog\"w\n\x07Numbers\x12\x0e\n\x06\x63ounts\x18\x01 \x03(\x0f\x12\r\n\x05shift\x18\x02 \x03(\x01\x12\x0f\n\x07\x64ivisor\x18\x03 \x03(\x01\x12\r\n\x05scale\x18\x04 \x03(\x01\x12\x0e\n\x06offset\x18\x05 \x03(\x01\x12\x0b\n\x03\x66\x33\x32\x18\x06 \x03(\x02\x12\x10\n\x08\x64\x65\x63imals\x18\x07 \x03(\x11\x62\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
@@ -24,5 +24,5 @@ _builder.BuildTopDescriptorsAndMessages(DESCRIPTOR, 'imulog.Numbers_pb2', _globa
 if not _descriptor._USE_C_DESCRIPTORS:
   DESCRIPTOR._loaded_options = None
   _globals['_NUMBERS']._serialized_start=32
-  _globals['_NUMBERS']._serialized_end=133
+  _globals['_NUMBERS']._serialized_end=151
 # @@protoc_insertion_point(module_scope)
