@@ -4,8 +4,9 @@
     python benchmarks/bench_archive.py --samples 600000   # quicker
     python benchmarks/bench_archive.py --no-twins         # the canonical block store alone
 
-The peer is what a user of the `mcap` Python library would write for the same data (issue 17): the very same
-imulog block messages (about 1 s of samples each, encoded by ``imulog.archive.codec``) written with
+The peer is what a user of the `mcap` Python library would write for the same data (issue 17): the same arrays
+as imulog block messages of schema_version 1 (about 1 s of samples each, float64 and explicit times:
+``imulog.archive.codec.encode(stream, compact=False)``; imulog itself stores counts, issue 28) written with
 ``mcap.writer.Writer`` (zstd chunks of the same 2 MiB target, full indexes and CRCs), and read back with
 ``mcap.reader.make_reader`` + the generated protobuf class + numpy, joining the block arrays — no per-sample
 Python objects on either side. The append peer is writing the derived channel's blocks alone to a new file with
@@ -48,7 +49,7 @@ def peer_write(stream, path: Path) -> float:
     from mcap.writer import CompressionType, Writer
 
     t0 = time.perf_counter()
-    schema_name, meta, times, payloads = codec.encode(stream)
+    schema_name, meta, times, payloads = codec.encode(stream, compact=False)  # the arrays as they are: float64
     with open(path, "wb") as f:
         w = Writer(f, chunk_size=CHUNK_TARGET_BYTES, compression=CompressionType.ZSTD)
         w.start(library="peer")
@@ -175,7 +176,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"imulog archive vs the mcap library ({version('mcap')}) on the same blocks: {n:,} samples of 9-axis IMU")
     twins = "without viewer twins" if args.no_twins else "with viewer twins (/derived/viewer/..., Foxglove/Rerun forms)"
     print(f"best of {args.repeat}; load average {load_before} before, {load_average()} after; imulog {twins}")
-    print(f"file size: imulog {size / 1e6:.1f} MB, peer {peer_size / 1e6:.1f} MB -> {size / peer_size:.3f}x (target <= 1.1x)")
+    print(
+        f"file size: imulog {size / 1e6:.1f} MB, peer {peer_size / 1e6:.1f} MB -> {size / peer_size:.3f}x (target <= 1.1x)"
+    )
     rows = [
         ("write", best["write"], best["peer_write"], best["peer_write"] / best["write"], ">= 1.0x", 1.0),
         ("read", best["read"], best["peer_read"], best["peer_read"] / best["read"], ">= 1.5x", 1.5),

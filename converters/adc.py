@@ -108,8 +108,10 @@ def read_adc(
         "units": {"acc": "counts"},
         "source": path.name,
     }
+    # the archive stores the counts: ((counts + shift) / divisor) * scale gives acc back exactly (issue 28)
+    resolution = {"acc": {"shift": [-float(z) for z in zero], "divisor": float(counts_per_g), "scale": G0}}
     rec = Recording(sources=[str(path)], warnings=[cut_warning] if cut_warning else [])
-    rec.imus.append(ImuStream(name=name, t_ns=t_ns, acc=acc, meta=dict(meta)))
+    rec.imus.append(ImuStream(name=name, t_ns=t_ns, acc=acc, meta={**meta, "resolution": resolution}))
     rec.metadata[f"imulog.device.{name}"] = meta
     return rec
 

@@ -276,10 +276,23 @@ def _decode(blocks: np.ndarray, layout: _Layout) -> tuple[np.ndarray, np.ndarray
     if layout.axes == 3:
         return raw / accel_lsb[:, None, None], None, None
     gyro_range = gyro_range_dps(blocks["light"])
-    gyr = raw[..., 0:3] * (gyro_range / 32768.0)[:, None, None]
+    gyr = raw[..., 0:3] / (32768.0 / gyro_range)[:, None, None]  # counts / (counts per deg/s): resolution()
     acc = raw[..., 3:6] / accel_lsb[:, None, None]
     mag = raw[..., 6:9] / 16.0 if layout.axes == 9 else None
     return acc, gyr, mag
+
+
+def resolution(blocks: np.ndarray, gyr: bool, mag: bool) -> dict[str, dict[str, float]]:
+    """How the SI values of ``_decode`` (then ``* G0`` and ``np.radians``) follow from the counts of a block:
+    ``(counts / divisor) * scale``; the archive stores the counts where this gives every value back
+    (imulog.archive.numbers)."""
+    light = blocks["light"][:1]
+    out = {"acc": {"divisor": float(np.left_shift(1, 8 + ((int(light[0]) >> 13) & 7))), "scale": G0}}
+    if gyr:
+        out["gyr"] = {"divisor": float(32768.0 / gyro_range_dps(light)[0]), "scale": float(np.pi / 180)}
+    if mag:
+        out["mag"] = {"divisor": 16.0}
+    return out
 
 
 def sample_times_ns(
@@ -476,6 +489,7 @@ def _decode_batches(
             raise ConversionError(path, f"data block {int(index[i])}: time stamp goes backwards")
         prev_end = int(t[-1])
         acc, gyr, mag = _decode(blocks, layout)
+        meta["resolution"] = resolution(blocks[:1], gyr is not None, mag is not None)
         values = {
             "acc": acc[filled] * G0,
             "gyr": None if gyr is None else np.radians(gyr[filled]),

@@ -116,3 +116,14 @@ def load_nexus_markers(path: Path) -> MarkerStream:
     t = np.round((data[:, 0] - 1) / rate * 1e9).astype(np.int64)
     pos = data[:, 2:].reshape(len(data), len(labels), 3) / 1000.0
     return MarkerStream("vicon", t, labels, pos, meta={"source": path.name, "rate_hz": rate})
+
+
+def generic_times(count, t_ns, t0_ns, t_span_ns, t_residual_ns) -> np.ndarray:
+    """A block's times as a generic protobuf reader rebuilds them (docs/schemas.md): ``t_ns``, or for
+    schema_version 2 the start plus the span spread evenly plus residuals (absent fields may come as None)."""
+    count = int(count or 0)
+    if (t_ns is not None and len(t_ns)) or not count:
+        return np.asarray(t_ns if t_ns is not None else [], dtype=np.int64)
+    k, den = np.arange(count, dtype=np.int64), max(count - 1, 1)
+    res = np.asarray(t_residual_ns, dtype=np.int64) if t_residual_ns is not None and len(t_residual_ns) else 0
+    return int(t0_ns or 0) + (2 * k * int(t_span_ns or 0) + den) // (2 * den) + res

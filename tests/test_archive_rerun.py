@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_archive_helpers import synthetic_recording
+from test_archive_helpers import generic_times, synthetic_recording
 
 from imulog.archive import append_derived, write_trial
 from imulog.archive.twins import TWIN_RATE_HZ
@@ -75,7 +75,13 @@ def test_rerun_decodes_blocks_and_draws_foxglove_poses(trial):
     ]
     assert sum(b[0]["count"] for b in blocks) == len(rec.imus[0])
     # packed repeated numbers: Rerun's protobuf reflection gives lists of numbers, not Binary
-    t = np.concatenate([np.asarray(b[0]["t_ns"], dtype=np.int64) for b in blocks])
+    # (schema_version 2 blocks give evenly spread times as start + span: docs/schemas.md)
+    t = np.concatenate(
+        [
+            generic_times(*(b[0].get(k) for k in ("count", "t_ns", "t0_ns", "t_span_ns", "t_residual_ns")))
+            for b in blocks
+        ]
+    )
     assert np.array_equal(t, rec.imus[0].t_ns)
     # the pose channel's viewer twin (foxglove.FrameTransform) is drawn as a Transform3D (float32)
     translations = [

@@ -62,10 +62,36 @@ with open(sys.argv[1], "rb") as f:
         else:  # packed repeated numbers arrive as Python numbers: pack them back to compare bit for bit
             fields = {}
             for fd, value in msg.ListFields():
+                if fd.type == FD.TYPE_MESSAGE and fd.name.endswith("_q"):  # schema_version 2: imulog.Numbers
+                    width = len(value.shift or value.divisor or value.scale or value.offset or [0])
+                    if value.f32:
+                        vals = list(value.f32)
+                    elif value.decimals:  # each value's own decimals: counts / 10**decimals
+                        vals = [float(c) / 10.0 ** d for c, d in zip(value.counts, value.decimals)]
+                    else:  # ((counts + shift) / divisor) * scale + offset, per column; absent steps skipped
+                        vals = []
+                        for i, c in enumerate(value.counts):
+                            v, k = float(c), i % width
+                            if value.shift:
+                                v += value.shift[k]
+                            if value.divisor:
+                                v /= value.divisor[k]
+                            if value.scale:
+                                v *= value.scale[k]
+                            if value.offset:
+                                v += value.offset[k]
+                            vals.append(v)
+                    fields[fd.name[:-2]] = struct.pack(f"<{len(vals)}d", *vals).hex()
+                    continue
                 fmt = PACK.get(fd.type) if fd.is_repeated else None
                 if fmt:
                     value = struct.pack(f"<{len(value)}{fmt}", *value)
                 fields[fd.name] = value.hex() if isinstance(value, bytes) else (list(value) if fd.is_repeated else value)
+            if msg.count and not len(msg.t_ns):  # schema_version 2: start + span spread evenly (+ residuals)
+                n, res = msg.count, list(msg.t_residual_ns) or [0] * msg.count
+                den = max(n - 1, 1)
+                t = [msg.t0_ns + (2 * k * msg.t_span_ns + den) // (2 * den) + res[k] for k in range(n)]
+                fields["t_ns"] = struct.pack(f"<{n}q", *t).hex()
             d["messages"].append(fields)
 json.dump(out, sys.stdout)
 """
@@ -97,7 +123,8 @@ def test_imu_block_arrays_are_bit_identical(decoded):
     imu = rec.imus[0]
     msgs = out["/imu/wrist"]["messages"]
     assert out["/imu/wrist"]["schema"] == "imulog.ImuBlock"
-    assert all(m["schema_version"] == 1 for m in msgs)
+    assert all(m["schema_version"] in (1, 2) for m in msgs)  # 2: a block using the fields of issue 28
+    assert all(m["schema_version"] == 2 for m in msgs if {"t0_ns", "t_span_ns", "t_residual_ns"} & set(m))
     assert sum(m["count"] for m in msgs) == len(imu)
     assert_bit_identical(_cat(msgs, "t_ns", "<i8"), imu.t_ns, "t_ns")
     for f in ("acc", "gyr", "mag"):

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_archive_helpers import generic_times
 
 from imulog.archive import TrialReader, append_derived, check_file, write_trial
 from imulog.archive.twin_filter import lowpass_at
@@ -181,7 +182,8 @@ def test_every_channel_decodes_as_numbers_with_mcap_and_foxglove_schemas(process
     blocks = [d for _, _, d in got["/imu/wrist"]]
     assert isinstance(blocks[0].gyr[0], float)
     assert np.array_equal(np.concatenate([np.array(b.gyr) for b in blocks]).reshape(-1, 3), imu.gyr)
-    assert np.array_equal(np.concatenate([np.array(b.t_ns, dtype=np.int64) for b in blocks]), imu.t_ns)
+    t = [generic_times(b.count, b.t_ns, b.t0_ns, b.t_span_ns, b.t_residual_ns) for b in blocks]  # docs/schemas.md
+    assert np.array_equal(np.concatenate(t), imu.t_ns)
     # the twins decode with Foxglove's published schemas (field numbers identical to ours)
     clouds = got["/derived/viewer/markers/vicon"]
     assert clouds[0][0] == "foxglove.PointCloud"

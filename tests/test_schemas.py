@@ -253,3 +253,107 @@ def _without_json_names(fd: descriptor_pb2.FileDescriptorProto) -> descriptor_pb
         for f in message.field:
             f.ClearField("json_name")
     return fd
+
+
+# ------------------------------------------------------------------ resolution storage (issue 28)
+
+
+def test_files_written_with_float64_packed_fields_still_read(repo_root: Path):
+    """tests/data/layout_v2_packed.mcap was written before issue 28 (float64 packed arrays, explicit times)."""
+    from imulog.archive import TrialReader, check_file
+
+    path = repo_root / "tests/data/layout_v2_packed.mcap"
+    ref = np.load(repo_root / "tests/data/layout_v2_packed.npz")
+    assert check_file(path).ok
+    with TrialReader(path) as tr:
+        raw = [codec.MESSAGE_CLASSES["imulog.ImuBlock"].FromString(bytes(p)) for p in tr.messages("/imu/wrist")]
+        assert all(m.schema_version == 1 and len(m.t_ns) == m.count and len(m.acc) for m in raw)  # the old layout
+        imu, mk, sig, an, pose = (
+            tr.read(t) for t in ("/imu/wrist", "/markers/vicon", "/signals/x", "/analog/emg", "/poses/optical")
+        )
+    assert np.array_equal(imu.t_ns, ref["t"]) and np.array_equal(mk.t_ns, ref["t"] + 123)
+    for got, want in ((imu.acc, "acc"), (imu.gyr, "gyr"), (imu.temperature, "temp"), (mk.pos, "pos")):
+        assert np.array_equal(got.view(np.uint64), ref[want].view(np.uint64)), want
+    assert np.array_equal(mk.valid, ref["valid"])
+    assert np.array_equal(an.values, ref["an"]) and np.array_equal(sig.values, ref["sig"])
+    assert np.array_equal(pose.position, ref["ppos"]) and np.array_equal(pose.orientation, ref["pq"])
+
+
+def _counts_stream(rng, n=1000):
+    from imulog.model import ImuStream
+
+    t = (np.arange(n) * 10_000_000 + 7).astype(np.int64)
+    raw = rng.integers(-4096, 4096, (n, 3)).astype(np.float64)
+    acc = (raw / 256.0) * 9.80665  # an Axivity-style conversion: (counts / divisor) * scale
+    gyr = np.round(rng.normal(size=(n, 3)) * 50, 3)  # text with 3 decimals
+    temperature = rng.normal(size=n)  # neither: stays float64
+    hint = {"acc": {"divisor": 256.0, "scale": 9.80665}}
+    return ImuStream("w", t, acc=acc, gyr=gyr, temperature=temperature, meta={"resolution": hint})
+
+
+def test_counts_and_compact_times_read_back_exactly_and_are_protobufs_own_bytes():
+    rng = np.random.default_rng(11)
+    s = _counts_stream(rng)
+    s.acc[5, 1] = np.nan  # a gap row: its block keeps float64, the others counts
+    s.t_ns[750:] += 2  # a 2-ns step inside block 7: residuals there
+    schema, meta, _, payloads = codec.encode(s)
+    msgs = [codec.MESSAGE_CLASSES[schema].FromString(p) for p in payloads]
+    for p, m in zip(payloads, msgs, strict=True):
+        assert m.SerializeToString() == p  # the bytes protobuf itself writes for these fields
+    assert len(msgs[0].acc) == 3 * msgs[0].count and not msgs[0].HasField("acc_q")
+    assert all(m.HasField("acc_q") and m.HasField("gyr_q") and not len(m.acc) for m in msgs[1:])
+    assert list(msgs[1].acc_q.divisor) == [256.0] * 3 and list(msgs[1].gyr_q.divisor) == [1000.0] * 3
+    assert all(len(m.temperature) == m.count for m in msgs)
+    assert all(m.schema_version == 2 and not len(m.t_ns) for m in msgs)
+    assert [len(m.t_residual_ns) > 0 for m in msgs] == [False] * 7 + [True] + [False] * 2
+    back = codec.decode(schema, "/imu/w", meta, payloads)
+    assert np.array_equal(back.t_ns, s.t_ns)
+    assert np.array_equal(back.acc, s.acc, equal_nan=True) and np.array_equal(back.gyr, s.gyr)
+    assert np.array_equal(back.temperature.view(np.uint64), s.temperature.view(np.uint64))
+    old = sum(len(m.count.to_bytes(2, "little")) + 8 * m.count * 7 for m in msgs)
+    assert sum(map(len, payloads)) < 0.65 * old  # int32 counts, no times: 32 of 56 bytes a sample
+
+
+def test_jittered_times_stay_explicit_and_a_hint_that_does_not_fit_falls_back():
+    from imulog.model import ImuStream
+
+    rng = np.random.default_rng(12)
+    t = np.cumsum(rng.integers(9_000_000, 11_000_000, 300)).astype(np.int64)
+    acc = rng.normal(size=(300, 3))
+    s = ImuStream("w", t, acc=acc, meta={"resolution": {"acc": {"divisor": 256.0}}})
+    schema, meta, _, payloads = codec.encode(s)
+    msgs = [codec.MESSAGE_CLASSES[schema].FromString(p) for p in payloads]
+    assert all(len(m.acc) == 3 * m.count for m in msgs)
+    assert all(m.schema_version == 1 and len(m.t_ns) == m.count for m in msgs if m.count > 2)  # 2 are always even
+    back = codec.decode(schema, "/imu/w", meta, payloads)
+    assert np.array_equal(back.t_ns, t) and np.array_equal(back.acc.view(np.uint64), acc.view(np.uint64))
+
+
+def test_float32_precision_request_and_blocks_parsed_by_protobuf():
+    from imulog.model import SignalStream
+
+    rng = np.random.default_rng(13)
+    t = (np.arange(500) * 4_000_000).astype(np.int64)
+    q = rng.normal(size=(500, 4))
+    s = SignalStream("/derived/x", t, list("wxyz"), ["1"] * 4, q, attrs={"precision": "float32"})
+    schema, meta, _, payloads = codec.encode(s)
+    msg = codec.MESSAGE_CLASSES[schema].FromString(payloads[0])
+    assert len(msg.values_q.f32) == 4 * msg.count and not len(msg.values)
+    # a reader that meets unpacked values (another writer) falls back to protobuf: same numbers
+    slow = [codec.MESSAGE_CLASSES[schema].FromString(p).SerializeToString() for p in payloads]
+    for back in (codec.decode(schema, "/derived/x", meta, payloads), codec.decode(schema, "/derived/x", meta, slow)):
+        assert np.array_equal(back.values, q.astype(np.float32).astype(np.float64))
+        assert np.array_equal(back.t_ns, t)
+
+
+def test_varints_decode_what_protobuf_encodes():
+    from imulog.archive import wire
+    from imulog.archive._generated.imulog import ImuBlock_pb2
+
+    values = np.array([0, 1, -1, 63, -64, 64, 8191, -8192, 2**40, -(2**62), 2**63 - 1, -(2**63)])
+    data, lengths = wire.zigzag_varints(values)  # the time residuals (repeated sint64)
+    assert ImuBlock_pb2.ImuBlock(t_residual_ns=values.tolist()).SerializeToString() == wire.len_field(12, data)
+    assert lengths.sum() == len(data)
+    assert np.array_equal(wire.read_zigzag_varints(data, len(values), "x"), values)
+    with pytest.raises(ValueError, match="x: 13 varints"):
+        wire.read_zigzag_varints(data + b"\x05", len(values), "x")

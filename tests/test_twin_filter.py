@@ -123,3 +123,15 @@ def test_streamed_trial_twin_equals_the_whole(tmp_path):
     np.testing.assert_array_equal(ra[:, : -37 * 8], rb[:, : -37 * 8])  # stamps and frame names
     fa, fb = (np.ascontiguousarray(r[:, -37 * 8 :]).view("<f8") for r in (ra, rb))
     np.testing.assert_allclose(fb, fa, rtol=0, atol=1e-12)  # the same sums (BLAS may order them differently)
+
+
+def test_long_recordings_get_an_epoch_rate_overview_short_trials_keep_25_hz():
+    from imulog.archive.twins import OVERVIEW_AFTER_S, OVERVIEW_EPOCH_S, TWIN_RATE_HZ
+
+    rate = 100.0
+    short = (np.arange(int(3600 * rate)) * 1e9 / rate).astype(np.int64)  # 1 h
+    keep = decimation(short)
+    assert np.median(np.diff(short[keep])) == pytest.approx(1e9 / TWIN_RATE_HZ)
+    long = (np.arange(int((OVERVIEW_AFTER_S + 600) * rate)) * 1e9 / rate).astype(np.int64)  # just over 3 h
+    keep = decimation(long)
+    assert np.median(np.diff(long[keep])) == pytest.approx(OVERVIEW_EPOCH_S * 1e9)

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from google.protobuf import descriptor_pb2
 
-from imulog.archive import wire
+from imulog.archive import numbers, wire
 from imulog.archive._generated.foxglove import PoseInFrame_pb2
 from imulog.archive._generated.imulog import (
     AnalogBlock_pb2,
@@ -33,7 +33,8 @@ from imulog.archive._generated.imulog import (
 from imulog.archive.timeline import IDENTITY, LogMap
 from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream, Stream
 
-SCHEMA_VERSION = 1  # layout version written into every imulog block; readers accept <= this
+SCHEMA_VERSION = 2  # newest layout version written (blocks with Numbers or compact times); readers accept <= this
+SCHEMA_VERSION_V1 = 1  # blocks using only the fields of the first layout keep writing 1 (readable by older imulog)
 BLOCK_NS = 1_000_000_000  # block length: samples are grouped in windows of 1 s
 
 MESSAGE_CLASSES = {
@@ -140,10 +141,6 @@ def block_bounds(t_ns: np.ndarray, block_ns: int = BLOCK_NS) -> list[tuple[int, 
     return list(zip(edges[:-1], edges[1:], strict=True))
 
 
-def _rows(a: np.ndarray | None, rows: slice) -> np.ndarray | None:
-    return None if a is None else a[rows]
-
-
 def _stats(t_ns: np.ndarray, values: list[np.ndarray | None]) -> dict[str, str]:
     """Channel metadata describing the samples: count, span, rate, gaps (time gaps and NaN samples)."""
     n = len(t_ns)
@@ -174,24 +171,22 @@ def nan_samples(n: int, arrays: list[np.ndarray]) -> int:
     return int(n - np.count_nonzero(finite))
 
 
-def _block(*fields: bytes) -> bytes:
-    return b"".join(fields)
-
-
-def encode(stream: Stream, log_map: LogMap = IDENTITY) -> tuple[str, dict[str, str], list[int], list[bytes]]:
+def encode(
+    stream: Stream, log_map: LogMap = IDENTITY, *, compact: bool = True
+) -> tuple[str, dict[str, str], list[int], list[bytes]]:
     """-> (schema name, channel metadata, log times, serialized messages) for one stream.
 
     ``log_map`` places the messages on the trial's time axis (:mod:`imulog.archive.timeline`); the
     default keeps log time = sample time (clamped at 0), the layout of files written before the axis.
+    Arrays are stored at their source's resolution and evenly spread times as start plus span where that
+    gives the values back exactly (:mod:`imulog.archive.numbers`); such blocks carry schema_version 2.
+    ``compact=False`` writes the layout of schema_version 1 (float64 arrays, explicit times: the benchmarks' peer).
     """
     kind = stream_kind(stream)
     meta: dict[str, str] = {"kind": kind, "schema_version": str(SCHEMA_VERSION)}
     if log_map is not IDENTITY:
         meta["log_time"] = log_map.to_meta()
-    starts: list[int] = []
-    payloads: list[bytes] = []
-    u, st, pk = wire.uint_field, wire.string_field, wire.packed
-    v = SCHEMA_VERSION
+    st = wire.string_field
     if kind == "imu":
         assert isinstance(stream, ImuStream)
         fields = [(f, getattr(stream, f)) for f in ("acc", "gyr", "mag", "temperature")]
@@ -206,21 +201,9 @@ def encode(stream: Stream, log_map: LogMap = IDENTITY) -> tuple[str, dict[str, s
             source=str(stream.meta.get("source", "")),
         )
         meta.update(_stats(stream.t_ns, [a for _, a in fields]))
-        head = u(1, v) + st(2, stream.name) + st(3, stream.frame_id)
-        for i, j in block_bounds(stream.t_ns):
-            r = slice(i, j)
-            payloads.append(
-                _block(
-                    head,
-                    u(4, j - i),
-                    pk(5, stream.t_ns[r], _I8),
-                    pk(6, _rows(stream.acc, r), _F8),
-                    pk(7, _rows(stream.gyr, r), _F8),
-                    pk(8, _rows(stream.mag, r), _F8),
-                    pk(9, _rows(stream.temperature, r), _F8),
-                )
-            )
-            starts.append(i)
+        hints, precision = _hints(stream.meta)
+        arrays = [(6 + k, 13 + k, a, hints.get(f)) for k, (f, a) in enumerate(fields)]
+        layout = _Layout(st(2, stream.name) + st(3, stream.frame_id), 4, 5, (10, 11, 12), arrays, precision)
     elif kind == "markers":
         assert isinstance(stream, MarkerStream)
         meta.update(
@@ -233,13 +216,18 @@ def encode(stream: Stream, log_map: LogMap = IDENTITY) -> tuple[str, dict[str, s
         )
         meta.update(_stats(stream.t_ns, [stream.pos]))
         valid = np.asarray(stream.valid, dtype=bool)
-        head = u(1, v) + st(2, stream.frame_id) + _strings(3, stream.labels)
-        for i, j in block_bounds(stream.t_ns):
-            r = slice(i, j)
-            payloads.append(
-                _block(head, u(4, j - i), pk(5, stream.t_ns[r], _I8), pk(6, stream.pos[r], _F8), pk(7, valid[r], _U1))
-            )
-            starts.append(i)
+        hints, precision = _hints(stream.meta)
+        n = len(stream.t_ns)
+        pos = stream.pos.reshape(n, -1)
+        layout = _Layout(
+            st(2, stream.frame_id) + _strings(3, stream.labels),
+            4,
+            5,
+            (8, 9, 10),
+            [(6, 11, pos, hints.get("pos"))],
+            precision,
+            extra=[(7, valid.reshape(n, -1), _U1)],
+        )
     elif kind in ("analog", "signal"):
         if isinstance(stream, AnalogStream):
             names, extra = stream.channel_names, {"name": stream.name, "frame_id": ""}
@@ -247,27 +235,27 @@ def encode(stream: Stream, log_map: LogMap = IDENTITY) -> tuple[str, dict[str, s
                 meta=json.dumps(stream.meta, sort_keys=True, default=str), source=str(stream.meta.get("source", ""))
             )
             second = st(2, stream.name)
+            hints, precision = _hints(stream.meta)
         else:
             assert isinstance(stream, SignalStream)
             names, extra = stream.columns, {**stream.attrs, "frame_id": stream.frame_id}
             second = st(2, stream.frame_id)
+            hints, precision = {}, str(stream.attrs.get("precision", ""))
         meta.update(extra, columns=json.dumps(list(names)), units=json.dumps(list(stream.units)))
         meta.update(_stats(stream.t_ns, [stream.values]))
-        head = u(1, v) + second + _strings(3, names) + _strings(4, stream.units)
-        for i, j in block_bounds(stream.t_ns):
-            r = slice(i, j)
-            payloads.append(_block(head, u(5, j - i), pk(6, stream.t_ns[r], _I8), pk(7, stream.values[r], _F8)))
-            starts.append(i)
+        head = second + _strings(3, names) + _strings(4, stream.units)
+        layout = _Layout(head, 5, 6, (8, 9, 10), [(7, 11, stream.values, hints.get("values"))], precision)
     elif kind == "intervals":
         assert isinstance(stream, Intervals)
         meta.update(frame_id="", units="ns", sample_count=str(len(stream)))
         if len(stream):
             meta.update(start_ns=str(int(stream.start_ns.min())), end_ns=str(int(stream.end_ns.max())))
+        payloads = []
         for s, e, label, k in zip(
             stream.start_ns.tolist(), stream.end_ns.tolist(), stream.labels, stream.task_index.tolist(), strict=True
         ):
             msg = IntervalEvent_pb2.IntervalEvent(
-                schema_version=SCHEMA_VERSION, start_ns=s, end_ns=e, label=label, task_index=k
+                schema_version=SCHEMA_VERSION_V1, start_ns=s, end_ns=e, label=label, task_index=k
             )
             payloads.append(msg.SerializeToString())
         times = log_map(stream.start_ns).tolist()
@@ -276,21 +264,109 @@ def encode(stream: Stream, log_map: LogMap = IDENTITY) -> tuple[str, dict[str, s
         assert isinstance(stream, PoseStream)
         meta.update(frame_id=stream.frame_id, units="m", columns=json.dumps(["x", "y", "z", "qw", "qx", "qy", "qz"]))
         meta.update(_stats(stream.t_ns, [stream.position, stream.orientation]))
-        head = u(1, v) + st(2, stream.frame_id)
-        for i, j in block_bounds(stream.t_ns):
-            r = slice(i, j)
-            payloads.append(
-                _block(
-                    head,
-                    u(3, j - i),
-                    pk(4, stream.t_ns[r], _I8),
-                    pk(5, stream.position[r], _F8),
-                    pk(6, stream.orientation[r], _F8),
-                )
-            )
-            starts.append(i)
+        precision = ""
+        arrays = [(5, 10, stream.position, None), (6, 11, stream.orientation, None)]
+        layout = _Layout(st(2, stream.frame_id), 3, 4, (7, 8, 9), arrays, precision)
+    layout.compact = compact
+    starts, payloads = _encode_blocks(stream.t_ns, layout)
     times = log_map(stream.t_ns[starts]).tolist() if starts else []
     return KIND_SCHEMA[kind], meta, times, payloads
+
+
+def _hints(meta: dict[str, Any]) -> tuple[dict[str, Any], str]:
+    """The converter's ``resolution`` hints (field -> shift/divisor/scale/offset) and a ``precision`` request."""
+    res = meta.get("resolution") if isinstance(meta, dict) else None
+    return (res if isinstance(res, dict) else {}), str(meta.get("precision", "")) if isinstance(meta, dict) else ""
+
+
+class _Layout:
+    """Field numbers of one block schema: head (strings), count, t_ns, compact time, arrays (f64 and Numbers)."""
+
+    def __init__(
+        self,
+        head: bytes,
+        count: int,
+        t_field: int,
+        time_fields: tuple[int, int, int],
+        arrays: list[tuple[int, int, np.ndarray | None, Any]],
+        precision: str,
+        extra: list[tuple[int, np.ndarray, np.dtype]] | None = None,
+    ) -> None:
+        self.head, self.count, self.t_field, self.time_fields = head, count, t_field, time_fields
+        self.arrays, self.precision, self.extra = arrays, precision, extra or []
+        self.compact = True
+
+
+def _encode_blocks(t_ns: np.ndarray, layout: _Layout) -> tuple[list[int], list[bytes]]:
+    """The block messages of one stream: numpy plans for the whole stream, then byte slices per block.
+
+    Fields go out in number order without sorting: layout-1 fields (``t_ns``, float64 arrays, extras) come
+    before the version-2 ones (compact times, then the ``_q`` arrays), as their numbers do.
+    """
+    bounds = block_bounds(t_ns)
+    if not bounds:
+        return [], []
+    first = np.asarray([b[0] for b in bounds], dtype=np.int64)
+    tp = numbers.plan_times(t_ns, bounds)
+    if not layout.compact:
+        tp.compact[:] = False
+    plans = []
+    for f64_no, q_no, values, hint in layout.arrays:
+        if values is None:
+            continue
+        v = np.asarray(values).reshape(len(t_ns), -1)
+        plan = numbers.plan_numbers(v, hint, layout.precision) if layout.compact else None
+        if plan is None:
+            plans.append((f64_no, v, None, None, None, None))
+        else:
+            ok = np.logical_and.reduceat(plan.ok, first).tolist()
+            q_tag = wire.tag(q_no, wire.WIRE_LEN)
+            inner_tag = b"\x0a" if plan.kind == "counts" else b"\x32"
+            cum = plan.cumulative()
+            edges = cum[np.append(first, len(t_ns))].tolist()  # byte offsets of the blocks in plan.data
+            dec = None
+            if plan.decimal_starts is not None:
+                dec = plan.decimal_starts[np.append(first, len(t_ns))].tolist()
+            plans.append((f64_no, v, plan, edges, ok, (q_tag, inner_tag, plan.head, dec)))
+    heads = {v: wire.uint_field(1, v) + layout.head for v in (SCHEMA_VERSION_V1, SCHEMA_VERSION)}
+    t0_no, span_no, resid_no = layout.time_fields
+    t0_tag, span_tag = wire.tag(t0_no, wire.WIRE_VARINT), wire.tag(span_no, wire.WIRE_VARINT)
+    resid_tag = wire.tag(resid_no, wire.WIRE_LEN)
+    count_tag = wire.tag(layout.count, wire.WIRE_VARINT)
+    varint, packed = wire.varint, wire.packed
+    compact, has_resid = tp.compact.tolist(), tp.has_resid.tolist()
+    t0s, spans = tp.t0.tolist(), tp.span.tolist()
+    rstarts = tp.resid_starts[np.append(first, len(t_ns))].tolist()  # residual bytes of each block
+    payloads = []
+    for b, (i, j) in enumerate(bounds):
+        low: list[bytes] = [count_tag + varint(j - i)]
+        high: list[bytes] = []
+        if compact[b]:
+            t0, span = t0s[b], spans[b]
+            if t0:
+                high.append(t0_tag + varint((t0 << 1) ^ (t0 >> 63)))
+            if span:
+                high.append(span_tag + varint((span << 1) ^ (span >> 63)))
+            if has_resid[b]:
+                body = tp.resid[rstarts[b] : rstarts[b + 1]]
+                high.append(resid_tag + varint(len(body)) + body)
+        else:
+            low.append(packed(layout.t_field, t_ns[i:j], _I8))
+        for f64_no, v, plan, cum, ok, tags in plans:
+            if plan is not None and ok[b]:
+                body = plan.data[cum[b] : cum[b + 1]]
+                inner = tags[1] + varint(len(body)) + body + tags[2] if body else b""
+                if tags[3] is not None:  # per-value decimals, field 7
+                    d = plan.decimals[tags[3][b] : tags[3][b + 1]]
+                    inner += b"\x3a" + varint(len(d)) + d
+                high.append(tags[0] + varint(len(inner)) + inner)
+            else:
+                low.append(packed(f64_no, v[i:j], _F8))
+        for number, a, dtype in layout.extra:
+            low.append(packed(number, a[i:j], dtype))
+        head = heads[SCHEMA_VERSION if high else SCHEMA_VERSION_V1]
+        payloads.append(b"".join([head, *low, *high]))
+    return first.tolist(), payloads
 
 
 def _strings(number: int, values: Sequence[str]) -> bytes:
@@ -326,6 +402,7 @@ class _Block:
 
 
 _PACKED = {}  # protobuf field type -> numpy dtype of its packed wire form
+_NO_MESSAGE = object()  # default of an absent sub-message field
 
 
 def _block_specs(cls: Any) -> tuple[dict[int, tuple[str, str]], dict[str, Any]]:
@@ -335,8 +412,12 @@ def _block_specs(cls: Any) -> tuple[dict[int, tuple[str, str]], dict[str, Any]]:
         _PACKED.update({FD.TYPE_SFIXED64: _I8, FD.TYPE_DOUBLE: _F8, FD.TYPE_BOOL: _U1})
     spec, defaults = {}, {}
     for f in cls.DESCRIPTOR.fields:
-        if f.type == FD.TYPE_BYTES or (f.is_repeated and f.type in _PACKED):
+        if f.type == FD.TYPE_BYTES or (f.is_repeated and f.type in (*_PACKED, FD.TYPE_SINT64)):
             kind, default = ("bool" if f.type == FD.TYPE_BOOL else "array"), b""
+        elif f.type == FD.TYPE_SINT64:
+            kind, default = "svarint", 0
+        elif f.type == FD.TYPE_MESSAGE:
+            kind, default = "message", _NO_MESSAGE
         elif f.type == FD.TYPE_STRING:
             kind, default = ("rstring", None) if f.is_repeated else ("string", "")
         elif f.type in (FD.TYPE_UINT32, FD.TYPE_UINT64):
@@ -349,6 +430,11 @@ def _block_specs(cls: Any) -> tuple[dict[int, tuple[str, str]], dict[str, Any]]:
 
 
 _BLOCK_SPECS = {name: _block_specs(MESSAGE_CLASSES[name]) for name in BLOCK_SCHEMAS}
+_SCALAR_DEFAULTS = {
+    name: {k: (None if d is _NO_MESSAGE else d) for k, d in spec[1].items() if d is not None}
+    for name, spec in _BLOCK_SPECS.items()
+}
+_LIST_FIELDS = {name: [k for k, d in spec[1].items() if d is None] for name, spec in _BLOCK_SPECS.items()}
 
 
 def _scan_block(schema_name: str, payload: bytes | memoryview) -> _Block:
@@ -359,21 +445,23 @@ def _scan_block(schema_name: str, payload: bytes | memoryview) -> _Block:
     """
     spec, defaults = _BLOCK_SPECS[schema_name]
     obj = _Block()
-    for name, default in defaults.items():
-        setattr(obj, name, [] if default is None else default)
+    fields = obj.__dict__
+    fields.update(_SCALAR_DEFAULTS[schema_name])  # one call: the blocks have up to 16 fields
+    for name in _LIST_FIELDS[schema_name]:
+        fields[name] = []
     try:
         for number, wire_type, value in wire.scan(payload):
             field = spec.get(number)
             if field is None:
                 continue  # unknown field (a newer writer): ignored, as protobuf does
             name, kind = field
-            if kind == "varint":
+            if kind in ("varint", "svarint"):
                 if wire_type != wire.WIRE_VARINT:
                     raise wire.Fallback
-                setattr(obj, name, value)
+                setattr(obj, name, value if kind == "varint" else (value >> 1) ^ -(value & 1))
             elif wire_type != wire.WIRE_LEN:
                 raise wire.Fallback
-            elif kind == "array":
+            elif kind in ("array", "message"):
                 setattr(obj, name, value)
             elif kind == "bool":
                 if len(value) and int(np.frombuffer(value, _U1).max()) > 1:
@@ -397,6 +485,10 @@ def _as_block(schema_name: str, msg: Any) -> _Block:
         value = getattr(msg, f.name)
         if f.is_repeated and f.type in _PACKED:
             value = np.asarray(list(value), dtype=_PACKED[f.type]).tobytes()
+        elif f.is_repeated and f.type == FD.TYPE_SINT64:
+            value = wire.zigzag_varints(np.asarray(list(value), dtype=np.int64))[0]
+        elif f.type == FD.TYPE_MESSAGE:
+            value = value.SerializeToString() if msg.HasField(f.name) else None
         elif f.type == FD.TYPE_STRING and f.is_repeated:
             value = list(value)
         setattr(obj, f.name, value)
@@ -429,6 +521,57 @@ def _json_meta(meta: dict[str, str], key: str, default: Any) -> Any:
         return default
 
 
+def _numbers_fields(payload: Any) -> dict[str, Any]:
+    try:
+        return numbers.scan_numbers(payload)
+    except wire.Fallback:
+        from imulog.archive._generated.imulog import Numbers_pb2
+
+        try:
+            msg = Numbers_pb2.Numbers.FromString(bytes(payload))
+        except Exception as exc:  # protobuf raises DecodeError subclasses of Exception
+            raise DecodeError(f"a Numbers field does not parse: {exc}") from exc
+        out: dict[str, Any] = {"counts": np.asarray(list(msg.counts), dtype="<i4").tobytes()}
+        out["f32"] = np.asarray(list(msg.f32), dtype="<f4").tobytes()
+        out["decimals"] = wire.zigzag_varints(np.asarray(list(msg.decimals), dtype=np.int64))[0]
+        for p in numbers.PARAMS:
+            values = list(getattr(msg, p))
+            out[p] = np.asarray(values, dtype="<f8").tobytes() if values else None
+        return out
+
+
+def _array(
+    msgs: list[Any], f: str, counts: np.ndarray, width: int, topic: str, *, required: bool = False
+) -> np.ndarray | None:
+    """(N, width) float64 of field ``f`` over all blocks: float64 bytes or ``f_q`` Numbers, mixed per block."""
+    qs = [getattr(msg, f + "_q", None) for msg in msgs]
+    if all(q is not None for q in qs):  # every block at the same resolution: its parameters parsed once
+        fast = numbers.numbers_sources(qs)
+        if fast is not None and not any(len(getattr(msg, f)) for msg in msgs):
+            try:
+                return numbers.decode_numbers([("q", x) for x in fast], counts, width, f"{topic} {f}")
+            except ValueError as exc:
+                raise DecodeError(str(exc)) from None
+    sources: list[tuple[str, Any]] = []
+    for msg, c in zip(msgs, counts.tolist(), strict=True):
+        raw = getattr(msg, f)
+        q = getattr(msg, f + "_q", None)
+        if len(raw):
+            sources.append(("f64", raw))
+        elif q is not None:
+            sources.append(("q", _numbers_fields(q)))
+        else:
+            sources.append(("none" if c or not required else "f64", b""))
+    if not required and all(k == "none" for k, _ in sources):
+        return None
+    if not required and any(k == "none" and c for (k, _), c in zip(sources, counts.tolist(), strict=True)):
+        raise DecodeError(f"{topic}: field {f} present in some blocks only")
+    try:
+        return numbers.decode_numbers(sources, counts, width, f"{topic} {f}")
+    except ValueError as exc:
+        raise DecodeError(str(exc)) from None
+
+
 def decode(schema_name: str, topic: str, meta: dict[str, str], payloads: Sequence[bytes | memoryview]) -> Stream:
     """Rebuild the imulog.model stream of one channel from its messages (in log order)."""
     if schema_name not in MESSAGE_CLASSES:
@@ -441,16 +584,20 @@ def decode(schema_name: str, topic: str, meta: dict[str, str], payloads: Sequenc
             _check_version(msg, schema_name)
         counts = [msg.count for msg in msgs]
         n = int(sum(counts))
-        t = _join([msg.t_ns for msg in msgs], _I8, 1, n, f"{topic} t_ns")
+        counts_a = np.asarray(counts, dtype=np.int64)
+        try:
+            t = numbers.decode_times(msgs, counts_a, topic)
+        except ValueError as exc:
+            raise DecodeError(str(exc)) from None
     if kind == "imu":
         columns = _json_meta(meta, "columns", None)
         values: dict[str, np.ndarray | None] = {}
         for f, width in (("acc", 3), ("gyr", 3), ("mag", 3), ("temperature", 1)):
-            parts = [getattr(msg, f) for msg in msgs]
-            present = any(parts) if msgs else (columns is not None and f in columns)
-            if msgs and present and not all(parts[k] or counts[k] == 0 for k in range(len(parts))):
-                raise DecodeError(f"{topic}: field {f} present in some blocks only")
-            values[f] = _join(parts, _F8, width, n, f"{topic} {f}") if present else None
+            if msgs:
+                a = _array(msgs, f, counts_a, width, topic)
+                values[f] = None if a is None else (a if width > 1 else a.reshape(n))
+            else:
+                values[f] = np.zeros((0, width) if width > 1 else 0) if columns is not None and f in columns else None
         return ImuStream(
             name=name,
             t_ns=t,
@@ -464,7 +611,7 @@ def decode(schema_name: str, topic: str, meta: dict[str, str], payloads: Sequenc
             if list(msg.labels) != labels:
                 raise DecodeError(f"{topic}: marker labels change between blocks")
         m = len(labels)
-        pos = _join([msg.pos for msg in msgs], _F8, m * 3, n, f"{topic} pos").reshape(n, m, 3)
+        pos = _array(msgs, "pos", counts_a, m * 3, topic, required=True).reshape(n, m, 3)
         valid = _join([msg.valid for msg in msgs], _U1, m, n, f"{topic} valid").reshape(n, m).astype(bool)
         return MarkerStream(
             name=name,
@@ -481,7 +628,7 @@ def decode(schema_name: str, topic: str, meta: dict[str, str], payloads: Sequenc
             units = list(msgs[0].units)
         else:
             names, units = _json_meta(meta, "columns", []), _json_meta(meta, "units", [])
-        values = _join([msg.values for msg in msgs], _F8, len(names), n, f"{topic} values").reshape(n, len(names))
+        values = _array(msgs, "values", counts_a, len(names), topic, required=True).reshape(n, len(names))
         if kind == "analog":
             return AnalogStream(
                 name=name, t_ns=t, channel_names=names, units=units, values=values, meta=_json_meta(meta, "meta", {})
@@ -500,8 +647,8 @@ def decode(schema_name: str, topic: str, meta: dict[str, str], payloads: Sequenc
         )
     frame = msgs[0].frame_id if msgs else meta.get("frame_id", "world")
     if schema_name == "imulog.PoseBlock":
-        position = _join([msg.position for msg in msgs], _F8, 3, n, f"{topic} position")
-        orientation = _join([msg.orientation for msg in msgs], _F8, 4, n, f"{topic} orientation")
+        position = _array(msgs, "position", counts_a, 3, topic, required=True)
+        orientation = _array(msgs, "orientation", counts_a, 4, topic, required=True)
         return PoseStream(topic=topic, t_ns=t, position=position, orientation=orientation, frame_id=frame)
     return _decode_pose_in_frame(topic, msgs, frame)
 

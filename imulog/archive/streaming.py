@@ -293,7 +293,7 @@ class StreamingTrialWriter:
 
     def _twin_step(self, stream: Stream) -> int:
         """Every k-th sample: at most the twins' rate, and at most their message budget over the expected length."""
-        from imulog.archive.twins import MAX_TWIN_MESSAGES, TWIN_RATE_HZ
+        from imulog.archive.twins import MAX_TWIN_MESSAGES, OVERVIEW_AFTER_S, TWIN_RATE_HZ, overview_step
 
         if stream.topic not in self._twin_k:
             t = np.asarray(stream.t_ns)
@@ -301,6 +301,8 @@ class StreamingTrialWriter:
             k = max(1, int(np.ceil(rate / TWIN_RATE_HZ - 1e-9)))
             if self.expected_duration_s:
                 k = max(k, int(np.ceil(rate * self.expected_duration_s / MAX_TWIN_MESSAGES)))
+                if self.expected_duration_s > OVERVIEW_AFTER_S:  # days: an epoch-rate overview
+                    k = max(k, overview_step(rate))
             self._twin_k[stream.topic] = k
         return self._twin_k[stream.topic]
 

@@ -16,7 +16,7 @@ interval channels (IntervalEvent)   ``foxglove.Log``                      TextLo
 ==================================  ====================================  ===========================
 
 Twins are at most :data:`TWIN_RATE_HZ` (every k-th sample) and at most :data:`MAX_TWIN_MESSAGES` messages per
-channel (long recordings get a lower rate). IMU axes are low-passed before decimation
+channel; recordings longer than :data:`OVERVIEW_AFTER_S` get an overview of one sample per :data:`OVERVIEW_EPOCH_S`. IMU axes are low-passed before decimation
 (:mod:`imulog.archive.twin_filter`: zero-phase FIR, flat to 0.8x the twin's Nyquist, >= 60 dB down from it), so
 what an IMU twin shows is the signal below its Nyquist frequency, not aliases of the content above it; marker
 positions, orientations, poses and trajectories are the canonical samples (their content above the twin's
@@ -43,6 +43,11 @@ TWIN_PREFIX = "/derived/viewer"
 # cost 12 % (MCAP indexes every message uncompressed); imulog's own viewer and every step read the full rate.
 TWIN_RATE_HZ = 25.0
 MAX_TWIN_MESSAGES = 180_000  # 2 h at 25 Hz; longer recordings get a proportionally lower twin rate
+# Recordings longer than this (home monitoring, days) get an epoch-rate overview instead: one low-passed sample
+# per OVERVIEW_EPOCH_S (a day 8 640 messages, 0.5 MB; a week 60 480). Issue 28: the 25 Hz copy budgeted to
+# 180 000 messages cost 10.5 MB a day, 7 % of the archive. Short trials keep 25 Hz.
+OVERVIEW_AFTER_S = 3 * 3600.0
+OVERVIEW_EPOCH_S = 10.0
 ORIENTATION_COLUMNS = ["qw", "qx", "qy", "qz"]
 
 ROS_IMU_SCHEMA = """std_msgs/Header header
@@ -125,7 +130,14 @@ def decimation(t_ns: np.ndarray, rate_hz: float = TWIN_RATE_HZ, max_messages: in
     median = float(np.median(dt)) if len(dt) else 0.0
     src_rate = 1e9 / median if median > 0 else rate_hz
     k = max(1, math.ceil(src_rate / rate_hz - 1e-9), math.ceil(n / max_messages))
+    if n / src_rate > OVERVIEW_AFTER_S:  # its length in samples over its rate (not the span: clock jumps)
+        k = max(k, overview_step(src_rate))
     return np.arange(0, n, k)
+
+
+def overview_step(rate_hz: float) -> int:
+    """Every k-th sample of a long recording's twin: one per :data:`OVERVIEW_EPOCH_S`."""
+    return max(1, math.ceil(rate_hz * OVERVIEW_EPOCH_S - 1e-9))
 
 
 def decimated(stream: ImuStream) -> tuple[np.ndarray, ImuStream]:

@@ -22,6 +22,12 @@ class Fallback(Exception):
 
 def varint(value: int) -> bytes:
     """Unsigned LEB128 varint (protobuf's encoding of a uint32/uint64/bool/enum and of tags and lengths)."""
+    if 0 <= value < _SMALL_N:
+        return _SMALL[value]
+    return _varint(value)
+
+
+def _varint(value: int) -> bytes:
     out = bytearray()
     value &= (1 << 64) - 1
     while value >= 0x80:
@@ -29,6 +35,10 @@ def varint(value: int) -> bytes:
         value >>= 7
     out.append(value)
     return bytes(out)
+
+
+_SMALL_N = 1 << 14  # the varints of 0 .. 16383 (tags, counts, block lengths), computed once
+_SMALL = [_varint(i) for i in range(_SMALL_N)]
 
 
 def tag(number: int, wire: int) -> bytes:
@@ -174,7 +184,10 @@ class Rows:
         body, mask = varint_rows(v)
         key = np.broadcast_to(np.frombuffer(tag(number, WIRE_VARINT), np.uint8), (self.n, len(tag(number, 0))))
         present = (v != 0) if omit_zero else np.ones(self.n, dtype=bool)
-        self._add(np.concatenate([key, body], axis=1), np.concatenate([np.repeat(present[:, None], key.shape[1], 1), mask & present[:, None]], axis=1))
+        self._add(
+            np.concatenate([key, body], axis=1),
+            np.concatenate([np.repeat(present[:, None], key.shape[1], 1), mask & present[:, None]], axis=1),
+        )
         return self
 
     def double(self, number: int, values: np.ndarray, omit_zero: bool = True) -> Rows:
@@ -234,3 +247,69 @@ def row_messages(rows: np.ndarray, mask: np.ndarray | None) -> list[bytes]:
     ends = np.cumsum(np.count_nonzero(mask, axis=1)).tolist()
     starts = [0, *ends[:-1]]
     return [flat[a:b] for a, b in zip(starts, ends, strict=True)]
+
+
+# ------------------------------------------------------------------------- packed varints as numpy arrays
+
+
+def zigzag_varints(values: np.ndarray) -> tuple[bytes, np.ndarray]:
+    """Packed ``sint64`` bytes of ``values`` (zigzag LEB128, row-major) and the byte length of each value.
+
+    One pass of numpy per byte position over the whole array: the bytes of any run of values are the slice
+    between the cumulative sums of the lengths (how :mod:`imulog.archive.codec` cuts blocks without a
+    per-block encode).
+    """
+    v = np.ascontiguousarray(values, dtype=np.int64).reshape(-1)
+    z = ((v << np.int64(1)) ^ (v >> np.int64(63))).view(np.uint64)
+    if not len(z):
+        return b"", np.zeros(0, dtype=np.int64)
+    top = int(z.max())
+    width = max(1, (top.bit_length() + 6) // 7)
+    if width == 1:
+        return z.astype(np.uint8).tobytes(), np.ones(len(z), dtype=np.int64)
+    if width <= 4:
+        z = z.astype(np.uint32)  # values < 2**28: cheaper shifts
+    length = np.ones(len(z), dtype=np.int8)
+    for k in range(1, width):
+        length += z >= (1 << (7 * k))
+    rows = np.empty((len(z), width), dtype=np.uint8)  # byte k of each value, then the used ones compacted
+    for k in range(width):
+        rows[:, k] = ((z >> (7 * k)) & 0x7F).astype(np.uint8) | ((length > k + 1).view(np.uint8) << np.uint8(7))
+    used = np.arange(width, dtype=np.int8)[None, :] < length[:, None]
+    return rows[used].tobytes(), length.astype(np.int64)
+
+
+def read_zigzag_varints(data: bytes | bytearray | memoryview, n: int, what: str) -> np.ndarray:
+    """int64 array of the ``n`` packed ``sint64`` varints in ``data`` (the inverse of :func:`zigzag_varints`).
+
+    Raises ValueError naming ``what`` when the bytes do not hold exactly ``n`` varints of at most 10 bytes.
+    """
+    b = np.frombuffer(data, dtype=np.uint8)
+    if n == 0:
+        if len(b):
+            raise ValueError(f"{what}: {len(b)} bytes for 0 values")
+        return np.zeros(0, dtype=np.int64)
+    if len(b) == n:  # every value one byte
+        if b.max() >= 0x80:
+            raise ValueError(f"{what}: a varint runs past the end of the data")
+        z = b.astype(np.int64)
+        return (z >> 1) ^ -(z & 1)
+    ends = np.flatnonzero(b < 0x80)
+    if len(ends) != n or ends[-1] != len(b) - 1:
+        raise ValueError(f"{what}: {len(ends)} varints in {len(b)} bytes for {n} values")
+    starts = np.empty(n, dtype=np.int64)
+    starts[0] = 0
+    starts[1:] = ends[:-1] + 1
+    length = ends - starts + 1
+    top = int(length.max())
+    if top > 10:
+        raise ValueError(f"{what}: a varint longer than 10 bytes")
+    low = np.concatenate([b & np.uint8(0x7F), np.zeros(top, dtype=np.uint8)])
+    kind = np.uint32 if top <= 4 else np.uint64
+    z = low[starts].astype(kind)
+    for k in range(1, top):
+        part = low[starts + k].astype(kind)
+        part[length <= k] = 0
+        z |= part << kind(7 * k)
+    z = z.astype(np.uint64)
+    return ((z >> np.uint64(1)).view(np.int64)) ^ -((z & np.uint64(1)).view(np.int64))

@@ -29,6 +29,9 @@ from imulog.steps.windows import Window, WindowParams, channel_rate_hz
 
 STEP = "orientation"
 CALIBRATED_TOPIC = "/derived/calibrated/{imu}"
+# Quaternions and global accelerations are stored as float32 (issue 28; docs/schemas.md: within 6e-8, far below
+# any IMU orientation's accuracy). A copy per stream: attrs become the channel's metadata.
+F32 = {"precision": "float32"}
 
 
 def source_topic(topics: list[str], imu: str, source: str) -> str:
@@ -107,8 +110,18 @@ def orientation_with_gaps(
         _continue_heading(quat, lin, report.runs)
     frame = f"{imu}_global"
     return [
-        SignalStream(f"/derived/orientation/{imu}", t_ns, ["qw", "qx", "qy", "qz"], ["1"] * 4, quat, frame_id=frame),
-        SignalStream(f"/derived/acc_global/{imu}", t_ns, ["ax", "ay", "az"], ["m/s^2"] * 3, lin, frame_id=frame),
+        SignalStream(
+            f"/derived/orientation/{imu}",
+            t_ns,
+            ["qw", "qx", "qy", "qz"],
+            ["1"] * 4,
+            quat,
+            frame_id=frame,
+            attrs=dict(F32),
+        ),
+        SignalStream(
+            f"/derived/acc_global/{imu}", t_ns, ["ax", "ay", "az"], ["m/s^2"] * 3, lin, frame_id=frame, attrs=dict(F32)
+        ),
         SignalStream(f"/derived/orientation_static/{imu}", t_ns, ["static"], ["1"], static[:, None], frame_id=imu),
     ], report
 

@@ -14,15 +14,16 @@ from imulog.archive._generated._pool import POOL as _POOL
 _sym_db = _symbol_database.Default()
 
 
+from imulog.archive._generated.imulog import Numbers_pb2 as imulog_dot_Numbers__pb2
 
 
-DESCRIPTOR = _POOL.AddSerializedFile(b'\n\x18imulog/AnalogBlock.proto\x12\x06imulog\"\x88\x01\n\x0b\x41nalogBlock\x12\x16\n\x0eschema_version\x18\x01 \x01(\r\x12\x0e\n\x06\x64\x65vice\x18\x02 \x01(\t\x12\x15\n\rchannel_names\x18\x03 \x03(\t\x12\r\n\x05units\x18\x04 \x03(\t\x12\r\n\x05\x63ount\x18\x05 \x01(\r\x12\x0c\n\x04t_ns\x18\x06 \x03(\x10\x12\x0e\n\x06values\x18\x07 \x03(\x01\x62\x06proto3')
+DESCRIPTOR = _POOL.AddSerializedFile(b'\n\x18imulog/AnalogBlock.proto\x12\x06imulog\x1a\x14imulog/Numbers.proto\"\xe4\x01\n\x0b\x41nalogBlock\x12\x16\n\x0eschema_version\x18\x01 \x01(\r\x12\x0e\n\x06\x64\x65vice\x18\x02 \x01(\t\x12\x15\n\rchannel_names\x18\x03 \x03(\t\x12\r\n\x05units\x18\x04 \x03(\t\x12\r\n\x05\x63ount\x18\x05 \x01(\r\x12\x0c\n\x04t_ns\x18\x06 \x03(\x10\x12\x0e\n\x06values\x18\x07 \x03(\x01\x12\r\n\x05t0_ns\x18\x08 \x01(\x12\x12\x11\n\tt_span_ns\x18\t \x01(\x12\x12\x15\n\rt_residual_ns\x18\n \x03(\x12\x12!\n\x08values_q\x18\x0b \x01(\x0b\x32\x0f.imulog.Numbersb\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
 _builder.BuildTopDescriptorsAndMessages(DESCRIPTOR, 'imulog.AnalogBlock_pb2', _globals)
 if not _descriptor._USE_C_DESCRIPTORS:
   DESCRIPTOR._loaded_options = None
-  _globals['_ANALOGBLOCK']._serialized_start=37
-  _globals['_ANALOGBLOCK']._serialized_end=173
+  _globals['_ANALOGBLOCK']._serialized_start=59
+  _globals['_ANALOGBLOCK']._serialized_end=287
 # @@protoc_insertion_point(module_scope)

@@ -14,15 +14,16 @@ from imulog.archive._generated._pool import POOL as _POOL
 _sym_db = _symbol_database.Default()
 
 
+from imulog.archive._generated.imulog import Numbers_pb2 as imulog_dot_Numbers__pb2
 
 
-DESCRIPTOR = _POOL.AddSerializedFile(b'\n\x18imulog/MarkerBlock.proto\x12\x06imulog\"\x80\x01\n\x0bMarkerBlock\x12\x16\n\x0eschema_version\x18\x01 \x01(\r\x12\x10\n\x08\x66rame_id\x18\x02 \x01(\t\x12\x0e\n\x06labels\x18\x03 \x03(\t\x12\r\n\x05\x63ount\x18\x04 \x01(\r\x12\x0c\n\x04t_ns\x18\x05 \x03(\x10\x12\x0b\n\x03pos\x18\x06 \x03(\x01\x12\r\n\x05valid\x18\x07 \x03(\x08\x62\x06proto3')
+DESCRIPTOR = _POOL.AddSerializedFile(b'\n\x18imulog/MarkerBlock.proto\x12\x06imulog\x1a\x14imulog/Numbers.proto\"\xd9\x01\n\x0bMarkerBlock\x12\x16\n\x0eschema_version\x18\x01 \x01(\r\x12\x10\n\x08\x66rame_id\x18\x02 \x01(\t\x12\x0e\n\x06labels\x18\x03 \x03(\t\x12\r\n\x05\x63ount\x18\x04 \x01(\r\x12\x0c\n\x04t_ns\x18\x05 \x03(\x10\x12\x0b\n\x03pos\x18\x06 \x03(\x01\x12\r\n\x05valid\x18\x07 \x03(\x08\x12\r\n\x05t0_ns\x18\x08 \x01(\x12\x12\x11\n\tt_span_ns\x18\t \x01(\x12\x12\x15\n\rt_residual_ns\x18\n \x03(\x12\x12\x1e\n\x05pos_q\x18\x0b \x01(\x0b\x32\x0f.imulog.Numbersb\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
 _builder.BuildTopDescriptorsAndMessages(DESCRIPTOR, 'imulog.MarkerBlock_pb2', _globals)
 if not _descriptor._USE_C_DESCRIPTORS:
   DESCRIPTOR._loaded_options = None
-  _globals['_MARKERBLOCK']._serialized_start=37
-  _globals['_MARKERBLOCK']._serialized_end=165
+  _globals['_MARKERBLOCK']._serialized_start=59
+  _globals['_MARKERBLOCK']._serialized_end=276
 # @@protoc_insertion_point(module_scope)

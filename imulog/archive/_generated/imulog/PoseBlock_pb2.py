@@ -14,15 +14,16 @@ from imulog.archive._generated._pool import POOL as _POOL
 _sym_db = _symbol_database.Default()
 
 
+from imulog.archive._generated.imulog import Numbers_pb2 as imulog_dot_Numbers__pb2
 
 
-DESCRIPTOR = _POOL.AddSerializedFile(b'\n\x16imulog/PoseBlock.proto\x12\x06imulog\"y\n\tPoseBlock\x12\x16\n\x0eschema_version\x18\x01 \x01(\r\x12\x10\n\x08\x66rame_id\x18\x02 \x01(\t\x12\r\n\x05\x63ount\x18\x03 \x01(\r\x12\x0c\n\x04t_ns\x18\x04 \x03(\x10\x12\x10\n\x08position\x18\x05 \x03(\x01\x12\x13\n\x0borientation\x18\x06 \x03(\x01\x62\x06proto3')
+DESCRIPTOR = _POOL.AddSerializedFile(b'\n\x16imulog/PoseBlock.proto\x12\x06imulog\x1a\x14imulog/Numbers.proto\"\xff\x01\n\tPoseBlock\x12\x16\n\x0eschema_version\x18\x01 \x01(\r\x12\x10\n\x08\x66rame_id\x18\x02 \x01(\t\x12\r\n\x05\x63ount\x18\x03 \x01(\r\x12\x0c\n\x04t_ns\x18\x04 \x03(\x10\x12\x10\n\x08position\x18\x05 \x03(\x01\x12\x13\n\x0borientation\x18\x06 \x03(\x01\x12\r\n\x05t0_ns\x18\x07 \x01(\x12\x12\x11\n\tt_span_ns\x18\x08 \x01(\x12\x12\x15\n\rt_residual_ns\x18\t \x03(\x12\x12#\n\nposition_q\x18\n \x01(\x0b\x32\x0f.imulog.Numbers\x12&\n\rorientation_q\x18\x0b \x01(\x0b\x32\x0f.imulog.Numbersb\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
 _builder.BuildTopDescriptorsAndMessages(DESCRIPTOR, 'imulog.PoseBlock_pb2', _globals)
 if not _descriptor._USE_C_DESCRIPTORS:
   DESCRIPTOR._loaded_options = None
-  _globals['_POSEBLOCK']._serialized_start=34
-  _globals['_POSEBLOCK']._serialized_end=155
+  _globals['_POSEBLOCK']._serialized_start=57
+  _globals['_POSEBLOCK']._serialized_end=312
 # @@protoc_insertion_point(module_scope)

@@ -1,0 +1,100 @@
+"""Size per hour of data: imulog's archive against the device's own file and against a fair peer (issue 28).
+
+    python benchmarks/bench_storage.py                  # 1 day of home AX6 .cwa and a 1-hour IMU text trial
+    python benchmarks/bench_storage.py --days 7         # the week of issue 28 (minutes on 2 shared cores)
+
+Cases (generated in a temporary folder):
+
+* home: ``imulog simulate home --days N`` (a 100 Hz Axivity AX6 .cwa, the device's own file), converted with
+  ``imulog convert --attach-original never`` (the original recorded by size and SHA-256, not attached);
+* IMU text: the 1-hour 9-axis 100 Hz text file of ``bench_convert.py`` (``%.6g`` values), converted with
+  ``--no-attach``.
+
+The peer is what a user of the `mcap` library would write for the same arrays: every canonical channel of the
+converted trial read back and written as 1-s blocks of float64 arrays with explicit times (imulog's
+schema_version-1 layout, ``codec.encode(stream, compact=False)``), zstd chunks of the same target size, in the
+same process. Ratios: the archive over the device file and over the peer. Targets (issue 28): the week at most
+1.3x its .cwa; the 1-hour IMU text trial at most 1.1x the peer. The machine's load average is printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from bench_archive import load_average
+from bench_convert import write_imu
+
+from imulog.archive import TrialReader, codec
+from imulog.archive._builder import CHUNK_TARGET_BYTES
+from imulog.archive.twins import is_twin
+
+
+def imulog_cli(*args: str) -> None:
+    subprocess.run([sys.executable, "-m", "imulog", *args], check=True, stdout=subprocess.DEVNULL)
+
+
+def peer_size(trial: Path, out: Path) -> int:
+    """Bytes of the peer's file: the trial's canonical channels as float64 1-s blocks with the mcap library."""
+    from mcap.writer import CompressionType, Writer
+
+    with TrialReader(trial) as tr, open(out, "wb") as f:
+        w = Writer(f, chunk_size=CHUNK_TARGET_BYTES, compression=CompressionType.ZSTD)
+        w.start(library="peer")
+        schemas: dict[str, int] = {}
+        for ch in tr.channels:
+            if is_twin(ch.topic, ch.metadata) or ch.schema_name not in codec.BLOCK_SCHEMAS:
+                continue
+            if ch.schema_name not in schemas:
+                data = codec.file_descriptor_set(ch.schema_name)
+                schemas[ch.schema_name] = w.register_schema(ch.schema_name, "protobuf", data)
+            cid = None
+            seq = 0
+            for piece in tr.iter_blocks(ch.topic):  # bounded memory: one chunk of the channel at a time
+                _, meta, times, payloads = codec.encode(piece, compact=False)
+                if cid is None:
+                    cid = w.register_channel(ch.topic, "protobuf", schemas[ch.schema_name], metadata=meta)
+                for t, payload in zip(times, payloads, strict=True):
+                    w.add_message(cid, t, payload, t, sequence=seq)
+                    seq += 1
+        w.finish()
+    return out.stat().st_size
+
+
+def report(name: str, hours: float, source: Path, trial: Path, peer: int) -> None:
+    mb = 1e6
+    src, arc = source.stat().st_size, trial.stat().st_size
+    print(
+        f"{name}: {hours:g} h; source file {src / mb:.1f} MB ({src / mb / hours:.2f} MB/h); imulog "
+        f"{arc / mb:.1f} MB ({arc / mb / hours:.2f} MB/h) = {arc / src:.2f}x the source; peer (float64 1-s blocks, "
+        f"mcap library) {peer / mb:.1f} MB ({peer / mb / hours:.2f} MB/h); imulog/peer {arc / peer:.2f}x"
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--days", type=float, default=1.0, help="home recording length in days (default 1)")
+    ap.add_argument("--minutes-imu", type=float, default=60.0, help="IMU text trial length (default 60)")
+    ap.add_argument("--dir", default=None, help="where to write the files (default: system temp)")
+    a = ap.parse_args(argv)
+    print(f"load average {load_average()}")
+    with tempfile.TemporaryDirectory(dir=a.dir) as tmp:
+        d = Path(tmp)
+        text = d / "imu_1h.csv"
+        write_imu(text, a.minutes_imu)
+        trial = d / "imu.mcap"
+        imulog_cli("convert", str(text), "-o", str(trial), "--no-attach")
+        report("IMU text 100 Hz 9-axis", a.minutes_imu / 60, text, trial, peer_size(trial, d / "imu_peer.mcap"))
+        imulog_cli("simulate", "home", "-o", str(d), "--days", str(a.days))
+        cwa = d / "home_s00_t00.cwa"
+        home = d / "home.mcap"
+        imulog_cli("convert", str(cwa), "-o", str(home), "--attach-original", "never")
+        report("home AX6 .cwa 100 Hz", a.days * 24, cwa, home, peer_size(home, d / "home_peer.mcap"))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

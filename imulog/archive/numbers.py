@@ -1,0 +1,416 @@
+"""Block arrays at their source's resolution (``imulog.Numbers``) and block times as start plus span (issue 28).
+
+Writing, for a whole stream at once (numpy, no per-sample Python):
+
+- :func:`plan_numbers` picks how an (N, C) float64 array is stored: integer counts (sfixed32) with per-column
+  ``shift``, ``divisor``, ``scale``, ``offset`` (from the converter's ``resolution`` hint, or decimal text found
+  in the numbers: ``counts / 10**k``), float32 when every value is a float32 (or the stream asks for float32:
+  derived channels whose accuracy is far coarser), else None (the float64 field, as before). Counts are kept
+  only where they give every value back exactly (compared as numbers: ``-0.0`` reads as ``0.0``); a block with
+  a row that does not (a NaN gap) keeps float64.
+- :func:`plan_times` gives each block its start and span when the times are evenly spread, with residuals
+  where they are not, and keeps explicit times when that is not smaller.
+
+Reading joins the fields of all blocks and decodes them with one numpy pass each (:func:`decode_numbers`,
+:func:`decode_times`). The formula a generic reader applies is in ``schemas/imulog/Numbers.proto`` and
+docs/schemas.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from imulog.archive import wire
+
+PARAMS = ("shift", "divisor", "scale", "offset")
+_SKIP = {"shift": 0.0, "divisor": 1.0, "scale": 1.0, "offset": 0.0}  # a parameter with these values is left out
+_MAX_DECIMALS = 9
+_EXACT_INT = 2.0**53
+_MAX_COUNT = 2.0**31  # counts are sfixed32
+_RESID_BYTES = 3  # residual varints longer than this make a block's times explicit
+
+
+def apply(counts: np.ndarray, params: dict[str, np.ndarray | None]) -> np.ndarray:
+    """float64 values of (N, C) counts: ``((counts + shift) / divisor) * scale + offset``, absent steps skipped."""
+    v = counts.astype(np.float64)
+    if params.get("shift") is not None:
+        v += params["shift"]
+    if params.get("divisor") is not None:
+        v /= params["divisor"]
+    if params.get("scale") is not None:
+        v *= params["scale"]
+    if params.get("offset") is not None:
+        v += params["offset"]
+    return v
+
+
+def _params(hint: dict[str, Any], width: int) -> dict[str, np.ndarray | None]:
+    out: dict[str, np.ndarray | None] = {}
+    for p in PARAMS:
+        value = hint.get(p)
+        if value is None:
+            out[p] = None
+            continue
+        a = np.broadcast_to(np.asarray(value, dtype=np.float64).reshape(-1), (width,)).copy()
+        out[p] = None if bool(np.all(a == _SKIP[p])) else a
+    return out
+
+
+@dataclass
+class NumbersPlan:
+    """How one (N, C) array is stored: ``kind`` "counts" or "f32"; ``ok`` rows that the encoding gives back."""
+
+    kind: str
+    width: int
+    ok: np.ndarray
+    data: bytes = b""  # counts: the varints of every row (rows not ok as 0); f32: the float32 bytes
+    row_bytes: np.ndarray | None = None  # bytes of each row in ``data``
+    params: dict[str, np.ndarray | None] = field(default_factory=dict)
+    head: bytes = b""  # the parameter fields, the same in every block
+    decimals: bytes = b""  # per-value decimals (varints), when the text's numbers have varying decimals
+    decimal_starts: np.ndarray | None = None  # byte offset of each row's decimals, N + 1
+
+    def cumulative(self) -> np.ndarray:
+        """Byte offset of each row's start in ``data`` (N + 1 entries)."""
+        assert self.row_bytes is not None
+        return np.concatenate([[0], np.cumsum(self.row_bytes)])
+
+
+def _from_counts(values: np.ndarray, counts: np.ndarray, params: dict[str, np.ndarray | None]) -> NumbersPlan:
+    """The plan for ``counts`` (float64, whole numbers or not): each value kept where the formula gives it back."""
+    eq = apply(counts, params) == values  # NaN never equals: a gap row keeps float64
+    ok = eq.all(axis=1)
+    counts[~eq] = 0
+    data = counts.astype("<i4").tobytes()  # |counts| < 2**31 (checked by _counts_of): one pass, no varints
+    head = b"".join(
+        wire.packed(k + 2, params[p], np.dtype("<f8")) for k, p in enumerate(PARAMS) if params[p] is not None
+    )
+    width = values.shape[1]
+    return NumbersPlan("counts", width, ok, data, np.full(len(values), 4 * width), params, head)
+
+
+def _counts_of(values: np.ndarray, params: dict[str, np.ndarray | None]) -> np.ndarray:
+    """Whole numbers (float64) that the parameters map to ``values``: the inverse formula, rounded; values
+    out of the exact integer range become 0 (and then fail the check)."""
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        c = values - params["offset"] if params.get("offset") is not None else values.copy()
+        if params.get("scale") is not None:
+            c /= params["scale"]
+        if params.get("divisor") is not None:
+            c *= params["divisor"]
+        if params.get("shift") is not None:
+            c -= params["shift"]
+        np.rint(c, out=c)
+        c[~(np.abs(c) < _MAX_COUNT)] = 0  # NaN, inf and beyond sfixed32
+    return c
+
+
+def _decimals(values: np.ndarray) -> np.ndarray | None:
+    """Per column the fewest decimals k <= 9 with ``rint(v * 10**k) / 10**k == v`` on a sample, or None."""
+    sample = values[: min(len(values), 4096)]
+    ks = []
+    for col in sample.T:
+        col = col[np.isfinite(col)]
+        if not len(col):
+            ks.append(0)
+            continue
+        for k in range(_MAX_DECIMALS + 1):
+            d = 10.0**k
+            if np.max(np.abs(col)) * d >= _MAX_COUNT:
+                return None
+            if np.array_equal(np.rint(col * d) / d, col):
+                ks.append(k)
+                break
+        else:
+            return None
+    return np.asarray(ks)
+
+
+_POW10 = 10.0 ** np.arange(_MAX_DECIMALS + 1)
+
+
+def _value_decimals(v: np.ndarray) -> NumbersPlan | None:
+    """Counts with each value's own decimals (``counts / 10**k``, k <= 9): text such as ``%.6g``."""
+    k = np.full(v.shape, -1, dtype=np.int8)
+    counts = np.zeros(v.shape)
+    with np.errstate(invalid="ignore", over="ignore"):
+        for d in range(_MAX_DECIMALS + 1):
+            todo = k < 0
+            if not todo.any():
+                break
+            c = np.rint(v[todo] * _POW10[d])
+            hit = (np.abs(c) < _MAX_COUNT) & (c / _POW10[d] == v[todo])
+            idx = np.flatnonzero(todo.reshape(-1))[hit]
+            k.reshape(-1)[idx] = d
+            counts.reshape(-1)[idx] = c[hit]
+    eq = k >= 0
+    ok = eq.all(axis=1)
+    if ok.mean() <= 0.5:
+        return None
+    k[~eq] = 0
+    width = v.shape[1]
+    dec, lengths = wire.zigzag_varints(k.astype(np.int64))
+    plan = NumbersPlan("counts", width, ok, counts.astype("<i4").tobytes(), np.full(len(v), 4 * width))
+    plan.decimals = dec
+    plan.decimal_starts = np.concatenate([[0], np.cumsum(lengths.reshape(-1, width).sum(axis=1))])
+    return plan
+
+
+def plan_numbers(values: np.ndarray | None, hint: dict[str, Any] | None, precision: str = "") -> NumbersPlan | None:
+    """How to store ``values`` (N, C) or (N,) float64; None: as float64 (the field of schema_version 1)."""
+    if values is None or len(values) == 0:
+        return None
+    v = np.asarray(values, dtype=np.float64)
+    v = v.reshape(len(v), -1)
+    width = v.shape[1]
+    if precision == "float32":
+        f = v.astype("<f4")
+        return NumbersPlan("f32", width, np.ones(len(v), dtype=bool), f.tobytes(), np.full(len(v), 4 * width))
+    candidates: list[dict[str, np.ndarray | None]] = []
+    if hint:
+        candidates.append(_params(hint, width))
+    ks = _decimals(v)
+    if ks is not None:
+        candidates.append(_params({"divisor": 10.0 ** ks.astype(np.float64)}, width))
+    for params in candidates:
+        plan = _from_counts(v, _counts_of(v, params), params)
+        if plan.ok.mean() > 0.5:
+            return plan
+    f = v.astype("<f4")
+    ok = np.all(f.astype(np.float64) == v, axis=1)
+    if ok.mean() > 0.5:
+        return NumbersPlan("f32", width, ok, f.tobytes(), np.full(len(v), 4 * width))
+    return _value_decimals(v)
+
+
+def numbers_field(number: int, plan: NumbersPlan, starts: np.ndarray, i: int, j: int) -> bytes:
+    """The ``Numbers`` sub-message field of rows [i, j) (``starts``: :meth:`NumbersPlan.cumulative`)."""
+    body = plan.data[int(starts[i]) : int(starts[j])]
+    # fields in number order, as protobuf writes them: counts 1, parameters 2-5; or f32 6
+    inner = wire.len_field(1, body) + plan.head if plan.kind == "counts" else wire.len_field(6, body)
+    return wire.tag(number, wire.WIRE_LEN) + wire.varint(len(inner)) + inner
+
+
+# --------------------------------------------------------------------------------------------- times
+
+
+@dataclass
+class TimesPlan:
+    """Per block: compact (start, span, residual bytes) or explicit ``t_ns``."""
+
+    compact: np.ndarray  # (blocks,) bool
+    t0: np.ndarray
+    span: np.ndarray
+    resid: bytes
+    resid_starts: np.ndarray  # byte offset of each sample's residual, N + 1
+    has_resid: np.ndarray  # (blocks,) bool
+
+
+def predicted(t0: np.ndarray, span: np.ndarray, k: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Times spread evenly: ``t0 + (2 k span + n - 1) // (2 (n - 1))`` (``t0`` for one-sample blocks)."""
+    den = np.maximum(n - 1, 1)
+    return t0 + (2 * k * span + den) // (2 * den)
+
+
+def spread(t0: np.ndarray, span: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """:func:`predicted` times of whole blocks, concatenated: a padded (blocks, max n) grid, no per-sample repeat."""
+    if not len(n):
+        return np.zeros(0, dtype=np.int64)
+    k = np.arange(int(n.max()), dtype=np.int64)[None, :]
+    grid = predicted(t0[:, None], span[:, None], k, n[:, None])
+    return grid[k < n[:, None]] if bool((n != n.max()).any()) else grid.reshape(-1)
+
+
+def plan_times(t_ns: np.ndarray, bounds: list[tuple[int, int]]) -> TimesPlan:
+    """Which blocks store start + span instead of explicit sfixed64 times.
+
+    A block is compact when its times are the span spread evenly, or differ from that by less than 2**20 ns
+    (about 1 ms) each: residuals of at most 3 bytes, less than half the 8 of an explicit time (an Axivity
+    block clock's 1/65536 s steps give residuals up to about 12 us). Larger jitter or a gap inside a block
+    keeps explicit times.
+    """
+    i = np.asarray([b[0] for b in bounds], dtype=np.int64)
+    j = np.asarray([b[1] for b in bounds], dtype=np.int64)
+    n = j - i
+    t = np.asarray(t_ns, dtype=np.int64)
+    t0, span = t[i], t[j - 1] - t[i]
+    resid = t - spread(t0, span, n)
+    data, lengths = wire.zigzag_varints(resid)
+    nonzero = np.add.reduceat(resid != 0, i) > 0
+    small = np.add.reduceat(lengths > _RESID_BYTES, i) == 0  # |r| < 2**20 ns: a device clock's rounding
+    compact = (~nonzero) | small
+    return TimesPlan(compact, t0, span, data, np.concatenate([[0], np.cumsum(lengths)]), nonzero)
+
+
+def decode_times(blocks: list[Any], counts: np.ndarray, what: str) -> np.ndarray:
+    """int64 times of all blocks: explicit ``t_ns`` joined, compact blocks expanded (one numpy pass)."""
+    total = int(counts.sum())
+    explicit = np.array([len(b.t_ns) > 0 for b in blocks], dtype=bool)
+    if explicit.all() or total == 0:
+        buf = bytearray().join([b.t_ns for b in blocks])
+        if len(buf) != total * 8:
+            raise ValueError(f"{what} t_ns: {len(buf)} bytes for {total} samples")
+        return np.frombuffer(buf, dtype="<i8").astype(np.int64)
+    if not explicit.any():
+        rows_explicit = np.zeros(total, dtype=bool)
+        out = np.empty(0, dtype=np.int64)
+    else:
+        rows_explicit = np.repeat(explicit, counts)
+        out = np.empty(total, dtype=np.int64)
+    if explicit.any():
+        buf = bytearray().join([b.t_ns for b, e in zip(blocks, explicit, strict=True) if e])
+        if len(buf) != int(rows_explicit.sum()) * 8:
+            raise ValueError(f"{what} t_ns: {len(buf)} bytes for {int(rows_explicit.sum())} samples")
+        out[rows_explicit] = np.frombuffer(buf, dtype="<i8")
+    comp = ~explicit
+    n = counts[comp]
+    t0 = np.array([b.t0_ns for b, c in zip(blocks, comp, strict=True) if c], dtype=np.int64)
+    span = np.array([b.t_span_ns for b, c in zip(blocks, comp, strict=True) if c], dtype=np.int64)
+    t = spread(t0, span, n)
+    has = np.array([len(b.t_residual_ns) > 0 for b, c in zip(blocks, comp, strict=True) if c], dtype=bool)
+    if has.any():
+        parts = [b.t_residual_ns for b, c in zip(blocks, comp, strict=True) if c and len(b.t_residual_ns)]
+        res = wire.read_zigzag_varints(bytearray().join(parts), int(has.astype(np.int64) @ n), f"{what} t_residual_ns")
+        if has.all():
+            t += res
+        else:
+            t[np.repeat(has, n)] += res
+    if not explicit.any():
+        return t
+    out[~rows_explicit] = t
+    return out
+
+
+# ------------------------------------------------------------------------------------------- reading
+
+
+def split_counts(payload: memoryview | bytes) -> tuple[memoryview, bytes] | None:
+    """(counts bytes, the rest) of a Numbers message that starts with its counts field, else None (cheap: the
+    rest is the same parameters in every block of a channel, compared as bytes by :func:`numbers_sources`)."""
+    mv = memoryview(payload)
+    if len(mv) < 2 or mv[0] != 0x0A:
+        return None
+    length, pos, shift = 0, 1, 0
+    while True:
+        if pos >= len(mv) or shift > 63:
+            return None
+        b = mv[pos]
+        pos += 1
+        length |= (b & 0x7F) << shift
+        if b < 0x80:
+            break
+        shift += 7
+    end = pos + length
+    if end > len(mv):
+        return None
+    return mv[pos:end], bytes(mv[end:])
+
+
+def numbers_sources(payloads: list[Any]) -> list[dict[str, Any]] | None:
+    """Scanned Numbers of blocks that all hold counts with the same parameters (the common case), or None."""
+    first = split_counts(payloads[0]) if payloads else None
+    if first is None:
+        return None
+    try:
+        common = scan_numbers(first[1])
+    except wire.Fallback:
+        return None
+    if len(common["counts"]) or len(common["f32"]):
+        return None
+    out = []
+    for p in payloads:
+        part = split_counts(p)
+        if part is None or part[1] != first[1]:
+            return None
+        out.append({**common, "counts": part[0]})
+    return out
+
+
+def scan_numbers(payload: memoryview | bytes) -> dict[str, Any]:
+    """The fields of one ``imulog.Numbers`` message (views); raises wire.Fallback on anything unexpected."""
+    out: dict[str, Any] = {"counts": b"", "f32": b"", "decimals": b"", **{p: None for p in PARAMS}}
+    names = {1: "counts", 2: "shift", 3: "divisor", 4: "scale", 5: "offset", 6: "f32", 7: "decimals"}
+    for number, wire_type, value in wire.scan(payload):
+        name = names.get(number)
+        if name is None:
+            continue
+        if wire_type != wire.WIRE_LEN:
+            raise wire.Fallback
+        out[name] = value
+    return out
+
+
+def decode_numbers(sources: list[tuple[str, Any]], counts: np.ndarray, width: int, what: str) -> np.ndarray:
+    """(N, width) float64 from each block's source: ("f64", bytes), ("q", scanned Numbers) or ("none", None)."""
+    total = int(counts.sum())
+    kinds = [k for k, _ in sources]
+    out = np.empty((total, width), dtype=np.float64)
+    groups = {"f64": [], "counts": [], "f32": []}
+    for b, (kind, src) in enumerate(sources):
+        if kind == "q":
+            kind = "counts" if len(src["counts"]) or not len(src["f32"]) else "f32"
+        if kind in groups:
+            groups[kind].append(b)
+    row_block = np.repeat(np.arange(len(sources)), counts)
+    if len(groups["f64"]) + len(groups["counts"]) + len(groups["f32"]) != sum(1 for k in kinds if k != "none"):
+        raise ValueError(f"{what}: unknown block layout")
+    covered = 0
+    for kind, blocks in groups.items():
+        if not blocks:
+            continue
+        n = int(counts[blocks].sum())
+        covered += n
+        if len(blocks) == len(sources):
+            rows: slice | np.ndarray = slice(None)
+        else:
+            mask = np.zeros(len(sources), dtype=bool)
+            mask[blocks] = True
+            rows = mask[row_block]
+        if kind == "f64":
+            buf = bytearray().join([sources[b][1] for b in blocks])
+            if len(buf) != n * width * 8:
+                raise ValueError(f"{what}: {len(buf)} bytes for {n} samples x {width} values")
+            out[rows] = np.frombuffer(buf, dtype="<f8").reshape(n, width)
+        elif kind == "f32":
+            buf = bytearray().join([sources[b][1]["f32"] for b in blocks])
+            if len(buf) != n * width * 4:
+                raise ValueError(f"{what}: {len(buf)} float32 bytes for {n} samples x {width} values")
+            out[rows] = np.frombuffer(buf, dtype="<f4").reshape(n, width)
+        else:
+            srcs = [sources[b][1] for b in blocks]
+            buf = bytearray().join([s["counts"] for s in srcs])
+            if len(buf) != n * width * 4:
+                raise ValueError(f"{what}: {len(buf)} count bytes for {n} samples x {width} values")
+            c = np.frombuffer(buf, dtype="<i4").reshape(n, width)
+            with_dec = [len(s.get("decimals") or b"") > 0 for s in srcs]
+            if any(with_dec):
+                if not all(with_dec):
+                    raise ValueError(f"{what}: decimals in some blocks only")
+                dec = wire.read_zigzag_varints(
+                    bytearray().join([s["decimals"] for s in srcs]), n * width, f"{what} decimals"
+                )
+                if dec.min() < 0 or dec.max() > _MAX_DECIMALS:
+                    raise ValueError(f"{what}: decimals outside 0..{_MAX_DECIMALS}")
+                out[rows] = c / _POW10[dec.reshape(n, width)]
+                continue
+            params = {}
+            for p in PARAMS:
+                raw = [bytes(s[p]) if s[p] is not None else b"" for s in srcs]
+                if not any(raw):
+                    params[p] = None
+                    continue
+                if any(len(r) not in (0, 8 * width) for r in raw):
+                    raise ValueError(f"{what}: {p} does not have {width} values")
+                if len(set(raw)) == 1:
+                    params[p] = np.frombuffer(raw[0], dtype="<f8").astype(np.float64)
+                    continue
+                default = np.full(width, _SKIP[p]).tobytes()
+                per = np.frombuffer(b"".join(r or default for r in raw), dtype="<f8").reshape(len(srcs), width)
+                params[p] = np.repeat(per, counts[blocks], axis=0)
+            out[rows] = apply(c, params)
+    if covered != total:
+        raise ValueError(f"{what}: present in some blocks only")
+    return out
