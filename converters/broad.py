@@ -73,7 +73,7 @@ def read_broad(path: Path, name: str = "imu") -> Recording:
         raise
     except (OSError, RuntimeError, KeyError, ValueError, TypeError, IndexError) as e:
         # h5py reports damaged b-trees, heaps and chunks as any of these, often only when data is read
-        raise ConversionError(path, f"damaged HDF5 file ({type(e).__name__}: {e})") from None
+        raise ConversionError(path, f"damaged HDF5 file ({e})") from None
     n = len(arrays["imu_acc"])
     for key, a in arrays.items():
         width = 4 if key == "opt_quat" else 3
