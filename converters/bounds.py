@@ -4,8 +4,6 @@ A header's count, length, rate or end time is a claim; the bytes that follow are
 claim against the bytes before they allocate from it, so an input of N bytes converts (or fails with one line
 naming the field) in time and memory that grow with N, not with what a header says:
 
-* :func:`check_declared`: a declared number of items of ``item_bytes`` each must fit in the bytes available
-  (times ``ratio`` for compressed storage), else a ConversionError naming the field;
 * :class:`RatioLimit`: decompressed members of containers (``.gt3x`` ZIP members, ``.gz``/``.zip`` wrappers) are
   read in bounded blocks and refused beyond :data:`MAX_RATIO` times their compressed size (past
   :data:`RATIO_FLOOR`), like the MCAP chunks;
@@ -34,28 +32,6 @@ FILL_SAMPLES_PER_BYTE = 16  # NaN samples for missing time per byte of input (ab
 FILL_FLOOR = 1 << 20  # a small file may still fill this many samples (a few minutes at 100 Hz)
 MIN_EPOCH_NS = 0  # 1970-01-01T00:00:00Z
 MAX_EPOCH_NS = int(datetime(2100, 1, 1, tzinfo=UTC).timestamp()) * 1_000_000_000
-
-
-def check_declared(
-    path: str | Path | None, field: str, count: Any, item_bytes: float, available: int, *, ratio: float = 1.0
-) -> int:
-    """``count`` as an int when ``count`` items of ``item_bytes`` fit in ``available`` bytes (x ``ratio``).
-
-    Raises ConversionError naming ``field`` otherwise (negative, non-integer or larger than the bytes can hold)."""
-    try:
-        n = int(count)
-        ok = n == count and n >= 0
-    except (TypeError, ValueError, OverflowError):
-        ok, n = False, -1
-    if not ok:
-        raise ConversionError(path, f"{field} {excerpt(count)} is not a count of items: the header is damaged")
-    if n * float(item_bytes) > max(float(available), 0.0) * ratio:
-        raise ConversionError(
-            path,
-            f"{field} declares {n} items ({n * float(item_bytes):.3g} bytes) but the file holds {available} bytes "
-            "for them: the header is damaged or the file is cut off",
-        )
-    return n
 
 
 class RatioLimit:
