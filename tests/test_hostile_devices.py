@@ -55,7 +55,7 @@ print(json.dumps(out))
 """
 
 
-def run_inputs(jobs: list[list[str]], cwd: Path) -> list[dict]:
+def run_inputs(jobs: list[list[str]], cwd: Path, env: dict[str, str] | None = None) -> list[dict]:
     """Run imulog commands in one child process; one result per job with its own peak RSS (MB) and time (s)."""
     proc = subprocess.run(
         [sys.executable, "-c", CHILD, json.dumps(jobs)],
@@ -63,7 +63,7 @@ def run_inputs(jobs: list[list[str]], cwd: Path) -> list[dict]:
         capture_output=True,
         text=True,
         timeout=60 + TIME_CAP_S * len(jobs),
-        env={**os.environ, "PYTHONPATH": str(REPO)},
+        env={**os.environ, "PYTHONPATH": str(REPO), **(env or {})},
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.strip().splitlines()[-1])
@@ -133,6 +133,18 @@ def _apdm_h5(out: Path, *, rows: int = 100, time_us: np.ndarray | None = None) -
     return out
 
 
+def _broad_rows(out: Path) -> Path:
+    """A BROAD trial whose gzip-compressed imu_acc declares 2e9 rows of which one chunk is written."""
+    import h5py
+
+    with h5py.File(out, "w") as f:
+        f.attrs["sampling_rate"] = 286.0
+        acc = f.create_dataset("imu_acc", shape=(2_000_000_000, 3), dtype="<f8", chunks=(4096, 3), compression="gzip")
+        acc[:4096] = 0.0
+        f["imu_gyr"] = np.zeros((100, 3))
+    return out
+
+
 def _apdm_csv(src: Path, out: Path, edit) -> Path:
     lines = src.read_text().splitlines()
     head, data = lines[:4], lines[4:200]
@@ -176,6 +188,7 @@ def hostile(shared_data: Path, tmp_path_factory) -> tuple[Path, list[dict]]:
     apdm = dev / "apdm_csv" / "imuData01.csv"
     built = {
         "h5_rows": _apdm_h5(d / "h5_rows.h5", rows=2_000_000_000),
+        "broad_rows": _broad_rows(d / "broad_rows.hdf5"),
         "h5_wrapped_time": _apdm_h5(
             d / "h5_wrapped_time.h5", time_us=np.uint64(2**64 - 1000) + np.arange(100, dtype=np.uint64)
         ),
@@ -217,6 +230,7 @@ def _error(r: dict) -> str:
 def test_declared_sizes_beyond_the_bytes_are_errors_naming_the_field(hostile):
     _, res = hostile
     assert "/Sensors/1234/Time declares shape (2000000000,)" in _error(res["h5_rows"])
+    assert "imu_acc declares shape (2000000000, 3)" in _error(res["broad_rows"])
     assert "outside 1970-2100" in _error(res["h5_wrapped_time"])  # uint64 near 2^64 is not wrapped to 1969
     assert "Start Date" in _error(res["neo_start_0"]) and "outside 1970-2100" in _error(res["neo_start_0"])
     assert "decompression bomb" in _error(res["gt3x_zeros"]) and "log.bin" in _error(res["gt3x_zeros"])
@@ -265,6 +279,25 @@ def test_values_checked_once_for_every_reader(hostile):
         q = tr.read("/orientation/upper").values
     assert np.isnan(q[::4]).all() and np.allclose(np.linalg.norm(q[1::4], axis=1), 1.0, atol=1e-3)
     assert "no samples" in _error(res["delsys_nan_time"]) or "time" in _error(res["delsys_nan_time"]).lower()
+
+
+def test_gt3x_read_piece_by_piece_is_bounded_and_checked_the_same(hostile):
+    """Large files take the piece-by-piece path (IMULOG_STREAM_MIN_BYTES=1 sends these small ones there too): the
+    same bounds, the same value check, the same one-line errors."""
+    d, whole = hostile
+    names = ["gt3x_stop_week", "gt3x_last_month", "gt3x_zeros", "gt3x_rate_9000", "neo_start_0"]
+    jobs = [["convert", str(d / f"{k}.gt3x"), "-o", str(d / f"{k}.streamed.mcap")] for k in names]
+    results = run_inputs(jobs, d, {"IMULOG_STREAM_MIN_BYTES": "1"})
+    for k, r in zip(names, results, strict=True):
+        assert_bounded(r, (d / f"{k}.gt3x").stat().st_size)
+        assert r["code"] == whole[k]["code"], (k, r["output"])
+        if r["code"] == 0:
+            assert "piece by piece" in r["output"]
+            with TrialReader(d / f"{k}.streamed.mcap") as tr:
+                acc = next(c for c in tr.channels if c.topic == "/imu/tas1e31150129")
+                assert acc.sample_count <= 180 * 90 + 90
+    assert "disagrees with the 90 samples" in results[3]["output"]
+    assert "Last Sample Time" in results[1]["output"]
 
 
 def test_zero_padding_is_skipped_at_c_speed():
