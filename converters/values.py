@@ -13,11 +13,15 @@
   exports), gaps (counted) beyond it; an error when none is left.
 * a declared rate (``rate_hz`` in the stream's meta) that differs from the time stamps' median rate by more than
   1 %: reported, and the time stamps' rate replaces it (the declared one is kept as ``declared_rate_hz``).
-* the recording's start (``imulog.trial`` ``start_time``) outside 1970-2100: ConversionError.
+* marker labels and column names longer than :data:`MAX_LABEL_CHARS` are cut (their start and a hash of the
+  whole); a topic longer than :data:`MAX_TOPIC_CHARS` (readers sanitise names to 64) is an error.
+* the recording's start (``imulog.trial`` ``start_time``) outside 1970-2100, or time stamps that do not increase
+  (the model's rule; a rate of 1e-300 Hz gave every sample the same time): ConversionError.
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -42,6 +46,33 @@ QUAT_TOLERANCE = 1e-3
 QUAT_AS_WRITTEN = 1e-6  # within this of unit norm a quaternion is stored exactly as the file has it
 RATE_TOLERANCE = 0.01
 MAX_RATE_SAMPLES = 50_000
+MAX_LABEL_CHARS = 64  # marker labels and column names taken from files (a 300k-character label costs GBs)
+MAX_TOPIC_CHARS = 200  # readers build topics from sanitize_name (64 characters); longer is a reader's bug
+
+
+def cap_label(text: str) -> str:
+    """``text`` when at most :data:`MAX_LABEL_CHARS` characters, else its start and a short hash of the whole."""
+    if len(text) <= MAX_LABEL_CHARS:
+        return text
+    return f"{text[: MAX_LABEL_CHARS - 9]}~{hashlib.sha1(text.encode('utf-8', 'replace')).hexdigest()[:8]}"
+
+
+def _names(rec: Recording, path: Any) -> None:
+    """Topics of sane length; marker labels and column names capped (same start, a hash of the whole)."""
+    for stream in rec.streams():
+        if len(stream.topic) > MAX_TOPIC_CHARS:
+            raise ConversionError(
+                path, f"topic {stream.topic[:60]}... ({len(stream.topic)} characters): a name in the file is too long"
+            )
+    for m in rec.markers:
+        if any(len(x) > MAX_LABEL_CHARS for x in m.labels):
+            m.labels = [cap_label(x) for x in m.labels]
+    for sig in rec.signals:
+        if any(len(x) > MAX_LABEL_CHARS for x in sig.columns):
+            sig.columns = [cap_label(x) for x in sig.columns]
+    for a in rec.analogs:
+        if any(len(x) > MAX_LABEL_CHARS for x in a.channel_names):
+            a.channel_names = [cap_label(x) for x in a.channel_names]
 
 
 @dataclass
@@ -53,6 +84,7 @@ class ValueReport:
     kept: dict[str, int] = field(default_factory=dict)  # finite values left per checked channel
     rates: dict[str, str] = field(default_factory=dict)  # topic -> the rate warning
     samples: dict[str, int] = field(default_factory=dict)  # IMU topic -> samples seen
+    last_t: dict[str, int] = field(default_factory=dict)  # topic -> last time stamp (ns) of the pieces so far
 
     def warnings(self) -> list[str]:
         out = [
@@ -152,6 +184,24 @@ def _rate(stream: Any, rec: Recording, report: ValueReport) -> None:
         device["declared_rate_hz"], device["rate_hz"] = declared, round(payload, 6)
 
 
+def _times(stream: Any, report: ValueReport, path: Any) -> None:
+    """Time stamps strictly increasing (the model's rule), across the pieces of a recording too."""
+    t = stream.t_ns
+    if len(t) == 0:
+        return
+    last = report.last_t.get(stream.topic)
+    if last is not None and t[0] <= last:
+        raise ConversionError(path, f"{stream.topic}: time stamps go back between two pieces of the file")
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if len(bad):
+        raise ConversionError(
+            path,
+            f"{stream.topic}: time stamps do not increase at sample {int(bad[0]) + 1} (a damaged time column, "
+            "rate or start time)",
+        )
+    report.last_t[stream.topic] = int(t[-1])
+
+
 def _imu(s: ImuStream, report: ValueReport) -> None:
     acc_g = _declared(s.meta, "acc_range_g", "accel_range_g")
     gyr_dps = _declared(s.meta, "gyr_range_dps", "gyro_range_dps")
@@ -202,6 +252,10 @@ def check_recording(
     unusable-channel errors to the call with ``final`` True."""
     report = report if report is not None else ValueReport()
     check_start(rec, path)
+    _names(rec, path)
+    for stream in rec.streams():
+        if getattr(stream, "t_ns", None) is not None:
+            _times(stream, report, path)
     for s in rec.imus:
         report.samples[s.topic] = report.samples.get(s.topic, 0) + len(s)
         _imu(s, report)
@@ -211,12 +265,15 @@ def check_recording(
         if pos is not m.pos:
             m.pos = pos
             m.valid = m.valid & np.isfinite(pos).all(axis=2)
+        _rate(m, rec, report)
     for p in rec.poses:
         p.position = _mask(p.position, LIMITS["position"], f"{p.topic} position", report)
         if p.orientation is not None:
             p.orientation = _quaternions(p.orientation, f"{p.topic} orientation", report)
+        _rate(p, rec, report)
     for a in rec.analogs:
         a.values = _columns(a.values, a.channel_names, a.topic, report)
+        _rate(a, rec, report)
     for sig in rec.signals:
         sig.values = _columns(sig.values, sig.columns, sig.topic, report)
         _rate(sig, rec, report)
