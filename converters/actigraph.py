@@ -221,6 +221,7 @@ def even_times_ns(seconds: np.ndarray, counts: np.ndarray, rate_hz: np.ndarray) 
     return np.repeat(seconds.astype(np.int64) * NS_PER_S, counts) + np.round(k * step).astype(np.int64)
 
 
+MAX_INFO_BYTES = 4 << 20  # info.txt is read whole, so its size is bounded
 MAX_RATE_HZ = 10_000.0  # ActiGraph devices sample at 30-100 Hz (IMU 100 Hz); a larger Sample Rate is damage
 MAX_GAP_S = 31 * 86400  # a longer silence is a clock or file problem, not idle sleep: refused
 INLINE_FILL = 1 << 16  # NaN samples a gap may add to its own piece; longer gaps become pieces of their own
@@ -637,7 +638,12 @@ def _open_gt3x(path: Path) -> tuple[zipfile.ZipFile, dict[str, str]]:
         z.close()
         raise ConversionError(path, "no info.txt inside: not an ActiGraph .gt3x")
     try:
-        info = parse_info(path, z.read("info.txt").decode("utf-8-sig", "replace"))
+        member = z.getinfo("info.txt")
+        if member.file_size > MAX_INFO_BYTES:  # a few hundred bytes in real files
+            raise ConversionError(path, f"info.txt of {member.file_size} bytes: not an ActiGraph info.txt (damaged?)")
+        with BoundedStream(z.open(member), RatioLimit(path, "info.txt", member.compress_size)) as f:
+            text = f.read(MAX_INFO_BYTES + 1)
+        info = parse_info(path, text.decode("utf-8-sig", "replace"))
     except (zipfile.BadZipFile, OSError, EOFError) as e:
         z.close()
         raise ConversionError(path, f"info.txt cannot be read: {e}") from None

@@ -83,8 +83,17 @@ def assert_bounded(r: dict, size: int) -> None:
 
 
 # ------------------------------------------------------------------------------------------------ builders
-def _gt3x(src: Path, out: Path, *, info: dict[str, str] | None = None, log: bytes | None = None, zeros: int = 0):
-    """``src`` rewritten: info.txt keys replaced (a value None removes the line), log.bin replaced or padded."""
+def _gt3x(
+    src: Path,
+    out: Path,
+    *,
+    info: dict[str, str] | None = None,
+    log: bytes | None = None,
+    zeros: int = 0,
+    info_pad: int = 0,
+):
+    """``src`` rewritten: info.txt keys replaced (a value None removes the line) or padded with ``info_pad``
+    blank lines, log.bin replaced or padded with ``zeros`` zero bytes."""
     with zipfile.ZipFile(src) as z:
         text = z.read("info.txt").decode()
         original = z.read("log.bin")
@@ -95,7 +104,10 @@ def _gt3x(src: Path, out: Path, *, info: dict[str, str] | None = None, log: byte
         else:
             lines[k] = v
     with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
-        z.writestr("info.txt", "".join(f"{k}: {v}\r\n" for k, v in lines.items()))
+        with z.open("info.txt", "w", force_zip64=True) as f:
+            f.write("".join(f"{k}: {v}\r\n" for k, v in lines.items()).encode())
+            for _ in range(info_pad // (8 << 20)):
+                f.write(b"\n" * (8 << 20))
         with z.open("log.bin", "w", force_zip64=True) as f:
             f.write(original if log is None else log)
             block = bytes(8 << 20)
@@ -200,6 +212,7 @@ def hostile(shared_data: Path, tmp_path_factory) -> tuple[Path, list[dict]]:
         ),
         "gt3x_serial": _gt3x(gt3x, d / "gt3x_serial.gt3x", info={"Serial Number": "TAS" + "1E3115" * 50_000}),
         "gt3x_zeros": _gt3x(gt3x, d / "gt3x_zeros.gt3x", zeros=512 << 20),
+        "gt3x_info_bomb": _gt3x(gt3x, d / "gt3x_info_bomb.gt3x", info_pad=256 << 20),
         "gt3x_rate_9000": _gt3x(gt3x, d / "gt3x_rate_9000.gt3x", info={"Sample Rate": "9000"}),
         "gt3x_rate_max": _gt3x(gt3x, d / "gt3x_rate_max.gt3x", info={"Sample Rate": "4294967295"}),
         "neo_start_0": _neo(d / "neo_start_0.gt3x", 0),
@@ -234,6 +247,7 @@ def test_declared_sizes_beyond_the_bytes_are_errors_naming_the_field(hostile):
     assert "outside 1970-2100" in _error(res["h5_wrapped_time"])  # uint64 near 2^64 is not wrapped to 1969
     assert "Start Date" in _error(res["neo_start_0"]) and "outside 1970-2100" in _error(res["neo_start_0"])
     assert "decompression bomb" in _error(res["gt3x_zeros"]) and "log.bin" in _error(res["gt3x_zeros"])
+    assert "info.txt of 268435" in _error(res["gt3x_info_bomb"])
 
 
 def test_gt3x_end_times_add_no_samples_the_bytes_cannot_back(hostile):
