@@ -202,6 +202,20 @@ def _times(stream: Any, report: ValueReport, path: Any) -> None:
     report.last_t[stream.topic] = int(t[-1])
 
 
+def _intervals(ev: Any, path: Any) -> None:
+    """Event times that are numbers (a NaN or inf cast to int64 becomes its smallest value) and end >= start."""
+    start, end = np.asarray(ev.start_ns), np.asarray(ev.end_ns)
+    if start.size == 0:
+        return
+    sentinel = np.iinfo(np.int64).min
+    bad = (start == sentinel) | (end == sentinel) | (end < start)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ConversionError(
+            path, f"{ev.topic}: event {i} has no valid time (empty, non-finite or ending before it starts)"
+        )
+
+
 def _imu(s: ImuStream, report: ValueReport) -> None:
     acc_g = _declared(s.meta, "acc_range_g", "accel_range_g")
     gyr_dps = _declared(s.meta, "gyr_range_dps", "gyro_range_dps")
@@ -256,6 +270,8 @@ def check_recording(
     for stream in rec.streams():
         if getattr(stream, "t_ns", None) is not None:
             _times(stream, report, path)
+    for ev in rec.events:
+        _intervals(ev, path)
     for s in rec.imus:
         report.samples[s.topic] = report.samples.get(s.topic, 0) + len(s)
         _imu(s, report)

@@ -108,3 +108,14 @@ def test_long_labels_are_capped_and_stay_distinct():
     rec = Recording(markers=[m])
     check_recording(rec)
     assert len(set(m.labels)) == 3 and max(len(x) for x in m.labels) == 64 and m.labels[2] == "LASI"
+
+
+def test_event_times_cast_from_nan_are_errors():
+    from imulog.model import Intervals
+
+    bad = np.array([0.0, np.nan]) * 1e9
+    with np.errstate(invalid="ignore"):
+        start = bad.astype(np.int64)  # what a reader's cast of an empty cell gives: the smallest int64
+    ev = Intervals(topic="/events/strides", start_ns=start, end_ns=start.copy(), labels=["a", "b"])
+    with pytest.raises(ConversionError, match="/events/strides: event 1 has no valid time"):
+        check_recording(Recording(events=[ev]), "s.csv")
