@@ -176,9 +176,15 @@ def iter_file_chunks(path: Path, conv: Converter, options: ConvertOptions, repor
 
 @contextmanager
 def reader_errors(path: Path, conv: Converter) -> Iterator[None]:
-    """The last safety net around a reader: anything but ConversionError becomes one line without a Python type."""
+    """The last safety net around a reader: anything but ConversionError becomes one line without a Python type.
+
+    Numpy's floating-point warnings (``RuntimeWarning: overflow encountered in multiply`` on a damaged file) are
+    silenced inside: what they would say, the value check (``converters/values.py``) counts per channel."""
+    import numpy as np
+
     try:
-        yield
+        with np.errstate(all="ignore"):
+            yield
     except ConversionError:
         raise
     except MemoryError:
