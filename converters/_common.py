@@ -681,7 +681,17 @@ def estimate_rate_hz(t_ns: np.ndarray) -> float | None:
     return 1e9 / dt if dt > 0 else None
 
 
+MAX_NAME_CHARS = 64  # a name taken from a file (serial, label, stream name) is cut to this many characters
+
+
 def sanitize_name(name: str) -> str:
-    """A topic-safe stream name: lower case, [a-z0-9_]."""
-    s = re.sub(r"[^0-9a-zA-Z]+", "_", name).strip("_").lower()
+    """A topic-safe stream name: lower case, [a-z0-9_], at most :data:`MAX_NAME_CHARS` characters.
+
+    A longer name (a hostile 300k-character serial) keeps its first characters and a short hash of the whole, so
+    two long names that differ only at their ends stay distinct."""
+    text = str(name)
+    s = re.sub(r"[^0-9a-zA-Z]+", "_", text[: 4 * MAX_NAME_CHARS]).strip("_").lower()
+    if len(text) > 4 * MAX_NAME_CHARS or len(s) > MAX_NAME_CHARS:
+        digest = hashlib.sha1(text.encode("utf-8", "replace")).hexdigest()[:8]
+        s = f"{s[: MAX_NAME_CHARS - 9].rstrip('_')}_{digest}"
     return s or "imu"

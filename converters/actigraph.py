@@ -44,7 +44,8 @@ import numpy as np
 from imulog.converters._binary import NS_PER_S, concat_chunks, iso_from_epoch_ns, time_zone_label, with_fills
 from imulog.converters._common import G0, sanitize_name
 from imulog.converters.base import Converter, ConvertOptions
-from imulog.converters.errors import ConversionError
+from imulog.converters.bounds import BoundedStream, RatioLimit, check_epoch_ns, fill_budget
+from imulog.converters.errors import ConversionError, excerpt
 
 from imulog.model import ImuStream, Recording, SignalStream
 
@@ -220,6 +221,8 @@ def even_times_ns(seconds: np.ndarray, counts: np.ndarray, rate_hz: np.ndarray) 
     return np.repeat(seconds.astype(np.int64) * NS_PER_S, counts) + np.round(k * step).astype(np.int64)
 
 
+MAX_INFO_BYTES = 4 << 20  # info.txt is read whole, so its size is bounded
+MAX_RATE_HZ = 10_000.0  # ActiGraph devices sample at 30-100 Hz (IMU 100 Hz); a larger Sample Rate is damage
 MAX_GAP_S = 31 * 86400  # a longer silence is a clock or file problem, not idle sleep: refused
 INLINE_FILL = 1 << 16  # NaN samples a gap may add to its own piece; longer gaps become pieces of their own
 FILL_PIECE = 1 << 20  # samples per NaN piece of a long gap
@@ -276,6 +279,9 @@ class RecordBatch:
         return self.buf[s : s + int(self.sizes[i])]
 
 
+_NONZERO = re.compile(rb"[^\x00]")
+
+
 def iter_record_batches(stream: IO[bytes], path: Path, batch_bytes: int = BATCH_BYTES) -> Iterator[RecordBatch]:
     """Split ``log.bin`` into batches of complete, checksum-verified records with bounded reads."""
     leftover = b""
@@ -295,8 +301,9 @@ def iter_record_batches(stream: IO[bytes], path: Path, batch_bytes: int = BATCH_
         while pos < n:
             b = buf[pos]
             if b != SEPARATOR:
-                if b == 0:
-                    pos += 1
+                if b == 0:  # zero padding: skip the whole run at once (a member of zeros is scanned at C speed)
+                    m = _NONZERO.search(buf, pos)
+                    pos = m.start() if m else n
                     continue
                 raise ConversionError(
                     path, f"log.bin record {index + len(heads)} (byte {byte0 + pos}): no record separator (0x{b:02X})"
@@ -359,6 +366,19 @@ class _State:
     gap_s: int = 0
     end_ns: int | None = None  # info.txt Last Sample Time (else Stop Date): the device recorded until then
     imu_rate_hz: int | None = None  # samples per SENSOR_DATA record (median of the first batch)
+    fill_left: int = 0  # NaN samples still allowed for idle sleep (bounds.fill_budget of the file)
+    rate_checked: bool = False  # Sample Rate compared with the samples per ACTIVITY2 record
+    warnings: list[str] = field(default_factory=list)
+
+    def spend_fill(self, path: Path, n: int, what: str) -> None:
+        """Count ``n`` NaN samples against the file's fill budget; ConversionError naming ``what`` beyond it."""
+        self.fill_left -= int(n)
+        if self.fill_left < 0:
+            raise ConversionError(
+                path,
+                f"{what}: idle sleep would add more NaN samples than a file of this size can describe "
+                "(a damaged time stamp or Sample Rate)",
+            )
 
     def idle_sleep(self) -> dict[str, int]:
         """Idle-sleep counts so far, including the tail between the last ACTIVITY record and the recording's end."""
@@ -422,15 +442,33 @@ def _activity(path: Path, batch: RecordBatch, st: _State) -> list[ImuStream]:
     prev = np.concatenate([[first_prev], secs[:-1]])
     jump = np.maximum(secs - prev - 1, 0)
     _check_gaps(path, batch, idx, jump, "ACTIVITY")
+    counts_a = np.asarray(counts, dtype=np.int64)
+    if not st.rate_checked and is_act2[idx].any():
+        _check_rate(path, st, counts_a[is_act2[idx]])
+    st.spend_fill(path, int(jump.sum()) * round(st.rate_hz), f"log.bin record {batch.first + int(idx[0])}")
     st.gaps += int(np.count_nonzero(jump))
     st.gap_s += int(jump.sum())
     st.last_activity_s = int(secs[-1])
-    counts_a = np.asarray(counts, dtype=np.int64)
     t = even_times_ns(secs, counts_a, np.maximum(st.rate_hz, counts_a)) - st.origin_ns
     acc = np.concatenate(parts).astype(np.float64) / st.accel_scale * G0
     first = np.cumsum(counts_a) - counts_a
     pieces = with_gaps(t, {"acc": acc}, first, prev + 1, jump, round(st.rate_hz), st.origin_ns)
     return [ImuStream(name=st.name, t_ns=pt, acc=pv["acc"], meta=dict(st.meta)) for pt, pv in pieces]
+
+
+def _check_rate(path: Path, st: _State, counts: np.ndarray) -> None:
+    """The payload wins: ``Sample Rate`` is replaced by the samples per full ACTIVITY2 record (one second) when
+    they differ by more than 1 %, with a warning."""
+    st.rate_checked = True
+    payload = float(np.median(counts))
+    if payload > 0 and abs(payload - st.rate_hz) > 0.01 * payload:
+        st.warnings.append(
+            f"{path.name}: info.txt Sample Rate {st.rate_hz:g} Hz disagrees with the {payload:g} samples per "
+            f"one-second ACTIVITY2 record; the records' {payload:g} Hz is used"
+        )
+        st.meta["declared_rate_hz"] = st.rate_hz
+        st.rate_hz = payload
+        st.meta["rate_hz"] = payload
 
 
 def _activity_tail(st: _State) -> list[ImuStream]:
@@ -442,6 +480,13 @@ def _activity_tail(st: _State) -> list[ImuStream]:
     if seconds <= 0 or seconds > MAX_GAP_S:  # an implausible Last Sample Time adds nothing
         return []
     n_all = seconds * round(st.rate_hz)
+    if n_all > st.fill_left:  # an end time the file's bytes cannot back: said, not filled
+        st.warnings.append(
+            f"Last Sample Time is {seconds} s after the last sample: more idle sleep than a file of this size can "
+            "describe, so no NaN samples were added after the last record"
+        )
+        return []
+    st.fill_left -= n_all
     out = []
     for a in range(0, n_all, FILL_PIECE):
         m = min(FILL_PIECE, n_all - a)
@@ -576,11 +621,11 @@ class _StoredMember:
         self.close()
 
 
-def _open_member(path: Path, z: zipfile.ZipFile, name: str) -> IO[bytes] | _StoredMember:
+def _open_member(path: Path, z: zipfile.ZipFile, name: str) -> IO[bytes] | _StoredMember | BoundedStream:
     info = z.getinfo(name)
     if info.compress_type == zipfile.ZIP_STORED and not info.flag_bits & 0x1:
         return _StoredMember(path, info)
-    return z.open(name)
+    return BoundedStream(z.open(name), RatioLimit(path, name, info.compress_size))
 
 
 def _open_gt3x(path: Path) -> tuple[zipfile.ZipFile, dict[str, str]]:
@@ -593,7 +638,12 @@ def _open_gt3x(path: Path) -> tuple[zipfile.ZipFile, dict[str, str]]:
         z.close()
         raise ConversionError(path, "no info.txt inside: not an ActiGraph .gt3x")
     try:
-        info = parse_info(path, z.read("info.txt").decode("utf-8-sig", "replace"))
+        member = z.getinfo("info.txt")
+        if member.file_size > MAX_INFO_BYTES:  # a few hundred bytes in real files
+            raise ConversionError(path, f"info.txt of {member.file_size} bytes: not an ActiGraph info.txt (damaged?)")
+        with BoundedStream(z.open(member), RatioLimit(path, "info.txt", member.compress_size)) as f:
+            text = f.read(MAX_INFO_BYTES + 1)
+        info = parse_info(path, text.decode("utf-8-sig", "replace"))
     except (zipfile.BadZipFile, OSError, EOFError) as e:
         z.close()
         raise ConversionError(path, f"info.txt cannot be read: {e}") from None
@@ -612,8 +662,9 @@ def _base_state(path: Path, info: dict[str, str], options: ConvertOptions) -> tu
         start_ticks = int(info["Start Date"])
     except (KeyError, ValueError):
         raise ConversionError(path, "info.txt needs a numeric 'Sample Rate' and 'Start Date'") from None
-    if not rate > 0:
-        raise ConversionError(path, f"info.txt: bad Sample Rate {info.get('Sample Rate')!r}")
+    if not 0 < rate < float("inf"):
+        raise ConversionError(path, f"info.txt: bad Sample Rate {excerpt(info.get('Sample Rate'))!r}")
+    start_ns = check_epoch_ns(path, "info.txt Start Date", ticks_to_epoch_ns(start_ticks))
     scale_text = info.get("Acceleration Scale")
     default_scale = NEO_SCALE if serial[:3].upper() in ("NEO", "CLE", "MRA") else 256.0
     scale = float(scale_text) if scale_text else default_scale
@@ -631,13 +682,15 @@ def _base_state(path: Path, info: dict[str, str], options: ConvertOptions) -> tu
     for key in ("Acceleration Min", "Acceleration Max", "Limb", "Subject Name", "Board Revision", "TimeZone"):
         if key in info:
             meta[sanitize_name(key)] = info[key]
-    st = _State(origin_ns=ticks_to_epoch_ns(start_ticks), rate_hz=rate, accel_scale=scale, name=name, meta=meta)
-    for key in ("Last Sample Time", "Stop Date"):
-        text = info.get(key, "").strip()
-        if text.isdigit() and int(text) > 0:
-            st.end_ns = ticks_to_epoch_ns(int(text))
+    st = _State(origin_ns=start_ns, rate_hz=rate, accel_scale=scale, name=name, meta=meta)
+    st.fill_left = fill_budget(path)
+    # Last Sample Time only: Stop Date is when recording was to stop, not evidence that it went on until then
+    text = info.get("Last Sample Time", "").strip()
+    if text.isdigit() and 0 < int(text) < 10**19:
+        end_ns = ticks_to_epoch_ns(int(text))
+        if start_ns <= end_ns <= start_ns + MAX_GAP_S * NS_PER_S * 12:
+            st.end_ns = end_ns
             meta["recording_end"] = iso_from_epoch_ns(st.end_ns, offset)
-            break
     return st, offset
 
 
@@ -676,8 +729,11 @@ def _iter_log(path: Path, z: zipfile.ZipFile, st: _State, offset: int | None) ->
             later = [*acts[1:], *sens[1:]]  # NaN pieces of long gaps (each stream's pieces stay in time order)
             for i, imus in enumerate([first, *[[p] for p in later]]):
                 yield _piece(path, st, trial, imus, signals if i == 0 else [])
-    for piece in _activity_tail(st):
+    tail = _activity_tail(st)
+    for piece in tail:
         yield _piece(path, st, trial, [piece], [])
+    if st.warnings and found:  # said after the last piece (e.g. an end time the bytes cannot back)
+        yield _piece(path, st, trial, [], [])
     if not found:
         raise ConversionError(path, "log.bin holds no ACTIVITY2, ACTIVITY or SENSOR_DATA samples")
 
@@ -690,7 +746,8 @@ def _piece(
     st.meta.update(sleep)
     for s in imus:
         s.meta.update(sleep)
-    rec = Recording(imus=imus, signals=signals, sources=[str(path)])
+    rec = Recording(imus=imus, signals=signals, sources=[str(path)], warnings=list(st.warnings))
+    st.warnings.clear()
     rec.metadata[f"imulog.device.{st.name}"] = dict(st.meta)
     imu_stream = next((s for s in imus if s.name == f"{st.name}_imu"), None)
     if imu_stream is not None:
@@ -703,6 +760,8 @@ def _piece(
 def _iter_activity_bin(path: Path, z: zipfile.ZipFile, st: _State, offset: int | None) -> Iterator[Recording]:
     """NEO/MRA activity.bin: 9 bytes per two samples, read in bounded batches."""
     st.meta["format"] = "actigraph-gt3x (NEO activity.bin)"
+    if st.rate_hz > MAX_RATE_HZ:  # the only time base of activity.bin: nothing in the payload can correct it
+        raise ConversionError(path, f"info.txt: Sample Rate {st.rate_hz:g} Hz is beyond any ActiGraph's (at most 100)")
     trial = _trial(st, offset)
     step = 9 * (BATCH_BYTES // 9)
     spacing = NS_PER_S / st.rate_hz

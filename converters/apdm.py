@@ -50,6 +50,7 @@ from imulog.converters._common import (
 )
 from imulog.converters._lab import ORIENTATION_TOPIC, orientation_stream, read_table, trial_start
 from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.bounds import check_epoch_array, read_h5
 from imulog.converters.errors import ConversionError
 
 from imulog.model import ImuStream, Recording, SignalStream
@@ -384,7 +385,7 @@ def read_apdm_h5(path: Path, names: dict[str, str]) -> Recording:
     except ConversionError:
         raise
     except (OSError, RuntimeError, KeyError, TypeError, ValueError) as e:  # h5py on a damaged file
-        raise ConversionError(path, f"damaged HDF5 file: {type(e).__name__}: {e}") from None
+        raise ConversionError(path, f"damaged HDF5 file: {e}") from None
 
 
 def _read_apdm_h5(path: Path, names: dict[str, str]) -> Recording:
@@ -402,7 +403,7 @@ def _read_apdm_h5(path: Path, names: dict[str, str]) -> Recording:
         try:
             layout, sensors = h5_sensors(f)
         except (KeyError, OSError, RuntimeError, TypeError, ValueError) as e:
-            raise ConversionError(path, f"cannot read the sensor list ({type(e).__name__}: {e})") from None
+            raise ConversionError(path, f"cannot read the sensor list ({e})") from None
         if not sensors:
             raise ConversionError(path, "no sensors (/Sensors/<id> or CaseIdList): not an APDM HDF5 file")
         rec = Recording(sources=[str(path)])
@@ -413,15 +414,20 @@ def _read_apdm_h5(path: Path, names: dict[str, str]) -> Recording:
             try:
                 if sensor.paths["time"] not in f:
                     raise ConversionError(path, f"{sensor.paths['time']} is missing")
-                us = np.asarray(f[sensor.paths["time"]][()], dtype=np.int64).reshape(-1)
-                n = len(us)
+                raw_us = read_h5(path, f[sensor.paths["time"]], sensor.paths["time"]).reshape(-1)
+                n = len(raw_us)
                 if n == 0:
                     raise ConversionError(path, f"{sensor.paths['time']} is empty")
+                if raw_us.dtype.kind not in "iuf":
+                    raise ConversionError(path, f"{sensor.paths['time']} holds {raw_us.dtype} values, not times")
+                # checked before the conversion to int64 ns: uint64 values near 2^64 must not wrap to 1969
+                check_epoch_array(path, sensor.paths["time"], raw_us.astype(np.float64) * 1000.0)
+                us = raw_us.astype(np.int64)
                 for q, width in widths.items():
                     p = sensor.paths.get(q)
                     if p is None or p not in f:
                         continue
-                    a = np.asarray(f[p][()], dtype=np.float64)
+                    a = read_h5(path, f[p], p, dtype=np.float64)
                     if width == 1:
                         a = a.reshape(-1)
                     if a.shape != ((n,) if width == 1 else (n, width)):
@@ -430,7 +436,7 @@ def _read_apdm_h5(path: Path, names: dict[str, str]) -> Recording:
             except (KeyError, OSError, RuntimeError, TypeError, ValueError) as e:
                 if isinstance(e, ConversionError):
                     raise
-                raise ConversionError(path, f"{where}: cannot read ({type(e).__name__}: {e})") from None
+                raise ConversionError(path, f"{where}: cannot read ({e})") from None
             bad = np.nonzero(np.diff(us) <= 0)[0]
             if len(bad):
                 raise ConversionError(path, f"{where}/Time does not increase at sample {int(bad[0]) + 1}")

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.bounds import read_h5
 from imulog.converters.errors import ConversionError
 
 from imulog.model import ImuStream, Intervals, PoseStream, Recording
@@ -43,11 +44,11 @@ def _read_datasets(f, path: Path) -> tuple[float, dict[str, np.ndarray], np.ndar
     if not (rate > 0 and np.isfinite(rate)):
         raise ConversionError(path, f"sampling_rate {rate!r} must be positive")
     arrays = {
-        k: np.asarray(f[k][()], dtype=np.float64)
+        k: read_h5(path, f[k], k, dtype=np.float64)
         for k in ("imu_acc", "imu_gyr", "imu_mag", "opt_pos", "opt_quat")
         if k in f
     }
-    movement = np.asarray(f["movement"][()], dtype=bool) if "movement" in f else None
+    movement = read_h5(path, f["movement"], "movement", dtype=bool) if "movement" in f else None
     info = f.attrs.get("info", "")
     info = info.decode(errors="replace") if isinstance(info, bytes) else str(info)
     return rate, arrays, movement, info
@@ -73,7 +74,7 @@ def read_broad(path: Path, name: str = "imu") -> Recording:
         raise
     except (OSError, RuntimeError, KeyError, ValueError, TypeError, IndexError) as e:
         # h5py reports damaged b-trees, heaps and chunks as any of these, often only when data is read
-        raise ConversionError(path, f"damaged HDF5 file ({type(e).__name__}: {e})") from None
+        raise ConversionError(path, f"damaged HDF5 file ({e})") from None
     n = len(arrays["imu_acc"])
     for key, a in arrays.items():
         width = 4 if key == "opt_quat" else 3

@@ -25,6 +25,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import IO
 
+from imulog.converters import bounds
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
 from imulog.converters.mapping import sibling_mapping
@@ -34,8 +35,10 @@ from imulog.model import Recording
 MAGIC = {"gzip": b"\x1f\x8b", "bzip2": b"BZh", "xz": b"\xfd7zXZ\x00", "zip": b"PK\x03\x04"}
 SUFFIX = {"gzip": (".gz", ".gzip"), "bzip2": (".bz2",), "xz": (".xz",), "zip": (".zip",)}
 MAX_BYTES = 16 << 30  # 16 GiB of decompressed text at most
-MAX_RATIO = 1000  # decompressed / compressed size, checked once past RATIO_FLOOR
-RATIO_FLOOR = 256 << 20
+# decompressed / compressed size, checked once past RATIO_FLOOR: the limits every container member has
+# (converters/bounds.py), so an input of N bytes is converted in time and memory that grow with N
+MAX_RATIO = bounds.MAX_RATIO
+RATIO_FLOOR = bounds.RATIO_FLOOR
 PIECE = 1 << 20
 
 

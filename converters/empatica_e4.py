@@ -124,7 +124,7 @@ def read_e4_file(path: Path, options: ConvertOptions | None = None) -> Recording
                 rate = float(rate_cells[0])
             except (IndexError, ValueError):
                 raise ConversionError(path, "second row is not the sample rate (Hz)", line=2) from None
-            if not 0 < rate <= 10_000:
+            if not 1e-3 <= rate <= 10_000:
                 raise ConversionError(path, f"sample rate {rate:g} Hz is not plausible", line=2)
             if len(start_cells) != width:
                 raise ConversionError(path, f"{len(start_cells)} columns, {kind}.csv has {width}", line=1)

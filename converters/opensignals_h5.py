@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.bounds import read_h5
 from imulog.converters.errors import ConversionError
 from imulog.converters.opensignals import device_streams
 
@@ -57,13 +58,13 @@ def read_opensignals_h5(path: Path, options: ConvertOptions | None = None) -> Re
             cols, blocks, sensors = [], [], []
             if "nSeq" in raw:
                 cols.append("nSeq")
-                blocks.append(np.asarray(raw["nSeq"][()], dtype=np.float64).reshape(-1))
+                blocks.append(read_h5(path, raw["nSeq"], f"{mac}/raw/nSeq", dtype=np.float64).reshape(-1))
             for k in names:
                 ds = raw[k]
                 if ds.size > MAX_SAMPLES:
                     raise ConversionError(path, f"device {mac}: {k} declares {ds.size} samples: too many")
                 cols.append(f"A{k[8:]}")
-                blocks.append(np.asarray(ds[()], dtype=np.float64).reshape(-1))
+                blocks.append(read_h5(path, ds, f"{mac}/raw/{k}", dtype=np.float64).reshape(-1))
                 sensors.append(str(_text(ds.attrs.get("sensor", ""))))
             n = min(len(b) for b in blocks)
             if any(len(b) != n for b in blocks):

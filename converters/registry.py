@@ -8,15 +8,17 @@ so a source checkout works before ``pip install -e``.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from importlib import import_module
 from importlib.metadata import entry_points
 from pathlib import Path
 
 from imulog.converters._common import read_head
 from imulog.converters.base import Converter, ConvertOptions
-from imulog.converters.errors import ConversionError, UnknownFormatError
+from imulog.converters.errors import ConversionError, UnknownFormatError, excerpt
 from imulog.converters.mapping import is_mapping_file
+from imulog.converters.values import ValueReport, check_recording
 
 from imulog.model import Recording
 
@@ -147,14 +149,57 @@ def convert_file(path: Path, fmt: str | None = None, options: ConvertOptions | N
         if fmt or options is None or options.mapping is None:
             raise
         conv = get("delimited")  # an explicit --mapping names the columns detection could not recognise
+    with reader_errors(path, conv):
+        rec = conv.convert(path, options or ConvertOptions())
+        check_recording(rec, path)  # the one value check every reader's output gets (converters/values.py)
+    return rec
+
+
+def iter_file_chunks(path: Path, conv: Converter, options: ConvertOptions, report: ValueReport) -> Iterator[Recording]:
+    """``conv.iter_chunks`` with the same safety net and value check as :func:`convert_file`, piece by piece.
+
+    ``report`` accumulates the value check; the caller ends with ``values.finish(rec, report, path)``."""
+    with reader_errors(path, conv):
+        pieces = conv.iter_chunks(path, options)
+        if pieces is None:
+            raise ConversionError(path, f"{conv.name} does not read piece by piece")
+        pieces = iter(pieces)
+    while True:
+        with reader_errors(path, conv):
+            piece = next(pieces, None)
+            if piece is not None:
+                check_recording(piece, path, report=report, final=False)
+        if piece is None:
+            return
+        yield piece
+
+
+@contextmanager
+def reader_errors(path: Path, conv: Converter) -> Iterator[None]:
+    """The last safety net around a reader: anything but ConversionError becomes one line without a Python type.
+
+    Numpy's floating-point warnings (``RuntimeWarning: overflow encountered in multiply`` on a damaged file) are
+    silenced inside: what they would say, the value check (``converters/values.py``) counts per channel."""
+    import numpy as np
+
     try:
-        return conv.convert(path, options or ConvertOptions())
+        with np.errstate(all="ignore"):
+            yield
     except ConversionError:
         raise
     except MemoryError:
-        raise ConversionError(path, "out of memory while converting") from None
+        raise ConversionError(
+            path, f"out of memory while reading it as {conv.name}: the file is damaged or declares more than it holds"
+        ) from None
+    except RecursionError:
+        raise ConversionError(path, f"nested too deeply to read as {conv.name}: the file is damaged") from None
     except Exception as e:  # noqa: BLE001 - last safety net: report, never crash with a traceback
-        raise ConversionError(path, f"{conv.name} converter failed: {type(e).__name__}: {e}") from None
+        detail = str(e).strip() or "no detail"
+        raise ConversionError(
+            path,
+            f"cannot be read as {conv.name} ({excerpt(detail, 120)}): the file is damaged or not in this format; "
+            "check it, or name the format with --format",
+        ) from None
 
 
 def convert_files(

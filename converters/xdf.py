@@ -390,7 +390,7 @@ def _load(path: Path, **kwargs: Any) -> tuple[list[dict], dict]:
         )
     except Exception as e:  # noqa: BLE001 - any parser failure becomes one line naming the file
         locate_damaged_samples(path)
-        raise ConversionError(path, f"XDF content cannot be parsed: {type(e).__name__}: {e}") from None
+        raise ConversionError(path, f"XDF content cannot be parsed ({e}): the file is damaged") from None
     finally:
         logger.removeHandler(collect)
         logger.setLevel(level)
@@ -414,7 +414,7 @@ def iter_chunks(
     try:
         infos = pyxdf.resolve_streams(str(path))
     except Exception as e:  # noqa: BLE001
-        raise ConversionError(path, f"XDF stream headers cannot be parsed: {type(e).__name__}: {e}") from None
+        raise ConversionError(path, f"XDF stream headers cannot be parsed ({e}): the file is damaged") from None
     names = _stream_names(infos)
     if per_stream is None:
         per_stream = path.stat().st_size > PER_STREAM_BYTES

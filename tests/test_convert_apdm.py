@@ -207,6 +207,7 @@ def test_hdf5_format_3_layout(tmp_path):
     n = 100
     time = 1_390_000_000_000_000 + np.arange(n, dtype=np.uint64) * 7812  # 128 Hz, us since 1970
     acc, gyr, q = rng.normal(0, 1, (n, 3)), rng.normal(0, 1, (n, 3)), rng.normal(0, 1, (n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)  # orientations are unit quaternions (others are refused)
     path = tmp_path / "20140126-134055-Base.h5"
     with h5py.File(path, "w") as f:
         f.attrs["FileFormatVersion"] = 3

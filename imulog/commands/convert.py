@@ -186,6 +186,8 @@ def _convert_streaming(
     from imulog.archive import ArchiveError
     from imulog.archive.streaming import StreamingTrialWriter
     from imulog.converters.plausibility import PieceExcerpts, marker_warnings
+    from imulog.converters.registry import iter_file_chunks
+    from imulog.converters.values import ValueReport, finish
 
     name = _format_name(path, fmt, options)
     conv = get(name)
@@ -193,7 +195,8 @@ def _convert_streaming(
     notes: list[str] = []
     counts: dict[str, int] = {}
     try:
-        pieces = conv.iter_chunks(path, options)
+        report = ValueReport()  # the value check of converters/values.py, over all pieces
+        pieces = iter_file_chunks(path, conv, options, report)
         first = next(pieces, None)
         if first is None:
             raise ConversionError(path, "no samples")
@@ -230,6 +233,9 @@ def _convert_streaming(
                 shown = max(shown, target)
             bar.update(bar.length - shown)
             notes.extend(w for w in spread.warnings() if w not in notes)
+            checked = Recording()
+            finish(checked, report, path)  # an unusable channel fails here, before the file is kept
+            notes.extend(w for w in checked.warnings if w not in notes)
             # after the pieces: a reader that hashed the file while reading it spares a second pass over it
             writer.metadata["imulog.conversion"] = {**conversion_record([path], {path.name: name}), "streamed": True}
             if notes:
