@@ -204,3 +204,33 @@ def test_salvage_does_not_launder_a_damaged_metadata_record(many_chunks, tmp_pat
     with TrialReader(tmp_path / "fixed.mcap") as tr:
         assert "imulog.trial" not in tr.metadata
         assert tr.metadata["imulog.salvage"]["dropped_metadata"] == report.dropped_metadata
+
+
+def test_exit_1_with_one_line_when_nothing_is_recoverable_or_the_output_would_fail_doctor(many_chunks, tmp_path):
+    """Exit 0 only for an output that passes doctor: a cut inside the first chunk, or messages that pass their
+    chunk's CRC but do not decode, give exit 1, one line, and no output."""
+    from mcap.writer import Writer
+
+    from imulog.archive import codec
+
+    data = many_chunks.read_bytes()
+    first_end = _chunks_with_messages(data)[0][1]
+    runner = CliRunner()
+    cut = tmp_path / "first_chunk_cut.mcap"
+    cut.write_bytes(data[: first_end - 10])
+    res = runner.invoke(cli, ["salvage", str(cut), "-o", str(tmp_path / "a.mcap")])
+    assert res.exit_code == 1 and "nothing recoverable" in res.output, res.output
+    assert len(res.output.strip().splitlines()) == 1 and not (tmp_path / "a.mcap").exists()
+
+    garbage = tmp_path / "garbage.mcap"  # a sound MCAP file whose imulog.ImuBlock messages are not protobuf
+    with open(garbage, "wb") as f:
+        w = Writer(f)
+        w.start()
+        sid = w.register_schema("imulog.ImuBlock", "protobuf", codec.file_descriptor_set("imulog.ImuBlock"))
+        ch = w.register_channel("/imu/x", "protobuf", sid)
+        for k in range(10):
+            w.add_message(ch, log_time=k, data=b"\xff\xff\xff\xff", publish_time=k)
+        w.finish()
+    res = runner.invoke(cli, ["salvage", str(garbage), "-o", str(tmp_path / "b.mcap")])
+    assert res.exit_code == 1 and "would not pass doctor" in res.output and "/imu/x" in res.output, res.output
+    assert len(res.output.strip().splitlines()) == 1 and not (tmp_path / "b.mcap").exists()

@@ -133,9 +133,7 @@ def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int]
     # closing statistics of streamed channels (imulog.channel_stats.N) that no kept channel refers to any more
     referenced = {c.metadata.get("stats_record") for cid, c in summary.channels.items() if cid not in drop}
     orphaned = {
-        x.offset
-        for x in summary.metadata_indexes
-        if x.name.startswith(f"{STATS_RECORD}.") and x.name not in referenced
+        x.offset for x in summary.metadata_indexes if x.name.startswith(f"{STATS_RECORD}.") and x.name not in referenced
     }
     limit = summary.data_end_offset
     shift: list[tuple[int, int]] = []  # (old offset of a kept record, bytes removed before it)
@@ -258,6 +256,21 @@ def _metadata_record(f: BinaryIO, summary: m.Summary, name: str, path: Path) -> 
             except (m.McapFormatError, MetadataError) as exc:
                 raise ArchiveCorruptError(f"{path}: unreadable metadata record {name!r}: {exc}") from None
     return None
+
+
+def _salvage_provenance(f: BinaryIO, summary: m.Summary, inputs: dict[str, str], path: Path) -> dict[str, Any] | None:
+    """What a run on a salvaged trial keeps of its ``imulog.salvage`` record: the source, the data-CRC verdict,
+    the metadata dropped and, for each input channel recovered in part, the time spans it lost."""
+    record = _metadata_record(f, summary, "imulog.salvage", path)
+    if record is None:
+        return None
+    spans = record.get("lost_spans") if isinstance(record.get("lost_spans"), dict) else {}
+    return {
+        "source": record.get("source"),
+        "data_crc": record.get("data_crc"),
+        "dropped_metadata": record.get("dropped_metadata") or [],
+        "partial_inputs": {t: spans[t] for t in inputs if t in spans},
+    }
 
 
 def _run_number(f: BinaryIO, summary: m.Summary) -> int:
@@ -415,6 +428,9 @@ def append_derived(
                     "imulog_version": __version__,
                     "time": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                 }
+                salvaged = _salvage_provenance(f, summary, inputs, path)
+                if salvaged is not None:
+                    record["salvage"] = salvaged
                 builder.add_metadata(f"imulog.run.{n}", encode_record(record))
                 builder.finish()
     return path

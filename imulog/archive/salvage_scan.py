@@ -297,6 +297,9 @@ class Scan:
             except (m.McapFormatError, struct.error, ValueError, UnicodeDecodeError) as exc:
                 self.report.lost.append(f"{m.OP_NAMES.get(op, hex(op))} record at byte {pos}: {exc}")
                 ok = False
+                if op == m.Op.METADATA:  # named by the summary's index when it has one
+                    names = [x.name for x in self.summary.metadata_indexes if x.offset == pos] if self.summary else []
+                    self.report.dropped_metadata.append(f"{(names or ['?'])[0]} at byte {pos}: {exc}")
             if ok:
                 self.regions.append((pos, self._unchecked_end(op, pos, end), op))
             if not ok and not (end == size or self._plausible(end)):
