@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import time
 import zlib
 from collections.abc import Sequence
@@ -30,11 +31,13 @@ from imulog.archive.errors import ArchiveCorruptError, ArchiveError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import MetadataError, decode_record, encode_record, loads, record_hash, to_json
 from imulog.archive.streaming import STATS_RECORD, StreamPieces, write_pieces
+from imulog.archive.summary_check import summary_defects
 from imulog.archive.writer import payload_hash, plan_append, write_stream, write_twin
 from imulog.model import DERIVED_PREFIX, Stream
 from imulog.workers import worker_pool
 
 COPY_BLOCK = 8 * 1024 * 1024
+REPAIR_RECORD = "imulog.repair"  # imulog.repair.<run>: the summary defects a run's rewrite repaired
 
 
 def _copy_range(src: BinaryIO, dst: McapBuilder, start: int, end: int, crc: int | None = None) -> int:
@@ -258,6 +261,16 @@ def _metadata_record(f: BinaryIO, summary: m.Summary, name: str, path: Path) -> 
     return None
 
 
+def _summary_repairs(summary: m.Summary, path: Path) -> list[str]:
+    """The summary defects the rewrite repairs (:mod:`imulog.archive.summary_check`); ArchiveCorruptError, with
+    the message ``doctor`` gives, for one it refuses."""
+    defects = summary_defects(summary)
+    for d in defects:
+        if not d.repaired:
+            raise ArchiveCorruptError(f"{path}: {d.message}; run 'imulog doctor {path}' - nothing was written")
+    return [d.message for d in defects]
+
+
 def _salvage_provenance(f: BinaryIO, summary: m.Summary, inputs: dict[str, str], path: Path) -> dict[str, Any] | None:
     """What a run on a salvaged trial keeps of its ``imulog.salvage`` record: the source, the data-CRC verdict,
     the metadata dropped and, for each input channel recovered in part, the time spans it lost."""
@@ -338,6 +351,7 @@ def append_derived(
                 summary = m.read_summary(f, os.fstat(f.fileno()).st_size)
             except m.McapFormatError as exc:
                 raise ArchiveCorruptError(f"{path}: {exc}") from exc
+            repairs = _summary_repairs(summary, path)
             existing = {c.topic: c for c in summary.channels.values()}
             raw_topics = _raw_topics(f, summary, path)
             for t in topics:
@@ -431,8 +445,14 @@ def append_derived(
                 salvaged = _salvage_provenance(f, summary, inputs, path)
                 if salvaged is not None:
                     record["salvage"] = salvaged
+                if repairs:
+                    record["repair"] = f"{REPAIR_RECORD}.{n}"
+                    repair = {"run": n, "repaired": repairs, "imulog_version": __version__, "time": record["time"]}
+                    builder.add_metadata(f"{REPAIR_RECORD}.{n}", encode_record(repair))
                 builder.add_metadata(f"imulog.run.{n}", encode_record(record))
                 builder.finish()
+    for line in repairs:  # the file doctor rejected passes now: say so
+        print(f"{path}: repaired the summary: {line} ({REPAIR_RECORD}.{n})", file=sys.stderr)
     return path
 
 

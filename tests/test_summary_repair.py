@@ -1,0 +1,154 @@
+"""A step never turns a file doctor rejects into one it accepts without saying so (issue 26, point 5).
+
+Each summary defect of ``imulog.archive.summary_check`` is crafted into a sound trial by rewriting its summary
+(the data section untouched): ``doctor`` rejects the file; a step's append then either refuses with the message
+doctor gives (nothing written) or repairs it, with one line on stderr and an ``imulog.repair.<n>`` record.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import struct
+import zlib
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from test_archive_helpers import synthetic_recording
+
+from imulog.archive import TrialReader, append_derived, write_trial
+from imulog.archive import _mcap as m
+from imulog.archive.doctor import check_file
+from imulog.archive.errors import ArchiveCorruptError
+from imulog.cli import cli
+from imulog.model import SignalStream
+
+
+@pytest.fixture(scope="module")
+def sound(tmp_path_factory) -> Path:
+    path = write_trial(tmp_path_factory.mktemp("repair") / "trial.mcap", synthetic_recording(np.random.default_rng(5)))
+    assert check_file(path).ok
+    return path
+
+
+def with_summary(src: Path, dst: Path, edit, *, break_offset: bool = False) -> Path:
+    """``src`` with its summary records replaced by ``edit(records)`` (full records, summary offsets rebuilt,
+    CRC right); ``break_offset`` makes the first summary offset one byte short."""
+    data = src.read_bytes()
+    s = m.read_summary_from_bytes(data)
+    footer = len(data) - len(m.MAGIC) - m.FOOTER_SIZE
+    end = s.summary_offset_start or footer
+    records = [
+        bytes(data[s.summary_start + off : s.summary_start + off + 9 + len(body)])
+        for _, off, body in m.iter_records(data[s.summary_start : end])
+    ]
+    records = edit(records)
+    body, offsets, k = bytearray(), [], 0
+    while k < len(records):
+        op, start = records[k][0], s.summary_start + len(body)
+        while k < len(records) and records[k][0] == op:
+            body += records[k]
+            k += 1
+        length = s.summary_start + len(body) - start - (1 if break_offset and not offsets else 0)
+        offsets.append(m.record(m.Op.SUMMARY_OFFSET, struct.pack("<BQQ", op, start, length)))
+    offset_start = s.summary_start + len(body)
+    body += b"".join(offsets)
+    head = struct.pack("<BQQQ", m.Op.FOOTER, 20, s.summary_start, offset_start)
+    crc = zlib.crc32(head, zlib.crc32(body))
+    dst.write_bytes(data[: s.summary_start] + bytes(body) + head + struct.pack("<I", crc) + m.MAGIC)
+    return dst
+
+
+def _statistics(records: list[bytes], **changes) -> list[bytes]:
+    out = []
+    for r in records:
+        if r[0] == m.Op.STATISTICS:
+            st = replace(m.parse_statistics(memoryview(r)[9:]), **changes)
+            r = st.encode()
+        out.append(r)
+    return out
+
+
+def _counts(records: list[bytes]) -> dict[int, int]:
+    st = next(m.parse_statistics(memoryview(r)[9:]) for r in records if r[0] == m.Op.STATISTICS)
+    return dict(st.channel_message_counts)
+
+
+def _first_of(op: int):
+    def dup(records: list[bytes], n: int) -> list[bytes]:
+        k = next(i for i, r in enumerate(records) if r[0] == op)
+        return records[: k + 1] + [records[k]] * n + records[k + 1 :]
+
+    return dup
+
+
+DEFECTS = {  # name -> (edit of the summary records, break a summary offset, repaired)
+    "100,000 duplicate chunk indexes": (lambda r: _first_of(m.Op.CHUNK_INDEX)(r, 100_000), False, True),
+    "duplicate metadata indexes": (lambda r: _first_of(m.Op.METADATA_INDEX)(r, 3), False, True),
+    "a summary offset one byte short": (lambda r: r, True, True),
+    "statistics chunk count off by one": (
+        lambda r: _statistics(r, chunk_count=sum(x[0] == m.Op.CHUNK_INDEX for x in r) + 1),
+        False,
+        True,
+    ),
+    "statistics message count off": (lambda r: _statistics(r, message_count=sum(_counts(r).values()) + 7), False, True),
+    "statistics end time off": (lambda r: _statistics(r, message_end_time=1), False, True),
+    "statistics count a channel that does not exist": (
+        lambda r: _statistics(r, channel_message_counts={**_counts(r), 999: 0}),
+        False,
+        True,
+    ),
+    "no statistics record": (lambda r: [x for x in r if x[0] != m.Op.STATISTICS], False, False),
+    "statistics miss a channel's count": (
+        lambda r: _statistics(r, channel_message_counts=dict(list(_counts(r).items())[1:])),
+        False,
+        False,
+    ),
+}
+
+
+def _derived(path: Path) -> SignalStream:
+    with TrialReader(path) as tr:
+        t = tr.read(tr.topics()[0]).t_ns
+    return SignalStream("/derived/x", t, ["v"], ["1"], np.zeros(len(t)))
+
+
+@pytest.mark.parametrize("name", list(DEFECTS))
+def test_each_summary_defect_is_refused_or_repaired_out_loud(name, sound, tmp_path, capfd):
+    edit, break_offset, repaired = DEFECTS[name]
+    path = with_summary(sound, tmp_path / "t.mcap", edit, break_offset=break_offset)
+    before = check_file(path).problems
+    assert before, f"doctor accepts the crafted file: {name}"
+    if not repaired:
+        digest = hashlib.sha256(path.read_bytes()).hexdigest()
+        with pytest.raises(ArchiveCorruptError) as exc:
+            append_derived(path, [_derived(sound)], run={"step": "x"})
+        assert any(p in str(exc.value) for p in before), (str(exc.value), before)  # doctor's own message
+        assert "nothing was written" in str(exc.value)
+        assert hashlib.sha256(path.read_bytes()).hexdigest() == digest
+        return
+    capfd.readouterr()
+    append_derived(path, [_derived(sound)], run={"step": "x"})
+    err = capfd.readouterr().err.strip().splitlines()
+    assert err and all("repaired the summary: " in line for line in err), err
+    assert check_file(path).ok  # it passes now, and the file says why
+    with TrialReader(path) as tr:
+        run = tr.runs()[max(tr.runs())]
+        repair = tr.metadata[run["repair"]]
+        assert repair["repaired"] == [
+            line.split("repaired the summary: ", 1)[1].rsplit(" (imulog.repair.", 1)[0] for line in err
+        ]
+    if name.startswith(("100,000", "duplicate", "a summary offset")):  # worded as doctor words them
+        assert set(repair["repaired"]) <= set(before), (repair, before)
+
+
+def test_a_step_on_the_issue_example_says_what_it_repaired(sound, tmp_path):
+    """The issue's case, through the command line: 100,000 duplicate chunk indexes, then a processing step."""
+    path = with_summary(sound, tmp_path / "dup.mcap", DEFECTS["100,000 duplicate chunk indexes"][0])
+    assert "summary indexes the same chunk more than once (100000 extra entries)" in check_file(path).problems
+    res = CliRunner().invoke(cli, ["process", "orientation", str(path), "--backend", "madgwick"])
+    assert res.exit_code == 0, res.output
+    assert "repaired the summary: summary indexes the same chunk more than once (100000 extra entries)" in res.stderr
+    assert check_file(path).ok
