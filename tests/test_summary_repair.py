@@ -28,7 +28,9 @@ from imulog.model import SignalStream
 
 @pytest.fixture(scope="module")
 def sound(tmp_path_factory) -> Path:
+    """A converted trial plus one derived channel, /derived/x (its chunk is the last one)."""
     path = write_trial(tmp_path_factory.mktemp("repair") / "trial.mcap", synthetic_recording(np.random.default_rng(5)))
+    append_derived(path, [_derived(path)], run={"step": "x"})
     assert check_file(path).ok
     return path
 
@@ -76,6 +78,18 @@ def _counts(records: list[bytes]) -> dict[int, int]:
     return dict(st.channel_message_counts)
 
 
+def _edit_last(op: int, parse, change):
+    """Change the last summary record of kind ``op`` (parsed with ``parse``, changed by ``change(rec)``)."""
+
+    def edit(records: list[bytes]) -> list[bytes]:
+        k = max(i for i, r in enumerate(records) if r[0] == op)
+        rec = parse(memoryview(records[k])[9:])
+        change(rec)
+        return [*records[:k], rec.encode(), *records[k + 1 :]]
+
+    return edit
+
+
 def _first_of(op: int):
     def dup(records: list[bytes], n: int) -> list[bytes]:
         k = next(i for i, r in enumerate(records) if r[0] == op)
@@ -101,6 +115,32 @@ DEFECTS = {  # name -> (edit of the summary records, break a summary offset, rep
         True,
     ),
     "no statistics record": (lambda r: [x for x in r if x[0] != m.Op.STATISTICS], False, False),
+    # the summary against the data section (doctor's checks, from the record heads): refused
+    "a chunk index with the wrong start time": (
+        _edit_last(m.Op.CHUNK_INDEX, m.parse_chunk_index, lambda c: setattr(c, "message_start_time", 5)),
+        False,
+        False,
+    ),
+    "a metadata index with the wrong name": (
+        _edit_last(m.Op.METADATA_INDEX, m.parse_metadata_index, lambda x: setattr(x, "name", "imulog.other")),
+        False,
+        False,
+    ),
+    "a channel record unlike the data section's": (
+        _edit_last(m.Op.CHANNEL, m.parse_channel, lambda c: c.metadata.update(units="furlong")),
+        False,
+        False,
+    ),
+    "a chunk left out of the index": (
+        lambda r: [x for k, x in enumerate(r) if k != max(i for i, y in enumerate(r) if y[0] == m.Op.CHUNK_INDEX)],
+        False,
+        False,
+    ),
+    "a per-channel count off by one": (
+        lambda r: _statistics(r, channel_message_counts={k: v + (k == max(_counts(r))) for k, v in _counts(r).items()}),
+        False,
+        False,
+    ),
     "statistics miss a channel's count": (
         lambda r: _statistics(r, channel_message_counts=dict(list(_counts(r).items())[1:])),
         False,
@@ -109,14 +149,15 @@ DEFECTS = {  # name -> (edit of the summary records, break a summary offset, rep
 }
 
 
-def _derived(path: Path) -> SignalStream:
+def _derived(path: Path, topic: str = "/derived/x") -> SignalStream:
     with TrialReader(path) as tr:
         t = tr.read(tr.topics()[0]).t_ns
-    return SignalStream("/derived/x", t, ["v"], ["1"], np.zeros(len(t)))
+    return SignalStream(topic, t, ["v"], ["1"], np.random.default_rng(len(topic)).normal(size=len(t)))
 
 
+@pytest.mark.parametrize("topic", ["/derived/x", "/derived/y"])  # replace the last channel, or append
 @pytest.mark.parametrize("name", list(DEFECTS))
-def test_each_summary_defect_is_refused_or_repaired_out_loud(name, sound, tmp_path, capfd):
+def test_each_summary_defect_is_refused_or_repaired_out_loud(name, topic, sound, tmp_path, capfd):
     edit, break_offset, repaired = DEFECTS[name]
     path = with_summary(sound, tmp_path / "t.mcap", edit, break_offset=break_offset)
     before = check_file(path).problems
@@ -124,13 +165,13 @@ def test_each_summary_defect_is_refused_or_repaired_out_loud(name, sound, tmp_pa
     if not repaired:
         digest = hashlib.sha256(path.read_bytes()).hexdigest()
         with pytest.raises(ArchiveCorruptError) as exc:
-            append_derived(path, [_derived(sound)], run={"step": "x"})
+            append_derived(path, [_derived(sound, topic)], run={"step": "x"})
         assert any(p in str(exc.value) for p in before), (str(exc.value), before)  # doctor's own message
         assert "nothing was written" in str(exc.value)
         assert hashlib.sha256(path.read_bytes()).hexdigest() == digest
         return
     capfd.readouterr()
-    append_derived(path, [_derived(sound)], run={"step": "x"})
+    append_derived(path, [_derived(sound, topic)], run={"step": "x"})
     err = capfd.readouterr().err.strip().splitlines()
     assert err and all("repaired the summary: " in line for line in err), err
     assert check_file(path).ok  # it passes now, and the file says why

@@ -32,6 +32,7 @@ from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import MetadataError, decode_record, encode_record, loads, record_hash, to_json
 from imulog.archive.streaming import STATS_RECORD, StreamPieces, write_pieces
 from imulog.archive.summary_check import summary_defects
+from imulog.archive.summary_walk import summary_problems
 from imulog.archive.writer import payload_hash, plan_append, write_stream, write_twin
 from imulog.model import DERIVED_PREFIX, Stream
 from imulog.workers import worker_pool
@@ -261,14 +262,17 @@ def _metadata_record(f: BinaryIO, summary: m.Summary, name: str, path: Path) -> 
     return None
 
 
-def _summary_repairs(summary: m.Summary, path: Path) -> list[str]:
+def _summary_repairs(f: BinaryIO, summary: m.Summary, path: Path) -> list[str]:
     """The summary defects the rewrite repairs (:mod:`imulog.archive.summary_check`); ArchiveCorruptError, with
-    the message ``doctor`` gives, for one it refuses."""
+    the message ``doctor`` gives, for one it refuses, or for an index that disagrees with the data section
+    (:mod:`imulog.archive.summary_walk`, from the record heads)."""
     defects = summary_defects(summary)
-    for d in defects:
-        if not d.repaired:
-            raise ArchiveCorruptError(f"{path}: {d.message}; run 'imulog doctor {path}' - nothing was written")
-    return [d.message for d in defects]
+    refused = [d.message for d in defects if not d.repaired]
+    repaired = [d.message for d in defects if d.repaired]
+    refused += summary_problems(f, summary, set(repaired))
+    if refused:
+        raise ArchiveCorruptError(f"{path}: {refused[0]}; run 'imulog doctor {path}' - nothing was written")
+    return repaired
 
 
 def _salvage_provenance(f: BinaryIO, summary: m.Summary, inputs: dict[str, str], path: Path) -> dict[str, Any] | None:
@@ -351,7 +355,7 @@ def append_derived(
                 summary = m.read_summary(f, os.fstat(f.fileno()).st_size)
             except m.McapFormatError as exc:
                 raise ArchiveCorruptError(f"{path}: {exc}") from exc
-            repairs = _summary_repairs(summary, path)
+            repairs = _summary_repairs(f, summary, path)
             existing = {c.topic: c for c in summary.channels.values()}
             raw_topics = _raw_topics(f, summary, path)
             for t in topics:
