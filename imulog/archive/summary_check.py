@@ -17,7 +17,8 @@ line on stderr and writes an ``imulog.repair.<n>`` record) or refuses it (with t
 | statistics without a count for one of the summary's channels | refused | the same |
 
 Defects between the summary and the data section (an index pointing at the wrong record, a channel record
-that differs) are copied as they are, so the rewritten file stays rejected by ``doctor``.
+that differs, a chunk left out of the index, a wrong per-channel count) are refused as well, with doctor's
+message: :mod:`imulog.archive.summary_walk` finds them from the record heads before the rewrite.
 """
 
 from __future__ import annotations
