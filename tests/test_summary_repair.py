@@ -193,3 +193,15 @@ def test_a_step_on_the_issue_example_says_what_it_repaired(sound, tmp_path):
     assert res.exit_code == 0, res.output
     assert "repaired the summary: summary indexes the same chunk more than once (100000 extra entries)" in res.stderr
     assert check_file(path).ok
+
+
+def test_salvage_of_a_file_with_a_summary_defect_says_so(sound, tmp_path):
+    from imulog.archive.salvage import salvage
+
+    path = with_summary(sound, tmp_path / "dup.mcap", DEFECTS["100,000 duplicate chunk indexes"][0])
+    report = salvage(path, tmp_path / "fixed.mcap")
+    assert check_file(tmp_path / "fixed.mcap").ok
+    with TrialReader(tmp_path / "fixed.mcap") as tr:
+        notes = tr.metadata["imulog.salvage"]["notes"]
+    assert any("summary indexes the same chunk more than once (100000 extra entries)" in n for n in notes), notes
+    assert report.notes == notes

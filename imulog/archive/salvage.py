@@ -33,6 +33,7 @@ from imulog.archive.files import atomic_output, target_path, temp_path, writer_l
 from imulog.archive.metadata import decode_record, encode_record
 from imulog.archive.salvage_records import LOST, metadata_problem, raw_record, recompute
 from imulog.archive.salvage_scan import LOST_SOURCE, SalvageReport, Scan, _Channel, release
+from imulog.archive.summary_check import summary_defects
 
 SALVAGE_RECORD = "imulog.salvage"
 
@@ -45,6 +46,8 @@ def _summary(f, size: int, report: SalvageReport) -> tuple[list[int], m.Summary 
         report.notes.append(f"summary not usable ({exc}): records found by scanning")
         return [], None
     report.summary_found = True
+    for d in summary_defects(s):  # the output's summary is written anew: say what was wrong with this one
+        report.notes.append(f"summary defect, not carried over: {d.message}")
     hints = (
         [ci.chunk_start_offset for ci in s.chunk_indexes]
         + [a.offset for a in s.attachment_indexes]
@@ -277,6 +280,7 @@ def _write(
                 "partial_channels": sorted(spans),
                 "lost_spans": spans,
                 "dropped_metadata": report.dropped_metadata,
+                "notes": report.notes[:1000],
                 "imulog_version": __version__,
             }
             if raw_original is not None:
