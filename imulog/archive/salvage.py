@@ -97,7 +97,9 @@ def _locate(scan: Scan, detected: bool) -> dict[int, str]:
                 f"{report.source}: the {what} record at byte {start} is damaged and there is no summary copy of it"
             )
         if op == m.Op.MESSAGE:
-            raise ArchiveError(f"{report.source}: the message at byte {start} (outside chunks) is damaged")
+            raise ArchiveError(
+                f"{report.source}: a message outside chunks (bytes {start}-{end}) is damaged at byte {p}"
+            )
         report.notes.append(f"the damaged {what} record is not copied (rebuilt or replaced by the summary's copy)")
         return {}
     if detected:

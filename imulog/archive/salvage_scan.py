@@ -301,7 +301,11 @@ class Scan:
                     names = [x.name for x in self.summary.metadata_indexes if x.offset == pos] if self.summary else []
                     self.report.dropped_metadata.append(f"{(names or ['?'])[0]} at byte {pos}: {exc}")
             if ok:
-                self.regions.append((pos, self._unchecked_end(op, pos, end), op))
+                last = self.regions[-1] if self.regions else None
+                if op == m.Op.MESSAGE and last is not None and last[2] == op and last[1] == pos:
+                    self.regions[-1] = (last[0], end, op)  # messages outside chunks: one region per run of them
+                else:
+                    self.regions.append((pos, self._unchecked_end(op, pos, end), op))
             if not ok and not (end == size or self._plausible(end)):
                 # its length field may be what is damaged: find the next record instead of trusting it
                 nxt = self._next_start(pos)
