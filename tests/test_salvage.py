@@ -91,14 +91,14 @@ def test_every_chunk_before_a_random_cut_is_recovered(many_chunks, tmp_path):
         broken.write_bytes(data[:cut])
         try:
             salvage(broken, out, overwrite=True)
-        except ArchiveError as exc:  # only when not even the first channel record survived
-            assert cut < chunks[0][0], f"cut at {cut}: {exc}"
+        except ArchiveError as exc:  # only when not even the first chunk survived: nothing recoverable
+            assert cut < chunks[0][1] and "nothing recoverable" in str(exc), f"cut at {cut}: {exc}"
             continue
         got = _recovered(out)
         for cid, payloads in _expected_prefix(data, cut).items():
             assert got.get(topic_of[cid], [])[: len(payloads)] == payloads, f"cut at {cut}: {topic_of[cid]}"
             assert len(got[topic_of[cid]]) == len(payloads), f"cut at {cut}: extra messages in {topic_of[cid]}"
-        assert check_file(out, decode=False).ok
+        assert check_file(out).ok, (cut, check_file(out).problems)  # recomputed channel records, raw record
 
 
 def test_a_damaged_chunk_is_dropped_and_everything_else_kept(many_chunks, tmp_path):
@@ -122,10 +122,17 @@ def test_a_damaged_chunk_is_dropped_and_everything_else_kept(many_chunks, tmp_pa
     with TrialReader(many_chunks) as tr:
         for cid, payloads in want.items():
             assert got[tr.summary.channels[cid].topic] == payloads
-    report2 = check_file(tmp_path / "fixed.mcap")  # the output is internally sound, but no longer the raw data
-    assert any("raw" in p for p in report2.problems)
-    assert not any("chunk CRC" in p for p in report2.problems)  # every chunk kept is intact
-    assert any("cannot be trusted" in p for p in report2.problems)  # the data CRC of the input did not match
+    assert check_file(tmp_path / "fixed.mcap").ok  # sound: the partial channel's records and imulog.raw recomputed
+    with TrialReader(tmp_path / "fixed.mcap") as tr, TrialReader(many_chunks) as orig:
+        record = tr.metadata["imulog.salvage"]
+        assert record["partial_channels"] == [topic]
+        assert record["raw_original"]["sha256"] == orig.metadata["imulog.raw"]["sha256"]
+        ((after, before),) = record["lost_spans"][topic]["spans"]  # one chunk lost: one span, between its neighbours
+        lost = orig.read(topic)
+        kept = tr.read(topic)
+        t_lost = np.setdiff1d(lost.t_ns, kept.t_ns)
+        assert len(t_lost) and after < t_lost.min() and t_lost.max() < before
+        assert tr.channel(topic).sample_count == len(kept.t_ns) == len(lost.t_ns) - len(t_lost)
 
 
 def test_mcap_library_file_without_summary(tmp_path):
@@ -181,7 +188,7 @@ def test_cli_salvage_refuses_its_input_as_output_and_reports_losses(many_chunks,
 
 
 def test_salvage_does_not_launder_a_damaged_metadata_record(many_chunks, tmp_path):
-    """Metadata records have no CRC of their own: after a data-CRC mismatch doctor must still reject the output."""
+    """Metadata records have no CRC of their own: the data-section CRC locates the damaged byte, the record goes."""
     data = bytearray(many_chunks.read_bytes())
     with TrialReader(many_chunks) as tr:
         idx = next(i for i in tr.summary.metadata_indexes if i.name == "imulog.trial")
@@ -190,6 +197,40 @@ def test_salvage_does_not_launder_a_damaged_metadata_record(many_chunks, tmp_pat
     broken.write_bytes(bytes(data))
     assert not check_file(broken).ok
     report = salvage(broken, tmp_path / "fixed.mcap")
-    assert report.data_crc == "mismatch" and "imulog.trial" in report.metadata
-    problems = check_file(tmp_path / "fixed.mcap").problems
-    assert any("cannot be trusted" in p for p in problems), problems
+    assert report.data_crc == "mismatch" and "imulog.trial" not in report.metadata
+    assert any(d.startswith(f"imulog.trial at byte {idx.offset}") for d in report.dropped_metadata), report
+    assert "imulog.raw" in report.metadata and "imulog.anthropometrics" in report.metadata  # the intact ones stay
+    assert check_file(tmp_path / "fixed.mcap").ok
+    with TrialReader(tmp_path / "fixed.mcap") as tr:
+        assert "imulog.trial" not in tr.metadata
+        assert tr.metadata["imulog.salvage"]["dropped_metadata"] == report.dropped_metadata
+
+
+def test_exit_1_with_one_line_when_nothing_is_recoverable_or_the_output_would_fail_doctor(many_chunks, tmp_path):
+    """Exit 0 only for an output that passes doctor: a cut inside the first chunk, or messages that pass their
+    chunk's CRC but do not decode, give exit 1, one line, and no output."""
+    from mcap.writer import Writer
+
+    from imulog.archive import codec
+
+    data = many_chunks.read_bytes()
+    first_end = _chunks_with_messages(data)[0][1]
+    runner = CliRunner()
+    cut = tmp_path / "first_chunk_cut.mcap"
+    cut.write_bytes(data[: first_end - 10])
+    res = runner.invoke(cli, ["salvage", str(cut), "-o", str(tmp_path / "a.mcap")])
+    assert res.exit_code == 1 and "nothing recoverable" in res.output, res.output
+    assert len(res.output.strip().splitlines()) == 1 and not (tmp_path / "a.mcap").exists()
+
+    garbage = tmp_path / "garbage.mcap"  # a sound MCAP file whose imulog.ImuBlock messages are not protobuf
+    with open(garbage, "wb") as f:
+        w = Writer(f)
+        w.start()
+        sid = w.register_schema("imulog.ImuBlock", "protobuf", codec.file_descriptor_set("imulog.ImuBlock"))
+        ch = w.register_channel("/imu/x", "protobuf", sid)
+        for k in range(10):
+            w.add_message(ch, log_time=k, data=b"\xff\xff\xff\xff", publish_time=k)
+        w.finish()
+    res = runner.invoke(cli, ["salvage", str(garbage), "-o", str(tmp_path / "b.mcap")])
+    assert res.exit_code == 1 and "would not pass doctor" in res.output and "/imu/x" in res.output, res.output
+    assert len(res.output.strip().splitlines()) == 1 and not (tmp_path / "b.mcap").exists()

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import time
 import zlib
 from collections.abc import Sequence
@@ -30,11 +31,14 @@ from imulog.archive.errors import ArchiveCorruptError, ArchiveError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import MetadataError, decode_record, encode_record, loads, record_hash, to_json
 from imulog.archive.streaming import STATS_RECORD, StreamPieces, write_pieces
+from imulog.archive.summary_check import summary_defects
+from imulog.archive.summary_walk import summary_problems
 from imulog.archive.writer import payload_hash, plan_append, write_stream, write_twin
 from imulog.model import DERIVED_PREFIX, Stream
 from imulog.workers import worker_pool
 
 COPY_BLOCK = 8 * 1024 * 1024
+REPAIR_RECORD = "imulog.repair"  # imulog.repair.<run>: the summary defects a run's rewrite repaired
 
 
 def _copy_range(src: BinaryIO, dst: McapBuilder, start: int, end: int, crc: int | None = None) -> int:
@@ -133,9 +137,7 @@ def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int]
     # closing statistics of streamed channels (imulog.channel_stats.N) that no kept channel refers to any more
     referenced = {c.metadata.get("stats_record") for cid, c in summary.channels.items() if cid not in drop}
     orphaned = {
-        x.offset
-        for x in summary.metadata_indexes
-        if x.name.startswith(f"{STATS_RECORD}.") and x.name not in referenced
+        x.offset for x in summary.metadata_indexes if x.name.startswith(f"{STATS_RECORD}.") and x.name not in referenced
     }
     limit = summary.data_end_offset
     shift: list[tuple[int, int]] = []  # (old offset of a kept record, bytes removed before it)
@@ -260,6 +262,34 @@ def _metadata_record(f: BinaryIO, summary: m.Summary, name: str, path: Path) -> 
     return None
 
 
+def _summary_repairs(f: BinaryIO, summary: m.Summary, path: Path) -> list[str]:
+    """The summary defects the rewrite repairs (:mod:`imulog.archive.summary_check`); ArchiveCorruptError, with
+    the message ``doctor`` gives, for one it refuses, or for an index that disagrees with the data section
+    (:mod:`imulog.archive.summary_walk`, from the record heads)."""
+    defects = summary_defects(summary)
+    refused = [d.message for d in defects if not d.repaired]
+    repaired = [d.message for d in defects if d.repaired]
+    refused += summary_problems(f, summary, set(repaired))
+    if refused:
+        raise ArchiveCorruptError(f"{path}: {refused[0]}; run 'imulog doctor {path}' - nothing was written")
+    return repaired
+
+
+def _salvage_provenance(f: BinaryIO, summary: m.Summary, inputs: dict[str, str], path: Path) -> dict[str, Any] | None:
+    """What a run on a salvaged trial keeps of its ``imulog.salvage`` record: the source, the data-CRC verdict,
+    the metadata dropped and, for each input channel recovered in part, the time spans it lost."""
+    record = _metadata_record(f, summary, "imulog.salvage", path)
+    if record is None:
+        return None
+    spans = record.get("lost_spans") if isinstance(record.get("lost_spans"), dict) else {}
+    return {
+        "source": record.get("source"),
+        "data_crc": record.get("data_crc"),
+        "dropped_metadata": record.get("dropped_metadata") or [],
+        "partial_inputs": {t: spans[t] for t in inputs if t in spans},
+    }
+
+
 def _run_number(f: BinaryIO, summary: m.Summary) -> int:
     numbers = [0]
     for idx in summary.metadata_indexes:
@@ -325,6 +355,7 @@ def append_derived(
                 summary = m.read_summary(f, os.fstat(f.fileno()).st_size)
             except m.McapFormatError as exc:
                 raise ArchiveCorruptError(f"{path}: {exc}") from exc
+            repairs = _summary_repairs(f, summary, path)
             existing = {c.topic: c for c in summary.channels.values()}
             raw_topics = _raw_topics(f, summary, path)
             for t in topics:
@@ -415,8 +446,17 @@ def append_derived(
                     "imulog_version": __version__,
                     "time": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                 }
+                salvaged = _salvage_provenance(f, summary, inputs, path)
+                if salvaged is not None:
+                    record["salvage"] = salvaged
+                if repairs:
+                    record["repair"] = f"{REPAIR_RECORD}.{n}"
+                    repair = {"run": n, "repaired": repairs, "imulog_version": __version__, "time": record["time"]}
+                    builder.add_metadata(f"{REPAIR_RECORD}.{n}", encode_record(repair))
                 builder.add_metadata(f"imulog.run.{n}", encode_record(record))
                 builder.finish()
+    for line in repairs:  # the file doctor rejected passes now: say so
+        print(f"{path}: repaired the summary: {line} ({REPAIR_RECORD}.{n})", file=sys.stderr)
     return path
 
 

@@ -22,6 +22,13 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from imulog.archive import _mcap as m
 from imulog.archive import codec
 from imulog.archive.errors import ArchiveError
+from imulog.archive.summary_check import (
+    CHANNEL_COUNTS,
+    DUPLICATE_CHUNKS,
+    DUPLICATE_RECORDS,
+    NO_STATISTICS,
+    offsets_problems,
+)
 from imulog.archive.writer import raw_digest
 
 Progress = Callable[[int], None]
@@ -230,24 +237,19 @@ def _check_summary(summary: m.Summary, found: dict, report: DoctorReport) -> Non
             a.create_time,
         ):
             report.fail(f"attachment index {a.name!r} disagrees with its attachment")
-    starts = {off: (op, ln) for op, off, ln in summary.summary_records}
-    for op, start, length in summary.summary_offsets:
-        pos, end = start, start + length
-        while pos < end and pos in starts and starts[pos][0] == op:
-            pos += starts[pos][1]
-        if pos != end:
-            report.fail(f"summary offset for {m.OP_NAMES.get(op, hex(op))} records does not match the summary")
+    for problem in offsets_problems(summary):
+        report.fail(problem)
     md = found["metadata"]
     if {(x.offset, x.length, x.name) for x in summary.metadata_indexes} != {(o, ln, nm) for o, (nm, ln) in md.items()}:
         report.fail("metadata indexes disagree with the metadata records in the data section")
     st = summary.statistics
     if st is None:
-        report.fail("summary has no statistics record")
+        report.fail(NO_STATISTICS)
     else:
         counts = {k: v for k, v in found["counts"].items()}
         expect = {cid: counts.get(cid, 0) for cid in found["channels"]}
         if {k: v for k, v in st.channel_message_counts.items()} != expect:
-            report.fail("statistics per-channel message counts disagree with the data")
+            report.fail(CHANNEL_COUNTS)
         checks = {
             "message_count": sum(counts.values()),
             "schema_count": len(found["schemas"]),
@@ -336,14 +338,9 @@ def check_file(path: str | os.PathLike[str], *, decode: bool = True, progress: P
             return report
         report.checks.append("magic, footer and summary CRC ok")
         if summary.duplicate_record_indexes:
-            report.fail(
-                f"summary indexes the same attachment or metadata record more than once "
-                f"({summary.duplicate_record_indexes} extra entries)"
-            )
+            report.fail(DUPLICATE_RECORDS.format(n=summary.duplicate_record_indexes))
         if summary.duplicate_chunk_indexes:
-            report.fail(
-                f"summary indexes the same chunk more than once ({summary.duplicate_chunk_indexes} extra entries)"
-            )
+            report.fail(DUPLICATE_CHUNKS.format(n=summary.duplicate_chunk_indexes))
         found = _walk_data_section(f, summary, report, progress)
         if found is None:
             return report
@@ -391,11 +388,9 @@ def check_file(path: str | os.PathLike[str], *, decode: bool = True, progress: P
                 else:
                     report.checks.append("raw-data hash ok")
             salvaged = trial.metadata.get("imulog.salvage")
-            if salvaged is not None and salvaged.get("data_crc") == "mismatch":
-                report.fail(
-                    "salvaged from a file whose data-section CRC did not match: its metadata, schema and channel "
-                    "records (which have no CRC of their own) cannot be trusted (imulog.salvage)"
-                )
+            if salvaged is not None:  # sound as written; what it lost (and dropped as untrusted) is recorded there
+                partial = salvaged.get("partial_channels") or []
+                report.checks.append(f"salvaged from {salvaged.get('source')}: {len(partial)} channel(s) partial")
     except ArchiveError as exc:
         report.fail(str(exc))
     except Exception as exc:  # pragma: no cover - every known failure is an ArchiveError

@@ -1,373 +1,132 @@
-"""Recover the intact parts of a truncated or damaged MCAP file into a new, sound trial file.
+"""Recover the intact parts of a truncated or damaged MCAP file into a new trial file that passes ``doctor``.
 
     report = salvage("broken.mcap", "fixed.mcap")
-    print(report.lines())            # what was recovered, what was lost
+    print(lines(report))            # what was recovered, what was lost
 
-The input is only read (memory-mapped, pages handed back as the scan passes them: memory about one chunk). Its records are scanned linearly from the start, so a missing or
-damaged summary does not matter; after a damaged record the scan resynchronises on the next record that
-the summary (when readable) indexes, or on the next plausible Chunk / Metadata record header. Every chunk
-is decompressed within its declared size and checked against its CRC before any of its messages is kept;
-attachments are checked against their CRC. Schemas and channels may sit at top level (imulog) or inside
-chunks (the ``mcap`` library's writer). The output is written like every imulog file (temporary file,
-fsync, rename): raw and derived channels, attachments and metadata records in their original order, plus
-an ``imulog.salvage`` record listing what was lost (``data_crc`` "mismatch" there makes ``imulog doctor`` reject
-the output: its schema, channel and metadata records, which have no CRC of their own, may be damaged). Channels that lost chunks keep only their intact
-messages; their ``sha256`` (and ``sample_count`` for imulog schemas) are recomputed and ``salvaged`` says
-how many chunks were lost, so ``imulog doctor`` on the output then reports the raw-data hash recorded at
-conversion as changed: the recording is no longer complete.
+The input is only read (memory-mapped, pages handed back as the scan passes them: memory about one chunk);
+:mod:`imulog.archive.salvage_scan` finds every intact record. Schema and channel records have no CRC of their
+own: when the summary is readable its CRC-checked copies are used. A data-section CRC mismatch that no
+damaged chunk, attachment or record explains is located to one damaged byte (:mod:`imulog.archive.crc_locate`);
+a metadata record holding it is dropped, and when it cannot be located every metadata record is dropped (none
+can be trusted). Metadata records that fail imulog's checks (types, nesting, size, the summary's index) are
+dropped and listed. Channels that lost samples get their channel records recomputed from what was recovered
+(sample count, start and end, rate, gaps, content hash; the old hash kept as ``salvaged_original_sha256``)
+and ``imulog.raw`` is rewritten to the recovered raw channels (the original hash kept in the salvage record),
+so the output is a sound, smaller trial. The ``imulog.salvage`` record lists what was lost, per channel the
+time spans lost, and the metadata dropped. The output is checked with ``doctor`` before it replaces
+anything: ArchiveError (nothing written) when it would not pass, or when nothing is recoverable.
 """
 
 from __future__ import annotations
 
-import contextlib
-import hashlib
-import mmap
 import os
-import struct
-import zlib
-from dataclasses import dataclass, field
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 from imulog import __version__
 from imulog.archive import _mcap as m
-from imulog.archive import codec
 from imulog.archive._builder import CHUNK_TARGET_BYTES, McapBuilder
+from imulog.archive.crc_locate import crc_field_damage, locate_byte_error
 from imulog.archive.errors import ArchiveError, ArchiveExistsError
-from imulog.archive.files import atomic_output, target_path, writer_lock
-from imulog.archive.metadata import encode_record
+from imulog.archive.files import atomic_output, target_path, temp_path, writer_lock
+from imulog.archive.metadata import decode_record, encode_record
+from imulog.archive.salvage_records import LOST, metadata_problem, raw_record, recompute
+from imulog.archive.salvage_scan import LOST_SOURCE, SalvageReport, Scan, _Channel, release
+from imulog.archive.summary_check import summary_defects
 
-_KNOWN_OPS = set(range(m.Op.HEADER, m.Op.DATA_END + 1))
-RELEASE_BYTES = 32 << 20  # hand mapped pages back to the kernel every this many bytes
-
-
-def release(buf: memoryview, start: int, end: int) -> None:
-    """Drop the mapped pages of ``buf[start:end]`` from this process's RSS (they are re-read if touched)."""
-    page = mmap.PAGESIZE
-    lo, hi = -(-start // page) * page, end // page * page
-    if hi > lo:
-        with contextlib.suppress(AttributeError, OSError, ValueError):  # not a map, or no madvise here
-            buf.obj.madvise(mmap.MADV_DONTNEED, lo, hi - lo)
+SALVAGE_RECORD = "imulog.salvage"
 
 
-_CHUNK_FIXED = 8 + 8 + 8 + 4  # start, end, uncompressed size, crc before the compression string
-
-
-@dataclass
-class _Channel:
-    """A channel found in the scan: where its intact messages are (not the messages: memory stays small)."""
-
-    rec: m.ChannelRec
-    sources: list[tuple[int, int, memoryview | None]] = field(default_factory=list)  # (chunk pos, end, None)
-    # or (log time, -1, payload view into the map) for a message outside chunks
-    messages: int = 0
-    hasher: Any = field(default_factory=hashlib.sha256)  # content hash of the intact messages, in order
-    chunks_kept: int = 0
-    chunks_lost: int = 0
-    messages_lost: int = 0
-
-    def add(self, payload: memoryview) -> None:
-        self.messages += 1
-        self.hasher.update(struct.pack("<Q", len(payload)))
-        self.hasher.update(payload)
-
-
-@dataclass
-class SalvageReport:
-    """What :func:`salvage` found: recovered channels/attachments/metadata and one line per loss."""
-
-    source: Path
-    output: Path | None = None
-    channels: dict[str, dict[str, int]] = field(default_factory=dict)  # topic -> messages, chunks kept/lost
-    attachments: list[str] = field(default_factory=list)
-    metadata: list[str] = field(default_factory=list)
-    lost: list[str] = field(default_factory=list)
-    notes: list[str] = field(default_factory=list)
-    summary_found: bool = False
-    data_crc: str = "truncated"  # "ok", "mismatch", "not recorded", or "truncated" (no DataEnd reached)
-
-    @property
-    def complete(self) -> bool:
-        """True when nothing was lost (the output holds everything the input held)."""
-        return not self.lost
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "source": str(self.source),
-            "output": str(self.output) if self.output else None,
-            "summary_found": self.summary_found,
-            "data_crc": self.data_crc,
-            "channels": self.channels,
-            "attachments": self.attachments,
-            "metadata": self.metadata,
-            "lost": self.lost,
-            "notes": self.notes,
-        }
-
-
-class _Scan:
-    """One linear pass over the records of a (possibly damaged) MCAP file."""
-
-    def __init__(self, buf: memoryview, size: int, report: SalvageReport, hints: list[int]) -> None:
-        self.buf = buf
-        self.size = size
-        self.report = report
-        self.hints = sorted(set(hints))
-        self.schemas: dict[int, m.SchemaRec] = {}
-        self.channels: dict[int, _Channel] = {}
-        # ("channel", id) / ("attachment", (record start, end)) / ("metadata", (name, items)), in file order
-        self.order: list[tuple[str, Any]] = []
-        self.header: tuple[str, str] = ("", "")
-        self.crc = zlib.crc32(buf[: len(m.MAGIC)])  # data-section CRC of the bytes read contiguously so far
-        self.crc_upto = len(m.MAGIC)
-        self.released = 0  # pages before this offset were handed back (madvise): RSS stays small
-        self.failed_chunk: int | None = None  # offset of the last chunk that could not be used
-        self.failed_channels: set[int] = set()
-
-    # ------------------------------------------------------------------ records
-    def _schema(self, rec: m.SchemaRec) -> None:
-        self.schemas.setdefault(rec.id, rec)
-
-    def _channel(self, rec: m.ChannelRec) -> None:
-        if rec.id not in self.channels:
-            self.channels[rec.id] = _Channel(rec)
-            self.order.append(("channel", rec.id))
-
-    def _chunk(self, pos: int, body: memoryview) -> None:
-        try:
-            chunk = m.parse_chunk(body)
-            data = m.decompress_chunk(chunk)
-            found: list[tuple[int, int, memoryview]] = []
-            for op, _, rec in m.iter_records(data):
-                if op == m.Op.SCHEMA:
-                    self._schema(m.parse_schema(rec))
-                elif op == m.Op.CHANNEL:
-                    self._channel(m.parse_channel(rec))
-                elif op == m.Op.MESSAGE:
-                    if len(rec) < 22:
-                        raise m.McapFormatError("message record too short")
-                    cid = m._H.unpack_from(rec, 0)[0]
-                    found.append((cid, m._Q.unpack_from(rec, 6)[0], rec[22:]))
-        except (m.McapFormatError, struct.error, ValueError) as exc:
-            self.failed_chunk, self.failed_channels = pos, set()
-            self.report.lost.append(f"chunk at byte {pos}: {exc}")
-            return
-        self.failed_chunk = None
-        kept: set[int] = set()
-        for cid, _, payload in found:
-            ch = self.channels.get(cid)
-            if ch is None:
-                self.report.lost.append(f"chunk at byte {pos}: message of unknown channel {cid} dropped")
-                continue
-            ch.add(payload)
-            kept.add(cid)
-        for cid in kept:
-            ch = self.channels[cid]
-            ch.chunks_kept += 1
-            ch.sources.append((pos, pos + 9 + len(body), None))
-
-    def _message_index(self, body: memoryview) -> None:
-        """Message indexes follow their chunk: they tell which channels a damaged chunk held."""
-        if self.failed_chunk is None or len(body) < 6:
-            return
-        cid, n = m._H.unpack_from(body, 0)[0], m._I.unpack_from(body, 2)[0]
-        if cid in self.failed_channels:
-            return
-        self.failed_channels.add(cid)
-        ch = self.channels.get(cid)
-        if ch is not None:
-            ch.chunks_lost += 1
-            ch.messages_lost += n // 16
-        self.report.lost[-1] += f"; held {n // 16} messages of channel {ch.rec.topic if ch else cid}"
-
-    def _record(self, op: int, pos: int, body: memoryview) -> bool:
-        """Take one record; False when it could not be used (damaged)."""
-        n_lost = len(self.report.lost)
-        self._take(op, pos, body)
-        return len(self.report.lost) == n_lost or op == m.Op.MESSAGE_INDEX
-
-    def _take(self, op: int, pos: int, body: memoryview) -> None:
-        if op == m.Op.HEADER:
-            c = m.Cursor(body)
-            self.header = (c.string(), c.string())
-        elif op == m.Op.SCHEMA:
-            self._schema(m.parse_schema(body))
-        elif op == m.Op.CHANNEL:
-            self._channel(m.parse_channel(body))
-        elif op == m.Op.MESSAGE:
-            cid = m._H.unpack_from(body, 0)[0]
-            ch = self.channels.get(cid)
-            if ch is None:
-                self.report.lost.append(f"message at byte {pos}: unknown channel {cid}")
-            else:
-                ch.add(body[22:])
-                ch.sources.append((m._Q.unpack_from(body, 6)[0], -1, body[22:]))
-        elif op == m.Op.CHUNK:
-            self._chunk(pos, body)
-            return
-        elif op == m.Op.MESSAGE_INDEX:
-            self._message_index(body)
-            return
-        elif op == m.Op.ATTACHMENT:
-            rec = m.parse_attachment(body)
-            if rec.crc != 0 and rec.crc != rec.computed_crc:
-                self.report.lost.append(f"attachment {rec.name!r} at byte {pos}: CRC mismatch (damaged), dropped")
-            else:
-                self.order.append(("attachment", (pos, pos + 9 + len(body))))  # data read again when written
-        elif op == m.Op.METADATA:
-            c = m.Cursor(body)
-            name, items = c.string(), c.str_map()
-            if c.pos != len(body):
-                raise m.McapFormatError("metadata record longer than its content")
-            self.order.append(("metadata", (name, items)))
-        self.failed_chunk = None
-
-    # ------------------------------------------------------------------ scanning
-    def _next_start(self, after: int) -> int | None:
-        """The next offset after ``after`` where a record plausibly starts (summary hints, then patterns)."""
-        best = None
-        for h in self.hints:
-            if h > after:
-                best = h
-                break
-        buf = self.buf
-        for pattern, back, op in (
-            (b"\x04\x00\x00\x00zstd", _CHUNK_FIXED + 9, m.Op.CHUNK),
-            (b"\x03\x00\x00\x00lz4", _CHUNK_FIXED + 9, m.Op.CHUNK),
-            (b"imulog.", 4 + 9, m.Op.METADATA),
-        ):
-            start = after + back + 1
-            limit = best if best is not None else self.size
-            while start < limit:
-                k = _find(buf, pattern, start, limit)
-                if k < 0:
-                    break
-                cand = k - back
-                if buf[cand] == op and self._plausible(cand):
-                    if best is None or cand < best:
-                        best = cand
-                    break
-                start = k + 1
-        return best
-
-    def _plausible(self, pos: int) -> bool:
-        if pos + 9 > self.size:
-            return False
-        op, length = m._REC.unpack_from(self.buf, pos)
-        return op in _KNOWN_OPS and pos + 9 + length <= self.size
-
-    def run(self) -> None:
-        pos = len(m.MAGIC)
-        size = self.size
-        while pos < size:
-            if pos + 9 > size:
-                self.report.lost.append(f"file ends inside a record header at byte {pos}")
-                break
-            op, length = m._REC.unpack_from(self.buf, pos)
-            end = pos + 9 + length
-            if op == m.Op.DATA_END or op == m.Op.FOOTER:
-                self._data_end(pos, op)
-                break  # the summary follows: everything in it is rebuilt
-            if op not in _KNOWN_OPS or end > size:
-                why = "truncated" if op in _KNOWN_OPS else f"unknown opcode {op:#04x}"
-                nxt = self._next_start(pos)
-                self._lost_range(pos, nxt, why, op)
-                if nxt is None:
-                    break
-                pos = nxt
-                continue
-            try:
-                ok = self._record(op, pos, self.buf[pos + 9 : end])
-            except (m.McapFormatError, struct.error, ValueError, UnicodeDecodeError) as exc:
-                self.report.lost.append(f"{m.OP_NAMES.get(op, hex(op))} record at byte {pos}: {exc}")
-                ok = False
-            if not ok and not (end == size or self._plausible(end)):
-                # its length field may be what is damaged: find the next record instead of trusting it
-                nxt = self._next_start(pos)
-                if nxt is None:
-                    break
-                end = nxt
-            elif self.crc_upto == pos:
-                self.crc = zlib.crc32(self.buf[pos:end], self.crc)
-                self.crc_upto = end
-            if end - self.released > RELEASE_BYTES:
-                release(self.buf, self.released, end)
-                self.released = end
-            pos = end
-
-    def _data_end(self, pos: int, op: int) -> None:
-        if op != m.Op.DATA_END or pos + 13 > self.size:
-            return
-        stored = m._I.unpack_from(self.buf, pos + 9)[0]
-        if stored == 0:
-            self.report.data_crc = "not recorded"
-            self.report.notes.append("the data section CRC was not recorded")
-        elif self.crc_upto == pos and self.crc == stored:
-            self.report.data_crc = "ok"
-            self.report.notes.append("data section CRC ok: every record was read as written")
-        else:
-            self.report.data_crc = "mismatch"
-            self.report.notes.append(
-                "data section CRC mismatch: chunks and attachments were checked by their own CRCs; "
-                "schema, channel and metadata records have none, so a damaged one cannot be ruled out"
-            )
-
-    def _lost_range(self, pos: int, nxt: int | None, why: str, op: int) -> None:
-        what = m.OP_NAMES.get(op, "record") if op in _KNOWN_OPS else "record"
-        stop = f"up to byte {nxt}" if nxt is not None else "to the end of the file"
-        self.report.lost.append(f"{what} at byte {pos} {why}: bytes {stop} skipped")
-
-
-def _find(buf: memoryview, pattern: bytes, start: int, end: int) -> int:
-    return buf.obj.find(pattern, start, end) if hasattr(buf.obj, "find") else bytes(buf[start:end]).find(pattern)
-
-
-def _summary_hints(f, size: int, report: SalvageReport) -> list[int]:
-    """Record offsets the summary indexes (empty when the summary is missing or damaged)."""
+def _summary(f, size: int, report: SalvageReport) -> tuple[list[int], m.Summary | None]:
+    """Record offsets the summary indexes, and the summary (empty and None when missing or damaged)."""
     try:
         s = m.read_summary(f, size)
     except m.McapFormatError as exc:
         report.notes.append(f"summary not usable ({exc}): records found by scanning")
-        return []
+        return [], None
     report.summary_found = True
-    return (
+    for d in summary_defects(s):  # the output's summary is written anew: say what was wrong with this one
+        report.notes.append(f"summary defect, not carried over: {d.message}")
+    hints = (
         [ci.chunk_start_offset for ci in s.chunk_indexes]
         + [a.offset for a in s.attachment_indexes]
         + [x.offset for x in s.metadata_indexes]
     )
+    return hints, s
 
 
-def _messages(buf: memoryview, ch: _Channel):
-    """The channel's intact (log time, payload) pairs, one source chunk decompressed at a time."""
+def _reconcile(scan: Scan) -> None:
+    """Use the summary's CRC-checked copies of schema and channel records where the data section's differ."""
+    s, report = scan.summary, scan.report
+    if s is None:
+        return
+    for sid, rec in s.schemas.items():
+        if sid in scan.schemas and scan.schemas[sid] != rec:
+            report.lost.append(
+                f"schema {sid} ({rec.name}) differs from the summary's copy (damaged): the summary's used"
+            )
+        scan.schemas[sid] = rec
+    for cid, ch in scan.channels.items():
+        rec = s.channels.get(cid)
+        if rec is not None and rec != ch.rec:
+            report.lost.append(
+                f"channel {cid} ({rec.topic}) differs from the summary's copy (damaged): the summary's used"
+            )
+            ch.rec = rec
+
+
+def _locate(scan: Scan, detected: bool) -> dict[int, str]:
+    """Metadata records (by offset) to drop because the data-section CRC places damage in them."""
+    report = scan.report
+    if report.data_crc != "mismatch" or scan.crc_upto != scan.data_end:
+        return {}
+    syndrome = scan.crc ^ scan.stored_crc
+    if crc_field_damage(syndrome):
+        report.notes.append("the damaged byte is in the stored data-section CRC itself: every record is intact")
+        return {}
+    p = locate_byte_error(syndrome, scan.data_end, [(a, b) for a, b, _ in scan.regions])
+    if p is not None:
+        start, end, op = next(r for r in scan.regions if r[0] <= p < r[1])
+        what = m.OP_NAMES.get(op, hex(op))
+        report.lost.append(f"data-section CRC: damaged byte at {p}, in the {what} record at byte {start}")
+        if op == m.Op.METADATA:
+            return {start: f"damaged byte at {p} (located by the data-section CRC)"}
+        if op in (m.Op.SCHEMA, m.Op.CHANNEL) and scan.summary is None:
+            raise ArchiveError(
+                f"{report.source}: the {what} record at byte {start} is damaged and there is no summary copy of it"
+            )
+        if op == m.Op.MESSAGE:
+            raise ArchiveError(
+                f"{report.source}: a message outside chunks (bytes {start}-{end}) is damaged at byte {p}"
+            )
+        report.notes.append(f"the damaged {what} record is not copied (rebuilt or replaced by the summary's copy)")
+        return {}
+    if detected:
+        report.notes.append("data-section CRC mismatch put down to the damaged records listed (one damaged region)")
+        return {}
+    why = "data-section CRC mismatch that no single damaged byte explains: no metadata record can be trusted"
+    report.lost.append(why)
+    return {pos: why for kind, item in scan.order if kind == "metadata" for pos in [item[2]]}
+
+
+def _pieces(buf: memoryview, ch: _Channel) -> Iterator[Any]:
+    """Per source of the channel, in file order: its intact (log time, payload) pairs, or LOST."""
     for first, end, payload in ch.sources:
-        if end < 0:
-            yield first, payload
-            continue
-        data = m.decompress_chunk(m.parse_chunk(buf[first + 9 : end]))  # checked in the scan: same bytes
-        release(buf, first, end)
-        for cid, log_time, p in m.chunk_messages(data, ch.rec.id):
-            if cid == ch.rec.id:
-                yield log_time, p
+        if end == LOST_SOURCE:
+            yield LOST
+        elif end < 0:
+            yield [(first, payload)]
+        else:
+            data = m.decompress_chunk(m.parse_chunk(buf[first + 9 : end]))  # checked in the scan: same bytes
+            release(buf, first, end)
+            yield [(t, p) for cid, t, p in m.chunk_messages(data, ch.rec.id) if cid == ch.rec.id]
 
 
-def _channel_meta(buf: memoryview, ch: _Channel, schema: m.SchemaRec | None) -> dict[str, str]:
-    """Channel metadata for the output: as found, or recomputed where chunks were lost."""
-    meta = dict(ch.rec.metadata)
-    if not ch.chunks_lost:
-        return meta
-    meta["salvaged"] = f"partial: {ch.chunks_lost} chunk(s), {ch.messages_lost} message(s) lost"
-    if "sha256" in meta:
-        meta["salvaged_original_sha256"] = meta["sha256"]
-        meta["sha256"] = ch.hasher.hexdigest()
-    if schema is not None and schema.name in codec.MESSAGE_CLASSES and "sample_count" in meta:
-        try:
-            n = 0
-            for batch in _batches(_messages(buf, ch), 1 << 20):
-                n += len(codec.decode(schema.name, ch.rec.topic, ch.rec.metadata, [p for _, p in batch]))
-            meta["sample_count"] = str(n)
-        except Exception:  # noqa: BLE001 - the count is informative; keep the data even if it will not decode
-            meta.pop("sample_count")
-    return meta
+def _messages(buf: memoryview, ch: _Channel) -> Iterator[tuple[int, Any]]:
+    for piece in _pieces(buf, ch):
+        if piece is not LOST:
+            yield from piece
 
 
 def _batches(pairs, target_bytes: int):
@@ -386,9 +145,12 @@ def _batches(pairs, target_bytes: int):
 def salvage(src: str | os.PathLike[str], dst: str | os.PathLike[str], *, overwrite: bool = False) -> SalvageReport:
     """Write every intact channel, attachment and metadata record of ``src`` to ``dst``; report the losses.
 
-    ``src`` is never modified. ``dst`` appears atomically (or not at all); ArchiveError when ``dst`` is
-    ``src``, exists without ``overwrite``, or nothing at all could be recovered.
+    ``src`` is never modified. ``dst`` appears atomically, and only when it passes ``doctor``; ArchiveError
+    (one line) when ``dst`` is ``src``, exists without ``overwrite``, nothing is recoverable (no intact
+    message: the first chunk cut or damaged), or the output would not pass ``doctor``.
     """
+    import mmap
+
     src_path, dst_path = Path(src), target_path(dst)
     report = SalvageReport(src_path)
     try:
@@ -402,21 +164,91 @@ def salvage(src: str | os.PathLike[str], dst: str | os.PathLike[str], *, overwri
         head = f.read(len(m.MAGIC))
         if head != m.MAGIC:
             raise ArchiveError(f"{src_path}: not an MCAP file (no magic at the start): nothing to salvage")
-        hints = _summary_hints(f, size, report)
+        hints, summary = _summary(f, size, report)
         mm = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
-        scan = _Scan(memoryview(mm), size, report, hints)
+        scan = Scan(memoryview(mm), size, report, hints, summary)
         scan.run()
-        _write(scan, scan.buf, dst_path, report, overwrite)
+        detected = bool(report.lost)
+        _reconcile(scan)
+        drop = _locate(scan, detected or bool(report.lost))
+        _write(scan, scan.buf, dst_path, report, overwrite, drop)
         del scan  # views into the map go with it; the map itself is unmapped when collected
     return report
 
 
-def _write(scan: _Scan, buf: memoryview, dst: Path, report: SalvageReport, overwrite: bool) -> None:
-    if not scan.order:
-        raise ArchiveError(f"{report.source}: no intact channel, attachment or metadata record found")
+def _metadata_to_keep(scan: Scan, drop: dict[int, str]) -> dict[int, tuple[str, dict[str, str]]]:
+    """Metadata records (by offset) that pass their checks; the others are listed as dropped."""
+    report = scan.report
+    indexed = None
+    if scan.summary is not None:
+        indexed = {(x.offset, x.length, x.name) for x in scan.summary.metadata_indexes}
+    keep = {}
+    for kind, item in scan.order:
+        if kind != "metadata":
+            continue
+        name, items, pos, end = item
+        why = drop.get(pos) or metadata_problem(name, items, end - pos)
+        if why is None and indexed is not None and (pos, end - pos, name) not in indexed:
+            why = "not the record the summary indexes there (damaged name or length)"
+        if why is not None:
+            report.dropped_metadata.append(f"{name} at byte {pos}: {why}")
+            continue
+        keep[pos] = (name, items)
+    return keep
+
+
+def _write(
+    scan: Scan, buf: memoryview, dst: Path, report: SalvageReport, overwrite: bool, drop: dict[int, str]
+) -> None:
     for ch in scan.channels.values():
         if ch.rec.schema_id != 0 and ch.rec.schema_id not in scan.schemas:
             report.lost.append(f"channel {ch.rec.topic}: its schema {ch.rec.schema_id} was lost; channel dropped")
+    usable = [ch for ch in scan.channels.values() if ch.rec.schema_id == 0 or ch.rec.schema_id in scan.schemas]
+    if not any(ch.messages for ch in usable):
+        why = f" ({report.lost[0]})" if report.lost else ""
+        raise ArchiveError(f"{report.source}: nothing recoverable: no intact message of any channel{why}")
+    metadata = _metadata_to_keep(scan, drop)
+    stats = {
+        name: decode_record(items, name)
+        for name, items in metadata.values()
+        if name.startswith("imulog.channel_stats.")
+    }
+    # channel records: as found when complete, recomputed from what was recovered otherwise
+    metas: dict[int, dict[str, str]] = {}
+    spans: dict[str, Any] = {}
+    hashes: dict[str, str] = {}
+    for ch in usable:
+        schema = scan.schemas.get(ch.rec.schema_id)
+        meta = dict(ch.rec.metadata)
+        recorded = meta.get("sha256") or (stats.get(meta.get("stats_record", "")) or {}).get(ch.rec.topic, {}).get(
+            "sha256"
+        )
+        digest = ch.hasher.hexdigest()
+        hashes[ch.rec.topic] = digest
+        if ch.chunks_lost or recorded != digest:
+            meta, lost_spans, clock = recompute(schema.name if schema else None, ch.rec.topic, meta, _pieces(buf, ch))
+            partial = bool(ch.chunks_lost or lost_spans or (recorded is not None and recorded != digest))
+            if partial:
+                meta["salvaged"] = f"partial: {len(lost_spans)} span(s) lost"
+                spans[ch.rec.topic] = {"clock": clock, "spans": lost_spans, "chunks_lost": ch.chunks_lost}
+        else:
+            partial = False
+        metas[ch.rec.id] = meta
+        report.channels[ch.rec.topic] = {
+            "messages": ch.messages,
+            "chunks_kept": ch.chunks_kept,
+            "chunks_lost": ch.chunks_lost,
+            "partial": partial,
+            "lost_spans": spans.get(ch.rec.topic, {}).get("spans", []),
+        }
+    raw_original = None
+    attached = {a: scan.attachment_sha[a] for a in scan.attachment_sha}
+    for pos, (name, items) in metadata.items():
+        if name == "imulog.raw":
+            values, changed = raw_record(decode_record(items, name), hashes, attached)
+            if changed is not None:
+                metadata[pos] = (name, encode_record(values))
+                raw_original = changed
     dst.parent.mkdir(parents=True, exist_ok=True)
     with writer_lock(dst):
         if dst.exists() and not overwrite:
@@ -427,38 +259,51 @@ def _write(scan: _Scan, buf: memoryview, dst: Path, report: SalvageReport, overw
             for kind, item in scan.order:
                 if kind == "channel":
                     ch = scan.channels[item]
-                    schema = scan.schemas.get(ch.rec.schema_id)
-                    if ch.rec.schema_id != 0 and schema is None:
+                    if ch.rec.id not in metas:
                         continue
+                    schema = scan.schemas.get(ch.rec.schema_id)
                     sid = b.add_schema(schema.name, schema.encoding, schema.data) if schema is not None else 0
-                    meta = _channel_meta(buf, ch, schema)
-                    new_id = b.add_channel(ch.rec.topic, sid, meta, ch.rec.message_encoding)
+                    new_id = b.add_channel(ch.rec.topic, sid, metas[ch.rec.id], ch.rec.message_encoding)
                     for batch in _batches(_messages(buf, ch), CHUNK_TARGET_BYTES):  # memory: about one chunk
                         b.add_messages(new_id, [t for t, _ in batch], [bytes(p) for _, p in batch])
-                    report.channels[ch.rec.topic] = {
-                        "messages": ch.messages,
-                        "chunks_kept": ch.chunks_kept,
-                        "chunks_lost": ch.chunks_lost,
-                    }
                 elif kind == "attachment":
                     a = m.parse_attachment(buf[item[0] + 9 : item[1]])  # CRC-checked in the scan
                     b.add_attachment(a.name, a.media_type, a.data, a.log_time, a.create_time)
                     report.attachments.append(a.name)
-                else:
-                    name, items = item
+                elif item[2] in metadata:
+                    name, items = metadata[item[2]]
                     b.add_metadata(name, dict(items))
                     report.metadata.append(name)
-            record = {
+            record: dict[str, Any] = {
                 "source": str(report.source),
                 "summary_found": report.summary_found,
                 "data_crc": report.data_crc,
                 "lost": report.lost[:1000],
-                "partial_channels": sorted(t for t, c in report.channels.items() if c["chunks_lost"]),
+                "partial_channels": sorted(spans),
+                "lost_spans": spans,
+                "dropped_metadata": report.dropped_metadata,
+                "notes": report.notes[:1000],
                 "imulog_version": __version__,
             }
-            b.add_metadata("imulog.salvage", encode_record(record))
+            if raw_original is not None:
+                record["raw_original"] = raw_original
+            b.add_metadata(SALVAGE_RECORD, encode_record(record))
             b.finish()
+            out.flush()
+            _check_output(temp_path(dst), report)
     report.output = dst
+
+
+def _check_output(path: Path, report: SalvageReport) -> None:
+    """Refuse (nothing written) an output ``doctor`` would reject."""
+    from imulog.archive.doctor import check_file
+
+    problems = check_file(path).problems
+    if problems:
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        raise ArchiveError(
+            f"{report.source}: the salvaged file would not pass doctor: {problems[0]}{more}; nothing written"
+        )
 
 
 def lines(report: SalvageReport) -> list[str]:
@@ -468,11 +313,15 @@ def lines(report: SalvageReport) -> list[str]:
         f"{len(report.metadata)} metadata records" + (f" into {report.output}" if report.output else "")
     ]
     for topic, c in report.channels.items():
-        if c["chunks_lost"]:
-            out.append(f"  partial: {topic}: {c['messages']} messages kept, {c['chunks_lost']} chunk(s) lost")
+        if c.get("partial"):
+            out.append(
+                f"  partial: {topic}: {c['messages']} messages kept, {c['chunks_lost']} chunk(s) and "
+                f"{len(c['lost_spans'])} time span(s) lost"
+            )
+    out += [f"  dropped: {x}" for x in report.dropped_metadata]
     out += [f"  lost: {x}" for x in report.lost]
     out += [f"  note: {x}" for x in report.notes]
     return out
 
 
-__all__ = ["SalvageReport", "lines", "salvage"]
+__all__ = ["SalvageReport", "lines", "release", "salvage"]

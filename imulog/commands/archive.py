@@ -506,9 +506,13 @@ def salvage(file: str, output: str, overwrite: bool, as_json: bool) -> None:
 
     Scans the records from the start (the summary may be missing: a writer that died, an interrupted
     copy, another MCAP writer), keeps every chunk that passes its CRC and every attachment that passes
-    its own, and writes them to OUTPUT (atomically) with an imulog.salvage record of what was lost.
-    FILE is never modified. Exit status 0 when something was recovered (the report lists any losses),
-    1 when nothing could be.
+    its own, and writes them to OUTPUT (atomically) with an imulog.salvage record of what was lost: per
+    channel the time spans lost, and the metadata records dropped because they failed their checks.
+    Channels recovered in part get their sample count, start, end and content hash recomputed and
+    imulog.raw is rewritten to what was recovered, so OUTPUT passes `imulog doctor`; it is checked
+    before it is written. FILE is never modified. Exit status 0 only when OUTPUT passes doctor; 1 with
+    a one-line reason (nothing written) when nothing is recoverable (e.g. the first chunk is cut) or
+    the output would not pass.
 
     \b
     Examples:
