@@ -194,7 +194,8 @@ def assess(
                 f"de-drift implies an acceleration offset of {dedrift['max_offset_mps2']:.2f} m/s^2 "
                 f"(> {params.max_offset_mps2:g}): the rests are not rests or the orientation is off"
             )
-            suggest = suggest or "check the rests (imulog process phases) and the orientation"
+            # rests that are no rests matter before a bias estimate (whose fallback, zupt, needs the rests)
+            suggest = suggest if "no_rest" in failed else "check the rests (imulog process phases) and the orientation"
     if share is not None:
         out["removed_share"] = list(share)
         worst = max((s for s in share if np.isfinite(s)), default=0.0)
