@@ -90,6 +90,10 @@ def test_each_segment_through_the_pipeline_says_what_does_not_apply(chain, tmp_p
             assert "bias" in rec["checks"]["zupt_bias"]["failed"]
     for m in ("zupt", "kalman", "zupt_bias"):
         assert not rec["checks"][m]["ok"] and {"no_rest", "dedrift"} & set(rec["checks"][m]["failed"]), m
+    # movements with no true rest between them are one window (a velocity reset only at each end)
+    assert rec.get("merged_repetitions"), rec.keys()
+    info = run("info", str(trial))
+    assert "/derived/trajectory/zupt" in info and "[assumptions failed]" in info and "\nassumptions failed:\n" in info
     ev = run("evaluate", str(trial))
     assert "median x" in ev and "p90 x" in ev and "\ndedrift " in ev and "beats dedrift" in ev
     assert "warning: zupt: assumptions fail" in ev

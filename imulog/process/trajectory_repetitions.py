@@ -110,10 +110,12 @@ def repetition_windows(
         hi = b[-1, 1] + pad_s
         if i > 0:
             lo = max(lo, 0.5 * (np.asarray(phase_bounds_s[keys[i - 1]])[-1, 1] + b[0, 0]))
+        shared = False  # the upper bound is the midpoint the next window starts at: a sample there is the next's
         if i + 1 < len(keys):
-            hi = min(hi, 0.5 * (b[-1, 1] + np.asarray(phase_bounds_s[keys[i + 1]])[0, 0]))
+            mid = 0.5 * (b[-1, 1] + np.asarray(phase_bounds_s[keys[i + 1]])[0, 0])
+            shared, hi = mid <= hi, min(hi, mid)
         s = int(np.searchsorted(t, lo, side="left"))
-        e = int(np.searchsorted(t, hi, side="right"))
+        e = int(np.searchsorted(t, hi, side="left" if shared else "right"))
         while s > 0 and not static[s]:
             s -= 1
         while e < len(t) and not static[e - 1]:
