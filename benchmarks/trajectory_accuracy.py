@@ -35,7 +35,7 @@ import numpy as np
 from imulog.process import quaternion as quat
 from imulog.process.alignment import device_to_reference
 from imulog.process.evaluation import aggregate, format_table, trajectory_errors
-from imulog.process.rests import true_rests
+from imulog.process.rests import RestParams, true_rests
 from imulog.process.trajectory_opt import (
     DEFAULT_PARAMS,
     METHODS,
@@ -63,9 +63,15 @@ def simulated_inputs(
     orientation: str = "estimated",
     segmentation: str = "estimated",
     anchor: bool = True,
+    rests: RestParams | None = DEFAULT_PARAMS.rests,
     **overrides: Any,
 ) -> dict[str, Any]:
-    """Simulate one R2G trial and build the trajectory inputs on the reference clock in the world frame."""
+    """Simulate one R2G trial and build the trajectory inputs on the reference clock in the world frame.
+
+    ``rests``: the trajectory step's accelerometer gate (None: the segmentation's static mask as it is). As in
+    the step, it is applied to the filter's gravity-free acceleration, and the orientation is anchored at the
+    gated rests only (``acc_gate`` holds that acceleration for :func:`evaluate_trial`).
+    """
     from imulog.simulate.core import simulate
 
     sim = simulate("r2g", subject=subject, seed=seed, repetitions=repetitions, **overrides)
@@ -79,15 +85,20 @@ def simulated_inputs(
         q_world = q_true
         acc_world = quat.rotate(q_true, imu.acc)
         acc_world[:, 2] -= truth.info["gravity_mps2"]
+        acc_gate = acc_world
     elif orientation == "estimated":
         from imulog.process.orientation import estimate_orientation, gravity_free_acceleration
 
         est = estimate_orientation(imu.gyr, imu.acc, rate)
         q_est = est.quat
+        acc_gate = gravity_free_acceleration(q_est, imu.acc, est.static)
         if anchor:  # what the trajectory step does with the gyroscope (TrajectoryParams.anchor)
             from imulog.process.integration import rest_anchored_orientation
 
-            q_est = rest_anchored_orientation(q_est, imu.gyr, t_s, _static_for_anchor(imu, rate, repetitions))
+            anchor_static = _static_for_anchor(imu, rate, repetitions)
+            if rests is not None:  # the step anchors at true rests only
+                anchor_static = true_rests(anchor_static, acc_gate, rate, rests)
+            q_est = rest_anchored_orientation(q_est, imu.gyr, t_s, anchor_static)
         acc_g = gravity_free_acceleration(q_est, imu.acc, est.static)
         q_g2w = quat.average(quat.multiply(q_true, quat.conjugate(q_est)))
         acc_world = quat.rotate(q_g2w, acc_g)
@@ -118,6 +129,7 @@ def simulated_inputs(
     return {
         "t_s": t_s,
         "acc_world": acc_world,
+        "acc_gate": acc_gate,
         "q_world": q_world,
         "static": static,
         "phase_bounds": phase_bounds,
@@ -131,7 +143,8 @@ def evaluate_trial(inputs: dict[str, Any], methods=METHODS, params: TrajectoryPa
     """Per-repetition error records {method: [trajectory_errors(...), ...]} and per-method seconds."""
     t_s = inputs["t_s"]
     # velocity resets only at true rests (the accelerometer agrees), as the trajectory step does
-    static = true_rests(inputs["static"], inputs["acc_world"], (len(t_s) - 1) / (t_s[-1] - t_s[0]), params.rests)
+    rate = (len(t_s) - 1) / (t_s[-1] - t_s[0])
+    static = true_rests(inputs["static"], inputs.get("acc_gate", inputs["acc_world"]), rate, params.rests)
     reps, _ = merge_overlapping(repetition_windows(t_s, inputs["phase_bounds"], static))
     seconds: dict[str, float] = {}
     recon: dict[str, np.ndarray] = {}
@@ -175,7 +188,7 @@ def grid_rows(
     for name in conditions:
         recs: dict[str, list[dict]] = {m: [] for m in methods}
         for s in subjects:
-            inputs = simulated_inputs(s, seed=s, repetitions=repetitions, **condition(name))
+            inputs = simulated_inputs(s, seed=s, repetitions=repetitions, rests=params.rests, **condition(name))
             records, _, _ = evaluate_trial(inputs, methods, params)
             for m in methods:
                 recs[m].extend(records[m])
@@ -258,6 +271,7 @@ def main(argv: list[str] | None = None) -> int:
             orientation=args.orientation,
             segmentation=args.segmentation,
             residual_velocity_mps=args.residual_velocity,
+            rests=params.rests,
         )
         records, seconds, n = evaluate_trial(inputs, methods, params)
         for m in methods:

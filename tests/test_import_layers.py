@@ -28,10 +28,7 @@ LAYERS = {
 
 #: imports that still break the rules, each with its reason; the test fails when one of them is gone (remove it
 #: here) or when a new one appears. Issue 24 asks for this list to be empty.
-KNOWN: dict[tuple[str, str], str] = {
-    # reconstruct_all runs every method's assumption checks, which re-run methods (a cycle inside process/)
-    ("imulog.process.trajectory_opt", "imulog.process.trajectory_checks"): "assumption checks (issue 32, open)",
-}
+KNOWN: dict[tuple[str, str], str] = {}
 
 
 def module_names() -> dict[str, Path]:

@@ -58,6 +58,22 @@ def test_a_still_gyroscope_during_translation_is_not_a_rest():
     assert true_rests(still, stance, RATE)[still].mean() > 0.9
 
 
+def test_movements_without_a_true_rest_between_them_are_one_window():
+    """Two movements whose still-gyroscope pause is a translation: with the gyroscope's mask they are two
+    windows, with the true rests both widen to the same rests and are merged (one reset at each end)."""
+    from imulog.process.trajectory_opt import merge_overlapping, repetition_windows
+
+    t = np.arange(0, 12, 1 / RATE)
+    bounds = {1: np.array([[2.0, 4.0]]), 2: np.array([[6.0, 8.0]])}
+    gyro = (t < 2.0) | ((t > 4.0) & (t < 6.0)) | (t > 8.0)
+    rests = (t < 2.0) | (t > 8.0)  # the pause between them translates: no rest
+    two, merged = merge_overlapping(repetition_windows(t, bounds, gyro))
+    assert len(two) == 2 and not merged
+    one, merged = merge_overlapping(repetition_windows(t, bounds, rests))
+    assert len(one) == 1 and merged == [[1, 2]]
+    assert rests[one[0].start] and rests[one[0].stop - 1] and not rests[one[0].start + 1 : one[0].stop - 1].all()
+
+
 def test_rest_summary_and_the_one_line_why():
     t = np.arange(0, 70, 1 / RATE)
     rests = (t < 3) | (t > 67)  # the chain: still only at the start and the end

@@ -46,3 +46,13 @@ def test_gaitmap_stride_length_against_markers(real, shared_data):
         assert np.mean(np.abs(g["error_m"])) < 0.10 * stride
         # per stride, the IMU follows the marker's variation
         assert np.corrcoef(g["imu_m"], g["mocap_m"])[0, 1] > 0.5
+
+
+def test_gaitmap_strides_no_worse_with_the_rest_gate(real, shared_data):
+    """Issue 32: the accelerometer's rest gate keeps every stance of the real foot recording, so the stride
+    lengths are no worse than with the still-gyroscope mask alone (the short-stance mean limit once cost
+    0.02 / 0.04 cm MAE here by dropping four 25-100 ms stances)."""
+    for foot in ("left", "right"):
+        on = real.gaitmap_stride_lengths(shared_data / "gaitmap_foot", foot, rest_gate=True)["error_m"]
+        off = real.gaitmap_stride_lengths(shared_data / "gaitmap_foot", foot, rest_gate=False)["error_m"]
+        assert np.mean(np.abs(on)) <= np.mean(np.abs(off)) + 1e-4, (foot, np.mean(np.abs(on)), np.mean(np.abs(off)))

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from imulog.numeric import moving_mean
+from imulog.process.integration import static_runs
 
 
 @dataclass(frozen=True)
@@ -38,6 +39,13 @@ class RestParams:
     short_max_mean_mps2: the same limit for candidate rests shorter than ``short_s`` (s) only (None: off): a
         tenth of a second of nearly constant acceleration mid-movement is no rest (a foot's 0.3 s stance with
         the residual gravity of a 6D filter during gait is not judged by it).
+    mean_relative: the short candidates' limit is at least this many times the 90th percentile of the windowed
+        mean at the candidates that are not short (the recording's residual gravity at rest; None: the fixed
+        limit). A foot's 25-100 ms stance during gait keeps 2-4 m/s^2 where its longer stances keep up to
+        1.3-1.7 m/s^2; a hand's rest keeps < 0.1 m/s^2, an uncalibrated sensor's up to 0.5 m/s^2. (The same
+        limit on every candidate dropped true rests' edges on the drinking grid: ZUPT +0.13 cm in x at 50 Hz.)
+    long_dilate: a sample is still for the long window when any 1-s window of its candidate run that holds it
+        is still (not only the centred one): a true rest beside motion inside one candidate run is kept.
     min_rest_s: rests shorter than this (s) are not rests.
     """
 
@@ -49,7 +57,9 @@ class RestParams:
     max_mean_mps2: float | None = None
     short_max_mean_mps2: float | None = 0.6
     short_s: float = 0.2
+    mean_relative: float | None = 3.0
     min_rest_s: float = 0.0
+    long_dilate: bool = True
 
 
 def white_noise_mps2(acc_mps2: np.ndarray) -> float:
@@ -94,6 +104,14 @@ def _short_and_accelerating(mean: np.ndarray, cand: np.ndarray, w: int, limit: f
     return out
 
 
+def _long_runs(mask: np.ndarray, min_samples: int) -> np.ndarray:
+    """The True runs of ``mask`` at least ``min_samples`` long."""
+    out = np.zeros(len(mask), dtype=bool)
+    for s, e in static_runs(mask, min_samples):
+        out[s:e] = True
+    return out
+
+
 def accelerometer_still(
     acc_global_mps2: np.ndarray, rate_hz: float, params: RestParams = RestParams(), candidates: np.ndarray | None = None
 ) -> np.ndarray:
@@ -119,12 +137,24 @@ def accelerometer_still(
         # a 0.3 s pause) are judged on their own samples
         cand = np.asarray(candidates, dtype=bool)
         wl = max(int(round(params.long_window_s * rate_hz)), 1)
-        still &= cand & (_run_std(a0, cand & ok, wl) <= limit)
+        long_still = _run_std(a0, cand & ok, wl) <= limit
+        if params.long_dilate:
+            # a rest beside motion inside one candidate run: a still 1-s window holds it
+            long_still = cand & (moving_mean(long_still.astype(float)[:, None], wl)[:, 0] > 0)
+        still &= cand & long_still
         if params.short_max_mean_mps2 is not None:
-            # a very short candidate is judged on few samples: a tenth of a second of nearly constant
-            # acceleration mid-movement passes the variation tests, so it must also be near zero
+            # the specific force must equal gravity within what this recording's own rests leave (a 6D filter's
+            # tilt error during gait leaves 1-2 m/s^2 at a foot's stance, an uncalibrated sensor 0.5 m/s^2 at a
+            # hand's rest): the level is the windowed mean at candidates that are no short ones
             ws = max(int(round(params.short_s * rate_hz)), 1)
-            still &= ~_short_and_accelerating(mean, cand, ws, params.short_max_mean_mps2)
+            long_cand = _long_runs(cand, ws)
+            level = np.linalg.norm(mean[still & long_cand], axis=1)
+            limit_mean = params.short_max_mean_mps2
+            if params.mean_relative and len(level):
+                limit_mean = max(limit_mean, params.mean_relative * float(np.percentile(level, 90)))
+            # a very short candidate is judged on few samples: a tenth of a second of nearly constant
+            # acceleration mid-movement passes the variation tests, so it must also be near zero as a whole
+            still &= ~_short_and_accelerating(mean, cand, ws, limit_mean)
     return still
 
 

@@ -23,12 +23,9 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
-
-if TYPE_CHECKING:
-    from imulog.process.trajectory_opt import TrajectoryParams
 
 REST_METHODS = ("zupt", "kalman", "zupt_bias", "optimized", "dedrift")
 FILTER_METHODS = ("highpass", "wavelet")
@@ -197,7 +194,8 @@ def assess(
                 f"de-drift implies an acceleration offset of {dedrift['max_offset_mps2']:.2f} m/s^2 "
                 f"(> {params.max_offset_mps2:g}): the rests are not rests or the orientation is off"
             )
-            suggest = suggest or "check the rests (imulog process phases) and the orientation"
+            # rests that are no rests matter before a bias estimate (whose fallback, zupt, needs the rests)
+            suggest = suggest if "no_rest" in failed else "check the rests (imulog process phases) and the orientation"
     if share is not None:
         out["removed_share"] = list(share)
         worst = max((s for s in share if np.isfinite(s)), default=0.0)
@@ -231,68 +229,3 @@ def check_attrs(check: Mapping[str, Any]) -> dict[str, str]:
         "assumptions_failed": ",".join(check.get("failed", [])),
         "assumptions_why": format_check("", check).lstrip(": "),
     }
-
-
-def method_checks(
-    t_s: np.ndarray,
-    acc_mps2: np.ndarray,
-    acc_compensated_mps2: np.ndarray | None,
-    rests: np.ndarray,
-    repetitions: Sequence[Any],
-    positions: Mapping[str, np.ndarray],
-    params: TrajectoryParams | None = None,
-    bias: Mapping[str, Any] | None = None,
-) -> dict[str, dict[str, Any]]:
-    """Per method in ``positions``, :func:`imulog.process.trajectory_checks.assess` on the windows it ran on:
-    rests (every dead-reckoning method), the implied de-drift offset (ZUPT-based methods), the rotating-bias
-    estimate's range (``zupt_bias``) and the share of the motion's range a filter removes (``highpass``,
-    ``wavelet``: the filter applied to ZUPT, or to the baseline in a window without rests)."""
-    from imulog.process.drift import highpass, wavelet_detrend
-    from imulog.process.trajectory_opt import TrajectoryParams, reconstruct
-
-    params = params or TrajectoryParams()
-    t = np.asarray(t_s, dtype=np.float64)
-    windows = [(r.start, r.stop) for r in repetitions]
-    summary = rest_summary(t, rests, windows)
-    offsets = np.concatenate(
-        [dedrift_offsets(t[r.start : r.stop], acc_mps2[r.start : r.stop], rests[r.start : r.stop]) for r in repetitions]
-        or [np.zeros(0)]
-    )
-    out: dict[str, dict[str, Any]] = {}
-    for m in positions:
-        if m in FILTER_METHODS:
-            shares = []
-            for r in repetitions:
-                sl = slice(r.start, r.stop)
-                own = rest_summary(t, rests, [(r.start, r.stop)])
-                if not own["count"] or own["longest_without_s"] > params.checks.max_without_rest_s:
-                    continue  # ZUPT drifts here too: what the filter removes cannot be told from drift
-                before = reconstruct("zupt", t[sl], acc_mps2[sl], rests[sl], params=params)
-                if np.nanmax(np.ptp(before, axis=0)) < params.checks.min_motion_m:
-                    continue  # hardly any motion (the alignment wave): no share to speak of
-                after = (
-                    highpass(before, (len(t[sl]) - 1) / (t[sl][-1] - t[sl][0]), params.highpass)
-                    if m == "highpass"
-                    else wavelet_detrend(before, params.wavelet)
-                )
-                shares.append(removed_share(before, after - after[0]))
-            share = np.nanmedian(np.asarray(shares, dtype=float), axis=0).round(4).tolist() if shares else None
-            out[m] = assess(m, rests=summary, share=share, params=params.checks)
-            continue
-        kwargs: dict[str, Any] = {"rests": summary}
-        if m in ("zupt", "kalman", "optimized"):
-            kwargs["dedrift"] = dedrift_check(offsets, params.checks)
-        if m == "zupt_bias":
-            comp = acc_mps2 if acc_compensated_mps2 is None else acc_compensated_mps2
-            off = np.concatenate(
-                [
-                    dedrift_offsets(t[r.start : r.stop], comp[r.start : r.stop], rests[r.start : r.stop])
-                    for r in repetitions
-                ]
-                or [np.zeros(0)]
-            )
-            kwargs["dedrift"] = dedrift_check(off, params.checks)
-            if bias is not None:
-                kwargs["bias"] = bias
-        out[m] = assess(m, params=params.checks, **kwargs)
-    return out

@@ -1,0 +1,213 @@
+"""Repetition windows and the R2G reference's waypoints for the trajectory methods.
+
+:func:`repetition_windows` cuts sample windows around each repetition's phases (widened to a true rest at each
+end), :func:`merge_overlapping` joins windows with no rest between them; :func:`trial_waypoints` measures the
+minimum-jerk reference's waypoints, and :func:`reference_residuals`, :func:`inconsistent_repetitions` and
+:func:`estimate_data_sigma` judge the initial estimate against that reference. Times in s, positions in m.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from imulog.process.input_checks import (
+    DEFAULT_INPUT_CHECKS,
+    InputCheck,
+    InputCheckParams,
+    apply_checks,
+    waypoint_checks,
+)
+from imulog.process.minjerk import (
+    R2GReferenceParams,
+    R2GWaypoints,
+    r2g_reference,
+    r2g_waypoints_from_anthropometrics,
+    r2g_waypoints_from_positions,
+)
+
+DEFAULT_REFERENCE = R2GReferenceParams()
+
+
+@dataclass
+class Repetition:
+    """One repetition: the sample window [start, stop) and its four phase bounds (4, 2) in s."""
+
+    index: int
+    start: int
+    stop: int
+    phase_bounds_s: np.ndarray
+
+
+def reference_residuals(
+    t_s: np.ndarray,
+    initial_m: np.ndarray,
+    static_mask: np.ndarray,
+    repetitions: Sequence[Repetition],
+    waypoints: R2GWaypoints,
+) -> dict[int, np.ndarray]:
+    """Per repetition (by list position), the (initial - reference) residuals (K, 3) m at the static samples
+    after the repetition's first phase starts."""
+    t = np.asarray(t_s, dtype=np.float64)
+    out: dict[int, np.ndarray] = {}
+    for i, rep in enumerate(repetitions):
+        if len(rep.phase_bounds_s) != 4:
+            continue
+        sl = slice(rep.start, rep.stop)
+        ref = r2g_reference(t[sl], rep.phase_bounds_s, waypoints)
+        # static samples after the first phase starts (before it, both are zero by construction)
+        st = np.asarray(static_mask[sl], dtype=bool) & (t[sl] >= rep.phase_bounds_s[0, 0])
+        out[i] = (np.asarray(initial_m[sl]) - ref)[st]
+    return out
+
+
+def inconsistent_repetitions(
+    residuals: Mapping[int, np.ndarray], factor: float = 3.0, min_m: float = 0.20
+) -> list[int]:
+    """Repetitions whose RMS residual against the reference exceeds ``factor`` x the trial median and
+    ``min_m`` (m; 0.2 m is about half an adult's bottle-to-mouth distance, so only a reference shifted by
+    whole waypoints exceeds it): their phases do not follow the protocol (e.g. a missed movement shifted the
+    labels), the optimisation's premise fails and they keep the initial estimate."""
+    rms = {i: float(np.sqrt(np.nanmean(np.sum(r**2, axis=1)))) for i, r in residuals.items() if len(r)}
+    if not rms:
+        return []
+    med = float(np.median(list(rms.values())))
+    return sorted(i for i, v in rms.items() if v > max(factor * med, min_m))
+
+
+def estimate_data_sigma(
+    t_s: np.ndarray,
+    initial_m: np.ndarray,
+    static_mask: np.ndarray,
+    repetitions: Sequence[Repetition],
+    waypoints: R2GWaypoints,
+    sigma_ref_m: float,
+    floor_m: float = 0.006,
+) -> tuple[float, float, float]:
+    """Per-axis error (m) of the initial estimate's static positions, by variance components.
+
+    Over the static samples of every complete repetition, the mean square of (initial - reference) is
+    the initial estimate's error variance plus the reference's (``sigma_ref_m``, assumed); the remainder
+    (at least ``floor_m``) is the estimate's.
+    """
+    resid = reference_residuals(t_s, initial_m, static_mask, repetitions, waypoints)
+    bad = set(inconsistent_repetitions(resid))
+    res = [r for i, r in resid.items() if i not in bad and len(r)]
+    if not res:
+        return (sigma_ref_m,) * 3
+    ms = np.nanmean(np.vstack(res) ** 2, axis=0)
+    return tuple(float(np.sqrt(max(v - sigma_ref_m**2, floor_m**2))) for v in ms)
+
+
+def repetition_windows(
+    t_s: np.ndarray, phase_bounds_s: Mapping[int, np.ndarray], static_mask: np.ndarray, pad_s: float = 1.0
+) -> list[Repetition]:
+    """Sample windows around each repetition: from ``pad_s`` before its first phase to ``pad_s`` after its
+    last (never past the neighbouring repetitions' phases), widened to include a static sample at each end."""
+    t = np.asarray(t_s, dtype=np.float64)
+    static = np.asarray(static_mask, dtype=bool)
+    keys = sorted(phase_bounds_s)
+    reps: list[Repetition] = []
+    for i, k in enumerate(keys):
+        b = np.asarray(phase_bounds_s[k], dtype=np.float64).reshape(-1, 2)
+        lo = b[0, 0] - pad_s
+        hi = b[-1, 1] + pad_s
+        if i > 0:
+            lo = max(lo, 0.5 * (np.asarray(phase_bounds_s[keys[i - 1]])[-1, 1] + b[0, 0]))
+        shared = False  # the upper bound is the midpoint the next window starts at: a sample there is the next's
+        if i + 1 < len(keys):
+            mid = 0.5 * (b[-1, 1] + np.asarray(phase_bounds_s[keys[i + 1]])[0, 0])
+            shared, hi = mid <= hi, min(hi, mid)
+        s = int(np.searchsorted(t, lo, side="left"))
+        e = int(np.searchsorted(t, hi, side="left" if shared else "right"))
+        while s > 0 and not static[s]:
+            s -= 1
+        while e < len(t) and not static[e - 1]:
+            e += 1
+        if e - s >= 3:
+            reps.append(Repetition(int(k), s, e, b))
+    return reps
+
+
+def merge_overlapping(repetitions: Sequence[Repetition]) -> tuple[list[Repetition], list[list[int]]]:
+    """Windows that overlap (no true rest between two movements, so both widened to the same rests) merged
+    into one, in time order: ``(windows, [[indices merged], ...])``. A merged window keeps the first index and
+    every phase bound (so it is not a 4-phase R2G repetition any more)."""
+    out: list[Repetition] = []
+    groups: list[list[int]] = []
+    for rep in sorted(repetitions, key=lambda r: r.start):
+        if out and rep.start < out[-1].stop:
+            last = out[-1]
+            bounds = np.vstack([last.phase_bounds_s.reshape(-1, 2), rep.phase_bounds_s.reshape(-1, 2)])
+            out[-1] = Repetition(last.index, last.start, max(last.stop, rep.stop), bounds)
+            groups[-1].append(rep.index)
+        else:
+            out.append(rep)
+            groups.append([rep.index])
+    return out, [g for g in groups if len(g) > 1]
+
+
+def trial_waypoints(
+    anthropometrics: Mapping[str, Any] | None,
+    t_s: np.ndarray,
+    zupt_m: np.ndarray,
+    repetitions: Sequence[Repetition],
+    params: R2GReferenceParams = DEFAULT_REFERENCE,
+    checks: list[InputCheck] | None = None,
+    check_params: InputCheckParams = DEFAULT_INPUT_CHECKS,
+) -> R2GWaypoints:
+    """Waypoints for a trial: h1, h2, h3 (and ``mouth_dx_m``, the mouth's x, and ``bottle_dy_m``, the bottle's
+    lateral offset from the start when it is not h2, when present) from the anthropometrics; every
+    other coordinate is the median over repetitions of the ZUPT displacement at the phase ends (no optical
+    data involved). Without anthropometrics all coordinates come from ZUPT.
+
+    Every given value is checked against the same ZUPT medians (:mod:`imulog.process.input_checks`): ``checks``,
+    when given, receives one :class:`InputCheck` per value; a disagreeing value marked approximate is replaced
+    by the estimate."""
+    t = np.asarray(t_s, dtype=np.float64)
+    bottles, mouths = [], []
+    for rep in repetitions:
+        if len(rep.phase_bounds_s) != 4:
+            continue
+        sl = slice(rep.start, rep.stop)
+        w = r2g_waypoints_from_positions(zupt_m[sl], t[sl], rep.phase_bounds_s)
+        bottles.append(w.bottle_m)
+        mouths.append(w.mouth_m)
+    if not bottles:
+        raise ValueError("no complete repetition to measure waypoints from")
+    bottle = np.median(np.asarray(bottles), axis=0)
+    mouth = np.median(np.asarray(mouths), axis=0)
+    if anthropometrics:
+        try:
+            anth = r2g_waypoints_from_anthropometrics(anthropometrics, params)
+        except KeyError:
+            anth = None
+        if anth is not None:
+            if "bottle_m" in anthropometrics:
+                return anth
+            c, s = np.cos(params.heading_rad), np.sin(params.heading_rad)
+            rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+            bt, mt = rot.T @ bottle, rot.T @ mouth  # into the task frame
+            at_b, at_m = rot.T @ np.asarray(anth.bottle_m), rot.T @ np.asarray(anth.mouth_m)
+            bt[0], bt[1] = at_b[0], at_b[1]  # h1, h2
+            mt[1], mt[2] = at_m[1], at_m[2]  # h2, h3
+            if "mouth_dx_m" in anthropometrics:
+                mt[0] = float(anthropometrics["mouth_dx_m"])
+            if anthropometrics.get("bottle_dy_m") is not None:  # bottle not in front of the shoulder: measured
+                bt[1] = float(anthropometrics["bottle_dy_m"])
+            found = waypoint_checks(
+                anthropometrics,
+                np.asarray(bottles) @ rot,  # each row into the task frame
+                np.asarray(mouths) @ rot,
+                params.keys,
+                check_params,
+                bottle_y_fraction=params.bottle_y_fraction,
+            )
+            bt, mt = apply_checks(bt, mt, found)
+            if checks is not None:
+                checks.extend(found)
+            bottle, mouth = rot @ bt, rot @ mt
+    return R2GWaypoints(bottle_m=tuple(bottle.tolist()), mouth_m=tuple(mouth.tolist()))
