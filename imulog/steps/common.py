@@ -31,6 +31,28 @@ def pick_imu(topics: list[str], imu: str | None, *, prefix: str = "/imu/", missi
     raise ValueError(f"choose an IMU with --imu among: {', '.join(names)}")
 
 
+def imu_names(topics: list[str], prefix: str = "/imu/") -> list[str]:
+    """Names of the IMUs with a ``{prefix}NAME`` channel, in the trial's order."""
+    return [t[len(prefix) :] for t in topics if t.startswith(prefix) and "/" not in t[len(prefix) :]]
+
+
+def primary_imu(topics: list[str], metadata: Mapping[str, Mapping[str, Any]]) -> str | None:
+    """The IMU whose results keep the trial-level record names (``imulog.timing``, ``imulog.metrics``,
+    ``imulog.epochs``): the one ``imulog.alignment`` names, else the only IMU, else ``wrist``, else the first."""
+    names = imu_names(topics)
+    aligned = str((metadata.get("imulog.alignment") or {}).get("imu") or "").removeprefix("/imu/")
+    for candidate in (aligned, names[0] if len(names) == 1 else "", "wrist"):
+        if candidate and candidate in names:
+            return candidate
+    return names[0] if names else None
+
+
+def record_for(base: str, imu: str, topics: list[str], metadata: Mapping[str, Mapping[str, Any]]) -> str:
+    """The metadata record a per-IMU step writes for ``imu``: ``base`` for the trial's primary IMU
+    (:func:`primary_imu`), ``base.IMU`` for the others, so that several IMUs never overwrite each other."""
+    return base if imu == primary_imu(topics, metadata) else f"{base}.{imu}"
+
+
 def alignment_for(metadata: Mapping[str, Mapping[str, Any]], imu_topic: str) -> dict[str, Any] | None:
     """The trial's ``imulog.alignment`` record if it concerns ``imu_topic`` (or names no IMU), else None."""
     record = metadata.get("imulog.alignment")

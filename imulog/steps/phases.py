@@ -28,7 +28,7 @@ from imulog.model import Intervals, SignalStream
 from imulog.process.gaps import GapParams, prepare
 from imulog.process.segmentation.pipeline import PhaseParams, segment_phases, timing_table
 from imulog.process.segmentation.repetitions import RepetitionParams
-from imulog.steps.common import alignment_for, mean_rate_hz, pick_imu
+from imulog.steps.common import alignment_for, mean_rate_hz, pick_imu, record_for
 from imulog.steps.long_phases import LONG_SAMPLES, PhaseCores, long_phase_pieces, long_unsupported
 
 STEP = "phases"
@@ -170,6 +170,7 @@ def run_phases(
 
     with TrialReader(path) as trial:
         name = pick_imu(trial.topics(), imu)
+        record_name = record_for("imulog.timing", name, trial.topics(), trial.metadata)
         params = params or params_for_trial(trial.metadata.get("imulog.trial", {}))
         channel = trial.channel(f"/imu/{name}")
         total = int(channel.sample_count or 0)
@@ -197,20 +198,29 @@ def run_phases(
             pieces = StreamPieces(
                 topics=[f"/derived/static/{name}", f"/derived/movements/{name}", f"/derived/phases/{name}"],
                 pieces=lambda: long_phase_pieces(
-                    path, topic, name, params, gaps, total, rate, record, alignment=alignment,
-                    start_time=str(start_time) if start_time else None, cores=cores,
+                    path,
+                    topic,
+                    name,
+                    params,
+                    gaps,
+                    total,
+                    rate,
+                    record,
+                    alignment=alignment,
+                    start_time=str(start_time) if start_time else None,
+                    cores=cores,
                 ),
                 expected_duration_s=span_ns * 1e-9,
             )
-            return StepResult(streams=[pieces], metadata={"imulog.timing": record})
+            return StepResult(streams=[pieces], metadata={record_name: record})
         stream = trial.read(topic)
         streams, timing = compute_phases(stream.t_ns, stream.gyr, name, params, alignment, stream.acc, gaps)
         provenance = {"gaps": timing["gaps"]} if "gaps" in timing else {}
-        return StepResult(streams=streams, metadata={"imulog.timing": timing}, provenance=provenance)
+        return StepResult(streams=streams, metadata={record_name: timing}, provenance=provenance)
 
     return run_step(
         path,
-        step=STEP,
+        step=f"{STEP}:{name}",
         algorithm=algorithm_name(params),
         params=step_params,
         inputs=[topic],
