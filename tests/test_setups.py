@@ -1,0 +1,105 @@
+"""Whole setups (issue 27): a session folder is one trial, and the per-IMU steps run on every IMU by default.
+
+Real files: the OpenSense Xsens trial (two MTw sensors, MT_012005D6_031) beside the kineticstoolkit C3D, and the
+APDM Opal CSV with four sensors (Static, Upper, Middle, Lower)."""
+
+from __future__ import annotations
+
+import shutil
+
+import pytest
+from click.testing import CliRunner
+
+from imulog.archive import TrialReader
+from imulog.cli import cli
+
+XSENS = ("MT_012005D6_031-000_00B421AF.txt", "MT_012005D6_031-000_00B4227B.txt")
+OPALS = ["static", "upper", "middle", "lower"]
+
+
+def run(*args):
+    result = CliRunner().invoke(cli, [str(a) for a in args])
+    return result.exit_code, result.stdout, result.stderr
+
+
+@pytest.fixture
+def session(shared_data, tmp_path):
+    """A session folder as a lab saves it: per-sensor IMU files, the optical export, a file of something else."""
+    folder = tmp_path / "session"
+    folder.mkdir()
+    for name in XSENS:
+        shutil.copy(shared_data / "devices" / "xsens_mtmanager" / name, folder)
+    shutil.copy(shared_data / "c3d" / "ktk_sample_propulsion_upperlimb.c3d", folder)
+    (folder / "notes.csv").write_text("who,what\nme,walked\n")
+    return folder
+
+
+def test_session_folder_is_one_trial_and_says_what_it_skipped(session, tmp_path):
+    out = tmp_path / "trial.mcap"
+    code, stdout, stderr = run("convert", session, "-o", out)
+    assert code == 0, stderr
+    assert "from 3 files" in stdout
+    assert "skipped" in stderr and "notes.csv: unknown format" in stderr
+    with TrialReader(out) as trial:
+        topics = trial.topics()
+        inputs = trial.metadata["imulog.conversion"]["inputs"]
+    assert {"/imu/mt_00b421af", "/imu/mt_00b4227b", "/markers/vicon"} <= set(topics)
+    assert sorted(inputs) == sorted([*XSENS, "ktk_sample_propulsion_upperlimb.c3d"])
+    # an output folder: the same session is still one trial, named after the IMU recording
+    code, _, stderr = run("convert", session, "-o", tmp_path / "trials")
+    assert code == 0, stderr
+    assert [p.name for p in (tmp_path / "trials").glob("*.mcap")] == ["MT_012005D6_031.mcap"]
+
+
+def test_folder_of_unrelated_recordings_is_not_one_trial(shared_data, tmp_path):
+    """The shared Xsens folder holds 10 separate recordings: one trial is refused, one per recording is made."""
+    code, _, stderr = run("convert", shared_data / "devices" / "xsens_mtmanager", "-o", tmp_path / "x.mcap")
+    assert code == 2 and "10 recordings" in stderr and not (tmp_path / "x.mcap").exists()
+
+
+@pytest.fixture
+def opals(shared_data, tmp_path):
+    path = tmp_path / "opals.mcap"
+    code, _, stderr = run("convert", shared_data / "devices" / "apdm_csv" / "imuData01.csv", "-o", path)
+    assert code == 0, stderr
+    return path
+
+
+def test_orientation_runs_on_every_imu_one_run_each(opals):
+    code, stdout, stderr = run("process", "orientation", opals)
+    assert code == 0, stderr
+    rows = [line.split() for line in stdout.splitlines() if line.strip().split(" ")[0] in OPALS]
+    assert [r[0] for r in rows] == OPALS and {r[1] for r in rows} == {"wrote"}
+    assert "own arbitrary heading" in stdout  # 6D orientations of several IMUs share no heading
+    with TrialReader(opals) as trial:
+        steps = sorted(r["step"] for r in trial.runs().values())
+        assert all(f"/derived/orientation/{n}" in trial.topics() for n in OPALS)
+    assert steps == sorted(f"orientation:{n}" for n in OPALS)
+    code, stdout, _ = run("process", "orientation", opals)  # the same again: nothing written
+    assert code == 0 and stdout.count("unchanged") == 4
+    code, stdout, _ = run("process", "orientation", opals, "--imu", "upper", "--backend", "madgwick")
+    assert code == 0 and stdout.startswith("wrote /derived/") and "/derived/orientation/upper" in stdout
+    code, _, stderr = run("process", "orientation", opals, "--imu", "upper", "--imu", "nope")
+    assert code == 1 and "no channel /imu/nope" in stderr and "static, upper, middle, lower" in stderr
+
+
+def test_phases_and_metrics_keep_one_record_per_imu(opals):
+    code, stdout, stderr = run("process", "phases", opals)
+    assert code == 0, stderr
+    assert stdout.startswith("phases: 4 IMUs")
+    with TrialReader(opals) as trial:
+        md = trial.metadata
+        runs = {r["step"] for r in trial.runs().values()}
+    # the primary IMU (no alignment, no 'wrist': the first) keeps imulog.timing; the others get their own
+    assert md["imulog.timing"]["imu"] == "/imu/static"
+    for name in OPALS[1:]:
+        assert md[f"imulog.timing.{name}"]["imu"] == f"/imu/{name}"
+    assert {f"phases:{n}" for n in OPALS} <= runs
+    code, stdout, _ = run("process", "phases", opals)
+    assert code == 0 and stdout.count("unchanged") == 4  # each IMU's run is found again
+    code, stdout, stderr = run("process", "metrics", opals, "--imu", "lower", "--imu", "upper", "--json")
+    assert code == 0, stderr
+    import json
+
+    records = json.loads(stdout)
+    assert sorted(records) == ["lower", "upper"] and records["upper"]["imu"] == "/imu/upper"
