@@ -103,3 +103,60 @@ def test_phases_and_metrics_keep_one_record_per_imu(opals):
 
     records = json.loads(stdout)
     assert sorted(records) == ["lower", "upper"] and records["upper"]["imu"] == "/imu/upper"
+
+
+def _sto(path):
+    """(column names, time (N,), quaternions {column: (N, 4)}) of a quaternion .sto file."""
+    import numpy as np
+
+    lines = path.read_text().splitlines()
+    k = lines.index("endheader")
+    names = lines[k + 1].split("\t")[1:]
+    rows = [line.split("\t") for line in lines[k + 2 :]]
+    time = np.array([float(r[0]) for r in rows])
+    quats = {n: np.array([[float(v) for v in r[j + 1].split(",")] for r in rows]) for j, n in enumerate(names)}
+    return names, time, quats
+
+
+def test_device_orientations_export_to_sto_with_names_checked(opals, tmp_path):
+    """The APDM Opals' own orientations go to .sto without `process orientation`; --name takes an IMU's name or
+    its label, and a name that matches no IMU is refused (it used to be ignored)."""
+    import numpy as np
+
+    out = tmp_path / "opals.sto"
+    code, stdout, stderr = run("export", opals, "-o", out, "--name", "Upper=humerus_r_imu", "--name", "lower=radius_r")
+    assert code == 0, stderr
+    assert "upper: /orientation/upper" not in stderr and "humerus_r_imu: /orientation/upper (the device's" in stderr
+    names, _, quats = _sto(out)
+    assert names == ["static_imu", "humerus_r_imu", "middle_imu", "radius_r"]
+    with TrialReader(opals) as trial:
+        for column, imu in zip(names, OPALS, strict=True):
+            q = trial.read(f"/orientation/{imu}").values
+            assert np.allclose(quats[column], q / np.linalg.norm(q, axis=1, keepdims=True), atol=1e-12)
+    code, _, stderr = run("export", opals, "-o", tmp_path / "bad.sto", "--name", "nope=foo")
+    assert code == 1 and "--name nope=foo: no IMU 'nope'" in stderr and not (tmp_path / "bad.sto").exists()
+    # imulog's 6D orientations: each has its own heading, and the export says so
+    assert run("process", "orientation", opals)[0] == 0
+    code, _, stderr = run("export", opals, "-o", tmp_path / "6d.sto")
+    assert code == 0 and "/derived/orientation/upper (imulog's" in stderr
+    assert "do not share one heading frame" in stderr
+    code, _, stderr = run("export", opals, "-o", tmp_path / "dev.sto", "--source", "device")
+    assert code == 0 and "do not share" not in stderr  # one device export: one global frame
+
+
+def test_opensense_sto_round_trips_through_a_trial(shared_data, tmp_path):
+    """An OpenSense orientation file (8 IMUs) converted and exported again holds the same quaternions."""
+    import numpy as np
+
+    src = shared_data / "devices" / "opensense_sto" / "MT_012005D6_009-quaternions_calibration_trial_Facing_negX.sto"
+    trial = tmp_path / "os.mcap"
+    assert run("convert", src, "-o", trial)[0] == 0
+    code, _, stderr = run("export", trial, "-o", tmp_path / "os.sto")
+    assert code == 0, stderr
+    names, time, quats = _sto(tmp_path / "os.sto")
+    their_names, their_time, theirs = _sto(src)
+    assert names == their_names and len(names) == 8
+    assert np.allclose(np.diff(time), np.diff(their_time), atol=1e-9)
+    for n in names:
+        q = theirs[n] / np.linalg.norm(theirs[n], axis=1, keepdims=True)
+        assert np.allclose(quats[n], q, atol=1e-9)
