@@ -160,3 +160,64 @@ def test_opensense_sto_round_trips_through_a_trial(shared_data, tmp_path):
     for n in names:
         q = theirs[n] / np.linalg.norm(theirs[n], axis=1, keepdims=True)
         assert np.allclose(quats[n], q, atol=1e-9)
+
+
+def test_arm_imus_from_names_and_placements():
+    from imulog.steps.placements import arm_imus, partner, words
+
+    assert words("RightUpperArm") == ["right", "upper", "arm"] and words("upper_arm_r") == ["upper", "arm", "r"]
+    assert arm_imus(["trunk", "upper_arm", "forearm"], {}) == ("upper_arm", "forearm")
+    assert arm_imus(["humerus_r_imu", "radius_r_imu", "pelvis_imu"], {}) == ("humerus_r_imu", "radius_r_imu")
+    assert arm_imus(["rightforearm", "rightupperarm"], {}) == ("rightupperarm", "rightforearm")  # lower-cased
+    # two arms: paired by side; a wrist sensor stands for the forearm when nothing else names it
+    names = ["upper_arm_l", "upper_arm_r", "forearm_l", "forearm_r"]
+    with pytest.raises(ValueError, match="more than one arm"):
+        arm_imus(names, {})
+    assert partner("forearm", "upper_arm_r", names, {}) == "forearm_r"
+    assert arm_imus(["left_wrist", "left_upper_arm"], {}) == ("left_upper_arm", "left_wrist")
+    # placements from the device records (an APDM label, or --meta device.NAME.placement=...)
+    md = {"imulog.device.a": {"label": "Upper Arm"}, "imulog.device.b": {"placement": "lower arm"}}
+    assert arm_imus(["a", "b", "c"], md) == ("a", "b")
+    with pytest.raises(ValueError, match="no upper-arm and forearm IMU .*static: Static"):
+        arm_imus(["static", "upper"], {"imulog.device.static": {"label": "Static"}})
+
+
+def test_kinematics_takes_the_arm_imus_named_at_conversion(session, tmp_path):
+    """The two real Xsens sensors named by --device-name are the DH model's IMUs, without --upper-arm/--forearm."""
+    trial = tmp_path / "arm.mcap"
+    code, _, stderr = run(
+        "convert",
+        session,
+        "-o",
+        trial,
+        "--device-name",
+        "00B421AF=right_upper_arm",
+        "--device-name",
+        "00B4227B=RightForearm",
+    )
+    assert code == 0, stderr
+    code, stdout, stderr = run("process", "kinematics", trial, "--no-markers")
+    assert code == 0, stderr
+    with TrialReader(trial) as reader:
+        run_record = next(r for r in reader.runs().values() if r["step"] == "kinematics")
+    assert {t for t in run_record["inputs"] if t.startswith("/imu/")} == {"/imu/right_upper_arm", "/imu/rightforearm"}
+    assert run_record["params"]["upper_arm"] == "right_upper_arm" and run_record["params"]["forearm"] == "rightforearm"
+
+
+def test_device_orientations_are_drawn_in_3d_for_every_imu(opals, tmp_path):
+    """The Opals' own orientations (no processing) are moving frames in the Rerun recording, equal to the file's."""
+    import numpy as np
+
+    from imulog.view import layout as L
+    from imulog.view.rrd import read_column
+
+    rrd = tmp_path / "opals.rrd"
+    code, _, stderr = run("view", opals, "--save", rrd)
+    assert code == 0, stderr
+    with TrialReader(opals) as trial:
+        for name in OPALS:
+            q = trial.read(f"/orientation/{name}").values
+            _, xyzw = read_column(rrd, L.imu_frame_entity(f"/orientation/{name}"), "Transform3D:quaternion")
+            drawn = np.array([r[0] for r in xyzw])[:, [3, 0, 1, 2]]
+            q = q / np.linalg.norm(q, axis=1, keepdims=True)
+            assert drawn.shape == q.shape and np.allclose(np.abs(np.sum(drawn * q, axis=1)), 1.0, atol=1e-6)
