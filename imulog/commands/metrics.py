@@ -215,7 +215,9 @@ def process_metrics(
         record = records[name] = step_record(trial, RECORD, name)
         text = format_summary(record)
         skipped = getattr(outcome, "skipped", False)
-        return outcome, text.splitlines()[0], ("(unchanged: same inputs and parameters) " if skipped else "") + text
+        usage = next((line.strip() for line in text.splitlines() if line.strip().startswith("arm usage")), "")
+        short = text.splitlines()[0].split(": ", 1)[-1] + (f", {usage}" if usage else "")
+        return outcome, short, ("(unchanged: same inputs and parameters) " if skipped else "") + text
 
     if as_json:  # the record(s) only: one IMU's record, or {imu: record}
         run_per_imu(trial, names, one, what="metrics", echo=False)
