@@ -221,3 +221,19 @@ def test_device_orientations_are_drawn_in_3d_for_every_imu(opals, tmp_path):
             drawn = np.array([r[0] for r in xyzw])[:, [3, 0, 1, 2]]
             q = q / np.linalg.norm(q, axis=1, keepdims=True)
             assert drawn.shape == q.shape and np.allclose(np.abs(np.sum(drawn * q, axis=1)), 1.0, atol=1e-6)
+
+
+def test_imus_that_lack_what_the_step_reads_are_left_out_by_default(shared_data, tmp_path):
+    """An ActiGraph GT9X has an accelerometer-only stream beside its IMU: orienting every IMU leaves it out with
+    a note instead of failing; named with --imu, the step's own error stands."""
+    trial = tmp_path / "ag.mcap"
+    assert run("convert", shared_data / "devices" / "actigraph_gt3x" / "example.gt3x", "-o", trial)[0] == 0
+    code, stdout, stderr = run("process", "orientation", trial)
+    assert code == 0, stderr
+    assert "left out /imu/tas1e31150129: no gyr" in stderr and "/derived/orientation/tas1e31150129_imu" in stdout
+    code, _, stderr = run("process", "orientation", trial, "--imu", "tas1e31150129")
+    assert code == 1 and "needs accelerometer and gyroscope" in stderr
+    # the first IMU a step runs on keeps imulog.timing when the trial names no primary IMU
+    assert run("process", "phases", trial)[0] == 0
+    with TrialReader(trial) as reader:
+        assert reader.metadata["imulog.timing"]["imu"] == "/imu/tas1e31150129_imu"

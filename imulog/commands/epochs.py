@@ -90,7 +90,7 @@ def process_epochs(
     params = replace(
         _D, epochs_s=tuple(epochs_s) or _D.epochs_s, calibrate=not no_calibrate, valid_day_hours=valid_day_hours
     )
-    names = choose_imus(trial, imus)
+    names = choose_imus(trial, imus, needs=("acc",))
     records: dict[str, dict] = {}
 
     def one(name: str):

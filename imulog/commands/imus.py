@@ -22,22 +22,41 @@ def imu_option(help_text: str = IMU_HELP) -> Callable[[Callable[..., Any]], Call
     return click.option("--imu", "imus", multiple=True, metavar="NAME", help=help_text)
 
 
-def choose_imus(trial: Path, imus: Sequence[str], *, prefix: str = "/imu/", missing_hint: str = "") -> list[str]:
+def choose_imus(
+    trial: Path, imus: Sequence[str], *, prefix: str = "/imu/", missing_hint: str = "", needs: Sequence[str] = ()
+) -> list[str]:
     """The IMUs to process: those named (each must have a ``{prefix}NAME`` channel), else every one the trial has.
 
-    Raises ``click.ClickException`` with one line naming the trial when a name matches no IMU or there is none.
+    ``needs``: the quantities the step reads (``acc``, ``gyr``); by default, IMUs whose channel lacks one (an
+    ActiGraph's accelerometer-only stream beside its IMU) are left out with a note on stderr. Raises
+    ``click.ClickException`` with one line naming the trial when a name matches no IMU or none is left.
     """
+    import json
+
     from imulog.archive import ArchiveError, TrialReader
     from imulog.steps.common import error_line, imu_names, pick_imu
 
     try:
         with TrialReader(trial) as reader:
             topics = reader.topics()
+            columns = {
+                c.topic: json.loads(c.metadata.get("columns") or "null") for c in reader.channels if c.topic in topics
+            }
         if imus:
             return [pick_imu(topics, name, prefix=prefix, missing_hint=missing_hint) for name in dict.fromkeys(imus)]
         names = imu_names(topics, prefix)
         if not names:
             pick_imu(topics, None, prefix=prefix, missing_hint=missing_hint)  # raises the step's own message
+        lacking = {}
+        for name in names:
+            have = columns.get(f"/imu/{name}")
+            missing = [q for q in needs if isinstance(have, list) and q not in have]
+            if missing:
+                lacking[name] = missing
+        if lacking and len(lacking) < len(names):
+            for name, missing in lacking.items():
+                click.echo(f"note: left out /imu/{name}: no {', '.join(missing)} (name it with --imu to try)", err=True)
+            names = [n for n in names if n not in lacking]
         return names
     except (ArchiveError, ValueError, OSError) as exc:
         raise click.ClickException(error_line(trial, exc)) from None
@@ -99,13 +118,13 @@ def run_per_imu(trial: Path, names: Sequence[str], call: StepCall, *, what: str,
 def step_record(trial: Path, base: str, imu: str) -> dict[str, Any]:
     """The record a per-IMU step wrote for ``imu`` (``base``, or ``base.IMU``: :func:`imulog.steps.common.record_for`)."""
     from imulog.archive import TrialReader
-    from imulog.steps.common import record_for
+    from imulog.steps.common import record_of
 
     with TrialReader(trial) as reader:
-        name = record_for(base, imu, reader.topics(), reader.metadata)
-        record = reader.metadata.get(name)
+        name = record_of(base, imu, reader.metadata)
+        record = reader.metadata.get(name) if name else None
     if record is None:
-        raise KeyError(f"no {name} record after the step")
+        raise KeyError(f"no {base} record for /imu/{imu} after the step")
     return dict(record)
 
 

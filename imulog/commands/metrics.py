@@ -207,7 +207,7 @@ def process_metrics(
         params.activity(100.0)
     except (ArchiveError, ValueError, KeyError, OSError) as exc:
         raise click.ClickException(error_line(trial, exc)) from exc
-    names = choose_imus(trial, imus)
+    names = choose_imus(trial, imus, needs=("acc",))
     records: dict[str, dict] = {}
 
     def one(name: str):

@@ -96,7 +96,7 @@ def process_orientation(
             text = f"wrote {', '.join(outcome.topics)} (run {outcome.run})"
         return outcome, f"/derived/orientation/{name}, {params.backend}, global frame {frame}", text
 
-    names = choose_imus(trial, imus)
+    names = choose_imus(trial, imus, needs=("acc", "gyr"))
     run_per_imu(trial, names, one, what="orientation")
     if len(names) > 1 and not use_mag:
         click.echo(

@@ -231,4 +231,4 @@ def process_phases(
         skipped = getattr(outcome, "skipped", False)
         return outcome, text.splitlines()[0], ("(unchanged: same inputs and parameters) " if skipped else "") + text
 
-    run_per_imu(trial, choose_imus(trial, imus), one, what="phases")
+    run_per_imu(trial, choose_imus(trial, imus, needs=("gyr",)), one, what="phases")

@@ -45,7 +45,7 @@ from imulog.process.trajectory_opt import (
     reconstruct_repetitions,
     repetition_windows,
 )
-from imulog.steps.common import alignment_for, pick_imu
+from imulog.steps.common import alignment_for, pick_imu, record_of
 
 STEP = "trajectory"
 TRAJECTORY_TOPIC = "/derived/trajectory/{method}"
@@ -274,6 +274,7 @@ def run_trajectory(
             topics, imu, prefix="/derived/acc_global/", missing_hint="run `imulog process orientation` first"
         )
         acc_topic = f"/derived/acc_global/{name}"
+        timing_record = record_of("imulog.timing", name, trial.metadata) or "imulog.timing"  # this IMU's phases
         refuse_long(
             "process trajectory",
             acc_topic,
@@ -294,7 +295,7 @@ def run_trajectory(
         phases = trial.read(phases_topic) if phases_topic in topics else None
         orient = trial.read(orient_topic) if orient_topic in topics else None
         raw = trial.read(imu_topic) if use_gyr else None
-        timing = trial.metadata.get("imulog.timing", {})
+        timing = trial.metadata.get(timing_record, {})
         streams, record = compute_trajectories(
             acc.t_ns,
             acc.values,
@@ -319,7 +320,7 @@ def run_trajectory(
         algorithm="imulog.trajectory",
         params={"imu": name, **params_dict(methods, params, reference_params)},
         inputs=inputs,
-        metadata_inputs=("imulog.alignment", "imulog.anthropometrics", "imulog.timing"),
+        metadata_inputs=("imulog.alignment", "imulog.anthropometrics", timing_record),
         compute=compute,
         force=force,
     )
