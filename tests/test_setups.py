@@ -237,3 +237,25 @@ def test_imus_that_lack_what_the_step_reads_are_left_out_by_default(shared_data,
     assert run("process", "phases", trial)[0] == 0
     with TrialReader(trial) as reader:
         assert reader.metadata["imulog.timing"]["imu"] == "/imu/tas1e31150129_imu"
+
+
+@pytest.mark.parametrize(
+    ("optical", "topics"),
+    [
+        (("vicon_nexus/markers.csv", "vicon_nexus/analogs.csv"), {"/markers/vicon", "/analog/vicon"}),
+        (("devices/opensim_trc/markers.trc", "devices/optitrack_motive/sample_optitrack_take.csv"), {"/markers/trc"}),
+    ],
+)
+def test_other_optical_exports_join_the_session(shared_data, tmp_path, optical, topics):
+    """Nexus CSV (markers + devices), TRC and Motive exports beside the per-sensor IMU files: one trial."""
+    folder = tmp_path / "session"
+    folder.mkdir()
+    for name in XSENS:
+        shutil.copy(shared_data / "devices" / "xsens_mtmanager" / name, folder)
+    for rel in optical:
+        shutil.copy(shared_data / rel, folder)
+    code, stdout, stderr = run("convert", folder, "-o", tmp_path / "t.mcap")
+    assert code == 0, stderr
+    assert f"from {len(XSENS) + len(optical)} files" in stdout
+    with TrialReader(tmp_path / "t.mcap") as trial:
+        assert {"/imu/mt_00b421af", "/imu/mt_00b4227b", *topics} <= set(trial.topics())
