@@ -259,3 +259,31 @@ def test_other_optical_exports_join_the_session(shared_data, tmp_path, optical, 
     assert f"from {len(XSENS) + len(optical)} files" in stdout
     with TrialReader(tmp_path / "t.mcap") as trial:
         assert {"/imu/mt_00b421af", "/imu/mt_00b4227b", *topics} <= set(trial.topics())
+
+
+def test_calibrate_every_imu_or_each_with_its_own_file(opals, tmp_path):
+    """One calibration file for the IMUs chosen (default all), or IMU=FILE pairs; unknown IMUs are refused."""
+    import json
+
+    import numpy as np
+
+    from imulog.process.calibration import AxisCalibration, Calibration
+
+    offset = np.array([0.1, -0.2, 0.3])
+    cal = tmp_path / "cal.json"
+    cal.write_text(json.dumps(Calibration(acc=AxisCalibration(bias=offset)).to_dict()))
+    code, stdout, stderr = run("process", "calibrate", opals, "--calibration", cal)
+    assert code == 0, stderr
+    assert stdout.startswith("calibrate: 4 IMUs") and stdout.count("wrote") == 4
+    code, stdout, stderr = run(
+        "process", "calibrate", opals, "--calibration", f"upper={cal}", "--calibration", f"lower={cal}"
+    )
+    assert code == 0 and stdout.count("unchanged") == 2, stderr  # the same file again for these two
+    with TrialReader(opals) as trial:
+        raw = trial.read("/imu/middle").acc
+        calibrated = trial.read("/derived/calibrated/middle").values[:, :3]
+        steps = {r["step"] for r in trial.runs().values()}
+    assert np.allclose(calibrated, raw - offset)
+    assert {f"calibrate:{n}" for n in OPALS} <= steps
+    code, _, stderr = run("process", "calibrate", opals, "--calibration", f"nope={cal}")
+    assert code == 1 and "no channel /imu/nope" in stderr
