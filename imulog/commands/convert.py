@@ -516,7 +516,7 @@ def _inspect(
     groups: list[list[Path]] = []
     for p in inputs:
         if p.is_dir():
-            groups.extend(files for _, files in group_directory(p))
+            groups.extend(files for _, files in sessions(group_directory(p)))
         else:
             groups.append([p])
     if all(not p.is_dir() for p in inputs):
