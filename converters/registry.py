@@ -262,6 +262,7 @@ _ROLE_TOKENS = {
     "events",
     "adc",
 }
+_DOC_NAMES = ("LICENSE", "LICENCE", "NOTICE", "README", "COPYING")  # documentation, not recordings
 _SKIP_SUFFIXES = {".md", ".txt.license", ".license", ".json", ".toml", ".npz", ".npy", ".pdf", ".png", ".mcap"}
 
 
@@ -286,10 +287,11 @@ def recording_key(path: Path, conv: Converter | None = None) -> str:
     return "_".join(tokens)
 
 
-def group_directory(directory: Path) -> list[tuple[str, list[Path]]]:
+def group_directory(directory: Path, skipped: list[tuple[Path, str]] | None = None) -> list[tuple[str, list[Path]]]:
     """Recordings under ``directory`` (recursively): (output name, files) per recording, convertible files only.
 
     A file is convertible when some converter recognises it; mapping files, licences and READMEs are skipped.
+    ``skipped``, when given, receives (file, reason) for each data file no converter recognises.
     """
     directory = Path(directory)
     groups: dict[tuple[Path, str], list[Path]] = {}
@@ -298,7 +300,11 @@ def group_directory(directory: Path) -> list[tuple[str, list[Path]]]:
             continue
         try:
             conv = detect(path)
-        except ConversionError:
+        except ConversionError as e:
+            if path.name.upper().startswith(_DOC_NAMES):
+                continue
+            if skipped is not None:
+                skipped.append((path, getattr(e, "problem", None) or str(e)))
             continue
         groups.setdefault((path.parent, recording_key(path, conv)), []).append(path)
     out = []

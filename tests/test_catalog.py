@@ -55,7 +55,7 @@ def test_catalog_rows_and_readers(archive, tmp_path):
         assert "/derived/trajectory/zupt" in list(row.derived_channels)
         assert sorted({s.split(":")[0] for s in row.steps}) == sorted(STEPS.split(","))  # orientation:wrist
         runs = json.loads(row.runs_json)
-        phases_run = next(r for r in runs if r["step"] == "phases")
+        phases_run = next(r for r in runs if r["step"] == "phases:wrist")  # one run per IMU
         assert phases_run["params"]["repetitions"]["n_repetitions"] == 3
         assert row.n_repetitions == 3 and row.n_phases == 12
         assert json.loads(row.evaluation_json) == json.loads(json.dumps(ev))
@@ -97,7 +97,7 @@ def test_catalog_is_incremental(archive, tmp_path):
     row = df.loc[str(changed.resolve())]
     assert row["file_size"] == changed.stat().st_size
     runs = json.loads(row["runs_json"])
-    assert runs[-1]["step"] == "phases" and runs[-1]["params"]["static_margin_s"] == 0.1
+    assert runs[-1]["step"] == "phases:wrist" and runs[-1]["params"]["static_margin_s"] == 0.1
     assert df.loc[str((root / "S02" / "junk.mcap").resolve()), "error"].startswith("Archive")
 
 

@@ -401,7 +401,22 @@ def doctor(file: str, verbose: bool, as_json: bool, original: str | None = None)
 @click.option("--imu", default=None, help="which IMU's device clock --clock device means (default: the only one)")
 @click.option("--start-ns", type=int, default=None, help="parquet/csv: first stored time stamp to include (ns)")
 @click.option("--end-ns", type=int, default=None, help="parquet/csv: stored time stamp to stop at (ns, exclusive)")
-@click.option("--name", "names", multiple=True, metavar="IMU=COLUMN", help="sto: column of an IMU (wrist=hand_r_imu)")
+@click.option(
+    "--name",
+    "names",
+    multiple=True,
+    metavar="IMU=COLUMN",
+    help="sto: column (OpenSim body frame) of an IMU, by name, serial or label (wrist=hand_r_imu; repeatable); "
+    "a name that matches no IMU is refused",
+)
+@click.option(
+    "--source",
+    "orientation_source",
+    type=click.Choice(["auto", "derived", "device"]),
+    default="auto",
+    show_default=True,
+    help="sto: per IMU, imulog's /derived/orientation (auto: where present) or the device's own /orientation",
+)
 @click.option("--rate", type=float, default=None, help="sto: rate of the uniform grid in Hz (default: the IMU's)")
 @click.option("--no-imu", is_flag=True, help="c3d: markers, analogs and events only")
 @overwrite_option("replace OUTPUT (a file, or the bids folder) if it exists; refused otherwise")
@@ -416,6 +431,7 @@ def export(
     start_ns: int | None,
     end_ns: int | None,
     names: tuple[str, ...],
+    orientation_source: str,
     rate: float | None,
     no_imu: bool,
     overwrite: bool,
@@ -427,7 +443,8 @@ def export(
     parquet/csv  one channel: time (timestamp with the trial's time zone), t[s], t_ns, then
                  columns with units in their names (acc_x[m/s^2]); Parquet also keeps units
                  and provenance in field and schema metadata
-    sto          OpenSense orientation file from /derived/orientation/* (w,x,y,z per IMU)
+    sto          OpenSense orientation file, every IMU: /derived/orientation/* or the device's
+                 own /orientation/* (w,x,y,z per IMU; says when headings are not shared)
     bids         a BIDS-motion folder: *_motion.tsv, *_channels.tsv, *_motion.json, *_events.tsv
     c3d          markers (mm), IMU and analog channels as analogs, phases as events
 
@@ -440,6 +457,7 @@ def export(
       imulog export trial.mcap --topic /imu/wrist -o wrist.parquet
       imulog export trial.mcap --topic /derived/phases/wrist -o phases.csv --clock reference
       imulog export trial.mcap -o trial.sto --name wrist=hand_r_imu
+      imulog export xsens.mcap -o xsens.sto --source device --name 00B421AF=pelvis_imu
       imulog export trial.mcap --to bids -o bids/
       imulog export trial.mcap -o trial.c3d
     """
@@ -473,7 +491,15 @@ def export(
             elif target == "sto":
                 from imulog.export.sto import export_sto
 
-                result = export_sto(trial, output, clock=clock or "device", imu=imu, names=rename, rate_hz=rate)
+                result = export_sto(
+                    trial,
+                    output,
+                    clock=clock or "device",
+                    imu=imu,
+                    names=rename,
+                    rate_hz=rate,
+                    source=orientation_source,
+                )
             elif target == "bids":
                 from imulog.export.bids import export_bids
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from imulog.commands.imus import imu_option
 from imulog.commands.outputs import overwrite_option, refuse_existing
 
 
@@ -102,35 +103,68 @@ def calibrate(
 @click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option(
     "--calibration",
-    "calibration_file",
-    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    "calibrations",
+    multiple=True,
     required=True,
-    help="Calibration JSON written by `imulog calibrate`.",
+    metavar="[IMU=]FILE",
+    help="Calibration JSON written by `imulog calibrate`: FILE for the IMUs chosen by --imu (default: every IMU), "
+    "or IMU=FILE (repeatable) for one sensor's own calibration.",
 )
-@click.option("--imu", default=None, help="IMU name (channel /imu/NAME); default: the only IMU, else 'wrist'.")
+@imu_option("IMU to calibrate with a plain --calibration FILE (repeatable); default: every IMU of the trial.")
 @click.option("--force", is_flag=True, help="Recompute even when the same calibration is already applied.")
-def process_calibrate(trial: Path, calibration_file: Path, imu: str | None, force: bool) -> None:
+def process_calibrate(trial: Path, calibrations: tuple[str, ...], imus: tuple[str, ...], force: bool) -> None:
     """Apply a calibration file to TRIAL: writes /derived/calibrated/IMU (acc m/s^2, gyr rad/s).
 
     The raw channel is never modified; `imulog process orientation` then uses the calibrated
-    channel automatically (--source auto).
+    channel automatically (--source auto). One run per IMU (calibrate:IMU), one summary table.
 
     \b
     Examples:
       imulog process calibrate trial.mcap --calibration bluebuddy_cal.json
+      imulog process calibrate two.mcap --calibration left=left_cal.json --calibration right=right_cal.json
       imulog process orientation trial.mcap
     """
-    from imulog.archive.errors import ArchiveError
-    from imulog.process.calibration import Calibration
+    from imulog.commands.imus import choose_imus, run_per_imu
     from imulog.steps.calibrate import run_calibrate
-    from imulog.steps.common import error_line
+
+    files = _calibration_files(calibrations)
+    if None in files:
+        if len(files) > 1:
+            raise click.BadParameter("give one FILE, or IMU=FILE pairs, not both", param_hint="--calibration")
+        names = choose_imus(trial, imus)
+        files = dict.fromkeys(names, files[None])
+    else:
+        if imus:
+            raise click.BadParameter("IMU=FILE pairs name their IMUs: leave out --imu", param_hint="--calibration")
+        choose_imus(trial, list(files))  # every named IMU must exist
+    cals = {name: _load_calibration(path) for name, path in files.items()}
+
+    def one(name: str):
+        outcome = run_calibrate(trial, cals[name], imu=name, force=force)
+        text = ("unchanged: " if outcome.skipped else "wrote ") + ", ".join(outcome.topics)
+        return outcome, f"/derived/calibrated/{name} from {files[name].name}", text
+
+    run_per_imu(trial, list(cals), one, what="calibrate")
+
+
+def _calibration_files(values: tuple[str, ...]) -> dict[str | None, Path]:
+    """``FILE`` -> {None: FILE}; ``IMU=FILE`` -> {IMU: FILE}; every file must exist."""
+    out: dict[str | None, Path] = {}
+    for value in values:
+        name, sep, file = value.partition("=")
+        key, path = (name.strip(), Path(file)) if sep and not Path(value).exists() else (None, Path(value))
+        if not path.is_file():
+            raise click.BadParameter(f"no calibration file {path}", param_hint="--calibration")
+        if key in out:
+            raise click.BadParameter(f"{key or 'FILE'} given twice", param_hint="--calibration")
+        out[key] = path
+    return out
+
+
+def _load_calibration(path: Path):
+    from imulog.process.calibration import Calibration
 
     try:
-        cal = Calibration.from_dict(json.loads(calibration_file.read_text()))
-    except (ValueError, KeyError) as exc:
-        raise click.ClickException(f"{calibration_file}: {exc}") from exc
-    try:
-        outcome = run_calibrate(trial, cal, imu=imu, force=force)
-    except (ArchiveError, ValueError, KeyError, OSError) as exc:
-        raise click.ClickException(error_line(trial, exc)) from exc
-    click.echo(("unchanged: " if outcome.skipped else "wrote ") + ", ".join(outcome.topics))
+        return Calibration.from_dict(json.loads(path.read_text()))
+    except (ValueError, KeyError, OSError) as exc:
+        raise click.ClickException(f"{path}: {exc}") from exc

@@ -8,6 +8,7 @@ from typing import Any
 
 import click
 
+from imulog.commands.imus import imu_option, step_record
 from imulog.steps.epochs import EpochParams
 
 _D = EpochParams()
@@ -42,7 +43,7 @@ def format_summary(r: dict[str, Any]) -> str:
 
 @click.command("epochs")
 @click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--imu", default=None, help="IMU name (channel /imu/NAME); default: the only IMU, else 'wrist'.")
+@imu_option()
 @click.option(
     "--epoch-s",
     "epochs_s",
@@ -60,7 +61,7 @@ def format_summary(r: dict[str, Any]) -> str:
 @click.option("--json", "as_json", is_flag=True, help="Print the imulog.epochs record as JSON.")
 def process_epochs(
     trial: Path,
-    imu: str | None,
+    imus: tuple[str, ...],
     epochs_s: tuple[float, ...],
     no_calibrate: bool,
     valid_day_hours: float,
@@ -83,20 +84,23 @@ def process_epochs(
     """
     from dataclasses import replace
 
-    from imulog.archive import TrialReader
-    from imulog.archive.errors import ArchiveError
-    from imulog.steps.common import error_line
+    from imulog.commands.imus import choose_imus, run_per_imu
     from imulog.steps.epochs import RECORD, run_epochs
 
     params = replace(
         _D, epochs_s=tuple(epochs_s) or _D.epochs_s, calibrate=not no_calibrate, valid_day_hours=valid_day_hours
     )
-    try:
-        run_epochs(trial, imu=imu, params=params, force=force)
-        with TrialReader(trial) as reader:
-            record = reader.metadata.get(RECORD)
-    except (ArchiveError, ValueError, KeyError, OSError) as exc:
-        raise click.ClickException(error_line(trial, exc)) from exc
-    if record is None:
-        raise click.ClickException(f"{trial}: no {RECORD} record after the step")
-    click.echo(json.dumps(record, indent=2) if as_json else format_summary(record))
+    names = choose_imus(trial, imus, needs=("acc",))
+    records: dict[str, dict] = {}
+
+    def one(name: str):
+        outcome = run_epochs(trial, imu=name, params=params, force=force)
+        record = records[name] = step_record(trial, RECORD, name)
+        text = format_summary(record)
+        return outcome, text.splitlines()[0], text
+
+    if as_json:  # the record(s) only: one IMU's record, or {imu: record}
+        run_per_imu(trial, names, one, what="epochs", echo=False)
+        click.echo(json.dumps(records[names[0]] if len(names) == 1 else records, indent=2))
+        return
+    run_per_imu(trial, names, one, what="epochs")

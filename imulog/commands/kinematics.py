@@ -24,9 +24,15 @@ def _floats(text: str | None, n: int, option: str) -> tuple[float, ...] | None:
 @click.option(
     "--upper-arm",
     default=None,
-    help="Upper-arm IMU name (/imu/NAME); default from imulog.kinematics, else 'upper_arm'.",
+    help="Upper-arm IMU name (/imu/NAME); default from imulog.kinematics, else the sensor whose name or placement "
+    "says upper arm (upper_arm, RightUpperArm, humerus_r, a device record's placement/label).",
 )
-@click.option("--forearm", default=None, help="Forearm IMU name; default from imulog.kinematics, else 'forearm'.")
+@click.option(
+    "--forearm",
+    default=None,
+    help="Forearm IMU name; default from imulog.kinematics, else the sensor whose name or placement says forearm "
+    "(forearm, lower arm, radius; a wrist sensor when none does), on the upper arm's side.",
+)
 @click.option(
     "--trunk",
     default=None,
@@ -88,6 +94,8 @@ def process_kinematics(
       imulog process kinematics arm.mcap
       imulog process kinematics arm.mcap --neutral-pose 90,30,0,90,90 --neutral-window 0.5,2.5
       imulog process kinematics trial.mcap --upper-arm ua --forearm fa --no-markers
+      imulog convert xsens/ -o arm.mcap --device-name 00B421AF=right_upper_arm --device-name 00B4227B=right_forearm
+      imulog process kinematics arm.mcap --no-markers             # the IMUs found by their names
       python -m imulog.simulate.arm sway.mcap --trunk-imu --trunk-sway 15
       imulog process kinematics sway.mcap                      # trunk IMU named in the metadata
       imulog info arm.mcap                                     # shows imulog.kinematics_errors

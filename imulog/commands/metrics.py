@@ -8,6 +8,7 @@ from typing import Any
 
 import click
 
+from imulog.commands.imus import imu_option, step_record
 from imulog.steps.metrics import MetricsParams
 
 _D = MetricsParams()  # the one source of defaults (tests/test_cli_defaults.py)
@@ -57,7 +58,7 @@ def format_summary(r: dict[str, Any]) -> str:
 
 @click.command("metrics")
 @click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--imu", default=None, help="IMU name (channel /imu/NAME); default: the only IMU, else 'wrist'.")
+@imu_option()
 @click.option(
     "--noise-level-g",
     type=float,
@@ -129,7 +130,7 @@ def format_summary(r: dict[str, Any]) -> str:
 @click.option("--json", "as_json", is_flag=True, help="Print the imulog.metrics record as JSON.")
 def process_metrics(
     trial: Path,
-    imu: str | None,
+    imus: tuple[str, ...],
     noise_level_g: float,
     arm_usage_rate_hz: float,
     noise_floor_g: float,
@@ -158,7 +159,9 @@ def process_metrics(
       smoothness     velocity peaks, normalised jerk, LDLJ, SPARC per phase, from a trajectory or Vicon
 
     Writes /derived/metrics/activity/IMU (Intervals), /derived/metrics/distance/IMU (distance_cm) and the
-    metadata record imulog.metrics (shown by `imulog info --json`). Same inputs and options: no change.
+    metadata record imulog.metrics (imulog.metrics.IMU for IMUs other than the trial's primary one; shown by
+    `imulog info --json`). Every IMU when no --imu is given, one run each, one summary table. Same inputs and
+    options: no change.
 
     \b
     Examples:
@@ -172,14 +175,17 @@ def process_metrics(
     from click.core import ParameterSource
 
     from imulog.archive.errors import ArchiveError
-    from imulog.steps.common import error_line, pick_imu
-    from imulog.steps.metrics import run_metrics
+    from imulog.commands.imus import choose_imus, run_per_imu
+    from imulog.steps.common import error_line
+    from imulog.steps.metrics import RECORD, run_metrics
 
     ctx = click.get_current_context()
     given = {n for n in ("noise_level_g", "noise_floor_g") if ctx.get_parameter_source(n) != ParameterSource.DEFAULT}
     try:
         if static_trial is not None:
-            level, floor = _noise_from_static(static_trial, imu, m_s, noise_statistic, arm_usage_rate_hz)
+            level, floor = _noise_from_static(
+                static_trial, imus[0] if len(imus) == 1 else None, m_s, noise_statistic, arm_usage_rate_hz
+            )
             noise_level_g = noise_level_g if "noise_level_g" in given else level
             noise_floor_g = noise_floor_g if "noise_floor_g" in given else floor
             click.echo(f"noise from {static_trial}: level {level:.4f} g ({noise_statistic}), floor {floor:.4f} g")
@@ -199,22 +205,25 @@ def process_metrics(
         )
         params.distance()  # validates the histogram and activity parameters before any I/O
         params.activity(100.0)
-        from imulog.archive import TrialReader
-
-        with TrialReader(trial) as reader:
-            name = pick_imu(reader.topics(), imu)
-        outcome = run_metrics(trial, imu=name, params=params, force=force)
-        with TrialReader(trial) as reader:
-            record = reader.metadata.get("imulog.metrics")
     except (ArchiveError, ValueError, KeyError, OSError) as exc:
         raise click.ClickException(error_line(trial, exc)) from exc
-    if record is None:
-        raise click.ClickException(f"{trial}: no imulog.metrics record after the step")
-    if as_json:
-        click.echo(json.dumps(record, indent=2))
+    names = choose_imus(trial, imus, needs=("acc",))
+    records: dict[str, dict] = {}
+
+    def one(name: str):
+        outcome = run_metrics(trial, imu=name, params=params, force=force)
+        record = records[name] = step_record(trial, RECORD, name)
+        text = format_summary(record)
+        skipped = getattr(outcome, "skipped", False)
+        usage = next((line.strip() for line in text.splitlines() if line.strip().startswith("arm usage")), "")
+        short = text.splitlines()[0].split(": ", 1)[-1] + (f", {usage}" if usage else "")
+        return outcome, short, ("(unchanged: same inputs and parameters) " if skipped else "") + text
+
+    if as_json:  # the record(s) only: one IMU's record, or {imu: record}
+        run_per_imu(trial, names, one, what="metrics", echo=False)
+        click.echo(json.dumps(records[names[0]] if len(names) == 1 else records, indent=2))
         return
-    skipped = getattr(outcome, "skipped", False)
-    click.echo(("(unchanged: same inputs and parameters) " if skipped else "") + format_summary(record))
+    run_per_imu(trial, names, one, what="metrics")
 
 
 def _noise_from_static(

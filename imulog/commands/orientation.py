@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from imulog.commands.imus import imu_option
 from imulog.process.orientation import OrientationParams
 
 BACKEND_CHOICES = ["vqf_offline", "vqf", "madgwick", "imufusion", "rts"]
@@ -14,7 +15,7 @@ _D = OrientationParams()  # the one source of defaults (tests/test_cli_defaults.
 
 @click.command("orientation")
 @click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--imu", default=None, help="IMU name (channel /imu/NAME); default: the only IMU, else 'wrist'.")
+@imu_option()
 @click.option(
     "--backend",
     type=click.Choice(BACKEND_CHOICES),
@@ -47,7 +48,7 @@ _D = OrientationParams()  # the one source of defaults (tests/test_cli_defaults.
 @click.option("--force", is_flag=True, help="Recompute even when the same parameters are already recorded.")
 def process_orientation(
     trial: Path,
-    imu: str | None,
+    imus: tuple[str, ...],
     backend: str,
     beta: float,
     use_mag: bool,
@@ -60,19 +61,21 @@ def process_orientation(
 
     Writes /derived/orientation/IMU (qw,qx,qy,qz sensor-to-global, z up), /derived/acc_global/IMU
     (m/s^2, gravity removed) and /derived/orientation_static/IMU (gyro-norm static mask), on the IMU
-    clock. Running twice with the same options changes nothing.
+    clock. Every IMU of the trial is oriented when no --imu is given, one run each, with one summary
+    table (the 6D global frame of each has its own arbitrary heading: the table says so). Running twice
+    with the same options changes nothing.
 
     \b
     Examples:
       imulog process orientation trial.mcap                          # VQF offline (default)
       imulog process orientation trial.mcap --backend madgwick --beta 0.03   # the thesis's setting
       imulog process orientation trial.mcap --backend vqf --mag      # causal VQF with magnetometer
+      imulog process orientation opals.mcap --imu upper --imu lower  # two of the trial's IMUs
     """
     from dataclasses import replace
 
-    from imulog.archive.errors import ArchiveError
-    from imulog.steps.common import error_line
-    from imulog.steps.orientation import run_orientation
+    from imulog.commands.imus import choose_imus, run_per_imu
+    from imulog.steps.orientation import global_frame, run_orientation
 
     if beta <= 0:
         raise click.ClickException(f"--beta must be positive, got {beta}")
@@ -83,11 +86,20 @@ def process_orientation(
         use_mag=use_mag,
         static=replace(_D.static, threshold_rad_s=static_threshold, min_duration_s=static_min_s),
     )
-    try:
-        outcome = run_orientation(trial, imu=imu, params=params, source=source, force=force)
-    except (ArchiveError, ValueError, KeyError, OSError, RuntimeError) as exc:
-        raise click.ClickException(error_line(trial, exc)) from exc
-    if outcome.skipped:
-        click.echo(f"unchanged (same inputs and parameters): {', '.join(outcome.topics)}")
-    else:
-        click.echo(f"wrote {', '.join(outcome.topics)} (run {outcome.run})")
+    frame = global_frame(params)
+
+    def one(name: str):
+        outcome = run_orientation(trial, imu=name, params=params, source=source, force=force)
+        if outcome.skipped:
+            text = f"unchanged (same inputs and parameters): {', '.join(outcome.topics)}"
+        else:
+            text = f"wrote {', '.join(outcome.topics)} (run {outcome.run})"
+        return outcome, f"/derived/orientation/{name}, {params.backend}, global frame {frame}", text
+
+    names = choose_imus(trial, imus, needs=("acc", "gyr"))
+    run_per_imu(trial, names, one, what="orientation")
+    if len(names) > 1 and not use_mag:
+        click.echo(
+            f"note: {len(names)} orientations without magnetometer: each has its own arbitrary heading "
+            "(no common heading frame; --mag where the magnetic field is consistent)"
+        )

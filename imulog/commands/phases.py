@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from imulog.commands.imus import imu_option, step_record
 from imulog.process.segmentation.pipeline import METHODS, PROTOCOLS, PhaseParams
 
 _D = PhaseParams()  # the one source of defaults (tests/test_cli_defaults.py); protocol/repetitions: the trial's
@@ -117,7 +118,7 @@ def _protocol_from_trial(trial: Path) -> tuple[str, int]:
 
 @click.command("phases")
 @click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--imu", default=None, help="IMU name (channel /imu/NAME); default: the only IMU, else 'wrist'.")
+@imu_option()
 @click.option("--method", type=click.Choice(METHODS), default=_D.method, show_default=True)
 @click.option(
     "--threshold",
@@ -168,7 +169,7 @@ def _protocol_from_trial(trial: Path) -> tuple[str, int]:
 @click.option("--quiet", is_flag=True, help="Print only the one-line summary.")
 def process_phases(
     trial: Path,
-    imu: str | None,
+    imus: tuple[str, ...],
     method: str,
     threshold: str,
     repetitions: int | None,
@@ -188,7 +189,9 @@ def process_phases(
     Writes /derived/movements/IMU, /derived/phases/IMU (R2G trials: reach, lift, return_bottle,
     return_hand with task_index = repetition; other tasks: one phase 'movement' per movement),
     /derived/static/IMU (1 = zero velocity) and the metadata record imulog.timing (per phase: start,
-    end, duration s, peak angular velocity rad/s). Running twice with the same options changes nothing.
+    end, duration s, peak angular velocity rad/s; imulog.timing.IMU for IMUs other than the trial's
+    primary one). Every IMU is segmented when no --imu is given, one run each, with one summary table.
+    Running twice with the same options changes nothing.
 
     \b
     Examples:
@@ -198,8 +201,7 @@ def process_phases(
       imulog process phases slide.mcap --method template --repetitions 30 --phases-per-repetition 1
       imulog process phases walk.mcap --protocol movements --static gyro-norm
     """
-    from imulog.archive import ArchiveError, TrialReader
-    from imulog.steps.common import error_line, pick_imu
+    from imulog.commands.imus import choose_imus, run_per_imu
     from imulog.steps.phases import run_phases
 
     thr = _threshold(threshold)
@@ -219,16 +221,14 @@ def process_phases(
         static=static_method,
         gyro_norm=replace(_D.gyro_norm, threshold_rad_s=static_threshold),
     )
-    try:
-        with TrialReader(trial) as reader:
-            pick_imu(reader.topics(), imu)
-        outcome = run_phases(trial, imu=imu, params=params, force=force)
-        with TrialReader(trial) as reader:
-            timing = reader.metadata["imulog.timing"]
-    except (ArchiveError, ValueError, KeyError, OSError) as exc:
-        raise click.ClickException(error_line(trial, exc)) from None
-    skipped = getattr(outcome, "skipped", False)
-    text = format_summary(timing)
-    if quiet:
-        text = text.splitlines()[0]
-    click.echo(("(unchanged: same inputs and parameters) " if skipped else "") + text)
+
+    def one(name: str):
+        outcome = run_phases(trial, imu=name, params=params, force=force)
+        timing = step_record(trial, "imulog.timing", name)
+        text = format_summary(timing)
+        if quiet:
+            text = text.splitlines()[0]
+        skipped = getattr(outcome, "skipped", False)
+        return outcome, text.splitlines()[0], ("(unchanged: same inputs and parameters) " if skipped else "") + text
+
+    run_per_imu(trial, choose_imus(trial, imus, needs=("gyr",)), one, what="phases")

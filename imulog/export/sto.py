@@ -11,7 +11,8 @@ Layout (as OpenSim 4.x writes it, e.g. ``../shared/data/devices/opensense_sto/``
     0<TAB>w,x,y,z<TAB>...
 
 One column per IMU (OpenSense matches them to model frames by name, e.g. ``radius_r_imu``); each
-cell holds the sensor-to-global quaternion ``w,x,y,z`` of ``/derived/orientation/{imu}``. Rows are on a
+cell holds the sensor-to-global quaternion ``w,x,y,z`` of ``/derived/orientation/{imu}``, or of the device's own
+estimate ``/orientation/{imu}`` (Xsens, APDM, MVN, OpenSense ``.sto``) for an IMU imulog has not oriented. Rows are on a
 uniform grid (``DataRate``): several IMUs are slerped onto the first one's grid on the chosen clock;
 samples across a time gap longer than 1.5 periods are ``nan,nan,nan,nan``. The global frame is imulog's
 (z up); OpenSense's IMU placer turns it to OpenSim's y-up ground with ``sensor_to_opensim_rotations``
@@ -87,6 +88,91 @@ def default_name(imu: str) -> str:
     return imu if imu.endswith("_imu") else f"{imu}_imu"
 
 
+DEVICE_PREFIX = "/orientation/"
+SOURCES = ("auto", "derived", "device")
+
+
+def orientation_topics(trial, source: str = "auto") -> dict[str, str]:
+    """IMU name -> the orientation channel exported for it: ``/derived/orientation/IMU`` (imulog's) or
+    ``/orientation/IMU`` (the device's own estimate: Xsens, APDM, MVN, OpenSense ``.sto``).
+
+    ``source``: ``auto`` takes imulog's where there is one and the device's otherwise; ``derived`` or ``device``
+    take only that kind. Every IMU of the trial with an orientation of the kind chosen is listed, in trial order.
+    """
+    if source not in SOURCES:
+        raise ExportError(f"{trial.path}: orientation source must be one of {', '.join(SOURCES)}, not {source!r}")
+    topics = trial.topics()
+    derived = {t[len(ORIENTATION_PREFIX) :]: t for t in topics if t.startswith(ORIENTATION_PREFIX)}
+    device = {t[len(DEVICE_PREFIX) :]: t for t in topics if t.startswith(DEVICE_PREFIX)}
+    order = [t.rsplit("/", 1)[-1] for t in topics if t.startswith((ORIENTATION_PREFIX, DEVICE_PREFIX, "/imu/"))]
+    out: dict[str, str] = {}
+    for name in dict.fromkeys(order):
+        if source in ("auto", "derived") and name in derived:
+            out[name] = derived[name]
+        elif source in ("auto", "device") and name in device:
+            out[name] = device[name]
+    return out
+
+
+def heading_frame(trial, topic: str) -> tuple[str, bool]:
+    """(the global frame of an orientation channel, whether other IMUs can share it).
+
+    imulog's: its ``global_frame`` (ENU with the magnetometer fused, shareable; 6D: z-up with an arbitrary
+    heading of its own, never shared). The device's: the device's global frame as its export declares it
+    (``Coordinate system`` of an Xsens header), which the sensors of one export share."""
+    import json
+
+    meta = trial.channel(topic).metadata
+    if topic.startswith(ORIENTATION_PREFIX):
+        params = meta.get("params") or "{}"
+        frame = str((json.loads(params) if isinstance(params, str) else params).get("global_frame") or "unknown")
+        return frame, "arbitrary heading" not in frame
+    name = topic[len(DEVICE_PREFIX) :]
+    device = trial.metadata.get(f"imulog.device.{name}") or {}
+    header = device.get("header") or {}
+    system = header.get("Coordinate system") or device.get("coordinate_system")
+    fmt = device.get("format") or device.get("model") or "device"
+    return (f"the {fmt} export's own" + (f" ({system})" if system else "")), True
+
+
+def resolve_names(trial, imus: Sequence[str], names: Mapping[str, str]) -> dict[str, str]:
+    """``--name KEY=COLUMN`` -> IMU -> column: KEY is an IMU's name, or its device serial or label
+    (``imulog.device.IMU``), case-insensitive. A KEY that matches no exported IMU is an error."""
+    keys: dict[str, str] = {}
+    for imu in imus:
+        device = trial.metadata.get(f"imulog.device.{imu}") or {}
+        for key in (imu, device.get("serial"), device.get("label")):
+            if key:
+                keys.setdefault(str(key).lower(), imu)
+    out: dict[str, str] = {}
+    for key, column in names.items():
+        imu = keys.get(str(key).lower())
+        if imu is None:
+            raise ExportError(
+                f"{trial.path}: --name {key}={column}: no IMU {key!r} with an orientation "
+                f"(IMUs: {', '.join(imus) or 'none'})"
+            )
+        out[imu] = column
+    return out
+
+
+def _clock_notes(trial, imus: Sequence[str], notes: list[str]) -> list[str]:
+    """The clock's notes, with "not aligned" notes of IMUs that share one recording's clock (one export file, or
+    one Xsens master) replaced by one line saying they share it."""
+
+    def recording(imu: str) -> str | None:
+        device = trial.metadata.get(f"imulog.device.{imu}") or {}
+        return str(device.get("master") or device.get("source") or "") or None
+
+    keys = {recording(i) for i in imus}
+    if len(imus) < 2 or len(keys) != 1 or None in keys:
+        return notes
+    kept = [n for n in notes if "is not aligned; its time stamps are exported as recorded" not in n]
+    if len(kept) < len(notes):
+        kept.append(f"the {len(imus)} IMUs share the clock of one recording ({keys.pop()}): exported as recorded")
+    return kept
+
+
 def export_sto(
     trial,
     out: str | Path,
@@ -96,30 +182,38 @@ def export_sto(
     imus: Sequence[str] | None = None,
     names: Mapping[str, str] | None = None,
     rate_hz: float | None = None,
+    source: str = "auto",
 ) -> ExportResult:
-    """Write the trial's ``/derived/orientation/*`` channels as one OpenSense ``.sto`` file.
+    """Write the orientation of every IMU of the trial as one OpenSense ``.sto`` file.
 
-    ``imus``: which IMUs (default: every IMU with an orientation channel); ``names``: IMU -> column name
-    (default ``{imu}_imu``); ``rate_hz``: the grid's rate (default: the first IMU's ``rate_hz``).
+    Per IMU, imulog's ``/derived/orientation/IMU`` or the device's own ``/orientation/IMU`` (``source``, see
+    :func:`orientation_topics`); each source is named in the result's notes and ``topics``. ``imus``: which IMUs
+    (default: all); ``names``: IMU (or serial, or label) -> column name (default ``{imu}_imu``), refused when it
+    matches no IMU; ``rate_hz``: the grid's rate (default: the first IMU's). When the IMUs' orientations do not
+    share one heading frame (6D orientations each have their own heading), a note says so.
     """
-    available = [t[len(ORIENTATION_PREFIX) :] for t in trial.topics() if t.startswith(ORIENTATION_PREFIX)]
-    chosen = list(imus) if imus else available
+    available = orientation_topics(trial, source)
+    chosen = list(imus) if imus else list(available)
     if not chosen:
+        hint = "" if source == "derived" else " or /orientation/*"
         raise ExportError(
-            f"{trial.path}: no /derived/orientation/* channel: run `imulog process orientation {trial.path}` first"
+            f"{trial.path}: no /derived/orientation/*{hint} channel: run `imulog process orientation {trial.path}` first"
         )
     missing = [i for i in chosen if i not in available]
     if missing:
         raise ExportError(
-            f"{trial.path}: no /derived/orientation/{missing[0]} (orientation channels: {', '.join(available) or 'none'})"
+            f"{trial.path}: no orientation of IMU {missing[0]!r} (orientations: {', '.join(available) or 'none'})"
         )
+    rename = resolve_names(trial, chosen, names or {})
     tc = trial_clock(trial, clock, imu)
+    raw_imus = set(trial.topics())
     streams = []
     for name in chosen:
-        topic = ORIENTATION_PREFIX + name
+        topic = available[name]
         s = trial.read(topic)
-        streams.append((name, tc.times(topic, s.t_ns), s.values))
-    first_info = trial.channel(ORIENTATION_PREFIX + chosen[0])
+        clock_topic = f"/imu/{name}" if f"/imu/{name}" in raw_imus else topic  # device estimates: the IMU's clock
+        streams.append((name, tc.times(clock_topic, s.t_ns), s.values))
+    first_info = trial.channel(available[chosen[0]])
     rate = float(rate_hz or first_info.rate_hz or 0.0)
     if rate <= 0:
         raise ExportError(f"{trial.path}: cannot tell the orientation rate; give --rate")
@@ -127,20 +221,32 @@ def export_sto(
     period = 1e9 / rate
     n = int(np.floor((t_first[-1] - t_first[0]) / period + 1e-9)) + 1 if len(t_first) else 0
     grid = t_first[0] + np.round(np.arange(n) * period).astype(np.int64) if n else np.zeros(0, np.int64)
-    columns = [(names or {}).get(name, default_name(name)) for name in chosen]
+    columns = [rename.get(name, default_name(name)) for name in chosen]
     if len(set(columns)) != len(columns):
         raise ExportError(f"{out}: two IMUs get the same column name ({', '.join(columns)})")
     quats = [resample_orientation(t, q, grid, period) for _, t, q in streams]
     text = format_sto(seconds_from(grid, tc.origin_ns), columns, quats, rate)
     with atomic_file(out) as tmp:
         tmp.write_text(text)
+    notes = _clock_notes(trial, chosen, list(tc.notes))
+    frames = {name: heading_frame(trial, available[name]) for name in chosen}
+    for name, column in zip(chosen, columns, strict=True):
+        kind = "imulog's" if available[name].startswith(ORIENTATION_PREFIX) else "the device's"
+        notes.append(f"{column}: {available[name]} ({kind}; global frame {frames[name][0]})")
+    shared = {frame for frame, ok in frames.values()}
+    if len(chosen) > 1 and (len(shared) > 1 or not all(ok for _, ok in frames.values())):
+        notes.append(
+            f"the {len(chosen)} IMUs' orientations do not share one heading frame ("
+            + "; ".join(f"{n}: {f}" for n, (f, _) in frames.items())
+            + "): segment headings in this file do not relate"
+        )
     return ExportResult(
         path=str(out),
         format="sto",
         clock=clock,
         rows=n,
         columns=["time", *columns],
-        topics=[ORIENTATION_PREFIX + c for c in chosen],
+        topics=[available[c] for c in chosen],
         files=[str(out)],
-        notes=list(tc.notes),
+        notes=notes,
     )

@@ -31,6 +31,47 @@ def pick_imu(topics: list[str], imu: str | None, *, prefix: str = "/imu/", missi
     raise ValueError(f"choose an IMU with --imu among: {', '.join(names)}")
 
 
+def imu_names(topics: list[str], prefix: str = "/imu/") -> list[str]:
+    """Names of the IMUs with a ``{prefix}NAME`` channel, in the trial's order."""
+    return [t[len(prefix) :] for t in topics if t.startswith(prefix) and "/" not in t[len(prefix) :]]
+
+
+def primary_imu(topics: list[str], metadata: Mapping[str, Mapping[str, Any]]) -> str | None:
+    """The IMU whose results keep the trial-level record names (``imulog.timing``, ``imulog.metrics``,
+    ``imulog.epochs``) whatever ran first: the one ``imulog.alignment`` names, else the only IMU, else ``wrist``;
+    None when the trial names none of these (then the first IMU a step runs on keeps them)."""
+    names = imu_names(topics)
+    aligned = str((metadata.get("imulog.alignment") or {}).get("imu") or "").removeprefix("/imu/")
+    for candidate in (aligned, names[0] if len(names) == 1 else "", "wrist"):
+        if candidate and candidate in names:
+            return candidate
+    return None
+
+
+def _owner(record: Mapping[str, Any] | None) -> str | None:
+    imu = (record or {}).get("imu")
+    return str(imu).removeprefix("/imu/") if imu else None
+
+
+def record_for(base: str, imu: str, topics: list[str], metadata: Mapping[str, Mapping[str, Any]]) -> str:
+    """The metadata record a per-IMU step writes for ``imu``: ``base`` for the trial's primary IMU
+    (:func:`primary_imu`; without one, for the IMU that already owns ``base``, or the first to write it) and
+    ``base.IMU`` for the others, so that several IMUs never overwrite each other."""
+    primary = primary_imu(topics, metadata)
+    if primary is not None:
+        return base if imu == primary else f"{base}.{imu}"
+    owner = _owner(metadata.get(base))
+    return base if owner in (None, imu) else f"{base}.{imu}"
+
+
+def record_of(base: str, imu: str, metadata: Mapping[str, Mapping[str, Any]]) -> str | None:
+    """The name of the record a per-IMU step wrote for ``imu`` (``base`` when it names ``imu``, else
+    ``base.IMU``), None when there is none. Records that name no IMU (older trials) count as the IMU's."""
+    if base in metadata and _owner(metadata.get(base)) in (None, imu):
+        return base
+    return f"{base}.{imu}" if f"{base}.{imu}" in metadata else None
+
+
 def alignment_for(metadata: Mapping[str, Mapping[str, Any]], imu_topic: str) -> dict[str, Any] | None:
     """The alignment record of ``imu_topic``: ``imulog.alignment`` if it concerns ``imu_topic`` (or names no
     IMU), else ``imulog.alignment.{imu}`` (written when several IMUs are aligned together), else None."""

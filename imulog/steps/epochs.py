@@ -243,11 +243,12 @@ def run_epochs(path, *, imu: str | None = None, params: EpochParams | None = Non
     from imulog.archive import TrialReader
     from imulog.archive.streaming import StreamPieces
     from imulog.steps.base import StepResult, run_step
-    from imulog.steps.common import pick_imu
+    from imulog.steps.common import pick_imu, record_for
 
     p = params or EpochParams()
     with TrialReader(path) as trial:
         name = pick_imu(trial.topics(), imu)
+        record_name = record_for(RECORD, name, trial.topics(), trial.metadata)
     imu_topic = f"/imu/{name}"
 
     def compute(trial) -> StepResult:
@@ -257,11 +258,11 @@ def run_epochs(path, *, imu: str | None = None, params: EpochParams | None = Non
             topics=[f"/derived/epochs/{e:g}s/{name}" for e in p.epochs_s],
             pieces=lambda: epoch_pieces(path, imu_topic, name, p, record, str(start_time) if start_time else None),
         )
-        return StepResult(streams=[pieces], metadata={RECORD: record})
+        return StepResult(streams=[pieces], metadata={record_name: record})
 
     return run_step(
         path,
-        step=STEP,
+        step=f"{STEP}:{name}",
         algorithm=ALGORITHM,
         params={"imu": name, **p.to_dict()},
         inputs=[imu_topic],

@@ -80,10 +80,24 @@ def resolve_config(metadata: dict[str, dict[str, Any]], options: KinematicsOptio
 
 
 def imu_names(topics: list[str], metadata: dict, options: KinematicsOptions) -> tuple[str, str]:
+    """(upper-arm IMU, forearm IMU): the options, else ``imulog.kinematics``, else the trial's sensor names and
+    placements (:mod:`imulog.steps.placements`)."""
+    from imulog.steps.placements import arm_imus, partner
+
     kin = metadata.get(META, {}) or {}
-    ua = options.upper_arm or kin.get("upper_arm_imu", "upper_arm")
-    fa = options.forearm or kin.get("forearm_imu", "forearm")
+    ua = options.upper_arm or kin.get("upper_arm_imu")
+    fa = options.forearm or kin.get("forearm_imu")
     have = [t.split("/", 2)[2] for t in topics if t.startswith("/imu/")]
+    hint = f"; choose with --upper-arm/--forearm or set {META}.upper_arm_imu/forearm_imu"
+    try:
+        if ua is None and fa is None:
+            ua, fa = arm_imus(have, metadata)
+        elif ua is None:
+            ua = partner("upper_arm", fa, have, metadata) if fa in have else "upper_arm"
+        elif fa is None:
+            fa = partner("forearm", ua, have, metadata) if ua in have else "forearm"
+    except ValueError as exc:
+        raise ValueError(f"{exc}{hint}") from None
     for role, name in (("upper-arm", ua), ("forearm", fa)):
         if name not in have:
             raise ValueError(

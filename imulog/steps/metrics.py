@@ -30,7 +30,7 @@ from imulog.process.metrics import (
     repetition_durations,
     smoothness,
 )
-from imulog.steps.common import alignment_for, nominal_rate_hz, pick_imu
+from imulog.steps.common import alignment_for, nominal_rate_hz, pick_imu, record_for
 from imulog.steps.metrics_windows import metric_pieces, metric_plan
 from imulog.steps.windows import WindowParams, channel_rate_hz
 
@@ -256,6 +256,7 @@ def run_metrics(
     with TrialReader(path) as trial:
         topics = trial.topics()
         name = pick_imu(topics, imu)
+        record_name = record_for(RECORD, name, topics, trial.metadata)
         traj_topic = pick_trajectory(topics, p.trajectory)
         info = trial.channel(imu_topic_of(name))
         total = info.sample_count
@@ -284,7 +285,7 @@ def run_metrics(
 
         if long:  # daily life over days: core by core while the result is written; the record fills at the end
             topics_out = [f"/derived/metrics/distance/{name}", f"/derived/metrics/activity/{name}"]
-            return StepResult(streams=[StreamPieces(topics=topics_out, pieces=pieces)], metadata={RECORD: record})
+            return StepResult(streams=[StreamPieces(topics=topics_out, pieces=pieces)], metadata={record_name: record})
         activity, distance = whole_streams(pieces())
         phases = trial.read(phase_topic) if phase_topic in topics else None
         trajectory = trial.read(traj_topic) if traj_topic is not None else None
@@ -293,11 +294,11 @@ def run_metrics(
         record = phase_records(record, p, phases, trajectory)
         gaps_done = {k[5:]: v for k, v in record.items() if k.startswith("gaps.")}
         provenance = {"gaps": gaps_done} if gaps_done else {}
-        return StepResult(streams=[activity, distance], metadata={RECORD: record}, provenance=provenance)
+        return StepResult(streams=[activity, distance], metadata={record_name: record}, provenance=provenance)
 
     return run_step(
         path,
-        step=STEP,
+        step=f"{STEP}:{name}",
         algorithm=ALGORITHM,
         params=step_params,
         inputs=inputs,

@@ -27,7 +27,7 @@ import numpy as np
 from imulog.process.gaps import GapParams
 from imulog.process.segmentation.pipeline import PhaseParams
 from imulog.process.segmentation.repetitions import RepetitionParams
-from imulog.steps.common import mean_rate_hz, pick_imu
+from imulog.steps.common import mean_rate_hz, pick_imu, record_for
 from imulog.steps.phases_record import LOW_CONFIDENCE
 from imulog.steps.phases_store import array_source, trial_source
 from imulog.steps.phases_windows import PhaseWindows, phase_pieces, unsupported
@@ -160,6 +160,7 @@ def run_phases(
     windows = windows or PhaseWindows()
     with TrialReader(path) as trial:
         name = pick_imu(trial.topics(), imu)
+        record_name = record_for("imulog.timing", name, trial.topics(), trial.metadata)
         params = params or params_for_trial(trial.metadata.get("imulog.trial", {}))
         channel = trial.channel(f"/imu/{name}")
         total = int(channel.sample_count or 0)
@@ -198,15 +199,15 @@ def run_phases(
                 ),
                 expected_duration_s=span_ns * 1e-9,
             )
-            return StepResult(streams=[pieces], metadata={"imulog.timing": record})
+            return StepResult(streams=[pieces], metadata={record_name: record})
         stream = trial.read(topic)
         streams, timing = compute_phases(stream.t_ns, stream.gyr, name, params, alignment, stream.acc, gaps)
         provenance = {"gaps": timing["gaps"]} if "gaps" in timing else {}
-        return StepResult(streams=streams, metadata={"imulog.timing": timing}, provenance=provenance)
+        return StepResult(streams=streams, metadata={record_name: timing}, provenance=provenance)
 
     return run_step(
         path,
-        step=STEP,
+        step=f"{STEP}:{name}",
         algorithm=algorithm_name(params),
         params=step_params,
         inputs=[topic],

@@ -45,7 +45,7 @@ from imulog.process.trajectory_opt import (
     reconstruct_repetitions,
     repetition_windows,
 )
-from imulog.steps.common import alignment_for, pick_imu
+from imulog.steps.common import alignment_for, pick_imu, record_of
 from imulog.steps.trajectory_windows import TrajectoryWindows, has_r2g, trajectory_pieces
 from imulog.steps.trajectory_windows import plan as window_plan
 
@@ -282,6 +282,7 @@ def run_trajectory(
             topics, imu, prefix="/derived/acc_global/", missing_hint="run `imulog process orientation` first"
         )
         acc_topic = f"/derived/acc_global/{name}"
+        timing_record = record_of("imulog.timing", name, trial.metadata) or "imulog.timing"  # this IMU's phases
         ch = trial.channel(acc_topic)
         total = int(ch.sample_count or 0)
         rate = channel_rate_hz(total, ch.start_ns, ch.end_ns, ch.rate_hz)
@@ -294,7 +295,7 @@ def run_trajectory(
     inputs += [imu_topic] if use_gyr else []
 
     def window_compute(trial, phases):
-        timing = trial.metadata.get("imulog.timing", {})
+        timing = trial.metadata.get(timing_record, {})
         alignment = alignment_for(trial.metadata, f"/imu/{name}")
         phases_clock = str(timing.get("clock", "reference"))
 
@@ -397,7 +398,7 @@ def run_trajectory(
         algorithm="imulog.trajectory",
         params=step_params,
         inputs=inputs,
-        metadata_inputs=("imulog.alignment", "imulog.anthropometrics", "imulog.timing"),
+        metadata_inputs=("imulog.alignment", "imulog.anthropometrics", timing_record),
         compute=compute,
         force=force,
     )
