@@ -55,7 +55,7 @@ def main() -> int:
         errors = rec.get("accelerometer_errors", {})
         bias = max((abs(v) for v in errors.get("bias_mps2", [0.0])), default=0.0)
 
-        def fig(m: str, q: str) -> str:
+        def fig(m: str, q: str, ev: dict = ev) -> str:
             return "/".join(f"{ev['methods'][m]['summary'][a][q]['mean']:.0f}" for a in "xyz")
 
         markers = ",".join(x.split(":")[-1] for x in al["cluster"]["markers"])
