@@ -223,6 +223,7 @@ def even_times_ns(seconds: np.ndarray, counts: np.ndarray, rate_hz: np.ndarray) 
 
 MAX_INFO_BYTES = 4 << 20  # info.txt is read whole, so its size is bounded
 MAX_RATE_HZ = 10_000.0  # ActiGraph devices sample at 30-100 Hz (IMU 100 Hz); a larger Sample Rate is damage
+MAX_RECORDING_S = 366 * 86400  # a Last Sample Time further from Start Date is not used
 MAX_GAP_S = 31 * 86400  # a longer silence is a clock or file problem, not idle sleep: refused
 INLINE_FILL = 1 << 16  # NaN samples a gap may add to its own piece; longer gaps become pieces of their own
 FILL_PIECE = 1 << 20  # samples per NaN piece of a long gap
@@ -364,7 +365,7 @@ class _State:
     last_sensor_s: int | None = None
     gaps: int = 0
     gap_s: int = 0
-    end_ns: int | None = None  # info.txt Last Sample Time (else Stop Date): the device recorded until then
+    end_ns: int | None = None  # info.txt Last Sample Time (never Stop Date): the device recorded until then
     imu_rate_hz: int | None = None  # samples per SENSOR_DATA record (median of the first batch)
     fill_left: int = 0  # NaN samples still allowed for idle sleep (bounds.fill_budget of the file)
     rate_checked: bool = False  # Sample Rate compared with the samples per ACTIVITY2 record
@@ -688,7 +689,7 @@ def _base_state(path: Path, info: dict[str, str], options: ConvertOptions) -> tu
     text = info.get("Last Sample Time", "").strip()
     if text.isdigit() and 0 < int(text) < 10**19:
         end_ns = ticks_to_epoch_ns(int(text))
-        if start_ns <= end_ns <= start_ns + MAX_GAP_S * NS_PER_S * 12:
+        if start_ns <= end_ns <= start_ns + MAX_RECORDING_S * NS_PER_S:
             st.end_ns = end_ns
             meta["recording_end"] = iso_from_epoch_ns(st.end_ns, offset)
     return st, offset

@@ -28,6 +28,8 @@ from imulog.converters.errors import ConversionError, excerpt
 
 MAX_RATIO = 100  # decompressed / compressed bytes of a container member, checked past RATIO_FLOOR
 RATIO_FLOOR = 64 << 20
+H5_MAX_RATIO = 1100  # an HDF5 filter's expansion: deflate cannot exceed 1032:1 (a constant channel reaches it)
+H5_FLOOR = 64 << 20  # a data set may always declare this much
 FILL_SAMPLES_PER_BYTE = 16  # NaN samples for missing time per byte of input (about 400 B of memory per byte)
 FILL_FLOOR = 1 << 20  # a small file may still fill this many samples (a few minutes at 100 Hz)
 MIN_EPOCH_NS = 0  # 1970-01-01T00:00:00Z
@@ -77,11 +79,12 @@ class BoundedStream:
         self.close()
 
 
-def read_h5(path: str | Path, ds: Any, name: str, *, ratio: float = MAX_RATIO, dtype: Any = None) -> np.ndarray:
+def read_h5(path: str | Path, ds: Any, name: str, *, ratio: float = H5_MAX_RATIO, dtype: Any = None) -> np.ndarray:
     """The data of h5py data set ``ds`` (``name`` in messages), refused when its declared size cannot be stored.
 
     The declared size (shape x item size) must fit in the storage HDF5 allocated for it (x ``ratio`` for a
-    compressed data set; 1 MiB at least) and in the file."""
+    filtered data set; :data:`H5_FLOOR` at least) and in the file: chunks never written (stored 0 bytes, read as
+    the fill value) cannot make a small file declare gigabytes."""
     shape = tuple(int(s) for s in ds.shape)
     itemsize = int(ds.dtype.itemsize)
     declared = int(np.prod(shape, dtype=np.float64) * itemsize) if shape else itemsize
@@ -90,8 +93,11 @@ def read_h5(path: str | Path, ds: Any, name: str, *, ratio: float = MAX_RATIO, d
     except Exception:  # noqa: BLE001 - h5py versions or virtual data sets: fall back to the file size
         stored = Path(path).stat().st_size
     stored = min(stored, Path(path).stat().st_size)
-    compressed = getattr(ds, "compression", None) is not None
-    allowed = max(1 << 20, stored * (ratio if compressed else 1) + (1 << 16))
+    try:  # any filter (gzip, lzf, szip, a plug-in's): the stored bytes may expand up to the ratio limit
+        compressed = ds.id.get_create_plist().get_nfilters() > 0
+    except Exception:  # noqa: BLE001 - not a regular data set: judge by the compression h5py names
+        compressed = getattr(ds, "compression", None) is not None
+    allowed = max(H5_FLOOR, stored * (ratio if compressed else 1) + (1 << 16))
     if declared > allowed:
         raise ConversionError(
             path,

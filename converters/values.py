@@ -46,6 +46,7 @@ QUAT_TOLERANCE = 1e-3
 QUAT_AS_WRITTEN = 1e-6  # within this of unit norm a quaternion is stored exactly as the file has it
 RATE_TOLERANCE = 0.01
 MAX_RATE_SAMPLES = 50_000
+BLOCK_ROWS = 1 << 18  # rows checked at a time
 MAX_LABEL_CHARS = 64  # marker labels and column names taken from files (a 300k-character label costs GBs)
 MAX_TOPIC_CHARS = 200  # readers build topics from sanitize_name (64 characters); longer is a reader's bug
 
@@ -126,14 +127,21 @@ def _mask(a: np.ndarray | None, limit: float, key: str, report: ValueReport) -> 
     """``a`` with non-finite (not NaN) and ``|x| > limit`` values set to NaN; counts into ``report``."""
     if a is None or a.size == 0:
         return a
-    with np.errstate(invalid="ignore"):
-        bad = np.isinf(a) | (np.abs(a) > limit)
-    n = int(np.count_nonzero(bad))
-    if n:
-        a = _writable(a)
-        a[bad] = np.nan
+    n = kept = 0
+    for lo in range(0, len(a), BLOCK_ROWS):  # in blocks: the temporaries stay small whatever the recording
+        block = a[lo : lo + BLOCK_ROWS]
+        with np.errstate(invalid="ignore"):
+            bad = np.abs(block) > limit  # inf included; NaN compares False
+        m = int(np.count_nonzero(bad))
+        if m:
+            if not a.flags.writeable:
+                a = a.copy()
+                block = a[lo : lo + BLOCK_ROWS]
+            block[bad] = np.nan
+            n += m
+        kept += int(np.count_nonzero(np.isfinite(block)))
     report.gaps[key] = report.gaps.get(key, 0) + n
-    report.kept[key] = report.kept.get(key, 0) + int(np.count_nonzero(np.isfinite(a)))
+    report.kept[key] = report.kept.get(key, 0) + kept
     return a
 
 

@@ -323,3 +323,20 @@ def test_zero_padding_is_skipped_at_c_speed():
     batches = list(iter_record_batches(io.BytesIO(data), Path("x.gt3x")))
     assert time.perf_counter() - t < 2.0
     assert sum(len(b.types) for b in batches) == 2
+
+
+def test_hdf5_bound_refuses_unwritten_rows_but_reads_a_constant_compressed_channel(tmp_path):
+    """A channel of zeros compresses about 1000:1 and is real data; rows never written are not."""
+    import h5py
+    from imulog.converters import ConversionError
+    from imulog.converters.bounds import read_h5
+
+    path = tmp_path / "x.h5"
+    with h5py.File(path, "w") as f:
+        f.create_dataset("zeros", data=np.zeros((2_000_000, 3)), compression="gzip", chunks=(100_000, 3))
+        f.create_dataset("declared", shape=(10**9,), dtype="f8", chunks=(10**6,), compression="gzip")
+        f["declared"][: 10**6] = 0.0  # one chunk written: 1e9 rows declared on a few kB
+    with h5py.File(path, "r") as f:
+        assert read_h5(path, f["zeros"], "zeros").shape == (2_000_000, 3)
+        with pytest.raises(ConversionError, match=r"declared declares shape \(1000000000,\)"):
+            read_h5(path, f["declared"], "declared")
