@@ -168,9 +168,8 @@ def salvage(src: str | os.PathLike[str], dst: str | os.PathLike[str], *, overwri
         mm = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
         scan = Scan(memoryview(mm), size, report, hints, summary)
         scan.run()
-        detected = bool(report.lost)
         _reconcile(scan)
-        drop = _locate(scan, detected or bool(report.lost))
+        drop = _locate(scan, detected=bool(report.lost))  # damage found by a record's own check, or none
         _write(scan, scan.buf, dst_path, report, overwrite, drop)
         del scan  # views into the map go with it; the map itself is unmapped when collected
     return report
