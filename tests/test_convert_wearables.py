@@ -20,14 +20,11 @@ from imulog.converters.registry import group_directory
 
 G = 9.80665
 DEG = math.pi / 180.0
-DEVICES = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "devices"
 
 
 @pytest.fixture(scope="module")
-def devices() -> Path:
-    if not DEVICES.is_dir():
-        pytest.skip("shared device samples not available")
-    return DEVICES
+def devices(shared_data: Path) -> Path:
+    return shared_data / "devices"
 
 
 # ------------------------------------------------------------------------------------ ActiLife epoch counts
@@ -317,10 +314,8 @@ def test_shimmer_uncalibrated_export(tmp_path):
     assert convert_file(path, options=ConvertOptions(rate_hz=51.2)).signals  # a rate stands in
 
 
-def test_shimmer_consensys_unix_column_dates_the_trial():
-    path = Path(__file__).resolve().parent.parent / "../shared/data/imu_text/shimmer_consensys_export.csv"
-    if not path.exists():
-        pytest.skip("shared data not available")
+def test_shimmer_consensys_unix_column_dates_the_trial(shared_data: Path):
+    path = shared_data / "imu_text" / "shimmer_consensys_export.csv"
     rec = convert_file(path)
     first_ms = float(pd.read_csv(path, sep=";", skiprows=[0, 2], nrows=1).iloc[0, 0])
     start = datetime.fromisoformat(rec.metadata["imulog.trial"]["start_time"])
