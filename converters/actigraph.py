@@ -634,11 +634,19 @@ def _base_state(path: Path, info: dict[str, str], options: ConvertOptions) -> tu
         if key in info:
             meta[sanitize_name(key)] = info[key]
     st = _State(origin_ns=ticks_to_epoch_ns(start_ticks), rate_hz=rate, accel_scale=scale, name=name, meta=meta)
+    try:
+        iso_from_epoch_ns(st.origin_ns, offset)
+    except (OverflowError, ValueError):
+        raise ConversionError(path, f"info.txt: Start Date {start_ticks} is not a date (.NET ticks)") from None
     for key in ("Last Sample Time", "Stop Date"):
         text = info.get(key, "").strip()
         if text.isdigit() and int(text) > 0:
-            st.end_ns = ticks_to_epoch_ns(int(text))
-            meta["recording_end"] = iso_from_epoch_ns(st.end_ns, offset)
+            end_ns = ticks_to_epoch_ns(int(text))
+            try:
+                meta["recording_end"] = iso_from_epoch_ns(end_ns, offset)
+            except (OverflowError, ValueError):  # not a date: the recording's end stays unknown
+                continue
+            st.end_ns = end_ns
             break
     return st, offset
 
