@@ -99,3 +99,36 @@ def guarded(
     if kind == "memory":
         raise GuardError("memory", f"needed more than {memory_bytes / 2**30:g} GiB of memory")
     raise GuardError("error", str(value))
+
+
+def _refusals_kept(fn: Callable, *args: Any) -> tuple[str, Any]:
+    """``fn(*args)`` with a ConversionError returned as its parts (the parent raises it again, message intact)."""
+    from imulog.converters.errors import ConversionError
+
+    try:
+        return ("ok", fn(*args))
+    except ConversionError as e:
+        return ("refused", (e.problem, e.line, e.column))
+
+
+def guarded_reader(
+    path: Any,
+    what: str,
+    fn: Callable,
+    *args: Any,
+    timeout_s: float = DEFAULT_TIMEOUT_S,
+    memory_bytes: int = DEFAULT_MEMORY_BYTES,
+) -> Any:
+    """A converter's reading function ``fn(*args)`` (which calls the third-party reader ``what``, e.g. ``h5py``) in
+    the guarded child: its ConversionErrors come back unchanged; a hang, crash, runaway allocation or other
+    exception becomes a ConversionError naming ``path`` and ``what``."""
+    from imulog.converters.errors import ConversionError
+
+    try:
+        kind, value = guarded(_refusals_kept, fn, *args, timeout_s=timeout_s, memory_bytes=memory_bytes)
+    except GuardError as e:
+        raise ConversionError(path, f"{what} failed: {e}" if e.kind == "error" else f"{what} {e}") from None
+    if kind == "refused":
+        problem, line, column = value
+        raise ConversionError(path, problem, line=line, column=column)
+    return value

@@ -299,3 +299,30 @@ def test_huge_declared_lengths_are_bounded(shared_data: Path, tmp_path: Path, ke
     fmt, build = HUGE[key]
     for path in build(shared_data, tmp_path):
         _convert_bounded(fmt, path, ConvertOptions(extra={"reader_timeout_s": 10.0}))
+
+
+def _hangs(*args, **kwargs):
+    time.sleep(3600)
+
+
+@pytest.mark.parametrize("module", ["apdm", "broad"])
+def test_h5py_readers_run_guarded(tmp_path: Path, monkeypatch, module: str):
+    """APDM and BROAD HDF5 are read by h5py in the guarded child: a reader that never returns is stopped after the
+    limit with one line; the readers' own refusals keep their message."""
+    h5py = pytest.importorskip("h5py")
+    import importlib
+
+    mod = importlib.import_module(f"imulog.converters.{module}")
+    read = mod.read_apdm_h5 if module == "apdm" else mod.read_broad
+    path = tmp_path / "empty.h5"
+    with h5py.File(path, "w") as f:
+        f.create_group("nothing")
+    with pytest.raises(ConversionError) as refused:
+        read(path, {}) if module == "apdm" else read(path)
+    assert "did not finish" not in str(refused.value) and "\n" not in str(refused.value)
+    monkeypatch.setattr(h5py, "File", _hangs)
+    monkeypatch.setattr(mod, "READER_TIMEOUT_S", 1.0)
+    t0 = time.monotonic()
+    with pytest.raises(ConversionError, match=r"empty\.h5: h5py did not finish within 1 s"):
+        read(path, {}) if module == "apdm" else read(path)
+    assert time.monotonic() - t0 < 15
