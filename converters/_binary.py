@@ -31,16 +31,18 @@ def days_from_civil(year: np.ndarray, month: np.ndarray, day: np.ndarray) -> np.
 
 
 def iso_from_epoch_ns(epoch_ns: int, utc_offset_s: int | None = None) -> str:
-    """ISO-8601 of ``epoch_ns`` (ns since 1970 on the clock's own wall time), millisecond precision.
+    """ISO-8601 of ``epoch_ns`` (ns since 1970 on the clock's own wall time): milliseconds when the time is a whole
+    millisecond, else microseconds (rounded), so the trial's first sample keeps its sub-millisecond time (a .cwa
+    block starts at a 1/65536 s fraction).
 
     ``utc_offset_s`` None gives a naive local time (``2020-02-12T09:03:38.000``); otherwise the wall time is
     written with its offset (``2019-02-14T08:58:00.000-05:00``).
     """
-    wall = datetime(1970, 1, 1) + timedelta(microseconds=int(epoch_ns) // 1000)
-    text = wall.isoformat(timespec="milliseconds")
+    wall = datetime(1970, 1, 1) + timedelta(microseconds=(int(epoch_ns) + 500) // 1000)
+    spec = "milliseconds" if wall.microsecond % 1000 == 0 else "microseconds"
     if utc_offset_s is None:
-        return text
-    return wall.replace(tzinfo=UTC).isoformat(timespec="milliseconds").replace("+00:00", format_offset(utc_offset_s))
+        return wall.isoformat(timespec=spec)
+    return wall.replace(tzinfo=UTC).isoformat(timespec=spec).replace("+00:00", format_offset(utc_offset_s))
 
 
 def format_offset(utc_offset_s: int) -> str:

@@ -22,11 +22,13 @@ DEFAULT_MEMORY_BYTES = 1 << 30
 
 
 class GuardError(RuntimeError):
-    """The guarded call failed; ``kind`` is ``timeout``, ``memory``, ``crash`` or ``error``."""
+    """The guarded call failed; ``kind`` is ``timeout``, ``memory``, ``crash`` or ``error``; ``exc_type`` names
+    the child's exception for ``error`` (for callers that branch on it: never shown to the user)."""
 
-    def __init__(self, kind: str, message: str) -> None:
+    def __init__(self, kind: str, message: str, exc_type: str = "") -> None:
         super().__init__(message)
         self.kind = kind
+        self.exc_type = exc_type
 
 
 def _vm_size() -> int:
@@ -54,7 +56,7 @@ def _child(conn, fn: Callable, args: tuple, memory_bytes: int) -> None:
     except BaseException as e:  # noqa: BLE001 - everything goes back to the parent as one line
         text = str(e).splitlines()[0] if str(e) else ""
         kind = "memory" if "bad_alloc" in text or "std::bad_alloc" in type(e).__name__ else "error"
-        result = (kind, f"{type(e).__name__}: {text}".rstrip(": "))
+        result = (kind, (text or "the reader failed without a message", type(e).__name__))
     try:
         conn.send_bytes(pickle.dumps(result, protocol=pickle.HIGHEST_PROTOCOL))
     except Exception as e:  # noqa: BLE001 - e.g. an unpicklable result
@@ -98,4 +100,38 @@ def guarded(
         return value
     if kind == "memory":
         raise GuardError("memory", f"needed more than {memory_bytes / 2**30:g} GiB of memory")
-    raise GuardError("error", str(value))
+    message, exc_type = value if isinstance(value, tuple) else (str(value), "")
+    raise GuardError("error", message, exc_type)
+
+
+def _refusals_kept(fn: Callable, *args: Any) -> tuple[str, Any]:
+    """``fn(*args)`` with a ConversionError returned as its parts (the parent raises it again, message intact)."""
+    from imulog.converters.errors import ConversionError
+
+    try:
+        return ("ok", fn(*args))
+    except ConversionError as e:
+        return ("refused", (e.problem, e.line, e.column))
+
+
+def guarded_reader(
+    path: Any,
+    what: str,
+    fn: Callable,
+    *args: Any,
+    timeout_s: float = DEFAULT_TIMEOUT_S,
+    memory_bytes: int = DEFAULT_MEMORY_BYTES,
+) -> Any:
+    """A converter's reading function ``fn(*args)`` (which calls the third-party reader ``what``, e.g. ``h5py``) in
+    the guarded child: its ConversionErrors come back unchanged; a hang, crash, runaway allocation or other
+    exception becomes a ConversionError naming ``path`` and ``what``."""
+    from imulog.converters.errors import ConversionError
+
+    try:
+        kind, value = guarded(_refusals_kept, fn, *args, timeout_s=timeout_s, memory_bytes=memory_bytes)
+    except GuardError as e:
+        raise ConversionError(path, f"{what} failed: {e}" if e.kind == "error" else f"{what} {e}") from None
+    if kind == "refused":
+        problem, line, column = value
+        raise ConversionError(path, problem, line=line, column=column)
+    return value

@@ -8,7 +8,8 @@
 (checksum = one's complement of the XOR of header and payload; zero bytes between records are allowed). Read here:
 
 * ACTIVITY2 (0x1A): one second of primary accelerometer samples, int16 LE X,Y,Z / ``ACCEL_SCALE`` (LSB/g) ->
-  ``/imu/<name>``; a 1-byte payload is a USB connection event (ignored). ACTIVITY (0x00): the same, 12-bit packed.
+  ``/imu/<name>``; a 1-byte payload is a USB connection event (ignored). ACTIVITY (0x00): the same, 12-bit packed
+  in Y,X,Z order; ACTIVITY3 (0x1B): 12-bit packed in X,Y,Z order (as ActiGraph's pygt3x reads both).
 * SENSOR_SCHEMA (0x18) + SENSOR_DATA (0x19): the built-in IMU (accelerometer g, gyroscope deg/s, magnetometer uT,
   temperature degC = value / scale + IMU_TEMP_OFFSET) with the columns, bit offsets, endianness and scales the
   schema declares -> ``/imu/<name>_imu``; the n samples of a record are spread evenly over its second.
@@ -54,7 +55,7 @@ TICKS_AT_1970 = 621_355_968_000_000_000  # .NET ticks of 1970-01-01T00:00:00
 BATCH_BYTES = 8 << 20
 SEPARATOR = 0x1E
 ACTIVITY, BATTERY, LUX, METADATA, CAPSENSE, PARAMETERS = 0x00, 0x02, 0x05, 0x06, 0x0D, 0x15
-SENSOR_SCHEMA, SENSOR_DATA, ACTIVITY2 = 0x18, 0x19, 0x1A
+SENSOR_SCHEMA, SENSOR_DATA, ACTIVITY2, ACTIVITY3 = 0x18, 0x19, 0x1A, 0x1B
 NEO_SCALE = 341.0  # LSB/g of NEO, CLE and MRA devices
 PARAMETER_NAMES = {
     (0, 6): "battery_state",
@@ -93,8 +94,9 @@ def ssp_decode(value: int) -> float:
     return significand / 8388608.0 * 2.0**exponent
 
 
-def unpack_12bit_yxz(data: bytes | np.ndarray) -> np.ndarray:
-    """NEO ``activity.bin`` / ACTIVITY bytes -> (N, 3) int16 counts in X, Y, Z order (stored Y, X, Z, 12 bits each).
+def unpack_12bit_yxz(data: bytes | np.ndarray, stored_order: str = "yxz") -> np.ndarray:
+    """NEO ``activity.bin`` / ACTIVITY bytes -> (N, 3) int16 counts in X, Y, Z order (stored Y, X, Z, 12 bits each;
+    ``stored_order="xyz"`` for ACTIVITY3 records, stored X, Y, Z).
 
     Two samples take 9 bytes; an odd last sample uses 5 bytes (its last nibble is unused).
     """
@@ -106,7 +108,7 @@ def unpack_12bit_yxz(data: bytes | np.ndarray) -> np.ndarray:
     v = nibbles[: 9 * n].reshape(n, 3, 3)
     values = (v[:, :, 0] << 8) | (v[:, :, 1] << 4) | v[:, :, 2]
     values = np.where(values > 2047, values - 4096, values).astype(np.int16)
-    return values[:, [1, 0, 2]]
+    return values if stored_order == "xyz" else values[:, [1, 0, 2]]
 
 
 def ticks_to_epoch_ns(ticks: int) -> int:
@@ -420,7 +422,7 @@ def _check_gaps(path: Path, batch: RecordBatch, idx: np.ndarray, jump: np.ndarra
 def _activity(path: Path, batch: RecordBatch, st: _State) -> list[ImuStream]:
     """The batch's primary-accelerometer samples, idle-sleep seconds as NaN samples (one or more pieces)."""
     is_act2 = (batch.types == ACTIVITY2) & (batch.sizes > 1)
-    is_act = batch.types == ACTIVITY
+    is_act = ((batch.types == ACTIVITY) | (batch.types == ACTIVITY3)) & (batch.sizes > 1)  # 1 byte: USB event
     idx = np.nonzero(is_act2 | is_act)[0]
     if len(idx) == 0:
         return []
@@ -435,7 +437,7 @@ def _activity(path: Path, batch: RecordBatch, st: _State) -> list[ImuStream]:
                 )
             xyz = np.frombuffer(payload, dtype="<i2").reshape(-1, 3)
         else:
-            xyz = unpack_12bit_yxz(payload)
+            xyz = unpack_12bit_yxz(payload, "xyz" if batch.types[i] == ACTIVITY3 else "yxz")
         parts.append(xyz)
         counts.append(len(xyz))
     secs = batch.seconds[idx]
@@ -736,7 +738,7 @@ def _iter_log(path: Path, z: zipfile.ZipFile, st: _State, offset: int | None) ->
     if st.warnings and found:  # said after the last piece (e.g. an end time the bytes cannot back)
         yield _piece(path, st, trial, [], [])
     if not found:
-        raise ConversionError(path, "log.bin holds no ACTIVITY2, ACTIVITY or SENSOR_DATA samples")
+        raise ConversionError(path, "log.bin holds no ACTIVITY, ACTIVITY2, ACTIVITY3 or SENSOR_DATA samples")
 
 
 def _piece(

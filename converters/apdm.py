@@ -56,6 +56,8 @@ from imulog.converters.errors import ConversionError
 from imulog.model import ImuStream, Recording, SignalStream
 
 HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
+READER_TIMEOUT_S = 60.0  # h5py runs in a guarded child: a hang, crash or runaway allocation ends in one line
+READER_MEMORY_BYTES = 1 << 30
 QUANTITY = {  # APDM quantity name -> (model quantity, SI unit when the file gives none)
     "acceleration": ("acc", "m/s^2"),
     "accelerometer": ("acc", "m/s^2"),
@@ -379,7 +381,16 @@ def h5_sensors(f: Any) -> tuple[str, list[H5Sensor]]:
 
 
 def read_apdm_h5(path: Path, names: dict[str, str]) -> Recording:
-    """An APDM HDF5 file (see :func:`h5_sensors` for both layouts): one IMU per sensor, its orientation estimate."""
+    """An APDM HDF5 file (see :func:`h5_sensors` for both layouts): one IMU per sensor, its orientation estimate.
+    h5py reads it in a guarded child process (time and memory limit, :mod:`imulog.converters._guard`)."""
+    from imulog.converters._guard import guarded_reader
+
+    return guarded_reader(
+        path, "h5py", _read_apdm_h5_checked, path, names, timeout_s=READER_TIMEOUT_S, memory_bytes=READER_MEMORY_BYTES
+    )
+
+
+def _read_apdm_h5_checked(path: Path, names: dict[str, str]) -> Recording:
     try:
         return _read_apdm_h5(path, names)
     except ConversionError:

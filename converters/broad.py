@@ -22,6 +22,8 @@ from imulog.model import ImuStream, Intervals, PoseStream, Recording
 
 HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
 REQUIRED = ("imu_acc", "imu_gyr")
+READER_TIMEOUT_S = 60.0  # h5py runs in a guarded child
+READER_MEMORY_BYTES = 1 << 30
 
 
 def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -54,27 +56,39 @@ def _read_datasets(f, path: Path) -> tuple[float, dict[str, np.ndarray], np.ndar
     return rate, arrays, movement, info
 
 
-def read_broad(path: Path, name: str = "imu") -> Recording:
-    path = Path(path)
-    try:
-        import h5py
-    except ImportError:  # pragma: no cover - optional extra
-        raise ConversionError(path, "reading BROAD HDF5 needs h5py: pip install 'imulog[hdf5]'") from None
-    with open(path, "rb") as f:
-        if f.read(8) != HDF5_MAGIC:
-            raise ConversionError(path, "not an HDF5 file")
+def _read_file(path: Path) -> tuple[float, dict[str, np.ndarray], np.ndarray | None, str]:
+    import h5py
+
     try:
         f = h5py.File(path, "r")
     except Exception as e:  # noqa: BLE001 - h5py raises OSError variants for corrupt files
         raise ConversionError(path, f"corrupt HDF5: {e}") from None
     try:
         with f:
-            rate, arrays, movement, info = _read_datasets(f, path)
+            return _read_datasets(f, path)
     except ConversionError:
         raise
     except (OSError, RuntimeError, KeyError, ValueError, TypeError, IndexError) as e:
         # h5py reports damaged b-trees, heaps and chunks as any of these, often only when data is read
         raise ConversionError(path, f"damaged HDF5 file ({e})") from None
+
+
+def read_broad(path: Path, name: str = "imu") -> Recording:
+    path = Path(path)
+    try:
+        import h5py  # noqa: F401
+    except ImportError:  # pragma: no cover - optional extra
+        raise ConversionError(path, "reading BROAD HDF5 needs h5py: pip install 'imulog[hdf5]'") from None
+    with open(path, "rb") as f:
+        if f.read(8) != HDF5_MAGIC:
+            raise ConversionError(path, "not an HDF5 file")
+    from imulog.converters._guard import guarded_reader
+
+    # h5py in a guarded child process (time and memory limit): a hostile file that hangs or crashes the HDF5
+    # library ends in one line
+    rate, arrays, movement, info = guarded_reader(
+        path, "h5py", _read_file, path, timeout_s=READER_TIMEOUT_S, memory_bytes=READER_MEMORY_BYTES
+    )
     n = len(arrays["imu_acc"])
     for key, a in arrays.items():
         width = 4 if key == "opt_quat" else 3

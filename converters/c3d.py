@@ -156,8 +156,8 @@ def load(path: Path, options: ConvertOptions | None = None) -> tuple[dict[str, A
         try:
             return guarded(_ezc3d_read, source, timeout_s=timeout, memory_bytes=memory), warnings
         except GuardError as e:
-            if e.kind == "error" and "RuntimeError" in str(e) and proc == INTEL and "support" not in str(e):
-                why = f"ezc3d: {str(e).partition(': ')[2]}"
+            if e.kind == "error" and e.exc_type == "RuntimeError" and proc == INTEL and "support" not in str(e):
+                why = f"ezc3d: {e}"
             else:
                 why = f"ezc3d {e}"
             try:

@@ -141,8 +141,12 @@ def read_e4_file(path: Path, options: ConvertOptions | None = None) -> Recording
                 )
     rec.metadata["imulog.device.e4"] = device
     if origin_s is not None:
+        # start_time is the wall time of this file's first sample (the trial's time axis starts there); t_ns stay
+        # on the session origin, so files converted one by one line up, and a folder's files merge to its earliest
+        firsts = [int(st.t_ns[0]) for st in rec.streams() if hasattr(st, "t_ns") and len(st.t_ns)]
+        first_s = origin_s + (min(firsts) / 1e9 if firsts else 0.0)
         rec.metadata["imulog.trial"] = trial_start(
-            datetime.fromtimestamp(origin_s, tz=UTC), "E4 files' first row (Unix s)"
+            datetime.fromtimestamp(first_s, tz=UTC), "E4 files' first row (Unix s)"
         )
     return rec
 

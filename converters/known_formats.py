@@ -67,6 +67,12 @@ KNOWN: tuple[KnownFormat, ...] = (
         "joint angles and moments need the opensim-mot converter; orientations need DataType=Quaternion",
     ),
     KnownFormat(
+        "NilsPod session header (NilsPodLib's _header.json)",
+        lambda p, h, ln: p.name.endswith("_header.json") and b'"sampling_rate_hz"' in h and b'"enabled_sensors"' in h,
+        "it holds the session's settings, not its samples",
+        "convert the _data.csv beside it (which reads this header), or the session's .bin",
+    ),
+    KnownFormat(
         "Excel workbook",
         lambda p, h, ln: h.startswith(b"PK\x03\x04") and (b"xl/" in h[:4096] or p.suffix.lower() in (".xlsx", ".xlsm")),
         "spreadsheets are not read",

@@ -22,6 +22,8 @@ from imulog.model import Recording
 
 _MAC = re.compile(r"^[0-9A-Fa-f]{2}(:[0-9A-Fa-f]{2}){5}$")
 MAX_SAMPLES = 1 << 31
+READER_TIMEOUT_S = 60.0  # h5py runs in a guarded child (a hang, crash or runaway allocation: one line)
+READER_MEMORY_BYTES = 1 << 30
 
 
 def _text(value: object) -> object:
@@ -34,27 +36,29 @@ def _text(value: object) -> object:
     return value
 
 
-def read_opensignals_h5(path: Path, options: ConvertOptions | None = None) -> Recording:
-    try:
-        import h5py
-    except ImportError:
-        raise ConversionError(path, "OpenSignals .h5 needs h5py: pip install 'imulog[hdf5]'") from None
-    path = Path(path)
+class _Refused(Exception):
+    """A layout problem found in the guarded child: its message becomes the ConversionError."""
+
+
+def _read_devices(path: str) -> list[tuple[str, dict, list[str], list[np.ndarray], list[str]]]:
+    """Every device group as plain data (runs in the guarded child: h5py's C library on a hostile file)."""
+    import h5py
+
     try:
         f = h5py.File(path, "r")
     except OSError as e:
-        raise ConversionError(path, f"not a readable HDF5 file: {e}") from None
-    rec = Recording(sources=[str(path)])
+        raise _Refused(f"not a readable HDF5 file: {e}") from None
+    out = []
     with f:
         macs = [k for k in f if isinstance(f[k], h5py.Group) and "raw" in f[k]]
         if not macs:
-            raise ConversionError(path, "no OpenSignals device group (<MAC>/raw) in the file")
+            raise _Refused("no OpenSignals device group (<MAC>/raw) in the file")
         for mac in macs:
             group, raw = f[mac], f[mac]["raw"]
             attrs = {k: _text(v) for k, v in group.attrs.items()}
             names = sorted((k for k in raw if re.fullmatch(r"channel_\d+", k)), key=lambda k: int(k[8:]))
             if not names:
-                raise ConversionError(path, f"device {mac}: no raw/channel_N datasets")
+                raise _Refused(f"device {mac}: no raw/channel_N datasets")
             cols, blocks, sensors = [], [], []
             if "nSeq" in raw:
                 cols.append("nSeq")
@@ -62,22 +66,50 @@ def read_opensignals_h5(path: Path, options: ConvertOptions | None = None) -> Re
             for k in names:
                 ds = raw[k]
                 if ds.size > MAX_SAMPLES:
-                    raise ConversionError(path, f"device {mac}: {k} declares {ds.size} samples: too many")
+                    raise _Refused(f"device {mac}: {k} declares {ds.size} samples: too many")
                 cols.append(f"A{k[8:]}")
                 blocks.append(read_h5(path, ds, f"{mac}/raw/{k}", dtype=np.float64).reshape(-1))
                 sensors.append(str(_text(ds.attrs.get("sensor", ""))))
-            n = min(len(b) for b in blocks)
-            if any(len(b) != n for b in blocks):
-                raise ConversionError(path, f"device {mac}: channels of different lengths ({[len(b) for b in blocks]})")
-            res = attrs.get("resolution") or []
-            res = res if isinstance(res, list) else [res]
-            analog_bits = [int(r) for r in res[-len(names) :]] if len(res) >= len(names) else [0] * len(names)
-            bits = ([4] if "nSeq" in cols else []) + analog_bits
-            header = dict(attrs, column=cols, sensor=sensors, resolution=bits, label=cols[-len(names) :])
-            rate = attrs.get("sampling rate", 0)
-            rate = float(rate) if isinstance(rate, int | float) and not isinstance(rate, bool) else 0.0
-            block = np.column_stack(blocks)
-            device_streams(rec, path, mac, header, cols, bits, rate, block, first_line=None, fmt="opensignals-h5")
+            out.append((mac, attrs, cols, blocks, sensors))
+    return out
+
+
+def read_opensignals_h5(path: Path, options: ConvertOptions | None = None) -> Recording:
+    """The file's devices read by h5py in a child process under a time and memory limit
+    (:mod:`imulog.converters._guard`), then the same streams as the text reader's."""
+    try:
+        import h5py  # noqa: F401
+    except ImportError:
+        raise ConversionError(path, "OpenSignals .h5 needs h5py: pip install 'imulog[hdf5]'") from None
+    from imulog.converters._guard import GuardError, guarded
+
+    path = Path(path)
+    extra = options.extra if options else {}
+    try:
+        devices = guarded(
+            _read_devices,
+            str(path),
+            timeout_s=float(extra.get("reader_timeout_s", READER_TIMEOUT_S)),
+            memory_bytes=int(extra.get("reader_memory_bytes", READER_MEMORY_BYTES)),
+        )
+    except GuardError as e:
+        text = str(e)
+        raise ConversionError(path, text.partition("_Refused: ")[2] if "_Refused: " in text else f"h5py {e}") from None
+    rec = Recording(sources=[str(path)])
+    for mac, attrs, cols, blocks, sensors in devices:
+        names = cols[1:] if cols and cols[0] == "nSeq" else cols
+        n = min(len(b) for b in blocks)
+        if any(len(b) != n for b in blocks):
+            raise ConversionError(path, f"device {mac}: channels of different lengths ({[len(b) for b in blocks]})")
+        res = attrs.get("resolution") or []
+        res = res if isinstance(res, list) else [res]
+        analog_bits = [int(r) for r in res[-len(names) :]] if len(res) >= len(names) else [0] * len(names)
+        bits = ([4] if "nSeq" in cols else []) + analog_bits
+        header = dict(attrs, column=cols, sensor=sensors, resolution=bits, label=cols[-len(names) :])
+        rate = attrs.get("sampling rate", 0)
+        rate = float(rate) if isinstance(rate, int | float) and not isinstance(rate, bool) else 0.0
+        block = np.column_stack(blocks)
+        device_streams(rec, path, mac, header, cols, bits, rate, block, first_line=None, fmt="opensignals-h5")
     return rec
 
 

@@ -222,13 +222,16 @@ def convert_files(
         if rec is None:
             rec = part
         else:
-            kept = _start_of(rec)
+            kept, first_ns = _start_of(rec), _first_ns(rec)
             try:
                 rec = rec.merge(part)
             except ValueError as e:
                 raise ConversionError(p, f"cannot combine with the other inputs: {e}") from None
             other = _start_of(part)
-            if kept and other and kept != other:  # the first input's start time stays, and the user hears of it
+            same = _same_origin(kept, first_ns, other, _first_ns(part))
+            if same is not None:  # one clock origin, stated from two first samples: the earlier one starts the trial
+                rec.metadata["imulog.trial"].update(same)
+            elif kept and other and kept != other:  # the first input's start time stays, and the user hears of it
                 rec.metadata["imulog.trial"].update(kept)
                 rec.warnings.append(
                     f"{Path(p).name}: start time {other['start_time']} ({other.get('time_zone', '?')}) differs from "
@@ -237,6 +240,31 @@ def convert_files(
                 )
     assert rec is not None
     return rec
+
+
+def _first_ns(rec: Recording) -> int | None:
+    """The earliest sample time of a recording's streams (its start_time is that sample's wall time)."""
+    firsts = [int(t[0]) for s in rec.streams() for t in [getattr(s, "t_ns", getattr(s, "start_ns", None))] if len(t)]
+    return min(firsts) if firsts else None
+
+
+def _same_origin(a: dict[str, str], a_first: int | None, b: dict[str, str], b_first: int | None) -> dict | None:
+    """``a``'s start entries moved to the earlier first sample when ``a`` and ``b`` put the same wall time at
+    ``t_ns`` = 0 (two files of one session on one time base, e.g. E4's HR.csv starting 10 s after ACC.csv); else
+    None. Both need a zoned or both a naive start_time, and the same time zone label."""
+    from datetime import datetime, timedelta
+
+    if not (a and b) or a_first is None or b_first is None or a.get("time_zone") != b.get("time_zone"):
+        return None
+    try:
+        sa, sb = datetime.fromisoformat(a["start_time"]), datetime.fromisoformat(b["start_time"])
+        zero_a = sa - timedelta(microseconds=a_first / 1000)
+        zero_b = sb - timedelta(microseconds=b_first / 1000)
+        if abs((zero_a - zero_b).total_seconds()) > 1e-6:
+            return None
+    except (KeyError, TypeError, ValueError):
+        return None
+    return a if a_first <= b_first else {**a, **b}
 
 
 def _start_of(rec: Recording) -> dict[str, str]:

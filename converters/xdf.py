@@ -43,6 +43,8 @@ from imulog.model import ImuStream, Intervals, MarkerStream, Recording, SignalSt
 MAGIC = b"XDF:"
 CHUNK_TAGS = {1: "FileHeader", 2: "StreamHeader", 3: "Samples", 4: "ClockOffset", 5: "Boundary", 6: "StreamFooter"}
 PER_STREAM_BYTES = 64 << 20  # files larger than this are loaded one stream at a time
+READER_TIMEOUT_S = 60.0  # pyxdf runs in a guarded child: a hang or a runaway allocation ends with one line
+READER_MEMORY_BYTES = 1 << 30
 _AXIS = r"[ _\-.:]?([xyz])"
 IMU_LABELS = {
     "acc": re.compile(r"^(?:acc|accel|accelerometer|acceleration)" + _AXIS + "$", re.I),
@@ -374,30 +376,40 @@ class _Collect(logging.Handler):
         self.messages.append(record.getMessage())
 
 
-def _load(path: Path, **kwargs: Any) -> tuple[list[dict], dict]:
-    """pyxdf.load_xdf without dejittering; pyxdf's recoveries from damaged chunks (logged, data skipped) become
-    a ConversionError naming the chunk."""
-    pyxdf = _pyxdf(path)
+def _load_child(path: str, kwargs: dict[str, Any]) -> tuple[Any, list[str]]:
+    """pyxdf.load_xdf without dejittering, and the errors pyxdf logged while recovering (runs in the guarded child)."""
+    import pyxdf
+
     logger = logging.getLogger("pyxdf.pyxdf")
-    level, propagate = logger.level, logger.propagate
     collect = _Collect()
     logger.setLevel(logging.ERROR)  # pyxdf warns about clock segments on resets
     logger.propagate = False
     logger.addHandler(collect)
+    result = pyxdf.load_xdf(
+        path, synchronize_clocks=True, handle_clock_resets=True, dejitter_timestamps=False, **kwargs
+    )
+    return result, collect.messages
+
+
+def _load(path: Path, **kwargs: Any) -> tuple[list[dict], dict]:
+    """pyxdf.load_xdf in a child process under a time and memory limit (``READER_TIMEOUT_S``,
+    ``READER_MEMORY_BYTES``; :mod:`imulog.converters._guard`); pyxdf's recoveries from damaged chunks (logged, data
+    skipped), its exceptions, a hang or a crash become a ConversionError naming the file (and the chunk)."""
+    from imulog.converters._guard import GuardError, guarded
+
+    _pyxdf(path)
     try:
-        result = pyxdf.load_xdf(
-            str(path), synchronize_clocks=True, handle_clock_resets=True, dejitter_timestamps=False, **kwargs
+        result, messages = guarded(
+            _load_child, str(path), kwargs, timeout_s=READER_TIMEOUT_S, memory_bytes=READER_MEMORY_BYTES
         )
-    except Exception as e:  # noqa: BLE001 - any parser failure becomes one line naming the file
+    except GuardError as e:
         locate_damaged_samples(path)
-        raise ConversionError(path, f"XDF content cannot be parsed ({e}): the file is damaged") from None
-    finally:
-        logger.removeHandler(collect)
-        logger.setLevel(level)
-        logger.propagate = propagate
-    if collect.messages:
+        if e.kind == "error":
+            raise ConversionError(path, f"XDF content cannot be parsed: {e}") from None
+        raise ConversionError(path, f"pyxdf {e}") from None
+    if messages:
         locate_damaged_samples(path)
-        raise ConversionError(path, f"pyxdf skipped damaged data: {collect.messages[0]}")
+        raise ConversionError(path, f"pyxdf skipped damaged data: {messages[0]}")
     return result
 
 

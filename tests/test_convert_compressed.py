@@ -14,15 +14,54 @@ import numpy as np
 import pytest
 from imulog.converters import ConversionError, convert_file, detect
 
-DEVICES = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "devices"
-DOT = DEVICES / "movella_dot_csv/bei_D4CA6EF17860_20210830_170505.csv"
+DOT = "movella_dot_csv/bei_D4CA6EF17860_20210830_170505.csv"
+# one shared text export per text format read through a compressed file
+TEXT_SAMPLES = (
+    "actigraph_count_csv/ActiGraph13.csv",
+    "actigraph_gt3x/exampleRAW.csv",
+    "apdm_csv/apdm_format7.csv",
+    "axivity_csv/ax3_testfile_unix_timestamps.csv",
+    "delsys_trigno/trigno_sample_header.csv",
+    "opensense_sto/myComplexTasksTrial_orientations.sto",
+    "opensim_mot/inverse_kin.mot",
+    "opensim_trc/markers.trc",
+    "optitrack_motive/sample_optitrack_take.csv",
+    "xsens_mtmanager/MT2022_ACC_GYRO_ROT_MAT_SEMICOLON_00B42D4B.txt",
+)
 
 
 @pytest.fixture(scope="module")
-def dot() -> Path:
-    if not DOT.is_file():
-        pytest.skip("shared device samples not available")
-    return DOT
+def dot(shared_data: Path) -> Path:
+    return shared_data / "devices" / DOT
+
+
+def _pack(src: Path, path: Path, kind: str) -> Path:
+    data = src.read_bytes()
+    if kind == "gz":
+        path.write_bytes(gzip.compress(data))
+    elif kind == "bz2":
+        path.write_bytes(bz2.compress(data))
+    elif kind == "xz":
+        path.write_bytes(lzma.compress(data))
+    else:
+        with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zf:
+            zf.writestr(src.name, data)
+    return path
+
+
+@pytest.mark.parametrize("kind", ["gz", "bz2", "xz", "zip"])
+@pytest.mark.parametrize("sample", TEXT_SAMPLES)
+def test_every_text_format_reads_through_compression(shared_data: Path, tmp_path: Path, sample: str, kind: str):
+    src = shared_data / "devices" / sample
+    packed_path = _pack(src, tmp_path / f"{src.name}.{kind}", kind)
+    plain, packed = convert_file(src), convert_file(packed_path)
+    assert [s.topic for s in plain.streams()] == [s.topic for s in packed.streams()]
+    for a, b in zip(plain.streams(), packed.streams(), strict=True):
+        np.testing.assert_array_equal(a.t_ns, b.t_ns)
+        for field in ("acc", "gyr", "values", "pos"):
+            if getattr(a, field, None) is not None:
+                np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+    assert packed.metadata.get("imulog.trial") == plain.metadata.get("imulog.trial")
 
 
 @pytest.mark.parametrize("kind", ["gz", "bz2", "xz", "zip"])

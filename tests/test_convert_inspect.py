@@ -12,7 +12,6 @@ from imulog.converters import ConversionError, UnknownFormatError, convert_file,
 
 from imulog.cli import cli
 
-DEVICES = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "devices"
 DEG = np.pi / 180
 
 
@@ -97,19 +96,15 @@ def test_recognised_formats_without_a_reader_are_named(tmp_path, content, name, 
     assert "unknown format" not in msg
 
 
-def test_shared_samples_without_a_reader_name_their_format():
-    for rel, named in (("edf/trigno_emg.edf", "EDF"), ("opensim_trc/markers.trc", "TRC")):
-        path = DEVICES / rel
-        if not path.exists():
-            pytest.skip("shared device samples not available")
-        try:
-            detect(path)
-        except UnknownFormatError as e:
-            assert named in str(e)
-        # else: a reader for it is registered (the binary/scientific converters), which is what we want
+def test_shared_companion_file_names_its_format(shared_data: Path):
+    """A NilsPod _header.json holds no samples: named, with the file to convert instead."""
+    path = shared_data / "devices" / "nilspod" / "NilsPodX-6F13_20210109_162824_header.json"
+    with pytest.raises(UnknownFormatError) as err:
+        detect(path)
+    msg = str(err.value)
+    assert "recognised as NilsPod session header" in msg and "_data.csv" in msg and "\n" not in msg
 
 
-# ------------------------------------------------------------------------------------------- --inspect
 def test_inspect_prints_columns_streams_start_and_warnings_without_writing(tmp_path):
     path, _ = _grouped(tmp_path, trailing_header=True, trailing_data=False)
     before = set(tmp_path.iterdir())

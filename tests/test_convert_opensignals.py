@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from imulog.converters import ConversionError, convert_file, detect
+from imulog.converters import ConversionError, ConvertOptions, convert_file, detect
 
 
 def _write(
@@ -104,3 +104,30 @@ def test_opensignals_h5_matches_the_text_file(tmp_path):
     np.testing.assert_allclose(from_h5.analogs[0].values, from_txt.analogs[0].values, rtol=1e-15)
     np.testing.assert_array_equal(from_h5.signals[0].values[:, 1:], a)
     assert from_h5.metadata["imulog.trial"]["start_time"] == from_txt.metadata["imulog.trial"]["start_time"]
+
+
+def _hangs(*args, **kwargs):
+    import time
+
+    time.sleep(3600)
+
+
+def test_opensignals_h5_reader_runs_guarded(tmp_path, monkeypatch):
+    """h5py reads the .h5 in a guarded child: a layout problem keeps its one-line message; a reader that never
+    returns is stopped after the limit, in one line."""
+    import time
+
+    h5py = pytest.importorskip("h5py")
+    from imulog.converters import ConversionError
+    from imulog.converters.opensignals_h5 import read_opensignals_h5
+
+    empty = tmp_path / "empty.h5"
+    with h5py.File(empty, "w") as f:
+        f.create_group("00:07:80:3B:46:61").create_group("raw")
+    with pytest.raises(ConversionError, match=r"empty\.h5: device 00:07:80:3B:46:61: no raw/channel_N datasets$"):
+        read_opensignals_h5(empty)
+    monkeypatch.setattr(h5py, "File", _hangs)
+    t0 = time.monotonic()
+    with pytest.raises(ConversionError, match=r"h5py did not finish within 1 s") as e:
+        read_opensignals_h5(empty, ConvertOptions(extra={"reader_timeout_s": 1.0}))
+    assert time.monotonic() - t0 < 15 and "\n" not in str(e.value)

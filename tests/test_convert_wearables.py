@@ -20,14 +20,11 @@ from imulog.converters.registry import group_directory
 
 G = 9.80665
 DEG = math.pi / 180.0
-DEVICES = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "devices"
 
 
 @pytest.fixture(scope="module")
-def devices() -> Path:
-    if not DEVICES.is_dir():
-        pytest.skip("shared device samples not available")
-    return DEVICES
+def devices(shared_data: Path) -> Path:
+    return shared_data / "devices"
 
 
 # ------------------------------------------------------------------------------------ ActiLife epoch counts
@@ -317,10 +314,8 @@ def test_shimmer_uncalibrated_export(tmp_path):
     assert convert_file(path, options=ConvertOptions(rate_hz=51.2)).signals  # a rate stands in
 
 
-def test_shimmer_consensys_unix_column_dates_the_trial():
-    path = Path(__file__).resolve().parent.parent / "../shared/data/imu_text/shimmer_consensys_export.csv"
-    if not path.exists():
-        pytest.skip("shared data not available")
+def test_shimmer_consensys_unix_column_dates_the_trial(shared_data: Path):
+    path = shared_data / "imu_text" / "shimmer_consensys_export.csv"
     rec = convert_file(path)
     first_ms = float(pd.read_csv(path, sep=";", skiprows=[0, 2], nrows=1).iloc[0, 0])
     start = datetime.fromisoformat(rec.metadata["imulog.trial"]["start_time"])
@@ -354,3 +349,18 @@ def test_actilife_epoch_csv_without_banner(tmp_path):
     path.write_text("Axis1,Axis2,Axis3\n1,2,3\n4,5,6\n")
     with pytest.raises(ConversionError, match=r"without its banner and without Date/Time columns"):
         convert_file(path)
+
+
+def test_e4_file_alone_starts_at_its_first_sample_and_files_merge_to_the_earliest(devices: Path):
+    """HR.csv starts 10 s after ACC.csv: alone, its start_time is its own first sample; given first with ACC.csv
+    (one time base), the merged trial starts at ACC's first sample, without a 'start time differs' warning."""
+    folder = devices / "empatica_e4"
+    acc_start = float((folder / "ACC.csv").read_text().split(",")[0])
+    hr_start = float((folder / "HR.csv").read_text().splitlines()[0])
+    assert hr_start - acc_start == 10.0
+    alone = convert_file(folder / "HR.csv")
+    assert alone.metadata["imulog.trial"]["start_time"] == datetime.fromtimestamp(hr_start, tz=UTC).isoformat()
+    assert alone.signals[0].t_ns[0] == 10 * 10**9  # t_ns stay on the session origin
+    both = convert_files([folder / "HR.csv", folder / "ACC.csv"])
+    assert both.metadata["imulog.trial"]["start_time"] == datetime.fromtimestamp(acc_start, tz=UTC).isoformat()
+    assert not any("differs" in w for w in both.warnings)

@@ -218,3 +218,37 @@ def test_cli_converts_every_example_and_doctor_passes(xdf_dir: Path, tmp_path: P
             if src.stem == "empty_streams":
                 assert "/events/empty_marker_stream_test_stream_0_counter" in trial.topics()
                 assert "/signals/empty_data_stream_test_stream_0_counter" in trial.topics()
+
+
+def _never_returns(*args, **kwargs):
+    import time
+
+    time.sleep(3600)
+
+
+def test_a_hanging_pyxdf_ends_with_one_line(shared_data: Path, monkeypatch):
+    """pyxdf runs in a guarded child: a reader that never returns is stopped after the time limit."""
+    import time
+
+    import pyxdf
+    from imulog.converters import ConversionError, xdf
+
+    monkeypatch.setattr(pyxdf, "load_xdf", _never_returns)
+    monkeypatch.setattr(xdf, "READER_TIMEOUT_S", 1.0)
+    t0 = time.monotonic()
+    with pytest.raises(ConversionError, match=r"minimal\.xdf.*pyxdf did not finish within 1 s") as e:
+        xdf.read_xdf(shared_data / "devices" / "xdf" / "minimal.xdf")
+    assert time.monotonic() - t0 < 15 and "\n" not in str(e.value)
+
+
+def _allocates(*args, **kwargs):
+    return bytearray(3 << 30)
+
+
+def test_a_runaway_pyxdf_allocation_is_bounded(shared_data: Path, monkeypatch):
+    import pyxdf
+    from imulog.converters import ConversionError, xdf
+
+    monkeypatch.setattr(pyxdf, "load_xdf", _allocates)
+    with pytest.raises(ConversionError, match=r"pyxdf needed more than 1 GiB of memory"):
+        xdf.read_xdf(shared_data / "devices" / "xdf" / "minimal.xdf")

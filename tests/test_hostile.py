@@ -399,7 +399,7 @@ def test_wrong_crc_after_honest_decompression_is_refused(tmp_path):
 
 # ---------------------------------------------------------------------------------------------- converters
 
-DATA = REPO.parent / "shared" / "data"
+DATA = Path(os.environ.get("IMULOG_SHARED_DATA", REPO.parent / "shared" / "data"))  # as tests/conftest.py
 # converter name -> (real sample, how many leading bytes to mutate: text samples are cut to keep parses short)
 REAL_SAMPLES = {
     "broad-hdf5": ("broad/02_undisturbed_slow_rotation_B.hdf5", None),
