@@ -20,10 +20,12 @@ from imulog.batch.registry import STEPS, _load, resolve_options
 from imulog.cli import cli
 
 # options that only steer the command line (what to print, which channel) or whose default is read from the trial
-CLI_ONLY = {"help", "force", "as_json", "quiet", "imu", "markers", "static_trial", "noise_statistic"}
+CLI_ONLY = {"help", "force", "as_json", "quiet", "imu", "imus", "markers", "static_trial", "noise_statistic"}
 FROM_TRIAL = {  # None on the command line = the trial's own value, as in the batch (StepSpec.trial_defaults)
     ("process", "phases"): {"repetitions", "protocol"},
     ("process", "kinematics"): {"upper_arm", "forearm", "trunk", "neutral_pose", "neutral_window"},
+    ("evaluate",): {"strides"},  # per stride when the trial is walking (issue 27)
+    ("process", "heading"): {"static_pose"},  # a pose only when the user declares one
 }
 
 
@@ -121,6 +123,7 @@ DEFAULTS: dict[tuple[str, ...], tuple[str, dict[str, Any]]] = {
         },
     ),
     ("process", "calibrate"): ("calibrate", {"calibration_file": "required"}),  # no default in either
+    ("process", "heading"): ("heading", {}),
     ("evaluate",): (
         "evaluate",
         {"methods": lambda kw, p: kw["methods"], "max_gap": lambda kw, p: kw["max_gap_s"]},
