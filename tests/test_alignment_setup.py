@@ -159,3 +159,42 @@ def test_cluster_markers_need_one_imu_named(tmp_path):
         cli, ["process", "align", str(path), "--cluster-markers", "upper_arm_O,upper_arm_X,upper_arm_Y"]
     )
     assert res.exit_code == 1 and "choose it with --imu" in res.output and "Traceback" not in res.output
+
+
+def test_an_imu_of_another_recording_without_a_cluster_is_refused_alone():
+    """The forearm logged by another recorder (own file, 7 s later) and its markers gone: the upper arm and the
+    trunk (one recording) keep their shared clock, the forearm gets a failed record saying why."""
+    from imulog.steps.align_setup import compute_setup_alignment
+
+    sim = simulate_setup(seed=3, duration_s=40.0)
+    mk = sim.recording.markers[0]
+    keep = [i for i, lab in enumerate(mk.labels) if not lab.startswith("forearm_")]
+    imus = {
+        s.name: {
+            "t_ns": s.t_ns + (7_000_000_000 if s.name == "forearm" else 0),
+            "gyr": s.gyr,
+            "acc": s.acc,
+            "orientation": None,
+            "acc_global": None,
+        }
+        for s in sim.recording.imus
+    }
+    meta = {n: {"source": f"{n}.csv" if n == "forearm" else "station.csv"} for n in imus}
+    streams, records, summary = compute_setup_alignment(
+        imus,
+        "/markers/vicon",
+        mk.t_ns,
+        [mk.labels[i] for i in keep],
+        mk.pos[:, keep],
+        al.AlignmentParams(),
+        meta,
+        False,
+    )
+    assert summary["recordings"] == [["upper_arm", "trunk"], ["forearm"]]
+    assert records["trunk"]["offset_ns"] == records["upper_arm"]["offset_ns"]
+    assert records["trunk"]["frame_alignment"] is False
+    assert (
+        records["forearm"]["quality"] == "failed"
+        and "no marker moves like /imu/forearm" in records["forearm"]["quality_reasons"][0]
+    )
+    assert not any(s.topic.endswith("/forearm") for s in streams)
