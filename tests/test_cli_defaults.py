@@ -24,6 +24,8 @@ CLI_ONLY = {"help", "force", "as_json", "quiet", "imu", "imus", "markers", "stat
 FROM_TRIAL = {  # None on the command line = the trial's own value, as in the batch (StepSpec.trial_defaults)
     ("process", "phases"): {"repetitions", "protocol"},
     ("process", "kinematics"): {"upper_arm", "forearm", "trunk", "neutral_pose", "neutral_window"},
+    ("evaluate",): {"strides"},  # per stride when the trial is walking (issue 27)
+    ("process", "heading"): {"static_pose"},  # a pose only when the user declares one
 }
 
 
@@ -121,6 +123,7 @@ DEFAULTS: dict[tuple[str, ...], tuple[str, dict[str, Any]]] = {
         },
     ),
     ("process", "calibrate"): ("calibrate", {"calibrations": "required"}),  # no default in either
+    ("process", "heading"): ("heading", {}),
     ("evaluate",): (
         "evaluate",
         {"methods": lambda kw, p: kw["methods"], "max_gap": lambda kw, p: kw["max_gap_s"]},

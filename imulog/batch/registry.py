@@ -32,6 +32,7 @@ STEP_ORDER = (
     "calibrate",
     "orientation",
     "align",
+    "heading",
     "phases",
     "trajectory",
     "metrics",
@@ -75,10 +76,16 @@ STEPS: dict[str, StepSpec] = {
     ),
     "align": StepSpec(
         "align",
-        "imulog.steps.align:run_align",
+        "imulog.steps.align_setup:run_align_trial",
         kwargs=("imu", "markers", "resample"),
         params_class="imulog.process.alignment:AlignmentParams",
         help="IMU-to-Vicon clock and frame alignment (AlignmentParams: window_s, max_lag_s, drift, ...)",
+    ),
+    "heading": StepSpec(
+        "heading",
+        "imulog.steps.heading:run_heading",
+        kwargs=("imus",),
+        help="one heading frame for the oriented IMUs (imulog.heading: magnetometer, optical, or none)",
     ),
     "phases": StepSpec(
         "phases",

@@ -224,21 +224,27 @@ def evaluate(
     from imulog.steps.evaluate import run_evaluate, table_from_record
 
     try:
-        from imulog.steps.evaluate import walking_of
+        _, record = run_evaluate(
+            trial,
+            methods=_methods(methods) if methods else None,
+            max_gap_s=max_gap,
+            strides=strides,
+            imus=list(imus) or None,
+            force=force,
+        )
+        if record.get("kind") == "strides":
+            from imulog.steps.gait_evaluate import stride_table
 
-        walking = walking_of(trial) if strides is None else ({"source": "asked"} if strides else None)
-        if walking is not None:
-            from imulog.steps.gait_evaluate import run_gait_evaluate, stride_table
-
-            _, record = run_gait_evaluate(trial, imus=list(imus) or None, walking=walking, force=force)
             if as_json:
                 click.echo(json.dumps(record, indent=1, default=float))
                 return
-            why = walking.get("task") or f"gyroscope period {walking.get('period_s')} s"
+            walking = record.get("walking") or {}
+            why = walking.get("task") or (
+                f"gyroscope period {walking.get('period_s')} s" if walking.get("period_s") else "asked"
+            )
             click.echo(f"{trial}: walking ({why}): per stride, against each foot's cluster (mean over strides)")
             click.echo(stride_table(record))
             return
-        _, record = run_evaluate(trial, methods=_methods(methods) if methods else None, max_gap_s=max_gap, force=force)
     except (ArchiveError, ValueError, KeyError, OSError) as exc:
         raise click.ClickException(error_line(trial, exc)) from None
     from imulog.archive import TrialReader

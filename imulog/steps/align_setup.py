@@ -253,3 +253,25 @@ def run_align_setup(
         compute=compute,
         force=force,
     )
+
+
+def run_align_trial(
+    path,
+    *,
+    imu: str | None = None,
+    markers: str | None = None,
+    params: al.AlignmentParams | None = None,
+    resample: bool = True,
+    force: bool = False,
+):
+    """The align step as ``imulog process align`` runs it: one IMU when named or when the trial has one, else
+    every IMU (:func:`run_align_setup`). Keywords as :func:`imulog.steps.align.run_align`."""
+    from imulog.archive import TrialReader
+    from imulog.steps.align import run_align
+
+    with TrialReader(path) as trial:
+        n = sum(t.startswith("/imu/") for t in trial.topics())
+    kw = {"markers": markers, "params": params, "resample": resample, "force": force}
+    if imu is None and n > 1:
+        return run_align_setup(path, **kw)
+    return run_align(path, imu=imu, **kw)

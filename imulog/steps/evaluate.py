@@ -241,10 +241,26 @@ def walking_of(path) -> dict[str, Any] | None:
     return walking_trial(metadata, gyros)
 
 
-def run_evaluate(path, *, methods: list[str] | None = None, max_gap_s: float = 0.05, force: bool = False):
-    """Run the step on a trial file; returns ``(outcome, record)``."""
+def run_evaluate(
+    path,
+    *,
+    methods: list[str] | None = None,
+    max_gap_s: float = 0.05,
+    strides: bool | None = None,
+    imus: list[str] | None = None,
+    force: bool = False,
+):
+    """Run the step on a trial file; returns ``(outcome, record)``. ``strides``: None evaluates a walking trial
+    (:func:`walking_of`) per stride and foot (:func:`imulog.steps.gait_evaluate.run_gait_evaluate`, on ``imus``)
+    and any other over the trajectory step's windows; True or False forces either."""
     from imulog.archive import TrialReader
     from imulog.steps.base import StepResult, run_step
+
+    walking = walking_of(path) if strides is None else ({"source": "asked"} if strides else None)
+    if walking is not None:
+        from imulog.steps.gait_evaluate import run_gait_evaluate
+
+        return run_gait_evaluate(path, imus=imus, walking=walking, force=force)
 
     with TrialReader(path) as trial:
         topics = trial.topics()
