@@ -76,7 +76,7 @@ def report(name: str, hours: float, source: Path, trial: Path, peer: int) -> Non
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--days", type=float, default=1.0, help="home recording length in days (default 1)")
+    ap.add_argument("--days", type=float, default=1.0, help="home recording length in days (default 1; 0: skip)")
     ap.add_argument("--minutes-imu", type=float, default=60.0, help="IMU text trial length (default 60)")
     ap.add_argument("--dir", default=None, help="where to write the files (default: system temp)")
     a = ap.parse_args(argv)
@@ -88,6 +88,8 @@ def main(argv: list[str] | None = None) -> int:
         trial = d / "imu.mcap"
         imulog_cli("convert", str(text), "-o", str(trial), "--no-attach")
         report("IMU text 100 Hz 9-axis", a.minutes_imu / 60, text, trial, peer_size(trial, d / "imu_peer.mcap"))
+        if a.days <= 0:
+            return 0
         imulog_cli("simulate", "home", "-o", str(d), "--days", str(a.days))
         cwa = d / "home_s00_t00.cwa"
         home = d / "home.mcap"

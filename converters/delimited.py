@@ -994,6 +994,7 @@ def _recording(
                 slots[key] = c
             else:
                 extra_cols.append(c)
+        resolution: dict[str, dict[str, list[float]]] = {}
         for q in ("acc", "gyr", "mag"):
             axes = {a: slots.get((q, a)) for a in "xyz"}
             present = [a for a, c in axes.items() if c is not None]
@@ -1006,6 +1007,9 @@ def _recording(
             for k, a in enumerate("xyz"):  # scaled straight into the (N, 3) array: no temporary per axis
                 np.multiply(values[:, axes[a].index], axes[a].factor, out=vec[:, k])
             units[q] = axes["x"].unit
+            factors = [float(axes[a].factor) for a in "xyz"]
+            if any(f != 1.0 for f in factors):  # text * unit factor: the archive stores the text's numbers
+                resolution[q] = {"scale": factors}
         if ("temperature", None) in slots:
             c = slots[("temperature", None)]
             streams["temperature"] = values[:, c.index] * c.factor
@@ -1025,7 +1029,8 @@ def _recording(
             for k, v in device_meta.items():
                 if k not in ("name",) and k not in meta:
                     meta[k] = v
-            rec.imus.append(ImuStream(name=dev, t_ns=t_ns, meta=dict(meta), **streams))
+            imu_meta = {**meta, "resolution": resolution} if resolution else dict(meta)
+            rec.imus.append(ImuStream(name=dev, t_ns=t_ns, meta=imu_meta, **streams))
             rec.metadata[f"imulog.device.{dev}"] = meta
         if extra_cols:
             cols_out = []

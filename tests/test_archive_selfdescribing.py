@@ -66,8 +66,15 @@ with open(sys.argv[1], "rb") as f:
                     width = len(value.shift or value.divisor or value.scale or value.offset or [0])
                     if value.f32:
                         vals = list(value.f32)
-                    elif value.decimals:  # each value's own decimals: counts / 10**decimals
-                        vals = [float(c) / 10.0 ** d for c, d in zip(value.counts, value.decimals)]
+                    elif value.decimals:  # each value's own decimals: counts / 10**decimals, then scale, offset
+                        vals = []
+                        for i, (c, d) in enumerate(zip(value.counts, value.decimals)):
+                            v = float(c) / 10.0**d
+                            if value.scale:
+                                v *= value.scale[i % len(value.scale)]
+                            if value.offset:
+                                v += value.offset[i % len(value.offset)]
+                            vals.append(v)
                     else:  # ((counts + shift) / divisor) * scale + offset, per column; absent steps skipped
                         vals = []
                         for i, c in enumerate(value.counts):

@@ -200,7 +200,11 @@ def _check_summary(summary: m.Summary, found: dict, report: DoctorReport) -> Non
     for cid in found["channels"]:
         if cid not in summary.channels:
             report.fail(f"channel {cid} of the data section is missing from the summary")
-    indexed = {ci.chunk_start_offset: ci for ci in summary.chunk_indexes}
+    try:  # parsed lazily: a damaged chunk index (no summary CRC to catch it) is a problem, not a traceback
+        indexed = {ci.chunk_start_offset: ci for ci in summary.chunk_indexes}
+    except m.McapFormatError as exc:
+        report.fail(f"summary chunk indexes do not parse: {exc}")
+        return
     if set(indexed) != set(found["chunks"]):
         report.fail(f"summary indexes {len(indexed)} chunks, data section has {len(found['chunks'])}")
     for off, seen in found["chunks"].items():

@@ -132,17 +132,22 @@ def _decimals(values: np.ndarray) -> np.ndarray | None:
 _POW10 = 10.0 ** np.arange(_MAX_DECIMALS + 1)
 
 
-def _value_decimals(v: np.ndarray) -> NumbersPlan | None:
-    """Counts with each value's own decimals (``counts / 10**k``, k <= 9): text such as ``%.6g``."""
+def _value_decimals(v: np.ndarray, scale: np.ndarray | None = None) -> NumbersPlan | None:
+    """Counts with each value's own decimals (``counts / 10**k``, k <= 9, then ``* scale`` per column when the
+    converter multiplied the text by a unit factor): text such as ``%.6g``."""
     k = np.full(v.shape, -1, dtype=np.int8)
     counts = np.zeros(v.shape)
+    text = v if scale is None else v / scale
     with np.errstate(invalid="ignore", over="ignore"):
         for d in range(_MAX_DECIMALS + 1):
             todo = k < 0
             if not todo.any():
                 break
-            c = np.rint(v[todo] * _POW10[d])
-            hit = (np.abs(c) < _MAX_COUNT) & (c / _POW10[d] == v[todo])
+            c = np.rint(text[todo] * _POW10[d])
+            back = c / _POW10[d]
+            if scale is not None:
+                back *= np.broadcast_to(scale, v.shape)[todo]
+            hit = (np.abs(c) < _MAX_COUNT) & (back == v[todo])
             idx = np.flatnonzero(todo.reshape(-1))[hit]
             k.reshape(-1)[idx] = d
             counts.reshape(-1)[idx] = c[hit]
@@ -154,6 +159,9 @@ def _value_decimals(v: np.ndarray) -> NumbersPlan | None:
     width = v.shape[1]
     dec, lengths = wire.zigzag_varints(k.astype(np.int64))
     plan = NumbersPlan("counts", width, ok, counts.astype("<i4").tobytes(), np.full(len(v), 4 * width))
+    if scale is not None:
+        plan.params = {"scale": scale}
+        plan.head = wire.packed(4, scale, np.dtype("<f8"))
     plan.decimals = dec
     plan.decimal_starts = np.concatenate([[0], np.cumsum(lengths.reshape(-1, width).sum(axis=1))])
     return plan
@@ -183,7 +191,17 @@ def plan_numbers(values: np.ndarray | None, hint: dict[str, Any] | None, precisi
     ok = np.all(f.astype(np.float64) == v, axis=1)
     if ok.mean() > 0.5:
         return NumbersPlan("f32", width, ok, f.tobytes(), np.full(len(v), 4 * width))
-    return _value_decimals(v)
+    scale = candidates[0].get("scale") if hint and len(candidates) else None
+    only_scale = scale is not None and all(candidates[0].get(p) is None for p in ("shift", "divisor", "offset"))
+    if only_scale:  # text times a unit factor: the text's decimals, then the factor
+        text = v / scale
+        ks = _decimals(text)
+        if ks is not None:
+            params = _params({"divisor": 10.0 ** ks.astype(np.float64), "scale": scale}, width)
+            plan = _from_counts(v, _counts_of(v, params), params)
+            if plan.ok.mean() > 0.5:
+                return plan
+    return _value_decimals(v, scale if only_scale else None)
 
 
 def numbers_field(number: int, plan: NumbersPlan, starts: np.ndarray, i: int, j: int) -> bytes:
@@ -394,7 +412,15 @@ def decode_numbers(sources: list[tuple[str, Any]], counts: np.ndarray, width: in
                 )
                 if dec.min() < 0 or dec.max() > _MAX_DECIMALS:
                     raise ValueError(f"{what}: decimals outside 0..{_MAX_DECIMALS}")
-                out[rows] = c / _POW10[dec.reshape(n, width)]
+                v = c / _POW10[dec.reshape(n, width)]
+                for p, srcs_p in (("scale", [s["scale"] for s in srcs]), ("offset", [s["offset"] for s in srcs])):
+                    raw = {bytes(x) if x is not None else b"" for x in srcs_p}
+                    if len(raw) != 1:
+                        raise ValueError(f"{what}: {p} changes between blocks with decimals")
+                    value = raw.pop()
+                    if value:
+                        v = v * np.frombuffer(value, "<f8") if p == "scale" else v + np.frombuffer(value, "<f8")
+                out[rows] = v
                 continue
             params = {}
             for p in PARAMS:
