@@ -93,8 +93,7 @@ def read_opensignals_h5(path: Path, options: ConvertOptions | None = None) -> Re
             memory_bytes=int(extra.get("reader_memory_bytes", READER_MEMORY_BYTES)),
         )
     except GuardError as e:
-        text = str(e)
-        raise ConversionError(path, text.partition("_Refused: ")[2] if "_Refused: " in text else f"h5py {e}") from None
+        raise ConversionError(path, str(e) if e.exc_type == "_Refused" else f"h5py {e}") from None
     rec = Recording(sources=[str(path)])
     for mac, attrs, cols, blocks, sensors in devices:
         names = cols[1:] if cols and cols[0] == "nSeq" else cols
