@@ -212,6 +212,8 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
         warnings=notes,
     )
     first_line = n_comment + 2
+    if not len(values):
+        raise ConversionError(path, "no data rows after the header", line=first_line)
 
     rate = rate_hz
     assumed: list[str] = []
