@@ -40,6 +40,7 @@ STEP = "kinematics"
 ALGORITHM = "imulog.kinematics.caruso2024_dh"
 PREFIX = "/derived/kinematics"
 META = "imulog.kinematics"
+KINEMATICS_CORE_S = 1800.0  # per-sample solutions: half-hour windows (about 1 KB per sample while solved)
 
 
 @dataclass(frozen=True)
@@ -337,9 +338,11 @@ def kinematics_pieces(path, ua: str, fa: str, trunk: str | None, options: Kinema
     from the previous one's last solution, so each sample's angles are the whole computation's. Yields the
     streams of each window; fills ``record`` (``imulog.kinematics_calibration``) at the end."""
     from imulog.archive import TrialReader
+    from imulog.heap import bound_heap
     from imulog.process.kinematics.pipeline import calibrate_kinematics
     from imulog.steps.sample_window import SampleWindow
 
+    bound_heap()  # the same temporaries window after window: keep them out of the heap (imulog.heap)
     margin_ns = 1_000_000_000  # forearm/trunk samples this far beyond the window, for the resampling
     sums = {"n": 0, "active": 0.0, "t_out": 0.0, "infeasible": 0, "ms": {}}
     with TrialReader(path) as trial:
@@ -401,7 +404,7 @@ def run_kinematics(
 ):
     """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
 
-    A recording longer than one window (``windows``, default one-hour cores) is solved window by window while
+    A recording longer than one window (``windows``, default half-hour cores) is solved window by window while
     the result is written (:func:`kinematics_pieces`: the same angles per sample, bounded memory); it needs the
     orientation step's channels of its IMUs."""
     from imulog.archive import TrialReader
@@ -422,7 +425,7 @@ def run_kinematics(
         if options.use_markers and kin.get("clusters") and marker_topic in topics:
             inputs.append(marker_topic)
 
-    windows = windows or WindowParams(margin_s=0.0)
+    windows = windows or WindowParams(core_s=KINEMATICS_CORE_S, margin_s=0.0)
     ua_topic = f"/derived/orientation/{ua}" if f"/derived/orientation/{ua}" in topics else f"/imu/{ua}"
     with TrialReader(path) as trial:
         ch = trial.channel(ua_topic)
