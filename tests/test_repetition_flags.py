@@ -72,3 +72,50 @@ def test_recall_and_precision_on_held_out_grid_trials():
     s = score(rows)
     assert s["bad"] >= 10, s  # the slice holds enough wrong repetitions to measure on
     assert s["recall"] >= 0.8 and s["precision"] >= 0.5, s
+
+
+def test_flags_through_the_steps_info_catalog_evaluate_and_viewer(tmp_path):
+    """A residual-velocity trial (the condition whose repetitions drift): process phases records event
+    correction's flags, process trajectory adds drift and prints one line, and info, the catalog, evaluate and the
+    viewer's repetition lane all show the flagged repetitions with their reasons."""
+    import pyarrow.parquet as pq
+    from click.testing import CliRunner
+
+    from imulog.archive import TrialReader
+    from imulog.cli import cli
+
+    def run(*args):
+        result = CliRunner().invoke(cli, [str(a) for a in args])
+        assert result.exit_code == 0, result.output
+        return result.output
+
+    sim = tmp_path / "sim"
+    run("simulate", "r2g", "-o", sim, "--repetitions", "4", "--set", "residual_velocity_mps=0.01", "--seed", "3")
+    stem = sim / "r2g_s00_t00"
+    trial = tmp_path / "trial.mcap"
+    run("convert", f"{stem}_imu.csv", f"{stem}_vicon.csv", "--meta-file", f"{stem}_meta.json", "-o", trial)
+    for step in ("orientation", "align", "phases"):
+        run("process", step, trial)
+    out = run("process", "trajectory", trial)
+    with TrialReader(trial) as t:
+        timing, record = t.metadata["imulog.timing"], t.metadata["imulog.trajectory"]
+    assert "flagged_repetitions" in timing  # event correction's reasons alone (may be none)
+    flagged = record["flagged_repetitions"]
+    assert flagged and all(f["reasons"] for f in flagged), record.get("flagged_repetitions")
+    assert any("drift" in f["reasons"] for f in flagged)
+    lines = [ln for ln in out.splitlines() if "repetitions flagged" in ln]
+    assert len(lines) == 1 and f"{len(flagged)} of {len(record['repetitions'])} repetitions flagged" in lines[0]
+    assert f"repetitions: {len(flagged)} of" in run("info", trial)
+    assert "flagged repetitions:" in run("evaluate", trial)
+    cat = tmp_path / "catalog.parquet"
+    run("catalog", tmp_path, "-o", cat, "-q")
+    row = pq.read_table(cat).to_pylist()[0]
+    assert row["n_flagged_repetitions"] == len(flagged) and "drift: " in row["flagged_reasons"]
+
+    from imulog.view.streams import _Logger
+
+    lane = _Logger.phase_quality_labels
+    fake = SimpleNamespace(trajectory_record=record, timing_record=timing)
+    k = flagged[0]["repetition"]
+    _, rep = lane(fake, np.array([0]), np.array(["reach"]), np.array([k]), np.array([f"rep {k}"], dtype=object))
+    assert rep[0].startswith(f"rep {k} (flagged: ")

@@ -41,6 +41,7 @@ STRING_COLUMNS = (
     "alignment_method",
     "phases_method",
     "phases_clock",
+    "flagged_reasons",
     "error",
 )
 INT_COLUMNS = (
@@ -55,6 +56,7 @@ INT_COLUMNS = (
     "n_phases",
     "n_forced_phases",
     "n_low_confidence_repetitions",
+    "n_flagged_repetitions",
     "valid_days",
 )
 FLOAT_COLUMNS = (
@@ -243,6 +245,7 @@ def trial_row(path: str | os.PathLike[str]) -> dict[str, Any]:
         if spans:
             row["repetition_mean_s"] = sum(e - s for s, e in spans.values()) / len(spans)
         row["timing_json"] = _json(timing)
+    row.update(_flag_columns(timing, _record(meta.get("imulog.trajectory"))))
     ev = _record(meta.get("imulog.evaluation"))
     if ev:
         row["eval_methods"] = sorted((ev.get("methods") or {}).keys())
@@ -253,6 +256,23 @@ def trial_row(path: str | os.PathLike[str]) -> dict[str, Any]:
         row["metrics_json"] = _json(mt)
     row.update(_epoch_columns(_record(meta.get("imulog.epochs"))))
     return row
+
+
+def _flag_columns(timing: dict[str, Any], trajectory: dict[str, Any]) -> dict[str, Any]:
+    """``n_flagged_repetitions`` and ``flagged_reasons`` ("drift: 3, merged: 1") of the repetition flags (issue
+    31): the trajectory step's when it ran (it adds drift to event correction's reasons), else the phases step's."""
+    source = trajectory if "flagged_repetitions" in (trajectory or {}) else (timing or {})
+    if "flagged_repetitions" not in source:
+        return {}
+    flagged = source.get("flagged_repetitions") or []
+    counts: dict[str, int] = {}
+    for f in flagged:
+        for reason in f.get("reasons") or []:
+            counts[reason] = counts.get(reason, 0) + 1
+    return {
+        "n_flagged_repetitions": len(flagged),
+        "flagged_reasons": ", ".join(f"{k}: {v}" for k, v in sorted(counts.items())),
+    }
 
 
 def _epoch_columns(ep: dict[str, Any]) -> dict[str, Any]:

@@ -142,6 +142,19 @@ def _echo_periods(metrics: dict) -> None:
         click.echo(f"  ... {len(rows) - 48} more (info --json lists all)")
 
 
+def _echo_flags(metadata: dict) -> None:
+    """One line: the repetitions to distrust and why (issue 31), from the trajectory step when it ran (it adds
+    drift to event correction's reasons), else from the phases step."""
+    from imulog.process.repetition_flags import flag_line
+
+    timing, trajectory = metadata.get("imulog.timing") or {}, metadata.get("imulog.trajectory") or {}
+    source = trajectory if "flagged_repetitions" in trajectory else timing
+    total = len(trajectory.get("repetitions") or []) if source is trajectory else int(timing.get("n_repetitions") or 0)
+    line = flag_line(source.get("flagged_repetitions") or [], total)
+    if line:
+        click.echo(f"repetitions: {line}")
+
+
 def _echo_phase_quality(timing: dict) -> None:
     """One line on what event correction did to the phases (imulog.timing, issue 19): forced phases are
     visible as forced."""
@@ -283,6 +296,7 @@ def info(file: str, verbose: bool, as_json: bool) -> None:
     _echo_alignment(data["metadata"].get("imulog.alignment") or {})
     _echo_heading(data["metadata"].get("imulog.heading") or {})
     _echo_phase_quality(data["metadata"].get("imulog.timing") or {})
+    _echo_flags(data["metadata"])
     failed = [c for c in data["channels"] if c["metadata"].get("assumptions") == "failed"]
     if failed:  # trajectories whose method does not apply to this recording (issue 32)
         click.echo("assumptions failed:")

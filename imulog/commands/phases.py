@@ -72,6 +72,11 @@ def format_summary(timing: dict) -> str:
             f"event correction: {timing.get('n_forced_phases', 0)} forced phases, confidence mean "
             f"{timing.get('mean_confidence')}, below 0.5 in repetitions {shown or '-'}"
         )
+    from imulog.process.repetition_flags import flag_line
+
+    flagged = flag_line(timing.get("flagged_repetitions") or [], int(timing.get("n_repetitions") or 0))
+    if flagged:  # one line (issue 31): which repetitions' phases to check, and why
+        lines.append(f"{flagged}; check them in imulog view (process trajectory adds drift to the reasons)")
     return "\n".join(lines)
 
 

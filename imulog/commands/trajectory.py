@@ -168,6 +168,11 @@ def process_trajectory(
 
     for line in check_lines(record):  # assumptions that do not hold, one line each (issue 32)
         click.echo(f"{trial}: {line}")
+    from imulog.process.repetition_flags import flag_line
+
+    flagged = flag_line(record.get("flagged_repetitions") or [], len(record.get("repetitions") or []))
+    if flagged:  # which repetitions to distrust and why (issue 31; docs/accuracy.md)
+        click.echo(f"{trial}: {flagged}")
 
 
 @click.command("evaluate")
@@ -248,10 +253,11 @@ def evaluate(
     except (ArchiveError, ValueError, KeyError, OSError) as exc:
         raise click.ClickException(error_line(trial, exc)) from None
     from imulog.archive import TrialReader
-    from imulog.steps.trajectory import format_phase_quality, phase_quality_summary
+    from imulog.steps.evaluate_quality import format_phase_quality, phase_quality_summary
 
-    with TrialReader(trial) as reader:  # forced phases stay visible as forced next to the errors
-        quality = phase_quality_summary(record, reader.metadata.get("imulog.timing") or {})
+    with TrialReader(trial) as reader:  # forced phases and flagged repetitions stay visible next to the errors
+        flagged = (reader.metadata.get("imulog.trajectory") or {}).get("flagged_repetitions")
+        quality = phase_quality_summary(record, reader.metadata.get("imulog.timing") or {}, flagged=flagged)
     if as_json:
         click.echo(json.dumps({**record, "phase_quality": quality} if quality else record, indent=1, default=float))
         return

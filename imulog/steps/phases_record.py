@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from imulog.process.repetition_flags import flagged_repetitions
 from imulog.process.segmentation.reduce import duration_summary, period_rows
 
 LOW_CONFIDENCE = 0.5  # repetitions below this confidence are listed in imulog.timing["low_confidence_repetitions"]
@@ -106,6 +107,8 @@ def phase_record(
         "mean_confidence": round(float(np.mean([q["confidence"] for q in quality])), 3) if quality else None,
         "low_confidence_repetitions": [q["repetition"] for q in quality if q["confidence"] < LOW_CONFIDENCE],
         "repetition_quality": quality,
+        # what event correction says alone (split, missing, merged, low confidence); the trajectory step adds drift
+        "flagged_repetitions": flagged_repetitions({int(q["repetition"]): q for q in quality}),
         "static_fraction": round(float(static_fraction), 4),
         "phase_durations": duration_summary(durations),
         "threshold_rad_s": None if threshold is None else round(float(threshold), 6),

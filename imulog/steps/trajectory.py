@@ -32,6 +32,7 @@ from imulog.process import quaternion as quat
 from imulog.process.gaps import GapParams, prepare, runs_of
 from imulog.process.integration import rest_anchored_orientation
 from imulog.process.minjerk import R2GReferenceParams, r2g_waypoints_from_anthropometrics
+from imulog.process.repetition_flags import flagged_repetitions, repetition_features
 from imulog.process.rests import rest_report, true_rests
 from imulog.process.trajectory_checks import check_attrs
 from imulog.process.trajectory_opt import (
@@ -98,8 +99,13 @@ def compute_trajectories(
     reference_params: R2GReferenceParams = DEFAULT_REFERENCE,
     gaps: GapParams | None = None,
     gyr: tuple[np.ndarray, np.ndarray] | None = None,
+    repetition_quality: list[dict[str, Any]] | None = None,
 ) -> tuple[list[SignalStream], dict[str, Any]]:
     """Pure part of the step: trajectory streams and the ``imulog.trajectory`` record (no I/O).
+
+    ``repetition_quality``: the phases step's per-repetition records (``imulog.timing``); with them,
+    ``imulog.trajectory["flagged_repetitions"]`` combines event correction's reasons with the trajectory's own
+    (:mod:`imulog.process.repetition_flags`: drift, weak rest, poor alignment).
 
     Missing samples (NaN in ``acc_global``) follow :mod:`imulog.process.gaps`: short gaps are bridged linearly; a
     repetition that contains a longer gap is not reconstructed (its motion inside the gap is unknown, and
@@ -214,6 +220,10 @@ def compute_trajectories(
         info=info,
         baseline=True,
     )
+    if any(len(r.phase_bounds_s) for r in reps):  # repetitions to judge (issue 31): what to distrust, and why
+        features = repetition_features(t_s, acc, mask, reps, recon, repetition_quality or ())
+        quality = (alignment or {}).get("quality")
+        info["flagged_repetitions"] = flagged_repetitions(features, alignment_quality=quality)
     streams = []
     checks = info.get("checks", {})
     for m, pos in recon.items():
@@ -326,6 +336,7 @@ def run_trajectory(
                 params=params,
                 reference_params=reference_params,
                 gyr=None if raw is None or raw[1] is None else raw,
+                repetition_quality=timing.get("repetition_quality"),
             )
 
         return one, alignment, str(timing.get("clock", "reference"))
@@ -445,54 +456,3 @@ def check_lines(record: dict[str, Any]) -> list[str]:
         if line:
             lines.append(f"assumption failed: {line}")
     return lines
-
-
-def phase_quality_summary(evaluation: dict[str, Any], timing: dict[str, Any], low: float = 0.5) -> dict[str, Any]:
-    """How the trajectory errors depend on how much event correction forced the phases (issue 19).
-
-    ``evaluation``: the ``imulog.evaluation`` record; ``timing``: the ``imulog.timing`` record of the phases step
-    (``repetition_quality``). Returns the repetitions with forced phases, those below confidence ``low`` and,
-    per method, the mean MAE over the axes (cm) on confident and on low-confidence repetitions. Empty when the
-    phases carry no quality record (phases step of an older imulog)."""
-    quality = {int(q["repetition"]): q for q in timing.get("repetition_quality") or []}
-    if not quality:
-        return {}
-    forced = sorted(k for k, q in quality.items() if int(q.get("forced") or 0) > 0)
-    low_reps = sorted(k for k, q in quality.items() if float(q.get("confidence", 1.0)) < low)
-    per_method: dict[str, dict[str, Any]] = {}
-    for method, rec in (evaluation.get("methods") or {}).items():
-        groups: dict[str, list[float]] = {"confident": [], "low_confidence": []}
-        for row in rec.get("repetitions") or []:
-            values = [row[a]["mae_cm"] for a in ("x", "y", "z") if isinstance(row.get(a), dict) and "mae_cm" in row[a]]
-            if not values:
-                continue
-            key = "low_confidence" if int(row.get("repetition", -1)) in low_reps else "confident"
-            groups[key].append(float(np.mean(values)))
-        per_method[method] = {
-            k: {"n": len(v), "mae_cm": round(float(np.mean(v)), 3) if v else None} for k, v in groups.items()
-        }
-    return {
-        "forced_repetitions": forced,
-        "low_confidence_repetitions": low_reps,
-        "threshold": low,
-        "methods": per_method,
-    }
-
-
-def format_phase_quality(summary: dict[str, Any]) -> str:
-    """Lines for ``imulog evaluate``: which repetitions' phases were forced and their errors apart."""
-    if not summary:
-        return ""
-    lines = [
-        "phases forced by event correction in repetitions "
-        f"{', '.join(map(str, summary['forced_repetitions'])) or '-'}; confidence < {summary['threshold']} in "
-        f"{', '.join(map(str, summary['low_confidence_repetitions'])) or '-'}"
-    ]
-    for method, groups in summary["methods"].items():
-        c, lo = groups["confident"], groups["low_confidence"]
-        if lo["n"]:
-            lines.append(
-                f"  {method}: mean MAE {c['mae_cm']} cm on {c['n']} confident, {lo['mae_cm']} cm on {lo['n']} "
-                "low-confidence repetitions"
-            )
-    return "\n".join(lines)

@@ -116,6 +116,8 @@ def merge_records(records: list[dict[str, Any]], skipped: list[dict], split: lis
         out.setdefault("repetitions", []).extend(rec.get("repetitions", []))
         if rec.get("merged_repetitions"):
             out.setdefault("merged_repetitions", []).extend(rec["merged_repetitions"])
+        if "flagged_repetitions" in rec:
+            out.setdefault("flagged_repetitions", []).extend(rec["flagged_repetitions"])
         for key in ("rests",):
             if key in rec:
                 acc = out.setdefault(key, {})

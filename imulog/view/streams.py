@@ -149,7 +149,8 @@ def repetition_colors(tasks: np.ndarray, rep: np.ndarray) -> dict[str, int]:
     colors: dict[str, int] = {}
     for r, k in zip(rep.tolist(), tasks.tolist(), strict=True):
         if r:
-            colors[str(r)] = LOW_CONFIDENCE_COLOR if "confidence" in str(r) else REP_COLORS[int(k) % 2]
+            unsure = "confidence" in str(r) or "flagged" in str(r)
+            colors[str(r)] = LOW_CONFIDENCE_COLOR if unsure else REP_COLORS[int(k) % 2]
     return colors
 
 
@@ -524,7 +525,8 @@ class _Logger:
 
     def phase_quality_labels(self, starts, labs, tasks, rep):
         """Phase labels ``"<label> (forced)"`` for phases event correction made by cutting a movement, and the
-        repetition lane ``"rep k (confidence c)"`` below confidence 0.5, from ``imulog.timing``."""
+        repetition lane ``"rep k (flagged: drift)"`` for a flagged repetition (``imulog.trajectory`` or
+        ``imulog.timing``), else ``"rep k (confidence c)"`` below confidence 0.5, from ``imulog.timing``."""
         rows = self.timing_record.get("phases") or []
         forced = {(int(r["repetition"]), str(r["label"])) for r in rows if r.get("forced")}
         low = {
@@ -532,16 +534,22 @@ class _Logger:
             for q in self.timing_record.get("repetition_quality") or []
             if float(q.get("confidence", 1.0)) < 0.5
         }
-        if not forced and not low:
+        # the repetition flags (issue 31): the trajectory step's when it ran (it adds drift), else the phases step's
+        source = self.trajectory_record if "flagged_repetitions" in self.trajectory_record else self.timing_record
+        flagged = {int(f["repetition"]): f.get("reasons") or [] for f in source.get("flagged_repetitions") or []}
+        if not forced and not low and not flagged:
             return labs, rep
         labs = np.array(
             [f"{lab}{FORCED}" if (int(k), str(lab)) in forced else lab for lab, k in zip(labs, tasks, strict=True)],
             dtype=object,
         )
-        rep = np.array(
-            [f"{r} (confidence {low[int(k)]:.2f})" if int(k) in low else r for r, k in zip(rep, tasks, strict=True)],
-            dtype=object,
-        )
+
+        def lane(r: str, k: int) -> str:
+            if k in flagged:
+                return f"{r} (flagged: {', '.join(flagged[k])})"
+            return f"{r} (confidence {low[k]:.2f})" if k in low else r
+
+        rep = np.array([lane(r, int(k)) for r, k in zip(rep, tasks, strict=True)], dtype=object)
         return labs, rep
 
     def phase_log(self, topic: str, starts: np.ndarray, ends: np.ndarray, labs: np.ndarray, rep: np.ndarray) -> None:
