@@ -61,9 +61,9 @@ class _ChunkSeen:
     message_index_length: int = 0
 
 
-def _walk_data_section(f, summary: m.Summary, report: DoctorReport, progress: Progress | None = None) -> dict | None:
-    """Read the data section record by record; check CRCs; return what was found (None on a fatal error)."""
-    found: dict = {
+def empty_found() -> dict:
+    """What a walk of the data section collects, empty: records by kind and message counts per channel."""
+    return {
         "schemas": {},
         "channels": {},
         "chunks": {},
@@ -72,6 +72,11 @@ def _walk_data_section(f, summary: m.Summary, report: DoctorReport, progress: Pr
         "metadata": {},
         "counts": defaultdict(int),
     }
+
+
+def _walk_data_section(f, summary: m.Summary, report: DoctorReport, progress: Progress | None = None) -> dict | None:
+    """Read the data section record by record; check CRCs; return what was found (None on a fatal error)."""
+    found = empty_found()
     limit = summary.data_end_offset
     f.seek(0)
     crc = zlib.crc32(f.read(len(m.MAGIC)))

@@ -12,6 +12,7 @@ from typing import Any
 
 from imulog.archive import codec
 from imulog.archive.metadata import MAX_RECORD_BYTES, MetadataError, decode_record, validate_record
+from imulog.archive.reader import _int
 from imulog.archive.streaming import STATS_KEYS, ChannelStats, _sample_arrays
 from imulog.archive.writer import raw_digest
 
@@ -28,13 +29,6 @@ def metadata_problem(name: str, items: dict[str, str], length: int) -> str | Non
     except MetadataError as exc:
         return str(exc)
     return None
-
-
-def _int(meta: dict[str, str], key: str) -> int | None:
-    try:
-        return int(meta[key])
-    except (KeyError, ValueError):
-        return None
 
 
 def recompute(

@@ -12,7 +12,6 @@ the records concerned are the ones it replaces, silently dropping it.
 from __future__ import annotations
 
 import struct
-from collections import defaultdict
 from pathlib import Path
 from typing import BinaryIO
 
@@ -32,17 +31,9 @@ def _string(data: bytes, at: int) -> tuple[str, int]:
 def walk_heads(f: BinaryIO, summary: m.Summary) -> dict | None:
     """What doctor's walk finds, read from record heads; None when the heads cannot tell (a chunk without
     message indexes, a record that does not parse: the data-section CRC check of the copy decides then)."""
-    from imulog.archive.doctor import _ChunkSeen
+    from imulog.archive.doctor import _ChunkSeen, empty_found
 
-    found: dict = {
-        "schemas": {},
-        "channels": {},
-        "chunks": {},
-        "message_indexes": {},
-        "attachments": {},
-        "metadata": {},
-        "counts": defaultdict(int),
-    }
+    found = empty_found()
     limit, pos, last = summary.data_end_offset, len(m.MAGIC), None
     try:
         while pos < limit:
