@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -111,3 +112,33 @@ def test_info_says_whether_the_headings_relate(oriented_setup, tmp_path):
     assert "heading: not related between" in info.output
     bad = CliRunner().invoke(cli, ["process", "heading", str(path), "--static-pose", "3,1"])
     assert bad.exit_code != 0 and "END must be after START" in bad.output
+
+
+def test_sto_export_writes_the_imus_in_the_common_heading_frame(oriented_setup, tmp_path):
+    """Issue 27 point 4: with a heading record, `export --to sto` writes every IMU in the common frame (so the
+    segments' headings relate) and says so; without one it writes them as estimated and says they do not."""
+    from imulog.export.sto import export_sto
+
+    def read_sto(path):
+        lines = Path(path).read_text().split("endheader\n", 1)[1].splitlines()
+        names = lines[0].split("\t")[1:]
+        rows = [line.split("\t")[1:] for line in lines[1:]]
+        return {n: np.array([[float(v) for v in r[i].split(",")] for r in rows]) for i, n in enumerate(names)}
+
+    _, src = oriented_setup
+    path = shutil.copy(src, tmp_path / "t.mcap")
+    names = ["upper_arm", "forearm"]
+    with TrialReader(path) as t:
+        plain = export_sto(t, tmp_path / "plain.sto", imus=names)
+    assert any("do not share one heading frame" in n and "process heading" in n for n in plain.notes), plain.notes
+    _, rec = run_heading(path, imus=names, static_s=(0.5, 2.5))
+    with TrialReader(path) as t:
+        common = export_sto(t, tmp_path / "common.sto", imus=names)
+    assert any("common heading frame (static pose" in n for n in common.notes), common.notes
+    assert not any("do not share" in n for n in common.notes)
+    before, after = read_sto(tmp_path / "plain.sto"), read_sto(tmp_path / "common.sto")
+    for n in names:
+        col = f"{n}_imu"
+        expect = hd.apply_correction(np.asarray(rec["imus"][n]["correction"]), before[col])
+        dots = np.abs(np.sum(expect * after[col], axis=1))
+        assert np.all(dots > 1 - 1e-6)  # the same rotation (q and -q alike)

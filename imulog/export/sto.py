@@ -224,21 +224,37 @@ def export_sto(
     columns = [rename.get(name, default_name(name)) for name in chosen]
     if len(set(columns)) != len(columns):
         raise ExportError(f"{out}: two IMUs get the same column name ({', '.join(columns)})")
+    frames = {name: heading_frame(trial, available[name]) for name in chosen}
+    shared = {frame for frame, ok in frames.values()}
+    related = len(chosen) < 2 or (len(shared) == 1 and all(ok for _, ok in frames.values()))
+    heading_note = ""
+    if not related and all(available[n].startswith(ORIENTATION_PREFIX) for n in chosen):
+        # imulog's orientations of several IMUs: into the trial's common heading frame when the heading step
+        # found one (issue 27: from the magnetometers, the optical clusters or a declared static pose)
+        from imulog.steps.heading import common_heading
+
+        corrections, heading_note = common_heading(trial.metadata, chosen)
+        if corrections is not None:
+            streams = [(n, t, quat.multiply(np.asarray(corrections[n], float), q)) for n, t, q in streams]
+            rec = trial.metadata.get("imulog.heading") or {}
+            heading_note = f"every IMU in the trial's common heading frame ({rec.get('source')}: {rec.get('frame')})"
+            related = True
     quats = [resample_orientation(t, q, grid, period) for _, t, q in streams]
     text = format_sto(seconds_from(grid, tc.origin_ns), columns, quats, rate)
     with atomic_file(out) as tmp:
         tmp.write_text(text)
     notes = _clock_notes(trial, chosen, list(tc.notes))
-    frames = {name: heading_frame(trial, available[name]) for name in chosen}
     for name, column in zip(chosen, columns, strict=True):
         kind = "imulog's" if available[name].startswith(ORIENTATION_PREFIX) else "the device's"
         notes.append(f"{column}: {available[name]} ({kind}; global frame {frames[name][0]})")
-    shared = {frame for frame, ok in frames.values()}
-    if len(chosen) > 1 and (len(shared) > 1 or not all(ok for _, ok in frames.values())):
+    if related and heading_note:
+        notes.append(heading_note)
+    elif not related:
         notes.append(
             f"the {len(chosen)} IMUs' orientations do not share one heading frame ("
             + "; ".join(f"{n}: {f}" for n, (f, _) in frames.items())
             + "): segment headings in this file do not relate"
+            + (f" ({heading_note})" if heading_note else "")
         )
     return ExportResult(
         path=str(out),
