@@ -194,11 +194,21 @@ def _echo_alignment(record: dict) -> None:
             click.echo(f"  {line}")
 
 
-def _echo_heading(record: dict) -> None:
-    """Whether the oriented IMUs share one heading frame (``imulog process heading``)."""
+def _echo_heading(record: dict, channels: list[dict[str, Any]]) -> None:
+    """Whether the oriented IMUs share one heading frame (``imulog process heading``); with several
+    orientations and no record, that their headings are not related yet."""
+    oriented = [c["topic"].rsplit("/", 1)[1] for c in channels if c["topic"].startswith("/derived/orientation/")]
     if not record:
+        if len(oriented) > 1:
+            click.echo(
+                f"heading: not related between {', '.join(oriented)} (no imulog.heading record: "
+                "run `imulog process heading`)"
+            )
         return
     names = ", ".join(record.get("imus") or {})
+    left = [n for n in oriented if n not in (record.get("imus") or {})]
+    if left:
+        click.echo(f"heading: {', '.join(left)} oriented but not in imulog.heading (run `imulog process heading`)")
     if record.get("source") == "none":
         click.echo(f"heading: not related between {names}: " + "; ".join(record.get("rejected") or []))
     else:
@@ -294,7 +304,7 @@ def info(file: str, verbose: bool, as_json: bool) -> None:
         click.echo(_cut(f"  {name}: {text}", width))
     _echo_periods(data["metadata"].get("imulog.metrics") or {})
     _echo_alignment(data["metadata"].get("imulog.alignment") or {})
-    _echo_heading(data["metadata"].get("imulog.heading") or {})
+    _echo_heading(data["metadata"].get("imulog.heading") or {}, data["channels"])
     _echo_phase_quality(data["metadata"].get("imulog.timing") or {})
     _echo_flags(data["metadata"])
     failed = [c for c in data["channels"] if c["metadata"].get("assumptions") == "failed"]

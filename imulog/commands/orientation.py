@@ -62,7 +62,8 @@ def process_orientation(
     Writes /derived/orientation/IMU (qw,qx,qy,qz sensor-to-global, z up), /derived/acc_global/IMU
     (m/s^2, gravity removed) and /derived/orientation_static/IMU (gyro-norm static mask), on the IMU
     clock. Every IMU of the trial is oriented when no --imu is given, one run each, with one summary
-    table (the 6D global frame of each has its own arbitrary heading: the table says so). Running twice
+    table and one line saying whether they share one heading frame (each 6D global frame has its own
+    arbitrary heading: `imulog process heading` relates them). Running twice
     with the same options changes nothing.
 
     \b
@@ -98,8 +99,7 @@ def process_orientation(
 
     names = choose_imus(trial, imus, needs=("acc", "gyr"))
     run_per_imu(trial, names, one, what="orientation")
-    if len(names) > 1 and not use_mag:
-        click.echo(
-            f"note: {len(names)} orientations without magnetometer: each has its own arbitrary heading "
-            "(no common heading frame; --mag where the magnetic field is consistent)"
-        )
+    if len(names) > 1:  # one heading frame for all, or what to run for it (imulog process heading)
+        from imulog.steps.heading import heading_status
+
+        click.echo(heading_status(trial, names, frame))

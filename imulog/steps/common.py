@@ -75,11 +75,23 @@ def record_of(base: str, imu: str, metadata: Mapping[str, Mapping[str, Any]]) ->
 def alignment_for(metadata: Mapping[str, Mapping[str, Any]], imu_topic: str) -> dict[str, Any] | None:
     """The alignment record of ``imu_topic``: ``imulog.alignment`` if it concerns ``imu_topic`` (or names no
     IMU), else ``imulog.alignment.{imu}`` (written when several IMUs are aligned together), else None."""
+    name = alignment_record(metadata, imu_topic)
+    record = metadata.get(name)
+    if name != "imulog.alignment":
+        return dict(record) if record and "offset_ns" in record else None
+    return dict(record) if record else None
+
+
+def alignment_record(metadata: Mapping[str, Mapping[str, Any]], imu_topic: str) -> str:
+    """The name of the record :func:`alignment_for` reads for ``imu_topic`` (what a step lists among its
+    ``metadata_inputs``, so re-aligning that IMU makes its results out of date): ``imulog.alignment`` when it
+    concerns ``imu_topic`` or there is no per-IMU record, else ``imulog.alignment.{imu}``."""
     record = metadata.get("imulog.alignment")
     if not record or record.get("imu") not in (None, "", imu_topic):
-        own = metadata.get(f"imulog.alignment.{imu_topic.rsplit('/', 1)[-1]}")
-        return dict(own) if own and "offset_ns" in own else None
-    return dict(record)
+        own = f"imulog.alignment.{imu_topic.rsplit('/', 1)[-1]}"
+        if own in metadata or record:
+            return own
+    return "imulog.alignment"
 
 
 def error_line(path: Any, exc: BaseException) -> str:

@@ -168,3 +168,39 @@ def run_heading(
         with TrialReader(path) as trial:
             holder["record"] = trial.metadata.get("imulog.heading", {})
     return outcome, holder["record"]
+
+
+def heading_status(path, names: list[str], frame: str) -> str:
+    """One line after orienting several IMUs: whether they share one heading frame, and what to run.
+
+    Shared when an ``imulog.heading`` record covers ``names`` and its run read the orientation channels as they
+    are now; otherwise the line says why not (6D: each heading arbitrary; 9D: magnetic north, not yet checked
+    to agree) and names ``imulog process heading``."""
+    from imulog.archive import TrialReader
+
+    with TrialReader(path) as trial:
+        record = trial.metadata.get("imulog.heading") or {}
+        runs = trial.runs()
+        last = next((runs[n] for n in sorted(runs, reverse=True) if runs[n].get("step") == STEP), {})
+        inputs = last.get("inputs") or {}
+        fresh = bool(record) and all(
+            n in (record.get("imus") or {})
+            and inputs.get(f"/derived/orientation/{n}") == trial.channel_hash(f"/derived/orientation/{n}")
+            for n in names
+        )
+    listed = ", ".join(names)
+    if fresh and record.get("source") != "none":
+        return f"heading: one frame for {listed}: {record.get('source')} ({record.get('frame')})"
+    if fresh:
+        tried = ", ".join(str(r).split(":", 1)[0] for r in record.get("rejected") or [])
+        return (
+            f"heading: not shared by {listed} ({STEP} step: no {tried or 'source'} applies; `imulog info` says "
+            f"why); declare a pose: `imulog process {STEP} {path} --static-pose START,END`"
+        )
+    from imulog.process.orientation import GLOBAL_FRAME_9D
+
+    if frame == GLOBAL_FRAME_9D:
+        what = "each heading is magnetic north as its own magnetometer sees it, not yet checked to agree"
+    else:
+        what = "each has its own arbitrary heading, 6D"
+    return f"heading: not one frame yet for {len(names)} IMUs ({what}): run `imulog process {STEP} {path}`"

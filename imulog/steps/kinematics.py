@@ -172,8 +172,12 @@ def _cluster_orientations(trial: Any, kin: dict) -> tuple[np.ndarray, dict[str, 
 
 
 def _reference_times(trial: Any, imu_topic: str, t_dev: np.ndarray) -> np.ndarray:
-    """IMU sample times on the marker clock: via ``imulog.alignment`` when it names this IMU, else equal."""
-    al = trial.metadata.get("imulog.alignment")
+    """IMU sample times on the marker clock: via the IMU's alignment record (``imulog.alignment``, or
+    ``imulog.alignment.{imu}`` in a setup aligned as a whole: :func:`imulog.steps.common.alignment_for`) when
+    there is one for this IMU, else equal."""
+    from imulog.steps.common import alignment_for
+
+    al = alignment_for(trial.metadata, imu_topic)
     if al and al.get("imu") == imu_topic:
         from imulog.process.alignment import device_to_reference
 
@@ -409,11 +413,13 @@ def run_kinematics(
     orientation step's channels of its IMUs."""
     from imulog.archive import TrialReader
     from imulog.steps.base import StepResult, run_step
+    from imulog.steps.common import alignment_record
 
     with TrialReader(path) as trial:
         topics = trial.topics()
         metadata = trial.metadata
         ua, fa = imu_names(topics, metadata, options)
+        alignment_name = alignment_record(metadata, f"/imu/{ua}")  # what the reference angles' clock reads
         trunk = trunk_name(topics, metadata, options)
         _, record = resolve_config(metadata, options)
         inputs = []
@@ -478,7 +484,7 @@ def run_kinematics(
         algorithm=ALGORITHM,
         params=params,
         inputs=inputs,
-        metadata_inputs=("imulog.alignment", "imulog.anthropometrics", META),
+        metadata_inputs=(alignment_name, "imulog.anthropometrics", META),
         compute=compute,
         force=force,
     )
