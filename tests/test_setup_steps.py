@@ -80,3 +80,91 @@ def test_kinematics_reads_the_arm_imus_own_alignment_record():
     expected = _reference_times(type("T", (), {"metadata": {"imulog.alignment": own}}), "/imu/upper_arm", t)
     assert np.array_equal(shifted, expected) and not np.array_equal(shifted, t)
     assert np.array_equal(_reference_times(Trial, "/imu/trunk", t), t)  # no record for it: device clock
+
+
+@pytest.fixture(scope="module")
+def setup_trial(tmp_path_factory):
+    """The simulated setup (upper arm, forearm, trunk IMUs, their clusters), oriented, aligned as a whole and
+    segmented, every IMU by default."""
+    from imulog.archive import write_trial
+    from imulog.simulate.setup import simulate_setup
+
+    path = write_trial(
+        tmp_path_factory.mktemp("setup") / "setup.mcap", simulate_setup(seed=0, duration_s=40.0).recording
+    )
+    for step in ("orientation", "align", "phases"):
+        code, _, stderr = run("process", step, path)
+        assert code == 0, stderr
+    return path
+
+
+def test_trajectories_and_evaluation_per_imu(setup_trial, tmp_path):
+    import shutil
+
+    from imulog.archive import TrialReader
+
+    path = shutil.copy(setup_trial, tmp_path / "t.mcap")
+    code, stdout, stderr = run("process", "trajectory", path, "--method", "ddi,highpass")
+    assert code == 0, stderr
+    assert stdout.startswith(f"trajectory: 3 IMUs of {path}")
+    with TrialReader(path) as trial:
+        topics, meta = trial.topics(), trial.metadata
+        runs = sorted(r["step"] for r in trial.runs().values() if r["step"].startswith("trajectory"))
+        clocks = {t: trial.channel(t).metadata.get("clock") for t in topics if t.startswith("/derived/trajectory/")}
+    imus = ("upper_arm", "forearm", "trunk")
+    assert runs == sorted(f"trajectory:{n}" for n in imus)  # one provenance run per IMU
+    for n in imus:
+        assert {f"/derived/trajectory/{m}/{n}" for m in ("ddi", "highpass")} <= set(topics)
+        assert f"/derived/trajectory_baseline/dedrift/{n}" in topics
+    assert not any(t in topics for t in ("/derived/trajectory/ddi", "/derived/trajectory/highpass"))
+    assert set(clocks.values()) == {"reference"}  # every IMU is on the station's shared clock
+    # the aligned (primary) IMU keeps imulog.trajectory, the others their own record
+    assert meta["imulog.trajectory"]["imu"] == "/imu/upper_arm"
+    assert meta["imulog.trajectory.forearm"]["imu"] == "/imu/forearm"
+    assert meta["imulog.trajectory.trunk"]["frame"] == "trunk_global"  # no cluster: no world frame
+    assert meta["imulog.trajectory.forearm"]["frame"] == "world"
+    code, stdout, _ = run("process", "trajectory", path, "--method", "ddi,highpass")
+    assert code == 0 and stdout.count("unchanged") == 3
+    # evaluate: every IMU against its own cluster; the trunk has none (the setup's IMU without a cluster)
+    code, stdout, stderr = run("evaluate", path)
+    assert code == 1 and "1 of 3 IMUs not evaluated: trunk" in stderr
+    assert f"{path}: upper_arm: errors against /derived/vicon/cluster_pose/upper_arm" in stdout
+    assert f"{path}: forearm: errors against /derived/vicon/cluster_pose/forearm" in stdout
+    with TrialReader(path) as trial:
+        meta = trial.metadata
+        steps = sorted(r["step"] for r in trial.runs().values() if r["step"].startswith("evaluate"))
+    assert steps == ["evaluate:forearm", "evaluate:upper_arm"]
+    assert meta["imulog.evaluation"]["imu"] == "/imu/upper_arm"
+    assert meta["imulog.evaluation.forearm"]["reference"] == "/derived/vicon/cluster_pose/forearm"
+    # the two arms' errors differ: each was compared with its own trajectory and cluster
+    mae = [meta[r]["methods"]["highpass"]["summary"] for r in ("imulog.evaluation", "imulog.evaluation.forearm")]
+    assert mae[0] != mae[1]
+    code, stdout, _ = run("evaluate", path, "--imu", "forearm", "--json")
+    assert code == 0 and list(__import__("json").loads(stdout)["imus"]) == ["forearm"]
+
+
+def test_older_one_set_trajectories_of_a_setup_are_read_then_replaced(setup_trial, tmp_path, monkeypatch):
+    """An archive written before per-IMU trajectories: one set, /derived/trajectory/METHOD, for the IMU its
+    imulog.trajectory names. Evaluate reads it as that IMU's; the new step replaces it with the per-IMU set."""
+    import shutil
+
+    from imulog.archive import TrialReader
+    from imulog.steps import trajectory as step
+    from imulog.steps.evaluate import run_evaluate
+    from imulog.steps.trajectory_topics import trajectories_by_imu
+
+    path = shutil.copy(setup_trial, tmp_path / "old.mcap")
+    monkeypatch.setattr(step, "per_imu_layout", lambda topics: False)  # the old layout
+    step.run_trajectory(path, imu="forearm", methods=["highpass"])
+    monkeypatch.undo()
+    with TrialReader(path) as trial:
+        topics, meta = trial.topics(), trial.metadata
+    assert "/derived/trajectory/highpass" in topics and meta["imulog.trajectory"]["imu"] == "/imu/forearm"
+    assert trajectories_by_imu(topics, meta) == {"forearm": {"highpass": "/derived/trajectory/highpass"}}
+    _, record = run_evaluate(path, strides=False)
+    assert list(record["imus"]) == ["forearm"]
+    assert record["imus"]["forearm"]["reference"] == "/derived/vicon/cluster_pose/forearm"
+    step.run_trajectory(path, imu="forearm", methods=["highpass"])
+    with TrialReader(path) as trial:
+        topics = trial.topics()
+    assert "/derived/trajectory/highpass/forearm" in topics and "/derived/trajectory/highpass" not in topics

@@ -25,7 +25,11 @@ def _methods(value: str) -> list[str]:
 @click.command("trajectory")
 @click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option(
-    "--imu", default=None, help="IMU name (uses /derived/acc_global/NAME); default: the only one, else 'wrist'."
+    "--imu",
+    "imus",
+    multiple=True,
+    metavar="NAME",
+    help="IMU (uses /derived/acc_global/NAME), repeatable; default: every oriented IMU with phases, one run each.",
 )
 @click.option(
     "--method",
@@ -81,7 +85,7 @@ def _methods(value: str) -> list[str]:
 @click.option("--force", is_flag=True, help="Recompute even when the same parameters are already recorded.")
 def process_trajectory(
     trial: Path,
-    imu: str | None,
+    imus: tuple[str, ...],
     methods: str,
     highpass_hz: float,
     wavelet: str,
@@ -105,6 +109,10 @@ def process_trajectory(
     metadata. The baseline /derived/trajectory_baseline/dedrift (linear velocity de-drift between each
     window's ends) is written with every run for `imulog evaluate`.
 
+    Every oriented IMU with phases is reconstructed when no --imu is given, one run each, with one summary
+    table; in a trial with several IMUs each gets its own channels, /derived/trajectory/METHOD/IMU, and its
+    own record (imulog.trajectory for the primary IMU, imulog.trajectory.IMU for the others).
+
     \b
     Methods:
       ddi        direct double integration (trapezoidal, window mean removed; R2G thesis)
@@ -120,59 +128,134 @@ def process_trajectory(
       imulog process orientation trial.mcap && imulog process align trial.mcap
       imulog process phases trial.mcap
       imulog process trajectory trial.mcap --method ddi,zupt,optimized
+      imulog process trajectory feet.mcap --imu left_foot --method zupt
       imulog evaluate trial.mcap
     """
-    from imulog.archive.errors import ArchiveError
-    from imulog.steps.common import error_line
+    from imulog.commands.imus import run_per_imu
     from imulog.steps.trajectory import run_trajectory
 
     chosen = _methods(methods)
     base = _D
     try:
-        params = replace(
+        params = _params(
             base,
-            highpass=replace(base.highpass, cutoff_hz=highpass_hz),
-            wavelet=replace(base.wavelet, wavelet=wavelet, level=wavelet_level),
-            kalman=replace(
-                base.kalman,
-                alpha=kalman_alpha,
-                process_var_m2ps4=kalman_q,
-                smoother=not no_smoother,
-                zero_velocity=not no_zero_velocity,
-            ),
-            optimized=replace(
-                base.optimized,
-                sigma_ref_static_m=sigma_ref,
-                sigma_data_mps=sigma_data,
-                return_to_start=not no_return_to_start,
-            ),
+            highpass_hz,
+            wavelet,
+            wavelet_level,
+            kalman_alpha,
+            kalman_q,
+            no_smoother,
+            no_zero_velocity,
+            sigma_ref,
+            sigma_data,
+            no_return_to_start,
         )
-        outcome = run_trajectory(trial, imu=imu, methods=chosen, params=params, force=force)
-    except (ArchiveError, ValueError, KeyError, OSError) as exc:
-        raise click.ClickException(error_line(trial, exc)) from None
-    if outcome.skipped:
-        click.echo(f"{trial}: trajectories up to date (run {outcome.run}); use --force to recompute")
-        return
-    click.echo(f"{trial}: wrote {', '.join(outcome.topics)} (run {outcome.run})")
+    except ValueError as exc:
+        raise click.ClickException(f"{trial}: {exc}") from None
+    names = _trajectory_imus(trial, imus, chosen)
+
+    def one(name: str):
+        outcome = run_trajectory(trial, imu=name, methods=chosen, params=params, force=force)
+        if outcome.skipped:
+            text = f"{trial}: trajectories up to date (run {outcome.run}); use --force to recompute"
+            return outcome, "up to date", text
+        lines = [f"{trial}: wrote {', '.join(outcome.topics)} (run {outcome.run})"]
+        record = _record(trial, name)
+        lines += [f"{trial}: {line}" for line in outcome_lines(record)]
+        for warning in record.get("input_warnings") or []:  # given anthropometrics the IMU disagrees with
+            who = f"{name}: " if len(names) > 1 else ""
+            click.echo(f"{trial}: {who}warning: {warning}", err=True)
+        short = f"{len(record.get('repetitions') or [])} windows, {', '.join(record.get('methods') or [])}"
+        return outcome, short, "\n".join(lines)
+
+    rows = run_per_imu(trial, names, one, what="trajectory")
+    if len(names) > 1:  # each IMU's notes and failed assumptions below the table
+        for row in rows:
+            for line in row.text.splitlines()[1:]:
+                click.echo(f"  {row.imu}: {line.removeprefix(f'{trial}: ')}")
+
+
+def _params(
+    base,
+    highpass_hz,
+    wavelet,
+    wavelet_level,
+    kalman_alpha,
+    kalman_q,
+    no_smoother,
+    no_zero_velocity,
+    sigma_ref,
+    sigma_data,
+    no_return_to_start,
+) -> TrajectoryParams:
+    """The command's options over the defaults (a ValueError for values the parameters refuse)."""
+    return replace(
+        base,
+        highpass=replace(base.highpass, cutoff_hz=highpass_hz),
+        wavelet=replace(base.wavelet, wavelet=wavelet, level=wavelet_level),
+        kalman=replace(
+            base.kalman,
+            alpha=kalman_alpha,
+            process_var_m2ps4=kalman_q,
+            smoother=not no_smoother,
+            zero_velocity=not no_zero_velocity,
+        ),
+        optimized=replace(
+            base.optimized,
+            sigma_ref_static_m=sigma_ref,
+            sigma_data_mps=sigma_data,
+            return_to_start=not no_return_to_start,
+        ),
+    )
+
+
+def _record(trial: Path, imu: str) -> dict:
     from imulog.archive import TrialReader
+    from imulog.steps.trajectory_topics import record_of_imu
 
     with TrialReader(trial) as reader:
-        record = reader.metadata.get("imulog.trajectory", {})
-    for method, why in (record.get("skipped") or {}).items():
-        click.echo(f"{trial}: skipped {method}: {why}")
-    for note in record.get("notes") or []:
-        click.echo(f"{trial}: note: {note}")
-    for warning in record.get("input_warnings") or []:  # given anthropometrics the IMU disagrees with (issue 31)
-        click.echo(f"{trial}: warning: {warning}", err=True)
+        return record_of_imu(imu, reader.metadata)
+
+
+def outcome_lines(record: dict) -> list[str]:
+    """What ``process trajectory`` says after writing: skipped methods, notes, failed assumptions (issue 32)
+    and the flagged repetitions (issue 31; docs/accuracy.md)."""
+    from imulog.process.repetition_flags import flag_line
     from imulog.steps.trajectory import check_lines
 
-    for line in check_lines(record):  # assumptions that do not hold, one line each (issue 32)
-        click.echo(f"{trial}: {line}")
-    from imulog.process.repetition_flags import flag_line
-
+    lines = [f"skipped {method}: {why}" for method, why in (record.get("skipped") or {}).items()]
+    lines += [f"note: {note}" for note in record.get("notes") or []]
+    lines += check_lines(record)
     flagged = flag_line(record.get("flagged_repetitions") or [], len(record.get("repetitions") or []))
-    if flagged:  # which repetitions to distrust and why (issue 31; docs/accuracy.md)
-        click.echo(f"{trial}: {flagged}")
+    return lines + ([flagged] if flagged else [])
+
+
+def _trajectory_imus(trial: Path, imus: tuple[str, ...], methods: list[str]) -> list[str]:
+    """The IMUs to reconstruct: those named, else every oriented IMU, without those that lack the phases step's
+    zero-velocity mask when a method needs it (a note on stderr; all of them when none has it, so the step's
+    own error says what to run)."""
+    from imulog.archive import ArchiveError, TrialReader
+    from imulog.commands.imus import choose_imus
+    from imulog.steps.common import error_line
+    from imulog.steps.trajectory import NEEDS_STATIC
+
+    names = choose_imus(
+        trial, imus, prefix="/derived/acc_global/", missing_hint="run `imulog process orientation` first"
+    )
+    if imus or len(names) < 2 or not NEEDS_STATIC.intersection(methods):
+        return names
+    try:
+        with TrialReader(trial) as reader:
+            topics = set(reader.topics())
+    except (ArchiveError, OSError) as exc:
+        raise click.ClickException(error_line(trial, exc)) from None
+    ready = [n for n in names if f"/derived/static/{n}" in topics]
+    if ready and len(ready) < len(names):
+        for n in names:
+            if n not in ready:
+                click.echo(f"note: left out {n}: no /derived/static/{n} (run `imulog process phases`)", err=True)
+        return ready
+    return names
 
 
 @click.command("evaluate")
@@ -226,7 +309,7 @@ def evaluate(
     """
     from imulog.archive.errors import ArchiveError
     from imulog.steps.common import error_line
-    from imulog.steps.evaluate import run_evaluate, table_from_record
+    from imulog.steps.evaluate import run_evaluate
 
     try:
         _, record = run_evaluate(
@@ -253,26 +336,56 @@ def evaluate(
     except (ArchiveError, ValueError, KeyError, OSError) as exc:
         raise click.ClickException(error_line(trial, exc)) from None
     from imulog.archive import TrialReader
-    from imulog.steps.evaluate_quality import format_phase_quality, phase_quality_summary
+    from imulog.steps.common import record_of
+    from imulog.steps.trajectory_topics import record_of_imu
 
+    per_imu = record.get("kind") == "imus"
+    evaluated = record["imus"] if per_imu else {str(record.get("imu") or "").removeprefix("/imu/"): record}
+    out: dict = {}
     with TrialReader(trial) as reader:  # forced phases and flagged repetitions stay visible next to the errors
-        flagged = (reader.metadata.get("imulog.trajectory") or {}).get("flagged_repetitions")
-        quality = phase_quality_summary(record, reader.metadata.get("imulog.timing") or {}, flagged=flagged)
+        for imu, rec in evaluated.items():
+            flagged = record_of_imu(imu, reader.metadata).get("flagged_repetitions")
+            timing = reader.metadata.get(record_of("imulog.timing", imu, reader.metadata) or "imulog.timing") or {}
+            out[imu] = (rec, {} if "failed" in rec else _quality(rec, timing, flagged))
     if as_json:
-        click.echo(json.dumps({**record, "phase_quality": quality} if quality else record, indent=1, default=float))
+        docs = {imu: {**rec, "phase_quality": q} if q else rec for imu, (rec, q) in out.items()}
+        click.echo(
+            json.dumps(
+                {"kind": "imus", "imus": docs} if per_imu else next(iter(docs.values())), indent=1, default=float
+            )
+        )
         return
-    click.echo(f"{trial}: errors against {record.get('reference', '?')} (mean±std over repetitions)")
-    click.echo(table_from_record(record))
-    from imulog.steps.evaluate import robust_from_record, warning_lines
+    for imu, (rec, quality) in out.items():
+        if "failed" in rec:
+            click.echo(f"{trial}: {imu}: not evaluated: {rec['failed'].removeprefix(f'{trial}: ')}")
+            continue
+        _echo_evaluation(trial, rec, quality, f"{imu}: " if per_imu else "")
+    failed = [imu for imu, (rec, _) in out.items() if "failed" in rec]
+    if failed:
+        raise click.ClickException(f"{trial}: {len(failed)} of {len(out)} IMUs not evaluated: {', '.join(failed)}")
 
+
+def _quality(record: dict, timing: dict, flagged) -> dict:
+    from imulog.steps.evaluate_quality import phase_quality_summary
+
+    return phase_quality_summary(record, timing, flagged=flagged)
+
+
+def _echo_evaluation(trial: Path, record: dict, quality: dict, who: str) -> None:
+    """One IMU's evaluation: the table, the robust figures, warnings and the phase quality."""
+    from imulog.steps.evaluate import robust_from_record, table_from_record, warning_lines
+    from imulog.steps.evaluate_quality import format_phase_quality
+
+    click.echo(f"{trial}: {who}errors against {record.get('reference', '?')} (mean±std over repetitions)")
+    click.echo(table_from_record(record))
     robust = robust_from_record(record)
     if robust:
         click.echo("robust figures (mean over windows; ROM = the reference's range of motion):")
         click.echo(robust)
     for line in warning_lines(record):
-        click.echo(f"{trial}: warning: {line}")
+        click.echo(f"{trial}: {who}warning: {line}")
     aligned = record.get("alignment") or {}
     if aligned.get("quality") == "poor":  # flagged by imulog process align (docs/alignment.md)
-        click.echo(f"{trial}: warning: poor alignment: {'; '.join(aligned.get('quality_reasons') or [])}")
+        click.echo(f"{trial}: {who}warning: poor alignment: {'; '.join(aligned.get('quality_reasons') or [])}")
     if quality:
         click.echo(format_phase_quality(quality))

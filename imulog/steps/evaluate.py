@@ -156,17 +156,23 @@ def _list(values: list[int], most: int = 8) -> str:
     return text + (f", ... ({len(values) - most} more)" if len(values) > most else "")
 
 
-def reference_source(trial, topics: list[str]) -> str:
+def reference_source(trial, topics: list[str], imu: str | None = None) -> str:
     """The optical reference to compare with, from channel metadata only (no data read).
 
-    ``/derived/vicon/cluster_pose`` when the align step ran on a cluster, ``{markers topic}:{marker}`` when it
-    aligned on one marker (``reference_marker``), else ``{markers topic}:O`` (the cluster origin).
+    ``/derived/vicon/cluster_pose`` when the align step ran on a cluster (``.../cluster_pose/{imu}`` for ``imu``
+    of a setup aligned as a whole), ``{markers topic}:{marker}`` when it aligned on one marker
+    (``reference_marker``), else ``{markers topic}:O`` (the cluster origin).
     """
-    record = trial.metadata.get("imulog.alignment") or {}
+    from imulog.steps.common import alignment_for, alignment_record
+
+    own = None if imu is None else alignment_record(trial.metadata, f"/imu/{imu}")
+    record = (alignment_for(trial.metadata, f"/imu/{imu}") if imu else trial.metadata.get("imulog.alignment")) or {}
     marker = record.get("reference_marker")
     if marker and str(record.get("reference", "")).startswith("/markers/") and record["reference"] in topics:
         return f"{record['reference']}:{marker}"
-    if POSE_TOPIC in topics:
+    if imu is not None and f"{POSE_TOPIC}/{imu}" in topics:
+        return f"{POSE_TOPIC}/{imu}"
+    if POSE_TOPIC in topics and own in (None, "imulog.alignment"):
         return POSE_TOPIC
     markers = [t for t in topics if t.startswith("/markers/")]
     for topic in markers:
@@ -188,8 +194,8 @@ def reference_source(trial, topics: list[str]) -> str:
 
 def read_reference(trial, source: str) -> tuple[np.ndarray, np.ndarray]:
     """(t_ns, position (N, 3) m) of a :func:`reference_source`."""
-    if source == POSE_TOPIC:
-        pose = trial.read(POSE_TOPIC)
+    if source == POSE_TOPIC or source.startswith(f"{POSE_TOPIC}/"):
+        pose = trial.read(source)
         return pose.t_ns, pose.position
     topic, _, marker = source.partition(":")
     stream = trial.read(topic)
@@ -199,12 +205,13 @@ def read_reference(trial, source: str) -> tuple[np.ndarray, np.ndarray]:
     return stream.t_ns, stream.pos[:, labels.index(marker.split(":")[-1])]
 
 
-def check_clock(path, metadata: dict[str, Any]) -> dict[str, Any]:
+def check_clock(path, metadata: dict[str, Any], info: dict[str, Any] | None = None) -> dict[str, Any]:
     """The alignment the trajectories were put on the reference clock with; a one-line ValueError naming
-    the command to run when there is none, or when the trajectories are still on the IMU device clock."""
+    the command to run when there is none, or when the trajectories are still on the IMU device clock.
+    ``info``: the IMU's trajectory record (default ``imulog.trajectory``)."""
     from imulog.steps.align import require_alignment
 
-    info = metadata.get("imulog.trajectory") or {}
+    info = metadata.get("imulog.trajectory") or {} if info is None else info
     imu = info.get("imu")
     record = require_alignment(metadata, path, imu, needed_for="evaluate (IMU trajectories against Vicon)")
     if info.get("clock") == "device":
@@ -252,9 +259,14 @@ def run_evaluate(
 ):
     """Run the step on a trial file; returns ``(outcome, record)``. ``strides``: None evaluates a walking trial
     (:func:`walking_of`) per stride and foot (:func:`imulog.steps.gait_evaluate.run_gait_evaluate`, on ``imus``)
-    and any other over the trajectory step's windows; True or False forces either."""
+    and any other over the trajectory step's windows; True or False forces either.
+
+    Over windows, a trial with one set of trajectories gives ``imulog.evaluation``; a trial with trajectories
+    per IMU (:mod:`imulog.steps.trajectory_topics`) is evaluated per IMU (``imus``: which; default every one
+    with trajectories), one ``evaluate:IMU`` run and record each (``imulog.evaluation`` for the primary IMU,
+    ``imulog.evaluation.IMU`` for the others), each against its own cluster, and returns the last outcome with
+    ``{"kind": "imus", "imus": {imu: record, or {"failed": why}}}``; a ValueError only when none could be."""
     from imulog.archive import TrialReader
-    from imulog.steps.base import StepResult, run_step
 
     walking = walking_of(path) if strides is None else ({"source": "asked"} if strides else None)
     if walking is not None:
@@ -262,20 +274,69 @@ def run_evaluate(
 
         return run_gait_evaluate(path, imus=imus, walking=walking, force=force)
 
+    from imulog.steps.trajectory_topics import baselines_by_imu, per_imu_layout, trajectories_by_imu
+
     with TrialReader(path) as trial:
         topics = trial.topics()
-        available = sorted(t.rsplit("/", 1)[1] for t in topics if t.startswith("/derived/trajectory/"))
-        ref_topic = reference_source(trial, topics)
         metadata = trial.metadata
-    alignment = check_clock(path, metadata)
-    if not available:
+    by_imu = trajectories_by_imu(topics, metadata)
+    if imus:
+        missing = [n for n in imus if n not in by_imu]
+        if missing:
+            have = ", ".join(n for n in by_imu if n) or "none"
+            raise ValueError(f"no trajectory of {', '.join(missing)} (IMUs with trajectories: {have})")
+        by_imu = {n: by_imu[n] for n in imus}
+    if not by_imu:  # what is missing first: the optical reference, the alignment, then the trajectories
+        with TrialReader(path) as trial:
+            reference_source(trial, topics)
+        check_clock(path, metadata)
         raise ValueError("no /derived/trajectory/* channel: run `imulog process trajectory` first")
+    baselines = baselines_by_imu(topics, metadata)
+    if len(by_imu) == 1 and not per_imu_layout(topics):  # one IMU: the trial's evaluation, as always
+        imu, channels = next(iter(by_imu.items()))
+        return _evaluate_imu(
+            path, imu, channels, baselines.get(imu, {}), "imulog.evaluation", STEP, methods, max_gap_s, force
+        )
+    from imulog.steps.common import record_for
+
+    outcomes, records = [], {}
+    for imu, channels in by_imu.items():
+        with TrialReader(path) as trial:
+            name = record_for("imulog.evaluation", imu, trial.topics(), trial.metadata)
+        try:
+            outcome, record = _evaluate_imu(
+                path, imu, channels, baselines.get(imu, {}), name, f"{STEP}:{imu}", methods, max_gap_s, force
+            )
+        except ValueError as exc:  # this IMU cannot be evaluated (no cluster, not aligned): the others still are
+            records[imu] = {"failed": str(exc)}
+            continue
+        outcomes.append(outcome)
+        records[imu] = record
+    if not outcomes:
+        raise ValueError("; ".join(f"{imu}: {r['failed']}" for imu, r in records.items()))
+    return outcomes[-1], {"kind": "imus", "imus": records}
+
+
+def _evaluate_imu(path, imu, channels, baselines, record_name, step, methods, max_gap_s, force):
+    """Evaluate one IMU's trajectories (``channels``: method -> topic) into ``record_name``."""
+    from imulog.archive import TrialReader
+    from imulog.steps.base import StepResult, run_step
+    from imulog.steps.common import alignment_record
+    from imulog.steps.trajectory_topics import record_name_of, record_of_imu
+
+    with TrialReader(path) as trial:
+        topics = trial.topics()
+        metadata = trial.metadata
+        info = record_of_imu(imu, metadata)
+        ref_topic = reference_source(trial, topics, imu or None)
+    alignment = check_clock(path, metadata, info)
+    available = sorted(channels)
     chosen = available if not methods else [m for m in methods if m in available]
     missing = sorted(set(methods or []) - set(available))
     if missing:
         raise ValueError(f"no trajectory for method(s) {', '.join(missing)} (available: {', '.join(available)})")
-    baseline_topic = f"/derived/trajectory_baseline/{BASELINE}"
-    inputs = [f"/derived/trajectory/{m}" for m in chosen] + [ref_topic.split(":")[0]]
+    baseline_topic = baselines.get(BASELINE, "")
+    inputs = [channels[m] for m in chosen] + [ref_topic.split(":")[0]]
     inputs += [baseline_topic] if baseline_topic in topics else []
     holder: dict[str, Any] = {}
 
@@ -283,13 +344,12 @@ def run_evaluate(
         ref_name, ref = ref_topic, read_reference(trial, ref_topic)
         trajs, checks = {}, {}
         for m in chosen:
-            s = trial.read(f"/derived/trajectory/{m}")
+            s = trial.read(channels[m])
             trajs[m] = (s.t_ns, s.values)
-            checks[m] = trial.channel(f"/derived/trajectory/{m}").metadata
+            checks[m] = trial.channel(channels[m]).metadata
         if baseline_topic in topics:  # the de-drift baseline every method must beat
             s = trial.read(baseline_topic)
             trajs[BASELINE] = (s.t_ns, s.values)
-        info = trial.metadata.get("imulog.trajectory", {})
         reps = info.get("repetitions")
         record = compute_evaluation(
             trajs, ref, reference_topic=ref_name, windows=reps, max_gap_s=max_gap_s, baseline=BASELINE
@@ -300,20 +360,24 @@ def run_evaluate(
             if meta.get("assumptions") == "failed":
                 record["methods"][m]["assumptions_why"] = meta.get("assumptions_why", "")
         record["alignment"] = alignment_note(alignment)
+        if imu:
+            record["imu"] = f"/imu/{imu}"
         holder["record"] = record
-        return StepResult(streams=[], metadata={"imulog.evaluation": record})
+        return StepResult(streams=[], metadata={record_name: record})
 
+    trajectory_record = record_name_of(imu, metadata) or "imulog.trajectory"
     outcome = run_step(
         path,
-        step=STEP,
+        step=step,
         algorithm="imulog.evaluation",
         params={"methods": chosen, "max_gap_s": max_gap_s},
         inputs=inputs,
-        metadata_inputs=("imulog.alignment",),
+        metadata_inputs=(alignment_record(metadata, f"/imu/{imu}") if imu else "imulog.alignment",)
+        + ((trajectory_record,) if step != STEP else ()),
         compute=compute,
         force=force,
     )
     if "record" not in holder:
         with TrialReader(path) as trial:
-            holder["record"] = trial.metadata.get("imulog.evaluation", {})
+            holder["record"] = trial.metadata.get(record_name, {})
     return outcome, holder["record"]

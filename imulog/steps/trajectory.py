@@ -14,7 +14,8 @@ Reads (``{imu}`` e.g. ``wrist``):
   ``imulog.anthropometrics`` (h1/h2/h3, for the optimisation's reference).
 
 Writes ``/derived/trajectory/{method}`` (``x,y,z`` m; reference clock and ``world`` frame when the trial is
-aligned, else IMU device clock and ``{imu}_global`` frame). Each repetition's samples are its displacement
+aligned, else IMU device clock and ``{imu}_global`` frame); in a trial with several IMUs one set per IMU,
+``/derived/trajectory/{method}/{imu}``, with the IMU's own record (:mod:`imulog.steps.trajectory_topics`). Each repetition's samples are its displacement
 from the repetition's first sample (a single IMU reconstructs displacement, not absolute position); only
 samples inside repetition windows are written. Metadata ``imulog.trajectory`` records the windows, clock,
 frame, estimated rotating bias and the waypoints used.
@@ -46,7 +47,8 @@ from imulog.process.trajectory_opt import (
     reconstruct_repetitions,
     repetition_windows,
 )
-from imulog.steps.common import alignment_for, pick_imu, record_of
+from imulog.steps.common import alignment_for, alignment_record, pick_imu, record_for, record_of
+from imulog.steps.trajectory_topics import RECORD, baseline_topic, per_imu_layout, split_topic, trajectory_topic
 from imulog.steps.trajectory_windows import TrajectoryWindows, has_r2g, trajectory_pieces
 from imulog.steps.trajectory_windows import plan as window_plan
 
@@ -100,12 +102,14 @@ def compute_trajectories(
     gaps: GapParams | None = None,
     gyr: tuple[np.ndarray, np.ndarray] | None = None,
     repetition_quality: list[dict[str, Any]] | None = None,
+    per_imu: bool = False,
 ) -> tuple[list[SignalStream], dict[str, Any]]:
     """Pure part of the step: trajectory streams and the ``imulog.trajectory`` record (no I/O).
 
     ``repetition_quality``: the phases step's per-repetition records (``imulog.timing``); with them,
     ``imulog.trajectory["flagged_repetitions"]`` combines event correction's reasons with the trajectory's own
-    (:mod:`imulog.process.repetition_flags`: drift, weak rest, poor alignment).
+    (:mod:`imulog.process.repetition_flags`: drift, weak rest, poor alignment). ``per_imu``: the channels are
+    ``/derived/trajectory/{method}/{imu}`` and carry their ``clock`` (a trial with several IMUs).
 
     Missing samples (NaN in ``acc_global``) follow :mod:`imulog.process.gaps`: short gaps are bridged linearly; a
     repetition that contains a longer gap is not reconstructed (its motion inside the gap is unknown, and
@@ -146,11 +150,14 @@ def compute_trajectories(
         acc = quat.rotate(quat.multiply(q_anchored, quat.conjugate(q_world)), acc + g_up) - g_up
         q_world, orientation_used = q_anchored, "rest_anchored"
     if alignment is not None:
-        g2w = np.asarray(alignment.get("rotation_global_to_world", [1, 0, 0, 0]), dtype=np.float64)
-        acc = quat.rotate(g2w, acc)
-        if q_world is not None:
-            q_world = quat.multiply(g2w, q_world)
-        frame, clock = "world", "reference"
+        clock = "reference"
+        rotation = alignment.get("rotation_global_to_world", [1, 0, 0, 0])
+        if rotation is not None:  # None: an IMU of a setup on the shared clock without a cluster of its own
+            g2w = np.asarray(rotation, dtype=np.float64)
+            acc = quat.rotate(g2w, acc)
+            if q_world is not None:
+                q_world = quat.multiply(g2w, q_world)
+            frame = "world"
     (acc,), gap_report = prepare([acc], gaps)
     unknown = ~np.all(np.isfinite(acc), axis=1)  # long gaps, after bridging the short ones
     if unknown.all():
@@ -224,8 +231,9 @@ def compute_trajectories(
         features = repetition_features(t_s, acc, mask, reps, recon, repetition_quality or ())
         quality = (alignment or {}).get("quality")
         info["flagged_repetitions"] = flagged_repetitions(features, alignment_quality=quality)
-    streams = []
+    streams, written = [], []
     checks = info.get("checks", {})
+    owner = imu if per_imu else None
     for m, pos in recon.items():
         rows = np.all(np.isfinite(pos), axis=1)
         if not np.any(rows):
@@ -233,20 +241,19 @@ def compute_trajectories(
         check = checks.get(m, {})
         streams.append(
             SignalStream(
-                topic=(BASELINE_TOPIC if m == BASELINE else TRAJECTORY_TOPIC).format(method=m),
+                topic=(baseline_topic if m == BASELINE else trajectory_topic)(m, owner),
                 t_ns=t_ref[rows],
                 columns=["x", "y", "z"],
                 units=["m", "m", "m"],
                 values=pos[rows],
                 frame_id=frame,
-                attrs=check_attrs(check),
+                attrs={**check_attrs(check), **clock_attrs(imu, clock, per_imu)},
             )
         )
+        written += [] if m == BASELINE else [m]
     record = {
         "imu": f"/imu/{imu}",
-        "methods": [
-            s.topic.rsplit("/", 1)[1] for s in streams if s.topic.startswith(TRAJECTORY_TOPIC.format(method=""))
-        ],
+        "methods": written,
         "baseline": BASELINE,
         "clock": clock,
         "frame": frame,
@@ -258,6 +265,12 @@ def compute_trajectories(
         **info,
     }
     return streams, record
+
+
+def clock_attrs(imu: str, clock: str, per_imu: bool) -> dict[str, str]:
+    """Channel metadata ``clock`` of a per-IMU trajectory (``reference``, or the IMU topic when unaligned), so
+    that the viewer and exports put it on the right clock without the trial-level record."""
+    return {"clock": "reference" if clock == "reference" else f"/imu/{imu}"} if per_imu else {}
 
 
 def params_dict(methods: list[str] | tuple[str, ...], params: TrajectoryParams, reference: R2GReferenceParams) -> dict:
@@ -293,6 +306,9 @@ def run_trajectory(
         )
         acc_topic = f"/derived/acc_global/{name}"
         timing_record = record_of("imulog.timing", name, trial.metadata) or "imulog.timing"  # this IMU's phases
+        per_imu = per_imu_layout(topics)  # several IMUs: one set of channels and one record each
+        record_name = record_for(RECORD, name, topics, trial.metadata) if per_imu else RECORD
+        alignment_name = alignment_record(trial.metadata, f"/imu/{name}")
         ch = trial.channel(acc_topic)
         total = int(ch.sample_count or 0)
         rate = channel_rate_hz(total, ch.start_ns, ch.end_ns, ch.rate_hz)
@@ -337,6 +353,7 @@ def run_trajectory(
                 reference_params=reference_params,
                 gyr=None if raw is None or raw[1] is None else raw,
                 repetition_quality=timing.get("repetition_quality"),
+                per_imu=per_imu,
             )
 
         return one, alignment, str(timing.get("clock", "reference"))
@@ -356,7 +373,7 @@ def run_trajectory(
                 None if raw is None else (raw.t_ns, raw.gyr),
             )
             provenance = {"gaps": record["gaps"]} if "gaps" in record else {}
-            return StepResult(streams=streams, metadata={"imulog.trajectory": record}, provenance=provenance)
+            return StepResult(streams=streams, metadata={record_name: record}, provenance=provenance)
         return _windowed(trial, phases, one, alignment, phases_clock)
 
     def _windowed(trial, phases, one, alignment, phases_clock) -> StepResult:
@@ -374,7 +391,8 @@ def run_trajectory(
             trial, static_topic if static_topic in topics else None, phases, t_first, total, rate, windows, to_device
         )
         used = [m for m in methods if m != "optimized" or has_r2g(phases)]
-        out_topics = [TRAJECTORY_TOPIC.format(method=m) for m in used] + [BASELINE_TOPIC.format(method=BASELINE)]
+        owner = name if per_imu else None
+        out_topics = [trajectory_topic(m, owner) for m in used] + [baseline_topic(BASELINE, owner)]
         record: dict[str, Any] = {}
         pieces = StreamPieces(
             topics=out_topics,
@@ -394,41 +412,47 @@ def run_trajectory(
                 windows,
                 lambda t: _to_reference(t, alignment),
                 total,
-                "world" if alignment is not None else f"{name}_global",
+                "world"
+                if alignment is not None and alignment.get("rotation_global_to_world", 0) is not None
+                else f"{name}_global",
+                clock_attrs(name, "reference" if alignment is not None else "device", per_imu),
             ),
             expected_duration_s=total / rate,
         )
-        return StepResult(streams=[pieces], metadata={"imulog.trajectory": record})
+        return StepResult(streams=[pieces], metadata={record_name: record})
 
     step_params = {"imu": name, **params_dict(methods, params, reference_params)}
     if not one_window:
         step_params["windows"] = windows.to_dict()
     outcome = run_step(
         path,
-        step=STEP,
+        step=f"{STEP}:{name}" if per_imu else STEP,
         algorithm="imulog.trajectory",
         params=step_params,
         inputs=inputs,
-        metadata_inputs=("imulog.alignment", "imulog.anthropometrics", timing_record),
+        metadata_inputs=(alignment_name, "imulog.anthropometrics", timing_record),
         compute=compute,
         force=force,
     )
     if not outcome.skipped:
-        _remove_stale(path, outcome.topics)
+        _remove_stale(path, outcome.topics, name)
     return outcome
 
 
-def _remove_stale(path, written: list[str]) -> None:
-    """Drop /derived/trajectory/* channels of earlier trajectory runs that this run did not rewrite (e.g. a
-    method left out of --method), so evaluate, metrics and the viewer never mix them with the new inputs."""
+def _remove_stale(path, written: list[str], imu: str) -> None:
+    """Drop the trajectory channels of ``imu`` from earlier trajectory runs that this run did not rewrite (a
+    method left out of --method; the one-set channels of an older run once the trial has several IMUs), so
+    evaluate, metrics and the viewer never mix them with the new inputs."""
     from imulog.archive import TrialReader, remove_derived
 
     with TrialReader(path) as trial:
+        metadata = trial.metadata
         stale = [
             c.topic
             for c in trial.channels
             if c.topic.startswith(TRAJECTORY_TOPIC.format(method=""))
-            and c.metadata.get("step") == STEP
+            and str(c.metadata.get("step", "")).split(":")[0] == STEP
+            and (split_topic(c.topic, metadata) or ("", ""))[0] in (imu, "")
             and c.topic not in written
         ]
     if stale:

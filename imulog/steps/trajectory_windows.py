@@ -160,10 +160,12 @@ def trajectory_pieces(
     to_reference: Any,
     total: int,
     frame: str,
+    attrs: dict[str, str] | None = None,
 ) -> Iterator[SignalStream]:
     """Yield each window's trajectories (rows it owns), an empty piece for a topic a window has none of; fill
     ``record`` at the end. ``topics``: acc, static, orientation, imu topics (None when absent); ``compute(acc,
-    static, orientation, gyr)`` reconstructs one window (its arguments ``(t_ns, values)``, or None)."""
+    static, orientation, gyr)`` reconstructs one window (its arguments ``(t_ns, values)``, or None); ``attrs``:
+    channel metadata of every piece (a per-IMU trajectory's ``clock``)."""
     from imulog.archive import TrialReader
 
     records, skipped, split = [], [], []
@@ -194,10 +196,20 @@ def trajectory_pieces(
                 s = by_topic.get(topic)
                 if s is None:
                     empty = np.zeros((0, 3))
-                    yield SignalStream(topic, np.zeros(0, np.int64), ["x", "y", "z"], ["m"] * 3, empty, frame_id=frame)
+                    yield SignalStream(
+                        topic,
+                        np.zeros(0, np.int64),
+                        ["x", "y", "z"],
+                        ["m"] * 3,
+                        empty,
+                        frame_id=frame,
+                        attrs=attrs or {},
+                    )
                     continue
                 keep = (s.t_ns >= t_own[0]) & (s.t_ns <= t_own[1])  # the rows this window owns
-                yield SignalStream(topic, s.t_ns[keep], s.columns, s.units, s.values[keep], frame_id=frame)
+                yield SignalStream(
+                    topic, s.t_ns[keep], s.columns, s.units, s.values[keep], frame_id=frame, attrs=attrs or {}
+                )
             if w.index + 1 < len(plan_):
                 for buf in bufs.values():
                     buf.drop_before(plan_[w.index + 1].lo)
