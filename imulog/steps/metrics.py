@@ -14,6 +14,7 @@ intervals) and ``/derived/trajectory/{method}`` (positions on the reference cloc
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -102,24 +103,41 @@ VICON_POSE = "/derived/vicon/cluster_pose"
 TRAJECTORY_PREFERENCE = ("optimized", "zupt_bias", "zupt", "kalman", "wavelet", "highpass", "ddi")
 
 
-def pick_trajectory(topics: list[str], method: str) -> str | None:
+def pick_trajectory(
+    topics: list[str], method: str, imu: str | None = None, metadata: Mapping[str, Any] | None = None
+) -> str | None:
     """Positions for smoothness: ``/derived/trajectory/{method}`` (``method`` "" = the most accurate present,
     in :data:`TRAJECTORY_PREFERENCE` order; "vicon" = the optical ``/derived/vicon/cluster_pose``), else the
-    Vicon cluster pose if present, else None."""
-    found = sorted(t for t in topics if t.startswith("/derived/trajectory/"))
+    Vicon cluster pose if present, else None. With ``imu`` (and ``metadata``), that IMU's trajectories in a
+    trial with one set per IMU (``/derived/trajectory/{method}/{imu}``, :mod:`imulog.steps.trajectory_topics`)
+    and its own cluster pose (``/derived/vicon/cluster_pose/{imu}``) when the setup was aligned as a whole."""
+    from imulog.steps.trajectory_topics import trajectories_by_imu
+
+    vicon = VICON_POSE
+    if imu is not None and f"{VICON_POSE}/{imu}" in topics:
+        vicon = f"{VICON_POSE}/{imu}"
+    by_imu = trajectories_by_imu(topics, metadata or {})
+    if imu is not None and imu in by_imu:
+        mine = by_imu[imu]
+    elif imu is not None and any(k for k in by_imu):  # per-IMU or attributed trajectories, none of this IMU
+        mine = {}
+    else:
+        mine = {t.removeprefix("/derived/trajectory/"): t for t in topics if t.startswith("/derived/trajectory/")}
+    found = sorted(mine.values())
     if method == "vicon":
-        if VICON_POSE not in topics:
-            raise ValueError(f"no channel {VICON_POSE} in the trial")
-        return VICON_POSE
+        if vicon not in topics:
+            raise ValueError(f"no channel {vicon} in the trial")
+        return vicon
     if method:
-        topic = f"/derived/trajectory/{method}"
-        if topic not in found:
+        if method not in mine:
+            per_imu = any(t.count("/") > 3 for t in topics if t.startswith("/derived/trajectory/"))
+            topic = f"/derived/trajectory/{method}" + (f"/{imu}" if imu and per_imu else "")
             raise ValueError(f"no channel {topic} in the trial (trajectories: {', '.join(found) or 'none'})")
-        return topic
-    if found:  # the most accurate method present (docs/trajectory.md), never plain double integration first
-        rank = {f"/derived/trajectory/{m}": i for i, m in enumerate(TRAJECTORY_PREFERENCE)}
-        return min(found, key=lambda t: (rank.get(t, len(rank)), t))
-    return VICON_POSE if VICON_POSE in topics else None
+        return mine[method]
+    if mine:  # the most accurate method present (docs/trajectory.md), never plain double integration first
+        rank = {m: i for i, m in enumerate(TRAJECTORY_PREFERENCE)}
+        return mine[min(mine, key=lambda m: (rank.get(m, len(rank)), m))]
+    return vicon if vicon in topics else None
 
 
 def _r(x: float, digits: int = 6) -> float:
@@ -257,7 +275,7 @@ def run_metrics(
         topics = trial.topics()
         name = pick_imu(topics, imu)
         record_name = record_for(RECORD, name, topics, trial.metadata)
-        traj_topic = pick_trajectory(topics, p.trajectory)
+        traj_topic = pick_trajectory(topics, p.trajectory, name, trial.metadata)
         info = trial.channel(imu_topic_of(name))
         total = info.sample_count
         rate = channel_rate_hz(total, info.start_ns, info.end_ns, info.rate_hz)

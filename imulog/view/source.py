@@ -33,11 +33,11 @@ class TrialData:
 
 def logging_rank(kind: str, topic: str) -> int:
     """Where a channel comes in the viewer's logging order: intervals (small) first, so a viewer still loading a
-    long trial already shows the phases; then the Vicon cluster pose, the reference the IMU trajectories are
+    long trial already shows the phases; then the Vicon cluster poses (one per IMU of a setup), the reference the IMU trajectories are
     anchored on and compared with; then everything else in its own order."""
     if kind == "intervals":
         return 0
-    return 1 if topic == CLUSTER_POSE_TOPIC else 2
+    return 1 if topic == CLUSTER_POSE_TOPIC or topic.startswith(f"{CLUSTER_POSE_TOPIC}/") else 2
 
 
 class ArchiveStreams:

@@ -174,6 +174,7 @@ class _Logger:
         reference: tuple[np.ndarray, np.ndarray] | None = None,
         trajectory_record: Mapping[str, Any] | None = None,
         timing_record: Mapping[str, Any] | None = None,
+        metadata: Mapping[str, Any] | None = None,
     ):
         self.rec = rec
         self.trial = trial
@@ -182,6 +183,8 @@ class _Logger:
         self.n_paths = color_offset  # next palette index for a trajectory / marker set
         self.reference = reference  # Vicon cluster origin (t_ref ns, position m); set when the cluster pose is logged
         self.trajectory_record = dict(trajectory_record or {})
+        self.metadata = metadata or {}  # the per-IMU trajectory records (imulog.trajectory.IMU)
+        self.references: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # IMU -> its cluster origin (a setup)
         self.timing_record = dict(timing_record or {})  # imulog.timing: forced phases, repetition confidence
         self._index: tuple[np.ndarray, _TimeIndex] | None = None  # last time column, reused for the same array
 
@@ -356,21 +359,25 @@ class _Logger:
 
     def imu_trajectory(self, s: SignalStream, t_ref: np.ndarray) -> None:
         """An IMU trajectory in 3D (anchored per repetition on the Vicon path) and its error vs Vicon (cm)."""
-        method = s.topic[len(L.TRAJECTORY_PREFIX) :]
-        record = self.trajectory_record
+        from imulog.steps.trajectory_topics import record_of_imu
+
+        method, _, imu = s.topic[len(L.TRAJECTORY_PREFIX) :].partition("/")  # per IMU: METHOD/IMU
+        record = record_of_imu(imu, self.metadata) if imu else self.trajectory_record
+        reference = self.references.get(imu, self.reference) if imu else self.reference
         world = s.values[:, :3]
         in_world = record.get("frame", s.frame_id or "world") == "world"
-        if self.reference is not None and in_world and record.get("origin") == "repetition_start":
+        if reference is not None and in_world and record.get("origin") == "repetition_start":
             starts = np.array([r["start_ns"] for r in record.get("repetitions", []) if "start_ns" in r], np.int64)
             if record.get("clock") == "device" and record.get("imu"):
                 starts = self.clocks.to_reference(str(record["imu"]), starts)
-            world = anchor_repetitions(t_ref, world, starts, *self.reference)
+            world = anchor_repetitions(t_ref, world, starts, *reference)
         check = (record.get("checks") or {}).get(method) or {}
         flag = f" (assumptions failed: {', '.join(check.get('failed', []))})" if check.get("ok") is False else ""
-        colour = self.trajectory(s.topic, t_ref, world, f"IMU {method}{flag}")
-        if self.reference is not None and in_world:
-            error = position_error_cm(t_ref, world, *self.reference)
-            names = [f"|{method} − Vicon| (cm){flag}"]
+        name = f"{imu} {method}" if imu else method
+        colour = self.trajectory(s.topic, t_ref, world, f"IMU {name}{flag}")
+        if reference is not None and in_world:
+            error = position_error_cm(t_ref, world, *reference)
+            names = [f"|{name} − Vicon| (cm){flag}"]
             self.scalars(L.error_entity(s.topic, self.prefix), "error", s.topic, t_ref, error, names, [colour])
             finite = np.asarray(error, dtype=np.float64)
             finite = finite[np.isfinite(finite)]
@@ -573,6 +580,8 @@ class _Logger:
         cols = rr.Transform3D.columns(translation=s.position[valid], quaternion=quat_xyzw)
         if s.topic == L.CLUSTER_POSE_TOPIC:  # logged before the trajectories anchored on it (logging_rank)
             self.reference = (t_ref, s.position)
+        elif s.topic.startswith(f"{L.CLUSTER_POSE_TOPIC}/"):  # an IMU's own cluster in a setup aligned as a whole
+            self.references[s.topic.rsplit("/", 1)[1]] = (t_ref, s.position)
         path = L.pose_entity(s.topic, self.prefix)
         self.rec.log(path, rr.TransformAxes3D(0.08), static=True)
         self.rec.send_columns(path, indexes=[self._time(t_ref)], columns=cols.partition(valid.astype(np.int64)))
@@ -663,6 +672,7 @@ def log_streams(
         None,
         metadata.get("imulog.trajectory"),
         metadata.get("imulog.timing"),
+        metadata=metadata,
     )
     recording.log(L.join(prefix, "/world"), rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     for stream in ordered:  # intervals, then the cluster pose (the trajectories' reference), then the rest
