@@ -168,3 +168,31 @@ def test_older_one_set_trajectories_of_a_setup_are_read_then_replaced(setup_tria
     with TrialReader(path) as trial:
         topics = trial.topics()
     assert "/derived/trajectory/highpass/forearm" in topics and "/derived/trajectory/highpass" not in topics
+
+
+def test_batch_runs_the_per_imu_steps_on_every_imu(tmp_path):
+    """The batch on a setup: orientation, phases and trajectory once per IMU (step:IMU runs), as the commands;
+    a second pass is up to date; ``imu=NAME`` still runs one."""
+    from imulog.archive import TrialReader, write_trial
+    from imulog.batch import run_file
+    from imulog.simulate.setup import simulate_setup
+
+    path = write_trial(tmp_path / "setup.mcap", simulate_setup(seed=1, duration_s=30.0).recording)
+    plan = [("orientation", {}), ("align", {}), ("phases", {}), ("trajectory", {"methods": "ddi,highpass"})]
+    result = run_file(str(path), plan)
+    assert result.status == "processed", result.error
+    assert [s.step for s in result.steps] == ["orientation", "align", "phases", "trajectory"]
+    with TrialReader(path) as trial:
+        steps = sorted(r["step"] for r in trial.runs().values())
+        topics = trial.topics()
+    for name in ("upper_arm", "forearm", "trunk"):
+        for step in ("orientation", "phases", "trajectory"):
+            assert f"{step}:{name}" in steps
+        assert f"/derived/trajectory/highpass/{name}" in topics
+    again = run_file(str(path), plan)
+    assert again.status == "up_to_date" and all(s.skipped for s in again.steps)
+    one = run_file(str(path), [("orientation", {"imu": "trunk", "backend": "madgwick"})])
+    assert one.status == "processed"
+    with TrialReader(path) as trial:
+        assert sum(r["step"] == "orientation:trunk" for r in trial.runs().values()) == 2
+        assert sum(r["step"] == "orientation:forearm" for r in trial.runs().values()) == 1

@@ -332,14 +332,20 @@ def call_step(path: str | os.PathLike[str], step: str, options: dict[str, Any] |
             base = _load(spec.trial_defaults)(trial.metadata.get("imulog.trial", {}))
     kwargs, params = resolve_options(step, options, base)
     fn = _load(spec.function)
+    from imulog.batch.imus import PER_IMU_NEEDS, run_every_imu
+
     if step == "calibrate":
         from imulog.process.calibration import Calibration
 
         cal_file = Path(kwargs.pop("calibration"))
         calibration = Calibration.from_dict(json.loads(cal_file.read_text()))
+        if "imu" not in kwargs:  # every IMU of the trial, like `imulog calibrate` with one file
+            return run_every_imu(path, step, lambda **kw: fn(path, calibration, force=force, **kw), kwargs)
         return fn(path, calibration, force=force, **kwargs)
     if params is not None:
         kwargs[spec.params_kwarg] = params
+    if step in PER_IMU_NEEDS and "imu" not in kwargs:  # every IMU of the trial, one step:IMU run each
+        return run_every_imu(path, step, lambda **kw: fn(path, force=force, **kw), kwargs)
     out = fn(path, force=force, **kwargs)
     return out[0] if isinstance(out, tuple) else out  # run_evaluate returns (outcome, record)
 
