@@ -141,6 +141,18 @@ def test_trajectories_and_evaluation_per_imu(setup_trial, tmp_path):
     assert mae[0] != mae[1]
     code, stdout, _ = run("evaluate", path, "--imu", "forearm", "--json")
     assert code == 0 and list(__import__("json").loads(stdout)["imus"]) == ["forearm"]
+    # the catalog row keeps the primary IMU's evaluation and the others' under per_imu
+    import json
+
+    import pyarrow.parquet as pq
+
+    from imulog.batch import build_catalog
+
+    build_catalog(tmp_path, tmp_path / "catalog.parquet")
+    row = pq.read_table(tmp_path / "catalog.parquet").to_pylist()[0]
+    ev = json.loads(row["evaluation_json"])
+    assert ev["imu"] == "/imu/upper_arm" and list(ev["per_imu"]) == ["forearm"]
+    assert {"trajectory:forearm", "evaluate:forearm"} <= set(row["steps"])
 
 
 def test_older_one_set_trajectories_of_a_setup_are_read_then_replaced(setup_trial, tmp_path, monkeypatch):

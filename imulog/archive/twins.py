@@ -466,6 +466,10 @@ def twins_for(
         and parts[:2] == ["derived", "trajectory"]
         and stream.columns[:3] == ["x", "y", "z"]
     ):
-        repetitions = ((metadata or {}).get("imulog.trajectory") or {}).get("repetitions")
+        record = (metadata or {}).get("imulog.trajectory") or {}
+        if len(parts) == 4:  # /derived/trajectory/METHOD/IMU: that IMU's record (imulog.trajectory.IMU)
+            own = (metadata or {}).get(f"imulog.trajectory.{parts[3]}")
+            record = own or (record if str(record.get("imu", "")).endswith(f"/{parts[3]}") else {})
+        repetitions = record.get("repetitions")
         return [trajectory_twin(stream, log_map, clock, repetitions if isinstance(repetitions, list) else None)]
     return []

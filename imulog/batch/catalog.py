@@ -247,10 +247,12 @@ def trial_row(path: str | os.PathLike[str]) -> dict[str, Any]:
         row["timing_json"] = _json(timing)
     row.update(_flag_columns(timing, _record(meta.get("imulog.trajectory"))))
     ev = _record(meta.get("imulog.evaluation"))
+    others = {k.split(".", 2)[2]: _record(v) for k, v in meta.items() if k.startswith("imulog.evaluation.")}
     if ev:
         row["eval_methods"] = sorted((ev.get("methods") or {}).keys())
         row["best_mae_cm"] = _best_mae(ev)
-        row["evaluation_json"] = _json(ev)
+    if ev or others:  # a setup evaluated per IMU: the primary IMU's record, the others under per_imu
+        row["evaluation_json"] = _json({**ev, "per_imu": others} if others else ev)
     mt = _record(meta.get("imulog.metrics"))
     if mt:
         row["metrics_json"] = _json(mt)
