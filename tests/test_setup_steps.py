@@ -125,6 +125,13 @@ def test_trajectories_and_evaluation_per_imu(setup_trial, tmp_path):
     assert meta["imulog.trajectory.forearm"]["frame"] == "world"
     code, stdout, _ = run("process", "trajectory", path, "--method", "ddi,highpass")
     assert code == 0 and stdout.count("unchanged") == 3
+    # metrics' smoothness reads the IMU's own trajectory and cluster
+    from imulog.steps.metrics import pick_trajectory
+
+    assert pick_trajectory(topics, "", "forearm", meta) == "/derived/trajectory/highpass/forearm"
+    assert pick_trajectory(topics, "vicon", "forearm", meta) == "/derived/vicon/cluster_pose/forearm"
+    with pytest.raises(ValueError, match="/derived/trajectory/zupt/trunk"):
+        pick_trajectory(topics, "zupt", "trunk", meta)
     # evaluate: every IMU against its own cluster; the trunk has none (the setup's IMU without a cluster)
     code, stdout, stderr = run("evaluate", path)
     assert code == 1 and "1 of 3 IMUs not evaluated: trunk" in stderr
@@ -173,6 +180,10 @@ def test_older_one_set_trajectories_of_a_setup_are_read_then_replaced(setup_tria
         topics, meta = trial.topics(), trial.metadata
     assert "/derived/trajectory/highpass" in topics and meta["imulog.trajectory"]["imu"] == "/imu/forearm"
     assert trajectories_by_imu(topics, meta) == {"forearm": {"highpass": "/derived/trajectory/highpass"}}
+    from imulog.steps.metrics import pick_trajectory
+
+    assert pick_trajectory(topics, "", "forearm", meta) == "/derived/trajectory/highpass"
+    assert pick_trajectory(topics, "", "upper_arm", meta) == "/derived/vicon/cluster_pose/upper_arm"
     _, record = run_evaluate(path, strides=False)
     assert list(record["imus"]) == ["forearm"]
     assert record["imus"]["forearm"]["reference"] == "/derived/vicon/cluster_pose/forearm"
