@@ -219,3 +219,23 @@ def test_batch_runs_the_per_imu_steps_on_every_imu(tmp_path):
     with TrialReader(path) as trial:
         assert sum(r["step"] == "orientation:trunk" for r in trial.runs().values()) == 2
         assert sum(r["step"] == "orientation:forearm" for r in trial.runs().values()) == 1
+
+
+def test_four_opals_get_one_trajectory_set_each_on_their_own_clock(opals):
+    """The APDM file (four Opals, no markers): trajectories per IMU on each IMU's device clock."""
+    from imulog.archive import TrialReader
+
+    for step in ("orientation", "phases"):
+        code, _, stderr = run("process", step, opals)
+        assert code == 0, stderr
+    code, stdout, stderr = run("process", "trajectory", opals, "--method", "zupt")
+    assert code == 0, stderr
+    rows = [line.split()[:2] for line in stdout.splitlines() if line.startswith("  ") and ":" not in line]
+    assert rows[1:] == [[n, "wrote"] for n in ("static", "upper", "middle", "lower")]
+    with TrialReader(opals) as trial:
+        for n in ("static", "upper", "middle", "lower"):
+            ch = trial.channel(f"/derived/trajectory/zupt/{n}")
+            assert ch.metadata["clock"] == f"/imu/{n}" and ch.sample_count > 0
+        assert trial.metadata["imulog.trajectory"]["clock"] == "device"
+    code, stdout, stderr = run("evaluate", opals, "--windows")  # nothing optical to compare with: one line
+    assert code == 1 and "no optical reference" in stderr and "Traceback" not in stdout + stderr
