@@ -165,7 +165,9 @@ def trajectory_pieces(
     ``record`` at the end. ``topics``: acc, static, orientation, imu topics (None when absent); ``compute(acc,
     static, orientation, gyr)`` reconstructs one window (its arguments ``(t_ns, values)``, or None)."""
     from imulog.archive import TrialReader
+    from imulog.heap import bound_heap
 
+    bound_heap()  # the same temporaries window after window: keep them out of the heap (imulog.heap)
     records, skipped, split = [], [], []
     with TrialReader(path) as trial:
         bufs = {
