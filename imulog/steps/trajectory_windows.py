@@ -167,7 +167,9 @@ def trajectory_pieces(
     static, orientation, gyr)`` reconstructs one window (its arguments ``(t_ns, values)``, or None); ``attrs``:
     channel metadata of every piece (a per-IMU trajectory's ``clock``)."""
     from imulog.archive import TrialReader
+    from imulog.heap import bound_heap
 
+    bound_heap()  # the same temporaries window after window: keep them out of the heap (imulog.heap)
     records, skipped, split = [], [], []
     with TrialReader(path) as trial:
         bufs = {
