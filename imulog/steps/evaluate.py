@@ -314,7 +314,10 @@ def run_evaluate(
         records[imu] = record
     if not outcomes:
         raise ValueError("; ".join(f"{imu}: {r['failed']}" for imu, r in records.items()))
-    return outcomes[-1], {"kind": "imus", "imus": records}
+    import dataclasses
+
+    last = dataclasses.replace(outcomes[-1], skipped=all(o.skipped for o in outcomes))  # computed if any IMU was
+    return last, {"kind": "imus", "imus": records}
 
 
 def _evaluate_imu(path, imu, channels, baselines, record_name, step, methods, max_gap_s, force):
