@@ -41,15 +41,31 @@ def test_a_channel_without_samples_shows_no_rate_duration_or_gaps(tmp_path):
     assert row.split()[:7] == ["/derived/x", "[empty]", "imulog.SignalBlock", "-", "0", "-", "-"]
 
 
+def _after_a_channel_record(data: bytes, near: int) -> int:
+    """The end of the last top-level MCAP Channel record before byte ``near`` (or the first one after it): a cut
+    there keeps the channel's record and loses every chunk of its messages (a writer puts a channel's record just
+    before the chunk of its first message), whatever the storage layout makes the file's size."""
+    ends, pos = [], 8  # past the magic
+    while pos + 9 <= len(data):
+        op, length = data[pos], int.from_bytes(data[pos + 1 : pos + 9], "little")
+        if op == 0x0F:  # DataEnd: the summary follows
+            break
+        if op == 0x04:  # Channel
+            ends.append(pos + 9 + length)
+        pos += 9 + length
+    before = [e for e in ends if e <= near]
+    return before[-1] if before else ends[0]
+
+
 def test_salvaged_trial_channel_lost_at_the_cut_is_empty(processed_r2g, tmp_path):
     """Half a processed trial, salvaged: the channels whose chunks were past the cut hold nothing, and info says
     so (it used to print their recorded rate, samples and duration)."""
     cut = tmp_path / "cut.mcap"
     data = processed_r2g.read_bytes()
-    cut.write_bytes(data[: len(data) // 2])
+    cut.write_bytes(data[: _after_a_channel_record(data, len(data) // 2)])
     shutil.copy(cut, tmp_path / "keep.mcap")
     run("salvage", cut, "-o", tmp_path / "fixed.mcap")
-    text = run("info", tmp_path / "fixed.mcap")
+    text = run("info", tmp_path / "fixed.mcap", "-v")  # -v: viewer twins too
     doc = json.loads(run("info", tmp_path / "fixed.mcap", "--json"))
     empty = [c for c in doc["channels"] if c["messages"] == 0]
     assert empty, "the cut should leave a channel without messages"

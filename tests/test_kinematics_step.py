@@ -149,7 +149,9 @@ def test_windows_give_the_angles_of_the_whole(arm_trial, tmp_path):
         for kind in ("joint_angles_unconstrained", "joint_angles_constrained", "constraint_active"):
             x, y = a.read(f"/derived/kinematics/{kind}"), b.read(f"/derived/kinematics/{kind}")
             np.testing.assert_array_equal(x.t_ns, y.t_ns)
-            np.testing.assert_allclose(x.values, y.values, atol=1e-9)
+            # angles (deg): the solver stops when a step is below 1e-9 rad, so two starts (warm from the previous
+            # window or not) agree to a few of those steps, 1e-6 deg = 1.7e-8 rad; flags and poses exactly below
+            np.testing.assert_allclose(x.values, y.values, atol=1e-6 if kind.startswith("joint") else 1e-9)
         np.testing.assert_allclose(
             a.read("/derived/kinematics/wrist").position, b.read("/derived/kinematics/wrist").position, atol=1e-9
         )

@@ -21,9 +21,10 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
 
 
 @dataclass(frozen=True)
@@ -49,6 +50,8 @@ def repetition_features(
     with ``index``, ``start``, ``stop`` (sample slice); trajectories_m: {method: (N, 3) m} with ``zupt`` and,
     when computed, ``optimized``; quality: the phases step's per-repetition records (``repetition`` 1-based).
     """
+    import numpy as np  # lazily: `imulog info` reads flag_line without numpy
+
     t = np.asarray(t_s, dtype=np.float64)
     acc = np.asarray(acc_mps2, dtype=np.float64)
     static = np.asarray(static_mask, dtype=bool)
@@ -82,6 +85,8 @@ def repetition_features(
 
 def _rms_distance_cm(a: np.ndarray, b: np.ndarray) -> float | None:
     """RMS 3D distance (cm) between two (N, 3) m trajectories over the samples where both are finite."""
+    import numpy as np
+
     d = np.asarray(a) - np.asarray(b)
     d = d[np.all(np.isfinite(d), axis=1)]
     return float(100 * np.sqrt(np.mean(np.sum(d**2, axis=1)))) if len(d) else None
@@ -89,6 +94,8 @@ def _rms_distance_cm(a: np.ndarray, b: np.ndarray) -> float | None:
 
 def _edge_run_s(t: np.ndarray, static: np.ndarray) -> float:
     """Length (s) of the run of static samples at the start of ``static``."""
+    import numpy as np
+
     if not len(static) or not static[0]:
         return 0.0
     moving = np.flatnonzero(~static)

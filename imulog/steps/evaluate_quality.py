@@ -29,26 +29,33 @@ def phase_quality_summary(
     low_reps = sorted(k for k, q in quality.items() if float(q.get("confidence", 1.0)) < low)
     reasons = {int(f["repetition"]): list(f.get("reasons") or []) for f in flagged or []}
     per_method: dict[str, dict[str, Any]] = {}
+    per_flag: dict[str, dict[str, Any]] = {}
     for method, rec in (evaluation.get("methods") or {}).items():
-        groups: dict[str, list[float]] = {"confident": [], "low_confidence": [], "unflagged": [], "flagged": []}
+        groups: dict[str, list[float]] = {"confident": [], "low_confidence": []}
+        by_flag: dict[str, list[float]] = {"unflagged": [], "flagged": []}
         for row in rec.get("repetitions") or []:
             values = [row[a]["mae_cm"] for a in ("x", "y", "z") if isinstance(row.get(a), dict) and "mae_cm" in row[a]]
             if not values:
                 continue
             k = int(row.get("repetition", -1))
             groups["low_confidence" if k in low_reps else "confident"].append(float(np.mean(values)))
-            if flagged is not None:
-                groups["flagged" if k in reasons else "unflagged"].append(float(np.mean(values)))
-        per_method[method] = {
-            k: {"n": len(v), "mae_cm": round(float(np.mean(v)), 3) if v else None} for k, v in groups.items()
-        }
-    return {
+            by_flag["flagged" if k in reasons else "unflagged"].append(float(np.mean(values)))
+        per_method[method] = _means(groups)
+        per_flag[method] = _means(by_flag)
+    out = {
         "forced_repetitions": forced,
         "low_confidence_repetitions": low_reps,
         "threshold": low,
-        **({"flagged_repetitions": [{"repetition": k, "reasons": v} for k, v in reasons.items()]} if flagged else {}),
         "methods": per_method,
     }
+    if flagged:  # the repetition flags and each method's errors on flagged and unflagged repetitions apart
+        out["flagged_repetitions"] = [{"repetition": k, "reasons": v} for k, v in reasons.items()]
+        out["flagged_methods"] = per_flag
+    return out
+
+
+def _means(groups: dict[str, list[float]]) -> dict[str, dict[str, Any]]:
+    return {k: {"n": len(v), "mae_cm": round(float(np.mean(v)), 3) if v else None} for k, v in groups.items()}
 
 
 def format_phase_quality(summary: dict[str, Any]) -> str:
@@ -71,8 +78,8 @@ def format_phase_quality(summary: dict[str, Any]) -> str:
     if flagged:
         shown = ", ".join(f"{f['repetition']} ({', '.join(f['reasons'])})" for f in flagged[:12])
         lines.append(f"flagged repetitions: {shown}{f' +{len(flagged) - 12} more' if len(flagged) > 12 else ''}")
-        for method, groups in summary["methods"].items():
-            u, f = groups.get("unflagged", {}), groups.get("flagged", {})
+        for method, groups in (summary.get("flagged_methods") or {}).items():
+            u, f = groups["unflagged"], groups["flagged"]
             if f.get("n"):
                 lines.append(
                     f"  {method}: mean MAE {u['mae_cm']} cm on {u['n']} unflagged, {f['mae_cm']} cm on {f['n']} "
