@@ -219,6 +219,8 @@ def encode(
         hints, precision = _hints(stream.meta)
         n = len(stream.t_ns)
         pos = stream.pos.reshape(n, -1)
+        if hints.get("pos"):  # counts: an invalid marker is count 0 (read back as NaN by its valid flag)
+            pos = np.where(np.repeat(valid.reshape(n, -1), 3, axis=1), pos, 0.0)
         layout = _Layout(
             st(2, stream.frame_id) + _strings(3, stream.labels),
             4,
