@@ -1,4 +1,4 @@
-"""Attached originals stored zstd-packed (issue 28): every reader gives back the original bytes and SHA-256,
+"""Attached originals stored compressed (issue 28: bzip2 for text, zstd for binary files): every reader gives back the original bytes and SHA-256,
 doctor and salvage agree with imulog.raw, and archives with plain attachments keep reading."""
 
 from __future__ import annotations
@@ -39,7 +39,9 @@ def test_packed_csv_reads_back_as_the_original(csv, tmp_path, monkeypatch, strea
         stored = t.summary.attachment_indexes[0]
         recorded = t.metadata["imulog.raw"]["attachments"][csv.name]
     assert (
-        info["packed"] and info["media_type"] == "text/csv" and stored.media_type == packing.PACKED_PREFIX + "text/csv"
+        info["packed"]
+        and info["media_type"] == "text/csv"
+        and stored.media_type == "application/x-bzip2; imulog-packed=text/csv"
     )
     assert stored.data_size < 0.5 * len(original)  # CSV text packs well
     assert att.data == original and att.media_type == "text/csv"
@@ -67,3 +69,14 @@ def test_salvage_keeps_packed_attachment(csv, tmp_path):
         (att,) = t.attachments()
         assert att.data == csv.read_bytes()
         assert t.metadata["imulog.raw"]["attachments"][csv.name] == att.sha256
+
+
+def test_binary_original_packs_with_zstd(shared_data):
+    data = (shared_data / "devices" / "geneactiv_bin" / "GENEActiv_testfile.bin").read_bytes()
+    noise = bytes(range(256)) * 64 + b"\0" + data  # a NUL byte: binary, whatever the extension says
+    for blob, media_type in ((noise, "application/octet-stream"), (data, "application/x-geneactiv")):
+        stored, stored_type = packing.pack(blob, media_type)
+        assert packing.is_packed(stored_type) and len(stored) < 0.9 * len(blob)
+        assert packing.original_media_type(stored_type) == media_type
+        assert packing.unpack(stored, stored_type) == blob
+    assert packing.pack(noise, "application/octet-stream")[1].startswith("application/zstd;")

@@ -47,7 +47,7 @@ from imulog.process.trajectory_opt import (
     repetition_windows,
 )
 from imulog.steps.common import alignment_for, pick_imu, record_of
-from imulog.steps.trajectory_windows import TrajectoryWindows, has_r2g, trajectory_pieces
+from imulog.steps.trajectory_windows import F32, TrajectoryWindows, has_r2g, trajectory_pieces
 from imulog.steps.trajectory_windows import plan as window_plan
 
 STEP = "trajectory"
@@ -239,7 +239,7 @@ def compute_trajectories(
                 units=["m", "m", "m"],
                 values=pos[rows],
                 frame_id=frame,
-                attrs=check_attrs(check),
+                attrs={**check_attrs(check), **F32},  # float32: sub-micrometre on metres (docs/schemas.md)
             )
         )
     record = {

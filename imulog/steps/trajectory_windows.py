@@ -22,6 +22,8 @@ from imulog.process.segmentation.dynamos import runs
 from imulog.steps.sample_window import SampleWindow
 from imulog.steps.windows import RestWindow, rest_windows
 
+F32 = {"precision": "float32"}  # trajectories in m stored as float32: under a micrometre on metres (docs/schemas.md)
+
 
 @dataclass(frozen=True)
 class TrajectoryWindows:
@@ -197,7 +199,9 @@ def trajectory_pieces(
                     yield SignalStream(topic, np.zeros(0, np.int64), ["x", "y", "z"], ["m"] * 3, empty, frame_id=frame)
                     continue
                 keep = (s.t_ns >= t_own[0]) & (s.t_ns <= t_own[1])  # the rows this window owns
-                yield SignalStream(topic, s.t_ns[keep], s.columns, s.units, s.values[keep], frame_id=frame)
+                yield SignalStream(
+                    topic, s.t_ns[keep], s.columns, s.units, s.values[keep], frame_id=frame, attrs=dict(F32)
+                )
             if w.index + 1 < len(plan_):
                 for buf in bufs.values():
                     buf.drop_before(plan_[w.index + 1].lo)
