@@ -2,13 +2,18 @@
 
     python benchmarks/bench_storage.py                  # 1 day of home AX6 .cwa and a 1-hour IMU text trial
     python benchmarks/bench_storage.py --days 7         # the week of issue 28 (minutes on 2 shared cores)
+    python benchmarks/bench_storage.py --days 0 --minutes-imu 0 --devices --demo   # real samples, the demo
 
 Cases (generated in a temporary folder):
 
 * home: ``imulog simulate home --days N`` (a 100 Hz Axivity AX6 .cwa, the device's own file), converted with
   ``imulog convert --attach-original never`` (the original recorded by size and SHA-256, not attached);
 * IMU text: the 1-hour 9-axis 100 Hz text file of ``bench_convert.py`` (``%.6g`` values), converted with
-  ``--no-attach``.
+  ``--no-attach``;
+* ``--devices``: the shared real samples of the integer sources (ActiGraph ``.gt3x``, GENEActiv ``.bin``,
+  integer C3D), each converted with ``--no-attach`` (short files: the viewer twins weigh in);
+* ``--demo``: ``imulog demo --no-view``, the whole processed trial and its attached originals (50.6 MB before
+  issue 28's second part).
 
 The peer is what a user of the `mcap` library would write for the same arrays: every canonical channel of the
 converted trial read back and written as 1-s blocks of float64 arrays with explicit times (imulog's
@@ -74,20 +79,72 @@ def report(name: str, hours: float, source: Path, trial: Path, peer: int) -> Non
     )
 
 
+SHARED = Path(__file__).resolve().parent.parent / ".." / "shared" / "data"
+SAMPLES = [
+    "devices/actigraph_gt3x/example.gt3x",
+    "devices/geneactiv_bin/GENEActiv_testfile.bin",
+    "devices/c3d_samples/pc_int.c3d",
+    "devices/c3d_samples/MACsample.c3d",
+]
+
+
+def devices(d: Path) -> None:
+    """The shared integer-source samples converted without their original."""
+    for rel in SAMPLES:
+        src = SHARED / rel
+        if not src.exists():
+            print(f"{rel}: not available")
+            continue
+        trial = d / f"{src.stem}.mcap"
+        imulog_cli("convert", str(src), "-o", str(trial), "--no-attach")
+        size, peer, n = trial.stat().st_size, peer_size(trial, d / f"{src.stem}_peer.mcap"), src.stat().st_size
+        print(
+            f"{src.name}: source {n / 1e3:.0f} kB; imulog {size / 1e3:.0f} kB = {size / n:.2f}x the source; "
+            f"peer {peer / 1e3:.0f} kB; imulog/peer {size / peer:.2f}x"
+        )
+
+
+def demo(d: Path) -> None:
+    """``imulog demo --no-view``: the processed trial and its attachments."""
+    out = d / "demo"
+    subprocess.run(
+        [sys.executable, "-m", "imulog", "demo", "-o", str(out), "--no-view", "--no-open"],
+        check=True,
+        stdout=subprocess.DEVNULL,
+    )
+    trial = out / "trial.mcap"
+    with TrialReader(trial) as tr:
+        atts = tr.attachment_infos()
+    originals = sum((out / "raw" / a["name"]).stat().st_size for a in atts if (out / "raw" / a["name"]).exists())
+    stored = sum(a["bytes"] for a in atts)
+    size = trial.stat().st_size
+    print(
+        f"demo trial: {size / 1e6:.1f} MB = {size / 50.6e6:.2f}x the 50.6 MB before; attached originals "
+        f"{originals / 1e6:.1f} MB stored as {stored / 1e6:.1f} MB"
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--days", type=float, default=1.0, help="home recording length in days (default 1; 0: skip)")
     ap.add_argument("--minutes-imu", type=float, default=60.0, help="IMU text trial length (default 60)")
+    ap.add_argument("--devices", action="store_true", help="also the shared .gt3x, GENEActiv and C3D samples")
+    ap.add_argument("--demo", action="store_true", help="also the demo trial (imulog demo --no-view)")
     ap.add_argument("--dir", default=None, help="where to write the files (default: system temp)")
     a = ap.parse_args(argv)
     print(f"load average {load_average()}")
     with tempfile.TemporaryDirectory(dir=a.dir) as tmp:
         d = Path(tmp)
-        text = d / "imu_1h.csv"
-        write_imu(text, a.minutes_imu)
-        trial = d / "imu.mcap"
-        imulog_cli("convert", str(text), "-o", str(trial), "--no-attach")
-        report("IMU text 100 Hz 9-axis", a.minutes_imu / 60, text, trial, peer_size(trial, d / "imu_peer.mcap"))
+        if a.devices:
+            devices(d)
+        if a.demo:
+            demo(d)
+        if a.minutes_imu > 0:
+            text = d / "imu_1h.csv"
+            write_imu(text, a.minutes_imu)
+            trial = d / "imu.mcap"
+            imulog_cli("convert", str(text), "-o", str(trial), "--no-attach")
+            report("IMU text 100 Hz 9-axis", a.minutes_imu / 60, text, trial, peer_size(trial, d / "imu_peer.mcap"))
         if a.days <= 0:
             return 0
         imulog_cli("simulate", "home", "-o", str(d), "--days", str(a.days))

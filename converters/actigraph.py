@@ -456,7 +456,8 @@ def _activity(path: Path, batch: RecordBatch, st: _State) -> list[ImuStream]:
     acc = np.concatenate(parts).astype(np.float64) / st.accel_scale * G0
     first = np.cumsum(counts_a) - counts_a
     pieces = with_gaps(t, {"acc": acc}, first, prev + 1, jump, round(st.rate_hz), st.origin_ns)
-    return [ImuStream(name=st.name, t_ns=pt, acc=pv["acc"], meta=dict(st.meta)) for pt, pv in pieces]
+    meta = {**st.meta, "resolution": {"acc": {"divisor": st.accel_scale, "scale": G0}}}  # counts / LSB per g * g
+    return [ImuStream(name=st.name, t_ns=pt, acc=pv["acc"], meta=dict(meta)) for pt, pv in pieces]
 
 
 def _check_rate(path: Path, st: _State, counts: np.ndarray) -> None:
@@ -542,6 +543,7 @@ def _sensor(path: Path, batch: RecordBatch, st: _State) -> list[ImuStream]:
     if st.imu_rate_hz is None:
         st.imu_rate_hz = rate
     meta = {**st.meta, "rate_hz": float(st.imu_rate_hz), "columns": [c.label for c in schema.columns if c.label]}
+    meta["resolution"] = _sensor_resolution(schema, float(st.meta.get("imu_temp_offset", 21.0)))
     values = {
         "acc": None if acc is None else acc * G0,
         "gyr": None if gyr is None else np.radians(gyr),
@@ -551,6 +553,24 @@ def _sensor(path: Path, batch: RecordBatch, st: _State) -> list[ImuStream]:
     first = np.cumsum(counts) - counts
     pieces = with_gaps(t - st.origin_ns, values, first, prev + 1, jump, st.imu_rate_hz, st.origin_ns)
     return [ImuStream(name=f"{st.name}_imu", t_ns=pt, meta=dict(meta), **pv) for pt, pv in pieces]
+
+
+def _sensor_resolution(schema: SensorSchema, temp_offset: float) -> dict[str, dict[str, Any]]:
+    """How the SI values of :func:`_sensor` follow from the SENSOR_DATA counts: ``(counts / column scale) *
+    unit factor (+ offset)`` per axis, as :mod:`imulog.archive.numbers` stores them (checked value by value)."""
+    scales = {c.label: c.scale for c in schema.columns if c.label and c.scale}
+    out: dict[str, dict[str, Any]] = {}
+    for name, prefix, factor in (
+        ("acc", "Accelerometer", G0),
+        ("gyr", "Gyroscope", np.pi / 180),
+        ("mag", "Magnetometer", 1.0),
+    ):
+        div = [scales.get(f"{prefix} {a}") for a in "XYZ"]
+        if all(div):
+            out[name] = {"divisor": div, "scale": factor}
+    if scales.get("Temperature"):
+        out["temperature"] = {"divisor": scales["Temperature"], "offset": temp_offset}
+    return out
 
 
 def _scalar_signals(batch: RecordBatch, st: _State) -> list[SignalStream]:
@@ -783,7 +803,7 @@ def _iter_activity_bin(path: Path, z: zipfile.ZipFile, st: _State, offset: int |
                 name=st.name,
                 t_ns=np.round(k * spacing).astype(np.int64),
                 acc=xyz / st.accel_scale * G0,
-                meta=dict(st.meta),
+                meta={**st.meta, "resolution": {"acc": {"divisor": st.accel_scale, "scale": G0}}},
             )
             rec = Recording(imus=[imu], sources=[str(path)])
             rec.metadata[f"imulog.device.{st.name}"] = dict(st.meta)

@@ -40,6 +40,24 @@ def _param(params: dict, group: str, name: str, default: Any = None) -> Any:
         return default
 
 
+def _positions_m(xyz: np.ndarray, params: dict, unit: str) -> tuple[np.ndarray, dict[str, Any]]:
+    """Marker positions in m and, for an integer C3D (``POINT:SCALE`` > 0), the ``resolution`` hint that lets the
+    archive store the file's int16 words: positions are then ``counts * (POINT:SCALE * unit to m)``, so they read
+    back bit for bit (:mod:`imulog.archive.numbers`); a float C3D (scale < 0) keeps ``xyz * unit to m``."""
+    to_m = LENGTH_TO_M[unit]
+    scale = _param(params, "POINT", "SCALE")
+    step = float(scale[0]) if scale is not None and len(scale) else 0.0
+    fin = np.isfinite(xyz)
+    if step > 0 and np.isfinite(step) and fin.any():
+        with np.errstate(invalid="ignore"):
+            counts = np.rint(xyz / step)
+        whole = np.abs(counts[fin]).max() <= 32768 and np.allclose(counts[fin] * step, xyz[fin], rtol=1e-6, atol=0)
+        if whole:  # the words of an integer file (ezc3d gives word x scale, possibly rounded in float32)
+            m_step = step * to_m
+            return counts * m_step, {"resolution": {"pos": {"scale": m_step}}}
+    return xyz * to_m, {}
+
+
 def _labels(params: dict, group: str, n: int) -> list[str]:
     labels = list(_param(params, group, "LABELS", []) or [])
     if len(labels) < n:
@@ -223,14 +241,15 @@ def read_c3d(path: Path, name: str = "vicon", options: ConvertOptions | None = N
         marker_idx = [i for i, lab in enumerate(labels) if lab not in outputs]
         out_idx = [i for i, lab in enumerate(labels) if lab in outputs]
         if marker_idx:
+            pos, res = _positions_m(xyz[:, marker_idx, :], params, unit)
             rec.markers.append(
                 MarkerStream(
                     name=name,
                     t_ns=t_ns,
                     labels=[labels[i] for i in marker_idx],
-                    pos=xyz[:, marker_idx, :] * LENGTH_TO_M[unit],
+                    pos=pos,
                     valid=valid[:, marker_idx],
-                    meta={"rate_hz": rate, "units": unit, "source": path.name},
+                    meta={"rate_hz": rate, "units": unit, "source": path.name, **res},
                 )
             )
             meta.update(marker_units=unit, markers=len(marker_idx))

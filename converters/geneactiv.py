@@ -181,6 +181,8 @@ def iter_chunks(path: Path, options: ConvertOptions | None = None) -> Iterator[R
             "time_base": "ns from start_time; sample i of a page at Page Time + i / Measurement Frequency",
             "source": path.name,
         }
+        # stored as counts x 100 (GGIR's calibration offset is in hundredths of a count): ((c - offset) / gain) * g
+        res = {"acc": {"shift": (-offset).tolist(), "divisor": gain.tolist(), "scale": G0}}
         origin_ms: int | None = None
         prev_end: float | None = None
         for c0 in range(0, n_pages, PAGES_PER_CHUNK):
@@ -230,7 +232,7 @@ def iter_chunks(path: Path, options: ConvertOptions | None = None) -> Iterator[R
             light = raw[..., 3].reshape(-1).astype(np.float64) * (lux / volts if volts else 1.0)
             button = raw[..., 4].reshape(-1).astype(np.float64)
             rec = Recording(
-                imus=[ImuStream(name=name, t_ns=flat_t, acc=acc_g * G0, meta=dict(meta))],
+                imus=[ImuStream(name=name, t_ns=flat_t, acc=acc_g * G0, meta={**meta, "resolution": res})],
                 signals=[
                     SignalStream(
                         f"/signals/{name}",

@@ -235,7 +235,13 @@ def read_vicon_csv(path: Path, name: str = "vicon", user_units: dict[str, str] |
                     labels=labels,
                     pos=pos,
                     valid=valid,
-                    meta={"rate_hz": rate, "units": units[2], "source": path.name},
+                    # text x unit factor: the archive stores the text's decimals as counts (imulog.archive.numbers)
+                    meta={
+                        "rate_hz": rate,
+                        "units": units[2],
+                        "source": path.name,
+                        "resolution": {"pos": {"scale": scale}},
+                    },
                 )
             )
             meta.update(rate_hz=rate, marker_units=units[2], markers=len(labels), marker_source=path.name)

@@ -203,6 +203,7 @@ class PoseStream:
     position: np.ndarray
     orientation: np.ndarray | None = None
     frame_id: str = "world"
+    precision: str = ""  # "float32": stored at float32 (derived poses, docs/schemas.md); "" at the source's resolution
 
     def __post_init__(self) -> None:
         self.t_ns = _as_time(self.t_ns)

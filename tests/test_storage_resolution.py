@@ -59,3 +59,75 @@ def test_adc_text_counts_with_zero_offset(tmp_path: Path):
     assert np.array_equal(back.acc, rec.imus[0].acc) and np.array_equal(back.t_ns, rec.imus[0].t_ns)
     assert all(b.HasField("acc_q") and list(b.acc_q.shift) == [-510.0, -512.0, -509.0] for b in blocks)
     assert np.array_equal(np.concatenate([np.array(b.acc_q.counts) for b in blocks]).reshape(-1, 3), counts)
+
+
+def _q_blocks(trial: TrialReader, topic: str, schema: str, field: str) -> tuple[int, list]:
+    cls = codec.MESSAGE_CLASSES[schema]
+    msgs = [cls.FromString(bytes(p)) for p in trial.messages(topic)]
+    return len(msgs), [getattr(m, field) for m in msgs if m.HasField(field) and len(getattr(m, field).counts)]
+
+
+def test_actigraph_gt3x_counts_read_back_as_the_converters_values(shared_data: Path, tmp_path: Path):
+    from imulog.converters.actigraph import read_gt3x
+
+    rec = read_gt3x(shared_data / "devices" / "actigraph_gt3x" / "example.gt3x")
+    path = write_trial(tmp_path / "t.mcap", rec, attach_sources=False)
+    with TrialReader(path) as tr:
+        for imu in rec.imus:
+            back = tr.read(f"/imu/{imu.name}")
+            assert np.array_equal(back.t_ns, imu.t_ns)
+            fields = [f for f in ("acc", "gyr", "mag", "temperature") if getattr(imu, f) is not None]
+            for f in fields:
+                assert np.array_equal(getattr(back, f), getattr(imu, f), equal_nan=True), (imu.name, f)
+                n, qs = _q_blocks(tr, f"/imu/{imu.name}", "imulog.ImuBlock", f"{f}_q")
+                assert len(qs) == n, (imu.name, f)  # every block as the device's counts
+                assert max(abs(c) for c in qs[0].counts) < 2**15
+            n, acc = _q_blocks(tr, f"/imu/{imu.name}", "imulog.ImuBlock", "acc_q")
+            # the primary accelerometer's LSB per g (256 at +-8 g) or the IMU's; 1 g = 9.80665 m/s^2
+            assert acc[0].divisor[0] in (256.0, 341.0, 2048.0) and acc[0].scale[0] == 9.80665, imu.name
+
+
+def test_geneactiv_counts_read_back_as_the_converters_values(shared_data: Path, tmp_path: Path):
+    from imulog.converters.geneactiv import read_bin
+
+    rec = read_bin(shared_data / "devices" / "geneactiv_bin" / "GENEActiv_testfile.bin")
+    imu = rec.imus[0]
+    path = write_trial(tmp_path / "t.mcap", rec, attach_sources=False)
+    with TrialReader(path) as tr:
+        back = tr.read(f"/imu/{imu.name}")
+        n, qs = _q_blocks(tr, f"/imu/{imu.name}", "imulog.ImuBlock", "acc_q")
+    assert np.array_equal(back.acc, imu.acc) and np.array_equal(back.t_ns, imu.t_ns)
+    assert len(qs) == n
+    cal = rec.metadata[f"imulog.device.{imu.name}"]["calibration"]
+    assert list(qs[0].divisor) == cal["gain"] and list(qs[0].shift) == [-o for o in cal["offset"]]
+    counts = np.concatenate([np.array(q.counts) for q in qs]).reshape(-1, 3)
+    assert np.all(counts % 100 == 0) and np.abs(counts // 100).max() < 2**11  # the 12-bit words x 100
+
+
+@pytest.mark.parametrize("name", ["pc_int.c3d", "MACsample.c3d"])
+def test_c3d_integer_points_stored_as_their_words(shared_data: Path, tmp_path: Path, name: str):
+    from imulog.converters.c3d import read_c3d
+
+    rec = read_c3d(shared_data / "devices" / "c3d_samples" / name)
+    mk = rec.markers[0]
+    path = write_trial(tmp_path / "t.mcap", rec, attach_sources=False)
+    with TrialReader(path) as tr:
+        back = tr.read(mk.topic)
+        n, qs = _q_blocks(tr, mk.topic, "imulog.MarkerBlock", "pos_q")
+    assert np.array_equal(back.pos, mk.pos, equal_nan=True) and np.array_equal(back.valid, mk.valid)
+    assert (~mk.valid).any()  # occluded samples: stored as count 0, read back as NaN
+    assert len(qs) == n
+    counts = np.concatenate([np.array(q.counts) for q in qs])
+    assert np.abs(counts).max() <= 32768  # the file's int16 words
+    scale = mk.meta["resolution"]["pos"]["scale"]
+    assert qs[0].scale[0] == scale and 1e-6 < scale < 1e-3  # POINT:SCALE (mm) in m
+
+
+def test_c3d_float_points_keep_float64(shared_data: Path, tmp_path: Path):
+    from imulog.converters.c3d import read_c3d
+
+    rec = read_c3d(shared_data / "c3d" / "ktk_sample_propulsion_upperlimb.c3d")
+    assert "resolution" not in rec.markers[0].meta  # POINT:SCALE < 0: float32 words, no integer counts
+    path = write_trial(tmp_path / "t.mcap", rec, attach_sources=False)
+    with TrialReader(path) as tr:
+        assert np.array_equal(tr.read(rec.markers[0].topic).pos, rec.markers[0].pos, equal_nan=True)

@@ -219,6 +219,8 @@ def encode(
         hints, precision = _hints(stream.meta)
         n = len(stream.t_ns)
         pos = stream.pos.reshape(n, -1)
+        if hints.get("pos"):  # counts: an invalid marker is count 0 (read back as NaN by its valid flag)
+            pos = np.where(np.repeat(valid.reshape(n, -1), 3, axis=1), pos, 0.0)
         layout = _Layout(
             st(2, stream.frame_id) + _strings(3, stream.labels),
             4,
@@ -264,7 +266,9 @@ def encode(
         assert isinstance(stream, PoseStream)
         meta.update(frame_id=stream.frame_id, units="m", columns=json.dumps(["x", "y", "z", "qw", "qx", "qy", "qz"]))
         meta.update(_stats(stream.t_ns, [stream.position, stream.orientation]))
-        precision = ""
+        precision = stream.precision
+        if precision:
+            meta["precision"] = precision
         arrays = [(5, 10, stream.position, None), (6, 11, stream.orientation, None)]
         layout = _Layout(st(2, stream.frame_id), 3, 4, (7, 8, 9), arrays, precision)
     layout.compact = compact

@@ -25,6 +25,7 @@ from imulog.archive.metadata import (
     record_hash,
     validate_record,
 )
+from imulog.archive.packing import is_packed, original_media_type, unpack
 from imulog.archive.tables import stream_columns
 from imulog.model import Stream
 
@@ -312,7 +313,13 @@ class TrialReader:
         """
         raw = self.metadata.get("imulog.raw", {}).get("attachments", {})
         return [
-            {"name": a.name, "media_type": a.media_type, "bytes": a.data_size, "sha256": raw.get(a.name)}
+            {
+                "name": a.name,
+                "media_type": original_media_type(a.media_type),
+                "bytes": a.data_size,  # as stored (zstd frame when packed)
+                "packed": is_packed(a.media_type),
+                "sha256": raw.get(a.name),
+            }
             for a in sorted(self.summary.attachment_indexes, key=lambda i: i.offset)
         ]
 
@@ -330,7 +337,12 @@ class TrialReader:
                 raise ArchiveCorruptError(f"{self.path}: attachment {idx.name!r}: {exc}") from exc
             if rec.crc != 0 and rec.crc != rec.computed_crc:
                 raise ArchiveCorruptError(f"{self.path}: attachment {idx.name!r} fails its CRC")
-            yield Attachment(rec.name, rec.media_type, rec.data, hashlib.sha256(rec.data).hexdigest(), rec.log_time)
+            try:
+                data = unpack(rec.data, rec.media_type)  # a zstd-packed original: its own bytes
+            except Exception as exc:  # zstandard.ZstdError: a frame the CRC did not catch
+                raise ArchiveCorruptError(f"{self.path}: attachment {idx.name!r} does not decompress: {exc}") from exc
+            media_type = original_media_type(rec.media_type)
+            yield Attachment(rec.name, media_type, data, hashlib.sha256(data).hexdigest(), rec.log_time)
 
     # ------------------------------------------------------------------ data
     def _channel_rec(self, topic: str) -> m.ChannelRec:

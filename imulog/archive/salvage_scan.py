@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from imulog.archive import _mcap as m
+from imulog.archive.packing import unpack
 
 _KNOWN_OPS = set(range(m.Op.HEADER, m.Op.DATA_END + 1))
 RELEASE_BYTES = 32 << 20  # hand mapped pages back to the kernel every this many bytes
@@ -229,7 +230,7 @@ class Scan:
                 self.report.lost.append(f"attachment {rec.name!r} at byte {pos}: CRC mismatch (damaged), dropped")
             else:
                 self.order.append(("attachment", (pos, pos + 9 + len(body))))  # data read again when written
-                self.attachment_sha[rec.name] = sha256_of(rec.data)
+                self.attachment_sha[rec.name] = sha256_of(unpack(rec.data, rec.media_type))  # the original's
         elif op == m.Op.METADATA:
             c = m.Cursor(body)
             name, items = c.string(), c.str_map()

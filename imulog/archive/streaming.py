@@ -33,6 +33,7 @@ from imulog.archive._builder import CHUNK_TARGET_BYTES, McapBuilder
 from imulog.archive.errors import ArchiveError, ArchiveExistsError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import encode_record
+from imulog.archive.packing import pack
 from imulog.archive.timeline import TIMELINE_RECORD, TimelineError, TrialAxis, timeline_record
 from imulog.model import Intervals, Recording, Stream, take_samples
 
@@ -372,11 +373,19 @@ class StreamingTrialWriter:
         return write_attachment_from_file(self._builder, src)
 
 
+STREAM_PACK_MAX = 64 << 20  # originals up to this size are read whole and packed; larger ones streamed as they are
+
+
 def write_attachment_from_file(builder: McapBuilder, src: Path, block: int = 1 << 20) -> str:
     """An MCAP Attachment record of the file ``src``, written block by block; returns the file's SHA-256."""
     size = src.stat().st_size
     media_type = mimetypes.guess_type(src.name)[0] or "application/octet-stream"
     mtime = max(src.stat().st_mtime_ns, 0)
+    if size <= STREAM_PACK_MAX:  # small enough to hold: zstd-packed when it pays (imulog.archive.packing)
+        data = src.read_bytes()
+        stored, stored_type = pack(data, media_type)
+        builder.add_attachment(src.name, stored_type, stored, log_time=mtime, create_time=mtime)
+        return hashlib.sha256(data).hexdigest()
     head = struct.pack("<QQ", mtime, mtime) + m._s(src.name) + m._s(media_type) + struct.pack("<Q", size)
     body_len = len(head) + size + 4
     offset = builder.offset

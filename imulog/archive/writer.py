@@ -18,6 +18,7 @@ from imulog.archive.errors import ArchiveError, ArchiveExistsError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.hashing import payload_hash, rows_hash  # noqa: F401  (re-exported: callers import them here)
 from imulog.archive.metadata import encode_record
+from imulog.archive.packing import pack
 from imulog.archive.timeline import IDENTITY, TIMELINE_RECORD, LogMap, TimelineError, TrialAxis, timeline_record
 from imulog.archive.twins import Origin, Twin, twin_topic, twins_for
 from imulog.model import Recording, Stream
@@ -253,7 +254,8 @@ def write_trial(
                 data = src.read_bytes()
                 media_type = mimetypes.guess_type(name)[0] or "application/octet-stream"
                 mtime = max(src.stat().st_mtime_ns, 0)
-                builder.add_attachment(name, media_type, data, log_time=mtime, create_time=mtime)
+                stored, stored_type = pack(data, media_type)  # zstd when it pays: read back as the original
+                builder.add_attachment(name, stored_type, stored, log_time=mtime, create_time=mtime)
                 attached[name] = hashlib.sha256(data).hexdigest()
             # imulog.raw and imulog.timeline describe this file's raw data: always recomputed (e.g. when
             # re-writing a read trial)

@@ -25,6 +25,10 @@ from imulog.process.resample import resample_quaternions, resample_signal
 from imulog.steps.align_summary import alignment_summary  # noqa: F401  (imulog.steps.align API)
 from imulog.steps.common import mean_rate_hz, pick_imu
 
+# the Vicon-derived and resampled channels are stored as float32 (issue 28; docs/schemas.md: 6e-8 relative, far
+# below the accuracy of a marker cluster or a resampled IMU signal); a copy per stream: attrs become metadata
+F32 = {"precision": "float32"}
+
 STEP = "align"
 
 
@@ -274,7 +278,12 @@ def alignment_streams(
         ok = ~ck.missing
         streams += [
             PoseStream(
-                "/derived/vicon/cluster_pose" + suffix, ck.t_ns[ok], ck.origin_m[ok], ck.quat_c2w[ok], frame_id="world"
+                "/derived/vicon/cluster_pose" + suffix,
+                ck.t_ns[ok],
+                ck.origin_m[ok],
+                ck.quat_c2w[ok],
+                frame_id="world",
+                precision=F32.get("precision", ""),
             ),
             SignalStream(
                 "/derived/vicon/angular_velocity" + suffix,
@@ -283,6 +292,7 @@ def alignment_streams(
                 ["rad/s"] * 3,
                 ck.omega_local_rad_s,
                 frame_id="cluster",
+                attrs=dict(F32),
             ),
         ]
     if resample:
@@ -298,6 +308,7 @@ def alignment_streams(
                 ["rad/s"] * 3,
                 resample_signal(t_ref_imu, gyr, t_dst, dst_rate_hz=vic_rate),
                 frame_id=imu_name,
+                attrs=dict(F32),
             )
         )
         if orientation is not None:
@@ -310,6 +321,7 @@ def alignment_streams(
                     ["1"] * 4,
                     resample_quaternions(t_o, orientation[1], t_dst, dst_rate_hz=vic_rate),
                     frame_id=f"{imu_name}_global",
+                    attrs=dict(F32),
                 )
             )
         if acc_global is not None:
@@ -322,6 +334,7 @@ def alignment_streams(
                     ["m/s^2"] * 3,
                     resample_signal(t_a, acc_global[1], t_dst, dst_rate_hz=vic_rate),
                     frame_id=f"{imu_name}_global",
+                    attrs=dict(F32),
                 )
             )
     return streams

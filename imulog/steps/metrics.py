@@ -216,6 +216,7 @@ def whole_streams(pieces) -> tuple[Intervals, SignalStream]:
         d[0].units,
         np.concatenate([s.values for s in d]),
         frame_id=d[0].frame_id,
+        attrs=dict(d[0].attrs),
     )
     return activity, distance
 

@@ -26,6 +26,8 @@ import numpy as np
 
 from imulog.model import Intervals, SignalStream
 
+F32 = {"precision": "float32"}  # the distance (cm) stored as float32: 6e-8 relative (docs/schemas.md)
+
 
 class DeadPeriodStitcher:
     """:func:`imulog.process.metrics.activity.dead_period_intervals` over consecutive pieces of one signal.
@@ -237,6 +239,7 @@ def metric_pieces(
             ["cm" if p.acc_unit == "m/s^2" else "cm (Doshi A.3, integrated in g)"],
             d_cm[:, None],
             frame_id=imu,
+            attrs=dict(F32),
         )
     for stitcher in stitchers[:3]:
         stitcher.finish()

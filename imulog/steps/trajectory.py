@@ -49,7 +49,7 @@ from imulog.process.trajectory_opt import (
 )
 from imulog.steps.common import alignment_for, alignment_record, pick_imu, record_for, record_of
 from imulog.steps.trajectory_topics import RECORD, baseline_topic, per_imu_layout, split_topic, trajectory_topic
-from imulog.steps.trajectory_windows import TrajectoryWindows, has_r2g, trajectory_pieces
+from imulog.steps.trajectory_windows import F32, TrajectoryWindows, has_r2g, trajectory_pieces
 from imulog.steps.trajectory_windows import plan as window_plan
 
 STEP = "trajectory"
@@ -247,7 +247,7 @@ def compute_trajectories(
                 units=["m", "m", "m"],
                 values=pos[rows],
                 frame_id=frame,
-                attrs={**check_attrs(check), **clock_attrs(imu, clock, per_imu)},
+                attrs={**check_attrs(check), **clock_attrs(imu, clock, per_imu), **F32},  # float32: docs/schemas.md
             )
         )
         written += [] if m == BASELINE else [m]

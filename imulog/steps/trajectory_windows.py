@@ -22,6 +22,8 @@ from imulog.process.segmentation.dynamos import runs
 from imulog.steps.sample_window import SampleWindow
 from imulog.steps.windows import RestWindow, rest_windows
 
+F32 = {"precision": "float32"}  # trajectories in m stored as float32: under a micrometre on metres (docs/schemas.md)
+
 
 @dataclass(frozen=True)
 class TrajectoryWindows:
@@ -210,7 +212,13 @@ def trajectory_pieces(
                     continue
                 keep = (s.t_ns >= t_own[0]) & (s.t_ns <= t_own[1])  # the rows this window owns
                 yield SignalStream(
-                    topic, s.t_ns[keep], s.columns, s.units, s.values[keep], frame_id=frame, attrs=attrs or {}
+                    topic,
+                    s.t_ns[keep],
+                    s.columns,
+                    s.units,
+                    s.values[keep],
+                    frame_id=frame,
+                    attrs={**(attrs or {}), **F32},
                 )
             if w.index + 1 < len(plan_):
                 for buf in bufs.values():
