@@ -84,3 +84,31 @@ def test_missing_samples_are_bridged_not_read_as_a_jump():
     got = refine_with_accelerometer(holed, gyr, RATE, gs, ge)
     assert np.abs(got[1] - ref[1]).max() <= 2 and np.abs(got[0] - ref[0]).max() <= 2
     assert np.isfinite(fill_gaps(holed)).all()
+
+
+def test_a_slow_last_submovement_after_a_pause_stays_in_the_phase():
+    """Issue 31: a stroke-like phase whose small, slow last submovement follows a pause after the wrist stopped
+    turning (gravity dominated the old continuation level, so the phase ended ~0.8 s early)."""
+    rng = np.random.default_rng(6)
+    plan = MotionPlan(np.zeros(3), np.array([1.0, 0, 0, 0]))
+    truth = []
+    for k in range(3):
+        plan.wait(4.0)
+        target = plan.p + np.array([0.25, 0.1 * (-1) ** k, 0.05])
+        q1 = quat.multiply(plan.q, quat.from_rotation_vector(np.radians([0.0, 20.0, 60.0 * (-1) ** k])))
+        # primary 2 s, pause 0.3 s, then a 0.7-s submovement carrying 30 % of the way; the wrist turns with the
+        # primary only
+        law = submovement_law(3.0, [0.0, 2.3], [2.0, 0.7], [1.0, 0.3])
+        rot = submovement_law(3.0, [0.0], [2.0], [1.0])
+        t0, t1 = plan.move(3.0, target, q1, law=law, rot_law=rot)
+        truth.append((t0, t1))
+    plan.wait(4.0)
+    truth = np.array(truth)
+    t, acc, gyr = _imu(plan, plan.t, rng)
+    s = np.round((truth[:, 0] + 0.15) * RATE).astype(int)
+    e = np.round((truth[:, 0] + 2.0 - 0.15) * RATE).astype(int)
+    gs, ge = refine_phase_boundaries(gyr, RATE, s, e)
+    assert np.all(t[ge - 1] - truth[:, 1] < -0.8)  # the gyroscope sees only the first 2 s
+    hs, he = refine_with_accelerometer(acc, gyr, RATE, gs, ge)
+    assert np.all(np.abs(t[he - 1] - truth[:, 1]) < 0.1), t[he - 1] - truth[:, 1]
+    assert np.all(np.abs(t[hs] - truth[:, 0]) < 0.05)

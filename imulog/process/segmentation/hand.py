@@ -24,14 +24,18 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
    zero-velocity update), so it is consistent with ZUPT;
 5. the hand moves where ``|a| > n_sigma x noise`` (at least ``min_level_mps2``), or where
    ``|v| > velocity_level_mps`` while ``|a|`` is above half that level (a slow tail still decelerating; a rest's
-   slow drift, the thesis's residual velocity, barely accelerates and is not taken); runs shorter than
-   ``min_run_s`` are noise; from the gyroscope
+   slow drift, the thesis's residual velocity, barely accelerates and is not taken), or where
+   ``|v| > cruise_velocity_mps`` (overlapping submovements of a slow phase cruise between them with next to
+   no acceleration: issue 31); runs shorter than ``min_run_s`` are noise; from the gyroscope
    boundary the onset (offset) walks outward over moving samples and stops at the first run of
    ``quiet_s`` without motion; a move beyond ``max_shift_s`` is not trusted (the "rest" is not a rest) and
    the gyroscope boundary stays;
 6. motion that resumes within ``continuation_s`` after the offset with ``|a|`` of at least
-   ``continuation_fraction`` of the phase's peak and settles before the rest window (a translation-only
-   correction after a pause) extends the phase, as :mod:`boundaries` does for rotations.
+   ``continuation_n_level`` x the level for ``min_run_s`` and settles before the rest window (a
+   translation-only correction after a pause) extends the phase, as :mod:`boundaries` does for rotations.
+   (Until issue 31 the level was 10 % of the phase's peak ``|f - f_rest|``, which gravity dominates once the
+   wrist has turned: 0.5-1.3 m/s^2, above a slow last submovement's 0.1-0.7 m/s^2, whose phase then ended
+   0.55-0.82 s early.)
 
 Pure numpy/scipy; intervals are half-open sample ranges ``[start, end)``.
 """
@@ -62,8 +66,11 @@ class HandParams:
     quiet_s: the walk stops at the first run this long (s) without motion.
     min_run_s: shorter runs above the level are noise, not motion (s).
     max_shift_s: a boundary moving further than this (s) beyond the gyroscope boundary is not trusted.
+    cruise_velocity_mps: the hand also moves where that velocity exceeds this (m/s) whatever its acceleration
+        (overlapping submovements of a slow phase cruise at a few cm/s with next to no acceleration); 0: off.
     continuation_s: a translation resuming within this time (s) after the offset can extend the phase.
-    continuation_fraction: ... when its ``|a|`` reaches this fraction of the phase's peak ``|a|``.
+    continuation_n_level: ... when its ``|a|`` stays at least this many times the acceleration level for
+        ``min_run_s`` (a sub-movement after a pause, not a noise spike).
     """
 
     enabled: bool = True
@@ -80,7 +87,8 @@ class HandParams:
     min_run_s: float = 0.03
     max_shift_s: float = 1.5
     continuation_s: float = 1.0
-    continuation_fraction: float = 0.1
+    continuation_n_level: float = 3.0
+    cruise_velocity_mps: float = 0.06
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:
@@ -162,19 +170,22 @@ def _walk(moving: np.ndarray, start: int, quiet: int) -> int:
     return last + 1
 
 
-def _extend_offset(a_norm, v_norm, b_local, level, vlevel, quiet, cont, cont_level, min_run) -> int:
+def _extend_offset(a_norm, v_norm, b_local, level, vlevel, quiet, cont, cont_level, min_run, cruise=0.0) -> int:
     """Offset (exclusive, local index) after walking out of the phase and over translation-only corrections."""
     moving = a_norm > level
     if vlevel > 0:  # a tail at speed that still decelerates; a rest's slow drift barely accelerates
         moving |= (v_norm > vlevel) & (a_norm > 0.5 * level)
+    if cruise > 0:
+        moving |= v_norm > cruise
     moving = sustained(moving, min_run)
     j = _walk(moving, b_local, quiet)
+    strong = sustained(a_norm >= cont_level, min_run)
     while cont > 0:
-        big = np.flatnonzero(a_norm[j : j + cont] >= cont_level)
+        big = np.flatnonzero(strong[j : j + cont])
         if len(big) == 0:
             break
         k = _walk(moving, j + int(big[0]), quiet)
-        if k >= len(moving):  # never settles before the rest: not a correction of this phase
+        if k >= len(moving) or k <= j:  # never settles before the rest: not a correction of this phase
             break
         j = k
     return j
@@ -240,16 +251,25 @@ def refine_with_accelerometer(
         a0, b0 = int(ss[k]), int(ee[k])
         prev_end = int(out_e[k - 1]) if k > 0 else first
         next_start = int(ss[k + 1]) if k + 1 < len(ss) else n
-        # the phase's peak |a| against the nearer rest, for the continuation level
         post = _rest_window(b0 + guard, min(next_start, n) - guard, length, reach, from_end=False)
         pre = _rest_window(prev_end + guard, a0 - guard, length, reach, from_end=True)
         if post is not None and post[0] > b0:
             a, v, noise = gravity_free(acc, gyr, dt, post, b0, post[0])
             level = max(params.n_sigma * noise, params.min_level_mps2)
             an, vn = np.linalg.norm(a, axis=1), np.linalg.norm(v, axis=1)
-            inside = np.linalg.norm(acc[a0:b0] - np.median(acc[post[0] : post[1]], axis=0), axis=1)
-            cont_level = max(params.continuation_fraction * float(inside.max(initial=0.0)), 3 * level)
-            j = _extend_offset(an, vn, 0, level, params.velocity_level_mps, quiet, cont, cont_level, min_run)
+            cont_level = params.continuation_n_level * level
+            j = _extend_offset(
+                an,
+                vn,
+                0,
+                level,
+                params.velocity_level_mps,
+                quiet,
+                cont,
+                cont_level,
+                min_run,
+                params.cruise_velocity_mps,
+            )
             if 0 < j <= shift:
                 out_e[k] = b0 + j
         if pre is not None and pre[1] < a0:
@@ -259,6 +279,8 @@ def refine_with_accelerometer(
             moving = an > level
             if params.velocity_level_mps > 0:
                 moving |= (vn > params.velocity_level_mps) & (an > 0.5 * level)
+            if params.cruise_velocity_mps > 0:
+                moving |= vn > params.cruise_velocity_mps
             moving = sustained(moving, min_run)
             i = _walk(moving, 0, quiet)
             if 0 < i <= shift:
