@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from google.protobuf import descriptor_pb2
 
-from imulog.archive import numbers, wire
+from imulog.archive import block_decode, numbers, wire
 from imulog.archive._generated.foxglove import PoseInFrame_pb2
 from imulog.archive._generated.imulog import (
     AnalogBlock_pb2,
@@ -30,12 +30,21 @@ from imulog.archive._generated.imulog import (
     PoseBlock_pb2,
     SignalBlock_pb2,
 )
+from imulog.archive.block_encode import (
+    BLOCK_NS,  # noqa: F401 (re-exported: codec.BLOCK_NS)
+    SCHEMA_VERSION,
+    SCHEMA_VERSION_V1,
+    Layout,
+    block_bounds,  # noqa: F401 (re-exported)
+    encode_blocks,
+    strings_field,
+)
 from imulog.archive.timeline import IDENTITY, LogMap
 from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream, Stream
 
-SCHEMA_VERSION = 2  # newest layout version written (blocks with Numbers or compact times); readers accept <= this
-SCHEMA_VERSION_V1 = 1  # blocks using only the fields of the first layout keep writing 1 (readable by older imulog)
-BLOCK_NS = 1_000_000_000  # block length: samples are grouped in windows of 1 s
+# SCHEMA_VERSION: newest layout version written (blocks with Numbers or compact times); readers accept <= this.
+# SCHEMA_VERSION_V1: blocks using only the fields of the first layout keep writing 1 (readable by older imulog).
+# BLOCK_NS: block length: samples are grouped in windows of 1 s.
 
 MESSAGE_CLASSES = {
     "imulog.ImuBlock": ImuBlock_pb2.ImuBlock,
@@ -130,17 +139,6 @@ def channel_log_time(channel_meta: dict[str, str], t_ns: int) -> int:
     return LogMap.from_meta(channel_meta).one(t_ns)
 
 
-def block_bounds(t_ns: np.ndarray, block_ns: int = BLOCK_NS) -> list[tuple[int, int]]:
-    """Index ranges of consecutive samples falling in the same ``block_ns`` window (from the first sample)."""
-    n = len(t_ns)
-    if n == 0:
-        return []
-    window = (t_ns - t_ns[0]) // block_ns
-    cuts = np.flatnonzero(np.diff(window)) + 1
-    edges = [0, *cuts.tolist(), n]
-    return list(zip(edges[:-1], edges[1:], strict=True))
-
-
 def _stats(t_ns: np.ndarray, values: list[np.ndarray | None]) -> dict[str, str]:
     """Channel metadata describing the samples: count, span, rate, gaps (time gaps and NaN samples)."""
     n = len(t_ns)
@@ -203,7 +201,7 @@ def encode(
         meta.update(_stats(stream.t_ns, [a for _, a in fields]))
         hints, precision = _hints(stream.meta)
         arrays = [(6 + k, 13 + k, a, hints.get(f)) for k, (f, a) in enumerate(fields)]
-        layout = _Layout(st(2, stream.name) + st(3, stream.frame_id), 4, 5, (10, 11, 12), arrays, precision)
+        layout = Layout(st(2, stream.name) + st(3, stream.frame_id), 4, 5, (10, 11, 12), arrays, precision)
     elif kind == "markers":
         assert isinstance(stream, MarkerStream)
         meta.update(
@@ -219,8 +217,8 @@ def encode(
         hints, precision = _hints(stream.meta)
         n = len(stream.t_ns)
         pos = stream.pos.reshape(n, -1)
-        layout = _Layout(
-            st(2, stream.frame_id) + _strings(3, stream.labels),
+        layout = Layout(
+            st(2, stream.frame_id) + strings_field(3, stream.labels),
             4,
             5,
             (8, 9, 10),
@@ -243,8 +241,8 @@ def encode(
             hints, precision = {}, str(stream.attrs.get("precision", ""))
         meta.update(extra, columns=json.dumps(list(names)), units=json.dumps(list(stream.units)))
         meta.update(_stats(stream.t_ns, [stream.values]))
-        head = second + _strings(3, names) + _strings(4, stream.units)
-        layout = _Layout(head, 5, 6, (8, 9, 10), [(7, 11, stream.values, hints.get("values"))], precision)
+        head = second + strings_field(3, names) + strings_field(4, stream.units)
+        layout = Layout(head, 5, 6, (8, 9, 10), [(7, 11, stream.values, hints.get("values"))], precision)
     elif kind == "intervals":
         assert isinstance(stream, Intervals)
         meta.update(frame_id="", units="ns", sample_count=str(len(stream)))
@@ -266,9 +264,9 @@ def encode(
         meta.update(_stats(stream.t_ns, [stream.position, stream.orientation]))
         precision = ""
         arrays = [(5, 10, stream.position, None), (6, 11, stream.orientation, None)]
-        layout = _Layout(st(2, stream.frame_id), 3, 4, (7, 8, 9), arrays, precision)
+        layout = Layout(st(2, stream.frame_id), 3, 4, (7, 8, 9), arrays, precision)
     layout.compact = compact
-    starts, payloads = _encode_blocks(stream.t_ns, layout)
+    starts, payloads = encode_blocks(stream.t_ns, layout)
     times = log_map(stream.t_ns[starts]).tolist() if starts else []
     return KIND_SCHEMA[kind], meta, times, payloads
 
@@ -277,105 +275,6 @@ def _hints(meta: dict[str, Any]) -> tuple[dict[str, Any], str]:
     """The converter's ``resolution`` hints (field -> shift/divisor/scale/offset) and a ``precision`` request."""
     res = meta.get("resolution") if isinstance(meta, dict) else None
     return (res if isinstance(res, dict) else {}), str(meta.get("precision", "")) if isinstance(meta, dict) else ""
-
-
-class _Layout:
-    """Field numbers of one block schema: head (strings), count, t_ns, compact time, arrays (f64 and Numbers)."""
-
-    def __init__(
-        self,
-        head: bytes,
-        count: int,
-        t_field: int,
-        time_fields: tuple[int, int, int],
-        arrays: list[tuple[int, int, np.ndarray | None, Any]],
-        precision: str,
-        extra: list[tuple[int, np.ndarray, np.dtype]] | None = None,
-    ) -> None:
-        self.head, self.count, self.t_field, self.time_fields = head, count, t_field, time_fields
-        self.arrays, self.precision, self.extra = arrays, precision, extra or []
-        self.compact = True
-
-
-def _encode_blocks(t_ns: np.ndarray, layout: _Layout) -> tuple[list[int], list[bytes]]:
-    """The block messages of one stream: numpy plans for the whole stream, then byte slices per block.
-
-    Fields go out in number order without sorting: layout-1 fields (``t_ns``, float64 arrays, extras) come
-    before the version-2 ones (compact times, then the ``_q`` arrays), as their numbers do.
-    """
-    bounds = block_bounds(t_ns)
-    if not bounds:
-        return [], []
-    first = np.asarray([b[0] for b in bounds], dtype=np.int64)
-    tp = numbers.plan_times(t_ns, bounds)
-    if not layout.compact:
-        tp.compact[:] = False
-    plans = []
-    for f64_no, q_no, values, hint in layout.arrays:
-        if values is None:
-            continue
-        v = np.asarray(values).reshape(len(t_ns), -1)
-        plan = numbers.plan_numbers(v, hint, layout.precision) if layout.compact else None
-        if plan is None:
-            plans.append((f64_no, v, None, None, None, None))
-        else:
-            ok = np.logical_and.reduceat(plan.ok, first).tolist()
-            q_tag = wire.tag(q_no, wire.WIRE_LEN)
-            inner_tag = b"\x0a" if plan.kind == "counts" else b"\x32"
-            cum = plan.cumulative()
-            edges = cum[np.append(first, len(t_ns))].tolist()  # byte offsets of the blocks in plan.data
-            dec = None
-            if plan.decimal_starts is not None:
-                dec = plan.decimal_starts[np.append(first, len(t_ns))].tolist()
-            plans.append((f64_no, v, plan, edges, ok, (q_tag, inner_tag, plan.head, dec)))
-    heads = {v: wire.uint_field(1, v) + layout.head for v in (SCHEMA_VERSION_V1, SCHEMA_VERSION)}
-    t0_no, span_no, resid_no = layout.time_fields
-    t0_tag, span_tag = wire.tag(t0_no, wire.WIRE_VARINT), wire.tag(span_no, wire.WIRE_VARINT)
-    resid_tag = wire.tag(resid_no, wire.WIRE_LEN)
-    count_tag = wire.tag(layout.count, wire.WIRE_VARINT)
-    varint, packed = wire.varint, wire.packed
-    compact, has_resid = tp.compact.tolist(), tp.has_resid.tolist()
-    t0s, spans = tp.t0.tolist(), tp.span.tolist()
-    rstarts = tp.resid_starts[np.append(first, len(t_ns))].tolist()  # residual bytes of each block
-    payloads = []
-    for b, (i, j) in enumerate(bounds):
-        low: list[bytes] = [count_tag + varint(j - i)]
-        high: list[bytes] = []
-        if compact[b]:
-            t0, span = t0s[b], spans[b]
-            if t0:
-                high.append(t0_tag + varint((t0 << 1) ^ (t0 >> 63)))
-            if span:
-                high.append(span_tag + varint((span << 1) ^ (span >> 63)))
-            if has_resid[b]:
-                body = tp.resid[rstarts[b] : rstarts[b + 1]]
-                high.append(resid_tag + varint(len(body)) + body)
-        else:
-            low.append(packed(layout.t_field, t_ns[i:j], _I8))
-        for f64_no, v, plan, cum, ok, tags in plans:
-            if plan is not None and ok[b]:
-                body = plan.data[cum[b] : cum[b + 1]]
-                inner = tags[1] + varint(len(body)) + body + tags[2] if body else b""
-                if tags[3] is not None:  # per-value decimals, field 7
-                    d = plan.decimals[tags[3][b] : tags[3][b + 1]]
-                    inner += b"\x3a" + varint(len(d)) + d
-                high.append(tags[0] + varint(len(inner)) + inner)
-            else:
-                low.append(packed(f64_no, v[i:j], _F8))
-        for number, a, dtype in layout.extra:
-            low.append(packed(number, a[i:j], dtype))
-        head = heads[SCHEMA_VERSION if high else SCHEMA_VERSION_V1]
-        payloads.append(b"".join([head, *low, *high]))
-    return first.tolist(), payloads
-
-
-def _strings(number: int, values: Sequence[str]) -> bytes:
-    """A repeated string field (each value its own length-delimited entry, empty strings included)."""
-    out = b""
-    for value in values:
-        data = str(value).encode("utf-8")
-        out += wire.tag(number, wire.WIRE_LEN) + wire.varint(len(data)) + data
-    return out
 
 
 # --------------------------------------------------------------------------------------------- decoding
@@ -576,9 +475,13 @@ def decode(schema_name: str, topic: str, meta: dict[str, str], payloads: Sequenc
     """Rebuild the imulog.model stream of one channel from its messages (in log order)."""
     if schema_name not in MESSAGE_CLASSES:
         raise DecodeError(f"{topic}: schema {schema_name!r} is not an imulog stream type")
-    msgs = _parse_all(schema_name, payloads)
     kind = SCHEMA_KIND[schema_name]
     name = meta.get("name") or topic.rstrip("/").rsplit("/", 1)[-1]
+    if schema_name in BLOCK_SCHEMAS:
+        fast = _decode_columns(schema_name, kind, name, topic, meta, payloads)
+        if fast is not None:
+            return fast
+    msgs = _parse_all(schema_name, payloads)
     if schema_name in BLOCK_SCHEMAS:
         for msg in msgs:
             _check_version(msg, schema_name)
@@ -651,6 +554,78 @@ def decode(schema_name: str, topic: str, meta: dict[str, str], payloads: Sequenc
         orientation = _array(msgs, "orientation", counts_a, 4, topic, required=True)
         return PoseStream(topic=topic, t_ns=t, position=position, orientation=orientation, frame_id=frame)
     return _decode_pose_in_frame(topic, msgs, frame)
+
+
+_NUMBER = {name: {f[0]: k for k, f in spec[0].items()} for name, spec in _BLOCK_SPECS.items()}
+
+
+def _decode_columns(
+    schema_name: str, kind: str, name: str, topic: str, meta: dict[str, str], payloads: Sequence[bytes | memoryview]
+) -> Stream | None:
+    """:func:`decode` of many blocks in the common layouts (:mod:`imulog.archive.block_decode`), else None."""
+    no = _NUMBER[schema_name]
+    c = block_decode.columns(payloads, _BLOCK_SPECS[schema_name][0])
+    if c is None:
+        return None
+    try:
+        first = _scan_block(schema_name, payloads[0])  # the strings: the same in every block (checked)
+    except wire.Fallback:
+        return None
+    _check_version(_Version(int(c.value[:, 1].max())), schema_name)
+    counts = c.value[:, no["count"]]
+    if bool((counts < 0).any()):
+        return None
+    n = int(counts.sum())
+    t = block_decode.times(c, no["t_ns"], no["t0_ns"], no["t_span_ns"], no["t_residual_ns"], counts, topic)
+    if t is None:
+        return None
+
+    def arr(f: str, width: int, required: bool = True) -> tuple[bool, np.ndarray | None] | None:
+        return block_decode.array(c, no[f], no.get(f + "_q"), counts, width, required)
+
+    if kind == "imu":
+        values: dict[str, np.ndarray | None] = {}
+        for f, width in (("acc", 3), ("gyr", 3), ("mag", 3), ("temperature", 1)):
+            got = arr(f, width, required=False)
+            if got is None:
+                return None
+            values[f] = got[1] if got[1] is None or width > 1 else got[1].reshape(n)
+        return ImuStream(
+            name=name, t_ns=t, frame_id=meta.get("frame_id", ""), meta=_json_meta(meta, "meta", {}), **values
+        )
+    if kind == "markers":
+        labels = list(first.labels)
+        got = arr("pos", len(labels) * 3)
+        raw = c.gather(no["valid"])
+        if got is None or len(raw) != n * len(labels) or (len(raw) and int(raw.max()) > 1):
+            return None
+        return MarkerStream(
+            name=name,
+            t_ns=t,
+            labels=labels,
+            pos=got[1].reshape(n, len(labels), 3),
+            valid=raw.reshape(n, len(labels)).astype(bool),
+            frame_id=first.frame_id,
+            meta=_json_meta(meta, "meta", {}),
+        )
+    if kind in ("analog", "signal"):
+        names = list(first.channel_names if kind == "analog" else first.columns)
+        got = arr("values", len(names))
+        if got is None:
+            return None
+        values_a = got[1].reshape(n, len(names))
+        if kind == "analog":
+            return AnalogStream(name, t, names, list(first.units), values_a, _json_meta(meta, "meta", {}))
+        return SignalStream(topic, t, names, list(first.units), values_a, first.frame_id)
+    position, orientation = arr("position", 3), arr("orientation", 4)
+    if position is None or orientation is None:
+        return None
+    return PoseStream(topic=topic, t_ns=t, position=position[1], orientation=orientation[1], frame_id=first.frame_id)
+
+
+class _Version:
+    def __init__(self, version: int) -> None:
+        self.schema_version = version
 
 
 def _decode_pose_in_frame(topic: str, msgs: list[Any], frame: str) -> PoseStream:

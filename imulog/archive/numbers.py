@@ -130,6 +130,7 @@ def _decimals(values: np.ndarray) -> np.ndarray | None:
 
 
 _POW10 = 10.0 ** np.arange(_MAX_DECIMALS + 1)
+POW10, MAX_DECIMALS = _POW10, _MAX_DECIMALS  # for imulog.archive.block_decode
 
 
 def _value_decimals(v: np.ndarray, scale: np.ndarray | None = None) -> NumbersPlan | None:
@@ -180,10 +181,12 @@ def plan_numbers(values: np.ndarray | None, hint: dict[str, Any] | None, precisi
     candidates: list[dict[str, np.ndarray | None]] = []
     if hint:
         candidates.append(_params(hint, width))
-    ks = _decimals(v)
+        plan = _from_counts(v, _counts_of(v, candidates[0]), candidates[0])
+        if plan.ok.mean() > 0.5:
+            return plan
+    ks = _decimals(v)  # only when the converter's hint does not fit: the text's decimals
     if ks is not None:
-        candidates.append(_params({"divisor": 10.0 ** ks.astype(np.float64)}, width))
-    for params in candidates:
+        params = _params({"divisor": 10.0 ** ks.astype(np.float64)}, width)
         plan = _from_counts(v, _counts_of(v, params), params)
         if plan.ok.mean() > 0.5:
             return plan
