@@ -260,6 +260,11 @@ def zigzag_varints(values: np.ndarray) -> tuple[bytes, np.ndarray]:
     per-block encode).
     """
     v = np.ascontiguousarray(values, dtype=np.int64).reshape(-1)
+    if len(v) >= 65536:  # compiled: one pass instead of one numpy pass per byte position
+        from imulog.archive.wire_kernels import zigzag_encode
+
+        data, lengths = zigzag_encode(v)
+        return data.tobytes(), lengths
     z = ((v << np.int64(1)) ^ (v >> np.int64(63))).view(np.uint64)
     if not len(z):
         return b"", np.zeros(0, dtype=np.int64)

@@ -156,3 +156,63 @@ def assemble(pool, seg_start, seg_len):  # pragma: no cover - compiled
                 out[k : k + n] = pool[o : o + n]
             k += n
     return out, bounds
+
+
+@njit(cache=True, nogil=True)
+def zigzag_encode(values):  # pragma: no cover - compiled
+    """Packed ``sint64`` bytes of int64 ``values`` (zigzag LEB128) and each value's byte length."""
+    n = len(values)
+    lengths = np.empty(n, np.int64)
+    out = np.empty(n * 10, np.uint8)
+    k = 0
+    for i in range(n):
+        v = values[i]
+        z = np.uint64((v << 1) ^ (v >> 63))
+        start = k
+        while z >= 0x80:
+            out[k] = np.uint8((z & np.uint64(0x7F)) | np.uint64(0x80))
+            z >>= np.uint64(7)
+            k += 1
+        out[k] = np.uint8(z)
+        k += 1
+        lengths[i] = k - start
+    return out[:k], lengths
+
+
+@njit(cache=True, nogil=True)
+def counts_check(values, shift, divisor, scale, offset, use):  # pragma: no cover - compiled
+    """Counts of (N, C) ``values`` under the parameters (``use``: which of the 4 apply) and rows given back.
+
+    The inverse formula rounded to a whole number (0 outside sfixed32), then the forward formula in float64
+    in the order of :func:`imulog.archive.numbers.apply`; values it does not give back exactly get count 0.
+    """
+    n, w = values.shape
+    counts = np.zeros((n, w), np.int32)
+    ok = np.ones(n, np.bool_)
+    for i in range(n):
+        for j in range(w):
+            x = values[i, j]
+            c = x - offset[j] if use[3] else x
+            if use[2]:
+                c = c / scale[j]
+            if use[1]:
+                c = c * divisor[j]
+            if use[0]:
+                c = c - shift[j]
+            c = np.rint(c)
+            if not abs(c) < 2147483648.0:
+                c = 0.0
+            back = c
+            if use[0]:
+                back = back + shift[j]
+            if use[1]:
+                back = back / divisor[j]
+            if use[2]:
+                back = back * scale[j]
+            if use[3]:
+                back = back + offset[j]
+            if back == x:
+                counts[i, j] = np.int32(c)
+            else:
+                ok[i] = False
+    return counts, ok
