@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from imulog.archive import block_decode, block_encode, codec, numbers, wire
+from imulog.archive import block_decode, block_encode, codec, codec_decode, numbers, wire
 from imulog.archive.block_encode import SCHEMA_VERSION, SCHEMA_VERSION_V1, block_bounds
 from imulog.model import AnalogStream, ImuStream, MarkerStream, PoseStream, SignalStream
 
@@ -169,7 +169,7 @@ def test_column_decoder_leaves_unusual_blocks_to_the_per_block_path():
     stream = _streams()[3]
     schema, meta, _, payloads = codec.encode(stream)
     other = codec.encode(MarkerStream("m", stream.t_ns, ["A", "B", "C", "D"], stream.pos, stream.valid))[3]
-    spec = codec._BLOCK_SPECS[schema][0]
+    spec = codec_decode._BLOCK_SPECS[schema][0]
     assert block_decode.columns(payloads, spec) is not None
     mixed = payloads[:10] + other[10:]
     assert block_decode.columns(mixed, spec) is None

@@ -294,6 +294,12 @@ def read_zigzag_varints(data: bytes | bytearray | memoryview, n: int, what: str)
         if len(b):
             raise ValueError(f"{what}: {len(b)} bytes for 0 values")
         return np.zeros(0, dtype=np.int64)
+    if n >= 65536 and len(b) != n:  # compiled: one pass
+        from imulog.archive.wire_kernels import zigzag_decode
+
+        values, bad = zigzag_decode(b, n)
+        if not bad:
+            return values
     if len(b) == n:  # every value one byte
         if b.max() >= 0x80:
             raise ValueError(f"{what}: a varint runs past the end of the data")

@@ -216,3 +216,28 @@ def counts_check(values, shift, divisor, scale, offset, use):  # pragma: no cove
             else:
                 ok[i] = False
     return counts, ok
+
+
+@njit(cache=True, nogil=True)
+def zigzag_decode(data, n):  # pragma: no cover - compiled
+    """int64 values of ``n`` packed ``sint64`` varints; (values, 0) or (partial, 1) when the bytes do not hold
+    exactly ``n`` varints of at most 10 bytes each."""
+    out = np.zeros(n, np.int64)
+    pos = 0
+    end = len(data)
+    for i in range(n):
+        z = np.uint64(0)
+        shift = 0
+        while True:
+            if pos >= end or shift > 63:
+                return out, 1
+            c = data[pos]
+            pos += 1
+            z |= np.uint64(c & 0x7F) << np.uint64(shift)
+            if c < 0x80:
+                break
+            shift += 7
+        out[i] = np.int64(z >> np.uint64(1)) ^ -np.int64(z & np.uint64(1))
+    if pos != end:
+        return out, 1
+    return out, 0
