@@ -33,7 +33,12 @@ class Columns:
         off, ln = self.offset[:, number], self.length[:, number]
         if blocks is not None:
             off, ln = off[blocks], ln[blocks]
-        return gather(self.pool, off, ln)
+        return gather(self.pool, _i8(off), _i8(ln))
+
+
+def _i8(a: np.ndarray) -> np.ndarray:
+    """C-contiguous writable int64: the one signature the compiled kernels are built (and cached) for."""
+    return np.require(a, np.int64, ["C", "W"])
 
 
 def columns(payloads: Sequence[bytes | memoryview], spec: dict[int, tuple[str, str]]) -> Columns | None:
@@ -51,7 +56,7 @@ def columns(payloads: Sequence[bytes | memoryview], spec: dict[int, tuple[str, s
     for number, (_, kind) in spec.items():
         multi[number] = kind == "rstring"
         expected[number] = 0 if kind in ("varint", "svarint") else 2
-    status, value, offset, length, wt, hashes = scan_many(pool, ends - lengths, ends, nfields, multi)
+    status, value, offset, length, wt, hashes = scan_many(pool, _i8(ends - lengths), _i8(ends), nfields, multi)
     if status or bool((hashes != hashes[0]).any()):  # malformed, or strings that change between blocks
         return None
     seen = wt >= 0
@@ -132,7 +137,9 @@ def array(c: Columns, f64_no: int, q_no: int | None, counts: np.ndarray, width: 
         qb = np.flatnonzero(q)
         starts = c.offset[qb, q_no]
         multi = np.zeros(_NUMBERS_FIELDS, np.bool_)
-        status, _, off, ln, wt, _ = scan_many(c.pool, starts, starts + c.length[qb, q_no], _NUMBERS_FIELDS, multi)
+        status, _, off, ln, wt, _ = scan_many(
+            c.pool, _i8(starts), _i8(starts + c.length[qb, q_no]), _NUMBERS_FIELDS, multi
+        )
         if status or bool(((wt >= 0) & (wt != 2)).any()):
             return None
         sub = Columns(c.pool, np.zeros_like(off), off, ln, wt)

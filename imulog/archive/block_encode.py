@@ -121,7 +121,8 @@ class _Segments:
         if not self.starts:
             return [b""] * self.nb
         pool = np.concatenate(self.parts) if self.parts else np.zeros(0, np.uint8)
-        out, bounds = assemble(pool, np.stack(self.starts, axis=1), np.stack(self.lens, axis=1))
+        starts = np.require(np.stack(self.starts, axis=1), np.int64, ["C", "W"])
+        out, bounds = assemble(pool, starts, np.require(np.stack(self.lens, axis=1), np.int64, ["C", "W"]))
         flat = out.tobytes()
         b = bounds.tolist()
         return [flat[b[k] : b[k + 1]] for k in range(self.nb)]

@@ -87,8 +87,10 @@ def _counted(values: np.ndarray, params: dict[str, np.ndarray | None]) -> Number
 
     width = values.shape[1]
     use = np.array([params.get(p) is not None for p in PARAMS])
-    arrays = [np.ascontiguousarray(params[p] if params.get(p) is not None else np.zeros(width)) for p in PARAMS]
-    counts, ok = counts_check(np.ascontiguousarray(values, dtype=np.float64), *arrays, use)
+    arrays = [
+        np.require(params[p] if params.get(p) is not None else np.zeros(width), np.float64, ["C", "W"]) for p in PARAMS
+    ]
+    counts, ok = counts_check(np.require(values, np.float64, ["C", "W"]), *arrays, use)
     head = b"".join(
         wire.packed(k + 2, params[p], np.dtype("<f8")) for k, p in enumerate(PARAMS) if params.get(p) is not None
     )

@@ -263,7 +263,7 @@ def zigzag_varints(values: np.ndarray) -> tuple[bytes, np.ndarray]:
     if len(v) >= 65536:  # compiled: one pass instead of one numpy pass per byte position
         from imulog.archive.wire_kernels import zigzag_encode
 
-        data, lengths = zigzag_encode(v)
+        data, lengths = zigzag_encode(np.require(v, np.int64, ["C", "W"]))
         return data.tobytes(), lengths
     z = ((v << np.int64(1)) ^ (v >> np.int64(63))).view(np.uint64)
     if not len(z):
@@ -297,7 +297,7 @@ def read_zigzag_varints(data: bytes | bytearray | memoryview, n: int, what: str)
     if n >= 65536 and len(b) != n:  # compiled: one pass
         from imulog.archive.wire_kernels import zigzag_decode
 
-        values, bad = zigzag_decode(b, n)
+        values, bad = zigzag_decode(np.require(b, np.uint8, ["C", "W"]), n)
         if not bad:
             return values
     if len(b) == n:  # every value one byte
