@@ -123,9 +123,10 @@ class _Segments:
         pool = np.concatenate(self.parts) if self.parts else np.zeros(0, np.uint8)
         starts = np.require(np.stack(self.starts, axis=1), np.int64, ["C", "W"])
         out, bounds = assemble(pool, starts, np.require(np.stack(self.lens, axis=1), np.int64, ["C", "W"]))
-        flat = out.tobytes()
+        del pool
+        mv = memoryview(out)
         b = bounds.tolist()
-        return [flat[b[k] : b[k + 1]] for k in range(self.nb)]
+        return [mv[b[k] : b[k + 1]].tobytes() for k in range(self.nb)]
 
 
 def _bytes_of(a: np.ndarray, dtype: np.dtype) -> np.ndarray:

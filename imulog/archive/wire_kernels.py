@@ -152,8 +152,11 @@ def assemble(pool, seg_start, seg_len):  # pragma: no cover - compiled
         for s in range(ns):
             o = seg_start[b, s]
             n = seg_len[b, s]
-            if n:
+            if n > 32:
                 out[k : k + n] = pool[o : o + n]
+            else:  # tags and varints: a few bytes, no slice objects
+                for i in range(n):
+                    out[k + i] = pool[o + i]
             k += n
     return out, bounds
 
