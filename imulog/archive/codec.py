@@ -20,56 +20,37 @@ from typing import Any
 import numpy as np
 from google.protobuf import descriptor_pb2
 
-from imulog.archive import numbers, wire
-from imulog.archive._generated.foxglove import PoseInFrame_pb2
+from imulog.archive import wire
 from imulog.archive._generated.imulog import (
-    AnalogBlock_pb2,
-    ImuBlock_pb2,
     IntervalEvent_pb2,
-    MarkerBlock_pb2,
-    PoseBlock_pb2,
-    SignalBlock_pb2,
+)
+from imulog.archive.block_encode import (
+    BLOCK_NS,  # noqa: F401 (re-exported: codec.BLOCK_NS)
+    SCHEMA_VERSION,
+    SCHEMA_VERSION_V1,
+    Layout,
+    block_bounds,  # noqa: F401 (re-exported)
+    encode_blocks,
+    strings_field,
+)
+from imulog.archive.block_schemas import (  # noqa: F401 (re-exported)
+    BLOCK_SCHEMAS,
+    KIND_SCHEMA,
+    MESSAGE_CLASSES,
+    SCHEMA_KIND,
+    DecodeError,
 )
 from imulog.archive.timeline import IDENTITY, LogMap
 from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream, Stream
 
-SCHEMA_VERSION = 2  # newest layout version written (blocks with Numbers or compact times); readers accept <= this
-SCHEMA_VERSION_V1 = 1  # blocks using only the fields of the first layout keep writing 1 (readable by older imulog)
-BLOCK_NS = 1_000_000_000  # block length: samples are grouped in windows of 1 s
+# SCHEMA_VERSION: newest layout version written (blocks with Numbers or compact times); readers accept <= this.
+# SCHEMA_VERSION_V1: blocks using only the fields of the first layout keep writing 1 (readable by older imulog).
+# BLOCK_NS: block length: samples are grouped in windows of 1 s.
 
-MESSAGE_CLASSES = {
-    "imulog.ImuBlock": ImuBlock_pb2.ImuBlock,
-    "imulog.MarkerBlock": MarkerBlock_pb2.MarkerBlock,
-    "imulog.AnalogBlock": AnalogBlock_pb2.AnalogBlock,
-    "imulog.SignalBlock": SignalBlock_pb2.SignalBlock,
-    "imulog.IntervalEvent": IntervalEvent_pb2.IntervalEvent,
-    "imulog.PoseBlock": PoseBlock_pb2.PoseBlock,
-    "foxglove.PoseInFrame": PoseInFrame_pb2.PoseInFrame,  # poses of files written before PoseBlock
-}
-KIND_SCHEMA = {
-    "imu": "imulog.ImuBlock",
-    "markers": "imulog.MarkerBlock",
-    "analog": "imulog.AnalogBlock",
-    "signal": "imulog.SignalBlock",
-    "intervals": "imulog.IntervalEvent",
-    "pose": "imulog.PoseBlock",
-}
-SCHEMA_KIND = {**{v: k for k, v in KIND_SCHEMA.items()}, "foxglove.PoseInFrame": "pose"}
-BLOCK_SCHEMAS = (
-    "imulog.ImuBlock",
-    "imulog.MarkerBlock",
-    "imulog.AnalogBlock",
-    "imulog.SignalBlock",
-    "imulog.PoseBlock",
-)
 _I8 = np.dtype("<i8")
 _F8 = np.dtype("<f8")
 _U1 = np.dtype("u1")
 _MAX_LOG_TIME = 2**64 - 1
-
-
-class DecodeError(ValueError):
-    """A message could not be decoded into the stream type its schema promises."""
 
 
 def _twin_classes() -> dict[str, Any]:
@@ -128,17 +109,6 @@ def log_time(t_ns: int) -> int:
 def channel_log_time(channel_meta: dict[str, str], t_ns: int) -> int:
     """The log time at which a channel's sample time ``t_ns`` sits (its ``log_time`` map; identity for old files)."""
     return LogMap.from_meta(channel_meta).one(t_ns)
-
-
-def block_bounds(t_ns: np.ndarray, block_ns: int = BLOCK_NS) -> list[tuple[int, int]]:
-    """Index ranges of consecutive samples falling in the same ``block_ns`` window (from the first sample)."""
-    n = len(t_ns)
-    if n == 0:
-        return []
-    window = (t_ns - t_ns[0]) // block_ns
-    cuts = np.flatnonzero(np.diff(window)) + 1
-    edges = [0, *cuts.tolist(), n]
-    return list(zip(edges[:-1], edges[1:], strict=True))
 
 
 def _stats(t_ns: np.ndarray, values: list[np.ndarray | None]) -> dict[str, str]:
@@ -203,7 +173,7 @@ def encode(
         meta.update(_stats(stream.t_ns, [a for _, a in fields]))
         hints, precision = _hints(stream.meta)
         arrays = [(6 + k, 13 + k, a, hints.get(f)) for k, (f, a) in enumerate(fields)]
-        layout = _Layout(st(2, stream.name) + st(3, stream.frame_id), 4, 5, (10, 11, 12), arrays, precision)
+        layout = Layout(st(2, stream.name) + st(3, stream.frame_id), 4, 5, (10, 11, 12), arrays, precision)
     elif kind == "markers":
         assert isinstance(stream, MarkerStream)
         meta.update(
@@ -221,8 +191,8 @@ def encode(
         pos = stream.pos.reshape(n, -1)
         if hints.get("pos"):  # counts: an invalid marker is count 0 (read back as NaN by its valid flag)
             pos = np.where(np.repeat(valid.reshape(n, -1), 3, axis=1), pos, 0.0)
-        layout = _Layout(
-            st(2, stream.frame_id) + _strings(3, stream.labels),
+        layout = Layout(
+            st(2, stream.frame_id) + strings_field(3, stream.labels),
             4,
             5,
             (8, 9, 10),
@@ -245,8 +215,8 @@ def encode(
             hints, precision = {}, str(stream.attrs.get("precision", ""))
         meta.update(extra, columns=json.dumps(list(names)), units=json.dumps(list(stream.units)))
         meta.update(_stats(stream.t_ns, [stream.values]))
-        head = second + _strings(3, names) + _strings(4, stream.units)
-        layout = _Layout(head, 5, 6, (8, 9, 10), [(7, 11, stream.values, hints.get("values"))], precision)
+        head = second + strings_field(3, names) + strings_field(4, stream.units)
+        layout = Layout(head, 5, 6, (8, 9, 10), [(7, 11, stream.values, hints.get("values"))], precision)
     elif kind == "intervals":
         assert isinstance(stream, Intervals)
         meta.update(frame_id="", units="ns", sample_count=str(len(stream)))
@@ -270,9 +240,9 @@ def encode(
         if precision:
             meta["precision"] = precision
         arrays = [(5, 10, stream.position, None), (6, 11, stream.orientation, None)]
-        layout = _Layout(st(2, stream.frame_id), 3, 4, (7, 8, 9), arrays, precision)
+        layout = Layout(st(2, stream.frame_id), 3, 4, (7, 8, 9), arrays, precision)
     layout.compact = compact
-    starts, payloads = _encode_blocks(stream.t_ns, layout)
+    starts, payloads = encode_blocks(stream.t_ns, layout)
     times = log_map(stream.t_ns[starts]).tolist() if starts else []
     return KIND_SCHEMA[kind], meta, times, payloads
 
@@ -283,402 +253,15 @@ def _hints(meta: dict[str, Any]) -> tuple[dict[str, Any], str]:
     return (res if isinstance(res, dict) else {}), str(meta.get("precision", "")) if isinstance(meta, dict) else ""
 
 
-class _Layout:
-    """Field numbers of one block schema: head (strings), count, t_ns, compact time, arrays (f64 and Numbers)."""
-
-    def __init__(
-        self,
-        head: bytes,
-        count: int,
-        t_field: int,
-        time_fields: tuple[int, int, int],
-        arrays: list[tuple[int, int, np.ndarray | None, Any]],
-        precision: str,
-        extra: list[tuple[int, np.ndarray, np.dtype]] | None = None,
-    ) -> None:
-        self.head, self.count, self.t_field, self.time_fields = head, count, t_field, time_fields
-        self.arrays, self.precision, self.extra = arrays, precision, extra or []
-        self.compact = True
-
-
-def _encode_blocks(t_ns: np.ndarray, layout: _Layout) -> tuple[list[int], list[bytes]]:
-    """The block messages of one stream: numpy plans for the whole stream, then byte slices per block.
-
-    Fields go out in number order without sorting: layout-1 fields (``t_ns``, float64 arrays, extras) come
-    before the version-2 ones (compact times, then the ``_q`` arrays), as their numbers do.
-    """
-    bounds = block_bounds(t_ns)
-    if not bounds:
-        return [], []
-    first = np.asarray([b[0] for b in bounds], dtype=np.int64)
-    tp = numbers.plan_times(t_ns, bounds)
-    if not layout.compact:
-        tp.compact[:] = False
-    plans = []
-    for f64_no, q_no, values, hint in layout.arrays:
-        if values is None:
-            continue
-        v = np.asarray(values).reshape(len(t_ns), -1)
-        plan = numbers.plan_numbers(v, hint, layout.precision) if layout.compact else None
-        if plan is None:
-            plans.append((f64_no, v, None, None, None, None))
-        else:
-            ok = np.logical_and.reduceat(plan.ok, first).tolist()
-            q_tag = wire.tag(q_no, wire.WIRE_LEN)
-            inner_tag = b"\x0a" if plan.kind == "counts" else b"\x32"
-            cum = plan.cumulative()
-            edges = cum[np.append(first, len(t_ns))].tolist()  # byte offsets of the blocks in plan.data
-            dec = None
-            if plan.decimal_starts is not None:
-                dec = plan.decimal_starts[np.append(first, len(t_ns))].tolist()
-            plans.append((f64_no, v, plan, edges, ok, (q_tag, inner_tag, plan.head, dec)))
-    heads = {v: wire.uint_field(1, v) + layout.head for v in (SCHEMA_VERSION_V1, SCHEMA_VERSION)}
-    t0_no, span_no, resid_no = layout.time_fields
-    t0_tag, span_tag = wire.tag(t0_no, wire.WIRE_VARINT), wire.tag(span_no, wire.WIRE_VARINT)
-    resid_tag = wire.tag(resid_no, wire.WIRE_LEN)
-    count_tag = wire.tag(layout.count, wire.WIRE_VARINT)
-    varint, packed = wire.varint, wire.packed
-    compact, has_resid = tp.compact.tolist(), tp.has_resid.tolist()
-    t0s, spans = tp.t0.tolist(), tp.span.tolist()
-    rstarts = tp.resid_starts[np.append(first, len(t_ns))].tolist()  # residual bytes of each block
-    payloads = []
-    for b, (i, j) in enumerate(bounds):
-        low: list[bytes] = [count_tag + varint(j - i)]
-        high: list[bytes] = []
-        if compact[b]:
-            t0, span = t0s[b], spans[b]
-            if t0:
-                high.append(t0_tag + varint((t0 << 1) ^ (t0 >> 63)))
-            if span:
-                high.append(span_tag + varint((span << 1) ^ (span >> 63)))
-            if has_resid[b]:
-                body = tp.resid[rstarts[b] : rstarts[b + 1]]
-                high.append(resid_tag + varint(len(body)) + body)
-        else:
-            low.append(packed(layout.t_field, t_ns[i:j], _I8))
-        for f64_no, v, plan, cum, ok, tags in plans:
-            if plan is not None and ok[b]:
-                body = plan.data[cum[b] : cum[b + 1]]
-                inner = tags[1] + varint(len(body)) + body + tags[2] if body else b""
-                if tags[3] is not None:  # per-value decimals, field 7
-                    d = plan.decimals[tags[3][b] : tags[3][b + 1]]
-                    inner += b"\x3a" + varint(len(d)) + d
-                high.append(tags[0] + varint(len(inner)) + inner)
-            else:
-                low.append(packed(f64_no, v[i:j], _F8))
-        for number, a, dtype in layout.extra:
-            low.append(packed(number, a[i:j], dtype))
-        head = heads[SCHEMA_VERSION if high else SCHEMA_VERSION_V1]
-        payloads.append(b"".join([head, *low, *high]))
-    return first.tolist(), payloads
-
-
-def _strings(number: int, values: Sequence[str]) -> bytes:
-    """A repeated string field (each value its own length-delimited entry, empty strings included)."""
-    out = b""
-    for value in values:
-        data = str(value).encode("utf-8")
-        out += wire.tag(number, wire.WIRE_LEN) + wire.varint(len(data)) + data
-    return out
-
-
 # --------------------------------------------------------------------------------------------- decoding
 
 
-def _join(parts: list[bytes], dtype: np.dtype, width: int, n: int, what: str) -> np.ndarray:
-    buf = bytearray().join(parts)
-    if len(buf) != n * width * dtype.itemsize:
-        raise DecodeError(f"{what}: {len(buf)} bytes for {n} samples x {width} values")
-    a = np.frombuffer(buf, dtype=dtype).astype(dtype.newbyteorder("="), copy=False)
-    return a.reshape(n, width) if width != 1 else a
-
-
-def _check_version(msg: Any, schema_name: str) -> None:
-    if msg.schema_version > SCHEMA_VERSION:
-        raise DecodeError(
-            f"{schema_name} schema_version {msg.schema_version} is newer than this imulog understands "
-            f"({SCHEMA_VERSION}); upgrade imulog"
-        )
-
-
-class _Block:
-    """Attribute bag with the fields of one block message; array fields are zero-copy memoryviews."""
-
-
-_PACKED = {}  # protobuf field type -> numpy dtype of its packed wire form
-_NO_MESSAGE = object()  # default of an absent sub-message field
-
-
-def _block_specs(cls: Any) -> tuple[dict[int, tuple[str, str]], dict[str, Any]]:
-    from google.protobuf.descriptor import FieldDescriptor as FD
-
-    if not _PACKED:
-        _PACKED.update({FD.TYPE_SFIXED64: _I8, FD.TYPE_DOUBLE: _F8, FD.TYPE_BOOL: _U1})
-    spec, defaults = {}, {}
-    for f in cls.DESCRIPTOR.fields:
-        if f.type == FD.TYPE_BYTES or (f.is_repeated and f.type in (*_PACKED, FD.TYPE_SINT64)):
-            kind, default = ("bool" if f.type == FD.TYPE_BOOL else "array"), b""
-        elif f.type == FD.TYPE_SINT64:
-            kind, default = "svarint", 0
-        elif f.type == FD.TYPE_MESSAGE:
-            kind, default = "message", _NO_MESSAGE
-        elif f.type == FD.TYPE_STRING:
-            kind, default = ("rstring", None) if f.is_repeated else ("string", "")
-        elif f.type in (FD.TYPE_UINT32, FD.TYPE_UINT64):
-            kind, default = "varint", 0
-        else:  # pragma: no cover - the block schemas have no other field types
-            raise TypeError(f"unexpected field type in {cls.DESCRIPTOR.full_name}.{f.name}")
-        spec[f.number] = (f.name, kind)
-        defaults[f.name] = default
-    return spec, defaults
-
-
-_BLOCK_SPECS = {name: _block_specs(MESSAGE_CLASSES[name]) for name in BLOCK_SCHEMAS}
-_SCALAR_DEFAULTS = {
-    name: {k: (None if d is _NO_MESSAGE else d) for k, d in spec[1].items() if d is not None}
-    for name, spec in _BLOCK_SPECS.items()
-}
-_LIST_FIELDS = {name: [k for k, d in spec[1].items() if d is None] for name, spec in _BLOCK_SPECS.items()}
-
-
-def _scan_block(schema_name: str, payload: bytes | memoryview) -> _Block:
-    """Parse a block message's wire format directly, keeping packed arrays as views (no copies).
-
-    Raises :class:`wire.Fallback` for what it does not handle: unpacked repeated values (legal protobuf
-    from another writer), bools that are not one byte 0/1, malformed input.
-    """
-    spec, defaults = _BLOCK_SPECS[schema_name]
-    obj = _Block()
-    fields = obj.__dict__
-    fields.update(_SCALAR_DEFAULTS[schema_name])  # one call: the blocks have up to 16 fields
-    for name in _LIST_FIELDS[schema_name]:
-        fields[name] = []
-    try:
-        for number, wire_type, value in wire.scan(payload):
-            field = spec.get(number)
-            if field is None:
-                continue  # unknown field (a newer writer): ignored, as protobuf does
-            name, kind = field
-            if kind in ("varint", "svarint"):
-                if wire_type != wire.WIRE_VARINT:
-                    raise wire.Fallback
-                setattr(obj, name, value if kind == "varint" else (value >> 1) ^ -(value & 1))
-            elif wire_type != wire.WIRE_LEN:
-                raise wire.Fallback
-            elif kind in ("array", "message"):
-                setattr(obj, name, value)
-            elif kind == "bool":
-                if len(value) and int(np.frombuffer(value, _U1).max()) > 1:
-                    raise wire.Fallback
-                setattr(obj, name, value)
-            elif kind == "string":
-                setattr(obj, name, str(value, "utf-8"))
-            else:
-                getattr(obj, name).append(str(value, "utf-8"))
-    except UnicodeDecodeError:
-        raise wire.Fallback from None
-    return obj
-
-
-def _as_block(schema_name: str, msg: Any) -> _Block:
-    """A block parsed by protobuf (the slow path) as a :class:`_Block` with packed array bytes."""
-    from google.protobuf.descriptor import FieldDescriptor as FD
-
-    obj = _Block()
-    for f in msg.DESCRIPTOR.fields:
-        value = getattr(msg, f.name)
-        if f.is_repeated and f.type in _PACKED:
-            value = np.asarray(list(value), dtype=_PACKED[f.type]).tobytes()
-        elif f.is_repeated and f.type == FD.TYPE_SINT64:
-            value = wire.zigzag_varints(np.asarray(list(value), dtype=np.int64))[0]
-        elif f.type == FD.TYPE_MESSAGE:
-            value = value.SerializeToString() if msg.HasField(f.name) else None
-        elif f.type == FD.TYPE_STRING and f.is_repeated:
-            value = list(value)
-        setattr(obj, f.name, value)
-    return obj
-
-
-def _parse_all(schema_name: str, payloads: Sequence[bytes | memoryview]) -> list[Any]:
-    cls = MESSAGE_CLASSES[schema_name]
-    fast = schema_name in _BLOCK_SPECS
-    out = []
-    for p in payloads:
-        if fast:
-            try:
-                out.append(_scan_block(schema_name, p))
-                continue
-            except wire.Fallback:
-                pass
-        try:
-            msg = cls.FromString(bytes(p))
-        except Exception as exc:  # protobuf raises DecodeError subclasses of Exception
-            raise DecodeError(f"message {len(out)} does not parse as {schema_name}: {exc}") from exc
-        out.append(_as_block(schema_name, msg) if fast else msg)
-    return out
-
-
-def _json_meta(meta: dict[str, str], key: str, default: Any) -> Any:
-    try:
-        return json.loads(meta[key])
-    except (KeyError, ValueError):
-        return default
-
-
-def _numbers_fields(payload: Any) -> dict[str, Any]:
-    try:
-        return numbers.scan_numbers(payload)
-    except wire.Fallback:
-        from imulog.archive._generated.imulog import Numbers_pb2
-
-        try:
-            msg = Numbers_pb2.Numbers.FromString(bytes(payload))
-        except Exception as exc:  # protobuf raises DecodeError subclasses of Exception
-            raise DecodeError(f"a Numbers field does not parse: {exc}") from exc
-        out: dict[str, Any] = {"counts": np.asarray(list(msg.counts), dtype="<i4").tobytes()}
-        out["f32"] = np.asarray(list(msg.f32), dtype="<f4").tobytes()
-        out["decimals"] = wire.zigzag_varints(np.asarray(list(msg.decimals), dtype=np.int64))[0]
-        for p in numbers.PARAMS:
-            values = list(getattr(msg, p))
-            out[p] = np.asarray(values, dtype="<f8").tobytes() if values else None
-        return out
-
-
-def _array(
-    msgs: list[Any], f: str, counts: np.ndarray, width: int, topic: str, *, required: bool = False
-) -> np.ndarray | None:
-    """(N, width) float64 of field ``f`` over all blocks: float64 bytes or ``f_q`` Numbers, mixed per block."""
-    qs = [getattr(msg, f + "_q", None) for msg in msgs]
-    if all(q is not None for q in qs):  # every block at the same resolution: its parameters parsed once
-        fast = numbers.numbers_sources(qs)
-        if fast is not None and not any(len(getattr(msg, f)) for msg in msgs):
-            try:
-                return numbers.decode_numbers([("q", x) for x in fast], counts, width, f"{topic} {f}")
-            except ValueError as exc:
-                raise DecodeError(str(exc)) from None
-    sources: list[tuple[str, Any]] = []
-    for msg, c in zip(msgs, counts.tolist(), strict=True):
-        raw = getattr(msg, f)
-        q = getattr(msg, f + "_q", None)
-        if len(raw):
-            sources.append(("f64", raw))
-        elif q is not None:
-            sources.append(("q", _numbers_fields(q)))
-        else:
-            sources.append(("none" if c or not required else "f64", b""))
-    if not required and all(k == "none" for k, _ in sources):
-        return None
-    if not required and any(k == "none" and c for (k, _), c in zip(sources, counts.tolist(), strict=True)):
-        raise DecodeError(f"{topic}: field {f} present in some blocks only")
-    try:
-        return numbers.decode_numbers(sources, counts, width, f"{topic} {f}")
-    except ValueError as exc:
-        raise DecodeError(str(exc)) from None
-
-
 def decode(schema_name: str, topic: str, meta: dict[str, str], payloads: Sequence[bytes | memoryview]) -> Stream:
-    """Rebuild the imulog.model stream of one channel from its messages (in log order)."""
-    if schema_name not in MESSAGE_CLASSES:
-        raise DecodeError(f"{topic}: schema {schema_name!r} is not an imulog stream type")
-    msgs = _parse_all(schema_name, payloads)
-    kind = SCHEMA_KIND[schema_name]
-    name = meta.get("name") or topic.rstrip("/").rsplit("/", 1)[-1]
-    if schema_name in BLOCK_SCHEMAS:
-        for msg in msgs:
-            _check_version(msg, schema_name)
-        counts = [msg.count for msg in msgs]
-        n = int(sum(counts))
-        counts_a = np.asarray(counts, dtype=np.int64)
-        try:
-            t = numbers.decode_times(msgs, counts_a, topic)
-        except ValueError as exc:
-            raise DecodeError(str(exc)) from None
-    if kind == "imu":
-        columns = _json_meta(meta, "columns", None)
-        values: dict[str, np.ndarray | None] = {}
-        for f, width in (("acc", 3), ("gyr", 3), ("mag", 3), ("temperature", 1)):
-            if msgs:
-                a = _array(msgs, f, counts_a, width, topic)
-                values[f] = None if a is None else (a if width > 1 else a.reshape(n))
-            else:
-                values[f] = np.zeros((0, width) if width > 1 else 0) if columns is not None and f in columns else None
-        return ImuStream(
-            name=name,
-            t_ns=t,
-            frame_id=meta.get("frame_id", ""),
-            meta=_json_meta(meta, "meta", {}),
-            **values,
-        )
-    if kind == "markers":
-        labels = list(msgs[0].labels) if msgs else _json_meta(meta, "labels", [])
-        for msg in msgs:
-            if list(msg.labels) != labels:
-                raise DecodeError(f"{topic}: marker labels change between blocks")
-        m = len(labels)
-        pos = _array(msgs, "pos", counts_a, m * 3, topic, required=True).reshape(n, m, 3)
-        valid = _join([msg.valid for msg in msgs], _U1, m, n, f"{topic} valid").reshape(n, m).astype(bool)
-        return MarkerStream(
-            name=name,
-            t_ns=t,
-            labels=labels,
-            pos=pos,
-            valid=valid,
-            frame_id=msgs[0].frame_id if msgs else meta.get("frame_id", "world"),
-            meta=_json_meta(meta, "meta", {}),
-        )
-    if kind in ("analog", "signal"):
-        if msgs:
-            names = list(msgs[0].channel_names if kind == "analog" else msgs[0].columns)
-            units = list(msgs[0].units)
-        else:
-            names, units = _json_meta(meta, "columns", []), _json_meta(meta, "units", [])
-        values = _array(msgs, "values", counts_a, len(names), topic, required=True).reshape(n, len(names))
-        if kind == "analog":
-            return AnalogStream(
-                name=name, t_ns=t, channel_names=names, units=units, values=values, meta=_json_meta(meta, "meta", {})
-            )
-        frame = msgs[0].frame_id if msgs else meta.get("frame_id", "")
-        return SignalStream(topic=topic, t_ns=t, columns=names, units=units, values=values, frame_id=frame)
-    if kind == "intervals":
-        for msg in msgs:
-            _check_version(msg, schema_name)
-        return Intervals(
-            topic=topic,
-            start_ns=np.array([msg.start_ns for msg in msgs], dtype=np.int64),
-            end_ns=np.array([msg.end_ns for msg in msgs], dtype=np.int64),
-            labels=[msg.label for msg in msgs],
-            task_index=np.array([msg.task_index for msg in msgs], dtype=np.int64),
-        )
-    frame = msgs[0].frame_id if msgs else meta.get("frame_id", "world")
-    if schema_name == "imulog.PoseBlock":
-        position = _array(msgs, "position", counts_a, 3, topic, required=True)
-        orientation = _array(msgs, "orientation", counts_a, 4, topic, required=True)
-        return PoseStream(topic=topic, t_ns=t, position=position, orientation=orientation, frame_id=frame)
-    return _decode_pose_in_frame(topic, msgs, frame)
+    """Rebuild the imulog.model stream of one channel from its messages (in log order):
+    :func:`imulog.archive.codec_decode.decode`."""
+    from imulog.archive import codec_decode
 
-
-def _decode_pose_in_frame(topic: str, msgs: list[Any], frame: str) -> PoseStream:
-    """Poses of files written before PoseBlock: one ``foxglove.PoseInFrame`` per sample."""
-    n = len(msgs)
-    t = np.fromiter((msg.timestamp.seconds * 1_000_000_000 + msg.timestamp.nanos for msg in msgs), np.int64, n)
-    arr = np.fromiter(
-        (
-            v
-            for msg in msgs
-            for v in (
-                msg.pose.position.x,
-                msg.pose.position.y,
-                msg.pose.position.z,
-                msg.pose.orientation.w,
-                msg.pose.orientation.x,
-                msg.pose.orientation.y,
-                msg.pose.orientation.z,
-            )
-        ),
-        np.float64,
-        n * 7,
-    ).reshape(n, 7)
-    return PoseStream(topic=topic, t_ns=t, position=arr[:, :3].copy(), orientation=arr[:, 3:].copy(), frame_id=frame)
+    return codec_decode.decode(schema_name, topic, meta, payloads)
 
 
 def stream_topic(stream: Stream) -> str:

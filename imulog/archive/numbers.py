@@ -79,6 +79,26 @@ class NumbersPlan:
         return np.concatenate([[0], np.cumsum(self.row_bytes)])
 
 
+def _counted(values: np.ndarray, params: dict[str, np.ndarray | None]) -> NumbersPlan:
+    """:func:`_from_counts` of :func:`_counts_of`: compiled in one pass for large arrays (same values)."""
+    if values.size < 65536:
+        return _from_counts(values, _counts_of(values, params), params)
+    from imulog.archive.wire_kernels import counts_check
+
+    width = values.shape[1]
+    use = np.array([params.get(p) is not None for p in PARAMS])
+    arrays = [
+        np.require(params[p] if params.get(p) is not None else np.zeros(width), np.float64, ["C", "W"]) for p in PARAMS
+    ]
+    counts, ok = counts_check(np.require(values, np.float64, ["C", "W"]), *arrays, use)
+    head = b"".join(
+        wire.packed(k + 2, params[p], np.dtype("<f8")) for k, p in enumerate(PARAMS) if params.get(p) is not None
+    )
+    return NumbersPlan(
+        "counts", width, ok, counts.astype("<i4").tobytes(), np.full(len(values), 4 * width), params, head
+    )
+
+
 def _from_counts(values: np.ndarray, counts: np.ndarray, params: dict[str, np.ndarray | None]) -> NumbersPlan:
     """The plan for ``counts`` (float64, whole numbers or not): each value kept where the formula gives it back."""
     eq = apply(counts, params) == values  # NaN never equals: a gap row keeps float64
@@ -130,6 +150,7 @@ def _decimals(values: np.ndarray) -> np.ndarray | None:
 
 
 _POW10 = 10.0 ** np.arange(_MAX_DECIMALS + 1)
+POW10, MAX_DECIMALS = _POW10, _MAX_DECIMALS  # for imulog.archive.block_decode
 
 
 def _value_decimals(v: np.ndarray, scale: np.ndarray | None = None) -> NumbersPlan | None:
@@ -180,11 +201,13 @@ def plan_numbers(values: np.ndarray | None, hint: dict[str, Any] | None, precisi
     candidates: list[dict[str, np.ndarray | None]] = []
     if hint:
         candidates.append(_params(hint, width))
-    ks = _decimals(v)
+        plan = _counted(v, candidates[0])
+        if plan.ok.mean() > 0.5:
+            return plan
+    ks = _decimals(v)  # only when the converter's hint does not fit: the text's decimals
     if ks is not None:
-        candidates.append(_params({"divisor": 10.0 ** ks.astype(np.float64)}, width))
-    for params in candidates:
-        plan = _from_counts(v, _counts_of(v, params), params)
+        params = _params({"divisor": 10.0 ** ks.astype(np.float64)}, width)
+        plan = _counted(v, params)
         if plan.ok.mean() > 0.5:
             return plan
     f = v.astype("<f4")
@@ -198,7 +221,7 @@ def plan_numbers(values: np.ndarray | None, hint: dict[str, Any] | None, precisi
         ks = _decimals(text)
         if ks is not None:
             params = _params({"divisor": 10.0 ** ks.astype(np.float64), "scale": scale}, width)
-            plan = _from_counts(v, _counts_of(v, params), params)
+            plan = _counted(v, params)
             if plan.ok.mean() > 0.5:
                 return plan
     return _value_decimals(v, scale if only_scale else None)

@@ -260,6 +260,11 @@ def zigzag_varints(values: np.ndarray) -> tuple[bytes, np.ndarray]:
     per-block encode).
     """
     v = np.ascontiguousarray(values, dtype=np.int64).reshape(-1)
+    if len(v) >= 65536:  # compiled: one pass instead of one numpy pass per byte position
+        from imulog.archive.wire_kernels import zigzag_encode
+
+        data, lengths = zigzag_encode(np.require(v, np.int64, ["C", "W"]))
+        return data.tobytes(), lengths
     z = ((v << np.int64(1)) ^ (v >> np.int64(63))).view(np.uint64)
     if not len(z):
         return b"", np.zeros(0, dtype=np.int64)
@@ -289,6 +294,12 @@ def read_zigzag_varints(data: bytes | bytearray | memoryview, n: int, what: str)
         if len(b):
             raise ValueError(f"{what}: {len(b)} bytes for 0 values")
         return np.zeros(0, dtype=np.int64)
+    if n >= 65536 and len(b) != n:  # compiled: one pass
+        from imulog.archive.wire_kernels import zigzag_decode
+
+        values, bad = zigzag_decode(np.require(b, np.uint8, ["C", "W"]), n)
+        if not bad:
+            return values
     if len(b) == n:  # every value one byte
         if b.max() >= 0x80:
             raise ValueError(f"{what}: a varint runs past the end of the data")
