@@ -15,6 +15,22 @@ BAD_WIRE = 1  # malformed: truncated, over-long varint, group wire types
 REPEATED = 2  # a field given twice in one message (unpacked repeated values or concatenated messages)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _varint(pool, pos, end):  # pragma: no cover - compiled
+    """The varint at ``pool[pos:end]``: (value, position after it); position -1 when truncated or over-long."""
+    v = np.int64(0)
+    shift = 0
+    while True:
+        if pos >= end or shift > 63:
+            return v, -1
+        c = pool[pos]
+        pos += 1
+        v |= np.int64(c & 0x7F) << shift
+        if c < 0x80:
+            return v, pos
+        shift += 7
+
+
 @njit(cache=True, nogil=True)
 def scan_many(pool, starts, ends, nfields, multi):  # pragma: no cover - compiled
     """Fields 1..nfields-1 of each message ``pool[starts[b]:ends[b]]``.
@@ -37,48 +53,24 @@ def scan_many(pool, starts, ends, nfields, multi):  # pragma: no cover - compile
         end = ends[b]
         h = np.uint64(14695981039346656037)
         while pos < end:
-            key = np.int64(0)
-            shift = 0
-            while True:
-                if pos >= end or shift > 63:
-                    return BAD_WIRE, value, offset, length, wire, hashes
-                c = pool[pos]
-                pos += 1
-                key |= np.int64(c & 0x7F) << shift
-                if c < 0x80:
-                    break
-                shift += 7
+            key, pos = _varint(pool, pos, end)
+            if pos < 0:
+                return BAD_WIRE, value, offset, length, wire, hashes
             number = key >> 3
             wt = key & 7
             if wt == 0:
-                v = np.int64(0)
-                shift = 0
-                while True:
-                    if pos >= end or shift > 63:
-                        return BAD_WIRE, value, offset, length, wire, hashes
-                    c = pool[pos]
-                    pos += 1
-                    v |= np.int64(c & 0x7F) << shift
-                    if c < 0x80:
-                        break
-                    shift += 7
+                v, pos = _varint(pool, pos, end)
+                if pos < 0:
+                    return BAD_WIRE, value, offset, length, wire, hashes
                 if number < nfields:
                     if wire[b, number] != -1:
                         return REPEATED, value, offset, length, wire, hashes
                     wire[b, number] = 0
                     value[b, number] = v
             elif wt == 2:
-                n = np.int64(0)
-                shift = 0
-                while True:
-                    if pos >= end or shift > 63:
-                        return BAD_WIRE, value, offset, length, wire, hashes
-                    c = pool[pos]
-                    pos += 1
-                    n |= np.int64(c & 0x7F) << shift
-                    if c < 0x80:
-                        break
-                    shift += 7
+                n, pos = _varint(pool, pos, end)
+                if pos < 0:
+                    return BAD_WIRE, value, offset, length, wire, hashes
                 if n < 0 or pos + n > end:
                     return BAD_WIRE, value, offset, length, wire, hashes
                 if number < nfields:
