@@ -263,10 +263,12 @@ def trial_row(path: str | os.PathLike[str]) -> dict[str, Any]:
 def _flag_columns(timing: dict[str, Any], trajectory: dict[str, Any]) -> dict[str, Any]:
     """``n_flagged_repetitions`` and ``flagged_reasons`` ("drift: 3, merged: 1") of the repetition flags (issue
     31): the trajectory step's when it ran (it adds drift to event correction's reasons), else the phases step's."""
-    source = trajectory if "flagged_repetitions" in (trajectory or {}) else (timing or {})
-    if "flagged_repetitions" not in source:
+    from imulog.process.repetition_flags import trial_flags
+
+    found = trial_flags(timing, trajectory)
+    if found is None:
         return {}
-    flagged = source.get("flagged_repetitions") or []
+    flagged = found[0]
     counts: dict[str, int] = {}
     for f in flagged:
         for reason in f.get("reasons") or []:

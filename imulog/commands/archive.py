@@ -145,12 +145,10 @@ def _echo_periods(metrics: dict) -> None:
 def _echo_flags(metadata: dict) -> None:
     """One line: the repetitions to distrust and why (issue 31), from the trajectory step when it ran (it adds
     drift to event correction's reasons), else from the phases step."""
-    from imulog.process.repetition_flags import flag_line
+    from imulog.process.repetition_flags import flag_line, trial_flags
 
-    timing, trajectory = metadata.get("imulog.timing") or {}, metadata.get("imulog.trajectory") or {}
-    source = trajectory if "flagged_repetitions" in trajectory else timing
-    total = len(trajectory.get("repetitions") or []) if source is trajectory else int(timing.get("n_repetitions") or 0)
-    line = flag_line(source.get("flagged_repetitions") or [], total)
+    found = trial_flags(metadata.get("imulog.timing") or {}, metadata.get("imulog.trajectory") or {})
+    line = flag_line(*found) if found else ""
     if line:
         click.echo(f"repetitions: {line}")
 

@@ -148,3 +148,15 @@ def flag_line(flagged: Sequence[Mapping[str, Any]], total: int, limit: int = 12)
     shown = ", ".join(f"{f['repetition']} ({', '.join(f['reasons'])})" for f in flagged[:limit])
     more = f" +{len(flagged) - limit} more" if len(flagged) > limit else ""
     return f"{len(flagged)} of {total} repetitions flagged: {shown}{more}"
+
+
+def trial_flags(timing: Mapping[str, Any], trajectory: Mapping[str, Any]) -> tuple[list[dict[str, Any]], int] | None:
+    """A trial's repetition flags and its repetition count: the trajectory step's when it ran (it adds drift to
+    event correction's reasons), else the phases step's (``imulog.trajectory`` / ``imulog.timing`` records);
+    None when neither holds flags (records of an older imulog)."""
+    timing, trajectory = timing or {}, trajectory or {}
+    if "flagged_repetitions" in trajectory:
+        return list(trajectory["flagged_repetitions"] or []), len(trajectory.get("repetitions") or [])
+    if "flagged_repetitions" in timing:
+        return list(timing["flagged_repetitions"] or []), int(timing.get("n_repetitions") or 0)
+    return None

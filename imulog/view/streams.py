@@ -18,6 +18,7 @@ import rerun as rr
 
 from imulog.archive.clocks import ClockMap, device_imu_of
 from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream
+from imulog.process.repetition_flags import trial_flags
 from imulog.view import layout as L
 from imulog.view import rates
 from imulog.view.anchor import anchor_repetitions, position_error_cm
@@ -542,8 +543,8 @@ class _Logger:
             if float(q.get("confidence", 1.0)) < 0.5
         }
         # the repetition flags (issue 31): the trajectory step's when it ran (it adds drift), else the phases step's
-        source = self.trajectory_record if "flagged_repetitions" in self.trajectory_record else self.timing_record
-        flagged = {int(f["repetition"]): f.get("reasons") or [] for f in source.get("flagged_repetitions") or []}
+        found = trial_flags(self.timing_record, self.trajectory_record)
+        flagged = {int(f["repetition"]): f.get("reasons") or [] for f in (found[0] if found else [])}
         if not forced and not low and not flagged:
             return labs, rep
         labs = np.array(
