@@ -190,3 +190,17 @@ def test_real_actigraph_time_column_matches_actilifes_own_export(shared_data, tm
     raw = pd.read_csv(folder / "exampleRAW.csv", skiprows=10)  # g, 3 decimals
     acc_g = np.column_stack([table[f"acc_{a}[m/s^2]"].to_numpy() for a in "xyz"])[: len(raw)] / 9.80665
     np.testing.assert_allclose(acc_g, raw.to_numpy(), atol=5.01e-4)
+
+
+def test_export_refuses_several_topics_for_one_table_and_a_topic_for_sto(tmp_path, processed_r2g):
+    """Two -t used to export only the last one silently; --topic with sto was ignored."""
+    out = tmp_path / "two.parquet"
+    result = CliRunner().invoke(
+        cli, ["export", str(processed_r2g), "-t", "/imu/wrist", "-t", "/vicon/markers", "-o", str(out)]
+    )
+    assert result.exit_code == 2
+    assert "one channel per file, got 2 (/imu/wrist, /vicon/markers)" in result.output
+    assert not out.exists()
+    sto = tmp_path / "trial.sto"
+    result = CliRunner().invoke(cli, ["export", str(processed_r2g), "-t", "/imu/wrist", "-o", str(sto)])
+    assert result.exit_code == 2 and "takes no --topic" in result.output and not sto.exists()

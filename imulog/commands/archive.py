@@ -412,7 +412,9 @@ def doctor(file: str, verbose: bool, as_json: bool, original: str | None = None)
     default=None,
     help="what to write (default: from OUTPUT's suffix; no suffix means bids)",
 )
-@click.option("--topic", "-t", default=None, help="channel for parquet/csv, e.g. /imu/wrist")
+@click.option(
+    "--topic", "-t", "topics", multiple=True, help="channel for parquet/csv, e.g. /imu/wrist (one per output file)"
+)
 @click.option(
     "--clock",
     type=click.Choice(["device", "reference"]),
@@ -447,7 +449,7 @@ def export(
     file: str,
     output: str,
     target: str | None,
-    topic: str | None,
+    topics: tuple[str, ...],
     clock: str | None,
     imu: str | None,
     start_ns: int | None,
@@ -493,8 +495,16 @@ def export(
         raise click.BadParameter(
             f"{end_ns} is not after --start-ns {start_ns} (the range is empty)", param_hint="--end-ns"
         )
-    if target in ("parquet", "csv") and not topic:
+    if target in ("parquet", "csv") and not topics:
         raise click.UsageError(f"--to {target} exports one channel: give --topic (imulog info {file} lists them)")
+    if topics and target not in ("parquet", "csv"):
+        raise click.UsageError(f"--to {target} takes no --topic (it writes every channel it supports): {topics[0]}")
+    if len(topics) > 1:
+        raise click.UsageError(
+            f"--to {target} writes one channel per file, got {len(topics)} ({', '.join(topics)}): "
+            "run export once per --topic"
+        )
+    topic = topics[0] if topics else None
     refuse_existing(output, overwrite=overwrite)
     rename = {}
     for item in names:
