@@ -119,3 +119,23 @@ def test_flags_through_the_steps_info_catalog_evaluate_and_viewer(tmp_path):
     k = flagged[0]["repetition"]
     _, rep = lane(fake, np.array([0]), np.array(["reach"]), np.array([k]), np.array([f"rep {k}"], dtype=object))
     assert rep[0].startswith(f"rep {k} (flagged: ")
+
+
+def test_info_shows_the_flags_of_every_imu_of_a_setup(capsys):
+    """info used to show only the primary IMU's flags; a setup's other IMUs keep theirs in RECORD.IMU."""
+    from imulog.commands.archive import _echo_flags
+
+    flag = {"repetition": 2, "reasons": ["merged"]}
+    metadata = {
+        "imulog.timing": {"imu": "/imu/upper_arm", "flagged_repetitions": [], "n_repetitions": 5},
+        "imulog.timing.forearm": {"imu": "/imu/forearm", "flagged_repetitions": [flag], "n_repetitions": 5},
+        "imulog.trajectory.trunk": {"imu": "/imu/trunk", "flagged_repetitions": [flag], "repetitions": [{}] * 4},
+    }
+    _echo_flags(metadata)
+    out = capsys.readouterr().out.splitlines()
+    assert out == [
+        "repetitions (forearm): 1 of 5 repetitions flagged: 2 (merged)",
+        "repetitions (trunk): 1 of 4 repetitions flagged: 2 (merged)",
+    ]
+    _echo_flags({"imulog.timing": {"imu": "/imu/wrist", "flagged_repetitions": [flag], "n_repetitions": 3}})
+    assert capsys.readouterr().out == "repetitions: 1 of 3 repetitions flagged: 2 (merged)\n"

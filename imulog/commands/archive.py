@@ -143,14 +143,29 @@ def _echo_periods(metrics: dict) -> None:
 
 
 def _echo_flags(metadata: dict) -> None:
-    """One line: the repetitions to distrust and why (issue 31), from the trajectory step when it ran (it adds
-    drift to event correction's reasons), else from the phases step."""
+    """One line per IMU: the repetitions to distrust and why (issue 31), from the trajectory step when it ran (it
+    adds drift to event correction's reasons), else from the phases step. A setup's other IMUs have their records
+    as ``imulog.timing.IMU`` / ``imulog.trajectory.IMU``; the IMU is named only when there are several."""
     from imulog.process.repetition_flags import flag_line, trial_flags
 
-    found = trial_flags(metadata.get("imulog.timing") or {}, metadata.get("imulog.trajectory") or {})
-    line = flag_line(*found) if found else ""
-    if line:
-        click.echo(f"repetitions: {line}")
+    lines = []
+    for imu, timing, trajectory in _per_imu_records(metadata, "imulog.timing", "imulog.trajectory"):
+        found = trial_flags(timing, trajectory)
+        line = flag_line(*found) if found else ""
+        if line:
+            lines.append((imu, line))
+    for imu, line in lines:
+        click.echo(f"repetitions ({imu}): {line}" if len(lines) > 1 and imu else f"repetitions: {line}")
+
+
+def _per_imu_records(metadata: dict, *bases: str) -> list[tuple[str, dict, dict]]:
+    """``(imu, record of bases[0], record of bases[1], ...)`` for the unsuffixed records (the primary IMU's,
+    named by their ``imu`` key) and every ``BASE.IMU`` record of another IMU; missing records are ``{}``."""
+    others = sorted({key[len(base) + 1 :] for key in metadata for base in bases if key.startswith(base + ".")})
+    primary = next((str(metadata[b].get("imu") or "") for b in bases if isinstance(metadata.get(b), dict)), "")
+    rows = [(primary.removeprefix("/imu/"), *(metadata.get(b) or {} for b in bases))]
+    rows += [(imu, *(metadata.get(f"{b}.{imu}") or {} for b in bases)) for imu in others]
+    return rows
 
 
 def _echo_phase_quality(timing: dict) -> None:
