@@ -146,3 +146,26 @@ def test_report_without_matplotlib_says_so(archive, tmp_path, monkeypatch):
     tables = CliRunner().invoke(cli, ["report", str(cat), "-o", str(tmp_path / "t"), "--no-plots"])
     assert tables.exit_code == 0, tables.output
     assert (tmp_path / "t" / "accuracy.md").is_file() and not (tmp_path / "t" / "subject_errors.png").exists()
+
+
+def test_report_keeps_each_imu_of_a_setup_apart():
+    """The report pooled only the primary IMU's evaluation; a setup's other IMUs (per_imu) get rows of their own,
+    never pooled with another segment's errors."""
+    from imulog.batch.report import accuracy_table, repetition_errors
+
+    def method(mae_cm):
+        return {"repetitions": [{"repetition": 0, **{a: {"mae_cm": mae_cm, "rom_pct": 1.0} for a in "xyz"}}]}
+
+    ev = {
+        "imu": "/imu/upper_arm",
+        "methods": {"zupt": method(1.0)},
+        "per_imu": {"forearm": {"methods": {"zupt": method(3.0)}}},
+    }
+    df = pd.DataFrame(
+        [{"path": "a.mcap", "subject": "S01", "trial": "T1", "evaluation_json": json.dumps(ev), "timing_json": None}]
+    )
+    table = {(r["method"], r["axis"]): r["mae_cm_mean"] for r in accuracy_table(df)}
+    assert table[("zupt (upper_arm)", "y")] == 1.0 and table[("zupt (forearm)", "y")] == 3.0
+    assert {r["method"] for r in repetition_errors(df)} == {"zupt (upper_arm)", "zupt (forearm)"}
+    single = df.assign(evaluation_json=json.dumps({"imu": "/imu/wrist", "methods": {"zupt": method(2.0)}}))
+    assert {r["method"] for r in accuracy_table(single)} == {"zupt"}  # one IMU: labels as before

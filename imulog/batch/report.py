@@ -41,7 +41,13 @@ def _fmt(mean: float, std: float, digits: int = 2) -> str:
 
 
 def _order(methods) -> list[str]:
-    return sorted(methods, key=lambda m: (METHODS.index(m) if m in METHODS else len(METHODS), m))
+    """Methods in the docs' order; labels ``method (imu)`` by IMU, then that order."""
+
+    def key(label: str) -> tuple:
+        method, _, imu = label.partition(" (")
+        return (imu, METHODS.index(method) if method in METHODS else len(METHODS), method)
+
+    return sorted(methods, key=key)
 
 
 def load_catalog(catalog: str | os.PathLike[str]):
@@ -55,27 +61,42 @@ def load_catalog(catalog: str | os.PathLike[str]):
 def repetition_errors(df) -> list[dict[str, Any]]:
     """Long table: one row per (trial, method, repetition, axis) with mae_cm, rom_pct, rmse_cm, final_cm."""
     rows = []
+    for rec, method, content in method_evaluations(df):
+        for rep in content.get("repetitions") or []:
+            for axis in AXES:
+                if axis not in rep:
+                    continue
+                rows.append(
+                    {
+                        "path": rec.path,
+                        "subject": rec.subject,
+                        "trial": rec.trial,
+                        "method": method,
+                        "repetition": rep.get("repetition"),
+                        "axis": axis,
+                        **{k: rep[axis].get(k) for k in ("mae_cm", "rom_pct", "rmse_cm", "final_cm", "spearman")},
+                    }
+                )
+    return rows
+
+
+def method_evaluations(df) -> list[tuple[Any, str, dict[str, Any]]]:
+    """``(catalog row, method label, the method's evaluation)`` for every IMU of every trial: the primary IMU's
+    record and a setup's other IMUs (``per_imu``). The label is the method, or ``method (imu)`` when the catalog
+    holds more than one IMU, so errors of different body segments are never pooled into one row."""
+    found = []
     for rec in df.itertuples(index=False):
         if not isinstance(rec.evaluation_json, str):
             continue
         ev = json.loads(rec.evaluation_json)
-        for method, content in (ev.get("methods") or {}).items():
-            for rep in content.get("repetitions") or []:
-                for axis in AXES:
-                    if axis not in rep:
-                        continue
-                    rows.append(
-                        {
-                            "path": rec.path,
-                            "subject": rec.subject,
-                            "trial": rec.trial,
-                            "method": method,
-                            "repetition": rep.get("repetition"),
-                            "axis": axis,
-                            **{k: rep[axis].get(k) for k in ("mae_cm", "rom_pct", "rmse_cm", "final_cm", "spearman")},
-                        }
-                    )
-    return rows
+        found.append((rec, str(ev.get("imu") or "").removeprefix("/imu/"), ev))
+        found += [(rec, str(imu), sub) for imu, sub in (ev.get("per_imu") or {}).items() if isinstance(sub, dict)]
+    several = len({imu for _, imu, _ in found}) > 1
+    return [
+        (rec, f"{method} ({imu})" if several and imu else method, content)
+        for rec, imu, ev in found
+        for method, content in (ev.get("methods") or {}).items()
+    ]
 
 
 def accuracy_table(df) -> list[dict[str, Any]]:
@@ -83,16 +104,12 @@ def accuracy_table(df) -> list[dict[str, Any]]:
     per_method: dict[str, list[dict[str, Any]]] = {}
     trials: dict[str, set] = {}
     subjects: dict[str, set] = {}
-    for rec in df.itertuples(index=False):
-        if not isinstance(rec.evaluation_json, str):
-            continue
-        ev = json.loads(rec.evaluation_json)
-        for method, content in (ev.get("methods") or {}).items():
-            reps = content.get("repetitions") or []
-            per_method.setdefault(method, []).extend(reps)
-            if reps:
-                trials.setdefault(method, set()).add(rec.path)
-                subjects.setdefault(method, set()).add(rec.subject)
+    for rec, method, content in method_evaluations(df):
+        reps = content.get("repetitions") or []
+        per_method.setdefault(method, []).extend(reps)
+        if reps:
+            trials.setdefault(method, set()).add(rec.path)
+            subjects.setdefault(method, set()).add(rec.subject)
     out = []
     for method in _order(per_method):
         summ = summarize(per_method[method])
