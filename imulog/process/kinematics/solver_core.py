@@ -1,0 +1,457 @@
+"""The compiled core of the constrained joint-angle solver (Caruso 2024), see :mod:`.solver`.
+
+Levenberg-Marquardt / SQP iterations in numba: the stacked rotation-vector residual of both segments and its
+analytic Jacobian, the 5-variable QP with up to 22 linear inequalities solved through its dual, the workspace-box
+constraints, and :func:`solve_packed_sequence`, the warm-started loop over samples. Angles in rad, positions in m.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from imulog.process.kinematics.dh import _fk_kernel, _jac_kernel
+
+
+@numba.njit(cache=True)
+def _log_rel(r_model, r_hat, out, o):
+    """``out[o:o+3] = log(r_model @ r_hat.T)`` (rotation vector, rad)."""
+    m00 = r_model[0, 0] * r_hat[0, 0] + r_model[0, 1] * r_hat[0, 1] + r_model[0, 2] * r_hat[0, 2]
+    m01 = r_model[0, 0] * r_hat[1, 0] + r_model[0, 1] * r_hat[1, 1] + r_model[0, 2] * r_hat[1, 2]
+    m02 = r_model[0, 0] * r_hat[2, 0] + r_model[0, 1] * r_hat[2, 1] + r_model[0, 2] * r_hat[2, 2]
+    m10 = r_model[1, 0] * r_hat[0, 0] + r_model[1, 1] * r_hat[0, 1] + r_model[1, 2] * r_hat[0, 2]
+    m11 = r_model[1, 0] * r_hat[1, 0] + r_model[1, 1] * r_hat[1, 1] + r_model[1, 2] * r_hat[1, 2]
+    m12 = r_model[1, 0] * r_hat[2, 0] + r_model[1, 1] * r_hat[2, 1] + r_model[1, 2] * r_hat[2, 2]
+    m20 = r_model[2, 0] * r_hat[0, 0] + r_model[2, 1] * r_hat[0, 1] + r_model[2, 2] * r_hat[0, 2]
+    m21 = r_model[2, 0] * r_hat[1, 0] + r_model[2, 1] * r_hat[1, 1] + r_model[2, 2] * r_hat[1, 2]
+    m22 = r_model[2, 0] * r_hat[2, 0] + r_model[2, 1] * r_hat[2, 1] + r_model[2, 2] * r_hat[2, 2]
+    tr = m00 + m11 + m22
+    # Shepperd: quaternion with w >= 0
+    if tr > 0.0:
+        s = 2.0 * math.sqrt(tr + 1.0)
+        w = 0.25 * s
+        x = (m21 - m12) / s
+        y = (m02 - m20) / s
+        z = (m10 - m01) / s
+    elif m00 > m11 and m00 > m22:
+        s = 2.0 * math.sqrt(1.0 + m00 - m11 - m22)
+        w = (m21 - m12) / s
+        x = 0.25 * s
+        y = (m01 + m10) / s
+        z = (m02 + m20) / s
+    elif m11 > m22:
+        s = 2.0 * math.sqrt(1.0 + m11 - m00 - m22)
+        w = (m02 - m20) / s
+        x = (m01 + m10) / s
+        y = 0.25 * s
+        z = (m12 + m21) / s
+    else:
+        s = 2.0 * math.sqrt(1.0 + m22 - m00 - m11)
+        w = (m10 - m01) / s
+        x = (m02 + m20) / s
+        y = (m12 + m21) / s
+        z = 0.25 * s
+    if w < 0.0:
+        w, x, y, z = -w, -x, -y, -z
+    vn = math.sqrt(x * x + y * y + z * z)
+    k = 2.0 if vn < 1e-12 else 2.0 * math.atan2(vn, w) / vn
+    out[o] = x * k
+    out[o + 1] = y * k
+    out[o + 2] = z * k
+
+
+@numba.njit(cache=True)
+def _evaluate(q, model, rua_hat, rfa_hat, lo, hi, frames_r, frames_p, r):
+    """Cost f (rad^2) and L1 constraint violation (rad + m) at ``q``; fills frames and residual ``r``."""
+    _fk_kernel(q, model, frames_r, frames_p)
+    _log_rel(frames_r[3], rua_hat, r, 0)
+    _log_rel(frames_r[6], rfa_hat, r, 3)
+    f = 0.0
+    for i in range(6):
+        f += r[i] * r[i]
+    v = 0.0
+    for c in range(5):
+        if q[c] < lo[c]:
+            v += lo[c] - q[c]
+        elif q[c] > hi[c]:
+            v += q[c] - hi[c]
+    for i in range(3):
+        pe = frames_p[3, i]
+        pw = frames_p[6, i]
+        if pe < lo[5 + i]:
+            v += lo[5 + i] - pe
+        elif pe > hi[5 + i]:
+            v += pe - hi[5 + i]
+        if pw < lo[8 + i]:
+            v += lo[8 + i] - pw
+        elif pw > hi[8 + i]:
+            v += pw - hi[8 + i]
+    return f, v
+
+
+@numba.njit(cache=True)
+def _solve_qp(h, g, a, b, m, sweeps, delta, lam):
+    """min 1/2 d'Hd + g'd  s.t.  a[:m] d <= b[:m]  (H 5x5 SPD). Writes ``delta``; returns #active."""
+    hinv_g = np.linalg.solve(h, g)
+    for j in range(5):
+        delta[j] = -hinv_g[j]
+    if m == 0:
+        return 0
+    worst = 0.0
+    for i in range(m):
+        s = b[i]
+        for j in range(5):
+            s -= a[i, j] * delta[j]
+        if s < worst:
+            worst = s
+    if worst >= -1e-12:
+        return 0
+    am = a[:m]
+    hinv_at = np.linalg.solve(h, am.T.copy())  # (5, m)
+    q = am @ hinv_at  # (m, m)
+    d0 = delta.copy()
+    c = b[:m] - am @ d0  # slack at lambda = 0
+    for i in range(m):
+        lam[i] = 0.0
+    for _sweep in range(sweeps):
+        change = 0.0
+        for i in range(m):
+            if q[i, i] <= 1e-14:
+                continue
+            s = c[i]
+            for k in range(m):
+                s += q[i, k] * lam[k]
+            new = lam[i] - s / q[i, i]
+            if new < 0.0:
+                new = 0.0
+            dl = abs(new - lam[i]) * q[i, i]
+            if dl > change:
+                change = dl
+            lam[i] = new
+        if change < 1e-15:
+            break
+    # polish: exact solve on the active set when it is consistent
+    idx = np.empty(m, dtype=np.int64)
+    na = 0
+    for i in range(m):
+        if lam[i] > 0.0:
+            idx[na] = i
+            na += 1
+    if 0 < na <= 5:
+        qa = np.empty((na, na))
+        ca = np.empty(na)
+        for u in range(na):
+            ca[u] = -c[idx[u]]
+            for v in range(na):
+                qa[u, v] = q[idx[u], idx[v]]
+        if abs(np.linalg.det(qa)) > 1e-18:
+            la = np.linalg.solve(qa, ca)
+            ok = True
+            for u in range(na):
+                if la[u] < 0.0:
+                    ok = False
+            if ok:
+                trial = np.zeros(m)
+                for u in range(na):
+                    trial[idx[u]] = la[u]
+                slack = c + q @ trial
+                for i in range(m):
+                    if slack[i] < -1e-12:
+                        ok = False
+                if ok:
+                    for i in range(m):
+                        lam[i] = trial[i]
+    for j in range(5):
+        s = 0.0
+        for i in range(m):
+            s += hinv_at[j, i] * lam[i]
+        delta[j] = d0[j] - s
+    return na
+
+
+@numba.njit(cache=True)
+def _build_constraints(q, lo, hi, frames_p, jp_el, jp_wr, a, b):
+    """Linearised constraints ``a[:m] d <= b[:m]`` at ``q`` (frames and Jacobians already at ``q``)."""
+    m = 0
+    for c in range(5):
+        if hi[c] < np.inf:
+            for j in range(5):
+                a[m, j] = 0.0
+            a[m, c] = 1.0
+            b[m] = hi[c] - q[c]
+            m += 1
+        if lo[c] > -np.inf:
+            for j in range(5):
+                a[m, j] = 0.0
+            a[m, c] = -1.0
+            b[m] = q[c] - lo[c]
+            m += 1
+    for i in range(3):
+        if hi[5 + i] < np.inf:
+            for j in range(5):
+                a[m, j] = jp_el[i, j]
+            b[m] = hi[5 + i] - frames_p[3, i]
+            m += 1
+        if lo[5 + i] > -np.inf:
+            for j in range(5):
+                a[m, j] = -jp_el[i, j]
+            b[m] = frames_p[3, i] - lo[5 + i]
+            m += 1
+        if hi[8 + i] < np.inf:
+            for j in range(5):
+                a[m, j] = jp_wr[i, j]
+            b[m] = hi[8 + i] - frames_p[6, i]
+            m += 1
+        if lo[8 + i] > -np.inf:
+            for j in range(5):
+                a[m, j] = -jp_wr[i, j]
+            b[m] = frames_p[6, i] - lo[8 + i]
+            m += 1
+    return m
+
+
+@numba.njit(cache=True)
+def _box_violation(frames_p, lo, hi):
+    """Largest distance (m) of the elbow or wrist centre outside its box."""
+    worst = 0.0
+    for i in range(3):
+        for o, k in ((3, 5), (6, 8)):
+            p = frames_p[o, i]
+            if lo[k + i] - p > worst:
+                worst = lo[k + i] - p
+            if p - hi[k + i] > worst:
+                worst = p - hi[k + i]
+    return worst
+
+
+@numba.njit(cache=True)
+def _solve_one(
+    q,
+    model,
+    rua_hat,
+    rfa_hat,
+    lo,
+    hi,
+    constrained,
+    max_iter,
+    step_tol,
+    damping0,
+    penalty,
+    sweeps,
+    feas_tol,
+    work_r,
+    work_p,
+    r,
+    jw_ua,
+    jw_fa,
+    jp_el,
+    jp_wr,
+    a,
+    b,
+    lam,
+    active,
+):
+    """Refine ``q`` (in place) for one sample; returns (cost, iterations)."""
+    f, v = _evaluate(q, model, rua_hat, rfa_hat, lo, hi, work_r, work_p, r)
+    if not constrained:
+        v = 0.0
+    merit = f + penalty * v
+    mu = damping0
+    h = np.empty((5, 5))
+    g = np.empty(5)
+    delta = np.empty(5)
+    q_new = np.empty(5)
+    r_new = np.empty(6)
+    jw2_ua = np.empty((3, 5))
+    jw2_fa = np.empty((3, 5))
+    jp2_el = np.empty((3, 5))
+    jp2_wr = np.empty((3, 5))
+    a2 = np.zeros((22, 5))
+    b2 = np.zeros(22)
+    lam2 = np.zeros(22)
+    d2 = np.empty(5)
+    q_soc = np.empty(5)
+    eye = np.eye(5)
+    zero5 = np.zeros(5)
+    it = 0
+    for _k in range(max_iter):
+        it += 1
+        # frames hold the current q (re-evaluate after a rejected step is unnecessary: q unchanged)
+        _fk_kernel(q, model, work_r, work_p)
+        _log_rel(work_r[3], rua_hat, r, 0)
+        _log_rel(work_r[6], rfa_hat, r, 3)
+        _jac_kernel(work_r, work_p, jw_ua, jw_fa, jp_el, jp_wr)
+        for i in range(5):
+            gi = 0.0
+            for k in range(3):
+                gi += jw_ua[k, i] * r[k] + jw_fa[k, i] * r[3 + k]
+            g[i] = gi
+            for j in range(5):
+                s = 0.0
+                for k in range(3):
+                    s += jw_ua[k, i] * jw_ua[k, j] + jw_fa[k, i] * jw_fa[k, j]
+                h[i, j] = s
+        m = _build_constraints(q, lo, hi, work_p, jp_el, jp_wr, a, b) if constrained else 0
+        accepted = False
+        for _try in range(12):
+            for i in range(5):
+                h[i, i] += mu
+            _solve_qp(h, g, a, b, m, sweeps, delta, lam)
+            for i in range(5):
+                h[i, i] -= mu
+            for i in range(5):
+                q_new[i] = q[i] + delta[i]
+            f_new, v_new = _evaluate(q_new, model, rua_hat, rfa_hat, lo, hi, work_r, work_p, r_new)
+            if not constrained:
+                v_new = 0.0
+            merit_new = f_new + penalty * v_new
+            if merit_new <= merit + 1e-15:
+                accepted = True
+                break
+            if constrained and v_new > 0.0:
+                # second-order correction (Maratos effect): min-norm step back onto the constraints
+                # linearised at q_new, then re-test the merit
+                _jac_kernel(work_r, work_p, jw2_ua, jw2_fa, jp2_el, jp2_wr)
+                m2 = _build_constraints(q_new, lo, hi, work_p, jp2_el, jp2_wr, a2, b2)
+                _solve_qp(eye, zero5, a2, b2, m2, sweeps, d2, lam2)
+                for i in range(5):
+                    q_soc[i] = q_new[i] + d2[i]
+                f_soc, v_soc = _evaluate(q_soc, model, rua_hat, rfa_hat, lo, hi, work_r, work_p, r_new)
+                merit_soc = f_soc + penalty * v_soc
+                if merit_soc <= merit + 1e-15:
+                    for i in range(5):
+                        q_new[i] = q_soc[i]
+                        delta[i] = q_soc[i] - q[i]
+                    f_new = f_soc
+                    v_new = v_soc
+                    merit_new = merit_soc
+                    accepted = True
+                    break
+            mu = mu * 10.0 + 1e-9
+        step = 0.0
+        for i in range(5):
+            if abs(delta[i]) > step:
+                step = abs(delta[i])
+        if not accepted:
+            break
+        for i in range(5):
+            q[i] = q_new[i]
+        merit = merit_new
+        f = f_new
+        v = v_new
+        mu = max(mu / 3.0, 1e-12)
+        if step < step_tol:
+            break
+    if constrained:
+        for c in range(5):
+            if q[c] < lo[c]:
+                q[c] = lo[c]
+            elif q[c] > hi[c]:
+                q[c] = hi[c]
+        f, v = _evaluate(q, model, rua_hat, rfa_hat, lo, hi, work_r, work_p, r)
+        # feasibility restoration: min-norm steps onto the linearised boxes until within feas_tol
+        for _fix in range(20):
+            if _box_violation(work_p, lo, hi) <= feas_tol:
+                break
+            _jac_kernel(work_r, work_p, jw2_ua, jw2_fa, jp2_el, jp2_wr)
+            m2 = _build_constraints(q, lo, hi, work_p, jp2_el, jp2_wr, a2, b2)
+            _solve_qp(eye, zero5, a2, b2, m2, sweeps, d2, lam2)
+            for c in range(5):
+                q[c] = min(max(q[c] + d2[c], lo[c]), hi[c])
+            f, v = _evaluate(q, model, rua_hat, rfa_hat, lo, hi, work_r, work_p, r)
+        tol_q = 1e-9
+        tol_p = max(feas_tol, 1e-9)
+        active[0] = False
+        active[1] = False
+        active[2] = False
+        for c in range(5):
+            if q[c] <= lo[c] + tol_q or q[c] >= hi[c] - tol_q:
+                active[0] = True
+        for i in range(3):
+            if work_p[3, i] <= lo[5 + i] + tol_p or work_p[3, i] >= hi[5 + i] - tol_p:
+                active[1] = True
+            if work_p[6, i] <= lo[8 + i] + tol_p or work_p[6, i] >= hi[8 + i] - tol_p:
+                active[2] = True
+    return f, it
+
+
+@numba.njit(cache=True)
+def solve_packed_sequence(
+    rua_hat,
+    rfa_hat,
+    q0,
+    model,
+    lo,
+    hi,
+    constrained,
+    max_iter,
+    step_tol,
+    damping0,
+    penalty,
+    sweeps,
+    feas_tol,
+    out_q,
+    out_cost,
+    out_iter,
+    out_active,
+):
+    n = rua_hat.shape[0]
+    work_r = np.empty((7, 3, 3))
+    work_p = np.empty((7, 3))
+    r = np.empty(6)
+    jw_ua = np.empty((3, 5))
+    jw_fa = np.empty((3, 5))
+    jp_el = np.empty((3, 5))
+    jp_wr = np.empty((3, 5))
+    a = np.zeros((22, 5))
+    b = np.zeros(22)
+    lam = np.zeros(22)
+    active = np.zeros(3, dtype=np.bool_)
+    q = q0.copy()
+    for k in range(n):
+        if not np.isfinite(rua_hat[k, 0, 0]) or not np.isfinite(rfa_hat[k, 0, 0]):
+            for i in range(5):
+                out_q[k, i] = np.nan
+            out_cost[k] = np.nan
+            out_iter[k] = 0
+            for i in range(3):
+                out_active[k, i] = False
+            continue
+        f, it = _solve_one(
+            q,
+            model,
+            rua_hat[k],
+            rfa_hat[k],
+            lo,
+            hi,
+            constrained,
+            max_iter,
+            step_tol,
+            damping0,
+            penalty,
+            sweeps,
+            feas_tol,
+            work_r,
+            work_p,
+            r,
+            jw_ua,
+            jw_fa,
+            jp_el,
+            jp_wr,
+            a,
+            b,
+            lam,
+            active,
+        )
+        for i in range(5):
+            out_q[k, i] = q[i]
+        out_cost[k] = f
+        out_iter[k] = it
+        for i in range(3):
+            out_active[k, i] = active[i]
+
+
+# --------------------------------------------------------------------------------------------
+# public API
