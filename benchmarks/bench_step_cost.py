@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from imulog.archive import TrialReader, append_derived, write_trial
-from imulog.commands.archive import trial_summary
+from imulog.commands.info import trial_summary
 from imulog.model import ImuStream, Recording, SignalStream
 
 

@@ -16,7 +16,7 @@ from imulog import __version__
 # command name -> ("module:attribute" of a click.Command, one-line help shown by --help without importing it)
 TOP_LEVEL_COMMANDS: dict[str, tuple[str, str]] = {
     "convert": ("imulog.commands.convert:convert", "Convert device exports (IMU text, Vicon CSV, C3D...) to a trial."),
-    "info": ("imulog.commands.archive:info", "Show a trial's channels, rates, gaps, metadata and derived runs."),
+    "info": ("imulog.commands.info:info", "Show a trial's channels, rates, gaps, metadata and derived runs."),
     "doctor": ("imulog.commands.archive:doctor", "Check a trial's integrity: CRCs, summary, decoding, raw hash."),
     "export": ("imulog.commands.archive:export", "Export to Parquet/CSV tables, OpenSense .sto, BIDS-motion or C3D."),
     "salvage": ("imulog.commands.archive:salvage", "Recover the intact channels of a damaged or truncated trial."),

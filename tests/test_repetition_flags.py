@@ -123,7 +123,7 @@ def test_flags_through_the_steps_info_catalog_evaluate_and_viewer(tmp_path):
 
 def test_info_shows_the_flags_of_every_imu_of_a_setup(capsys):
     """info used to show only the primary IMU's flags; a setup's other IMUs keep theirs in RECORD.IMU."""
-    from imulog.commands.archive import _echo_flags
+    from imulog.commands.info import _echo_flags
 
     flag = {"repetition": 2, "reasons": ["merged"]}
     metadata = {

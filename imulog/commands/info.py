@@ -1,0 +1,345 @@
+"""``imulog info``: a trial's channels, rates, gaps, metadata, derived runs and step summaries, for reading."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import click
+
+from imulog.archive import ArchiveError, TrialReader
+from imulog.commands.archive import open_trial
+
+
+def rerun_command(step: str) -> str:
+    """The command that reruns a recorded step (``orientation:wrist`` -> ``imulog process orientation``)."""
+    from imulog.cli import PROCESS_COMMANDS, TOP_LEVEL_COMMANDS
+
+    base = step.split(":", 1)[0]
+    if base in PROCESS_COMMANDS:
+        return f"imulog process {base}"
+    if base in TOP_LEVEL_COMMANDS:
+        return f"imulog {base}"
+    return f"the step {step!r}"
+
+
+def trial_summary(trial: TrialReader) -> dict[str, Any]:
+    """Everything ``imulog info`` shows, as a JSON-able dict (summary and metadata only: no channel or
+    attachment data is read)."""
+    stale = trial.stale_channels()
+    stored = trial.summary.stored_bytes_by_channel()
+    channels = []
+    for c in trial.channels:
+        md = c.metadata
+        if c.message_count == 0:  # nothing stored (salvaged, interrupted): the recorded statistics do not hold
+            channels.append(
+                {
+                    "topic": c.topic,
+                    "schema": c.schema_name,
+                    "kind": c.kind,
+                    "derived": c.derived,
+                    "messages": 0,
+                    "samples": 0,
+                    "rate_hz": None,
+                    "start_ns": None,
+                    "end_ns": None,
+                    "duration_s": None,
+                    "time_gaps": None,
+                    "nan_samples": None,
+                    "units": md.get("units", ""),
+                    "frame_id": md.get("frame_id", ""),
+                    "stored_bytes": 0,
+                    "out_of_date": None,
+                    "metadata": md,
+                }
+            )
+            continue
+        channels.append(
+            {
+                "topic": c.topic,
+                "schema": c.schema_name,
+                "kind": c.kind,
+                "derived": c.derived,
+                "messages": c.message_count,
+                "samples": c.sample_count,
+                "rate_hz": c.rate_hz,
+                "start_ns": c.start_ns,
+                "end_ns": c.end_ns,
+                "duration_s": c.duration_s,
+                "time_gaps": int(md["time_gaps"]) if "time_gaps" in md else None,
+                "nan_samples": int(md["nan_samples"]) if "nan_samples" in md else None,
+                "units": md.get("units", ""),
+                "frame_id": md.get("frame_id", ""),
+                "stored_bytes": stored.get(c.channel_id, 0),
+                "out_of_date": (
+                    {**stale[c.topic], "rerun": rerun_command(stale[c.topic]["step"])} if c.topic in stale else None
+                ),
+                "metadata": md,
+            }
+        )
+    runs = trial.runs()
+    # runs are listed on their own; the closing statistics of streamed channels (imulog.channel_stats[.N]) are
+    # already merged into those channels' metadata above, and the records of replaced channels are history
+    metadata = {k: v for k, v in trial.metadata.items() if not k.startswith(("imulog.run.", "imulog.channel_stats"))}
+    atts = trial.attachment_infos()  # sizes from the index, hashes from imulog.raw: nothing re-read
+    return {
+        "path": str(trial.path),
+        "bytes": trial.summary.file_size,
+        "channels": channels,
+        "metadata": metadata,
+        "attachments": atts,
+        "runs": {str(k): v for k, v in runs.items()},
+        "out_of_date": sorted(stale),
+        "out_of_date_steps": {step: {**v, "rerun": rerun_command(step)} for step, v in trial.stale_steps().items()},
+    }
+
+
+def _fmt_units(units: str) -> str:
+    """A short form of a channel's units: ``V x38`` for many equal units, else the list, cut at 40 chars."""
+    try:
+        values = json.loads(units)
+    except ValueError:
+        return units
+    if not isinstance(values, list):
+        return str(values)
+    if len(values) > 1 and len(set(values)) == 1:
+        return f"{values[0]} x{len(values)}"
+    text = ",".join(str(v) for v in values)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _fmt_rate(rate: float | None) -> str:
+    return "-" if not rate else f"{rate:.6g}"
+
+
+def _echo_periods(metrics: dict) -> None:
+    """Daily-life summaries of long recordings (``imulog.metrics`` by_day, else by_hour) as a small table."""
+    key = "by_day" if isinstance(metrics.get("by_day"), list) else "by_hour"
+    rows = metrics.get(key)
+    if not isinstance(rows, list) or not rows:
+        return
+    click.echo(f"daily life ({'per day' if key == 'by_day' else 'per hour'}, from imulog.metrics):")
+    click.echo("  start                      valid_h  arm_use_%  activities  distance_area")
+    for r in rows[:48]:
+        if not isinstance(r, dict):
+            continue
+        use = r.get("arm_use_percent")
+        click.echo(
+            f"  {str(r.get('start') or r.get('start_ns')):<26} {float(r.get('valid_s') or 0) / 3600:7.2f}  "
+            f"{'-' if use is None else f'{float(use):9.2f}'}  {r.get('activity_count', ''):>10}  "
+            f"{float(r.get('distance_weighted_area') or 0):13.1f}"
+        )
+    if len(rows) > 48:
+        click.echo(f"  ... {len(rows) - 48} more (info --json lists all)")
+
+
+def _echo_flags(metadata: dict) -> None:
+    """One line per IMU: the repetitions to distrust and why (issue 31), from the trajectory step when it ran (it
+    adds drift to event correction's reasons), else from the phases step. A setup's other IMUs have their records
+    as ``imulog.timing.IMU`` / ``imulog.trajectory.IMU``; the IMU is named only when there are several."""
+    from imulog.process.repetition_flags import flag_line, trial_flags
+
+    lines = []
+    for imu, timing, trajectory in _per_imu_records(metadata, "imulog.timing", "imulog.trajectory"):
+        found = trial_flags(timing, trajectory)
+        line = flag_line(*found) if found else ""
+        if line:
+            lines.append((imu, line))
+    for imu, line in lines:
+        click.echo(f"repetitions ({imu}): {line}" if len(lines) > 1 and imu else f"repetitions: {line}")
+
+
+def _per_imu_records(metadata: dict, *bases: str) -> list[tuple[str, dict, dict]]:
+    """``(imu, record of bases[0], record of bases[1], ...)`` for the unsuffixed records (the primary IMU's,
+    named by their ``imu`` key) and every ``BASE.IMU`` record of another IMU; missing records are ``{}``."""
+    others = sorted({key[len(base) + 1 :] for key in metadata for base in bases if key.startswith(base + ".")})
+    primary = next((str(metadata[b].get("imu") or "") for b in bases if isinstance(metadata.get(b), dict)), "")
+    rows = [(primary.removeprefix("/imu/"), *(metadata.get(b) or {} for b in bases))]
+    rows += [(imu, *(metadata.get(f"{b}.{imu}") or {} for b in bases)) for imu in others]
+    return rows
+
+
+def _echo_phase_quality(timing: dict) -> None:
+    """One line on what event correction did to the phases (imulog.timing, issue 19): forced phases are
+    visible as forced."""
+    quality = timing.get("repetition_quality") or []
+    if not quality:
+        return
+    total = {k: sum(int(q.get(k) or 0) for q in quality) for k in ("merged", "dropped", "split", "missing")}
+    corrected = sum(1 for q in quality if any(int(q.get(k) or 0) for k in total))
+    low = timing.get("low_confidence_repetitions") or []
+    click.echo(
+        f"phases: {timing.get('n_phases', 0)} in {len(quality)} repetitions from {timing.get('n_movements', 0)} "
+        f"movements; event correction changed {corrected} (merged {total['merged']}, dropped {total['dropped']}, "
+        f"split {total['split']}, missing {total['missing']})"
+    )
+    low_text = ", ".join(map(str, low[:20])) + (f" +{len(low) - 20} more" if len(low) > 20 else "")
+    click.echo(
+        f"  {timing.get('n_forced_phases', 0)} forced phases; confidence mean {timing.get('mean_confidence')}, "
+        f"low in repetitions {low_text or '-'}"
+    )
+
+
+def _echo_alignment(record: dict) -> None:
+    """The IMU-to-Vicon alignment: offset and drift with uncertainty, markers, windows, quality flag."""
+    if not record:
+        return
+    from imulog.steps.align_summary import alignment_summary, setup_lines
+
+    if record.get("setup"):  # several IMUs aligned together: one line per IMU, then the clocks
+        click.echo(f"alignment ({len(record['setup'])} IMUs on {record.get('reference', '?')}):")
+        for line in setup_lines(record):
+            click.echo(f"  {line}")
+        return
+    lines = alignment_summary(record)
+    if lines:
+        click.echo(f"alignment ({record.get('imu', '?')} on {record.get('reference', '?')}): {lines[0]}")
+        for line in lines[1:]:
+            click.echo(f"  {line}")
+
+
+def _echo_heading(record: dict, channels: list[dict[str, Any]]) -> None:
+    """Whether the oriented IMUs share one heading frame (``imulog process heading``); with several
+    orientations and no record, that their headings are not related yet."""
+    oriented = [c["topic"].rsplit("/", 1)[1] for c in channels if c["topic"].startswith("/derived/orientation/")]
+    if not record:
+        if len(oriented) > 1:
+            click.echo(
+                f"heading: not related between {', '.join(oriented)} (no imulog.heading record: "
+                "run `imulog process heading`)"
+            )
+        return
+    names = ", ".join(record.get("imus") or {})
+    left = [n for n in oriented if n not in (record.get("imus") or {})]
+    if left:
+        click.echo(f"heading: {', '.join(left)} oriented but not in imulog.heading (run `imulog process heading`)")
+    if record.get("source") == "none":
+        click.echo(f"heading: not related between {names}: " + "; ".join(record.get("rejected") or []))
+    else:
+        click.echo(f"heading: one frame for {names}: {record.get('source')} ({record.get('frame')})")
+
+
+def _echo_wrapped(text: str, width: int | None) -> None:
+    """``text`` on lines of at most ``width`` characters (continuations indented); as is when None."""
+    import textwrap
+
+    click.echo(text if width is None else textwrap.fill(text, width, subsequent_indent="    "))
+
+
+def _cut(text: str, width: int | None) -> str:
+    return text if width is None or len(text) <= width else text[: width - 3] + "..."
+
+
+def _channel_row(c: dict[str, Any]) -> tuple[str, ...]:
+    """One row of the channels table; a channel without samples (salvaged, interrupted) shows only that."""
+    salvaged = str(c["metadata"].get("salvaged", ""))
+    topic = (
+        c["topic"]
+        + (" [out of date]" if c["out_of_date"] else "")
+        + (" [assumptions failed]" if c["metadata"].get("assumptions") == "failed" else "")
+    )
+    if salvaged:
+        topic += f" [{salvaged.split(':', 1)[0]}]"
+    if not c["samples"]:
+        return (topic + " [empty]", c["schema"], "-", "0", "-", "-", f"{c['stored_bytes'] / 1e6:.2f}", "-")
+    gaps = f"{c['time_gaps'] if c['time_gaps'] is not None else '-'}/{c['nan_samples'] if c['nan_samples'] is not None else '-'}"
+    dur = "-" if c["duration_s"] is None else f"{c['duration_s']:.3f}"
+    return (
+        topic,
+        c["schema"],
+        _fmt_rate(c["rate_hz"]),
+        str(c["samples"]),
+        dur,
+        gaps,
+        f"{c['stored_bytes'] / 1e6:.2f}",
+        _fmt_units(c["units"]),
+    )
+
+
+@click.command()
+@click.argument("file", type=click.Path(exists=True, dir_okay=False))
+@click.option("-v", "--verbose", is_flag=True, help="also every run's parameters, the viewer twins, full metadata")
+@click.option("--json", "as_json", is_flag=True, help="print one JSON document (for scripts)")
+def info(file: str, verbose: bool, as_json: bool) -> None:
+    """Show a trial's channels, metadata, attachments and derived runs (compact; -v for everything).
+
+    For every channel: schema, rate (Hz), sample count, duration, gaps (time gaps longer than 1.5
+    sample periods / samples with NaN), stored (compressed) size, units and frame. A salvaged channel
+    says [partial] (chunks were lost) and a channel with no samples [empty] (no rate, duration or
+    gaps). Derived channels whose inputs (channels or metadata records such as imulog.alignment)
+    changed since they were computed are marked out of date, with the command that recomputes them.
+    By default the viewer twins (/derived/viewer/...) are one line, metadata records one line each
+    (cut at 110 characters) and runs one line without their parameters; -v lists them all in full.
+    Reads only the summary and the metadata records (fast on any trial size).
+
+    \b
+    Examples:
+      imulog info trial.mcap
+      imulog info trial.mcap -v          # every run's parameters, the viewer twins
+      imulog info trial.mcap --json | python -c "import json,sys; print(json.load(sys.stdin)['channels'][0])"
+    """
+    with open_trial(file) as trial:
+        try:
+            data = trial_summary(trial)
+        except ArchiveError as exc:
+            raise click.ClickException(str(exc)) from None
+    if as_json:
+        click.echo(json.dumps(data, indent=2, default=str))
+        return
+    width = None if verbose else 110
+    click.echo(f"{data['path']}  ({data['bytes'] / 1e6:.2f} MB)")
+    click.echo("channels:")
+    twins = [c for c in data["channels"] if c["metadata"].get("twin_of") or c["topic"].startswith("/derived/viewer/")]
+    shown = data["channels"] if verbose else [c for c in data["channels"] if c not in twins]
+    rows = [("topic", "schema", "rate_hz", "samples", "duration_s", "gaps(t/nan)", "MB", "units")]
+    rows += [_channel_row(c) for c in shown]
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    for r in rows:
+        click.echo("  " + "  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)).rstrip())
+    if twins and not verbose:
+        mb = sum(c["stored_bytes"] for c in twins) / 1e6
+        click.echo(f"  + {len(twins)} viewer twins under /derived/viewer/ ({mb:.2f} MB; -v lists them)")
+    from imulog.archive.timeline import TrialAxis
+
+    _echo_wrapped(f"time axis (MCAP log time): {TrialAxis(data['metadata']).describe()}", width)
+    click.echo("metadata:")
+    for name, values in data["metadata"].items():
+        text = ", ".join(f"{k}={v}" if isinstance(v, str) else f"{k}={json.dumps(v)}" for k, v in values.items())
+        click.echo(_cut(f"  {name}: {text}", width))
+    _echo_periods(data["metadata"].get("imulog.metrics") or {})
+    _echo_alignment(data["metadata"].get("imulog.alignment") or {})
+    _echo_heading(data["metadata"].get("imulog.heading") or {}, data["channels"])
+    _echo_phase_quality(data["metadata"].get("imulog.timing") or {})
+    _echo_flags(data["metadata"])
+    failed = [c for c in data["channels"] if c["metadata"].get("assumptions") == "failed"]
+    if failed:  # trajectories whose method does not apply to this recording (issue 32)
+        click.echo("assumptions failed:")
+        for c in failed:
+            click.echo(f"  {c['topic']}: {c['metadata'].get('assumptions_why', '')}")
+    if data["attachments"]:
+        click.echo("attachments:")
+        for a in data["attachments"]:
+            digest = (a["sha256"] or "-")[:16]
+            click.echo(f"  {a['name']}  {a['media_type']}  {a['bytes']} bytes  sha256 {digest}")
+    if data["runs"]:
+        click.echo("derived runs:" + ("" if verbose else " (-v: their parameters)"))
+        for n, r in data["runs"].items():
+            outputs = list(r.get("outputs", {}))
+            out = ", ".join(outputs) or "-"
+            if not verbose and len(outputs) > 3:
+                out = f"{', '.join(outputs[:3])} +{len(outputs) - 3} more"
+            params = f" params={json.dumps(r.get('params', {}))}" if verbose else ""
+            line = f"  #{n} {r.get('step', '')}: {r.get('algorithm', '')}{params} -> {out} ({r.get('time', '')})"
+            click.echo(_cut(line, None if verbose else 160))
+    if data["out_of_date"] or data["out_of_date_steps"]:
+        click.echo("out of date (inputs changed since they were computed):")
+        by_step: dict[str, list[str]] = {}
+        for c in data["channels"]:
+            if c["out_of_date"]:
+                by_step.setdefault(c["out_of_date"]["step"], []).append(c["topic"])
+        for step, topics in by_step.items():
+            reasons = next(c["out_of_date"]["reasons"] for c in data["channels"] if c["topic"] == topics[0])
+            click.echo(f"  {', '.join(topics)}: {'; '.join(reasons)} -> rerun {rerun_command(step)}")
+        for step, v in data["out_of_date_steps"].items():
+            if step not in by_step:  # steps that wrote only metadata records (evaluate, ...)
+                click.echo(f"  step {step} (run #{v['run']}): {'; '.join(v['reasons'])} -> rerun {v['rerun']}")
