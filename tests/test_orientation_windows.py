@@ -54,6 +54,10 @@ def test_windows_agree_with_the_whole(trial, tmp_path):
         lb = b.read("/derived/acc_global/ax6_4321").values
         assert np.median(np.linalg.norm(la - lb, axis=1)) < 0.05  # m/s^2
         info = b.channel("/derived/orientation/ax6_4321")
+        # stored at the precision the one-window path asks for (several windows used to write float64: 2x the bytes)
+        for topic in ("/derived/orientation/ax6_4321", "/derived/acc_global/ax6_4321"):
+            assert a.channel(topic).metadata.get("precision") == "float32"
+            assert b.channel(topic).metadata.get("precision") == "float32", topic
         assert info.sample_count == len(qa) and info.metadata["sha256"] == b.compute_channel_hash(info.topic)
         assert b.runs()[max(b.runs())]["params"]["windows"] == {"core_s": 300.0, "margin_s": 20.0}
         assert any(c.topic == "/derived/viewer/orientation/ax6_4321" for c in b.channels)

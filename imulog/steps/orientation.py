@@ -193,7 +193,15 @@ def orientation_windows(
             last = int(len(ok) - 1 - np.argmax(ok[::-1]))
             join = (w.core_lo + last, quat[last : last + 1].copy())
         for stream, values in zip(streams, (quat, lin, static), strict=True):
-            yield SignalStream(stream.topic, t[core], stream.columns, stream.units, values, frame_id=stream.frame_id)
+            yield SignalStream(
+                stream.topic,
+                t[core],
+                stream.columns,
+                stream.units,
+                values,
+                frame_id=stream.frame_id,
+                attrs=dict(stream.attrs),
+            )
 
 
 def windowed_gap_report(reports: list[tuple[Window, GapReport]]) -> dict[str, Any]:
