@@ -54,10 +54,10 @@ def test_windows_agree_with_the_whole(trial, tmp_path):
         lb = b.read("/derived/acc_global/ax6_4321").values
         assert np.median(np.linalg.norm(la - lb, axis=1)) < 0.05  # m/s^2
         info = b.channel("/derived/orientation/ax6_4321")
-        # stored at the precision the one-window path asks for (several windows used to write float64: 2x the bytes)
+        # stored at the precision the one-window path asks for (several windows used to write float64: 2-4x the bytes)
         for topic in ("/derived/orientation/ax6_4321", "/derived/acc_global/ax6_4321"):
-            assert a.channel(topic).metadata.get("precision") == "float32"
-            assert b.channel(topic).metadata.get("precision") == "float32", topic
+            assert a.channel(topic).metadata.get("precision") == "quantized"
+            assert b.channel(topic).metadata.get("precision") == "quantized", topic
         assert info.sample_count == len(qa) and info.metadata["sha256"] == b.compute_channel_hash(info.topic)
         assert b.runs()[max(b.runs())]["params"]["windows"] == {"core_s": 300.0, "margin_s": 20.0}
         assert any(c.topic == "/derived/viewer/orientation/ax6_4321" for c in b.channels)
@@ -76,8 +76,11 @@ def test_a_lab_trial_is_one_window_and_equals_the_whole_computation(processed_r2
         for s in streams:
             got = trial.read(s.topic)
             np.testing.assert_array_equal(got.t_ns, s.t_ns)
-            # quaternions and global accelerations are stored as float32 (issue 28, docs/schemas.md)
-            want = s.values.astype(np.float32) if s.attrs.get("precision") == "float32" else s.values
+            # quaternions and global accelerations are stored as counts on their grids (issue 28, docs/schemas.md)
+            want = s.values
+            if s.attrs.get("precision") == "quantized":
+                step = float(s.attrs["quantum"])
+                want = np.rint(s.values / step) * step
             np.testing.assert_array_equal(got.values, want)
         run = next(r for r in trial.runs().values() if r["step"] == "orientation:wrist")
         assert "windows" not in run["params"]  # one window: the result does not depend on the plan

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from google.protobuf import descriptor_pb2
 
-from imulog.archive import wire
+from imulog.archive import numbers, wire
 from imulog.archive._generated.imulog import (
     IntervalEvent_pb2,
 )
@@ -212,7 +212,9 @@ def encode(
             assert isinstance(stream, SignalStream)
             names, extra = stream.columns, {**stream.attrs, "frame_id": stream.frame_id}
             second = st(2, stream.frame_id)
-            hints, precision = {}, str(stream.attrs.get("precision", ""))
+            precision = str(stream.attrs.get("precision", ""))
+            grid = numbers.quantum_hint(stream.attrs)
+            hints = {"values": grid} if grid else {}
         meta.update(extra, columns=json.dumps(list(names)), units=json.dumps(list(stream.units)))
         meta.update(_stats(stream.t_ns, [stream.values]))
         head = second + strings_field(3, names) + strings_field(4, stream.units)

@@ -5,7 +5,9 @@ Writing, for a whole stream at once (numpy, no per-sample Python):
 - :func:`plan_numbers` picks how an (N, C) float64 array is stored: integer counts (sfixed32) with per-column
   ``shift``, ``divisor``, ``scale``, ``offset`` (from the converter's ``resolution`` hint, or decimal text found
   in the numbers: ``counts / 10**k``), float32 when every value is a float32 (or the stream asks for float32:
-  derived channels whose accuracy is far coarser), else None (the float64 field, as before). Counts are kept
+  derived channels whose accuracy is far coarser), counts on a grid the stream asks for (``precision:
+  quantized`` with its ``quantum``: values rounded to a step far below their accuracy, :func:`quantum_hint`),
+  else None (the float64 field, as before). Counts are kept
   only where they give every value back exactly (compared as numbers: ``-0.0`` reads as ``0.0``); a block with
   a row that does not (a NaN gap) keeps float64.
 - :func:`plan_times` gives each block its start and span when the times are evenly spread, with residuals
@@ -198,6 +200,17 @@ def plan_numbers(values: np.ndarray | None, hint: dict[str, Any] | None, precisi
     if precision == "float32":
         f = v.astype("<f4")
         return NumbersPlan("f32", width, np.ones(len(v), dtype=bool), f.tobytes(), np.full(len(v), 4 * width))
+    if precision == "quantized" and hint:  # counts on the requested grid: rounded, by request (see quantum_hint)
+        params = _params(hint, width)
+        counts = _counts_of(v, params)
+        ok = (np.isfinite(v) & (np.abs(counts) < _MAX_COUNT)).all(axis=1)  # a NaN gap row keeps float64
+        counts[~ok] = 0
+        head = b"".join(
+            wire.packed(k + 2, params[p], np.dtype("<f8")) for k, p in enumerate(PARAMS) if params[p] is not None
+        )
+        return NumbersPlan(
+            "counts", width, ok, counts.astype("<i4").tobytes(), np.full(len(v), 4 * width), params, head
+        )
     candidates: list[dict[str, np.ndarray | None]] = []
     if hint:
         candidates.append(_params(hint, width))
@@ -463,3 +476,14 @@ def decode_numbers(sources: list[tuple[str, Any]], counts: np.ndarray, width: in
     if covered != total:
         raise ValueError(f"{what}: present in some blocks only")
     return out
+
+
+def quantum_hint(attrs: dict[str, Any]) -> dict[str, float] | None:
+    """The ``values`` hint of a derived stream that asks for ``precision: quantized``: ``{"scale": quantum}`` (its
+    ``quantum`` attribute, the grid step in the channel's units); None when it asks for no grid."""
+    if attrs.get("precision") != "quantized":
+        return None
+    quantum = float(attrs.get("quantum", "nan"))
+    if not (np.isfinite(quantum) and quantum > 0):
+        raise ValueError(f"precision quantized needs a positive quantum, got {attrs.get('quantum')!r}")
+    return {"scale": quantum}
