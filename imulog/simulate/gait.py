@@ -294,7 +294,9 @@ def body_kinematics(p: GaitParams, rng: np.random.Generator):
     pel = _lowpass(mid, rate, 1.5) + 0.09 * np.column_stack([np.cos(body_yaw), np.sin(body_yaw), 0 * t])
     pel[:, 2] = 0.90 - 0.05 * _lowpass(np.clip(gap - 0.18, 0, None), rate, 2.0) ** 2 / 0.25
     n = len(t)
-    q_pel = quat.multiply(_rz(body_yaw + 0.12 * ahead), quat.multiply(_rx(0.03 * ahead), _ry(np.full(n, 0.05))))
+    # pelvic rotation and obliquity about +-5 deg with the step, tilt at twice the stride frequency
+    tilt = 0.05 + 0.03 * _lowpass(np.abs(ahead), rate, 3.0)
+    q_pel = quat.multiply(_rz(body_yaw + 0.15 * ahead), quat.multiply(_rx(0.14 * ahead), _ry(tilt)))
     q_seg["pelvis"] = quat.multiply(q_pel, _wobble(n, rate, 0.01, rng))
     p_seg["pelvis"] = pel
     for side, sgn in (("l", 1.0), ("r", -1.0)):
@@ -310,10 +312,10 @@ def body_kinematics(p: GaitParams, rng: np.random.Generator):
         knee = _lowpass(hip + a[:, None] * u + h[:, None] * v, rate, 6.0)  # smooths the straight-knee kink
         q_seg[f"thigh_{side}"], p_seg[f"thigh_{side}"] = _frame(hip - knee, fwds[side]), hip
         q_seg[f"shank_{side}"], p_seg[f"shank_{side}"] = _frame(knee - ankle, fwds[side]), ankle
-    q_trunk = quat.multiply(_rz(body_yaw - 0.06 * ahead), _ry(np.full(n, 0.08)))
+    q_trunk = quat.multiply(_rz(body_yaw - 0.10 * ahead), quat.multiply(_rx(-0.05 * ahead), _ry(np.full(n, 0.08))))
     q_seg["sternum"] = quat.multiply(q_trunk, _wobble(n, rate, 0.015, rng))
     p_seg["sternum"] = pel + quat.rotate(q_pel, np.array([0.0, 0.0, 0.10]))
-    q_seg["head"] = quat.multiply(q_trunk, _wobble(n, rate, 0.03, rng))
+    q_seg["head"] = quat.multiply(quat.multiply(_rz(body_yaw), _ry(np.full(n, 0.1))), _wobble(n, rate, 0.05, rng))
     p_seg["head"] = p_seg["sternum"] + quat.rotate(q_seg["sternum"], np.array([0.0, 0.0, 0.55]))
     for side, sgn in (("l", 1.0), ("r", -1.0)):
         swing = -sgn * 0.45 * ahead  # the arm swings forward with the opposite leg
@@ -321,7 +323,7 @@ def body_kinematics(p: GaitParams, rng: np.random.Generator):
         q_seg[f"upper_arm_{side}"] = quat.multiply(q, _wobble(n, rate, 0.02, rng))
         p_seg[f"upper_arm_{side}"] = p_seg["sternum"] + quat.rotate(q_seg["sternum"], np.array([0.0, sgn * 0.18, 0.42]))
     stances = {
-        f"foot_{s}": [(float(x["t_on"]), float(x["t_off"])) for x in feet[s] if 0 <= x["t_on"] and x["t_off"] < end]
+        f"foot_{s}": [(float(x["t_on"]), float(x["t_off"])) for x in feet[s] if x["t_on"] >= 0 and x["t_off"] < end]
         for s in "lr"
     }
     return t, q_seg, p_seg, stances, end

@@ -58,8 +58,10 @@ def compute_heading(
     alignments: dict[str, dict | None],
     static_s: tuple[float, float] | None = None,
     declared_deg: dict[str, float] | None = None,
+    devices: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> dict[str, Any]:
-    """The ``imulog.heading`` record. ``orientations``: name -> (t_ns, q_s2g, global_frame); ``mags``: name ->
+    """The ``imulog.heading`` record. ``devices``: name -> (t_ns, the device's own orientation, sensor to the
+    device's global frame) when the IMUs are of one recording: the last source, the device's frame. ``orientations``: name -> (t_ns, q_s2g, global_frame); ``mags``: name ->
     (t_ns, field uT) or None; ``alignments``: name -> alignment record or None; ``static_s``: a declared pose
     (s from each IMU's first sample)."""
     from imulog.process import heading as hd
@@ -120,7 +122,47 @@ def compute_heading(
             corr,
         )
     rejected.append("static pose: none declared (--static-pose START,END)")
+    if devices and all(devices.get(n) is not None for n in names):
+        corr, spread = {}, {}
+        for n in names:
+            t_o, q, _ = orientations[n]
+            t_d, q_d = devices[n]
+            yaw, sd = device_yaw(t_o, q, t_d, q_d)
+            corr[n], spread[n] = hd.yaw_quaternion(yaw), sd
+        worst = max(spread, key=lambda n: spread[n])
+        if spread[worst] <= DEVICE_YAW_SD_DEG:
+            return record(
+                "device",
+                "the device's global frame (its own orientations of one recording)",
+                corr,
+                yaw_sd_deg={n: round(v, 2) for n, v in spread.items()},
+            )
+        rejected.append(
+            f"device: {worst}'s own orientation turns against imulog's by {spread[worst]:.1f} deg (sd) over the "
+            f"trial (at most {DEVICE_YAW_SD_DEG:g})"
+        )
+    else:
+        rejected.append("device: not every IMU has the device's own orientation (/orientation/IMU) of one recording")
     return record("none", "none: each IMU keeps its own heading", None)
+
+
+DEVICE_YAW_SD_DEG = 5.0  # the heading between imulog's and the device's orientation may wander this much (sd)
+
+
+def device_yaw(t_ns: np.ndarray, q_s2g: np.ndarray, t_dev_ns: np.ndarray, q_dev: np.ndarray) -> tuple[float, float]:
+    """The rotation about the vertical (rad) from imulog's global frame to the device's, its circular mean over
+    the trial, and how much it wanders (circular sd, deg)."""
+    from imulog.process import quaternion as quat
+    from imulog.process.resample import resample_quaternions
+
+    qd = q_dev if np.array_equal(t_ns, t_dev_ns) else resample_quaternions(t_dev_ns, q_dev, t_ns)
+    e = quat.multiply(quat.normalize(qd), quat.conjugate(q_s2g))
+    ok = np.all(np.isfinite(e), axis=1)
+    x = quat.rotate(e[ok], np.array([1.0, 0.0, 0.0]))
+    z = np.exp(1j * np.arctan2(x[:, 1], x[:, 0]))
+    r = abs(z.mean())
+    sd = float(np.degrees(np.sqrt(max(-2.0 * np.log(max(r, 1e-12)), 0.0))))
+    return float(np.angle(z.mean())), sd
 
 
 def run_heading(
@@ -150,6 +192,7 @@ def run_heading(
         raise ValueError(f"no /derived/orientation/* channel: run `imulog process orientation {path}` first")
     inputs = [f"/derived/orientation/{n}" for n in names] + [f"/imu/{n}" for n in names if f"/imu/{n}" in topics]
     inputs += [t for n in names if (t := _pose_topic(n, topics, metadata)) is not None]
+    inputs += [f"/orientation/{n}" for n in names if f"/orientation/{n}" in topics]
     meta_inputs = tuple(k for k in metadata if k == "imulog.alignment" or k.startswith("imulog.alignment."))
     holder: dict[str, Any] = {}
 
@@ -177,7 +220,8 @@ def run_heading(
                 g2w = global_to_world_from_pose(s.t_ns, s.values, aligns[n], ps.t_ns, ps.orientation)
                 if g2w is not None:
                     aligns[n] = {**aligns[n], "rotation_global_to_world": g2w}
-        record = compute_heading(orientations, mags, aligns, static_s, declared_deg)
+        devices = {n: _device_orientation(trial, n, topics) for n in names}
+        record = compute_heading(orientations, mags, aligns, static_s, declared_deg, devices)
         if len(names) == 1:
             record["note"] = "one IMU: nothing to relate"
         holder["record"] = record
@@ -197,6 +241,15 @@ def run_heading(
         with TrialReader(path) as trial:
             holder["record"] = trial.metadata.get("imulog.heading", {})
     return outcome, holder["record"]
+
+
+def _device_orientation(trial, name: str, topics: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
+    """The device's own orientation of IMU ``name`` (``/orientation/{name}``: t_ns, w,x,y,z), or None."""
+    topic = f"/orientation/{name}"
+    if topic not in topics:
+        return None
+    s = trial.read(topic)
+    return s.t_ns, np.asarray(s.values, np.float64)[:, :4]
 
 
 def _pose_topic(name: str, topics: list[str], metadata: dict[str, Any]) -> str | None:
