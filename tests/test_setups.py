@@ -288,3 +288,29 @@ def test_calibrate_every_imu_or_each_with_its_own_file(opals, tmp_path):
     assert {f"calibrate:{n}" for n in OPALS} <= steps
     code, _, stderr = run("process", "calibrate", opals, "--calibration", f"nope={cal}")
     assert code == 1 and "no channel /imu/nope" in stderr
+
+
+def test_kinematics_takes_the_arm_imus_from_placements_declared_at_conversion(session, tmp_path):
+    """Placements (`--meta device.NAME.placement=...`), not names: the streams keep their Xsens names and the DH
+    model still finds its upper arm and forearm; without placements or names it refuses, listing the IMUs."""
+    trial = tmp_path / "placed.mcap"
+    code, _, stderr = run(
+        "convert",
+        session,
+        "-o",
+        trial,
+        "--meta",
+        "device.mt_00b421af.placement=right upper arm",
+        "--meta",
+        "device.mt_00b4227b.placement=right lower arm",
+    )
+    assert code == 0, stderr
+    code, _, stderr = run("process", "kinematics", trial, "--no-markers")
+    assert code == 0, stderr
+    with TrialReader(trial) as reader:
+        run_record = next(r for r in reader.runs().values() if r["step"] == "kinematics")
+    assert run_record["params"]["upper_arm"] == "mt_00b421af" and run_record["params"]["forearm"] == "mt_00b4227b"
+    bare = tmp_path / "bare.mcap"
+    assert run("convert", session, "-o", bare)[0] == 0
+    code, _, stderr = run("process", "kinematics", bare, "--no-markers")
+    assert code != 0 and "mt_00b421af" in stderr and "mt_00b4227b" in stderr
