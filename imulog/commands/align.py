@@ -150,7 +150,10 @@ def process_align(
         if len(imus) != 1 and n_imus > 1:  # oriented IMUs: their common heading frame from the clusters now
             from imulog.steps.heading import refresh_heading
 
-            heading = refresh_heading(trial)
+            try:
+                heading = refresh_heading(trial)
+            except (ValueError, KeyError) as exc:  # the alignment is written; say why the headings do not relate
+                click.echo(f"heading: not related ({exc})", err=True)
         with TrialReader(trial) as reader:
             rec = reader.metadata.get("imulog.alignment", {})
     except (ArchiveError, ValueError, KeyError, OSError) as exc:

@@ -102,5 +102,8 @@ def process_orientation(
     if len(names) > 1:  # one heading frame for all (the heading step, from what the trial has), or why not
         from imulog.steps.heading import heading_status, refresh_heading
 
-        refresh_heading(trial)
+        try:
+            refresh_heading(trial)
+        except (ValueError, KeyError) as exc:  # the orientations are written; the line says they do not relate
+            click.echo(f"heading: not related ({exc})", err=True)
         click.echo(heading_status(trial, names, frame))
