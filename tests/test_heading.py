@@ -63,7 +63,7 @@ def test_six_d_imus_without_anything_to_relate_them_say_so(oriented_setup, tmp_p
     path = shutil.copy(src, tmp_path / "t.mcap")
     _, rec = run_heading(path, imus=["upper_arm", "forearm"])
     assert rec["source"] == "none"
-    assert [r.split(":")[0] for r in rec["rejected"]] == ["magnetometer", "optical", "static pose"]
+    assert [r.split(":")[0] for r in rec["rejected"]] == ["magnetometer", "optical", "static pose", "device"]
     assert all("correction" not in v for v in rec["imus"].values())
     corr, warn = common_heading({"imulog.heading": rec}, ["upper_arm", "forearm"])
     assert corr is None and "not related" in warn and "magnetometer" in warn

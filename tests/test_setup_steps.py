@@ -36,27 +36,22 @@ def _heading_line(stdout: str) -> str:
 def test_orientation_says_whether_the_imus_share_one_heading_frame(opals):
     code, stdout, stderr = run("process", "orientation", opals)
     assert code == 0, stderr
-    line = _heading_line(stdout)
-    assert "not one frame yet for 4 IMUs" in line and "arbitrary heading" in line
-    assert f"imulog process heading {opals}" in line
-    code, stdout, _ = run("info", opals)  # no record yet: info says the headings do not relate
-    assert code == 0 and "heading: not related between" in stdout and "run `imulog process heading`" in stdout
-    # the magnetometers disagree on this file (one wanders by about 10 deg): the step finds no frame, and the
-    # orientation command then says so and what would give one
-    code, stdout, _ = run("process", "heading", opals)
-    assert code == 0 and "no common heading" in stdout
-    code, stdout, _ = run("process", "orientation", opals)
-    line = _heading_line(stdout)
-    assert stdout.count("unchanged") == 4 and "not shared by static, upper, middle, lower" in line
-    assert "--static-pose START,END" in line
+    # 6D: each its own heading; the Opals' own orientations (one recording) relate them, without `process heading`
+    assert _heading_line(stdout).startswith("heading: one frame for static, upper, middle, lower: device")
+    code, stdout, _ = run("info", opals)
+    assert code == 0 and "heading: one frame" in stdout
     # a declared pose relates them: the same command now reports one frame
     code, stdout, stderr = run("process", "heading", opals, "--static-pose", "0.2,1.0")
     assert code == 0, stderr
     code, stdout, _ = run("process", "orientation", opals)
     assert _heading_line(stdout).startswith("heading: one frame for static, upper, middle, lower: static pose")
-    # re-orienting one IMU makes the record stale: the line no longer claims one frame
+    # re-orienting two IMUs re-relates every oriented IMU, the declared pose kept
     code, stdout, _ = run("process", "orientation", opals, "--imu", "upper", "--imu", "lower", "--backend", "madgwick")
-    assert code == 0 and "not one frame yet for 2 IMUs" in _heading_line(stdout)
+    assert code == 0 and _heading_line(stdout).startswith("heading: one frame for upper, lower: static pose")
+    from imulog.archive import TrialReader
+
+    with TrialReader(opals) as trial:
+        assert set(trial.metadata["imulog.heading"]["imus"]) == {"static", "upper", "middle", "lower"}
     code, stdout, _ = run("process", "orientation", opals, "--imu", "upper")  # one IMU: no heading line
     assert code == 0 and "heading:" not in stdout
 

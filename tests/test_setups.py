@@ -70,11 +70,12 @@ def test_orientation_runs_on_every_imu_one_run_each(opals):
     assert code == 0, stderr
     rows = [line.split() for line in stdout.splitlines() if line.strip().split(" ")[0] in OPALS]
     assert [r[0] for r in rows] == OPALS and {r[1] for r in rows} == {"wrote"}
-    assert "own arbitrary heading" in stdout  # 6D orientations of several IMUs share no heading
+    # 6D orientations each have their own heading; the Opals' own orientations (one recording) relate them
+    assert "heading: one frame for static, upper, middle, lower: device" in stdout
     with TrialReader(opals) as trial:
         steps = sorted(r["step"] for r in trial.runs().values())
         assert all(f"/derived/orientation/{n}" in trial.topics() for n in OPALS)
-    assert steps == sorted(f"orientation:{n}" for n in OPALS)
+    assert steps == sorted([*(f"orientation:{n}" for n in OPALS), "heading"])  # one heading run relates them
     code, stdout, _ = run("process", "orientation", opals)  # the same again: nothing written
     assert code == 0 and stdout.count("unchanged") == 4
     code, stdout, _ = run("process", "orientation", opals, "--imu", "upper", "--backend", "madgwick")
@@ -135,11 +136,11 @@ def test_device_orientations_export_to_sto_with_names_checked(opals, tmp_path):
             assert np.allclose(quats[column], q / np.linalg.norm(q, axis=1, keepdims=True), atol=1e-12)
     code, _, stderr = run("export", opals, "-o", tmp_path / "bad.sto", "--name", "nope=foo")
     assert code == 1 and "--name nope=foo: no IMU 'nope'" in stderr and not (tmp_path / "bad.sto").exists()
-    # imulog's 6D orientations: each has its own heading, and the export says so
+    # imulog's 6D orientations: each has its own heading, related by the Opals' own orientations
     assert run("process", "orientation", opals)[0] == 0
     code, _, stderr = run("export", opals, "-o", tmp_path / "6d.sto")
     assert code == 0 and "/derived/orientation/upper (imulog's" in stderr
-    assert "do not share one heading frame" in stderr
+    assert "every IMU in the trial's common heading frame (device" in stderr
     code, _, stderr = run("export", opals, "-o", tmp_path / "dev.sto", "--source", "device")
     assert code == 0 and "do not share" not in stderr  # one device export: one global frame
 
@@ -287,3 +288,29 @@ def test_calibrate_every_imu_or_each_with_its_own_file(opals, tmp_path):
     assert {f"calibrate:{n}" for n in OPALS} <= steps
     code, _, stderr = run("process", "calibrate", opals, "--calibration", f"nope={cal}")
     assert code == 1 and "no channel /imu/nope" in stderr
+
+
+def test_kinematics_takes_the_arm_imus_from_placements_declared_at_conversion(session, tmp_path):
+    """Placements (`--meta device.NAME.placement=...`), not names: the streams keep their Xsens names and the DH
+    model still finds its upper arm and forearm; without placements or names it refuses, listing the IMUs."""
+    trial = tmp_path / "placed.mcap"
+    code, _, stderr = run(
+        "convert",
+        session,
+        "-o",
+        trial,
+        "--meta",
+        "device.mt_00b421af.placement=right upper arm",
+        "--meta",
+        "device.mt_00b4227b.placement=right lower arm",
+    )
+    assert code == 0, stderr
+    code, _, stderr = run("process", "kinematics", trial, "--no-markers")
+    assert code == 0, stderr
+    with TrialReader(trial) as reader:
+        run_record = next(r for r in reader.runs().values() if r["step"] == "kinematics")
+    assert run_record["params"]["upper_arm"] == "mt_00b421af" and run_record["params"]["forearm"] == "mt_00b4227b"
+    bare = tmp_path / "bare.mcap"
+    assert run("convert", session, "-o", bare)[0] == 0
+    code, _, stderr = run("process", "kinematics", bare, "--no-markers")
+    assert code != 0 and "mt_00b421af" in stderr and "mt_00b4227b" in stderr

@@ -146,6 +146,14 @@ def process_align(
             outcome = run_align(
                 trial, imu=imus[0] if imus else None, markers=markers, params=params, resample=resample, force=force
             )
+        heading = None
+        if len(imus) != 1 and n_imus > 1:  # oriented IMUs: their common heading frame from the clusters now
+            from imulog.steps.heading import refresh_heading
+
+            try:
+                heading = refresh_heading(trial)
+            except (ValueError, KeyError) as exc:  # the alignment is written; say why the headings do not relate
+                click.echo(f"heading: not related ({exc})", err=True)
         with TrialReader(trial) as reader:
             rec = reader.metadata.get("imulog.alignment", {})
     except (ArchiveError, ValueError, KeyError, OSError) as exc:
@@ -160,6 +168,12 @@ def process_align(
         click.echo(f"{trial}: {prefix}{len(rec['setup'])} IMUs aligned")
         for line in setup_lines(rec):
             click.echo(f"  {line}")
+        if heading:
+            shared = heading.get("source") != "none"
+            click.echo(
+                f"  heading: {'one frame, ' + str(heading.get('source')) if shared else 'not shared'} "
+                f"({heading.get('frame')})"
+            )
         return
     q = rec.get("rotation_imu_to_cluster")
     lines = alignment_summary(rec)

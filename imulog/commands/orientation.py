@@ -99,7 +99,11 @@ def process_orientation(
 
     names = choose_imus(trial, imus, needs=("acc", "gyr"))
     run_per_imu(trial, names, one, what="orientation")
-    if len(names) > 1:  # one heading frame for all, or what to run for it (imulog process heading)
-        from imulog.steps.heading import heading_status
+    if len(names) > 1:  # one heading frame for all (the heading step, from what the trial has), or why not
+        from imulog.steps.heading import heading_status, refresh_heading
 
+        try:
+            refresh_heading(trial)
+        except (ValueError, KeyError) as exc:  # the orientations are written; the line says they do not relate
+            click.echo(f"heading: not related ({exc})", err=True)
         click.echo(heading_status(trial, names, frame))

@@ -41,7 +41,8 @@ class PruneParams:
     """Leave-one-out rigidity of a cluster's markers (m).
 
     A marker is dropped when its residual from the rigid body of the others (RMS over the frames where all
-    are visible) exceeds ``factor`` times the median residual of the cluster's markers and ``floor_m``; at
+    are visible) exceeds ``factor`` times the median residual of the cluster's three most rigid markers and
+    ``floor_m``; at
     most ``frames`` evenly spread frames are used; the cluster keeps at least 3 markers."""
 
     factor: float = 2.0
@@ -84,7 +85,9 @@ def prune_cluster(
             res[m] = float(np.sqrt(np.mean(_rigid_fit(p[:, others], p[:, k]) ** 2)))
         residual.update(res)
         worst = max(res, key=res.get)
-        limit = max(params.factor * float(np.median(list(res.values()))), params.floor_m)
+        # the yardstick is the three most rigid markers' residual: a foreign marker inflates every other
+        # marker's residual too, so the median of all would let a second one stay
+        limit = max(params.factor * float(np.median(sorted(res.values())[:3])), params.floor_m)
         if res[worst] <= limit:
             break
         kept.remove(worst)

@@ -66,6 +66,9 @@ def _pose_topic(name: str, topics: list[str], metadata: dict[str, Any]) -> str |
     return None
 
 
+FOOT_STILL_MPS = 0.15  # median speed of the IMU's point on its cluster while its gyroscope is still, m/s
+
+
 def evaluate_foot(imu, alignment: dict[str, Any], pose, acc_global: tuple[np.ndarray, np.ndarray] | None) -> dict:
     """Per-stride evaluation of one foot IMU (``imu`` an ImuStream, ``pose`` its cluster's PoseStream on the
     reference clock, ``acc_global`` (t_ns, gravity-free acceleration) from the orientation step or None to
@@ -98,10 +101,21 @@ def evaluate_foot(imu, alignment: dict[str, Any], pose, acc_global: tuple[np.nda
     q_ws = quat.multiply(q_wc, np.tile(q_i2c, (len(q_wc), 1)))
     r, resid = lever_arm(imu.acc, q_ws, origin, q_wc, rate)
     ref = origin + quat.rotate(q_wc, np.tile(r, (len(q_wc), 1)))
+    walking = np.zeros(len(still), bool)  # the still samples of the strides (not the standing before/after)
+    for a, b in strides:
+        walking[a : b + 1] = True
+    speed = np.linalg.norm(np.gradient(ref, t_s, axis=0), axis=1)[still & walking]
+    still_speed = float(np.nanmedian(speed)) if np.isfinite(speed).any() else float("nan")
+    if not still_speed <= FOOT_STILL_MPS:  # a foot is flat on the floor when its gyroscope is still
+        raise ValueError(
+            f"not a foot: its point on the markers moves at {still_speed:.2f} m/s (median) while its gyroscope is "
+            f"still in its strides (a foot on the floor: under {FOOT_STILL_MPS:g} m/s)"
+        )
     keep = np.all(np.isfinite(ref[strides[:, 0]]), axis=1) & np.all(np.isfinite(ref[strides[:, 1]]), axis=1)
     out = stride_errors(pos, ref, t_s, strides[keep])
     out["lever_arm_m"] = [round(float(v), 4) for v in r]
     out["lever_arm_residual_mps2"] = round(resid, 3)
+    out["still_speed_mps"] = round(still_speed, 3)
     out["acc_global"] = source
     return out
 

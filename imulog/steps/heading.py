@@ -31,14 +31,37 @@ def common_heading(metadata: dict[str, Any], imus: list[str]) -> tuple[dict[str,
     return {n: rec["imus"][n]["correction"] for n in imus}, ""
 
 
+def global_to_world_from_pose(
+    t_ns: np.ndarray, q_s2g: np.ndarray, alignment: dict[str, Any], pose_t_ns: np.ndarray, pose_q_c2w: np.ndarray
+) -> list[float] | None:
+    """The IMU's ``rotation_global_to_world`` (w,x,y,z) from its orientation (device clock), its alignment record
+    (clock and ``rotation_imu_to_cluster``) and its cluster's poses (reference clock): what the align step
+    records when the orientation existed before it. None without the rotation or common samples."""
+    from imulog.process.alignment import device_to_reference
+    from imulog.process.alignment_lag import rotation_global_to_world
+    from imulog.process.resample import resample_quaternions
+
+    q_i2c = alignment.get("rotation_imu_to_cluster")
+    if q_i2c is None or pose_q_c2w is None:
+        return None
+    q_at = resample_quaternions(device_to_reference(np.asarray(t_ns, np.int64), alignment), q_s2g, pose_t_ns)
+    ok = np.all(np.isfinite(q_at), axis=1) & np.all(np.isfinite(pose_q_c2w), axis=1)
+    if ok.sum() < 10:
+        return None
+    q = rotation_global_to_world(q_at[ok], pose_q_c2w[ok], np.asarray(q_i2c, np.float64))
+    return [float(v) for v in q]
+
+
 def compute_heading(
     orientations: dict[str, tuple[np.ndarray, np.ndarray, str]],
     mags: dict[str, tuple[np.ndarray, np.ndarray] | None],
     alignments: dict[str, dict | None],
     static_s: tuple[float, float] | None = None,
     declared_deg: dict[str, float] | None = None,
+    devices: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> dict[str, Any]:
-    """The ``imulog.heading`` record. ``orientations``: name -> (t_ns, q_s2g, global_frame); ``mags``: name ->
+    """The ``imulog.heading`` record. ``devices``: name -> (t_ns, the device's own orientation, sensor to the
+    device's global frame) when the IMUs are of one recording: the last source, the device's frame. ``orientations``: name -> (t_ns, q_s2g, global_frame); ``mags``: name ->
     (t_ns, field uT) or None; ``alignments``: name -> alignment record or None; ``static_s``: a declared pose
     (s from each IMU's first sample)."""
     from imulog.process import heading as hd
@@ -99,7 +122,47 @@ def compute_heading(
             corr,
         )
     rejected.append("static pose: none declared (--static-pose START,END)")
+    if devices and all(devices.get(n) is not None for n in names):
+        corr, spread = {}, {}
+        for n in names:
+            t_o, q, _ = orientations[n]
+            t_d, q_d = devices[n]
+            yaw, sd = device_yaw(t_o, q, t_d, q_d)
+            corr[n], spread[n] = hd.yaw_quaternion(yaw), sd
+        worst = max(spread, key=lambda n: spread[n])
+        if spread[worst] <= DEVICE_YAW_SD_DEG:
+            return record(
+                "device",
+                "the device's global frame (its own orientations of one recording)",
+                corr,
+                yaw_sd_deg={n: round(v, 2) for n, v in spread.items()},
+            )
+        rejected.append(
+            f"device: {worst}'s own orientation turns against imulog's by {spread[worst]:.1f} deg (sd) over the "
+            f"trial (at most {DEVICE_YAW_SD_DEG:g})"
+        )
+    else:
+        rejected.append("device: not every IMU has the device's own orientation (/orientation/IMU) of one recording")
     return record("none", "none: each IMU keeps its own heading", None)
+
+
+DEVICE_YAW_SD_DEG = 5.0  # the heading between imulog's and the device's orientation may wander this much (sd)
+
+
+def device_yaw(t_ns: np.ndarray, q_s2g: np.ndarray, t_dev_ns: np.ndarray, q_dev: np.ndarray) -> tuple[float, float]:
+    """The rotation about the vertical (rad) from imulog's global frame to the device's, its circular mean over
+    the trial, and how much it wanders (circular sd, deg)."""
+    from imulog.process import quaternion as quat
+    from imulog.process.resample import resample_quaternions
+
+    qd = q_dev if np.array_equal(t_ns, t_dev_ns) else resample_quaternions(t_dev_ns, q_dev, t_ns)
+    e = quat.multiply(quat.normalize(qd), quat.conjugate(q_s2g))
+    ok = np.all(np.isfinite(e), axis=1)
+    x = quat.rotate(e[ok], np.array([1.0, 0.0, 0.0]))
+    z = np.exp(1j * np.arctan2(x[:, 1], x[:, 0]))
+    r = abs(z.mean())
+    sd = float(np.degrees(np.sqrt(max(-2.0 * np.log(max(r, 1e-12)), 0.0))))
+    return float(np.angle(z.mean())), sd
 
 
 def run_heading(
@@ -128,6 +191,8 @@ def run_heading(
     if not names:
         raise ValueError(f"no /derived/orientation/* channel: run `imulog process orientation {path}` first")
     inputs = [f"/derived/orientation/{n}" for n in names] + [f"/imu/{n}" for n in names if f"/imu/{n}" in topics]
+    inputs += [t for n in names if (t := _pose_topic(n, topics, metadata)) is not None]
+    inputs += [f"/orientation/{n}" for n in names if f"/orientation/{n}" in topics]
     meta_inputs = tuple(k for k in metadata if k == "imulog.alignment" or k.startswith("imulog.alignment."))
     holder: dict[str, Any] = {}
 
@@ -148,7 +213,15 @@ def run_heading(
                 if imu.mag is not None and np.isfinite(imu.mag).any():
                     mags[n] = (imu.t_ns, imu.mag)
             aligns[n] = alignment_for(trial.metadata, f"/imu/{n}")
-        record = compute_heading(orientations, mags, aligns, static_s, declared_deg)
+            pose = _pose_topic(n, topics, trial.metadata)
+            if aligns[n] and aligns[n].get("rotation_global_to_world") is None and pose is not None:
+                # aligned before it was oriented: the same rotation from the cluster's poses
+                ps = trial.read(pose)
+                g2w = global_to_world_from_pose(s.t_ns, s.values, aligns[n], ps.t_ns, ps.orientation)
+                if g2w is not None:
+                    aligns[n] = {**aligns[n], "rotation_global_to_world": g2w}
+        devices = {n: _device_orientation(trial, n, topics) for n in names}
+        record = compute_heading(orientations, mags, aligns, static_s, declared_deg, devices)
         if len(names) == 1:
             record["note"] = "one IMU: nothing to relate"
         holder["record"] = record
@@ -168,6 +241,51 @@ def run_heading(
         with TrialReader(path) as trial:
             holder["record"] = trial.metadata.get("imulog.heading", {})
     return outcome, holder["record"]
+
+
+def _device_orientation(trial, name: str, topics: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
+    """The device's own orientation of IMU ``name`` (``/orientation/{name}``: t_ns, w,x,y,z), or None."""
+    topic = f"/orientation/{name}"
+    if topic not in topics:
+        return None
+    s = trial.read(topic)
+    return s.t_ns, np.asarray(s.values, np.float64)[:, :4]
+
+
+def _pose_topic(name: str, topics: list[str], metadata: dict[str, Any]) -> str | None:
+    """The IMU's cluster pose channel (``/derived/vicon/cluster_pose/{name}``, or the single-IMU one)."""
+    own = f"/derived/vicon/cluster_pose/{name}"
+    if own in topics:
+        return own
+    record = metadata.get("imulog.alignment") or {}
+    if record.get("imu") == f"/imu/{name}" and "/derived/vicon/cluster_pose" in topics:
+        return "/derived/vicon/cluster_pose"
+    return None
+
+
+def refresh_heading(path, names: list[str] | None = None) -> dict[str, Any] | None:
+    """Relate the headings of ``names`` (default: every oriented IMU; two or more) after the orientation or the align step:
+    the heading step again with the options of its last run (a declared pose is kept), skipped when nothing it
+    reads changed. Returns the record, or None with fewer than two oriented IMUs."""
+    from imulog.archive import TrialReader
+
+    with TrialReader(path) as trial:
+        oriented = [t.rsplit("/", 1)[1] for t in trial.topics() if t.startswith("/derived/orientation/")]
+        runs = trial.runs()
+        last = next((runs[n] for n in sorted(runs, reverse=True) if runs[n].get("step") == STEP), {})
+    names = [n for n in (oriented if names is None else names) if n in oriented]
+    if len(names) < 2:
+        return None
+    params = last.get("params") or {}
+    if isinstance(params, str):
+        import json
+
+        params = json.loads(params)
+    static = params.get("static_s")
+    _, record = run_heading(
+        path, imus=names, static_s=tuple(static) if static else None, declared_deg=params.get("declared_deg")
+    )
+    return record
 
 
 def heading_status(path, names: list[str], frame: str) -> str:
