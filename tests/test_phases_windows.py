@@ -353,7 +353,7 @@ def test_rest_windows_read_only_the_context_of_a_long_rest():
     assert w[0].core_lo == 0 and w[-1].core_hi == 6000
     assert [x.core_lo for x in w[1:]] == [x.core_hi for x in w[:-1]]  # contiguous, each sample once
     assert max(x.hi - x.lo for x in w) <= 500 + 2 * 100  # no window reads the whole night
-    middle = [x for x in w if 650 <= x.lo and x.hi <= 5550]
+    middle = [x for x in w if x.lo >= 650 and x.hi <= 5550]
     assert sum(x.hi - x.lo for x in middle) == 5550 - 650 and all(x.hi - x.lo <= 300 for x in middle)
     assert all(x.lo == x.core_lo and x.hi == x.core_hi for x in middle)
     assert rest_windows(rests, 6000, 1.0, core_s=500, max_s=300) != w  # without context_s: as before
