@@ -8,7 +8,8 @@
 
 For each length: ``imulog simulate home --days D`` writes an Axivity AX6 .cwa (accelerometer + gyroscope,
 100 Hz), then ``imulog convert``, ``imulog process orientation``, ``imulog process phases``, ``imulog process
-metrics``, ``imulog process trajectory``, ``imulog info`` and ``imulog view --save`` run as separate processes (``--trials``: on copies of
+metrics``, ``imulog process trajectory``, ``imulog info``, ``imulog view --save`` and ``imulog export`` (the
+wrist's samples to Parquet) run as separate processes (``--trials``: on copies of
 trials already converted, one per length, for the commands named by ``--commands``); the peak resident memory of each (``ru_maxrss`` of the child)
 and its wall time are printed, with the ratio of the longest to the shortest length. The machine's load average
 is printed too: times are only comparable within one run.
@@ -42,6 +43,8 @@ COMMANDS = [
     ("trajectory", ["process", "trajectory", "{mcap}", "--force"]),
     ("info", ["info", "{mcap}"]),
     ("view", ["view", "{mcap}", "--save", "{rrd}"]),
+    # one long topic to Parquet, block by block (default options; the gyroscope and accelerometer of the day/week)
+    ("export", ["export", "{mcap}", "--topic", "{imu_topic}", "-o", "{parquet}", "--overwrite"]),
     # the two-IMU trial (written by two_imu_trial from the same .cwa)
     (
         "orientation2",
@@ -195,6 +198,7 @@ def main(argv: list[str] | None = None) -> int:
                 "mcap": folder / "home.mcap",
                 "rrd": folder / "home.rrd",
                 "arm": folder / "arm.mcap",
+                "parquet": folder / "wrist.parquet",
             }
             if args.trials:
                 shutil.copy(args.trials[i], paths["mcap"])
@@ -209,7 +213,14 @@ def main(argv: list[str] | None = None) -> int:
             if any(name in ("orientation2", "kinematics") for name, _ in commands) and paths["cwa"].exists():
                 two_imu_trial(paths["cwa"], paths["arm"])
             for name, templates in commands:
-                runs = [run([*imulog, *[a.format(**paths) for a in template]]) for template in templates]
+                if any("{imu_topic}" in a for t in templates for a in t):
+                    from imulog.archive import TrialReader
+
+                    with TrialReader(paths["mcap"]) as trial:  # the device's IMU channel (/imu/ax6_4321)
+                        fields = {"imu_topic": next(t for t in trial.topics() if t.startswith("/imu/"))}
+                else:
+                    fields = {}
+                runs = [run([*imulog, *[a.format(**paths, **fields) for a in template]]) for template in templates]
                 results[days][name] = (sum(r[0] for r in runs), max(r[1] for r in runs))
                 print(
                     f"{days:g} d {name}: {results[days][name][0]:.1f} s, {results[days][name][1]:.0f} MB, "

@@ -341,3 +341,46 @@ def test_trajectory_windows_records_merge_into_one():
     assert rec["windows"]["count"] == 3 and rec["windows"]["skipped"] == skipped
     assert rec["checks"]["zupt"]["windows_failed"] == 1
     assert check_lines(rec) == ["assumption failed: zupt: no rest; use ddi"]
+
+
+def test_rest_windows_read_only_the_context_of_a_long_rest():
+    """A night between two movements: each window reads ``context_s`` of it, rest-only windows of at most
+    ``max_s`` own the middle; every sample is owned once (issue 24: memory did not stay bounded by a window)."""
+    from imulog.steps.windows import rest_windows
+
+    rests = [(0, 100), (300, 400), (600, 5600), (5800, 5900)]  # a 5000 s rest at 600-5600
+    w = rest_windows(rests, 6000, 1.0, core_s=500, max_s=300, context_s=50)
+    assert w[0].core_lo == 0 and w[-1].core_hi == 6000
+    assert [x.core_lo for x in w[1:]] == [x.core_hi for x in w[:-1]]  # contiguous, each sample once
+    assert max(x.hi - x.lo for x in w) <= 500 + 2 * 100  # no window reads the whole night
+    middle = [x for x in w if x.lo >= 650 and x.hi <= 5550]
+    assert sum(x.hi - x.lo for x in middle) == 5550 - 650 and all(x.hi - x.lo <= 300 for x in middle)
+    assert all(x.lo == x.core_lo and x.hi == x.core_hi for x in middle)
+    assert rest_windows(rests, 6000, 1.0, core_s=500, max_s=300) != w  # without context_s: as before
+
+
+def test_trajectory_with_capped_rests_equals_the_whole(trial, tmp_path):
+    """Rests read only 20 s beside each movement (rest-only windows for the rest of them): the trajectories of
+    zupt are the whole computation's, every sample once."""
+    from imulog.steps.orientation import run_orientation
+    from imulog.steps.trajectory import run_trajectory
+    from imulog.steps.trajectory_windows import TrajectoryWindows
+
+    path = tmp_path / "traj.mcap"
+    shutil.copy(trial, path)
+    run_orientation(path)
+    run_phases(path)
+    cut = tmp_path / "cut.mcap"
+    shutil.copy(path, cut)
+    run_trajectory(path, methods=("zupt",), windows=TrajectoryWindows(core_s=3600.0))
+    run_trajectory(cut, methods=("zupt",), windows=TrajectoryWindows(core_s=600.0, context_s=20.0))
+    with TrialReader(path) as a, TrialReader(cut) as b:
+        rb = b.metadata["imulog.trajectory"]
+        assert rb["windows"]["count"] >= 4 and not rb["windows"]["skipped"]
+        assert [r["start_ns"] for r in a.metadata["imulog.trajectory"]["repetitions"]] == [
+            r["start_ns"] for r in rb["repetitions"]
+        ]
+        for topic in ("/derived/trajectory/zupt", "/derived/trajectory_baseline/dedrift"):
+            x, y = a.read(topic), b.read(topic)
+            np.testing.assert_array_equal(x.t_ns, y.t_ns)
+            np.testing.assert_allclose(x.values, y.values, atol=1e-6)

@@ -70,18 +70,33 @@ def compute_evaluation(
         t_ns = np.asarray(t_ns, dtype=np.int64)
         ref = interpolate_reference(reference[0], reference[1], t_ns, max_gap_s)
         spans = windows or [{"index": -1, "start_ns": int(t_ns[0]), "end_ns": int(t_ns[-1])}]
-        rows = []
-        for w in spans:
-            sel = (t_ns >= w["start_ns"]) & (t_ns <= w["end_ns"])
-            if np.count_nonzero(sel) < 2:
-                continue
-            try:
-                r = trajectory_errors(pos[sel], ref[sel])
-            except ValueError:
-                continue
-            r["repetition"] = int(w.get("index", -1))
-            rows.append(r)
-        per_method[method] = rows
+        per_method[method] = error_rows(t_ns, pos, ref, spans)
+    return evaluation_record(per_method, reference_topic, baseline)
+
+
+def error_rows(
+    t_ns: np.ndarray, pos: np.ndarray, ref: np.ndarray, spans: list[dict[str, Any]]
+) -> list[dict[str, Any]]:
+    """Errors of ``pos`` (N, 3) m against ``ref`` (N, 3) m (both at ``t_ns``) in each span (``start_ns``,
+    ``end_ns`` inclusive, ``index``); spans with fewer than 2 samples or no valid reference are left out."""
+    rows = []
+    for w in spans:
+        sel = (t_ns >= w["start_ns"]) & (t_ns <= w["end_ns"])
+        if np.count_nonzero(sel) < 2:
+            continue
+        try:
+            r = trajectory_errors(pos[sel], ref[sel])
+        except ValueError:
+            continue
+        r["repetition"] = int(w.get("index", -1))
+        rows.append(r)
+    return rows
+
+
+def evaluation_record(
+    per_method: dict[str, list[dict[str, Any]]], reference_topic: str, baseline: str | None = None
+) -> dict[str, Any]:
+    """The ``imulog.evaluation`` record from each method's per-repetition error rows."""
     methods = {m: {"summary": summarize(rows), "repetitions": rows} for m, rows in per_method.items()}
     for rec in methods.values():  # windows where the error is larger than the motion itself (issue 32)
         rec["exceeds_motion"] = [int(r["repetition"]) for r in rec["repetitions"] if r.get("exceeds_motion")]
@@ -344,19 +359,29 @@ def _evaluate_imu(path, imu, channels, baselines, record_name, step, methods, ma
     holder: dict[str, Any] = {}
 
     def compute(trial) -> StepResult:
-        ref_name, ref = ref_topic, read_reference(trial, ref_topic)
-        trajs, checks = {}, {}
-        for m in chosen:
-            s = trial.read(channels[m])
-            trajs[m] = (s.t_ns, s.values)
-            checks[m] = trial.channel(channels[m]).metadata
+        from imulog.steps.evaluate_windows import windowed_rows
+
+        ref_name = ref_topic
+        checks = {m: trial.channel(channels[m]).metadata for m in chosen}
+        read = {m: channels[m] for m in chosen}
         if baseline_topic in topics:  # the de-drift baseline every method must beat
-            s = trial.read(baseline_topic)
-            trajs[BASELINE] = (s.t_ns, s.values)
+            read[BASELINE] = baseline_topic
         reps = info.get("repetitions")
-        record = compute_evaluation(
-            trajs, ref, reference_topic=ref_name, windows=reps, max_gap_s=max_gap_s, baseline=BASELINE
-        )
+        if reps:  # repetition by repetition, half an hour of recording read at a time (bounded memory)
+            rows = windowed_rows(trial, read, ref_topic, reps, max_gap_s, error_rows, interpolate_reference)
+            record = evaluation_record(rows, ref_name, BASELINE)
+        else:  # no repetitions: errors over each whole channel
+            trajs = {}
+            for m, topic in read.items():
+                s = trial.read(topic)
+                trajs[m] = (s.t_ns, s.values)
+            record = compute_evaluation(
+                trajs,
+                read_reference(trial, ref_topic),
+                reference_topic=ref_name,
+                max_gap_s=max_gap_s,
+                baseline=BASELINE,
+            )
         for m, meta in checks.items():  # the trajectory step's verdict on each method's assumptions
             if meta.get("assumptions"):
                 record["methods"][m]["assumptions"] = meta["assumptions"]

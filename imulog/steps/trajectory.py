@@ -416,6 +416,7 @@ def run_trajectory(
                 if alignment is not None and alignment.get("rotation_global_to_world", 0) is not None
                 else f"{name}_global",
                 clock_attrs(name, "reference" if alignment is not None else "device", per_imu),
+                skip_rest_only=phases is not None and len(phases) > 0,
             ),
             expected_duration_s=total / rate,
         )

@@ -28,15 +28,17 @@ F32 = {"precision": "float32"}  # trajectories in m stored as float32: under a m
 @dataclass(frozen=True)
 class TrajectoryWindows:
     """Longest window (s), longest stretch without a rest before it is cut and flagged (s), shortest rest (s)
-    a window may be cut at. Half-hour windows (a lab trial is one): the reconstruction holds about 15 MB per minute of recording
+    a window may be cut at, most of a rest read beside a movement (s: the middle of a longer rest, a night, is
+    reconstructed in rest-only windows, so memory does not grow with the longest rest). Half-hour windows (a lab trial is one): the reconstruction holds about 15 MB per minute of recording
     (every method's arrays), and results do not depend on where the rests cut (tests/test_phases_windows.py)."""
 
     core_s: float = 1800.0
     max_s: float = 600.0
     min_rest_s: float = 1.0
+    context_s: float = 600.0
 
     def to_dict(self) -> dict[str, float]:
-        return {"core_s": self.core_s, "max_s": self.max_s, "min_rest_s": self.min_rest_s}
+        return {"core_s": self.core_s, "max_s": self.max_s, "min_rest_s": self.min_rest_s, "context_s": self.context_s}
 
 
 def has_r2g(phases: Intervals | None) -> bool:
@@ -102,7 +104,15 @@ def plan(
             a = int(round((int(start[sel].min()) - t_first) * 1e-9 * rate_hz))
             b = int(round((int(end[sel].max()) - t_first) * 1e-9 * rate_hz)) + 1
             keep.append((a, b))
-    return rest_windows(rests, total, rate_hz, core_s=windows.core_s, max_s=windows.max_s, keep_together=keep)
+    return rest_windows(
+        rests,
+        total,
+        rate_hz,
+        core_s=windows.core_s,
+        max_s=windows.max_s,
+        keep_together=keep,
+        context_s=windows.context_s,
+    )
 
 
 def merge_records(records: list[dict[str, Any]], skipped: list[dict], split: list[dict], windows: Any) -> dict:
@@ -163,11 +173,13 @@ def trajectory_pieces(
     total: int,
     frame: str,
     attrs: dict[str, str] | None = None,
+    skip_rest_only: bool = False,
 ) -> Iterator[SignalStream]:
     """Yield each window's trajectories (rows it owns), an empty piece for a topic a window has none of; fill
     ``record`` at the end. ``topics``: acc, static, orientation, imu topics (None when absent); ``compute(acc,
     static, orientation, gyr)`` reconstructs one window (its arguments ``(t_ns, values)``, or None); ``attrs``:
-    channel metadata of every piece (a per-IMU trajectory's ``clock``)."""
+    channel metadata of every piece (a per-IMU trajectory's ``clock``); ``skip_rest_only``: rest-only windows
+    give no samples (with phases, trajectories are written for the repetitions only)."""
     from imulog.archive import TrialReader
     from imulog.heap import bound_heap
 
@@ -188,12 +200,15 @@ def trajectory_pieces(
             t_own = to_reference(t[[w.core_lo - w.lo, max(w.core_hi - w.lo - 1, 0)]])
             if w.split:
                 split.append({"start_ns": int(t_own[0]), "end_ns": int(t_own[1])})
-            try:
-                streams, rec = compute(*(got.get(k) for k in ("acc", "static", "orientation", "imu")))
-            except ValueError as exc:
-                skipped.append({"start_ns": int(t_own[0]), "end_ns": int(t_own[1]), "why": str(exc)})
+            if skip_rest_only and w.rest_only:
                 streams, rec = [], None
-            if rec is not None:
+            else:
+                try:
+                    streams, rec = compute(*(got.get(k) for k in ("acc", "static", "orientation", "imu")))
+                except ValueError as exc:
+                    skipped.append({"start_ns": int(t_own[0]), "end_ns": int(t_own[1]), "why": str(exc)})
+                    streams, rec = [], None
+            if rec is not None and not w.rest_only:  # a rest-only window: its samples, not a repetition
                 records.append(rec)
             by_topic = {s.topic: s for s in streams}
             for topic in out_topics:

@@ -158,6 +158,7 @@ class RestWindow(Window):
     stretch longer than ``max_s`` that was cut without a rest."""
 
     split: bool = False
+    rest_only: bool = False  # the middle of a long rest (``context_s``): no movement in it
 
 
 def rest_windows(
@@ -168,11 +169,16 @@ def rest_windows(
     core_s: float = 3600.0,
     max_s: float = 600.0,
     keep_together: Sequence[tuple[int, int]] = (),
+    context_s: float | None = None,
 ) -> list[RestWindow]:
     """The movements between rests (:func:`event_windows`) grouped into windows of at most ``core_s`` seconds,
     cut only at a rest (or where a stretch longer than ``max_s`` was split, flagged) and never inside a span of
     ``keep_together`` (sample intervals, e.g. a repetition's phases). A recording within one core is one window
-    (nothing split). A stretch of movements longer than ``core_s`` without an allowed cut stays one window."""
+    (nothing split). A stretch of movements longer than ``core_s`` without an allowed cut stays one window.
+
+    ``context_s``: at most this much of a rest is read beside a movement; the middle of a longer rest between two
+    windows (a night) becomes windows of its own of at most ``max_s`` (and ``core_s``), rest only, so a window's memory does not
+    grow with the longest rest of the recording."""
     if not (rate_hz > 0 and np.isfinite(rate_hz)):
         raise ValueError(f"rate must be a positive number of Hz, got {rate_hz}")
     core = max(1, int(round(core_s * rate_hz)))
@@ -204,4 +210,35 @@ def rest_windows(
         own_hi = total if k == len(groups) - 1 else (g[-1].move_hi + groups[k + 1][0].move_lo) // 2
         lo, hi = min(g[0].lo, own_lo), max(g[-1].hi, own_hi)
         out.append(RestWindow(k, lo, hi, own_lo, own_hi, any(u.split for u in g)))
-    return out
+    if context_s is None:
+        return out
+    return _cap_rests(
+        out, groups, min(core, max(1, int(round(max_s * rate_hz)))), max(1, int(round(context_s * rate_hz)))
+    )
+
+
+def _cap_rests(out: list[RestWindow], groups: list[list[EventWindow]], core: int, ctx: int) -> list[RestWindow]:
+    """``out`` with every rest longer than ``2 * ctx`` samples between two windows read only ``ctx`` into by
+    each, the samples between owned by rest-only windows of at most ``core`` samples."""
+    capped: list[RestWindow] = []
+    for k, w in enumerate(out):
+        g = groups[k]
+        lo, own_lo = w.lo, w.core_lo
+        before = groups[k - 1][-1].move_hi + ctx if k else 0  # the recording's start: a rest before it too
+        if g[0].move_lo - before > ctx:
+            lo = own_lo = g[0].move_lo - ctx
+            a = before
+            for b in range(a, own_lo, core):
+                e = min(b + core, own_lo)
+                capped.append(RestWindow(0, b, e, b, e, False, True))
+        hi, own_hi = w.hi, w.core_hi
+        after = groups[k + 1][0].move_lo - ctx if k + 1 < len(out) else w.core_hi  # core_hi: the total
+        if after - g[-1].move_hi > ctx:
+            hi = own_hi = g[-1].move_hi + ctx
+        capped.append(RestWindow(0, min(lo, own_lo), max(hi, own_hi), own_lo, own_hi, w.split))
+        if k + 1 == len(out):
+            capped += [
+                RestWindow(0, b, min(b + core, after), b, min(b + core, after), False, True)
+                for b in range(hi, after, core)
+            ]
+    return [RestWindow(i, c.lo, c.hi, c.core_lo, c.core_hi, c.split, c.rest_only) for i, c in enumerate(capped)]

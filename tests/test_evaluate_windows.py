@@ -1,0 +1,117 @@
+"""The evaluate step window by window (issue 24): the per-repetition errors read span by span equal the whole
+computation's on a simulated drinking trial, with the reference occluded around a span's edge."""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pytest
+from test_trajectory_steps import _write_with_inputs
+
+from imulog.archive import TrialReader
+from imulog.model import SignalStream
+from imulog.process.trajectory_opt import BASELINE
+from imulog.simulate.core import simulate
+from imulog.steps.evaluate import compute_evaluation, error_rows, interpolate_reference, read_reference, run_evaluate
+from imulog.steps.evaluate_windows import spans_of, windowed_rows
+from imulog.steps.trajectory import run_trajectory
+
+
+@pytest.fixture(scope="module")
+def evaluated(tmp_path_factory):
+    sim = simulate("r2g", subject=1, seed=3, repetitions=5)
+    path = tmp_path_factory.mktemp("evalwin") / "trial.mcap"
+    _write_with_inputs(path, sim)
+    run_trajectory(path)
+    return path
+
+
+def _whole(trial, channels, source, reps, max_gap_s=0.05):
+    trajs = {m: (trial.read(t).t_ns, trial.read(t).values) for m, t in channels.items()}
+    return compute_evaluation(
+        trajs,
+        read_reference(trial, source),
+        reference_topic=source,
+        windows=reps,
+        max_gap_s=max_gap_s,
+        baseline=BASELINE,
+    )
+
+
+def test_spans_group_consecutive_repetitions_within_the_span():
+    reps = [{"start_ns": int(a * 1e9), "end_ns": int((a + 2) * 1e9)} for a in (0, 3, 10, 11, 30)]
+    assert [len(g) for g in spans_of(reps, 12.0)] == [3, 1, 1]  # 0-12 s; 11-13 would make it 13 s; 30-32 alone
+    assert [len(g) for g in spans_of(reps, 1.0)] == [1] * 5  # a repetition longer than the span is its own
+
+
+@pytest.mark.parametrize("span_s", [0.5, 7.0, 1e9])
+def test_windowed_rows_equal_the_whole(evaluated, span_s):
+    with TrialReader(evaluated) as trial:
+        reps = trial.metadata["imulog.trajectory"]["repetitions"]
+        topics = trial.topics()
+        channels = {m: f"/derived/trajectory/{m}" for m in ("ddi", "zupt", "optimized")}
+        channels = {m: t for m, t in channels.items() if t in topics}
+        channels[BASELINE] = f"/derived/trajectory_baseline/{BASELINE}"
+        assert len(reps) >= 4 and len(channels) >= 3
+        source = "/markers/vicon:O"
+        whole = _whole(trial, channels, source, reps)
+        rows = windowed_rows(trial, channels, source, reps, 0.05, error_rows, interpolate_reference, span_s=span_s)
+    for m in channels:
+        assert len(rows[m]) == len(whole["methods"][m]["repetitions"]) == len(reps)
+        for a, b in zip(rows[m], whole["methods"][m]["repetitions"], strict=True):
+            assert a == b  # the same floats: the same samples and interpolation
+
+
+def test_step_record_equals_the_whole_and_an_occluded_edge(evaluated, tmp_path):
+    """The step (windowed) gives the whole computation's record; with the reference missing for 2 s before a
+    repetition (so the first valid sample of its span follows a long gap) the rows still match."""
+    path = tmp_path / "occluded.mcap"
+    shutil.copy(evaluated, path)
+    _, record = run_evaluate(path, force=True)
+    with TrialReader(path) as trial:
+        reps = trial.metadata["imulog.trajectory"]["repetitions"]
+        channels = {m: f"/derived/trajectory/{m}" for m in record["methods"] if m != BASELINE}
+        channels[BASELINE] = f"/derived/trajectory_baseline/{BASELINE}"
+        whole = _whole(trial, channels, record["reference"], reps)
+    assert record["methods"].keys() == whole["methods"].keys()
+    for m in whole["methods"]:
+        assert record["methods"][m]["repetitions"] == whole["methods"][m]["repetitions"]
+        assert record["methods"][m]["summary"] == whole["methods"][m]["summary"]
+    # an occlusion that ends exactly on a trajectory sample inside the second repetition's span
+    with TrialReader(path) as trial:
+        t_ref, pos = read_reference(trial, record["reference"])
+        s = trial.read(channels["zupt"])
+    # the reference resampled onto the trajectory's times, so a valid reference sample falls on a trajectory one
+    t_ref, pos = np.asarray(s.t_ns, np.int64), interpolate_reference(t_ref, pos, s.t_ns, 0.05)
+    r = reps[1]
+    inside = np.flatnonzero((t_ref >= r["start_ns"]) & (t_ref <= r["end_ns"]))
+    head = t_ref[inside[len(inside) // 4]]
+    pos[(t_ref < head) & (t_ref >= int(r["start_ns"]) - int(3e9))] = np.nan  # 3 s occluded before it
+    stream = SignalStream("/ref", t_ref, ["x", "y", "z"], ["m"] * 3, pos)
+
+    class Patched:
+        def __init__(self, trial):
+            self.trial = trial
+
+        def __getattr__(self, name):
+            return getattr(self.trial, name)
+
+    with TrialReader(path) as trial:
+        trajs = {m: (trial.read(t).t_ns, trial.read(t).values) for m, t in channels.items()}
+        whole = compute_evaluation(trajs, (t_ref, pos), reference_topic="o", windows=reps, baseline=BASELINE)
+
+        class Reader(Patched):
+            def read(self, topic, start_ns=None, end_ns=None):
+                if topic != "/ref":
+                    return self.trial.read(topic, start_ns, end_ns)
+                from imulog.archive import codec
+
+                return codec.select_time(stream, start_ns, end_ns)
+
+            def iter_blocks(self, topic, start_ns=None, end_ns=None):
+                yield self.read(topic, start_ns, end_ns)
+
+        rows = windowed_rows(Reader(trial), channels, "/ref", reps, 0.05, error_rows, interpolate_reference, span_s=0.5)
+    for m in channels:
+        assert rows[m] == whole["methods"][m]["repetitions"]
