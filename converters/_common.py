@@ -77,11 +77,31 @@ def unit_overrides(extra: dict[str, Any] | None) -> dict[str, str]:
     return {str(k).lower(): str(v) for k, v in units.items()}
 
 
+# the degree sign as files mangle it, before "/s" or "C": UTF-8 read as Latin-1 ("Â°", twice: "Ã‚Â°"), that text
+# folded to ASCII ("A /s": EDF's dimension field is ASCII-only, so a writer transliterates "Â°/s"), "?" or U+FFFD for
+# an unencodable character, and the ordinal sign "º" typed for it
+_DEGREE_SIGN = re.compile(r"^(?:ã‚â°|â°|âº|º|°|\ufffd|\?|a\s+)(?=/\s*s(?:ec)?$|c$)")
+# SI product/exponent spellings (EDF+ and ISO 80000): "m.s-2", "m*s^-2", "m s-2", "m/s/s"; "deg.s-1", "rad*s^-1"
+_PER_S2 = re.compile(r"^(.*?)(?:[.*·]?s\^?-2|/s/s)$")
+_PER_S = re.compile(r"^(.*?)[.*·]s\^?-1$")
+
+
 def normalise_unit(unit: str) -> str:
-    """Canonical spelling used for look-ups: ``m/(s^2)`` -> ``m/s^2``, ``Degrees Celsius`` -> ``degreescelsius``."""
+    """Canonical spelling used for look-ups: ``m/(s^2)`` -> ``m/s^2``, ``Degrees Celsius`` -> ``degreescelsius``,
+    ``m.s-2`` -> ``m/s^2``, ``deg.s-1`` -> ``deg/s``, a mangled degree sign (``Â°/s``, ``A /s``, ``?/s``) -> ``°/s``."""
     u = unit.strip().strip("[]()").strip().lower()
+    u = _DEGREE_SIGN.sub("°", u)
     u = u.replace("²", "^2").replace("**", "^").replace(" ", "").replace("(", "").replace(")", "")
-    u = u.replace("deg/sec", "deg/s").replace("/sec", "/s")
+    u = u.replace("/second", "/s").replace("deg/sec", "deg/s").replace("/sec", "/s")
+    if u not in ("ms-2", "ms^-2"):  # "ms-2" is metres per second squared, not milliseconds
+        m = _PER_S2.match(u)
+        if m and m.group(1) in ("m", "mm", "cm"):
+            u = m.group(1) + "/s^2"
+    else:
+        u = "m/s^2"
+    m = _PER_S.match(u)
+    if m and m.group(1):
+        u = m.group(1) + "/s"
     return u
 
 

@@ -48,7 +48,7 @@ FIELDS = (
     ("samples", 8),
     ("reserved", 32),
 )
-EMG_TO_V = {"v": 1.0, "mv": 1e-3, "uv": 1e-6, "µv": 1e-6, "μv": 1e-6}
+EMG_TO_V = {"v": 1.0, "mv": 1e-3, "uv": 1e-6, "µv": 1e-6, "μv": 1e-6, "nv": 1e-9}
 _AXIS = re.compile(r"[\s_.:-]*(?:acc(?:el)?|gyr(?:o)?)?[\s_.:-]*\(?([xyz])\)?$", re.I)
 
 

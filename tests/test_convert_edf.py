@@ -34,8 +34,10 @@ def test_shared_trigno_edf(shared_data: Path):
     # this file's ACC/GYRO channels have physical min == max (pyedflib refuses it): every value 0, said per channel
     assert sum("physical min == max" in w for w in rec.warnings) == 12
     assert [i.name for i in rec.imus] == ["mini_sensor_10", "mini_sensor_11"]  # "ACC sensor" channels in g
-    assert np.all(rec.imus[0].acc == 0) and rec.imus[0].gyr is None  # 'A /s' is no known rate unit: kept analog
-    assert rec.analogs[1].units[0] == "A /s"
+    # "GYRO sensor" channels in "A /s": the degree sign of "Â°/s" (UTF-8 read as Latin-1) folded to ASCII
+    assert np.all(rec.imus[0].acc == 0) and rec.imus[0].gyr is not None and np.all(rec.imus[0].gyr == 0)
+    assert rec.imus[0].meta["channels"]["gyr.x"].endswith("Mini sensor 10:")
+    assert all("A /s" not in u for a in rec.analogs for u in a.units)
 
 
 def test_shared_trigno_edf_equals_mne(shared_data: Path):
@@ -54,6 +56,7 @@ def test_shared_trigno_edf_equals_mne(shared_data: Path):
 
 
 def _write(path: Path, bdf: bool) -> tuple[list[np.ndarray], list[tuple[float, float, str]]]:
+    """An EDF+/BDF+ walk: Acc X-Z (g), Gyro X-Z (deg/s), EMG RF (uV, 1 kHz), Temp (degC, 1 Hz), three annotations."""
     pyedflib = pytest.importorskip("pyedflib")
     kind = pyedflib.FILETYPE_BDFPLUS if bdf else pyedflib.FILETYPE_EDFPLUS
     labels = ["Acc X", "Acc Y", "Acc Z", "Gyro X", "Gyro Y", "Gyro Z", "EMG RF", "Temp"]
@@ -201,3 +204,50 @@ def test_pieces_equal_the_whole(tmp_path: Path):
         np.testing.assert_array_equal(np.concatenate([p.analogs[j].values for p in pieces]), a.values)
         np.testing.assert_array_equal(np.concatenate([p.analogs[j].t_ns for p in pieces]), a.t_ns)
     assert len(pieces[0].events) == 1 and not pieces[1].events
+
+
+def _set_dimensions(path: Path, dims: dict[int, bytes]) -> None:
+    """Overwrite signals' 8-byte physical dimension fields (header byte 256 + ns*96 + i*8) with raw bytes."""
+    raw = bytearray(path.read_bytes())
+    ns = int(raw[252:256])
+    for i, d in dims.items():
+        at = 256 + ns * 96 + i * 8
+        raw[at : at + 8] = d.ljust(8)[:8]
+    path.write_bytes(bytes(raw))
+
+
+@pytest.mark.parametrize(
+    ("acc_dim", "acc_to_g", "gyr_dim", "gyr_to_deg"),
+    [
+        (b"m/s2", 1 / G0, "\u00c2\u00b0/s".encode("latin-1"), 1.0),  # UTF-8 degree sign read as Latin-1
+        (b"m.s-2", 1 / G0, b"A /s", 1.0),  # ... and folded to ASCII (the shared Trigno file)
+        (b"m s-2", 1 / G0, b"\xb0/s", 1.0),  # Latin-1 degree sign
+        (b"mg", 1e-3, b"?/s", 1.0),  # unencodable character
+        (b"G", 1.0, b"deg.s-1", 1.0),
+        (b"m/s/s", 1 / G0, b"rad/s", 180 / np.pi),
+        (b"m*s^-2", 1 / G0, b"mdps", 1e-3),
+    ],
+)
+def test_physical_dimension_spellings(tmp_path: Path, acc_dim, acc_to_g, gyr_dim, gyr_to_deg):
+    """Accelerometer and gyroscope channels are found from their physical dimension however the writer spelled it
+    (EDF+ SI spellings, ``m/s/s``, and the degree sign's usual manglings), and scaled by what it says."""
+    path = tmp_path / "walk.edf"
+    data, _ = _write(path, bdf=False)
+    _set_dimensions(path, {0: acc_dim, 1: acc_dim, 2: acc_dim, 3: gyr_dim, 4: gyr_dim, 5: gyr_dim})
+    rec = read_edf(path)
+    (imu,) = rec.imus
+    assert imu.gyr is not None, [a.units for a in rec.analogs]
+    np.testing.assert_allclose(imu.acc / G0, np.column_stack(data[:3]) * acc_to_g, rtol=0, atol=1e-2 * acc_to_g)
+    np.testing.assert_allclose(np.degrees(imu.gyr), np.column_stack(data[3:6]) * gyr_to_deg, rtol=0, atol=0.01 * gyr_to_deg)
+    assert [a.channel_names for a in rec.analogs] == [["EMG RF"], ["Temp"]]
+
+
+def test_unknown_dimension_stays_analog(tmp_path: Path):
+    """A gyroscope channel whose dimension names no rate (here amperes) is not guessed: kept analog, unit as found."""
+    path = tmp_path / "walk.edf"
+    _write(path, bdf=False)
+    _set_dimensions(path, {3: b"A", 4: b"A", 5: b"A"})
+    rec = read_edf(path)
+    assert rec.imus[0].gyr is None
+    gyro = next(a for a in rec.analogs if "Gyro X" in a.channel_names)
+    assert gyro.units[gyro.channel_names.index("Gyro X")] == "A"
