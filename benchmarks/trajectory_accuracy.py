@@ -20,6 +20,9 @@ Accuracy grid (issue 19): the conditions of :mod:`imulog.simulate.grid`, one row
 ``zupt``, ``zupt_bias`` and ``optimized``, mean over repetitions of ``--subjects`` trials, subject k with seed k):
 
     python benchmarks/trajectory_accuracy.py --grid all --subjects 2 --repetitions 8
+
+``--first-subject N --per-trial`` runs other trials (subjects and seeds N, N+1, ...) one row each;
+``--fixed-velocity-sigma`` is the optimisation before issue 31 (no per-axis velocity weight).
 """
 
 from __future__ import annotations
@@ -179,22 +182,30 @@ GRID_METHODS = ("zupt", "zupt_bias", "optimized")
 
 
 def grid_rows(
-    conditions, subjects: range, repetitions: int, methods=GRID_METHODS, params: TrajectoryParams = DEFAULT_PARAMS
+    conditions,
+    subjects: range,
+    repetitions: int,
+    methods=GRID_METHODS,
+    params: TrajectoryParams = DEFAULT_PARAMS,
+    per_trial: bool = False,
 ) -> list[dict[str, Any]]:
-    """Per condition and method: mean MAE per axis (cm) over every repetition of the trials (subject k, seed k)."""
+    """Per condition and method: mean MAE per axis (cm) over every repetition of the trials (subject k, seed k);
+    ``per_trial``: one row per trial (condition ``name s<k>``)."""
     from imulog.simulate.grid import condition
 
     rows = []
     for name in conditions:
-        recs: dict[str, list[dict]] = {m: [] for m in methods}
+        groups: dict[str, dict[str, list[dict]]] = {}
         for s in subjects:
             inputs = simulated_inputs(s, seed=s, repetitions=repetitions, rests=params.rests, **condition(name))
             records, _, _ = evaluate_trial(inputs, methods, params)
+            recs = groups.setdefault(f"{name} s{s}" if per_trial else name, {m: [] for m in methods})
             for m in methods:
                 recs[m].extend(records[m])
-        for m in methods:
-            mae = np.array([[r[a]["mae_cm"] for a in "xyz"] for r in recs[m]])
-            rows.append({"condition": name, "method": m, "n": len(mae), "mae_cm": mae.mean(axis=0).tolist()})
+        for label, recs in groups.items():
+            for m in methods:
+                mae = np.array([[r[a]["mae_cm"] for a in "xyz"] for r in recs[m]])
+                rows.append({"condition": label, "method": m, "n": len(mae), "mae_cm": mae.mean(axis=0).tolist()})
     return rows
 
 
@@ -231,6 +242,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--residual-velocity", type=float, default=0.0, help="simulator residual_velocity_mps")
     ap.add_argument("--json", type=str, default=None, help="also write the table and records here")
     ap.add_argument("--grid", nargs="+", default=None, help="accuracy-grid conditions (names or 'all')")
+    ap.add_argument("--first-subject", type=int, default=0, help="grid: subjects (and seeds) from this one")
+    ap.add_argument("--per-trial", action="store_true", help="grid: one row per trial instead of per condition")
+    ap.add_argument(
+        "--fixed-velocity-sigma",
+        action="store_true",
+        help="optimisation: the fixed sigma_data_mps on every trial (before issue 31's velocity_from_static)",
+    )
     ap.add_argument(
         "--no-rest-gate",
         action="store_true",
@@ -244,15 +262,20 @@ def main(argv: list[str] | None = None) -> int:
         from imulog.process.rests import RestParams
 
         params = replace(DEFAULT_PARAMS, rests=RestParams(enabled=False))
+    if args.fixed_velocity_sigma:
+        from dataclasses import replace
+
+        params = replace(params, optimized=replace(params.optimized, velocity_from_static=False))
     if args.grid:
         from imulog.simulate.grid import CONDITIONS
 
         t0 = time.perf_counter()
         rows = grid_rows(
             list(CONDITIONS) if args.grid == ["all"] else args.grid,
-            range(args.subjects),
+            range(args.first_subject, args.first_subject + args.subjects),
             args.repetitions,
             params=params,
+            per_trial=args.per_trial,
         )
         print_grid(rows)
         print(f"\n{time.perf_counter() - t0:.0f} s wall")

@@ -59,6 +59,7 @@ from imulog.process.trajectory_repetitions import (
     reference_residuals,
     repetition_windows,
     trial_waypoints,
+    velocity_sigma,
 )
 
 __all__ = [
@@ -85,6 +86,7 @@ __all__ = [
     "repetition_windows",
     "rotate_about_z",
     "trial_waypoints",
+    "velocity_sigma",
 ]
 
 
@@ -153,6 +155,11 @@ def reconstruct_repetitions(
             params = replace(params, optimized=replace(params.optimized, sigma_data_static_m=sig))
             if info is not None:
                 info["sigma_data_static_m"] = list(sig)
+            if params.optimized.velocity_from_static:
+                vel = velocity_sigma(sig, repetitions, params.optimized.sigma_data_mps)
+                params = replace(params, optimized=replace(params.optimized, sigma_data_mps=vel))
+                if info is not None:
+                    info["sigma_data_mps"] = list(vel)
         if info is not None:
             info["optimized_fallback"] = [repetitions[i].index for i in sorted(fallback)]
     if baseline:

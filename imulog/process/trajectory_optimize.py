@@ -52,7 +52,7 @@ class OptimizationParams:
     max_heading_deg: the largest heading correction applied (deg); larger fits are clipped.
     """
 
-    sigma_data_mps: float = 0.02
+    sigma_data_mps: float | tuple[float, float, float] = 0.02
     sigma_ref_static_m: float = 0.015
     sigma_ref_moving_m: float = 0.10
     sigma_symmetry_m: float | None = 0.02
@@ -61,6 +61,7 @@ class OptimizationParams:
     return_to_start: bool = True
     align_heading: bool = False
     max_heading_deg: float = 20.0
+    velocity_from_static: bool = True
 
 
 @dataclass
@@ -116,6 +117,12 @@ def optimize_repetition(
     if isinstance(sds, str):
         sds = None  # "auto" needs the whole trial (reconstruct_repetitions); alone: term off
         params = replace(params, sigma_data_static_m=None)
+    sdv = params.sigma_data_mps
+    if isinstance(sdv, (tuple, list, np.ndarray)):
+        if len(sdv) != d:
+            raise ValueError(f"sigma_data_mps has {len(sdv)} values for {d} axes")
+        if not isinstance(sds, (tuple, list, np.ndarray)):
+            sds = (sds,) * d
     if isinstance(sds, (tuple, list, np.ndarray)):
         if len(sds) != d:
             raise ValueError(f"sigma_data_static_m has {len(sds)} values for {d} axes")
@@ -123,7 +130,16 @@ def optimize_repetition(
             raise ValueError("per-axis sigma_data_static_m cannot be combined with align_heading")
         parts = [
             optimize_repetition(
-                t, z[:, j], ref[:, j], phase_bounds_s, static, replace(params, sigma_data_static_m=float(v))
+                t,
+                z[:, j],
+                ref[:, j],
+                phase_bounds_s,
+                static,
+                replace(
+                    params,
+                    sigma_data_static_m=None if v is None else float(v),
+                    sigma_data_mps=float(sdv[j]) if isinstance(sdv, (tuple, list, np.ndarray)) else sdv,
+                ),
             )
             for j, v in enumerate(sds)
         ]

@@ -211,3 +211,20 @@ def trial_waypoints(
                 checks.extend(found)
             bottle, mouth = rot @ bt, rot @ mt
     return R2GWaypoints(bottle_m=tuple(bottle.tolist()), mouth_m=tuple(mouth.tolist()))
+
+
+def velocity_sigma(
+    sigma_static_m: Sequence[float], repetitions: Sequence[Repetition], floor_mps: float
+) -> tuple[float, float, float]:
+    """Per-axis error (m/s) of the initial estimate's velocity, consistent with its static positions' error.
+
+    The initial estimate starts every repetition from zero, so an error ``sigma_static_m`` (m, per axis, from
+    :func:`estimate_data_sigma`) at the holds was built up during the phases: over a phase of the trial's
+    median duration ``T`` (s) the velocity is off by about ``sigma_static_m / T``. The optimisation's
+    velocity term must trust the estimate no more than that, or it keeps the shape of a drifting estimate
+    against the reference (``floor_mps``, the configured ``sigma_data_mps``, is the least)."""
+    durations = [float(b[1] - b[0]) for r in repetitions if len(r.phase_bounds_s) == 4 for b in r.phase_bounds_s]
+    if not durations:
+        return (float(floor_mps),) * 3
+    t = max(float(np.median(durations)), 1e-3)
+    return tuple(max(float(floor_mps), float(s) / t) for s in sigma_static_m)
