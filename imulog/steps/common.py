@@ -72,6 +72,18 @@ def record_of(base: str, imu: str, metadata: Mapping[str, Mapping[str, Any]]) ->
     return f"{base}.{imu}" if f"{base}.{imu}" in metadata else None
 
 
+def cluster_pose_topic(name: str, topics: list[str], metadata: Mapping[str, Mapping[str, Any]]) -> str | None:
+    """The cluster pose channel of IMU ``name``: ``/derived/vicon/cluster_pose/{name}`` (a setup), or the single
+    ``/derived/vicon/cluster_pose`` when ``imulog.alignment`` names that IMU; None when it has none."""
+    own = f"/derived/vicon/cluster_pose/{name}"
+    if own in topics:
+        return own
+    record = metadata.get("imulog.alignment") or {}
+    if record.get("imu") == f"/imu/{name}" and "/derived/vicon/cluster_pose" in topics:
+        return "/derived/vicon/cluster_pose"
+    return None
+
+
 def alignment_for(metadata: Mapping[str, Mapping[str, Any]], imu_topic: str) -> dict[str, Any] | None:
     """The alignment record of ``imu_topic``: ``imulog.alignment`` if it concerns ``imu_topic`` (or names no
     IMU), else ``imulog.alignment.{imu}`` (written when several IMUs are aligned together), else None."""

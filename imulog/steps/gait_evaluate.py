@@ -56,16 +56,6 @@ def walking_trial(metadata: dict[str, Any], gyros: dict[str, tuple[np.ndarray, f
     return best
 
 
-def _pose_topic(name: str, topics: list[str], metadata: dict[str, Any]) -> str | None:
-    own = f"/derived/vicon/cluster_pose/{name}"
-    if own in topics:
-        return own
-    record = metadata.get("imulog.alignment") or {}
-    if record.get("imu") == f"/imu/{name}" and "/derived/vicon/cluster_pose" in topics:
-        return "/derived/vicon/cluster_pose"
-    return None
-
-
 FOOT_STILL_MPS = 0.15  # median speed of the IMU's point on its cluster while its gyroscope is still, m/s
 
 
@@ -122,7 +112,7 @@ def evaluate_foot(imu, alignment: dict[str, Any], pose, acc_global: tuple[np.nda
 
 def compute_gait_evaluation(trial, names: list[str], walking: dict[str, Any]) -> dict[str, Any]:
     """The ``imulog.evaluation`` record of a walking trial (see the module docstring)."""
-    from imulog.steps.common import alignment_for
+    from imulog.steps.common import alignment_for, cluster_pose_topic
 
     topics = trial.topics()
     feet, skipped = {}, {}
@@ -131,7 +121,7 @@ def compute_gait_evaluation(trial, names: list[str], walking: dict[str, Any]) ->
         if not rec or not rec.get("rotation_imu_to_cluster"):
             skipped[name] = "no marker cluster aligned with it (run `imulog process align`)"
             continue
-        topic = _pose_topic(name, topics, trial.metadata)
+        topic = cluster_pose_topic(name, topics, trial.metadata)
         if topic is None:
             skipped[name] = "no cluster pose from the align step"
             continue

@@ -176,7 +176,7 @@ def run_heading(
     """Run the step on a trial file; returns ``(outcome, record)``."""
     from imulog.archive import TrialReader
     from imulog.steps.base import StepResult, run_step
-    from imulog.steps.common import alignment_for
+    from imulog.steps.common import alignment_for, cluster_pose_topic
 
     with TrialReader(path) as trial:
         topics = trial.topics()
@@ -191,7 +191,7 @@ def run_heading(
     if not names:
         raise ValueError(f"no /derived/orientation/* channel: run `imulog process orientation {path}` first")
     inputs = [f"/derived/orientation/{n}" for n in names] + [f"/imu/{n}" for n in names if f"/imu/{n}" in topics]
-    inputs += [t for n in names if (t := _pose_topic(n, topics, metadata)) is not None]
+    inputs += [t for n in names if (t := cluster_pose_topic(n, topics, metadata)) is not None]
     inputs += [f"/orientation/{n}" for n in names if f"/orientation/{n}" in topics]
     meta_inputs = tuple(k for k in metadata if k == "imulog.alignment" or k.startswith("imulog.alignment."))
     holder: dict[str, Any] = {}
@@ -213,7 +213,7 @@ def run_heading(
                 if imu.mag is not None and np.isfinite(imu.mag).any():
                     mags[n] = (imu.t_ns, imu.mag)
             aligns[n] = alignment_for(trial.metadata, f"/imu/{n}")
-            pose = _pose_topic(n, topics, trial.metadata)
+            pose = cluster_pose_topic(n, topics, trial.metadata)
             if aligns[n] and aligns[n].get("rotation_global_to_world") is None and pose is not None:
                 # aligned before it was oriented: the same rotation from the cluster's poses
                 ps = trial.read(pose)
@@ -250,17 +250,6 @@ def _device_orientation(trial, name: str, topics: list[str]) -> tuple[np.ndarray
         return None
     s = trial.read(topic)
     return s.t_ns, np.asarray(s.values, np.float64)[:, :4]
-
-
-def _pose_topic(name: str, topics: list[str], metadata: dict[str, Any]) -> str | None:
-    """The IMU's cluster pose channel (``/derived/vicon/cluster_pose/{name}``, or the single-IMU one)."""
-    own = f"/derived/vicon/cluster_pose/{name}"
-    if own in topics:
-        return own
-    record = metadata.get("imulog.alignment") or {}
-    if record.get("imu") == f"/imu/{name}" and "/derived/vicon/cluster_pose" in topics:
-        return "/derived/vicon/cluster_pose"
-    return None
 
 
 def refresh_heading(path, names: list[str] | None = None) -> dict[str, Any] | None:
