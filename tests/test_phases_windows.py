@@ -275,16 +275,10 @@ def test_rest_windows_cut_at_rests_keep_repetitions_and_flag_long_stretches():
 def test_trajectory_window_by_window_equals_the_whole(trial, tmp_path):
     """A daily-life recording cut at rests into 10-min windows gives the whole computation's trajectories (each
     movement is reconstructed from its own rests), every sample once; no step refuses for length."""
-    from imulog.steps.orientation import run_orientation
     from imulog.steps.trajectory import run_trajectory
     from imulog.steps.trajectory_windows import TrajectoryWindows
 
-    path = tmp_path / "traj.mcap"
-    shutil.copy(trial, path)
-    run_orientation(path)
-    run_phases(path)
-    cut = tmp_path / "cut.mcap"
-    shutil.copy(path, cut)
+    path, cut = _oriented_and_segmented_twice(trial, tmp_path)
     methods = ("zupt", "ddi")
     run_trajectory(path, methods=methods, windows=TrajectoryWindows(core_s=3600.0))  # one window: the whole
     run_trajectory(cut, methods=methods, windows=TrajectoryWindows(core_s=600.0))
@@ -362,16 +356,10 @@ def test_rest_windows_read_only_the_context_of_a_long_rest():
 def test_trajectory_with_capped_rests_equals_the_whole(trial, tmp_path):
     """Rests read only 20 s beside each movement (rest-only windows for the rest of them): the trajectories of
     zupt are the whole computation's, every sample once."""
-    from imulog.steps.orientation import run_orientation
     from imulog.steps.trajectory import run_trajectory
     from imulog.steps.trajectory_windows import TrajectoryWindows
 
-    path = tmp_path / "traj.mcap"
-    shutil.copy(trial, path)
-    run_orientation(path)
-    run_phases(path)
-    cut = tmp_path / "cut.mcap"
-    shutil.copy(path, cut)
+    path, cut = _oriented_and_segmented_twice(trial, tmp_path)
     run_trajectory(path, methods=("zupt",), windows=TrajectoryWindows(core_s=3600.0))
     run_trajectory(cut, methods=("zupt",), windows=TrajectoryWindows(core_s=600.0, context_s=20.0))
     with TrialReader(path) as a, TrialReader(cut) as b:
@@ -384,3 +372,16 @@ def test_trajectory_with_capped_rests_equals_the_whole(trial, tmp_path):
             x, y = a.read(topic), b.read(topic)
             np.testing.assert_array_equal(x.t_ns, y.t_ns)
             np.testing.assert_allclose(x.values, y.values, atol=1e-6)
+
+
+def _oriented_and_segmented_twice(trial, tmp_path):
+    """Two copies of ``trial`` after orientation and phases (``traj.mcap``, ``cut.mcap``), for whole-vs-windowed runs."""
+    from imulog.steps.orientation import run_orientation
+
+    path = tmp_path / "traj.mcap"
+    shutil.copy(trial, path)
+    run_orientation(path)
+    run_phases(path)
+    cut = tmp_path / "cut.mcap"
+    shutil.copy(path, cut)
+    return path, cut
