@@ -61,6 +61,13 @@ def _params(hint: dict[str, Any], width: int) -> dict[str, np.ndarray | None]:
     return out
 
 
+def _params_head(params: dict[str, np.ndarray | None]) -> bytes:
+    """The parameter fields (shift, divisor, scale, offset: packed doubles) that every block of a plan repeats."""
+    return b"".join(
+        wire.packed(k + 2, params[p], np.dtype("<f8")) for k, p in enumerate(PARAMS) if params.get(p) is not None
+    )
+
+
 @dataclass
 class NumbersPlan:
     """How one (N, C) array is stored: ``kind`` "counts" or "f32"; ``ok`` rows that the encoding gives back."""
@@ -93,9 +100,7 @@ def _counted(values: np.ndarray, params: dict[str, np.ndarray | None]) -> Number
         np.require(params[p] if params.get(p) is not None else np.zeros(width), np.float64, ["C", "W"]) for p in PARAMS
     ]
     counts, ok = counts_check(np.require(values, np.float64, ["C", "W"]), *arrays, use)
-    head = b"".join(
-        wire.packed(k + 2, params[p], np.dtype("<f8")) for k, p in enumerate(PARAMS) if params.get(p) is not None
-    )
+    head = _params_head(params)
     return NumbersPlan(
         "counts", width, ok, counts.astype("<i4").tobytes(), np.full(len(values), 4 * width), params, head
     )
@@ -107,9 +112,7 @@ def _from_counts(values: np.ndarray, counts: np.ndarray, params: dict[str, np.nd
     ok = eq.all(axis=1)
     counts[~eq] = 0
     data = counts.astype("<i4").tobytes()  # |counts| < 2**31 (checked by _counts_of): one pass, no varints
-    head = b"".join(
-        wire.packed(k + 2, params[p], np.dtype("<f8")) for k, p in enumerate(PARAMS) if params[p] is not None
-    )
+    head = _params_head(params)
     width = values.shape[1]
     return NumbersPlan("counts", width, ok, data, np.full(len(values), 4 * width), params, head)
 
@@ -205,9 +208,7 @@ def plan_numbers(values: np.ndarray | None, hint: dict[str, Any] | None, precisi
         counts = _counts_of(v, params)
         ok = (np.isfinite(v) & (np.abs(counts) < _MAX_COUNT)).all(axis=1)  # a NaN gap row keeps float64
         counts[~ok] = 0
-        head = b"".join(
-            wire.packed(k + 2, params[p], np.dtype("<f8")) for k, p in enumerate(PARAMS) if params[p] is not None
-        )
+        head = _params_head(params)
         return NumbersPlan(
             "counts", width, ok, counts.astype("<i4").tobytes(), np.full(len(v), 4 * width), params, head
         )
