@@ -1,4 +1,4 @@
-"""The fast text path of ``imulog.converters._common.read_numeric`` (issue 17: convert within 1.5x its floor).
+"""The fast text path of ``imulog.converters._table.read_numeric`` (issue 17: convert within 1.5x its floor).
 
 * pyarrow's CSV reader parses the numeric block from the bytes in memory; whatever it would read differently from
   the pandas C parser (other NaN spellings, ``-0`` in whole-number columns, ragged or blank rows, quotes, spaces,
@@ -15,6 +15,7 @@ import hashlib
 from pathlib import Path
 
 import imulog.converters._common as common
+import imulog.converters._table as table
 import numpy as np
 import pytest
 from imulog.converters import ConversionError, convert_file
@@ -51,7 +52,7 @@ def _outcome(path: Path, monkeypatch, *, arrow: bool):
     """(arrays, warnings) or the error message of converting ``path`` with or without the pyarrow path."""
     with monkeypatch.context() as m:
         if not arrow:
-            m.setattr(common, "_parse_arrow", lambda *a: None)
+            m.setattr(table, "_parse_arrow", lambda *a: None)
         try:
             rec = convert_file(path)
         except ConversionError as e:
@@ -75,14 +76,14 @@ def _same(a, b) -> bool:
 def _spy_arrow(monkeypatch) -> list[bool]:
     """Record whether each ``_parse_arrow`` call returned values (True) or left the block to pandas (False)."""
     taken: list[bool] = []
-    real = common._parse_arrow
+    real = table._parse_arrow
 
     def spy(*args):
         out = real(*args)
         taken.append(out is not None)
         return out
 
-    monkeypatch.setattr(common, "_parse_arrow", spy)
+    monkeypatch.setattr(table, "_parse_arrow", spy)
     return taken
 
 
