@@ -33,584 +33,113 @@ in bounded batches (:func:`iter_chunks`), so memory does not grow with the recor
 from __future__ import annotations
 
 import json
-import re
 import struct
 import zipfile
 from collections.abc import Iterator
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
-from imulog.converters._binary import NS_PER_S, concat_chunks, iso_from_epoch_ns, time_zone_label, with_fills
+from imulog.converters._binary import NS_PER_S, concat_chunks, iso_from_epoch_ns, time_zone_label
 from imulog.converters._common import G0, sanitize_name
+from imulog.converters.actigraph_decode import (
+    _activity,
+    _activity_tail,
+    _scalar_signals,
+    _sensor,
+    _State,
+)
+from imulog.converters.actigraph_format import (
+    ACTIVITY,
+    ACTIVITY2,
+    ACTIVITY3,
+    BATCH_BYTES,
+    BATTERY,
+    CAPSENSE,
+    FILL_PIECE,
+    FLOAT_PARAMETERS,
+    INLINE_FILL,
+    LUX,
+    MAX_GAP_S,
+    MAX_INFO_BYTES,
+    MAX_RATE_HZ,
+    MAX_RECORDING_S,
+    METADATA,
+    NEO_SCALE,
+    PARAMETER_NAMES,
+    PARAMETERS,
+    SENSOR_DATA,
+    SENSOR_SCHEMA,
+    SEPARATOR,
+    SIGNED_PARAMETERS,
+    TICKS_AT_1970,
+    TICKS_PER_S,
+    SensorColumn,
+    SensorSchema,
+    decode_sensor_samples,
+    even_times_ns,
+    fill_times_ns,
+    parse_info,
+    parse_offset_s,
+    parse_parameters,
+    parse_schema,
+    ssp_decode,
+    ticks_to_epoch_ns,
+    unpack_12bit_yxz,
+    with_gaps,
+)
+from imulog.converters.actigraph_records import RecordBatch, iter_record_batches
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.bounds import BoundedStream, RatioLimit, check_epoch_ns, fill_budget
 from imulog.converters.errors import ConversionError, excerpt
 
 from imulog.model import ImuStream, Recording, SignalStream
 
-TICKS_PER_S = 10_000_000
-TICKS_AT_1970 = 621_355_968_000_000_000  # .NET ticks of 1970-01-01T00:00:00
-BATCH_BYTES = 8 << 20
-SEPARATOR = 0x1E
-ACTIVITY, BATTERY, LUX, METADATA, CAPSENSE, PARAMETERS = 0x00, 0x02, 0x05, 0x06, 0x0D, 0x15
-SENSOR_SCHEMA, SENSOR_DATA, ACTIVITY2, ACTIVITY3 = 0x18, 0x19, 0x1A, 0x1B
-NEO_SCALE = 341.0  # LSB/g of NEO, CLE and MRA devices
-PARAMETER_NAMES = {
-    (0, 6): "battery_state",
-    (0, 7): "battery_voltage",
-    (0, 8): "board_revision",
-    (0, 9): "calibration_time",
-    (0, 13): "firmware_version",
-    (0, 49): "imu_accel_scale",
-    (0, 50): "imu_gyro_scale",
-    (0, 51): "imu_mag_scale",
-    (0, 55): "accel_scale",
-    (0, 57): "imu_temp_scale",
-    (0, 58): "imu_temp_offset",
-    (1, 10): "sample_rate",
-    (1, 12): "target_start_time",
-    (1, 13): "target_stop_time",
-    (1, 40): "utc_offset",
-    (1, 44): "sensor_configuration",
-}
-FLOAT_PARAMETERS = {"battery_voltage", "imu_accel_scale", "imu_gyro_scale", "imu_mag_scale", "accel_scale"}
-FLOAT_PARAMETERS |= {"imu_temp_scale", "imu_temp_offset"}
-SIGNED_PARAMETERS = {"utc_offset"}
-
-
-# ----------------------------------------------------------------------------------------------- pure decoders
-def ssp_decode(value: int) -> float:
-    """ActiGraph's SSP float: 24-bit two's-complement fraction (/2^23) times 2^(signed 8-bit exponent)."""
-    if value == 0x007FFFFF:
-        return float("inf")
-    if value == 0x00800000:
-        return float("-inf")
-    exponent = (value >> 24) & 0xFF
-    exponent = exponent - 256 if exponent & 0x80 else exponent
-    significand = value & 0x00FFFFFF
-    significand = significand - (1 << 24) if significand & 0x00800000 else significand
-    return significand / 8388608.0 * 2.0**exponent
-
-
-def unpack_12bit_yxz(data: bytes | np.ndarray, stored_order: str = "yxz") -> np.ndarray:
-    """NEO ``activity.bin`` / ACTIVITY bytes -> (N, 3) int16 counts in X, Y, Z order (stored Y, X, Z, 12 bits each;
-    ``stored_order="xyz"`` for ACTIVITY3 records, stored X, Y, Z).
-
-    Two samples take 9 bytes; an odd last sample uses 5 bytes (its last nibble is unused).
-    """
-    b = np.frombuffer(bytes(data), dtype=np.uint8) if not isinstance(data, np.ndarray) else data.astype(np.uint8)
-    nibbles = np.empty(2 * len(b), dtype=np.int32)
-    nibbles[0::2] = b >> 4
-    nibbles[1::2] = b & 0x0F
-    n = len(nibbles) // 9
-    v = nibbles[: 9 * n].reshape(n, 3, 3)
-    values = (v[:, :, 0] << 8) | (v[:, :, 1] << 4) | v[:, :, 2]
-    values = np.where(values > 2047, values - 4096, values).astype(np.int16)
-    return values if stored_order == "xyz" else values[:, [1, 0, 2]]
-
-
-def ticks_to_epoch_ns(ticks: int) -> int:
-    """.NET ticks (100 ns since 0001-01-01, wall time) -> ns since 1970 of the same wall time."""
-    return (int(ticks) - TICKS_AT_1970) * 100
-
-
-def parse_info(path: Path, text: str) -> dict[str, str]:
-    """``info.txt`` ``Key: Value`` lines (keys as written)."""
-    out: dict[str, str] = {}
-    for line in text.splitlines():
-        key, sep, value = line.partition(":")
-        if sep and key.strip():
-            out[key.strip()] = value.strip()
-    if "Serial Number" not in out:
-        raise ConversionError(path, "info.txt has no 'Serial Number' line: not an ActiGraph .gt3x")
-    return out
-
-
-def parse_offset_s(text: str | None) -> int | None:
-    """``-05:00:00`` -> -18000 s; None when absent or unreadable."""
-    if not text:
-        return None
-    m = re.fullmatch(r"([+-])?(\d{1,2}):(\d{2})(?::(\d{2}))?", text.strip())
-    if not m:
-        return None
-    s = int(m.group(2)) * 3600 + int(m.group(3)) * 60 + int(m.group(4) or 0)
-    return -s if m.group(1) == "-" else s
-
-
-def parse_parameters(payload: bytes) -> dict[str, Any]:
-    """PARAMETERS payload (8-byte address/id/value triples) -> the known parameters by name."""
-    out: dict[str, Any] = {}
-    for k in range(0, len(payload) - 7, 8):
-        space, ident, value = struct.unpack_from("<HHI", payload, k)
-        name = PARAMETER_NAMES.get((space, ident))
-        if name is None:
-            continue
-        if name in FLOAT_PARAMETERS:
-            out[name] = round(ssp_decode(value), 6)
-        elif name in SIGNED_PARAMETERS:
-            out[name] = value - (1 << 32) if value & 0x80000000 else value
-        else:
-            out[name] = value
-    return out
-
-
-@dataclass(frozen=True)
-class SensorColumn:
-    label: str
-    big_endian: bool
-    signed: bool
-    bit_offset: int
-    bits: int
-    scale: float
-
-
-@dataclass(frozen=True)
-class SensorSchema:
-    ident: int
-    columns: tuple[SensorColumn, ...]
-
-    @property
-    def bytes_per_sample(self) -> int:
-        return max(c.bit_offset + c.bits for c in self.columns) // 8
-
-
-def parse_schema(path: Path, payload: bytes, index: int) -> SensorSchema:
-    """SENSOR_SCHEMA payload: id, column count, then 23 bytes per column (flags, bit offset, bits, SSP scale, label)."""
-    if len(payload) < 6:
-        raise ConversionError(path, f"record {index}: SENSOR_SCHEMA too short")
-    ident, ncols, _ = struct.unpack_from("<hhh", payload, 0)
-    if ncols <= 0 or len(payload) < 6 + 23 * ncols:
-        raise ConversionError(path, f"record {index}: SENSOR_SCHEMA declares {ncols} columns in {len(payload)} bytes")
-    cols = []
-    for i in range(ncols):
-        o = 6 + 23 * i
-        flags, offset, bits, scale = struct.unpack_from("<BBBI", payload, o)
-        if bits not in (8, 16) or offset % 8:
-            raise ConversionError(path, f"record {index}: SENSOR_SCHEMA column {i} has {bits} bits at bit {offset}")
-        label = payload[o + 7 : o + 23].decode("ascii", "replace").strip()
-        cols.append(SensorColumn(label, bool(flags & 1), bool(flags & 2), offset, bits, round(ssp_decode(scale), 6)))
-    return SensorSchema(ident, tuple(cols))
-
-
-def decode_sensor_samples(schema: SensorSchema, raw: np.ndarray) -> dict[str, np.ndarray]:
-    """(N, bytes_per_sample) uint8 -> {label: scaled float64 (N,)} for the labelled columns."""
-    out = {}
-    for c in schema.columns:
-        if not c.label:
-            continue
-        b = raw[:, c.bit_offset // 8 : (c.bit_offset + c.bits) // 8].astype(np.int64)
-        if c.bits == 16:
-            v = (b[:, 0] << 8 | b[:, 1]) if c.big_endian else (b[:, 1] << 8 | b[:, 0])
-            if c.signed:
-                v = np.where(v >= 32768, v - 65536, v)
-        else:
-            v = b[:, 0]
-            if c.signed:
-                v = np.where(v >= 128, v - 256, v)
-        out[c.label] = v / c.scale if c.scale else v.astype(np.float64)
-    return out
-
-
-def even_times_ns(seconds: np.ndarray, counts: np.ndarray, rate_hz: np.ndarray) -> np.ndarray:
-    """Times of the samples of per-second records: record r's k-th sample at ``seconds[r] + k / rate_hz[r]``."""
-    counts = np.asarray(counts, dtype=np.int64)
-    total = int(counts.sum())
-    first = np.repeat(np.cumsum(counts) - counts, counts)
-    k = np.arange(total, dtype=np.int64) - first
-    step = np.repeat(NS_PER_S / np.asarray(rate_hz, dtype=np.float64), counts)
-    return np.repeat(seconds.astype(np.int64) * NS_PER_S, counts) + np.round(k * step).astype(np.int64)
-
-
-MAX_INFO_BYTES = 4 << 20  # info.txt is read whole, so its size is bounded
-MAX_RATE_HZ = 10_000.0  # ActiGraph devices sample at 30-100 Hz (IMU 100 Hz); a larger Sample Rate is damage
-MAX_RECORDING_S = 366 * 86400  # a Last Sample Time further from Start Date is not used
-MAX_GAP_S = 31 * 86400  # a longer silence is a clock or file problem, not idle sleep: refused
-INLINE_FILL = 1 << 16  # NaN samples a gap may add to its own piece; longer gaps become pieces of their own
-FILL_PIECE = 1 << 20  # samples per NaN piece of a long gap
-
-
-def fill_times_ns(first_s: int, n: int, rate: int) -> np.ndarray:
-    """Times of ``n`` samples at ``rate`` Hz from the whole second ``first_s`` (k-th at ``first_s + k / rate``)."""
-    k = np.arange(n, dtype=np.int64)
-    return (first_s + k // rate) * NS_PER_S + np.round((k % rate) * (NS_PER_S / rate)).astype(np.int64)
-
-
-def with_gaps(
-    t: np.ndarray,
-    values: dict[str, np.ndarray | None],
-    first_sample: np.ndarray,
-    gap_first_s: np.ndarray,
-    gap_seconds: np.ndarray,
-    rate: int,
-    origin_ns: int,
-) -> Iterator[tuple[np.ndarray, dict[str, np.ndarray | None]]]:
-    """The samples of a batch with its missing seconds as NaN samples, in time order, in bounded pieces.
-
-    ``first_sample[r]``: index in ``t`` of record r's first sample; ``gap_seconds[r]`` whole seconds are missing
-    before it, from second ``gap_first_s[r]`` (absolute, like the record time stamps); ``t`` is relative to
-    ``origin_ns``. A gap of more than ``INLINE_FILL`` samples is yielded as pieces of ``FILL_PIECE`` samples.
-    """
-    return with_fills(
-        t,
-        values,
-        first_sample,
-        np.asarray(gap_first_s, dtype=np.int64) * NS_PER_S - origin_ns,
-        np.asarray(gap_seconds, dtype=np.int64) * rate,
-        NS_PER_S / rate,
-        inline=INLINE_FILL,
-        piece=FILL_PIECE,
-    )
-
-
-# ---------------------------------------------------------------------------------------------- record reading
-@dataclass
-class RecordBatch:
-    """Complete records found in ``buf``: types, timestamps (s), payload offsets and sizes; ``first`` = index."""
-
-    buf: bytes
-    first: int
-    byte0: int
-    types: np.ndarray
-    seconds: np.ndarray
-    starts: np.ndarray
-    sizes: np.ndarray
-
-    def payload(self, i: int) -> bytes:
-        s = int(self.starts[i])
-        return self.buf[s : s + int(self.sizes[i])]
-
-
-_NONZERO = re.compile(rb"[^\x00]")
-
-
-def iter_record_batches(stream: IO[bytes], path: Path, batch_bytes: int = BATCH_BYTES) -> Iterator[RecordBatch]:
-    """Split ``log.bin`` into batches of complete, checksum-verified records with bounded reads."""
-    leftover = b""
-    index = 0
-    byte0 = 0
-    eof = False
-    while not eof:
-        data = stream.read(batch_bytes)
-        eof = not data
-        buf = leftover + data
-        pos = 0
-        heads: list[int] = []
-        types: list[int] = []
-        secs: list[int] = []
-        sizes: list[int] = []
-        n = len(buf)
-        while pos < n:
-            b = buf[pos]
-            if b != SEPARATOR:
-                if b == 0:  # zero padding: skip the whole run at once (a member of zeros is scanned at C speed)
-                    m = _NONZERO.search(buf, pos)
-                    pos = m.start() if m else n
-                    continue
-                raise ConversionError(
-                    path, f"log.bin record {index + len(heads)} (byte {byte0 + pos}): no record separator (0x{b:02X})"
-                )
-            if pos + 8 > n:
-                break
-            typ, sec, size = struct.unpack_from("<BIH", buf, pos + 1)
-            if pos + 9 + size > n:
-                break
-            heads.append(pos)
-            types.append(typ)
-            secs.append(sec)
-            sizes.append(size)
-            pos += 9 + size
-        if eof and pos < n:
-            raise ConversionError(
-                path,
-                f"log.bin record {index + len(heads)} (byte {byte0 + pos}): truncated ({n - pos} bytes at the end)",
-            )
-        if heads:
-            h = np.asarray(heads, dtype=np.int64)
-            arr = np.frombuffer(buf, dtype=np.uint8, count=pos)
-            xor = np.bitwise_xor.reduceat(arr, h)  # header ^ payload ^ checksum (^ zero padding) == 0xFF
-            bad = np.nonzero(xor != 0xFF)[0]
-            if len(bad):
-                i = int(bad[0])
-                raise ConversionError(
-                    path,
-                    f"log.bin record {index + i} (byte {byte0 + heads[i]}, type 0x{types[i]:02X}): checksum mismatch "
-                    "(the record is damaged)",
-                )
-            yield RecordBatch(
-                buf=buf,
-                first=index,
-                byte0=byte0,
-                types=np.asarray(types, dtype=np.int64),
-                seconds=np.asarray(secs, dtype=np.int64),
-                starts=h + 8,
-                sizes=np.asarray(sizes, dtype=np.int64),
-            )
-        index += len(heads)
-        leftover = buf[pos:]
-        byte0 += pos
-
-
-# ------------------------------------------------------------------------------------------------- conversion
-@dataclass
-class _State:
-    """What carries over between batches of one log.bin."""
-
-    origin_ns: int
-    rate_hz: float
-    accel_scale: float
-    name: str
-    meta: dict[str, Any]
-    schemas: dict[int, SensorSchema] = field(default_factory=dict)
-    last_activity_s: int | None = None
-    last_sensor_s: int | None = None
-    gaps: int = 0
-    gap_s: int = 0
-    end_ns: int | None = None  # info.txt Last Sample Time (never Stop Date): the device recorded until then
-    imu_rate_hz: int | None = None  # samples per SENSOR_DATA record (median of the first batch)
-    fill_left: int = 0  # NaN samples still allowed for idle sleep (bounds.fill_budget of the file)
-    rate_checked: bool = False  # Sample Rate compared with the samples per ACTIVITY2 record
-    warnings: list[str] = field(default_factory=list)
-
-    def spend_fill(self, path: Path, n: int, what: str) -> None:
-        """Count ``n`` NaN samples against the file's fill budget; ConversionError naming ``what`` beyond it."""
-        self.fill_left -= int(n)
-        if self.fill_left < 0:
-            raise ConversionError(
-                path,
-                f"{what}: idle sleep would add more NaN samples than a file of this size can describe "
-                "(a damaged time stamp or Sample Rate)",
-            )
-
-    def idle_sleep(self) -> dict[str, int]:
-        """Idle-sleep counts so far, including the tail between the last ACTIVITY record and the recording's end."""
-        gaps, total = self.gaps, self.gap_s
-        if self.end_ns is not None and self.last_activity_s is not None:
-            tail = self.end_ns // NS_PER_S - (self.last_activity_s + 1)
-            if 0 < tail <= MAX_GAP_S:
-                gaps, total = gaps + 1, total + int(tail)
-        return {"idle_sleep_gaps": gaps, "idle_sleep_s": total}
-
-
-def _concat_payloads(batch: RecordBatch, idx: np.ndarray, skip: int = 0) -> bytes:
-    return b"".join(batch.buf[int(batch.starts[i]) + skip : int(batch.starts[i] + batch.sizes[i])] for i in idx)
-
-
-def _check_order(path: Path, batch: RecordBatch, idx: np.ndarray, last: int | None, what: str) -> None:
-    secs = batch.seconds[idx]
-    prev = np.concatenate([[last if last is not None else secs[0] - 1], secs[:-1]])
-    bad = np.nonzero(secs <= prev)[0]
-    if len(bad):
-        i = int(idx[bad[0]])
-        raise ConversionError(
-            path, f"log.bin record {batch.first + i}: {what} time stamp does not increase ({int(batch.seconds[i])})"
-        )
-
-
-def _check_gaps(path: Path, batch: RecordBatch, idx: np.ndarray, jump: np.ndarray, what: str) -> None:
-    long = np.nonzero(jump > MAX_GAP_S)[0]
-    if len(long):
-        i = int(idx[long[0]])
-        raise ConversionError(
-            path,
-            f"log.bin record {batch.first + i}: {what} resumes {int(jump[long[0]]) / 86400:.0f} days after the "
-            "previous one (or after Start Date): a device clock or file problem, not idle sleep",
-        )
-
-
-def _activity(path: Path, batch: RecordBatch, st: _State) -> list[ImuStream]:
-    """The batch's primary-accelerometer samples, idle-sleep seconds as NaN samples (one or more pieces)."""
-    is_act2 = (batch.types == ACTIVITY2) & (batch.sizes > 1)
-    is_act = ((batch.types == ACTIVITY) | (batch.types == ACTIVITY3)) & (batch.sizes > 1)  # 1 byte: USB event
-    idx = np.nonzero(is_act2 | is_act)[0]
-    if len(idx) == 0:
-        return []
-    _check_order(path, batch, idx, st.last_activity_s, "activity")
-    counts, parts = [], []
-    for i in idx:
-        payload = batch.payload(int(i))
-        if batch.types[i] == ACTIVITY2:
-            if len(payload) % 6:
-                raise ConversionError(
-                    path, f"log.bin record {batch.first + int(i)}: ACTIVITY2 payload of {len(payload)} bytes"
-                )
-            xyz = np.frombuffer(payload, dtype="<i2").reshape(-1, 3)
-        else:
-            xyz = unpack_12bit_yxz(payload, "xyz" if batch.types[i] == ACTIVITY3 else "yxz")
-        parts.append(xyz)
-        counts.append(len(xyz))
-    secs = batch.seconds[idx]
-    first_prev = st.last_activity_s if st.last_activity_s is not None else st.origin_ns // NS_PER_S - 1
-    prev = np.concatenate([[first_prev], secs[:-1]])
-    jump = np.maximum(secs - prev - 1, 0)
-    _check_gaps(path, batch, idx, jump, "ACTIVITY")
-    counts_a = np.asarray(counts, dtype=np.int64)
-    if not st.rate_checked and is_act2[idx].any():
-        _check_rate(path, st, counts_a[is_act2[idx]])
-    st.spend_fill(path, int(jump.sum()) * round(st.rate_hz), f"log.bin record {batch.first + int(idx[0])}")
-    st.gaps += int(np.count_nonzero(jump))
-    st.gap_s += int(jump.sum())
-    st.last_activity_s = int(secs[-1])
-    t = even_times_ns(secs, counts_a, np.maximum(st.rate_hz, counts_a)) - st.origin_ns
-    acc = np.concatenate(parts).astype(np.float64) / st.accel_scale * G0
-    first = np.cumsum(counts_a) - counts_a
-    pieces = with_gaps(t, {"acc": acc}, first, prev + 1, jump, round(st.rate_hz), st.origin_ns)
-    meta = {**st.meta, "resolution": {"acc": {"divisor": st.accel_scale, "scale": G0}}}  # counts / LSB per g * g
-    return [ImuStream(name=st.name, t_ns=pt, acc=pv["acc"], meta=dict(meta)) for pt, pv in pieces]
-
-
-def _check_rate(path: Path, st: _State, counts: np.ndarray) -> None:
-    """The payload wins: ``Sample Rate`` is replaced by the samples per full ACTIVITY2 record (one second) when
-    they differ by more than 1 %, with a warning."""
-    st.rate_checked = True
-    payload = float(np.median(counts))
-    if payload > 0 and abs(payload - st.rate_hz) > 0.01 * payload:
-        st.warnings.append(
-            f"{path.name}: info.txt Sample Rate {st.rate_hz:g} Hz disagrees with the {payload:g} samples per "
-            f"one-second ACTIVITY2 record; the records' {payload:g} Hz is used"
-        )
-        st.meta["declared_rate_hz"] = st.rate_hz
-        st.rate_hz = payload
-        st.meta["rate_hz"] = payload
-
-
-def _activity_tail(st: _State) -> list[ImuStream]:
-    """NaN samples for an idle sleep that lasted until the recording's end (no record follows it)."""
-    if st.end_ns is None or st.last_activity_s is None:
-        return []
-    first_s = st.last_activity_s + 1
-    seconds = st.end_ns // NS_PER_S - first_s
-    if seconds <= 0 or seconds > MAX_GAP_S:  # an implausible Last Sample Time adds nothing
-        return []
-    n_all = seconds * round(st.rate_hz)
-    if n_all > st.fill_left:  # an end time the file's bytes cannot back: said, not filled
-        st.warnings.append(
-            f"Last Sample Time is {seconds} s after the last sample: more idle sleep than a file of this size can "
-            "describe, so no NaN samples were added after the last record"
-        )
-        return []
-    st.fill_left -= n_all
-    out = []
-    for a in range(0, n_all, FILL_PIECE):
-        m = min(FILL_PIECE, n_all - a)
-        t = fill_times_ns(first_s, a + m, round(st.rate_hz))[a:] - st.origin_ns
-        out.append(ImuStream(name=st.name, t_ns=t, acc=np.full((m, 3), np.nan), meta=dict(st.meta)))
-    return out
-
-
-def _sensor(path: Path, batch: RecordBatch, st: _State) -> list[ImuStream]:
-    """The batch's IMU samples; seconds without a SENSOR_DATA record between two records become NaN samples."""
-    idx = np.nonzero(batch.types == SENSOR_DATA)[0]
-    if len(idx) == 0:
-        return []
-    _check_order(path, batch, idx, st.last_sensor_s, "SENSOR_DATA")
-    secs = batch.seconds[idx]
-    prev = np.concatenate([[st.last_sensor_s if st.last_sensor_s is not None else secs[0] - 1], secs[:-1]])
-    jump = np.maximum(secs - prev - 1, 0)
-    _check_gaps(path, batch, idx, jump, "SENSOR_DATA")
-    st.last_sensor_s = int(secs[-1])
-    schema_ids = [struct.unpack_from("<h", batch.buf, int(batch.starts[i]))[0] for i in idx]
-    if len(set(schema_ids)) != 1:
-        raise ConversionError(path, f"log.bin record {batch.first + int(idx[0])}: several sensor schemas interleaved")
-    schema = st.schemas.get(schema_ids[0])
-    if schema is None:
-        raise ConversionError(
-            path, f"log.bin record {batch.first + int(idx[0])}: SENSOR_DATA before its SENSOR_SCHEMA {schema_ids[0]}"
-        )
-    bps = schema.bytes_per_sample
-    body = batch.sizes[idx] - 2
-    bad = np.nonzero(body % bps)[0]
-    if len(bad):
-        i = int(idx[bad[0]])
-        raise ConversionError(
-            path, f"log.bin record {batch.first + i}: SENSOR_DATA of {int(batch.sizes[i])} bytes is not whole samples"
-        )
-    counts = body // bps
-    raw = np.frombuffer(_concat_payloads(batch, idx, skip=2), dtype=np.uint8).reshape(-1, bps)
-    cols = decode_sensor_samples(schema, raw)
-    t = even_times_ns(batch.seconds[idx], counts, np.maximum(counts, 1))
-
-    def trio(prefix: str) -> np.ndarray | None:
-        names = [f"{prefix} {a}" for a in "XYZ"]
-        return np.column_stack([cols[n] for n in names]) if all(n in cols for n in names) else None
-
-    acc, gyr, mag = trio("Accelerometer"), trio("Gyroscope"), trio("Magnetometer")
-    temp = cols.get("Temperature")
-    if temp is not None:
-        temp = temp + float(st.meta.get("imu_temp_offset", 21.0))
-    rate = int(np.median(counts))
-    if st.imu_rate_hz is None:
-        st.imu_rate_hz = rate
-    meta = {**st.meta, "rate_hz": float(st.imu_rate_hz), "columns": [c.label for c in schema.columns if c.label]}
-    meta["resolution"] = _sensor_resolution(schema, float(st.meta.get("imu_temp_offset", 21.0)))
-    values = {
-        "acc": None if acc is None else acc * G0,
-        "gyr": None if gyr is None else np.radians(gyr),
-        "mag": mag,
-        "temperature": temp,
-    }
-    first = np.cumsum(counts) - counts
-    pieces = with_gaps(t - st.origin_ns, values, first, prev + 1, jump, st.imu_rate_hz, st.origin_ns)
-    return [ImuStream(name=f"{st.name}_imu", t_ns=pt, meta=dict(meta), **pv) for pt, pv in pieces]
-
-
-def _sensor_resolution(schema: SensorSchema, temp_offset: float) -> dict[str, dict[str, Any]]:
-    """How the SI values of :func:`_sensor` follow from the SENSOR_DATA counts: ``(counts / column scale) *
-    unit factor (+ offset)`` per axis, as :mod:`imulog.archive.numbers` stores them (checked value by value)."""
-    scales = {c.label: c.scale for c in schema.columns if c.label and c.scale}
-    out: dict[str, dict[str, Any]] = {}
-    for name, prefix, factor in (
-        ("acc", "Accelerometer", G0),
-        ("gyr", "Gyroscope", np.pi / 180),
-        ("mag", "Magnetometer", 1.0),
-    ):
-        div = [scales.get(f"{prefix} {a}") for a in "XYZ"]
-        if all(div):
-            out[name] = {"divisor": div, "scale": factor}
-    if scales.get("Temperature"):
-        out["temperature"] = {"divisor": scales["Temperature"], "offset": temp_offset}
-    return out
-
-
-def _scalar_signals(batch: RecordBatch, st: _State) -> list[SignalStream]:
-    out = []
-    specs = [
-        (BATTERY, "battery", "<u2", ["battery"], ["V"], 1e-3),
-        (LUX, "lux", "<u2", ["lux"], ["lux"], 1.0),
-        (
-            CAPSENSE,
-            "capsense",
-            "<u2,<u2,u1,u1",
-            ["signal", "reference", "state", "bursts"],
-            ["counts"] * 2 + ["1"] * 2,
-            1.0,
-        ),
-    ]
-    for typ, suffix, fmt, columns, units, scale in specs:
-        idx = np.nonzero(batch.types == typ)[0]
-        dt = (
-            np.dtype(fmt)
-            if "," not in fmt
-            else np.dtype([(c, f) for c, f in zip(columns, fmt.split(","), strict=True)])
-        )
-        idx = idx[batch.sizes[idx] >= dt.itemsize]
-        if len(idx) == 0:
-            continue
-        rows = np.frombuffer(b"".join(batch.payload(int(i))[: dt.itemsize] for i in idx), dtype=dt)
-        values = (
-            np.column_stack([rows[c].astype(np.float64) for c in columns])
-            if rows.dtype.names
-            else rows.astype(np.float64)[:, None] * scale
-        )
-        t = batch.seconds[idx] * NS_PER_S - st.origin_ns
-        keep = np.concatenate([[True], np.diff(t) > 0])  # a repeated second keeps its first record
-        out.append(
-            SignalStream(
-                topic=f"/signals/{st.name}_{suffix}", t_ns=t[keep], columns=columns, units=units, values=values[keep]
-            )
-        )
-    return out
+__all__ = [
+    "ActiGraphConverter",
+    "ACTIVITY",
+    "ACTIVITY2",
+    "ACTIVITY3",
+    "BATCH_BYTES",
+    "BATTERY",
+    "CAPSENSE",
+    "CONVERTER",
+    "decode_sensor_samples",
+    "even_times_ns",
+    "FILL_PIECE",
+    "fill_times_ns",
+    "FLOAT_PARAMETERS",
+    "INLINE_FILL",
+    "iter_chunks",
+    "iter_record_batches",
+    "LUX",
+    "MAX_GAP_S",
+    "MAX_INFO_BYTES",
+    "MAX_RATE_HZ",
+    "MAX_RECORDING_S",
+    "METADATA",
+    "NEO_SCALE",
+    "PARAMETER_NAMES",
+    "PARAMETERS",
+    "parse_info",
+    "parse_offset_s",
+    "parse_parameters",
+    "parse_schema",
+    "read_gt3x",
+    "RecordBatch",
+    "SENSOR_DATA",
+    "SENSOR_SCHEMA",
+    "SensorColumn",
+    "SensorSchema",
+    "SEPARATOR",
+    "SIGNED_PARAMETERS",
+    "ssp_decode",
+    "TICKS_AT_1970",
+    "TICKS_PER_S",
+    "ticks_to_epoch_ns",
+    "unpack_12bit_yxz",
+    "with_gaps",
+]
 
 
 class _StoredMember:

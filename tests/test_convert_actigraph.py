@@ -162,9 +162,12 @@ def test_a_clock_jump_is_not_idle_sleep(gt3x_dir: Path, tmp_path: Path):
 
 def test_long_idle_sleep_comes_in_bounded_pieces(monkeypatch, gt3x_dir: Path, tmp_path: Path):
     import imulog.converters.actigraph as ag
+    import imulog.converters.actigraph_decode as decode
+    import imulog.converters.actigraph_format as fmt
 
-    monkeypatch.setattr(ag, "INLINE_FILL", 900)  # 10 s at 90 Hz
-    monkeypatch.setattr(ag, "FILL_PIECE", 1000)
+    monkeypatch.setattr(fmt, "INLINE_FILL", 900)  # 10 s at 90 Hz
+    for module in (fmt, decode):  # where the gaps are cut and where the long ones are filled
+        monkeypatch.setattr(module, "FILL_PIECE", 1000)
     src = gt3x_dir / "example.gt3x"
     with zipfile.ZipFile(src) as z:
         log = z.read("log.bin")
