@@ -1,0 +1,322 @@
+"""Axivity .cwa building blocks: the header, data block layout, time stamps, sample unpacking, checks and gaps (pure)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from imulog.converters._binary import (
+    NS_PER_S,
+    days_from_civil,
+)
+from imulog.converters._common import G0
+from imulog.converters.errors import ConversionError
+
+HEADER_BYTES = 1024
+
+
+BLOCK_BYTES = 512
+
+
+BLOCKS_PER_CHUNK = 8192  # 4 MiB of blocks per decoded batch
+
+
+BLOCK_DTYPE = np.dtype(
+    [
+        ("magic", "<u2"),
+        ("length", "<u2"),
+        ("fractional", "<u2"),
+        ("session", "<u4"),
+        ("sequence", "<u4"),
+        ("rtc", "<u4"),
+        ("light", "<u2"),
+        ("temperature", "<u2"),
+        ("events", "u1"),
+        ("battery", "u1"),
+        ("rate_code", "u1"),
+        ("axes_bps", "u1"),
+        ("offset", "<i2"),
+        ("count", "<u2"),
+        ("data", "u1", (480,)),
+        ("checksum", "<u2"),
+    ]
+)
+
+
+MAGIC_AX = 0x5841  # b"AX"
+
+
+OTHER_BLOCKS = {0x444D, 0x4255, 0x4953}  # "MD" (repeated metadata), "UB" (usage), "SI" (session info): skipped
+
+
+HARDWARE = {0x00: "AX3", 0xFF: "AX3", 0x17: "AX3", 0x64: "AX6"}
+
+
+@dataclass(frozen=True)
+class CwaHeader:
+    """The ``MD`` header's fields (rate in Hz, accelerometer range in g)."""
+
+    hardware_type: int
+    device_id: int
+    session_id: int
+    sensor_config: int
+    rate_code: int
+    firmware: int
+    annotation: str
+
+    @property
+    def rate_hz(self) -> float:
+        return rate_from_code(self.rate_code)
+
+    @property
+    def accel_range_g(self) -> int:
+        return 16 >> (self.rate_code >> 6)
+
+    @property
+    def model(self) -> str:
+        return HARDWARE.get(self.hardware_type, f"Axivity (hardware 0x{self.hardware_type:02X})")
+
+
+def rate_from_code(code: int | np.ndarray) -> float | np.ndarray:
+    """Sampling rate in Hz of a CWA rate code: 3200 / 2^(15 - (code & 15))."""
+    return 3200.0 / np.left_shift(1, 15 - (np.asarray(code, dtype=np.int64) & 0x0F))
+
+
+def parse_header(path: Path, data: bytes) -> CwaHeader:
+    """The 1024-byte ``MD`` header; ConversionError when it is not one."""
+    if len(data) < HEADER_BYTES or data[:2] != b"MD":
+        raise ConversionError(path, "not an Axivity .cwa file (no 'MD' header block)")
+    h = np.frombuffer(data, dtype=np.uint8, count=HEADER_BYTES)
+    device = int(h[5]) | int(h[6]) << 8
+    upper = int(h[11]) | int(h[12]) << 8
+    if upper != 0xFFFF:
+        device |= upper << 16
+    annotation = bytes(h[64:512]).rstrip(b"\xff\x00 ").decode("latin-1").strip()
+    return CwaHeader(
+        hardware_type=int(h[4]),
+        device_id=device,
+        session_id=int.from_bytes(bytes(h[7:11]), "little"),
+        sensor_config=int(h[35]),
+        rate_code=int(h[36]),
+        firmware=int(h[41]),
+        annotation=annotation,
+    )
+
+
+def rtc_to_epoch_s(rtc: np.ndarray) -> np.ndarray:
+    """Packed CWA RTC values -> int64 seconds since 1970 of the device's local wall time."""
+    v = np.asarray(rtc, dtype=np.int64)
+    year = ((v >> 26) & 0x3F) + 2000
+    month = (v >> 22) & 0x0F
+    day = (v >> 17) & 0x1F
+    hour = (v >> 12) & 0x1F
+    minute = (v >> 6) & 0x3F
+    second = v & 0x3F
+    return days_from_civil(year, month, day) * 86400 + hour * 3600 + minute * 60 + second
+
+
+def block_word_sums(raw: np.ndarray) -> np.ndarray:
+    """16-bit sum of the 256 little-endian words of each 512-byte block (0 for an intact block)."""
+    words = raw.view("<u2").reshape(len(raw), BLOCK_BYTES // 2)
+    return (words.sum(axis=1, dtype=np.uint64) & 0xFFFF).astype(np.uint16)
+
+
+def block_start_ns(blocks: np.ndarray) -> np.ndarray:
+    """Start time of each block (its sample 0), int64 ns since 1970 on the device's local clock."""
+    rate = rate_from_code(blocks["rate_code"])
+    frac = blocks["fractional"].astype(np.int64)
+    has_frac = (frac & 0x8000) != 0
+    frac16 = np.where(has_frac, (frac & 0x7FFF) << 1, 0)  # 1/65536 s
+    offset = blocks["offset"].astype(np.int64) + np.where(has_frac, (frac16 * rate.astype(np.int64)) // 65536, 0)
+    secs = rtc_to_epoch_s(blocks["rtc"])
+    return secs * NS_PER_S + (frac16 * NS_PER_S) // 65536 - np.round(offset * (NS_PER_S / rate)).astype(np.int64)
+
+
+def gyro_range_dps(light: np.ndarray) -> np.ndarray:
+    """Gyroscope range (deg/s, 32768 LSB) from the block's ``light`` word: 8000 / 2^m, 2000 when m = 0 (older
+    firmware leaves the bits clear)."""
+    m = (np.asarray(light, dtype=np.int64) >> 10) & 7
+    return np.where(m == 0, 2000.0, 8000.0 / np.left_shift(1, m))
+
+
+def temperature_degc(raw: np.ndarray) -> np.ndarray:
+    """Block temperature in degC from its 10-bit raw value (OpenMovement: raw * 75 / 256 - 50, an MCP9700 on a
+    3 V 10-bit ADC)."""
+    return (np.asarray(raw, dtype=np.int64) & 0x3FF) * (75.0 / 256.0) - 50.0
+
+
+def unpack_packed(data: np.ndarray, count: int) -> np.ndarray:
+    """AX3 packed samples (N, 480) bytes -> (N, count, 3) int32 counts (1 g = 256)."""
+    v = np.ascontiguousarray(data[:, : 4 * count]).view("<u4").astype(np.int64)
+    e = v >> 30
+    out = np.empty((*v.shape, 3), dtype=np.int32)
+    for k in range(3):
+        x = (v >> (10 * k)) & 0x3FF
+        x = np.where(x >= 512, x - 1024, x)
+        out[..., k] = x << e
+    return out
+
+
+def unpack_int16(data: np.ndarray, count: int, axes: int) -> np.ndarray:
+    """Unpacked samples (N, 480) bytes -> (N, count, axes) int16."""
+    return np.ascontiguousarray(data[:, : 2 * axes * count]).view("<i2").reshape(len(data), count, axes)
+
+
+@dataclass(frozen=True)
+class _Layout:
+    axes: int
+    packed: bool
+    capacity: int  # samples a block can hold; each block says how many it holds (sampleCount)
+
+
+def _layout(path: Path, blocks: np.ndarray, first_index: int) -> _Layout:
+    """The (single) sample format of a batch of blocks; ConversionError naming the first odd block."""
+    axes_bps = blocks["axes_bps"]
+    a0 = int(axes_bps[0])
+    odd = np.nonzero(axes_bps != a0)[0]
+    if len(odd):
+        i = int(odd[0])
+        raise ConversionError(
+            path,
+            f"data block {first_index + i}: sample format changes (numAxesBPS 0x{int(axes_bps[i]):02X}; "
+            f"the file started with 0x{a0:02X})",
+        )
+    axes, bps = a0 >> 4, a0 & 0x0F
+    if bps == 0 and axes == 3:
+        packed, size = True, 4
+    elif bps == 2 and axes in (3, 6, 9):
+        packed, size = False, 2 * axes
+    else:
+        raise ConversionError(path, f"data block {first_index}: unsupported sample format numAxesBPS 0x{a0:02X}")
+    capacity = 480 // size
+    too_many = np.nonzero(blocks["count"] > capacity)[0]
+    if len(too_many):
+        i = int(too_many[0])
+        raise ConversionError(
+            path,
+            f"data block {first_index + i}: impossible sample count {int(blocks['count'][i])} (at most {capacity})",
+        )
+    return _Layout(axes=axes, packed=packed, capacity=capacity)
+
+
+def _damage(raw: np.ndarray, blocks: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """Per block of a batch: damaged?, and why ("" when intact)."""
+    sums = block_word_sums(raw)
+    magic = blocks["magic"]
+    bad_magic = (magic != MAGIC_AX) & ~np.isin(magic, list(OTHER_BLOCKS))
+    bad_sum = (magic == MAGIC_AX) & ((sums != 0) | (blocks["length"] != 508))
+    why = [
+        f"not an 'AX' data block (starts {bytes(raw[i, :2])!r})"
+        if bad_magic[i]
+        else "checksum mismatch"
+        if bad_sum[i]
+        else ""
+        for i in range(len(raw))
+    ]
+    return bad_magic | bad_sum, why
+
+
+def _check_blocks(
+    path: Path, raw: np.ndarray, blocks: np.ndarray, first_index: int, skip_damaged: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """(indices in the batch of the AX blocks to decode, indices of damaged blocks). A damaged block is an error
+    naming it unless ``skip_damaged``."""
+    bad, why = _damage(raw, blocks)
+    if bad.any() and not skip_damaged:
+        i = int(np.nonzero(bad)[0][0])
+        what = why[i] if why[i] != "checksum mismatch" else "checksum mismatch (the block is damaged)"
+        raise ConversionError(
+            path,
+            f"data block {first_index + i} (byte {HEADER_BYTES + (first_index + i) * BLOCK_BYTES}): {what}; "
+            "--skip-damaged converts the rest with the damaged blocks as gaps",
+        )
+    return np.nonzero((blocks["magic"] == MAGIC_AX) & ~bad)[0], np.nonzero(bad)[0]
+
+
+def _decode(blocks: np.ndarray, layout: _Layout) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """(acc g, gyr deg/s or None, mag uT or None), each (N, count, 3) float64."""
+    accel_lsb = np.left_shift(1, 8 + ((blocks["light"].astype(np.int64) >> 13) & 7)).astype(np.float64)
+    if layout.packed:
+        return unpack_packed(blocks["data"], layout.capacity) / accel_lsb[:, None, None], None, None
+    raw = unpack_int16(blocks["data"], layout.capacity, layout.axes).astype(np.float64)
+    if layout.axes == 3:
+        return raw / accel_lsb[:, None, None], None, None
+    gyro_range = gyro_range_dps(blocks["light"])
+    gyr = raw[..., 0:3] / (32768.0 / gyro_range)[:, None, None]  # counts / (counts per deg/s): resolution()
+    acc = raw[..., 3:6] / accel_lsb[:, None, None]
+    mag = raw[..., 6:9] / 16.0 if layout.axes == 9 else None
+    return acc, gyr, mag
+
+
+def resolution(blocks: np.ndarray, gyr: bool, mag: bool) -> dict[str, dict[str, float]]:
+    """How the SI values of ``_decode`` (then ``* G0`` and ``np.radians``) follow from the counts of a block:
+    ``(counts / divisor) * scale``; the archive stores the counts where this gives every value back
+    (imulog.archive.numbers)."""
+    light = blocks["light"][:1]
+    out = {"acc": {"divisor": float(np.left_shift(1, 8 + ((int(light[0]) >> 13) & 7))), "scale": G0}}
+    if gyr:
+        out["gyr"] = {"divisor": float(32768.0 / gyro_range_dps(light)[0]), "scale": float(np.pi / 180)}
+    if mag:
+        out["mag"] = {"divisor": 16.0}
+    return out
+
+
+def sample_times_ns(
+    starts: np.ndarray,
+    next_start: int | None,
+    counts: np.ndarray,
+    rate_hz: np.ndarray,
+    breaks: np.ndarray | None = None,
+) -> np.ndarray:
+    """Per-sample times (N, max count) int64 ns from block starts (entries past a block's count are meaningless):
+    spread to the next block's start when it follows within twice the nominal block duration (and no skipped
+    damaged block lies between them: ``breaks``), else at the nominal rate."""
+    counts = np.maximum(np.asarray(counts, dtype=np.int64), 1)
+    nominal = np.round(counts * NS_PER_S / rate_hz).astype(np.int64)
+    nxt = np.append(starts[1:], next_start if next_start is not None else starts[-1] + nominal[-1])
+    span = nxt - starts
+    ok = (span > 0) & (span < 2 * nominal)
+    if breaks is not None:
+        ok &= ~breaks
+    span = np.where(ok, span, nominal)
+    k = np.arange(int(counts.max()), dtype=np.int64)
+    return starts[:, None] + (span[:, None] * k[None, :]) // counts[:, None]
+
+
+MAX_GAP_NS = 31 * 86400 * NS_PER_S  # a longer pause is a clock or file problem: refused
+
+
+def _gaps(
+    path: Path,
+    starts: np.ndarray,
+    next_start: int | None,
+    counts: np.ndarray,
+    rate_hz: np.ndarray,
+    index: np.ndarray,
+    breaks: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the recording paused: (sample positions, first NaN time, NaN count) per block, as ``with_fills`` takes.
+
+    A block followed by the next one more than twice its nominal duration later ends a run; the samples that
+    would fit between its nominal end and the next block's start are missing (NaN on the nominal grid).
+    """
+    counts = np.asarray(counts, dtype=np.int64)
+    nominal = np.round(counts * NS_PER_S / rate_hz).astype(np.int64)
+    has_next = np.ones(len(starts), dtype=bool)
+    nxt = np.append(starts[1:], next_start if next_start is not None else 0)
+    has_next[-1] = next_start is not None
+    end = starts + nominal
+    pause = has_next & (nxt - starts >= 2 * nominal)
+    if breaks is not None:  # skipped damaged blocks: a gap whatever its length
+        pause |= has_next & breaks & (nxt > end)
+    long = np.nonzero(pause & (nxt - end > MAX_GAP_NS))[0]
+    if len(long):
+        i = int(long[0])
+        raise ConversionError(
+            path,
+            f"data block {int(index[i]) + 1}: starts {int(nxt[i] - end[i]) / 86400e9:.0f} days after the previous "
+            "block: a device clock or file problem",
+        )
+    fill_n = np.where(pause, np.ceil((nxt - end) * rate_hz / NS_PER_S - 1e-9), 0).astype(np.int64)
+    return np.cumsum(counts), end, fill_n
