@@ -79,7 +79,7 @@ def test_convert_streams_large_files(cwa, tmp_path, monkeypatch):
     from click.testing import CliRunner
 
     from imulog.cli import cli
-    from imulog.commands import convert as convert_command
+    from imulog.commands import convert_stream as convert_command
 
     monkeypatch.setattr(convert_command, "STREAM_MIN_BYTES", 0)  # every file counts as large here
     out = tmp_path / "streamed.mcap"

@@ -36,7 +36,7 @@ def _convert(src: Path, out: Path, *args: str, env: dict | None = None) -> dict:
 @pytest.mark.parametrize("streamed", [False, True])
 def test_modes(cwa, tmp_path, monkeypatch, streamed):
     if streamed:
-        monkeypatch.setattr("imulog.commands.convert.STREAM_MIN_BYTES", 0)
+        monkeypatch.setattr("imulog.commands.convert_stream.STREAM_MIN_BYTES", 0)
     digest = hashlib.sha256(cwa.read_bytes()).hexdigest()
     auto = _convert(cwa, tmp_path / "auto.mcap")
     assert auto["attachments"] == ["ax6.cwa"] and "originals" not in auto["raw"]

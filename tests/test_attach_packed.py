@@ -28,7 +28,7 @@ def csv(tmp_path) -> Path:
 @pytest.mark.parametrize("streamed", [False, True])
 def test_packed_csv_reads_back_as_the_original(csv, tmp_path, monkeypatch, streamed):
     if streamed:
-        monkeypatch.setattr("imulog.commands.convert.STREAM_MIN_BYTES", 0)
+        monkeypatch.setattr("imulog.commands.convert_stream.STREAM_MIN_BYTES", 0)
     out = tmp_path / "t.mcap"
     r = CliRunner().invoke(cli, ["convert", str(csv), "-o", str(out), "--attach-original", "always"])
     assert r.exit_code == 0, r.output

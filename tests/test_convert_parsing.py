@@ -367,7 +367,7 @@ def test_damage_in_a_later_piece_names_the_same_line(case, tmp_path):
 def test_imulog_convert_streams_large_text_files(tmp_path, monkeypatch):
     from click.testing import CliRunner
 
-    import imulog.commands.convert as convert_command
+    import imulog.commands.convert_stream as convert_stream
     from imulog.archive import TrialReader
     from imulog.cli import cli
 
@@ -376,7 +376,7 @@ def test_imulog_convert_streams_large_text_files(tmp_path, monkeypatch):
     runner = CliRunner()
     whole = runner.invoke(cli, ["convert", str(path), "-o", str(tmp_path / "whole.mcap")])
     assert whole.exit_code == 0 and "piece by piece" not in whole.output
-    monkeypatch.setattr(convert_command, "STREAM_MIN_BYTES", 100_000)
+    monkeypatch.setattr(convert_stream, "STREAM_MIN_BYTES", 100_000)
     monkeypatch.setattr("imulog.converters.delimited.PIECE_BYTES", 200_000)
     streamed = runner.invoke(cli, ["convert", str(path), "-o", str(tmp_path / "streamed.mcap")])
     assert streamed.exit_code == 0 and "piece by piece" in streamed.output, streamed.output

@@ -383,7 +383,7 @@ def test_streamed_text_is_judged_on_excerpts_from_every_piece(tmp_path, monkeypa
     from imulog.converters import delimited
 
     from imulog.archive import TrialReader
-    from imulog.commands import convert as convert_command
+    from imulog.commands import convert_stream as convert_command
 
     rng = np.random.default_rng(5)
     n = 60_000  # 10 min at 100 Hz, ~4 pieces of 1.5 MB

@@ -1,0 +1,171 @@
+"""``imulog convert`` of folders: one trial per session (an IMU recording with the optical exports beside it)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any
+
+import click
+
+from imulog.commands.convert_common import (
+    _channel_list,
+    _convert_group,
+    _echo_json,
+    _write,
+    conversion_warnings,
+    finish_recording,
+    load_meta_file,
+)
+from imulog.converters import ConversionError, ConvertOptions
+from imulog.converters.registry import (
+    detect,
+    group_directory,
+    recording_key,
+)
+from imulog.model import Recording
+
+#: formats of optical (motion capture) exports: beside one IMU recording in a folder, they are its session's
+OPTICAL_FORMATS = frozenset({"c3d", "vicon-csv", "motive", "qualisys", "opensim-trc"})
+
+
+def _is_optical(files: list[Path]) -> bool:
+    """True when every file of a recording is an optical export (:data:`OPTICAL_FORMATS`)."""
+    try:
+        return all(detect(p).name in OPTICAL_FORMATS for p in files)
+    except ConversionError:
+        return False
+
+
+def sessions(groups: list[tuple[str, list[Path]]]) -> list[tuple[str, list[Path]]]:
+    """One trial per session: in each folder, a single recording with IMU data (e.g. 11 per-sensor Xsens files)
+    and the optical exports beside it (C3D, Nexus CSV, Motive, Qualisys, TRC) are one trial, named after the
+    IMU recording. A folder with several IMU recordings keeps one trial per recording."""
+    by_folder: dict[Path, list[tuple[str, list[Path]]]] = {}
+    for name, files in groups:
+        by_folder.setdefault(files[0].parent, []).append((name, files))
+    out: list[tuple[str, list[Path]]] = []
+    for found in by_folder.values():
+        optical = [_is_optical(files) for _, files in found]
+        imu = [g for g, opt in zip(found, optical, strict=True) if not opt]
+        if len(imu) == 1 and len(found) > 1:
+            out.append(
+                (
+                    imu[0][0],
+                    [*imu[0][1], *(p for (_, files), opt in zip(found, optical, strict=True) if opt for p in files)],
+                )
+            )
+        else:
+            out.extend(found)
+    return out
+
+
+def _convert_folder_group(
+    files: list[Path], fmt: str | None, options: ConvertOptions
+) -> tuple[Recording, dict[str, str], list[tuple[Path, str]]]:
+    """Convert the files of one folder trial; a file that fails to convert is left out and returned with its
+    reason (the others still make the trial). Files that convert but cannot be combined are an error."""
+    skipped: list[tuple[Path, str]] = []
+    todo = list(files)
+    while True:
+        try:
+            rec, formats = _convert_group(todo, fmt, options)
+            return rec, formats, skipped
+        except ConversionError as e:
+            bad = next((p for p in todo if e.path == str(p)), None)
+            if bad is None or len(todo) == 1 or e.problem.startswith("cannot combine"):
+                raise
+            skipped.append((bad, e.problem))
+            todo.remove(bad)
+
+
+def _sibling_meta(files: list[Path]) -> dict[str, dict[str, Any]]:
+    """Per-recording metadata beside the exports: ``<key>_meta.json`` / ``<key>.meta.toml`` (as the simulator writes)."""
+    try:
+        conv = detect(files[0])
+    except ConversionError:
+        conv = None
+    key = recording_key(files[0], conv)  # the format's own key (Xsens: MT_<master>_<trial>) when it has one
+    for suffix in ("_meta.json", "_meta.toml", ".meta.json", ".meta.toml"):
+        candidate = files[0].parent / f"{key}{suffix}"
+        if key and candidate.is_file():
+            return load_meta_file(candidate)
+    return {}
+
+
+def _convert_directories(
+    dirs: list[Path],
+    out_dir: Path,
+    fmt: str | None,
+    options: ConvertOptions,
+    meta: dict,
+    *,
+    attach: str,
+    overwrite: bool,
+    as_json: bool = False,
+) -> None:
+    jobs: list[tuple[Path, list[Path]]] = []
+    skipped: list[tuple[Path, str]] = []
+    for d in dirs:
+        for name, files in sessions(group_directory(d, skipped)):
+            prefix = d.name if len(dirs) > 1 else ""
+            jobs.append((out_dir / prefix / f"{name}.mcap", files))
+    if not jobs:
+        reasons = "".join(f"; {p.name}: {why}" for p, why in skipped[:3])
+        raise click.ClickException(f"no convertible files under {', '.join(map(str, dirs))}{reasons}")
+    if out_dir.suffix.lower() == ".mcap":  # -o trial.mcap: fine for a folder holding one recording
+        if len(jobs) != 1:
+            raise click.UsageError(
+                f"the folder holds {len(jobs)} recordings, one trial each: give an output folder "
+                f"(e.g. -o {out_dir.with_suffix('')}/), not {out_dir} (one session is one trial: one IMU "
+                "recording, e.g. per-sensor files sharing a name, with its optical exports; or list the files)"
+            )
+        jobs = [(out_dir, jobs[0][1])]
+    failures: list[str] = []
+    warnings: list[str] = []
+    written = 0
+    trials: list[dict[str, Any]] = []
+    with click.progressbar(
+        jobs, label="converting", item_show_func=lambda j: j[0].name if j else "", file=sys.stderr
+    ) as bar:
+        for target, files in bar:
+            try:
+                rec, formats, left_out = _convert_folder_group(files, fmt, options)
+                skipped.extend(left_out)
+                trial_meta = _sibling_meta(files)
+                for name, values in meta.items():
+                    trial_meta.setdefault(name, {}).update(values)
+                finish_recording(rec, trial_meta, formats)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                _write(target, rec, attach=attach, overwrite=overwrite)
+                written += 1
+                warnings.extend(f"{target}: {msg}" for msg in conversion_warnings(rec))
+                trials.append(
+                    {
+                        "path": str(target),
+                        "channels": {s.topic: len(s) for s in rec.streams()},
+                        "warnings": conversion_warnings(rec),
+                        "inputs": [p.name for p in files if p not in {q for q, _ in left_out}],
+                    }
+                )
+            except ConversionError as e:
+                failures.append(str(e))
+            except (FileExistsError, ValueError, OSError) as e:
+                failures.append(f"{target}: {e}")
+    if as_json:
+        _echo_json(trials, failures, skipped)
+        if failures:
+            raise click.exceptions.Exit(1)
+        return
+    if out_dir.suffix.lower() == ".mcap" and trials:
+        click.echo(f"wrote {out_dir} from {len(trials[0]['inputs'])} files ({_channel_list(trials[0]['channels'])})")
+    else:
+        click.echo(f"wrote {written} trial(s) to {out_dir}")
+    for path, why in skipped:
+        click.echo(f"skipped {path}: {why}", err=True)
+    for msg in warnings:
+        click.echo(f"warning: {msg}", err=True)
+    for msg in failures:
+        click.echo(f"error: {msg}", err=True)
+    if failures:
+        raise click.exceptions.Exit(1)

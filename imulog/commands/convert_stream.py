@@ -1,0 +1,137 @@
+"""``imulog convert`` of one large file piece by piece (``Converter.iter_chunks``): memory bounded by a piece."""
+
+from __future__ import annotations
+
+import itertools
+import os
+import sys
+from pathlib import Path
+
+import click
+
+from imulog.commands.convert_common import _echo_json, _format_name, conversion_record
+from imulog.converters import ConversionError, ConvertOptions, UnknownFormatError
+from imulog.converters.base import Converter
+from imulog.converters.registry import get
+from imulog.model import Recording
+
+#: files at least this large are converted piece by piece when their format can (memory stays bounded)
+STREAM_MIN_BYTES = int(os.environ.get("IMULOG_STREAM_MIN_BYTES", 32 * 1024 * 1024))
+
+
+def _streams(path: Path, fmt: str | None, options: ConvertOptions) -> bool:
+    """True when ``path`` is large and its format reads piece by piece (``Converter.iter_chunks``)."""
+    if not path.is_file() or path.stat().st_size < STREAM_MIN_BYTES:
+        return False
+    try:
+        conv = get(_format_name(path, fmt, options))
+    except (ConversionError, UnknownFormatError):
+        return False
+    return type(conv).iter_chunks is not Converter.iter_chunks
+
+
+def _convert_streaming(
+    path: Path,
+    output: Path,
+    fmt: str | None,
+    options: ConvertOptions,
+    meta: dict,
+    *,
+    attach: str,
+    overwrite: bool,
+    as_json: bool = False,
+) -> None:
+    """Convert one large file piece by piece (memory bounded by a piece, not by the recording)."""
+    from imulog.archive import ArchiveError
+    from imulog.archive.streaming import StreamingTrialWriter
+    from imulog.converters.plausibility import PieceExcerpts, marker_warnings
+    from imulog.converters.registry import iter_file_chunks
+    from imulog.converters.values import ValueReport, finish
+
+    name = _format_name(path, fmt, options)
+    conv = get(name)
+    size = path.stat().st_size
+    notes: list[str] = []
+    counts: dict[str, int] = {}
+    try:
+        report = ValueReport()  # the value check of converters/values.py, over all pieces
+        pieces = iter_file_chunks(path, conv, options, report)
+        first = next(pieces, None)
+        if first is None:
+            raise ConversionError(path, "no samples")
+        records = {k: {**first.metadata.get(k, {}), **v} for k, v in meta.items()}
+        expected = _expected_duration_s(first, size, _bytes_per_sample(path))
+        with (
+            StreamingTrialWriter(
+                output,
+                metadata=records,
+                sources=[path],
+                attach=attach,
+                overwrite=overwrite,
+                expected_duration_s=expected,
+            ) as writer,
+            click.progressbar(
+                length=max(1, int(expected or 1)), label=f"converting {path.name} (s of recording)", file=sys.stderr
+            ) as bar,
+        ):
+            covered, shown = 0.0, 0
+            spread = PieceExcerpts()  # unit plausibility on excerpts from the whole recording, judged at the end
+            for piece in itertools.chain([first], pieces):
+                writer.write(piece)
+                for stream in piece.streams():
+                    counts[stream.topic] = counts.get(stream.topic, 0) + len(stream)
+                for imu in piece.imus:
+                    spread.add(imu)
+                checks = [w for m in piece.markers for w in marker_warnings(m.topic, m.pos)] if piece is first else []
+                for note in [*piece.warnings, *checks]:  # the converter's own notes for every piece
+                    if note not in notes:
+                        notes.append(note)
+                covered += _span_s(piece)
+                target = min(bar.length - 1, int(covered))  # an estimate: the bar closes when the file ends
+                bar.update(max(0, target - shown))
+                shown = max(shown, target)
+            bar.update(bar.length - shown)
+            notes.extend(w for w in spread.warnings() if w not in notes)
+            checked = Recording()
+            finish(checked, report, path)  # an unusable channel fails here, before the file is kept
+            notes.extend(w for w in checked.warnings if w not in notes)
+            # after the pieces: a reader that hashed the file while reading it spares a second pass over it
+            writer.metadata["imulog.conversion"] = {**conversion_record([path], {path.name: name}), "streamed": True}
+            if notes:
+                writer.metadata["imulog.conversion"]["warnings"] = notes
+    except ConversionError as e:
+        raise click.ClickException(str(e)) from None
+    except ArchiveError as e:
+        raise click.ClickException(str(e)) from None
+    except (FileExistsError, ValueError, OSError) as e:
+        raise click.ClickException(f"{output}: {e}") from None
+    if as_json:
+        _echo_json([{"path": str(output), "channels": counts, "warnings": notes, "streamed": True}], [])
+        return
+    click.echo(f"wrote {output} ({', '.join(f'{t} {n}' for t, n in counts.items())}; converted piece by piece)")
+    for msg in notes:
+        click.echo(f"warning: {output}: {msg}", err=True)
+
+
+def _span_s(piece: Recording) -> float:
+    """Seconds covered by a piece (its longest stream)."""
+    spans = [(s.t_ns[-1] - s.t_ns[0]) / 1e9 for s in piece.streams() if getattr(s, "t_ns", None) is not None and len(s)]
+    return max(spans, default=0.0)
+
+
+def _bytes_per_sample(path: Path) -> float:
+    """About how many bytes of the file one sample takes: ~12 in the wearables' binary formats, one line of text
+    (the mean line length of the file's first 256 KiB) in text exports."""
+    from imulog.converters._common import looks_binary, read_head
+
+    head = read_head(path)
+    lines = head.count(b"\n")
+    return 12.0 if looks_binary(head) or lines < 2 else len(head) / lines
+
+
+def _expected_duration_s(first: Recording, size: int, bytes_per_sample: float = 12.0) -> float | None:
+    """About how long the file's recording is (s), from the first piece's rate and ``bytes_per_sample``; for the
+    progress bar and the viewer twins' message budget only."""
+    span = _span_s(first)
+    rate = sum(len(s) for s in first.imus) / span if span > 0 else 0.0
+    return size / (bytes_per_sample * rate) if rate > 0 else None
