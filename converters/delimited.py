@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from imulog.converters._binary import concat_chunks
 from imulog.converters._common import (
     drop_cut_final_row,
     estimate_rate_hz,
@@ -45,6 +46,7 @@ from imulog.converters.delimited_plan import (
     TIME_UNITS,
     _assumed_units,
     _check_infinite,
+    _Plan,
     _plan,
     _units_warning,
     resolve_inferred,
@@ -52,12 +54,14 @@ from imulog.converters.delimited_plan import (
 from imulog.converters.delimited_streams import _recording
 from imulog.converters.delimited_time import (
     UNIX_S_RANGE,
-    _is_host_clock,
     _StepCounts,
     _times,
+    host_column,
+    host_stamps,
     unix_start,
 )
 from imulog.converters.errors import ConversionError
+from imulog.converters.host_clock import HostClockFit
 from imulog.converters.mapping import Mapping, load_mapping, sibling_mapping
 
 from imulog.model import Recording
@@ -94,12 +98,58 @@ def read_delimited(
     header_lines: list[str] | None = None,
     raw: set[int] | None = None,
 ) -> Recording:
-    """Read one delimited IMU text file into a Recording (see module docstring).
+    """Read one delimited IMU text file into a Recording (see module docstring): :func:`iter_delimited` with the
+    whole file as one piece.
 
     Empty or NaN cells in IMU columns are gaps (NaN in the stream); ``units`` replaces the header's unit per
     quantity (``{"gyr": "deg/s"}``); units the header does not give are inferred from the values and said in
     ``Recording.warnings``. ``header_lines``: the file's first lines as a format reader normalised them (same
     number of lines, e.g. Shimmer's four header rows as a names and a units row); ``raw``: see :func:`analyse_header`.
+    """
+    pieces = list(
+        iter_delimited(
+            path,
+            mapping=mapping,
+            rate_hz=rate_hz,
+            default_units=default_units,
+            device_meta=device_meta,
+            fmt=fmt,
+            head=head,
+            units=units,
+            header_lines=header_lines,
+            raw=raw,
+            piece_bytes=None,
+        )
+    )
+    return pieces[0] if len(pieces) == 1 else concat_chunks(pieces)
+
+
+#: bytes of text per piece when a large file is converted piece by piece (``iter_delimited``)
+PIECE_BYTES = 16 * 1024 * 1024
+
+
+def iter_delimited(
+    path: Path,
+    *,
+    mapping: Mapping | None = None,
+    rate_hz: float | None = None,
+    default_units: dict[str, str] | None = None,
+    device_meta: dict[str, Any] | None = None,
+    fmt: str = "delimited",
+    head: bytes | None = None,
+    units: dict[str, str] | None = None,
+    header_lines: list[str] | None = None,
+    raw: set[int] | None = None,
+    piece_bytes: int | None = PIECE_BYTES,
+) -> Iterator[Recording]:
+    """The Recording of a delimited text file as consecutive pieces of about ``piece_bytes`` of text each (None:
+    the whole file as one piece, what :func:`read_delimited` returns); options as :func:`read_delimited`.
+
+    Every value, time stamp, gap and error (file, line, column) is the same whatever the piece size; the units the
+    header lacks are inferred from the first piece (an hour or more), a cut final row is dropped from the last.
+    Host receive stamps that repeat get a uniform clock fitted over the whole recording: a first pass over the
+    pieces sums the line's terms (:mod:`imulog.converters.host_clock`), the second converts, so memory stays one
+    piece. While reading, the file's SHA-256 is computed (the conversion record reuses it).
     """
     path = Path(path)
     plan = _plan(
@@ -114,53 +164,69 @@ def read_delimited(
         header_lines=header_lines,
         raw=raw,
     )
-    data = read_source(path)  # read once: parsed from memory, its SHA-256 computed from these bytes
-    values = read_numeric(plan.spec, data)
-    del data
-    first_line = plan.layout.skip_lines + 1
-    warnings = list(plan.spec.warnings)
-    _check_infinite(path, plan.layout, values, first_line)
-    assumed = _assumed_units(plan, values)
-    t_ns, time_desc = _times(plan, values, first_line)
-    assumed.extend(resolve_inferred(path, plan.layout, values, t_ns, plan.units))
-    warnings.extend(_units_warning(path, assumed))
-    rate_meta = float(plan.rate) if plan.rate else estimate_rate_hz(t_ns)
-    rec = _recording(plan, values, t_ns, time_desc, rate_meta, warnings)
-    start = unix_start(plan.layout, values, t_ns)
-    if start is not None:
-        rec.metadata["imulog.trial"] = start
-    return rec
-
-
-#: bytes of text per piece when a large file is converted piece by piece (``iter_delimited``)
-PIECE_BYTES = 16 * 1024 * 1024
-
-
-def iter_delimited(
-    path: Path,
-    *,
-    mapping: Mapping | None = None,
-    rate_hz: float | None = None,
-    units: dict[str, str] | None = None,
-    piece_bytes: int = PIECE_BYTES,
-) -> Iterator[Recording]:
-    """The Recording of :func:`read_delimited` as consecutive pieces of about ``piece_bytes`` of text each.
-
-    Every value, time stamp, gap and error (file, line, column) is what the whole-file reader gives; the units the
-    header lacks are inferred from the first piece (an hour or more), a cut final row is dropped from the last.
-    Host-clock time stamps that repeat need a least-squares fit over the whole recording: such a file comes
-    whole, as one piece. While reading, the file's SHA-256 is computed (the conversion record reuses it).
-    """
-    path = Path(path)
-    head = read_head(path)
-    plan = _plan(
-        path, head, mapping=mapping, rate_hz=rate_hz, default_units=None, device_meta=None, fmt="delimited", units=units
-    )
     time_cols = [c for c in plan.layout.columns if c.quantity == "time"]
-    if time_cols and _is_host_clock(plan, time_cols[0]):
-        yield read_delimited(path, mapping=mapping, rate_hz=rate_hz, head=head, units=units)
-        return
     index_cols = [c for c in plan.layout.columns if c.quantity == "index"]
+    pieces = _parsed_pieces(plan, piece_bytes)
+    assumed: list[str] | None = None
+    fit: HostClockFit | None = None
+    host = host_column(plan)
+    if host is not None:  # first pass: the line through every host stamp; a single piece is kept, not read again
+        fit, kept, assumed = HostClockFit(), [], None
+        origin = None
+        for k, (values, first_line, _, warnings) in enumerate(pieces):
+            _check_infinite(path, plan.layout, values, first_line)
+            if assumed is None:
+                assumed = _assumed_units(plan, values)
+                origin = float(values[0, host.index]) if len(values) else None
+            fit.add(host_stamps(plan, host, values, origin))
+            kept = [(values, first_line, k, warnings)] if k == 0 else []
+        pieces = iter(kept) if kept else _parsed_pieces(plan, piece_bytes)
+    first_row = 0
+    origin = None  # the recording's first time value: every piece's ns are relative to it
+    before: float | None = None  # the previous piece's last time (ns) or index: time must keep increasing
+    rate_meta: float | None = None
+    started = False
+    steps = _StepCounts() if time_cols and not plan.rate else None  # the exact median step, piece by piece
+    for values, first_line, _, warnings in pieces:
+        _check_infinite(path, plan.layout, values, first_line)
+        if not started:
+            assumed = _assumed_units(plan, values) if assumed is None else assumed
+            if time_cols:
+                origin = float(values[0, time_cols[0].index])
+        t_ns, time_desc = _times(plan, values, first_line, first_row=first_row, origin=origin, before=before, fit=fit)
+        if not started:
+            assert assumed is not None
+            assumed.extend(resolve_inferred(path, plan.layout, values, t_ns, plan.units))
+            warnings.extend(_units_warning(path, assumed))
+            rate_meta = float(plan.rate) if plan.rate else estimate_rate_hz(t_ns)
+        if steps is not None:
+            steps.add(np.diff(t_ns) if before is None else np.diff(np.concatenate([[before], t_ns])))
+            rate_meta = steps.rate_hz() if steps.exact else rate_meta  # the last piece's: the whole recording's
+        if time_cols:
+            before = int(t_ns[-1])
+        elif index_cols:
+            before = float(values[-1, index_cols[0].index])
+        rec = _recording(plan, values, t_ns, time_desc, rate_meta, warnings)
+        if not started:
+            start = unix_start(plan.layout, values, t_ns)
+            if start is not None:
+                rec.metadata["imulog.trial"] = start
+            started = True
+        yield rec
+        first_row += len(values)
+
+
+def _parsed_pieces(plan: _Plan, piece_bytes: int | None) -> Iterator[tuple[np.ndarray, int, int, list[str]]]:
+    """(values, first line number, piece number, warnings) of each piece of about ``piece_bytes`` of text (None:
+    the whole file, read once by :func:`read_source`, one piece); the file's SHA-256 is remembered."""
+    path = plan.path
+    if piece_bytes is None:
+        data = read_source(path)  # read once: parsed from memory, its SHA-256 computed from these bytes
+        spec = replace(plan.spec, warnings=[])
+        values = read_numeric(spec, data)
+        del data
+        yield values, plan.layout.skip_lines + 1, 0, list(spec.warnings)
+        return
     digest = hashlib.sha256()
     total = 0
     with open(path, "rb") as f:
@@ -171,12 +237,7 @@ def iter_delimited(
             digest.update(line)
             total += len(line)
         lines_before = plan.layout.skip_lines
-        first_row = 0
-        origin: float | None = None  # the recording's first time value: every piece's ns are relative to it
-        before: float | None = None  # the previous piece's last time (ns) or index: time must keep increasing
-        rate_meta: float | None = None
-        started = False
-        steps = _StepCounts() if time_cols and not plan.rate else None  # the exact median step, piece by piece
+        k = 0
         buf = f.read(piece_bytes)
         digest.update(buf)
         total += len(buf)
@@ -208,31 +269,11 @@ def iter_delimited(
                 if warning is not None:
                     spec = replace(spec, byte_range=(0, end))
                     warnings.append(warning)
-                if first_row and not piece[:end].strip(b" \t\r\n"):
+                if k and not piece[:end].strip(b" \t\r\n"):
                     break  # nothing but blank lines after the previous piece
-            values = read_numeric(spec, piece)
-            first_line = lines_before + 1
-            _check_infinite(path, plan.layout, values, first_line)
-            if not started:
-                assumed = _assumed_units(plan, values)
-                if time_cols:
-                    origin = float(values[0, time_cols[0].index])
-            t_ns, time_desc = _times(plan, values, first_line, first_row=first_row, origin=origin, before=before)
-            if not started:
-                assumed.extend(resolve_inferred(path, plan.layout, values, t_ns, plan.units))
-                warnings.extend(_units_warning(path, assumed))
-                rate_meta = float(plan.rate) if plan.rate else estimate_rate_hz(t_ns)
-                started = True
-            if steps is not None:
-                steps.add(np.diff(t_ns) if before is None else np.diff(np.concatenate([[before], t_ns])))
-                rate_meta = steps.rate_hz() if steps.exact else rate_meta  # the last piece's: the whole recording's
-            if time_cols:
-                before = int(t_ns[-1])
-            elif index_cols:
-                before = float(values[-1, index_cols[0].index])
-            yield _recording(plan, values, t_ns, time_desc, rate_meta, warnings)
+            yield read_numeric(spec, piece), lines_before + 1, k, warnings
             lines_before += piece.count(b"\n")
-            first_row += len(values)
+            k += 1
         st = os.fstat(f.fileno())
     if st.st_size == total:
         remember_sha256(path, st, digest.hexdigest())

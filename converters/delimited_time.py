@@ -14,31 +14,27 @@ from imulog.converters._common import (
 from imulog.converters.delimited_header import Column, Layout, _tokens
 from imulog.converters.delimited_plan import _Plan
 from imulog.converters.errors import ConversionError
-
-
-def _fit_host_clock(path: Path, t_ns: np.ndarray, first_line: int, column: str) -> np.ndarray:
-    """Uniform device clock fitted to jittery host time stamps (e.g. Shimmer ``Timestamp_Unix``, 1 ms resolution).
-
-    The sensor samples at a fixed rate; the host stamps packets on arrival, so stamps repeat and jitter. A
-    least-squares line through (sample index, stamp) gives start and period; stamps further than 1 s from the
-    line mean a real clock problem and are reported.
-    """
-    i = np.arange(len(t_ns), dtype=np.float64)
-    rel = (t_ns - t_ns[0]).astype(np.float64)
-    slope, intercept = np.polyfit(i, rel, 1)
-    if not slope > 0:
-        raise ConversionError(path, "host time stamps do not increase", column=column)
-    resid = np.abs(rel - (slope * i + intercept))
-    if resid.max() > 1e9:
-        bad = int(np.argmax(resid))
-        raise ConversionError(
-            path, "host time stamp more than 1 s off the sample clock", line=first_line + bad, column=column
-        )
-    return t_ns[0] + np.round(intercept + slope * i).astype(np.int64)
+from imulog.converters.host_clock import HostClockFit
 
 
 def _is_host_clock(plan: _Plan, column: Column) -> bool:
     return "unix" in _tokens(column.name) or bool(plan.mapping and plan.mapping.host_clock)
+
+
+def host_column(plan: _Plan) -> Column | None:
+    """The time column when it holds host receive stamps (a Unix time column, or ``time.host_clock`` in the
+    mapping file), else None."""
+    time_cols = [c for c in plan.layout.columns if c.quantity == "time"]
+    return time_cols[0] if time_cols and _is_host_clock(plan, time_cols[0]) else None
+
+
+def host_stamps(plan: _Plan, column: Column, values: np.ndarray, origin: float | None) -> np.ndarray:
+    """The host stamps of a piece as int64 ns (``origin``: the recording's first time value), as :func:`_times`
+    converts them."""
+    try:
+        return to_ns(values[:, column.index], column.factor, origin)
+    except ValueError:
+        raise ConversionError(plan.path, "time stamps out of range", column=column.name) from None
 
 
 def _times(
@@ -49,11 +45,13 @@ def _times(
     first_row: int = 0,
     origin: float | None = None,
     before: float | None = None,
+    fit: HostClockFit | None = None,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Sample times (int64 ns) of the rows ``values`` and how they were found; ConversionError naming the line.
 
     For a later piece of the file: ``first_row`` its first row's index in the recording, ``origin`` the recording's
-    first time value, ``before`` the last time (or index) value of the piece before it.
+    first time value, ``before`` the last time (or index) value of the piece before it. ``fit``: the host clock
+    fitted over every piece (:func:`host_stamps`), for a time column of host receive stamps.
     """
     path = plan.path
     time_cols = [c for c in plan.layout.columns if c.quantity == "time"]
@@ -65,8 +63,15 @@ def _times(
         except ValueError:
             raise ConversionError(path, "time stamps out of range", column=tc.name) from None
         time_desc: dict[str, Any] = {"column": tc.name, "unit": tc.unit}
-        if _is_host_clock(plan, tc) and len(t_ns) > 2 and np.any(np.diff(t_ns) <= 0):
-            t_ns = _fit_host_clock(path, t_ns, first_line, tc.name)
+        if fit is not None and fit.applies:
+            slope, _ = fit.line()
+            if not slope > 0:
+                raise ConversionError(path, "host time stamps do not increase", column=tc.name)
+            t_ns, off = fit.times(t_ns, first_row)
+            if off is not None:
+                raise ConversionError(
+                    path, "host time stamp more than 1 s off the sample clock", line=first_line + off, column=tc.name
+                )
             time_desc["clock"] = "host receive time with repeated stamps: least-squares fit of a uniform rate"
         _check_increasing(path, t_ns, first_line, tc.name, before)
     elif plan.rate:
