@@ -14,25 +14,20 @@ units as found, in a :class:`~imulog.model.SignalStream` ``/signals/<device>``.
 
 from __future__ import annotations
 
-import hashlib
-import os
 from collections.abc import Iterator
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from imulog.converters import _pieces
 from imulog.converters._binary import concat_chunks
 from imulog.converters._common import (
-    drop_cut_final_row,
     estimate_rate_hz,
     read_head,
-    read_numeric,
-    read_source,
-    remember_sha256,
     text_head_lines,
     unit_overrides,
 )
+from imulog.converters._pieces import PIECE_BYTES, iter_numeric
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.delimited_header import (
     INFER,
@@ -46,7 +41,6 @@ from imulog.converters.delimited_plan import (
     TIME_UNITS,
     _assumed_units,
     _check_infinite,
-    _Plan,
     _plan,
     _units_warning,
     resolve_inferred,
@@ -124,10 +118,6 @@ def read_delimited(
     return pieces[0] if len(pieces) == 1 else concat_chunks(pieces)
 
 
-#: bytes of text per piece when a large file is converted piece by piece (``iter_delimited``)
-PIECE_BYTES = 16 * 1024 * 1024
-
-
 def iter_delimited(
     path: Path,
     *,
@@ -166,7 +156,7 @@ def iter_delimited(
     )
     time_cols = [c for c in plan.layout.columns if c.quantity == "time"]
     index_cols = [c for c in plan.layout.columns if c.quantity == "index"]
-    pieces = _parsed_pieces(plan, piece_bytes)
+    pieces = iter_numeric(plan.spec, piece_bytes)
     assumed: list[str] | None = None
     fit: HostClockFit | None = None
     host = host_column(plan)
@@ -180,7 +170,7 @@ def iter_delimited(
                 origin = float(values[0, host.index]) if len(values) else None
             fit.add(host_stamps(plan, host, values, origin))
             kept = [(values, first_line, k, warnings)] if k == 0 else []
-        pieces = iter(kept) if kept else _parsed_pieces(plan, piece_bytes)
+        pieces = iter(kept) if kept else iter_numeric(plan.spec, piece_bytes)
     first_row = 0
     origin = None  # the recording's first time value: every piece's ns are relative to it
     before: float | None = None  # the previous piece's last time (ns) or index: time must keep increasing
@@ -214,69 +204,6 @@ def iter_delimited(
             started = True
         yield rec
         first_row += len(values)
-
-
-def _parsed_pieces(plan: _Plan, piece_bytes: int | None) -> Iterator[tuple[np.ndarray, int, int, list[str]]]:
-    """(values, first line number, piece number, warnings) of each piece of about ``piece_bytes`` of text (None:
-    the whole file, read once by :func:`read_source`, one piece); the file's SHA-256 is remembered."""
-    path = plan.path
-    if piece_bytes is None:
-        data = read_source(path)  # read once: parsed from memory, its SHA-256 computed from these bytes
-        spec = replace(plan.spec, warnings=[])
-        values = read_numeric(spec, data)
-        del data
-        yield values, plan.layout.skip_lines + 1, 0, list(spec.warnings)
-        return
-    digest = hashlib.sha256()
-    total = 0
-    with open(path, "rb") as f:
-        for _ in range(plan.layout.skip_lines):
-            line = f.readline()
-            if not line.endswith(b"\n"):
-                raise ConversionError(path, "file ends inside the header", line=plan.layout.skip_lines)
-            digest.update(line)
-            total += len(line)
-        lines_before = plan.layout.skip_lines
-        k = 0
-        buf = f.read(piece_bytes)
-        digest.update(buf)
-        total += len(buf)
-        last = False
-        while not last:
-            nxt = f.read(piece_bytes)
-            digest.update(nxt)
-            total += len(nxt)
-            if len(nxt) < min(piece_bytes, 1 << 20):  # the file ends: a last piece of at least 1 MiB (or a piece)
-                piece, buf, last = buf + nxt, b"", True  # so the cut-row check sees the rows above the last one
-            else:
-                cut = buf.rfind(b"\n") + 1
-                if cut == 0:  # a line longer than a piece: read on
-                    buf += nxt
-                    continue
-                piece, buf = buf[:cut], buf[cut:] + nxt
-            spec = replace(
-                plan.spec,
-                skip_lines=lines_before,
-                byte_range=(0, len(piece)),
-                in_memory=True,
-                check_final_row=False,
-                allow_trailing_blank=last,
-                warnings=[],
-            )
-            warnings: list[str] = []
-            if last:
-                end, warning = drop_cut_final_row(path, piece, spec.delimiter, line_offset=lines_before)
-                if warning is not None:
-                    spec = replace(spec, byte_range=(0, end))
-                    warnings.append(warning)
-                if k and not piece[:end].strip(b" \t\r\n"):
-                    break  # nothing but blank lines after the previous piece
-            yield read_numeric(spec, piece), lines_before + 1, k, warnings
-            lines_before += piece.count(b"\n")
-            k += 1
-        st = os.fstat(f.fileno())
-    if st.st_size == total:
-        remember_sha256(path, st, digest.hexdigest())
 
 
 class DelimitedConverter(Converter):
@@ -320,7 +247,11 @@ class DelimitedConverter(Converter):
         mapping_path = options.mapping or sibling_mapping(path)
         mapping = load_mapping(mapping_path) if mapping_path else None
         return iter_delimited(
-            path, mapping=mapping, rate_hz=options.rate_hz, units=unit_overrides(options.extra), piece_bytes=PIECE_BYTES
+            path,
+            mapping=mapping,
+            rate_hz=options.rate_hz,
+            units=unit_overrides(options.extra),
+            piece_bytes=_pieces.PIECE_BYTES,
         )
 
 

@@ -24,11 +24,14 @@ dates the trial (UTC).
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from pathlib import Path
 
+from imulog.converters import _pieces
 from imulog.converters._common import head_lines, is_number, read_head, split_row, text_head_lines, unit_overrides
+from imulog.converters._pieces import PIECE_BYTES
 from imulog.converters.base import Converter, ConvertOptions
-from imulog.converters.delimited import detect_delimiter, read_delimited
+from imulog.converters.delimited import detect_delimiter, iter_delimited
 from imulog.converters.errors import ConversionError
 from imulog.converters.mapping import load_mapping, sibling_mapping
 
@@ -121,6 +124,16 @@ def normalised_lines(lines: list[str], found: tuple[int, str, list[list[str]]]) 
 
 
 def read_shimmer(path: Path, options: ConvertOptions | None = None) -> Recording:
+    """The whole file: :func:`iter_shimmer` as one piece."""
+    (rec,) = iter_shimmer(path, options, piece_bytes=None)
+    return rec
+
+
+def iter_shimmer(
+    path: Path, options: ConvertOptions | None = None, piece_bytes: int | None = PIECE_BYTES
+) -> Iterator[Recording]:
+    """The recording in pieces of about ``piece_bytes`` of text (None: one piece), read by
+    :func:`~imulog.converters.delimited.iter_delimited` with the four header rows as a names and a units row."""
     options = options or ConvertOptions()
     path = Path(path)
     head = read_head(path)
@@ -131,36 +144,43 @@ def read_shimmer(path: Path, options: ConvertOptions | None = None) -> Recording
     norm, raw = normalised_lines(lines, found)
     flags = found[2][2]
     mapping_path = options.mapping or sibling_mapping(path)
-    try:
-        rec = read_delimited(
-            path,
-            mapping=load_mapping(mapping_path) if mapping_path else None,
-            rate_hz=options.rate_hz,
-            head=head,
-            units=unit_overrides(options.extra),
-            header_lines=norm,
-            raw=raw,
-            fmt="shimmer-csv",
-        )
-    except ConversionError as e:
-        if "no time column" in e.problem and raw:
-            raise ConversionError(
-                path,
-                "uncalibrated (RAW) Shimmer export: its Timestamp is clock ticks, not time; export calibrated "
-                "(CAL) data from Consensys/ShimmerCapture, or give --rate",
-            ) from None
-        raise
-    if raw and not rec.imus:
-        rec.warnings.append(
-            f"{path.name}: uncalibrated (RAW) Shimmer export: {len(raw)} columns kept as ADC counts in the signals, "
-            "no IMU stream (export calibrated data for SI units)"
-        )
-    elif raw and len(raw) < len([f for f in flags if f]):
-        rec.warnings.append(f"{path.name}: {len(raw)} RAW (uncalibrated) columns kept as counts in the signals")
-    for name, meta in rec.metadata.items():
-        if name.startswith("imulog.device."):
-            meta["layout"] = "four header rows (device, signal, RAW/CAL, units)"
-    return rec
+    pieces = iter_delimited(
+        path,
+        mapping=load_mapping(mapping_path) if mapping_path else None,
+        rate_hz=options.rate_hz,
+        head=head,
+        units=unit_overrides(options.extra),
+        header_lines=norm,
+        raw=raw,
+        fmt="shimmer-csv",
+        piece_bytes=piece_bytes,
+    )
+    first = True
+    while True:
+        try:
+            rec = next(pieces, None)
+        except ConversionError as e:
+            if "no time column" in e.problem and raw:
+                raise ConversionError(
+                    path,
+                    "uncalibrated (RAW) Shimmer export: its Timestamp is clock ticks, not time; export calibrated "
+                    "(CAL) data from Consensys/ShimmerCapture, or give --rate",
+                ) from None
+            raise
+        if rec is None:
+            return
+        if first and raw and not rec.imus:
+            rec.warnings.append(
+                f"{path.name}: uncalibrated (RAW) Shimmer export: {len(raw)} columns kept as ADC counts in the "
+                "signals, no IMU stream (export calibrated data for SI units)"
+            )
+        elif first and raw and len(raw) < len([f for f in flags if f]):
+            rec.warnings.append(f"{path.name}: {len(raw)} RAW (uncalibrated) columns kept as counts in the signals")
+        for name, meta in rec.metadata.items():
+            if name.startswith("imulog.device."):
+                meta["layout"] = "four header rows (device, signal, RAW/CAL, units)"
+        first = False
+        yield rec
 
 
 class ShimmerConverter(Converter):
@@ -175,6 +195,10 @@ class ShimmerConverter(Converter):
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_shimmer(Path(path), options)
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """Pieces of about 16 MB of text (see :func:`iter_shimmer`)."""
+        return iter_shimmer(Path(path), options, piece_bytes=_pieces.PIECE_BYTES)
 
 
 CONVERTER = ShimmerConverter()

@@ -377,7 +377,7 @@ def test_imulog_convert_streams_large_text_files(tmp_path, monkeypatch):
     whole = runner.invoke(cli, ["convert", str(path), "-o", str(tmp_path / "whole.mcap")])
     assert whole.exit_code == 0 and "piece by piece" not in whole.output
     monkeypatch.setattr(convert_stream, "STREAM_MIN_BYTES", 100_000)
-    monkeypatch.setattr("imulog.converters.delimited.PIECE_BYTES", 200_000)
+    monkeypatch.setattr("imulog.converters._pieces.PIECE_BYTES", 200_000)
     streamed = runner.invoke(cli, ["convert", str(path), "-o", str(tmp_path / "streamed.mcap")])
     assert streamed.exit_code == 0 and "piece by piece" in streamed.output, streamed.output
     with TrialReader(tmp_path / "whole.mcap") as a, TrialReader(tmp_path / "streamed.mcap") as b:

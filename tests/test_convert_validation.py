@@ -397,7 +397,7 @@ def test_streamed_text_is_judged_on_excerpts_from_every_piece(tmp_path, monkeypa
     path = tmp_path / "long.csv"
     np.savetxt(path, np.column_stack([t, gyr, acc]), delimiter=",", header=header, comments="", fmt="%.6f")
     monkeypatch.setattr(convert_command, "STREAM_MIN_BYTES", 0)
-    monkeypatch.setattr(delimited, "PIECE_BYTES", 1_500_000)
+    monkeypatch.setattr("imulog.converters._pieces.PIECE_BYTES", 1_500_000)
     assert len(list(delimited.CONVERTER.iter_chunks(path))) >= 3
     out = tmp_path / "long.mcap"
     res = CliRunner().invoke(main, ["convert", str(path), "-o", str(out)])

@@ -1,0 +1,88 @@
+"""Numeric tables of delimited text in pieces of bounded size: the one way text readers read their rows.
+
+A reader parses its header, describes the numeric block as a :class:`~imulog.converters._table.TableSpec` and takes
+the rows from :func:`iter_numeric`; the whole file is the one-piece case (``piece_bytes=None``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from collections.abc import Iterator
+from dataclasses import replace
+
+import numpy as np
+from imulog.converters._final_row import drop_cut_final_row
+from imulog.converters._source import read_source, remember_sha256
+from imulog.converters._table import TableSpec, read_numeric
+from imulog.converters.errors import ConversionError
+
+#: bytes of text per piece when a large file is converted piece by piece (``Converter.iter_chunks`` of text formats)
+PIECE_BYTES = 16 * 1024 * 1024
+
+
+def iter_numeric(spec: TableSpec, piece_bytes: int | None) -> Iterator[tuple[np.ndarray, int, int, list[str]]]:
+    """The numeric block of ``spec`` (:func:`~imulog.converters._table.read_numeric`) in pieces of about
+    ``piece_bytes`` of text, each cut after a whole row: (values, line number of its first row, piece number,
+    warnings). None: the whole file, read once by :func:`read_source`, as one piece. Values, gaps, a cut final row
+    (dropped from the last piece, with its warning) and errors (file, line, column) are the same whatever the piece
+    size; the file's SHA-256 is computed while reading and remembered (:func:`known_sha256`)."""
+    path = spec.path
+    base = spec
+    if piece_bytes is None:
+        data = read_source(path)  # read once: parsed from memory, its SHA-256 computed from these bytes
+        spec = replace(base, warnings=[])
+        values = read_numeric(spec, data)
+        del data
+        yield values, base.skip_lines + 1, 0, list(spec.warnings)
+        return
+    digest = hashlib.sha256()
+    total = 0
+    with open(path, "rb") as f:
+        for _ in range(base.skip_lines):
+            line = f.readline()
+            if not line.endswith(b"\n"):
+                raise ConversionError(path, "file ends inside the header", line=base.skip_lines)
+            digest.update(line)
+            total += len(line)
+        lines_before = base.skip_lines
+        k = 0
+        buf = f.read(piece_bytes)
+        digest.update(buf)
+        total += len(buf)
+        last = False
+        while not last:
+            nxt = f.read(piece_bytes)
+            digest.update(nxt)
+            total += len(nxt)
+            if len(nxt) < min(piece_bytes, 1 << 20):  # the file ends: a last piece of at least 1 MiB (or a piece)
+                piece, buf, last = buf + nxt, b"", True  # so the cut-row check sees the rows above the last one
+            else:
+                cut = buf.rfind(b"\n") + 1
+                if cut == 0:  # a line longer than a piece: read on
+                    buf += nxt
+                    continue
+                piece, buf = buf[:cut], buf[cut:] + nxt
+            spec = replace(
+                base,
+                skip_lines=lines_before,
+                byte_range=(0, len(piece)),
+                in_memory=True,
+                check_final_row=False,
+                allow_trailing_blank=last,
+                warnings=[],
+            )
+            warnings: list[str] = []
+            if last:
+                end, warning = drop_cut_final_row(path, piece, spec.delimiter, line_offset=lines_before)
+                if warning is not None:
+                    spec = replace(spec, byte_range=(0, end))
+                    warnings.append(warning)
+                if k and not piece[:end].strip(b" \t\r\n"):
+                    break  # nothing but blank lines after the previous piece
+            yield read_numeric(spec, piece), lines_before + 1, k, warnings
+            lines_before += piece.count(b"\n")
+            k += 1
+        st = os.fstat(f.fileno())
+    if st.st_size == total:
+        remember_sha256(path, st, digest.hexdigest())
