@@ -34,11 +34,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import difflib
-import json
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -47,109 +44,35 @@ import numpy as np
 from imulog.model import ImuStream, MarkerStream, Recording
 from imulog.process import quaternion as quat
 from imulog.process.kinematics.dh import JOINT_NAMES, ArmModel, JointLimits, forward_kinematics
-from imulog.simulate import imu_model, minjerk, vicon_model, writers
+from imulog.simulate import imu_model, minjerk, vicon_model
+from imulog.simulate.arm_files import TRUTH_FORMAT, load_arm_truth, save_arm_truth, write_arm_files
+from imulog.simulate.arm_params import (
+    SEGMENTS,
+    TRUNK,
+    VICON_NAME,
+    ArmParams,
+    ArmTrial,
+    ArmTruth,
+    _split_overrides,
+    arm_parameter_names,
+)
 
-SEGMENTS = ("upper_arm", "forearm")
-TRUNK = "trunk"
-VICON_NAME = "vicon"
-
-
-@dataclass(frozen=True)
-class ArmParams:
-    """Arm trial parameters (degrees, metres, seconds)."""
-
-    duration_s: float = 60.0
-    rate_hz: float = 100.0  # Xsens MTw and Vicon Vero of the paper
-    neutral_s: float = 3.0  # static neutral posture at the start
-    blend_s: float = 2.0  # minimum-jerk blend from the posture into the movement
-    neutral_pose_deg: tuple[float, float, float, float, float] = (90.0, 30.0, 0.0, 90.0, 90.0)
-    # movement: centre and amplitude per joint (deg); centre - amplitude = 0 touches the lower limit
-    centre_deg: tuple[float, float, float, float, float] = (60.0, 55.0, 15.0, 55.0, 60.0)
-    amplitude_deg: tuple[float, float, float, float, float] = (35.0, 30.0, 35.0, 55.0, 60.0)
-    frequency_hz: tuple[float, float] = (0.05, 0.25)  # per-joint frequencies drawn in this range
-    upper_arm_length_m: float = 0.30
-    forearm_length_m: float = 0.27
-    styloid_distance_m: float = 0.06
-    carrying_angle_deg: float = 15.0
-    shoulder_m: tuple[float, float, float] = (0.2, 0.5, 1.3)  # shoulder centre in the Vicon world
-    trunk_heading_deg: float = 30.0  # trunk frame's rotation about the world vertical
-    workspace_margin_m: float = 0.0
-    mounting_error_deg: float = 0.0  # sd of the IMU-on-segment misalignment per axis
-    imu_lever_m: float = 0.04  # IMU distance from the segment's long axis
-    field_uT: float = 46.0
-    inclination_deg: float = 62.0
-    noise_free: bool = False
-    vicon_noise_mm: float = 0.2
-    imu_to_cluster_sd_deg: float = 0.0  # clusters slotted on the IMU supports (paper, Fig. 3a)
-    trunk_imu: bool = False  # add a trunk IMU (and cluster)
-    trunk_sway_deg: float = 0.0  # amplitude of the trunk's yaw / forward lean / side lean after the posture
-    trunk_pivot_below_m: float = 0.45  # the trunk turns about a point this far below the shoulder
-
-
-@dataclass
-class ArmTruth:
-    """True state on the common clock: joint angles ``q_rad`` (N, 5) (:data:`JOINT_NAMES` order),
-    segment-to-trunk rotations, elbow/wrist centres (N, 3) m in the trunk frame, the trunk-to-world
-    quaternions ``q_world_trunk`` (N, 4) and the IMU mounting rotations; per worn IMU its
-    sensor-to-world quaternion ``q_world_sensor[name]`` (N, 4, w,x,y,z) and position
-    ``imu_position_m[name]`` (N, 3) m in the Vicon world."""
-
-    t_ns: np.ndarray
-    q_rad: np.ndarray
-    r_upper_arm: np.ndarray
-    r_forearm: np.ndarray
-    elbow_m: np.ndarray
-    wrist_m: np.ndarray
-    q_world_trunk: np.ndarray
-    q_segment_to_sensor: dict[str, np.ndarray]
-    info: dict[str, Any] = field(default_factory=dict)
-    q_world_sensor: dict[str, np.ndarray] = field(default_factory=dict)
-    imu_position_m: dict[str, np.ndarray] = field(default_factory=dict)
-
-    @property
-    def joint_angles_deg(self) -> np.ndarray:
-        """``q_rad`` in degrees (N, 5)."""
-        return np.degrees(self.q_rad)
-
-
-@dataclass
-class ArmTrial:
-    recording: Recording
-    truth: ArmTruth
-    params: ArmParams
-    seed: int = 0
-    subject: int = 0
-    trial: int = 0
-    raw: dict[str, Any] | None = None  # exact decimal file values the writers use (see imu_model)
-
-    @property
-    def stem(self) -> str:
-        """File stem of the written trial (and of the in-memory ``source`` names)."""
-        return f"arm_s{self.subject:02d}_t{self.trial:02d}"
-
-
-def arm_parameter_names() -> dict[str, list[str]]:
-    """Names :func:`simulate_arm` accepts as ``**overrides``, grouped: arm model, IMU error model."""
-    return {
-        "arm": [f.name for f in dataclasses.fields(ArmParams)],
-        "imu": [f.name for f in dataclasses.fields(imu_model.ImuParams)],
-    }
-
-
-def _split_overrides(overrides: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(ArmParams fields, ImuParams fields); TypeError naming unknown ones (with the closest name)."""
-    names = arm_parameter_names()
-    arm = {k: v for k, v in overrides.items() if k in names["arm"]}
-    imu = {k: v for k, v in overrides.items() if k in names["imu"] and k not in arm}
-    unknown = sorted(set(overrides) - set(arm) - set(imu))
-    if unknown:
-        valid = names["arm"] + names["imu"]
-        hints = []
-        for name in unknown:
-            close = difflib.get_close_matches(name, valid, n=1)
-            hints.append(f"{name} (did you mean {close[0]}?)" if close else name)
-        raise TypeError(f"unknown arm parameter(s): {', '.join(hints)}")
-    return arm, imu
+__all__ = [
+    "arm_parameter_names",
+    "ArmParams",
+    "ArmTrial",
+    "ArmTruth",
+    "load_arm_truth",
+    "main",
+    "save_arm_truth",
+    "SEGMENTS",
+    "simulate_arm",
+    "simulate_arm_to_folder",
+    "TRUNK",
+    "TRUTH_FORMAT",
+    "VICON_NAME",
+    "write_arm_files",
+]
 
 
 def _joint_law(params: ArmParams, rng: np.random.Generator):
@@ -386,110 +309,6 @@ def simulate_arm(
     )
     raw = {"t_ns": t_ns, "channels": channels, "vicon_decimals": vparams.decimals}
     return ArmTrial(recording, truth, params, int(seed), int(subject), int(trial), raw)
-
-
-TRUTH_FORMAT = "imulog.arm_truth/1"
-_TRUTH_ARRAYS = ("t_ns", "q_rad", "r_upper_arm", "r_forearm", "elbow_m", "wrist_m", "q_world_trunk")
-_TRUTH_DICTS = ("q_segment_to_sensor", "q_world_sensor", "imu_position_m")
-
-
-def _json_default(obj: Any) -> Any:
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
-
-
-def save_arm_truth(truth: ArmTruth, stem: Path | str) -> tuple[Path, Path]:
-    """Write ``<stem>_truth.npz`` (arrays; per-IMU ones as ``<field>/<imu>``) and ``<stem>_truth.json``.
-
-    Same file pair as :func:`imulog.simulate.truth.save_truth`, format ``imulog.arm_truth/1``:
-    ``t_ns`` (common IMU/Vicon clock), ``q_rad`` (N, 5) true joint angles in
-    ``joint_names`` order (rad), segment-to-trunk rotation matrices, elbow/wrist centres (m, trunk
-    frame), trunk-to-world and per-IMU sensor-to-world quaternions (w,x,y,z), IMU positions (m)."""
-    stem = Path(stem)
-    npz = stem.with_name(stem.name + "_truth.npz")
-    js = stem.with_name(stem.name + "_truth.json")
-    arrays = {name: getattr(truth, name) for name in _TRUTH_ARRAYS}
-    for name in _TRUTH_DICTS:
-        for imu, value in getattr(truth, name).items():
-            arrays[f"{name}/{imu}"] = np.asarray(value)
-    np.savez_compressed(npz, **arrays)
-    doc = {
-        "format": TRUTH_FORMAT,
-        "protocol": "arm",
-        "arrays": npz.name,
-        "joint_names": list(JOINT_NAMES),
-        "units": {"t_ns": "ns", "q_rad": "rad", "elbow_m": "m", "wrist_m": "m", "imu_position_m": "m"},
-        "info": truth.info,
-    }
-    js.write_text(json.dumps(doc, indent=1, default=_json_default) + "\n")
-    return npz, js
-
-
-def load_arm_truth(path: Path | str) -> ArmTruth:
-    """Read :func:`save_arm_truth` files from ``<stem>_truth.json``, ``<stem>_truth.npz`` or the stem."""
-    path = Path(path)
-    for suffix in ("_truth.json", "_truth.npz"):
-        if path.name.endswith(suffix):
-            path = path.with_name(path.name[: -len(suffix)])
-            break
-    js = path.with_name(path.name + "_truth.json")
-    if not js.is_file():
-        raise FileNotFoundError(f"{js}: no ground-truth file")
-    doc = json.loads(js.read_text())
-    if doc.get("format") != TRUTH_FORMAT:
-        raise ValueError(f"{js}: not an arm truth file (format {doc.get('format')!r}, expected {TRUTH_FORMAT!r})")
-    with np.load(js.with_name(doc["arrays"])) as z:
-        data: dict[str, Any] = {name: z[name] for name in _TRUTH_ARRAYS}
-        for name in _TRUTH_DICTS:
-            data[name] = {k.split("/", 1)[1]: z[k] for k in z.files if k.startswith(name + "/")}
-    return ArmTruth(info=doc.get("info", {}), **data)
-
-
-def write_arm_files(sim: ArmTrial, out_dir: Path | str, stem: str | None = None) -> dict[str, Path]:
-    """Write the trial as raw exports + truth (module docstring); returns the paths by kind
-    (``imu``, ``mapping``, ``vicon``, ``meta``, ``truth_npz``, ``truth``); sets ``recording.sources``.
-
-    ``imulog convert`` of the folder (or of ``imu``, ``vicon`` with ``--meta-file meta``) gives
-    back ``sim.recording``'s streams exactly (same samples, values and time stamps)."""
-    if sim.raw is None:
-        raise ValueError("this ArmTrial has no raw file values (simulate it with simulate_arm)")
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    stem = stem or sim.stem
-    info = sim.truth.info.get("imu_params", {})
-    device = {
-        "name": "station",
-        "model": "LSM9DS1 (simulated), cable-synchronised station",
-        "rate_hz": sim.params.rate_hz,
-        "acc_range_g": info.get("acc_range_g"),
-        "gyr_range_dps": info.get("gyr_range_dps"),
-    }
-    paths: dict[str, Path] = {}
-    paths["imu"], paths["mapping"] = writers.write_multi_imu_text(
-        out / f"{stem}_imu.csv",
-        sim.raw["t_ns"],
-        sim.raw["channels"],
-        {k: v for k, v in device.items() if v is not None},
-    )
-    vicon = sim.recording.markers[0]
-    paths["vicon"] = writers.write_nexus_csv(
-        out / f"{stem}_vicon.csv",
-        vicon.pos,
-        list(vicon.labels),
-        float(vicon.meta["rate_hz"]),
-        "",
-        sim.raw["vicon_decimals"],
-    )
-    records = ("imulog.trial", "imulog.anthropometrics", "imulog.kinematics")
-    meta = out / f"{stem}_meta.json"
-    meta.write_text(json.dumps({k: sim.recording.metadata[k] for k in records}, indent=1) + "\n")
-    paths["meta"] = meta
-    paths["truth_npz"], paths["truth"] = save_arm_truth(sim.truth, out / stem)
-    sim.recording.sources = [str(paths[k]) for k in ("imu", "mapping", "vicon")]
-    return paths
 
 
 def simulate_arm_to_folder(
