@@ -9,10 +9,11 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
 from datetime import UTC, datetime, timedelta
+from typing import Any
 
 import numpy as np
 
-from imulog.model import ImuStream, Intervals, MarkerStream, Recording, SignalStream
+from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, Recording, SignalStream
 
 NS_PER_S = 1_000_000_000
 UNKNOWN_ZONE = "unknown (device local time)"
@@ -141,7 +142,8 @@ def _cat(parts: list[np.ndarray | None]) -> np.ndarray | None:
 
 
 def concat_chunks(chunks: Iterable[Recording]) -> Recording:
-    """One Recording from the chunks of one file (streams joined by name/topic; metadata of the first chunk).
+    """One Recording from the chunks of one file: every kind of stream joined by name/topic; metadata records and
+    each stream's ``meta`` are the first chunk's updated by every later one (a reader learns e.g. the rate as it goes).
 
     A stream missing from some chunks is joined from the chunks that have it. Raises ValueError when no chunk.
     """
@@ -161,7 +163,13 @@ def concat_chunks(chunks: Iterable[Recording]) -> Recording:
     signals: dict[str, list[SignalStream]] = {}
     events: dict[str, list[Intervals]] = {}
     markers: dict[str, list[MarkerStream]] = {}
+    analogs: dict[str, list[AnalogStream]] = {}
+    poses: dict[str, list[PoseStream]] = {}
     for c in chunks:
+        for s in c.analogs:
+            analogs.setdefault(s.name, []).append(s)
+        for s in c.poses:
+            poses.setdefault(s.topic, []).append(s)
         for s in c.markers:
             markers.setdefault(s.name, []).append(s)
         for s in c.imus:
@@ -181,7 +189,7 @@ def concat_chunks(chunks: Iterable[Recording]) -> Recording:
                 mag=_cat([p.mag for p in parts]),
                 temperature=_cat([p.temperature for p in parts]),
                 frame_id=p0.frame_id,
-                meta=dict(p0.meta),
+                meta=_meta(parts),
             )
         )
     for parts in signals.values():
@@ -206,7 +214,7 @@ def concat_chunks(chunks: Iterable[Recording]) -> Recording:
                 pos=np.concatenate([p.pos for p in parts]),
                 valid=np.concatenate([p.valid for p in parts]),
                 frame_id=p0.frame_id,
-                meta=dict(p0.meta),
+                meta=_meta(parts),
             )
         )
     for parts in events.values():
@@ -219,4 +227,36 @@ def concat_chunks(chunks: Iterable[Recording]) -> Recording:
                 task_index=np.concatenate([p.task_index for p in parts]),
             )
         )
+    for parts in analogs.values():
+        p0 = parts[0]
+        out.analogs.append(
+            AnalogStream(
+                name=p0.name,
+                t_ns=np.concatenate([p.t_ns for p in parts]),
+                channel_names=list(p0.channel_names),
+                units=list(p0.units),
+                values=np.concatenate([p.values for p in parts]),
+                meta=_meta(parts),
+            )
+        )
+    for parts in poses.values():
+        p0 = parts[0]
+        out.poses.append(
+            PoseStream(
+                topic=p0.topic,
+                t_ns=np.concatenate([p.t_ns for p in parts]),
+                position=np.concatenate([p.position for p in parts]),
+                orientation=np.concatenate([p.orientation for p in parts]),
+                frame_id=p0.frame_id,
+                precision=p0.precision,
+            )
+        )
+    return out
+
+
+def _meta(parts: list[Any]) -> dict[str, Any]:
+    """A joined stream's ``meta``: the first part's, updated by each later part's."""
+    out: dict[str, Any] = {}
+    for p in parts:
+        out.update(p.meta)
     return out

@@ -13,12 +13,15 @@ Both recordings start together (t = 0 at index 0); they are synchronised over th
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from imulog.converters import _pieces
 from imulog.converters._common import TableSpec, check_increasing, head_lines, read_numeric, split_row, text_head_lines
 from imulog.converters.base import Converter, ConvertOptions
-from imulog.converters.delimited import read_delimited
+from imulog.converters.delimited import iter_delimited, read_delimited
 from imulog.converters.errors import ConversionError
 
 from imulog.model import Intervals, MarkerStream, Recording
@@ -115,6 +118,16 @@ def read_strides(path: Path, imu_rate_hz: float = IMU_RATE_HZ) -> Recording:
     return Recording(events=[ev], sources=[str(path)])
 
 
+def _imu_options(rate_hz: float) -> dict[str, Any]:
+    """How :func:`~imulog.converters.delimited.iter_delimited` reads the gaitmap IMU file (no time column)."""
+    return {
+        "rate_hz": rate_hz,
+        "default_units": IMU_UNITS,
+        "device_meta": {"model": "gaitmap example foot IMU"},
+        "fmt": "gaitmap",
+    }
+
+
 class GaitmapConverter(Converter):
     name = "gaitmap"
     description = "gaitmap example data set: imu_sample.csv (204.8 Hz), mocap_sample.csv (100 Hz, mm), stride borders"
@@ -131,18 +144,22 @@ class GaitmapConverter(Converter):
         kind = _kind(head_lines(path, max_lines=3))
         imu_rate = float(options.rate_hz or options.extra.get("imu_rate_hz", IMU_RATE_HZ))
         if kind == "imu":
-            return read_delimited(
-                path,
-                rate_hz=imu_rate,
-                default_units=IMU_UNITS,
-                device_meta={"model": "gaitmap example foot IMU"},
-                fmt="gaitmap",
-            )
+            return read_delimited(path, **_imu_options(imu_rate))
         if kind == "mocap":
             return read_mocap(path, float(options.extra.get("mocap_rate_hz", MOCAP_RATE_HZ)))
         if kind == "strides":
             return read_strides(path, imu_rate)
         raise ConversionError(path, "not a gaitmap example file (imu_sample, mocap_sample or stride_borders)", line=1)
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """The IMU file in pieces of text (:func:`~imulog.converters.delimited.iter_delimited`); the mocap and
+        stride files are lab-sized (100 Hz mocap of one walk, one row per stride) and come whole, as one piece."""
+        options = options or ConvertOptions()
+        path = Path(path)
+        if _kind(head_lines(path, max_lines=3)) == "imu":
+            imu_rate = float(options.rate_hz or options.extra.get("imu_rate_hz", IMU_RATE_HZ))
+            return iter_delimited(path, **_imu_options(imu_rate), piece_bytes=_pieces.PIECE_BYTES)
+        return iter([self.convert(path, options)])
 
 
 CONVERTER = GaitmapConverter()

@@ -436,22 +436,23 @@ def iter_chunks(
             streams, header = _load(path, select_streams=[sid])
             for s in streams:
                 rec = stream_to_recording(path, s, names[int(s["info"]["stream_id"])])
-                rec.metadata["imulog.trial"] = header_start_time(header)
+                trial = header_start_time(header)
+                if trial:
+                    rec.metadata["imulog.trial"] = trial
                 yield rec
         return
     streams, header = _load(path)
     trial = header_start_time(header)
     for s in sorted(streams, key=lambda s: int(s["info"]["stream_id"])):
         rec = stream_to_recording(path, s, names[int(s["info"]["stream_id"])])
-        rec.metadata["imulog.trial"] = dict(trial)
+        if trial:
+            rec.metadata["imulog.trial"] = dict(trial)
         yield rec
 
 
 def read_xdf(path: Path, options: ConvertOptions | None = None) -> Recording:
-    rec = concat_chunks(iter_chunks(path, options))
-    if not rec.metadata.get("imulog.trial"):
-        rec.metadata.pop("imulog.trial", None)
-    return rec
+    """The whole file: the streams of :func:`iter_chunks` joined."""
+    return concat_chunks(iter_chunks(path, options))
 
 
 class XdfConverter(Converter):

@@ -1,0 +1,210 @@
+"""Every reader that yields its recording in pieces (``Converter.iter_chunks``) gives, with a tiny piece size, what
+it gives in one piece: values, times, counts, warnings, metadata and sources (issue 24, point 4). Real files from
+``../shared/data`` and the repository's simulated recording; host-clock text generated in the documented layout."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from imulog.converters import ConversionError
+from imulog.converters._binary import concat_chunks
+from imulog.converters.base import ConvertOptions
+from imulog.converters.registry import get
+
+from imulog.model import Recording
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def assert_same_recording(a: Recording, b: Recording) -> None:
+    """``a`` and ``b`` hold the same streams bit for bit, the same warnings, metadata and sources."""
+    assert [s.topic for s in a.streams()] == [s.topic for s in b.streams()]
+    for sa, sb in zip(a.streams(), b.streams(), strict=True):
+        for f in dataclasses.fields(sa):
+            va, vb = getattr(sa, f.name), getattr(sb, f.name)
+            if isinstance(va, np.ndarray):
+                assert va.dtype == vb.dtype and va.shape == vb.shape, (sa.topic, f.name)
+                assert va.tobytes() == vb.tobytes(), (sa.topic, f.name)
+            else:
+                assert va == vb, (sa.topic, f.name)
+    assert a.warnings == b.warnings
+    assert a.metadata == b.metadata
+    assert a.sources == b.sources
+
+
+def _pieces_equal_whole(pieces: list[Recording], whole: Recording) -> None:
+    assert len(pieces) > 1, "the tiny piece size must cut the file"
+    assert_same_recording(concat_chunks(pieces), whole)
+
+
+# (converter name, path under ../shared/data or the repository, how to set a tiny piece size)
+TEXT = "imulog.converters._pieces.PIECE_BYTES"
+CASES = [
+    ("delimited", "imu_text/fusion_sensor_data.csv", (TEXT, 4096)),
+    ("delimited", "imu_text/shimmer_consensys_export.csv", (TEXT, 700)),  # host clock: stamps repeat
+    ("delimited", "repo:recordings/sim/r2g_s00_t00_imu.csv", (TEXT, 65536)),  # no time column: mapping and rate
+    ("gaitmap", "gaitmap_foot/imu_sample.csv", (TEXT, 16384)),
+    ("actigraph", "devices/actigraph_gt3x/example.gt3x", None),
+    ("axivity", "devices/axivity_cwa/ax3_sample.cwa", None),
+    ("axivity", "devices/axivity_cwa/ax6_sample.cwa", None),
+    ("edf", "devices/edf/trigno_emg.edf", None),
+    ("geneactiv", "devices/geneactiv_bin/GENEActiv_testfile.bin", ("imulog.converters.geneactiv.PAGES_PER_CHUNK", 3)),
+    ("xdf", "devices/xdf/clock_resets.xdf", None),
+    ("xdf", "devices/xdf/minimal.xdf", None),
+]
+
+
+def _path(rel: str, shared_data: Path) -> Path:
+    return REPO / rel[5:] if rel.startswith("repo:") else shared_data / rel
+
+
+def _tiny_pieces(name: str, path: Path, setting, monkeypatch) -> list[Recording]:
+    conv = get(name)
+    if setting is not None:
+        monkeypatch.setattr(*setting)
+        return list(conv.iter_chunks(path))
+    if name == "actigraph":
+        import imulog.converters.actigraph as ag
+        from imulog.converters.actigraph_records import iter_record_batches
+
+        monkeypatch.setattr(ag, "iter_record_batches", functools.partial(iter_record_batches, batch_bytes=4096))
+        return list(conv.iter_chunks(path))
+    if name == "axivity":
+        from imulog.converters.axivity import iter_chunks
+
+        return list(iter_chunks(path, blocks_per_chunk=2))
+    if name == "edf":
+        from imulog.converters.edf import iter_chunks
+
+        return list(iter_chunks(path, max_samples=2000))
+    if name == "xdf":
+        from imulog.converters.xdf import iter_chunks
+
+        return list(iter_chunks(path, per_stream=True))
+    raise AssertionError(name)
+
+
+@pytest.mark.parametrize(("name", "rel", "setting"), CASES, ids=[f"{c[0]}:{Path(c[1]).name}" for c in CASES])
+def test_tiny_pieces_equal_one_piece_on_real_files(name, rel, setting, shared_data, monkeypatch):
+    path = _path(rel, shared_data)
+    if name == "xdf":
+        pytest.importorskip("pyxdf")
+    whole = get(name).convert(path)
+    pieces = _tiny_pieces(name, path, setting, monkeypatch)
+    if name == "xdf" and len(pieces) == 1:  # one stream: its pieces are the streams
+        assert_same_recording(pieces[0], whole)
+        return
+    _pieces_equal_whole(pieces, whole)
+
+
+# ----------------------------------------------------------------------------------- host clock in pieces
+def host_clock_csv(path: Path, n: int, *, rate_hz: float = 51.2, seed: int = 0, late: dict[int, float] | None = None):
+    """A Shimmer Consensys export (``sep=`` line, names row, units row; docs/converters.md) of ``n`` samples whose
+    host Unix stamps (ms) repeat and jitter: packets of 4 samples stamped on arrival. ``late``: row -> extra
+    delay (s) of that row's stamp."""
+    rng = np.random.default_rng(seed)
+    t_true_ms = 1.6e12 + np.arange(n) * (1000.0 / rate_hz)
+    arrival = t_true_ms[(np.arange(n) // 4) * 4 + 3] + rng.uniform(0, 15, n)  # a packet is stamped when it arrives
+    for row, delay_s in (late or {}).items():
+        arrival[row] += delay_s * 1000.0
+    stamps = np.floor(arrival)  # 1 ms resolution: repeats within a packet
+    acc = rng.normal(0, 1, (n, 3)) + [0, 0, 9.81]
+    gyr = rng.normal(0, 5, (n, 3))
+    pre = "Shimmer_40AC_"
+    names = (
+        [pre + "Timestamp_Unix_CAL"]
+        + [pre + f"Accel_LN_{a}_CAL" for a in "XYZ"]
+        + [pre + f"Gyro_{a}_CAL" for a in "XYZ"]
+    )
+    units = ["ms"] + ["m/(s^2)"] * 3 + ["deg/s"] * 3
+    rows = np.column_stack([stamps, acc, gyr])
+    with open(path, "w") as f:
+        f.write('"sep=;"\n' + ";".join(names) + "\n" + ";".join(units) + "\n")
+        np.savetxt(f, rows, delimiter=";", fmt=["%.0f"] + ["%.5f"] * 6)
+    return stamps
+
+
+def test_host_clock_fit_is_the_same_in_any_pieces(tmp_path):
+    from imulog.converters.delimited import iter_delimited, read_delimited
+
+    path = tmp_path / "shimmer.csv"
+    stamps = host_clock_csv(path, 20_000)
+    whole = read_delimited(path)
+    (imu,) = whole.imus
+    assert np.any(np.diff(stamps) == 0) and np.all(np.diff(imu.t_ns) > 0)
+    assert "least-squares" in whole.metadata["imulog.device.shimmer_40ac"]["time"]["clock"]
+    assert np.abs(imu.t_ns - stamps * 1e6).max() < 80e6  # within the packets' delay and jitter
+    assert abs(1e9 / np.median(np.diff(imu.t_ns)) - 51.2) < 0.01
+    for piece_bytes in (3000, 50_000, 400_000):
+        _pieces_equal_whole(list(iter_delimited(path, piece_bytes=piece_bytes)), whole)
+
+
+@pytest.mark.parametrize("row", [150, 9_000, 19_990])
+def test_a_host_stamp_far_off_the_line_names_the_same_line_in_pieces(row, tmp_path):
+    from imulog.converters.delimited import iter_delimited, read_delimited
+
+    path = tmp_path / "late.csv"
+    host_clock_csv(path, 20_000, late={row: 5.0, row + 3: 9.0})  # two late stamps: the first is named
+    with pytest.raises(ConversionError) as whole:
+        read_delimited(path)
+    assert "more than 1 s off the sample clock" in str(whole.value) and f"line {row + 4}" in str(whole.value)
+    for piece_bytes in (3000, 50_000):
+        with pytest.raises(ConversionError) as pieces:
+            list(iter_delimited(path, piece_bytes=piece_bytes))
+        assert str(pieces.value) == str(whole.value)
+
+
+def test_shimmer_four_row_export_in_pieces(tmp_path):
+    from imulog.converters.shimmer import iter_shimmer, read_shimmer
+
+    path = tmp_path / "capture.csv"
+    n = 5000
+    rng = np.random.default_rng(1)
+    rows = np.column_stack([np.arange(n) * 1000 / 51.2, rng.normal(0, 1, (n, 3)), rng.normal(0, 9, (n, 3))])
+    sig = ["Timestamp"] + [f"Accel_LN_{a}" for a in "XYZ"] + [f"Gyro_{a}" for a in "XYZ"]
+    with open(path, "w") as f:
+        f.write("\t".join(["Shimmer_8E5E"] * 7) + "\n" + "\t".join(sig) + "\n" + "\t".join(["CAL"] * 7) + "\n")
+        f.write("\t".join(["mSecs"] + ["m/(sec^2)"] * 3 + ["deg/sec"] * 3) + "\n")
+        np.savetxt(f, rows, delimiter="\t", fmt="%.4f")
+    whole = read_shimmer(path)
+    assert len(whole.imus[0]) == n
+    _pieces_equal_whole(list(iter_shimmer(path, ConvertOptions(), piece_bytes=20_000)), whole)
+
+
+# ----------------------------------------------------------------------------------- bounded memory
+_PEAK = """
+import resource, sys
+from imulog.converters.delimited import iter_delimited
+n = 0
+for piece in iter_delimited(sys.argv[1], piece_bytes=1 << 20):
+    n += len(piece.imus[0])
+print(n, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+"""
+
+
+def _peak_kib(path: Path) -> tuple[int, int]:
+    out = subprocess.run([sys.executable, "-c", _PEAK, str(path)], capture_output=True, text=True, check=True)
+    n, kib = out.stdout.split()
+    return int(n), int(kib)
+
+
+def test_host_clock_text_converts_in_bounded_memory(tmp_path):
+    """Peak memory of converting a host-clock file in 1 MiB pieces does not grow with the file: a file 4x as long
+    (about 60 MB more text, 45 MB more values) peaks within 15 MB of the short one (the whole file in memory would
+    add at least its text and values: 100 MB)."""
+    short, long = tmp_path / "short.csv", tmp_path / "long.csv"
+    host_clock_csv(short, 250_000)
+    host_clock_csv(long, 1_000_000)
+    n_short, peak_short = _peak_kib(short)
+    n_long, peak_long = _peak_kib(long)
+    assert (n_short, n_long) == (250_000, 1_000_000)
+    grow_mb = (peak_long - peak_short) / 1024
+    assert grow_mb < 15, (
+        f"peak grew {grow_mb:.0f} MB from {short.stat().st_size >> 20} to {long.stat().st_size >> 20} MB of text"
+    )
