@@ -112,8 +112,14 @@ def to_ns(values: np.ndarray, factor_to_ns: float, origin: float | None = None) 
     return rel.astype(np.int64) + np.int64(base)
 
 
-def check_increasing(path: Path, t_ns: np.ndarray, first_line: int, column: str | None = None) -> None:
-    """Raise ConversionError at the first duplicated or decreasing time stamp (``first_line`` = line of row 0)."""
+def check_increasing(
+    path: Path, t_ns: np.ndarray, first_line: int, column: str | None = None, before: float | None = None
+) -> None:
+    """Raise ConversionError at the first duplicated or decreasing time stamp (``first_line`` = line of row 0);
+    ``before``: the last time of the piece before this one, which the first row must follow."""
+    if before is not None:
+        t_ns = np.concatenate([[before], t_ns])
+        first_line -= 1
     if len(t_ns) < 2:
         return
     d = np.diff(t_ns)

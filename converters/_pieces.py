@@ -10,6 +10,7 @@ import hashlib
 import os
 from collections.abc import Iterator
 from dataclasses import replace
+from typing import Any, NamedTuple
 
 import numpy as np
 from imulog.converters._final_row import drop_cut_final_row
@@ -21,10 +22,21 @@ from imulog.converters.errors import ConversionError
 PIECE_BYTES = 16 * 1024 * 1024
 
 
-def iter_numeric(spec: TableSpec, piece_bytes: int | None) -> Iterator[tuple[np.ndarray, int, int, list[str]]]:
+class NumericPiece(NamedTuple):
+    """One piece of a numeric table: its rows' ``values`` (N, ncols), the line number of its first row, its number
+    in the file, its warnings (a cut final row) and ``text``, the bytes of its rows (for a column of text, such as
+    formatted time stamps: :func:`text_column`)."""
+
+    values: np.ndarray
+    first_line: int
+    index: int
+    warnings: list[str]
+    text: memoryview
+
+
+def iter_numeric(spec: TableSpec, piece_bytes: int | None) -> Iterator[NumericPiece]:
     """The numeric block of ``spec`` (:func:`~imulog.converters._table.read_numeric`) in pieces of about
-    ``piece_bytes`` of text, each cut after a whole row: (values, line number of its first row, piece number,
-    warnings). None: the whole file, read once by :func:`read_source`, as one piece. Values, gaps, a cut final row
+    ``piece_bytes`` of text, each cut after a whole row (:class:`NumericPiece`). None: the whole file, read once by :func:`read_source`, as one piece. Values, gaps, a cut final row
     (dropped from the last piece, with its warning) and errors (file, line, column) are the same whatever the piece
     size; the file's SHA-256 is computed while reading and remembered (:func:`known_sha256`)."""
     path = spec.path
@@ -33,8 +45,10 @@ def iter_numeric(spec: TableSpec, piece_bytes: int | None) -> Iterator[tuple[np.
         data = read_source(path)  # read once: parsed from memory, its SHA-256 computed from these bytes
         spec = replace(base, warnings=[])
         values = read_numeric(spec, data)
-        del data
-        yield values, base.skip_lines + 1, 0, list(spec.warnings)
+        start = 0
+        for _ in range(base.skip_lines):
+            start = data.index(b"\n", start) + 1
+        yield NumericPiece(values, base.skip_lines + 1, 0, list(spec.warnings), memoryview(data)[start:])
         return
     digest = hashlib.sha256()
     total = 0
@@ -80,9 +94,27 @@ def iter_numeric(spec: TableSpec, piece_bytes: int | None) -> Iterator[tuple[np.
                     warnings.append(warning)
                 if k and not piece[:end].strip(b" \t\r\n"):
                     break  # nothing but blank lines after the previous piece
-            yield read_numeric(spec, piece), lines_before + 1, k, warnings
+            yield NumericPiece(read_numeric(spec, piece), lines_before + 1, k, warnings, memoryview(piece))
             lines_before += piece.count(b"\n")
             k += 1
         st = os.fstat(f.fileno())
     if st.st_size == total:
         remember_sha256(path, st, digest.hexdigest())
+
+
+def text_column(piece: NumericPiece, column: int, delimiter: str = ",") -> Any:
+    """Column ``column`` of the piece's rows as text (a pandas Series of str, one per row of ``piece.values``),
+    e.g. formatted time stamps that the numeric parse leaves out."""
+    import pandas as pd  # here: detecting a format must not import pandas
+    import pyarrow as pa
+
+    return pd.read_csv(
+        pa.BufferReader(pa.py_buffer(piece.text)),
+        sep=delimiter,
+        header=None,
+        usecols=[column],
+        nrows=len(piece.values),
+        dtype=str,
+        engine="c",
+        skip_blank_lines=False,
+    )[column]

@@ -25,12 +25,15 @@ the .gt3x converter names them: ``/imu/<serial>`` (RAW), ``/imu/<serial>_imu`` (
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from datetime import datetime
 from pathlib import Path
 
 import numpy as np
+from imulog.converters import _pieces
 from imulog.converters._binary import UNKNOWN_ZONE
-from imulog.converters._common import G0, TableSpec, head_lines, read_numeric, sanitize_name, text_head_lines
+from imulog.converters._common import G0, TableSpec, head_lines, sanitize_name, text_head_lines
+from imulog.converters._pieces import NumericPiece, iter_numeric, text_column
 from imulog.converters.actilife_epoch import bannerless_banner, is_bannerless, read_epoch_csv, strptime_format
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
@@ -96,16 +99,27 @@ def _check_complete(path: Path) -> None:
 
 
 def read_actilife_csv(path: Path, options: ConvertOptions | None = None) -> Recording:
-    import pandas as pd  # here, not at module top: detecting a format must not import pandas
+    """The whole export: :func:`iter_actilife_csv` as one piece."""
+    (rec,) = iter_actilife_csv(path, options, piece_bytes=None)
+    return rec
 
+
+def iter_actilife_csv(
+    path: Path, options: ConvertOptions | None = None, piece_bytes: int | None = None
+) -> Iterator[Recording]:
+    """A raw (RAW or IMU) export in pieces of about ``piece_bytes`` of text (None: one piece), read by
+    :func:`~imulog.converters._pieces.iter_numeric`. Epoch (count) exports hold one row per epoch (a week of 60 s
+    epochs is 10,080 rows) and come whole, as one piece."""
     options = options or ConvertOptions()
     path = Path(path)
     lines = head_lines(path, max_lines=BANNER_LINES + 2)
     if is_bannerless(lines):
-        return read_epoch_csv(path, lines, bannerless_banner(path, lines), options, banner_lines=0)
+        yield read_epoch_csv(path, lines, bannerless_banner(path, lines), options, banner_lines=0)
+        return
     banner = parse_banner(path, lines)
     if banner["epoch"] != "00:00:00":
-        return read_epoch_csv(path, lines, banner, options)
+        yield read_epoch_csv(path, lines, banner, options)
+        return
     names_row = [c.strip() for c in lines[BANNER_LINES].split(",")]
     while names_row and not names_row[-1]:
         names_row.pop()
@@ -122,41 +136,11 @@ def read_actilife_csv(path: Path, options: ConvertOptions | None = None) -> Reco
         ignore={0} if has_time else set(),
     )
     _check_complete(path)
-    values = read_numeric(spec)
-    if has_time:
-        values = values[:, 1:]
-        stamps = pd.read_csv(
-            path, skiprows=BANNER_LINES + 1, header=None, usecols=[0], nrows=len(values), dtype=str, engine="c"
-        )[0]
-        try:
-            t_abs = pd.to_datetime(stamps, format="ISO8601").to_numpy().astype("datetime64[ns]")
-        except (ValueError, TypeError):
-            bad = next((i for i, s in enumerate(stamps) if pd.isna(pd.to_datetime(s, errors="coerce"))), 0)
-            raise ConversionError(
-                path,
-                f"{str(stamps.iloc[bad])[:30]!r} is not a time stamp",
-                line=BANNER_LINES + 2 + bad,
-                column="Timestamp",
-            ) from None
-        t_ns = (t_abs - np.datetime64(banner["start"], "ns")).astype(np.int64)
-        d = np.diff(t_ns)
-        if len(d) and (d <= 0).any():
-            i = int(np.nonzero(d <= 0)[0][0]) + 1
-            raise ConversionError(path, "time stamp does not increase", line=BANNER_LINES + 2 + i, column="Timestamp")
-    else:
-        t_ns = np.round(np.arange(len(values)) * (1e9 / banner["rate_hz"])).astype(np.int64)
-    index = {c: i for i, c in enumerate(cols)}
-
-    def trio(prefix: str) -> np.ndarray | None:
-        names = [f"{prefix} {a}" for a in "XYZ"]
-        return values[:, [index[n] for n in names]] if all(n in index for n in names) else None
-
-    acc, gyr, mag = trio(TRIOS["acc"]), trio(TRIOS["gyr"]), trio(TRIOS["mag"])
-    temp = values[:, index["Temperature"]] if "Temperature" in index else None
-    is_imu = gyr is not None or "IMU" in banner["device"]
     serial = banner["serial"]
     names_map = {str(k).upper(): v for k, v in (options.extra.get("names") or {}).items()}
     base = sanitize_name(names_map.get(serial.upper(), serial))
+    index = {c: i for i, c in enumerate(cols)}
+    is_imu = all(f"{TRIOS['gyr']} {a}" in index for a in "XYZ") or "IMU" in banner["device"]
     name = f"{base}_imu" if is_imu else base
     meta = {
         "format": "actilife-csv",
@@ -167,7 +151,65 @@ def read_actilife_csv(path: Path, options: ConvertOptions | None = None) -> Reco
         "time_base": "ns from start_time (banner Start Date/Time, device local time)",
         "source": path.name,
     }
-    rec = Recording(sources=[str(path)], warnings=list(spec.warnings))
+    first_row, before = 0, None
+    for piece in iter_numeric(spec, piece_bytes):
+        values = piece.values
+        if has_time:
+            values = values[:, 1:]
+            t_ns = _stamps_ns(path, piece, banner["start"])
+            d = np.diff(t_ns if before is None else np.concatenate([[before], t_ns]))
+            bad = np.flatnonzero(d <= 0)
+            if len(bad):
+                row = int(bad[0]) + (1 if before is None else 0)
+                raise ConversionError(
+                    path, "time stamp does not increase", line=piece.first_line + row, column="Timestamp"
+                )
+            before = int(t_ns[-1]) if len(t_ns) else before
+        else:
+            rows = np.arange(first_row, first_row + len(values))
+            t_ns = np.round(rows * (1e9 / banner["rate_hz"])).astype(np.int64)
+        first_row += len(values)
+        yield _recording(path, name, cols, index, values, t_ns, meta, banner, piece.warnings)
+
+
+def _stamps_ns(path: Path, piece: NumericPiece, start: datetime) -> np.ndarray:
+    """The piece's ``Timestamp`` cells (local ISO time) as ns from the banner's start; one line naming a bad cell."""
+    import pandas as pd  # here, not at module top: detecting a format must not import pandas
+
+    stamps = text_column(piece, 0)
+    try:
+        t_abs = pd.to_datetime(stamps, format="ISO8601").to_numpy().astype("datetime64[ns]")
+    except (ValueError, TypeError):
+        bad = next((i for i, s in enumerate(stamps) if pd.isna(pd.to_datetime(s, errors="coerce"))), 0)
+        raise ConversionError(
+            path,
+            f"{str(stamps.iloc[bad])[:30]!r} is not a time stamp",
+            line=piece.first_line + bad,
+            column="Timestamp",
+        ) from None
+    return (t_abs - np.datetime64(start, "ns")).astype(np.int64)
+
+
+def _recording(
+    path: Path,
+    name: str,
+    cols: list[str],
+    index: dict[str, int],
+    values: np.ndarray,
+    t_ns: np.ndarray,
+    meta: dict,
+    banner: dict,
+    warnings: list[str],
+) -> Recording:
+    """The IMU stream (SI units) and the other columns of one piece's ``values``."""
+
+    def trio(prefix: str) -> np.ndarray | None:
+        names = [f"{prefix} {a}" for a in "XYZ"]
+        return values[:, [index[n] for n in names]] if all(n in index for n in names) else None
+
+    acc, gyr, mag = trio(TRIOS["acc"]), trio(TRIOS["gyr"]), trio(TRIOS["mag"])
+    temp = values[:, index["Temperature"]] if "Temperature" in index else None
+    rec = Recording(sources=[str(path)], warnings=list(warnings))
     rec.imus.append(
         ImuStream(
             name=name,
@@ -191,7 +233,7 @@ def read_actilife_csv(path: Path, options: ConvertOptions | None = None) -> Reco
                 values=values[:, [index[c] for c in extra]],
             )
         )
-    rec.metadata[f"imulog.device.{name}"] = meta
+    rec.metadata[f"imulog.device.{name}"] = dict(meta)
     rec.metadata["imulog.trial"] = {
         "start_time": banner["start"].isoformat(timespec="milliseconds"),
         "time_zone": UNKNOWN_ZONE,
@@ -219,6 +261,10 @@ class ActiLifeCsvConverter(Converter):
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_actilife_csv(Path(path), options)
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """Raw exports in pieces of about 16 MB of text (see :func:`iter_actilife_csv`)."""
+        return iter_actilife_csv(Path(path), options, piece_bytes=_pieces.PIECE_BYTES)
 
 
 CONVERTER = ActiLifeCsvConverter()

@@ -48,7 +48,7 @@ from imulog.converters.delimited_plan import (
 from imulog.converters.delimited_streams import _recording
 from imulog.converters.delimited_time import (
     UNIX_S_RANGE,
-    _StepCounts,
+    StepCounts,
     _times,
     host_column,
     host_stamps,
@@ -163,21 +163,21 @@ def iter_delimited(
     if host is not None:  # first pass: the line through every host stamp; a single piece is kept, not read again
         fit, kept, assumed = HostClockFit(), [], None
         origin = None
-        for k, (values, first_line, _, warnings) in enumerate(pieces):
-            _check_infinite(path, plan.layout, values, first_line)
+        for k, piece in enumerate(pieces):
+            _check_infinite(path, plan.layout, piece.values, piece.first_line)
             if assumed is None:
-                assumed = _assumed_units(plan, values)
-                origin = float(values[0, host.index]) if len(values) else None
-            fit.add(host_stamps(plan, host, values, origin))
-            kept = [(values, first_line, k, warnings)] if k == 0 else []
+                assumed = _assumed_units(plan, piece.values)
+                origin = float(piece.values[0, host.index]) if len(piece.values) else None
+            fit.add(host_stamps(plan, host, piece.values, origin))
+            kept = [piece] if k == 0 else []
         pieces = iter(kept) if kept else iter_numeric(plan.spec, piece_bytes)
     first_row = 0
     origin = None  # the recording's first time value: every piece's ns are relative to it
     before: float | None = None  # the previous piece's last time (ns) or index: time must keep increasing
     rate_meta: float | None = None
     started = False
-    steps = _StepCounts() if time_cols and not plan.rate else None  # the exact median step, piece by piece
-    for values, first_line, _, warnings in pieces:
+    steps = StepCounts() if time_cols and not plan.rate else None  # the exact median step, piece by piece
+    for values, first_line, _, warnings, _ in pieces:
         _check_infinite(path, plan.layout, values, first_line)
         if not started:
             assumed = _assumed_units(plan, values) if assumed is None else assumed

@@ -90,10 +90,7 @@ def _times(
 
 def _check_increasing(path: Path, t: np.ndarray, first_line: int, column: str, before: float | None) -> None:
     """:func:`check_increasing` of ``t``, continuing from ``before`` (the previous piece's last value)."""
-    if before is None:
-        check_increasing(path, t, first_line, column)
-    else:
-        check_increasing(path, np.concatenate([[before], t]), first_line - 1, column)
+    check_increasing(path, t, first_line, column, before)
 
 
 UNIX_S_RANGE = (9.0e8, 4.2e9)  # 1998 .. 2103: a first stamp in this range (s since 1970) is a Unix time
@@ -127,7 +124,7 @@ def unix_start(layout: Layout, values: np.ndarray, t_ns: np.ndarray) -> dict[str
     return None
 
 
-class _StepCounts:
+class StepCounts:
     """How often each time step (ns) occurs, to give the whole recording's median rate (as
     :func:`estimate_rate_hz` of all time stamps) from its pieces; gives up beyond a million distinct steps."""
 

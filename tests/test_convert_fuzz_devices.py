@@ -312,7 +312,7 @@ def test_h5py_readers_run_guarded(tmp_path: Path, monkeypatch, module: str):
     h5py = pytest.importorskip("h5py")
     import importlib
 
-    mod = importlib.import_module(f"imulog.converters.{module}")
+    mod = importlib.import_module(f"imulog.converters.{'apdm_h5' if module == 'apdm' else module}")  # the reader's
     read = mod.read_apdm_h5 if module == "apdm" else mod.read_broad
     path = tmp_path / "empty.h5"
     with h5py.File(path, "w") as f:

@@ -50,6 +50,8 @@ CASES = [
     ("delimited", "imu_text/shimmer_consensys_export.csv", (TEXT, 700)),  # host clock: stamps repeat
     ("delimited", "repo:recordings/sim/r2g_s00_t00_imu.csv", (TEXT, 65536)),  # no time column: mapping and rate
     ("gaitmap", "gaitmap_foot/imu_sample.csv", (TEXT, 16384)),
+    ("actilife-csv", "devices/actigraph_gt3x/exampleRAW.csv", (TEXT, 8192)),  # no time column: banner rate
+    ("actilife-csv", "devices/actigraph_gt3x/example-IMU.csv", (TEXT, 8192)),  # formatted local time stamps
     ("actigraph", "devices/actigraph_gt3x/example.gt3x", None),
     ("axivity", "devices/axivity_cwa/ax3_sample.cwa", None),
     ("axivity", "devices/axivity_cwa/ax6_sample.cwa", None),
