@@ -14,12 +14,16 @@ Formatted time stamps are ``YYYY-MM-DD hh:mm:ss.fff`` (OMGUI) or ISO ``T``-separ
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
+from imulog.converters import _pieces
 from imulog.converters._binary import UNKNOWN_ZONE, iso_from_epoch_ns
-from imulog.converters._common import G0, TableSpec, check_increasing, estimate_rate_hz, read_numeric, text_head_lines
+from imulog.converters._common import G0, TableSpec, check_increasing, estimate_rate_hz, text_head_lines
+from imulog.converters._pieces import NumericPiece, iter_numeric, text_column
 from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.delimited_time import StepCounts
 from imulog.converters.errors import ConversionError
 
 from imulog.model import ImuStream, Recording
@@ -53,8 +57,16 @@ def layout(lines: list[str]) -> tuple[str, int] | None:
 
 
 def read_axivity_csv(path: Path, options: ConvertOptions | None = None) -> Recording:
-    import pandas as pd
+    """The whole export: :func:`iter_axivity_csv` as one piece."""
+    (rec,) = iter_axivity_csv(path, options, piece_bytes=None)
+    return rec
 
+
+def iter_axivity_csv(
+    path: Path, options: ConvertOptions | None = None, piece_bytes: int | None = None
+) -> Iterator[Recording]:
+    """The export in pieces of about ``piece_bytes`` of text (None: one piece), read by
+    :func:`~imulog.converters._pieces.iter_numeric`; the rate is the median step over every piece."""
     path = Path(path)
     with open(path, "rb") as f:
         head = f.read(64 * 1024)
@@ -65,46 +77,62 @@ def read_axivity_csv(path: Path, options: ConvertOptions | None = None) -> Recor
     kind, width = found
     names = ["time"] + ["acc_x", "acc_y", "acc_z", "gyr_x", "gyr_y", "gyr_z"][:width]
     spec = TableSpec(path=path, delimiter=",", skip_lines=0, names=names, ignore={0} if kind == "formatted" else set())
-    values = read_numeric(spec)
-    if kind == "unix":
-        # float64 keeps 0.1 us at 1.5e9 s; round to whole microseconds as OMGUI writes at most 4-6 decimals
-        epoch_ns = np.round(values[:, 0] * 1e6).astype(np.int64) * 1000
-    else:
-        cells = pd.read_csv(path, header=None, usecols=[0], nrows=len(values), dtype=str, engine="c")[0]
-        parsed = pd.to_datetime(cells.str.strip(), format="ISO8601", errors="coerce")
-        if parsed.isna().any():
-            bad = int(np.nonzero(parsed.isna().to_numpy())[0][0])
-            raise ConversionError(path, f"{cells.iloc[bad][:30]!r} is not a time stamp", line=bad + 1, column="time")
-        epoch_ns = parsed.to_numpy().astype("datetime64[ns]").astype(np.int64)
-    if len(epoch_ns) == 0:
-        raise ConversionError(path, "no samples", line=1)
-    t_ns = epoch_ns - epoch_ns[0]
-    check_increasing(path, t_ns, 1, "time")
     model = "AX6" if width == 6 else "AX3"
     name = "axivity"
-    rate = estimate_rate_hz(t_ns)
-    meta = {
-        "format": "axivity-csv",
-        "model": model,
-        "rate_hz": round(rate, 3) if rate else None,
-        "time_stamps": "Unix seconds (device local clock)" if kind == "unix" else "formatted (device local clock)",
-        "units": "accelerometer g, gyroscope deg/s (OMGUI)",
-        "time_base": "ns from start_time (first row, device local time)",
-        "source": path.name,
-    }
-    rec = Recording(sources=[str(path)], warnings=list(spec.warnings))
-    rec.imus.append(
-        ImuStream(
-            name=name,
-            t_ns=t_ns,
-            acc=values[:, 1:4] * G0,
-            gyr=np.radians(values[:, 4:7]) if width == 6 else None,
-            meta=dict(meta),
+    origin: int | None = None
+    before: int | None = None
+    steps = StepCounts()
+    for piece in iter_numeric(spec, piece_bytes):
+        values = piece.values
+        epoch_ns = _epoch_ns(path, piece, kind)
+        if origin is None:
+            if len(epoch_ns) == 0:
+                raise ConversionError(path, "no samples", line=1)
+            origin = int(epoch_ns[0])
+        t_ns = epoch_ns - origin
+        check_increasing(path, t_ns, piece.first_line, "time", before)
+        steps.add(np.diff(t_ns) if before is None else np.diff(np.concatenate([[before], t_ns])))
+        before = int(t_ns[-1]) if len(t_ns) else before
+        rate = steps.rate_hz() if steps.exact else estimate_rate_hz(t_ns)  # the last piece's: the whole file's
+        meta = {
+            "format": "axivity-csv",
+            "model": model,
+            "rate_hz": round(rate, 3) if rate else None,
+            "time_stamps": "Unix seconds (device local clock)" if kind == "unix" else "formatted (device local clock)",
+            "units": "accelerometer g, gyroscope deg/s (OMGUI)",
+            "time_base": "ns from start_time (first row, device local time)",
+            "source": path.name,
+        }
+        rec = Recording(sources=[str(path)], warnings=list(piece.warnings))
+        rec.imus.append(
+            ImuStream(
+                name=name,
+                t_ns=t_ns,
+                acc=values[:, 1:4] * G0,
+                gyr=np.radians(values[:, 4:7]) if width == 6 else None,
+                meta=dict(meta),
+            )
         )
-    )
-    rec.metadata[f"imulog.device.{name}"] = meta
-    rec.metadata["imulog.trial"] = {"start_time": iso_from_epoch_ns(int(epoch_ns[0])), "time_zone": UNKNOWN_ZONE}
-    return rec
+        rec.metadata[f"imulog.device.{name}"] = meta
+        rec.metadata["imulog.trial"] = {"start_time": iso_from_epoch_ns(origin), "time_zone": UNKNOWN_ZONE}
+        yield rec
+
+
+def _epoch_ns(path: Path, piece: NumericPiece, kind: str) -> np.ndarray:
+    """The piece's time stamps as ns since 1970 (device local clock); one line naming a bad formatted cell."""
+    if kind == "unix":
+        # float64 keeps 0.1 us at 1.5e9 s; round to whole microseconds as OMGUI writes at most 4-6 decimals
+        return np.round(piece.values[:, 0] * 1e6).astype(np.int64) * 1000
+    import pandas as pd
+
+    cells = text_column(piece, 0)
+    parsed = pd.to_datetime(cells.str.strip(), format="ISO8601", errors="coerce")
+    if parsed.isna().any():
+        bad = int(np.nonzero(parsed.isna().to_numpy())[0][0])
+        raise ConversionError(
+            path, f"{cells.iloc[bad][:30]!r} is not a time stamp", line=piece.first_line + bad, column="time"
+        )
+    return parsed.to_numpy().astype("datetime64[ns]").astype(np.int64)
 
 
 class AxivityCsvConverter(Converter):
@@ -124,6 +152,10 @@ class AxivityCsvConverter(Converter):
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_axivity_csv(Path(path), options)
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """Pieces of about 16 MB of text (see :func:`iter_axivity_csv`)."""
+        return iter_axivity_csv(Path(path), options, piece_bytes=_pieces.PIECE_BYTES)
 
 
 CONVERTER = AxivityCsvConverter()

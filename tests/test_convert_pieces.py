@@ -52,6 +52,7 @@ CASES = [
     ("gaitmap", "gaitmap_foot/imu_sample.csv", (TEXT, 16384)),
     ("actilife-csv", "devices/actigraph_gt3x/exampleRAW.csv", (TEXT, 8192)),  # no time column: banner rate
     ("actilife-csv", "devices/actigraph_gt3x/example-IMU.csv", (TEXT, 8192)),  # formatted local time stamps
+    ("axivity-csv", "devices/axivity_csv/ax3_testfile_unix_timestamps.csv", (TEXT, 2048)),
     ("actigraph", "devices/actigraph_gt3x/example.gt3x", None),
     ("axivity", "devices/axivity_cwa/ax3_sample.cwa", None),
     ("axivity", "devices/axivity_cwa/ax6_sample.cwa", None),
