@@ -132,6 +132,14 @@ def decompressed(path: Path) -> Iterator[Path]:
 
 def convert_compressed(path: Path, options: ConvertOptions | None = None) -> Recording:
     """Convert the inner file of ``path`` with the converter its content names; sources = the compressed file."""
+    (rec,) = iter_compressed(path, options, whole=True)
+    return rec
+
+
+def iter_compressed(path: Path, options: ConvertOptions | None = None, *, whole: bool = False) -> Iterator[Recording]:
+    """The inner file's recording in the pieces of its own converter (``Converter.iter_chunks``; one piece when
+    it reads whole, or with ``whole``). The inner file is decompressed to disk (bounded: :data:`MAX_BYTES`), so
+    memory is what the inner reader holds for one piece."""
     from dataclasses import replace
 
     from imulog.converters.registry import detect, get
@@ -150,7 +158,9 @@ def convert_compressed(path: Path, options: ConvertOptions | None = None) -> Rec
                 raise ConversionError(path, f"inside: {e.problem}") from None
             conv = get("delimited")  # a mapping names the columns detection could not recognise
         try:
-            rec = conv.convert(inner, options)
+            pieces = conv.iter_chunks(inner, options) if not whole else None
+            for rec in pieces if pieces is not None else iter([conv.convert(inner, options)]):
+                yield _as_container(rec, path, inner, conv.name)
         except ConversionError as e:
             where = ", ".join(
                 x for x in (f"line {e.line}" if e.line else "", f"column {e.column!r}" if e.column else "") if x
@@ -158,11 +168,15 @@ def convert_compressed(path: Path, options: ConvertOptions | None = None) -> Rec
             raise ConversionError(
                 path, f"{inner.name} ({conv.name}): {where + ': ' if where else ''}{e.problem}"
             ) from None
+
+
+def _as_container(rec: Recording, path: Path, inner: Path, inner_format: str) -> Recording:
+    """``rec`` as read from the compressed file ``path``: its sources, warnings and device records name it."""
     rec.sources = [str(path) if s == str(inner) else s for s in rec.sources]
     rec.warnings = [w.replace(str(inner), path.name) for w in rec.warnings]
     for key, meta in rec.metadata.items():
         if key.startswith("imulog.device.") and isinstance(meta, dict):
-            meta["compression"] = {"container": path.name, "inner": inner.name, "inner_format": conv.name}
+            meta["compression"] = {"container": path.name, "inner": inner.name, "inner_format": inner_format}
     return rec
 
 
@@ -185,6 +199,10 @@ class CompressedConverter(Converter):
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return convert_compressed(Path(path), options)
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """The inner converter's pieces (see :func:`iter_compressed`)."""
+        return iter_compressed(Path(path), options)
 
 
 CONVERTER = CompressedConverter()

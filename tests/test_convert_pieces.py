@@ -211,3 +211,16 @@ def test_host_clock_text_converts_in_bounded_memory(tmp_path):
     assert grow_mb < 15, (
         f"peak grew {grow_mb:.0f} MB from {short.stat().st_size >> 20} to {long.stat().st_size >> 20} MB of text"
     )
+
+
+def test_compressed_text_comes_in_the_inner_readers_pieces(shared_data, tmp_path, monkeypatch):
+    import gzip
+
+    src = shared_data / "imu_text/fusion_sensor_data.csv"
+    path = tmp_path / "fusion.csv.gz"
+    path.write_bytes(gzip.compress(src.read_bytes()))
+    conv = get("compressed")
+    whole = conv.convert(path)
+    assert whole.sources == [str(path)] and len(whole.imus[0]) > 0
+    monkeypatch.setattr(TEXT, 4096)
+    _pieces_equal_whole(list(conv.iter_chunks(path)), whole)
