@@ -15,6 +15,8 @@ Each row is one epoch: it becomes one sample of the signal stream ``/signals/<se
 start (``Start Date``/``Start Time`` + row x epoch, or the row's ``Date``/``Time``), with the epoch length in the
 device metadata (``epoch_s``). Counts are ActiGraph's device-specific activity counts (unit ``counts``), steps
 ``steps``, lux ``lx``, inclinometer columns ``s`` of the epoch in that posture (ActiLife writes seconds).
+
+Memory: one piece on purpose: one row per epoch (a week of 60 s epochs is 10,080 rows).
 """
 
 from __future__ import annotations

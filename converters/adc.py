@@ -7,6 +7,8 @@ be given (``--rate HZ``); sample ``i`` is at ``round(i / rate * 1e9)`` ns.
 Settings (``ConvertOptions.extra``, CLI ``--adc-zero``, ``--adc-counts-per-g``): ``zero_counts`` (one number or one
 per axis), ``counts_per_g``, ``adc_bits`` (10: counts must lie in 0..1023), ``name`` (stream name, default
 ``acc``).
+
+Memory: read whole, not yet in pieces (issue 24): a board's log of hours of 3-axis counts is tens of MB of text.
 """
 
 from __future__ import annotations

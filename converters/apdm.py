@@ -29,6 +29,9 @@ Gyroscopes, Magnetometers, Temperature, Orientation}``, group attribute ``Sample
 Streams are named from the sensor label (``Right Ankle`` -> ``/imu/right_ankle``), else ``opal_<case ID>``;
 ``--device-name 5718=pelvis`` renames by case ID (or by label). Orientation estimates go to
 ``/orientation/<name>``, other columns to ``/signals/<name>``.
+
+Memory: the CSV layouts are read whole (lab sessions); the HDF5 file is read by h5py whole in a guarded child process
+capped at ``READER_MEMORY_BYTES`` (1 GiB), which bounds memory (:mod:`imulog.converters.apdm_h5`).
 """
 
 from __future__ import annotations

@@ -15,6 +15,8 @@ The recording's ``*_events.tsv`` (same entities without ``tracksys``) becomes ``
 ``trial_type``), attached by the recording's first tracking system only, so that the systems of one recording
 (grouped by :meth:`BidsConverter.recording_key`: the file name without ``tracksys``) merge into one trial. A
 dataset folder therefore converts to one trial per recording (``imulog convert DATASET/ -o trials/``).
+
+Memory: read whole, not yet in pieces (issue 24); BIDS-motion recordings are lab sessions (minutes).
 """
 
 from __future__ import annotations

@@ -7,6 +7,9 @@ at ``round(i / rate * 1e9)`` ns.
 
 Output: IMU ``/imu/imu``; optical pose ``PoseStream`` ``/poses/optical`` (NaN where lost); ``Intervals``
 ``/events/movement`` (label ``movement``: the samples to evaluate).
+
+Memory: h5py reads a trial's datasets whole in a guarded child process capped at ``READER_MEMORY_BYTES`` (1 GiB);
+BROAD trials are minutes long.
 """
 
 from __future__ import annotations

@@ -16,6 +16,8 @@ empty. Per sensor (``<label>: <channel> <number>``): ``EMG`` -> ``/analog/<senso
 ``GYRO.X/Y/Z`` (deg/s) -> ``/imu/<sensor>`` in m/s^2 and rad/s (``MAG.*`` uT); any other channel ->
 ``/signals/<sensor>`` with the unit as found. Units come from the ``Label:`` lines. Sensors are named from their
 label (``Mini sensor 10`` -> ``mini_sensor_10``); ``--device-name 10=wrist`` renames by sensor number or label.
+
+Memory: read whole (one piece) on purpose: a Trigno export is one lab session (minutes of EMG and IMU samples).
 """
 
 from __future__ import annotations

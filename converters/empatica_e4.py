@@ -13,6 +13,8 @@ heart rate, bpm, 1 Hz, computed from BVP: starts about 10 s later) -> ``/signals
 ``/signals/e4_ibi`` (irregular, one sample per beat); ``tags.csv`` (Unix s of each button press) ->
 ``/events/e4_tags``. Time is ns from the earliest start of the folder's files, so every file of the session is
 on one time base (a file converted alone still reads its siblings' first lines for that origin).
+
+Memory: one piece on purpose: a session folder of E4 CSVs is small (ACC at 32 Hz, a day is about 40 MB of text).
 """
 
 from __future__ import annotations

@@ -18,6 +18,8 @@ Layout::
   their ``Marker Quality`` -> ``/signals/motive_marker_quality``; empty cells (occlusions) are gaps (invalid);
 * lengths in ``Length Units`` (Meters, Centimeters, Millimeters) -> m; the ``Time`` column (s) is the clock;
 * ``Capture Start Time`` (local time of the capture PC, no zone) -> ``imulog.trial`` ``start_time``.
+
+Memory: one piece on purpose: a Motive take is a lab capture (minutes of markers and rigid bodies).
 """
 
 from __future__ import annotations

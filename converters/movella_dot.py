@@ -23,6 +23,8 @@ Mapping: acc/gyr -> ``/imu/<tag>`` (SI); quaternion (else Euler) -> ``/orientati
 unwrapped (a drop of more than half the range is one wrap), from the first sample. The banner's ``StartTime``
 (local time with its ``GMT+h`` zone) dates the trial; the real-time log has no start time. ``<tag>`` is the
 banner's ``DeviceTag``, else the file name's first part.
+
+Memory: read whole, not yet in pieces (issue 24): a DOT recording of hours at 60 Hz is tens of MB of text.
 """
 
 from __future__ import annotations

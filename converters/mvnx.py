@@ -27,6 +27,9 @@ gyroscope samples, so there is no ``/imu`` stream (free acceleration is gravity-
 force). Clock: the frame ``time`` attribute (ms from the start); ``recDateMSecsSinceEpoch`` (UTC) is the trial's
 start, with the local offset found by comparing it with ``recDate`` (local time) when both are present.
 The file is parsed incrementally (``iterparse``), frames are cleared once read.
+
+Memory: one piece; ``xml.etree.ElementTree.iterparse`` streams the XML and clears each frame, so memory holds the
+arrays, not the document (an MVN capture is a lab session).
 """
 
 from __future__ import annotations

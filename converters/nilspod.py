@@ -16,6 +16,8 @@ mag, analog, ecg and ppg stay raw counts (``/signals/<name>``). Time: the counte
 midnight) over the rate, ``t_ns`` from the first sample; ``start_time`` = midnight of ``utc_start``'s day + counter
 / rate, in UTC (the sensor clock is set to UTC by its app; NilsPodLib warns it may not be). A counter step above 1
 is missing samples (a gap), a step <= 0 is an error naming the sample.
+
+Memory: read whole, not yet in pieces (issue 24): a NilsPod session of days is hundreds of MB.
 """
 
 from __future__ import annotations

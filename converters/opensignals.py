@@ -17,6 +17,8 @@ EDA uS = (ADC/2^n) x VCC / 0.132. Accelerometer channels need the device's own c
 file does not hold: they stay counts, and a warning says so. Other PLUX devices (biosignalsplux) use other gains:
 their channels stay counts. Time: row / ``sampling rate`` (``nSeq`` is a 4-bit counter that only shows lost
 samples: a jump other than +1 mod 16 is reported); ``date`` + ``time`` (the acquiring PC's local time) is the start.
+
+Memory: read whole, not yet in pieces (issue 24): a long PLUX recording is hundreds of MB of text.
 """
 
 from __future__ import annotations

@@ -5,6 +5,9 @@ text header (``sampling rate``, ``nsamples``, ``resolution``, ``device``, ``date
 group holding ``nSeq`` and one dataset per analog channel ``channel_1``, ``channel_2``, ... (attribute ``sensor``).
 The channels become the same streams as the text file's (:mod:`imulog.converters.opensignals`): counts in
 ``/signals/opensignals_<device>``, BITalino EMG/ECG/EDA in physical units in ``/analog/opensignals_<device>``.
+
+Memory: h5py reads the datasets whole in a guarded child process capped at ``READER_MEMORY_BYTES`` (1 GiB), which
+bounds memory.
 """
 
 from __future__ import annotations

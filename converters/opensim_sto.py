@@ -22,6 +22,8 @@ stream (``<name>`` from the first header line, e.g. ``Coordinates`` -> ``/signal
 ``*_force``/``*_v[xyz]`` N, ``*_p[xyz]``/``*_tx``/``*_ty``/``*_tz`` m, other coordinates deg when ``inDegrees=yes``
 and rad when ``inDegrees=no``, otherwise ``""`` (unknown). Header and data may be tab- or comma-separated (a
 storage file re-saved as CSV pads each header line with commas).
+
+Memory: one piece on purpose: a ``.sto`` of orientations is one lab trial (OpenSense).
 """
 
 from __future__ import annotations

@@ -15,6 +15,8 @@ Positions become one marker set ``/markers/trc`` in m (``Units`` mm, cm or m). T
 written; when it has empty cells the frame number over ``DataRate`` is used (the file is refused when
 neither works). Rows shorter than the header (trailing markers missing, as some exporters write) are padded with
 missing markers. A ``NumFrames``/``NumMarkers`` that disagrees with the data is a warning; the data wins.
+
+Memory: one piece on purpose: a ``.trc`` is one lab capture of markers.
 """
 
 from __future__ import annotations

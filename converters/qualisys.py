@@ -20,6 +20,8 @@ Missing 3D data is exported as empty cells, ``NULL`` or ``0.000 0.000 0.000``; a
 The clock is the ``Time`` column (s) when present, else ``(Frame - 1) / FREQUENCY`` (else sample index /
 ``FREQUENCY``). ``TIME_STAMP`` (the QTM PC's local time, no zone) -> ``imulog.trial`` ``start_time``.
 ``NO_OF_FRAMES`` is checked against the rows (a cut-off file is an error naming its last line).
+
+Memory: one piece on purpose: a QTM export is one lab capture of markers.
 """
 
 from __future__ import annotations

@@ -5,6 +5,8 @@ first column of each marker/device/output), a ``Frame,Sub Frame,X,Y,Z,...`` row,
 ``deg``) and data rows; sections are separated by blank lines. Empty cells are gaps: NaN with validity False,
 never zeros. Time on the Vicon clock: ``t_ns = round((frame - 1 + sub_frame / n_sub) / rate_hz * 1e9)`` where
 ``rate_hz`` is the frame (trajectory) rate and ``n_sub`` the number of sub frames per frame.
+
+Memory: one piece on purpose: a Nexus CSV is one lab trial (its sections are read from the file's bytes once).
 """
 
 from __future__ import annotations

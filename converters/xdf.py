@@ -21,6 +21,10 @@ same for all streams of a file). The file header's ``datetime`` (when LabRecorde
 layout (time-stamp flags, string lengths, samples filling the chunk exactly) are verified before parsing, so
 truncated files and damaged chunks are reported with their chunk index (pyxdf would read misaligned values or skip
 data with a log message); a flipped bit inside a sample value cannot be detected by any reader.
+
+Memory: pyxdf parses a stream whole (its clock offsets and jitter removal fit over the stream), always in a guarded
+child capped at ``READER_MEMORY_BYTES`` (1 GiB), which bounds memory; ``iter_chunks`` yields one stream at a time and,
+beyond 64 MiB, loads one stream at a time, so memory is the largest stream, not the file.
 """
 
 from __future__ import annotations

@@ -23,6 +23,8 @@ Time: ``SampleTimeFine`` (10 kHz ticks, unsigned 32 bit, unwrapped) when every r
 (100 Hz, said out loud, when the file gives none and ``--rate`` is not set). The serial is the header's
 ``DeviceId``, else the last 8 hex digits of ``MT_<master>_<trial>-000_<DeviceId>.txt``; the stream is named
 ``mt_<serial>`` unless ``options.extra["names"]`` maps the serial to a name.
+
+Memory: read whole, not yet in pieces (issue 24): MT Manager exports of one session per sensor file.
 """
 
 from __future__ import annotations
