@@ -3,6 +3,8 @@ huge declared numbers in headers, plus foreign inputs forced on each converter. 
 with one ConversionError line naming the file and no Python exception type, within the issue's bound
 (max(30 s, N / 10 MB/s), 512 MB), measured per input in one child process as tests/test_hostile_devices.py does.
 
+Readers without a shared sample get a built one (the older Genea .bin: tests/genea_build.py).
+
 The corpus is a bounded, seeded sample (a fixed number of mutations per real file, files up to 2 MB), so the test
 takes about a minute; ``IMULOG_FUZZ_PER_FILE`` raises the count for a longer local run.
 """
@@ -20,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from genea_build import build_genea
 from imulog.converters import ConversionError, available, detect
 
 RSS_CAP_MB = 512
@@ -132,7 +135,10 @@ def _zip_members(path: Path, rng: np.random.Generator) -> list[tuple[str, bytes]
 def corpus(shared_data: Path, tmp_path_factory) -> list[tuple[Path, str]]:
     d = tmp_path_factory.mktemp("fuzz_devices")
     jobs: list[tuple[Path, str]] = []
-    for src in _samples(shared_data):
+    built = d / "built"
+    built.mkdir()
+    sources = _samples(shared_data) + [build_genea(built / "genea_built.bin", seconds=30).path]  # no shared sample
+    for src in sources:
         try:
             fmt = detect(src).name
         except ConversionError:
