@@ -1,10 +1,10 @@
 """Older Genea ``.bin`` recordings (Unilever Discover / Activinsights Genea, the binary format before GENEActiv).
 
-Layout (GGIRread's ``readGenea.R``, read as documentation of the format, and checked byte by byte on GGIR's
-``genea_testfile.bin``)::
+Layout (GGIRread's ``readGenea.R``, read as documentation of the format, and checked byte by byte on GGIRread's
+real ``genea_testfile.bin``, kept as ``tests/data/genea_testfile.bin.xz``)::
 
     GENEA/1.00\\r\\n                                  format and version
-    Serial-Number:01275\\r\\n ... Key:Value\\r\\n        header lines (Accel-Offsets, Accel-Gains, Sample-Rate: 80Hz, ...)
+    Serial-Number:01275\\r\\n ... Key:Value\\r\\n        header lines (Accel-Offsets, Accel-Gains, Sample-Rate...)
     \\r\\n                                            a blank line ends the header; pages start on the next byte
     pages of 2048 bytes: 341 chunks of 6 bytes, then 2 padding bytes
 

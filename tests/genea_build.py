@@ -1,9 +1,10 @@
 """Build older Genea ``.bin`` files by the documented layout (GGIRread's readGenea.R; converters/genea.py).
 
-The layout was checked on GGIR's real ``genea_testfile.bin`` (not redistributed: LGPL): a ``GENEA/1.00`` line and
-``Key:Value`` lines ending with CRLF, a blank line, then 2048-byte pages of 341 six-byte chunks and two zero bytes;
-one time stamp chunk before every ``rate`` accelerometer chunks, one battery chunk per page, the first byte of every
-chunk varying (unused by the reference reader). The builder writes the same, with known counts and times.
+The layout was checked on GGIRread's real ``genea_testfile.bin`` (tests/data/genea_testfile.bin.xz): a
+``GENEA/1.00`` line and ``Key:Value`` lines ending with CRLF, a blank line, then 2048-byte pages of 341 six-byte
+chunks and two zero bytes; one time stamp chunk before every ``rate`` accelerometer chunks, one battery chunk per
+page, the first byte of every chunk varying (unused by the reference reader). The builder writes the same, with
+known counts and times.
 """
 
 from __future__ import annotations
@@ -47,7 +48,8 @@ def build_genea(
     stamp_edits: dict[int, int] | None = None,
 ) -> Built:
     """A Genea file: ``lead`` samples, then ``seconds`` stamps each followed by ``rate`` samples (fewer where
-    ``drop`` = {second: samples lost}), then at least ``tail`` samples after one last stamp (as many as fill the last page); a battery chunk every 210 chunks.
+    ``drop`` = {second: samples lost}), then at least ``tail`` samples after one last stamp (as many as fill the
+    last page); a battery chunk every 210 chunks.
     ``stamp_edits`` = {second: value} writes a wrong stamp (its samples keep their true times)."""
     rng = np.random.default_rng(seed)
     drop = drop or {}

@@ -1,11 +1,11 @@
-"""Older Genea .bin (converters/genea.py) on files built by the documented layout (tests/genea_build.py).
-
-The layout and the published conversion were checked on GGIR's real genea_testfile.bin, which is not redistributed
-(LGPL): ``python benchmarks/genea_reference.py genea_testfile.bin`` prints GGIRread's documented values for it next
-to imulog's (all equal). Here the builder writes files with known counts and times."""
+"""Older Genea .bin (converters/genea.py): GGIRread's real test file (tests/data/genea_testfile.bin.xz, Apache-2.0)
+against the values GGIRread's own test documents, and files built by the documented layout (tests/genea_build.py)
+with known counts and times."""
 
 from __future__ import annotations
 
+import lzma
+from datetime import datetime
 from pathlib import Path
 
 import imulog.converters.genea as genea
@@ -17,6 +17,56 @@ from imulog.converters import ConversionError, convert_file, detect
 from imulog.converters._common import G0
 
 from imulog.cli import cli
+
+REAL = Path(__file__).parent / "data" / "genea_testfile.bin.xz"
+
+
+@pytest.fixture(scope="module")
+def real(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("genea") / "genea_testfile.bin"
+    path.write_bytes(lzma.decompress(REAL.read_bytes()))
+    return path
+
+
+def test_real_file_equals_ggirreads_documented_values(real: Path, monkeypatch):
+    """GGIRread's test_GeneaBinReader.R reads pages 1 to 4 (three pages) and expects 993 samples (it keeps them up
+    to the first sample of the last time stamp), a sum of 1 058 559 over x, y, z in whole mg (its two integer
+    roundings: counts x gain / 8192, then x 1000 / 340), 4 battery readings, the first at 1 269 950 921 s, and the
+    100th sample at 1 269 950 922 s within its tolerance (1.5e-8 relative); its own rule puts it at ...921.8375."""
+    assert detect(real).name == "genea"
+    monkeypatch.setattr(genea, "PAGES_PER_CHUNK", 1)  # one piece per page: pages 1-3 are pieces 1-3
+    pieces = list(genea.iter_chunks(real))
+    start = datetime.fromisoformat(pieces[0].metadata["imulog.trial"]["start_time"])
+    t0 = (start - datetime(1970, 1, 1)).total_seconds()
+    imu = [p.imus[0] for p in pieces[1:4]]
+    t = t0 + np.concatenate([i.t_ns for i in imu]) / 1e9
+    g = np.concatenate([i.acc for i in imu]) / G0
+    cal = pieces[0].metadata["imulog.device.genea"]["calibration"]
+    assert (cal["gain"], cal["offset"]) == ([8144, 8132, 8004], [1, -3, -13])  # the header's Accel-Gains/-Offsets
+    gains, offsets = np.array(cal["gain"], float), np.array(cal["offset"], float)
+    counts = np.rint(g * (8192 * 340 / gains) - offsets)  # the stored counts, axis signs applied
+    np.testing.assert_allclose(counts, g * (8192 * 340 / gains) - offsets, atol=1e-6)  # whole counts
+    rows = int(np.flatnonzero(np.abs(t - np.round(t)) < 1e-6)[-1]) + 1
+    assert rows == 993
+    mg = np.rint(np.rint((counts + offsets) * gains / 8192) * 1000 / 340)[:rows]
+    assert mg.sum() == 1058559
+    exact = (counts + offsets) * gains / 8192 * 1000 / 340
+    assert np.abs(exact[:rows] - mg).max() < 1.8  # imulog keeps the value GGIRread rounds twice
+    bat = np.concatenate([p.signals[0].t_ns for p in pieces[1:4]]) / 1e9 + t0
+    assert len(bat) == 4 and np.floor(bat[0] + 1e-6) == 1269950921
+    assert t[99] == pytest.approx(1269950921.8375, abs=1e-6) == pytest.approx(1269950922, rel=1.5e-8)
+
+
+def test_real_file_whole(real: Path):
+    rec = convert_file(real)
+    (w,) = rec.warnings
+    assert "the last page (index 127) is cut short (1626 bytes); dropped" in w  # the file was cut at 256 KiB
+    imu = rec.imus[0]
+    assert len(imu) == 42598 and len(rec.signals[0]) == 177  # 127 pages: 532 stamps, 177 battery readings
+    np.testing.assert_allclose(np.diff(imu.t_ns), 12_500_000, atol=1)  # one stamp per 80 samples: 80 Hz exactly
+    assert rec.metadata["imulog.trial"]["start_time"] == "2010-03-30T12:08:36.400000"  # Trial-Start 12:08:36
+    g = np.linalg.norm(imu.acc / G0, axis=1)
+    assert 0.9 < np.median(g) < 1.1
 
 
 def test_built_file_decodes_to_its_counts_times_and_battery(tmp_path: Path):
