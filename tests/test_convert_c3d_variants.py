@@ -65,14 +65,19 @@ def test_mips_sample_reads_with_own_reader(shared_data: Path):
         assert not m.valid[0, 1]
 
 
-def test_header_frame_count_disagrees_with_point_frames(pc_int: Path, tmp_path: Path):
+@pytest.mark.parametrize("extra", [500, -20])
+def test_header_frame_count_disagrees_with_point_frames(pc_int: Path, tmp_path: Path, extra: int):
+    """The header claims more (or fewer) frames than POINT:FRAMES: imulog reads what ezc3d reads."""
+    import ezc3d
+
     data = bytearray(pc_int.read_bytes())
     first, last = struct.unpack_from("<HH", data, 6)
-    struct.pack_into("<H", data, 8, last + 500)  # the header claims 500 frames more than the file holds
-    path = tmp_path / "long_header.c3d"
+    struct.pack_into("<H", data, 8, last + extra)
+    path = tmp_path / "header_frames.c3d"
     path.write_bytes(bytes(data))
     rec = convert_file(path)
-    assert len(rec.markers[0]) == last - first + 1
+    assert len(rec.markers[0]) == last - first + 1 == ezc3d.c3d(str(path))["data"]["points"].shape[2]
+    np.testing.assert_array_equal(rec.markers[0].pos, convert_file(pc_int).markers[0].pos)
     assert any("disagrees with POINT:FRAMES" in w for w in rec.warnings)
 
 
