@@ -273,15 +273,29 @@ def sample_times_ns(
     spread to the next block's start when it follows within twice the nominal block duration (and no skipped
     damaged block lies between them: ``breaks``), else at the nominal rate."""
     counts = np.maximum(np.asarray(counts, dtype=np.int64), 1)
+    span = _spans(starts, next_start, counts, rate_hz, breaks)
+    k = np.arange(int(counts.max()), dtype=np.int64)
+    return starts[:, None] + (span[:, None] * k[None, :]) // counts[:, None]
+
+
+def _spans(
+    starts: np.ndarray, next_start: int | None, counts: np.ndarray, rate_hz: np.ndarray, breaks: np.ndarray | None
+) -> np.ndarray:
+    """Each block's duration (ns): to the next block's start when it follows within twice the nominal duration,
+    else nominal; a block before skipped damaged blocks (``breaks``) takes the measured rate of the block before it
+    (the device's clock runs off nominal by ~1 %: 14 ms over an AX3 block), nominal when that is unknown too."""
+    counts = np.maximum(np.asarray(counts, dtype=np.int64), 1)
     nominal = np.round(counts * NS_PER_S / rate_hz).astype(np.int64)
     nxt = np.append(starts[1:], next_start if next_start is not None else starts[-1] + nominal[-1])
     span = nxt - starts
     ok = (span > 0) & (span < 2 * nominal)
     if breaks is not None:
         ok &= ~breaks
-    span = np.where(ok, span, nominal)
-    k = np.arange(int(counts.max()), dtype=np.int64)
-    return starts[:, None] + (span[:, None] * k[None, :]) // counts[:, None]
+    out = np.where(ok, span, nominal)
+    if breaks is not None and len(out) > 1:
+        measured = np.append(nominal[:1], (span[:-1] * counts[1:]) // counts[:-1])  # previous block's rate
+        out = np.where(breaks & np.append(False, ok[:-1]), measured, out)
+    return out
 
 
 MAX_GAP_NS = 31 * 86400 * NS_PER_S  # a longer pause is a clock or file problem: refused
@@ -308,7 +322,8 @@ def _gaps(
     has_next[-1] = next_start is not None
     end = starts + nominal
     pause = has_next & (nxt - starts >= 2 * nominal)
-    if breaks is not None:  # skipped damaged blocks: a gap whatever its length
+    if breaks is not None:  # skipped damaged blocks: a gap whatever its length, after the block's own samples
+        end = np.where(breaks, starts + _spans(starts, next_start, counts, rate_hz, breaks), end)
         pause |= has_next & breaks & (nxt > end)
     long = np.nonzero(pause & (nxt - end > MAX_GAP_NS))[0]
     if len(long):

@@ -9,6 +9,11 @@ process under a time and memory limit (``extra["reader_timeout_s"]``, default 60
 point scale ``POINT:SCALE`` (warned when the header's copy disagrees). A marker set without one valid sample, or
 markers that are never valid, are warned about per marker set.
 
+Valid samples (the C3D guide, "3D data"): a point whose fourth word (camera mask and residual) is negative is
+invalid, whatever its coordinates say, and so is a non-finite one. A marker at exactly (0, 0, 0) whose residual is
+0 (not measured) is the guide's other spelling of an invalid point (coordinates zeroed, the -1 word not written):
+a gap too, counted in one warning per marker set. A measured point (residual > 0) at the origin stays valid.
+
 Time on the capture clock: point frame ``k`` (0-based, counting from the header's first frame) is at
 ``round((first_frame + k) / point_rate * 1e9)`` ns, so a Vicon C3D and its Nexus CSV export share one clock.
 Analog sample ``j`` is at ``(first_frame + j / ratio) / point_rate``. Event times (``EVENT:TIMES``, minutes and
@@ -236,11 +241,21 @@ def read_c3d(path: Path, name: str = "vicon", options: ConvertOptions | None = N
         residuals = c["data"]["meta_points"]["residuals"][0] if "meta_points" in c["data"] else None
         xyz = np.transpose(points[:3], (2, 1, 0)).astype(np.float64)  # (N, M, 3)
         valid = finite_rows(xyz)
+        unmeasured_origin = np.zeros_like(valid)
         if residuals is not None and residuals.shape == (n_points, n_frames):
             valid &= residuals.T >= 0
+            unmeasured_origin = valid & (residuals.T == 0) & (xyz == 0).all(axis=2)
         marker_idx = [i for i, lab in enumerate(labels) if lab not in outputs]
         out_idx = [i for i, lab in enumerate(labels) if lab in outputs]
         if marker_idx:
+            zeros = unmeasured_origin[:, marker_idx]
+            if zeros.any():  # the C3D guide's invalid point: X = Y = Z = 0, written without the -1 residual word
+                valid[:, marker_idx] &= ~zeros
+                rec.warnings.append(
+                    f"{path.name}: marker set {name!r}: {int(zeros.sum())} sample(s) of "
+                    f"{int(zeros.any(axis=0).sum())} marker(s) at exactly (0, 0, 0) with no residual (not measured: "
+                    "the C3D convention for an invalid point) stored as gaps"
+                )
             pos, res = _positions_m(xyz[:, marker_idx, :], params, unit)
             rec.markers.append(
                 MarkerStream(

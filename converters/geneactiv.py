@@ -23,7 +23,7 @@ header's zone) is the trial's ``start_time``. Pages are decoded in batches so me
 (:func:`iter_chunks`). A final page cut short (an interrupted download) is dropped with a warning; a damaged page
 elsewhere stops the conversion naming its sequence number.
 
-The older Genea ``.bin`` (binary 2048-byte pages after a ``GENEA`` header) is recognised and refused by name.
+The older Genea ``.bin`` (binary 2048-byte pages after a ``GENEA`` header) is :mod:`imulog.converters.genea`'s.
 """
 
 from __future__ import annotations
@@ -140,10 +140,7 @@ def iter_chunks(path: Path, options: ConvertOptions | None = None) -> Iterator[R
             raise ConversionError(path, "empty file") from None
     with buf:
         if buf[:5] == b"GENEA":
-            raise ConversionError(
-                path,
-                "older Genea binary .bin (2048-byte pages) is not supported; export it to CSV with the Genea software",
-            )
+            raise ConversionError(path, "an older Genea .bin (GENEA header, binary pages): convert it as --format genea")
         first = buf.find(PAGE_MARK)
         if first < 0:
             raise ConversionError(path, "no 'Recorded Data' page: not a GENEActiv .bin, or the file holds no data")
@@ -277,8 +274,6 @@ class GeneactivConverter(Converter):
     def sniff(self, path: Path, head: bytes) -> float:
         if head.startswith(b"Device Identity") and b"Device Unique Serial Code" in head[:200]:
             return 0.99 if PAGE_MARK in head or b"Calibration Data" in head else 0.8
-        if head[:5] == b"GENEA" and Path(path).suffix.lower() == ".bin":
-            return 0.8  # older Genea: claimed so the refusal names the format
         return 0.0
 
     def recording_key(self, path: Path) -> str | None:

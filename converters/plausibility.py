@@ -235,7 +235,7 @@ def gyro_tilt_ratio(
         tilt[k:-k] = np.sqrt(step[0] ** 2 + step[1] ** 2 + step[2] ** 2) * (rate / (2 * k))
         along = w_s[0] * u[0] + w_s[1] * u[1] + w_s[2] * u[2]
         perp = np.sqrt(sum((w_s[j] - along * u[j]) ** 2 for j in range(3)))
-    ok = np.isfinite(tilt) & np.isfinite(perp) & (np.abs(norm / ref - 1.0) < 0.1) & (tilt > min_tilt_rad_s)
+        ok = np.isfinite(tilt) & np.isfinite(perp) & (np.abs(norm / ref - 1.0) < 0.1) & (tilt > min_tilt_rad_s)
     ok[: k + 1] = False
     ok[-k - 1 :] = False
     if ok.sum() < 0.5 * rate:
@@ -278,7 +278,9 @@ def imu_warnings(
     if acc is not None and len(acc) > 2 and np.isfinite(acc).any():
         norm, at_rest = rest_acc_norm(acc, t_ns, rest=rest)
         ref_norm = norm
-        if not 0.5 * G0 <= norm <= 2.0 * G0:
+        if norm == 0 and not np.nanmax(np.abs(acc)) > 0:  # no data: no unit can be judged (EDF min == max)
+            out.append(f"{topic}: every acc value is 0 (the channel holds no data); no unit can be judged")
+        elif not 0.5 * G0 <= norm <= 2.0 * G0:
             guess = ""
             if 0.5 <= norm <= 2.0:
                 guess = " (the numbers look like g: is the unit g rather than m/s^2? --unit acc=g)"

@@ -42,6 +42,7 @@ BUILTIN: dict[str, str] = {
     "actilife-csv": "imulog.converters.actilife_csv:CONVERTER",
     "xdf": "imulog.converters.xdf:CONVERTER",
     "geneactiv": "imulog.converters.geneactiv:CONVERTER",
+    "genea": "imulog.converters.genea:CONVERTER",
     "opensim-trc": "imulog.converters.opensim_trc:CONVERTER",
     "edf": "imulog.converters.edf:CONVERTER",
     "nilspod": "imulog.converters.nilspod:CONVERTER",

@@ -146,3 +146,47 @@ def test_skip_damaged_from_the_command_line(cwa_dir: Path, tmp_path: Path):
     done = CliRunner().invoke(cli, ["convert", str(bad), "-o", str(out), "--skip-damaged"])
     assert done.exit_code == 0, done.output
     assert out.exists() and "damaged" in done.output
+
+
+GGIRREAD = Path(__file__).parent / "data"  # GGIRread's AX3 test files (Apache-2.0; ggirread_testfiles.md)
+
+
+def _unxz(name: str, tmp_path: Path) -> Path:
+    import lzma
+
+    out = tmp_path / name.removesuffix(".xz")
+    out.write_bytes(lzma.decompress((GGIRREAD / name).read_bytes()))
+    return out
+
+
+@pytest.mark.parametrize("chunk", [None, 13, 50])
+def test_real_damaged_file_skips_exactly_the_damaged_blocks(tmp_path: Path, chunk):
+    """GGIRread's real AX3 file with data blocks 0, 13, 14, 142, 143 and 144 damaged, against the intact file it
+    was made from: refused by default naming block 0; with skip_damaged the three runs are named, counted, the
+    intact samples equal the intact file's exactly (times to 1 us, the block before a run to 0.2 ms: its samples
+    take the previous block's measured rate), and the run inside the recording is a gap of NaN samples."""
+    from imulog.converters._binary import concat_chunks
+    from imulog.converters.axivity import iter_chunks
+
+    bad = _unxz("ax3_testfile_corrupt_blocks_0_13_14_142_143_144.cwa.xz", tmp_path)
+    intact = read_cwa(_unxz("ax3_testfile.cwa.xz", tmp_path))
+    with pytest.raises(ConversionError, match=r"data block 0 \(byte 1024\): checksum mismatch.*--skip-damaged"):
+        read_cwa(bad)
+    opts = ConvertOptions(extra={"skip_damaged": True})
+    rec = read_cwa(bad, opts) if chunk is None else concat_chunks(iter_chunks(bad, opts, blocks_per_chunk=chunk))
+    runs = [w.split(": ")[1].split(" damaged")[0] for w in rec.warnings if "damaged" in w]
+    assert runs == ["data blocks 0-0", "data blocks 13-14", "data blocks 142-144"]
+    meta = rec.metadata[next(k for k in rec.metadata if k.startswith("imulog.device."))]
+    assert meta["skipped_damaged_blocks"] == 6 and meta["gaps"] == 1
+    imu, ref = rec.imus[0], intact.imus[0]
+    n = 120  # samples per AX3 packed block
+    block = np.arange(len(ref)) // n
+    kept = ((block >= 1) & (block <= 12)) | ((block >= 15) & (block <= 141))
+    finite = np.isfinite(imu.acc[:, 0])
+    np.testing.assert_array_equal(imu.acc[finite], ref.acc[kept])
+    dt = np.abs(_abs_s(rec)[finite] - _abs_s(intact)[kept])
+    before_gap = np.isin(block[kept], [12, 141])
+    assert dt[~before_gap].max() < 1e-6 and dt[before_gap].max() < 2e-4
+    # blocks 13-14 (2 x 120 samples at the device's ~98.8 Hz) are NaN rows on the nominal 100 Hz grid
+    assert (~finite).sum() == meta["gap_samples"] and 240 <= meta["gap_samples"] <= 246
+    assert np.all(np.diff(imu.t_ns) > 0)

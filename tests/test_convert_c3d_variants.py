@@ -65,14 +65,19 @@ def test_mips_sample_reads_with_own_reader(shared_data: Path):
         assert not m.valid[0, 1]
 
 
-def test_header_frame_count_disagrees_with_point_frames(pc_int: Path, tmp_path: Path):
+@pytest.mark.parametrize("extra", [500, -20])
+def test_header_frame_count_disagrees_with_point_frames(pc_int: Path, tmp_path: Path, extra: int):
+    """The header claims more (or fewer) frames than POINT:FRAMES: imulog reads what ezc3d reads."""
+    import ezc3d
+
     data = bytearray(pc_int.read_bytes())
     first, last = struct.unpack_from("<HH", data, 6)
-    struct.pack_into("<H", data, 8, last + 500)  # the header claims 500 frames more than the file holds
-    path = tmp_path / "long_header.c3d"
+    struct.pack_into("<H", data, 8, last + extra)
+    path = tmp_path / "header_frames.c3d"
     path.write_bytes(bytes(data))
     rec = convert_file(path)
-    assert len(rec.markers[0]) == last - first + 1
+    assert len(rec.markers[0]) == last - first + 1 == ezc3d.c3d(str(path))["data"]["points"].shape[2]
+    np.testing.assert_array_equal(rec.markers[0].pos, convert_file(pc_int).markers[0].pos)
     assert any("disagrees with POINT:FRAMES" in w for w in rec.warnings)
 
 
@@ -138,3 +143,100 @@ def test_hanging_reader_falls_back_with_one_line(pc_int: Path, monkeypatch):
     (w,) = [w for w in rec.warnings if "imulog's own" in w]
     assert "did not finish within 0.5 s" in w and "\n" not in w
     np.testing.assert_array_equal(rec.markers[0].pos, ref)
+
+
+def _with_words(pc_int: Path, tmp_path: Path, edits: dict[int, int], zero: tuple[int, ...] = ()) -> tuple[Path, int]:
+    """pc_int.c3d with frame 0's fourth point word set per ``edits`` (point -> int16 word) and the coordinates of
+    the points in ``zero`` set to 0; returns the path and the number of points."""
+    data = bytearray(pc_int.read_bytes())
+    n_points, n_analog = struct.unpack_from("<2H", data, 2)
+    start = (struct.unpack_from("<H", data, 16)[0] - 1) * 512
+    frames = parameters(bytes(data))["POINT:FRAMES"][0]
+    words = np.frombuffer(bytes(data), "<i2", count=frames * (4 * n_points + n_analog), offset=start).copy()
+    words = words.reshape(frames, -1)
+    for j, w in edits.items():
+        words[0, 4 * j + 3] = w
+    for j in zero:
+        words[0, 4 * j : 4 * j + 3] = 0
+    data[start : start + words.nbytes] = words.tobytes()
+    path = tmp_path / "words.c3d"
+    path.write_bytes(bytes(data))
+    return path, n_points
+
+
+def _c3d_package_residuals(path: Path) -> np.ndarray:
+    """Frame 0's residuals as the `c3d` package reads them (-1 = invalid)."""
+    import warnings
+
+    import c3d
+
+    with warnings.catch_warnings(), open(path, "rb") as f:
+        warnings.simplefilter("ignore")
+        (_, points, _) = next(iter(c3d.Reader(f).read_frames()))
+    return points[:, 3]
+
+
+@pytest.mark.parametrize("own_reader", [False, True], ids=["ezc3d", "imulog-reader"])
+def test_residual_and_camera_mask_semantics_make_gaps(pc_int: Path, tmp_path: Path, monkeypatch, own_reader: bool):
+    """A negative fourth word is invalid whatever the coordinates and camera bits say (-1, -2, a camera mask with
+    the sign bit set, 0x8000); so is the guide's other spelling, X = Y = Z = 0 with a zero word (no residual, no
+    camera). A measured point (residual > 0) at the origin stays valid. ezc3d and the `c3d` package agree on the
+    negative words; on the zero word both report a valid point at the origin, which imulog stores as a gap."""
+    import ezc3d
+    import imulog.converters.c3d as c3d_mod
+
+    ref = convert_file(pc_int).markers[0]
+    valid0 = np.flatnonzero(ref.valid[0])
+    a, b, c, d, e, f = (int(j) for j in valid0[:6])
+    negative = {a: -1, b: -2, c: -0x7EFB, d: -32768}  # -0x7EFB = 0x8105: cameras 1 and 8 (sign), residual 5
+    path, n_points = _with_words(pc_int, tmp_path, {**negative, e: 0, f: 0x0105}, zero=(e, f))
+    if own_reader:
+        monkeypatch.setattr(c3d_mod, "_ezc3d_read", lambda p: _crash())
+    rec = convert_file(path)
+    m = rec.markers[0]
+    assert any("imulog's own" in w for w in rec.warnings) == own_reader
+    for j in negative:
+        assert not m.valid[0, j], j
+    assert not m.valid[0, e]  # (0, 0, 0), word 0: not measured -> the invalid convention
+    assert m.valid[0, f] and np.all(m.pos[0, f] == 0)  # measured at the origin (residual 5 x scale)
+    (w,) = [w for w in rec.warnings if "exactly (0, 0, 0)" in w]
+    assert "1 sample(s) of 1 marker(s)" in w and "'vicon'" in w
+    # every other sample is as in the unedited file
+    keep = np.ones_like(m.valid)
+    keep[0, [a, b, c, d, e, f]] = False
+    np.testing.assert_array_equal(m.valid[keep], ref.valid[keep])
+    np.testing.assert_array_equal(m.pos[keep & m.valid], ref.pos[keep & m.valid])
+    # the two reference readers on the same bytes
+    ez = ezc3d.c3d(str(path))["data"]["meta_points"]["residuals"][0][:, 0]
+    pk = _c3d_package_residuals(path)
+    for j in negative:
+        assert ez[j] < 0 and pk[j] < 0, j
+    assert ez[e] == 0 and pk[e] == 0 and ez[f] > 0 and pk[f] > 0
+
+
+def test_shared_c3d_files_validity_equals_two_readers(shared_data: Path):
+    """On the real files a sample is valid exactly where ezc3d gives finite coordinates and a residual >= 0, and
+    (where the `c3d` package reads the file) where it gives a residual >= 0."""
+    import warnings
+
+    import c3d
+    import ezc3d
+
+    for rel in (
+        "devices/c3d_samples/pc_int.c3d",
+        "vicon_nexus/markers_analogs.c3d",
+        "c3d/ktk_sample_propulsion_upperlimb.c3d",
+    ):
+        path = shared_data / rel
+        ez = ezc3d.c3d(str(path))
+        res = ez["data"]["meta_points"]["residuals"][0]
+        ok = np.isfinite(ez["data"]["points"][:3]).all(axis=0) & (res >= 0)
+        m = convert_file(path).markers[0]
+        np.testing.assert_array_equal(m.valid, ok.T, err_msg=rel)
+        try:
+            with warnings.catch_warnings(), open(path, "rb") as f:
+                warnings.simplefilter("ignore")
+                pk = np.array([p[:, 3] for _, p, _ in c3d.Reader(f).read_frames()])
+        except AssertionError:  # the c3d package refuses the ktk file's SCALE parameter
+            continue
+        np.testing.assert_array_equal(m.valid, pk >= 0, err_msg=rel)

@@ -91,7 +91,7 @@ def test_chunks_assemble_to_the_whole_file(src: Path, monkeypatch):
         (lambda d: d.replace(b"Recorded Data", b"Recorded Dat"), r"no 'Recorded Data' page"),
         (lambda d: d.replace(b"Sequence Number:3\r\n", b"Sequence Number:3\r\nX:1\r\n"), r"page index 3: damaged"),
         (lambda d: d.replace(b"Page Time:2013-05-30 10:13:01", b"Page Time:2013-05-30 10:12:01"), r"goes backwards"),
-        (lambda d: b"GENEA" + d[5:], r"older Genea binary \.bin .* not supported"),
+        (lambda d: b"GENEA" + d[5:], r"older Genea \.bin .*--format genea"),
     ],
 )
 def test_damaged_file_one_line_error(src: Path, tmp_path: Path, damage, message):

@@ -3,6 +3,9 @@ huge declared numbers in headers, plus foreign inputs forced on each converter. 
 with one ConversionError line naming the file and no Python exception type, within the issue's bound
 (max(30 s, N / 10 MB/s), 512 MB), measured per input in one child process as tests/test_hostile_devices.py does.
 
+Readers without a shared sample get one from tests/data and a built one (the older Genea .bin: GGIRread's
+genea_testfile.bin, tests/genea_build.py).
+
 The corpus is a bounded, seeded sample (a fixed number of mutations per real file, files up to 2 MB), so the test
 takes about a minute; ``IMULOG_FUZZ_PER_FILE`` raises the count for a longer local run.
 """
@@ -10,6 +13,7 @@ takes about a minute; ``IMULOG_FUZZ_PER_FILE`` raises the count for a longer loc
 from __future__ import annotations
 
 import json
+import lzma
 import os
 import re
 import subprocess
@@ -20,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from genea_build import build_genea
 from imulog.converters import ConversionError, available, detect
 
 RSS_CAP_MB = 512
@@ -132,7 +137,12 @@ def _zip_members(path: Path, rng: np.random.Generator) -> list[tuple[str, bytes]
 def corpus(shared_data: Path, tmp_path_factory) -> list[tuple[Path, str]]:
     d = tmp_path_factory.mktemp("fuzz_devices")
     jobs: list[tuple[Path, str]] = []
-    for src in _samples(shared_data):
+    built = d / "built"
+    built.mkdir()
+    real_genea = built / "genea_testfile.bin"  # GGIRread's real file (tests/data): no shared sample of the format
+    real_genea.write_bytes(lzma.decompress((REPO / "tests" / "data" / "genea_testfile.bin.xz").read_bytes()))
+    sources = _samples(shared_data) + [real_genea, build_genea(built / "genea_built.bin", seconds=30).path]
+    for src in sources:
         try:
             fmt = detect(src).name
         except ConversionError:
