@@ -20,6 +20,8 @@ from imulog.converters.registry import get
 from imulog.model import Recording
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "benchmarks"))
+from bench_convert_pieces import host_clock_csv  # noqa: E402  (the documented layout, shared with the benchmark)
 
 
 def assert_same_recording(a: Recording, b: Recording) -> None:
@@ -107,32 +109,6 @@ def test_tiny_pieces_equal_one_piece_on_real_files(name, rel, setting, shared_da
 
 
 # ----------------------------------------------------------------------------------- host clock in pieces
-def host_clock_csv(path: Path, n: int, *, rate_hz: float = 51.2, seed: int = 0, late: dict[int, float] | None = None):
-    """A Shimmer Consensys export (``sep=`` line, names row, units row; docs/converters.md) of ``n`` samples whose
-    host Unix stamps (ms) repeat and jitter: packets of 4 samples stamped on arrival. ``late``: row -> extra
-    delay (s) of that row's stamp."""
-    rng = np.random.default_rng(seed)
-    t_true_ms = 1.6e12 + np.arange(n) * (1000.0 / rate_hz)
-    arrival = t_true_ms[(np.arange(n) // 4) * 4 + 3] + rng.uniform(0, 15, n)  # a packet is stamped when it arrives
-    for row, delay_s in (late or {}).items():
-        arrival[row] += delay_s * 1000.0
-    stamps = np.floor(arrival)  # 1 ms resolution: repeats within a packet
-    acc = rng.normal(0, 1, (n, 3)) + [0, 0, 9.81]
-    gyr = rng.normal(0, 5, (n, 3))
-    pre = "Shimmer_40AC_"
-    names = (
-        [pre + "Timestamp_Unix_CAL"]
-        + [pre + f"Accel_LN_{a}_CAL" for a in "XYZ"]
-        + [pre + f"Gyro_{a}_CAL" for a in "XYZ"]
-    )
-    units = ["ms"] + ["m/(s^2)"] * 3 + ["deg/s"] * 3
-    rows = np.column_stack([stamps, acc, gyr])
-    with open(path, "w") as f:
-        f.write('"sep=;"\n' + ";".join(names) + "\n" + ";".join(units) + "\n")
-        np.savetxt(f, rows, delimiter=";", fmt=["%.0f"] + ["%.5f"] * 6)
-    return stamps
-
-
 def test_host_clock_fit_is_the_same_in_any_pieces(tmp_path):
     from imulog.converters.delimited import iter_delimited, read_delimited
 
