@@ -88,17 +88,27 @@ def test_truncated_file_still_refused(pc_int: Path, tmp_path: Path):
         convert_file(path)
 
 
-def test_all_invalid_marker_set_is_warned(pc_int: Path, tmp_path: Path):
-    data = bytearray(pc_int.read_bytes())
+def _edit_words(src: Path, out: Path, edit) -> int:
+    """``src`` (an integer Intel C3D) written to ``out`` after ``edit(words, n_points)`` changed its data words,
+    (frames, 4 x points + analogs) int16; returns the number of points."""
+    data = bytearray(src.read_bytes())
     n_points, n_analog = struct.unpack_from("<2H", data, 2)
     start = (struct.unpack_from("<H", data, 16)[0] - 1) * 512
     frames = parameters(bytes(data))["POINT:FRAMES"][0]
     words = np.frombuffer(bytes(data), "<i2", count=frames * (4 * n_points + n_analog), offset=start).copy()
     words = words.reshape(frames, -1)
-    words[:, 3 : 4 * n_points : 4] = -1  # every point's residual word: invalid
+    edit(words, n_points)
     data[start : start + words.nbytes] = words.tobytes()
+    out.write_bytes(bytes(data))
+    return n_points
+
+
+def test_all_invalid_marker_set_is_warned(pc_int: Path, tmp_path: Path):
+    def every_residual_invalid(words: np.ndarray, n_points: int) -> None:
+        words[:, 3 : 4 * n_points : 4] = -1
+
     path = tmp_path / "invalid.c3d"
-    path.write_bytes(bytes(data))
+    n_points = _edit_words(pc_int, path, every_residual_invalid)
     rec = convert_file(path)
     assert not rec.markers[0].valid.any()
     assert any(f"all {n_points} markers are invalid in every frame" in w for w in rec.warnings)
@@ -148,20 +158,15 @@ def test_hanging_reader_falls_back_with_one_line(pc_int: Path, monkeypatch):
 def _with_words(pc_int: Path, tmp_path: Path, edits: dict[int, int], zero: tuple[int, ...] = ()) -> tuple[Path, int]:
     """pc_int.c3d with frame 0's fourth point word set per ``edits`` (point -> int16 word) and the coordinates of
     the points in ``zero`` set to 0; returns the path and the number of points."""
-    data = bytearray(pc_int.read_bytes())
-    n_points, n_analog = struct.unpack_from("<2H", data, 2)
-    start = (struct.unpack_from("<H", data, 16)[0] - 1) * 512
-    frames = parameters(bytes(data))["POINT:FRAMES"][0]
-    words = np.frombuffer(bytes(data), "<i2", count=frames * (4 * n_points + n_analog), offset=start).copy()
-    words = words.reshape(frames, -1)
-    for j, w in edits.items():
-        words[0, 4 * j + 3] = w
-    for j in zero:
-        words[0, 4 * j : 4 * j + 3] = 0
-    data[start : start + words.nbytes] = words.tobytes()
+
+    def edit(words: np.ndarray, n_points: int) -> None:
+        for j, w in edits.items():
+            words[0, 4 * j + 3] = w
+        for j in zero:
+            words[0, 4 * j : 4 * j + 3] = 0
+
     path = tmp_path / "words.c3d"
-    path.write_bytes(bytes(data))
-    return path, n_points
+    return path, _edit_words(pc_int, path, edit)
 
 
 def _c3d_package_residuals(path: Path) -> np.ndarray:
