@@ -217,6 +217,9 @@ def test_residual_and_camera_mask_semantics_make_gaps(pc_int: Path, tmp_path: Pa
     for j in negative:
         assert ez[j] < 0 and pk[j] < 0, j
     assert ez[e] == 0 and pk[e] == 0 and ez[f] > 0 and pk[f] > 0
+    # the two readers split the word differently: ezc3d's residual is its high byte, the c3d package's the low byte
+    scale = parameters(path.read_bytes())["POINT:SCALE"][0]
+    assert ez[f] == pytest.approx(0x01 * scale) and pk[f] == pytest.approx(0x05 * scale)
 
 
 def test_shared_c3d_files_validity_equals_two_readers(shared_data: Path):
@@ -245,3 +248,36 @@ def test_shared_c3d_files_validity_equals_two_readers(shared_data: Path):
         except AssertionError:  # the c3d package refuses the ktk file's SCALE parameter
             continue
         np.testing.assert_array_equal(m.valid, pk >= 0, err_msg=rel)
+
+
+@pytest.mark.parametrize("own_reader", [False, True], ids=["ezc3d", "imulog-reader"])
+def test_float_c3d_residual_semantics(tmp_path: Path, monkeypatch, own_reader: bool):
+    """The same rules in a floating-point C3D (POINT:SCALE < 0, the fourth word a float), written by ezc3d itself:
+    residual -1 is a gap, (0, 0, 0) with residual 0 a gap, (0, 0, 0) with residual 2 a valid measured point."""
+    import ezc3d
+    import imulog.converters.c3d as c3d_mod
+
+    c = ezc3d.c3d()
+    c["parameters"]["POINT"]["RATE"]["value"] = [100]
+    c["parameters"]["POINT"]["LABELS"]["value"] = ("A", "B", "C", "D")
+    pts = np.ones((4, 4, 5))
+    pts[:3] = np.arange(60).reshape(3, 4, 5) + 100.0
+    pts[:3, 1:3, 0] = 0.0  # B and C at the origin in frame 0
+    res = np.full((1, 4, 5), 2.0)
+    res[0, 0, 0] = -1.0  # A invalid
+    res[0, 1, 0] = 0.0  # B not measured
+    c["data"]["points"] = pts
+    c["data"]["meta_points"]["residuals"] = res
+    path = tmp_path / "float.c3d"
+    c.write(str(path))
+    data = path.read_bytes()
+    assert struct.unpack_from("<f", data, 12)[0] < 0  # a float file
+    np.testing.assert_array_equal(ezc3d.c3d(str(path))["data"]["meta_points"]["residuals"][0][:, 0], [-1, 0, 2, 2])
+    if own_reader:
+        monkeypatch.setattr(c3d_mod, "_ezc3d_read", lambda p: _crash())
+    rec = convert_file(path)
+    m = rec.markers[0]
+    np.testing.assert_array_equal(m.valid[0], [False, False, True, True])
+    assert m.valid[1:].all()
+    np.testing.assert_allclose(m.pos[1:, 3], pts[:3, 3, 1:].T * 1e-3)  # mm -> m
+    assert sum("exactly (0, 0, 0)" in w for w in rec.warnings) == 1
