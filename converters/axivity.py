@@ -24,9 +24,9 @@ and battery (V = (raw + 512) * 6 / 1024) become one row per block in ``/signals/
 Every block's checksum is verified: a bad or truncated block stops the conversion with the file and block index
 (a silently skipped block would turn damaged data into a time gap nobody sees). With
 ``ConvertOptions.extra["skip_damaged"]`` damaged blocks (bad checksum, length or block type) are skipped instead:
-each run of them is a gap (NaN samples on the nominal grid, counted in ``gaps``/``gap_samples``), one warning per
-run names its blocks (the warnings go to the conversion record), and ``skipped_damaged_blocks`` in the device
-record counts them.
+each run of them is a gap (NaN samples on the nominal grid, counted in ``gaps``/``gap_samples``; the intact block
+before it keeps the measured rate of the block before that), one warning per run names its blocks (the warnings go
+to the conversion record), and ``skipped_damaged_blocks`` in the device record counts them.
 
 Times follow OpenMovement's definition (``cwa-convert``, ``openmovement-python``; GGIRread computes the same block
 start). scikit-digital-health reads times ~10 ms earlier on the shared AX3/AX6 samples: its reader ignores the

@@ -10,9 +10,12 @@ point scale ``POINT:SCALE`` (warned when the header's copy disagrees). A marker 
 markers that are never valid, are warned about per marker set.
 
 Valid samples (the C3D guide, "3D data"): a point whose fourth word (camera mask and residual) is negative is
-invalid, whatever its coordinates say, and so is a non-finite one. A marker at exactly (0, 0, 0) whose residual is
-0 (not measured) is the guide's other spelling of an invalid point (coordinates zeroed, the -1 word not written):
-a gap too, counted in one warning per marker set. A measured point (residual > 0) at the origin stays valid.
+invalid, whatever its coordinates say, and so is a non-finite one. A marker at exactly (0, 0, 0) whose fourth word
+is 0 (no residual, no camera: not measured) is the guide's other spelling of an invalid point (coordinates zeroed,
+the -1 word not written): a gap too, counted in one warning per marker set. A point at the origin with a residual
+or a camera stays valid. Only the word's sign and whether it is 0 are used, because readers split it differently:
+ezc3d takes the residual from its high byte and the cameras from the low byte, the `c3d` package and imulog's own
+reader the other way round (the guide puts the cameras in the high byte, below the sign bit).
 
 Time on the capture clock: point frame ``k`` (0-based, counting from the header's first frame) is at
 ``round((first_frame + k) / point_rate * 1e9)`` ns, so a Vicon C3D and its Nexus CSV export share one clock.
@@ -128,7 +131,9 @@ def _ezc3d_read(path: str) -> dict[str, Any]:
         if isinstance(grp, dict)
     }
     data = c["data"]
-    meta = {"residuals": np.asarray(data["meta_points"]["residuals"])} if "meta_points" in data else {}
+    meta = {}
+    if "meta_points" in data:
+        meta = {k: np.asarray(data["meta_points"][k]) for k in ("residuals", "camera_masks") if k in data["meta_points"]}
     return {
         "header": {"points": dict(c["header"]["points"])},
         "parameters": params,
@@ -238,13 +243,16 @@ def read_c3d(path: Path, name: str = "vicon", options: ConvertOptions | None = N
         outputs = set()
         for grp in MODEL_OUTPUT_GROUPS:
             outputs.update(str(x).strip() for x in (_param(params, "POINT", grp, []) or []))
-        residuals = c["data"]["meta_points"]["residuals"][0] if "meta_points" in c["data"] else None
+        meta_points = c["data"].get("meta_points", {})
+        residuals = meta_points["residuals"][0] if "residuals" in meta_points else None
+        cameras = meta_points.get("camera_masks")  # (7, M, N) bool
+        no_camera = ~np.asarray(cameras).any(axis=0).T if cameras is not None else True
         xyz = np.transpose(points[:3], (2, 1, 0)).astype(np.float64)  # (N, M, 3)
         valid = finite_rows(xyz)
         unmeasured_origin = np.zeros_like(valid)
         if residuals is not None and residuals.shape == (n_points, n_frames):
             valid &= residuals.T >= 0
-            unmeasured_origin = valid & (residuals.T == 0) & (xyz == 0).all(axis=2)
+            unmeasured_origin = valid & (residuals.T == 0) & no_camera & (xyz == 0).all(axis=2)
         marker_idx = [i for i, lab in enumerate(labels) if lab not in outputs]
         out_idx = [i for i, lab in enumerate(labels) if lab in outputs]
         if marker_idx:

@@ -3,12 +3,14 @@
 Used when the C3D library cannot read a file (ezc3d refuses MIPS files and crashes on some old ones). It returns
 the same structure as ezc3d's ``c3d()`` for the fields :mod:`imulog.converters.c3d` uses: ``header.points``
 (``frame_rate``, ``first_frame``), ``parameters[GROUP][NAME]["value"]``, ``data.points`` (4, M, N),
-``data.meta_points.residuals`` (1, M, N; -1 = invalid) and ``data.analogs`` (1, C, N * ratio).
+``data.meta_points.residuals`` (1, M, N; -1 = invalid), ``data.meta_points.camera_masks`` (7, M, N) and
+``data.analogs`` (1, C, N * ratio).
 
 Frames: ``POINT:FRAMES`` when present (the header's 16-bit last frame wraps for long trials), else the header's
 ``last - first + 1``; a file with fewer whole frames is truncated. Points: int16 x ``POINT:SCALE`` (or float32 when
-the scale is negative); the fourth word's sign marks an invalid point and its low byte times ``|scale|`` is the
-residual. Analogs: ``(raw - ANALOG:OFFSET) * ANALOG:GEN_SCALE * ANALOG:SCALE`` per channel (raw unsigned when
+the scale is negative); the fourth word's sign marks an invalid point, its low byte times ``|scale|`` is the
+residual and its high byte's 7 bits the cameras (the C3D guide's layout; ezc3d reads the two bytes the other way
+round). Analogs: ``(raw - ANALOG:OFFSET) * ANALOG:GEN_SCALE * ANALOG:SCALE`` per channel (raw unsigned when
 ``ANALOG:FORMAT`` is ``UNSIGNED``).
 """
 
@@ -105,7 +107,10 @@ def read(data: bytes) -> dict[str, Any]:
     res_word = pts[:, :, 3]
     invalid = res_word < 0
     xyz = pts[:, :, :3] * (1.0 if word == 4 else abs(scale))
-    resid = np.where(invalid, -1.0, (np.abs(res_word).astype(np.int64) & 0xFF) * abs(scale))
+    w4 = np.abs(res_word).astype(np.int64)
+    resid = np.where(invalid, -1.0, (w4 & 0xFF) * abs(scale))
+    bits = (np.where(invalid, 0, w4)[None, :, :] >> (8 + np.arange(7))[:, None, None]) & 1  # cameras 1-7
+    cameras = np.transpose(bits.astype(bool), (0, 2, 1))  # (7, M, N) as ezc3d
     points = np.ones((4, n_points, frames))
     points[:3] = np.transpose(xyz, (2, 1, 0))
     points[:3, :, :][:, invalid.T] = np.nan
@@ -125,5 +130,9 @@ def read(data: bytes) -> dict[str, Any]:
     return {
         "header": {"points": {"frame_rate": float(rate), "first_frame": int(first) - 1, "size": n_points}},
         "parameters": params,
-        "data": {"points": points, "meta_points": {"residuals": resid.T[None, :, :]}, "analogs": analogs},
+        "data": {
+            "points": points,
+            "meta_points": {"residuals": resid.T[None, :, :], "camera_masks": cameras},
+            "analogs": analogs,
+        },
     }

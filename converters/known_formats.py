@@ -43,6 +43,12 @@ KNOWN: tuple[KnownFormat, ...] = (
         "converter",
     ),
     KnownFormat(
+        "older Genea .bin",
+        lambda p, h, ln: h[:5] == b"GENEA",
+        "its header is not the layout the genea reader knows (CRLF 'Key:Value' lines ended by a blank line)",
+        "force it with --format genea to see the first thing wrong, or export CSV with the Genea software",
+    ),
+    KnownFormat(
         "EDF/EDF+",
         lambda p, h, ln: h[:8] == b"0       " and len(h) >= 256 and h[184:192].strip().isdigit(),
         "no EDF reader is installed",

@@ -16,7 +16,9 @@ channel's resolution in bits): EMG V = (ADC/2^n - 1/2) x VCC / 1009, ECG V = (AD
 EDA uS = (ADC/2^n) x VCC / 0.132. Accelerometer channels need the device's own calibration (Cmin, Cmax), which the
 file does not hold: they stay counts, and a warning says so. Other PLUX devices (biosignalsplux) use other gains:
 their channels stay counts. Time: row / ``sampling rate`` (``nSeq`` is a 4-bit counter that only shows lost
-samples: a jump other than +1 mod 16 is reported); ``date`` + ``time`` (the acquiring PC's local time) is the start.
+samples: a jump other than +1 mod 16 is reported; the ``.h5`` files' uint16 copy counts up and stays at 65535,
+which is not a loss); ``date`` + ``time`` (the acquiring PC's local time, with or without milliseconds) is the
+start.
 
 Memory: read whole, not yet in pieces (issue 24): a long PLUX recording is hundreds of MB of text.
 """
@@ -38,6 +40,7 @@ from imulog.model import AnalogStream, Recording, SignalStream
 MAGIC = "# OpenSignals Text File Format"
 END = "# EndOfHeader"
 VCC = 3.3  # V, BITalino supply
+NSEQ_H5_MAX = 65535  # OpenSignals .h5 stores nSeq as uint16 counting up from its start and stopping at 65535
 TRANSFER = {  # sensor -> (unit, function of (adc, bits))
     "EMG": ("V", lambda a, n: (a / 2.0**n - 0.5) * VCC / 1009.0),
     "ECG": ("V", lambda a, n: (a / 2.0**n - 0.5) * VCC / 1100.0),
@@ -129,7 +132,8 @@ def device_streams(
     t_ns = np.round(np.arange(len(block)) * (1e9 / rate)).astype(np.int64)
     if "nSeq" in cols and len(block) > 1:
         seq = block[:, cols.index("nSeq")]
-        jumps = np.nonzero((np.diff(seq) % 16) != 1)[0]
+        stuck = (seq[:-1] >= NSEQ_H5_MAX) & (seq[1:] >= NSEQ_H5_MAX)  # an .h5 counter stays at 65535 once there
+        jumps = np.nonzero(((np.diff(seq) % 16) != 1) & ~stuck)[0]
         if len(jumps):
             where = (
                 f"line {first_line + 1 + int(jumps[0])}" if first_line is not None else f"sample {int(jumps[0]) + 1}"
@@ -185,9 +189,14 @@ def device_streams(
         "source": path.name,
     }
     if "imulog.trial" not in rec.metadata and dev.get("date") and dev.get("time"):
-        try:
-            start = datetime.strptime(f"{dev['date']} {dev['time']}", "%Y-%m-%d %H:%M:%S.%f")
-        except ValueError:
+        start = None
+        for fmt_time in ("%H:%M:%S.%f", "%H:%M:%S"):  # .h5 headers often give whole seconds
+            try:
+                start = datetime.strptime(f"{dev['date']} {dev['time']}", f"%Y-%m-%d {fmt_time}")
+                break
+            except ValueError:
+                continue
+        if start is None:
             rec.warnings.append(f"{path.name}: date/time {dev['date']!r} {dev['time']!r} not understood")
             return
         rec.metadata["imulog.trial"] = {

@@ -88,17 +88,27 @@ def test_truncated_file_still_refused(pc_int: Path, tmp_path: Path):
         convert_file(path)
 
 
-def test_all_invalid_marker_set_is_warned(pc_int: Path, tmp_path: Path):
-    data = bytearray(pc_int.read_bytes())
+def _edit_words(src: Path, out: Path, edit) -> int:
+    """``src`` (an integer Intel C3D) written to ``out`` after ``edit(words, n_points)`` changed its data words,
+    (frames, 4 x points + analogs) int16; returns the number of points."""
+    data = bytearray(src.read_bytes())
     n_points, n_analog = struct.unpack_from("<2H", data, 2)
     start = (struct.unpack_from("<H", data, 16)[0] - 1) * 512
     frames = parameters(bytes(data))["POINT:FRAMES"][0]
     words = np.frombuffer(bytes(data), "<i2", count=frames * (4 * n_points + n_analog), offset=start).copy()
     words = words.reshape(frames, -1)
-    words[:, 3 : 4 * n_points : 4] = -1  # every point's residual word: invalid
+    edit(words, n_points)
     data[start : start + words.nbytes] = words.tobytes()
+    out.write_bytes(bytes(data))
+    return n_points
+
+
+def test_all_invalid_marker_set_is_warned(pc_int: Path, tmp_path: Path):
+    def every_residual_invalid(words: np.ndarray, n_points: int) -> None:
+        words[:, 3 : 4 * n_points : 4] = -1
+
     path = tmp_path / "invalid.c3d"
-    path.write_bytes(bytes(data))
+    n_points = _edit_words(pc_int, path, every_residual_invalid)
     rec = convert_file(path)
     assert not rec.markers[0].valid.any()
     assert any(f"all {n_points} markers are invalid in every frame" in w for w in rec.warnings)
@@ -148,20 +158,15 @@ def test_hanging_reader_falls_back_with_one_line(pc_int: Path, monkeypatch):
 def _with_words(pc_int: Path, tmp_path: Path, edits: dict[int, int], zero: tuple[int, ...] = ()) -> tuple[Path, int]:
     """pc_int.c3d with frame 0's fourth point word set per ``edits`` (point -> int16 word) and the coordinates of
     the points in ``zero`` set to 0; returns the path and the number of points."""
-    data = bytearray(pc_int.read_bytes())
-    n_points, n_analog = struct.unpack_from("<2H", data, 2)
-    start = (struct.unpack_from("<H", data, 16)[0] - 1) * 512
-    frames = parameters(bytes(data))["POINT:FRAMES"][0]
-    words = np.frombuffer(bytes(data), "<i2", count=frames * (4 * n_points + n_analog), offset=start).copy()
-    words = words.reshape(frames, -1)
-    for j, w in edits.items():
-        words[0, 4 * j + 3] = w
-    for j in zero:
-        words[0, 4 * j : 4 * j + 3] = 0
-    data[start : start + words.nbytes] = words.tobytes()
+
+    def edit(words: np.ndarray, n_points: int) -> None:
+        for j, w in edits.items():
+            words[0, 4 * j + 3] = w
+        for j in zero:
+            words[0, 4 * j : 4 * j + 3] = 0
+
     path = tmp_path / "words.c3d"
-    path.write_bytes(bytes(data))
-    return path, n_points
+    return path, _edit_words(pc_int, path, edit)
 
 
 def _c3d_package_residuals(path: Path) -> np.ndarray:
@@ -212,6 +217,9 @@ def test_residual_and_camera_mask_semantics_make_gaps(pc_int: Path, tmp_path: Pa
     for j in negative:
         assert ez[j] < 0 and pk[j] < 0, j
     assert ez[e] == 0 and pk[e] == 0 and ez[f] > 0 and pk[f] > 0
+    # the two readers split the word differently: ezc3d's residual is its high byte, the c3d package's the low byte
+    scale = parameters(path.read_bytes())["POINT:SCALE"][0]
+    assert ez[f] == pytest.approx(0x01 * scale) and pk[f] == pytest.approx(0x05 * scale)
 
 
 def test_shared_c3d_files_validity_equals_two_readers(shared_data: Path):
@@ -240,3 +248,36 @@ def test_shared_c3d_files_validity_equals_two_readers(shared_data: Path):
         except AssertionError:  # the c3d package refuses the ktk file's SCALE parameter
             continue
         np.testing.assert_array_equal(m.valid, pk >= 0, err_msg=rel)
+
+
+@pytest.mark.parametrize("own_reader", [False, True], ids=["ezc3d", "imulog-reader"])
+def test_float_c3d_residual_semantics(tmp_path: Path, monkeypatch, own_reader: bool):
+    """The same rules in a floating-point C3D (POINT:SCALE < 0, the fourth word a float), written by ezc3d itself:
+    residual -1 is a gap, (0, 0, 0) with residual 0 a gap, (0, 0, 0) with residual 2 a valid measured point."""
+    import ezc3d
+    import imulog.converters.c3d as c3d_mod
+
+    c = ezc3d.c3d()
+    c["parameters"]["POINT"]["RATE"]["value"] = [100]
+    c["parameters"]["POINT"]["LABELS"]["value"] = ("A", "B", "C", "D")
+    pts = np.ones((4, 4, 5))
+    pts[:3] = np.arange(60).reshape(3, 4, 5) + 100.0
+    pts[:3, 1:3, 0] = 0.0  # B and C at the origin in frame 0
+    res = np.full((1, 4, 5), 2.0)
+    res[0, 0, 0] = -1.0  # A invalid
+    res[0, 1, 0] = 0.0  # B not measured
+    c["data"]["points"] = pts
+    c["data"]["meta_points"]["residuals"] = res
+    path = tmp_path / "float.c3d"
+    c.write(str(path))
+    data = path.read_bytes()
+    assert struct.unpack_from("<f", data, 12)[0] < 0  # a float file
+    np.testing.assert_array_equal(ezc3d.c3d(str(path))["data"]["meta_points"]["residuals"][0][:, 0], [-1, 0, 2, 2])
+    if own_reader:
+        monkeypatch.setattr(c3d_mod, "_ezc3d_read", lambda p: _crash())
+    rec = convert_file(path)
+    m = rec.markers[0]
+    np.testing.assert_array_equal(m.valid[0], [False, False, True, True])
+    assert m.valid[1:].all()
+    np.testing.assert_allclose(m.pos[1:, 3], pts[:3, 3, 1:].T * 1e-3)  # mm -> m
+    assert sum("exactly (0, 0, 0)" in w for w in rec.warnings) == 1

@@ -131,3 +131,31 @@ def test_opensignals_h5_reader_runs_guarded(tmp_path, monkeypatch):
     with pytest.raises(ConversionError, match=r"h5py did not finish within 1 s") as e:
         read_opensignals_h5(empty, ConvertOptions(extra={"reader_timeout_s": 1.0}))
     assert time.monotonic() - t0 < 15 and "\n" not in str(e.value)
+
+
+def test_opensignals_h5_saturated_counter_and_whole_second_time(tmp_path):
+    """As in the real biosignalsnotebooks .h5 recordings (51 files checked by hand, MIT): a biosignalsplux file's
+    uint16 nSeq counts up and then stays at 65535, which is no loss of samples (a real skip still is), and the
+    header time may have no milliseconds (`12:02:03`)."""
+    h5py = pytest.importorskip("h5py")
+    n = 40000
+    seq = np.minimum(np.arange(n) + 30000, 65535)
+    seq[1000:] += 1  # one real lost sample at row 1000 (before the counter saturates)
+    seq = np.minimum(seq, 65535).astype(np.uint16)
+    h5 = tmp_path / "plux.h5"
+    with h5py.File(h5, "w") as f:
+        g = f.create_group("00:07:80:79:6F:DB")
+        g.attrs["sampling rate"] = 1000
+        g.attrs["resolution"] = [16]
+        g.attrs["device"] = "channeller"
+        g.attrs["date"] = "2019-03-18"
+        g.attrs["time"] = "12:02:03"
+        raw = g.create_group("raw")
+        raw["nSeq"] = seq.reshape(-1, 1)
+        raw["channel_1"] = np.arange(n, dtype=np.uint16).reshape(-1, 1)
+        raw["channel_1"].attrs["sensor"] = "BVP"
+    rec = convert_file(h5)
+    (w,) = [w for w in rec.warnings if "nSeq" in w]
+    assert "nSeq jumps at 1 row(s) (first sample 1000)" in w  # not the ~4500 rows at 65535
+    assert rec.metadata["imulog.trial"]["start_time"] == "2019-03-18T12:02:03.000"
+    assert not any("not understood" in w for w in rec.warnings)
