@@ -213,8 +213,8 @@ def encode(
             names, extra = stream.columns, {**stream.attrs, "frame_id": stream.frame_id}
             second = st(2, stream.frame_id)
             precision = str(stream.attrs.get("precision", ""))
-            grid = numbers.quantum_hint(stream.attrs)
-            hints = {"values": grid} if grid else {}
+            hint = numbers.signal_hint(stream.attrs)
+            hints = {"values": hint} if hint else {}
         meta.update(extra, columns=json.dumps(list(names)), units=json.dumps(list(stream.units)))
         meta.update(_stats(stream.t_ns, [stream.values]))
         head = second + strings_field(3, names) + strings_field(4, stream.units)

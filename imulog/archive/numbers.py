@@ -20,6 +20,7 @@ docs/schemas.md.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -477,6 +478,20 @@ def decode_numbers(sources: list[tuple[str, Any]], counts: np.ndarray, width: in
     if covered != total:
         raise ValueError(f"{what}: present in some blocks only")
     return out
+
+
+def signal_hint(attrs: dict[str, Any]) -> dict[str, Any] | None:
+    """The ``values`` hint of a SignalStream: its grid (:func:`quantum_hint`), else a converter's ``resolution``
+    attribute (JSON ``{"values": {"scale": [...], ...}}``, e.g. GENEActiv light ``counts * lux / volts``), else None."""
+    grid = quantum_hint(attrs)
+    if grid is not None:
+        return grid
+    res = attrs.get("resolution")
+    if not res:
+        return None
+    hint = json.loads(res) if isinstance(res, str) else res
+    values = hint.get("values") if isinstance(hint, dict) else None
+    return values if isinstance(values, dict) else None
 
 
 def quantum_hint(attrs: dict[str, Any]) -> dict[str, float] | None:
