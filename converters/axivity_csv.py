@@ -99,7 +99,8 @@ def read_axivity_csv(path: Path, options: ConvertOptions | None = None) -> Recor
             t_ns=t_ns,
             acc=values[:, 1:4] * G0,
             gyr=np.radians(values[:, 4:7]) if width == 6 else None,
-            meta=dict(meta),
+            # the text's decimals times the unit factor (imulog.archive.numbers): g and deg/s to SI, exactly
+            meta={**meta, "resolution": {"acc": {"scale": G0}, "gyr": {"scale": np.pi / 180.0}}},
         )
     )
     rec.metadata[f"imulog.device.{name}"] = meta

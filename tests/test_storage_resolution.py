@@ -187,3 +187,33 @@ def test_c3d_analogs_stored_as_their_words(shared_data: Path, tmp_path: Path, na
     off[: len(p.get("ANALOG:OFFSET", []))] = np.asarray(p.get("ANALOG:OFFSET", []), dtype=np.float64)[:channels]
     step = float(p["ANALOG:GEN_SCALE"][0]) * np.asarray(p["ANALOG:SCALE"], dtype=np.float64)[:channels]
     np.testing.assert_allclose(an.values, (words - off) * step, rtol=1e-12, atol=0)
+
+
+TEXT_AND_INTEGER_SOURCES = [
+    # (file, topic, field, what the stored numbers are)
+    ("empatica_e4/ACC.csv", "/imu/e4", "acc", "the file's 1/64 g counts: (counts / 64) * g"),
+    ("axivity_csv/ax3_testfile_unix_timestamps.csv", "/imu/axivity", "acc", "the text's g decimals * g"),
+    ("opensim_trc/markers.trc", "/markers/trc", "pos", "the text's mm decimals * 0.001"),
+    ("optitrack_motive/sample_optitrack_take.csv", "/markers/motive", "pos", "the text's decimals, occlusions 0"),
+    ("delsys_trigno/truncated_trigno_sample.csv", "/analog/mini_sensor_10", "values", "%.7g EMG to 13 decimals"),
+    ("edf/trigno_emg.edf", "/analog/edf", "values", "the digital words: (d - dmin) * gain + pmin"),
+]
+
+
+@pytest.mark.parametrize(("rel", "topic", "field", "what"), TEXT_AND_INTEGER_SOURCES)
+def test_text_and_integer_sources_store_no_float64(shared_data: Path, tmp_path: Path, rel, topic, field, what):
+    """Every block of these channels is stored at the source's resolution (counts, with the text's decimals or
+    the file's integer words), none as float64, and reads back equal to the converter's values."""
+    from imulog.converters import convert_file
+
+    rec = convert_file(shared_data / "devices" / rel)
+    streams = {s.topic: s for s in [*rec.imus, *rec.markers, *rec.analogs, *rec.signals]}
+    want = getattr(streams[topic], field)
+    path = write_trial(tmp_path / "t.mcap", rec, attach_sources=False)
+    schema = {"pos": "imulog.MarkerBlock", "values": "imulog.AnalogBlock"}.get(field, "imulog.ImuBlock")
+    with TrialReader(path) as tr:
+        got = getattr(tr.read(topic), field)
+        cls = codec.MESSAGE_CLASSES[schema]
+        msgs = [cls.FromString(bytes(p)) for p in tr.messages(topic)]
+    assert np.array_equal(got, want, equal_nan=True), what
+    assert msgs and all(m.HasField(f"{field}_q") and not len(getattr(m, field)) for m in msgs), what

@@ -30,7 +30,7 @@ from imulog.archive import wire
 
 PARAMS = ("shift", "divisor", "scale", "offset")
 _SKIP = {"shift": 0.0, "divisor": 1.0, "scale": 1.0, "offset": 0.0}  # a parameter with these values is left out
-_MAX_DECIMALS = 9
+_MAX_DECIMALS = 15  # %.7g of EMG in V near 1e-7 has 13 decimals; 10**15 is an exact double
 _EXACT_INT = 2.0**53
 _MAX_COUNT = 2.0**31  # counts are sfixed32
 _RESID_BYTES = 3  # residual varints longer than this make a block's times explicit
@@ -135,7 +135,7 @@ def _counts_of(values: np.ndarray, params: dict[str, np.ndarray | None]) -> np.n
 
 
 def _decimals(values: np.ndarray) -> np.ndarray | None:
-    """Per column the fewest decimals k <= 9 with ``rint(v * 10**k) / 10**k == v`` on a sample, or None."""
+    """Per column the fewest decimals k <= 15 with ``rint(v * 10**k) / 10**k == v`` on a sample, or None."""
     sample = values[: min(len(values), 4096)]
     ks = []
     for col in sample.T:
@@ -160,7 +160,7 @@ POW10, MAX_DECIMALS = _POW10, _MAX_DECIMALS  # for imulog.archive.block_decode
 
 
 def _value_decimals(v: np.ndarray, scale: np.ndarray | None = None) -> NumbersPlan | None:
-    """Counts with each value's own decimals (``counts / 10**k``, k <= 9, then ``* scale`` per column when the
+    """Counts with each value's own decimals (``counts / 10**k``, k <= 15, then ``* scale`` per column when the
     converter multiplied the text by a unit factor): text such as ``%.6g``."""
     k = np.full(v.shape, -1, dtype=np.int8)
     counts = np.zeros(v.shape)
