@@ -2,12 +2,17 @@
 
     python benchmarks/bench_storage.py                  # 1 day of home AX6 .cwa and a 1-hour IMU text trial
     python benchmarks/bench_storage.py --days 7         # the week of issue 28 (minutes on 2 shared cores)
+    python benchmarks/bench_storage.py --days 7 --minutes-imu 0 --steps   # the week converted, then processed
     python benchmarks/bench_storage.py --days 0 --minutes-imu 0 --devices --demo   # real samples, the demo
 
 Cases (generated in a temporary folder):
 
 * home: ``imulog simulate home --days N`` (a 100 Hz Axivity AX6 .cwa, the device's own file), converted with
   ``imulog convert --attach-original never`` (the original recorded by size and SHA-256, not attached);
+* ``--steps``: the converted home recording then goes through ``imulog process orientation``, ``phases``,
+  ``metrics`` and ``epochs`` (each its own process), with the archive's size after each step against the .cwa
+  (issue 28: at most 2.5x after all four) and each step's wall and CPU time (user + sys of the child: the machine
+  is shared, so wall time depends on the load);
 * IMU text: the 1-hour 9-axis 100 Hz text file of ``bench_convert.py`` (``%.6g`` values), converted with
   ``--no-attach``;
 * ``--devices``: the shared real samples of the integer sources (ActiGraph ``.gt3x``, GENEActiv ``.bin``,
@@ -25,9 +30,11 @@ same process. Ratios: the archive over the device file and over the peer. Target
 from __future__ import annotations
 
 import argparse
+import resource
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 from bench_archive import load_average
@@ -38,8 +45,32 @@ from imulog.archive._builder import CHUNK_TARGET_BYTES
 from imulog.archive.twins import is_twin
 
 
-def imulog_cli(*args: str) -> None:
+def imulog_cli(*args: str) -> tuple[float, float]:
+    """Run ``imulog ARGS`` in a child process; -> (wall s, CPU s: the child's user + sys)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
     subprocess.run([sys.executable, "-m", "imulog", *args], check=True, stdout=subprocess.DEVNULL)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+STEPS = ("orientation", "phases", "metrics", "epochs")
+
+
+def steps(cwa: Path, trial: Path) -> None:
+    """Each processing step of a home recording in turn, with the archive's size after it against the .cwa."""
+    src = cwa.stat().st_size
+    before = trial.stat().st_size
+    for step in STEPS:
+        wall, cpu = imulog_cli("process", step, str(trial))
+        size = trial.stat().st_size
+        print(
+            f"  after {step}: {size / 1e6:.1f} MB (+{(size - before) / 1e6:.1f} MB) = {size / src:.2f}x the .cwa; "
+            f"wall {wall:.0f} s, CPU {cpu:.0f} s (user + sys), load average {load_average()}",
+            flush=True,
+        )
+        before = size
 
 
 def peer_size(trial: Path, out: Path) -> int:
@@ -75,7 +106,8 @@ def report(name: str, hours: float, source: Path, trial: Path, peer: int) -> Non
     print(
         f"{name}: {hours:g} h; source file {src / mb:.1f} MB ({src / mb / hours:.2f} MB/h); imulog "
         f"{arc / mb:.1f} MB ({arc / mb / hours:.2f} MB/h) = {arc / src:.2f}x the source; peer (float64 1-s blocks, "
-        f"mcap library) {peer / mb:.1f} MB ({peer / mb / hours:.2f} MB/h); imulog/peer {arc / peer:.2f}x"
+        f"mcap library) {peer / mb:.1f} MB ({peer / mb / hours:.2f} MB/h); imulog/peer {arc / peer:.2f}x",
+        flush=True,
     )
 
 
@@ -130,6 +162,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--minutes-imu", type=float, default=60.0, help="IMU text trial length (default 60)")
     ap.add_argument("--devices", action="store_true", help="also the shared .gt3x, GENEActiv and C3D samples")
     ap.add_argument("--demo", action="store_true", help="also the demo trial (imulog demo --no-view)")
+    ap.add_argument("--steps", action="store_true", help="then orientation, phases, metrics, epochs (sizes after each)")
+    ap.add_argument("--cwa", default=None, help="an existing `imulog simulate home` .cwa instead of simulating --days")
     ap.add_argument("--dir", default=None, help="where to write the files (default: system temp)")
     a = ap.parse_args(argv)
     print(f"load average {load_average()}")
@@ -147,11 +181,18 @@ def main(argv: list[str] | None = None) -> int:
             report("IMU text 100 Hz 9-axis", a.minutes_imu / 60, text, trial, peer_size(trial, d / "imu_peer.mcap"))
         if a.days <= 0:
             return 0
-        imulog_cli("simulate", "home", "-o", str(d), "--days", str(a.days))
-        cwa = d / "home_s00_t00.cwa"
+        if a.cwa:
+            cwa = Path(a.cwa)
+        else:
+            imulog_cli("simulate", "home", "-o", str(d), "--days", str(a.days))
+            cwa = d / "home_s00_t00.cwa"
         home = d / "home.mcap"
-        imulog_cli("convert", str(cwa), "-o", str(home), "--attach-original", "never")
+        wall, cpu = imulog_cli("convert", str(cwa), "-o", str(home), "--attach-original", "never")
+        print(f"  convert: wall {wall:.0f} s, CPU {cpu:.0f} s (user + sys)", flush=True)
         report("home AX6 .cwa 100 Hz", a.days * 24, cwa, home, peer_size(home, d / "home_peer.mcap"))
+        (d / "home_peer.mcap").unlink()
+        if a.steps:
+            steps(cwa, home)
     return 0
 
 

@@ -202,6 +202,7 @@ def concat_chunks(chunks: Iterable[Recording]) -> Recording:
                 units=list(p0.units),
                 values=np.concatenate([p.values for p in parts]),
                 frame_id=p0.frame_id,
+                attrs=dict(p0.attrs),
             )
         )
     for parts in markers.values():

@@ -110,7 +110,8 @@ def iter_axivity_csv(
                 t_ns=t_ns,
                 acc=values[:, 1:4] * G0,
                 gyr=np.radians(values[:, 4:7]) if width == 6 else None,
-                meta=dict(meta),
+                # the text's decimals times the unit factor (imulog.archive.numbers): g and deg/s to SI, exactly
+                meta={**meta, "resolution": {"acc": {"scale": G0}, "gyr": {"scale": np.pi / 180.0}}},
             )
         )
         rec.metadata[f"imulog.device.{name}"] = meta

@@ -66,6 +66,34 @@ def _positions_m(xyz: np.ndarray, params: dict, unit: str) -> tuple[np.ndarray, 
     return xyz * to_m, {}
 
 
+def _analog_values(values: np.ndarray, params: dict) -> tuple[np.ndarray, dict[str, Any]]:
+    """(N, C) analog values and, when they are the file's words, the ``resolution`` hint that stores those words:
+    C3D analogs are ``(word - ANALOG:OFFSET) * ANALOG:GEN_SCALE * ANALOG:SCALE`` per channel, so with the words as
+    counts the values are ``(counts + shift) * scale`` (shift = -offset, scale = GEN_SCALE * SCALE), given back
+    exactly by the archive (:mod:`imulog.archive.numbers`). Values that are not whole words (a float C3D's
+    analogs) keep float64."""
+    n_ch = values.shape[1]
+
+    def per_channel(key: str, default: float) -> np.ndarray:
+        out = np.full(n_ch, default)
+        given = _param(params, "ANALOG", key)
+        given = np.asarray([] if given is None else given, dtype=np.float64).reshape(-1)[:n_ch]
+        out[: len(given)] = given
+        return out
+
+    off = per_channel("OFFSET", 0.0)
+    step = per_channel("GEN_SCALE", 1.0)[0] * per_channel("SCALE", 1.0)
+    if not (np.isfinite(step).all() and (step != 0).all() and np.isfinite(off).all() and np.isfinite(values).all()):
+        return values, {}
+    with np.errstate(invalid="ignore", over="ignore"):
+        words = values / step + off
+    counts = np.rint(words)
+    # ezc3d computes in float32 or float64: the words within a thousandth of a count, and within 16 bits
+    if not (np.abs(words - counts).max(initial=0.0) <= 1e-3 and np.abs(counts).max(initial=0.0) <= 65536):
+        return values, {}
+    return (counts - off) * step, {"resolution": {"values": {"shift": (-off).tolist(), "scale": step.tolist()}}}
+
+
 def _labels(params: dict, group: str, n: int) -> list[str]:
     labels = list(_param(params, group, "LABELS", []) or [])
     if len(labels) < n:
@@ -299,14 +327,15 @@ def read_c3d(path: Path, name: str = "vicon", options: ConvertOptions | None = N
         a_units = [str(u).strip() for u in a_units[:n_ch]] + [""] * max(0, n_ch - len(a_units))
         n = analogs.shape[2]
         t_a = np.round((first + np.arange(n) / ratio) * (1e9 / rate)).astype(np.int64)
+        a_values, a_hint = _analog_values(analogs[0].T.astype(np.float64), params)
         rec.analogs.append(
             AnalogStream(
                 name=name,
                 t_ns=t_a,
                 channel_names=labels,
                 units=a_units,
-                values=analogs[0].T.astype(np.float64),
-                meta={"rate_hz": a_rate, "source": path.name},
+                values=a_values,
+                meta={"rate_hz": a_rate, "source": path.name, **a_hint},
             )
         )
         meta.update(analog_rate_hz=a_rate, analog_channels=n_ch)

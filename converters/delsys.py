@@ -191,6 +191,7 @@ def read_delsys(path: Path, *, names: dict[str, str] | None = None) -> Recording
                 raise ConversionError(path, f"{axes[0].name}: unknown unit {unit!r}")  # type: ignore[union-attr]
             imu[quantity] = np.stack([v[: len(imu_t)] for _, v in cols], axis=1) * factor
             meta.setdefault("units_in_file", {})[quantity] = unit
+            meta.setdefault("resolution", {})[quantity] = {"scale": factor}  # the text's decimals x the unit factor
         if imu and imu_t is not None:
             rate = sensor.channels.get(f"{imu_from}.X").rate_hz  # type: ignore[union-attr]
             rec.imus.append(ImuStream(name=name, t_ns=imu_t, meta={**meta, "rate_hz": rate}, **imu))
@@ -207,7 +208,7 @@ def read_delsys(path: Path, *, names: dict[str, str] | None = None) -> Recording
                     channel_names=["EMG"],
                     units=["V"],
                     values=v[:, None] * f,
-                    meta={"rate_hz": ch.rate_hz, "unit_in_file": ch.unit},
+                    meta={"rate_hz": ch.rate_hz, "unit_in_file": ch.unit, "resolution": {"values": {"scale": f}}},
                 )
             )
         others = [

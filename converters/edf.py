@@ -228,7 +228,9 @@ def iter_chunks(
     def build(r0: int, r1: int) -> Recording:
         """Records r0..r1 as one Recording (events and warnings with the first)."""
 
-        def values(i: int) -> tuple[np.ndarray, np.ndarray]:
+        def values(i: int, factor: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+            """Times and physical values of signal ``i`` times a unit ``factor``, computed as the archive's
+            counts formula gives them back: ``(digital - dmin) * (gain * factor) + pmin * factor``."""
             s = sigs[i]
             block = np.ascontiguousarray(mm[r0:r1, offsets[i] : offsets[i + 1]])
             if width == 2:
@@ -238,7 +240,7 @@ def iter_chunks(
                 v = b[:, 0] | (b[:, 1] << 8) | (b[:, 2] << 16)
                 dig = np.where(v >= 1 << 23, v - (1 << 24), v).astype(np.float64)
             gain = (s["pmax"] - s["pmin"]) / (s["dmax"] - s["dmin"])
-            phys = s["pmin"] + (dig - s["dmin"]) * gain
+            phys = (dig - s["dmin"]) * (gain * factor) + s["pmin"] * factor
             k = s["samples"]
             t = (
                 record_ns[r0:r1, None] + np.round(np.arange(k) * (duration * 1e9 / k)).astype(np.int64)[None, :]
@@ -285,24 +287,33 @@ def iter_chunks(
         labels_seen: dict[str, int] = {}
         for k, (spr, idx) in enumerate(sorted(by_rate.items(), key=lambda kv: -kv[0])):
             chans, units, cols, t_ns = [], [], [], None
+            res: dict[str, list[float]] = {"shift": [], "scale": [], "offset": []}
             for i in idx:
                 s = sigs[i]
-                t_ns, v = values(i)
+                f = EMG_TO_V[s["dimension"].strip().lower()] if _kind(s) == "emg" else 1.0
+                t_ns, v = values(i, f)
+                # stored as the digital words: ((digital - dmin) * gain * f) + pmin * f (imulog.archive.numbers)
+                res["shift"].append(-s["dmin"])
+                res["scale"].append((s["pmax"] - s["pmin"]) / (s["dmax"] - s["dmin"]) * f)
+                res["offset"].append(s["pmin"] * f)
                 label = s["label"] or f"signal {i + 1}"
                 if label in labels_seen or sum(x["label"] == s["label"] for x in sigs) > 1:
                     label = f"{label} {s['transducer']} #{i + 1}".strip()
                 labels_seen[label] = i
-                if _kind(s) == "emg":
-                    v = v * EMG_TO_V[s["dimension"].strip().lower()]
-                    unit = "V"
-                else:
-                    unit = s["dimension"]
+                unit = "V" if _kind(s) == "emg" else s["dimension"]
                 chans.append(label)
                 units.append(unit)
                 cols.append(v)
             name = "edf" if k == 0 else f"edf_{spr / duration:g}hz".replace(".", "_")
             rec.analogs.append(
-                AnalogStream(name, t_ns, chans, units, np.column_stack(cols), meta={"rate_hz": spr / duration})
+                AnalogStream(
+                    name,
+                    t_ns,
+                    chans,
+                    units,
+                    np.column_stack(cols),
+                    meta={"rate_hz": spr / duration, "resolution": {"values": res}},
+                )
             )
         if events and r0 == 0:
             ev = sorted(events)

@@ -136,7 +136,9 @@ def read_e4_file(path: Path, options: ConvertOptions | None = None) -> Recording
             t_ns = offset_ns + np.round(np.arange(len(v)) * (1e9 / rate)).astype(np.int64)
             if kind == "ACC":
                 device.update(rate_hz=rate, units="ACC 1/64 g (converted to m/s^2)")
-                rec.imus.append(ImuStream(name="e4", t_ns=t_ns, acc=v * ACC_G_PER_COUNT * G0, meta=dict(device)))
+                # stored as the file's counts: (counts / 64) * g, the same double as counts * (1/64) * g (1/64 is exact)
+                res = {"resolution": {"acc": {"divisor": 1.0 / ACC_G_PER_COUNT, "scale": G0}}}
+                rec.imus.append(ImuStream(name="e4", t_ns=t_ns, acc=v * ACC_G_PER_COUNT * G0, meta={**device, **res}))
             else:
                 rec.signals.append(
                     SignalStream(topic=f"/signals/e4_{kind.lower()}", t_ns=t_ns, columns=names, units=[unit], values=v)

@@ -28,6 +28,7 @@ The older Genea ``.bin`` (binary 2048-byte pages after a ``GENEA`` header) is :m
 
 from __future__ import annotations
 
+import json
 import mmap
 import re
 from collections.abc import Iterator
@@ -180,6 +181,8 @@ def iter_chunks(path: Path, options: ConvertOptions | None = None) -> Iterator[R
         }
         # stored as counts x 100 (GGIR's calibration offset is in hundredths of a count): ((c - offset) / gain) * g
         res = {"acc": {"shift": (-offset).tolist(), "divisor": gain.tolist(), "scale": G0}}
+        # light and button stored as the 10-bit and 1-bit words: light = word * (Lux / Volts), exactly as computed
+        light_res = json.dumps({"values": {"scale": [lux / volts if volts else 1.0, 1.0]}})
         origin_ms: int | None = None
         prev_end: float | None = None
         for c0 in range(0, n_pages, PAGES_PER_CHUNK):
@@ -237,6 +240,7 @@ def iter_chunks(path: Path, options: ConvertOptions | None = None) -> Iterator[R
                         ["light", "button"],
                         ["lux" if volts else "counts", "1"],
                         np.column_stack([light, button]),
+                        attrs={"resolution": light_res},
                     ),
                     SignalStream(
                         f"/signals/{name}_page",

@@ -109,7 +109,8 @@ def read_trc(path: Path, options: ConvertOptions | None = None) -> Recording:
         "source": path.name,
     }
     rec = Recording(sources=[str(path)])
-    rec.markers.append(MarkerStream(name="trc", t_ns=t_ns, labels=labels, pos=pos, valid=valid, meta=dict(meta)))
+    res = {"resolution": {"pos": {"scale": LENGTH_TO_M[unit.lower()]}}}  # the text's decimals times the unit factor
+    rec.markers.append(MarkerStream(name="trc", t_ns=t_ns, labels=labels, pos=pos, valid=valid, meta={**meta, **res}))
     rec.metadata["imulog.device.trc"] = meta
     rec.warnings.extend(warnings)
     return rec

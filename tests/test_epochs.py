@@ -303,3 +303,32 @@ def test_choi_nonwear_finds_each_simulated_removal(half_day):
     assert long_ones and len(long_ones) < len(truth), truth  # the fixture holds both kinds
     assert len(minutes) == len(long_ones), (minutes, truth)
     np.testing.assert_allclose(minutes, np.array(long_ones, dtype=float), atol=1.0)
+
+
+@pytest.mark.slow  # 25 s of CPU: a week at 12.5 Hz simulated, converted and summarised
+def test_nonwear_on_a_simulated_week_finds_each_removal(tmp_path):
+    """Issue 28's done-when on its own terms: a simulated week (12.5 Hz, the lowest AX6 rate, to keep the test to
+    seconds; the rule works on 15-min block statistics, not on the rate) with one removal a day of 1-3 h: every
+    removal found within one 15-min window at each end (van Hees), each of 90 min or more within one 60-s epoch
+    (Choi), nothing else flagged, and the days' wear hours add up to the recording less the removals."""
+    from imulog.simulate.home import HomeParams, removals, write_home_cwa
+
+    p = HomeParams(days=7.0, rate_hz=12.5, removals_per_day=1, seed=11)
+    truth = np.array(removals(p), dtype=float)
+    assert len(truth) >= 6  # about one a day (a removal cut by the recording's end is left out)
+    write_home_cwa(tmp_path / "w.cwa", p)
+    trial = tmp_path / "w.mcap"
+    _convert(tmp_path / "w.cwa", trial)
+    run_epochs(trial, params=EpochParams(epochs_s=(10.0, 60.0), calibrate=False))  # 5 s is 62.5 samples
+    _, record = _epochs(trial, "/derived/epochs/60s/ax6_4321")
+    found = np.array(record["nonwear"], dtype=np.int64).reshape(-1, 2) / 60e9
+    assert len(found) == len(truth), (found, truth)
+    np.testing.assert_allclose(found, truth, atol=15.0)
+    long_ones = truth[truth[:, 1] - truth[:, 0] >= 90]
+    choi = np.array(record["nonwear_choi"], dtype=np.int64).reshape(-1, 2) / 60e9
+    assert len(long_ones) and len(choi) == len(long_ones), (choi, truth)
+    np.testing.assert_allclose(choi, long_ones, atol=1.0)
+    assert len(record["by_day"]) >= 7
+    worn = sum(d["wear_h"] for d in record["by_day"])
+    recorded = sum(d["recorded_h"] for d in record["by_day"])
+    assert worn == pytest.approx(recorded - (found[:, 1] - found[:, 0]).sum() / 60, abs=1e-2)

@@ -65,8 +65,10 @@ def test_cores_equal_the_whole(trial, tmp_path):
                 assert hb[key] == pytest.approx(ha[key], rel=1e-6, abs=1e-6), (ha["start"], key)
         da, db = a.read("/derived/metrics/distance/ax6_4321"), b.read("/derived/metrics/distance/ax6_4321")
         np.testing.assert_array_equal(da.t_ns, db.t_ns)
-        # cumulative-sum rounding only, then float32 storage (docs/schemas.md): at most one float32 step apart
-        np.testing.assert_allclose(da.values, db.values, rtol=2.0**-23, atol=1e-9)
+        # cumulative-sum rounding (below 1e-9 cm), then counts on a 2**-10 cm grid (docs/schemas.md): a value that
+        # falls on a half step can round to the next grid point, never further
+        np.testing.assert_array_equal(np.isnan(da.values), np.isnan(db.values))
+        assert np.nanmax(np.abs(da.values - db.values)) <= 2.0**-10
         ia, ib = a.read("/derived/metrics/activity/ax6_4321"), b.read("/derived/metrics/activity/ax6_4321")
         np.testing.assert_array_equal(ia.start_ns, ib.start_ns)
         np.testing.assert_array_equal(ia.end_ns, ib.end_ns)

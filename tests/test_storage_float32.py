@@ -18,7 +18,6 @@ F32_TOPICS = (
     "/derived/vicon/cluster_pose",
     "/derived/vicon/angular_velocity",
     "/derived/reference/",
-    "/derived/metrics/distance/",
 )
 
 
@@ -45,7 +44,7 @@ def _numbers(record, prefix=""):
 def test_float32_derived_channels_do_not_change_the_evaluation(tmp_path: Path, monkeypatch):
     _pipeline(tmp_path / "f32")
     # the same pipeline with these channels' float32 requests taken back (orientation stays float32 in both)
-    for module in ("align", "trajectory", "trajectory_windows", "metrics_windows"):
+    for module in ("align", "trajectory", "trajectory_windows"):
         monkeypatch.setattr(f"imulog.steps.{module}.F32", {})
     _pipeline(tmp_path / "f64")
     with TrialReader(tmp_path / "f32" / "trial.mcap") as a, TrialReader(tmp_path / "f64" / "trial.mcap") as b:
@@ -95,3 +94,44 @@ def test_orientation_on_its_grid_does_not_change_the_evaluation(tmp_path: Path, 
     print(f"largest change of an error: {accurate:.5f} cm (drift-free methods), {max(change.values()):.5f} cm (all)")
     # measured 0.002 cm and 0.03 cm: well under the 0.1 cm the errors are reported at
     assert accurate <= 0.005 and max(change.values()) <= 0.1
+
+
+def test_metrics_distance_on_its_grid_keeps_every_value_and_the_record(tmp_path: Path, monkeypatch):
+    """The metrics distance channel on a 2**-10 cm grid (counts) against the same step storing it as float64, on a
+    simulated home recording longer than one core (so it is written core by core, gaps and all): every stored value
+    is the nearest grid point of the float64 one (at most 2**-11 cm, 5 um, against the published 1 cm histogram
+    bins), the gaps stay NaN, and the metrics record (histogram, area, activity, per hour) is the same."""
+    from imulog.converters import axivity
+
+    from imulog.archive.streaming import write_trial_streaming
+    from imulog.simulate.home import HomeParams, write_home_cwa
+    from imulog.steps import metrics_windows
+    from imulog.steps.metrics import run_metrics
+    from imulog.steps.windows import WindowParams
+
+    cwa = tmp_path / "home.cwa"
+    write_home_cwa(cwa, HomeParams(days=1.0 / 24, rate_hz=25.0, seed=4, start="2024-03-04T09:40:00"))
+    grid = write_trial_streaming(tmp_path / "grid.mcap", axivity.iter_chunks(cwa, blocks_per_chunk=300))
+    wide = tmp_path / "f64.mcap"
+    wide.write_bytes(grid.read_bytes())
+    cores = WindowParams(core_s=1500.0, margin_s=10.0)
+    run_metrics(grid, windows=cores)
+    monkeypatch.setattr(metrics_windows, "DISTANCE_GRID", {})
+    run_metrics(wide, windows=cores)
+    step = 2.0**-10
+    topic = "/derived/metrics/distance/ax6_4321"
+    with TrialReader(grid) as a, TrialReader(wide) as b:
+        assert a.channel(topic).metadata["precision"] == "quantized"
+        assert "precision" not in b.channel(topic).metadata
+        x, y = a.read(topic).values, b.read(topic).values
+        assert len(x) == 90_000 and np.isfinite(y).mean() > 0.9
+        np.testing.assert_array_equal(np.isnan(x), np.isnan(y))
+        finite = np.isfinite(y)
+        assert not np.array_equal(x[finite], y[finite])  # the float64 values are not on the grid: it did round
+        np.testing.assert_array_equal(x[finite], np.rint(y[finite] / step) * step)  # the nearest grid point
+        assert np.nanmax(np.abs(x - y)) <= step / 2
+        ra, rb = dict(a.metadata["imulog.metrics"]), dict(b.metadata["imulog.metrics"])
+    assert ra.keys() == rb.keys()
+    for k in ra:
+        if k not in ("step", "created", "run"):
+            assert ra[k] == rb[k], k

@@ -131,3 +131,89 @@ def test_c3d_float_points_keep_float64(shared_data: Path, tmp_path: Path):
     path = write_trial(tmp_path / "t.mcap", rec, attach_sources=False)
     with TrialReader(path) as tr:
         assert np.array_equal(tr.read(rec.markers[0].topic).pos, rec.markers[0].pos, equal_nan=True)
+
+
+def test_geneactiv_light_stored_as_its_words(shared_data: Path, tmp_path: Path):
+    """Light (10-bit word x Lux / Volts) and button (1 bit) as their words, read back as the converter's lux."""
+    from imulog.converters.geneactiv import read_bin
+
+    src = shared_data / "devices" / "geneactiv_bin" / "GENEActiv_testfile.bin"
+    rec = read_bin(src)
+    sig = rec.signals[0]
+    cal = rec.metadata["imulog.device.geneactiv"]["calibration"]
+    path = write_trial(tmp_path / "t.mcap", rec, attach_sources=False)
+    with TrialReader(path) as tr:
+        back = tr.read(sig.topic)
+        n, qs = _q_blocks(tr, sig.topic, "imulog.SignalBlock", "values_q")
+    assert np.array_equal(back.values, sig.values) and np.array_equal(back.t_ns, sig.t_ns)
+    assert len(qs) == n and list(qs[0].scale) == [cal["lux"] / cal["volts"], 1.0]
+    words = np.concatenate([np.array(q.counts) for q in qs]).reshape(-1, 2)
+    # the words decoded by hand from the hex pages: light is bits 47-38 of each 48-bit sample, button bit 37
+    hexes = [line for line in src.read_bytes().splitlines() if len(line) == 3600]
+    raw = np.array([int(h[k : k + 12], 16) for h in hexes for k in range(0, 3600, 12)], dtype=np.int64)
+    np.testing.assert_array_equal(words[:, 0], (raw >> 2) & 0x3FF)
+    np.testing.assert_array_equal(words[:, 1], (raw >> 1) & 1)
+    assert words[:, 0].max() > 0
+
+
+@pytest.mark.parametrize("name", ["pc_int.c3d", "MACsample.c3d"])
+def test_c3d_analogs_stored_as_their_words(shared_data: Path, tmp_path: Path, name: str):
+    """C3D analogs as the file's int16 words with ANALOG:OFFSET and GEN_SCALE * SCALE, read back exactly as the
+    converter's values, which equal the C3D formula on the words read by hand from the file."""
+    import struct
+
+    from imulog.converters.c3d import read_c3d
+    from imulog.converters.c3d_format import parameters, to_intel
+
+    src = shared_data / "devices" / "c3d_samples" / name
+    rec = read_c3d(src)
+    an = rec.analogs[0]
+    path = write_trial(tmp_path / "t.mcap", rec, attach_sources=False)
+    with TrialReader(path) as tr:
+        back = tr.read(an.topic)
+        n, qs = _q_blocks(tr, an.topic, "imulog.AnalogBlock", "values_q")
+    assert np.array_equal(back.values, an.values) and len(qs) == n
+    data = to_intel(src.read_bytes())
+    p = parameters(data)
+    n_points, per_frame = struct.unpack_from("<2H", data, 2)
+    start = (struct.unpack_from("<H", data, 16)[0] - 1) * 512
+    frames = int(p["POINT:FRAMES"][0])
+    block = np.frombuffer(data, "<i2", count=frames * (4 * n_points + per_frame), offset=start).reshape(frames, -1)
+    channels = an.values.shape[1]
+    words = block[:, 4 * n_points :].reshape(-1, channels).astype(np.float64)
+    stored = np.concatenate([np.array(q.counts) for q in qs]).reshape(-1, channels)
+    np.testing.assert_array_equal(stored, words)
+    off = np.zeros(channels)
+    off[: len(p.get("ANALOG:OFFSET", []))] = np.asarray(p.get("ANALOG:OFFSET", []), dtype=np.float64)[:channels]
+    step = float(p["ANALOG:GEN_SCALE"][0]) * np.asarray(p["ANALOG:SCALE"], dtype=np.float64)[:channels]
+    np.testing.assert_allclose(an.values, (words - off) * step, rtol=1e-12, atol=0)
+
+
+TEXT_AND_INTEGER_SOURCES = [
+    # (file, topic, field, what the stored numbers are)
+    ("empatica_e4/ACC.csv", "/imu/e4", "acc", "the file's 1/64 g counts: (counts / 64) * g"),
+    ("axivity_csv/ax3_testfile_unix_timestamps.csv", "/imu/axivity", "acc", "the text's g decimals * g"),
+    ("opensim_trc/markers.trc", "/markers/trc", "pos", "the text's mm decimals * 0.001"),
+    ("optitrack_motive/sample_optitrack_take.csv", "/markers/motive", "pos", "the text's decimals, occlusions 0"),
+    ("delsys_trigno/truncated_trigno_sample.csv", "/analog/mini_sensor_10", "values", "%.7g EMG to 13 decimals"),
+    ("edf/trigno_emg.edf", "/analog/edf", "values", "the digital words: (d - dmin) * gain + pmin"),
+]
+
+
+@pytest.mark.parametrize(("rel", "topic", "field", "what"), TEXT_AND_INTEGER_SOURCES)
+def test_text_and_integer_sources_store_no_float64(shared_data: Path, tmp_path: Path, rel, topic, field, what):
+    """Every block of these channels is stored at the source's resolution (counts, with the text's decimals or
+    the file's integer words), none as float64, and reads back equal to the converter's values."""
+    from imulog.converters import convert_file
+
+    rec = convert_file(shared_data / "devices" / rel)
+    streams = {s.topic: s for s in [*rec.imus, *rec.markers, *rec.analogs, *rec.signals]}
+    want = getattr(streams[topic], field)
+    path = write_trial(tmp_path / "t.mcap", rec, attach_sources=False)
+    schema = {"pos": "imulog.MarkerBlock", "values": "imulog.AnalogBlock"}.get(field, "imulog.ImuBlock")
+    with TrialReader(path) as tr:
+        got = getattr(tr.read(topic), field)
+        cls = codec.MESSAGE_CLASSES[schema]
+        msgs = [cls.FromString(bytes(p)) for p in tr.messages(topic)]
+    assert np.array_equal(got, want, equal_nan=True), what
+    assert msgs and all(m.HasField(f"{field}_q") and not len(getattr(m, field)) for m in msgs), what

@@ -189,7 +189,7 @@ def encode(
         hints, precision = _hints(stream.meta)
         n = len(stream.t_ns)
         pos = stream.pos.reshape(n, -1)
-        if hints.get("pos"):  # counts: an invalid marker is count 0 (read back as NaN by its valid flag)
+        if compact:  # an invalid marker stored as 0 (counts, decimals, float32), read back as NaN by its valid flag
             pos = np.where(np.repeat(valid.reshape(n, -1), 3, axis=1), pos, 0.0)
         layout = Layout(
             st(2, stream.frame_id) + strings_field(3, stream.labels),
@@ -213,8 +213,8 @@ def encode(
             names, extra = stream.columns, {**stream.attrs, "frame_id": stream.frame_id}
             second = st(2, stream.frame_id)
             precision = str(stream.attrs.get("precision", ""))
-            grid = numbers.quantum_hint(stream.attrs)
-            hints = {"values": grid} if grid else {}
+            hint = numbers.signal_hint(stream.attrs)
+            hints = {"values": hint} if hint else {}
         meta.update(extra, columns=json.dumps(list(names)), units=json.dumps(list(stream.units)))
         meta.update(_stats(stream.t_ns, [stream.values]))
         head = second + strings_field(3, names) + strings_field(4, stream.units)

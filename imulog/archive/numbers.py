@@ -20,6 +20,7 @@ docs/schemas.md.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,7 +30,7 @@ from imulog.archive import wire
 
 PARAMS = ("shift", "divisor", "scale", "offset")
 _SKIP = {"shift": 0.0, "divisor": 1.0, "scale": 1.0, "offset": 0.0}  # a parameter with these values is left out
-_MAX_DECIMALS = 9
+_MAX_DECIMALS = 15  # %.7g of EMG in V near 1e-7 has 13 decimals; 10**15 is an exact double
 _EXACT_INT = 2.0**53
 _MAX_COUNT = 2.0**31  # counts are sfixed32
 _RESID_BYTES = 3  # residual varints longer than this make a block's times explicit
@@ -134,7 +135,7 @@ def _counts_of(values: np.ndarray, params: dict[str, np.ndarray | None]) -> np.n
 
 
 def _decimals(values: np.ndarray) -> np.ndarray | None:
-    """Per column the fewest decimals k <= 9 with ``rint(v * 10**k) / 10**k == v`` on a sample, or None."""
+    """Per column the fewest decimals k <= 15 with ``rint(v * 10**k) / 10**k == v`` on a sample, or None."""
     sample = values[: min(len(values), 4096)]
     ks = []
     for col in sample.T:
@@ -159,7 +160,7 @@ POW10, MAX_DECIMALS = _POW10, _MAX_DECIMALS  # for imulog.archive.block_decode
 
 
 def _value_decimals(v: np.ndarray, scale: np.ndarray | None = None) -> NumbersPlan | None:
-    """Counts with each value's own decimals (``counts / 10**k``, k <= 9, then ``* scale`` per column when the
+    """Counts with each value's own decimals (``counts / 10**k``, k <= 15, then ``* scale`` per column when the
     converter multiplied the text by a unit factor): text such as ``%.6g``."""
     k = np.full(v.shape, -1, dtype=np.int8)
     counts = np.zeros(v.shape)
@@ -477,6 +478,20 @@ def decode_numbers(sources: list[tuple[str, Any]], counts: np.ndarray, width: in
     if covered != total:
         raise ValueError(f"{what}: present in some blocks only")
     return out
+
+
+def signal_hint(attrs: dict[str, Any]) -> dict[str, Any] | None:
+    """The ``values`` hint of a SignalStream: its grid (:func:`quantum_hint`), else a converter's ``resolution``
+    attribute (JSON ``{"values": {"scale": [...], ...}}``, e.g. GENEActiv light ``counts * lux / volts``), else None."""
+    grid = quantum_hint(attrs)
+    if grid is not None:
+        return grid
+    res = attrs.get("resolution")
+    if not res:
+        return None
+    hint = json.loads(res) if isinstance(res, str) else res
+    values = hint.get("values") if isinstance(hint, dict) else None
+    return values if isinstance(values, dict) else None
 
 
 def quantum_hint(attrs: dict[str, Any]) -> dict[str, float] | None:
