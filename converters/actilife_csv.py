@@ -42,6 +42,8 @@ from imulog.model import ImuStream, Recording, SignalStream
 
 BANNER_LINES = 10
 BANNER_START = "------------ Data File Created By ActiGraph"
+# ActiLife's banner, and the Actigraph Link's epoch export: "------------ Data Table File Created By Actigraph Link"
+BANNER = re.compile(r"^-+ Data (?:Table )?File Created By ActiGraph", re.IGNORECASE)
 TRIOS = {"acc": "Accelerometer", "gyr": "Gyroscope", "mag": "Magnetometer"}
 
 
@@ -55,7 +57,7 @@ def _field(path: Path, lines: list[str], pattern: str, what: str, line_hint: int
 
 def parse_banner(path: Path, lines: list[str]) -> dict:
     """Rate (Hz), serial, device line, local start (datetime), date format and epoch period from the banner."""
-    if len(lines) < BANNER_LINES + 1 or not lines[0].startswith(BANNER_START):
+    if len(lines) < BANNER_LINES + 1 or not BANNER.match(lines[0]):
         raise ConversionError(path, "not an ActiLife CSV export (no 'Data File Created By ActiGraph' banner)", line=1)
     epoch = _field(path, lines, r"Epoch Period \(hh:mm:ss\)\s+(\d{2}:\d{2}:\d{2})", "Epoch Period", 5).group(1)
     rate_m = re.search(r" at (\d+(?:\.\d+)?) Hz", lines[0])
@@ -70,7 +72,9 @@ def parse_banner(path: Path, lines: list[str]) -> dict:
     try:
         start = datetime.strptime(f"{start_date} {start_time}", f"{py_fmt} %H:%M:%S")
     except ValueError:
-        raise ConversionError(path, f"Start Date {start_date!r} does not match date format {fmt}", line=4) from None
+        if epoch == "00:00:00":
+            raise ConversionError(path, f"Start Date {start_date!r} does not match date format {fmt}", line=4) from None
+        start = None  # an epoch export may still date itself by its rows (the Link writes M-d-yyyy under dd/MM/yyyy)
     device = re.search(r"Created By (.+?) ActiLife", lines[0])
     return {
         "rate_hz": rate,
@@ -79,6 +83,7 @@ def parse_banner(path: Path, lines: list[str]) -> dict:
         "epoch": epoch,
         "device": device.group(1).strip() if device else "ActiGraph",
         "date_format": fmt,
+        "start_text": f"{start_date} {start_time}",
     }
 
 
@@ -252,7 +257,7 @@ class ActiLifeCsvConverter(Converter):
 
     def sniff(self, path: Path, head: bytes) -> float:
         lines = text_head_lines(head, 2)
-        if lines and lines[0].startswith(BANNER_START):
+        if lines and BANNER.match(lines[0]):
             return 0.97
         return 0.8 if lines and is_bannerless(lines) else 0.0
 

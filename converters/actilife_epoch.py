@@ -82,6 +82,8 @@ def _parse_dates(path: Path, date: list[str], time: list[str] | None, fmt: str, 
     text = pd.Series(date) if time is None else pd.Series(date) + " " + pd.Series(time)
     for f in (f"{py_fmt} %H:%M:%S", "ISO8601") if time is not None else ("ISO8601",):
         parsed = pd.to_datetime(text, format=f, errors="coerce")
+        if getattr(parsed.dt, "tz", None) is not None:  # the Link's "...Z" stamps: its wall clock, kept as written
+            parsed = parsed.dt.tz_localize(None)
         if not parsed.isna().any():
             return parsed.to_numpy().astype("datetime64[ns]")
     bad = int(np.nonzero(pd.to_datetime(text, format="mixed", errors="coerce").isna().to_numpy())[0][0])
@@ -140,7 +142,7 @@ def read_epoch_csv(
     n = len(values)
     if n == 0:
         raise ConversionError(path, "no epochs after the banner", line=skip + 1)
-    start = np.datetime64(banner["start"], "ns")
+    start = None if banner["start"] is None else np.datetime64(banner["start"], "ns")
     if time_idx:
         cells = pd.read_csv(
             path, skiprows=skip, header=None, usecols=time_idx, nrows=n, dtype=str, engine="c", skipinitialspace=True
@@ -152,6 +154,18 @@ def read_epoch_csv(
             stamps = _parse_dates(path, by_name["date"], by_name.get("time"), banner["date_format"], skip + 1)
         else:
             raise ConversionError(path, "a 'Time' column without a 'Date' column", line=skip)
+        if start is None or stamps[0] != start:  # the rows' own times date the epochs
+            if start is not None:
+                spec.warnings.append(
+                    f"{path.name}: banner start {banner['start']} disagrees with the first epoch's time "
+                    f"{str(stamps[0])[:19]}; the rows' times are used"
+                )
+            elif BANNER_LINES:
+                spec.warnings.append(
+                    f"{path.name}: banner Start Date/Time {banner.get('start_text', '')!r} does not match its date "
+                    f"format {banner['date_format']}; the start is the first epoch's time {str(stamps[0])[:19]}"
+                )
+            start = stamps[0]
         t_ns = (stamps - start).astype(np.int64)
         d = np.diff(t_ns)
         if len(d) and (d <= 0).any():
@@ -161,6 +175,12 @@ def read_epoch_csv(
             spec.warnings.append(
                 f"{path.name}: epoch times are not {epoch_s:g} s apart everywhere (gaps or a changed epoch)"
             )
+    elif start is None:
+        raise ConversionError(
+            path,
+            f"Start Date/Time {banner.get('start_text', '')!r} does not match date format {banner['date_format']}",
+            line=4,
+        )
     else:
         t_ns = np.arange(n, dtype=np.int64) * np.int64(round(epoch_s * 1e9))
     serial = banner["serial"]
@@ -198,7 +218,7 @@ def read_epoch_csv(
     )
     rec.metadata[f"imulog.device.{name}"] = meta
     rec.metadata["imulog.trial"] = {
-        "start_time": datetime.fromisoformat(str(banner["start"])).isoformat(timespec="milliseconds"),
+        "start_time": datetime.fromisoformat(str(start)[:26]).isoformat(timespec="milliseconds"),
         "time_zone": UNKNOWN_ZONE,
     }
     return rec

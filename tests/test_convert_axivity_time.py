@@ -190,3 +190,25 @@ def test_real_damaged_file_skips_exactly_the_damaged_blocks(tmp_path: Path, chun
     # blocks 13-14 (2 x 120 samples at the device's ~98.8 Hz) are NaN rows on the nominal 100 Hz grid
     assert (~finite).sum() == meta["gap_samples"] and 240 <= meta["gap_samples"] <= 246
     assert np.all(np.diff(imu.t_ns) > 0)
+
+
+def test_held_out_ax6_csv_export_follows_skdhs_rule(tmp_path: Path):
+    """Held out: GGIR's ax6_testfile_formatted_timestamps.csv is a CSV export of GGIRread's ax6_testfile.cwa
+    (its first 8 blocks kept in tests/data). Its values equal imulog's .cwa decode and its axivity-csv reading;
+    its time stamps follow scikit-digital-health's rule (no fraction, blocks chained) to its 1 ms print
+    resolution, so imulog's .cwa times, OpenMovement's block starts, are ~10 ms later than that export."""
+    from imulog.converters import convert_file
+
+    cwa = _unxz("ax6_testfile_first8blocks.cwa.xz", tmp_path)
+    csv = _unxz("ax6_testfile_formatted_timestamps.csv.xz", tmp_path)
+    rec, exported = read_cwa(cwa), convert_file(csv)
+    imu, ex = rec.imus[0], exported.imus[0]
+    n = len(ex)
+    assert n == 210 and len(imu) == 320
+    np.testing.assert_allclose(ex.acc, imu.acc[:n], rtol=0, atol=1e-6 * 9.80665)  # g printed to 6 decimals
+    np.testing.assert_allclose(ex.gyr, imu.gyr[:n], rtol=0, atol=np.radians(1e-5))  # deg/s to 6 decimals
+    csv_s = _abs_s(exported)
+    skdh_s = skdh_rule_s(_blocks(cwa))[:n]
+    assert np.abs(skdh_s - csv_s).max() < 1.001e-3
+    late_ms = (_abs_s(rec)[:n] - csv_s) * 1e3
+    assert 9 < np.median(late_ms) < 11 and late_ms.max() < 15
