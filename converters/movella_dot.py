@@ -24,19 +24,23 @@ unwrapped (a drop of more than half the range is one wrap), from the first sampl
 (local time with its ``GMT+h`` zone) dates the trial; the real-time log has no start time. ``<tag>`` is the
 banner's ``DeviceTag``, else the file name's first part.
 
-Memory: read whole, not yet in pieces (issue 24): a DOT recording of hours at 60 Hz is tens of MB of text.
+Memory: in pieces of text (:func:`iter_movella_dot`); the whole file is the one-piece case.
 """
 
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
 import numpy as np
-from imulog.converters._common import TableSpec, estimate_rate_hz, read_numeric, sanitize_name, text_head_lines
+from imulog.converters import _pieces
+from imulog.converters._common import TableSpec, estimate_rate_hz, sanitize_name, text_head_lines
 from imulog.converters._lab import orientation_stream, trial_start
+from imulog.converters._pieces import iter_numeric
 from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.delimited_time import StepCounts
 from imulog.converters.errors import ConversionError
 from imulog.converters.xsens import orientation_wxyz
 
@@ -53,12 +57,27 @@ UNITS = {"FreeAcc": "m/s^2", "Mag": "a.u.", "dq": "1", "dv": "m/s", "Euler": "de
 def unwrap_sample_time_fine(raw: np.ndarray) -> np.ndarray:
     """SampleTimeFine (us, uint32, wrapping) -> int64 ns from the first sample; a backwards step of more than half
     the range is a wrap (the counter restarts at 0), a smaller one stays (reported by the caller)."""
-    raw = np.asarray(raw, dtype=np.int64)
-    if len(raw) == 0:
-        return raw
-    d = np.diff(raw)
-    wraps = np.concatenate([[0], np.cumsum(d < -(WRAP // 2))])
-    return (raw - raw[0] + wraps * WRAP) * 1000
+    return SampleTimeUnwrap()(raw)
+
+
+class SampleTimeUnwrap:
+    """:func:`unwrap_sample_time_fine` piece by piece: call it on consecutive pieces of the column."""
+
+    def __init__(self) -> None:
+        self.first: int | None = None  # the recording's first raw value, us
+        self.last: int | None = None  # the previous piece's last raw value
+        self.wraps = 0
+
+    def __call__(self, raw: np.ndarray) -> np.ndarray:
+        raw = np.asarray(raw, dtype=np.int64)
+        if len(raw) == 0:
+            return raw
+        if self.first is None:
+            self.first = self.last = int(raw[0])
+        d = np.diff(np.concatenate([[self.last], raw]))
+        wraps = self.wraps + np.cumsum(d < -(WRAP // 2))
+        self.wraps, self.last = int(wraps[-1]), int(raw[-1])
+        return (raw - self.first + wraps * WRAP) * 1000
 
 
 def parse_start(text: str) -> datetime | None:
@@ -88,6 +107,17 @@ def find_header(lines: list[str]) -> tuple[int, dict[str, str]] | None:
 
 
 def read_movella_dot(path: Path, options: ConvertOptions | None = None) -> Recording:
+    """The whole file: :func:`iter_movella_dot` as one piece."""
+    (rec,) = iter_movella_dot(path, options, piece_bytes=None)
+    return rec
+
+
+def iter_movella_dot(
+    path: Path, options: ConvertOptions | None = None, piece_bytes: int | None = None
+) -> Iterator[Recording]:
+    """The recording in pieces of about ``piece_bytes`` of text (None: one piece), read by
+    :func:`~imulog.converters._pieces.iter_numeric`; SampleTimeFine unwrapped across pieces, the rate the median
+    step over every piece."""
     path = Path(path)
     with open(path, "rb") as f:
         head = f.read(64 * 1024)
@@ -102,20 +132,44 @@ def read_movella_dot(path: Path, options: ConvertOptions | None = None) -> Recor
     if len(set(names)) != len(names):
         raise ConversionError(path, "repeated column name in the names row", line=row + 1)
     spec = TableSpec(path=path, delimiter=",", skip_lines=row + 1, names=names, ignore=set())
-    values = read_numeric(spec)
-    if len(values) == 0:
-        raise ConversionError(path, "no samples after the names row", line=row + 2)
     seen = {n: i for i, n in enumerate(names)}
-    t_ns = unwrap_sample_time_fine(values[:, seen["SampleTimeFine"]])
-    d = np.diff(t_ns)
-    warnings = list(spec.warnings)
-    if len(d) and (d <= 0).any():
-        i = int(np.nonzero(d <= 0)[0][0]) + 1
-        raise ConversionError(
-            path, "SampleTimeFine does not increase (and is no 32-bit wrap)", line=row + 2 + i, column="SampleTimeFine"
-        )
     tag = banner.get("DeviceTag") or path.stem.split("_")[0]
     name = sanitize_name(tag)
+    unwrap, steps, before = SampleTimeUnwrap(), StepCounts(), None
+    for piece in iter_numeric(spec, piece_bytes):
+        values = piece.values
+        if before is None and len(values) == 0:
+            raise ConversionError(path, "no samples after the names row", line=row + 2)
+        t_ns = unwrap(values[:, seen["SampleTimeFine"]])
+        d = np.diff(t_ns if before is None else np.concatenate([[before], t_ns]))
+        if len(d) and (d <= 0).any():
+            i = int(np.nonzero(d <= 0)[0][0]) + (1 if before is None else 0)
+            raise ConversionError(
+                path,
+                "SampleTimeFine does not increase (and is no 32-bit wrap)",
+                line=piece.first_line + i,
+                column="SampleTimeFine",
+            )
+        steps.add(d)
+        before = int(t_ns[-1]) if len(t_ns) else before
+        rate = steps.rate_hz() if steps.exact else estimate_rate_hz(t_ns)  # the last piece's: the whole file's
+        yield _recording(path, name, tag, banner, names, seen, values, t_ns, rate, piece.warnings, row)
+
+
+def _recording(
+    path: Path,
+    name: str,
+    tag: str,
+    banner: dict[str, str],
+    names: list[str],
+    seen: dict[str, int],
+    values: np.ndarray,
+    t_ns: np.ndarray,
+    rate: float | None,
+    warnings: list[str],
+    row: int,
+) -> Recording:
+    """The IMU, orientation and other columns of one piece's ``values``."""
 
     def trio(prefix: str) -> np.ndarray | None:
         cols = [f"{prefix}_{a}" for a in "XYZ"]
@@ -131,7 +185,6 @@ def read_movella_dot(path: Path, options: ConvertOptions | None = None) -> Recor
         alias = {"Roll": seen["Euler_X"], "Pitch": seen["Euler_Y"], "Yaw": seen["Euler_Z"]}
         q, q_from = orientation_wxyz(values, alias)
         q_from = "Euler_X/Y/Z = roll/pitch/yaw (deg, Rz(yaw) Ry(pitch) Rx(roll))"
-    rate = estimate_rate_hz(t_ns)
     meta = {
         "format": "movella-dot-csv",
         "layout": "app export" if banner else "SDK real-time log (no banner)",
@@ -145,7 +198,7 @@ def read_movella_dot(path: Path, options: ConvertOptions | None = None) -> Recor
     for k in ("FirmwareVersion", "AppVersion"):
         if k in banner:
             meta[k] = banner[k]
-    rec = Recording(sources=[str(path)], warnings=warnings)
+    rec = Recording(sources=[str(path)], warnings=list(warnings))
     if acc is not None or gyr is not None:
         rec.imus.append(
             ImuStream(
@@ -208,6 +261,10 @@ class MovellaDotConverter(Converter):
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_movella_dot(Path(path), options)
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """Pieces of about 16 MB of text (see :func:`iter_movella_dot`)."""
+        return iter_movella_dot(Path(path), options, piece_bytes=_pieces.PIECE_BYTES)
 
 
 CONVERTER = MovellaDotConverter()

@@ -55,6 +55,7 @@ CASES = [
     ("actilife-csv", "devices/actigraph_gt3x/exampleRAW.csv", (TEXT, 8192)),  # no time column: banner rate
     ("actilife-csv", "devices/actigraph_gt3x/example-IMU.csv", (TEXT, 8192)),  # formatted local time stamps
     ("axivity-csv", "devices/axivity_csv/ax3_testfile_unix_timestamps.csv", (TEXT, 2048)),
+    ("movella-dot", "devices/movella_dot_csv/bei_D4CA6EF17860_20210830_170505.csv", (TEXT, 4096)),
     ("actigraph", "devices/actigraph_gt3x/example.gt3x", None),
     ("axivity", "devices/axivity_cwa/ax3_sample.cwa", None),
     ("axivity", "devices/axivity_cwa/ax6_sample.cwa", None),
@@ -200,3 +201,18 @@ def test_compressed_text_comes_in_the_inner_readers_pieces(shared_data, tmp_path
     assert whole.sources == [str(path)] and len(whole.imus[0]) > 0
     monkeypatch.setattr(TEXT, 4096)
     _pieces_equal_whole(list(conv.iter_chunks(path)), whole)
+
+
+def test_movella_dot_wrap_of_sample_time_fine_across_pieces(tmp_path):
+    from imulog.converters.movella_dot import WRAP, iter_movella_dot, read_movella_dot
+
+    n = 6000
+    us = (WRAP - 30 * 16_667 + np.arange(n) * 16_667) % WRAP  # 60 Hz; the 32-bit counter wraps at row 30
+    rng = np.random.default_rng(2)
+    rows = np.column_stack([np.arange(n), us, rng.normal(0, 1, (n, 6))])
+    path = tmp_path / "dot_D4CA6EF17860_20210830_170505.csv"
+    header = "PacketCounter,SampleTimeFine," + ",".join(f"{q}_{a}" for q in ("Acc", "Gyr") for a in "XYZ")
+    np.savetxt(path, rows, delimiter=",", header=header, comments="", fmt=["%d", "%d"] + ["%.5f"] * 6)
+    whole = read_movella_dot(path)
+    assert np.all(np.diff(whole.imus[0].t_ns) == 16_667_000)
+    _pieces_equal_whole(list(iter_movella_dot(path, piece_bytes=5000)), whole)
