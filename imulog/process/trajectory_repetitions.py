@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.stats import t as student_t
 from scipy.stats import theilslopes
 
 from imulog.process.input_checks import (
@@ -240,6 +241,7 @@ def heading_drift(
     repetitions: Sequence[Repetition],
     waypoints: R2GWaypoints,
     sigma_ref_m: float,
+    alpha: float = 0.001,
 ) -> np.ndarray:
     """Per repetition, the heading error (rad, about the vertical) of the initial estimate that a drift line
     explains beyond its uncertainty; 0 where it does not (incomplete repetitions, fewer than 3 complete ones).
@@ -248,10 +250,13 @@ def heading_drift(
     trial's horizontal trajectory by an angle that grows with time. Each complete repetition's angle is the
     rotation about z that best maps its static positions onto the reference's
     (:func:`imulog.process.trajectory_optimize.heading_alignment`, unwrapped over the trial); a straight line in
-    time (what a constant bias gives) is fitted through them robustly (Theil-Sen). The line is trusted no closer
-    than its uncertainty: the reference's own (``sigma_ref_m`` over the bottle's horizontal distance, rad) and
-    the scatter of the repetitions' angles about the line (their standard deviation), added in quadrature; the applied angle is the line shrunk towards 0 by that much (soft threshold), so a trial
-    without drift keeps its estimate."""
+    time (what a constant bias gives) is fitted through them robustly (Theil-Sen). Unless its slope differs
+    from 0 at significance level ``alpha`` (t test with the angles' scatter about the line, n - 2 degrees of
+    freedom) there is no drift to remove: the angles then mostly measure position errors of the estimate and the
+    reference, not its heading, and every angle is 0. Otherwise each repetition gets the line plus its own
+    deviation from it, shrunk by the share of the deviations' variance the reference's error does not explain
+    (empirical Bayes: the reference's error in angle is ``sigma_ref_m`` over the bottle's horizontal distance,
+    rad), so a drift that is not quite linear is followed where the repetitions agree on it."""
     t = np.asarray(t_s, dtype=np.float64)
     static = np.asarray(static_mask, dtype=bool)
     out = np.zeros(len(repetitions))
@@ -277,6 +282,9 @@ def heading_drift(
     slope, intercept, _, _ = theilslopes(th, tm)
     line = intercept + slope * tm
     scatter = float(np.sqrt(np.sum((th - line) ** 2) / (len(th) - 2)))
-    kappa = float(np.hypot(sigma_ref_m / lever, scatter))
-    out[idx] = np.sign(line) * np.maximum(np.abs(line) - kappa, 0.0)
+    spread = float(np.sqrt(np.sum((tm - tm.mean()) ** 2)))
+    if spread <= 0 or abs(slope) * spread < scatter * student_t.ppf(1.0 - alpha / 2.0, len(th) - 2):
+        return out
+    own = max(0.0, 1.0 - (sigma_ref_m / lever) ** 2 / scatter**2) if scatter > 0 else 0.0
+    out[idx] = line + own * (th - line)
     return out
