@@ -243,8 +243,8 @@ def heading_drift(
     sigma_ref_m: float,
     alpha: float = 0.001,
 ) -> np.ndarray:
-    """Per repetition, the heading error (rad, about the vertical) of the initial estimate that a drift line
-    explains beyond its uncertainty; 0 where it does not (incomplete repetitions, fewer than 3 complete ones).
+    """Per repetition, the heading error (rad, about the vertical) of the initial estimate when it drifts
+    significantly over the trial; 0 otherwise (and for incomplete repetitions, or fewer than 3 complete ones).
 
     A 6D orientation filter has no heading reference, so a gyroscope bias about the vertical turns the whole
     trial's horizontal trajectory by an angle that grows with time. Each complete repetition's angle is the
