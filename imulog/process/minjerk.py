@@ -72,17 +72,11 @@ class R2GWaypoints:
     bottle_m: tuple[float, float, float]
     mouth_m: tuple[float, float, float]
 
-    def as_array(self, origin_m: np.ndarray | None = None, end_m: np.ndarray | None = None) -> np.ndarray:
-        """The five waypoints of one repetition: start, bottle, mouth, bottle, end; (5, 3) m.
-
-        origin_m: where this repetition starts relative to the trial's home (m; bottle and mouth are relative to
-        the home, so they move by ``-origin_m``); end_m: where it ends relative to its start (m). Both default to
-        zero (the thesis: every repetition starts at home and returns to its start)."""
-        o = np.zeros(3) if origin_m is None else np.asarray(origin_m, dtype=np.float64)
-        e = np.zeros(3) if end_m is None else np.asarray(end_m, dtype=np.float64)
-        b = np.asarray(self.bottle_m, dtype=np.float64) - o
-        m = np.asarray(self.mouth_m, dtype=np.float64) - o
-        return np.stack([np.zeros(3), b, m, b, e])
+    def as_array(self) -> np.ndarray:
+        """The five waypoints of one repetition: start, bottle, mouth, bottle, start; (5, 3) m."""
+        b = np.asarray(self.bottle_m, dtype=np.float64)
+        m = np.asarray(self.mouth_m, dtype=np.float64)
+        return np.stack([np.zeros(3), b, m, b, np.zeros(3)])
 
 
 @dataclass(frozen=True)
@@ -166,16 +160,9 @@ def r2g_waypoints_from_positions(pos_m: np.ndarray, t_s: np.ndarray, phase_bound
     return R2GWaypoints(bottle_m=tuple(bottle.tolist()), mouth_m=tuple(mouth.tolist()))
 
 
-def r2g_reference(
-    t_s: np.ndarray,
-    phase_bounds_s: np.ndarray,
-    waypoints: R2GWaypoints,
-    origin_m: np.ndarray | None = None,
-    end_m: np.ndarray | None = None,
-) -> np.ndarray:
-    """Reference position (N, 3) m relative to the start for one repetition with (4, 2) phase bounds in s;
-    ``origin_m`` and ``end_m`` as in :meth:`R2GWaypoints.as_array`."""
+def r2g_reference(t_s: np.ndarray, phase_bounds_s: np.ndarray, waypoints: R2GWaypoints) -> np.ndarray:
+    """Reference position (N, 3) m relative to the start for one repetition with (4, 2) phase bounds in s."""
     b = np.asarray(phase_bounds_s, dtype=np.float64).reshape(-1, 2)
     if len(b) != 4:
         raise ValueError(f"an R2G repetition has 4 phases, got {len(b)}")
-    return piecewise_minimum_jerk(t_s, b, waypoints.as_array(origin_m, end_m))
+    return piecewise_minimum_jerk(t_s, b, waypoints.as_array())

@@ -53,7 +53,7 @@ class OptimizationParams:
     velocity_from_static: trust the initial velocity per axis no more than its static positions' error allows
         (:func:`imulog.process.trajectory_repetitions.velocity_sigma`, issue 31).
     heading_drift: before optimising, turn each repetition's initial estimate about the vertical by the trial's
-        heading drift line (:func:`imulog.process.trajectory_repetitions.heading_drift`, issue 31; needs the
+        heading drift when it is significant (:func:`imulog.process.trajectory_repetitions.heading_drift`, issue 31; needs the
         whole trial, so :func:`imulog.process.trajectory_opt.reconstruct_repetitions` applies it).
     """
 
@@ -106,21 +106,17 @@ def optimize_repetition(
     phase_bounds_s: np.ndarray,
     static_mask: np.ndarray,
     params: OptimizationParams = OptimizationParams(),
-    end_m: np.ndarray | None = None,
 ) -> OptimizationResult:
     """Optimise one repetition.
 
     t_s: (N,) s; initial_m: (N, 3) ZUPT positions (m, start at 0); reference_m: (N, 3) reference (m);
-    phase_bounds_s: (4, 2) reach, lift, return_bottle, return_hand start/end (s); static_mask: (N,) bool;
-    end_m: (3,) where ``params.return_to_start`` holds the last sample (m relative to the start; default the
-    start itself, the thesis's constraint).
+    phase_bounds_s: (4, 2) reach, lift, return_bottle, return_hand start/end (s); static_mask: (N,) bool.
     """
     t = np.asarray(t_s, dtype=np.float64)
     z = np.asarray(initial_m, dtype=np.float64).reshape(len(t), -1)
     ref = np.asarray(reference_m, dtype=np.float64).reshape(len(t), -1)
     static = np.asarray(static_mask, dtype=bool)
     n, d = z.shape
-    end = np.zeros(d) if end_m is None else np.asarray(end_m, dtype=np.float64).reshape(d)
     if n < 3:
         raise ValueError("a repetition needs at least 3 samples")
     sds = params.sigma_data_static_m
@@ -150,7 +146,6 @@ def optimize_repetition(
                     sigma_data_static_m=None if v is None else float(v),
                     sigma_data_mps=float(sdv[j]) if isinstance(sdv, (tuple, list, np.ndarray)) else sdv,
                 ),
-                end[j : j + 1],
             )
             for j, v in enumerate(sds)
         ]
@@ -221,8 +216,6 @@ def optimize_repetition(
     c_rows = [0] + ([n - 1] if params.return_to_start else [])
     c_mat = sp.csr_matrix((np.ones(len(c_rows)), (np.arange(len(c_rows)), c_rows)), shape=(len(c_rows), n))
     d_vec = np.zeros((len(c_rows), d))
-    if params.return_to_start:
-        d_vec[-1] = end
     h = (a_mat.T @ a_mat).tocsc()
     kkt = sp.bmat([[2.0 * h, c_mat.T], [c_mat, None]], format="csc")
     rhs_kkt = np.vstack([2.0 * (a_mat.T @ b_vec), d_vec])
