@@ -54,6 +54,7 @@ from imulog.process.trajectory_repetitions import (
     DEFAULT_REFERENCE,
     Repetition,
     estimate_data_sigma,
+    heading_drift,
     inconsistent_repetitions,
     merge_overlapping,
     reference_residuals,
@@ -75,6 +76,7 @@ __all__ = [
     "coupled_symmetry_cost",
     "estimate_data_sigma",
     "heading_alignment",
+    "heading_drift",
     "inconsistent_repetitions",
     "merge_overlapping",
     "method_checks",
@@ -129,26 +131,28 @@ def reconstruct_repetitions(
         a_comp = compensate_rotating_bias(a, rot, t, static, errors, params.rotating_bias) if bias["ok"] else None
         if info is not None:
             info["accelerometer_errors"] = {**errors.as_dict(), "applied": bool(bias["ok"])}
-    if "optimized" in methods and waypoints is None:
-        base = a if a_comp is None else a_comp
-        z = np.full((len(t), 3), np.nan)
-        for rep in repetitions:
-            sl = slice(rep.start, rep.stop)
-            z[sl] = zupt(base[sl], t[sl], static[sl], params.zupt)[1]
-        input_checks: list[InputCheck] = []
-        waypoints = trial_waypoints(anthropometrics, t, z, repetitions, reference_params, input_checks)
-        if info is not None and input_checks:
-            info["input_checks"] = [c.as_dict() for c in input_checks]
-            info["input_warnings"] = [c.line() for c in input_checks if c.disagrees]
+    base = a if a_comp is None else a_comp
+    if "optimized" in methods:
+        z = _initial(t, base, static, repetitions, params)
+        if waypoints is None:
+            input_checks: list[InputCheck] = []
+            waypoints = trial_waypoints(anthropometrics, t, z, repetitions, reference_params, input_checks)
+            if info is not None and input_checks:
+                info["input_checks"] = [c.as_dict() for c in input_checks]
+                info["input_warnings"] = [c.line() for c in input_checks if c.disagrees]
     if info is not None and waypoints is not None:
         info["waypoints_m"] = {"bottle": list(waypoints.bottle_m), "mouth": list(waypoints.mouth_m)}
     fallback: set[int] = set()
     if "optimized" in methods:
-        base = a if a_comp is None else a_comp
-        z = np.full((len(t), 3), np.nan)
-        for rep in repetitions:
-            sl = slice(rep.start, rep.stop)
-            z[sl] = zupt(base[sl], t[sl], static[sl], params.zupt)[1]
+        if params.optimized.heading_drift:
+            turn = heading_drift(t, z, static, repetitions, waypoints, params.optimized.sigma_ref_static_m)
+            if np.any(turn):
+                base = base.copy()
+                for rep, angle in zip(repetitions, turn, strict=True):
+                    base[rep.start : rep.stop] = rotate_about_z(base[rep.start : rep.stop], float(angle))
+                z = _initial(t, base, static, repetitions, params)
+            if info is not None:
+                info["heading_drift_deg"] = np.degrees(turn).round(3).tolist()
         fallback = set(inconsistent_repetitions(reference_residuals(t, z, static, repetitions, waypoints)))
         if params.optimized.sigma_data_static_m == "auto":
             sig = estimate_data_sigma(t, z, static, repetitions, waypoints, params.optimized.sigma_ref_static_m)
@@ -167,12 +171,13 @@ def reconstruct_repetitions(
         out[BASELINE] = np.full((len(t), 3), np.nan)
     for i, rep in enumerate(repetitions):
         sl = slice(rep.start, rep.stop)
+        # a refused (unphysical) estimate: zupt_bias is ZUPT on the uncompensated acceleration
+        comp = a_comp[sl] if a_comp is not None else a[sl] if bias is not None else None
         for m in methods:
             if m == "optimized" and len(rep.phase_bounds_s) != 4:
                 continue
             if m == "optimized" and i in fallback:  # keep the initial estimate
-                base = a[sl] if a_comp is None else a_comp[sl]
-                out[m][sl] = zupt(base, t[sl], static[sl], params.zupt)[1]
+                out[m][sl] = z[sl]
                 continue
             out[m][sl] = reconstruct(
                 m,
@@ -181,13 +186,23 @@ def reconstruct_repetitions(
                 static[sl],
                 phase_bounds_s=rep.phase_bounds_s,
                 waypoints=waypoints,
-                # a refused (unphysical) estimate: zupt_bias is ZUPT on the uncompensated acceleration
-                acc_compensated_mps2=a_comp[sl] if a_comp is not None else a[sl] if bias is not None else None,
+                acc_compensated_mps2=base[sl] if m == "optimized" else comp,  # optimized: heading-corrected
                 params=params,
             )
     if info is not None:
         info["checks"] = method_checks(t, a, a_comp, static, repetitions, out, params, bias)
     return out
+
+
+def _initial(
+    t: np.ndarray, acc: np.ndarray, static: np.ndarray, repetitions: Sequence[Repetition], params: TrajectoryParams
+) -> np.ndarray:
+    """ZUPT positions (N, 3) m of every repetition from its own start (NaN outside): the optimisation's start."""
+    z = np.full((len(t), 3), np.nan)
+    for rep in repetitions:
+        sl = slice(rep.start, rep.stop)
+        z[sl] = zupt(acc[sl], t[sl], static[sl], params.zupt)[1]
+    return z
 
 
 def method_checks(

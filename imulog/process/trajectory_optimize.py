@@ -50,6 +50,11 @@ class OptimizationParams:
         matches its static positions to the reference's (closed-form 2D Procrustes; an imulog addition that
         removes the heading error of 6D orientation filters using only the anthropometric waypoints).
     max_heading_deg: the largest heading correction applied (deg); larger fits are clipped.
+    velocity_from_static: trust the initial velocity per axis no more than its static positions' error allows
+        (:func:`imulog.process.trajectory_repetitions.velocity_sigma`, issue 31).
+    heading_drift: before optimising, turn each repetition's initial estimate about the vertical by the trial's
+        heading drift when it is significant (:func:`imulog.process.trajectory_repetitions.heading_drift`, issue 31; needs the
+        whole trial, so :func:`imulog.process.trajectory_opt.reconstruct_repetitions` applies it).
     """
 
     sigma_data_mps: float | tuple[float, float, float] = 0.02
@@ -62,6 +67,7 @@ class OptimizationParams:
     align_heading: bool = False
     max_heading_deg: float = 20.0
     velocity_from_static: bool = True
+    heading_drift: bool = True
 
 
 @dataclass
@@ -219,8 +225,11 @@ def optimize_repetition(
     return OptimizationResult(position=p, costs=costs, heading_rad=heading)
 
 
-def heading_alignment(initial_m: np.ndarray, reference_m: np.ndarray, mask: np.ndarray | None = None) -> float:
-    """Rotation angle (rad) about z that best maps the initial estimate's x-y onto the reference's (least squares)."""
+def heading_alignment(
+    initial_m: np.ndarray, reference_m: np.ndarray, mask: np.ndarray | None = None, full_circle: bool = False
+) -> float:
+    """Rotation angle (rad) about z that best maps the initial estimate's x-y onto the reference's (least squares);
+    beyond +-90 deg it is 0 unless ``full_circle``."""
     z = np.asarray(initial_m, dtype=np.float64)
     r = np.asarray(reference_m, dtype=np.float64)
     if mask is not None:
@@ -229,7 +238,7 @@ def heading_alignment(initial_m: np.ndarray, reference_m: np.ndarray, mask: np.n
     z, r = z[ok], r[ok]
     num = np.sum(z[:, 0] * r[:, 1] - z[:, 1] * r[:, 0])
     den = np.sum(z[:, 0] * r[:, 0] + z[:, 1] * r[:, 1])
-    return float(np.arctan2(num, den)) if den > 0 else 0.0
+    return float(np.arctan2(num, den)) if den > 0 or full_circle else 0.0
 
 
 def rotate_about_z(pos: np.ndarray, angle_rad: float) -> np.ndarray:

@@ -3,7 +3,8 @@
 :func:`repetition_windows` cuts sample windows around each repetition's phases (widened to a true rest at each
 end), :func:`merge_overlapping` joins windows with no rest between them; :func:`trial_waypoints` measures the
 minimum-jerk reference's waypoints, and :func:`reference_residuals`, :func:`inconsistent_repetitions` and
-:func:`estimate_data_sigma` judge the initial estimate against that reference. Times in s, positions in m.
+:func:`estimate_data_sigma` judge the initial estimate against that reference; :func:`heading_drift` finds the
+initial estimate's heading drift over the trial. Times in s, positions in m.
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.stats import t as student_t
+from scipy.stats import theilslopes
 
 from imulog.process.input_checks import (
     DEFAULT_INPUT_CHECKS,
@@ -28,6 +31,7 @@ from imulog.process.minjerk import (
     r2g_waypoints_from_anthropometrics,
     r2g_waypoints_from_positions,
 )
+from imulog.process.trajectory_optimize import heading_alignment
 
 DEFAULT_REFERENCE = R2GReferenceParams()
 
@@ -228,3 +232,59 @@ def velocity_sigma(
         return (float(floor_mps),) * 3
     t = max(float(np.median(durations)), 1e-3)
     return tuple(max(float(floor_mps), float(s) / t) for s in sigma_static_m)
+
+
+def heading_drift(
+    t_s: np.ndarray,
+    initial_m: np.ndarray,
+    static_mask: np.ndarray,
+    repetitions: Sequence[Repetition],
+    waypoints: R2GWaypoints,
+    sigma_ref_m: float,
+    alpha: float = 0.001,
+) -> np.ndarray:
+    """Per repetition, the heading error (rad, about the vertical) of the initial estimate when it drifts
+    significantly over the trial; 0 otherwise (and for incomplete repetitions, or fewer than 3 complete ones).
+
+    A 6D orientation filter has no heading reference, so a gyroscope bias about the vertical turns the whole
+    trial's horizontal trajectory by an angle that grows with time. Each complete repetition's angle is the
+    rotation about z that best maps its static positions onto the reference's
+    (:func:`imulog.process.trajectory_optimize.heading_alignment`, unwrapped over the trial); a straight line in
+    time (what a constant bias gives) is fitted through them robustly (Theil-Sen). Unless its slope differs
+    from 0 at significance level ``alpha`` (t test with the angles' scatter about the line, n - 2 degrees of
+    freedom) there is no drift to remove: the angles then mostly measure position errors of the estimate and the
+    reference, not its heading, and every angle is 0. Otherwise each repetition gets the line plus its own
+    deviation from it, shrunk by the share of the deviations' variance the reference's error does not explain
+    (empirical Bayes: the reference's error in angle is ``sigma_ref_m`` over the bottle's horizontal distance,
+    rad), so a drift that is not quite linear is followed where the repetitions agree on it."""
+    t = np.asarray(t_s, dtype=np.float64)
+    static = np.asarray(static_mask, dtype=bool)
+    out = np.zeros(len(repetitions))
+    idx, angles, times = [], [], []
+    for i, rep in enumerate(repetitions):
+        if len(rep.phase_bounds_s) != 4:
+            continue
+        sl = slice(rep.start, rep.stop)
+        ref = r2g_reference(t[sl], rep.phase_bounds_s, waypoints)
+        mask = static[sl] & (t[sl] >= rep.phase_bounds_s[0, 0])
+        if not np.any(mask):
+            continue
+        idx.append(i)
+        angles.append(heading_alignment(np.asarray(initial_m[sl]), ref, mask, full_circle=True))
+        times.append(float(np.mean(t[sl])))
+    lever = float(np.hypot(waypoints.bottle_m[0], waypoints.bottle_m[1]))
+    if len(idx) < 3 or lever <= 0:
+        return out
+    order = np.argsort(times)
+    th = np.empty(len(angles))
+    th[order] = np.unwrap(np.asarray(angles)[order])
+    tm = np.asarray(times)
+    slope, intercept, _, _ = theilslopes(th, tm)
+    line = intercept + slope * tm
+    scatter = float(np.sqrt(np.sum((th - line) ** 2) / (len(th) - 2)))
+    spread = float(np.sqrt(np.sum((tm - tm.mean()) ** 2)))
+    if spread <= 0 or abs(slope) * spread < scatter * student_t.ppf(1.0 - alpha / 2.0, len(th) - 2):
+        return out
+    own = max(0.0, 1.0 - (sigma_ref_m / lever) ** 2 / scatter**2) if scatter > 0 else 0.0
+    out[idx] = line + own * (th - line)
+    return out
