@@ -24,7 +24,10 @@ data with a log message); a flipped bit inside a sample value cannot be detected
 
 Memory: pyxdf parses a stream whole (its clock offsets and jitter removal fit over the stream), always in a guarded
 child capped at ``READER_MEMORY_BYTES`` (1 GiB), which bounds memory; ``iter_chunks`` yields one stream at a time and,
-beyond 64 MiB, loads one stream at a time, so memory is the largest stream, not the file.
+beyond 64 MiB, loads one stream at a time, so memory is the largest stream, not the file. The converter has no
+``iter_chunks`` method yet: ``imulog convert`` reads an XDF file whole, because the streaming writer takes the
+trial's time origin from its first piece, and a piece here is a whole stream (measured on ``clock_resets.xdf``:
+same samples, another reference origin).
 """
 
 from __future__ import annotations
