@@ -202,3 +202,20 @@ def test_data_section_crc_keeps_resident_memory_small(tmp_path):
     crc, grown_kb = map(int, out.stdout.split())
     assert crc == zlib.crc32(block * 256)
     assert grown_kb < 64 * 1024  # a fraction of the 256 MiB read
+
+
+def test_a_reader_open_during_an_append_keeps_reading(tmp_path):
+    """A trial opened before an in-place append reads the same samples after it (its summary points only below
+    the old DataEnd, and no byte there is written); a reader opened afterwards sees the new channel too."""
+    from imulog.archive.reader import TrialReader
+
+    imu = _imu()
+    path = tmp_path / "t.mcap"
+    write_trial(path, Recording(imus=[imu]))
+    with TrialReader(path) as before:
+        topic = before.topics()[0]
+        append_derived(path, [_derived(imu)], run={"step": "t", "algorithm": "none", "params": {}})
+        assert np.array_equal(before.read(topic).acc, imu.acc)
+        assert "/derived/orientation/wrist" not in before.topics()
+    with TrialReader(path) as after:
+        assert "/derived/orientation/wrist" in after.topics()
