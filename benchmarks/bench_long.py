@@ -10,8 +10,9 @@ For each length: ``imulog simulate home --days D`` writes an Axivity AX6 .cwa (a
 100 Hz), then ``imulog convert``, ``imulog process orientation``, ``imulog process phases``, ``imulog process
 metrics``, ``imulog process trajectory``, ``imulog info``, ``imulog view --save`` and ``imulog export`` (the
 wrist's samples to Parquet) run as separate processes (``--trials``: on copies of
-trials already converted, one per length, for the commands named by ``--commands``); the peak resident memory of each (``ru_maxrss`` of the child)
-and its wall time are printed, with the ratio of the longest to the shortest length. The machine's load average
+trials already converted, one per length, for the commands named by ``--commands``); the peak resident memory of each (``ru_maxrss`` of the child),
+its wall time and its CPU time (user + system of the child, every thread) are printed, with the ratio of the
+longest to the shortest length. The machine's load average
 is printed too: times are only comparable within one run.
 
 Kinematics needs two IMUs: the same simulated days are written a second time as a two-IMU trial (the wrist's
@@ -77,8 +78,8 @@ def two_imu_trial(cwa: Path, out: Path) -> None:
     write_trial_streaming(out, pieces())
 
 
-def run(args: list[str]) -> tuple[float, float]:
-    """(seconds, peak RSS MB) of one command in a child process."""
+def run(args: list[str]) -> tuple[float, float, float]:
+    """(wall seconds, peak RSS MB, CPU seconds: user + system) of one command in a child process."""
     t0 = time.perf_counter()
     proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     _, status, usage = os.wait4(proc.pid, 0)
@@ -86,7 +87,7 @@ def run(args: list[str]) -> tuple[float, float]:
     err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
     if os.waitstatus_to_exitcode(status) != 0:
         raise SystemExit(f"{' '.join(args)} failed:\n{err[-2000:]}")
-    return elapsed, usage.ru_maxrss / 1024.0  # kB on Linux
+    return elapsed, usage.ru_maxrss / 1024.0, usage.ru_utime + usage.ru_stime  # ru_maxrss: kB on Linux
 
 
 def orientation_peer(days: float, rate: float = 100.0, repeats: int = 1) -> int:
@@ -188,7 +189,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--trials needs one trial per --days value ({len(args.days)})")
     commands = [(c[0], c[1:]) for c in COMMANDS if c[0] in args.commands and not (args.trials and c[0] == "convert")]
     imulog = [sys.executable, "-m", "imulog"]
-    results: dict[float, dict[str, tuple[float, float]]] = {}
+    results: dict[float, dict[str, tuple[float, float, float]]] = {}
     with tempfile.TemporaryDirectory(dir=args.dir) as tmp:
         for i, days in enumerate(args.days):
             folder = Path(tmp) / f"d{days:g}"
@@ -221,10 +222,10 @@ def main(argv: list[str] | None = None) -> int:
                 else:
                     fields = {}
                 runs = [run([*imulog, *[a.format(**paths, **fields) for a in template]]) for template in templates]
-                results[days][name] = (sum(r[0] for r in runs), max(r[1] for r in runs))
+                results[days][name] = (sum(r[0] for r in runs), max(r[1] for r in runs), sum(r[2] for r in runs))
+                wall, mb, cpu = results[days][name]
                 print(
-                    f"{days:g} d {name}: {results[days][name][0]:.1f} s, {results[days][name][1]:.0f} MB, "
-                    f"load {os.getloadavg()[0]:.1f}",
+                    f"{days:g} d {name}: {wall:.1f} s wall, {cpu:.1f} s CPU, {mb:.0f} MB, load {os.getloadavg()[0]:.1f}",
                     flush=True,
                 )
             sizes = {k: p.stat().st_size / 1e6 for k, p in paths.items() if p.exists()}
@@ -239,12 +240,14 @@ def main(argv: list[str] | None = None) -> int:
     lo, hi = min(args.days), max(args.days)
     print(
         f"{'command':12s}"
-        + "".join(f"{f'{d:g} d s':>10s}{f'{d:g} d MB':>11s}" for d in args.days)
+        + "".join(f"{f'{d:g} d s':>10s}{f'{d:g} d CPU s':>12s}{f'{d:g} d MB':>11s}" for d in args.days)
         + f"{'RSS ratio':>11s}  verdict"
     )
     ok_all = True
     for name, _ in commands:
-        row = "".join(f"{results[d][name][0]:10.1f}{results[d][name][1]:11.0f}" for d in args.days)
+        row = "".join(
+            f"{results[d][name][0]:10.1f}{results[d][name][2]:12.1f}{results[d][name][1]:11.0f}" for d in args.days
+        )
         ratio = results[hi][name][1] / results[lo][name][1]
         ok = max(results[d][name][1] for d in args.days) <= 1024 and ratio <= MAX_GROWTH
         ok_all &= ok

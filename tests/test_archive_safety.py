@@ -17,6 +17,8 @@ from test_archive_helpers import synthetic_recording
 from imulog.archive import ArchiveCorruptError, TrialReader, append_derived, write_trial
 from imulog.archive import _mcap as m
 from imulog.archive.doctor import check_file
+from imulog.archive.files import writer_lock
+from imulog.archive.journal import journal_path
 from imulog.cli import cli
 from imulog.model import SignalStream
 
@@ -196,9 +198,21 @@ def _fork_append(path: Path, stream: SignalStream, *, kill_at: int | None = None
 
 
 def _check_after_kill(path: Path, original: bytes, conversion_end: int, stream: SignalStream) -> str:
+    """What a reader sees right after the kill (before any writer ran) and what the next writer leaves (it undoes
+    an unfinished append from its journal): the original trial or the complete append, the same for both."""
+    assert check_file(path).ok  # doctor, too, reads an interrupted append as the trial before it
+    with TrialReader(path) as tr:
+        seen = "appended" if "/derived/killed" in tr.topics() else "unchanged"
+        if seen == "appended":
+            assert np.array_equal(tr.read("/derived/killed").values, stream.values)
+    with writer_lock(path):  # what every writer does first
+        pass
+    assert not journal_path(path).exists()
     now = path.read_bytes()
     if now == original:
+        assert seen == "unchanged"
         return "unchanged"
+    assert seen == "appended"
     assert now[:conversion_end] == original[:conversion_end]
     report = check_file(path)
     assert report.ok, report.problems
@@ -264,7 +278,7 @@ def test_append_killed_at_every_io_step_leaves_original_valid(small_trial, tmp_p
         code = os.waitstatus_to_exitcode(status)
         assert code in (-signal.SIGKILL, 0), code
         outcomes.append(_check_after_kill(path, original, conversion_end, stream))
-    # killed before os.replace -> unchanged; after it -> the complete new file; never anything in between
+    # killed before the journal is removed -> unchanged; after -> the complete new file; never anything between
     first_appended = outcomes.index("appended")
     assert set(outcomes[:first_appended]) == {"unchanged"} and set(outcomes[first_appended:]) == {"appended"}
     assert first_appended >= total - 4

@@ -1,16 +1,15 @@
 """Append derived channels to an existing trial, and replace them (DESIGN.md, "Appending").
 
-Append: the data section of the old file (every byte before its DataEnd record) is copied unchanged into a
-temporary file beside it while its CRC is verified; the new Schema/Channel/Chunk/MessageIndex/Metadata
-records follow; then a new DataEnd (the data CRC continued over the new records), the summary (old + new
-schemas, channels, chunk/attachment/metadata indexes, recomputed statistics), summary offsets and footer.
-The temporary file is fsynced and moved over the original with ``os.replace``: a crash at any point leaves
-the original untouched.
+Append: the new Schema/Channel/Chunk/MessageIndex/Metadata records follow the old data section (every byte
+before its DataEnd record, unchanged); then a new DataEnd (the data CRC continued over the new records), the
+summary (old + new schemas, channels, chunk/attachment/metadata indexes, recomputed statistics), summary offsets
+and footer. They are written into the trial itself, the old summary kept in a journal until the new footer is
+durable, so a crash at any point leaves the trial as it was (:mod:`imulog.archive.journal`; a departure from
+the DESIGN's copy-then-rename, docs/architecture.md).
 
-Replace: when a derived topic already exists, the data section is copied record by record, leaving out the
-old channel's Channel, Chunk and MessageIndex records (imulog writes one channel per chunk, so every other
-chunk is copied byte for byte without recompressing); indexes of the kept records are shifted to their new
-offsets. Raw channels always precede derived ones, so the raw bytes stay identical in both cases.
+Replace: when a derived topic already exists, the file is rewritten without the old channel's records
+(:mod:`imulog.archive.append_output`). Raw channels always precede derived ones, so the raw bytes stay
+identical in both cases.
 """
 
 from __future__ import annotations
@@ -19,217 +18,23 @@ import json
 import os
 import sys
 import time
-import zlib
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, BinaryIO
 
 from imulog import __version__
 from imulog.archive import _mcap as m
-from imulog.archive._builder import McapBuilder
+from imulog.archive.append_output import append_output
 from imulog.archive.errors import ArchiveCorruptError, ArchiveError
-from imulog.archive.files import atomic_output, target_path, writer_lock
+from imulog.archive.files import target_path, writer_lock
 from imulog.archive.metadata import MetadataError, decode_record, encode_record, loads, record_hash, to_json
 from imulog.archive.streaming import STATS_RECORD, StreamPieces, write_pieces
 from imulog.archive.summary_check import summary_defects
 from imulog.archive.summary_walk import summary_problems
 from imulog.archive.writer import payload_hash, plan_append, write_stream, write_twin
 from imulog.model import DERIVED_PREFIX, Stream
-from imulog.workers import worker_pool
 
-COPY_BLOCK = 8 * 1024 * 1024
 REPAIR_RECORD = "imulog.repair"  # imulog.repair.<run>: the summary defects a run's rewrite repaired
-
-
-def _copy_range(src: BinaryIO, dst: McapBuilder, start: int, end: int, crc: int | None = None) -> int:
-    """Copy src[start:end] into the builder (which continues the data CRC); return the CRC of the range."""
-    src.seek(start)
-    remaining = end - start
-    while remaining > 0:
-        block = src.read(min(COPY_BLOCK, remaining))
-        if not block:
-            raise ArchiveCorruptError(f"unexpected end of file at byte {end - remaining}")
-        dst.write(block)
-        if crc is not None:
-            crc = zlib.crc32(block, crc)
-        remaining -= len(block)
-    return crc if crc is not None else 0
-
-
-def _copy_prefix(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int], path: Path) -> McapBuilder:
-    """Copy the whole old data section verbatim, verifying its CRC.
-
-    The bytes are copied by the kernel (``os.copy_file_range``, on a second thread) while this thread
-    computes their CRC from a read-only memory map: no byte goes through a Python buffer. A mismatch raises
-    (the temporary output is then removed: nothing is written).
-    """
-    end = summary.data_end_offset
-    out.flush()
-    start = out.tell()
-    copier = worker_pool().submit(_kernel_copy, f.fileno(), out.fileno(), start, end)
-    try:
-        crc = _crc_of(f, end)
-    finally:
-        copied = copier.result()
-    if not copied:  # no in-kernel copy here (another file system, an old kernel): through Python buffers
-        builder = McapBuilder(out, start, 0, summary)
-        _copy_range(f, builder, 0, end)
-    else:
-        out.seek(start + end)
-        builder = McapBuilder(out, start + end, crc, summary)
-    if summary.data_section_crc not in (0, builder.crc):
-        raise ArchiveCorruptError(
-            f"{path}: data section CRC mismatch (file damaged?); run 'imulog doctor {path}' - nothing was written"
-        )
-    return builder
-
-
-def _kernel_copy(src: int, dst: int, dst_offset: int, length: int) -> bool:
-    """Copy ``length`` bytes from the start of ``src`` to ``dst`` at ``dst_offset`` in the kernel; False if
-    the system cannot (then nothing is relied on: the caller copies the bytes itself, from the start)."""
-    copy = getattr(os, "copy_file_range", None)
-    if copy is None:
-        return False
-    done = 0
-    try:
-        while done < length:
-            n = copy(src, dst, length - done, done, dst_offset + done)
-            if n == 0:
-                raise ArchiveCorruptError(f"unexpected end of file at byte {done}")
-            done += n
-    except OSError:
-        os.ftruncate(dst, dst_offset)
-        return False
-    return True
-
-
-def _crc_of(f: BinaryIO, end: int) -> int:
-    """CRC-32 of the first ``end`` bytes of ``f`` (memory-mapped, in blocks: zlib releases the GIL)."""
-    import mmap
-
-    from imulog.archive.salvage import release
-
-    if end == 0:
-        return 0
-    crc = 0
-    with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
-        if len(mm) < end:
-            raise ArchiveCorruptError(f"unexpected end of file at byte {len(mm)}")
-        view = memoryview(mm)
-        try:
-            for a in range(0, end, COPY_BLOCK):
-                b = min(end, a + COPY_BLOCK)
-                crc = zlib.crc32(view[a:b], crc)
-                release(view, a, b)  # mapped file pages count as resident memory: a week's trial is GBs
-        finally:
-            view.release()
-    return crc
-
-
-def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int], path: Path) -> McapBuilder:
-    """Copy the data section leaving out the records of channels ``drop``; shift the kept indexes.
-
-    One pass: every byte of the old data section is read once, counted in the data-section CRC (checked
-    against the recorded one before the file is finished: a damaged input is refused, nothing written)
-    and, unless dropped, written once.
-    """
-    chunk_by_offset = {ci.chunk_start_offset: ci for ci in summary.chunk_indexes}
-    # closing statistics of streamed channels (imulog.channel_stats.N) that no kept channel refers to any more
-    referenced = {c.metadata.get("stats_record") for cid, c in summary.channels.items() if cid not in drop}
-    orphaned = {
-        x.offset for x in summary.metadata_indexes if x.name.startswith(f"{STATS_RECORD}.") and x.name not in referenced
-    }
-    limit = summary.data_end_offset
-    shift: list[tuple[int, int]] = []  # (old offset of a kept record, bytes removed before it)
-    removed = 0
-    dropped_chunks: set[int] = set()
-    in_dropped_chunk = False
-    builder = McapBuilder(out, 0, 0, summary)
-    f.seek(0)
-    magic = f.read(len(m.MAGIC))
-    crc = zlib.crc32(magic)
-    builder.write(magic)
-    pos = len(m.MAGIC)
-    while pos < limit:
-        head = f.read(9)
-        if len(head) < 9 or pos + 9 > limit:
-            raise ArchiveCorruptError(f"{path}: truncated record at byte {pos}; nothing was written")
-        op, length = m._REC.unpack_from(head, 0)
-        end = pos + 9 + length
-        if end > limit:
-            raise ArchiveCorruptError(f"{path}: record at byte {pos} runs past the data section; nothing was written")
-        first = f.read(min(length, COPY_BLOCK))
-        drop_it = False
-        if op == m.Op.CHUNK:
-            ci = chunk_by_offset.get(pos)
-            if ci is None:
-                raise ArchiveCorruptError(f"{path}: chunk at byte {pos} is not in the summary index")
-            chans = set(ci.message_index_offsets)
-            in_dropped_chunk = bool(chans) and chans <= drop
-            if chans & drop and not in_dropped_chunk:
-                raise ArchiveError(
-                    f"{path}: the chunk at byte {pos} mixes the replaced channel with others; "
-                    "cannot replace it without recompressing (file not written by imulog?)"
-                )
-            drop_it = in_dropped_chunk
-            if drop_it:
-                dropped_chunks.add(pos)
-        elif op == m.Op.MESSAGE_INDEX:
-            drop_it = in_dropped_chunk  # message indexes follow their chunk
-        else:
-            in_dropped_chunk = False
-            if op in (m.Op.CHANNEL, m.Op.MESSAGE) and len(first) >= 2:
-                drop_it = m._H.unpack_from(first, 0)[0] in drop
-            elif op == m.Op.METADATA:
-                drop_it = pos in orphaned
-        crc = zlib.crc32(first, zlib.crc32(head, crc))
-        if drop_it:
-            removed += end - pos
-        else:
-            shift.append((pos, removed))
-            builder.write(head)
-            builder.write(first)
-        remaining = length - len(first)
-        while remaining > 0:
-            block = f.read(min(COPY_BLOCK, remaining))
-            if not block:
-                raise ArchiveCorruptError(f"{path}: unexpected end of file at byte {end - remaining}")
-            crc = zlib.crc32(block, crc)
-            if not drop_it:
-                builder.write(block)
-            remaining -= len(block)
-        pos = end
-    if summary.data_section_crc not in (0, crc):
-        raise ArchiveCorruptError(
-            f"{path}: data section CRC mismatch (file damaged?); run 'imulog doctor {path}' - nothing was written"
-        )
-    new_offset = {old: old - rem for old, rem in shift}
-
-    def moved(offset: int) -> int:
-        if offset not in new_offset:
-            raise ArchiveCorruptError(f"{path}: summary points at byte {offset}, which is not a record start")
-        return new_offset[offset]
-
-    for cid in drop:
-        builder.channels.pop(cid, None)
-        builder.channel_counts.pop(cid, None)
-    builder.chunk_indexes = []
-    for ci in summary.chunk_indexes:
-        if ci.chunk_start_offset in dropped_chunks:
-            continue
-        ci = m.ChunkIndexRec(**vars(ci))
-        ci.chunk_start_offset = moved(ci.chunk_start_offset)
-        ci.message_index_offsets = {k: moved(v) for k, v in ci.message_index_offsets.items()}
-        builder.chunk_indexes.append(ci)
-    builder.attachment_indexes = [m.AttachmentIndexRec(**vars(a)) for a in summary.attachment_indexes]
-    for ai in builder.attachment_indexes:
-        ai.offset = moved(ai.offset)
-    builder.metadata_indexes = [
-        m.MetadataIndexRec(**vars(x)) for x in summary.metadata_indexes if x.offset not in orphaned
-    ]
-    for mi in builder.metadata_indexes:
-        mi.offset = moved(mi.offset)
-    return builder
 
 
 def _raw_topics(f: BinaryIO, summary: m.Summary, path: Path | None = None) -> set[str]:
@@ -410,9 +215,7 @@ def append_derived(
                 "run": str(n),
                 "imulog_version": __version__,
             }
-            with atomic_output(path) as out:
-                copy = _copy_without if drop else _copy_prefix
-                builder = copy(f, summary, out, drop, path)
+            with append_output(f, summary, drop, path) as builder:
                 outputs = {}
                 piece_stats: dict[str, dict[str, str]] = {}
                 late: dict[str, Any] = {}  # run-record keys the pieces filled while they were written

@@ -20,7 +20,7 @@ from pathlib import Path
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
 from imulog.archive import _mcap as m
-from imulog.archive import codec
+from imulog.archive import codec, journal
 from imulog.archive.errors import ArchiveError
 from imulog.archive.summary_check import (
     CHANNEL_COUNTS,
@@ -341,16 +341,20 @@ def check_file(path: str | os.PathLike[str], *, decode: bool = True, progress: P
     with f:
         size = os.fstat(f.fileno()).st_size
         try:
-            summary = m.read_summary(f, size)
+            summary, view = journal.read_summary_view(f, size, path)
         except Exception as exc:  # McapFormatError, or anything a damaged summary provokes
             report.fail(str(exc) if isinstance(exc, m.McapFormatError) else f"unreadable summary ({exc})")
             return report
         report.checks.append("magic, footer and summary CRC ok")
+        if view is not f:
+            report.checks.append(
+                "an append is in progress or was interrupted: checked the trial as before it (the next write undoes it)"
+            )
         if summary.duplicate_record_indexes:
             report.fail(DUPLICATE_RECORDS.format(n=summary.duplicate_record_indexes))
         if summary.duplicate_chunk_indexes:
             report.fail(DUPLICATE_CHUNKS.format(n=summary.duplicate_chunk_indexes))
-        found = _walk_data_section(f, summary, report, progress)
+        found = _walk_data_section(view, summary, report, progress)
         if found is None:
             return report
         _check_summary(summary, found, report)

@@ -3,7 +3,8 @@
 Every write goes to a temporary file beside the target (``.NAME.PID.tmp``), is fsynced and then moved over
 the target with :func:`os.replace`, so a reader or a crash never sees a half-written archive. A lock file
 (``.NAME.lock``, held with ``flock``) refuses a second writer; the kernel releases it when the holder dies,
-so a killed writer never leaves a stale lock.
+so a killed writer never leaves a stale lock. Appends write in place instead, their old summary kept in a
+journal until the new footer is durable (:mod:`imulog.archive.journal`); the writer lock undoes one that died.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from pathlib import Path
 from typing import BinaryIO
 
 from imulog.archive.errors import ArchiveLockedError
+from imulog.archive.journal import fsync_dir, recover
 
 
 def target_path(path: str | os.PathLike[str]) -> Path:
@@ -71,6 +73,7 @@ def writer_lock(path: str | os.PathLike[str], wait_s: float = 0.0) -> Iterator[N
         for stale in path.parent.glob(f".{path.name}.*.tmp"):
             with contextlib.suppress(OSError):
                 stale.unlink()
+        recover(path)  # an append that died midway (imulog.archive.journal) is undone before anything else
         yield
 
 
@@ -114,15 +117,6 @@ def _flock(lp: Path, path: Path, wait_s: float, what: str) -> Iterator[None]:
         with contextlib.suppress(OSError):
             lp.unlink()
         os.close(fd)
-
-
-def fsync_dir(directory: Path) -> None:
-    with contextlib.suppress(OSError):
-        fd = os.open(directory, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
 
 
 @contextlib.contextmanager

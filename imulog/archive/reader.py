@@ -7,22 +7,21 @@ decompressed; the messages' packed arrays are joined once and viewed with ``nump
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 from collections.abc import Iterator
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from imulog._lazy import LazyModule
 from imulog.archive import _mcap as m
+from imulog.archive import journal, staleness
+from imulog.archive.channel_info import Attachment, ChannelInfo, _float, _int
 from imulog.archive.errors import ArchiveCorruptError, ArchiveError
 from imulog.archive.metadata import (
     MAX_RECORD_BYTES,
     MetadataError,
     check_depth,
     decode_record,
-    record_hash,
     validate_record,
 )
 from imulog.archive.packing import is_packed, original_media_type, unpack
@@ -59,68 +58,6 @@ def _forget_pool() -> None:  # a forked child does not inherit the pool's thread
 os.register_at_fork(after_in_child=_forget_pool)
 
 
-@dataclass
-class ChannelInfo:
-    """One channel as listed in the file's summary (no data read)."""
-
-    topic: str
-    schema_name: str
-    message_count: int
-    sample_count: int
-    start_ns: int | None
-    end_ns: int | None
-    rate_hz: float | None
-    metadata: dict[str, str] = field(default_factory=dict)
-    channel_id: int = -1
-
-    @property
-    def kind(self) -> str:
-        return self.metadata.get("kind") or _codec().SCHEMA_KIND.get(self.schema_name, "unknown")
-
-    @property
-    def derived(self) -> bool:
-        return self.topic.startswith("/derived/")
-
-    @property
-    def duration_s(self) -> float | None:
-        if self.start_ns is None or self.end_ns is None:
-            return None
-        return (self.end_ns - self.start_ns) / 1e9
-
-    @property
-    def params(self) -> dict[str, Any] | None:
-        """Parsed ``params`` of a derived channel (None for raw channels)."""
-        return json.loads(self.metadata["params"]) if "params" in self.metadata else None
-
-    @property
-    def inputs(self) -> dict[str, str] | None:
-        """Parsed ``inputs`` (topic -> content hash) of a derived channel."""
-        return json.loads(self.metadata["inputs"]) if "inputs" in self.metadata else None
-
-
-@dataclass
-class Attachment:
-    name: str
-    media_type: str
-    data: bytes
-    sha256: str
-    log_time: int = 0
-
-
-def _float(value: str | None) -> float | None:
-    try:
-        return float(value) if value else None
-    except ValueError:
-        return None
-
-
-def _int(meta: dict[str, str], key: str) -> int | None:
-    try:
-        return int(meta[key])
-    except (KeyError, ValueError):
-        return None
-
-
 class TrialReader:
     """Open a trial file for reading: ``with TrialReader(path) as trial: trial.read("/imu/wrist")``."""
 
@@ -132,7 +69,7 @@ class TrialReader:
             raise ArchiveError(f"{self.path}: {exc.strerror or exc}") from exc
         try:
             size = os.fstat(self._f.fileno()).st_size
-            self.summary = m.read_summary(self._f, size)
+            self.summary = journal.read_summary(self._f, size, self.path)
         except m.McapFormatError as exc:
             self._f.close()
             raise ArchiveCorruptError(f"{self.path}: {exc}") from exc
@@ -251,60 +188,14 @@ class TrialReader:
         return dict(sorted(out.items()))
 
     def stale_channels(self) -> dict[str, dict[str, Any]]:
-        """Derived channels out of date against the trial's current inputs, by topic (no data read).
-
-        A channel is stale when an input channel's recorded content hash or a metadata record it read
-        (``metadata:NAME`` in its ``inputs``) differs from what its provenance recorded, when an input is
-        gone, or when an input is itself stale. Values: ``{"step": ..., "reasons": [one line each]}``.
-        """
-        chans = {c.topic: c for c in self.summary.channels.values()}
-        metadata = self.metadata
-        stale: dict[str, dict[str, Any]] = {}
-        deps: dict[str, list[str]] = {}
-        for topic, c in chans.items():
-            if not topic.startswith("/derived/") or "inputs" not in c.metadata:
-                continue
-            try:
-                inputs = json.loads(c.metadata["inputs"])
-            except ValueError:
-                inputs = None
-            reasons = _changed_inputs(inputs, chans, metadata)
-            if isinstance(inputs, dict):
-                deps[topic] = [k for k in inputs if k in chans]
-            if reasons:
-                stale[topic] = {"step": c.metadata.get("step", ""), "reasons": reasons}
-        changed = True
-        while changed:  # an input that is itself out of date makes its users out of date
-            changed = False
-            for topic, used in deps.items():
-                if topic in stale:
-                    continue
-                late = [t for t in used if t in stale]
-                if late:
-                    step = chans[topic].metadata.get("step", "")
-                    stale[topic] = {"step": step, "reasons": [f"input {t} is out of date" for t in late]}
-                    changed = True
-        return dict(sorted(stale.items()))
+        """Derived channels out of date against the trial's current inputs, by topic (no data read):
+        :func:`imulog.archive.staleness.stale_channels`."""
+        return staleness.stale_channels(self.summary.channels, self.metadata)
 
     def stale_steps(self) -> dict[str, dict[str, Any]]:
-        """Steps whose latest run is out of date (its recorded inputs changed, or an output is stale), by step.
-
-        Covers steps that write only metadata records (``evaluate``: ``imulog.evaluation``) as well as
-        channels. Values: ``{"run": n, "reasons": [...]}``. No data is read.
-        """
-        chans = {c.topic: c for c in self.summary.channels.values()}
-        stale_topics = self.stale_channels()
-        latest: dict[str, tuple[int, dict[str, Any]]] = {}
-        for n, rec in self.runs().items():
-            if rec.get("step"):
-                latest[rec["step"]] = (n, rec)
-        out = {}
-        for step, (n, rec) in latest.items():
-            reasons = _changed_inputs(rec.get("inputs", {}), chans, self.metadata)
-            reasons += [f"input {t} is out of date" for t in rec.get("inputs", {}) if t in stale_topics]
-            if reasons:
-                out[step] = {"run": n, "reasons": reasons}
-        return dict(sorted(out.items()))
+        """Steps whose latest run is out of date, by step (no data read):
+        :func:`imulog.archive.staleness.stale_steps`."""
+        return staleness.stale_steps(self.summary.channels, self.metadata, self.runs())
 
     def attachment_infos(self) -> list[dict[str, Any]]:
         """Name, media type and size of every attachment, from the summary (no attachment is read).
@@ -540,22 +431,3 @@ class TrialReader:
         from imulog.archive.display import trial_html
 
         return trial_html(self)
-
-
-def _changed_inputs(inputs: Any, chans: dict[str, m.ChannelRec], metadata: dict[str, Any]) -> list[str]:
-    """Why recorded provenance ``inputs`` ({topic or metadata:NAME: hash}) no longer match the trial."""
-    if not isinstance(inputs, dict):
-        return ["unreadable inputs in its provenance"]
-    reasons = []
-    for key, digest in inputs.items():
-        if key.startswith("metadata:"):
-            name = key[len("metadata:") :]
-            if record_hash(metadata.get(name)) != digest:
-                reasons.append(f"metadata record {name} changed")
-        elif key not in chans:
-            reasons.append(f"input {key} is gone")
-        else:
-            recorded = chans[key].metadata.get("sha256")
-            if recorded and recorded != digest:
-                reasons.append(f"input {key} changed")
-    return reasons

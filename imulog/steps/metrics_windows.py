@@ -128,7 +128,7 @@ def metric_pieces(
     ``blocks()`` yields the recording's ``(t_ns, acc)`` in order (called twice: a first pass for the rate, the
     means and the plan); ``windows`` a :class:`~imulog.steps.windows.WindowParams` (default: an hour, 10 s margins
     rounded up to whole distance windows)."""
-    from imulog.heap import bound_heap
+    from imulog.heap import reuse_heap
     from imulog.process.gaps import prepare
     from imulog.process.metrics import ArmUsageParams, acc_to_g, arm_usage
     from imulog.process.metrics.activity import high_passed_noise_removed
@@ -158,7 +158,7 @@ def metric_pieces(
     plan = metric_plan(total, rate, p, c)
     core = plan[0].core_hi - plan[0].core_lo
     if len(plan) > 1:
-        bound_heap()  # the same temporaries core after core: keep them out of the heap (imulog.heap)
+        reuse_heap()  # the same temporaries core after core: reuse their pages (imulog.heap)
     usage_p = ArmUsageParams(p.noise_level_g, p.arm_usage_rate_hz)
     decimated = rate > 1.5 * usage_p.reference_rate_hz  # as arm_usage decides
     width_ns = 1e9 / usage_p.reference_rate_hz

@@ -243,10 +243,10 @@ def read_orientation_windows(
 ) -> Iterator[SignalStream]:
     """:func:`orientation_windows` on ``topic`` of the trial at ``path``, read chunk by chunk."""
     from imulog.archive import TrialReader
-    from imulog.heap import bound_heap
+    from imulog.heap import reuse_heap
 
     if len(plan) > 1:
-        bound_heap()  # the same temporaries core after core: keep them out of the heap (imulog.heap)
+        reuse_heap()  # the same temporaries core after core: reuse their pages (imulog.heap)
     with TrialReader(path) as trial:
         blocks = (imu_arrays(b, topic) for b in trial.iter_blocks(topic))
         yield from orientation_windows(blocks, total, plan, imu, params, gaps, reports)

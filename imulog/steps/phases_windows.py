@@ -125,7 +125,7 @@ def phase_pieces(
 ) -> Iterator[Any]:
     """Yield ``/derived/static/{imu}`` core by core, then the movements and phases; fill ``record``
     (``imulog.timing``) at the end. ``params``: a :class:`~imulog.process.segmentation.pipeline.PhaseParams`."""
-    from imulog.heap import bound_heap
+    from imulog.heap import reuse_heap
     from imulog.process.segmentation.boundaries import adaptive_cutoff_hz, refine_phase_boundaries
     from imulog.process.segmentation.dynamos import lowpass_norm, postprocess, refine_boundaries, threshold_value
     from imulog.process.segmentation.hand import (
@@ -153,7 +153,7 @@ def phase_pieces(
         raise ValueError(reason)
     single = len(plan) == 1
     if not single:
-        bound_heap()  # the same temporaries window after window: keep them out of the heap (imulog.heap)
+        reuse_heap()  # the same temporaries window after window: reuse their pages (imulog.heap)
     over = plan[0].core_lo - plan[0].lo if single else max(w.core_lo - w.lo for w in plan)
     over = max(over, int(round(c.margin_s * rate)))
     ctx = total if single else max(1, int(round(c.context_s * rate)))
