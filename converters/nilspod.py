@@ -137,6 +137,18 @@ def read_bin(path: Path, options: ConvertOptions | None = None) -> Recording:
     return _recording(path, hdr, counter, values, warnings)
 
 
+def _resolution(hdr: dict) -> dict:
+    """How the IMU fields are stored: the int16 words with the divisions and factors of :func:`_units` (NilsPodLib's
+    CSV holds the same quotients, printed in full), which the archive checks value by value
+    (:mod:`imulog.archive.numbers`); without the ranges, the text's decimals x pi/180 for the gyroscope."""
+    res: dict = {"gyr": {"scale": np.pi / 180}, "temperature": {"scale": 2.0**-9, "offset": 23.0}}
+    if hdr.get("acc_range_g"):
+        res["acc"] = {"divisor": 2**16 / hdr["acc_range_g"] / 2 / GRAV}
+    if hdr.get("gyro_range_dps"):
+        res["gyr"] = {"divisor": 2**16 / hdr["gyro_range_dps"] / 2, "scale": np.pi / 180}
+    return res
+
+
 def _recording(path: Path, hdr: dict, counter: np.ndarray, values: dict, warnings: list[str]) -> Recording:
     """The Recording of decoded NilsPod values (shared by the binary and the CSV + JSON reader)."""
     rate = float(hdr["sampling_rate_hz"])
@@ -163,6 +175,7 @@ def _recording(path: Path, hdr: dict, counter: np.ndarray, values: dict, warning
         "missing_samples": missing,
         "units": "NilsPodLib factory calibration (acc with g = 9.81)",
         "source": path.name,
+        "resolution": _resolution(hdr),
     }
     rec = Recording(sources=[str(path)], warnings=warnings)
     imu = {

@@ -197,6 +197,10 @@ TEXT_AND_INTEGER_SOURCES = [
     ("optitrack_motive/sample_optitrack_take.csv", "/markers/motive", "pos", "the text's decimals, occlusions 0"),
     ("delsys_trigno/truncated_trigno_sample.csv", "/analog/mini_sensor_10", "values", "%.7g EMG to 13 decimals"),
     ("edf/trigno_emg.edf", "/analog/edf", "values", "the digital words: (d - dmin) * gain + pmin"),
+    ("nilspod/NilsPodX-6F13_20210109_162824.bin", "/imu/nilspod_6f13", "acc", "int16 / (2**16 / range / 2 / 9.81)"),
+    ("nilspod/NilsPodX-6F13_20210109_162824.bin", "/imu/nilspod_6f13", "gyr", "int16 / (2**16 / range / 2) * pi/180"),
+    ("nilspod/NilsPodX-6F13_20210109_162824_data.csv", "/imu/nilspod_6f13", "acc", "NilsPodLib's quotients in full"),
+    ("nilspod/NilsPodX-6F13_20210109_162824_data.csv", "/imu/nilspod_6f13", "gyr", "the same, deg/s x pi/180"),
 ]
 
 
