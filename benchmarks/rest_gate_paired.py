@@ -8,6 +8,10 @@ on, the mean paired difference on - off with its 95 % bootstrap interval, the me
 repetitions got worse / better by more than 0.5 cm. Repetitions the gate changes nothing at are counted too.
 
     python benchmarks/rest_gate_paired.py --grid stroke combined-stroke --subjects 12 --repetitions 8
+
+``--first-subject N`` runs subjects (and seeds) N, N+1, ... (held-out seeds); ``--static gyro-norm`` gives the
+phases step a zero-velocity mask from the angular rate alone (every gyroscope-still translation is a candidate
+rest: the gate's hardest input); ``--methods`` any of ``trajectory_opt.METHODS``, comma-separated.
 """
 
 from __future__ import annotations

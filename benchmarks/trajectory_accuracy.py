@@ -97,19 +97,19 @@ def simulated_inputs(
         q_world = q_true
         acc_world = quat.rotate(q_true, imu.acc)
         acc_world[:, 2] -= truth.info["gravity_mps2"]
-        acc_gate = acc_world
+        acc_gate, q_gate = acc_world, q_true
     elif orientation == "estimated":
         from imulog.process.orientation import estimate_orientation, gravity_free_acceleration
 
         est = estimate_orientation(imu.gyr, imu.acc, rate)
-        q_est = est.quat
+        q_est = q_gate = est.quat
         acc_gate = gravity_free_acceleration(q_est, imu.acc, est.static)
         if anchor:  # what the trajectory step does with the gyroscope (TrajectoryParams.anchor)
             from imulog.process.integration import rest_anchored_orientation
 
             anchor_static = _static_for_anchor(imu, rate, repetitions, static)
             if rests is not None:  # the step anchors at true rests only
-                anchor_static = true_rests(anchor_static, acc_gate, rate, rests)
+                anchor_static = true_rests(anchor_static, acc_gate, rate, rests, orientation=q_gate)
             q_est = rest_anchored_orientation(q_est, imu.gyr, t_s, anchor_static)
         acc_g = gravity_free_acceleration(q_est, imu.acc, est.static)
         q_g2w = quat.average(quat.multiply(q_true, quat.conjugate(q_est)))
@@ -139,6 +139,7 @@ def simulated_inputs(
         "t_s": t_s,
         "acc_world": acc_world,
         "acc_gate": acc_gate,
+        "q_gate": q_gate,
         "q_world": q_world,
         "static": static,
         "phase_bounds": phase_bounds,
@@ -153,7 +154,8 @@ def evaluate_trial(inputs: dict[str, Any], methods=METHODS, params: TrajectoryPa
     t_s = inputs["t_s"]
     # velocity resets only at true rests (the accelerometer agrees), as the trajectory step does
     rate = (len(t_s) - 1) / (t_s[-1] - t_s[0])
-    static = true_rests(inputs["static"], inputs.get("acc_gate", inputs["acc_world"]), rate, params.rests)
+    acc_gate = inputs.get("acc_gate", inputs["acc_world"])
+    static = true_rests(inputs["static"], acc_gate, rate, params.rests, orientation=inputs.get("q_gate"))
     reps, _ = merge_overlapping(repetition_windows(t_s, inputs["phase_bounds"], static))
     seconds: dict[str, float] = {}
     recon: dict[str, np.ndarray] = {}

@@ -58,6 +58,28 @@ def test_a_still_gyroscope_during_translation_is_not_a_rest():
     assert true_rests(still, stance, RATE)[still].mean() > 0.9
 
 
+def test_a_rest_whose_orientation_drifts_stays_a_rest_and_a_glide_stays_none():
+    """A gyroscope bias makes the filter's tilt drift during a rest, so the gravity-free acceleration ramps
+    (5 deg/s: 0 -> 2.6 m/s^2 over 3 s) although the sensor is still; in its own frame the specific force is
+    constant. With the orientation the gate keeps that rest; a glide (the translation of the first test, with the
+    same drift) varies the specific force in both frames and stays no rest."""
+    from imulog.process import quaternion as quat
+
+    t = np.arange(0, 10, 1 / RATE)
+    g = np.array([0.0, 0.0, 9.81])
+    q = quat.from_rotation_vector(np.radians(5.0) * t[:, None] * np.array([1.0, 0.0, 0.0]))  # drifting estimate
+    f_sensor = np.tile(g, (len(t), 1)) + _noise(len(t), seed=5)  # the still sensor measures gravity only
+    acc = quat.rotate(q, f_sensor) - g  # what the trajectory step gets: gravity-free in the drifting frame
+    gyro_static = np.ones(len(t), bool)
+    assert true_rests(gyro_static, acc, RATE)[(t > 2) & (t < 8)].mean() < 0.5  # the drift alone: dropped
+    assert true_rests(gyro_static, acc, RATE, orientation=q).all()
+    moving = (t >= 2) & (t < 8)
+    glide = f_sensor.copy()
+    glide[moving, 0] += 0.5 * np.sin(2 * np.pi * 0.4 * (t[moving] - 2))  # along the drift axis: no cancelling
+    acc_glide = quat.rotate(q, glide) - g
+    assert true_rests(gyro_static, acc_glide, RATE, orientation=q)[(t > 3) & (t < 7)].mean() < 0.1
+
+
 def test_movements_without_a_true_rest_between_them_are_one_window():
     """Two movements whose still-gyroscope pause is a translation: with the gyroscope's mask they are two
     windows, with the true rests both widen to the same rests and are merged (one reset at each end)."""
