@@ -170,6 +170,39 @@ def test_robust_errors_and_error_larger_than_the_motion():
     assert trajectory_errors(far, ref)["exceeds_motion"]
 
 
+def test_evaluate_names_the_windows_whose_error_exceeds_the_motion_and_methods_that_do_not_beat_the_baseline():
+    """Two 2-s windows of a 10 cm reach: ``zupt`` is 1 cm off in both, ``ddi`` drifts 30 cm in the second,
+    the baseline is 2 cm off in both."""
+    from imulog.steps.evaluate import compute_evaluation, warning_lines
+
+    t_ns = np.arange(400, dtype=np.int64) * 10_000_000  # 100 Hz, 4 s
+    ref = np.zeros((400, 3))
+    ref[:, 0] = 0.10 * np.sin(np.pi * np.arange(400) / 200) ** 2  # out and back in each window
+    ramp = np.concatenate([np.linspace(0, 1, 200)] * 2)[:, None]
+    zupt = ref + 0.01 * ramp * np.array([0.0, 1.0, 0.0])
+    ddi = ref + np.where(np.arange(400)[:, None] >= 200, 0.30 * ramp, 0.005 * ramp) * np.array([0.0, 0.0, 1.0])
+    base = ref + 0.02 * ramp * np.array([1.0, 1.0, 1.0])
+    windows = [
+        {"index": 1, "start_ns": 0, "end_ns": int(t_ns[199])},
+        {"index": 2, "start_ns": int(t_ns[200]), "end_ns": int(t_ns[-1])},
+    ]
+    rec = compute_evaluation(
+        {"zupt": (t_ns, zupt), "ddi": (t_ns, ddi), "dedrift": (t_ns, base)},
+        (t_ns, ref),
+        reference_topic="/markers/cluster",
+        windows=windows,
+        baseline="dedrift",
+    )
+    assert rec["methods"]["ddi"]["exceeds_motion"] == [2] and rec["methods"]["zupt"]["exceeds_motion"] == []
+    assert rec["methods"]["zupt"]["beats_baseline"] == {"x": True, "y": True, "z": True}
+    assert rec["methods"]["ddi"]["beats_baseline"] == {"x": True, "y": True, "z": False}
+    lines = warning_lines(rec)
+    assert "ddi: the error exceeds the motion itself in 1 of 2 windows (2)" in lines
+    assert not any(x.startswith("zupt:") for x in lines)
+    rec["methods"]["ddi"]["beats_baseline"]["x"] = rec["methods"]["ddi"]["beats_baseline"]["y"] = False
+    assert "ddi: no better than the dedrift baseline on any axis" in warning_lines(rec)
+
+
 def test_continuous_simulation_has_exact_motion_and_gyroscope_still_glides():
     from imulog.process import quaternion as quat
     from imulog.simulate.protocols import continuous
