@@ -149,12 +149,12 @@ def accelerometer_still(
     still."""
     a = np.asarray(acc_global_mps2, dtype=np.float64).reshape(len(acc_global_mps2), -1)
     ok = np.all(np.isfinite(a), axis=1)
-    frames = [np.where(ok[:, None], a, 0.0)]
+    a0 = np.where(ok[:, None], a, 0.0)
+    frames = [(a0, ok)]  # (values, valid) per frame the long window is measured in
     if orientation is not None:
         f = sensor_frame_force(a, orientation)
-        ok &= np.all(np.isfinite(f), axis=1)
-        frames = [np.where(ok[:, None], x, 0.0) for x in (a, f)]
-    a0 = frames[0]
+        ok_f = ok & np.all(np.isfinite(f), axis=1)  # no orientation: the gravity-free frame alone
+        frames.append((np.where(ok_f[:, None], f, 0.0), ok_f))
     w = max(int(round(params.window_s * rate_hz)), 1)
     mean = moving_mean(a0, w)
     sigma = white_noise_mps2(a[ok]) if ok.any() else 0.0
@@ -171,7 +171,7 @@ def accelerometer_still(
         # a 0.3 s pause) are judged on their own samples
         cand = np.asarray(candidates, dtype=bool)
         wl = max(int(round(params.long_window_s * rate_hz)), 1)
-        long_still = np.min([_run_std(x, cand & ok, wl) for x in frames], axis=0) <= limit
+        long_still = np.min([_run_std(x, cand & v, wl) for x, v in frames], axis=0) <= limit
         if params.long_dilate:
             # a rest beside motion inside one candidate run: a still 1-s window holds it
             long_still = cand & (moving_mean(long_still.astype(float)[:, None], wl)[:, 0] > 0)
