@@ -67,7 +67,7 @@ def trial_rows(name: str, subject: int, seed: int, repetitions: int, overrides: 
     for s, e, k in zip(ph.start, ph.end, ph.repetition, strict=True):
         bounds.setdefault(int(k), []).append((t_s[int(s)], t_s[min(int(e), len(t_s) - 1)]))
     phase_bounds = {k: np.asarray(sorted(v)) for k, v in bounds.items()}
-    static = true_rests(static_ph, acc_world, rate, DEFAULT_PARAMS.rests)
+    static = true_rests(static_ph, acc_world, rate, DEFAULT_PARAMS.rests, orientation=q_world)
     reps, _ = merge_overlapping(repetition_windows(t_s, phase_bounds, static))
     info: dict[str, Any] = {}
     recon = reconstruct_repetitions(

@@ -8,6 +8,10 @@ on, the mean paired difference on - off with its 95 % bootstrap interval, the me
 repetitions got worse / better by more than 0.5 cm. Repetitions the gate changes nothing at are counted too.
 
     python benchmarks/rest_gate_paired.py --grid stroke combined-stroke --subjects 12 --repetitions 8
+
+``--first-subject N`` runs subjects (and seeds) N, N+1, ... (held-out seeds); ``--static gyro-norm`` gives the
+phases step a zero-velocity mask from the angular rate alone (every gyroscope-still translation is a candidate
+rest: the gate's hardest input); ``--methods`` any of ``trajectory_opt.METHODS``, comma-separated.
 """
 
 from __future__ import annotations
@@ -27,9 +31,11 @@ from imulog.process.rests import RestParams  # noqa: E402
 from imulog.process.trajectory_opt import DEFAULT_PARAMS  # noqa: E402
 
 
-def paired_errors(name: str, subjects: range, repetitions: int, methods: tuple[str, ...]) -> dict:
+def paired_errors(
+    name: str, subjects: range, repetitions: int, methods: tuple[str, ...], static: str = "movements"
+) -> dict:
     """{method: (off (K, 3), on (K, 3), keys [(subject, repetition), ...])} MAE per axis (cm) of the K
-    repetitions found with both gates."""
+    repetitions found with both gates; ``static``: the phases step's zero-velocity mask."""
     from imulog.simulate.grid import condition
 
     off = replace(DEFAULT_PARAMS, rests=RestParams(enabled=False))
@@ -37,7 +43,9 @@ def paired_errors(name: str, subjects: range, repetitions: int, methods: tuple[s
     for s in subjects:
         by_gate = {}
         for gate, p in (("off", off), ("on", DEFAULT_PARAMS)):
-            inputs = simulated_inputs(s, seed=s, repetitions=repetitions, rests=p.rests, **condition(name))
+            inputs = simulated_inputs(
+                s, seed=s, repetitions=repetitions, rests=p.rests, static=static, **condition(name)
+            )
             records, _, _ = evaluate_trial(inputs, methods, p)
             by_gate[gate] = {m: {r["repetition"]: [r[a]["mae_cm"] for a in "xyz"] for r in records[m]} for m in methods}
         for m in methods:
@@ -56,7 +64,14 @@ def bootstrap_ci(d: np.ndarray, n: int = 2000, seed: int = 0) -> tuple[np.ndarra
     return np.percentile(means, 2.5, axis=0), np.percentile(means, 97.5, axis=0)
 
 
-def rows(conditions: list[str], subjects: int, repetitions: int, methods: tuple[str, ...]) -> list[str]:
+def rows(
+    conditions: list[str],
+    subjects: int,
+    repetitions: int,
+    methods: tuple[str, ...],
+    first: int = 0,
+    static: str = "movements",
+) -> list[str]:
     f = lambda v: " / ".join(f"{x:.2f}" for x in v)  # noqa: E731
     g = lambda v: " / ".join(f"{x:+.2f}" for x in v)  # noqa: E731
     lines = [
@@ -66,7 +81,8 @@ def rows(conditions: list[str], subjects: int, repetitions: int, methods: tuple[
     ]
     worse: list[str] = []
     for name in conditions:
-        for m, (a, b, keys) in paired_errors(name, range(subjects), repetitions, methods).items():
+        subjects_k = range(first, first + subjects)
+        for m, (a, b, keys) in paired_errors(name, subjects_k, repetitions, methods, static).items():
             if not len(a):
                 continue
             d = b - a
@@ -92,9 +108,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--grid", nargs="+", default=["stroke", "combined-stroke"])
     ap.add_argument("--subjects", type=int, default=12)
     ap.add_argument("--repetitions", type=int, default=8)
+    ap.add_argument("--first-subject", type=int, default=0, help="subjects (and seeds) N, N+1, ... (held-out runs)")
     ap.add_argument("--methods", default="zupt,zupt_bias")
+    ap.add_argument(
+        "--static",
+        default="movements",
+        choices=("movements", "gyro-norm"),
+        help="the phases step's zero-velocity mask (gyro-norm: the angular rate alone; the gate's hardest input)",
+    )
     args = ap.parse_args(argv)
-    print("\n".join(rows(args.grid, args.subjects, args.repetitions, tuple(args.methods.split(",")))))
+    methods = tuple(args.methods.split(","))
+    print("\n".join(rows(args.grid, args.subjects, args.repetitions, methods, args.first_subject, args.static)))
     return 0
 
 

@@ -49,13 +49,20 @@ from imulog.process.trajectory_opt import (
 )
 
 
-def _static_for_anchor(imu, rate: float, repetitions: int) -> np.ndarray:
-    """The phases step's zero-velocity mask (what the trajectory step anchors the orientation to)."""
-    from imulog.process.segmentation.pipeline import PhaseParams, segment_phases
+def _phase_params(repetitions: int, static: str = "movements"):
+    """The phases step's parameters for a trial of ``repetitions``; ``static``: its zero-velocity mask
+    (``"movements"``, the default, or ``"gyro-norm"``: the angular rate alone)."""
+    from imulog.process.segmentation.pipeline import PhaseParams
     from imulog.process.segmentation.repetitions import RepetitionParams
 
-    params = PhaseParams(repetitions=RepetitionParams(n_repetitions=repetitions))
-    return np.asarray(segment_phases(imu.gyr, rate, params, imu.acc).static, dtype=bool)
+    return PhaseParams(repetitions=RepetitionParams(n_repetitions=repetitions), static=static)
+
+
+def _static_for_anchor(imu, rate: float, repetitions: int, static: str = "movements") -> np.ndarray:
+    """The phases step's zero-velocity mask (what the trajectory step anchors the orientation to)."""
+    from imulog.process.segmentation.pipeline import segment_phases
+
+    return np.asarray(segment_phases(imu.gyr, rate, _phase_params(repetitions, static), imu.acc).static, dtype=bool)
 
 
 def simulated_inputs(
@@ -67,13 +74,15 @@ def simulated_inputs(
     segmentation: str = "estimated",
     anchor: bool = True,
     rests: RestParams | None = DEFAULT_PARAMS.rests,
+    static: str = "movements",
     **overrides: Any,
 ) -> dict[str, Any]:
     """Simulate one R2G trial and build the trajectory inputs on the reference clock in the world frame.
 
     ``rests``: the trajectory step's accelerometer gate (None: the segmentation's static mask as it is). As in
     the step, it is applied to the filter's gravity-free acceleration, and the orientation is anchored at the
-    gated rests only (``acc_gate`` holds that acceleration for :func:`evaluate_trial`).
+    gated rests only (``acc_gate`` holds that acceleration for :func:`evaluate_trial`). ``static``: the phases
+    step's zero-velocity mask (``"gyro-norm"``: the angular rate alone, many still-gyroscope translations).
     """
     from imulog.simulate.core import simulate
 
@@ -88,19 +97,19 @@ def simulated_inputs(
         q_world = q_true
         acc_world = quat.rotate(q_true, imu.acc)
         acc_world[:, 2] -= truth.info["gravity_mps2"]
-        acc_gate = acc_world
+        acc_gate, q_gate = acc_world, q_true
     elif orientation == "estimated":
         from imulog.process.orientation import estimate_orientation, gravity_free_acceleration
 
         est = estimate_orientation(imu.gyr, imu.acc, rate)
-        q_est = est.quat
+        q_est = q_gate = est.quat
         acc_gate = gravity_free_acceleration(q_est, imu.acc, est.static)
         if anchor:  # what the trajectory step does with the gyroscope (TrajectoryParams.anchor)
             from imulog.process.integration import rest_anchored_orientation
 
-            anchor_static = _static_for_anchor(imu, rate, repetitions)
+            anchor_static = _static_for_anchor(imu, rate, repetitions, static)
             if rests is not None:  # the step anchors at true rests only
-                anchor_static = true_rests(anchor_static, acc_gate, rate, rests)
+                anchor_static = true_rests(anchor_static, acc_gate, rate, rests, orientation=q_gate)
             q_est = rest_anchored_orientation(q_est, imu.gyr, t_s, anchor_static)
         acc_g = gravity_free_acceleration(q_est, imu.acc, est.static)
         q_g2w = quat.average(quat.multiply(q_true, quat.conjugate(q_est)))
@@ -116,12 +125,9 @@ def simulated_inputs(
             bounds.setdefault(int(k), []).append((s / 1e9 - t0_ref_s, e / 1e9 - t0_ref_s))
         static = truth.imu_static_mask.copy()
     elif segmentation == "estimated":
-        from imulog.process.segmentation.pipeline import PhaseParams, segment_phases
-        from imulog.process.segmentation.repetitions import RepetitionParams
+        from imulog.process.segmentation.pipeline import segment_phases
 
-        res = segment_phases(
-            imu.gyr, rate, PhaseParams(repetitions=RepetitionParams(n_repetitions=repetitions)), imu.acc
-        )
+        res = segment_phases(imu.gyr, rate, _phase_params(repetitions, static), imu.acc)
         ph = res.phases
         for s, e, k in zip(ph.start, ph.end, ph.repetition, strict=True):
             bounds.setdefault(int(k), []).append((t_s[int(s)], t_s[min(int(e), len(t_s) - 1)]))
@@ -133,6 +139,7 @@ def simulated_inputs(
         "t_s": t_s,
         "acc_world": acc_world,
         "acc_gate": acc_gate,
+        "q_gate": q_gate,
         "q_world": q_world,
         "static": static,
         "phase_bounds": phase_bounds,
@@ -147,7 +154,8 @@ def evaluate_trial(inputs: dict[str, Any], methods=METHODS, params: TrajectoryPa
     t_s = inputs["t_s"]
     # velocity resets only at true rests (the accelerometer agrees), as the trajectory step does
     rate = (len(t_s) - 1) / (t_s[-1] - t_s[0])
-    static = true_rests(inputs["static"], inputs.get("acc_gate", inputs["acc_world"]), rate, params.rests)
+    acc_gate = inputs.get("acc_gate", inputs["acc_world"])
+    static = true_rests(inputs["static"], acc_gate, rate, params.rests, orientation=inputs.get("q_gate"))
     reps, _ = merge_overlapping(repetition_windows(t_s, inputs["phase_bounds"], static))
     seconds: dict[str, float] = {}
     recon: dict[str, np.ndarray] = {}

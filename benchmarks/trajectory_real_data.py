@@ -88,14 +88,14 @@ def gaitmap_stride_lengths(
     acc = imu[sensor][["acc_x", "acc_y", "acc_z"]].to_numpy(float)
     gyr = np.radians(imu[sensor][["gyr_x", "gyr_y", "gyr_z"]].to_numpy(float))
     t = np.arange(len(acc)) / rate_imu
-    _, acc_g, _ = _orientation(gyr, acc, rate_imu)
+    q_est, acc_g, _ = _orientation(gyr, acc, rate_imu)
     gnorm = np.linalg.norm(gyr, axis=1)
     k = max(int(round(0.05 * rate_imu)), 1)
     static = np.convolve(gnorm < gyro_threshold_rad_s, np.ones(k) / k, mode="same") > 0.999
     if rest_gate:
         from imulog.process.rests import true_rests
 
-        static = true_rests(static, acc_g, rate_imu)
+        static = true_rests(static, acc_g, rate_imu, orientation=q_est)
     _, pos = zupt(acc_g, t, static, ZuptParams())
     heel = mocap[f"{foot[0].upper()}_FCC"][["x", "y", "z"]].to_numpy(float) / 1000.0
     t_m = np.arange(len(heel)) / rate_mocap

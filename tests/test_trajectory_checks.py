@@ -58,6 +58,31 @@ def test_a_still_gyroscope_during_translation_is_not_a_rest():
     assert true_rests(still, stance, RATE)[still].mean() > 0.9
 
 
+def test_a_rest_whose_orientation_drifts_stays_a_rest_and_a_glide_stays_none():
+    """A gyroscope bias makes the filter's tilt drift during a rest, so the gravity-free acceleration ramps
+    (5 deg/s: 0 -> 2.6 m/s^2 over 3 s) although the sensor is still; in its own frame the specific force is
+    constant. With the orientation the gate keeps that rest; a glide (the translation of the first test, with the
+    same drift) varies the specific force in both frames and stays no rest."""
+    from imulog.process import quaternion as quat
+
+    t = np.arange(0, 10, 1 / RATE)
+    g = np.array([0.0, 0.0, 9.81])
+    q = quat.from_rotation_vector(np.radians(5.0) * t[:, None] * np.array([1.0, 0.0, 0.0]))  # drifting estimate
+    f_sensor = np.tile(g, (len(t), 1)) + _noise(len(t), seed=5)  # the still sensor measures gravity only
+    acc = quat.rotate(q, f_sensor) - g  # what the trajectory step gets: gravity-free in the drifting frame
+    gyro_static = np.ones(len(t), bool)
+    assert true_rests(gyro_static, acc, RATE)[(t > 2) & (t < 8)].mean() < 0.5  # the drift alone: dropped
+    assert true_rests(gyro_static, acc, RATE, orientation=q).all()
+    moving = (t >= 2) & (t < 8)
+    glide = f_sensor.copy()
+    glide[moving, 0] += 0.5 * np.sin(2 * np.pi * 0.4 * (t[moving] - 2))  # along the drift axis: no cancelling
+    acc_glide = quat.rotate(q, glide) - g
+    assert true_rests(gyro_static, acc_glide, RATE, orientation=q)[(t > 3) & (t < 7)].mean() < 0.1
+    # without a valid orientation the gate is the gravity-free one
+    no_q = np.full_like(q, np.nan)
+    np.testing.assert_array_equal(true_rests(gyro_static, acc, RATE, orientation=no_q), true_rests(gyro_static, acc, RATE))
+
+
 def test_movements_without_a_true_rest_between_them_are_one_window():
     """Two movements whose still-gyroscope pause is a translation: with the gyroscope's mask they are two
     windows, with the true rests both widen to the same rests and are merged (one reset at each end)."""
@@ -146,6 +171,39 @@ def test_robust_errors_and_error_larger_than_the_motion():
     assert r["reach_cm"] == pytest.approx(10.0) and not r["exceeds_motion"]
     far = ref + np.array([0.0, 0.3, 0.0]) * np.linspace(0, 1, 200)[:, None]
     assert trajectory_errors(far, ref)["exceeds_motion"]
+
+
+def test_evaluate_names_the_windows_whose_error_exceeds_the_motion_and_methods_that_do_not_beat_the_baseline():
+    """Two 2-s windows of a 10 cm reach: ``zupt`` is 1 cm off in both, ``ddi`` drifts 30 cm in the second,
+    the baseline is 2 cm off in both."""
+    from imulog.steps.evaluate import compute_evaluation, warning_lines
+
+    t_ns = np.arange(400, dtype=np.int64) * 10_000_000  # 100 Hz, 4 s
+    ref = np.zeros((400, 3))
+    ref[:, 0] = 0.10 * np.sin(np.pi * np.arange(400) / 200) ** 2  # out and back in each window
+    ramp = np.concatenate([np.linspace(0, 1, 200)] * 2)[:, None]
+    zupt = ref + 0.01 * ramp * np.array([0.0, 1.0, 0.0])
+    ddi = ref + np.where(np.arange(400)[:, None] >= 200, 0.30 * ramp, 0.005 * ramp) * np.array([0.0, 0.0, 1.0])
+    base = ref + 0.02 * ramp * np.array([1.0, 1.0, 1.0])
+    windows = [
+        {"index": 1, "start_ns": 0, "end_ns": int(t_ns[199])},
+        {"index": 2, "start_ns": int(t_ns[200]), "end_ns": int(t_ns[-1])},
+    ]
+    rec = compute_evaluation(
+        {"zupt": (t_ns, zupt), "ddi": (t_ns, ddi), "dedrift": (t_ns, base)},
+        (t_ns, ref),
+        reference_topic="/markers/cluster",
+        windows=windows,
+        baseline="dedrift",
+    )
+    assert rec["methods"]["ddi"]["exceeds_motion"] == [2] and rec["methods"]["zupt"]["exceeds_motion"] == []
+    assert rec["methods"]["zupt"]["beats_baseline"] == {"x": True, "y": True, "z": True}
+    assert rec["methods"]["ddi"]["beats_baseline"] == {"x": True, "y": True, "z": False}
+    lines = warning_lines(rec)
+    assert "ddi: the error exceeds the motion itself in 1 of 2 windows (2)" in lines
+    assert not any(x.startswith("zupt:") for x in lines)
+    rec["methods"]["ddi"]["beats_baseline"]["x"] = rec["methods"]["ddi"]["beats_baseline"]["y"] = False
+    assert "ddi: no better than the dedrift baseline on any axis" in warning_lines(rec)
 
 
 def test_continuous_simulation_has_exact_motion_and_gyroscope_still_glides():

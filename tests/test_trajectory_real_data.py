@@ -56,3 +56,30 @@ def test_gaitmap_strides_no_worse_with_the_rest_gate(real, shared_data):
         on = real.gaitmap_stride_lengths(shared_data / "gaitmap_foot", foot, rest_gate=True)["error_m"]
         off = real.gaitmap_stride_lengths(shared_data / "gaitmap_foot", foot, rest_gate=False)["error_m"]
         assert np.mean(np.abs(on)) <= np.mean(np.abs(off)) + 1e-4, (foot, np.mean(np.abs(on)), np.mean(np.abs(off)))
+
+
+def test_broad_translation_with_a_still_gyroscope_is_no_rest(shared_data):
+    """Issue 32 point 1 on a real recording: BROAD trial 14 translates the IMU by hand with little rotation, so the
+    phases step's still-gyroscope mask holds moments of translation; the accelerometer's gate must drop every one
+    of them (optical speed > 10 cm/s) and keep the trial's breaks (its ``movement`` mask) whole."""
+    h5py = pytest.importorskip("h5py")
+    from imulog.process.orientation import estimate_orientation, gravity_free_acceleration
+    from imulog.process.rests import true_rests
+    from imulog.process.segmentation.pipeline import PhaseParams, segment_phases
+
+    with h5py.File(shared_data / "broad" / "14_undisturbed_slow_translation_with_breaks_B.hdf5", "r") as f:
+        rate = float(f.attrs["sampling_rate"])
+        acc, gyr, pos = f["imu_acc"][:], f["imu_gyr"][:], f["opt_pos"][:]
+        rest = ~f["movement"][:].astype(bool)
+    est = estimate_orientation(gyr, acc, rate)
+    acc_g = gravity_free_acceleration(est.quat, acc, est.static)
+    still_gyro = np.asarray(segment_phases(gyr, rate, PhaseParams(), acc).static, dtype=bool)
+    gated = true_rests(still_gyro, acc_g, rate)
+    # optical speed by central differences over 0.1 s (NaN where tracking was lost at either end)
+    k = int(round(0.05 * rate))
+    speed = np.full(len(pos), np.nan)
+    speed[k:-k] = np.linalg.norm(pos[2 * k :] - pos[: -2 * k], axis=1) / (2 * k / rate)
+    fast = np.nan_to_num(speed) > 0.10
+    assert (still_gyro & fast).sum() / rate > 0.5  # the premise: the gyroscope is still while the hand translates
+    assert not (gated & fast).any(), np.flatnonzero(gated & fast)[:10] / rate
+    assert (gated & rest).sum() >= 0.99 * rest.sum()

@@ -11,6 +11,14 @@ agrees, within a centred window of ``window_s``:
 * its mean is zero within ``max_mean_mps2``: the specific force equals gravity (a resting sensor measures
   gravity only; a 1 deg tilt error of the orientation leaves 0.17 m/s^2).
 
+With the orientation, the longer window's variation is also measured on the specific force in the sensor frame,
+and the smaller of the two counts: a resting sensor's specific force is constant in its own frame whatever the
+orientation filter does, while the gravity-free acceleration of a sensor with a gyroscope bias ramps during a
+rest as the filter's tilt drifts (0 -> 1.5 m/s^2 over a 3 s rest of the grid's ``uncalibrated`` sensor: the
+1 s window dropped the middle of such rests). A candidate rest has a still gyroscope, so a glide varies the
+specific force in both frames alike. Over the short window the drift stays below the noise, and the short test
+keeps the gravity-free acceleration alone.
+
 A constant-velocity translation has neither a variation nor a mean; hand motion does not keep one for long,
 and the window sees its start and end. All functions are pure numpy; accelerations in m/s^2, times in s.
 """
@@ -74,6 +82,22 @@ def white_noise_mps2(acc_mps2: np.ndarray) -> float:
     return float(np.median(mad) / np.sqrt(2.0))
 
 
+def sensor_frame_force(acc_global_mps2: np.ndarray, q_s2g: np.ndarray, gravity_mps2: float = 9.80665) -> np.ndarray:
+    """Specific force (N, 3) m/s^2 in the sensor frame from the gravity-free global acceleration and the
+    sensor-to-global orientation (N, 4) w,x,y,z used to compute it (an error in ``gravity_mps2`` adds a
+    constant while the sensor does not turn)."""
+    from imulog.process import quaternion as quat
+
+    a = np.asarray(acc_global_mps2, dtype=np.float64)
+    return quat.rotate_inverse(np.asarray(q_s2g, dtype=np.float64), a + np.array([0.0, 0.0, gravity_mps2]))
+
+
+def _window_std(a0: np.ndarray, w: int) -> np.ndarray:
+    """3D standard deviation of ``a0`` (N, D) over a centred window of ``w`` samples."""
+    mean = moving_mean(a0, w)
+    return np.sqrt(np.maximum(moving_mean(a0**2, w) - mean**2, 0.0).sum(axis=1))
+
+
 def _run_std(a: np.ndarray, mask: np.ndarray, w: int) -> np.ndarray:
     """3D standard deviation of ``a`` (N, D) over a centred window of ``w`` samples cut to the True run of
     ``mask`` that holds each sample (inf outside runs)."""
@@ -113,19 +137,29 @@ def _long_runs(mask: np.ndarray, min_samples: int) -> np.ndarray:
 
 
 def accelerometer_still(
-    acc_global_mps2: np.ndarray, rate_hz: float, params: RestParams = RestParams(), candidates: np.ndarray | None = None
+    acc_global_mps2: np.ndarray,
+    rate_hz: float,
+    params: RestParams = RestParams(),
+    candidates: np.ndarray | None = None,
+    orientation: np.ndarray | None = None,
 ) -> np.ndarray:
     """(N,) bool: the gravity-free acceleration (N, 3) m/s^2 is still (variation at noise, mean near zero)
-    within the centred window. NaN samples are never still."""
+    within the centred window. With ``orientation`` (N, 4) sensor-to-global, the longer window's variation is
+    the smaller of the global and the sensor-frame one (:func:`sensor_frame_force`). NaN samples are never
+    still."""
     a = np.asarray(acc_global_mps2, dtype=np.float64).reshape(len(acc_global_mps2), -1)
     ok = np.all(np.isfinite(a), axis=1)
     a0 = np.where(ok[:, None], a, 0.0)
+    frames = [(a0, ok)]  # (values, valid) per frame the long window is measured in
+    if orientation is not None:
+        f = sensor_frame_force(a, orientation)
+        ok_f = ok & np.all(np.isfinite(f), axis=1)  # no orientation: the gravity-free frame alone
+        frames.append((np.where(ok_f[:, None], f, 0.0), ok_f))
     w = max(int(round(params.window_s * rate_hz)), 1)
     mean = moving_mean(a0, w)
-    var = np.maximum(moving_mean(a0**2, w) - mean**2, 0.0).sum(axis=1)
     sigma = white_noise_mps2(a[ok]) if ok.any() else 0.0
     limit = max(params.k_noise * sigma * np.sqrt(a.shape[1]), params.min_std_mps2)
-    still = np.sqrt(var) <= limit
+    still = _window_std(a0, w) <= limit
     if params.max_mean_mps2 is not None:
         still &= np.linalg.norm(mean, axis=1) <= params.max_mean_mps2
     still &= moving_mean((~ok).astype(float)[:, None], w)[:, 0] == 0
@@ -137,7 +171,7 @@ def accelerometer_still(
         # a 0.3 s pause) are judged on their own samples
         cand = np.asarray(candidates, dtype=bool)
         wl = max(int(round(params.long_window_s * rate_hz)), 1)
-        long_still = _run_std(a0, cand & ok, wl) <= limit
+        long_still = np.min([_run_std(x, cand & v, wl) for x, v in frames], axis=0) <= limit
         if params.long_dilate:
             # a rest beside motion inside one candidate run: a still 1-s window holds it
             long_still = cand & (moving_mean(long_still.astype(float)[:, None], wl)[:, 0] > 0)
@@ -170,14 +204,19 @@ def _drop_short(mask: np.ndarray, min_samples: int) -> np.ndarray:
 
 
 def true_rests(
-    static_mask: np.ndarray, acc_global_mps2: np.ndarray, rate_hz: float, params: RestParams = RestParams()
+    static_mask: np.ndarray,
+    acc_global_mps2: np.ndarray,
+    rate_hz: float,
+    params: RestParams = RestParams(),
+    orientation: np.ndarray | None = None,
 ) -> np.ndarray:
     """The static mask (N,) bool restricted to samples where the accelerometer agrees
-    (:func:`accelerometer_still`), rests shorter than ``min_rest_s`` dropped."""
+    (:func:`accelerometer_still`; ``orientation`` (N, 4) sensor-to-global of ``acc_global_mps2`` adds the
+    sensor frame), rests shorter than ``min_rest_s`` dropped."""
     static = np.asarray(static_mask, dtype=bool)
     if not params.enabled:
         return static.copy()
-    rest = static & accelerometer_still(acc_global_mps2, rate_hz, params, candidates=static)
+    rest = static & accelerometer_still(acc_global_mps2, rate_hz, params, candidates=static, orientation=orientation)
     return _drop_short(rest, int(round(params.min_rest_s * rate_hz)))
 
 

@@ -139,7 +139,7 @@ def compute_trajectories(
     if static is not None:  # velocity resets only at true rests: the accelerometer must agree (issue 32)
         given = _sample_onto(np.asarray(static[0], np.int64), np.asarray(static[1]).reshape(-1) > 0.5, t_dev)
         rate = (len(t_dev) - 1) / max((t_dev[-1] - t_dev[0]) / 1e9, 1e-9)
-        rest_mask = true_rests(given, acc, rate, params.rests)
+        rest_mask = true_rests(given, acc, rate, params.rests, orientation=q_world)
         rest_info = rest_report(given, rest_mask, rate)
         static = (t_dev, rest_mask)
     if q_world is not None and gyr is not None and params.anchor.enabled and static is not None:
