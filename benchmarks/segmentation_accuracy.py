@@ -184,6 +184,9 @@ def main() -> None:
     ap.add_argument("--methods", nargs="+", default=[*METHODS, "dynamos-otsu", "dynamos-no-boundaries", "dynamos-raw"])
     ap.add_argument("--grid", nargs="+", default=None, help="accuracy-grid conditions (names or 'all')")
     ap.add_argument("--repetitions", type=int, default=10, help="repetitions per grid trial")
+    ap.add_argument(
+        "--grid-methods", nargs="+", default=list(GRID_METHODS), choices=list(GRID_METHODS), help="grid methods"
+    )
     args = ap.parse_args()
     if args.grid:
         from imulog.simulate.grid import CONDITIONS
@@ -195,6 +198,7 @@ def main() -> None:
             range(args.first_seed, args.first_seed + args.seeds),
             range(args.first_subject, args.first_subject + args.subjects),
             args.repetitions,
+            {k: GRID_METHODS[k] for k in args.grid_methods},
         )
         print_grid(rows)
         print(f"\n{time.perf_counter() - t0:.0f} s wall")

@@ -71,6 +71,10 @@ class HandParams:
     continuation_s: a translation resuming within this time (s) after the offset can extend the phase.
     continuation_n_level: ... when its ``|a|`` stays at least this many times the acceleration level for
         ``min_run_s`` (a sub-movement after a pause, not a noise spike).
+    flank_top_n_level: the acceleration flank leading out of (into) the rest is fitted between the level and
+        this many times the level, and extrapolated to zero acceleration (0: off; see :func:`flank_zero`).
+    flank_search_s: that flank must reach its top within this time (s) inside the phase from the boundary.
+    max_extrapolation_s: the extrapolated boundary moves at most this far (s) beyond the level's boundary.
     """
 
     enabled: bool = True
@@ -89,6 +93,9 @@ class HandParams:
     continuation_s: float = 1.0
     continuation_n_level: float = 3.0
     cruise_velocity_mps: float = 0.06
+    flank_top_n_level: float = 3.0
+    flank_search_s: float = 0.6
+    max_extrapolation_s: float = 0.3
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:
@@ -191,6 +198,57 @@ def _extend_offset(a_norm, v_norm, b_local, level, vlevel, quiet, cont, cont_lev
     return j
 
 
+def flank_zero(a: np.ndarray, first: int, level: float, top: float, span: int, back: int) -> float | None:
+    """Where the acceleration flank leaving a rest starts (local sample index), by a hinge fit.
+
+    ``a`` (n, 3) m/s^2 gravity-free acceleration in time order from the rest into the movement; ``first`` the
+    current onset. A movement that starts from rest with finite jerk has an acceleration rising linearly
+    from zero (minimum jerk: ``a = 60 D t / T^3`` near the onset, Flash & Hogan 1985), so a level is crossed
+    ``level / jerk`` after the true onset: a slow movement crosses it late. The model ``a = 0`` before
+    ``t0`` and ``k (t - t0)`` after it is fitted by least squares to the component of ``a`` along its
+    direction at the flank's top (signed, so the noise does not bias it), over the samples from ``back``
+    before ``first`` to the flank's top: the first sample at ``min(top, half the flank's peak)`` (a
+    curved flank near its peak would tilt the line); the peak is the largest ``|a|`` within ``span`` samples
+    of ``first`` and must reach twice the ``level``. Returns ``t0``, or None without such a flank."""
+    n = len(a)
+    first = max(int(first), 0)
+    if n == 0 or first >= n:
+        return None
+    an = np.linalg.norm(a, axis=1)
+    window = an[first : min(n, first + span)]
+    if len(window) == 0 or window.max() < 2 * level:
+        return None
+    height = min(top, max(0.5 * float(window.max()), 1.5 * level))
+    p = first + int(np.flatnonzero(window >= height)[0])
+    lo = max(0, first - back)
+    if p - lo < 3:
+        return None
+    y = a[lo : p + 1] @ (a[p] / an[p])
+    x = np.arange(lo, p + 1, dtype=float)
+    best, best_sse = None, np.inf
+    for t0 in range(lo, p - 1):
+        h = np.maximum(x - t0, 0.0)
+        k = float(h @ y) / float(h @ h)
+        if k <= 0:
+            continue
+        sse = float(np.sum((y - k * h) ** 2))
+        if sse < best_sse:
+            best, best_sse = t0, sse
+    return None if best is None else float(best)
+
+
+def _extrapolated(a: np.ndarray, first: int, level: float, params: HandParams, rate_hz: float) -> int:
+    """Onset ``first`` (local index into ``a``, time order from the rest) moved out to the extrapolated zero
+    of its acceleration flank (:func:`flank_zero`): never inward, at most ``max_extrapolation_s``, never
+    before the array's start (the rest window)."""
+    if params.flank_top_n_level <= 0:
+        return first
+    span = int(round(params.flank_search_s * rate_hz))
+    back = int(round(params.max_extrapolation_s * rate_hz))
+    z = flank_zero(a, first, level, params.flank_top_n_level * level, span, back)
+    return first if z is None else int(min(first, max(int(z), 0)))
+
+
 def cutoff_params(params: HandParams) -> BoundaryParams:
     """The accelerometer's cut-off adaptation expressed as :class:`BoundaryParams` (levels in m/s^2)."""
     return BoundaryParams(
@@ -253,8 +311,11 @@ def refine_with_accelerometer(
         next_start = int(ss[k + 1]) if k + 1 < len(ss) else n
         post = _rest_window(b0 + guard, min(next_start, n) - guard, length, reach, from_end=False)
         pre = _rest_window(prev_end + guard, a0 - guard, length, reach, from_end=True)
+        inside = int(round(params.flank_search_s * rate_hz))  # the flank can lie inside the gyroscope's phase
         if post is not None and post[0] > b0:
-            a, v, noise = gravity_free(acc, gyr, dt, post, b0, post[0])
+            lo = max(a0, b0 - inside)
+            a_all, v, noise = gravity_free(acc, gyr, dt, post, lo, post[0])
+            a, v = a_all[b0 - lo :], v[b0 - lo :]
             level = max(params.n_sigma * noise, params.min_level_mps2)
             an, vn = np.linalg.norm(a, axis=1), np.linalg.norm(v, axis=1)
             cont_level = params.continuation_n_level * level
@@ -272,8 +333,12 @@ def refine_with_accelerometer(
             )
             if 0 < j <= shift:
                 out_e[k] = b0 + j
+            m = len(a_all)  # the offset's flank, time reversed: from the rest into the phase
+            out_e[k] = lo + m - _extrapolated(a_all[::-1], m - (int(out_e[k]) - lo), level, params, rate_hz)
         if pre is not None and pre[1] < a0:
-            a, v, noise = gravity_free(acc, gyr, dt, pre, pre[1], a0)
+            hi = max(a0, min(int(out_e[k]), a0 + inside))
+            a_all, v, noise = gravity_free(acc, gyr, dt, pre, pre[1], hi)
+            a, v = a_all[: a0 - pre[1]], v[: a0 - pre[1]]
             level = max(params.n_sigma * noise, params.min_level_mps2)
             an, vn = np.linalg.norm(a, axis=1)[::-1], np.linalg.norm(v, axis=1)[::-1]
             moving = an > level
@@ -285,5 +350,6 @@ def refine_with_accelerometer(
             i = _walk(moving, 0, quiet)
             if 0 < i <= shift:
                 out_s[k] = a0 - i
+            out_s[k] = pre[1] + _extrapolated(a_all, int(out_s[k]) - pre[1], level, params, rate_hz)
     s[order], e[order] = out_s, out_e
     return s, e
