@@ -198,7 +198,15 @@ def _extend_offset(a_norm, v_norm, b_local, level, vlevel, quiet, cont, cont_lev
     return j
 
 
-def flank_zero(a: np.ndarray, first: int, level: float, top: float, span: int, back: int) -> float | None:
+def flank_zero(
+    a: np.ndarray,
+    first: int,
+    level: float,
+    top: float,
+    span: int,
+    back: int,
+    smooth: int = 5,
+) -> float | None:
     """Where the acceleration flank leaving a rest starts (local sample index), by a hinge fit.
 
     ``a`` (n, 3) m/s^2 gravity-free acceleration in time order from the rest into the movement; ``first`` the
@@ -216,37 +224,51 @@ def flank_zero(a: np.ndarray, first: int, level: float, top: float, span: int, b
         return None
     an = np.linalg.norm(a, axis=1)
     window = an[first : min(n, first + span)]
-    if len(window) == 0 or window.max() < 2 * level:
+    rise = np.flatnonzero(window >= 2 * level)
+    if len(rise) == 0:
         return None
-    height = min(top, max(0.5 * float(window.max()), 1.5 * level))
+    # the flank's peak: the first local maximum of |a| (smoothed over ~smooth samples) after it reaches 2 levels
+    sm = np.convolve(window, np.ones(smooth) / smooth, mode="same") if len(window) > smooth else window
+    m = int(rise[0])
+    while m + 1 < len(sm) and sm[m + 1] >= sm[m]:
+        m += 1
+    height = min(top, max(0.5 * float(max(sm[m], window[rise[0]])), 1.5 * level))
     p = first + int(np.flatnonzero(window >= height)[0])
     lo = max(0, first - back)
     if p - lo < 3:
         return None
     y = a[lo : p + 1] @ (a[p] / an[p])
     x = np.arange(lo, p + 1, dtype=float)
-    best, best_sse = None, np.inf
-    for t0 in range(lo, p - 1):
+    ones = np.ones_like(x)
+    sse = np.full(p - 1 - lo, np.inf)
+    for i, t0 in enumerate(range(lo, p - 1)):
         h = np.maximum(x - t0, 0.0)
-        k = float(h @ y) / float(h @ h)
-        if k <= 0:
-            continue
-        sse = float(np.sum((y - k * h) ** 2))
-        if sse < best_sse:
-            best, best_sse = t0, sse
-    return None if best is None else float(best)
+        (c, k), *_ = np.linalg.lstsq(np.column_stack([ones, h]), y, rcond=None)
+        if k > 0:
+            sse[i] = float(np.sum((y - c - k * h) ** 2))
+    if not np.isfinite(sse).any():
+        return None
+    i = int(np.argmin(sse))
+    frac = 0.0  # the vertex of the parabola through the neighbouring errors: the onset between two samples
+    if 0 < i < len(sse) - 1 and np.isfinite(sse[i - 1]) and np.isfinite(sse[i + 1]):
+        curv = sse[i - 1] - 2 * sse[i] + sse[i + 1]
+        if curv > 0:
+            frac = float(np.clip(0.5 * (sse[i - 1] - sse[i + 1]) / curv, -0.5, 0.5))
+    return float(lo + i + frac)
 
 
-def _extrapolated(a: np.ndarray, first: int, level: float, params: HandParams, rate_hz: float) -> int:
-    """Onset ``first`` (local index into ``a``, time order from the rest) moved out to the extrapolated zero
-    of its acceleration flank (:func:`flank_zero`): never inward, at most ``max_extrapolation_s``, never
-    before the array's start (the rest window)."""
+def _extrapolated(a: np.ndarray, first: int, inner: int, level: float, params: HandParams, rate_hz: float) -> int:
+    """Onset (local index into ``a``, time order from the rest) at the start of its acceleration flank
+    (:func:`flank_zero`, searched from ``first``, the onset the level gave) or at ``inner`` (the gyroscope's
+    onset) if that is earlier; ``first`` when there is no such flank. Never before the array's start (the
+    rest window), at most ``max_extrapolation_s`` before ``first``."""
     if params.flank_top_n_level <= 0:
         return first
     span = int(round(params.flank_search_s * rate_hz))
     back = int(round(params.max_extrapolation_s * rate_hz))
-    z = flank_zero(a, first, level, params.flank_top_n_level * level, span, back)
-    return first if z is None else int(min(first, max(int(z), 0)))
+    smooth = max(1, int(round(0.05 * rate_hz)))
+    z = flank_zero(a, first, level, params.flank_top_n_level * level, span, back, smooth)
+    return first if z is None else int(min(inner, max(int(np.ceil(z)), 0)))  # the first sample after t0
 
 
 def cutoff_params(params: HandParams) -> BoundaryParams:
@@ -334,7 +356,18 @@ def refine_with_accelerometer(
             if 0 < j <= shift:
                 out_e[k] = b0 + j
             m = len(a_all)  # the offset's flank, time reversed: from the rest into the phase
-            out_e[k] = lo + m - _extrapolated(a_all[::-1], m - (int(out_e[k]) - lo), level, params, rate_hz)
+            out_e[k] = (
+                lo
+                + m
+                - _extrapolated(
+                    a_all[::-1],
+                    m - (int(out_e[k]) - lo),
+                    m - (b0 - lo),
+                    level,
+                    params,
+                    rate_hz,
+                )
+            )
         if pre is not None and pre[1] < a0:
             hi = max(a0, min(int(out_e[k]), a0 + inside))
             a_all, v, noise = gravity_free(acc, gyr, dt, pre, pre[1], hi)
@@ -350,6 +383,6 @@ def refine_with_accelerometer(
             i = _walk(moving, 0, quiet)
             if 0 < i <= shift:
                 out_s[k] = a0 - i
-            out_s[k] = pre[1] + _extrapolated(a_all, int(out_s[k]) - pre[1], level, params, rate_hz)
+            out_s[k] = pre[1] + _extrapolated(a_all, int(out_s[k]) - pre[1], a0 - pre[1], level, params, rate_hz)
     s[order], e[order] = out_s, out_e
     return s, e
