@@ -177,8 +177,15 @@ def _walk(moving: np.ndarray, start: int, quiet: int) -> int:
     return last + 1
 
 
-def _extend_offset(a_norm, v_norm, b_local, level, vlevel, quiet, cont, cont_level, min_run, cruise=0.0) -> int:
-    """Offset (exclusive, local index) after walking out of the phase and over translation-only corrections."""
+def _extend_offset(
+    a_norm, v_norm, b_local, level, vlevel, quiet, cont, cont_level, min_run, cruise=0.0, bridge=True
+) -> int:
+    """Offset (exclusive, local index) after walking out of the phase and over translation-only corrections.
+
+    A correction continues the phase when its ``|a|`` reaches ``cont_level`` (a sub-movement after a pause)
+    or, with ``bridge``, when it reaches the ``level`` and the speed stayed above ``vlevel`` all the way from
+    the walk's end to it (the hand never stopped: overlapping submovements of a slow phase, whose
+    acceleration passes through zero between them); in both cases only when it settles before the rest."""
     moving = a_norm > level
     if vlevel > 0:  # a tail at speed that still decelerates; a rest's slow drift barely accelerates
         moving |= (v_norm > vlevel) & (a_norm > 0.5 * level)
@@ -187,11 +194,17 @@ def _extend_offset(a_norm, v_norm, b_local, level, vlevel, quiet, cont, cont_lev
     moving = sustained(moving, min_run)
     j = _walk(moving, b_local, quiet)
     strong = sustained(a_norm >= cont_level, min_run)
+    active = sustained(a_norm > level, min_run) if bridge and vlevel > 0 else None
     while cont > 0:
         big = np.flatnonzero(strong[j : j + cont])
-        if len(big) == 0:
+        nxt = j + int(big[0]) if len(big) else None
+        if active is not None:
+            run = np.flatnonzero(active[j : j + cont])
+            if len(run) and np.all(v_norm[j : j + int(run[0])] > vlevel):
+                nxt = j + int(run[0]) if nxt is None else min(nxt, j + int(run[0]))
+        if nxt is None:
             break
-        k = _walk(moving, j + int(big[0]), quiet)
+        k = _walk(moving, nxt, quiet)
         if k >= len(moving) or k <= j:  # never settles before the rest: not a correction of this phase
             break
         j = k
@@ -374,13 +387,9 @@ def refine_with_accelerometer(
             a, v = a_all[: a0 - pre[1]], v[: a0 - pre[1]]
             level = max(params.n_sigma * noise, params.min_level_mps2)
             an, vn = np.linalg.norm(a, axis=1)[::-1], np.linalg.norm(v, axis=1)[::-1]
-            moving = an > level
-            if params.velocity_level_mps > 0:
-                moving |= (vn > params.velocity_level_mps) & (an > 0.5 * level)
-            if params.cruise_velocity_mps > 0:
-                moving |= vn > params.cruise_velocity_mps
-            moving = sustained(moving, min_run)
-            i = _walk(moving, 0, quiet)
+            i = _extend_offset(
+                an, vn, 0, level, params.velocity_level_mps, quiet, cont, np.inf, min_run, params.cruise_velocity_mps
+            )
             if 0 < i <= shift:
                 out_s[k] = a0 - i
             out_s[k] = pre[1] + _extrapolated(a_all, int(out_s[k]) - pre[1], a0 - pre[1], level, params, rate_hz)
