@@ -124,6 +124,32 @@ def _rest_window(lo: int, hi: int, length: int, reach: int, from_end: bool):
     return a, a + length
 
 
+def _still_window(acc: np.ndarray, lo: int, hi: int, length: int, reach: int, from_end: bool):
+    """:func:`_rest_window`, moved away from the phase (up to the gap's middle) when it is not still.
+
+    The window ``reach`` from the phase's gyroscope boundary lies in the rest only if that boundary is right;
+    a slow last submovement after a pause (the wrist no longer turning) can still be under way there. Of the
+    windows between that position and the gap's middle, the one nearest the phase whose acceleration variance
+    (summed over the axes) is at most twice the smallest is taken: the default position whenever it is as
+    still as the rest of the gap."""
+    w = _rest_window(lo, hi, length, reach, from_end)
+    if w is None or hi - lo <= 2 * reach:
+        return w
+    length = w[1] - w[0]
+    mid = (lo + hi) // 2 - length // 2
+    first, last = (mid, w[0]) if from_end else (w[0], mid)
+    if last <= first:
+        return w
+    seg = np.asarray(acc[first : last + length], dtype=float)
+    c1 = np.concatenate([np.zeros((1, 3)), np.cumsum(seg, axis=0)])
+    c2 = np.concatenate([np.zeros((1, 3)), np.cumsum(seg**2, axis=0)])
+    s1, s2 = c1[length:] - c1[:-length], c2[length:] - c2[:-length]
+    var = (s2 - s1**2 / length).sum(axis=1) / length
+    ok = np.flatnonzero(var <= 2.0 * var.min())
+    a = first + int(ok[-1] if from_end else ok[0])
+    return a, a + length
+
+
 def gravity_free(
     acc: np.ndarray, gyr: np.ndarray, dt_s: float, window: tuple[int, int], lo: int, hi: int
 ) -> tuple[np.ndarray, np.ndarray, float]:
@@ -344,15 +370,24 @@ def refine_with_accelerometer(
         a0, b0 = int(ss[k]), int(ee[k])
         prev_end = int(out_e[k - 1]) if k > 0 else first
         next_start = int(ss[k + 1]) if k + 1 < len(ss) else n
-        post = _rest_window(b0 + guard, min(next_start, n) - guard, length, reach, from_end=False)
-        pre = _rest_window(prev_end + guard, a0 - guard, length, reach, from_end=True)
+        post = _still_window(acc, b0 + guard, min(next_start, n) - guard, length, reach, from_end=False)
+        pre = _still_window(acc, prev_end + guard, a0 - guard, length, reach, from_end=True)
         inside = int(round(params.flank_search_s * rate_hz))  # the flank can lie inside the gyroscope's phase
-        if post is not None and post[0] > b0:
-            lo = max(a0, b0 - inside)
+        lo = max(a0, b0 - inside)
+        for _ in range(3):  # a "rest" the hand still accelerates into is none: the next still window after it
+            if post is None or post[0] <= b0:
+                break
             a_all, v, noise = gravity_free(acc, gyr, dt, post, lo, post[0])
             a, v = a_all[b0 - lo :], v[b0 - lo :]
             level = max(params.n_sigma * noise, params.min_level_mps2)
             an, vn = np.linalg.norm(a, axis=1), np.linalg.norm(v, axis=1)
+            if not sustained(an > level, min_run)[-quiet:].any():
+                break
+            later = _still_window(acc, post[1], min(next_start, n) - guard, length, length, from_end=False)
+            if later is None or later[0] <= post[0]:
+                break
+            post = later
+        if post is not None and post[0] > b0:
             cont_level = params.continuation_n_level * level
             j = _extend_offset(
                 an,
@@ -381,12 +416,21 @@ def refine_with_accelerometer(
                     rate_hz,
                 )
             )
-        if pre is not None and pre[1] < a0:
-            hi = max(a0, min(int(out_e[k]), a0 + inside))
+        hi = max(a0, min(int(out_e[k]), a0 + inside))
+        for _ in range(3):  # likewise before the onset
+            if pre is None or pre[1] >= a0:
+                break
             a_all, v, noise = gravity_free(acc, gyr, dt, pre, pre[1], hi)
             a, v = a_all[: a0 - pre[1]], v[: a0 - pre[1]]
             level = max(params.n_sigma * noise, params.min_level_mps2)
             an, vn = np.linalg.norm(a, axis=1)[::-1], np.linalg.norm(v, axis=1)[::-1]
+            if not sustained(an > level, min_run)[-quiet:].any():
+                break
+            earlier = _still_window(acc, prev_end + guard, pre[0], length, length, from_end=True)
+            if earlier is None or earlier[1] >= pre[1]:
+                break
+            pre = earlier
+        if pre is not None and pre[1] < a0:
             i = _extend_offset(
                 an, vn, 0, level, params.velocity_level_mps, quiet, cont, np.inf, min_run, params.cruise_velocity_mps
             )
