@@ -89,7 +89,7 @@ class HandParams:
     velocity_level_mps: float = 0.03
     quiet_s: float = 0.05
     min_run_s: float = 0.03
-    max_shift_s: float = 1.5
+    max_shift_s: float = 2.5
     continuation_s: float = 1.0
     continuation_n_level: float = 3.0
     cruise_velocity_mps: float = 0.06
@@ -209,7 +209,8 @@ def _extend_offset(
     """Offset (exclusive, local index) after walking out of the phase and over translation-only corrections.
 
     A correction continues the phase when its ``|a|`` reaches ``cont_level`` (a sub-movement after a pause)
-    or, with ``bridge``, when it reaches the ``level`` and the speed stayed above ``vlevel`` all the way from
+    or, with ``bridge``, when it reaches twice the ``level`` (a submovement, not a noise run in a rest drifting
+    at a few cm/s) and the speed stayed above ``vlevel`` all the way from
     the walk's end to it (the hand never stopped: overlapping submovements of a slow phase, whose
     acceleration passes through zero between them); in both cases only when it settles before the rest."""
     moving = a_norm > level
@@ -220,7 +221,7 @@ def _extend_offset(
     moving = sustained(moving, min_run)
     j = _walk(moving, b_local, quiet)
     strong = sustained(a_norm >= cont_level, min_run)
-    active = sustained(a_norm > level, min_run) if bridge and vlevel > 0 else None
+    active = sustained(a_norm > 2 * level, min_run) if bridge and vlevel > 0 else None
     while cont > 0:
         big = np.flatnonzero(strong[j : j + cont])
         nxt = j + int(big[0]) if len(big) else None
