@@ -59,6 +59,9 @@ class RepetitionParams:
     fused_groups: also try the partition whose repetitions may hold ``n_phases - 1`` movements (two phases fused
         into one movement: the repetition's borders then stay at the longest rests instead of moving a movement
         across a rest to make up the count; imulog addition, issue 19).
+    rescue_fraction: a run of the norm in a rest above this fraction of the lowest real movement's height and
+        as long as a short movement is a movement the detector missed, see
+        :func:`~imulog.process.segmentation.rescue.rescue_missed` (imulog addition, issue 31; 0 = off).
     labels: phase labels in order.
     """
 
@@ -76,6 +79,7 @@ class RepetitionParams:
     min_height_fraction: float = 0.5
     max_candidates: int = 14
     fused_groups: bool = True
+    rescue_fraction: float = 0.5
     labels: tuple[str, ...] = R2G_PHASES
 
 
@@ -462,6 +466,11 @@ def segment_repetitions(
     empty = np.zeros(0, dtype=np.int64)
     if len(start) == 0:
         return Phases(empty, empty, empty, empty, [], 0)
+    if params.rescue_fraction > 0 and params.split != "activity":
+        from imulog.process.segmentation.rescue import rescue_missed
+
+        task = ~burst_mask(start, end, rate_hz, params.burst_gap_s, params.burst_min_movements)
+        start, end = rescue_missed(start, end, norm, params.rescue_fraction, task=task)
     heights = features(start, end, norm, rate_hz)[1]
     if params.split == "activity":
         rep_s, rep_e = split_repetitions(norm, n_rep, params.activity_fraction)
