@@ -71,6 +71,9 @@ class HandParams:
     continuation_s: a translation resuming within this time (s) after the offset can extend the phase.
     continuation_n_level: ... when its ``|a|`` stays at least this many times the acceleration level for
         ``min_run_s`` (a sub-movement after a pause, not a noise spike).
+    bridge_n_level: a phase also continues over a dip in acceleration to the next run of ``|a|`` above this many
+        times the level when the speed stays above ``velocity_level_mps`` in between (the hand never stopped;
+        overlapping submovements, issue 31); 0: off.
     flank_top_n_level: the acceleration flank leading out of (into) the rest is fitted between the level and
         this many times the level, and extrapolated to zero acceleration (0: off; see :func:`flank_zero`).
     flank_search_s: that flank must reach its top within this time (s) inside the phase from the boundary.
@@ -93,6 +96,7 @@ class HandParams:
     continuation_s: float = 1.0
     continuation_n_level: float = 3.0
     cruise_velocity_mps: float = 0.06
+    bridge_n_level: float = 1.5
     flank_top_n_level: float = 3.0
     flank_search_s: float = 0.6
     max_extrapolation_s: float = 0.3
@@ -204,13 +208,13 @@ def _walk(moving: np.ndarray, start: int, quiet: int) -> int:
 
 
 def _extend_offset(
-    a_norm, v_norm, b_local, level, vlevel, quiet, cont, cont_level, min_run, cruise=0.0, bridge=True
+    a_norm, v_norm, b_local, level, vlevel, quiet, cont, cont_level, min_run, cruise=0.0, bridge=1.5
 ) -> int:
     """Offset (exclusive, local index) after walking out of the phase and over translation-only corrections.
 
     A correction continues the phase when its ``|a|`` reaches ``cont_level`` (a sub-movement after a pause)
-    or, with ``bridge``, when it reaches twice the ``level`` (a submovement, not a noise run in a rest drifting
-    at a few cm/s) and the speed stayed above ``vlevel`` all the way from
+    or, with ``bridge`` > 0, when it reaches ``bridge`` x the ``level`` (a submovement, not a noise run in a rest
+    drifting at a few cm/s) and the speed stayed above ``vlevel`` all the way from
     the walk's end to it (the hand never stopped: overlapping submovements of a slow phase, whose
     acceleration passes through zero between them); in both cases only when it settles before the rest."""
     moving = a_norm > level
@@ -221,7 +225,7 @@ def _extend_offset(
     moving = sustained(moving, min_run)
     j = _walk(moving, b_local, quiet)
     strong = sustained(a_norm >= cont_level, min_run)
-    active = sustained(a_norm > 2 * level, min_run) if bridge and vlevel > 0 else None
+    active = sustained(a_norm > bridge * level, min_run) if bridge > 0 and vlevel > 0 else None
     while cont > 0:
         big = np.flatnonzero(strong[j : j + cont])
         nxt = j + int(big[0]) if len(big) else None
@@ -401,6 +405,7 @@ def refine_with_accelerometer(
                 cont_level,
                 min_run,
                 params.cruise_velocity_mps,
+                params.bridge_n_level,
             )
             if 0 < j <= shift:
                 out_e[k] = b0 + j
@@ -433,7 +438,17 @@ def refine_with_accelerometer(
             pre = earlier
         if pre is not None and pre[1] < a0:
             i = _extend_offset(
-                an, vn, 0, level, params.velocity_level_mps, quiet, cont, np.inf, min_run, params.cruise_velocity_mps
+                an,
+                vn,
+                0,
+                level,
+                params.velocity_level_mps,
+                quiet,
+                cont,
+                np.inf,
+                min_run,
+                params.cruise_velocity_mps,
+                params.bridge_n_level,
             )
             if 0 < i <= shift:
                 out_s[k] = a0 - i
