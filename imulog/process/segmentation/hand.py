@@ -47,6 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
+from imulog.process.segmentation.flanks import flank_zero, speed_flank_zero
 
 
 @dataclass(frozen=True)
@@ -242,77 +243,25 @@ def _extend_offset(
     return j
 
 
-def flank_zero(
-    a: np.ndarray,
-    first: int,
-    level: float,
-    top: float,
-    span: int,
-    back: int,
-    smooth: int = 5,
-) -> float | None:
-    """Where the acceleration flank leaving a rest starts (local sample index), by a hinge fit.
-
-    ``a`` (n, 3) m/s^2 gravity-free acceleration in time order from the rest into the movement; ``first`` the
-    current onset. A movement that starts from rest with finite jerk has an acceleration rising linearly
-    from zero (minimum jerk: ``a = 60 D t / T^3`` near the onset, Flash & Hogan 1985), so a level is crossed
-    ``level / jerk`` after the true onset: a slow movement crosses it late. The model ``a = 0`` before
-    ``t0`` and ``k (t - t0)`` after it is fitted by least squares to the component of ``a`` along its
-    direction at the flank's top (signed, so the noise does not bias it), over the samples from ``back``
-    before ``first`` to the flank's top: the first sample at ``min(top, half the flank's peak)`` (a
-    curved flank near its peak would tilt the line); the peak is the largest ``|a|`` within ``span`` samples
-    of ``first`` and must reach twice the ``level``. Returns ``t0``, or None without such a flank."""
-    n = len(a)
-    first = max(int(first), 0)
-    if n == 0 or first >= n:
-        return None
-    an = np.linalg.norm(a, axis=1)
-    window = an[first : min(n, first + span)]
-    rise = np.flatnonzero(window >= 2 * level)
-    if len(rise) == 0:
-        return None
-    # the flank's peak: the first local maximum of |a| (smoothed over ~smooth samples) after it reaches 2 levels
-    sm = np.convolve(window, np.ones(smooth) / smooth, mode="same") if len(window) > smooth else window
-    m = int(rise[0])
-    while m + 1 < len(sm) and sm[m + 1] >= sm[m]:
-        m += 1
-    height = min(top, max(0.5 * float(max(sm[m], window[rise[0]])), 1.5 * level))
-    p = first + int(np.flatnonzero(window >= height)[0])
-    lo = max(0, first - back)
-    if p - lo < 3:
-        return None
-    y = a[lo : p + 1] @ (a[p] / an[p])
-    x = np.arange(lo, p + 1, dtype=float)
-    ones = np.ones_like(x)
-    sse = np.full(p - 1 - lo, np.inf)
-    for i, t0 in enumerate(range(lo, p - 1)):
-        h = np.maximum(x - t0, 0.0)
-        (c, k), *_ = np.linalg.lstsq(np.column_stack([ones, h]), y, rcond=None)
-        if k > 0:
-            sse[i] = float(np.sum((y - c - k * h) ** 2))
-    if not np.isfinite(sse).any():
-        return None
-    i = int(np.argmin(sse))
-    frac = 0.0  # the vertex of the parabola through the neighbouring errors: the onset between two samples
-    if 0 < i < len(sse) - 1 and np.isfinite(sse[i - 1]) and np.isfinite(sse[i + 1]):
-        curv = sse[i - 1] - 2 * sse[i] + sse[i + 1]
-        if curv > 0:
-            frac = float(np.clip(0.5 * (sse[i - 1] - sse[i + 1]) / curv, -0.5, 0.5))
-    return float(lo + i + frac)
-
-
-def _extrapolated(a: np.ndarray, first: int, inner: int, level: float, params: HandParams, rate_hz: float) -> int:
-    """Onset (local index into ``a``, time order from the rest) at the start of its acceleration flank
-    (:func:`flank_zero`, searched from ``first``, the onset the level gave) or at ``inner`` (the gyroscope's
-    onset) if that is earlier; ``first`` when there is no such flank. Never before the array's start (the
-    rest window), at most ``max_extrapolation_s`` before ``first``."""
+def _extrapolated(
+    a: np.ndarray, v: np.ndarray, first: int, inner: int, level: float, params: HandParams, rate_hz: float
+) -> int:
+    """Onset (local index into ``a`` and ``v``, time order from the rest) at the start of its acceleration flank
+    (:func:`~imulog.process.segmentation.flanks.flank_zero`, searched from ``first``, the onset the level gave)
+    or, for a movement too slow for its acceleration to clear the noise, of its speed
+    (:func:`~imulog.process.segmentation.flanks.speed_flank_zero`), or at ``inner`` (the gyroscope's onset) if
+    that is earlier; ``first`` when there is no such flank. Never before the array's start (the rest window)."""
     if params.flank_top_n_level <= 0:
         return first
     span = int(round(params.flank_search_s * rate_hz))
     back = int(round(params.max_extrapolation_s * rate_hz))
     smooth = max(1, int(round(0.05 * rate_hz)))
     z = flank_zero(a, first, level, params.flank_top_n_level * level, span, back, smooth)
-    return first if z is None else int(min(inner, max(int(np.ceil(z)), 0)))  # the first sample after t0
+    if z is None and params.velocity_level_mps > 0:
+        z = speed_flank_zero(v, first, params.velocity_level_mps)
+    if z is None:
+        return first
+    return int(min(inner, max(int(np.ceil(z)), 0)))  # the first sample after t0
 
 
 def cutoff_params(params: HandParams) -> BoundaryParams:
@@ -382,8 +331,8 @@ def refine_with_accelerometer(
         for _ in range(3):  # a "rest" the hand still accelerates into is none: the next still window after it
             if post is None or post[0] <= b0:
                 break
-            a_all, v, noise = gravity_free(acc, gyr, dt, post, lo, post[0])
-            a, v = a_all[b0 - lo :], v[b0 - lo :]
+            a_all, v_all, noise = gravity_free(acc, gyr, dt, post, lo, post[0])
+            a, v = a_all[b0 - lo :], v_all[b0 - lo :]
             level = max(params.n_sigma * noise, params.min_level_mps2)
             an, vn = np.linalg.norm(a, axis=1), np.linalg.norm(v, axis=1)
             if not sustained(an > level, min_run)[-quiet:].any():
@@ -415,6 +364,7 @@ def refine_with_accelerometer(
                 + m
                 - _extrapolated(
                     a_all[::-1],
+                    v_all[::-1],
                     m - (int(out_e[k]) - lo),
                     m - (b0 - lo),
                     level,
@@ -426,8 +376,8 @@ def refine_with_accelerometer(
         for _ in range(3):  # likewise before the onset
             if pre is None or pre[1] >= a0:
                 break
-            a_all, v, noise = gravity_free(acc, gyr, dt, pre, pre[1], hi)
-            a, v = a_all[: a0 - pre[1]], v[: a0 - pre[1]]
+            a_all, v_all, noise = gravity_free(acc, gyr, dt, pre, pre[1], hi)
+            a, v = a_all[: a0 - pre[1]], v_all[: a0 - pre[1]]
             level = max(params.n_sigma * noise, params.min_level_mps2)
             an, vn = np.linalg.norm(a, axis=1)[::-1], np.linalg.norm(v, axis=1)[::-1]
             if not sustained(an > level, min_run)[-quiet:].any():
@@ -452,6 +402,6 @@ def refine_with_accelerometer(
             )
             if 0 < i <= shift:
                 out_s[k] = a0 - i
-            out_s[k] = pre[1] + _extrapolated(a_all, int(out_s[k]) - pre[1], a0 - pre[1], level, params, rate_hz)
+            out_s[k] = pre[1] + _extrapolated(a_all, v_all, int(out_s[k]) - pre[1], a0 - pre[1], level, params, rate_hz)
     s[order], e[order] = out_s, out_e
     return s, e
