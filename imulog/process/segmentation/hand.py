@@ -46,6 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imulog.process import quaternion as quat
 from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
 from imulog.process.segmentation.flanks import flank_zero, speed_flank_zero
 
@@ -129,14 +130,17 @@ def _rest_window(lo: int, hi: int, length: int, reach: int, from_end: bool):
     return a, a + length
 
 
-def _still_window(acc: np.ndarray, lo: int, hi: int, length: int, reach: int, from_end: bool):
+def _still_window(acc: np.ndarray, lo: int, hi: int, length: int, reach: int, from_end: bool, n_sigma: float = 2.5):
     """:func:`_rest_window`, moved away from the phase (up to the gap's middle) when it is not still.
 
     The window ``reach`` from the phase's gyroscope boundary lies in the rest only if that boundary is right;
-    a slow last submovement after a pause (the wrist no longer turning) can still be under way there. Of the
-    windows between that position and the gap's middle, the one nearest the phase whose acceleration variance
-    (summed over the axes) is at most twice the smallest is taken: the default position whenever it is as
-    still as the rest of the gap."""
+    a slow last submovement (the wrist no longer turning) can still be under way there. The gap's middle is
+    the surest rest; of the windows between the default position and the middle, the one nearest the phase is
+    taken whose mean specific force (m/s^2) is within ``n_sigma`` x the middle's noise (per-axis robust sd, rms
+    over the axes; half the motion level) of the middle's mean (a hand still decelerating into it is not still;
+    a rest drifting at 1-2 cm/s, whose acceleration stays under 0.04 m/s^2, is left as it is) and whose
+    acceleration variance is at most twice the smallest: the default position whenever it is as still as the
+    middle; else half a window beyond the first such window."""
     w = _rest_window(lo, hi, length, reach, from_end)
     if w is None or hi - lo <= 2 * reach:
         return w
@@ -150,8 +154,18 @@ def _still_window(acc: np.ndarray, lo: int, hi: int, length: int, reach: int, fr
     c2 = np.concatenate([np.zeros((1, 3)), np.cumsum(seg**2, axis=0)])
     s1, s2 = c1[length:] - c1[:-length], c2[length:] - c2[:-length]
     var = (s2 - s1**2 / length).sum(axis=1) / length
-    ok = np.flatnonzero(var <= 2.0 * var.min())
+    ref = np.asarray(acc[mid : mid + length], dtype=float)
+    centre = np.median(ref, axis=0)
+    noise = float(np.sqrt(np.mean((1.4826 * np.median(np.abs(ref - centre), axis=0)) ** 2)))
+    shift = np.linalg.norm(s1 / length - ref.mean(axis=0), axis=1)
+    ok = np.flatnonzero((var <= 2.0 * var.min()) & (shift <= n_sigma * noise))
+    if len(ok) == 0:
+        return mid, mid + length
     a = first + int(ok[-1] if from_end else ok[0])
+    if a == w[0]:  # the default position is still
+        return w
+    # half a window further: the test averages over the window, so its near edge may still see a tail's end
+    a = max(a - length // 2, mid) if from_end else min(a + length // 2, mid)
     return a, a + length
 
 
@@ -171,13 +185,13 @@ def gravity_free(
     if hi <= w0:  # stretch before the window (an offset): integrate backwards from the window's start
         idx = np.arange(lo, w0)
         theta = -np.cumsum(w[idx][::-1], axis=0)[::-1]
-        f = acc[idx] + np.cross(theta, acc[idx])
+        f = quat.rotate(quat.from_rotation_vector(theta), acc[idx])
         a = f - f_rest
         v = -np.cumsum(a[::-1], axis=0)[::-1] * dt_s
     else:  # stretch after the window (an onset): integrate forwards from the window's end
         idx = np.arange(w1, hi)
         theta = np.cumsum(w[idx], axis=0)
-        f = acc[idx] + np.cross(theta, acc[idx])
+        f = quat.rotate(quat.from_rotation_vector(theta), acc[idx])
         a = f - f_rest
         v = np.cumsum(a, axis=0) * dt_s
     return a, v, noise
@@ -324,8 +338,8 @@ def refine_with_accelerometer(
         a0, b0 = int(ss[k]), int(ee[k])
         prev_end = int(out_e[k - 1]) if k > 0 else first
         next_start = int(ss[k + 1]) if k + 1 < len(ss) else n
-        post = _still_window(acc, b0 + guard, min(next_start, n) - guard, length, reach, from_end=False)
-        pre = _still_window(acc, prev_end + guard, a0 - guard, length, reach, from_end=True)
+        post = _still_window(acc, b0 + guard, min(next_start, n) - guard, length, reach, False, 0.5 * params.n_sigma)
+        pre = _still_window(acc, prev_end + guard, a0 - guard, length, reach, True, 0.5 * params.n_sigma)
         inside = int(round(params.flank_search_s * rate_hz))  # the flank can lie inside the gyroscope's phase
         lo = max(a0, b0 - inside)
         for _ in range(3):  # a "rest" the hand still accelerates into is none: the next still window after it
@@ -337,7 +351,7 @@ def refine_with_accelerometer(
             an, vn = np.linalg.norm(a, axis=1), np.linalg.norm(v, axis=1)
             if not sustained(an > level, min_run)[-quiet:].any():
                 break
-            later = _still_window(acc, post[1], min(next_start, n) - guard, length, length, from_end=False)
+            later = _still_window(acc, post[1], min(next_start, n) - guard, length, length, False, 0.5 * params.n_sigma)
             if later is None or later[0] <= post[0]:
                 break
             post = later
@@ -382,7 +396,7 @@ def refine_with_accelerometer(
             an, vn = np.linalg.norm(a, axis=1)[::-1], np.linalg.norm(v, axis=1)[::-1]
             if not sustained(an > level, min_run)[-quiet:].any():
                 break
-            earlier = _still_window(acc, prev_end + guard, pre[0], length, length, from_end=True)
+            earlier = _still_window(acc, prev_end + guard, pre[0], length, length, True, 0.5 * params.n_sigma)
             if earlier is None or earlier[1] >= pre[1]:
                 break
             pre = earlier
