@@ -13,13 +13,13 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
 1. the accelerometer is low-passed per axis (zero-phase, 2nd order, ``cutoff_hz``, lowered for a noisy
    sensor like the gyroscope's, :func:`~imulog.process.segmentation.boundaries.adaptive_cutoff_hz`);
 2. a rest window of ``rest_window_s`` in the adjacent gap (at its middle, or ``rest_distance_s`` from the phase
-   in a long rest) gives the static
-   specific force ``f_rest`` (per-axis median, the sensor's gravity reading and bias) and the noise
+   in a long rest; moved further out when it is not still, :func:`_still_window`) gives the static
+   specific force ``f_rest`` (mean, the sensor's gravity reading and bias) and the noise
    (per-axis 1.4826 MAD, rms over the axes);
 3. between the boundary and the rest window the specific force is rotated into the rest window's sensor
-   frame with the bias-corrected gyroscope integrated from the window (small angles: the wrist barely turns
-   there) and ``a = R f - f_rest`` is the gravity-free acceleration (m/s^2; a sensor bias cancels, a slow tilt
-   is compensated);
+   frame with the bias-corrected gyroscope integrated from the window (the rotation of the summed rotation
+   vector) and ``a = R f - f_rest`` is the gravity-free acceleration (m/s^2; a sensor bias cancels, a slow
+   tilt is compensated);
 4. the velocity ``v`` (m/s) is ``a`` integrated from the rest window (where the hand is still: a
    zero-velocity update), so it is consistent with ZUPT;
 5. the hand moves where ``|a| > n_sigma x noise`` (at least ``min_level_mps2``), or where
@@ -35,7 +35,10 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
    translation-only correction after a pause) extends the phase, as :mod:`boundaries` does for rotations.
    (Until issue 31 the level was 10 % of the phase's peak ``|f - f_rest|``, which gravity dominates once the
    wrist has turned: 0.5-1.3 m/s^2, above a slow last submovement's 0.1-0.7 m/s^2, whose phase then ended
-   0.55-0.82 s early.)
+   0.55-0.82 s early.) A dip of ``|a|`` is bridged to the next run above ``bridge_n_level`` x the level when
+   the speed stays above ``velocity_level_mps`` in between (the hand never stopped);
+7. the boundary moves on to where its acceleration flank (or, for a phase too slow for the accelerometer, its
+   speed flank) extrapolates to rest (:mod:`~imulog.process.segmentation.flanks`, issue 31).
 
 Pure numpy/scipy; intervals are half-open sample ranges ``[start, end)``.
 """
