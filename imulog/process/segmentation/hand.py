@@ -13,13 +13,13 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
 1. the accelerometer is low-passed per axis (zero-phase, 2nd order, ``cutoff_hz``, lowered for a noisy
    sensor like the gyroscope's, :func:`~imulog.process.segmentation.boundaries.adaptive_cutoff_hz`);
 2. a rest window of ``rest_window_s`` in the adjacent gap (at its middle, or ``rest_distance_s`` from the phase
-   in a long rest) gives the static
-   specific force ``f_rest`` (per-axis median, the sensor's gravity reading and bias) and the noise
+   in a long rest; moved further out when it is not still, :func:`_still_window`) gives the static
+   specific force ``f_rest`` (mean, the sensor's gravity reading and bias) and the noise
    (per-axis 1.4826 MAD, rms over the axes);
 3. between the boundary and the rest window the specific force is rotated into the rest window's sensor
-   frame with the bias-corrected gyroscope integrated from the window (small angles: the wrist barely turns
-   there) and ``a = R f - f_rest`` is the gravity-free acceleration (m/s^2; a sensor bias cancels, a slow tilt
-   is compensated);
+   frame with the bias-corrected gyroscope integrated from the window (the rotation of the summed rotation
+   vector) and ``a = R f - f_rest`` is the gravity-free acceleration (m/s^2; a sensor bias cancels, a slow
+   tilt is compensated);
 4. the velocity ``v`` (m/s) is ``a`` integrated from the rest window (where the hand is still: a
    zero-velocity update), so it is consistent with ZUPT;
 5. the hand moves where ``|a| > n_sigma x noise`` (at least ``min_level_mps2``), or where
@@ -35,7 +35,10 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
    translation-only correction after a pause) extends the phase, as :mod:`boundaries` does for rotations.
    (Until issue 31 the level was 10 % of the phase's peak ``|f - f_rest|``, which gravity dominates once the
    wrist has turned: 0.5-1.3 m/s^2, above a slow last submovement's 0.1-0.7 m/s^2, whose phase then ended
-   0.55-0.82 s early.)
+   0.55-0.82 s early.) A dip of ``|a|`` is bridged to the next run above ``bridge_n_level`` x the level when
+   the speed stays above ``velocity_level_mps`` in between (the hand never stopped);
+7. the boundary moves on to where its acceleration flank (or, for a phase too slow for the accelerometer, its
+   speed flank) extrapolates to rest (:mod:`~imulog.process.segmentation.flanks`, issue 31).
 
 Pure numpy/scipy; intervals are half-open sample ranges ``[start, end)``.
 """
@@ -46,7 +49,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imulog.process import quaternion as quat
 from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
+from imulog.process.segmentation.flanks import flank_zero, speed_flank_zero
 
 
 @dataclass(frozen=True)
@@ -71,6 +76,13 @@ class HandParams:
     continuation_s: a translation resuming within this time (s) after the offset can extend the phase.
     continuation_n_level: ... when its ``|a|`` stays at least this many times the acceleration level for
         ``min_run_s`` (a sub-movement after a pause, not a noise spike).
+    bridge_n_level: a phase also continues over a dip in acceleration to the next run of ``|a|`` above this many
+        times the level when the speed stays above ``velocity_level_mps`` in between (the hand never stopped;
+        overlapping submovements, issue 31); 0: off.
+    flank_top_n_level: the acceleration flank leading out of (into) the rest is fitted between the level and
+        this many times the level, and extrapolated to zero acceleration (0: off; see :func:`flank_zero`).
+    flank_search_s: that flank must reach its top within this time (s) inside the phase from the boundary.
+    max_extrapolation_s: the extrapolated boundary moves at most this far (s) beyond the level's boundary.
     """
 
     enabled: bool = True
@@ -85,10 +97,14 @@ class HandParams:
     velocity_level_mps: float = 0.03
     quiet_s: float = 0.05
     min_run_s: float = 0.03
-    max_shift_s: float = 1.5
+    max_shift_s: float = 2.5
     continuation_s: float = 1.0
     continuation_n_level: float = 3.0
     cruise_velocity_mps: float = 0.06
+    bridge_n_level: float = 1.5
+    flank_top_n_level: float = 3.0
+    flank_search_s: float = 0.6
+    max_extrapolation_s: float = 0.3
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:
@@ -117,6 +133,45 @@ def _rest_window(lo: int, hi: int, length: int, reach: int, from_end: bool):
     return a, a + length
 
 
+def _still_window(acc: np.ndarray, lo: int, hi: int, length: int, reach: int, from_end: bool, n_sigma: float = 2.5):
+    """:func:`_rest_window`, moved away from the phase (up to the gap's middle) when it is not still.
+
+    The window ``reach`` from the phase's gyroscope boundary lies in the rest only if that boundary is right;
+    a slow last submovement (the wrist no longer turning) can still be under way there. The gap's middle is
+    the surest rest; of the windows between the default position and the middle, the one nearest the phase is
+    taken whose mean specific force (m/s^2) is within ``n_sigma`` x the middle's noise (per-axis robust sd, rms
+    over the axes; half the motion level) of the middle's mean (a hand still decelerating into it is not still;
+    a rest drifting at 1-2 cm/s, whose acceleration stays under 0.04 m/s^2, is left as it is) and whose
+    acceleration variance is at most twice the smallest: the default position whenever it is as still as the
+    middle; else half a window beyond the first such window."""
+    w = _rest_window(lo, hi, length, reach, from_end)
+    if w is None or hi - lo <= 2 * reach:
+        return w
+    length = w[1] - w[0]
+    mid = (lo + hi) // 2 - length // 2
+    first, last = (mid, w[0]) if from_end else (w[0], mid)
+    if last <= first:
+        return w
+    seg = np.asarray(acc[first : last + length], dtype=float)
+    c1 = np.concatenate([np.zeros((1, 3)), np.cumsum(seg, axis=0)])
+    c2 = np.concatenate([np.zeros((1, 3)), np.cumsum(seg**2, axis=0)])
+    s1, s2 = c1[length:] - c1[:-length], c2[length:] - c2[:-length]
+    var = (s2 - s1**2 / length).sum(axis=1) / length
+    ref = np.asarray(acc[mid : mid + length], dtype=float)
+    centre = np.median(ref, axis=0)
+    noise = float(np.sqrt(np.mean((1.4826 * np.median(np.abs(ref - centre), axis=0)) ** 2)))
+    shift = np.linalg.norm(s1 / length - ref.mean(axis=0), axis=1)
+    ok = np.flatnonzero((var <= 2.0 * var.min()) & (shift <= n_sigma * noise))
+    if len(ok) == 0:
+        return mid, mid + length
+    a = first + int(ok[-1] if from_end else ok[0])
+    if a == w[0]:  # the default position is still
+        return w
+    # half a window further: the test averages over the window, so its near edge may still see a tail's end
+    a = max(a - length // 2, mid) if from_end else min(a + length // 2, mid)
+    return a, a + length
+
+
 def gravity_free(
     acc: np.ndarray, gyr: np.ndarray, dt_s: float, window: tuple[int, int], lo: int, hi: int
 ) -> tuple[np.ndarray, np.ndarray, float]:
@@ -133,13 +188,13 @@ def gravity_free(
     if hi <= w0:  # stretch before the window (an offset): integrate backwards from the window's start
         idx = np.arange(lo, w0)
         theta = -np.cumsum(w[idx][::-1], axis=0)[::-1]
-        f = acc[idx] + np.cross(theta, acc[idx])
+        f = quat.rotate(quat.from_rotation_vector(theta), acc[idx])
         a = f - f_rest
         v = -np.cumsum(a[::-1], axis=0)[::-1] * dt_s
     else:  # stretch after the window (an onset): integrate forwards from the window's end
         idx = np.arange(w1, hi)
         theta = np.cumsum(w[idx], axis=0)
-        f = acc[idx] + np.cross(theta, acc[idx])
+        f = quat.rotate(quat.from_rotation_vector(theta), acc[idx])
         a = f - f_rest
         v = np.cumsum(a, axis=0) * dt_s
     return a, v, noise
@@ -170,8 +225,16 @@ def _walk(moving: np.ndarray, start: int, quiet: int) -> int:
     return last + 1
 
 
-def _extend_offset(a_norm, v_norm, b_local, level, vlevel, quiet, cont, cont_level, min_run, cruise=0.0) -> int:
-    """Offset (exclusive, local index) after walking out of the phase and over translation-only corrections."""
+def _extend_offset(
+    a_norm, v_norm, b_local, level, vlevel, quiet, cont, cont_level, min_run, cruise=0.0, bridge=1.5
+) -> int:
+    """Offset (exclusive, local index) after walking out of the phase and over translation-only corrections.
+
+    A correction continues the phase when its ``|a|`` reaches ``cont_level`` (a sub-movement after a pause)
+    or, with ``bridge`` > 0, when it reaches ``bridge`` x the ``level`` (a submovement, not a noise run in a rest
+    drifting at a few cm/s) and the speed stayed above ``vlevel`` all the way from
+    the walk's end to it (the hand never stopped: overlapping submovements of a slow phase, whose
+    acceleration passes through zero between them); in both cases only when it settles before the rest."""
     moving = a_norm > level
     if vlevel > 0:  # a tail at speed that still decelerates; a rest's slow drift barely accelerates
         moving |= (v_norm > vlevel) & (a_norm > 0.5 * level)
@@ -180,15 +243,42 @@ def _extend_offset(a_norm, v_norm, b_local, level, vlevel, quiet, cont, cont_lev
     moving = sustained(moving, min_run)
     j = _walk(moving, b_local, quiet)
     strong = sustained(a_norm >= cont_level, min_run)
+    active = sustained(a_norm > bridge * level, min_run) if bridge > 0 and vlevel > 0 else None
     while cont > 0:
         big = np.flatnonzero(strong[j : j + cont])
-        if len(big) == 0:
+        nxt = j + int(big[0]) if len(big) else None
+        if active is not None:
+            run = np.flatnonzero(active[j : j + cont])
+            if len(run) and np.all(v_norm[j : j + int(run[0])] > vlevel):
+                nxt = j + int(run[0]) if nxt is None else min(nxt, j + int(run[0]))
+        if nxt is None:
             break
-        k = _walk(moving, j + int(big[0]), quiet)
+        k = _walk(moving, nxt, quiet)
         if k >= len(moving) or k <= j:  # never settles before the rest: not a correction of this phase
             break
         j = k
     return j
+
+
+def _extrapolated(
+    a: np.ndarray, v: np.ndarray, first: int, inner: int, level: float, params: HandParams, rate_hz: float
+) -> int:
+    """Onset (local index into ``a`` and ``v``, time order from the rest) at the start of its acceleration flank
+    (:func:`~imulog.process.segmentation.flanks.flank_zero`, searched from ``first``, the onset the level gave)
+    or, for a movement too slow for its acceleration to clear the noise, of its speed
+    (:func:`~imulog.process.segmentation.flanks.speed_flank_zero`), or at ``inner`` (the gyroscope's onset) if
+    that is earlier; ``first`` when there is no such flank. Never before the array's start (the rest window)."""
+    if params.flank_top_n_level <= 0:
+        return first
+    span = int(round(params.flank_search_s * rate_hz))
+    back = int(round(params.max_extrapolation_s * rate_hz))
+    smooth = max(1, int(round(0.05 * rate_hz)))
+    z = flank_zero(a, first, level, params.flank_top_n_level * level, span, back, smooth)
+    if z is None and params.velocity_level_mps > 0:
+        z = speed_flank_zero(v, first, params.velocity_level_mps)
+    if z is None:
+        return first
+    return int(min(inner, max(int(np.ceil(z)), 0)))  # the first sample after t0
 
 
 def cutoff_params(params: HandParams) -> BoundaryParams:
@@ -251,12 +341,24 @@ def refine_with_accelerometer(
         a0, b0 = int(ss[k]), int(ee[k])
         prev_end = int(out_e[k - 1]) if k > 0 else first
         next_start = int(ss[k + 1]) if k + 1 < len(ss) else n
-        post = _rest_window(b0 + guard, min(next_start, n) - guard, length, reach, from_end=False)
-        pre = _rest_window(prev_end + guard, a0 - guard, length, reach, from_end=True)
-        if post is not None and post[0] > b0:
-            a, v, noise = gravity_free(acc, gyr, dt, post, b0, post[0])
+        post = _still_window(acc, b0 + guard, min(next_start, n) - guard, length, reach, False, 0.5 * params.n_sigma)
+        pre = _still_window(acc, prev_end + guard, a0 - guard, length, reach, True, 0.5 * params.n_sigma)
+        inside = int(round(params.flank_search_s * rate_hz))  # the flank can lie inside the gyroscope's phase
+        lo = max(a0, b0 - inside)
+        for _ in range(3):  # a "rest" the hand still accelerates into is none: the next still window after it
+            if post is None or post[0] <= b0:
+                break
+            a_all, v_all, noise = gravity_free(acc, gyr, dt, post, lo, post[0])
+            a, v = a_all[b0 - lo :], v_all[b0 - lo :]
             level = max(params.n_sigma * noise, params.min_level_mps2)
             an, vn = np.linalg.norm(a, axis=1), np.linalg.norm(v, axis=1)
+            if not sustained(an > level, min_run)[-quiet:].any():
+                break
+            later = _still_window(acc, post[1], min(next_start, n) - guard, length, length, False, 0.5 * params.n_sigma)
+            if later is None or later[0] <= post[0]:
+                break
+            post = later
+        if post is not None and post[0] > b0:
             cont_level = params.continuation_n_level * level
             j = _extend_offset(
                 an,
@@ -269,21 +371,54 @@ def refine_with_accelerometer(
                 cont_level,
                 min_run,
                 params.cruise_velocity_mps,
+                params.bridge_n_level,
             )
             if 0 < j <= shift:
                 out_e[k] = b0 + j
-        if pre is not None and pre[1] < a0:
-            a, v, noise = gravity_free(acc, gyr, dt, pre, pre[1], a0)
+            m = len(a_all)  # the offset's flank, time reversed: from the rest into the phase
+            out_e[k] = (
+                lo
+                + m
+                - _extrapolated(
+                    a_all[::-1],
+                    v_all[::-1],
+                    m - (int(out_e[k]) - lo),
+                    m - (b0 - lo),
+                    level,
+                    params,
+                    rate_hz,
+                )
+            )
+        hi = max(a0, min(int(out_e[k]), a0 + inside))
+        for _ in range(3):  # likewise before the onset
+            if pre is None or pre[1] >= a0:
+                break
+            a_all, v_all, noise = gravity_free(acc, gyr, dt, pre, pre[1], hi)
+            a, v = a_all[: a0 - pre[1]], v_all[: a0 - pre[1]]
             level = max(params.n_sigma * noise, params.min_level_mps2)
             an, vn = np.linalg.norm(a, axis=1)[::-1], np.linalg.norm(v, axis=1)[::-1]
-            moving = an > level
-            if params.velocity_level_mps > 0:
-                moving |= (vn > params.velocity_level_mps) & (an > 0.5 * level)
-            if params.cruise_velocity_mps > 0:
-                moving |= vn > params.cruise_velocity_mps
-            moving = sustained(moving, min_run)
-            i = _walk(moving, 0, quiet)
+            if not sustained(an > level, min_run)[-quiet:].any():
+                break
+            earlier = _still_window(acc, prev_end + guard, pre[0], length, length, True, 0.5 * params.n_sigma)
+            if earlier is None or earlier[1] >= pre[1]:
+                break
+            pre = earlier
+        if pre is not None and pre[1] < a0:
+            i = _extend_offset(
+                an,
+                vn,
+                0,
+                level,
+                params.velocity_level_mps,
+                quiet,
+                cont,
+                np.inf,
+                min_run,
+                params.cruise_velocity_mps,
+                params.bridge_n_level,
+            )
             if 0 < i <= shift:
                 out_s[k] = a0 - i
+            out_s[k] = pre[1] + _extrapolated(a_all, v_all, int(out_s[k]) - pre[1], a0 - pre[1], level, params, rate_hz)
     s[order], e[order] = out_s, out_e
     return s, e

@@ -1,0 +1,110 @@
+"""Where a movement leaves (or reaches) rest: extrapolating the flank of its acceleration or speed to zero.
+
+A level crossing is late by ``level / slope``: a hand starting from rest with finite jerk accelerates as
+``a = j (t - t0)`` and moves at ``v = j (t - t0)^2 / 2`` (minimum jerk, Flash & Hogan 1985: ``j = 60 D / T^3``),
+so a slow phase crosses any fixed level long after it began (issue 31: 0.05-0.2 s on the stroke-like grid, up to
+0.85 s for a 6-s reach). Fitting that shape to the flank between the rest and a level well above the noise, with
+a constant for a rest's bias, gives ``t0`` (a "hinge" fit). An offset is the same problem time-reversed (the
+arrays then run from the rest after the phase into it). Pure numpy; indices are local sample indices.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def hinge_fit(x: np.ndarray, y: np.ndarray, power: int = 1, drift: bool = False) -> float | None:
+    """``t0`` (in units of ``x``, sub-sample) of the least-squares fit ``y = c + k max(x - t0, 0)^power``, ``k > 0``.
+
+    ``t0`` runs over the samples of ``x`` but the last two (the vertex of the parabola through the errors
+    around the best one refines it); ``c`` absorbs a constant offset (a rest's bias); with ``drift`` a term
+    ``b x`` absorbs a linear drift too (a velocity integrated with a small bias). None without a rising fit."""
+    base = [np.ones_like(x)] + ([x - x[0]] if drift else [])
+    sse = np.full(max(len(x) - 2, 0), np.inf)
+    for i in range(len(sse)):
+        h = np.maximum(x - x[i], 0.0) ** power
+        m = np.column_stack([*base, h])
+        coef, *_ = np.linalg.lstsq(m, y, rcond=None)
+        if coef[-1] > 0:
+            sse[i] = float(np.sum((y - m @ coef) ** 2))
+    if not np.isfinite(sse).any():
+        return None
+    i = int(np.argmin(sse))
+    frac = 0.0  # the vertex of the parabola through the neighbouring errors: the onset between two samples
+    if 0 < i < len(sse) - 1 and np.isfinite(sse[i - 1]) and np.isfinite(sse[i + 1]):
+        curv = sse[i - 1] - 2 * sse[i] + sse[i + 1]
+        if curv > 0:
+            frac = float(np.clip(0.5 * (sse[i - 1] - sse[i + 1]) / curv, -0.5, 0.5))
+    step = float(x[1] - x[0]) if len(x) > 1 else 1.0
+    return float(x[i] + frac * step)
+
+
+def flank_zero(
+    a: np.ndarray,
+    first: int,
+    level: float,
+    top: float,
+    span: int,
+    back: int,
+    smooth: int = 5,
+) -> float | None:
+    """Where the acceleration flank leaving a rest starts (local sample index), by a hinge fit.
+
+    ``a`` (n, 3) m/s^2 gravity-free acceleration in time order from the rest into the movement; ``first`` the
+    current onset. A movement that starts from rest with finite jerk has an acceleration rising linearly
+    from zero (minimum jerk: ``a = 60 D t / T^3`` near the onset, Flash & Hogan 1985), so a level is crossed
+    ``level / jerk`` after the true onset: a slow movement crosses it late. The model ``a = 0`` before
+    ``t0`` and ``k (t - t0)`` after it is fitted by least squares to the component of ``a`` along its
+    direction at the flank's top (signed, so the noise does not bias it), over the samples from ``back``
+    before ``first`` to the flank's top: the first sample at ``min(top, half the flank's peak)`` (a
+    curved flank near its peak would tilt the line); the peak is the largest ``|a|`` within ``span`` samples
+    of ``first`` and must reach twice the ``level``. Returns ``t0``, or None without such a flank."""
+    n = len(a)
+    first = max(int(first), 0)
+    if n == 0 or first >= n:
+        return None
+    an = np.linalg.norm(a, axis=1)
+    window = an[first : min(n, first + span)]
+    rise = np.flatnonzero(window >= 2 * level)
+    if len(rise) == 0:
+        return None
+    # the flank's peak: the first local maximum of |a| (smoothed over ~smooth samples) after it reaches 2 levels
+    sm = np.convolve(window, np.ones(smooth) / smooth, mode="same") if len(window) > smooth else window
+    m = int(rise[0])
+    while m + 1 < len(sm) and sm[m + 1] >= sm[m]:
+        m += 1
+    height = min(top, max(0.5 * float(max(sm[m], window[rise[0]])), 1.5 * level))
+    p = first + int(np.flatnonzero(window >= height)[0])
+    lo = max(0, first - back)
+    if p - lo < 3:
+        return None
+    y = a[lo : p + 1] @ (a[p] / an[p])
+    x = np.arange(lo, p + 1, dtype=float)
+    return hinge_fit(x, y, 1)
+
+
+def speed_flank_zero(v: np.ndarray, first: int, height: float) -> float | None:
+    """Where the speed leaving a rest starts to rise (local sample index), for movements too slow for their
+    acceleration to clear the noise.
+
+    ``v`` (n, 3) m/s velocity integrated from the rest (the array's start, a zero-velocity update) in time order;
+    ``first`` the current onset. A movement starting from rest with finite jerk has a speed rising as
+    ``(t - t0)^2`` (minimum jerk: ``30 D t^2 / T^3``; a 30-cm reach over 6 s reaches 3 cm/s only 0.85 s after it
+    started, with a peak acceleration of 0.05 m/s^2, below the accelerometer's noise level). The model
+    ``v = c + b t`` before ``t0`` (a bias integrated from the rest drifts linearly) and ``c + b t + k (t - t0)^2``
+    after it is fitted to the component of ``v`` along its direction where
+    the speed first reaches ``height`` (m/s) at or after ``first``, over the samples from the rest to there.
+    None when the speed does not reach ``height`` within twice the stretch already walked."""
+    n = len(v)
+    first = max(int(first), 0)
+    if n < 4 or first >= n:
+        return None
+    vn = np.linalg.norm(v, axis=1)
+    hit = np.flatnonzero(vn[first : min(n, 2 * first + 4)] >= height)
+    if len(hit) == 0:
+        return None
+    p = first + int(hit[0])
+    if p < 3:
+        return None
+    y = v[: p + 1] @ (v[p] / vn[p])
+    return hinge_fit(np.arange(p + 1, dtype=float), y, 2)

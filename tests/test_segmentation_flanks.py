@@ -1,0 +1,110 @@
+"""Slow movements (issue 31): phase onsets/offsets at the start of the acceleration's or the speed's flank
+(imulog.process.segmentation.flanks) and phases the movement detector missed (rescue.py), on constructed
+signals with exact onsets and offsets."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from imulog.process import quaternion as quat
+from imulog.process.segmentation.boundaries import refine_phase_boundaries
+from imulog.process.segmentation.flanks import hinge_fit
+from imulog.process.segmentation.hand import HandParams, refine_with_accelerometer
+from imulog.process.segmentation.rescue import rescue_missed
+from imulog.simulate.motion import MotionPlan
+
+RATE = 100.0
+G = np.array([0.0, 0.0, 9.81])
+
+
+def test_hinge_fit_finds_the_corner_between_samples():
+    rng = np.random.default_rng(1)
+    x = np.arange(60, dtype=float)
+    for t0, power in ((20.3, 1), (31.7, 1), (25.5, 2)):
+        y = 0.4 + 0.05 * np.maximum(x - t0, 0.0) ** power + rng.normal(0, 0.01, len(x))
+        assert abs(hinge_fit(x, y, power) - t0) < 0.5
+    assert hinge_fit(x, -np.maximum(x - 20, 0.0)) is None  # falling: no onset
+
+
+def _slow_reaches(seconds: float, distance_m: float, rng):
+    """Three reaches of ``distance_m`` over ``seconds`` each, 5-s rests, the wrist turning 30 deg over the
+    first third of each (a slow phase whose rotation ends long before the hand arrives)."""
+    plan = MotionPlan(np.zeros(3), np.array([1.0, 0, 0, 0]))
+    truth = []
+    for k in range(3):
+        plan.wait(5.0)
+        target = plan.p + distance_m * np.array([0.8, 0.6 * (-1) ** k, 0.0])
+        q1 = quat.multiply(plan.q, quat.from_rotation_vector(np.radians([0.0, 10.0, 30.0 * (-1) ** k])))
+        from imulog.simulate.motion import submovement_law
+
+        rot = submovement_law(seconds, [0.0], [seconds / 3], [1.0])
+        truth.append(plan.move(seconds, target, q1, rot_law=rot))
+    plan.wait(5.0)
+    t = np.arange(0.0, plan.t, 1.0 / RATE)
+    kin = plan.evaluate(t)
+    acc = quat.rotate_inverse(kin.orientation, kin.acceleration + G) + np.array([0.2, -0.1, 0.3])
+    gyr = kin.omega + np.array([0.01, -0.02, 0.015])
+    acc = acc + rng.normal(0, 0.02, acc.shape)
+    gyr = gyr + rng.normal(0, 0.002, gyr.shape)
+    return t, acc, gyr, np.array(truth)
+
+
+def _boundaries(seconds: float, distance_m: float, params: HandParams, seed: int = 4):
+    rng = np.random.default_rng(seed)
+    t, acc, gyr, truth = _slow_reaches(seconds, distance_m, rng)
+    # gyroscope phases from inside the rotation, refined on the gyroscope (as the pipeline leaves them)
+    s = np.round((truth[:, 0] + 0.2) * RATE).astype(int)
+    e = np.round((truth[:, 0] + seconds / 3 - 0.2) * RATE).astype(int)
+    gs, ge = refine_phase_boundaries(gyr, RATE, s, e)
+    hs, he = refine_with_accelerometer(acc, gyr, RATE, gs, ge, params)
+    return t[hs] - truth[:, 0], t[he - 1] - truth[:, 1]
+
+
+def test_a_slow_reach_starts_and_ends_where_its_acceleration_flank_does():
+    # 20 cm over 3 s: peak acceleration 0.13 m/s^2, a few times the accelerometer's noise level
+    onset, offset = _boundaries(3.0, 0.20, HandParams())
+    assert np.all(np.abs(onset) < 0.05) and np.all(np.abs(offset) < 0.05), (onset, offset)
+    level_onset, level_offset = _boundaries(3.0, 0.20, HandParams(flank_top_n_level=0.0))
+    assert np.mean(level_offset - level_onset) < -0.1  # where the level is crossed: > 0.1 s too short
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known limit (docs/accuracy.md): the wrist stops turning 4 s before this hand does and the last 2.7 s "
+    "decelerate at under 0.04 m/s^2, like a rest drifting at 2 cm/s; the rest window then lies inside the reach",
+)
+def test_a_reach_too_slow_for_the_accelerometer_ends_where_its_speed_does():
+    """25 cm over 6 s, the wrist turning over the first 2 s: peak acceleration 0.04 m/s^2, under the level; the
+    speed still reaches 8 cm/s. The onsets are right (speed flank); the offsets are 2.7 s early."""
+    onset, offset = _boundaries(6.0, 0.25, HandParams())
+    assert np.all(np.abs(onset) < 0.05), onset
+    assert np.all(np.abs(offset - onset) < 0.1), (onset, offset)
+
+
+def test_a_phase_below_the_detection_threshold_is_rescued_from_its_rest():
+    rate = 50.0
+    t = np.arange(0.0, 60.0, 1.0 / rate)
+
+    def bump(t0, dur, height):
+        x = np.clip((t - t0) / dur, 0.0, 1.0)
+        return height * np.sin(np.pi * x) ** 2
+
+    # four phases of 2-3 s with heights 0.8-2 rad/s; a fifth at 0.45 rad/s lies in the long rest; a short
+    # fidget and a tail touching the last phase are no phases
+    norm = 0.01 + bump(5, 2.5, 2.0) + bump(12, 3.0, 0.8) + bump(34, 2.0, 1.5) + bump(41, 3.0, 0.9)
+    missed = bump(20, 3.0, 0.45)
+    fidget = bump(27, 0.4, 0.7)
+    tail = bump(43.8, 2.5, 0.45)
+    norm = norm + missed + fidget + tail
+    above = norm > 0.55  # the detector's threshold
+    d = np.diff(np.r_[0, above.astype(np.int8), 0])
+    start, end = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    assert len(start) == 5  # the four phases and the fidget: the slow phase and the tail are missed
+    s, e = rescue_missed(start, end, norm)
+    added = sorted(set(s.tolist()) - set(start.tolist()))
+    assert len(added) == 1
+    k = int(np.flatnonzero(s == added[0])[0])
+    assert 20.0 < t[s[k]] < t[e[k] - 1] < 23.0  # inside the slow phase (its boundaries are refined later)
+    assert np.all(np.diff(s) > 0) and np.all(e > s)
+    assert rescue_missed(start, end, norm, fraction=0.0)[0].tolist() == start.tolist()
