@@ -35,9 +35,13 @@ class Layout:
         arrays: list[tuple[int, int, np.ndarray | None, Any]],
         precision: str,
         extra: list[tuple[int, np.ndarray, np.dtype]] | None = None,
+        f64_values: dict[int, np.ndarray] | None = None,
     ) -> None:
         self.head, self.count, self.t_field, self.time_fields = head, count, t_field, time_fields
         self.arrays, self.precision, self.extra = arrays, precision, extra or []
+        # float64 field number -> what a block that stays float64 writes there, when it differs from the array
+        # planned for counts (markers: NaN at invalid samples, planned as 0 so occlusions do not block counts)
+        self.f64_values = f64_values or {}
         self.compact = True
 
 
@@ -176,7 +180,8 @@ def encode_blocks(t_ns: np.ndarray, layout: Layout) -> tuple[list[int], list[byt
     for f64_no, _, v, _, ok in arrays:
         if not ok.all():
             w = v.shape[1] * 8
-            seg.len_field(f64_no, _bytes_of(v, _F8), w * first, w * counts, ~ok)
+            f64 = np.asarray(layout.f64_values.get(f64_no, v)).reshape(v.shape)
+            seg.len_field(f64_no, _bytes_of(f64, _F8), w * first, w * counts, ~ok)
     for number, a, dtype in layout.extra:
         a = np.asarray(a).reshape(n_rows, -1)
         w = a.shape[1] * np.dtype(dtype).itemsize

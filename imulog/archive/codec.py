@@ -188,7 +188,7 @@ def encode(
         valid = np.asarray(stream.valid, dtype=bool)
         hints, precision = _hints(stream.meta)
         n = len(stream.t_ns)
-        pos = stream.pos.reshape(n, -1)
+        pos = raw_pos = stream.pos.reshape(n, -1)
         if compact:  # an invalid marker stored as 0 (counts, decimals, float32), read back as NaN by its valid flag
             pos = np.where(np.repeat(valid.reshape(n, -1), 3, axis=1), pos, 0.0)
         layout = Layout(
@@ -199,6 +199,7 @@ def encode(
             [(6, 11, pos, hints.get("pos"))],
             precision,
             extra=[(7, valid.reshape(n, -1), _U1)],
+            f64_values={6: raw_pos},  # a block left as float64 keeps NaN at invalid samples, as layout 1
         )
     elif kind in ("analog", "signal"):
         if isinstance(stream, AnalogStream):
