@@ -216,3 +216,25 @@ def test_movella_dot_wrap_of_sample_time_fine_across_pieces(tmp_path):
     whole = read_movella_dot(path)
     assert np.all(np.diff(whole.imus[0].t_ns) == 16_667_000)
     _pieces_equal_whole(list(iter_movella_dot(path, piece_bytes=5000)), whole)
+
+
+def test_adc_text_in_pieces(tmp_path):
+    from imulog.converters.adc import iter_adc, read_adc
+
+    rng = np.random.default_rng(4)
+    counts = rng.integers(300, 700, (20_000, 3))
+    lines = [f"X={x} Y={y} Z={z}" for x, y, z in counts]
+    path = tmp_path / "witilt.txt"
+    path.write_text("\n".join(lines) + "\nX=51")  # a logger that lost power mid-line
+    whole = read_adc(path, rate_hz=50.0)
+    assert len(whole.imus[0]) == 20_000 and "cut short" in whole.warnings[0]
+    _pieces_equal_whole(list(iter_adc(path, rate_hz=50.0, piece_bytes=20_000)), whole)
+    for row, bad in ((150, "X=12 Y=3"), (15_000, ""), (19_990, "X=2000 Y=1 Z=1")):  # damage in later pieces
+        damaged = tmp_path / f"bad_{row}.txt"
+        damaged.write_text("\n".join(lines[:row] + [bad] + lines[row + 1 :]) + "\n")
+        with pytest.raises(ConversionError) as one:
+            read_adc(damaged, rate_hz=50.0)
+        assert f"line {row + 1}" in str(one.value)
+        with pytest.raises(ConversionError) as pieces:
+            list(iter_adc(damaged, rate_hz=50.0, piece_bytes=20_000))
+        assert str(pieces.value) == str(one.value)
