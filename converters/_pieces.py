@@ -10,6 +10,7 @@ import hashlib
 import os
 from collections.abc import Iterator
 from dataclasses import replace
+from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -50,16 +51,42 @@ def iter_numeric(spec: TableSpec, piece_bytes: int | None) -> Iterator[NumericPi
             start = data.index(b"\n", start) + 1
         yield NumericPiece(values, base.skip_lines + 1, 0, list(spec.warnings), memoryview(data)[start:])
         return
+    for piece, lines_before, k, last in text_pieces(path, base.skip_lines, piece_bytes):
+        spec = replace(
+            base,
+            skip_lines=lines_before,
+            byte_range=(0, len(piece)),
+            in_memory=True,
+            check_final_row=False,
+            allow_trailing_blank=last,
+            warnings=[],
+        )
+        warnings: list[str] = []
+        if last:
+            end, warning = drop_cut_final_row(path, piece, spec.delimiter, line_offset=lines_before)
+            if warning is not None:
+                spec = replace(spec, byte_range=(0, end))
+                warnings.append(warning)
+            if k and not piece[:end].strip(b" \t\r\n"):
+                continue  # nothing but blank lines after the previous piece (the last piece: the loop ends)
+        yield NumericPiece(read_numeric(spec, piece), lines_before + 1, k, warnings, memoryview(piece))
+
+
+def text_pieces(path: Path, skip_lines: int, piece_bytes: int) -> Iterator[tuple[bytes, int, int, bool]]:
+    """The text after ``skip_lines`` header lines in pieces of about ``piece_bytes``, each ending after a whole line:
+    (piece, lines before it in the file, piece number, whether it is the last). The last piece holds at least
+    1 MiB (or ``piece_bytes``) so that a cut final row is judged against the rows above it. The file's SHA-256 is
+    computed while reading and remembered (:func:`known_sha256`) when the file did not change meanwhile."""
     digest = hashlib.sha256()
     total = 0
     with open(path, "rb") as f:
-        for _ in range(base.skip_lines):
+        for _ in range(skip_lines):
             line = f.readline()
             if not line.endswith(b"\n"):
-                raise ConversionError(path, "file ends inside the header", line=base.skip_lines)
+                raise ConversionError(path, "file ends inside the header", line=skip_lines)
             digest.update(line)
             total += len(line)
-        lines_before = base.skip_lines
+        lines_before = skip_lines
         k = 0
         buf = f.read(piece_bytes)
         digest.update(buf)
@@ -77,24 +104,7 @@ def iter_numeric(spec: TableSpec, piece_bytes: int | None) -> Iterator[NumericPi
                     buf += nxt
                     continue
                 piece, buf = buf[:cut], buf[cut:] + nxt
-            spec = replace(
-                base,
-                skip_lines=lines_before,
-                byte_range=(0, len(piece)),
-                in_memory=True,
-                check_final_row=False,
-                allow_trailing_blank=last,
-                warnings=[],
-            )
-            warnings: list[str] = []
-            if last:
-                end, warning = drop_cut_final_row(path, piece, spec.delimiter, line_offset=lines_before)
-                if warning is not None:
-                    spec = replace(spec, byte_range=(0, end))
-                    warnings.append(warning)
-                if k and not piece[:end].strip(b" \t\r\n"):
-                    break  # nothing but blank lines after the previous piece
-            yield NumericPiece(read_numeric(spec, piece), lines_before + 1, k, warnings, memoryview(piece))
+            yield piece, lines_before, k, last
             lines_before += piece.count(b"\n")
             k += 1
         st = os.fstat(f.fileno())

@@ -8,7 +8,7 @@ Settings (``ConvertOptions.extra``, CLI ``--adc-zero``, ``--adc-counts-per-g``):
 per axis), ``counts_per_g``, ``adc_bits`` (10: counts must lie in 0..1023), ``name`` (stream name, default
 ``acc``).
 
-Memory: read whole, not yet in pieces (issue 24): a board's log of hours of 3-axis counts is tens of MB of text.
+Memory: in pieces of text (:func:`iter_adc`, ``iter_chunks``); the whole file is the one-piece case.
 """
 
 from __future__ import annotations
@@ -17,10 +17,14 @@ import io
 import json
 import re
 import tomllib
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from imulog.converters import _pieces
 from imulog.converters._common import G0, drop_cut_final_row, looks_binary, text_head_lines
+from imulog.converters._pieces import text_pieces
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
 from imulog.converters.mapping import sibling_mapping
@@ -31,12 +35,15 @@ LINE = re.compile(rb"^[ \t]*X=(-?\d+)[ \t]+Y=(-?\d+)[ \t]+Z=(-?\d+)[ \t]*\r?$")
 _NOISE = b"0123456789- \t=\r"
 
 
-def _locate(path: Path, data: bytes) -> None:
-    """Careful pass: raise ConversionError at the first line that is not ``X=.. Y=.. Z=..``."""
+def _locate(path: Path, data: bytes, line_offset: int = 0, *, at_end: bool = True) -> None:
+    """Careful pass: raise ConversionError at the first line that is not ``X=.. Y=.. Z=..`` (``data`` follows
+    ``line_offset`` lines of the file; blank lines at its end are the file's end only when ``at_end``)."""
     lines = data.split(b"\n")
-    while lines and not lines[-1].strip():
+    if not at_end and lines and lines[-1] == b"":
+        lines.pop()  # the piece ends with a line break
+    while at_end and lines and not lines[-1].strip():
         lines.pop()
-    for lineno, line in enumerate(lines, start=1):
+    for lineno, line in enumerate(lines, start=line_offset + 1):
         if not LINE.match(line):
             shown = line.decode("latin-1").strip()
             shown = shown if len(shown) <= 30 else shown[:27] + "..."
@@ -53,51 +60,41 @@ def read_adc(
     adc_bits: int = 10,
     name: str = "acc",
 ) -> Recording:
-    import pandas as pd  # here, not at module top: detecting a format must not import pandas
+    """The whole file: :func:`iter_adc` as one piece."""
+    (rec,) = iter_adc(
+        path, rate_hz=rate_hz, zero_counts=zero_counts, counts_per_g=counts_per_g, adc_bits=adc_bits, name=name
+    )
+    return rec
 
+
+def iter_adc(
+    path: Path,
+    *,
+    rate_hz: float | None,
+    zero_counts: float | list[float] = 512.0,
+    counts_per_g: float = 256.0,
+    adc_bits: int = 10,
+    name: str = "acc",
+    piece_bytes: int | None = None,
+) -> Iterator[Recording]:
+    """The recording in pieces of about ``piece_bytes`` of text (None: the whole file as one piece), cut after whole
+    lines (:func:`~imulog.converters._pieces.text_pieces`); every value, error line and warning as in one piece."""
     path = Path(path)
-    data = path.read_bytes()
-    if not data.strip():
+    with open(path, "rb") as f:
+        head = f.read(65536)
+    if not head.strip() and path.stat().st_size <= len(head):
         raise ConversionError(path, "empty file")
-    if looks_binary(data[:65536]):
+    if looks_binary(head):
         raise ConversionError(path, "binary data, not a text export")
     if rate_hz is None or not rate_hz > 0:
         raise ConversionError(path, "raw ADC text has no time stamps: give the sampling rate with --rate HZ")
     if not counts_per_g > 0:
         raise ConversionError(path, f"counts_per_g must be positive, got {counts_per_g}")
-    end, cut_warning = drop_cut_final_row(path, data, " ")  # a logger that lost power mid-line
-    data = data[:end]
-    body = data.rstrip(b" \t\r\n") + b"\n"
-    n = body.count(b"\n")
-    # structural check at C speed: with digits, signs, blanks and '=' removed every line must read 'XYZ'
-    if body.translate(None, _NOISE) != b"XYZ\n" * n or b"==" in body or b"--" in body:
-        _locate(path, data)
-    try:
-        counts = pd.read_csv(
-            io.BytesIO(body.translate(None, b"XYZ=")), sep=r"\s+", header=None, dtype=np.float64, engine="c"
-        ).to_numpy()
-    except Exception:  # noqa: BLE001 - located precisely below
-        _locate(path, data)
-        raise ConversionError(path, "could not parse the counts") from None
-    if counts.shape != (n, 3) or not np.isfinite(counts).all():
-        _locate(path, data)
-        raise ConversionError(path, "could not parse the counts")
-    top = 2**adc_bits - 1
-    out = (counts < 0) | (counts > top) | (counts != np.round(counts))
-    if out.any():
-        row, col = (int(x) for x in np.argwhere(out)[0])
-        raise ConversionError(
-            path,
-            f"{counts[row, col]:g} counts outside the {adc_bits}-bit range 0..{top}",
-            line=row + 1,
-            column="XYZ"[col],
-        )
     try:
         zero = np.broadcast_to(np.asarray(zero_counts, dtype=np.float64), (3,))
     except (ValueError, TypeError):
         raise ConversionError(path, f"zero_counts must be one number or three, got {zero_counts!r}") from None
-    acc = (counts - zero) / counts_per_g * G0
-    t_ns = np.round(np.arange(n) * (1e9 / rate_hz)).astype(np.int64)
+    top = 2**adc_bits - 1
     meta = {
         "format": "adc",
         "model": "3-axis ADC accelerometer (WiTilt-style)",
@@ -112,10 +109,56 @@ def read_adc(
     }
     # the archive stores the counts: ((counts + shift) / divisor) * scale gives acc back exactly (issue 28)
     resolution = {"acc": {"shift": [-float(z) for z in zero], "divisor": float(counts_per_g), "scale": G0}}
-    rec = Recording(sources=[str(path)], warnings=[cut_warning] if cut_warning else [])
-    rec.imus.append(ImuStream(name=name, t_ns=t_ns, acc=acc, meta={**meta, "resolution": resolution}))
-    rec.metadata[f"imulog.device.{name}"] = meta
-    return rec
+    pieces = iter([(path.read_bytes(), 0, 0, True)]) if piece_bytes is None else text_pieces(path, 0, piece_bytes)
+    first_row = 0
+    for data, lines_before, k, last in pieces:
+        cut_warning = None
+        if last:
+            end, cut_warning = drop_cut_final_row(path, data, " ", line_offset=lines_before)  # power lost mid-line
+            data = data[:end]
+            if not data.strip():
+                if k:
+                    continue  # nothing but blank lines after the previous piece
+                raise ConversionError(path, "empty file")
+        counts = _counts(path, data, lines_before, last)
+        out = (counts < 0) | (counts > top) | (counts != np.round(counts))
+        if out.any():
+            row, col = (int(x) for x in np.argwhere(out)[0])
+            raise ConversionError(
+                path,
+                f"{counts[row, col]:g} counts outside the {adc_bits}-bit range 0..{top}",
+                line=lines_before + row + 1,
+                column="XYZ"[col],
+            )
+        acc = (counts - zero) / counts_per_g * G0
+        t_ns = np.round(np.arange(first_row, first_row + len(counts)) * (1e9 / rate_hz)).astype(np.int64)
+        first_row += len(counts)
+        rec = Recording(sources=[str(path)], warnings=[cut_warning] if cut_warning else [])
+        rec.imus.append(ImuStream(name=name, t_ns=t_ns, acc=acc, meta={**meta, "resolution": resolution}))
+        rec.metadata[f"imulog.device.{name}"] = dict(meta)
+        yield rec
+
+
+def _counts(path: Path, data: bytes, lines_before: int, last: bool) -> np.ndarray:
+    """The (N, 3) counts of the lines ``data`` (after ``lines_before`` lines; ``last``: the file ends with it)."""
+    import pandas as pd  # here, not at module top: detecting a format must not import pandas
+
+    body = data.rstrip(b" \t\r\n") + b"\n" if last else data
+    n = body.count(b"\n")
+    # structural check at C speed: with digits, signs, blanks and '=' removed every line must read 'XYZ'
+    if body.translate(None, _NOISE) != b"XYZ\n" * n or b"==" in body or b"--" in body:
+        _locate(path, data, lines_before, at_end=last)
+    try:
+        counts = pd.read_csv(
+            io.BytesIO(body.translate(None, b"XYZ=")), sep=r"\s+", header=None, dtype=np.float64, engine="c"
+        ).to_numpy()
+    except Exception:  # noqa: BLE001 - located precisely below
+        _locate(path, data, lines_before, at_end=last)
+        raise ConversionError(path, "could not parse the counts") from None
+    if counts.shape != (n, 3) or not np.isfinite(counts).all():
+        _locate(path, data, lines_before, at_end=last)
+        raise ConversionError(path, "could not parse the counts")
+    return counts
 
 
 class AdcConverter(Converter):
@@ -135,18 +178,25 @@ class AdcConverter(Converter):
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         """Options on the command line win over a sibling ``<stem>.mapping.json`` ``device`` section."""
-        options = options or ConvertOptions()
-        path = Path(path)
-        device = device_sidecar(options.mapping or sibling_mapping(path))
-        extra = {**device, **options.extra}
-        return read_adc(
-            path,
-            rate_hz=options.rate_hz if options.rate_hz is not None else extra.get("rate_hz"),
-            zero_counts=extra.get("zero_counts", 512.0),
-            counts_per_g=float(extra.get("counts_per_g", 256.0)),
-            adc_bits=int(extra.get("adc_bits", 10)),
-            name=str(extra.get("name", "acc")),
-        )
+        return read_adc(Path(path), **_settings(Path(path), options))
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """Pieces of about 16 MB of text (see :func:`iter_adc`)."""
+        return iter_adc(Path(path), **_settings(Path(path), options), piece_bytes=_pieces.PIECE_BYTES)
+
+
+def _settings(path: Path, options: ConvertOptions | None) -> dict[str, Any]:
+    """The board's settings: the command line's over a sibling ``<stem>.mapping.json`` ``device`` section."""
+    options = options or ConvertOptions()
+    device = device_sidecar(options.mapping or sibling_mapping(path))
+    extra = {**device, **options.extra}
+    return {
+        "rate_hz": options.rate_hz if options.rate_hz is not None else extra.get("rate_hz"),
+        "zero_counts": extra.get("zero_counts", 512.0),
+        "counts_per_g": float(extra.get("counts_per_g", 256.0)),
+        "adc_bits": int(extra.get("adc_bits", 10)),
+        "name": str(extra.get("name", "acc")),
+    }
 
 
 def device_sidecar(mapping_path: Path | None) -> dict:

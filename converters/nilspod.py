@@ -17,13 +17,16 @@ midnight) over the rate, ``t_ns`` from the first sample; ``start_time`` = midnig
 / rate, in UTC (the sensor clock is set to UTC by its app; NilsPodLib warns it may not be). A counter step above 1
 is missing samples (a gap), a step <= 0 is an error naming the sample.
 
-Memory: read whole, not yet in pieces (issue 24): a NilsPod session of days is hundreds of MB.
+Memory: a ``.bin`` session in pieces of samples read from the file (:func:`iter_bin`; the whole file is the
+one-piece case); NilsPodLib's CSV export is read whole (one piece), not yet in pieces.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import re
+from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
@@ -108,33 +111,51 @@ def _units(sensor: str, raw: np.ndarray, hdr: dict) -> np.ndarray:
 
 
 def read_bin(path: Path, options: ConvertOptions | None = None) -> Recording:
+    """The whole session: :func:`iter_bin` as one piece."""
+    (rec,) = iter_bin(path, options, samples_per_piece=None)
+    return rec
+
+
+#: samples per piece of a ``.bin`` session converted piece by piece (about 30 MB of samples at 30 bytes each)
+PIECE_SAMPLES = 1 << 20
+
+
+def iter_bin(
+    path: Path, options: ConvertOptions | None = None, samples_per_piece: int | None = PIECE_SAMPLES
+) -> Iterator[Recording]:
+    """The session in pieces of ``samples_per_piece`` fixed-size samples read from the file (None: one piece);
+    the counter is checked across pieces, and the missing-sample count is the last piece's (the whole session's)."""
     path = Path(path)
-    data = path.read_bytes()
-    hdr = parse_header(path, data)
-    size = hdr["sample_size"]
-    widths = {s[0]: s[3] * s[4] for s in SENSORS}
-    need = sum(widths[s] for s in hdr["enabled_sensors"]) + 4
-    if size != need:
-        raise ConversionError(path, f"header: sample size {size} bytes, the enabled sensors need {need}")
-    body = data[hdr["header_size"] :]
-    n, rest = divmod(len(body), size)
-    warnings = []
-    if rest:
-        warnings.append(f"{path.name}: {rest} bytes after the last whole sample (a cut sample); ignored")
-    if n != hdr["n_samples"]:
-        warnings.append(f"{path.name}: header says {hdr['n_samples']} samples, the file holds {n}; read them")
-    if n == 0:
-        raise ConversionError(path, "no samples after the header")
-    rows = np.frombuffer(body, dtype=np.uint8, count=n * size).reshape(n, size)
-    values: dict[str, np.ndarray] = {}
-    pos = 0
-    for name, _, _, ch, width, dt in SENSORS:
-        if name in hdr["enabled_sensors"]:
-            raw = np.ascontiguousarray(rows[:, pos : pos + ch * width]).view(dt).reshape(n, ch).astype(np.float64)
-            values[name] = _units(name, raw, hdr)
-            pos += ch * width
-    counter = np.ascontiguousarray(rows[:, pos : pos + 4]).view("<u4").reshape(n).astype(np.int64)
-    return _recording(path, hdr, counter, values, warnings)
+    with open(path, "rb") as f:
+        hdr = parse_header(path, f.read(256))
+        size = hdr["sample_size"]
+        widths = {s[0]: s[3] * s[4] for s in SENSORS}
+        need = sum(widths[s] for s in hdr["enabled_sensors"]) + 4
+        if size != need:
+            raise ConversionError(path, f"header: sample size {size} bytes, the enabled sensors need {need}")
+        n, rest = divmod(os.fstat(f.fileno()).st_size - hdr["header_size"], size)
+        warnings = []
+        if rest:
+            warnings.append(f"{path.name}: {rest} bytes after the last whole sample (a cut sample); ignored")
+        if n != hdr["n_samples"]:
+            warnings.append(f"{path.name}: header says {hdr['n_samples']} samples, the file holds {n}; read them")
+        if n == 0:
+            raise ConversionError(path, "no samples after the header")
+        f.seek(hdr["header_size"])
+        step = n if samples_per_piece is None else samples_per_piece
+        carry = _Counter()
+        for first in range(0, n, step):
+            k = min(step, n - first)
+            rows = np.frombuffer(f.read(k * size), dtype=np.uint8, count=k * size).reshape(k, size)
+            values: dict[str, np.ndarray] = {}
+            pos = 0
+            for name, _, _, ch, width, dt in SENSORS:
+                if name in hdr["enabled_sensors"]:
+                    raw = np.ascontiguousarray(rows[:, pos : pos + ch * width]).view(dt).reshape(k, ch)
+                    values[name] = _units(name, raw.astype(np.float64), hdr)
+                    pos += ch * width
+            counter = np.ascontiguousarray(rows[:, pos : pos + 4]).view("<u4").reshape(k).astype(np.int64)
+            yield _recording(path, hdr, counter, values, warnings if first == 0 else [], carry, last=first + k == n)
 
 
 def _resolution(hdr: dict) -> dict:
@@ -149,17 +170,45 @@ def _resolution(hdr: dict) -> dict:
     return res
 
 
-def _recording(path: Path, hdr: dict, counter: np.ndarray, values: dict, warnings: list[str]) -> Recording:
-    """The Recording of decoded NilsPod values (shared by the binary and the CSV + JSON reader)."""
+class _Counter:
+    """The sample counter across pieces: the first value, the last one, how many samples it skipped and where."""
+
+    def __init__(self) -> None:
+        self.first: int | None = None
+        self.last: int | None = None
+        self.seen = 0  # samples before this piece
+        self.missing = 0
+        self.places = 0
+
+
+def _recording(
+    path: Path,
+    hdr: dict,
+    counter: np.ndarray,
+    values: dict,
+    warnings: list[str],
+    carry: _Counter | None = None,
+    last: bool = True,
+) -> Recording:
+    """The Recording of decoded NilsPod values (shared by the binary and the CSV + JSON reader); ``carry``: the
+    counter so far when this is a later piece of the session, ``last``: whether it is the session's last."""
+    carry = _Counter() if carry is None else carry
     rate = float(hdr["sampling_rate_hz"])
-    step = np.diff(counter)
+    full = counter if carry.last is None else np.concatenate([[carry.last], counter])
+    step = np.diff(full)
     if (step <= 0).any():
-        i = int(np.argmax(step <= 0)) + 1
-        raise ConversionError(path, f"sample {i}: the counter does not increase ({counter[i - 1]} -> {counter[i]})")
-    missing = int((step - 1).sum())
-    if missing:
-        warnings.append(f"{path.name}: the counter skips {missing} samples in {int((step > 1).sum())} places (gaps)")
-    t_ns = np.round((counter - counter[0]) * (1e9 / rate)).astype(np.int64)
+        j = int(np.argmax(step <= 0)) + 1
+        i = j + carry.seen - (0 if carry.last is None else 1)
+        raise ConversionError(path, f"sample {i}: the counter does not increase ({full[j - 1]} -> {full[j]})")
+    carry.missing += int((step - 1).sum())
+    carry.places += int((step > 1).sum())
+    missing = carry.missing
+    if missing and last:
+        warnings.append(f"{path.name}: the counter skips {missing} samples in {carry.places} places (gaps)")
+    if carry.first is None:
+        carry.first = int(counter[0])
+    carry.last, carry.seen = int(counter[-1]), carry.seen + len(counter)
+    t_ns = np.round((counter - carry.first) * (1e9 / rate)).astype(np.int64)
     sid = "".join(hdr.get("mac_address", "")[-5:].split(":")) or "nilspod"
     name = f"nilspod_{sid}"
     meta = {
@@ -204,7 +253,7 @@ def _recording(path: Path, hdr: dict, counter: np.ndarray, values: dict, warning
     start = hdr.get("utc_start")
     if start:
         midnight = datetime.fromtimestamp(int(start), tz=UTC).replace(hour=0, minute=0, second=0)
-        when = midnight + timedelta(seconds=float(counter[0]) / rate)
+        when = midnight + timedelta(seconds=float(carry.first) / rate)
         rec.metadata["imulog.trial"] = trial_start(when, "NilsPod header utc_start (midnight) + counter / rate")
     rec.metadata[f"imulog.device.{name}"] = meta
     return rec
@@ -294,6 +343,12 @@ class NilsPodConverter(Converter):
         if Path(path).suffix.lower() == ".csv":
             return read_csv(Path(path), options)
         return read_bin(Path(path), options)
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """A ``.bin`` session in pieces of :data:`PIECE_SAMPLES` samples (:func:`iter_bin`); NilsPodLib's CSV whole."""
+        if Path(path).suffix.lower() == ".csv":
+            return iter([read_csv(Path(path), options)])
+        return iter_bin(Path(path), options, samples_per_piece=PIECE_SAMPLES)
 
 
 CONVERTER = NilsPodConverter()

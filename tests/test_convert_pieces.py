@@ -56,6 +56,7 @@ CASES = [
     ("actilife-csv", "devices/actigraph_gt3x/example-IMU.csv", (TEXT, 8192)),  # formatted local time stamps
     ("axivity-csv", "devices/axivity_csv/ax3_testfile_unix_timestamps.csv", (TEXT, 2048)),
     ("movella-dot", "devices/movella_dot_csv/bei_D4CA6EF17860_20210830_170505.csv", (TEXT, 4096)),
+    ("nilspod", "devices/nilspod/NilsPodX-6F13_20210109_162824.bin", ("imulog.converters.nilspod.PIECE_SAMPLES", 500)),
     ("actigraph", "devices/actigraph_gt3x/example.gt3x", None),
     ("axivity", "devices/axivity_cwa/ax3_sample.cwa", None),
     ("axivity", "devices/axivity_cwa/ax6_sample.cwa", None),
@@ -216,3 +217,48 @@ def test_movella_dot_wrap_of_sample_time_fine_across_pieces(tmp_path):
     whole = read_movella_dot(path)
     assert np.all(np.diff(whole.imus[0].t_ns) == 16_667_000)
     _pieces_equal_whole(list(iter_movella_dot(path, piece_bytes=5000)), whole)
+
+
+def test_adc_text_in_pieces(tmp_path):
+    from imulog.converters.adc import iter_adc, read_adc
+
+    rng = np.random.default_rng(4)
+    counts = rng.integers(300, 700, (20_000, 3))
+    lines = [f"X={x} Y={y} Z={z}" for x, y, z in counts]
+    path = tmp_path / "witilt.txt"
+    path.write_text("\n".join(lines) + "\nX=51")  # a logger that lost power mid-line
+    whole = read_adc(path, rate_hz=50.0)
+    assert len(whole.imus[0]) == 20_000 and "cut short" in whole.warnings[0]
+    _pieces_equal_whole(list(iter_adc(path, rate_hz=50.0, piece_bytes=20_000)), whole)
+    for row, bad in ((150, "X=12 Y=3"), (15_000, ""), (19_990, "X=2000 Y=1 Z=1")):  # damage in later pieces
+        damaged = tmp_path / f"bad_{row}.txt"
+        damaged.write_text("\n".join(lines[:row] + [bad] + lines[row + 1 :]) + "\n")
+        with pytest.raises(ConversionError) as one:
+            read_adc(damaged, rate_hz=50.0)
+        assert f"line {row + 1}" in str(one.value)
+        with pytest.raises(ConversionError) as pieces:
+            list(iter_adc(damaged, rate_hz=50.0, piece_bytes=20_000))
+        assert str(pieces.value) == str(one.value)
+
+
+def test_nilspod_counter_gap_and_error_across_pieces(shared_data, tmp_path):
+    from imulog.converters.nilspod import iter_bin, read_bin
+
+    data = (shared_data / "devices/nilspod/NilsPodX-6F13_20210109_162824.bin").read_bytes()
+    size, hsz = 32, 52  # this session's sample and header sizes
+    gap = tmp_path / "NilsPodX-gap.bin"  # samples 100..109 dropped, 200..204 too: two gaps, in two pieces
+    gap.write_bytes(data[: hsz + 100 * size] + data[hsz + 110 * size : hsz + 200 * size] + data[hsz + 205 * size :])
+    whole = read_bin(gap)
+    assert any("skips 15 samples in 2 places" in w for w in whole.warnings)
+    assert whole.imus[0].meta["missing_samples"] == 15
+    _pieces_equal_whole(list(iter_bin(gap, samples_per_piece=150)), whole)
+    swap = tmp_path / "NilsPodX-swap.bin"  # samples 300 and 301 swapped, 300 the first of a piece
+    s = [data[hsz + k * size : hsz + (k + 1) * size] for k in range((len(data) - hsz) // size)]
+    s[300], s[301] = s[301], s[300]
+    swap.write_bytes(data[:hsz] + b"".join(s))
+    with pytest.raises(ConversionError) as one:
+        read_bin(swap)
+    for per in (100, 150, 301):
+        with pytest.raises(ConversionError) as pieces:
+            list(iter_bin(swap, samples_per_piece=per))
+        assert str(pieces.value) == str(one.value) and "sample 301:" in str(one.value)
