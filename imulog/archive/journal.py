@@ -238,7 +238,8 @@ def read_summary_view(f: BinaryIO, size: int, path: Path) -> tuple[m.Summary, Bi
         return m.read_summary(f, size), f
     except m.McapFormatError as exc:
         first = exc
-    journal = load(path)
+    path = Path(path)
+    journal = load(path.resolve() if path.is_symlink() else path)  # the writer journals the link's target
     if journal is None:  # no append under way, or one just finished: read the file once more
         now = os.fstat(f.fileno()).st_size
         if now == size:

@@ -144,7 +144,7 @@ def _continue_heading(quat: np.ndarray, lin: np.ndarray, runs: tuple[tuple[int, 
     from imulog.process import quaternion as qmath
 
     for (_, b0), (a1, b1) in zip(runs, runs[1:], strict=False):
-        r = np.tile(qmath.heading_offset(quat[a1 : a1 + 1], quat[b0 - 1 : b0]), (b1 - a1, 1))
+        r = qmath.heading_offset(quat[a1 : a1 + 1], quat[b0 - 1 : b0])  # (1, 4), broadcast over the run
         quat[a1:b1] = qmath.multiply(r, quat[a1:b1])
         lin[a1:b1] = qmath.rotate(r, lin[a1:b1])
 
@@ -193,10 +193,7 @@ def orientation_windows(
             at = join[0] - w.core_lo  # the join sample in this window's core; else its first valid sample
             k = at if 0 <= at < len(quat) and ok[at] else int(np.argmax(ok))
             turn = qmath.heading_offset(quat[k : k + 1], join[1])
-            quat, lin = (
-                qmath.multiply(np.tile(turn, (len(quat), 1)), quat),
-                qmath.rotate(np.tile(turn, (len(lin), 1)), lin),
-            )
+            quat, lin = qmath.multiply(turn, quat), qmath.rotate(turn, lin)  # (1, 4) broadcast over the core
         k1 = w.core_hi - w.lo  # the next core's first sample, in this window's margin
         if k1 < len(whole) and np.isfinite(whole[k1]).all():
             join = (w.core_hi, whole[k1 : k1 + 1] if turn is None else qmath.multiply(turn, whole[k1 : k1 + 1]))
