@@ -13,20 +13,21 @@ from __future__ import annotations
 import numpy as np
 
 
-def hinge_fit(x: np.ndarray, y: np.ndarray, power: int = 1, drift: bool = False) -> float | None:
+def hinge_fit(x: np.ndarray, y: np.ndarray, power: int = 1) -> float | None:
     """``t0`` (in units of ``x``, sub-sample) of the least-squares fit ``y = c + k max(x - t0, 0)^power``, ``k > 0``.
 
     ``t0`` runs over the samples of ``x`` but the last two (the vertex of the parabola through the errors
-    around the best one refines it); ``c`` absorbs a constant offset (a rest's bias); with ``drift`` a term
-    ``b x`` absorbs a linear drift too (a velocity integrated with a small bias). None without a rising fit."""
-    base = [np.ones_like(x)] + ([x - x[0]] if drift else [])
-    sse = np.full(max(len(x) - 2, 0), np.inf)
-    for i in range(len(sse)):
-        h = np.maximum(x - x[i], 0.0) ** power
-        m = np.column_stack([*base, h])
-        coef, *_ = np.linalg.lstsq(m, y, rcond=None)
-        if coef[-1] > 0:
-            sse[i] = float(np.sum((y - m @ coef) ** 2))
+    around the best one refines it); ``c`` absorbs a constant offset (a rest's bias). None without a rising
+    fit."""
+    n_cand = max(len(x) - 2, 0)
+    if n_cand == 0:
+        return None
+    h = np.maximum(x[None, :] - x[:n_cand, None], 0.0) ** power  # one row per candidate t0
+    hc = h - h.mean(axis=1, keepdims=True)
+    yc = y - y.mean()
+    cov, var = hc @ yc, np.einsum("ij,ij->i", hc, hc)
+    with np.errstate(divide="ignore", invalid="ignore"):  # least squares of y = c + k h, in closed form
+        sse = np.where((var > 0) & (cov > 0), float(yc @ yc) - cov**2 / var, np.inf)
     if not np.isfinite(sse).any():
         return None
     i = int(np.argmin(sse))
