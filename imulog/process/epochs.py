@@ -276,15 +276,20 @@ def counts_factors(rate_hz: float) -> tuple[int, int]:
 
 
 def to_30hz(acc_g: np.ndarray, rate_hz: float) -> np.ndarray:
-    """Acceleration at 30 Hz, (M, 3) g: every k-th sample at 30 k Hz (30, 60, 90 Hz: what ActiLife does, and
-    what makes the counts equal agcounts' at those rates), else polyphase resampling (anti-aliased; at 100 Hz this
-    differs from ActiLife's own resampler, see docs/epochs.md)."""
+    """Acceleration at 30 Hz, (M, 3) g, as ActiLife computes it where it accepts the rate: every k-th sample at
+    30 k Hz (30, 60, 90 Hz), ActiLife's own resampler at 40, 50, 70, 80 and 100 Hz
+    (:mod:`imulog.process.counts_resample`); at other rates (no reference exists) polyphase resampling
+    (anti-aliased). See docs/epochs.md."""
     from scipy.signal import resample_poly
+
+    from imulog.process.counts_resample import actilife_to_30hz, is_actilife_resampled
 
     up, down = counts_factors(rate_hz)
     a = np.asarray(acc_g, dtype=np.float64)
     if up == 1:
         return a[::down]
+    if is_actilife_resampled(rate_hz):
+        return actilife_to_30hz(a, up, down)
     return resample_poly(a, up, down, axis=0, padtype="line")  # no step at the edges
 
 
