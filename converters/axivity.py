@@ -46,12 +46,24 @@ import numpy as np
 from imulog.converters._binary import (
     NS_PER_S,
     concat_chunks,
-    days_from_civil,
     iso_from_epoch_ns,
     time_zone_label,
     with_fills,
 )
 from imulog.converters._common import G0, sanitize_name
+from imulog.converters.axivity_time import (
+    DEFAULT_TIME_RULE,
+    TIME_RULES,
+    PreviousBlock,
+    anchor_ns,
+    block_spans,
+    block_start_ns,  # noqa: F401 - re-exported (tests, benchmarks)
+    gaps,
+    nominal_ns,
+    rate_from_code,
+    rtc_to_epoch_s,  # noqa: F401 - re-exported
+    sample_times_ns,
+)
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
 
@@ -111,11 +123,6 @@ class CwaHeader:
         return HARDWARE.get(self.hardware_type, f"Axivity (hardware 0x{self.hardware_type:02X})")
 
 
-def rate_from_code(code: int | np.ndarray) -> float | np.ndarray:
-    """Sampling rate in Hz of a CWA rate code: 3200 / 2^(15 - (code & 15))."""
-    return 3200.0 / np.left_shift(1, 15 - (np.asarray(code, dtype=np.int64) & 0x0F))
-
-
 def parse_header(path: Path, data: bytes) -> CwaHeader:
     """The 1024-byte ``MD`` header; ConversionError when it is not one."""
     if len(data) < HEADER_BYTES or data[:2] != b"MD":
@@ -137,33 +144,10 @@ def parse_header(path: Path, data: bytes) -> CwaHeader:
     )
 
 
-def rtc_to_epoch_s(rtc: np.ndarray) -> np.ndarray:
-    """Packed CWA RTC values -> int64 seconds since 1970 of the device's local wall time."""
-    v = np.asarray(rtc, dtype=np.int64)
-    year = ((v >> 26) & 0x3F) + 2000
-    month = (v >> 22) & 0x0F
-    day = (v >> 17) & 0x1F
-    hour = (v >> 12) & 0x1F
-    minute = (v >> 6) & 0x3F
-    second = v & 0x3F
-    return days_from_civil(year, month, day) * 86400 + hour * 3600 + minute * 60 + second
-
-
 def block_word_sums(raw: np.ndarray) -> np.ndarray:
     """16-bit sum of the 256 little-endian words of each 512-byte block (0 for an intact block)."""
     words = raw.view("<u2").reshape(len(raw), BLOCK_BYTES // 2)
     return (words.sum(axis=1, dtype=np.uint64) & 0xFFFF).astype(np.uint16)
-
-
-def block_start_ns(blocks: np.ndarray) -> np.ndarray:
-    """Start time of each block (its sample 0), int64 ns since 1970 on the device's local clock."""
-    rate = rate_from_code(blocks["rate_code"])
-    frac = blocks["fractional"].astype(np.int64)
-    has_frac = (frac & 0x8000) != 0
-    frac16 = np.where(has_frac, (frac & 0x7FFF) << 1, 0)  # 1/65536 s
-    offset = blocks["offset"].astype(np.int64) + np.where(has_frac, (frac16 * rate.astype(np.int64)) // 65536, 0)
-    secs = rtc_to_epoch_s(blocks["rtc"])
-    return secs * NS_PER_S + (frac16 * NS_PER_S) // 65536 - np.round(offset * (NS_PER_S / rate)).astype(np.int64)
 
 
 def gyro_range_dps(light: np.ndarray) -> np.ndarray:
@@ -295,81 +279,6 @@ def resolution(blocks: np.ndarray, gyr: bool, mag: bool) -> dict[str, dict[str, 
     return out
 
 
-def sample_times_ns(
-    starts: np.ndarray,
-    next_start: int | None,
-    counts: np.ndarray,
-    rate_hz: np.ndarray,
-    breaks: np.ndarray | None = None,
-) -> np.ndarray:
-    """Per-sample times (N, max count) int64 ns from block starts (entries past a block's count are meaningless):
-    spread to the next block's start when it follows within twice the nominal block duration (and no skipped
-    damaged block lies between them: ``breaks``), else at the nominal rate."""
-    counts = np.maximum(np.asarray(counts, dtype=np.int64), 1)
-    span = _spans(starts, next_start, counts, rate_hz, breaks)
-    k = np.arange(int(counts.max()), dtype=np.int64)
-    return starts[:, None] + (span[:, None] * k[None, :]) // counts[:, None]
-
-
-def _spans(
-    starts: np.ndarray, next_start: int | None, counts: np.ndarray, rate_hz: np.ndarray, breaks: np.ndarray | None
-) -> np.ndarray:
-    """Each block's duration (ns): to the next block's start when it follows within twice the nominal duration,
-    else nominal; a block before skipped damaged blocks (``breaks``) takes the measured rate of the block before it
-    (the device's clock runs off nominal by ~1 %: 14 ms over an AX3 block), nominal when that is unknown too."""
-    counts = np.maximum(np.asarray(counts, dtype=np.int64), 1)
-    nominal = np.round(counts * NS_PER_S / rate_hz).astype(np.int64)
-    nxt = np.append(starts[1:], next_start if next_start is not None else starts[-1] + nominal[-1])
-    span = nxt - starts
-    ok = (span > 0) & (span < 2 * nominal)
-    if breaks is not None:
-        ok &= ~breaks
-    out = np.where(ok, span, nominal)
-    if breaks is not None and len(out) > 1:
-        measured = np.append(nominal[:1], (span[:-1] * counts[1:]) // counts[:-1])  # previous block's rate
-        out = np.where(breaks & np.append(False, ok[:-1]), measured, out)
-    return out
-
-
-MAX_GAP_NS = 31 * 86400 * NS_PER_S  # a longer pause is a clock or file problem: refused
-
-
-def _gaps(
-    path: Path,
-    starts: np.ndarray,
-    next_start: int | None,
-    counts: np.ndarray,
-    rate_hz: np.ndarray,
-    index: np.ndarray,
-    breaks: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Where the recording paused: (sample positions, first NaN time, NaN count) per block, as ``with_fills`` takes.
-
-    A block followed by the next one more than twice its nominal duration later ends a run; the samples that
-    would fit between its nominal end and the next block's start are missing (NaN on the nominal grid).
-    """
-    counts = np.asarray(counts, dtype=np.int64)
-    nominal = np.round(counts * NS_PER_S / rate_hz).astype(np.int64)
-    has_next = np.ones(len(starts), dtype=bool)
-    nxt = np.append(starts[1:], next_start if next_start is not None else 0)
-    has_next[-1] = next_start is not None
-    end = starts + nominal
-    pause = has_next & (nxt - starts >= 2 * nominal)
-    if breaks is not None:  # skipped damaged blocks: a gap whatever its length, after the block's own samples
-        end = np.where(breaks, starts + _spans(starts, next_start, counts, rate_hz, breaks), end)
-        pause |= has_next & breaks & (nxt > end)
-    long = np.nonzero(pause & (nxt - end > MAX_GAP_NS))[0]
-    if len(long):
-        i = int(long[0])
-        raise ConversionError(
-            path,
-            f"data block {int(index[i]) + 1}: starts {int(nxt[i] - end[i]) / 86400e9:.0f} days after the previous "
-            "block: a device clock or file problem",
-        )
-    fill_n = np.where(pause, np.ceil((nxt - end) * rate_hz / NS_PER_S - 1e-9), 0).astype(np.int64)
-    return np.cumsum(counts), end, fill_n
-
-
 def iter_chunks(
     path: Path, options: ConvertOptions | None = None, blocks_per_chunk: int = BLOCKS_PER_CHUNK
 ) -> Iterator[Recording]:
@@ -397,9 +306,19 @@ def iter_chunks(
     name = sanitize_name(names.get(serial.upper(), f"{header.model.lower()}_{serial}"))
     try:
         skip = bool(options.extra.get("skip_damaged"))
-        yield from _decode_batches(path, source, header, n_blocks, blocks_per_chunk, name, skip)
+        rule = time_rule(path, options)
+        yield from _decode_batches(path, source, header, n_blocks, blocks_per_chunk, name, skip, rule)
     finally:
         source.close()
+
+
+def time_rule(path: Path, options: ConvertOptions) -> str:
+    """The sample-time rule asked for (``ConvertOptions.extra["cwa_times"]``, ``--cwa-times``): ``"skdh"``
+    (default) or ``"openmovement"`` (see :mod:`imulog.converters.axivity_time`)."""
+    rule = options.extra.get("cwa_times") or DEFAULT_TIME_RULE
+    if rule not in TIME_RULES:
+        raise ConversionError(path, f"unknown .cwa time rule {rule!r}; known: {', '.join(TIME_RULES)}")
+    return str(rule)
 
 
 def _read_blocks(source, first: int, count: int) -> np.ndarray:
@@ -435,8 +354,10 @@ def _decode_batches(
     blocks_per_chunk: int,
     name: str,
     skip_damaged: bool = False,
+    rule: str = DEFAULT_TIME_RULE,
 ) -> Iterator[Recording]:
     layout: _Layout | None = None
+    previous: PreviousBlock | None = None  # the last intact block so far (chaining across batches)
     origin: int | None = None
     meta: dict = {}
     prev_end: int | None = None
@@ -458,7 +379,7 @@ def _decode_batches(
                     break
                 good, _ = _check_blocks(path, nxt_raw, nxt, j, skip_damaged)
                 if len(good):
-                    ahead, ahead_index = int(block_start_ns(nxt)[0]), j
+                    ahead, ahead_index = int(anchor_ns(nxt, rule)[0]), j
                     break
                 damaged.append(j)
                 j += 1
@@ -490,14 +411,21 @@ def _decode_batches(
         elif lay != layout:
             raise ConversionError(path, f"data block {int(index[0])}: sample layout changes within the recording")
         rate = rate_from_code(blocks["rate_code"])
-        starts = block_start_ns(blocks)
+        anchors = anchor_ns(blocks, rule)
         counts = blocks["count"].astype(np.int64)
         filled = np.arange(layout.capacity)[None, :] < counts[:, None]  # (N, capacity): the samples each block holds
-        t = sample_times_ns(starts, ahead, counts, rate, breaks)
+        starts, spans = block_spans(rule, anchors, ahead, counts, rate, breaks, previous)
+        previous = PreviousBlock(
+            anchor=int(anchors[-1]),
+            nominal=int(nominal_ns(counts[-1:], rate[-1:])[0]),
+            break_after=bool(breaks[-1]) if breaks is not None else False,
+        )
+        t = sample_times_ns(starts, spans, counts)
         t = np.pad(t, ((0, 0), (0, layout.capacity - t.shape[1])))[filled]
         if origin is None:
             origin = int(t[0])
             meta = _device_meta(path, header, layout, name, blocks)
+            meta["time_rule"] = rule
         d = np.diff(np.concatenate([[origin - 1 if prev_end is None else prev_end], t]))
         if (d <= 0).any():
             i = int(np.repeat(np.arange(len(counts)), counts)[int(np.nonzero(d <= 0)[0][0])])
@@ -510,7 +438,7 @@ def _decode_batches(
             "gyr": None if gyr is None else np.radians(gyr[filled]),
             "mag": None if mag is None else mag[filled],
         }
-        positions, fill_t0, fill_n = _gaps(path, starts, ahead, counts, rate, index, breaks)
+        positions, fill_t0, fill_n = gaps(path, anchors, ahead, starts + spans, counts, rate, index, breaks)
         n_gaps += int(np.count_nonzero(fill_n))
         gap_samples += int(fill_n.sum())
         meta.update(gaps=n_gaps, gap_samples=gap_samples)
