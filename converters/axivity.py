@@ -11,12 +11,10 @@ Samples: ``numAxesBPS`` 0x30 = 3 axes packed in 32 bits (3 x 10-bit signed + 2-b
 1/2^(8+n) g with n the top 3 bits of ``light``; gyro range 8000/2^m deg/s with m the next 3 bits (32768 = range).
 
 Time: the RTC (``YYYYYYMM MMDDDDDh hhhhmmmm mmssssss``, year + 2000) is the device's **local** time with no zone.
-A set top bit of ``deviceFractional`` gives 15 bits of fraction of that second; the device then lowered
-``timestampOffset`` (the sample index where the RTC second applies) by ``fraction * rate``, which is added back.
-Block start = RTC + fraction - timestampOffset / rate; sample times are interpolated between consecutive block
-starts (nominal rate for the last block and across gaps); where the device paused (the next block more than two
-block durations later) the samples that would fit are NaN on the nominal grid (``gaps``, ``gap_samples`` in the
-device record), in bounded pieces. ``t_ns`` counts from the first sample, whose local time
+Sample times follow scikit-digital-health's rule by default, OpenMovement's with ``extra["cwa_times"] =
+"openmovement"`` (both in :mod:`imulog.converters.axivity_time`). Where the device paused (the next block two
+block durations or more later) the samples that would fit are NaN on the nominal grid (``gaps``, ``gap_samples``
+in the device record), in bounded pieces. ``t_ns`` counts from the first sample, whose local time
 is the trial's ``start_time`` (zone unknown). Light (raw 10-bit counts), temperature (degC = raw * 75 / 256 - 50,
 OpenMovement's conversion; scikit-digital-health's (raw - 171) / 3.142 reads ~2 degC higher at skin temperature)
 and battery (V = (raw + 512) * 6 / 1024) become one row per block in ``/signals/<name>``.
@@ -24,16 +22,11 @@ and battery (V = (raw + 512) * 6 / 1024) become one row per block in ``/signals/
 Every block's checksum is verified: a bad or truncated block stops the conversion with the file and block index
 (a silently skipped block would turn damaged data into a time gap nobody sees). With
 ``ConvertOptions.extra["skip_damaged"]`` damaged blocks (bad checksum, length or block type) are skipped instead:
-each run of them is a gap (NaN samples on the nominal grid, counted in ``gaps``/``gap_samples``; the intact block
-before it keeps the measured rate of the block before that), one warning per run names its blocks (the warnings go
+each run of them is a gap (NaN samples on the nominal grid, counted in ``gaps``/``gap_samples``; the block after
+it is not chained across it), one warning per run names its blocks (the warnings go
 to the conversion record), and ``skipped_damaged_blocks`` in the device record counts them.
 
-Times follow OpenMovement's definition (``cwa-convert``, ``openmovement-python``; GGIRread computes the same block
-start). scikit-digital-health reads times ~10 ms earlier on the shared AX3/AX6 samples: its reader ignores the
-fraction and the offset shim (block start = RTC - timestampOffset / rate, quantised to whole samples) and starts
-each block at the previous block's nominal end; ``tests/test_convert_axivity_time.py`` reproduces its times from
-that rule within 0.1 ms. Blocks are decoded in batches from
-a memory map, so memory does not grow with the recording (:func:`iter_chunks`).
+Blocks are decoded in batches of plain reads, so memory does not grow with the recording (:func:`iter_chunks`).
 """
 
 from __future__ import annotations
