@@ -11,12 +11,10 @@ Samples: ``numAxesBPS`` 0x30 = 3 axes packed in 32 bits (3 x 10-bit signed + 2-b
 1/2^(8+n) g with n the top 3 bits of ``light``; gyro range 8000/2^m deg/s with m the next 3 bits (32768 = range).
 
 Time: the RTC (``YYYYYYMM MMDDDDDh hhhhmmmm mmssssss``, year + 2000) is the device's **local** time with no zone.
-A set top bit of ``deviceFractional`` gives 15 bits of fraction of that second; the device then lowered
-``timestampOffset`` (the sample index where the RTC second applies) by ``fraction * rate``, which is added back.
-Block start = RTC + fraction - timestampOffset / rate; sample times are interpolated between consecutive block
-starts (nominal rate for the last block and across gaps); where the device paused (the next block more than two
-block durations later) the samples that would fit are NaN on the nominal grid (``gaps``, ``gap_samples`` in the
-device record), in bounded pieces. ``t_ns`` counts from the first sample, whose local time
+Sample times follow scikit-digital-health's rule by default, OpenMovement's with ``extra["cwa_times"] =
+"openmovement"`` (both in :mod:`imulog.converters.axivity_time`). Where the device paused (the next block two
+block durations or more later) the samples that would fit are NaN on the nominal grid (``gaps``, ``gap_samples``
+in the device record), in bounded pieces. ``t_ns`` counts from the first sample, whose local time
 is the trial's ``start_time`` (zone unknown). Light (raw 10-bit counts), temperature (degC = raw * 75 / 256 - 50,
 OpenMovement's conversion; scikit-digital-health's (raw - 171) / 3.142 reads ~2 degC higher at skin temperature)
 and battery (V = (raw + 512) * 6 / 1024) become one row per block in ``/signals/<name>``.
@@ -24,21 +22,17 @@ and battery (V = (raw + 512) * 6 / 1024) become one row per block in ``/signals/
 Every block's checksum is verified: a bad or truncated block stops the conversion with the file and block index
 (a silently skipped block would turn damaged data into a time gap nobody sees). With
 ``ConvertOptions.extra["skip_damaged"]`` damaged blocks (bad checksum, length or block type) are skipped instead:
-each run of them is a gap (NaN samples on the nominal grid, counted in ``gaps``/``gap_samples``; the intact block
-before it keeps the measured rate of the block before that), one warning per run names its blocks (the warnings go
+each run of them is a gap (NaN samples on the nominal grid, counted in ``gaps``/``gap_samples``; the block after
+it is not chained across it), one warning per run names its blocks (the warnings go
 to the conversion record), and ``skipped_damaged_blocks`` in the device record counts them.
 
-Times follow OpenMovement's definition (``cwa-convert``, ``openmovement-python``; GGIRread computes the same block
-start). scikit-digital-health reads times ~10 ms earlier on the shared AX3/AX6 samples: its reader ignores the
-fraction and the offset shim (block start = RTC - timestampOffset / rate, quantised to whole samples) and starts
-each block at the previous block's nominal end; ``tests/test_convert_axivity_time.py`` reproduces its times from
-that rule within 0.1 ms. Blocks are decoded in batches from
-a memory map, so memory does not grow with the recording (:func:`iter_chunks`).
+Blocks are decoded in batches of plain reads, so memory does not grow with the recording (:func:`iter_chunks`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -50,67 +44,232 @@ from imulog.converters._binary import (
     with_fills,
 )
 from imulog.converters._common import G0, sanitize_name
-from imulog.converters.axivity_format import (
-    BLOCK_BYTES,
-    BLOCK_DTYPE,
-    BLOCKS_PER_CHUNK,
-    HARDWARE,
-    HEADER_BYTES,
-    MAGIC_AX,
-    MAX_GAP_NS,
-    OTHER_BLOCKS,
-    CwaHeader,
-    _check_blocks,
-    _damage,
-    _decode,
-    _gaps,
-    _Layout,
-    _layout,
-    block_start_ns,
-    block_word_sums,
-    gyro_range_dps,
-    parse_header,
+from imulog.converters.axivity_time import (
+    DEFAULT_TIME_RULE,
+    TIME_RULES,
+    PreviousBlock,
+    anchor_ns,
+    block_spans,
+    block_start_ns,  # noqa: F401 - re-exported (tests, benchmarks)
+    gaps,
+    nominal_ns,
     rate_from_code,
-    resolution,
-    rtc_to_epoch_s,
+    rtc_to_epoch_s,  # noqa: F401 - re-exported
     sample_times_ns,
-    temperature_degc,
-    unpack_int16,
-    unpack_packed,
 )
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
 
 from imulog.model import ImuStream, Recording, SignalStream
 
-__all__ = [
-    "AxivityConverter",
-    "BLOCK_BYTES",
-    "BLOCK_DTYPE",
-    "block_start_ns",
-    "block_word_sums",
-    "BLOCKS_PER_CHUNK",
-    "CONVERTER",
-    "CwaHeader",
-    "gyro_range_dps",
-    "HARDWARE",
-    "HEADER_BYTES",
-    "iter_chunks",
-    "MAGIC_AX",
-    "MAX_GAP_NS",
-    "OTHER_BLOCKS",
-    "parse_header",
-    "rate_from_code",
-    "read_cwa",
-    "resolution",
-    "rtc_to_epoch_s",
-    "sample_times_ns",
-    "temperature_degc",
-    "unpack_int16",
-    "unpack_packed",
-]
-
+HEADER_BYTES = 1024
+BLOCK_BYTES = 512
+BLOCKS_PER_CHUNK = 8192  # 4 MiB of blocks per decoded batch
+BLOCK_DTYPE = np.dtype(
+    [
+        ("magic", "<u2"),
+        ("length", "<u2"),
+        ("fractional", "<u2"),
+        ("session", "<u4"),
+        ("sequence", "<u4"),
+        ("rtc", "<u4"),
+        ("light", "<u2"),
+        ("temperature", "<u2"),
+        ("events", "u1"),
+        ("battery", "u1"),
+        ("rate_code", "u1"),
+        ("axes_bps", "u1"),
+        ("offset", "<i2"),
+        ("count", "<u2"),
+        ("data", "u1", (480,)),
+        ("checksum", "<u2"),
+    ]
+)
 assert BLOCK_DTYPE.itemsize == BLOCK_BYTES
+MAGIC_AX = 0x5841  # b"AX"
+OTHER_BLOCKS = {0x444D, 0x4255, 0x4953}  # "MD" (repeated metadata), "UB" (usage), "SI" (session info): skipped
+HARDWARE = {0x00: "AX3", 0xFF: "AX3", 0x17: "AX3", 0x64: "AX6"}
+
+
+@dataclass(frozen=True)
+class CwaHeader:
+    """The ``MD`` header's fields (rate in Hz, accelerometer range in g)."""
+
+    hardware_type: int
+    device_id: int
+    session_id: int
+    sensor_config: int
+    rate_code: int
+    firmware: int
+    annotation: str
+
+    @property
+    def rate_hz(self) -> float:
+        return rate_from_code(self.rate_code)
+
+    @property
+    def accel_range_g(self) -> int:
+        return 16 >> (self.rate_code >> 6)
+
+    @property
+    def model(self) -> str:
+        return HARDWARE.get(self.hardware_type, f"Axivity (hardware 0x{self.hardware_type:02X})")
+
+
+def parse_header(path: Path, data: bytes) -> CwaHeader:
+    """The 1024-byte ``MD`` header; ConversionError when it is not one."""
+    if len(data) < HEADER_BYTES or data[:2] != b"MD":
+        raise ConversionError(path, "not an Axivity .cwa file (no 'MD' header block)")
+    h = np.frombuffer(data, dtype=np.uint8, count=HEADER_BYTES)
+    device = int(h[5]) | int(h[6]) << 8
+    upper = int(h[11]) | int(h[12]) << 8
+    if upper != 0xFFFF:
+        device |= upper << 16
+    annotation = bytes(h[64:512]).rstrip(b"\xff\x00 ").decode("latin-1").strip()
+    return CwaHeader(
+        hardware_type=int(h[4]),
+        device_id=device,
+        session_id=int.from_bytes(bytes(h[7:11]), "little"),
+        sensor_config=int(h[35]),
+        rate_code=int(h[36]),
+        firmware=int(h[41]),
+        annotation=annotation,
+    )
+
+
+def block_word_sums(raw: np.ndarray) -> np.ndarray:
+    """16-bit sum of the 256 little-endian words of each 512-byte block (0 for an intact block)."""
+    words = raw.view("<u2").reshape(len(raw), BLOCK_BYTES // 2)
+    return (words.sum(axis=1, dtype=np.uint64) & 0xFFFF).astype(np.uint16)
+
+
+def gyro_range_dps(light: np.ndarray) -> np.ndarray:
+    """Gyroscope range (deg/s, 32768 LSB) from the block's ``light`` word: 8000 / 2^m, 2000 when m = 0 (older
+    firmware leaves the bits clear)."""
+    m = (np.asarray(light, dtype=np.int64) >> 10) & 7
+    return np.where(m == 0, 2000.0, 8000.0 / np.left_shift(1, m))
+
+
+def temperature_degc(raw: np.ndarray) -> np.ndarray:
+    """Block temperature in degC from its 10-bit raw value (OpenMovement: raw * 75 / 256 - 50, an MCP9700 on a
+    3 V 10-bit ADC)."""
+    return (np.asarray(raw, dtype=np.int64) & 0x3FF) * (75.0 / 256.0) - 50.0
+
+
+def unpack_packed(data: np.ndarray, count: int) -> np.ndarray:
+    """AX3 packed samples (N, 480) bytes -> (N, count, 3) int32 counts (1 g = 256)."""
+    v = np.ascontiguousarray(data[:, : 4 * count]).view("<u4").astype(np.int64)
+    e = v >> 30
+    out = np.empty((*v.shape, 3), dtype=np.int32)
+    for k in range(3):
+        x = (v >> (10 * k)) & 0x3FF
+        x = np.where(x >= 512, x - 1024, x)
+        out[..., k] = x << e
+    return out
+
+
+def unpack_int16(data: np.ndarray, count: int, axes: int) -> np.ndarray:
+    """Unpacked samples (N, 480) bytes -> (N, count, axes) int16."""
+    return np.ascontiguousarray(data[:, : 2 * axes * count]).view("<i2").reshape(len(data), count, axes)
+
+
+@dataclass(frozen=True)
+class _Layout:
+    axes: int
+    packed: bool
+    capacity: int  # samples a block can hold; each block says how many it holds (sampleCount)
+
+
+def _layout(path: Path, blocks: np.ndarray, first_index: int) -> _Layout:
+    """The (single) sample format of a batch of blocks; ConversionError naming the first odd block."""
+    axes_bps = blocks["axes_bps"]
+    a0 = int(axes_bps[0])
+    odd = np.nonzero(axes_bps != a0)[0]
+    if len(odd):
+        i = int(odd[0])
+        raise ConversionError(
+            path,
+            f"data block {first_index + i}: sample format changes (numAxesBPS 0x{int(axes_bps[i]):02X}; "
+            f"the file started with 0x{a0:02X})",
+        )
+    axes, bps = a0 >> 4, a0 & 0x0F
+    if bps == 0 and axes == 3:
+        packed, size = True, 4
+    elif bps == 2 and axes in (3, 6, 9):
+        packed, size = False, 2 * axes
+    else:
+        raise ConversionError(path, f"data block {first_index}: unsupported sample format numAxesBPS 0x{a0:02X}")
+    capacity = 480 // size
+    too_many = np.nonzero(blocks["count"] > capacity)[0]
+    if len(too_many):
+        i = int(too_many[0])
+        raise ConversionError(
+            path,
+            f"data block {first_index + i}: impossible sample count {int(blocks['count'][i])} (at most {capacity})",
+        )
+    return _Layout(axes=axes, packed=packed, capacity=capacity)
+
+
+def _damage(raw: np.ndarray, blocks: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """Per block of a batch: damaged?, and why ("" when intact)."""
+    sums = block_word_sums(raw)
+    magic = blocks["magic"]
+    bad_magic = (magic != MAGIC_AX) & ~np.isin(magic, list(OTHER_BLOCKS))
+    bad_sum = (magic == MAGIC_AX) & ((sums != 0) | (blocks["length"] != 508))
+    why = [
+        f"not an 'AX' data block (starts {bytes(raw[i, :2])!r})"
+        if bad_magic[i]
+        else "checksum mismatch"
+        if bad_sum[i]
+        else ""
+        for i in range(len(raw))
+    ]
+    return bad_magic | bad_sum, why
+
+
+def _check_blocks(
+    path: Path, raw: np.ndarray, blocks: np.ndarray, first_index: int, skip_damaged: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """(indices in the batch of the AX blocks to decode, indices of damaged blocks). A damaged block is an error
+    naming it unless ``skip_damaged``."""
+    bad, why = _damage(raw, blocks)
+    if bad.any() and not skip_damaged:
+        i = int(np.nonzero(bad)[0][0])
+        what = why[i] if why[i] != "checksum mismatch" else "checksum mismatch (the block is damaged)"
+        raise ConversionError(
+            path,
+            f"data block {first_index + i} (byte {HEADER_BYTES + (first_index + i) * BLOCK_BYTES}): {what}; "
+            "--skip-damaged converts the rest with the damaged blocks as gaps",
+        )
+    return np.nonzero((blocks["magic"] == MAGIC_AX) & ~bad)[0], np.nonzero(bad)[0]
+
+
+def _decode(blocks: np.ndarray, layout: _Layout) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """(acc g, gyr deg/s or None, mag uT or None), each (N, count, 3) float64."""
+    accel_lsb = np.left_shift(1, 8 + ((blocks["light"].astype(np.int64) >> 13) & 7)).astype(np.float64)
+    if layout.packed:
+        return unpack_packed(blocks["data"], layout.capacity) / accel_lsb[:, None, None], None, None
+    raw = unpack_int16(blocks["data"], layout.capacity, layout.axes).astype(np.float64)
+    if layout.axes == 3:
+        return raw / accel_lsb[:, None, None], None, None
+    gyro_range = gyro_range_dps(blocks["light"])
+    gyr = raw[..., 0:3] / (32768.0 / gyro_range)[:, None, None]  # counts / (counts per deg/s): resolution()
+    acc = raw[..., 3:6] / accel_lsb[:, None, None]
+    mag = raw[..., 6:9] / 16.0 if layout.axes == 9 else None
+    return acc, gyr, mag
+
+
+def resolution(blocks: np.ndarray, gyr: bool, mag: bool) -> dict[str, dict[str, float]]:
+    """How the SI values of ``_decode`` (then ``* G0`` and ``np.radians``) follow from the counts of a block:
+    ``(counts / divisor) * scale``; the archive stores the counts where this gives every value back
+    (imulog.archive.numbers)."""
+    light = blocks["light"][:1]
+    out = {"acc": {"divisor": float(np.left_shift(1, 8 + ((int(light[0]) >> 13) & 7))), "scale": G0}}
+    if gyr:
+        out["gyr"] = {"divisor": float(32768.0 / gyro_range_dps(light)[0]), "scale": float(np.pi / 180)}
+    if mag:
+        out["mag"] = {"divisor": 16.0}
+    return out
 
 
 def iter_chunks(
@@ -140,9 +299,19 @@ def iter_chunks(
     name = sanitize_name(names.get(serial.upper(), f"{header.model.lower()}_{serial}"))
     try:
         skip = bool(options.extra.get("skip_damaged"))
-        yield from _decode_batches(path, source, header, n_blocks, blocks_per_chunk, name, skip)
+        rule = time_rule(path, options)
+        yield from _decode_batches(path, source, header, n_blocks, blocks_per_chunk, name, skip, rule)
     finally:
         source.close()
+
+
+def time_rule(path: Path, options: ConvertOptions) -> str:
+    """The sample-time rule asked for (``ConvertOptions.extra["cwa_times"]``, ``--cwa-times``): ``"skdh"``
+    (default) or ``"openmovement"`` (see :mod:`imulog.converters.axivity_time`)."""
+    rule = options.extra.get("cwa_times") or DEFAULT_TIME_RULE
+    if rule not in TIME_RULES:
+        raise ConversionError(path, f"unknown .cwa time rule {rule!r}; known: {', '.join(TIME_RULES)}")
+    return str(rule)
 
 
 def _read_blocks(source, first: int, count: int) -> np.ndarray:
@@ -178,8 +347,10 @@ def _decode_batches(
     blocks_per_chunk: int,
     name: str,
     skip_damaged: bool = False,
+    rule: str = DEFAULT_TIME_RULE,
 ) -> Iterator[Recording]:
     layout: _Layout | None = None
+    previous: PreviousBlock | None = None  # the last intact block so far (chaining across batches)
     origin: int | None = None
     meta: dict = {}
     prev_end: int | None = None
@@ -201,7 +372,7 @@ def _decode_batches(
                     break
                 good, _ = _check_blocks(path, nxt_raw, nxt, j, skip_damaged)
                 if len(good):
-                    ahead, ahead_index = int(block_start_ns(nxt)[0]), j
+                    ahead, ahead_index = int(anchor_ns(nxt, rule)[0]), j
                     break
                 damaged.append(j)
                 j += 1
@@ -233,14 +404,21 @@ def _decode_batches(
         elif lay != layout:
             raise ConversionError(path, f"data block {int(index[0])}: sample layout changes within the recording")
         rate = rate_from_code(blocks["rate_code"])
-        starts = block_start_ns(blocks)
+        anchors = anchor_ns(blocks, rule)
         counts = blocks["count"].astype(np.int64)
         filled = np.arange(layout.capacity)[None, :] < counts[:, None]  # (N, capacity): the samples each block holds
-        t = sample_times_ns(starts, ahead, counts, rate, breaks)
+        starts, spans = block_spans(rule, anchors, ahead, counts, rate, breaks, previous)
+        previous = PreviousBlock(
+            anchor=int(anchors[-1]),
+            nominal=int(nominal_ns(counts[-1:], rate[-1:])[0]),
+            break_after=bool(breaks[-1]) if breaks is not None else False,
+        )
+        t = sample_times_ns(starts, spans, counts)
         t = np.pad(t, ((0, 0), (0, layout.capacity - t.shape[1])))[filled]
         if origin is None:
             origin = int(t[0])
             meta = _device_meta(path, header, layout, name, blocks)
+            meta["time_rule"] = rule
         d = np.diff(np.concatenate([[origin - 1 if prev_end is None else prev_end], t]))
         if (d <= 0).any():
             i = int(np.repeat(np.arange(len(counts)), counts)[int(np.nonzero(d <= 0)[0][0])])
@@ -253,7 +431,7 @@ def _decode_batches(
             "gyr": None if gyr is None else np.radians(gyr[filled]),
             "mag": None if mag is None else mag[filled],
         }
-        positions, fill_t0, fill_n = _gaps(path, starts, ahead, counts, rate, index, breaks)
+        positions, fill_t0, fill_n = gaps(path, anchors, ahead, starts + spans, counts, rate, index, breaks)
         n_gaps += int(np.count_nonzero(fill_n))
         gap_samples += int(fill_n.sum())
         meta.update(gaps=n_gaps, gap_samples=gap_samples)

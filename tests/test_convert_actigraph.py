@@ -321,3 +321,28 @@ def test_actilife_csv_errors(gt3x_dir: Path, tmp_path: Path):
     assert r.exit_code != 0 and f"line {n_lines}" in r.output and not out.exists()
     frame = pd.read_csv(io.StringIO("\n".join(lines[10:12])))
     assert list(frame.columns) == ["Accelerometer X", "Accelerometer Y", "Accelerometer Z"]
+
+
+def test_ggir_testfile_sum_differs_only_by_read_gt3xs_rounding(tmp_path: Path):
+    """Held out: GGIR's actigraph_testfile.gt3x (wGT3X-BT, 30 Hz, with idle sleep; Apache-2.0, tests/data). GGIR's
+    test_greadaccfile.R reads its 17,640 recorded samples with read.gt3x and sums x, y, z to 2732.35 g (tolerance
+    0.01); imulog's values sum to 2731.566 g. The whole difference is read.gt3x rounding every value to 3 decimals
+    (``scaleAndRoundActivity``, C ``round``: half away from zero): imulog's values are whole counts / 256, the
+    same 17,640 samples are recorded (the idle-sleep seconds are NaN), and rounded that way they give GGIR's sum."""
+    import lzma
+
+    src = Path(__file__).parent / "data" / "actigraph_testfile.gt3x.xz"
+    path = tmp_path / "actigraph_testfile.gt3x"
+    path.write_bytes(lzma.decompress(src.read_bytes()))
+    rec = read_gt3x(path)
+    imu = rec.imus[0]
+    recorded = np.isfinite(imu.acc).all(axis=1)
+    assert recorded.sum() == 17640 and (~recorded).sum() == 53160 - 17640
+    meta = rec.metadata[f"imulog.device.{imu.name}"]
+    assert meta["rate_hz"] == 30.0 and meta["idle_sleep_gaps"] == 24 and meta["idle_sleep_s"] * 30 == (~recorded).sum()
+    g = imu.acc[recorded] / G0
+    np.testing.assert_allclose(g * 256, np.round(g * 256), rtol=0, atol=1e-9)  # whole counts at 256 per g
+    milli = g * 1000
+    read_gt3x_values = np.sign(milli) * np.floor(np.abs(milli) + 0.5) / 1000
+    assert abs(read_gt3x_values.sum() - 2732.35) < 0.01
+    assert abs(g.sum() - 2731.566) < 0.001  # exact: 699281 counts / 256

@@ -40,10 +40,8 @@ def test_values_match_skdh_reference(cwa_dir: Path, kind: str):
     else:
         assert imu.gyr is None
         np.testing.assert_allclose(imu.acc[0] / G0, [-0.09375, -0.203125, 0.953125], atol=1e-12)
-    # skdh ignores the 15-bit fraction of the block time stamp; ours uses it, so times agree within ~3 samples
-    rate = float(ref["fs"][0])
-    d = _abs_times_s(rec) - ref["time"]
-    assert np.abs(d).max() < 3.2 / rate
+    # times: skdh's rule is the default (tests/test_convert_axivity_time.py), equal to its decode within 0.1 ms
+    assert np.abs(_abs_times_s(rec) - ref["time"]).max() < 1e-4
     assert np.all(np.diff(imu.t_ns) > 0)
     # one signal row per block: temperature as skdh computes it, light counts, battery volts
     sig = rec.signals[0]
@@ -116,16 +114,22 @@ def test_partly_filled_last_block(cwa_dir: Path, tmp_path: Path):
     np.testing.assert_array_equal(part.t_ns, whole.t_ns[: len(part)])
 
 
-def test_a_pause_becomes_nan_samples(cwa_dir: Path, tmp_path: Path):
+@pytest.mark.parametrize("rule", ["skdh", "openmovement"])
+def test_a_pause_becomes_nan_samples(cwa_dir: Path, tmp_path: Path, rule: str):
     """Blocks missing from the middle (the device stopped for 20 s): the samples that would fit are NaN on the
-    nominal grid (the project's gap rule), the recorded samples are untouched."""
+    nominal grid (the project's gap rule), the recorded samples are untouched. By skdh's rule the block after the
+    pause starts at its own time, not chained to the block before it (skdh's rule on the cut file, to 1 us); by
+    OpenMovement's every block keeps its start."""
+    from imulog.converters import ConvertOptions
+
+    opts = ConvertOptions(extra={"cwa_times": rule})
     src = cwa_dir / "ax6_sample.cwa"
     data = src.read_bytes()
     cut = HEADER_BYTES + 100 * BLOCK_BYTES
     path = tmp_path / "pause.cwa"
     path.write_bytes(data[:cut] + data[cut + 50 * BLOCK_BYTES :])
-    whole = read_cwa(src).imus[0]
-    rec = read_cwa(path)
+    whole = read_cwa(src, opts).imus[0]
+    rec = read_cwa(path, opts)
     imu = rec.imus[0]
     missing = np.isnan(imu.acc).any(axis=1)
     run = np.nonzero(missing)[0]
@@ -133,7 +137,13 @@ def test_a_pause_becomes_nan_samples(cwa_dir: Path, tmp_path: Path):
     assert run[0] == 100 * 40 and abs(len(run) - 50 * 40) <= 40  # ~ the 2000 samples of 50 blocks at 100 Hz
     assert np.all(np.diff(imu.t_ns) > 0)
     np.testing.assert_array_equal(imu.acc[~missing], np.concatenate([whole.acc[:4000], whole.acc[6000:]]))
-    np.testing.assert_array_equal(imu.t_ns[~missing][4000:], whole.t_ns[6000:])
+    after = 4040 if rule == "skdh" else 4000  # skdh: the first block after the pause is not chained
+    np.testing.assert_array_equal(imu.t_ns[~missing][after:], whole.t_ns[6000 + after - 4000 :])
+    if rule == "skdh":
+        from cwa_rules import ax_blocks, skdh_rule_s  # skdh itself aborts on a file whose sequence ids skip
+
+        ref = skdh_rule_s(ax_blocks(path))
+        np.testing.assert_allclose(_abs_times_s(rec)[~missing], ref, atol=1e-6, rtol=0)
     np.testing.assert_allclose(np.diff(imu.t_ns[run]), 1e7, atol=1)  # 100 Hz
     dev = rec.metadata[f"imulog.device.{imu.name}"]
     assert dev["gaps"] == 1 and dev["gap_samples"] == len(run)

@@ -122,6 +122,14 @@ __all__ = [
     "(default: the first damaged block is an error naming it).",
 )
 @click.option(
+    "--cwa-times",
+    type=click.Choice(["skdh", "openmovement"]),
+    default="skdh",
+    show_default=True,
+    help="Axivity .cwa sample times: skdh = scikit-digital-health's rule (the reference decode; GGIR's exports "
+    "agree), openmovement = OpenMovement's block starts with the sub-second fraction (docs/converters.md).",
+)
+@click.option(
     "--inspect",
     is_flag=True,
     help="Print what would be made (format, columns to channels, units, rate, start time, warnings); write nothing.",
@@ -147,6 +155,7 @@ def convert(
     list_formats_flag: bool,
     as_json: bool = False,
     skip_damaged: bool = False,
+    cwa_times: str = "skdh",
     inspect: bool = False,
 ) -> None:
     """Convert device exports into one MCAP trial (or a folder of exports into one trial per recording).
@@ -200,6 +209,7 @@ def convert(
             "names": _kv(device_names, "--device-name"),
             "units": _units(unit_pairs),
             "skip_damaged": skip_damaged,
+            "cwa_times": cwa_times,
         },
     )
     dirs = [p for p in inputs if p.is_dir()]
