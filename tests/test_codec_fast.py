@@ -225,3 +225,23 @@ def test_large_stream_bytes_equal_the_per_block_encoder(monkeypatch):
     monkeypatch.setattr(codec, "encode_blocks", _old_encode_blocks)
     assert new[3] == codec.encode(imu)[3]
     assert np.array_equal(codec.decode(new[0], "/imu/big", new[1], new[3]).acc, acc, equal_nan=True)
+
+
+@pytest.mark.parametrize("column_decoder", [True, False])
+def test_blocks_with_and_without_per_value_decimals_decode_together(monkeypatch, column_decoder: bool):
+    """A channel appended in pieces (a live recording's flushes) is planned piece by piece: a piece of
+    values as text with varying decimals (``%.7g``: 123456.5 beside 0.0012345) needs per-value decimals, a piece of whole numbers
+    does not; together they decode exactly."""
+    if not column_decoder:
+        monkeypatch.setattr(block_decode, "MIN_BLOCKS", 10**9)
+    pieces = [np.array([[123456.5, 1.0], [1.234567, 2.0], [0.0012345, 3.0]]), np.array([[3.0, -1.0], [4.0, -1.0]])]
+    t0, payloads, schema, meta = 0, [], None, None
+    for values in pieces:
+        t_ns = t0 + np.arange(len(values), dtype=np.int64) * 5_000_000
+        t0 = int(t_ns[-1]) + 5_000_000
+        schema, meta, _, blocks = codec.encode(SignalStream("/s", t_ns, ["a", "b"], ["mV", "mV"], values))
+        payloads += blocks
+    assert numbers.plan_numbers(pieces[0], None).decimals and not numbers.plan_numbers(pieces[1], None).decimals
+    assert all(codec.MESSAGE_CLASSES[schema].FromString(p).HasField("values_q") for p in payloads)
+    got = codec.decode(schema, "/s", meta, payloads)
+    np.testing.assert_array_equal(got.values, np.concatenate(pieces))

@@ -404,14 +404,18 @@ def decode_numbers(sources: list[tuple[str, Any]], counts: np.ndarray, width: in
     total = int(counts.sum())
     kinds = [k for k, _ in sources]
     out = np.empty((total, width), dtype=np.float64)
-    groups = {"f64": [], "counts": [], "f32": []}
+    # counts with per-value decimals and counts with per-column parameters are decoded apart: a channel written
+    # in several appends (a live recording's flushes) can hold both, e.g. a block whose values are all integers
+    groups: dict[str, list[int]] = {"f64": [], "counts": [], "decimals": [], "f32": []}
     for b, (kind, src) in enumerate(sources):
         if kind == "q":
             kind = "counts" if len(src["counts"]) or not len(src["f32"]) else "f32"
+            if kind == "counts" and len(src.get("decimals") or b""):
+                kind = "decimals"
         if kind in groups:
             groups[kind].append(b)
     row_block = np.repeat(np.arange(len(sources)), counts)
-    if len(groups["f64"]) + len(groups["counts"]) + len(groups["f32"]) != sum(1 for k in kinds if k != "none"):
+    if sum(len(g) for g in groups.values()) != sum(1 for k in kinds if k != "none"):
         raise ValueError(f"{what}: unknown block layout")
     covered = 0
     for kind, blocks in groups.items():
@@ -441,10 +445,7 @@ def decode_numbers(sources: list[tuple[str, Any]], counts: np.ndarray, width: in
             if len(buf) != n * width * 4:
                 raise ValueError(f"{what}: {len(buf)} count bytes for {n} samples x {width} values")
             c = np.frombuffer(buf, dtype="<i4").reshape(n, width)
-            with_dec = [len(s.get("decimals") or b"") > 0 for s in srcs]
-            if any(with_dec):
-                if not all(with_dec):
-                    raise ValueError(f"{what}: decimals in some blocks only")
+            if kind == "decimals":
                 dec = wire.read_zigzag_varints(
                     bytearray().join([s["decimals"] for s in srcs]), n * width, f"{what} decimals"
                 )
