@@ -20,18 +20,21 @@ samples: a jump other than +1 mod 16 is reported; the ``.h5`` files' uint16 copy
 which is not a loss); ``date`` + ``time`` (the acquiring PC's local time, with or without milliseconds) is the
 start.
 
-Memory: read whole, not yet in pieces (issue 24): a long PLUX recording is hundreds of MB of text.
+Memory: in pieces of text cut after whole rows (:func:`iter_opensignals`); the whole file is the one-piece case.
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from datetime import datetime
 from pathlib import Path
 
 import numpy as np
+from imulog.converters import _pieces
 from imulog.converters._binary import UNKNOWN_ZONE
 from imulog.converters._common import sanitize_name, text_head_lines
+from imulog.converters._pieces import text_pieces
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
 
@@ -76,16 +79,23 @@ def _device_columns(path: Path, key: str, dev: dict) -> tuple[list[str], list[in
     return [str(c) for c in cols], bits[: len(cols)], float(rate)
 
 
-def _read_block(path: Path, skip: int, names: list[str]) -> tuple[np.ndarray, list[str]]:
-    """The tab-separated integer block (OpenSignals ends each row with a tab); a bad cell names its line."""
+def _read_block(
+    path: Path, skip: int, names: list[str], data: bytes | None = None, last: bool = True
+) -> tuple[np.ndarray, list[str]]:
+    """The tab-separated integer block (OpenSignals ends each row with a tab); a bad cell names its line.
+
+    ``data``: the rows of one piece of the file, after ``skip`` lines (None: the file's rows after its header);
+    only the file's last row (``last``: the piece ends the file) may be cut short."""
+    import io
+
     import pandas as pd
 
     try:
         df = pd.read_csv(
-            path,
+            path if data is None else io.BytesIO(data),
             sep="\t",
             header=None,
-            skiprows=skip,
+            skiprows=skip if data is None else 0,
             usecols=range(len(names)),
             dtype=str,
             engine="c",
@@ -103,12 +113,21 @@ def _read_block(path: Path, skip: int, names: list[str]) -> tuple[np.ndarray, li
     bad = ~np.isfinite(values)
     if bad.any():
         row, col = (int(x[0]) for x in np.nonzero(bad))
-        if row == len(values) - 1:  # only the last row is damaged: a copy cut short
+        if row == len(values) - 1 and last:  # only the last row is damaged: a copy cut short
             warnings.append(f"{path.name}: line {skip + 1 + row}: last row cut short: dropped")
             return values[:row], warnings
         cell = df.iat[row, col]
         raise ConversionError(path, f"{cell[:30]!r} is not a number", line=skip + 1 + row, column=names[col])
     return values, warnings
+
+
+class _SeqCarry:
+    """A device's ``nSeq`` across pieces: its last value, how many rows it jumped at and the first such line."""
+
+    def __init__(self) -> None:
+        self.last: float | None = None
+        self.jumps = 0
+        self.first: str | None = None  # where the first jump is: "line N" (text) or "sample N" (.h5)
 
 
 def device_streams(
@@ -122,26 +141,36 @@ def device_streams(
     block: np.ndarray,
     first_line: int | None,
     fmt: str = "opensignals-txt",
+    *,
+    first_row: int = 0,
+    seq: _SeqCarry | None = None,
+    last: bool = True,
 ) -> None:
     """Add one device's streams (counts; BITalino physical units), metadata and start time to ``rec``.
 
-    ``first_line``: the text line of the first sample (for the lost-sample warning), None for ``.h5``."""
+    ``first_line``: the text line of the first sample (for the lost-sample warning), None for ``.h5``. For a piece
+    of the file: ``first_row`` its first sample's index, ``seq`` the device's ``nSeq`` so far, ``last`` whether it
+    ends the file (the warnings, about the whole recording, come with the last piece)."""
     if not 0 < rate <= 1e6:
         raise ConversionError(path, f"device {key}: 'sampling rate' {rate!r} is not a rate in Hz")
+    seq = _SeqCarry() if seq is None else seq
     name = sanitize_name(f"opensignals_{key}")
-    t_ns = np.round(np.arange(len(block)) * (1e9 / rate)).astype(np.int64)
-    if "nSeq" in cols and len(block) > 1:
-        seq = block[:, cols.index("nSeq")]
-        stuck = (seq[:-1] >= NSEQ_H5_MAX) & (seq[1:] >= NSEQ_H5_MAX)  # an .h5 counter stays at 65535 once there
-        jumps = np.nonzero(((np.diff(seq) % 16) != 1) & ~stuck)[0]
-        if len(jumps):
-            where = (
-                f"line {first_line + 1 + int(jumps[0])}" if first_line is not None else f"sample {int(jumps[0]) + 1}"
-            )
-            rec.warnings.append(
-                f"{path.name}: device {key}: nSeq jumps at {len(jumps)} row(s) (first {where}): "
-                "samples were lost there; times assume none were"
-            )
+    t_ns = np.round(np.arange(first_row, first_row + len(block)) * (1e9 / rate)).astype(np.int64)
+    if "nSeq" in cols and len(block):
+        col = block[:, cols.index("nSeq")]
+        full = col if seq.last is None else np.concatenate([[seq.last], col])
+        stuck = (full[:-1] >= NSEQ_H5_MAX) & (full[1:] >= NSEQ_H5_MAX)  # an .h5 counter stays at 65535 once there
+        jumps = np.nonzero(((np.diff(full) % 16) != 1) & ~stuck)[0]
+        if len(jumps) and seq.first is None:
+            row = first_row + int(jumps[0]) + (0 if seq.last is None else -1)  # the row before the jump
+            seq.first = f"line {first_line - first_row + 1 + row}" if first_line is not None else f"sample {row + 1}"
+        seq.jumps += len(jumps)
+        seq.last = float(col[-1])
+    if last and seq.jumps:
+        rec.warnings.append(
+            f"{path.name}: device {key}: nSeq jumps at {seq.jumps} row(s) (first {seq.first}): "
+            "samples were lost there; times assume none were"
+        )
     rec.signals.append(
         SignalStream(
             topic=f"/signals/{name}",
@@ -172,7 +201,7 @@ def device_streams(
                 name=name, t_ns=t_ns, channel_names=conv_names, units=conv_units, values=np.column_stack(conv_vals)
             )
         )
-    if raw_acc:
+    if raw_acc and last:
         rec.warnings.append(
             f"{path.name}: device {key}: accelerometer channel(s) {', '.join(raw_acc)} kept as ADC counts: the "
             "file has no calibration (Cmin/Cmax) to convert them to g"
@@ -197,7 +226,8 @@ def device_streams(
             except ValueError:
                 continue
         if start is None:
-            rec.warnings.append(f"{path.name}: date/time {dev['date']!r} {dev['time']!r} not understood")
+            if last:
+                rec.warnings.append(f"{path.name}: date/time {dev['date']!r} {dev['time']!r} not understood")
             return
         rec.metadata["imulog.trial"] = {
             "start_time": start.isoformat(timespec="milliseconds"),
@@ -207,6 +237,16 @@ def device_streams(
 
 
 def read_opensignals(path: Path, options: ConvertOptions | None = None) -> Recording:
+    """The whole file: :func:`iter_opensignals` as one piece."""
+    (rec,) = iter_opensignals(path, options, piece_bytes=None)
+    return rec
+
+
+def iter_opensignals(
+    path: Path, options: ConvertOptions | None = None, piece_bytes: int | None = None
+) -> Iterator[Recording]:
+    """The recording in pieces of about ``piece_bytes`` of text cut after whole rows (None: one piece); the
+    warnings about the whole recording (lost samples, counts kept) come with the last piece."""
     path = Path(path)
     with open(path, "rb") as f:
         head = f.read(256 * 1024)
@@ -214,16 +254,36 @@ def read_opensignals(path: Path, options: ConvertOptions | None = None) -> Recor
     devices, skip = parse_header(path, lines)
     layout = [(key, dev, *_device_columns(path, key, dev)) for key, dev in devices]
     names = [f"{key}:{c}" for key, _, cols, _, _ in layout for c in cols]
-    values, warnings = _read_block(path, skip, names)
-    if len(values) == 0:
-        raise ConversionError(path, "no samples after the header", line=skip + 1)
-    rec = Recording(sources=[str(path)], warnings=warnings)
-    offset = 0
-    for key, dev, cols, bits, rate in layout:
-        block = values[:, offset : offset + len(cols)]
-        offset += len(cols)
-        device_streams(rec, path, key, dev, cols, bits, rate, block, first_line=skip + 1)
-    return rec
+    carries = {key: _SeqCarry() for key, *_ in layout}
+    pieces = iter([(None, skip, 0, True)]) if piece_bytes is None else text_pieces(path, skip, piece_bytes)
+    first_row = 0
+    for data, lines_before, k, last in pieces:
+        if data is not None and k and last and not data.strip():
+            continue  # nothing but blank lines after the previous piece
+        values, warnings = _read_block(path, lines_before, names, data, last)
+        if first_row == 0 and len(values) == 0:
+            raise ConversionError(path, "no samples after the header", line=skip + 1)
+        rec = Recording(sources=[str(path)], warnings=warnings)
+        offset = 0
+        for key, dev, cols, bits, rate in layout:
+            block = values[:, offset : offset + len(cols)]
+            offset += len(cols)
+            device_streams(
+                rec,
+                path,
+                key,
+                dev,
+                cols,
+                bits,
+                rate,
+                block,
+                first_line=lines_before + 1,
+                first_row=first_row,
+                seq=carries[key],
+                last=last,
+            )
+        first_row += len(values)
+        yield rec
 
 
 class OpenSignalsConverter(Converter):
@@ -247,6 +307,10 @@ class OpenSignalsConverter(Converter):
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_opensignals(Path(path), options)
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """Pieces of about 16 MB of text (see :func:`iter_opensignals`)."""
+        return iter_opensignals(Path(path), options, piece_bytes=_pieces.PIECE_BYTES)
 
 
 CONVERTER = OpenSignalsConverter()

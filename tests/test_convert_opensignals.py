@@ -159,3 +159,26 @@ def test_opensignals_h5_saturated_counter_and_whole_second_time(tmp_path):
     assert "nSeq jumps at 1 row(s) (first sample 1000)" in w  # not the ~4500 rows at 65535
     assert rec.metadata["imulog.trial"]["start_time"] == "2019-03-18T12:02:03.000"
     assert not any("not understood" in w for w in rec.warnings)
+
+
+@pytest.mark.parametrize("seq_gap", [False, True])
+def test_text_in_pieces_equals_one_piece(tmp_path, seq_gap):
+    """Tiny pieces give the one-piece conversion: values, times, the nSeq warning (its first line across a piece
+    border), the counts warning and a cut final row."""
+    import dataclasses
+
+    from imulog.converters._binary import concat_chunks
+    from imulog.converters.opensignals import iter_opensignals, read_opensignals
+
+    path, _ = _write(tmp_path, seq_gap=seq_gap)
+    path.write_bytes(path.read_bytes() + b"7\t0\t0")  # a copy cut inside its last row
+    whole = read_opensignals(path)
+    assert any("last row cut short" in w for w in whole.warnings)
+    for piece_bytes in (700, 4000):
+        pieces = list(iter_opensignals(path, piece_bytes=piece_bytes))
+        joined = concat_chunks(pieces)
+        assert len(pieces) > 1 and joined.warnings == whole.warnings and joined.metadata == whole.metadata
+        for a, b in zip(joined.streams(), whole.streams(), strict=True):
+            for f in dataclasses.fields(a):
+                if isinstance(getattr(a, f.name), np.ndarray):
+                    assert getattr(a, f.name).tobytes() == getattr(b, f.name).tobytes(), (a.topic, f.name)
