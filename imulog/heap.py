@@ -8,7 +8,7 @@ as :func:`bound_heap` does, turns the dynamic adjustment off (``mallopt(3)``): e
 mapped on allocation and returned to the system when freed. Measured on ``imulog process metrics`` of a
 simulated 1-day and 7-day recording (``benchmarks/bench_long.py``): peak RSS 261 and 309 MB (1.18x) with glibc's
 default, 234 and 257 MB (1.10x) with the fixed threshold, and the step was no slower (34 s against 46 s for the
-day, on a loaded machine). The core-by-core paths (metrics, orientation, phases of long recordings) call it; short
+day, on a loaded machine). The window-by-window paths of trajectory and kinematics call it; short
 trials do not, because mapping every temporary afresh costs system time (about 0.4 s on a whole-file Nexus
 conversion, measured by the convert benchmark).
 
@@ -17,8 +17,9 @@ samples is 2.9 MB) is mapped, faulted in page by page and unmapped again. ``imul
 simulated day spent 8.7 s of its 26 s CPU in the kernel (3.3 M minor page faults) with the 128 KiB threshold.
 :func:`reuse_heap` does the opposite: blocks up to 32 MiB come from the heap and freed memory is kept there (trim
 threshold 256 MiB, top pad 64 MiB), so the next core reuses the pages already faulted in: 0.4 s system time
-(83 k faults), peak RSS 438 MB against 389 MB, on the same day (loaded machine, ``/usr/bin/time``). The steps
-whose memory growth from one to seven days was measured with it call it (docs/long_recordings.md).
+(83 k faults), peak RSS 438 MB against 389 MB, on the same day (loaded machine, ``/usr/bin/time``). Orientation,
+phases and metrics call it: with it their peak RSS grew 1.05-1.07x from a simulated day to a week
+(docs/long_recordings.md), within issue 24's 1.15x, where glibc's default had given metrics 1.18x.
 """
 
 from __future__ import annotations
