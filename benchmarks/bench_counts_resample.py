@@ -3,7 +3,7 @@
     python benchmarks/bench_counts_resample.py          # agreement with agcounts + speed on 1 h at 100 Hz
 
 Agreement: largest difference per 10-s epoch and axis, and total counts, against agcounts' stored output
-(tests/data/agcounts_10s.csv) for the AX6 sample (../shared/data, if present) and the closed-form signals of
+(tests/data/agcounts_10s.csv) for the AX6 and GT9X samples (../shared/data, if present) and the closed-form signals of
 tests/data/agcounts_signals.py, with each resampler. Speed: wall and CPU (user+sys) seconds to bring one hour of
 100 Hz (3 axes) to 30 Hz, best of 3, both resamplers in this process (the machine is shared: CPU time is the
 steadier figure).
@@ -54,13 +54,14 @@ def reference() -> dict[tuple[str, int], np.ndarray]:
     return {k: np.array(v) for k, v in out.items()}
 
 
-def ax6_g() -> np.ndarray | None:
+def shared_g(name: str, topic: str) -> np.ndarray | None:
+    """A shared recording (../shared/data/devices/NAME) converted by imulog, acceleration in g; None if absent."""
     from click.testing import CliRunner
 
     from imulog.archive import TrialReader
     from imulog.cli import cli
 
-    src = REPO / ".." / "shared" / "data" / "devices" / "axivity_cwa" / "ax6_sample.cwa"
+    src = REPO / ".." / "shared" / "data" / "devices" / name
     if not src.exists():
         return None
     with tempfile.TemporaryDirectory() as d:
@@ -69,7 +70,7 @@ def ax6_g() -> np.ndarray | None:
         if r.exit_code:
             raise SystemExit(r.output)
         with TrialReader(out) as t:
-            return np.asarray(t.read("/imu/ax6_6011802").acc, dtype=np.float64) / 9.80665
+            return np.asarray(t.read(topic).acc, dtype=np.float64) / 9.80665
 
 
 def main() -> int:
@@ -78,9 +79,13 @@ def main() -> int:
     spec.loader.exec_module(sig)
     ref = reference()
     cases = [(f"closed-form {r} Hz", r, sig.synthetic_acc(r), ref[("synthetic", r)]) for r in sig.RATES_HZ]
-    g = ax6_g()
-    if g is not None:
-        cases.insert(0, ("AX6 sample 100 Hz", 100, g, ref[("axivity_cwa/ax6_sample.cwa", 100)]))
+    for label, name, topic, rate in (
+        ("AX6 sample 100 Hz", "axivity_cwa/ax6_sample.cwa", "/imu/ax6_6011802", 100),
+        ("GT9X sample 90 Hz", "actigraph_gt3x/example.gt3x", "/imu/tas1e31150129", 90),
+    ):
+        g = shared_g(name, topic)
+        if g is not None:
+            cases.insert(0, (label, rate, g, ref[(name, rate)]))
     print("largest |difference| per 10-s epoch and axis (x, y, z) and total counts, against agcounts 0.2.6")
     print(f"  {'signal':22s} {'ActiLife resampler':>26s} {'polyphase (before)':>30s}   agcounts total")
     for name, rate, acc, r in cases:
