@@ -7,7 +7,8 @@
 * **non-wear** by the van Hees 2013 rule: a 60-min window is non-wear when at least 2 of the 3 axes have a standard
   deviation below 13 mg or at least 2 have a value range below 50 mg; windows move in 15-min blocks;
 * **ActiGraph counts** by the published algorithm (Brønd et al. 2017; exact coefficients in Neishabouri et al.
-  2022, Sci Rep 12:11958, Table 1): resample to 30 Hz, band-pass IIR, scale, rectify, threshold, 10 Hz, epoch sum.
+  2022, Sci Rep 12:11958, Table 1): resample to 30 Hz as ActiLife does (:mod:`imulog.process.counts_resample`),
+  band-pass IIR, scale, rectify, threshold, 10 Hz, epoch sum.
 
 Every function here works on one window of samples plus small state, so the step
 (:mod:`imulog.steps.epochs`) applies them window by window in bounded memory.
