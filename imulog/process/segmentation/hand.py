@@ -137,13 +137,14 @@ def _still_window(acc: np.ndarray, lo: int, hi: int, length: int, reach: int, fr
     """:func:`_rest_window`, moved away from the phase (up to the gap's middle) when it is not still.
 
     The window ``reach`` from the phase's gyroscope boundary lies in the rest only if that boundary is right;
-    a slow last submovement (the wrist no longer turning) can still be under way there. The gap's middle is
-    the surest rest; of the windows between the default position and the middle, the one nearest the phase is
-    taken whose mean specific force (m/s^2) is within ``n_sigma`` x the middle's noise (per-axis robust sd, rms
-    over the axes; half the motion level) of the middle's mean (a hand still decelerating into it is not still;
-    a rest drifting at 1-2 cm/s, whose acceleration stays under 0.04 m/s^2, is left as it is) and whose
-    acceleration variance is at most twice the smallest: the default position whenever it is as still as the
-    middle; else half a window beyond the first such window."""
+    a slow last submovement (the wrist no longer turning) can still be under way there. Of the windows between
+    the default position and the gap's middle, the quietest (smallest acceleration variance, summed over the
+    axes) is the surest rest (the middle itself can lie in a calibration wave); the one nearest the phase is
+    taken whose mean specific force (m/s^2) is within ``n_sigma`` x the quietest's noise (per-axis robust sd,
+    rms over the axes; half the motion level) of the quietest's mean (a hand still decelerating into it is not
+    still; a rest drifting at 1-2 cm/s, whose acceleration stays under 0.04 m/s^2, is left as it is) and whose
+    variance is at most twice the smallest: the default position whenever it is as still as the quietest; else
+    half a window beyond the first such window (the quietest when none is)."""
     w = _rest_window(lo, hi, length, reach, from_end)
     if w is None or hi - lo <= 2 * reach:
         return w
@@ -157,13 +158,14 @@ def _still_window(acc: np.ndarray, lo: int, hi: int, length: int, reach: int, fr
     c2 = np.concatenate([np.zeros((1, 3)), np.cumsum(seg**2, axis=0)])
     s1, s2 = c1[length:] - c1[:-length], c2[length:] - c2[:-length]
     var = (s2 - s1**2 / length).sum(axis=1) / length
-    ref = np.asarray(acc[mid : mid + length], dtype=float)
+    quiet = first + int(np.argmin(var))  # the surest rest: the quietest window of the range
+    ref = np.asarray(acc[quiet : quiet + length], dtype=float)
     centre = np.median(ref, axis=0)
     noise = float(np.sqrt(np.mean((1.4826 * np.median(np.abs(ref - centre), axis=0)) ** 2)))
     shift = np.linalg.norm(s1 / length - ref.mean(axis=0), axis=1)
     ok = np.flatnonzero((var <= 2.0 * var.min()) & (shift <= n_sigma * noise))
     if len(ok) == 0:
-        return mid, mid + length
+        return quiet, quiet + length
     a = first + int(ok[-1] if from_end else ok[0])
     if a == w[0]:  # the default position is still
         return w
