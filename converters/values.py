@@ -31,6 +31,7 @@ import numpy as np
 from imulog.converters.errors import ConversionError
 
 from imulog.model import ImuStream, Recording
+from imulog.numeric import step_rate_hz
 
 G0 = 9.80665
 LIMITS = {
@@ -168,13 +169,11 @@ def _median_rate(t_ns: np.ndarray) -> float | None:
     if len(t_ns) < 3:
         return None
     step = max(1, (len(t_ns) - 1) // MAX_RATE_SAMPLES)
-    dt = (t_ns[1:][::step] - t_ns[:-1][::step]).astype(np.float64)
-    dt = dt[dt > 0]
-    return 1e9 / float(np.median(dt)) if len(dt) >= 2 else None
+    return step_rate_hz(t_ns[1:][::step] - t_ns[:-1][::step])
 
 
 def _rate(stream: Any, rec: Recording, report: ValueReport) -> None:
-    """A declared ``rate_hz`` off the time stamps' median rate by more than 1 %: the time stamps win, reported."""
+    """A declared ``rate_hz`` off the time stamps' rate (:func:`imulog.numeric.step_rate_hz`) by more than 1 %: the time stamps win, reported."""
     meta = getattr(stream, "meta", None)
     if not isinstance(meta, dict) or stream.topic in report.rates:
         return

@@ -13,6 +13,7 @@ import time
 import pytest
 
 from imulog.archive import TrialReader
+from imulog.archive.journal import journal_path
 from imulog.batch import run
 from imulog.batch.ledger import LEDGER_NAME
 from imulog.batch.simulated import simulate_archive
@@ -42,8 +43,11 @@ def test_killed_batch_resumes_without_repeating_work(tmp_path):
         while _ledger_lines(ledger) < 2 and proc.poll() is None and time.monotonic() < deadline:
             time.sleep(0.02)
         # ... and the next file has at least one step appended (so one file is killed half-processed)
+        # (an append writes into the file in place: it is committed once its journal is gone, docs/archive.md)
         third = paths[2]
-        while third.stat().st_mtime_ns == mtimes[2] and proc.poll() is None and time.monotonic() < deadline:
+        while proc.poll() is None and time.monotonic() < deadline and (
+            third.stat().st_mtime_ns == mtimes[2] or journal_path(third).exists()
+        ):
             time.sleep(0.005)
         assert proc.poll() is None, proc.communicate()
         os.killpg(proc.pid, signal.SIGKILL)  # the batch's own process group (it and any children)

@@ -122,8 +122,12 @@ def mean_rate_hz(t_ns: np.ndarray) -> float:
 
 
 def nominal_rate_hz(t_ns: np.ndarray) -> float:
-    """Nominal sampling rate (Hz) from the median sample interval: insensitive to dropped samples."""
+    """Nominal sampling rate (Hz) from the steady sample intervals (:func:`imulog.numeric.step_rate_hz`):
+    insensitive to dropped samples and gaps."""
+    from imulog.numeric import step_rate_hz
+
     dt = np.diff(np.asarray(t_ns, dtype=np.int64))
-    if len(dt) == 0 or np.median(dt) <= 0:
+    rate = step_rate_hz(dt) if len(dt) and np.median(dt) > 0 else None
+    if rate is None:
         raise ValueError("need at least 2 samples with increasing time stamps")
-    return 1e9 / float(np.median(dt))
+    return rate
