@@ -122,12 +122,15 @@ def mean_rate_hz(t_ns: np.ndarray) -> float:
 
 
 def nominal_rate_hz(t_ns: np.ndarray) -> float:
-    """Nominal sampling rate (Hz) from the steady sample intervals (:func:`imulog.numeric.step_rate_hz`):
-    insensitive to dropped samples and gaps."""
+    """Nominal sampling rate (Hz) from the median sample interval: insensitive to dropped samples and gaps. Where
+    the intervals' median and the mean of the steady ones (:func:`imulog.numeric.step_rate_hz`) disagree by more
+    than 0.5 %, the clock steps around its rate (Axivity block times at 12.5 Hz: 79, 81 and 82 ms) and the mean is
+    the rate."""
     from imulog.numeric import step_rate_hz
 
     dt = np.diff(np.asarray(t_ns, dtype=np.int64))
-    rate = step_rate_hz(dt) if len(dt) and np.median(dt) > 0 else None
-    if rate is None:
+    if len(dt) == 0 or np.median(dt) <= 0:
         raise ValueError("need at least 2 samples with increasing time stamps")
-    return rate
+    median = 1e9 / float(np.median(dt))
+    steady = step_rate_hz(dt)
+    return steady if steady is not None and abs(steady - median) > 0.005 * steady else median
