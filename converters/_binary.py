@@ -7,6 +7,7 @@ them into one :class:`imulog.model.Recording` (and a streaming writer can consum
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterable, Iterator
 from datetime import UTC, datetime, timedelta
 from typing import Any
@@ -178,46 +179,8 @@ def concat_chunks(chunks: Iterable[Recording]) -> Recording:
             signals.setdefault(s.topic, []).append(s)
         for s in c.events:
             events.setdefault(s.topic, []).append(s)
-    for parts in imus.values():
-        p0 = parts[0]
-        out.imus.append(
-            ImuStream(
-                name=p0.name,
-                t_ns=np.concatenate([p.t_ns for p in parts]),
-                acc=_cat([p.acc for p in parts]),
-                gyr=_cat([p.gyr for p in parts]),
-                mag=_cat([p.mag for p in parts]),
-                temperature=_cat([p.temperature for p in parts]),
-                frame_id=p0.frame_id,
-                meta=_meta(parts),
-            )
-        )
-    for parts in signals.values():
-        p0 = parts[0]
-        out.signals.append(
-            SignalStream(
-                topic=p0.topic,
-                t_ns=np.concatenate([p.t_ns for p in parts]),
-                columns=list(p0.columns),
-                units=list(p0.units),
-                values=np.concatenate([p.values for p in parts]),
-                frame_id=p0.frame_id,
-                attrs=dict(p0.attrs),
-            )
-        )
-    for parts in markers.values():
-        p0 = parts[0]
-        out.markers.append(
-            MarkerStream(
-                name=p0.name,
-                t_ns=np.concatenate([p.t_ns for p in parts]),
-                labels=list(p0.labels),
-                pos=np.concatenate([p.pos for p in parts]),
-                valid=np.concatenate([p.valid for p in parts]),
-                frame_id=p0.frame_id,
-                meta=_meta(parts),
-            )
-        )
+    for kind, groups in ((out.imus, imus), (out.signals, signals), (out.markers, markers)):
+        kind.extend(_join(parts) for parts in groups.values())
     for parts in events.values():
         out.events.append(
             Intervals(
@@ -228,31 +191,25 @@ def concat_chunks(chunks: Iterable[Recording]) -> Recording:
                 task_index=np.concatenate([p.task_index for p in parts]),
             )
         )
-    for parts in analogs.values():
-        p0 = parts[0]
-        out.analogs.append(
-            AnalogStream(
-                name=p0.name,
-                t_ns=np.concatenate([p.t_ns for p in parts]),
-                channel_names=list(p0.channel_names),
-                units=list(p0.units),
-                values=np.concatenate([p.values for p in parts]),
-                meta=_meta(parts),
-            )
-        )
-    for parts in poses.values():
-        p0 = parts[0]
-        out.poses.append(
-            PoseStream(
-                topic=p0.topic,
-                t_ns=np.concatenate([p.t_ns for p in parts]),
-                position=np.concatenate([p.position for p in parts]),
-                orientation=np.concatenate([p.orientation for p in parts]),
-                frame_id=p0.frame_id,
-                precision=p0.precision,
-            )
-        )
+    for kind, groups in ((out.analogs, analogs), (out.poses, poses)):
+        kind.extend(_join(parts) for parts in groups.values())
     return out
+
+
+def _join(parts: list[Any]) -> Any:
+    """One sample stream (IMU, signal, marker, analog, pose) from its consecutive parts: every array field joined
+    (None when a part lacks it), ``meta`` merged (:func:`_meta`), names, labels, units and the rest the first's."""
+    p0 = parts[0]
+    fields: dict[str, Any] = {}
+    for f in dataclasses.fields(p0):
+        v = getattr(p0, f.name)
+        if f.name == "meta":
+            fields[f.name] = _meta(parts)
+        elif isinstance(v, np.ndarray) or v is None:
+            fields[f.name] = _cat([getattr(p, f.name) for p in parts])
+        else:
+            fields[f.name] = type(v)(v) if isinstance(v, (list, dict)) else v
+    return type(p0)(**fields)
 
 
 def _meta(parts: list[Any]) -> dict[str, Any]:
