@@ -10,34 +10,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from truth_repetitions import true_repetitions
 
-from imulog.process.trajectory_opt import DEFAULT_PARAMS, Repetition, heading_drift, rotate_about_z, trial_waypoints
+from imulog.process.trajectory_opt import DEFAULT_PARAMS, heading_drift, rotate_about_z, trial_waypoints
 from imulog.simulate import simulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
 
-def _true_repetitions(sim) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[Repetition]]:
-    """Times (s), true positions relative to each repetition's start (m), the true static mask and the
-    repetitions (true phases, 1 s of rest either side)."""
-    t = (sim.truth.t_ns - sim.truth.t_ns[0]) * 1e-9
-    ph = sim.truth.phases
-    reps = []
-    for rep in sorted(set(ph.task_index.tolist())):
-        sel = ph.task_index == rep
-        b = np.c_[ph.start_ns[sel], ph.end_ns[sel]] * 1e-9 - sim.truth.t_ns[0] * 1e-9
-        i0, i1 = np.searchsorted(t, b[0, 0] - 1.0), np.searchsorted(t, b[-1, 1] + 1.0)
-        reps.append(Repetition(int(rep), int(i0), int(i1), b))
-    rel = np.full_like(sim.truth.position, np.nan)
-    for r in reps:
-        rel[r.start : r.stop] = sim.truth.position[r.start : r.stop] - sim.truth.position[r.start]
-    return t, rel, np.asarray(sim.truth.static_mask, dtype=bool), reps
-
-
 @pytest.fixture(scope="module")
 def true_trial():
     sim = simulate("r2g", subject=3, seed=4, repetitions=8, noise_free=True)
-    t, rel, static, reps = _true_repetitions(sim)
+    t, rel, static, reps = true_repetitions(sim)
     wp = trial_waypoints(sim.recording.metadata["imulog.anthropometrics"], t, rel, reps)  # as the pipeline does
     return t, rel, static, reps, wp
 

@@ -8,9 +8,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from truth_repetitions import true_repetitions
 
 from imulog.process.minjerk import r2g_waypoints_from_anthropometrics
-from imulog.process.trajectory_opt import Repetition, trial_waypoints
+from imulog.process.trajectory_opt import trial_waypoints
 from imulog.simulate import simulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
@@ -61,17 +62,7 @@ def test_h1_h2_h3_are_the_bottle_and_mouth_displacements_with_their_signs():
         assert mouth[0] == pytest.approx(anth["mouth_dx_m"], abs=0.015)
         # the waypoints the optimisation uses: measured coordinates from the record, the rest from a trajectory
         # (here the truth itself, so only the anthropometric coordinates are under test)
-        t = (sim.truth.t_ns - sim.truth.t_ns[0]) * 1e-9
-        ph = sim.truth.phases
-        reps = []
-        for rep in sorted(set(ph.task_index.tolist())):
-            sel = ph.task_index == rep
-            b = np.c_[ph.start_ns[sel], ph.end_ns[sel]] * 1e-9 - sim.truth.t_ns[0] * 1e-9
-            i0, i1 = np.searchsorted(t, b[0, 0] - 1.0), np.searchsorted(t, b[-1, 1] + 1.0)
-            reps.append(Repetition(int(rep), int(i0), int(i1), b))
-        rel = np.full_like(sim.truth.position, np.nan)
-        for r in reps:
-            rel[r.start : r.stop] = sim.truth.position[r.start : r.stop] - sim.truth.position[r.start]
+        t, rel, _, reps = true_repetitions(sim)
         wp = trial_waypoints(anth, t, rel, reps)
         assert np.allclose(wp.bottle_m[:2], bottle[:2], atol=0.015)
         assert np.allclose(wp.mouth_m, mouth, atol=0.015)
