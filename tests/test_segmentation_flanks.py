@@ -9,7 +9,7 @@ import pytest
 
 from imulog.process import quaternion as quat
 from imulog.process.segmentation.boundaries import refine_phase_boundaries
-from imulog.process.segmentation.flanks import hinge_fit
+from imulog.process.segmentation.flanks import hinge_fit, speed_flank_zero
 from imulog.process.segmentation.hand import HandParams, refine_with_accelerometer
 from imulog.process.segmentation.rescue import rescue_missed
 from imulog.simulate.motion import MotionPlan
@@ -108,3 +108,32 @@ def test_a_phase_below_the_detection_threshold_is_rescued_from_its_rest():
     assert 20.0 < t[s[k]] < t[e[k] - 1] < 23.0  # inside the slow phase (its boundaries are refined later)
     assert np.all(np.diff(s) > 0) and np.all(e > s)
     assert rescue_missed(start, end, norm, fraction=0.0)[0].tolist() == start.tolist()
+
+
+def test_the_speed_flank_after_an_hour_of_rest_is_the_one_after_a_short_rest():
+    """A daily-life rest can last hours (a week's phases step asked for 55 GiB when the fit spanned the whole
+    rest): the fit is bounded and finds the onset of a short rest within a sample."""
+    rate = 100.0
+    t = np.arange(int(3 * rate)) / rate
+    rise = np.where(t > 1.0, 0.08 * (t - 1.0) ** 2, 0.0)  # speed of a slow start at 1.0 s, m/s
+    v_short = np.c_[rise, 0.3 * rise, np.zeros_like(rise)] + 0.001 * np.random.default_rng(1).standard_normal(
+        (len(t), 3)
+    )
+    rest = 0.001 * np.random.default_rng(2).standard_normal((int(3600 * rate), 3))
+    v_long = np.r_[rest, v_short]
+    max_fit = int(10 * rate)
+    z_short = speed_flank_zero(v_short, 100, 0.03, max_fit)
+    z_long = speed_flank_zero(v_long, len(rest) + 100, 0.03, max_fit)
+    assert z_short is not None and abs(z_short / rate - 1.0) < 0.05
+    assert z_long == pytest.approx(len(rest) + z_short, abs=1.0)  # within a sample (the fit sees more rest)
+
+
+def test_hinge_fit_in_blocks_equals_one_block(monkeypatch):
+    import imulog.process.segmentation.flanks as flanks
+
+    x = np.arange(400, dtype=float)
+    y = np.maximum(x - 123.4, 0) + 0.3 * np.random.default_rng(3).standard_normal(len(x))
+    whole = hinge_fit(x, y, 1)
+    monkeypatch.setattr(flanks, "_MAX_CELLS", 1000)  # 2 candidates per block
+    assert hinge_fit(x, y, 1) == pytest.approx(whole, abs=1e-9)
+    assert abs(whole - 123.4) < 2

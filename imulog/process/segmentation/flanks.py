@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+_MAX_CELLS = 1 << 21  # candidate x sample cells per block of hinge_fit (16 MB of float64)
+
 
 def hinge_fit(x: np.ndarray, y: np.ndarray, power: int = 1) -> float | None:
     """``t0`` (in units of ``x``, sub-sample) of the least-squares fit ``y = c + k max(x - t0, 0)^power``, ``k > 0``.
@@ -22,10 +24,13 @@ def hinge_fit(x: np.ndarray, y: np.ndarray, power: int = 1) -> float | None:
     n_cand = max(len(x) - 2, 0)
     if n_cand == 0:
         return None
-    h = np.maximum(x[None, :] - x[:n_cand, None], 0.0) ** power  # one row per candidate t0
-    hc = h - h.mean(axis=1, keepdims=True)
     yc = y - y.mean()
-    cov, var = hc @ yc, np.einsum("ij,ij->i", hc, hc)
+    cov, var = np.empty(n_cand), np.empty(n_cand)
+    rows = max(1, _MAX_CELLS // max(len(x), 1))  # candidates per block: memory bounded whatever the length
+    for lo in range(0, n_cand, rows):
+        h = np.maximum(x[None, :] - x[lo : min(lo + rows, n_cand), None], 0.0) ** power  # one row per t0
+        hc = h - h.mean(axis=1, keepdims=True)
+        cov[lo : lo + len(h)], var[lo : lo + len(h)] = hc @ yc, np.einsum("ij,ij->i", hc, hc)
     with np.errstate(divide="ignore", invalid="ignore"):  # least squares of y = c + k h, in closed form
         sse = np.where((var > 0) & (cov > 0), float(yc @ yc) - cov**2 / var, np.inf)
     if not np.isfinite(sse).any():
@@ -84,7 +89,7 @@ def flank_zero(
     return hinge_fit(x, y, 1)
 
 
-def speed_flank_zero(v: np.ndarray, first: int, height: float) -> float | None:
+def speed_flank_zero(v: np.ndarray, first: int, height: float, max_fit: int | None = None) -> float | None:
     """Where the speed leaving a rest starts to rise (local sample index), for movements too slow for their
     acceleration to clear the noise.
 
@@ -94,7 +99,8 @@ def speed_flank_zero(v: np.ndarray, first: int, height: float) -> float | None:
     started, with a peak acceleration of 0.05 m/s^2, below the accelerometer's noise level). The model
     ``v = c + b t`` before ``t0`` (a bias integrated from the rest drifts linearly) and ``c + b t + k (t - t0)^2``
     after it is fitted to the component of ``v`` along its direction where
-    the speed first reaches ``height`` (m/s) at or after ``first``, over the samples from the rest to there.
+    the speed first reaches ``height`` (m/s) at or after ``first``, over the samples from the rest to there
+    (at most the last ``max_fit`` of them: a rest hours long in daily life adds nothing to the fit but time).
     None when the speed does not reach ``height`` within twice the stretch already walked."""
     n = len(v)
     first = max(int(first), 0)
@@ -107,5 +113,6 @@ def speed_flank_zero(v: np.ndarray, first: int, height: float) -> float | None:
     p = first + int(hit[0])
     if p < 3:
         return None
-    y = v[: p + 1] @ (v[p] / vn[p])
-    return hinge_fit(np.arange(p + 1, dtype=float), y, 2)
+    lo = 0 if max_fit is None else max(0, p - int(max_fit))
+    y = v[lo : p + 1] @ (v[p] / vn[p])
+    return hinge_fit(np.arange(lo, p + 1, dtype=float), y, 2)

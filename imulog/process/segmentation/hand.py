@@ -83,6 +83,9 @@ class HandParams:
         this many times the level, and extrapolated to zero acceleration (0: off; see :func:`flank_zero`).
     flank_search_s: that flank must reach its top within this time (s) inside the phase from the boundary.
     max_extrapolation_s: the extrapolated boundary moves at most this far (s) beyond the level's boundary.
+    speed_fit_s: the speed flank (a movement too slow for its acceleration) is fitted over at most this long (s)
+        before the speed reaches ``velocity_level_mps`` (a 6-s reach needs about 1 s; a daily-life rest can
+        be hours long).
     """
 
     enabled: bool = True
@@ -105,6 +108,7 @@ class HandParams:
     flank_top_n_level: float = 3.0
     flank_search_s: float = 0.6
     max_extrapolation_s: float = 0.3
+    speed_fit_s: float = 10.0
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:
@@ -277,7 +281,7 @@ def _extrapolated(
     smooth = max(1, int(round(0.05 * rate_hz)))
     z = flank_zero(a, first, level, params.flank_top_n_level * level, span, back, smooth)
     if z is None and params.velocity_level_mps > 0:
-        z = speed_flank_zero(v, first, params.velocity_level_mps)
+        z = speed_flank_zero(v, first, params.velocity_level_mps, int(round(params.speed_fit_s * rate_hz)))
     if z is None:
         return first
     return int(min(inner, max(int(np.ceil(z)), 0)))  # the first sample after t0
