@@ -139,7 +139,8 @@ def test_block_writer_bytes_equal_protobufs_own_serialization():
             parsed, rebuilt = _as_protobuf(schema, payload)
             assert rebuilt.SerializeToString() == payload, schema
         # any protobuf reader gets numbers, not bytes
-        assert isinstance(parsed.t_ns[0], int)
+        times = parsed.t_ns if len(parsed.t_ns) else parsed.t_residual_ns  # jittered times: explicit or residuals
+        assert isinstance(times[0], int)
 
 
 def test_packed_bool_is_one_byte_per_value_on_the_wire():
@@ -314,19 +315,33 @@ def test_counts_and_compact_times_read_back_exactly_and_are_protobufs_own_bytes(
     assert sum(map(len, payloads)) < 0.65 * old  # int32 counts, no times: 32 of 56 bytes a sample
 
 
-def test_jittered_times_stay_explicit_and_a_hint_that_does_not_fit_falls_back():
+def test_jittered_times_are_residuals_a_gap_stays_explicit_and_a_hint_that_does_not_fit_falls_back():
     from imulog.model import ImuStream
 
     rng = np.random.default_rng(12)
-    t = np.cumsum(rng.integers(9_000_000, 11_000_000, 300)).astype(np.int64)
+    t = np.cumsum(rng.integers(9_000_000, 11_000_000, 300)).astype(np.int64)  # +-1 ms jitter: ms off the line
+    t[250:] += 400_000_000  # a 0.4-s gap inside the third block: 134 ms or more off its line
     acc = rng.normal(size=(300, 3))
     s = ImuStream("w", t, acc=acc, meta={"resolution": {"acc": {"divisor": 256.0}}})
     schema, meta, _, payloads = codec.encode(s)
     msgs = [codec.MESSAGE_CLASSES[schema].FromString(p) for p in payloads]
-    assert all(len(m.acc) == 3 * m.count for m in msgs)
-    assert all(m.schema_version == 1 and len(m.t_ns) == m.count for m in msgs if m.count > 2)  # 2 are always even
+    assert all(len(m.acc) == 3 * m.count for m in msgs)  # the hint does not fit: float64 values
+    explicit = [len(m.t_ns) == m.count for m in msgs]
+    assert explicit == [False, False, True, False]
+    assert all(len(m.t_residual_ns) == m.count for m, e in zip(msgs, explicit, strict=True) if not e)
     back = codec.decode(schema, "/imu/w", meta, payloads)
     assert np.array_equal(back.t_ns, t) and np.array_equal(back.acc.view(np.uint64), acc.view(np.uint64))
+
+
+def test_skdh_rule_cwa_times_are_stored_compact(tmp_path):
+    """skdh's .cwa time rule steps 9.75 / 10 / 10.25 ms (up to 6 ms off a 1-s block's line): the blocks keep
+    start + span + residuals, not explicit times (explicit, a converted .cwa was 1.5x the size)."""
+    from imulog.archive import numbers
+    from imulog.archive.block_encode import block_bounds
+
+    t = np.cumsum(np.tile(np.r_[np.full(40, 9_750_000), np.full(80, 10_000_000), np.full(40, 10_250_000)], 10))
+    tp = numbers.plan_times(t.astype(np.int64), block_bounds(t))
+    assert tp.compact.all() and tp.has_resid.any()
 
 
 def test_float32_precision_request_and_blocks_parsed_by_protobuf():

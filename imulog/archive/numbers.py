@@ -33,7 +33,7 @@ _SKIP = {"shift": 0.0, "divisor": 1.0, "scale": 1.0, "offset": 0.0}  # a paramet
 _MAX_DECIMALS = 15  # %.7g of EMG in V near 1e-7 has 13 decimals; 10**15 is an exact double
 _EXACT_INT = 2.0**53
 _MAX_COUNT = 2.0**31  # counts are sfixed32
-_RESID_BYTES = 3  # residual varints longer than this make a block's times explicit
+_RESID_BYTES = 4  # residual varints longer than this make a block's times explicit (|r| >= 2**27 ns)
 
 
 def apply(counts: np.ndarray, params: dict[str, np.ndarray | None]) -> np.ndarray:
@@ -283,10 +283,12 @@ def spread(t0: np.ndarray, span: np.ndarray, n: np.ndarray) -> np.ndarray:
 def plan_times(t_ns: np.ndarray, bounds: list[tuple[int, int]]) -> TimesPlan:
     """Which blocks store start + span instead of explicit sfixed64 times.
 
-    A block is compact when its times are the span spread evenly, or differ from that by less than 2**20 ns
-    (about 1 ms) each: residuals of at most 3 bytes, less than half the 8 of an explicit time (an Axivity
-    block clock's 1/65536 s steps give residuals up to about 12 us). Larger jitter or a gap inside a block
-    keeps explicit times.
+    A block is compact when its times are the span spread evenly, or differ from that by less than 2**27 ns
+    (about 134 ms) each: residuals of at most 4 bytes, half the 8 of an explicit time, and the smooth
+    residuals of a device clock compress far better than explicit times (an Axivity block clock's 1/65536 s
+    steps give residuals up to about 12 us; skdh's .cwa time rule steps 9.75 / 10 / 10.25 ms, up to 6 ms off
+    a 1-s block's line: explicit, a converted .cwa was 1.5x larger). Larger jitter or a longer gap inside a
+    block keeps explicit times.
     """
     i = np.asarray([b[0] for b in bounds], dtype=np.int64)
     j = np.asarray([b[1] for b in bounds], dtype=np.int64)
@@ -296,7 +298,7 @@ def plan_times(t_ns: np.ndarray, bounds: list[tuple[int, int]]) -> TimesPlan:
     resid = t - spread(t0, span, n)
     data, lengths = wire.zigzag_varints(resid)
     nonzero = np.add.reduceat(resid != 0, i) > 0
-    small = np.add.reduceat(lengths > _RESID_BYTES, i) == 0  # |r| < 2**20 ns: a device clock's rounding
+    small = np.add.reduceat(lengths > _RESID_BYTES, i) == 0  # |r| < 2**27 ns: a device clock's jitter
     compact = (~nonzero) | small
     return TimesPlan(compact, t0, span, data, np.concatenate([[0], np.cumsum(lengths)]), nonzero)
 
