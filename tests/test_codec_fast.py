@@ -205,6 +205,11 @@ def test_compiled_counts_and_varints_equal_the_numpy_passes():
     small = [wire.zigzag_varints(r[k : k + 1000]) for k in range(0, len(r), 1000)]
     assert data == b"".join(d for d, _ in small)
     assert np.array_equal(lengths, np.concatenate([ln for _, ln in small]))
+    # decoding: int32 counts take the compiled formula, the same float64 bits as the numpy passes (float counts)
+    c32 = counts.astype(np.int32)
+    for some in (params, {"divisor": params["divisor"], "scale": params["scale"]}, {}):
+        assert np.array_equal(numbers.apply(c32, some), numbers.apply(counts, some))
+        assert np.array_equal(numbers.apply(c32[:5], some), numbers.apply(counts[:5], some))  # short: numpy
 
 
 def test_large_stream_bytes_equal_the_per_block_encoder(monkeypatch):
