@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imulog.numeric import finite_rows
+from imulog.numeric import finite_rows, median_int
 from imulog.process import quaternion as quat
 
 __all__ = [
@@ -307,7 +307,7 @@ def _has_gaps(t_ns: np.ndarray) -> bool:
         return False
     if d.min() > 0 and d.max() <= 1.5 * d.min():  # the median lies between: no step exceeds 1.5x it, no sort
         return False
-    return bool(np.any(d > 1.5 * np.median(d)))
+    return bool(np.any(d > 1.5 * median_int(d)))
 
 
 def _on_uniform_grid(

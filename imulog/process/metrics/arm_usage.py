@@ -30,7 +30,7 @@ from typing import Literal
 
 import numpy as np
 
-from imulog.numeric import finite_rows
+from imulog.numeric import finite_rows, median_int
 
 STANDARD_GRAVITY = 9.80665  # m/s^2 per g
 
@@ -157,7 +157,7 @@ def arm_usage(
     rate = None
     if t_ns is not None:
         dt = np.diff(np.asarray(t_ns, dtype=np.int64))
-        median = float(np.median(dt)) if len(dt) else 0.0
+        median = median_int(dt) if len(dt) else 0.0
         if median <= 0:
             raise ValueError("t_ns must increase")
         rate = 1e9 / median  # nominal rate: insensitive to dropped samples
