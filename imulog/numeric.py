@@ -21,6 +21,22 @@ def finite_rows(a: np.ndarray) -> np.ndarray:
     return out
 
 
+def median_int(a: np.ndarray) -> float:
+    """``float(np.median(a))`` of an integer array (e.g. time steps in ns), exactly; by counting values instead
+    of sorting when they span a range at most 4x the array's length (a sampling clock's steps; an AX6 block clock's
+    hour of 100 Hz steps: 1.1 ms instead of 2.4), else numpy's partition. NaN for an empty array, as numpy."""
+    a = np.asarray(a)
+    n = len(a)
+    if a.ndim != 1 or a.dtype.kind not in "iu" or n < 64:
+        return float(np.median(a))
+    lo, hi = int(a.min()), int(a.max())
+    if hi - lo >= min(4 * n, 1 << 22):  # counting would cost more than sorting (or too much memory)
+        return float(np.median(a))
+    cum = np.cumsum(np.bincount((a - lo).astype(np.intp, copy=False), minlength=hi - lo + 1))
+    below, above = np.searchsorted(cum, [(n - 1) // 2, n // 2], side="right")  # the middle value(s), sorted
+    return (float(lo + int(below)) + float(lo + int(above))) / 2.0
+
+
 def moving_mean(x: np.ndarray, w: int) -> np.ndarray:
     """Centred moving mean along the first axis over ``w`` samples (at least 1), shrinking at the ends: sample i
     averages ``x[i - w // 2 : i - w // 2 + w]`` clipped to the array. Same shape as ``x`` (1-D or (N, D))."""

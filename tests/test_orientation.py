@@ -74,6 +74,36 @@ def test_rotate_is_the_cross_product_formula_bit_for_bit(rand_q):
         assert got.shape == want.shape and np.array_equal(got, want)
 
 
+def test_rotate_and_multiply_compiled_rows_are_the_numpy_expressions_bit_for_bit():
+    """From quaternion._MIN_ROWS rows rotate() and multiply() run compiled loops (quaternion_kernels): every row
+    equals the numpy expressions of short calls (the same rows in pieces below the threshold) exactly, with NaN
+    rows, one quaternion for all rows ((4,) or (1, 4)) and int input."""
+    from imulog.process import quaternion_kernels
+
+    assert Q._MIN_ROWS == quaternion_kernels.MIN_ROWS
+    rng = np.random.default_rng(5)
+    n = 3 * Q._MIN_ROWS + 17
+    q, p = Q.normalize(rng.normal(size=(n, 4))), Q.normalize(rng.normal(size=(n, 4)))
+    v = rng.normal(0.0, 9.8, (n, 3))
+    q[10], v[20] = np.nan, np.nan
+    piece = Q._MIN_ROWS // 4
+
+    def in_pieces(fn, *args):
+        def part(i):
+            return fn(*(a if a.ndim == 1 or len(a) == 1 else a[i : i + piece] for a in args))
+
+        return np.concatenate([part(i) for i in range(0, n, piece)])
+
+    for a, b in ((q, v), (q[3], v), (q[3:4], v)):
+        got = Q.rotate(a, b)
+        assert got.shape == (n, 3) and np.array_equal(got, in_pieces(Q.rotate, a, b), equal_nan=True)
+    for a, b in ((p, q), (p[2], q), (q, p[2:3])):
+        got = Q.multiply(a, b)
+        assert got.shape == (n, 4) and np.array_equal(got, in_pieces(Q.multiply, a, b), equal_nan=True)
+    ints = rng.integers(-100, 100, (n, 3))
+    assert np.array_equal(Q.rotate(q, ints), in_pieces(Q.rotate, q, ints.astype(float)), equal_nan=True)
+
+
 def test_slerp_and_average(rand_q):
     a, b = rand_q[:50], rand_q[50:100]
     mid = Q.slerp(a, b, 0.5)

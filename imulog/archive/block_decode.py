@@ -47,7 +47,7 @@ def columns(payloads: Sequence[bytes | memoryview], spec: dict[int, tuple[str, s
         return None
     from imulog.archive.wire_kernels import scan_many
 
-    lengths = np.fromiter((len(p) for p in payloads), np.int64, len(payloads))
+    lengths = np.fromiter(map(len, payloads), np.int64, len(payloads))
     ends = np.cumsum(lengths)
     pool = np.frombuffer(b"".join(payloads), np.uint8)
     nfields = max(spec) + 1

@@ -42,6 +42,7 @@ from imulog.archive.block_schemas import (  # noqa: F401 (re-exported)
 )
 from imulog.archive.timeline import IDENTITY, LogMap
 from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream, Stream
+from imulog.numeric import median_int
 
 # SCHEMA_VERSION: newest layout version written (blocks with Numbers or compact times); readers accept <= this.
 # SCHEMA_VERSION_V1: blocks using only the fields of the first layout keep writing 1 (readable by older imulog).
@@ -120,7 +121,7 @@ def _stats(t_ns: np.ndarray, values: list[np.ndarray | None]) -> dict[str, str]:
         out["end_ns"] = str(int(t_ns[-1]))
     if n > 1:
         dt = np.diff(t_ns)
-        median = float(np.median(dt))
+        median = median_int(dt)
         out["rate_hz"] = f"{1e9 / median:.6g}" if median > 0 else "0"
         out["time_gaps"] = str(int(np.count_nonzero(dt > 1.5 * median))) if median > 0 else "0"
     arrays = [v for v in values if v is not None]

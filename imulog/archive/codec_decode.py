@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from imulog.archive import block_decode, numbers, wire
+from imulog.archive import block_decode, numbers, numbers_decode, wire
 from imulog.archive.block_encode import SCHEMA_VERSION
 from imulog.archive.block_schemas import BLOCK_SCHEMAS, MESSAGE_CLASSES, SCHEMA_KIND, DecodeError
 from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, SignalStream, Stream
@@ -164,7 +164,7 @@ def _json_meta(meta: dict[str, str], key: str, default: Any) -> Any:
 
 def _numbers_fields(payload: Any) -> dict[str, Any]:
     try:
-        return numbers.scan_numbers(payload)
+        return numbers_decode.scan_numbers(payload)
     except wire.Fallback:
         from imulog.archive._generated.imulog import Numbers_pb2
 
@@ -187,10 +187,10 @@ def _array(
     """(N, width) float64 of field ``f`` over all blocks: float64 bytes or ``f_q`` Numbers, mixed per block."""
     qs = [getattr(msg, f + "_q", None) for msg in msgs]
     if all(q is not None for q in qs):  # every block at the same resolution: its parameters parsed once
-        fast = numbers.numbers_sources(qs)
+        fast = numbers_decode.numbers_sources(qs)
         if fast is not None and not any(len(getattr(msg, f)) for msg in msgs):
             try:
-                return numbers.decode_numbers([("q", x) for x in fast], counts, width, f"{topic} {f}")
+                return numbers_decode.decode_numbers([("q", x) for x in fast], counts, width, f"{topic} {f}")
             except ValueError as exc:
                 raise DecodeError(str(exc)) from None
     sources: list[tuple[str, Any]] = []
@@ -208,7 +208,7 @@ def _array(
     if not required and any(k == "none" and c for (k, _), c in zip(sources, counts.tolist(), strict=True)):
         raise DecodeError(f"{topic}: field {f} present in some blocks only")
     try:
-        return numbers.decode_numbers(sources, counts, width, f"{topic} {f}")
+        return numbers_decode.decode_numbers(sources, counts, width, f"{topic} {f}")
     except ValueError as exc:
         raise DecodeError(str(exc)) from None
 
@@ -231,7 +231,7 @@ def decode(schema_name: str, topic: str, meta: dict[str, str], payloads: Sequenc
         n = int(sum(counts))
         counts_a = np.asarray(counts, dtype=np.int64)
         try:
-            t = numbers.decode_times(msgs, counts_a, topic)
+            t = numbers_decode.decode_times(msgs, counts_a, topic)
         except ValueError as exc:
             raise DecodeError(str(exc)) from None
     if kind == "imu":

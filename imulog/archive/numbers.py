@@ -13,8 +13,8 @@ Writing, for a whole stream at once (numpy, no per-sample Python):
 - :func:`plan_times` gives each block its start and span when the times are evenly spread, with residuals
   where they are not, and keeps explicit times when that is not smaller.
 
-Reading joins the fields of all blocks and decodes them with one numpy pass each (:func:`decode_numbers`,
-:func:`decode_times`). The formula a generic reader applies is in ``schemas/imulog/Numbers.proto`` and
+Reading joins the fields of all blocks and decodes them with one numpy pass each
+(:mod:`imulog.archive.numbers_decode`; large int32 counts through :func:`apply`'s compiled pass). The formula a generic reader applies is in ``schemas/imulog/Numbers.proto`` and
 docs/schemas.md.
 """
 
@@ -34,10 +34,18 @@ _MAX_DECIMALS = 15  # %.7g of EMG in V near 1e-7 has 13 decimals; 10**15 is an e
 _EXACT_INT = 2.0**53
 _MAX_COUNT = 2.0**31  # counts are sfixed32
 _RESID_BYTES = 4  # residual varints longer than this make a block's times explicit (|r| >= 2**27 ns)
+_COMPILED_SIZE = 65536  # values from which apply and _counted use the compiled loops (wire_kernels)
 
 
 def apply(counts: np.ndarray, params: dict[str, np.ndarray | None]) -> np.ndarray:
-    """float64 values of (N, C) counts: ``((counts + shift) / divisor) * scale + offset``, absent steps skipped."""
+    """float64 values of (N, C) counts: ``((counts + shift) / divisor) * scale + offset``, absent steps skipped.
+
+    Large int32 arrays (the decoder's) take one compiled pass (:func:`imulog.archive.wire_kernels.apply_counts`,
+    bit-identical) instead of a numpy pass per parameter."""
+    if counts.dtype == np.int32 and counts.ndim == 2 and counts.size >= 4096:
+        from imulog.archive.wire_kernels import apply_counts
+
+        return apply_counts(np.ascontiguousarray(counts), *_param_arrays(params, counts.shape[1]))
     v = counts.astype(np.float64)
     if params.get("shift") is not None:
         v += params["shift"]
@@ -91,16 +99,12 @@ class NumbersPlan:
 
 def _counted(values: np.ndarray, params: dict[str, np.ndarray | None]) -> NumbersPlan:
     """:func:`_from_counts` of :func:`_counts_of`: compiled in one pass for large arrays (same values)."""
-    if values.size < 65536:
+    if values.size < _COMPILED_SIZE:
         return _from_counts(values, _counts_of(values, params), params)
     from imulog.archive.wire_kernels import counts_check
 
     width = values.shape[1]
-    use = np.array([params.get(p) is not None for p in PARAMS])
-    arrays = [
-        np.require(params[p] if params.get(p) is not None else np.zeros(width), np.float64, ["C", "W"]) for p in PARAMS
-    ]
-    counts, ok = counts_check(np.require(values, np.float64, ["C", "W"]), *arrays, use)
+    counts, ok = counts_check(np.require(values, np.float64, ["C", "W"]), *_param_arrays(params, width))
     head = _params_head(params)
     return NumbersPlan(
         "counts", width, ok, counts.astype("<i4").tobytes(), np.full(len(values), 4 * width), params, head
@@ -118,9 +122,9 @@ def _from_counts(values: np.ndarray, counts: np.ndarray, params: dict[str, np.nd
     return NumbersPlan("counts", width, ok, data, np.full(len(values), 4 * width), params, head)
 
 
-def _counts_of(values: np.ndarray, params: dict[str, np.ndarray | None]) -> np.ndarray:
+def _counts_of(values: np.ndarray, params: dict[str, np.ndarray | None], clip: bool = True) -> np.ndarray:
     """Whole numbers (float64) that the parameters map to ``values``: the inverse formula, rounded; values
-    out of the exact integer range become 0 (and then fail the check)."""
+    out of the exact integer range become 0 (and then fail the check; ``clip=False``: left as they are)."""
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         c = values - params["offset"] if params.get("offset") is not None else values.copy()
         if params.get("scale") is not None:
@@ -130,8 +134,17 @@ def _counts_of(values: np.ndarray, params: dict[str, np.ndarray | None]) -> np.n
         if params.get("shift") is not None:
             c -= params["shift"]
         np.rint(c, out=c)
-        c[~(np.abs(c) < _MAX_COUNT)] = 0  # NaN, inf and beyond sfixed32
+        if clip:
+            c[~(np.abs(c) < _MAX_COUNT)] = 0  # NaN, inf and beyond sfixed32
     return c
+
+
+def _param_arrays(params: dict[str, np.ndarray | None], width: int) -> list[np.ndarray]:
+    """The compiled kernels' arguments: the 4 parameters as (width,) float64 (zeros when absent), then ``use``."""
+    arrays = [
+        np.require(params[p] if params.get(p) is not None else np.zeros(width), np.float64, ["C", "W"]) for p in PARAMS
+    ]
+    return [*arrays, np.array([params.get(p) is not None for p in PARAMS])]
 
 
 def _decimals(values: np.ndarray) -> np.ndarray | None:
@@ -206,9 +219,15 @@ def plan_numbers(values: np.ndarray | None, hint: dict[str, Any] | None, precisi
         return NumbersPlan("f32", width, np.ones(len(v), dtype=bool), f.tobytes(), np.full(len(v), 4 * width))
     if precision == "quantized" and hint:  # counts on the requested grid: rounded, by request (see quantum_hint)
         params = _params(hint, width)
-        counts = _counts_of(v, params)
-        ok = (np.isfinite(v) & (np.abs(counts) < _MAX_COUNT)).all(axis=1)  # a NaN gap row keeps float64
-        counts[~ok] = 0
+        if v.size >= _COMPILED_SIZE:  # one compiled pass, the same counts (wire_kernels.quantize_counts)
+            from imulog.archive.wire_kernels import quantize_counts
+
+            counts, ok = quantize_counts(np.require(v, np.float64, ["C"]), *_param_arrays(params, width))
+        else:
+            counts = _counts_of(v, params, clip=False)
+            with np.errstate(invalid="ignore"):
+                ok = (np.abs(counts) < _MAX_COUNT).all(axis=1)
+            counts[~ok] = 0  # a NaN gap row (or one beyond the counts' range) keeps float64
         head = _params_head(params)
         return NumbersPlan(
             "counts", width, ok, counts.astype("<i4").tobytes(), np.full(len(v), 4 * width), params, head
@@ -301,186 +320,6 @@ def plan_times(t_ns: np.ndarray, bounds: list[tuple[int, int]]) -> TimesPlan:
     small = np.add.reduceat(lengths > _RESID_BYTES, i) == 0  # |r| < 2**27 ns: a device clock's jitter
     compact = (~nonzero) | small
     return TimesPlan(compact, t0, span, data, np.concatenate([[0], np.cumsum(lengths)]), nonzero)
-
-
-def decode_times(blocks: list[Any], counts: np.ndarray, what: str) -> np.ndarray:
-    """int64 times of all blocks: explicit ``t_ns`` joined, compact blocks expanded (one numpy pass)."""
-    total = int(counts.sum())
-    explicit = np.array([len(b.t_ns) > 0 for b in blocks], dtype=bool)
-    if explicit.all() or total == 0:
-        buf = bytearray().join([b.t_ns for b in blocks])
-        if len(buf) != total * 8:
-            raise ValueError(f"{what} t_ns: {len(buf)} bytes for {total} samples")
-        return np.frombuffer(buf, dtype="<i8").astype(np.int64)
-    if not explicit.any():
-        rows_explicit = np.zeros(total, dtype=bool)
-        out = np.empty(0, dtype=np.int64)
-    else:
-        rows_explicit = np.repeat(explicit, counts)
-        out = np.empty(total, dtype=np.int64)
-    if explicit.any():
-        buf = bytearray().join([b.t_ns for b, e in zip(blocks, explicit, strict=True) if e])
-        if len(buf) != int(rows_explicit.sum()) * 8:
-            raise ValueError(f"{what} t_ns: {len(buf)} bytes for {int(rows_explicit.sum())} samples")
-        out[rows_explicit] = np.frombuffer(buf, dtype="<i8")
-    comp = ~explicit
-    n = counts[comp]
-    t0 = np.array([b.t0_ns for b, c in zip(blocks, comp, strict=True) if c], dtype=np.int64)
-    span = np.array([b.t_span_ns for b, c in zip(blocks, comp, strict=True) if c], dtype=np.int64)
-    t = spread(t0, span, n)
-    has = np.array([len(b.t_residual_ns) > 0 for b, c in zip(blocks, comp, strict=True) if c], dtype=bool)
-    if has.any():
-        parts = [b.t_residual_ns for b, c in zip(blocks, comp, strict=True) if c and len(b.t_residual_ns)]
-        res = wire.read_zigzag_varints(bytearray().join(parts), int(has.astype(np.int64) @ n), f"{what} t_residual_ns")
-        if has.all():
-            t += res
-        else:
-            t[np.repeat(has, n)] += res
-    if not explicit.any():
-        return t
-    out[~rows_explicit] = t
-    return out
-
-
-# ------------------------------------------------------------------------------------------- reading
-
-
-def split_counts(payload: memoryview | bytes) -> tuple[memoryview, bytes] | None:
-    """(counts bytes, the rest) of a Numbers message that starts with its counts field, else None (cheap: the
-    rest is the same parameters in every block of a channel, compared as bytes by :func:`numbers_sources`)."""
-    mv = memoryview(payload)
-    if len(mv) < 2 or mv[0] != 0x0A:
-        return None
-    length, pos, shift = 0, 1, 0
-    while True:
-        if pos >= len(mv) or shift > 63:
-            return None
-        b = mv[pos]
-        pos += 1
-        length |= (b & 0x7F) << shift
-        if b < 0x80:
-            break
-        shift += 7
-    end = pos + length
-    if end > len(mv):
-        return None
-    return mv[pos:end], bytes(mv[end:])
-
-
-def numbers_sources(payloads: list[Any]) -> list[dict[str, Any]] | None:
-    """Scanned Numbers of blocks that all hold counts with the same parameters (the common case), or None."""
-    first = split_counts(payloads[0]) if payloads else None
-    if first is None:
-        return None
-    try:
-        common = scan_numbers(first[1])
-    except wire.Fallback:
-        return None
-    if len(common["counts"]) or len(common["f32"]):
-        return None
-    out = []
-    for p in payloads:
-        part = split_counts(p)
-        if part is None or part[1] != first[1]:
-            return None
-        out.append({**common, "counts": part[0]})
-    return out
-
-
-def scan_numbers(payload: memoryview | bytes) -> dict[str, Any]:
-    """The fields of one ``imulog.Numbers`` message (views); raises wire.Fallback on anything unexpected."""
-    out: dict[str, Any] = {"counts": b"", "f32": b"", "decimals": b"", **{p: None for p in PARAMS}}
-    names = {1: "counts", 2: "shift", 3: "divisor", 4: "scale", 5: "offset", 6: "f32", 7: "decimals"}
-    for number, wire_type, value in wire.scan(payload):
-        name = names.get(number)
-        if name is None:
-            continue
-        if wire_type != wire.WIRE_LEN:
-            raise wire.Fallback
-        out[name] = value
-    return out
-
-
-def decode_numbers(sources: list[tuple[str, Any]], counts: np.ndarray, width: int, what: str) -> np.ndarray:
-    """(N, width) float64 from each block's source: ("f64", bytes), ("q", scanned Numbers) or ("none", None)."""
-    total = int(counts.sum())
-    kinds = [k for k, _ in sources]
-    out = np.empty((total, width), dtype=np.float64)
-    # counts with per-value decimals and counts with per-column parameters are decoded apart: a channel written
-    # in several appends (a live recording's flushes) can hold both, e.g. a block whose values are all integers
-    groups: dict[str, list[int]] = {"f64": [], "counts": [], "decimals": [], "f32": []}
-    for b, (kind, src) in enumerate(sources):
-        if kind == "q":
-            kind = "counts" if len(src["counts"]) or not len(src["f32"]) else "f32"
-            if kind == "counts" and len(src.get("decimals") or b""):
-                kind = "decimals"
-        if kind in groups:
-            groups[kind].append(b)
-    row_block = np.repeat(np.arange(len(sources)), counts)
-    if sum(len(g) for g in groups.values()) != sum(1 for k in kinds if k != "none"):
-        raise ValueError(f"{what}: unknown block layout")
-    covered = 0
-    for kind, blocks in groups.items():
-        if not blocks:
-            continue
-        n = int(counts[blocks].sum())
-        covered += n
-        if len(blocks) == len(sources):
-            rows: slice | np.ndarray = slice(None)
-        else:
-            mask = np.zeros(len(sources), dtype=bool)
-            mask[blocks] = True
-            rows = mask[row_block]
-        if kind == "f64":
-            buf = bytearray().join([sources[b][1] for b in blocks])
-            if len(buf) != n * width * 8:
-                raise ValueError(f"{what}: {len(buf)} bytes for {n} samples x {width} values")
-            out[rows] = np.frombuffer(buf, dtype="<f8").reshape(n, width)
-        elif kind == "f32":
-            buf = bytearray().join([sources[b][1]["f32"] for b in blocks])
-            if len(buf) != n * width * 4:
-                raise ValueError(f"{what}: {len(buf)} float32 bytes for {n} samples x {width} values")
-            out[rows] = np.frombuffer(buf, dtype="<f4").reshape(n, width)
-        else:
-            srcs = [sources[b][1] for b in blocks]
-            buf = bytearray().join([s["counts"] for s in srcs])
-            if len(buf) != n * width * 4:
-                raise ValueError(f"{what}: {len(buf)} count bytes for {n} samples x {width} values")
-            c = np.frombuffer(buf, dtype="<i4").reshape(n, width)
-            if kind == "decimals":
-                dec = wire.read_zigzag_varints(
-                    bytearray().join([s["decimals"] for s in srcs]), n * width, f"{what} decimals"
-                )
-                if dec.min() < 0 or dec.max() > _MAX_DECIMALS:
-                    raise ValueError(f"{what}: decimals outside 0..{_MAX_DECIMALS}")
-                v = c / _POW10[dec.reshape(n, width)]
-                for p, srcs_p in (("scale", [s["scale"] for s in srcs]), ("offset", [s["offset"] for s in srcs])):
-                    raw = {bytes(x) if x is not None else b"" for x in srcs_p}
-                    if len(raw) != 1:
-                        raise ValueError(f"{what}: {p} changes between blocks with decimals")
-                    value = raw.pop()
-                    if value:
-                        v = v * np.frombuffer(value, "<f8") if p == "scale" else v + np.frombuffer(value, "<f8")
-                out[rows] = v
-                continue
-            params = {}
-            for p in PARAMS:
-                raw = [bytes(s[p]) if s[p] is not None else b"" for s in srcs]
-                if not any(raw):
-                    params[p] = None
-                    continue
-                if any(len(r) not in (0, 8 * width) for r in raw):
-                    raise ValueError(f"{what}: {p} does not have {width} values")
-                if len(set(raw)) == 1:
-                    params[p] = np.frombuffer(raw[0], dtype="<f8").astype(np.float64)
-                    continue
-                default = np.full(width, _SKIP[p]).tobytes()
-                per = np.frombuffer(b"".join(r or default for r in raw), dtype="<f8").reshape(len(srcs), width)
-                params[p] = np.repeat(per, counts[blocks], axis=0)
-            out[rows] = apply(c, params)
-    if covered != total:
-        raise ValueError(f"{what}: present in some blocks only")
-    return out
 
 
 def signal_hint(attrs: dict[str, Any]) -> dict[str, Any] | None:

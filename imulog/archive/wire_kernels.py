@@ -214,6 +214,56 @@ def counts_check(values, shift, divisor, scale, offset, use):  # pragma: no cove
 
 
 @njit(cache=True, nogil=True)
+def quantize_counts(values, shift, divisor, scale, offset, use):  # pragma: no cover - compiled
+    """Counts of (N, C) ``values`` rounded onto the parameters' grid (``use``: which of the 4 apply) and the rows
+    that have them: the inverse formula in the order of :func:`imulog.archive.numbers._counts_of`, rounded; a row
+    with a value that is not finite or beyond sfixed32 is not ok and gets counts 0."""
+    n, w = values.shape
+    counts = np.zeros((n, w), np.int32)
+    ok = np.ones(n, np.bool_)
+    for i in range(n):
+        for j in range(w):
+            x = values[i, j]
+            c = x - offset[j] if use[3] else x
+            if use[2]:
+                c = c / scale[j]
+            if use[1]:
+                c = c * divisor[j]
+            if use[0]:
+                c = c - shift[j]
+            c = np.rint(c)
+            if abs(c) < 2147483648.0:  # NaN and inf fail too
+                counts[i, j] = np.int32(c)
+            else:
+                ok[i] = False
+        if not ok[i]:
+            for j in range(w):
+                counts[i, j] = 0
+    return counts, ok
+
+
+@njit(cache=True, nogil=True)
+def apply_counts(counts, shift, divisor, scale, offset, use):  # pragma: no cover - compiled
+    """float64 values of (N, C) int32 ``counts``: :func:`imulog.archive.numbers.apply` in one pass (the same
+    operations in the same order, no fast-math: bit-identical); ``use`` says which of the 4 parameters apply."""
+    n, w = counts.shape
+    out = np.empty((n, w), np.float64)
+    for i in range(n):
+        for j in range(w):
+            v = np.float64(counts[i, j])
+            if use[0]:
+                v = v + shift[j]
+            if use[1]:
+                v = v / divisor[j]
+            if use[2]:
+                v = v * scale[j]
+            if use[3]:
+                v = v + offset[j]
+            out[i, j] = v
+    return out
+
+
+@njit(cache=True, nogil=True)
 def zigzag_decode(data, n):  # pragma: no cover - compiled
     """int64 values of ``n`` packed ``sint64`` varints; (values, 0) or (partial, 1) when the bytes do not hold
     exactly ``n`` varints of at most 10 bytes each."""

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imulog.numeric import finite_rows, median_int
 from imulog.process import quaternion as quat
 
 __all__ = [
@@ -291,7 +292,7 @@ def _fill_nan(x: np.ndarray) -> np.ndarray:
     if np.isfinite(x).all():
         return x
     x = x.copy()
-    bad = ~np.all(np.isfinite(x), axis=1)
+    bad = ~finite_rows(x)
     if np.any(bad) and not np.all(bad):
         idx = np.arange(len(x))
         for c in range(x.shape[1]):
@@ -300,8 +301,13 @@ def _fill_nan(x: np.ndarray) -> np.ndarray:
 
 
 def _has_gaps(t_ns: np.ndarray) -> bool:
+    """A step longer than 1.5x the median step (a dropped sample)."""
     d = np.diff(np.asarray(t_ns, dtype=np.int64))
-    return len(d) > 0 and bool(np.any(d > 1.5 * np.median(d)))
+    if len(d) == 0:
+        return False
+    if d.min() > 0 and d.max() <= 1.5 * d.min():  # the median lies between: no step exceeds 1.5x it, no sort
+        return False
+    return bool(np.any(d > 1.5 * median_int(d)))
 
 
 def _on_uniform_grid(

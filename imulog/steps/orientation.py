@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from imulog.model import SignalStream
+from imulog.numeric import finite_rows
 from imulog.process.gaps import GapParams, GapReport, per_run, prepare
 from imulog.process.orientation import OrientationParams, estimate_orientation, gravity_free_acceleration
 from imulog.steps.common import mean_rate_hz, pick_imu
@@ -187,7 +188,7 @@ def orientation_windows(
         core = w.core_slice
         whole = streams[0].values
         quat, lin, static = (s.values[core] for s in streams)
-        ok = np.isfinite(quat).all(axis=1)
+        ok = finite_rows(quat)
         turn = None
         if join is not None and not params.use_mag and ok.any():
             at = join[0] - w.core_lo  # the join sample in this window's core; else its first valid sample

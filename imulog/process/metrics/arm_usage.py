@@ -30,6 +30,8 @@ from typing import Literal
 
 import numpy as np
 
+from imulog.numeric import finite_rows, median_int
+
 STANDARD_GRAVITY = 9.80665  # m/s^2 per g
 
 NoiseStatistic = Literal["peak", "std", "diff_peak", "diff_std"]
@@ -120,10 +122,14 @@ def to_reference_rate(
         raise ValueError("origin_ns must be at or before the first sample")
     index = ((t - origin) // width_ns).astype(np.int64)
     m = int(index[-1]) + 1
-    finite = np.isfinite(a).all(axis=1)
+    finite = finite_rows(a)
     counts = np.bincount(index, minlength=m).astype(np.float64)
-    valid = np.bincount(index[finite], minlength=m).astype(np.float64)
-    sums = np.column_stack([np.bincount(index[finite], a[finite, j], minlength=m) for j in range(a.shape[1])])
+    if finite.all():  # no gap: the same sums without copying every sample out (most windows of a recording)
+        valid, kept, a_kept = counts, index, a
+    else:
+        kept, a_kept = index[finite], a[finite]
+        valid = np.bincount(kept, minlength=m).astype(np.float64)
+    sums = np.column_stack([np.bincount(kept, a_kept[:, j], minlength=m) for j in range(a.shape[1])])
     expected = np.median(counts[counts > 0]) if np.any(counts > 0) else 1.0
     with np.errstate(invalid="ignore", divide="ignore"):
         windows = sums / valid[:, None]
@@ -151,16 +157,17 @@ def arm_usage(
     rate = None
     if t_ns is not None:
         dt = np.diff(np.asarray(t_ns, dtype=np.int64))
-        if len(dt) == 0 or np.median(dt) <= 0:
+        median = median_int(dt) if len(dt) else 0.0
+        if median <= 0:
             raise ValueError("t_ns must increase")
-        rate = 1e9 / float(np.median(dt))  # nominal rate: insensitive to dropped samples
+        rate = 1e9 / median  # nominal rate: insensitive to dropped samples
         if rate > 1.5 * p.reference_rate_hz:
             a, index = to_reference_rate(a, t_ns, p.reference_rate_hz, origin_ns)
             rate = p.reference_rate_hz
     active = np.zeros(a.shape, dtype=bool)
     with np.errstate(invalid="ignore"):
         active[1:] = np.abs(np.diff(a, axis=0)) > p.noise_level_g  # NaN compares False: a gap is not use
-    n = max(1, int(np.isfinite(a).all(axis=1).sum()))
+    n = max(1, int(finite_rows(a).sum()))
     return ArmUsage(
         per_axis_percent=100.0 * active.sum(axis=0) / n,
         overall_percent=float(100.0 * active.any(axis=1).sum() / n),
