@@ -1,4 +1,4 @@
-"""XDF recordings (Lab Streaming Layer, LabRecorder), read with pyxdf (BSD-2-Clause).
+"""XDF recordings (Lab Streaming Layer, LabRecorder), read chunk by chunk by imulog (pyxdf is the reference).
 
 Every stream becomes channels of its own, named from the stream's ``name`` (topic-safe; the stream id is appended
 when two streams share a name):
@@ -14,25 +14,23 @@ when two streams share a name):
 * empty streams are kept as empty channels.
 
 Time: each stream's time stamps on the recording host's LSL clock after applying the stream's ClockOffset
-measurements (pyxdf ``synchronize_clocks``, with host clock resets handled as separate clock segments); stamps are
-not dejittered (raw data keeps what was recorded). ``t_ns`` = LSL seconds x 1e9 (the host clock's own origin, the
-same for all streams of a file). The file header's ``datetime`` (when LabRecorder started) is the trial's
-``start_time``. XDF has no checksums: the chunk structure (magic, chunk lengths, tags) and every Samples chunk's
-layout (time-stamp flags, string lengths, samples filling the chunk exactly) are verified before parsing, so
-truncated files and damaged chunks are reported with their chunk index (pyxdf would read misaligned values or skip
-data with a log message); a flipped bit inside a sample value cannot be detected by any reader.
+measurements exactly as pyxdf's ``load_xdf(synchronize_clocks=True, handle_clock_resets=True,
+dejitter_timestamps=False)`` does (:mod:`imulog.converters.xdf_clock`: host clock resets as separate clock
+segments, a robust line per segment, the pylsl#67 corrupted last offset dropped); stamps are not dejittered (raw
+data keeps what was recorded). ``t_ns`` = LSL seconds x 1e9. The file header's ``datetime`` (when LabRecorder
+started) is the trial's ``start_time``. XDF has no checksums: the chunk structure (magic, chunk lengths, tags) and
+every Samples chunk's layout (time-stamp flags, string lengths, samples filling the chunk exactly) are verified
+before parsing, so truncated files and damaged chunks are reported with their chunk index; a flipped bit inside a
+sample value cannot be detected by any reader.
 
-Memory: pyxdf parses a stream whole (its clock offsets and jitter removal fit over the stream), always in a guarded
-child capped at ``READER_MEMORY_BYTES`` (1 GiB), which bounds memory; ``iter_chunks`` yields one stream at a time and,
-beyond 64 MiB, loads one stream at a time, so memory is the largest stream, not the file. The converter has no
-``iter_chunks`` method yet: ``imulog convert`` reads an XDF file whole, because the streaming writer takes the
-trial's time origin from its first piece, and a piece here is a whole stream (measured on ``clock_resets.xdf``:
-same samples, another reference origin).
+Memory: in pieces (:func:`iter_chunks`, :mod:`imulog.converters.xdf_pieces`): a first pass keeps headers, clock
+offsets, footers and counts (a few bytes per chunk), a second the synchronised first and last stamp of every
+stream (declared by the first piece: a stream whose chunks come later may start earlier), then samples are decoded
+chunk by chunk, about 16 MiB of values a piece; the whole file is the one-piece case.
 """
 
 from __future__ import annotations
 
-import logging
 import re
 from collections.abc import Iterator
 from datetime import datetime
@@ -49,9 +47,6 @@ from imulog.model import ImuStream, Intervals, MarkerStream, Recording, SignalSt
 
 MAGIC = b"XDF:"
 CHUNK_TAGS = {1: "FileHeader", 2: "StreamHeader", 3: "Samples", 4: "ClockOffset", 5: "Boundary", 6: "StreamFooter"}
-PER_STREAM_BYTES = 64 << 20  # files larger than this are loaded one stream at a time
-READER_TIMEOUT_S = 60.0  # pyxdf runs in a guarded child: a hang or a runaway allocation ends with one line
-READER_MEMORY_BYTES = 1 << 30
 _AXIS = r"[ _\-.:]?([xyz])"
 IMU_LABELS = {
     "acc": re.compile(r"^(?:acc|accel|accelerometer|acceleration)" + _AXIS + "$", re.I),
@@ -261,23 +256,17 @@ def _marker_groups(labels: list[str], units: list[str]) -> tuple[list[str], list
     return names, groups, LENGTH_UNITS[units[0].lower()]
 
 
-def stream_to_recording(path: Path, stream: dict, name: str) -> Recording:
-    """One pyxdf stream -> a Recording with its channel(s) and an ``imulog.device.<name>`` record."""
-    info = stream["info"]
-    fmt = str(_first(info, "channel_format", "float32"))
-    n_ch = int(float(_first(info, "channel_count", 1) or 1))
-    srate = float(_first(info, "nominal_srate", 0) or 0)
-    stype = str(_first(info, "type", "") or "")
-    t_ns = np.round(np.asarray(stream["time_stamps"], dtype=np.float64) * 1e9).astype(np.int64)
+def stream_meta(path: Path, info: dict, name: str, n_samples: int, footer: dict | None, segments: int) -> dict:
+    """The ``imulog.device.<name>`` record of a stream: its header, sample count, footer count, clock segments."""
     meta: dict[str, Any] = {
         "format": "xdf",
         "stream_name": str(_first(info, "name", name)),
-        "stream_type": stype,
+        "stream_type": str(_first(info, "type", "") or ""),
         "stream_id": int(_first(info, "stream_id", 0) or 0),
-        "channel_format": fmt,
-        "channel_count": n_ch,
-        "nominal_srate_hz": srate,
-        "samples": int(len(t_ns)),
+        "channel_format": str(_first(info, "channel_format", "float32")),
+        "channel_count": int(float(_first(info, "channel_count", 1) or 1)),
+        "nominal_srate_hz": float(_first(info, "nominal_srate", 0) or 0),
+        "samples": int(n_samples),
         "time_base": "ns of the recording host's LSL clock, stream clock offsets applied",
         "source": path.name,
     }
@@ -288,59 +277,100 @@ def stream_to_recording(path: Path, stream: dict, name: str) -> Recording:
     manufacturer = _first(_first(info, "desc"), "manufacturer")
     if manufacturer:
         meta["manufacturer"] = str(manufacturer)
-    footer = (stream.get("footer") or {}).get("info") or {}
-    if footer:
-        meta["footer_sample_count"] = int(float(_first(footer, "sample_count", 0) or 0))
-    segments = info.get("clock_segments") or []
-    meta["clock_segments"] = len(segments)  # > 1: the host clock was reset during the recording
-    rec = Recording(sources=[str(path)])
-    rec.metadata[f"imulog.device.{name}"] = meta
-    if len(np.unique(t_ns)) != len(t_ns) or (len(t_ns) > 1 and np.any(np.diff(t_ns) < 0)):
-        bad = int(np.nonzero(np.diff(t_ns) <= 0)[0][0]) + 1
-        raise ConversionError(
-            path, f"stream {meta['stream_id']} ({meta['stream_name']!r}): sample {bad} time stamp does not increase"
-        )
+    footer_info = (footer or {}).get("info") or {}
+    if footer_info:
+        meta["footer_sample_count"] = int(float(_first(footer_info, "sample_count", 0) or 0))
+    meta["clock_segments"] = segments  # > 1: the host clock was reset during the recording
+    return meta
+
+
+def stream_layout(info: dict) -> tuple[str, Any]:
+    """How a stream's channels map to imulog streams: ("events", None), ("markers", (names, groups, scale)) or
+    ("numeric", (IMU groups, the remaining channel indices, their column names, units))."""
+    fmt = str(_first(info, "channel_format", "float32"))
     if fmt == "string":
-        series = stream["time_series"]
-        labels = ["|".join(str(v) for v in row) if isinstance(row, list | tuple) else str(row) for row in series]
-        rec.events.append(Intervals(topic=f"/events/{name}", start_ns=t_ns, end_ns=t_ns.copy(), labels=labels))
-        return rec
-    values = np.asarray(stream["time_series"], dtype=np.float64).reshape(len(t_ns), n_ch)
+        return "events", None
+    n_ch = int(float(_first(info, "channel_count", 1) or 1))
     labels, units, types = channel_info(info, n_ch)
-    used: set[int] = set()
-    if stype.lower() in ("mocap", "motion capture"):
+    if str(_first(info, "type", "") or "").lower() in ("mocap", "motion capture"):
         markers = _marker_groups(labels, units)
         if markers is not None:
-            marker_names, groups, scale = markers
-            pos = np.stack([values[:, g] for g in groups], axis=1) * scale
-            rec.markers.append(MarkerStream(name=name, t_ns=t_ns, labels=marker_names, pos=pos, meta=dict(meta)))
-            meta["marker_units"] = units[0]
-            return rec
+            return "markers", markers
     groups = _imu_groups(labels, units, types)
-    if "acc" in groups or "gyr" in groups:
+    if "acc" not in groups and "gyr" not in groups:
+        groups = {}
+    used = {i for idx, _, _ in groups.values() for i in idx}
+    rest = [i for i in range(n_ch) if i not in used]
+    cols = [labels[i] for i in rest]
+    if len(set(cols)) != len(cols):
+        cols = [f"{c}_{i}" for c, i in zip(cols, rest, strict=True)]
+    return "numeric", (groups, rest, cols, [units[i] for i in rest])
+
+
+def stream_piece(name: str, layout: tuple[str, Any], t_ns: np.ndarray, series: Any, meta: dict) -> list[Any]:
+    """The imulog streams of some samples of one stream (``series``: (n, channels) numbers or string rows);
+    ``meta`` is the device record (the IMU stream carries it with the declared IMU units, markers without)."""
+    kind, how = layout
+    if kind == "events":
+        labels = ["|".join(str(v) for v in row) if isinstance(row, list | tuple) else str(row) for row in series]
+        return [Intervals(topic=f"/events/{name}", start_ns=t_ns, end_ns=t_ns.copy(), labels=labels)]
+    n_ch = int(meta["channel_count"])
+    values = np.asarray(series, dtype=np.float64).reshape(len(t_ns), n_ch)
+    if kind == "markers":
+        marker_names, groups, scale = how
+        pos = np.stack([values[:, g] for g in groups], axis=1) * scale
+        shown = {k: v for k, v in meta.items() if k != "marker_units"}
+        return [MarkerStream(name=name, t_ns=t_ns, labels=marker_names, pos=pos, meta=shown)]
+    groups, rest, cols, units = how
+    out: list[Any] = []
+    if groups:
         parts = {q: values[:, idx] * factor for q, (idx, factor, _) in groups.items()}
-        for idx, _, _ in groups.values():
-            used.update(idx)
-        meta["imu_units_declared"] = {q: u for q, (_, _, u) in groups.items()}
-        rec.imus.append(
+        out.append(
             ImuStream(
                 name=name, t_ns=t_ns, acc=parts.get("acc"), gyr=parts.get("gyr"), mag=parts.get("mag"), meta=dict(meta)
             )
         )
-    rest = [i for i in range(n_ch) if i not in used]
-    if rest or not rec.imus:
-        cols = [labels[i] for i in rest]
-        if len(set(cols)) != len(cols):
-            cols = [f"{c}_{i}" for c, i in zip(cols, rest, strict=True)]
-        rec.signals.append(
-            SignalStream(
-                topic=f"/signals/{name}",
-                t_ns=t_ns,
-                columns=cols,
-                units=[units[i] for i in rest],
-                values=values[:, rest],
-            )
+    if rest or not groups:
+        out.append(SignalStream(topic=f"/signals/{name}", t_ns=t_ns, columns=cols, units=units, values=values[:, rest]))
+    return out
+
+
+def device_meta(path: Path, info: dict, name: str, n: int, footer: dict | None, segments: int) -> dict:
+    """:func:`stream_meta` plus what the layout adds: the declared IMU units or the markers' unit."""
+    meta = stream_meta(path, info, name, n, footer, segments)
+    kind, how = stream_layout(info)
+    if kind == "markers":
+        meta["marker_units"] = channel_info(info, int(meta["channel_count"]))[1][0]
+    elif kind == "numeric" and how[0]:
+        meta["imu_units_declared"] = {q: u for q, (_, _, u) in how[0].items()}
+    return meta
+
+
+def _check_increasing(path: Path, t_ns: np.ndarray, meta: dict, before: int | None, offset: int) -> None:
+    """Stamps must increase (also from the previous piece's last, ``before``); the sample is named by its index."""
+    full = t_ns if before is None else np.concatenate([[before], t_ns])
+    bad = np.flatnonzero(np.diff(full) <= 0)
+    if len(bad):
+        i = int(bad[0]) + 1 + offset - (0 if before is None else 1)
+        raise ConversionError(
+            path, f"stream {meta['stream_id']} ({meta['stream_name']!r}): sample {i} time stamp does not increase"
         )
+
+
+def stream_to_recording(path: Path, stream: dict, name: str) -> Recording:
+    """One stream in pyxdf's layout (``info``, ``time_stamps`` s, ``time_series``, optional ``footer``) -> a
+    Recording with its channel(s) and an ``imulog.device.<name>`` record (the live capture's mapping)."""
+    info = stream["info"]
+    t_ns = np.round(np.asarray(stream["time_stamps"], dtype=np.float64) * 1e9).astype(np.int64)
+    segments = len(info.get("clock_segments") or [])
+    meta = device_meta(path, info, name, len(t_ns), stream.get("footer"), segments)
+    rec = Recording(sources=[str(path)])
+    rec.metadata[f"imulog.device.{name}"] = meta
+    _check_increasing(path, t_ns, meta, None, 0)
+    for s in stream_piece(name, stream_layout(info), t_ns, stream["time_series"], meta):
+        {ImuStream: rec.imus, MarkerStream: rec.markers, SignalStream: rec.signals, Intervals: rec.events}[
+            type(s)
+        ].append(s)
     return rec
 
 
@@ -366,106 +396,34 @@ def _stream_names(infos: list[dict]) -> dict[int, str]:
     return {sid: (n if taken.count(n) == 1 else f"{n}_{sid}") for sid, n in names.items()}
 
 
-def _pyxdf(path: Path) -> Any:
-    try:
-        import pyxdf
-    except ImportError:
-        raise ConversionError(path, "reading XDF needs pyxdf: pip install 'imulog[xdf]'") from None
-    return pyxdf
-
-
-class _Collect(logging.Handler):
-    def __init__(self) -> None:
-        super().__init__(logging.ERROR)
-        self.messages: list[str] = []
-
-    def emit(self, record: logging.LogRecord) -> None:
-        self.messages.append(record.getMessage())
-
-
-def _load_child(path: str, kwargs: dict[str, Any]) -> tuple[Any, list[str]]:
-    """pyxdf.load_xdf without dejittering, and the errors pyxdf logged while recovering (runs in the guarded child)."""
-    import pyxdf
-
-    logger = logging.getLogger("pyxdf.pyxdf")
-    collect = _Collect()
-    logger.setLevel(logging.ERROR)  # pyxdf warns about clock segments on resets
-    logger.propagate = False
-    logger.addHandler(collect)
-    result = pyxdf.load_xdf(
-        path, synchronize_clocks=True, handle_clock_resets=True, dejitter_timestamps=False, **kwargs
-    )
-    return result, collect.messages
-
-
-def _load(path: Path, **kwargs: Any) -> tuple[list[dict], dict]:
-    """pyxdf.load_xdf in a child process under a time and memory limit (``READER_TIMEOUT_S``,
-    ``READER_MEMORY_BYTES``; :mod:`imulog.converters._guard`); pyxdf's recoveries from damaged chunks (logged, data
-    skipped), its exceptions, a hang or a crash become a ConversionError naming the file (and the chunk)."""
-    from imulog.converters._guard import GuardError, guarded
-
-    _pyxdf(path)
-    try:
-        result, messages = guarded(
-            _load_child, str(path), kwargs, timeout_s=READER_TIMEOUT_S, memory_bytes=READER_MEMORY_BYTES
-        )
-    except GuardError as e:
-        locate_damaged_samples(path)
-        if e.kind == "error":
-            raise ConversionError(path, f"XDF content cannot be parsed: {e}") from None
-        raise ConversionError(path, f"pyxdf {e}") from None
-    if messages:
-        locate_damaged_samples(path)
-        raise ConversionError(path, f"pyxdf skipped damaged data: {messages[0]}")
-    return result
+#: bytes of sample values gathered before a piece is given (``iter_chunks``); None: the whole file as one piece
+PIECE_BYTES = 16 << 20
 
 
 def iter_chunks(
-    path: Path, options: ConvertOptions | None = None, per_stream: bool | None = None
+    path: Path, options: ConvertOptions | None = None, piece_bytes: int | None = PIECE_BYTES
 ) -> Iterator[Recording]:
-    """One Recording per stream. ``per_stream`` (default: files over 64 MiB) loads one stream at a time, so memory
-    holds the largest stream, not the file; otherwise the file is parsed once."""
+    """The recording in pieces of about ``piece_bytes`` of samples, read chunk by chunk in file order (None: one
+    piece). The first piece holds every stream (empty where none of its samples came yet) and declares every
+    stream's span and meta (:data:`imulog.model.PIECES_RECORD`) from two passes before it: headers, clock offsets,
+    footers and counts (:func:`~imulog.converters.xdf_read.scan`), then the synchronised stamps."""
+    from imulog.converters.xdf_pieces import iter_pieces
+
     path = Path(path)
     scan_chunks(path)
     locate_damaged_samples(path)
-    pyxdf = _pyxdf(path)
-
-    try:
-        infos = pyxdf.resolve_streams(str(path))
-    except Exception as e:  # noqa: BLE001
-        raise ConversionError(path, f"XDF stream headers cannot be parsed ({e}): the file is damaged") from None
-    names = _stream_names(infos)
-    if per_stream is None:
-        per_stream = path.stat().st_size > PER_STREAM_BYTES
-    if per_stream:
-        header: dict = {}
-        for sid in sorted(names):
-            streams, header = _load(path, select_streams=[sid])
-            for s in streams:
-                rec = stream_to_recording(path, s, names[int(s["info"]["stream_id"])])
-                trial = header_start_time(header)
-                if trial:
-                    rec.metadata["imulog.trial"] = trial
-                yield rec
-        return
-    streams, header = _load(path)
-    trial = header_start_time(header)
-    for s in sorted(streams, key=lambda s: int(s["info"]["stream_id"])):
-        rec = stream_to_recording(path, s, names[int(s["info"]["stream_id"])])
-        if trial:
-            rec.metadata["imulog.trial"] = dict(trial)
-        yield rec
+    return iter_pieces(path, piece_bytes)
 
 
 def read_xdf(path: Path, options: ConvertOptions | None = None) -> Recording:
-    """The whole file: the streams of :func:`iter_chunks` joined."""
-    return concat_chunks(iter_chunks(path, options))
+    """The whole file: :func:`iter_chunks` in one piece."""
+    return concat_chunks(iter_chunks(path, options, piece_bytes=None))
 
 
 class XdfConverter(Converter):
     name = "xdf"
     description = (
-        "XDF (Lab Streaming Layer / LabRecorder): every stream with its units, clock offsets applied, via pyxdf"
+        "XDF (Lab Streaming Layer / LabRecorder): every stream with its units, clock offsets applied (as pyxdf)"
     )
     extensions = (".xdf",)
     example = "imulog convert ../shared/data/devices/xdf/clock_resets.xdf -o lsl.mcap"
@@ -478,6 +436,9 @@ class XdfConverter(Converter):
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_xdf(Path(path), options)
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        return iter_chunks(Path(path), options)
 
 
 CONVERTER = XdfConverter()
