@@ -57,6 +57,10 @@ CASES = [
     ("axivity-csv", "devices/axivity_csv/ax3_testfile_unix_timestamps.csv", (TEXT, 2048)),
     ("movella-dot", "devices/movella_dot_csv/bei_D4CA6EF17860_20210830_170505.csv", (TEXT, 4096)),
     ("nilspod", "devices/nilspod/NilsPodX-6F13_20210109_162824.bin", ("imulog.converters.nilspod.PIECE_SAMPLES", 500)),
+    ("nilspod", "devices/nilspod/NilsPodX-6F13_20210109_162824_data.csv", (TEXT, 4096)),  # NilsPodLib's export
+    ("xsens", "devices/xsens_mtmanager/MT_012005D6_031-000_00B421AF.txt", (TEXT, 16384)),  # old header, Mat
+    ("xsens", "devices/xsens_mtmanager/MT_01200454_000-000_00B40DE4.txt", (TEXT, 64)),  # no SampleTimeFine
+    ("xsens", "devices/xsens_mtmanager/MT2022_ACC_GYRO_ROT_MAT_SPACE_00B42D4B.txt", (TEXT, 64)),  # space-delimited
     ("actigraph", "devices/actigraph_gt3x/example.gt3x", None),
     ("axivity", "devices/axivity_cwa/ax3_sample.cwa", None),
     ("axivity", "devices/axivity_cwa/ax6_sample.cwa", None),
