@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from imulog.numeric import add_counts, median_of_counts
+
 UTC_COLUMNS = ["UTC_Year", "UTC_Month", "UTC_Day", "UTC_Hour", "UTC_Minute", "UTC_Second"]
 
 
@@ -61,14 +63,7 @@ class XsensSummary:
 
     def median_step_ns(self) -> float | None:
         """``np.median(np.diff(t_ns))`` of the SampleTimeFine times from the step counts (None: fewer than 2)."""
-        n = sum(self.steps.values())
-        if n == 0:
-            return None
-        keys = sorted(self.steps)
-        cum = np.cumsum([self.steps[k] for k in keys])
-        lo = keys[int(np.searchsorted(cum, (n - 1) // 2, side="right"))]
-        hi = keys[int(np.searchsorted(cum, n // 2, side="right"))]
-        return float(np.mean(np.array([lo, hi], dtype=np.int64)))
+        return median_of_counts(self.steps)
 
 
 def summarize(pieces: Iterable[np.ndarray], seen: dict[str, int], ncols: int, imu_cols: list[int]) -> XsensSummary:
@@ -88,9 +83,7 @@ def summarize(pieces: Iterable[np.ndarray], seen: dict[str, int], ncols: int, im
             ticks = stf.add(raw) if s.stf_finite else None
             if ticks is not None and len(ticks):
                 full = ticks if before is None else np.concatenate([[before], ticks])
-                step, count = np.unique(np.diff(full) * 100_000, return_counts=True)
-                for k, c in zip(step.tolist(), count.tolist(), strict=True):
-                    s.steps[k] = s.steps.get(k, 0) + c
+                add_counts(s.steps, np.diff(full) * 100_000)
                 s.first_ticks = int(ticks[0]) if s.first_ticks is None else s.first_ticks
         if pc is not None:
             counts = pc.add(values[:, seen["PacketCounter"]])

@@ -267,8 +267,10 @@ class StreamingTrialWriter:
     def _write_piece(self, stream: Stream) -> None:
         ch = self._channels.get(stream.topic) or self._open(stream)
         _, _, times, payloads = codec.encode(stream, self._axis.map_for(stream.topic))
-        t, arrays = _sample_arrays(stream)
-        ch.stats.add_samples(t, arrays)
+        if isinstance(stream, Intervals):
+            ch.stats.add_intervals(stream.start_ns, stream.end_ns)
+        else:
+            ch.stats.add_samples(*_sample_arrays(stream))
         self._spans.add(stream)
         if hasattr(stream, "meta"):
             ch.meta = {**ch.meta, **stream.meta}
