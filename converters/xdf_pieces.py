@@ -22,7 +22,7 @@ from imulog.model import PIECES_RECORD, ImuStream, MarkerStream, Recording, Sign
 
 def _names(fs: FileScan) -> dict[int, str]:
     """Topic-safe stream names (:func:`imulog.converters.xdf._stream_names`)."""
-    from imulog.converters.xdf import _first, _stream_names
+    from imulog.converters.xdf_map import _first, _stream_names
 
     return _stream_names([{"stream_id": sid, "name": _first(s.info, "name")} for sid, s in fs.streams.items()])
 
@@ -73,7 +73,7 @@ class _Gathered:
 
 def iter_pieces(path: Path, piece_bytes: int | None) -> Iterator[Recording]:
     """The pieces of an XDF file whose chunk structure and Samples layouts were checked (see module docstring)."""
-    from imulog.converters.xdf import _check_increasing, header_start_time, stream_layout, stream_piece
+    from imulog.converters.xdf_map import _check_increasing, header_start_time, stream_layout, stream_piece
 
     fs = scan(path)
     names = _names(fs)
@@ -124,7 +124,7 @@ def iter_pieces(path: Path, piece_bytes: int | None) -> Iterator[Recording]:
 
 
 def _meta(path: Path, s: StreamScan, name: str, segments: int) -> dict:
-    from imulog.converters.xdf import device_meta
+    from imulog.converters.xdf_map import device_meta
 
     info = {**s.info, "stream_id": [str(s.sid)]}
     return device_meta(path, info, name, s.keep, s.footer, segments)
@@ -134,7 +134,7 @@ def _declaration(
     names: dict[int, str], layouts: dict[int, Any], metas: dict[int, dict], spans: dict[int, list[int] | None]
 ) -> dict[str, Any]:
     """``{"spans": {topic: [first, last] or None}, "meta": {topic: stream meta}}`` of every stream's channels."""
-    from imulog.converters.xdf import stream_piece
+    from imulog.converters.xdf_map import stream_piece
 
     out: dict[str, Any] = {"spans": {}, "meta": {}}
     for sid, name in sorted(names.items()):

@@ -93,7 +93,7 @@ def _varlen(data: bytes | memoryview, pos: int) -> tuple[int, int]:
 def scan(path: Path) -> FileScan:
     """The first pass: file header, stream headers, clock offsets, footers and sample counts (chunk structure and
     Samples layouts are checked by :func:`imulog.converters.xdf.locate_damaged_samples` before)."""
-    from imulog.converters.xdf import iter_chunk_headers
+    from imulog.converters.xdf_chunks import iter_chunk_headers
 
     header: dict[str, Any] = {}
     streams: dict[int, StreamScan] = {}
@@ -194,7 +194,7 @@ def _decode(content: bytes, s: StreamScan, last: float, stamps_only: bool = Fals
 def iter_samples(path: Path, fs: FileScan, stamps_only: bool = False) -> Iterator[tuple[int, np.ndarray, Any]]:
     """(stream id, raw stamps in s, values) of every Samples chunk in file order, the samples a stream keeps only
     (:attr:`StreamScan.keep`); values are (n, channels) arrays of the stream's format, or lists of string rows."""
-    from imulog.converters.xdf import iter_chunk_headers
+    from imulog.converters.xdf_chunks import iter_chunk_headers
 
     last: dict[int, float] = dict.fromkeys(fs.streams, 0.0)
     seen: dict[int, int] = dict.fromkeys(fs.streams, 0)
