@@ -47,7 +47,9 @@ def _convert_streaming(
     from imulog.converters.plausibility import PieceExcerpts, marker_warnings
     from imulog.converters.registry import iter_file_chunks
     from imulog.converters.values import ValueReport, finish
+    from imulog.heap import bound_heap
 
+    bound_heap()  # the same temporaries piece after piece: keep them out of the heap (imulog.heap), so memory stays flat
     name = _format_name(path, fmt, options)
     conv = get(name)
     size = path.stat().st_size
