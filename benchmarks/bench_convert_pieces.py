@@ -3,8 +3,9 @@
 Writes Shimmer Consensys exports (``sep=`` line, names row, units row; host Unix stamps in ms that repeat and jitter,
 so a uniform clock is fitted: docs/converters.md) of ``--hours`` and 4x as many hours at 51.2 Hz, then converts each
 with ``imulog convert`` in a fresh subprocess (a) piece by piece (``IMULOG_STREAM_MIN_BYTES=0``, 16 MB pieces: two
-passes over the file, the first summing the line) and (b) in one piece (the whole-file path). Peak RSS, user+sys CPU
-and wall time are the subprocess's own (``resource.getrusage``); the machine is shared, so CPU time is the figure to
+passes over the file, the first summing the line) and (b) in one piece (the whole-file path). Peak RSS (``VmHWM``;
+``ru_maxrss`` would carry this process's own peak, the generated arrays, across the child's exec), user+sys CPU
+(``resource.getrusage``) and wall time are the subprocess's own; the machine is shared, so CPU time is the figure to
 compare.
 
     .venv/bin/python benchmarks/bench_convert_pieces.py [--hours 2]
@@ -59,8 +60,10 @@ try:
     cli(["convert", sys.argv[1], "-o", sys.argv[2], "--attach-original", "never"], standalone_mode=False)
 finally:
     ru = resource.getrusage(resource.RUSAGE_SELF)
+    # VmHWM: this program's own peak (ru_maxrss keeps the forking parent's peak across exec on Linux)
+    hwm = [int(x.split()[1]) for x in open("/proc/self/status") if x.startswith("VmHWM:")]
     print(json.dumps({"wall_s": time.perf_counter() - t0, "cpu_s": ru.ru_utime + ru.ru_stime,
-                      "peak_mb": ru.ru_maxrss / 1024}), file=sys.stderr)
+                      "peak_mb": (hwm[0] if hwm else ru.ru_maxrss) / 1024}), file=sys.stderr)
 """
 
 

@@ -24,7 +24,9 @@ Time: ``SampleTimeFine`` (10 kHz ticks, unsigned 32 bit, unwrapped) when every r
 ``DeviceId``, else the last 8 hex digits of ``MT_<master>_<trial>-000_<DeviceId>.txt``; the stream is named
 ``mt_<serial>`` unless ``options.extra["names"]`` maps the serial to a name.
 
-Memory: read whole, not yet in pieces (issue 24): MT Manager exports of one session per sensor file.
+Memory: in pieces of about 16 MiB of text (:func:`iter_xsens`; the whole file is the one-piece case), after a first
+pass over the pieces (:mod:`imulog.converters.xsens_scan`) that settles what only the whole file tells: the time
+base, the rate, the columns with values, the gap count and the UTC start, which the first piece declares.
 """
 
 from __future__ import annotations

@@ -11,6 +11,7 @@ at the end."""
 from __future__ import annotations
 
 import dataclasses
+import os
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,9 @@ from click.testing import CliRunner
 from imulog.archive import TrialReader
 from imulog.cli import cli
 
+#: the real recordings, found as the conftest's ``shared_data`` fixture finds them (listed here at collection)
+SHARED_DATA = Path(os.environ.get("IMULOG_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
+
 TEXT = "imulog.converters._pieces.PIECE_BYTES"
 DEV = "devices"
 CASES = [
@@ -28,22 +32,9 @@ CASES = [
     ("xdf/empty_streams.xdf", ("imulog.converters.xdf.PIECE_BYTES", 64)),
     ("nilspod/NilsPodX-6F13_20210109_162824_data.csv", (TEXT, 4096)),
     ("nilspod/NilsPodX-6F13_20210109_162824.bin", ("imulog.converters.nilspod.PIECE_SAMPLES", 100)),
-] + [
-    (f"xsens_mtmanager/{name}", (TEXT, 64 if "031" not in name else 16384))
-    for name in (
-        "MT2022_ACC_00B42D4B.txt",
-        "MT2022_ACC_GYRO_ROT_ALL_TAB_NAN_00B42D4B.txt",
-        "MT2022_ACC_GYRO_ROT_EULER_TAB_00B42D4F.txt",
-        "MT2022_ACC_GYRO_ROT_MAT_COMMA_00B42D4B.txt",
-        "MT2022_ACC_GYRO_ROT_MAT_SEMICOLON_00B42D4B.txt",
-        "MT2022_ACC_GYRO_ROT_MAT_SPACE_00B42D4B.txt",
-        "MT46_01-000_00B42D4D.txt",
-        "MT46_01-000_00B42D4E.txt",
-        "MT_01200312-002-000_00B474BA.txt",
-        "MT_01200454_000-000_00B40DE4.txt",
-        "MT_012005D6_031-000_00B421AF.txt",
-        "MT_012005D6_031-000_00B4227B.txt",
-    )
+] + [  # every MT Manager export in the shared folder
+    (f"xsens_mtmanager/{p.name}", (TEXT, 64 if "031" not in p.name else 16384))
+    for p in sorted((SHARED_DATA / DEV / "xsens_mtmanager").glob("MT*.txt"))
 ]
 SKIP_CHANNEL_KEYS = {"sha256", "stats_record"}
 SKIP_RECORDS = {"imulog.raw", "imulog.channel_stats"}
@@ -100,10 +91,9 @@ def test_every_shared_file_of_the_four_formats_is_a_case(shared_data):
         f"{p.parent.name}/{p.name}"
         for folder in ("xdf", "nilspod", "xsens_mtmanager")
         for p in (shared_data / DEV / folder).iterdir()
-        if p.suffix in (".xdf", ".bin", ".txt") or p.name.endswith("_data.csv")
+        if p.suffix in (".xdf", ".bin") or p.name.endswith("_data.csv") or p.name.startswith("MT")
     }
-    found = {f for f in found if "LICENSE" not in f and "NOTICE" not in f}
-    assert found == {rel for rel, _ in CASES}
+    assert found == {rel for rel, _ in CASES} and len(found) == 17
 
 
 def test_bids_dataset_pieces_write_the_whole_files_archive(tmp_path, monkeypatch):
