@@ -70,7 +70,9 @@ def _pyxdf_ns(path: Path) -> dict[str, tuple[np.ndarray, object]]:
     """pyxdf's reading (the reference): {stream name: (stamps in ns, samples)}, clocks synchronised, no dejitter."""
     pyxdf = pytest.importorskip("pyxdf")
     streams, _ = pyxdf.load_xdf(str(path), synchronize_clocks=True, handle_clock_resets=True, dejitter_timestamps=False)
-    return {s["info"]["name"][0]: (np.round(s["time_stamps"] * 1e9).astype(np.int64), s["time_series"]) for s in streams}
+    return {
+        s["info"]["name"][0]: (np.round(s["time_stamps"] * 1e9).astype(np.int64), s["time_series"]) for s in streams
+    }
 
 
 @pytest.mark.parametrize("name", ["clock_resets.xdf", "minimal.xdf", "empty_streams.xdf"])
@@ -248,3 +250,35 @@ def test_cli_converts_every_example_and_doctor_passes(xdf_dir: Path, tmp_path: P
             if src.stem == "empty_streams":
                 assert "/events/empty_marker_stream_test_stream_0_counter" in trial.topics()
                 assert "/signals/empty_data_stream_test_stream_0_counter" in trial.topics()
+
+
+def test_a_stream_whose_chunks_come_later_but_start_earlier(tmp_path: Path, monkeypatch):
+    """The case that kept XDF out of piece-wise conversion: the mocap stream's chunks all come after the IMU's in the
+    file, yet its samples start 2 s earlier. In pieces the first piece declares every stream's span, so the trial's
+    time origin (and every channel's log-time map) is the whole file's: both archives are equal sample by sample."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_convert_pieces_archive import assert_same_trial, convert_twice
+
+    rng = np.random.default_rng(5)
+    n = 400
+    t_imu = 1002.0 + np.arange(n) / 100.0
+    t_mocap = 1000.0 + np.arange(n) / 100.0
+    imu_ch = [(f"Acc{a}", "g", "Accelerometer") for a in "XYZ"]
+    mocap_ch = [(f"wrist_{a}", "mm", "Position") for a in "XYZ"]
+    imu, mocap = rng.normal(0, 1, (n, 3)), rng.normal(500, 10, (n, 3))
+    body = b"XDF:" + _chunk(1, b'<?xml version="1.0"?><info><version>1.0</version></info>')
+    body += _header(1, "WristIMU", "IMU", imu_ch, 100) + _header(2, "Qualisys", "MoCap", mocap_ch, 100)
+    for lo in range(0, n, 50):
+        body += _samples(1, t_imu[lo : lo + 50], imu[lo : lo + 50])
+    for lo in range(0, n, 50):
+        body += _samples(2, t_mocap[lo : lo + 50], mocap[lo : lo + 50])
+    path = tmp_path / "late.xdf"
+    path.write_bytes(body)
+    whole, pieces = convert_twice(path, tmp_path, ("imulog.converters.xdf.PIECE_BYTES", 2000), monkeypatch)
+    assert_same_trial(whole, pieces)
+    with TrialReader(pieces) as trial:
+        timeline = trial.metadata["imulog.timeline"]  # one clock: both start at the mocap's first sample
+        assert timeline["clocks"] == "shared" and timeline["device_origin_ns"] == round(1000.0 * 1e9)
+        assert trial.read("/markers/qualisys").t_ns[0] == round(1000.0 * 1e9)
