@@ -93,7 +93,7 @@ class XdfConverter(Converter):
         return read_xdf(Path(path), options)
 
     def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
-        return iter_chunks(Path(path), options)
+        return iter_chunks(Path(path), options, piece_bytes=PIECE_BYTES)
 
 
 CONVERTER = XdfConverter()
