@@ -161,9 +161,7 @@ def _ezc3d_read(path: str) -> dict[str, Any]:
     data = c["data"]
     meta = {}
     if "meta_points" in data:
-        meta = {
-            k: np.asarray(data["meta_points"][k]) for k in ("residuals", "camera_masks") if k in data["meta_points"]
-        }
+        meta = {k: np.asarray(data["meta_points"][k]) for k in ("residuals", "camera_masks") if k in data["meta_points"]}
     return {
         "header": {"points": dict(c["header"]["points"])},
         "parameters": params,

@@ -39,6 +39,5 @@ BLOCK_SCHEMAS = (
     "imulog.PoseBlock",
 )
 
-
 class DecodeError(ValueError):
     """A message could not be decoded into the stream type its schema promises."""
