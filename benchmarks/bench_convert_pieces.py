@@ -3,11 +3,17 @@
 Writes Shimmer Consensys exports (``sep=`` line, names row, units row; host Unix stamps in ms that repeat and jitter,
 so a uniform clock is fitted: docs/converters.md) of ``--hours`` and 4x as many hours at 51.2 Hz, then converts each
 with ``imulog convert`` in a fresh subprocess (a) piece by piece (``IMULOG_STREAM_MIN_BYTES=0``, 16 MB pieces: two
-passes over the file, the first summing the line) and (b) in one piece (the whole-file path). Peak RSS, user+sys CPU
-and wall time are the subprocess's own (``resource.getrusage``); the machine is shared, so CPU time is the figure to
+passes over the file, the first summing the line) and (b) in one piece (the whole-file path). Peak RSS (``VmHWM``;
+``ru_maxrss`` would carry this process's own peak, the generated arrays, across the child's exec), user+sys CPU
+(``resource.getrusage``) and wall time are the subprocess's own; the machine is shared, so CPU time is the figure to
 compare.
 
     .venv/bin/python benchmarks/bench_convert_pieces.py [--hours 2]
+
+The same for the four formats issue 24 brought into pieces (XDF, NilsPodLib CSV, Xsens MT text, BIDS-motion):
+generated files of ``--hours`` and 4x as many hours converted piece by piece, with the growth of the peak:
+
+    .venv/bin/python benchmarks/bench_convert_pieces.py --formats xdf,nilspod-csv,xsens,bids --hours 1 [--whole]
 """
 
 from __future__ import annotations
@@ -54,8 +60,10 @@ try:
     cli(["convert", sys.argv[1], "-o", sys.argv[2], "--attach-original", "never"], standalone_mode=False)
 finally:
     ru = resource.getrusage(resource.RUSAGE_SELF)
+    # VmHWM: this program's own peak (ru_maxrss keeps the forking parent's peak across exec on Linux)
+    hwm = [int(x.split()[1]) for x in open("/proc/self/status") if x.startswith("VmHWM:")]
     print(json.dumps({"wall_s": time.perf_counter() - t0, "cpu_s": ru.ru_utime + ru.ru_stime,
-                      "peak_mb": ru.ru_maxrss / 1024}), file=sys.stderr)
+                      "peak_mb": (hwm[0] if hwm else ru.ru_maxrss) / 1024}), file=sys.stderr)
 """
 
 
@@ -69,10 +77,191 @@ def convert(src: Path, out: Path, pieces: bool) -> dict:
     return json.loads(res.stderr.strip().splitlines()[-1])
 
 
+def xdf_file(path: Path, n: int, *, rate_hz: float = 100.0, seed: int = 0) -> None:
+    """An XDF recording of ``n`` samples: a 9-channel float32 IMU stream (AccX.. in g, GyroX.. in deg/s, MagX.. in
+    uT) in 5-s Samples chunks, a marker stream every 10 s, clock offsets every 5 s, footers, as LabRecorder writes."""
+    import struct
+
+    rng = np.random.default_rng(seed)
+
+    def chunk(tag: int, content: bytes) -> bytes:
+        return bytes([8]) + struct.pack("<QH", len(content) + 2, tag) + content
+
+    labels = [f"{q}{a}" for q in ("Acc", "Gyro", "Mag") for a in "XYZ"]
+    units = ["g"] * 3 + ["deg/s"] * 3 + ["uT"] * 3
+    ch = "".join(
+        f"<channel><label>{lab}</label><unit>{u}</unit></channel>" for lab, u in zip(labels, units, strict=True)
+    )
+    imu_xml = (
+        f"<?xml version='1.0'?><info><name>Wrist</name><type>IMU</type><channel_count>9</channel_count>"
+        f"<nominal_srate>{rate_hz}</nominal_srate><channel_format>float32</channel_format>"
+        f"<desc><channels>{ch}</channels></desc></info>"
+    )
+    mk_xml = (
+        "<?xml version='1.0'?><info><name>Markers</name><type>Markers</type><channel_count>1</channel_count>"
+        "<nominal_srate>0</nominal_srate><channel_format>string</channel_format></info>"
+    )
+    rec = np.dtype([("f", "u1"), ("t", "<f8"), ("v", "<f4", (9,))])
+    t0 = 1000.0
+    per = int(5 * rate_hz)
+    with open(path, "wb") as f:
+        f.write(b"XDF:" + chunk(1, b"<?xml version='1.0'?><info><version>1.0</version></info>"))
+        f.write(chunk(2, struct.pack("<I", 1) + imu_xml.encode()))
+        f.write(chunk(2, struct.pack("<I", 2) + mk_xml.encode()))
+        for k, lo in enumerate(range(0, n, per)):
+            m = min(per, n - lo)
+            block = np.zeros(m, rec)
+            block["f"] = 8
+            block["t"] = t0 + (lo + np.arange(m)) / rate_hz + rng.uniform(0, 2e-4, m)
+            block["v"] = rng.normal(0, 1, (m, 9))
+            f.write(chunk(3, struct.pack("<IBI", 1, 4, m) + block.tobytes()))
+            tk = t0 + lo / rate_hz
+            f.write(chunk(4, struct.pack("<Idd", 1, tk, -0.25 + 1e-6 * k)))
+            if k % 2 == 0:
+                label = f"event {k}".encode()
+                f.write(
+                    chunk(
+                        3,
+                        struct.pack("<IBB", 2, 1, 1)
+                        + bytes([8])
+                        + struct.pack("<d", tk)
+                        + bytes([1, len(label)])
+                        + label,
+                    )
+                )
+                f.write(chunk(4, struct.pack("<Idd", 2, tk, -0.25)))
+        for sid, count in ((1, n), (2, (n + 2 * per - 1) // (2 * per))):
+            footer = f"<?xml version='1.0'?><info><sample_count>{count}</sample_count></info>"
+            f.write(chunk(6, struct.pack("<I", sid) + footer.encode()))
+
+
+def nilspod_csv(path: Path, n: int, *, seed: int = 0) -> None:
+    """NilsPodLib's ``data_as_csv`` export of ``n`` samples at 102.4 Hz (``<stem>_data.csv`` + ``_header.json``)."""
+    rng = np.random.default_rng(seed)
+    rate = 102.4
+    t = np.arange(n) / rate
+    cols = ["t", "gyr_x", "gyr_y", "gyr_z", "acc_x", "acc_y", "acc_z", "baro", "temp"]
+    data = np.column_stack(
+        [
+            t,
+            rng.normal(0, 5, (n, 3)),
+            rng.normal(0, 1, (n, 3)) + [0, 0, 9.81],
+            rng.normal(1000, 1, n),
+            rng.normal(25, 0.1, n),
+        ]
+    )
+    np.savetxt(path, data, delimiter=",", header=",".join(cols), comments="", fmt=["%.8f"] + ["%.5f"] * 8)
+    stem = path.name[: -len("_data.csv")]
+    header = {
+        "sampling_rate_hz": rate,
+        "acc_range_g": 16.0,
+        "gyro_range_dps": 2000.0,
+        "utc_start": 1610209704,
+        "n_samples": n,
+        "mac_address": "aa:bb:cc:dd:6f:13",
+        "version_firmware": "v0.18.0",
+    }
+    (path.parent / f"{stem}_header.json").write_text(json.dumps(header))
+
+
+def xsens_txt(path: Path, n: int, *, seed: int = 0) -> None:
+    """An MT Manager 2022 text export of ``n`` samples at 100 Hz: PacketCounter (wrapping), SampleTimeFine, Acc,
+    Gyr, Mag, Quat, tab-separated under the ``//`` header."""
+    rng = np.random.default_rng(seed)
+    head = [
+        "// General information:",
+        "//  MT Manager version: 2022.2.0",
+        "// Device information:",
+        "//  DeviceId: 00B42D4B",
+        "//  ProductCode: MTW2-3A7G6",
+        "// Coordinate system: ENU",
+    ]
+    cols = ["PacketCounter", "SampleTimeFine"] + [f"{q}_{a}" for q in ("Acc", "Gyr", "Mag") for a in "XYZ"]
+    cols += [f"Quat_q{i}" for i in range(4)]
+    q = rng.normal(0, 1, (n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    data = np.column_stack(
+        [
+            np.arange(n) % 65536,
+            1_000_000 + np.arange(n) * 100,
+            rng.normal(0, 1, (n, 3)),
+            rng.normal(0, 0.5, (n, 3)),
+            rng.normal(0, 0.3, (n, 3)),
+            q,
+        ]
+    )
+    with open(path, "w") as f:
+        f.write("\n".join(head) + "\n" + "\t".join(cols) + "\n")
+        np.savetxt(f, data, delimiter="\t", fmt=["%05d", "%d"] + ["%.6f"] * 13)
+
+
+def bids_motion(folder: Path, n: int, *, seed: int = 0) -> Path:
+    """A BIDS-motion recording of ``n`` samples at 100 Hz: one wrist IMU (acc m/s^2, gyr rad/s), ``n/a`` gaps."""
+    rng = np.random.default_rng(seed)
+    folder.mkdir(parents=True, exist_ok=True)
+    base = folder / "sub-01_task-home_tracksys-imu"
+    rows = ["name\tcomponent\ttype\ttracked_point\tunits"]
+    rows += [f"acc_{a}\t{a}\tACCEL\twrist\tm/s^2" for a in "xyz"] + [f"gyr_{a}\t{a}\tGYRO\twrist\trad/s" for a in "xyz"]
+    Path(f"{base}_channels.tsv").write_text("\n".join(rows) + "\n")
+    Path(f"{base}_motion.json").write_text(json.dumps({"SamplingFrequency": 100, "TrackingSystemName": "imu"}))
+    data = np.column_stack([rng.normal(0, 1, (n, 3)) + [0, 0, 9.81], rng.normal(0, 0.5, (n, 3))])
+    motion = Path(f"{base}_motion.tsv")
+    np.savetxt(motion, data, delimiter="\t", fmt="%.6f")
+    return motion
+
+
+#: format -> (samples per hour, how to write a file of n samples into a folder and return the path to convert)
+FORMATS = {
+    "xdf": (360_000, lambda d, n: (xdf_file(d / "rec.xdf", n), d / "rec.xdf")[1]),
+    "nilspod-csv": (
+        368_640,
+        lambda d, n: (nilspod_csv(d / "NilsPodX-6F13_data.csv", n), d / "NilsPodX-6F13_data.csv")[1],
+    ),
+    "xsens": (
+        360_000,
+        lambda d, n: (xsens_txt(d / "MT_0120_000-000_00B42D4B.txt", n), d / "MT_0120_000-000_00B42D4B.txt")[1],
+    ),
+    "bids": (360_000, lambda d, n: bids_motion(d, n)),
+}
+
+
+def main_formats(hours: float, formats: list[str], whole: bool) -> None:
+    """Each format at ``hours`` and 4x ``hours``, piece by piece (and in one piece with ``whole``)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        for fmt in formats:
+            per_hour, write = FORMATS[fmt]
+            peaks = {}
+            for h in (hours, 4 * hours):
+                folder = Path(tmp) / f"{fmt}_{h:g}h"
+                folder.mkdir()
+                src = write(folder, int(h * per_hour))
+                size_mb = sum(p.stat().st_size for p in folder.iterdir()) / 1e6
+                for pieces in (True, False) if whole else (True,):
+                    r = convert(src, Path(tmp) / "out.mcap", pieces)
+                    kind = "pieces" if pieces else "one piece"
+                    peaks[(h, kind)] = r["peak_mb"]
+                    print(
+                        f"{fmt:12s} {h:5.1f} h  {int(h * per_hour) / 1e6:5.2f} M samples  {size_mb:6.0f} MB  {kind:9s}  "
+                        f"peak {r['peak_mb']:6.0f} MB  cpu {r['cpu_s']:6.1f} s  wall {r['wall_s']:6.1f} s",
+                        flush=True,
+                    )
+                for p in folder.iterdir():
+                    p.unlink()
+            growth = peaks[(4 * hours, "pieces")] / peaks[(hours, "pieces")]
+            print(f"{fmt:12s} peak memory in pieces, 4x the hours: {growth:.2f}x (target <= 1.15)", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hours", type=float, default=2.0, help="the short file; the long one is 4x (default 2)")
+    ap.add_argument("--formats", default="shimmer", help="comma-separated: shimmer, " + ", ".join(FORMATS))
+    ap.add_argument("--whole", action="store_true", help="also convert each file of --formats in one piece")
     args = ap.parse_args()
+    others = [f for f in args.formats.split(",") if f != "shimmer"]
+    if others:
+        main_formats(args.hours, others, args.whole)
+    if "shimmer" not in args.formats.split(","):
+        return
     with tempfile.TemporaryDirectory() as tmp:
         rows = []
         for hours in (args.hours, 4 * args.hours):

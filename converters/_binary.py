@@ -14,7 +14,16 @@ from typing import Any
 
 import numpy as np
 
-from imulog.model import AnalogStream, ImuStream, Intervals, MarkerStream, PoseStream, Recording, SignalStream
+from imulog.model import (
+    PIECES_RECORD,
+    AnalogStream,
+    ImuStream,
+    Intervals,
+    MarkerStream,
+    PoseStream,
+    Recording,
+    SignalStream,
+)
 
 NS_PER_S = 1_000_000_000
 UNKNOWN_ZONE = "unknown (device local time)"
@@ -160,6 +169,7 @@ def concat_chunks(chunks: Iterable[Recording]) -> Recording:
     for later in chunks[1:]:
         for key, value in later.metadata.items():
             out.metadata[key] = {**out.metadata.get(key, {}), **value}
+    out.metadata.pop(PIECES_RECORD, None)  # what the pieces declared for the streaming writer: not a record
     imus: dict[str, list[ImuStream]] = {}
     signals: dict[str, list[SignalStream]] = {}
     events: dict[str, list[Intervals]] = {}

@@ -128,3 +128,51 @@ def text_column(piece: NumericPiece, column: int, delimiter: str = ",") -> Any:
         engine="c",
         skip_blank_lines=False,
     )[column]
+
+
+def iter_table(
+    path: Path,
+    *,
+    delimiter: str,
+    skip_lines: int,
+    names: list[str],
+    piece_bytes: int | None,
+    required: tuple[int, ...] | list[int] = (),
+    skip_columns: tuple[int, ...] | list[int] = (),
+    warnings: list[str] | None = None,
+) -> Iterator[tuple[np.ndarray, int]]:
+    """:func:`imulog.converters._lab.read_table` in pieces of about ``piece_bytes`` of text cut after whole rows
+    (:func:`text_pieces`; None: the whole file at once): (values, line number of the piece's first row). Values,
+    errors (their line numbers in the file) and a cut final row's warning are those of the whole file."""
+    from imulog.converters._lab import read_table
+
+    kw: dict[str, Any] = dict(delimiter=delimiter, names=names, required=required, skip_columns=skip_columns)
+    if piece_bytes is None:
+        yield read_table(path, skip_lines=skip_lines, warnings=warnings, **kw), skip_lines + 1
+        return
+    for piece, lines_before, k, last in text_pieces(path, skip_lines, piece_bytes):
+        if k and last and not piece.strip(b" \t\r\n\x00"):
+            continue  # blank lines after the previous piece
+        if last and warnings is not None:  # a cut final row, judged and named as in the whole file
+            block = _trimmed(piece)
+            end, warning = drop_cut_final_row(path, piece, delimiter, end=len(block), line_offset=lines_before)
+            if warning is not None:
+                piece = piece[:end]
+                warnings.append(warning)
+        try:
+            values = read_table(path, data=piece, skip_lines=0, **kw)
+        except ConversionError as e:
+            if e.line is None:
+                raise
+            raise ConversionError(path, e.problem, line=e.line + lines_before, column=e.column) from None
+        yield values, lines_before + 1
+
+
+def _trimmed(data: bytes) -> bytes:
+    """``data`` without its trailing blank lines (whitespace only) and line breaks, as ``read_table`` trims it."""
+    block = data.rstrip(b"\r\n\x00")
+    while True:
+        cut = block.rfind(b"\n")
+        if cut < 0 or block[cut + 1 :].strip():
+            return block
+        block = block[:cut].rstrip(b"\r\n")

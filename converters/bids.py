@@ -16,19 +16,24 @@ The recording's ``*_events.tsv`` (same entities without ``tracksys``) becomes ``
 (grouped by :meth:`BidsConverter.recording_key`: the file name without ``tracksys``) merge into one trial. A
 dataset folder therefore converts to one trial per recording (``imulog convert DATASET/ -o trials/``).
 
-Memory: read whole, not yet in pieces (issue 24); BIDS-motion recordings are lab sessions (minutes).
+Memory: in pieces of about 16 MiB of text (:func:`iter_motion`; the whole file is the one-piece case): the channels
+file and sidecar say every stream and its meta before the first row, so no first pass is needed.
 """
 
 from __future__ import annotations
 
 import csv
+import io
 import json
 import re
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from imulog.converters._common import LENGTH_TO_M, check_increasing, sanitize_name, unit_factor
 from imulog.converters._lab import orientation_stream
+from imulog.converters._pieces import PIECE_BYTES
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
 
@@ -72,6 +77,39 @@ def _unit(path: Path, quantity: str, unit: str, channel: str) -> float:
 
 
 def read_motion(path: Path, options: ConvertOptions | None = None) -> Recording:
+    """The whole recording: :func:`iter_motion` as one piece."""
+    from imulog.converters._binary import concat_chunks
+
+    return concat_chunks(iter_motion(path, options, piece_bytes=None))
+
+
+def _tables(path: Path, piece_bytes: int | None) -> Iterator[tuple[np.ndarray, int]]:
+    """The motion table (no header, ``n/a`` = missing) in pieces of about ``piece_bytes`` of text cut after whole
+    lines (None: the whole file): (values, rows before the piece)."""
+    from imulog.converters._pieces import text_pieces
+
+    if piece_bytes is None:
+        parts: Iterator[tuple[Any, int, int, bool]] = iter([(path, 0, 0, True)])
+    else:
+        parts = text_pieces(path, 0, piece_bytes)
+    rows = 0
+    for piece, _, k, last in parts:
+        if k and last and not piece.strip():
+            continue
+        source = piece if isinstance(piece, Path) else io.BytesIO(piece)
+        try:
+            data = np.genfromtxt(source, delimiter="\t", missing_values="n/a", filling_values=np.nan, ndmin=2)
+        except ValueError as e:
+            raise ConversionError(path, f"not a numeric table: {str(e).splitlines()[0]}") from None
+        yield data, rows
+        rows += len(data)
+
+
+def iter_motion(
+    path: Path, options: ConvertOptions | None = None, piece_bytes: int | None = PIECE_BYTES
+) -> Iterator[Recording]:
+    """One tracking system's recording in pieces of about ``piece_bytes`` of text (None: one piece); the channels
+    and sidecars say every stream up front, the events come with the first piece."""
     path = Path(path)
     parts = recording_stem(path)
     if parts is None:
@@ -91,33 +129,45 @@ def read_motion(path: Path, options: ConvertOptions | None = None) -> Recording:
             side = json.loads(js.read_text())
         except ValueError as e:
             raise ConversionError(js, f"not JSON: {e}") from None
-    try:
-        data = np.genfromtxt(path, delimiter="\t", missing_values="n/a", filling_values=np.nan, ndmin=2)
-    except ValueError as e:
-        raise ConversionError(path, f"not a numeric table: {str(e).splitlines()[0]}") from None
-    if data.size == 0:
-        raise ConversionError(path, "no samples")
-    if data.shape[1] != len(chans):
-        raise ConversionError(path, f"{data.shape[1]} columns, {ch_path.name} lists {len(chans)} channels")
     types = [c["type"].upper() for c in chans]
     rate = side.get("SamplingFrequency")
     if not isinstance(rate, int | float):
         rate = next(
             (float(c["sampling_frequency"]) for c in chans if c.get("sampling_frequency", "n/a") != "n/a"), None
         )
-    if "LATENCY" in types:
-        j = types.index("LATENCY")
-        f = unit_factor("time", chans[j].get("units", "s") or "s") or 1e9
-        t = data[:, j]
-        if not np.isfinite(t).all():
-            raise ConversionError(path, "missing LATENCY value", line=int(np.argmax(~np.isfinite(t))) + 1)
-        t_ns = np.round(t * f).astype(np.int64)
-    elif rate:
-        t_ns = np.round(np.arange(len(data)) * (1e9 / float(rate))).astype(np.int64)
-    else:
+    if "LATENCY" not in types and not rate:
         raise ConversionError(path, "no LATENCY channel and no SamplingFrequency: sample times unknown")
-    check_increasing(path, t_ns, 1, "latency")
-    rec = Recording(sources=[str(path), str(ch_path)] + ([str(js)] if js.is_file() else []))
+    before = None
+    first = True
+    for data, row0 in _tables(path, piece_bytes):
+        if first and data.size == 0:
+            raise ConversionError(path, "no samples")
+        if data.shape[1] != len(chans):
+            raise ConversionError(path, f"{data.shape[1]} columns, {ch_path.name} lists {len(chans)} channels")
+        if "LATENCY" in types:
+            j = types.index("LATENCY")
+            f = unit_factor("time", chans[j].get("units", "s") or "s") or 1e9
+            t = data[:, j]
+            if not np.isfinite(t).all():
+                raise ConversionError(path, "missing LATENCY value", line=row0 + int(np.argmax(~np.isfinite(t))) + 1)
+            t_ns = np.round(t * f).astype(np.int64)
+        else:
+            t_ns = np.round(np.arange(row0, row0 + len(data)) * (1e9 / float(rate))).astype(np.int64)
+        check_increasing(path, t_ns, row0 + 1, "latency", before=before)
+        before = int(t_ns[-1]) if len(t_ns) else before
+        rec = _motion_piece(path, system, chans, types, rate, side, data, t_ns)
+        rec.sources = [str(path), str(ch_path)] + ([str(js)] if js.is_file() else [])
+        if first:
+            _attach_events(rec, path, key, system)
+        first = False
+        yield rec
+
+
+def _motion_piece(
+    path: Path, system: str, chans: list[dict[str, str]], types: list[str], rate, side: dict, data, t_ns
+) -> Recording:
+    """The streams of some rows of one tracking system's table, and its device record."""
+    rec = Recording()
     imus: dict[str, dict[str, list]] = {}
     markers: dict[str, dict[str, int]] = {}
     quats: dict[str, dict[str, int]] = {}
@@ -191,7 +241,6 @@ def read_motion(path: Path, options: ConvertOptions | None = None) -> Recording:
         )
     if not rec.streams():
         raise ConversionError(path, "no channel to convert")
-    _attach_events(rec, path, key, system)
     rec.metadata[f"imulog.device.{sanitize_name(system)}"] = {
         "format": "bids-motion",
         "tracking_system": system,
@@ -244,6 +293,11 @@ class BidsConverter(Converter):
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_motion(Path(path), options)
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        from imulog.converters import _pieces
+
+        return iter_motion(Path(path), options, piece_bytes=_pieces.PIECE_BYTES)
 
 
 CONVERTER = BidsConverter()

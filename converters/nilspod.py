@@ -17,8 +17,9 @@ midnight) over the rate, ``t_ns`` from the first sample; ``start_time`` = midnig
 / rate, in UTC (the sensor clock is set to UTC by its app; NilsPodLib warns it may not be). A counter step above 1
 is missing samples (a gap), a step <= 0 is an error naming the sample.
 
-Memory: a ``.bin`` session in pieces of samples read from the file (:func:`iter_bin`; the whole file is the
-one-piece case); NilsPodLib's CSV export is read whole (one piece), not yet in pieces.
+Memory: a ``.bin`` session in pieces of samples read from the file (:func:`iter_bin`), NilsPodLib's CSV export in
+pieces of text (:func:`iter_csv`); the whole file is the one-piece case. In pieces, a first pass over the counters
+(the ``t`` column) gives the missing-sample count that the first piece declares as the IMU's meta.
 """
 
 from __future__ import annotations
@@ -29,13 +30,14 @@ import re
 from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from imulog.converters._lab import trial_start
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
 
-from imulog.model import ImuStream, Recording, SignalStream
+from imulog.model import PIECES_RECORD, ImuStream, Recording, SignalStream
 
 SENSORS = (  # name, flag byte index (0/1), flag, channels, bytes per channel, dtype
     ("gyro", 0, 0x02, 3, 2, "<i2"),
@@ -141,12 +143,17 @@ def iter_bin(
             warnings.append(f"{path.name}: header says {hdr['n_samples']} samples, the file holds {n}; read them")
         if n == 0:
             raise ConversionError(path, "no samples after the header")
-        f.seek(hdr["header_size"])
         step = n if samples_per_piece is None else samples_per_piece
+        declared = None
+        if step < n:  # pieces: the counters first (the missing-sample count goes into the first piece's meta)
+            f.seek(hdr["header_size"])
+            counters = (_read_rows(f, min(step, n - i), size)[:, -4:] for i in range(0, n, step))
+            declared = _declare_counters(path, hdr, hdr["enabled_sensors"], (_counter(c) for c in counters))
+        f.seek(hdr["header_size"])
         carry = _Counter()
         for first in range(0, n, step):
             k = min(step, n - first)
-            rows = np.frombuffer(f.read(k * size), dtype=np.uint8, count=k * size).reshape(k, size)
+            rows = _read_rows(f, k, size)
             values: dict[str, np.ndarray] = {}
             pos = 0
             for name, _, _, ch, width, dt in SENSORS:
@@ -154,8 +161,34 @@ def iter_bin(
                     raw = np.ascontiguousarray(rows[:, pos : pos + ch * width]).view(dt).reshape(k, ch)
                     values[name] = _units(name, raw.astype(np.float64), hdr)
                     pos += ch * width
-            counter = np.ascontiguousarray(rows[:, pos : pos + 4]).view("<u4").reshape(k).astype(np.int64)
-            yield _recording(path, hdr, counter, values, warnings if first == 0 else [], carry, last=first + k == n)
+            counter = _counter(rows[:, pos : pos + 4])
+            rec = _recording(path, hdr, counter, values, warnings if first == 0 else [], carry, last=first + k == n)
+            if declared is not None and first == 0:
+                rec.metadata[PIECES_RECORD] = declared
+            yield rec
+
+
+def _read_rows(f: Any, k: int, size: int) -> np.ndarray:
+    return np.frombuffer(f.read(k * size), dtype=np.uint8, count=k * size).reshape(k, size)
+
+
+def _counter(raw: np.ndarray) -> np.ndarray:
+    """The uint32 sample counters of rows' last four bytes, as int64."""
+    return np.ascontiguousarray(raw).view("<u4").reshape(len(raw)).astype(np.int64)
+
+
+def _declare_counters(path: Path, hdr: dict, sensors: list[str], counters: Iterator[np.ndarray]) -> dict:
+    """The declaration of a session from its counters read piece by piece: the samples they skip (as
+    :func:`_recording` counts them) and the last sample's time."""
+    first = last = None
+    missing = 0
+    for c in counters:
+        full = c if last is None else np.concatenate([[last], c])
+        missing += int((np.diff(full) - 1).sum())
+        first = int(c[0]) if first is None else first
+        last = int(c[-1])
+    span = int(np.round((np.array([last], np.int64) - first) * (1e9 / float(hdr["sampling_rate_hz"])))[0])
+    return _declaration(hdr, sensors, _meta(path, hdr, missing), span)
 
 
 def _resolution(hdr: dict) -> dict:
@@ -179,6 +212,40 @@ class _Counter:
         self.seen = 0  # samples before this piece
         self.missing = 0
         self.places = 0
+
+
+def _name(hdr: dict) -> str:
+    """The device's stream name: ``nilspod_`` and the last two bytes of its MAC address."""
+    return "nilspod_" + ("".join(hdr.get("mac_address", "")[-5:].split(":")) or "nilspod")
+
+
+def _meta(path: Path, hdr: dict, missing: int) -> dict:
+    """The device record (and the IMU stream's meta) of a session with ``missing`` samples skipped in all."""
+    rate = float(hdr["sampling_rate_hz"])
+    return {
+        "format": "nilspod",
+        "model": f"NilsPod (hardware {hdr.get('version_hardware', '?')})",
+        "serial": hdr.get("mac_address", ""),
+        "firmware": hdr.get("version_firmware", ""),
+        "rate_hz": rate,
+        "acc_range_g": hdr.get("acc_range_g"),
+        "gyro_range_dps": hdr.get("gyro_range_dps"),
+        "sync_role": hdr.get("sync_role"),
+        "session_termination": hdr.get("session_termination"),
+        "missing_samples": missing,
+        "units": "NilsPodLib factory calibration (acc with g = 9.81)",
+        "source": path.name,
+        "resolution": _resolution(hdr),
+    }
+
+
+def _declaration(hdr: dict, sensors: list[str], meta: dict, span_ns: int) -> dict:
+    """What the first piece declares (:data:`imulog.model.PIECES_RECORD`): every stream from 0 to ``span_ns`` and
+    the IMU's final meta (its missing-sample count is known only after every counter was read)."""
+    name = _name(hdr)
+    topics = [f"/imu/{name}"] if {"acc", "gyro"} & set(sensors) else []
+    topics += [f"/signals/{name}"] if {"mag", "baro", "analog", "ecg", "ppg"} & set(sensors) else []
+    return {"spans": dict.fromkeys(topics, [0, span_ns]), "meta": {t: meta for t in topics if t.startswith("/imu/")}}
 
 
 def _recording(
@@ -209,23 +276,8 @@ def _recording(
         carry.first = int(counter[0])
     carry.last, carry.seen = int(counter[-1]), carry.seen + len(counter)
     t_ns = np.round((counter - carry.first) * (1e9 / rate)).astype(np.int64)
-    sid = "".join(hdr.get("mac_address", "")[-5:].split(":")) or "nilspod"
-    name = f"nilspod_{sid}"
-    meta = {
-        "format": "nilspod",
-        "model": f"NilsPod (hardware {hdr.get('version_hardware', '?')})",
-        "serial": hdr.get("mac_address", ""),
-        "firmware": hdr.get("version_firmware", ""),
-        "rate_hz": rate,
-        "acc_range_g": hdr.get("acc_range_g"),
-        "gyro_range_dps": hdr.get("gyro_range_dps"),
-        "sync_role": hdr.get("sync_role"),
-        "session_termination": hdr.get("session_termination"),
-        "missing_samples": missing,
-        "units": "NilsPodLib factory calibration (acc with g = 9.81)",
-        "source": path.name,
-        "resolution": _resolution(hdr),
-    }
+    name = _name(hdr)
+    meta = _meta(path, hdr, missing)
     rec = Recording(sources=[str(path)], warnings=warnings)
     imu = {
         "acc": values.get("acc"),
@@ -281,9 +333,17 @@ def header_json_for(path: Path) -> Path | None:
 
 
 def read_csv(path: Path, options: ConvertOptions | None = None) -> Recording:
+    """NilsPodLib's ``data_as_csv`` export whole: :func:`iter_csv` as one piece."""
+    from imulog.converters._binary import concat_chunks
+
+    return concat_chunks(iter_csv(path, options, piece_bytes=None))
+
+
+def iter_csv(path: Path, options: ConvertOptions | None = None, piece_bytes: int | None = None) -> Iterator[Recording]:
     """NilsPodLib's ``data_as_csv`` export (``t`` in s from the first sample, columns as its legends) and the
-    ``_header.json`` it writes beside it (rate, ranges, start)."""
-    from imulog.converters._lab import read_table
+    ``_header.json`` it writes beside it (rate, ranges, start), in pieces of about ``piece_bytes`` of text (None:
+    one piece); in pieces, a first pass over the ``t`` column gives the missing-sample count the first declares."""
+    from imulog.converters._pieces import iter_table
 
     path = Path(path)
     hj = header_json_for(path)
@@ -299,23 +359,39 @@ def read_csv(path: Path, options: ConvertOptions | None = None) -> Recording:
         names = [c.strip() for c in f.readline().strip().split(",")]
     if not names or names[0] != "t":
         raise ConversionError(path, "the first column must be 't'", line=1)
-    table = read_table(path, delimiter=",", skip_lines=1, names=names, required=[0])
     rate = float(hdr["sampling_rate_hz"])
-    counter = np.round(table[:, 0] * rate).astype(np.int64)
-    values = {}
-    for sensor, cols in CSV_SENSORS.items():
-        if all(c in names for c in cols):
-            values[sensor] = table[:, [names.index(c) for c in cols]]
-    warnings: list[str] = []
-    if hdr.get("n_samples") not in (None, len(counter)):
-        warnings.append(f"{path.name}: header says {hdr['n_samples']} samples, the CSV holds {len(counter)}")
-    rec = _recording(path, hdr, counter, values, warnings)
-    rec.sources.append(str(hj))
-    if "imulog.trial" in rec.metadata:  # the CSV's t starts at 0: the start is utc_start's second, as written
-        rec.metadata["imulog.trial"] = trial_start(
-            datetime.fromtimestamp(int(hdr["utc_start"]), tz=UTC), "NilsPodLib header JSON utc_start"
-        )
-    return rec
+    sensors = [sensor for sensor, cols in CSV_SENSORS.items() if all(c in names for c in cols)]
+    table = {"delimiter": ",", "skip_lines": 1, "names": names, "required": [0], "piece_bytes": piece_bytes}
+    declared = None
+    if piece_bytes is not None:
+        others = list(range(1, len(names)))
+        times = (np.round(v[:, 0] * rate).astype(np.int64) for v, _ in iter_table(path, **table, skip_columns=others))
+        declared = _declare_counters(path, hdr, sensors, times)
+    carry = _Counter()
+    pieces = iter_table(path, **table)
+    piece = next(pieces)
+    k = 0
+    while piece is not None:
+        values_table = piece[0]
+        piece = next(pieces, None)
+        last = piece is None
+        counter = np.round(values_table[:, 0] * rate).astype(np.int64)
+        values = {s: values_table[:, [names.index(c) for c in CSV_SENSORS[s]]] for s in sensors}
+        warnings: list[str] = []
+        if last and hdr.get("n_samples") not in (None, carry.seen + len(counter)):
+            warnings.append(
+                f"{path.name}: header says {hdr['n_samples']} samples, the CSV holds {carry.seen + len(counter)}"
+            )
+        rec = _recording(path, hdr, counter, values, warnings, carry, last=last)
+        rec.sources.append(str(hj))
+        if "imulog.trial" in rec.metadata:  # the CSV's t starts at 0: the start is utc_start's second, as written
+            rec.metadata["imulog.trial"] = trial_start(
+                datetime.fromtimestamp(int(hdr["utc_start"]), tz=UTC), "NilsPodLib header JSON utc_start"
+            )
+        if declared is not None and k == 0:
+            rec.metadata[PIECES_RECORD] = declared
+        k += 1
+        yield rec
 
 
 class NilsPodConverter(Converter):
@@ -345,9 +421,12 @@ class NilsPodConverter(Converter):
         return read_bin(Path(path), options)
 
     def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
-        """A ``.bin`` session in pieces of :data:`PIECE_SAMPLES` samples (:func:`iter_bin`); NilsPodLib's CSV whole."""
+        """A ``.bin`` session in pieces of :data:`PIECE_SAMPLES` samples (:func:`iter_bin`); NilsPodLib's CSV in
+        pieces of :data:`imulog.converters._pieces.PIECE_BYTES` of text (:func:`iter_csv`)."""
         if Path(path).suffix.lower() == ".csv":
-            return iter([read_csv(Path(path), options)])
+            from imulog.converters import _pieces
+
+            return iter_csv(Path(path), options, piece_bytes=_pieces.PIECE_BYTES)
         return iter_bin(Path(path), options, samples_per_piece=PIECE_SAMPLES)
 
 

@@ -1,4 +1,4 @@
-"""XDF recordings (Lab Streaming Layer, LabRecorder), read with pyxdf (BSD-2-Clause).
+"""XDF recordings (Lab Streaming Layer, LabRecorder), read chunk by chunk by imulog (pyxdf is the reference).
 
 Every stream becomes channels of its own, named from the stream's ``name`` (topic-safe; the stream id is appended
 when two streams share a name):
@@ -14,458 +14,71 @@ when two streams share a name):
 * empty streams are kept as empty channels.
 
 Time: each stream's time stamps on the recording host's LSL clock after applying the stream's ClockOffset
-measurements (pyxdf ``synchronize_clocks``, with host clock resets handled as separate clock segments); stamps are
-not dejittered (raw data keeps what was recorded). ``t_ns`` = LSL seconds x 1e9 (the host clock's own origin, the
-same for all streams of a file). The file header's ``datetime`` (when LabRecorder started) is the trial's
-``start_time``. XDF has no checksums: the chunk structure (magic, chunk lengths, tags) and every Samples chunk's
-layout (time-stamp flags, string lengths, samples filling the chunk exactly) are verified before parsing, so
-truncated files and damaged chunks are reported with their chunk index (pyxdf would read misaligned values or skip
-data with a log message); a flipped bit inside a sample value cannot be detected by any reader.
+measurements exactly as pyxdf's ``load_xdf(synchronize_clocks=True, handle_clock_resets=True,
+dejitter_timestamps=False)`` does (:mod:`imulog.converters.xdf_clock`: host clock resets as separate clock
+segments, a robust line per segment, the pylsl#67 corrupted last offset dropped); stamps are not dejittered (raw
+data keeps what was recorded). ``t_ns`` = LSL seconds x 1e9. The file header's ``datetime`` (when LabRecorder
+started) is the trial's ``start_time``. XDF has no checksums: the chunk structure (magic, chunk lengths, tags) and
+every Samples chunk's layout (time-stamp flags, string lengths, samples filling the chunk exactly) are verified
+before parsing, so truncated files and damaged chunks are reported with their chunk index; a flipped bit inside a
+sample value cannot be detected by any reader.
 
-Memory: pyxdf parses a stream whole (its clock offsets and jitter removal fit over the stream), always in a guarded
-child capped at ``READER_MEMORY_BYTES`` (1 GiB), which bounds memory; ``iter_chunks`` yields one stream at a time and,
-beyond 64 MiB, loads one stream at a time, so memory is the largest stream, not the file. The converter has no
-``iter_chunks`` method yet: ``imulog convert`` reads an XDF file whole, because the streaming writer takes the
-trial's time origin from its first piece, and a piece here is a whole stream (measured on ``clock_resets.xdf``:
-same samples, another reference origin).
+Memory: in pieces (:func:`iter_chunks`, :mod:`imulog.converters.xdf_pieces`): a first pass keeps headers, clock
+offsets, footers and counts (a few bytes per chunk), a second the synchronised first and last stamp of every
+stream (declared by the first piece: a stream whose chunks come later may start earlier), then samples are decoded
+chunk by chunk, about 16 MiB of values a piece; the whole file is the one-piece case.
 """
 
 from __future__ import annotations
 
-import logging
-import re
 from collections.abc import Iterator
-from datetime import datetime
 from pathlib import Path
-from typing import Any
 
-import numpy as np
-from imulog.converters._binary import concat_chunks, format_offset
-from imulog.converters._common import sanitize_name, unit_factor
+from imulog.converters._binary import concat_chunks
 from imulog.converters.base import Converter, ConvertOptions
-from imulog.converters.errors import ConversionError
+from imulog.converters.xdf_chunks import (  # noqa: F401 (re-exported)
+    CHUNK_TAGS,
+    MAGIC,
+    iter_chunk_headers,
+    locate_damaged_samples,
+    scan_chunks,
+)
+from imulog.converters.xdf_map import (  # noqa: F401 (re-exported)
+    channel_info,
+    header_start_time,
+    stream_to_recording,
+)
 
-from imulog.model import ImuStream, Intervals, MarkerStream, Recording, SignalStream
+from imulog.model import Recording
 
-MAGIC = b"XDF:"
-CHUNK_TAGS = {1: "FileHeader", 2: "StreamHeader", 3: "Samples", 4: "ClockOffset", 5: "Boundary", 6: "StreamFooter"}
-PER_STREAM_BYTES = 64 << 20  # files larger than this are loaded one stream at a time
-READER_TIMEOUT_S = 60.0  # pyxdf runs in a guarded child: a hang or a runaway allocation ends with one line
-READER_MEMORY_BYTES = 1 << 30
-_AXIS = r"[ _\-.:]?([xyz])"
-IMU_LABELS = {
-    "acc": re.compile(r"^(?:acc|accel|accelerometer|acceleration)" + _AXIS + "$", re.I),
-    "gyr": re.compile(r"^(?:gyr|gyro|gyroscope|angularvelocity|angular_velocity)" + _AXIS + "$", re.I),
-    "mag": re.compile(r"^(?:mag|magn|magnetometer|magneticfield)" + _AXIS + "$", re.I),
-}
-IMU_TYPES = {"accelerometer": "acc", "acc": "acc", "gyroscope": "gyr", "gyro": "gyr", "magnetometer": "mag"}
-LENGTH_UNITS = {"m": 1.0, "meters": 1.0, "cm": 0.01, "mm": 0.001, "millimeters": 0.001}
-
-
-# --------------------------------------------------------------------------------------------- chunk structure
-def _varlen(f, path: Path, index: int, at: int) -> int | None:
-    n = f.read(1)
-    if not n:
-        return None
-    size = {1: 1, 4: 4, 8: 8}.get(n[0])
-    if size is None:
-        raise ConversionError(path, f"chunk {index} (byte {at}): bad chunk length width {n[0]} (damaged chunk header)")
-    data = f.read(size)
-    if len(data) < size:
-        raise ConversionError(path, f"chunk {index} (byte {at}): truncated chunk header")
-    return int.from_bytes(data, "little")
-
-
-def iter_chunk_headers(path: Path) -> Iterator[tuple[int, int, int, int, int]]:
-    """(index, byte of the chunk, tag, byte of its content after the tag, content length) of every chunk.
-
-    ConversionError naming the chunk for a missing magic, a bad length or tag, or a chunk cut by the file's end.
-    """
-    size = path.stat().st_size
-    with open(path, "rb") as f:
-        if f.read(4) != MAGIC:
-            raise ConversionError(path, "not an XDF file (no 'XDF:' magic)")
-        index = 0
-        while True:
-            at = f.tell()
-            length = _varlen(f, path, index, at)
-            if length is None:
-                break
-            start = f.tell()
-            if length < 2 or start + length > size:
-                what = "truncated" if start + length > size and length >= 2 else "bad length"
-                raise ConversionError(
-                    path, f"chunk {index} (byte {at}): {what} ({length} bytes declared, {size - start} left)"
-                )
-            tag = int.from_bytes(f.read(2), "little")
-            if tag not in CHUNK_TAGS:
-                raise ConversionError(
-                    path, f"chunk {index} (byte {at}): unknown chunk tag {tag} (damaged chunk header)"
-                )
-            if index == 0 and tag != 1:
-                raise ConversionError(path, "chunk 0 is not the FileHeader")
-            yield index, at, tag, start + 2, length - 2
-            f.seek(start + length)
-            index += 1
-
-
-def scan_chunks(path: Path) -> dict[str, int]:
-    """Walk the chunk headers (lengths and tags, seeking over contents): counts per chunk type."""
-    counts: dict[str, int] = {}
-    for _, _, tag, _, _ in iter_chunk_headers(path):
-        counts[CHUNK_TAGS[tag]] = counts.get(CHUNK_TAGS[tag], 0) + 1
-    if not counts:
-        raise ConversionError(path, "no chunks after the 'XDF:' magic")
-    return counts
-
-
-VALUE_BYTES = {"int8": 1, "int16": 2, "int32": 4, "int64": 8, "float32": 4, "double64": 8}
-
-
-def _samples_problem(data: bytes, fmt: str, n_ch: int) -> str | None:
-    """Why a Samples chunk's content (after the stream id) does not hold whole samples, or None."""
-    mv = memoryview(data)
-
-    def varlen(pos: int) -> tuple[int, int]:
-        width = mv[pos] if pos < len(mv) else 0
-        if width not in (1, 4, 8) or pos + 1 + width > len(mv):
-            raise ValueError(f"bad length field at content byte {pos}")
-        return int.from_bytes(mv[pos + 1 : pos + 1 + width], "little"), pos + 1 + width
-
-    try:
-        count, pos = varlen(0)
-        if fmt != "string":  # fast path: every sample stamped (LabRecorder's usual layout), checked vectorised
-            stride = 9 + VALUE_BYTES.get(fmt, 4) * n_ch
-            if pos + count * stride == len(mv):
-                flags = np.frombuffer(data, dtype=np.uint8)[pos : pos + count * stride : stride]
-                if np.all(flags == 8):
-                    return None
-        for k in range(count):
-            if pos >= len(mv) or mv[pos] not in (0, 8):
-                return f"sample {k}: bad time stamp flag"
-            pos += 1 + mv[pos]
-            if fmt == "string":
-                for _ in range(n_ch):
-                    n, pos = varlen(pos)
-                    pos += n
-            else:
-                pos += VALUE_BYTES.get(fmt, 4) * n_ch
-            if pos > len(mv):
-                return f"sample {k} of {count} runs past the chunk's end"
-    except ValueError as e:
-        return str(e)
-    return None if pos == len(mv) else f"{len(mv) - pos} bytes left after {count} samples"
-
-
-def locate_damaged_samples(path: Path) -> None:
-    """Raise ConversionError naming the first Samples chunk whose samples do not fit its length (returns if none).
-
-    pyxdf reads past such damage silently (misaligned values) or skips it with a log message, so every file is
-    checked; numeric chunks whose samples all carry a time stamp are checked vectorised, others sample by sample.
-    """
-    import xml.etree.ElementTree as ET
-
-    formats: dict[int, tuple[str, int]] = {}
-    with open(path, "rb") as f:
-        for index, at, tag, start, length in iter_chunk_headers(path):
-            if tag not in (2, 3) or length < 4:
-                continue
-            f.seek(start)
-            content = f.read(length)
-            sid = int.from_bytes(content[:4], "little")
-            if tag == 2:
-                try:
-                    root = ET.fromstring(content[4:].decode("utf-8", "replace"))
-                    formats[sid] = (
-                        root.findtext("channel_format", "float32"),
-                        int(root.findtext("channel_count", "1")),
-                    )
-                except (ET.ParseError, ValueError):
-                    raise ConversionError(path, f"chunk {index} (byte {at}): stream header is not valid XML") from None
-                continue
-            if sid not in formats:
-                raise ConversionError(path, f"chunk {index} (byte {at}): samples of stream {sid} before its header")
-            problem = _samples_problem(content[4:], *formats[sid])
-            if problem:
-                raise ConversionError(
-                    path, f"chunk {index} (byte {at}): damaged Samples chunk of stream {sid}: {problem}"
-                )
-
-
-# --------------------------------------------------------------------------------------------- stream mapping
-def _first(d: Any, key: str, default: Any = None) -> Any:
-    if not isinstance(d, dict):
-        return default
-    v = d.get(key)
-    if isinstance(v, list):
-        return v[0] if v else default
-    return v if v is not None else default
-
-
-def channel_info(info: dict, n: int) -> tuple[list[str], list[str], list[str]]:
-    """(labels, units, types) of a stream's channels from ``desc/channels/channel`` (``ch<i>`` / "" when absent)."""
-    labels, units, types = [f"ch{i}" for i in range(n)], [""] * n, [""] * n
-    desc = _first(info, "desc")
-    channels = _first(desc, "channels")
-    entries = channels.get("channel", []) if isinstance(channels, dict) else []
-    for i, ch in enumerate(entries[:n]):
-        labels[i] = str(_first(ch, "label", labels[i]) or labels[i]).strip()
-        units[i] = str(_first(ch, "unit", "") or "").strip()
-        types[i] = str(_first(ch, "type", "") or "").strip()
-    return labels, units, types
-
-
-def _imu_groups(labels: list[str], units: list[str], types: list[str]) -> dict[str, tuple[list[int], float, str]]:
-    """quantity -> (x, y, z channel indices, factor to SI, unit as declared) for complete groups with known units."""
-    found: dict[str, dict[str, int]] = {}
-    for i, (label, ctype) in enumerate(zip(labels, types, strict=True)):
-        for q, rx in IMU_LABELS.items():
-            m = rx.match(label.replace(" ", ""))
-            if m:
-                found.setdefault(q, {})[m.group(1).lower()] = i
-                break
-        else:
-            q = IMU_TYPES.get(ctype.lower())
-            m = re.search(r"([xyz])$", label, re.I)
-            if q and m:
-                found.setdefault(q, {})[m.group(1).lower()] = i
-    out = {}
-    for q, axes in found.items():
-        if set(axes) != {"x", "y", "z"}:
-            continue
-        idx = [axes["x"], axes["y"], axes["z"]]
-        declared = {units[i] for i in idx}
-        if len(declared) != 1:
-            continue
-        unit = declared.pop()
-        factor = unit_factor(q, unit) if unit else None
-        if factor is not None:
-            out[q] = (idx, factor, unit)
-    return out
-
-
-def _marker_groups(labels: list[str], units: list[str]) -> tuple[list[str], list[list[int]], float] | None:
-    if len(labels) % 3 or not labels:
-        return None
-    names, groups = [], []
-    for j in range(0, len(labels), 3):
-        trio = labels[j : j + 3]
-        m = [re.match(r"^(.*?)[ _\-.:]?([xyz])$", lab, re.I) for lab in trio]
-        if not all(m) or [x.group(2).lower() for x in m] != ["x", "y", "z"] or len({x.group(1) for x in m}) != 1:
-            return None
-        names.append(m[0].group(1) or f"marker{j // 3}")
-        groups.append(list(range(j, j + 3)))
-    declared = {u.lower() for u in units}
-    if len(declared) != 1 or declared.pop() not in LENGTH_UNITS or len(set(names)) != len(names):
-        return None
-    return names, groups, LENGTH_UNITS[units[0].lower()]
-
-
-def stream_to_recording(path: Path, stream: dict, name: str) -> Recording:
-    """One pyxdf stream -> a Recording with its channel(s) and an ``imulog.device.<name>`` record."""
-    info = stream["info"]
-    fmt = str(_first(info, "channel_format", "float32"))
-    n_ch = int(float(_first(info, "channel_count", 1) or 1))
-    srate = float(_first(info, "nominal_srate", 0) or 0)
-    stype = str(_first(info, "type", "") or "")
-    t_ns = np.round(np.asarray(stream["time_stamps"], dtype=np.float64) * 1e9).astype(np.int64)
-    meta: dict[str, Any] = {
-        "format": "xdf",
-        "stream_name": str(_first(info, "name", name)),
-        "stream_type": stype,
-        "stream_id": int(_first(info, "stream_id", 0) or 0),
-        "channel_format": fmt,
-        "channel_count": n_ch,
-        "nominal_srate_hz": srate,
-        "samples": int(len(t_ns)),
-        "time_base": "ns of the recording host's LSL clock, stream clock offsets applied",
-        "source": path.name,
-    }
-    for key in ("source_id", "hostname", "created_at", "uid"):
-        v = _first(info, key)
-        if v:
-            meta[key] = str(v)
-    manufacturer = _first(_first(info, "desc"), "manufacturer")
-    if manufacturer:
-        meta["manufacturer"] = str(manufacturer)
-    footer = (stream.get("footer") or {}).get("info") or {}
-    if footer:
-        meta["footer_sample_count"] = int(float(_first(footer, "sample_count", 0) or 0))
-    segments = info.get("clock_segments") or []
-    meta["clock_segments"] = len(segments)  # > 1: the host clock was reset during the recording
-    rec = Recording(sources=[str(path)])
-    rec.metadata[f"imulog.device.{name}"] = meta
-    if len(np.unique(t_ns)) != len(t_ns) or (len(t_ns) > 1 and np.any(np.diff(t_ns) < 0)):
-        bad = int(np.nonzero(np.diff(t_ns) <= 0)[0][0]) + 1
-        raise ConversionError(
-            path, f"stream {meta['stream_id']} ({meta['stream_name']!r}): sample {bad} time stamp does not increase"
-        )
-    if fmt == "string":
-        series = stream["time_series"]
-        labels = ["|".join(str(v) for v in row) if isinstance(row, list | tuple) else str(row) for row in series]
-        rec.events.append(Intervals(topic=f"/events/{name}", start_ns=t_ns, end_ns=t_ns.copy(), labels=labels))
-        return rec
-    values = np.asarray(stream["time_series"], dtype=np.float64).reshape(len(t_ns), n_ch)
-    labels, units, types = channel_info(info, n_ch)
-    used: set[int] = set()
-    if stype.lower() in ("mocap", "motion capture"):
-        markers = _marker_groups(labels, units)
-        if markers is not None:
-            marker_names, groups, scale = markers
-            pos = np.stack([values[:, g] for g in groups], axis=1) * scale
-            rec.markers.append(MarkerStream(name=name, t_ns=t_ns, labels=marker_names, pos=pos, meta=dict(meta)))
-            meta["marker_units"] = units[0]
-            return rec
-    groups = _imu_groups(labels, units, types)
-    if "acc" in groups or "gyr" in groups:
-        parts = {q: values[:, idx] * factor for q, (idx, factor, _) in groups.items()}
-        for idx, _, _ in groups.values():
-            used.update(idx)
-        meta["imu_units_declared"] = {q: u for q, (_, _, u) in groups.items()}
-        rec.imus.append(
-            ImuStream(
-                name=name, t_ns=t_ns, acc=parts.get("acc"), gyr=parts.get("gyr"), mag=parts.get("mag"), meta=dict(meta)
-            )
-        )
-    rest = [i for i in range(n_ch) if i not in used]
-    if rest or not rec.imus:
-        cols = [labels[i] for i in rest]
-        if len(set(cols)) != len(cols):
-            cols = [f"{c}_{i}" for c, i in zip(cols, rest, strict=True)]
-        rec.signals.append(
-            SignalStream(
-                topic=f"/signals/{name}",
-                t_ns=t_ns,
-                columns=cols,
-                units=[units[i] for i in rest],
-                values=values[:, rest],
-            )
-        )
-    return rec
-
-
-def header_start_time(header: dict) -> dict[str, str]:
-    """``imulog.trial`` start fields from the FileHeader ``datetime`` (``2025-01-31T00:21:17+0000``), else {}."""
-    text = _first(header.get("info", {}), "datetime")
-    if not text:
-        return {}
-    try:
-        when = datetime.fromisoformat(str(text).strip())
-    except ValueError:
-        return {}
-    if when.tzinfo is None:
-        return {"start_time": when.isoformat(timespec="milliseconds"), "time_zone": "unknown (device local time)"}
-    offset = int(when.utcoffset().total_seconds())  # type: ignore[union-attr]
-    zone = "UTC" if offset == 0 else format_offset(offset)
-    return {"start_time": when.isoformat(timespec="milliseconds"), "time_zone": zone}
-
-
-def _stream_names(infos: list[dict]) -> dict[int, str]:
-    names = {int(i["stream_id"]): sanitize_name(str(i.get("name") or "stream")) for i in infos}
-    taken = list(names.values())
-    return {sid: (n if taken.count(n) == 1 else f"{n}_{sid}") for sid, n in names.items()}
-
-
-def _pyxdf(path: Path) -> Any:
-    try:
-        import pyxdf
-    except ImportError:
-        raise ConversionError(path, "reading XDF needs pyxdf: pip install 'imulog[xdf]'") from None
-    return pyxdf
-
-
-class _Collect(logging.Handler):
-    def __init__(self) -> None:
-        super().__init__(logging.ERROR)
-        self.messages: list[str] = []
-
-    def emit(self, record: logging.LogRecord) -> None:
-        self.messages.append(record.getMessage())
-
-
-def _load_child(path: str, kwargs: dict[str, Any]) -> tuple[Any, list[str]]:
-    """pyxdf.load_xdf without dejittering, and the errors pyxdf logged while recovering (runs in the guarded child)."""
-    import pyxdf
-
-    logger = logging.getLogger("pyxdf.pyxdf")
-    collect = _Collect()
-    logger.setLevel(logging.ERROR)  # pyxdf warns about clock segments on resets
-    logger.propagate = False
-    logger.addHandler(collect)
-    result = pyxdf.load_xdf(
-        path, synchronize_clocks=True, handle_clock_resets=True, dejitter_timestamps=False, **kwargs
-    )
-    return result, collect.messages
-
-
-def _load(path: Path, **kwargs: Any) -> tuple[list[dict], dict]:
-    """pyxdf.load_xdf in a child process under a time and memory limit (``READER_TIMEOUT_S``,
-    ``READER_MEMORY_BYTES``; :mod:`imulog.converters._guard`); pyxdf's recoveries from damaged chunks (logged, data
-    skipped), its exceptions, a hang or a crash become a ConversionError naming the file (and the chunk)."""
-    from imulog.converters._guard import GuardError, guarded
-
-    _pyxdf(path)
-    try:
-        result, messages = guarded(
-            _load_child, str(path), kwargs, timeout_s=READER_TIMEOUT_S, memory_bytes=READER_MEMORY_BYTES
-        )
-    except GuardError as e:
-        locate_damaged_samples(path)
-        if e.kind == "error":
-            raise ConversionError(path, f"XDF content cannot be parsed: {e}") from None
-        raise ConversionError(path, f"pyxdf {e}") from None
-    if messages:
-        locate_damaged_samples(path)
-        raise ConversionError(path, f"pyxdf skipped damaged data: {messages[0]}")
-    return result
+#: bytes of sample values gathered before a piece is given (``iter_chunks``); None: the whole file as one piece
+PIECE_BYTES = 16 << 20
 
 
 def iter_chunks(
-    path: Path, options: ConvertOptions | None = None, per_stream: bool | None = None
+    path: Path, options: ConvertOptions | None = None, piece_bytes: int | None = PIECE_BYTES
 ) -> Iterator[Recording]:
-    """One Recording per stream. ``per_stream`` (default: files over 64 MiB) loads one stream at a time, so memory
-    holds the largest stream, not the file; otherwise the file is parsed once."""
+    """The recording in pieces of about ``piece_bytes`` of samples, read chunk by chunk in file order (None: one
+    piece). The first piece holds every stream (empty where none of its samples came yet) and declares every
+    stream's span and meta (:data:`imulog.model.PIECES_RECORD`) from two passes before it: headers, clock offsets,
+    footers and counts (:func:`~imulog.converters.xdf_read.scan`), then the synchronised stamps."""
+    from imulog.converters.xdf_pieces import iter_pieces
+
     path = Path(path)
     scan_chunks(path)
     locate_damaged_samples(path)
-    pyxdf = _pyxdf(path)
-
-    try:
-        infos = pyxdf.resolve_streams(str(path))
-    except Exception as e:  # noqa: BLE001
-        raise ConversionError(path, f"XDF stream headers cannot be parsed ({e}): the file is damaged") from None
-    names = _stream_names(infos)
-    if per_stream is None:
-        per_stream = path.stat().st_size > PER_STREAM_BYTES
-    if per_stream:
-        header: dict = {}
-        for sid in sorted(names):
-            streams, header = _load(path, select_streams=[sid])
-            for s in streams:
-                rec = stream_to_recording(path, s, names[int(s["info"]["stream_id"])])
-                trial = header_start_time(header)
-                if trial:
-                    rec.metadata["imulog.trial"] = trial
-                yield rec
-        return
-    streams, header = _load(path)
-    trial = header_start_time(header)
-    for s in sorted(streams, key=lambda s: int(s["info"]["stream_id"])):
-        rec = stream_to_recording(path, s, names[int(s["info"]["stream_id"])])
-        if trial:
-            rec.metadata["imulog.trial"] = dict(trial)
-        yield rec
+    return iter_pieces(path, piece_bytes)
 
 
 def read_xdf(path: Path, options: ConvertOptions | None = None) -> Recording:
-    """The whole file: the streams of :func:`iter_chunks` joined."""
-    return concat_chunks(iter_chunks(path, options))
+    """The whole file: :func:`iter_chunks` in one piece."""
+    return concat_chunks(iter_chunks(path, options, piece_bytes=None))
 
 
 class XdfConverter(Converter):
     name = "xdf"
     description = (
-        "XDF (Lab Streaming Layer / LabRecorder): every stream with its units, clock offsets applied, via pyxdf"
+        "XDF (Lab Streaming Layer / LabRecorder): every stream with its units, clock offsets applied (as pyxdf)"
     )
     extensions = (".xdf",)
     example = "imulog convert ../shared/data/devices/xdf/clock_resets.xdf -o lsl.mcap"
@@ -478,6 +91,9 @@ class XdfConverter(Converter):
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_xdf(Path(path), options)
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        return iter_chunks(Path(path), options, piece_bytes=PIECE_BYTES)
 
 
 CONVERTER = XdfConverter()

@@ -24,31 +24,36 @@ Time: ``SampleTimeFine`` (10 kHz ticks, unsigned 32 bit, unwrapped) when every r
 ``DeviceId``, else the last 8 hex digits of ``MT_<master>_<trial>-000_<DeviceId>.txt``; the stream is named
 ``mt_<serial>`` unless ``options.extra["names"]`` maps the serial to a name.
 
-Memory: read whole, not yet in pieces (issue 24): MT Manager exports of one session per sensor file.
+Memory: in pieces of about 16 MiB of text (:func:`iter_xsens`; the whole file is the one-piece case), after a first
+pass over the pieces (:mod:`imulog.converters.xsens_scan`) that settles what only the whole file tells: the time
+base, the rate, the columns with values, the gap count and the UTC start, which the first piece declares.
 """
 
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from imulog.converters._binary import concat_chunks
 from imulog.converters._common import (
     check_increasing,
-    estimate_rate_hz,
     head_lines,
     is_number,
     sanitize_name,
     split_row,
     text_head_lines,
 )
-from imulog.converters._lab import ORIENTATION_TOPIC, orientation_stream, read_table, trial_start
+from imulog.converters._lab import ORIENTATION_TOPIC, orientation_stream, trial_start
+from imulog.converters._pieces import PIECE_BYTES
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
+from imulog.converters.xsens_scan import summarize
 
-from imulog.model import ImuStream, Recording, SignalStream
+from imulog.model import PIECES_RECORD, ImuStream, Recording, SignalStream
 from imulog.process import quaternion
 
 TICKS_PER_S = 10_000  # SampleTimeFine resolution
@@ -177,7 +182,12 @@ def utc_start(values: np.ndarray, seen: dict[str, int], t_ns: np.ndarray) -> dat
 
 
 def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: float | None = None) -> Recording:
-    path = Path(path)
+    """The whole export: :func:`iter_xsens` as one piece."""
+    return concat_chunks(iter_xsens(path, names=names, rate_hz=rate_hz, piece_bytes=None))
+
+
+def _layout(path: Path) -> tuple[dict[str, str], int, str, list[str], dict[str, int], list[int]]:
+    """(header info, comment lines, delimiter, column names, column index by name, text columns) of an export."""
     lines = head_lines(path)
     info, n_comment = _header_info(lines)
     if n_comment >= len(lines):
@@ -198,42 +208,118 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
             raise ConversionError(path, f"duplicated column {c!r}", line=n_comment + 1)
         seen[c] = i
     first = split_row(lines[n_comment + 1], delimiter) if n_comment + 1 < len(lines) and delimiter != " " else []
-    imu_cols = {f"{q}_{a}" for q in ("Acc", "Gyr") for a in "XYZ"}
     text_cols = [
-        i for i, c in enumerate(cols) if c not in imu_cols and i < len(first) and first[i] and not is_number(first[i])
+        i for i, c in enumerate(cols) if c not in IMU_COLS and i < len(first) and first[i] and not is_number(first[i])
     ]
-    time_col = "PacketCounter" if "PacketCounter" in seen else "SampleTimeFine"
-    notes: list[str] = []  # a cut final row dropped
-    values = read_table(
-        path,
-        delimiter=delimiter,
-        skip_lines=n_comment + 1,
-        names=cols,
-        required=[seen[time_col]],
-        skip_columns=text_cols,
-        warnings=notes,
-    )
-    first_line = n_comment + 2
-    if not len(values):
-        raise ConversionError(path, "no data rows after the header", line=first_line)
+    return info, n_comment, delimiter, cols, seen, text_cols
 
+
+IMU_COLS = {f"{q}_{a}" for q in ("Acc", "Gyr") for a in "XYZ"}
+
+
+def iter_xsens(
+    path: Path,
+    *,
+    names: dict[str, str] | None = None,
+    rate_hz: float | None = None,
+    piece_bytes: int | None = PIECE_BYTES,
+) -> Iterator[Recording]:
+    """The export in pieces of about ``piece_bytes`` of text (None: one piece). A first pass over the pieces
+    (:func:`~imulog.converters.xsens_scan.summarize`) settles the time base, rate, channels, gap count and start
+    time, so every piece has the whole file's streams and meta; the second converts and checks them."""
+    from imulog.converters._pieces import iter_table
+
+    path = Path(path)
+    info, n_comment, delimiter, cols, seen, text_cols = _layout(path)
+    time_col = "PacketCounter" if "PacketCounter" in seen else "SampleTimeFine"
+    table = dict(delimiter=delimiter, skip_lines=n_comment + 1, names=cols, required=[seen[time_col]])
+    notes: list[str] = []  # a cut final row dropped
+    cached = None
+    if piece_bytes is None:  # one piece: parsed once, for both passes
+        cached = [v for v, _ in iter_table(path, **table, skip_columns=text_cols, piece_bytes=None, warnings=notes)]
+
+    def pieces(warnings: list[str]) -> Iterator[tuple[np.ndarray, int]]:
+        if cached is not None:
+            return iter([(cached[0], n_comment + 2)])
+        return iter_table(path, **table, skip_columns=text_cols, piece_bytes=piece_bytes, warnings=warnings)
+
+    first_line = n_comment + 2
+    for q in ("Acc", "Gyr"):
+        present = [f"{q}_{a}" in seen for a in "XYZ"]
+        if any(present) and not all(present):
+            missing = [f"{q}_{a}" for a in "XYZ" if f"{q}_{a}" not in seen]
+            raise ConversionError(path, f"missing column(s) {', '.join(missing)}", line=n_comment + 1)
+    imu_idx = [seen[f"{q}_{a}"] for q in ("Acc", "Gyr") for a in "XYZ" if f"{q}_Z" in seen]
+    summary = summarize((v for v, _ in pieces([])), seen, len(cols), imu_idx)
+    if summary.rows == 0:
+        raise ConversionError(path, "no data rows after the header", line=first_line)
+    plan = _plan(path, (info, n_comment, delimiter, cols, seen, text_cols), summary, names, rate_hz)
+    last_t: int | None = None
+    stf, pc = _Carry(2**32, "SampleTimeFine"), _Carry(65536, "PacketCounter")
+    it = pieces(notes)
+    piece = next(it)
+    k = 0
+    while piece is not None:
+        values, line = piece
+        piece = next(it, None)
+        if plan["stf"]:
+            t_ns = stf.unwrap(path, values[:, seen["SampleTimeFine"]], line) * (1_000_000_000 // TICKS_PER_S)
+        else:
+            t_ns = np.round(pc.unwrap(path, values[:, seen["PacketCounter"]], line) * (1e9 / plan["rate"]))
+            t_ns = t_ns.astype(np.int64)
+        check_increasing(path, t_ns, line, before=last_t)
+        if len(t_ns):
+            last_t = int(t_ns[-1])
+        rec = _piece(path, plan, seen, values, t_ns)
+        if k == 0:
+            rec.metadata[PIECES_RECORD] = plan["declared"]
+        if piece is None:
+            rec.warnings = [*notes, *plan["assumed"]]
+        k += 1
+        yield rec
+
+
+class _Carry:
+    """A wrapping counter column (SampleTimeFine, PacketCounter) checked and unwrapped across pieces."""
+
+    def __init__(self, modulus: int, column: str) -> None:
+        self.modulus, self.column = modulus, column
+        self.prev_raw: float | None = None
+        self.prev: int | None = None
+
+    def unwrap(self, path: Path, raw: np.ndarray, first_line: int) -> np.ndarray:
+        _check_counter(path, raw, self.modulus, first_line, self.column)
+        full = raw if self.prev_raw is None else np.concatenate([[self.prev_raw], raw])
+        ticks, bad, problem = unwrap_counter(full, self.modulus)
+        if bad is not None:
+            line = first_line + bad - (0 if self.prev_raw is None else 1)
+            raise ConversionError(path, f"{self.column} {problem}", line=line, column=self.column)
+        if self.prev is not None:
+            ticks = ticks[1:] - ticks[0] + self.prev
+        if len(ticks):
+            self.prev_raw, self.prev = float(raw[-1]), int(ticks[-1])
+        return ticks
+
+
+def _plan(
+    path: Path,
+    layout: tuple[dict[str, str], int, str, list[str], dict[str, int], list[int]],
+    summary: Any,
+    names: dict[str, str] | None,
+    rate_hz: float | None,
+) -> dict[str, Any]:
+    """The recording's time base, rate, name, channels, meta and start, from the first pass; ``declared``: what
+    the first piece declares (every stream's meta; spans are its samples' own, every stream starts in it)."""
+    info, n_comment, delimiter, cols, seen, text_cols = layout
     rate = rate_hz
     assumed: list[str] = []
     m = re.search(r"([0-9]+(?:\.[0-9]+)?)", info.get("Update Rate", info.get("Sample rate", "")))
     if rate is None and m:
         rate = float(m.group(1))
-    time_source = ""
-    t_ns: np.ndarray | None = None
-    if "SampleTimeFine" in seen:
-        stf = values[:, seen["SampleTimeFine"]]
-        if np.isfinite(stf).all():
-            _check_counter(path, stf, 2**32, first_line, "SampleTimeFine")
-            ticks, bad, problem = unwrap_counter(stf, 2**32)
-            if bad is not None:
-                raise ConversionError(path, f"SampleTimeFine {problem}", line=first_line + bad, column="SampleTimeFine")
-            t_ns = ticks * (1_000_000_000 // TICKS_PER_S)
-            time_source = "SampleTimeFine (10 kHz ticks, unwrapped at 2^32)"
-    if t_ns is None:
+    stf = "SampleTimeFine" in seen and summary.stf_finite
+    if stf:
+        time_source = "SampleTimeFine (10 kHz ticks, unwrapped at 2^32)"
+    else:
         if "PacketCounter" not in seen:
             raise ConversionError(
                 path, "SampleTimeFine has empty cells and there is no PacketCounter", column="SampleTimeFine"
@@ -244,38 +330,21 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
                 f"{path.name}: no '// Update Rate' line and no SampleTimeFine: assumed {DEFAULT_RATE_HZ:g} Hz "
                 "for the PacketCounter; pass --rate HZ if the recording used another rate"
             )
-        pc = values[:, seen["PacketCounter"]]
-        _check_counter(path, pc, 65536, first_line, "PacketCounter")
-        counts, bad, problem = unwrap_counter(pc, 65536)
-        if bad is not None:
-            raise ConversionError(path, f"PacketCounter {problem}", line=first_line + bad, column="PacketCounter")
-        t_ns = np.round(counts * (1e9 / rate)).astype(np.int64)
         time_source = f"PacketCounter / {rate:g} Hz (unwrapped at 65535)"
-    check_increasing(path, t_ns, first_line)
-
     serial = info.get("DeviceId") or info.get("Device ID") or serial_from_name(path)
     serial = serial.split()[0].upper() if serial else ""
     names = {k.upper(): v for k, v in (names or {}).items()}
     name = sanitize_name(names.get(serial, f"mt_{serial}" if serial else "xsens"))
-    streams: dict[str, np.ndarray] = {}
-    for q, key in (("Acc", "acc"), ("Gyr", "gyr")):
-        present = [f"{q}_{a}" in seen for a in "XYZ"]
-        if any(present) and not all(present):
-            missing = [f"{q}_{a}" for a in "XYZ" if f"{q}_{a}" not in seen]
-            raise ConversionError(path, f"missing column(s) {', '.join(missing)}", line=n_comment + 1)
-        if all(present):
-            streams[key] = values[:, [seen[f"{q}_{a}"] for a in "XYZ"]]
-    if "Temperature" in seen:
-        temp = values[:, seen["Temperature"]]
-        if np.isfinite(temp).any():
-            streams["temperature"] = temp
-    if not streams:
+    keys = [k for q, k in (("Acc", "acc"), ("Gyr", "gyr")) if f"{q}_X" in seen]
+    temperature = "Temperature" in seen and bool(summary.any_finite[seen["Temperature"]])
+    if not keys and not temperature:
         raise ConversionError(path, "no Acc_X/Y/Z or Gyr_X/Y/Z columns", line=n_comment + 1)
+    step = summary.median_step_ns() if stf and not rate else None
     meta: dict[str, Any] = {
         "format": "xsens",
         "model": info.get("ProductCode", info.get("Product Code", "Xsens MT")),
         "serial": serial,
-        "rate_hz": float(rate) if rate else estimate_rate_hz(t_ns),
+        "rate_hz": float(rate) if rate else (1e9 / step if step and step > 0 else None),
         "units": {"acc": "m/s^2", "gyr": "rad/s", "mag": "a.u. (normalised to the calibration field)"},
         "time": time_source,
         "source": path.name,
@@ -292,23 +361,63 @@ def read_xsens(path: Path, *, names: dict[str, str] | None = None, rate_hz: floa
     master = re.match(r"^MT_([0-9A-Fa-f]{8})_", path.name)
     if master and master.group(1).upper() != serial:
         meta["master"] = master.group(1).upper()  # the Awinda station / master of this sensor (file name)
-    n_gaps = int((~np.isfinite(np.hstack([streams[k] for k in ("acc", "gyr") if k in streams]))).any(axis=1).sum())
-    if n_gaps:
-        meta["samples_with_gaps"] = n_gaps
-    rec = Recording(sources=[str(path)], warnings=[*notes, *assumed])
-    rec.imus.append(ImuStream(name=name, t_ns=t_ns, meta=dict(meta), **streams))
-    q, q_source = orientation_wxyz(values, seen)
+    if keys and summary.gaps:
+        meta["samples_with_gaps"] = summary.gaps
+    imu_meta = dict(meta)
+    probe = np.zeros((0, len(cols)))
+    q, q_source = orientation_wxyz(probe, seen)
+    if q is not None:
+        meta["orientation"] = {"topic": ORIENTATION_TOPIC.format(name=name), "from": q_source}
+    skip = IMU_COLS | {"PacketCounter", "SampleTimeFine"} | ({"Temperature"} if temperature else set())
+    extra = [(c, i) for c, i in seen.items() if c not in skip and i not in text_cols and summary.any_finite[i]]
+    records: dict[str, dict[str, Any]] = {f"imulog.device.{name}": meta}
+    start = _utc_start(summary, stf, rate)
+    if start is not None:
+        records["imulog.trial"] = trial_start(start, f"{path.name}: UTC_* columns")
+    return {
+        "stf": stf,
+        "rate": rate,
+        "assumed": assumed,
+        "name": name,
+        "keys": keys,
+        "temperature": temperature,
+        "imu_meta": imu_meta,
+        "records": records,
+        "extra": extra,
+        "declared": {"meta": {f"/imu/{name}": imu_meta}},
+    }
+
+
+def _utc_start(summary: Any, stf: bool, rate: float | None) -> datetime | None:
+    """:func:`utc_start` from the first pass's candidate rows (their times relative to the first row's)."""
+    for cols, nano, tick, count in summary.utc_rows:
+        y, mo, d, h, mi, sec = (int(v) for v in cols)
+        try:
+            when = datetime(y, mo, d, h, mi, sec, tzinfo=UTC) + timedelta(microseconds=float(nano) / 1000)
+        except ValueError:
+            continue
+        if stf:
+            rel = (tick - summary.first_ticks) * (1_000_000_000 // TICKS_PER_S)
+        else:
+            t = np.round(np.array([summary.first_counts, count], dtype=np.int64) * (1e9 / rate)).astype(np.int64)
+            rel = int(t[1] - t[0])
+        return when - timedelta(microseconds=int(rel) / 1000)
+    return None
+
+
+def _piece(path: Path, plan: dict[str, Any], seen: dict[str, int], values: np.ndarray, t_ns: np.ndarray) -> Recording:
+    """The streams of one piece's rows, with the whole recording's channels and records."""
+    name = plan["name"]
+    streams: dict[str, np.ndarray] = {k: values[:, [seen[f"{k.title()}_{a}"] for a in "XYZ"]] for k in plan["keys"]}
+    if plan["temperature"]:
+        streams["temperature"] = values[:, seen["Temperature"]]
+    rec = Recording(sources=[str(path)])
+    rec.imus.append(ImuStream(name=name, t_ns=t_ns, meta=dict(plan["imu_meta"]), **streams))
+    q, _ = orientation_wxyz(values, seen)
     if q is not None:
         rec.signals.append(orientation_stream(name, t_ns, q))
-        meta["orientation"] = {"topic": ORIENTATION_TOPIC.format(name=name), "from": q_source}
-    rec.metadata[f"imulog.device.{name}"] = meta
-    start = utc_start(values, seen, t_ns)
-    if start is not None:
-        rec.metadata["imulog.trial"] = trial_start(start, f"{path.name}: UTC_* columns")
-    skip = imu_cols | {"PacketCounter", "SampleTimeFine"} | ({"Temperature"} if "temperature" in streams else set())
-    extra = [
-        (c, i) for c, i in seen.items() if c not in skip and i not in text_cols and np.isfinite(values[:, i]).any()
-    ]
+    rec.metadata.update({k: dict(v) for k, v in plan["records"].items()})
+    extra = plan["extra"]
     if extra:
         units = [SIGNAL_UNITS.get(c.split("_")[0].lower(), "") for c, _ in extra]
         rec.signals.insert(
@@ -346,6 +455,13 @@ class XsensConverter(Converter):
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         options = options or ConvertOptions()
         return read_xsens(Path(path), names=options.extra.get("names"), rate_hz=options.rate_hz)
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        from imulog.converters import _pieces
+
+        options = options or ConvertOptions()
+        names, rate = options.extra.get("names"), options.rate_hz
+        return iter_xsens(Path(path), names=names, rate_hz=rate, piece_bytes=_pieces.PIECE_BYTES)
 
     def recording_key(self, path: Path) -> str | None:
         """``MT_012005D6_031-000_00B421AF.txt`` -> ``MT_012005D6_031``: the per-sensor files of one recording."""

@@ -276,3 +276,10 @@ def take_samples(stream: Any, index: np.ndarray) -> Any:
             value = value[index]
         fields[f.name] = value
     return type(stream)(**fields)
+
+
+#: reserved ``Recording.metadata`` name in the first piece of a recording given in pieces (``Converter.iter_chunks``):
+#: what the whole recording holds, known before its first piece is written, so that the streaming writer's time axis
+#: and channel records equal the whole-file ones: ``{"spans": {topic: [first_ns, last_ns]}, "meta": {topic: meta}}``
+#: (docs/converters.md, "Piece-wise conversion"); never written as a record, dropped when pieces are joined
+PIECES_RECORD = "imulog.pieces"

@@ -60,3 +60,22 @@ def step_rate_hz(steps_ns: np.ndarray) -> float | None:
     med = float(np.median(dt))
     steady = dt[(dt >= 0.5 * med) & (dt <= 1.5 * med)]
     return 1e9 / float(steady.mean())
+
+
+def add_counts(counts: dict[int, int], values: np.ndarray) -> None:
+    """Add integer ``values`` to ``counts`` (value -> how many times it occurred), e.g. sample steps piece by piece."""
+    keys, n = np.unique(np.asarray(values, dtype=np.int64), return_counts=True)
+    for k, c in zip(keys.tolist(), n.tolist(), strict=True):
+        counts[k] = counts.get(k, 0) + c
+
+
+def median_of_counts(counts: dict[int, int]) -> float | None:
+    """``np.median`` of the integers that ``counts`` (value -> occurrences) describes, exactly (None when empty)."""
+    n = sum(counts.values())
+    if n == 0:
+        return None
+    keys = sorted(counts)
+    cum = np.cumsum([counts[k] for k in keys])
+    lo = keys[int(np.searchsorted(cum, (n - 1) // 2, side="right"))]
+    hi = keys[int(np.searchsorted(cum, n // 2, side="right"))]
+    return float(np.mean(np.array([lo, hi], dtype=np.int64)))

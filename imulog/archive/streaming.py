@@ -15,11 +15,8 @@ after them (in the same chunks order), attachments, metadata records, ``imulog.t
 
 from __future__ import annotations
 
-import hashlib
-import mimetypes
+import dataclasses
 import os
-import struct
-import zlib
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,79 +24,18 @@ from typing import Any
 
 import numpy as np
 
-from imulog.archive import _mcap as m
 from imulog.archive import codec, twin_filter
 from imulog.archive._builder import CHUNK_TARGET_BYTES, McapBuilder
+from imulog.archive.attach_file import STREAM_PACK_MAX, write_attachment_from_file  # noqa: F401 (re-exported)
+from imulog.archive.channel_stats import STATS_KEYS, ChannelStats, _sample_arrays  # noqa: F401 (re-exported)
 from imulog.archive.errors import ArchiveError, ArchiveExistsError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import encode_record
-from imulog.archive.packing import pack
+from imulog.archive.piece_plan import SpanCheck, declared_spans, meta_problem, split_plan
 from imulog.archive.timeline import TIMELINE_RECORD, TimelineError, TrialAxis, timeline_record
 from imulog.model import Intervals, Recording, Stream, take_samples
 
 STATS_RECORD = "imulog.channel_stats"
-STATS_KEYS = ("sample_count", "start_ns", "end_ns", "rate_hz", "time_gaps", "nan_samples", "sha256")
-
-
-class ChannelStats:
-    """Running statistics of one channel, the same fields :mod:`imulog.archive.codec` computes at once."""
-
-    def __init__(self) -> None:
-        self.count = 0
-        self.start: int | None = None
-        self.end: int | None = None
-        self.median_dt: float | None = None
-        self.gaps = 0
-        self.nan = 0
-        self.has_values = False
-        self._hash = hashlib.sha256()
-
-    def add_samples(self, t_ns: np.ndarray, values: Iterable[np.ndarray | None]) -> None:
-        t = np.asarray(t_ns, dtype=np.int64)
-        if not len(t):
-            return
-        if self.median_dt is None and len(t) > 1:
-            self.median_dt = float(np.median(np.diff(t)))
-        t_all = np.concatenate([[self.end], t]) if self.end is not None else t
-        if self.median_dt and len(t_all) > 1:
-            self.gaps += int(np.count_nonzero(np.diff(t_all) > 1.5 * self.median_dt))
-        arrays = [v for v in values if v is not None]
-        if arrays:
-            self.has_values = True
-            self.nan += codec.nan_samples(len(t), arrays)
-        self.start = int(t[0]) if self.start is None else self.start
-        self.end = int(t[-1])
-        self.count += len(t)
-
-    def add_payloads(self, payloads: Iterable[bytes]) -> None:
-        """Continue the content hash (as :func:`imulog.archive.writer.payload_hash`)."""
-        for p in payloads:
-            self._hash.update(struct.pack("<Q", len(p)))
-            self._hash.update(p)
-
-    @property
-    def sha256(self) -> str:
-        return self._hash.hexdigest()
-
-    def to_meta(self) -> dict[str, str]:
-        out = {"sample_count": str(self.count), "sha256": self.sha256}
-        if self.count:
-            out["start_ns"], out["end_ns"] = str(self.start), str(self.end)
-        if self.count > 1 and self.median_dt:
-            out["rate_hz"] = f"{1e9 / self.median_dt:.6g}"
-            out["time_gaps"] = str(self.gaps)
-        if self.has_values:
-            out["nan_samples"] = str(self.nan)
-        return out
-
-
-def _sample_arrays(stream: Stream) -> tuple[np.ndarray, list[np.ndarray | None]]:
-    """(times, value arrays) of a piece, for the statistics; intervals count their starts."""
-    t = getattr(stream, "t_ns", None)
-    if t is None:
-        return np.asarray(stream.start_ns), []
-    names = ("acc", "gyr", "mag", "temperature", "pos", "values", "position")
-    return np.asarray(t), [getattr(stream, n) for n in names if getattr(stream, n, None) is not None]
 
 
 class _Channel:
@@ -110,6 +46,8 @@ class _Channel:
         self.times: list[int] = []
         self.payloads: list[bytes] = []
         self.pending = 0
+        self.written_meta: dict[str, Any] | None = None  # the stream meta in the Channel record
+        self.meta: dict[str, Any] = {}  # every piece's meta merged (what the whole recording's stream holds)
 
 
 class StreamingTrialWriter:
@@ -153,6 +91,10 @@ class StreamingTrialWriter:
         self._timeline: dict[str, Any] | None = None
         self._topics: list[str] | None = None
         self._stack: list[Any] = []
+        self._plan: dict[str, Any] | None = None  # what the first piece declared (imulog.model.PIECES_RECORD)
+        self._spans = SpanCheck()
+        #: channels whose meta a later piece changed (undeclared: the Channel record keeps the first piece's)
+        self.meta_changes: list[str] = []
 
     # ------------------------------------------------------------------ context
     def __enter__(self) -> StreamingTrialWriter:
@@ -202,28 +144,41 @@ class StreamingTrialWriter:
         dup = sorted({t for t in topics if topics.count(t) > 1})
         if dup:
             raise ArchiveError(f"{self.path}: two streams share the topic(s) {', '.join(dup)}")
+        records, plan = split_plan(piece.metadata)
         if self._topics is None:
+            self._plan = plan
             self._start(piece, streams)
-        for key, values in piece.metadata.items():  # a reader may learn records (e.g. the device) as it goes
+        for key, values in records.items():  # a reader may learn records (e.g. the device) as it goes
             self.metadata[key] = {**self.metadata.get(key, {}), **values}
         for stream in streams:
             self._write_piece(stream)
             self._write_twins(stream)
 
     def _start(self, piece: Recording, streams: list[Stream]) -> None:
-        """Time axis from the first piece (its first samples are the trial's origin) and the channel records."""
-        trial = {**piece.metadata.get("imulog.trial", {}), **self.metadata.get("imulog.trial", {})}
+        """The time axis from the spans the first piece declares, else from its samples (checked at the end)."""
+        trial = self._trial(piece.metadata)
+        spans = declared_spans(self._plan) if self._plan else None
         try:
-            self._timeline = timeline_record(trial, streams)
+            self._timeline = timeline_record(trial, streams if spans is None else spans)
         except TimelineError as exc:
             raise ArchiveError(f"{self.path}: {exc}") from None
         self._axis = TrialAxis({TIMELINE_RECORD: self._timeline}, {s.name for s in piece.imus})
         self._topics = [s.topic for s in streams]
         self._imus = list(piece.imus)
 
+    def _trial(self, first: dict[str, dict[str, Any]]) -> dict[str, Any]:
+        """The ``imulog.trial`` record the time axis starts at: the first piece's, updated by the writer's own."""
+        return {**first.get("imulog.trial", {}), **self.metadata.get("imulog.trial", {})}
+
+    def _declared_meta(self, topic: str) -> dict[str, Any] | None:
+        return ((self._plan or {}).get("meta") or {}).get(topic)
+
     def _open(self, stream: Stream) -> _Channel:
-        """The channel record of a stream, on its first piece (a stream may start in a later piece)."""
-        schema_name, meta, _, _ = codec.encode(stream, self._axis.map_for(stream.topic))
+        """The channel record of a stream, on its first piece (a stream may start in a later piece), with the stream
+        meta declared up front when the recording declares it."""
+        declared = self._declared_meta(stream.topic)
+        shown = dataclasses.replace(stream, meta=declared) if declared is not None else stream
+        schema_name, meta, _, _ = codec.encode(shown, self._axis.map_for(stream.topic))
         for key in STATS_KEYS:
             meta.pop(key, None)
         meta.update(self._extra)
@@ -232,6 +187,8 @@ class StreamingTrialWriter:
         ch = self._channels[stream.topic] = _Channel(
             self._builder.add_channel(stream.topic, schema_id, meta), stream.topic
         )
+        if hasattr(shown, "meta"):
+            ch.written_meta = dict(shown.meta)
         if stream.topic not in self._topics:
             self._topics.append(stream.topic)
         if hasattr(stream, "acc") and all(i.name != stream.name for i in self._imus):
@@ -310,8 +267,13 @@ class StreamingTrialWriter:
     def _write_piece(self, stream: Stream) -> None:
         ch = self._channels.get(stream.topic) or self._open(stream)
         _, _, times, payloads = codec.encode(stream, self._axis.map_for(stream.topic))
-        t, arrays = _sample_arrays(stream)
-        ch.stats.add_samples(t, arrays)
+        if isinstance(stream, Intervals):
+            ch.stats.add_intervals(stream.start_ns, stream.end_ns)
+        else:
+            ch.stats.add_samples(*_sample_arrays(stream))
+        self._spans.add(stream)
+        if hasattr(stream, "meta"):
+            ch.meta = {**ch.meta, **stream.meta}
         self._add_messages(ch, times, payloads)
 
     def _add_messages(self, ch: _Channel, log_times: Iterable[int], payloads: list[bytes]) -> None:
@@ -334,6 +296,7 @@ class StreamingTrialWriter:
 
         if self._topics is None:
             raise ArchiveError(f"{self.path}: nothing to write (the source gave no samples)")
+        self._check_declared()
         self._flush_twin_filters()
         for ch in [*self._channels.values(), *self._twins.values()]:
             self._flush(ch)
@@ -350,7 +313,8 @@ class StreamingTrialWriter:
         hashes = {topic: s["sha256"] for topic, s in stats.items()}
         for topic, ch in self._twins.items():
             stats[topic] = {k: v for k, v in ch.stats.to_meta().items() if k != "nan_samples"}
-        device = _device_records(Recording(imus=self._imus, metadata=self.metadata))
+        imus = [dataclasses.replace(i, meta=self._channels[i.topic].meta or i.meta) for i in self._imus]
+        device = _device_records(Recording(imus=imus, metadata=self.metadata))
         records = {k: v for k, v in {**self.metadata, **device}.items() if k not in ("imulog.raw", TIMELINE_RECORD)}
         records[TIMELINE_RECORD] = self._timeline or {}
         for name, values in records.items():
@@ -368,45 +332,24 @@ class StreamingTrialWriter:
         self._builder.add_metadata("imulog.raw", encode_record(raw))
         self._builder.finish()
 
+    def _check_declared(self) -> None:
+        """Refuse a trial whose time axis is not the whole recording's, or whose declared channel meta a piece
+        contradicted; note undeclared meta that later pieces changed (:attr:`meta_changes`)."""
+        problem = self._spans.axis_problem(self._timeline or {}, self._trial({}), self._plan is not None)
+        if problem:
+            raise ArchiveError(f"{self.path}: {problem}")
+        for topic, ch in self._channels.items():
+            if ch.written_meta is None:
+                continue
+            problem = meta_problem(topic, ch.written_meta, ch.meta)
+            if problem and self._declared_meta(topic) is not None:
+                raise ArchiveError(f"{self.path}: {problem}, unlike the meta its first piece declared")
+            if problem:
+                self.meta_changes.append(problem)
+
     def _attach(self, src: Path) -> str:
         """Attach ``src`` read in 1 MiB blocks (a week's .cwa is 770 MB: never held at once); its SHA-256."""
         return write_attachment_from_file(self._builder, src)
-
-
-STREAM_PACK_MAX = 64 << 20  # originals up to this size are read whole and packed; larger ones streamed as they are
-
-
-def write_attachment_from_file(builder: McapBuilder, src: Path, block: int = 1 << 20) -> str:
-    """An MCAP Attachment record of the file ``src``, written block by block; returns the file's SHA-256."""
-    size = src.stat().st_size
-    media_type = mimetypes.guess_type(src.name)[0] or "application/octet-stream"
-    mtime = max(src.stat().st_mtime_ns, 0)
-    if size <= STREAM_PACK_MAX:  # small enough to hold: zstd-packed when it pays (imulog.archive.packing)
-        data = src.read_bytes()
-        stored, stored_type = pack(data, media_type)
-        builder.add_attachment(src.name, stored_type, stored, log_time=mtime, create_time=mtime)
-        return hashlib.sha256(data).hexdigest()
-    head = struct.pack("<QQ", mtime, mtime) + m._s(src.name) + m._s(media_type) + struct.pack("<Q", size)
-    body_len = len(head) + size + 4
-    offset = builder.offset
-    builder.write(struct.pack("<BQ", m.Op.ATTACHMENT, body_len))
-    builder.write(head)
-    crc = zlib.crc32(head)
-    digest = hashlib.sha256()
-    done = 0
-    with open(src, "rb") as f:
-        while data := f.read(block):
-            builder.write(data)
-            crc = zlib.crc32(data, crc)
-            digest.update(data)
-            done += len(data)
-    if done != size:
-        raise ArchiveError(f"{src}: the file changed size while it was attached ({size} -> {done} bytes)")
-    builder.write(struct.pack("<I", crc))
-    builder.attachment_indexes.append(
-        m.AttachmentIndexRec(offset, builder.offset - offset, mtime, mtime, size, src.name, media_type)
-    )
-    return digest.hexdigest()
 
 
 def write_trial_streaming(

@@ -47,7 +47,9 @@ def _convert_streaming(
     from imulog.converters.plausibility import PieceExcerpts, marker_warnings
     from imulog.converters.registry import iter_file_chunks
     from imulog.converters.values import ValueReport, finish
+    from imulog.heap import bound_heap
 
+    bound_heap()  # the same temporaries piece after piece: keep them out of the heap (imulog.heap), so memory stays flat
     name = _format_name(path, fmt, options)
     conv = get(name)
     size = path.stat().st_size
@@ -60,12 +62,13 @@ def _convert_streaming(
         if first is None:
             raise ConversionError(path, "no samples")
         records = {k: {**first.metadata.get(k, {}), **v} for k, v in meta.items()}
+        sources = [Path(s) for s in first.sources] or [path]  # the sidecars a reader read too (BIDS, NilsPod CSV)
         expected = _expected_duration_s(first, size, _bytes_per_sample(path))
         with (
             StreamingTrialWriter(
                 output,
                 metadata=records,
-                sources=[path],
+                sources=sources,
                 attach=attach,
                 overwrite=overwrite,
                 expected_duration_s=expected,
@@ -96,7 +99,7 @@ def _convert_streaming(
             finish(checked, report, path)  # an unusable channel fails here, before the file is kept
             notes.extend(w for w in checked.warnings if w not in notes)
             # after the pieces: a reader that hashed the file while reading it spares a second pass over it
-            writer.metadata["imulog.conversion"] = {**conversion_record([path], {path.name: name}), "streamed": True}
+            writer.metadata["imulog.conversion"] = {**conversion_record(sources, {path.name: name}), "streamed": True}
             if notes:
                 writer.metadata["imulog.conversion"]["warnings"] = notes
     except ConversionError as e:
