@@ -15,21 +15,24 @@ import numpy as np
 _MAX_CELLS = 1 << 21  # candidate x sample cells per block of hinge_fit (16 MB of float64)
 
 
-def hinge_fit(x: np.ndarray, y: np.ndarray, power: int = 1) -> float | None:
-    """``t0`` (in units of ``x``, sub-sample) of the least-squares fit ``y = c + k max(x - t0, 0)^power``, ``k > 0``.
+def hinge_fit(x: np.ndarray, y: np.ndarray, power: int = 1, drift: bool = False) -> float | None:
+    """``t0`` (in units of ``x``, sub-sample) of the least-squares fit ``y = c + k max(x - t0, 0)^power``, ``k > 0``
+    (with ``drift``: ``y = c + b x + k max(x - t0, 0)^power``).
 
     ``t0`` runs over the samples of ``x`` but the last two (the vertex of the parabola through the errors
-    around the best one refines it); ``c`` absorbs a constant offset (a rest's bias). None without a rising
-    fit."""
+    around the best one refines it); ``c`` absorbs a constant offset (a rest's bias), ``b x`` a linear drift (a
+    velocity integrated from a rest whose bias is known only to the noise of a short window). None without a
+    rising fit."""
     n_cand = max(len(x) - 2, 0)
     if n_cand == 0:
         return None
-    yc = y - y.mean()
+    basis = _baseline(x, drift)
+    yc = _residual(y[None, :], basis)[0]
     cov, var = np.empty(n_cand), np.empty(n_cand)
     rows = max(1, _MAX_CELLS // max(len(x), 1))  # candidates per block: memory bounded whatever the length
     for lo in range(0, n_cand, rows):
         h = np.maximum(x[None, :] - x[lo : min(lo + rows, n_cand), None], 0.0) ** power  # one row per t0
-        hc = h - h.mean(axis=1, keepdims=True)
+        hc = _residual(h, basis)
         cov[lo : lo + len(h)], var[lo : lo + len(h)] = hc @ yc, np.einsum("ij,ij->i", hc, hc)
     with np.errstate(divide="ignore", invalid="ignore"):  # least squares of y = c + k h, in closed form
         sse = np.where((var > 0) & (cov > 0), float(yc @ yc) - cov**2 / var, np.inf)
@@ -43,6 +46,19 @@ def hinge_fit(x: np.ndarray, y: np.ndarray, power: int = 1) -> float | None:
             frac = float(np.clip(0.5 * (sse[i - 1] - sse[i + 1]) / curv, -0.5, 0.5))
     step = float(x[1] - x[0]) if len(x) > 1 else 1.0
     return float(x[i] + frac * step)
+
+
+def _baseline(x: np.ndarray, drift: bool) -> np.ndarray:
+    """Orthonormal rows spanning the baseline of :func:`hinge_fit`: a constant, and a line with ``drift``."""
+    rows = [np.ones_like(x, dtype=float)]
+    if drift and len(x) > 2:
+        rows.append(np.asarray(x, dtype=float) - float(np.mean(x)))
+    return np.array([r / np.linalg.norm(r) for r in rows])
+
+
+def _residual(h: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """Rows of ``h`` minus their projection on the orthonormal rows of ``basis``."""
+    return h - (h @ basis.T) @ basis
 
 
 def flank_zero(
@@ -89,7 +105,9 @@ def flank_zero(
     return hinge_fit(x, y, 1)
 
 
-def speed_flank_zero(v: np.ndarray, first: int, height: float, max_fit: int | None = None) -> float | None:
+def speed_flank_zero(
+    v: np.ndarray, first: int, height: float, max_fit: int | None = None, drift: bool = True
+) -> float | None:
     """Where the speed leaving a rest starts to rise (local sample index), for movements too slow for their
     acceleration to clear the noise.
 
@@ -110,9 +128,46 @@ def speed_flank_zero(v: np.ndarray, first: int, height: float, max_fit: int | No
     hit = np.flatnonzero(vn[first : min(n, 2 * first + 4)] >= height)
     if len(hit) == 0:
         return None
-    p = first + int(hit[0])
-    if p < 3:
+    return _speed_fit(v, first + int(hit[0]), max_fit, drift)
+
+
+def first_motion(
+    v: np.ndarray, height: float, min_run: int, until: int, near: int, max_fit: int | None = None
+) -> float | None:
+    """Where a movement that the hand continues up to ``until`` left the rest at the array's start (local sample
+    index, sub-sample).
+
+    ``v`` (n, 3) m/s velocity integrated from a verified rest (the array's start) in time order; ``until`` the
+    current boundary, inside the movement. From ``until`` back towards the rest, the hand moves while its speed
+    stays at half ``height`` or more (a hand that stopped on the way, e.g. before a rest's drift, is a
+    different movement); the first run of at least ``min_run`` samples at ``height`` or more after that is the
+    movement's flank, and its ``t0`` (:func:`speed_flank_zero`'s model) where it began. Unlike
+    :func:`speed_flank_zero` this does not need the acceleration to have crossed a level: a slow last
+    submovement (the wrist no longer turning) can stay under the acceleration level for seconds at 3-13 cm/s
+    (issue 31). None when the speed at ``until`` is under half ``height``, or the flank starts within 3 samples
+    of the rest."""
+    vn = np.linalg.norm(v, axis=1)
+    until = min(int(until), len(vn) - 1)
+    if until < 3 or vn[until] < 0.5 * height:
+        return None
+    slow = np.flatnonzero(vn[: until + 1] < 0.5 * height)
+    e = int(slow[-1]) + 1 if len(slow) else 0  # the hand moves over [e, until]
+    above = np.r_[vn[e : until + 1] >= height, False].astype(np.int8)
+    d = np.diff(np.r_[0, above])
+    starts, ends = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    runs = [e + int(a) for a, b in zip(starts, ends, strict=True) if b - a >= min_run or e + b > until]
+    if not runs or not 3 <= runs[0] < near:
+        return None
+    low = np.flatnonzero(vn[: runs[0] + 1] < 0.5 * height)  # fitted up to half the height: the lower part of
+    p = int(low[-1]) + 1 if len(low) else runs[0]  # the flank, where it is closest to (t - t0)^2
+    return _speed_fit(v, max(p, 3), max_fit)
+
+
+def _speed_fit(v: np.ndarray, p: int, max_fit: int | None, drift: bool = True) -> float | None:
+    """``t0`` of ``v = c + b t + k max(t - t0, 0)^2`` along ``v[p]``'s direction, fitted from the rest to ``p``."""
+    speed = float(np.linalg.norm(v[p]))
+    if p < 3 or speed <= 0:
         return None
     lo = 0 if max_fit is None else max(0, p - int(max_fit))
-    y = v[lo : p + 1] @ (v[p] / vn[p])
-    return hinge_fit(np.arange(lo, p + 1, dtype=float), y, 2)
+    y = v[lo : p + 1] @ (v[p] / speed)
+    return hinge_fit(np.arange(lo, p + 1, dtype=float), y, 2, drift=drift)
