@@ -9,7 +9,7 @@ import pytest
 
 from imulog.process import quaternion as quat
 from imulog.process.segmentation.boundaries import refine_phase_boundaries
-from imulog.process.segmentation.flanks import hinge_fit, speed_flank_zero
+from imulog.process.segmentation.flanks import first_motion, hinge_fit, speed_flank_zero
 from imulog.process.segmentation.hand import HandParams, refine_with_accelerometer
 from imulog.process.segmentation.rescue import rescue_missed
 from imulog.simulate.motion import MotionPlan
@@ -137,3 +137,33 @@ def test_hinge_fit_in_blocks_equals_one_block(monkeypatch):
     monkeypatch.setattr(flanks, "_MAX_CELLS", 1000)  # 2 candidates per block
     assert hinge_fit(x, y, 1) == pytest.approx(whole, abs=1e-9)
     assert abs(whole - 123.4) < 2
+
+
+def test_hinge_fit_with_drift_finds_a_speed_onset_on_a_drifting_velocity():
+    """A velocity integrated from a short rest window drifts linearly (its bias is known only to the window's
+    noise): without the drift term the quadratic flank's t0 comes out early, with it within a sample."""
+    rng = np.random.default_rng(7)
+    x = np.arange(300, dtype=float)
+    y = 0.0001 * x + 2e-5 * np.maximum(x - 180.0, 0.0) ** 2 + rng.normal(0, 5e-4, len(x))
+    assert abs(hinge_fit(x, y, 2, drift=True) - 180.0) < 3
+    assert hinge_fit(x, y, 2) < 180.0 - 5  # the drift read as the start of the flank (0.1 s early at 100 Hz)
+
+
+def test_first_motion_is_the_flank_of_a_movement_continuing_to_the_boundary():
+    """From a verified rest (the array's start, time reversed for an offset) into a slow last submovement: the
+    flank where it starts; where the hand stopped when it stopped between that flank and the boundary (a rest's
+    drift after a stop is not the phase's); none farther than ``near`` or from a boundary where the hand is
+    still."""
+    rate = 100.0
+    t = np.arange(int(4 * rate)) / rate
+    speed = np.where(t > 1.0, 0.06 * (t - 1.0) ** 2, 0.0)  # a slow tail, reversed in time: 6 cm/s at 2 s
+    speed = np.minimum(speed, 0.06)
+    v = np.c_[speed, 0.5 * speed, np.zeros_like(t)] + 0.0005 * np.random.default_rng(2).standard_normal((len(t), 3))
+    z = first_motion(v, 0.03, 3, until=350, near=300)
+    assert z is not None and abs(z / rate - 1.0) < 0.05
+    assert first_motion(v, 0.03, 3, until=350, near=100) is None  # motion farther than checked from the rest
+    stopped = v.copy()
+    stopped[250:300] = 0.0  # the hand stopped for 0.5 s: the phase ends there, the motion beyond is not its own
+    z = first_motion(stopped, 0.03, 3, until=350, near=400)
+    assert z is not None and 297 <= z <= 300
+    assert first_motion(stopped, 0.03, 3, until=280, near=400) is None  # the boundary inside the stop
