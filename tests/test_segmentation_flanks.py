@@ -162,8 +162,10 @@ def test_first_motion_is_the_flank_of_a_movement_continuing_to_the_boundary():
     z = first_motion(v, 0.03, 3, until=350, near=300)
     assert z is not None and abs(z / rate - 1.0) < 0.05
     assert first_motion(v, 0.03, 3, until=350, near=100) is None  # motion farther than checked from the rest
-    stopped = v.copy()
-    stopped[250:300] = 0.0  # the hand stopped for 0.5 s: the phase ends there, the motion beyond is not its own
-    z = first_motion(stopped, 0.03, 3, until=350, near=400)
-    assert z is not None and 297 <= z <= 300
+    # the hand stopped for 0.5 s (2.5-3.0 s) before the boundary's movement: the phase ends where it stopped, the
+    # motion beyond is not its own
+    again = np.where(t < 2.5, speed, np.where(t < 3.0, 0.0, np.minimum(0.5 * (t - 3.0) ** 2, 0.06)))
+    stopped = np.c_[again, 0.5 * again, np.zeros_like(t)] + v - np.c_[speed, 0.5 * speed, np.zeros_like(t)]
+    z = first_motion(stopped, 0.03, 3, until=390, near=400)
+    assert z is not None and abs(z / rate - 3.0) < 0.05
     assert first_motion(stopped, 0.03, 3, until=280, near=400) is None  # the boundary inside the stop

@@ -15,27 +15,41 @@ import numpy as np
 _MAX_CELLS = 1 << 21  # candidate x sample cells per block of hinge_fit (16 MB of float64)
 
 
-def hinge_fit(x: np.ndarray, y: np.ndarray, power: int = 1, drift: bool = False) -> float | None:
+def hinge_fit(
+    x: np.ndarray, y: np.ndarray, power: int = 1, drift: bool = False, curvature: bool = False
+) -> float | None:
     """``t0`` (in units of ``x``, sub-sample) of the least-squares fit ``y = c + k max(x - t0, 0)^power``, ``k > 0``
-    (with ``drift``: ``y = c + b x + k max(x - t0, 0)^power``).
+    (with ``drift``: ``+ b x``; with ``curvature``: ``+ k2 max(x - t0, 0)^(power + 1)``).
 
     ``t0`` runs over the samples of ``x`` but the last two (the vertex of the parabola through the errors
     around the best one refines it); ``c`` absorbs a constant offset (a rest's bias), ``b x`` a linear drift (a
-    velocity integrated from a rest whose bias is known only to the noise of a short window). None without a
-    rising fit."""
+    velocity integrated from a rest whose bias is known only to the noise of a short window), the next power
+    the flank's bending (the speed of a movement from rest is ``k t^2 + k2 t^3 + ...``; minimum jerk:
+    ``30 D / T^3 (t^2 - 2 t^3 / T + ...)``, so a pure square fitted up to a few cm/s puts a slow phase's
+    ``t0`` 0.1-0.3 s early). None without a rising fit."""
     n_cand = max(len(x) - 2, 0)
     if n_cand == 0:
         return None
     basis = _baseline(x, drift)
     yc = _residual(y[None, :], basis)[0]
-    cov, var = np.empty(n_cand), np.empty(n_cand)
+    span = max(float(x[-1] - x[0]), 1e-12)  # powers of (x - t0) / span: a well-conditioned normal matrix
+    sse = np.empty(n_cand)
     rows = max(1, _MAX_CELLS // max(len(x), 1))  # candidates per block: memory bounded whatever the length
     for lo in range(0, n_cand, rows):
-        h = np.maximum(x[None, :] - x[lo : min(lo + rows, n_cand), None], 0.0) ** power  # one row per t0
-        hc = _residual(h, basis)
-        cov[lo : lo + len(h)], var[lo : lo + len(h)] = hc @ yc, np.einsum("ij,ij->i", hc, hc)
-    with np.errstate(divide="ignore", invalid="ignore"):  # least squares of y = c + k h, in closed form
-        sse = np.where((var > 0) & (cov > 0), float(yc @ yc) - cov**2 / var, np.inf)
+        d = np.maximum(x[None, :] - x[lo : min(lo + rows, n_cand), None], 0.0) / span  # one row per t0
+        h1 = _residual(d**power, basis)
+        g11, r1 = np.einsum("ij,ij->i", h1, h1), h1 @ yc
+        with np.errstate(divide="ignore", invalid="ignore"):  # least squares of y = c (+ b x) + k h (+ k2 h x)
+            if not curvature:
+                out = np.where((g11 > 0) & (r1 > 0), float(yc @ yc) - r1**2 / g11, np.inf)
+            else:
+                h2 = _residual(d ** (power + 1), basis)
+                g12, g22, r2 = np.einsum("ij,ij->i", h1, h2), np.einsum("ij,ij->i", h2, h2), h2 @ yc
+                det = g11 * g22 - g12**2
+                k = (g22 * r1 - g12 * r2) / det
+                fit = (g22 * r1**2 - 2 * g12 * r1 * r2 + g11 * r2**2) / det
+                out = np.where((det > 1e-12 * g11 * g22) & (k > 0), float(yc @ yc) - fit, np.inf)
+        sse[lo : lo + len(d)] = out
     if not np.isfinite(sse).any():
         return None
     i = int(np.argmin(sse))
@@ -105,9 +119,7 @@ def flank_zero(
     return hinge_fit(x, y, 1)
 
 
-def speed_flank_zero(
-    v: np.ndarray, first: int, height: float, max_fit: int | None = None, drift: bool = True
-) -> float | None:
+def speed_flank_zero(v: np.ndarray, first: int, height: float, max_fit: int | None = None) -> float | None:
     """Where the speed leaving a rest starts to rise (local sample index), for movements too slow for their
     acceleration to clear the noise.
 
@@ -128,7 +140,7 @@ def speed_flank_zero(
     hit = np.flatnonzero(vn[first : min(n, 2 * first + 4)] >= height)
     if len(hit) == 0:
         return None
-    return _speed_fit(v, first + int(hit[0]), max_fit, drift)
+    return _speed_fit(v, first + int(hit[0]), max_fit)
 
 
 def first_motion(
@@ -148,26 +160,34 @@ def first_motion(
     of the rest."""
     vn = np.linalg.norm(v, axis=1)
     until = min(int(until), len(vn) - 1)
-    if until < 3 or vn[until] < 0.5 * height:
+    if until < 3:
         return None
-    slow = np.flatnonzero(vn[: until + 1] < 0.5 * height)
-    e = int(slow[-1]) + 1 if len(slow) else 0  # the hand moves over [e, until]
-    above = np.r_[vn[e : until + 1] >= height, False].astype(np.int8)
-    d = np.diff(np.r_[0, above])
-    starts, ends = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
-    runs = [e + int(a) for a, b in zip(starts, ends, strict=True) if b - a >= min_run or e + b > until]
-    if not runs or not 3 <= runs[0] < near:
+    stops = _runs(vn[: until + 1] < 0.5 * height, min_run)  # the hand still (or a rest's slow drift)
+    if len(stops) == 0 or stops[-1][1] > until:
         return None
-    low = np.flatnonzero(vn[: runs[0] + 1] < 0.5 * height)  # fitted up to half the height: the lower part of
-    p = int(low[-1]) + 1 if len(low) else runs[0]  # the flank, where it is closest to (t - t0)^2
-    return _speed_fit(v, max(p, 3), max_fit)
+    rest, e = stops[-1]  # the hand moves over [e, until]
+    runs = [(a, b) for a, b in _runs(vn[e : until + 1] >= height, min_run) + e if a < until]
+    if not runs or not 3 <= runs[0][0] < near:
+        return None
+    low = np.flatnonzero(vn[: runs[0][0] + 1] < 0.5 * height)  # fitted up to half the height: the lower part
+    p = int(low[-1]) + 1 if len(low) else runs[0][0]  # of the flank, from where the hand was last still
+    return _speed_fit(v, max(p, 3), max_fit, start=int(rest))
 
 
-def _speed_fit(v: np.ndarray, p: int, max_fit: int | None, drift: bool = True) -> float | None:
+def _runs(mask: np.ndarray, min_run: int) -> np.ndarray:
+    """``[start, end)`` (k, 2) of the True runs of ``mask`` at least ``min_run`` long (one shorter at its end)."""
+    d = np.diff(np.r_[0, np.asarray(mask, dtype=np.int8), 0])
+    out = np.c_[np.flatnonzero(d == 1), np.flatnonzero(d == -1)].astype(np.int64)
+    return out[(out[:, 1] - out[:, 0] >= min_run) | (out[:, 1] == len(mask))]
+
+
+def _speed_fit(v: np.ndarray, p: int, max_fit: int | None, start: int = 0) -> float | None:
     """``t0`` of ``v = c + b t + k max(t - t0, 0)^2`` along ``v[p]``'s direction, fitted from the rest to ``p``."""
     speed = float(np.linalg.norm(v[p]))
     if p < 3 or speed <= 0:
         return None
-    lo = 0 if max_fit is None else max(0, p - int(max_fit))
+    lo = max(int(start), 0 if max_fit is None else p - int(max_fit))
+    if p - lo < 3:
+        return None
     y = v[lo : p + 1] @ (v[p] / speed)
-    return hinge_fit(np.arange(lo, p + 1, dtype=float), y, 2, drift=drift)
+    return hinge_fit(np.arange(lo, p + 1, dtype=float), y, 2, drift=True, curvature=True)

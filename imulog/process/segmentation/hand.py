@@ -276,23 +276,13 @@ def _extend_offset(
 
 
 def _extrapolated(
-    a: np.ndarray,
-    v: np.ndarray,
-    first: int,
-    inner: int,
-    level: float,
-    params: HandParams,
-    rate_hz: float,
-    onset: bool = True,
+    a: np.ndarray, v: np.ndarray, first: int, inner: int, level: float, params: HandParams, rate_hz: float
 ) -> int:
     """Onset (local index into ``a`` and ``v``, time order from the rest) at the start of its acceleration flank
     (:func:`~imulog.process.segmentation.flanks.flank_zero`, searched from ``first``, the onset the level gave)
     or, for a movement too slow for its acceleration to clear the noise, of its speed
     (:func:`~imulog.process.segmentation.flanks.speed_flank_zero`), or at ``inner`` (the gyroscope's onset) if
-    that is earlier; ``first`` when there is no such flank. Never before the array's start (the rest window).
-    ``onset``: the speed flank's fit includes a linear drift (the bias of the velocity integrated from a 0.5-s
-    window; issue 31: onsets 0.2-0.95 s early without it); an offset's (``False``) does not: on the development
-    trials it moved offsets of slow overlapping last submovements 0.1-0.2 s late."""
+    that is earlier; ``first`` when there is no such flank. Never before the array's start (the rest window)."""
     if params.flank_top_n_level <= 0:
         return first
     span = int(round(params.flank_search_s * rate_hz))
@@ -301,7 +291,7 @@ def _extrapolated(
     z = flank_zero(a, first, level, params.flank_top_n_level * level, span, back, smooth)
     if z is None and params.velocity_level_mps > 0:
         fit = int(round(params.speed_fit_s * rate_hz))
-        z = speed_flank_zero(v, first, params.velocity_level_mps, fit, drift=onset)
+        z = speed_flank_zero(v, first, params.velocity_level_mps, fit)
     if z is None:
         return first
     return int(min(inner, max(int(np.ceil(z)), 0)))  # the first sample after t0
@@ -444,7 +434,6 @@ def refine_with_accelerometer(
                     level,
                     params,
                     rate_hz,
-                    onset=False,
                 )
             )
             out_e[k] = _slow_tail_end(acc, gyr, dt, post, lo, int(out_e[k]), n_next, params, rate_hz)
