@@ -19,14 +19,15 @@ def hinge_fit(
     x: np.ndarray, y: np.ndarray, power: int = 1, drift: bool = False, curvature: bool = False
 ) -> float | None:
     """``t0`` (in units of ``x``, sub-sample) of the least-squares fit ``y = c + k max(x - t0, 0)^power``, ``k > 0``
-    (with ``drift``: ``+ b x``; with ``curvature``: ``+ k2 max(x - t0, 0)^(power + 1)``).
+    (with ``drift``: ``+ b x``; with ``curvature``: ``+ k2 max(x - t0, 0)^(power + 1)``, ``k2 <= 0``).
 
     ``t0`` runs over the samples of ``x`` but the last two (the vertex of the parabola through the errors
     around the best one refines it); ``c`` absorbs a constant offset (a rest's bias), ``b x`` a linear drift (a
     velocity integrated from a rest whose bias is known only to the noise of a short window), the next power
-    the flank's bending (the speed of a movement from rest is ``k t^2 + k2 t^3 + ...``; minimum jerk:
-    ``30 D / T^3 (t^2 - 2 t^3 / T + ...)``, so a pure square fitted up to a few cm/s puts a slow phase's
-    ``t0`` 0.1-0.3 s early). None without a rising fit."""
+    the flank's bending towards its peak (the speed of a movement from rest is ``k t^2 + k2 t^3 + ...``;
+    minimum jerk: ``30 D / T^3 (t^2 - 2 t^3 / T + ...)``, so a pure square fitted up to a few cm/s puts a slow
+    phase's ``t0`` 0.1-0.3 s early; a free ``k2 > 0`` lets a slow rise of noise and drift pass for a late,
+    steepening flank). None without a rising fit."""
     n_cand = max(len(x) - 2, 0)
     if n_cand == 0:
         return None
@@ -40,15 +41,14 @@ def hinge_fit(
         h1 = _residual(d**power, basis)
         g11, r1 = np.einsum("ij,ij->i", h1, h1), h1 @ yc
         with np.errstate(divide="ignore", invalid="ignore"):  # least squares of y = c (+ b x) + k h (+ k2 h x)
-            if not curvature:
-                out = np.where((g11 > 0) & (r1 > 0), float(yc @ yc) - r1**2 / g11, np.inf)
-            else:
+            out = np.where((g11 > 0) & (r1 > 0), float(yc @ yc) - r1**2 / g11, np.inf)
+            if curvature:  # k2 < 0 only (the flank bends towards its peak); else k2 = 0, the plain power
                 h2 = _residual(d ** (power + 1), basis)
                 g12, g22, r2 = np.einsum("ij,ij->i", h1, h2), np.einsum("ij,ij->i", h2, h2), h2 @ yc
                 det = g11 * g22 - g12**2
-                k = (g22 * r1 - g12 * r2) / det
+                k, k2 = (g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det
                 fit = (g22 * r1**2 - 2 * g12 * r1 * r2 + g11 * r2**2) / det
-                out = np.where((det > 1e-12 * g11 * g22) & (k > 0), float(yc @ yc) - fit, np.inf)
+                out = np.where((det > 1e-12 * g11 * g22) & (k > 0) & (k2 < 0), float(yc @ yc) - fit, out)
         sse[lo : lo + len(d)] = out
     if not np.isfinite(sse).any():
         return None
