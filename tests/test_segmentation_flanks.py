@@ -169,3 +169,26 @@ def test_first_motion_is_the_flank_of_a_movement_continuing_to_the_boundary():
     z = first_motion(stopped, 0.03, 3, until=390, near=400)
     assert z is not None and abs(z / rate - 3.0) < 0.05
     assert first_motion(stopped, 0.03, 3, until=280, near=400) is None  # the boundary inside the stop
+
+
+def test_a_slow_phase_is_rescued_when_its_run_is_as_long_as_the_real_phases_at_the_same_level():
+    """The rescue's length bound is measured where the rescue measures: a slow phase's run above half the lowest
+    height (1.85 s here) is shorter than the detector's movements (3 s, boundaries at rest), but as long as
+    those movements are above that level (2 s median)."""
+    rate = 50.0
+    t = np.arange(0.0, 70.0, 1.0 / rate)
+
+    def bump(t0, dur, height):
+        x = np.clip((t - t0) / dur, 0.0, 1.0)
+        return height * np.sin(np.pi * x) ** 2
+
+    real = [(5, 1.6), (12, 0.7), (34, 1.4), (41, 1.3), (50, 1.5)]  # (onset s, height rad/s), 3 s each
+    norm = 0.01 + sum(bump(t0, 3.0, h) for t0, h in real) + bump(20, 5.0, 0.5)  # the slow phase: 20-25 s
+    start = np.array([int(t0 * rate) for t0, _ in real])
+    end = start + int(3.0 * rate)  # the detector's boundaries where the movements leave and reach rest
+    s, e = rescue_missed(start, end, norm)
+    added = sorted(set(s.tolist()) - set(start.tolist()))
+    assert len(added) == 1
+    k = int(np.flatnonzero(s == added[0])[0])
+    assert 20.0 < t[s[k]] < t[e[k] - 1] < 25.0
+    assert np.sum(norm[(t > 20) & (t < 25)] > 0.35) / rate < 0.8 * 3.0  # the old bound (0.8 x 3 s) missed it
