@@ -169,6 +169,13 @@ def test_first_motion_is_the_flank_of_a_movement_continuing_to_the_boundary():
     z = first_motion(stopped, 0.03, 3, until=390, near=400)
     assert z is not None and abs(z / rate - 3.0) < 0.05
     assert first_motion(stopped, 0.03, 3, until=280, near=400) is None  # the boundary inside the stop
+    # a still hand whose rest window's mean is off by 0.02 m/s^2: the velocity integrated back is a ramp to
+    # 3.5 cm/s, not a movement (seen at 50 Hz, where it moved an offset 0.8 s into the rest)
+    ramp = np.c_[0.02 * t, 0.01 * t, np.zeros_like(t)] + v - np.c_[speed, 0.5 * speed, np.zeros_like(t)]
+    assert first_motion(ramp, 0.03, 3, until=170, near=400) is None
+    drifting = v + np.c_[0.005 * t, 0.0025 * t, np.zeros_like(t)]  # a movement on a smaller bias
+    z = first_motion(drifting, 0.03, 3, until=350, near=300)
+    assert z is not None and abs(z / rate - 1.0) < 0.05
 
 
 def test_a_slow_phase_is_rescued_when_its_run_is_as_long_as_the_real_phases_at_the_same_level():

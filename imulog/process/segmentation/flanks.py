@@ -156,8 +156,9 @@ def first_motion(
     movement's flank, and its ``t0`` (:func:`speed_flank_zero`'s model) where it began. Unlike
     :func:`speed_flank_zero` this does not need the acceleration to have crossed a level: a slow last
     submovement (the wrist no longer turning) can stay under the acceleration level for seconds at 3-13 cm/s
-    (issue 31). None when the speed at ``until`` is under half ``height``, or the flank starts within 3 samples
-    of the rest."""
+    (issue 31). None when the speed at ``until`` is under half ``height``, the flank starts within 3 samples
+    of the rest, or the speed at the run is within half ``height`` of the line through the velocity before
+    ``t0`` (the rest window's bias integrated back: a ramp, not a movement)."""
     vn = np.linalg.norm(v, axis=1)
     until = min(int(until), len(vn) - 1)
     if until < 3:
@@ -171,7 +172,17 @@ def first_motion(
         return None
     low = np.flatnonzero(vn[: runs[0][0] + 1] < 0.5 * height)  # fitted up to half the height: the lower part
     p = int(low[-1]) + 1 if len(low) else runs[0][0]  # of the flank, from where the hand was last still
-    return _speed_fit(v, max(p, 3), max_fit, start=int(rest))
+    z = _speed_fit(v, max(p, 3), max_fit, start=int(rest))
+    if z is None:
+        return None
+    # a movement, not the window's bias integrated (a ramp): at the run, the speed along it stands out by half the
+    # height from the line through the velocity before t0
+    r0 = int(runs[0][0])
+    x = np.arange(int(rest), r0 + 1, dtype=float)
+    y = v[int(rest) : r0 + 1] @ (v[r0] / max(float(vn[r0]), 1e-12))
+    before = x <= z
+    line = np.polyval(np.polyfit(x[before], y[before], 1), x[-1]) if before.sum() >= 3 else float(y[0])
+    return z if y[-1] - line >= 0.5 * height else None
 
 
 def _runs(mask: np.ndarray, min_run: int) -> np.ndarray:
