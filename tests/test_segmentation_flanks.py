@@ -9,7 +9,7 @@ import pytest
 
 from imulog.process import quaternion as quat
 from imulog.process.segmentation.boundaries import refine_phase_boundaries
-from imulog.process.segmentation.flanks import hinge_fit, speed_flank_zero
+from imulog.process.segmentation.flanks import first_motion, hinge_fit, speed_flank_zero
 from imulog.process.segmentation.hand import HandParams, refine_with_accelerometer
 from imulog.process.segmentation.rescue import rescue_missed
 from imulog.simulate.motion import MotionPlan
@@ -137,3 +137,65 @@ def test_hinge_fit_in_blocks_equals_one_block(monkeypatch):
     monkeypatch.setattr(flanks, "_MAX_CELLS", 1000)  # 2 candidates per block
     assert hinge_fit(x, y, 1) == pytest.approx(whole, abs=1e-9)
     assert abs(whole - 123.4) < 2
+
+
+def test_hinge_fit_with_drift_finds_a_speed_onset_on_a_drifting_velocity():
+    """A velocity integrated from a short rest window drifts linearly (its bias is known only to the window's
+    noise): without the drift term the quadratic flank's t0 comes out early, with it within a sample."""
+    rng = np.random.default_rng(7)
+    x = np.arange(300, dtype=float)
+    y = 0.0001 * x + 2e-5 * np.maximum(x - 180.0, 0.0) ** 2 + rng.normal(0, 5e-4, len(x))
+    assert abs(hinge_fit(x, y, 2, drift=True) - 180.0) < 3
+    assert hinge_fit(x, y, 2) < 180.0 - 5  # the drift read as the start of the flank (0.1 s early at 100 Hz)
+
+
+def test_first_motion_is_the_flank_of_a_movement_continuing_to_the_boundary():
+    """From a verified rest (the array's start, time reversed for an offset) into a slow last submovement: the
+    flank where it starts; where the hand stopped when it stopped between that flank and the boundary (a rest's
+    drift after a stop is not the phase's); none farther than ``near`` or from a boundary where the hand is
+    still."""
+    rate = 100.0
+    t = np.arange(int(4 * rate)) / rate
+    speed = np.where(t > 1.0, 0.06 * (t - 1.0) ** 2, 0.0)  # a slow tail, reversed in time: 6 cm/s at 2 s
+    speed = np.minimum(speed, 0.06)
+    v = np.c_[speed, 0.5 * speed, np.zeros_like(t)] + 0.0005 * np.random.default_rng(2).standard_normal((len(t), 3))
+    z = first_motion(v, 0.03, 3, until=350, near=300)
+    assert z is not None and abs(z / rate - 1.0) < 0.05
+    assert first_motion(v, 0.03, 3, until=350, near=100) is None  # motion farther than checked from the rest
+    # the hand stopped for 0.5 s (2.5-3.0 s) before the boundary's movement: the phase ends where it stopped, the
+    # motion beyond is not its own
+    again = np.where(t < 2.5, speed, np.where(t < 3.0, 0.0, np.minimum(0.5 * (t - 3.0) ** 2, 0.06)))
+    stopped = np.c_[again, 0.5 * again, np.zeros_like(t)] + v - np.c_[speed, 0.5 * speed, np.zeros_like(t)]
+    z = first_motion(stopped, 0.03, 3, until=390, near=400)
+    assert z is not None and abs(z / rate - 3.0) < 0.05
+    assert first_motion(stopped, 0.03, 3, until=280, near=400) is None  # the boundary inside the stop
+    # a still hand whose rest window's mean is off by 0.02 m/s^2: the velocity integrated back is a ramp to
+    # 3.5 cm/s, not a movement (seen at 50 Hz, where it moved an offset 0.8 s into the rest)
+    ramp = np.c_[0.02 * t, 0.01 * t, np.zeros_like(t)] + v - np.c_[speed, 0.5 * speed, np.zeros_like(t)]
+    assert first_motion(ramp, 0.03, 3, until=170, near=400) is None
+    drifting = v + np.c_[0.005 * t, 0.0025 * t, np.zeros_like(t)]  # a movement on a smaller bias
+    z = first_motion(drifting, 0.03, 3, until=350, near=300)
+    assert z is not None and abs(z / rate - 1.0) < 0.05
+
+
+def test_a_slow_phase_is_rescued_when_its_run_is_as_long_as_the_real_phases_at_the_same_level():
+    """The rescue's length bound is measured where the rescue measures: a slow phase's run above half the lowest
+    height (1.85 s here) is shorter than the detector's movements (3 s, boundaries at rest), but as long as
+    those movements are above that level (2 s median)."""
+    rate = 50.0
+    t = np.arange(0.0, 70.0, 1.0 / rate)
+
+    def bump(t0, dur, height):
+        x = np.clip((t - t0) / dur, 0.0, 1.0)
+        return height * np.sin(np.pi * x) ** 2
+
+    real = [(5, 1.6), (12, 0.7), (34, 1.4), (41, 1.3), (50, 1.5)]  # (onset s, height rad/s), 3 s each
+    norm = 0.01 + sum(bump(t0, 3.0, h) for t0, h in real) + bump(20, 5.0, 0.5)  # the slow phase: 20-25 s
+    start = np.array([int(t0 * rate) for t0, _ in real])
+    end = start + int(3.0 * rate)  # the detector's boundaries where the movements leave and reach rest
+    s, e = rescue_missed(start, end, norm)
+    added = sorted(set(s.tolist()) - set(start.tolist()))
+    assert len(added) == 1
+    k = int(np.flatnonzero(s == added[0])[0])
+    assert 20.0 < t[s[k]] < t[e[k] - 1] < 25.0
+    assert np.sum(norm[(t > 20) & (t < 25)] > 0.35) / rate < 0.8 * 3.0  # the old bound (0.8 x 3 s) missed it

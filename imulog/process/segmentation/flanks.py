@@ -15,24 +15,41 @@ import numpy as np
 _MAX_CELLS = 1 << 21  # candidate x sample cells per block of hinge_fit (16 MB of float64)
 
 
-def hinge_fit(x: np.ndarray, y: np.ndarray, power: int = 1) -> float | None:
-    """``t0`` (in units of ``x``, sub-sample) of the least-squares fit ``y = c + k max(x - t0, 0)^power``, ``k > 0``.
+def hinge_fit(
+    x: np.ndarray, y: np.ndarray, power: int = 1, drift: bool = False, curvature: bool = False
+) -> float | None:
+    """``t0`` (in units of ``x``, sub-sample) of the least-squares fit ``y = c + k max(x - t0, 0)^power``, ``k > 0``
+    (with ``drift``: ``+ b x``; with ``curvature``: ``+ k2 max(x - t0, 0)^(power + 1)``, ``k2 <= 0``).
 
     ``t0`` runs over the samples of ``x`` but the last two (the vertex of the parabola through the errors
-    around the best one refines it); ``c`` absorbs a constant offset (a rest's bias). None without a rising
-    fit."""
+    around the best one refines it); ``c`` absorbs a constant offset (a rest's bias), ``b x`` a linear drift (a
+    velocity integrated from a rest whose bias is known only to the noise of a short window), the next power
+    the flank's bending towards its peak (the speed of a movement from rest is ``k t^2 + k2 t^3 + ...``;
+    minimum jerk: ``30 D / T^3 (t^2 - 2 t^3 / T + ...)``, so a pure square fitted up to a few cm/s puts a slow
+    phase's ``t0`` 0.1-0.3 s early; a free ``k2 > 0`` lets a slow rise of noise and drift pass for a late,
+    steepening flank). None without a rising fit."""
     n_cand = max(len(x) - 2, 0)
     if n_cand == 0:
         return None
-    yc = y - y.mean()
-    cov, var = np.empty(n_cand), np.empty(n_cand)
+    basis = _baseline(x, drift)
+    yc = _residual(y[None, :], basis)[0]
+    span = max(float(x[-1] - x[0]), 1e-12)  # powers of (x - t0) / span: a well-conditioned normal matrix
+    sse = np.empty(n_cand)
     rows = max(1, _MAX_CELLS // max(len(x), 1))  # candidates per block: memory bounded whatever the length
     for lo in range(0, n_cand, rows):
-        h = np.maximum(x[None, :] - x[lo : min(lo + rows, n_cand), None], 0.0) ** power  # one row per t0
-        hc = h - h.mean(axis=1, keepdims=True)
-        cov[lo : lo + len(h)], var[lo : lo + len(h)] = hc @ yc, np.einsum("ij,ij->i", hc, hc)
-    with np.errstate(divide="ignore", invalid="ignore"):  # least squares of y = c + k h, in closed form
-        sse = np.where((var > 0) & (cov > 0), float(yc @ yc) - cov**2 / var, np.inf)
+        d = np.maximum(x[None, :] - x[lo : min(lo + rows, n_cand), None], 0.0) / span  # one row per t0
+        h1 = _residual(d**power, basis)
+        g11, r1 = np.einsum("ij,ij->i", h1, h1), h1 @ yc
+        with np.errstate(divide="ignore", invalid="ignore"):  # least squares of y = c (+ b x) + k h (+ k2 h x)
+            out = np.where((g11 > 0) & (r1 > 0), float(yc @ yc) - r1**2 / g11, np.inf)
+            if curvature:  # k2 < 0 only (the flank bends towards its peak); else k2 = 0, the plain power
+                h2 = _residual(d ** (power + 1), basis)
+                g12, g22, r2 = np.einsum("ij,ij->i", h1, h2), np.einsum("ij,ij->i", h2, h2), h2 @ yc
+                det = g11 * g22 - g12**2
+                k, k2 = (g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det
+                fit = (g22 * r1**2 - 2 * g12 * r1 * r2 + g11 * r2**2) / det
+                out = np.where((det > 1e-12 * g11 * g22) & (k > 0) & (k2 < 0), float(yc @ yc) - fit, out)
+        sse[lo : lo + len(d)] = out
     if not np.isfinite(sse).any():
         return None
     i = int(np.argmin(sse))
@@ -43,6 +60,19 @@ def hinge_fit(x: np.ndarray, y: np.ndarray, power: int = 1) -> float | None:
             frac = float(np.clip(0.5 * (sse[i - 1] - sse[i + 1]) / curv, -0.5, 0.5))
     step = float(x[1] - x[0]) if len(x) > 1 else 1.0
     return float(x[i] + frac * step)
+
+
+def _baseline(x: np.ndarray, drift: bool) -> np.ndarray:
+    """Orthonormal rows spanning the baseline of :func:`hinge_fit`: a constant, and a line with ``drift``."""
+    rows = [np.ones_like(x, dtype=float)]
+    if drift and len(x) > 2:
+        rows.append(np.asarray(x, dtype=float) - float(np.mean(x)))
+    return np.array([r / np.linalg.norm(r) for r in rows])
+
+
+def _residual(h: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """Rows of ``h`` minus their projection on the orthonormal rows of ``basis``."""
+    return h - (h @ basis.T) @ basis
 
 
 def flank_zero(
@@ -110,9 +140,65 @@ def speed_flank_zero(v: np.ndarray, first: int, height: float, max_fit: int | No
     hit = np.flatnonzero(vn[first : min(n, 2 * first + 4)] >= height)
     if len(hit) == 0:
         return None
-    p = first + int(hit[0])
-    if p < 3:
+    return _speed_fit(v, first + int(hit[0]), max_fit)
+
+
+def first_motion(
+    v: np.ndarray, height: float, min_run: int, until: int, near: int, max_fit: int | None = None
+) -> float | None:
+    """Where a movement that the hand continues up to ``until`` left the rest at the array's start (local sample
+    index, sub-sample).
+
+    ``v`` (n, 3) m/s velocity integrated from a verified rest (the array's start) in time order; ``until`` the
+    current boundary, inside the movement. From ``until`` back towards the rest, the hand moves while its speed
+    stays at half ``height`` or more (a hand that stopped on the way, e.g. before a rest's drift, is a
+    different movement); the first run of at least ``min_run`` samples at ``height`` or more after that is the
+    movement's flank, and its ``t0`` (:func:`speed_flank_zero`'s model) where it began. Unlike
+    :func:`speed_flank_zero` this does not need the acceleration to have crossed a level: a slow last
+    submovement (the wrist no longer turning) can stay under the acceleration level for seconds at 3-13 cm/s
+    (issue 31). None when the speed at ``until`` is under half ``height``, the flank starts within 3 samples
+    of the rest, or the speed at the run is within half ``height`` of the line through the velocity before
+    ``t0`` (the rest window's bias integrated back: a ramp, not a movement)."""
+    vn = np.linalg.norm(v, axis=1)
+    until = min(int(until), len(vn) - 1)
+    if until < 3:
         return None
-    lo = 0 if max_fit is None else max(0, p - int(max_fit))
-    y = v[lo : p + 1] @ (v[p] / vn[p])
-    return hinge_fit(np.arange(lo, p + 1, dtype=float), y, 2)
+    stops = _runs(vn[: until + 1] < 0.5 * height, min_run)  # the hand still (or a rest's slow drift)
+    if len(stops) == 0 or stops[-1][1] > until:
+        return None
+    rest, e = stops[-1]  # the hand moves over [e, until]
+    runs = [(a, b) for a, b in _runs(vn[e : until + 1] >= height, min_run) + e if a < until]
+    if not runs or not 3 <= runs[0][0] < near:
+        return None
+    low = np.flatnonzero(vn[: runs[0][0] + 1] < 0.5 * height)  # fitted up to half the height: the lower part
+    p = int(low[-1]) + 1 if len(low) else runs[0][0]  # of the flank, from where the hand was last still
+    z = _speed_fit(v, max(p, 3), max_fit, start=int(rest))
+    if z is None:
+        return None
+    # a movement, not the window's bias integrated (a ramp): at the run, the speed along it stands out by half the
+    # height from the line through the velocity before t0
+    r0 = int(runs[0][0])
+    x = np.arange(int(rest), r0 + 1, dtype=float)
+    y = v[int(rest) : r0 + 1] @ (v[r0] / max(float(vn[r0]), 1e-12))
+    before = x <= z
+    line = np.polyval(np.polyfit(x[before], y[before], 1), x[-1]) if before.sum() >= 3 else float(y[0])
+    return z if y[-1] - line >= 0.5 * height else None
+
+
+def _runs(mask: np.ndarray, min_run: int) -> np.ndarray:
+    """``[start, end)`` (k, 2) of the True runs of ``mask`` at least ``min_run`` long (one shorter at its end)."""
+    d = np.diff(np.r_[0, np.asarray(mask, dtype=np.int8), 0])
+    out = np.c_[np.flatnonzero(d == 1), np.flatnonzero(d == -1)].astype(np.int64)
+    return out[(out[:, 1] - out[:, 0] >= min_run) | (out[:, 1] == len(mask))]
+
+
+def _speed_fit(v: np.ndarray, p: int, max_fit: int | None, start: int = 0) -> float | None:
+    """``t0`` of ``v = c + b t + k max(t - t0, 0)^2`` along ``v[p]``'s direction, fitted from the rest to ``p``."""
+    speed = float(np.linalg.norm(v[p]))
+    if p < 3 or speed <= 0:
+        return None
+    lo = max(int(start), 0 if max_fit is None else p - int(max_fit))
+    if p - lo < 3:
+        return None
+    y = v[lo : p + 1] @ (v[p] / speed)
+    return hinge_fit(np.arange(lo, p + 1, dtype=float), y, 2, drift=True, curvature=True)

@@ -38,7 +38,12 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
    0.55-0.82 s early.) A dip of ``|a|`` is bridged to the next run above ``bridge_n_level`` x the level when
    the speed stays above ``velocity_level_mps`` in between (the hand never stopped);
 7. the boundary moves on to where its acceleration flank (or, for a phase too slow for the accelerometer, its
-   speed flank) extrapolates to rest (:mod:`~imulog.process.segmentation.flanks`, issue 31).
+   speed flank) extrapolates to rest (:mod:`~imulog.process.segmentation.flanks`, issue 31);
+8. a slow last part at ``velocity_level_mps`` or more with next to no acceleration (the wrist stopped turning,
+   the hand still arriving: up to 3 s) extends the offset when the rest window is verified as a rest (the
+   velocity integrated forward from it stays under half that speed for ``rest_check_s``) and the hand never
+   slowed under half that speed between the offset and that part (:func:`_slow_tail_end`; a rest's drift
+   follows a stop and a window in a drift fails the check).
 
 Pure numpy/scipy; intervals are half-open sample ranges ``[start, end)``.
 """
@@ -51,7 +56,7 @@ import numpy as np
 
 from imulog.process import quaternion as quat
 from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
-from imulog.process.segmentation.flanks import flank_zero, speed_flank_zero
+from imulog.process.segmentation.flanks import first_motion, flank_zero, speed_flank_zero
 
 
 @dataclass(frozen=True)
@@ -86,6 +91,9 @@ class HandParams:
     speed_fit_s: the speed flank (a movement too slow for its acceleration) is fitted over at most this long (s)
         before the speed reaches ``velocity_level_mps`` (a 6-s reach needs about 1 s; a daily-life rest can
         be hours long).
+    rest_check_s: a slow last part of a phase at ``velocity_level_mps`` or more with next to no acceleration
+        extends the offset when the velocity relative to the rest window stays under half that speed for this
+        long (s) after the window (the window is a rest, not a hand cruising or drifting); 0: off.
     """
 
     enabled: bool = True
@@ -109,6 +117,7 @@ class HandParams:
     flank_search_s: float = 0.6
     max_extrapolation_s: float = 0.3
     speed_fit_s: float = 10.0
+    rest_check_s: float = 1.5
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:
@@ -281,10 +290,41 @@ def _extrapolated(
     smooth = max(1, int(round(0.05 * rate_hz)))
     z = flank_zero(a, first, level, params.flank_top_n_level * level, span, back, smooth)
     if z is None and params.velocity_level_mps > 0:
-        z = speed_flank_zero(v, first, params.velocity_level_mps, int(round(params.speed_fit_s * rate_hz)))
+        fit = int(round(params.speed_fit_s * rate_hz))
+        z = speed_flank_zero(v, first, params.velocity_level_mps, fit)
     if z is None:
         return first
     return int(min(inner, max(int(np.ceil(z)), 0)))  # the first sample after t0
+
+
+def _slow_tail_end(acc, gyr, dt, post, lo, end, stop, params: HandParams, rate_hz) -> int:
+    """Offset (exclusive sample index) at the end of a slow last part of the phase, or ``end`` (the current one).
+
+    A window counts as a rest only when the velocity integrated forward from it stays under half
+    ``velocity_level_mps`` for ``rest_check_s`` (up to ``stop``): a window in a slow tail or in a rest's drift
+    moves at a few cm/s and the hand slows or speeds up after it. The first such window from ``post`` on (in
+    steps of half a window) is the rest; the last time before it that the speed integrated back from it
+    reaches ``velocity_level_mps`` is motion, and the offset moves to where that speed flank reaches zero
+    (:func:`~imulog.process.segmentation.flanks.first_motion`, time reversed). ``lo``: where the velocity
+    integration may start (inside the phase)."""
+    check = int(round(params.rest_check_s * rate_hz))
+    vlevel = params.velocity_level_mps
+    if check <= 0 or vlevel <= 0:
+        return end
+    length = post[1] - post[0]
+    w0 = post[0]
+    if min(stop, post[1] + check) - post[1] < check // 2 or w0 <= end:
+        return end
+    _, v_fwd, _ = gravity_free(acc, gyr, dt, post, post[1], min(stop, post[1] + check))
+    if np.linalg.norm(v_fwd, axis=1).max() >= 0.5 * vlevel:
+        return end
+    _, v_all, _ = gravity_free(acc, gyr, dt, (w0, w0 + length), lo, w0)
+    m = len(v_all)
+    min_run = max(1, int(round(params.min_run_s * rate_hz)))
+    z = first_motion(v_all[::-1], vlevel, min_run, m - (end - lo), check, int(round(params.speed_fit_s * rate_hz)))
+    if z is None:
+        return end
+    return max(end, lo + m - int(np.ceil(z)))
 
 
 def cutoff_params(params: HandParams) -> BoundaryParams:
@@ -347,6 +387,7 @@ def refine_with_accelerometer(
         a0, b0 = int(ss[k]), int(ee[k])
         prev_end = int(out_e[k - 1]) if k > 0 else first
         next_start = int(ss[k + 1]) if k + 1 < len(ss) else n
+        n_next = min(next_start, n) - guard
         post = _still_window(acc, b0 + guard, min(next_start, n) - guard, length, reach, False, 0.5 * params.n_sigma)
         pre = _still_window(acc, prev_end + guard, a0 - guard, length, reach, True, 0.5 * params.n_sigma)
         inside = int(round(params.flank_search_s * rate_hz))  # the flank can lie inside the gyroscope's phase
@@ -395,6 +436,7 @@ def refine_with_accelerometer(
                     rate_hz,
                 )
             )
+            out_e[k] = _slow_tail_end(acc, gyr, dt, post, lo, int(out_e[k]), n_next, params, rate_hz)
         hi = max(a0, min(int(out_e[k]), a0 + inside))
         for _ in range(3):  # likewise before the onset
             if pre is None or pre[1] >= a0:

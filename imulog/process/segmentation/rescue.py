@@ -40,7 +40,11 @@ def rescue_missed(
     heights = np.array([float(np.max(norm[a:b])) if b > a else 0.0 for a, b in zip(ts, te, strict=True)])
     real = heights[heights >= 0.5 * np.median(heights)]
     level = fraction * float(real.min())
-    min_len = alpha * float(np.median(te - ts))
+    # as long as the real movements are above the same level (DynAMoS's own short-movement bound, alpha x the
+    # median, measured where the rescue measures: a slow phase's run above half the lowest height is shorter
+    # than its movement at DynAMoS's threshold)
+    above_level = [int(np.count_nonzero(np.asarray(norm[a:b]) > level)) for a, b in zip(ts, te, strict=True)]
+    min_len = alpha * float(np.median(above_level))
     new_s, new_e = [], []
     for k in range(len(start) - 1):
         lo, hi = int(end[k]), int(start[k + 1])
