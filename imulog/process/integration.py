@@ -174,13 +174,21 @@ class RotatingBiasParams:
 
 @dataclass
 class AccelerometerErrors:
-    """Sensor-frame accelerometer bias (3,) m/s^2 and gravity-coupled error matrix (3, 3) (dimensionless)."""
+    """Sensor-frame accelerometer bias (3,) m/s^2 and gravity-coupled error matrix (3, 3) (dimensionless), with
+    their least-squares standard errors (same shapes and units; NaN when there was no estimate)."""
 
     bias_mps2: np.ndarray
     matrix: np.ndarray
+    bias_se_mps2: np.ndarray | None = None
+    matrix_se: np.ndarray | None = None
 
     def as_dict(self) -> dict:
-        return {"bias_mps2": self.bias_mps2.tolist(), "matrix": self.matrix.tolist()}
+        out = {"bias_mps2": self.bias_mps2.tolist(), "matrix": self.matrix.tolist()}
+        if self.bias_se_mps2 is not None:
+            out["bias_se_mps2"] = np.round(self.bias_se_mps2, 6).tolist()
+        if self.matrix_se is not None:
+            out["matrix_se"] = np.round(self.matrix_se, 6).tolist()
+        return out
 
 
 def _movements(static: np.ndarray) -> np.ndarray:
@@ -232,9 +240,21 @@ def estimate_rotating_bias(
     zero = AccelerometerErrors(np.zeros(3), np.zeros((3, 3)))
     if len(rows) < max(params.min_movements, k // 3 * 2):
         return zero
-    x, *_ = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)
+    design, y = np.vstack(rows), np.concatenate(rhs)
+    x, *_ = np.linalg.lstsq(design, y, rcond=None)
+    se = _standard_errors(design, y - design @ x)
     matrix = x[3:].reshape(3, 3) if params.gravity_coupled else np.zeros((3, 3))
-    return AccelerometerErrors(bias_mps2=x[:3], matrix=matrix)
+    matrix_se = se[3:].reshape(3, 3) if params.gravity_coupled else np.zeros((3, 3))
+    return AccelerometerErrors(bias_mps2=x[:3], matrix=matrix, bias_se_mps2=se[:3], matrix_se=matrix_se)
+
+
+def _standard_errors(design: np.ndarray, residual: np.ndarray) -> np.ndarray:
+    """Least-squares standard errors of the unknowns: sqrt(diag((A^T A)^-1) * RSS / (rows - unknowns))."""
+    n, k = design.shape
+    if n <= k:
+        return np.full(k, np.nan)
+    cov = np.linalg.pinv(design.T @ design) * float(residual @ residual) / (n - k)
+    return np.sqrt(np.clip(np.diag(cov), 0.0, None))
 
 
 def compensate_rotating_bias(
