@@ -12,7 +12,8 @@ ZUPT, and the target check of issue 31: optimized at most 1.0 cm on every axis a
 
 Changes: ``heading-drift`` (``OptimizationParams.heading_drift`` off / on), ``bias-uncertainty`` (the rotating-bias
 estimate refused at its bare physical limits, ``CheckParams.limit_z = 0``, / within its own standard errors),
-``rest-run-mean`` (``RestParams.run_mean`` off / on: a still run that keeps accelerating as a whole is no rest).
+``rest-run-mean`` (``RestParams.run_mean`` off / on: a still run that keeps accelerating as a whole is no rest),
+``bias-and-rests`` (both of the last two off / on: the code before and after them).
 """
 
 from __future__ import annotations
@@ -40,6 +41,14 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
     ),
     "bias-uncertainty": (replace(DEFAULT_PARAMS, checks=replace(DEFAULT_PARAMS.checks, limit_z=0.0)), DEFAULT_PARAMS),
     "rest-run-mean": (replace(DEFAULT_PARAMS, rests=replace(DEFAULT_PARAMS.rests, run_mean=False)), DEFAULT_PARAMS),
+    "bias-and-rests": (
+        replace(
+            DEFAULT_PARAMS,
+            checks=replace(DEFAULT_PARAMS.checks, limit_z=0.0),
+            rests=replace(DEFAULT_PARAMS.rests, run_mean=False),
+        ),
+        DEFAULT_PARAMS,
+    ),
 }
 
 
