@@ -83,3 +83,23 @@ def test_a_drinking_trial_with_pauses_gets_within_1_cm_and_below_zupt():
     assert np.all(mae["optimized_after"] <= 1.0), mae
     assert np.all(mae["optimized_after"] < mae["zupt_after"]), mae
     assert np.all(mae["optimized_after"][:2] < mae["optimized_before"][:2] - 0.3), mae
+
+
+def test_a_good_estimate_is_trusted_by_its_movements_closure():
+    """`residual-velocity` subject and seed 10 (a development trial of issue 31; the hand drifts at ~1 cm/s
+    between phases, which the reference and the smoothness term deny): the static-position error estimated
+    against the reference alone made the optimisation follow the reference and end worse than ZUPT on every axis;
+    bounded by the movements' closure (``closure_factor``) it is below ZUPT on every axis."""
+    from trajectory_accuracy import evaluate_trial, simulated_inputs
+
+    from imulog.simulate.grid import condition
+
+    inputs = simulated_inputs(10, seed=10, repetitions=10, rests=DEFAULT_PARAMS.rests, **condition("residual-velocity"))
+    off = replace(DEFAULT_PARAMS, optimized=replace(DEFAULT_PARAMS.optimized, closure_factor=None))
+    mae = {}
+    for label, params, methods in (("before", off, ("zupt", "optimized")), ("after", DEFAULT_PARAMS, ("optimized",))):
+        records, _, _ = evaluate_trial(inputs, methods, params)
+        for m in methods:
+            mae["zupt" if m == "zupt" else label] = np.mean([[r[a]["mae_cm"] for a in "xyz"] for r in records[m]], 0)
+    assert np.all(mae["before"] > mae["zupt"]), mae
+    assert np.all(mae["after"] < mae["zupt"]), mae

@@ -121,21 +121,28 @@ def bias_check(errors: Mapping[str, Any] | None, params: CheckParams = DEFAULT_C
     }
 
 
-def dedrift_offsets(t_s: np.ndarray, acc_mps2: np.ndarray, rests: np.ndarray) -> np.ndarray:
-    """Per movement between two rests, the constant acceleration offset (m/s^2, 3D norm) that the linear
-    de-drift removes: the velocity integrated from the last rest sample to the next, divided by the duration."""
+def movement_closures(t_s: np.ndarray, acc_mps2: np.ndarray, rests: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per movement between two rests: the velocity (K, D) m/s integrated from the last rest sample to the next
+    (what ZUPT's linear de-drift removes) and the movement's duration (K,) s."""
     t = np.asarray(t_s, dtype=np.float64)
     a = np.asarray(acc_mps2, dtype=np.float64).reshape(len(t), -1)
     m = np.asarray(rests, dtype=bool)
-    out = []
+    vel, dur = [], []
     for s, e in _runs(~m):
         if s == 0 or e >= len(t):
             continue
         i0, i1 = s - 1, e
         seg = a[i0 : i1 + 1]
-        v = np.sum(0.5 * (seg[1:] + seg[:-1]) * np.diff(t[i0 : i1 + 1])[:, None], axis=0)
-        out.append(float(np.linalg.norm(v) / max(t[i1] - t[i0], 1e-9)))
-    return np.asarray(out)
+        vel.append(np.sum(0.5 * (seg[1:] + seg[:-1]) * np.diff(t[i0 : i1 + 1])[:, None], axis=0))
+        dur.append(max(float(t[i1] - t[i0]), 1e-9))
+    return np.asarray(vel).reshape(len(vel), a.shape[1]), np.asarray(dur)
+
+
+def dedrift_offsets(t_s: np.ndarray, acc_mps2: np.ndarray, rests: np.ndarray) -> np.ndarray:
+    """Per movement between two rests, the constant acceleration offset (m/s^2, 3D norm) that the linear
+    de-drift removes: the velocity integrated from the last rest sample to the next, divided by the duration."""
+    vel, dur = movement_closures(t_s, acc_mps2, rests)
+    return np.linalg.norm(vel, axis=1) / dur if len(dur) else np.zeros(0)
 
 
 def dedrift_check(offsets_mps2: np.ndarray, params: CheckParams = DEFAULT_CHECKS) -> dict[str, Any]:

@@ -58,6 +58,11 @@ class OptimizationParams:
     heading_drift: before optimising, turn each repetition's initial estimate about the vertical by the trial's
         heading drift when it is significant (:func:`imulog.process.trajectory_repetitions.heading_drift`, issue 31; needs the
         whole trial, so :func:`imulog.process.trajectory_opt.reconstruct_repetitions` applies it).
+    closure_factor: the ``"auto"`` static-position error per axis is at most this many times what ZUPT's de-drift
+        took off the initial estimate's movements (:func:`imulog.process.trajectory_repetitions.closure_sigma`,
+        issue 31; at least 6 mm; None: off). The variance components measure the estimate against a reference
+        that is itself 1-5 cm off per repetition, so a good estimate looked as poor as the reference; its
+        movements' closure says it is good. 0.5 chosen on development trials (0.25 hurt ``combined``).
     """
 
     sigma_data_mps: float | tuple[float, float, float] = 0.02
@@ -71,6 +76,7 @@ class OptimizationParams:
     max_heading_deg: float = 20.0
     velocity_from_static: bool = True
     heading_drift: bool = True
+    closure_factor: float | None = 0.5
 
 
 @dataclass
