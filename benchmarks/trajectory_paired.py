@@ -11,14 +11,14 @@ pipeline: ZUPT before for before, after for after) on every axis.
     python benchmarks/trajectory_paired.py --change bias-uncertainty --grid all --subjects 6 --first-subject 30 \
         --repetitions 10 --per-trial
 
-Changes (each: the defaults without it / the defaults): ``heading-drift`` (``OptimizationParams.heading_drift``),
+Changes (each: the defaults without it / the defaults, unless said): ``heading-drift`` (``OptimizationParams.heading_drift``),
 ``bias-uncertainty`` (the rotating-bias estimate refused at its bare physical limits, ``CheckParams.limit_z = 0``,
 / within 3 of its own standard errors), ``rest-run-mean`` (``RestParams.run_mean``: a still run that keeps
 accelerating as a whole is no rest), ``heading-through-rests`` (``AnchorParams.heading`` ``"filter"`` /
 ``"gyroscope"``: a rest keeps the heading the gyroscope carried through the movement before it), ``z-return``
-(``OptimizationParams.return_to_start`` on every axis / z only), ``closure-sigma``
-(``OptimizationParams.closure_factor`` off / 0.5), ``issue31-session3`` (the last five together: the code before
-and after them).
+(``OptimizationParams.return_to_start`` on every axis / z only), ``closure-sigma`` (the defaults / with
+``OptimizationParams.closure_factor = 0.5``, an option), ``issue31-session3`` (the code before this round's
+four default changes, bias-uncertainty to z-return, / the defaults).
 """
 
 from __future__ import annotations
@@ -46,14 +46,14 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
     "rest-run-mean": (replace(D, rests=replace(D.rests, run_mean=False)), D),
     "heading-through-rests": (replace(D, anchor=replace(D.anchor, heading="filter")), D),
     "z-return": (replace(D, optimized=replace(D.optimized, return_to_start=True)), D),
-    "closure-sigma": (replace(D, optimized=replace(D.optimized, closure_factor=None)), D),
+    "closure-sigma": (D, replace(D, optimized=replace(D.optimized, closure_factor=0.5))),
     "issue31-session3": (
         replace(
             D,
             checks=replace(D.checks, limit_z=0.0),
             rests=replace(D.rests, run_mean=False),
             anchor=replace(D.anchor, heading="filter"),
-            optimized=replace(D.optimized, return_to_start=True, closure_factor=None),
+            optimized=replace(D.optimized, return_to_start=True),
         ),
         D,
     ),

@@ -382,7 +382,9 @@ def _levelled(q_filter: np.ndarray, heading_from: np.ndarray) -> np.ndarray:
     that maps its vertical onto that tilt's."""
     from imulog.process import quaternion as quat
 
-    up = np.mean(quat.rotate_inverse(q_filter, np.tile([0.0, 0.0, 1.0], (len(q_filter), 1))), axis=0)
+    up = np.nanmean(quat.rotate_inverse(q_filter, np.tile([0.0, 0.0, 1.0], (len(q_filter), 1))), axis=0)
+    if not np.all(np.isfinite(up)):  # no valid filter sample in the rest: keep the heading's own tilt
+        return np.asarray(heading_from, dtype=np.float64)
     return quat.normalize(
         quat.multiply(quat.from_two_vectors(quat.rotate(heading_from, up), np.array([0.0, 0.0, 1.0])), heading_from)
     )
@@ -396,41 +398,50 @@ def _heading_offset(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
     return 2.0 * np.arctan2(d[..., 3], d[..., 0])
 
 
+def _finite_in(q: np.ndarray, lo: int, hi: int) -> np.ndarray | None:
+    """The first row of ``q[lo:hi]`` without NaN, or None."""
+    ok = np.flatnonzero(np.all(np.isfinite(q[lo:hi]), axis=1))
+    return q[lo + int(ok[0])] if len(ok) else None
+
+
 def _heading_through_rests(
     q: np.ndarray, gyr: np.ndarray, t: np.ndarray, static: np.ndarray, params: AnchorParams
 ) -> np.ndarray:
     """:func:`rest_anchored_orientation` with ``heading="gyroscope"``: rests constant (the filter's mean tilt,
     the heading carried from the movement before), movements integrated from the gyroscope between them; a
-    movement that cannot be integrated (too long, NaN gyroscope) is the filter's turned to the heading reached."""
+    movement that cannot be integrated (too long, NaN gyroscope or filter) is the filter's turned to the heading
+    reached, and a rest without a valid filter sample keeps the orientation reached."""
     from imulog.process import quaternion as quat
 
+    z_axis = np.array([0.0, 0.0, 1.0])
     out = q.copy()
-    rests = static_runs(static)
-    if not len(rests):
+    rests = [(int(a), int(b)) for a, b in static_runs(static)]
+    rests = [r for r in rests if _finite_in(q, *r) is not None]
+    if not rests:
         return out
-    s0, e0 = (int(x) for x in rests[0])
-    cur = _levelled(q[s0:e0], q[s0])
+    s0, e0 = rests[0]
+    cur = _levelled(q[s0:e0], _finite_in(q, s0, e0))
     out[s0:e0] = cur
-    for (_, e), (s2, e2) in zip(rests[:-1], rests[1:], strict=True):
-        a, b, s2, e2 = int(e), int(s2), int(s2), int(e2)  # movement [a, b): last rest sample a - 1, next rest b
+    for (_, a), (b, e2) in zip(rests[:-1], rests[1:], strict=True):  # movement [a, b) between two rests
         w = gyr[a - 1 : b + 1]
         if t[b] - t[a - 1] > params.max_movement_s or not np.all(np.isfinite(w)):
-            turn = quat.from_axis_angle(np.array([0.0, 0.0, 1.0]), float(_heading_offset(cur, q[a - 1])))
+            off = _heading_offset(cur, q[a - 1]) if np.all(np.isfinite(q[a - 1])) else 0.0
+            turn = quat.from_axis_angle(z_axis, float(off))
             out[a:b] = quat.multiply(turn, q[a:b])
-            nxt = _levelled(q[s2:e2], quat.multiply(turn, q[s2]))
+            nxt = _levelled(q[b:e2], quat.multiply(turn, _finite_in(q, b, e2)))
         else:
             bias = _rest_bias(gyr, t, static, a, params.bias_window_s)
             free = _through_movement(cur, w, t[a - 1 : b + 1], bias, None, params.spread)
-            nxt = _levelled(q[s2:e2], free[-1])
+            nxt = _levelled(q[b:e2], free[-1])
             out[a - 1 : b + 1] = _through_movement(cur, w, t[a - 1 : b + 1], bias, nxt, params.spread)
-        out[s2:e2] = cur = nxt
+        out[b:e2] = cur = nxt
     # the filter's mean heading (the frame the align step fitted the world to): turn the result onto it
     off = _heading_offset(q, out)
-    mean = float(np.arctan2(np.mean(np.sin(off)), np.mean(np.cos(off))))
-    out = quat.multiply(quat.from_axis_angle(np.array([0.0, 0.0, 1.0]), mean), out)
+    off = off[np.isfinite(off)]
+    mean = float(np.arctan2(np.mean(np.sin(off)), np.mean(np.cos(off)))) if len(off) else 0.0
+    out = quat.multiply(quat.from_axis_angle(z_axis, mean), out)
     # before the first rest and after the last: the filter's, turned to the heading at that rest
-    for lo, hi, ref in ((0, s0, s0), (int(rests[-1][1]), len(q), int(rests[-1][1]) - 1)):
-        if hi > lo:
-            turn = quat.from_axis_angle(np.array([0.0, 0.0, 1.0]), float(_heading_offset(out[ref], q[ref])))
-            out[lo:hi] = quat.multiply(turn, q[lo:hi])
+    for lo, hi, ref in ((0, s0, s0), (rests[-1][1], len(q), rests[-1][1] - 1)):
+        if hi > lo and np.all(np.isfinite(q[ref])):
+            out[lo:hi] = quat.multiply(quat.from_axis_angle(z_axis, float(_heading_offset(out[ref], q[ref]))), q[lo:hi])
     return quat.normalize(out)

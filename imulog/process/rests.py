@@ -69,6 +69,7 @@ class RestParams:
     min_rest_s: float = 0.0
     long_dilate: bool = True
     run_mean: bool = True
+    run_mean_max_s: float = 1.0
 
 
 def white_noise_mps2(acc_mps2: np.ndarray) -> float:
@@ -129,12 +130,12 @@ def _short_and_accelerating(mean: np.ndarray, cand: np.ndarray, w: int, limit: f
     return out
 
 
-def _accelerating_runs(a0: np.ndarray, still: np.ndarray, limit: float) -> np.ndarray:
-    """Samples of the True runs of ``still`` whose mean acceleration (3D norm of the run's mean vector, m/s^2)
-    exceeds ``limit`` (the whole run is then no rest)."""
+def _accelerating_runs(a0: np.ndarray, still: np.ndarray, limit: float, max_samples: int) -> np.ndarray:
+    """Samples of the True runs of ``still`` shorter than ``max_samples`` whose mean acceleration (3D norm of the
+    run's mean vector, m/s^2) exceeds ``limit`` (the whole run is then no rest)."""
     out = np.zeros(len(still), dtype=bool)
     for s, e in static_runs(still):
-        if np.linalg.norm(a0[s:e].mean(axis=0)) > limit:
+        if e - s < max_samples and np.linalg.norm(a0[s:e].mean(axis=0)) > limit:
             out[s:e] = True
     return out
 
@@ -201,7 +202,7 @@ def accelerometer_still(
             # acceleration mid-movement passes the variation tests, so it must also be near zero as a whole
             still &= ~_short_and_accelerating(mean, cand, ws, limit_mean)
             if params.run_mean:  # a rest is still, not just slow: no run keeps accelerating as a whole
-                still &= ~_accelerating_runs(a0, still, limit_mean)
+                still &= ~_accelerating_runs(a0, still, limit_mean, int(round(params.run_mean_max_s * rate_hz)))
     return still
 
 

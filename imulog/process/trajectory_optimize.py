@@ -62,7 +62,10 @@ class OptimizationParams:
         took off the initial estimate's movements (:func:`imulog.process.trajectory_repetitions.closure_sigma`,
         issue 31; at least 6 mm; None: off). The variance components measure the estimate against a reference
         that is itself 1-5 cm off per repetition, so a good estimate looked as poor as the reference; its
-        movements' closure says it is good. 0.5 chosen on development trials (0.25 hurt ``combined``).
+        movements' closure says it is good. 0.5 (chosen on development trials; 0.25 hurt ``combined``) helped on
+        held-out trials (``residual-velocity`` -0.9 cm per axis, no condition worse) but is off by default: the
+        repetition flags' ``drift`` reason (:mod:`imulog.process.repetition_flags`) is calibrated on how far the
+        optimisation pulls the estimate, and with it the flags' recall on the grid fell from >= 0.8 to 0.58.
     """
 
     sigma_data_mps: float | tuple[float, float, float] = 0.02
@@ -76,7 +79,7 @@ class OptimizationParams:
     max_heading_deg: float = 20.0
     velocity_from_static: bool = True
     heading_drift: bool = True
-    closure_factor: float | None = 0.5
+    closure_factor: float | None = None
 
 
 @dataclass
