@@ -14,11 +14,11 @@ pipeline: ZUPT before for before, after for after) on every axis.
 Changes (each: the defaults without it / the defaults, unless said): ``heading-drift`` (``OptimizationParams.heading_drift``),
 ``bias-uncertainty`` (the rotating-bias estimate refused at its bare physical limits, ``CheckParams.limit_z = 0``,
 / within 3 of its own standard errors), ``rest-run-mean`` (``RestParams.run_mean``: a still run that keeps
-accelerating as a whole is no rest), ``heading-through-rests`` (``AnchorParams.heading`` ``"filter"`` /
-``"gyroscope"``: a rest keeps the heading the gyroscope carried through the movement before it), ``z-return``
+accelerating as a whole is no rest), ``heading-through-rests`` (the defaults / with ``AnchorParams.heading =
+"gyroscope"``, an option: a rest keeps the heading the gyroscope carried through the movement before it), ``z-return``
 (``OptimizationParams.return_to_start`` on every axis / z only), ``closure-sigma`` (the defaults / with
 ``OptimizationParams.closure_factor = 0.5``, an option), ``issue31-session3`` (the code before this round's
-four default changes, bias-uncertainty to z-return, / the defaults).
+default changes, ``bias-uncertainty``, ``rest-run-mean`` and ``z-return``, / the defaults).
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
     "heading-drift": (replace(D, optimized=replace(D.optimized, heading_drift=False)), D),
     "bias-uncertainty": (replace(D, checks=replace(D.checks, limit_z=0.0)), D),
     "rest-run-mean": (replace(D, rests=replace(D.rests, run_mean=False)), D),
-    "heading-through-rests": (replace(D, anchor=replace(D.anchor, heading="filter")), D),
+    "heading-through-rests": (D, replace(D, anchor=replace(D.anchor, heading="gyroscope"))),
     "z-return": (replace(D, optimized=replace(D.optimized, return_to_start=True)), D),
     "closure-sigma": (D, replace(D, optimized=replace(D.optimized, closure_factor=0.5))),
     "issue31-session3": (
@@ -52,7 +52,6 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
             D,
             checks=replace(D.checks, limit_z=0.0),
             rests=replace(D.rests, run_mean=False),
-            anchor=replace(D.anchor, heading="filter"),
             optimized=replace(D.optimized, return_to_start=True),
         ),
         D,

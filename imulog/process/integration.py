@@ -296,13 +296,15 @@ class AnchorParams:
         gyroscope bias about the vertical, which depends on the hand's pose (the mouth hold turns it), while the
         bias measured at each rest leaves the integrated heading within ~0.01 deg/s. The whole result is then
         turned about the vertical so its mean heading equals the filter's (the frame the align step fitted).
+        An option, not the default: the heading chains through the whole recording (and the final turn uses all
+        of it), so the step's windows would not equal the whole computation (tests/test_phases_windows.py).
     """
 
     enabled: bool = True
     bias_window_s: float = 0.5
     max_movement_s: float = 15.0
     spread: str = "mixed"
-    heading: str = "gyroscope"
+    heading: str = "filter"
 
 
 def rest_anchored_orientation(
