@@ -16,9 +16,10 @@ Changes (each: the defaults without it / the defaults, unless said): ``heading-d
 / within 3 of its own standard errors), ``rest-run-mean`` (``RestParams.run_mean``: a still run that keeps
 accelerating as a whole is no rest), ``heading-through-rests`` (the defaults / with ``AnchorParams.heading =
 "gyroscope"``, an option: a rest keeps the heading the gyroscope carried through the movement before it), ``z-return``
-(``OptimizationParams.return_to_start`` on every axis / z only), ``closure-sigma`` (the defaults / with
+(the defaults / ``OptimizationParams.return_to_start`` in z only), ``heading-and-z-return`` (the defaults / both
+options), ``closure-sigma`` (the defaults / with
 ``OptimizationParams.closure_factor = 0.5``, an option), ``issue31-session3`` (the code before this round's
-default changes, ``bias-uncertainty``, ``rest-run-mean`` and ``z-return``, / the defaults).
+default changes, ``bias-uncertainty`` and ``rest-run-mean``, / the defaults).
 """
 
 from __future__ import annotations
@@ -45,14 +46,21 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
     "bias-uncertainty": (replace(D, checks=replace(D.checks, limit_z=0.0)), D),
     "rest-run-mean": (replace(D, rests=replace(D.rests, run_mean=False)), D),
     "heading-through-rests": (D, replace(D, anchor=replace(D.anchor, heading="gyroscope"))),
-    "z-return": (replace(D, optimized=replace(D.optimized, return_to_start=True)), D),
+    "z-return": (D, replace(D, optimized=replace(D.optimized, return_to_start=(False, False, True)))),
+    "heading-and-z-return": (
+        D,
+        replace(
+            D,
+            anchor=replace(D.anchor, heading="gyroscope"),
+            optimized=replace(D.optimized, return_to_start=(False, False, True)),
+        ),
+    ),
     "closure-sigma": (D, replace(D, optimized=replace(D.optimized, closure_factor=0.5))),
     "issue31-session3": (
         replace(
             D,
             checks=replace(D.checks, limit_z=0.0),
             rests=replace(D.rests, run_mean=False),
-            optimized=replace(D.optimized, return_to_start=True),
         ),
         D,
     ),
