@@ -19,7 +19,8 @@ accelerating as a whole is no rest), ``heading-through-rests`` (the defaults / w
 (the defaults / ``OptimizationParams.return_to_start`` in z only), ``heading-and-z-return`` (the defaults / both
 options), ``closure-sigma`` (the defaults / with
 ``OptimizationParams.closure_factor = 0.5``, an option), ``issue31-session3`` (the code before this round's
-default changes, ``bias-uncertainty`` and ``rest-run-mean``, / the defaults).
+default changes, ``bias-uncertainty`` and ``rest-run-mean``, / the defaults), ``issue31-options`` (the same
+before / the defaults with the heading through rests and the z-only return).
 """
 
 from __future__ import annotations
@@ -56,6 +57,14 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
         ),
     ),
     "closure-sigma": (D, replace(D, optimized=replace(D.optimized, closure_factor=0.5))),
+    "issue31-options": (
+        replace(D, checks=replace(D.checks, limit_z=0.0), rests=replace(D.rests, run_mean=False)),
+        replace(
+            D,
+            anchor=replace(D.anchor, heading="gyroscope"),
+            optimized=replace(D.optimized, return_to_start=(False, False, True)),
+        ),
+    ),
     "issue31-session3": (
         replace(
             D,
