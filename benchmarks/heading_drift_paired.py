@@ -1,120 +1,17 @@
-"""Paired comparison of the optimisation's heading-drift correction over simulated trials (issue 31 point 2).
-
-For every trial (``trajectory_accuracy``'s simulated R2G trials, subject k with seed k, k from ``--first-subject``)
-the same inputs are reconstructed with ``OptimizationParams.heading_drift`` off (before) and on (after, the
-default), and every repetition is paired by (subject, repetition index). Per condition and axis (cm): the mean
-optimized MAE before and after, the mean paired difference after - before with its 95 % bootstrap interval, and
-how many repetitions got worse / better by more than 0.5 cm (3D sum). ``--per-trial`` adds one row per trial with
-ZUPT, and the target check of issue 31: optimized at most 1.0 cm on every axis and below ZUPT on every axis.
+"""Paired comparison of the optimisation's heading-drift correction (issue 31 point 2): ``trajectory_paired.py
+--change heading-drift`` under its earlier name (the command docs/accuracy.md names).
 
     python benchmarks/heading_drift_paired.py --grid all --subjects 6 --first-subject 20 --repetitions 10 --per-trial
 """
 
 from __future__ import annotations
 
-import argparse
-import resource
 import sys
-import time
-from dataclasses import replace
 from pathlib import Path
-
-import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from rest_gate_paired import bootstrap_ci  # noqa: E402
-from trajectory_accuracy import evaluate_trial, simulated_inputs  # noqa: E402
-
-from imulog.process.trajectory_opt import DEFAULT_PARAMS  # noqa: E402
-
-BEFORE = replace(DEFAULT_PARAMS, optimized=replace(DEFAULT_PARAMS.optimized, heading_drift=False))
-AFTER = replace(DEFAULT_PARAMS, optimized=replace(DEFAULT_PARAMS.optimized, heading_drift=True))
-
-
-def trial_errors(name: str, subject: int, repetitions: int) -> dict[str, dict[int, list[float]]]:
-    """{"zupt" | "before" | "after": {repetition: [MAE x, y, z] cm}} of one trial."""
-    from imulog.simulate.grid import condition
-
-    inputs = simulated_inputs(
-        subject, seed=subject, repetitions=repetitions, rests=DEFAULT_PARAMS.rests, **condition(name)
-    )
-    out = {}
-    for label, params, methods in (("before", BEFORE, ("zupt", "optimized")), ("after", AFTER, ("optimized",))):
-        records, _, _ = evaluate_trial(inputs, methods, params)
-        for m in methods:
-            key = "zupt" if m == "zupt" else label
-            out[key] = {r["repetition"]: [r[a]["mae_cm"] for a in "xyz"] for r in records[m]}
-    return out
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--grid", nargs="+", default=["all"])
-    ap.add_argument("--subjects", type=int, default=6)
-    ap.add_argument("--first-subject", type=int, default=20)
-    ap.add_argument("--repetitions", type=int, default=10)
-    ap.add_argument("--per-trial", action="store_true")
-    args = ap.parse_args(argv)
-    from imulog.simulate.grid import CONDITIONS
-
-    conditions = list(CONDITIONS) if args.grid == ["all"] else args.grid
-    f = lambda v: " / ".join(f"{x:.2f}" for x in v)  # noqa: E731
-    g = lambda v: " / ".join(f"{x:+.2f}" for x in v)  # noqa: E731
-    t0, r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
-    table = [
-        "| condition | pairs | before x/y/z (cm) | after x/y/z (cm) | mean after - before (cm) | 95 % CI (cm) | "
-        "worse / better by > 0.5 cm |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    trials = [
-        "| trial | zupt x/y/z (cm) | before x/y/z (cm) | after x/y/z (cm) | before: <= 1 cm / < zupt | "
-        "after: <= 1 cm / < zupt |",
-        "|---|---|---|---|---|---|",
-    ]
-    counts = {"before": [0, 0, 0], "after": [0, 0, 0]}  # y > 1 cm, any axis > 1 cm, any axis >= zupt
-    for name in conditions:
-        a_all, b_all = [], []
-        for s in range(args.first_subject, args.first_subject + args.subjects):
-            e = trial_errors(name, s, args.repetitions)
-            keys = sorted(set(e["before"]) & set(e["after"]) & set(e["zupt"]))
-            a = np.array([e["before"][k] for k in keys])
-            b = np.array([e["after"][k] for k in keys])
-            z = np.array([e["zupt"][k] for k in keys])
-            a_all.append(a)
-            b_all.append(b)
-            ok = []
-            for label, v in (("before", a.mean(0)), ("after", b.mean(0))):
-                zm = z.mean(0)
-                counts[label][0] += int(v[1] > 1.0)
-                counts[label][1] += int(np.any(v > 1.0))
-                counts[label][2] += int(np.any(v >= zm))
-                ok.append(f"{'yes' if np.all(v <= 1.0) else 'no'} / {'yes' if np.all(v < zm) else 'no'}")
-            trials.append(f"| {name} s{s} | {f(z.mean(0))} | {f(a.mean(0))} | {f(b.mean(0))} | {ok[0]} | {ok[1]} |")
-            if args.per_trial:
-                print(trials[-1], file=sys.stderr, flush=True)
-        a, b = np.vstack(a_all), np.vstack(b_all)
-        d = b - a
-        lo, hi = bootstrap_ci(d)
-        ci = " / ".join(f"[{x:+.2f}, {y:+.2f}]" for x, y in zip(lo, hi, strict=True))
-        s3 = d.sum(axis=1)
-        table.append(
-            f"| {name} | {len(d)} | {f(a.mean(0))} | {f(b.mean(0))} | {g(d.mean(0))} | {ci} | "
-            f"{(s3 > 0.5).sum()} / {(s3 < -0.5).sum()} |"
-        )
-        print(table[-1], file=sys.stderr, flush=True)
-    print("\n".join(table))
-    if args.per_trial:
-        print()
-        print("\n".join(trials))
-    n = len(conditions) * args.subjects
-    for label, (y1, any1, zupt) in counts.items():
-        print(f"{label}: y > 1 cm on {y1} of {n} trials, some axis > 1 cm on {any1}, some axis >= ZUPT on {zupt}")
-    r1 = resource.getrusage(resource.RUSAGE_SELF)
-    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
-    print(f"\n{time.perf_counter() - t0:.0f} s wall, {cpu:.0f} s CPU (user+sys)")
-    return 0
-
+from trajectory_paired import main  # noqa: E402
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(main(["--change", "heading-drift", *sys.argv[1:]]))

@@ -75,6 +75,7 @@ def simulated_inputs(
     anchor: bool = True,
     rests: RestParams | None = DEFAULT_PARAMS.rests,
     static: str = "movements",
+    anchor_params: Any = None,
     **overrides: Any,
 ) -> dict[str, Any]:
     """Simulate one R2G trial and build the trajectory inputs on the reference clock in the world frame.
@@ -83,6 +84,7 @@ def simulated_inputs(
     the step, it is applied to the filter's gravity-free acceleration, and the orientation is anchored at the
     gated rests only (``acc_gate`` holds that acceleration for :func:`evaluate_trial`). ``static``: the phases
     step's zero-velocity mask (``"gyro-norm"``: the angular rate alone, many still-gyroscope translations).
+    ``anchor_params``: :class:`imulog.process.integration.AnchorParams` of the anchoring (None: the default).
     """
     from imulog.simulate.core import simulate
 
@@ -105,12 +107,12 @@ def simulated_inputs(
         q_est = q_gate = est.quat
         acc_gate = gravity_free_acceleration(q_est, imu.acc, est.static)
         if anchor:  # what the trajectory step does with the gyroscope (TrajectoryParams.anchor)
-            from imulog.process.integration import rest_anchored_orientation
+            from imulog.process.integration import AnchorParams, rest_anchored_orientation
 
             anchor_static = _static_for_anchor(imu, rate, repetitions, static)
             if rests is not None:  # the step anchors at true rests only
                 anchor_static = true_rests(anchor_static, acc_gate, rate, rests, orientation=q_gate)
-            q_est = rest_anchored_orientation(q_est, imu.gyr, t_s, anchor_static)
+            q_est = rest_anchored_orientation(q_est, imu.gyr, t_s, anchor_static, anchor_params or AnchorParams())
         acc_g = gravity_free_acceleration(q_est, imu.acc, est.static)
         q_g2w = quat.average(quat.multiply(q_true, quat.conjugate(q_est)))
         acc_world = quat.rotate(q_g2w, acc_g)

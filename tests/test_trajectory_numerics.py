@@ -185,6 +185,11 @@ def test_optimization_fixed_point_and_constraints():
     res = optimize_repetition(ts, pos + drift, ref, b, static, OptimizationParams())
     np.testing.assert_allclose(res.position[[0, -1]], 0.0, atol=1e-9)
     assert np.mean(np.abs(res.position - pos)) < 0.5 * np.mean(np.abs(drift))
+    # per axis: z only (the table's height); x and y end where the data and the reference put them
+    res = optimize_repetition(ts, pos + drift, ref, b, static, OptimizationParams(return_to_start=(False, False, True)))
+    np.testing.assert_allclose(res.position[0], 0.0, atol=1e-9)
+    assert abs(res.position[-1, 2]) < 1e-9 and np.all(np.abs(res.position[-1, :2]) > 1e-4)
+    assert np.mean(np.abs(res.position - pos)) < 0.5 * np.mean(np.abs(drift))
 
 
 def _rotation_z_then_x(yaw, roll):

@@ -81,7 +81,7 @@ def _methods(value: str) -> list[str]:
     show_default=True,
     help="Optimisation: trust in ZUPT velocity, m/s.",
 )
-@click.option("--no-return-to-start", is_flag=True, help="Optimisation: drop the return-to-start constraint.")
+@click.option("--no-return-to-start", is_flag=True, help="Optimisation: drop the return-to-start constraint (default: z only).")
 @click.option("--force", is_flag=True, help="Recompute even when the same parameters are already recorded.")
 def process_trajectory(
     trial: Path,
@@ -204,7 +204,7 @@ def _params(
             base.optimized,
             sigma_ref_static_m=sigma_ref,
             sigma_data_mps=sigma_data,
-            return_to_start=not no_return_to_start,
+            return_to_start=False if no_return_to_start else base.optimized.return_to_start,
         ),
     )
 

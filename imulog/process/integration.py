@@ -174,13 +174,21 @@ class RotatingBiasParams:
 
 @dataclass
 class AccelerometerErrors:
-    """Sensor-frame accelerometer bias (3,) m/s^2 and gravity-coupled error matrix (3, 3) (dimensionless)."""
+    """Sensor-frame accelerometer bias (3,) m/s^2 and gravity-coupled error matrix (3, 3) (dimensionless), with
+    their least-squares standard errors (same shapes and units; NaN when there was no estimate)."""
 
     bias_mps2: np.ndarray
     matrix: np.ndarray
+    bias_se_mps2: np.ndarray | None = None
+    matrix_se: np.ndarray | None = None
 
     def as_dict(self) -> dict:
-        return {"bias_mps2": self.bias_mps2.tolist(), "matrix": self.matrix.tolist()}
+        out = {"bias_mps2": self.bias_mps2.tolist(), "matrix": self.matrix.tolist()}
+        if self.bias_se_mps2 is not None:
+            out["bias_se_mps2"] = np.round(self.bias_se_mps2, 6).tolist()
+        if self.matrix_se is not None:
+            out["matrix_se"] = np.round(self.matrix_se, 6).tolist()
+        return out
 
 
 def _movements(static: np.ndarray) -> np.ndarray:
@@ -232,9 +240,21 @@ def estimate_rotating_bias(
     zero = AccelerometerErrors(np.zeros(3), np.zeros((3, 3)))
     if len(rows) < max(params.min_movements, k // 3 * 2):
         return zero
-    x, *_ = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)
+    design, y = np.vstack(rows), np.concatenate(rhs)
+    x, *_ = np.linalg.lstsq(design, y, rcond=None)
+    se = _standard_errors(design, y - design @ x)
     matrix = x[3:].reshape(3, 3) if params.gravity_coupled else np.zeros((3, 3))
-    return AccelerometerErrors(bias_mps2=x[:3], matrix=matrix)
+    matrix_se = se[3:].reshape(3, 3) if params.gravity_coupled else np.zeros((3, 3))
+    return AccelerometerErrors(bias_mps2=x[:3], matrix=matrix, bias_se_mps2=se[:3], matrix_se=matrix_se)
+
+
+def _standard_errors(design: np.ndarray, residual: np.ndarray) -> np.ndarray:
+    """Least-squares standard errors of the unknowns: sqrt(diag((A^T A)^-1) * RSS / (rows - unknowns))."""
+    n, k = design.shape
+    if n <= k:
+        return np.full(k, np.nan)
+    cov = np.linalg.pinv(design.T @ design) * float(residual @ residual) / (n - k)
+    return np.sqrt(np.clip(np.diag(cov), 0.0, None))
 
 
 def compensate_rotating_bias(
@@ -270,12 +290,21 @@ class AnchorParams:
     spread: how the end discrepancy is spread over the movement: ``"time"`` (linear in time, right for a
         gyroscope bias), ``"angle"`` (in proportion to the angle turned so far, right for a scale error) or
         ``"mixed"`` (their mean: neither error is known to dominate).
+    heading: ``"filter"``: every rest keeps the filter's orientation (its heading too); ``"gyroscope"``: a rest
+        keeps the filter's tilt (averaged over the rest, constant through it) but the heading the gyroscope
+        carried through the movement before it (issue 31): a 6D filter's heading drifts with the residual
+        gyroscope bias about the vertical, which depends on the hand's pose (the mouth hold turns it), while the
+        bias measured at each rest leaves the integrated heading within ~0.01 deg/s. The whole result is then
+        turned about the vertical so its mean heading equals the filter's (the frame the align step fitted).
+        An option, not the default: the heading chains through the whole recording (and the final turn uses all
+        of it), so the step's windows would not equal the whole computation (tests/test_phases_windows.py).
     """
 
     enabled: bool = True
     bias_window_s: float = 0.5
     max_movement_s: float = 15.0
     spread: str = "mixed"
+    heading: str = "filter"
 
 
 def rest_anchored_orientation(
@@ -296,8 +325,6 @@ def rest_anchored_orientation(
     de-drift spreads the velocity error. Static samples keep ``q_s2g``. ``t_s`` seconds, ``static_mask`` (N,) True
     at zero velocity; samples with NaN gyroscope keep the filter's orientation.
     """
-    from imulog.process import quaternion as quat
-
     q = np.asarray(q_s2g, dtype=np.float64)
     gyr = np.asarray(gyr_rad_s, dtype=np.float64)
     t = np.asarray(t_s, dtype=np.float64)
@@ -305,6 +332,8 @@ def rest_anchored_orientation(
     out = q.copy()
     if not params.enabled or len(q) < 3:
         return out
+    if params.heading == "gyroscope":
+        return _heading_through_rests(q, gyr, t, static, params)
     for a, b in _movements(static):
         a, b = int(a), int(b)
         if a == 0 or b >= len(q) or t[b] - t[a - 1] > params.max_movement_s:
@@ -312,20 +341,109 @@ def rest_anchored_orientation(
         w = gyr[a - 1 : b + 1]
         if not np.all(np.isfinite(w)):
             continue
-        lo = a - 1
-        while lo > 0 and static[lo - 1] and t[a - 1] - t[lo - 1] <= params.bias_window_s:
-            lo -= 1
-        bias = np.mean(gyr[lo:a], axis=0)
-        steps = quat.from_rotation_vector(0.5 * ((w[1:] - bias) + (w[:-1] - bias)) * np.diff(t[a - 1 : b + 1])[:, None])
-        qs = np.empty((len(w), 4))
-        qs[0] = cur = q[a - 1]
-        for k, step in enumerate(steps, start=1):
-            cur = quat.multiply(cur, step)
-            qs[k] = cur
-        delta = quat.to_rotation_vector(quat.multiply(q[b], quat.conjugate(qs[-1])))
-        by_time = (t[a - 1 : b + 1] - t[a - 1]) / max(t[b] - t[a - 1], 1e-9)
-        turned = np.concatenate([[0.0], np.cumsum(np.linalg.norm(w[1:] + w[:-1] - 2 * bias, axis=1))])
-        by_angle = turned / max(turned[-1], 1e-12)
-        alpha = {"time": by_time, "angle": by_angle, "mixed": 0.5 * (by_time + by_angle)}[params.spread][:, None]
-        out[a - 1 : b + 1] = quat.normalize(quat.multiply(quat.from_rotation_vector(alpha * delta), qs))
+        bias = _rest_bias(gyr, t, static, a, params.bias_window_s)
+        out[a - 1 : b + 1] = _through_movement(q[a - 1], w, t[a - 1 : b + 1], bias, q[b], params.spread)
     return out
+
+
+def _rest_bias(gyr: np.ndarray, t: np.ndarray, static: np.ndarray, a: int, window_s: float) -> np.ndarray:
+    """Gyroscope bias (3,) rad/s: the mean over at most ``window_s`` s of the rest that ends at sample a - 1."""
+    lo = a - 1
+    while lo > 0 and static[lo - 1] and t[a - 1] - t[lo - 1] <= window_s:
+        lo -= 1
+    return np.mean(gyr[lo:a], axis=0)
+
+
+def _through_movement(
+    cur: np.ndarray, gyr: np.ndarray, t: np.ndarray, bias: np.ndarray, end: np.ndarray | None, spread: str
+) -> np.ndarray:
+    """Orientations (M, 4) integrated from ``cur`` with the gyroscope ``gyr`` (M, 3) rad/s minus ``bias`` at
+    times ``t`` (M,) s, the discrepancy with ``end`` (the orientation at the last sample; None: none) spread
+    over the samples by ``spread`` (:class:`AnchorParams`)."""
+    from imulog.process import quaternion as quat
+
+    steps = quat.from_rotation_vector(0.5 * ((gyr[1:] - bias) + (gyr[:-1] - bias)) * np.diff(t)[:, None])
+    qs = np.empty((len(gyr), 4))
+    qs[0] = c = cur
+    for k, step in enumerate(steps, start=1):
+        c = quat.multiply(c, step)
+        qs[k] = c
+    if end is None:
+        return qs
+    delta = quat.to_rotation_vector(quat.multiply(end, quat.conjugate(qs[-1])))
+    by_time = (t - t[0]) / max(t[-1] - t[0], 1e-9)
+    turned = np.concatenate([[0.0], np.cumsum(np.linalg.norm(gyr[1:] + gyr[:-1] - 2 * bias, axis=1))])
+    by_angle = turned / max(turned[-1], 1e-12)
+    alpha = {"time": by_time, "angle": by_angle, "mixed": 0.5 * (by_time + by_angle)}[spread][:, None]
+    return quat.normalize(quat.multiply(quat.from_rotation_vector(alpha * delta), qs))
+
+
+def _levelled(q_filter: np.ndarray, heading_from: np.ndarray) -> np.ndarray:
+    """One orientation (4,) with the tilt of ``q_filter`` (K, 4) averaged over its samples (the mean vertical
+    in the sensor frame) and the heading of ``heading_from`` (4,): ``heading_from`` turned by the least rotation
+    that maps its vertical onto that tilt's."""
+    from imulog.process import quaternion as quat
+
+    up = np.nanmean(quat.rotate_inverse(q_filter, np.tile([0.0, 0.0, 1.0], (len(q_filter), 1))), axis=0)
+    if not np.all(np.isfinite(up)):  # no valid filter sample in the rest: keep the heading's own tilt
+        return np.asarray(heading_from, dtype=np.float64)
+    return quat.normalize(
+        quat.multiply(quat.from_two_vectors(quat.rotate(heading_from, up), np.array([0.0, 0.0, 1.0])), heading_from)
+    )
+
+
+def _heading_offset(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
+    """Angle (rad) about the vertical of the global-frame rotation from ``q_b`` to ``q_a`` (both (..., 4))."""
+    from imulog.process import quaternion as quat
+
+    d = quat.multiply(q_a, quat.conjugate(q_b))
+    return 2.0 * np.arctan2(d[..., 3], d[..., 0])
+
+
+def _finite_in(q: np.ndarray, lo: int, hi: int) -> np.ndarray | None:
+    """The first row of ``q[lo:hi]`` without NaN, or None."""
+    ok = np.flatnonzero(np.all(np.isfinite(q[lo:hi]), axis=1))
+    return q[lo + int(ok[0])] if len(ok) else None
+
+
+def _heading_through_rests(
+    q: np.ndarray, gyr: np.ndarray, t: np.ndarray, static: np.ndarray, params: AnchorParams
+) -> np.ndarray:
+    """:func:`rest_anchored_orientation` with ``heading="gyroscope"``: rests constant (the filter's mean tilt,
+    the heading carried from the movement before), movements integrated from the gyroscope between them; a
+    movement that cannot be integrated (too long, NaN gyroscope or filter) is the filter's turned to the heading
+    reached, and a rest without a valid filter sample keeps the orientation reached."""
+    from imulog.process import quaternion as quat
+
+    z_axis = np.array([0.0, 0.0, 1.0])
+    out = q.copy()
+    rests = [(int(a), int(b)) for a, b in static_runs(static)]
+    rests = [r for r in rests if _finite_in(q, *r) is not None]
+    if not rests:
+        return out
+    s0, e0 = rests[0]
+    cur = _levelled(q[s0:e0], _finite_in(q, s0, e0))
+    out[s0:e0] = cur
+    for (_, a), (b, e2) in zip(rests[:-1], rests[1:], strict=True):  # movement [a, b) between two rests
+        w = gyr[a - 1 : b + 1]
+        if t[b] - t[a - 1] > params.max_movement_s or not np.all(np.isfinite(w)):
+            off = _heading_offset(cur, q[a - 1]) if np.all(np.isfinite(q[a - 1])) else 0.0
+            turn = quat.from_axis_angle(z_axis, float(off))
+            out[a:b] = quat.multiply(turn, q[a:b])
+            nxt = _levelled(q[b:e2], quat.multiply(turn, _finite_in(q, b, e2)))
+        else:
+            bias = _rest_bias(gyr, t, static, a, params.bias_window_s)
+            free = _through_movement(cur, w, t[a - 1 : b + 1], bias, None, params.spread)
+            nxt = _levelled(q[b:e2], free[-1])
+            out[a - 1 : b + 1] = _through_movement(cur, w, t[a - 1 : b + 1], bias, nxt, params.spread)
+        out[b:e2] = cur = nxt
+    # the filter's mean heading (the frame the align step fitted the world to): turn the result onto it
+    off = _heading_offset(q, out)
+    off = off[np.isfinite(off)]
+    mean = float(np.arctan2(np.mean(np.sin(off)), np.mean(np.cos(off)))) if len(off) else 0.0
+    out = quat.multiply(quat.from_axis_angle(z_axis, mean), out)
+    # before the first rest and after the last: the filter's, turned to the heading at that rest
+    for lo, hi, ref in ((0, s0, s0), (rests[-1][1], len(q), rests[-1][1] - 1)):
+        if hi > lo and np.all(np.isfinite(q[ref])):
+            out[lo:hi] = quat.multiply(quat.from_axis_angle(z_axis, float(_heading_offset(out[ref], q[ref]))), q[lo:hi])
+    return quat.normalize(out)

@@ -68,6 +68,8 @@ class RestParams:
     mean_relative: float | None = 3.0
     min_rest_s: float = 0.0
     long_dilate: bool = True
+    run_mean: bool = True
+    run_mean_max_s: float = 1.0
 
 
 def white_noise_mps2(acc_mps2: np.ndarray) -> float:
@@ -124,6 +126,16 @@ def _short_and_accelerating(mean: np.ndarray, cand: np.ndarray, w: int, limit: f
     norm = np.linalg.norm(mean, axis=1)
     for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True):
         if e - s < w and norm[s:e].max() > limit:
+            out[s:e] = True
+    return out
+
+
+def _accelerating_runs(a0: np.ndarray, still: np.ndarray, limit: float, max_samples: int) -> np.ndarray:
+    """Samples of the True runs of ``still`` shorter than ``max_samples`` whose mean acceleration (3D norm of the
+    run's mean vector, m/s^2) exceeds ``limit`` (the whole run is then no rest)."""
+    out = np.zeros(len(still), dtype=bool)
+    for s, e in static_runs(still):
+        if e - s < max_samples and np.linalg.norm(a0[s:e].mean(axis=0)) > limit:
             out[s:e] = True
     return out
 
@@ -189,6 +201,8 @@ def accelerometer_still(
             # a very short candidate is judged on few samples: a tenth of a second of nearly constant
             # acceleration mid-movement passes the variation tests, so it must also be near zero as a whole
             still &= ~_short_and_accelerating(mean, cand, ws, limit_mean)
+            if params.run_mean:  # a rest is still, not just slow: no run keeps accelerating as a whole
+                still &= ~_accelerating_runs(a0, still, limit_mean, int(round(params.run_mean_max_s * rate_hz)))
     return still
 
 

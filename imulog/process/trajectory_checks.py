@@ -8,7 +8,8 @@ number in centimetres then hides that it measures nothing. These pure functions 
   ``ddi`` integrates a whole window from its first rest);
 * accelerometer errors (:func:`bias_check`): the rotating-bias estimate of ``zupt_bias`` must be within the
   sensor's physical range (a MEMS accelerometer's zero-g offset is at most ~1 m/s^2, scale and misalignment a
-  few per cent); an estimate outside it is a fit of motion, not of the sensor;
+  few per cent) within its own uncertainty (``limit_z`` standard errors of the least-squares fit); an estimate
+  significantly outside it is a fit of motion, not of the sensor;
 * drift correction (:func:`dedrift_check`): the linear velocity de-drift assumes a constant acceleration
   offset; the offset each movement implies (velocity reached at the next rest / duration) must be small;
 * filtering (:func:`removed_share`): high-pass and wavelet remove everything slow, drift and motion alike;
@@ -38,6 +39,8 @@ class CheckParams:
     max_without_rest_s: longest stretch (s) a method may integrate without a velocity reset.
     max_bias_mps2: largest physical accelerometer bias (m/s^2; MEMS zero-g offsets are <= ~0.9 m/s^2).
     max_matrix: largest scale/misalignment element (dimensionless; 0.05 = 5 %).
+    limit_z: an estimate is refused only when an element exceeds its physical limit by more than this many of
+        its own standard errors (the estimate's uncertainty, not a constant margin, decides; 0: the bare limits).
     max_offset_mps2: largest constant acceleration offset (m/s^2) the de-drift may imply for a movement
         (0.35 m/s^2 is the gravity left by a 2 deg tilt error).
     max_removed_share: largest share of the motion's range a filter may remove.
@@ -47,6 +50,7 @@ class CheckParams:
     max_without_rest_s: float = 15.0
     max_bias_mps2: float = 1.0
     max_matrix: float = 0.05
+    limit_z: float = 3.0
     max_offset_mps2: float = 0.35
     max_removed_share: float = 0.10
     min_motion_m: float = 0.02
@@ -86,32 +90,59 @@ def rest_summary(t_s: np.ndarray, rests: np.ndarray, windows: Sequence[tuple[int
     }
 
 
+def _beyond(values: Any, se: Any, z: float) -> float:
+    """The largest ``|value| - z * se`` over the elements (the part of each estimate its uncertainty does not
+    explain); without standard errors (or a NaN one) the bare ``|value|``."""
+    v = np.abs(np.asarray(values, dtype=float)).ravel()
+    s = np.zeros_like(v) if se is None else np.nan_to_num(np.asarray(se, dtype=float).ravel(), nan=0.0)
+    return float(np.max(v - z * s)) if len(v) == len(s) else float(np.max(v))
+
+
 def bias_check(errors: Mapping[str, Any] | None, params: CheckParams = DEFAULT_CHECKS) -> dict[str, Any]:
-    """Is the rotating-bias estimate (``AccelerometerErrors.as_dict()``) physical? ``ok``, the largest bias
-    component (m/s^2) and the largest matrix element."""
+    """Is the rotating-bias estimate (``AccelerometerErrors.as_dict()``) physical? ``ok`` when no element exceeds
+    its limit by more than ``limit_z`` of its standard errors (``bias_se_mps2``, ``matrix_se``; absent: the bare
+    limits); the largest bias component (m/s^2) and matrix element, and the same after the uncertainty
+    (``*_beyond_se``)."""
     if not errors:
         return {"ok": True, "max_bias_mps2": 0.0, "max_matrix": 0.0}
-    b = float(np.max(np.abs(np.asarray(errors.get("bias_mps2", [0.0]), dtype=float))))
-    e = float(np.max(np.abs(np.asarray(errors.get("matrix", [[0.0]]), dtype=float))))
-    ok = b <= params.max_bias_mps2 and e <= params.max_matrix
-    return {"ok": bool(ok), "max_bias_mps2": round(b, 4), "max_matrix": round(e, 4)}
+    bias = errors.get("bias_mps2", [0.0])
+    matrix = errors.get("matrix", [[0.0]])
+    b = float(np.max(np.abs(np.asarray(bias, dtype=float))))
+    e = float(np.max(np.abs(np.asarray(matrix, dtype=float))))
+    b_se = _beyond(bias, errors.get("bias_se_mps2"), params.limit_z)
+    e_se = _beyond(matrix, errors.get("matrix_se"), params.limit_z)
+    ok = b_se <= params.max_bias_mps2 and e_se <= params.max_matrix
+    return {
+        "ok": bool(ok),
+        "max_bias_mps2": round(b, 4),
+        "max_matrix": round(e, 4),
+        "max_bias_beyond_se_mps2": round(b_se, 4),
+        "max_matrix_beyond_se": round(e_se, 4),
+    }
 
 
-def dedrift_offsets(t_s: np.ndarray, acc_mps2: np.ndarray, rests: np.ndarray) -> np.ndarray:
-    """Per movement between two rests, the constant acceleration offset (m/s^2, 3D norm) that the linear
-    de-drift removes: the velocity integrated from the last rest sample to the next, divided by the duration."""
+def movement_closures(t_s: np.ndarray, acc_mps2: np.ndarray, rests: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per movement between two rests: the velocity (K, D) m/s integrated from the last rest sample to the next
+    (what ZUPT's linear de-drift removes) and the movement's duration (K,) s."""
     t = np.asarray(t_s, dtype=np.float64)
     a = np.asarray(acc_mps2, dtype=np.float64).reshape(len(t), -1)
     m = np.asarray(rests, dtype=bool)
-    out = []
+    vel, dur = [], []
     for s, e in _runs(~m):
         if s == 0 or e >= len(t):
             continue
         i0, i1 = s - 1, e
         seg = a[i0 : i1 + 1]
-        v = np.sum(0.5 * (seg[1:] + seg[:-1]) * np.diff(t[i0 : i1 + 1])[:, None], axis=0)
-        out.append(float(np.linalg.norm(v) / max(t[i1] - t[i0], 1e-9)))
-    return np.asarray(out)
+        vel.append(np.sum(0.5 * (seg[1:] + seg[:-1]) * np.diff(t[i0 : i1 + 1])[:, None], axis=0))
+        dur.append(max(float(t[i1] - t[i0]), 1e-9))
+    return np.asarray(vel).reshape(len(vel), a.shape[1]), np.asarray(dur)
+
+
+def dedrift_offsets(t_s: np.ndarray, acc_mps2: np.ndarray, rests: np.ndarray) -> np.ndarray:
+    """Per movement between two rests, the constant acceleration offset (m/s^2, 3D norm) that the linear
+    de-drift removes: the velocity integrated from the last rest sample to the next, divided by the duration."""
+    vel, dur = movement_closures(t_s, acc_mps2, rests)
+    return np.linalg.norm(vel, axis=1) / dur if len(dur) else np.zeros(0)
 
 
 def dedrift_check(offsets_mps2: np.ndarray, params: CheckParams = DEFAULT_CHECKS) -> dict[str, Any]:
@@ -183,7 +214,8 @@ def assess(
             failed.append("bias")
             why.append(
                 f"accelerometer bias estimate {bias['max_bias_mps2']:.2f} m/s^2 (limit {params.max_bias_mps2:g}) or "
-                f"scale {bias['max_matrix']:.3f} (limit {params.max_matrix:g}) is not physical: not applied"
+                f"scale {bias['max_matrix']:.3f} (limit {params.max_matrix:g}) is not physical beyond "
+                f"{params.limit_z:g} standard errors: not applied"
             )
             suggest = suggest or "zupt (the estimate fits motion, not the sensor); calibrate the accelerometer"
     if dedrift is not None:

@@ -53,6 +53,7 @@ from imulog.process.trajectory_optimize import (
 from imulog.process.trajectory_repetitions import (
     DEFAULT_REFERENCE,
     Repetition,
+    closure_sigma,
     estimate_data_sigma,
     heading_drift,
     inconsistent_repetitions,
@@ -156,6 +157,10 @@ def reconstruct_repetitions(
         fallback = set(inconsistent_repetitions(reference_residuals(t, z, static, repetitions, waypoints)))
         if params.optimized.sigma_data_static_m == "auto":
             sig = estimate_data_sigma(t, z, static, repetitions, waypoints, params.optimized.sigma_ref_static_m)
+            if params.optimized.closure_factor is not None:  # at most what the movements' closure allows
+                closure = closure_sigma(t, base, static, repetitions)
+                k = params.optimized.closure_factor
+                sig = tuple(max(0.006, min(s, k * c)) for s, c in zip(sig, closure, strict=True))
             params = replace(params, optimized=replace(params.optimized, sigma_data_static_m=sig))
             if info is not None:
                 info["sigma_data_static_m"] = list(sig)

@@ -31,6 +31,7 @@ from imulog.process.minjerk import (
     r2g_waypoints_from_anthropometrics,
     r2g_waypoints_from_positions,
 )
+from imulog.process.trajectory_checks import movement_closures
 from imulog.process.trajectory_optimize import heading_alignment
 
 DEFAULT_REFERENCE = R2GReferenceParams()
@@ -104,6 +105,27 @@ def estimate_data_sigma(
         return (sigma_ref_m,) * 3
     ms = np.nanmean(np.vstack(res) ** 2, axis=0)
     return tuple(float(np.sqrt(max(v - sigma_ref_m**2, floor_m**2))) for v in ms)
+
+
+def closure_sigma(
+    t_s: np.ndarray, acc_mps2: np.ndarray, static_mask: np.ndarray, repetitions: Sequence[Repetition]
+) -> tuple[float, float, float]:
+    """Per-axis size (m) of what ZUPT's de-drift removed in the complete repetitions' movements: the RMS of the
+    velocity reached at the next rest times half the movement's duration (the displacement the linear de-drift
+    takes off). An estimate whose movements close with little velocity has little to be wrong about."""
+    t = np.asarray(t_s, dtype=np.float64)
+    parts = []
+    for rep in repetitions:
+        if len(rep.phase_bounds_s) != 4:
+            continue
+        sl = slice(rep.start, rep.stop)
+        vel, dur = movement_closures(t[sl], np.asarray(acc_mps2)[sl], np.asarray(static_mask, dtype=bool)[sl])
+        if len(dur):
+            parts.append(vel * dur[:, None] / 2.0)
+    if not parts:
+        return (float("inf"),) * 3
+    d = np.vstack(parts)
+    return tuple(float(x) for x in np.sqrt(np.nanmean(d**2, axis=0)))
 
 
 def repetition_windows(

@@ -1,0 +1,184 @@
+"""Paired comparison of one change to the optimized trajectory over simulated trials (issue 31 point 2).
+
+For every trial (``trajectory_accuracy``'s simulated R2G trials, subject k with seed k, k from ``--first-subject``)
+the same inputs are reconstructed before and after a change (``--change``, one of :data:`CHANGES`: the
+parameters without it, and the defaults), and every repetition is paired by (subject, repetition index). Per
+condition and axis (cm): the mean optimized MAE before and after, the mean paired difference after - before with its 95 % bootstrap interval, and
+how many repetitions got worse / better by more than 0.5 cm (3D sum). ``--per-trial`` adds one row per trial with
+ZUPT, and the target check of issue 31: optimized at most 1.0 cm on every axis and below ZUPT (of the same
+pipeline: ZUPT before for before, after for after) on every axis.
+
+    python benchmarks/trajectory_paired.py --change bias-uncertainty --grid all --subjects 6 --first-subject 30 \
+        --repetitions 10 --per-trial
+
+Changes (each: the defaults without it / the defaults, unless said): ``heading-drift`` (``OptimizationParams.heading_drift``),
+``bias-uncertainty`` (the rotating-bias estimate refused at its bare physical limits, ``CheckParams.limit_z = 0``,
+/ within 3 of its own standard errors), ``rest-run-mean`` (``RestParams.run_mean``: a still run that keeps
+accelerating as a whole is no rest), ``heading-through-rests`` (the defaults / with ``AnchorParams.heading =
+"gyroscope"``, an option: a rest keeps the heading the gyroscope carried through the movement before it), ``z-return``
+(the defaults / ``OptimizationParams.return_to_start`` in z only), ``heading-and-z-return`` (the defaults / both
+options), ``closure-sigma`` (the defaults / with
+``OptimizationParams.closure_factor = 0.5``, an option), ``issue31-session3`` (the code before this round's
+default changes, ``bias-uncertainty`` and ``rest-run-mean``, / the defaults), ``issue31-options`` (the same
+before / the defaults with the heading through rests and the z-only return).
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from rest_gate_paired import bootstrap_ci  # noqa: E402
+from trajectory_accuracy import evaluate_trial, simulated_inputs  # noqa: E402
+
+from imulog.process.trajectory_opt import DEFAULT_PARAMS, TrajectoryParams  # noqa: E402
+
+D = DEFAULT_PARAMS
+CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
+    "heading-drift": (replace(D, optimized=replace(D.optimized, heading_drift=False)), D),
+    "bias-uncertainty": (replace(D, checks=replace(D.checks, limit_z=0.0)), D),
+    "rest-run-mean": (replace(D, rests=replace(D.rests, run_mean=False)), D),
+    "heading-through-rests": (D, replace(D, anchor=replace(D.anchor, heading="gyroscope"))),
+    "z-return": (D, replace(D, optimized=replace(D.optimized, return_to_start=(False, False, True)))),
+    "heading-and-z-return": (
+        D,
+        replace(
+            D,
+            anchor=replace(D.anchor, heading="gyroscope"),
+            optimized=replace(D.optimized, return_to_start=(False, False, True)),
+        ),
+    ),
+    "closure-sigma": (D, replace(D, optimized=replace(D.optimized, closure_factor=0.5))),
+    "issue31-options": (
+        replace(D, checks=replace(D.checks, limit_z=0.0), rests=replace(D.rests, run_mean=False)),
+        replace(
+            D,
+            anchor=replace(D.anchor, heading="gyroscope"),
+            optimized=replace(D.optimized, return_to_start=(False, False, True)),
+        ),
+    ),
+    "issue31-session3": (
+        replace(
+            D,
+            checks=replace(D.checks, limit_z=0.0),
+            rests=replace(D.rests, run_mean=False),
+        ),
+        D,
+    ),
+}
+
+
+def trial_errors(
+    name: str, subject: int, repetitions: int, change: str = "heading-drift"
+) -> dict[str, dict[int, list[float]]]:
+    """{"zupt" | "zupt_after" | "before" | "after": {repetition: [MAE x, y, z] cm}} of one trial (``zupt``:
+    ZUPT with the before parameters, against which the targets are checked; ``zupt_after``: with the after
+    ones)."""
+    BEFORE, AFTER = CHANGES[change]  # noqa: N806
+    from imulog.simulate.grid import condition
+
+    inputs = {}
+    for label, params in (("before", BEFORE), ("after", AFTER)):  # the anchoring is part of the inputs
+        if label == "after" and AFTER.anchor == BEFORE.anchor and AFTER.rests == BEFORE.rests:
+            inputs[label] = inputs["before"]
+            continue
+        inputs[label] = simulated_inputs(
+            subject,
+            seed=subject,
+            repetitions=repetitions,
+            rests=params.rests,
+            anchor_params=params.anchor,
+            **condition(name),
+        )
+    out = {}
+    for label, params in (("before", BEFORE), ("after", AFTER)):
+        records, _, _ = evaluate_trial(inputs[label], ("zupt", "optimized"), params)
+        for m, key in (("zupt", "zupt" if label == "before" else "zupt_after"), ("optimized", label)):
+            out[key] = {r["repetition"]: [r[a]["mae_cm"] for a in "xyz"] for r in records[m]}
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--change", choices=list(CHANGES), default="heading-drift")
+    ap.add_argument("--grid", nargs="+", default=["all"])
+    ap.add_argument("--subjects", type=int, default=6)
+    ap.add_argument("--first-subject", type=int, default=20)
+    ap.add_argument("--repetitions", type=int, default=10)
+    ap.add_argument("--per-trial", action="store_true")
+    args = ap.parse_args(argv)
+    from imulog.simulate.grid import CONDITIONS
+
+    conditions = list(CONDITIONS) if args.grid == ["all"] else args.grid
+    f = lambda v: " / ".join(f"{x:.2f}" for x in v)  # noqa: E731
+    g = lambda v: " / ".join(f"{x:+.2f}" for x in v)  # noqa: E731
+    t0, r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
+    table = [
+        "| condition | pairs | before x/y/z (cm) | after x/y/z (cm) | mean after - before (cm) | 95 % CI (cm) | "
+        "worse / better by > 0.5 cm | zupt before / after x/y/z (cm) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    trials = [
+        "| trial | zupt before x/y/z (cm) | before x/y/z (cm) | zupt after x/y/z (cm) | after x/y/z (cm) | "
+        "before: <= 1 cm / < zupt | after: <= 1 cm / < zupt |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    counts = {"before": [0, 0, 0], "after": [0, 0, 0]}  # y > 1 cm, any axis > 1 cm, any axis >= zupt
+    for name in conditions:
+        a_all, b_all, z_all, y_all = [], [], [], []
+        for s in range(args.first_subject, args.first_subject + args.subjects):
+            e = trial_errors(name, s, args.repetitions, args.change)
+            keys = sorted(set(e["before"]) & set(e["after"]) & set(e["zupt"]) & set(e["zupt_after"]))
+            a = np.array([e["before"][k] for k in keys])
+            b = np.array([e["after"][k] for k in keys])
+            z = np.array([e["zupt"][k] for k in keys])
+            za = np.array([e["zupt_after"][k] for k in keys])
+            a_all.append(a)
+            b_all.append(b)
+            z_all.append(z)
+            y_all.append(za)
+            ok = []
+            for label, v, zm in (("before", a.mean(0), z.mean(0)), ("after", b.mean(0), za.mean(0))):
+                counts[label][0] += int(v[1] > 1.0)
+                counts[label][1] += int(np.any(v > 1.0))
+                counts[label][2] += int(np.any(v >= zm))
+                ok.append(f"{'yes' if np.all(v <= 1.0) else 'no'} / {'yes' if np.all(v < zm) else 'no'}")
+            trials.append(
+                f"| {name} s{s} | {f(z.mean(0))} | {f(a.mean(0))} | {f(za.mean(0))} | {f(b.mean(0))} | {ok[0]} | "
+                f"{ok[1]} |"
+            )
+            if args.per_trial:
+                print(trials[-1], file=sys.stderr, flush=True)
+        a, b = np.vstack(a_all), np.vstack(b_all)
+        d = b - a
+        lo, hi = bootstrap_ci(d)
+        ci = " / ".join(f"[{x:+.2f}, {y:+.2f}]" for x, y in zip(lo, hi, strict=True))
+        s3 = d.sum(axis=1)
+        table.append(
+            f"| {name} | {len(d)} | {f(a.mean(0))} | {f(b.mean(0))} | {g(d.mean(0))} | {ci} | "
+            f"{(s3 > 0.5).sum()} / {(s3 < -0.5).sum()} | {f(np.vstack(z_all).mean(0))} / {f(np.vstack(y_all).mean(0))} |"
+        )
+        print(table[-1], file=sys.stderr, flush=True)
+    print("\n".join(table))
+    if args.per_trial:
+        print()
+        print("\n".join(trials))
+    n = len(conditions) * args.subjects
+    for label, (y1, any1, zupt) in counts.items():
+        print(f"{label}: y > 1 cm on {y1} of {n} trials, some axis > 1 cm on {any1}, some axis >= ZUPT on {zupt}")
+    r1 = resource.getrusage(resource.RUSAGE_SELF)
+    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+    print(f"\n{time.perf_counter() - t0:.0f} s wall, {cpu:.0f} s CPU (user+sys)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
