@@ -26,6 +26,7 @@ Targets: peak RSS at most 1 GB for every command; growth from 1 to 7 days at mos
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import resource
 import shutil
@@ -34,6 +35,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 COMMANDS = [
     ("convert", ["convert", "{cwa}", "-o", "{mcap}"]),
@@ -53,7 +56,30 @@ COMMANDS = [
         ["process", "orientation", "{arm}", "--imu", "forearm", "--force"],
     ),
     ("kinematics", ["process", "kinematics", "{arm}", "--upper-arm", "upper_arm", "--forearm", "forearm", "--force"]),
+    ("heading", ["process", "heading", "{arm}", "--force"]),
+    # the wrist trial's remaining steps (after the others: orientation would read a calibrated channel)
+    ("epochs", ["process", "epochs", "{mcap}", "--force"]),
+    ("calibrate", ["process", "calibrate", "{mcap}", "--calibration", "{cal}", "--force"]),
+    # the wrist with a marker cluster (written by reference_trial from the same .cwa)
+    ("align", ["process", "align", "{ref}", "--force"]),
+    ("evaluate", ["evaluate", "{ref}", "--force"]),
 ]
+#: steps a measured command needs first, run (unmeasured, time printed) unless up to date: no --force
+SETUP = {
+    "heading": [
+        ["process", "orientation", "{arm}", "--imu", "upper_arm"],
+        ["process", "orientation", "{arm}", "--imu", "forearm"],
+    ],
+    "align": [["process", "orientation", "{ref}"]],
+    "evaluate": [
+        ["process", "orientation", "{ref}"],
+        ["process", "align", "{ref}"],
+        ["process", "phases", "{ref}"],
+        ["process", "trajectory", "{ref}"],
+    ],
+}
+TWO_IMU = ("orientation2", "kinematics", "heading")
+REFERENCE = ("align", "evaluate")
 MAX_GROWTH = 1.15  # issue 24: peak memory from the shortest to the longest recording
 
 
@@ -78,15 +104,72 @@ def two_imu_trial(cwa: Path, out: Path) -> None:
     write_trial_streaming(out, pieces())
 
 
-def run(args: list[str]) -> tuple[float, float, float]:
+CLUSTER_M = np.array([[0.0, 0.0, 0.0], [0.06, 0.0, 0.0], [0.0, 0.06, 0.0]])  # markers O, X, Y in the sensor frame
+WRIST_M = np.array([0.3, 0.2, 1.0])  # where the (only rotating) wrist sits in the room, m
+
+
+def reference_trial(cwa: Path, out: Path, noise_m: float = 2e-4) -> None:
+    """An archive of the wrist in ``cwa`` with a rigid marker cluster (O, X, Y, 6 cm apart) that turns with it,
+    written piece by piece: what ``align`` and ``evaluate`` need. The home model only rotates the wrist, so O
+    stays put and X, Y follow VQF's orientation of the samples (state carried from piece to piece), on the
+    IMU's time stamps, with ``noise_m`` of marker noise, to 0.1 mm."""
+    from dataclasses import replace
+
+    from imulog.converters import axivity
+    from vqf import VQF
+
+    from imulog.archive.streaming import write_trial_streaming
+    from imulog.model import MarkerStream
+    from imulog.process.quaternion import rotate
+
+    rng = np.random.default_rng(0)
+    state: dict[str, VQF] = {}
+
+    def pieces():
+        for rec in axivity.iter_chunks(cwa):
+            imu = rec.imus[0]
+            if "vqf" not in state:
+                state["vqf"] = VQF(float(np.median(np.diff(imu.t_ns[:1000]))) * 1e-9)
+            q = state["vqf"].updateBatch(np.ascontiguousarray(imu.gyr), np.ascontiguousarray(imu.acc))["quat6D"]
+            pos = WRIST_M + np.stack([rotate(q, np.broadcast_to(c, (len(q), 3))) for c in CLUSTER_M], axis=1)
+            pos = np.round(pos + rng.normal(0.0, noise_m, pos.shape), 4)  # 0.1 mm, as a Vicon export in mm
+            markers = MarkerStream("vicon", imu.t_ns, ["O", "X", "Y"], pos)
+            yield replace(rec, imus=[replace(imu, name="wrist", meta=dict(imu.meta))], markers=[markers], signals=[])
+
+    write_trial_streaming(out, pieces())
+
+
+def calibration_file(out: Path) -> None:
+    """A calibration JSON (``imulog calibrate``'s format) with small biases and a near-identity matrix."""
+    from imulog.process.calibration import AxisCalibration, Calibration
+
+    acc = AxisCalibration(np.array([0.02, -0.01, 0.03]), np.eye(3) * 1.01)
+    gyr = AxisCalibration(np.array([0.001, -0.002, 0.0005]), np.eye(3))
+    out.write_text(json.dumps(Calibration(acc=acc, gyr=gyr).to_dict()))
+
+
+def _limit_memory(gb: float) -> None:
+    """In the child: a cap on its private memory (RLIMIT_DATA: heap and anonymous maps, not the mapped trial), so
+    a command that would take the shared machine's memory fails instead."""
+    cap = int(gb * 2**30)
+    resource.setrlimit(resource.RLIMIT_DATA, (cap, cap))
+
+
+class CommandFailed(Exception):
+    """A measured command exited non-zero: its last line of error output."""
+
+
+def run(args: list[str], limit_gb: float | None = None) -> tuple[float, float, float]:
     """(wall seconds, peak RSS MB, CPU seconds: user + system) of one command in a child process."""
     t0 = time.perf_counter()
-    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    pre = None if not limit_gb else (lambda: _limit_memory(limit_gb))
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, preexec_fn=pre)
     _, status, usage = os.wait4(proc.pid, 0)
     elapsed = time.perf_counter() - t0
     err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
     if os.waitstatus_to_exitcode(status) != 0:
-        raise SystemExit(f"{' '.join(args)} failed:\n{err[-2000:]}")
+        last = [line for line in err.splitlines() if line.strip()][-1:] or [f"exit {os.waitstatus_to_exitcode(status)}"]
+        raise CommandFailed(f"{' '.join(args[2:])}: {last[0][:300]} (peak {usage.ru_maxrss / 1024:.0f} MB)")
     return elapsed, usage.ru_maxrss / 1024.0, usage.ru_utime + usage.ru_stime  # ru_maxrss: kB on Linux
 
 
@@ -183,6 +266,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--dir", default=None, help="scratch folder (needs ~3 GB per simulated week)")
     ap.add_argument("--trials", nargs="+", default=None, help="converted trials, one per --days value (copied)")
     ap.add_argument("--commands", nargs="+", default=[c[0] for c in COMMANDS], choices=[c[0] for c in COMMANDS])
+    ap.add_argument(
+        "--limit-gb",
+        type=float,
+        default=6.0,
+        help="cap each command's private memory (RLIMIT_DATA) so one that does not fit fails instead of taking the "
+        "shared machine's memory; 0: no cap",
+    )
     args = ap.parse_args(argv)
     if args.dynamos:
         return dynamos_scaling(args.dynamos)
@@ -191,8 +281,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.trials and len(args.trials) != len(args.days):
         ap.error(f"--trials needs one trial per --days value ({len(args.days)})")
     commands = [(c[0], c[1:]) for c in COMMANDS if c[0] in args.commands and not (args.trials and c[0] == "convert")]
+    names = {name for name, _ in commands}
     imulog = [sys.executable, "-m", "imulog"]
-    results: dict[float, dict[str, tuple[float, float, float]]] = {}
+    results: dict[float, dict[str, tuple[float, float, float] | str]] = {}
     with tempfile.TemporaryDirectory(dir=args.dir) as tmp:
         for i, days in enumerate(args.days):
             folder = Path(tmp) / f"d{days:g}"
@@ -202,20 +293,27 @@ def main(argv: list[str] | None = None) -> int:
                 "mcap": folder / "home.mcap",
                 "rrd": folder / "home.rrd",
                 "arm": folder / "arm.mcap",
+                "ref": folder / "ref.mcap",
+                "cal": folder / "cal.json",
                 "parquet": folder / "wrist.parquet",
             }
             if args.trials:
                 shutil.copy(args.trials[i], paths["mcap"])
-            else:
+            if not args.trials or names & {*TWO_IMU, *REFERENCE}:
                 subprocess.run(
                     [*imulog, "simulate", "home", "-o", str(folder), "--days", str(days)],
                     check=True,
                     stdout=subprocess.DEVNULL,
                     stderr=subprocess.DEVNULL,
                 )
+            if not paths["mcap"].exists() and "convert" not in names:  # steps of the wrist trial, no convert asked
+                subprocess.run([*imulog, "convert", str(paths["cwa"]), "-o", str(paths["mcap"])], check=True)
             results[days] = {}
-            if any(name in ("orientation2", "kinematics") for name, _ in commands) and paths["cwa"].exists():
+            if names & set(TWO_IMU):
                 two_imu_trial(paths["cwa"], paths["arm"])
+            if names & set(REFERENCE):
+                reference_trial(paths["cwa"], paths["ref"])
+            calibration_file(paths["cal"])
             for name, templates in commands:
                 if any("{imu_topic}" in a for t in templates for a in t):
                     from imulog.archive import TrialReader
@@ -224,7 +322,20 @@ def main(argv: list[str] | None = None) -> int:
                         fields = {"imu_topic": next(t for t in trial.topics() if t.startswith("/imu/"))}
                 else:
                     fields = {}
-                runs = [run([*imulog, *[a.format(**paths, **fields) for a in template]]) for template in templates]
+                try:
+                    for setup in SETUP.get(name, []):
+                        wall, mb, cpu = run([*imulog, *[a.format(**paths) for a in setup]], args.limit_gb)
+                        print(
+                            f"{days:g} d   setup {' '.join(setup[:2])}: {wall:.1f} s wall, {cpu:.1f} s CPU, {mb:.0f} MB"
+                        )
+                    runs = [
+                        run([*imulog, *[a.format(**paths, **fields) for a in template]], args.limit_gb)
+                        for template in templates
+                    ]
+                except CommandFailed as exc:
+                    results[days][name] = str(exc)
+                    print(f"{days:g} d {name}: FAILED {exc}; load {os.getloadavg()[0]:.1f}", flush=True)
+                    continue
                 results[days][name] = (sum(r[0] for r in runs), max(r[1] for r in runs), sum(r[2] for r in runs))
                 wall, mb, cpu = results[days][name]
                 print(
@@ -240,19 +351,33 @@ def main(argv: list[str] | None = None) -> int:
         f"load average {one:.1f} (1 min), {five:.1f} (5 min) on {os.cpu_count()} cores; "
         f"self peak {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB"
     )
-    lo, hi = min(args.days), max(args.days)
+    return verdicts(commands, results, args.days)
+
+
+def verdicts(
+    commands: list[tuple[str, list]], results: dict[float, dict[str, tuple[float, float, float] | str]], days: list
+) -> int:
+    """Print the table (wall s, CPU s, peak MB per length, the RSS ratio of the longest to the shortest, the
+    verdict); 0 when every command meets both targets."""
+    lo, hi = min(days), max(days)
     print(
         f"{'command':12s}"
-        + "".join(f"{f'{d:g} d s':>10s}{f'{d:g} d CPU s':>12s}{f'{d:g} d MB':>11s}" for d in args.days)
+        + "".join(f"{f'{d:g} d s':>10s}{f'{d:g} d CPU s':>12s}{f'{d:g} d MB':>11s}" for d in days)
         + f"{'RSS ratio':>11s}  verdict"
     )
     ok_all = True
     for name, _ in commands:
-        row = "".join(
-            f"{results[d][name][0]:10.1f}{results[d][name][2]:12.1f}{results[d][name][1]:11.0f}" for d in args.days
-        )
+        got = [results[d][name] for d in days]
+        if any(isinstance(r, str) for r in got):
+            ok_all = False
+            print(
+                f"{name:12s}FAILED: "
+                + "; ".join(f"{d:g} d {r}" for d, r in zip(days, got, strict=True) if isinstance(r, str))
+            )
+            continue
+        row = "".join(f"{r[0]:10.1f}{r[2]:12.1f}{r[1]:11.0f}" for r in got)
         ratio = results[hi][name][1] / results[lo][name][1]
-        ok = max(results[d][name][1] for d in args.days) <= 1024 and ratio <= MAX_GROWTH
+        ok = max(r[1] for r in got) <= 1024 and ratio <= MAX_GROWTH
         ok_all &= ok
         print(f"{name:12s}{row}{ratio:10.2f}x  {'meets target' if ok else f'MISSES (<= 1 GB, <= {MAX_GROWTH}x)'}")
     return 0 if ok_all else 1
