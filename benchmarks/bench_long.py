@@ -49,20 +49,21 @@ COMMANDS = [
     ("view", ["view", "{mcap}", "--save", "{rrd}"]),
     # one long topic to Parquet, block by block (default options; the gyroscope and accelerometer of the day/week)
     ("export", ["export", "{mcap}", "--topic", "{imu_topic}", "-o", "{parquet}", "--overwrite"]),
-    # the two-IMU trial (written by two_imu_trial from the same .cwa)
-    (
-        "orientation2",
-        ["process", "orientation", "{arm}", "--imu", "upper_arm", "--force"],
-        ["process", "orientation", "{arm}", "--imu", "forearm", "--force"],
-    ),
-    ("kinematics", ["process", "kinematics", "{arm}", "--upper-arm", "upper_arm", "--forearm", "forearm", "--force"]),
-    ("heading", ["process", "heading", "{arm}", "--force"]),
     # the wrist trial's remaining steps (after the others: orientation would read a calibrated channel)
     ("epochs", ["process", "epochs", "{mcap}", "--force"]),
     ("calibrate", ["process", "calibrate", "{mcap}", "--calibration", "{cal}", "--force"]),
     # the wrist with a marker cluster (written by reference_trial from the same .cwa)
     ("align", ["process", "align", "{ref}", "--force"]),
     ("evaluate", ["evaluate", "{ref}", "--force"]),
+    # the two-IMU trial (written by two_imu_trial from the same .cwa)
+    (
+        "orientation2",
+        ["process", "orientation", "{arm}", "--imu", "upper_arm", "--force"],
+        ["process", "orientation", "{arm}", "--imu", "forearm", "--force"],
+    ),
+    ("heading", ["process", "heading", "{arm}", "--force"]),
+    # the slowest on a week: last
+    ("kinematics", ["process", "kinematics", "{arm}", "--upper-arm", "upper_arm", "--forearm", "forearm", "--force"]),
 ]
 #: steps a measured command needs first, run (unmeasured, time printed) unless up to date: no --force
 SETUP = {
@@ -108,11 +109,15 @@ CLUSTER_M = np.array([[0.0, 0.0, 0.0], [0.06, 0.0, 0.0], [0.0, 0.06, 0.0]])  # m
 WRIST_M = np.array([0.3, 0.2, 1.0])  # where the (only rotating) wrist sits in the room, m
 
 
-def reference_trial(cwa: Path, out: Path, noise_m: float = 2e-4) -> None:
-    """An archive of the wrist in ``cwa`` with a rigid marker cluster (O, X, Y, 6 cm apart) that turns with it,
-    written piece by piece: what ``align`` and ``evaluate`` need. The home model only rotates the wrist, so O
-    stays put and X, Y follow VQF's orientation of the samples (state carried from piece to piece), on the
-    IMU's time stamps, with ``noise_m`` of marker noise, to 0.1 mm."""
+LAB_S = 3600.0  # the marker cluster records the first hour: a lab session with Vicon before the week at home
+
+
+def reference_trial(cwa: Path, out: Path, noise_m: float = 2e-4, lab_s: float = LAB_S) -> None:
+    """An archive of the wrist in ``cwa`` with a rigid marker cluster (O, X, Y, 6 cm apart) that turns with it
+    for the first ``lab_s`` seconds (a lab session, as a study would record one; nobody wears a Vicon cluster
+    for a week), written piece by piece: what ``align`` and ``evaluate`` need. The home model only rotates the
+    wrist, so O stays put and X, Y follow VQF's orientation of the samples (state carried from piece to piece),
+    on the IMU's time stamps, with ``noise_m`` of marker noise, to 0.1 mm."""
     from dataclasses import replace
 
     from imulog.converters import axivity
@@ -123,18 +128,25 @@ def reference_trial(cwa: Path, out: Path, noise_m: float = 2e-4) -> None:
     from imulog.process.quaternion import rotate
 
     rng = np.random.default_rng(0)
-    state: dict[str, VQF] = {}
+    state: dict = {}
 
     def pieces():
         for rec in axivity.iter_chunks(cwa):
             imu = rec.imus[0]
+            wrist = replace(imu, name="wrist", meta=dict(imu.meta))
             if "vqf" not in state:
                 state["vqf"] = VQF(float(np.median(np.diff(imu.t_ns[:1000]))) * 1e-9)
-            q = state["vqf"].updateBatch(np.ascontiguousarray(imu.gyr), np.ascontiguousarray(imu.acc))["quat6D"]
+                state["end"] = int(imu.t_ns[0]) + int(lab_s * 1e9)
+            keep = imu.t_ns < state["end"]
+            if not keep.any():
+                yield replace(rec, imus=[wrist], signals=[])
+                continue
+            gyr, acc = np.ascontiguousarray(imu.gyr[keep]), np.ascontiguousarray(imu.acc[keep])
+            q = state["vqf"].updateBatch(gyr, acc)["quat6D"]
             pos = WRIST_M + np.stack([rotate(q, np.broadcast_to(c, (len(q), 3))) for c in CLUSTER_M], axis=1)
             pos = np.round(pos + rng.normal(0.0, noise_m, pos.shape), 4)  # 0.1 mm, as a Vicon export in mm
-            markers = MarkerStream("vicon", imu.t_ns, ["O", "X", "Y"], pos)
-            yield replace(rec, imus=[replace(imu, name="wrist", meta=dict(imu.meta))], markers=[markers], signals=[])
+            markers = MarkerStream("vicon", imu.t_ns[keep], ["O", "X", "Y"], pos)
+            yield replace(rec, imus=[wrist], markers=[markers], signals=[])
 
     write_trial_streaming(out, pieces())
 
