@@ -8,8 +8,9 @@
 
 For each length: ``imulog simulate home --days D`` writes an Axivity AX6 .cwa (accelerometer + gyroscope,
 100 Hz), then ``imulog convert``, ``imulog process orientation``, ``imulog process phases``, ``imulog process
-metrics``, ``imulog process trajectory``, ``imulog info``, ``imulog view --save`` and ``imulog export`` (the
-wrist's samples to Parquet) run as separate processes (``--trials``: on copies of
+metrics``, ``imulog process trajectory``, ``imulog info``, ``imulog view --save``, ``imulog export`` (the
+wrist's samples to Parquet), ``imulog process epochs`` and ``imulog process calibrate`` (a calibration file the
+script writes) run as separate processes (``--trials``: on copies of
 trials already converted, one per length, for the commands named by ``--commands``); the peak resident memory of each (``ru_maxrss`` of the child),
 its wall time and its CPU time (user + system of the child, every thread) are printed, with the ratio of the
 longest to the shortest length. The machine's load average
@@ -17,7 +18,13 @@ is printed too: times are only comparable within one run.
 
 Kinematics needs two IMUs: the same simulated days are written a second time as a two-IMU trial (the wrist's
 samples as ``upper_arm`` and, axes permuted, as ``forearm``, streamed into one archive), whose orientation
-(both IMUs) and kinematics are measured as ``orientation2`` and ``kinematics``.
+(both IMUs), heading and kinematics are measured as ``orientation2``, ``heading`` and ``kinematics``.
+
+``align`` and ``evaluate`` need an optical reference: the same days are written a third time with a marker
+cluster that turns with the wrist for the first hour (a lab session before the week at home), and the steps
+they need first (orientation; align, phases, trajectory) run unmeasured, their time printed as ``setup``.
+Every command runs under a cap on its private memory (``--limit-gb``, default 6 GB) so that one that does not
+fit fails (reported, the others still run) instead of taking the shared machine's memory.
 
 Targets: peak RSS at most 1 GB for every command; growth from 1 to 7 days at most 10 % (issue 17) / 15 %
 (issue 24, every step including trajectory and kinematics). The verdict column uses 1.15x.
