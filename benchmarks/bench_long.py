@@ -56,12 +56,12 @@ COMMANDS = [
     ("view", ["view", "{mcap}", "--save", "{rrd}"]),
     # one long topic to Parquet, block by block (default options; the gyroscope and accelerometer of the day/week)
     ("export", ["export", "{mcap}", "--topic", "{imu_topic}", "-o", "{parquet}", "--overwrite"]),
-    # the wrist trial's remaining steps (after the others: orientation would read a calibrated channel)
-    ("epochs", ["process", "epochs", "{mcap}", "--force"]),
-    ("calibrate", ["process", "calibrate", "{mcap}", "--calibration", "{cal}", "--force"]),
     # the wrist with a marker cluster (written by reference_trial from the same .cwa)
     ("align", ["process", "align", "{ref}", "--force"]),
     ("evaluate", ["evaluate", "{ref}", "--force"]),
+    # the wrist trial's remaining steps (after the others: orientation would read a calibrated channel)
+    ("epochs", ["process", "epochs", "{mcap}", "--force"]),
+    ("calibrate", ["process", "calibrate", "{mcap}", "--calibration", "{cal}", "--force"]),
     # the two-IMU trial (written by two_imu_trial from the same .cwa)
     (
         "orientation2",
@@ -325,15 +325,23 @@ def main(argv: list[str] | None = None) -> int:
                     stdout=subprocess.DEVNULL,
                     stderr=subprocess.DEVNULL,
                 )
-            if not paths["mcap"].exists() and "convert" not in names:  # steps of the wrist trial, no convert asked
-                subprocess.run([*imulog, "convert", str(paths["cwa"]), "-o", str(paths["mcap"])], check=True)
             results[days] = {}
-            if names & set(TWO_IMU):
-                two_imu_trial(paths["cwa"], paths["arm"])
-            if names & set(REFERENCE):
-                reference_trial(paths["cwa"], paths["ref"])
             calibration_file(paths["cal"])
             for name, templates in commands:
+                # each trial written when a command first needs it (unmeasured)
+                uses = {
+                    k
+                    for t in [*templates, *SETUP.get(name, [])]
+                    for a in t
+                    for k in ("mcap", "arm", "ref")
+                    if a == f"{{{k}}}"
+                }
+                if "mcap" in uses and not paths["mcap"].exists():  # the wrist's steps without convert asked
+                    subprocess.run([*imulog, "convert", str(paths["cwa"]), "-o", str(paths["mcap"])], check=True)
+                if "arm" in uses and not paths["arm"].exists():
+                    two_imu_trial(paths["cwa"], paths["arm"])
+                if "ref" in uses and not paths["ref"].exists():
+                    reference_trial(paths["cwa"], paths["ref"])
                 if any("{imu_topic}" in a for t in templates for a in t):
                     from imulog.archive import TrialReader
 
