@@ -8,8 +8,9 @@
 
 For each length: ``imulog simulate home --days D`` writes an Axivity AX6 .cwa (accelerometer + gyroscope,
 100 Hz), then ``imulog convert``, ``imulog process orientation``, ``imulog process phases``, ``imulog process
-metrics``, ``imulog process trajectory``, ``imulog info``, ``imulog view --save`` and ``imulog export`` (the
-wrist's samples to Parquet) run as separate processes (``--trials``: on copies of
+metrics``, ``imulog process trajectory``, ``imulog info``, ``imulog view --save``, ``imulog export`` (the
+wrist's samples to Parquet), ``imulog process epochs`` and ``imulog process calibrate`` (a calibration file the
+script writes) run as separate processes (``--trials``: on copies of
 trials already converted, one per length, for the commands named by ``--commands``); the peak resident memory of each (``ru_maxrss`` of the child),
 its wall time and its CPU time (user + system of the child, every thread) are printed, with the ratio of the
 longest to the shortest length. The machine's load average
@@ -17,7 +18,14 @@ is printed too: times are only comparable within one run.
 
 Kinematics needs two IMUs: the same simulated days are written a second time as a two-IMU trial (the wrist's
 samples as ``upper_arm`` and, axes permuted, as ``forearm``, streamed into one archive), whose orientation
-(both IMUs) and kinematics are measured as ``orientation2`` and ``kinematics``.
+(both IMUs), heading and kinematics are measured as ``orientation2``, ``heading`` and ``kinematics``.
+
+``align`` and ``evaluate`` need an optical reference: the same days are written a third time with a marker
+cluster that turns with the wrist for the first hour (a lab session before the week at home), and the steps
+they need first (for evaluate: align, orientation, phases, trajectory) run unmeasured, their time printed as
+``setup``; align runs on the trial before its orientation (aligning an oriented week is not yet bounded).
+Every command runs under a cap on its private memory (``--limit-gb``, default 6 GB) so that one that does not
+fit fails (reported, the others still run) instead of taking the shared machine's memory.
 
 Targets: peak RSS at most 1 GB for every command; growth from 1 to 7 days at most 10 % (issue 17) / 15 %
 (issue 24, every step including trajectory and kinematics). The verdict column uses 1.15x.
@@ -26,6 +34,7 @@ Targets: peak RSS at most 1 GB for every command; growth from 1 to 7 days at mos
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import resource
 import shutil
@@ -34,6 +43,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 COMMANDS = [
     ("convert", ["convert", "{cwa}", "-o", "{mcap}"]),
@@ -46,14 +57,39 @@ COMMANDS = [
     ("view", ["view", "{mcap}", "--save", "{rrd}"]),
     # one long topic to Parquet, block by block (default options; the gyroscope and accelerometer of the day/week)
     ("export", ["export", "{mcap}", "--topic", "{imu_topic}", "-o", "{parquet}", "--overwrite"]),
+    # the wrist with a marker cluster (written by reference_trial from the same .cwa)
+    ("align", ["process", "align", "{ref}", "--force"]),
+    ("evaluate", ["evaluate", "{ref}", "--force"]),
+    # the wrist trial's remaining steps (after the others: orientation would read a calibrated channel)
+    ("epochs", ["process", "epochs", "{mcap}", "--force"]),
+    ("calibrate", ["process", "calibrate", "{mcap}", "--calibration", "{cal}", "--force"]),
     # the two-IMU trial (written by two_imu_trial from the same .cwa)
     (
         "orientation2",
         ["process", "orientation", "{arm}", "--imu", "upper_arm", "--force"],
         ["process", "orientation", "{arm}", "--imu", "forearm", "--force"],
     ),
+    ("heading", ["process", "heading", "{arm}", "--force"]),
+    # the slowest on a week: last
     ("kinematics", ["process", "kinematics", "{arm}", "--upper-arm", "upper_arm", "--forearm", "forearm", "--force"]),
 ]
+#: steps a measured command needs first, run (unmeasured, time printed) unless up to date: no --force
+SETUP = {
+    "heading": [
+        ["process", "orientation", "{arm}", "--imu", "upper_arm"],
+        ["process", "orientation", "{arm}", "--imu", "forearm"],
+    ],
+    # align before orientation: aligning an oriented trial rewrites the orientation's viewer twin from the whole
+    # channel (imulog.archive.writer.plan_append), 4.6 GB on the week: not yet bounded (docs/long_recordings.md)
+    "evaluate": [
+        ["process", "align", "{ref}"],
+        ["process", "orientation", "{ref}"],
+        ["process", "phases", "{ref}"],
+        ["process", "trajectory", "{ref}"],
+    ],
+}
+TWO_IMU = ("orientation2", "kinematics", "heading")
+REFERENCE = ("align", "evaluate")
 MAX_GROWTH = 1.15  # issue 24: peak memory from the shortest to the longest recording
 
 
@@ -78,15 +114,83 @@ def two_imu_trial(cwa: Path, out: Path) -> None:
     write_trial_streaming(out, pieces())
 
 
-def run(args: list[str]) -> tuple[float, float, float]:
+CLUSTER_M = np.array([[0.0, 0.0, 0.0], [0.06, 0.0, 0.0], [0.0, 0.06, 0.0]])  # markers O, X, Y in the sensor frame
+WRIST_M = np.array([0.3, 0.2, 1.0])  # where the (only rotating) wrist sits in the room, m
+
+
+LAB_S = 3600.0  # the marker cluster records the first hour: a lab session with Vicon before the week at home
+
+
+def reference_trial(cwa: Path, out: Path, noise_m: float = 2e-4, lab_s: float = LAB_S) -> None:
+    """An archive of the wrist in ``cwa`` with a rigid marker cluster (O, X, Y, 6 cm apart) that turns with it
+    for the first ``lab_s`` seconds (a lab session, as a study would record one; nobody wears a Vicon cluster
+    for a week), written piece by piece: what ``align`` and ``evaluate`` need. The home model only rotates the
+    wrist, so O stays put and X, Y follow VQF's orientation of the samples (state carried from piece to piece),
+    on the IMU's time stamps, with ``noise_m`` of marker noise, to 0.1 mm."""
+    from dataclasses import replace
+
+    from imulog.converters import axivity
+    from vqf import VQF
+
+    from imulog.archive.streaming import write_trial_streaming
+    from imulog.model import MarkerStream
+    from imulog.process.quaternion import rotate
+
+    rng = np.random.default_rng(0)
+    state: dict = {}
+
+    def pieces():
+        for rec in axivity.iter_chunks(cwa):
+            imu = rec.imus[0]
+            wrist = replace(imu, name="wrist", meta=dict(imu.meta))
+            if "vqf" not in state:
+                state["vqf"] = VQF(float(np.median(np.diff(imu.t_ns[:1000]))) * 1e-9)
+                state["end"] = int(imu.t_ns[0]) + int(lab_s * 1e9)
+            keep = imu.t_ns < state["end"]
+            if not keep.any():
+                yield replace(rec, imus=[wrist], signals=[])
+                continue
+            gyr, acc = np.ascontiguousarray(imu.gyr[keep]), np.ascontiguousarray(imu.acc[keep])
+            q = state["vqf"].updateBatch(gyr, acc)["quat6D"]
+            pos = WRIST_M + np.stack([rotate(q, np.broadcast_to(c, (len(q), 3))) for c in CLUSTER_M], axis=1)
+            pos = np.round(pos + rng.normal(0.0, noise_m, pos.shape), 4)  # 0.1 mm, as a Vicon export in mm
+            markers = MarkerStream("vicon", imu.t_ns[keep], ["O", "X", "Y"], pos)
+            yield replace(rec, imus=[wrist], markers=[markers], signals=[])
+
+    write_trial_streaming(out, pieces())
+
+
+def calibration_file(out: Path) -> None:
+    """A calibration JSON (``imulog calibrate``'s format) with small biases and a near-identity matrix."""
+    from imulog.process.calibration import AxisCalibration, Calibration
+
+    acc = AxisCalibration(np.array([0.02, -0.01, 0.03]), np.eye(3) * 1.01)
+    gyr = AxisCalibration(np.array([0.001, -0.002, 0.0005]), np.eye(3))
+    out.write_text(json.dumps(Calibration(acc=acc, gyr=gyr).to_dict()))
+
+
+def _limit_memory(gb: float) -> None:
+    """In the child: a cap on its private memory (RLIMIT_DATA: heap and anonymous maps, not the mapped trial), so
+    a command that would take the shared machine's memory fails instead."""
+    cap = int(gb * 2**30)
+    resource.setrlimit(resource.RLIMIT_DATA, (cap, cap))
+
+
+class CommandFailed(Exception):
+    """A measured command exited non-zero: its last line of error output."""
+
+
+def run(args: list[str], limit_gb: float | None = None) -> tuple[float, float, float]:
     """(wall seconds, peak RSS MB, CPU seconds: user + system) of one command in a child process."""
     t0 = time.perf_counter()
-    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    pre = None if not limit_gb else (lambda: _limit_memory(limit_gb))
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, preexec_fn=pre)
     _, status, usage = os.wait4(proc.pid, 0)
     elapsed = time.perf_counter() - t0
     err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
     if os.waitstatus_to_exitcode(status) != 0:
-        raise SystemExit(f"{' '.join(args)} failed:\n{err[-2000:]}")
+        last = [line for line in err.splitlines() if line.strip()][-1:] or [f"exit {os.waitstatus_to_exitcode(status)}"]
+        raise CommandFailed(f"{' '.join(args[2:])}: {last[0][:300]} (peak {usage.ru_maxrss / 1024:.0f} MB)")
     return elapsed, usage.ru_maxrss / 1024.0, usage.ru_utime + usage.ru_stime  # ru_maxrss: kB on Linux
 
 
@@ -191,6 +295,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--dir", default=None, help="scratch folder (needs ~3 GB per simulated week)")
     ap.add_argument("--trials", nargs="+", default=None, help="converted trials, one per --days value (copied)")
     ap.add_argument("--commands", nargs="+", default=[c[0] for c in COMMANDS], choices=[c[0] for c in COMMANDS])
+    ap.add_argument(
+        "--limit-gb",
+        type=float,
+        default=6.0,
+        help="cap each command's private memory (RLIMIT_DATA) so one that does not fit fails instead of taking the "
+        "shared machine's memory; 0: no cap",
+    )
     args = ap.parse_args(argv)
     if args.dynamos:
         return dynamos_scaling(args.dynamos)
@@ -199,8 +310,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.trials and len(args.trials) != len(args.days):
         ap.error(f"--trials needs one trial per --days value ({len(args.days)})")
     commands = [(c[0], c[1:]) for c in COMMANDS if c[0] in args.commands and not (args.trials and c[0] == "convert")]
+    names = {name for name, _ in commands}
     imulog = [sys.executable, "-m", "imulog"]
-    results: dict[float, dict[str, tuple[float, float, float]]] = {}
+    results: dict[float, dict[str, tuple[float, float, float] | str]] = {}
     with tempfile.TemporaryDirectory(dir=args.dir) as tmp:
         for i, days in enumerate(args.days):
             folder = Path(tmp) / f"d{days:g}"
@@ -210,11 +322,13 @@ def main(argv: list[str] | None = None) -> int:
                 "mcap": folder / "home.mcap",
                 "rrd": folder / "home.rrd",
                 "arm": folder / "arm.mcap",
+                "ref": folder / "ref.mcap",
+                "cal": folder / "cal.json",
                 "parquet": folder / "wrist.parquet",
             }
             if args.trials:
                 shutil.copy(args.trials[i], paths["mcap"])
-            else:
+            if not args.trials or names & {*TWO_IMU, *REFERENCE}:
                 subprocess.run(
                     [*imulog, "simulate", "home", "-o", str(folder), "--days", str(days)],
                     check=True,
@@ -222,9 +336,22 @@ def main(argv: list[str] | None = None) -> int:
                     stderr=subprocess.DEVNULL,
                 )
             results[days] = {}
-            if any(name in ("orientation2", "kinematics") for name, _ in commands) and paths["cwa"].exists():
-                two_imu_trial(paths["cwa"], paths["arm"])
+            calibration_file(paths["cal"])
             for name, templates in commands:
+                # each trial written when a command first needs it (unmeasured)
+                uses = {
+                    k
+                    for t in [*templates, *SETUP.get(name, [])]
+                    for a in t
+                    for k in ("mcap", "arm", "ref")
+                    if a == f"{{{k}}}"
+                }
+                if "mcap" in uses and not paths["mcap"].exists():  # the wrist's steps without convert asked
+                    subprocess.run([*imulog, "convert", str(paths["cwa"]), "-o", str(paths["mcap"])], check=True)
+                if "arm" in uses and not paths["arm"].exists():
+                    two_imu_trial(paths["cwa"], paths["arm"])
+                if "ref" in uses and not paths["ref"].exists():
+                    reference_trial(paths["cwa"], paths["ref"])
                 if any("{imu_topic}" in a for t in templates for a in t):
                     from imulog.archive import TrialReader
 
@@ -232,7 +359,20 @@ def main(argv: list[str] | None = None) -> int:
                         fields = {"imu_topic": next(t for t in trial.topics() if t.startswith("/imu/"))}
                 else:
                     fields = {}
-                runs = [run([*imulog, *[a.format(**paths, **fields) for a in template]]) for template in templates]
+                try:
+                    for setup in SETUP.get(name, []):
+                        wall, mb, cpu = run([*imulog, *[a.format(**paths) for a in setup]], args.limit_gb)
+                        print(
+                            f"{days:g} d   setup {' '.join(setup[:2])}: {wall:.1f} s wall, {cpu:.1f} s CPU, {mb:.0f} MB"
+                        )
+                    runs = [
+                        run([*imulog, *[a.format(**paths, **fields) for a in template]], args.limit_gb)
+                        for template in templates
+                    ]
+                except CommandFailed as exc:
+                    results[days][name] = str(exc)
+                    print(f"{days:g} d {name}: FAILED {exc}; load {os.getloadavg()[0]:.1f}", flush=True)
+                    continue
                 results[days][name] = (sum(r[0] for r in runs), max(r[1] for r in runs), sum(r[2] for r in runs))
                 wall, mb, cpu = results[days][name]
                 print(
@@ -248,19 +388,33 @@ def main(argv: list[str] | None = None) -> int:
         f"load average {one:.1f} (1 min), {five:.1f} (5 min) on {os.cpu_count()} cores; "
         f"self peak {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB"
     )
-    lo, hi = min(args.days), max(args.days)
+    return verdicts(commands, results, args.days)
+
+
+def verdicts(
+    commands: list[tuple[str, list]], results: dict[float, dict[str, tuple[float, float, float] | str]], days: list
+) -> int:
+    """Print the table (wall s, CPU s, peak MB per length, the RSS ratio of the longest to the shortest, the
+    verdict); 0 when every command meets both targets."""
+    lo, hi = min(days), max(days)
     print(
         f"{'command':12s}"
-        + "".join(f"{f'{d:g} d s':>10s}{f'{d:g} d CPU s':>12s}{f'{d:g} d MB':>11s}" for d in args.days)
+        + "".join(f"{f'{d:g} d s':>10s}{f'{d:g} d CPU s':>12s}{f'{d:g} d MB':>11s}" for d in days)
         + f"{'RSS ratio':>11s}  verdict"
     )
     ok_all = True
     for name, _ in commands:
-        row = "".join(
-            f"{results[d][name][0]:10.1f}{results[d][name][2]:12.1f}{results[d][name][1]:11.0f}" for d in args.days
-        )
+        got = [results[d][name] for d in days]
+        if any(isinstance(r, str) for r in got):
+            ok_all = False
+            print(
+                f"{name:12s}FAILED: "
+                + "; ".join(f"{d:g} d {r}" for d, r in zip(days, got, strict=True) if isinstance(r, str))
+            )
+            continue
+        row = "".join(f"{r[0]:10.1f}{r[2]:12.1f}{r[1]:11.0f}" for r in got)
         ratio = results[hi][name][1] / results[lo][name][1]
-        ok = max(results[d][name][1] for d in args.days) <= 1024 and ratio <= MAX_GROWTH
+        ok = max(r[1] for r in got) <= 1024 and ratio <= MAX_GROWTH
         ok_all &= ok
         print(f"{name:12s}{row}{ratio:10.2f}x  {'meets target' if ok else f'MISSES (<= 1 GB, <= {MAX_GROWTH}x)'}")
     return 0 if ok_all else 1

@@ -112,3 +112,51 @@ def test_align_short_real_recording_with_foot_markers(shared_data, tmp_path):
     with TrialReader(path) as t:
         rec = t.metadata["imulog.alignment"]
     assert rec["cluster"]["selection"] == "given" and abs(rec["offset_ns"]) < 20_000_000
+
+
+def test_align_reads_the_imu_only_around_the_markers(tmp_path, monkeypatch):
+    """An IMU that records long after the markers stop (a lab session, then a week at home) is read only around
+    the markers' span (issue 24: a day's wrist took 3.2 GB to align on an hour of markers), with the alignment it
+    gave reading every sample."""
+    import dataclasses
+
+    from imulog.steps.align import MARGIN_S, run_align
+
+    sim = simulate("r2g", seed=4, repetitions=4)
+    imu = sim.recording.imus[0]
+    rate = (len(imu.t_ns) - 1) / ((imu.t_ns[-1] - imu.t_ns[0]) * 1e-9)
+    extra = int((2 * MARGIN_S + 120.0) * rate)  # still on a table after the session, beyond the margin
+    t_more = imu.t_ns[-1] + np.round(np.arange(1, extra + 1) * 1e9 / rate).astype(np.int64)
+    longer = dataclasses.replace(
+        imu,
+        t_ns=np.concatenate([imu.t_ns, t_more]),
+        acc=np.vstack([imu.acc, np.tile([0.0, 0.0, 9.81], (extra, 1))]),
+        gyr=np.vstack([imu.gyr, np.zeros((extra, 3))]),
+        mag=None if imu.mag is None else np.vstack([imu.mag, np.tile(imu.mag[-1], (extra, 1))]),
+    )
+    whole = write_trial(tmp_path / "whole.mcap", dataclasses.replace(sim.recording, imus=[longer]))
+    long_ = write_trial(tmp_path / "long.mcap", dataclasses.replace(sim.recording, imus=[longer]))
+    with monkeypatch.context() as patch:  # the previous reading: every IMU sample
+        patch.setattr("imulog.steps.align.imu_span", lambda *a: (None, None))
+        run_align(whole)
+    reads: list[tuple[str, int | None, int | None]] = []
+    original = TrialReader.read
+
+    def spy(self, topic, start_ns=None, end_ns=None):
+        reads.append((topic, start_ns, end_ns))
+        return original(self, topic, start_ns, end_ns)
+
+    monkeypatch.setattr(TrialReader, "read", spy)
+    run_align(long_)
+    imu_reads = [r for r in reads if r[0] == "/imu/wrist"]
+    assert imu_reads and all(r[2] is not None and r[2] < t_more[-1] for r in imu_reads), imu_reads
+    with TrialReader(whole) as a, TrialReader(long_) as b:
+        ra, rb = a.metadata["imulog.alignment"], b.metadata["imulog.alignment"]
+        ga, gb = a.read("/derived/reference/gyr/wrist"), b.read("/derived/reference/gyr/wrist")
+    for key in ("offset_ns", "drift_ppm", "quality"):
+        assert ra[key] == rb[key], key
+    for key in ("rotation_imu_to_cluster", "rotation_global_to_world"):  # less of the still tail is seen: 3e-6
+        assert (ra[key] is None) == (rb[key] is None), key
+        if ra[key] is not None:
+            np.testing.assert_allclose(ra[key], rb[key], atol=1e-5, err_msg=key)  # 1e-5: 0.002 deg
+    assert np.array_equal(ga.t_ns, gb.t_ns) and np.allclose(ga.values, gb.values, atol=1e-6, equal_nan=True)

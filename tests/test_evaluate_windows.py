@@ -115,3 +115,51 @@ def test_step_record_equals_the_whole_and_an_occluded_edge(evaluated, tmp_path):
         rows = windowed_rows(Reader(trial), channels, "/ref", reps, 0.05, error_rows, interpolate_reference, span_s=0.5)
     for m in channels:
         assert rows[m] == whole["methods"][m]["repetitions"]
+
+
+def _walking_foot(hours: float, rate: float = 100.0) -> tuple[np.ndarray, np.ndarray]:
+    """(t_ns, gyroscope rad/s) of a foot walking throughout: strides of 1.2 +- 0.03 s, each a 0.6-s swing and a
+    rest (the stride period and the rests walking_trial looks for)."""
+    rng = np.random.default_rng(0)
+    n = int(hours * 3600 * rate)
+    t = np.arange(n) / rate
+    starts = np.cumsum(rng.normal(1.2, 0.03, int(t[-1] / 1.1)))
+    k = np.searchsorted(starts, t) - 1
+    ph = np.where(k >= 0, t - starts[np.maximum(k, 0)], 1.0)
+    swing = np.where(ph < 0.6, 5.0 * np.sin(np.pi * ph / 0.6), 0.0)
+    gyr = np.column_stack([0.3 * swing, swing, 0.1 * swing]) + rng.normal(0.0, 0.01, (n, 3))
+    return (t * 1e9).astype(np.int64), gyr
+
+
+def test_walking_of_a_long_trial_reads_its_middle_hour_not_the_whole_channel(tmp_path, monkeypatch):
+    """Deciding whether to evaluate per stride must not load a week's gyroscope (issue 24): a 2-h trial is read in
+    its middle hour, and the verdict is the one from the whole gyroscope."""
+    from imulog.archive import write_trial
+    from imulog.model import ImuStream, Recording
+    from imulog.steps.evaluate import walking_of
+    from imulog.steps.gait_evaluate import walking_trial
+
+    t_ns, gyr = _walking_foot(2.0)
+    acc = np.tile([0.0, 0.0, 9.81], (len(t_ns), 1))
+    path = tmp_path / "walk.mcap"
+    write_trial(path, Recording(imus=[ImuStream(name="foot", t_ns=t_ns, acc=acc, gyr=gyr)]))
+    whole = walking_trial({}, {"foot": (gyr, 100.0)})
+    assert whole is not None and whole["period_s"] == pytest.approx(1.2, abs=0.05)
+
+    reads: list[tuple[str, int | None, int | None]] = []
+    original = TrialReader.read
+
+    def spy(self, topic, start_ns=None, end_ns=None):
+        reads.append((topic, start_ns, end_ns))
+        return original(self, topic, start_ns, end_ns)
+
+    monkeypatch.setattr(TrialReader, "read", spy)
+    got = walking_of(path)
+    assert got == whole
+    imu_reads = [r for r in reads if r[0] == "/imu/foot"]
+    assert imu_reads, "the gyroscope was not read"
+    for _, lo, hi in imu_reads:
+        assert lo is not None and hi is not None and (hi - lo) <= 3600e9 + 1, "read the whole 2-h channel"
+    reads.clear()
+    assert walking_of(path, span_s=3 * 3600.0) == whole  # within the span: read whole, as before
+    assert [r[1:] for r in reads if r[0] == "/imu/foot"] == [(None, None)]

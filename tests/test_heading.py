@@ -73,6 +73,34 @@ def test_six_d_imus_without_anything_to_relate_them_say_so(oriented_setup, tmp_p
     assert pose["source"] == "static pose" and common_heading({"imulog.heading": pose}, ["forearm"])[0]
 
 
+def test_without_a_field_a_pose_or_device_orientations_no_samples_are_read(oriented_setup, tmp_path, monkeypatch):
+    """6D IMUs without magnetometers, not aligned, no pose declared: the record ("none", every reason) needs no
+    samples, so neither the orientations nor the IMU channels are read (two IMUs' quaternions of a week are 4 GB;
+    issue 24); a declared pose still reads the orientations and relates them."""
+    import dataclasses
+
+    sim, _ = oriented_setup
+    imus = [dataclasses.replace(i, mag=None) for i in sim.recording.imus]
+    path = write_trial(tmp_path / "nomag.mcap", dataclasses.replace(sim.recording, imus=imus))
+    for imu in ("upper_arm", "forearm"):
+        run_orientation(path, imu=imu)
+    reads: list[str] = []
+    original = TrialReader.read
+
+    def spy(self, topic, start_ns=None, end_ns=None):
+        reads.append(topic)
+        return original(self, topic, start_ns, end_ns)
+
+    monkeypatch.setattr(TrialReader, "read", spy)
+    _, rec = run_heading(path, imus=["upper_arm", "forearm"])
+    assert rec["source"] == "none"
+    assert [r.split(":")[0] for r in rec["rejected"]] == ["magnetometer", "optical", "static pose", "device"]
+    assert rec["rejected"][0] == "magnetometer: not every IMU has one"
+    assert not [t for t in reads if t.startswith(("/imu/", "/derived/orientation/"))], reads
+    _, pose = run_heading(path, imus=["upper_arm", "forearm"], static_s=(0.5, 2.5))
+    assert pose["source"] == "static pose" and "/derived/orientation/forearm" in reads
+
+
 def test_corrected_headings_agree_with_the_truth(oriented_setup, tmp_path):
     """Optical (align after orientation): each IMU in the common frame has the true heading up to one
     rotation shared by all IMUs (the markers' world is the truth's world here: offsets near 0)."""

@@ -359,6 +359,23 @@ def params_dict(params: al.AlignmentParams) -> dict:
     return d
 
 
+MARGIN_S = 600.0  # IMU samples read beyond the markers' span on either side, besides the lag search's range
+
+
+def imu_span(trial, imu_topic: str, marker_topic: str, max_lag_s: float) -> tuple[int | None, int | None]:
+    """(start_ns, end_ns) of the IMU samples the alignment reads (device clock). The lag search starts from the
+    two recordings starting together (:func:`imulog.process.alignment_lag`) and looks ``max_lag_s`` either way,
+    so the IMU is read from its start to as long after it as the markers last, plus ``max_lag_s`` and
+    :data:`MARGIN_S`; (None, None), the whole channel, when the IMU ends within that or a span is unknown. A lab
+    trial's IMU is read whole, as before; a week's wrist with an hour of markers (a lab session at the start)
+    only over that hour and the margin, in bounded memory (issue 24)."""
+    mk, imu = trial.channel(marker_topic), trial.channel(imu_topic)
+    if None in (mk.start_ns, mk.end_ns, imu.start_ns, imu.end_ns):
+        return None, None
+    hi = int(imu.start_ns) + (int(mk.end_ns) - int(mk.start_ns)) + int((max_lag_s + MARGIN_S) * 1e9)
+    return (None, None) if imu.end_ns < hi else (None, hi)
+
+
 def run_align(
     path,
     *,
@@ -383,14 +400,15 @@ def run_align(
     inputs = [imu_topic, marker_topic] + [t for t in (o_topic, a_topic) if t in topics]
 
     def compute(trial) -> StepResult:
-        imu_stream = trial.read(imu_topic)
+        lo, hi = imu_span(trial, imu_topic, marker_topic, params.max_lag_s)
+        imu_stream = trial.read(imu_topic, lo, hi)
         mk = trial.read(marker_topic)
         orientation = acc_global = None
         if o_topic in inputs:
-            s = trial.read(o_topic)
+            s = trial.read(o_topic, lo, hi)
             orientation = (s.t_ns, s.values)
         if a_topic in inputs:
-            s = trial.read(a_topic)
+            s = trial.read(a_topic, lo, hi)
             acc_global = (s.t_ns, s.values)
         streams, record = compute_alignment(
             name,

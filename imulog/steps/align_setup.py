@@ -19,7 +19,7 @@ import numpy as np
 
 from imulog.process import alignment as al
 from imulog.process.resample import resample_quaternions
-from imulog.steps.align import STEP, _jsonable, alignment_streams, compute_alignment, params_dict
+from imulog.steps.align import STEP, _jsonable, alignment_streams, compute_alignment, imu_span, params_dict
 from imulog.steps.common import mean_rate_hz
 
 CLOCK_KEYS = (
@@ -219,12 +219,13 @@ def run_align_setup(
         data = {}
         device_meta = {}
         for n in names:
-            s = trial.read(f"/imu/{n}")
+            lo, hi = imu_span(trial, f"/imu/{n}", marker_topic, params.max_lag_s)  # around the markers' span
+            s = trial.read(f"/imu/{n}", lo, hi)
             d = {"t_ns": s.t_ns, "gyr": s.gyr, "acc": s.acc, "orientation": None, "acc_global": None}
             for k, key in (("orientation", "orientation"), ("acc_global", "acc_global")):
                 topic = f"/derived/{k}/{n}"
                 if topic in inputs:
-                    x = trial.read(topic)
+                    x = trial.read(topic, lo, hi)
                     d[key] = (x.t_ns, x.values)
             data[n] = d
             device_meta[n] = dict(trial.metadata.get(f"imulog.device.{n}") or {})

@@ -87,7 +87,9 @@ def compute_calibrated(
 def calibrated_pieces(path, topic: str, imu: str, calibration: cal.Calibration) -> Iterator[SignalStream]:
     """The calibrated channel of ``topic`` block by block (a per-sample map: no margins, no carry)."""
     from imulog.archive import TrialReader
+    from imulog.heap import reuse_heap
 
+    reuse_heap()  # the same temporaries block after block: reuse their pages (imulog.heap; 1.31x from 1 to 7 days without)
     with TrialReader(path) as trial:
         for s in trial.iter_blocks(topic):
             yield compute_calibrated(s.t_ns, s.acc, s.gyr, s.mag, imu, calibration)

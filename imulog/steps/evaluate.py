@@ -243,9 +243,14 @@ def alignment_note(record: dict[str, Any]) -> dict[str, Any]:
     return {k: record[k] for k in keys if k in record}
 
 
-def walking_of(path) -> dict[str, Any] | None:
+WALK_SPAN_S = 3600.0  # a longer recording is judged on its middle hour (bounded memory; issue 24)
+
+
+def walking_of(path, span_s: float = WALK_SPAN_S) -> dict[str, Any] | None:
     """Why the trial at ``path`` is a walking trial (evaluated per stride), else None
-    (:func:`imulog.steps.gait_evaluate.walking_trial`)."""
+    (:func:`imulog.steps.gait_evaluate.walking_trial`). Each IMU's gyroscope is read whole when it spans at most
+    ``span_s`` seconds, else its middle ``span_s`` only (which holds the middle two minutes
+    :func:`imulog.process.gait.walking_period` looks at), so a week is not read whole to decide this."""
     from imulog.archive import TrialReader
     from imulog.steps.common import mean_rate_hz
     from imulog.steps.gait_evaluate import WALK_TASKS, walking_trial
@@ -257,7 +262,12 @@ def walking_of(path) -> dict[str, Any] | None:
         gyros = {}
         for topic in trial.topics():
             if topic.startswith("/imu/"):
-                s = trial.read(topic)
+                info = trial.channel(topic)
+                a, b = info.start_ns, info.end_ns
+                if a is None or b is None or (b - a) * 1e-9 <= span_s:
+                    s = trial.read(topic)
+                else:
+                    s = trial.read(topic, (a + b) // 2 - int(span_s * 5e8), (a + b) // 2 + int(span_s * 5e8))
                 if s.gyr is not None and len(s.t_ns) > 10:
                     gyros[topic[5:]] = (s.gyr, mean_rate_hz(s.t_ns))
     return walking_trial(metadata, gyros)

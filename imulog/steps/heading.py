@@ -10,6 +10,7 @@ nothing to relate and the step says so. :func:`common_heading` is what exports t
 
 from __future__ import annotations
 
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -198,6 +199,11 @@ def run_heading(
 
     def compute(trial) -> StepResult:
         orientations, mags, aligns = {}, {}, {}
+        # the orientations and magnetometers are read only for a source that uses them (the field, a declared
+        # pose, the device's own orientations): the optical source and none need neither, so they are not read
+        # whole (a week of two IMUs' quaternions is 4 GB; issue 24)
+        with_mag = all(_has_mag(trial, n, topics) for n in names)
+        series = with_mag or static_s is not None or all(f"/orientation/{n}" in topics for n in names)
         for n in names:
             ch = trial.channel(f"/derived/orientation/{n}")
             params = ch.metadata.get("params") or {}
@@ -205,16 +211,20 @@ def run_heading(
                 import json
 
                 params = json.loads(params)
-            s = trial.read(f"/derived/orientation/{n}")
+            aligns[n] = alignment_for(trial.metadata, f"/imu/{n}")
+            pose = cluster_pose_topic(n, topics, trial.metadata)
+            late = aligns[n] and aligns[n].get("rotation_global_to_world") is None and pose is not None
+            if series or late:
+                s = trial.read(f"/derived/orientation/{n}")
+            else:
+                s = SimpleNamespace(t_ns=np.zeros(0, np.int64), values=np.zeros((0, 4)))
             orientations[n] = (s.t_ns, s.values, str(params.get("global_frame", "")))
             mags[n] = None
-            if f"/imu/{n}" in topics:
+            if with_mag:
                 imu = trial.read(f"/imu/{n}")
                 if imu.mag is not None and np.isfinite(imu.mag).any():
                     mags[n] = (imu.t_ns, imu.mag)
-            aligns[n] = alignment_for(trial.metadata, f"/imu/{n}")
-            pose = cluster_pose_topic(n, topics, trial.metadata)
-            if aligns[n] and aligns[n].get("rotation_global_to_world") is None and pose is not None:
+            if late:
                 # aligned before it was oriented: the same rotation from the cluster's poses
                 ps = trial.read(pose)
                 g2w = global_to_world_from_pose(s.t_ns, s.values, aligns[n], ps.t_ns, ps.orientation)
@@ -241,6 +251,16 @@ def run_heading(
         with TrialReader(path) as trial:
             holder["record"] = trial.metadata.get("imulog.heading", {})
     return outcome, holder["record"]
+
+
+def _has_mag(trial, name: str, topics: list[str]) -> bool:
+    """Whether ``/imu/{name}`` records a magnetometer (its channel's columns; nothing read)."""
+    import json
+
+    if f"/imu/{name}" not in topics:
+        return False
+    columns = trial.channel(f"/imu/{name}").metadata.get("columns") or "[]"
+    return "mag" in (json.loads(columns) if isinstance(columns, str) else columns)
 
 
 def _device_orientation(trial, name: str, topics: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
