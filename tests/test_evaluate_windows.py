@@ -163,3 +163,64 @@ def test_walking_of_a_long_trial_reads_its_middle_hour_not_the_whole_channel(tmp
     reads.clear()
     assert walking_of(path, span_s=3 * 3600.0) == whole  # within the span: read whole, as before
     assert [r[1:] for r in reads if r[0] == "/imu/foot"] == [(None, None)]
+
+
+class _RefReader:
+    """A TrialReader whose ``/ref`` channel is ``stream``, recording every read as (topic, start_ns, end_ns)."""
+
+    def __init__(self, trial, stream):
+        self.trial, self.stream, self.reads = trial, stream, []
+
+    def __getattr__(self, name):
+        return getattr(self.trial, name)
+
+    def read(self, topic, start_ns=None, end_ns=None):
+        self.reads.append((topic, start_ns, end_ns))
+        if topic != "/ref":
+            return self.trial.read(topic, start_ns, end_ns)
+        from imulog.archive import codec
+
+        return codec.select_time(self.stream, start_ns, end_ns)
+
+    def iter_blocks(self, topic, start_ns=None, end_ns=None):
+        yield self.read(topic, start_ns, end_ns)
+
+
+@pytest.mark.parametrize("whole_window", [False, True])
+def test_trajectories_are_read_only_where_the_reference_is(evaluated, whole_window):
+    """A trajectory longer than its reference (a week at home after an hour in the lab, issue 24) is read only
+    within the reference's valid extent, even in one span over every repetition or one window over the whole
+    channel (no repetitions), and the rows are still the whole computation's."""
+    from imulog.steps.evaluate import WHOLE_NS
+
+    with TrialReader(evaluated) as trial:
+        reps = trial.metadata["imulog.trajectory"]["repetitions"]
+        channels = {"zupt": "/derived/trajectory/zupt", BASELINE: f"/derived/trajectory_baseline/{BASELINE}"}
+        t_ref, pos = read_reference(trial, "/markers/vicon:O")
+        s = trial.read(channels["zupt"])
+    t_ref, pos = np.asarray(t_ref, np.int64), np.array(pos, np.float64)
+    # the reference covers the second repetition and 1 s either side, with an occluded tail: its valid extent
+    # ends before the channel does
+    a, b = int(reps[1]["start_ns"]) - int(1e9), int(reps[1]["end_ns"]) + int(1e9)
+    keep = (t_ref >= a) & (t_ref <= b)
+    t_ref, pos = t_ref[keep], pos[keep]
+    pos[t_ref > b - int(0.5e9)] = np.nan
+    ok = np.all(np.isfinite(pos), axis=1)
+    first, last = int(t_ref[ok][0]), int(t_ref[ok][-1])
+    assert int(s.t_ns[0]) < first and last < int(s.t_ns[-1])  # the trajectory outlasts the reference both sides
+    stream = SignalStream("/ref", t_ref, ["x", "y", "z"], ["m"] * 3, pos)
+    windows = [{"index": -1, "start_ns": -WHOLE_NS, "end_ns": WHOLE_NS}] if whole_window else reps
+    with TrialReader(evaluated) as trial:
+        trajs = {m: (trial.read(t).t_ns, trial.read(t).values) for m, t in channels.items()}
+        whole = compute_evaluation(
+            trajs, (t_ref, pos), reference_topic="o", windows=None if whole_window else reps, baseline=BASELINE
+        )
+        reader = _RefReader(trial, stream)
+        rows = windowed_rows(reader, channels, "/ref", windows, 0.05, error_rows, interpolate_reference, span_s=1e9)
+    for m in channels:
+        assert rows[m], m
+        assert rows[m] == whole["methods"][m]["repetitions"]
+    traj_reads = [r for r in reader.reads if r[0] in channels.values()]
+    assert traj_reads
+    for _, lo, hi in traj_reads:
+        assert lo is not None and hi is not None and first <= lo and hi <= last + 1, "read beyond the reference"

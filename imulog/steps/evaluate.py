@@ -28,6 +28,7 @@ from imulog.process.evaluation import (
 from imulog.process.trajectory_opt import BASELINE, METHODS
 
 STEP = "evaluate"
+WHOLE_NS = 2**62  # a window over a whole channel (from -WHOLE_NS to WHOLE_NS ns)
 POSE_TOPIC = "/derived/vicon/cluster_pose"
 
 
@@ -376,22 +377,11 @@ def _evaluate_imu(path, imu, channels, baselines, record_name, step, methods, ma
         read = {m: channels[m] for m in chosen}
         if baseline_topic in topics:  # the de-drift baseline every method must beat
             read[BASELINE] = baseline_topic
-        reps = info.get("repetitions")
-        if reps:  # repetition by repetition, half an hour of recording read at a time (bounded memory)
-            rows = windowed_rows(trial, read, ref_topic, reps, max_gap_s, error_rows, interpolate_reference)
-            record = evaluation_record(rows, ref_name, BASELINE)
-        else:  # no repetitions: errors over each whole channel
-            trajs = {}
-            for m, topic in read.items():
-                s = trial.read(topic)
-                trajs[m] = (s.t_ns, s.values)
-            record = compute_evaluation(
-                trajs,
-                read_reference(trial, ref_topic),
-                reference_topic=ref_name,
-                max_gap_s=max_gap_s,
-                baseline=BASELINE,
-            )
+        # repetition by repetition, half an hour of recording read at a time, and only where the reference is
+        # valid (bounded memory); without repetitions (a record of an older imulog), one window over each channel
+        reps = info.get("repetitions") or [{"index": -1, "start_ns": -WHOLE_NS, "end_ns": WHOLE_NS}]
+        rows = windowed_rows(trial, read, ref_topic, reps, max_gap_s, error_rows, interpolate_reference)
+        record = evaluation_record(rows, ref_name, BASELINE)
         for m, meta in checks.items():  # the trajectory step's verdict on each method's assumptions
             if meta.get("assumptions"):
                 record["methods"][m]["assumptions"] = meta["assumptions"]
