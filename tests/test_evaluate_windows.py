@@ -224,3 +224,50 @@ def test_trajectories_are_read_only_where_the_reference_is(evaluated, whole_wind
     assert traj_reads
     for _, lo, hi in traj_reads:
         assert lo is not None and hi is not None and first <= lo and hi <= last + 1, "read beyond the reference"
+
+
+def test_foot_evaluation_reads_the_imu_only_around_its_cluster(shared_data, tmp_path, monkeypatch):
+    """Per-stride evaluation reads each foot IMU and its gravity-free acceleration over the cluster pose's span
+    (mapped to the device clock) and the margin, not the whole channel (issue 24: a week's IMU with an hour of
+    markers). The real gaitmap trial is within the default margin (read whole, as before); with the margin at 0
+    its IMU outlasts the markers by 16 ms, so the reads are bounded, and the strides are still evaluated."""
+    from click.testing import CliRunner
+
+    from imulog.cli import cli
+    from imulog.process.alignment_clock import reference_to_device
+    from imulog.steps import align
+    from imulog.steps.common import alignment_for, cluster_pose_topic
+    from imulog.steps.gait_evaluate import foot_span
+
+    root = shared_data / "gaitmap_foot"
+    path = tmp_path / "gait.mcap"
+    run = CliRunner()
+    res = run.invoke(cli, ["convert", str(root / "imu_sample.csv"), str(root / "mocap_sample.csv"), "-o", str(path)])
+    assert res.exit_code == 0, res.output
+    assert run.invoke(cli, ["process", "align", str(path), "--no-resample"]).exit_code == 0
+    feet = ("left_sensor", "right_sensor")
+    with TrialReader(path) as trial:
+        recs = {n: alignment_for(trial.metadata, f"/imu/{n}") for n in feet}
+        poses = {n: cluster_pose_topic(n, trial.topics(), trial.metadata) for n in feet}
+        assert all(foot_span(trial, f"/imu/{n}", poses[n], recs[n]) == (None, None) for n in feet)
+        monkeypatch.setattr(align, "MARGIN_S", 0.0)
+        spans = {n: foot_span(trial, f"/imu/{n}", poses[n], recs[n]) for n in feet}
+        for n in feet:
+            p = trial.channel(poses[n])
+            lo, hi = (int(v) for v in reference_to_device(np.array([p.start_ns, p.end_ns]), recs[n]))
+            assert spans[n] == (lo, hi + 1)
+            assert trial.channel(f"/imu/{n}").end_ns >= hi + 1  # the IMU outlasts its cluster
+    reads: list[tuple[str, int | None, int | None]] = []
+    original = TrialReader.read
+
+    def spy(self, topic, start_ns=None, end_ns=None):
+        reads.append((topic, start_ns, end_ns))
+        return original(self, topic, start_ns, end_ns)
+
+    monkeypatch.setattr(TrialReader, "read", spy)
+    _, record = run_evaluate(path, strides=True, force=True)
+    assert set(record["feet"]) == set(feet)
+    assert all(r["count"] >= 28 for r in record["feet"].values())
+    for n in feet:
+        got = [r[1:] for r in reads if r[0] in (f"/imu/{n}", f"/derived/acc_global/{n}")]
+        assert got and all(g == spans[n] for g in got), (n, got)
