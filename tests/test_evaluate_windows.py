@@ -271,3 +271,28 @@ def test_foot_evaluation_reads_the_imu_only_around_its_cluster(shared_data, tmp_
     for n in feet:
         got = [r[1:] for r in reads if r[0] in (f"/imu/{n}", f"/derived/acc_global/{n}")]
         assert got and all(g == spans[n] for g in got), (n, got)
+
+
+def test_walking_is_judged_where_the_reference_is(tmp_path):
+    """A long recording is judged walking or not on the hour around its optical reference's middle (issue 24):
+    a simulated week's wrist walks in the middle of the week but not in its lab hour, where it is evaluated. Here
+    a 2-h foot stands still for 40 min, then walks, with markers for the first 30 min: not a walking trial (its
+    middle hour, read before, walks); without the markers, the middle hour decides as before."""
+    from imulog.archive import write_trial
+    from imulog.model import ImuStream, MarkerStream, Recording
+    from imulog.steps.evaluate import judged_span, walking_of
+
+    t_ns, gyr = _walking_foot(2.0)
+    gyr = np.where((t_ns < 2400e9)[:, None], np.random.default_rng(1).normal(0.0, 0.01, gyr.shape), gyr)
+    acc = np.tile([0.0, 0.0, 9.81], (len(t_ns), 1))
+    imu = ImuStream(name="foot", t_ns=t_ns, acc=acc, gyr=gyr)
+    lab = t_ns < 1800e9
+    markers = MarkerStream("vicon", t_ns[lab], ["O"], np.zeros((int(lab.sum()), 1, 3)))
+    with_ref, without = tmp_path / "lab.mcap", tmp_path / "home.mcap"
+    write_trial(with_ref, Recording(imus=[imu], markers=[markers]))
+    write_trial(without, Recording(imus=[imu]))
+    assert walking_of(without) is not None  # the middle hour walks
+    with TrialReader(with_ref) as trial:
+        mid = (int(t_ns[lab][0]) + int(t_ns[lab][-1])) // 2  # the markers' middle (no alignment: same clock)
+        assert judged_span(trial, "/imu/foot", 3600.0) == (mid - int(1800e9), mid + int(1800e9))
+    assert walking_of(with_ref) is None
