@@ -28,6 +28,7 @@ from imulog.process.evaluation import (
 from imulog.process.trajectory_opt import BASELINE, METHODS
 
 STEP = "evaluate"
+WHOLE_NS = 2**62  # a window over a whole channel (from -WHOLE_NS to WHOLE_NS ns)
 POSE_TOPIC = "/derived/vicon/cluster_pose"
 
 
@@ -243,14 +244,15 @@ def alignment_note(record: dict[str, Any]) -> dict[str, Any]:
     return {k: record[k] for k in keys if k in record}
 
 
-WALK_SPAN_S = 3600.0  # a longer recording is judged on its middle hour (bounded memory; issue 24)
+WALK_SPAN_S = 3600.0  # a longer recording is judged on one hour: the reference's middle (bounded memory; issue 24)
 
 
 def walking_of(path, span_s: float = WALK_SPAN_S) -> dict[str, Any] | None:
     """Why the trial at ``path`` is a walking trial (evaluated per stride), else None
     (:func:`imulog.steps.gait_evaluate.walking_trial`). Each IMU's gyroscope is read whole when it spans at most
-    ``span_s`` seconds, else its middle ``span_s`` only (which holds the middle two minutes
-    :func:`imulog.process.gait.walking_period` looks at), so a week is not read whole to decide this."""
+    ``span_s`` seconds, else only ``span_s`` around the middle of the optical reference (:func:`judged_span`; it
+    holds the middle two minutes :func:`imulog.process.gait.walking_period` looks at), so a week is not read whole
+    to decide this, and a week at home with an hour in the lab is judged on the lab hour it is evaluated on."""
     from imulog.archive import TrialReader
     from imulog.steps.common import mean_rate_hz
     from imulog.steps.gait_evaluate import WALK_TASKS, walking_trial
@@ -267,10 +269,30 @@ def walking_of(path, span_s: float = WALK_SPAN_S) -> dict[str, Any] | None:
                 if a is None or b is None or (b - a) * 1e-9 <= span_s:
                     s = trial.read(topic)
                 else:
-                    s = trial.read(topic, (a + b) // 2 - int(span_s * 5e8), (a + b) // 2 + int(span_s * 5e8))
+                    s = trial.read(topic, *judged_span(trial, topic, span_s))
                 if s.gyr is not None and len(s.t_ns) > 10:
                     gyros[topic[5:]] = (s.gyr, mean_rate_hz(s.t_ns))
     return walking_trial(metadata, gyros)
+
+
+def judged_span(trial, imu_topic: str, span_s: float) -> tuple[int, int]:
+    """(start_ns, end_ns) on ``imu_topic``'s clock: ``span_s`` around the middle of the optical reference (the
+    ``/markers/*`` and ``/derived/vicon/cluster_pose*`` channels, through the IMU's alignment when it has one),
+    or around the IMU's middle when the trial has no reference."""
+    from imulog.process.alignment_clock import reference_to_device
+    from imulog.steps.common import alignment_for
+
+    refs = [trial.channel(t) for t in trial.topics() if t.startswith(("/markers/", POSE_TOPIC))]
+    refs = [c for c in refs if c.start_ns is not None and c.end_ns is not None]
+    if refs:
+        ends = np.array([min(c.start_ns for c in refs), max(c.end_ns for c in refs)], np.int64)
+        alignment = alignment_for(trial.metadata, imu_topic)
+        lo, hi = (int(v) for v in (reference_to_device(ends, alignment) if alignment else ends))
+    else:
+        info = trial.channel(imu_topic)
+        lo, hi = int(info.start_ns), int(info.end_ns)
+    mid = (lo + hi) // 2
+    return mid - int(span_s * 5e8), mid + int(span_s * 5e8)
 
 
 def run_evaluate(
@@ -376,22 +398,11 @@ def _evaluate_imu(path, imu, channels, baselines, record_name, step, methods, ma
         read = {m: channels[m] for m in chosen}
         if baseline_topic in topics:  # the de-drift baseline every method must beat
             read[BASELINE] = baseline_topic
-        reps = info.get("repetitions")
-        if reps:  # repetition by repetition, half an hour of recording read at a time (bounded memory)
-            rows = windowed_rows(trial, read, ref_topic, reps, max_gap_s, error_rows, interpolate_reference)
-            record = evaluation_record(rows, ref_name, BASELINE)
-        else:  # no repetitions: errors over each whole channel
-            trajs = {}
-            for m, topic in read.items():
-                s = trial.read(topic)
-                trajs[m] = (s.t_ns, s.values)
-            record = compute_evaluation(
-                trajs,
-                read_reference(trial, ref_topic),
-                reference_topic=ref_name,
-                max_gap_s=max_gap_s,
-                baseline=BASELINE,
-            )
+        # repetition by repetition, half an hour of recording read at a time, and only where the reference is
+        # valid (bounded memory); without repetitions (a record of an older imulog), one window over each channel
+        reps = info.get("repetitions") or [{"index": -1, "start_ns": -WHOLE_NS, "end_ns": WHOLE_NS}]
+        rows = windowed_rows(trial, read, ref_topic, reps, max_gap_s, error_rows, interpolate_reference)
+        record = evaluation_record(rows, ref_name, BASELINE)
         for m, meta in checks.items():  # the trajectory step's verdict on each method's assumptions
             if meta.get("assumptions"):
                 record["methods"][m]["assumptions"] = meta["assumptions"]

@@ -8,6 +8,12 @@ needs to know about samples outside the span: a trajectory sample exactly on the
 of the span, the previous valid one lying before the padding (then more than ``max_gap_s`` away: NaN in the
 whole computation). The first valid reference time of the whole channel, gathered in a first pass block by
 block, settles it.
+
+Only trajectory samples between the reference's first and last valid sample can have a valid reference (the
+interpolation is NaN outside them, and the errors use only samples with a valid reference), so each span's
+trajectories are read within that extent and spans outside it are not read at all: a week-long trajectory
+evaluated against an hour of markers reads about an hour, even when one repetition (or a trajectory without
+repetitions) spans the whole week.
 """
 
 from __future__ import annotations
@@ -34,14 +40,18 @@ def reference_part(stream: Any, source: str) -> tuple[np.ndarray, np.ndarray]:
     return stream.t_ns, stream.pos[:, labels.index(marker.split(":")[-1])]
 
 
-def first_valid_ns(trial: Any, source: str) -> int | None:
-    """Time of the reference's first finite sample (a pass over the channel, one chunk at a time)."""
+def valid_extent(trial: Any, source: str) -> tuple[int, int] | None:
+    """Times (ns) of the reference's first and last finite samples, None when it has none (a pass over the
+    channel, one chunk at a time)."""
+    first = last = None
     for block in trial.iter_blocks(source.partition(":")[0]):
         t, pos = reference_part(block, source)
         ok = np.flatnonzero(np.all(np.isfinite(np.asarray(pos, np.float64)), axis=1))
         if len(ok):
-            return int(np.asarray(t, np.int64)[ok[0]])
-    return None
+            t = np.asarray(t, np.int64)
+            first = int(t[ok[0]]) if first is None else first
+            last = int(t[ok[-1]]) if last is None else max(last, int(t[ok[-1]]))
+    return None if first is None else (first, last)
 
 
 def spans_of(windows: list[dict[str, Any]], span_s: float = SPAN_S) -> Iterator[list[dict[str, Any]]]:
@@ -73,12 +83,17 @@ def windowed_rows(
     ``rows_of(t_ns, pos, ref, spans)`` and ``interpolate(t_ref, pos_ref, t_ns, max_gap_s)`` are the whole
     computation's functions (:mod:`imulog.steps.evaluate`)."""
     pad = int(max(PAD_S, 2.0 * max_gap_s) * 1e9)
-    first = first_valid_ns(trial, source)
-    ref_topic = source.partition(":")[0]
     out: dict[str, list[dict[str, Any]]] = {m: [] for m in channels}
+    extent = valid_extent(trial, source)
+    if extent is None:  # no valid reference: no rows (as in the whole computation)
+        return out
+    first, last = extent
+    ref_topic = source.partition(":")[0]
     for group in spans_of(windows, span_s):
-        lo = min(int(w["start_ns"]) for w in group)
-        hi = max(int(w["end_ns"]) for w in group)
+        lo = max(first, min(int(w["start_ns"]) for w in group))  # only where the reference can be valid
+        hi = min(last, max(int(w["end_ns"]) for w in group))
+        if lo > hi:
+            continue  # these repetitions lie outside the reference: no rows, nothing read
         ref_t, ref_pos = reference_part(trial.read(ref_topic, lo - pad, hi + pad + 1), source)
         ref_t, ref_pos = np.asarray(ref_t, np.int64), np.asarray(ref_pos, np.float64)
         ok = np.all(np.isfinite(ref_pos), axis=1)
@@ -87,7 +102,7 @@ def windowed_rows(
             s = trial.read(topic, lo, hi + 1)
             t_ns = np.asarray(s.t_ns, np.int64)
             ref = interpolate(ref_t, ref_pos, t_ns, max_gap_s)
-            if head is not None and first is not None and first < head and head >= lo:
+            if head is not None and first < head and head >= lo:
                 ref[t_ns == head] = np.nan  # its previous valid sample lies before the padding: > max_gap_s away
             out[method] += rows_of(t_ns, np.asarray(s.values, np.float64), ref, group)
     return out

@@ -110,6 +110,25 @@ def evaluate_foot(imu, alignment: dict[str, Any], pose, acc_global: tuple[np.nda
     return out
 
 
+def foot_span(trial, imu_topic: str, pose_topic: str, alignment: dict[str, Any]) -> tuple[int | None, int | None]:
+    """(start_ns, end_ns) on the device clock of the IMU samples a foot's evaluation reads: the cluster pose's
+    span mapped through the alignment, with :data:`imulog.steps.align.MARGIN_S` either side; (None, None), the
+    whole channel, when the IMU lies within that (a lab trial, read as before) or a span is unknown. A week's
+    foot with an hour of markers is read over that hour only (bounded memory, issue 24)."""
+    from imulog.process.alignment_clock import reference_to_device
+    from imulog.steps.align import MARGIN_S
+
+    pose, imu = trial.channel(pose_topic), trial.channel(imu_topic)
+    if None in (pose.start_ns, pose.end_ns, imu.start_ns, imu.end_ns):
+        return None, None
+    margin = int(MARGIN_S * 1e9)
+    lo, hi = (int(v) for v in reference_to_device(np.array([pose.start_ns, pose.end_ns], np.int64), alignment))
+    lo, hi = lo - margin, hi + margin
+    if lo <= int(imu.start_ns) and int(imu.end_ns) < hi:
+        return None, None
+    return lo, hi + 1
+
+
 def compute_gait_evaluation(trial, names: list[str], walking: dict[str, Any]) -> dict[str, Any]:
     """The ``imulog.evaluation`` record of a walking trial (see the module docstring)."""
     from imulog.steps.common import alignment_for, cluster_pose_topic
@@ -126,12 +145,17 @@ def compute_gait_evaluation(trial, names: list[str], walking: dict[str, Any]) ->
             skipped[name] = "no cluster pose from the align step"
             continue
         a_topic = f"/derived/acc_global/{name}"
+        lo, hi = foot_span(trial, f"/imu/{name}", topic, rec)
         acc_global = None
         if a_topic in topics:
-            s = trial.read(a_topic)
+            s = trial.read(a_topic, lo, hi)
             acc_global = (s.t_ns, s.values)
+        imu = trial.read(f"/imu/{name}", lo, hi)
+        if len(imu.t_ns) < 2:
+            skipped[name] = "no IMU samples within its cluster's span"
+            continue
         try:
-            r = evaluate_foot(trial.read(f"/imu/{name}"), rec, trial.read(topic), acc_global)
+            r = evaluate_foot(imu, rec, trial.read(topic), acc_global)
         except ValueError as exc:
             skipped[name] = str(exc)
             continue
