@@ -306,7 +306,10 @@ _AXIS_RGBA = ((230, 40, 40, 255), (40, 190, 40, 255), (40, 90, 230, 255))  # x r
 
 
 def _frame_samples(
-    stream: SignalStream | PoseStream, rotation: list[float] | None, origin: Origin | None, keep: np.ndarray | None
+    stream: SignalStream | PoseStream,
+    rotation: list[float] | None,
+    origin: Origin | None,
+    keep: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Kept indices (``keep``, default :func:`decimation`), orientations (w, x, y, z) and positions of a frame twin."""
     keep = decimation(stream.t_ns) if keep is None else keep
