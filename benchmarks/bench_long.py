@@ -23,7 +23,8 @@ samples as ``upper_arm`` and, axes permuted, as ``forearm``, streamed into one a
 ``align`` and ``evaluate`` need an optical reference: the same days are written a third time with a marker
 cluster that turns with the wrist for the first hour (a lab session before the week at home), and the steps
 they need first (for evaluate: align, orientation, phases, trajectory) run unmeasured, their time printed as
-``setup``; align runs on the trial before its orientation (aligning an oriented week is not yet bounded).
+``setup``; ``align`` runs on the trial before its orientation, ``align_oriented`` after it (the append then
+rewrites the orientation's viewer twins on the new axis, block by block: :mod:`imulog.archive.twin_blocks`).
 Every command runs under a cap on its private memory (``--limit-gb``, default 6 GB) so that one that does not
 fit fails (reported, the others still run) instead of taking the shared machine's memory.
 
@@ -59,6 +60,8 @@ COMMANDS = [
     ("export", ["export", "{mcap}", "--topic", "{imu_topic}", "-o", "{parquet}", "--overwrite"]),
     # the wrist with a marker cluster (written by reference_trial from the same .cwa)
     ("align", ["process", "align", "{ref}", "--force"]),
+    # align on a trial whose orientation exists: the append rewrites the orientation's viewer twins (block by block)
+    ("align_oriented", ["process", "align", "{ref}", "--force"]),
     ("evaluate", ["evaluate", "{ref}", "--force"]),
     # the wrist trial's remaining steps (after the others: orientation would read a calibrated channel)
     ("epochs", ["process", "epochs", "{mcap}", "--force"]),
@@ -79,8 +82,7 @@ SETUP = {
         ["process", "orientation", "{arm}", "--imu", "upper_arm"],
         ["process", "orientation", "{arm}", "--imu", "forearm"],
     ],
-    # align before orientation: aligning an oriented trial rewrites the orientation's viewer twin from the whole
-    # channel (imulog.archive.writer.plan_append), 4.6 GB on the week: not yet bounded (docs/long_recordings.md)
+    "align_oriented": [["process", "orientation", "{ref}"]],
     "evaluate": [
         ["process", "align", "{ref}"],
         ["process", "orientation", "{ref}"],
@@ -89,7 +91,7 @@ SETUP = {
     ],
 }
 TWO_IMU = ("orientation2", "kinematics", "heading")
-REFERENCE = ("align", "evaluate")
+REFERENCE = ("align", "align_oriented", "evaluate")
 MAX_GROWTH = 1.15  # issue 24: peak memory from the shortest to the longest recording
 
 

@@ -266,6 +266,18 @@ class Recording:
         return merged
 
 
+def concat_samples(parts: list[Any]) -> Any:
+    """Consecutive pieces of one stream as one: per-sample arrays joined in order, the rest from the last piece."""
+    last = parts[-1]
+    fields = {}
+    for f in dataclasses.fields(last):
+        value = getattr(last, f.name)
+        if isinstance(value, np.ndarray) and value.ndim >= 1 and len(value) == len(last.t_ns):
+            value = np.concatenate([getattr(p, f.name) for p in parts])
+        fields[f.name] = value
+    return type(last)(**fields)
+
+
 def take_samples(stream: Any, index: np.ndarray) -> Any:
     """The samples ``index`` of a stream with per-sample ``t_ns`` (every per-sample array indexed; the same type,
     names and metadata), e.g. to decimate a channel or keep part of it."""

@@ -126,13 +126,18 @@ def decimation(t_ns: np.ndarray, rate_hz: float = TWIN_RATE_HZ, max_messages: in
     n = len(t_ns)
     if n < 2:
         return np.arange(n)
-    dt = np.diff(t_ns)
-    median = float(np.median(dt)) if len(dt) else 0.0
-    src_rate = 1e9 / median if median > 0 else rate_hz
+    return np.arange(0, n, decimation_step(n, float(np.median(np.diff(t_ns))), rate_hz, max_messages))
+
+
+def decimation_step(
+    n: int, median_dt_ns: float, rate_hz: float = TWIN_RATE_HZ, max_messages: int = MAX_TWIN_MESSAGES
+) -> int:
+    """The ``k`` of :func:`decimation` for ``n`` samples whose median sampling interval is ``median_dt_ns`` (ns)."""
+    src_rate = 1e9 / median_dt_ns if median_dt_ns > 0 else rate_hz
     k = max(1, math.ceil(src_rate / rate_hz - 1e-9), math.ceil(n / max_messages))
     if n / src_rate > OVERVIEW_AFTER_S:  # its length in samples over its rate (not the span: clock jumps)
         k = max(k, overview_step(src_rate))
-    return np.arange(0, n, k)
+    return k
 
 
 def overview_step(rate_hz: float) -> int:
@@ -264,15 +269,17 @@ def frame_twin(
     clock: str,
     rotation: list[float] | None = None,
     origin: Origin | None = None,
+    keep: np.ndarray | None = None,
 ) -> Twin:
     """``foxglove.FrameTransform`` parent -> child from a pose stream or an orientation (qw..qz) stream.
 
     ``rotation`` (w, x, y, z) is applied in front of every orientation (e.g. the alignment's global-to-world);
-    ``origin`` places an orientation stream's frame (else at the parent's origin).
+    ``origin`` places an orientation stream's frame (else at the parent's origin); ``keep``: the samples the
+    twin shows (default :func:`decimation`).
     """
     from imulog.archive._generated.foxglove import FrameTransform_pb2
 
-    keep, q, p = _frame_samples(stream, rotation, origin)
+    keep, q, p = _frame_samples(stream, rotation, origin, keep)
     twin = _protobuf_twin(
         twin_topic(stream.topic), "foxglove.FrameTransform", _meta(stream, stream.topic, clock, keep, stream.t_ns)
     )
@@ -299,10 +306,13 @@ _AXIS_RGBA = ((230, 40, 40, 255), (40, 190, 40, 255), (40, 90, 230, 255))  # x r
 
 
 def _frame_samples(
-    stream: SignalStream | PoseStream, rotation: list[float] | None, origin: Origin | None
+    stream: SignalStream | PoseStream,
+    rotation: list[float] | None,
+    origin: Origin | None,
+    keep: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Kept indices, orientations (w, x, y, z) and positions of a frame twin."""
-    keep = decimation(stream.t_ns)
+    """Kept indices (``keep``, default :func:`decimation`), orientations (w, x, y, z) and positions of a frame twin."""
+    keep = decimation(stream.t_ns) if keep is None else keep
     if isinstance(stream, PoseStream):
         q, p = stream.orientation[keep], stream.position[keep]
     else:
@@ -318,7 +328,14 @@ def _frame_samples(
     return keep, q, p
 
 
-def axes_twin(stream: SignalStream, log_map: LogMap, *, clock: str, rate_hz: float = AXES_RATE_HZ) -> Twin:
+def axes_twin(
+    stream: SignalStream,
+    log_map: LogMap,
+    *,
+    clock: str,
+    rate_hz: float = AXES_RATE_HZ,
+    keep: np.ndarray | None = None,
+) -> Twin:
     """The IMU frame as coloured points along its axes (``foxglove.PointCloud``, x red, y green, z blue).
 
     The points are constant, in the IMU's own frame (``frame_id`` = the IMU name): the ``FrameTransform``
@@ -328,7 +345,7 @@ def axes_twin(stream: SignalStream, log_map: LogMap, *, clock: str, rate_hz: flo
     """
     from imulog.archive._generated.foxglove import PackedElementField_pb2, PointCloud_pb2
 
-    keep = decimation(stream.t_ns, rate_hz)
+    keep = decimation(stream.t_ns, rate_hz) if keep is None else keep
     name = stream.topic.rsplit("/", 1)[-1]
     twin = _protobuf_twin(
         f"{TWIN_PREFIX}/axes/{name}", "foxglove.PointCloud", _meta(stream, stream.topic, clock, keep, stream.t_ns)
@@ -442,7 +459,6 @@ def twins_for(
         return [twin] if twin is not None else []
     if isinstance(stream, MarkerStream):
         return [marker_twin(stream, log_map)] if len(stream) else []
-    name = stream.topic.rstrip("/").rsplit("/", 1)[-1]
     if isinstance(stream, PoseStream):
         # a frame name unique in the trial (kinematics' "wrist" joint centre is not the IMU frame "wrist")
         child = "_".join(p for p in stream.topic.strip("/").split("/") if p != "derived")
@@ -452,12 +468,7 @@ def twins_for(
         and stream.columns[:4] == ORIENTATION_COLUMNS
         and stream.topic.startswith("/derived/orientation/")
     ):
-        alignment = (metadata or {}).get("imulog.alignment") or {}
-        rotation = alignment.get("rotation_global_to_world")
-        return [
-            frame_twin(stream, log_map, parent="world", child=name, clock=clock, rotation=rotation, origin=origin),
-            axes_twin(stream, log_map, clock=clock),
-        ]
+        return orientation_twins(stream, log_map, clock, metadata, origin)
     if isinstance(stream, Intervals) and len(stream):
         return [log_twin(stream, log_map, clock)]
     parts = stream.topic.strip("/").split("/")
@@ -473,3 +484,29 @@ def twins_for(
         repetitions = record.get("repetitions")
         return [trajectory_twin(stream, log_map, clock, repetitions if isinstance(repetitions, list) else None)]
     return []
+
+
+def orientation_twins(
+    stream: SignalStream,
+    log_map: LogMap,
+    clock: str,
+    metadata: Mapping[str, Mapping[str, Any]] | None = None,
+    origin: Origin | None = None,
+    keeps: tuple[np.ndarray, np.ndarray] | None = None,
+) -> list[Twin]:
+    """The frame (world -> IMU) and axes twins of an orientation stream (``/derived/orientation/{imu}``).
+
+    ``keeps``: the samples of ``stream`` each twin shows (frame, axes); default :func:`decimation` at
+    :data:`TWIN_RATE_HZ` and :data:`AXES_RATE_HZ` (:mod:`imulog.archive.twin_blocks` passes the samples it
+    kept of a long channel read block by block).
+    """
+    name = stream.topic.rstrip("/").rsplit("/", 1)[-1]
+    alignment = (metadata or {}).get("imulog.alignment") or {}
+    rotation = alignment.get("rotation_global_to_world")
+    frame_keep, axes_keep = keeps if keeps is not None else (None, None)
+    return [
+        frame_twin(
+            stream, log_map, parent="world", child=name, clock=clock, rotation=rotation, origin=origin, keep=frame_keep
+        ),
+        axes_twin(stream, log_map, clock=clock, keep=axes_keep),
+    ]

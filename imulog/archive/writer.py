@@ -20,8 +20,8 @@ from imulog.archive.hashing import payload_hash, rows_hash  # noqa: F401  (re-ex
 from imulog.archive.metadata import encode_record
 from imulog.archive.packing import pack
 from imulog.archive.timeline import IDENTITY, TIMELINE_RECORD, LogMap, TimelineError, TrialAxis, timeline_record
-from imulog.archive.twins import Origin, Twin, twin_topic, twins_for
-from imulog.model import Recording, Stream
+from imulog.archive.twins import ORIENTATION_COLUMNS, Origin, Twin, orientation_twins, twin_topic, twins_for
+from imulog.model import Recording, SignalStream, Stream
 from imulog.workers import in_background
 
 LIBRARY = f"imulog {__version__}"
@@ -112,6 +112,25 @@ def _imu_origin(trial: Any, streams: list[Stream], records: dict[str, Any]) -> O
     return np.asarray(reference_to_device(pose.t_ns, dict(alignment)), np.int64), pose.position
 
 
+def _orientation_retwin(
+    trial: Any, info: Any, axis: TrialAxis, records: dict[str, Any], origin: Origin | None
+) -> list[Twin]:
+    """The twins of a stored orientation channel on ``axis``, read block by block (:mod:`.twin_blocks`):
+    a week's channel is never decoded whole (issue 24)."""
+    if not WRITE_TWINS:
+        return []
+    from imulog.archive.twin_blocks import kept_samples
+
+    kept = kept_samples(lambda: trial.iter_blocks(info.topic), info.sample_count)
+    if kept is None:
+        return []
+    stream, (frame_keep, axes_keep) = kept
+    if not isinstance(stream, SignalStream) or stream.columns[:4] != ORIENTATION_COLUMNS:
+        return []
+    clock = axis.clock_of(info.topic)
+    return orientation_twins(stream, axis.map_for(info.topic), clock, records, origin, (frame_keep, axes_keep))
+
+
 def plan_append(
     path: Path, streams: list[Stream], metadata: dict[str, dict[str, Any]], remove: Iterable[str] = ()
 ) -> tuple[TrialAxis, list[Twin], list[str]]:
@@ -137,7 +156,9 @@ def plan_append(
                 if topic in new or info.metadata.get("twin_of") or info.schema_name not in codec.SCHEMA_KIND:
                     continue
                 retwin = axis.clock_of(topic, info.metadata) == "reference" and not topic.startswith("/derived/")
-                if retwin and info.kind in ("markers", "intervals") or topic.startswith("/derived/orientation/"):
+                if topic.startswith("/derived/orientation/"):
+                    twins.extend(_orientation_retwin(trial, info, axis, records, origin))
+                elif retwin and info.kind in ("markers", "intervals"):
                     twins.extend(stream_twins(trial.read(topic), axis, records, origin))
         dropped = [twin_topic(t) for t in remove if twin_topic(t) in channels]
     return axis, twins, dropped

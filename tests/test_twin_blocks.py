@@ -1,0 +1,95 @@
+"""Issue 24: an append that changes the alignment rebuilds the orientation twins block by block, equal to the
+twins of the whole channel, without decoding the whole orientation channel."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from click.testing import CliRunner
+
+from imulog.archive import TrialReader, append_derived, write_trial
+from imulog.archive import twin_blocks as tb
+from imulog.archive.timeline import TrialAxis
+from imulog.archive.twins import AXES_RATE_HZ, OVERVIEW_AFTER_S, TWIN_RATE_HZ, decimation
+from imulog.archive.writer import _imu_origin, stream_twins
+from imulog.cli import cli
+from imulog.model import SignalStream
+from imulog.simulate import simulate
+
+
+def _pieces(stream: SignalStream, cuts: list[int]):
+    edges = [0, *cuts, len(stream.t_ns)]
+    return lambda: iter(
+        dataclasses.replace(stream, t_ns=stream.t_ns[a:b], values=stream.values[a:b])
+        for a, b in zip(edges[:-1], edges[1:], strict=True)
+    )
+
+
+def _orientation(n: int, rate_hz: float, seed: int = 1) -> SignalStream:
+    rng = np.random.default_rng(seed)
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    t = np.round(np.arange(n) * 1e9 / rate_hz + rng.normal(0, 2e5, n)).astype(np.int64)  # jittered clock
+    return SignalStream("/derived/orientation/wrist", t, ["qw", "qx", "qy", "qz"], ["1"] * 4, q, "wrist")
+
+
+def test_kept_samples_are_the_whole_channels_decimation(monkeypatch):
+    """Uneven blocks keep exactly the samples ``decimation`` keeps of the whole channel, for both twin rates."""
+    for n, rate, cuts in ((5_000, 100.0, [1, 7, 1_234, 4_999]), (2_000, 60.0, [])):
+        whole = _orientation(n, rate)
+        got = tb.kept_samples(_pieces(whole, cuts), 0)
+        assert got is not None
+        stream, keeps = got
+        for r, keep in zip((TWIN_RATE_HZ, AXES_RATE_HZ), keeps, strict=True):
+            want = decimation(whole.t_ns, r)
+            np.testing.assert_array_equal(stream.t_ns[keep], whole.t_ns[want])
+            np.testing.assert_array_equal(stream.values[keep], whole.values[want])
+    # a channel longer than the overview threshold, its median interval from the first samples only
+    monkeypatch.setattr(tb, "MEDIAN_SAMPLES", 700)
+    rate = 1.23  # past OVERVIEW_AFTER_S with few samples (k = ceil(12.3): away from a rounding edge)
+    n = int(OVERVIEW_AFTER_S * rate) + 500
+    whole = _orientation(n, rate, seed=2)
+    stream, keeps = tb.kept_samples(_pieces(whole, list(range(300, n, 300))), n)
+    assert len(stream.t_ns) < n / 5
+    np.testing.assert_array_equal(stream.t_ns[keeps[0]], whole.t_ns[decimation(whole.t_ns)])
+    assert tb.kept_samples(lambda: iter([]), 0) is None
+
+
+def test_alignment_append_never_reads_the_whole_orientation(tmp_path, monkeypatch):
+    """Appending a new alignment rewrites the orientation twins from blocks, equal to today's whole-channel twins."""
+    sim = simulate("r2g", seed=4, repetitions=4)
+    path = write_trial(tmp_path / "trial.mcap", sim.recording)
+    runner = CliRunner()
+    for args in (["process", "orientation", str(path)], ["process", "align", str(path), "--window", "60"]):
+        result = runner.invoke(cli, args)
+        assert result.exit_code == 0, result.output + repr(result.exception)
+    with TrialReader(path) as trial:
+        record = dict(trial.metadata["imulog.alignment"])
+        topics = [t for t in trial.topics() if t.startswith("/derived/orientation/")]
+    assert topics
+    record["offset_ns"] = int(record["offset_ns"]) + 250_000_000  # a changed clock map: the twins' log times move
+    original = TrialReader.read
+
+    def no_whole_orientation(self, topic, start_ns=None, end_ns=None):
+        assert not topic.startswith("/derived/orientation/"), f"whole-channel read of {topic}"
+        return original(self, topic, start_ns, end_ns)
+
+    monkeypatch.setattr(TrialReader, "read", no_whole_orientation)
+    monkeypatch.setattr(tb, "MEDIAN_SAMPLES", 1_000)  # and the median interval from the first samples only
+    append_derived(path, [], run={"step": "test"}, metadata={"imulog.alignment": record})
+    monkeypatch.setattr(TrialReader, "read", original)
+    with TrialReader(path) as trial:
+        records = trial.metadata
+        assert records["imulog.alignment"]["offset_ns"] == record["offset_ns"]
+        channels = {c.topic: c for c in trial.channels}
+        imus = {t.split("/")[2] for t in channels if t.startswith("/imu/") and t.count("/") == 2}
+        axis = TrialAxis(records, imus)
+        origin = _imu_origin(trial, [], records)
+        for topic in topics:
+            want = stream_twins(trial.read(topic), axis, records, origin)  # today's: the whole channel
+            assert len(want) == 2
+            for twin in want:
+                stored = trial.messages(twin.topic)
+                assert [bytes(p) for p in stored] == twin.payload_list(), twin.topic
+                assert channels[twin.topic].metadata["sample_count"] == twin.metadata["sample_count"]
