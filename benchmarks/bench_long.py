@@ -348,7 +348,8 @@ def main(argv: list[str] | None = None) -> int:
                     for k in ("mcap", "arm", "ref")
                     if a == f"{{{k}}}"
                 }
-                if "mcap" in uses and not paths["mcap"].exists():  # the wrist's steps without convert asked
+                # the wrist's steps without convert asked (convert itself is measured writing it)
+                if "mcap" in uses and name != "convert" and not paths["mcap"].exists():
                     subprocess.run([*imulog, "convert", str(paths["cwa"]), "-o", str(paths["mcap"])], check=True)
                 if "arm" in uses and not paths["arm"].exists():
                     two_imu_trial(paths["cwa"], paths["arm"])
