@@ -174,6 +174,35 @@ def zigzag_encode(values):  # pragma: no cover - compiled
     return out[:k], lengths
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _rounded_count(x, j, shift, divisor, scale, offset, use):  # pragma: no cover - compiled
+    """The inverse formula of column ``j`` in the order of :func:`imulog.archive.numbers._counts_of`, rounded
+    (float64; ``use``: which of the 4 parameters apply)."""
+    c = x - offset[j] if use[3] else x
+    if use[2]:
+        c = c / scale[j]
+    if use[1]:
+        c = c * divisor[j]
+    if use[0]:
+        c = c - shift[j]
+    return np.rint(c)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _value_of(c, j, shift, divisor, scale, offset, use):  # pragma: no cover - compiled
+    """The forward formula of column ``j`` on the float64 count ``c``, in the order of
+    :func:`imulog.archive.numbers.apply` (no fast-math: the same bits)."""
+    if use[0]:
+        c = c + shift[j]
+    if use[1]:
+        c = c / divisor[j]
+    if use[2]:
+        c = c * scale[j]
+    if use[3]:
+        c = c + offset[j]
+    return c
+
+
 @njit(cache=True, nogil=True)
 def counts_check(values, shift, divisor, scale, offset, use):  # pragma: no cover - compiled
     """Counts of (N, C) ``values`` under the parameters (``use``: which of the 4 apply) and rows given back.
@@ -187,26 +216,10 @@ def counts_check(values, shift, divisor, scale, offset, use):  # pragma: no cove
     for i in range(n):
         for j in range(w):
             x = values[i, j]
-            c = x - offset[j] if use[3] else x
-            if use[2]:
-                c = c / scale[j]
-            if use[1]:
-                c = c * divisor[j]
-            if use[0]:
-                c = c - shift[j]
-            c = np.rint(c)
+            c = _rounded_count(x, j, shift, divisor, scale, offset, use)
             if not abs(c) < 2147483648.0:
                 c = 0.0
-            back = c
-            if use[0]:
-                back = back + shift[j]
-            if use[1]:
-                back = back / divisor[j]
-            if use[2]:
-                back = back * scale[j]
-            if use[3]:
-                back = back + offset[j]
-            if back == x:
+            if _value_of(c, j, shift, divisor, scale, offset, use) == x:
                 counts[i, j] = np.int32(c)
             else:
                 ok[i] = False
@@ -224,14 +237,7 @@ def quantize_counts(values, shift, divisor, scale, offset, use):  # pragma: no c
     for i in range(n):
         for j in range(w):
             x = values[i, j]
-            c = x - offset[j] if use[3] else x
-            if use[2]:
-                c = c / scale[j]
-            if use[1]:
-                c = c * divisor[j]
-            if use[0]:
-                c = c - shift[j]
-            c = np.rint(c)
+            c = _rounded_count(x, j, shift, divisor, scale, offset, use)
             if abs(c) < 2147483648.0:  # NaN and inf fail too
                 counts[i, j] = np.int32(c)
             else:
@@ -250,16 +256,7 @@ def apply_counts(counts, shift, divisor, scale, offset, use):  # pragma: no cove
     out = np.empty((n, w), np.float64)
     for i in range(n):
         for j in range(w):
-            v = np.float64(counts[i, j])
-            if use[0]:
-                v = v + shift[j]
-            if use[1]:
-                v = v / divisor[j]
-            if use[2]:
-                v = v * scale[j]
-            if use[3]:
-                v = v + offset[j]
-            out[i, j] = v
+            out[i, j] = _value_of(np.float64(counts[i, j]), j, shift, divisor, scale, offset, use)
     return out
 
 
