@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from read_spy import record_reads
 
 from imulog.archive import TrialReader, write_trial
 from imulog.cli import cli
@@ -139,14 +140,7 @@ def test_align_reads_the_imu_only_around_the_markers(tmp_path, monkeypatch):
     with monkeypatch.context() as patch:  # the previous reading: every IMU sample
         patch.setattr("imulog.steps.align.imu_span", lambda *a: (None, None))
         run_align(whole)
-    reads: list[tuple[str, int | None, int | None]] = []
-    original = TrialReader.read
-
-    def spy(self, topic, start_ns=None, end_ns=None):
-        reads.append((topic, start_ns, end_ns))
-        return original(self, topic, start_ns, end_ns)
-
-    monkeypatch.setattr(TrialReader, "read", spy)
+    reads = record_reads(monkeypatch)
     run_align(long_)
     imu_reads = [r for r in reads if r[0] == "/imu/wrist"]
     assert imu_reads and all(r[2] is not None and r[2] < t_more[-1] for r in imu_reads), imu_reads

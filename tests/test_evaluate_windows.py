@@ -7,6 +7,7 @@ import shutil
 
 import numpy as np
 import pytest
+from read_spy import record_reads
 from test_trajectory_steps import _write_with_inputs
 
 from imulog.archive import TrialReader
@@ -146,14 +147,7 @@ def test_walking_of_a_long_trial_reads_its_middle_hour_not_the_whole_channel(tmp
     whole = walking_trial({}, {"foot": (gyr, 100.0)})
     assert whole is not None and whole["period_s"] == pytest.approx(1.2, abs=0.05)
 
-    reads: list[tuple[str, int | None, int | None]] = []
-    original = TrialReader.read
-
-    def spy(self, topic, start_ns=None, end_ns=None):
-        reads.append((topic, start_ns, end_ns))
-        return original(self, topic, start_ns, end_ns)
-
-    monkeypatch.setattr(TrialReader, "read", spy)
+    reads = record_reads(monkeypatch)
     got = walking_of(path)
     assert got == whole
     imu_reads = [r for r in reads if r[0] == "/imu/foot"]
@@ -257,14 +251,7 @@ def test_foot_evaluation_reads_the_imu_only_around_its_cluster(shared_data, tmp_
             lo, hi = (int(v) for v in reference_to_device(np.array([p.start_ns, p.end_ns]), recs[n]))
             assert spans[n] == (lo, hi + 1)
             assert trial.channel(f"/imu/{n}").end_ns >= hi + 1  # the IMU outlasts its cluster
-    reads: list[tuple[str, int | None, int | None]] = []
-    original = TrialReader.read
-
-    def spy(self, topic, start_ns=None, end_ns=None):
-        reads.append((topic, start_ns, end_ns))
-        return original(self, topic, start_ns, end_ns)
-
-    monkeypatch.setattr(TrialReader, "read", spy)
+    reads = record_reads(monkeypatch)
     _, record = run_evaluate(path, strides=True, force=True)
     assert set(record["feet"]) == set(feet)
     assert all(r["count"] >= 28 for r in record["feet"].values())

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from read_spy import record_reads
 
 from imulog.archive import TrialReader, write_trial
 from imulog.process import heading as hd
@@ -84,21 +85,15 @@ def test_without_a_field_a_pose_or_device_orientations_no_samples_are_read(orien
     path = write_trial(tmp_path / "nomag.mcap", dataclasses.replace(sim.recording, imus=imus))
     for imu in ("upper_arm", "forearm"):
         run_orientation(path, imu=imu)
-    reads: list[str] = []
-    original = TrialReader.read
-
-    def spy(self, topic, start_ns=None, end_ns=None):
-        reads.append(topic)
-        return original(self, topic, start_ns, end_ns)
-
-    monkeypatch.setattr(TrialReader, "read", spy)
+    spans = record_reads(monkeypatch)
     _, rec = run_heading(path, imus=["upper_arm", "forearm"])
+    reads = [topic for topic, _, _ in spans]
     assert rec["source"] == "none"
     assert [r.split(":")[0] for r in rec["rejected"]] == ["magnetometer", "optical", "static pose", "device"]
     assert rec["rejected"][0] == "magnetometer: not every IMU has one"
     assert not [t for t in reads if t.startswith(("/imu/", "/derived/orientation/"))], reads
     _, pose = run_heading(path, imus=["upper_arm", "forearm"], static_s=(0.5, 2.5))
-    assert pose["source"] == "static pose" and "/derived/orientation/forearm" in reads
+    assert pose["source"] == "static pose" and "/derived/orientation/forearm" in [topic for topic, _, _ in spans]
 
 
 def test_corrected_headings_agree_with_the_truth(oriented_setup, tmp_path):
