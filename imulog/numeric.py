@@ -33,8 +33,7 @@ def median_int(a: np.ndarray) -> float:
     if hi - lo >= min(4 * n, 1 << 22):  # counting would cost more than sorting (or too much memory)
         return float(np.median(a))
     cum = np.cumsum(np.bincount((a - lo).astype(np.intp, copy=False), minlength=hi - lo + 1))
-    below, above = np.searchsorted(cum, [(n - 1) // 2, n // 2], side="right")  # the middle value(s), sorted
-    return (float(lo + int(below)) + float(lo + int(above))) / 2.0
+    return lo + _middle(cum)
 
 
 def moving_mean(x: np.ndarray, w: int) -> np.ndarray:
@@ -71,11 +70,17 @@ def add_counts(counts: dict[int, int], values: np.ndarray) -> None:
 
 def median_of_counts(counts: dict[int, int]) -> float | None:
     """``np.median`` of the integers that ``counts`` (value -> occurrences) describes, exactly (None when empty)."""
-    n = sum(counts.values())
-    if n == 0:
+    if sum(counts.values()) == 0:
         return None
     keys = sorted(counts)
-    cum = np.cumsum([counts[k] for k in keys])
-    lo = keys[int(np.searchsorted(cum, (n - 1) // 2, side="right"))]
-    hi = keys[int(np.searchsorted(cum, n // 2, side="right"))]
-    return float(np.mean(np.array([lo, hi], dtype=np.int64)))
+    lo = keys[0]
+    return lo + _middle(np.cumsum([counts[k] for k in keys]), np.asarray(keys, dtype=np.int64) - lo)
+
+
+def _middle(cum: np.ndarray, offsets: np.ndarray | None = None) -> float:
+    """The median's offset from the smallest value, given the cumulative counts ``cum`` of the sorted distinct
+    values at ``offsets`` from it (default: every integer from 0): the mean of the middle value(s)."""
+    below, above = np.searchsorted(cum, [(int(cum[-1]) - 1) // 2, int(cum[-1]) // 2], side="right")
+    if offsets is not None:
+        below, above = offsets[below], offsets[above]
+    return (float(below) + float(above)) / 2.0
