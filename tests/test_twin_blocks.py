@@ -1,5 +1,5 @@
-"""Issue 24: an append that changes the alignment rebuilds the orientation twins block by block, equal to the
-twins of the whole channel, without decoding the whole orientation channel."""
+"""Issue 24: an append that changes the alignment rebuilds the orientation, marker and event twins block by block,
+equal to the twins of the whole channels, without decoding a whole channel."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import dataclasses
 
 import numpy as np
 from click.testing import CliRunner
+from read_spy import record_reads
 
 from imulog.archive import TrialReader, append_derived, write_trial
 from imulog.archive import twin_blocks as tb
@@ -14,7 +15,7 @@ from imulog.archive.timeline import TrialAxis
 from imulog.archive.twins import AXES_RATE_HZ, OVERVIEW_AFTER_S, TWIN_RATE_HZ, decimation
 from imulog.archive.writer import _imu_origin, stream_twins
 from imulog.cli import cli
-from imulog.model import SignalStream
+from imulog.model import Intervals, SignalStream
 from imulog.simulate import simulate
 
 
@@ -93,3 +94,50 @@ def test_alignment_append_never_reads_the_whole_orientation(tmp_path, monkeypatc
                 stored = trial.messages(twin.topic)
                 assert [bytes(p) for p in stored] == twin.payload_list(), twin.topic
                 assert channels[twin.topic].metadata["sample_count"] == twin.metadata["sample_count"]
+
+
+def test_alignment_append_rebuilds_marker_and_event_twins_from_blocks(tmp_path, monkeypatch):
+    """The raw reference-clock markers and events an alignment append re-twins are read block by block (small chunks:
+    several blocks each), never whole, and their twins equal those of the whole channels."""
+    import imulog.archive._builder as builder
+
+    sim = simulate("r2g", seed=5, repetitions=3)
+    rec = sim.recording
+    t = rec.markers[0].t_ns
+    starts = t[::37][1:]  # an event every 0.37 s of the marker clock, some lasting 0.1 s
+    ends = starts + np.where(np.arange(len(starts)) % 3 == 0, 100_000_000, 0)
+    labels = [f"event {k}" for k in range(len(starts))]
+    rec.events.append(Intervals("/events/vicon", starts, ends, labels, np.arange(len(starts)) % 5 - 1))
+    monkeypatch.setattr(builder, "CHUNK_TARGET_BYTES", 2048)
+    path = write_trial(tmp_path / "trial.mcap", rec)
+    monkeypatch.undo()
+    result = CliRunner().invoke(cli, ["process", "align", str(path), "--window", "60"])
+    assert result.exit_code == 0, result.output + repr(result.exception)
+    with TrialReader(path) as trial:
+        record = dict(trial.metadata["imulog.alignment"])
+        topics = [
+            c.topic for c in trial.channels if c.kind in ("markers", "intervals") and not c.metadata.get("twin_of")
+        ]
+        topics = [tp for tp in topics if not tp.startswith("/derived/")]
+        assert "/events/vicon" in topics and any(tp.startswith("/markers/") for tp in topics)
+        for topic in topics:
+            assert len(list(trial.iter_blocks(topic))) > 3, topic
+    record["offset_ns"] = int(record["offset_ns"]) - 180_000_000  # a changed clock map: the twins' log times move
+    reads = record_reads(monkeypatch)
+    append_derived(path, [], run={"step": "test"}, metadata={"imulog.alignment": record})
+    assert not [r for r in reads if r[0] in topics], "a raw marker or event channel was read whole"
+    monkeypatch.undo()
+    with TrialReader(path) as trial:
+        records = trial.metadata
+        channels = {c.topic: c for c in trial.channels}
+        imus = {tp.split("/")[2] for tp in channels if tp.startswith("/imu/") and tp.count("/") == 2}
+        axis = TrialAxis(records, imus)
+        origin = _imu_origin(trial, [], records)
+        for topic in topics:
+            want = stream_twins(trial.read(topic), axis, records, origin)  # the whole channel's twins
+            assert len(want) == 1
+            twin = want[0]
+            stored = trial.messages(twin.topic)
+            assert [bytes(p) for p in stored] == twin.payload_list(), twin.topic
+            for key in ("sample_count", "start_ns", "end_ns", "rate_hz", "twin_of", "clock"):
+                assert channels[twin.topic].metadata.get(key) == twin.metadata.get(key), (twin.topic, key)

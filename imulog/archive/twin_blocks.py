@@ -1,25 +1,37 @@
 """Viewer twins of a stored channel rebuilt block by block, in bounded memory (issue 24).
 
-When an append changes the trial's alignment, the orientation twins are rewritten on the new axis
-(:func:`imulog.archive.writer.plan_append`). Reading the whole orientation channel for that costs a week's
-recording 4.6 GB (60 M samples); the twins keep one sample in :func:`imulog.archive.twins.decimation`'s ``k``.
-:func:`kept_samples` reads the channel chunk by chunk and keeps only those samples, so memory is the kept
-samples plus one chunk (about 2 MiB) plus the first :data:`MEDIAN_SAMPLES` samples' intervals. The twins
-built from the kept samples are the ones the whole channel gives whenever the channel has at most
-:data:`MEDIAN_SAMPLES` samples (the median sampling interval is then taken over all of them, as
-:func:`~imulog.archive.twins.decimation` does); longer channels take it over their first
-:data:`MEDIAN_SAMPLES` samples.
-"""
+When an append changes the trial's alignment, the twins of the orientations and of the raw reference-clock
+markers and events are rewritten on the new axis (:func:`imulog.archive.writer.plan_append`, through
+:func:`stored_twins`). Reading a whole orientation channel for that costs a week's recording 4.6 GB (60 M
+samples); the twins keep one sample in :func:`imulog.archive.twins.decimation`'s ``k``. :func:`kept_samples`
+reads the channel chunk by chunk and keeps only those samples, so memory is the kept samples plus one chunk
+(about 2 MiB) plus the first :data:`MEDIAN_SAMPLES` samples' intervals. The twins built from the kept samples
+(orientation frames and axes, marker point clouds) are the ones the whole channel gives whenever the channel has
+at most :data:`MEDIAN_SAMPLES` samples (the median sampling interval is then taken over all of them, as
+:func:`~imulog.archive.twins.decimation` does); longer channels take it over their first :data:`MEDIAN_SAMPLES`
+samples. An event channel's twin has one message per interval: its blocks' twins are joined in order
+(:func:`joined_log_twin`), so memory is one block plus the messages."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
-from imulog.archive.twins import AXES_RATE_HZ, TWIN_RATE_HZ, decimation_step
-from imulog.model import concat_samples, take_samples
+from imulog.archive.timeline import LogMap
+from imulog.archive.twins import (
+    AXES_RATE_HZ,
+    ORIENTATION_COLUMNS,
+    TWIN_RATE_HZ,
+    Origin,
+    Twin,
+    decimation_step,
+    log_twin,
+    marker_twin,
+    orientation_twins,
+)
+from imulog.model import Intervals, MarkerStream, SignalStream, concat_samples, take_samples
 
 MEDIAN_SAMPLES = 1_000_000  # samples whose intervals give the median sampling interval (8 MB of int64)
 
@@ -72,3 +84,54 @@ def kept_samples(
         take(block)
     hit = np.concatenate(flags, axis=1)
     return concat_samples(parts), [np.flatnonzero(row) for row in hit]
+
+
+def joined_log_twin(blocks: Iterable[Intervals], log_map: LogMap, clock: str) -> Twin | None:
+    """:func:`~imulog.archive.twins.log_twin` of an interval channel given block by block (in channel order): each
+    block's messages in turn, the count summed and the span widened; None when the channel holds no interval."""
+    twin: Twin | None = None
+    for block in blocks:
+        if not len(block):
+            continue
+        part = log_twin(block, log_map, clock)
+        if twin is None:
+            twin = part
+            continue
+        twin.log_times.extend(part.log_times)
+        twin.payloads.extend(part.payloads)
+        meta, new = twin.metadata, part.metadata
+        meta["sample_count"] = str(int(meta["sample_count"]) + int(new["sample_count"]))
+        meta["start_ns"] = str(min(int(meta["start_ns"]), int(new["start_ns"])))
+        meta["end_ns"] = str(max(int(meta["end_ns"]), int(new["end_ns"])))
+    return twin
+
+
+def stored_twins(
+    kind: str,
+    blocks: Callable[[], Iterator[Any]],
+    n: int,
+    log_map: LogMap,
+    clock: str,
+    metadata: Mapping[str, Mapping[str, Any]] | None = None,
+    origin: Origin | None = None,
+) -> list[Twin]:
+    """The viewer twins of a stored channel read block by block, equal to
+    :func:`~imulog.archive.twins.twins_for` of the whole channel (see the module docstring for the median).
+
+    ``kind``: ``"orientation"`` (a ``/derived/orientation/{imu}`` channel), ``"markers"`` or ``"intervals"``;
+    ``blocks`` and ``n`` as :func:`kept_samples`. Other kinds, and a channel that is not what ``kind`` says, give [].
+    """
+    if kind == "intervals":
+        twin = joined_log_twin(blocks(), log_map, clock)
+        return [twin] if twin is not None else []
+    if kind not in ("orientation", "markers"):
+        return []
+    kept = kept_samples(blocks, n, (TWIN_RATE_HZ, AXES_RATE_HZ) if kind == "orientation" else (TWIN_RATE_HZ,))
+    if kept is None:
+        return []
+    stream, keeps = kept
+    if kind == "markers":
+        return [marker_twin(stream, log_map, keeps[0])] if isinstance(stream, MarkerStream) else []
+    if not isinstance(stream, SignalStream) or stream.columns[:4] != ORIENTATION_COLUMNS:
+        return []
+    return orientation_twins(stream, log_map, clock, metadata, origin, (keeps[0], keeps[1]))

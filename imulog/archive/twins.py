@@ -234,10 +234,12 @@ def imu_twin(stream: ImuStream, log_map: LogMap) -> Twin | None:
     return twin
 
 
-def marker_twin(stream: MarkerStream, log_map: LogMap) -> Twin:
+def marker_twin(stream: MarkerStream, log_map: LogMap, keep: np.ndarray | None = None) -> Twin:
+    """``foxglove.PointCloud`` of the valid markers; ``keep``: the samples shown (default :func:`decimation`)."""
     from imulog.archive._generated.foxglove import PackedElementField_pb2, PointCloud_pb2
 
-    keep = decimation(stream.t_ns)  # positions as sampled: their content above the twin's Nyquist is < -46 dB
+    # positions as sampled: their content above the twin's Nyquist is < -46 dB
+    keep = decimation(stream.t_ns) if keep is None else keep
     twin = _protobuf_twin(
         twin_topic(stream.topic), "foxglove.PointCloud", _meta(stream, stream.topic, "reference", keep, stream.t_ns)
     )

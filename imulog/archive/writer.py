@@ -20,8 +20,8 @@ from imulog.archive.hashing import payload_hash, rows_hash  # noqa: F401  (re-ex
 from imulog.archive.metadata import encode_record
 from imulog.archive.packing import pack
 from imulog.archive.timeline import IDENTITY, TIMELINE_RECORD, LogMap, TimelineError, TrialAxis, timeline_record
-from imulog.archive.twins import ORIENTATION_COLUMNS, Origin, Twin, orientation_twins, twin_topic, twins_for
-from imulog.model import Recording, SignalStream, Stream
+from imulog.archive.twins import Origin, Twin, twin_topic, twins_for
+from imulog.model import Recording, Stream
 from imulog.workers import in_background
 
 LIBRARY = f"imulog {__version__}"
@@ -112,23 +112,20 @@ def _imu_origin(trial: Any, streams: list[Stream], records: dict[str, Any]) -> O
     return np.asarray(reference_to_device(pose.t_ns, dict(alignment)), np.int64), pose.position
 
 
-def _orientation_retwin(
-    trial: Any, info: Any, axis: TrialAxis, records: dict[str, Any], origin: Origin | None
+def _stored_retwin(
+    trial: Any, info: Any, kind: str, axis: TrialAxis, records: dict[str, Any], origin: Origin | None
 ) -> list[Twin]:
-    """The twins of a stored orientation channel on ``axis``, read block by block (:mod:`.twin_blocks`):
-    a week's channel is never decoded whole (issue 24)."""
+    """The twins of a stored channel (``kind``: orientation, markers, intervals) on ``axis``, read block by block
+    (:func:`.twin_blocks.stored_twins`): a week's channel is never decoded whole (issue 24)."""
     if not WRITE_TWINS:
         return []
-    from imulog.archive.twin_blocks import kept_samples
+    from functools import partial
 
-    kept = kept_samples(lambda: trial.iter_blocks(info.topic), info.sample_count)
-    if kept is None:
-        return []
-    stream, (frame_keep, axes_keep) = kept
-    if not isinstance(stream, SignalStream) or stream.columns[:4] != ORIENTATION_COLUMNS:
-        return []
-    clock = axis.clock_of(info.topic)
-    return orientation_twins(stream, axis.map_for(info.topic), clock, records, origin, (frame_keep, axes_keep))
+    from imulog.archive.twin_blocks import stored_twins
+
+    clock = axis.clock_of(info.topic)  # as stream_twins places a stream read whole
+    blocks = partial(trial.iter_blocks, info.topic)
+    return stored_twins(kind, blocks, info.sample_count, axis.map_for(info.topic), clock, records, origin)
 
 
 def plan_append(
@@ -157,9 +154,9 @@ def plan_append(
                     continue
                 retwin = axis.clock_of(topic, info.metadata) == "reference" and not topic.startswith("/derived/")
                 if topic.startswith("/derived/orientation/"):
-                    twins.extend(_orientation_retwin(trial, info, axis, records, origin))
+                    twins.extend(_stored_retwin(trial, info, "orientation", axis, records, origin))
                 elif retwin and info.kind in ("markers", "intervals"):
-                    twins.extend(stream_twins(trial.read(topic), axis, records, origin))
+                    twins.extend(_stored_retwin(trial, info, info.kind, axis, records, origin))
         dropped = [twin_topic(t) for t in remove if twin_topic(t) in channels]
     return axis, twins, dropped
 
