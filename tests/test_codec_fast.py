@@ -262,3 +262,27 @@ def test_blocks_with_and_without_per_value_decimals_decode_together(monkeypatch,
     assert all(codec.MESSAGE_CLASSES[schema].FromString(p).HasField("values_q") for p in payloads)
     got = codec.decode(schema, "/s", meta, payloads)
     np.testing.assert_array_equal(got.values, np.concatenate(pieces))
+
+
+@pytest.mark.parametrize("column_decoder", [True, False])
+def test_blocks_with_different_scales_decode_together(monkeypatch, column_decoder: bool):
+    """A channel converted in pieces is planned piece by piece: pieces whose counts have different scales give
+    per-row parameters; with more than 4096 counts (the compiled formula's threshold) they decode exactly, as the
+    numpy formula does (they failed in numba's typing: a per-row scale is 2-D)."""
+    if not column_decoder:
+        monkeypatch.setattr(block_decode, "MIN_BLOCKS", 10**9)
+    rng = np.random.default_rng(11)
+    scales = (9.81 / 256, 9.81 / 4096, 0.01)
+    pieces = [rng.integers(-3000, 3000, (3000, 3)) * s for s in scales]
+    t0, payloads, schema, meta = 0, [], None, None
+    for k, values in enumerate(pieces):
+        t_ns = t0 + np.arange(len(values), dtype=np.int64) * 10_000_000
+        t0 = int(t_ns[-1]) + 10_000_000
+        imu = ImuStream("big", t_ns, acc=values, meta={"resolution": {"acc": {"scale": scales[k]}}})
+        schema, meta, _, blocks = codec.encode(imu)
+        payloads += blocks
+    got = codec.decode(schema, "/imu/big", meta, payloads)
+    np.testing.assert_array_equal(got.acc, np.concatenate(pieces))
+    counts = rng.integers(-3000, 3000, (5000, 3))
+    per_row = {"scale": np.repeat(np.array([[0.5, 0.25, 2.0], [0.1, 0.2, 0.3]]), [2500, 2500], axis=0), "offset": None}
+    assert np.array_equal(numbers.apply(counts.astype(np.int32), per_row), numbers.apply(counts.astype(float), per_row))

@@ -41,8 +41,10 @@ def apply(counts: np.ndarray, params: dict[str, np.ndarray | None]) -> np.ndarra
     """float64 values of (N, C) counts: ``((counts + shift) / divisor) * scale + offset``, absent steps skipped.
 
     Large int32 arrays (the decoder's) take one compiled pass (:func:`imulog.archive.wire_kernels.apply_counts`,
-    bit-identical) instead of a numpy pass per parameter."""
-    if counts.dtype == np.int32 and counts.ndim == 2 and counts.size >= 4096:
+    bit-identical) instead of a numpy pass per parameter, when every parameter is one value per column; per-row
+    parameters ((N, C): blocks planned apart, e.g. a file converted in pieces) take the numpy passes."""
+    per_column = all(p is None or np.ndim(p) <= 1 for p in params.values())
+    if counts.dtype == np.int32 and counts.ndim == 2 and counts.size >= 4096 and per_column:
         from imulog.archive.wire_kernels import apply_counts
 
         return apply_counts(np.ascontiguousarray(counts), *_param_arrays(params, counts.shape[1]))
