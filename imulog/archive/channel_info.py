@@ -6,6 +6,11 @@ import json
 from dataclasses import dataclass, field
 from typing import Any
 
+#: channel metadata from the stream's ``meta`` (:func:`imulog.archive.codec.encode`) that a recording's later pieces
+#: may change (a text reader refines ``rate_hz`` as it reads): a streamed trial's closing ``imulog.channel_stats``
+#: record holds the final values, which replace the Channel record's when read (``TrialReader``)
+FINAL_META_KEYS = ("meta", "source")
+
 
 def _kinds() -> dict[str, str]:
     from imulog.archive.codec import SCHEMA_KIND  # imported on first use: listing a trial needs no protobuf

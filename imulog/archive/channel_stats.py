@@ -4,8 +4,10 @@ rate, gaps, NaN samples, content hash), kept in the closing ``imulog.channel_sta
 from __future__ import annotations
 
 import hashlib
+import json
 import struct
 from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 
@@ -16,6 +18,12 @@ from imulog.numeric import add_counts, median_of_counts
 #: distinct sample steps counted exactly (as many as 64 k: 1 MiB); beyond, the statistics keep the median so far
 MAX_STEPS = 1 << 16
 STATS_KEYS = ("sample_count", "start_ns", "end_ns", "rate_hz", "time_gaps", "nan_samples", "sha256")
+
+
+def final_meta(meta: dict[str, Any]) -> dict[str, str]:
+    """The channel metadata of ``channel_info.FINAL_META_KEYS`` for a stream whose ``meta`` is ``meta``, as
+    :func:`imulog.archive.codec.encode` writes them."""
+    return {"meta": json.dumps(meta, sort_keys=True, default=str), "source": str(meta.get("source", ""))}
 
 
 class ChannelStats:

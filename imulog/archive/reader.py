@@ -15,7 +15,7 @@ from typing import Any
 from imulog._lazy import LazyModule
 from imulog.archive import _mcap as m
 from imulog.archive import journal, staleness
-from imulog.archive.channel_info import Attachment, ChannelInfo, _float, _int
+from imulog.archive.channel_info import FINAL_META_KEYS, Attachment, ChannelInfo, _float, _int
 from imulog.archive.errors import ArchiveCorruptError, ArchiveError
 from imulog.archive.metadata import (
     MAX_RECORD_BYTES,
@@ -87,7 +87,8 @@ class TrialReader:
     def _merge_channel_stats(self) -> None:
         """Channels written piece by piece (:mod:`imulog.archive.streaming`) keep their sample count, time span,
         rate, gaps and content hash in one closing metadata record: merge it into their metadata here, so every
-        reader sees them as if they were in the Channel record."""
+        reader sees them as if they were in the Channel record; the stream meta its later pieces changed
+        (:data:`~imulog.archive.channel_info.FINAL_META_KEYS`) replaces the Channel record's."""
         names = {c.metadata.get("stats_record") for c in self.summary.channels.values()} - {None, ""}
         for name in names:
             try:
@@ -99,8 +100,10 @@ class TrialReader:
                 if c.metadata.get("stats_record") != name:
                     continue
                 stats = record.get(c.topic)
-                if isinstance(stats, dict):
-                    c.metadata.update({k: str(v) for k, v in stats.items() if k not in c.metadata})
+                if isinstance(stats, dict):  # the stream meta that later pieces changed replaces the first piece's
+                    c.metadata.update(
+                        {k: str(v) for k, v in stats.items() if k not in c.metadata or k in FINAL_META_KEYS}
+                    )
 
     # ------------------------------------------------------------------ context manager
     def __enter__(self) -> TrialReader:

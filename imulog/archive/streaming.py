@@ -27,7 +27,7 @@ import numpy as np
 from imulog.archive import codec, twin_filter
 from imulog.archive._builder import CHUNK_TARGET_BYTES, McapBuilder
 from imulog.archive.attach_file import STREAM_PACK_MAX, write_attachment_from_file  # noqa: F401 (re-exported)
-from imulog.archive.channel_stats import STATS_KEYS, ChannelStats, _sample_arrays  # noqa: F401 (re-exported)
+from imulog.archive.channel_stats import STATS_KEYS, ChannelStats, _sample_arrays, final_meta  # noqa: F401 (re-exported)
 from imulog.archive.errors import ArchiveError, ArchiveExistsError
 from imulog.archive.files import atomic_output, target_path, writer_lock
 from imulog.archive.metadata import encode_record
@@ -48,6 +48,7 @@ class _Channel:
         self.pending = 0
         self.written_meta: dict[str, Any] | None = None  # the stream meta in the Channel record
         self.meta: dict[str, Any] = {}  # every piece's meta merged (what the whole recording's stream holds)
+        self.final: dict[str, str] = {}  # the Channel record's meta keys that later pieces changed, final values
 
 
 class StreamingTrialWriter:
@@ -93,7 +94,8 @@ class StreamingTrialWriter:
         self._stack: list[Any] = []
         self._plan: dict[str, Any] | None = None  # what the first piece declared (imulog.model.PIECES_RECORD)
         self._spans = SpanCheck()
-        #: channels whose meta a later piece changed (undeclared: the Channel record keeps the first piece's)
+        #: channels whose meta a later piece changed (undeclared): the Channel record keeps the first piece's, the
+        #: closing stats record the final one, which readers take (channel_stats.FINAL_META_KEYS)
         self.meta_changes: list[str] = []
 
     # ------------------------------------------------------------------ context
@@ -309,7 +311,7 @@ class StreamingTrialWriter:
                 attached[src.name] = self._attach(src)
             else:
                 originals.append(original_record(src, src.name))
-        stats = {topic: ch.stats.to_meta() for topic, ch in self._channels.items()}
+        stats = {topic: {**ch.stats.to_meta(), **ch.final} for topic, ch in self._channels.items()}
         hashes = {topic: s["sha256"] for topic, s in stats.items()}
         for topic, ch in self._twins.items():
             stats[topic] = {k: v for k, v in ch.stats.to_meta().items() if k != "nan_samples"}
@@ -334,7 +336,8 @@ class StreamingTrialWriter:
 
     def _check_declared(self) -> None:
         """Refuse a trial whose time axis is not the whole recording's, or whose declared channel meta a piece
-        contradicted; note undeclared meta that later pieces changed (:attr:`meta_changes`)."""
+        contradicted; note undeclared meta that later pieces changed (:attr:`meta_changes`) and keep its final value
+        for the stats record."""
         problem = self._spans.axis_problem(self._timeline or {}, self._trial({}), self._plan is not None)
         if problem:
             raise ArchiveError(f"{self.path}: {problem}")
@@ -346,6 +349,7 @@ class StreamingTrialWriter:
                 raise ArchiveError(f"{self.path}: {problem}, unlike the meta its first piece declared")
             if problem:
                 self.meta_changes.append(problem)
+                ch.final = final_meta(ch.meta)
 
     def _attach(self, src: Path) -> str:
         """Attach ``src`` read in 1 MiB blocks (a week's .cwa is 770 MB: never held at once); its SHA-256."""
