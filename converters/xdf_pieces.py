@@ -99,8 +99,6 @@ def iter_pieces(path: Path, piece_bytes: int | None) -> Iterator[Recording]:
             _check_increasing(path, t, meta, g.before, g.seen)
             if len(t):
                 g.before, g.seen = int(t[-1]), g.seen + len(t)
-            if not len(t) and layouts[sid][0] == "markers" and g.scan.keep:
-                continue  # an empty marker block cannot be encoded: the channel opens with its first samples
             for s in stream_piece(names[sid], layouts[sid], t, values, meta):
                 kinds = {ImuStream: rec.imus, MarkerStream: rec.markers, SignalStream: rec.signals}
                 kinds.get(type(s), rec.events).append(s)

@@ -282,3 +282,48 @@ def test_a_stream_whose_chunks_come_later_but_start_earlier(tmp_path: Path, monk
         timeline = trial.metadata["imulog.timeline"]  # one clock: both start at the mocap's first sample
         assert timeline["clocks"] == "shared" and timeline["device_origin_ns"] == round(1000.0 * 1e9)
         assert trial.read("/markers/qualisys").t_ns[0] == round(1000.0 * 1e9)
+
+
+def test_an_empty_mocap_stream_is_a_channel_without_samples(tmp_path: Path, monkeypatch):
+    """A MoCap stream that recorded nothing (its header only) is a marker channel with zero samples, its labels and
+    meta kept, whole and in pieces (the codec could not encode a marker stream without samples); a MoCap stream
+    whose samples all come after the first piece opens its channel in the first piece, as the whole file does."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_convert_pieces_archive import assert_same_trial, convert_twice
+
+    rng = np.random.default_rng(7)
+    n = 300
+    t = 1000.0 + np.arange(n) / 100.0
+    imu_ch = [(f"Acc{a}", "g", "Accelerometer") for a in "XYZ"]
+    mocap_ch = [(f"{m}_{a}", "mm", "Position") for m in ("wrist", "elbow") for a in "XYZ"]
+    body = b"XDF:" + _chunk(1, b'<?xml version="1.0"?><info><version>1.0</version></info>')
+    body += _header(1, "WristIMU", "IMU", imu_ch, 100) + _header(2, "Empty", "MoCap", mocap_ch, 100)
+    body += _header(3, "Late", "MoCap", mocap_ch[:3], 100)
+    imu = rng.normal(0, 1, (n, 3))
+    for lo in range(0, n, 50):
+        body += _samples(1, t[lo : lo + 50], imu[lo : lo + 50])
+    body += _samples(3, t[-20:], rng.normal(500, 10, (20, 3)))
+    path = tmp_path / "empty_mocap.xdf"
+    path.write_bytes(body)
+    rec = read_xdf(path)
+    empty = next(m for m in rec.markers if m.topic == "/markers/empty")
+    assert len(empty.t_ns) == 0 and empty.labels == ["wrist", "elbow"] and empty.pos.shape == (0, 2, 3)
+    whole, pieces = convert_twice(path, tmp_path, ("imulog.converters.xdf.PIECE_BYTES", 2000), monkeypatch)
+    assert_same_trial(whole, pieces)
+    with TrialReader(pieces) as trial:
+        info = trial.channel("/markers/empty")
+        assert info.sample_count == 0 and info.message_count == 0
+        got = trial.read("/markers/empty")
+        assert got.labels == ["wrist", "elbow"] and got.pos.shape == (0, 2, 3)
+        assert got.meta["stream_type"] == "MoCap" and got.meta == empty.meta
+        assert len(trial.read("/markers/late").t_ns) == 20
+    r = CliRunner().invoke(cli, ["doctor", str(pieces)])
+    assert r.exit_code == 0, r.output
+    r = CliRunner().invoke(cli, ["info", str(pieces)])
+    assert r.exit_code == 0 and "/markers/empty" in r.output, r.output
+    out = tmp_path / "empty.csv"
+    r = CliRunner().invoke(cli, ["export", str(pieces), "-t", "/markers/empty", "-o", str(out)])
+    assert r.exit_code == 0 and "0 rows" in r.output, r.output
+    assert out.read_text().splitlines()[0].startswith('"t[s]","t_ns","wrist_x[m]"')

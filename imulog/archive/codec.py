@@ -188,10 +188,11 @@ def encode(
         meta.update(_stats(stream.t_ns, [stream.pos]))
         valid = np.asarray(stream.valid, dtype=bool)
         hints, precision = _hints(stream.meta)
-        n = len(stream.t_ns)
-        pos = raw_pos = stream.pos.reshape(n, -1)
+        n, m_ = len(stream.t_ns), len(stream.labels)
+        pos = raw_pos = stream.pos.reshape(n, 3 * m_)  # (N, 3M): also without samples (a stream with none yet)
+        valid = valid.reshape(n, m_)
         if compact:  # an invalid marker stored as 0 (counts, decimals, float32), read back as NaN by its valid flag
-            pos = np.where(np.repeat(valid.reshape(n, -1), 3, axis=1), pos, 0.0)
+            pos = np.where(np.repeat(valid, 3, axis=1), pos, 0.0)
         layout = Layout(
             st(2, stream.frame_id) + strings_field(3, stream.labels),
             4,
@@ -199,7 +200,7 @@ def encode(
             (8, 9, 10),
             [(6, 11, pos, hints.get("pos"))],
             precision,
-            extra=[(7, valid.reshape(n, -1), _U1)],
+            extra=[(7, valid, _U1)],
             f64_values={6: raw_pos},  # a block left as float64 keeps NaN at invalid samples, as layout 1
         )
     elif kind in ("analog", "signal"):
