@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import struct
 import xml.etree.ElementTree as ET
-from collections import defaultdict
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,11 +24,15 @@ DTYPES = {"int8": "<i1", "int16": "<i2", "int32": "<i4", "int64": "<i8", "float3
 
 
 def xml_dict(element: ET.Element) -> dict[str, Any]:
-    """An attribute-less XML element as pyxdf's ``_xml2dict`` gives it: ``{tag: {child: [values]} or text}``."""
-    children: dict[str, list[Any]] = defaultdict(list)
-    for child in map(xml_dict, list(element)):
-        for k, v in child.items():
-            children[k].append(v)
+    """An attribute-less XML element in pyxdf's ``_xml2dict`` layout: ``{tag: {child: [values]} or text}``.
+
+    Plain dicts where pyxdf has defaultdicts (equal to them): a missing key raises instead of appearing as ``[]``,
+    so readers ask with ``.get``. The XDF reader and the live capture's stream headers (:mod:`imulog.live.mapping`)
+    both parse with it."""
+    children: dict[str, list[Any]] = {}
+    for child in element:
+        for k, v in xml_dict(child).items():
+            children.setdefault(k, []).append(v)
     return {element.tag: children or element.text}
 
 

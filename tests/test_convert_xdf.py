@@ -327,3 +327,29 @@ def test_an_empty_mocap_stream_is_a_channel_without_samples(tmp_path: Path, monk
     r = CliRunner().invoke(cli, ["export", str(pieces), "-t", "/markers/empty", "-o", str(out)])
     assert r.exit_code == 0 and "0 rows" in r.output, r.output
     assert out.read_text().splitlines()[0].startswith('"t[s]","t_ns","wrist_x[m]"')
+
+
+def test_one_xml_parser_for_files_and_live_headers(tmp_path: Path):
+    """The XDF reader and the live capture parse a stream header with one function (``xdf_read.xml_dict``), in
+    pyxdf's layout and equal to pyxdf's ``_xml2dict``, as plain dicts: a missing key raises instead of appearing."""
+    import xml.etree.ElementTree as ET
+
+    from imulog.converters import xdf_read
+
+    import imulog.live.mapping as live
+
+    assert live.xml_dict is xdf_read.xml_dict and not hasattr(live, "xml_to_dict")
+    chunk = _header(1, "Qualisys", "MoCap", [(f"wrist_{a}", "mm", "Position") for a in "XYZ"], 100)
+    path = tmp_path / "header.xdf"
+    path.write_bytes(b"XDF:" + _chunk(1, b"<info><version>1.0</version></info>") + chunk)
+    info = xdf_read.scan(path).streams[1].info
+    xml = chunk[chunk.index(b"<?xml") :].decode()
+    assert live.header_info(xml, 1) == {**info, "stream_id": ["1"]}
+    assert {"info": info} == pytest.importorskip("pyxdf.pyxdf")._xml2dict(ET.fromstring(xml))
+    channel = info["desc"][0]["channels"][0]["channel"][2]
+    assert channel == {"label": ["wrist_Z"], "unit": ["mm"], "type": ["Position"]}
+    for d in (info, info["desc"][0], channel):
+        assert type(d) is dict
+    with pytest.raises(KeyError):
+        info["manufacturer"]  # noqa: B018
+    assert "manufacturer" not in info

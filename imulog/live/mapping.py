@@ -17,16 +17,8 @@ import numpy as np
 
 from imulog.converters._common import sanitize_name
 from imulog.converters.xdf import stream_to_recording
+from imulog.converters.xdf_read import xml_dict
 from imulog.model import Recording
-
-
-def xml_to_dict(element: ET.Element) -> dict[str, Any]:
-    """pyxdf's layout of an XML element: ``{tag: {child: [..], ...}}`` or ``{tag: text}`` for a leaf."""
-    children: dict[str, list[Any]] = {}
-    for child in element:
-        for key, value in xml_to_dict(child).items():
-            children.setdefault(key, []).append(value)
-    return {element.tag: children or element.text}
 
 
 def header_info(xml: str, stream_id: int) -> dict[str, Any]:
@@ -35,7 +27,7 @@ def header_info(xml: str, stream_id: int) -> dict[str, Any]:
         root = ET.fromstring(xml)
     except ET.ParseError as exc:
         raise ValueError(f"stream header is not valid XML: {exc}") from None
-    info = xml_to_dict(root).get(root.tag)
+    info = xml_dict(root).get(root.tag)
     if not isinstance(info, dict):
         info = {}
     info["stream_id"] = [str(stream_id)]
