@@ -299,12 +299,12 @@ def test_an_empty_mocap_stream_is_a_channel_without_samples(tmp_path: Path, monk
     imu_ch = [(f"Acc{a}", "g", "Accelerometer") for a in "XYZ"]
     mocap_ch = [(f"{m}_{a}", "mm", "Position") for m in ("wrist", "elbow") for a in "XYZ"]
     body = b"XDF:" + _chunk(1, b'<?xml version="1.0"?><info><version>1.0</version></info>')
-    body += _header(1, "WristIMU", "IMU", imu_ch, 100) + _header(2, "Empty", "MoCap", mocap_ch, 100)
-    body += _header(3, "Late", "MoCap", mocap_ch[:3], 100)
+    body += _header(1, "Late", "MoCap", mocap_ch[:3], 100)  # stream 1: its channel comes first
+    body += _header(2, "WristIMU", "IMU", imu_ch, 100) + _header(3, "Empty", "MoCap", mocap_ch, 100)
     imu = rng.normal(0, 1, (n, 3))
     for lo in range(0, n, 50):
-        body += _samples(1, t[lo : lo + 50], imu[lo : lo + 50])
-    body += _samples(3, t[-20:], rng.normal(500, 10, (20, 3)))
+        body += _samples(2, t[lo : lo + 50], imu[lo : lo + 50])
+    body += _samples(1, t[-20:], rng.normal(500, 10, (20, 3)))
     path = tmp_path / "empty_mocap.xdf"
     path.write_bytes(body)
     rec = read_xdf(path)
@@ -312,7 +312,9 @@ def test_an_empty_mocap_stream_is_a_channel_without_samples(tmp_path: Path, monk
     assert len(empty.t_ns) == 0 and empty.labels == ["wrist", "elbow"] and empty.pos.shape == (0, 2, 3)
     whole, pieces = convert_twice(path, tmp_path, ("imulog.converters.xdf.PIECE_BYTES", 2000), monkeypatch)
     assert_same_trial(whole, pieces)
-    with TrialReader(pieces) as trial:
+    with TrialReader(whole) as a, TrialReader(pieces) as trial:
+        opened = [[c.topic for c in t.channels if not c.metadata.get("twin_of")] for t in (a, trial)]
+        assert opened[0] == opened[1]  # every channel opened in the first piece, in the whole file's order
         info = trial.channel("/markers/empty")
         assert info.sample_count == 0 and info.message_count == 0
         got = trial.read("/markers/empty")
