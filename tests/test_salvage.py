@@ -259,3 +259,37 @@ def test_crc_locates_one_damaged_byte_and_only_one():
         wrong += locate_byte_error(zlib.crc32(data) ^ zlib.crc32(bytes(bad)), n, [(0, n)]) is not None
     assert wrong <= 1
     assert crc_field_damage(0x00AB0000) and not crc_field_damage(0x01010000)
+
+
+def test_a_streamed_trial_keeps_the_final_stream_meta(tmp_path, monkeypatch):
+    """A trial written piece by piece whose stream meta changed after its first piece (the closing statistics record
+    holds the final one): salvaged intact, and with one of its chunks damaged, readers still see the final meta."""
+    import json
+
+    import imulog.archive.streaming as streaming
+    from imulog.model import ImuStream, Recording
+
+    rng = np.random.default_rng(4)
+    monkeypatch.setattr(streaming, "CHUNK_TARGET_BYTES", 4096)
+    path = tmp_path / "streamed.mcap"
+    with streaming.StreamingTrialWriter(path) as w:
+        for k in range(4):
+            t = (k * 500 + np.arange(500)) * 10_000_000
+            w.write(Recording(imus=[ImuStream("wrist", t, acc=rng.normal(size=(500, 3)), meta={"missing": k})]))
+    assert w.meta_changes == ["/imu/wrist: its meta changed after the channel was written (missing)"]
+    with TrialReader(path) as tr:
+        assert json.loads(tr.channel("/imu/wrist").metadata["meta"]) == {"missing": 3}
+    salvage(path, tmp_path / "intact.mcap")
+    data = bytearray(path.read_bytes())
+    with TrialReader(path) as tr:
+        imu = next(c.id for c in tr.summary.channels.values() if c.topic == "/imu/wrist")
+    start, end, _ = [c for c in _chunks_with_messages(bytes(data)) if c[2][0][0] == imu][1]
+    data[start + (end - start) // 2] ^= 0x10
+    (tmp_path / "flipped.mcap").write_bytes(bytes(data))
+    report = salvage(tmp_path / "flipped.mcap", tmp_path / "fixed.mcap")
+    assert report.channels["/imu/wrist"]["chunks_lost"] == 1
+    for out in ("intact.mcap", "fixed.mcap"):
+        assert check_file(tmp_path / out).ok
+        with TrialReader(tmp_path / out) as tr:
+            assert json.loads(tr.channel("/imu/wrist").metadata["meta"]) == {"missing": 3}, out
+            assert tr.read("/imu/wrist").meta == {"missing": 3}

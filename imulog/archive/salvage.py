@@ -27,6 +27,7 @@ from typing import Any
 from imulog import __version__
 from imulog.archive import _mcap as m
 from imulog.archive._builder import CHUNK_TARGET_BYTES, McapBuilder
+from imulog.archive.channel_info import FINAL_META_KEYS
 from imulog.archive.crc_locate import crc_field_damage, locate_byte_error
 from imulog.archive.errors import ArchiveError, ArchiveExistsError
 from imulog.archive.files import atomic_output, target_path, temp_path, writer_lock
@@ -207,10 +208,10 @@ def _write(
         why = f" ({report.lost[0]})" if report.lost else ""
         raise ArchiveError(f"{report.source}: nothing recoverable: no intact message of any channel{why}")
     metadata = _metadata_to_keep(scan, drop)
-    stats = {
+    stats = {  # the closing statistics of streamed channels: a converted trial's and every appended run's
         name: decode_record(items, name)
         for name, items in metadata.values()
-        if name.startswith("imulog.channel_stats.")
+        if name == "imulog.channel_stats" or name.startswith("imulog.channel_stats.")
     }
     # channel records: as found when complete, recomputed from what was recovered otherwise
     metas: dict[int, dict[str, str]] = {}
@@ -219,13 +220,15 @@ def _write(
     for ch in usable:
         schema = scan.schemas.get(ch.rec.schema_id)
         meta = dict(ch.rec.metadata)
-        recorded = meta.get("sha256") or (stats.get(meta.get("stats_record", "")) or {}).get(ch.rec.topic, {}).get(
-            "sha256"
-        )
+        closing = (stats.get(meta.get("stats_record", "")) or {}).get(ch.rec.topic, {})
+        recorded = meta.get("sha256") or closing.get("sha256")
         digest = ch.hasher.hexdigest()
         hashes[ch.rec.topic] = digest
         if ch.chunks_lost or recorded != digest:
-            meta, lost_spans, clock = recompute(schema.name if schema else None, ch.rec.topic, meta, _pieces(buf, ch))
+            final = {k: str(closing[k]) for k in FINAL_META_KEYS if k in closing}  # the stream meta at its end
+            meta, lost_spans, clock = recompute(
+                schema.name if schema else None, ch.rec.topic, {**meta, **final}, _pieces(buf, ch)
+            )
             partial = bool(ch.chunks_lost or lost_spans or (recorded is not None and recorded != digest))
             if partial:
                 meta["salvaged"] = f"partial: {len(lost_spans)} span(s) lost"
