@@ -1,7 +1,8 @@
 """The compiled core of the constrained joint-angle solver (Caruso 2024), see :mod:`.solver`.
 
-Levenberg-Marquardt / SQP iterations in numba: the stacked rotation-vector residual of both segments and its
-analytic Jacobian, the workspace-box constraints linearised for the 5-variable QP (:mod:`.solver_qp`), and
+Damped Newton / SQP iterations in numba: the stacked rotation-vector residual of both segments, its analytic
+Jacobian and the exact Hessian of the cost (:func:`_newton_matrix`; Gauss-Newton's ``J'J`` where that is not
+positive definite), the workspace-box constraints linearised for the 5-variable QP (:mod:`.solver_qp`), and
 :func:`solve_packed_sequence`, the warm-started loop over samples. Every scratch array is allocated once per
 sequence (:func:`_sample_work`), none per sample. Angles in rad, positions in m.
 """
@@ -149,6 +150,65 @@ def _box_violation(frames_p, lo, hi):
 
 
 @numba.njit(cache=True)
+def _newton_matrix(r, jw_ua, jw_fa, h, ll):
+    """Exact Hessian of ``f / 2`` (rad^2 / rad^2) into ``h`` (5x5) from the residual ``r`` (6,) and the joint axes
+    ``jw_ua``/``jw_fa`` (3, 5); ``ll`` scratch for its Cholesky factor. True when it is positive definite (use it:
+    Newton's step), False when it is not or a residual angle is near pi (use Gauss-Newton's ``J'J`` instead).
+
+    ``H_jk = sum_s w_sk' Jl^-T(r_s) w_sj + [k < j] r_s . (z_k x z_j)``: the change of ``J'r`` with ``q_k`` through
+    the residual (``dr_s/dq_k = Jl^-1(r_s) w_sk``) and through axis j turning with joint k (``dz_j/dq_k = z_k x
+    z_j``); checked against finite differences of ``J'r`` in the tests."""
+    for i in range(5):
+        for j in range(5):
+            h[i, j] = 0.0
+    for seg in range(2):
+        o = 3 * seg
+        w = jw_ua if seg == 0 else jw_fa
+        n_j = 3 if seg == 0 else 5
+        rx, ry, rz = r[o], r[o + 1], r[o + 2]
+        th2 = rx * rx + ry * ry + rz * rz
+        th = math.sqrt(th2)
+        if th > 3.0:
+            return False
+        # Jl^-T(r) = I + [r]x / 2 + c [r]x^2 (SO(3) left Jacobian, inverse transposed); c -> 1/12 at r -> 0
+        c = 1.0 / 12.0 if th < 1e-4 else 1.0 / th2 - (1.0 + math.cos(th)) / (2.0 * th * math.sin(th))
+        for j in range(n_j):
+            wj0, wj1, wj2 = w[0, j], w[1, j], w[2, j]
+            rwj = rx * wj0 + ry * wj1 + rz * wj2
+            # r x w_j
+            cx = ry * wj2 - rz * wj1
+            cy = rz * wj0 - rx * wj2
+            cz = rx * wj1 - ry * wj0
+            for k in range(j + 1):
+                wk0, wk1, wk2 = w[0, k], w[1, k], w[2, k]
+                dot = wk0 * wj0 + wk1 * wj1 + wk2 * wj2
+                rwk = rx * wk0 + ry * wk1 + rz * wk2
+                val = dot + c * (rwk * rwj - th2 * dot)
+                if k < j:
+                    # Jl^-T's skew part, w_k . (r x w_j) / 2, plus the turning of axis j with joint k,
+                    # r . (w_k x w_j) = -w_k . (r x w_j): together -w_k . (r x w_j) / 2
+                    val -= 0.5 * (wk0 * cx + wk1 * cy + wk2 * cz)
+                h[j, k] += val
+    for j in range(5):
+        for k in range(j):
+            h[k, j] = h[j, k]
+    # positive definite? (Cholesky without storing)
+    for j in range(5):
+        s = h[j, j]
+        for k in range(j):
+            s -= ll[j, k] * ll[j, k]
+        if s <= 1e-12:
+            return False
+        ll[j, j] = math.sqrt(s)
+        for i in range(j + 1, 5):
+            t = h[i, j]
+            for k in range(j):
+                t -= ll[i, k] * ll[j, k]
+            ll[i, j] = t / ll[j, j]
+    return True
+
+
+@numba.njit(cache=True)
 def _sample_work():
     """Scratch arrays of :func:`_solve_one` (allocated once per sequence, not per sample)."""
     return (
@@ -173,6 +233,8 @@ def _sample_work():
         np.eye(5),
         np.zeros(5),
         _qp_work(),
+        np.empty((5, 5)),  # exact Hessian
+        np.empty((5, 5)),  # its Cholesky factor
     )
 
 
@@ -181,7 +243,31 @@ def _solve_one(
     q, model, rua_hat, rfa_hat, lo, hi, constrained, max_iter, step_tol, damping0, penalty, sweeps, feas_tol, ws, active
 ):
     """Refine ``q`` (in place) for one sample; returns (cost, iterations). ``ws``: :func:`_sample_work`."""
-    work_r, work_p, r, r_new, jac, jac2, a, b, lam, a2, b2, lam2, h, g, delta, q_new, d2, q_soc, eye, zero5, qp = ws
+    (
+        work_r,
+        work_p,
+        r,
+        r_new,
+        jac,
+        jac2,
+        a,
+        b,
+        lam,
+        a2,
+        b2,
+        lam2,
+        h,
+        g,
+        delta,
+        q_new,
+        d2,
+        q_soc,
+        eye,
+        zero5,
+        qp,
+        hn,
+        ll,
+    ) = ws
     jw_ua, jw_fa, jp_el, jp_wr = jac[0], jac[1], jac[2], jac[3]
     jw2_ua, jw2_fa, jp2_el, jp2_wr = jac2[0], jac2[1], jac2[2], jac2[3]
     f, v = _evaluate(q, model, rua_hat, rfa_hat, lo, hi, work_r, work_p, r)
@@ -204,6 +290,10 @@ def _solve_one(
                 for k in range(3):
                     s += jw_ua[k, i] * jw_ua[k, j] + jw_fa[k, i] * jw_fa[k, j]
                 h[i, j] = s
+        if _newton_matrix(r, jw_ua, jw_fa, hn, ll):  # Newton where the Hessian is positive definite, else GN
+            for i in range(5):
+                for j in range(5):
+                    h[i, j] = hn[i, j]
         m = _build_constraints(q, lo, hi, work_p, jp_el, jp_wr, a, b) if constrained else 0
         accepted = False
         for _try in range(12):
