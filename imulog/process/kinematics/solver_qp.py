@@ -83,6 +83,37 @@ def _qp_work():
 
 
 @numba.njit(cache=True)
+def _on_active_set(qm, c, m, idx, na, lam, trial, qa, lua, piva, ca):
+    """Multipliers of the dual ``min 1/2 l'Q l + c'l, l >= 0`` with the rows ``idx[:na]`` active, solved exactly;
+    written to ``lam`` and True when they are >= 0 and leave every slack >= 0 (the optimum), else False."""
+    if na == 0 or na > 5:
+        return False
+    for u in range(na):
+        ca[u] = -c[idx[u]]
+        for v in range(na):
+            qa[u, v] = qm[idx[u], idx[v]]
+    if abs(_lu_factor(qa, na, lua, piva)) <= 1e-18:
+        return False
+    _lu_solve(lua, piva, na, ca)
+    for u in range(na):
+        if ca[u] < 0.0:
+            return False
+    for i in range(m):
+        trial[i] = 0.0
+    for u in range(na):
+        trial[idx[u]] = ca[u]
+    for i in range(m):
+        s = c[i]
+        for k in range(m):
+            s += qm[i, k] * trial[k]
+        if s < -1e-12:
+            return False
+    for i in range(m):
+        lam[i] = trial[i]
+    return True
+
+
+@numba.njit(cache=True)
 def _solve_qp(h, g, a, b, m, sweeps, delta, lam, work):
     """min 1/2 d'Hd + g'd  s.t.  a[:m] d <= b[:m]  (H 5x5 SPD). Writes ``delta``; returns #active."""
     lu, piv, hat, qm, c, trial, idx, qa, lua, piva, ca, d0 = work
@@ -123,54 +154,38 @@ def _solve_qp(h, g, a, b, m, sweeps, delta, lam, work):
             s += a[i, j] * d0[j]
         c[i] = b[i] - s
         lam[i] = 0.0
-    for _sweep in range(sweeps):
-        change = 0.0
-        for i in range(m):
-            if qm[i, i] <= 1e-14:
-                continue
-            s = c[i]
-            for k in range(m):
-                s += qm[i, k] * lam[k]
-            new = lam[i] - s / qm[i, i]
-            if new < 0.0:
-                new = 0.0
-            dl = abs(new - lam[i]) * qm[i, i]
-            if dl > change:
-                change = dl
-            lam[i] = new
-        if change < 1e-15:
-            break
-    # polish: exact solve on the active set when it is consistent
+    # the rows the unconstrained step violates are usually the active set: the exact solve on them is the
+    # optimum when its multipliers are >= 0 and it violates no other row (KKT); else projected Gauss-Seidel
     na = 0
     for i in range(m):
-        if lam[i] > 0.0:
+        if c[i] < -1e-12:
             idx[na] = i
             na += 1
-    if 0 < na <= 5:
-        for u in range(na):
-            ca[u] = -c[idx[u]]
-            for v in range(na):
-                qa[u, v] = qm[idx[u], idx[v]]
-        if abs(_lu_factor(qa, na, lua, piva)) > 1e-18:
-            _lu_solve(lua, piva, na, ca)
-            ok = True
-            for u in range(na):
-                if ca[u] < 0.0:
-                    ok = False
-            if ok:
-                for i in range(m):
-                    trial[i] = 0.0
-                for u in range(na):
-                    trial[idx[u]] = ca[u]
-                for i in range(m):
-                    s = c[i]
-                    for k in range(m):
-                        s += qm[i, k] * trial[k]
-                    if s < -1e-12:
-                        ok = False
-                if ok:
-                    for i in range(m):
-                        lam[i] = trial[i]
+    if not _on_active_set(qm, c, m, idx, na, lam, trial, qa, lua, piva, ca):
+        for _sweep in range(sweeps):
+            change = 0.0
+            for i in range(m):
+                if qm[i, i] <= 1e-14:
+                    continue
+                s = c[i]
+                for k in range(m):
+                    s += qm[i, k] * lam[k]
+                new = lam[i] - s / qm[i, i]
+                if new < 0.0:
+                    new = 0.0
+                dl = abs(new - lam[i]) * qm[i, i]
+                if dl > change:
+                    change = dl
+                lam[i] = new
+            if change < 1e-15:
+                break
+        # polish: exact solve on the active set when it is consistent
+        na = 0
+        for i in range(m):
+            if lam[i] > 0.0:
+                idx[na] = i
+                na += 1
+        _on_active_set(qm, c, m, idx, na, lam, trial, qa, lua, piva, ca)
     for j in range(5):
         s = 0.0
         for i in range(m):
