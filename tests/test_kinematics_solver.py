@@ -148,3 +148,73 @@ def test_workspace_box_validation_and_round_trip():
         WorkspaceBox((1.0, 0, 0), (0.0, 1, 1))
     with pytest.raises(ValueError, match="N, 3, 3"):
         solve_sequence(np.zeros((3, 4)), np.zeros((3, 4)))
+
+
+def _gradient(q: np.ndarray, r_ua: np.ndarray, r_fa: np.ndarray, model: ArmModel) -> tuple[float, np.ndarray]:
+    """(f rad^2, J'r = the gradient of f / 2) at ``q`` from the forward kinematics and joint-axis Jacobians."""
+    from imulog.process.kinematics.dh import jacobians
+
+    fk = forward_kinematics(q, model)
+    r = np.concatenate(
+        [
+            quat.to_rotation_vector(quat.from_rotation_matrix(fk.r_upper_arm @ r_ua.T)),
+            quat.to_rotation_vector(quat.from_rotation_matrix(fk.r_forearm @ r_fa.T)),
+        ]
+    )
+    j = jacobians(q, model)
+    return float(r @ r), j["omega_upper_arm"].T @ r[:3] + j["omega_forearm"].T @ r[3:]
+
+
+def test_newton_matrix_is_the_hessian_of_the_cost():
+    """The exact Hessian the solver steps with equals central differences of J'r (and J'r those of f / 2)."""
+    from imulog.process.kinematics.dh import jacobians
+    from imulog.process.kinematics.solver_core import _newton_matrix
+
+    rng = np.random.default_rng(3)
+    model = ArmModel(0.29, 0.26, 0.05, 17.0)
+    checked = definite = 0
+    for _ in range(60):
+        q = rng.uniform(-1.5, 1.5, 5)
+        r_ua, r_fa = quat.to_rotation_matrix(quat.from_rotation_vector(rng.normal(0.0, 0.8, (2, 3))))
+        f, g = _gradient(q, r_ua, r_fa, model)
+        fk = forward_kinematics(q, model)
+        r = np.concatenate(
+            [
+                quat.to_rotation_vector(quat.from_rotation_matrix(fk.r_upper_arm @ r_ua.T)),
+                quat.to_rotation_vector(quat.from_rotation_matrix(fk.r_forearm @ r_fa.T)),
+            ]
+        )
+        if max(np.linalg.norm(r[:3]), np.linalg.norm(r[3:])) > 2.9:
+            continue
+        j = jacobians(q, model)
+        h, ll = np.empty((5, 5)), np.empty((5, 5))
+        definite += _newton_matrix(r, j["omega_upper_arm"], j["omega_forearm"], h, ll)
+        e = 1e-6
+        h_fd = np.empty((5, 5))
+        g_fd = np.empty(5)
+        for k in range(5):
+            dq = np.zeros(5)
+            dq[k] = e
+            h_fd[:, k] = (_gradient(q + dq, r_ua, r_fa, model)[1] - _gradient(q - dq, r_ua, r_fa, model)[1]) / (2 * e)
+            g_fd[k] = (_gradient(q + dq, r_ua, r_fa, model)[0] - _gradient(q - dq, r_ua, r_fa, model)[0]) / (4 * e)
+        assert np.max(np.abs(g - g_fd)) < 1e-6
+        assert np.max(np.abs(h - h_fd)) < 1e-5
+        checked += 1
+    assert checked >= 40 and 0 < definite < checked  # both branches: Newton's step and the Gauss-Newton fallback
+
+
+def test_unconstrained_solutions_are_stationary_when_the_orientations_do_not_fit_the_model():
+    """Segment orientations no arm can take (the forearm turned 60 deg off the model's): every sample still ends
+    at a stationary point of f (J'r ~ 0), within the iteration bound."""
+    q = _trajectory(1500, seed=2)
+    model = ArmModel()
+    fk = forward_kinematics(q, model)
+    off = quat.to_rotation_matrix(quat.from_rotation_vector(np.radians([35.0, -40.0, 25.0])))
+    r_fa = fk.r_forearm @ off
+    res = solve_sequence(fk.r_upper_arm, r_fa, model, q0_rad=q[0])
+    assert np.median(res.cost_rad2) > 0.1  # a large residual: the Newton and Gauss-Newton steps differ
+    assert np.all(res.iterations < 50)
+    worst = max(
+        np.max(np.abs(_gradient(res.q_rad[k], fk.r_upper_arm[k], r_fa[k], model)[1])) for k in range(0, 1500, 7)
+    )
+    assert worst < 1e-8

@@ -102,8 +102,11 @@ class ArmModel:
         )
 
     def packed(self) -> np.ndarray:
-        """Flat (26,) float array for the numba kernels: the DH table then the carrying angle (rad)."""
-        return np.concatenate([self.dh_table().ravel(), [math.radians(self.carrying_angle_deg)]])
+        """Flat (38,) float array for the numba kernels: the DH table, the carrying angle (rad), then the cosines
+        and sines of the six link twists alpha (constants, computed once instead of at every evaluation)."""
+        table = self.dh_table()
+        trig = [math.cos(a) for a in table[:, 3]] + [math.sin(a) for a in table[:, 3]]
+        return np.concatenate([table.ravel(), [math.radians(self.carrying_angle_deg)], trig])
 
     @classmethod
     def from_metadata(cls, anthropometrics: dict) -> ArmModel:
@@ -154,7 +157,7 @@ class JointLimits:
 def _fk_kernel(q, model, frames_r, frames_p):
     """Fill ``frames_r`` (7, 3, 3) and ``frames_p`` (7, 3) with the rotation and origin of frames 0..6.
 
-    ``q`` (5,) free joint angles in rad; ``model`` the packed DH table + carrying angle.
+    ``q`` (5,) free joint angles in rad; ``model`` :meth:`ArmModel.packed` (DH table, carrying angle, twists).
     """
     for i in range(3):
         for j in range(3):
@@ -164,7 +167,6 @@ def _fk_kernel(q, model, frames_r, frames_p):
         off = model[4 * k]
         d = model[4 * k + 1]
         a = model[4 * k + 2]
-        al = model[4 * k + 3]
         if k < 4:
             th = q[k] + off
         elif k == 4:
@@ -173,8 +175,8 @@ def _fk_kernel(q, model, frames_r, frames_p):
             th = q[4] + off
         ct = math.cos(th)
         st = math.sin(th)
-        ca = math.cos(al)
-        sa = math.sin(al)
+        ca = model[25 + k]  # cos(alpha), sin(alpha): packed by ArmModel.packed
+        sa = model[31 + k]
         # local link transform Rz(th) Tz(d) Tx(a) Rx(al)
         l00 = ct
         l01 = -st * ca

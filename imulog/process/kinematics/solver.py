@@ -8,9 +8,11 @@ optionally subject to the joint limits g1 (eq. 6) and to the elbow and wrist cen
 axis-aligned workspace boxes g2 (eq. 7), starting from the previous sample's solution (warm start).
 
 The paper solves this with MATLAB's SQP (6.9 / 11.3 ms per sample). Here the same problem is solved
-by a Levenberg-Marquardt / SQP iteration compiled with numba: the residual is the stacked rotation
+by a damped Newton / SQP iteration compiled with numba: the residual is the stacked rotation
 vectors ``r = [log(R_UA(q) R_UA_hat^T), log(R_FA(q) R_FA_hat^T)]`` (so ``|r|^2 = f`` exactly),
-with the analytic joint-axis Jacobian (its ``J^T r`` is the exact gradient of ``f / 2``). With
+with the analytic joint-axis Jacobian (its ``J^T r`` is the exact gradient of ``f / 2``) and the
+exact Hessian of ``f / 2`` where it is positive definite (Gauss-Newton's ``J^T J`` elsewhere), with
+Levenberg-Marquardt damping: a few iterations per sample from the previous solution. With
 constraints, every iteration solves the linearised problem, a 5-variable QP with up to 22 linear
 inequalities, through its dual (projected Gauss-Seidel, then an exact solve on the active set); an
 L1 merit function accepts or rejects steps. Joint limits are met exactly (the last iterate is clipped

@@ -1,8 +1,10 @@
 """The compiled core of the constrained joint-angle solver (Caruso 2024), see :mod:`.solver`.
 
-Levenberg-Marquardt / SQP iterations in numba: the stacked rotation-vector residual of both segments and its
-analytic Jacobian, the 5-variable QP with up to 22 linear inequalities solved through its dual, the workspace-box
-constraints, and :func:`solve_packed_sequence`, the warm-started loop over samples. Angles in rad, positions in m.
+Damped Newton / SQP iterations in numba: the stacked rotation-vector residual of both segments, its analytic
+Jacobian and the exact Hessian of the cost (:func:`_newton_matrix`; Gauss-Newton's ``J'J`` where that is not
+positive definite), the workspace-box constraints linearised for the 5-variable QP (:mod:`.solver_qp`), and
+:func:`solve_packed_sequence`, the warm-started loop over samples. Every scratch array is allocated once per
+sequence (:func:`_sample_work`), none per sample. Angles in rad, positions in m.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import numba
 import numpy as np
 
 from imulog.process.kinematics.dh import _fk_kernel, _jac_kernel
+from imulog.process.kinematics.solver_qp import _qp_work, _solve_qp
 
 
 @numba.njit(cache=True)
@@ -92,86 +95,6 @@ def _evaluate(q, model, rua_hat, rfa_hat, lo, hi, frames_r, frames_p, r):
 
 
 @numba.njit(cache=True)
-def _solve_qp(h, g, a, b, m, sweeps, delta, lam):
-    """min 1/2 d'Hd + g'd  s.t.  a[:m] d <= b[:m]  (H 5x5 SPD). Writes ``delta``; returns #active."""
-    hinv_g = np.linalg.solve(h, g)
-    for j in range(5):
-        delta[j] = -hinv_g[j]
-    if m == 0:
-        return 0
-    worst = 0.0
-    for i in range(m):
-        s = b[i]
-        for j in range(5):
-            s -= a[i, j] * delta[j]
-        if s < worst:
-            worst = s
-    if worst >= -1e-12:
-        return 0
-    am = a[:m]
-    hinv_at = np.linalg.solve(h, am.T.copy())  # (5, m)
-    q = am @ hinv_at  # (m, m)
-    d0 = delta.copy()
-    c = b[:m] - am @ d0  # slack at lambda = 0
-    for i in range(m):
-        lam[i] = 0.0
-    for _sweep in range(sweeps):
-        change = 0.0
-        for i in range(m):
-            if q[i, i] <= 1e-14:
-                continue
-            s = c[i]
-            for k in range(m):
-                s += q[i, k] * lam[k]
-            new = lam[i] - s / q[i, i]
-            if new < 0.0:
-                new = 0.0
-            dl = abs(new - lam[i]) * q[i, i]
-            if dl > change:
-                change = dl
-            lam[i] = new
-        if change < 1e-15:
-            break
-    # polish: exact solve on the active set when it is consistent
-    idx = np.empty(m, dtype=np.int64)
-    na = 0
-    for i in range(m):
-        if lam[i] > 0.0:
-            idx[na] = i
-            na += 1
-    if 0 < na <= 5:
-        qa = np.empty((na, na))
-        ca = np.empty(na)
-        for u in range(na):
-            ca[u] = -c[idx[u]]
-            for v in range(na):
-                qa[u, v] = q[idx[u], idx[v]]
-        if abs(np.linalg.det(qa)) > 1e-18:
-            la = np.linalg.solve(qa, ca)
-            ok = True
-            for u in range(na):
-                if la[u] < 0.0:
-                    ok = False
-            if ok:
-                trial = np.zeros(m)
-                for u in range(na):
-                    trial[idx[u]] = la[u]
-                slack = c + q @ trial
-                for i in range(m):
-                    if slack[i] < -1e-12:
-                        ok = False
-                if ok:
-                    for i in range(m):
-                        lam[i] = trial[i]
-    for j in range(5):
-        s = 0.0
-        for i in range(m):
-            s += hinv_at[j, i] * lam[i]
-        delta[j] = d0[j] - s
-    return na
-
-
-@numba.njit(cache=True)
 def _build_constraints(q, lo, hi, frames_p, jp_el, jp_wr, a, b):
     """Linearised constraints ``a[:m] d <= b[:m]`` at ``q`` (frames and Jacobians already at ``q``)."""
     m = 0
@@ -227,61 +150,135 @@ def _box_violation(frames_p, lo, hi):
 
 
 @numba.njit(cache=True)
+def _newton_matrix(r, jw_ua, jw_fa, h, ll):
+    """Exact Hessian of ``f / 2`` (rad^2 / rad^2) into ``h`` (5x5) from the residual ``r`` (6,) and the joint axes
+    ``jw_ua``/``jw_fa`` (3, 5); ``ll`` scratch for its Cholesky factor. True when it is positive definite (use it:
+    Newton's step), False when it is not or a residual angle is near pi (use Gauss-Newton's ``J'J`` instead).
+
+    ``H_jk = sum_s w_sk' Jl^-T(r_s) w_sj + [k < j] r_s . (z_k x z_j)``: the change of ``J'r`` with ``q_k`` through
+    the residual (``dr_s/dq_k = Jl^-1(r_s) w_sk``) and through axis j turning with joint k (``dz_j/dq_k = z_k x
+    z_j``); checked against finite differences of ``J'r`` in the tests."""
+    for i in range(5):
+        for j in range(5):
+            h[i, j] = 0.0
+    for seg in range(2):
+        o = 3 * seg
+        w = jw_ua if seg == 0 else jw_fa
+        n_j = 3 if seg == 0 else 5
+        rx, ry, rz = r[o], r[o + 1], r[o + 2]
+        th2 = rx * rx + ry * ry + rz * rz
+        th = math.sqrt(th2)
+        if th > 3.0:
+            return False
+        # Jl^-T(r) = I + [r]x / 2 + c [r]x^2 (SO(3) left Jacobian, inverse transposed); c -> 1/12 at r -> 0
+        c = 1.0 / 12.0 if th < 1e-4 else 1.0 / th2 - (1.0 + math.cos(th)) / (2.0 * th * math.sin(th))
+        for j in range(n_j):
+            wj0, wj1, wj2 = w[0, j], w[1, j], w[2, j]
+            rwj = rx * wj0 + ry * wj1 + rz * wj2
+            # r x w_j
+            cx = ry * wj2 - rz * wj1
+            cy = rz * wj0 - rx * wj2
+            cz = rx * wj1 - ry * wj0
+            for k in range(j + 1):
+                wk0, wk1, wk2 = w[0, k], w[1, k], w[2, k]
+                dot = wk0 * wj0 + wk1 * wj1 + wk2 * wj2
+                rwk = rx * wk0 + ry * wk1 + rz * wk2
+                val = dot + c * (rwk * rwj - th2 * dot)
+                if k < j:
+                    # Jl^-T's skew part, w_k . (r x w_j) / 2, plus the turning of axis j with joint k,
+                    # r . (w_k x w_j) = -w_k . (r x w_j): together -w_k . (r x w_j) / 2
+                    val -= 0.5 * (wk0 * cx + wk1 * cy + wk2 * cz)
+                h[j, k] += val
+    for j in range(5):
+        for k in range(j):
+            h[k, j] = h[j, k]
+    # positive definite? (Cholesky without storing)
+    for j in range(5):
+        s = h[j, j]
+        for k in range(j):
+            s -= ll[j, k] * ll[j, k]
+        if s <= 1e-12:
+            return False
+        ll[j, j] = math.sqrt(s)
+        for i in range(j + 1, 5):
+            t = h[i, j]
+            for k in range(j):
+                t -= ll[i, k] * ll[j, k]
+            ll[i, j] = t / ll[j, j]
+    return True
+
+
+@numba.njit(cache=True)
+def _sample_work():
+    """Scratch arrays of :func:`_solve_one` (allocated once per sequence, not per sample)."""
+    return (
+        np.empty((7, 3, 3)),  # frames' rotations
+        np.empty((7, 3)),  # frames' origins
+        np.empty(6),  # residual at q
+        np.empty(6),  # residual at a trial point
+        np.empty((4, 3, 5)),  # Jacobians at q: UA, FA orientation; elbow, wrist position
+        np.empty((4, 3, 5)),  # Jacobians at a trial point
+        np.zeros((22, 5)),  # linearised constraints at q
+        np.zeros(22),
+        np.zeros(22),  # their multipliers
+        np.zeros((22, 5)),  # linearised constraints at a trial point
+        np.zeros(22),
+        np.zeros(22),
+        np.empty((5, 5)),  # J'J
+        np.empty(5),  # J'r
+        np.empty(5),  # step
+        np.empty(5),  # trial point
+        np.empty(5),  # restoration step
+        np.empty(5),  # second-order-corrected point
+        np.eye(5),
+        np.zeros(5),
+        _qp_work(),
+        np.empty((5, 5)),  # exact Hessian
+        np.empty((5, 5)),  # its Cholesky factor
+    )
+
+
+@numba.njit(cache=True)
 def _solve_one(
-    q,
-    model,
-    rua_hat,
-    rfa_hat,
-    lo,
-    hi,
-    constrained,
-    max_iter,
-    step_tol,
-    damping0,
-    penalty,
-    sweeps,
-    feas_tol,
-    work_r,
-    work_p,
-    r,
-    jw_ua,
-    jw_fa,
-    jp_el,
-    jp_wr,
-    a,
-    b,
-    lam,
-    active,
+    q, model, rua_hat, rfa_hat, lo, hi, constrained, max_iter, step_tol, damping0, penalty, sweeps, feas_tol, ws, active
 ):
-    """Refine ``q`` (in place) for one sample; returns (cost, iterations)."""
+    """Refine ``q`` (in place) for one sample; returns (cost, iterations). ``ws``: :func:`_sample_work`."""
+    (
+        work_r,
+        work_p,
+        r,
+        r_new,
+        jac,
+        jac2,
+        a,
+        b,
+        lam,
+        a2,
+        b2,
+        lam2,
+        h,
+        g,
+        delta,
+        q_new,
+        d2,
+        q_soc,
+        eye,
+        zero5,
+        qp,
+        hn,
+        ll,
+    ) = ws
+    jw_ua, jw_fa, jp_el, jp_wr = jac[0], jac[1], jac[2], jac[3]
+    jw2_ua, jw2_fa, jp2_el, jp2_wr = jac2[0], jac2[1], jac2[2], jac2[3]
     f, v = _evaluate(q, model, rua_hat, rfa_hat, lo, hi, work_r, work_p, r)
     if not constrained:
         v = 0.0
     merit = f + penalty * v
     mu = damping0
-    h = np.empty((5, 5))
-    g = np.empty(5)
-    delta = np.empty(5)
-    q_new = np.empty(5)
-    r_new = np.empty(6)
-    jw2_ua = np.empty((3, 5))
-    jw2_fa = np.empty((3, 5))
-    jp2_el = np.empty((3, 5))
-    jp2_wr = np.empty((3, 5))
-    a2 = np.zeros((22, 5))
-    b2 = np.zeros(22)
-    lam2 = np.zeros(22)
-    d2 = np.empty(5)
-    q_soc = np.empty(5)
-    eye = np.eye(5)
-    zero5 = np.zeros(5)
     it = 0
     for _k in range(max_iter):
         it += 1
-        # frames hold the current q (re-evaluate after a rejected step is unnecessary: q unchanged)
-        _fk_kernel(q, model, work_r, work_p)
-        _log_rel(work_r[3], rua_hat, r, 0)
-        _log_rel(work_r[6], rfa_hat, r, 3)
+        # the frames and the residual hold the current q: from the evaluation above, or of the accepted step
         _jac_kernel(work_r, work_p, jw_ua, jw_fa, jp_el, jp_wr)
         for i in range(5):
             gi = 0.0
@@ -293,12 +290,16 @@ def _solve_one(
                 for k in range(3):
                     s += jw_ua[k, i] * jw_ua[k, j] + jw_fa[k, i] * jw_fa[k, j]
                 h[i, j] = s
+        if _newton_matrix(r, jw_ua, jw_fa, hn, ll):  # Newton where the Hessian is positive definite, else GN
+            for i in range(5):
+                for j in range(5):
+                    h[i, j] = hn[i, j]
         m = _build_constraints(q, lo, hi, work_p, jp_el, jp_wr, a, b) if constrained else 0
         accepted = False
         for _try in range(12):
             for i in range(5):
                 h[i, i] += mu
-            _solve_qp(h, g, a, b, m, sweeps, delta, lam)
+            _solve_qp(h, g, a, b, m, sweeps, delta, lam, qp)
             for i in range(5):
                 h[i, i] -= mu
             for i in range(5):
@@ -315,7 +316,7 @@ def _solve_one(
                 # linearised at q_new, then re-test the merit
                 _jac_kernel(work_r, work_p, jw2_ua, jw2_fa, jp2_el, jp2_wr)
                 m2 = _build_constraints(q_new, lo, hi, work_p, jp2_el, jp2_wr, a2, b2)
-                _solve_qp(eye, zero5, a2, b2, m2, sweeps, d2, lam2)
+                _solve_qp(eye, zero5, a2, b2, m2, sweeps, d2, lam2, qp)
                 for i in range(5):
                     q_soc[i] = q_new[i] + d2[i]
                 f_soc, v_soc = _evaluate(q_soc, model, rua_hat, rfa_hat, lo, hi, work_r, work_p, r_new)
@@ -338,6 +339,8 @@ def _solve_one(
             break
         for i in range(5):
             q[i] = q_new[i]
+        for i in range(6):
+            r[i] = r_new[i]
         merit = merit_new
         f = f_new
         v = v_new
@@ -357,7 +360,7 @@ def _solve_one(
                 break
             _jac_kernel(work_r, work_p, jw2_ua, jw2_fa, jp2_el, jp2_wr)
             m2 = _build_constraints(q, lo, hi, work_p, jp2_el, jp2_wr, a2, b2)
-            _solve_qp(eye, zero5, a2, b2, m2, sweeps, d2, lam2)
+            _solve_qp(eye, zero5, a2, b2, m2, sweeps, d2, lam2, qp)
             for c in range(5):
                 q[c] = min(max(q[c] + d2[c], lo[c]), hi[c])
             f, v = _evaluate(q, model, rua_hat, rfa_hat, lo, hi, work_r, work_p, r)
@@ -397,17 +400,10 @@ def solve_packed_sequence(
     out_iter,
     out_active,
 ):
+    """Every sample of ``rua_hat``/``rfa_hat`` (N, 3, 3), each warm-started from the previous solution (``q0`` for
+    the first); non-finite samples give NaN and keep the warm start. Writes the ``out_*`` arrays."""
     n = rua_hat.shape[0]
-    work_r = np.empty((7, 3, 3))
-    work_p = np.empty((7, 3))
-    r = np.empty(6)
-    jw_ua = np.empty((3, 5))
-    jw_fa = np.empty((3, 5))
-    jp_el = np.empty((3, 5))
-    jp_wr = np.empty((3, 5))
-    a = np.zeros((22, 5))
-    b = np.zeros(22)
-    lam = np.zeros(22)
+    ws = _sample_work()
     active = np.zeros(3, dtype=np.bool_)
     q = q0.copy()
     for k in range(n):
@@ -433,16 +429,7 @@ def solve_packed_sequence(
             penalty,
             sweeps,
             feas_tol,
-            work_r,
-            work_p,
-            r,
-            jw_ua,
-            jw_fa,
-            jp_el,
-            jp_wr,
-            a,
-            b,
-            lam,
+            ws,
             active,
         )
         for i in range(5):
@@ -451,7 +438,3 @@ def solve_packed_sequence(
         out_iter[k] = it
         for i in range(3):
             out_active[k, i] = active[i]
-
-
-# --------------------------------------------------------------------------------------------
-# public API
