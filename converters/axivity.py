@@ -411,6 +411,7 @@ class AxivityConverter(Converter):
     description = "Axivity AX3/AX6 .cwa (accel, gyro; light, temperature, battery as signals); local start time"
     extensions = (".cwa",)
     example = "imulog convert ../shared/data/devices/axivity_cwa/ax6_sample.cwa -o ax6.mcap"
+    fixed_pieces = True  # BLOCKS_PER_CHUNK blocks a piece: the same temporaries each time
 
     def sniff(self, path: Path, head: bytes) -> float:
         if len(head) >= HEADER_BYTES + 2 and head[:2] == b"MD" and head[HEADER_BYTES : HEADER_BYTES + 2] == b"AX":

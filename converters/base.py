@@ -41,6 +41,10 @@ class Converter:
     description: ClassVar[str] = ""
     extensions: ClassVar[tuple[str, ...]] = ()
     example: ClassVar[str] = ""
+    #: True when ``iter_chunks`` yields pieces of one fixed size (binary block formats): ``imulog convert`` then
+    #: keeps freed piece temporaries in the heap for the next piece to reuse (imulog.heap.reuse_heap) instead of
+    #: mapping each afresh (bound_heap, which pieces of varying size need to keep memory flat)
+    fixed_pieces: ClassVar[bool] = False
 
     def sniff(self, path: Path, head: bytes) -> float:  # pragma: no cover - interface
         raise NotImplementedError

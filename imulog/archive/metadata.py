@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 from typing import Any
 
 from imulog._lazy import LazyModule
@@ -23,17 +24,26 @@ class MetadataError(ValueError):
     """A metadata record or channel metadata value is malformed (message names the key)."""
 
 
-def _depth(value: Any) -> int:
-    """Nesting depth of a decoded JSON value, without recursion."""
-    deepest, stack = 0, [(value, 1)]
-    while stack:
-        v, d = stack.pop()
-        if isinstance(v, dict | list):
-            deepest = max(deepest, d)
-            if d > MAX_JSON_DEPTH:
-                return d
-            stack.extend((x, d + 1) for x in (v.values() if isinstance(v, dict) else v))
-    return deepest
+_KEEP = b'"[]{}'
+_DROP = bytes(c for c in range(256) if c not in _KEEP)  # bytes deleted before counting (UTF-8: never these)
+_QUOTED = re.compile(rb'"[^"]*"')
+_INNERMOST = re.compile(rb"\[\]|\{\}")
+
+
+def _depth(text: str, limit: int = MAX_JSON_DEPTH) -> int:
+    """Nesting depth of the containers of valid JSON ``text`` (at most ``limit + 1``: deeper is not counted).
+
+    Escaped backslashes and quotes removed (left to right, as JSON reads them), every byte but quotes and
+    brackets dropped, the brackets inside strings (between quote pairs) dropped, then the innermost pairs removed
+    round by round: the number of rounds is the depth. String operations in C, so a record of a week's rows
+    takes milliseconds rather than a walk over its objects."""
+    kept = text.replace("\\\\", "").replace('\\"', "").encode("utf-8", "surrogatepass").translate(None, _DROP)
+    brackets = _QUOTED.sub(b"", kept.replace(b'""', b""))  # removing "" keeps every bracket's side of the quotes
+    depth = 0
+    while brackets and depth <= limit:
+        brackets = _INNERMOST.sub(b"", brackets)
+        depth += 1
+    return depth
 
 
 def loads(text: str, what: str) -> Any:
@@ -45,7 +55,7 @@ def loads(text: str, what: str) -> Any:
             value = None
             deep = True
         else:
-            deep = _depth(value) > MAX_JSON_DEPTH
+            deep = _depth(text) > MAX_JSON_DEPTH
         if deep:
             raise MetadataError(f"{what}: JSON nested deeper than {MAX_JSON_DEPTH} levels")
         return value

@@ -47,11 +47,16 @@ def _convert_streaming(
     from imulog.converters.plausibility import PieceExcerpts, marker_warnings
     from imulog.converters.registry import iter_file_chunks
     from imulog.converters.values import ValueReport, finish
-    from imulog.heap import bound_heap
+    from imulog.heap import bound_heap, reuse_heap
 
-    bound_heap()  # the same temporaries piece after piece: keep them out of the heap (imulog.heap), so memory stays flat
     name = _format_name(path, fmt, options)
     conv = get(name)
+    # the same temporaries piece after piece (imulog.heap): pieces of one size reuse their pages (a .cwa day: 5 s
+    # of system time less); pieces of varying size are mapped afresh, which keeps memory flat
+    if conv.fixed_pieces:
+        reuse_heap()
+    else:
+        bound_heap()
     size = path.stat().st_size
     notes: list[str] = []
     counts: dict[str, int] = {}
