@@ -63,7 +63,7 @@ def _static_for_anchor(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The phases step's zero-velocity mask (what the trajectory step anchors the orientation to) and the rests
     where the trajectory step may cut a window (the heading chain restarts there: rests of at least
-    ``TrajectoryWindows.min_rest_s`` outside the repetitions; ``t_s`` the sample times, s)."""
+    ``TrajectoryWindows.chain_rest_s`` outside the repetitions; ``t_s`` the sample times, s)."""
     from imulog.process.anchor_heading import restart_rests
     from imulog.process.segmentation.pipeline import segment_phases
     from imulog.steps.trajectory_windows import TrajectoryWindows
@@ -75,7 +75,7 @@ def _static_for_anchor(
     for s, e, k in zip(res.phases.start, res.phases.end, res.phases.repetition, strict=True):
         lo, hi = spans.get(int(k), (np.inf, -np.inf))
         spans[int(k)] = (min(lo, t[int(s)]), max(hi, t[min(int(e), len(t) - 1)]))
-    return mask, restart_rests(mask, t, TrajectoryWindows.min_rest_s, [v for k, v in spans.items() if k >= 0])
+    return mask, restart_rests(mask, t, TrajectoryWindows.chain_rest_s, [v for k, v in spans.items() if k >= 0])
 
 
 def simulated_inputs(

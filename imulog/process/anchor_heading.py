@@ -26,7 +26,8 @@ def restart_rests(
     """(N,) bool: the samples of the runs of ``static`` (the phases step's zero-velocity mask) of at least
     ``min_rest_s`` s (in samples at the mean rate of ``t_s``, as the step's window plan counts them) whose middle
     lies outside every repetition ``(start s, end s)`` of ``repetitions_s``: where the trajectory step may cut a
-    window (``imulog.steps.windows.rest_windows``: at a rest, never inside a repetition)."""
+    window (``imulog.steps.windows.rest_windows``: at a rest, never inside a repetition). A rest at either end of
+    the samples counts whatever its length: a window that reads only ``context_s`` of a long rest starts there."""
     from imulog.process.integration import static_runs
 
     m = np.asarray(static, dtype=bool)
@@ -36,7 +37,10 @@ def restart_rests(
         return out
     rate = (len(t) - 1) / max(t[-1] - t[0], 1e-9)
     spans = np.asarray(list(repetitions_s), dtype=np.float64).reshape(-1, 2)
-    for a, b in static_runs(m, max(1, int(round(min_rest_s * rate)))):
+    shortest = max(1, int(round(min_rest_s * rate)))
+    for a, b in static_runs(m):
+        if b - a < shortest and a > 0 and b < len(m):  # a rest at either end: a window starts or ends there
+            continue
         mid = t[(int(a) + int(b) - 1) // 2]
         if not np.any((spans[:, 0] < mid) & (mid < spans[:, 1])):
             out[a:b] = True

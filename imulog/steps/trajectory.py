@@ -104,7 +104,7 @@ def compute_trajectories(
     gyr: tuple[np.ndarray, np.ndarray] | None = None,
     repetition_quality: list[dict[str, Any]] | None = None,
     per_imu: bool = False,
-    min_rest_s: float = TrajectoryWindows.min_rest_s,
+    chain_rest_s: float = TrajectoryWindows.chain_rest_s,
 ) -> tuple[list[SignalStream], dict[str, Any]]:
     """Pure part of the step: trajectory streams and the ``imulog.trajectory`` record (no I/O).
 
@@ -123,9 +123,9 @@ def compute_trajectories(
     (``(t_ns, (N, 3) rad/s)``, device clock) and the orientation, the orientation is re-integrated through every
     movement and anchored at its rests (:func:`imulog.process.integration.rest_anchored_orientation`,
     ``params.anchor``) and the gravity-free acceleration rotated accordingly (``imulog.trajectory["orientation"]``
-    says which was used). ``min_rest_s``: the shortest rest a window may be cut at
-    (:class:`imulog.steps.trajectory_windows.TrajectoryWindows`): the heading chain of
-    ``AnchorParams.heading="gyroscope"`` restarts at such rests outside the repetitions, so windows equal the whole.
+    says which was used). ``chain_rest_s``: the heading chain of ``AnchorParams.heading="gyroscope"`` restarts at
+    rests at least this long outside the repetitions, where the step's windows are cut
+    (:class:`imulog.steps.trajectory_windows.TrajectoryWindows`), so windows equal the whole.
     """
     t_dev = np.asarray(acc_t_ns, dtype=np.int64)
     acc = np.asarray(acc_global, dtype=np.float64)
@@ -161,7 +161,7 @@ def compute_trajectories(
         t_s = (t_ref - t_ref[0]) / 1e9  # where a window may be cut: the heading chain restarts there
         bounds = phase_bounds_by_repetition(t_ph, int(t_ref[0])) if t_ph is not None and len(t_ph) else {}
         spans = [(float(b[:, 0].min()), float(b[:, 1].max())) for b in bounds.values()]
-        restart = restart_rests(given, t_s, min_rest_s, spans)
+        restart = restart_rests(given, t_s, chain_rest_s, spans)
         q_anchored = rest_anchored_orientation(q_world, w, (t_dev - t_dev[0]) / 1e9, rest, params.anchor, restart)
         g_up = np.array([0.0, 0.0, 9.81])  # (any g: the correction rotations are small, its error ~1e-4 m/s^2)
         acc = quat.rotate(quat.multiply(q_anchored, quat.conjugate(q_world)), acc + g_up) - g_up
@@ -362,7 +362,7 @@ def run_trajectory(
                 gyr=None if raw is None or raw[1] is None else raw,
                 repetition_quality=timing.get("repetition_quality"),
                 per_imu=per_imu,
-                min_rest_s=windows.min_rest_s,
+                chain_rest_s=windows.chain_rest_s,
             )
 
         return one, alignment, str(timing.get("clock", "reference"))
