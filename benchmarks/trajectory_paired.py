@@ -22,8 +22,9 @@ options), ``closure-sigma`` (the defaults / with
 default changes, ``bias-uncertainty`` and ``rest-run-mean``, / the defaults), ``issue31-options`` (the same
 before / the defaults with the heading through rests and the z-only return), ``heading-restart`` (options 3 and 4
 with the heading chained through the whole recording, ``AnchorParams.restart = False``, / restarted at every rest
-where the trajectory step may cut a window), ``windowed-options`` (the defaults / options 3 and 4, the heading
-restarted where a window may be cut).
+where the trajectory step may cut a window), ``windowed-options`` (the filter's heading and the return to the start on every
+axis, the defaults before 2026-12-07, / options 3 and 4 with the heading restarted where a window may be cut, the
+defaults since).
 """
 
 from __future__ import annotations
@@ -81,7 +82,7 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
         ),
     ),
     "windowed-options": (
-        D,
+        replace(D, anchor=replace(D.anchor, heading="filter"), optimized=replace(D.optimized, return_to_start=True)),
         replace(
             D,
             anchor=replace(D.anchor, heading="gyroscope", restart=True),

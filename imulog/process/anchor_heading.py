@@ -108,44 +108,47 @@ def heading_through_rests(
     if not rests:
         return out
     is_restart = [restart is not None and bool(np.any(restart[a:b])) for a, b in rests]
-    chain_of = np.full(len(q), -1)  # the chain each sample is turned with (-1: a restart rest, the filter's)
+    chain_of = np.full(len(q), 0)  # the chain each sample is turned with
+    in_mean = np.ones(len(q), dtype=bool)  # samples whose offset sets their chain's turn (not a restart rest's)
     s0, e0 = rests[0]
-    chain_of[:s0] = 0
     if is_restart[0]:
-        cur = q[_finite_rows(q, s0, e0)[-1]]
+        out[s0:e0] = cur = q[_finite_rows(q, s0, e0)[-1]]
+        in_mean[s0:e0] = False
     else:
         out[s0:e0] = cur = _levelled(q[s0:e0], q[_finite_rows(q, s0, e0)[0]])
-        chain_of[s0:e0] = 0
     chain = 0
     for k, ((_, a), (b, e2)) in enumerate(zip(rests[:-1], rests[1:], strict=True)):  # movement [a, b)
         to_restart = is_restart[k + 1]
         w = gyr[a - 1 : b + 1]
+        tilt = q[_near_start(t, b, e2, params.bias_window_s)] if to_restart else q[b:e2]  # (a window may cut it)
         if t[b] - t[a - 1] > params.max_movement_s or not np.all(np.isfinite(w)):
             off = heading_offset(cur, q[a - 1]) if np.all(np.isfinite(q[a - 1])) else 0.0
             turn = quat.from_axis_angle(Z_AXIS, float(off))
             out[a:b] = quat.multiply(turn, q[a:b])
-            nxt = _levelled(q[b:e2], quat.multiply(turn, q[_finite_rows(q, b, e2)[0]]))
+            nxt = _levelled(tilt, quat.multiply(turn, q[_finite_rows(q, b, e2)[0]]))
         else:
             bias = _rest_bias(gyr, t, static, a, params.bias_window_s)
             free = _through_movement(cur, w, t[a - 1 : b + 1], bias, None, params.spread)
-            tilt = q[_near_start(t, b, e2, params.bias_window_s)] if to_restart else q[b:e2]
             nxt = _levelled(tilt, free[-1])
             out[a - 1 : b + 1] = _through_movement(cur, w, t[a - 1 : b + 1], bias, nxt, params.spread)
         chain_of[a:b] = chain
-        if to_restart:  # the filter's own orientation; the next movement starts from it
-            out[b:e2] = q[b:e2]
-            cur = q[_finite_rows(q, b, e2)[-1]]
+        out[b:e2] = cur = nxt
+        chain_of[b:e2] = chain
+        if to_restart and k + 2 < len(rests):  # from the rest's middle on: the filter's, where the next chain starts
+            m = (b + e2) // 2
+            in_mean[b:e2] = False
+            out[m:e2] = cur = q[_finite_rows(q, b, e2)[-1]]
             chain += 1
-        else:
-            out[b:e2] = cur = nxt
-            chain_of[b:e2] = chain
-    chain_of[rests[-1][1] :] = chain
+            chain_of[m:] = chain
+        elif to_restart:
+            in_mean[b:e2] = False
     # each chain onto the filter's mean heading over its samples (the frame the align step fitted)
     off = heading_offset(q, out)
     for c in range(chain + 1):
         sel = chain_of == c
         if sel.any():
-            out[sel] = quat.multiply(quat.from_axis_angle(Z_AXIS, _mean_angle(off[sel])), out[sel])
+            turn = quat.from_axis_angle(Z_AXIS, _mean_angle(off[sel & in_mean]))
+            out[sel] = quat.multiply(turn, out[sel])
     # before the first rest and after the last: the filter's, turned to the heading at that rest
     for lo, hi, ref in ((0, s0, s0), (rests[-1][1], len(q), rests[-1][1] - 1)):
         if hi > lo and np.all(np.isfinite(q[ref])):
