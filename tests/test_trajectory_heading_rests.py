@@ -158,7 +158,9 @@ def test_window_plan_cuts_at_long_rests_and_flags_joins_at_short_ones():
     mask = np.zeros(230)
     for a, b in rests:
         mask[a:b] = 1.0
-    trial = SimpleNamespace(iter_blocks=lambda topic: iter([SimpleNamespace(t_ns=np.arange(230), values=mask[:, None])]))
+    trial = SimpleNamespace(
+        iter_blocks=lambda topic: iter([SimpleNamespace(t_ns=np.arange(230), values=mask[:, None])])
+    )
     windows = plan(trial, "/derived/static/x", None, 0, 230, 1.0, w, lambda x: x)
     at_short = [any(a <= j < b for a, b in extra) for j in (x.core_lo for x in windows[1:])]
     assert any(at_short) and not all(at_short)  # joins at a long rest and at a short one

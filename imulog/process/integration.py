@@ -294,8 +294,9 @@ class AnchorParams:
         keeps the filter's tilt (averaged over the rest, constant through it) but the heading the gyroscope
         carried through the movement before it (issue 31): a 6D filter's heading drifts with the residual
         gyroscope bias about the vertical, which depends on the hand's pose (the mouth hold turns it), while the
-        bias measured at each rest leaves the integrated heading within ~0.01 deg/s. The whole result is then
-        turned about the vertical so its mean heading equals the filter's (the frame the align step fitted).
+        bias measured at each rest leaves the integrated heading within ~0.01 deg/s. Each chain is then turned
+        about the vertical so its mean heading equals the filter's (the frame the align step fitted). The default
+        since 2026-12-07 (before: ``"filter"``; docs/accuracy.md, issue 31 point 2).
     restart: with ``heading="gyroscope"``, restart the heading chain at the rests the caller marks (the trajectory
         step: where it may cut a window, :func:`imulog.process.anchor_heading.restart_rests`), each chain turned
         onto the filter's mean heading on its own, so the step's windows equal the whole computation; False: one
@@ -306,7 +307,7 @@ class AnchorParams:
     bias_window_s: float = 0.5
     max_movement_s: float = 15.0
     spread: str = "mixed"
-    heading: str = "filter"
+    heading: str = "gyroscope"
     restart: bool = True
 
 
