@@ -40,12 +40,14 @@ TRAJECTORY_TOLERANCE_CM = 2.0
 
 def trial_rows(name: str, subject: int, seed: int, repetitions: int, overrides: dict[str, Any]) -> list[dict]:
     """One row per estimated repetition of one simulated trial: features and truth labels."""
+    from imulog.process.anchor_heading import restart_rests
     from imulog.process.integration import rest_anchored_orientation
     from imulog.process.orientation import estimate_orientation, gravity_free_acceleration
     from imulog.process.repetition_flags import repetition_features
     from imulog.process.segmentation.pipeline import PhaseParams, segment_phases
     from imulog.process.segmentation.repetitions import RepetitionParams
     from imulog.simulate.core import simulate
+    from imulog.steps.trajectory_windows import TrajectoryWindows
 
     sim = simulate("r2g", subject=subject, seed=seed, repetitions=repetitions, **overrides)
     imu, truth = sim.recording.imus[0], sim.truth
@@ -56,13 +58,19 @@ def trial_rows(name: str, subject: int, seed: int, repetitions: int, overrides: 
     static_ph = np.asarray(res.static, dtype=bool)
     # orientation and world frame as the trajectory step has them after alignment (a constant rotation)
     est = estimate_orientation(imu.gyr, imu.acc, rate)
-    q_est = rest_anchored_orientation(est.quat, imu.gyr, t_s, static_ph)
+    ph = res.phases
+    spans: dict[int, tuple[float, float]] = {}
+    for s, e, k in zip(ph.start, ph.end, ph.repetition, strict=True):
+        lo, hi = spans.get(int(k), (np.inf, -np.inf))
+        spans[int(k)] = (min(lo, t_s[int(s)]), max(hi, t_s[min(int(e), len(t_s) - 1)]))
+    # the heading chain restarts where the step may cut a window (AnchorParams.heading="gyroscope")
+    restart = restart_rests(static_ph, t_s, TrajectoryWindows.chain_rest_s, [v for k, v in spans.items() if k >= 0])
+    q_est = rest_anchored_orientation(est.quat, imu.gyr, t_s, static_ph, restart=restart)
     acc_g = gravity_free_acceleration(q_est, imu.acc, est.static)
     q_g2w = quat.average(quat.multiply(truth.imu_orientation, quat.conjugate(q_est)))
     acc_world = quat.rotate(q_g2w, acc_g)
     q_world = quat.multiply(q_g2w, q_est)
 
-    ph = res.phases
     bounds: dict[int, list[tuple[float, float]]] = {}
     for s, e, k in zip(ph.start, ph.end, ph.repetition, strict=True):
         bounds.setdefault(int(k), []).append((t_s[int(s)], t_s[min(int(e), len(t_s) - 1)]))

@@ -58,11 +58,24 @@ def _phase_params(repetitions: int, static: str = "movements"):
     return PhaseParams(repetitions=RepetitionParams(n_repetitions=repetitions), static=static)
 
 
-def _static_for_anchor(imu, rate: float, repetitions: int, static: str = "movements") -> np.ndarray:
-    """The phases step's zero-velocity mask (what the trajectory step anchors the orientation to)."""
+def _static_for_anchor(
+    imu, rate: float, repetitions: int, static: str = "movements", t_s: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The phases step's zero-velocity mask (what the trajectory step anchors the orientation to) and the rests
+    where the trajectory step may cut a window (the heading chain restarts there: rests of at least
+    ``TrajectoryWindows.chain_rest_s`` outside the repetitions; ``t_s`` the sample times, s)."""
+    from imulog.process.anchor_heading import restart_rests
     from imulog.process.segmentation.pipeline import segment_phases
+    from imulog.steps.trajectory_windows import TrajectoryWindows
 
-    return np.asarray(segment_phases(imu.gyr, rate, _phase_params(repetitions, static), imu.acc).static, dtype=bool)
+    res = segment_phases(imu.gyr, rate, _phase_params(repetitions, static), imu.acc)
+    mask = np.asarray(res.static, dtype=bool)
+    t = np.arange(len(mask)) / rate if t_s is None else t_s
+    spans: dict[int, tuple[float, float]] = {}
+    for s, e, k in zip(res.phases.start, res.phases.end, res.phases.repetition, strict=True):
+        lo, hi = spans.get(int(k), (np.inf, -np.inf))
+        spans[int(k)] = (min(lo, t[int(s)]), max(hi, t[min(int(e), len(t) - 1)]))
+    return mask, restart_rests(mask, t, TrajectoryWindows.chain_rest_s, [v for k, v in spans.items() if k >= 0])
 
 
 def simulated_inputs(
@@ -109,10 +122,12 @@ def simulated_inputs(
         if anchor:  # what the trajectory step does with the gyroscope (TrajectoryParams.anchor)
             from imulog.process.integration import AnchorParams, rest_anchored_orientation
 
-            anchor_static = _static_for_anchor(imu, rate, repetitions, static)
+            anchor_static, restart = _static_for_anchor(imu, rate, repetitions, static, t_s)
             if rests is not None:  # the step anchors at true rests only
                 anchor_static = true_rests(anchor_static, acc_gate, rate, rests, orientation=q_gate)
-            q_est = rest_anchored_orientation(q_est, imu.gyr, t_s, anchor_static, anchor_params or AnchorParams())
+            q_est = rest_anchored_orientation(
+                q_est, imu.gyr, t_s, anchor_static, anchor_params or AnchorParams(), restart
+            )
         acc_g = gravity_free_acceleration(q_est, imu.acc, est.static)
         q_g2w = quat.average(quat.multiply(q_true, quat.conjugate(q_est)))
         acc_world = quat.rotate(q_g2w, acc_g)

@@ -20,7 +20,11 @@ accelerating as a whole is no rest), ``heading-through-rests`` (the defaults / w
 options), ``closure-sigma`` (the defaults / with
 ``OptimizationParams.closure_factor = 0.5``, an option), ``issue31-session3`` (the code before this round's
 default changes, ``bias-uncertainty`` and ``rest-run-mean``, / the defaults), ``issue31-options`` (the same
-before / the defaults with the heading through rests and the z-only return).
+before / the defaults with the heading through rests and the z-only return), ``heading-restart`` (options 3 and 4
+with the heading chained through the whole recording, ``AnchorParams.restart = False``, / restarted at every rest
+where the trajectory step may cut a window), ``windowed-options`` (the filter's heading and the return to the start on every
+axis, the defaults before 2026-12-07, / options 3 and 4 with the heading restarted where a window may be cut, the
+defaults since).
 """
 
 from __future__ import annotations
@@ -57,11 +61,31 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
         ),
     ),
     "closure-sigma": (D, replace(D, optimized=replace(D.optimized, closure_factor=0.5))),
+    "heading-restart": (
+        replace(
+            D,
+            anchor=replace(D.anchor, heading="gyroscope", restart=False),
+            optimized=replace(D.optimized, return_to_start=(False, False, True)),
+        ),
+        replace(
+            D,
+            anchor=replace(D.anchor, heading="gyroscope", restart=True),
+            optimized=replace(D.optimized, return_to_start=(False, False, True)),
+        ),
+    ),
     "issue31-options": (
         replace(D, checks=replace(D.checks, limit_z=0.0), rests=replace(D.rests, run_mean=False)),
         replace(
             D,
             anchor=replace(D.anchor, heading="gyroscope"),
+            optimized=replace(D.optimized, return_to_start=(False, False, True)),
+        ),
+    ),
+    "windowed-options": (
+        replace(D, anchor=replace(D.anchor, heading="filter"), optimized=replace(D.optimized, return_to_start=True)),
+        replace(
+            D,
+            anchor=replace(D.anchor, heading="gyroscope", restart=True),
             optimized=replace(D.optimized, return_to_start=(False, False, True)),
         ),
     ),

@@ -109,3 +109,60 @@ def test_a_good_estimate_is_trusted_by_its_movements_closure():
             mae["zupt" if m == "zupt" else label] = np.mean([[r[a]["mae_cm"] for a in "xyz"] for r in records[m]], 0)
     assert np.all(mae["before"] > mae["zupt"]), mae
     assert np.all(mae["after"] < mae["zupt"]), mae
+
+
+def test_the_heading_restarts_only_at_long_rests_outside_repetitions():
+    """The chain restarts at rests of at least `chain_rest_s` whose middle is outside every repetition, and at a
+    rest at either end of the samples (a window that starts in a long rest); from a restart rest's middle on, the
+    orientation does not depend on what came before it."""
+    from imulog.process.anchor_heading import restart_rests
+
+    t = np.arange(0.0, 200.0, 1.0 / RATE)
+    static = np.ones(len(t), dtype=bool)
+    for a, b in ((10, 12), (20, 22), (60, 62), (100, 102), (190, 192)):  # movements; rests between them
+        static[(t >= a) & (t < b)] = False
+    # rests: [0,10) [12,20) [22,60) [62,100) [102,190) [192,200); one repetition spans 20-100 s
+    r = restart_rests(static, t, 30.0, [(19.0, 101.0)])
+    starts = [float(t[i]) for i in np.flatnonzero(np.diff(np.concatenate([[0], r.astype(int)])) == 1)]
+    assert starts == [0.0, 102.0, 192.0]  # not 12 (8 s), nor 22 and 62 (inside the repetition)
+
+    # the orientation after a restart rest equals that of the same samples computed from that rest on
+    t2, _, q_filter, gyr, static2 = _trial()
+    restart = np.zeros(len(t2), dtype=bool)
+    restart[(t2 >= 6.0) & (t2 < 8.0)] = True  # the third rest
+    p = AnchorParams(heading="gyroscope")
+    whole = rest_anchored_orientation(q_filter, gyr, t2, static2, p, restart)
+    k = int(np.flatnonzero(t2 >= 6.0)[0])
+    part = rest_anchored_orientation(q_filter[k:], gyr[k:], t2[k:], static2[k:], p, restart[k:])
+    m = int(np.flatnonzero(t2 >= 7.0)[0])  # the rest's first half keeps the heading of the chain before it
+    np.testing.assert_allclose(whole[m:], part[m - k :], atol=1e-12)
+    chained = rest_anchored_orientation(q_filter, gyr, t2, static2, replace(p, restart=False), restart)
+    assert np.max(np.abs(chained[m:] - whole[m:])) > 1e-3  # without the restart the past matters
+
+
+def test_window_plan_cuts_at_long_rests_and_flags_joins_at_short_ones():
+    """Windows are cut at rests of at least `chain_rest_s`; inside a stretch longer than `max_s` between two such
+    rests at its shorter rests too, and those joins are flagged as split (the heading restarts there in the window
+    only)."""
+    from imulog.steps.trajectory_windows import TrajectoryWindows, chain_rests
+
+    w = TrajectoryWindows(core_s=100.0, max_s=50.0, min_rest_s=1.0, chain_rest_s=30.0)
+    rests = [(0, 40), (45, 47), (60, 100), (110, 112), (130, 132), (150, 152), (170, 210), (220, 222)]
+    cut, extra = chain_rests(rests, 230, 1.0, w)
+    assert extra == [(110, 112), (130, 132), (150, 152)]  # 100-170: 70 s > max_s; 40-60 and 210-230 are short
+    assert cut == [(0, 40), (60, 100), (110, 112), (130, 132), (150, 152), (170, 210)]
+    from types import SimpleNamespace
+
+    from imulog.steps.trajectory_windows import plan
+
+    mask = np.zeros(230)
+    for a, b in rests:
+        mask[a:b] = 1.0
+    trial = SimpleNamespace(
+        iter_blocks=lambda topic: iter([SimpleNamespace(t_ns=np.arange(230), values=mask[:, None])])
+    )
+    windows = plan(trial, "/derived/static/x", None, 0, 230, 1.0, w, lambda x: x)
+    at_short = [any(a <= j < b for a, b in extra) for j in (x.core_lo for x in windows[1:])]
+    assert any(at_short) and not all(at_short)  # joins at a long rest and at a short one
+    for k, x in enumerate(windows):  # a window is flagged when one of its joins is at a short rest
+        assert x.split == ((k > 0 and at_short[k - 1]) or (k + 1 < len(windows) and at_short[k])), windows

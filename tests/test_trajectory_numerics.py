@@ -182,7 +182,7 @@ def test_optimization_fixed_point_and_constraints():
     drift = np.outer((ts - ts[0]) / (ts[-1] - ts[0]), [0.05, -0.04, 0.03])
     wp = R2GWaypoints(bottle_m=(0.36, 0.11, 0.0), mouth_m=(0.1, 0.09, 0.31))  # 1-2 cm off the truth
     ref = r2g_reference(ts, b, wp)
-    res = optimize_repetition(ts, pos + drift, ref, b, static, OptimizationParams())
+    res = optimize_repetition(ts, pos + drift, ref, b, static, OptimizationParams(return_to_start=True))  # the thesis's
     np.testing.assert_allclose(res.position[[0, -1]], 0.0, atol=1e-9)
     assert np.mean(np.abs(res.position - pos)) < 0.5 * np.mean(np.abs(drift))
     # per axis: z only (the table's height); x and y end where the data and the reference put them

@@ -93,9 +93,23 @@ def test_evaluate_against_markers_orders_methods(sim_trial):
     assert record["reference"] == "/markers/vicon:O"
     for axis in "xyz":
         ddi, zupt, opt = (_mae(record, m, axis) for m in ("ddi", "zupt", "optimized"))
-        assert ddi > zupt > opt, (axis, ddi, zupt, opt)
+        assert ddi > zupt and ddi > opt, (axis, ddi, zupt, opt)
     with TrialReader(path) as trial:
         assert "imulog.evaluation" in trial.metadata
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 31 point 2, the 'below ZUPT' half: with the heading through rests (default since 2026-12-07) "
+    "ZUPT is at 0.78 cm in y on this trial and the optimized trajectory at 0.88 cm (docs/accuracy.md)",
+)
+def test_evaluate_ranks_optimized_below_zupt(sim_trial):
+    _, path = sim_trial
+    run_trajectory(path)
+    _, record = run_evaluate(path)
+    for axis in "xyz":
+        zupt, opt = (_mae(record, m, axis) for m in ("zupt", "optimized"))
+        assert zupt > opt, (axis, zupt, opt)
 
 
 def test_compute_trajectories_without_phases_or_alignment(sim_trial):

@@ -294,17 +294,21 @@ class AnchorParams:
         keeps the filter's tilt (averaged over the rest, constant through it) but the heading the gyroscope
         carried through the movement before it (issue 31): a 6D filter's heading drifts with the residual
         gyroscope bias about the vertical, which depends on the hand's pose (the mouth hold turns it), while the
-        bias measured at each rest leaves the integrated heading within ~0.01 deg/s. The whole result is then
-        turned about the vertical so its mean heading equals the filter's (the frame the align step fitted).
-        An option, not the default: the heading chains through the whole recording (and the final turn uses all
-        of it), so the step's windows would not equal the whole computation (tests/test_phases_windows.py).
+        bias measured at each rest leaves the integrated heading within ~0.01 deg/s. Each chain is then turned
+        about the vertical so its mean heading equals the filter's (the frame the align step fitted). The default
+        since 2026-12-07 (before: ``"filter"``; docs/accuracy.md, issue 31 point 2).
+    restart: with ``heading="gyroscope"``, restart the heading chain at the rests the caller marks (the trajectory
+        step: where it may cut a window, :func:`imulog.process.anchor_heading.restart_rests`), each chain turned
+        onto the filter's mean heading on its own, so the step's windows equal the whole computation; False: one
+        chain over the whole recording (not window-invariant; kept for the paired comparison).
     """
 
     enabled: bool = True
     bias_window_s: float = 0.5
     max_movement_s: float = 15.0
     spread: str = "mixed"
-    heading: str = "filter"
+    heading: str = "gyroscope"
+    restart: bool = True
 
 
 def rest_anchored_orientation(
@@ -313,6 +317,7 @@ def rest_anchored_orientation(
     t_s: np.ndarray,
     static_mask: np.ndarray,
     params: AnchorParams = AnchorParams(),
+    restart: np.ndarray | None = None,
 ) -> np.ndarray:
     """Orientation (N, 4) w,x,y,z sensor-to-global re-integrated through every movement and anchored at its rests.
 
@@ -323,7 +328,8 @@ def rest_anchored_orientation(
     filter's orientation at the last static sample, and the discrepancy with the filter's orientation at the
     next rest (a world-frame rotation ``delta``) is spread linearly in time over the movement, the way ZUPT's
     de-drift spreads the velocity error. Static samples keep ``q_s2g``. ``t_s`` seconds, ``static_mask`` (N,) True
-    at zero velocity; samples with NaN gyroscope keep the filter's orientation.
+    at zero velocity; samples with NaN gyroscope keep the filter's orientation. ``restart`` (N,) bool: the rests
+    where the heading chain of ``params.heading="gyroscope"`` restarts (:mod:`imulog.process.anchor_heading`).
     """
     q = np.asarray(q_s2g, dtype=np.float64)
     gyr = np.asarray(gyr_rad_s, dtype=np.float64)
@@ -333,7 +339,9 @@ def rest_anchored_orientation(
     if not params.enabled or len(q) < 3:
         return out
     if params.heading == "gyroscope":
-        return _heading_through_rests(q, gyr, t, static, params)
+        from imulog.process.anchor_heading import heading_through_rests
+
+        return heading_through_rests(q, gyr, t, static, params, restart if params.restart else None)
     for a, b in _movements(static):
         a, b = int(a), int(b)
         if a == 0 or b >= len(q) or t[b] - t[a - 1] > params.max_movement_s:
@@ -376,74 +384,3 @@ def _through_movement(
     by_angle = turned / max(turned[-1], 1e-12)
     alpha = {"time": by_time, "angle": by_angle, "mixed": 0.5 * (by_time + by_angle)}[spread][:, None]
     return quat.normalize(quat.multiply(quat.from_rotation_vector(alpha * delta), qs))
-
-
-def _levelled(q_filter: np.ndarray, heading_from: np.ndarray) -> np.ndarray:
-    """One orientation (4,) with the tilt of ``q_filter`` (K, 4) averaged over its samples (the mean vertical
-    in the sensor frame) and the heading of ``heading_from`` (4,): ``heading_from`` turned by the least rotation
-    that maps its vertical onto that tilt's."""
-    from imulog.process import quaternion as quat
-
-    up = np.nanmean(quat.rotate_inverse(q_filter, np.tile([0.0, 0.0, 1.0], (len(q_filter), 1))), axis=0)
-    if not np.all(np.isfinite(up)):  # no valid filter sample in the rest: keep the heading's own tilt
-        return np.asarray(heading_from, dtype=np.float64)
-    return quat.normalize(
-        quat.multiply(quat.from_two_vectors(quat.rotate(heading_from, up), np.array([0.0, 0.0, 1.0])), heading_from)
-    )
-
-
-def _heading_offset(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
-    """Angle (rad) about the vertical of the global-frame rotation from ``q_b`` to ``q_a`` (both (..., 4))."""
-    from imulog.process import quaternion as quat
-
-    d = quat.multiply(q_a, quat.conjugate(q_b))
-    return 2.0 * np.arctan2(d[..., 3], d[..., 0])
-
-
-def _finite_in(q: np.ndarray, lo: int, hi: int) -> np.ndarray | None:
-    """The first row of ``q[lo:hi]`` without NaN, or None."""
-    ok = np.flatnonzero(np.all(np.isfinite(q[lo:hi]), axis=1))
-    return q[lo + int(ok[0])] if len(ok) else None
-
-
-def _heading_through_rests(
-    q: np.ndarray, gyr: np.ndarray, t: np.ndarray, static: np.ndarray, params: AnchorParams
-) -> np.ndarray:
-    """:func:`rest_anchored_orientation` with ``heading="gyroscope"``: rests constant (the filter's mean tilt,
-    the heading carried from the movement before), movements integrated from the gyroscope between them; a
-    movement that cannot be integrated (too long, NaN gyroscope or filter) is the filter's turned to the heading
-    reached, and a rest without a valid filter sample keeps the orientation reached."""
-    from imulog.process import quaternion as quat
-
-    z_axis = np.array([0.0, 0.0, 1.0])
-    out = q.copy()
-    rests = [(int(a), int(b)) for a, b in static_runs(static)]
-    rests = [r for r in rests if _finite_in(q, *r) is not None]
-    if not rests:
-        return out
-    s0, e0 = rests[0]
-    cur = _levelled(q[s0:e0], _finite_in(q, s0, e0))
-    out[s0:e0] = cur
-    for (_, a), (b, e2) in zip(rests[:-1], rests[1:], strict=True):  # movement [a, b) between two rests
-        w = gyr[a - 1 : b + 1]
-        if t[b] - t[a - 1] > params.max_movement_s or not np.all(np.isfinite(w)):
-            off = _heading_offset(cur, q[a - 1]) if np.all(np.isfinite(q[a - 1])) else 0.0
-            turn = quat.from_axis_angle(z_axis, float(off))
-            out[a:b] = quat.multiply(turn, q[a:b])
-            nxt = _levelled(q[b:e2], quat.multiply(turn, _finite_in(q, b, e2)))
-        else:
-            bias = _rest_bias(gyr, t, static, a, params.bias_window_s)
-            free = _through_movement(cur, w, t[a - 1 : b + 1], bias, None, params.spread)
-            nxt = _levelled(q[b:e2], free[-1])
-            out[a - 1 : b + 1] = _through_movement(cur, w, t[a - 1 : b + 1], bias, nxt, params.spread)
-        out[b:e2] = cur = nxt
-    # the filter's mean heading (the frame the align step fitted the world to): turn the result onto it
-    off = _heading_offset(q, out)
-    off = off[np.isfinite(off)]
-    mean = float(np.arctan2(np.mean(np.sin(off)), np.mean(np.cos(off)))) if len(off) else 0.0
-    out = quat.multiply(quat.from_axis_angle(z_axis, mean), out)
-    # before the first rest and after the last: the filter's, turned to the heading at that rest
-    for lo, hi, ref in ((0, s0, s0), (rests[-1][1], len(q), rests[-1][1] - 1)):
-        if hi > lo and np.all(np.isfinite(q[ref])):
-            out[lo:hi] = quat.multiply(quat.from_axis_angle(z_axis, float(_heading_offset(out[ref], q[ref]))), q[lo:hi])
-    return quat.normalize(out)

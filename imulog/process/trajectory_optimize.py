@@ -48,8 +48,8 @@ class OptimizationParams:
     return_to_start: hard constraint ``p[-1] = p[0]`` (thesis 3.3.7); one bool, or one per axis (x, y, z).
         ``(False, False, True)``, z only (issue 31): the hand comes back to the table's height but 1-3 cm away
         from where it started in x and y; with the heading through rests (``AnchorParams.heading="gyroscope"``)
-        the estimate measures that and x and y get 0.00-0.09 cm better on held-out trials, but with the default
-        filter heading `combined` x got 0.07 cm worse, so every axis stays the default.
+        the estimate measures that and x and y get 0.00-0.09 cm better on held-out trials (with the filter's
+        heading `combined` x got 0.07 cm worse): the default since 2026-12-07, with that heading (before: True).
     align_heading: before optimising, rotate the initial estimate about the vertical by the angle that best
         matches its static positions to the reference's (closed-form 2D Procrustes; an imulog addition that
         removes the heading error of 6D orientation filters using only the anthropometric waypoints).
@@ -75,7 +75,7 @@ class OptimizationParams:
     sigma_symmetry_m: float | None = 0.02
     sigma_static_vel_mps: float | None = 0.005
     sigma_data_static_m: float | tuple[float, float, float] | str | None = "auto"
-    return_to_start: bool | tuple[bool, bool, bool] = True
+    return_to_start: bool | tuple[bool, bool, bool] = (False, False, True)
     align_heading: bool = False
     max_heading_deg: float = 20.0
     velocity_from_static: bool = True

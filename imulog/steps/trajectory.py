@@ -30,6 +30,7 @@ import numpy as np
 
 from imulog.model import Intervals, SignalStream
 from imulog.process import quaternion as quat
+from imulog.process.anchor_heading import restart_rests
 from imulog.process.gaps import GapParams, prepare, runs_of
 from imulog.process.integration import rest_anchored_orientation
 from imulog.process.minjerk import R2GReferenceParams, r2g_waypoints_from_anthropometrics
@@ -103,6 +104,7 @@ def compute_trajectories(
     gyr: tuple[np.ndarray, np.ndarray] | None = None,
     repetition_quality: list[dict[str, Any]] | None = None,
     per_imu: bool = False,
+    chain_rest_s: float = TrajectoryWindows.chain_rest_s,
 ) -> tuple[list[SignalStream], dict[str, Any]]:
     """Pure part of the step: trajectory streams and the ``imulog.trajectory`` record (no I/O).
 
@@ -121,7 +123,9 @@ def compute_trajectories(
     (``(t_ns, (N, 3) rad/s)``, device clock) and the orientation, the orientation is re-integrated through every
     movement and anchored at its rests (:func:`imulog.process.integration.rest_anchored_orientation`,
     ``params.anchor``) and the gravity-free acceleration rotated accordingly (``imulog.trajectory["orientation"]``
-    says which was used).
+    says which was used). ``chain_rest_s``: the heading chain of ``AnchorParams.heading="gyroscope"`` restarts at
+    rests at least this long outside the repetitions, where the step's windows are cut
+    (:class:`imulog.steps.trajectory_windows.TrajectoryWindows`), so windows equal the whole.
     """
     t_dev = np.asarray(acc_t_ns, dtype=np.int64)
     acc = np.asarray(acc_global, dtype=np.float64)
@@ -142,10 +146,23 @@ def compute_trajectories(
         rest_mask = true_rests(given, acc, rate, params.rests, orientation=q_world)
         rest_info = rest_report(given, rest_mask, rate)
         static = (t_dev, rest_mask)
+    t_ph = phases
+    if phases is not None and len(phases) and phases_clock == "device" and alignment is not None:
+        t_ph = Intervals(
+            phases.topic,
+            _to_reference(phases.start_ns, alignment),
+            _to_reference(phases.end_ns, alignment),
+            phases.labels,
+            phases.task_index,
+        )
     if q_world is not None and gyr is not None and params.anchor.enabled and static is not None:
         rest = static[1]
         w = _sample_onto(np.asarray(gyr[0], np.int64), np.asarray(gyr[1], float), t_dev)
-        q_anchored = rest_anchored_orientation(q_world, w, (t_dev - t_dev[0]) / 1e9, rest, params.anchor)
+        t_s = (t_ref - t_ref[0]) / 1e9  # where a window may be cut: the heading chain restarts there
+        bounds = phase_bounds_by_repetition(t_ph, int(t_ref[0])) if t_ph is not None and len(t_ph) else {}
+        spans = [(float(b[:, 0].min()), float(b[:, 1].max())) for b in bounds.values()]
+        restart = restart_rests(given, t_s, chain_rest_s, spans)
+        q_anchored = rest_anchored_orientation(q_world, w, (t_dev - t_dev[0]) / 1e9, rest, params.anchor, restart)
         g_up = np.array([0.0, 0.0, 9.81])  # (any g: the correction rotations are small, its error ~1e-4 m/s^2)
         acc = quat.rotate(quat.multiply(q_anchored, quat.conjugate(q_world)), acc + g_up) - g_up
         q_world, orientation_used = q_anchored, "rest_anchored"
@@ -171,15 +188,6 @@ def compute_trajectories(
     )
     reps: list[Repetition] = []
     if phases is not None and len(phases):
-        t_ph = phases
-        if phases_clock == "device" and alignment is not None:
-            t_ph = Intervals(
-                phases.topic,
-                _to_reference(phases.start_ns, alignment),
-                _to_reference(phases.end_ns, alignment),
-                phases.labels,
-                phases.task_index,
-            )
         reps = repetition_windows(t_s, phase_bounds_by_repetition(t_ph, int(t_ref[0])), mask)
     info: dict[str, Any] = {"rests": rest_info} if rest_info else {}
     reps, merged = merge_overlapping(reps)
@@ -354,6 +362,7 @@ def run_trajectory(
                 gyr=None if raw is None or raw[1] is None else raw,
                 repetition_quality=timing.get("repetition_quality"),
                 per_imu=per_imu,
+                chain_rest_s=windows.chain_rest_s,
             )
 
         return one, alignment, str(timing.get("clock", "reference"))

@@ -12,7 +12,7 @@ whose samples cannot be reconstructed (every repetition across a long gap) is li
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -29,16 +29,29 @@ F32 = {"precision": "float32"}  # trajectories in m stored as float32: under a m
 class TrajectoryWindows:
     """Longest window (s), longest stretch without a rest before it is cut and flagged (s), shortest rest (s)
     a window may be cut at, most of a rest read beside a movement (s: the middle of a longer rest, a night, is
-    reconstructed in rest-only windows, so memory does not grow with the longest rest). Half-hour windows (a lab trial is one): the reconstruction holds about 15 MB per minute of recording
-    (every method's arrays), and results do not depend on where the rests cut (tests/test_phases_windows.py)."""
+    reconstructed in rest-only windows, so memory does not grow with the longest rest), and the shortest rest (s)
+    where the heading carried through rests restarts (``AnchorParams.heading="gyroscope"``,
+    :mod:`imulog.process.anchor_heading`). Windows are cut at rests of at least ``chain_rest_s`` outside the
+    repetitions, where the whole computation restarts the heading too; a stretch between two such rests longer than
+    ``max_s`` may also be cut at its rests of at least ``min_rest_s`` (the heading then restarts there in the window
+    only: flagged as ``split``, as a stretch without any rest is). Half-hour windows (a lab trial is one): the
+    reconstruction holds about 15 MB per minute of recording (every method's arrays), and results do not depend
+    on where the rests cut (tests/test_phases_windows.py)."""
 
     core_s: float = 1800.0
     max_s: float = 600.0
     min_rest_s: float = 1.0
     context_s: float = 600.0
+    chain_rest_s: float = 30.0
 
     def to_dict(self) -> dict[str, float]:
-        return {"core_s": self.core_s, "max_s": self.max_s, "min_rest_s": self.min_rest_s, "context_s": self.context_s}
+        return {
+            "core_s": self.core_s,
+            "max_s": self.max_s,
+            "min_rest_s": self.min_rest_s,
+            "context_s": self.context_s,
+            "chain_rest_s": self.chain_rest_s,
+        }
 
 
 def has_r2g(phases: Intervals | None) -> bool:
@@ -93,8 +106,11 @@ def plan(
     windows: TrajectoryWindows,
     to_device: Any,
 ) -> list[RestWindow]:
-    """The windows of a recording (one when it fits a core), repetitions kept whole."""
+    """The windows of a recording (one when it fits a core), repetitions kept whole, cut at the rests of at least
+    ``chain_rest_s`` and, within a longer stretch than ``max_s`` between two of them, at its rests of at least
+    ``min_rest_s`` (windows joined at one of those are marked ``split``)."""
     rests = [] if static_topic is None else static_rests(trial, static_topic, total, rate_hz, windows.min_rest_s)
+    rests, extra = chain_rests(rests, total, rate_hz, windows)
     keep: list[tuple[int, int]] = []
     if phases is not None and len(phases):
         start = to_device(np.asarray(phases.start_ns, np.int64))
@@ -104,7 +120,7 @@ def plan(
             a = int(round((int(start[sel].min()) - t_first) * 1e-9 * rate_hz))
             b = int(round((int(end[sel].max()) - t_first) * 1e-9 * rate_hz)) + 1
             keep.append((a, b))
-    return rest_windows(
+    out = rest_windows(
         rests,
         total,
         rate_hz,
@@ -113,6 +129,28 @@ def plan(
         keep_together=keep,
         context_s=windows.context_s,
     )
+    if not extra:
+        return out
+    # a join in the middle of such a rest: the window restarts the heading there, the whole computation does not
+    cut = {w.core_lo for w in out[1:] if any(a <= w.core_lo < b for a, b in extra)}
+    return [replace(w, split=w.split or w.core_lo in cut or w.core_hi in cut) for w in out]
+
+
+def chain_rests(
+    rests: list[tuple[int, int]], total: int, rate_hz: float, windows: TrajectoryWindows
+) -> tuple[list[tuple[int, int]], list[tuple[int, int]]]:
+    """The rests a window may be cut at: those of at least ``chain_rest_s``, and every rest of ``rests`` inside a
+    stretch longer than ``max_s`` between two of them (the recording's ends count as such rests); the second list
+    holds the latter (sample intervals)."""
+    chain = max(1, int(round(windows.chain_rest_s * rate_hz)))
+    longest = max(1, int(round(windows.max_s * rate_hz)))
+    long_ = [r for r in rests if r[1] - r[0] >= chain]
+    bounds = [(0, 0), *long_, (total, total)]
+    extra = []
+    for (_, a), (b, _) in zip(bounds[:-1], bounds[1:], strict=True):
+        if b - a > longest:
+            extra += [r for r in rests if a <= r[0] and r[1] <= b and r[1] - r[0] < chain]
+    return sorted(long_ + extra), extra
 
 
 def merge_records(records: list[dict[str, Any]], skipped: list[dict], split: list[dict], windows: Any) -> dict:
