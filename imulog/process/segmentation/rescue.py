@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from imulog.process.segmentation.dynamos import refine_boundaries
+
 
 def half_width(norm, lo: int, hi: int, peak_at: int) -> int:
     """Samples of the contiguous run around ``peak_at`` where the norm in ``[lo, hi)`` stands above half its
@@ -81,8 +83,14 @@ def rescue_missed(
                 continue
             peak = lo + int(a) + int(np.argmax(np.asarray(norm[lo + a : lo + b])))
             if half_width(norm, lo, hi, peak) >= min_len:  # inside the rest, as wide as a phase
-                new_s.append(lo + int(a))
-                new_e.append(lo + int(b))
+                # down its flanks as DynAMoS's movements are (refine_boundaries: while the norm keeps falling,
+                # to 10 % of the way from the rest's floor to the level): a slow bump is seconds wider than
+                # its run above the level, more than the later refinements may move a boundary
+                seg = np.asarray(norm[lo:hi], dtype=float)
+                floor = float(np.percentile(seg, 10))
+                ra, rb = refine_boundaries(np.array([a]), np.array([b]), seg, level, 0.1, noise=floor)
+                new_s.append(lo + int(ra[0]))
+                new_e.append(lo + int(rb[0]))
     if not new_s:
         return start, end
     s = np.concatenate([start, new_s])
@@ -100,7 +108,9 @@ def bump_in_rest(norm, lo: int, hi: int, min_len: int = 2) -> tuple[int, int, fl
     rises to their onset); in what is left the rest's floor is the 10th percentile and its noise the standard
     deviation of the quieter half. A bump whose peak ``P`` stands more than 5 noise deviations above the floor
     gives the run above ``floor + (P - floor) / 2`` around its peak, which must lie inside the interior and last
-    at least ``min_len`` samples. Returns ``(start, end, P)`` (samples, rad/s)."""
+    at least ``min_len`` samples; it is then widened down its flanks like DynAMoS's movements
+    (:func:`~imulog.process.segmentation.dynamos.refine_boundaries`). Returns ``(start, end, P)`` (samples,
+    rad/s)."""
     seg = np.asarray(norm[lo:hi], dtype=float)
     if len(seg) < 3:
         return None
@@ -128,4 +138,7 @@ def bump_in_rest(norm, lo: int, hi: int, min_len: int = 2) -> tuple[int, int, fl
         b += 1
     if a == 0 or b == len(inner) or b - a < min_len:  # touches a neighbour's flank: not a bump of its own
         return None
-    return lo + i + a, lo + i + b, peak
+    # down its flanks as DynAMoS's movements are (to 10 % of the way from the floor to half the height), so that
+    # its duration compares with theirs
+    ra, rb = refine_boundaries(np.array([a]), np.array([b]), inner, floor + 0.5 * (peak - floor), 0.1, noise=floor)
+    return lo + i + int(ra[0]), lo + i + int(rb[0]), peak
