@@ -8,8 +8,9 @@
   ``n_phases`` movements whose durations ``D``, heights ``H`` (peak norm) and gaps ``S`` best match the
   subject's reference (mean over the repetitions that show exactly ``n_phases`` movements), minimising
   ``RMS(D - D*) + RMS(H - H*) + RMS(S - S*)`` exhaustively over all combinations. A repetition with fewer
-  movements (two phases fused) is split at the local minimum of the norm that best matches the reference
-  (an imulog addition, so that a trial always yields ``n_repetitions x n_phases`` phases).
+  movements (two phases fused, or one too low for every detection level) is split at the local minimum of the
+  norm, or given the bump of the norm in one of its rests, whichever best matches the reference (imulog
+  additions, so that a trial always yields ``n_repetitions x n_phases`` phases).
 
 Units: durations and gaps in seconds, heights in rad/s; intervals are half-open sample ranges.
 """
@@ -149,27 +150,45 @@ def _split_candidates(start, end, norm, min_len: int):
 
 
 def _split_to(start, end, norm, rate_hz, ref, n_phases: int):
-    """Split fused movements (fewer than ``n_phases``) at the local minima that best match the reference."""
+    """Make up fused or missing phases (fewer than ``n_phases`` movements): split a movement at the local minimum
+    of the norm, or (with a reference) take the bump of the norm in a rest between two movements
+    (:func:`~imulog.process.segmentation.rescue.bump_in_rest`, at least half the reference's shortest phase),
+    whichever best matches the reference; while more than one phase is missing, a bump goes before a split.
+    Returns the movements and the starts of the phases taken from rests."""
+    from imulog.process.segmentation.rescue import bump_in_rest
+
     start, end = list(start), list(end)
     min_len = max(2, int(0.1 * rate_hz))
+    found: set[int] = set()
     while 0 < len(start) < n_phases:
         best, best_cost = None, np.inf
-        for k, cut, value in _split_candidates(start, end, norm, min_len):
-            s2 = np.array(start[: k + 1] + [cut] + start[k + 1 :])
-            e2 = np.array(end[:k] + [cut] + end[k:])
+        candidates = [(k, cut, None, value) for k, cut, value in _split_candidates(start, end, norm, min_len)]
+        if ref is not None:
+            bump_len = max(min_len, int(0.5 * float(np.min(ref[0])) * rate_hz))
+            for k in range(len(start) - 1):
+                bump = bump_in_rest(norm, int(end[k]), int(start[k + 1]), bump_len)
+                if bump is not None:
+                    candidates.append((k, bump[0], bump[1], -bump[2]))
+        for k, a, b, value in candidates:
+            s2 = np.array(start[: k + 1] + [a] + start[k + 1 :])
+            e2 = np.array(end[:k] + ([a, end[k]] if b is None else [end[k], b]) + end[k + 1 :])
             if ref is not None and len(s2) == n_phases:
                 d, h, gaps = features(s2, e2, norm, rate_hz)
                 cost = correction_cost(d, h, gaps, *ref)
             else:
-                cost = value  # deepest minimum first
+                cost = value  # a bump in a rest first (negative), then the deepest minimum
             if cost < best_cost:
-                best, best_cost = (k, cut), cost
+                best, best_cost = (k, a, b), cost
         if best is None:
             break
-        k, cut = best
-        start.insert(k + 1, cut)
-        end.insert(k, cut)
-    return np.asarray(start, dtype=np.int64), np.asarray(end, dtype=np.int64)
+        k, a, b = best
+        start.insert(k + 1, a)
+        if b is None:  # movement k cut at a
+            end.insert(k, a)
+        else:  # a bump in the rest after movement k: a phase of its own
+            end.insert(k + 1, b)
+            found.add(int(a))
+    return np.asarray(start, dtype=np.int64), np.asarray(end, dtype=np.int64), found
 
 
 def _reference(groups, start, end, norm, rate_hz, n_phases, major=None):
@@ -190,7 +209,7 @@ def _select(s, e, norm, rate_hz, ref, params: RepetitionParams) -> tuple[np.ndar
     the correction did: ``{"movements", "merged", "dropped", "split", "missing", "forced"}`` (counts; forced:
     per kept phase, True when it was made by cutting a movement)."""
     n = params.n_phases
-    info = {"movements": len(s), "merged": 0, "dropped": 0, "split": 0, "missing": 0}
+    info = {"movements": len(s), "merged": 0, "dropped": 0, "split": 0, "missing": 0, "found": 0}
     forced = np.zeros(min(len(s), n), dtype=bool)
     if len(s) > n:
         d, h, _ = features(s, e, norm, rate_hz)
@@ -222,10 +241,16 @@ def _select(s, e, norm, rate_hz, ref, params: RepetitionParams) -> tuple[np.ndar
         s, e = ks, ke
     elif len(s) < n:
         original = set(np.asarray(s).tolist()) | set(np.asarray(e).tolist())
-        s, e = _split_to(s, e, norm, rate_hz, ref, n)
-        info["split"] = len(s) - info["movements"]
+        s, e, found = _split_to(s, e, norm, rate_hz, ref, n)
+        info["found"] = len(found)
+        info["split"] = len(s) - info["movements"] - len(found)
         info["missing"] = n - len(s)
-        forced = np.array([int(a) not in original or int(b) not in original for a, b in zip(s, e, strict=True)])
+        forced = np.array(
+            [
+                int(a) not in found and (int(a) not in original or int(b) not in original)
+                for a, b in zip(s, e, strict=True)
+            ]
+        )
     cost = np.inf
     if ref is not None and len(s) == n:
         cost = correction_cost(*features(s, e, norm, rate_hz), *ref)
@@ -388,8 +413,9 @@ def repetition_quality(selected: list[tuple[float, dict]], n_phases: int) -> lis
     ``selected``: (correction cost, info of :func:`_select`) per kept repetition. Counts: ``movements`` detected
     in the repetition, ``merged`` (sub-movements absorbed into a kept phase), ``dropped`` (extra movements
     removed), ``split`` (phases made by cutting a fused movement at a minimum of the norm: invented
-    boundaries), ``missing`` (phases that could not be made); ``forced`` = phases of the repetition with no
-    movement of their own; ``cost`` = the thesis's criterion ``RMS(D-D*) + RMS(H-H*) + RMS(S-S*)`` of the kept
+    boundaries), ``missing`` (phases that could not be made), ``found`` (phases taken from a bump of the norm in a
+    rest between two movements: below every detection level, a movement of their own); ``forced`` = phases of
+    the repetition with no movement of their own; ``cost`` = the thesis's criterion ``RMS(D-D*) + RMS(H-H*) + RMS(S-S*)`` of the kept
     movements (before absorbed sub-movements lengthen them) against the subject's reference (None without
     reference).
 
@@ -416,6 +442,7 @@ def repetition_quality(selected: list[tuple[float, dict]], n_phases: int) -> lis
                 "dropped": int(info["dropped"]),
                 "split": int(info["split"]),
                 "missing": int(info["missing"]),
+                "found": int(info.get("found", 0)),
                 "forced": int(np.sum(info["forced"])),
                 "cost": round(float(cost), 4) if np.isfinite(cost) else None,
                 "confidence": round(float(conf), 3),
