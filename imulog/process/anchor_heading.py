@@ -104,7 +104,7 @@ def heading_through_rests(
     stays with the chain before it). Each chain is then turned about the vertical onto the filter's mean
     heading over its samples (restart rests excluded; the frame the align step fitted)."""
     from imulog.process import quaternion as quat
-    from imulog.process.integration import _rest_bias, _through_movement, static_runs
+    from imulog.process.integration import _rest_bias, _through_movement, spread_to, static_runs
 
     out = q.copy()
     rests = [(int(a), int(b)) for a, b in static_runs(static)]
@@ -134,7 +134,7 @@ def heading_through_rests(
             bias = _rest_bias(gyr, t, static, a, params.bias_window_s)
             free = _through_movement(cur, w, t[a - 1 : b + 1], bias, None, params.spread)
             nxt = _levelled(tilt, free[-1])
-            out[a - 1 : b + 1] = _through_movement(cur, w, t[a - 1 : b + 1], bias, nxt, params.spread)
+            out[a - 1 : b + 1] = spread_to(free, w, t[a - 1 : b + 1], bias, nxt, params.spread)
         chain_of[a:b] = chain
         out[b:e2] = cur = nxt
         chain_of[b:e2] = chain
