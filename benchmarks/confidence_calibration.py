@@ -18,6 +18,7 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -148,12 +149,13 @@ def collect(conditions: list[str], seeds: list[int], subjects: list[int], repeti
     return rows
 
 
-def score(rows: list[dict]) -> dict[str, float]:
-    """Recall and precision of ``flag_repetitions`` against the truth labels (bad phase or bad trajectory)."""
-    from imulog.process.repetition_flags import flag_repetition
+def score(rows: list[dict], params: Any = None) -> dict[str, float]:
+    """Recall and precision of ``flag_repetitions`` (``params``: ``FlagParams``, None: the defaults) against the
+    truth labels (bad phase or bad trajectory)."""
+    from imulog.process.repetition_flags import FlagParams, flag_repetition
 
     bad = np.array([r["bad_phase"] or r["bad_trajectory"] for r in rows])
-    flagged = np.array([bool(flag_repetition(r)) for r in rows])
+    flagged = np.array([bool(flag_repetition(r, params or FlagParams())) for r in rows])
     tp = int(np.sum(bad & flagged))
     return {
         "repetitions": len(rows),
@@ -165,6 +167,7 @@ def score(rows: list[dict]) -> dict[str, float]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from imulog.process.repetition_flags import FlagParams
     from imulog.simulate.grid import CONDITIONS
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -174,7 +177,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repetitions", type=int, default=8)
     ap.add_argument("-o", "--output", type=Path, help="write the rows (JSON) here")
     ap.add_argument("--score", type=Path, help="score the rows of this file instead of simulating")
+    ap.add_argument("--max-pull-cm", nargs="*", type=float, help="also score these drift thresholds (cm)")
+    ap.add_argument(
+        "--closure-factor", type=float, help="OptimizationParams.closure_factor (option 5 of issue 31; default off)"
+    )
     args = ap.parse_args(argv)
+    if args.closure_factor is not None:
+        global DEFAULT_PARAMS
+        D = DEFAULT_PARAMS  # noqa: N806
+        DEFAULT_PARAMS = replace(D, optimized=replace(D.optimized, closure_factor=args.closure_factor))
     if args.score:
         rows = json.loads(args.score.read_text())
     else:
@@ -182,6 +193,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.output:
             args.output.write_text(json.dumps(rows, default=float))
     print(json.dumps(score(rows), indent=1))
+    for pull in args.max_pull_cm or ():  # the drift threshold scanned (FlagParams.max_pull_cm)
+        print(f"max_pull_cm {pull}: {json.dumps(score(rows, FlagParams(max_pull_cm=pull)))}")
     by_condition: dict[str, list[dict]] = {}
     for r in rows:
         by_condition.setdefault(r["condition"], []).append(r)

@@ -138,7 +138,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--first-subject", type=int, default=20)
     ap.add_argument("--repetitions", type=int, default=10)
     ap.add_argument("--per-trial", action="store_true")
+    ap.add_argument(
+        "--chain-rest-s",
+        type=float,
+        help="shortest rest (s) where the heading chain restarts (TrajectoryWindows.chain_rest_s, default 30)",
+    )
     args = ap.parse_args(argv)
+    if args.chain_rest_s is not None:  # read by trajectory_accuracy._static_for_anchor
+        from imulog.steps.trajectory_windows import TrajectoryWindows
+
+        TrajectoryWindows.chain_rest_s = args.chain_rest_s
     from imulog.simulate.grid import CONDITIONS
 
     conditions = list(CONDITIONS) if args.grid == ["all"] else args.grid

@@ -2,11 +2,14 @@
 
 A rest keeps the filter's tilt but the heading the gyroscope carried through the movement before it, so the heading
 chains from rest to rest. The chain restarts at every rest where the trajectory step may cut a window
-(:func:`restart_rests`: a rest of the phases' mask at least ``TrajectoryWindows.min_rest_s`` long and not inside a
-repetition): such a rest keeps the filter's own orientation, the movement leaving it starts there, and each chain
-between two restarts is turned about the vertical so that its mean heading equals the filter's over the same samples.
-Everything a chain computes then comes from its own samples and the adjacent ``bias_window_s`` of its two restart
-rests, so a window that starts and ends at such rests computes exactly what the whole recording computes.
+(:func:`restart_rests`: a rest of the phases' mask at least ``TrajectoryWindows.chain_rest_s`` long and not inside
+a repetition): the movement into it arrives at the filter's tilt over the rest's first ``bias_window_s`` with the
+heading carried, the rest's first half keeps that orientation and its second half the filter's orientation at the
+rest's last sample, where the next chain starts; each chain between two restarts is turned about the vertical so
+that its mean heading equals the filter's over its samples (restart rests left out). Everything a chain computes
+then comes from its own samples and the ends of its two restart rests, so a window that starts and ends at such
+rests computes what the whole recording computes on the samples it owns (up to the middles of those rests; the
+other half of an edge rest is the next chain's in the whole computation and the window's own chain in the window).
 Pure numpy; times in s, rates in rad/s, quaternions w,x,y,z sensor-to-global.
 """
 
@@ -95,12 +98,13 @@ def heading_through_rests(
     Rests are constant (the filter's mean tilt, the heading carried from the movement before) and movements are
     integrated from the gyroscope between them; a movement that cannot be integrated (too long, NaN gyroscope or
     filter) is the filter's turned to the heading reached, and a rest without a valid filter sample keeps the
-    orientation reached. A restart rest keeps the filter's orientation: the movement into it ends at the filter's
-    tilt over its first ``bias_window_s`` with the heading carried, the movement out of it starts at the filter's
-    orientation at its last valid sample. Each chain is then turned about the vertical onto the filter's mean
+    orientation reached. In a restart rest the movement into it ends at the filter's tilt over its first
+    ``bias_window_s`` with the heading carried (the rest's first half keeps it), the movement out of it starts at
+    the filter's orientation at its last valid sample (the rest's second half keeps it; the recording's last rest
+    stays with the chain before it). Each chain is then turned about the vertical onto the filter's mean
     heading over its samples (restart rests excluded; the frame the align step fitted)."""
     from imulog.process import quaternion as quat
-    from imulog.process.integration import _rest_bias, _through_movement, static_runs
+    from imulog.process.integration import _rest_bias, _through_movement, spread_to, static_runs
 
     out = q.copy()
     rests = [(int(a), int(b)) for a, b in static_runs(static)]
@@ -130,7 +134,7 @@ def heading_through_rests(
             bias = _rest_bias(gyr, t, static, a, params.bias_window_s)
             free = _through_movement(cur, w, t[a - 1 : b + 1], bias, None, params.spread)
             nxt = _levelled(tilt, free[-1])
-            out[a - 1 : b + 1] = _through_movement(cur, w, t[a - 1 : b + 1], bias, nxt, params.spread)
+            out[a - 1 : b + 1] = spread_to(free, w, t[a - 1 : b + 1], bias, nxt, params.spread)
         chain_of[a:b] = chain
         out[b:e2] = cur = nxt
         chain_of[b:e2] = chain

@@ -376,8 +376,16 @@ def _through_movement(
     for k, step in enumerate(steps, start=1):
         c = quat.multiply(c, step)
         qs[k] = c
-    if end is None:
-        return qs
+    return qs if end is None else spread_to(qs, gyr, t, bias, end, spread)
+
+
+def spread_to(
+    qs: np.ndarray, gyr: np.ndarray, t: np.ndarray, bias: np.ndarray, end: np.ndarray, spread: str
+) -> np.ndarray:
+    """Orientations ``qs`` (M, 4) integrated through a movement (:func:`_through_movement` without an end) with the
+    discrepancy between their last and ``end`` spread over the samples by ``spread`` (:class:`AnchorParams`)."""
+    from imulog.process import quaternion as quat
+
     delta = quat.to_rotation_vector(quat.multiply(end, quat.conjugate(qs[-1])))
     by_time = (t - t[0]) / max(t[-1] - t[0], 1e-9)
     turned = np.concatenate([[0.0], np.cumsum(np.linalg.norm(gyr[1:] + gyr[:-1] - 2 * bias, axis=1))])
