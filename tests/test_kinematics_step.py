@@ -136,10 +136,23 @@ def test_windows_give_the_angles_of_the_whole(arm_trial, tmp_path):
     for name in ("upper_arm", "forearm"):
         run_orientation(one, imu=name)
     shutil.copy(one, cut)
-    with pytest.raises(ValueError, match="window by window; run `imulog process orientation"):
-        run_kinematics(path, windows=WindowParams(core_s=7.0, margin_s=0.0), force=True)
+    # without orientation channels (computed in memory: at once for one window, core by core as the orientation
+    # step would for several) the windows give the one-window angles too: no refusal for length
+    bare_one, bare_cut = tmp_path / "bare_one.mcap", tmp_path / "bare_cut.mcap"
+    shutil.copy(path, bare_one)
+    shutil.copy(path, bare_cut)
+    run_kinematics(bare_one, options=KinematicsOptions(use_markers=False))
+    cut_7s = WindowParams(core_s=7.0, margin_s=0.0)
+    run_kinematics(bare_cut, options=KinematicsOptions(use_markers=False), windows=cut_7s)
+    with TrialReader(bare_one) as b, TrialReader(bare_cut) as c:
+        assert "/derived/orientation/upper_arm" not in c.topics()
+        assert c.metadata["imulog.kinematics_calibration"]["windows"] == 5
+        for kind in ("joint_angles_unconstrained", "joint_angles_constrained", "constraint_active"):
+            x, y = b.read(f"/derived/kinematics/{kind}"), c.read(f"/derived/kinematics/{kind}")
+            np.testing.assert_array_equal(x.t_ns, y.t_ns)
+            np.testing.assert_allclose(x.values, y.values, atol=1e-6 if kind.startswith("joint") else 1e-9)
     run_kinematics(one, options=KinematicsOptions(use_markers=False))
-    run_kinematics(cut, options=KinematicsOptions(use_markers=False), windows=WindowParams(core_s=7.0, margin_s=0.0))
+    run_kinematics(cut, options=KinematicsOptions(use_markers=False), windows=cut_7s)
     with TrialReader(one) as a, TrialReader(cut) as b:
         assert b.metadata["imulog.kinematics_calibration"]["windows"] == 5
         assert (

@@ -26,19 +26,17 @@ from typing import Any
 
 import numpy as np
 
-from imulog.model import PoseStream, SignalStream
-from imulog.process import quaternion as quat
 from imulog.process.kinematics.calibration import NeutralCalibration
 from imulog.process.kinematics.dh import JOINT_NAMES, ArmModel, JointLimits
 from imulog.process.kinematics.errors import kinematics_errors
-from imulog.process.kinematics.pipeline import KinematicsConfig, KinematicsEstimate, estimate_kinematics
+from imulog.process.kinematics.pipeline import KinematicsConfig, estimate_kinematics
 from imulog.process.kinematics.solver import SolverParams, Workspace
 from imulog.process.orientation import OrientationParams
+from imulog.steps.kinematics_windows import PREFIX, kinematics_streams, resample_onto
 from imulog.steps.windows import WindowParams, channel_rate_hz
 
 STEP = "kinematics"
 ALGORITHM = "imulog.kinematics.caruso2024_dh"
-PREFIX = "/derived/kinematics"
 META = "imulog.kinematics"
 KINEMATICS_CORE_S = 1800.0  # per-sample solutions: half-hour windows (about 1 KB per sample while solved)
 
@@ -137,14 +135,6 @@ def _orientation(trial: Any, imu: str, params: OrientationParams) -> tuple[np.nd
     return t, res.quat, f"/imu/{imu}"
 
 
-def _resample(t_src: np.ndarray, q: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
-    if len(t_src) == len(t_dst) and np.array_equal(t_src, t_dst):
-        return q
-    from imulog.process.resample import ResampleParams, resample_quaternions
-
-    return resample_quaternions(t_src, q, t_dst, ResampleParams(cutoff_ratio=0.0))
-
-
 def _cluster_orientations(trial: Any, kin: dict) -> tuple[np.ndarray, dict[str, np.ndarray]] | None:
     """Cluster-to-world quaternions per segment from the markers named in ``imulog.kinematics``."""
     from imulog.process.alignment import cluster_kinematics
@@ -201,53 +191,6 @@ def _interp_angles(t_src: np.ndarray, q: np.ndarray, t_dst: np.ndarray) -> np.nd
     return out
 
 
-def _streams(est: KinematicsEstimate, q_ref: np.ndarray | None) -> list:
-    t = est.t_ns
-    units = ["deg"] * len(JOINT_NAMES)
-    con = est.constrained
-    fk = est.fk_constrained
-    active = con.active
-    mask = np.column_stack([con.any_active, active[:, 0], active[:, 1], active[:, 2], est.t_out]).astype(np.float64)
-    nan_rows = ~np.all(np.isfinite(con.q_rad), axis=1)
-    mask[nan_rows] = np.nan
-    q_ua = np.full((len(t), 4), np.nan)
-    q_fa = np.full((len(t), 4), np.nan)
-    ok = ~nan_rows
-    if ok.any():
-        q_ua[ok] = quat.from_rotation_matrix(fk.r_upper_arm[ok])
-        q_fa[ok] = quat.from_rotation_matrix(fk.r_forearm[ok])
-    streams = [
-        SignalStream(
-            f"{PREFIX}/joint_angles_unconstrained",
-            t,
-            list(JOINT_NAMES),
-            units,
-            np.degrees(est.unconstrained.q_rad),
-            frame_id="trunk",
-        ),
-        SignalStream(
-            f"{PREFIX}/joint_angles_constrained", t, list(JOINT_NAMES), units, np.degrees(con.q_rad), frame_id="trunk"
-        ),
-        PoseStream(f"{PREFIX}/elbow", t, fk.elbow_m, q_ua, frame_id="trunk"),
-        PoseStream(f"{PREFIX}/wrist", t, fk.wrist_m, q_fa, frame_id="trunk"),
-        SignalStream(
-            f"{PREFIX}/constraint_active",
-            t,
-            ["active", "joint_limit", "elbow_box", "wrist_box", "outside_unconstrained"],
-            ["1"] * 5,
-            mask,
-            frame_id="trunk",
-        ),
-    ]
-    if q_ref is not None:
-        streams.append(
-            SignalStream(
-                f"{PREFIX}/joint_angles_reference", t, list(JOINT_NAMES), units, np.degrees(q_ref), frame_id="trunk"
-            )
-        )
-    return streams
-
-
 def compute_kinematics(
     trial: Any, ua: str, fa: str, options: KinematicsOptions, trunk: str | None = None
 ) -> tuple[list, dict]:
@@ -256,11 +199,11 @@ def compute_kinematics(
     config, record = resolve_config(metadata, options)
     t_ua, q_ua, _ = _orientation(trial, ua, options.orientation)
     t_fa, q_fa, _ = _orientation(trial, fa, options.orientation)
-    q_fa = _resample(t_fa, q_fa, t_ua)
+    q_fa = resample_onto(t_fa, q_fa, t_ua)
     q_tr = None
     if trunk is not None:
         t_tr, q_tr, _ = _orientation(trial, trunk, options.orientation)
-        q_tr = _resample(t_tr, q_tr, t_ua)
+        q_tr = resample_onto(t_tr, q_tr, t_ua)
     est = estimate_kinematics(q_ua, q_fa, t_ua, config, q_trunk_s2g=q_tr)
     meta: dict[str, dict[str, Any]] = {
         "imulog.kinematics_calibration": {
@@ -295,112 +238,7 @@ def compute_kinematics(
             "config": record,
         }
     )
-    return _streams(est, q_ref), meta
-
-
-class _TimeCursor:
-    """Samples ``(t_ns, q)`` of a channel read block by block, handed out by time range (forward only)."""
-
-    def __init__(self, blocks) -> None:
-        self.blocks = blocks
-        self.parts: list[tuple[np.ndarray, np.ndarray]] = []
-        self.done = False
-
-    def get(self, t_lo: int, t_hi: int) -> tuple[np.ndarray, np.ndarray]:
-        while not self.done and (not self.parts or self.parts[-1][0][-1] < t_hi):
-            try:
-                t, q = next(self.blocks)
-            except StopIteration:
-                self.done = True
-                break
-            if len(t):
-                self.parts.append((t, q))
-        while len(self.parts) > 1 and self.parts[0][0][-1] < t_lo:
-            self.parts.pop(0)
-        if not self.parts:
-            return np.zeros(0, np.int64), np.zeros((0, 4))
-        t = np.concatenate([p[0] for p in self.parts])
-        q = np.concatenate([p[1] for p in self.parts])
-        keep = (t >= t_lo) & (t <= t_hi)
-        return t[keep], q[keep]
-
-
-def _quaternion_blocks(trial: Any, topic: str):
-    for b in trial.iter_blocks(topic):
-        cols = [b.columns.index(c) for c in ("qw", "qx", "qy", "qz")]
-        yield np.asarray(b.t_ns, np.int64), np.asarray(b.values[:, cols], dtype=np.float64)
-
-
-def _last_finite(q: np.ndarray) -> np.ndarray | None:
-    ok = np.flatnonzero(np.all(np.isfinite(q), axis=1))
-    return None if len(ok) == 0 else q[ok[-1]].copy()
-
-
-def kinematics_pieces(path, ua: str, fa: str, trunk: str | None, options: KinematicsOptions, plan, record: dict):
-    """The step window by window (``plan``: :class:`~imulog.steps.windows.Window` s over the upper-arm IMU's
-    orientation samples): the neutral-posture calibration from the first window, every later window warm-started
-    from the previous one's last solution, so each sample's angles are the whole computation's. Yields the
-    streams of each window; fills ``record`` (``imulog.kinematics_calibration``) at the end."""
-    from imulog.archive import TrialReader
-    from imulog.heap import bound_heap
-    from imulog.process.kinematics.pipeline import calibrate_kinematics
-    from imulog.steps.sample_window import SampleWindow
-
-    bound_heap()  # the same temporaries window after window: keep them out of the heap (imulog.heap)
-    margin_ns = 1_000_000_000  # forearm/trunk samples this far beyond the window, for the resampling
-    sums = {"n": 0, "active": 0.0, "t_out": 0.0, "infeasible": 0, "ms": {}}
-    with TrialReader(path) as trial:
-        config, cfg_record = resolve_config(trial.metadata, options)
-        total = plan[-1].hi
-        ua_buf = SampleWindow(_quaternion_blocks(trial, f"/derived/orientation/{ua}"), total)
-        others = {
-            k: _TimeCursor(_quaternion_blocks(trial, f"/derived/orientation/{n}"))
-            for k, n in (("fa", fa), ("tr", trunk))
-            if n
-        }
-        calibrated, warm = None, {}
-        for w in plan:
-            t, q_ua = ua_buf.take(w.lo, w.hi)
-            t_fa, q_fa = others["fa"].get(int(t[0]) - margin_ns, int(t[-1]) + margin_ns)
-            q_fa = _resample(t_fa, q_fa, t)
-            q_tr = None
-            if "tr" in others:
-                t_tr, q_tr = others["tr"].get(int(t[0]) - margin_ns, int(t[-1]) + margin_ns)
-                q_tr = _resample(t_tr, q_tr, t)
-            if calibrated is None:
-                calibrated = calibrate_kinematics(q_ua, q_fa, t, config, q_trunk_s2g=q_tr)
-            est = estimate_kinematics(q_ua, q_fa, t, config, q_trunk_s2g=q_tr, calibrated=calibrated, warm_start=warm)
-            for key, res in (("unconstrained", est.unconstrained), ("constrained", est.constrained)):
-                last = _last_finite(res.q_rad)
-                if last is not None:
-                    warm[key] = last
-            n = len(t)
-            sums["n"] += n
-            sums["active"] += float(np.sum(est.constrained.any_active))
-            sums["t_out"] += float(np.sum(est.t_out))
-            sums["infeasible"] += int(est.constrained.extra.get("n_infeasible", 0))
-            for k, v in est.timing_ms_per_sample.items():
-                sums["ms"][k] = sums["ms"].get(k, 0.0) + float(v) * n
-            yield from _streams(est, None)
-    n = max(sums["n"], 1)
-    record.update(
-        {
-            "upper_arm_imu": ua,
-            "forearm_imu": fa,
-            "trunk_imu": trunk,
-            "mode": config.calibration.mode,
-            "neutral_pose_deg": list(config.calibration.pose_deg),
-            "neutral_window_s": list(config.calibration.window_s),
-            "q_global_to_trunk": {k: [float(x) for x in v] for k, v in calibrated[0].items()},
-            "ms_per_sample": {k: v / n for k, v in sums["ms"].items()},
-            "constraint_active_fraction": sums["active"] / n,
-            "infeasible_samples": sums["infeasible"],
-            "t_out_fraction": sums["t_out"] / n,
-            "config": cfg_record,
-            "windows": len(plan),
-            "reference": "marker reference angles are computed for recordings of one window (lab trials)",
-        }
-    )
+    return kinematics_streams(est, q_ref), meta
 
 
 def run_kinematics(
@@ -409,8 +247,8 @@ def run_kinematics(
     """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
 
     A recording longer than one window (``windows``, default half-hour cores) is solved window by window while
-    the result is written (:func:`kinematics_pieces`: the same angles per sample, bounded memory); it needs the
-    orientation step's channels of its IMUs."""
+    the result is written (:func:`~imulog.steps.kinematics_windows.kinematics_pieces`: the same angles per sample, bounded memory); it reads the
+    orientation step's channels of its IMUs, or computes them core by core as that step would when absent."""
     from imulog.archive import TrialReader
     from imulog.steps.base import StepResult, run_step
     from imulog.steps.common import alignment_record
@@ -421,7 +259,7 @@ def run_kinematics(
         ua, fa = imu_names(topics, metadata, options)
         alignment_name = alignment_record(metadata, f"/imu/{ua}")  # what the reference angles' clock reads
         trunk = trunk_name(topics, metadata, options)
-        _, record = resolve_config(metadata, options)
+        config, config_record = resolve_config(metadata, options)
         inputs = []
         for imu in (ua, fa) if trunk is None else (ua, fa, trunk):
             o = f"/derived/orientation/{imu}"
@@ -437,17 +275,11 @@ def run_kinematics(
         ch = trial.channel(ua_topic)
         total = int(ch.sample_count or 0)
         plan = windows.plan(total, channel_rate_hz(total, ch.start_ns, ch.end_ns, ch.rate_hz))
-    if len(plan) > 1:
-        missing = [i for i in (ua, fa, trunk) if i and f"/derived/orientation/{i}" not in topics]
-        if missing:
-            raise ValueError(
-                f"/imu/{ua} spans {len(plan)} windows: kinematics reads the orientation step's channels window by "
-                f"window; run `imulog process orientation --imu {missing[0]}` first"
-            )
 
     def compute(trial) -> StepResult:
         if len(plan) > 1:
             from imulog.archive.streaming import StreamPieces
+            from imulog.steps.kinematics_windows import kinematics_pieces
 
             record: dict[str, Any] = {}
             pieces = StreamPieces(
@@ -461,7 +293,9 @@ def run_kinematics(
                         "constraint_active",
                     )
                 ],
-                pieces=lambda: kinematics_pieces(path, ua, fa, trunk, options, plan, record),
+                pieces=lambda: kinematics_pieces(
+                    path, ua, fa, trunk, options.orientation, plan, record, config, config_record
+                ),
                 expected_duration_s=((ch.end_ns or 0) - (ch.start_ns or 0)) * 1e-9,
             )
             return StepResult(streams=[pieces], metadata={"imulog.kinematics_calibration": record})
@@ -474,7 +308,7 @@ def run_kinematics(
         "trunk": trunk,
         "use_markers": options.use_markers,
         "orientation": dataclasses.asdict(options.orientation),
-        **record,
+        **config_record,
     }
     if len(plan) > 1:  # a trial within one core does not depend on the window sizes
         params["windows"] = windows.to_dict()
