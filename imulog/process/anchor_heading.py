@@ -31,7 +31,7 @@ def restart_rests(
     lies outside every repetition ``(start s, end s)`` of ``repetitions_s``: where the trajectory step may cut a
     window (``imulog.steps.windows.rest_windows``: at a rest, never inside a repetition). A rest at either end of
     the samples counts whatever its length: a window that reads only ``context_s`` of a long rest starts there."""
-    from imulog.process.integration import static_runs
+    from imulog.process.rest_runs import static_runs
 
     m = np.asarray(static, dtype=bool)
     t = np.asarray(t_s, dtype=np.float64)
@@ -104,7 +104,7 @@ def heading_through_rests(
     stays with the chain before it). Each chain is then turned about the vertical onto the filter's mean
     heading over its samples (restart rests excluded; the frame the align step fitted)."""
     from imulog.process import quaternion as quat
-    from imulog.process.integration import _rest_bias, _through_movement, spread_to, static_runs
+    from imulog.process.rest_runs import rest_bias, spread_to, static_runs, through_movement
 
     out = q.copy()
     rests = [(int(a), int(b)) for a, b in static_runs(static)]
@@ -131,8 +131,8 @@ def heading_through_rests(
             out[a:b] = quat.multiply(turn, q[a:b])
             nxt = _levelled(tilt, quat.multiply(turn, q[_finite_rows(q, b, e2)[0]]))
         else:
-            bias = _rest_bias(gyr, t, static, a, params.bias_window_s)
-            free = _through_movement(cur, w, t[a - 1 : b + 1], bias, None, params.spread)
+            bias = rest_bias(gyr, t, static, a, params.bias_window_s)
+            free = through_movement(cur, w, t[a - 1 : b + 1], bias, None, params.spread)
             nxt = _levelled(tilt, free[-1])
             out[a - 1 : b + 1] = spread_to(free, w, t[a - 1 : b + 1], bias, nxt, params.spread)
         chain_of[a:b] = chain

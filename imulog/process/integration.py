@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imulog.process.rest_runs import movement_runs, rest_bias, static_runs, through_movement
+
 
 def _as_2d(x: np.ndarray) -> tuple[np.ndarray, bool]:
     a = np.asarray(x, dtype=np.float64)
@@ -86,18 +88,6 @@ class ZuptParams:
 
     dedrift: bool = True
     min_static_samples: int = 1
-
-
-def static_runs(mask: np.ndarray, min_samples: int = 1) -> np.ndarray:
-    """Runs of True in a boolean mask as an (R, 2) int array of [start, stop) indices."""
-    m = np.asarray(mask, dtype=bool)
-    if m.size == 0:
-        return np.zeros((0, 2), dtype=np.int64)
-    d = np.diff(np.concatenate([[0], m.astype(np.int8), [0]]))
-    starts = np.flatnonzero(d == 1)
-    stops = np.flatnonzero(d == -1)
-    keep = (stops - starts) >= min_samples
-    return np.stack([starts[keep], stops[keep]], axis=1).astype(np.int64)
 
 
 def zupt_velocity(
@@ -191,12 +181,6 @@ class AccelerometerErrors:
         return out
 
 
-def _movements(static: np.ndarray) -> np.ndarray:
-    runs = static_runs(~static)
-    n = len(static)
-    return runs[(runs[:, 0] > 0) & (runs[:, 1] < n)]  # rests on both sides
-
-
 def _error_terms(rot: np.ndarray, params: RotatingBiasParams) -> np.ndarray:
     """Regressors (n, 3, 3 or 12): d e(t) / d [b, vec(E)] at each sample."""
     parts = [rot]
@@ -226,7 +210,7 @@ def estimate_rotating_bias(
     static = np.asarray(static_mask, dtype=bool)
     k = 12 if params.gravity_coupled else 3
     rows, rhs = [], []
-    for s, e in _movements(static):
+    for s, e in movement_runs(static):
         c = _rest_mean(a, t, static, s, params.rest_s)
         if c is None:
             continue
@@ -271,7 +255,7 @@ def compensate_rotating_bias(
     t = _check_time(t_s, len(a))
     static = np.asarray(static_mask, dtype=bool)
     x = np.concatenate([errors.bias_mps2, errors.matrix.reshape(-1)]) if params.gravity_coupled else errors.bias_mps2
-    for s, e in _movements(static):
+    for s, e in movement_runs(static):
         c = _rest_mean(a, t, static, s, params.rest_s)
         if c is None:
             c = np.zeros(3)
@@ -342,53 +326,13 @@ def rest_anchored_orientation(
         from imulog.process.anchor_heading import heading_through_rests
 
         return heading_through_rests(q, gyr, t, static, params, restart if params.restart else None)
-    for a, b in _movements(static):
+    for a, b in movement_runs(static):
         a, b = int(a), int(b)
         if a == 0 or b >= len(q) or t[b] - t[a - 1] > params.max_movement_s:
             continue
         w = gyr[a - 1 : b + 1]
         if not np.all(np.isfinite(w)):
             continue
-        bias = _rest_bias(gyr, t, static, a, params.bias_window_s)
-        out[a - 1 : b + 1] = _through_movement(q[a - 1], w, t[a - 1 : b + 1], bias, q[b], params.spread)
+        bias = rest_bias(gyr, t, static, a, params.bias_window_s)
+        out[a - 1 : b + 1] = through_movement(q[a - 1], w, t[a - 1 : b + 1], bias, q[b], params.spread)
     return out
-
-
-def _rest_bias(gyr: np.ndarray, t: np.ndarray, static: np.ndarray, a: int, window_s: float) -> np.ndarray:
-    """Gyroscope bias (3,) rad/s: the mean over at most ``window_s`` s of the rest that ends at sample a - 1."""
-    lo = a - 1
-    while lo > 0 and static[lo - 1] and t[a - 1] - t[lo - 1] <= window_s:
-        lo -= 1
-    return np.mean(gyr[lo:a], axis=0)
-
-
-def _through_movement(
-    cur: np.ndarray, gyr: np.ndarray, t: np.ndarray, bias: np.ndarray, end: np.ndarray | None, spread: str
-) -> np.ndarray:
-    """Orientations (M, 4) integrated from ``cur`` with the gyroscope ``gyr`` (M, 3) rad/s minus ``bias`` at
-    times ``t`` (M,) s, the discrepancy with ``end`` (the orientation at the last sample; None: none) spread
-    over the samples by ``spread`` (:class:`AnchorParams`)."""
-    from imulog.process import quaternion as quat
-
-    steps = quat.from_rotation_vector(0.5 * ((gyr[1:] - bias) + (gyr[:-1] - bias)) * np.diff(t)[:, None])
-    qs = np.empty((len(gyr), 4))
-    qs[0] = c = cur
-    for k, step in enumerate(steps, start=1):
-        c = quat.multiply(c, step)
-        qs[k] = c
-    return qs if end is None else spread_to(qs, gyr, t, bias, end, spread)
-
-
-def spread_to(
-    qs: np.ndarray, gyr: np.ndarray, t: np.ndarray, bias: np.ndarray, end: np.ndarray, spread: str
-) -> np.ndarray:
-    """Orientations ``qs`` (M, 4) integrated through a movement (:func:`_through_movement` without an end) with the
-    discrepancy between their last and ``end`` spread over the samples by ``spread`` (:class:`AnchorParams`)."""
-    from imulog.process import quaternion as quat
-
-    delta = quat.to_rotation_vector(quat.multiply(end, quat.conjugate(qs[-1])))
-    by_time = (t - t[0]) / max(t[-1] - t[0], 1e-9)
-    turned = np.concatenate([[0.0], np.cumsum(np.linalg.norm(gyr[1:] + gyr[:-1] - 2 * bias, axis=1))])
-    by_angle = turned / max(turned[-1], 1e-12)
-    alpha = {"time": by_time, "angle": by_angle, "mixed": 0.5 * (by_time + by_angle)}[spread][:, None]
-    return quat.normalize(quat.multiply(quat.from_rotation_vector(alpha * delta), qs))
