@@ -101,7 +101,8 @@ def test_evaluate_against_markers_orders_methods(sim_trial):
 @pytest.mark.xfail(
     strict=True,
     reason="issue 31 point 2, the 'below ZUPT' half: with the heading through rests (default since 2026-12-07) "
-    "ZUPT is at 0.78 cm in y on this trial and the optimized trajectory at 0.88 cm (docs/accuracy.md)",
+    "ZUPT is at 0.78 cm in y on this trial and the optimized trajectory at 0.88 cm, its start zupt_bias at 0.96 cm "
+    "(docs/accuracy.md)",
 )
 def test_evaluate_ranks_optimized_below_zupt(sim_trial):
     _, path = sim_trial
