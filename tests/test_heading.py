@@ -165,3 +165,35 @@ def test_sto_export_writes_the_imus_in_the_common_heading_frame(oriented_setup, 
         expect = hd.apply_correction(np.asarray(rec["imus"][n]["correction"]), before[col])
         dots = np.abs(np.sum(expect * after[col], axis=1))
         assert np.all(dots > 1 - 1e-6)  # the same rotation (q and -q alike)
+
+
+def test_aligned_before_oriented_reads_the_orientation_only_around_the_poses(tmp_path, monkeypatch):
+    """Aligned before its orientation existed, the optical heading comes from the cluster's poses: the
+    orientation is read over the poses' span and a margin (a lab hour of a week's recording, not the week:
+    issue 24), and the rotation is the one the whole orientation gives."""
+    import dataclasses
+
+    from imulog.simulate import simulate
+    from imulog.steps.align import run_align
+    from imulog.steps.common import cluster_pose_topic
+    from imulog.steps.heading import global_to_world_from_pose
+
+    sim = simulate("r2g", seed=4, repetitions=4)
+    imus = [dataclasses.replace(i, mag=None) for i in sim.recording.imus]
+    path = write_trial(tmp_path / "t.mcap", dataclasses.replace(sim.recording, imus=imus))
+    run_align(path)
+    run_orientation(path)
+    with TrialReader(path) as t:
+        name = next(x.split("/")[3] for x in t.topics() if x.startswith("/derived/orientation/"))
+        whole = t.read(f"/derived/orientation/{name}")
+        align = t.metadata["imulog.alignment"]
+        pose = t.read(cluster_pose_topic(name, t.topics(), t.metadata))
+    assert align.get("rotation_global_to_world") is None  # the late case
+    want = np.asarray(global_to_world_from_pose(whole.t_ns, whole.values, align, pose.t_ns, pose.orientation))
+    spans = record_reads(monkeypatch)
+    _, rec = run_heading(path, force=True)
+    reads = [(lo, hi) for topic, lo, hi in spans if topic == f"/derived/orientation/{name}"]
+    assert reads and all(lo is not None and hi is not None for lo, hi in reads), reads
+    assert rec["source"] == "optical"
+    got = np.asarray(rec["imus"][name]["correction"])
+    assert np.allclose(got, want, atol=1e-9) or np.allclose(got, -want, atol=1e-9), (got, want)

@@ -141,3 +141,27 @@ def test_alignment_append_rebuilds_marker_and_event_twins_from_blocks(tmp_path, 
             assert [bytes(p) for p in stored] == twin.payload_list(), twin.topic
             for key in ("sample_count", "start_ns", "end_ns", "rate_hz", "twin_of", "clock"):
                 assert channels[twin.topic].metadata.get(key) == twin.metadata.get(key), (twin.topic, key)
+
+
+def test_twin_hash_joins_a_bounded_block_of_rows():
+    """A long twin held as wide rows (a week's 0.1 Hz orientation overview: 60,480 messages of ~0.7 KB) is
+    hashed a few MB at a time, not 65,536 rows at once (three copies of the whole twin: 120 MB on the week);
+    the hash is the same as over the messages one by one."""
+    import tracemalloc
+
+    from imulog.archive.hashing import payload_hash, rows_hash
+
+    rng = np.random.default_rng(4)
+    rows = rng.integers(0, 256, (40_000, 600), dtype=np.uint8)  # 24 MB
+    mask = np.ones(rows.shape, dtype=bool)
+    mask[:, 500:] = rng.random((40_000, 100)) < 0.5  # messages of different lengths
+    want = payload_hash(bytes(r[k]) for r, k in zip(rows[:300], mask[:300], strict=True))
+    assert rows_hash(rows[:300], mask[:300]) == want == rows_hash(rows[:300], mask[:300], block=7)
+    tracemalloc.start()
+    try:
+        digest = rows_hash(rows, mask)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert digest == rows_hash(rows, mask, block=40_000)
+    assert peak < 16e6, f"{peak / 1e6:.0f} MB joined at once for {rows.nbytes / 1e6:.0f} MB of rows"

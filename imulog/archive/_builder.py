@@ -12,12 +12,14 @@ import struct
 import threading
 import zlib
 from collections import deque
+from collections.abc import Iterator
 from concurrent.futures import Future
 from typing import BinaryIO
 
 import numpy as np
 
 from imulog.archive import _mcap as m
+from imulog.archive.summary_check import chunk_time_span
 from imulog.workers import COMPRESS_THREADS, PIPELINE, worker_pool
 
 CHUNK_TARGET_BYTES = 2 * 1024 * 1024  # uncompressed size at which a chunk is closed
@@ -79,14 +81,17 @@ class McapBuilder:
         self._pending: deque[tuple[Future | tuple[bytes, int], int, int, int, bytes, int]] = deque()
         self.schemas: dict[int, m.SchemaRec] = {}
         self.channels: dict[int, m.ChannelRec] = {}
-        self._chunk_indexes: list[m.ChunkIndexRec] = []
+        self._chunk_indexes: list[m.ChunkIndexRec] = []  # after ``_kept``'s
+        # the chunk indexes of the file appended to, read from its summary's bytes when the summary is written
+        # (issue 24: a week's ~10,000 ChunkIndex objects are not held for an append)
+        self._kept: m.Summary | None = None
         self.attachment_indexes: list[m.AttachmentIndexRec] = []
         self.metadata_indexes: list[m.MetadataIndexRec] = []
         self.channel_counts: dict[int, int] = {}
         if summary is not None:
             self.schemas = dict(summary.schemas)
             self.channels = dict(summary.channels)
-            self._chunk_indexes = list(summary.chunk_indexes)
+            self._kept = summary
             self.attachment_indexes = list(summary.attachment_indexes)
             self.metadata_indexes = list(summary.metadata_indexes)
             stats = summary.statistics
@@ -114,13 +119,25 @@ class McapBuilder:
 
     @property
     def chunk_indexes(self) -> list[m.ChunkIndexRec]:
+        """Every chunk index of the file being written (the kept file's, parsed here, then the new ones)."""
         self._drain()
+        if self._kept is not None:
+            self._chunk_indexes = [*self._kept.chunk_indexes, *self._chunk_indexes]
+            self._kept = None
         return self._chunk_indexes
 
     @chunk_indexes.setter
     def chunk_indexes(self, value: list[m.ChunkIndexRec]) -> None:
         self._drain()
+        self._kept = None
         self._chunk_indexes = value
+
+    def _iter_chunk_indexes(self) -> Iterator[m.ChunkIndexRec]:
+        """Every chunk index, one at a time (the kept file's parsed from its bytes, not held)."""
+        self._drain()
+        if self._kept is not None:
+            yield from self._kept.iter_chunk_indexes()
+        yield from self._chunk_indexes
 
     def write(self, data: bytes | memoryview) -> None:
         """Write data-section bytes (counted in the data CRC), after any chunk still being compressed."""
@@ -267,15 +284,17 @@ class McapBuilder:
     # ------------------------------------------------------------------ summary
     def statistics(self) -> m.StatisticsRec:
         counts = {cid: self.channel_counts.get(cid, 0) for cid in self.channels}
+        self._drain()
+        start, end = chunk_time_span(self._iter_chunk_indexes())
         return m.StatisticsRec(
             message_count=sum(counts.values()),
             schema_count=len(self.schemas),
             channel_count=len(self.channels),
             attachment_count=len(self.attachment_indexes),
             metadata_count=len(self.metadata_indexes),
-            chunk_count=len(self.chunk_indexes),
-            message_start_time=min((c.message_start_time for c in self.chunk_indexes), default=0),
-            message_end_time=max((c.message_end_time for c in self.chunk_indexes), default=0),
+            chunk_count=(self._kept.chunk_count if self._kept is not None else 0) + len(self._chunk_indexes),
+            message_start_time=start,
+            message_end_time=end,
             channel_message_counts=counts,
         )
 
@@ -289,7 +308,7 @@ class McapBuilder:
             (m.Op.SCHEMA, [s.encode() for s in sorted(self.schemas.values(), key=lambda s: s.id)]),
             (m.Op.CHANNEL, [c.encode() for c in sorted(self.channels.values(), key=lambda c: c.id)]),
             (m.Op.STATISTICS, [self.statistics().encode()]),
-            (m.Op.CHUNK_INDEX, [c.encode() for c in self.chunk_indexes]),
+            (m.Op.CHUNK_INDEX, [c.encode() for c in self._iter_chunk_indexes()]),
             (m.Op.ATTACHMENT_INDEX, [a.encode() for a in self.attachment_indexes]),
             (m.Op.METADATA_INDEX, [x.encode() for x in self.metadata_indexes]),
         ]

@@ -231,8 +231,8 @@ def append_derived(
                     outputs[topic] = digest
                 if piece_stats:
                     builder.add_metadata(f"{STATS_RECORD}.{n}", encode_record(piece_stats))
-                for twin in twins:
-                    write_twin(builder, twin, provenance)
+                while twins:  # each twin's rows freed once written (a week's orientation twins: tens of MB)
+                    write_twin(builder, twins.pop(0), provenance)
                 for name, values in metadata.items():
                     builder.add_metadata(name, encode_record(dict(values)))
                 record = {

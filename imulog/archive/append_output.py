@@ -116,7 +116,6 @@ def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int]
     against the recorded one before the file is finished: a damaged input is refused, nothing written)
     and, unless dropped, written once.
     """
-    chunk_by_offset = {ci.chunk_start_offset: ci for ci in summary.chunk_indexes}
     # closing statistics of streamed channels (imulog.channel_stats.N) that no kept channel refers to any more
     referenced = {c.metadata.get("stats_record") for cid, c in summary.channels.items() if cid not in drop}
     orphaned = {
@@ -144,7 +143,7 @@ def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int]
         first = f.read(min(length, COPY_BLOCK))
         drop_it = False
         if op == m.Op.CHUNK:
-            ci = chunk_by_offset.get(pos)
+            ci = summary.chunk_index_at(pos)  # parsed alone: no dict of every chunk's index (issue 24)
             if ci is None:
                 raise ArchiveCorruptError(f"{path}: chunk at byte {pos} is not in the summary index")
             chans = set(ci.message_index_offsets)
@@ -195,7 +194,7 @@ def _copy_without(f: BinaryIO, summary: m.Summary, out: BinaryIO, drop: set[int]
         builder.channels.pop(cid, None)
         builder.channel_counts.pop(cid, None)
     builder.chunk_indexes = []
-    for ci in summary.chunk_indexes:
+    for ci in summary.iter_chunk_indexes():
         if ci.chunk_start_offset in dropped_chunks:
             continue
         ci = m.ChunkIndexRec(**vars(ci))

@@ -21,6 +21,7 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
 from imulog.archive import _mcap as m
 from imulog.archive import codec, journal
+from imulog.archive.chunk_check import ChunkSeen, ChunkTally
 from imulog.archive.errors import ArchiveError
 from imulog.archive.summary_check import (
     CHANNEL_COUNTS,
@@ -48,19 +49,6 @@ class DoctorReport:
         self.problems.append(message)
 
 
-@dataclass
-class _ChunkSeen:
-    offset: int
-    length: int
-    start: int
-    end: int
-    compressed_size: int
-    uncompressed_size: int
-    compression: str
-    counts: dict[int, int]
-    message_index_length: int = 0
-
-
 def empty_found() -> dict:
     """What a walk of the data section collects, empty: records by kind and message counts per channel."""
     return {
@@ -82,7 +70,7 @@ def _walk_data_section(f, summary: m.Summary, report: DoctorReport, progress: Pr
     crc = zlib.crc32(f.read(len(m.MAGIC)))
     pos = len(m.MAGIC)
     first = True
-    last_chunk: _ChunkSeen | None = None
+    last_chunk: ChunkSeen | None = None
     last_chunk_msgs: dict[int, list[tuple[int, int]]] = {}
     while pos < limit:
         head = f.read(9)
@@ -143,7 +131,7 @@ def _walk_data_section(f, summary: m.Summary, report: DoctorReport, progress: Pr
                         report.fail(f"{where}: message times outside the chunk's recorded start/end")
                     for cid, n in counts.items():
                         found["counts"][cid] += n
-                last_chunk = _ChunkSeen(
+                last_chunk = ChunkSeen(
                     pos,
                     9 + length,
                     ch.message_start_time,
@@ -194,6 +182,15 @@ def _walk_data_section(f, summary: m.Summary, report: DoctorReport, progress: Pr
     return found
 
 
+def _tally(summary: m.Summary, found: dict) -> ChunkTally:
+    """The chunks of a whole walk (``found["chunks"]``, ``found["message_indexes"]``) against the summary."""
+    tally = ChunkTally()
+    mis = found["message_indexes"]
+    for seen in found["chunks"].values():
+        tally.add(summary, seen, lambda off: mis.get(off, (None,))[0])
+    return tally
+
+
 def _check_summary(summary: m.Summary, found: dict, report: DoctorReport) -> None:
     n0 = len(report.problems)
     for sid, s in summary.schemas.items():
@@ -205,34 +202,14 @@ def _check_summary(summary: m.Summary, found: dict, report: DoctorReport) -> Non
     for cid in found["channels"]:
         if cid not in summary.channels:
             report.fail(f"channel {cid} of the data section is missing from the summary")
-    try:  # parsed lazily: a damaged chunk index (no summary CRC to catch it) is a problem, not a traceback
-        indexed = {ci.chunk_start_offset: ci for ci in summary.chunk_indexes}
-    except m.McapFormatError as exc:
-        report.fail(f"summary chunk indexes do not parse: {exc}")
+    tally = found.get("tally") or _tally(summary, found)
+    if tally.parse_error is not None:
+        report.fail(f"summary chunk indexes do not parse: {tally.parse_error}")
         return
-    if set(indexed) != set(found["chunks"]):
-        report.fail(f"summary indexes {len(indexed)} chunks, data section has {len(found['chunks'])}")
-    for off, seen in found["chunks"].items():
-        ci = indexed.get(off)
-        if ci is None:
-            continue
-        if (ci.chunk_length, ci.message_start_time, ci.message_end_time, ci.compressed_size, ci.uncompressed_size) != (
-            seen.length,
-            seen.start,
-            seen.end,
-            seen.compressed_size,
-            seen.uncompressed_size,
-        ):
-            report.fail(f"chunk index for byte {off} disagrees with the chunk")
-        if (ci.compression, ci.message_index_length) != (seen.compression, seen.message_index_length):
-            report.fail(f"chunk index for byte {off} has the wrong compression or message index length")
-        if set(ci.message_index_offsets) != set(seen.counts):
-            report.fail(
-                f"chunk index for byte {off} lists channels {sorted(ci.message_index_offsets)}, chunk has {sorted(seen.counts)}"
-            )
-        for cid, mi_off in ci.message_index_offsets.items():
-            if found["message_indexes"].get(mi_off, (None,))[0] != cid:
-                report.fail(f"chunk index for byte {off} points at no message index of channel {cid}")
+    if tally.unindexed or tally.count != summary.chunk_count:
+        report.fail(f"summary indexes {summary.chunk_count} chunks, data section has {tally.count}")
+    for problem in tally.problems:
+        report.fail(problem)
     att = found["attachments"]
     if {(a.offset, a.length) for a in summary.attachment_indexes} != {(o, ln) for o, (_, ln) in att.items()}:
         report.fail("attachment indexes disagree with the attachments in the data section")
@@ -265,16 +242,13 @@ def _check_summary(summary: m.Summary, found: dict, report: DoctorReport) -> Non
             "channel_count": len(found["channels"]),
             "attachment_count": len(att),
             "metadata_count": len(md),
-            "chunk_count": len(found["chunks"]),
+            "chunk_count": tally.count,
         }
         for key, value in checks.items():
             if getattr(st, key) != value:
                 report.fail(f"statistics {key} = {getattr(st, key)}, data section has {value}")
-        if found["chunks"]:
-            start = min(c.start for c in found["chunks"].values())
-            end = max(c.end for c in found["chunks"].values())
-            if (st.message_start_time, st.message_end_time) != (start, end):
-                report.fail("statistics message start/end times disagree with the chunks")
+        if tally.count and (st.message_start_time, st.message_end_time) != (tally.start, tally.end):
+            report.fail("statistics message start/end times disagree with the chunks")
     if len(report.problems) == n0:
         report.checks.append("summary, indexes and statistics consistent")
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 import struct
 import zlib
 from array import array
+from bisect import bisect_left
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import BinaryIO
 
@@ -69,6 +71,7 @@ class Summary:
     _chunk_spans: array = field(default_factory=lambda: array("Q"), repr=False)  # (start, length) in _section
     _records: array = field(default_factory=lambda: array("Q"), repr=False)  # (opcode, offset, length) triples
     _chunk_indexes: list[ChunkIndexRec] | None = field(default=None, repr=False)
+    _by_offset: tuple[array, array] | None = field(default=None, repr=False)  # chunk offsets sorted, their order
 
     @property
     def chunk_indexes(self) -> list[ChunkIndexRec]:
@@ -83,6 +86,45 @@ class Summary:
     @chunk_indexes.setter
     def chunk_indexes(self, value: list[ChunkIndexRec]) -> None:
         self._chunk_indexes = list(value)
+        self._by_offset = None
+
+    @property
+    def chunk_count(self) -> int:
+        """How many chunks the summary indexes (duplicates dropped), without parsing their indexes."""
+        if self._chunk_indexes is not None:
+            return len(self._chunk_indexes)
+        return len(self._chunk_spans) // 2
+
+    def iter_chunk_indexes(self) -> Iterator[ChunkIndexRec]:
+        """Every ChunkIndex in summary order, one at a time: parsed from the kept bytes and not kept (a pass
+        over a week's ~10,000 indexes holds one), or the parsed list once ``chunk_indexes`` was used."""
+        if self._chunk_indexes is not None:
+            yield from self._chunk_indexes
+            return
+        spans, section = self._chunk_spans, memoryview(self._section)
+        for i in range(0, len(spans), 2):
+            yield parse_chunk_index(section[spans[i] : spans[i] + spans[i + 1]])
+
+    def chunk_index_at(self, offset: int) -> ChunkIndexRec | None:
+        """The ChunkIndex of the chunk starting at byte ``offset`` (None: not indexed), parsed alone; the lookup
+        table is 16 bytes a chunk (two arrays sorted by offset), built on first use."""
+        if self._by_offset is None:
+            if self._chunk_indexes is not None:
+                offsets = array("Q", [ci.chunk_start_offset for ci in self._chunk_indexes])
+            else:
+                spans, section = self._chunk_spans, self._section
+                offsets = array("Q", [_Q.unpack_from(section, spans[i] + 16)[0] for i in range(0, len(spans), 2)])
+            order = array("Q", sorted(range(len(offsets)), key=offsets.__getitem__))
+            self._by_offset = (array("Q", [offsets[i] for i in order]), order)
+        offsets, order = self._by_offset
+        k = bisect_left(offsets, offset)
+        if k == len(offsets) or offsets[k] != offset:
+            return None
+        i = order[k]
+        if self._chunk_indexes is not None:
+            return self._chunk_indexes[i]
+        lo, n = self._chunk_spans[2 * i], self._chunk_spans[2 * i + 1]
+        return parse_chunk_index(memoryview(self._section)[lo : lo + n])
 
     @property
     def summary_records(self) -> list[tuple[int, int, int]]:

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import BinaryIO
 
 from imulog.archive import _mcap as m
+from imulog.archive.chunk_check import ChunkSeen, ChunkTally
 
 
 def _body(f: BinaryIO, pos: int, n: int) -> bytes:
@@ -30,11 +31,26 @@ def _string(data: bytes, at: int) -> tuple[str, int]:
 
 def walk_heads(f: BinaryIO, summary: m.Summary) -> dict | None:
     """What doctor's walk finds, read from record heads; None when the heads cannot tell (a chunk without
-    message indexes, a record that does not parse: the data-section CRC check of the copy decides then)."""
-    from imulog.archive.doctor import _ChunkSeen, empty_found
+    message indexes, a record that does not parse: the data-section CRC check of the copy decides then).
+
+    Chunks are compared with the summary's index as the walk passes them (``found["tally"]``,
+    :class:`~imulog.archive.chunk_check.ChunkTally`): one chunk and its message indexes are held at a time, not
+    a dict of every chunk (issue 24). A chunk index must point at message indexes that follow its chunk."""
+    from imulog.archive.doctor import empty_found
 
     found = empty_found()
+    tally = found["tally"] = ChunkTally()
     limit, pos, last = summary.data_end_offset, len(m.MAGIC), None
+    indexes: dict[int, int] = {}  # the current chunk's message indexes: offset -> channel id
+
+    def close() -> bool:  # the chunk before ``pos`` is complete: check it; False when the heads cannot tell
+        if last is None:
+            return True
+        if not last.counts:
+            return False
+        tally.add(summary, last, indexes.get)
+        return True
+
     try:
         while pos < limit:
             f.seek(pos)
@@ -55,14 +71,16 @@ def walk_heads(f: BinaryIO, summary: m.Summary) -> dict | None:
                 start, end, usize = struct.unpack_from("<QQQ", h, 0)
                 compression, at = _string(h, 28)
                 (csize,) = m._Q.unpack_from(h, at)
-                last = _ChunkSeen(pos, 9 + length, start, end, csize, usize, compression, {})
-                found["chunks"][pos] = last
+                if not close():
+                    return None
+                last = ChunkSeen(pos, 9 + length, start, end, csize, usize, compression, {})
+                indexes = {}
             elif op == m.Op.MESSAGE_INDEX:
                 h = _body(f, pos, 6)
                 cid, n = m._H.unpack_from(h, 0)[0], m._I.unpack_from(h, 2)[0]
-                found["message_indexes"][pos] = (cid, 9 + length)
                 if last is None:
                     return None
+                indexes[pos] = cid
                 last.message_index_length += 9 + length
                 if n // 16:
                     last.counts[cid] = last.counts.get(cid, 0) + n // 16
@@ -82,7 +100,7 @@ def walk_heads(f: BinaryIO, summary: m.Summary) -> dict | None:
             pos += 9 + length
     except (m.McapFormatError, struct.error, ValueError, UnicodeDecodeError):
         return None
-    if any(not c.counts for c in found["chunks"].values()):
+    if not close():
         return None
     # schemas and channels inside chunks (another writer's) are not seen without decompressing: the summary's
     for sid, rec in summary.schemas.items():

@@ -53,6 +53,19 @@ def global_to_world_from_pose(
     return [float(v) for v in q]
 
 
+POSE_MARGIN_S = 60.0  # orientation read either side of the cluster's poses (the resampling filter's edges)
+
+
+def pose_span_on_device(pose_t_ns: np.ndarray, alignment: dict[str, Any]) -> tuple[int, int]:
+    """The device-clock span [lo, hi) (ns) holding the cluster poses' times ``pose_t_ns`` (reference clock)
+    and :data:`POSE_MARGIN_S` either side."""
+    from imulog.process.alignment_clock import reference_to_device
+
+    ends = reference_to_device(np.array([pose_t_ns.min(), pose_t_ns.max()], np.int64), alignment)
+    margin = int(POSE_MARGIN_S * 1e9)
+    return int(ends[0]) - margin, int(ends[1]) + margin + 1
+
+
 def compute_heading(
     orientations: dict[str, tuple[np.ndarray, np.ndarray, str]],
     mags: dict[str, tuple[np.ndarray, np.ndarray] | None],
@@ -214,10 +227,8 @@ def run_heading(
             aligns[n] = alignment_for(trial.metadata, f"/imu/{n}")
             pose = cluster_pose_topic(n, topics, trial.metadata)
             late = aligns[n] and aligns[n].get("rotation_global_to_world") is None and pose is not None
-            if series or late:
-                s = trial.read(f"/derived/orientation/{n}")
-            else:
-                s = SimpleNamespace(t_ns=np.zeros(0, np.int64), values=np.zeros((0, 4)))
+            none = SimpleNamespace(t_ns=np.zeros(0, np.int64), values=np.zeros((0, 4)))
+            s = trial.read(f"/derived/orientation/{n}") if series else none
             orientations[n] = (s.t_ns, s.values, str(params.get("global_frame", "")))
             mags[n] = None
             if with_mag:
@@ -225,8 +236,12 @@ def run_heading(
                 if imu.mag is not None and np.isfinite(imu.mag).any():
                     mags[n] = (imu.t_ns, imu.mag)
             if late:
-                # aligned before it was oriented: the same rotation from the cluster's poses
+                # aligned before it was oriented: the same rotation from the cluster's poses, from the
+                # orientation over the poses' span only (a lab hour of a week: issue 24)
                 ps = trial.read(pose)
+                if not series and len(ps.t_ns):
+                    lo, hi = pose_span_on_device(ps.t_ns, aligns[n])
+                    s = trial.read(f"/derived/orientation/{n}", lo, hi)
                 g2w = global_to_world_from_pose(s.t_ns, s.values, aligns[n], ps.t_ns, ps.orientation)
                 if g2w is not None:
                     aligns[n] = {**aligns[n], "rotation_global_to_world": g2w}
