@@ -32,7 +32,7 @@ from imulog.process.kinematics.errors import kinematics_errors
 from imulog.process.kinematics.pipeline import KinematicsConfig, estimate_kinematics
 from imulog.process.kinematics.solver import SolverParams, Workspace
 from imulog.process.orientation import OrientationParams
-from imulog.steps.kinematics_windows import PREFIX, kinematics_streams, resample_onto
+from imulog.steps.kinematics_windows import PREFIX, calibration_record, kinematics_streams, resample_onto
 from imulog.steps.windows import WindowParams, channel_rate_hz
 
 STEP = "kinematics"
@@ -206,15 +206,7 @@ def compute_kinematics(
         q_tr = resample_onto(t_tr, q_tr, t_ua)
     est = estimate_kinematics(q_ua, q_fa, t_ua, config, q_trunk_s2g=q_tr)
     meta: dict[str, dict[str, Any]] = {
-        "imulog.kinematics_calibration": {
-            "upper_arm_imu": ua,
-            "forearm_imu": fa,
-            "trunk_imu": trunk,
-            "mode": config.calibration.mode,
-            "neutral_pose_deg": list(config.calibration.pose_deg),
-            "neutral_window_s": list(config.calibration.window_s),
-            "q_global_to_trunk": {k: [float(x) for x in v] for k, v in est.q_global_to_trunk.items()},
-        }
+        "imulog.kinematics_calibration": calibration_record(ua, fa, trunk, config, est.q_global_to_trunk)
     }
     q_ref = None
     kin = metadata.get(META, {}) or {}

@@ -30,6 +30,22 @@ def resample_onto(t_src: np.ndarray, q: np.ndarray, t_dst: np.ndarray) -> np.nda
     return resample_quaternions(t_src, q, t_dst, ResampleParams(cutoff_ratio=0.0))
 
 
+def calibration_record(
+    ua: str, fa: str, trunk: str | None, config: KinematicsConfig, q_global_to_trunk: dict[str, Any]
+) -> dict[str, Any]:
+    """The ``imulog.kinematics_calibration`` record: the IMUs, the neutral-pose calibration's settings and the
+    global-to-trunk rotations (w,x,y,z) it found."""
+    return {
+        "upper_arm_imu": ua,
+        "forearm_imu": fa,
+        "trunk_imu": trunk,
+        "mode": config.calibration.mode,
+        "neutral_pose_deg": list(config.calibration.pose_deg),
+        "neutral_window_s": list(config.calibration.window_s),
+        "q_global_to_trunk": {k: [float(x) for x in v] for k, v in q_global_to_trunk.items()},
+    }
+
+
 def kinematics_streams(est: KinematicsEstimate, q_ref: np.ndarray | None) -> list:
     t = est.t_ns
     units = ["deg"] * len(JOINT_NAMES)
@@ -193,13 +209,7 @@ def kinematics_pieces(
     n = max(sums["n"], 1)
     record.update(
         {
-            "upper_arm_imu": ua,
-            "forearm_imu": fa,
-            "trunk_imu": trunk,
-            "mode": config.calibration.mode,
-            "neutral_pose_deg": list(config.calibration.pose_deg),
-            "neutral_window_s": list(config.calibration.window_s),
-            "q_global_to_trunk": {k: [float(x) for x in v] for k, v in calibrated[0].items()},
+            **calibration_record(ua, fa, trunk, config, calibrated[0]),
             "ms_per_sample": {k: v / n for k, v in sums["ms"].items()},
             "constraint_active_fraction": sums["active"] / n,
             "infeasible_samples": sums["infeasible"],
