@@ -22,7 +22,8 @@ import numpy as np
 
 from imulog.process import quaternion as quat
 from imulog.process.evaluation import summarize, trajectory_errors
-from imulog.process.integration import DdiParams, ZuptParams, double_integrate, static_runs, zupt
+from imulog.process.integration import DdiParams, ZuptParams, double_integrate, zupt
+from imulog.process.rest_runs import static_runs
 
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
 BROAD_14 = "broad/14_undisturbed_slow_translation_with_breaks_B.hdf5"

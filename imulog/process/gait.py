@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from imulog.process.integration import static_runs
+from imulog.process.rest_runs import static_runs
 
 
 @dataclass(frozen=True)

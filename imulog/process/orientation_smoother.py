@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 
 from imulog.numeric import moving_mean
-from imulog.process.integration import static_runs
+from imulog.process.rest_runs import static_runs
 
 GRAVITY_M_S2 = 9.81
 

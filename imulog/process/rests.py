@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from imulog.numeric import moving_mean
-from imulog.process.integration import static_runs
+from imulog.process.rest_runs import static_runs
 
 
 @dataclass(frozen=True)
