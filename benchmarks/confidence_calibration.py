@@ -5,7 +5,7 @@ trajectory error is above 2 cm on an axis, should be flagged with recall >= 80 %
 This script simulates the grid's drinking trials (``imulog.simulate.grid``), runs imulog's own segmentation,
 orientation and trajectory code on each (no truth enters the estimates), and writes one row per repetition:
 the features the phases and trajectory steps know (event correction's counts and confidence, the ZUPT
-velocity drift, the residual against the trial's reference) and the truth labels. Then it scores
+velocity drift, the initial estimate's distance to the reference at the rests, the optimisation's pull) and the truth labels. Then it scores
 ``imulog.process.repetition_flags.flag_repetitions`` on it.
 
     python benchmarks/confidence_calibration.py --seeds 0 --subjects 0 1 -o /tmp/calib.json     # collect
@@ -90,7 +90,7 @@ def trial_rows(name: str, subject: int, seed: int, repetitions: int, overrides: 
         params=DEFAULT_PARAMS,
         info=info,
     )
-    features = repetition_features(t_s, acc_world, static, reps, recon, ph.quality)
+    features = repetition_features(t_s, acc_world, static, reps, recon, ph.quality, trajectory_info=info)
 
     # truth: phase boundaries per (repetition, label) on the reference clock
     t0 = float(t_ref_ns[0]) / 1e9
@@ -177,7 +177,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repetitions", type=int, default=8)
     ap.add_argument("-o", "--output", type=Path, help="write the rows (JSON) here")
     ap.add_argument("--score", type=Path, help="score the rows of this file instead of simulating")
-    ap.add_argument("--max-pull-cm", nargs="*", type=float, help="also score these drift thresholds (cm)")
+    ap.add_argument(
+        "--max-reference-cm", nargs="*", type=float, help="also score these drift thresholds (FlagParams.max_reference_cm)"
+    )
+    ap.add_argument(
+        "--max-pull-cm", nargs="*", type=float, help="also score the pull rule used until 2026-12-07 at these thresholds"
+    )
     ap.add_argument(
         "--closure-factor", type=float, help="OptimizationParams.closure_factor (option 5 of issue 31; default off)"
     )
@@ -193,8 +198,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.output:
             args.output.write_text(json.dumps(rows, default=float))
     print(json.dumps(score(rows), indent=1))
-    for pull in args.max_pull_cm or ():  # the drift threshold scanned (FlagParams.max_pull_cm)
-        print(f"max_pull_cm {pull}: {json.dumps(score(rows, FlagParams(max_pull_cm=pull)))}")
+    for ref in args.max_reference_cm or ():  # the drift threshold scanned (FlagParams.max_reference_cm)
+        print(f"max_reference_cm {ref}: {json.dumps(score(rows, FlagParams(max_reference_cm=ref)))}")
+    for pull in args.max_pull_cm or ():  # the rule until 2026-12-07: the pull alone
+        print(f"max_pull_cm {pull}: {json.dumps(score(rows, FlagParams(max_reference_cm=None, max_pull_cm=pull)))}")
     by_condition: dict[str, list[dict]] = {}
     for r in rows:
         by_condition.setdefault(r["condition"], []).append(r)

@@ -21,21 +21,22 @@ from imulog.process.repetition_flags import (
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
 
-def test_reasons_come_from_event_correction_the_pull_and_the_rests():
-    ok = {"confidence": 0.98, "merged": 0, "split": 0, "missing": 0, "zupt_bias_optimized_cm": 1.0}
+def test_reasons_come_from_event_correction_the_reference_distance_and_the_rests():
+    ok = {"confidence": 0.98, "merged": 0, "split": 0, "missing": 0, "reference_cm": 1.0}
     assert flag_repetition(ok) == []
     assert flag_repetition({**ok, "split": 1}) == ["split"]
     assert flag_repetition({**ok, "merged": 2, "confidence": 0.64}) == ["merged"]  # the real wrist data's misses
     assert flag_repetition({**ok, "confidence": 0.5}) == ["low confidence"]
-    assert flag_repetition({**ok, "zupt_bias_optimized_cm": 3.5}) == ["drift"]
+    assert flag_repetition({**ok, "reference_cm": 3.5}) == ["drift"]
     assert flag_repetition({**ok, "rest_before_s": 0.05, "rest_after_s": 1.0}) == ["weak rest"]
-    # without zupt_bias (no orientation) the pull is measured from ZUPT
-    assert flag_repetition({"zupt_optimized_cm": 3.5}) == ["drift"]
-    assert flag_repetition({"zupt_optimized_cm": 3.5}, FlagParams(max_pull_cm=4.0)) == []
+    # the pull (how far the optimisation moved its estimate) depends on its trust: no reason by default
+    assert flag_repetition({**ok, "zupt_bias_optimized_cm": 9.0}) == []
+    assert flag_repetition({"zupt_optimized_cm": 3.5}, FlagParams(max_reference_cm=None, max_pull_cm=3.0)) == ["drift"]
+    assert flag_repetition({**ok, "reference_cm": 3.5}, FlagParams(max_reference_cm=4.0)) == []
 
 
 def test_flagged_list_and_line():
-    feats = {2: {"split": 1}, 1: {}, 3: {"zupt_bias_optimized_cm": 9.0}}
+    feats = {2: {"split": 1}, 1: {}, 3: {"reference_cm": 9.0}}
     flagged = flagged_repetitions(feats)
     assert flagged == [{"repetition": 2, "reasons": ["split"]}, {"repetition": 3, "reasons": ["drift"]}]
     assert flag_line(flagged, 3) == "2 of 3 repetitions flagged: 2 (split), 3 (drift)"
@@ -139,3 +140,32 @@ def test_info_shows_the_flags_of_every_imu_of_a_setup(capsys):
     ]
     _echo_flags({"imulog.timing": {"imu": "/imu/wrist", "flagged_repetitions": [flag], "n_repetitions": 3}})
     assert capsys.readouterr().out == "repetitions: 1 of 3 repetitions flagged: 2 (merged)\n"
+
+
+def test_reference_distance_of_a_built_repetition_turned_by_its_heading_drift():
+    """reference_cm: the initial estimate against the minimum-jerk reference at the rests after the first phase,
+    worst axis, after turning the estimate back by the trial's heading drift as the optimisation does."""
+    from imulog.process.minjerk import R2GWaypoints, r2g_reference
+    from imulog.process.trajectory_optimize import rotate_about_z
+
+    rate = 100.0
+    t = np.arange(0, 12, 1 / rate)
+    bounds = np.array([[1.0, 2.5], [3.5, 5.0], [7.0, 8.5], [9.5, 11.0]])
+    wp = R2GWaypoints((0.30, 0.05, 0.0), (0.10, 0.25, 0.35))
+    ref = r2g_reference(t, bounds, wp)
+    static = ~np.any([(t >= a) & (t <= b) for a, b in bounds], axis=0)
+    offset = np.where(t >= bounds[0, 0], 1.0, 0.0)[:, None] * [0.0, 0.04, 0.01]  # 4 cm in y from the first phase
+    angle = np.radians(20.0)
+    estimate = rotate_about_z(ref + offset, -angle)  # the heading drift turned it by -20 deg
+    rep = SimpleNamespace(index=1, start=0, stop=len(t), phase_bounds_s=bounds)
+    info = {"waypoints_m": {"bottle": list(wp.bottle_m), "mouth": list(wp.mouth_m)}, "heading_drift_deg": [20.0]}
+    acc = np.zeros((len(t), 3))
+    (f,) = repetition_features(t, acc, static, [rep], {"zupt": estimate, "zupt_bias": estimate}, (), info).values()
+    assert f["reference_cm"] == pytest.approx(4.0, abs=1e-6)
+    assert flag_repetition(f) == ["drift"]
+    info["heading_drift_deg"] = [0.0]  # not turned back: the 20-deg turn of the bottle and the mouth adds to it
+    (g,) = repetition_features(t, acc, static, [rep], {"zupt": estimate, "zupt_bias": estimate}, (), info).values()
+    assert g["reference_cm"] > f["reference_cm"] + 1.0
+    # without the trajectory step's info (no reference) there is no reference distance, hence no drift reason
+    (h,) = repetition_features(t, acc, static, [rep], {"zupt": estimate}).values()
+    assert "reference_cm" not in h and flag_repetition(h) == []

@@ -8,9 +8,13 @@ data):
 
 - ``drift_mps``: the speed (m/s) plain integration of the gravity-free acceleration reaches at the end of the
   repetition's window, which starts and ends at rest: what ZUPT has to remove;
+- ``reference_cm``: the optimisation's initial estimate (``zupt_bias`` turned by the trial's heading drift, or ZUPT
+  without an orientation) against the minimum-jerk reference at the rests after the first phase starts: RMS per
+  axis, the worst axis (cm). It does not depend on how far the optimisation trusts the estimate
+  (``OptimizationParams.closure_factor``), so the ``drift`` reason keeps its meaning whatever the trust rule;
 - ``zupt_bias_optimized_cm`` (``zupt_optimized_cm`` without an orientation): RMS distance (cm) between the
-  optimisation's initial estimate and its result: how far the optimisation had to pull the dead reckoning
-  towards the reference (on the grid the best single predictor of a large error);
+  initial estimate and the optimised result: how far the optimisation pulled it (the ``drift`` feature until
+  2026-12-07; kept in the records, not a reason by default);
 - ``rest_before_s`` / ``rest_after_s``: the rest (s) at each end of the window that the velocity is reset on.
 
 :func:`flag_repetition` turns them into reasons (``merged``, ``split``, ``missing``, ``drift``, ``weak rest``);
@@ -32,7 +36,11 @@ class FlagParams:
     """Thresholds of :func:`flag_repetition` (units in the names)."""
 
     min_confidence: float = 0.7  # the phases step's confidence (0..1)
-    max_pull_cm: float = 3.0  # RMS distance between the initial estimate and the optimised trajectory (cm)
+    # the initial estimate's RMS distance to the reference at rests, worst axis (cm; None: off): the largest value
+    # in 0.25-cm steps that keeps recall >= 0.8 on the calibration set (docs/accuracy.md), about twice the
+    # reference's own uncertainty there (OptimizationParams.sigma_ref_static_m = 1.5 cm)
+    max_reference_cm: float | None = 3.25
+    max_pull_cm: float | None = None  # the pull (initial estimate to optimised, RMS cm): the rule until 2026-12-07
     min_rest_s: float = 0.1  # the shorter of the two rests around the repetition (s)
 
 
@@ -43,12 +51,16 @@ def repetition_features(
     repetitions: Sequence[Any],
     trajectories_m: Mapping[str, np.ndarray],
     quality: Sequence[Mapping[str, Any]] = (),
+    trajectory_info: Mapping[str, Any] | None = None,
 ) -> dict[int, dict[str, Any]]:
     """Per repetition (by its ``index``): the phases step's counts and the dead-reckoning figures above.
 
     t_s (N,) s; acc_mps2 (N, 3) gravity-free, world frame; static_mask (N,) true rests; repetitions: objects
-    with ``index``, ``start``, ``stop`` (sample slice); trajectories_m: {method: (N, 3) m} with ``zupt`` and,
-    when computed, ``optimized``; quality: the phases step's per-repetition records (``repetition`` 1-based).
+    with ``index``, ``start``, ``stop`` (sample slice) and, for ``reference_cm``, ``phase_bounds_s`` (4, 2) s;
+    trajectories_m: {method: (N, 3) m} with ``zupt`` and, when computed, ``zupt_bias`` and ``optimized``;
+    quality: the phases step's per-repetition records (``repetition`` 1-based); trajectory_info: the ``info``
+    :func:`imulog.process.trajectory_opt.reconstruct_repetitions` filled (``waypoints_m``, ``heading_drift_deg``
+    per repetition in list order), needed for ``reference_cm``.
     """
     import numpy as np  # lazily: `imulog info` reads flag_line without numpy
 
@@ -56,8 +68,9 @@ def repetition_features(
     acc = np.asarray(acc_mps2, dtype=np.float64)
     static = np.asarray(static_mask, dtype=bool)
     by_rep = {int(q["repetition"]): q for q in quality}
+    reference = _reference_distances(t, static, repetitions, trajectories_m, trajectory_info or {})
     out: dict[int, dict[str, Any]] = {}
-    for rep in repetitions:
+    for i, rep in enumerate(repetitions):
         sl = slice(rep.start, rep.stop)
         tt, a, st = t[sl], acc[sl], static[sl]
         if len(tt) < 3:
@@ -75,11 +88,49 @@ def repetition_features(
             z = trajectories_m.get(name)
             if z is not None and o is not None:
                 f[f"{name}_optimized_cm"] = _rms_distance_cm(o[sl], z[sl])
+        if i in reference:
+            f["reference_cm"] = reference[i]
         q = by_rep.get(int(rep.index), {})
         for key in ("merged", "dropped", "split", "missing", "forced", "confidence"):
             if key in q:
                 f[key] = q[key]
         out[int(rep.index)] = f
+    return out
+
+
+def _reference_distances(
+    t: np.ndarray,
+    static: np.ndarray,
+    repetitions: Sequence[Any],
+    trajectories_m: Mapping[str, np.ndarray],
+    info: Mapping[str, Any],
+) -> dict[int, float]:
+    """Per repetition (list position): ``reference_cm``, the initial estimate's RMS distance (cm, worst axis) to
+    the minimum-jerk reference at the static samples after the first phase starts (the samples the
+    optimisation's ``sigma_ref_static_m`` term holds; before the first phase both are 0 by construction)."""
+    import numpy as np
+
+    from imulog.process.minjerk import R2GWaypoints
+    from imulog.process.trajectory_optimize import rotate_about_z
+    from imulog.process.trajectory_repetitions import reference_residuals
+
+    initial = trajectories_m.get("zupt_bias", trajectories_m.get("zupt"))
+    wp = info.get("waypoints_m")
+    if initial is None or not wp:
+        return {}
+    initial = np.array(initial, dtype=np.float64, copy=True)
+    for rep, deg in zip(repetitions, info.get("heading_drift_deg") or (), strict=False):
+        if deg:  # the optimisation starts from the estimate turned back by the trial's heading drift
+            initial[rep.start : rep.stop] = rotate_about_z(initial[rep.start : rep.stop], np.radians(deg))
+    complete = [r for r in repetitions if len(getattr(r, "phase_bounds_s", ())) == 4]
+    waypoints = R2GWaypoints(tuple(wp["bottle"]), tuple(wp["mouth"]))
+    res = reference_residuals(t, initial, static, complete, waypoints)
+    position = {id(r): i for i, r in enumerate(repetitions)}
+    out = {}
+    for j, d in res.items():
+        d = d[np.all(np.isfinite(d), axis=1)]
+        if len(d):
+            out[position[id(complete[j])]] = float(100 * np.max(np.sqrt(np.mean(d**2, axis=0))))
     return out
 
 
@@ -114,8 +165,11 @@ def flag_repetition(features: Mapping[str, Any], params: FlagParams = FlagParams
         reasons.append("merged")
     elif features.get("confidence", 1.0) < params.min_confidence:
         reasons.append("low confidence")
+    ref = features.get("reference_cm")
+    if ref is not None and params.max_reference_cm is not None and ref > params.max_reference_cm:
+        reasons.append("drift")
     pull = features.get("zupt_bias_optimized_cm", features.get("zupt_optimized_cm"))
-    if pull is not None and pull > params.max_pull_cm:
+    if pull is not None and params.max_pull_cm is not None and pull > params.max_pull_cm:
         reasons.append("drift")
     if min(features.get("rest_before_s", 1.0), features.get("rest_after_s", 1.0)) < params.min_rest_s:
         reasons.append("weak rest")

@@ -236,7 +236,7 @@ def compute_trajectories(
         baseline=True,
     )
     if any(len(r.phase_bounds_s) for r in reps):  # repetitions to judge (issue 31): what to distrust, and why
-        features = repetition_features(t_s, acc, mask, reps, recon, repetition_quality or ())
+        features = repetition_features(t_s, acc, mask, reps, recon, repetition_quality or (), trajectory_info=info)
         quality = (alignment or {}).get("quality")
         info["flagged_repetitions"] = flagged_repetitions(features, alignment_quality=quality)
     streams, written = [], []
