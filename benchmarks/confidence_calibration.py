@@ -178,13 +178,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("-o", "--output", type=Path, help="write the rows (JSON) here")
     ap.add_argument("--score", type=Path, help="score the rows of this file instead of simulating")
     ap.add_argument(
-        "--max-reference-cm", nargs="*", type=float, help="also score these drift thresholds (FlagParams.max_reference_cm)"
+        "--max-reference-cm",
+        nargs="*",
+        type=float,
+        help="also score these drift thresholds (FlagParams.max_reference_cm)",
     )
     ap.add_argument(
-        "--max-pull-cm", nargs="*", type=float, help="also score the pull rule used until 2026-12-07 at these thresholds"
+        "--max-pull-cm",
+        nargs="*",
+        type=float,
+        help="also score the pull rule used until 2026-12-07 at these thresholds",
     )
     ap.add_argument(
-        "--closure-factor", type=float, help="OptimizationParams.closure_factor (option 5 of issue 31; default off)"
+        "--closure-factor", type=float, help="OptimizationParams.closure_factor (option 5 of issue 31; default 0.5 since 2026-12-07)"
     )
     args = ap.parse_args(argv)
     if args.closure_factor is not None:

@@ -17,8 +17,8 @@ Changes (each: the defaults without it / the defaults, unless said): ``heading-d
 accelerating as a whole is no rest), ``heading-through-rests`` (the defaults / with ``AnchorParams.heading =
 "gyroscope"``, an option: a rest keeps the heading the gyroscope carried through the movement before it), ``z-return``
 (the defaults / ``OptimizationParams.return_to_start`` in z only), ``heading-and-z-return`` (the defaults / both
-options), ``closure-sigma`` (the defaults / with
-``OptimizationParams.closure_factor = 0.5``, an option), ``issue31-session3`` (the code before this round's
+options), ``closure-sigma`` (without
+``OptimizationParams.closure_factor`` / with 0.5, the default since 2026-12-07), ``issue31-session3`` (the code before this round's
 default changes, ``bias-uncertainty`` and ``rest-run-mean``, / the defaults), ``issue31-options`` (the same
 before / the defaults with the heading through rests and the z-only return), ``heading-restart`` (options 3 and 4
 with the heading chained through the whole recording, ``AnchorParams.restart = False``, / restarted at every rest
@@ -60,7 +60,7 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
             optimized=replace(D.optimized, return_to_start=(False, False, True)),
         ),
     ),
-    "closure-sigma": (D, replace(D, optimized=replace(D.optimized, closure_factor=0.5))),
+    "closure-sigma": (replace(D, optimized=replace(D.optimized, closure_factor=None)), D),
     "heading-restart": (
         replace(
             D,

@@ -89,9 +89,9 @@ def test_a_good_estimate_is_trusted_by_its_movements_closure():
     """`residual-velocity` subject and seed 10 (a development trial of issue 31; the hand drifts at ~1 cm/s
     between phases, which the reference and the smoothness term deny): the static-position error estimated
     against the reference alone made the optimisation follow the reference and end worse than ZUPT on every axis;
-    bounded by the movements' closure (``closure_factor = 0.5``, an option: the repetition flags are calibrated
-    without it) it is below ZUPT on every axis. With the heading through rests (the other option), where the
-    estimate is good enough to trust."""
+    bounded by the movements' closure (``closure_factor = 0.5``, the default since 2026-12-07) it is below ZUPT
+    on every axis. With the heading through rests (default since 2026-12-07), where the estimate is good enough
+    to trust."""
     from trajectory_accuracy import evaluate_trial, simulated_inputs
 
     from imulog.simulate.grid import condition

@@ -61,12 +61,12 @@ class OptimizationParams:
         whole trial, so :func:`imulog.process.trajectory_opt.reconstruct_repetitions` applies it).
     closure_factor: the ``"auto"`` static-position error per axis is at most this many times what ZUPT's de-drift
         took off the initial estimate's movements (:func:`imulog.process.trajectory_repetitions.closure_sigma`,
-        issue 31; at least 6 mm; None: off). The variance components measure the estimate against a reference
-        that is itself 1-5 cm off per repetition, so a good estimate looked as poor as the reference; its
-        movements' closure says it is good. 0.5 (chosen on development trials; 0.25 hurt ``combined``) helped on
-        held-out trials (``residual-velocity`` -0.9 cm per axis, no condition worse) but is off by default: the
-        repetition flags' ``drift`` reason (:mod:`imulog.process.repetition_flags`) is calibrated on how far the
-        optimisation pulls the estimate, and with it the flags' recall on the grid fell from >= 0.8 to 0.58.
+        issue 31; at least 6 mm; None: off, the default before 2026-12-07). The variance components measure the
+        estimate against a reference that is itself 1-5 cm off per repetition, so a good estimate looked as poor
+        as the reference; its movements' closure says it is good. 0.5 (chosen on development trials; 0.25 hurt
+        ``combined``): ``residual-velocity`` about -1 cm per axis, no condition worse on development or held-out
+        trials (docs/accuracy.md). The default since the repetition flags' ``drift`` reason stopped measuring how
+        far the optimisation pulls the estimate (:mod:`imulog.process.repetition_flags`).
     """
 
     sigma_data_mps: float | tuple[float, float, float] = 0.02
@@ -80,7 +80,7 @@ class OptimizationParams:
     max_heading_deg: float = 20.0
     velocity_from_static: bool = True
     heading_drift: bool = True
-    closure_factor: float | None = None
+    closure_factor: float | None = 0.5
 
 
 @dataclass
