@@ -10,8 +10,9 @@ Memory: in pieces (``iter_chunks``): the sections are found in one pass over the
 (:mod:`imulog.converters.vicon_csv_sections`), then each section's data rows are read in pieces of about 16 MiB of
 text by :func:`imulog.converters._pieces.iter_numeric` (the section's byte range alone), one section after the
 other; a piece holds one section's stream. The first piece declares every section's span and stream ``meta``
-(known from the headers and the first and last rows). The whole-file ``convert`` is the one-piece case (a piece
-per section).
+(known from the headers and the first and last rows) and holds every section's stream, those of later sections
+empty, so that the channels come in the order the whole file gives them. The whole-file ``convert`` is the one-piece
+case (a piece per section).
 """
 
 from __future__ import annotations
@@ -240,8 +241,12 @@ def iter_vicon_csv(
             t_ns = pl.times(path, values, part.first_line, before)
             before = int(t_ns[-1]) if len(t_ns) else before
             rec = Recording(sources=[str(path)], warnings=list(part.warnings))
-            stream = pl.stream(path, name, t_ns, values)
-            {MarkerStream: rec.markers, AnalogStream: rec.analogs}.get(type(stream), rec.signals).append(stream)
+            for other in plans if first else [pl]:  # the first piece opens every section's stream, in kind order
+                if other is pl:
+                    stream = pl.stream(path, name, t_ns, values)
+                else:
+                    stream = other.stream(path, name, t_ns[:0], np.zeros((0, len(other.header))))
+                {MarkerStream: rec.markers, AnalogStream: rec.analogs}.get(type(stream), rec.signals).append(stream)
             rec.metadata[f"imulog.device.{name}"] = dict(device)
             if first and piece_bytes is not None:
                 rec.metadata[PIECES_RECORD] = declared

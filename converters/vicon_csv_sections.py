@@ -69,11 +69,12 @@ def _blank_lines(f: BinaryIO, block_bytes: int) -> tuple[list[tuple[int, int, in
             return out, base
 
 
-def find_sections(path: Path, block_bytes: int = SCAN_BYTES) -> list[Section]:
+def find_sections(path: Path, block_bytes: int | None = None) -> list[Section]:
     """Section starts and data byte ranges: sections begin at the top or after a blank line; a section's data rows
-    end at the next blank line or the end of the file."""
+    end at the next blank line or the end of the file. The file is read ``block_bytes`` (:data:`SCAN_BYTES`) at a
+    time."""
     with open(path, "rb") as f:
-        blanks, size = _blank_lines(f, block_bytes)
+        blanks, size = _blank_lines(f, block_bytes or SCAN_BYTES)
         blank_starts = np.array([b for b, _, _ in blanks], dtype=np.int64)
         candidates = {0: 0}
         for _, after, line in blanks:
