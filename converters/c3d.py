@@ -57,8 +57,10 @@ from imulog.model import Recording
 
 __all__ = ["LENGTH_TO_M", "MODEL_OUTPUT_GROUPS", "PIECE_BYTES", "C3dConverter", "iter_c3d", "load", "read_c3d"]
 
-#: bytes of the data section per piece when a large file is converted piece by piece (whole frames, at least one)
-PIECE_BYTES = 16 * 1024 * 1024
+#: bytes of the data section per piece when a large file is converted piece by piece (whole frames, at least one):
+#: decoded to float64 positions, times and analogs, 4 MiB of float32 data is about 11 MB of arrays, of int16 about 22 MB
+#: (16 MiB pieces peaked at 460-520 MB for 1-4 h, as the command holds the first and the previous piece: 271-280 MB)
+PIECE_BYTES = 4 * 1024 * 1024
 
 
 def _frames_needed(path: Path, intel: bytes, params: dict, size: int) -> tuple[int, list[str]]:
