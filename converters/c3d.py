@@ -6,8 +6,8 @@ process under a time and memory limit (``extra["reader_timeout_s"]``, default 60
 1 GiB, :mod:`imulog.converters._guard`) on the header and parameters; when it fails, crashes or hangs, imulog's own
 parser reads them, with a warning naming what ezc3d did. The points and analogs are always imulog's reading
 (:mod:`imulog.converters.c3d_data`, equal to ezc3d's and the `c3d` package's on the shared files). The frame count is
-``POINT:FRAMES`` (warned when the header's count disagrees; the header's 16-bit count wraps on long trials), the
-point scale ``POINT:SCALE`` (warned when the header's copy disagrees). A marker set without one valid sample, or
+``POINT:FRAMES`` (warned when the header's count disagrees; the header's 16-bit count wraps on long trials; beyond
+65535 frames ``TRIAL:ACTUAL_START_FIELD``/``ACTUAL_END_FIELD``, else ``POINT:LONG_FRAMES``), the point scale ``POINT:SCALE`` (warned when the header's copy disagrees). A marker set without one valid sample, or
 markers that are never valid, are warned about per marker set.
 
 Valid samples (the C3D guide, "3D data"): a point whose fourth word (camera mask and residual) is negative is
@@ -25,7 +25,7 @@ seconds) are seconds on the same clock. Points listed under ``POINT:ANGLES/FORCE
 model outputs, kept in ``/vicon/model_outputs`` with their units rather than as markers.
 
 Memory: in pieces (``iter_chunks``). ezc3d reads only the header and parameter section (a copy of the file's bytes
-before the data, in the guarded child); the data section, frames of one fixed size, is read a range of frames at a
+before the data and its first frame, in the guarded child); the data section, frames of one fixed size, is read a range of frames at a
 time by imulog's own reader (:mod:`imulog.converters.c3d_data`, about :data:`PIECE_BYTES` of data a piece), so a
 piece holds one range whatever the file's length. The whole-file ``convert`` is the one-piece case. What the whole
 file decides (each stream's span and ``meta``) comes from the header and parameters and is declared by the first
