@@ -148,3 +148,39 @@ def test_a_trial_longer_than_65535_frames(tmp_path, integer):
     pieces = list(iter_c3d(path, piece_bytes=1 << 20))
     assert len(pieces) > 2
     assert_same_recording(concat_chunks(pieces), rec)
+
+
+_PEAK = """
+import sys
+from imulog.converters.c3d import iter_c3d
+n = 0
+for piece in iter_c3d(sys.argv[1], piece_bytes=1 << 20):
+    n += len(piece.markers[0])
+hwm = [int(x.split()[1]) for x in open("/proc/self/status") if x.startswith("VmHWM:")]
+print(n, hwm[0])
+"""
+
+
+def _peak_kib(path: Path) -> tuple[int, int]:
+    """(frames read, the reading child's own peak RSS in KiB: VmHWM, which the parent's peak does not carry)."""
+    import subprocess
+
+    out = subprocess.run([sys.executable, "-c", _PEAK, str(path)], capture_output=True, text=True, check=True)
+    n, kib = out.stdout.split()
+    return int(n), int(kib)
+
+
+def test_a_long_c3d_reads_in_bounded_memory(tmp_path):
+    """Peak memory of reading a C3D in 1 MiB pieces does not grow with the file: 400 000 frames (42 MB) peak
+    within 15 MB of 100 000 frames (10 MB); measured 56.5 -> 57.4 MB, where one piece (``piece_bytes=None``) peaks
+    at 135 -> 423 MB."""
+    short, long = tmp_path / "short.c3d", tmp_path / "long.c3d"
+    write_long_c3d(short, 100_000)
+    write_long_c3d(long, 400_000)
+    n_short, peak_short = _peak_kib(short)
+    n_long, peak_long = _peak_kib(long)
+    assert (n_short, n_long) == (100_000, 400_000)
+    grow_mb = (peak_long - peak_short) / 1024
+    assert grow_mb < 15, (
+        f"peak grew {grow_mb:.0f} MB from {short.stat().st_size >> 20} to {long.stat().st_size >> 20} MB"
+    )
