@@ -100,3 +100,47 @@ def test_sections_file_pieces_write_the_whole_files_archive(sections_file, tmp_p
     out.mkdir()
     whole, pieces = convert_twice(sections_file, out, (TEXT, 8192), monkeypatch)
     assert_same_trial(whole, pieces)
+
+
+def _nexus(path: Path, frames: int) -> None:
+    """A Nexus export of ``frames`` frames: Devices (one EMG channel, 10 sub frames) then Trajectories (2 markers)."""
+    rng = np.random.default_rng(0)
+    with open(path, "w") as f:
+        f.write("Devices\n1000\n,,EMG Sensor 1\nFrame,Sub Frame,EMG1\n,,V\n")
+        frame = np.repeat(np.arange(1, frames + 1), 10)
+        sub = np.tile(np.arange(10), frames)
+        np.savetxt(
+            f, np.column_stack([frame, sub, rng.normal(0, 1e-4, 10 * frames)]), delimiter=",", fmt=["%d", "%d", "%.3e"]
+        )
+        f.write("\nTrajectories\n100\n,,s:a,,,s:b,,\nFrame,Sub Frame,X,Y,Z,X,Y,Z\n,,mm,mm,mm,mm,mm,mm\n")
+        rows = np.column_stack([np.arange(1, frames + 1), np.zeros(frames), rng.normal(0, 500, (frames, 6))])
+        np.savetxt(f, rows, delimiter=",", fmt=["%d", "%d"] + ["%.3f"] * 6)
+
+
+_PEAK = """
+import sys
+from imulog.converters.vicon_csv import iter_vicon_csv
+n = 0
+for piece in iter_vicon_csv(sys.argv[1], piece_bytes=1 << 20):
+    n += sum(len(m) for m in piece.markers)
+hwm = [int(x.split()[1]) for x in open("/proc/self/status") if x.startswith("VmHWM:")]
+print(n, hwm[0])
+"""
+
+
+def test_a_long_nexus_csv_reads_in_bounded_memory(tmp_path):
+    """Reading a two-section Nexus export in 1 MiB pieces: 4x the frames (100 000 -> 400 000, 23 -> 95 MB of text)
+    peaks within 15 MB (the child's own VmHWM); measured 112 -> 115 MB, where one piece a section
+    (``piece_bytes=None``) peaks at 192 -> 471 MB."""
+    import subprocess
+    import sys
+
+    peaks = {}
+    for frames in (100_000, 400_000):
+        path = tmp_path / f"nexus_{frames}.csv"
+        _nexus(path, frames)
+        out = subprocess.run([sys.executable, "-c", _PEAK, str(path)], capture_output=True, text=True, check=True)
+        n, kib = (int(x) for x in out.stdout.split())
+        assert n == frames
+        peaks[frames] = kib / 1024
+    assert peaks[400_000] - peaks[100_000] < 15, peaks
