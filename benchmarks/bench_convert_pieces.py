@@ -14,6 +14,9 @@ The same for the four formats issue 24 brought into pieces (XDF, NilsPodLib CSV,
 generated files of ``--hours`` and 4x as many hours converted piece by piece, with the growth of the peak:
 
     .venv/bin/python benchmarks/bench_convert_pieces.py --formats xdf,nilspod-csv,xsens,bids --hours 1 [--whole]
+
+C3D (``--formats c3d``): a 4-marker cluster at 100 Hz and one analog channel at 1 kHz, float32, the frame count in
+``TRIAL:ACTUAL_END_FIELD`` (``benchmarks/long_c3d.py``: 1 h is 360 000 frames, 37 MB).
 """
 
 from __future__ import annotations
@@ -27,6 +30,9 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from long_c3d import write_long_c3d  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -222,6 +228,7 @@ FORMATS = {
         lambda d, n: (xsens_txt(d / "MT_0120_000-000_00B42D4B.txt", n), d / "MT_0120_000-000_00B42D4B.txt")[1],
     ),
     "bids": (360_000, lambda d, n: bids_motion(d, n)),
+    "c3d": (360_000, lambda d, n: (write_long_c3d(d / "long.c3d", n), d / "long.c3d")[1]),
 }
 
 

@@ -39,19 +39,20 @@ def iter_numeric(spec: TableSpec, piece_bytes: int | None) -> Iterator[NumericPi
     """The numeric block of ``spec`` (:func:`~imulog.converters._table.read_numeric`) in pieces of about
     ``piece_bytes`` of text, each cut after a whole row (:class:`NumericPiece`). None: the whole file, read once by :func:`read_source`, as one piece. Values, gaps, a cut final row
     (dropped from the last piece, with its warning) and errors (file, line, column) are the same whatever the piece
-    size; the file's SHA-256 is computed while reading and remembered (:func:`known_sha256`)."""
+    size; the file's SHA-256 is computed while reading and remembered (:func:`known_sha256`). A ``spec.byte_range``
+    (one section of a file: Vicon Nexus CSV) is cut alone, ``spec.skip_lines`` being the lines before it."""
     path = spec.path
     base = spec
     if piece_bytes is None:
         data = read_source(path)  # read once: parsed from memory, its SHA-256 computed from these bytes
         spec = replace(base, warnings=[])
         values = read_numeric(spec, data)
-        start = 0
-        for _ in range(base.skip_lines):
+        start, end = base.byte_range or (0, len(data))
+        for _ in range(0 if base.byte_range else base.skip_lines):
             start = data.index(b"\n", start) + 1
-        yield NumericPiece(values, base.skip_lines + 1, 0, list(spec.warnings), memoryview(data)[start:])
+        yield NumericPiece(values, base.skip_lines + 1, 0, list(spec.warnings), memoryview(data)[start:end])
         return
-    for piece, lines_before, k, last in text_pieces(path, base.skip_lines, piece_bytes):
+    for piece, lines_before, k, last in text_pieces(path, base.skip_lines, piece_bytes, span=base.byte_range):
         spec = replace(
             base,
             skip_lines=lines_before,
@@ -72,28 +73,43 @@ def iter_numeric(spec: TableSpec, piece_bytes: int | None) -> Iterator[NumericPi
         yield NumericPiece(read_numeric(spec, piece), lines_before + 1, k, warnings, memoryview(piece))
 
 
-def text_pieces(path: Path, skip_lines: int, piece_bytes: int) -> Iterator[tuple[bytes, int, int, bool]]:
+def text_pieces(
+    path: Path, skip_lines: int, piece_bytes: int, span: tuple[int, int] | None = None
+) -> Iterator[tuple[bytes, int, int, bool]]:
     """The text after ``skip_lines`` header lines in pieces of about ``piece_bytes``, each ending after a whole line:
     (piece, lines before it in the file, piece number, whether it is the last). The last piece holds at least
     1 MiB (or ``piece_bytes``) so that a cut final row is judged against the rows above it. The file's SHA-256 is
-    computed while reading and remembered (:func:`known_sha256`) when the file did not change meanwhile."""
+    computed while reading and remembered (:func:`known_sha256`) when the file did not change meanwhile.
+    ``span``: the bytes ``[start, end)`` alone (a section of the file), ``skip_lines`` being the lines before it."""
     digest = hashlib.sha256()
     total = 0
     with open(path, "rb") as f:
-        for _ in range(skip_lines):
+        left = None
+        if span is not None:
+            f.seek(span[0])
+            left = span[1] - span[0]
+        for _ in range(0 if span is not None else skip_lines):
             line = f.readline()
             if not line.endswith(b"\n"):
                 raise ConversionError(path, "file ends inside the header", line=skip_lines)
             digest.update(line)
             total += len(line)
+
+        def read(n: int) -> bytes:
+            nonlocal left
+            if left is not None:
+                n = min(n, left)
+                left -= n
+            return f.read(n)
+
         lines_before = skip_lines
         k = 0
-        buf = f.read(piece_bytes)
+        buf = read(piece_bytes)
         digest.update(buf)
         total += len(buf)
         last = False
         while not last:
-            nxt = f.read(piece_bytes)
+            nxt = read(piece_bytes)
             digest.update(nxt)
             total += len(nxt)
             if len(nxt) < min(piece_bytes, 1 << 20):  # the file ends: a last piece of at least 1 MiB (or a piece)
@@ -108,7 +124,7 @@ def text_pieces(path: Path, skip_lines: int, piece_bytes: int) -> Iterator[tuple
             lines_before += piece.count(b"\n")
             k += 1
         st = os.fstat(f.fileno())
-    if st.st_size == total:
+    if span is None and st.st_size == total:
         remember_sha256(path, st, digest.hexdigest())
 
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable
+from typing import BinaryIO
 
 import numpy as np
 
@@ -197,3 +198,30 @@ def parameters(data: bytes) -> dict[str, list | str]:
 def header_frames(data: bytes) -> tuple[int, int]:
     """(first frame, last frame) of an Intel header (16-bit words 4 and 5)."""
     return struct.unpack_from("<HH", data, 6)
+
+
+def read_prefix(f: BinaryIO) -> bytes:
+    """The header and parameter section of an open C3D file (everything before the data, as stored): the first
+    512-byte block, then up to the data start (header word 9) or the parameter section's declared end, whichever is
+    later, or the end of the file; the data is not read. C3dLayoutError when it is not a C3D file."""
+    f.seek(0)
+    head = f.read(512)
+    if len(head) < 512 or head[1] != 0x50:
+        raise C3dLayoutError("not a C3D file (byte 2 of the header is not 0x50)")
+    p = (max(head[0], 1) - 1) * 512
+    f.seek(p)
+    phead = f.read(4)
+    if len(phead) < 4:
+        raise C3dLayoutError(f"file ends before the parameter section (block {head[0]})")
+    (data_block,) = struct.unpack_from(">H" if phead[3] == MIPS else "<H", head, 16)
+    end = max(p + 512 * max(phead[2], 1), (data_block - 1) * 512)
+    f.seek(0)
+    return f.read(end)
+
+
+def data_words(raw: bytes, proc: int, is_float: bool) -> np.ndarray:
+    """Data words stored by processor ``proc`` (a whole number of words from the data section) as float32 (a float
+    file, POINT:SCALE < 0) or int16 values in the machine's byte order: what :func:`to_intel` makes of them."""
+    if is_float:
+        return _floats_in(proc)(np.frombuffer(raw, dtype=np.uint8).reshape(-1, 4))
+    return np.frombuffer(raw, dtype=_i16(proc)).astype(np.int16)

@@ -9,6 +9,10 @@ Files (convert the folder to get one trial with all three):
 * ``stride_borders_sample.csv``: ``s_id,foot,start,end`` in IMU samples -> Intervals ``/events/strides``
   (label = foot, task_index = s_id).
 Both recordings start together (t = 0 at index 0); they are synchronised over the 38.7 s.
+
+Memory: the IMU and mocap files in pieces of about 16 MiB of text (``iter_chunks``, rows from
+:func:`imulog.converters._pieces.iter_numeric`; their whole-file readers are the one-piece case); the stride file,
+one row per stride, whole.
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ from typing import Any
 
 import numpy as np
 from imulog.converters import _pieces
-from imulog.converters._common import TableSpec, check_increasing, head_lines, read_numeric, split_row, text_head_lines
+from imulog.converters._common import TableSpec, check_increasing, head_lines, split_row, text_head_lines
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.delimited import iter_delimited, read_delimited
 from imulog.converters.errors import ConversionError
@@ -44,7 +48,8 @@ def _kind(lines: list[str]) -> str | None:
     return None
 
 
-def read_mocap(path: Path, rate_hz: float = MOCAP_RATE_HZ, name: str = "mocap") -> Recording:
+def _mocap_layout(path: Path) -> tuple[list[str], list[str]]:
+    """(marker labels, column names) from the two header rows of ``mocap_sample.csv``."""
     lines = head_lines(path)
     if len(lines) < 3:
         raise ConversionError(path, "expected two header rows and data")
@@ -59,14 +64,17 @@ def read_mocap(path: Path, rate_hz: float = MOCAP_RATE_HZ, name: str = "mocap") 
         labels.append(trio[0])
     if len(set(labels)) != len(labels):
         raise ConversionError(path, "duplicated marker name", line=1)
-    names = ["index"] + [f"{m}/{a}" for m in labels for a in "xyz"]
-    values = read_numeric(
-        TableSpec(path=path, delimiter=",", skip_lines=2, names=names, optional=set(range(1, len(names))))
-    )
-    idx = values[:, 0]
-    check_increasing(path, idx, 3, "index")
-    t_ns = np.round(idx * (1e9 / rate_hz)).astype(np.int64)
-    pos = values[:, 1:].reshape(len(values), len(labels), 3) * 1e-3
+    return labels, ["index"] + [f"{m}/{a}" for m in labels for a in "xyz"]
+
+
+def iter_mocap(
+    path: Path, rate_hz: float = MOCAP_RATE_HZ, name: str = "mocap", piece_bytes: int | None = _pieces.PIECE_BYTES
+) -> Iterator[Recording]:
+    """``mocap_sample.csv`` in pieces of about ``piece_bytes`` of text (:func:`imulog.converters._pieces.iter_numeric`;
+    None: one piece): markers in m on the frame index / ``rate_hz`` clock."""
+    path = Path(path)
+    labels, names = _mocap_layout(path)
+    spec = TableSpec(path=path, delimiter=",", skip_lines=2, names=names, optional=set(range(1, len(names))))
     meta = {
         "format": "gaitmap",
         "model": "gaitmap example mocap",
@@ -74,9 +82,23 @@ def read_mocap(path: Path, rate_hz: float = MOCAP_RATE_HZ, name: str = "mocap") 
         "marker_units": "mm",
         "source": path.name,
     }
-    rec = Recording(sources=[str(path)])
-    rec.markers.append(MarkerStream(name=name, t_ns=t_ns, labels=labels, pos=pos, meta=dict(meta)))
-    rec.metadata[f"imulog.device.{name}"] = meta
+    before = None
+    for part in _pieces.iter_numeric(spec, piece_bytes):
+        values = part.values
+        idx = values[:, 0]
+        check_increasing(path, idx, part.first_line, "index", before=before)
+        before = float(idx[-1]) if len(idx) else before
+        t_ns = np.round(idx * (1e9 / rate_hz)).astype(np.int64)
+        pos = values[:, 1:].reshape(len(values), len(labels), 3) * 1e-3
+        rec = Recording(sources=[str(path)], warnings=list(part.warnings))
+        rec.markers.append(MarkerStream(name=name, t_ns=t_ns, labels=list(labels), pos=pos, meta=dict(meta)))
+        rec.metadata[f"imulog.device.{name}"] = dict(meta)
+        yield rec
+
+
+def read_mocap(path: Path, rate_hz: float = MOCAP_RATE_HZ, name: str = "mocap") -> Recording:
+    """``mocap_sample.csv`` whole: :func:`iter_mocap` in one piece."""
+    (rec,) = iter_mocap(path, rate_hz, name, piece_bytes=None)
     return rec
 
 
@@ -152,13 +174,17 @@ class GaitmapConverter(Converter):
         raise ConversionError(path, "not a gaitmap example file (imu_sample, mocap_sample or stride_borders)", line=1)
 
     def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
-        """The IMU file in pieces of text (:func:`~imulog.converters.delimited.iter_delimited`); the mocap and
-        stride files are lab-sized (100 Hz mocap of one walk, one row per stride) and come whole, as one piece."""
+        """The IMU file (:func:`~imulog.converters.delimited.iter_delimited`) and the mocap file (:func:`iter_mocap`)
+        in pieces of text; the stride file (one row per stride) comes whole, as one piece."""
         options = options or ConvertOptions()
         path = Path(path)
-        if _kind(head_lines(path, max_lines=3)) == "imu":
+        kind = _kind(head_lines(path, max_lines=3))
+        if kind == "imu":
             imu_rate = float(options.rate_hz or options.extra.get("imu_rate_hz", IMU_RATE_HZ))
             return iter_delimited(path, **_imu_options(imu_rate), piece_bytes=_pieces.PIECE_BYTES)
+        if kind == "mocap":
+            rate = float(options.extra.get("mocap_rate_hz", MOCAP_RATE_HZ))
+            return iter_mocap(path, rate, piece_bytes=_pieces.PIECE_BYTES)
         return iter([self.convert(path, options)])
 
 

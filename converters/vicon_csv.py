@@ -6,143 +6,52 @@ first column of each marker/device/output), a ``Frame,Sub Frame,X,Y,Z,...`` row,
 never zeros. Time on the Vicon clock: ``t_ns = round((frame - 1 + sub_frame / n_sub) / rate_hz * 1e9)`` where
 ``rate_hz`` is the frame (trajectory) rate and ``n_sub`` the number of sub frames per frame.
 
-Memory: one piece on purpose: a Nexus CSV is one lab trial (its sections are read from the file's bytes once).
+Memory: in pieces (``iter_chunks``): the sections are found in one pass over the file a block at a time
+(:mod:`imulog.converters.vicon_csv_sections`), then each section's data rows are read in pieces of about 16 MiB of
+text by :func:`imulog.converters._pieces.iter_numeric` (the section's byte range alone), one section after the
+other; a piece holds one section's stream. The first piece declares every section's span and stream ``meta``
+(known from the headers and the first and last rows) and holds every section's stream, those of later sections
+empty, so that the channels come in the order the whole file gives them. The whole-file ``convert`` is the one-piece
+case (a piece per section).
 """
 
 from __future__ import annotations
 
-import re
-from dataclasses import dataclass
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from imulog.converters import _pieces
+from imulog.converters._binary import concat_chunks
 from imulog.converters._common import (
     TableSpec,
     check_increasing,
-    decode,
     looks_binary,
     read_head,
-    read_numeric,
-    read_source,
-    split_row,
     text_head_lines,
     unit_overrides,
 )
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
+from imulog.converters.vicon_csv_sections import (
+    SECTIONS,
+    Section,
+    edge_rows,
+    find_sections,
+    first_cell,
+    max_sub_frame,
+    section_header,
+)
 
-from imulog.model import AnalogStream, MarkerStream, Recording, SignalStream
+from imulog.model import PIECES_RECORD, AnalogStream, MarkerStream, Recording, SignalStream
 from imulog.numeric import finite_rows
 
-_BLANK_LINE = re.compile(rb"\n[ \t]*\r?(?=\n)")
-SECTIONS = ("Trajectories", "Devices", "Model Outputs", "Segments", "Joints")
+__all__ = ["SECTIONS", "ViconCsvConverter", "find_sections", "iter_vicon_csv", "read_vicon_csv"]
+
 LENGTH_TO_M = {"mm": 1e-3, "m": 1.0, "cm": 1e-2}
 # units converted on the way in (everything else is kept as found)
 CONVERTED = {"mm": ("m", 1e-3), "cm": ("m", 1e-2), "n.mm": ("N.m", 1e-3), "nmm": ("N.m", 1e-3), "mm/s": ("m/s", 1e-3)}
-
-
-@dataclass
-class Section:
-    name: str
-    line: int  # 0-based line index of the name line
-    nrows: int  # data rows
-    offset: int = 0  # byte offset of the name line
-    data_start: int = 0  # byte range of the data rows
-    data_end: int = 0
-
-
-def _first_cell(line: str) -> str:
-    return line.split(",", 1)[0].strip().strip('"')
-
-
-def find_sections(path: Path, data: bytes) -> list[Section]:
-    """Section starts and data byte ranges (one vectorised newline scan): sections begin at the top or after
-    a blank line; a section's data rows end at the next blank line or the end of the file."""
-    blanks = [(m.start() + 1, m.end() + 1) for m in _BLANK_LINE.finditer(data)]  # (blank line start, after it)
-    blank_starts = np.array([b for b, _ in blanks], dtype=np.int64)
-    candidates = [0] + [after for _, after in blanks if after < len(data)]
-    starts: list[tuple[int, str]] = []
-    for pos in sorted(set(candidates)):
-        line_end = data.find(b"\n", pos)
-        first = decode(data[pos : line_end if line_end != -1 else len(data)]).rstrip("\r")
-        name = _first_cell(first)
-        if name in SECTIONS:
-            starts.append((pos, name))
-        elif pos == 0:
-            raise ConversionError(
-                path, f"not a Vicon Nexus CSV: first line must be one of {', '.join(SECTIONS)}", line=1
-            )
-        elif first.strip(" ,\t\r\n"):
-            line = data.count(b"\n", 0, pos) + 1
-            raise ConversionError(
-                path, f"unexpected text after a blank line (expected a section name): {first[:30]!r}", line=line
-            )
-    sections = []
-    for k, (offset, name) in enumerate(starts):
-        end = starts[k + 1][0] if k + 1 < len(starts) else len(data)
-        line0 = data.count(b"\n", 0, offset) if offset else 0
-        data_start = offset
-        for j in range(5):
-            nxt = data.find(b"\n", data_start, end)
-            if nxt == -1:
-                raise ConversionError(path, f"{name} section header ends early", line=line0 + j + 1)
-            data_start = nxt + 1
-        later = blank_starts[(blank_starts >= data_start) & (blank_starts < end)]
-        stop = int(later[0]) if len(later) else end
-        first_end = data.find(b"\n", data_start, stop)
-        if data_start >= stop or not data[data_start : first_end if first_end != -1 else stop].strip(b"\r\t ,"):
-            raise ConversionError(path, f"{name} section has no data rows", line=line0 + 6)
-        sections.append(Section(name=name, line=line0, nrows=-1, offset=offset, data_start=data_start, data_end=stop))
-    return sections
-
-
-def _header(path: Path, data: bytes, sec: Section) -> tuple[float, list[str], list[str], list[str], int]:
-    pos = sec.offset
-    rows = []
-    for k in range(5):
-        nxt = data.find(b"\n", pos)
-        if nxt == -1:
-            raise ConversionError(path, f"{sec.name} section header ends early", line=sec.line + k + 1)
-        rows.append(decode(data[pos:nxt]).rstrip("\r"))
-        pos = nxt + 1
-    rate_cell = split_row(rows[1], ",")[0]
-    try:
-        rate = float(rate_cell)
-    except ValueError:
-        raise ConversionError(path, f"{sec.name} rate {rate_cell!r} is not a number", line=sec.line + 2) from None
-    if not (rate > 0 and np.isfinite(rate)):
-        raise ConversionError(path, f"{sec.name} rate must be positive, got {rate_cell!r}", line=sec.line + 2)
-    names, header, units = (split_row(r, ",") for r in rows[2:5])
-    if len(header) < 2 or header[0].lower() != "frame" or header[1].lower() != "sub frame":
-        raise ConversionError(path, "expected 'Frame,Sub Frame,...' header", line=sec.line + 4)
-    width = len(header)
-    while width > 2 and header[width - 1] == "":
-        width -= 1
-    header = header[:width]
-    names = (names + [""] * width)[:width]
-    units = (units + [""] * width)[:width]
-    nxt = data.find(b"\n", pos)
-    first_data = data[pos : nxt if nxt != -1 else len(data)]
-    return rate, names, header, units, first_data.count(b",") + 1
-
-
-def _read_block(
-    path: Path, data: bytes, sec: Section, header: list[str], ncols_file: int, warnings: list[str]
-) -> np.ndarray:
-    """The section's numbers; a final row cut off by a truncated file is dropped with a warning (Nexus pads every
-    row to the full width, so a short row would otherwise be read as gaps and the cut go unnoticed)."""
-    spec = TableSpec(
-        path=path,
-        delimiter=",",
-        skip_lines=sec.line + 5,
-        names=[*header, *[""] * (ncols_file - len(header))],
-        optional=set(range(2, ncols_file)),
-        ignore=set(range(len(header), ncols_file)),
-        byte_range=(sec.data_start, sec.data_end),
-        warnings=warnings,
-        short_rows_are_errors=False,
-    )
-    return read_numeric(spec, data)[:, : len(header)]
 
 
 def _groups(path: Path, names: list[str], header: list[str], line: int, what: str) -> list[tuple[str, list[int]]]:
@@ -162,42 +71,32 @@ def _groups(path: Path, names: list[str], header: list[str], line: int, what: st
     return groups
 
 
-def _time(path: Path, frame: np.ndarray, sub: np.ndarray, frame_rate: float, n_sub: int, first_line: int) -> np.ndarray:
+def _time(
+    path: Path,
+    frame: np.ndarray,
+    sub: np.ndarray,
+    frame_rate: float,
+    n_sub: int,
+    first_line: int,
+    before: int | None = None,
+) -> np.ndarray:
+    """Time stamps (ns) of rows from their frame and sub frame; ``before``: the previous piece's last time."""
     if np.any(frame != np.round(frame)) or np.any(sub != np.round(sub)) or np.any(sub < 0) or np.any(sub >= n_sub):
         bad = int(np.nonzero((frame != np.round(frame)) | (sub != np.round(sub)) | (sub < 0) | (sub >= n_sub))[0][0])
         raise ConversionError(path, f"bad frame/sub frame {frame[bad]:g}/{sub[bad]:g}", line=first_line + bad)
     t = np.round(((frame - 1.0) * n_sub + sub) * (1e9 / (frame_rate * n_sub))).astype(np.int64)
-    check_increasing(path, t, first_line, "Frame")
+    check_increasing(path, t, first_line, "Frame", before=before)
     return t
 
 
-def read_vicon_csv(path: Path, name: str = "vicon", user_units: dict[str, str] | None = None) -> Recording:
-    """Read every section of a Nexus CSV export into one Recording (markers, analogs, model outputs).
+class _Plan:
+    """One section: its header as read and what its rows become (decided before any row is read)."""
 
-    ``user_units={"markers": "mm"}`` replaces the units row of the Trajectories section (``--unit markers=mm``)."""
-    path = Path(path)
-    head = read_head(path, 4096)
-    if not head.strip():
-        raise ConversionError(path, "empty file")
-    if looks_binary(head):
-        raise ConversionError(path, "binary data, not a text export")
-    data = read_source(path)
-    sections = find_sections(path, data)
-    parsed = []
-    warnings: list[str] = []
-    for sec in sections:
-        rate, names, header, units, first_width = _header(path, data, sec)
-        # width of the data rows (may carry padding commas beyond the header)
-        ncols_file = max(len(header), first_width)
-        values = _read_block(path, data, sec, header, ncols_file, warnings)
-        parsed.append((sec, rate, names, header, units, values))
-    traj_rate = next((p[1] for p in parsed if p[0].name == "Trajectories"), None)
-
-    rec = Recording(sources=[str(path)], warnings=warnings)
-    meta: dict = {"format": "vicon-csv", "model": "Vicon Nexus"}
-    for sec, rate, names, header, units, values in parsed:
-        first_line = sec.line + 6
-        frame, sub = values[:, 0], values[:, 1]
+    def __init__(self, path: Path, sec: Section, head: tuple, traj_rate: float | None, user_units: dict | None) -> None:
+        rate, names, header, units, first_width = head
+        self.sec, self.rate, self.header = sec, rate, header
+        self.ncols_file = max(len(header), first_width)  # data rows may carry padding commas beyond the header
+        self.n_sub, self.frame_rate = 1, rate
         if sec.name == "Devices":
             if traj_rate:
                 n_sub = round(rate / traj_rate)
@@ -208,18 +107,14 @@ def read_vicon_csv(path: Path, name: str = "vicon", user_units: dict[str, str] |
                         line=sec.line + 2,
                     )
             else:
-                n_sub = int(np.nanmax(sub)) + 1 if len(sub) else 1
-            frame_rate = rate / n_sub
-        else:
-            n_sub = 1
-            frame_rate = rate
-        t_ns = _time(path, frame, sub, frame_rate, n_sub, first_line)
+                top = max_sub_frame(path, sec, _pieces.PIECE_BYTES)
+                n_sub = int(top) + 1 if np.isfinite(top) else 1
+            self.n_sub, self.frame_rate = n_sub, rate / n_sub
         if sec.name == "Trajectories":
-            groups = _groups(path, names, header, sec.line + 3, "marker")
-            labels = [g[0] for g in groups]
+            self.groups = _groups(path, names, header, sec.line + 3, "marker")
             if user_units and "markers" in user_units:
                 units = [*units[:2], *[user_units["markers"].strip().lower()] * (len(units) - 2)]  # the user's unit
-            for label, cols in groups:
+            for label, cols in self.groups:
                 if len(cols) != 3 or [header[c].upper() for c in cols] != ["X", "Y", "Z"]:
                     raise ConversionError(path, f"marker {label!r} must have X,Y,Z columns", line=sec.line + 4)
                 for c in cols:
@@ -227,67 +122,142 @@ def read_vicon_csv(path: Path, name: str = "vicon", user_units: dict[str, str] |
                         raise ConversionError(
                             path, f"unknown length unit {units[c]!r}", line=sec.line + 5, column=f"{label} {header[c]}"
                         )
-            scale = np.array([LENGTH_TO_M[u] for u in units[2 : 2 + 3 * len(groups)]])
-            pos = np.multiply(values[:, 2 : 2 + 3 * len(groups)], scale, order="C").reshape(len(values), len(groups), 3)
-            valid = finite_rows(pos)
-            rec.markers.append(
-                MarkerStream(
-                    name=name,
-                    t_ns=t_ns,
-                    labels=labels,
-                    pos=pos,
-                    valid=valid,
-                    # text x unit factor: the archive stores the text's decimals as counts (imulog.archive.numbers)
-                    meta={
-                        "rate_hz": rate,
-                        "units": units[2],
-                        "source": path.name,
-                        "resolution": {"pos": {"scale": scale}},
-                    },
-                )
-            )
-            meta.update(rate_hz=rate, marker_units=units[2], markers=len(labels), marker_source=path.name)
-        elif sec.name == "Devices":
-            groups = _groups(path, names, header, sec.line + 3, "device")
-            ch_names, ch_units, cols_all = [], [], []
-            for dev, cols in groups:
-                for c in cols:
-                    unit = units[c]
-                    conv = CONVERTED.get(unit.lower())
-                    ch_names.append(f"{dev}/{header[c]}")
-                    ch_units.append(conv[0] if conv else unit)
-                    cols_all.append(values[:, c] * (conv[1] if conv else 1.0))
-            if len(set(ch_names)) != len(ch_names):
+            self.scale = np.array([LENGTH_TO_M[u] for u in units[2 : 2 + 3 * len(self.groups)]])
+            self.topic = None
+            # text x unit factor: the archive stores the text's decimals as counts (imulog.archive.numbers)
+            self.meta: dict[str, Any] = {
+                "rate_hz": rate,
+                "units": units[2],
+                "source": path.name,
+                "resolution": {"pos": {"scale": self.scale}},
+            }
+            self.device = dict(rate_hz=rate, marker_units=units[2], markers=len(self.groups), marker_source=path.name)
+            return
+        what = "device" if sec.name == "Devices" else "output"
+        self.groups = _groups(path, names, header, sec.line + 3, what)
+        self.columns, self.units, self.factors = [], [], []
+        for label, cols in self.groups:
+            for c in cols:
+                conv = CONVERTED.get(units[c].lower())
+                self.columns.append(f"{label}/{header[c]}" if what == "device" else f"{label}.{header[c]}")
+                self.units.append(conv[0] if conv else units[c])
+                self.factors.append((c, conv[1] if conv else 1.0))
+        if sec.name == "Devices":
+            if len(set(self.columns)) != len(self.columns):
                 raise ConversionError(path, "duplicated device channel names", line=sec.line + 4)
-            rec.analogs.append(
-                AnalogStream(
-                    name=name,
-                    t_ns=t_ns,
-                    channel_names=ch_names,
-                    units=ch_units,
-                    values=np.column_stack(cols_all),
-                    meta={"rate_hz": rate, "source": path.name, "devices": [g[0] for g in groups]},
-                )
-            )
-            meta.update(analog_rate_hz=rate, sub_frames=n_sub, devices=[g[0] for g in groups], analog_source=path.name)
+            devices = [g[0] for g in self.groups]
+            self.meta = {"rate_hz": rate, "source": path.name, "devices": devices}
+            self.device = dict(analog_rate_hz=rate, sub_frames=self.n_sub, devices=devices, analog_source=path.name)
         else:
-            groups = _groups(path, names, header, sec.line + 3, "output")
-            cols_out, units_out, data_out = [], [], []
-            for label, cols in groups:
-                for c in cols:
-                    conv = CONVERTED.get(units[c].lower())
-                    cols_out.append(f"{label}.{header[c]}")
-                    units_out.append(conv[0] if conv else units[c])
-                    data_out.append(values[:, c] * (conv[1] if conv else 1.0))
-            topic = "/vicon/" + sec.name.lower().replace(" ", "_")
-            meta[f"{sec.name.lower().replace(' ', '_')}_source"] = path.name
-            rec.signals.append(
-                SignalStream(
-                    topic=topic, t_ns=t_ns, columns=cols_out, units=units_out, values=np.column_stack(data_out)
-                )
+            self.meta = {}
+            self.device = {f"{sec.name.lower().replace(' ', '_')}_source": path.name}
+
+    def topic_of(self, name: str) -> str:
+        kind = {"Trajectories": "/markers/", "Devices": "/analog/"}.get(self.sec.name)
+        return f"{kind}{name}" if kind else "/vicon/" + self.sec.name.lower().replace(" ", "_")
+
+    def times(self, path: Path, values: np.ndarray, first_line: int, before: int | None = None) -> np.ndarray:
+        return _time(path, values[:, 0], values[:, 1], self.frame_rate, self.n_sub, first_line, before)
+
+    def span(self, path: Path) -> list[int] | None:
+        """First and last time stamp of the section (from its first and last rows), or None."""
+        edges = edge_rows(path, self.sec)
+        if edges is None:
+            return None
+        (f0, s0), (f1, s1) = edges
+        t = np.round(((np.array([f0, f1]) - 1.0) * self.n_sub + [s0, s1]) * (1e9 / (self.frame_rate * self.n_sub)))
+        return [int(t[0]), int(t[1])]
+
+    def stream(self, path: Path, name: str, t_ns: np.ndarray, values: np.ndarray) -> Any:
+        """This section's stream of one piece of rows."""
+        if self.sec.name == "Trajectories":
+            n = len(self.groups)
+            pos = np.multiply(values[:, 2 : 2 + 3 * n], self.scale, order="C").reshape(len(values), n, 3)
+            labels = [g[0] for g in self.groups]
+            return MarkerStream(name=name, t_ns=t_ns, labels=labels, pos=pos, valid=finite_rows(pos), meta=self.meta)
+        data = np.column_stack([values[:, c] * f for c, f in self.factors])
+        if self.sec.name == "Devices":
+            return AnalogStream(
+                name=name,
+                t_ns=t_ns,
+                channel_names=list(self.columns),
+                units=list(self.units),
+                values=data,
+                meta=self.meta,
             )
-    rec.metadata[f"imulog.device.{name}"] = meta
-    return rec
+        return SignalStream(
+            topic=self.topic_of(name), t_ns=t_ns, columns=list(self.columns), units=list(self.units), values=data
+        )
+
+
+def _plans(path: Path, user_units: dict[str, str] | None) -> list[_Plan]:
+    head = read_head(path, 4096)
+    if not head.strip():
+        raise ConversionError(path, "empty file")
+    if looks_binary(head):
+        raise ConversionError(path, "binary data, not a text export")
+    sections = find_sections(path)
+    heads = [section_header(path, sec) for sec in sections]
+    traj_rate = next((h[0] for sec, h in zip(sections, heads, strict=True) if sec.name == "Trajectories"), None)
+    return [_Plan(path, sec, h, traj_rate, user_units) for sec, h in zip(sections, heads, strict=True)]
+
+
+def iter_vicon_csv(
+    path: Path,
+    name: str = "vicon",
+    user_units: dict[str, str] | None = None,
+    piece_bytes: int | None = _pieces.PIECE_BYTES,
+) -> Iterator[Recording]:
+    """Every section of a Nexus CSV export, one after the other, each in pieces of about ``piece_bytes`` of text
+    (None: a piece per section); the first piece declares every section's span and stream meta.
+
+    ``user_units={"markers": "mm"}`` replaces the units row of the Trajectories section (``--unit markers=mm``)."""
+    path = Path(path)
+    plans = _plans(path, user_units)
+    device: dict[str, Any] = {"format": "vicon-csv", "model": "Vicon Nexus"}
+    for pl in plans:
+        device.update(pl.device)
+    declared: dict[str, Any] = {"spans": {}, "meta": {}}
+    for pl in plans:
+        declared["spans"][pl.topic_of(name)] = pl.span(path)
+        if pl.meta:
+            declared["meta"][pl.topic_of(name)] = pl.meta
+    first = True
+    for pl in plans:
+        sec = pl.sec
+        spec = TableSpec(
+            path=path,
+            delimiter=",",
+            skip_lines=sec.line + 5,
+            names=[*pl.header, *[""] * (pl.ncols_file - len(pl.header))],
+            optional=set(range(2, pl.ncols_file)),
+            ignore=set(range(len(pl.header), pl.ncols_file)),
+            byte_range=(sec.data_start, sec.data_end),
+            short_rows_are_errors=False,
+        )
+        before = None
+        for part in _pieces.iter_numeric(spec, piece_bytes or max(1, sec.data_end - sec.data_start)):
+            values = part.values[:, : len(pl.header)]
+            t_ns = pl.times(path, values, part.first_line, before)
+            before = int(t_ns[-1]) if len(t_ns) else before
+            rec = Recording(sources=[str(path)], warnings=list(part.warnings))
+            for other in plans if first else [pl]:  # the first piece opens every section's stream, in kind order
+                if other is pl:
+                    stream = pl.stream(path, name, t_ns, values)
+                else:
+                    stream = other.stream(path, name, t_ns[:0], np.zeros((0, len(other.header))))
+                {MarkerStream: rec.markers, AnalogStream: rec.analogs}.get(type(stream), rec.signals).append(stream)
+            rec.metadata[f"imulog.device.{name}"] = dict(device)
+            if first and piece_bytes is not None:
+                rec.metadata[PIECES_RECORD] = declared
+            first = False
+            yield rec
+
+
+def read_vicon_csv(path: Path, name: str = "vicon", user_units: dict[str, str] | None = None) -> Recording:
+    """Every section of a Nexus CSV export as one Recording (markers, analogs, model outputs): a piece per section
+    of :func:`iter_vicon_csv`, joined."""
+    return concat_chunks(iter_vicon_csv(path, name, user_units, piece_bytes=None))
 
 
 class ViconCsvConverter(Converter):
@@ -300,14 +270,19 @@ class ViconCsvConverter(Converter):
         lines = text_head_lines(head, 3)
         if not lines:
             return 0.0
-        first = _first_cell(lines[0])
-        if first in SECTIONS and len(lines) > 1 and _first_cell(lines[1]).replace(".", "", 1).isdigit():
+        first = first_cell(lines[0])
+        if first in SECTIONS and len(lines) > 1 and first_cell(lines[1]).replace(".", "", 1).isdigit():
             return 0.95
         return 0.0
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         extra = options.extra if options else {}
         return read_vicon_csv(Path(path), name=extra.get("vicon_name", "vicon"), user_units=unit_overrides(extra))
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        extra = options.extra if options else {}
+        name = extra.get("vicon_name", "vicon")
+        return iter_vicon_csv(Path(path), name, unit_overrides(extra), piece_bytes=_pieces.PIECE_BYTES)
 
 
 CONVERTER = ViconCsvConverter()
