@@ -35,16 +35,19 @@ class NumericPiece(NamedTuple):
     text: memoryview
 
 
-def iter_numeric(spec: TableSpec, piece_bytes: int | None) -> Iterator[NumericPiece]:
+def iter_numeric(spec: TableSpec, piece_bytes: int | None, *, missing: bytes | None = None) -> Iterator[NumericPiece]:
     """The numeric block of ``spec`` (:func:`~imulog.converters._table.read_numeric`) in pieces of about
     ``piece_bytes`` of text, each cut after a whole row (:class:`NumericPiece`). None: the whole file, read once by :func:`read_source`, as one piece. Values, gaps, a cut final row
     (dropped from the last piece, with its warning) and errors (file, line, column) are the same whatever the piece
-    size; the file's SHA-256 is computed while reading and remembered (:func:`known_sha256`)."""
+    size; the file's SHA-256 is computed while reading and remembered (:func:`known_sha256`). ``missing``: another
+    spelling of an empty cell (BIDS: ``n/a``), read as a gap (:func:`blank_cells`)."""
     path = spec.path
     base = spec
     if piece_bytes is None:
         data = read_source(path)  # read once: parsed from memory, its SHA-256 computed from these bytes
         spec = replace(base, warnings=[])
+        if missing is not None and missing in data:
+            data, spec = _blanked(data, spec, missing)
         values = read_numeric(spec, data)
         start = 0
         for _ in range(base.skip_lines):
@@ -52,6 +55,8 @@ def iter_numeric(spec: TableSpec, piece_bytes: int | None) -> Iterator[NumericPi
         yield NumericPiece(values, base.skip_lines + 1, 0, list(spec.warnings), memoryview(data)[start:])
         return
     for piece, lines_before, k, last in text_pieces(path, base.skip_lines, piece_bytes):
+        if missing is not None and missing in piece:
+            piece = blank_cells(piece, missing, base.delimiter)
         spec = replace(
             base,
             skip_lines=lines_before,
@@ -70,6 +75,26 @@ def iter_numeric(spec: TableSpec, piece_bytes: int | None) -> Iterator[NumericPi
             if k and not piece[:end].strip(b" \t\r\n"):
                 continue  # nothing but blank lines after the previous piece (the last piece: the loop ends)
         yield NumericPiece(read_numeric(spec, piece), lines_before + 1, k, warnings, memoryview(piece))
+
+
+def _blanked(data: bytes, spec: TableSpec, missing: bytes) -> tuple[bytes, TableSpec]:
+    """The whole file's bytes with ``missing`` cells blanked, and ``spec`` parsing that copy (not the file)."""
+    start = 0
+    for _ in range(spec.skip_lines):
+        start = data.find(b"\n", start) + 1
+        if start == 0:
+            return data, spec  # the file ends inside the header: read_numeric says so
+    data = blank_cells(data, missing, spec.delimiter)
+    return data, replace(spec, in_memory=True, byte_range=(start, len(data)))
+
+
+def blank_cells(data: bytes, token: bytes, delimiter: str) -> bytes:
+    """``data`` with every cell that is exactly ``token`` (between delimiters or line ends) made empty, a gap; lines
+    and fields keep their numbers, so errors name the same line and column."""
+    import re
+
+    d = re.escape(delimiter.encode())
+    return re.sub(rb"(?<![^" + d + rb"\n])" + re.escape(token) + rb"(?=" + d + rb"|[\r\n]|\Z)", b"", data)
 
 
 def text_pieces(path: Path, skip_lines: int, piece_bytes: int) -> Iterator[tuple[bytes, int, int, bool]]:
