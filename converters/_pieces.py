@@ -75,6 +75,7 @@ def iter_numeric(spec: TableSpec, piece_bytes: int | None, *, missing: bytes | N
             if k and not piece[:end].strip(b" \t\r\n"):
                 continue  # nothing but blank lines after the previous piece (the last piece: the loop ends)
         yield NumericPiece(read_numeric(spec, piece), lines_before + 1, k, warnings, memoryview(piece))
+        del piece  # not held while the next piece is read and parsed
 
 
 def _blanked(data: bytes, spec: TableSpec, missing: bytes) -> tuple[bytes, TableSpec]:
@@ -129,8 +130,10 @@ def text_pieces(path: Path, skip_lines: int, piece_bytes: int) -> Iterator[tuple
                     buf += nxt
                     continue
                 piece, buf = buf[:cut], buf[cut:] + nxt
+            nxt = b""  # its bytes are in piece or buf now: not a third copy of a piece held while it is parsed
             yield piece, lines_before, k, last
             lines_before += piece.count(b"\n")
+            piece = b""  # released before the next piece is cut (the consumer's copy too: see iter_table)
             k += 1
         st = os.fstat(f.fileno())
     if st.st_size == total:
@@ -191,6 +194,7 @@ def iter_table(
                 raise
             raise ConversionError(path, e.problem, line=e.line + lines_before, column=e.column) from None
         yield values, lines_before + 1
+        del piece, values  # not held while the next piece is read and parsed
 
 
 def _trimmed(data: bytes) -> bytes:

@@ -156,6 +156,7 @@ def iter_motion(
             _attach_events(rec, path, key, system)
         row0 += len(data)
         yield rec
+        del rec, piece, data  # not held while the next piece is read and parsed
 
 
 def _motion_piece(
