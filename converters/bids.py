@@ -16,8 +16,10 @@ The recording's ``*_events.tsv`` (same entities without ``tracksys``) becomes ``
 (grouped by :meth:`BidsConverter.recording_key`: the file name without ``tracksys``) merge into one trial. A
 dataset folder therefore converts to one trial per recording (``imulog convert DATASET/ -o trials/``).
 
-Memory: in pieces of about 16 MiB of text (:func:`iter_motion`; the whole file is the one-piece case): the channels
-file and sidecar say every stream and its meta before the first row, so no first pass is needed.
+Memory: in pieces of about 16 MiB of text (:func:`iter_motion`; the whole file is the one-piece case), the rows
+through the one text cutter (:func:`~imulog.converters._pieces.iter_numeric`, ``n/a`` read as a gap): a piece costs
+a few times its text. The channels file and sidecar say every stream and its meta before the first row, so no first
+pass is needed.
 """
 
 from __future__ import annotations

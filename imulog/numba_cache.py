@@ -174,7 +174,7 @@ def _cache_impl(caching: ModuleType) -> Any:
 
 def _register(caching: ModuleType) -> None:
     """Put the keyed locators first in numba's list (``CacheImpl._locator_classes``; ``_CacheImpl`` and
-    ``_...CacheLocator`` before numba 0.62)."""
+    ``_...CacheLocator`` in older numba releases)."""
     impl = _cache_impl(caching)
     bases = [getattr(caching, n, None) or getattr(caching, "_" + n, None) for n in _BASES]
     if impl is None or None in bases:
@@ -209,7 +209,7 @@ def _user_wide(py_file: str, numba_path: str) -> str:
     return os.path.join(root, "numba", os.path.basename(numba_path))
 
 
-#: numba's locator (without its pre-0.62 underscore) -> the folder its keyed twin uses
+#: numba's locator (older releases prefix an underscore) -> the folder its keyed twin uses
 _BASES = {
     "UserProvidedCacheLocator": _user_provided,
     "InTreeCacheLocator": _in_tree,
