@@ -90,12 +90,13 @@ def _blanked(data: bytes, spec: TableSpec, missing: bytes) -> tuple[bytes, Table
 
 
 def blank_cells(data: bytes, token: bytes, delimiter: str) -> bytes:
-    """``data`` with every cell that is exactly ``token`` (between delimiters or line ends) made empty, a gap; lines
-    and fields keep their numbers, so errors name the same line and column."""
+    """``data`` with every cell that is exactly ``token`` (between delimiters or line ends) written ``nan``, a gap to
+    both parsers (``_table.NA_CELLS``; not an empty cell, which would make a one-column row a blank line); lines and
+    fields keep their numbers, so errors name the same line and column."""
     import re
 
     d = re.escape(delimiter.encode())
-    return re.sub(rb"(?<![^" + d + rb"\n])" + re.escape(token) + rb"(?=" + d + rb"|[\r\n]|\Z)", b"", data)
+    return re.sub(rb"(?<![^" + d + rb"\n])" + re.escape(token) + rb"(?=" + d + rb"|[\r\n]|\Z)", b"nan", data)
 
 
 def text_pieces(path: Path, skip_lines: int, piece_bytes: int) -> Iterator[tuple[bytes, int, int, bool]]:

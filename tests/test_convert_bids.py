@@ -176,3 +176,12 @@ def test_bad_table_rows_name_their_line(tmp_path: Path):
     path.write_text("\n".join(lines) + "\n")
     with pytest.raises(ConversionError, match=r"line 8.*truncated line"):
         convert_file(path)
+
+
+def test_one_column_table_with_a_missing_value(tmp_path: Path):
+    """A lone ``n/a`` is a gap, not a blank line, whole and in pieces (as numpy reads it)."""
+    path = tmp_path / "sub-01_tracksys-x_motion.tsv"
+    path.write_text("1.0\nn/a\n2.5\n" * 200)
+    for piece_bytes in (None, 64):
+        got = np.concatenate([p.values for p in _tables(path, [{"name": "c"}], "channels", piece_bytes)])
+        np.testing.assert_array_equal(got, _genfromtxt(path))
