@@ -35,17 +35,20 @@ class NumericPiece(NamedTuple):
     text: memoryview
 
 
-def iter_numeric(spec: TableSpec, piece_bytes: int | None) -> Iterator[NumericPiece]:
+def iter_numeric(spec: TableSpec, piece_bytes: int | None, *, missing: bytes | None = None) -> Iterator[NumericPiece]:
     """The numeric block of ``spec`` (:func:`~imulog.converters._table.read_numeric`) in pieces of about
     ``piece_bytes`` of text, each cut after a whole row (:class:`NumericPiece`). None: the whole file, read once by :func:`read_source`, as one piece. Values, gaps, a cut final row
     (dropped from the last piece, with its warning) and errors (file, line, column) are the same whatever the piece
     size; the file's SHA-256 is computed while reading and remembered (:func:`known_sha256`). A ``spec.byte_range``
-    (one section of a file: Vicon Nexus CSV) is cut alone, ``spec.skip_lines`` being the lines before it."""
+    (one section of a file: Vicon Nexus CSV) is cut alone, ``spec.skip_lines`` being the lines before it.
+    ``missing``: another spelling of an empty cell (BIDS: ``n/a``), read as a gap (:func:`blank_cells`)."""
     path = spec.path
     base = spec
     if piece_bytes is None:
         data = read_source(path)  # read once: parsed from memory, its SHA-256 computed from these bytes
         spec = replace(base, warnings=[])
+        if missing is not None and missing in data:
+            data, spec = _blanked(data, spec, missing)
         values = read_numeric(spec, data)
         start, end = base.byte_range or (0, len(data))
         for _ in range(0 if base.byte_range else base.skip_lines):
@@ -53,6 +56,8 @@ def iter_numeric(spec: TableSpec, piece_bytes: int | None) -> Iterator[NumericPi
         yield NumericPiece(values, base.skip_lines + 1, 0, list(spec.warnings), memoryview(data)[start:end])
         return
     for piece, lines_before, k, last in text_pieces(path, base.skip_lines, piece_bytes, span=base.byte_range):
+        if missing is not None and missing in piece:
+            piece = blank_cells(piece, missing, base.delimiter)
         spec = replace(
             base,
             skip_lines=lines_before,
@@ -71,6 +76,28 @@ def iter_numeric(spec: TableSpec, piece_bytes: int | None) -> Iterator[NumericPi
             if k and not piece[:end].strip(b" \t\r\n"):
                 continue  # nothing but blank lines after the previous piece (the last piece: the loop ends)
         yield NumericPiece(read_numeric(spec, piece), lines_before + 1, k, warnings, memoryview(piece))
+        del piece  # not held while the next piece is read and parsed
+
+
+def _blanked(data: bytes, spec: TableSpec, missing: bytes) -> tuple[bytes, TableSpec]:
+    """The whole file's bytes with ``missing`` cells blanked, and ``spec`` parsing that copy (not the file)."""
+    start = 0
+    for _ in range(spec.skip_lines):
+        start = data.find(b"\n", start) + 1
+        if start == 0:
+            return data, spec  # the file ends inside the header: read_numeric says so
+    data = blank_cells(data, missing, spec.delimiter)
+    return data, replace(spec, in_memory=True, byte_range=spec.byte_range or (start, len(data)))
+
+
+def blank_cells(data: bytes, token: bytes, delimiter: str) -> bytes:
+    """``data`` with every cell that is exactly ``token`` (between delimiters or line ends) written ``nan``, a gap to
+    both parsers (``_table.NA_CELLS``; not an empty cell, which would make a one-column row a blank line); lines and
+    fields keep their numbers, so errors name the same line and column."""
+    import re
+
+    d = re.escape(delimiter.encode())
+    return re.sub(rb"(?<![^" + d + rb"\n])" + re.escape(token) + rb"(?=" + d + rb"|[\r\n]|\Z)", b"nan", data)
 
 
 def text_pieces(
@@ -120,8 +147,10 @@ def text_pieces(
                     buf += nxt
                     continue
                 piece, buf = buf[:cut], buf[cut:] + nxt
+            nxt = b""  # its bytes are in piece or buf now: not a third copy of a piece held while it is parsed
             yield piece, lines_before, k, last
             lines_before += piece.count(b"\n")
+            piece = b""  # released before the next piece is cut (the consumer's copy too: see iter_table)
             k += 1
         st = os.fstat(f.fileno())
     if span is None and st.st_size == total:
@@ -182,6 +211,7 @@ def iter_table(
                 raise
             raise ConversionError(path, e.problem, line=e.line + lines_before, column=e.column) from None
         yield values, lines_before + 1
+        del piece, values  # not held while the next piece is read and parsed
 
 
 def _trimmed(data: bytes) -> bytes:

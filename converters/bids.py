@@ -16,24 +16,24 @@ The recording's ``*_events.tsv`` (same entities without ``tracksys``) becomes ``
 (grouped by :meth:`BidsConverter.recording_key`: the file name without ``tracksys``) merge into one trial. A
 dataset folder therefore converts to one trial per recording (``imulog convert DATASET/ -o trials/``).
 
-Memory: in pieces of about 16 MiB of text (:func:`iter_motion`; the whole file is the one-piece case): the channels
-file and sidecar say every stream and its meta before the first row, so no first pass is needed.
+Memory: in pieces of about 16 MiB of text (:func:`iter_motion`; the whole file is the one-piece case), the rows
+through the one text cutter (:func:`~imulog.converters._pieces.iter_numeric`, ``n/a`` read as a gap): a piece costs
+a few times its text. The channels file and sidecar say every stream and its meta before the first row, so no first
+pass is needed.
 """
 
 from __future__ import annotations
 
 import csv
-import io
 import json
 import re
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from imulog.converters._common import LENGTH_TO_M, check_increasing, sanitize_name, unit_factor
 from imulog.converters._lab import orientation_stream
-from imulog.converters._pieces import PIECE_BYTES
+from imulog.converters._pieces import PIECE_BYTES, NumericPiece, iter_numeric
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
 
@@ -83,26 +83,22 @@ def read_motion(path: Path, options: ConvertOptions | None = None) -> Recording:
     return concat_chunks(iter_motion(path, options, piece_bytes=None))
 
 
-def _tables(path: Path, piece_bytes: int | None) -> Iterator[tuple[np.ndarray, int]]:
-    """The motion table (no header, ``n/a`` = missing) in pieces of about ``piece_bytes`` of text cut after whole
-    lines (None: the whole file): (values, rows before the piece)."""
-    from imulog.converters._pieces import text_pieces
+def _tables(
+    path: Path, chans: list[dict[str, str]], channels_file: str, piece_bytes: int | None
+) -> Iterator[NumericPiece]:
+    """The motion table (no header, ``n/a`` or empty = missing) in pieces of about ``piece_bytes`` of text cut after
+    whole lines (None: the whole file), through the one text cutter (:func:`iter_numeric`): every cell may be a gap,
+    a cut final row is dropped with a warning, a malformed row is named by its line."""
+    from imulog.converters._table import TableSpec
 
-    if piece_bytes is None:
-        parts: Iterator[tuple[Any, int, int, bool]] = iter([(path, 0, 0, True)])
-    else:
-        parts = text_pieces(path, 0, piece_bytes)
-    rows = 0
-    for piece, _, k, last in parts:
-        if k and last and not piece.strip():
-            continue
-        source = piece if isinstance(piece, Path) else io.BytesIO(piece)
-        try:
-            data = np.genfromtxt(source, delimiter="\t", missing_values="n/a", filling_values=np.nan, ndmin=2)
-        except ValueError as e:
-            raise ConversionError(path, f"not a numeric table: {str(e).splitlines()[0]}") from None
-        yield data, rows
-        rows += len(data)
+    with open(path, "rb") as f:
+        first = f.readline().rstrip(b"\r\n")
+    columns = first.count(b"\t") + 1
+    if first.strip() and columns != len(chans):
+        raise ConversionError(path, f"{columns} columns, {channels_file} lists {len(chans)} channels", line=1)
+    names = [c["name"] for c in chans]
+    spec = TableSpec(path, "\t", 0, names, optional=set(range(len(names))))
+    yield from iter_numeric(spec, piece_bytes, missing=b"n/a")
 
 
 def iter_motion(
@@ -138,29 +134,31 @@ def iter_motion(
     if "LATENCY" not in types and not rate:
         raise ConversionError(path, "no LATENCY channel and no SamplingFrequency: sample times unknown")
     before = None
-    first = True
-    for data, row0 in _tables(path, piece_bytes):
-        if first and data.size == 0:
-            raise ConversionError(path, "no samples")
-        if data.shape[1] != len(chans):
-            raise ConversionError(path, f"{data.shape[1]} columns, {ch_path.name} lists {len(chans)} channels")
+    row0 = 0  # samples before the piece (a sample's index when the rate gives its time)
+    for piece in _tables(path, chans, ch_path.name, piece_bytes):
+        data = piece.values
         if "LATENCY" in types:
             j = types.index("LATENCY")
             f = unit_factor("time", chans[j].get("units", "s") or "s") or 1e9
             t = data[:, j]
             if not np.isfinite(t).all():
-                raise ConversionError(path, "missing LATENCY value", line=row0 + int(np.argmax(~np.isfinite(t))) + 1)
+                bad = int(np.argmax(~np.isfinite(t)))
+                raise ConversionError(
+                    path, "missing LATENCY value", line=piece.first_line + bad, column=chans[j]["name"]
+                )
             t_ns = np.round(t * f).astype(np.int64)
         else:
             t_ns = np.round(np.arange(row0, row0 + len(data)) * (1e9 / float(rate))).astype(np.int64)
-        check_increasing(path, t_ns, row0 + 1, "latency", before=before)
+        check_increasing(path, t_ns, piece.first_line, "latency", before=before)
         before = int(t_ns[-1]) if len(t_ns) else before
         rec = _motion_piece(path, system, chans, types, rate, side, data, t_ns)
         rec.sources = [str(path), str(ch_path)] + ([str(js)] if js.is_file() else [])
-        if first:
+        rec.warnings += piece.warnings
+        if row0 == 0:
             _attach_events(rec, path, key, system)
-        first = False
+        row0 += len(data)
         yield rec
+        del rec, piece, data  # not held while the next piece is read and parsed
 
 
 def _motion_piece(

@@ -363,18 +363,23 @@ def iter_csv(path: Path, options: ConvertOptions | None = None, piece_bytes: int
     sensors = [sensor for sensor, cols in CSV_SENSORS.items() if all(c in names for c in cols)]
     table = {"delimiter": ",", "skip_lines": 1, "names": names, "required": [0], "piece_bytes": piece_bytes}
     declared = None
+    total = None  # rows in the file (the first pass counts them): the piece that reaches it is the last
     if piece_bytes is not None:
         others = list(range(1, len(names)))
-        times = (np.round(v[:, 0] * rate).astype(np.int64) for v, _ in iter_table(path, **table, skip_columns=others))
-        declared = _declare_counters(path, hdr, sensors, times)
+        rows = [0]
+
+        def times() -> Iterator[np.ndarray]:
+            for v, _ in iter_table(path, **table, skip_columns=others):
+                rows[0] += len(v)
+                yield np.round(v[:, 0] * rate).astype(np.int64)
+
+        declared = _declare_counters(path, hdr, sensors, times())
+        total = rows[0]
     carry = _Counter()
-    pieces = iter_table(path, **table)
-    piece = next(pieces)
-    k = 0
-    while piece is not None:
-        values_table = piece[0]
-        piece = next(pieces, None)
-        last = piece is None
+    for k, (values_table, _) in enumerate(iter_table(path, **table)):
+        # no look-ahead to learn which piece is last (it held the next piece's table and text while this one was
+        # built and written): the whole file is one piece, else the first pass counted the rows
+        last = total is None or carry.seen + len(values_table) >= total
         counter = np.round(values_table[:, 0] * rate).astype(np.int64)
         values = {s: values_table[:, [names.index(c) for c in CSV_SENSORS[s]]] for s in sensors}
         warnings: list[str] = []
@@ -390,8 +395,8 @@ def iter_csv(path: Path, options: ConvertOptions | None = None, piece_bytes: int
             )
         if declared is not None and k == 0:
             rec.metadata[PIECES_RECORD] = declared
-        k += 1
         yield rec
+        del rec, values, values_table  # not held while the next piece is read and parsed
 
 
 class NilsPodConverter(Converter):

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from imulog.converters import ConversionError, convert_file, detect
+from imulog.converters.bids import _tables, iter_motion
 from imulog.converters.registry import group_directory
 
 from imulog.archive import TrialReader
@@ -125,3 +126,62 @@ def test_bad_inputs_one_line(tmp_path: Path):
     ch.unlink()
     with pytest.raises(ConversionError, match=r"no .*_channels\.tsv beside it"):
         convert_file(path, fmt="bids-motion")
+
+
+def _genfromtxt(path: Path) -> np.ndarray:
+    """numpy's own reader of the table, the reference the converter read it with before issue 24's pieces."""
+    return np.genfromtxt(path, delimiter="\t", missing_values="n/a", filling_values=np.nan, ndmin=2)
+
+
+@pytest.mark.parametrize("piece_bytes", [None, 4096, 1 << 20])
+def test_motion_table_values_equal_numpy_whole_and_in_pieces(exported, tmp_path: Path, piece_bytes):
+    """Every table (the export's IMU and markers with n/a gaps, the hand-written one) read through the one text
+    cutter, whole and in pieces of 4 KiB (many pieces) and 1 MiB, gives numpy.genfromtxt's values bit for bit,
+    gaps at the same cells, times on the same rows."""
+    _, ds = exported
+    paths = sorted(ds.rglob("*_motion.tsv")) + sorted(_dataset(tmp_path).rglob("*_motion.tsv"))
+    gaps = 0
+    for path in paths:
+        ref = _genfromtxt(path)
+        chans = (path.with_name(path.name.replace("_motion.tsv", "_channels.tsv")).read_text().count("\n")) - 1
+        pieces = list(_tables(path, [{"name": f"c{i}"} for i in range(chans)], "channels", piece_bytes))
+        got = np.concatenate([p.values for p in pieces])
+        assert got.shape == ref.shape, path.name
+        np.testing.assert_array_equal(got, ref)  # NaN where numpy has NaN, every other bit equal
+        gaps += int(np.isnan(ref).sum())
+        if piece_bytes == 4096 and path.stat().st_size > 3 * 4096:
+            assert len(pieces) > 2
+            lines = np.cumsum([0] + [len(p.values) for p in pieces[:-1]]) + 1
+            assert [p.first_line for p in pieces] == lines.tolist()
+        whole = list(iter_motion(path, piece_bytes=None))
+        parts = list(iter_motion(path, piece_bytes=piece_bytes))
+        for a, b in zip(whole[0].streams(), [s for r in parts[:1] for s in r.streams()], strict=True):
+            assert type(a) is type(b)
+        t_whole = np.concatenate([r.streams()[0].t_ns for r in whole])
+        t_parts = np.concatenate([r.streams()[0].t_ns for r in parts])
+        np.testing.assert_array_equal(t_whole, t_parts)
+    assert gaps > 0  # the export's markers and the hand-written table have n/a cells
+
+
+def test_bad_table_rows_name_their_line(tmp_path: Path):
+    ds = _dataset(tmp_path)
+    path = next(ds.rglob("*_motion.tsv"))
+    lines = path.read_text().splitlines()
+    lines[7] = lines[7].replace("\t", "\tx", 1)
+    path.write_text("\n".join(lines) + "\n")
+    for piece_bytes in (None, 256):
+        with pytest.raises(ConversionError, match=r"line 8"):
+            list(iter_motion(path, piece_bytes=piece_bytes))
+    lines[7] = "\t".join(lines[8].split("\t")[:-1])  # a row one cell short
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ConversionError, match=r"line 8.*truncated line"):
+        convert_file(path)
+
+
+def test_one_column_table_with_a_missing_value(tmp_path: Path):
+    """A lone ``n/a`` is a gap, not a blank line, whole and in pieces (as numpy reads it)."""
+    path = tmp_path / "sub-01_tracksys-x_motion.tsv"
+    path.write_text("1.0\nn/a\n2.5\n" * 200)
+    for piece_bytes in (None, 64):
+        got = np.concatenate([p.values for p in _tables(path, [{"name": "c"}], "channels", piece_bytes)])
+        np.testing.assert_array_equal(got, _genfromtxt(path))
