@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from imulog.converters import ConversionError, convert_file, detect
+from imulog.converters import convert_file, detect
 from imulog.converters._binary import concat_chunks
 from test_convert_pieces_archive import assert_same_trial, convert_twice
 
@@ -33,11 +33,18 @@ FOLDERS = {
     "opensim_mot": "*.mot",
     "opensense_sto": "*.sto",
 }
-CASES = [(f"{folder}/{p.name}", 2048) for folder, pat in FOLDERS.items() for p in sorted((DEV / folder).glob(pat))]
+#: pieces of 2 KiB, or a sixth of a small file (at least 64 bytes: some rows are longer)
+CASES = [
+    (f"{folder}/{p.name}", max(64, min(2048, p.stat().st_size // 6)))
+    for folder, pat in FOLDERS.items()
+    for p in sorted((DEV / folder).glob(pat))
+]
 
 
 def test_every_shared_file_of_these_formats_is_a_case(shared_data):
-    found = {f"{folder}/{p.name}" for folder, pat in FOLDERS.items() for p in (shared_data / "devices" / folder).glob(pat)}
+    found = {
+        f"{folder}/{p.name}" for folder, pat in FOLDERS.items() for p in (shared_data / "devices" / folder).glob(pat)
+    }
     assert found == {rel for rel, _ in CASES} and len(found) >= 1
 
 
@@ -83,3 +90,138 @@ def same_error(path: Path, piece_bytes: int, monkeypatch) -> str:
         out.append(r.output.strip().splitlines()[-1])
     assert out[0] == out[1]
     return out[0]
+
+
+# ------------------------------------------------------------------ what only the whole file shows
+def _edit_rows(src: Path, dst: Path, skip: int, edit) -> None:
+    """Copy ``src`` to ``dst`` with ``edit(i, cells)`` applied to the comma-separated data rows after ``skip``."""
+    lines = src.read_text().splitlines()
+    out = lines[:skip]
+    for i, line in enumerate(lines[skip:]):
+        cells = line.split(",")
+        edit(i, cells)
+        out.append(",".join(cells))
+    dst.write_text("\n".join(out) + "\n")
+
+
+def test_trc_time_hole_and_unseen_marker_decided_over_the_whole_file(shared_data, tmp_path, monkeypatch):
+    """One empty Time cell near the end makes every time (Frame# - first) / DataRate, and a marker never seen is a
+    warning: both known only at the end, both in every piece's result as in the whole file's."""
+    path = tmp_path / "holes.trc"
+
+    def edit(i: int, cells: list[str]) -> None:
+        if i == 80:
+            cells[1] = ""
+        cells[5:8] = ["", "", ""]  # ASISr (the second marker) never seen
+
+    _edit_rows(shared_data / "devices/opensim_trc/markers.trc", path, 6, edit)
+    pieces = pieces_equal_whole(path, 4096, monkeypatch)
+    rec = convert_file(path)
+    assert any("Time column unusable" in w for w in rec.warnings)
+    assert any("1 of 51 markers have no valid sample (ASISr)" in w for w in rec.warnings)
+    assert not pieces[0].warnings  # the first piece could not know
+    np.testing.assert_array_equal(rec.markers[0].t_ns, np.arange(93) * 10_000_000)
+    assert_same_trial(*convert_twice(path, tmp_path, (TEXT, 4096), monkeypatch))
+
+
+def test_mot_rate_estimated_from_every_time(shared_data, tmp_path, monkeypatch):
+    """No DataRate: the rate is the median step of all times; a slower stretch at the end changes it, which only
+    the last piece sees (the pieces refine it in the device record)."""
+    path = tmp_path / "slow_end.mot"
+    src = shared_data / "devices/opensim_mot/inverse_kin.mot"
+    lines = src.read_text().splitlines()
+    head = next(i for i, x in enumerate(lines) if x.startswith("time")) + 1
+    rows = lines[head:]
+    fast = len(rows) // 3  # the first third at 100 Hz, the rest at 50 Hz: the median step is 20 ms
+    t = 1.56 + np.concatenate([np.arange(fast) * 0.01, fast * 0.01 + np.arange(len(rows) - fast) * 0.02])
+    out = [f"{t[i]:.2f}," + r.split(",", 1)[1] for i, r in enumerate(rows)]
+    path.write_text("\n".join(lines[:head] + out) + "\n")
+    pieces = pieces_equal_whole(path, 1024, monkeypatch)
+    rate = convert_file(path).metadata["imulog.device.opensense"]["rate_hz"]
+    assert rate == pytest.approx(50.0) and pieces[0].metadata["imulog.device.opensense"]["rate_hz"] != rate
+    assert_same_trial(*convert_twice(path, tmp_path, (TEXT, 1024), monkeypatch))
+
+
+@pytest.mark.parametrize("hole", [None, "Time", "Frame"])
+def test_qualisys_pieces_equal_whole(hole, tmp_path, monkeypatch):
+    """A QTM export written here (no shared one exists): NULL and zero samples, and a Time (or Frame and Time)
+    cell empty near the end, which sends the whole file to the next clock (Frame, else the row index)."""
+    from test_convert_qualisys import write_qtm
+
+    path = tmp_path / "reach_3d.tsv"
+    write_qtm(path, n=400)
+    lines = path.read_text().splitlines()
+    cells = lines[-20].split("\t")
+    cells[4] = "NULL"
+    if hole:
+        cells[1] = ""
+    if hole == "Frame":
+        cells[0] = ""
+    lines[-20] = "\t".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+    pieces_equal_whole(path, 2048, monkeypatch)
+    rec = convert_file(path)
+    clock = rec.metadata["imulog.device.qualisys"]["time"]
+    assert clock == {None: "Time column (s)", "Time": "(Frame - 1) / 200 Hz", "Frame": "row index / 200 Hz"}[hole]
+    assert rec.metadata["imulog.device.qualisys"]["missing_as_zero_samples"] == 1
+    assert np.isnan(rec.markers[0].pos[-20, 0, 2])  # the NULL cell: RSHO Z
+    assert_same_trial(*convert_twice(path, tmp_path, (TEXT, 2048), monkeypatch))
+
+
+# ------------------------------------------------------------------ bad input: the same one-line error
+def _cut_row(path: Path, row_from_end: int, delim: str, keep: int) -> None:
+    lines = path.read_text().splitlines()
+    lines[-row_from_end] = delim.join(lines[-row_from_end].split(delim)[:keep])
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_motive_bad_input_same_error(shared_data, tmp_path, monkeypatch):
+    path = tmp_path / "take.csv"
+    path.write_bytes((shared_data / "devices/optitrack_motive/sample_optitrack_take.csv").read_bytes())
+    _cut_row(path, 30, ",", 10)
+    msg = same_error(path, 2048, monkeypatch)
+    assert "truncated line: 10 fields" in msg and "line 228" in msg
+    lines = path.read_text().splitlines()
+    lines[6] = lines[6].replace("Frame,Time,", "Frame,Tick,", 1)
+    path.write_text("\n".join(lines) + "\n")
+    assert "the second column must be 'Time'" in same_error(path, 2048, monkeypatch)
+
+
+def test_qualisys_bad_input_same_error(tmp_path, monkeypatch):
+    from test_convert_qualisys import write_qtm
+
+    path = tmp_path / "reach_3d.tsv"
+    write_qtm(path, n=400)
+    _cut_row(path, 30, "\t", 5)
+    assert "truncated line: 5 fields, expected 11" in same_error(path, 2048, monkeypatch)
+    write_qtm(path, n=400)
+    lines = path.read_text().splitlines()[:-30]  # NO_OF_FRAMES says 400
+    path.write_text("\n".join(lines) + "\n")
+    assert "file ends after 370 of NO_OF_FRAMES 400 frames" in same_error(path, 2048, monkeypatch)
+    text = path.read_text().replace("\tRWRA Z", "\tRWRA_Z")
+    path.write_text(text)
+    assert "no 'RWRA X/Y/Z' columns for marker 'RWRA'" in same_error(path, 2048, monkeypatch)
+
+
+def test_trc_and_sto_bad_input_same_error(shared_data, tmp_path, monkeypatch):
+    trc = tmp_path / "m.trc"
+    _edit_rows(
+        shared_data / "devices/opensim_trc/markers.trc",
+        trc,
+        6,
+        lambda i, c: c.__setitem__(4, "x") if i == 80 else None,
+    )
+    assert "'x' is not a number" in same_error(trc, 4096, monkeypatch)
+    sto = tmp_path / "o.sto"
+    sto.write_bytes(
+        (
+            shared_data / "devices/opensense_sto/MT_012005D6_009-quaternions_calibration_trial_Facing_negX.sto"
+        ).read_bytes()
+    )
+    _cut_row(sto, 40, "\t", 3)
+    assert "truncated line" in same_error(sto, 4096, monkeypatch)
+    lines = sto.read_text().splitlines()
+    i = next(k for k, x in enumerate(lines) if x.startswith("time"))
+    lines[i] = "t" + lines[i][4:]
+    sto.write_text("\n".join(lines) + "\n")
+    assert "the first column must be 'time'" in same_error(sto, 4096, monkeypatch)
