@@ -33,6 +33,7 @@ FOLDERS = {
     "opensim_mot": "*.mot",
     "opensense_sto": "*.sto",
     "delsys_trigno": "*.csv",
+    "empatica_e4": "*.csv",
 }
 #: pieces of 2 KiB, or a sixth of a small file (at least 64 bytes: some rows are longer)
 CASES = [
@@ -259,3 +260,23 @@ def test_delsys_bad_input_same_error(shared_data, tmp_path, monkeypatch):
     lines[-10] = ",".join(lines[-10].split(",")[:7])
     path.write_text("\n".join(lines) + "\n")
     assert "truncated line: 7 fields, expected 28" in same_error(path, 2048, monkeypatch)
+
+
+def test_e4_bad_input_same_error(shared_data, tmp_path, monkeypatch):
+    """A short ACC row far into the file, a beat that goes back in IBI.csv, and a final row cut short (dropped
+    with the same warning)."""
+    src = shared_data / "devices/empatica_e4"
+    acc = tmp_path / "ACC.csv"
+    lines = (src / "ACC.csv").read_text().splitlines()
+    lines[-500] = lines[-500].rsplit(",", 1)[0]
+    acc.write_text("\n".join(lines) + "\n")
+    msg = same_error(acc, 4096, monkeypatch)
+    assert f"line {len(lines) - 499}" in msg, msg
+    ibi = tmp_path / "IBI.csv"
+    lines = (src / "IBI.csv").read_text().splitlines()
+    lines[-50] = "1.0," + lines[-50].split(",")[1]
+    ibi.write_text("\n".join(lines) + "\n")
+    assert f"line {len(lines) - 49}: beat time does not increase" in same_error(ibi, 1024, monkeypatch)
+    acc.write_text((src / "ACC.csv").read_text()[:-3])  # the last row cut inside its last number
+    pieces = pieces_equal_whole(acc, 4096, monkeypatch)
+    assert any("cut" in w or "ends inside" in w for w in pieces[-1].warnings), pieces[-1].warnings
