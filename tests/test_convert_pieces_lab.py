@@ -34,6 +34,7 @@ FOLDERS = {
     "opensense_sto": "*.sto",
     "delsys_trigno": "*.csv",
     "empatica_e4": "*.csv",
+    "actigraph_count_csv": "*.csv",  # ActiLife epoch CSV
 }
 #: pieces of 2 KiB, or a sixth of a small file (at least 64 bytes: some rows are longer)
 CASES = [
@@ -280,3 +281,40 @@ def test_e4_bad_input_same_error(shared_data, tmp_path, monkeypatch):
     acc.write_text((src / "ACC.csv").read_text()[:-3])  # the last row cut inside its last number
     pieces = pieces_equal_whole(acc, 4096, monkeypatch)
     assert any("cut" in w or "ends inside" in w for w in pieces[-1].warnings), pieces[-1].warnings
+
+
+def _epoch_export(path: Path, n: int = 3000, *, gap_at: int | None = None) -> None:
+    """An ActiLife epoch export with a names row and Date/Time columns (15 s epochs), a gap near the end."""
+    banner = (
+        "------------ Data File Created By ActiGraph GT3X+ ActiLife v6.13.3 Firmware v3.2.1 date format M/d/yyyy "
+        "at 30 Hz  Filter Normal -----------\nSerial Number: NEO1F12345678\nStart Time 10:00:00\nStart Date 3/4/2021\n"
+        "Epoch Period (hh:mm:ss) 00:00:15\nDownload Time 10:00:00\nDownload Date 3/11/2021\n"
+        "Current Memory Address: 0\nCurrent Battery Voltage: 4.10     Mode = 61\n"
+        "--------------------------------------------------\n"
+    )
+    t0 = np.datetime64("2021-03-04T10:00:00")
+    rows = ["Date,Time,Axis1,Axis2,Axis3,Steps,Lux,Vector Magnitude"]
+    rng = np.random.default_rng(3)
+    for i in range(n):
+        t = t0 + np.timedelta64(15 * (i + (60 if gap_at is not None and i >= gap_at else 0)), "s")
+        d = t.astype(object)
+        a = rng.integers(0, 900, 3)
+        rows.append(f"{d.month}/{d.day}/{d.year},{d:%H:%M:%S},{a[0]},{a[1]},{a[2]},{i % 7},{i % 50},{a.sum()}")
+    path.write_text(banner + "\n".join(rows) + "\n")
+
+
+def test_actilife_epoch_dated_rows_pieces_equal_whole(tmp_path, monkeypatch):
+    """Rows with Date and Time cells read piece by piece; a gap near the end gives the uneven-epoch warning, which
+    only the last piece can see."""
+    path = tmp_path / "epochs15s.csv"
+    _epoch_export(path, gap_at=2900)
+    pieces = pieces_equal_whole(path, 8192, monkeypatch)
+    rec = convert_file(path)
+    assert any("not 15 s apart everywhere" in w for w in pieces[-1].warnings) and not pieces[0].warnings
+    (sig,) = rec.signals
+    assert sig.t_ns[2900] - sig.t_ns[2899] == 61 * 15 * 10**9 and len(sig.t_ns) == 3000
+    assert_same_trial(*convert_twice(path, tmp_path, (TEXT, 8192), monkeypatch))
+    lines = path.read_text().splitlines()
+    lines[-100] = lines[-100].replace(":", ";", 1)
+    path.write_text("\n".join(lines) + "\n")
+    assert f"line {len(lines) - 99}" in same_error(path, 8192, monkeypatch)
