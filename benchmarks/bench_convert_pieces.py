@@ -14,6 +14,11 @@ The same for the four formats issue 24 brought into pieces (XDF, NilsPodLib CSV,
 generated files of ``--hours`` and 4x as many hours converted piece by piece, with the growth of the peak:
 
     .venv/bin/python benchmarks/bench_convert_pieces.py --formats xdf,nilspod-csv,xsens,bids --hours 1 [--whole]
+
+The lab and device text exports (Motive, Qualisys, TRC, ``.sto``, Delsys, Empatica E4 ACC, ActiLife epochs; files
+written by ``lab_text_files.py``) likewise:
+
+    .venv/bin/python benchmarks/bench_convert_pieces.py --formats motive,qualisys,trc,sto,delsys,e4,actilife-epoch --hours 1
 """
 
 from __future__ import annotations
@@ -27,6 +32,9 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from lab_text_files import FORMATS as LAB_FORMATS  # noqa: E402 - the lab and device text exports' writers
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -223,6 +231,9 @@ FORMATS = {
     ),
     "bids": (360_000, lambda d, n: bids_motion(d, n)),
 }
+
+
+FORMATS.update(LAB_FORMATS)
 
 
 def main_formats(hours: float, formats: list[str], whole: bool) -> None:
