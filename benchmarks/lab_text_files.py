@@ -17,6 +17,7 @@ from datetime import datetime, timedelta
 from pathlib import Path
 
 import numpy as np
+from bench_lab_converters import motive_header
 
 BLOCK = 100_000  # rows generated and written at a time
 
@@ -32,19 +33,30 @@ def _write_rows(
         f.write(buf.getvalue().replace(f"{delimiter}nan", delimiter))
 
 
+def _write_file(
+    path: Path, header: list[str], n: int, make: Callable[[int, int, np.random.Generator], np.ndarray], fmt, delim: str
+) -> Path:
+    """``header`` lines, then ``n`` rows of ``make`` (:func:`_write_rows`); returns ``path``."""
+    with open(path, "w") as f:
+        f.write("\n".join(header) + "\n")
+        _write_rows(f, n, make, fmt, delim)
+    return path
+
+
+def _marker_rows(
+    lo: int, hi: int, rng: np.random.Generator, markers: int, missing: tuple[int, float], rate_hz: float = 100.0
+) -> np.ndarray:
+    """Frame (from 1), time (s) and x, y, z (mm) of ``markers`` markers; ``missing``: (every k-th row, the value
+    the first marker then has: 0 as QTM writes it, or NaN, an empty cell)."""
+    mm = rng.normal(0, 400, (hi - lo, 3 * markers))
+    every, value = missing
+    mm[::every, :3] = value
+    return np.column_stack([np.arange(lo, hi) + 1, np.arange(lo, hi) / rate_hz, mm])
+
+
 def motive_csv(folder: Path, n: int, markers: int = 4) -> Path:
     path = folder / "take.csv"
-    header = [
-        "Format Version,1.21,Take Name,bench,Capture Frame Rate,120.000000,Export Frame Rate,120.000000,"
-        f"Capture Start Time,2016-01-05 03.49.50.755 PM,Total Frames in Take,{n},Total Exported Frames,{n},"
-        "Rotation Type,Quaternion,Length Units,Meters,Coordinate Space,Global",
-        "",
-        ",," + ",".join(["Rigid Body"] * 7 + ["Marker"] * 3 * markers),
-        ",," + ",".join(["RB"] * 7 + [f"M{m}" for m in range(markers) for _ in range(3)]),
-        ",," + ",".join(["1"] * 7 + [str(100 + m) for m in range(markers) for _ in range(3)]),
-        ",," + ",".join(["Rotation"] * 4 + ["Position"] * 3 + ["Position"] * 3 * markers),
-        "Frame,Time," + ",".join(["X", "Y", "Z", "W", "X", "Y", "Z"] + ["X", "Y", "Z"] * markers),
-    ]
+    header = motive_header(n, markers)
 
     def make(lo: int, hi: int, rng: np.random.Generator) -> np.ndarray:
         q = rng.normal(0, 1, (hi - lo, 4))
@@ -54,10 +66,7 @@ def motive_csv(folder: Path, n: int, markers: int = 4) -> Path:
         frames = np.arange(lo, hi)
         return np.column_stack([frames, frames / 120.0, q, rng.normal(0, 1, (hi - lo, 3)), pos])
 
-    with open(path, "w") as f:
-        f.write("\n".join(header) + "\n")
-        _write_rows(f, n, make, ["%d", "%.6f"] + ["%.6f"] * (7 + 3 * markers), ",")
-    return path
+    return _write_file(path, header, n, make, ["%d", "%.6f"] + ["%.6f"] * (7 + 3 * markers), ",")
 
 
 def qualisys_tsv(folder: Path, n: int, markers: int = 8) -> Path:
@@ -78,14 +87,9 @@ def qualisys_tsv(folder: Path, n: int, markers: int = 8) -> Path:
     ]
 
     def make(lo: int, hi: int, rng: np.random.Generator) -> np.ndarray:
-        mm = rng.normal(0, 400, (hi - lo, 3 * markers))
-        mm[::997, :3] = 0.0  # QTM's missing marker as 0.000 0.000 0.000
-        return np.column_stack([np.arange(lo, hi) + 1, np.arange(lo, hi) / 100.0, mm])
+        return _marker_rows(lo, hi, rng, markers, (997, 0.0))  # QTM's missing marker: 0.000 0.000 0.000
 
-    with open(path, "w") as f:
-        f.write("\n".join(header) + "\n")
-        _write_rows(f, n, make, ["%d", "%.5f"] + ["%.3f"] * (3 * markers), "\t")
-    return path
+    return _write_file(path, header, n, make, ["%d", "%.5f"] + ["%.3f"] * (3 * markers), "\t")
 
 
 def trc(folder: Path, n: int, markers: int = 8) -> Path:
@@ -101,14 +105,9 @@ def trc(folder: Path, n: int, markers: int = 8) -> Path:
     ]
 
     def make(lo: int, hi: int, rng: np.random.Generator) -> np.ndarray:
-        mm = rng.normal(0, 400, (hi - lo, 3 * markers))
-        mm[::1009, 3:6] = np.nan  # a marker missing now and then
-        return np.column_stack([np.arange(lo, hi) + 1, np.arange(lo, hi) / 100.0, mm])
+        return _marker_rows(lo, hi, rng, markers, (1009, np.nan))  # a marker missing now and then
 
-    with open(path, "w") as f:
-        f.write("\n".join(header) + "\n")
-        _write_rows(f, n, make, ["%d", "%.3f"] + ["%.4f"] * (3 * markers), "\t")
-    return path
+    return _write_file(path, header, n, make, ["%d", "%.3f"] + ["%.4f"] * (3 * markers), "\t")
 
 
 def sto(folder: Path, n: int, imus: int = 3) -> Path:
@@ -157,10 +156,7 @@ def delsys_csv(folder: Path, n: int) -> Path:
             out[has, 3 + 2 * j] = rng.normal(0, 1 if j < 3 else 20, int(has.sum()))
         return out
 
-    with open(path, "w") as f:
-        f.write("\n".join(header) + "\n")
-        _write_rows(f, n, make, ["%.6f", "%.7e"] * 7, ",")
-    return path
+    return _write_file(path, header, n, make, ["%.6f", "%.7e"] * 7, ",")
 
 
 def e4_acc(folder: Path, n: int) -> Path:
