@@ -75,8 +75,16 @@ def iter_trc(
         rate = float(info.get("DataRate", "nan"))
     except ValueError:
         rate = float("nan")
+    cached = next(iter_table(path, **table, piece_bytes=None)) if piece_bytes is None else None
+
+    def pieces(skip_columns: range) -> Iterator[tuple[np.ndarray, int]]:
+        """The rows: one piece parsed once for both passes, or the pieces (the first pass skips the markers)."""
+        if cached is not None:
+            return iter([cached])
+        return iter_table(path, **table, piece_bytes=piece_bytes, skip_columns=skip_columns)
+
     time_ok, frames_ok, first_frame, n = True, True, None, 0
-    for values, _ in iter_table(path, **table, piece_bytes=piece_bytes, skip_columns=range(2, use)):
+    for values, _ in pieces(range(2, use)):
         n += len(values)
         time_ok = time_ok and bool(np.isfinite(values[:, 1]).all())
         frames_ok = frames_ok and bool(np.isfinite(values[:, 0]).all())
@@ -105,7 +113,7 @@ def iter_trc(
     res = {"resolution": {"pos": {"scale": scale}}}  # the text's decimals times the unit factor
     seen = np.zeros(m, dtype=bool)
     before: int | None = None
-    rows = iter_table(path, **table, piece_bytes=piece_bytes)
+    rows = pieces(range(0))
     nxt = next(rows, None)
     k = 0
     while nxt is not None:
