@@ -18,6 +18,7 @@ import pytest
 from click.testing import CliRunner
 from imulog.converters import convert_file, detect
 from imulog.converters._binary import concat_chunks
+from imulog.converters.base import Converter
 from test_convert_pieces_archive import assert_same_trial, convert_twice
 
 from imulog.cli import cli
@@ -26,29 +27,33 @@ SHARED_DATA = Path(os.environ.get("IMULOG_SHARED_DATA", Path(__file__).resolve()
 TEXT = "imulog.converters._pieces.PIECE_BYTES"
 DEV = SHARED_DATA / "devices"
 
-#: every shared file of the formats (folder, file name pattern), the acceptance list
+#: every shared file of the formats: folder -> (file name pattern, the converter that reads it)
 FOLDERS = {
-    "optitrack_motive": "*.csv",
-    "opensim_trc": "*.trc",
-    "opensim_mot": "*.mot",
-    "opensense_sto": "*.sto",
-    "delsys_trigno": "*.csv",
-    "empatica_e4": "*.csv",
-    "actigraph_count_csv": "*.csv",  # ActiLife epoch CSV
+    "optitrack_motive": ("*.csv", "motive"),
+    "opensim_trc": ("*.trc", "opensim-trc"),
+    "opensim_mot": ("*.mot", "opensim-sto"),
+    "opensense_sto": ("*.sto", "opensim-sto"),
+    "delsys_trigno": ("*.csv", "delsys"),
+    "empatica_e4": ("*.csv", "empatica-e4"),
+    "actigraph_count_csv": ("*.csv", "actilife-csv"),  # ActiLife epoch CSV
 }
 #: pieces of 2 KiB, or a sixth of a small file (at least 64 bytes: some rows are longer)
 CASES = [
     (f"{folder}/{p.name}", max(64, min(2048, p.stat().st_size // 6)))
-    for folder, pat in FOLDERS.items()
+    for folder, (pat, _) in FOLDERS.items()
     for p in sorted((DEV / folder).glob(pat))
 ]
 
 
 def test_every_shared_file_of_these_formats_is_a_case(shared_data):
-    found = {
-        f"{folder}/{p.name}" for folder, pat in FOLDERS.items() for p in (shared_data / "devices" / folder).glob(pat)
-    }
-    assert found == {rel for rel, _ in CASES} and len(found) >= 1
+    """The shared folders hold the 14 files listed in ../shared/data/devices/SOURCES.tsv for these formats, each
+    read by the converter that now reads in pieces (a file added there becomes a case; one of another format fails)."""
+    assert len(CASES) == 14
+    for rel, _ in CASES:
+        folder = rel.split("/")[0]
+        conv = detect(shared_data / "devices" / rel)
+        assert conv.name == FOLDERS[folder][1], rel
+        assert type(conv).iter_chunks is not Converter.iter_chunks, rel  # imulog convert streams it
 
 
 #: recordings of IMU samples too short for the streaming path's unit plausibility check on excerpts of each piece
