@@ -323,3 +323,15 @@ def test_actilife_epoch_dated_rows_pieces_equal_whole(tmp_path, monkeypatch):
     lines[-100] = lines[-100].replace(":", ";", 1)
     path.write_text("\n".join(lines) + "\n")
     assert f"line {len(lines) - 99}" in same_error(path, 8192, monkeypatch)
+
+
+def test_qualisys_without_clock_columns_cut_off_leaves_no_archive(tmp_path, monkeypatch):
+    """Without Frame/Time columns there is no first pass: the row count is checked after the last piece, when the
+    streaming writer has taken every piece; the error is the whole file's and no archive is kept."""
+    from test_convert_qualisys import write_qtm
+
+    path = tmp_path / "reach_3d.tsv"
+    write_qtm(path, n=400, time_columns=False, names_row=False)
+    lines = path.read_text().splitlines()[:-30]
+    path.write_text("\n".join(lines) + "\n")
+    assert "file ends after 370 of NO_OF_FRAMES 400 frames" in same_error(path, 2048, monkeypatch)
