@@ -17,6 +17,11 @@ generated files of ``--hours`` and 4x as many hours converted piece by piece, wi
 
 C3D (``--formats c3d``): a 4-marker cluster at 100 Hz and one analog channel at 1 kHz, float32, the frame count in
 ``TRIAL:ACTUAL_END_FIELD`` (``benchmarks/long_c3d.py``: 1 h is 360 000 frames, 37 MB).
+
+The lab and device text exports (Motive, Qualisys, TRC, ``.sto``, Delsys, Empatica E4 ACC, ActiLife epochs; files
+written by ``lab_text_files.py``) likewise:
+
+    .venv/bin/python benchmarks/bench_convert_pieces.py --formats motive,qualisys,trc,sto,delsys,e4,actilife-epoch --hours 1
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from lab_text_files import FORMATS as LAB_FORMATS  # noqa: E402 - the lab and device text exports' writers
 from long_c3d import write_long_c3d  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -230,6 +236,9 @@ FORMATS = {
     "bids": (360_000, lambda d, n: bids_motion(d, n)),
     "c3d": (360_000, lambda d, n: (write_long_c3d(d / "long.c3d", n), d / "long.c3d")[1]),
 }
+
+
+FORMATS.update(LAB_FORMATS)
 
 
 def main_formats(hours: float, formats: list[str], whole: bool) -> None:

@@ -54,6 +54,21 @@ def write_xsens(path: Path, minutes: float, seed: int = 0) -> int:
     return n
 
 
+def motive_header(n: int, markers: int) -> list[str]:
+    """The header lines of a Motive 1.21 take of ``n`` frames at 120 Hz: rigid body ``RB``, markers ``M0``..."""
+    return [
+        "Format Version,1.21,Take Name,bench,Capture Frame Rate,120.000000,Export Frame Rate,120.000000,"
+        f"Capture Start Time,2016-01-05 03.49.50.755 PM,Total Frames in Take,{n},Total Exported Frames,{n},"
+        "Rotation Type,Quaternion,Length Units,Meters,Coordinate Space,Global",
+        "",
+        ",," + ",".join(["Rigid Body"] * 7 + ["Marker"] * 3 * markers),
+        ",," + ",".join(["RB"] * 7 + [f"M{m}" for m in range(markers) for _ in range(3)]),
+        ",," + ",".join(["1"] * 7 + [str(100 + m) for m in range(markers) for _ in range(3)]),
+        ",," + ",".join(["Rotation"] * 4 + ["Position"] * 3 + ["Position"] * 3 * markers),
+        "Frame,Time," + ",".join(["X", "Y", "Z", "W", "X", "Y", "Z"] + ["X", "Y", "Z"] * markers),
+    ]
+
+
 def write_motive(path: Path, minutes: float, markers: int = 40, seed: int = 1) -> int:
     rng = np.random.default_rng(seed)
     n = int(minutes * 60 * 120)
@@ -68,19 +83,8 @@ def write_motive(path: Path, minutes: float, markers: int = 40, seed: int = 1) -
     marker_part = text.iloc[:, 9:].to_numpy()
     marker_part[occluded] = ""
     text.iloc[:, 9:] = marker_part
-    header = [
-        "Format Version,1.21,Take Name,bench,Capture Frame Rate,120.000000,Export Frame Rate,120.000000,"
-        f"Capture Start Time,2016-01-05 03.49.50.755 PM,Total Frames in Take,{n},Total Exported Frames,{n},"
-        "Rotation Type,Quaternion,Length Units,Meters,Coordinate Space,Global",
-        "",
-        ",," + ",".join(["Rigid Body"] * 7 + ["Marker"] * 3 * markers),
-        ",," + ",".join(["RB"] * 7 + [f"M{m}" for m in range(markers) for _ in range(3)]),
-        ",," + ",".join(["1"] * 7 + [str(100 + m) for m in range(markers) for _ in range(3)]),
-        ",," + ",".join(["Rotation"] * 4 + ["Position"] * 3 + ["Position"] * 3 * markers),
-        "Frame,Time," + ",".join(["X", "Y", "Z", "W", "X", "Y", "Z"] + ["X", "Y", "Z"] * markers),
-    ]
     with open(path, "w") as f:
-        f.write("\n".join(header) + "\n")
+        f.write("\n".join(motive_header(n, markers)) + "\n")
         text.to_csv(f, header=False, index=False, lineterminator="\n")
     return n
 

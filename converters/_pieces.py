@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -185,17 +185,26 @@ def iter_table(
     required: tuple[int, ...] | list[int] = (),
     skip_columns: tuple[int, ...] | list[int] = (),
     warnings: list[str] | None = None,
+    ragged: bool = False,
+    transform: Callable[[bytes], bytes] | None = None,
 ) -> Iterator[tuple[np.ndarray, int]]:
     """:func:`imulog.converters._lab.read_table` in pieces of about ``piece_bytes`` of text cut after whole rows
     (:func:`text_pieces`; None: the whole file at once): (values, line number of the piece's first row). Values,
-    errors (their line numbers in the file) and a cut final row's warning are those of the whole file."""
+    errors (their line numbers in the file) and a cut final row's warning are those of the whole file.
+    ``ragged``: as ``read_table``'s; ``transform``: applied to the text before parsing (the whole file's bytes, or
+    each piece's), e.g. QTM's ``NULL`` cells to empty ones; it must keep the line breaks."""
     from imulog.converters._lab import read_table
 
-    kw: dict[str, Any] = dict(delimiter=delimiter, names=names, required=required, skip_columns=skip_columns)
+    kw: dict[str, Any] = dict(
+        delimiter=delimiter, names=names, required=required, skip_columns=skip_columns, ragged=ragged
+    )
     if piece_bytes is None:
-        yield read_table(path, skip_lines=skip_lines, warnings=warnings, **kw), skip_lines + 1
+        data = None if transform is None else transform(Path(path).read_bytes())
+        yield read_table(path, skip_lines=skip_lines, warnings=warnings, data=data, **kw), skip_lines + 1
         return
     for piece, lines_before, k, last in text_pieces(path, skip_lines, piece_bytes):
+        if transform is not None:
+            piece = transform(piece)
         if k and last and not piece.strip(b" \t\r\n\x00"):
             continue  # blank lines after the previous piece
         if last and warnings is not None:  # a cut final row, judged and named as in the whole file

@@ -34,7 +34,7 @@ from imulog.converters import _pieces
 from imulog.converters._binary import UNKNOWN_ZONE
 from imulog.converters._common import G0, TableSpec, head_lines, sanitize_name, text_head_lines
 from imulog.converters._pieces import NumericPiece, iter_numeric, text_column
-from imulog.converters.actilife_epoch import bannerless_banner, is_bannerless, read_epoch_csv, strptime_format
+from imulog.converters.actilife_epoch import bannerless_banner, is_bannerless, iter_epoch_csv, strptime_format
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
 
@@ -113,17 +113,19 @@ def iter_actilife_csv(
     path: Path, options: ConvertOptions | None = None, piece_bytes: int | None = None
 ) -> Iterator[Recording]:
     """A raw (RAW or IMU) export in pieces of about ``piece_bytes`` of text (None: one piece), read by
-    :func:`~imulog.converters._pieces.iter_numeric`. Epoch (count) exports hold one row per epoch (a week of 60 s
-    epochs is 10,080 rows) and come whole, as one piece."""
+    :func:`~imulog.converters._pieces.iter_numeric`; epoch (count) exports likewise
+    (:func:`~imulog.converters.actilife_epoch.iter_epoch_csv`)."""
     options = options or ConvertOptions()
     path = Path(path)
     lines = head_lines(path, max_lines=BANNER_LINES + 2)
     if is_bannerless(lines):
-        yield read_epoch_csv(path, lines, bannerless_banner(path, lines), options, banner_lines=0)
+        yield from iter_epoch_csv(
+            path, lines, bannerless_banner(path, lines), options, banner_lines=0, piece_bytes=piece_bytes
+        )
         return
     banner = parse_banner(path, lines)
     if banner["epoch"] != "00:00:00":
-        yield read_epoch_csv(path, lines, banner, options)
+        yield from iter_epoch_csv(path, lines, banner, options, piece_bytes=piece_bytes)
         return
     names_row = [c.strip() for c in lines[BANNER_LINES].split(",")]
     while names_row and not names_row[-1]:

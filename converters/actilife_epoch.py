@@ -16,18 +16,23 @@ start (``Start Date``/``Start Time`` + row x epoch, or the row's ``Date``/``Time
 device metadata (``epoch_s``). Counts are ActiGraph's device-specific activity counts (unit ``counts``), steps
 ``steps``, lux ``lx``, inclinometer columns ``s`` of the epoch in that posture (ActiLife writes seconds).
 
-Memory: one piece on purpose: one row per epoch (a week of 60 s epochs is 10,080 rows).
+Memory: in pieces of about 16 MB of text (:func:`iter_epoch_csv`, called by the ActiLife CSV converter's
+``iter_chunks``), the whole-file reading being the one-piece case: the banner (or the first row) gives the start,
+epoch times are checked across pieces, and the warnings come with the last piece. A week of 60 s epochs is only
+10,080 rows; of 1 s epochs 604,800 (about 25 MB of text).
 """
 
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from datetime import datetime
 from pathlib import Path
 
 import numpy as np
 from imulog.converters._binary import UNKNOWN_ZONE
-from imulog.converters._common import TableSpec, read_numeric, sanitize_name
+from imulog.converters._common import TableSpec, sanitize_name
+from imulog.converters._pieces import NumericPiece, iter_numeric, text_column
 from imulog.converters.errors import ConversionError
 
 from imulog.model import Recording, SignalStream
@@ -80,13 +85,17 @@ def _parse_dates(path: Path, date: list[str], time: list[str] | None, fmt: str, 
 
     py_fmt = strptime_format(fmt)
     text = pd.Series(date) if time is None else pd.Series(date) + " " + pd.Series(time)
+    first_bad = None
     for f in (f"{py_fmt} %H:%M:%S", "ISO8601") if time is not None else ("ISO8601",):
         parsed = pd.to_datetime(text, format=f, errors="coerce")
         if getattr(parsed.dt, "tz", None) is not None:  # the Link's "...Z" stamps: its wall clock, kept as written
             parsed = parsed.dt.tz_localize(None)
         if not parsed.isna().any():
             return parsed.to_numpy().astype("datetime64[ns]")
-    bad = int(np.nonzero(pd.to_datetime(text, format="mixed", errors="coerce").isna().to_numpy())[0][0])
+        if first_bad is None:  # the first cell the declared format does not read
+            first_bad = int(np.argmax(parsed.isna().to_numpy()))
+    unread = np.nonzero(pd.to_datetime(text, format="mixed", errors="coerce").isna().to_numpy())[0]
+    bad = int(unread[0]) if len(unread) else first_bad  # a cell pandas reads in some format: the declared one's
     raise ConversionError(
         path, f"{text.iloc[bad][:30]!r} is not a date/time in format {fmt}", line=first_line + bad, column="Date"
     )
@@ -95,11 +104,27 @@ def _parse_dates(path: Path, date: list[str], time: list[str] | None, fmt: str, 
 def read_epoch_csv(
     path: Path, lines: list[str], banner: dict, options: object = None, *, banner_lines: int = BANNER_LINES
 ) -> Recording:
-    """An ActiLife epoch CSV (``banner`` from :func:`imulog.converters.actilife_csv.parse_banner`) as epoch signals.
+    """An ActiLife epoch CSV (``banner`` from :func:`imulog.converters.actilife_csv.parse_banner`) as epoch signals:
+    :func:`iter_epoch_csv` as one piece.
 
     ``banner_lines`` 0: an export without the banner (``banner`` then comes from :func:`bannerless_banner`)."""
-    import pandas as pd
+    (rec,) = iter_epoch_csv(path, lines, banner, options, banner_lines=banner_lines, piece_bytes=None)
+    return rec
 
+
+def iter_epoch_csv(
+    path: Path,
+    lines: list[str],
+    banner: dict,
+    options: object = None,
+    *,
+    banner_lines: int = BANNER_LINES,
+    piece_bytes: int | None = None,
+) -> Iterator[Recording]:
+    """The epoch export in pieces of about ``piece_bytes`` of text (None: one piece), rows read by
+    :func:`~imulog.converters._pieces.iter_numeric` and their Date/Time cells by ``text_column``. The start is the
+    banner's, or the first row's time (first piece); epoch times are checked to increase across pieces; the warnings
+    (a start that disagrees, uneven epochs, a cut final row, no banner or names row) come with the last piece."""
     BANNER_LINES = banner_lines  # noqa: N806 - the banner's length in this file
 
     epoch_s = epoch_seconds(banner["epoch"])
@@ -135,54 +160,15 @@ def read_epoch_csv(
     value_idx = [i for i in range(len(names)) if i not in time_idx]
     if not value_idx:
         raise ConversionError(path, "names row has no count columns", line=BANNER_LINES + 1)
-    spec = TableSpec(path=path, delimiter=",", skip_lines=skip, names=names, ignore=set(time_idx))
-    values = read_numeric(spec)
-    if values.ndim == 1:
-        values = values[:, None]
-    n = len(values)
-    if n == 0:
-        raise ConversionError(path, "no epochs after the banner", line=skip + 1)
+    if time_idx and "timestamp" not in lower and "date" not in lower:
+        raise ConversionError(path, "a 'Time' column without a 'Date' column", line=skip)
     start = None if banner["start"] is None else np.datetime64(banner["start"], "ns")
-    if time_idx:
-        cells = pd.read_csv(
-            path, skiprows=skip, header=None, usecols=time_idx, nrows=n, dtype=str, engine="c", skipinitialspace=True
-        )
-        by_name = {lower[i]: cells[i].str.strip().tolist() for i in time_idx}
-        if "timestamp" in by_name:
-            stamps = _parse_dates(path, by_name["timestamp"], None, banner["date_format"], skip + 1)
-        elif "date" in by_name:
-            stamps = _parse_dates(path, by_name["date"], by_name.get("time"), banner["date_format"], skip + 1)
-        else:
-            raise ConversionError(path, "a 'Time' column without a 'Date' column", line=skip)
-        if start is None or stamps[0] != start:  # the rows' own times date the epochs
-            if start is not None:
-                spec.warnings.append(
-                    f"{path.name}: banner start {banner['start']} disagrees with the first epoch's time "
-                    f"{str(stamps[0])[:19]}; the rows' times are used"
-                )
-            elif BANNER_LINES:
-                spec.warnings.append(
-                    f"{path.name}: banner Start Date/Time {banner.get('start_text', '')!r} does not match its date "
-                    f"format {banner['date_format']}; the start is the first epoch's time {str(stamps[0])[:19]}"
-                )
-            start = stamps[0]
-        t_ns = (stamps - start).astype(np.int64)
-        d = np.diff(t_ns)
-        if len(d) and (d <= 0).any():
-            i = int(np.nonzero(d <= 0)[0][0]) + 1
-            raise ConversionError(path, "epoch time does not increase", line=skip + 1 + i, column="Date")
-        if len(d) and not np.allclose(d, epoch_s * 1e9):
-            spec.warnings.append(
-                f"{path.name}: epoch times are not {epoch_s:g} s apart everywhere (gaps or a changed epoch)"
-            )
-    elif start is None:
+    if not time_idx and start is None:
         raise ConversionError(
             path,
             f"Start Date/Time {banner.get('start_text', '')!r} does not match date format {banner['date_format']}",
             line=4,
         )
-    else:
-        t_ns = np.arange(n, dtype=np.int64) * np.int64(round(epoch_s * 1e9))
     serial = banner["serial"]
     name = sanitize_name(f"{serial}_counts" if serial else "actigraph_counts")
     columns = [sanitize_name(names[i]) for i in value_idx]
@@ -196,32 +182,89 @@ def read_epoch_csv(
         "time_base": "ns from start_time (banner Start Date/Time, device local time); one sample per epoch start",
         "source": path.name,
     }
-    warnings = list(spec.warnings)
-    if not BANNER_LINES:
-        warnings.append(
-            f"{path.name}: no ActiLife banner: start and epoch ({epoch_s:g} s) from the first rows, dates read as "
-            f"{banner['date_format']}, serial unknown"
+    spec = TableSpec(path=path, delimiter=",", skip_lines=skip, names=names, ignore=set(time_idx))
+    cut: list[str] = []  # a cut final row
+    warnings: list[str] = []
+    uneven = False
+    before: int | None = None
+    done = 0
+    pieces = iter_numeric(spec, piece_bytes)
+    nxt = next(pieces, None)
+    k = 0
+    while nxt is not None:
+        piece = nxt
+        nxt = next(pieces, None)
+        values = piece.values if piece.values.ndim == 2 else piece.values[:, None]
+        n = len(values)
+        if k == 0 and n == 0:
+            raise ConversionError(path, "no epochs after the banner", line=skip + 1)
+        cut.extend(piece.warnings)
+        if time_idx:
+            stamps = _piece_stamps(path, piece, time_idx, lower, banner["date_format"])
+            if k == 0 and (start is None or stamps[0] != start):  # the rows' own times date the epochs
+                if start is not None:
+                    warnings.append(
+                        f"{path.name}: banner start {banner['start']} disagrees with the first epoch's time "
+                        f"{str(stamps[0])[:19]}; the rows' times are used"
+                    )
+                elif BANNER_LINES:
+                    warnings.append(
+                        f"{path.name}: banner Start Date/Time {banner.get('start_text', '')!r} does not match its "
+                        f"date format {banner['date_format']}; the start is the first epoch's time {str(stamps[0])[:19]}"
+                    )
+                start = stamps[0]
+            t_ns = (stamps - start).astype(np.int64)
+            d = np.diff(t_ns if before is None else np.concatenate([[before], t_ns]))
+            if len(d) and (d <= 0).any():
+                i = int(np.nonzero(d <= 0)[0][0]) + (1 if before is None else 0)
+                raise ConversionError(path, "epoch time does not increase", line=piece.first_line + i, column="Date")
+            uneven = uneven or bool(len(d) and not np.allclose(d, epoch_s * 1e9))
+        else:
+            t_ns = np.arange(done, done + n, dtype=np.int64) * np.int64(round(epoch_s * 1e9))
+        done += n
+        if n:
+            before = int(t_ns[-1])
+        rec = Recording(sources=[str(path)])
+        rec.signals.append(
+            SignalStream(
+                topic=f"/signals/{name}",
+                t_ns=t_ns,
+                columns=columns,
+                units=[_unit(names[i]) for i in value_idx],
+                values=values[:, value_idx],
+            )
         )
-    if not has_names:
-        warnings.append(
-            f"{path.name}: no names row; {len(names)} columns taken in ActiLife's order ({', '.join(names)})"
-        )
-    rec = Recording(sources=[str(path)], warnings=warnings)
-    rec.signals.append(
-        SignalStream(
-            topic=f"/signals/{name}",
-            t_ns=t_ns,
-            columns=columns,
-            units=[_unit(names[i]) for i in value_idx],
-            values=values[:, value_idx],
-        )
-    )
-    rec.metadata[f"imulog.device.{name}"] = meta
-    rec.metadata["imulog.trial"] = {
-        "start_time": datetime.fromisoformat(str(start)[:26]).isoformat(timespec="milliseconds"),
-        "time_zone": UNKNOWN_ZONE,
-    }
-    return rec
+        if k == 0:
+            rec.metadata[f"imulog.device.{name}"] = dict(meta)
+            rec.metadata["imulog.trial"] = {
+                "start_time": datetime.fromisoformat(str(start)[:26]).isoformat(timespec="milliseconds"),
+                "time_zone": UNKNOWN_ZONE,
+            }
+        if nxt is None:
+            if uneven:
+                warnings.append(
+                    f"{path.name}: epoch times are not {epoch_s:g} s apart everywhere (gaps or a changed epoch)"
+                )
+            if not BANNER_LINES:
+                warnings.append(
+                    f"{path.name}: no ActiLife banner: start and epoch ({epoch_s:g} s) from the first rows, dates "
+                    f"read as {banner['date_format']}, serial unknown"
+                )
+            if not has_names:
+                warnings.append(
+                    f"{path.name}: no names row; {len(names)} columns taken in ActiLife's order ({', '.join(names)})"
+                )
+            rec.warnings = [*cut, *warnings]
+        k += 1
+        yield rec
+
+
+def _piece_stamps(path: Path, piece: NumericPiece, time_idx: list[int], lower: list[str], fmt: str) -> np.ndarray:
+    """The piece's epoch times (datetime64[ns]) from its Timestamp, or Date and Time, cells."""
+    by_name = {lower[i]: text_column(piece, i).str.strip().tolist() for i in time_idx}
+    if "timestamp" in by_name:
+        return _parse_dates(path, by_name["timestamp"], None, fmt, piece.first_line)
+    return _parse_dates(path, by_name["date"], by_name.get("time"), fmt, piece.first_line)
 
 
 BANNERLESS_FORMATS = ("M/d/yyyy", "d/M/yyyy", "yyyy-MM-dd", "d.M.yyyy", "d-M-yyyy")

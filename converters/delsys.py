@@ -17,20 +17,25 @@ empty. Per sensor (``<label>: <channel> <number>``): ``EMG`` -> ``/analog/<senso
 ``/signals/<sensor>`` with the unit as found. Units come from the ``Label:`` lines. Sensors are named from their
 label (``Mini sensor 10`` -> ``mini_sensor_10``); ``--device-name 10=wrist`` renames by sensor number or label.
 
-Memory: read whole (one piece) on purpose: a Trigno export is one lab session (minutes of EMG and IMU samples).
+Memory: in pieces of about 16 MB of text (:func:`iter_delsys`), the whole-file ``convert`` being the one-piece case:
+the ``Label:`` lines say every channel, rate and unit up front; each channel's time column is checked across pieces
+(set on a prefix of the rows); a stream whose channel has ended is left out of later pieces.
 """
 
 from __future__ import annotations
 
 import csv
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from imulog.converters import _pieces
 from imulog.converters._common import head_lines, sanitize_name, text_head_lines, unit_factor
-from imulog.converters._lab import read_table
+from imulog.converters._pieces import PIECE_BYTES, iter_table
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
 
@@ -75,7 +80,94 @@ def _labels(lines: list[str]) -> tuple[dict[str, dict[str, str]], int]:
 
 
 def read_delsys(path: Path, *, names: dict[str, str] | None = None) -> Recording:
+    """The whole export: :func:`iter_delsys` as one piece."""
+    (rec,) = iter_delsys(path, names=names, piece_bytes=None)
+    return rec
+
+
+@dataclass
+class _Plan:
+    """One sensor's streams: its topic name, device record, IMU trios (quantity, axes, factor), EMG, others."""
+
+    name: str
+    meta: dict[str, Any]
+    imu_meta: dict[str, Any]
+    trios: list[tuple[str, str, list[Channel], float]]
+    emg: tuple[Channel, float] | None
+    others: list[tuple[str, Channel]]
+
+
+@dataclass
+class _Carry:
+    """A channel across pieces: the line of its first empty time cell (its end), its last time (ns)."""
+
+    end_line: int | None = None
+    last: int | None = None
+
+
+def iter_delsys(
+    path: Path, *, names: dict[str, str] | None = None, piece_bytes: int | None = PIECE_BYTES
+) -> Iterator[Recording]:
+    """The export in pieces of about ``piece_bytes`` of text (None: one piece), rows read by
+    :func:`~imulog.converters._pieces.iter_table`. The header says every channel, rate and unit; each channel's
+    column is a prefix of the rows (slower channels end early), checked across pieces: a time set after the
+    channel's first empty time cell is an error naming that cell's line. A stream that has ended is left out of
+    later pieces (the first piece has every stream)."""
     path = Path(path)
+    header, hi, plans = _layout(path, names)
+    carry: dict[str, _Carry] = {}
+    rows = iter_table(path, delimiter=",", skip_lines=hi + 1, names=header, piece_bytes=piece_bytes)
+    for k, (values, first_line) in enumerate(rows):
+        column = partial(_column, path, values, first_line, carry)
+        rec = Recording(sources=[str(path)])
+        for plan in plans:
+            _sensor_piece(path, plan, column, rec)
+            if k == 0:
+                rec.metadata[f"imulog.device.{plan.name}"] = plan.meta
+        if k:
+            for kind in (rec.imus, rec.analogs, rec.signals):
+                kind[:] = [st for st in kind if len(st.t_ns)]
+        yield rec
+
+
+def _column(
+    path: Path, values: np.ndarray, first_line: int, carries: dict[str, _Carry], ch: Channel
+) -> tuple[np.ndarray, np.ndarray]:
+    """(t_ns, values) of one channel in one piece: the rows where its time is set; empty only after its end
+    (``carries``: each channel's state from the pieces before)."""
+    carry = carries.setdefault(ch.name, _Carry())
+    t = values[:, ch.time_col]
+    v = values[:, ch.value_col]
+    have = np.isfinite(t)
+    n = int(have.sum())
+    if carry.end_line is not None and n:
+        line = carry.end_line  # the channel had ended in an earlier piece
+    elif not have[:n].all():
+        line = first_line + int(np.argmin(have[:n]))
+    else:
+        line = None
+    if line is not None:
+        raise ConversionError(
+            path, "empty time cell before the channel's last sample", line=line, column=f"X[s] of {ch.name}"
+        )
+    if n < len(t) and carry.end_line is None:
+        carry.end_line = first_line + n
+    bad = ~np.isfinite(v[:n])
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ConversionError(path, "missing value where the time is set", line=first_line + i, column=ch.name)
+    t_ns = np.round(t[:n] * 1e9).astype(np.int64)
+    d = np.diff(t_ns if carry.last is None else np.concatenate([[carry.last], t_ns]))
+    if np.any(d <= 0):
+        i = int(np.argmax(d <= 0)) + (1 if carry.last is None else 0)
+        raise ConversionError(path, "time does not increase", line=first_line + i, column=f"X[s] of {ch.name}")
+    if n:
+        carry.last = int(t_ns[-1])
+    return t_ns, v[:n]
+
+
+def _layout(path: Path, names: dict[str, str] | None) -> tuple[list[str], int, list[_Plan]]:
+    """The names row, its index and every sensor's streams, from the ``Label:`` lines (errors name the line)."""
     names = {k.upper(): v for k, v in (names or {}).items()}
     lines = head_lines(path, max_lines=400)
     labels, hi = _labels(lines)
@@ -88,7 +180,6 @@ def read_delsys(path: Path, *, names: dict[str, str] | None = None) -> Recording
     if len(header) % 2:
         raise ConversionError(path, f"{len(header)} columns: expected pairs of X[s] and a channel", line=hi + 1)
     sensors: dict[str, Sensor] = {}
-    channels: list[Channel] = []
     for j in range(0, len(header), 2):
         if header[j] != "X[s]":
             raise ConversionError(path, f"column {j + 1} is {header[j]!r}, expected 'X[s]'", line=hi + 1)
@@ -101,7 +192,6 @@ def read_delsys(path: Path, *, names: dict[str, str] | None = None) -> Recording
             except ValueError:
                 raise ConversionError(path, f"{name}: sampling frequency {lab['fs']!r} is not a number") from None
             ch.points = int(lab["n"])
-        channels.append(ch)
         m = _CHANNEL.match(name)
         if not m:
             key, label, number, kind = name, name, "", "VALUE"
@@ -113,35 +203,7 @@ def read_delsys(path: Path, *, names: dict[str, str] | None = None) -> Recording
         if kind in sensor.channels:
             raise ConversionError(path, f"channel {name!r} appears twice", line=hi + 1)
         sensor.channels[kind] = ch
-    values = read_table(path, delimiter=",", skip_lines=hi + 1, names=header)
-    first_line = hi + 2
-
-    def column(ch: Channel) -> tuple[np.ndarray, np.ndarray]:
-        """(t_ns, values) of one channel: the rows where its time is set; padding only at the end."""
-        t = values[:, ch.time_col]
-        v = values[:, ch.value_col]
-        have = np.isfinite(t)
-        n = int(have.sum())
-        if not have[:n].all():
-            i = int(np.argmin(have[:n]))
-            raise ConversionError(
-                path,
-                "empty time cell before the channel's last sample",
-                line=first_line + i,
-                column=f"X[s] of {ch.name}",
-            )
-        bad = ~np.isfinite(v[:n])
-        if bad.any():
-            i = int(np.argmax(bad))
-            raise ConversionError(path, "missing value where the time is set", line=first_line + i, column=ch.name)
-        t_ns = np.round(t[:n] * 1e9).astype(np.int64)
-        d = np.diff(t_ns)
-        if np.any(d <= 0):
-            i = int(np.argmax(d <= 0)) + 1
-            raise ConversionError(path, "time does not increase", line=first_line + i, column=f"X[s] of {ch.name}")
-        return t_ns, v[:n]
-
-    rec = Recording(sources=[str(path)])
+    plans: list[_Plan] = []
     used: set[str] = set()
     for sensor in sensors.values():
         name = sanitize_name(names.get(sensor.number) or names.get(sensor.label.upper()) or sensor.label)
@@ -160,68 +222,80 @@ def read_delsys(path: Path, *, names: dict[str, str] | None = None) -> Recording
             },
             "time": "per-channel X[s] columns (s)",
         }
-        imu: dict[str, np.ndarray] = {}
-        imu_t: np.ndarray | None = None
-        imu_from = ""
+        trios: list[tuple[str, str, list[Channel], float]] = []
         for quantity, prefix in (("acc", "ACC"), ("gyr", "GYRO"), ("mag", "MAG")):
             axes = [sensor.channels.get(f"{prefix}.{a}") for a in "XYZ"]
             if not any(axes):
                 continue
             if not all(axes):
                 raise ConversionError(path, f"sensor {sensor.label}: {prefix} lacks an axis", line=hi + 1)
-            cols = [column(c) for c in axes]  # type: ignore[arg-type]
-            n = min(len(t) for t, _ in cols)
-            t0 = cols[0][0][:n]
-            for (t, _), c in zip(cols[1:], axes[1:], strict=True):
-                if np.max(np.abs(t[:n] - t0), initial=0) > 1000:  # > 1 us apart
-                    raise ConversionError(path, f"{c.name}: time column differs from {axes[0].name}")  # type: ignore[union-attr]
-            if imu_t is None:
-                imu_t, imu_from = t0, prefix
-            elif len(t0) != len(imu_t) or np.max(np.abs(t0[: len(imu_t)] - imu_t), initial=0) > 1000:
-                n2 = min(len(t0), len(imu_t))
-                if np.max(np.abs(t0[:n2] - imu_t[:n2]), initial=0) > 1000:
-                    raise ConversionError(path, f"sensor {sensor.label}: {prefix} is not sampled with {imu_from}")
-                imu_t = imu_t[:n2]
-                for k in imu:
-                    imu[k] = imu[k][:n2]
-                t0 = t0[:n2]
             unit = axes[0].unit  # type: ignore[union-attr]
             factor = unit_factor(quantity, unit)
             if factor is None:
                 raise ConversionError(path, f"{axes[0].name}: unknown unit {unit!r}")  # type: ignore[union-attr]
-            imu[quantity] = np.stack([v[: len(imu_t)] for _, v in cols], axis=1) * factor
+            trios.append((quantity, prefix, axes, factor))  # type: ignore[arg-type]
             meta.setdefault("units_in_file", {})[quantity] = unit
             meta.setdefault("resolution", {})[quantity] = {"scale": factor}  # the text's decimals x the unit factor
-        if imu and imu_t is not None:
-            rate = sensor.channels.get(f"{imu_from}.X").rate_hz  # type: ignore[union-attr]
-            rec.imus.append(ImuStream(name=name, t_ns=imu_t, meta={**meta, "rate_hz": rate}, **imu))
+        imu_rate = sensor.channels[f"{trios[0][1]}.X"].rate_hz if trios else None
+        emg = None
         if "EMG" in sensor.channels:
             ch = sensor.channels["EMG"]
-            t_ns, v = column(ch)
             f = EMG_UNITS.get(ch.unit.lower())
             if f is None:
                 raise ConversionError(path, f"{ch.name}: unknown EMG unit {ch.unit!r}")
-            rec.analogs.append(
-                AnalogStream(
-                    name=name,
-                    t_ns=t_ns,
-                    channel_names=["EMG"],
-                    units=["V"],
-                    values=v[:, None] * f,
-                    meta={"rate_hz": ch.rate_hz, "unit_in_file": ch.unit, "resolution": {"values": {"scale": f}}},
-                )
-            )
+            emg = (ch, f)
         others = [
             (k, c) for k, c in sensor.channels.items() if k != "EMG" and not k.startswith(("ACC.", "GYRO.", "MAG."))
         ]
-        for k, c in others:
-            t_ns, v = column(c)
-            rec.signals.append(SignalStream(f"/signals/{name}_{sanitize_name(k)}", t_ns, [k], [c.unit], v[:, None]))
+        imu_meta = {**meta, "rate_hz": imu_rate}
         meta["rate_hz"] = max((c.rate_hz or 0.0) for c in sensor.channels.values()) or None
-        rec.metadata[f"imulog.device.{name}"] = meta
-    if not rec.streams():
+        plans.append(_Plan(name, meta, imu_meta, trios, emg, others))
+    if not plans or not any(p.trios or p.emg or p.others for p in plans):
         raise ConversionError(path, "no channels", line=hi + 1)
-    return rec
+    return header, hi, plans
+
+
+def _sensor_piece(path: Path, plan: _Plan, column: Any, rec: Recording) -> None:
+    """Append one sensor's streams of one piece to ``rec`` (``column``: a channel's times and values)."""
+    imu: dict[str, np.ndarray] = {}
+    imu_t: np.ndarray | None = None
+    imu_from = ""
+    for quantity, prefix, axes, factor in plan.trios:
+        cols = [column(c) for c in axes]
+        n = min(len(t) for t, _ in cols)
+        t0 = cols[0][0][:n]
+        for (t, _), c in zip(cols[1:], axes[1:], strict=True):
+            if np.max(np.abs(t[:n] - t0), initial=0) > 1000:  # > 1 us apart
+                raise ConversionError(path, f"{c.name}: time column differs from {axes[0].name}")
+        if imu_t is None:
+            imu_t, imu_from = t0, prefix
+        elif len(t0) != len(imu_t) or np.max(np.abs(t0[: len(imu_t)] - imu_t), initial=0) > 1000:
+            n2 = min(len(t0), len(imu_t))
+            if np.max(np.abs(t0[:n2] - imu_t[:n2]), initial=0) > 1000:
+                raise ConversionError(path, f"sensor {plan.meta['label']}: {prefix} is not sampled with {imu_from}")
+            imu_t = imu_t[:n2]
+            for key in imu:
+                imu[key] = imu[key][:n2]
+            t0 = t0[:n2]
+        imu[quantity] = np.stack([v[: len(imu_t)] for _, v in cols], axis=1) * factor
+    if imu and imu_t is not None:
+        rec.imus.append(ImuStream(name=plan.name, t_ns=imu_t, meta=dict(plan.imu_meta), **imu))
+    if plan.emg is not None:
+        ch, f = plan.emg
+        t_ns, v = column(ch)
+        rec.analogs.append(
+            AnalogStream(
+                name=plan.name,
+                t_ns=t_ns,
+                channel_names=["EMG"],
+                units=["V"],
+                values=v[:, None] * f,
+                meta={"rate_hz": ch.rate_hz, "unit_in_file": ch.unit, "resolution": {"values": {"scale": f}}},
+            )
+        )
+    for k, c in plan.others:
+        t_ns, v = column(c)
+        rec.signals.append(SignalStream(f"/signals/{plan.name}_{sanitize_name(k)}", t_ns, [k], [c.unit], v[:, None]))
 
 
 class DelsysConverter(Converter):
@@ -239,6 +313,11 @@ class DelsysConverter(Converter):
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         options = options or ConvertOptions()
         return read_delsys(Path(path), names=options.extra.get("names"))
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """The export in pieces of about 16 MB of text (see :func:`iter_delsys`)."""
+        options = options or ConvertOptions()
+        return iter_delsys(Path(path), names=options.extra.get("names"), piece_bytes=_pieces.PIECE_BYTES)
 
 
 CONVERTER = DelsysConverter()

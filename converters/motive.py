@@ -19,20 +19,25 @@ Layout::
 * lengths in ``Length Units`` (Meters, Centimeters, Millimeters) -> m; the ``Time`` column (s) is the clock;
 * ``Capture Start Time`` (local time of the capture PC, no zone) -> ``imulog.trial`` ``start_time``.
 
-Memory: one piece on purpose: a Motive take is a lab capture (minutes of markers and rigid bodies).
+Memory: in pieces of about 16 MB of text (:func:`iter_motive`, rows by ``_pieces.iter_table``), the whole-file
+``convert`` being the one-piece case: the header says every stream, unit and the start, so the first piece needs to
+declare nothing; memory is bounded by a piece, whatever the take's length.
 """
 
 from __future__ import annotations
 
 import csv
 import io
+from collections.abc import Iterator
 from datetime import datetime
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from imulog.converters import _pieces
 from imulog.converters._common import check_increasing, head_lines, sanitize_name, text_head_lines, to_ns
-from imulog.converters._lab import read_table, trial_start
+from imulog.converters._lab import trial_start
+from imulog.converters._pieces import PIECE_BYTES, iter_table
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
 
@@ -58,7 +63,46 @@ def _info(first: list[str]) -> dict[str, str]:
 
 
 def read_motive(path: Path) -> Recording:
+    """The whole take: :func:`iter_motive` as one piece."""
+    (rec,) = iter_motive(path, piece_bytes=None)
+    return rec
+
+
+def iter_motive(path: Path, piece_bytes: int | None = PIECE_BYTES) -> Iterator[Recording]:
+    """The take in pieces of about ``piece_bytes`` of text (None: one piece), rows read by
+    :func:`~imulog.converters._pieces.iter_table`. The header says everything the pieces share (streams, units,
+    rate, start time); the ``Time`` column is converted relative to the file's first time, as in one piece."""
     path = Path(path)
+    layout = _layout(path)
+    before: int | None = None
+    origin: float | None = None
+    time_name = layout["axes"][1].strip()
+    rows = iter_table(
+        path,
+        delimiter=",",
+        skip_lines=layout["skip"],
+        names=layout["col_names"],
+        required=[0, 1],
+        piece_bytes=piece_bytes,
+    )
+    for k, (values, first_line) in enumerate(rows):
+        if origin is None and len(values):
+            origin = float(values[0, 1])
+        try:
+            t_ns = to_ns(values[:, 1], 1e9, origin=origin)
+        except ValueError as e:
+            raise ConversionError(path, str(e), column=layout["axes"][1]) from None
+        check_increasing(path, t_ns, first_line, time_name, before=before)
+        if len(t_ns):
+            before = int(t_ns[-1])
+        rec = _piece(path, layout, values, t_ns)
+        if k:  # the records are the first piece's
+            rec.metadata.clear()
+        yield rec
+
+
+def _layout(path: Path) -> dict[str, Any]:
+    """The header: key/value line, column groups (rigid bodies, markers), names, units; errors name the line."""
     lines = head_lines(path, max_lines=12)
     rows = list(csv.reader(io.StringIO("\n".join(lines))))
     info = _info(rows[0])
@@ -95,21 +139,11 @@ def read_motive(path: Path) -> Recording:
     col_names = [
         f"{cell(names, j)} {cell(props, j)} {cell(axes, j)}".strip() if j >= 2 else cell(axes, j) for j in range(ncols)
     ]
-    skip = frame_row + 1  # csv.reader gives one row per line here (blank lines are empty rows)
-    values = read_table(path, delimiter=",", skip_lines=skip, names=col_names, required=[0, 1])
-    first_line = skip + 1
-    try:
-        t_ns = to_ns(values[:, 1], 1e9)
-    except ValueError as e:
-        raise ConversionError(path, str(e), column=axes[1]) from None
-    check_increasing(path, t_ns, first_line, axes[1].strip())
     unit = info.get("Length Units", "Meters")
     scale = LENGTH.get(unit.lower())
     if scale is None:
         raise ConversionError(path, f"unknown Length Units {unit!r}", line=1)
     rot_type = info.get("Rotation Type", "Quaternion")
-
-    rec = Recording(sources=[str(path)])
     markers: list[tuple[str, list[int]]] = []
     model_markers: list[tuple[str, list[int]]] = []
     quality: list[tuple[str, int]] = []
@@ -143,7 +177,43 @@ def read_motive(path: Path) -> Recording:
             bodies.setdefault(f"{kind} {name}".strip(), {"extra": []})["extra"].extend(
                 (f"{prop} {a}", j) for a, j in cols.items()
             )
-    for name, body in bodies.items():
+    for group in (markers, model_markers):
+        labels = [n for n, _ in group]
+        if len(set(labels)) != len(labels):
+            dup = sorted({n for n in labels if labels.count(n) > 1})
+            raise ConversionError(path, f"marker name(s) used twice: {', '.join(dup)}", line=frame_row - 2)
+    if not (markers or model_markers or quality or any("position" in b or b["extra"] for b in bodies.values())):
+        raise ConversionError(path, "no rigid body or marker columns", line=frame_row + 1)
+    meta: dict[str, Any] = {
+        "format": "motive-csv",
+        "model": "OptiTrack Motive",
+        "format_version": info.get("Format Version", ""),
+        "rate_hz": float(info.get("Export Frame Rate") or info.get("Capture Frame Rate") or 0) or None,
+        "length_units": unit,
+        "rotation": "Rotation X,Y,Z,W (scalar last) stored as w,x,y,z",
+        "coordinate_space": info.get("Coordinate Space", ""),
+        "time": f"{axes[1].strip()} column (s)",
+        "header": info,
+        "source": path.name,
+        "rigid_bodies": [n for n, b in bodies.items() if "position" in b],
+    }
+    records: dict[str, dict[str, Any]] = {"imulog.device.motive": meta}
+    start = parse_start_time(info.get("Capture Start Time", ""))
+    if start is not None:
+        records["imulog.trial"] = trial_start(start, f"{path.name}: Capture Start Time (capture PC local time)")
+        records["imulog.trial"]["time_zone"] = "unknown (device local time)"
+    skip = frame_row + 1  # csv.reader gives one row per line here (blank lines are empty rows)
+    return dict(
+        axes=axes, col_names=col_names, skip=skip, scale=scale, bodies=bodies, markers=markers,
+        model_markers=model_markers, quality=quality, records=records,
+    )  # fmt: skip
+
+
+def _piece(path: Path, layout: dict[str, Any], values: np.ndarray, t_ns: np.ndarray) -> Recording:
+    """One piece's streams (poses, signals, markers; lengths in m) from its rows ``values``."""
+    scale = layout["scale"]
+    rec = Recording(sources=[str(path)])
+    for name, body in layout["bodies"].items():
         topic_name = sanitize_name(name)
         if "position" in body:
             pos = values[:, body["position"]] * scale
@@ -160,15 +230,12 @@ def read_motive(path: Path) -> Recording:
                     values[:, [j for _, j in body["extra"]]] * np.array([scale if u == "m" else 1.0 for u in units]),
                 )
             )
-    for stream_name, group in (("motive", markers), ("motive_rigid_body_markers", model_markers)):
+    for stream_name, group in (("motive", layout["markers"]), ("motive_rigid_body_markers", layout["model_markers"])):
         if not group:
             continue
         pos = np.stack([values[:, cols] for _, cols in group], axis=1) * scale
-        labels = [n for n, _ in group]
-        if len(set(labels)) != len(labels):
-            dup = sorted({n for n in labels if labels.count(n) > 1})
-            raise ConversionError(path, f"marker name(s) used twice: {', '.join(dup)}", line=frame_row - 2)
-        rec.markers.append(MarkerStream(stream_name, t_ns, labels, pos, meta={"units": "m"}))
+        rec.markers.append(MarkerStream(stream_name, t_ns, [n for n, _ in group], pos, meta={"units": "m"}))
+    quality = layout["quality"]
     if quality:
         rec.signals.append(
             SignalStream(
@@ -179,26 +246,7 @@ def read_motive(path: Path) -> Recording:
                 values[:, [j for _, j in quality]],
             )
         )
-    if not rec.streams():
-        raise ConversionError(path, "no rigid body or marker columns", line=frame_row + 1)
-    meta: dict[str, Any] = {
-        "format": "motive-csv",
-        "model": "OptiTrack Motive",
-        "format_version": info.get("Format Version", ""),
-        "rate_hz": float(info.get("Export Frame Rate") or info.get("Capture Frame Rate") or 0) or None,
-        "length_units": unit,
-        "rotation": "Rotation X,Y,Z,W (scalar last) stored as w,x,y,z",
-        "coordinate_space": info.get("Coordinate Space", ""),
-        "time": f"{axes[1].strip()} column (s)",
-        "header": info,
-        "source": path.name,
-        "rigid_bodies": [n for n, b in bodies.items() if "position" in b],
-    }
-    rec.metadata["imulog.device.motive"] = meta
-    start = parse_start_time(info.get("Capture Start Time", ""))
-    if start is not None:
-        rec.metadata["imulog.trial"] = trial_start(start, f"{path.name}: Capture Start Time (capture PC local time)")
-        rec.metadata["imulog.trial"]["time_zone"] = "unknown (device local time)"
+    rec.metadata.update({k: dict(v) for k, v in layout["records"].items()})
     return rec
 
 
@@ -216,6 +264,10 @@ class MotiveConverter(Converter):
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_motive(Path(path))
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """The take in pieces of about 16 MB of text (see :func:`iter_motive`)."""
+        return iter_motive(Path(path), piece_bytes=_pieces.PIECE_BYTES)
 
 
 CONVERTER = MotiveConverter()

@@ -23,25 +23,25 @@ stream (``<name>`` from the first header line, e.g. ``Coordinates`` -> ``/signal
 and rad when ``inDegrees=no``, otherwise ``""`` (unknown). Header and data may be tab- or comma-separated (a
 storage file re-saved as CSV pads each header line with commas).
 
-Memory: one piece on purpose: a ``.sto`` of orientations is one lab trial (OpenSense).
+Memory: in pieces of about 16 MB of text (:func:`iter_sto`), the whole-file ``convert`` being the one-piece case.
+A rate estimated from the times (no ``DataRate``) is refined piece by piece in the device record, the last piece's
+being the whole file's; an ``nRows`` warning comes with the last piece.
 """
 
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from imulog.converters._common import (
-    check_increasing,
-    estimate_rate_hz,
-    head_lines,
-    sanitize_name,
-    text_head_lines,
-    to_ns,
-)
-from imulog.converters._lab import line_offsets, orientation_stream, read_table
+import numpy as np
+from imulog.converters import _pieces
+from imulog.converters._common import check_increasing, head_lines, sanitize_name, text_head_lines, to_ns
+from imulog.converters._lab import orientation_stream
+from imulog.converters._pieces import PIECE_BYTES, iter_table
 from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.delimited_time import StepCounts
 from imulog.converters.errors import ConversionError
 
 from imulog.model import Recording, SignalStream
@@ -88,6 +88,20 @@ def column_unit(name: str, in_degrees: bool | None) -> str:
 
 
 def read_sto(path: Path) -> Recording:
+    """The whole file: :func:`iter_sto` as one piece."""
+    (rec,) = iter_sto(path, piece_bytes=None)
+    return rec
+
+
+def _tabs_to_commas(data: bytes) -> bytes:
+    return data.replace(b"\t", b",")
+
+
+def iter_sto(path: Path, piece_bytes: int | None = PIECE_BYTES) -> Iterator[Recording]:
+    """The file in pieces of about ``piece_bytes`` of text (None: one piece), rows read by
+    :func:`~imulog.converters._pieces.iter_table`. Without a ``DataRate`` the rate is the median step of every time
+    so far (:class:`~imulog.converters.delimited_time.StepCounts`), refined piece by piece in the device record: the
+    last piece's is the whole file's; an ``nRows`` that disagrees is a warning of the last piece."""
     path = Path(path)
     lines = head_lines(path, max_lines=200)
     info, title, ni = _header(path, lines)
@@ -102,19 +116,6 @@ def read_sto(path: Path) -> Recording:
     if not cols or cols[0].lower() != "time":
         raise ConversionError(path, "the first column must be 'time'", line=ni + 1)
     names = ["time"] + [f"{c}[{k}]" for c in cols[1:] for k in range(width)]
-    data = path.read_bytes()
-    try:
-        start = line_offsets(data, ni + 1)
-    except ValueError:
-        raise ConversionError(path, "no data rows after the column names", line=ni + 1) from None
-    body = data[:start] + data[start:].replace(b"\t", b",") if delim == "\t" else data
-    values = read_table(path, delimiter=",", skip_lines=ni + 1, names=names, data=body, required=[0])
-    first_line = ni + 2
-    try:
-        t_ns = to_ns(values[:, 0], 1e9)
-    except ValueError as e:
-        raise ConversionError(path, str(e), column="time") from None
-    check_increasing(path, t_ns, first_line, "time")
     rate = None
     m = re.match(r"^\s*([0-9.]+)", info.get("DataRate", ""))
     if m:
@@ -122,33 +123,66 @@ def read_sto(path: Path) -> Recording:
     meta: dict[str, Any] = {
         "format": "opensim-sto",
         "data_type": info.get("DataType", ""),
-        "rate_hz": rate or estimate_rate_hz(t_ns),
+        "rate_hz": rate,
         "header": info,
         "time": "time column (s) as written",
         "source": path.name,
     }
     if title:
         meta["name"] = title
-    rec = Recording(sources=[str(path)])
+    degrees = _in_degrees(info)
+    units = [column_unit(c, degrees) for c in cols[1:]]
     if width == 1:
-        degrees = _in_degrees(info)
-        units = [column_unit(c, degrees) for c in cols[1:]]
-        topic = f"/signals/{sanitize_name(title).lower()}" if title else "/signals/sto"
-        rec.signals.append(SignalStream(topic, t_ns, cols[1:], units, values[:, 1:]))
         meta["in_degrees"] = degrees
         meta["units"] = dict(zip(cols[1:], units, strict=True))
-    for j, c in enumerate(cols[1:]):
-        block = values[:, 1 + j * width : 1 + (j + 1) * width]
-        name = sanitize_name(c)
-        if width == 4:
-            rec.signals.append(orientation_stream(name, t_ns, block, frame_id="ground"))
-        elif width == 3:
-            rec.signals.append(SignalStream(f"/signals/{name}", t_ns, ["x", "y", "z"], ["", "", ""], block))
-    declared = info.get("nRows", "")
-    if declared.isdigit() and int(declared) != len(t_ns):
-        rec.warnings.append(f"{path.name}: header nRows={declared} but the file holds {len(t_ns)} rows; read them all")
-    rec.metadata["imulog.device.opensense"] = {**meta, "columns": cols[1:]}
-    return rec
+    steps = StepCounts()
+    origin: float | None = None
+    before: int | None = None
+    count = 0
+    rows = iter_table(
+        path,
+        delimiter=",",
+        skip_lines=ni + 1,
+        names=names,
+        required=[0],
+        piece_bytes=piece_bytes,
+        transform=_tabs_to_commas if delim == "\t" else None,
+    )
+    nxt = next(rows, None)
+    while nxt is not None:
+        values, first_line = nxt
+        nxt = next(rows, None)
+        if origin is None and len(values):
+            origin = float(values[0, 0])
+        try:
+            t_ns = to_ns(values[:, 0], 1e9, origin=origin)
+        except ValueError as e:
+            raise ConversionError(path, str(e), column="time") from None
+        check_increasing(path, t_ns, first_line, "time", before=before)
+        steps.add(np.diff(t_ns if before is None else np.concatenate([[before], t_ns])))
+        if len(t_ns):
+            before = int(t_ns[-1])
+        count += len(t_ns)
+        rec = Recording(sources=[str(path)])
+        if width == 1:
+            topic = f"/signals/{sanitize_name(title).lower()}" if title else "/signals/sto"
+            rec.signals.append(SignalStream(topic, t_ns, cols[1:], units, values[:, 1:]))
+        for j, c in enumerate(cols[1:]):
+            block = values[:, 1 + j * width : 1 + (j + 1) * width]
+            name = sanitize_name(c)
+            if width == 4:
+                rec.signals.append(orientation_stream(name, t_ns, block, frame_id="ground"))
+            elif width == 3:
+                rec.signals.append(SignalStream(f"/signals/{name}", t_ns, ["x", "y", "z"], ["", "", ""], block))
+        estimate = rate or (steps.rate_hz() if steps.exact else None)
+        rec.metadata["imulog.device.opensense"] = {**meta, "rate_hz": estimate, "columns": cols[1:]}
+        if nxt is None:
+            declared = info.get("nRows", "")
+            if declared.isdigit() and int(declared) != count:
+                rec.warnings.append(
+                    f"{path.name}: header nRows={declared} but the file holds {count} rows; read them all"
+                )
+        yield rec
 
 
 class OpenSimStoConverter(Converter):
@@ -177,6 +211,10 @@ class OpenSimStoConverter(Converter):
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_sto(Path(path))
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """The file in pieces of about 16 MB of text (see :func:`iter_sto`)."""
+        return iter_sto(Path(path), piece_bytes=_pieces.PIECE_BYTES)
 
 
 CONVERTER = OpenSimStoConverter()

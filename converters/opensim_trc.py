@@ -16,16 +16,21 @@ written; when it has empty cells the frame number over ``DataRate`` is used (the
 neither works). Rows shorter than the header (trailing markers missing, as some exporters write) are padded with
 missing markers. A ``NumFrames``/``NumMarkers`` that disagrees with the data is a warning; the data wins.
 
-Memory: one piece on purpose: a ``.trc`` is one lab capture of markers.
+Memory: in pieces of about 16 MB of text (:func:`iter_trc`), the whole-file ``convert`` being the one-piece case.
+What only the whole file shows (the widest row, whether the ``Time`` column is usable in every row, the row count,
+markers never seen) comes from first passes (field counts, then the two clock columns) or with the last piece.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from imulog.converters import _pieces
 from imulog.converters._common import LENGTH_TO_M, check_increasing, head_lines, text_head_lines
-from imulog.converters._lab import read_table
+from imulog.converters._pieces import PIECE_BYTES, iter_table, text_pieces
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
 
@@ -45,7 +50,103 @@ def _trim(cells: list[str]) -> list[str]:
 
 
 def read_trc(path: Path, options: ConvertOptions | None = None) -> Recording:
+    """The whole file: :func:`iter_trc` as one piece."""
+    (rec,) = iter_trc(path, options, piece_bytes=None)
+    return rec
+
+
+def iter_trc(
+    path: Path, options: ConvertOptions | None = None, piece_bytes: int | None = PIECE_BYTES
+) -> Iterator[Recording]:
+    """The file in pieces of about ``piece_bytes`` of text (None: one piece), rows read by
+    :func:`~imulog.converters._pieces.iter_table`. What the whole file decides comes from first passes: the widest
+    row (rows shorter than the header are padded) and whether the ``Time`` column is usable everywhere (else every
+    time is ``(Frame# - first) / DataRate``). The warnings (the time fallback, a header count that disagrees, markers
+    never seen) come with the last piece."""
     path = Path(path)
+    lay = _layout(path)
+    delim, cols, skip, labels, info = lay["delim"], lay["cols"], lay["skip"], lay["labels"], lay["info"]
+    widest = 0
+    for piece, _, _, _ in text_pieces(path, skip, piece_bytes or max(1, path.stat().st_size)):
+        widest = max(widest, max(line.rstrip(b"\r").count(delim.encode()) + 1 for line in piece.split(b"\n")))
+    use = min(len(cols), max(widest, 2))  # every row short (trailing markers never recorded): pad them
+    table: dict[str, Any] = dict(delimiter=delim, skip_lines=skip, names=cols[:use], ragged=True)
+    try:
+        rate = float(info.get("DataRate", "nan"))
+    except ValueError:
+        rate = float("nan")
+    cached = next(iter_table(path, **table, piece_bytes=None)) if piece_bytes is None else None
+
+    def pieces(skip_columns: range) -> Iterator[tuple[np.ndarray, int]]:
+        """The rows: one piece parsed once for both passes, or the pieces (the first pass skips the markers)."""
+        if cached is not None:
+            return iter([cached])
+        return iter_table(path, **table, piece_bytes=piece_bytes, skip_columns=skip_columns)
+
+    time_ok, frames_ok, first_frame, n = True, True, None, 0
+    for values, _ in pieces(range(2, use)):
+        n += len(values)
+        time_ok = time_ok and bool(np.isfinite(values[:, 1]).all())
+        frames_ok = frames_ok and bool(np.isfinite(values[:, 0]).all())
+        if first_frame is None and len(values):
+            first_frame = float(values[0, 0])
+    warnings: list[str] = []
+    if not time_ok:
+        if not (rate > 0 and frames_ok):
+            raise ConversionError(path, "the Time column has empty cells and DataRate or Frame# is unusable")
+        warnings.append(f"{path.name}: Time column unusable; time = (Frame# - first) / DataRate")
+    m = len(labels)
+    for key, actual in (("NumFrames", n), ("NumMarkers", m)):
+        declared = info.get(key, "")
+        if declared.isdigit() and int(declared) != actual:
+            warnings.append(f"{path.name}: header {key}={declared} but the file holds {actual}; read what is there")
+    meta = {
+        "format": "opensim-trc",
+        "rate_hz": rate if rate > 0 else None,
+        "units": lay["unit"],
+        "header": info,
+        "path_file_type": lay["path_file_type"],
+        "time": "Time column (s) as written",
+        "source": path.name,
+    }
+    scale = LENGTH_TO_M[lay["unit"].lower()]
+    res = {"resolution": {"pos": {"scale": scale}}}  # the text's decimals times the unit factor
+    seen = np.zeros(m, dtype=bool)
+    before: int | None = None
+    rows = pieces(range(0))
+    nxt = next(rows, None)
+    k = 0
+    while nxt is not None:
+        part, line = nxt
+        nxt = next(rows, None)
+        values = np.full((len(part), len(cols)), np.nan)
+        values[:, :use] = part
+        t_s = values[:, 1] if time_ok else (values[:, 0] - first_frame) / rate
+        t_ns = np.round(t_s * 1e9).astype(np.int64)
+        check_increasing(path, t_ns, line, "Time", before=before)
+        if len(t_ns):
+            before = int(t_ns[-1])
+        pos = values[:, 2:].reshape(len(values), m, 3) * scale
+        valid = np.isfinite(pos).all(axis=2)
+        seen |= valid.any(axis=0)
+        rec = Recording(sources=[str(path)])
+        rec.markers.append(
+            MarkerStream(name="trc", t_ns=t_ns, labels=labels, pos=pos, valid=valid, meta={**meta, **res})
+        )
+        if k == 0:
+            rec.metadata["imulog.device.trc"] = dict(meta)
+        if nxt is None:
+            missing = [labels[j] for j in range(m) if not seen[j]]
+            if missing:
+                shown = ", ".join(missing[:5]) + (" ..." if len(missing) > 5 else "")
+                warnings.append(f"{path.name}: {len(missing)} of {m} markers have no valid sample ({shown})")
+            rec.warnings.extend(warnings)
+        k += 1
+        yield rec
+
+
+def _layout(path: Path) -> dict[str, Any]:
+    """The 5-line header: delimiter, keys, marker labels, unit, column names and where the rows start."""
     lines = head_lines(path, max_lines=8)
     if len(lines) < HEADER_LINES:
         raise ConversionError(path, "file ends inside the 5-line TRC header")
@@ -66,54 +167,10 @@ def read_trc(path: Path, options: ConvertOptions | None = None) -> Recording:
         raise ConversionError(path, f"unknown Units {unit!r} (mm, cm or m)", line=3)
     skip = HEADER_LINES + (1 if len(lines) > HEADER_LINES and not lines[HEADER_LINES].strip(" \t,\r\n") else 0)
     cols = ["Frame#", "Time"] + [f"{m}.{a}" for m in labels for a in "XYZ"]
-    warnings: list[str] = []
-    data = path.read_bytes()
-    widest = max((line.rstrip(b"\r").count(delim.encode()) + 1 for line in data.splitlines()[skip:]), default=0)
-    use = min(len(cols), max(widest, 2))  # every row short (trailing markers never recorded): pad them
-    part = read_table(
-        path, delimiter=delim, skip_lines=skip, names=cols[:use], data=data, ragged=True, warnings=warnings
-    )
-    values = np.full((len(part), len(cols)), np.nan)
-    values[:, :use] = part
-    n, m = len(values), len(labels)
-    try:
-        rate = float(info.get("DataRate", "nan"))
-    except ValueError:
-        rate = float("nan")
-    t_s = values[:, 1]
-    if not np.isfinite(t_s).all():
-        frames = values[:, 0]
-        if not (rate > 0 and np.isfinite(frames).all()):
-            raise ConversionError(path, "the Time column has empty cells and DataRate or Frame# is unusable")
-        warnings.append(f"{path.name}: Time column unusable; time = (Frame# - first) / DataRate")
-        t_s = (frames - frames[0]) / rate
-    t_ns = np.round(t_s * 1e9).astype(np.int64)
-    check_increasing(path, t_ns, skip + 1, "Time")
-    for key, actual in (("NumFrames", n), ("NumMarkers", m)):
-        declared = info.get(key, "")
-        if declared.isdigit() and int(declared) != actual:
-            warnings.append(f"{path.name}: header {key}={declared} but the file holds {actual}; read what is there")
-    pos = values[:, 2:].reshape(n, m, 3) * LENGTH_TO_M[unit.lower()]
-    valid = np.isfinite(pos).all(axis=2)
-    missing = [labels[j] for j in range(m) if not valid[:, j].any()]
-    if missing:
-        shown = ", ".join(missing[:5]) + (" ..." if len(missing) > 5 else "")
-        warnings.append(f"{path.name}: {len(missing)} of {m} markers have no valid sample ({shown})")
-    meta = {
-        "format": "opensim-trc",
-        "rate_hz": rate if rate > 0 else None,
-        "units": unit,
-        "header": info,
-        "path_file_type": _split(lines[0], delim)[1:3],
-        "time": "Time column (s) as written",
-        "source": path.name,
-    }
-    rec = Recording(sources=[str(path)])
-    res = {"resolution": {"pos": {"scale": LENGTH_TO_M[unit.lower()]}}}  # the text's decimals times the unit factor
-    rec.markers.append(MarkerStream(name="trc", t_ns=t_ns, labels=labels, pos=pos, valid=valid, meta={**meta, **res}))
-    rec.metadata["imulog.device.trc"] = meta
-    rec.warnings.extend(warnings)
-    return rec
+    return dict(
+        delim=delim, info=info, labels=labels, unit=unit, skip=skip, cols=cols,
+        path_file_type=_split(lines[0], delim)[1:3],
+    )  # fmt: skip
 
 
 class OpenSimTrcConverter(Converter):
@@ -132,6 +189,10 @@ class OpenSimTrcConverter(Converter):
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_trc(Path(path), options)
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """The file in pieces of about 16 MB of text (see :func:`iter_trc`)."""
+        return iter_trc(Path(path), options, piece_bytes=_pieces.PIECE_BYTES)
 
 
 CONVERTER = OpenSimTrcConverter()

@@ -21,19 +21,25 @@ The clock is the ``Time`` column (s) when present, else ``(Frame - 1) / FREQUENC
 ``FREQUENCY``). ``TIME_STAMP`` (the QTM PC's local time, no zone) -> ``imulog.trial`` ``start_time``.
 ``NO_OF_FRAMES`` is checked against the rows (a cut-off file is an error naming its last line).
 
-Memory: one piece on purpose: a QTM export is one lab capture of markers.
+Memory: in pieces of about 16 MB of text (:func:`iter_qualisys`), the whole-file ``convert`` being the one-piece
+case. What only the whole file shows (whether the ``Time``/``Frame`` column has an empty cell anywhere, the row count
+against ``NO_OF_FRAMES``) comes from a first pass over those two columns; the zero-sample count in the device record
+is the running total, the last piece's being the file's.
 """
 
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from datetime import datetime
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from imulog.converters import _pieces
 from imulog.converters._common import check_increasing, head_lines, is_number, text_head_lines, to_ns
-from imulog.converters._lab import read_table, trial_start
+from imulog.converters._lab import trial_start
+from imulog.converters._pieces import PIECE_BYTES, iter_table
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
 
@@ -54,7 +60,92 @@ def parse_time_stamp(value: str) -> datetime | None:
 
 
 def read_qualisys(path: Path) -> Recording:
+    """The whole export: :func:`iter_qualisys` as one piece."""
+    (rec,) = iter_qualisys(path, piece_bytes=None)
+    return rec
+
+
+def _no_null(data: bytes) -> bytes:
+    """QTM's ``NULL`` cells (missing 3D data) as empty cells."""
+    return data.replace(b"\tNULL", b"\t").replace(b"\tnull", b"\t")
+
+
+def iter_qualisys(path: Path, piece_bytes: int | None = PIECE_BYTES) -> Iterator[Recording]:
+    """The export in pieces of about ``piece_bytes`` of text (None: one piece), rows read by
+    :func:`~imulog.converters._pieces.iter_table`. Which clock the file has (a ``Time`` or ``Frame`` column with no
+    empty cell in the whole file) and its row count (against ``NO_OF_FRAMES``) come from a first pass over those
+    columns; the count of samples exported as zeros grows piece by piece in the device record (the last piece's is
+    the file's)."""
     path = Path(path)
+    lay = _layout(path)
+    names, index, freq, n_frames = lay["names"], lay["index"], lay["freq"], lay["n_frames"]
+    first_line = lay["skip"] + 1
+    table: dict[str, Any] = dict(delimiter="\t", skip_lines=lay["skip"], names=names, transform=_no_null)
+    cached = next(iter_table(path, **table, piece_bytes=None)) if piece_bytes is None else None
+
+    def pieces(skip_columns: list[int]) -> Iterator[tuple[np.ndarray, int]]:
+        if cached is not None:
+            return iter([cached])
+        return iter_table(path, **table, piece_bytes=piece_bytes, skip_columns=skip_columns)
+
+    clocks = [c for c in ("Time", "Frame") if c in index]
+    finite = dict.fromkeys(clocks, True)
+    rows: int | None = None
+    if clocks:  # pass 1: the clock columns only
+        rows = 0
+        others = [j for j in range(len(names)) if j not in {index[c] for c in clocks}]
+        for values, _ in pieces(others):
+            rows += len(values)
+            for c in clocks:
+                finite[c] = finite[c] and bool(np.isfinite(values[:, index[c]]).all())
+        _check_frames(path, rows, n_frames, first_line)
+    if finite.get("Time", False):
+        time_source = "Time column (s)"
+    elif finite.get("Frame", False):
+        time_source = f"(Frame - 1) / {freq:g} Hz"
+    else:
+        time_source = f"row index / {freq:g} Hz"
+    device = {**lay["device"], "time": time_source}
+    done, zeros_total = 0, 0
+    origin: float | None = None
+    before: int | None = None
+    for k, (values, line) in enumerate(pieces([])):
+        if time_source.startswith("Time"):
+            origin = float(values[0, index["Time"]]) if origin is None and len(values) else origin
+            t_ns = to_ns(values[:, index["Time"]], 1e9, origin=origin)
+        elif time_source.startswith("(Frame"):
+            t_ns = np.round((values[:, index["Frame"]] - 1) * (1e9 / freq)).astype(np.int64)
+        else:
+            t_ns = np.round(np.arange(done, done + len(values)) * (1e9 / freq)).astype(np.int64)
+        done += len(values)
+        check_increasing(path, t_ns, line, before=before)
+        if len(t_ns):
+            before = int(t_ns[-1])
+        pos = np.stack([values[:, c] for c in lay["cols"]], axis=1) / 1000.0  # mm -> m
+        zeros = np.all(pos == 0.0, axis=2)
+        pos[zeros] = np.nan
+        zeros_total += int(zeros.sum())
+        rec = Recording(sources=[str(path)])
+        meta = {"units": "m", "source": path.name}
+        rec.markers.append(MarkerStream("qualisys", t_ns, lay["markers"], pos, meta=meta))
+        rec.metadata["imulog.device.qualisys"] = {**device, "missing_as_zero_samples": zeros_total}
+        if k == 0 and lay["stamp"] is not None:
+            rec.metadata["imulog.trial"] = trial_start(lay["stamp"], f"{path.name}: TIME_STAMP (QTM PC local time)")
+        yield rec
+    if rows is None:
+        _check_frames(path, done, n_frames, first_line)
+
+
+def _check_frames(path: Path, rows: int, n_frames: int, first_line: int) -> None:
+    """A file with fewer rows than its ``NO_OF_FRAMES`` is cut off: one line naming its last row."""
+    if rows < n_frames:
+        raise ConversionError(
+            path, f"file ends after {rows} of NO_OF_FRAMES {n_frames} frames (cut off?)", line=first_line + rows - 1
+        )
+
+
+def _layout(path: Path) -> dict[str, Any]:
+    """The header: keys, markers, column names, where the rows start and the device record (errors name lines)."""
     lines = head_lines(path, max_lines=400)
     info: dict[str, list[str]] = {}
     n = 0
@@ -106,47 +197,23 @@ def read_qualisys(path: Path) -> Recording:
             cols.append([index[f"{m} {a}"] for a in "XYZ"])
         except KeyError:
             raise ConversionError(path, f"no '{m} X/Y/Z' columns for marker {m!r}", line=skip) from None
-    data = path.read_bytes().replace(b"\tNULL", b"\t").replace(b"\tnull", b"\t")
-    values = read_table(path, delimiter="\t", skip_lines=skip, names=names, data=data)
-    first_line = skip + 1
-    if len(values) < n_frames:
-        raise ConversionError(
-            path,
-            f"file ends after {len(values)} of NO_OF_FRAMES {n_frames} frames (cut off?)",
-            line=first_line + len(values) - 1,
-        )
-    if "Time" in index and np.isfinite(values[:, index["Time"]]).all():
-        t_ns = to_ns(values[:, index["Time"]], 1e9)
-        time_source = "Time column (s)"
-    elif "Frame" in index and np.isfinite(values[:, index["Frame"]]).all():
-        t_ns = np.round((values[:, index["Frame"]] - 1) * (1e9 / freq)).astype(np.int64)
-        time_source = f"(Frame - 1) / {freq:g} Hz"
-    else:
-        t_ns = np.round(np.arange(len(values)) * (1e9 / freq)).astype(np.int64)
-        time_source = f"row index / {freq:g} Hz"
-    check_increasing(path, t_ns, first_line)
-    pos = np.stack([values[:, c] for c in cols], axis=1) / 1000.0  # mm -> m
-    zeros = np.all(pos == 0.0, axis=2)
-    pos[zeros] = np.nan
-    rec = Recording(sources=[str(path)])
-    rec.markers.append(MarkerStream("qualisys", t_ns, markers, pos, meta={"units": "m", "source": path.name}))
-    meta: dict[str, Any] = {
+    device: dict[str, Any] = {
         "format": "qualisys-tsv",
         "model": "Qualisys QTM",
         "rate_hz": freq,
         "units_in_file": "mm",
-        "time": time_source,
+        "time": "",
         "header": {k: "\t".join(v) for k, v in info.items() if k != "MARKER_NAMES"},
-        "missing_as_zero_samples": int(zeros.sum()),
+        "missing_as_zero_samples": 0,
         "source": path.name,
     }
     if "TRAJECTORY_TYPES" in info:
-        meta["trajectory_types"] = dict(zip(markers, info["TRAJECTORY_TYPES"], strict=False))
-    rec.metadata["imulog.device.qualisys"] = meta
+        device["trajectory_types"] = dict(zip(markers, info["TRAJECTORY_TYPES"], strict=False))
     stamp = parse_time_stamp("\t".join(info.get("TIME_STAMP", [])))
-    if stamp is not None:
-        rec.metadata["imulog.trial"] = trial_start(stamp, f"{path.name}: TIME_STAMP (QTM PC local time)")
-    return rec
+    return dict(
+        names=names, index=index, skip=skip, cols=cols, markers=markers, freq=freq, n_frames=n_frames,
+        device=device, stamp=stamp,
+    )  # fmt: skip
 
 
 class QualisysConverter(Converter):
@@ -161,6 +228,10 @@ class QualisysConverter(Converter):
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_qualisys(Path(path))
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """The export in pieces of about 16 MB of text (see :func:`iter_qualisys`)."""
+        return iter_qualisys(Path(path), piece_bytes=_pieces.PIECE_BYTES)
 
 
 CONVERTER = QualisysConverter()
