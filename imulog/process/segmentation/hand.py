@@ -94,7 +94,7 @@ class HandParams:
         1.6x slower than 4 s, with the same held-out segmentation figures).
     speed_reach_s: the velocity before an onset is integrated this far (s) into the phase (at least
         ``flank_search_s``), so that a slow start reaches ``velocity_level_mps`` for its speed flank (a 6-s reach
-        needs 1.5 s; 0.6 s left a fifth of the stroke-slow onsets without a flank, 0.1-0.4 s late: issue 31).
+        needs 1.5 s; 0.6 s left 56 of 1200 stroke-slow onsets without a flank, 0.115 s late on average: issue 31).
     rest_check_s: a slow last part of a phase at ``velocity_level_mps`` or more with next to no acceleration
         extends the offset when the velocity relative to the rest window stays under half that speed for this
         long (s) after the window (the window is a rest, not a hand cruising or drifting); 0: off.
@@ -332,7 +332,6 @@ def _slow_tail_end(acc, gyr, dt, post, lo, end, stop, params: HandParams, rate_h
     return max(end, lo + m - int(np.ceil(z)))
 
 
-
 def _offset(acc, gyr, dt, post, lo: int, b0: int, stop: int, params: HandParams, rate_hz: float) -> int:
     """Offset (exclusive sample index) of the phase whose gyroscope offset is ``b0``, with the rest window ``post``
     after it (steps 5-8 of the module docstring); ``b0`` without a usable window. ``lo``: where the velocity
@@ -374,6 +373,7 @@ def _offset(acc, gyr, dt, post, lo: int, b0: int, stop: int, params: HandParams,
     m = len(a_all)  # the offset's flank, time reversed: from the rest into the phase
     end = lo + m - _extrapolated(a_all[::-1], v_all[::-1], m - (end - lo), m - (b0 - lo), level, params, rate_hz)
     return _slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz)
+
 
 def cutoff_params(params: HandParams) -> BoundaryParams:
     """The accelerometer's cut-off adaptation expressed as :class:`BoundaryParams` (levels in m/s^2)."""
