@@ -136,20 +136,21 @@ def _wider() -> dict[str, dict]:
     }
 
 
-def grid_rows(conditions, seeds, subjects, repetitions: int, methods=GRID_METHODS) -> list[dict]:
+def grid_rows(conditions, seeds, subjects, repetitions: int, methods=GRID_METHODS, pairs=None) -> list[dict]:
     """One record per (condition, method) with the means over the trials (see :func:`score`); a condition is
-    one of :mod:`imulog.simulate.grid` or of :func:`_wider`."""
+    one of :mod:`imulog.simulate.grid` or of :func:`_wider`. Trials: every seed x subject, or the (seed, subject)
+    ``pairs`` when given."""
     from dataclasses import replace
 
     from imulog.process.segmentation.repetitions import RepetitionParams
     from imulog.simulate.grid import condition
 
     wider = _wider()
+    pairs = list(pairs) if pairs is not None else [(seed, subject) for seed in seeds for subject in subjects]
     trials = [
         (name, seed, subject, dict(wider[name]) if name in wider else condition(name))
         for name in conditions
-        for seed in seeds
-        for subject in subjects
+        for seed, subject in pairs
     ]
     rows: dict[tuple[str, str], list[dict]] = {}
     for name, seed, subject, options in trials:
@@ -196,6 +197,35 @@ def print_trials_under(rows: list[dict], share: float = 0.95) -> None:
     print(f"  {n} of {sum(len(r['per_trial']) for r in rows)} trials")
 
 
+def print_comparison(before: list[dict], rows: list[dict]) -> None:
+    """Per condition and method, ``before`` (a ``--json`` file of an earlier run on the same trials) → ``rows``:
+    the share of durations within 0.1 s (worst trial), the trials under 95 %, how many trials gained / lost, and
+    the onset / offset MAE (s)."""
+    old = {(r["condition"], r["method"]): r for r in before}
+    print(
+        "\n| condition | method | within 0.1 s % (worst trial), before → after | trials under 95 % | trials better / worse "
+        "| onset / offset MAE s |"
+    )
+    print("|" + "---|" * 6)
+    for r in rows:
+        b = old.get((r["condition"], r["method"]))
+        if b is None:
+            continue
+        was = {(t[0], t[1]): t[2] for t in b["per_trial"]}
+        now = {(t[0], t[1]): t[2] for t in r["per_trial"]}
+        better = sum(now[k] > was[k] + 1e-9 for k in now if k in was)
+        worse = sum(now[k] < was[k] - 1e-9 for k in now if k in was)
+        print(
+            f"| {r['condition']} | {r['method']} | {100 * b['within_0_1_s']:.1f} ({100 * b['worst_trial_within_0_1_s']:.1f}) → "
+            f"{100 * r['within_0_1_s']:.1f} ({100 * r['worst_trial_within_0_1_s']:.1f}) | "
+            f"{sum(v < 0.95 for v in was.values())} → {sum(v < 0.95 for v in now.values())} | {better} / {worse} | "
+            f"{b['onset_mae_s']:.3f} / {b['offset_mae_s']:.3f} → {r['onset_mae_s']:.3f} / {r['offset_mae_s']:.3f} |"
+        )
+        for k in sorted(now):
+            if k in was and now[k] < was[k] - 1e-9:
+                print(f"  worse: seed {k[0]} subject {k[1]}: {100 * was[k]:.1f} → {100 * now[k]:.1f} %")
+
+
 def print_grid(rows: list[dict]) -> None:
     print(
         "| condition | method | trials | correct phases % | durations within 0.1 s % (worst trial) | onset MAE s "
@@ -237,6 +267,17 @@ def main() -> None:
         "--grid-methods", nargs="+", default=list(GRID_METHODS), choices=list(GRID_METHODS), help="grid methods"
     )
     ap.add_argument("--per-trial", action="store_true", help="also list every grid trial under 95 %% within 0.1 s")
+    ap.add_argument(
+        "--sets",
+        nargs="+",
+        default=None,
+        metavar="SEED:SUBJECT",
+        help="several trial sets, each --seeds x --subjects from a first seed and subject (instead of --first-*)",
+    )
+    ap.add_argument("--json", default=None, help="also write the grid records (with every trial's figures) here")
+    ap.add_argument(
+        "--compare", default=None, help="a --json file of an earlier run on the same trials: before → after"
+    )
     args = ap.parse_args()
     if args.grid:
         from imulog.simulate.grid import CONDITIONS
@@ -244,16 +285,28 @@ def main() -> None:
         named = {"all": list(CONDITIONS), "wider": list(_wider())}
         conditions = [c for g in args.grid for c in named.get(g, [g])]
         t0 = time.perf_counter()
+        firsts = (
+            [tuple(int(x) for x in s.split(":")) for s in args.sets]
+            if args.sets
+            else [(args.first_seed, args.first_subject)]
+        )
+        pairs = [(s0 + i, j0 + j) for s0, j0 in firsts for i in range(args.seeds) for j in range(args.subjects)]
         rows = grid_rows(
-            conditions,
-            range(args.first_seed, args.first_seed + args.seeds),
-            range(args.first_subject, args.first_subject + args.subjects),
-            args.repetitions,
-            {k: GRID_METHODS[k] for k in args.grid_methods},
+            conditions, None, None, args.repetitions, {k: GRID_METHODS[k] for k in args.grid_methods}, pairs=pairs
         )
         print_grid(rows)
         if args.per_trial:
             print_trials_under(rows)
+        if args.json:
+            import json
+
+            with open(args.json, "w") as f:
+                json.dump(rows, f, indent=1)
+        if args.compare:
+            import json
+
+            with open(args.compare) as f:
+                print_comparison(json.load(f), rows)
         print(f"\n{time.perf_counter() - t0:.0f} s wall")
         return
     variants = {

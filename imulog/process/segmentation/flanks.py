@@ -193,12 +193,16 @@ def _runs(mask: np.ndarray, min_run: int) -> np.ndarray:
 
 
 def _speed_fit(v: np.ndarray, p: int, max_fit: int | None, start: int = 0) -> float | None:
-    """``t0`` of ``v = c + b t + k max(t - t0, 0)^2`` along ``v[p]``'s direction, fitted from the rest to ``p``."""
+    """``t0`` of ``v = c + b t + k max(t - t0, 0)^2 + k2 max(t - t0, 0)^3`` along ``v[p]``'s direction, fitted from
+    the rest to ``p``: the model differentiated, ``dv = b + 2 k (t - t0) + 3 k2 (t - t0)^2`` (per sample), is
+    fitted to the sample-to-sample differences of ``v`` (the acceleration, whose noise is white; ``v`` is its
+    running sum, whose noise is a random walk that an ordinary least-squares fit of ``v`` itself weights as if it
+    were white, so that a slow wander of the integrated noise passed for the flank: issue 31)."""
     speed = float(np.linalg.norm(v[p]))
     if p < 3 or speed <= 0:
         return None
     lo = max(int(start), 0 if max_fit is None else p - int(max_fit))
-    if p - lo < 3:
+    if p - lo < 4:
         return None
-    y = v[lo : p + 1] @ (v[p] / speed)
-    return hinge_fit(np.arange(lo, p + 1, dtype=float), y, 2, drift=True, curvature=True)
+    dv = np.diff(v[lo : p + 1] @ (v[p] / speed))  # dv[i] spans samples lo + i .. lo + i + 1
+    return hinge_fit(np.arange(lo, p, dtype=float) + 0.5, dv, 1, curvature=True)

@@ -92,6 +92,9 @@ class HandParams:
         before the speed reaches ``velocity_level_mps`` (a 6-s reach needs about 1 s; a daily-life rest can
         be hours long, and the fit's cost grows with the square of its length: 10 s made a day's phases step
         1.6x slower than 4 s, with the same held-out segmentation figures).
+    speed_reach_s: the velocity before an onset is integrated this far (s) into the phase (at least
+        ``flank_search_s``), so that a slow start reaches ``velocity_level_mps`` for its speed flank (a 6-s reach
+        needs 1.5 s; 0.6 s left 56 of 1200 stroke-slow onsets without a flank, 0.115 s late on average: issue 31).
     rest_check_s: a slow last part of a phase at ``velocity_level_mps`` or more with next to no acceleration
         extends the offset when the velocity relative to the rest window stays under half that speed for this
         long (s) after the window (the window is a rest, not a hand cruising or drifting); 0: off.
@@ -119,6 +122,7 @@ class HandParams:
     max_extrapolation_s: float = 0.3
     speed_fit_s: float = 4.0
     rest_check_s: float = 1.5
+    speed_reach_s: float = 2.0
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:
@@ -303,8 +307,8 @@ def _slow_tail_end(acc, gyr, dt, post, lo, end, stop, params: HandParams, rate_h
 
     A window counts as a rest only when the velocity integrated forward from it stays under half
     ``velocity_level_mps`` for ``rest_check_s`` (up to ``stop``): a window in a slow tail or in a rest's drift
-    moves at a few cm/s and the hand slows or speeds up after it. The first such window from ``post`` on (in
-    steps of half a window) is the rest; the last time before it that the speed integrated back from it
+    moves at a few cm/s and the hand slows or speeds up after it. Only ``post`` is tried (searching later windows
+    until one verifies extends phases into a rest's drift: issue 31); the last time before it that the speed integrated back from it
     reaches ``velocity_level_mps`` is motion, and the offset moves to where that speed flank reaches zero
     (:func:`~imulog.process.segmentation.flanks.first_motion`, time reversed). ``lo``: where the velocity
     integration may start (inside the phase)."""
@@ -326,6 +330,49 @@ def _slow_tail_end(acc, gyr, dt, post, lo, end, stop, params: HandParams, rate_h
     if z is None:
         return end
     return max(end, lo + m - int(np.ceil(z)))
+
+
+def _offset(acc, gyr, dt, post, lo: int, b0: int, stop: int, params: HandParams, rate_hz: float) -> int:
+    """Offset (exclusive sample index) of the phase whose gyroscope offset is ``b0``, with the rest window ``post``
+    after it (steps 5-8 of the module docstring); ``b0`` without a usable window. ``lo``: where the velocity
+    integration may start (inside the phase); ``stop``: the next phase's guard."""
+    length = post[1] - post[0] if post is not None else 0
+    quiet = max(1, int(round(params.quiet_s * rate_hz)))
+    min_run = max(1, int(round(params.min_run_s * rate_hz)))
+    for _ in range(3):  # a "rest" the hand still accelerates into is none: the next still window after it
+        if post is None or post[0] <= b0:
+            break
+        a_all, v_all, noise = gravity_free(acc, gyr, dt, post, lo, post[0])
+        a, v = a_all[b0 - lo :], v_all[b0 - lo :]
+        level = max(params.n_sigma * noise, params.min_level_mps2)
+        an, vn = np.linalg.norm(a, axis=1), np.linalg.norm(v, axis=1)
+        if not sustained(an > level, min_run)[-quiet:].any():
+            break
+        later = _still_window(acc, post[1], stop, length, length, False, 0.5 * params.n_sigma)
+        if later is None or later[0] <= post[0]:
+            break
+        post = later
+    if post is None or post[0] <= b0:
+        return b0
+    end = b0
+    j = _extend_offset(
+        an,
+        vn,
+        0,
+        level,
+        params.velocity_level_mps,
+        quiet,
+        int(round(params.continuation_s * rate_hz)),
+        params.continuation_n_level * level,
+        min_run,
+        params.cruise_velocity_mps,
+        params.bridge_n_level,
+    )
+    if 0 < j <= int(round(params.max_shift_s * rate_hz)):
+        end = b0 + j
+    m = len(a_all)  # the offset's flank, time reversed: from the rest into the phase
+    end = lo + m - _extrapolated(a_all[::-1], v_all[::-1], m - (end - lo), m - (b0 - lo), level, params, rate_hz)
+    return _slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz)
 
 
 def cutoff_params(params: HandParams) -> BoundaryParams:
@@ -388,57 +435,14 @@ def refine_with_accelerometer(
         a0, b0 = int(ss[k]), int(ee[k])
         prev_end = int(out_e[k - 1]) if k > 0 else first
         next_start = int(ss[k + 1]) if k + 1 < len(ss) else n
-        n_next = min(next_start, n) - guard
         post = _still_window(acc, b0 + guard, min(next_start, n) - guard, length, reach, False, 0.5 * params.n_sigma)
         pre = _still_window(acc, prev_end + guard, a0 - guard, length, reach, True, 0.5 * params.n_sigma)
         inside = int(round(params.flank_search_s * rate_hz))  # the flank can lie inside the gyroscope's phase
         lo = max(a0, b0 - inside)
-        for _ in range(3):  # a "rest" the hand still accelerates into is none: the next still window after it
-            if post is None or post[0] <= b0:
-                break
-            a_all, v_all, noise = gravity_free(acc, gyr, dt, post, lo, post[0])
-            a, v = a_all[b0 - lo :], v_all[b0 - lo :]
-            level = max(params.n_sigma * noise, params.min_level_mps2)
-            an, vn = np.linalg.norm(a, axis=1), np.linalg.norm(v, axis=1)
-            if not sustained(an > level, min_run)[-quiet:].any():
-                break
-            later = _still_window(acc, post[1], min(next_start, n) - guard, length, length, False, 0.5 * params.n_sigma)
-            if later is None or later[0] <= post[0]:
-                break
-            post = later
-        if post is not None and post[0] > b0:
-            cont_level = params.continuation_n_level * level
-            j = _extend_offset(
-                an,
-                vn,
-                0,
-                level,
-                params.velocity_level_mps,
-                quiet,
-                cont,
-                cont_level,
-                min_run,
-                params.cruise_velocity_mps,
-                params.bridge_n_level,
-            )
-            if 0 < j <= shift:
-                out_e[k] = b0 + j
-            m = len(a_all)  # the offset's flank, time reversed: from the rest into the phase
-            out_e[k] = (
-                lo
-                + m
-                - _extrapolated(
-                    a_all[::-1],
-                    v_all[::-1],
-                    m - (int(out_e[k]) - lo),
-                    m - (b0 - lo),
-                    level,
-                    params,
-                    rate_hz,
-                )
-            )
-            out_e[k] = _slow_tail_end(acc, gyr, dt, post, lo, int(out_e[k]), n_next, params, rate_hz)
-        hi = max(a0, min(int(out_e[k]), a0 + inside))
+        stop = min(next_start, n) - guard
+        out_e[k] = _offset(acc, gyr, dt, post, lo, b0, stop, params, rate_hz)
+        reach_in = int(round(params.speed_reach_s * rate_hz))  # a slow start reaches the speed level late
+        hi = max(a0, min(int(out_e[k]), a0 + max(inside, reach_in)))
         for _ in range(3):  # likewise before the onset
             if pre is None or pre[1] >= a0:
                 break
