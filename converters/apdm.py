@@ -37,8 +37,11 @@ capped at ``READER_MEMORY_BYTES`` (1 GiB), which bounds memory (:mod:`imulog.con
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from pathlib import Path
 
+from imulog.converters import _h5pieces
+from imulog.converters._binary import concat_chunks
 from imulog.converters._common import (
     head_lines,
     text_head_lines,
@@ -57,6 +60,7 @@ from imulog.converters.apdm_h5 import (
     H5Sensor,
     _is_apdm_h5,
     h5_sensors,
+    iter_apdm_h5,
     read_apdm_h5,
 )
 from imulog.converters.base import Converter, ConvertOptions
@@ -102,17 +106,24 @@ class ApdmConverter(Converter):
         return 0.0
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
+        return concat_chunks(self._pieces(Path(path), options, None))
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        return self._pieces(Path(path), options, _h5pieces.PIECE_BYTES)
+
+    def _pieces(self, path: Path, options: ConvertOptions | None, piece_bytes: int | None) -> Iterator[Recording]:
         options = options or ConvertOptions()
         names = {k.upper(): v for k, v in (options.extra.get("names") or {}).items()}
-        path = Path(path)
         with open(path, "rb") as fh:
             magic = fh.read(8)
         if magic == HDF5_MAGIC:
-            return read_apdm_h5(path, names)
+            yield from iter_apdm_h5(path, names, piece_bytes)
+            return
         lines = head_lines(path, max_lines=8)
         if lines[0].startswith("Format="):
-            return read_format7(path, lines, names)
-        return read_labelled_csv(path, lines, names)
+            yield read_format7(path, lines, names)
+            return
+        yield read_labelled_csv(path, lines, names)
 
 
 CONVERTER = ApdmConverter()

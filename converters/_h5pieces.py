@@ -1,0 +1,58 @@
+"""HDF5 recordings in row ranges: what the three h5py readers (APDM ``.h5``, BROAD, OpenSignals ``.h5``) share.
+
+h5py (the HDF5 C library) runs in a guarded child process (time and memory limit,
+:mod:`imulog.converters._guard`). A reader first scans the file in one child (names, shapes, attributes, declared
+sizes against storage, and what only the whole file decides, read in slices of :data:`SCAN_ROWS` rows: time
+checks, the median step, event runs), then reads each piece's rows in a child of its own, so a hostile file ends
+in one line and the parent holds one piece at a time. The whole file is the one-piece case (``piece_bytes=None``:
+one row range).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+
+#: bytes of samples (float64 values of every data set a piece reads) per piece when a file is converted in pieces
+PIECE_BYTES = 16 * 1024 * 1024
+#: rows a scan reads at a time (its memory in the guarded child)
+SCAN_ROWS = 1 << 20
+
+
+def row_ranges(n: int, row_bytes: int, piece_bytes: int | None) -> list[tuple[int, int]]:
+    """Consecutive ``[start, stop)`` row ranges covering ``n`` rows, each about ``piece_bytes`` of rows of
+    ``row_bytes`` bytes; one range for ``piece_bytes=None`` (the whole file) or an empty file."""
+    if piece_bytes is None or n <= 0:
+        return [(0, max(n, 0))]
+    step = max(1, int(piece_bytes) // max(1, int(row_bytes)))
+    return [(a, min(n, a + step)) for a in range(0, n, step)]
+
+
+def scan_slices(n: int, rows: int = SCAN_ROWS) -> Iterator[slice]:
+    """Slices of at most ``rows`` rows covering ``n`` rows (how a scan reads a long data set in bounded memory)."""
+    for a in range(0, n, rows):
+        yield slice(a, min(n, a + rows))
+
+
+def true_runs(pieces: Iterator[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(first, last) row of every run of True in a boolean mask given in consecutive pieces (runs that cross a
+    piece border are one run)."""
+    starts: list[np.ndarray] = []
+    ends: list[np.ndarray] = []
+    prev, offset = False, 0
+    for m in pieces:
+        m = np.asarray(m, dtype=bool).reshape(-1)
+        if not len(m):
+            continue
+        d = np.diff(np.concatenate([[prev], m]).astype(np.int8))
+        starts.append(np.nonzero(d == 1)[0] + offset)
+        ends.append(np.nonzero(d == -1)[0] + offset - 1)
+        prev, offset = bool(m[-1]), offset + len(m)
+    if prev:
+        ends.append(np.array([offset - 1]))
+    empty = np.zeros(0, dtype=np.int64)
+    return (
+        np.concatenate(starts).astype(np.int64) if starts else empty,
+        np.concatenate(ends).astype(np.int64) if ends else empty,
+    )
