@@ -10,9 +10,12 @@ one row range).
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import numpy as np
+
+from imulog.model import Recording
 
 #: bytes of samples (float64 values of every data set a piece reads) per piece when a file is converted in pieces
 PIECE_BYTES = 16 * 1024 * 1024
@@ -56,3 +59,17 @@ def true_runs(pieces: Iterator[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         np.concatenate(starts).astype(np.int64) if starts else empty,
         np.concatenate(ends).astype(np.int64) if ends else empty,
     )
+
+
+def declared_spans(first: Recording, last_ns: Callable[[str], int]) -> dict[str, Any]:
+    """The ``imulog.pieces`` declaration (:data:`imulog.model.PIECES_RECORD`) of a reader whose scan knows every
+    stream's last time: ``spans``, topic -> [its first time in the first piece, ``last_ns(topic)``] (intervals: their
+    first start and last end). ``imulog convert`` takes the recording's length from it (the viewer twins' budget)."""
+    spans: dict[str, list[int] | None] = {}
+    for s in first.streams():
+        t = getattr(s, "t_ns", None)
+        if t is None:
+            spans[s.topic] = [int(np.min(s.start_ns)), int(np.max(s.end_ns))] if len(s.start_ns) else None
+        elif len(t):
+            spans[s.topic] = [int(t[0]), int(last_ns(s.topic))]
+    return {"spans": spans}

@@ -14,13 +14,13 @@ from typing import Any
 
 import numpy as np
 from imulog.converters._binary import concat_chunks
-from imulog.converters._h5pieces import PIECE_BYTES, row_ranges, scan_slices
+from imulog.converters._h5pieces import PIECE_BYTES, declared_spans, row_ranges, scan_slices
 from imulog.converters._lab import ORIENTATION_TOPIC, orientation_stream, trial_start
 from imulog.converters.apdm_csv import Sensor, _name
 from imulog.converters.bounds import check_epoch_array, check_h5_size, read_h5
 from imulog.converters.errors import ConversionError
 
-from imulog.model import ImuStream, Recording, SignalStream
+from imulog.model import PIECES_RECORD, ImuStream, Recording, SignalStream
 from imulog.numeric import add_counts, median_of_counts
 
 HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
@@ -117,6 +117,7 @@ class SensorLayout:
     quantities: list[str]
     rate_hz: float | None
     us0: int
+    us_last: int
 
 
 def read_apdm_h5(path: Path, names: dict[str, str]) -> Recording:
@@ -164,6 +165,9 @@ def iter_apdm_h5(path: Path, names: dict[str, str], piece_bytes: int | None = PI
                 rec.signals.append(orientation_stream(s.name, t_ns, data["orientation"]))
             rec.metadata[f"imulog.device.{s.name}"] = meta
         rec.metadata["imulog.trial"] = dict(trial)
+        if a == 0:  # every stream's span, known from the scan (the time axis and the recording's length)
+            last = {s.name: s.us_last * 1000 for s in sensors}
+            rec.metadata[PIECES_RECORD] = declared_spans(rec, lambda topic, last=last: last[topic.rsplit("/", 1)[1]])
         yield rec
 
 
@@ -242,7 +246,7 @@ def _scan(f: Any, path: Path, names: dict[str, str]) -> tuple[str, list[SensorLa
     for sensor in sensors:
         where = sensor.paths["time"].rsplit("/", 1)[0]
         try:
-            n, us0, steps, quantities = _scan_sensor(f, path, sensor, where)
+            n, us0, us_last, steps, quantities = _scan_sensor(f, path, sensor, where)
         except (KeyError, OSError, RuntimeError, TypeError, ValueError) as e:
             if isinstance(e, ConversionError):
                 raise
@@ -257,12 +261,13 @@ def _scan(f: Any, path: Path, names: dict[str, str]) -> tuple[str, list[SensorLa
         else:
             step = median_of_counts(steps)
             rate = 1e9 / step if step is not None and step > 0 else None  # as estimate_rate_hz of every time
-        out.append(SensorLayout(sensor, n, name, quantities, rate, us0))
+        out.append(SensorLayout(sensor, n, name, quantities, rate, us0, us_last))
     return layout, out
 
 
-def _scan_sensor(f: Any, path: Path, sensor: H5Sensor, where: str) -> tuple[int, int, dict[int, int], list[str]]:
-    """(samples, first time in us, step counts in ns when the file gives no rate, quantities present) of one sensor."""
+def _scan_sensor(f: Any, path: Path, sensor: H5Sensor, where: str) -> tuple[int, int, int, dict[int, int], list[str]]:
+    """(samples, first and last time in us, step counts in ns when the file gives no rate, quantities present) of
+    one sensor."""
     tpath = sensor.paths["time"]
     if tpath not in f:
         raise ConversionError(path, f"{tpath} is missing")
@@ -304,7 +309,7 @@ def _scan_sensor(f: Any, path: Path, sensor: H5Sensor, where: str) -> tuple[int,
         if sensor.rate is None:
             add_counts(steps, d * 1000)
         prev = int(us[-1])
-    return n, us0, steps, quantities
+    return n, us0, int(prev), steps, quantities
 
 
 def _rows(f: Any, path: Path, sensors: list[SensorLayout], a: int, b: int) -> dict[str, tuple[np.ndarray, dict]]:

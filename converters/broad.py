@@ -23,12 +23,12 @@ from pathlib import Path
 import numpy as np
 from imulog.converters import _h5pieces
 from imulog.converters._binary import concat_chunks
-from imulog.converters._h5pieces import PIECE_BYTES, row_ranges, scan_slices, true_runs
+from imulog.converters._h5pieces import PIECE_BYTES, declared_spans, row_ranges, scan_slices, true_runs
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.bounds import check_h5_size, read_h5
 from imulog.converters.errors import ConversionError
 
-from imulog.model import ImuStream, Intervals, PoseStream, Recording
+from imulog.model import PIECES_RECORD, ImuStream, Intervals, PoseStream, Recording
 from imulog.numeric import finite_rows
 
 HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
@@ -200,6 +200,9 @@ def iter_broad(path: Path, name: str = "imu", piece_bytes: int | None = PIECE_BY
                     labels=["movement"] * len(first),
                 )
             )
+        if a == 0:  # every stream's span, known from the scan (the time axis and the recording's length)
+            last = int(np.round((n - 1) * (1e9 / rate)))
+            rec.metadata[PIECES_RECORD] = declared_spans(rec, lambda topic, last=last: last)
         yield rec
 
 

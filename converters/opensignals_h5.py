@@ -20,13 +20,14 @@ from pathlib import Path
 import numpy as np
 from imulog.converters import _h5pieces
 from imulog.converters._binary import concat_chunks
-from imulog.converters._h5pieces import PIECE_BYTES, row_ranges
+from imulog.converters._common import sanitize_name
+from imulog.converters._h5pieces import PIECE_BYTES, declared_spans, row_ranges
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.bounds import check_h5_size, read_h5
 from imulog.converters.errors import ConversionError
 from imulog.converters.opensignals import _SeqCarry, device_streams
 
-from imulog.model import Recording
+from imulog.model import PIECES_RECORD, Recording
 
 _MAC = re.compile(r"^[0-9A-Fa-f]{2}(:[0-9A-Fa-f]{2}){5}$")
 MAX_SAMPLES = 1 << 31
@@ -182,6 +183,9 @@ def iter_opensignals_h5(
             )
             if target is not rec:
                 rec.warnings.extend(target.warnings)
+        if a == 0:  # every stream's span, known from the layout (the time axis and the recording's length)
+            last = {sanitize_name(f"opensignals_{d[0]}"): round((d[6] - 1) * (1e9 / d[4])) for d in devices}
+            rec.metadata[PIECES_RECORD] = declared_spans(rec, lambda topic, last=last: last[topic.rsplit("/", 1)[1]])
         yield rec
 
 
