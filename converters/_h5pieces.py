@@ -11,7 +11,8 @@ one row range).
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from typing import Any
+from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -73,3 +74,45 @@ def declared_spans(first: Recording, last_ns: Callable[[str], int]) -> dict[str,
         elif len(t):
             spans[s.topic] = [int(t[0]), int(last_ns(s.topic))]
     return {"spans": spans}
+
+
+class H5Messages(NamedTuple):
+    """How a reader words h5py's failures: ``opened`` when the file cannot be opened (``open_errors``), ``damaged``
+    when reading it raises one of ``errors`` (both with ``{e}``, the error's text)."""
+
+    opened: str
+    damaged: str
+    open_errors: tuple[type[BaseException], ...]
+    errors: tuple[type[BaseException], ...]
+
+
+def guarded_h5(
+    path: Path, fn: Callable[..., Any], *args: Any, words: H5Messages, timeout_s: float, memory_bytes: int
+) -> Any:
+    """``fn(open h5py file, path, *args)`` in a guarded child (:func:`imulog.converters._guard.guarded_reader`):
+    its ConversionErrors come back unchanged, h5py's errors on a damaged file as ``words`` say, a hang, crash or
+    runaway allocation as one line naming h5py."""
+    from imulog.converters._guard import guarded_reader
+
+    return guarded_reader(path, "h5py", _in_file, path, fn, args, words, timeout_s=timeout_s, memory_bytes=memory_bytes)
+
+
+def _in_file(path: Path, fn: Callable[..., Any], args: tuple, words: H5Messages) -> Any:
+    """``fn(f, path, *args)`` on the open file (runs in the guarded child)."""
+    from imulog.converters.errors import ConversionError
+
+    try:
+        import h5py
+    except ImportError:  # pragma: no cover - h5py is in the hdf5 extra
+        raise ConversionError(path, "reading HDF5 needs h5py: pip install 'imulog[hdf5]'") from None
+    try:
+        f = h5py.File(path, "r")
+    except words.open_errors as e:
+        raise ConversionError(path, words.opened.format(e=e)) from None
+    try:
+        with f:
+            return fn(f, path, *args)
+    except ConversionError:
+        raise
+    except words.errors as e:  # h5py reports damaged b-trees, heaps and chunks so, often only when data is read
+        raise ConversionError(path, words.damaged.format(e=e)) from None

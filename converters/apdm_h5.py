@@ -14,7 +14,14 @@ from typing import Any
 
 import numpy as np
 from imulog.converters._binary import concat_chunks
-from imulog.converters._h5pieces import PIECE_BYTES, declared_spans, row_ranges, scan_slices
+from imulog.converters._h5pieces import (
+    PIECE_BYTES,
+    H5Messages,
+    declared_spans,
+    guarded_h5,
+    row_ranges,
+    scan_slices,
+)
 from imulog.converters._lab import ORIENTATION_TOPIC, orientation_stream, trial_start
 from imulog.converters.apdm_csv import Sensor, _name
 from imulog.converters.bounds import check_epoch_array, check_h5_size, read_h5
@@ -204,32 +211,18 @@ def _trial(path: Path, starts: list[tuple[int, Any]]) -> dict[str, Any]:
     return trial_start(start, f"{path.name}: {source}")
 
 
+#: how h5py's failures on an APDM file are worded
+WORDS = H5Messages(
+    opened="not a readable HDF5 file (cut off or damaged?): {e}",
+    damaged="damaged HDF5 file: {e}",
+    open_errors=(OSError,),
+    errors=(OSError, RuntimeError, KeyError, TypeError, ValueError),
+)
+
+
 def _guarded(path: Path, fn, *args):
     """``fn(open file, path, *args)`` in the guarded child (the module's time and memory limits)."""
-    from imulog.converters._guard import guarded_reader
-
-    return guarded_reader(
-        path, "h5py", _in_file, path, fn, *args, timeout_s=READER_TIMEOUT_S, memory_bytes=READER_MEMORY_BYTES
-    )
-
-
-def _in_file(path: Path, fn, *args):
-    """``fn(f, path, *args)`` on the open file, h5py's errors on a damaged file as one line (in the child)."""
-    try:
-        import h5py
-    except ImportError:  # pragma: no cover - h5py is in the hdf5 extra
-        raise ConversionError(path, "reading APDM HDF5 needs h5py: pip install 'imulog[hdf5]'") from None
-    try:
-        f = h5py.File(path, "r")
-    except OSError as e:
-        raise ConversionError(path, f"not a readable HDF5 file (cut off or damaged?): {e}") from None
-    try:
-        with f:
-            return fn(f, path, *args)
-    except ConversionError:
-        raise
-    except (OSError, RuntimeError, KeyError, TypeError, ValueError) as e:  # h5py on a damaged file
-        raise ConversionError(path, f"damaged HDF5 file: {e}") from None
+    return guarded_h5(path, fn, *args, words=WORDS, timeout_s=READER_TIMEOUT_S, memory_bytes=READER_MEMORY_BYTES)
 
 
 def _scan(f: Any, path: Path, names: dict[str, str]) -> tuple[str, list[SensorLayout]]:

@@ -23,7 +23,15 @@ from pathlib import Path
 import numpy as np
 from imulog.converters import _h5pieces
 from imulog.converters._binary import concat_chunks
-from imulog.converters._h5pieces import PIECE_BYTES, declared_spans, row_ranges, scan_slices, true_runs
+from imulog.converters._h5pieces import (
+    PIECE_BYTES,
+    H5Messages,
+    declared_spans,
+    guarded_h5,
+    row_ranges,
+    scan_slices,
+    true_runs,
+)
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.bounds import check_h5_size, read_h5
 from imulog.converters.errors import ConversionError
@@ -100,32 +108,19 @@ def _rows(f, path: Path, keys: list[str], a: int, b: int) -> dict[str, np.ndarra
     return {k: read_h5(path, f[k], k, dtype=np.float64, rows=slice(a, b)) for k in keys}
 
 
-def _in_file(path: Path, fn, *args):
-    """``fn(open file, path, *args)`` with h5py's errors on a damaged file as one line (runs in the guarded child)."""
-    import h5py
-
-    try:
-        f = h5py.File(path, "r")
-    except Exception as e:  # noqa: BLE001 - h5py raises OSError variants for corrupt files
-        raise ConversionError(path, f"corrupt HDF5: {e}") from None
-    try:
-        with f:
-            return fn(f, path, *args)
-    except ConversionError:
-        raise
-    except (OSError, RuntimeError, KeyError, ValueError, TypeError, IndexError) as e:
-        # h5py reports damaged b-trees, heaps and chunks as any of these, often only when data is read
-        raise ConversionError(path, f"damaged HDF5 file ({e})") from None
+#: how h5py's failures on a BROAD file are worded
+WORDS = H5Messages(
+    opened="corrupt HDF5: {e}",
+    damaged="damaged HDF5 file ({e})",
+    open_errors=(Exception,),
+    errors=(OSError, RuntimeError, KeyError, ValueError, TypeError, IndexError),
+)
 
 
 def _guarded(path: Path, fn, *args):
-    from imulog.converters._guard import guarded_reader
-
     # h5py in a guarded child process (time and memory limit): a hostile file that hangs or crashes the HDF5
     # library ends in one line
-    return guarded_reader(
-        path, "h5py", _in_file, path, fn, *args, timeout_s=READER_TIMEOUT_S, memory_bytes=READER_MEMORY_BYTES
-    )
+    return guarded_h5(path, fn, *args, words=WORDS, timeout_s=READER_TIMEOUT_S, memory_bytes=READER_MEMORY_BYTES)
 
 
 def iter_broad(path: Path, name: str = "imu", piece_bytes: int | None = PIECE_BYTES) -> Iterator[Recording]:
