@@ -169,12 +169,20 @@ def _convert(src: Path, out: Path, monkeypatch, piece_bytes: int | None) -> tupl
         ("late_backwards", "/Sensors/XI-000203/Time does not increase at sample 2999"),
         ("late_epoch", "/Sensors/XI-010203/Time sample 2400: "),
         ("late_nan", "non-finite IMU value at sample 2950"),
+        ("apdm_rows", "/Sensors/1234/Time declares shape (2000000000,)"),  # tests/test_hostile_devices.py's files
+        ("broad_rows", "imu_acc declares shape (2000000000, 3)"),
     ],
 )
 def test_damage_late_in_the_file_fails_with_the_whole_files_error(damage, message, tmp_path, monkeypatch):
     """What the whole file's checks find in its last rows fails before the first piece is written, with the same
-    one line, and no archive is left."""
-    if damage == "late_nan":
+    one line, and no archive is left; so does a data set declaring 2e9 rows it does not store."""
+    if damage.endswith("_rows"):
+        from test_hostile_devices import _apdm_h5, _broad_rows
+
+        src = (
+            _apdm_h5(tmp_path / "a.h5", rows=2_000_000_000) if damage == "apdm_rows" else _broad_rows(tmp_path / "b.h5")
+        )
+    elif damage == "late_nan":
         src = tmp_path / "b.hdf5"
         with h5py.File(src, "w") as f:
             f.attrs["sampling_rate"] = 100.0
