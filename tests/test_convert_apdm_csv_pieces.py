@@ -21,3 +21,15 @@ def test_apdm_csv_pieces_write_the_whole_files_archive(name, piece_bytes, shared
     src = shared_data / "devices" / "apdm_csv" / name
     whole, pieces = convert_twice(src, tmp_path, (TEXT, piece_bytes), monkeypatch)
     assert_same_trial(whole, pieces)
+
+
+@pytest.mark.parametrize(("name", "piece_bytes"), CASES)
+def test_pieces_joined_are_the_whole_recording(name, piece_bytes, shared_data, monkeypatch):
+    from imulog.converters.registry import get
+    from test_convert_pieces import _pieces_equal_whole
+
+    src = shared_data / "devices" / "apdm_csv" / name
+    conv = get("apdm")
+    whole = conv.convert(src)
+    monkeypatch.setattr(TEXT, piece_bytes)
+    _pieces_equal_whole(list(conv.iter_chunks(src)), whole)

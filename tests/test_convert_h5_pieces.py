@@ -207,3 +207,26 @@ def test_damage_late_in_the_file_fails_with_the_whole_files_error(damage, messag
         assert code != 0 and message in output and not out.exists(), output
         lines.append(output.strip().splitlines()[-1])
     assert lines[0] == lines[1] and len(lines[0].splitlines()) == 1
+
+
+@pytest.mark.parametrize("kind", ["broad", "apdm", "opensignals"])
+def test_pieces_joined_are_the_whole_recording(kind, shared_data, tmp_path, monkeypatch):
+    """The reader's own pieces, joined (``concat_chunks``), are its whole-file Recording: streams bit for bit,
+    warnings, metadata (the ``imulog.pieces`` declaration dropped) and sources."""
+    from imulog.converters.registry import get
+    from test_convert_pieces import _pieces_equal_whole
+
+    if kind == "broad":
+        src, name = shared_data / "broad" / f"{BROAD[1]}.hdf5", "broad-hdf5"
+    elif kind == "apdm":
+        src, name = tmp_path / "apdm.h5", "apdm"
+        write_apdm(src)
+    else:
+        src, name = tmp_path / "opensignals_000780.h5", "opensignals-h5"
+        write_opensignals(src)
+    conv = get(name)
+    whole = conv.convert(src)
+    monkeypatch.setattr(PIECES, 1 << 16)
+    pieces = list(conv.iter_chunks(src))
+    assert "imulog.pieces" in pieces[0].metadata
+    _pieces_equal_whole(pieces, whole)

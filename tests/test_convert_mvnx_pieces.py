@@ -107,3 +107,13 @@ def test_mvnx_memory_is_one_piece_not_the_file(tmp_path):
     n_long, peak_long = _peak_bytes(long, 200)
     assert (n_short, n_long) == (2000, 8000)
     assert peak_long < 1.15 * peak_short, (peak_short, peak_long)
+
+
+def test_pieces_joined_are_the_whole_recording(tmp_path):
+    from imulog.converters.mvnx import iter_mvnx, read_mvnx
+    from test_convert_pieces import _pieces_equal_whole
+
+    src = tmp_path / "reach-001.mvnx"
+    write_mvnx(src, n=500)
+    names = {"RightForeArm": "wrist"}
+    _pieces_equal_whole(list(iter_mvnx(src, names=names, piece_frames=64)), read_mvnx(src, names=names))
