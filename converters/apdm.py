@@ -94,6 +94,9 @@ class ApdmConverter(Converter):
     description = "APDM Opal: labelled CSV (Label/Quantity/Axis + units row), Mobility Lab Format=7 CSV, HDF5 (.h5)"
     extensions = (".csv", ".h5")
     example = "imulog convert ../shared/data/devices/apdm_csv/imuData01.csv -o apdm.mcap"
+    #: HDF5 row ranges of one size; CSV pieces of 16 MiB of text cut at a line, nearly one size: freed temporaries
+    #: are reused (an hour of APDM .h5 in pieces: 2.9 s of CPU instead of 6.4-7.6 with bound_heap)
+    fixed_pieces = True
 
     def sniff(self, path: Path, head: bytes) -> float:
         if head.startswith(HDF5_MAGIC):

@@ -211,6 +211,7 @@ class BroadConverter(Converter):
     description = "BROAD benchmark trial (HDF5: IMU acc/gyr/mag + optical position and orientation) via h5py"
     extensions = (".hdf5", ".h5")
     example = "imulog convert 02_undisturbed_slow_rotation_B.hdf5 -o trial.mcap"
+    fixed_pieces = True  # row ranges of one size (the last shorter): freed temporaries are reused
 
     def sniff(self, path: Path, head: bytes) -> float:
         if not head.startswith(HDF5_MAGIC):

@@ -311,6 +311,7 @@ class MvnxConverter(Converter):
     description = "Xsens MVN .mvnx (XML v4): segment poses, sensor orientation + free acceleration, joint angles"
     extensions = (".mvnx",)
     example = "imulog convert walk.mvnx -o walk.mcap"
+    fixed_pieces = True  # pieces of PIECE_FRAMES frames: freed temporaries are reused
 
     def sniff(self, path: Path, head: bytes) -> float:
         text = head[:4096].decode("utf-8", "replace")

@@ -131,7 +131,7 @@ def iter_opensignals_h5(
 ) -> Iterator[Recording]:
     """The file's devices in pieces of about ``piece_bytes`` of samples (None: one piece), read by h5py in child
     processes under a time and memory limit (:mod:`imulog.converters._guard`): the layout in one, each piece's rows
-    in another; the same streams as the text reader's (the lost-sample warnings with each device's last piece)."""
+    in another; the same streams as the text reader's (the warnings about the whole recording with the last piece)."""
     try:
         import h5py  # noqa: F401
     except ImportError:
@@ -194,6 +194,7 @@ class OpenSignalsH5Converter(Converter):
     description = "OpenSignals/BITalino .h5 (<MAC>/raw/channel_N; needs h5py): as the text file"
     extensions = (".h5",)
     example = "imulog convert opensignals_000780.h5 -o bitalino.mcap"
+    fixed_pieces = True  # row ranges of one size (the last shorter): freed temporaries are reused
 
     def sniff(self, path: Path, head: bytes) -> float:
         if not head.startswith(b"\x89HDF\r\n\x1a\n") or Path(path).suffix.lower() not in (".h5", ".hdf5"):
