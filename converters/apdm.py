@@ -95,7 +95,7 @@ class ApdmConverter(Converter):
     extensions = (".csv", ".h5")
     example = "imulog convert ../shared/data/devices/apdm_csv/imuData01.csv -o apdm.mcap"
     #: HDF5 row ranges of one size; CSV pieces of 16 MiB of text cut at a line, nearly one size: freed temporaries
-    #: are reused (an hour of APDM .h5 in pieces: 2.9 s of CPU instead of 6.4-7.6 with bound_heap)
+    #: are reused (CPU of an hour in pieces about halved: docs/converters.md, benchmarks/bench_convert_pieces.py)
     fixed_pieces = True
 
     def sniff(self, path: Path, head: bytes) -> float:
