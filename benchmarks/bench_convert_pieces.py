@@ -22,6 +22,11 @@ The lab and device text exports (Motive, Qualisys, TRC, ``.sto``, Delsys, Empati
 written by ``lab_text_files.py``) likewise:
 
     .venv/bin/python benchmarks/bench_convert_pieces.py --formats motive,qualisys,trc,sto,delsys,e4,actilife-epoch --hours 1
+
+And for the HDF5 readers and MVNX (files written with h5py / as XML): the guarded h5py reader processes' CPU and
+peak RSS are printed beside the command's own:
+
+    .venv/bin/python benchmarks/bench_convert_pieces.py --formats broad,apdm-h5,opensignals-h5,mvnx --hours 1
 """
 
 from __future__ import annotations
@@ -72,10 +77,13 @@ try:
     cli(["convert", sys.argv[1], "-o", sys.argv[2], "--attach-original", "never"], standalone_mode=False)
 finally:
     ru = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)  # guarded reader processes (h5py), if any
     # VmHWM: this program's own peak (ru_maxrss keeps the forking parent's peak across exec on Linux)
     hwm = [int(x.split()[1]) for x in open("/proc/self/status") if x.startswith("VmHWM:")]
     print(json.dumps({"wall_s": time.perf_counter() - t0, "cpu_s": ru.ru_utime + ru.ru_stime,
-                      "peak_mb": (hwm[0] if hwm else ru.ru_maxrss) / 1024}), file=sys.stderr)
+                      "peak_mb": (hwm[0] if hwm else ru.ru_maxrss) / 1024,
+                      "children_cpu_s": kids.ru_utime + kids.ru_stime,
+                      "children_peak_mb": kids.ru_maxrss / 1024}), file=sys.stderr)
 """
 
 
@@ -222,6 +230,119 @@ def bids_motion(folder: Path, n: int, *, seed: int = 0) -> Path:
     return motion
 
 
+def _blocks(n: int, size: int = 1 << 18):
+    """Consecutive (start, stop) row blocks covering ``n`` (the HDF5 writers write in blocks: bounded memory)."""
+    return [(a, min(n, a + size)) for a in range(0, n, size)]
+
+
+def broad_h5(path: Path, n: int, *, seed: int = 0) -> None:
+    """A BROAD trial of ``n`` samples at 285.714 Hz (h5py): IMU acc/gyr/mag, optical position (NaN rows where tracking
+    is lost) and quaternion, a movement mask in runs."""
+    import h5py
+
+    rng = np.random.default_rng(seed)
+    with h5py.File(path, "w") as f:
+        f.attrs["sampling_rate"] = 285.714
+        ds = {k: f.create_dataset(k, (n, w), "f8") for k, w in (("imu_acc", 3), ("imu_gyr", 3), ("imu_mag", 3))}
+        ds["opt_pos"] = f.create_dataset("opt_pos", (n, 3), "f8")
+        ds["opt_quat"] = f.create_dataset("opt_quat", (n, 4), "f8")
+        move = f.create_dataset("movement", (n,), "u1")
+        for a, b in _blocks(n):
+            m = b - a
+            ds["imu_acc"][a:b] = rng.normal(0, 1, (m, 3)) + [0, 0, 9.81]
+            ds["imu_gyr"][a:b] = rng.normal(0, 0.3, (m, 3))
+            ds["imu_mag"][a:b] = rng.normal(20, 5, (m, 3))
+            pos = rng.normal(0, 0.1, (m, 3))
+            pos[rng.random(m) < 0.01] = np.nan
+            ds["opt_pos"][a:b] = pos
+            q = rng.normal(0, 1, (m, 4))
+            ds["opt_quat"][a:b] = q / np.linalg.norm(q, axis=1, keepdims=True)
+            move[a:b] = (np.arange(a, b) // 2857) % 2  # 10-s runs of movement and rest
+
+
+def apdm_h5(path: Path, n: int, *, seed: int = 0) -> None:
+    """An APDM Opal format-5 file of ``n`` samples at 128 Hz (h5py): one sensor with Time, accelerometer, gyroscope,
+    magnetometer, temperature, barometer and the orientation estimate."""
+    import h5py
+
+    rng = np.random.default_rng(seed)
+    with h5py.File(path, "w") as f:
+        g = f.create_group("Sensors/XI-010203")
+        cfg = g.create_group("Configuration")
+        cfg.attrs["Label 0"] = b"Right Wrist"
+        cfg.attrs["Sample Rate"] = np.uint16(128)
+        cfg.attrs["Timezone Offset"] = 1.0
+        time = g.create_dataset("Time", (n,), "u8")
+        ds = {k: g.create_dataset(k, (n, 3), "f8") for k in ("Accelerometer", "Gyroscope", "Magnetometer")}
+        temp, baro = g.create_dataset("Temperature", (n,), "f8"), g.create_dataset("Barometer", (n,), "f8")
+        ori = f.create_group("Processed/XI-010203").create_dataset("Orientation", (n, 4), "f8")
+        for a, b in _blocks(n):
+            m = b - a
+            time[a:b] = 1_600_000_000_000_000 + np.arange(a, b, dtype=np.uint64) * 7812
+            ds["Accelerometer"][a:b] = rng.normal(0, 1, (m, 3)) + [0, 0, 9.81]
+            ds["Gyroscope"][a:b] = rng.normal(0, 0.3, (m, 3))
+            ds["Magnetometer"][a:b] = rng.normal(20, 5, (m, 3))
+            temp[a:b] = 31 + rng.normal(0, 0.1, m)
+            baro[a:b] = 101.3 + rng.normal(0, 0.01, m)
+            q = rng.normal(0, 1, (m, 4))
+            ori[a:b] = q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def opensignals_h5(path: Path, n: int, *, seed: int = 0) -> None:
+    """An OpenSignals ``.h5`` of ``n`` samples at 1000 Hz (h5py): one BITalino, nSeq and EMG, EDA, ACC (uint16)."""
+    import h5py
+
+    rng = np.random.default_rng(seed)
+    with h5py.File(path, "w") as f:
+        g = f.create_group("00:07:80:3B:46:61")
+        for k, v in (("sampling rate", 1000), ("resolution", [4, 10, 10, 10]), ("device", "bitalino_rev")):
+            g.attrs[k] = v
+        g.attrs["date"], g.attrs["time"] = "2017-1-20", "14:40:49.587"
+        raw = g.create_group("raw")
+        seq = raw.create_dataset("nSeq", (n, 1), "u2")
+        chans = [raw.create_dataset(f"channel_{j}", (n, 1), "u2") for j in (1, 2, 3)]
+        for ch, sensor in zip(chans, ("EMG", "EDA", "ACC"), strict=True):
+            ch.attrs["sensor"] = sensor
+        for a, b in _blocks(n):
+            seq[a:b] = (np.arange(a, b) % 16).reshape(-1, 1)
+            for ch in chans:
+                ch[a:b] = rng.integers(0, 1024, (b - a, 1))
+
+
+def mvnx_xml(path: Path, n: int, *, seed: int = 0) -> None:
+    """An Xsens MVN ``.mvnx`` of ``n`` frames at 60 Hz in the MVNX 4 layout of ``tests/test_convert_mvnx.py`` (5
+    segments, 2 sensors, 4 joints); frame bodies are drawn from a pool of 1000 (their values repeat; times do not)."""
+    rng = np.random.default_rng(seed)
+    segs, sensors, joints = ["Pelvis", "T8", "RightUpperArm", "RightForeArm", "RightHand"], ["Pelvis", "Hand"], 4
+
+    def txt(a: np.ndarray) -> str:
+        return " ".join(f"{v:.6f}" for v in a.ravel())
+
+    pool = []
+    for _ in range(1000):
+        q = rng.normal(0, 1, (len(segs), 4))
+        sq = rng.normal(0, 1, (len(sensors), 4))
+        pool.append(
+            f"<orientation>{txt(q / np.linalg.norm(q, axis=1, keepdims=True))}</orientation>"
+            f"<position>{txt(rng.normal(0, 1, (len(segs), 3)))}</position>"
+            f"<sensorFreeAcceleration>{txt(rng.normal(0, 2, (len(sensors), 3)))}</sensorFreeAcceleration>"
+            f"<sensorMagneticField>{txt(rng.normal(0, 1, (len(sensors), 3)))}</sensorMagneticField>"
+            f"<sensorOrientation>{txt(sq / np.linalg.norm(sq, axis=1, keepdims=True))}</sensorOrientation>"
+            f"<jointAngle>{txt(rng.normal(0, 40, (joints, 3)))}</jointAngle></frame>\n"
+        )
+    with open(path, "w") as f:
+        f.write('<?xml version="1.0" encoding="UTF-8"?>\n<mvnx version="4" xmlns="http://www.xsens.com/mvn/mvnx">\n')
+        f.write('<mvn version="2021.0.1" build="1"/>\n<subject label="s" frameRate="60" ')
+        f.write('recDate="Tue Mar 03 14:08:49.271 2020" recDateMSecsSinceEpoch="1583240929271">\n<segments>')
+        f.write("".join(f'<segment label="{s}" id="{i}"/>' for i, s in enumerate(segs, 1)))
+        f.write("</segments>\n<sensors>" + "".join(f'<sensor label="{s}"/>' for s in sensors) + "</sensors>\n")
+        f.write("<joints>" + "".join(f'<joint label="j{k}"/>' for k in range(joints)) + "</joints>\n<frames>\n")
+        t_ms = np.round(np.arange(n) * 1000 / 60).astype(np.int64)
+        for a, b in _blocks(n, 10_000):
+            f.write("".join(f'<frame time="{t_ms[i]}" index="{i}" type="normal">{pool[i % 1000]}' for i in range(a, b)))
+        f.write("</frames>\n</subject>\n</mvnx>\n")
+
+
 #: format -> (samples per hour, how to write a file of n samples into a folder and return the path to convert)
 FORMATS = {
     "xdf": (360_000, lambda d, n: (xdf_file(d / "rec.xdf", n), d / "rec.xdf")[1]),
@@ -235,6 +356,10 @@ FORMATS = {
     ),
     "bids": (360_000, lambda d, n: bids_motion(d, n)),
     "c3d": (360_000, lambda d, n: (write_long_c3d(d / "long.c3d", n), d / "long.c3d")[1]),
+    "broad": (1_028_570, lambda d, n: (broad_h5(d / "trial.hdf5", n), d / "trial.hdf5")[1]),
+    "apdm-h5": (460_800, lambda d, n: (apdm_h5(d / "opal.h5", n), d / "opal.h5")[1]),
+    "opensignals-h5": (3_600_000, lambda d, n: (opensignals_h5(d / "opensignals.h5", n), d / "opensignals.h5")[1]),
+    "mvnx": (216_000, lambda d, n: (mvnx_xml(d / "capture.mvnx", n), d / "capture.mvnx")[1]),
 }
 
 
@@ -256,9 +381,14 @@ def main_formats(hours: float, formats: list[str], whole: bool) -> None:
                     r = convert(src, Path(tmp) / "out.mcap", pieces)
                     kind = "pieces" if pieces else "one piece"
                     peaks[(h, kind)] = r["peak_mb"]
+                    kids = (  # the guarded h5py readers: their CPU and the largest one's peak RSS
+                        f"  + reader children: cpu {r['children_cpu_s']:5.1f} s, peak {r['children_peak_mb']:5.0f} MB"
+                        if r.get("children_cpu_s")
+                        else ""
+                    )
                     print(
                         f"{fmt:12s} {h:5.1f} h  {int(h * per_hour) / 1e6:5.2f} M samples  {size_mb:6.0f} MB  {kind:9s}  "
-                        f"peak {r['peak_mb']:6.0f} MB  cpu {r['cpu_s']:6.1f} s  wall {r['wall_s']:6.1f} s",
+                        f"peak {r['peak_mb']:6.0f} MB  cpu {r['cpu_s']:6.1f} s  wall {r['wall_s']:6.1f} s{kids}",
                         flush=True,
                     )
                 for p in folder.iterdir():

@@ -30,15 +30,21 @@ Streams are named from the sensor label (``Right Ankle`` -> ``/imu/right_ankle``
 ``--device-name 5718=pelvis`` renames by case ID (or by label). Orientation estimates go to
 ``/orientation/<name>``, other columns to ``/signals/<name>``.
 
-Memory: the CSV layouts are read whole (lab sessions); the HDF5 file is read by h5py whole in a guarded child process
-capped at ``READER_MEMORY_BYTES`` (1 GiB), which bounds memory (:mod:`imulog.converters.apdm_h5`).
+Memory: in pieces, each layout (``iter_chunks``; ``convert`` is the one-piece case). The CSV layouts in about 16 MiB
+of text (:mod:`imulog.converters.apdm_csv`, ``_pieces.iter_table``), the rate estimate refined to the whole file's
+by the last piece; the HDF5 file in about 16 MiB of samples, read by h5py in guarded child processes capped at
+``READER_MEMORY_BYTES`` (1 GiB): a scan of the whole file (every check, the rate from all times), then each piece's
+rows (:mod:`imulog.converters.apdm_h5`).
 """
 
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from pathlib import Path
 
+from imulog.converters import _h5pieces, _pieces
+from imulog.converters._binary import concat_chunks
 from imulog.converters._common import (
     head_lines,
     text_head_lines,
@@ -47,6 +53,8 @@ from imulog.converters.apdm_csv import (
     QUANTITY,
     QUANTITY_SI,
     Sensor,
+    iter_format7,
+    iter_labelled_csv,
     read_format7,
     read_labelled_csv,
 )
@@ -57,6 +65,7 @@ from imulog.converters.apdm_h5 import (
     H5Sensor,
     _is_apdm_h5,
     h5_sensors,
+    iter_apdm_h5,
     read_apdm_h5,
 )
 from imulog.converters.base import Converter, ConvertOptions
@@ -85,6 +94,9 @@ class ApdmConverter(Converter):
     description = "APDM Opal: labelled CSV (Label/Quantity/Axis + units row), Mobility Lab Format=7 CSV, HDF5 (.h5)"
     extensions = (".csv", ".h5")
     example = "imulog convert ../shared/data/devices/apdm_csv/imuData01.csv -o apdm.mcap"
+    #: HDF5 row ranges of one size; CSV pieces of 16 MiB of text cut at a line, nearly one size: freed temporaries
+    #: are reused (CPU of an hour in pieces about halved: docs/converters.md, benchmarks/bench_convert_pieces.py)
+    fixed_pieces = True
 
     def sniff(self, path: Path, head: bytes) -> float:
         if head.startswith(HDF5_MAGIC):
@@ -102,17 +114,26 @@ class ApdmConverter(Converter):
         return 0.0
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
+        return concat_chunks(self._pieces(Path(path), options, whole=True))
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """Pieces of about 16 MiB (of samples in HDF5, of text in CSV); ``convert`` is the one-piece case."""
+        return self._pieces(Path(path), options, whole=False)
+
+    def _pieces(self, path: Path, options: ConvertOptions | None, *, whole: bool) -> Iterator[Recording]:
         options = options or ConvertOptions()
         names = {k.upper(): v for k, v in (options.extra.get("names") or {}).items()}
-        path = Path(path)
         with open(path, "rb") as fh:
             magic = fh.read(8)
         if magic == HDF5_MAGIC:
-            return read_apdm_h5(path, names)
+            yield from iter_apdm_h5(path, names, None if whole else _h5pieces.PIECE_BYTES)
+            return
         lines = head_lines(path, max_lines=8)
+        text_bytes = None if whole else _pieces.PIECE_BYTES
         if lines[0].startswith("Format="):
-            return read_format7(path, lines, names)
-        return read_labelled_csv(path, lines, names)
+            yield from iter_format7(path, lines, names, text_bytes)
+            return
+        yield from iter_labelled_csv(path, lines, names, text_bytes)
 
 
 CONVERTER = ApdmConverter()

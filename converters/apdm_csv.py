@@ -1,24 +1,32 @@
-"""APDM Opal CSV exports (labelled columns, Mobility Lab Format=7) to one IMU stream per sensor (see imulog.converters.apdm)."""
+"""APDM Opal CSV exports (labelled columns, Mobility Lab Format=7) to one IMU stream per sensor (see imulog.converters.apdm).
+
+Both layouts are read in pieces of about 16 MiB of text by :func:`imulog.converters._pieces.iter_table` (the whole
+file is the one-piece case): the time checks carry across pieces and the rate estimate (when the file gives none)
+is the median step of all times so far, so the last piece's is the whole file's."""
 
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from imulog.converters._binary import concat_chunks
 from imulog.converters._common import (
     check_increasing,
     estimate_rate_hz,
     sanitize_name,
     unit_factor,
 )
-from imulog.converters._lab import ORIENTATION_TOPIC, orientation_stream, read_table, trial_start
+from imulog.converters._lab import ORIENTATION_TOPIC, orientation_stream, trial_start
+from imulog.converters._pieces import iter_table
 from imulog.converters.errors import ConversionError
 
 from imulog.model import ImuStream, Recording, SignalStream
+from imulog.numeric import add_counts, median_of_counts
 
 QUANTITY = {  # APDM quantity name -> (model quantity, SI unit when the file gives none)
     "acceleration": ("acc", "m/s^2"),
@@ -159,7 +167,14 @@ QUANTITY_SI = {"acc": "m/s^2", "gyr": "rad/s", "mag": "uT", "temperature": "degC
 
 # ------------------------------------------------------------------------------------------ labelled CSV
 def read_labelled_csv(path: Path, lines: list[str], names: dict[str, str]) -> Recording:
-    """The ``Test Name:`` / ``Sample Rate:`` / ``Label/Quantity/Axis`` / units-row layout."""
+    """The ``Test Name:`` / ``Sample Rate:`` / ``Label/Quantity/Axis`` / units-row layout, in one piece."""
+    return concat_chunks(iter_labelled_csv(path, lines, names, None))
+
+
+def iter_labelled_csv(
+    path: Path, lines: list[str], names: dict[str, str], piece_bytes: int | None
+) -> Iterator[Recording]:
+    """:func:`read_labelled_csv` in pieces of about ``piece_bytes`` of text (None: one piece)."""
     info: dict[str, str] = {}
     n = 0
     while n < len(lines) and re.match(r"^[A-Za-z ]+:,", lines[n]):
@@ -188,14 +203,8 @@ def read_labelled_csv(path: Path, lines: list[str], names: dict[str, str]) -> Re
             continue
         if units_row[j]:
             s.units[q[0]] = units_row[j]
-    values = read_table(path, delimiter=",", skip_lines=n + 2, names=header, required=[0])
     tunit = units_row[0] or "s"
     factor = unit_factor("time", tunit)
-    if factor is None:
-        raise ConversionError(path, f"unknown time unit {tunit!r}", line=n + 2, column="Time")
-    t = values[:, 0]
-    t_ns = (np.round((t - t[0]) * factor) + round(t[0] * factor)).astype(np.int64)
-    check_increasing(path, t_ns, n + 3, "Time")
     rate = None
     m = re.search(r"([0-9.]+)", info.get("Sample Rate", ""))
     if m:
@@ -203,12 +212,47 @@ def read_labelled_csv(path: Path, lines: list[str], names: dict[str, str]) -> Re
     common = {"format": "apdm-csv", "rate_hz": rate, "time": f"Time column ({tunit} from the start)"}
     if "Test Name" in info:
         common["test_name"] = info["Test Name"]
-    return _build(path, list(sensors.values()), t_ns, values, names, n + 1, common)
+    t0: float | None = None
+    clock = _Clock()
+    for values, first_line in iter_table(
+        path, delimiter=",", skip_lines=n + 2, names=header, required=[0], piece_bytes=piece_bytes
+    ):
+        if factor is None:
+            raise ConversionError(path, f"unknown time unit {tunit!r}", line=n + 2, column="Time")
+        t = values[:, 0]
+        if t0 is None and len(t):
+            t0 = float(t[0])
+        t_ns = (np.round((t - t0) * factor) + round(t0 * factor)).astype(np.int64) if len(t) else t.astype(np.int64)
+        estimate = clock.add(path, t_ns, first_line)
+        yield _build(path, list(sensors.values()), t_ns, values, names, n + 1, {**common, "rate_hz": rate or estimate})
+
+
+class _Clock:
+    """The time checks and rate estimate of the whole file, piece by piece: every time after the one before (the
+    previous piece's last included), the median step of all times so far (the last piece's: the whole file's)."""
+
+    def __init__(self) -> None:
+        self.before: int | None = None
+        self.steps: dict[int, int] = {}
+
+    def add(self, path: Path, t_ns: np.ndarray, first_line: int) -> float | None:
+        check_increasing(path, t_ns, first_line, "Time", before=self.before)
+        if len(t_ns):
+            add_counts(self.steps, np.diff(t_ns if self.before is None else np.concatenate([[self.before], t_ns])))
+            self.before = int(t_ns[-1])
+        step = median_of_counts(self.steps)
+        return 1e9 / step if step is not None and step > 0 else None  # as estimate_rate_hz of every time
 
 
 # ------------------------------------------------------------------------------------------ Format=7 CSV
 def read_format7(path: Path, lines: list[str], names: dict[str, str]) -> Recording:
-    """Mobility Lab ``Format=7``: case-ID/label row, quantity row, axis row, time in us since the Unix epoch."""
+    """Mobility Lab ``Format=7``: case-ID/label row, quantity row, axis row, time in us since the Unix epoch; one
+    piece."""
+    return concat_chunks(iter_format7(path, lines, names, None))
+
+
+def iter_format7(path: Path, lines: list[str], names: dict[str, str], piece_bytes: int | None) -> Iterator[Recording]:
+    """:func:`read_format7` in pieces of about ``piece_bytes`` of text (None: one piece)."""
     if len(lines) < 4:
         raise ConversionError(path, "file ends inside the 3 header rows", line=len(lines))
     rows = [[c.strip() for c in lines[i].split(",")] for i in range(3)]
@@ -241,35 +285,42 @@ def read_format7(path: Path, lines: list[str], names: dict[str, str]) -> Recordi
     if not sensors:
         raise ConversionError(path, "no case IDs in the first row", line=1)
     header = ["Time"] + [f"{rows[1][j] or '?'}/{rows[2][j]}" for j in range(1, width)]
-    data = path.read_bytes()
-    values = read_table(path, delimiter=",", skip_lines=3, names=header, data=data, required=[0])
+    clock = _Clock()
     quirk = False
-    for j in baro:
-        col = values[:, j]
-        big = np.isfinite(col) & (np.abs(col) > 1e15)
-        if big.any():  # the bit pattern of a double printed as an integer: reinterpret it
-            bits = np.zeros(len(col), dtype=np.int64)
-            bits[big] = np.round(col[big]).astype(np.int64)
-            col = np.where(big, bits.view(np.float64), col)
-            values[:, j] = col
-            quirk = True
-    us = values[:, 0]
-    if np.any(us < 0) or np.any(us > 2**62 / 1000):
-        i = int(np.argmax((us < 0) | (us > 2**62 / 1000)))
-        raise ConversionError(path, f"time {us[i]:.0f} is not microseconds since 1970", line=4 + i, column="Time")
-    t_ns = np.round(us).astype(np.int64) * 1000
-    check_increasing(path, t_ns, 4, "Time")
-    common: dict[str, Any] = {
-        "format": "apdm-format7",
-        "rate_hz": estimate_rate_hz(t_ns),
-        "time": "Time column: microseconds since the Unix epoch (UTC), kept as the device clock",
-        "units_note": "no units row: APDM's SI units m/s^2, rad/s, uT, kPa",
-    }
-    if quirk:
-        common["barometer_quirk"] = "Barometer cells hold the int64 bit pattern of a double; reinterpreted (kPa)"
-    rec = _build(path, sensors, t_ns, values, names, 2, common)
-    start = datetime.fromtimestamp(int(round(us[0])) // 1_000_000, tz=UTC) + timedelta(
-        microseconds=int(round(us[0])) % 1_000_000
-    )
-    rec.metadata["imulog.trial"] = trial_start(start, f"{path.name}: Time column (us since the Unix epoch, UTC)")
-    return rec
+    start = None
+    for values, first_line in iter_table(
+        path, delimiter=",", skip_lines=3, names=header, required=[0], piece_bytes=piece_bytes
+    ):
+        for j in baro:
+            col = values[:, j]
+            big = np.isfinite(col) & (np.abs(col) > 1e15)
+            if big.any():  # the bit pattern of a double printed as an integer: reinterpret it
+                bits = np.zeros(len(col), dtype=np.int64)
+                bits[big] = np.round(col[big]).astype(np.int64)
+                col = np.where(big, bits.view(np.float64), col)
+                values[:, j] = col
+                quirk = True
+        us = values[:, 0]
+        if np.any(us < 0) or np.any(us > 2**62 / 1000):
+            i = int(np.argmax((us < 0) | (us > 2**62 / 1000)))
+            raise ConversionError(
+                path, f"time {us[i]:.0f} is not microseconds since 1970", line=first_line + i, column="Time"
+            )
+        t_ns = np.round(us).astype(np.int64) * 1000
+        common: dict[str, Any] = {
+            "format": "apdm-format7",
+            "rate_hz": clock.add(path, t_ns, first_line),
+            "time": "Time column: microseconds since the Unix epoch (UTC), kept as the device clock",
+            "units_note": "no units row: APDM's SI units m/s^2, rad/s, uT, kPa",
+        }
+        if quirk:
+            common["barometer_quirk"] = "Barometer cells hold the int64 bit pattern of a double; reinterpreted (kPa)"
+        rec = _build(path, sensors, t_ns, values, names, 2, common)
+        if start is None and len(us):
+            us0 = int(round(us[0]))
+            start = datetime.fromtimestamp(us0 // 1_000_000, tz=UTC) + timedelta(microseconds=us0 % 1_000_000)
+        if start is not None:
+            rec.metadata["imulog.trial"] = trial_start(
+                start, f"{path.name}: Time column (us since the Unix epoch, UTC)"
+            )
+        yield rec

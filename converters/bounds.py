@@ -79,8 +79,18 @@ class BoundedStream:
         self.close()
 
 
-def read_h5(path: str | Path, ds: Any, name: str, *, ratio: float = H5_MAX_RATIO, dtype: Any = None) -> np.ndarray:
-    """The data of h5py data set ``ds`` (``name`` in messages), refused when its declared size cannot be stored.
+def read_h5(
+    path: str | Path, ds: Any, name: str, *, ratio: float = H5_MAX_RATIO, dtype: Any = None, rows: slice | None = None
+) -> np.ndarray:
+    """The data of h5py data set ``ds`` (``name`` in messages), refused when its declared size cannot be stored
+    (:func:`check_h5_size`); ``rows``: only these rows (first axis), e.g. one piece of a long recording."""
+    check_h5_size(path, ds, name, ratio=ratio)
+    out = ds[()] if rows is None else ds[rows]
+    return np.asarray(out, dtype=dtype) if dtype is not None else np.asarray(out)
+
+
+def check_h5_size(path: str | Path, ds: Any, name: str, *, ratio: float = H5_MAX_RATIO) -> None:
+    """Refuse h5py data set ``ds`` (``name`` in messages) when its declared size cannot be stored.
 
     The declared size (shape x item size) must fit in the storage HDF5 allocated for it (x ``ratio`` for a
     filtered data set; :data:`H5_FLOOR` at least) and in the file: chunks never written (stored 0 bytes, read as
@@ -104,8 +114,6 @@ def read_h5(path: str | Path, ds: Any, name: str, *, ratio: float = H5_MAX_RATIO
             f"{name} declares shape {shape} ({declared:.3g} bytes) but stores {stored} bytes: the file is damaged "
             "or cut off (HDF5 returns a fill value for what was never written)",
         )
-    out = ds[()]
-    return np.asarray(out, dtype=dtype) if dtype is not None else np.asarray(out)
 
 
 def fill_budget(path: str | Path) -> int:
@@ -132,8 +140,9 @@ def check_epoch_ns(path: str | Path | None, field: str, epoch_ns: Any) -> int:
     return v
 
 
-def check_epoch_array(path: str | Path | None, field: str, epoch_ns: np.ndarray) -> None:
-    """Every value of ``epoch_ns`` (int64 ns since 1970, or float) in 1970-2100, else ConversionError (first bad)."""
+def check_epoch_array(path: str | Path | None, field: str, epoch_ns: np.ndarray, offset: int = 0) -> None:
+    """Every value of ``epoch_ns`` (int64 ns since 1970, or float) in 1970-2100, else ConversionError (first bad;
+    ``offset``: the index of the first value in the whole array, for a piece)."""
     a = np.asarray(epoch_ns)
     if a.size == 0:
         return
@@ -141,5 +150,5 @@ def check_epoch_array(path: str | Path | None, field: str, epoch_ns: np.ndarray)
     if bad.any():
         i = int(np.argmax(bad))
         raise ConversionError(
-            path, f"{field} sample {i}: {float(a.reshape(-1)[i]) / 1e9:.6g} s from 1970 is outside 1970-2100"
+            path, f"{field} sample {i + offset}: {float(a.reshape(-1)[i]) / 1e9:.6g} s from 1970 is outside 1970-2100"
         )

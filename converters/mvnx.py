@@ -26,20 +26,25 @@ Becomes ``/poses/mvn_<segment>`` (position m + orientation), ``/orientation/mvn_
 gyroscope samples, so there is no ``/imu`` stream (free acceleration is gravity-free and global: not a specific
 force). Clock: the frame ``time`` attribute (ms from the start); ``recDateMSecsSinceEpoch`` (UTC) is the trial's
 start, with the local offset found by comparing it with ``recDate`` (local time) when both are present.
-The file is parsed incrementally (``iterparse``), frames are cleared once read.
 
-Memory: one piece; ``xml.etree.ElementTree.iterparse`` streams the XML and clears each frame, so memory holds the
-arrays, not the document (an MVN capture is a lab session).
+Memory: in pieces of :data:`PIECE_FRAMES` frames (:func:`iter_mvnx`; the whole file is the one-piece case):
+``xml.etree.ElementTree.iterparse`` streams the XML and each frame element is cleared and removed from ``<frames>``
+once read, so memory holds one piece's arrays, not the document. XML safety: the standard library's expat parser
+(2.4 or later: its amplification limit refuses "billion laughs" entity expansion with an XML error) never fetches
+external entities or DTDs.
 """
 
 from __future__ import annotations
 
 import re
 import xml.etree.ElementTree as ET
+from collections.abc import Iterator
+from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta, timezone
 from pathlib import Path
 
 import numpy as np
+from imulog.converters._binary import concat_chunks
 from imulog.converters._common import sanitize_name
 from imulog.converters._lab import orientation_stream, trial_start
 from imulog.converters.base import Converter, ConvertOptions
@@ -76,56 +81,136 @@ def local_offset(rec_date: str, utc: datetime) -> timezone | None:
     return None
 
 
+#: frames per piece when a file is converted in pieces (a full-body suit's frame holds about 460 values: ~15 MiB)
+PIECE_FRAMES = 4096
+
+
+@dataclass
+class _Header:
+    """What precedes the frames: root, ``<mvn>`` and ``<subject>`` attributes, segment/sensor/joint labels."""
+
+    root: dict[str, str] = field(default_factory=dict)
+    subject: dict[str, str] = field(default_factory=dict)
+    mvn: dict[str, str] = field(default_factory=dict)
+    labels: dict[str, list[str]] = field(default_factory=lambda: {"segment": [], "sensor": [], "joint": []})
+
+
+@dataclass
+class _Frames:
+    """The frames read so far: the current piece's times and values, and what the whole file's checks need."""
+
+    times: list[float] = field(default_factory=list)
+    data: dict[str, list[np.ndarray]] = field(default_factory=lambda: {k: [] for k in FRAME_FIELDS})
+    present: dict[str, int] = field(default_factory=dict)  # frames holding each field, over the file
+    n: int = 0  # normal frames over the file
+    last_ns: int | None = None
+    bad_time: tuple[int, float] | None = None  # the first frame whose time does not increase
+    fields: set[str] | None = None  # the fields of the first piece (every piece must hold the same)
+    held: bool = False  # a whole-file check will fail: no more pieces, read on to the file's end for its error
+    empty: bool = False
+
+
 def read_mvnx(path: Path, *, names: dict[str, str] | None = None) -> Recording:
+    """The whole file: :func:`iter_mvnx` in one piece."""
+    return concat_chunks(iter_mvnx(path, names=names, piece_frames=None))
+
+
+def iter_mvnx(
+    path: Path, *, names: dict[str, str] | None = None, piece_frames: int | None = PIECE_FRAMES
+) -> Iterator[Recording]:
+    """The frames of an MVNX file in pieces of ``piece_frames`` (None: one piece), streamed by ``iterparse``: each
+    frame element is cleared and dropped from ``<frames>`` once read, so memory holds one piece. Errors are the whole
+    file's, in its order: a frame's own (values, time attribute) and XML errors where they occur; a time that does
+    not increase, a field missing from some frames or frames without data stop the pieces and fail at the end."""
     path = Path(path)
     names = {k.upper(): v for k, v in (names or {}).items()}
-    root_attrs: dict[str, str] = {}
-    subject: dict[str, str] = {}
-    mvn: dict[str, str] = {}
-    labels: dict[str, list[str]] = {"segment": [], "sensor": [], "joint": []}
-    times: list[float] = []
-    data: dict[str, list[np.ndarray]] = {k: [] for k in FRAME_FIELDS}
-    present: dict[str, int] = {}
-    n_frames = 0
+    head, fr = _Header(), _Frames()
     stack: list[str] = []
+    frames_el: ET.Element | None = None
     try:
         for event, el in ET.iterparse(path, events=("start", "end")):
             tag = _local(el.tag)
             if event == "start":
                 stack.append(tag)
                 if tag == "mvnx":
-                    root_attrs = dict(el.attrib)
+                    head.root = dict(el.attrib)
                 elif tag == "subject":
-                    subject = dict(el.attrib)
+                    head.subject = dict(el.attrib)
                 elif tag == "mvn":
-                    mvn = dict(el.attrib)
+                    head.mvn = dict(el.attrib)
+                elif tag == "frames":
+                    frames_el = el
                 continue
             stack.pop()
             parent = stack[-1] if stack else ""
             if tag in ("segment", "sensor", "joint") and parent in ("segments", "sensors", "joints"):
-                labels[tag].append(el.get("label", f"{tag}{len(labels[tag]) + 1}"))
+                head.labels[tag].append(el.get("label", f"{tag}{len(head.labels[tag]) + 1}"))
                 el.clear()
             elif tag == "frame":
                 if el.get("type", "normal") == "normal":
-                    _read_frame(path, el, n_frames, labels, times, data, present)
-                    n_frames += 1
+                    _read_frame(path, el, fr.n, head.labels, fr.times, fr.data, fr.present)
+                    fr.n += 1
+                    if piece_frames is not None and len(fr.times) >= piece_frames:
+                        piece = _piece(path, head, fr, names)
+                        if piece is not None:
+                            yield piece
                 el.clear()
+                if frames_el is not None and parent == "frames":
+                    frames_el.remove(el)  # the cleared frame too: <frames> never holds more than one
     except ET.ParseError as e:
         line = e.position[0] if getattr(e, "position", None) else None
         raise ConversionError(path, f"XML error: {e.msg if hasattr(e, 'msg') else e}", line=line) from None
-    if not subject:
+    piece = _piece(path, head, fr, names) if fr.times else None
+    if not head.subject:
         raise ConversionError(path, "no <mvnx> root with a <subject>: not an MVNX file")
-    if n_frames == 0:
+    if fr.n == 0:
         raise ConversionError(path, 'no <frame type="normal"> elements')
+    if fr.bad_time is not None:
+        raise ConversionError(path, f"frame {fr.bad_time[0]}: time {fr.bad_time[1]} ms does not increase")
+    for k in FRAME_FIELDS:
+        if 0 < fr.present.get(k, 0) != fr.n:
+            raise ConversionError(path, f"<{k}> is missing in {fr.n - fr.present[k]} of {fr.n} frames")
+    if fr.empty or fr.held:
+        raise ConversionError(path, "frames hold no position, orientation, sensor or joint data")
+    if piece is not None:
+        yield piece
+
+
+def _piece(path: Path, head: _Header, fr: _Frames, names: dict[str, str]) -> Recording | None:
+    """The frames gathered since the last piece as a Recording (None once a whole-file check is known to fail:
+    the caller reads on for the file's first error); the piece's frames are dropped."""
+    times, n = fr.times, len(fr.times)
     t_ns = np.round(np.asarray(times) * 1e6).astype(np.int64)
-    bad = np.nonzero(np.diff(t_ns) <= 0)[0]
-    if len(bad):
-        raise ConversionError(path, f"frame {int(bad[0]) + 1}: time {times[int(bad[0]) + 1]} ms does not increase")
+    full = t_ns if fr.last_ns is None else np.concatenate([[fr.last_ns], t_ns])
+    bad = np.nonzero(np.diff(full) <= 0)[0]
+    if len(bad) and fr.bad_time is None:
+        i = int(bad[0]) + (0 if fr.last_ns is None else -1)  # index in this piece of the frame before
+        fr.bad_time = (fr.n - n + i + 1, times[i + 1])
+    fr.last_ns = int(t_ns[-1])
+    fields = {k for k, v in fr.data.items() if v}
+    if any(len(fr.data[k]) != n for k in fields) or (fr.fields is not None and fields != fr.fields):
+        fr.held = True  # a field missing from some frames: the whole file's error names how many, at the end
+    fr.fields = fields if fr.fields is None else fr.fields
+    if not head.subject or fr.bad_time is not None:
+        fr.held = True
+    arrays = {k: np.stack(v) for k, v in fr.data.items() if v} if not fr.held else {}
+    fr.times = []
+    fr.data = {k: [] for k in FRAME_FIELDS}
+    if fr.held:
+        return None
+    rec = _recording(path, head, t_ns, arrays, names)
+    if not rec.streams():
+        fr.empty = fr.held = True
+        return None
+    return rec
+
+
+def _recording(
+    path: Path, head: _Header, t_ns: np.ndarray, arrays: dict[str, np.ndarray], names: dict[str, str]
+) -> Recording:
+    """The streams and records of ``len(t_ns)`` frames (``arrays``: field -> (frames, values))."""
+    labels, subject, n_frames = head.labels, head.subject, len(t_ns)
     rec = Recording(sources=[str(path)])
-    arrays = {k: np.stack(v) for k, v in data.items() if v and len(v) == n_frames}
-    for k, v in data.items():
-        if v and len(v) != n_frames:
-            raise ConversionError(path, f"<{k}> is missing in {n_frames - len(v)} of {n_frames} frames")
 
     def stream_name(label: str) -> str:
         return sanitize_name(names.get(label.upper(), f"mvn_{label}"))
@@ -166,13 +251,11 @@ def read_mvnx(path: Path, *, names: dict[str, str] | None = None) -> Recording:
         if key in arrays and labels["joint"]:
             cols = [f"{j}_{a}" for j in labels["joint"] for a in "xyz"]
             rec.signals.append(SignalStream(topic, t_ns, cols, ["deg"] * len(cols), arrays[key]))
-    if not rec.streams():
-        raise ConversionError(path, "frames hold no position, orientation, sensor or joint data")
     rec.metadata["imulog.device.mvn"] = {
         "format": "mvnx",
         "model": "Xsens MVN",
-        "mvnx_version": root_attrs.get("version", ""),
-        "mvn_version": mvn.get("version", ""),
+        "mvnx_version": head.root.get("version", ""),
+        "mvn_version": head.mvn.get("version", ""),
         "subject": {k: v for k, v in subject.items() if k != "originalFilename"},
         "segments": labels["segment"],
         "sensors": labels["sensor"],
@@ -228,6 +311,7 @@ class MvnxConverter(Converter):
     description = "Xsens MVN .mvnx (XML v4): segment poses, sensor orientation + free acceleration, joint angles"
     extensions = (".mvnx",)
     example = "imulog convert walk.mvnx -o walk.mcap"
+    fixed_pieces = True  # pieces of PIECE_FRAMES frames: freed temporaries are reused
 
     def sniff(self, path: Path, head: bytes) -> float:
         text = head[:4096].decode("utf-8", "replace")
@@ -236,6 +320,11 @@ class MvnxConverter(Converter):
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         options = options or ConvertOptions()
         return read_mvnx(Path(path), names=options.extra.get("names"))
+
+    def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
+        """Pieces of :data:`PIECE_FRAMES` frames (see :func:`iter_mvnx`)."""
+        options = options or ConvertOptions()
+        return iter_mvnx(Path(path), names=options.extra.get("names"), piece_frames=PIECE_FRAMES)
 
 
 CONVERTER = MvnxConverter()

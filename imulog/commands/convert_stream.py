@@ -68,7 +68,7 @@ def _convert_streaming(
             raise ConversionError(path, "no samples")
         records = {k: {**first.metadata.get(k, {}), **v} for k, v in meta.items()}
         sources = [Path(s) for s in first.sources] or [path]  # the sidecars a reader read too (BIDS, NilsPod CSV)
-        expected = _expected_duration_s(first, size, _bytes_per_sample(path))
+        expected = _declared_duration_s(first) or _expected_duration_s(first, size, _bytes_per_sample(path))
         with (
             StreamingTrialWriter(
                 output,
@@ -125,6 +125,15 @@ def _span_s(piece: Recording) -> float:
     """Seconds covered by a piece (its longest stream)."""
     spans = [(s.t_ns[-1] - s.t_ns[0]) / 1e9 for s in piece.streams() if getattr(s, "t_ns", None) is not None and len(s)]
     return max(spans, default=0.0)
+
+
+def _declared_duration_s(first: Recording) -> float | None:
+    """The recording's length (s) from the stream spans its first piece declares (``imulog.pieces``), if it does."""
+    from imulog.model import PIECES_RECORD
+
+    spans = (first.metadata.get(PIECES_RECORD) or {}).get("spans") or {}
+    lengths = [(int(v[1]) - int(v[0])) / 1e9 for v in spans.values() if v is not None]
+    return max(lengths) if lengths else None
 
 
 def _bytes_per_sample(path: Path) -> float:
