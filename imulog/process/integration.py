@@ -155,9 +155,11 @@ class RotatingBiasParams:
     gravity_mps2: gravity magnitude (m/s^2) for the gravity-coupled term.
     min_movements: fewer complete movements than this (at least 2 per unknown triple) give no estimate.
     outlier_factor: refit without the movements whose closure residual (3D norm, m/s) exceeds this many times
-        the median movement's, until none does (never below ``min_movements``; None: one plain least squares,
-        the default before issue 31). A movement the model cannot close (a long continuous swing, a rest
-        missed inside it) otherwise dominates the 12 unknowns.
+        the median movement's (never below ``min_movements``; None: one plain least squares, the default before
+        issue 31). A movement the model cannot close (a long continuous swing, a rest missed inside it)
+        otherwise dominates the 12 unknowns.
+    outlier_refits: at most this many refits, each judging the residuals of the previous fit (1: the plain
+        fit's residuals only; more peels off borderline movements once the gross ones are gone).
     """
 
     rest_s: float = 0.5
@@ -165,6 +167,7 @@ class RotatingBiasParams:
     gravity_mps2: float = 9.81
     min_movements: int = 8
     outlier_factor: float | None = None
+    outlier_refits: int = 1
 
 
 @dataclass
@@ -242,12 +245,12 @@ def _closing_movements(
     rows: list[np.ndarray], rhs: list[np.ndarray], params: RotatingBiasParams, least: int
 ) -> list[int]:
     """Indices of the movements the fit keeps: all, or (``params.outlier_factor``) those whose residual norm
-    (m/s) is at most that factor times the median's, refitting until the set stops changing (never fewer than
-    ``least``)."""
+    (m/s) is at most that factor times the median's, refitting up to ``params.outlier_refits`` times while the
+    set changes (never fewer than ``least``)."""
     keep = list(range(len(rows)))
     if params.outlier_factor is None:
         return keep
-    for _ in range(len(rows)):
+    for _ in range(params.outlier_refits):
         x, *_ = np.linalg.lstsq(np.vstack([rows[i] for i in keep]), np.concatenate([rhs[i] for i in keep]), rcond=None)
         norm = np.array([np.linalg.norm(r @ x - v) for r, v in zip(rows, rhs, strict=True)])
         new = [i for i in range(len(rows)) if norm[i] <= params.outlier_factor * float(np.median(norm[keep]))]
