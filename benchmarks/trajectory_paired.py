@@ -20,7 +20,7 @@ accelerating as a whole is no rest), ``heading-through-rests`` (the defaults / w
 options), ``closure-sigma`` (without
 ``OptimizationParams.closure_factor`` / with 0.5, the default since 2026-12-07), ``robust-bias`` (the defaults / the rotating-bias
 estimate refitted once without the movements it cannot close, ``RotatingBiasParams.outlier_factor = 3``),
-``robust-bias-iterated`` (the same, refitted up to 20 times while the set of movements changes),
+``robust-bias-4`` (the same with ``outlier_factor = 4``), ``robust-bias-iterated`` (factor 3, refitted up to 20 times while the set of movements changes),
 ``issue31-session3`` (the code before this round's
 default changes, ``bias-uncertainty`` and ``rest-run-mean``, / the defaults), ``issue31-options`` (the same
 before / the defaults with the heading through rests and the z-only return), ``heading-restart`` (options 3 and 4
@@ -65,6 +65,7 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
     ),
     "closure-sigma": (replace(D, optimized=replace(D.optimized, closure_factor=None)), D),
     "robust-bias": (D, replace(D, rotating_bias=replace(D.rotating_bias, outlier_factor=3.0))),
+    "robust-bias-4": (D, replace(D, rotating_bias=replace(D.rotating_bias, outlier_factor=4.0))),
     "robust-bias-iterated": (
         D,
         replace(D, rotating_bias=replace(D.rotating_bias, outlier_factor=3.0, outlier_refits=20)),
