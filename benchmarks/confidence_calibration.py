@@ -197,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--bias-outlier-factor",
         type=float,
-        help="RotatingBiasParams.outlier_factor (refit the rotating bias without the movements it cannot close)",
+        help="RotatingBiasParams.outlier_factor (refit the rotating bias without the movements it cannot close; an option, off by default)",
     )
     args = ap.parse_args(argv)
     global DEFAULT_PARAMS

@@ -155,9 +155,11 @@ class RotatingBiasParams:
     gravity_mps2: gravity magnitude (m/s^2) for the gravity-coupled term.
     min_movements: fewer complete movements than this (at least 2 per unknown triple) give no estimate.
     outlier_factor: refit without the movements whose closure residual (3D norm, m/s) exceeds this many times
-        the median movement's (never below ``min_movements``; None: one plain least squares, the default before
-        issue 31). A movement the model cannot close (a long continuous swing, a rest missed inside it)
-        otherwise dominates the 12 unknowns.
+        the median movement's (never below ``min_movements``; None, the default: one plain least squares). A
+        movement the model cannot close (a long continuous swing such as the alignment wave, a rest missed inside
+        it) otherwise dominates the 12 unknowns (issue 31: `default` subject 52's start was 1.5 cm off in z). 4 is
+        no condition worse on development trials, but not the default: the repetition flags' precision on their
+        calibration set falls to 0.497 with it at the current drift threshold (docs/accuracy.md).
     outlier_refits: at most this many refits, each judging the residuals of the previous fit (1: the plain
         fit's residuals only; more peels off borderline movements once the gross ones are gone).
     """
