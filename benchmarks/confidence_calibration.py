@@ -190,13 +190,23 @@ def main(argv: list[str] | None = None) -> int:
         help="also score the pull rule used until 2026-12-07 at these thresholds",
     )
     ap.add_argument(
-        "--closure-factor", type=float, help="OptimizationParams.closure_factor (option 5 of issue 31; default 0.5 since 2026-12-07)"
+        "--closure-factor",
+        type=float,
+        help="OptimizationParams.closure_factor (option 5 of issue 31; default 0.5 since 2026-12-07)",
+    )
+    ap.add_argument(
+        "--bias-outlier-factor",
+        type=float,
+        help="RotatingBiasParams.outlier_factor (refit the rotating bias without the movements it cannot close; an option, off by default)",
     )
     args = ap.parse_args(argv)
+    global DEFAULT_PARAMS
+    D = DEFAULT_PARAMS  # noqa: N806
     if args.closure_factor is not None:
-        global DEFAULT_PARAMS
-        D = DEFAULT_PARAMS  # noqa: N806
         DEFAULT_PARAMS = replace(D, optimized=replace(D.optimized, closure_factor=args.closure_factor))
+    if args.bias_outlier_factor is not None:
+        D = DEFAULT_PARAMS  # noqa: N806
+        DEFAULT_PARAMS = replace(D, rotating_bias=replace(D.rotating_bias, outlier_factor=args.bias_outlier_factor))
     if args.score:
         rows = json.loads(args.score.read_text())
     else:

@@ -15,6 +15,13 @@ axis). ``--cost-pick`` optimises each trial from two starts, ``zupt_bias`` and t
 only (x and y as measured, as plain ZUPT), both with the trust the default run estimated (so that their costs
 compare), and keeps per axis the start whose optimisation ends at the lower total cost over the trial's
 repetitions (a rule from the data: the optimisation's own fit of start, reference and smoothness).
+``--per-repetition`` adds, per trial, one row per repetition with the MAE (cm) per axis of ZUPT, ``zupt_bias``,
+the minimum-jerk reference and the optimized trajectory, and the trial's movements the rotating-bias fit closes
+worst (what is left of each movement's velocity at the next rest after the compensation, cm/s, and its ratio to
+the median movement's: the fit's residuals).
+
+    python benchmarks/trajectory_start.py --grid default --subjects 1 --first-subject 52 --repetitions 10 \
+        --per-repetition
 
     python benchmarks/trajectory_start.py --grid default rotation-early clock-occlusion --subjects 6 \
         --first-subject 40 --repetitions 10
@@ -36,6 +43,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from trajectory_accuracy import evaluate_trial, simulated_inputs  # noqa: E402
 
 from imulog.process import trajectory_methods, trajectory_opt  # noqa: E402
+from imulog.process.minjerk import R2GWaypoints, r2g_reference  # noqa: E402
+from imulog.process.rest_runs import movement_runs  # noqa: E402
 from imulog.process.rests import true_rests  # noqa: E402
 from imulog.process.trajectory_checks import movement_closures  # noqa: E402
 from imulog.process.trajectory_opt import (  # noqa: E402
@@ -181,6 +190,57 @@ def trial_row(inputs: dict, params=DEFAULT_PARAMS) -> dict:
     return {"mae": mae, "sigma_m": sigma, "sigma_mps": sigma_mps, "closure_m": closure}
 
 
+def repetition_rows(inputs: dict, params=DEFAULT_PARAMS) -> tuple[list[str], list[str]]:
+    """Per repetition, MAE (cm) per axis of ZUPT, ``zupt_bias``, the reference and the optimized trajectory
+    against the truth; and the three movements of the trial with the largest rotating-bias fit residual."""
+    t = inputs["t_s"]
+    rate = (len(t) - 1) / (t[-1] - t[0])
+    static = true_rests(inputs["static"], inputs["acc_gate"], rate, params.rests, orientation=inputs.get("q_gate"))
+    reps, _ = merge_overlapping(repetition_windows(t, inputs["phase_bounds"], static))
+    info: dict = {}
+    out = reconstruct_repetitions(
+        t,
+        inputs["acc_world"],
+        static,
+        reps,
+        list(METHODS),
+        anthropometrics=inputs["anthropometrics"],
+        orientation=inputs["q_world"],
+        params=params,
+        info=info,
+    )
+    way = R2GWaypoints(**{f"{k}_m": tuple(v) for k, v in info["waypoints_m"].items()})
+    rows = []
+    for rep in reps:
+        sl = slice(rep.start, rep.stop)
+        truth = inputs["truth_pos"][sl] - inputs["truth_pos"][sl][0]
+        ests = {m: out[m][sl] for m in METHODS}
+        if len(rep.phase_bounds_s) == 4:
+            ests["reference"] = r2g_reference(t[sl], rep.phase_bounds_s, way)
+        cells = [
+            " / ".join(f"{100 * x:.2f}" for x in np.nanmean(np.abs(ests[m] - ests[m][0] - truth), axis=0))
+            if m in ests
+            else "-"
+            for m in ("zupt", "zupt_bias", "reference", "optimized")
+        ]
+        rows.append(f"| {rep.index} | " + " | ".join(cells) + " |")
+    rot = trajectory_opt.quat_to_matrix(inputs["q_world"])
+    acc = inputs["acc_world"]
+    errors = trajectory_opt.estimate_rotating_bias(acc, rot, t, static, params.rotating_bias)
+    comp = _COMPENSATE(acc, rot, t, static, errors, params.rotating_bias)
+    vel, dur = movement_closures(t, comp, static)
+    starts = [a for a, b in movement_runs(static) if a > 0 and b < len(t)]  # as movement_closures counts
+    norm = np.linalg.norm(vel, axis=1)
+    med = float(np.median(norm)) if len(norm) else float("nan")
+    worst = [
+        f"t {t[starts[i]]:.1f} s, {dur[i]:.2f} s: {100 * norm[i]:.1f} cm/s ({norm[i] / med:.1f} x median)"
+        for i in np.argsort(norm)[::-1][:3]
+        if i < len(starts)
+    ]
+    bias = " / ".join(f"{x:.3f}" for x in errors.bias_mps2)
+    return rows, [f"rotating-bias estimate {bias} m/s^2; worst-closed movements: " + "; ".join(worst)]
+
+
 def main(argv: list[str] | None = None) -> int:
     from imulog.simulate.grid import CONDITIONS, condition
 
@@ -191,6 +251,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repetitions", type=int, default=10)
     ap.add_argument("--start-variants", action="store_true", help="also optimise from the start variants")
     ap.add_argument("--cost-pick", action="store_true", help="also pick the start per axis by the lower cost")
+    ap.add_argument("--per-repetition", action="store_true", help="also one row per repetition and the fit's outliers")
     args = ap.parse_args(argv)
     names = list(CONDITIONS) if args.grid == ["all"] else args.grid
     t0, r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
@@ -247,6 +308,12 @@ def main(argv: list[str] | None = None) -> int:
                 f"{f(row['sigma_m'], 1000)} | {f(row['closure_m'], 500)} |",
                 flush=True,
             )
+            if args.per_repetition:
+                reps, notes = repetition_rows(inputs)
+                print(f"\n{name} s{s}: " + "\n".join(notes))
+                print("| repetition | ZUPT x/y/z | zupt_bias x/y/z | reference x/y/z | optimized x/y/z |")
+                print("|---|---|---|---|---|")
+                print("\n".join(reps) + "\n", flush=True)
     print(
         f"\noptimized >= ZUPT on {above} trial axes; of these the start zupt_bias >= ZUPT on {start}, "
         f"the trust at its {FLOOR_M * 1000:.0f}-mm floor on {floor}"
