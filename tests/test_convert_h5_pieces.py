@@ -37,8 +37,6 @@ def test_broad_pieces_write_the_whole_files_archive(stem, shared_data, tmp_path,
         mask = np.asarray(f["movement"], bool) if "movement" in f else np.zeros(n, bool)
     rows = n // 7 + 13  # about 8 pieces, borders at no round sample
     whole, pieces = convert_twice(src, tmp_path, (PIECES, rows * 8 * 16), monkeypatch)
-    # the optical pose's nan_samples aside (the streaming writer counts NaN positions only: the xfail below)
-    monkeypatch.setattr("test_convert_pieces_archive.SKIP_CHANNEL_KEYS", {"sha256", "stats_record", "nan_samples"})
     assert_same_trial(whole, pieces)
     with TrialReader(whole) as a, TrialReader(pieces) as b:
         for topic in ("/imu/imu", "/poses/optical"):
@@ -51,11 +49,6 @@ def test_broad_pieces_write_the_whole_files_archive(stem, shared_data, tmp_path,
         assert mask[borders - 1].any() and mask[borders].any()
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="imulog/archive/channel_stats._sample_arrays leaves a PoseStream's orientation out of nan_samples, "
-    "which codec._stats (the whole-file writer) counts: archive code, not this reader's",
-)
 def test_streamed_pose_counts_nan_orientation_as_the_whole_file(shared_data, tmp_path, monkeypatch):
     """BROAD's optical orientation is NaN where tracking was lost: the whole-file writer counts those samples."""
     src = shared_data / "broad" / f"{BROAD[0]}.hdf5"

@@ -102,5 +102,5 @@ def _sample_arrays(stream: Stream) -> tuple[np.ndarray, list[np.ndarray | None]]
     t = getattr(stream, "t_ns", None)
     if t is None:
         return np.asarray(stream.start_ns), []
-    names = ("acc", "gyr", "mag", "temperature", "pos", "values", "position")
+    names = ("acc", "gyr", "mag", "temperature", "pos", "values", "position", "orientation")
     return np.asarray(t), [getattr(stream, n) for n in names if getattr(stream, n, None) is not None]
