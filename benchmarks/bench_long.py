@@ -29,7 +29,12 @@ Every command runs under a cap on its private memory (``--limit-gb``, default 6 
 fit fails (reported, the others still run) instead of taking the shared machine's memory.
 
 Targets: peak RSS at most 1 GB for every command; growth from 1 to 7 days at most 10 % (issue 17) / 15 %
-(issue 24, every step including trajectory and kinematics). The verdict column uses 1.15x.
+(issue 24, every step including trajectory and kinematics). The final table (``long_table.py``) gives per
+command the peak RSS, CPU and wall time at each length, the growth from the shortest to the longest and PASS/FAIL
+against 1 GB and 1.15x (a command that failed or was not run fails); ``--summary FILE`` writes it with the
+commit, the times and the load averages (JSON for ``.json``, else a Markdown table the docs can quote):
+
+    python benchmarks/bench_long.py --days 1 7 --commands evaluate --summary evaluate.md
 """
 
 from __future__ import annotations
@@ -46,6 +51,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from long_table import format_table, run_info, summary, table_rows, write_summary
 
 COMMANDS = [
     ("convert", ["convert", "{cwa}", "-o", "{mcap}"]),
@@ -92,7 +98,6 @@ SETUP = {
 }
 TWO_IMU = ("orientation2", "kinematics", "heading")
 REFERENCE = ("align", "align_oriented", "evaluate")
-MAX_GROWTH = 1.15  # issue 24: peak memory from the shortest to the longest recording
 
 
 def two_imu_trial(cwa: Path, out: Path) -> None:
@@ -304,6 +309,13 @@ def main(argv: list[str] | None = None) -> int:
         help="cap each command's private memory (RLIMIT_DATA) so one that does not fit fails instead of taking the "
         "shared machine's memory; 0: no cap",
     )
+    ap.add_argument(
+        "--summary",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="also write the final table with the commit, times and load averages: JSON for .json, else Markdown",
+    )
     args = ap.parse_args(argv)
     if args.dynamos:
         return dynamos_scaling(args.dynamos)
@@ -315,6 +327,7 @@ def main(argv: list[str] | None = None) -> int:
     names = {name for name, _ in commands}
     imulog = [sys.executable, "-m", "imulog"]
     results: dict[float, dict[str, tuple[float, float, float] | str]] = {}
+    start, loads = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), [os.getloadavg()[0]]
     with tempfile.TemporaryDirectory(dir=args.dir) as tmp:
         for i, days in enumerate(args.days):
             folder = Path(tmp) / f"d{days:g}"
@@ -374,10 +387,12 @@ def main(argv: list[str] | None = None) -> int:
                     ]
                 except CommandFailed as exc:
                     results[days][name] = str(exc)
+                    loads.append(os.getloadavg()[0])
                     print(f"{days:g} d {name}: FAILED {exc}; load {os.getloadavg()[0]:.1f}", flush=True)
                     continue
                 results[days][name] = (sum(r[0] for r in runs), max(r[1] for r in runs), sum(r[2] for r in runs))
                 wall, mb, cpu = results[days][name]
+                loads.append(os.getloadavg()[0])
                 print(
                     f"{days:g} d {name}: {wall:.1f} s wall, {cpu:.1f} s CPU, {mb:.0f} MB, load {os.getloadavg()[0]:.1f}",
                     flush=True,
@@ -391,36 +406,32 @@ def main(argv: list[str] | None = None) -> int:
         f"load average {one:.1f} (1 min), {five:.1f} (5 min) on {os.cpu_count()} cores; "
         f"self peak {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB"
     )
-    return verdicts(commands, results, args.days)
+    meta = {
+        **run_info(Path(__file__).resolve().parents[1]),
+        "argv": " ".join(["python benchmarks/bench_long.py", *(argv if argv is not None else sys.argv[1:])]),
+        "start": start,
+        "end": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "load": f"{min(loads):.1f}-{max(loads):.1f} (1 min, at each command's end)",
+    }
+    return verdicts(commands, results, args.days, args.summary, meta)
 
 
 def verdicts(
-    commands: list[tuple[str, list]], results: dict[float, dict[str, tuple[float, float, float] | str]], days: list
+    commands: list[tuple[str, list]],
+    results: dict[float, dict[str, tuple[float, float, float] | str]],
+    days: list,
+    summary_file: Path | None = None,
+    meta: dict | None = None,
 ) -> int:
-    """Print the table (wall s, CPU s, peak MB per length, the RSS ratio of the longest to the shortest, the
-    verdict); 0 when every command meets both targets."""
-    lo, hi = min(days), max(days)
-    print(
-        f"{'command':12s}"
-        + "".join(f"{f'{d:g} d s':>10s}{f'{d:g} d CPU s':>12s}{f'{d:g} d MB':>11s}" for d in days)
-        + f"{'RSS ratio':>11s}  verdict"
-    )
-    ok_all = True
-    for name, _ in commands:
-        got = [results[d][name] for d in days]
-        if any(isinstance(r, str) for r in got):
-            ok_all = False
-            print(
-                f"{name:12s}FAILED: "
-                + "; ".join(f"{d:g} d {r}" for d, r in zip(days, got, strict=True) if isinstance(r, str))
-            )
-            continue
-        row = "".join(f"{r[0]:10.1f}{r[2]:12.1f}{r[1]:11.0f}" for r in got)
-        ratio = results[hi][name][1] / results[lo][name][1]
-        ok = max(r[1] for r in got) <= 1024 and ratio <= MAX_GROWTH
-        ok_all &= ok
-        print(f"{name:12s}{row}{ratio:10.2f}x  {'meets target' if ok else f'MISSES (<= 1 GB, <= {MAX_GROWTH}x)'}")
-    return 0 if ok_all else 1
+    """Print the final table (per command: peak RSS, CPU and wall at each length, the RSS growth from the shortest
+    to the longest, PASS/FAIL against 1 GB and 1.15x: :mod:`long_table`), write it to ``summary_file`` (JSON or
+    Markdown) if given; 0 when every command passes."""
+    rows = table_rows([name for name, _ in commands], results, days)
+    print(format_table(rows, days), flush=True)
+    if summary_file is not None:
+        write_summary(summary_file, summary(rows, days, meta or {}))
+        print(f"summary: {summary_file}")
+    return 0 if all(r["verdict"] == "PASS" for r in rows) else 1
 
 
 if __name__ == "__main__":
