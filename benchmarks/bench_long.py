@@ -44,6 +44,7 @@ import json
 import os
 import resource
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -183,6 +184,11 @@ def _limit_memory(gb: float) -> None:
     resource.setrlimit(resource.RLIMIT_DATA, (cap, cap))
 
 
+def _interrupt(signum: int, frame: object) -> None:
+    """SIGTERM: stop as Ctrl-C does (the running command killed, the table printed with what was measured)."""
+    raise KeyboardInterrupt
+
+
 class CommandFailed(Exception):
     """A measured command exited non-zero: its last line of error output."""
 
@@ -192,7 +198,12 @@ def run(args: list[str], limit_gb: float | None = None) -> tuple[float, float, f
     t0 = time.perf_counter()
     pre = None if not limit_gb else (lambda: _limit_memory(limit_gb))
     proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, preexec_fn=pre)
-    _, status, usage = os.wait4(proc.pid, 0)
+    try:
+        _, status, usage = os.wait4(proc.pid, 0)
+    except KeyboardInterrupt:  # the benchmark stopped (Ctrl-C, SIGTERM): the command with it
+        proc.kill()
+        proc.wait()
+        raise
     elapsed = time.perf_counter() - t0
     err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
     if os.waitstatus_to_exitcode(status) != 0:
@@ -329,78 +340,86 @@ def main(argv: list[str] | None = None) -> int:
     results: dict[float, dict[str, tuple[float, float, float] | str]] = {}
     start, loads = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), [os.getloadavg()[0]]
     with tempfile.TemporaryDirectory(dir=args.dir) as tmp:
-        for i, days in enumerate(args.days):
-            folder = Path(tmp) / f"d{days:g}"
-            folder.mkdir()
-            paths = {
-                "cwa": folder / "home_s00_t00.cwa",
-                "mcap": folder / "home.mcap",
-                "rrd": folder / "home.rrd",
-                "arm": folder / "arm.mcap",
-                "ref": folder / "ref.mcap",
-                "cal": folder / "cal.json",
-                "parquet": folder / "wrist.parquet",
-            }
-            if args.trials:
-                shutil.copy(args.trials[i], paths["mcap"])
-            if not args.trials or names & {*TWO_IMU, *REFERENCE}:
-                subprocess.run(
-                    [*imulog, "simulate", "home", "-o", str(folder), "--days", str(days)],
-                    check=True,
-                    stdout=subprocess.DEVNULL,
-                    stderr=subprocess.DEVNULL,
-                )
-            results[days] = {}
-            calibration_file(paths["cal"])
-            for name, templates in commands:
-                # each trial written when a command first needs it (unmeasured)
-                uses = {
-                    k
-                    for t in [*templates, *SETUP.get(name, [])]
-                    for a in t
-                    for k in ("mcap", "arm", "ref")
-                    if a == f"{{{k}}}"
+        interrupted = False
+        previous = signal.signal(signal.SIGTERM, _interrupt)
+        try:
+            for i, days in enumerate(args.days):
+                folder = Path(tmp) / f"d{days:g}"
+                folder.mkdir()
+                paths = {
+                    "cwa": folder / "home_s00_t00.cwa",
+                    "mcap": folder / "home.mcap",
+                    "rrd": folder / "home.rrd",
+                    "arm": folder / "arm.mcap",
+                    "ref": folder / "ref.mcap",
+                    "cal": folder / "cal.json",
+                    "parquet": folder / "wrist.parquet",
                 }
-                # the wrist's steps without convert asked (convert itself is measured writing it)
-                if "mcap" in uses and name != "convert" and not paths["mcap"].exists():
-                    subprocess.run([*imulog, "convert", str(paths["cwa"]), "-o", str(paths["mcap"])], check=True)
-                if "arm" in uses and not paths["arm"].exists():
-                    two_imu_trial(paths["cwa"], paths["arm"])
-                if "ref" in uses and not paths["ref"].exists():
-                    reference_trial(paths["cwa"], paths["ref"])
-                if any("{imu_topic}" in a for t in templates for a in t):
-                    from imulog.archive import TrialReader
+                if args.trials:
+                    shutil.copy(args.trials[i], paths["mcap"])
+                if not args.trials or names & {*TWO_IMU, *REFERENCE}:
+                    subprocess.run(
+                        [*imulog, "simulate", "home", "-o", str(folder), "--days", str(days)],
+                        check=True,
+                        stdout=subprocess.DEVNULL,
+                        stderr=subprocess.DEVNULL,
+                    )
+                results[days] = {}
+                calibration_file(paths["cal"])
+                for name, templates in commands:
+                    # each trial written when a command first needs it (unmeasured)
+                    uses = {
+                        k
+                        for t in [*templates, *SETUP.get(name, [])]
+                        for a in t
+                        for k in ("mcap", "arm", "ref")
+                        if a == f"{{{k}}}"
+                    }
+                    # the wrist's steps without convert asked (convert itself is measured writing it)
+                    if "mcap" in uses and name != "convert" and not paths["mcap"].exists():
+                        subprocess.run([*imulog, "convert", str(paths["cwa"]), "-o", str(paths["mcap"])], check=True)
+                    if "arm" in uses and not paths["arm"].exists():
+                        two_imu_trial(paths["cwa"], paths["arm"])
+                    if "ref" in uses and not paths["ref"].exists():
+                        reference_trial(paths["cwa"], paths["ref"])
+                    if any("{imu_topic}" in a for t in templates for a in t):
+                        from imulog.archive import TrialReader
 
-                    with TrialReader(paths["mcap"]) as trial:  # the device's IMU channel (/imu/ax6_4321)
-                        fields = {"imu_topic": next(t for t in trial.topics() if t.startswith("/imu/"))}
-                else:
-                    fields = {}
-                try:
-                    for setup in SETUP.get(name, []):
-                        wall, mb, cpu = run([*imulog, *[a.format(**paths) for a in setup]], args.limit_gb)
-                        print(
-                            f"{days:g} d   setup {' '.join(setup[:2])}: {wall:.1f} s wall, {cpu:.1f} s CPU, {mb:.0f} MB"
-                        )
-                    runs = [
-                        run([*imulog, *[a.format(**paths, **fields) for a in template]], args.limit_gb)
-                        for template in templates
-                    ]
-                except CommandFailed as exc:
-                    results[days][name] = str(exc)
+                        with TrialReader(paths["mcap"]) as trial:  # the device's IMU channel (/imu/ax6_4321)
+                            fields = {"imu_topic": next(t for t in trial.topics() if t.startswith("/imu/"))}
+                    else:
+                        fields = {}
+                    try:
+                        for setup in SETUP.get(name, []):
+                            wall, mb, cpu = run([*imulog, *[a.format(**paths) for a in setup]], args.limit_gb)
+                            print(
+                                f"{days:g} d   setup {' '.join(setup[:2])}: {wall:.1f} s wall, {cpu:.1f} s CPU, {mb:.0f} MB"
+                            )
+                        runs = [
+                            run([*imulog, *[a.format(**paths, **fields) for a in template]], args.limit_gb)
+                            for template in templates
+                        ]
+                    except CommandFailed as exc:
+                        results[days][name] = str(exc)
+                        loads.append(os.getloadavg()[0])
+                        print(f"{days:g} d {name}: FAILED {exc}; load {os.getloadavg()[0]:.1f}", flush=True)
+                        continue
+                    results[days][name] = (sum(r[0] for r in runs), max(r[1] for r in runs), sum(r[2] for r in runs))
+                    wall, mb, cpu = results[days][name]
                     loads.append(os.getloadavg()[0])
-                    print(f"{days:g} d {name}: FAILED {exc}; load {os.getloadavg()[0]:.1f}", flush=True)
-                    continue
-                results[days][name] = (sum(r[0] for r in runs), max(r[1] for r in runs), sum(r[2] for r in runs))
-                wall, mb, cpu = results[days][name]
-                loads.append(os.getloadavg()[0])
-                print(
-                    f"{days:g} d {name}: {wall:.1f} s wall, {cpu:.1f} s CPU, {mb:.0f} MB, load {os.getloadavg()[0]:.1f}",
-                    flush=True,
-                )
-            sizes = {k: p.stat().st_size / 1e6 for k, p in paths.items() if p.exists()}
-            print(f"{days:g} d: " + ", ".join(f"{k} {v:.0f} MB" for k, v in sizes.items()), flush=True)
-            for p in paths.values():
-                p.unlink(missing_ok=True)
+                    print(
+                        f"{days:g} d {name}: {wall:.1f} s wall, {cpu:.1f} s CPU, {mb:.0f} MB, load {os.getloadavg()[0]:.1f}",
+                        flush=True,
+                    )
+                sizes = {k: p.stat().st_size / 1e6 for k, p in paths.items() if p.exists()}
+                print(f"{days:g} d: " + ", ".join(f"{k} {v:.0f} MB" for k, v in sizes.items()), flush=True)
+                for p in paths.values():
+                    p.unlink(missing_ok=True)
+        except KeyboardInterrupt:  # what was measured so far still makes the table; the rest is "not run"
+            interrupted = True
+            print(f"interrupted; load {os.getloadavg()[0]:.1f}", flush=True)
+        finally:
+            signal.signal(signal.SIGTERM, previous)
     one, five, _ = os.getloadavg()
     print(
         f"load average {one:.1f} (1 min), {five:.1f} (5 min) on {os.cpu_count()} cores; "
@@ -412,6 +431,7 @@ def main(argv: list[str] | None = None) -> int:
         "start": start,
         "end": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "load": f"{min(loads):.1f}-{max(loads):.1f} (1 min, at each command's end)",
+        "interrupted": interrupted,
     }
     return verdicts(commands, results, args.days, args.summary, meta)
 

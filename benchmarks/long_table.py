@@ -123,7 +123,8 @@ def markdown(doc: dict) -> str:
         f"`{doc.get('argv', '')}` on commit {(doc.get('commit') or 'unknown')[:7]}"
         + (" (imulog/ changed)" if doc.get("imulog_changed") else "")
         + f", {doc.get('start', '')} to {doc.get('end', '')}, load average {doc.get('load', '')} on"
-        f" {doc['cpu_count']} cores; CPU = user + sys of the child",
+        f" {doc['cpu_count']} cores; CPU = user + sys of the child"
+        + ("; interrupted (what was not measured: not run)" if doc.get("interrupted") else ""),
         "",
         "| command | "
         + " | ".join(f"{k} d: peak RSS" for k in keys)

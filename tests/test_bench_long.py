@@ -80,3 +80,29 @@ def test_a_tiny_run_writes_its_table_and_summary(tmp_path, capsys):
     assert code == (0 if row["verdict"] == "PASS" else 1)
     assert "\ninfo  " in capsys.readouterr().out.split("growth  verdict")[-1]
     assert list(tmp_path.iterdir()) == [out]  # the scratch folder is removed
+
+
+def test_an_interrupted_run_still_writes_what_it_measured(tmp_path, monkeypatch):
+    """SIGTERM or Ctrl-C during the second command: the first is in the table, the second "not run"."""
+    calls = []
+
+    def run(args, limit_gb=None):
+        calls.append(args)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return 1.0, 100.0, 0.5
+
+    monkeypatch.setattr(bench_long, "run", run)
+    out = tmp_path / "summary.json"
+    code = bench_long.main(
+        ["--days", "0.002", "--commands", "info", "export", "--dir", str(tmp_path), "--summary", str(out)]
+    )
+    doc = json.loads(out.read_text())
+    assert doc["interrupted"] is True and code == 1
+    assert [(r["command"], r["verdict"], r["runs"]["0.002"]) for r in doc["commands"]] == [
+        ("info", "PASS", {"wall_s": 1.0, "rss_mb": 100.0, "cpu_s": 0.5}),
+        ("export", "FAIL", None),
+    ]
+    assert [a[3] for a in calls] == ["info", "export"]
+    assert "interrupted" in markdown(doc).splitlines()[0]
+    assert list(tmp_path.iterdir()) == [out]
