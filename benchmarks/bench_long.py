@@ -339,6 +339,7 @@ def main(argv: list[str] | None = None) -> int:
     imulog = [sys.executable, "-m", "imulog"]
     results: dict[float, dict[str, tuple[float, float, float] | str]] = {}
     start, loads = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), [os.getloadavg()[0]]
+    measured = run_info(Path(__file__).resolve().parents[1])  # the commit at the start (a run can take hours)
     with tempfile.TemporaryDirectory(dir=args.dir) as tmp:
         interrupted = False
         previous = signal.signal(signal.SIGTERM, _interrupt)
@@ -426,7 +427,7 @@ def main(argv: list[str] | None = None) -> int:
         f"self peak {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB"
     )
     meta = {
-        **run_info(Path(__file__).resolve().parents[1]),
+        **measured,
         "argv": " ".join(["python benchmarks/bench_long.py", *(argv if argv is not None else sys.argv[1:])]),
         "start": start,
         "end": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
