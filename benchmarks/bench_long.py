@@ -177,11 +177,21 @@ def calibration_file(out: Path) -> None:
     out.write_text(json.dumps(Calibration(acc=acc, gyr=gyr).to_dict()))
 
 
-def _limit_memory(gb: float) -> None:
-    """In the child: a cap on its private memory (RLIMIT_DATA: heap and anonymous maps, not the mapped trial), so
-    a command that would take the shared machine's memory fails instead."""
-    cap = int(gb * 2**30)
-    resource.setrlimit(resource.RLIMIT_DATA, (cap, cap))
+#: runs the measured command from a small process: a child's ``ru_maxrss`` starts at the RSS of the process that
+#: forked it (Linux copies the page tables at fork and keeps their high-water mark through exec), and the benchmark
+#: itself holds up to 400 MB after writing a trial. Arguments: the file for "maxrss_kB utime_s stime_s", the cap on
+#: private memory in GB (RLIMIT_DATA: heap and anonymous maps, not the mapped trial; 0: none), the command.
+LAUNCHER = """
+import os, resource, sys
+out, cap, args = sys.argv[1], float(sys.argv[2]), sys.argv[3:]
+if cap:
+    resource.setrlimit(resource.RLIMIT_DATA, (int(cap * 2**30),) * 2)
+_, status, u = os.wait4(os.posix_spawn(args[0], args, os.environ), 0)
+with open(out, "w") as f:
+    f.write(f"{u.ru_maxrss} {u.ru_utime} {u.ru_stime}")
+code = os.waitstatus_to_exitcode(status)
+sys.exit(code if code >= 0 else 128 - code)
+"""
 
 
 def _interrupt(signum: int, frame: object) -> None:
@@ -194,22 +204,29 @@ class CommandFailed(Exception):
 
 
 def run(args: list[str], limit_gb: float | None = None) -> tuple[float, float, float]:
-    """(wall seconds, peak RSS MB, CPU seconds: user + system) of one command in a child process."""
+    """(wall seconds, peak RSS MB, CPU seconds: user + system) of one command, spawned by :data:`LAUNCHER` under
+    a cap on its private memory (``limit_gb``) so that one that would take the shared machine's memory fails."""
+    fd, usage_file = tempfile.mkstemp(suffix=".rusage")
+    os.close(fd)
     t0 = time.perf_counter()
-    pre = None if not limit_gb else (lambda: _limit_memory(limit_gb))
-    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, preexec_fn=pre)
+    launch = [sys.executable, "-S", "-c", LAUNCHER, usage_file, str(limit_gb or 0), *args]
+    proc = subprocess.Popen(launch, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
     try:
-        _, status, usage = os.wait4(proc.pid, 0)
+        _, err_bytes = proc.communicate()
     except KeyboardInterrupt:  # the benchmark stopped (Ctrl-C, SIGTERM): the command with it
-        proc.kill()
+        os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
+        os.unlink(usage_file)
         raise
     elapsed = time.perf_counter() - t0
-    err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
-    if os.waitstatus_to_exitcode(status) != 0:
-        last = [line for line in err.splitlines() if line.strip()][-1:] or [f"exit {os.waitstatus_to_exitcode(status)}"]
-        raise CommandFailed(f"{' '.join(args[2:])}: {last[0][:300]} (peak {usage.ru_maxrss / 1024:.0f} MB)")
-    return elapsed, usage.ru_maxrss / 1024.0, usage.ru_utime + usage.ru_stime  # ru_maxrss: kB on Linux
+    text = Path(usage_file).read_text().split()
+    os.unlink(usage_file)
+    maxrss_mb, cpu = (int(text[0]) / 1024.0, float(text[1]) + float(text[2])) if text else (0.0, 0.0)
+    err = err_bytes.decode(errors="replace")
+    if proc.returncode != 0:
+        last = [line for line in err.splitlines() if line.strip()][-1:] or [f"exit {proc.returncode}"]
+        raise CommandFailed(f"{' '.join(args[2:])}: {last[0][:300]} (peak {maxrss_mb:.0f} MB)")
+    return elapsed, maxrss_mb, cpu  # ru_maxrss: kB on Linux
 
 
 def orientation_peer(days: float, rate: float = 100.0, repeats: int = 1) -> int:

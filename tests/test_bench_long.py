@@ -106,3 +106,24 @@ def test_an_interrupted_run_still_writes_what_it_measured(tmp_path, monkeypatch)
     assert [a[3] for a in calls] == ["info", "export"]
     assert "interrupted" in markdown(doc).splitlines()[0]
     assert list(tmp_path.iterdir()) == [out]
+
+
+def test_a_command_is_measured_apart_from_the_benchmark_s_own_memory():
+    """A child's ru_maxrss starts at the RSS of the process that forked it: with 300 MB held here, a command of a
+    few MB must still measure a few MB (it measured over 300 MB when the benchmark forked the commands itself)."""
+    held = bytearray(300 * 2**20)
+    held[::4096] = b"\1" * len(held[::4096])  # resident
+    wall, mb, cpu = bench_long.run([sys.executable, "-S", "-c", "pass"])
+    assert mb < 100 and wall > 0 and cpu >= 0
+    big = "b = bytearray(400 * 2**20); b[::4096] = b'\\1' * len(b[::4096])"
+    assert 400 < bench_long.run([sys.executable, "-S", "-c", big])[1] < 600
+    del held
+
+
+def test_the_memory_cap_still_applies_to_the_command():
+    try:
+        bench_long.run([sys.executable, "-S", "-c", "b = bytearray(2 * 2**30)"], limit_gb=0.5)
+    except bench_long.CommandFailed as exc:
+        assert "MemoryError" in str(exc)
+    else:
+        raise AssertionError("a command over the cap must fail")
