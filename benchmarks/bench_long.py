@@ -29,7 +29,12 @@ Every command runs under a cap on its private memory (``--limit-gb``, default 6 
 fit fails (reported, the others still run) instead of taking the shared machine's memory.
 
 Targets: peak RSS at most 1 GB for every command; growth from 1 to 7 days at most 10 % (issue 17) / 15 %
-(issue 24, every step including trajectory and kinematics). The verdict column uses 1.15x.
+(issue 24, every step including trajectory and kinematics). The final table (``long_table.py``) gives per
+command the peak RSS, CPU and wall time at each length, the growth from the shortest to the longest and PASS/FAIL
+against 1 GB and 1.15x (a command that failed or was not run fails); ``--summary FILE`` writes it with the
+commit, the times and the load averages (JSON for ``.json``, else a Markdown table the docs can quote):
+
+    python benchmarks/bench_long.py --days 1 7 --commands evaluate --summary evaluate.md
 """
 
 from __future__ import annotations
@@ -39,6 +44,7 @@ import json
 import os
 import resource
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -46,6 +52,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from long_table import format_table, run_info, summary, table_rows, write_summary
 
 COMMANDS = [
     ("convert", ["convert", "{cwa}", "-o", "{mcap}"]),
@@ -92,7 +99,6 @@ SETUP = {
 }
 TWO_IMU = ("orientation2", "kinematics", "heading")
 REFERENCE = ("align", "align_oriented", "evaluate")
-MAX_GROWTH = 1.15  # issue 24: peak memory from the shortest to the longest recording
 
 
 def two_imu_trial(cwa: Path, out: Path) -> None:
@@ -171,11 +177,26 @@ def calibration_file(out: Path) -> None:
     out.write_text(json.dumps(Calibration(acc=acc, gyr=gyr).to_dict()))
 
 
-def _limit_memory(gb: float) -> None:
-    """In the child: a cap on its private memory (RLIMIT_DATA: heap and anonymous maps, not the mapped trial), so
-    a command that would take the shared machine's memory fails instead."""
-    cap = int(gb * 2**30)
-    resource.setrlimit(resource.RLIMIT_DATA, (cap, cap))
+#: runs the measured command from a small process: a child's ``ru_maxrss`` starts at the RSS of the process that
+#: forked it (Linux copies the page tables at fork and keeps their high-water mark through exec), and the benchmark
+#: itself holds up to 400 MB after writing a trial. Arguments: the file for "maxrss_kB utime_s stime_s", the cap on
+#: private memory in GB (RLIMIT_DATA: heap and anonymous maps, not the mapped trial; 0: none), the command.
+LAUNCHER = """
+import os, resource, sys
+out, cap, args = sys.argv[1], float(sys.argv[2]), sys.argv[3:]
+if cap:
+    resource.setrlimit(resource.RLIMIT_DATA, (int(cap * 2**30),) * 2)
+_, status, u = os.wait4(os.posix_spawn(args[0], args, os.environ), 0)
+with open(out, "w") as f:
+    f.write(f"{u.ru_maxrss} {u.ru_utime} {u.ru_stime}")
+code = os.waitstatus_to_exitcode(status)
+sys.exit(code if code >= 0 else 128 - code)
+"""
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    """SIGTERM: stop as Ctrl-C does (the running command killed, the table printed with what was measured)."""
+    raise KeyboardInterrupt
 
 
 class CommandFailed(Exception):
@@ -183,17 +204,29 @@ class CommandFailed(Exception):
 
 
 def run(args: list[str], limit_gb: float | None = None) -> tuple[float, float, float]:
-    """(wall seconds, peak RSS MB, CPU seconds: user + system) of one command in a child process."""
+    """(wall seconds, peak RSS MB, CPU seconds: user + system) of one command, spawned by :data:`LAUNCHER` under
+    a cap on its private memory (``limit_gb``) so that one that would take the shared machine's memory fails."""
+    fd, usage_file = tempfile.mkstemp(suffix=".rusage")
+    os.close(fd)
     t0 = time.perf_counter()
-    pre = None if not limit_gb else (lambda: _limit_memory(limit_gb))
-    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, preexec_fn=pre)
-    _, status, usage = os.wait4(proc.pid, 0)
+    launch = [sys.executable, "-S", "-c", LAUNCHER, usage_file, str(limit_gb or 0), *args]
+    proc = subprocess.Popen(launch, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+    try:
+        _, err_bytes = proc.communicate()
+    except KeyboardInterrupt:  # the benchmark stopped (Ctrl-C, SIGTERM): the command with it
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        os.unlink(usage_file)
+        raise
     elapsed = time.perf_counter() - t0
-    err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
-    if os.waitstatus_to_exitcode(status) != 0:
-        last = [line for line in err.splitlines() if line.strip()][-1:] or [f"exit {os.waitstatus_to_exitcode(status)}"]
-        raise CommandFailed(f"{' '.join(args[2:])}: {last[0][:300]} (peak {usage.ru_maxrss / 1024:.0f} MB)")
-    return elapsed, usage.ru_maxrss / 1024.0, usage.ru_utime + usage.ru_stime  # ru_maxrss: kB on Linux
+    text = Path(usage_file).read_text().split()
+    os.unlink(usage_file)
+    maxrss_mb, cpu = (int(text[0]) / 1024.0, float(text[1]) + float(text[2])) if text else (0.0, 0.0)
+    err = err_bytes.decode(errors="replace")
+    if proc.returncode != 0:
+        last = [line for line in err.splitlines() if line.strip()][-1:] or [f"exit {proc.returncode}"]
+        raise CommandFailed(f"{' '.join(args[2:])}: {last[0][:300]} (peak {maxrss_mb:.0f} MB)")
+    return elapsed, maxrss_mb, cpu  # ru_maxrss: kB on Linux
 
 
 def orientation_peer(days: float, rate: float = 100.0, repeats: int = 1) -> int:
@@ -304,6 +337,13 @@ def main(argv: list[str] | None = None) -> int:
         help="cap each command's private memory (RLIMIT_DATA) so one that does not fit fails instead of taking the "
         "shared machine's memory; 0: no cap",
     )
+    ap.add_argument(
+        "--summary",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="also write the final table with the commit, times and load averages: JSON for .json, else Markdown",
+    )
     args = ap.parse_args(argv)
     if args.dynamos:
         return dynamos_scaling(args.dynamos)
@@ -315,112 +355,121 @@ def main(argv: list[str] | None = None) -> int:
     names = {name for name, _ in commands}
     imulog = [sys.executable, "-m", "imulog"]
     results: dict[float, dict[str, tuple[float, float, float] | str]] = {}
+    start, loads = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), [os.getloadavg()[0]]
+    measured = run_info(Path(__file__).resolve().parents[1])  # the commit at the start (a run can take hours)
     with tempfile.TemporaryDirectory(dir=args.dir) as tmp:
-        for i, days in enumerate(args.days):
-            folder = Path(tmp) / f"d{days:g}"
-            folder.mkdir()
-            paths = {
-                "cwa": folder / "home_s00_t00.cwa",
-                "mcap": folder / "home.mcap",
-                "rrd": folder / "home.rrd",
-                "arm": folder / "arm.mcap",
-                "ref": folder / "ref.mcap",
-                "cal": folder / "cal.json",
-                "parquet": folder / "wrist.parquet",
-            }
-            if args.trials:
-                shutil.copy(args.trials[i], paths["mcap"])
-            if not args.trials or names & {*TWO_IMU, *REFERENCE}:
-                subprocess.run(
-                    [*imulog, "simulate", "home", "-o", str(folder), "--days", str(days)],
-                    check=True,
-                    stdout=subprocess.DEVNULL,
-                    stderr=subprocess.DEVNULL,
-                )
-            results[days] = {}
-            calibration_file(paths["cal"])
-            for name, templates in commands:
-                # each trial written when a command first needs it (unmeasured)
-                uses = {
-                    k
-                    for t in [*templates, *SETUP.get(name, [])]
-                    for a in t
-                    for k in ("mcap", "arm", "ref")
-                    if a == f"{{{k}}}"
+        interrupted = False
+        previous = signal.signal(signal.SIGTERM, _interrupt)
+        try:
+            for i, days in enumerate(args.days):
+                folder = Path(tmp) / f"d{days:g}"
+                folder.mkdir()
+                paths = {
+                    "cwa": folder / "home_s00_t00.cwa",
+                    "mcap": folder / "home.mcap",
+                    "rrd": folder / "home.rrd",
+                    "arm": folder / "arm.mcap",
+                    "ref": folder / "ref.mcap",
+                    "cal": folder / "cal.json",
+                    "parquet": folder / "wrist.parquet",
                 }
-                # the wrist's steps without convert asked (convert itself is measured writing it)
-                if "mcap" in uses and name != "convert" and not paths["mcap"].exists():
-                    subprocess.run([*imulog, "convert", str(paths["cwa"]), "-o", str(paths["mcap"])], check=True)
-                if "arm" in uses and not paths["arm"].exists():
-                    two_imu_trial(paths["cwa"], paths["arm"])
-                if "ref" in uses and not paths["ref"].exists():
-                    reference_trial(paths["cwa"], paths["ref"])
-                if any("{imu_topic}" in a for t in templates for a in t):
-                    from imulog.archive import TrialReader
+                if args.trials:
+                    shutil.copy(args.trials[i], paths["mcap"])
+                if not args.trials or names & {*TWO_IMU, *REFERENCE}:
+                    subprocess.run(
+                        [*imulog, "simulate", "home", "-o", str(folder), "--days", str(days)],
+                        check=True,
+                        stdout=subprocess.DEVNULL,
+                        stderr=subprocess.DEVNULL,
+                    )
+                results[days] = {}
+                calibration_file(paths["cal"])
+                for name, templates in commands:
+                    # each trial written when a command first needs it (unmeasured)
+                    uses = {
+                        k
+                        for t in [*templates, *SETUP.get(name, [])]
+                        for a in t
+                        for k in ("mcap", "arm", "ref")
+                        if a == f"{{{k}}}"
+                    }
+                    # the wrist's steps without convert asked (convert itself is measured writing it)
+                    if "mcap" in uses and name != "convert" and not paths["mcap"].exists():
+                        subprocess.run([*imulog, "convert", str(paths["cwa"]), "-o", str(paths["mcap"])], check=True)
+                    if "arm" in uses and not paths["arm"].exists():
+                        two_imu_trial(paths["cwa"], paths["arm"])
+                    if "ref" in uses and not paths["ref"].exists():
+                        reference_trial(paths["cwa"], paths["ref"])
+                    if any("{imu_topic}" in a for t in templates for a in t):
+                        from imulog.archive import TrialReader
 
-                    with TrialReader(paths["mcap"]) as trial:  # the device's IMU channel (/imu/ax6_4321)
-                        fields = {"imu_topic": next(t for t in trial.topics() if t.startswith("/imu/"))}
-                else:
-                    fields = {}
-                try:
-                    for setup in SETUP.get(name, []):
-                        wall, mb, cpu = run([*imulog, *[a.format(**paths) for a in setup]], args.limit_gb)
-                        print(
-                            f"{days:g} d   setup {' '.join(setup[:2])}: {wall:.1f} s wall, {cpu:.1f} s CPU, {mb:.0f} MB"
-                        )
-                    runs = [
-                        run([*imulog, *[a.format(**paths, **fields) for a in template]], args.limit_gb)
-                        for template in templates
-                    ]
-                except CommandFailed as exc:
-                    results[days][name] = str(exc)
-                    print(f"{days:g} d {name}: FAILED {exc}; load {os.getloadavg()[0]:.1f}", flush=True)
-                    continue
-                results[days][name] = (sum(r[0] for r in runs), max(r[1] for r in runs), sum(r[2] for r in runs))
-                wall, mb, cpu = results[days][name]
-                print(
-                    f"{days:g} d {name}: {wall:.1f} s wall, {cpu:.1f} s CPU, {mb:.0f} MB, load {os.getloadavg()[0]:.1f}",
-                    flush=True,
-                )
-            sizes = {k: p.stat().st_size / 1e6 for k, p in paths.items() if p.exists()}
-            print(f"{days:g} d: " + ", ".join(f"{k} {v:.0f} MB" for k, v in sizes.items()), flush=True)
-            for p in paths.values():
-                p.unlink(missing_ok=True)
+                        with TrialReader(paths["mcap"]) as trial:  # the device's IMU channel (/imu/ax6_4321)
+                            fields = {"imu_topic": next(t for t in trial.topics() if t.startswith("/imu/"))}
+                    else:
+                        fields = {}
+                    try:
+                        for setup in SETUP.get(name, []):
+                            wall, mb, cpu = run([*imulog, *[a.format(**paths) for a in setup]], args.limit_gb)
+                            print(
+                                f"{days:g} d   setup {' '.join(setup[:2])}: {wall:.1f} s wall, {cpu:.1f} s CPU, {mb:.0f} MB"
+                            )
+                        runs = [
+                            run([*imulog, *[a.format(**paths, **fields) for a in template]], args.limit_gb)
+                            for template in templates
+                        ]
+                    except CommandFailed as exc:
+                        results[days][name] = str(exc)
+                        loads.append(os.getloadavg()[0])
+                        print(f"{days:g} d {name}: FAILED {exc}; load {os.getloadavg()[0]:.1f}", flush=True)
+                        continue
+                    results[days][name] = (sum(r[0] for r in runs), max(r[1] for r in runs), sum(r[2] for r in runs))
+                    wall, mb, cpu = results[days][name]
+                    loads.append(os.getloadavg()[0])
+                    print(
+                        f"{days:g} d {name}: {wall:.1f} s wall, {cpu:.1f} s CPU, {mb:.0f} MB, load {os.getloadavg()[0]:.1f}",
+                        flush=True,
+                    )
+                sizes = {k: p.stat().st_size / 1e6 for k, p in paths.items() if p.exists()}
+                print(f"{days:g} d: " + ", ".join(f"{k} {v:.0f} MB" for k, v in sizes.items()), flush=True)
+                for p in paths.values():
+                    p.unlink(missing_ok=True)
+        except KeyboardInterrupt:  # what was measured so far still makes the table; the rest is "not run"
+            interrupted = True
+            print(f"interrupted; load {os.getloadavg()[0]:.1f}", flush=True)
+        finally:
+            signal.signal(signal.SIGTERM, previous)
     one, five, _ = os.getloadavg()
     print(
         f"load average {one:.1f} (1 min), {five:.1f} (5 min) on {os.cpu_count()} cores; "
         f"self peak {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB"
     )
-    return verdicts(commands, results, args.days)
+    meta = {
+        **measured,
+        "argv": " ".join(["python benchmarks/bench_long.py", *(argv if argv is not None else sys.argv[1:])]),
+        "start": start,
+        "end": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "load": f"{min(loads):.1f}-{max(loads):.1f} (1 min, at each command's end)",
+        "interrupted": interrupted,
+    }
+    return verdicts(commands, results, args.days, args.summary, meta)
 
 
 def verdicts(
-    commands: list[tuple[str, list]], results: dict[float, dict[str, tuple[float, float, float] | str]], days: list
+    commands: list[tuple[str, list]],
+    results: dict[float, dict[str, tuple[float, float, float] | str]],
+    days: list,
+    summary_file: Path | None = None,
+    meta: dict | None = None,
 ) -> int:
-    """Print the table (wall s, CPU s, peak MB per length, the RSS ratio of the longest to the shortest, the
-    verdict); 0 when every command meets both targets."""
-    lo, hi = min(days), max(days)
-    print(
-        f"{'command':12s}"
-        + "".join(f"{f'{d:g} d s':>10s}{f'{d:g} d CPU s':>12s}{f'{d:g} d MB':>11s}" for d in days)
-        + f"{'RSS ratio':>11s}  verdict"
-    )
-    ok_all = True
-    for name, _ in commands:
-        got = [results[d][name] for d in days]
-        if any(isinstance(r, str) for r in got):
-            ok_all = False
-            print(
-                f"{name:12s}FAILED: "
-                + "; ".join(f"{d:g} d {r}" for d, r in zip(days, got, strict=True) if isinstance(r, str))
-            )
-            continue
-        row = "".join(f"{r[0]:10.1f}{r[2]:12.1f}{r[1]:11.0f}" for r in got)
-        ratio = results[hi][name][1] / results[lo][name][1]
-        ok = max(r[1] for r in got) <= 1024 and ratio <= MAX_GROWTH
-        ok_all &= ok
-        print(f"{name:12s}{row}{ratio:10.2f}x  {'meets target' if ok else f'MISSES (<= 1 GB, <= {MAX_GROWTH}x)'}")
-    return 0 if ok_all else 1
+    """Print the final table (per command: peak RSS, CPU and wall at each length, the RSS growth from the shortest
+    to the longest, PASS/FAIL against 1 GB and 1.15x: :mod:`long_table`), write it to ``summary_file`` (JSON or
+    Markdown) if given; 0 when every command passes."""
+    rows = table_rows([name for name, _ in commands], results, days)
+    print(format_table(rows, days), flush=True)
+    if summary_file is not None:
+        write_summary(summary_file, summary(rows, days, meta or {}))
+        print(f"summary: {summary_file}")
+    return 0 if all(r["verdict"] == "PASS" for r in rows) else 1
 
 
 if __name__ == "__main__":
