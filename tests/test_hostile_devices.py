@@ -315,13 +315,15 @@ def test_gt3x_read_piece_by_piece_is_bounded_and_checked_the_same(hostile):
 
 
 def test_zero_padding_is_skipped_at_c_speed():
-    """64 MiB of zeros between two records: the byte-by-byte scan took about 7 s; now well under one."""
+    """64 MiB of zeros between two records: the byte-by-byte scan took about 7 s of CPU; now well under one. CPU
+    time of this process, not wall time, so that a loaded machine does not fail it (it failed at 2 s of wall under
+    load); the reader's speed on long files is measured by ``benchmarks/bench_wearables.py``."""
     rec = bytes([0x1E, 0x02, 0, 0, 0, 0, 2, 0]) + b"\x10\x0e"
     rec += bytes([0xFF ^ np.bitwise_xor.reduce(np.frombuffer(rec, dtype=np.uint8))])
     data = rec + bytes(64 << 20) + rec
-    t = time.perf_counter()
+    t = time.process_time()
     batches = list(iter_record_batches(io.BytesIO(data), Path("x.gt3x")))
-    assert time.perf_counter() - t < 2.0
+    assert time.process_time() - t < 2.0
     assert sum(len(b.types) for b in batches) == 2
 
 
