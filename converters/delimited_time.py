@@ -16,6 +16,8 @@ from imulog.converters.delimited_plan import _Plan
 from imulog.converters.errors import ConversionError
 from imulog.converters.host_clock import HostClockFit
 
+from imulog.numeric import add_counts, median_of_counts
+
 
 def _is_host_clock(plan: _Plan, column: Column) -> bool:
     return "unix" in _tokens(column.name) or bool(plan.mapping and plan.mapping.host_clock)
@@ -137,20 +139,11 @@ class StepCounts:
     def add(self, steps: np.ndarray) -> None:
         if not self.exact or not len(steps):
             return
-        values, counts = np.unique(steps, return_counts=True)
-        for v, c in zip(values.tolist(), counts.tolist(), strict=True):
-            self.counts[v] = self.counts.get(v, 0) + c
+        add_counts(self.counts, steps)
         if len(self.counts) > self.MAX_DISTINCT:
             self.exact, self.counts = False, {}
 
     def rate_hz(self) -> float | None:
         """1e9 / the median step (the mean of the two middle steps for an even count), None without steps."""
-        if not self.counts:
-            return None
-        values = np.array(sorted(self.counts), dtype=np.int64)
-        cum = np.cumsum([self.counts[int(v)] for v in values])
-        n = int(cum[-1])
-        lo, hi = (n - 1) // 2, n // 2
-        pick = values[np.searchsorted(cum, [lo + 1, hi + 1])]
-        dt = float(np.mean(pick)) if n % 2 == 0 else float(pick[1])
-        return 1e9 / dt if dt > 0 else None
+        step = median_of_counts(self.counts)
+        return 1e9 / step if step is not None and step > 0 else None
