@@ -9,7 +9,9 @@ axis) where the optimized MAE is at or above ZUPT's, how many have the start ``z
 too (the start: no trust rule can bring the optimized below ZUPT without leaving its own start) and how many
 have the trust at its floor (following the start as closely as the rule allows). ``--start-variants`` also runs
 the optimisation from a start with the rotating-bias compensation in z only, with half of it in x and y, and
-with it in x or y only where it closes the movements better than the measured acceleration,
+with it in x or y only where it closes the movements better than the measured acceleration, and with each axis's
+compensation scaled by its James-Stein share (``shrink``, ``RotatingBiasParams.shrink``; the table's last column is
+the significance it is computed from, :func:`imulog.process.integration.axis_significance`),
 and counts per variant the trials that meet both targets of issue 31 (at most 1.0 cm and below ZUPT on every
 axis). ``--cost-pick`` optimises each trial from two starts, ``zupt_bias`` and the start with the compensation in z
 only (x and y as measured, as plain ZUPT), both with the trust the default run estimated (so that their costs
@@ -43,6 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from trajectory_accuracy import evaluate_trial, simulated_inputs  # noqa: E402
 
 from imulog.process import trajectory_methods, trajectory_opt  # noqa: E402
+from imulog.process.integration import shrinkage_weight  # noqa: E402
 from imulog.process.minjerk import R2GWaypoints, r2g_reference  # noqa: E402
 from imulog.process.rest_runs import movement_runs  # noqa: E402
 from imulog.process.rests import true_rests  # noqa: E402
@@ -86,7 +89,13 @@ def _closure_pick(acc, rot, t_s, static, *args, **kwargs):
     return out
 
 
-START_VARIANTS = {"z-only": _z_only, "half-xy": _half_xy, "closure-pick": _closure_pick}
+def _shrink(acc, rot, t_s, static, errors, *args, **kwargs):
+    """The compensation on each global axis scaled by its James-Stein share (``RotatingBiasParams.shrink``)."""
+    errors = replace(errors, axis_weight=shrinkage_weight(errors.axis_z))
+    return _COMPENSATE(acc, rot, t_s, static, errors, *args, **kwargs)
+
+
+START_VARIANTS = {"z-only": _z_only, "half-xy": _half_xy, "closure-pick": _closure_pick, "shrink": _shrink}
 
 
 def start_variant_mae(inputs: dict, variant: str, params=DEFAULT_PARAMS) -> np.ndarray:
@@ -187,7 +196,8 @@ def trial_row(inputs: dict, params=DEFAULT_PARAMS) -> dict:
     sigma = np.asarray(info.get("sigma_data_static_m", [np.nan] * 3), dtype=float)
     sigma_mps = np.asarray(info.get("sigma_data_mps", [np.nan] * 3), dtype=float)
     closure = np.asarray(closure_sigma(t, inputs["acc_world"], static, reps), dtype=float)
-    return {"mae": mae, "sigma_m": sigma, "sigma_mps": sigma_mps, "closure_m": closure}
+    z = np.asarray(info.get("accelerometer_errors", {}).get("axis_z", [np.nan] * 3), dtype=float)
+    return {"mae": mae, "sigma_m": sigma, "sigma_mps": sigma_mps, "closure_m": closure, "axis_z": z}
 
 
 def repetition_rows(inputs: dict, params=DEFAULT_PARAMS) -> tuple[list[str], list[str]]:
@@ -249,20 +259,29 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--subjects", type=int, default=6)
     ap.add_argument("--first-subject", type=int, default=40)
     ap.add_argument("--repetitions", type=int, default=10)
-    ap.add_argument("--start-variants", action="store_true", help="also optimise from the start variants")
+    ap.add_argument(
+        "--start-variants",
+        nargs="*",
+        choices=list(START_VARIANTS),
+        help="also optimise from these start variants (no name: all of them)",
+    )
     ap.add_argument("--cost-pick", action="store_true", help="also pick the start per axis by the lower cost")
     ap.add_argument("--per-repetition", action="store_true", help="also one row per repetition and the fit's outliers")
     args = ap.parse_args(argv)
     names = list(CONDITIONS) if args.grid == ["all"] else args.grid
     t0, r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
-    print("| trial | ZUPT x/y/z | zupt_bias x/y/z | optimized x/y/z | trust x/y/z (mm) | closure x 0.5 (mm) |")
-    print("|---|---|---|---|---|---|")
+    print(
+        "| trial | ZUPT x/y/z | zupt_bias x/y/z | optimized x/y/z | trust x/y/z (mm) | closure x 0.5 (mm) "
+        "| compensation / its noise x/y/z |"
+    )
+    print("|---|---|---|---|---|---|---|")
     above = start = floor = 0
+    chosen = (args.start_variants or list(START_VARIANTS)) if args.start_variants is not None else []
     met = {
         k: 0
         for k in (
             "default",
-            *(START_VARIANTS if args.start_variants else ()),
+            *chosen,
             *(("measured-xy", "cost-pick") if args.cost_pick else ()),
         )
     }
@@ -285,8 +304,7 @@ def main(argv: list[str] | None = None) -> int:
             floor += int((bad & (row["sigma_m"] <= FLOOR_M + 1e-9)).sum())
             trials += 1
             variants = {"default": m["optimized"]}
-            if args.start_variants:
-                variants.update({k: start_variant_mae(inputs, k) for k in START_VARIANTS})
+            variants.update({k: start_variant_mae(inputs, k) for k in chosen})
             picked = ""
             if args.cost_pick:
                 cp = cost_pick(inputs, row["sigma_m"], row["sigma_mps"])
@@ -305,7 +323,7 @@ def main(argv: list[str] | None = None) -> int:
             mark = extra + picked + (f" ({axes} >= ZUPT)" if axes else "")
             print(
                 f"| {name} s{s}{mark} | {f(m['zupt'])} | {f(m['zupt_bias'])} | {f(m['optimized'])} | "
-                f"{f(row['sigma_m'], 1000)} | {f(row['closure_m'], 500)} |",
+                f"{f(row['sigma_m'], 1000)} | {f(row['closure_m'], 500)} | {f(row['axis_z'])} |",
                 flush=True,
             )
             if args.per_repetition:

@@ -162,6 +162,10 @@ class RotatingBiasParams:
         calibration set falls to 0.497 with it at the current drift threshold (docs/accuracy.md).
     outlier_refits: at most this many refits, each judging the residuals of the previous fit (1: the plain
         fit's residuals only; more peels off borderline movements once the gross ones are gone).
+    shrink: apply the compensation on each global axis only as far as it stands out of its own uncertainty
+        (:func:`axis_shrinkage`: per axis, the positive-part James-Stein / Wiener factor ``1 - noise / total``
+        of the velocity it removes per movement; False: in full). Issue 31 point 2: on calibrated trials the
+        x / y compensation is mostly noise and put the start above plain ZUPT.
     """
 
     rest_s: float = 0.5
@@ -170,6 +174,7 @@ class RotatingBiasParams:
     min_movements: int = 8
     outlier_factor: float | None = None
     outlier_refits: int = 1
+    shrink: bool = False
 
 
 @dataclass
@@ -181,9 +186,14 @@ class AccelerometerErrors:
     matrix: np.ndarray
     bias_se_mps2: np.ndarray | None = None
     matrix_se: np.ndarray | None = None
+    axis_z: np.ndarray | None = None  # (3,) per global axis: the compensation in units of its own noise
+    axis_weight: np.ndarray | None = None  # (3,) 0..1: how much of it each global axis gets (None: all)
 
     def as_dict(self) -> dict:
         out = {"bias_mps2": self.bias_mps2.tolist(), "matrix": self.matrix.tolist()}
+        for key in ("axis_z", "axis_weight"):
+            if getattr(self, key) is not None:
+                out[key] = np.round(getattr(self, key), 4).tolist()
         if self.bias_se_mps2 is not None:
             out["bias_se_mps2"] = np.round(self.bias_se_mps2, 6).tolist()
         if self.matrix_se is not None:
@@ -237,10 +247,37 @@ def estimate_rotating_bias(
     keep = _closing_movements(rows, rhs, params, max(params.min_movements, k // 3 * 2))
     design, y = np.vstack([rows[i] for i in keep]), np.concatenate([rhs[i] for i in keep])
     x, *_ = np.linalg.lstsq(design, y, rcond=None)
-    se = _standard_errors(design, y - design @ x)
+    cov = _covariance(design, y - design @ x)
+    se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     matrix = x[3:].reshape(3, 3) if params.gravity_coupled else np.zeros((3, 3))
     matrix_se = se[3:].reshape(3, 3) if params.gravity_coupled else np.zeros((3, 3))
-    return AccelerometerErrors(bias_mps2=x[:3], matrix=matrix, bias_se_mps2=se[:3], matrix_se=matrix_se)
+    z = axis_significance(np.stack([rows[i] for i in keep]), x, cov)
+    weight = shrinkage_weight(z) if params.shrink else None
+    return AccelerometerErrors(x[:3], matrix, se[:3], matrix_se, axis_z=z, axis_weight=weight)
+
+
+def axis_significance(rows: np.ndarray, x: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """Per global axis (3,), the compensation's size in units of its own uncertainty (dimensionless).
+
+    rows (M, 3, k): each movement's velocity (m/s) per unit of the k unknowns ``x`` (their covariance ``cov``,
+    (k, k)); the compensation removes ``d_mj = rows[m, j] @ x`` from movement m on axis j, with variance
+    ``s_mj^2 = rows[m, j] cov rows[m, j]^T``. Returns ``sqrt(sum_m d_mj^2 / sum_m s_mj^2)``: about 1 when the
+    estimate is pure noise on that axis (NaN covariance, too few movements: inf, taken as significant)."""
+    d = np.einsum("mjk,k->mj", rows, x)
+    var = np.einsum("mjk,kl,mjl->mj", rows, cov, rows)
+    total, noise = np.sum(d**2, axis=0), np.sum(var, axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.sqrt(total / noise)
+    return np.where(np.isfinite(z), z, np.inf)
+
+
+def shrinkage_weight(z: np.ndarray) -> np.ndarray:
+    """Per axis, the share (0..1) of a compensation of significance ``z`` (:func:`axis_significance`) to apply:
+    ``max(0, 1 - 1 / z^2)``, the positive-part James-Stein (Wiener) factor, the share of its mean square that
+    exceeds what noise alone gives; the least-squares-optimal shrinkage, with no threshold to choose."""
+    z = np.asarray(z, dtype=np.float64)
+    with np.errstate(divide="ignore"):
+        return np.clip(1.0 - 1.0 / z**2, 0.0, 1.0)
 
 
 def _closing_movements(
@@ -262,13 +299,12 @@ def _closing_movements(
     return keep
 
 
-def _standard_errors(design: np.ndarray, residual: np.ndarray) -> np.ndarray:
-    """Least-squares standard errors of the unknowns: sqrt(diag((A^T A)^-1) * RSS / (rows - unknowns))."""
+def _covariance(design: np.ndarray, residual: np.ndarray) -> np.ndarray:
+    """Least-squares covariance of the unknowns: (A^T A)^-1 * RSS / (rows - unknowns) (NaN without dof)."""
     n, k = design.shape
     if n <= k:
-        return np.full(k, np.nan)
-    cov = np.linalg.pinv(design.T @ design) * float(residual @ residual) / (n - k)
-    return np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        return np.full((k, k), np.nan)
+    return np.linalg.pinv(design.T @ design) * float(residual @ residual) / (n - k)
 
 
 def compensate_rotating_bias(
@@ -290,6 +326,8 @@ def compensate_rotating_bias(
         if c is None:
             c = np.zeros(3)
         err = _error_terms(r[s - 1 : e], params) @ x
+        if errors.axis_weight is not None:
+            err = err * errors.axis_weight
         a[s:e] = a[s:e] - c - (err[1:] - err[0])
     return a
 

@@ -88,8 +88,7 @@ def repetition_features(
             z = trajectories_m.get(name)
             if z is not None and o is not None:
                 f[f"{name}_optimized_cm"] = _rms_distance_cm(o[sl], z[sl])
-        if i in reference:
-            f["reference_cm"] = reference[i]
+        f.update(reference.get(i, {}))
         q = by_rep.get(int(rep.index), {})
         for key in ("merged", "dropped", "split", "missing", "forced", "confidence"):
             if key in q:
@@ -104,34 +103,65 @@ def _reference_distances(
     repetitions: Sequence[Any],
     trajectories_m: Mapping[str, np.ndarray],
     info: Mapping[str, Any],
-) -> dict[int, float]:
+) -> dict[int, dict[str, float]]:
     """Per repetition (list position): ``reference_cm``, the initial estimate's RMS distance (cm, worst axis) to
     the minimum-jerk reference at the static samples after the first phase starts (the samples the
     optimisation's ``sigma_ref_static_m`` term holds; before the first phase both are 0 by construction)."""
     import numpy as np
 
     from imulog.process.minjerk import R2GWaypoints
-    from imulog.process.trajectory_optimize import rotate_about_z
     from imulog.process.trajectory_repetitions import reference_residuals
 
     initial = trajectories_m.get("zupt_bias", trajectories_m.get("zupt"))
     wp = info.get("waypoints_m")
     if initial is None or not wp:
         return {}
-    initial = np.array(initial, dtype=np.float64, copy=True)
-    for rep, deg in zip(repetitions, info.get("heading_drift_deg") or (), strict=False):
-        if deg:  # the optimisation starts from the estimate turned back by the trial's heading drift
-            initial[rep.start : rep.stop] = rotate_about_z(initial[rep.start : rep.stop], np.radians(deg))
+    turned = {"start": _turned(initial, repetitions, info)}
+    if "zupt_bias" in trajectories_m and "zupt" in trajectories_m:
+        turned["zupt"] = _turned(trajectories_m["zupt"], repetitions, info)
+    if "optimized" in trajectories_m:  # already in the turned frame
+        turned["optimized"] = np.asarray(trajectories_m["optimized"], dtype=np.float64)
     complete = [r for r in repetitions if len(getattr(r, "phase_bounds_s", ())) == 4]
     waypoints = R2GWaypoints(tuple(wp["bottle"]), tuple(wp["mouth"]))
-    res = reference_residuals(t, initial, static, complete, waypoints)
+    res = {k: reference_residuals(t, v, static, complete, waypoints) for k, v in turned.items()}
     position = {id(r): i for i, r in enumerate(repetitions)}
-    out = {}
-    for j, d in res.items():
-        d = d[np.all(np.isfinite(d), axis=1)]
-        if len(d):
-            out[position[id(complete[j])]] = float(100 * np.max(np.sqrt(np.mean(d**2, axis=0))))
+    out: dict[int, dict[str, float]] = {}
+    for j, d in res["start"].items():
+        ok = np.all(np.isfinite(d), axis=1)
+        if not ok.any():
+            continue
+        f = {"reference_cm": _worst_axis_cm(d[ok])}
+        if "zupt" in res and j in res["zupt"]:
+            dz = res["zupt"][j]
+            both = ok & np.all(np.isfinite(dz), axis=1)
+            if both.any():  # the two estimates at the same rests: their disagreement, and ZUPT's own distance
+                f["start_zupt_cm"] = _worst_axis_cm(d[both] - dz[both])
+                f["zupt_reference_cm"] = _worst_axis_cm(dz[both])
+        do = res.get("optimized", {}).get(j)
+        if do is not None and np.all(np.isfinite(do), axis=1).any():
+            f["optimized_reference_cm"] = _worst_axis_cm(do[np.all(np.isfinite(do), axis=1)])
+        out[position[id(complete[j])]] = f
     return out
+
+
+def _turned(positions: np.ndarray, repetitions: Sequence[Any], info: Mapping[str, Any]) -> np.ndarray:
+    """``positions`` (N, 3) m turned back by each repetition's heading drift, as the optimisation starts."""
+    import numpy as np
+
+    from imulog.process.trajectory_optimize import rotate_about_z
+
+    out = np.array(positions, dtype=np.float64, copy=True)
+    for rep, deg in zip(repetitions, info.get("heading_drift_deg") or (), strict=False):
+        if deg:
+            out[rep.start : rep.stop] = rotate_about_z(out[rep.start : rep.stop], np.radians(deg))
+    return out
+
+
+def _worst_axis_cm(d: np.ndarray) -> float:
+    """The largest per-axis RMS (cm) of (n, 3) m differences."""
+    import numpy as np
+
+    return float(100 * np.max(np.sqrt(np.mean(d**2, axis=0))))
 
 
 def _rms_distance_cm(a: np.ndarray, b: np.ndarray) -> float | None:
