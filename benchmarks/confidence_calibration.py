@@ -166,6 +166,15 @@ def score(rows: list[dict], params: Any = None) -> dict[str, float]:
     }
 
 
+def score_feature(rows: list[dict], feature: str, threshold: float) -> dict[str, float]:
+    """``score`` with the ``drift`` reason replaced by ``feature > threshold`` (a candidate feature of the rows,
+    absent counting as not above; every other reason as in ``FlagParams``)."""
+    from imulog.process.repetition_flags import FlagParams
+
+    marked = [{**r, "reference_cm": 1e9 if (r.get(feature) or 0.0) > threshold else 0.0} for r in rows]
+    return score(marked, FlagParams(max_reference_cm=0.5))
+
+
 def main(argv: list[str] | None = None) -> int:
     from imulog.process.repetition_flags import FlagParams
     from imulog.simulate.grid import CONDITIONS
@@ -188,6 +197,12 @@ def main(argv: list[str] | None = None) -> int:
         nargs="*",
         type=float,
         help="also score the pull rule used until 2026-12-07 at these thresholds",
+    )
+    ap.add_argument(
+        "--feature",
+        nargs="+",
+        metavar="NAME=T1,T2",
+        help="also score a candidate drift feature of the rows at these thresholds (e.g. start_zupt_cm=1,2,3)",
     )
     ap.add_argument(
         "--closure-factor",
@@ -218,6 +233,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"max_reference_cm {ref}: {json.dumps(score(rows, FlagParams(max_reference_cm=ref)))}")
     for pull in args.max_pull_cm or ():  # the rule until 2026-12-07: the pull alone
         print(f"max_pull_cm {pull}: {json.dumps(score(rows, FlagParams(max_reference_cm=None, max_pull_cm=pull)))}")
+    for spec in args.feature or ():  # candidate drift features (issue 31 point 2)
+        name, _, values = spec.partition("=")
+        for thr in map(float, values.split(",")):
+            print(f"{name} > {thr}: {json.dumps(score_feature(rows, name, thr))}")
     by_condition: dict[str, list[dict]] = {}
     for r in rows:
         by_condition.setdefault(r["condition"], []).append(r)

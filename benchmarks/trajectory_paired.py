@@ -19,7 +19,8 @@ accelerating as a whole is no rest), ``heading-through-rests`` (the defaults / w
 (the defaults / ``OptimizationParams.return_to_start`` in z only), ``heading-and-z-return`` (the defaults / both
 options), ``closure-sigma`` (without
 ``OptimizationParams.closure_factor`` / with 0.5, the default since 2026-12-07), ``robust-bias`` (the defaults, the rotating-bias estimate as one plain least squares, / refitted once
-without the movements it cannot close, ``RotatingBiasParams.outlier_factor = 4``, an option), ``robust-bias-3`` (the same with factor 3), ``robust-bias-iterated`` (factor 3, refitted
+without the movements it cannot close, ``RotatingBiasParams.outlier_factor = 4``, an option), ``robust-bias-3`` (the same with factor 3), ``shrink-bias`` (the defaults / each global
+axis's rotating-bias compensation scaled by its James-Stein share, ``RotatingBiasParams.shrink``, an option), ``robust-bias-iterated`` (factor 3, refitted
 up to 20 times while the set of movements changes), ``issue31-session3`` (the code before this round's
 default changes, ``bias-uncertainty`` and ``rest-run-mean``, / the defaults), ``issue31-options`` (the same
 before / the defaults with the heading through rests and the z-only return), ``heading-restart`` (options 3 and 4
@@ -65,6 +66,7 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
     "closure-sigma": (replace(D, optimized=replace(D.optimized, closure_factor=None)), D),
     "robust-bias": (D, replace(D, rotating_bias=replace(D.rotating_bias, outlier_factor=4.0))),
     "robust-bias-3": (D, replace(D, rotating_bias=replace(D.rotating_bias, outlier_factor=3.0))),
+    "shrink-bias": (D, replace(D, rotating_bias=replace(D.rotating_bias, shrink=True))),
     "robust-bias-iterated": (
         D,
         replace(D, rotating_bias=replace(D.rotating_bias, outlier_factor=3.0, outlier_refits=20)),

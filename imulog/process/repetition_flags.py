@@ -15,7 +15,13 @@ data):
 - ``zupt_bias_optimized_cm`` (``zupt_optimized_cm`` without an orientation): RMS distance (cm) between the
   initial estimate and the optimised result: how far the optimisation pulled it (the ``drift`` feature until
   2026-12-07; kept in the records, not a reason by default);
-- ``rest_before_s`` / ``rest_after_s``: the rest (s) at each end of the window that the velocity is reset on.
+- ``rest_before_s`` / ``rest_after_s``: the rest (s) at each end of the window that the velocity is reset on;
+- candidates measured for the ``drift`` reason with ``RotatingBiasParams.outlier_factor = 4`` and not used by any
+  reason (docs/accuracy.md, "a drift feature for the robust bias fit"): ``start_zupt_cm`` (the start against plain
+  ZUPT at the same rests, both turned, worst axis), ``zupt_reference_cm`` (ZUPT against the reference there),
+  ``anchored_reference_cm`` (``reference_cm`` on the reference coordinates the start does not enter) and
+  ``closure_mps`` (the largest velocity the repetition's movements leave at their next rest after the
+  rotating-bias compensation: the fit's own residual there).
 
 :func:`flag_repetition` turns them into reasons (``merged``, ``split``, ``missing``, ``drift``, ``weak rest``);
 thresholds are :class:`FlagParams`, calibrated on the grid by ``benchmarks/confidence_calibration.py``.
@@ -89,6 +95,9 @@ def repetition_features(
             if z is not None and o is not None:
                 f[f"{name}_optimized_cm"] = _rms_distance_cm(o[sl], z[sl])
         f.update(reference.get(i, {}))
+        closure = (trajectory_info or {}).get("closure_mps") or ()
+        if i < len(closure) and closure[i] is not None:
+            f["closure_mps"] = closure[i]
         q = by_rep.get(int(rep.index), {})
         for key in ("merged", "dropped", "split", "missing", "forced", "confidence"):
             if key in q:
@@ -119,8 +128,6 @@ def _reference_distances(
     turned = {"start": _turned(initial, repetitions, info)}
     if "zupt_bias" in trajectories_m and "zupt" in trajectories_m:
         turned["zupt"] = _turned(trajectories_m["zupt"], repetitions, info)
-    if "optimized" in trajectories_m:  # already in the turned frame
-        turned["optimized"] = np.asarray(trajectories_m["optimized"], dtype=np.float64)
     complete = [r for r in repetitions if len(getattr(r, "phase_bounds_s", ())) == 4]
     waypoints = R2GWaypoints(tuple(wp["bottle"]), tuple(wp["mouth"]))
     res = {k: reference_residuals(t, v, static, complete, waypoints) for k, v in turned.items()}
@@ -137,11 +144,41 @@ def _reference_distances(
             if both.any():  # the two estimates at the same rests: their disagreement, and ZUPT's own distance
                 f["start_zupt_cm"] = _worst_axis_cm(d[both] - dz[both])
                 f["zupt_reference_cm"] = _worst_axis_cm(dz[both])
-        do = res.get("optimized", {}).get(j)
-        if do is not None and np.all(np.isfinite(do), axis=1).any():
-            f["optimized_reference_cm"] = _worst_axis_cm(do[np.all(np.isfinite(do), axis=1)])
+        anchored = _anchored_distance_cm(t, turned["start"], static, complete[j], waypoints)
+        if anchored is not None:
+            f["anchored_reference_cm"] = anchored
         out[position[id(complete[j])]] = f
     return out
+
+
+# Which reference coordinates do not come from the start itself (trial_waypoints: the bottle's x, y and the
+# mouth's y, z from the anthropometrics, home in z (the return the optimisation holds); the bottle's z and mouth's x are the start's medians)
+_ANCHORED_AXES = {"bottle": (0, 1), "mouth": (1, 2), "home": (2,)}
+
+
+def _anchored_distance_cm(
+    t: np.ndarray, start: np.ndarray, static: np.ndarray, rep: Any, waypoints: Any
+) -> float | None:
+    """``reference_cm`` on the reference coordinates the start does not enter (:data:`_ANCHORED_AXES`, task frame
+    = world frame): RMS per axis over the rests at the bottle, the mouth and home, the worst axis (cm)."""
+    import numpy as np
+
+    from imulog.process.minjerk import r2g_reference
+
+    sl = slice(rep.start, rep.stop)
+    b = np.asarray(rep.phase_bounds_s, dtype=np.float64)
+    tt = t[sl]
+    st = np.asarray(static[sl], dtype=bool) & (tt >= b[0, 0])
+    d = (np.asarray(start[sl]) - r2g_reference(tt, b, waypoints))[st]
+    ts = tt[st]
+    where = np.where(ts < b[1, 0], 0, np.where(ts < b[2, 0], 1, np.where(ts < b[3, 0], 2, 3)))
+    sq: list[list[float]] = [[], [], []]
+    for k, name in enumerate(("bottle", "mouth", "bottle", "home")):
+        for ax in _ANCHORED_AXES[name]:
+            v = d[where == k, ax]
+            sq[ax].extend(v[np.isfinite(v)].tolist())
+    rms = [float(np.sqrt(np.mean(np.square(v)))) for v in sq if v]
+    return 100 * max(rms) if rms else None
 
 
 def _turned(positions: np.ndarray, repetitions: Sequence[Any], info: Mapping[str, Any]) -> np.ndarray:

@@ -30,6 +30,7 @@ from imulog.process.trajectory_checks import (
     bias_check,
     dedrift_check,
     dedrift_offsets,
+    movement_closures,
     removed_share,
     rest_summary,
 )
@@ -133,6 +134,10 @@ def reconstruct_repetitions(
         if info is not None:
             info["accelerometer_errors"] = {**errors.as_dict(), "applied": bool(bias["ok"])}
     base = a if a_comp is None else a_comp
+    if info is not None and bias is not None:  # what the fit leaves of each repetition's movements (flags' drift)
+        info["closure_mps"] = [
+            _closure_left(t[r.start : r.stop], base[r.start : r.stop], static[r.start : r.stop]) for r in repetitions
+        ]
     if "optimized" in methods:
         z = _initial(t, base, static, repetitions, params)
         if waypoints is None:
@@ -197,6 +202,13 @@ def reconstruct_repetitions(
     if info is not None:
         info["checks"] = method_checks(t, a, a_comp, static, repetitions, out, params, bias)
     return out
+
+
+def _closure_left(t: np.ndarray, acc: np.ndarray, static: np.ndarray) -> float | None:
+    """The largest velocity (m/s, 3D norm) a window's movements leave at their next rest (None: no movement
+    between two rests): with the rotating-bias-compensated acceleration, the fit's residual there."""
+    vel, _ = movement_closures(t, acc, static)
+    return round(float(np.max(np.linalg.norm(vel, axis=1))), 5) if len(vel) else None
 
 
 def _initial(
