@@ -274,3 +274,49 @@ def test_rotating_bias_fit_leaves_out_a_movement_it_cannot_close():
         fixed = compensate_rotating_bias(acc_global, rot, t, static, errors, params)
         rms[factor] = float(np.sqrt(np.mean((fixed - acc)[others] ** 2)))
     assert rms[3.0] < 0.01 < rms[None]  # m/s^2 on the movements the sensor model describes
+
+
+def test_rotating_bias_compensation_is_shrunk_by_its_own_noise():
+    """``RotatingBiasParams.shrink``: per global axis, the compensation is applied as far as it stands out of its
+    own uncertainty (James-Stein). Real sensor errors stand out (weight near 1, the same compensation); an
+    estimate fitted to noise alone is about its own standard error and is mostly left out."""
+    from imulog.process.integration import (
+        AccelerometerErrors,
+        RotatingBiasParams,
+        compensate_rotating_bias,
+        estimate_rotating_bias,
+    )
+
+    rng = np.random.default_rng(11)
+    wp = r2g_waypoints(0.3, 0.15, 0.4)
+    segments = [r2g_truth(None, waypoints=wp, durations=tuple(rng.uniform(0.9, 1.4, 4))) for _ in range(8)]
+    t = np.concatenate([s[0] + 25.0 * i for i, s in enumerate(segments)])
+    acc = np.concatenate([s[2] for s in segments])
+    static = np.concatenate([s[4] for s in segments])
+    poses = np.array([[0.0, 0.0], [0.4, -1.3], [0.8, -1.8], [0.4, -1.3], [0.0, 0.0]])
+    angles = np.concatenate([piecewise_minimum_jerk(s[0], s[3], poses) for s in segments])
+    rot = np.stack([_rotation_z_then_x(y, r) for y, r in angles])
+    g = np.array([0.0, 0.0, 9.81])
+    f_sensor = np.einsum("nji,nj->ni", rot, acc + g)
+    noise = 0.05 * rng.standard_normal(acc.shape)  # m/s^2, white
+    moving = ~static
+    cases = (([0.06, -0.08, 0.05], [0.006, -0.004, 0.005], True), ([0.0] * 3, [0.0] * 3, False))
+    for bias, scale, expect_signal in cases:
+        measured = f_sensor + np.array(bias) + f_sensor @ np.diag(scale).T
+        acc_global = np.einsum("nij,nj->ni", rot, measured) - g + noise
+        plain = estimate_rotating_bias(acc_global, rot, t, static, RotatingBiasParams())
+        shrunk = estimate_rotating_bias(acc_global, rot, t, static, RotatingBiasParams(shrink=True))
+        assert plain.axis_weight is None and np.allclose(plain.axis_z, shrunk.axis_z)
+        rests_only = compensate_rotating_bias(
+            acc_global, rot, t, static, AccelerometerErrors(np.zeros(3), np.zeros((3, 3)))
+        )
+        removed = {}  # m/s^2 RMS during movements: the rotating part only (each rest's mean is removed either way)
+        for name, errors in (("plain", plain), ("shrunk", shrunk)):
+            fixed = compensate_rotating_bias(acc_global, rot, t, static, errors)
+            removed[name] = np.sqrt(np.mean((rests_only - fixed)[moving] ** 2))
+        if expect_signal:
+            assert np.all(shrunk.axis_z > 3) and np.all(shrunk.axis_weight > 1 - 1 / 9), shrunk.axis_z
+            assert removed["shrunk"] == pytest.approx(removed["plain"], rel=0.1)
+        else:
+            assert np.all(shrunk.axis_z < 3), shrunk.axis_z
+            assert removed["shrunk"] < 0.5 * removed["plain"], (removed, shrunk.axis_z)
