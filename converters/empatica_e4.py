@@ -103,12 +103,26 @@ def iter_e4_file(
     return iter_e4_session([Path(path)], options, piece_bytes)
 
 
+#: the longest time window (s) of a session read in pieces: E4 rows are short (3 to 10 bytes), so 16 MiB of their text
+#: is about 5 hours of a session and parses to several times its size; windows of at most half an hour keep a
+#: session's memory that of its first hour, whatever its length
+WINDOW_S = 1800.0
+
+
 def _window_ns(files: list[E4File], spans: dict[str, list[int] | None], piece_bytes: int | None) -> int | None:
-    """The length of a time window (ns) holding about ``piece_bytes`` of text of all files; None: one window."""
+    """The length of a time window (ns) holding about ``piece_bytes`` of text of all files and at most
+    :data:`WINDOW_S`; None: one window."""
     if piece_bytes is None:
         return None
     per_s = sum(f.bytes_per_s(spans.get(f.topic)) for f in files)
-    return None if per_s <= 0 else max(1_000_000, int(piece_bytes / per_s * 1e9))
+    longest = int(WINDOW_S * 1e9)
+    return longest if per_s <= 0 else max(1_000_000, min(longest, int(piece_bytes / per_s * 1e9)))
+
+
+def _cut_bytes(f: E4File, spans: dict, window_ns: int, piece_bytes: int) -> int:
+    """The text cutter's piece size for one file: about its text in one window, at least 256 bytes."""
+    per_s = f.bytes_per_s(spans.get(f.topic))
+    return max(256, min(piece_bytes, int(per_s * window_ns / 1e9))) if per_s > 0 else piece_bytes
 
 
 def iter_e4_session(
@@ -117,7 +131,7 @@ def iter_e4_session(
     """The files of one E4 session (one folder) as one recording in pieces, each covering one time window of every
     file, sized so that a window holds about ``piece_bytes`` of text in all (None: the whole session, one piece).
 
-    Every file is read by the text cutter (each file's cutter pieces sized by its share of a window), rows handed
+    Every file is read by the text cutter (each file's cutter pieces about its text in one window), rows handed
     out by time (:class:`~imulog.converters.empatica_e4_files.Rows`). Every header is read first, so a damaged
     header fails before any row. A file without rows is left out with a warning (an ``IBI.csv`` of a session without
     detected beats); alone, it is an error."""
@@ -147,11 +161,8 @@ def iter_e4_session(
     files = [f for f in files if not f.empty or f.kind == "TAGS"]
     spans = {f.topic: span_ns(f) for f in files} if piece_bytes is not None else {}
     window = _window_ns(files, spans, piece_bytes)
-    share = sum(f.bytes_per_s(spans.get(f.topic)) for f in files)
-    rows = [
-        Rows(f, None if window is None else max(256, int(piece_bytes * f.bytes_per_s(spans.get(f.topic)) / share)))
-        for f in files
-    ]
+    # each file cut into pieces of about its text in one window (a tiny file: one piece of at most piece_bytes)
+    rows = [Rows(f, None if window is None else _cut_bytes(f, spans, window, piece_bytes)) for f in files]
     starts = [s[0] for f in files if f.kind != "TAGS" for s in [spans.get(f.topic)] if s is not None]
     t1 = None if window is None else min(starts, default=0) + window
     counts = [0] * len(rows)
