@@ -229,11 +229,15 @@ def iter_epoch_csv(
                 "time_zone": UNKNOWN_ZONE,
             }
         if piece_bytes is None:  # the one piece is the last
-            rec.warnings = [*cut, *_end_warnings(path, epoch_s, uneven, BANNER_LINES, has_names, banner, names)]
+            rec.warnings = [
+                *cut,
+                *warnings,
+                *_end_warnings(path, epoch_s, uneven, BANNER_LINES, has_names, banner, names),
+            ]
         yield rec
         del rec, piece, values  # not held while the next piece is read and parsed
     if piece_bytes is not None:
-        end = [*cut, *_end_warnings(path, epoch_s, uneven, BANNER_LINES, has_names, banner, names)]
+        end = [*cut, *warnings, *_end_warnings(path, epoch_s, uneven, BANNER_LINES, has_names, banner, names)]
         if end:
             last = _epochs(path, name, columns, [_unit(names[i]) for i in value_idx], np.zeros(0, np.int64), None)
             last.warnings = end
