@@ -112,9 +112,16 @@ def _stream_session(
     files: list[Path], target: Path, fmt: str | None, options: ConvertOptions, meta: dict, attach: str, overwrite: bool
 ) -> dict[str, Any]:
     """One session's files converted piece by piece (time windows of every file) into ``target``: its JSON entry."""
-    counts, notes = convert_stream._convert_streaming(
-        files[0].parent, target, fmt, options, meta, attach=attach, overwrite=overwrite, files=files
-    )
+    from imulog.commands.outputs import exists_message
+
+    if target.exists() and not overwrite:  # the whole-folder path's line (_write), before anything is read
+        raise ConversionError(None, exists_message(target))
+    try:
+        counts, notes = convert_stream._convert_streaming(
+            files[0].parent, target, fmt, options, meta, attach=attach, overwrite=overwrite, files=files
+        )
+    except click.ClickException as e:  # its one line, a failure of this trial as in the whole-folder path
+        raise ConversionError(None, e.message) from None
     return {
         "path": str(target),
         "channels": counts,
@@ -192,8 +199,6 @@ def _convert_directories(
                 )
             except ConversionError as e:
                 failures.append(str(e))
-            except click.ClickException as e:  # a session converted piece by piece: its one line
-                failures.append(e.message)
             except (FileExistsError, ValueError, OSError) as e:
                 failures.append(f"{target}: {e}")
     if as_json:
