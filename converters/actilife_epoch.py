@@ -18,7 +18,8 @@ device metadata (``epoch_s``). Counts are ActiGraph's device-specific activity c
 
 Memory: in pieces of about 16 MB of text (:func:`iter_epoch_csv`, called by the ActiLife CSV converter's
 ``iter_chunks``), the whole-file reading being the one-piece case: the banner (or the first row) gives the start,
-epoch times are checked across pieces, and the warnings come with the last piece. A week of 60 s epochs is only
+epoch times are checked across pieces, and the warnings come at the end (in pieces, in a last piece without epochs:
+the reader does not look a piece ahead, which held two pieces' text and values at once). A week of 60 s epochs is only
 10,080 rows; of 1 s epochs 604,800 (about 25 MB of text).
 """
 
@@ -124,7 +125,8 @@ def iter_epoch_csv(
     """The epoch export in pieces of about ``piece_bytes`` of text (None: one piece), rows read by
     :func:`~imulog.converters._pieces.iter_numeric` and their Date/Time cells by ``text_column``. The start is the
     banner's, or the first row's time (first piece); epoch times are checked to increase across pieces; the warnings
-    (a start that disagrees, uneven epochs, a cut final row, no banner or names row) come with the last piece."""
+    (a start that disagrees, uneven epochs, a cut final row, no banner or names row) come with the one piece, or in
+    pieces in a last piece without epochs."""
     BANNER_LINES = banner_lines  # noqa: N806 - the banner's length in this file
 
     epoch_s = epoch_seconds(banner["epoch"])
