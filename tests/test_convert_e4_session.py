@@ -198,3 +198,42 @@ def test_gaitmap_stride_borders_pieces_equal_whole(shared_data, tmp_path, monkey
         assert r.exit_code != 0 and not target.exists()
         out.append(r.output.strip().splitlines()[-1])
     assert out[0] == out[1] and "line 41: s_id, start and end must be numbers" in out[0]
+
+
+def _short_row_reference(block: bytes, ncols: int) -> int | None:
+    """The first short row of ``block`` as the field check found it before it counted from delimiter positions: a
+    running count of delimiters per byte (the reference), None when every row is complete or the short one blank."""
+    raw = np.frombuffer(block, dtype=np.uint8)
+    ends = np.flatnonzero(raw == 10)
+    delims = np.cumsum(raw == ord(","))
+    at_end = np.concatenate([delims[ends], [delims[-1]]]) if len(raw) else np.zeros(1, dtype=np.int64)
+    fields = np.diff(np.concatenate([[0], at_end])) + 1
+    short = np.flatnonzero(fields < ncols)
+    return int(short[0]) if len(short) and block.split(b"\n")[short[0]].strip(b" \t\r") else None
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_field_counts_from_delimiter_positions_equal_the_running_count(seed, tmp_path):
+    """``_table._check_field_counts`` (the row check of a parse with skipped columns, e.g. ActiLife epochs' Date/Time)
+    names the same short row as the running count it replaced, on random blocks with short, long, blank rows."""
+    from imulog.converters._table import TableSpec, _block, _check_field_counts
+    from imulog.converters.errors import ConversionError
+
+    rng = np.random.default_rng(seed)
+    ncols = int(rng.integers(2, 6))
+    rows = []
+    for _ in range(int(rng.integers(1, 40))):
+        k = ncols if rng.random() < 0.9 else int(rng.integers(0, ncols + 2))
+        rows.append(",".join(str(int(x)) for x in rng.integers(0, 99, k)) if k else rng.choice(["", " ", "\r"]))
+    if seed % 2:  # a short final row (the last line, after no line break or one)
+        rows.append(",".join(["7"] * (ncols - 1)))
+    block = ("\n".join(rows) + ("\n" if rng.random() < 0.5 else "")).encode()
+    spec = TableSpec(path=tmp_path / "t.csv", delimiter=",", skip_lines=3, names=[f"c{i}" for i in range(ncols)])
+    data = b"a\nb\nc\n" + block
+    expected = _short_row_reference(_block(spec, data), ncols)  # the numeric block the check is given
+    try:
+        _check_field_counts(spec, data)
+        found = None
+    except ConversionError as e:
+        found = e.line - 4
+    assert found == expected
