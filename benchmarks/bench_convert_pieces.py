@@ -23,6 +23,11 @@ written by ``lab_text_files.py``) likewise:
 
     .venv/bin/python benchmarks/bench_convert_pieces.py --formats motive,qualisys,trc,sto,delsys,e4,actilife-epoch --hours 1
 
+An Empatica E4 session folder (ACC 32 Hz, BVP 64 Hz, EDA and TEMP 4 Hz, HR 1 Hz, IBI beats; ``imulog convert
+FOLDER``, time windows across the files) in pieces and as the whole-folder read:
+
+    .venv/bin/python benchmarks/bench_convert_pieces.py --formats e4-folder --hours 1 --whole
+
 And for the HDF5 readers and MVNX (files written with h5py / as XML): the guarded h5py reader processes' CPU and
 peak RSS are printed beside the command's own:
 
@@ -343,6 +348,35 @@ def mvnx_xml(path: Path, n: int, *, seed: int = 0) -> None:
         f.write("</frames>\n</subject>\n</mvnx>\n")
 
 
+def e4_folder(folder: Path, n: int) -> Path:
+    """An Empatica E4 session of ``n`` ACC samples (``n / 115200`` hours) in ``folder``: ACC 32 Hz (1/64 g counts),
+    BVP 64 Hz, EDA and TEMP 4 Hz, HR 1 Hz (starting 10 s later, as E4 connect writes it), IBI beats about every
+    0.8 s in runs with gaps; returns the folder (``imulog convert FOLDER`` converts the session)."""
+    from lab_text_files import _write_file
+
+    start = 1680686620
+    seconds = n / 32.0
+    files = {  # name: (rate Hz, columns, printf format, values(lo, hi, rng))
+        "ACC": (32.0, 3, ["%d"] * 3, lambda lo, hi, rng: rng.integers(-64, 64, (hi - lo, 3))),
+        "BVP": (64.0, 1, ["%.2f"], lambda lo, hi, rng: rng.normal(0, 40, (hi - lo, 1))),
+        "EDA": (4.0, 1, ["%.6f"], lambda lo, hi, rng: np.abs(rng.normal(0.5, 0.2, (hi - lo, 1)))),
+        "TEMP": (4.0, 1, ["%.2f"], lambda lo, hi, rng: rng.normal(32, 0.5, (hi - lo, 1))),
+        "HR": (1.0, 1, ["%.2f"], lambda lo, hi, rng: rng.normal(75, 5, (hi - lo, 1))),
+    }
+    for name, (rate, cols, fmt, make) in files.items():
+        t0 = start + (10 if name == "HR" else 0)
+        header = [", ".join([f"{t0:.6f}"] * cols), ", ".join([f"{rate:.6f}"] * cols)]
+        _write_file(folder / f"{name}.csv", header, int((seconds - (10 if name == "HR" else 0)) * rate), make, fmt, ",")
+    rng = np.random.default_rng(1)
+    ibi = rng.uniform(0.6, 1.0, int(seconds / 0.8))
+    beats = np.cumsum(ibi) + 5.0
+    keep = (beats < seconds) & (rng.random(len(beats)) < 0.7)  # beats the device dropped
+    with open(folder / "IBI.csv", "w") as f:
+        f.write(f"{start:.6f}, IBI\n")
+        np.savetxt(f, np.column_stack([beats[keep], ibi[keep]]), delimiter=",", fmt="%.6f")
+    return folder
+
+
 #: format -> (samples per hour, how to write a file of n samples into a folder and return the path to convert)
 FORMATS = {
     "xdf": (360_000, lambda d, n: (xdf_file(d / "rec.xdf", n), d / "rec.xdf")[1]),
@@ -364,6 +398,7 @@ FORMATS = {
 
 
 FORMATS.update(LAB_FORMATS)
+FORMATS["e4-folder"] = (115_200, e4_folder)  # an E4 session folder (ACC samples per hour), converted as a folder
 
 
 def main_formats(hours: float, formats: list[str], whole: bool) -> None:

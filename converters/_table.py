@@ -288,8 +288,9 @@ def _check_field_counts(spec: TableSpec, data: bytes | None) -> None:
         return
     raw = np.frombuffer(block, dtype=np.uint8)
     ends = np.flatnonzero(raw == 10)
-    delims = np.cumsum(raw == ord(spec.delimiter))
-    at_end = np.concatenate([delims[ends], [delims[-1]]]) if len(raw) else np.zeros(1, dtype=np.int64)
+    # delimiters before each line end: one int64 per delimiter, not a running count per byte (8 bytes per byte of text)
+    delims = np.flatnonzero(raw == ord(spec.delimiter))
+    at_end = np.concatenate([np.searchsorted(delims, ends), [len(delims)]])
     fields = np.diff(np.concatenate([[0], at_end])) + 1
     short = np.flatnonzero(fields < len(spec.names))
     if len(short) and block.split(b"\n")[short[0]].strip(b" \t\r"):

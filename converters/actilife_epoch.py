@@ -18,7 +18,8 @@ device metadata (``epoch_s``). Counts are ActiGraph's device-specific activity c
 
 Memory: in pieces of about 16 MB of text (:func:`iter_epoch_csv`, called by the ActiLife CSV converter's
 ``iter_chunks``), the whole-file reading being the one-piece case: the banner (or the first row) gives the start,
-epoch times are checked across pieces, and the warnings come with the last piece. A week of 60 s epochs is only
+epoch times are checked across pieces, and the warnings come at the end (in pieces, in a last piece without epochs:
+the reader does not look a piece ahead, which held two pieces' text and values at once). A week of 60 s epochs is only
 10,080 rows; of 1 s epochs 604,800 (about 25 MB of text).
 """
 
@@ -124,7 +125,8 @@ def iter_epoch_csv(
     """The epoch export in pieces of about ``piece_bytes`` of text (None: one piece), rows read by
     :func:`~imulog.converters._pieces.iter_numeric` and their Date/Time cells by ``text_column``. The start is the
     banner's, or the first row's time (first piece); epoch times are checked to increase across pieces; the warnings
-    (a start that disagrees, uneven epochs, a cut final row, no banner or names row) come with the last piece."""
+    (a start that disagrees, uneven epochs, a cut final row, no banner or names row) come with the one piece, or in
+    pieces in a last piece without epochs."""
     BANNER_LINES = banner_lines  # noqa: N806 - the banner's length in this file
 
     epoch_s = epoch_seconds(banner["epoch"])
@@ -188,12 +190,9 @@ def iter_epoch_csv(
     uneven = False
     before: int | None = None
     done = 0
-    pieces = iter_numeric(spec, piece_bytes)
-    nxt = next(pieces, None)
-    k = 0
-    while nxt is not None:
-        piece = nxt
-        nxt = next(pieces, None)
+    # no look-ahead to learn which piece is last (it held the next piece's text and values while this one was
+    # built and written): in pieces, the warnings only the end knows come in a last piece without epochs
+    for k, piece in enumerate(iter_numeric(spec, piece_bytes)):
         values = piece.values if piece.values.ndim == 2 else piece.values[:, None]
         n = len(values)
         if k == 0 and n == 0:
@@ -224,39 +223,52 @@ def iter_epoch_csv(
         done += n
         if n:
             before = int(t_ns[-1])
-        rec = Recording(sources=[str(path)])
-        rec.signals.append(
-            SignalStream(
-                topic=f"/signals/{name}",
-                t_ns=t_ns,
-                columns=columns,
-                units=[_unit(names[i]) for i in value_idx],
-                values=values[:, value_idx],
-            )
-        )
+        rec = _epochs(path, name, columns, [_unit(names[i]) for i in value_idx], t_ns, values[:, value_idx])
         if k == 0:
             rec.metadata[f"imulog.device.{name}"] = dict(meta)
             rec.metadata["imulog.trial"] = {
                 "start_time": datetime.fromisoformat(str(start)[:26]).isoformat(timespec="milliseconds"),
                 "time_zone": UNKNOWN_ZONE,
             }
-        if nxt is None:
-            if uneven:
-                warnings.append(
-                    f"{path.name}: epoch times are not {epoch_s:g} s apart everywhere (gaps or a changed epoch)"
-                )
-            if not BANNER_LINES:
-                warnings.append(
-                    f"{path.name}: no ActiLife banner: start and epoch ({epoch_s:g} s) from the first rows, dates "
-                    f"read as {banner['date_format']}, serial unknown"
-                )
-            if not has_names:
-                warnings.append(
-                    f"{path.name}: no names row; {len(names)} columns taken in ActiLife's order ({', '.join(names)})"
-                )
-            rec.warnings = [*cut, *warnings]
-        k += 1
+        if piece_bytes is None:  # the one piece is the last
+            rec.warnings = [
+                *cut,
+                *warnings,
+                *_end_warnings(path, epoch_s, uneven, BANNER_LINES, has_names, banner, names),
+            ]
         yield rec
+        del rec, piece, values  # not held while the next piece is read and parsed
+    if piece_bytes is not None:
+        end = [*cut, *warnings, *_end_warnings(path, epoch_s, uneven, BANNER_LINES, has_names, banner, names)]
+        if end:
+            last = _epochs(path, name, columns, [_unit(names[i]) for i in value_idx], np.zeros(0, np.int64), None)
+            last.warnings = end
+            yield last
+
+
+def _epochs(path: Path, name: str, columns: list[str], units: list[str], t_ns: np.ndarray, values) -> Recording:
+    """A piece: the epochs' signal stream (``values`` None: no epoch)."""
+    values = np.zeros((0, len(columns))) if values is None else values
+    rec = Recording(sources=[str(path)])
+    rec.signals.append(SignalStream(topic=f"/signals/{name}", t_ns=t_ns, columns=columns, units=units, values=values))
+    return rec
+
+
+def _end_warnings(
+    path: Path, epoch_s: float, uneven: bool, banner_lines: int, has_names: bool, banner: dict, names: list[str]
+) -> list[str]:
+    """What only the end of the file shows (uneven epochs) and what the file lacks, one line each."""
+    out = []
+    if uneven:
+        out.append(f"{path.name}: epoch times are not {epoch_s:g} s apart everywhere (gaps or a changed epoch)")
+    if not banner_lines:
+        out.append(
+            f"{path.name}: no ActiLife banner: start and epoch ({epoch_s:g} s) from the first rows, dates "
+            f"read as {banner['date_format']}, serial unknown"
+        )
+    if not has_names:
+        out.append(f"{path.name}: no names row; {len(names)} columns taken in ActiLife's order ({', '.join(names)})")
+    return out
 
 
 def _piece_stamps(path: Path, piece: NumericPiece, time_idx: list[int], lower: list[str], fmt: str) -> np.ndarray:

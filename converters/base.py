@@ -57,6 +57,14 @@ class Converter:
         None when the format is read whole. ``imulog convert`` streams large files of formats that have it."""
         return None
 
+    def iter_session(
+        self, paths: list[Path], options: ConvertOptions | None = None, *, whole: bool = False
+    ) -> Iterator[Recording] | None:
+        """The files of one recording that belong together (a session folder: Empatica E4's ACC.csv, BVP.csv, ...) as
+        one recording, in pieces each covering one time window of every file (``whole``: one piece), or None when
+        the format's files convert one by one. ``imulog convert FOLDER`` uses it for such a folder's files."""
+        return None
+
     def recording_key(self, path: Path) -> str | None:
         """The recording ``path`` belongs to when the format names it (e.g. Xsens ``MT_<master>_<trial>-000_<id>``:
         one file per sensor); None lets the registry group by the file name without role words."""

@@ -14,48 +14,45 @@ heart rate, bpm, 1 Hz, computed from BVP: starts about 10 s later) -> ``/signals
 ``/events/e4_tags``. Time is ns from the earliest start of the folder's files, so every file of the session is
 on one time base (a file converted alone still reads its siblings' first lines for that origin).
 
-Memory: each file in pieces of about 16 MB of text (:func:`iter_e4_file`), the whole-file ``convert`` being the
-one-piece case: the header rows say start and rate, so nothing needs declaring; ``imulog convert`` streams one
-large file (a week's ``ACC.csv``, about 280 MB); a session folder is converted file by file, whole (``tags.csv`` is
-always one piece). A final row cut short is dropped with a warning (it was dropped silently before).
+Memory: a session (the folder's files, :meth:`EmpaticaE4Converter.iter_session`) or one file (``iter_chunks``) is
+read in time windows [t0, t1) of about 16 MiB of text in all (:func:`iter_e4_session`): every file through the one
+text cutter (:mod:`imulog.converters.empatica_e4_files`), a window being a row range of each signal file and the
+beats and tags before t1; every piece holds every stream (empty where a file has no row in the window). The first
+piece declares every stream's span (from each file's header and a count of its lines) and the IMU's meta
+(``imulog.pieces``); the warnings (a final row cut short, dropped; a file without rows, left out) come with the last.
+The whole session or file is the one-piece case. A damaged file stops the session with the file's one-line error
+(header errors before any row is read; in pieces, of two damaged files the one whose damage comes first in time).
 """
 
 from __future__ import annotations
 
-import re
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 
-import numpy as np
 from imulog.converters import _pieces
-from imulog.converters._common import G0, TableSpec, read_numeric, text_head_lines
+from imulog.converters._common import text_head_lines
 from imulog.converters._lab import trial_start
-from imulog.converters._pieces import PIECE_BYTES, iter_numeric
 from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.empatica_e4_files import (
+    ACC_G_PER_COUNT,
+    FILES,
+    SIGNALS,
+    UNIX,
+    E4File,
+    Rows,
+    first_cells,
+    kind_of,
+    open_e4_file,
+    span_ns,
+)
 from imulog.converters.errors import ConversionError
 
-from imulog.model import ImuStream, Intervals, Recording, SignalStream
+from imulog.model import PIECES_RECORD, Recording
 
-SIGNALS = {
-    "ACC": (3, "1/64 g"),
-    "BVP": (1, "nW"),
-    "EDA": (1, "uS"),
-    "TEMP": (1, "degC"),
-    "HR": (1, "bpm"),
-}
-FILES = set(SIGNALS) | {"IBI", "TAGS"}
-ACC_G_PER_COUNT = 1.0 / 64.0  # Empatica: ACC data in 1/64 g (range +-2 g)
-_UNIX = re.compile(r"^\d{9,10}(\.\d*)?$")
+__all__ = ["ACC_G_PER_COUNT", "FILES", "SIGNALS", "iter_e4_file", "iter_e4_session", "read_e4_file", "session_start"]
 
-
-def _kind(path: Path) -> str | None:
-    stem = Path(path).stem.upper()
-    return stem if Path(path).suffix.lower() == ".csv" and stem in FILES else None
-
-
-def _first_cells(lines: list[str], row: int) -> list[str]:
-    return [c.strip() for c in lines[row].split(",")] if len(lines) > row else []
+_kind, _first_cells, _UNIX = kind_of, first_cells, UNIX  # the names this module used before the split
 
 
 def session_start(path: Path) -> float | None:
@@ -66,122 +63,155 @@ def session_start(path: Path) -> float | None:
     except OSError:
         return None
     lines = text_head_lines(head, 2) or []
-    cells = _first_cells(lines, 0)
-    if not cells or not _UNIX.match(cells[0]):
+    cells = first_cells(lines, 0)
+    if not cells or not UNIX.match(cells[0]):
         return None
     return float(cells[0])
 
 
 def folder_origin(path: Path) -> float:
     """The earliest start (Unix s) among the E4 files beside ``path``: the session's common time origin."""
-    starts = [s for p in Path(path).parent.iterdir() if _kind(p) and _kind(p) != "TAGS" for s in [session_start(p)]]
+    starts = [s for p in Path(path).parent.iterdir() if kind_of(p) and kind_of(p) != "TAGS" for s in [session_start(p)]]
     starts = [s for s in starts if s is not None]
     if not starts:
         raise ConversionError(path, "no E4 session start in the folder's files")
     return min(starts)
 
 
+def _origin(paths: list[Path]) -> float:
+    """The session origin: the folder's earliest start; tags alone (no signal file beside them): the first tag."""
+    path = paths[0]
+    if any(kind_of(p) not in (None, "TAGS") for p in path.parent.iterdir()):
+        return folder_origin(path)
+    head = path.read_bytes()[:256].split(b"\n")[0].split(b",")[0].strip()
+    try:
+        return float(head)
+    except ValueError:
+        return 0.0
+
+
 def read_e4_file(path: Path, options: ConvertOptions | None = None) -> Recording:
-    """The whole file: :func:`iter_e4_file` as one piece."""
-    (rec,) = iter_e4_file(path, options, piece_bytes=None)
+    """The whole file: :func:`iter_e4_session` of one file as one piece."""
+    (rec,) = iter_e4_session([Path(path)], options, piece_bytes=None)
     return rec
 
 
 def iter_e4_file(
-    path: Path, options: ConvertOptions | None = None, piece_bytes: int | None = PIECE_BYTES
+    path: Path, options: ConvertOptions | None = None, piece_bytes: int | None = _pieces.PIECE_BYTES
 ) -> Iterator[Recording]:
-    """One E4 file in pieces of about ``piece_bytes`` of text (None: one piece), rows read by
-    :func:`~imulog.converters._pieces.iter_numeric`. The two header rows say the start and rate, so sample ``i``
-    of the file is at ``start + i / rate`` in every piece; IBI beats are checked to increase across pieces; the
-    device and trial records come with the first piece. ``tags.csv`` (a few button presses) is one piece."""
-    path = Path(path)
-    kind = _kind(path)
-    if kind is None:
-        raise ConversionError(path, "not an Empatica E4 file (ACC, BVP, EDA, HR, IBI, TEMP or tags .csv)")
+    """One E4 file in pieces of about ``piece_bytes`` of text (None: one piece): a session of one file."""
+    return iter_e4_session([Path(path)], options, piece_bytes)
+
+
+#: the longest time window (s) of a session read in pieces: E4 rows are short (3 to 10 bytes), so 16 MiB of their text
+#: is about 5 hours of a session and parses to several times its size; windows of at most half an hour keep a
+#: session's memory that of its first hour, whatever its length
+WINDOW_S = 1800.0
+
+
+def _window_ns(files: list[E4File], spans: dict[str, list[int] | None], piece_bytes: int | None) -> int | None:
+    """The length of a time window (ns) holding about ``piece_bytes`` of text of all files and at most
+    :data:`WINDOW_S`; None: one window."""
+    if piece_bytes is None:
+        return None
+    per_s = sum(f.bytes_per_s(spans.get(f.topic)) for f in files)
+    longest = int(WINDOW_S * 1e9)
+    return longest if per_s <= 0 else max(1_000_000, min(longest, int(piece_bytes / per_s * 1e9)))
+
+
+def _cut_bytes(f: E4File, spans: dict, window_ns: int, piece_bytes: int) -> int:
+    """The text cutter's piece size for one file: about its text in one window, at least 256 bytes."""
+    per_s = f.bytes_per_s(spans.get(f.topic))
+    return max(256, min(piece_bytes, int(per_s * window_ns / 1e9))) if per_s > 0 else piece_bytes
+
+
+def iter_e4_session(
+    paths: Sequence[Path], options: ConvertOptions | None = None, piece_bytes: int | None = _pieces.PIECE_BYTES
+) -> Iterator[Recording]:
+    """The files of one E4 session (one folder) as one recording in pieces, each covering one time window of every
+    file, sized so that a window holds about ``piece_bytes`` of text in all (None: the whole session, one piece).
+
+    Every file is read by the text cutter (each file's cutter pieces about its text in one window), rows handed
+    out by time (:class:`~imulog.converters.empatica_e4_files.Rows`). Every header is read first, so a damaged
+    header fails before any row. A file without rows is left out with a warning (an ``IBI.csv`` of a session without
+    detected beats); alone, it is an error."""
+    paths = [Path(p) for p in paths]
+    if not paths:
+        raise ConversionError(None, "no E4 files")
+    kinds = [kind_of(p) for p in paths]
+    for p, k in zip(paths, kinds, strict=True):
+        if k is None:
+            raise ConversionError(p, "not an Empatica E4 file (ACC, BVP, EDA, HR, IBI, TEMP or tags .csv)")
+        if kinds.count(k) > 1:
+            raise ConversionError(p, f"a second {k} file in the session")
     device = {
         "format": "empatica-e4",
         "model": "Empatica E4",
         "time_base": "ns from the session's earliest file start (Unix s, UTC)",
-        "source": path.parent.name,
+        "source": paths[0].parent.name,
     }
-    if kind == "TAGS":
-        spec = TableSpec(path=path, delimiter=",", skip_lines=0, names=["tag_time"])
-        t = read_numeric(spec).reshape(-1) if path.stat().st_size else np.zeros(0)
-        siblings = [p for p in path.parent.iterdir() if _kind(p) not in (None, "TAGS")]
-        origin_s = folder_origin(siblings[0]) if siblings else (float(t[0]) if len(t) else 0.0)
-        t_ns = np.round((t - origin_s) * 1e9).astype(np.int64)
-        rec = Recording(sources=[str(path)])
-        rec.events.append(
-            Intervals(
-                topic="/events/e4_tags", start_ns=t_ns, end_ns=t_ns, labels=[f"tag {i + 1}" for i in range(len(t))]
-            )
-        )
-        rec.metadata["imulog.device.e4"] = device
-        yield rec
-        return
-    origin_s = folder_origin(path)
-    with open(path, "rb") as f:
-        head = f.read(4096)
-    lines = text_head_lines(head, 3) or []
-    start_cells = _first_cells(lines, 0)
-    if not start_cells or not _UNIX.match(start_cells[0]):
-        raise ConversionError(path, "first row is not the session start (Unix seconds)", line=1)
-    start_s = float(start_cells[0])
-    offset_ns = int(round((start_s - origin_s) * 1e9))
-    if kind == "IBI":
-        width, rate, names = 2, None, ["offset_s", "ibi_s"]
-        spec = TableSpec(path=path, delimiter=",", skip_lines=1, names=names)
-    else:
-        width, unit = SIGNALS[kind]
-        rate_cells = _first_cells(lines, 1)
-        try:
-            rate = float(rate_cells[0])
-        except (IndexError, ValueError):
-            raise ConversionError(path, "second row is not the sample rate (Hz)", line=2) from None
-        if not 1e-3 <= rate <= 10_000:
-            raise ConversionError(path, f"sample rate {rate:g} Hz is not plausible", line=2)
-        if len(start_cells) != width:
-            raise ConversionError(path, f"{len(start_cells)} columns, {kind}.csv has {width}", line=1)
-        names = [f"{kind.lower()}_{a}" for a in "xyz"] if width == 3 else [kind.lower()]
-        spec = TableSpec(path=path, delimiter=",", skip_lines=2, names=names)
-        if kind == "ACC":
-            device.update(rate_hz=rate, units="ACC 1/64 g (converted to m/s^2)")
-    done = 0
-    before: int | None = None
-    for k, piece in enumerate(iter_numeric(spec, piece_bytes)):
-        v = piece.values.reshape(-1, width)
-        rec = Recording(sources=[str(path)], warnings=list(piece.warnings))
-        if rate is None:  # IBI: the beat's offset from the start (s), the interval (s)
-            t_ns = offset_ns + np.round(v[:, 0] * 1e9).astype(np.int64)
-            d = np.diff(t_ns if before is None else np.concatenate([[before], t_ns]))
-            if (d <= 0).any():
-                i = int(np.nonzero(d <= 0)[0][0]) + (1 if before is None else 0)
-                raise ConversionError(path, "beat time does not increase", line=piece.first_line + i)
-            rec.signals.append(
-                SignalStream(topic="/signals/e4_ibi", t_ns=t_ns, columns=["ibi"], units=["s"], values=v[:, 1:])
-            )
-        else:
-            t_ns = offset_ns + np.round(np.arange(done, done + len(v)) * (1e9 / rate)).astype(np.int64)
-            if kind == "ACC":
-                # stored as the file's counts: (counts / 64) * g, the same double as counts * (1/64) * g (1/64 is exact)
-                res = {"resolution": {"acc": {"divisor": 1.0 / ACC_G_PER_COUNT, "scale": G0}}}
-                rec.imus.append(ImuStream(name="e4", t_ns=t_ns, acc=v * ACC_G_PER_COUNT * G0, meta={**device, **res}))
+    origin_s = _origin(paths)
+    files = [open_e4_file(p, origin_s, device) for p in paths]  # every header before any row
+    warnings: list[str] = []
+    for f in files:
+        if f.empty and f.kind != "TAGS":
+            if len(files) == 1:
+                raise ConversionError(f.path, "no data rows", line=f.spec.skip_lines + 1)
+            warnings.append(f"{f.path.name}: no data rows: left out")
+    files = [f for f in files if not f.empty or f.kind == "TAGS"]
+    spans = {f.topic: span_ns(f) for f in files} if piece_bytes is not None else {}
+    window = _window_ns(files, spans, piece_bytes)
+    # each file cut into pieces of about its text in one window (a tiny file: one piece of at most piece_bytes)
+    rows = [Rows(f, None if window is None else _cut_bytes(f, spans, window, piece_bytes)) for f in files]
+    starts = [s[0] for f in files if f.kind != "TAGS" for s in [spans.get(f.topic)] if s is not None]
+    t1 = None if window is None else min(starts, default=0) + window
+    counts = [0] * len(rows)
+    first = True
+    while True:
+        taken = [r.take(t1) for r in rows]
+        last = all(r.finished for r in rows)
+        if not last and not any(len(t) for _, t in taken):
+            t1 += window
+            continue
+        rec = Recording(sources=[str(p) for p in paths])
+        for k, (r, (v, t)) in enumerate(zip(rows, taken, strict=True)):
+            stream = r.stream(v, t, counts[k])
+            counts[k] += len(t)
+            if r.f.kind == "TAGS":
+                rec.events.append(stream)
+            elif r.f.kind == "ACC":
+                rec.imus.append(stream)
             else:
-                rec.signals.append(
-                    SignalStream(topic=f"/signals/e4_{kind.lower()}", t_ns=t_ns, columns=names, units=[unit], values=v)
-                )
-        if k == 0:
+                rec.signals.append(stream)
+        if first:
             rec.metadata["imulog.device.e4"] = dict(device)
-            # start_time is the wall time of this file's first sample (the trial's time axis starts there); t_ns stay
-            # on the session origin, so files converted one by one line up, and a folder's files merge to its earliest
-            first_s = origin_s + (int(t_ns[0]) / 1e9 if len(t_ns) else 0.0)
-            rec.metadata["imulog.trial"] = trial_start(
-                datetime.fromtimestamp(first_s, tz=UTC), "E4 files' first row (Unix s)"
-            )
-        done += len(v)
-        if len(t_ns):
-            before = int(t_ns[-1])
+            _start(rec, origin_s, files, taken, spans)
+            if window is not None:
+                declared = {f.topic: spans[f.topic] for f in files if spans.get(f.topic) is not None}
+                rec.metadata[PIECES_RECORD] = {"spans": declared, "meta": {s.topic: dict(s.meta) for s in rec.imus}}
+            first = False
+        if last:
+            rec.warnings = [*warnings, *(w for r in rows for w in r.warnings)]
         yield rec
+        del rec, taken  # not held while the next window is read
+        if last:
+            return
+        t1 += window
+
+
+def _start(rec: Recording, origin_s: float, files: list[E4File], taken: list, spans: dict) -> None:
+    """``start_time``: the wall time of the session's first sample (tags aside): from the declared spans in pieces,
+    from the samples in one piece (it holds them all)."""
+    if spans:
+        firsts = [spans[f.topic][0] for f in files if f.kind != "TAGS" and spans.get(f.topic) is not None]
+    else:
+        firsts = [int(t[0]) for f, (_, t) in zip(files, taken, strict=True) if f.kind != "TAGS" and len(t)]
+    if not firsts:
+        return
+    # start_time is the wall time of the first sample (the trial's time axis starts there); t_ns stay on the session
+    # origin, so files converted one by one line up, and a folder's files start at its earliest
+    first_s = origin_s + min(firsts) / 1e9
+    rec.metadata["imulog.trial"] = trial_start(datetime.fromtimestamp(first_s, tz=UTC), "E4 files' first row (Unix s)")
 
 
 class EmpaticaE4Converter(Converter):
@@ -191,21 +221,23 @@ class EmpaticaE4Converter(Converter):
     example = "imulog convert ../shared/data/devices/empatica_e4 -o e4"
 
     def sniff(self, path: Path, head: bytes) -> float:
-        kind = _kind(path)
+        kind = kind_of(path)
         if kind is None:
             return 0.0
         lines = text_head_lines(head, 3)
-        if not lines:
-            return 0.0
-        first = _first_cells(lines, 0)
+        first = first_cells(lines, 0) if lines else []
         if kind == "TAGS":
-            return 0.6 if first and _UNIX.match(first[0]) else 0.0
+            return 0.6 if first and UNIX.match(first[0]) else 0.0
         if kind == "IBI":
-            return 0.9 if len(first) == 2 and _UNIX.match(first[0]) and first[1].upper() == "IBI" else 0.0
-        width = SIGNALS[kind][0]
-        second = _first_cells(lines, 1)
-        ok = len(first) == width and all(_UNIX.match(c) for c in first) and len(second) == width
-        return 0.9 if ok else 0.0
+            ok = len(first) == 2 and UNIX.match(first[0]) and first[1].upper() == "IBI"
+        else:
+            width = SIGNALS[kind][0]
+            second = first_cells(lines, 1) if lines else []
+            ok = len(first) == width and all(UNIX.match(c) for c in first) and len(second) == width
+        if ok:
+            return 0.9
+        # a session's file whose header is damaged (cut, missing) is still the session's: its reader names the damage
+        return 0.5 if _has_session_sibling(Path(path)) else 0.0
 
     def recording_key(self, path: Path) -> str | None:
         return Path(path).parent.name or "e4"
@@ -214,8 +246,22 @@ class EmpaticaE4Converter(Converter):
         return read_e4_file(Path(path), options)
 
     def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
-        """One file in pieces of about 16 MB of text (see :func:`iter_e4_file`)."""
-        return iter_e4_file(Path(path), options, piece_bytes=_pieces.PIECE_BYTES)
+        """One file in time windows of about 16 MB of text (see :func:`iter_e4_session`)."""
+        return iter_e4_session([Path(path)], options, piece_bytes=_pieces.PIECE_BYTES)
+
+    def iter_session(
+        self, paths: Sequence[Path], options: ConvertOptions | None = None, *, whole: bool = False
+    ) -> Iterator[Recording]:
+        """The folder's files as one recording in time windows of about 16 MB of text (``whole``: one piece)."""
+        return iter_e4_session(paths, options, piece_bytes=None if whole else _pieces.PIECE_BYTES)
+
+
+def _has_session_sibling(path: Path) -> bool:
+    """True when another E4 file beside ``path`` starts with a session start (a file of the same session)."""
+    try:
+        return any(p != path and kind_of(p) not in (None, "TAGS") and session_start(p) for p in path.parent.iterdir())
+    except OSError:
+        return False
 
 
 CONVERTER = EmpaticaE4Converter()

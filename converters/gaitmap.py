@@ -10,9 +10,10 @@ Files (convert the folder to get one trial with all three):
   (label = foot, task_index = s_id).
 Both recordings start together (t = 0 at index 0); they are synchronised over the 38.7 s.
 
-Memory: the IMU and mocap files in pieces of about 16 MiB of text (``iter_chunks``, rows from
-:func:`imulog.converters._pieces.iter_numeric`; their whole-file readers are the one-piece case); the stride file,
-one row per stride, whole.
+Memory: every file in pieces of about 16 MiB of text (``iter_chunks``; the IMU and mocap rows from
+:func:`imulog.converters._pieces.iter_numeric`, the stride rows, whose ``foot`` cell is text, parsed line by line from
+the pieces of the same cutter, :func:`imulog.converters._pieces.text_pieces`); the whole-file readers are the
+one-piece case.
 """
 
 from __future__ import annotations
@@ -103,15 +104,34 @@ def read_mocap(path: Path, rate_hz: float = MOCAP_RATE_HZ, name: str = "mocap") 
 
 
 def read_strides(path: Path, imu_rate_hz: float = IMU_RATE_HZ) -> Recording:
+    """``stride_borders_sample.csv`` whole: :func:`iter_strides` in one piece."""
+    (rec,) = iter_strides(path, imu_rate_hz, piece_bytes=None)
+    return rec
+
+
+def iter_strides(
+    path: Path, imu_rate_hz: float = IMU_RATE_HZ, piece_bytes: int | None = _pieces.PIECE_BYTES
+) -> Iterator[Recording]:
+    """``stride_borders_sample.csv`` (``s_id,foot,start,end`` in IMU samples) in pieces of about ``piece_bytes`` of
+    text cut after whole rows by the text cutter (:func:`imulog.converters._pieces.text_pieces`; None: one piece):
+    Intervals ``/events/strides`` (label = foot sensor, task_index = s_id). Blank lines are skipped; a row that is
+    short, not numeric or ends before it starts is an error naming its line, whatever the piece size."""
+    path = Path(path)
     lines = head_lines(path)
     header = split_row(lines[0], ",")
     need = ["s_id", "foot", "start", "end"]
     if header[:4] != need:
         raise ConversionError(path, f"expected header starting {','.join(need)}", line=1)
-    ids, feet, start, end = [], [], [], []
-    with open(path, encoding="latin-1") as f:
-        next(f)
-        for lineno, line in enumerate(f, start=2):
+    with open(path, "rb") as f:
+        if not f.readline().endswith(b"\n"):
+            raise ConversionError(path, "no strides")
+    size = max(1, path.stat().st_size)
+    scale = 1e9 / imu_rate_hz
+    found = 0
+    for piece, lines_before, _, last in _pieces.text_pieces(path, 1, piece_bytes or size):
+        ids, feet, start, end = [], [], [], []
+        for lineno, raw in enumerate(piece.split(b"\n"), start=lines_before + 1):
+            line = raw.decode("latin-1").rstrip("\r")
             if not line.strip():
                 continue
             cells = split_row(line, ",")
@@ -127,17 +147,19 @@ def read_strides(path: Path, imu_rate_hz: float = IMU_RATE_HZ) -> Recording:
             feet.append(cells[1])
             start.append(s)
             end.append(e)
-    if not ids:
-        raise ConversionError(path, "no strides")
-    scale = 1e9 / imu_rate_hz
-    ev = Intervals(
-        topic="/events/strides",
-        start_ns=np.round(np.array(start) * scale).astype(np.int64),
-        end_ns=np.round(np.array(end) * scale).astype(np.int64),
-        labels=[f"{foot}_sensor" for foot in feet],
-        task_index=np.array(ids),
-    )
-    return Recording(events=[ev], sources=[str(path)])
+        found += len(ids)
+        if last and not found:
+            raise ConversionError(path, "no strides")
+        if not ids and not last:
+            continue
+        ev = Intervals(
+            topic="/events/strides",
+            start_ns=np.round(np.array(start, dtype=np.float64) * scale).astype(np.int64),
+            end_ns=np.round(np.array(end, dtype=np.float64) * scale).astype(np.int64),
+            labels=[f"{foot}_sensor" for foot in feet],
+            task_index=np.array(ids, dtype=np.int64),
+        )
+        yield Recording(events=[ev], sources=[str(path)])
 
 
 def _imu_options(rate_hz: float) -> dict[str, Any]:
@@ -174,8 +196,8 @@ class GaitmapConverter(Converter):
         raise ConversionError(path, "not a gaitmap example file (imu_sample, mocap_sample or stride_borders)", line=1)
 
     def iter_chunks(self, path: Path, options: ConvertOptions | None = None) -> Iterator[Recording]:
-        """The IMU file (:func:`~imulog.converters.delimited.iter_delimited`) and the mocap file (:func:`iter_mocap`)
-        in pieces of text; the stride file (one row per stride) comes whole, as one piece."""
+        """The IMU file (:func:`~imulog.converters.delimited.iter_delimited`), the mocap file (:func:`iter_mocap`)
+        and the stride file (:func:`iter_strides`) in pieces of text."""
         options = options or ConvertOptions()
         path = Path(path)
         kind = _kind(head_lines(path, max_lines=3))
@@ -185,6 +207,9 @@ class GaitmapConverter(Converter):
         if kind == "mocap":
             rate = float(options.extra.get("mocap_rate_hz", MOCAP_RATE_HZ))
             return iter_mocap(path, rate, piece_bytes=_pieces.PIECE_BYTES)
+        if kind == "strides":
+            imu_rate = float(options.rate_hz or options.extra.get("imu_rate_hz", IMU_RATE_HZ))
+            return iter_strides(path, imu_rate, piece_bytes=_pieces.PIECE_BYTES)
         return iter([self.convert(path, options)])
 
 

@@ -156,12 +156,15 @@ def convert_file(path: Path, fmt: str | None = None, options: ConvertOptions | N
     return rec
 
 
-def iter_file_chunks(path: Path, conv: Converter, options: ConvertOptions, report: ValueReport) -> Iterator[Recording]:
+def iter_file_chunks(
+    path: Path, conv: Converter, options: ConvertOptions, report: ValueReport, files: Sequence[Path] | None = None
+) -> Iterator[Recording]:
     """``conv.iter_chunks`` with the same safety net and value check as :func:`convert_file`, piece by piece.
 
-    ``report`` accumulates the value check; the caller ends with ``values.finish(rec, report, path)``."""
+    ``report`` accumulates the value check; the caller ends with ``values.finish(rec, report, path)``. ``files``: the
+    files of one session read together (``conv.iter_session``), ``path`` their folder."""
     with reader_errors(path, conv):
-        pieces = conv.iter_chunks(path, options)
+        pieces = conv.iter_chunks(path, options) if files is None else conv.iter_session(list(files), options)
         if pieces is None:
             raise ConversionError(path, f"{conv.name} does not read piece by piece")
         pieces = iter(pieces)

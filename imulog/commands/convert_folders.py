@@ -8,6 +8,7 @@ from typing import Any
 
 import click
 
+from imulog.commands import convert_stream
 from imulog.commands.convert_common import (
     _channel_list,
     _convert_group,
@@ -17,12 +18,16 @@ from imulog.commands.convert_common import (
     finish_recording,
     load_meta_file,
 )
+from imulog.commands.convert_stream import session_converter
 from imulog.converters import ConversionError, ConvertOptions
+from imulog.converters.base import Converter
 from imulog.converters.registry import (
     detect,
     group_directory,
+    reader_errors,
     recording_key,
 )
+from imulog.converters.values import check_recording
 from imulog.model import Recording
 
 #: formats of optical (motion capture) exports: beside one IMU recording in a folder, they are its session's
@@ -93,6 +98,39 @@ def _sibling_meta(files: list[Path]) -> dict[str, dict[str, Any]]:
     return {}
 
 
+def convert_session(files: list[Path], conv: Converter, options: ConvertOptions) -> Recording:
+    """The files of one session as one recording (``conv.iter_session`` in one piece), value-checked as
+    :func:`~imulog.converters.registry.convert_file` checks a file; errors name the file (or the folder)."""
+    folder = files[0].parent
+    with reader_errors(folder, conv):
+        (rec,) = conv.iter_session(files, options, whole=True)
+        check_recording(rec, folder)
+    return rec
+
+
+def _stream_session(
+    files: list[Path], target: Path, fmt: str | None, options: ConvertOptions, meta: dict, attach: str, overwrite: bool
+) -> dict[str, Any]:
+    """One session's files converted piece by piece (time windows of every file) into ``target``: its JSON entry."""
+    from imulog.commands.outputs import exists_message
+
+    if target.exists() and not overwrite:  # the whole-folder path's line (_write), before anything is read
+        raise ConversionError(None, exists_message(target))
+    try:
+        counts, notes = convert_stream._convert_streaming(
+            files[0].parent, target, fmt, options, meta, attach=attach, overwrite=overwrite, files=files
+        )
+    except click.ClickException as e:  # its one line, a failure of this trial as in the whole-folder path
+        raise ConversionError(None, e.message) from None
+    return {
+        "path": str(target),
+        "channels": counts,
+        "warnings": notes,
+        "inputs": [p.name for p in files],
+        "streamed": True,
+    }
+
+
 def _convert_directories(
     dirs: list[Path],
     out_dir: Path,
@@ -130,11 +168,22 @@ def _convert_directories(
     ) as bar:
         for target, files in bar:
             try:
-                rec, formats, left_out = _convert_folder_group(files, fmt, options)
-                skipped.extend(left_out)
                 trial_meta = _sibling_meta(files)
                 for name, values in meta.items():
                     trial_meta.setdefault(name, {}).update(values)
+                session = session_converter(files, fmt, options)
+                if session is not None and sum(p.stat().st_size for p in files) >= convert_stream.STREAM_MIN_BYTES:
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    trials.append(_stream_session(files, target, fmt, options, trial_meta, attach, overwrite))
+                    warnings.extend(f"{target}: {msg}" for msg in trials[-1]["warnings"])
+                    written += 1
+                    continue
+                if session is not None:  # a session read as one: a damaged file fails it (as in pieces)
+                    rec, left_out = convert_session(files, session, options), []
+                    formats = {p.name: session.name for p in files}
+                else:
+                    rec, formats, left_out = _convert_folder_group(files, fmt, options)
+                skipped.extend(left_out)
                 finish_recording(rec, trial_meta, formats)
                 target.parent.mkdir(parents=True, exist_ok=True)
                 _write(target, rec, attach=attach, overwrite=overwrite)
@@ -158,7 +207,10 @@ def _convert_directories(
             raise click.exceptions.Exit(1)
         return
     if out_dir.suffix.lower() == ".mcap" and trials:
-        click.echo(f"wrote {out_dir} from {len(trials[0]['inputs'])} files ({_channel_list(trials[0]['channels'])})")
+        how = "; converted piece by piece" if trials[0].get("streamed") else ""
+        click.echo(
+            f"wrote {out_dir} from {len(trials[0]['inputs'])} files ({_channel_list(trials[0]['channels'])}{how})"
+        )
     else:
         click.echo(f"wrote {written} trial(s) to {out_dir}")
     for path, why in skipped:

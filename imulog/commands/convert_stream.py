@@ -30,6 +30,17 @@ def _streams(path: Path, fmt: str | None, options: ConvertOptions) -> bool:
     return type(conv).iter_chunks is not Converter.iter_chunks
 
 
+def session_converter(files: list[Path], fmt: str | None, options: ConvertOptions) -> Converter | None:
+    """The converter that reads ``files`` together as one session (``Converter.iter_session``: every file of one format
+    that has it), else None (the files convert one by one)."""
+    try:
+        names = {_format_name(p, fmt, options) for p in files}
+        conv = get(names.pop()) if len(names) == 1 else None
+    except (ConversionError, UnknownFormatError):
+        return None
+    return conv if conv is not None and type(conv).iter_session is not Converter.iter_session else None
+
+
 def _convert_streaming(
     path: Path,
     output: Path,
@@ -40,8 +51,11 @@ def _convert_streaming(
     attach: str,
     overwrite: bool,
     as_json: bool = False,
-) -> None:
-    """Convert one large file piece by piece (memory bounded by a piece, not by the recording)."""
+    files: list[Path] | None = None,
+) -> tuple[dict[str, int], list[str]] | None:
+    """Convert one large file piece by piece (memory bounded by a piece, not by the recording). ``files``: the files
+    of one session read together in time windows (``Converter.iter_session``), ``path`` their folder; then nothing
+    is printed and (samples per topic, warnings) are returned."""
     from imulog.archive import ArchiveError
     from imulog.archive.streaming import StreamingTrialWriter
     from imulog.converters.plausibility import PieceExcerpts, marker_warnings
@@ -49,7 +63,7 @@ def _convert_streaming(
     from imulog.converters.values import ValueReport, finish
     from imulog.heap import bound_heap, reuse_heap
 
-    name = _format_name(path, fmt, options)
+    name = _format_name(files[0] if files else path, fmt, options)
     conv = get(name)
     # the same temporaries piece after piece (imulog.heap): pieces of one size reuse their pages (a .cwa day: 5 s
     # of system time less); pieces of varying size are mapped afresh, which keeps memory flat
@@ -57,18 +71,20 @@ def _convert_streaming(
         reuse_heap()
     else:
         bound_heap()
-    size = path.stat().st_size
+    size = sum(p.stat().st_size for p in files or [path])
     notes: list[str] = []
     counts: dict[str, int] = {}
     try:
         report = ValueReport()  # the value check of converters/values.py, over all pieces
-        pieces = iter_file_chunks(path, conv, options, report)
+        pieces = iter_file_chunks(path, conv, options, report, files)
         first = next(pieces, None)
         if first is None:
             raise ConversionError(path, "no samples")
         records = {k: {**first.metadata.get(k, {}), **v} for k, v in meta.items()}
         sources = [Path(s) for s in first.sources] or [path]  # the sidecars a reader read too (BIDS, NilsPod CSV)
-        expected = _declared_duration_s(first) or _expected_duration_s(first, size, _bytes_per_sample(path))
+        expected = _declared_duration_s(first) or _expected_duration_s(
+            first, size, _bytes_per_sample((files or [path])[0])
+        )
         with (
             StreamingTrialWriter(
                 output,
@@ -104,7 +120,10 @@ def _convert_streaming(
             finish(checked, report, path)  # an unusable channel fails here, before the file is kept
             notes.extend(w for w in checked.warnings if w not in notes)
             # after the pieces: a reader that hashed the file while reading it spares a second pass over it
-            writer.metadata["imulog.conversion"] = {**conversion_record(sources, {path.name: name}), "streamed": True}
+            writer.metadata["imulog.conversion"] = {
+                **conversion_record(sources, {p.name: name for p in files or [path]}),
+                "streamed": True,
+            }
             if notes:
                 writer.metadata["imulog.conversion"]["warnings"] = notes
     except ConversionError as e:
@@ -113,12 +132,15 @@ def _convert_streaming(
         raise click.ClickException(str(e)) from None
     except (FileExistsError, ValueError, OSError) as e:
         raise click.ClickException(f"{output}: {e}") from None
+    if files is not None:
+        return counts, notes
     if as_json:
         _echo_json([{"path": str(output), "channels": counts, "warnings": notes, "streamed": True}], [])
         return
     click.echo(f"wrote {output} ({', '.join(f'{t} {n}' for t, n in counts.items())}; converted piece by piece)")
     for msg in notes:
         click.echo(f"warning: {output}: {msg}", err=True)
+    return None
 
 
 def _span_s(piece: Recording) -> float:
