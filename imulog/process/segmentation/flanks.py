@@ -202,8 +202,13 @@ def first_motion(
     x = np.arange(int(rest), r0 + 1, dtype=float)
     y = v[int(rest) : r0 + 1] @ (v[r0] / max(float(np.linalg.norm(v[r0])), 1e-12))
     before = x <= z
-    line = np.polyval(np.polyfit(x[before], y[before], 1), x[-1]) if before.sum() >= 3 else float(y[0])
-    return z if y[-1] - line >= 0.5 * height * unit[r0] else None
+    coef = np.polyfit(x[before], y[before], 1) if before.sum() >= 3 else np.array([0.0, float(y[0])])
+    if y[-1] - np.polyval(coef, x[-1]) < 0.5 * height * unit[r0]:
+        return None
+    # against the noise, the boundary (before the run) also moves: its speed, not only the ramp's, is the stop's bound
+    if scale is not None and until < r0 and y[until - int(rest)] - np.polyval(coef, until) < 0.5 * height * unit[until]:
+        return None
+    return z
 
 
 def _runs(mask: np.ndarray, min_run: int) -> np.ndarray:

@@ -42,8 +42,9 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
 8. a slow last part at ``velocity_level_mps`` or more with next to no acceleration (the wrist stopped turning,
    the hand still arriving: up to 3 s) extends the offset when the rest window is verified as a rest (the
    velocity integrated forward from it stays under half that speed for ``rest_check_s``) and the hand never
-   slowed under half that speed between the offset and that part (:func:`~imulog.process.segmentation.arrival.slow_tail_end`; a rest's drift
-   follows a stop and a window in a drift fails the check).
+   slowed under half that speed between the offset and that part (a rest's drift follows a stop and a window in
+   a drift fails the check); a slower last part, under that speed, where its speed stands ``n_sigma`` sd out of
+   the velocity's own noise (:func:`~imulog.process.segmentation.arrival.slow_tail_end`).
 
 Pure numpy/scipy; intervals are half-open sample ranges ``[start, end)``.
 """
@@ -70,7 +71,8 @@ class HandParams:
     rest_distance_s: the rest window is centred this far (s) from the phase, or at the gap's middle when the
         gap is shorter than twice this.
     guard_s: the rest window keeps this distance (s) from the neighbouring phases.
-    n_sigma: acceleration level = ``n_sigma`` x the rest noise (rms of per-axis robust sd, m/s^2).
+    n_sigma: acceleration level = ``n_sigma`` x the rest noise (rms of per-axis robust sd, m/s^2); also the
+        speed level of step 8's slower last parts, in sd of the velocity's noise.
     min_level_mps2: lower bound of that level (quantised, nearly noise-free sensors).
     velocity_level_mps: the hand moves where the velocity integrated from the rest exceeds this (m/s).
     quiet_s: the walk stops at the first run this long (s) without motion.
