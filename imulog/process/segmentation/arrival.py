@@ -97,20 +97,22 @@ def slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw=None) 
         return end
     min_run = max(1, int(round(params.min_run_s * rate_hz)))
     fit = int(round(params.speed_fit_s * rate_hz))
-    _, v_all, _ = gravity_free(acc, gyr, dt, post, lo, post[0])
-    m = len(v_all)
     if min(stop, post[1] + check) - post[1] < check // 2:
         return end
     _, v_fwd, _ = gravity_free(acc, gyr, dt, post, post[1], min(stop, post[1] + check))
     fwd = np.linalg.norm(v_fwd, axis=1)
-    z = None
+    m = post[0] - lo  # samples integrated back from the window
+    v_back, z = None, None
     if fwd.max() < 0.5 * vlevel:
-        z = first_motion(v_all[::-1], vlevel, min_run, m - (end - lo), check, fit)
+        v_back = gravity_free(acc, gyr, dt, post, lo, post[0])[1][::-1]
+        z = first_motion(v_back, vlevel, min_run, m - (end - lo), check, fit)
     if z is None and raw is not None:  # against the velocity's noise, measured at the window
         w0, w1 = post
         acc_sd = max(white_noise(raw[0], w0, w1), params.min_level_mps2 / params.n_sigma)  # a quantised sensor
         tau = (np.arange(max(m, len(fwd))) + 1) * dt  # time from the window (s)
         sd = velocity_noise_mps(tau, dt, (w1 - w0) * dt, acc_sd, white_noise(raw[1], w0, w1))
         if np.all(fwd < params.n_sigma * sd[: len(fwd)]):  # a rest within the noise: an offset in the last part
-            z = first_motion(v_all[::-1], params.n_sigma, min_run, m - (end - lo), check, fit, scale=sd[:m])
+            if v_back is None:
+                v_back = gravity_free(acc, gyr, dt, post, lo, post[0])[1][::-1]
+            z = first_motion(v_back, params.n_sigma, min_run, m - (end - lo), check, fit, scale=sd[:m])
     return end if z is None else max(end, lo + m - int(np.ceil(z)))
