@@ -158,8 +158,8 @@ def first_motion(
 
     ``v`` (n, 3) m/s velocity integrated from a verified rest (the array's start) in time order; ``until`` the
     current boundary, inside the movement (with ``scale``, also in its last part, under ``height``: the run may
-    then lie beyond ``until``, inside the phase, with no stop in between). From ``until`` back towards the rest, the hand moves while its speed
-    stays at half ``height`` or more (a hand that stopped on the way, e.g. before a rest's drift, is a
+    then lie beyond ``until``, inside the phase, with no stop in between). From ``until`` back towards the
+    rest, the hand moves while its speed stays at half ``height`` or more (a hand that stopped on the way, e.g. before a rest's drift, is a
     different movement); the first run of at least ``min_run`` samples at ``height`` or more after that is the
     movement's flank, and its ``t0`` (:func:`speed_flank_zero`'s model) where it began. Unlike
     :func:`speed_flank_zero` this does not need the acceleration to have crossed a level: a slow last
@@ -181,17 +181,21 @@ def first_motion(
     if len(stops) == 0 or stops[-1][1] > until:
         return None
     rest, e = stops[-1]  # the hand moves over [e, until]
-    beyond = scale is not None  # a run inside the phase only against the noise: a window in a rest's drift
-    runs = _runs(vn[e : max(until + 1, near) if beyond else until + 1] >= height, min_run) + e  # moves at ~2 cm/s
-    if not len(runs) or not 3 <= runs[0][0] < near:
+    if scale is None:
+        runs = [(a, b) for a, b in _runs(vn[e : until + 1] >= height, min_run) + e if a < until]
+    else:  # against the noise the run may also lie beyond the boundary, inside the phase, without a stop between
+        runs = [(a, b) for a, b in _runs(vn[e : max(until + 1, near)] >= height, min_run) + e]
+        if runs and runs[0][0] >= until and len(_runs(vn[until : runs[0][0]] < 0.5 * height, min_run)):
+            return None
+    if not runs or not 3 <= runs[0][0] < near:
         return None
-    if runs[0][0] >= until and len(_runs(vn[until : runs[0][0]] < 0.5 * height, min_run)):
-        return None  # the boundary's speed reaches the height only beyond a stop
     low = np.flatnonzero(vn[: runs[0][0] + 1] < 0.5 * height)  # fitted up to half the height: the lower part
     p = int(low[-1]) + 1 if len(low) else runs[0][0]  # of the flank, from where the hand was last still
-    if scale is not None:  # with late_only, only a boundary in the movement's last part, under the height, the run
-        if late_only and runs[0][0] < until:  # inside the phase: a window moving in a rest's drift sees the stop
-            return None  # before the drift as a speed of several noise sd right from the window (the run near it)
+    if scale is not None:
+        # late_only: only a boundary in the last part (under the height) with the run inside the phase; a window
+        # moving with a rest's drift sees the stop before the drift as several noise sd right from the window
+        if late_only and runs[0][0] < until:
+            return None
         p = int(runs[0][0])  # fitted up to the run: half the noise-scaled height can be the window's bias integrated
     z = _speed_fit(v, max(p, 3), max_fit, start=int(rest))
     if z is None:

@@ -279,7 +279,8 @@ def _extrapolated(
 def _offset(acc, gyr, dt, post, lo: int, b0: int, stop: int, params: HandParams, rate_hz: float, raw=None) -> int:
     """Offset (exclusive sample index) of the phase whose gyroscope offset is ``b0``, with the rest window ``post``
     after it (steps 5-8 of the module docstring); ``b0`` without a usable window. ``lo``: where the velocity
-    integration may start (inside the phase); ``stop``: the next phase's guard."""
+    integration may start (inside the phase); ``stop``: the next phase's guard; ``raw``: the unfiltered
+    (accelerometer, gyroscope) for the velocity's noise of step 8."""
     length = post[1] - post[0] if post is not None else 0
     quiet = max(1, int(round(params.quiet_s * rate_hz)))
     min_run = max(1, int(round(params.min_run_s * rate_hz)))
