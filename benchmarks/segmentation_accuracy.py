@@ -19,6 +19,8 @@ one table row per condition and method, over ``--seeds`` x ``--subjects`` trials
     python benchmarks/segmentation_accuracy.py --grid all --seeds 3 --subjects 1 --repetitions 10
 
 ``--grid wider``: slower, more hesitant and slow curved stroke-like phases beyond the simulator's grid (issue 31).
+``--outside`` lists every phase whose duration is outside 0.1 s with its onset and offset errors, and counts them
+per condition by what is wrong (missing, offsets early or late, onsets early or late, both ends within 0.1 s).
 """
 
 from __future__ import annotations
@@ -68,7 +70,18 @@ def score(sim, params: PhaseParams) -> dict:
             for r, lab, a, b in zip(truth.task_index, truth.labels, truth.start_ns, truth.end_ns, strict=True)
         ]
     )
+    ends = {(int(r), lab): (s, e) for r, lab, s, e in zip(ph.repetition, ph.labels, det_s, det_e, strict=True)}
+    outside = [  # (repetition, label, onset error s, offset error s) of the durations outside 0.1 s (nan: missing)
+        (
+            int(r),
+            str(lab),
+            *(np.subtract(ends[(int(r), lab)], (a * 1e-9, b * 1e-9)) if (int(r), lab) in ends else (np.nan,) * 2),
+        )
+        for r, lab, a, b, d in zip(truth.task_index, truth.labels, truth.start_ns, truth.end_ns, dur_err, strict=True)
+        if not abs(d) < 0.1
+    ]
     return {
+        "outside": [(r, lab, float(on), float(off)) for r, lab, on, off in outside],
         "n_phases": len(ph),
         "n_true": len(truth),
         "correct": correct / len(truth),
@@ -176,6 +189,7 @@ def grid_rows(conditions, seeds, subjects, repetitions: int, methods=GRID_METHOD
                     (r["seed"], r["subject"], r["duration_within_0_1_s"], r["correct"], r["max_duration_error_s"])
                     for r in rs
                 ],
+                "outside": [(r["seed"], r["subject"], *o) for r in rs for o in r["outside"]],
             }
         )
     return out
@@ -195,6 +209,27 @@ def print_trials_under(rows: list[dict], share: float = 0.95) -> None:
                     f"(correct phases {100 * correct:.1f} %, max duration error {worst:.2f} s)"
                 )
     print(f"  {n} of {sum(len(r['per_trial']) for r in rows)} trials")
+
+
+def print_outside(rows: list[dict]) -> None:
+    """Per condition and method, the phases whose durations are outside 0.1 s by what is wrong (a phase can count
+    under two ends), then each of them: seed, subject, repetition, label, onset and offset errors (s)."""
+    for r in rows:
+        out = r["outside"]
+        if not out:
+            continue
+        on, off = np.array([o[4] for o in out]), np.array([o[5] for o in out])
+        both = (np.abs(on) < 0.1) & (np.abs(off) < 0.1)
+        print(
+            f"\n{r['condition']} / {r['method']}: {len(out)} phases outside 0.1 s: missing {int(np.isnan(on).sum())}, "
+            f"offset more than 0.3 s early {int((off < -0.3).sum())}, 0.1-0.3 s early {int(((off >= -0.3) & (off < -0.1)).sum())}, "
+            f"0.1-0.3 s late {int(((off > 0.1) & (off <= 0.3)).sum())}, more than 0.3 s late {int((off > 0.3).sum())}; "
+            f"onset more than 0.1 s early {int((on < -0.1).sum())}, late {int((on > 0.1).sum())}; both ends within 0.1 s "
+            f"{int(both.sum())}"
+            + (f" (onset {on[both].mean():+.3f} s, offset {off[both].mean():+.3f} s on average)" if both.any() else "")
+        )
+        for seed, subject, rep, label, a, b in out:
+            print(f"  seed {seed} subject {subject} repetition {rep} {label}: onset {a:+.3f} s, offset {b:+.3f} s")
 
 
 def print_comparison(before: list[dict], rows: list[dict]) -> None:
@@ -274,6 +309,9 @@ def main() -> None:
         metavar="SEED:SUBJECT",
         help="several trial sets, each --seeds x --subjects from a first seed and subject (instead of --first-*)",
     )
+    ap.add_argument(
+        "--outside", action="store_true", help="also list the phases outside 0.1 s, by what is wrong (issue 31)"
+    )
     ap.add_argument("--json", default=None, help="also write the grid records (with every trial's figures) here")
     ap.add_argument(
         "--compare", default=None, help="a --json file of an earlier run on the same trials: before → after"
@@ -297,6 +335,8 @@ def main() -> None:
         print_grid(rows)
         if args.per_trial:
             print_trials_under(rows)
+        if args.outside:
+            print_outside(rows)
         if args.json:
             import json
 

@@ -144,22 +144,36 @@ def speed_flank_zero(v: np.ndarray, first: int, height: float, max_fit: int | No
 
 
 def first_motion(
-    v: np.ndarray, height: float, min_run: int, until: int, near: int, max_fit: int | None = None
+    v: np.ndarray,
+    height: float,
+    min_run: int,
+    until: int,
+    near: int,
+    max_fit: int | None = None,
+    scale: np.ndarray | None = None,
+    late_only: bool = True,
 ) -> float | None:
     """Where a movement that the hand continues up to ``until`` left the rest at the array's start (local sample
     index, sub-sample).
 
     ``v`` (n, 3) m/s velocity integrated from a verified rest (the array's start) in time order; ``until`` the
-    current boundary, inside the movement. From ``until`` back towards the rest, the hand moves while its speed
-    stays at half ``height`` or more (a hand that stopped on the way, e.g. before a rest's drift, is a
+    current boundary, inside the movement (with ``scale``, also in its last part, under ``height``: the run may
+    then lie beyond ``until``, inside the phase, with no stop in between). From ``until`` back towards the
+    rest, the hand moves while its speed stays at half ``height`` or more (a hand that stopped on the way, e.g. before a rest's drift, is a
     different movement); the first run of at least ``min_run`` samples at ``height`` or more after that is the
     movement's flank, and its ``t0`` (:func:`speed_flank_zero`'s model) where it began. Unlike
     :func:`speed_flank_zero` this does not need the acceleration to have crossed a level: a slow last
     submovement (the wrist no longer turning) can stay under the acceleration level for seconds at 3-13 cm/s
     (issue 31). None when the speed at ``until`` is under half ``height``, the flank starts within 3 samples
     of the rest, or the speed at the run is within half ``height`` of the line through the velocity before
-    ``t0`` (the rest window's bias integrated back: a ramp, not a movement)."""
+    ``t0`` (the rest window's bias integrated back: a ramp, not a movement).
+
+    ``scale`` (n,) m/s: the speed is compared with ``height`` x ``scale`` per sample instead of ``height`` (m/s)
+    (``height`` then in units of the velocity's noise sd, :mod:`~imulog.process.segmentation.arrival`), the flank is
+    fitted up to the run, and with ``late_only`` the run must lie beyond ``until``."""
     vn = np.linalg.norm(v, axis=1)
+    unit = np.ones(len(vn)) if scale is None else np.maximum(np.asarray(scale, dtype=float), 1e-12)
+    vn = vn / unit  # the speed in units of its level (m/s, or noise sd)
     until = min(int(until), len(vn) - 1)
     if until < 3:
         return None
@@ -167,11 +181,22 @@ def first_motion(
     if len(stops) == 0 or stops[-1][1] > until:
         return None
     rest, e = stops[-1]  # the hand moves over [e, until]
-    runs = [(a, b) for a, b in _runs(vn[e : until + 1] >= height, min_run) + e if a < until]
+    if scale is None:
+        runs = [(a, b) for a, b in _runs(vn[e : until + 1] >= height, min_run) + e if a < until]
+    else:  # against the noise the run may also lie beyond the boundary, inside the phase, without a stop between
+        runs = [(a, b) for a, b in _runs(vn[e : max(until + 1, near)] >= height, min_run) + e]
+        if runs and runs[0][0] >= until and len(_runs(vn[until : runs[0][0]] < 0.5 * height, min_run)):
+            return None
     if not runs or not 3 <= runs[0][0] < near:
         return None
     low = np.flatnonzero(vn[: runs[0][0] + 1] < 0.5 * height)  # fitted up to half the height: the lower part
     p = int(low[-1]) + 1 if len(low) else runs[0][0]  # of the flank, from where the hand was last still
+    if scale is not None:
+        # late_only: only a boundary in the last part (under the height) with the run inside the phase; a window
+        # moving with a rest's drift sees the stop before the drift as several noise sd right from the window
+        if late_only and runs[0][0] < until:
+            return None
+        p = int(runs[0][0])  # fitted up to the run: half the noise-scaled height can be the window's bias integrated
     z = _speed_fit(v, max(p, 3), max_fit, start=int(rest))
     if z is None:
         return None
@@ -179,10 +204,15 @@ def first_motion(
     # height from the line through the velocity before t0
     r0 = int(runs[0][0])
     x = np.arange(int(rest), r0 + 1, dtype=float)
-    y = v[int(rest) : r0 + 1] @ (v[r0] / max(float(vn[r0]), 1e-12))
+    y = v[int(rest) : r0 + 1] @ (v[r0] / max(float(np.linalg.norm(v[r0])), 1e-12))
     before = x <= z
-    line = np.polyval(np.polyfit(x[before], y[before], 1), x[-1]) if before.sum() >= 3 else float(y[0])
-    return z if y[-1] - line >= 0.5 * height else None
+    coef = np.polyfit(x[before], y[before], 1) if before.sum() >= 3 else np.array([0.0, float(y[0])])
+    if y[-1] - np.polyval(coef, x[-1]) < 0.5 * height * unit[r0]:
+        return None
+    # against the noise, the boundary (before the run) also moves: its speed, not only the ramp's, is the stop's bound
+    if scale is not None and until < r0 and y[until - int(rest)] - np.polyval(coef, until) < 0.5 * height * unit[until]:
+        return None
+    return z
 
 
 def _runs(mask: np.ndarray, min_run: int) -> np.ndarray:

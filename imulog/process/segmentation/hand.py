@@ -42,8 +42,9 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
 8. a slow last part at ``velocity_level_mps`` or more with next to no acceleration (the wrist stopped turning,
    the hand still arriving: up to 3 s) extends the offset when the rest window is verified as a rest (the
    velocity integrated forward from it stays under half that speed for ``rest_check_s``) and the hand never
-   slowed under half that speed between the offset and that part (:func:`_slow_tail_end`; a rest's drift
-   follows a stop and a window in a drift fails the check).
+   slowed under half that speed between the offset and that part (a rest's drift follows a stop and a window in
+   a drift fails the check); a slower last part, under that speed, where its speed stands ``n_sigma`` sd out of
+   the velocity's own noise (:func:`~imulog.process.segmentation.arrival.slow_tail_end`).
 
 Pure numpy/scipy; intervals are half-open sample ranges ``[start, end)``.
 """
@@ -54,9 +55,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imulog.process import quaternion as quat
+from imulog.process.segmentation.arrival import gravity_free, slow_tail_end
 from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
-from imulog.process.segmentation.flanks import first_motion, flank_zero, speed_flank_zero
+from imulog.process.segmentation.flanks import flank_zero, speed_flank_zero
 
 
 @dataclass(frozen=True)
@@ -70,7 +71,8 @@ class HandParams:
     rest_distance_s: the rest window is centred this far (s) from the phase, or at the gap's middle when the
         gap is shorter than twice this.
     guard_s: the rest window keeps this distance (s) from the neighbouring phases.
-    n_sigma: acceleration level = ``n_sigma`` x the rest noise (rms of per-axis robust sd, m/s^2).
+    n_sigma: acceleration level = ``n_sigma`` x the rest noise (rms of per-axis robust sd, m/s^2); also the
+        speed level of step 8's slower last parts, in sd of the velocity's noise.
     min_level_mps2: lower bound of that level (quantised, nearly noise-free sensors).
     velocity_level_mps: the hand moves where the velocity integrated from the rest exceeds this (m/s).
     quiet_s: the walk stops at the first run this long (s) without motion.
@@ -192,34 +194,6 @@ def _still_window(acc: np.ndarray, lo: int, hi: int, length: int, reach: int, fr
     return a, a + length
 
 
-def gravity_free(
-    acc: np.ndarray, gyr: np.ndarray, dt_s: float, window: tuple[int, int], lo: int, hi: int
-) -> tuple[np.ndarray, np.ndarray, float]:
-    """Gravity-free acceleration (m/s^2) and velocity (m/s) over ``[lo, hi)`` relative to a rest ``window``.
-
-    Specific force rotated into the window's sensor frame (bias-corrected gyroscope integrated from the window,
-    small-angle), minus the window's median; velocity integrated from zero at the window (ZUPT). Also returns
-    the rest noise (m/s^2, rms over the axes of the per-axis robust sd)."""
-    w0, w1 = window
-    f_rest = np.mean(acc[w0:w1], axis=0)  # the mean: a median of quantised samples is off by up to LSB/2
-    noise = float(np.sqrt(np.mean((1.4826 * np.median(np.abs(acc[w0:w1] - f_rest), axis=0)) ** 2)))
-    bias = np.median(gyr[w0:w1], axis=0)
-    w = (gyr - bias) * dt_s
-    if hi <= w0:  # stretch before the window (an offset): integrate backwards from the window's start
-        idx = np.arange(lo, w0)
-        theta = -np.cumsum(w[idx][::-1], axis=0)[::-1]
-        f = quat.rotate(quat.from_rotation_vector(theta), acc[idx])
-        a = f - f_rest
-        v = -np.cumsum(a[::-1], axis=0)[::-1] * dt_s
-    else:  # stretch after the window (an onset): integrate forwards from the window's end
-        idx = np.arange(w1, hi)
-        theta = np.cumsum(w[idx], axis=0)
-        f = quat.rotate(quat.from_rotation_vector(theta), acc[idx])
-        a = f - f_rest
-        v = np.cumsum(a, axis=0) * dt_s
-    return a, v, noise
-
-
 def sustained(mask: np.ndarray, min_run: int) -> np.ndarray:
     """``mask`` without its True runs shorter than ``min_run`` samples (isolated noise exceedances)."""
     mask = np.asarray(mask, dtype=bool)
@@ -302,40 +276,11 @@ def _extrapolated(
     return int(min(inner, max(int(np.ceil(z)), 0)))  # the first sample after t0
 
 
-def _slow_tail_end(acc, gyr, dt, post, lo, end, stop, params: HandParams, rate_hz) -> int:
-    """Offset (exclusive sample index) at the end of a slow last part of the phase, or ``end`` (the current one).
-
-    A window counts as a rest only when the velocity integrated forward from it stays under half
-    ``velocity_level_mps`` for ``rest_check_s`` (up to ``stop``): a window in a slow tail or in a rest's drift
-    moves at a few cm/s and the hand slows or speeds up after it. Only ``post`` is tried (searching later windows
-    until one verifies extends phases into a rest's drift: issue 31); the last time before it that the speed integrated back from it
-    reaches ``velocity_level_mps`` is motion, and the offset moves to where that speed flank reaches zero
-    (:func:`~imulog.process.segmentation.flanks.first_motion`, time reversed). ``lo``: where the velocity
-    integration may start (inside the phase)."""
-    check = int(round(params.rest_check_s * rate_hz))
-    vlevel = params.velocity_level_mps
-    if check <= 0 or vlevel <= 0:
-        return end
-    length = post[1] - post[0]
-    w0 = post[0]
-    if min(stop, post[1] + check) - post[1] < check // 2 or w0 <= end:
-        return end
-    _, v_fwd, _ = gravity_free(acc, gyr, dt, post, post[1], min(stop, post[1] + check))
-    if np.linalg.norm(v_fwd, axis=1).max() >= 0.5 * vlevel:
-        return end
-    _, v_all, _ = gravity_free(acc, gyr, dt, (w0, w0 + length), lo, w0)
-    m = len(v_all)
-    min_run = max(1, int(round(params.min_run_s * rate_hz)))
-    z = first_motion(v_all[::-1], vlevel, min_run, m - (end - lo), check, int(round(params.speed_fit_s * rate_hz)))
-    if z is None:
-        return end
-    return max(end, lo + m - int(np.ceil(z)))
-
-
-def _offset(acc, gyr, dt, post, lo: int, b0: int, stop: int, params: HandParams, rate_hz: float) -> int:
+def _offset(acc, gyr, dt, post, lo: int, b0: int, stop: int, params: HandParams, rate_hz: float, raw=None) -> int:
     """Offset (exclusive sample index) of the phase whose gyroscope offset is ``b0``, with the rest window ``post``
     after it (steps 5-8 of the module docstring); ``b0`` without a usable window. ``lo``: where the velocity
-    integration may start (inside the phase); ``stop``: the next phase's guard."""
+    integration may start (inside the phase); ``stop``: the next phase's guard; ``raw``: the unfiltered
+    (accelerometer, gyroscope) for the velocity's noise of step 8."""
     length = post[1] - post[0] if post is not None else 0
     quiet = max(1, int(round(params.quiet_s * rate_hz)))
     min_run = max(1, int(round(params.min_run_s * rate_hz)))
@@ -372,7 +317,7 @@ def _offset(acc, gyr, dt, post, lo: int, b0: int, stop: int, params: HandParams,
         end = b0 + j
     m = len(a_all)  # the offset's flank, time reversed: from the rest into the phase
     end = lo + m - _extrapolated(a_all[::-1], v_all[::-1], m - (end - lo), m - (b0 - lo), level, params, rate_hz)
-    return _slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz)
+    return slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw)
 
 
 def cutoff_params(params: HandParams) -> BoundaryParams:
@@ -418,7 +363,8 @@ def refine_with_accelerometer(
     raw = fill_gaps(acc_mps2)  # a missing sample must not look like a jump to 0 m/s^2
     cut = accelerometer_cutoff_hz(raw, rate_hz, params) if cutoff_hz is None else cutoff_hz
     acc = lowpass_axes(raw, rate_hz, cut)
-    gyr = lowpass_axes(fill_gaps(gyr_rad_s), rate_hz, min(25.0, 0.45 * rate_hz))
+    gyr_raw = fill_gaps(gyr_rad_s)
+    gyr = lowpass_axes(gyr_raw, rate_hz, min(25.0, 0.45 * rate_hz))
     dt = 1.0 / rate_hz
     first, n = bounds if bounds is not None else (0, len(acc))
     length = max(3, int(round(params.rest_window_s * rate_hz)))
@@ -440,7 +386,7 @@ def refine_with_accelerometer(
         inside = int(round(params.flank_search_s * rate_hz))  # the flank can lie inside the gyroscope's phase
         lo = max(a0, b0 - inside)
         stop = min(next_start, n) - guard
-        out_e[k] = _offset(acc, gyr, dt, post, lo, b0, stop, params, rate_hz)
+        out_e[k] = _offset(acc, gyr, dt, post, lo, b0, stop, params, rate_hz, (raw, gyr_raw))
         reach_in = int(round(params.speed_reach_s * rate_hz))  # a slow start reaches the speed level late
         hi = max(a0, min(int(out_e[k]), a0 + max(inside, reach_in)))
         for _ in range(3):  # likewise before the onset
