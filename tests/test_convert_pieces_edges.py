@@ -1,0 +1,119 @@
+"""The edges of piece-wise conversion (issue 24, item 4): the whole file is the one-piece case, so pieces of any size
+give the same values, the same warnings and the same one-line error as the whole file. Random piece sizes from
+1 byte up (seeded) over the shared Vicon Nexus CSVs with a cut last row, and small crafted tables with a blank line
+at every border position."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from imulog.converters._binary import concat_chunks
+from imulog.converters._pieces import iter_table, text_pieces
+from imulog.converters.errors import ConversionError
+from imulog.converters.vicon_csv import iter_vicon_csv, read_vicon_csv
+from test_convert_vicon_pieces import assert_same_nexus
+
+
+def piece_sizes(size: int, n: int, seed: int) -> list[int]:
+    """1 byte, then ``n`` random piece sizes up to ``size`` (log-uniform: most of them smaller than a row)."""
+    rng = np.random.default_rng(seed)
+    return [1, *sorted({int(x) for x in np.exp(rng.uniform(0, np.log(size), n))})]
+
+
+def outcome(read) -> tuple:  # noqa: ANN001 - a callable returning a Recording
+    """("ok", recording) or ("error", the one-line message)."""
+    try:
+        return "ok", read()
+    except ConversionError as e:
+        return "error", str(e)
+
+
+def assert_same_outcome(whole: tuple, pieces: tuple) -> None:
+    assert whole[0] == pieces[0], (whole, pieces)
+    if whole[0] == "error":
+        assert pieces[1] == whole[1] and "\n" not in whole[1]
+    else:
+        assert_same_nexus(pieces[1], whole[1])
+
+
+# ------------------------------------------------------------------------------------ a cut last row, Vicon CSV
+@pytest.mark.parametrize("name", ["markers.csv", "analogs.csv"])
+@pytest.mark.parametrize("cut", [1, 7, 40, 200])
+def test_nexus_csv_with_a_cut_last_row_in_any_pieces_is_the_whole_file(shared_data, tmp_path, name, cut):
+    """The last row cut ``cut`` bytes short (an interrupted export): the whole file drops it with a warning; pieces
+    smaller than a row (the last piece a fraction of a row) kept it or refused it before the last piece was judged
+    with the rows above it."""
+    lines = (shared_data / "vicon_nexus" / name).read_bytes().rstrip(b"\r\n").split(b"\n")
+    text = b"\n".join(lines[:5] + lines[-400:])  # the header and the last 400 rows (fewer tiny pieces to parse)
+    path = tmp_path / name
+    path.write_bytes(text[:-cut])
+    whole = outcome(lambda: read_vicon_csv(path))
+    if cut >= 7:  # a cut of a decimal or two cannot be told from a complete row (_final_row.final_row_cut)
+        assert whole[0] == "ok" and any("last row cut short" in w for w in whole[1].warnings)
+    for piece_bytes in piece_sizes(len(text) // 4, 6, seed=cut):
+        assert_same_outcome(
+            whole, outcome(lambda pb=piece_bytes: concat_chunks(list(iter_vicon_csv(path, piece_bytes=pb))))
+        )
+
+
+def test_the_last_piece_holds_the_last_row(tmp_path):
+    """Whatever the piece size, the text's last row (here complete but short, with a line break after it) is in
+    the last piece, so the cut-row check sees it with the rows above (``_pieces.text_pieces``)."""
+    path = tmp_path / "t.csv"
+    path.write_bytes(b"h\n" + b"".join(b"%d,%d.5\n" % (i, i) for i in range(30)) + b"30\n\n \n")
+    for piece_bytes in range(1, 80):
+        pieces = list(text_pieces(path, 1, piece_bytes))
+        assert b"".join(p[0] for p in pieces) == path.read_bytes()[2:]
+        assert b"\n30\n" in b"\n" + pieces[-1][0] and pieces[-1][3]
+        assert all(p[0].endswith(b"\n") for p in pieces[:-1])
+
+
+# --------------------------------------------------------------------------------- a blank line, iter_table
+def _table(path: Path, piece_bytes: int | None) -> tuple:
+    warnings: list[str] = []
+
+    def read():
+        rows = list(
+            iter_table(
+                path, delimiter=",", skip_lines=1, names=["a", "b", "c"], piece_bytes=piece_bytes, warnings=warnings
+            )
+        )
+        return np.concatenate([v for v, _ in rows]), [first for _, first in rows]
+
+    result = outcome(read)
+    return result if result[0] == "error" else ("ok", (result[1][0], warnings))
+
+
+@pytest.mark.parametrize(
+    ("blank", "problem"),
+    [
+        (b"\n", "empty line inside the data"),
+        (b"\r\n", "empty line inside the data"),
+        (b" \t\n", "truncated line: 1 fields, expected 3"),
+    ],
+)
+def test_a_blank_line_at_any_piece_border_is_reported_by_iter_table(tmp_path, blank, problem):
+    """A blank line inside the rows is an error naming its line, wherever the pieces are cut (before: a piece
+    that ended with it dropped it as trailing blank lines, and the pieces read on)."""
+    rows = [b"%d,%.3f,%.3f\n" % (i, i * 0.5, i * 0.25) for i in range(40)]
+    rows.insert(20, blank)
+    path = tmp_path / "blank.csv"
+    path.write_bytes(b"a,b,c\n" + b"".join(rows))
+    whole = _table(path, None)
+    assert whole == ("error", f"{path}: line 22: {problem}")
+    for piece_bytes in range(1, len(path.read_bytes()) + 2):
+        assert _table(path, piece_bytes) == whole, piece_bytes
+
+
+def test_blank_lines_ending_the_file_are_no_error_in_any_pieces(tmp_path):
+    path = tmp_path / "end.csv"
+    path.write_bytes(
+        b"a,b,c\n" + b"".join(b"%d,%.3f,%.3f\n" % (i, i * 0.5, i * 0.25) for i in range(30)) + b"\n\r\n \n"
+    )
+    whole = _table(path, None)
+    assert whole[0] == "ok" and len(whole[1][0]) == 30
+    for piece_bytes in range(1, 400):
+        got = _table(path, piece_bytes)
+        assert got[0] == "ok" and got[1][0].tobytes() == whole[1][0].tobytes() and got[1][1] == whole[1][1]
