@@ -117,3 +117,46 @@ def test_blank_lines_ending_the_file_are_no_error_in_any_pieces(tmp_path):
     for piece_bytes in range(1, 400):
         got = _table(path, piece_bytes)
         assert got[0] == "ok" and got[1][0].tobytes() == whole[1][0].tobytes() and got[1][1] == whole[1][1]
+
+
+# ---------------------------------------------------------------------------------- the IMU unit check in pieces
+def _slices(n: int, rng: np.random.Generator, most: int) -> list[slice]:
+    """Random consecutive slices of ``n`` samples, from 1 sample up to ``most`` (log-uniform)."""
+    bounds, at = [0], 0
+    while at < n:
+        at = min(n, at + int(np.exp(rng.uniform(0, np.log(most)))))
+        bounds.append(at)
+    return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+
+
+@pytest.mark.parametrize("hours", [0.5, 3.0])
+def test_unit_check_excerpts_are_the_same_in_any_pieces(hours):
+    """The streaming path's IMU unit check (``plausibility.PieceExcerpts``) sees the samples the whole recording's
+    check sees (``recording_warnings``), whatever the pieces, on a recording that fits the check (0.5 h at 25 Hz)
+    and one that is judged on excerpts (3 h, with a 10-minute gap): same samples, same warnings. The gyroscope is
+    deg/s numbers declared rad/s, a bias at rest: the whole recording warns."""
+    from imulog.converters import plausibility as plaus
+
+    from imulog.model import ImuStream, Recording
+
+    rng = np.random.default_rng(int(hours * 10))
+    n = int(hours * 3600 * 25)
+    t = np.arange(n, dtype=np.int64) * 40_000_000
+    t[n // 2 :] += 600 * 10**9  # a gap of 10 minutes
+    acc = np.tile([0.0, 0.0, 9.81], (n, 1)) + rng.normal(0, 0.02, (n, 3))
+    gyr = rng.normal(0, 0.05, (n, 3)) + [0.6, -0.4, 0.2]
+    whole = Recording(imus=[ImuStream(name="wrist", t_ns=t, acc=acc, gyr=gyr)])
+    expected = plaus.recording_warnings(whole)
+    assert len(expected) == 1 and "at rest the gyroscope reads" in expected[0]
+    t_whole, arrays_whole = plaus.excerpts(t, acc, gyr)
+    for seed, most in enumerate([n // 3, 5000, 20]):  # pieces under 1 s (20 samples): the old per-piece
+        # excerpts, a NaN row after each, left no 1 s rest window and missed the warning
+        spread, ex = plaus.PieceExcerpts(), plaus.Excerpts()
+        for sl in _slices(n, np.random.default_rng(seed), most):
+            spread.add(ImuStream(name="wrist", t_ns=t[sl], acc=acc[sl], gyr=gyr[sl]))
+            ex.add(t[sl], acc[sl], gyr[sl])
+        t_ex, arrays = ex.result()
+        assert t_ex.tobytes() == t_whole.tobytes()
+        for a, b in zip(arrays, arrays_whole, strict=True):
+            assert np.array_equal(a, b, equal_nan=True)
+        assert spread.warnings() == expected
