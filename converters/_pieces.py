@@ -122,8 +122,9 @@ def text_pieces(
 ) -> Iterator[tuple[bytes, int, int, bool]]:
     """The text after ``skip_lines`` header lines in pieces of about ``piece_bytes`` (at least that, up to a line
     break): (piece, lines before it in the file, piece number, whether it is the last). A piece ends between two
-    lines that are not blank, so that a blank line is never at a border (readers report it as in the whole file)
-    and the text's last row is in the last piece. The file's SHA-256 is computed while reading and remembered
+    lines that are not blank, so that a blank line is never at a border (readers report it as in the whole file),
+    and the last piece holds the text's last two rows (a cut last row is judged and dropped in it, with its
+    warning, as in the whole file). The file's SHA-256 is computed while reading and remembered
     (:func:`known_sha256`) when the file did not change meanwhile. ``span``: the bytes ``[start, end)`` alone (a
     section of the file), ``skip_lines`` being the lines before it."""
     for piece, lines_before, k, last, _ in _cut_text(path, skip_lines, piece_bytes, span):
@@ -191,16 +192,19 @@ def _cut_text(
 
 
 def _border(buf: bytes, start: int) -> int:
-    """The first place at or after ``start`` (just after a line break) between two lines of ``buf`` that are not
-    blank, the second complete; 0 when ``buf`` has none."""
+    """The first place at or after ``start`` (just after a line break) that has a line that is not blank before it
+    and two after it, complete, in ``buf``; 0 when ``buf`` has none. So a blank line is never at a border and the
+    last piece holds the text's last two rows (a cut last row dropped, a row remains to carry its warning)."""
     while True:
         cut = buf.find(b"\n", start) + 1
         if cut == 0:
             return 0
-        nxt = buf.find(b"\n", cut)
-        if nxt < 0:
+        mid = buf.find(b"\n", cut)
+        end = buf.find(b"\n", mid + 1) if mid >= 0 else -1
+        if end < 0:
             return 0
-        if buf[buf.rfind(b"\n", 0, cut - 1) + 1 : cut - 1].strip(b" \t\r") and buf[cut:nxt].strip(b" \t\r"):
+        before = buf[buf.rfind(b"\n", 0, cut - 1) + 1 : cut - 1]
+        if before.strip(b" \t\r") and buf[cut:mid].strip(b" \t\r") and buf[mid + 1 : end].strip(b" \t\r"):
             return cut
         start = cut
 
