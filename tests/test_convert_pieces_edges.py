@@ -66,7 +66,7 @@ def test_the_last_piece_holds_the_last_row(tmp_path):
     for piece_bytes in range(1, 80):
         pieces = list(text_pieces(path, 1, piece_bytes))
         assert b"".join(p[0] for p in pieces) == path.read_bytes()[2:]
-        assert b"\n30\n" in b"\n" + pieces[-1][0] and pieces[-1][3]
+        assert b"\n29,29.5\n30\n" in b"\n" + pieces[-1][0] and pieces[-1][3]  # the last two rows
         assert all(p[0].endswith(b"\n") for p in pieces[:-1])
 
 
@@ -160,3 +160,32 @@ def test_unit_check_excerpts_are_the_same_in_any_pieces(hours):
         for a, b in zip(arrays, arrays_whole, strict=True):
             assert np.array_equal(a, b, equal_nan=True)
         assert spread.warnings() == expected
+
+
+# ------------------------------------------------------------------------- HDF5 through the Python API in pieces
+def test_a_long_broad_trial_converts_through_the_python_api_under_the_childs_memory_cap(
+    shared_data, tmp_path, monkeypatch
+):
+    """``Converter.convert`` of an HDF5 reader is its pieces joined, each piece's rows read in a guarded child of its
+    own: a BROAD trial four times the shared one (27 MB of samples) converts with the children capped at 8 MiB, as
+    its pieces do; before, the whole-file path read every row in one child and failed with the cap."""
+    h5py = pytest.importorskip("h5py")
+    import imulog.converters._h5pieces as h5pieces
+    from imulog.converters import broad
+
+    src = shared_data / "broad" / "02_undisturbed_slow_rotation_B.hdf5"
+    path = tmp_path / "long_B.hdf5"
+    with h5py.File(src, "r") as f, h5py.File(path, "w") as out:
+        out.attrs.update(dict(f.attrs))
+        for key in f:
+            out[key] = np.concatenate([np.asarray(f[key])] * 4)
+        n = 4 * len(f["imu_acc"])
+    monkeypatch.setattr(broad, "READER_MEMORY_BYTES", 8 << 20)
+    monkeypatch.setattr(h5pieces, "SCAN_ROWS", 4096)
+    monkeypatch.setattr(h5pieces, "PIECE_BYTES", 256 << 10)
+    rec = broad.CONVERTER.convert(path)
+    assert len(rec.imus[0]) == n
+    with pytest.raises(ConversionError):  # the rows read in one child need more than the cap
+        list(broad.iter_broad(path, piece_bytes=None))
+    joined = concat_chunks(list(broad.CONVERTER.iter_chunks(path)))
+    assert rec.imus[0].acc.tobytes() == joined.imus[0].acc.tobytes() and rec.metadata == joined.metadata
