@@ -163,12 +163,11 @@ def test_unit_check_excerpts_are_the_same_in_any_pieces(hours):
 
 
 # ------------------------------------------------------------------------- HDF5 through the Python API in pieces
-def test_a_long_broad_trial_converts_through_the_python_api_under_the_childs_memory_cap(
-    shared_data, tmp_path, monkeypatch
-):
+def test_a_long_broad_trial_converts_through_the_python_api_in_a_child_per_piece(shared_data, tmp_path, monkeypatch):
     """``Converter.convert`` of an HDF5 reader is its pieces joined, each piece's rows read in a guarded child of its
-    own: a BROAD trial four times the shared one (27 MB of samples) converts with the children capped at 8 MiB, as
-    its pieces do; before, the whole-file path read every row in one child and failed with the cap."""
+    own: a BROAD trial four times the shared one (27 MB of samples) converts with the children capped at 8 MiB, in
+    children that read at most a piece of rows each (before: one child read every row, which fails at that cap
+    when the child's heap must grow for them)."""
     h5py = pytest.importorskip("h5py")
     import imulog.converters._h5pieces as h5pieces
     from imulog.converters import broad
@@ -183,9 +182,51 @@ def test_a_long_broad_trial_converts_through_the_python_api_under_the_childs_mem
     monkeypatch.setattr(broad, "READER_MEMORY_BYTES", 8 << 20)
     monkeypatch.setattr(h5pieces, "SCAN_ROWS", 4096)
     monkeypatch.setattr(h5pieces, "PIECE_BYTES", 256 << 10)
+    reads: list[tuple[int, int]] = []
+    guarded = broad._guarded
+
+    def recorded(p, fn, *args):
+        if fn is broad._rows:
+            reads.append(args[-2:])
+        return guarded(p, fn, *args)
+
+    monkeypatch.setattr(broad, "_guarded", recorded)
     rec = broad.CONVERTER.convert(path)
     assert len(rec.imus[0]) == n
-    with pytest.raises(ConversionError):  # the rows read in one child need more than the cap
-        list(broad.iter_broad(path, piece_bytes=None))
+    rows = (256 << 10) // (8 * 16)  # 16 float64 values a row (imu acc, gyr, mag; optical position, quaternion)
+    assert reads == [(a, min(n, a + rows)) for a in range(0, n, rows)] and len(reads) > 100
     joined = concat_chunks(list(broad.CONVERTER.iter_chunks(path)))
     assert rec.imus[0].acc.tobytes() == joined.imus[0].acc.tobytes() and rec.metadata == joined.metadata
+
+
+# ------------------------------------------------------------------- what the header does not say, in pieces
+@pytest.mark.parametrize("gyr_peak", [200.0, 0.03])
+def test_units_a_header_lacks_are_decided_on_the_same_rows_in_any_pieces(tmp_path, gyr_peak):
+    """A unit-less table (time, acc in g, gyr): the time unit and the axes' units are decided on the first
+    ``delimited.DECIDE_ROWS`` rows, whole and in pieces (the first pieces read ahead). Before, a first piece of one
+    row had no time step (``a step of 0 fits no unit``) and the gyroscope's evidence (its peaks) came from the
+    first piece alone. A gyroscope of 200 deg/s peaks is told deg/s; one of 0.03 cannot be told: the same error."""
+    from imulog.converters import _pieces
+    from imulog.converters.registry import get
+
+    rng = np.random.default_rng(1)
+    n = 600
+    t = np.arange(n) * 0.01 + rng.normal(0, 0.0005, n)
+    acc = np.tile([0.0, 0.0, 1.0], (n, 1)) + rng.normal(0, 0.002, (n, 3))
+    gyr = gyr_peak * np.sin(np.arange(n) / 50.0)[:, None] * [1.0, 0.5, 0.2] + rng.normal(0, 0.001, (n, 3))
+    path = tmp_path / "unitless.csv"
+    header = "time,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z"
+    np.savetxt(path, np.column_stack([t, acc, gyr]), delimiter=",", header=header, comments="", fmt="%.5f")
+    conv = get("delimited")
+    whole = outcome(lambda: conv.convert(path))
+    if gyr_peak > 100:
+        assert whole[0] == "ok" and "gyr in deg/s" in whole[1].warnings[0]
+    else:
+        assert whole[0] == "error" and "values cannot tell" in whole[1]
+    for piece_bytes in piece_sizes(len(path.read_bytes()) // 3, 8, seed=int(gyr_peak)):
+        _pieces.PIECE_BYTES, saved = piece_bytes, _pieces.PIECE_BYTES
+        try:
+            got = outcome(lambda: concat_chunks(list(conv.iter_chunks(path))))
+        finally:
+            _pieces.PIECE_BYTES = saved
+        assert_same_outcome(whole, got)
