@@ -58,9 +58,10 @@ def test_nexus_csv_with_a_cut_last_row_in_any_pieces_is_the_whole_file(shared_da
         )
 
 
-def test_the_last_piece_holds_the_last_row(tmp_path):
-    """Whatever the piece size, the text's last row (here complete but short, with a line break after it) is in
-    the last piece, so the cut-row check sees it with the rows above (``_pieces.text_pieces``)."""
+def test_the_last_piece_holds_the_last_two_rows(tmp_path):
+    """Whatever the piece size, the text's last two rows (the last complete but short, with a line break and blank
+    lines after it) are in the last piece, so the cut-row check drops the last one there and a row remains to carry
+    its warning (``_pieces.text_pieces``); the pieces join to the text."""
     path = tmp_path / "t.csv"
     path.write_bytes(b"h\n" + b"".join(b"%d,%d.5\n" % (i, i) for i in range(30)) + b"30\n\n \n")
     for piece_bytes in range(1, 80):
