@@ -231,3 +231,35 @@ def test_units_a_header_lacks_are_decided_on_the_same_rows_in_any_pieces(tmp_pat
         finally:
             _pieces.PIECE_BYTES = saved
         assert_same_outcome(whole, got)
+
+
+# ------------------------------------------------------------------------------ through imulog convert, archives
+@pytest.mark.parametrize("defect", ["cut last row", "blank line", "NaN field"])
+def test_imulog_convert_in_pieces_writes_the_same_archive_or_fails_alike(shared_data, tmp_path, monkeypatch, defect):
+    """``imulog convert`` of a defective Nexus CSV whole and in 1-byte pieces (``convert_stream``): the same archive
+    and warnings, or the same one-line error and no archive left behind."""
+    from click.testing import CliRunner
+    from test_convert_pieces_archive import assert_same_trial
+    from test_convert_pieces_defects import DEFECTS, _sample
+
+    import imulog.commands.convert_stream as cs
+    from imulog.cli import cli
+
+    src = shared_data / "vicon_nexus" / "markers.csv"
+    path = tmp_path / "markers.csv"
+    path.write_bytes(DEFECTS[defect](_sample(src)))
+    runs = {}
+    for how, min_bytes, piece_bytes in (("whole", 1 << 60, 1 << 24), ("pieces", 0, 1)):
+        monkeypatch.setattr(cs, "STREAM_MIN_BYTES", min_bytes)
+        monkeypatch.setattr("imulog.converters._pieces.PIECE_BYTES", piece_bytes)
+        out = tmp_path / f"{how}.mcap"
+        r = CliRunner().invoke(cli, ["convert", str(path), "-o", str(out)])
+        assert ("piece by piece" in r.output) == (how == "pieces" and r.exit_code == 0)
+        runs[how] = (r.exit_code, out, [ln for ln in r.output.splitlines() if "warning" in ln or "Error" in ln])
+    (code_w, whole, lines_w), (code_p, pieces, lines_p) = runs["whole"], runs["pieces"]
+    assert code_w == code_p and [ln.replace("pieces.mcap", "whole.mcap") for ln in lines_p] == lines_w
+    if code_w:
+        assert len(lines_w) == 1 and not whole.exists() and not pieces.exists()
+    else:
+        assert_same_trial(whole, pieces)
+        assert defect != "cut last row" or any("last row cut short" in ln for ln in lines_w)
