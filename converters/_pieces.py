@@ -8,13 +8,14 @@ from __future__ import annotations
 
 import hashlib
 import os
+from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
-from imulog.converters._final_row import drop_cut_final_row
+from imulog.converters._final_row import TAIL_BYTES, drop_cut_final_row
 from imulog.converters._source import read_source, remember_sha256
 from imulog.converters._table import TableSpec, read_numeric
 from imulog.converters.errors import ConversionError
@@ -55,7 +56,7 @@ def iter_numeric(spec: TableSpec, piece_bytes: int | None, *, missing: bytes | N
             start = data.index(b"\n", start) + 1
         yield NumericPiece(values, base.skip_lines + 1, 0, list(spec.warnings), memoryview(data)[start:end])
         return
-    for piece, lines_before, k, last in text_pieces(path, base.skip_lines, piece_bytes, span=base.byte_range):
+    for piece, lines_before, k, last, before in _cut_text(path, base.skip_lines, piece_bytes, span=base.byte_range):
         if missing is not None and missing in piece:
             piece = blank_cells(piece, missing, base.delimiter)
         spec = replace(
@@ -69,7 +70,7 @@ def iter_numeric(spec: TableSpec, piece_bytes: int | None, *, missing: bytes | N
         )
         warnings: list[str] = []
         if last:
-            end, warning = drop_cut_final_row(path, piece, spec.delimiter, line_offset=lines_before)
+            end, warning = _cut_final_row(path, piece, before, spec.delimiter, lines_before)
             if warning is not None:
                 spec = replace(spec, byte_range=(0, end))
                 warnings.append(warning)
@@ -77,6 +78,22 @@ def iter_numeric(spec: TableSpec, piece_bytes: int | None, *, missing: bytes | N
                 continue  # nothing but blank lines after the previous piece (the last piece: the loop ends)
         yield NumericPiece(read_numeric(spec, piece), lines_before + 1, k, warnings, memoryview(piece))
         del piece  # not held while the next piece is read and parsed
+
+
+def _cut_final_row(
+    path: Path, piece: bytes, before: bytes, delimiter: str, lines_before: int, end: int | None = None
+) -> tuple[int, str | None]:
+    """:func:`~imulog.converters._final_row.drop_cut_final_row` of the last piece (its rows up to ``end``), judged
+    with ``before`` (the text above it, :func:`_cut_text`) as the whole file judges it: the end of the piece
+    without a cut final row, and the warning."""
+    end = len(piece) if end is None else end
+    if end >= TAIL_BYTES or not before:
+        return drop_cut_final_row(path, piece, delimiter, end=end, line_offset=lines_before)
+    offset = lines_before - before.count(b"\n")
+    row, warning = drop_cut_final_row(path, before + piece, delimiter, end=len(before) + end, line_offset=offset)
+    if warning is None or row < len(before):
+        return end, None
+    return row - len(before), warning
 
 
 def _blanked(data: bytes, spec: TableSpec, missing: bytes) -> tuple[bytes, TableSpec]:
@@ -103,11 +120,23 @@ def blank_cells(data: bytes, token: bytes, delimiter: str) -> bytes:
 def text_pieces(
     path: Path, skip_lines: int, piece_bytes: int, span: tuple[int, int] | None = None
 ) -> Iterator[tuple[bytes, int, int, bool]]:
-    """The text after ``skip_lines`` header lines in pieces of about ``piece_bytes``, each ending after a whole line:
-    (piece, lines before it in the file, piece number, whether it is the last). The last piece holds at least
-    1 MiB (or ``piece_bytes``) so that a cut final row is judged against the rows above it. The file's SHA-256 is
-    computed while reading and remembered (:func:`known_sha256`) when the file did not change meanwhile.
-    ``span``: the bytes ``[start, end)`` alone (a section of the file), ``skip_lines`` being the lines before it."""
+    """The text after ``skip_lines`` header lines in pieces of about ``piece_bytes`` (at least that, up to a line
+    break): (piece, lines before it in the file, piece number, whether it is the last). A piece ends between two
+    lines that are not blank, so that a blank line is never at a border (readers report it as in the whole file),
+    and the last piece holds the text's last two rows (a cut last row is judged and dropped in it, with its
+    warning, as in the whole file). The file's SHA-256 is computed while reading and remembered
+    (:func:`known_sha256`) when the file did not change meanwhile. ``span``: the bytes ``[start, end)`` alone (a
+    section of the file), ``skip_lines`` being the lines before it."""
+    for piece, lines_before, k, last, _ in _cut_text(path, skip_lines, piece_bytes, span):
+        yield piece, lines_before, k, last
+
+
+def _cut_text(
+    path: Path, skip_lines: int, piece_bytes: int, span: tuple[int, int] | None = None
+) -> Iterator[tuple[bytes, int, int, bool, bytes]]:
+    """:func:`text_pieces` with, for the last piece, ``before``: the last :data:`TAIL_BYTES` of the text before it
+    (or all of it), so that a cut final row is judged against the rows above it as in the whole file (empty bytes
+    for the other pieces)."""
     digest = hashlib.sha256()
     total = 0
     with open(path, "rb") as f:
@@ -131,30 +160,53 @@ def text_pieces(
 
         lines_before = skip_lines
         k = 0
-        buf = read(piece_bytes)
-        digest.update(buf)
-        total += len(buf)
-        last = False
-        while not last:
-            nxt = read(piece_bytes)
+        chunk = max(piece_bytes, 1 << 16)  # bytes read at a time (small pieces: several cut from one read)
+        buf, pos = b"", 0  # the text read and not yet given, from buf[pos]
+        recent: deque[bytes] = deque()  # the last pieces given, TAIL_BYTES of text or more
+        held = 0
+        while True:
+            nxt = read(chunk)
             digest.update(nxt)
             total += len(nxt)
-            if len(nxt) < min(piece_bytes, 1 << 20):  # the file ends: a last piece of at least 1 MiB (or a piece)
-                piece, buf, last = buf + nxt, b"", True  # so the cut-row check sees the rows above the last one
-            else:
-                cut = buf.rfind(b"\n") + 1
-                if cut == 0:  # a line longer than a piece: read on
-                    buf += nxt
-                    continue
-                piece, buf = buf[:cut], buf[cut:] + nxt
-            nxt = b""  # its bytes are in piece or buf now: not a third copy of a piece held while it is parsed
-            yield piece, lines_before, k, last
-            lines_before += piece.count(b"\n")
-            piece = b""  # released before the next piece is cut (the consumer's copy too: see iter_table)
-            k += 1
+            ends = len(nxt) < chunk  # the text ends: the rest is the last piece
+            buf, pos, nxt = buf[pos:] + nxt, 0, b""  # nxt released: not a third copy held while a piece is parsed
+            while (cut := _border(buf, pos + piece_bytes - 1)) > 0:
+                if cut - pos > len(buf) // 2:  # a large piece: the rest copied, not the whole buffer kept
+                    piece, buf, pos = buf[pos:cut], buf[cut:], 0
+                else:
+                    piece, pos = buf[pos:cut], cut
+                yield piece, lines_before, k, False, b""
+                lines_before += piece.count(b"\n")
+                recent.append(piece[-TAIL_BYTES:])
+                held += len(recent[-1])
+                while held - len(recent[0]) >= TAIL_BYTES:
+                    held -= len(recent.popleft())
+                piece = b""  # released before the next piece is cut (the consumer's copy too: see iter_table)
+                k += 1
+            if ends:
+                break
+        yield buf[pos:], lines_before, k, True, b"".join(recent)[-TAIL_BYTES:]
         st = os.fstat(f.fileno())
     if span is None and st.st_size == total:
         remember_sha256(path, st, digest.hexdigest())
+
+
+def _border(buf: bytes, start: int) -> int:
+    """The first place at or after ``start`` (just after a line break) that has a line that is not blank before it
+    and two after it, complete, in ``buf``; 0 when ``buf`` has none. So a blank line is never at a border and the
+    last piece holds the text's last two rows (a cut last row dropped, a row remains to carry its warning)."""
+    while True:
+        cut = buf.find(b"\n", start) + 1
+        if cut == 0:
+            return 0
+        mid = buf.find(b"\n", cut)
+        end = buf.find(b"\n", mid + 1) if mid >= 0 else -1
+        if end < 0:
+            return 0
+        before = buf[buf.rfind(b"\n", 0, cut - 1) + 1 : cut - 1]
+        if before.strip(b" \t\r") and buf[cut:mid].strip(b" \t\r") and buf[mid + 1 : end].strip(b" \t\r"):
+            return cut
+        start = cut
 
 
 def text_column(piece: NumericPiece, column: int, delimiter: str = ",") -> Any:
@@ -202,14 +254,13 @@ def iter_table(
         data = None if transform is None else transform(Path(path).read_bytes())
         yield read_table(path, skip_lines=skip_lines, warnings=warnings, data=data, **kw), skip_lines + 1
         return
-    for piece, lines_before, k, last in text_pieces(path, skip_lines, piece_bytes):
+    for piece, lines_before, k, last, before in _cut_text(path, skip_lines, piece_bytes):
         if transform is not None:
-            piece = transform(piece)
+            piece, before = transform(piece), transform(before)
         if k and last and not piece.strip(b" \t\r\n\x00"):
             continue  # blank lines after the previous piece
         if last and warnings is not None:  # a cut final row, judged and named as in the whole file
-            block = _trimmed(piece)
-            end, warning = drop_cut_final_row(path, piece, delimiter, end=len(block), line_offset=lines_before)
+            end, warning = _cut_final_row(path, piece, before, delimiter, lines_before, end=len(_trimmed(piece)))
             if warning is not None:
                 piece = piece[:end]
                 warnings.append(warning)

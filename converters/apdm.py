@@ -126,7 +126,7 @@ class ApdmConverter(Converter):
         with open(path, "rb") as fh:
             magic = fh.read(8)
         if magic == HDF5_MAGIC:
-            yield from iter_apdm_h5(path, names, None if whole else _h5pieces.PIECE_BYTES)
+            yield from iter_apdm_h5(path, names, _h5pieces.PIECE_BYTES)  # whole: the pieces joined
             return
         lines = head_lines(path, max_lines=8)
         text_bytes = None if whole else _pieces.PIECE_BYTES

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from imulog.converters import _h5pieces
 from imulog.converters._binary import concat_chunks
 from imulog.converters._h5pieces import (
     PIECE_BYTES,
@@ -129,8 +130,9 @@ class SensorLayout:
 
 def read_apdm_h5(path: Path, names: dict[str, str]) -> Recording:
     """An APDM HDF5 file (see :func:`h5_sensors` for both layouts): one IMU per sensor, its orientation estimate;
-    :func:`iter_apdm_h5` in one piece."""
-    return concat_chunks(iter_apdm_h5(path, names, piece_bytes=None))
+    the pieces of :func:`iter_apdm_h5` joined (each piece's rows read in a guarded child of its own, so a long file
+    is not refused by the child's memory cap)."""
+    return concat_chunks(iter_apdm_h5(path, names, piece_bytes=_h5pieces.PIECE_BYTES))
 
 
 def iter_apdm_h5(path: Path, names: dict[str, str], piece_bytes: int | None = PIECE_BYTES) -> Iterator[Recording]:

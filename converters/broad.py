@@ -202,8 +202,9 @@ def iter_broad(path: Path, name: str = "imu", piece_bytes: int | None = PIECE_BY
 
 
 def read_broad(path: Path, name: str = "imu") -> Recording:
-    """A whole BROAD trial: :func:`iter_broad` in one piece."""
-    return concat_chunks(iter_broad(path, name, piece_bytes=None))
+    """A whole BROAD trial: the pieces of :func:`iter_broad` joined (each piece's rows read in a guarded child of
+    its own, so a long trial is not refused by the child's memory cap)."""
+    return concat_chunks(iter_broad(path, name, piece_bytes=_h5pieces.PIECE_BYTES))
 
 
 class BroadConverter(Converter):

@@ -14,6 +14,7 @@ units as found, in a :class:`~imulog.model.SignalStream` ``/signals/<device>``.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -27,7 +28,7 @@ from imulog.converters._common import (
     text_head_lines,
     unit_overrides,
 )
-from imulog.converters._pieces import PIECE_BYTES, iter_numeric
+from imulog.converters._pieces import PIECE_BYTES, NumericPiece, iter_numeric
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.delimited_header import (
     INFER,
@@ -57,6 +58,7 @@ from imulog.converters.delimited_time import (
 from imulog.converters.errors import ConversionError
 from imulog.converters.host_clock import HostClockFit
 from imulog.converters.mapping import Mapping, load_mapping, sibling_mapping
+from imulog.converters.plausibility import MAX_CHECK_SAMPLES
 
 from imulog.model import Recording
 
@@ -77,6 +79,10 @@ __all__ = [
     "UNIX_S_RANGE",
     "unix_start",
 ]
+
+#: rows that decide what the header does not say (time unit, unit-less axes), whole or in pieces of any size: the
+#: rows the IMU plausibility check takes whole (20 min at 100 Hz)
+DECIDE_ROWS = MAX_CHECK_SAMPLES
 
 
 def read_delimited(
@@ -118,6 +124,20 @@ def read_delimited(
     return pieces[0] if len(pieces) == 1 else concat_chunks(pieces)
 
 
+def _read_ahead(pieces: Iterator[NumericPiece], rows: int) -> tuple[list[NumericPiece], np.ndarray]:
+    """The first pieces of ``pieces`` that hold ``rows`` rows (all, when fewer) and those rows' values."""
+    ahead: list[NumericPiece] = []
+    count = 0
+    for piece in pieces:
+        ahead.append(piece)
+        count += len(piece.values)
+        if count >= rows:
+            break
+    if len(ahead) <= 1:
+        return ahead, ahead[0].values[:rows] if ahead else np.zeros((0, 0))
+    return ahead, np.concatenate([p.values for p in ahead])[:rows]
+
+
 def iter_delimited(
     path: Path,
     *,
@@ -136,7 +156,8 @@ def iter_delimited(
     the whole file as one piece, what :func:`read_delimited` returns); options as :func:`read_delimited`.
 
     Every value, time stamp, gap and error (file, line, column) is the same whatever the piece size; the units the
-    header lacks are inferred from the first piece (an hour or more), a cut final row is dropped from the last.
+    header lacks are inferred from the first :data:`DECIDE_ROWS` rows (the first pieces read ahead), a cut final
+    row is dropped from the last.
     Host receive stamps that repeat get a uniform clock fitted over the whole recording: a first pass over the
     pieces sums the line's terms (:mod:`imulog.converters.host_clock`), the second converts, so memory stays one
     piece. While reading, the file's SHA-256 is computed (the conversion record reuses it).
@@ -157,17 +178,19 @@ def iter_delimited(
     time_cols = [c for c in plan.layout.columns if c.quantity == "time"]
     index_cols = [c for c in plan.layout.columns if c.quantity == "index"]
     pieces = iter_numeric(plan.spec, piece_bytes)
-    assumed: list[str] | None = None
+    # what the header does not say is decided on the first DECIDE_ROWS rows, whatever the piece size: read ahead
+    ahead, head = _read_ahead(pieces, DECIDE_ROWS)
+    for piece in ahead:
+        _check_infinite(path, plan.layout, piece.values, piece.first_line)
+    assumed = _assumed_units(plan, head)
+    pieces = itertools.chain(ahead, pieces)
     fit: HostClockFit | None = None
     host = host_column(plan)
     if host is not None:  # first pass: the line through every host stamp; a single piece is kept, not read again
-        fit, kept, assumed = HostClockFit(), [], None
-        origin = None
+        fit, kept = HostClockFit(), []
+        origin = float(head[0, host.index]) if len(head) else None
         for k, piece in enumerate(pieces):
             _check_infinite(path, plan.layout, piece.values, piece.first_line)
-            if assumed is None:
-                assumed = _assumed_units(plan, piece.values)
-                origin = float(piece.values[0, host.index]) if len(piece.values) else None
             fit.add(host_stamps(plan, host, piece.values, origin))
             kept = [piece] if k == 0 else []
         pieces = iter(kept) if kept else iter_numeric(plan.spec, piece_bytes)
@@ -179,14 +202,15 @@ def iter_delimited(
     steps = StepCounts() if time_cols and not plan.rate else None  # the exact median step, piece by piece
     for values, first_line, _, warnings, _ in pieces:
         _check_infinite(path, plan.layout, values, first_line)
-        if not started:
-            assumed = _assumed_units(plan, values) if assumed is None else assumed
-            if time_cols:
-                origin = float(values[0, time_cols[0].index])
+        if not started and time_cols:
+            origin = float(values[0, time_cols[0].index])
         t_ns, time_desc = _times(plan, values, first_line, first_row=first_row, origin=origin, before=before, fit=fit)
         if not started:
-            assert assumed is not None
-            assumed.extend(resolve_inferred(path, plan.layout, values, t_ns, plan.units))
+            if len(head) <= len(values):
+                head_t = t_ns[: len(head)]
+            else:  # the rows read ahead: their times as one block (the same as piece by piece)
+                head_t = _times(plan, head, first_line, origin=origin, fit=fit)[0]
+            assumed.extend(resolve_inferred(path, plan.layout, head, head_t, plan.units))
             warnings.extend(_units_warning(path, assumed))
             rate_meta = float(plan.rate) if plan.rate else estimate_rate_hz(t_ns)
         if steps is not None:

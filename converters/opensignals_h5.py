@@ -122,8 +122,9 @@ def _guarded(fn, *args, extra: dict):
 
 
 def read_opensignals_h5(path: Path, options: ConvertOptions | None = None) -> Recording:
-    """The whole file: :func:`iter_opensignals_h5` in one piece."""
-    return concat_chunks(iter_opensignals_h5(path, options, piece_bytes=None))
+    """The whole file: the pieces of :func:`iter_opensignals_h5` joined (each piece's rows read in a guarded child
+    of its own, so a long file is not refused by the child's memory cap)."""
+    return concat_chunks(iter_opensignals_h5(path, options, piece_bytes=_h5pieces.PIECE_BYTES))
 
 
 def iter_opensignals_h5(

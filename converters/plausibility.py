@@ -108,45 +108,86 @@ def rest_windows(acc: np.ndarray, t_ns: np.ndarray, window_s: float = REST_WINDO
     return [slice(int(i) * n, (int(i) + 1) * n) for i in index]
 
 
-MAX_CHECK_SAMPLES = 120_000  # longer recordings: 20 or more evenly spread 1-min excerpts (cost, memory)
+MAX_CHECK_SAMPLES = 120_000  # longer recordings: evenly spread 1-min excerpts (cost, memory)
 EXCERPT_S = 60.0
 
 
+class Excerpts:
+    """Excerpts of one stream (time stamps and arrays of rows), given in pieces, that do not depend on where the
+    pieces are cut: the samples fall in blocks of :data:`EXCERPT_S` of time from the first sample; every block is
+    kept while the samples fit :data:`MAX_CHECK_SAMPLES`, else the blocks whose number is a multiple of ``stride``,
+    the smallest power of two that makes them fit, each followed by a NaN row (so that no window, gradient or
+    moving average spans two excerpts). Memory: at most that many samples and a slice of the piece being added."""
+
+    def __init__(self) -> None:
+        self.t0: int | None = None
+        self.stride = 1
+        self._parts: list[tuple[np.ndarray, np.ndarray, list[np.ndarray | None]]] = []  # (block, t, arrays)
+        self._blocks: set[int] = set()
+        self._count = 0
+
+    def add(self, t_ns: np.ndarray, *arrays: np.ndarray | None) -> None:
+        """Add the next samples (time order) of the stream: ``t_ns`` (ns) and one row of each array per sample."""
+        t = np.asarray(t_ns, dtype=np.int64)
+        if not len(t):
+            return
+        if self.t0 is None:
+            self.t0 = int(t[0])
+        for lo in range(0, len(t), MAX_CHECK_SAMPLES):  # a long piece a slice at a time: memory stays bounded
+            sl = slice(lo, lo + MAX_CHECK_SAMPLES)
+            block = (t[sl] - self.t0) // int(EXCERPT_S * 1e9)
+            keep = block % self.stride == 0
+            if not keep.any():
+                continue
+            rows = [None if a is None else np.array(np.asarray(a[sl])[keep], dtype=np.float64) for a in arrays]
+            self._parts.append((block[keep], t[sl][keep], rows))
+            self._blocks.update(np.unique(block[keep]).tolist())
+            self._count += int(keep.sum())
+            while self._size() > MAX_CHECK_SAMPLES and len(self._blocks) > 1:
+                self._thin()
+
+    def _size(self) -> int:
+        """Samples the excerpts hold, with their NaN rows."""
+        return self._count + (len(self._blocks) - 1 if self.stride > 1 else 0)
+
+    def _thin(self) -> None:
+        """Double the stride: keep every other excerpt."""
+        self.stride *= 2
+        parts = []
+        for block, t, rows in self._parts:
+            keep = block % self.stride == 0
+            if keep.any():
+                parts.append((block[keep], t[keep], [None if r is None else r[keep] for r in rows]))
+        self._parts = parts
+        self._blocks = {b for b in self._blocks if b % self.stride == 0}
+        self._count = sum(len(p[1]) for p in parts)
+
+    def result(self) -> tuple[np.ndarray, list[np.ndarray | None]]:
+        """(time stamps, arrays) of the excerpts, a NaN row (time: the sample before + 1 ns) after each but the
+        last when some blocks were left out; every sample as given while they fit."""
+        if not self._parts:
+            return np.zeros(0, dtype=np.int64), []
+        block = np.concatenate([p[0] for p in self._parts])
+        t = np.concatenate([p[1] for p in self._parts])
+        rows = [
+            None if self._parts[0][2][j] is None else np.concatenate([p[2][j] for p in self._parts])
+            for j in range(len(self._parts[0][2]))
+        ]
+        if self.stride == 1:
+            return t, rows
+        cut = np.flatnonzero(np.diff(block)) + 1  # where the next excerpt starts
+        t = np.insert(t, cut, t[cut - 1] + 1)
+        return t, [None if r is None else np.insert(r, cut, np.nan, axis=0) for r in rows]
+
+
 def excerpts(t_ns: np.ndarray, *arrays: np.ndarray | None) -> tuple[np.ndarray, list[np.ndarray | None]]:
-    """At most :data:`MAX_CHECK_SAMPLES` samples of long recordings: evenly spread 60 s excerpts, each followed
-    by a NaN row (so no window, gradient or moving average spans two excerpts). Short recordings as they are."""
-    n = len(t_ns)
-    if n <= MAX_CHECK_SAMPLES:
+    """At most :data:`MAX_CHECK_SAMPLES` samples of long recordings (:class:`Excerpts` of one piece: the same
+    excerpts as the recording given in pieces of any size). Short recordings as they are."""
+    if len(t_ns) <= MAX_CHECK_SAMPLES:
         return np.asarray(t_ns), list(arrays)
-    block = max(10, int(EXCERPT_S * _rate_hz(t_ns[: min(n, 10_000)])))
-    k = max(1, MAX_CHECK_SAMPLES // (block + 1))
-    starts = np.linspace(0, n - block, k).astype(np.int64)
-    idx = np.concatenate([np.arange(s0, s0 + block) for s0 in starts])
-    gap = np.cumsum(np.r_[0, np.diff(idx) > 1])  # excerpt number of each index
-    cut = np.flatnonzero(np.diff(gap)) + 1
-    t = _with_separators(np.asarray(t_ns), idx, cut, 0)
-    t[cut + np.arange(len(cut))] = t[cut + np.arange(len(cut)) - 1] + 1  # keeps time increasing at the NaN rows
-    out: list[np.ndarray | None] = []
-    for a in arrays:
-        out.append(None if a is None else _with_separators(np.asarray(a, dtype=np.float64), idx, cut, np.nan))
-    return t, out
-
-
-def _with_separators(a: np.ndarray, idx: np.ndarray, cut: np.ndarray, fill: float) -> np.ndarray:
-    """``np.insert(a[idx], cut, fill, axis=0)`` copying each excerpt once, as a slice, when ``idx`` is a run of
-    consecutive indices between the cuts (as :func:`excerpts` makes it)."""
-    bounds = np.concatenate([[0], cut, [len(idx)]])
-    runs = np.diff(idx)
-    runs[cut - 1] = 1  # the steps across a cut are not inside an excerpt
-    if not np.all(runs == 1):
-        return np.insert(a[idx], cut, fill, axis=0)
-    out = np.empty((len(idx) + len(cut), *a.shape[1:]), dtype=a.dtype)
-    for j in range(len(bounds) - 1):
-        lo, hi = int(bounds[j]), int(bounds[j + 1])
-        out[lo + j : hi + j] = a[idx[lo] : idx[lo] + hi - lo]
-        if j < len(cut):
-            out[hi + j] = fill
-    return out
+    ex = Excerpts()
+    ex.add(t_ns, *arrays)
+    return ex.result()
 
 
 def rest_acc_norm(
@@ -321,51 +362,27 @@ def imu_warnings(
 
 
 class PieceExcerpts:
-    """Excerpts of the IMU streams of a recording converted piece by piece, spread over all of it, for
-    :func:`imu_warnings` at the end (the whole recording is never held: at most :data:`MAX_CHECK_SAMPLES` per IMU).
-
-    Each piece gives its first :data:`EXCERPT_S` seconds; when an IMU's excerpts exceed the budget every other one
-    is dropped, so those kept stay evenly spread over the pieces seen (one per 2^k pieces).
-    """
+    """The IMU streams of a recording converted piece by piece, for :func:`imu_warnings` at the end: each IMU's
+    :class:`Excerpts`, fed every piece, so the check sees what it sees in the whole recording (the same samples,
+    whatever the piece size) and never holds more than :data:`MAX_CHECK_SAMPLES` per IMU."""
 
     def __init__(self) -> None:
-        self._kept: dict[str, list[tuple[np.ndarray, np.ndarray | None, np.ndarray | None]]] = {}
-        self._stride: dict[str, int] = {}
-        self._seen: dict[str, int] = {}
+        self._kept: dict[str, Excerpts] = {}
         self._declared: dict[str, str | None] = {}
 
     def add(self, imu) -> None:  # noqa: ANN001 - imulog.model.ImuStream (no import cycle)
-        """Take the excerpt of this piece of ``imu`` (when its turn comes at the current spacing)."""
-        topic, t = imu.topic, np.asarray(imu.t_ns)
-        if not len(t):
+        """Add this piece of ``imu``."""
+        if not len(imu.t_ns):
             return
-        self._declared.setdefault(topic, _declared_gyr_unit(imu))
-        k = self._seen.get(topic, 0)
-        self._seen[topic] = k + 1
-        stride = self._stride.setdefault(topic, 1)
-        if k % stride:
-            return
-        n = min(len(t), max(10, int(EXCERPT_S * _rate_hz(t[: min(len(t), 10_000)]))))
-        cut = [None if a is None else np.array(a[:n], dtype=np.float64) for a in (imu.acc, imu.gyr)]
-        kept = self._kept.setdefault(topic, [])
-        kept.append((t[:n].copy(), cut[0], cut[1]))
-        while sum(len(e[0]) + 1 for e in kept) > MAX_CHECK_SAMPLES and len(kept) > 1:
-            kept[:] = kept[::2]  # excerpts of pieces 0, 2s, 4s, ...: still evenly spread
-            self._stride[topic] *= 2
+        self._declared.setdefault(imu.topic, _declared_gyr_unit(imu))
+        self._kept.setdefault(imu.topic, Excerpts()).add(imu.t_ns, imu.acc, imu.gyr)
 
     def warnings(self) -> list[str]:
-        """:func:`imu_warnings` of every IMU on its excerpts (each followed by a NaN row, as :func:`excerpts` does)."""
+        """:func:`imu_warnings` of every IMU on its excerpts."""
         out = []
         for topic, kept in self._kept.items():
-            t = np.concatenate([np.r_[e[0], e[0][-1] + 1] for e in kept])[:-1]
-            arrays = []
-            for j in (1, 2):
-                if kept[0][j] is None:
-                    arrays.append(None)
-                    continue
-                gap = np.full((1, kept[0][j].shape[1]), np.nan)
-                arrays.append(np.concatenate([x for e in kept for x in (e[j], gap)])[:-1])
-            out.extend(imu_warnings(topic, arrays[0], arrays[1], t, self._declared[topic]))
+            t, (acc, gyr) = kept.result()
+            out.extend(imu_warnings(topic, acc, gyr, t, self._declared[topic]))
         return out
 
 

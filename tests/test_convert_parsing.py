@@ -262,27 +262,23 @@ def test_marker_check_of_all_nan_positions_says_nothing():
 
 
 @pytest.mark.parametrize("n", [plaus.MAX_CHECK_SAMPLES + 1, 360_000, 1_000_003])
-def test_excerpts_copied_as_slices_equal_the_inserted_form(n):
+def test_excerpts_are_every_stride_th_minute_with_a_nan_row_after_each(n):
+    """A long recording at 100 Hz is checked on the 60 s blocks of time whose number is a multiple of the smallest
+    power of two that makes them fit MAX_CHECK_SAMPLES (with a NaN row between two), computed here directly."""
     t = np.arange(n, dtype=np.int64) * 10_000_000 + 123
     x = np.random.default_rng(n).normal(size=(n, 3))
     t_ex, (x_ex, none) = plaus.excerpts(t, x, None)
-    block = int(plaus.EXCERPT_S * 100)
-    k = max(1, plaus.MAX_CHECK_SAMPLES // (block + 1))
-    starts = np.linspace(0, n - block, k).astype(np.int64)
-    idx = np.concatenate([np.arange(s0, s0 + block) for s0 in starts])
-    cut = np.flatnonzero(np.diff(np.cumsum(np.r_[0, np.diff(idx) > 1]))) + 1
+    block = np.arange(n) // 6000
+    stride = 1
+    while np.sum(block % stride == 0) + (len(np.unique(block[block % stride == 0])) - 1) * (stride > 1) > 120_000:
+        stride *= 2
+    idx = np.flatnonzero(block % stride == 0)
+    cut = np.flatnonzero(np.diff(block[idx])) + 1
     ref_x = np.insert(x[idx], cut, np.nan, axis=0)
-    ref_t = np.insert(t[idx], cut, 0)
-    ref_t[cut + np.arange(len(cut))] = ref_t[cut + np.arange(len(cut)) - 1] + 1
-    assert none is None and len(cut) > 0
+    ref_t = np.insert(t[idx], cut, t[idx][cut - 1] + 1)
+    assert none is None and len(cut) > 0 and stride > 1
     assert np.array_equal(x_ex, ref_x, equal_nan=True) and np.array_equal(t_ex, ref_t)
-
-
-def test_separators_of_overlapping_excerpts_fall_back_to_insert():
-    a = np.arange(20.0)
-    idx = np.array([0, 1, 2, 1, 2, 3, 10, 11])  # overlapping runs: not one slice each
-    cut = np.array([6])
-    assert np.array_equal(plaus._with_separators(a, idx, cut, np.nan), np.insert(a[idx], cut, np.nan), equal_nan=True)
+    assert len(t_ex) <= plaus.MAX_CHECK_SAMPLES and np.all(np.diff(t_ex) > 0)
 
 
 # --------------------------------------------------------------------------------- text piece by piece
