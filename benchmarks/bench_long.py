@@ -32,9 +32,9 @@ fit fails (reported, the others still run) instead of taking the shared machine'
 Before the measured lengths every command runs once, unmeasured, on a short simulated recording (``--warm-days``,
 default 0.05 d: 72 minutes, more than one window of every step): numba compiles the kernels a command's code
 has not cached yet (``__pycache__/numba-keyed``, keyed on the sources) in the process of the command, and the
-compiler's memory stays resident: ``imulog process kinematics`` on the two-IMU quarter day peaked at 652 MB
-with an empty cache and at 495-514 MB with a warm one (docs/long_recordings.md). Without the warm-up the first
-length measured that compilation and the others did not (``--warm-days 0``: the cold-cache figures).
+compiler's memory stays resident: ``imulog process kinematics`` on the two-IMU quarter day peaked at 614 and
+637 MB with an empty cache and at 484 MB with a warm one (docs/long_recordings.md). Without the warm-up the
+first length measured that compilation and the others did not (``--warm-days 0``: the cold-cache figures).
 
 Targets: peak RSS at most 1 GB for every command; growth from 1 to 7 days at most 10 % (issue 17) / 15 %
 (issue 24, every step including trajectory and kinematics). The final table (``long_table.py``) gives per
