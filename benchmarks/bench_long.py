@@ -2,6 +2,7 @@
 
     python benchmarks/bench_long.py                    # 1 and 7 days at 100 Hz (a 774 MB .cwa; ~10 min)
     python benchmarks/bench_long.py --days 0.25 1      # quicker
+    python benchmarks/bench_long.py --warm-days 0      # no warm-up: the first length measures numba's compilation
     python benchmarks/bench_long.py --trials day.mcap week.mcap --commands phases   # copies of processed trials
     python benchmarks/bench_long.py --orientation-peer 1     # windowed orientation vs VQF offline, a day, in-process
     python benchmarks/bench_long.py --dynamos 12500 25000 50000   # DynAMoS merge/split time vs movements
@@ -27,6 +28,13 @@ they need first (for evaluate: align, orientation, phases, trajectory) run unmea
 rewrites the orientation's viewer twins on the new axis, block by block: :mod:`imulog.archive.twin_blocks`).
 Every command runs under a cap on its private memory (``--limit-gb``, default 6 GB) so that one that does not
 fit fails (reported, the others still run) instead of taking the shared machine's memory.
+
+Before the measured lengths every command runs once, unmeasured, on a short simulated recording (``--warm-days``,
+default 0.05 d: 72 minutes, more than one window of every step): numba compiles the kernels a command's code
+has not cached yet (``__pycache__/numba-keyed``, keyed on the sources) in the process of the command, and the
+compiler's memory stays resident: ``imulog process kinematics`` on the two-IMU quarter day peaked at 614 and
+637 MB with an empty cache and at 484 MB with a warm one (docs/long_recordings.md). Without the warm-up the
+first length measured that compilation and the others did not (``--warm-days 0``: the cold-cache figures).
 
 Targets: peak RSS at most 1 GB for every command; growth from 1 to 7 days at most 10 % (issue 17) / 15 %
 (issue 24, every step including trajectory and kinematics). The final table (``long_table.py``) gives per
@@ -98,6 +106,9 @@ SETUP = {
     ],
 }
 TWO_IMU = ("orientation2", "kinematics", "heading")
+#: the unmeasured warm-up recording (days): longer than one window of every step (kinematics: half-hour cores,
+#: orientation: one-hour cores), so that the windowed paths' kernels are compiled too
+WARM_DAYS = 0.05
 REFERENCE = ("align", "align_oriented", "evaluate")
 
 
@@ -329,6 +340,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--days", type=float, nargs="+", default=[1.0, 7.0], help="recording lengths, days")
     ap.add_argument("--dir", default=None, help="scratch folder (needs ~3 GB per simulated week)")
     ap.add_argument("--trials", nargs="+", default=None, help="converted trials, one per --days value (copied)")
+    ap.add_argument(
+        "--warm-days",
+        type=float,
+        default=WARM_DAYS,
+        metavar="DAYS",
+        help="first run every command unmeasured on DAYS of simulated samples (numba's cache warm for every "
+        f"measured length; default {WARM_DAYS:g}); 0: no warm-up (the first length then measures the compilation)",
+    )
     ap.add_argument("--commands", nargs="+", default=[c[0] for c in COMMANDS], choices=[c[0] for c in COMMANDS])
     ap.add_argument(
         "--limit-gb",
@@ -361,8 +380,13 @@ def main(argv: list[str] | None = None) -> int:
         interrupted = False
         previous = signal.signal(signal.SIGTERM, _interrupt)
         try:
-            for i, days in enumerate(args.days):
-                folder = Path(tmp) / f"d{days:g}"
+            lengths = [None, *args.days] if args.warm_days > 0 else list(args.days)
+            for i, length in enumerate(lengths):
+                warm = length is None  # the warm-up: every command once, its figures printed, not tabled
+                days = args.warm_days if warm else length
+                label = f"warm-up {days:g} d" if warm else f"{days:g} d"
+                given = args.trials[i - (len(lengths) - len(args.days))] if args.trials and not warm else None
+                folder = Path(tmp) / ("warm" if warm else f"d{days:g}")
                 folder.mkdir()
                 paths = {
                     "cwa": folder / "home_s00_t00.cwa",
@@ -373,16 +397,18 @@ def main(argv: list[str] | None = None) -> int:
                     "cal": folder / "cal.json",
                     "parquet": folder / "wrist.parquet",
                 }
-                if args.trials:
-                    shutil.copy(args.trials[i], paths["mcap"])
-                if not args.trials or names & {*TWO_IMU, *REFERENCE}:
+                if given:
+                    shutil.copy(given, paths["mcap"])
+                if not given or names & {*TWO_IMU, *REFERENCE}:
                     subprocess.run(
                         [*imulog, "simulate", "home", "-o", str(folder), "--days", str(days)],
                         check=True,
                         stdout=subprocess.DEVNULL,
                         stderr=subprocess.DEVNULL,
                     )
-                results[days] = {}
+                measured_here: dict[str, tuple[float, float, float] | str] = {}
+                if not warm:
+                    results[days] = measured_here
                 calibration_file(paths["cal"])
                 for name, templates in commands:
                     # each trial written when a command first needs it (unmeasured)
@@ -411,26 +437,26 @@ def main(argv: list[str] | None = None) -> int:
                         for setup in SETUP.get(name, []):
                             wall, mb, cpu = run([*imulog, *[a.format(**paths) for a in setup]], args.limit_gb)
                             print(
-                                f"{days:g} d   setup {' '.join(setup[:2])}: {wall:.1f} s wall, {cpu:.1f} s CPU, {mb:.0f} MB"
+                                f"{label}   setup {' '.join(setup[:2])}: {wall:.1f} s wall, {cpu:.1f} s CPU, {mb:.0f} MB"
                             )
                         runs = [
                             run([*imulog, *[a.format(**paths, **fields) for a in template]], args.limit_gb)
                             for template in templates
                         ]
                     except CommandFailed as exc:
-                        results[days][name] = str(exc)
+                        measured_here[name] = str(exc)
                         loads.append(os.getloadavg()[0])
-                        print(f"{days:g} d {name}: FAILED {exc}; load {os.getloadavg()[0]:.1f}", flush=True)
+                        print(f"{label} {name}: FAILED {exc}; load {os.getloadavg()[0]:.1f}", flush=True)
                         continue
-                    results[days][name] = (sum(r[0] for r in runs), max(r[1] for r in runs), sum(r[2] for r in runs))
-                    wall, mb, cpu = results[days][name]
+                    measured_here[name] = (sum(r[0] for r in runs), max(r[1] for r in runs), sum(r[2] for r in runs))
+                    wall, mb, cpu = measured_here[name]
                     loads.append(os.getloadavg()[0])
                     print(
-                        f"{days:g} d {name}: {wall:.1f} s wall, {cpu:.1f} s CPU, {mb:.0f} MB, load {os.getloadavg()[0]:.1f}",
+                        f"{label} {name}: {wall:.1f} s wall, {cpu:.1f} s CPU, {mb:.0f} MB, load {os.getloadavg()[0]:.1f}",
                         flush=True,
                     )
                 sizes = {k: p.stat().st_size / 1e6 for k, p in paths.items() if p.exists()}
-                print(f"{days:g} d: " + ", ".join(f"{k} {v:.0f} MB" for k, v in sizes.items()), flush=True)
+                print(f"{label}: " + ", ".join(f"{k} {v:.0f} MB" for k, v in sizes.items()), flush=True)
                 for p in paths.values():
                     p.unlink(missing_ok=True)
         except KeyboardInterrupt:  # what was measured so far still makes the table; the rest is "not run"
@@ -450,6 +476,7 @@ def main(argv: list[str] | None = None) -> int:
         "end": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "load": f"{min(loads):.1f}-{max(loads):.1f} (1 min, at each command's end)",
         "interrupted": interrupted,
+        "warm_days": args.warm_days,
     }
     return verdicts(commands, results, args.days, args.summary, meta)
 

@@ -124,6 +124,13 @@ def markdown(doc: dict) -> str:
         + (" (imulog/ changed)" if doc.get("imulog_changed") else "")
         + f", {doc.get('start', '')} to {doc.get('end', '')}, load average {doc.get('load', '')} on"
         f" {doc['cpu_count']} cores; CPU = user + sys of the child"
+        + (
+            f"; numba's cache warmed by a {doc['warm_days']:g}-day run first"
+            if doc.get("warm_days")
+            else "; no warm-up (the first length includes numba's compilation)"
+            if "warm_days" in doc
+            else ""
+        )
         + ("; interrupted (what was not measured: not run)" if doc.get("interrupted") else ""),
         "",
         "| command | "

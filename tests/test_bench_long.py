@@ -67,8 +67,10 @@ def test_a_tiny_run_writes_its_table_and_summary(tmp_path, capsys):
     out = tmp_path / "summary.json"
     code = bench_long.main(
         ["--days", "0.002", "0.004", "--commands", "info", "--dir", str(tmp_path), "--summary", str(out)]
+        + ["--warm-days", "0.001"]
     )
     doc = json.loads(out.read_text())
+    assert doc["warm_days"] == 0.001 and "warmed by a 0.001-day run first" in markdown(doc).splitlines()[0]
     head = subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True, text=True).stdout
     assert doc["commit"] == (head.strip() or None)
     assert doc["days"] == [0.002, 0.004] and "--summary" in doc["argv"]
@@ -96,9 +98,11 @@ def test_an_interrupted_run_still_writes_what_it_measured(tmp_path, monkeypatch)
     out = tmp_path / "summary.json"
     code = bench_long.main(
         ["--days", "0.002", "--commands", "info", "export", "--dir", str(tmp_path), "--summary", str(out)]
+        + ["--warm-days", "0"]
     )
     doc = json.loads(out.read_text())
     assert doc["interrupted"] is True and code == 1
+    assert "no warm-up" in markdown(doc).splitlines()[0]
     assert [(r["command"], r["verdict"], r["runs"]["0.002"]) for r in doc["commands"]] == [
         ("info", "PASS", {"wall_s": 1.0, "rss_mb": 100.0, "cpu_s": 0.5}),
         ("export", "FAIL", None),
@@ -106,6 +110,35 @@ def test_an_interrupted_run_still_writes_what_it_measured(tmp_path, monkeypatch)
     assert [a[3] for a in calls] == ["info", "export"]
     assert "interrupted" in markdown(doc).splitlines()[0]
     assert list(tmp_path.iterdir()) == [out]
+
+
+def test_every_command_runs_once_on_the_warm_up_before_the_measured_lengths(tmp_path, monkeypatch):
+    """numba compiles a kernel in the first process that needs it and the compiler's memory stays resident (about
+    135 MB for the kinematics kernels): every command runs first on the short warm-up recording, unmeasured, and
+    the table holds only the measured lengths, each trial of ``--trials`` copied for its own length."""
+    calls = []
+
+    def run(args, limit_gb=None):
+        trial = Path(args[-1])
+        calls.append((trial.parent.name, args[3], trial.read_bytes()[:4]))
+        return 1.0, 999.0 if trial.parent.name == "warm" else 100.0 + len(calls), 0.5
+
+    monkeypatch.setattr(bench_long, "run", run)
+    trials = [tmp_path / "a.mcap", tmp_path / "b.mcap"]
+    for t, text in zip(trials, (b"AAAA", b"BBBB"), strict=True):
+        t.write_bytes(text)
+    out = tmp_path / "summary.json"
+    scratch = tmp_path / "scratch"
+    scratch.mkdir()
+    argv = ["--days", "0.002", "0.004", "--trials", *map(str, trials), "--commands", "info", "--warm-days", "0.001"]
+    bench_long.main([*argv, "--dir", str(scratch), "--summary", str(out)])
+    # the warm-up simulates and converts its own recording (an MCAP file), then each length gets its trial
+    assert calls == [("warm", "info", b"\x89MCA"), ("d0.002", "info", b"AAAA"), ("d0.004", "info", b"BBBB")]
+    doc = json.loads(out.read_text())
+    assert doc["days"] == [0.002, 0.004] and doc["warm_days"] == 0.001
+    (row,) = doc["commands"]
+    assert [r["rss_mb"] for r in row["runs"].values()] == [102.0, 103.0]  # not the warm-up's 999 MB
+    assert list(scratch.iterdir()) == []
 
 
 def test_a_command_is_measured_apart_from_the_benchmark_s_own_memory():
