@@ -16,7 +16,7 @@ start (``Start Date``/``Start Time`` + row x epoch, or the row's ``Date``/``Time
 device metadata (``epoch_s``). Counts are ActiGraph's device-specific activity counts (unit ``counts``), steps
 ``steps``, lux ``lx``, inclinometer columns ``s`` of the epoch in that posture (ActiLife writes seconds).
 
-Memory: in pieces of about 16 MB of text (:func:`iter_epoch_csv`, called by the ActiLife CSV converter's
+Memory: in pieces of at most 2 MiB of text (:data:`EPOCH_PIECE_BYTES`; :func:`iter_epoch_csv`, called by the ActiLife CSV converter's
 ``iter_chunks``), the whole-file reading being the one-piece case: the banner (or the first row) gives the start,
 epoch times are checked across pieces, and the warnings come at the end (in pieces, in a last piece without epochs:
 the reader does not look a piece ahead, which held two pieces' text and values at once). A week of 60 s epochs is only
@@ -56,6 +56,11 @@ TIME_NAMES = {"date", "time", "timestamp"}
 
 
 _DATE_TOKENS = {"yyyy": "%Y", "yy": "%y", "MM": "%m", "M": "%m", "dd": "%d", "d": "%d"}
+
+# Pieces of an epoch export, at most (bytes of text). Each epoch row (about 45 bytes) is one archive message, and
+# the archive writer holds about 1.3 kB per message of a piece while it encodes it: 16 MiB pieces of 1-s epochs
+# peaked at 0.7-1.2 GB; 2 MiB pieces of about 45,000 epochs keep that near 60 MB.
+EPOCH_PIECE_BYTES = 2 * 1024 * 1024
 
 
 def strptime_format(fmt: str) -> str:
@@ -128,6 +133,8 @@ def iter_epoch_csv(
     (a start that disagrees, uneven epochs, a cut final row, no banner or names row) come with the one piece, or in
     pieces in a last piece without epochs."""
     BANNER_LINES = banner_lines  # noqa: N806 - the banner's length in this file
+    if piece_bytes is not None:
+        piece_bytes = min(piece_bytes, EPOCH_PIECE_BYTES)
 
     epoch_s = epoch_seconds(banner["epoch"])
     if epoch_s <= 0:

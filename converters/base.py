@@ -45,6 +45,9 @@ class Converter:
     #: keeps freed piece temporaries in the heap for the next piece to reuse (imulog.heap.reuse_heap) instead of
     #: mapping each afresh (bound_heap, which pieces of varying size need to keep memory flat)
     fixed_pieces: ClassVar[bool] = False
+    #: files at least this large (bytes) convert piece by piece even below ``imulog convert``'s general threshold
+    #: (``STREAM_MIN_BYTES``): for formats whose whole-file conversion costs many times the text (None: the general one)
+    stream_min_bytes: ClassVar[int | None] = None
 
     def sniff(self, path: Path, head: bytes) -> float:  # pragma: no cover - interface
         raise NotImplementedError

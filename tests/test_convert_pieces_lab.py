@@ -329,3 +329,26 @@ def test_qualisys_without_clock_columns_cut_off_leaves_no_archive(tmp_path, monk
     lines = path.read_text().splitlines()[:-30]
     path.write_text("\n".join(lines) + "\n")
     assert "file ends after 370 of NO_OF_FRAMES 400 frames" in same_error(path, 2048, monkeypatch)
+
+
+def test_an_epoch_export_streams_below_the_general_threshold(tmp_path, monkeypatch):
+    """An epoch export is one archive message per row, so `imulog convert` reads one of a few MB piece by piece
+    (``ActiLifeCsvConverter.stream_min_bytes``) although it is far below ``STREAM_MIN_BYTES``; the archive is the
+    one the whole file gives."""
+    import imulog.commands.convert_stream as cs
+    from imulog.converters.actilife_csv import ActiLifeCsvConverter
+    from imulog.converters.actilife_epoch import EPOCH_PIECE_BYTES
+
+    path = tmp_path / "epochs15s.csv"
+    _epoch_export(path, n=60_000)
+    size = path.stat().st_size
+    assert EPOCH_PIECE_BYTES <= size < cs.STREAM_MIN_BYTES
+    streamed = tmp_path / "streamed.mcap"
+    r = CliRunner().invoke(cli, ["convert", str(path), "-o", str(streamed)])
+    assert r.exit_code == 0 and "converted piece by piece" in r.output, r.output
+    assert len(list(ActiLifeCsvConverter().iter_chunks(path))) >= size // EPOCH_PIECE_BYTES
+    monkeypatch.setattr(ActiLifeCsvConverter, "stream_min_bytes", None)
+    whole = tmp_path / "whole.mcap"
+    r = CliRunner().invoke(cli, ["convert", str(path), "-o", str(whole)])
+    assert r.exit_code == 0 and "piece by piece" not in r.output, r.output
+    assert_same_trial(whole, streamed)

@@ -20,14 +20,17 @@ STREAM_MIN_BYTES = int(os.environ.get("IMULOG_STREAM_MIN_BYTES", 32 * 1024 * 102
 
 
 def _streams(path: Path, fmt: str | None, options: ConvertOptions) -> bool:
-    """True when ``path`` is large and its format reads piece by piece (``Converter.iter_chunks``)."""
-    if not path.is_file() or path.stat().st_size < STREAM_MIN_BYTES:
+    """True when ``path`` is large and its format reads piece by piece (``Converter.iter_chunks``): at least
+    ``STREAM_MIN_BYTES``, or its converter's smaller ``stream_min_bytes``."""
+    if not path.is_file():
         return False
+    size = path.stat().st_size
     try:
         conv = get(_format_name(path, fmt, options))
     except (ConversionError, UnknownFormatError):
         return False
-    return type(conv).iter_chunks is not Converter.iter_chunks
+    threshold = STREAM_MIN_BYTES if conv.stream_min_bytes is None else min(STREAM_MIN_BYTES, conv.stream_min_bytes)
+    return size >= threshold and type(conv).iter_chunks is not Converter.iter_chunks
 
 
 def session_converter(files: list[Path], fmt: str | None, options: ConvertOptions) -> Converter | None:
