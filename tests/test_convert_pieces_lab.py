@@ -335,9 +335,10 @@ def test_an_epoch_export_streams_below_the_general_threshold(tmp_path, monkeypat
     """An epoch export is one archive message per row, so `imulog convert` reads one of a few MB piece by piece
     (``ActiLifeCsvConverter.stream_min_bytes``) although it is far below ``STREAM_MIN_BYTES``; the archive is the
     one the whole file gives."""
-    import imulog.commands.convert_stream as cs
     from imulog.converters.actilife_csv import ActiLifeCsvConverter
     from imulog.converters.actilife_epoch import EPOCH_PIECE_BYTES
+
+    import imulog.commands.convert_stream as cs
 
     path = tmp_path / "epochs15s.csv"
     _epoch_export(path, n=60_000)
