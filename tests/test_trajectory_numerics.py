@@ -242,16 +242,12 @@ def test_rotating_bias_is_estimated_from_zupt_closure():
     assert np.mean(err_fixed) < 0.003  # below 3 mm once the errors are compensated
 
 
-def test_rotating_bias_fit_leaves_out_a_movement_it_cannot_close():
-    """One movement with an error the sensor model has no term for (a world-frame 0.5 m/s^2 push, like an
-    orientation error during a long swing) dominates the plain least squares; ``outlier_factor`` refits
-    without it and recovers the sensor errors' effect on the other movements."""
-    from imulog.process.integration import RotatingBiasParams, compensate_rotating_bias, estimate_rotating_bias
-    from imulog.process.rest_runs import movement_runs
-
-    rng = np.random.default_rng(7)
+def _turning_drinking_trial(rng: np.random.Generator, repetitions: int):
+    """Drinking movements 25 s apart whose sensor turns with the hand (yaw then roll, piecewise minimum jerk):
+    (t s, true global acceleration m/s^2, static mask, sensor-to-global rotations, true specific force in the
+    sensor frame m/s^2, gravity m/s^2)."""
     wp = r2g_waypoints(0.3, 0.15, 0.4)
-    segments = [r2g_truth(None, waypoints=wp, durations=tuple(rng.uniform(0.9, 1.4, 4))) for _ in range(6)]
+    segments = [r2g_truth(None, waypoints=wp, durations=tuple(rng.uniform(0.9, 1.4, 4))) for _ in range(repetitions)]
     t = np.concatenate([s[0] + 25.0 * i for i, s in enumerate(segments)])
     acc = np.concatenate([s[2] for s in segments])
     static = np.concatenate([s[4] for s in segments])
@@ -259,7 +255,17 @@ def test_rotating_bias_fit_leaves_out_a_movement_it_cannot_close():
     angles = np.concatenate([piecewise_minimum_jerk(s[0], s[3], poses) for s in segments])
     rot = np.stack([_rotation_z_then_x(y, r) for y, r in angles])
     g = np.array([0.0, 0.0, 9.81])
-    f_sensor = np.einsum("nji,nj->ni", rot, acc + g)
+    return t, acc, static, rot, np.einsum("nji,nj->ni", rot, acc + g), g
+
+
+def test_rotating_bias_fit_leaves_out_a_movement_it_cannot_close():
+    """One movement with an error the sensor model has no term for (a world-frame 0.5 m/s^2 push, like an
+    orientation error during a long swing) dominates the plain least squares; ``outlier_factor`` refits
+    without it and recovers the sensor errors' effect on the other movements."""
+    from imulog.process.integration import RotatingBiasParams, compensate_rotating_bias, estimate_rotating_bias
+    from imulog.process.rest_runs import movement_runs
+
+    t, acc, static, rot, f_sensor, g = _turning_drinking_trial(np.random.default_rng(7), 6)
     measured = f_sensor + np.array([0.06, -0.08, 0.05]) + f_sensor @ np.diag([0.006, -0.004, 0.005]).T
     acc_global = np.einsum("nij,nj->ni", rot, measured) - g
     runs = [(s, e) for s, e in movement_runs(static) if s > 0 and e < len(t)]
@@ -288,16 +294,7 @@ def test_rotating_bias_compensation_is_shrunk_by_its_own_noise():
     )
 
     rng = np.random.default_rng(11)
-    wp = r2g_waypoints(0.3, 0.15, 0.4)
-    segments = [r2g_truth(None, waypoints=wp, durations=tuple(rng.uniform(0.9, 1.4, 4))) for _ in range(8)]
-    t = np.concatenate([s[0] + 25.0 * i for i, s in enumerate(segments)])
-    acc = np.concatenate([s[2] for s in segments])
-    static = np.concatenate([s[4] for s in segments])
-    poses = np.array([[0.0, 0.0], [0.4, -1.3], [0.8, -1.8], [0.4, -1.3], [0.0, 0.0]])
-    angles = np.concatenate([piecewise_minimum_jerk(s[0], s[3], poses) for s in segments])
-    rot = np.stack([_rotation_z_then_x(y, r) for y, r in angles])
-    g = np.array([0.0, 0.0, 9.81])
-    f_sensor = np.einsum("nji,nj->ni", rot, acc + g)
+    t, acc, static, rot, f_sensor, g = _turning_drinking_trial(rng, 8)
     noise = 0.05 * rng.standard_normal(acc.shape)  # m/s^2, white
     moving = ~static
     cases = (([0.06, -0.08, 0.05], [0.006, -0.004, 0.005], True), ([0.0] * 3, [0.0] * 3, False))
