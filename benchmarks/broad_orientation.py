@@ -1,6 +1,13 @@
 """Orientation accuracy on the BROAD trials in ../shared/data/broad, per trial and per backend.
 
-    python benchmarks/broad_orientation.py [--mag] [--no-ahrs]
+    python benchmarks/broad_orientation.py [--mag] [--no-ahrs] [--data DIR] [--trials 02,05,14 | --exclude 02,05,14]
+        [--backends vqf_offline,vqf_gyrocal]
+
+``--data DIR`` reads every ``*.hdf5`` of a BROAD folder (default ../shared/data/broad, the three shared trials;
+the full dataset is github dlaidig/broad ``data_hdf5/``, CC-BY-4.0); ``--trials``/``--exclude`` select trials by
+their number. Besides the table it prints, per backend, the mean inclination RMSE over the trials, its ratio to
+VQF offline's, the worst per-trial ratio, and the CPU time (user+sys of this process) and wall time spent in
+that backend (the machine may be loaded: compare ratios within one run).
 
 Prints a Markdown table of inclination and heading-free orientation RMSE (degrees) against BROAD's
 optical quaternion ``opt_quat`` over the ``movement`` samples (rows with lost optical tracking
@@ -20,6 +27,8 @@ identity start) unless ``--no-ahrs``.
 from __future__ import annotations
 
 import argparse
+import os
+import time
 from pathlib import Path
 
 import h5py
@@ -43,14 +52,29 @@ def load(path: Path) -> dict:
     return d
 
 
+def cpu_s() -> float:
+    """User + system CPU time of this process (s)."""
+    t = os.times()
+    return t.user + t.system
+
+
 def evaluate(
-    data: dict, *, use_mag: bool = False, ahrs: bool = True, all_samples: bool = False
+    data: dict,
+    *,
+    use_mag: bool = False,
+    ahrs: bool = True,
+    all_samples: bool = False,
+    backends: list[str] | None = None,
+    timing: dict[str, list[float]] | None = None,
 ) -> dict[str, dict[str, float]]:
-    """Errors per backend for one BROAD trial (dict backend -> orientation_errors dict)."""
+    """Errors per backend for one BROAD trial (dict backend -> orientation_errors dict); CPU and wall seconds
+    per backend are added to ``timing`` (backend -> [cpu, wall])."""
     if all_samples:
         data = {**data, "movement": np.ones(len(data["movement"]), dtype=bool)}
     out = {}
-    for backend in available_backends():
+    timing = {} if timing is None else timing
+    for backend in backends or available_backends():
+        c0, w0 = cpu_s(), time.perf_counter()
         r = estimate_orientation(
             data["imu_gyr"],
             data["imu_acc"],
@@ -58,6 +82,9 @@ def evaluate(
             data["imu_mag"],
             OrientationParams(backend=backend, use_mag=use_mag),
         )
+        spent = timing.setdefault(backend, [0.0, 0.0])
+        spent[0] += cpu_s() - c0
+        spent[1] += time.perf_counter() - w0
         out[backend] = orientation_errors(r.quat, data["opt_quat"], data["movement"])
     if ahrs:
         from ahrs.filters import Madgwick
@@ -97,14 +124,34 @@ def main() -> None:
     ap.add_argument(
         "--all-samples", action="store_true", help="evaluate every sample, not only BROAD's movement phases"
     )
+    ap.add_argument("--trials", default="", help="comma-separated trial numbers to use (e.g. 02,05,14)")
+    ap.add_argument("--exclude", default="", help="comma-separated trial numbers to leave out")
+    ap.add_argument("--backends", default="", help="comma-separated backends (default: all available)")
     args = ap.parse_args()
-    files = sorted(args.data.glob("*.hdf5"))
+    keep = {t for t in args.trials.split(",") if t}
+    drop = {t for t in args.exclude.split(",") if t}
+    files = [
+        f
+        for f in sorted(args.data.glob("*.hdf5"))
+        if (not keep or f.stem.split("_")[0] in keep) and f.stem.split("_")[0] not in drop
+    ]
     if not files:
-        raise SystemExit(f"no BROAD .hdf5 files in {args.data}")
+        raise SystemExit(f"no BROAD .hdf5 files in {args.data} (after --trials/--exclude)")
+    backends = [b for b in args.backends.split(",") if b] or None
+    if backends and "vqf_offline" not in backends:
+        backends.insert(0, "vqf_offline")  # the baseline every ratio is taken against
     results = {}
+    timing: dict[str, list[float]] = {}
     for f in files:
         data = load(f)
-        results[f.stem] = evaluate(data, use_mag=args.mag, ahrs=not args.no_ahrs, all_samples=args.all_samples)
+        results[f.stem] = evaluate(
+            data,
+            use_mag=args.mag,
+            ahrs=not args.no_ahrs,
+            all_samples=args.all_samples,
+            backends=backends,
+            timing=timing,
+        )
         if args.all_samples:
             data["movement"] = np.ones(len(data["movement"]), dtype=bool)
         if args.candidates:
@@ -128,6 +175,20 @@ def main() -> None:
         inc = [f"{results[t][b]['inclination_rmse_deg']:.2f}" for t in trials]
         hf = [f"{results[t][b]['heading_free_rmse_deg']:.2f}" for t in trials]
         print(f"| {b} | " + " | ".join(inc) + " | " + " | ".join(hf) + " |")
+    print()
+    print(f"{len(trials)} trials; mean inclination RMSE, ratio to vqf_offline's mean, worst per-trial ratio, time:\n")
+    print("| backend | mean incl. (deg) | ratio | worst trial ratio | CPU s | wall s | CPU vs vqf_offline |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    base = np.array([results[t]["vqf_offline"]["inclination_rmse_deg"] for t in trials])
+    for b in backends:
+        inc = np.array([results[t][b]["inclination_rmse_deg"] for t in trials])
+        cpu, wall = timing.get(b, [float("nan"), float("nan")])
+        rel = cpu / timing["vqf_offline"][0] if "vqf_offline" in timing else float("nan")
+        worst = np.argmax(inc / base)
+        print(
+            f"| {b} | {inc.mean():.3f} | {inc.mean() / base.mean():.3f} | {(inc / base)[worst]:.3f} ({short[worst]}) "
+            f"| {cpu:.1f} | {wall:.1f} | {rel:.2f}x |"
+        )
     print()
     ok = all(
         results[t][DEFAULT_BACKEND]["inclination_rmse_deg"] <= results[t]["vqf_offline"]["inclination_rmse_deg"] + 1e-9

@@ -9,7 +9,7 @@ import click
 from imulog.commands.imus import imu_option
 from imulog.process.orientation import OrientationParams
 
-BACKEND_CHOICES = ["vqf_offline", "vqf", "madgwick", "imufusion", "rts"]
+BACKEND_CHOICES = ["vqf_offline", "vqf", "madgwick", "imufusion", "rts", "vqf_gyrocal"]
 _D = OrientationParams()  # the one source of defaults (tests/test_cli_defaults.py)
 
 
@@ -23,8 +23,9 @@ _D = OrientationParams()  # the one source of defaults (tests/test_cli_defaults.
     show_default=True,
     help="vqf_offline: acausal VQF (most accurate on BROAD); vqf: causal VQF; madgwick: the R2G thesis "
     "setting (AQUA init + Madgwick, numba); imufusion: x-io Fusion (optional package); rts: imulog's "
-    "Kalman smoother over the whole trial with rest-based gyroscope bias (6D; docs/orientation.md says where it "
-    "stands against vqf_offline).",
+    "Kalman smoother over the whole trial with rest-based gyroscope bias (6D); vqf_gyrocal: vqf_offline on "
+    "the gyroscope self-calibrated over the whole trial (docs/orientation.md says where both stand against "
+    "vqf_offline).",
 )
 @click.option("--beta", type=float, default=_D.beta, show_default=True, help="Madgwick gain, rad/s (madgwick backend).")
 @click.option("--mag/--no-mag", "use_mag", default=_D.use_mag, show_default=True, help="Fuse the magnetometer (9D).")

@@ -22,6 +22,11 @@ Backends (:data:`BACKENDS`, chosen by :class:`OrientationParams.backend`):
     BROAD trial it is the most accurate of the backends here (docs/orientation.md).
 ``imufusion``
     x-io's Fusion AHRS (optional import of PyPI ``imufusion``).
+``rts``
+    An error-state Kalman filter and RTS smoother over the whole trial (6D; ``orientation_smoother``).
+``vqf_gyrocal``
+    VQF offline on the gyroscope self-calibrated over the whole trial (sensitivity and misalignment,
+    ``orientation_gyrocal``). Options, not the default: docs/orientation.md "Beyond VQF" says where they stand.
 """
 
 from __future__ import annotations
@@ -257,6 +262,12 @@ def _imufusion(gyr, acc, mag, rate_hz, params, static):
     return out
 
 
+def _vqf_gyrocal(gyr, acc, mag, rate_hz, params, static):
+    from imulog.process.orientation_gyrocal import vqf_gyrocal
+
+    return vqf_gyrocal(gyr, acc, rate_hz, mag)[0]
+
+
 def _rts(gyr, acc, mag, rate_hz, params, static):
     from imulog.process.orientation_smoother import SmootherParams, smooth_orientation
 
@@ -271,12 +282,13 @@ BACKENDS: dict[str, Backend] = {
     "vqf_offline": _vqf_offline,
     "imufusion": _imufusion,
     "rts": _rts,
+    "vqf_gyrocal": _vqf_gyrocal,
 }
 
 
 def available_backends() -> list[str]:
     """Backend names usable in this environment (``imufusion`` only when installed)."""
-    names = ["madgwick", "vqf", "vqf_offline", "rts"]
+    names = ["madgwick", "vqf", "vqf_offline", "rts", "vqf_gyrocal"]
     try:
         import imufusion  # noqa: F401
 
