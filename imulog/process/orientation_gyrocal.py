@@ -83,13 +83,16 @@ def block_mean(x: np.ndarray, step: int) -> np.ndarray:
 
 def _design(r_i: np.ndarray, w: np.ndarray, g0: np.ndarray, dt: float, step: int, knot_s: float) -> np.ndarray:
     """Regressors (M, 3, P) of gravity in the almost-inertial frame as block means over ``step`` samples: 3
-    constant, 9 sensitivity entries (``g0 x cumsum(R_I[:, :, i] w_j) dt``, column 3 + 3 i + j), and 2 drift
-    ramps per knot perpendicular to ``g0``."""
+    constant, 9 sensitivity entries (``g0 x cumsum(R_I[:, :, i] w_j) dt``, column 3 + 3 i + j), 3 for a constant
+    error of the bias estimate (``g0 x cumsum(R_I[:, :, i]) dt``: its drift turns with the sensor, so a ramp in
+    the frame cannot absorb it) and 2 drift ramps per knot perpendicular to ``g0``."""
     m = len(w) // step
     cols = [np.broadcast_to(np.eye(3)[i], (m, 3)) for i in range(3)]
     for i in range(3):
         for j in range(3):
             cols.append(np.cross(g0, block_mean(np.cumsum(r_i[:, :, i] * w[:, j : j + 1], axis=0) * dt, step)))
+    for i in range(3):
+        cols.append(np.cross(g0, block_mean(np.cumsum(r_i[:, :, i], axis=0) * dt, step)))
     t = (np.arange(m) + 0.5) * step * dt
     u1 = np.cross(g0, [1.0, 0.0, 0.0] if abs(g0[0]) < 0.9 * np.linalg.norm(g0) else [0.0, 1.0, 0.0])
     u1 /= np.linalg.norm(u1)
