@@ -142,6 +142,7 @@ def main() -> None:
         backends.insert(0, "vqf_offline")  # the baseline every ratio is taken against
     results = {}
     timing: dict[str, list[float]] = {}
+    evaluate(load(files[0]), use_mag=args.mag, ahrs=False, backends=backends)  # warm-up: numba compiles untimed
     for f in files:
         data = load(f)
         results[f.stem] = evaluate(
