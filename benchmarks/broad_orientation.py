@@ -52,6 +52,18 @@ def load(path: Path) -> dict:
     return d
 
 
+def select_files(data: Path, trials: str = "", exclude: str = "") -> list[Path]:
+    """The ``*.hdf5`` trials of ``data`` whose number is in ``trials`` (comma-separated; empty: all) and not in
+    ``exclude``."""
+    keep = {t for t in trials.split(",") if t}
+    drop = {t for t in exclude.split(",") if t}
+    number = lambda f: f.stem.split("_")[0]  # noqa: E731
+    files = [f for f in sorted(data.glob("*.hdf5")) if (not keep or number(f) in keep) and number(f) not in drop]
+    if not files:
+        raise SystemExit(f"no BROAD .hdf5 files in {data} (after --trials/--exclude)")
+    return files
+
+
 def cpu_s() -> float:
     """User + system CPU time of this process (s)."""
     t = os.times()
@@ -128,15 +140,7 @@ def main() -> None:
     ap.add_argument("--exclude", default="", help="comma-separated trial numbers to leave out")
     ap.add_argument("--backends", default="", help="comma-separated backends (default: all available)")
     args = ap.parse_args()
-    keep = {t for t in args.trials.split(",") if t}
-    drop = {t for t in args.exclude.split(",") if t}
-    files = [
-        f
-        for f in sorted(args.data.glob("*.hdf5"))
-        if (not keep or f.stem.split("_")[0] in keep) and f.stem.split("_")[0] not in drop
-    ]
-    if not files:
-        raise SystemExit(f"no BROAD .hdf5 files in {args.data} (after --trials/--exclude)")
+    files = select_files(args.data, args.trials, args.exclude)
     backends = [b for b in args.backends.split(",") if b] or None
     if backends and "vqf_offline" not in backends:
         backends.insert(0, "vqf_offline")  # the baseline every ratio is taken against
