@@ -127,16 +127,24 @@ def estimate_gyro_correction(
     n_fixed = 3
     a = design.reshape(-1, design.shape[-1])
     y = a_i.reshape(-1)
-    x = np.linalg.lstsq(a, y, rcond=None)[0]
+    ata = np.einsum("ij,ik->jk", a, a)  # einsum, not BLAS: threaded BLAS spins on a loaded machine (docs)
+    aty = np.einsum("ij,i->j", a, y)
+    penalty = np.zeros(a.shape[1])
+    x = ridge_solve(ata, aty, penalty)
     # Gaussian prior on the sensitivity entries; the residual is correlated over about tau: its variance counts
     # once per tau, not once per decimated sample
-    noise_var = float(np.mean((y - a @ x) ** 2)) * fit_hz * params.tau_s
-    penalty = np.zeros(a.shape[1])
+    noise_var = float(np.mean((y - np.einsum("ij,j->i", a, x)) ** 2)) * fit_hz * params.tau_s
     penalty[n_fixed : n_fixed + 9] = noise_var / params.prior_sd**2
-    x = np.linalg.lstsq(
-        np.vstack([a, np.diag(np.sqrt(penalty))]), np.concatenate([y, np.zeros(a.shape[1])]), rcond=None
-    )[0]
+    x = ridge_solve(ata, aty, penalty)
     return np.eye(3) + x[n_fixed : n_fixed + 9].reshape(3, 3)
+
+
+def ridge_solve(ata: np.ndarray, aty: np.ndarray, penalty: np.ndarray) -> np.ndarray:
+    """``argmin |A x - y|^2 + sum(penalty x^2)`` from the normal equations ``A^T A``, ``A^T y``, with the columns
+    scaled to unit norm first (and a 1e-10 relative ridge, so columns the data do not determine stay at 0)."""
+    scale = np.sqrt(np.maximum(np.diag(ata), 1e-300))
+    m = ata / np.outer(scale, scale) + np.diag(penalty / scale**2 + 1e-10)
+    return np.linalg.solve(m, aty / scale) / scale
 
 
 def vqf_gyrocal(
