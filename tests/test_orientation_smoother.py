@@ -11,12 +11,13 @@ from imulog.process.orientation import OrientationParams, estimate_orientation, 
 from imulog.process.orientation_smoother import SmootherParams, rest_mask, smooth_orientation
 
 
-def _trial(seconds: float = 60.0, rate: float = 200.0, seed: int = 1):
-    """Rotations with 3-s rests every 20 s, a constant gyroscope bias, white noise on both sensors."""
+def _trial(seconds: float = 60.0, rate: float = 200.0, seed: int = 1, gain: float = 1.0):
+    """Rotations with 3-s rests every 20 s (peak rates ``gain`` x 0.8/0.6/0.5 rad/s), a constant gyroscope bias,
+    white noise on both sensors."""
     rng = np.random.default_rng(seed)
     n = int(seconds * rate)
     t = np.arange(n) / rate
-    w = np.stack(
+    w = gain * np.stack(
         [
             0.8 * np.sin(2 * np.pi * 0.13 * t),
             0.6 * np.sin(2 * np.pi * 0.21 * t + 1),
