@@ -1,14 +1,14 @@
 """Offline gyroscope self-calibration before VQF offline: the ``vqf_gyrocal`` orientation backend.
 
 What an offline estimator can use and VQF does not: the whole trial at once, to estimate the gyroscope's
-sensitivity and axis misalignment (a 3x3 correction ``M``, true rate = ``M @ gyr``) from the data itself. VQF
+sensitivity and axis misalignment (a 3x3 correction ``M``, true rate = ``M @ (gyr - bias)``) from the data itself. VQF
 offline integrates the bias-corrected gyroscope into an almost-inertial frame ``I``, low-passes the accelerometer
 in ``I`` (where gravity is constant) and tilts the result onto it. A sensitivity error ``E`` makes ``I`` drift by
 ``dtheta(t) = integral of R_I(s) E w(s) ds`` (rad), and gravity seen in ``I`` moves by ``g0 x dtheta(t)``
 (first order): linear in the nine entries of ``E``. This module fits them by least squares on the low-passed
-accelerometer in ``I`` (VQF's own low-pass, ``tau_s``), next to a constant gravity and a piecewise-linear drift
-(knots every ``knot_s``, absorbing what VQF's bias estimate leaves), with a Gaussian prior of ``prior_sd`` on each
-entry; then runs ``vqf.offlineVQF`` on ``M @ gyr``. With little rotation (a translation trial) the data say
+accelerometer in ``I`` (VQF's own low-pass, ``tau_s``), next to a constant gravity, a constant error of VQF's bias
+estimate and a piecewise-linear drift (knots every ``knot_s``), with a Gaussian prior of ``prior_sd`` on each
+entry; then runs ``vqf.offlineVQF`` on the corrected gyroscope. With little rotation (a translation trial) the data say
 little and the prior keeps ``M`` near the identity.
 
 Units: gyr rad/s, acc m/s^2, rate Hz, times s; ``M`` and ``prior_sd`` dimensionless (0.002 = 0.2 %).
