@@ -61,6 +61,7 @@ from imulog.process.trajectory_repetitions import (
     merge_overlapping,
     reference_residuals,
     repetition_windows,
+    rest_blend_weight,
     trial_waypoints,
     velocity_sigma,
 )
@@ -150,6 +151,7 @@ def reconstruct_repetitions(
         info["waypoints_m"] = {"bottle": list(waypoints.bottle_m), "mouth": list(waypoints.mouth_m)}
     fallback: set[int] = set()
     if "optimized" in methods:
+        turn = np.zeros(len(repetitions))
         if params.optimized.heading_drift:
             turn = heading_drift(t, z, static, repetitions, waypoints, params.optimized.sigma_ref_static_m)
             if np.any(turn):
@@ -159,6 +161,8 @@ def reconstruct_repetitions(
                 z = _initial(t, base, static, repetitions, params)
             if info is not None:
                 info["heading_drift_deg"] = np.degrees(turn).round(3).tolist()
+        if any(params.optimized.start_blend) and a_comp is not None:
+            base, z = _blended_start(t, a, base, z, turn, static, repetitions, waypoints, anthropometrics, params, info)
         fallback = set(inconsistent_repetitions(reference_residuals(t, z, static, repetitions, waypoints)))
         if params.optimized.sigma_data_static_m == "auto":
             sig = estimate_data_sigma(t, z, static, repetitions, waypoints, params.optimized.sigma_ref_static_m)
@@ -202,6 +206,36 @@ def reconstruct_repetitions(
     if info is not None:
         info["checks"] = method_checks(t, a, a_comp, static, repetitions, out, params, bias)
     return out
+
+
+def _blended_start(
+    t: np.ndarray,
+    acc: np.ndarray,
+    comp: np.ndarray,
+    z: np.ndarray,
+    turn: np.ndarray,
+    static: np.ndarray,
+    repetitions: Sequence[Repetition],
+    waypoints: R2GWaypoints,
+    anthropometrics: Mapping[str, Any] | None,
+    params: TrajectoryParams,
+    info: dict[str, Any] | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The optimisation's start on the acceleration ``acc + w (comp - acc)`` per global axis, ``w`` from the rests
+    (:func:`imulog.process.trajectory_repetitions.rest_blend_weight`); ``comp`` is the compensated (and turned)
+    acceleration, ``z`` its ZUPT start. The measured acceleration is turned by the same heading drift (``turn``,
+    rad per repetition)."""
+    raw = np.array(acc, dtype=np.float64, copy=True)
+    for rep, angle in zip(repetitions, turn, strict=True):
+        if angle:
+            raw[rep.start : rep.stop] = rotate_about_z(raw[rep.start : rep.stop], float(angle))
+    z_raw = _initial(t, raw, static, repetitions, params)
+    mouth_x = bool(anthropometrics) and "mouth_dx_m" in anthropometrics
+    w = np.asarray(rest_blend_weight(t, z_raw, z, static, repetitions, waypoints, mouth_x))
+    w = np.where(np.asarray(params.optimized.start_blend, dtype=bool), w, 1.0)
+    if info is not None:
+        info["start_weight"] = np.round(w, 4).tolist()
+    return raw + w * (comp - raw), z_raw + w * (z - z_raw)
 
 
 def _closure_left(t: np.ndarray, acc: np.ndarray, static: np.ndarray) -> float | None:

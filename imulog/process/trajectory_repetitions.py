@@ -310,3 +310,91 @@ def heading_drift(
     own = max(0.0, 1.0 - (sigma_ref_m / lever) ** 2 / scatter**2) if scatter > 0 else 0.0
     out[idx] = line + own * (th - line)
     return out
+
+
+# Reference coordinates per rest that do not come from the start itself (trial_waypoints): the bottle's x and y
+# and the mouth's y and z from the anthropometrics (the mouth's x too when ``mouth_dx_m`` is given), and home
+# (the hand's start: 0 on every axis, where the protocol puts it back on average).
+ANCHORED_REST_AXES = {"bottle": (0, 1), "mouth": (1, 2), "home": (0, 1, 2)}
+
+
+def rest_positions(
+    t_s: np.ndarray, positions_m: np.ndarray, static_mask: np.ndarray, repetition: Repetition
+) -> np.ndarray:
+    """Mean position (4, 3) m of an estimate over each rest of a complete repetition, relative to its start: after
+    the reach (bottle), the lift (mouth), the return of the bottle (bottle) and the return of the hand (home);
+    NaN where a rest has no static sample."""
+    t = np.asarray(t_s, dtype=np.float64)[repetition.start : repetition.stop]
+    p = np.asarray(positions_m, dtype=np.float64)[repetition.start : repetition.stop]
+    st = np.asarray(static_mask, dtype=bool)[repetition.start : repetition.stop]
+    b = np.asarray(repetition.phase_bounds_s, dtype=np.float64)
+    out = np.full((4, 3), np.nan)
+    for k in range(4):
+        hi = b[k + 1, 0] if k < 3 else t[-1]
+        sel = st & (t >= b[k, 1]) & (t <= hi)
+        if np.any(sel):
+            out[k] = np.nanmean(p[sel] - p[0], axis=0)
+    return out
+
+
+def rest_blend_weight(
+    t_s: np.ndarray,
+    measured_m: np.ndarray,
+    compensated_m: np.ndarray,
+    static_mask: np.ndarray,
+    repetitions: Sequence[Repetition],
+    waypoints: R2GWaypoints,
+    mouth_x_anchored: bool = False,
+) -> tuple[float, float, float]:
+    """Per global axis, how much (0..1) of the rotating-bias compensation the optimisation's start should take.
+
+    The two starts (ZUPT on the measured and on the compensated acceleration, (N, 3) m each) differ only by the
+    compensation, and ZUPT is linear in the acceleration, so ``measured + w (compensated - measured)`` is ZUPT on
+    the blended acceleration. The compensation is fitted to the movements' closures, whose velocity integral it
+    matches even where its time course within a movement is wrong (issue 31 point 2). Its time course is judged at
+    the rests instead: each complete repetition's rest positions (:func:`rest_positions`) against the reference
+    coordinates that do not come from either start (:data:`ANCHORED_REST_AXES`: the anthropometric bottle and
+    mouth, home), one equation per rest; ``w`` is their least-squares blend, shrunk towards 1 by its own
+    uncertainty (:func:`_shrunk_weight`) and clipped to [0, 1]. An axis without such an equation, or where the
+    compensation does not move the rests, keeps all of it (1)."""
+    anchored = {k: set(v) for k, v in ANCHORED_REST_AXES.items()}
+    if mouth_x_anchored:
+        anchored["mouth"].add(0)
+    targets = {
+        "bottle": np.asarray(waypoints.bottle_m, dtype=np.float64),
+        "mouth": np.asarray(waypoints.mouth_m, dtype=np.float64),
+        "home": np.zeros(3),
+    }
+    r_all: list[list[list[float]]] = [[], [], []]  # per axis, per repetition: the residuals and compensations
+    c_all: list[list[list[float]]] = [[], [], []]
+    for rep in repetitions:
+        if len(rep.phase_bounds_s) != 4:
+            continue
+        a = rest_positions(t_s, measured_m, static_mask, rep)
+        c = rest_positions(t_s, compensated_m, static_mask, rep) - a
+        for ax in range(3):
+            rows = [
+                (a[k, ax] - targets[name][ax], c[k, ax])
+                for k, name in enumerate(("bottle", "mouth", "bottle", "home"))
+                if ax in anchored[name] and np.isfinite(a[k, ax]) and np.isfinite(c[k, ax])
+            ]
+            if rows:
+                r_all[ax].append([x for x, _ in rows])
+                c_all[ax].append([y for _, y in rows])
+    return tuple(_shrunk_weight(r_all[ax], c_all[ax]) for ax in range(3))
+
+
+def _shrunk_weight(residuals: list[list[float]], compensations: list[list[float]]) -> float:
+    """The least-squares ``w`` minimising ``sum (r + w c)^2`` (r, c in m, one list per repetition), shrunk towards
+    1 (the whole compensation) by the positive-part James-Stein factor of ``w - 1`` against its standard error
+    (cluster-robust by repetition: a repetition's rests share where the hand started), clipped to [0, 1]."""
+    den = float(sum(np.sum(np.square(c)) for c in compensations))
+    if den <= 0 or len(residuals) < 2:
+        return 1.0
+    w = -float(sum(np.dot(r, c) for r, c in zip(residuals, compensations, strict=True))) / den
+    scores = [
+        float(np.dot(np.asarray(r) + w * np.asarray(c), c)) for r, c in zip(residuals, compensations, strict=True)
+    ]
+    var = float(np.sum(np.square(scores))) / den**2 * len(scores) / (len(scores) - 1)
+    shrink = max(0.0, 1.0 - var / (w - 1.0) ** 2) if w != 1.0 else 0.0
+    return float(np.clip(1.0 + shrink * (w - 1.0), 0.0, 1.0))
