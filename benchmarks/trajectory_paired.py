@@ -68,6 +68,7 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
     "robust-bias-3": (D, replace(D, rotating_bias=replace(D.rotating_bias, outlier_factor=3.0))),
     "shrink-bias": (D, replace(D, rotating_bias=replace(D.rotating_bias, shrink=True))),
     "rest-blend": (D, replace(D, optimized=replace(D.optimized, start_blend=(True, True, False)))),
+    "rest-chain": (D, replace(D, optimized=replace(D.optimized, rest_chain=True))),
     "robust-bias-iterated": (
         D,
         replace(D, rotating_bias=replace(D.rotating_bias, outlier_factor=3.0, outlier_refits=20)),

@@ -61,10 +61,10 @@ from imulog.process.trajectory_repetitions import (
     merge_overlapping,
     reference_residuals,
     repetition_windows,
-    rest_blend_weight,
     trial_waypoints,
     velocity_sigma,
 )
+from imulog.process.trajectory_rests import repetition_offsets, rest_blend_weight, shifted_waypoints
 
 __all__ = [
     "BASELINE",
@@ -150,6 +150,7 @@ def reconstruct_repetitions(
     if info is not None and waypoints is not None:
         info["waypoints_m"] = {"bottle": list(waypoints.bottle_m), "mouth": list(waypoints.mouth_m)}
     fallback: set[int] = set()
+    rep_waypoints = [waypoints] * len(repetitions)
     if "optimized" in methods:
         turn = np.zeros(len(repetitions))
         if params.optimized.heading_drift:
@@ -180,6 +181,8 @@ def reconstruct_repetitions(
                     info["sigma_data_mps"] = list(vel)
         if info is not None:
             info["optimized_fallback"] = [repetitions[i].index for i in sorted(fallback)]
+        if params.optimized.rest_chain:
+            rep_waypoints = _chained_waypoints(t, z, static, repetitions, waypoints, params, info)
     if baseline:
         methods = [*methods, BASELINE]
         out[BASELINE] = np.full((len(t), 3), np.nan)
@@ -199,13 +202,37 @@ def reconstruct_repetitions(
                 a[sl],
                 static[sl],
                 phase_bounds_s=rep.phase_bounds_s,
-                waypoints=waypoints,
+                waypoints=rep_waypoints[i] if m == "optimized" else waypoints,
                 acc_compensated_mps2=base[sl] if m == "optimized" else comp,  # optimized: heading-corrected
                 params=params,
             )
     if info is not None:
         info["checks"] = method_checks(t, a, a_comp, static, repetitions, out, params, bias)
     return out
+
+
+def _chained_waypoints(
+    t: np.ndarray,
+    z: np.ndarray,
+    static: np.ndarray,
+    repetitions: Sequence[Repetition],
+    waypoints: R2GWaypoints,
+    params: TrajectoryParams,
+    info: dict[str, Any] | None,
+) -> list[R2GWaypoints]:
+    """Each repetition's reference waypoints moved by where it starts and ends relative to the trial's home
+    (:func:`imulog.process.trajectory_rests.repetition_offsets` on the start ``z``, the axes not held to return
+    to the start), with the start's static-position error per axis against the reference (variance components,
+    :func:`imulog.process.trajectory_repetitions.estimate_data_sigma`, not bounded by the closure) as the chain's
+    uncertainty."""
+    o = params.optimized
+    sig = estimate_data_sigma(t, z, static, repetitions, waypoints, o.sigma_ref_static_m)
+    rts = o.return_to_start
+    free = [not r for r in rts] if isinstance(rts, (tuple, list)) else [not rts] * 3
+    offsets = repetition_offsets(t, z, static, repetitions, sig, o.sigma_ref_static_m)
+    if info is not None:
+        info["repetition_offsets_m"] = np.round(offsets * np.asarray(free), 5).tolist()
+    return [shifted_waypoints(waypoints, off, free) for off in offsets]
 
 
 def _blended_start(
