@@ -61,8 +61,8 @@ def test_rest_positions_are_the_displacements_at_each_rest():
 def test_a_compensation_that_moves_the_rests_away_is_dropped_and_one_that_brings_them_back_kept():
     rng = np.random.default_rng(3)
     t, truth, static, reps = _trial(10, rng)
-    # 2 cm at the rests against the hand's 1-cm scatter per repetition (with ten repetitions the weight's own
-    # standard error is then about 0.15; at 1 cm it is about 0.3)
+    # 2 cm at the rests against the hand's 1-cm scatter per repetition (at 1 cm, ten repetitions do not pin the
+    # weight: this seed gave 0.72 in x for a compensation that is all wrong)
     err = _error(t, reps, np.array([[0.02, -0.016, 0.0], [0.024, 0.02, 0.0], [0.018, -0.012, 0.0], [0.0, 0.0, 0.0]]))
     # measured right, compensated wrong in x and y (a compensation whose time course is wrong): w -> 0
     w = rest_blend_weight(t, truth, truth + err, static, reps, WAY)
