@@ -21,7 +21,10 @@ options), ``closure-sigma`` (without
 ``OptimizationParams.closure_factor`` / with 0.5, the default since 2026-12-07), ``robust-bias`` (the defaults, the rotating-bias estimate as one plain least squares, / refitted once
 without the movements it cannot close, ``RotatingBiasParams.outlier_factor = 4``, an option), ``robust-bias-3`` (the same with factor 3), ``shrink-bias`` (the defaults / each global
 axis's rotating-bias compensation scaled by its James-Stein share, ``RotatingBiasParams.shrink``, an option), ``robust-bias-iterated`` (factor 3, refitted
-up to 20 times while the set of movements changes), ``issue31-session3`` (the code before this round's
+up to 20 times while the set of movements changes), ``rest-blend`` (the defaults / the start's rotating-bias
+compensation in x and y blended by the rests, ``OptimizationParams.start_blend = (True, True, False)``, an option;
+``rest-blend-xyz`` in z too), ``rest-chain`` (the defaults / each repetition's reference moved by where the hand
+started and ended it, ``OptimizationParams.rest_chain``, an option), ``issue31-session3`` (the code before this round's
 default changes, ``bias-uncertainty`` and ``rest-run-mean``, / the defaults), ``issue31-options`` (the same
 before / the defaults with the heading through rests and the z-only return), ``heading-restart`` (options 3 and 4
 with the heading chained through the whole recording, ``AnchorParams.restart = False``, / restarted at every rest
@@ -67,6 +70,9 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
     "robust-bias": (D, replace(D, rotating_bias=replace(D.rotating_bias, outlier_factor=4.0))),
     "robust-bias-3": (D, replace(D, rotating_bias=replace(D.rotating_bias, outlier_factor=3.0))),
     "shrink-bias": (D, replace(D, rotating_bias=replace(D.rotating_bias, shrink=True))),
+    "rest-blend": (D, replace(D, optimized=replace(D.optimized, start_blend=(True, True, False)))),
+    "rest-blend-xyz": (D, replace(D, optimized=replace(D.optimized, start_blend=(True, True, True)))),
+    "rest-chain": (D, replace(D, optimized=replace(D.optimized, rest_chain=True))),
     "robust-bias-iterated": (
         D,
         replace(D, rotating_bias=replace(D.rotating_bias, outlier_factor=3.0, outlier_refits=20)),

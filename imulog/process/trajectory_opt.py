@@ -64,6 +64,7 @@ from imulog.process.trajectory_repetitions import (
     trial_waypoints,
     velocity_sigma,
 )
+from imulog.process.trajectory_rests import repetition_offsets, rest_blend_weight, shifted_waypoints
 
 __all__ = [
     "BASELINE",
@@ -149,7 +150,9 @@ def reconstruct_repetitions(
     if info is not None and waypoints is not None:
         info["waypoints_m"] = {"bottle": list(waypoints.bottle_m), "mouth": list(waypoints.mouth_m)}
     fallback: set[int] = set()
+    rep_waypoints = [waypoints] * len(repetitions)
     if "optimized" in methods:
+        turn = np.zeros(len(repetitions))
         if params.optimized.heading_drift:
             turn = heading_drift(t, z, static, repetitions, waypoints, params.optimized.sigma_ref_static_m)
             if np.any(turn):
@@ -159,6 +162,8 @@ def reconstruct_repetitions(
                 z = _initial(t, base, static, repetitions, params)
             if info is not None:
                 info["heading_drift_deg"] = np.degrees(turn).round(3).tolist()
+        if any(params.optimized.start_blend) and a_comp is not None:
+            base, z = _blended_start(t, a, base, z, turn, static, repetitions, waypoints, anthropometrics, params, info)
         fallback = set(inconsistent_repetitions(reference_residuals(t, z, static, repetitions, waypoints)))
         if params.optimized.sigma_data_static_m == "auto":
             sig = estimate_data_sigma(t, z, static, repetitions, waypoints, params.optimized.sigma_ref_static_m)
@@ -176,6 +181,8 @@ def reconstruct_repetitions(
                     info["sigma_data_mps"] = list(vel)
         if info is not None:
             info["optimized_fallback"] = [repetitions[i].index for i in sorted(fallback)]
+        if params.optimized.rest_chain:
+            rep_waypoints = _chained_waypoints(t, z, static, repetitions, waypoints, params, info)
     if baseline:
         methods = [*methods, BASELINE]
         out[BASELINE] = np.full((len(t), 3), np.nan)
@@ -195,13 +202,67 @@ def reconstruct_repetitions(
                 a[sl],
                 static[sl],
                 phase_bounds_s=rep.phase_bounds_s,
-                waypoints=waypoints,
+                waypoints=rep_waypoints[i] if m == "optimized" else waypoints,
                 acc_compensated_mps2=base[sl] if m == "optimized" else comp,  # optimized: heading-corrected
                 params=params,
             )
     if info is not None:
         info["checks"] = method_checks(t, a, a_comp, static, repetitions, out, params, bias)
     return out
+
+
+def _chained_waypoints(
+    t: np.ndarray,
+    z: np.ndarray,
+    static: np.ndarray,
+    repetitions: Sequence[Repetition],
+    waypoints: R2GWaypoints,
+    params: TrajectoryParams,
+    info: dict[str, Any] | None,
+) -> list[R2GWaypoints]:
+    """Each repetition's reference waypoints moved by where it starts and ends relative to the trial's home
+    (:func:`imulog.process.trajectory_rests.repetition_offsets` on the start ``z``, the axes not held to return
+    to the start), with the start's static-position error per axis against the reference (variance components,
+    :func:`imulog.process.trajectory_repetitions.estimate_data_sigma`, not bounded by the closure) as the chain's
+    uncertainty."""
+    o = params.optimized
+    sig = estimate_data_sigma(t, z, static, repetitions, waypoints, o.sigma_ref_static_m)
+    rts = o.return_to_start
+    free = [not r for r in rts] if isinstance(rts, (tuple, list)) else [not rts] * 3
+    offsets = repetition_offsets(t, z, static, repetitions, sig, o.sigma_ref_static_m)
+    if info is not None:
+        info["repetition_offsets_m"] = np.round(offsets * np.asarray(free), 5).tolist()
+    return [shifted_waypoints(waypoints, off, free) for off in offsets]
+
+
+def _blended_start(
+    t: np.ndarray,
+    acc: np.ndarray,
+    comp: np.ndarray,
+    z: np.ndarray,
+    turn: np.ndarray,
+    static: np.ndarray,
+    repetitions: Sequence[Repetition],
+    waypoints: R2GWaypoints,
+    anthropometrics: Mapping[str, Any] | None,
+    params: TrajectoryParams,
+    info: dict[str, Any] | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The optimisation's start on the acceleration ``acc + w (comp - acc)`` per global axis, ``w`` from the rests
+    (:func:`imulog.process.trajectory_repetitions.rest_blend_weight`); ``comp`` is the compensated (and turned)
+    acceleration, ``z`` its ZUPT start. The measured acceleration is turned by the same heading drift (``turn``,
+    rad per repetition)."""
+    raw = np.array(acc, dtype=np.float64, copy=True)
+    for rep, angle in zip(repetitions, turn, strict=True):
+        if angle:
+            raw[rep.start : rep.stop] = rotate_about_z(raw[rep.start : rep.stop], float(angle))
+    z_raw = _initial(t, raw, static, repetitions, params)
+    mouth_x = bool(anthropometrics) and "mouth_dx_m" in anthropometrics
+    w = np.asarray(rest_blend_weight(t, z_raw, z, static, repetitions, waypoints, mouth_x))
+    w = np.where(np.asarray(params.optimized.start_blend, dtype=bool), w, 1.0)
+    if info is not None:
+        info["start_weight"] = np.round(w, 4).tolist()
+    return raw + w * (comp - raw), z_raw + w * (z - z_raw)
 
 
 def _closure_left(t: np.ndarray, acc: np.ndarray, static: np.ndarray) -> float | None:

@@ -67,6 +67,12 @@ class OptimizationParams:
         ``combined``): ``residual-velocity`` about -1 cm per axis, no condition worse on development or held-out
         trials (docs/accuracy.md). The default since the repetition flags' ``drift`` reason stopped measuring how
         far the optimisation pulls the estimate (:mod:`imulog.process.repetition_flags`).
+    start_blend: per global axis (x, y, z), start from ZUPT on the measured acceleration plus the share of the
+        rotating-bias compensation that best puts the rests where the anthropometric reference has them
+        (:func:`imulog.process.trajectory_rests.rest_blend_weight`, issue 31 point 2); False: all of it.
+    rest_chain: on the axes not held to return to the start, move each repetition's reference by where the hand
+        started and ended it relative to the trial's home (:func:`imulog.process.trajectory_rests.repetition_offsets`:
+        the start's return displacements chained, each offset 0 within ``sigma_ref_static_m``; issue 31 point 2).
     """
 
     sigma_data_mps: float | tuple[float, float, float] = 0.02
@@ -81,6 +87,8 @@ class OptimizationParams:
     velocity_from_static: bool = True
     heading_drift: bool = True
     closure_factor: float | None = 0.5
+    start_blend: tuple[bool, bool, bool] = (False, False, False)
+    rest_chain: bool = False
 
 
 @dataclass
