@@ -66,6 +66,8 @@ class RepetitionParams:
     rescue_fraction: a run of the norm in a rest above this fraction of the lowest real movement's height and
         as long as a short movement is a movement the detector missed, see
         :func:`~imulog.process.segmentation.rescue.rescue_missed` (imulog addition, issue 31; 0 = off).
+    wide_majors: a movement as wide as a phase (at half its own height, the rescue's length bound) counts as
+        major in the grouping whatever its height (imulog addition, issue 31 sixth round; False = height only).
     labels: phase labels in order.
     """
 
@@ -84,6 +86,7 @@ class RepetitionParams:
     max_candidates: int = 14
     fused_groups: bool = True
     rescue_fraction: float = 0.5
+    wide_majors: bool = True
     labels: tuple[str, ...] = R2G_PHASES
 
 
@@ -336,7 +339,13 @@ def segment_repetitions(
         rep_s, rep_e = split_repetitions(norm, n_rep, params.activity_fraction)
         subsets = [(np.arange(len(start)), [assign_to_repetitions(start, end, rep_s, rep_e)])]
     else:
-        task = np.flatnonzero(~burst_mask(start, end, rate_hz, params.burst_gap_s, params.burst_min_movements))
+        in_task = ~burst_mask(start, end, rate_hz, params.burst_gap_s, params.burst_min_movements)
+        task = np.flatnonzero(in_task)
+        wide = np.zeros(len(start), dtype=bool)
+        if params.wide_majors:
+            from imulog.process.segmentation.rescue import as_wide_as_a_phase
+
+            wide = as_wide_as_a_phase(start, end, norm, in_task)
         subsets = [task] if len(task) == len(start) else [task, np.arange(len(start))]
         subsets = [
             (
@@ -351,6 +360,7 @@ def segment_repetitions(
                         params.major_fraction,
                         params.extra_cut_fraction,
                         size,
+                        wide[idx],
                     )
                     for size in ([params.n_phases] + ([params.n_phases - 1] if params.fused_groups else []))
                     for j in range(params.extra_groups + 1 if size == params.n_phases else 1)

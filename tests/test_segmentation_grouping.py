@@ -1,0 +1,100 @@
+"""A repetition with a missing phase and a low, slow one (issue 31 point 1, sixth round): the grouping counts a
+movement as wide as a phase among the major movements whatever its height, so the repetition stays a group of
+its own and the missing phase is taken from its rest, instead of every later phase slipping by a repetition."""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from imulog.process.segmentation.repetitions import RepetitionParams, segment_repetitions
+from imulog.process.segmentation.rescue import as_wide_as_a_phase
+
+RATE = 50.0
+
+
+def _bump(t, t0, dur, height):
+    x = np.clip((t - t0) / dur, 0.0, 1.0)
+    return height * np.sin(np.pi * x) ** 2
+
+
+def _trial():
+    """Five repetitions of four 2.5-s phases (0.8-1.4 rad/s), 3-s pauses, 9-s rests. In repetition 4 the lift
+    turns the wrist at 0.4 rad/s over 4 s (detected, but under half the median height) and the return of the
+    bottle at 0.2 rad/s over 7 s (under the detector's 0.3 rad/s and the rescue's level): that repetition has two
+    movements of the usual height. Returns times, norm, the detector's movements and the true phases (s)."""
+    t = np.arange(0.0, 170.0, 1.0 / RATE)
+    rng = np.random.default_rng(5)
+    norm = 0.02 + 0.0005 * rng.standard_normal(len(t))
+    heights = [1.2, 0.9, 0.8, 1.4]
+    t0, truth = 5.0, []
+    for rep in range(5):
+        for k, h in enumerate(heights):
+            dur = 2.5
+            if rep == 3 and k == 1:
+                dur, h = 4.0, 0.4
+            if rep == 3 and k == 2:
+                dur, h = 7.0, 0.2
+            norm += _bump(t, t0, dur, h)
+            truth.append((rep + 1, k, t0, t0 + dur))
+            t0 += dur + 3.0
+        t0 += 6.0
+    above = norm > 0.3  # the detector's threshold
+    d = np.diff(np.r_[0, above.astype(np.int8), 0])
+    return t, norm, np.flatnonzero(d == 1), np.flatnonzero(d == -1), truth
+
+
+def _right(t, ph, truth) -> int:
+    """Phases whose mid-point lies in the true phase of their repetition and phase index (the detector's
+    boundaries of a low phase are narrower than the truth: the refinements that widen them are not run here)."""
+    mid = {
+        (int(r), int(p)): 0.5 * (t[s] + t[e - 1])
+        for s, e, r, p in zip(ph.start, ph.end, ph.repetition, ph.phase, strict=True)
+    }
+    return sum(a < mid[(r, k)] < b for r, k, a, b in truth if (r, k) in mid)
+
+
+def test_a_low_slow_phase_counts_as_a_phase_in_the_grouping():
+    t, norm, start, end, truth = _trial()
+    assert len(start) == 19  # the 0.2-rad/s phase is missed
+    heights = np.array([norm[a:b].max() for a, b in zip(start, end, strict=True)])
+    low = heights < 0.5 * np.median(heights)
+    assert low.sum() == 1  # the slow lift is not major by its height ...
+    assert as_wide_as_a_phase(start, end, norm)[low].all()  # ... but as wide as a phase
+    params = RepetitionParams(n_repetitions=5)
+    ph = segment_repetitions(start, end, norm, RATE, params)
+    assert len(ph) == 20 and _right(t, ph, truth) == 20
+    assert ph.quality[3]["found"] == 1 and ph.quality[3]["missing"] == 0
+    # by height alone (as before) the repetition holds two major movements, fewer than any partition allows:
+    # phases are lost or shifted
+    old = segment_repetitions(start, end, norm, RATE, replace(params, wide_majors=False))
+    assert _right(t, old, truth) < 20
+
+
+def test_brief_adjustments_in_a_rest_are_not_wide():
+    t = np.arange(0.0, 60.0, 1.0 / RATE)
+    phases = [(5, 1.0), (11, 0.8), (17, 1.2), (23, 0.9)]
+    norm = 0.02 + sum(_bump(t, t0, 2.5, h) for t0, h in phases) + _bump(t, 33.0, 0.4, 0.35)
+    start = np.array([int(t0 * RATE) for t0, _ in phases] + [int(33.05 * RATE)])
+    end = np.array([int((t0 + 2.5) * RATE) for t0, _ in phases] + [int(33.35 * RATE)])
+    assert as_wide_as_a_phase(start, end, norm).tolist() == [True] * 4 + [False]
+
+
+def test_the_stroke_trial_with_a_missing_and_a_low_phase_in_its_last_repetition():
+    """stroke, seed 112, subject 81 (benchmarks/segmentation_accuracy.py, held out in the fifth round): the last
+    repetition's lift turned at 0.38 rad/s (a median phase: 1.0) and its return of the bottle was missed; the
+    last two repetitions were grouped as one movement and three, 80 % of durations within 0.1 s."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from segmentation_accuracy import score
+
+    from imulog.process.segmentation.pipeline import PhaseParams
+    from imulog.simulate import simulate
+    from imulog.simulate.grid import condition
+
+    sim = simulate("r2g", seed=112, subject=81, repetitions=10, **condition("stroke"))
+    r = score(sim, PhaseParams(repetitions=RepetitionParams(n_repetitions=10)))
+    assert r["n_phases"] == 40 and r["correct"] == 1.0
+    assert r["duration_within_0_1_s"] >= 0.95
