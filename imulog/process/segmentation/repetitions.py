@@ -66,8 +66,9 @@ class RepetitionParams:
     rescue_fraction: a run of the norm in a rest above this fraction of the lowest real movement's height and
         as long as a short movement is a movement the detector missed, see
         :func:`~imulog.process.segmentation.rescue.rescue_missed` (imulog addition, issue 31; 0 = off).
-    wide_majors: a movement as wide as a phase (at half its own height, the rescue's length bound) counts as
-        major in the grouping whatever its height (imulog addition, issue 31 sixth round; False = height only).
+    turned_majors: a movement that turns the wrist at least ``major_fraction`` x the median angle (the norm
+        integrated over it, rad) counts as major in the grouping whatever its height (imulog addition, issue 31
+        sixth round: a slow, low phase; False = height only, as before).
     labels: phase labels in order.
     """
 
@@ -86,7 +87,7 @@ class RepetitionParams:
     max_candidates: int = 14
     fused_groups: bool = True
     rescue_fraction: float = 0.5
-    wide_majors: bool = True
+    turned_majors: bool = True
     labels: tuple[str, ...] = R2G_PHASES
 
 
@@ -114,6 +115,12 @@ def features(start: np.ndarray, end: np.ndarray, norm: np.ndarray, rate_hz: floa
     h = np.array([norm[s:e].max() if e > s else 0.0 for s, e in zip(start, end, strict=True)])
     s = (start[1:] - end[:-1]) / rate_hz
     return d, h, s
+
+
+def turned_angles(start: np.ndarray, end: np.ndarray, norm, rate_hz: float) -> np.ndarray:
+    """Angle (rad) each movement ``[start, end)`` turns the wrist: the filtered norm (rad/s, an array or a store)
+    integrated over it."""
+    return np.array([float(np.sum(np.asarray(norm[a:b]))) / rate_hz for a, b in zip(start, end, strict=True)])
 
 
 def _rms(a: np.ndarray) -> float:
@@ -339,13 +346,8 @@ def segment_repetitions(
         rep_s, rep_e = split_repetitions(norm, n_rep, params.activity_fraction)
         subsets = [(np.arange(len(start)), [assign_to_repetitions(start, end, rep_s, rep_e)])]
     else:
-        in_task = ~burst_mask(start, end, rate_hz, params.burst_gap_s, params.burst_min_movements)
-        task = np.flatnonzero(in_task)
-        wide = np.zeros(len(start), dtype=bool)
-        if params.wide_majors:
-            from imulog.process.segmentation.rescue import as_wide_as_a_phase
-
-            wide = as_wide_as_a_phase(start, end, norm, in_task)
+        task = np.flatnonzero(~burst_mask(start, end, rate_hz, params.burst_gap_s, params.burst_min_movements))
+        angles = turned_angles(start, end, norm, rate_hz) if params.turned_majors else None
         subsets = [task] if len(task) == len(start) else [task, np.arange(len(start))]
         subsets = [
             (
@@ -360,7 +362,7 @@ def segment_repetitions(
                         params.major_fraction,
                         params.extra_cut_fraction,
                         size,
-                        wide[idx],
+                        None if angles is None else angles[idx],
                     )
                     for size in ([params.n_phases] + ([params.n_phases - 1] if params.fused_groups else []))
                     for j in range(params.extra_groups + 1 if size == params.n_phases else 1)

@@ -44,23 +44,6 @@ def _movement_half_width(norm, start: np.ndarray, end: np.ndarray, k: int) -> in
     return half_width(norm, lo, hi, a + int(np.argmax(np.asarray(norm[a:b]))))
 
 
-def as_wide_as_a_phase(
-    start: np.ndarray, end: np.ndarray, norm, task: np.ndarray | None = None, alpha: float = 0.8
-) -> np.ndarray:
-    """True for each movement ``[start, end)`` whose :func:`half_width` is at least ``alpha`` x the median of the
-    ``task`` movements' (default all): the rescue's length bound, which a phase meets however low it is and a
-    brief adjustment in a rest does not (issue 31, sixth round: a slow subject's lowest phases fall under half the
-    median height, yet last as long as the others)."""
-    start, end = np.asarray(start, dtype=np.int64), np.asarray(end, dtype=np.int64)
-    task = np.ones(len(start), dtype=bool) if task is None else np.asarray(task, dtype=bool)
-    widths = np.array(
-        [_movement_half_width(norm, start, end, k) if end[k] > start[k] else 0 for k in range(len(start))]
-    )
-    if not task.any():
-        return np.zeros(len(start), dtype=bool)
-    return widths >= alpha * float(np.median(widths[task]))
-
-
 def rescue_missed(
     start: np.ndarray,
     end: np.ndarray,
