@@ -120,3 +120,30 @@ def test_the_stroke_trial_with_a_missing_and_a_low_phase_in_its_last_repetition(
     r = score(sim, PhaseParams(repetitions=RepetitionParams(n_repetitions=10)))
     assert r["n_phases"] == 40 and r["correct"] == 1.0
     assert r["duration_within_0_1_s"] >= 0.95
+
+
+def test_a_missing_last_phase_is_taken_from_the_rest_after_the_trial():
+    """The trial's last return of the hand turns the wrist at 0.2 rad/s over 7 s, under every detection level, and
+    the recording ends 3 s after it (stroke-slow, seed 12, subject 5, with 3 and with 25 repetitions): there is no
+    rest between two movements to look in, so the last repetition cut a movement in two or kept three phases."""
+    t = np.arange(0.0, 100.0, 1.0 / RATE)
+    rng = np.random.default_rng(7)
+    norm = 0.02 + 0.0005 * rng.standard_normal(len(t))
+    truth, t0 = [], 5.0
+    for rep in range(3):
+        for k, h in enumerate([1.2, 0.9, 0.8, 1.4]):
+            dur, h = (7.0, 0.2) if (rep, k) == (2, 3) else (2.5, h)
+            norm += _bump(t, t0, dur, h)
+            truth.append((rep + 1, k, t0, t0 + dur))
+            t0 += dur + 3.0
+        t0 += 6.0
+    norm = norm[: int((truth[-1][3] + 3.0) * RATE)]
+    t = t[: len(norm)]
+    start, end = _detect(norm)
+    assert len(start) == 11
+    params = RepetitionParams(n_repetitions=3)
+    ph = segment_repetitions(start, end, norm, RATE, params)
+    assert len(ph) == 12 and _right(t, ph, truth) == 12
+    assert ph.quality[2]["found"] == 1 and ph.quality[2]["missing"] == 0
+    old = segment_repetitions(start, end, norm, RATE, replace(params, tail_bump=False))
+    assert _right(t, old, truth) < 12 and old.quality[2]["found"] == 0  # a movement cut in two instead

@@ -69,6 +69,8 @@ class RepetitionParams:
     turned_majors: a movement that turns the wrist at least ``major_fraction`` x the median angle (the norm
         integrated over it, rad) counts as major in the grouping whatever its height (imulog addition, issue 31
         sixth round: a slow, low phase; False = height only, as before).
+    tail_bump: the trial's last repetition, short of a phase, may also take it from the bump of the norm in the
+        rest after its last movement (imulog addition, issue 31 sixth round; False = only rests between movements).
     labels: phase labels in order.
     """
 
@@ -88,6 +90,7 @@ class RepetitionParams:
     fused_groups: bool = True
     rescue_fraction: float = 0.5
     turned_majors: bool = True
+    tail_bump: bool = True
     labels: tuple[str, ...] = R2G_PHASES
 
 
@@ -159,12 +162,13 @@ def _split_candidates(start, end, norm, min_len: int):
                 yield k, int(start[k] + cut), float(seg[cut])
 
 
-def _split_to(start, end, norm, rate_hz, ref, n_phases: int):
+def _split_to(start, end, norm, rate_hz, ref, n_phases: int, tail: int | None = None):
     """Make up fused or missing phases (fewer than ``n_phases`` movements): split a movement at the local minimum
     of the norm, or (with a reference) take the bump of the norm in a rest between two movements
     (:func:`~imulog.process.segmentation.rescue.bump_in_rest`, at least half the reference's shortest phase),
-    whichever best matches the reference; while more than one phase is missing, a bump goes before a split.
-    Returns the movements and the starts of the phases taken from rests."""
+    or, with ``tail`` (the end of the recording, samples; the trial's last repetition), in the rest after the
+    last movement, whichever best matches the reference; while more than one phase is missing, a bump goes
+    before a split. Returns the movements and the starts of the phases taken from rests."""
     from imulog.process.segmentation.rescue import bump_in_rest
 
     start, end = list(start), list(end)
@@ -175,8 +179,8 @@ def _split_to(start, end, norm, rate_hz, ref, n_phases: int):
         candidates = [(k, cut, None, value) for k, cut, value in _split_candidates(start, end, norm, min_len)]
         if ref is not None:
             bump_len = max(min_len, int(0.5 * float(np.min(ref[0])) * rate_hz))
-            for k in range(len(start) - 1):
-                bump = bump_in_rest(norm, int(end[k]), int(start[k + 1]), bump_len)
+            for k in range(len(start) - (0 if tail is not None else 1)):
+                bump = bump_in_rest(norm, int(end[k]), int(start[k + 1]) if k + 1 < len(start) else tail, bump_len)
                 if bump is not None:
                     candidates.append((k, bump[0], bump[1], -bump[2]))
         for k, a, b, value in candidates:
@@ -214,9 +218,12 @@ def _reference(groups, start, end, norm, rate_hz, n_phases, major=None):
     return tuple(np.mean([f[i] for f in feats], axis=0) for i in range(3))
 
 
-def _select(s, e, norm, rate_hz, ref, params: RepetitionParams) -> tuple[np.ndarray, np.ndarray, float, dict]:
+def _select(
+    s, e, norm, rate_hz, ref, params: RepetitionParams, tail: int | None = None
+) -> tuple[np.ndarray, np.ndarray, float, dict]:
     """Exactly ``n_phases`` movements of one repetition, their correction cost (inf without reference) and what
-    the correction did: ``{"movements", "merged", "dropped", "split", "missing", "forced"}`` (counts; forced:
+    the correction did (``tail``: the end of the recording when this is the trial's last repetition, see
+    :func:`_split_to`): ``{"movements", "merged", "dropped", "split", "missing", "forced"}`` (counts; forced:
     per kept phase, True when it was made by cutting a movement)."""
     n = params.n_phases
     info = {"movements": len(s), "merged": 0, "dropped": 0, "split": 0, "missing": 0, "found": 0}
@@ -251,7 +258,7 @@ def _select(s, e, norm, rate_hz, ref, params: RepetitionParams) -> tuple[np.ndar
         s, e = ks, ke
     elif len(s) < n:
         original = set(np.asarray(s).tolist()) | set(np.asarray(e).tolist())
-        s, e, found = _split_to(s, e, norm, rate_hz, ref, n)
+        s, e, found = _split_to(s, e, norm, rate_hz, ref, n, tail)
         info["found"] = len(found)
         info["split"] = len(s) - info["movements"] - len(found)
         info["missing"] = n - len(s)
@@ -267,6 +274,12 @@ def _select(s, e, norm, rate_hz, ref, params: RepetitionParams) -> tuple[np.ndar
     info["forced"] = forced
     info.setdefault("cost", cost)
     return s, e, cost, info
+
+
+def _tail(group, start, norm, params: RepetitionParams) -> int | None:
+    """The end of the recording (samples) for the group holding the trial's last movement (its last phase may lie
+    in the rest after it, under every detection level: issue 31, sixth round), else None."""
+    return len(norm) if params.tail_bump and len(group) and int(group[-1]) == len(start) - 1 else None
 
 
 def _kept_cost(costs: list[float], n_keep: int) -> tuple[int, int, float]:
@@ -292,7 +305,7 @@ def split_merged_groups(groups, start, end, norm, rate_hz, ref, params: Repetiti
     n = params.n_phases
 
     def cost(g) -> float:
-        return _select(start[g], end[g], norm, rate_hz, ref, params)[2]
+        return _select(start[g], end[g], norm, rate_hz, ref, params, _tail(g, start, norm, params))[2]
 
     groups = list(groups)
     costs = [cost(g) for g in groups]
@@ -385,7 +398,9 @@ def segment_repetitions(
                 ref = _reference(groups, start, end, norm, rate_hz, params.n_phases, major)
             if ref is not None and params.split_merged:
                 groups = split_merged_groups(groups, start, end, norm, rate_hz, ref, params, n_rep)
-            selected = [_select(start[g], end[g], norm, rate_hz, ref, params) for g in groups]
+            selected = [
+                _select(start[g], end[g], norm, rate_hz, ref, params, _tail(g, start, norm, params)) for g in groups
+            ]
             if len(selected) > n_rep:  # drop the groups least like a repetition, keep time order
                 order = np.argsort([c for _, _, c, _ in selected], kind="stable")
                 keep = np.sort(order[:n_rep])
