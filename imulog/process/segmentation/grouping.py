@@ -132,13 +132,17 @@ def group_movements(
     major_fraction: float = 0.5,
     extra_cut_fraction: float = 0.5,
     min_size: int | None = None,
+    angles: np.ndarray | None = None,
 ) -> np.ndarray:
     """Candidate repetition of each movement (0-based, in time order) from the longest rests.
 
     A movement is major when its height is at least ``major_fraction`` x the median height (so small
     adjustments inside a rest do not cut the rest in two); when the major movements cannot fill
     ``n_repetitions`` groups of ``n_phases`` (a slow subject's low phase counts as minor), every movement
-    counts. The ``n_repetitions - 1`` borders are the gaps between consecutive major movements that
+    counts. With ``angles`` (rad turned by each movement, the norm integrated over it) a movement is also major
+    when its angle is at least ``major_fraction`` x the median angle: a slow subject's low phase turns the wrist
+    as far as the others, only slower (an adjustment in a rest turns it little), and a repetition holding two
+    such phases besides a missing one must still be a group. The ``n_repetitions - 1`` borders are the gaps between consecutive major movements that
     maximise the summed rest with every repetition holding ``n_phases`` to ``4 n_phases`` major movements
     (dynamic programming); further gaps at least ``extra_cut_fraction`` x the median border gap are cut as
     well (longest first, while every group keeps ``n_phases`` major movements), so that activity which is not
@@ -147,11 +151,17 @@ def group_movements(
     span contains (or is nearest to) their mid-point.
     """
     start, end, heights = np.asarray(start), np.asarray(end), np.asarray(heights, dtype=float)
+    angles = None if angles is None else np.asarray(angles, dtype=float)
     if len(start) == 0:
         return np.zeros(0, dtype=np.int64)
     size = n_phases if min_size is None else int(min_size)
+
+    def majors(fraction: float) -> np.ndarray:
+        turned = np.zeros(len(start), dtype=bool) if angles is None else angles >= fraction * np.median(angles)
+        return np.flatnonzero((heights >= fraction * np.median(heights)) | turned)
+
     for fraction in (major_fraction, 0.0):  # a low phase (slow subject) can fall below major_fraction
-        major = np.flatnonzero(heights >= fraction * np.median(heights))
+        major = majors(fraction)
         gaps = start[major[1:]] - end[major[:-1]]
         if size < n_phases:  # fused partition: short groups allowed at a price of the median gap between majors
             penalty = float(np.sort(gaps)[-max(1, n_repetitions - 1) :].mean()) if len(gaps) else 0.0
@@ -161,7 +171,7 @@ def group_movements(
         if cuts is not None:
             break
     if cuts is None:  # too few movements for the constraint: plain longest gaps between major movements
-        major = np.flatnonzero(heights >= major_fraction * np.median(heights))
+        major = majors(major_fraction)
         gaps = start[major[1:]] - end[major[:-1]]
         cuts = sorted(np.argsort(-gaps, kind="stable")[: n_repetitions - 1].tolist())
     elif len(cuts) and size >= n_phases:  # (a fused partition only moves borders, it adds no groups)

@@ -66,6 +66,11 @@ class RepetitionParams:
     rescue_fraction: a run of the norm in a rest above this fraction of the lowest real movement's height and
         as long as a short movement is a movement the detector missed, see
         :func:`~imulog.process.segmentation.rescue.rescue_missed` (imulog addition, issue 31; 0 = off).
+    turned_majors: a movement that turns the wrist at least ``major_fraction`` x the median angle (the norm
+        integrated over it, rad) counts as major in the grouping whatever its height (imulog addition, issue 31
+        sixth round: a slow, low phase; False = height only, as before).
+    tail_bump: the trial's last repetition, short of a phase, may also take it from the bump of the norm in the
+        rest after its last movement (imulog addition, issue 31 sixth round; False = only rests between movements).
     labels: phase labels in order.
     """
 
@@ -84,6 +89,8 @@ class RepetitionParams:
     max_candidates: int = 14
     fused_groups: bool = True
     rescue_fraction: float = 0.5
+    turned_majors: bool = True
+    tail_bump: bool = True
     labels: tuple[str, ...] = R2G_PHASES
 
 
@@ -111,6 +118,12 @@ def features(start: np.ndarray, end: np.ndarray, norm: np.ndarray, rate_hz: floa
     h = np.array([norm[s:e].max() if e > s else 0.0 for s, e in zip(start, end, strict=True)])
     s = (start[1:] - end[:-1]) / rate_hz
     return d, h, s
+
+
+def turned_angles(start: np.ndarray, end: np.ndarray, norm, rate_hz: float) -> np.ndarray:
+    """Angle (rad) each movement ``[start, end)`` turns the wrist: the filtered norm (rad/s, an array or a store)
+    integrated over it."""
+    return np.array([float(np.sum(np.asarray(norm[a:b]))) / rate_hz for a, b in zip(start, end, strict=True)])
 
 
 def _rms(a: np.ndarray) -> float:
@@ -149,12 +162,13 @@ def _split_candidates(start, end, norm, min_len: int):
                 yield k, int(start[k] + cut), float(seg[cut])
 
 
-def _split_to(start, end, norm, rate_hz, ref, n_phases: int):
+def _split_to(start, end, norm, rate_hz, ref, n_phases: int, tail: int | None = None):
     """Make up fused or missing phases (fewer than ``n_phases`` movements): split a movement at the local minimum
     of the norm, or (with a reference) take the bump of the norm in a rest between two movements
     (:func:`~imulog.process.segmentation.rescue.bump_in_rest`, at least half the reference's shortest phase),
-    whichever best matches the reference; while more than one phase is missing, a bump goes before a split.
-    Returns the movements and the starts of the phases taken from rests."""
+    or, with ``tail`` (the end of the recording, samples; the trial's last repetition), in the rest after the
+    last movement, whichever best matches the reference; while more than one phase is missing, a bump goes
+    before a split. Returns the movements and the starts of the phases taken from rests."""
     from imulog.process.segmentation.rescue import bump_in_rest
 
     start, end = list(start), list(end)
@@ -165,8 +179,8 @@ def _split_to(start, end, norm, rate_hz, ref, n_phases: int):
         candidates = [(k, cut, None, value) for k, cut, value in _split_candidates(start, end, norm, min_len)]
         if ref is not None:
             bump_len = max(min_len, int(0.5 * float(np.min(ref[0])) * rate_hz))
-            for k in range(len(start) - 1):
-                bump = bump_in_rest(norm, int(end[k]), int(start[k + 1]), bump_len)
+            for k in range(len(start) - (0 if tail is not None else 1)):
+                bump = bump_in_rest(norm, int(end[k]), int(start[k + 1]) if k + 1 < len(start) else tail, bump_len)
                 if bump is not None:
                     candidates.append((k, bump[0], bump[1], -bump[2]))
         for k, a, b, value in candidates:
@@ -204,9 +218,12 @@ def _reference(groups, start, end, norm, rate_hz, n_phases, major=None):
     return tuple(np.mean([f[i] for f in feats], axis=0) for i in range(3))
 
 
-def _select(s, e, norm, rate_hz, ref, params: RepetitionParams) -> tuple[np.ndarray, np.ndarray, float, dict]:
+def _select(
+    s, e, norm, rate_hz, ref, params: RepetitionParams, tail: int | None = None
+) -> tuple[np.ndarray, np.ndarray, float, dict]:
     """Exactly ``n_phases`` movements of one repetition, their correction cost (inf without reference) and what
-    the correction did: ``{"movements", "merged", "dropped", "split", "missing", "forced"}`` (counts; forced:
+    the correction did (``tail``: the end of the recording when this is the trial's last repetition, see
+    :func:`_split_to`): ``{"movements", "merged", "dropped", "split", "missing", "forced"}`` (counts; forced:
     per kept phase, True when it was made by cutting a movement)."""
     n = params.n_phases
     info = {"movements": len(s), "merged": 0, "dropped": 0, "split": 0, "missing": 0, "found": 0}
@@ -241,7 +258,7 @@ def _select(s, e, norm, rate_hz, ref, params: RepetitionParams) -> tuple[np.ndar
         s, e = ks, ke
     elif len(s) < n:
         original = set(np.asarray(s).tolist()) | set(np.asarray(e).tolist())
-        s, e, found = _split_to(s, e, norm, rate_hz, ref, n)
+        s, e, found = _split_to(s, e, norm, rate_hz, ref, n, tail)
         info["found"] = len(found)
         info["split"] = len(s) - info["movements"] - len(found)
         info["missing"] = n - len(s)
@@ -257,6 +274,12 @@ def _select(s, e, norm, rate_hz, ref, params: RepetitionParams) -> tuple[np.ndar
     info["forced"] = forced
     info.setdefault("cost", cost)
     return s, e, cost, info
+
+
+def _tail(group, start, norm, params: RepetitionParams) -> int | None:
+    """The end of the recording (samples) for the group holding the trial's last movement (its last phase may lie
+    in the rest after it, under every detection level: issue 31, sixth round), else None."""
+    return len(norm) if params.tail_bump and len(group) and int(group[-1]) == len(start) - 1 else None
 
 
 def _kept_cost(costs: list[float], n_keep: int) -> tuple[int, int, float]:
@@ -282,7 +305,7 @@ def split_merged_groups(groups, start, end, norm, rate_hz, ref, params: Repetiti
     n = params.n_phases
 
     def cost(g) -> float:
-        return _select(start[g], end[g], norm, rate_hz, ref, params)[2]
+        return _select(start[g], end[g], norm, rate_hz, ref, params, _tail(g, start, norm, params))[2]
 
     groups = list(groups)
     costs = [cost(g) for g in groups]
@@ -337,6 +360,7 @@ def segment_repetitions(
         subsets = [(np.arange(len(start)), [assign_to_repetitions(start, end, rep_s, rep_e)])]
     else:
         task = np.flatnonzero(~burst_mask(start, end, rate_hz, params.burst_gap_s, params.burst_min_movements))
+        angles = turned_angles(start, end, norm, rate_hz) if params.turned_majors else None
         subsets = [task] if len(task) == len(start) else [task, np.arange(len(start))]
         subsets = [
             (
@@ -351,6 +375,7 @@ def segment_repetitions(
                         params.major_fraction,
                         params.extra_cut_fraction,
                         size,
+                        None if angles is None else angles[idx],
                     )
                     for size in ([params.n_phases] + ([params.n_phases - 1] if params.fused_groups else []))
                     for j in range(params.extra_groups + 1 if size == params.n_phases else 1)
@@ -373,7 +398,9 @@ def segment_repetitions(
                 ref = _reference(groups, start, end, norm, rate_hz, params.n_phases, major)
             if ref is not None and params.split_merged:
                 groups = split_merged_groups(groups, start, end, norm, rate_hz, ref, params, n_rep)
-            selected = [_select(start[g], end[g], norm, rate_hz, ref, params) for g in groups]
+            selected = [
+                _select(start[g], end[g], norm, rate_hz, ref, params, _tail(g, start, norm, params)) for g in groups
+            ]
             if len(selected) > n_rep:  # drop the groups least like a repetition, keep time order
                 order = np.argsort([c for _, _, c, _ in selected], kind="stable")
                 keep = np.sort(order[:n_rep])
