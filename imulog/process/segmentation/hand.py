@@ -58,6 +58,7 @@ import numpy as np
 from imulog.process.segmentation.arrival import gravity_free, slow_tail_end
 from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
 from imulog.process.segmentation.flanks import flank_zero, speed_flank_zero
+from imulog.process.segmentation.speed_profile import profile_end
 
 
 @dataclass(frozen=True)
@@ -125,6 +126,9 @@ class HandParams:
     speed_fit_s: float = 4.0
     rest_check_s: float = 1.5
     speed_reach_s: float = 2.0
+    profile_rest_s: float = 1.0
+    profile_durations_s: tuple[float, float] = (0.5, 8.0)
+    profile_grid_hz: float = 20.0
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:
@@ -419,5 +423,12 @@ def refine_with_accelerometer(
             if 0 < i <= shift:
                 out_s[k] = a0 - i
             out_s[k] = pre[1] + _extrapolated(a_all, v_all, int(out_s[k]) - pre[1], a0 - pre[1], level, params, rate_hz)
+        if post is not None and post[0] > out_e[k]:  # step 9: the last movement's arrival, starting after the onset
+            out_e[k] = max(
+                out_e[k],
+                profile_end(
+                    acc, gyr, dt, lo, int(out_s[k]), int(out_e[k]), post[0], stop, params, rate_hz, (raw, gyr_raw)
+                ),
+            )
     s[order], e[order] = out_s, out_e
     return s, e
