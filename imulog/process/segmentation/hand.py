@@ -128,7 +128,7 @@ class HandParams:
     speed_reach_s: float = 2.0
     profile_rest_s: float = 1.0
     profile_durations_s: tuple[float, float] = (0.5, 8.0)
-    profile_grid_hz: float = 20.0
+    profile_grid_hz: float = 10.0
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:

@@ -47,31 +47,36 @@ def speed_left(s: float) -> float:
     return s * s / 2 - s**3 + s**4 / 2
 
 
-def _grid_fit(yc, basis, i, ends, durations, earliest):
-    """Best ``(gain, i_end, T, K)`` of :func:`fit_arrival`'s model over the candidate ``ends`` x ``durations`` (a
-    ``None`` duration: ``T = i_end - earliest``); ``gain`` the squared error removed, (m/s^2)^2."""
-    best = (-np.inf, None, None, None)
-    rows = max(1, _MAX_CELLS // len(i))
-    for dur in durations:
-        for lo in range(0, len(ends), rows):
-            e = ends[lo : lo + rows]
-            d = e - earliest if dur is None else np.full(len(e), float(dur))
-            h = decel_shape((e[:, None] - i[None, :]) / np.maximum(d, 1.0)[:, None])
-            h = h - (h @ basis.T) @ basis
-            hh = np.einsum("ij,ij->i", h, h)
-            r = h @ yc  # (m, 3)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                gain = np.where((hh > 0) & (e - d >= earliest), np.einsum("ij,ij->i", r, r) / hh, -np.inf)
-            k = int(np.argmax(gain))
-            if np.isfinite(gain[k]) and gain[k] > best[0]:
-                best = (float(gain[k]), float(e[k]), float(d[k]), r[k] / hh[k])
-    return best
-
-
-def _baseline(n: int) -> np.ndarray:
-    """Orthonormal rows spanning a constant and a line over ``n`` samples."""
+def _gains(a: np.ndarray, e: np.ndarray, d: np.ndarray, earliest: float) -> tuple[np.ndarray, np.ndarray]:
+    """Squared error (m/s^2)^2 that :func:`fit_arrival`'s model removes from ``a`` (n, 3) for each candidate arrival
+    ``e`` (m,) and duration ``d`` (m,) (samples; -inf where the movement would start before ``earliest``) and its
+    ``K`` (m, 3)."""
+    n = len(a)
     i = np.arange(n, dtype=float)
-    return np.array([np.ones(n) / np.sqrt(n), (i - i.mean()) / max(float(np.linalg.norm(i - i.mean())), 1e-12)])
+    basis = np.array([np.ones(n) / np.sqrt(n), (i - i.mean()) / max(float(np.linalg.norm(i - i.mean())), 1e-12)])
+    yc = a - basis.T @ (basis @ a)  # (n, 3) without the constant and the line
+    gain, k = np.full(len(e), -np.inf), np.zeros((len(e), a.shape[1]))
+    rows = max(1, _MAX_CELLS // n)
+    for lo in range(0, len(e), rows):
+        sl = slice(lo, lo + rows)
+        h = decel_shape((e[sl, None] - i[None, :]) / np.maximum(d[sl], 1.0)[:, None])
+        hb = h @ basis.T  # h's part in the baseline: yc has none, so h @ yc is the residual's
+        hh = np.einsum("ij,ij->i", h, h) - np.einsum("ij,ij->i", hb, hb)
+        r = h @ yc  # (m, 3)
+        ok = (hh > 0) & (e[sl] - d[sl] >= earliest)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            gain[sl] = np.where(ok, np.einsum("ij,ij->i", r, r) / hh, -np.inf)
+            k[sl] = np.where(ok[:, None], r / hh[:, None], 0.0)
+    return gain, k
+
+
+def _pairs(ends: np.ndarray, durations: list, earliest: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every (arrival, duration) of ``ends`` x ``durations`` (None: ``T = arrival - earliest``) whose movement starts
+    at ``earliest`` or later, and the index of each pair's duration."""
+    e = np.tile(ends, len(durations))
+    d = np.concatenate([ends - earliest if dur is None else np.full(len(ends), float(dur)) for dur in durations])
+    ok = e - d >= earliest  # the movement starts after ``earliest``: the others are not computed
+    return e[ok], d[ok], np.repeat(np.arange(len(durations)), len(ends))[ok]
 
 
 def fit_arrival(
@@ -84,37 +89,54 @@ def fit_arrival(
     at ``earliest`` or later (and, with a finite ``earliest``, ``T = i_end - earliest``: the phase as one
     movement). Returns ``(i_end, T, K)`` (K in m/s^2, a 3-vector: ``60 D / T^2`` times the direction of ``-a`` at
     the arrival, i.e. along ``-d`` for a movement along ``d``) of the smallest error; None when nothing fits.
-    With ``step`` > 1 the grid is searched on block means of ``step`` samples (``a`` is low-passed: the cost falls
-    with ``step^2``), then at every sample within 3 blocks of the best."""
+    With ``step`` > 1 the grid is searched on block means of ``step`` samples first (``a`` is low-passed: the
+    cost falls with ``step^2``), then, for the three best durations, at every sample within 3 blocks of their
+    best arrival; the best is refined over 5 durations between its grid neighbours, within a block."""
     n = len(a)
     if n < 8 or last < first:
         return None
-    whole = [None] if np.isfinite(earliest) else []
-    durations = np.asarray(durations, dtype=float)
+    grid = np.asarray(durations, dtype=float)
+    durs = [*grid, *([None] if np.isfinite(earliest) else [])]
     step = max(1, min(int(step), n // 8))
+    ends = np.arange(max(int(first), 1), min(int(last), n - 1) + 1, dtype=float)
+    if len(ends) == 0:
+        return None
     if step > 1:  # coarse: block means, the blocks aligned to the rest (the array's end)
         m = n // step
         blocks = a[n - m * step :].reshape(m, step, a.shape[1]).mean(axis=1)
         off = n - m * step + 0.5 * (step - 1)  # sample index of block 0's centre
-        i = np.arange(m, dtype=float)
-        basis = _baseline(m)
-        ends = np.arange(
-            max(1, int(np.ceil((first - off) / step))), min(m - 1, int((last - off) // step)) + 1, dtype=float
-        )
-        coarse = _grid_fit(
-            blocks - basis.T @ (basis @ blocks), basis, i, ends, [*(durations / step), *whole], (earliest - off) / step
-        )
-        if coarse[1] is None:
+        coarse = np.arange(np.ceil((first - off) / step), (last - off) // step + 1)
+        coarse = coarse[(coarse >= 1) & (coarse <= m - 1)]
+        cd = [None if dur is None else dur / step for dur in durs]
+        e, d, which = _pairs(coarse, cd, (earliest - off) / step)
+        gain = _gains(blocks, e, d, (earliest - off) / step)[0]
+        best = np.full(len(durs), -np.inf)
+        np.maximum.at(best, which, gain)
+        e_list, d_list = [], []
+        for j in np.argsort(-best)[:3]:  # the three best durations, every sample within 3 blocks of their best
+            if np.isfinite(best[j]):
+                c = off + e[(which == j) & (gain == best[j])][0] * step
+                near = ends[np.abs(ends - c) <= 3 * step]
+                e_list.append(near)
+                d_list.append(near - earliest if durs[j] is None else np.full(len(near), durs[j]))
+        if not e_list:
             return None
-        centre = off + coarse[1] * step  # the fine search: every sample within 3 blocks, every duration
-        first, last = max(first, int(centre) - 3 * step), min(last, int(centre) + 3 * step)
-    i = np.arange(n, dtype=float)
-    basis = _baseline(n)
-    ends = np.arange(max(int(first), 1), min(int(last), n - 1) + 1, dtype=float)
-    best = _grid_fit(a - basis.T @ (basis @ a), basis, i, ends, [*durations, *whole], earliest)
-    if best[1] is None:
+        e, d = np.concatenate(e_list), np.concatenate(d_list)
+    else:
+        e, d, _ = _pairs(ends, durs, earliest)
+    gain, k = _gains(a, e, d, earliest)
+    j = int(np.argmax(gain))
+    if not np.isfinite(gain[j]):
         return None
-    return best[1], best[2], best[3]
+    # between the grid's durations (a duration 6 % off moves the arrival by ~1 % of T): 5 more around the best
+    ratio = np.sqrt(grid[1] / grid[0]) if len(grid) > 1 and grid[0] > 0 else 1.0
+    around = ends[np.abs(ends - e[j]) <= step]
+    e2, d2, _ = _pairs(around, list(d[j] * np.geomspace(1 / ratio, ratio, 5)), earliest)
+    gain2, k2 = _gains(a, e2, d2, earliest)
+    i2 = int(np.argmax(gain2))
+    if gain2[i2] > gain[j]:
+        return float(e2[i2]), float(d2[i2]), k2[i2]
+    return float(e[j]), float(d[j]), k[j]
 
 
 def velocity_misfit(a: np.ndarray, v: np.ndarray, i_end: float, dur: float, dt: float) -> np.ndarray:
@@ -146,10 +168,11 @@ def profile_end(
     quiet = max(1, int(round(params.quiet_s * rate_hz)))
     if stop - end < length + 4 * quiet:
         return end
-    rest = quietest_window(acc, max(end + 2 * quiet, stop - 2 * length), stop, length)  # near the gap's end
+    t_lo, t_hi = params.profile_durations_s
+    hi = min(stop, end + int(round(t_hi * rate_hz)) + 2 * length)  # an arrival is at most t_hi after the offset
+    rest = quietest_window(acc, max(end + 2 * quiet, hi - 2 * length), hi, length)  # near the gap's end
     if rest is None or rest[1] - rest[0] < length // 2:
         return end
-    t_lo, t_hi = params.profile_durations_s
     durations = np.unique(np.round(np.geomspace(t_lo, t_hi, 24) * rate_hz))
     lo = max(0, min(int(lo), end - quiet))
     a, v, _ = gravity_free(acc, gyr, dt, rest, lo, rest[0])
