@@ -44,7 +44,11 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
    velocity integrated forward from it stays under half that speed for ``rest_check_s``) and the hand never
    slowed under half that speed between the offset and that part (a rest's drift follows a stop and a window in
    a drift fails the check); a slower last part, under that speed, where its speed stands ``n_sigma`` sd out of
-   the velocity's own noise (:func:`~imulog.process.segmentation.arrival.slow_tail_end`).
+   the velocity's own noise (:func:`~imulog.process.segmentation.arrival.slow_tail_end`);
+9. the phase's last movement is fitted as one minimum-jerk deceleration from inside the phase to a rest window
+   near the gap's end (:mod:`~imulog.process.segmentation.speed_profile`): when its arrival lies beyond the
+   rest window of step 2 (a window inside a steadily decelerating last part passes as a rest), starts after the
+   onset, covers the offset, and stands out of the velocity's noise, the offset moves to it.
 
 Pure numpy/scipy; intervals are half-open sample ranges ``[start, end)``.
 """
@@ -98,6 +102,9 @@ class HandParams:
     speed_reach_s: the velocity before an onset is integrated this far (s) into the phase (at least
         ``flank_search_s``), so that a slow start reaches ``velocity_level_mps`` for its speed flank (a 6-s reach
         needs 1.5 s; 0.6 s left 56 of 1200 stroke-slow onsets without a flank, 0.115 s late on average: issue 31).
+    profile_rest_s: length (s) of the rest window near the gap's end that step 9's fit is referred to; 0: off.
+    profile_durations_s: the range (s) of the fitted last movement's duration ``T``.
+    profile_grid_hz: step 9 searches the arrival on block means at this rate first (s^-1), then at every sample.
     rest_check_s: a slow last part of a phase at ``velocity_level_mps`` or more with next to no acceleration
         extends the offset when the velocity relative to the rest window stays under half that speed for this
         long (s) after the window (the window is a rest, not a hand cruising or drifting); 0: off.
@@ -381,6 +388,7 @@ def refine_with_accelerometer(
     order = np.argsort(s, kind="stable")
     ss, ee = s[order].copy(), e[order].copy()
     out_s, out_e = ss.copy(), ee.copy()
+    fits = []  # per phase: where step 9's fit starts and step 2's rest window after it
     for k in range(len(ss)):
         a0, b0 = int(ss[k]), int(ee[k])
         prev_end = int(out_e[k - 1]) if k > 0 else first
@@ -423,12 +431,13 @@ def refine_with_accelerometer(
             if 0 < i <= shift:
                 out_s[k] = a0 - i
             out_s[k] = pre[1] + _extrapolated(a_all, v_all, int(out_s[k]) - pre[1], a0 - pre[1], level, params, rate_hz)
-        if post is not None and post[0] > out_e[k]:  # step 9: the last movement's arrival, starting after the onset
-            out_e[k] = max(
-                out_e[k],
-                profile_end(
-                    acc, gyr, dt, lo, int(out_s[k]), int(out_e[k]), post[0], stop, params, rate_hz, (raw, gyr_raw)
-                ),
+        fits.append((lo, post[0] if post is not None else None))
+    for k, (lo, window) in enumerate(fits):  # step 9, once every onset is known: the next phase's bounds the rest
+        stop = (int(out_s[k + 1]) if k + 1 < len(ss) else n) - guard
+        if window is not None and out_e[k] < window < stop:
+            end = profile_end(
+                acc, gyr, dt, lo, int(out_s[k]), int(out_e[k]), window, stop, params, rate_hz, (raw, gyr_raw)
             )
+            out_e[k] = max(int(out_e[k]), end)
     s[order], e[order] = out_s, out_e
     return s, e

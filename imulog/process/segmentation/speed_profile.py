@@ -9,8 +9,9 @@ a minimum-jerk movement (Flash & Hogan 1985) of ``D`` m over ``T`` s decelerates
 ``a(s) = -60 D / T^2 (s - 3 s^2 + 2 s^3)``, ``s`` the time left to the arrival in units of ``T``: the deceleration
 fades linearly to zero at the arrival, then the hand rests.
 
-The model ``a = c + b t + K g((t_end - t) / T)`` (``g(s) = s - 3 s^2 + 2 s^3`` on ``0 < s < 1``, 0 after the
-arrival; ``c`` and ``b`` per axis: the rest's bias and the tilt of a gyroscope bias error growing linearly;
+The model ``a = c + K g((t_end - t) / T)`` (``g(s) = s - 3 s^2 + 2 s^3`` on ``0 < s < 1``, 0 after the
+arrival; ``c`` per axis: the window mean's error; a free line ``b t`` as well, for the tilt of a gyroscope bias
+error, let a ramp and a long deceleration stand for a sharp stop: offsets went 1-2.6 s into plain rests;
 ``K`` a 3-vector, the movement's direction) is fitted by least squares to the gravity-free acceleration
 (:func:`~imulog.process.segmentation.arrival.gravity_free`) relative to a rest window near the end of the gap,
 from the current offset to that window, over a grid of ``t_end`` and ``T``. The fitted arrival is kept when
@@ -53,8 +54,8 @@ def _gains(a: np.ndarray, e: np.ndarray, d: np.ndarray, earliest: float) -> tupl
     ``K`` (m, 3)."""
     n = len(a)
     i = np.arange(n, dtype=float)
-    basis = np.array([np.ones(n) / np.sqrt(n), (i - i.mean()) / max(float(np.linalg.norm(i - i.mean())), 1e-12)])
-    yc = a - basis.T @ (basis @ a)  # (n, 3) without the constant and the line
+    basis = np.ones((1, n)) / np.sqrt(n)
+    yc = a - basis.T @ (basis @ a)  # (n, 3) without the constant
     gain, k = np.full(len(e), -np.inf), np.zeros((len(e), a.shape[1]))
     rows = max(1, _MAX_CELLS // n)
     for lo in range(0, len(e), rows):
@@ -84,7 +85,7 @@ def fit_arrival(
 ) -> tuple[float, float, np.ndarray] | None:
     """Least-squares fit of the last movement's deceleration to ``a`` (n, 3) m/s^2 (time order, the rest at the end).
 
-    Model per axis ``c + b i + K g((i_end - i) / T)`` (:func:`decel_shape`; ``i`` the sample index), ``i_end``
+    Model per axis ``c + K g((i_end - i) / T)`` (:func:`decel_shape`; ``i`` the sample index), ``i_end``
     over the samples ``first .. last`` and ``T`` over ``durations`` (samples), the movement starting (``i_end - T``)
     at ``earliest`` or later (and, with a finite ``earliest``, ``T = i_end - earliest``: the phase as one
     movement). Returns ``(i_end, T, K)`` (K in m/s^2, a 3-vector: ``60 D / T^2`` times the direction of ``-a`` at
@@ -141,11 +142,11 @@ def fit_arrival(
 
 def velocity_misfit(a: np.ndarray, v: np.ndarray, i_end: float, dur: float, dt: float) -> np.ndarray:
     """``|v - v_model|`` (n,) m/s: the velocity ``v`` (n, 3) integrated back from the rest at the array's end minus the
-    fitted model's (``c + b i + K g``, refitted by least squares for the arrival ``i_end`` and duration ``dur``,
+    fitted model's (``c + K g``, refitted by least squares for the arrival ``i_end`` and duration ``dur``,
     samples) integrated the same way."""
     n = len(a)
     i = np.arange(n, dtype=float)
-    design = np.c_[np.ones(n), i - i.mean(), decel_shape((i_end - i) / max(dur, 1.0))]
+    design = np.c_[np.ones(n), decel_shape((i_end - i) / max(dur, 1.0))]
     coef = np.linalg.lstsq(design, a, rcond=None)[0]
     model = design @ coef
     v_model = -np.cumsum(model[::-1], axis=0)[::-1] * dt  # as gravity_free integrates back from the rest
