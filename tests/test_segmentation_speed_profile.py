@@ -7,15 +7,12 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from test_segmentation_flanks import _boundaries
 
-from imulog.process import quaternion as quat
-from imulog.process.segmentation.boundaries import refine_phase_boundaries
-from imulog.process.segmentation.hand import HandParams, refine_with_accelerometer
+from imulog.process.segmentation.hand import HandParams
 from imulog.process.segmentation.speed_profile import decel_shape, fit_arrival, speed_left
-from imulog.simulate.motion import MotionPlan, submovement_law
 
 RATE = 100.0
-G = np.array([0.0, 0.0, 9.81])
 ON = replace(HandParams(), profile_rest_s=1.0)  # step 9 is off by default (docs/accuracy.md)
 OFF = replace(HandParams(), profile_rest_s=0.0)
 
@@ -61,46 +58,12 @@ def test_fit_arrival_finds_the_arrival_of_a_slow_deceleration_under_noise():
     assert np.linalg.norm(k) * dur / RATE * speed_left(0.5) < 0.01  # under 1 cm/s at its peak
 
 
-def _reaches(seconds: float, distance_m: float, rng, drift_mps: float = 0.0):
-    """Three reaches of ``distance_m`` over ``seconds`` each between 5-s rests, the wrist turning over the first
-    third of each; with ``drift_mps`` the hand drifts (minimum jerk over 3 s, 0.4 s after each arrival, sideways)
-    during the rest, as the simulator's residual velocity does."""
-    plan = MotionPlan(np.zeros(3), np.array([1.0, 0, 0, 0]))
-    truth = []
-    for k in range(3):
-        plan.wait(5.0 if k == 0 or drift_mps <= 0 else 1.6)
-        target = plan.p + distance_m * np.array([0.8, 0.6 * (-1) ** k, 0.0])
-        q1 = quat.multiply(plan.q, quat.from_rotation_vector(np.radians([0.0, 10.0, 30.0 * (-1) ** k])))
-        rot = submovement_law(seconds, [0.0], [seconds / 3], [1.0])
-        truth.append(plan.move(seconds, target, q1, rot_law=rot))
-        if drift_mps > 0:
-            plan.wait(0.4)
-            plan.move(3.0, plan.p + drift_mps * 3.0 * np.array([0.0, 0.6, 0.8]))
-    plan.wait(5.0)
-    t = np.arange(0.0, plan.t, 1.0 / RATE)
-    kin = plan.evaluate(t)
-    acc = quat.rotate_inverse(kin.orientation, kin.acceleration + G) + np.array([0.2, -0.1, 0.3])
-    gyr = kin.omega + np.array([0.01, -0.02, 0.015])
-    acc = acc + rng.normal(0, 0.02, acc.shape)
-    gyr = gyr + rng.normal(0, 0.002, gyr.shape)
-    return t, acc, gyr, np.array(truth)
-
-
-def _errors(seconds, distance_m, params, seed=4, drift_mps=0.0):
-    t, acc, gyr, truth = _reaches(seconds, distance_m, np.random.default_rng(seed), drift_mps)
-    s = np.round((truth[:, 0] + 0.2) * RATE).astype(int)
-    e = np.round((truth[:, 0] + seconds / 3 - 0.2) * RATE).astype(int)
-    gs, ge = refine_phase_boundaries(gyr, RATE, s, e)
-    hs, he = refine_with_accelerometer(acc, gyr, RATE, gs, ge, params)
-    return t[hs] - truth[:, 0], t[he - 1] - truth[:, 1]
-
-
 def test_a_rest_window_inside_a_slow_deceleration_no_longer_ends_the_phase():
     """5-6-s reaches whose wrist stops turning in the first third: without step 9 the rest window lies inside the
     last part's deceleration and the offsets are 2.2-2.8 s early; with it they are within a quarter second."""
     for seconds, distance in ((6.0, 0.25), (5.0, 0.25)):
-        _, before = _errors(seconds, distance, OFF)
-        onset, offset = _errors(seconds, distance, ON)
+        _, before = _boundaries(seconds, distance, OFF)
+        onset, offset = _boundaries(seconds, distance, ON)
         far = before < -1.5  # the rest window inside the last part (3 of 3 at 6 s, 2 of 3 at 5 s)
         assert far.sum() >= 2, before
         assert np.all(np.abs(offset[far]) < 0.25), (seconds, before, offset)
@@ -113,7 +76,7 @@ def test_a_drift_after_the_arrival_stays_outside_the_phase():
     """A rest drifting at 2 cm/s (minimum jerk over 3 s, 0.4 s after the arrival): a slow movement of its own,
     which the profile fitted from the phase's last part to the rest cannot explain; the offsets do not move."""
     for seconds in (2.0, 3.0):
-        off = _errors(seconds, 0.25, OFF, drift_mps=0.02)[1]
-        on = _errors(seconds, 0.25, ON, drift_mps=0.02)[1]
+        off = _boundaries(seconds, 0.25, OFF, drift_mps=0.02)[1]
+        on = _boundaries(seconds, 0.25, ON, drift_mps=0.02)[1]
         assert np.all(on < 0.05), (seconds, on)  # never into the drift
         assert np.allclose(on, off), (on, off)
