@@ -10,16 +10,21 @@ a minimum-jerk movement (Flash & Hogan 1985) of ``D`` m over ``T`` s decelerates
 fades linearly to zero at the arrival, then the hand rests.
 
 The model ``a = c + K g((t_end - t) / T)`` (``g(s) = s - 3 s^2 + 2 s^3`` on ``0 < s < 1``, 0 after the
-arrival; ``c`` per axis: the window mean's error; a free line ``b t`` as well, for the tilt of a gyroscope bias
-error, let a ramp and a long deceleration stand for a sharp stop: offsets went 1-2.6 s into plain rests;
-``K`` a 3-vector, the movement's direction) is fitted by least squares to the gravity-free acceleration
+arrival; ``c`` per axis, the far window mean's error; ``K`` a 3-vector, the movement's direction and size) is
+fitted by least squares to the gravity-free acceleration
 (:func:`~imulog.process.segmentation.arrival.gravity_free`) relative to a rest window near the end of the gap,
-from the current offset to that window, over a grid of ``t_end`` and ``T``. The fitted arrival is kept when
-the fitted movement covers the current offset (it is the phase's own last movement, not a rest's drift
-starting after a stop), decelerates along the phase's motion, and its speed at the offset,
-``|K| T int_0^s g``, stands ``n_sigma`` sd out of the velocity's noise
-(:func:`~imulog.process.segmentation.arrival.velocity_noise_mps`, measured at that window) over the time
-from the offset to the arrival, with the rest from the arrival to the window's end as the rest window.
+from a little inside the phase (where the wrist's rotation is small) to that window, over a grid of ``t_end``
+and ``T``. (A free line ``b t`` as well, for the tilt of a gyroscope bias error, let a ramp and a long
+deceleration stand for a sharp stop: offsets went 1-2.6 s into plain rests.) The fitted arrival is kept when
+it lies beyond the phase's first rest window (that window lay inside the movement), the fitted movement starts
+after the phase's onset and the offset lies in its main deceleration (``profile_min_s`` of ``T`` or more before
+the arrival), it decelerates along the phase's motion, its speed at the offset, ``|K| T int_0^s g``, stands
+``n_sigma`` sd out of the velocity's noise (:func:`~imulog.process.segmentation.arrival.velocity_noise_mps`,
+measured at the far window) over the time from the offset to the arrival, with the rest from the arrival to
+the window's end as the rest window, and the profile integrated back from the far window stays within
+``n_sigma`` sd of the velocity integrated from it (:func:`velocity_misfit`): a rest's drift after a stop is no
+deceleration of the phase. Off by default (``HandParams.profile_rest_s = 0``, docs/accuracy.md: on the
+development and held-out grids it also moved two offsets into still rests).
 Pure numpy; indices are sample indices.
 """
 
@@ -160,9 +165,10 @@ def profile_end(
     or ``end`` (the current offset) when the fit does not stand out of the noise (see the module docstring).
 
     ``acc``/``gyr`` the low-passed accelerometer (m/s^2) and gyroscope (rad/s), ``raw`` the unfiltered ones,
-    ``lo`` where the fit starts (inside the phase, where the wrist's rotation is small), ``onset`` the phase's onset, where its last movement can start at the earliest, ``stop`` the next
-    phase's guard, ``params`` a :class:`~imulog.process.segmentation.hand.HandParams`
-    (``profile_rest_s``: the reference window's length; ``profile_durations_s``: the range of ``T``)."""
+    ``lo`` where the fit starts (inside the phase, where the wrist's rotation is small), ``onset`` the phase's
+    onset (where its last movement can start at the earliest), ``window`` the start of the rest window steps 2-8
+    used, ``stop`` the next phase's guard, ``params`` a :class:`~imulog.process.segmentation.hand.HandParams`
+    (``profile_rest_s``: the far window's length, s; ``profile_durations_s``: the range of ``T``, s)."""
     if params.profile_rest_s <= 0 or raw is None:
         return end
     length = int(round(params.profile_rest_s * rate_hz))
