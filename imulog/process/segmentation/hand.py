@@ -48,7 +48,8 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
 9. the phase's last movement is fitted as one minimum-jerk deceleration from inside the phase to a rest window
    near the gap's end (:mod:`~imulog.process.segmentation.speed_profile`): when its arrival lies beyond the
    rest window of step 2 (a window inside a steadily decelerating last part passes as a rest), starts after the
-   onset, covers the offset, and stands out of the velocity's noise, the offset moves to it.
+   onset, covers the offset, and stands out of the velocity's noise, the offset moves to it (off by default:
+   ``profile_rest_s = 0``).
 
 Pure numpy/scipy; intervals are half-open sample ranges ``[start, end)``.
 """
