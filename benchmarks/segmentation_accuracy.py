@@ -128,6 +128,7 @@ def table(trials, methods, variants) -> None:
 
 GRID_METHODS = {
     "hand (default)": PhaseParams(),
+    "hand + speed profile (step 9)": PhaseParams(hand=HandParams(profile_rest_s=1.0)),  # issue 31, off by default
     "gyroscope only": PhaseParams(hand=HandParams(enabled=False)),
     "published (--no-refine)": PhaseParams(
         dynamos=DynamosParams(refine_boundaries=False), boundaries=BoundaryParams(enabled=False)
@@ -232,18 +233,18 @@ def print_outside(rows: list[dict]) -> None:
             print(f"  seed {seed} subject {subject} repetition {rep} {label}: onset {a:+.3f} s, offset {b:+.3f} s")
 
 
-def print_comparison(before: list[dict], rows: list[dict]) -> None:
+def print_comparison(before: list[dict], rows: list[dict], method: str | None = None) -> None:
     """Per condition and method, ``before`` (a ``--json`` file of an earlier run on the same trials) → ``rows``:
     the share of durations within 0.1 s (worst trial), the trials under 95 %, how many trials gained / lost, and
-    the onset / offset MAE (s)."""
-    old = {(r["condition"], r["method"]): r for r in before}
+    the onset / offset MAE (s). With ``method``, every row is compared with that method's record in ``before``."""
+    old = {(r["condition"], method or r["method"]): r for r in before if method is None or r["method"] == method}
     print(
         "\n| condition | method | within 0.1 s % (worst trial), before → after | trials under 95 % | trials better / worse "
         "| onset / offset MAE s |"
     )
     print("|" + "---|" * 6)
     for r in rows:
-        b = old.get((r["condition"], r["method"]))
+        b = old.get((r["condition"], method or r["method"]))
         if b is None:
             continue
         was = {(t[0], t[1]): t[2] for t in b["per_trial"]}
@@ -316,6 +317,9 @@ def main() -> None:
     ap.add_argument(
         "--compare", default=None, help="a --json file of an earlier run on the same trials: before → after"
     )
+    ap.add_argument(
+        "--compare-as", default=None, help="compare every method with this method's records in --compare's file"
+    )
     args = ap.parse_args()
     if args.grid:
         from imulog.simulate.grid import CONDITIONS
@@ -346,7 +350,7 @@ def main() -> None:
             import json
 
             with open(args.compare) as f:
-                print_comparison(json.load(f), rows)
+                print_comparison(json.load(f), rows, args.compare_as)
         print(f"\n{time.perf_counter() - t0:.0f} s wall")
         return
     variants = {

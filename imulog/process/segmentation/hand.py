@@ -44,7 +44,12 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
    velocity integrated forward from it stays under half that speed for ``rest_check_s``) and the hand never
    slowed under half that speed between the offset and that part (a rest's drift follows a stop and a window in
    a drift fails the check); a slower last part, under that speed, where its speed stands ``n_sigma`` sd out of
-   the velocity's own noise (:func:`~imulog.process.segmentation.arrival.slow_tail_end`).
+   the velocity's own noise (:func:`~imulog.process.segmentation.arrival.slow_tail_end`);
+9. the phase's last movement is fitted as one minimum-jerk deceleration from inside the phase to a rest window
+   near the gap's end (:mod:`~imulog.process.segmentation.speed_profile`): when its arrival lies beyond the
+   rest window of step 2 (a window inside a steadily decelerating last part passes as a rest), starts after the
+   onset, covers the offset, and stands out of the velocity's noise, the offset moves to it (off by default:
+   ``profile_rest_s = 0``).
 
 Pure numpy/scipy; intervals are half-open sample ranges ``[start, end)``.
 """
@@ -58,6 +63,7 @@ import numpy as np
 from imulog.process.segmentation.arrival import gravity_free, slow_tail_end
 from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
 from imulog.process.segmentation.flanks import flank_zero, speed_flank_zero
+from imulog.process.segmentation.speed_profile import profile_end
 
 
 @dataclass(frozen=True)
@@ -97,6 +103,12 @@ class HandParams:
     speed_reach_s: the velocity before an onset is integrated this far (s) into the phase (at least
         ``flank_search_s``), so that a slow start reaches ``velocity_level_mps`` for its speed flank (a 6-s reach
         needs 1.5 s; 0.6 s left 56 of 1200 stroke-slow onsets without a flank, 0.115 s late on average: issue 31).
+    profile_rest_s: length (s) of the rest window near the gap's end that step 9's fit is referred to; 0: off (the
+        default: on, 1 s, it moved 5 stroke-slow development trials up and one stroke trial down, docs/accuracy.md).
+    profile_durations_s: the range (s) of the fitted last movement's duration ``T``.
+    profile_min_s: step 9 moves an offset only when it lies at least this far (in units of the fitted movement's
+        duration) before the fitted arrival: in the main deceleration, at 56 % of the peak speed or more.
+    profile_grid_hz: step 9 searches the arrival on block means at this rate first (s^-1), then at every sample.
     rest_check_s: a slow last part of a phase at ``velocity_level_mps`` or more with next to no acceleration
         extends the offset when the velocity relative to the rest window stays under half that speed for this
         long (s) after the window (the window is a rest, not a hand cruising or drifting); 0: off.
@@ -125,6 +137,10 @@ class HandParams:
     speed_fit_s: float = 4.0
     rest_check_s: float = 1.5
     speed_reach_s: float = 2.0
+    profile_rest_s: float = 0.0
+    profile_durations_s: tuple[float, float] = (0.5, 8.0)
+    profile_grid_hz: float = 10.0
+    profile_min_s: float = 0.25
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:
@@ -377,6 +393,7 @@ def refine_with_accelerometer(
     order = np.argsort(s, kind="stable")
     ss, ee = s[order].copy(), e[order].copy()
     out_s, out_e = ss.copy(), ee.copy()
+    fits = []  # per phase: where step 9's fit starts and step 2's rest window after it
     for k in range(len(ss)):
         a0, b0 = int(ss[k]), int(ee[k])
         prev_end = int(out_e[k - 1]) if k > 0 else first
@@ -419,5 +436,13 @@ def refine_with_accelerometer(
             if 0 < i <= shift:
                 out_s[k] = a0 - i
             out_s[k] = pre[1] + _extrapolated(a_all, v_all, int(out_s[k]) - pre[1], a0 - pre[1], level, params, rate_hz)
+        fits.append((lo, post[0] if post is not None else None))
+    for k, (lo, window) in enumerate(fits):  # step 9, once every onset is known: the next phase's bounds the rest
+        stop = (int(out_s[k + 1]) if k + 1 < len(ss) else n) - guard
+        if window is not None and out_e[k] < window < stop:
+            end = profile_end(
+                acc, gyr, dt, lo, int(out_s[k]), int(out_e[k]), window, stop, params, rate_hz, (raw, gyr_raw)
+            )
+            out_e[k] = max(int(out_e[k]), end)
     s[order], e[order] = out_s, out_e
     return s, e
