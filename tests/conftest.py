@@ -1,4 +1,5 @@
-"""Shared test fixtures: the real recordings in ../shared/data and temporary trial folders."""
+"""Shared test fixtures (the real recordings in ../shared/data, temporary trial folders) and the pytest-xdist
+scheduler of ``.ci/run``."""
 
 from __future__ import annotations
 
@@ -58,7 +59,8 @@ PER_TEST_FILES = frozenset({"tests/test_docs.py"})
 if importlib.util.find_spec("xdist") is not None:  # the hook exists only with pytest-xdist (the dev extra)
 
     def pytest_xdist_make_scheduler(config, log):
-        """``--dist loadfile`` (``.ci/run``): whole files to the workers, except :data:`PER_TEST_FILES`."""
+        """``--dist loadfile`` (``.ci/run``): whole files to the workers, except :data:`PER_TEST_FILES`. (Marks
+        for ``--dist loadgroup`` cannot say this: with pytest 9.2 it ignores them, pytest-xdist issue 1386.)"""
         if config.getvalue("dist") != "loadfile":
             return None
         from xdist.scheduler import LoadScopeScheduling
