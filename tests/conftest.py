@@ -1,7 +1,9 @@
-"""Shared test fixtures: the real recordings in ../shared/data and temporary trial folders."""
+"""Shared test fixtures (the real recordings in ../shared/data, temporary trial folders) and the pytest-xdist
+scheduler of ``.ci/run``."""
 
 from __future__ import annotations
 
+import importlib.util
 import os
 from pathlib import Path
 
@@ -47,3 +49,36 @@ def processed_r2g(tmp_path_factory) -> Path:
     run_align(out)
     run_phases(out)
     return out
+
+
+#: test files whose tests are independent and long (each docs page runs in its own folder, ~10-170 s): under
+#: pytest-xdist they are scheduled test by test; every other file goes to one worker whole (its module fixtures
+#: are built once, its tests run in file order, as in one process)
+PER_TEST_FILES = frozenset({"tests/test_docs.py"})
+
+if importlib.util.find_spec("xdist") is not None:  # the hook exists only with pytest-xdist (the dev extra)
+
+    def pytest_xdist_make_scheduler(config, log):
+        """``--dist loadfile`` (``.ci/run``): whole files to the workers, except :data:`PER_TEST_FILES`. (Marks
+        for ``--dist loadgroup`` cannot say this: with pytest 9.2 it ignores them, pytest-xdist issue 1386.)"""
+        if config.getvalue("dist") != "loadfile":
+            return None
+        from xdist.scheduler import LoadScopeScheduling
+
+        class FilesAndPages(LoadScopeScheduling):
+            """Scopes go out one at a time as a worker runs low; the single tests of :data:`PER_TEST_FILES` (the
+            longest units) first, so that no worker is left with one at the end while the other idles."""
+
+            def _split_scope(self, nodeid: str) -> str:
+                path = nodeid.split("::", 1)[0]
+                return nodeid if path in PER_TEST_FILES else path
+
+            def _assign_work_unit(self, node) -> None:
+                if not getattr(self, "_ordered", False):
+                    first = [s for s in self.workqueue if "::" in s]
+                    for scope in reversed(first):
+                        self.workqueue.move_to_end(scope, last=False)
+                    self._ordered = True
+                super()._assign_work_unit(node)
+
+        return FilesAndPages(config, log)

@@ -6,7 +6,8 @@ first on PATH, and, unless the page makes its own, ``trial.mcap``: recordings/si
 (what ``imulog convert recordings/sim/... -o trial.mcap`` makes) and processed by orientation, align,
 phases and trajectory, since most pages start from it. ``imulog view ... --web`` gets
 ``--serve-seconds 1`` and free ports. A page's blocks run in order in one process: python blocks share
-one namespace, bash blocks run with ``set -e``. Pages run two at a time (CI has two cores).
+one namespace, bash blocks run with ``set -e``. Pages run two at a time (CI has two cores): on two threads
+in one pytest process, or one page per worker under pytest-xdist (``.ci/run`` uses ``-n 2``).
 
 A block is skipped only when the line before its fence is ``<!-- no-run: reason -->`` (servers, the
 test suite itself, benchmarks of minutes); docs/cli.md lists the conventions.
@@ -190,11 +191,12 @@ def make_docs_trial(out: Path) -> Path:
 
 @pytest.fixture(scope="session")
 def page_runs(tmp_path_factory):
-    """Every page started at once on two workers (CI has two cores): page -> future of its process."""
+    """page -> its finished process. In one pytest process every page starts at once on two threads (CI has two
+    cores); on a pytest-xdist worker (``.ci/run``: the workers already fill the cores) a page runs when its test
+    asks for it, so each page test is scheduled like any other test and no worker starts every page."""
     from concurrent.futures import ThreadPoolExecutor
 
     trial = make_docs_trial(tmp_path_factory.mktemp("docs_trial") / "trial.mcap")
-    pool = ThreadPoolExecutor(max_workers=2)
 
     def run(page: str) -> subprocess.CompletedProcess:
         root = tmp_path_factory.mktemp("docs_" + re.sub(r"\W", "_", page))
@@ -202,8 +204,12 @@ def page_runs(tmp_path_factory):
         cmd = [sys.executable, __file__, page, "--workdir", str(workdir)]
         return subprocess.run(cmd, capture_output=True, text=True, env=page_env(), timeout=PAGE_TIMEOUT_S, cwd=workdir)
 
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        yield run
+        return
+    pool = ThreadPoolExecutor(max_workers=2)
     futures = {page: pool.submit(run, page) for page in RUN_PAGES}
-    yield futures
+    yield lambda page: futures[page].result()
     pool.shutdown(wait=True, cancel_futures=True)
 
 
@@ -226,7 +232,7 @@ def test_docs_have_no_paths_of_a_development_machine():
 
 @pytest.mark.parametrize("page", RUN_PAGES)
 def test_page_blocks_run(page, page_runs):
-    proc = page_runs[page].result()
+    proc = page_runs(page)
     failures = [ln[len("FAIL ") :] for ln in proc.stdout.splitlines() if ln.startswith("FAIL ")]
     assert proc.returncode == 0 and not failures, "\n".join(failures) or proc.stderr[-2000:]
 

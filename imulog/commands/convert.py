@@ -221,13 +221,17 @@ def convert(
     if output.suffix.lower() != ".mcap":
         raise click.UsageError(f"output {output} should end in .mcap")
     refuse_existing(output, overwrite=overwrite)  # before any reading
-    if len(inputs) == 1 and _streams(inputs[0], fmt, options):
+    try:
+        names = [_format_name(p, fmt, options) for p in inputs]  # each file sniffed once, for both paths below
+    except ConversionError as e:
+        raise click.ClickException(str(e)) from None
+    if len(inputs) == 1 and _streams(inputs[0], names[0]):
         _convert_streaming(
-            inputs[0], output, fmt, options, meta, attach=attach_mode, overwrite=overwrite, as_json=as_json
+            inputs[0], output, names[0], options, meta, attach=attach_mode, overwrite=overwrite, as_json=as_json
         )
         return
     try:
-        rec, formats = _convert_group(list(inputs), fmt, options)
+        rec, formats = _convert_group(list(inputs), fmt, options, names)
         finish_recording(rec, meta, formats)
         path = _write(output, rec, attach=attach_mode, overwrite=overwrite)
     except ConversionError as e:

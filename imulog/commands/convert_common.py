@@ -127,8 +127,12 @@ def _format_name(path: Path, fmt: str | None, options: ConvertOptions) -> str:
         return "delimited"
 
 
-def _convert_group(files: list[Path], fmt: str | None, options: ConvertOptions) -> tuple[Recording, dict[str, str]]:
-    names = [_format_name(p, fmt, options) for p in files]  # detected once, here
+def _convert_group(
+    files: list[Path], fmt: str | None, options: ConvertOptions, names: list[str] | None = None
+) -> tuple[Recording, dict[str, str]]:
+    """``files`` as one recording, and each file's format; ``names``: the formats when already detected."""
+    if names is None:
+        names = [_format_name(p, fmt, options) for p in files]  # detected once, here
     return convert_files(files, fmt, options, formats=names), {p.name: n for p, n in zip(files, names, strict=True)}
 
 

@@ -19,14 +19,15 @@ from imulog.model import Recording
 STREAM_MIN_BYTES = int(os.environ.get("IMULOG_STREAM_MIN_BYTES", 32 * 1024 * 1024))
 
 
-def _streams(path: Path, fmt: str | None, options: ConvertOptions) -> bool:
-    """True when ``path`` is large and its format reads piece by piece (``Converter.iter_chunks``): at least
-    ``STREAM_MIN_BYTES``, or its converter's smaller ``stream_min_bytes``."""
+def _streams(path: Path, name: str) -> bool:
+    """True when ``path`` is large and its format ``name`` (forced or already detected: ``_format_name``) reads piece
+    by piece (``Converter.iter_chunks``): at least ``STREAM_MIN_BYTES``, or its converter's smaller
+    ``stream_min_bytes``."""
     if not path.is_file():
         return False
     size = path.stat().st_size
     try:
-        conv = get(_format_name(path, fmt, options))
+        conv = get(name)
     except (ConversionError, UnknownFormatError):
         return False
     threshold = STREAM_MIN_BYTES if conv.stream_min_bytes is None else min(STREAM_MIN_BYTES, conv.stream_min_bytes)
