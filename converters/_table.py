@@ -172,6 +172,8 @@ def _parse_arrow(spec: TableSpec, data: bytes, nrows: int | None, used: list[int
     ``Nan``), or ``-0`` in a whole-number column (pandas reads those as integers: +0).
     """
     ncols = len(spec.names)
+    if not used:
+        return None  # pyarrow reads an empty include_columns as every column: pandas decides
     try:
         trim = spec.allow_trailing_blank if spec.in_memory else spec.byte_range is not None or nrows is None
         lo, hi = _data_range(replace(spec, allow_trailing_blank=trim), data)
