@@ -122,9 +122,7 @@ def test_the_placement_side_is_checked_against_the_mouths_lateral_direction():
     _, right_mouths = repetitions([0.30, 0.15, 0.0], [0.09, 0.15, 0.35])
     assert not any(c.disagrees for c in side_checks("Right", "name", right_mouths, ("h2_m", 0.15)))
     # a right-labelled hand with a positive h2 whose IMU disagrees: only the IMU's line
-    assert [c.name for c in side_checks("right", "x", left_mouths, ("h2_m", 0.15)) if c.disagrees] == [
-        "placement_side"
-    ]
+    assert [c.name for c in side_checks("right", "x", left_mouths, ("h2_m", 0.15)) if c.disagrees] == ["placement_side"]
     with pytest.raises(ValueError, match="left or right"):
         side_checks("both", "x", right_mouths)
 
@@ -142,3 +140,75 @@ def test_a_mouth_near_the_start_does_not_contradict_the_side():
     spread[:, 1] = [-0.10, -0.095, -0.09, -0.085, -0.08]  # the same median, repetitions that agree
     (imu,) = side_checks("right", "x", spread, params=params)
     assert imu.threshold_m == params.min_disagreement_m and imu.disagrees and imu.seen == "left"
+
+
+# --- on simulated trials: the simulator's true repetitions, as trial_waypoints takes them -------------------
+
+
+@pytest.fixture(scope="module")
+def moved_trials():
+    """Trial 4 of subject 3 as set up (``base``), with the bottle 8 cm further and 10 cm to the right
+    (``moved``), and drunk towards -y like a left hand (``left``: mouth and bottle 40 cm to the right; the
+    simulator still labels it right)."""
+    from imulog.simulate import simulate
+
+    kw = dict(subject=3, seed=4, repetitions=4, noise_free=True)
+    return {
+        "base": simulate("r2g", **kw),
+        "moved": simulate("r2g", bottle_offset_m=(0.08, -0.10), **kw),
+        "left": simulate("r2g", bottle_offset_m=(0.0, -0.40), mouth_offset_m=(0.0, -0.40, 0.0), **kw),
+    }
+
+
+def _waypoints_and_checks(sim, anthro, side=None):
+    from truth_repetitions import true_repetitions
+
+    from imulog.process.trajectory_opt import trial_waypoints
+
+    t, rel, _, reps = true_repetitions(sim)
+    checks: list = []
+    return trial_waypoints(anthro, t, rel, reps, checks=checks, side=side), checks
+
+
+def test_stale_explicit_waypoints_on_a_moved_bottle(moved_trials):
+    """The bottle moved 8 cm forward and 10 cm right, the explicit bottle_m not: the two coordinates are named;
+    marked approximate they are replaced by the IMU's (here the truth's) estimate, z and the mouth kept."""
+    before, _ = _waypoints_and_checks(moved_trials["base"], None)  # the unmoved bottle where the hand went
+    moved = moved_trials["moved"]
+    anth = moved.recording.metadata["imulog.anthropometrics"]
+    stale = {"bottle_m": list(before.bottle_m), "mouth_m": [anth["mouth_dx_m"], anth["h2_m"], anth["h3_m"]]}
+    wp, checks = _waypoints_and_checks(moved, stale)
+    assert [c.label for c in checks if c.disagrees] == ["bottle_m[0]", "bottle_m[1]"]
+    assert wp.bottle_m == pytest.approx(tuple(stale["bottle_m"]))  # measured: kept
+    wp, checks = _waypoints_and_checks(moved, {**stale, "bottle_m_status": "approximate"})
+    assert [c.label for c in checks if c.replaced] == ["bottle_m[0]", "bottle_m[1]"]
+    assert wp.bottle_m[0] == pytest.approx(anth["h1_m"], abs=0.015)  # the moved bottle, within the jitter
+    assert wp.bottle_m[1] == pytest.approx(anth["bottle_dy_m"], abs=0.015)
+    assert wp.bottle_m[2] == stale["bottle_m"][2] and wp.mouth_m == pytest.approx(tuple(stale["mouth_m"]))
+
+
+def test_a_left_hand_labelled_right(moved_trials):
+    """The IMU drinks towards -y (a left hand) under a right label: the IMU's line and h2's sign are named;
+    labelled left, or the right hand labelled right, nothing is said."""
+    from imulog.steps.placements import placement_side
+
+    left = moved_trials["left"]
+    meta = left.recording.metadata
+    anth = meta["imulog.anthropometrics"]
+    assert anth["h2_m"] < -0.1 and meta["imulog.trial"]["side"] == "right"
+    side = placement_side("wrist", meta)
+    assert side == ("right", "imulog.trial side")
+    _, checks = _waypoints_and_checks(left, anth, side)
+    lines = [c.line() for c in checks if c.disagrees]
+    assert len(lines) == 2 and lines[0].startswith("placement side = right (imulog.trial side), but the IMU puts")
+    assert "a left hand's drink" in lines[0] and lines[1].startswith(f"h2_m = {anth['h2_m'] * 100:.1f} cm")
+    (rec,) = [c.as_dict() for c in checks if c.name == "placement_side"]
+    assert rec["seen"] == "left" and rec["value_m"] == pytest.approx(anth["h2_m"], abs=0.015)
+    relabelled = {**meta, f"imulog.device.{left.recording.imus[0].name}": {"placement": "Left wrist"}}
+    side = placement_side(left.recording.imus[0].name, relabelled)
+    assert side[0] == "left" and "placement 'Left wrist'" in side[1]
+    _, checks = _waypoints_and_checks(left, anth, side)
+    assert not any(c.disagrees for c in checks) and len(checks) > 2
+    base = moved_trials["base"]
+    _, checks = _waypoints_and_checks(base, base.recording.metadata["imulog.anthropometrics"], ("right", "x"))
+    assert not any(c.disagrees for c in checks) and {"placement_side", "h2_m"} <= {c.name for c in checks}
