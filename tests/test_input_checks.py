@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from imulog.process.input_checks import InputCheckParams, apply_checks, value_status, waypoint_checks
+from imulog.process.input_checks import (
+    InputCheckParams,
+    apply_checks,
+    side_checks,
+    value_status,
+    waypoint_checks,
+)
 from imulog.process.minjerk import R2GReferenceParams
 
 KEYS = R2GReferenceParams().keys
@@ -75,3 +81,134 @@ def test_values_not_given_are_not_checked_and_cm_keys_are_converted():
     bottles, mouths = repetitions([0.30, 0.15, 0.0], [0.09, 0.15, 0.35])
     checks = waypoint_checks({"mouth_height_cm": 35.0}, bottles, mouths, {**KEYS, "h3": ("mouth_height_cm",)})
     assert [(c.name, c.given_m) for c in checks] == [("mouth_height_cm", pytest.approx(0.35))]
+
+
+def test_explicit_waypoints_are_checked_per_coordinate_and_replace_h_values():
+    """Explicit bottle_m / mouth_m are what the reference uses: their six coordinates are checked (the h-values
+    beside them are not); an approximate one that disagrees is replaced coordinate by coordinate."""
+    bottles, mouths = repetitions([0.38, 0.05, 0.0], [0.09, 0.15, 0.35], spread_m=0.005)  # the bottle moved
+    anthro = {"bottle_m": [0.30, 0.15, 0.0], "mouth_m": [0.09, 0.15, 0.35], "h1_m": 0.0, "h2_m": 0.0, "h3_m": 0.0}
+    checks = waypoint_checks(anthro, bottles, mouths, KEYS)
+    assert [c.label for c in checks] == [f"{k}[{a}]" for k in ("bottle_m", "mouth_m") for a in range(3)]
+    assert [c.label for c in checks if c.disagrees] == ["bottle_m[0]", "bottle_m[1]"]
+    line = checks[0].line()
+    assert line.startswith("bottle_m[0] = 30.0 cm, but the IMU puts the bottle's x at 38.")
+    assert "kept as measured" in line and "anthropometrics.bottle_m_status=approximate" in line
+    assert not any(c.replaced for c in checks)
+    approx = {**anthro, "bottle_m_status": "approximate"}
+    checks = waypoint_checks(approx, bottles, mouths, KEYS)
+    assert [c.label for c in checks if c.replaced] == ["bottle_m[0]", "bottle_m[1]"]
+    bottle, mouth = apply_checks(np.array(anthro["bottle_m"]), np.array(anthro["mouth_m"]), checks)
+    assert bottle[:2] == pytest.approx([0.38, 0.05], abs=0.005) and bottle[2] == 0.0  # z agreed: kept
+    assert mouth.tolist() == anthro["mouth_m"]
+    # one explicit waypoint alone is not what the reference uses (it needs both): the h-values are checked
+    alone = waypoint_checks({"bottle_m": [0.3, 0.15, 0.0], "h1_m": 0.30}, bottles, mouths, KEYS)
+    assert [c.name for c in alone] == ["h1_m"] and alone[0].disagrees
+
+
+def test_the_placement_side_is_checked_against_the_mouths_lateral_direction():
+    """Towards the midline is +y for a right hand, -y for a left one: a left hand labelled right is one line
+    naming the placement and what the IMU saw, and h2's sign is checked against the side too."""
+    _, left_mouths = repetitions([0.30, -0.15, 0.0], [0.09, -0.15, 0.35])
+    (imu, h2) = side_checks("right", "imulog.trial side", left_mouths, ("h2_m", -0.15))
+    assert imu.disagrees and imu.seen == "left" and imu.value_m == pytest.approx(-0.15, abs=0.01)
+    line = imu.line()
+    assert line.startswith("placement side = right (imulog.trial side), but the IMU puts the mouth's y at -1")
+    assert "a left hand's drink" in line and "placement is kept" in line and "\n" not in line
+    assert h2.disagrees and h2.line().startswith("h2_m = -15.0 cm puts the mouth on a left hand's side")
+    assert imu.as_dict()["seen"] == "left" and imu.as_dict()["replaced"] is False
+    # labelled left, the same trial is consistent; a right-labelled right hand too
+    assert not any(c.disagrees for c in side_checks("left", "name", left_mouths, ("h2_m", -0.15)))
+    _, right_mouths = repetitions([0.30, 0.15, 0.0], [0.09, 0.15, 0.35])
+    assert not any(c.disagrees for c in side_checks("Right", "name", right_mouths, ("h2_m", 0.15)))
+    # a right-labelled hand with a positive h2 whose IMU disagrees: only the IMU's line
+    assert [c.name for c in side_checks("right", "x", left_mouths, ("h2_m", 0.15)) if c.disagrees] == ["placement_side"]
+    with pytest.raises(ValueError, match="left or right"):
+        side_checks("both", "x", right_mouths)
+
+
+def test_a_mouth_near_the_start_does_not_contradict_the_side():
+    """Within the estimate's threshold of the start the IMU cannot tell the side: undecided, no warning."""
+    params = InputCheckParams()
+    _, mouths = repetitions([0.30, 0.0, 0.0], [0.09, -0.03, 0.35])  # 3 cm to the right: inside 5 cm
+    (imu,) = side_checks("right", "x", mouths, params=params)
+    assert imu.seen == "undecided" and not imu.disagrees and imu.threshold_m >= params.min_disagreement_m
+    spread = np.zeros((5, 3))
+    spread[:, 1] = [-0.35, -0.25, -0.09, 0.05, 0.15]  # 9 cm to the right in the median, repetitions far apart
+    (imu,) = side_checks("right", "x", spread, params=params)
+    assert imu.value_m == pytest.approx(-0.09) and imu.threshold_m > 0.09 and not imu.disagrees
+    spread[:, 1] = [-0.10, -0.095, -0.09, -0.085, -0.08]  # the same median, repetitions that agree
+    (imu,) = side_checks("right", "x", spread, params=params)
+    assert imu.threshold_m == params.min_disagreement_m and imu.disagrees and imu.seen == "left"
+
+
+# --- on simulated trials: the simulator's true repetitions, as trial_waypoints takes them -------------------
+
+
+@pytest.fixture(scope="module")
+def moved_trials():
+    """Trial 4 of subject 3 as set up (``base``), with the bottle 8 cm further and 10 cm to the right
+    (``moved``), and drunk towards -y like a left hand (``left``: mouth and bottle 40 cm to the right; the
+    simulator still labels it right)."""
+    from imulog.simulate import simulate
+
+    kw = dict(subject=3, seed=4, repetitions=4, noise_free=True)
+    return {
+        "base": simulate("r2g", **kw),
+        "moved": simulate("r2g", bottle_offset_m=(0.08, -0.10), **kw),
+        "left": simulate("r2g", bottle_offset_m=(0.0, -0.40), mouth_offset_m=(0.0, -0.40, 0.0), **kw),
+    }
+
+
+def _waypoints_and_checks(sim, anthro, side=None):
+    from truth_repetitions import true_repetitions
+
+    from imulog.process.trajectory_opt import trial_waypoints
+
+    t, rel, _, reps = true_repetitions(sim)
+    checks: list = []
+    return trial_waypoints(anthro, t, rel, reps, checks=checks, side=side), checks
+
+
+def test_stale_explicit_waypoints_on_a_moved_bottle(moved_trials):
+    """The bottle moved 8 cm forward and 10 cm right, the explicit bottle_m not: the two coordinates are named;
+    marked approximate they are replaced by the IMU's (here the truth's) estimate, z and the mouth kept."""
+    before, _ = _waypoints_and_checks(moved_trials["base"], None)  # the unmoved bottle where the hand went
+    moved = moved_trials["moved"]
+    anth = moved.recording.metadata["imulog.anthropometrics"]
+    stale = {"bottle_m": list(before.bottle_m), "mouth_m": [anth["mouth_dx_m"], anth["h2_m"], anth["h3_m"]]}
+    wp, checks = _waypoints_and_checks(moved, stale)
+    assert [c.label for c in checks if c.disagrees] == ["bottle_m[0]", "bottle_m[1]"]
+    assert wp.bottle_m == pytest.approx(tuple(stale["bottle_m"]))  # measured: kept
+    wp, checks = _waypoints_and_checks(moved, {**stale, "bottle_m_status": "approximate"})
+    assert [c.label for c in checks if c.replaced] == ["bottle_m[0]", "bottle_m[1]"]
+    assert wp.bottle_m[0] == pytest.approx(anth["h1_m"], abs=0.015)  # the moved bottle, within the jitter
+    assert wp.bottle_m[1] == pytest.approx(anth["bottle_dy_m"], abs=0.015)
+    assert wp.bottle_m[2] == stale["bottle_m"][2] and wp.mouth_m == pytest.approx(tuple(stale["mouth_m"]))
+
+
+def test_a_left_hand_labelled_right(moved_trials):
+    """The IMU drinks towards -y (a left hand) under a right label: the IMU's line and h2's sign are named;
+    labelled left, or the right hand labelled right, nothing is said."""
+    from imulog.steps.placements import placement_side
+
+    left = moved_trials["left"]
+    meta = left.recording.metadata
+    anth = meta["imulog.anthropometrics"]
+    assert anth["h2_m"] < -0.1 and meta["imulog.trial"]["side"] == "right"
+    side = placement_side("wrist", meta)
+    assert side == ("right", "imulog.trial side")
+    _, checks = _waypoints_and_checks(left, anth, side)
+    lines = [c.line() for c in checks if c.disagrees]
+    assert len(lines) == 2 and lines[0].startswith("placement side = right (imulog.trial side), but the IMU puts")
+    assert "a left hand's drink" in lines[0] and lines[1].startswith(f"h2_m = {anth['h2_m'] * 100:.1f} cm")
+    (rec,) = [c.as_dict() for c in checks if c.name == "placement_side"]
+    assert rec["seen"] == "left" and rec["value_m"] == pytest.approx(anth["h2_m"], abs=0.015)
+    relabelled = {**meta, f"imulog.device.{left.recording.imus[0].name}": {"placement": "Left wrist"}}
+    side = placement_side(left.recording.imus[0].name, relabelled)
+    assert side[0] == "left" and "placement 'Left wrist'" in side[1]
+    _, checks = _waypoints_and_checks(left, anth, side)
+    assert not any(c.disagrees for c in checks) and len(checks) > 2
+    base = moved_trials["base"]
+    _, checks = _waypoints_and_checks(base, base.recording.metadata["imulog.anthropometrics"], ("right", "x"))
+    assert not any(c.disagrees for c in checks) and {"placement_side", "h2_m"} <= {c.name for c in checks}

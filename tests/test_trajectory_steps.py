@@ -300,3 +300,40 @@ def test_rerun_with_fewer_methods_removes_the_stale_trajectories(sim_trial, tmp_
     _, record = run_evaluate(path)
     assert sorted(record["methods"]) == ["ddi", "dedrift", "zupt"] and record["baseline"] == "dedrift"
     assert check_file(path).ok
+
+
+def test_the_placement_side_is_checked_against_the_imu(sim_trial, tmp_path):
+    """Issue 31, point 4: the simulated right hand drinks towards +y; labelled left (the device's placement),
+    the step says so in one line naming the placement and what the IMU saw, records it with the other checks and
+    changes nothing; labelled right (the simulator's imulog.trial side) it is silent."""
+    import dataclasses
+
+    sim, path = sim_trial
+    anth = sim.recording.metadata["imulog.anthropometrics"]
+    with TrialReader(path) as t:
+        acc, static = t.read("/derived/acc_global/wrist"), t.read("/derived/static/wrist")
+        phases, alignment = t.read("/derived/phases/wrist"), t.metadata["imulog.alignment"]
+    kw = dict(imu="wrist", methods=["zupt", "optimized"], static=(static.t_ns, static.values[:, 0]), phases=phases)
+    kw |= dict(alignment=alignment, anthropometrics=anth)
+    _, right = compute_trajectories(acc.t_ns, acc.values, side=("right", "imulog.trial side"), **kw)
+    assert not right.get("input_warnings")
+    _, left = compute_trajectories(acc.t_ns, acc.values, side=("left", "the test's label"), **kw)
+    imu_line, h2_line = left["input_warnings"]
+    assert imu_line.startswith("placement side = left (the test's label), but the IMU puts the mouth's y at ")
+    assert "a right hand's drink" in imu_line and h2_line.startswith(f"h2_m = {anth['h2_m'] * 100:.1f} cm")
+    (rec,) = [c for c in left["input_checks"] if c["name"] == "placement_side"]
+    assert rec["side"] == "left" and rec["seen"] == "right" and rec["disagrees"] and not rec["replaced"]
+    assert abs(rec["value_m"] - anth["h2_m"]) < 0.03  # the IMU's mouth y is the true one
+    assert left["waypoints_m"] == right["waypoints_m"]  # the side changes no waypoint
+
+    # through the CLI: the device record's placement names the side
+    meta = {**sim.recording.metadata, "imulog.device.wrist": {**sim.recording.metadata["imulog.device.wrist"]}}
+    meta["imulog.device.wrist"]["placement"] = "left wrist"
+    left_path = tmp_path / "left.mcap"
+    _write_with_inputs(left_path, sim, dataclasses.replace(sim.recording, metadata=meta))
+    result = CliRunner().invoke(cli, ["process", "trajectory", str(left_path), "--method", "zupt,optimized"])
+    assert result.exit_code == 0, result.output
+    warnings = [ln for ln in result.stderr.splitlines() if "warning: placement side" in ln]
+    assert len(warnings) == 1 and "(imulog.device.wrist placement 'left wrist')" in warnings[0]
+    with TrialReader(left_path) as t:
+        assert t.metadata["imulog.device.wrist"]["placement"] == "left wrist"  # the metadata is not changed

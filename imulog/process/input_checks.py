@@ -10,7 +10,12 @@ reported in one line naming the value.
 
 A value can be marked ``approximate`` (``--meta anthropometrics.h2_m_status=approximate``, or
 ``anthropometrics.status=approximate`` for all of them); a disagreeing approximate value is replaced by the
-IMU's estimate. Unmarked values count as ``measured``: they are kept, and the warning says so.
+IMU's estimate. Unmarked values count as ``measured``: they are kept, and the warning says so. Explicit
+``bottle_m`` / ``mouth_m`` waypoints (which the reference then uses instead of h1-h3) are checked coordinate by
+coordinate under the same rule (``bottle_m_status`` / ``mouth_m_status``).
+
+The placement's side (which wrist) is checked against the lateral direction of the drink (:func:`side_checks`):
+towards the midline is +y for a right hand, -y for a left one, for the IMU's mouth and for the given h2.
 """
 
 from __future__ import annotations
@@ -116,7 +121,8 @@ def value_status(anthro: Mapping[str, Any], key: str) -> str:
     return status
 
 
-def _given(anthro: Mapping[str, Any], names: tuple[str, ...]) -> tuple[str, float] | None:
+def given_value(anthro: Mapping[str, Any], names: tuple[str, ...]) -> tuple[str, float] | None:
+    """The first of ``names`` the record gives as a number: ``(name, value in m)`` (``*_cm`` keys converted)."""
     for name in names:
         value = anthro.get(name)
         if value is not None and not isinstance(value, (list, dict, bool)):
@@ -138,6 +144,23 @@ def robust_standard_error(values: np.ndarray) -> float:
     return 1.2533 * mad / np.sqrt(len(v))  # the median's efficiency against the mean: sqrt(pi/2)
 
 
+def _explicit(anthro: Mapping[str, Any], key: str) -> np.ndarray | None:
+    """An explicit ``[x, y, z]`` waypoint (m), or None when the record does not give a usable one."""
+    value = anthro.get(key)
+    if not isinstance(value, (list, tuple, np.ndarray)) or len(value) != 3:
+        return None
+    try:
+        return np.asarray([float(v) for v in value], dtype=np.float64)
+    except (TypeError, ValueError):
+        return None
+
+
+def explicit_waypoints(anthro: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(bottle_m, mouth_m)`` when the record gives both explicit waypoints (m), which then replace h1-h3."""
+    bottle, mouth = _explicit(anthro, "bottle_m"), _explicit(anthro, "mouth_m")
+    return None if bottle is None or mouth is None else (bottle, mouth)
+
+
 def waypoint_checks(
     anthro: Mapping[str, Any],
     bottles_task_m: np.ndarray,
@@ -153,42 +176,144 @@ def waypoint_checks(
     (:class:`imulog.process.minjerk.R2GReferenceParams.keys`); ``mouth_dx`` and ``bottle_dy`` are read from
     ``mouth_dx_m`` and ``bottle_dy_m``. Values the record does not give are not checked. Without
     ``bottle_dy_m`` the bottle's y is ``bottle_y_fraction`` x h2 and is checked as h2's second coordinate.
+    When the record gives both explicit waypoints ``bottle_m`` and ``mouth_m`` (the reference then uses them,
+    not h1-h3), their six coordinates are checked instead, named ``bottle_m[0]`` ... ``mouth_m[2]``; the
+    waypoint arrays must then be in the frame those are given in.
     """
     waypoints = {"bottle": np.asarray(bottles_task_m, dtype=np.float64), "mouth": np.asarray(mouths_task_m)}
-    names = {**{k: tuple(v) for k, v in keys.items()}, "mouth_dx": ("mouth_dx_m",), "bottle_dy": ("bottle_dy_m",)}
-    coordinates: list[tuple[str, str, int, float, str]] = []  # (what, waypoint, axis, factor, label)
-    for what, (waypoint, axis) in COORDINATES.items():
-        coordinates.append((what, waypoint, axis, 1.0, ""))
-    if _given(anthro, names["bottle_dy"]) is None:
-        found = _given(anthro, names.get("h2", ()))
-        label = f"{found[0]} x {bottle_y_fraction:g} (the bottle's y)" if found else ""
-        coordinates.append(("h2", "bottle", 1, bottle_y_fraction, label))
+    given: list[tuple[str, float, str, int, str]] = []  # (name, given value m, waypoint, axis, label)
+    explicit = explicit_waypoints(anthro)
+    if explicit is not None:
+        for key, vector in zip(("bottle_m", "mouth_m"), explicit, strict=True):
+            given += [(key, float(vector[axis]), key.removesuffix("_m"), axis, f"{key}[{axis}]") for axis in range(3)]
+    else:
+        names = {**{k: tuple(v) for k, v in keys.items()}, "mouth_dx": ("mouth_dx_m",), "bottle_dy": ("bottle_dy_m",)}
+        for what, (waypoint, axis) in COORDINATES.items():
+            found = given_value(anthro, names.get(what, ()))
+            if found is not None:
+                given.append((found[0], found[1], waypoint, axis, ""))
+        found = given_value(anthro, names.get("h2", ()))
+        if found is not None and given_value(anthro, names["bottle_dy"]) is None:
+            label = f"{found[0]} x {bottle_y_fraction:g} (the bottle's y)"
+            given.append((found[0], found[1] * bottle_y_fraction, "bottle", 1, label))
     out = []
-    for what, waypoint, axis, factor, label in coordinates:
-        found = _given(anthro, names.get(what, ()))
-        if found is None:
+    for name, given_m, waypoint, axis, label in given:
+        estimate = imu_estimate(waypoints[waypoint][:, axis], params)
+        if estimate is None:
             continue
-        name, given = found
-        given *= factor
-        values = waypoints[waypoint][:, axis]
-        values = values[np.isfinite(values)]
-        if len(values) == 0:
-            continue
-        sigma = float(np.hypot(robust_standard_error(values), params.floor_sigma_m))
+        median, sigma, threshold, n = estimate
         out.append(
             InputCheck(
                 name=name,
                 waypoint=waypoint,
                 axis=axis,
-                given_m=given,
-                estimated_m=float(np.median(values)),
+                given_m=given_m,
+                estimated_m=median,
                 uncertainty_m=sigma,
-                threshold_m=max(params.min_disagreement_m, params.k_sigma * sigma),
+                threshold_m=threshold,
                 status=value_status(anthro, name),
-                repetitions=len(values),
+                repetitions=n,
                 label=label,
             )
         )
+    return out
+
+
+def imu_estimate(values_m: np.ndarray, params: InputCheckParams) -> tuple[float, float, float, int] | None:
+    """The IMU's estimate of one coordinate from its per-repetition values (m): ``(median, standard error,
+    threshold, repetitions)``, the threshold ``max(min_disagreement_m, k_sigma x standard error)``; None
+    without a finite value."""
+    values = np.asarray(values_m, dtype=np.float64)
+    values = values[np.isfinite(values)]
+    if len(values) == 0:
+        return None
+    sigma = float(np.hypot(robust_standard_error(values), params.floor_sigma_m))
+    return float(np.median(values)), sigma, max(params.min_disagreement_m, params.k_sigma * sigma), len(values)
+
+
+SIDE_SIGN = {"right": 1.0, "left": -1.0}  # the sign of the midline's y from the hand's start (task frame)
+
+
+@dataclass(frozen=True)
+class SideCheck:
+    """The placement's side against the lateral direction of the drink (task frame, y to the subject's left).
+
+    Towards the midline is +y for a right hand and -y for a left one. ``name`` is ``placement_side`` for the
+    IMU's mouth y (median over repetitions), or the given key (``h2_m``, ``mouth_m[1]``) whose sign is checked.
+    A contradiction is a value on the other side of the start by more than ``threshold_m`` (0 for a given value).
+    """
+
+    name: str
+    side: str  # "left" or "right", as the placement metadata says
+    source: str  # where the metadata says it, e.g. "imulog.trial side"
+    value_m: float  # the mouth's y: the IMU's median, or the given value (m)
+    uncertainty_m: float = 0.0  # standard error of the IMU's estimate (m); 0 for a given value
+    threshold_m: float = 0.0
+    repetitions: int = 0  # 0 for a given value
+    status: str = "measured"  # the metadata is never changed
+    replaced: bool = False
+
+    @property
+    def disagrees(self) -> bool:
+        return SIDE_SIGN[self.side] * self.value_m < -self.threshold_m
+
+    @property
+    def seen(self) -> str:
+        """``left`` / ``right`` as the value points, ``undecided`` within the threshold of the start."""
+        if abs(self.value_m) <= self.threshold_m or self.value_m == 0.0:
+            return "undecided"
+        return "right" if self.value_m > 0 else "left"
+
+    def line(self) -> str:
+        """One line for the terminal: the placement, what the value says, and that nothing was changed."""
+        if self.repetitions:
+            return (
+                f"placement side = {self.side} ({self.source}), but the IMU puts the mouth's y at "
+                f"{self.value_m * 100:.1f} ± {self.uncertainty_m * 100:.1f} cm over {self.repetitions} repetitions, "
+                f"a {self.seen} hand's drink (towards the midline is +y for a right hand, -y for a left one): "
+                "the placement is kept; check which wrist the IMU is on"
+            )
+        return (
+            f"{self.name} = {self.value_m * 100:.1f} cm puts the mouth on a {self.seen} hand's side, but the "
+            f"placement says {self.side} ({self.source}): kept (h2 is +y for a right hand, -y for a left one)"
+        )
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "side": self.side,
+            "source": self.source,
+            "value_m": self.value_m,
+            "uncertainty_m": self.uncertainty_m,
+            "threshold_m": self.threshold_m,
+            "seen": self.seen,
+            "repetitions": self.repetitions,
+            "disagrees": self.disagrees,
+            "replaced": False,
+        }
+
+
+def side_checks(
+    side: str,
+    source: str,
+    mouths_task_m: np.ndarray,
+    given_mouth_y: tuple[str, float] | None = None,
+    params: InputCheckParams = InputCheckParams(),
+) -> list[SideCheck]:
+    """The placement's side (``left``/``right``, named by ``source``) against the IMU's mouth y (the median of
+    the per-repetition ZUPT mouths ``mouths_task_m`` (R, 3), task frame, m, with the threshold of
+    :func:`imu_estimate`) and against the sign of ``given_mouth_y`` (``(key, m)``: h2 or the explicit mouth's
+    y, what the reference uses), when given."""
+    side = str(side).strip().lower()
+    if side not in SIDE_SIGN:
+        raise ValueError(f"placement side must be left or right, not {side!r}")
+    out = []
+    estimate = imu_estimate(np.asarray(mouths_task_m, dtype=np.float64).reshape(-1, 3)[:, 1], params)
+    if estimate is not None:
+        median, sigma, threshold, n = estimate
+        out.append(SideCheck("placement_side", side, source, median, sigma, threshold, n))
+    if given_mouth_y is not None:
+        out.append(SideCheck(given_mouth_y[0], side, source, float(given_mouth_y[1])))
     return out
 
 

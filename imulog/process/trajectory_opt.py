@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from imulog.process.drift import highpass, wavelet_detrend
-from imulog.process.input_checks import InputCheck
+from imulog.process.input_checks import InputCheck, SideCheck
 from imulog.process.integration import compensate_rotating_bias, estimate_rotating_bias, zupt
 from imulog.process.minjerk import R2GReferenceParams, R2GWaypoints
 from imulog.process.trajectory_checks import (
@@ -109,6 +109,7 @@ def reconstruct_repetitions(
     reference_params: R2GReferenceParams = DEFAULT_REFERENCE,
     info: dict[str, Any] | None = None,
     baseline: bool = False,
+    side: tuple[str, str] | None = None,
 ) -> dict[str, np.ndarray]:
     """Every method on every repetition: {method: (N, 3) m relative to each repetition's start, NaN outside}.
 
@@ -118,7 +119,8 @@ def reconstruct_repetitions(
     the verdict of :func:`imulog.process.trajectory_checks.assess` on its assumptions. A rotating-bias estimate
     outside the sensor's physical range (``params.checks``) is refused: ``zupt_bias`` is then ZUPT and the
     optimisation starts from ZUPT. ``baseline``: also return :data:`BASELINE` (linear velocity de-drift
-    between each window's first and last sample), the figure every method must beat.
+    between each window's first and last sample), the figure every method must beat. ``side``: the placement's
+    ``(left|right, source)``, checked with the given anthropometrics (``info["input_checks"]``).
     """
     t = np.asarray(t_s, dtype=np.float64)
     a = np.asarray(acc_mps2, dtype=np.float64)
@@ -142,8 +144,8 @@ def reconstruct_repetitions(
     if "optimized" in methods:
         z = _initial(t, base, static, repetitions, params)
         if waypoints is None:
-            input_checks: list[InputCheck] = []
-            waypoints = trial_waypoints(anthropometrics, t, z, repetitions, reference_params, input_checks)
+            input_checks: list[InputCheck | SideCheck] = []
+            waypoints = trial_waypoints(anthropometrics, t, z, repetitions, reference_params, input_checks, side=side)
             if info is not None and input_checks:
                 info["input_checks"] = [c.as_dict() for c in input_checks]
                 info["input_warnings"] = [c.line() for c in input_checks if c.disagrees]

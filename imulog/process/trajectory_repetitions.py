@@ -21,7 +21,11 @@ from imulog.process.input_checks import (
     DEFAULT_INPUT_CHECKS,
     InputCheck,
     InputCheckParams,
+    SideCheck,
     apply_checks,
+    explicit_waypoints,
+    given_value,
+    side_checks,
     waypoint_checks,
 )
 from imulog.process.minjerk import (
@@ -182,8 +186,9 @@ def trial_waypoints(
     zupt_m: np.ndarray,
     repetitions: Sequence[Repetition],
     params: R2GReferenceParams = DEFAULT_REFERENCE,
-    checks: list[InputCheck] | None = None,
+    checks: list[InputCheck | SideCheck] | None = None,
     check_params: InputCheckParams = DEFAULT_INPUT_CHECKS,
+    side: tuple[str, str] | None = None,
 ) -> R2GWaypoints:
     """Waypoints for a trial: h1, h2, h3 (and ``mouth_dx_m``, the mouth's x, and ``bottle_dy_m``, the bottle's
     lateral offset from the start when it is not h2, when present) from the anthropometrics; every
@@ -192,7 +197,10 @@ def trial_waypoints(
 
     Every given value is checked against the same ZUPT medians (:mod:`imulog.process.input_checks`): ``checks``,
     when given, receives one :class:`InputCheck` per value; a disagreeing value marked approximate is replaced
-    by the estimate."""
+    by the estimate. Explicit ``bottle_m`` and ``mouth_m`` (both given) are the waypoints, each coordinate checked
+    the same way. ``side``: ``(left|right, where the metadata says so)``, checked against the ZUPT mouths' y and
+    the sign of the given h2 (or ``mouth_m``'s y) (:func:`imulog.process.input_checks.side_checks`), never
+    changed."""
     t = np.asarray(t_s, dtype=np.float64)
     bottles, mouths = [], []
     for rep in repetitions:
@@ -206,16 +214,22 @@ def trial_waypoints(
         raise ValueError("no complete repetition to measure waypoints from")
     bottle = np.median(np.asarray(bottles), axis=0)
     mouth = np.median(np.asarray(mouths), axis=0)
-    if anthropometrics:
+    c, s = np.cos(params.heading_rad), np.sin(params.heading_rad)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    given_y = None  # the mouth's y the reference is given (task frame), for the side's check
+    explicit = explicit_waypoints(anthropometrics or {})
+    if explicit is not None:  # the reference's waypoints as given (world frame), each coordinate checked
+        found = waypoint_checks(anthropometrics, np.asarray(bottles), np.asarray(mouths), params.keys, check_params)
+        bottle, mouth = apply_checks(explicit[0], explicit[1], found)
+        given_y = ("mouth_m[1]", float((rot.T @ explicit[1])[1]))
+        if checks is not None:
+            checks.extend(found)
+    elif anthropometrics:
         try:
             anth = r2g_waypoints_from_anthropometrics(anthropometrics, params)
         except KeyError:
             anth = None
         if anth is not None:
-            if "bottle_m" in anthropometrics:
-                return anth
-            c, s = np.cos(params.heading_rad), np.sin(params.heading_rad)
-            rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
             bt, mt = rot.T @ bottle, rot.T @ mouth  # into the task frame
             at_b, at_m = rot.T @ np.asarray(anth.bottle_m), rot.T @ np.asarray(anth.mouth_m)
             bt[0], bt[1] = at_b[0], at_b[1]  # h1, h2
@@ -236,6 +250,9 @@ def trial_waypoints(
             if checks is not None:
                 checks.extend(found)
             bottle, mouth = rot @ bt, rot @ mt
+            given_y = given_value(anthropometrics, tuple(params.keys.get("h2", ())))
+    if side is not None and checks is not None:
+        checks.extend(side_checks(side[0], side[1], np.asarray(mouths) @ rot, given_y, check_params))
     return R2GWaypoints(bottle_m=tuple(bottle.tolist()), mouth_m=tuple(mouth.tolist()))
 
 

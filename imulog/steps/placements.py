@@ -106,3 +106,21 @@ def arm_imus(imus: Sequence[str], metadata: Mapping[str, Mapping[str, Any]]) -> 
         missing = " and ".join(r for r, c in (("upper-arm", ua), ("forearm", fa)) if not c)
         raise ValueError(f"no {missing} IMU among the trial's sensor names and placements ({seen})")
     raise ValueError(f"more than one arm: upper-arm IMUs {', '.join(ua)}, forearm IMUs {', '.join(fa)} ({seen})")
+
+
+def placement_side(imu: str, metadata: Mapping[str, Any]) -> tuple[str, str] | None:
+    """Which wrist the metadata puts ``imu`` on: ``(left|right, where it says so)``, from the IMU's device
+    record and name (:func:`side_of`), else ``imulog.trial["side"]``, else
+    ``imulog.anthropometrics["side"]``; None when nothing names a side."""
+    device = metadata.get(f"imulog.device.{imu}") or {}
+    for text in placements([imu], metadata)[imu]:
+        found = side_of([text])
+        if found is not None:
+            key = next((k for k in PLACEMENT_KEYS if device.get(k) is not None and str(device[k]) == text), None)
+            where = f"imulog.device.{imu} {key}" if key else "the IMU's name"
+            return found, f"{where} {text!r}"
+    for record in ("imulog.trial", "imulog.anthropometrics"):
+        found = side_of([str((metadata.get(record) or {}).get("side") or "")])
+        if found is not None:
+            return found, f"{record} side"
+    return None

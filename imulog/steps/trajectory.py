@@ -49,6 +49,7 @@ from imulog.process.trajectory_opt import (
     repetition_windows,
 )
 from imulog.steps.common import alignment_for, alignment_record, pick_imu, record_for, record_of
+from imulog.steps.placements import placement_side
 from imulog.steps.trajectory_topics import RECORD, baseline_topic, per_imu_layout, split_topic, trajectory_topic
 from imulog.steps.trajectory_windows import F32, TrajectoryWindows, has_r2g, trajectory_pieces
 from imulog.steps.trajectory_windows import plan as window_plan
@@ -105,6 +106,7 @@ def compute_trajectories(
     repetition_quality: list[dict[str, Any]] | None = None,
     per_imu: bool = False,
     chain_rest_s: float = TrajectoryWindows.chain_rest_s,
+    side: tuple[str, str] | None = None,
 ) -> tuple[list[SignalStream], dict[str, Any]]:
     """Pure part of the step: trajectory streams and the ``imulog.trajectory`` record (no I/O).
 
@@ -125,7 +127,9 @@ def compute_trajectories(
     ``params.anchor``) and the gravity-free acceleration rotated accordingly (``imulog.trajectory["orientation"]``
     says which was used). ``chain_rest_s``: the heading chain of ``AnchorParams.heading="gyroscope"`` restarts at
     rests at least this long outside the repetitions, where the step's windows are cut
-    (:class:`imulog.steps.trajectory_windows.TrajectoryWindows`), so windows equal the whole.
+    (:class:`imulog.steps.trajectory_windows.TrajectoryWindows`), so windows equal the whole. ``side``: which
+    wrist the placement metadata says (``(left|right, source)``, :func:`imulog.steps.placements.placement_side`), checked against the
+    IMU's lateral direction of the drink with the anthropometrics (issue 31).
     """
     t_dev = np.asarray(acc_t_ns, dtype=np.int64)
     acc = np.asarray(acc_global, dtype=np.float64)
@@ -234,6 +238,7 @@ def compute_trajectories(
         reference_params=reference_params,
         info=info,
         baseline=True,
+        side=side,
     )
     if any(len(r.phase_bounds_s) for r in reps):  # repetitions to judge (issue 31): what to distrust, and why
         features = repetition_features(t_s, acc, mask, reps, recon, repetition_quality or (), trajectory_info=info)
@@ -363,6 +368,7 @@ def run_trajectory(
                 repetition_quality=timing.get("repetition_quality"),
                 per_imu=per_imu,
                 chain_rest_s=windows.chain_rest_s,
+                side=placement_side(name, trial.metadata),
             )
 
         return one, alignment, str(timing.get("clock", "reference"))
@@ -440,7 +446,13 @@ def run_trajectory(
         algorithm="imulog.trajectory",
         params=step_params,
         inputs=inputs,
-        metadata_inputs=(alignment_name, "imulog.anthropometrics", timing_record),
+        metadata_inputs=(
+            alignment_name,
+            "imulog.anthropometrics",
+            timing_record,
+            "imulog.trial",
+            f"imulog.device.{name}",
+        ),
         compute=compute,
         force=force,
     )
