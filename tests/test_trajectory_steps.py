@@ -211,14 +211,21 @@ def test_non_r2g_task_skips_optimized_instead_of_failing():
         compute_trajectories(imu.t_ns, acc_g, methods=["optimized"], **kw)
 
 
-def test_missing_anthropometrics_is_recorded_and_reported(sim_trial):
-    """Without h1/h2/h3 the optimisation measures its waypoints from ZUPT: the record and the CLI say so
-    (it used to fall back silently)."""
-    sim, path = sim_trial
+def _processed_wrist(path):
+    """The processed simulated trial's gravity-free acceleration, its alignment record and the keyword arguments of
+    :func:`compute_trajectories` for ZUPT and the optimisation on it (static mask and phases from the archive)."""
     with TrialReader(path) as t:
         acc, static = t.read("/derived/acc_global/wrist"), t.read("/derived/static/wrist")
         phases, alignment = t.read("/derived/phases/wrist"), t.metadata["imulog.alignment"]
     kw = dict(imu="wrist", methods=["zupt", "optimized"], static=(static.t_ns, static.values[:, 0]), phases=phases)
+    return acc, alignment, kw
+
+
+def test_missing_anthropometrics_is_recorded_and_reported(sim_trial):
+    """Without h1/h2/h3 the optimisation measures its waypoints from ZUPT: the record and the CLI say so
+    (it used to fall back silently)."""
+    sim, path = sim_trial
+    acc, alignment, kw = _processed_wrist(path)
     _, record = compute_trajectories(acc.t_ns, acc.values, alignment=alignment, **kw)
     assert record["waypoints_from"] == "zupt" and "no imulog.anthropometrics" in record["notes"][0]
     anth = sim.recording.metadata["imulog.anthropometrics"]
@@ -235,10 +242,7 @@ def test_anthropometrics_are_checked_against_the_imu(sim_trial, tmp_path):
 
     sim, path = sim_trial
     anth = sim.recording.metadata["imulog.anthropometrics"]
-    with TrialReader(path) as t:
-        acc, static = t.read("/derived/acc_global/wrist"), t.read("/derived/static/wrist")
-        phases, alignment = t.read("/derived/phases/wrist"), t.metadata["imulog.alignment"]
-    kw = dict(imu="wrist", methods=["zupt", "optimized"], static=(static.t_ns, static.values[:, 0]), phases=phases)
+    acc, alignment, kw = _processed_wrist(path)
     _, record = compute_trajectories(acc.t_ns, acc.values, alignment=alignment, anthropometrics=anth, **kw)
     assert record["input_checks"] and not record.get("input_warnings")  # the simulator's own values agree
     wrong = {**anth, "h1_m": anth["h1_m"] - 0.10}
@@ -310,10 +314,7 @@ def test_the_placement_side_is_checked_against_the_imu(sim_trial, tmp_path):
 
     sim, path = sim_trial
     anth = sim.recording.metadata["imulog.anthropometrics"]
-    with TrialReader(path) as t:
-        acc, static = t.read("/derived/acc_global/wrist"), t.read("/derived/static/wrist")
-        phases, alignment = t.read("/derived/phases/wrist"), t.metadata["imulog.alignment"]
-    kw = dict(imu="wrist", methods=["zupt", "optimized"], static=(static.t_ns, static.values[:, 0]), phases=phases)
+    acc, alignment, kw = _processed_wrist(path)
     kw |= dict(alignment=alignment, anthropometrics=anth)
     _, right = compute_trajectories(acc.t_ns, acc.values, side=("right", "imulog.trial side"), **kw)
     assert not right.get("input_warnings")
