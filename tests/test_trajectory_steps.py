@@ -235,11 +235,20 @@ def test_missing_anthropometrics_is_recorded_and_reported(sim_trial):
     assert record["waypoints_from"] == "zupt" and "h2" in record["notes"][0]
 
 
+def _cli_trajectory_warnings(path, sim, metadata, needle):
+    """The simulated trial written to ``path`` with ``metadata`` and the step's inputs, `imulog process trajectory`
+    run on it (ZUPT and the optimisation), and its stderr lines containing ``needle``."""
+    import dataclasses
+
+    _write_with_inputs(path, sim, dataclasses.replace(sim.recording, metadata=metadata))
+    result = CliRunner().invoke(cli, ["process", "trajectory", str(path), "--method", "zupt,optimized"])
+    assert result.exit_code == 0, result.output
+    return path, [ln for ln in result.stderr.splitlines() if needle in ln]
+
+
 def test_anthropometrics_are_checked_against_the_imu(sim_trial, tmp_path):
     """Issue 31, point 4: a given h1 that is 10 cm off where the hand goes is named in one line by the CLI and
     recorded; the right values raise nothing; marked approximate, the IMU's estimate replaces it."""
-    import dataclasses
-
     sim, path = sim_trial
     anth = sim.recording.metadata["imulog.anthropometrics"]
     acc, alignment, kw = _processed_wrist(path)
@@ -257,11 +266,7 @@ def test_anthropometrics_are_checked_against_the_imu(sim_trial, tmp_path):
 
     # through the CLI: the warning is printed on stderr, one line
     meta = {**sim.recording.metadata, "imulog.anthropometrics": wrong}
-    wrong_path = tmp_path / "wrong.mcap"
-    _write_with_inputs(wrong_path, sim, dataclasses.replace(sim.recording, metadata=meta))
-    result = CliRunner().invoke(cli, ["process", "trajectory", str(wrong_path), "--method", "zupt,optimized"])
-    assert result.exit_code == 0, result.output
-    warnings = [ln for ln in result.stderr.splitlines() if "warning: h1_m" in ln]
+    _, warnings = _cli_trajectory_warnings(tmp_path / "wrong.mcap", sim, meta, "warning: h1_m")
     assert len(warnings) == 1 and "h1_m_status=approximate" in warnings[0]
 
 
@@ -310,8 +315,6 @@ def test_the_placement_side_is_checked_against_the_imu(sim_trial, tmp_path):
     """Issue 31, point 4: the simulated right hand drinks towards +y; labelled left (the device's placement),
     the step says so in one line naming the placement and what the IMU saw, records it with the other checks and
     changes nothing; labelled right (the simulator's imulog.trial side) it is silent."""
-    import dataclasses
-
     sim, path = sim_trial
     anth = sim.recording.metadata["imulog.anthropometrics"]
     acc, alignment, kw = _processed_wrist(path)
@@ -330,11 +333,7 @@ def test_the_placement_side_is_checked_against_the_imu(sim_trial, tmp_path):
     # through the CLI: the device record's placement names the side
     meta = {**sim.recording.metadata, "imulog.device.wrist": {**sim.recording.metadata["imulog.device.wrist"]}}
     meta["imulog.device.wrist"]["placement"] = "left wrist"
-    left_path = tmp_path / "left.mcap"
-    _write_with_inputs(left_path, sim, dataclasses.replace(sim.recording, metadata=meta))
-    result = CliRunner().invoke(cli, ["process", "trajectory", str(left_path), "--method", "zupt,optimized"])
-    assert result.exit_code == 0, result.output
-    warnings = [ln for ln in result.stderr.splitlines() if "warning: placement side" in ln]
+    left_path, warnings = _cli_trajectory_warnings(tmp_path / "left.mcap", sim, meta, "warning: placement side")
     assert len(warnings) == 1 and "(imulog.device.wrist placement 'left wrist')" in warnings[0]
     with TrialReader(left_path) as t:
         assert t.metadata["imulog.device.wrist"]["placement"] == "left wrist"  # the metadata is not changed

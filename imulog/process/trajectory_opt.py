@@ -251,7 +251,7 @@ def _blended_start(
     info: dict[str, Any] | None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The optimisation's start on the acceleration ``acc + w (comp - acc)`` per global axis, ``w`` from the rests
-    (:func:`imulog.process.trajectory_repetitions.rest_blend_weight`); ``comp`` is the compensated (and turned)
+    (:func:`imulog.process.trajectory_rests.rest_blend_weight`); ``comp`` is the compensated (and turned)
     acceleration, ``z`` its ZUPT start. The measured acceleration is turned by the same heading drift (``turn``,
     rad per repetition)."""
     raw = np.array(acc, dtype=np.float64, copy=True)

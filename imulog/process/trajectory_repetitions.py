@@ -327,4 +327,3 @@ def heading_drift(
     own = max(0.0, 1.0 - (sigma_ref_m / lever) ** 2 / scatter**2) if scatter > 0 else 0.0
     out[idx] = line + own * (th - line)
     return out
-
