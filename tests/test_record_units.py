@@ -111,6 +111,21 @@ def test_flushed_part_file_salvages_at_every_moment(tmp_path):
     assert ": ok" in runner.invoke(cli, ["doctor", str(out)]).output
 
 
+def test_a_kill_before_the_first_sample_leaves_an_mcap_start_salvage_names(tmp_path):
+    out = tmp_path / "trial.mcap"
+    copy = tmp_path / "early.mcap.part"
+    with LiveTrialWriter(out, metadata={"imulog.trial": {"start_time": "2026-01-01T10:00:00+00:00"}}) as w:
+        shutil.copy(part_path(out), copy)  # what a SIGKILL before any stream sent a sample would leave
+        w.write(_piece(0))
+    assert copy.read_bytes().startswith(b"\x89MCAP")  # the magic and header were fsynced at open
+    result = CliRunner().invoke(cli, ["salvage", str(copy), "-o", str(tmp_path / "fixed.mcap")])
+    assert result.exit_code == 1
+    assert result.output.strip().splitlines() == [
+        f"Error: {copy}: nothing recoverable: cut before any channel was written"
+    ]
+    assert not (tmp_path / "fixed.mcap").exists()
+
+
 def test_an_error_keeps_the_part_file_only_with_samples(tmp_path):
     out = tmp_path / "trial.mcap"
     with pytest.raises(RuntimeError), LiveTrialWriter(out):

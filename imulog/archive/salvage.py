@@ -204,6 +204,8 @@ def _write(
         if ch.rec.schema_id != 0 and ch.rec.schema_id not in scan.schemas:
             report.lost.append(f"channel {ch.rec.topic}: its schema {ch.rec.schema_id} was lost; channel dropped")
     usable = [ch for ch in scan.channels.values() if ch.rec.schema_id == 0 or ch.rec.schema_id in scan.schemas]
+    if not scan.channels and not report.lost:
+        raise ArchiveError(f"{report.source}: nothing recoverable: cut before any channel was written")
     if not any(ch.messages for ch in usable):
         why = f" ({report.lost[0]})" if report.lost else ""
         raise ArchiveError(f"{report.source}: nothing recoverable: no intact message of any channel{why}")

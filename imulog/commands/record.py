@@ -156,7 +156,14 @@ def _record(output, infos, metadata, overwrite, stop, duration_s, live=None) -> 
         show = (lambda piece: live.submit(piece, writer.metadata)) if live is not None else None
         if live is not None:
             live.start()
-        recorder = Recorder(streams, writer, stop=stop, duration_s=duration_s, on_piece=show)
+        recorder = Recorder(
+            streams,
+            writer,
+            stop=stop,
+            duration_s=duration_s,
+            on_piece=show,
+            on_first_flush=lambda: click.echo("first samples written", err=True),
+        )
         recorder.run()
         recorder.finish()
     for line in summary_lines(streams):

@@ -96,7 +96,8 @@ def _iso(wall_s: float) -> str:
 class Recorder:
     """Records ``streams`` into ``writer`` until ``stop`` is set (or ``duration_s`` passed since the first sample).
 
-    ``on_piece(recording)``, when given, sees every written piece (the live view).
+    ``on_piece(recording)``, when given, sees every written piece (the live view). ``on_first_flush()``, when given, is called
+    once, after the first samples are written and fsynced (from then on a kill leaves a ``.part`` salvage recovers).
     """
 
     def __init__(
@@ -107,6 +108,7 @@ class Recorder:
         stop: threading.Event | None = None,
         duration_s: float | None = None,
         on_piece: Callable[[Recording], None] | None = None,
+        on_first_flush: Callable[[], None] | None = None,
         flush_s: float = FLUSH_S,
     ) -> None:
         self.streams = streams
@@ -114,6 +116,7 @@ class Recorder:
         self.stop = stop or threading.Event()
         self.duration_s = duration_s
         self.on_piece = on_piece
+        self.on_first_flush = on_first_flush
         self.flush_s = flush_s
         self.lsl = pylsl()
         self.started_s: float | None = None  # recorder LSL time of the first written sample
@@ -135,9 +138,13 @@ class Recorder:
                 if self.writer.started or self._ready(now - opened) or stopping:
                     self._write(limit_s=self.started_s + self.duration_s if self._limited() else None)
                 last_write = now
-            if self.writer.started and (now - last_flush >= self.flush_s or stopping):
+            first_flush = self.writer.started and self.on_first_flush is not None
+            if self.writer.started and (now - last_flush >= self.flush_s or stopping or first_flush):
                 self.writer.flush()
                 last_flush = now
+                if first_flush:
+                    self.on_first_flush()
+                    self.on_first_flush = None
             if stopping:
                 return
             if not got:

@@ -61,6 +61,7 @@ class LiveTrialWriter(StreamingTrialWriter):
         from imulog.archive.writer import LIBRARY, PROFILE
 
         self._builder = McapBuilder.new(self._file, LIBRARY, PROFILE)
+        self._sync()  # the magic and header on disk: a kill from now on leaves an MCAP start
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
