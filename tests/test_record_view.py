@@ -44,6 +44,7 @@ def test_record_view_web_streams_to_the_viewer(trial, lsl_env, tmp_path):
             stderr=subprocess.DEVNULL,
             env={**lsl_env, "RERUN_ANALYTICS": "0"},
         )
+        base.wait_for_line(rec, "first samples written")
         time.sleep(3.0)  # mid-recording: the client has been receiving
         assert rec.poll() is None and got.exists() and got.stat().st_size > 0, (
             "no data reached the viewer while recording"
