@@ -64,14 +64,9 @@ def test_candidates_of_a_built_repetition_only_when_asked():
     (from the trajectory info) only with ``candidates``."""
     from types import SimpleNamespace
 
-    from imulog.process.minjerk import R2GWaypoints, r2g_reference
+    from test_repetition_flags import built_r2g
 
-    rate = 100.0
-    t = np.arange(0, 12, 1 / rate)
-    bounds = np.array([[1.0, 2.5], [3.5, 5.0], [7.0, 8.5], [9.5, 11.0]])
-    wp = R2GWaypoints((0.30, 0.05, 0.0), (0.10, 0.25, 0.35))
-    ref = r2g_reference(t, bounds, wp)
-    static = ~np.any([(t >= a) & (t <= b) for a, b in bounds], axis=0)
+    t, bounds, wp, ref, static = built_r2g()
     start = ref + np.where(t >= bounds[0, 0], 1.0, 0.0)[:, None] * [0.0, 0.04, 0.01]  # 4 cm off in y
     zupt = ref + np.where(t >= bounds[0, 0], 1.0, 0.0)[:, None] * [0.01, 0.0, 0.0]  # 1 cm off in x
     rep = SimpleNamespace(index=1, start=0, stop=len(t), phase_bounds_s=bounds)
