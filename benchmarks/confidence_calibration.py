@@ -89,8 +89,11 @@ def trial_rows(name: str, subject: int, seed: int, repetitions: int, overrides: 
         orientation=q_world,
         params=DEFAULT_PARAMS,
         info=info,
+        drift_candidates=True,  # the rows carry the unused drift candidates too (--feature scores them)
     )
-    features = repetition_features(t_s, acc_world, static, reps, recon, ph.quality, trajectory_info=info)
+    features = repetition_features(
+        t_s, acc_world, static, reps, recon, ph.quality, trajectory_info=info, candidates=True
+    )
 
     # truth: phase boundaries per (repetition, label) on the reference clock
     t0 = float(t_ref_ns[0]) / 1e9

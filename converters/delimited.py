@@ -60,7 +60,7 @@ from imulog.converters.host_clock import HostClockFit
 from imulog.converters.mapping import Mapping, load_mapping, sibling_mapping
 from imulog.converters.plausibility import MAX_CHECK_SAMPLES
 
-from imulog.model import Recording
+from imulog.model import Recording, first_pieces
 
 __all__ = [
     "analyse_header",
@@ -126,13 +126,7 @@ def read_delimited(
 
 def _read_ahead(pieces: Iterator[NumericPiece], rows: int) -> tuple[list[NumericPiece], np.ndarray]:
     """The first pieces of ``pieces`` that hold ``rows`` rows (all, when fewer) and those rows' values."""
-    ahead: list[NumericPiece] = []
-    count = 0
-    for piece in pieces:
-        ahead.append(piece)
-        count += len(piece.values)
-        if count >= rows:
-            break
+    ahead, _ = first_pieces(pieces, rows, lambda piece: len(piece.values))
     if len(ahead) <= 1:
         return ahead, ahead[0].values[:rows] if ahead else np.zeros((0, 0))
     return ahead, np.concatenate([p.values for p in ahead])[:rows]

@@ -319,11 +319,14 @@ def recording_key(path: Path, conv: Converter | None = None) -> str:
     return "_".join(tokens)
 
 
-def group_directory(directory: Path, skipped: list[tuple[Path, str]] | None = None) -> list[tuple[str, list[Path]]]:
+def group_directory(
+    directory: Path, skipped: list[tuple[Path, str]] | None = None, detected: dict[Path, Converter] | None = None
+) -> list[tuple[str, list[Path]]]:
     """Recordings under ``directory`` (recursively): (output name, files) per recording, convertible files only.
 
     A file is convertible when some converter recognises it; mapping files, licences and READMEs are skipped.
-    ``skipped``, when given, receives (file, reason) for each data file no converter recognises.
+    ``skipped``, when given, receives (file, reason) for each data file no converter recognises; ``detected``
+    receives each convertible file's converter (:func:`detect` ran once per file: callers need not run it again).
     """
     directory = Path(directory)
     groups: dict[tuple[Path, str], list[Path]] = {}
@@ -338,6 +341,8 @@ def group_directory(directory: Path, skipped: list[tuple[Path, str]] | None = No
             if skipped is not None:
                 skipped.append((path, getattr(e, "problem", None) or str(e)))
             continue
+        if detected is not None:
+            detected[path] = conv
         groups.setdefault((path.parent, recording_key(path, conv)), []).append(path)
     out = []
     for (parent, key), files in groups.items():

@@ -15,8 +15,9 @@ Conventions
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 from imulog._lazy import LazyModule
 
@@ -276,6 +277,22 @@ def concat_samples(parts: list[Any]) -> Any:
             value = np.concatenate([getattr(p, f.name) for p in parts])
         fields[f.name] = value
     return type(last)(**fields)
+
+
+P = TypeVar("P")
+
+
+def first_pieces(pieces: Iterator[P], rows: int, size: Callable[[P], int]) -> tuple[list[P], int]:
+    """Read ahead: the first pieces of ``pieces`` that hold at least ``rows`` rows (all of them, when they hold
+    fewer; ``size`` counts a piece's rows), and how many rows they hold. The rest stays in ``pieces``."""
+    ahead: list[P] = []
+    count = 0
+    for piece in pieces:
+        ahead.append(piece)
+        count += size(piece)
+        if count >= rows:
+            break
+    return ahead, count
 
 
 def take_samples(stream: Any, index: np.ndarray) -> Any:

@@ -201,6 +201,21 @@ def test_a_long_broad_trial_converts_through_the_python_api_in_a_child_per_piece
 
 
 # ------------------------------------------------------------------- what the header does not say, in pieces
+def test_read_ahead_stops_at_the_piece_that_completes_the_rows():
+    """``imulog.model.first_pieces``, the read-ahead of the delimited reader (``DECIDE_ROWS``) and of the viewer
+    twins rebuilt block by block (``twin_blocks.MEDIAN_SAMPLES``): the pieces up to the one that reaches the rows,
+    their row count, and the rest left in the iterator; all pieces when they hold fewer rows."""
+    from imulog.model import first_pieces
+
+    pieces = iter([np.zeros(3), np.zeros(4), np.zeros(5), np.zeros(6)])
+    ahead, rows = first_pieces(pieces, 7, len)
+    assert [len(p) for p in ahead] == [3, 4] and rows == 7
+    assert [len(p) for p in pieces] == [5, 6]
+    ahead, rows = first_pieces(iter([np.zeros(2), np.zeros(2)]), 100, len)
+    assert [len(p) for p in ahead] == [2, 2] and rows == 4
+    assert first_pieces(iter([]), 1, len) == ([], 0)
+
+
 @pytest.mark.parametrize("gyr_peak", [200.0, 0.03])
 def test_units_a_header_lacks_are_decided_on_the_same_rows_in_any_pieces(tmp_path, gyr_peak):
     """A unit-less table (time, acc in g, gyr): the time unit and the axes' units are decided on the first

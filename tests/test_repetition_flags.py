@@ -143,18 +143,24 @@ def test_info_shows_the_flags_of_every_imu_of_a_setup(capsys):
     assert capsys.readouterr().out == "repetitions: 1 of 3 repetitions flagged: 2 (merged)\n"
 
 
-def test_reference_distance_of_a_built_repetition_turned_by_its_heading_drift():
-    """reference_cm: the initial estimate against the minimum-jerk reference at the rests after the first phase,
-    worst axis, after turning the estimate back by the trial's heading drift as the optimisation does."""
+def built_r2g(rate: float = 100.0):
+    """A built 12-s drinking repetition: times (s), phase bounds (4, 2) s, waypoints, the minimum-jerk reference
+    (N, 3) m and the rests (outside the phases)."""
     from imulog.process.minjerk import R2GWaypoints, r2g_reference
-    from imulog.process.trajectory_optimize import rotate_about_z
 
-    rate = 100.0
     t = np.arange(0, 12, 1 / rate)
     bounds = np.array([[1.0, 2.5], [3.5, 5.0], [7.0, 8.5], [9.5, 11.0]])
     wp = R2GWaypoints((0.30, 0.05, 0.0), (0.10, 0.25, 0.35))
-    ref = r2g_reference(t, bounds, wp)
     static = ~np.any([(t >= a) & (t <= b) for a, b in bounds], axis=0)
+    return t, bounds, wp, r2g_reference(t, bounds, wp), static
+
+
+def test_reference_distance_of_a_built_repetition_turned_by_its_heading_drift():
+    """reference_cm: the initial estimate against the minimum-jerk reference at the rests after the first phase,
+    worst axis, after turning the estimate back by the trial's heading drift as the optimisation does."""
+    from imulog.process.trajectory_optimize import rotate_about_z
+
+    t, bounds, wp, ref, static = built_r2g()
     offset = np.where(t >= bounds[0, 0], 1.0, 0.0)[:, None] * [0.0, 0.04, 0.01]  # 4 cm in y from the first phase
     angle = np.radians(20.0)
     estimate = rotate_about_z(ref + offset, -angle)  # the heading drift turned it by -20 deg

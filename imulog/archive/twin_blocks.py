@@ -31,7 +31,7 @@ from imulog.archive.twins import (
     marker_twin,
     orientation_twins,
 )
-from imulog.model import Intervals, MarkerStream, SignalStream, concat_samples, take_samples
+from imulog.model import Intervals, MarkerStream, SignalStream, concat_samples, first_pieces, take_samples
 
 MEDIAN_SAMPLES = 1_000_000  # samples whose intervals give the median sampling interval (8 MB of int64)
 
@@ -48,13 +48,7 @@ def kept_samples(
     if n <= 0:
         n = sum(len(b.t_ns) for b in blocks())
     it = blocks()
-    head: list[Any] = []
-    seen = 0
-    for block in it:
-        head.append(block)
-        seen += len(block.t_ns)
-        if seen >= MEDIAN_SAMPLES:
-            break
+    head, seen = first_pieces(it, MEDIAN_SAMPLES, lambda block: len(block.t_ns))
     if not head:
         return None
     if seen < MEDIAN_SAMPLES:  # the whole channel is in ``head``: its own count

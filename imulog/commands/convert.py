@@ -29,6 +29,7 @@ from imulog.commands.convert_common import (
 from imulog.commands.convert_folders import (
     OPTICAL_FORMATS,
     _convert_directories,
+    format_names,
     sessions,
 )
 from imulog.commands.convert_stream import (
@@ -273,9 +274,10 @@ def _inspect(
         extra={"names": _kv(device_names, "--device-name"), "units": _units(unit_pairs)},
     )
     groups: list[list[Path]] = []
+    detected: dict[Path, Any] = {}  # each file of a folder detected once, while grouping
     for p in inputs:
         if p.is_dir():
-            groups.extend(files for _, files in sessions(group_directory(p)))
+            groups.extend(files for _, files in sessions(group_directory(p, None, detected), detected))
         else:
             groups.append([p])
     if all(not p.is_dir() for p in inputs):
@@ -285,7 +287,7 @@ def _inspect(
     reports, failures = [], []
     for files in groups:
         try:
-            formats = [_format_name(p, fmt, options) for p in files]
+            formats = format_names(files, fmt, options, detected)
             rec = convert_files(files, options=options, formats=formats)
             reports.append(describe(files, formats, rec, unit_warnings(rec), options))
         except ConversionError as e:

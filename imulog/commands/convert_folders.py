@@ -13,6 +13,7 @@ from imulog.commands.convert_common import (
     _channel_list,
     _convert_group,
     _echo_json,
+    _format_name,
     _write,
     conversion_warnings,
     finish_recording,
@@ -34,24 +35,42 @@ from imulog.model import Recording
 OPTICAL_FORMATS = frozenset({"c3d", "vicon-csv", "motive", "qualisys", "opensim-trc"})
 
 
-def _is_optical(files: list[Path]) -> bool:
+Detected = dict[Path, Converter]  # each file's converter, as group_directory(..., detected=) found it
+
+
+def _detected(path: Path, detected: Detected | None) -> Converter:
+    """The converter of ``path``: the one already detected (``detected``), else :func:`detect` now."""
+    if detected is not None and path in detected:
+        return detected[path]
+    return detect(path)
+
+
+def format_names(files: list[Path], fmt: str | None, options: ConvertOptions, detected: Detected | None) -> list[str]:
+    """The format each file converts with: forced (``fmt``), already detected, else ``_format_name`` (detects)."""
+    if fmt:
+        return [fmt] * len(files)
+    return [detected[p].name if detected and p in detected else _format_name(p, fmt, options) for p in files]
+
+
+def _is_optical(files: list[Path], detected: Detected | None = None) -> bool:
     """True when every file of a recording is an optical export (:data:`OPTICAL_FORMATS`)."""
     try:
-        return all(detect(p).name in OPTICAL_FORMATS for p in files)
+        return all(_detected(p, detected).name in OPTICAL_FORMATS for p in files)
     except ConversionError:
         return False
 
 
-def sessions(groups: list[tuple[str, list[Path]]]) -> list[tuple[str, list[Path]]]:
+def sessions(groups: list[tuple[str, list[Path]]], detected: Detected | None = None) -> list[tuple[str, list[Path]]]:
     """One trial per session: in each folder, a single recording with IMU data (e.g. 11 per-sensor Xsens files)
     and the optical exports beside it (C3D, Nexus CSV, Motive, Qualisys, TRC) are one trial, named after the
-    IMU recording. A folder with several IMU recordings keeps one trial per recording."""
+    IMU recording. A folder with several IMU recordings keeps one trial per recording. ``detected``: each
+    file's converter when already known (:func:`~imulog.converters.registry.group_directory`)."""
     by_folder: dict[Path, list[tuple[str, list[Path]]]] = {}
     for name, files in groups:
         by_folder.setdefault(files[0].parent, []).append((name, files))
     out: list[tuple[str, list[Path]]] = []
     for found in by_folder.values():
-        optical = [_is_optical(files) for _, files in found]
+        optical = [_is_optical(files, detected) for _, files in found]
         imu = [g for g, opt in zip(found, optical, strict=True) if not opt]
         if len(imu) == 1 and len(found) > 1:
             out.append(
@@ -66,28 +85,29 @@ def sessions(groups: list[tuple[str, list[Path]]]) -> list[tuple[str, list[Path]
 
 
 def _convert_folder_group(
-    files: list[Path], fmt: str | None, options: ConvertOptions
+    files: list[Path], fmt: str | None, options: ConvertOptions, names: list[str]
 ) -> tuple[Recording, dict[str, str], list[tuple[Path, str]]]:
-    """Convert the files of one folder trial; a file that fails to convert is left out and returned with its
-    reason (the others still make the trial). Files that convert but cannot be combined are an error."""
+    """Convert the files of one folder trial (``names``: their formats, :func:`format_names`); a file that fails
+    to convert is left out and returned with its reason (the others still make the trial). Files that convert but
+    cannot be combined are an error."""
     skipped: list[tuple[Path, str]] = []
-    todo = list(files)
+    todo = dict(zip(files, names, strict=True))
     while True:
         try:
-            rec, formats = _convert_group(todo, fmt, options)
+            rec, formats = _convert_group(list(todo), fmt, options, list(todo.values()))
             return rec, formats, skipped
         except ConversionError as e:
             bad = next((p for p in todo if e.path == str(p)), None)
             if bad is None or len(todo) == 1 or e.problem.startswith("cannot combine"):
                 raise
             skipped.append((bad, e.problem))
-            todo.remove(bad)
+            del todo[bad]
 
 
-def _sibling_meta(files: list[Path]) -> dict[str, dict[str, Any]]:
+def _sibling_meta(files: list[Path], detected: Detected | None = None) -> dict[str, dict[str, Any]]:
     """Per-recording metadata beside the exports: ``<key>_meta.json`` / ``<key>.meta.toml`` (as the simulator writes)."""
     try:
-        conv = detect(files[0])
+        conv = _detected(files[0], detected)
     except ConversionError:
         conv = None
     key = recording_key(files[0], conv)  # the format's own key (Xsens: MT_<master>_<trial>) when it has one
@@ -109,9 +129,10 @@ def convert_session(files: list[Path], conv: Converter, options: ConvertOptions)
 
 
 def _stream_session(
-    files: list[Path], target: Path, fmt: str | None, options: ConvertOptions, meta: dict, attach: str, overwrite: bool
+    files: list[Path], target: Path, fmt: str, options: ConvertOptions, meta: dict, attach: str, overwrite: bool
 ) -> dict[str, Any]:
-    """One session's files converted piece by piece (time windows of every file) into ``target``: its JSON entry."""
+    """One session's files converted piece by piece (time windows of every file) into ``target``: its JSON entry.
+    ``fmt``: the session's format (forced or already detected: nothing is detected again)."""
     from imulog.commands.outputs import exists_message
 
     if target.exists() and not overwrite:  # the whole-folder path's line (_write), before anything is read
@@ -144,8 +165,9 @@ def _convert_directories(
 ) -> None:
     jobs: list[tuple[Path, list[Path]]] = []
     skipped: list[tuple[Path, str]] = []
+    detected: Detected = {}  # each file's format is detected once, while grouping; everything below reuses it
     for d in dirs:
-        for name, files in sessions(group_directory(d, skipped)):
+        for name, files in sessions(group_directory(d, skipped, detected), detected):
             prefix = d.name if len(dirs) > 1 else ""
             jobs.append((out_dir / prefix / f"{name}.mcap", files))
     if not jobs:
@@ -168,13 +190,14 @@ def _convert_directories(
     ) as bar:
         for target, files in bar:
             try:
-                trial_meta = _sibling_meta(files)
+                trial_meta = _sibling_meta(files, detected)
                 for name, values in meta.items():
                     trial_meta.setdefault(name, {}).update(values)
-                session = session_converter(files, fmt, options)
+                names = format_names(files, fmt, options, detected)
+                session = session_converter(files, fmt, options, names)
                 if session is not None and sum(p.stat().st_size for p in files) >= convert_stream.STREAM_MIN_BYTES:
                     target.parent.mkdir(parents=True, exist_ok=True)
-                    trials.append(_stream_session(files, target, fmt, options, trial_meta, attach, overwrite))
+                    trials.append(_stream_session(files, target, session.name, options, trial_meta, attach, overwrite))
                     warnings.extend(f"{target}: {msg}" for msg in trials[-1]["warnings"])
                     written += 1
                     continue
@@ -182,7 +205,7 @@ def _convert_directories(
                     rec, left_out = convert_session(files, session, options), []
                     formats = {p.name: session.name for p in files}
                 else:
-                    rec, formats, left_out = _convert_folder_group(files, fmt, options)
+                    rec, formats, left_out = _convert_folder_group(files, fmt, options, names)
                 skipped.extend(left_out)
                 finish_recording(rec, trial_meta, formats)
                 target.parent.mkdir(parents=True, exist_ok=True)

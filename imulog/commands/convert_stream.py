@@ -34,12 +34,14 @@ def _streams(path: Path, name: str) -> bool:
     return size >= threshold and type(conv).iter_chunks is not Converter.iter_chunks
 
 
-def session_converter(files: list[Path], fmt: str | None, options: ConvertOptions) -> Converter | None:
+def session_converter(
+    files: list[Path], fmt: str | None, options: ConvertOptions, names: list[str] | None = None
+) -> Converter | None:
     """The converter that reads ``files`` together as one session (``Converter.iter_session``: every file of one format
-    that has it), else None (the files convert one by one)."""
+    that has it), else None (the files convert one by one). ``names``: the files' formats when already known."""
     try:
-        names = {_format_name(p, fmt, options) for p in files}
-        conv = get(names.pop()) if len(names) == 1 else None
+        found = set(names) if names is not None else {_format_name(p, fmt, options) for p in files}
+        conv = get(found.pop()) if len(found) == 1 else None
     except (ConversionError, UnknownFormatError):
         return None
     return conv if conv is not None and type(conv).iter_session is not Converter.iter_session else None

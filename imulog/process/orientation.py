@@ -32,7 +32,8 @@ Backends (:data:`BACKENDS`, chosen by :class:`OrientationParams.backend`):
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -197,15 +198,22 @@ class OrientationParams:
 @dataclass
 class OrientationResult:
     """Output of :func:`estimate_orientation`: ``quat`` (N, 4) sensor-to-global, ``static`` (N,) bool,
-    ``global_frame`` :data:`GLOBAL_FRAME_9D` (magnetometer fused) or :data:`GLOBAL_FRAME_6D`."""
+    ``global_frame`` :data:`GLOBAL_FRAME_9D` (magnetometer fused) or :data:`GLOBAL_FRAME_6D`; ``estimates``:
+    what the backend estimated besides the orientation, as JSON values (``vqf_gyrocal``: ``gyro_correction``,
+    :func:`imulog.process.orientation_gyrocal.correction_record`; empty for the others)."""
 
     quat: np.ndarray
     static: np.ndarray
     backend: str
     global_frame: str = GLOBAL_FRAME_6D
+    estimates: dict[str, Any] = field(default_factory=dict)
 
 
-Backend = Callable[[np.ndarray, np.ndarray, "np.ndarray | None", float, OrientationParams, np.ndarray], np.ndarray]
+#: a backend returns the quaternions (N, 4), or them and what else it estimated (``OrientationResult.estimates``)
+Backend = Callable[
+    [np.ndarray, np.ndarray, "np.ndarray | None", float, OrientationParams, np.ndarray],
+    "np.ndarray | tuple[np.ndarray, dict[str, Any]]",
+]
 
 
 def _madgwick(gyr, acc, mag, rate_hz, params, static):
@@ -265,7 +273,9 @@ def _imufusion(gyr, acc, mag, rate_hz, params, static):
 def _vqf_gyrocal(gyr, acc, mag, rate_hz, params, static):
     from imulog.process.orientation_gyrocal import vqf_gyrocal
 
-    return vqf_gyrocal(gyr, acc, rate_hz, mag)[0]
+    correction: dict[str, Any] = {}
+    q = vqf_gyrocal(gyr, acc, rate_hz, mag, info=correction)[0]
+    return q, {"gyro_correction": correction}  # what it estimated, for the step's provenance
 
 
 def _rts(gyr, acc, mag, rate_hz, params, static):
@@ -345,7 +355,9 @@ def _on_uniform_grid(
     res = estimate_orientation(interp(gyr), interp(acc), nominal_hz, None if mag is None else interp(mag), params)
     q = resample_quaternions(grid, res.quat, t, ResampleParams(cutoff_ratio=0.0))
     idx = np.clip(np.searchsorted(grid, t), 0, len(grid) - 1)
-    return OrientationResult(quat=q, static=res.static[idx], backend=res.backend, global_frame=res.global_frame)
+    return OrientationResult(
+        quat=q, static=res.static[idx], backend=res.backend, global_frame=res.global_frame, estimates=res.estimates
+    )
 
 
 def estimate_orientation(
@@ -371,10 +383,12 @@ def estimate_orientation(
     acc = np.ascontiguousarray(_fill_nan(acc_m_s2))
     m = np.ascontiguousarray(_fill_nan(mag)) if (params.use_mag and mag is not None) else None
     static = detect_static(gyr, rate_hz, params.static)
-    q = np.asarray(BACKENDS[params.backend](gyr, acc, m, float(rate_hz), params, static), dtype=np.float64)
+    out = BACKENDS[params.backend](gyr, acc, m, float(rate_hz), params, static)
+    out, estimates = out if isinstance(out, tuple) else (out, {})
+    q = np.asarray(out, dtype=np.float64)
     # every backend returns unit quaternions; their sign is kept continuous (no w >= 0 flips)
     frame = GLOBAL_FRAME_9D if m is not None else GLOBAL_FRAME_6D
-    return OrientationResult(quat=q, static=static, backend=params.backend, global_frame=frame)
+    return OrientationResult(quat=q, static=static, backend=params.backend, global_frame=frame, estimates=estimates)
 
 
 def gravity_free_acceleration(

@@ -17,6 +17,7 @@ Units: gyr rad/s, acc m/s^2, rate Hz, times s; ``M`` and ``prior_sd`` dimensionl
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -153,9 +154,14 @@ def vqf_gyrocal(
     rate_hz: float,
     mag: np.ndarray | None = None,
     params: GyroCalParams = GyroCalParams(),
+    info: dict[str, Any] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Sensor-to-global quaternions (N, 4) of VQF offline run on the self-calibrated gyroscope, and the
-    correction ``M`` (3x3). 6D without ``mag`` (z up, arbitrary heading), ENU with it."""
+    correction ``M`` (3x3). 6D without ``mag`` (z up, arbitrary heading), ENU with it.
+
+    ``info``, when given, receives what was estimated and applied (:func:`correction_record`): ``M``, the mean of
+    VQF offline's bias estimate the correction turns about (rad/s) and whether the recording was long enough to
+    fit ``M`` (``params.min_duration_s``)."""
     from vqf import offlineVQF
 
     gyr = np.ascontiguousarray(gyr, dtype=np.float64)
@@ -165,7 +171,21 @@ def vqf_gyrocal(
     dt = 1.0 / float(rate_hz)
     bias = offlineVQF(gyr, acc, None, dt)["bias"]
     m = estimate_gyro_correction(gyr, acc, rate_hz, bias, params)
+    if info is not None:
+        info.update(correction_record(m, bias, len(gyr) * dt >= params.min_duration_s))
     corrected = np.ascontiguousarray((gyr - bias) @ m.T + bias)  # VQF estimates (and removes) the bias again
     mag = None if mag is None else np.ascontiguousarray(mag, dtype=np.float64)
     out = offlineVQF(corrected, acc, mag, dt)
     return np.asarray(out["quat6D" if mag is None else "quat9D"]), m
+
+
+def correction_record(m: np.ndarray, bias: np.ndarray, fitted: bool) -> dict[str, Any]:
+    """The gyroscope correction as recorded (JSON): ``matrix`` ``M`` (3x3, true rate = ``M @ (gyr - bias)``,
+    dimensionless), ``bias_rad_s`` the mean of the bias estimate (N, 3 or 3, rad/s) it is applied about, and
+    ``fitted`` (False: the recording was shorter than ``GyroCalParams.min_duration_s``, ``M`` is the identity)."""
+    mean_bias = np.asarray(bias, dtype=np.float64).reshape(-1, 3).mean(axis=0)
+    return {
+        "matrix": np.asarray(m, dtype=np.float64).tolist(),
+        "bias_rad_s": mean_bias.tolist(),
+        "fitted": bool(fitted),
+    }

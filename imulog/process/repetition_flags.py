@@ -16,12 +16,14 @@ data):
   initial estimate and the optimised result: how far the optimisation pulled it (the ``drift`` feature until
   2026-12-07; kept in the records, not a reason by default);
 - ``rest_before_s`` / ``rest_after_s``: the rest (s) at each end of the window that the velocity is reset on;
-- candidates measured for the ``drift`` reason with ``RotatingBiasParams.outlier_factor = 4`` and not used by any
+- with ``candidates`` only (``benchmarks/confidence_calibration.py`` asks; the trajectory step does not): the
+  candidates measured for the ``drift`` reason with ``RotatingBiasParams.outlier_factor = 4`` and not used by any
   reason (docs/accuracy.md, "a drift feature for the robust bias fit"): ``start_zupt_cm`` (the start against plain
   ZUPT at the same rests, both turned, worst axis), ``zupt_reference_cm`` (ZUPT against the reference there),
   ``anchored_reference_cm`` (``reference_cm`` on the reference coordinates the start does not enter) and
   ``closure_mps`` (the largest velocity the repetition's movements leave at their next rest after the
-  rotating-bias compensation: the fit's own residual there).
+  rotating-bias compensation: the fit's own residual there; in ``trajectory_info`` when
+  :func:`imulog.process.trajectory_opt.reconstruct_repetitions` ran with ``drift_candidates``).
 
 :func:`flag_repetition` turns them into reasons (``merged``, ``split``, ``missing``, ``drift``, ``weak rest``);
 thresholds are :class:`FlagParams`, calibrated on the grid by ``benchmarks/confidence_calibration.py``.
@@ -58,6 +60,7 @@ def repetition_features(
     trajectories_m: Mapping[str, np.ndarray],
     quality: Sequence[Mapping[str, Any]] = (),
     trajectory_info: Mapping[str, Any] | None = None,
+    candidates: bool = False,
 ) -> dict[int, dict[str, Any]]:
     """Per repetition (by its ``index``): the phases step's counts and the dead-reckoning figures above.
 
@@ -66,7 +69,8 @@ def repetition_features(
     trajectories_m: {method: (N, 3) m} with ``zupt`` and, when computed, ``zupt_bias`` and ``optimized``;
     quality: the phases step's per-repetition records (``repetition`` 1-based); trajectory_info: the ``info``
     :func:`imulog.process.trajectory_opt.reconstruct_repetitions` filled (``waypoints_m``, ``heading_drift_deg``
-    per repetition in list order), needed for ``reference_cm``.
+    per repetition in list order), needed for ``reference_cm``; candidates: also the unused ``drift`` candidates
+    (above; no reason reads them, so the flags are the same without them).
     """
     import numpy as np  # lazily: `imulog info` reads flag_line without numpy
 
@@ -74,7 +78,7 @@ def repetition_features(
     acc = np.asarray(acc_mps2, dtype=np.float64)
     static = np.asarray(static_mask, dtype=bool)
     by_rep = {int(q["repetition"]): q for q in quality}
-    reference = _reference_distances(t, static, repetitions, trajectories_m, trajectory_info or {})
+    reference = _reference_distances(t, static, repetitions, trajectories_m, trajectory_info or {}, candidates)
     out: dict[int, dict[str, Any]] = {}
     for i, rep in enumerate(repetitions):
         sl = slice(rep.start, rep.stop)
@@ -95,7 +99,7 @@ def repetition_features(
             if z is not None and o is not None:
                 f[f"{name}_optimized_cm"] = _rms_distance_cm(o[sl], z[sl])
         f.update(reference.get(i, {}))
-        closure = (trajectory_info or {}).get("closure_mps") or ()
+        closure = (trajectory_info or {}).get("closure_mps") or () if candidates else ()
         if i < len(closure) and closure[i] is not None:
             f["closure_mps"] = closure[i]
         q = by_rep.get(int(rep.index), {})
@@ -112,10 +116,12 @@ def _reference_distances(
     repetitions: Sequence[Any],
     trajectories_m: Mapping[str, np.ndarray],
     info: Mapping[str, Any],
+    candidates: bool = False,
 ) -> dict[int, dict[str, float]]:
     """Per repetition (list position): ``reference_cm``, the initial estimate's RMS distance (cm, worst axis) to
     the minimum-jerk reference at the static samples after the first phase starts (the samples the
-    optimisation's ``sigma_ref_static_m`` term holds; before the first phase both are 0 by construction)."""
+    optimisation's ``sigma_ref_static_m`` term holds; before the first phase both are 0 by construction); with
+    ``candidates`` also ``start_zupt_cm``, ``zupt_reference_cm`` and ``anchored_reference_cm``."""
     import numpy as np
 
     from imulog.process.minjerk import R2GWaypoints
@@ -126,7 +132,7 @@ def _reference_distances(
     if initial is None or not wp:
         return {}
     turned = {"start": _turned(initial, repetitions, info)}
-    if "zupt_bias" in trajectories_m and "zupt" in trajectories_m:
+    if candidates and "zupt_bias" in trajectories_m and "zupt" in trajectories_m:
         turned["zupt"] = _turned(trajectories_m["zupt"], repetitions, info)
     complete = [r for r in repetitions if len(getattr(r, "phase_bounds_s", ())) == 4]
     waypoints = R2GWaypoints(tuple(wp["bottle"]), tuple(wp["mouth"]))
@@ -144,7 +150,7 @@ def _reference_distances(
             if both.any():  # the two estimates at the same rests: their disagreement, and ZUPT's own distance
                 f["start_zupt_cm"] = _worst_axis_cm(d[both] - dz[both])
                 f["zupt_reference_cm"] = _worst_axis_cm(dz[both])
-        anchored = _anchored_distance_cm(t, turned["start"], static, complete[j], waypoints)
+        anchored = _anchored_distance_cm(t, turned["start"], static, complete[j], waypoints) if candidates else None
         if anchored is not None:
             f["anchored_reference_cm"] = anchored
         out[position[id(complete[j])]] = f

@@ -110,6 +110,7 @@ def reconstruct_repetitions(
     info: dict[str, Any] | None = None,
     baseline: bool = False,
     side: tuple[str, str] | None = None,
+    drift_candidates: bool = False,
 ) -> dict[str, np.ndarray]:
     """Every method on every repetition: {method: (N, 3) m relative to each repetition's start, NaN outside}.
 
@@ -121,6 +122,8 @@ def reconstruct_repetitions(
     optimisation starts from ZUPT. ``baseline``: also return :data:`BASELINE` (linear velocity de-drift
     between each window's first and last sample), the figure every method must beat. ``side``: the placement's
     ``(left|right, source)``, checked with the given anthropometrics (``info["input_checks"]``).
+    ``drift_candidates``: also ``info["closure_mps"]``, an unused candidate of the repetition flags' ``drift``
+    reason (:mod:`imulog.process.repetition_flags`; only ``benchmarks/confidence_calibration.py`` asks for it).
     """
     t = np.asarray(t_s, dtype=np.float64)
     a = np.asarray(acc_mps2, dtype=np.float64)
@@ -137,7 +140,7 @@ def reconstruct_repetitions(
         if info is not None:
             info["accelerometer_errors"] = {**errors.as_dict(), "applied": bool(bias["ok"])}
     base = a if a_comp is None else a_comp
-    if info is not None and bias is not None:  # what the fit leaves of each repetition's movements (flags' drift)
+    if drift_candidates and info is not None and bias is not None:  # what the fit leaves (a drift candidate)
         info["closure_mps"] = [
             _closure_left(t[r.start : r.stop], base[r.start : r.stop], static[r.start : r.stop]) for r in repetitions
         ]

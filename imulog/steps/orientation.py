@@ -97,21 +97,30 @@ def orientation_with_gaps(
     imu: str,
     params: OrientationParams,
     gaps: GapParams | None = None,
+    estimates: list[dict[str, Any]] | None = None,
 ) -> tuple[list[SignalStream], GapReport]:
     """The three derived streams and the gap report: missing samples (NaN) follow :mod:`imulog.process.gaps`
-    (short gaps bridged, the filter restarted after long ones, NaN outputs inside them)."""
+    (short gaps bridged, the filter restarted after long ones, NaN outputs inside them). ``estimates``, when
+    given, receives what the backend estimated besides the orientation (``OrientationResult.estimates``, e.g.
+    ``vqf_gyrocal``'s ``gyro_correction``), one entry per valid run it ran on: ``{"samples": [a, b], ...}``."""
     if params.use_mag and mag is None:
         raise ValueError(f"/imu/{imu} has no magnetometer: drop --mag")
     (acc, gyr, mag_used), report = prepare([acc, gyr, mag if params.use_mag else None], gaps)
+    found: list[dict[str, Any]] = []  # per run, in report.runs order (per_run calls run once per run)
 
     def run(t, a, g, m):
         res = estimate_orientation(g, a, mean_rate_hz(t), m, params, t_ns=t)
+        found.append(res.estimates)
         return res.quat, gravity_free_acceleration(res.quat, a, res.static), res.static.astype(np.float64)
 
     try:
         quat, lin, static = per_run(run, report, t_ns, acc, gyr, mag_used)
     except ValueError as exc:
         raise ValueError(f"/imu/{imu}: {exc}") from None
+    if estimates is not None:
+        estimates.extend(
+            {"samples": [int(a), int(b)], **est} for (a, b), est in zip(report.runs, found, strict=True) if est
+        )
     if not params.use_mag:
         _continue_heading(quat, lin, report.runs)
     frame = f"{imu}_global"
@@ -169,19 +178,25 @@ def orientation_windows(
     params: OrientationParams,
     gaps: GapParams | None = None,
     reports: list[tuple[Window, GapReport]] | None = None,
+    estimates: list[dict[str, Any]] | None = None,
 ) -> Iterator[SignalStream]:
     """The three derived streams of an IMU given as ``(t_ns, acc, gyr, mag)`` blocks (``total`` samples), core
-    by core over ``plan``; each window's gap report is appended to ``reports``. One window: exactly
-    :func:`orientation_with_gaps` on the whole."""
+    by core over ``plan``; each window's gap report is appended to ``reports``, and what the backend estimated
+    to ``estimates`` (:func:`orientation_with_gaps`; ``samples`` in whole-channel indices, with the window's
+    ``core`` when there are several). One window: exactly :func:`orientation_with_gaps` on the whole."""
     from imulog.process import quaternion as qmath
 
     buf = SampleWindow(blocks, total)
     join: tuple[int, np.ndarray] | None = None  # (global sample, orientation there) the next window continues
     for w in plan:
         t, acc, gyr, mag = buf.take(w.lo, w.hi)
-        streams, report = orientation_with_gaps(t, acc, gyr, mag, imu, params, gaps)
+        found: list[dict[str, Any]] = []
+        streams, report = orientation_with_gaps(t, acc, gyr, mag, imu, params, gaps, found)
         if reports is not None:
             reports.append((w, report))
+        if estimates is not None:
+            core = {"core": [w.core_lo, w.core_hi]} if len(plan) > 1 else {}
+            estimates.extend({**e, "samples": [e["samples"][0] + w.lo, e["samples"][1] + w.lo], **core} for e in found)
         if len(plan) == 1:
             yield from streams
             return
@@ -213,6 +228,18 @@ def orientation_windows(
             )
 
 
+def estimated(entries: list[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
+    """The run record's entries of what the backend estimated: per name (``gyro_correction``), the list of
+    ``{"samples": [a, b], "core": ..., **value}`` over the runs and windows it ran on; ``{}`` when none."""
+    out: dict[str, list[dict[str, Any]]] = {}
+    for entry in entries:
+        where = {k: entry[k] for k in ("samples", "core") if k in entry}
+        for key, value in entry.items():
+            if key not in where:
+                out.setdefault(key, []).append({**where, **value})
+    return out
+
+
 def windowed_gap_report(reports: list[tuple[Window, GapReport]]) -> dict[str, Any]:
     """The run's ``gaps`` entry of a recording computed in several windows: the windows that had missing
     samples, each with its read span and core (sample indices in the whole channel) and its own report, whose
@@ -238,6 +265,7 @@ def read_orientation_windows(
     plan: list[Window],
     total: int,
     reports: list[tuple[Window, GapReport]] | None = None,
+    estimates: list[dict[str, Any]] | None = None,
 ) -> Iterator[SignalStream]:
     """:func:`orientation_windows` on ``topic`` of the trial at ``path``, read chunk by chunk."""
     from imulog.archive import TrialReader
@@ -247,7 +275,7 @@ def read_orientation_windows(
         reuse_heap()  # the same temporaries core after core: reuse their pages (imulog.heap)
     with TrialReader(path) as trial:
         blocks = (imu_arrays(b, topic) for b in trial.iter_blocks(topic))
-        yield from orientation_windows(blocks, total, plan, imu, params, gaps, reports)
+        yield from orientation_windows(blocks, total, plan, imu, params, gaps, reports, estimates)
 
 
 def run_orientation(
@@ -269,6 +297,9 @@ def run_orientation(
     ``gaps``: how missing IMU samples are treated (default :class:`~imulog.process.gaps.GapParams`); what was
     bridged or split is recorded in the run's ``gaps`` entry (one window: as a whole; several: per window with
     missing samples, :func:`windowed_gap_report`, filled by the pieces once written).
+
+    What the backend estimated besides the orientation goes into the run's record under its name, one entry per
+    valid run (and window) it ran on: ``vqf_gyrocal``'s ``gyro_correction`` (:func:`orientation_windows`).
     """
     params = params or OrientationParams()
     windows = windows or WindowParams()
@@ -290,16 +321,19 @@ def run_orientation(
 
     def compute(trial) -> StepResult:
         reports: list[tuple[Window, GapReport]] = []
+        estimates: list[dict[str, Any]] = []
         if len(plan) == 1:  # one window: the streams at once, and the gap report with them
-            streams = list(read_orientation_windows(path, topic, name, params, gaps, plan, total, reports))
+            streams = list(read_orientation_windows(path, topic, name, params, gaps, plan, total, reports, estimates))
             report = reports[0][1]
-            return StepResult(streams=streams, provenance={"gaps": report.as_dict()} if report.missing else {})
+            provenance = {"gaps": report.as_dict()} if report.missing else {}
+            return StepResult(streams=streams, provenance={**provenance, **estimated(estimates)})
 
         def produce() -> Iterator[SignalStream]:
-            yield from read_orientation_windows(path, topic, name, params, gaps, plan, total, reports)
+            yield from read_orientation_windows(path, topic, name, params, gaps, plan, total, reports, estimates)
             gapped = windowed_gap_report(reports)
             if gapped:
                 pieces.provenance["gaps"] = gapped
+            pieces.provenance.update(estimated(estimates))
 
         pieces = StreamPieces(
             topics=[f"/derived/{kind}/{name}" for kind in ("orientation", "acc_global", "orientation_static")],
