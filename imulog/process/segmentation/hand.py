@@ -105,7 +105,8 @@ class HandParams:
         ``flank_search_s``), so that a slow start reaches ``velocity_level_mps`` for its speed flank (a 6-s reach
         needs 1.5 s; 0.6 s left 56 of 1200 stroke-slow onsets without a flank, 0.115 s late on average: issue 31).
     profile_rest_s: length (s) of the rest window near the gap's end that step 9's fit is referred to; 0: off (the
-        default: on, 1 s, it moved 5 stroke-slow development trials up and one stroke trial down, docs/accuracy.md).
+        default until issue 31's seventh round; with its two checks, 1 s, it moved 9 development trials up and
+        none down, and on the held-out set one up and one down, docs/accuracy.md).
     profile_durations_s: the range (s) of the fitted last movement's duration ``T``.
     profile_min_s: step 9 moves an offset only when it lies at least this far (in units of the fitted movement's
         duration) before the fitted arrival: in the main deceleration, at 56 % of the peak speed or more.
