@@ -128,7 +128,7 @@ def table(trials, methods, variants) -> None:
 
 GRID_METHODS = {
     "hand (default)": PhaseParams(),
-    "hand + speed profile (step 9)": PhaseParams(hand=HandParams(profile_rest_s=1.0)),  # issue 31, off by default
+    "hand without step 9": PhaseParams(hand=HandParams(profile_rest_s=0.0)),  # the default until issue 31's 7th round
     "gyroscope only": PhaseParams(hand=HandParams(enabled=False)),
     "published (--no-refine)": PhaseParams(
         dynamos=DynamosParams(refine_boundaries=False), boundaries=BoundaryParams(enabled=False)

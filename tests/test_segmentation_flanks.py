@@ -80,7 +80,8 @@ def test_a_slow_reach_starts_and_ends_where_its_acceleration_flank_does():
     strict=True,
     reason="known limit (docs/accuracy.md): the wrist stops turning 4 s before this hand does and the last 2.7 s "
     "decelerate at under 0.04 m/s^2, like a rest drifting at 2 cm/s; the rest window then lies inside the reach "
-    "(step 9, speed_profile.py, off by default, brings the durations to -0.15/-0.03/-0.11 s: two over 0.1 s)",
+    "(step 9, speed_profile.py, on by default since issue 31's seventh round, brings the durations to "
+    "-0.15/-0.03/-0.11 s: two over 0.1 s)",
 )
 def test_a_reach_too_slow_for_the_accelerometer_ends_where_its_speed_does():
     """25 cm over 6 s, the wrist turning over the first 2 s: peak acceleration 0.04 m/s^2, under the level; the

@@ -13,7 +13,7 @@ from imulog.process.segmentation.hand import HandParams
 from imulog.process.segmentation.speed_profile import decel_shape, fit_arrival, speed_left
 
 RATE = 100.0
-ON = replace(HandParams(), profile_rest_s=1.0)  # step 9 is off by default (docs/accuracy.md)
+ON = replace(HandParams(), profile_rest_s=1.0)  # step 9, the default since issue 31's seventh round
 OFF = replace(HandParams(), profile_rest_s=0.0)
 
 
@@ -80,3 +80,57 @@ def test_a_drift_after_the_arrival_stays_outside_the_phase():
         on = _boundaries(seconds, 0.25, ON, drift_mps=0.02)[1]
         assert np.all(on < 0.05), (seconds, on)  # never into the drift
         assert np.allclose(on, off), (on, off)
+
+
+def _offset_errors(name: str, seed: int, subject: int, hand: HandParams, **sensor) -> dict:
+    """Offset error (s, detected minus true) per (repetition, label) of a simulated 10-repetition trial of the
+    accuracy grid's condition ``name`` (or the benchmark's wider ones), segmented with ``hand``."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from segmentation_accuracy import _wider
+
+    from imulog.process.segmentation.pipeline import PhaseParams, segment_phases
+    from imulog.process.segmentation.repetitions import RepetitionParams
+    from imulog.simulate import simulate
+    from imulog.simulate.grid import condition
+
+    options = _wider()[name] if name in _wider() else condition(name)
+    sim = simulate("r2g", seed=seed, subject=subject, repetitions=10, **options, **sensor)
+    imu = sim.recording.imus[0]
+    rate = (len(imu.t_ns) - 1) / ((imu.t_ns[-1] - imu.t_ns[0]) * 1e-9)
+    params = PhaseParams(hand=hand, repetitions=RepetitionParams(n_repetitions=10))
+    ph = segment_phases(imu.gyr, rate, params, imu.acc).phases
+    t_ref, truth = np.asarray(sim.truth.imu_t_ref_ns) * 1e-9, sim.truth.phases
+    true_end = {(int(r), lab): e * 1e-9 for r, lab, e in zip(truth.task_index, truth.labels, truth.end_ns, strict=True)}
+    return {
+        (int(r), lab): float(t_ref[max(e - 1, s)] - true_end[(int(r), lab)])
+        for r, lab, s, e in zip(ph.repetition, ph.labels, ph.start, ph.end, strict=True)
+        if (int(r), lab) in true_end
+    }
+
+
+def test_a_sharp_stop_before_a_rest_with_a_wandering_bias_keeps_its_offset():
+    """stroke, seed 81, subject 51 (development grid): the hand stops sharply at the end of repetition 9's return
+    and rests 9 s. Over that rest the gyroscope's bias random walk (0.005 deg/s/sqrt(s) in the simulator) tilts
+    the specific force referred to the far rest window by ~1.4 mrad, a 14 mm/s^2 plateau that the profile fitted
+    as the tail of a 4-s deceleration: without the residual check the offset went 2 s into the rest, and with the
+    bias random walk switched off (the same random streams otherwise) it did not move. The smooth profile leaves
+    a residual inside the phase ~3x the rest's (the sharp stop), so the offset stays."""
+    key = (9, "return_hand")
+    unchecked = replace(ON, profile_residual_ratio=np.inf)
+    assert _offset_errors("stroke", 81, 51, unchecked)[key] > 1.5  # the case: moved into the still rest
+    no_walk = _offset_errors("stroke", 81, 51, unchecked, gyr_bias_rw_dps_per_sqrt_s=1e-12)
+    assert abs(no_walk[key]) < 0.1  # the cause: the gyroscope's bias instability
+    default = _offset_errors("stroke", 81, 51, HandParams())
+    assert abs(default[key]) < 0.1
+    assert default == _offset_errors("stroke", 81, 51, OFF)  # step 9 moves nothing in this trial
+
+
+def test_an_arrival_at_the_limit_of_the_search_is_no_arrival():
+    """stroke-slow, seed 112, subject 81 (development grid): the far rest window lies 1.2 s after repetition 10's
+    return of the hand; the fitted arrival came out in the search's last block, just before that window (the fit
+    wanted it later), and moved a right offset 1.0 s late. An arrival at the search's limit is not used."""
+    errors = _offset_errors("stroke-slow", 112, 81, HandParams())
+    assert abs(errors[(10, "return_hand")]) < 0.1

@@ -48,8 +48,9 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
 9. the phase's last movement is fitted as one minimum-jerk deceleration from inside the phase to a rest window
    near the gap's end (:mod:`~imulog.process.segmentation.speed_profile`): when its arrival lies beyond the
    rest window of step 2 (a window inside a steadily decelerating last part passes as a rest), starts after the
-   onset, covers the offset, and stands out of the velocity's noise, the offset moves to it (off by default:
-   ``profile_rest_s = 0``).
+   onset, covers the offset, stands out of the velocity's noise, lies before the search's last block and explains
+   the phase's own last part (its residual there at most ``profile_residual_ratio`` x the rest's), the offset
+   moves to it (on by default since issue 31's seventh round; ``profile_rest_s = 0`` turns it off).
 
 Pure numpy/scipy; intervals are half-open sample ranges ``[start, end)``.
 """
@@ -104,11 +105,15 @@ class HandParams:
         ``flank_search_s``), so that a slow start reaches ``velocity_level_mps`` for its speed flank (a 6-s reach
         needs 1.5 s; 0.6 s left 56 of 1200 stroke-slow onsets without a flank, 0.115 s late on average: issue 31).
     profile_rest_s: length (s) of the rest window near the gap's end that step 9's fit is referred to; 0: off (the
-        default: on, 1 s, it moved 5 stroke-slow development trials up and one stroke trial down, docs/accuracy.md).
+        default until issue 31's seventh round; with its two checks, 1 s, it moved 9 development trials up and
+        none down, and on the held-out set one up and one down, docs/accuracy.md).
     profile_durations_s: the range (s) of the fitted last movement's duration ``T``.
     profile_min_s: step 9 moves an offset only when it lies at least this far (in units of the fitted movement's
         duration) before the fitted arrival: in the main deceleration, at 56 % of the peak speed or more.
     profile_grid_hz: step 9 searches the arrival on block means at this rate first (s^-1), then at every sample.
+    profile_residual_ratio: step 9 moves an offset only when the fit's residual over the phase's last part has at
+        most this many times the rms of its residual over the rest after the fitted arrival (a phase stopping
+        sharply at the offset is not the fitted profile's movement, docs/accuracy.md, issue 31 seventh round).
     rest_check_s: a slow last part of a phase at ``velocity_level_mps`` or more with next to no acceleration
         extends the offset when the velocity relative to the rest window stays under half that speed for this
         long (s) after the window (the window is a rest, not a hand cruising or drifting); 0: off.
@@ -137,10 +142,11 @@ class HandParams:
     speed_fit_s: float = 4.0
     rest_check_s: float = 1.5
     speed_reach_s: float = 2.0
-    profile_rest_s: float = 0.0
+    profile_rest_s: float = 1.0
     profile_durations_s: tuple[float, float] = (0.5, 8.0)
     profile_grid_hz: float = 10.0
     profile_min_s: float = 0.25
+    profile_residual_ratio: float = 2.0
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:

@@ -23,8 +23,12 @@ the arrival), it decelerates along the phase's motion, its speed at the offset, 
 measured at the far window) over the time from the offset to the arrival, with the rest from the arrival to
 the window's end as the rest window, and the profile integrated back from the far window stays within
 ``n_sigma`` sd of the velocity integrated from it (:func:`velocity_misfit`): a rest's drift after a stop is no
-deceleration of the phase. Off by default (``HandParams.profile_rest_s = 0``, docs/accuracy.md: on the
-development and held-out grids it also moved two offsets into still rests).
+deceleration of the phase. Two more checks (issue 31, seventh round): the arrival does not lie in the search's
+last block (the fit wanted it in the far window, which is then no rest), and the fitted profile explains the
+phase's own last part, its residual there at most ``profile_residual_ratio`` times the residual over the rest
+after the arrival (:func:`residual_ratio`): a phase that stops sharply, followed by a slow wander of the rest's
+acceleration error (the tilt from the gyroscope's noise or its bias instability, referred to the far window),
+is not one smooth movement. On by default since then (docs/accuracy.md).
 Pure numpy; indices are sample indices.
 """
 
@@ -145,17 +149,32 @@ def fit_arrival(
     return float(e[j]), float(d[j]), k[j]
 
 
-def velocity_misfit(a: np.ndarray, v: np.ndarray, i_end: float, dur: float, dt: float) -> np.ndarray:
-    """``|v - v_model|`` (n,) m/s: the velocity ``v`` (n, 3) integrated back from the rest at the array's end minus the
-    fitted model's (``c + K g``, refitted by least squares for the arrival ``i_end`` and duration ``dur``,
-    samples) integrated the same way."""
+def profile_model(a: np.ndarray, i_end: float, dur: float) -> np.ndarray:
+    """The model ``c + K g`` (n, 3) m/s^2 refitted by least squares to ``a`` (n, 3) m/s^2 for the arrival ``i_end``
+    and duration ``dur`` (samples)."""
     n = len(a)
     i = np.arange(n, dtype=float)
     design = np.c_[np.ones(n), decel_shape((i_end - i) / max(dur, 1.0))]
-    coef = np.linalg.lstsq(design, a, rcond=None)[0]
-    model = design @ coef
+    return design @ np.linalg.lstsq(design, a, rcond=None)[0]
+
+
+def velocity_misfit(a: np.ndarray, v: np.ndarray, i_end: float, dur: float, dt: float) -> np.ndarray:
+    """``|v - v_model|`` (n,) m/s: the velocity ``v`` (n, 3) integrated back from the rest at the array's end minus the
+    fitted model's (:func:`profile_model`) integrated the same way."""
+    model = profile_model(a, i_end, dur)
     v_model = -np.cumsum(model[::-1], axis=0)[::-1] * dt  # as gravity_free integrates back from the rest
     return np.linalg.norm(v - v_model, axis=1)
+
+
+def residual_ratio(a: np.ndarray, i_end: float, dur: float, inside: int, arrival: int) -> float:
+    """rms of the fit's residual (:func:`profile_model`) over the phase's part ``a[:inside]`` divided by its rms over
+    the rest ``a[arrival:]`` (inf when that rest is empty): about 1 when the profile explains the phase's last part
+    to within the rest's noise, several when the phase stops more sharply than the profile does."""
+    res = a - profile_model(a, i_end, dur)
+    if inside < 1 or arrival >= len(a):
+        return np.inf
+    rest = float(np.sqrt(np.mean(res[arrival:] ** 2)))
+    return float(np.sqrt(np.mean(res[:inside] ** 2))) / max(rest, 1e-12)
 
 
 def profile_end(
@@ -194,6 +213,15 @@ def profile_end(
     # speed or more: a window there takes the deceleration for a bias); the fit's own spread (0.1-0.3 s) is larger
     # than the last 0.1-0.3 s a sensor cannot resolve, which it does not extend (see docs/accuracy.md)
     if t_end <= max(end, window) or not params.profile_min_s <= s_end < 1.0 or dur > t_hi * rate_hz:
+        return end
+    # an arrival in the search's last block is the search's limit, not an arrival: the fit wanted it in the far
+    # window, which is then no rest (the next movement starting early)
+    if t_end > rest[0] - 2 * quiet - step:
+        return end
+    # the profile explains the phase's own last part: a phase that stops sharply at the offset, with a slow wander
+    # of the rest's acceleration error after it (a tilt from the gyroscope's noise or bias instability) fitted as
+    # the deceleration, leaves a residual inside the phase several times the rest's
+    if residual_ratio(a, i_end, dur, end - lo, t_end - lo) > params.profile_residual_ratio:
         return end
     u = v[end - lo] / max(float(np.linalg.norm(v[end - lo])), 1e-12)
     if float(k @ u) >= 0:  # K g opposes the motion while it decelerates (an arrival)
