@@ -73,6 +73,9 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
     "rest-blend": (D, replace(D, optimized=replace(D.optimized, start_blend=(True, True, False)))),
     "rest-blend-xyz": (D, replace(D, optimized=replace(D.optimized, start_blend=(True, True, True)))),
     "rest-chain": (D, replace(D, optimized=replace(D.optimized, rest_chain=True))),
+    "rest-model": (D, replace(D, optimized=replace(D.optimized, rest_model="waypoints"))),
+    "rest-model-replace": (D, replace(D, optimized=replace(D.optimized, rest_model="replace"))),
+    "rest-model-posterior": (D, replace(D, optimized=replace(D.optimized, rest_model="posterior"))),
     "robust-bias-iterated": (
         D,
         replace(D, rotating_bias=replace(D.rotating_bias, outlier_factor=3.0, outlier_refits=20)),

@@ -64,6 +64,7 @@ from imulog.process.trajectory_repetitions import (
     trial_waypoints,
     velocity_sigma,
 )
+from imulog.process.trajectory_rest_model import repetition_rests
 from imulog.process.trajectory_rests import repetition_offsets, rest_blend_weight, shifted_waypoints
 
 __all__ = [
@@ -153,6 +154,7 @@ def reconstruct_repetitions(
         info["waypoints_m"] = {"bottle": list(waypoints.bottle_m), "mouth": list(waypoints.mouth_m)}
     fallback: set[int] = set()
     rep_waypoints = [waypoints] * len(repetitions)
+    rep_params: list[TrajectoryParams | None] = [None] * len(repetitions)
     if "optimized" in methods:
         turn = np.zeros(len(repetitions))
         if params.optimized.heading_drift:
@@ -185,6 +187,10 @@ def reconstruct_repetitions(
             info["optimized_fallback"] = [repetitions[i].index for i in sorted(fallback)]
         if params.optimized.rest_chain:
             rep_waypoints = _chained_waypoints(t, z, static, repetitions, waypoints, params, info)
+        if params.optimized.rest_model:
+            rep_waypoints, rep_params = _modelled_waypoints(
+                t, z, static, repetitions, rep_waypoints, waypoints, params, info
+            )
     if baseline:
         methods = [*methods, BASELINE]
         out[BASELINE] = np.full((len(t), 3), np.nan)
@@ -206,7 +212,7 @@ def reconstruct_repetitions(
                 phase_bounds_s=rep.phase_bounds_s,
                 waypoints=rep_waypoints[i] if m == "optimized" else waypoints,
                 acc_compensated_mps2=base[sl] if m == "optimized" else comp,  # optimized: heading-corrected
-                params=params,
+                params=(rep_params[i] or params) if m == "optimized" else params,
             )
     if info is not None:
         info["checks"] = method_checks(t, a, a_comp, static, repetitions, out, params, bias)
@@ -235,6 +241,50 @@ def _chained_waypoints(
     if info is not None:
         info["repetition_offsets_m"] = np.round(offsets * np.asarray(free), 5).tolist()
     return [shifted_waypoints(waypoints, off, free) for off in offsets]
+
+
+def _modelled_waypoints(
+    t: np.ndarray,
+    z: np.ndarray,
+    static: np.ndarray,
+    repetitions: Sequence[Repetition],
+    rep_waypoints: list[R2GWaypoints],
+    waypoints: R2GWaypoints,
+    params: TrajectoryParams,
+    info: dict[str, Any] | None,
+) -> tuple[list[R2GWaypoints], list[TrajectoryParams | None]]:
+    """Each complete repetition's reference waypoints at its own rests
+    (:func:`imulog.process.trajectory_rest_model.repetition_rests` on the start ``z``); the end moves only on the
+    axes not held to return to the start. The others keep ``rep_waypoints``."""
+    est = repetition_rests(t, z, static, repetitions, waypoints)
+    rep_params: list[TrajectoryParams | None] = [None] * len(repetitions)
+    if est is None:
+        return rep_waypoints, rep_params
+    rts = params.optimized.return_to_start
+    free = [not r for r in rts] if isinstance(rts, (tuple, list)) else [not rts] * 3
+    out = list(rep_waypoints)
+    mode = params.optimized.rest_model
+    for k, i in enumerate(est.index):
+        if mode in ("replace", "posterior"):
+            o = replace(params.optimized, sigma_data_static_m=None)
+            if mode == "posterior":
+                sd = np.sqrt(np.nanmean(est.sd_m[k, 1:4] ** 2, axis=0))
+                o = replace(o, sigma_ref_static_m=tuple(float(max(v, 0.003)) for v in sd))
+            rep_params[int(i)] = replace(params, optimized=o)
+        bottle, mouth, back, end = est.waypoints(k, end_axes=free)
+        out[int(i)] = R2GWaypoints(
+            bottle_m=tuple(bottle.tolist()),
+            mouth_m=tuple(mouth.tolist()),
+            end_m=tuple(end.tolist()),
+            bottle_back_m=tuple(back.tolist()),
+        )
+    if info is not None:
+        info["rest_model"] = {
+            "sigma_m": np.round(est.sigma_m, 5).tolist(),
+            "tau_m": np.round(est.tau_m, 5).tolist(),
+            "bias_m": np.round(est.bias_m, 5).tolist(),
+        }
+    return out, rep_params
 
 
 def _blended_start(

@@ -1,0 +1,158 @@
+"""Each repetition's own rest positions from the IMU, with their uncertainty (issue 31 point 2).
+
+The trial-wide reference puts every repetition's bottle and mouth at the same place relative to its start, while
+the hand's grasp, mouth and home scatter by about a centimetre per repetition. Each movement between two rests is
+short (about 1 s), so the start's rest-to-rest displacement (ZUPT between zero-velocity rests) has a small error of
+its own, far smaller than a trial-long drift. :func:`repetition_rests` chains those displacements through every
+repetition (home -> bottle -> mouth -> bottle -> home, one repetition's end being the next one's start) and
+combines them with the trial-wide reference as a linear Gaussian model per axis: the rests in the room scatter
+about the reference's places by ``tau`` (the hand's own scatter) and each displacement is off by ``sigma``; both
+variance components are estimated from the trial by maximum likelihood, so a repetition's rests move from the
+reference only as far as the evidence says. Positions in m, relative to the trial's home (the first start).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from imulog.process.minjerk import R2GWaypoints
+from imulog.process.trajectory_repetitions import Repetition
+from imulog.process.trajectory_rests import rest_positions
+
+# the grid (m) the two standard deviations are searched on, log-spaced: 1 mm to 10 cm
+_GRID_M = np.geomspace(0.001, 0.10, 41)
+
+
+@dataclass
+class RestEstimate:
+    """Every complete repetition's five rests (start, bottle, mouth, bottle, end) in the room (K, 5, 3) m relative to
+    the trial's home, their posterior standard deviations relative to the repetition's start (K, 5, 3) m, the
+    repetitions' list positions (K,), and per axis the displacement error ``sigma_m`` and the rests' scatter
+    ``tau_m`` (3,) m the data gave."""
+
+    rests_m: np.ndarray
+    sd_m: np.ndarray
+    index: np.ndarray
+    sigma_m: np.ndarray
+    tau_m: np.ndarray
+    bias_m: np.ndarray
+
+    def waypoints(self, k: int, axes: Sequence[bool] = (True, True, True), end_axes: Sequence[bool] | None = None):
+        """The reference's waypoints of the ``k``-th complete repetition relative to its own start, on ``axes``
+        (elsewhere 0: the caller's trial-wide ones are used instead); its end on ``end_axes`` (default ``axes``)."""
+        r = self.rests_m[k] - self.rests_m[k, 0]
+        use = np.asarray(axes, dtype=bool)
+        end_use = use if end_axes is None else np.asarray(end_axes, dtype=bool)
+        return r[1], r[2], r[3], np.where(end_use, r[4], 0.0)
+
+
+def repetition_rests(
+    t_s: np.ndarray,
+    initial_m: np.ndarray,
+    static_mask: np.ndarray,
+    repetitions: Sequence[Repetition],
+    waypoints: R2GWaypoints,
+    bias: bool = True,
+) -> RestEstimate | None:
+    """Each complete repetition's rests from the start ``initial_m`` (N, 3) m (ZUPT from each window's start) and
+    the trial-wide ``waypoints``; None with fewer than two complete repetitions.
+
+    Per axis the unknowns are every rest's room position: each repetition's start (the previous window's end when
+    the windows meet), bottle, mouth, bottle again and end. Observations: the start's displacement over each
+    movement (:func:`imulog.process.trajectory_rests.rest_positions`, differenced), each ``X_j - X_{j-1}`` within
+    ``sigma``. Prior: every home at 0, every bottle at the reference's bottle and every mouth at its mouth, each
+    within ``tau``. ``(sigma, tau)`` maximise the marginal likelihood of the displacements on a log grid (1 mm to
+    10 cm); the rests are the posterior means, their uncertainty the posterior standard deviation of each rest
+    relative to its repetition's start."""
+    reps = [(i, r) for i, r in enumerate(repetitions) if len(r.phase_bounds_s) == 4]
+    if len(reps) < 2:
+        return None
+    obs = np.array([np.diff(np.vstack([np.zeros(3), rest_positions(t_s, initial_m, static_mask, r)]), axis=0)
+                    for _, r in reps])  # (K, 4, 3) displacement per movement
+    # unknown numbering: a repetition's start is the previous one's end when their windows meet
+    cols = np.zeros((len(reps), 5), dtype=int)
+    n = 0
+    for k, (i, r) in enumerate(reps):
+        prev = reps[k - 1][1] if k else None
+        if prev is not None and reps[k - 1][0] == i - 1 and r.start <= prev.stop:
+            cols[k, 0] = cols[k - 1, 4]
+        else:
+            cols[k, 0], n = n, n + 1
+        cols[k, 1:] = np.arange(n, n + 4)
+        n += 4
+    kind = np.zeros(n, dtype=int)  # 0 home, 1 bottle, 2 mouth
+    kind[cols[:, 1]] = kind[cols[:, 3]] = 1
+    kind[cols[:, 2]] = 2
+    targets = np.stack([np.zeros(3), np.asarray(waypoints.bottle_m), np.asarray(waypoints.mouth_m)])
+    rests = np.zeros((len(reps), 5, 3))
+    sd = np.zeros((len(reps), 5, 3))
+    sig, tau = np.full(3, np.nan), np.full(3, np.nan)
+    bias_m = np.zeros((4, 3))
+    for ax in range(3):
+        rows, y, btype = [], [], []
+        for k in range(len(reps)):
+            for j in range(4):
+                if np.isfinite(obs[k, j, ax]):
+                    r = np.zeros(n)
+                    r[cols[k, j + 1]], r[cols[k, j]] = 1.0, -1.0
+                    rows.append(r)
+                    y.append(obs[k, j, ax])
+                    btype.append(j)
+        mu = targets[kind, ax]
+        if len(rows) < 4:
+            rests[:, :, ax] = mu[cols]
+            sd[:, :, ax] = np.nan
+            continue
+        d = np.vstack(rows)
+        b = np.asarray(btype)[:, None] == np.arange(4)[None, :] if bias else np.zeros((len(rows), 0))
+        resid = np.asarray(y) - d @ mu
+        s, t_, beta = _variance_components(d @ d.T, resid, b.astype(float))
+        sig[ax], tau[ax] = s, t_
+        if bias:
+            bias_m[:, ax] = beta
+            resid = resid - b @ beta
+        # posterior of X ~ N(mu, tau^2 I) given resid = D (X - mu) + e, e ~ N(0, s^2 I)
+        prec = d.T @ d / s**2 + np.eye(n) / t_**2
+        cov = np.linalg.inv(prec)
+        x = mu + cov @ (d.T @ resid) / s**2
+        rests[:, :, ax] = x[cols]
+        for k in range(len(reps)):
+            c0 = cols[k, 0]
+            for j in range(5):
+                cj = cols[k, j]
+                sd[k, j, ax] = np.sqrt(max(cov[cj, cj] + cov[c0, c0] - 2 * cov[cj, c0], 0.0))
+    return RestEstimate(rests, sd, np.array([i for i, _ in reps]), sig, tau, bias_m)
+
+
+def _variance_components(
+    a: np.ndarray, resid: np.ndarray, fixed: np.ndarray
+) -> tuple[float, float, np.ndarray]:
+    """``(sigma, tau, beta)``: the standard deviations (m) maximising the restricted likelihood (REML) of
+    ``resid ~ N(fixed beta, tau^2 a + sigma^2 I)`` on the log grid, and the fixed effects ``beta`` (m, generalised
+    least squares) there."""
+    lam, u = np.linalg.eigh(a)
+    ry = u.T @ resid
+    rb = u.T @ fixed  # (M, P)
+    s2 = _GRID_M[:, None, None] ** 2
+    t2 = _GRID_M[None, :, None] ** 2
+    v = t2 * np.clip(lam, 0.0, None)[None, None, :] + s2  # (G, G, M): the covariance's eigenvalues
+    p = fixed.shape[1]
+    if p:
+        btb = np.einsum("mp,ijm,mq->ijpq", rb, 1.0 / v, rb) + 1e-12 * np.eye(p)
+        bty = np.einsum("mp,ijm,m->ijp", rb, 1.0 / v, ry)
+        beta = np.linalg.solve(btb, bty[..., None])[..., 0]  # (G, G, P)
+        e = ry[None, None, :] - np.einsum("mp,ijp->ijm", rb, beta)
+        ll = -0.5 * (np.sum(np.log(v) + e**2 / v, axis=2) + np.linalg.slogdet(btb)[1])
+    else:
+        ll = -0.5 * np.sum(np.log(v) + ry[None, None, :] ** 2 / v, axis=2)
+    i, j = np.unravel_index(int(np.argmax(ll)), ll.shape)
+    if not p:
+        return float(_GRID_M[i]), float(_GRID_M[j]), np.zeros(0)
+    b = beta[i, j]
+    se2 = np.diag(np.linalg.inv(btb[i, j]))  # each effect's variance, m^2
+    # positive-part James-Stein: only the share of each effect beyond its own noise
+    keep = np.where(b**2 > 0, np.clip(1.0 - se2 / np.maximum(b**2, 1e-30), 0.0, 1.0), 0.0)
+    return float(_GRID_M[i]), float(_GRID_M[j]), keep * b
