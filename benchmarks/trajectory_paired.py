@@ -76,6 +76,7 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
     "rest-model": (D, replace(D, optimized=replace(D.optimized, rest_model="waypoints"))),
     "rest-model-replace": (D, replace(D, optimized=replace(D.optimized, rest_model="replace"))),
     "rest-model-posterior": (D, replace(D, optimized=replace(D.optimized, rest_model="posterior"))),
+    "rest-model-posterior-data": (D, replace(D, optimized=replace(D.optimized, rest_model="posterior-data"))),
     "robust-bias-iterated": (
         D,
         replace(D, rotating_bias=replace(D.rotating_bias, outlier_factor=3.0, outlier_refits=20)),

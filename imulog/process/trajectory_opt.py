@@ -255,7 +255,8 @@ def _modelled_waypoints(
 ) -> tuple[list[R2GWaypoints], list[TrajectoryParams | None]]:
     """Each complete repetition's reference waypoints at its own rests
     (:func:`imulog.process.trajectory_rest_model.repetition_rests` on the start ``z``); the end moves only on the
-    axes not held to return to the start. The others keep ``rep_waypoints``."""
+    axes not held to return to the start. The others keep ``rep_waypoints``. Per ``OptimizationParams.rest_model``
+    also each repetition's own parameters (None: the trial's)."""
     est = repetition_rests(t, z, static, repetitions, waypoints)
     rep_params: list[TrajectoryParams | None] = [None] * len(repetitions)
     if est is None:
@@ -265,9 +266,9 @@ def _modelled_waypoints(
     out = list(rep_waypoints)
     mode = params.optimized.rest_model
     for k, i in enumerate(est.index):
-        if mode in ("replace", "posterior"):
-            o = replace(params.optimized, sigma_data_static_m=None)
-            if mode == "posterior":
+        if mode in ("replace", "posterior", "posterior-data"):
+            o = params.optimized if mode == "posterior-data" else replace(params.optimized, sigma_data_static_m=None)
+            if mode.startswith("posterior"):
                 sd = np.sqrt(np.nanmean(est.sd_m[k, 1:4] ** 2, axis=0))
                 o = replace(o, sigma_ref_static_m=tuple(float(max(v, 0.003)) for v in sd))
             rep_params[int(i)] = replace(params, optimized=o)

@@ -76,7 +76,11 @@ class OptimizationParams:
     rest_model: give each complete repetition's reference its own rests (bottle, mouth, bottle put back, and on the
         axes not held to return to the start its end), estimated from the start's rest-to-rest displacements and
         the trial-wide waypoints by variance components
-        (:func:`imulog.process.trajectory_rest_model.repetition_rests`; issue 31 point 2).
+        (:func:`imulog.process.trajectory_rest_model.repetition_rests`; issue 31 point 2; an option, None: off).
+        ``"waypoints"``: only the waypoints; ``"posterior"``: also the reference's static trust per axis from the
+        estimate's posterior standard deviation (at least 3 mm) and no static-position term for the start (the
+        estimate already holds it); ``"posterior-data"``: the posterior trust, the start's term kept; ``"replace"``:
+        the waypoints, no static-position term.
     """
 
     sigma_data_mps: float | tuple[float, float, float] = 0.02

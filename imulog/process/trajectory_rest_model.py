@@ -70,8 +70,9 @@ def repetition_rests(
     reps = [(i, r) for i, r in enumerate(repetitions) if len(r.phase_bounds_s) == 4]
     if len(reps) < 2:
         return None
-    obs = np.array([np.diff(np.vstack([np.zeros(3), rest_positions(t_s, initial_m, static_mask, r)]), axis=0)
-                    for _, r in reps])  # (K, 4, 3) displacement per movement
+    obs = np.array(
+        [np.diff(np.vstack([np.zeros(3), rest_positions(t_s, initial_m, static_mask, r)]), axis=0) for _, r in reps]
+    )  # (K, 4, 3) displacement per movement
     # unknown numbering: a repetition's start is the previous one's end when their windows meet
     cols = np.zeros((len(reps), 5), dtype=int)
     n = 0
@@ -127,9 +128,7 @@ def repetition_rests(
     return RestEstimate(rests, sd, np.array([i for i, _ in reps]), sig, tau, bias_m)
 
 
-def _variance_components(
-    a: np.ndarray, resid: np.ndarray, fixed: np.ndarray
-) -> tuple[float, float, np.ndarray]:
+def _variance_components(a: np.ndarray, resid: np.ndarray, fixed: np.ndarray) -> tuple[float, float, np.ndarray]:
     """``(sigma, tau, beta)``: the standard deviations (m) maximising the restricted likelihood (REML) of
     ``resid ~ N(fixed beta, tau^2 a + sigma^2 I)`` on the log grid, and the fixed effects ``beta`` (m, generalised
     least squares) there."""
