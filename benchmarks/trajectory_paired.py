@@ -77,6 +77,9 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
     "rest-model-replace": (D, replace(D, optimized=replace(D.optimized, rest_model="replace"))),
     "rest-model-posterior": (D, replace(D, optimized=replace(D.optimized, rest_model="posterior"))),
     "rest-model-posterior-data": (D, replace(D, optimized=replace(D.optimized, rest_model="posterior-data"))),
+    "rest-model-capped": (D, replace(D, optimized=replace(D.optimized, rest_model="capped"))),
+    "rest-model-capped-tau": (D, replace(D, optimized=replace(D.optimized, rest_model="capped-tau"))),
+    "rest-model-capped-tau-xy": (D, replace(D, optimized=replace(D.optimized, rest_model="capped-tau-xy"))),
     "robust-bias-iterated": (
         D,
         replace(D, rotating_bias=replace(D.rotating_bias, outlier_factor=3.0, outlier_refits=20)),

@@ -257,22 +257,34 @@ def _modelled_waypoints(
     (:func:`imulog.process.trajectory_rest_model.repetition_rests` on the start ``z``); the end moves only on the
     axes not held to return to the start. The others keep ``rep_waypoints``. Per ``OptimizationParams.rest_model``
     also each repetition's own parameters (None: the trial's)."""
-    est = repetition_rests(t, z, static, repetitions, waypoints)
+    mode = params.optimized.rest_model
+    use = np.array([True, True, not mode.endswith("-xy")])
+    mode = mode.removesuffix("-xy")
+    cap = params.optimized.sigma_ref_static_m if mode in ("capped", "capped-tau") else None
+    est = repetition_rests(t, z, static, repetitions, waypoints, tau_max_m=cap if mode == "capped-tau" else None)
     rep_params: list[TrajectoryParams | None] = [None] * len(repetitions)
     if est is None:
         return rep_waypoints, rep_params
     rts = params.optimized.return_to_start
     free = [not r for r in rts] if isinstance(rts, (tuple, list)) else [not rts] * 3
     out = list(rep_waypoints)
-    mode = params.optimized.rest_model
     for k, i in enumerate(est.index):
-        if mode in ("replace", "posterior", "posterior-data"):
+        if cap is not None:  # the posterior trust, between the start's floor and the trial-wide reference's
+            sd = np.where(use, np.clip(np.sqrt(np.nanmean(est.sd_m[k, 1:4] ** 2, axis=0)), 0.006, cap), cap)
+            o = replace(params.optimized, sigma_ref_static_m=tuple(float(v) for v in sd))
+            rep_params[int(i)] = replace(params, optimized=o)
+        elif mode in ("replace", "posterior", "posterior-data"):
             o = params.optimized if mode == "posterior-data" else replace(params.optimized, sigma_data_static_m=None)
             if mode.startswith("posterior"):
                 sd = np.sqrt(np.nanmean(est.sd_m[k, 1:4] ** 2, axis=0))
                 o = replace(o, sigma_ref_static_m=tuple(float(max(v, 0.003)) for v in sd))
             rep_params[int(i)] = replace(params, optimized=o)
-        bottle, mouth, back, end = est.waypoints(k, end_axes=free)
+        bottle, mouth, back, end = est.waypoints(k, end_axes=np.asarray(free) & use)
+        trial = out[int(i)]
+        bottle = np.where(use, bottle, trial.bottle_m)
+        mouth = np.where(use, mouth, trial.mouth_m)
+        back = np.where(use, back, trial.bottle_m if trial.bottle_back_m is None else trial.bottle_back_m)
+        end = np.where(use, end, trial.end_m)
         out[int(i)] = R2GWaypoints(
             bottle_m=tuple(bottle.tolist()),
             mouth_m=tuple(mouth.tolist()),

@@ -56,6 +56,7 @@ def repetition_rests(
     repetitions: Sequence[Repetition],
     waypoints: R2GWaypoints,
     bias: bool = True,
+    tau_max_m: float | None = None,
 ) -> RestEstimate | None:
     """Each complete repetition's rests from the start ``initial_m`` (N, 3) m (ZUPT from each window's start) and
     the trial-wide ``waypoints``; None with fewer than two complete repetitions.
@@ -110,7 +111,7 @@ def repetition_rests(
         d = np.vstack(rows)
         b = np.asarray(btype)[:, None] == np.arange(4)[None, :] if bias else np.zeros((len(rows), 0))
         resid = np.asarray(y) - d @ mu
-        s, t_, beta = _variance_components(d @ d.T, resid, b.astype(float))
+        s, t_, beta = _variance_components(d @ d.T, resid, b.astype(float), tau_max_m)
         sig[ax], tau[ax] = s, t_
         if bias:
             bias_m[:, ax] = beta
@@ -128,10 +129,12 @@ def repetition_rests(
     return RestEstimate(rests, sd, np.array([i for i, _ in reps]), sig, tau, bias_m)
 
 
-def _variance_components(a: np.ndarray, resid: np.ndarray, fixed: np.ndarray) -> tuple[float, float, np.ndarray]:
+def _variance_components(
+    a: np.ndarray, resid: np.ndarray, fixed: np.ndarray, tau_max_m: float | None = None
+) -> tuple[float, float, np.ndarray]:
     """``(sigma, tau, beta)``: the standard deviations (m) maximising the restricted likelihood (REML) of
     ``resid ~ N(fixed beta, tau^2 a + sigma^2 I)`` on the log grid, and the fixed effects ``beta`` (m, generalised
-    least squares) there."""
+    least squares) there; ``tau`` at most ``tau_max_m``."""
     lam, u = np.linalg.eigh(a)
     ry = u.T @ resid
     rb = u.T @ fixed  # (M, P)
@@ -147,6 +150,8 @@ def _variance_components(a: np.ndarray, resid: np.ndarray, fixed: np.ndarray) ->
         ll = -0.5 * (np.sum(np.log(v) + e**2 / v, axis=2) + np.linalg.slogdet(btb)[1])
     else:
         ll = -0.5 * np.sum(np.log(v) + ry[None, None, :] ** 2 / v, axis=2)
+    if tau_max_m is not None:
+        ll = np.where(_GRID_M[None, :] <= tau_max_m * (1 + 1e-9), ll, -np.inf)
     i, j = np.unravel_index(int(np.argmax(ll)), ll.shape)
     if not p:
         return float(_GRID_M[i]), float(_GRID_M[j]), np.zeros(0)
