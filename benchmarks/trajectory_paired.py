@@ -80,6 +80,14 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
     "rest-model-capped": (D, replace(D, optimized=replace(D.optimized, rest_model="capped"))),
     "rest-model-capped-tau": (D, replace(D, optimized=replace(D.optimized, rest_model="capped-tau"))),
     "rest-model-capped-tau-xy": (D, replace(D, optimized=replace(D.optimized, rest_model="capped-tau-xy"))),
+    "rest-model-trusted-xy": (D, replace(D, optimized=replace(D.optimized, rest_model="trusted-xy"))),
+    "rest-model-trusted": (D, replace(D, optimized=replace(D.optimized, rest_model="trusted"))),
+    "rest-model-trusted-xy-test": (D, replace(D, optimized=replace(D.optimized, rest_model="trusted-xy-test"))),
+    "rest-model-trusted-xy-nobias": (D, replace(D, optimized=replace(D.optimized, rest_model="trusted-xy-nobias"))),
+    "rest-model-trusted-posterior-xy": (
+        D,
+        replace(D, optimized=replace(D.optimized, rest_model="trusted-posterior-xy")),
+    ),
     "robust-bias-iterated": (
         D,
         replace(D, rotating_bias=replace(D.rotating_bias, outlier_factor=3.0, outlier_refits=20)),

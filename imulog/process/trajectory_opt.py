@@ -258,10 +258,31 @@ def _modelled_waypoints(
     axes not held to return to the start. The others keep ``rep_waypoints``. Per ``OptimizationParams.rest_model``
     also each repetition's own parameters (None: the trial's)."""
     mode = params.optimized.rest_model
+
+    bias = not mode.endswith("-nobias")
+    mode = mode.removesuffix("-nobias")
+    alpha = 0.001 if mode.endswith("-test") else None  # the bias only where significant (as heading_drift)
+    mode = mode.removesuffix("-test")
     use = np.array([True, True, not mode.endswith("-xy")])
     mode = mode.removesuffix("-xy")
-    cap = params.optimized.sigma_ref_static_m if mode in ("capped", "capped-tau") else None
-    est = repetition_rests(t, z, static, repetitions, waypoints, tau_max_m=cap if mode == "capped-tau" else None)
+    only = mode == "trusted-posterior"  # the estimate holds the start's rests: no static-position term of its own
+    mode = mode.removesuffix("-posterior")
+    cap = params.optimized.sigma_ref_static_m if mode in ("capped", "capped-tau", "trusted") else None
+    floor = None
+    sds = params.optimized.sigma_data_static_m
+    if mode == "trusted" and isinstance(sds, (tuple, list)):  # a rest two movements on: the start's own trust
+        floor = [float(v) / np.sqrt(2.0) for v in sds]
+    est = repetition_rests(
+        t,
+        z,
+        static,
+        repetitions,
+        waypoints,
+        bias,
+        tau_max_m=None if mode == "capped" else cap,
+        sigma_min_m=floor,
+        alpha=alpha,
+    )
     rep_params: list[TrajectoryParams | None] = [None] * len(repetitions)
     if est is None:
         return rep_waypoints, rep_params
@@ -270,8 +291,11 @@ def _modelled_waypoints(
     out = list(rep_waypoints)
     for k, i in enumerate(est.index):
         if cap is not None:  # the posterior trust, between the start's floor and the trial-wide reference's
-            sd = np.where(use, np.clip(np.sqrt(np.nanmean(est.sd_m[k, 1:4] ** 2, axis=0)), 0.006, cap), cap)
+            post = np.sqrt(np.nanmean(est.sd_m[k, 1:4] ** 2, axis=0))
+            sd = np.where(use, np.clip(post, 0.001 if only else 0.006, cap), cap)
             o = replace(params.optimized, sigma_ref_static_m=tuple(float(v) for v in sd))
+            if only and isinstance(sds, (tuple, list)):
+                o = replace(o, sigma_data_static_m=tuple(None if u else v for u, v in zip(use, sds, strict=True)))
             rep_params[int(i)] = replace(params, optimized=o)
         elif mode in ("replace", "posterior", "posterior-data"):
             o = params.optimized if mode == "posterior-data" else replace(params.optimized, sigma_data_static_m=None)

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import chi2
 
 from imulog.process.minjerk import R2GWaypoints
 from imulog.process.trajectory_repetitions import Repetition
@@ -57,6 +58,8 @@ def repetition_rests(
     waypoints: R2GWaypoints,
     bias: bool = True,
     tau_max_m: float | None = None,
+    sigma_min_m: Sequence[float] | None = None,
+    alpha: float | None = None,
 ) -> RestEstimate | None:
     """Each complete repetition's rests from the start ``initial_m`` (N, 3) m (ZUPT from each window's start) and
     the trial-wide ``waypoints``; None with fewer than two complete repetitions.
@@ -111,7 +114,8 @@ def repetition_rests(
         d = np.vstack(rows)
         b = np.asarray(btype)[:, None] == np.arange(4)[None, :] if bias else np.zeros((len(rows), 0))
         resid = np.asarray(y) - d @ mu
-        s, t_, beta = _variance_components(d @ d.T, resid, b.astype(float), tau_max_m)
+        lo = None if sigma_min_m is None else float(sigma_min_m[ax])
+        s, t_, beta = _variance_components(d @ d.T, resid, b.astype(float), tau_max_m, lo, alpha)
         sig[ax], tau[ax] = s, t_
         if bias:
             bias_m[:, ax] = beta
@@ -130,11 +134,18 @@ def repetition_rests(
 
 
 def _variance_components(
-    a: np.ndarray, resid: np.ndarray, fixed: np.ndarray, tau_max_m: float | None = None
+    a: np.ndarray,
+    resid: np.ndarray,
+    fixed: np.ndarray,
+    tau_max_m: float | None = None,
+    sigma_min_m: float | None = None,
+    alpha: float | None = None,
 ) -> tuple[float, float, np.ndarray]:
     """``(sigma, tau, beta)``: the standard deviations (m) maximising the restricted likelihood (REML) of
     ``resid ~ N(fixed beta, tau^2 a + sigma^2 I)`` on the log grid, and the fixed effects ``beta`` (m, generalised
-    least squares) there; ``tau`` at most ``tau_max_m``."""
+    least squares) there; ``tau`` at most ``tau_max_m``, ``sigma`` at least ``sigma_min_m``. ``beta`` is 0 unless
+    it differs from 0 at level ``alpha`` (Wald chi-square test; None: no test), and each effect is shrunk by its
+    positive-part James-Stein factor."""
     lam, u = np.linalg.eigh(a)
     ry = u.T @ resid
     rb = u.T @ fixed  # (M, P)
@@ -152,11 +163,16 @@ def _variance_components(
         ll = -0.5 * np.sum(np.log(v) + ry[None, None, :] ** 2 / v, axis=2)
     if tau_max_m is not None:
         ll = np.where(_GRID_M[None, :] <= tau_max_m * (1 + 1e-9), ll, -np.inf)
+    if sigma_min_m is not None:
+        ll = np.where(_GRID_M[:, None] >= min(sigma_min_m, _GRID_M[-1]) * (1 - 1e-9), ll, -np.inf)
     i, j = np.unravel_index(int(np.argmax(ll)), ll.shape)
     if not p:
         return float(_GRID_M[i]), float(_GRID_M[j]), np.zeros(0)
     b = beta[i, j]
-    se2 = np.diag(np.linalg.inv(btb[i, j]))  # each effect's variance, m^2
+    cov = np.linalg.inv(btb[i, j])  # the effects' covariance, m^2
+    if alpha is not None and float(b @ btb[i, j] @ b) < chi2.ppf(1.0 - alpha, p):
+        return float(_GRID_M[i]), float(_GRID_M[j]), np.zeros(p)  # no significant bias: none taken off
     # positive-part James-Stein: only the share of each effect beyond its own noise
+    se2 = np.diag(cov)
     keep = np.where(b**2 > 0, np.clip(1.0 - se2 / np.maximum(b**2, 1e-30), 0.0, 1.0), 0.0)
     return float(_GRID_M[i]), float(_GRID_M[j]), keep * b
