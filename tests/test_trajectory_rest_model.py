@@ -93,6 +93,20 @@ def test_a_systematic_displacement_error_is_taken_off():
     assert abs(est.bias_m[1, 1] - 0.02) < 0.008 and abs(est.bias_m[2, 1] + 0.02) < 0.008, est.bias_m
 
 
+def test_the_bias_is_taken_off_only_where_significant():
+    """With the significance gate (``alpha``, as the trial's heading drift): a start without a systematic error gets
+    no bias taken off on any axis, a start 2 cm off at every mouth gets it taken off in y."""
+    rng = np.random.default_rng(7)
+    t, truth, static, reps = _trial(10, rng, jitter_m=0.01)
+    plain = truth + _movement_noise(t, reps, 0.002, rng)
+    assert np.all(repetition_rests(t, plain, static, reps, WAY, alpha=0.001).bias_m == 0.0)
+    assert np.any(repetition_rests(t, plain, static, reps, WAY).bias_m != 0.0)  # without the gate: its noise
+    bias = np.array([[0.0, 0.0, 0.0], [0.0, 0.02, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    est = repetition_rests(t, plain + _error(t, reps, bias), static, reps, WAY, alpha=0.001)
+    assert abs(est.bias_m[1, 1] - 0.02) < 0.008, est.bias_m
+    assert np.all(est.bias_m[:, 0] == 0.0) and np.all(est.bias_m[:, 2] == 0.0), est.bias_m
+
+
 def test_the_option_gives_each_repetition_its_own_reference():
     """With ``OptimizationParams.rest_model`` the optimisation runs against each repetition's estimated rests: on
     the synthetic trial whose start is 2 cm off at every mouth its rests are nearer the truth than with the
@@ -103,7 +117,7 @@ def test_the_option_gives_each_repetition_its_own_reference():
     start = truth + _error(t, reps, bias) + _movement_noise(t, reps, 0.002, rng)
     acc = np.gradient(np.gradient(start, t, axis=0), t, axis=0)
     errs = {}
-    for mode in (None, "posterior"):
+    for mode in (None, "trusted-xy-test"):
         params = replace(DEFAULT_PARAMS, optimized=replace(DEFAULT_PARAMS.optimized, rest_model=mode))
         info: dict = {}
         out = reconstruct_repetitions(
@@ -112,4 +126,4 @@ def test_the_option_gives_each_repetition_its_own_reference():
         )["optimized"]
         errs[mode] = np.sqrt(np.mean((_rests(t, out, static, reps) - _rests(t, truth, static, reps)) ** 2))
         assert ("rest_model" in info) == (mode is not None)
-    assert errs["posterior"] < 0.9 * errs[None], errs
+    assert errs["trusted-xy-test"] < 0.9 * errs[None], errs
