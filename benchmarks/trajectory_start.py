@@ -211,21 +211,22 @@ def oracle_mae(inputs: dict, mode: str, params=DEFAULT_PARAMS) -> np.ndarray:
 REST_NAMES = ("bottle", "mouth", "bottle back", "home")
 
 
-def rest_errors(inputs: dict, params=DEFAULT_PARAMS) -> dict:
+def rest_errors(inputs: dict, mode: str = "trusted-xy-test", params=DEFAULT_PARAMS) -> dict:
     """Per complete repetition, the error (m) against the truth of each rest (bottle, mouth, bottle put back, home;
     relative to the repetition's start) of the trial-wide reference, of the start (``zupt_bias`` as the optimisation
-    uses it) and of :func:`imulog.process.trajectory_rest_model.repetition_rests`; {name: (K, 4, 3)}."""
+    uses it) and of :func:`imulog.process.trajectory_rest_model.repetition_rests` as ``OptimizationParams.rest_model =
+    mode`` runs it; {name: (K, 4, 3)}."""
     seen: dict = {}
     model = trajectory_opt.repetition_rests
 
-    def spy(t, z, static, reps, waypoints):
-        est = model(t, z, static, reps, waypoints)
+    def spy(t, z, static, reps, waypoints, *args, **kwargs):
+        est = model(t, z, static, reps, waypoints, *args, **kwargs)
         seen.update(t=t, z=z, static=static, reps=reps, waypoints=waypoints, est=est)
         return est
 
     trajectory_opt.repetition_rests = spy
     try:
-        on = replace(params, optimized=replace(params.optimized, rest_model="posterior"))
+        on = replace(params, optimized=replace(params.optimized, rest_model=mode))
         t = inputs["t_s"]
         rate = (len(t) - 1) / (t[-1] - t[0])
         static = true_rests(inputs["static"], inputs["acc_gate"], rate, on.rests, orientation=inputs.get("q_gate"))
@@ -376,9 +377,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument(
         "--rest-model",
-        action="store_true",
+        nargs="?",
+        const="trusted-xy-test",
+        metavar="MODE",
         help="only the rests: per condition and rest, the RMS error (cm) of the trial-wide reference, the start and "
-        "each repetition's estimated rests (trajectory_rest_model) against the truth",
+        "each repetition's estimated rests (trajectory_rest_model, as OptimizationParams.rest_model = MODE runs it; "
+        "default trusted-xy-test) against the truth",
     )
     args = ap.parse_args(argv)
     names = list(CONDITIONS) if args.grid == ["all"] else args.grid
@@ -398,7 +402,7 @@ def main(argv: list[str] | None = None) -> int:
                     anchor_params=DEFAULT_PARAMS.anchor,
                     **condition(name),
                 )
-                errs.append(rest_errors(inputs))
+                errs.append(rest_errors(inputs, args.rest_model))
             better += print_rest_errors(name, errs)
             cells += 12
         r1 = resource.getrusage(resource.RUSAGE_SELF)

@@ -64,7 +64,7 @@ from imulog.process.trajectory_repetitions import (
     trial_waypoints,
     velocity_sigma,
 )
-from imulog.process.trajectory_rest_model import repetition_rests
+from imulog.process.trajectory_rest_model import repetition_references
 from imulog.process.trajectory_rests import repetition_offsets, rest_blend_weight, shifted_waypoints
 
 __all__ = [
@@ -188,9 +188,10 @@ def reconstruct_repetitions(
         if params.optimized.rest_chain:
             rep_waypoints = _chained_waypoints(t, z, static, repetitions, waypoints, params, info)
         if params.optimized.rest_model:
-            rep_waypoints, rep_params = _modelled_waypoints(
-                t, z, static, repetitions, rep_waypoints, waypoints, params, info
+            rep_waypoints, own = repetition_references(
+                t, z, static, repetitions, rep_waypoints, waypoints, params.optimized, info
             )
+            rep_params = [None if o is None else replace(params, optimized=o) for o in own]
     if baseline:
         methods = [*methods, BASELINE]
         out[BASELINE] = np.full((len(t), 3), np.nan)
@@ -241,87 +242,6 @@ def _chained_waypoints(
     if info is not None:
         info["repetition_offsets_m"] = np.round(offsets * np.asarray(free), 5).tolist()
     return [shifted_waypoints(waypoints, off, free) for off in offsets]
-
-
-def _modelled_waypoints(
-    t: np.ndarray,
-    z: np.ndarray,
-    static: np.ndarray,
-    repetitions: Sequence[Repetition],
-    rep_waypoints: list[R2GWaypoints],
-    waypoints: R2GWaypoints,
-    params: TrajectoryParams,
-    info: dict[str, Any] | None,
-) -> tuple[list[R2GWaypoints], list[TrajectoryParams | None]]:
-    """Each complete repetition's reference waypoints at its own rests
-    (:func:`imulog.process.trajectory_rest_model.repetition_rests` on the start ``z``); the end moves only on the
-    axes not held to return to the start. The others keep ``rep_waypoints``. Per ``OptimizationParams.rest_model``
-    also each repetition's own parameters (None: the trial's)."""
-    mode = params.optimized.rest_model
-
-    bias = not mode.endswith("-nobias")
-    mode = mode.removesuffix("-nobias")
-    alpha = 0.001 if mode.endswith("-test") else None  # the bias only where significant (as heading_drift)
-    mode = mode.removesuffix("-test")
-    use = np.array([True, True, not mode.endswith("-xy")])
-    mode = mode.removesuffix("-xy")
-    only = mode == "trusted-posterior"  # the estimate holds the start's rests: no static-position term of its own
-    mode = mode.removesuffix("-posterior")
-    cap = params.optimized.sigma_ref_static_m if mode in ("capped", "capped-tau", "trusted") else None
-    floor = None
-    sds = params.optimized.sigma_data_static_m
-    if mode == "trusted" and isinstance(sds, (tuple, list)):  # a rest two movements on: the start's own trust
-        floor = [float(v) / np.sqrt(2.0) for v in sds]
-    est = repetition_rests(
-        t,
-        z,
-        static,
-        repetitions,
-        waypoints,
-        bias,
-        tau_max_m=None if mode == "capped" else cap,
-        sigma_min_m=floor,
-        alpha=alpha,
-    )
-    rep_params: list[TrajectoryParams | None] = [None] * len(repetitions)
-    if est is None:
-        return rep_waypoints, rep_params
-    rts = params.optimized.return_to_start
-    free = [not r for r in rts] if isinstance(rts, (tuple, list)) else [not rts] * 3
-    out = list(rep_waypoints)
-    for k, i in enumerate(est.index):
-        if cap is not None:  # the posterior trust, between the start's floor and the trial-wide reference's
-            post = np.sqrt(np.nanmean(est.sd_m[k, 1:4] ** 2, axis=0))
-            sd = np.where(use, np.clip(post, 0.001 if only else 0.006, cap), cap)
-            o = replace(params.optimized, sigma_ref_static_m=tuple(float(v) for v in sd))
-            if only and isinstance(sds, (tuple, list)):
-                o = replace(o, sigma_data_static_m=tuple(None if u else v for u, v in zip(use, sds, strict=True)))
-            rep_params[int(i)] = replace(params, optimized=o)
-        elif mode in ("replace", "posterior", "posterior-data"):
-            o = params.optimized if mode == "posterior-data" else replace(params.optimized, sigma_data_static_m=None)
-            if mode.startswith("posterior"):
-                sd = np.sqrt(np.nanmean(est.sd_m[k, 1:4] ** 2, axis=0))
-                o = replace(o, sigma_ref_static_m=tuple(float(max(v, 0.003)) for v in sd))
-            rep_params[int(i)] = replace(params, optimized=o)
-        bottle, mouth, back, end = est.waypoints(k, end_axes=np.asarray(free) & use)
-        trial = out[int(i)]
-        bottle = np.where(use, bottle, trial.bottle_m)
-        mouth = np.where(use, mouth, trial.mouth_m)
-        back = np.where(use, back, trial.bottle_m if trial.bottle_back_m is None else trial.bottle_back_m)
-        end = np.where(use, end, trial.end_m)
-        out[int(i)] = R2GWaypoints(
-            bottle_m=tuple(bottle.tolist()),
-            mouth_m=tuple(mouth.tolist()),
-            end_m=tuple(end.tolist()),
-            bottle_back_m=tuple(back.tolist()),
-        )
-    if info is not None:
-        info["rest_model"] = {
-            "sigma_m": np.round(est.sigma_m, 5).tolist(),
-            "tau_m": np.round(est.tau_m, 5).tolist(),
-            "bias_m": np.round(est.bias_m, 5).tolist(),
-        }
-    return out, rep_params
 
 
 def _blended_start(

@@ -14,12 +14,14 @@ reference only as far as the evidence says. Positions in m, relative to the tria
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from scipy.stats import chi2
 
 from imulog.process.minjerk import R2GWaypoints
+from imulog.process.trajectory_optimize import OptimizationParams
 from imulog.process.trajectory_repetitions import Repetition
 from imulog.process.trajectory_rests import rest_positions
 
@@ -48,6 +50,118 @@ class RestEstimate:
         use = np.asarray(axes, dtype=bool)
         end_use = use if end_axes is None else np.asarray(end_axes, dtype=bool)
         return r[1], r[2], r[3], np.where(end_use, r[4], 0.0)
+
+
+@dataclass(frozen=True)
+class RestRule:
+    """How ``OptimizationParams.rest_model`` uses the estimate, parsed from its name ``TRUST[-xy][-test][-nobias]``.
+
+    trust: the reference's static trust per repetition and what the start keeps: ``waypoints`` (only the waypoints;
+        ``sigma_ref_static_m`` as configured), ``replace`` (the waypoints, no static-position term for the start),
+        ``posterior`` (the estimate's posterior standard deviation, at least 3 mm, no static-position term for the
+        start), ``posterior-data`` (the same, the start's term kept), ``capped`` (the posterior standard deviation
+        between 6 mm, the start's trust floor, and ``sigma_ref_static_m``), ``capped-tau`` (the same, with the rests'
+        scatter ``tau`` at most ``sigma_ref_static_m``), ``trusted`` (``capped-tau``, and each displacement's error
+        at least the start's own static trust over sqrt 2: a rest two movements on is no better known than the
+        start's rests), ``trusted-posterior`` (``trusted`` with the posterior trust down to 1 mm and no
+        static-position term for the start).
+    axes: where the estimate is used (``-xy``: x and y; z keeps the trial-wide reference and trust).
+    bias: per-movement bias terms (``-nobias``: none).
+    alpha: ``-test``: the bias terms only where they differ from 0 at the 0.1 % level (as the trial's heading drift).
+    """
+
+    trust: str
+    axes: tuple[bool, bool, bool] = (True, True, True)
+    bias: bool = True
+    alpha: float | None = None
+
+    TRUSTS = ("waypoints", "replace", "posterior", "posterior-data", "capped", "capped-tau", "trusted")
+
+    @classmethod
+    def parse(cls, name: str) -> RestRule:
+        """The rule named ``name`` (ValueError for an unknown one)."""
+        rest, kw = name, {}
+        for suffix, key, value in (
+            ("-nobias", "bias", False),
+            ("-test", "alpha", 0.001),
+            ("-xy", "axes", (True, True, False)),
+        ):
+            if rest.endswith(suffix):
+                rest, kw[key] = rest.removesuffix(suffix), value
+        if rest not in (*cls.TRUSTS, "trusted-posterior"):
+            raise ValueError(f"unknown rest_model {name!r}: TRUST[-xy][-test][-nobias], TRUST one of {cls.TRUSTS}")
+        return cls(trust=rest, **kw)
+
+
+def repetition_references(
+    t_s: np.ndarray,
+    initial_m: np.ndarray,
+    static_mask: np.ndarray,
+    repetitions: Sequence[Repetition],
+    rep_waypoints: Sequence[R2GWaypoints],
+    waypoints: R2GWaypoints,
+    params: OptimizationParams,
+    info: dict[str, Any] | None = None,
+) -> tuple[list[R2GWaypoints], list[OptimizationParams | None]]:
+    """Each complete repetition's reference waypoints at its own rests (:func:`repetition_rests` on the start
+    ``initial_m``, the trial-wide ``waypoints``) and its own optimisation parameters (None: the trial's ``params``,
+    whose ``sigma_data_static_m`` is the per-axis trust already estimated), by ``params.rest_model``
+    (:class:`RestRule`); the end moves only on the axes not held to return to the start. The other repetitions keep
+    ``rep_waypoints``. ``info`` receives the variance components and the bias terms (``rest_model``)."""
+    rule = RestRule.parse(str(params.rest_model))
+    use = np.asarray(rule.axes, dtype=bool)
+    base = rule.trust.removesuffix("-posterior")
+    cap = params.sigma_ref_static_m if base in ("capped", "capped-tau", "trusted") else None
+    sds = params.sigma_data_static_m
+    floor = None
+    if base == "trusted" and isinstance(sds, (tuple, list)):
+        floor = [float(v) / np.sqrt(2.0) for v in sds]
+    est = repetition_rests(
+        t_s,
+        initial_m,
+        static_mask,
+        repetitions,
+        waypoints,
+        rule.bias,
+        tau_max_m=None if base == "capped" else cap,
+        sigma_min_m=floor,
+        alpha=rule.alpha,
+    )
+    own: list[OptimizationParams | None] = [None] * len(repetitions)
+    out = list(rep_waypoints)
+    if est is None:
+        return out, own
+    rts = params.return_to_start
+    free = np.asarray([not r for r in rts] if isinstance(rts, (tuple, list)) else [not rts] * 3, dtype=bool)
+    no_start = rule.trust in ("replace", "posterior", "trusted-posterior")
+    for k, i in enumerate(est.index):
+        post = np.sqrt(np.nanmean(est.sd_m[k, 1:4] ** 2, axis=0))
+        o = params
+        if cap is not None:  # the posterior trust, at most the trial-wide reference's
+            lo = 0.001 if rule.trust == "trusted-posterior" else 0.006
+            o = replace(o, sigma_ref_static_m=tuple(float(v) for v in np.where(use, np.clip(post, lo, cap), cap)))
+        elif rule.trust.startswith("posterior"):
+            o = replace(o, sigma_ref_static_m=tuple(float(max(v, 0.003)) for v in post))
+        if no_start:
+            keep = sds if isinstance(sds, (tuple, list)) else (sds,) * 3
+            o = replace(o, sigma_data_static_m=tuple(None if u else v for u, v in zip(use, keep, strict=True)))
+        own[int(i)] = None if o is params else o
+        bottle, mouth, back, end = est.waypoints(k, end_axes=free & use)
+        trial = out[int(i)]
+        back_trial = trial.bottle_m if trial.bottle_back_m is None else trial.bottle_back_m
+        out[int(i)] = R2GWaypoints(
+            bottle_m=tuple(np.where(use, bottle, trial.bottle_m).tolist()),
+            mouth_m=tuple(np.where(use, mouth, trial.mouth_m).tolist()),
+            end_m=tuple(np.where(use, end, trial.end_m).tolist()),
+            bottle_back_m=tuple(np.where(use, back, back_trial).tolist()),
+        )
+    if info is not None:
+        info["rest_model"] = {
+            "sigma_m": np.round(est.sigma_m, 5).tolist(),
+            "tau_m": np.round(est.tau_m, 5).tolist(),
+            "bias_m": np.round(est.bias_m, 5).tolist(),
+        }
+    return out, own
 
 
 def repetition_rests(
