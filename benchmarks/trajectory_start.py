@@ -53,7 +53,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from trajectory_accuracy import evaluate_trial, simulated_inputs  # noqa: E402
 
-from imulog.process import trajectory_methods, trajectory_opt  # noqa: E402
+from imulog.process import trajectory_methods, trajectory_opt, trajectory_rest_model  # noqa: E402
 from imulog.process.integration import shrinkage_weight  # noqa: E402
 from imulog.process.minjerk import R2GWaypoints, piecewise_minimum_jerk, r2g_reference  # noqa: E402
 from imulog.process.rest_runs import movement_runs  # noqa: E402
@@ -211,45 +211,53 @@ def oracle_mae(inputs: dict, mode: str, params=DEFAULT_PARAMS) -> np.ndarray:
 REST_NAMES = ("bottle", "mouth", "bottle back", "home")
 
 
+def run_methods(inputs: dict, params=DEFAULT_PARAMS, methods=("optimized",), info: dict | None = None):
+    """The trajectory methods on a simulated trial as the step runs them (the accelerometer's rest gate, the
+    repetition windows): ``(t_s, static, repetitions, {method: (N, 3) m})``; ``info`` as
+    :func:`imulog.process.trajectory_opt.reconstruct_repetitions` fills it."""
+    t = inputs["t_s"]
+    rate = (len(t) - 1) / (t[-1] - t[0])
+    static = true_rests(inputs["static"], inputs["acc_gate"], rate, params.rests, orientation=inputs.get("q_gate"))
+    reps, _ = merge_overlapping(repetition_windows(t, inputs["phase_bounds"], static))
+    out = reconstruct_repetitions(
+        t,
+        inputs["acc_world"],
+        static,
+        reps,
+        list(methods),
+        anthropometrics=inputs["anthropometrics"],
+        orientation=inputs["q_world"],
+        params=params,
+        info=info,
+    )
+    return t, static, reps, out
+
+
 def rest_errors(inputs: dict, mode: str = "trusted-xy-test", params=DEFAULT_PARAMS) -> dict:
     """Per complete repetition, the error (m) against the truth of each rest (bottle, mouth, bottle put back, home;
     relative to the repetition's start) of the trial-wide reference, of the start (``zupt_bias`` as the optimisation
     uses it) and of :func:`imulog.process.trajectory_rest_model.repetition_rests` as ``OptimizationParams.rest_model =
     mode`` runs it; {name: (K, 4, 3)}."""
     seen: dict = {}
-    model = trajectory_opt.repetition_rests
+    model = trajectory_rest_model.repetition_rests
 
     def spy(t, z, static, reps, waypoints, *args, **kwargs):
         est = model(t, z, static, reps, waypoints, *args, **kwargs)
         seen.update(t=t, z=z, static=static, reps=reps, waypoints=waypoints, est=est)
         return est
 
-    trajectory_opt.repetition_rests = spy
+    trajectory_rest_model.repetition_rests = spy
     try:
-        on = replace(params, optimized=replace(params.optimized, rest_model=mode))
-        t = inputs["t_s"]
-        rate = (len(t) - 1) / (t[-1] - t[0])
-        static = true_rests(inputs["static"], inputs["acc_gate"], rate, on.rests, orientation=inputs.get("q_gate"))
-        reps, _ = merge_overlapping(repetition_windows(t, inputs["phase_bounds"], static))
-        reconstruct_repetitions(
-            t,
-            inputs["acc_world"],
-            static,
-            reps,
-            ["optimized"],
-            anthropometrics=inputs["anthropometrics"],
-            orientation=inputs["q_world"],
-            params=on,
-        )
+        run_methods(inputs, replace(params, optimized=replace(params.optimized, rest_model=mode)))
     finally:
-        trajectory_opt.repetition_rests = model
+        trajectory_rest_model.repetition_rests = model
     est, way = seen["est"], seen["waypoints"]
     if est is None:
         return {}
     ref = np.stack([way.bottle_m, way.mouth_m, way.bottle_m, np.zeros(3)])
     out: dict = {"reference": [], "start": [], "estimate": [], "sd": []}
     for k, i in enumerate(est.index):
-        rep = seen["reps"][int(i)]
+        rep, t = seen["reps"][int(i)], seen["t"]
         truth = rest_positions(t, inputs["truth_pos"] - inputs["truth_pos"][rep.start], seen["static"], rep)
         out["reference"].append(ref - truth)
         out["start"].append(rest_positions(t, seen["z"], seen["static"], rep) - truth)
@@ -280,22 +288,8 @@ def trial_row(inputs: dict, params=DEFAULT_PARAMS) -> dict:
     """Mean MAE (cm) per method and axis, the optimisation's static trust (m) and the closure bound (m)."""
     records, _, _ = evaluate_trial(inputs, METHODS, params)
     mae = {m: np.mean([[r[a]["mae_cm"] for a in "xyz"] for r in records[m]], axis=0) for m in METHODS}
-    t = inputs["t_s"]
-    rate = (len(t) - 1) / (t[-1] - t[0])
-    static = true_rests(inputs["static"], inputs["acc_gate"], rate, params.rests, orientation=inputs.get("q_gate"))
-    reps, _ = merge_overlapping(repetition_windows(t, inputs["phase_bounds"], static))
     info: dict = {}
-    reconstruct_repetitions(
-        t,
-        inputs["acc_world"],
-        static,
-        reps,
-        ["optimized"],
-        anthropometrics=inputs["anthropometrics"],
-        orientation=inputs["q_world"],
-        params=params,
-        info=info,
-    )
+    t, static, reps, _ = run_methods(inputs, params, info=info)
     sigma = np.asarray(info.get("sigma_data_static_m", [np.nan] * 3), dtype=float)
     sigma_mps = np.asarray(info.get("sigma_data_mps", [np.nan] * 3), dtype=float)
     closure = np.asarray(closure_sigma(t, inputs["acc_world"], static, reps), dtype=float)
@@ -306,22 +300,8 @@ def trial_row(inputs: dict, params=DEFAULT_PARAMS) -> dict:
 def repetition_rows(inputs: dict, params=DEFAULT_PARAMS) -> tuple[list[str], list[str]]:
     """Per repetition, MAE (cm) per axis of ZUPT, ``zupt_bias``, the reference and the optimized trajectory
     against the truth; and the three movements of the trial with the largest rotating-bias fit residual."""
-    t = inputs["t_s"]
-    rate = (len(t) - 1) / (t[-1] - t[0])
-    static = true_rests(inputs["static"], inputs["acc_gate"], rate, params.rests, orientation=inputs.get("q_gate"))
-    reps, _ = merge_overlapping(repetition_windows(t, inputs["phase_bounds"], static))
     info: dict = {}
-    out = reconstruct_repetitions(
-        t,
-        inputs["acc_world"],
-        static,
-        reps,
-        list(METHODS),
-        anthropometrics=inputs["anthropometrics"],
-        orientation=inputs["q_world"],
-        params=params,
-        info=info,
-    )
+    t, static, reps, out = run_methods(inputs, params, METHODS, info)
     way = R2GWaypoints(**{f"{k}_m": tuple(v) for k, v in info["waypoints_m"].items()})
     rows = []
     for rep in reps:
@@ -354,8 +334,18 @@ def repetition_rows(inputs: dict, params=DEFAULT_PARAMS) -> tuple[list[str], lis
     return rows, [f"rotating-bias estimate {bias} m/s^2; worst-closed movements: " + "; ".join(worst)]
 
 
+def trial_inputs(name: str, subject: int, repetitions: int) -> dict:
+    """One simulated trial of grid condition ``name`` (subject k with seed k), as the trajectory step sees it."""
+    from imulog.simulate.grid import condition
+
+    d = DEFAULT_PARAMS
+    return simulated_inputs(
+        subject, seed=subject, repetitions=repetitions, rests=d.rests, anchor_params=d.anchor, **condition(name)
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
-    from imulog.simulate.grid import CONDITIONS, condition
+    from imulog.simulate.grid import CONDITIONS
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--grid", nargs="+", default=["default"])
@@ -394,14 +384,7 @@ def main(argv: list[str] | None = None) -> int:
         for name in names:
             errs = []
             for s in range(args.first_subject, args.first_subject + args.subjects):
-                inputs = simulated_inputs(
-                    s,
-                    seed=s,
-                    repetitions=args.repetitions,
-                    rests=DEFAULT_PARAMS.rests,
-                    anchor_params=DEFAULT_PARAMS.anchor,
-                    **condition(name),
-                )
+                inputs = trial_inputs(name, s, args.repetitions)
                 errs.append(rest_errors(inputs, args.rest_model))
             better += print_rest_errors(name, errs)
             cells += 12
@@ -431,14 +414,7 @@ def main(argv: list[str] | None = None) -> int:
     trials = 0
     for name in names:
         for s in range(args.first_subject, args.first_subject + args.subjects):
-            inputs = simulated_inputs(
-                s,
-                seed=s,
-                repetitions=args.repetitions,
-                rests=DEFAULT_PARAMS.rests,
-                anchor_params=DEFAULT_PARAMS.anchor,
-                **condition(name),
-            )
+            inputs = trial_inputs(name, s, args.repetitions)
             row = trial_row(inputs)
             m = row["mae"]
             bad = m["optimized"] >= m["zupt"]
