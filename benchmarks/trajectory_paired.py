@@ -129,6 +129,7 @@ REST_RULES = (
     "trusted-xy",
     "trusted-xy-nobias",
     "trusted-xy-test",
+    "trusted-xy-test-gated",
     "trusted-posterior-xy",
 )
 CHANGES.update(

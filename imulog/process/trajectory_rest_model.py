@@ -54,7 +54,8 @@ class RestEstimate:
 
 @dataclass(frozen=True)
 class RestRule:
-    """How ``OptimizationParams.rest_model`` uses the estimate, parsed from its name ``TRUST[-xy][-test][-nobias]``.
+    """How ``OptimizationParams.rest_model`` uses the estimate, parsed from its name
+    ``TRUST[-xy][-test][-nobias][-gated]``.
 
     trust: the reference's static trust per repetition and what the start keeps: ``waypoints`` (only the waypoints;
         ``sigma_ref_static_m`` as configured), ``replace`` (the waypoints, no static-position term for the start),
@@ -68,12 +69,16 @@ class RestRule:
     axes: where the estimate is used (``-xy``: x and y; z keeps the trial-wide reference and trust).
     bias: per-movement bias terms (``-nobias``: none).
     alpha: ``-test``: the bias terms only where they differ from 0 at the 0.1 % level (as the trial's heading drift).
+    gated: ``-gated``: on an axis only where the estimate's posterior standard deviation (RMS over the trial's
+        rests) is below the start's own static trust there (the estimate then knows the rests better than the start
+        alone does).
     """
 
     trust: str
     axes: tuple[bool, bool, bool] = (True, True, True)
     bias: bool = True
     alpha: float | None = None
+    gated: bool = False
 
     TRUSTS = ("waypoints", "replace", "posterior", "posterior-data", "capped", "capped-tau", "trusted")
 
@@ -82,6 +87,7 @@ class RestRule:
         """The rule named ``name`` (ValueError for an unknown one)."""
         rest, kw = name, {}
         for suffix, key, value in (
+            ("-gated", "gated", True),
             ("-nobias", "bias", False),
             ("-test", "alpha", 0.001),
             ("-xy", "axes", (True, True, False)),
@@ -89,7 +95,9 @@ class RestRule:
             if rest.endswith(suffix):
                 rest, kw[key] = rest.removesuffix(suffix), value
         if rest not in (*cls.TRUSTS, "trusted-posterior"):
-            raise ValueError(f"unknown rest_model {name!r}: TRUST[-xy][-test][-nobias], TRUST one of {cls.TRUSTS}")
+            raise ValueError(
+                f"unknown rest_model {name!r}: TRUST[-xy][-test][-nobias][-gated], TRUST one of {cls.TRUSTS}"
+            )
         return cls(trust=rest, **kw)
 
 
@@ -134,6 +142,11 @@ def repetition_references(
     rts = params.return_to_start
     free = np.asarray([not r for r in rts] if isinstance(rts, (tuple, list)) else [not rts] * 3, dtype=bool)
     no_start = rule.trust in ("replace", "posterior", "trusted-posterior")
+    if rule.gated and isinstance(sds, (tuple, list)):
+        post_all = np.sqrt(np.nanmean(est.sd_m[:, 1:4] ** 2, axis=(0, 1)))
+        use = use & (post_all < np.asarray([np.inf if v is None else v for v in sds], dtype=float))
+        if not np.any(use):
+            return out, own
     for k, i in enumerate(est.index):
         post = np.sqrt(np.nanmean(est.sd_m[k, 1:4] ** 2, axis=0))
         o = params
