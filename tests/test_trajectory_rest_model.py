@@ -135,3 +135,5 @@ def test_an_unknown_rule_is_refused():
     with pytest.raises(ValueError, match="unknown rest_model"):
         RestRule.parse("trusting")
     assert RestRule.parse("trusted-xy-test") == RestRule("trusted", (True, True, False), True, 0.001)
+    assert RestRule.parse("trusted-xy-test-gated").gated and not RestRule.parse("trusted-xy-test").gated
+    assert not RestRule.parse("capped-tau-nobias").bias
