@@ -6,9 +6,12 @@ short (about 1 s), so the start's rest-to-rest displacement (ZUPT between zero-v
 its own, far smaller than a trial-long drift. :func:`repetition_rests` chains those displacements through every
 repetition (home -> bottle -> mouth -> bottle -> home, one repetition's end being the next one's start) and
 combines them with the trial-wide reference as a linear Gaussian model per axis: the rests in the room scatter
-about the reference's places by ``tau`` (the hand's own scatter) and each displacement is off by ``sigma``; both
-variance components are estimated from the trial by maximum likelihood, so a repetition's rests move from the
-reference only as far as the evidence says. Positions in m, relative to the trial's home (the first start).
+about the reference's places by ``tau`` (the hand's own scatter), each displacement is off by ``sigma`` plus one
+bias per movement type; both variance components are estimated from the trial by restricted maximum likelihood, so
+a repetition's rests move from the reference only as far as the evidence says. :class:`RestRule` and
+:func:`repetition_references` turn the estimate into each repetition's reference for the optimisation
+(``OptimizationParams.rest_model``, an option: docs/accuracy.md, the seventh round of issue 31 point 2). Positions
+in m, relative to the trial's home (the first start).
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
+from imulog.process.integration import shrinkage_weight
 from imulog.process.minjerk import R2GWaypoints
 from imulog.process.trajectory_optimize import OptimizationParams
 from imulog.process.trajectory_repetitions import Repetition
@@ -33,8 +37,9 @@ _GRID_M = np.geomspace(0.001, 0.10, 41)
 class RestEstimate:
     """Every complete repetition's five rests (start, bottle, mouth, bottle, end) in the room (K, 5, 3) m relative to
     the trial's home, their posterior standard deviations relative to the repetition's start (K, 5, 3) m, the
-    repetitions' list positions (K,), and per axis the displacement error ``sigma_m`` and the rests' scatter
-    ``tau_m`` (3,) m the data gave."""
+    repetitions' list positions (K,), per axis the displacement error ``sigma_m`` and the rests' scatter ``tau_m``
+    (3,) m the data gave, and the bias per movement type (reach, lift, return of the bottle, return of the hand) and
+    axis ``bias_m`` (4, 3) m taken off the displacements."""
 
     rests_m: np.ndarray
     sd_m: np.ndarray
@@ -43,13 +48,11 @@ class RestEstimate:
     tau_m: np.ndarray
     bias_m: np.ndarray
 
-    def waypoints(self, k: int, axes: Sequence[bool] = (True, True, True), end_axes: Sequence[bool] | None = None):
-        """The reference's waypoints of the ``k``-th complete repetition relative to its own start, on ``axes``
-        (elsewhere 0: the caller's trial-wide ones are used instead); its end on ``end_axes`` (default ``axes``)."""
+    def waypoints(self, k: int, end_axes: Sequence[bool] = (True, True, True)):
+        """The ``k``-th complete repetition's bottle, mouth, bottle put back and end (3,) m each, relative to its own
+        start; the end only on ``end_axes`` (0, the start, elsewhere)."""
         r = self.rests_m[k] - self.rests_m[k, 0]
-        use = np.asarray(axes, dtype=bool)
-        end_use = use if end_axes is None else np.asarray(end_axes, dtype=bool)
-        return r[1], r[2], r[3], np.where(end_use, r[4], 0.0)
+        return r[1], r[2], r[3], np.where(np.asarray(end_axes, dtype=bool), r[4], 0.0)
 
 
 @dataclass(frozen=True)
@@ -194,10 +197,13 @@ def repetition_rests(
     Per axis the unknowns are every rest's room position: each repetition's start (the previous window's end when
     the windows meet), bottle, mouth, bottle again and end. Observations: the start's displacement over each
     movement (:func:`imulog.process.trajectory_rests.rest_positions`, differenced), each ``X_j - X_{j-1}`` within
-    ``sigma``. Prior: every home at 0, every bottle at the reference's bottle and every mouth at its mouth, each
-    within ``tau``. ``(sigma, tau)`` maximise the marginal likelihood of the displacements on a log grid (1 mm to
-    10 cm); the rests are the posterior means, their uncertainty the posterior standard deviation of each rest
-    relative to its repetition's start."""
+    ``sigma``, plus (``bias``) one fixed effect per movement type: what the start gets wrong the same way in every
+    repetition. Prior: every home at 0, every bottle at the reference's bottle and every mouth at its mouth, each
+    within ``tau``. ``(sigma, tau)`` maximise the restricted likelihood of the displacements on a log grid (1 mm to
+    10 cm; ``tau`` at most ``tau_max_m``, ``sigma`` per axis at least ``sigma_min_m``); the bias terms are shrunk
+    by their James-Stein factor and, with ``alpha``, kept only where they differ from 0 at that level. The rests
+    are the posterior means, their uncertainty the posterior standard deviation of each rest relative to its
+    repetition's start."""
     reps = [(i, r) for i, r in enumerate(repetitions) if len(r.phase_bounds_s) == 4]
     if len(reps) < 2:
         return None
@@ -300,6 +306,5 @@ def _variance_components(
     if alpha is not None and float(b @ btb[i, j] @ b) < chi2.ppf(1.0 - alpha, p):
         return float(_GRID_M[i]), float(_GRID_M[j]), np.zeros(p)  # no significant bias: none taken off
     # positive-part James-Stein: only the share of each effect beyond its own noise
-    se2 = np.diag(cov)
-    keep = np.where(b**2 > 0, np.clip(1.0 - se2 / np.maximum(b**2, 1e-30), 0.0, 1.0), 0.0)
+    keep = shrinkage_weight(np.abs(b) / np.sqrt(np.diag(cov)))
     return float(_GRID_M[i]), float(_GRID_M[j]), keep * b
