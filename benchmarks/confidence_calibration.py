@@ -217,9 +217,18 @@ def main(argv: list[str] | None = None) -> int:
         type=float,
         help="RotatingBiasParams.outlier_factor (refit the rotating bias without the movements it cannot close; an option, off by default)",
     )
+    ap.add_argument(
+        "--rest-model",
+        help="OptimizationParams.rest_model (each repetition's own rests in the reference, issue 31 point 2; "
+        "'none' for off)",
+    )
     args = ap.parse_args(argv)
     global DEFAULT_PARAMS
     D = DEFAULT_PARAMS  # noqa: N806
+    if args.rest_model is not None:
+        mode = None if args.rest_model == "none" else args.rest_model
+        DEFAULT_PARAMS = replace(D, optimized=replace(D.optimized, rest_model=mode))
+        D = DEFAULT_PARAMS  # noqa: N806
     if args.closure_factor is not None:
         DEFAULT_PARAMS = replace(D, optimized=replace(D.optimized, closure_factor=args.closure_factor))
     if args.bias_outlier_factor is not None:

@@ -24,7 +24,9 @@ axis's rotating-bias compensation scaled by its James-Stein share, ``RotatingBia
 up to 20 times while the set of movements changes), ``rest-blend`` (the defaults / the start's rotating-bias
 compensation in x and y blended by the rests, ``OptimizationParams.start_blend = (True, True, False)``, an option;
 ``rest-blend-xyz`` in z too), ``rest-chain`` (the defaults / each repetition's reference moved by where the hand
-started and ended it, ``OptimizationParams.rest_chain``, an option), ``issue31-session3`` (the code before this round's
+started and ended it, ``OptimizationParams.rest_chain``, an option), ``rest-model-NAME`` (the defaults / each
+repetition's reference at its own rests estimated from the IMU, ``OptimizationParams.rest_model = NAME``, an option;
+the names in :data:`REST_RULES`, ``trajectory_rest_model.RestRule``), ``issue31-session3`` (the code before this round's
 default changes, ``bias-uncertainty`` and ``rest-run-mean``, / the defaults), ``issue31-options`` (the same
 before / the defaults with the heading through rests and the z-only return), ``heading-restart`` (options 3 and 4
 with the heading chained through the whole recording, ``AnchorParams.restart = False``, / restarted at every rest
@@ -114,6 +116,25 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
         D,
     ),
 }
+# each rule of OptimizationParams.rest_model (trajectory_rest_model.RestRule) against the defaults: rest-model-NAME
+REST_RULES = (
+    "waypoints",
+    "replace",
+    "posterior",
+    "posterior-data",
+    "capped",
+    "capped-tau",
+    "capped-tau-xy",
+    "trusted",
+    "trusted-xy",
+    "trusted-xy-nobias",
+    "trusted-xy-test",
+    "trusted-xy-test-gated",
+    "trusted-posterior-xy",
+)
+CHANGES.update(
+    {f"rest-model-{name}": (D, replace(D, optimized=replace(D.optimized, rest_model=name))) for name in REST_RULES}
+)
 
 
 def trial_errors(

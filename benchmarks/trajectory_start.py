@@ -22,6 +22,10 @@ repetition's own rest positions (``rests``: where the hand started, held the bot
 where it started and ended (``offset``: the bottle and the mouth at their mean place in the room over the trial), and
 counts the failing trial axes it brings within both targets: how much of the failures the reference's
 one-size-fits-all waypoints explain (issue 31 point 2, cause b; a diagnostic, not a method).
+``--rest-model`` prints only the rests: per condition and rest (bottle, mouth, bottle put back, home, each relative to
+the repetition's start), the RMS error (cm) against the truth of the trial-wide reference, of the start and of each
+repetition's rests estimated from the start's rest-to-rest displacements
+(:func:`imulog.process.trajectory_rest_model.repetition_rests`), with the estimate's own posterior standard deviation.
 ``--per-repetition`` adds, per trial, one row per repetition with the MAE (cm) per axis of ZUPT, ``zupt_bias``,
 the minimum-jerk reference and the optimized trajectory, and the trial's movements the rotating-bias fit closes
 worst (what is left of each movement's velocity at the next rest after the compensation, cm/s, and its ratio to
@@ -49,7 +53,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from trajectory_accuracy import evaluate_trial, simulated_inputs  # noqa: E402
 
-from imulog.process import trajectory_methods, trajectory_opt  # noqa: E402
+from imulog.process import trajectory_methods, trajectory_opt, trajectory_rest_model  # noqa: E402
 from imulog.process.integration import shrinkage_weight  # noqa: E402
 from imulog.process.minjerk import R2GWaypoints, piecewise_minimum_jerk, r2g_reference  # noqa: E402
 from imulog.process.rest_runs import movement_runs  # noqa: E402
@@ -62,6 +66,7 @@ from imulog.process.trajectory_opt import (  # noqa: E402
     repetition_windows,
 )
 from imulog.process.trajectory_repetitions import closure_sigma  # noqa: E402
+from imulog.process.trajectory_rests import rest_positions  # noqa: E402
 
 METHODS = ("zupt", "zupt_bias", "optimized")
 _COMPENSATE = trajectory_opt.compensate_rotating_bias
@@ -203,6 +208,79 @@ def oracle_mae(inputs: dict, mode: str, params=DEFAULT_PARAMS) -> np.ndarray:
     return np.mean([[r[a]["mae_cm"] for a in "xyz"] for r in records["optimized"]], axis=0)
 
 
+REST_NAMES = ("bottle", "mouth", "bottle back", "home")
+
+
+def run_methods(inputs: dict, params=DEFAULT_PARAMS, methods=("optimized",), info: dict | None = None):
+    """The trajectory methods on a simulated trial as the step runs them (the accelerometer's rest gate, the
+    repetition windows): ``(t_s, static, repetitions, {method: (N, 3) m})``; ``info`` as
+    :func:`imulog.process.trajectory_opt.reconstruct_repetitions` fills it."""
+    t = inputs["t_s"]
+    rate = (len(t) - 1) / (t[-1] - t[0])
+    static = true_rests(inputs["static"], inputs["acc_gate"], rate, params.rests, orientation=inputs.get("q_gate"))
+    reps, _ = merge_overlapping(repetition_windows(t, inputs["phase_bounds"], static))
+    out = reconstruct_repetitions(
+        t,
+        inputs["acc_world"],
+        static,
+        reps,
+        list(methods),
+        anthropometrics=inputs["anthropometrics"],
+        orientation=inputs["q_world"],
+        params=params,
+        info=info,
+    )
+    return t, static, reps, out
+
+
+def rest_errors(inputs: dict, mode: str = "trusted-xy-test", params=DEFAULT_PARAMS) -> dict:
+    """Per complete repetition, the error (m) against the truth of each rest (bottle, mouth, bottle put back, home;
+    relative to the repetition's start) of the trial-wide reference, of the start (``zupt_bias`` as the optimisation
+    uses it) and of :func:`imulog.process.trajectory_rest_model.repetition_rests` as ``OptimizationParams.rest_model =
+    mode`` runs it; {name: (K, 4, 3)}."""
+    seen: dict = {}
+    model = trajectory_rest_model.repetition_rests
+
+    def spy(t, z, static, reps, waypoints, *args, **kwargs):
+        est = model(t, z, static, reps, waypoints, *args, **kwargs)
+        seen.update(t=t, z=z, static=static, reps=reps, waypoints=waypoints, est=est)
+        return est
+
+    trajectory_rest_model.repetition_rests = spy
+    try:
+        run_methods(inputs, replace(params, optimized=replace(params.optimized, rest_model=mode)))
+    finally:
+        trajectory_rest_model.repetition_rests = model
+    est, way = seen["est"], seen["waypoints"]
+    if est is None:
+        return {}
+    ref = np.stack([way.bottle_m, way.mouth_m, way.bottle_m, np.zeros(3)])
+    out: dict = {"reference": [], "start": [], "estimate": [], "sd": []}
+    for k, i in enumerate(est.index):
+        rep, t = seen["reps"][int(i)], seen["t"]
+        truth = rest_positions(t, inputs["truth_pos"] - inputs["truth_pos"][rep.start], seen["static"], rep)
+        out["reference"].append(ref - truth)
+        out["start"].append(rest_positions(t, seen["z"], seen["static"], rep) - truth)
+        out["estimate"].append((est.rests_m[k] - est.rests_m[k, 0])[1:] - truth)
+        out["sd"].append(est.sd_m[k, 1:])
+    return {k: np.asarray(v) for k, v in out.items()}
+
+
+def print_rest_errors(name: str, errs: list[dict]) -> int:
+    """One table row per rest of a condition: RMS error (cm) per axis of the reference, the start and the estimate,
+    and the estimate's mean posterior standard deviation (cm); returns how many (rest, axis) cells the estimate is
+    below both the reference and the start on."""
+    cat = {k: np.concatenate([e[k] for e in errs if e]) for k in ("reference", "start", "estimate", "sd")}
+    rms = {k: 100 * np.sqrt(np.nanmean(cat[k] ** 2, axis=0)) for k in ("reference", "start", "estimate")}
+    sd = 100 * np.sqrt(np.nanmean(cat["sd"] ** 2, axis=0))
+    better = 0
+    for j, rest in enumerate(REST_NAMES):
+        cells = " | ".join(" / ".join(f"{x:.2f}" for x in rms[k][j]) for k in ("reference", "start", "estimate"))
+        print(f"| {name} | {rest} | {cells} | {' / '.join(f'{x:.2f}' for x in sd[j])} |", flush=True)
+        better += int(np.sum((rms["estimate"][j] < rms["reference"][j]) & (rms["estimate"][j] < rms["start"][j])))
+    return better
+
+
 FLOOR_M = 0.006  # estimate_data_sigma's floor
 
 
@@ -210,22 +288,8 @@ def trial_row(inputs: dict, params=DEFAULT_PARAMS) -> dict:
     """Mean MAE (cm) per method and axis, the optimisation's static trust (m) and the closure bound (m)."""
     records, _, _ = evaluate_trial(inputs, METHODS, params)
     mae = {m: np.mean([[r[a]["mae_cm"] for a in "xyz"] for r in records[m]], axis=0) for m in METHODS}
-    t = inputs["t_s"]
-    rate = (len(t) - 1) / (t[-1] - t[0])
-    static = true_rests(inputs["static"], inputs["acc_gate"], rate, params.rests, orientation=inputs.get("q_gate"))
-    reps, _ = merge_overlapping(repetition_windows(t, inputs["phase_bounds"], static))
     info: dict = {}
-    reconstruct_repetitions(
-        t,
-        inputs["acc_world"],
-        static,
-        reps,
-        ["optimized"],
-        anthropometrics=inputs["anthropometrics"],
-        orientation=inputs["q_world"],
-        params=params,
-        info=info,
-    )
+    t, static, reps, _ = run_methods(inputs, params, info=info)
     sigma = np.asarray(info.get("sigma_data_static_m", [np.nan] * 3), dtype=float)
     sigma_mps = np.asarray(info.get("sigma_data_mps", [np.nan] * 3), dtype=float)
     closure = np.asarray(closure_sigma(t, inputs["acc_world"], static, reps), dtype=float)
@@ -236,22 +300,8 @@ def trial_row(inputs: dict, params=DEFAULT_PARAMS) -> dict:
 def repetition_rows(inputs: dict, params=DEFAULT_PARAMS) -> tuple[list[str], list[str]]:
     """Per repetition, MAE (cm) per axis of ZUPT, ``zupt_bias``, the reference and the optimized trajectory
     against the truth; and the three movements of the trial with the largest rotating-bias fit residual."""
-    t = inputs["t_s"]
-    rate = (len(t) - 1) / (t[-1] - t[0])
-    static = true_rests(inputs["static"], inputs["acc_gate"], rate, params.rests, orientation=inputs.get("q_gate"))
-    reps, _ = merge_overlapping(repetition_windows(t, inputs["phase_bounds"], static))
     info: dict = {}
-    out = reconstruct_repetitions(
-        t,
-        inputs["acc_world"],
-        static,
-        reps,
-        list(METHODS),
-        anthropometrics=inputs["anthropometrics"],
-        orientation=inputs["q_world"],
-        params=params,
-        info=info,
-    )
+    t, static, reps, out = run_methods(inputs, params, METHODS, info)
     way = R2GWaypoints(**{f"{k}_m": tuple(v) for k, v in info["waypoints_m"].items()})
     rows = []
     for rep in reps:
@@ -284,8 +334,18 @@ def repetition_rows(inputs: dict, params=DEFAULT_PARAMS) -> tuple[list[str], lis
     return rows, [f"rotating-bias estimate {bias} m/s^2; worst-closed movements: " + "; ".join(worst)]
 
 
+def trial_inputs(name: str, subject: int, repetitions: int) -> dict:
+    """One simulated trial of grid condition ``name`` (subject k with seed k), as the trajectory step sees it."""
+    from imulog.simulate.grid import condition
+
+    d = DEFAULT_PARAMS
+    return simulated_inputs(
+        subject, seed=subject, repetitions=repetitions, rests=d.rests, anchor_params=d.anchor, **condition(name)
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
-    from imulog.simulate.grid import CONDITIONS, condition
+    from imulog.simulate.grid import CONDITIONS
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--grid", nargs="+", default=["default"])
@@ -305,9 +365,34 @@ def main(argv: list[str] | None = None) -> int:
         choices=("rests", "offset"),
         help="also optimise against a reference with each repetition's true rests (or only its true start and end)",
     )
+    ap.add_argument(
+        "--rest-model",
+        nargs="?",
+        const="trusted-xy-test",
+        metavar="MODE",
+        help="only the rests: per condition and rest, the RMS error (cm) of the trial-wide reference, the start and "
+        "each repetition's estimated rests (trajectory_rest_model, as OptimizationParams.rest_model = MODE runs it; "
+        "default trusted-xy-test) against the truth",
+    )
     args = ap.parse_args(argv)
     names = list(CONDITIONS) if args.grid == ["all"] else args.grid
     t0, r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
+    if args.rest_model:
+        print("| condition | rest | reference x/y/z | start x/y/z | estimate x/y/z | estimate's sd x/y/z |")
+        print("|---|---|---|---|---|---|")
+        better = cells = 0
+        for name in names:
+            errs = []
+            for s in range(args.first_subject, args.first_subject + args.subjects):
+                inputs = trial_inputs(name, s, args.repetitions)
+                errs.append(rest_errors(inputs, args.rest_model))
+            better += print_rest_errors(name, errs)
+            cells += 12
+        r1 = resource.getrusage(resource.RUSAGE_SELF)
+        cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+        print(f"\nthe estimate below both the reference and the start on {better} of {cells} (rest, axis) cells")
+        print(f"{time.perf_counter() - t0:.0f} s wall, {cpu:.0f} s CPU (user+sys)")
+        return 0
     print(
         "| trial | ZUPT x/y/z | zupt_bias x/y/z | optimized x/y/z | trust x/y/z (mm) | closure x 0.5 (mm) "
         "| compensation / its noise x/y/z |"
@@ -329,14 +414,7 @@ def main(argv: list[str] | None = None) -> int:
     trials = 0
     for name in names:
         for s in range(args.first_subject, args.first_subject + args.subjects):
-            inputs = simulated_inputs(
-                s,
-                seed=s,
-                repetitions=args.repetitions,
-                rests=DEFAULT_PARAMS.rests,
-                anchor_params=DEFAULT_PARAMS.anchor,
-                **condition(name),
-            )
+            inputs = trial_inputs(name, s, args.repetitions)
             row = trial_row(inputs)
             m = row["mae"]
             bad = m["optimized"] >= m["zupt"]

@@ -68,17 +68,20 @@ def piecewise_minimum_jerk(t_s: np.ndarray, bounds_s: np.ndarray, waypoints: np.
 @dataclass(frozen=True)
 class R2GWaypoints:
     """Bottle and mouth positions (m) relative to the hand's start, in the world frame; ``end_m`` where the hand
-    comes back to (relative to its start; 0, the start, unless a repetition's own offsets are known)."""
+    comes back to (relative to its start; 0, the start, unless a repetition's own offsets are known);
+    ``bottle_back_m`` where the bottle is put back (None: where it was grasped, ``bottle_m``)."""
 
     bottle_m: tuple[float, float, float]
     mouth_m: tuple[float, float, float]
     end_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    bottle_back_m: tuple[float, float, float] | None = None
 
     def as_array(self) -> np.ndarray:
-        """The five waypoints of one repetition: start, bottle, mouth, bottle, end; (5, 3) m."""
+        """The five waypoints of one repetition: start, bottle, mouth, bottle (put back), end; (5, 3) m."""
         b = np.asarray(self.bottle_m, dtype=np.float64)
         m = np.asarray(self.mouth_m, dtype=np.float64)
-        return np.stack([np.zeros(3), b, m, b, np.asarray(self.end_m, dtype=np.float64)])
+        back = b if self.bottle_back_m is None else np.asarray(self.bottle_back_m, dtype=np.float64)
+        return np.stack([np.zeros(3), b, m, back, np.asarray(self.end_m, dtype=np.float64)])
 
 
 @dataclass(frozen=True)

@@ -64,6 +64,7 @@ from imulog.process.trajectory_repetitions import (
     trial_waypoints,
     velocity_sigma,
 )
+from imulog.process.trajectory_rest_model import repetition_references
 from imulog.process.trajectory_rests import repetition_offsets, rest_blend_weight, shifted_waypoints
 
 __all__ = [
@@ -156,6 +157,7 @@ def reconstruct_repetitions(
         info["waypoints_m"] = {"bottle": list(waypoints.bottle_m), "mouth": list(waypoints.mouth_m)}
     fallback: set[int] = set()
     rep_waypoints = [waypoints] * len(repetitions)
+    rep_params: list[TrajectoryParams | None] = [None] * len(repetitions)
     if "optimized" in methods:
         turn = np.zeros(len(repetitions))
         if params.optimized.heading_drift:
@@ -188,6 +190,11 @@ def reconstruct_repetitions(
             info["optimized_fallback"] = [repetitions[i].index for i in sorted(fallback)]
         if params.optimized.rest_chain:
             rep_waypoints = _chained_waypoints(t, z, static, repetitions, waypoints, params, info)
+        if params.optimized.rest_model:
+            rep_waypoints, own = repetition_references(
+                t, z, static, repetitions, rep_waypoints, waypoints, params.optimized, info
+            )
+            rep_params = [None if o is None else replace(params, optimized=o) for o in own]
     if baseline:
         methods = [*methods, BASELINE]
         out[BASELINE] = np.full((len(t), 3), np.nan)
@@ -209,7 +216,7 @@ def reconstruct_repetitions(
                 phase_bounds_s=rep.phase_bounds_s,
                 waypoints=rep_waypoints[i] if m == "optimized" else waypoints,
                 acc_compensated_mps2=base[sl] if m == "optimized" else comp,  # optimized: heading-corrected
-                params=params,
+                params=(rep_params[i] or params) if m == "optimized" else params,
             )
     if info is not None:
         info["checks"] = method_checks(t, a, a_comp, static, repetitions, out, params, bias)

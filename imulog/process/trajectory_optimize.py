@@ -73,10 +73,18 @@ class OptimizationParams:
     rest_chain: on the axes not held to return to the start, move each repetition's reference by where the hand
         started and ended it relative to the trial's home (:func:`imulog.process.trajectory_rests.repetition_offsets`:
         the start's return displacements chained, each offset 0 within ``sigma_ref_static_m``; issue 31 point 2).
+    rest_model: give each complete repetition's reference its own rests (bottle, mouth, bottle put back, and on the
+        axes not held to return to the start its end), estimated from the start's rest-to-rest displacements and
+        the trial-wide waypoints by variance components
+        (:func:`imulog.process.trajectory_rest_model.repetition_rests`; issue 31 point 2; an option, None: off).
+        ``"waypoints"``: only the waypoints; ``"posterior"``: also the reference's static trust per axis from the
+        estimate's posterior standard deviation (at least 3 mm) and no static-position term for the start (the
+        estimate already holds it); ``"posterior-data"``: the posterior trust, the start's term kept; ``"replace"``:
+        the waypoints, no static-position term.
     """
 
     sigma_data_mps: float | tuple[float, float, float] = 0.02
-    sigma_ref_static_m: float = 0.015
+    sigma_ref_static_m: float | tuple[float, float, float] = 0.015
     sigma_ref_moving_m: float = 0.10
     sigma_symmetry_m: float | None = 0.02
     sigma_static_vel_mps: float | None = 0.005
@@ -89,6 +97,7 @@ class OptimizationParams:
     closure_factor: float | None = 0.5
     start_blend: tuple[bool, bool, bool] = (False, False, False)
     rest_chain: bool = False
+    rest_model: str | None = None
 
 
 @dataclass
@@ -146,8 +155,9 @@ def optimize_repetition(
         params = replace(params, sigma_data_static_m=None)
     sdv = params.sigma_data_mps
     rts = params.return_to_start
-    if isinstance(sdv, (tuple, list, np.ndarray)) or isinstance(rts, (tuple, list)):
-        for name, value in (("sigma_data_mps", sdv), ("return_to_start", rts)):
+    srs = params.sigma_ref_static_m
+    if any(isinstance(v, (tuple, list, np.ndarray)) for v in (sdv, rts, srs)):
+        for name, value in (("sigma_data_mps", sdv), ("return_to_start", rts), ("sigma_ref_static_m", srs)):
             if isinstance(value, (tuple, list, np.ndarray)) and len(value) != d:
                 raise ValueError(f"{name} has {len(value)} values for {d} axes")
         if not isinstance(sds, (tuple, list, np.ndarray)):
@@ -169,6 +179,7 @@ def optimize_repetition(
                     sigma_data_static_m=None if v is None else float(v),
                     sigma_data_mps=float(sdv[j]) if isinstance(sdv, (tuple, list, np.ndarray)) else sdv,
                     return_to_start=bool(rts[j]) if isinstance(rts, (tuple, list)) else rts,
+                    sigma_ref_static_m=float(srs[j]) if isinstance(srs, (tuple, list, np.ndarray)) else srs,
                 ),
             )
             for j, v in enumerate(sds)
