@@ -29,10 +29,7 @@ from typing import Any
 import numpy as np
 
 from imulog.model import Intervals, SignalStream
-from imulog.process import quaternion as quat
-from imulog.process.anchor_heading import restart_rests
 from imulog.process.gaps import GapParams, prepare, runs_of
-from imulog.process.integration import rest_anchored_orientation
 from imulog.process.minjerk import R2GReferenceParams, r2g_waypoints_from_anthropometrics
 from imulog.process.repetition_flags import flagged_repetitions, repetition_features
 from imulog.process.rests import rest_report, true_rests
@@ -50,6 +47,7 @@ from imulog.process.trajectory_opt import (
 )
 from imulog.steps.common import alignment_for, alignment_record, pick_imu, record_for, record_of
 from imulog.steps.placements import placement_side
+from imulog.steps.trajectory_inputs import phase_bounds_by_repetition, sample_onto, to_reference, world_acceleration
 from imulog.steps.trajectory_topics import RECORD, baseline_topic, per_imu_layout, split_topic, trajectory_topic
 from imulog.steps.trajectory_windows import F32, TrajectoryWindows, has_r2g, trajectory_pieces
 from imulog.steps.trajectory_windows import plan as window_plan
@@ -58,33 +56,6 @@ STEP = "trajectory"
 TRAJECTORY_TOPIC = "/derived/trajectory/{method}"
 BASELINE_TOPIC = "/derived/trajectory_baseline/{method}"  # what every method must beat (imulog evaluate)
 NEEDS_STATIC = {"zupt", "kalman", "zupt_bias", "optimized"}
-
-
-def _to_reference(t_dev_ns: np.ndarray, alignment: dict[str, Any] | None) -> np.ndarray:
-    if alignment is None:
-        return np.asarray(t_dev_ns, dtype=np.int64)
-    from imulog.process.alignment import device_to_reference
-
-    return np.asarray(np.round(device_to_reference(np.asarray(t_dev_ns, dtype=np.int64), alignment)), dtype=np.int64)
-
-
-def _sample_onto(t_src: np.ndarray, values: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
-    """Nearest-sample lookup (exact when the clocks are the same)."""
-    if len(t_src) == len(t_dst) and np.array_equal(t_src, t_dst):
-        return values
-    idx = np.clip(np.searchsorted(t_src, t_dst), 1, len(t_src) - 1)
-    left = t_dst - t_src[idx - 1] <= t_src[idx] - t_dst
-    return values[np.where(left, idx - 1, idx)]
-
-
-def phase_bounds_by_repetition(phases: Intervals, t0_ns: int) -> dict[int, np.ndarray]:
-    """{repetition: (P, 2) start/end s relative to ``t0_ns``}, phases sorted by start."""
-    out: dict[int, list[tuple[float, float]]] = {}
-    for s, e, k in zip(phases.start_ns, phases.end_ns, phases.task_index, strict=True):
-        if k < 0:
-            continue
-        out.setdefault(int(k), []).append(((s - t0_ns) / 1e9, (e - t0_ns) / 1e9))
-    return {k: np.asarray(sorted(v)) for k, v in out.items()}
 
 
 def compute_trajectories(
@@ -139,13 +110,13 @@ def compute_trajectories(
     if static is None and any(m in NEEDS_STATIC for m in methods):
         need = ", ".join(m for m in methods if m in NEEDS_STATIC)
         raise ValueError(f"methods {need} need /derived/static/{imu}: run `imulog process phases` first")
-    t_ref = _to_reference(t_dev, alignment)
-    frame, clock = f"{imu}_global", "device"
-    q_world = None if orientation is None else _sample_onto(orientation[0], np.asarray(orientation[1], float), t_dev)
+    t_ref = to_reference(t_dev, alignment)
+    q_world = None if orientation is None else sample_onto(orientation[0], np.asarray(orientation[1], float), t_dev)
     orientation_used = "filter" if q_world is not None else None
     rest_info: dict[str, Any] = {}
+    given = None  # the phases step's static mask, before the accelerometer's check
     if static is not None:  # velocity resets only at true rests: the accelerometer must agree (issue 32)
-        given = _sample_onto(np.asarray(static[0], np.int64), np.asarray(static[1]).reshape(-1) > 0.5, t_dev)
+        given = sample_onto(np.asarray(static[0], np.int64), np.asarray(static[1]).reshape(-1) > 0.5, t_dev)
         rate = (len(t_dev) - 1) / max((t_dev[-1] - t_dev[0]) / 1e9, 1e-9)
         rest_mask = true_rests(given, acc, rate, params.rests, orientation=q_world)
         rest_info = rest_report(given, rest_mask, rate)
@@ -154,31 +125,26 @@ def compute_trajectories(
     if phases is not None and len(phases) and phases_clock == "device" and alignment is not None:
         t_ph = Intervals(
             phases.topic,
-            _to_reference(phases.start_ns, alignment),
-            _to_reference(phases.end_ns, alignment),
+            to_reference(phases.start_ns, alignment),
+            to_reference(phases.end_ns, alignment),
             phases.labels,
             phases.task_index,
         )
-    if q_world is not None and gyr is not None and params.anchor.enabled and static is not None:
-        rest = static[1]
-        w = _sample_onto(np.asarray(gyr[0], np.int64), np.asarray(gyr[1], float), t_dev)
-        t_s = (t_ref - t_ref[0]) / 1e9  # where a window may be cut: the heading chain restarts there
-        bounds = phase_bounds_by_repetition(t_ph, int(t_ref[0])) if t_ph is not None and len(t_ph) else {}
-        spans = [(float(b[:, 0].min()), float(b[:, 1].max())) for b in bounds.values()]
-        restart = restart_rests(given, t_s, chain_rest_s, spans)
-        q_anchored = rest_anchored_orientation(q_world, w, (t_dev - t_dev[0]) / 1e9, rest, params.anchor, restart)
-        g_up = np.array([0.0, 0.0, 9.81])  # (any g: the correction rotations are small, its error ~1e-4 m/s^2)
-        acc = quat.rotate(quat.multiply(q_anchored, quat.conjugate(q_world)), acc + g_up) - g_up
-        q_world, orientation_used = q_anchored, "rest_anchored"
-    if alignment is not None:
-        clock = "reference"
-        rotation = alignment.get("rotation_global_to_world", [1, 0, 0, 0])
-        if rotation is not None:  # None: an IMU of a setup on the shared clock without a cluster of its own
-            g2w = np.asarray(rotation, dtype=np.float64)
-            acc = quat.rotate(g2w, acc)
-            if q_world is not None:
-                q_world = quat.multiply(g2w, q_world)
-            frame = "world"
+    acc, q_world, anchored, frame, clock = world_acceleration(
+        acc,
+        q_world,
+        imu=imu,
+        t_dev=t_dev,
+        t_ref=t_ref,
+        rest=None if static is None else static[1],
+        given_rest=given,
+        gyr=gyr,
+        phases=t_ph,
+        alignment=alignment,
+        params=params,
+        chain_rest_s=chain_rest_s,
+    )
+    orientation_used = "rest_anchored" if anchored else orientation_used
     (acc,), gap_report = prepare([acc], gaps)
     unknown = ~np.all(np.isfinite(acc), axis=1)  # long gaps, after bridging the short ones
     if unknown.all():
@@ -188,7 +154,7 @@ def compute_trajectories(
     mask = (
         np.zeros(len(t_dev), bool)
         if static is None
-        else _sample_onto(np.asarray(static[0], np.int64), np.asarray(static[1]).reshape(-1) > 0.5, t_dev)
+        else sample_onto(np.asarray(static[0], np.int64), np.asarray(static[1]).reshape(-1) > 0.5, t_dev)
     )
     reps: list[Repetition] = []
     if phases is not None and len(phases):
@@ -342,7 +308,7 @@ def run_trajectory(
             mine = phases
             if phases is not None and not one_window:  # the repetitions inside this window only
                 t = np.asarray(acc[0][[0, -1]], dtype=np.int64)
-                lo, hi = _to_reference(t, alignment) if phases_clock == "reference" else t
+                lo, hi = to_reference(t, alignment) if phases_clock == "reference" else t
                 inside = (phases.start_ns >= lo) & (phases.end_ns <= hi)
                 mine = Intervals(
                     phases.topic,
@@ -425,7 +391,7 @@ def run_trajectory(
                 record,
                 out_topics,
                 windows,
-                lambda t: _to_reference(t, alignment),
+                lambda t: to_reference(t, alignment),
                 total,
                 "world"
                 if alignment is not None and alignment.get("rotation_global_to_world", 0) is not None
