@@ -87,7 +87,8 @@ class HandParams:
     velocity_level_mps: the hand moves where the velocity integrated from the rest exceeds this (m/s).
     quiet_s: the walk stops at the first run this long (s) without motion.
     min_run_s: shorter runs above the level are noise, not motion (s).
-    max_shift_s: a boundary moving further than this (s) beyond the gyroscope boundary is not trusted.
+    max_shift_s: a boundary walking further than this (s) beyond the gyroscope boundary is not trusted (see
+        settled_beyond_shift for a continuation after the walk).
     cruise_velocity_mps: the hand also moves where that velocity exceeds this (m/s) whatever its acceleration
         (overlapping submovements of a slow phase cruise at a few cm/s with next to no acceleration); 0: off.
     continuation_s: a translation resuming within this time (s) after the offset can extend the phase.
@@ -260,7 +261,9 @@ def _extend_offset(
     or, with ``bridge`` > 0, when it reaches ``bridge`` x the ``level`` (a submovement, not a noise run in a rest
     drifting at a few cm/s) and the speed stayed above ``vlevel`` all the way from
     the walk's end to it (the hand never stopped: overlapping submovements of a slow phase, whose
-    acceleration passes through zero between them); in both cases only when it settles before the rest."""
+    acceleration passes through zero between them) or, with ``resume``, when its speed on the walk from it exceeds
+    ``cruise`` (a last submovement after a pause, not a rest's drift); in every case only when it settles before
+    the rest. Returns the offset and the first walk's end (local indices; ``max_shift_s`` bounds the walk)."""
     moving = a_norm > level
     if vlevel > 0:  # a tail at speed that still decelerates; a rest's slow drift barely accelerates
         moving |= (v_norm > vlevel) & (a_norm > 0.5 * level)
