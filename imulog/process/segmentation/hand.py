@@ -36,7 +36,10 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
    (Until issue 31 the level was 10 % of the phase's peak ``|f - f_rest|``, which gravity dominates once the
    wrist has turned: 0.5-1.3 m/s^2, above a slow last submovement's 0.1-0.7 m/s^2, whose phase then ended
    0.55-0.82 s early.) A dip of ``|a|`` is bridged to the next run above ``bridge_n_level`` x the level when
-   the speed stays above ``velocity_level_mps`` in between (the hand never stopped);
+   the speed stays above ``velocity_level_mps`` in between (the hand never stopped) or, after a pause, when
+   the resumed motion moves faster than ``cruise_velocity_mps`` (``resume_cruise``: a slow last submovement, not
+   a rest's drift); a continuation that settles before the rest window extends the phase even beyond
+   ``max_shift_s`` (``settled_beyond_shift``; the bound is on the walk of step 5, issue 31 point 1);
 7. the boundary moves on to where its acceleration flank (or, for a phase too slow for the accelerometer, its
    speed flank) extrapolates to rest (:mod:`~imulog.process.segmentation.flanks`, issue 31);
 8. a slow last part at ``velocity_level_mps`` or more with next to no acceleration (the wrist stopped turning,
@@ -84,7 +87,8 @@ class HandParams:
     velocity_level_mps: the hand moves where the velocity integrated from the rest exceeds this (m/s).
     quiet_s: the walk stops at the first run this long (s) without motion.
     min_run_s: shorter runs above the level are noise, not motion (s).
-    max_shift_s: a boundary moving further than this (s) beyond the gyroscope boundary is not trusted.
+    max_shift_s: a boundary walking further than this (s) beyond the gyroscope boundary is not trusted (see
+        settled_beyond_shift for a continuation after the walk).
     cruise_velocity_mps: the hand also moves where that velocity exceeds this (m/s) whatever its acceleration
         (overlapping submovements of a slow phase cruise at a few cm/s with next to no acceleration); 0: off.
     continuation_s: a translation resuming within this time (s) after the offset can extend the phase.
@@ -114,6 +118,11 @@ class HandParams:
     profile_residual_ratio: step 9 moves an offset only when the fit's residual over the phase's last part has at
         most this many times the rms of its residual over the rest after the fitted arrival (a phase stopping
         sharply at the offset is not the fitted profile's movement, docs/accuracy.md, issue 31 seventh round).
+    resume_cruise: a submovement resumed after a pause (``|a|`` above ``bridge_n_level`` levels, under the
+        ``continuation_n_level``) continues the phase when its speed exceeds ``cruise_velocity_mps`` (issue 31
+        point 1: stroke-curved last submovements of 9-11 cm/s at 2-3 levels; a rest's 1-2 cm/s drift stays under).
+    settled_beyond_shift: a continuation that settles before the rest window extends the phase even when it ends
+        more than ``max_shift_s`` after the gyroscope's offset (the bound stays on step 5's walk).
     rest_check_s: a slow last part of a phase at ``velocity_level_mps`` or more with next to no acceleration
         extends the offset when the velocity relative to the rest window stays under half that speed for this
         long (s) after the window (the window is a rest, not a hand cruising or drifting); 0: off.
@@ -147,6 +156,8 @@ class HandParams:
     profile_grid_hz: float = 10.0
     profile_min_s: float = 0.25
     profile_residual_ratio: float = 2.0
+    resume_cruise: bool = True
+    settled_beyond_shift: bool = True
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:
@@ -242,22 +253,24 @@ def _walk(moving: np.ndarray, start: int, quiet: int) -> int:
 
 
 def _extend_offset(
-    a_norm, v_norm, b_local, level, vlevel, quiet, cont, cont_level, min_run, cruise=0.0, bridge=1.5
-) -> int:
+    a_norm, v_norm, b_local, level, vlevel, quiet, cont, cont_level, min_run, cruise=0.0, bridge=1.5, resume=False
+) -> tuple[int, int]:
     """Offset (exclusive, local index) after walking out of the phase and over translation-only corrections.
 
     A correction continues the phase when its ``|a|`` reaches ``cont_level`` (a sub-movement after a pause)
     or, with ``bridge`` > 0, when it reaches ``bridge`` x the ``level`` (a submovement, not a noise run in a rest
     drifting at a few cm/s) and the speed stayed above ``vlevel`` all the way from
     the walk's end to it (the hand never stopped: overlapping submovements of a slow phase, whose
-    acceleration passes through zero between them); in both cases only when it settles before the rest."""
+    acceleration passes through zero between them) or, with ``resume``, when its speed on the walk from it exceeds
+    ``cruise`` (a last submovement after a pause, not a rest's drift); in every case only when it settles before
+    the rest. Returns the offset and the first walk's end (local indices; ``max_shift_s`` bounds the walk)."""
     moving = a_norm > level
     if vlevel > 0:  # a tail at speed that still decelerates; a rest's slow drift barely accelerates
         moving |= (v_norm > vlevel) & (a_norm > 0.5 * level)
     if cruise > 0:
         moving |= v_norm > cruise
     moving = sustained(moving, min_run)
-    j = _walk(moving, b_local, quiet)
+    j = walked = _walk(moving, b_local, quiet)
     strong = sustained(a_norm >= cont_level, min_run)
     active = sustained(a_norm > bridge * level, min_run) if bridge > 0 and vlevel > 0 else None
     while cont > 0:
@@ -265,15 +278,21 @@ def _extend_offset(
         nxt = j + int(big[0]) if len(big) else None
         if active is not None:
             run = np.flatnonzero(active[j : j + cont])
-            if len(run) and np.all(v_norm[j : j + int(run[0])] > vlevel):
-                nxt = j + int(run[0]) if nxt is None else min(nxt, j + int(run[0]))
+            r0 = j + int(run[0]) if len(run) else None
+            # the hand never stopped, or it resumed faster than the cruise speed (after a pause: a last
+            # submovement, not a rest's drift, which stays under it)
+            if r0 is not None and (
+                np.all(v_norm[j:r0] > vlevel)
+                or (resume and cruise > 0 and v_norm[r0 : _walk(moving, r0, quiet)].max(initial=0.0) > cruise)
+            ):
+                nxt = r0 if nxt is None else min(nxt, r0)
         if nxt is None:
             break
         k = _walk(moving, nxt, quiet)
         if k >= len(moving) or k <= j:  # never settles before the rest: not a correction of this phase
             break
         j = k
-    return j
+    return j, walked
 
 
 def _extrapolated(
@@ -322,7 +341,7 @@ def _offset(acc, gyr, dt, post, lo: int, b0: int, stop: int, params: HandParams,
     if post is None or post[0] <= b0:
         return b0
     end = b0
-    j = _extend_offset(
+    j, walked = _extend_offset(
         an,
         vn,
         0,
@@ -334,8 +353,12 @@ def _offset(acc, gyr, dt, post, lo: int, b0: int, stop: int, params: HandParams,
         min_run,
         params.cruise_velocity_mps,
         params.bridge_n_level,
+        params.resume_cruise,
     )
-    if 0 < j <= int(round(params.max_shift_s * rate_hz)):
+    # the walk from the gyroscope's offset is trusted up to max_shift_s; motion after it that settles before the
+    # rest window (a correction after a pause) is the phase's, however far the walk went
+    shift = int(round(params.max_shift_s * rate_hz))
+    if 0 < j <= shift or (params.settled_beyond_shift and walked <= shift < j):
         end = b0 + j
     m = len(a_all)  # the offset's flank, time reversed: from the rest into the phase
     end = lo + m - _extrapolated(a_all[::-1], v_all[::-1], m - (end - lo), m - (b0 - lo), level, params, rate_hz)
@@ -426,7 +449,7 @@ def refine_with_accelerometer(
                 break
             pre = earlier
         if pre is not None and pre[1] < a0:
-            i = _extend_offset(
+            i, _ = _extend_offset(
                 an,
                 vn,
                 0,
