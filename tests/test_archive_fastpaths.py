@@ -19,7 +19,9 @@ from imulog.archive._builder import McapBuilder
 from imulog.archive._generated.foxglove import FrameTransform_pb2, PackedElementField_pb2, PointCloud_pb2
 from imulog.archive.errors import ArchiveCorruptError
 from imulog.archive.timeline import IDENTITY
-from imulog.archive.twins import _frame_samples, _stamp, axes_twin, decimation, frame_twin, marker_twin
+from imulog.archive.twin_frames import _frame_samples
+from imulog.archive.twin_record import set_stamp
+from imulog.archive.twins import axes_twin, decimation, frame_twin, marker_twin
 from imulog.archive.writer import payload_hash, rows_hash
 from imulog.model import ImuStream, MarkerStream, Recording, SignalStream
 
@@ -54,7 +56,7 @@ def test_frame_twin_rows_equal_protobuf():
     for k, stamp in enumerate(IDENTITY(t[keep]).tolist()):
         if not (np.isfinite(qq[k]).all() and np.isfinite(pp[k]).all()):
             continue
-        _stamp(msg, stamp)
+        set_stamp(msg, stamp)
         msg.translation.x, msg.translation.y, msg.translation.z = pp[k].tolist()
         msg.rotation.w, msg.rotation.x, msg.rotation.y, msg.rotation.z = qq[k].tolist()
         want.append(msg.SerializeToString())
@@ -83,7 +85,7 @@ def test_marker_and_axes_twin_rows_equal_protobuf():
     want = []
     keep = decimation(t)
     for i, stamp in zip(keep.tolist(), IDENTITY(t[keep]).tolist(), strict=True):
-        _stamp(msg, stamp)
+        set_stamp(msg, stamp)
         msg.data = np.ascontiguousarray(pos[i][ok[i]], dtype="<f4").tobytes()
         want.append(msg.SerializeToString())
     assert twin.payload_list() == want

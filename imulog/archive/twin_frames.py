@@ -9,7 +9,7 @@ import numpy as np
 
 from imulog.archive.timeline import LogMap
 from imulog.archive.twin_rate import decimation
-from imulog.archive.twin_record import TWIN_PREFIX, Twin, _meta, _protobuf_twin, _timestamp, twin_topic
+from imulog.archive.twin_record import TWIN_PREFIX, Twin, protobuf_twin, timestamp_message, twin_meta, twin_topic
 from imulog.model import MarkerStream, PoseStream, SignalStream
 from imulog.numeric import finite_rows
 
@@ -26,8 +26,8 @@ def marker_twin(stream: MarkerStream, log_map: LogMap, keep: np.ndarray | None =
 
     # positions as sampled: their content above the twin's Nyquist is < -46 dB
     keep = decimation(stream.t_ns) if keep is None else keep
-    twin = _protobuf_twin(
-        twin_topic(stream.topic), "foxglove.PointCloud", _meta(stream, stream.topic, "reference", keep, stream.t_ns)
+    twin = protobuf_twin(
+        twin_topic(stream.topic), "foxglove.PointCloud", twin_meta(stream, stream.topic, "reference", keep, stream.t_ns)
     )
     twin.metadata["units"] = "m"
     fld = PackedElementField_pb2.PackedElementField
@@ -42,7 +42,7 @@ def marker_twin(stream: MarkerStream, log_map: LogMap, keep: np.ndarray | None =
     ok = np.asarray(stream.valid, dtype=bool)[keep] & finite_rows(stream.pos[keep])  # (K, M)
     n, m_ = ok.shape
     pos = np.ascontiguousarray(stream.pos[keep], dtype="<f4").view(np.uint8).reshape(n, m_ * 12)
-    rows = Rows(n).message(1, _timestamp(stamps)).raw(msg.SerializeToString())  # fields 2-5: the same each time
+    rows = Rows(n).message(1, timestamp_message(stamps)).raw(msg.SerializeToString())  # fields 2-5: the same each time
     rows.data(6, pos, np.repeat(ok, 12, axis=1))  # the valid markers' x, y, z
     twin.set_rows(stamps.astype(np.uint64), *rows.build())
     return twin
@@ -68,8 +68,8 @@ def frame_twin(
     from imulog.archive._generated.foxglove import FrameTransform_pb2
 
     keep, q, p = _frame_samples(stream, rotation, origin, keep)
-    twin = _protobuf_twin(
-        twin_topic(stream.topic), "foxglove.FrameTransform", _meta(stream, stream.topic, clock, keep, stream.t_ns)
+    twin = protobuf_twin(
+        twin_topic(stream.topic), "foxglove.FrameTransform", twin_meta(stream, stream.topic, clock, keep, stream.t_ns)
     )
     twin.metadata.update(parent_frame_id=parent, child_frame_id=child)
     from imulog.archive.wire import Rows
@@ -81,7 +81,7 @@ def frame_twin(
     names = FrameTransform_pb2.FrameTransform(parent_frame_id=parent, child_frame_id=child).SerializeToString()
     translation = Rows(n).double(1, p[:, 0]).double(2, p[:, 1]).double(3, p[:, 2])
     rotation = Rows(n).double(1, q[:, 1]).double(2, q[:, 2]).double(3, q[:, 3]).double(4, q[:, 0])  # x, y, z, w
-    rows = Rows(n).message(1, _timestamp(stamps)).raw(names).message(4, translation).message(5, rotation)
+    rows = Rows(n).message(1, timestamp_message(stamps)).raw(names).message(4, translation).message(5, rotation)
     twin.set_rows(stamps.astype(np.uint64), *rows.build())
     return twin
 
@@ -128,8 +128,8 @@ def axes_twin(
 
     keep = decimation(stream.t_ns, rate_hz) if keep is None else keep
     name = stream.topic.rsplit("/", 1)[-1]
-    twin = _protobuf_twin(
-        f"{TWIN_PREFIX}/axes/{name}", "foxglove.PointCloud", _meta(stream, stream.topic, clock, keep, stream.t_ns)
+    twin = protobuf_twin(
+        f"{TWIN_PREFIX}/axes/{name}", "foxglove.PointCloud", twin_meta(stream, stream.topic, clock, keep, stream.t_ns)
     )
     twin.metadata.update(units="m", axis_length_m=str(AXIS_LENGTH_M), frame_id=name)
     fld = PackedElementField_pb2.PackedElementField
@@ -146,6 +146,7 @@ def axes_twin(
     from imulog.archive.wire import Rows
 
     stamps = np.asarray(log_map(stream.t_ns[keep]), dtype=np.int64)
-    rows = Rows(len(stamps)).message(1, _timestamp(stamps)).raw(msg.SerializeToString())  # the rest never changes
+    # the rest of the message never changes
+    rows = Rows(len(stamps)).message(1, timestamp_message(stamps)).raw(msg.SerializeToString())
     twin.set_rows(stamps.astype(np.uint64), *rows.build())
     return twin

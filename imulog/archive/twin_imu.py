@@ -9,7 +9,7 @@ import numpy as np
 
 from imulog.archive.timeline import LogMap
 from imulog.archive.twin_rate import decimated
-from imulog.archive.twin_record import Twin, _meta, twin_topic
+from imulog.archive.twin_record import Twin, twin_meta, twin_topic
 from imulog.model import ImuStream
 
 ROS_IMU_SCHEMA = """std_msgs/Header header
@@ -87,7 +87,7 @@ def imu_twin(stream: ImuStream, log_map: LogMap) -> Twin | None:
     nan = np.full((len(keep), 3), np.nan)
     gyr = low.gyr if low.gyr is not None else nan
     acc = low.acc if low.acc is not None else nan
-    meta = _meta(stream, stream.topic, stream.name, keep, stream.t_ns)
+    meta = twin_meta(stream, stream.topic, stream.name, keep, stream.t_ns)
     meta.update(units=f"angular_velocity rad/s, linear_acceleration m/s^2 ({stream.frame_id} frame)")
     twin = Twin(twin_topic(stream.topic), "sensor_msgs/msg/Imu", "ros2msg", ROS_IMU_SCHEMA.encode(), "cdr", meta)
     twin.set_rows(stamps.astype(np.uint64), ros_imu_rows(stamps, stream.frame_id, gyr, acc))

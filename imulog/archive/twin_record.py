@@ -60,11 +60,11 @@ def is_twin(topic: str, channel_meta: Mapping[str, str] | None = None) -> bool:
     return bool((channel_meta or {}).get("twin_of")) or topic.startswith(TWIN_PREFIX + "/")
 
 
-def _stamp(msg: Any, t: int) -> None:
+def set_stamp(msg: Any, t: int) -> None:
     msg.timestamp.seconds, msg.timestamp.nanos = divmod(int(t), 1_000_000_000)
 
 
-def _meta(stream: Stream, canonical: str, clock: str, keep: np.ndarray, t: np.ndarray) -> dict[str, str]:
+def twin_meta(stream: Stream, canonical: str, clock: str, keep: np.ndarray, t: np.ndarray) -> dict[str, str]:
     out = {"twin_of": canonical, "clock": clock, "kind": "viewer", "sample_count": str(len(keep))}
     if len(keep):
         out.update(start_ns=str(int(t[keep[0]])), end_ns=str(int(t[keep[-1]])))
@@ -73,13 +73,13 @@ def _meta(stream: Stream, canonical: str, clock: str, keep: np.ndarray, t: np.nd
     return out
 
 
-def _protobuf_twin(topic: str, schema_name: str, meta: dict[str, str]) -> Twin:
+def protobuf_twin(topic: str, schema_name: str, meta: dict[str, str]) -> Twin:
     from imulog.archive import codec
 
     return Twin(topic, schema_name, "protobuf", codec.file_descriptor_set(schema_name), "protobuf", meta)
 
 
-def _timestamp(stamps: np.ndarray) -> Any:
+def timestamp_message(stamps: np.ndarray) -> Any:
     """``google.protobuf.Timestamp`` sub-messages of int64 ns stamps, as :class:`imulog.archive.wire.Rows`."""
     from imulog.archive.wire import Rows
 

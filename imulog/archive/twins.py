@@ -42,7 +42,6 @@ from imulog.archive.twin_frames import (
     AXIS_LENGTH_M,
     AXIS_POINTS,
     Origin,
-    _frame_samples,
     axes_twin,
     frame_twin,
     marker_twin,
@@ -67,11 +66,9 @@ from imulog.archive.twin_record import (
     ORIENTATION_COLUMNS,
     TWIN_PREFIX,
     Twin,
-    _meta,
-    _protobuf_twin,
-    _stamp,
-    _timestamp,
     is_twin,
+    protobuf_twin,
+    set_stamp,
     twin_topic,
 )
 from imulog.model import ImuStream, Intervals, MarkerStream, PoseStream, SignalStream, Stream
@@ -84,26 +81,21 @@ __all__ = [
     "decimated",
     "decimation",
     "decimation_step",
-    "_frame_samples",
     "frame_twin",
     "imu_twin",
     "is_twin",
     "log_twin",
     "marker_twin",
     "MAX_TWIN_MESSAGES",
-    "_meta",
     "ORIENTATION_COLUMNS",
     "orientation_twins",
     "Origin",
     "OVERVIEW_AFTER_S",
     "OVERVIEW_EPOCH_S",
     "overview_step",
-    "_protobuf_twin",
     "ros_imu_payloads",
     "ros_imu_rows",
     "ROS_IMU_SCHEMA",
-    "_stamp",
-    "_timestamp",
     "TRAJECTORY_RATE_HZ",
     "trajectory_twin",
     "Twin",
@@ -131,7 +123,7 @@ def trajectory_twin(
     spans = [(int(r["start_ns"]), int(r["end_ns"])) for r in repetitions or [] if "start_ns" in r and "end_ns" in r]
     if not spans and len(t):
         spans = [(int(t[0]), int(t[-1]))]
-    twin = _protobuf_twin(
+    twin = protobuf_twin(
         twin_topic(stream.topic), "foxglove.PosesInFrame", {"twin_of": stream.topic, "clock": clock, "kind": "viewer"}
     )
     twin.metadata.update(sample_count=str(len(spans)), units="m", frame_id=stream.frame_id or "world")
@@ -150,7 +142,7 @@ def trajectory_twin(
             pose.position.x, pose.position.y, pose.position.z = x, y, z
             pose.orientation.w = 1.0
         stamp = log_map.one(int(t[rows[0]]))
-        _stamp(msg, stamp)
+        set_stamp(msg, stamp)
         twin.log_times.append(stamp)
         twin.payloads.append(msg.SerializeToString())
     return twin
@@ -160,7 +152,7 @@ def log_twin(stream: Intervals, log_map: LogMap, clock: str) -> Twin:
     """One ``foxglove.Log`` per interval, at its start: ``reach #3 (1.24 s)``."""
     from imulog.archive._generated.foxglove import Log_pb2
 
-    twin = _protobuf_twin(
+    twin = protobuf_twin(
         twin_topic(stream.topic), "foxglove.Log", {"twin_of": stream.topic, "clock": clock, "kind": "viewer"}
     )
     twin.metadata["sample_count"] = str(len(stream))
@@ -178,7 +170,7 @@ def log_twin(stream: Intervals, log_map: LogMap, clock: str) -> Twin:
     ):
         rep = f" #{k}" if k >= 0 else ""
         msg = Log_pb2.Log(level=Log_pb2.Log.INFO, message=f"{label}{rep} ({(e - s) / 1e9:.2f} s)", name=name)
-        _stamp(msg, stamp)
+        set_stamp(msg, stamp)
         twin.log_times.append(int(stamp))
         twin.payloads.append(msg.SerializeToString())
     return twin
