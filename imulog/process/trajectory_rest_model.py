@@ -27,7 +27,7 @@ from imulog.process.integration import shrinkage_weight
 from imulog.process.minjerk import R2GWaypoints
 from imulog.process.trajectory_optimize import OptimizationParams
 from imulog.process.trajectory_repetitions import Repetition
-from imulog.process.trajectory_rests import rest_positions
+from imulog.process.trajectory_rests import rest_positions, window_links
 
 # the grid (m) the two standard deviations are searched on, log-spaced: 1 mm to 10 cm
 _GRID_M = np.geomspace(0.001, 0.10, 41)
@@ -211,11 +211,11 @@ def repetition_rests(
         [np.diff(np.vstack([np.zeros(3), rest_positions(t_s, initial_m, static_mask, r)]), axis=0) for _, r in reps]
     )  # (K, 4, 3) displacement per movement
     # unknown numbering: a repetition's start is the previous one's end when their windows meet
+    links = window_links(repetitions)
     cols = np.zeros((len(reps), 5), dtype=int)
     n = 0
-    for k, (i, r) in enumerate(reps):
-        prev = reps[k - 1][1] if k else None
-        if prev is not None and reps[k - 1][0] == i - 1 and r.start <= prev.stop:
+    for k, (i, _) in enumerate(reps):
+        if k and reps[k - 1][0] == i - 1 and links[i]:
             cols[k, 0] = cols[k - 1, 4]
         else:
             cols[k, 0], n = n, n + 1

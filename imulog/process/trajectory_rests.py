@@ -4,7 +4,8 @@ Where the hand is still, its position is known better than anywhere else: from t
 the mouth) and from the protocol (the hand comes back home). :func:`rest_positions` measures an estimate there;
 :func:`rest_blend_weight` judges the rotating-bias compensation of the optimisation's start by them (an option);
 :func:`repetition_offsets` estimates where each repetition starts and ends relative to the trial's home, from the
-start's own return displacements (the chain of rests). Times in s, positions in m.
+start's own return displacements (the chain of rests; :func:`window_links` says which window starts where the
+previous one ends, for this chain and for :mod:`imulog.process.trajectory_rest_model`'s). Times in s, positions in m.
 """
 
 from __future__ import annotations
@@ -104,6 +105,13 @@ def _shrunk_weight(residuals: list[list[float]], compensations: list[list[float]
     return float(np.clip(1.0 + shrink * (w - 1.0), 0.0, 1.0))
 
 
+def window_links(repetitions: Sequence[Repetition]) -> np.ndarray:
+    """Per window (in list order), whether it starts where the previous one ends: its first rest is the previous
+    window's last, so both share that rest's place (bool (K,); the first window never)."""
+    reps = list(repetitions)
+    return np.array([i > 0 and reps[i].start <= reps[i - 1].stop for i in range(len(reps))], dtype=bool)
+
+
 def repetition_offsets(
     t_s: np.ndarray,
     initial_m: np.ndarray,
@@ -128,7 +136,8 @@ def repetition_offsets(
     if n == 0:
         return out
     # unknowns: each window's start, plus one end per window whose successor does not start where it stops
-    follows = [i + 1 < n and reps[i + 1].start <= reps[i].stop for i in range(n)]
+    links = window_links(reps)
+    follows = [i + 1 < n and bool(links[i + 1]) for i in range(n)]
     end_index = {}
     m = n
     for i in range(n):
