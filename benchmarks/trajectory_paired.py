@@ -75,6 +75,8 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
     "rest-blend": (D, replace(D, optimized=replace(D.optimized, start_blend=(True, True, False)))),
     "rest-blend-xyz": (D, replace(D, optimized=replace(D.optimized, start_blend=(True, True, True)))),
     "rest-chain": (D, replace(D, optimized=replace(D.optimized, rest_chain=True))),
+    "rest-ramp-xy": (D, replace(D, optimized=replace(D.optimized, rest_ramp=(True, True, False)))),
+    "rest-ramp-xyz": (D, replace(D, optimized=replace(D.optimized, rest_ramp=(True, True, True)))),
     "robust-bias-iterated": (
         D,
         replace(D, rotating_bias=replace(D.rotating_bias, outlier_factor=3.0, outlier_refits=20)),

@@ -14,6 +14,7 @@ uniform). Outputs: velocity in m/s and position in m, starting at zero.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -130,6 +131,35 @@ def zupt(
     """ZUPT dead reckoning. Returns ``(velocity m/s, position m)``; position starts at zero."""
     vel = zupt_velocity(acc_mps2, t_s, static_mask, params)
     return vel, cumtrapz(vel, t_s)
+
+
+def rest_ramp(
+    acc_mps2: np.ndarray, t_s: np.ndarray, static_mask: np.ndarray, rest_s: float, axes: Sequence[bool]
+) -> np.ndarray:
+    """The acceleration (N, 3) m/s^2 with, on the ``axes`` given, each movement's offset taken off as a line in time
+    from the mean over the last ``rest_s`` s of the rest before it to the mean over the first ``rest_s`` s of the
+    rest after it (issue 31 point 2, eighth round). Linear de-drift (:func:`zupt_velocity`) assumes one constant
+    offset per movement; when the orientation's tilt error differs between the two rests (the anchoring spreads
+    that difference over the movement), gravity leaks as an offset that moves from one rest's value to the other's,
+    and a ramp ``d`` left over a movement of ``T`` s puts the displacement off by ``d T^2 / 12``. Movements
+    without a rest on both sides are left as they are."""
+    a = np.array(acc_mps2, dtype=np.float64, copy=True)
+    t = _check_time(t_s, len(a))
+    static = np.asarray(static_mask, dtype=bool)
+    use = np.flatnonzero(np.asarray(axes, dtype=bool))
+    if not len(use):
+        return a
+    for s, e in movement_runs(static):
+        lo = int(np.searchsorted(t, t[s - 1] - rest_s, side="left"))
+        hi = int(np.searchsorted(t, t[e] + rest_s, side="right"))
+        before = a[lo:s][static[lo:s]][:, use]
+        after = a[e:hi][static[e:hi]][:, use]
+        if not (len(before) and len(after)) or not (np.all(np.isfinite(before)) and np.all(np.isfinite(after))):
+            continue
+        c0, c1 = before.mean(axis=0), after.mean(axis=0)
+        frac = (t[s - 1 : e + 1] - t[s - 1]) / (t[e] - t[s - 1])
+        a[s - 1 : e + 1, use] -= c0 + frac[:, None] * (c1 - c0)
+    return a
 
 
 # --------------------------------------------------------------------------------------------------

@@ -22,7 +22,7 @@ import numpy as np
 
 from imulog.process.drift import highpass, wavelet_detrend
 from imulog.process.input_checks import InputCheck, SideCheck
-from imulog.process.integration import compensate_rotating_bias, estimate_rotating_bias, zupt
+from imulog.process.integration import compensate_rotating_bias, estimate_rotating_bias, rest_ramp, zupt
 from imulog.process.minjerk import R2GReferenceParams, R2GWaypoints
 from imulog.process.trajectory_checks import (
     FILTER_METHODS,
@@ -146,6 +146,8 @@ def reconstruct_repetitions(
             _closure_left(t[r.start : r.stop], base[r.start : r.stop], static[r.start : r.stop]) for r in repetitions
         ]
     if "optimized" in methods:
+        if any(params.optimized.rest_ramp):  # the start's drift as a ramp between the flanking rests
+            base = rest_ramp(base, t, static, params.rotating_bias.rest_s, params.optimized.rest_ramp)
         z = _initial(t, base, static, repetitions, params)
         if waypoints is None:
             input_checks: list[InputCheck | SideCheck] = []

@@ -81,6 +81,10 @@ class OptimizationParams:
         estimate's posterior standard deviation (at least 3 mm) and no static-position term for the start (the
         estimate already holds it); ``"posterior-data"``: the posterior trust, the start's term kept; ``"replace"``:
         the waypoints, no static-position term.
+    rest_ramp: per global axis (x, y, z), take each movement's acceleration offset off the optimisation's start as
+        a line from the rest before's mean to the rest after's (:func:`imulog.process.integration.rest_ramp`, over
+        ``RotatingBiasParams.rest_s`` of each rest) before ZUPT's linear de-drift (issue 31 point 2, eighth
+        round); ZUPT and ``zupt_bias`` themselves are unchanged.
     """
 
     sigma_data_mps: float | tuple[float, float, float] = 0.02
@@ -98,6 +102,7 @@ class OptimizationParams:
     start_blend: tuple[bool, bool, bool] = (False, False, False)
     rest_chain: bool = False
     rest_model: str | None = None
+    rest_ramp: tuple[bool, bool, bool] = (False, False, False)
 
 
 @dataclass

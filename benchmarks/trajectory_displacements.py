@@ -1,0 +1,294 @@
+"""Where one movement's rest-to-rest displacement goes wrong (issue 31 point 2, eighth round): oracle substitutions.
+
+The rest model (:func:`imulog.process.trajectory_rest_model.repetition_rests`) reads each repetition's rests from
+the optimisation's start: ZUPT (zero velocity at the rests, linear velocity de-drift over each movement) on the
+rotating-bias-compensated, heading-corrected acceleration, averaged over each rest
+(:func:`imulog.process.trajectory_rests.rest_positions`). Its input is the displacement from one rest to the next
+(home -> bottle -> mouth -> bottle -> home). For every simulated trial (``trajectory_accuracy``'s R2G trials,
+subject k with seed k) this prints the RMS error (cm, x / y / z) of those displacements against the truth over the
+same rest samples, with the pipeline's own inputs (``base``) and with sources of error replaced by the simulator's
+truth, one at a time and all but one:
+
+* ``tilt``: the true orientation's tilt (the estimate's heading kept): gravity leaking through a tilt error;
+* ``heading``: the true orientation's heading (the estimate's tilt kept): a displacement turned about the vertical
+  (``tilt`` and ``heading`` together: the true sensor-to-world orientation, with the true gravity);
+* ``sensor``: the accelerometer corrected by the device's true constant bias and scale/misalignment matrix (its
+  bias random walk and warm-up drift stay);
+* ``rests``: the true zero-velocity mask (the body exactly still) and the true phase boundaries (segmentation's);
+* ``velocity``: the true velocity wherever ZUPT assumes zero (at the rests, and linearly between the two rests'
+  true velocities in the de-drift), instead of zero.
+
+The rotating-bias compensation and the heading drift are re-estimated on each variant's inputs, as the step would.
+Then, per group of conditions, each source's share of the mean-square displacement error in x and y (the axes the
+rest model uses): what replacing it alone removes, and what it adds when it is the only one left. A diagnostic, not
+a method.
+
+    python benchmarks/trajectory_displacements.py --grid all --subjects 6 --first-subject 40 --repetitions 10
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import resource
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from trajectory_accuracy import simulated_inputs  # noqa: E402
+
+from imulog.process import quaternion as quat  # noqa: E402
+from imulog.process import trajectory_opt, trajectory_rest_model  # noqa: E402
+from imulog.process.anchor_heading import heading_offset  # noqa: E402
+from imulog.process.integration import cumtrapz, zupt_velocity  # noqa: E402
+from imulog.process.rest_runs import static_runs  # noqa: E402
+from imulog.process.rests import true_rests  # noqa: E402
+from imulog.process.trajectory_opt import DEFAULT_PARAMS, merge_overlapping, repetition_windows  # noqa: E402
+from imulog.process.trajectory_rests import rest_positions  # noqa: E402
+
+SOURCES = ("tilt", "heading", "sensor", "rests", "velocity")
+GROUPS = {
+    "calibrated": (
+        "default",
+        "rotation-early",
+        "curved",
+        "placements",
+        "pauses",
+        "clock-occlusion",
+        "rate-50hz",
+        "rate-200hz",
+    ),
+    "uncalibrated": ("uncalibrated", "combined"),
+    "stroke-like": ("stroke", "combined-stroke"),
+    "residual-velocity": ("residual-velocity",),
+}
+
+
+class _Captured(Exception):
+    """Raised by the spy once the start is known (the optimisation itself is not needed)."""
+
+
+def trial(name: str, subject: int, repetitions: int, calibrate: str = "") -> tuple[dict, object]:
+    """One simulated trial of grid condition ``name`` as the trajectory step sees it, and its simulation;
+    ``calibrate`` ``"acc"`` or ``"gyr"``: that sensor corrected by the device's true constant bias and scale /
+    misalignment matrix before anything runs (the orientation filter, the anchoring and the segmentation too)."""
+    from imulog.simulate import core
+    from imulog.simulate.grid import condition
+
+    seen: dict = {}
+    original = core.simulate
+
+    def keep(*args, **kwargs):
+        sim = seen["sim"] = original(*args, **kwargs)
+        if calibrate:
+            imu, dev = sim.recording.imus[0], sim.truth.info["device_errors"]
+            raw = getattr(imu, calibrate)
+            bias, matrix = (
+                np.asarray(dev[f"{calibrate}_bias_{'mps2' if calibrate == 'acc' else 'rads'}"]),
+                np.asarray(dev[f"{calibrate}_matrix"]),
+            )
+            setattr(imu, calibrate, (raw - bias) @ np.linalg.inv(matrix).T)
+        return sim
+
+    core.simulate = keep
+    try:
+        d = DEFAULT_PARAMS
+        inputs = simulated_inputs(
+            subject, seed=subject, repetitions=repetitions, rests=d.rests, anchor_params=d.anchor, **condition(name)
+        )
+    finally:
+        core.simulate = original
+    return inputs, seen["sim"]
+
+
+def _with_true_velocity(v_true: np.ndarray, t_all: np.ndarray):
+    """``zupt`` with the true velocity (N, 3) m/s where it assumes zero: at the static samples, and the de-drift's
+    line running between the true velocities of the movement's two rests."""
+
+    def run(acc, t, static, params):
+        i0 = int(np.searchsorted(t_all, t[0]))
+        vt = v_true[i0 : i0 + len(t)]
+        v = zupt_velocity(acc, t, static, params)
+        add = np.where(np.asarray(static, dtype=bool)[:, None], vt, 0.0)
+        n = len(t)
+        for s, e in static_runs(~np.asarray(static, dtype=bool)):
+            a, b = max(s - 1, 0), min(e, n - 1)
+            if e < n and b > a:  # de-drifted: from the true velocity at one rest to the true one at the next
+                frac = (t[s:e] - t[a]) / (t[b] - t[a])
+                add[s:e] = vt[a] + frac[:, None] * (vt[b] - vt[a])
+            else:
+                add[s:e] = vt[a]
+        v = v + add
+        return v, cumtrapz(v, t)
+
+    return run
+
+
+def variant(inputs: dict, sim, subs: set[str]) -> dict:
+    """The trajectory inputs with the sources in ``subs`` replaced by the truth."""
+    truth = sim.truth
+    imu = sim.recording.imus[0]
+    t = inputs["t_s"]
+    acc_s = np.asarray(imu.acc, dtype=np.float64)
+    rate = (len(t) - 1) / (t[-1] - t[0])
+    static = true_rests(inputs["static"], inputs["acc_gate"], rate, DEFAULT_PARAMS.rests, orientation=inputs["q_gate"])
+    if "sensor" in subs:
+        dev = truth.info["device_errors"]
+        fixed = (acc_s - np.asarray(dev["acc_bias_mps2"])) @ np.linalg.inv(np.asarray(dev["acc_matrix"])).T
+    else:
+        fixed = acc_s
+    if "tilt" in subs:
+        q = truth.imu_orientation
+        acc = quat.rotate(q, fixed)
+        acc[:, 2] -= truth.info["gravity_mps2"]
+    else:
+        q = inputs["q_world"]
+        acc = np.array(inputs["acc_world"], copy=True)
+        if "sensor" in subs:  # the same gravity-free acceleration of the corrected specific force
+            acc += quat.rotate(q, fixed - acc_s)
+            dg = np.mean(np.linalg.norm(fixed[static], axis=1)) - np.mean(np.linalg.norm(acc_s[static], axis=1))
+            acc[:, 2] -= dg
+    if ("tilt" in subs) != ("heading" in subs):  # one of the two: turn about the vertical onto the other's heading
+        turn = heading_offset(truth.imu_orientation, inputs["q_world"]) * (1.0 if "heading" in subs else -1.0)
+        rz = np.column_stack([np.cos(turn / 2), np.zeros((len(turn), 2)), np.sin(turn / 2)])
+        q = quat.normalize(quat.multiply(rz, q))
+        acc = quat.rotate(rz, acc)
+    bounds = inputs["phase_bounds"]
+    if "rests" in subs:
+        static = np.asarray(truth.imu_static_mask, dtype=bool)
+        t0 = float(truth.imu_t_ref_ns[0]) / 1e9
+        ph = truth.phases
+        b: dict[int, list] = {}
+        for s, e, k in zip(ph.start_ns, ph.end_ns, ph.task_index, strict=True):
+            b.setdefault(int(k), []).append((s / 1e9 - t0, e / 1e9 - t0))
+        bounds = {k: np.asarray(sorted(v)) for k, v in b.items()}
+    vel = np.asarray(truth.imu_velocity, dtype=np.float64) if "velocity" in subs else None
+    return {"t": t, "acc": acc, "q": q, "static": static, "bounds": bounds, "vel": vel}
+
+
+def start_of(inputs: dict, v: dict, ramp: bool = False) -> tuple[np.ndarray, np.ndarray, list]:
+    """The optimisation's start (N, 3) m as :func:`imulog.process.trajectory_opt.reconstruct_repetitions` builds it
+    for the rest model (compensated, heading-corrected ZUPT; ``ramp``: with ``OptimizationParams.rest_ramp`` in x and
+    y), with the static mask and windows it used."""
+    reps, _ = merge_overlapping(repetition_windows(v["t"], v["bounds"], v["static"]))
+    seen: dict = {}
+
+    def spy(t, z, static, repetitions, *args, **kwargs):
+        seen.update(z=z, static=static, reps=repetitions)
+        raise _Captured
+
+    ramp_axes = (True, True, False) if ramp else (False, False, False)
+    params = replace(
+        DEFAULT_PARAMS,
+        optimized=replace(DEFAULT_PARAMS.optimized, rest_model="trusted-xy-test", rest_ramp=ramp_axes),
+    )
+    model, zupt = trajectory_rest_model.repetition_rests, trajectory_opt.zupt
+    trajectory_rest_model.repetition_rests = spy
+    if v["vel"] is not None:
+        trajectory_opt.zupt = _with_true_velocity(v["vel"], v["t"])
+    try:
+        trajectory_opt.reconstruct_repetitions(
+            v["t"],
+            v["acc"],
+            v["static"],
+            reps,
+            ["optimized"],
+            anthropometrics=inputs["anthropometrics"],
+            orientation=v["q"],
+            params=params,
+        )
+    except _Captured:
+        pass
+    finally:
+        trajectory_rest_model.repetition_rests, trajectory_opt.zupt = model, zupt
+    return seen["z"], seen["static"], seen["reps"]
+
+
+def displacement_errors(inputs: dict, v: dict, ramp: bool = False) -> np.ndarray:
+    """Every complete repetition's four rest-to-rest displacement errors (M, 3) m against the truth over the same
+    rest samples (``ramp``: of the start with ``OptimizationParams.rest_ramp`` in x and y)."""
+    z, static, reps = start_of(inputs, v, ramp)
+    out = []
+    for rep in reps:
+        if len(rep.phase_bounds_s) != 4:
+            continue
+        est = rest_positions(v["t"], z, static, rep)
+        truth = rest_positions(v["t"], inputs["truth_pos"] - inputs["truth_pos"][rep.start], static, rep)
+        d = np.diff(np.vstack([np.zeros(3), est]), axis=0) - np.diff(np.vstack([np.zeros(3), truth]), axis=0)
+        out.extend(d)
+    return np.asarray(out).reshape(-1, 3)
+
+
+VARIANTS = {
+    "base": frozenset(),
+    **{s: frozenset({s}) for s in SOURCES},
+    **{f"all-{s}": frozenset(SOURCES) - {s} for s in SOURCES},
+    "all": frozenset(SOURCES),
+}
+# the whole pipeline re-run on a calibrated sensor (the filter's tilt then absorbs no accelerometer bias)
+RERUN = ("acc-calibrated", "gyr-calibrated")
+# and the start as OptimizationParams.rest_ramp = (True, True, False) builds it, with the pipeline's inputs
+EXTRA = (*RERUN, "rest-ramp")
+
+
+def main(argv: list[str] | None = None) -> int:
+    from imulog.simulate.grid import CONDITIONS
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--grid", nargs="+", default=["default"])
+    ap.add_argument("--subjects", type=int, default=6)
+    ap.add_argument("--first-subject", type=int, default=40)
+    ap.add_argument("--repetitions", type=int, default=10)
+    args = ap.parse_args(argv)
+    names = list(CONDITIONS) if args.grid == ["all"] else args.grid
+    t0, r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
+    errs: dict[str, dict[str, list]] = {n: {k: [] for k in (*VARIANTS, *EXTRA)} for n in names}
+    print("| condition | " + " | ".join((*VARIANTS, *EXTRA)) + " |")
+    print("|---|" + "---|" * (len(VARIANTS) + len(EXTRA)))
+    for name in names:
+        for s in range(args.first_subject, args.first_subject + args.subjects):
+            inputs, sim = trial(name, s, args.repetitions)
+            for k, subs in VARIANTS.items():
+                errs[name][k].append(displacement_errors(inputs, variant(inputs, sim, set(subs))))
+            errs[name]["rest-ramp"].append(displacement_errors(inputs, variant(inputs, sim, set()), ramp=True))
+            for k in RERUN:
+                fixed, sim_k = trial(name, s, args.repetitions, calibrate=k.removesuffix("-calibrated"))
+                errs[name][k].append(displacement_errors(fixed, variant(fixed, sim_k, set())))
+        cells = [
+            " / ".join(f"{100 * x:.2f}" for x in np.sqrt(np.nanmean(np.concatenate(errs[name][k]) ** 2, axis=0)))
+            for k in (*VARIANTS, *EXTRA)
+        ]
+        print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+    print("\nshare of the x/y mean-square displacement error per source: removed when it alone is true / added when")
+    print("it alone is left (all others true); RMS x/y (cm) with the pipeline's inputs and with every source true\n")
+    print("| group | movements | RMS base (cm) | " + " | ".join((*SOURCES, *EXTRA)) + " | RMS all true (cm) |")
+    print("|---|---:|---:|" + "---|" * (len(SOURCES) + len(EXTRA)) + "---:|")
+    for group, members in GROUPS.items():
+        members = [m for m in members if m in names]
+        if not members:
+            continue
+
+        def mse(k: str, members=members) -> float:
+            e = np.concatenate(list(itertools.chain.from_iterable(errs[m][k] for m in members)))
+            return float(np.nanmean(e[:, :2] ** 2))
+
+        base, every = mse("base"), mse("all")
+        n = sum(len(e) for m in members for e in errs[m]["base"])
+        shares = [f"{(base - mse(s)) / base:+.0%} / {(mse(f'all-{s}') - every) / base:+.0%}" for s in SOURCES]
+        shares += [f"{(base - mse(k)) / base:+.0%}" for k in EXTRA]
+        print(
+            f"| {group} | {n} | {100 * np.sqrt(base):.2f} | " + " | ".join(shares) + f" | {100 * np.sqrt(every):.2f} |"
+        )
+    r1 = resource.getrusage(resource.RUSAGE_SELF)
+    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+    print(f"\n{time.perf_counter() - t0:.0f} s wall, {cpu:.0f} s CPU (user+sys)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
