@@ -19,6 +19,11 @@ truth, one at a time and all but one:
   true velocities in the de-drift), instead of zero.
 
 The rotating-bias compensation and the heading drift are re-estimated on each variant's inputs, as the step would.
+Three more columns, with the pipeline's inputs otherwise: ``acc-calibrated`` / ``gyr-calibrated`` (everything re-run
+on a sensor corrected by its true constant bias and scale / misalignment matrix, the orientation filter included),
+``rest-ramp`` (the start with ``OptimizationParams.rest_ramp`` in x and y: each movement's offset a line between
+its two rests' mean accelerations) and ``spread-none`` (the anchoring's ``AnchorParams.spread = "none"``: the
+gyroscope's tilt through each movement, the next rest's tilt taken up only at that rest).
 Then, per group of conditions, each source's share of the mean-square displacement error in x and y (the axes the
 rest model uses): what replacing it alone removes, and what it adds when it is the only one left. A diagnostic, not
 a method.
@@ -73,10 +78,11 @@ class _Captured(Exception):
     """Raised by the spy once the start is known (the optimisation itself is not needed)."""
 
 
-def trial(name: str, subject: int, repetitions: int, calibrate: str = "") -> tuple[dict, object]:
+def trial(name: str, subject: int, repetitions: int, calibrate: str = "", anchor=None) -> tuple[dict, object]:
     """One simulated trial of grid condition ``name`` as the trajectory step sees it, and its simulation;
     ``calibrate`` ``"acc"`` or ``"gyr"``: that sensor corrected by the device's true constant bias and scale /
-    misalignment matrix before anything runs (the orientation filter, the anchoring and the segmentation too)."""
+    misalignment matrix before anything runs (the orientation filter, the anchoring and the segmentation too);
+    ``anchor``: the anchoring's :class:`imulog.process.integration.AnchorParams` (None: the default's)."""
     from imulog.simulate import core
     from imulog.simulate.grid import condition
 
@@ -99,7 +105,12 @@ def trial(name: str, subject: int, repetitions: int, calibrate: str = "") -> tup
     try:
         d = DEFAULT_PARAMS
         inputs = simulated_inputs(
-            subject, seed=subject, repetitions=repetitions, rests=d.rests, anchor_params=d.anchor, **condition(name)
+            subject,
+            seed=subject,
+            repetitions=repetitions,
+            rests=d.rests,
+            anchor_params=anchor or d.anchor,
+            **condition(name),
         )
     finally:
         core.simulate = original
@@ -233,7 +244,8 @@ VARIANTS = {
 # the whole pipeline re-run on a calibrated sensor (the filter's tilt then absorbs no accelerometer bias)
 RERUN = ("acc-calibrated", "gyr-calibrated")
 # and the start as OptimizationParams.rest_ramp = (True, True, False) builds it, with the pipeline's inputs
-EXTRA = (*RERUN, "rest-ramp")
+# and with the anchoring's spread "none" (the gyroscope's tilt through each movement, no spread to the next rest)
+EXTRA = (*RERUN, "rest-ramp", "spread-none")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -259,6 +271,8 @@ def main(argv: list[str] | None = None) -> int:
             for k in RERUN:
                 fixed, sim_k = trial(name, s, args.repetitions, calibrate=k.removesuffix("-calibrated"))
                 errs[name][k].append(displacement_errors(fixed, variant(fixed, sim_k, set())))
+            carried, sim_c = trial(name, s, args.repetitions, anchor=replace(DEFAULT_PARAMS.anchor, spread="none"))
+            errs[name]["spread-none"].append(displacement_errors(carried, variant(carried, sim_c, set())))
         cells = [
             " / ".join(f"{100 * x:.2f}" for x in np.sqrt(np.nanmean(np.concatenate(errs[name][k]) ** 2, axis=0)))
             for k in (*VARIANTS, *EXTRA)

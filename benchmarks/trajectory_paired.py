@@ -77,6 +77,10 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
     "rest-chain": (D, replace(D, optimized=replace(D.optimized, rest_chain=True))),
     "rest-ramp-xy": (D, replace(D, optimized=replace(D.optimized, rest_ramp=(True, True, False)))),
     "rest-ramp-xyz": (D, replace(D, optimized=replace(D.optimized, rest_ramp=(True, True, True)))),
+    "rest-ramp-xy-rest-model": (
+        D,
+        replace(D, optimized=replace(D.optimized, rest_ramp=(True, True, False), rest_model="trusted-xy-test")),
+    ),
     "robust-bias-iterated": (
         D,
         replace(D, rotating_bias=replace(D.rotating_bias, outlier_factor=3.0, outlier_refits=20)),
@@ -133,6 +137,7 @@ REST_RULES = (
     "trusted-xy-test",
     "trusted-xy-test-gated",
     "trusted-posterior-xy",
+    "trusted-xy-test-ramp",
 )
 CHANGES.update(
     {f"rest-model-{name}": (D, replace(D, optimized=replace(D.optimized, rest_model=name))) for name in REST_RULES}

@@ -134,7 +134,9 @@ def heading_through_rests(
             bias = rest_bias(gyr, t, static, a, params.bias_window_s)
             free = through_movement(cur, w, t[a - 1 : b + 1], bias, None, params.spread)
             nxt = _levelled(tilt, free[-1])
-            out[a - 1 : b + 1] = spread_to(free, w, t[a - 1 : b + 1], bias, nxt, params.spread)
+            out[a - 1 : b + 1] = (
+                free if params.spread == "none" else spread_to(free, w, t[a - 1 : b + 1], bias, nxt, params.spread)
+            )
         chain_of[a:b] = chain
         out[b:e2] = cur = nxt
         chain_of[b:e2] = chain

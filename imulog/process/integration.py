@@ -371,7 +371,10 @@ class AnchorParams:
     max_movement_s: longer movements (continuous motion: no rest to anchor to) keep the filter's orientation.
     spread: how the end discrepancy is spread over the movement: ``"time"`` (linear in time, right for a
         gyroscope bias), ``"angle"`` (in proportion to the angle turned so far, right for a scale error) or
-        ``"mixed"`` (their mean: neither error is known to dominate).
+        ``"mixed"`` (their mean: neither error is known to dominate); ``"none"``: the gyroscope's orientation through
+        the whole movement, the next rest's tilt taken up at that rest (a diagnostic of the eighth round of issue 31
+        point 2: the tilt the filter gives each rest differs from rest to rest, and spreading that difference makes
+        gravity leak as a ramp the linear de-drift cannot remove).
     heading: ``"filter"``: every rest keeps the filter's orientation (its heading too); ``"gyroscope"``: a rest
         keeps the filter's tilt (averaged over the rest, constant through it) but the heading the gyroscope
         carried through the movement before it (issue 31): a 6D filter's heading drifts with the residual
@@ -432,5 +435,6 @@ def rest_anchored_orientation(
         if not np.all(np.isfinite(w)):
             continue
         bias = rest_bias(gyr, t, static, a, params.bias_window_s)
-        out[a - 1 : b + 1] = through_movement(q[a - 1], w, t[a - 1 : b + 1], bias, q[b], params.spread)
+        end = None if params.spread == "none" else q[b]
+        out[a - 1 : b + 1] = through_movement(q[a - 1], w, t[a - 1 : b + 1], bias, end, params.spread)
     return out

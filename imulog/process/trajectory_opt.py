@@ -64,7 +64,7 @@ from imulog.process.trajectory_repetitions import (
     trial_waypoints,
     velocity_sigma,
 )
-from imulog.process.trajectory_rest_model import repetition_references
+from imulog.process.trajectory_rest_model import RestRule, repetition_references
 from imulog.process.trajectory_rests import repetition_offsets, rest_blend_weight, shifted_waypoints
 
 __all__ = [
@@ -193,8 +193,14 @@ def reconstruct_repetitions(
         if params.optimized.rest_chain:
             rep_waypoints = _chained_waypoints(t, z, static, repetitions, waypoints, params, info)
         if params.optimized.rest_model:
+            rule = RestRule.parse(str(params.optimized.rest_model))
+            z_rests = z
+            if rule.ramp:  # the rests from displacements with each movement's offset ramped between its rests
+                z_rests = _initial(
+                    t, rest_ramp(base, t, static, params.rotating_bias.rest_s, rule.axes), static, repetitions, params
+                )
             rep_waypoints, own = repetition_references(
-                t, z, static, repetitions, rep_waypoints, waypoints, params.optimized, info
+                t, z_rests, static, repetitions, rep_waypoints, waypoints, params.optimized, info
             )
             rep_params = [None if o is None else replace(params, optimized=o) for o in own]
     if baseline:

@@ -58,7 +58,7 @@ class RestEstimate:
 @dataclass(frozen=True)
 class RestRule:
     """How ``OptimizationParams.rest_model`` uses the estimate, parsed from its name
-    ``TRUST[-xy][-test][-nobias][-gated]``.
+    ``TRUST[-xy][-test][-nobias][-gated][-ramp]``.
 
     trust: the reference's static trust per repetition and what the start keeps: ``waypoints`` (only the waypoints;
         ``sigma_ref_static_m`` as configured), ``replace`` (the waypoints, no static-position term for the start),
@@ -75,6 +75,9 @@ class RestRule:
     gated: ``-gated``: on an axis only where the estimate's posterior standard deviation (RMS over the trial's
         rests) is below the start's own static trust there (the estimate then knows the rests better than the start
         alone does).
+    ramp: ``-ramp``: the displacements from the start with each movement's offset taken off as a ramp between its
+        two rests (:func:`imulog.process.integration.rest_ramp`, on the rule's axes; the eighth round), the start
+        itself unchanged.
     """
 
     trust: str
@@ -82,6 +85,7 @@ class RestRule:
     bias: bool = True
     alpha: float | None = None
     gated: bool = False
+    ramp: bool = False
 
     TRUSTS = ("waypoints", "replace", "posterior", "posterior-data", "capped", "capped-tau", "trusted")
 
@@ -90,6 +94,7 @@ class RestRule:
         """The rule named ``name`` (ValueError for an unknown one)."""
         rest, kw = name, {}
         for suffix, key, value in (
+            ("-ramp", "ramp", True),
             ("-gated", "gated", True),
             ("-nobias", "bias", False),
             ("-test", "alpha", 0.001),
@@ -99,7 +104,7 @@ class RestRule:
                 rest, kw[key] = rest.removesuffix(suffix), value
         if rest not in (*cls.TRUSTS, "trusted-posterior"):
             raise ValueError(
-                f"unknown rest_model {name!r}: TRUST[-xy][-test][-nobias][-gated], TRUST one of {cls.TRUSTS}"
+                f"unknown rest_model {name!r}: TRUST[-xy][-test][-nobias][-gated][-ramp], TRUST one of {cls.TRUSTS}"
             )
         return cls(trust=rest, **kw)
 
