@@ -182,10 +182,10 @@ def variant(inputs: dict, sim, subs: set[str]) -> dict:
     return {"t": t, "acc": acc, "q": q, "static": static, "bounds": bounds, "vel": vel}
 
 
-def start_of(inputs: dict, v: dict, ramp: bool = False) -> tuple[np.ndarray, np.ndarray, list]:
+def start_of(inputs: dict, v: dict, ramp: bool = False) -> tuple[np.ndarray, np.ndarray, list] | None:
     """The optimisation's start (N, 3) m as :func:`imulog.process.trajectory_opt.reconstruct_repetitions` builds it
     for the rest model (compensated, heading-corrected ZUPT; ``ramp``: with ``OptimizationParams.rest_ramp`` in x and
-    y), with the static mask and windows it used."""
+    y), with the static mask and windows it used; None when the variant leaves no complete repetition."""
     reps, _ = merge_overlapping(repetition_windows(v["t"], v["bounds"], v["static"]))
     seen: dict = {}
 
@@ -215,6 +215,8 @@ def start_of(inputs: dict, v: dict, ramp: bool = False) -> tuple[np.ndarray, np.
         )
     except _Captured:
         pass
+    except ValueError:  # no complete repetition in this variant's windows (e.g. no true rest when the hand drifts)
+        return None
     finally:
         trajectory_rest_model.repetition_rests, trajectory_opt.zupt = model, zupt
     return seen["z"], seen["static"], seen["reps"]
@@ -223,7 +225,10 @@ def start_of(inputs: dict, v: dict, ramp: bool = False) -> tuple[np.ndarray, np.
 def displacement_errors(inputs: dict, v: dict, ramp: bool = False) -> np.ndarray:
     """Every complete repetition's four rest-to-rest displacement errors (M, 3) m against the truth over the same
     rest samples (``ramp``: of the start with ``OptimizationParams.rest_ramp`` in x and y)."""
-    z, static, reps = start_of(inputs, v, ramp)
+    start = start_of(inputs, v, ramp)
+    if start is None:
+        return np.zeros((0, 3))
+    z, static, reps = start
     out = []
     for rep in reps:
         if len(rep.phase_bounds_s) != 4:
@@ -275,6 +280,7 @@ def main(argv: list[str] | None = None) -> int:
             errs[name]["spread-none"].append(displacement_errors(carried, variant(carried, sim_c, set())))
         cells = [
             " / ".join(f"{100 * x:.2f}" for x in np.sqrt(np.nanmean(np.concatenate(errs[name][k]) ** 2, axis=0)))
+            + ("" if all(len(e) for e in errs[name][k]) else f" ({sum(not len(e) for e in errs[name][k])} trials none)")
             for k in (*VARIANTS, *EXTRA)
         ]
         print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
