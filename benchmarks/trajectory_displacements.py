@@ -26,7 +26,8 @@ its two rests' mean accelerations) and ``spread-none`` (the anchoring's ``Anchor
 gyroscope's tilt through each movement, the next rest's tilt taken up only at that rest).
 Then, per group of conditions, each source's share of the mean-square displacement error in x and y (the axes the
 rest model uses): what replacing it alone removes, and what it adds when it is the only one left. A diagnostic, not
-a method.
+a method. ``--tilt`` prints only the estimated orientation's tilt error at each rest of the step's static mask and
+its change from one rest to the next (deg, median and 90th percentile per condition).
 
     python benchmarks/trajectory_displacements.py --grid all --subjects 6 --first-subject 40 --repetitions 10
 """
@@ -240,6 +241,22 @@ def displacement_errors(inputs: dict, v: dict, ramp: bool = False) -> np.ndarray
     return np.asarray(out).reshape(-1, 3)
 
 
+def rest_tilt_errors(inputs: dict, sim) -> tuple[np.ndarray, np.ndarray]:
+    """The estimated orientation's tilt error (deg) at each rest of the step's static mask (the angle between the
+    estimated and the true vertical in the sensor frame, averaged over the rest) and its change (deg) from each rest
+    to the next (the angle between the two rests' error vectors' difference, small-angle)."""
+    v = variant(inputs, sim, set())
+    up = np.tile([0.0, 0.0, 1.0], (len(v["t"]), 1))
+    est = quat.rotate_inverse(inputs["q_world"], up)
+    true = quat.rotate_inverse(sim.truth.imu_orientation, up)
+    errs = []
+    for a, b in static_runs(v["static"]):
+        e = np.mean(np.cross(true[a:b], est[a:b]), axis=0)  # small-angle tilt error vector (rad), sensor frame
+        errs.append(quat.rotate(sim.truth.imu_orientation[(a + b) // 2], e))  # in the world frame
+    errs = np.degrees(np.asarray(errs).reshape(-1, 3))
+    return np.linalg.norm(errs, axis=1), np.linalg.norm(np.diff(errs, axis=0), axis=1)
+
+
 VARIANTS = {
     "base": frozenset(),
     **{s: frozenset({s}) for s in SOURCES},
@@ -261,9 +278,34 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--subjects", type=int, default=6)
     ap.add_argument("--first-subject", type=int, default=40)
     ap.add_argument("--repetitions", type=int, default=10)
+    ap.add_argument(
+        "--tilt",
+        action="store_true",
+        help="only the estimated orientation's tilt error at the rests and its change from rest to rest (deg)",
+    )
     args = ap.parse_args(argv)
     names = list(CONDITIONS) if args.grid == ["all"] else args.grid
     t0, r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
+    if args.tilt:
+        print("| condition | rests | tilt error at a rest, median / 90th pct (deg) | change to the next rest (deg) |")
+        print("|---|---:|---|---|")
+        for name in names:
+            err, change = [], []
+            for s in range(args.first_subject, args.first_subject + args.subjects):
+                e, c = rest_tilt_errors(*trial(name, s, args.repetitions))
+                err.append(e)
+                change.append(c)
+            e, c = np.concatenate(err), np.concatenate(change)
+            print(
+                f"| {name} | {len(e)} | {np.median(e):.2f} / {np.percentile(e, 90):.2f} | "
+                f"{np.median(c):.2f} / {np.percentile(c, 90):.2f} |",
+                flush=True,
+            )
+        r1 = resource.getrusage(resource.RUSAGE_SELF)
+        print(
+            f"\n{time.perf_counter() - t0:.0f} s wall, {(r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime):.0f} s CPU"
+        )
+        return 0
     errs: dict[str, dict[str, list]] = {n: {k: [] for k in (*VARIANTS, *EXTRA)} for n in names}
     print("| condition | " + " | ".join((*VARIANTS, *EXTRA)) + " |")
     print("|---|" + "---|" * (len(VARIANTS) + len(EXTRA)))

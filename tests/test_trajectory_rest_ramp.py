@@ -81,21 +81,35 @@ def test_the_option_moves_the_start_in_x_and_y_only():
     np.testing.assert_array_equal(after[:, 2], before[:, 2])
 
 
-def test_the_ramped_displacements_put_a_calibrated_trials_rests_nearer_the_truth():
-    """``rest_model = "trusted-xy-test-ramp"`` against ``"trusted-xy-test"`` (the seventh round's rule) on a simulated
-    `default` trial (subject and seed 5, 6 repetitions): each repetition's estimated rests (bottle, mouth, bottle put
-    back, home, relative to its start) are nearer the truth in x and in y (RMS over the rests), the rule's only
-    difference being the ramp in the displacements it reads; z is not estimated by either (the trial-wide reference)."""
+def test_the_ramp_rule_reads_the_ramped_start_in_x_and_y_only(monkeypatch):
+    """``rest_model = "trusted-xy-test-ramp"`` on a simulated `default` trial (subject and seed 5, 6 repetitions):
+    the rest model reads a start that differs from the plain rule's in x and y (by more than 1 mm somewhere) and is
+    the same in z, and the optimized trajectory's z is the plain rule's (the rule is x / y only). Whether the rests
+    come out nearer the truth depends on the trial (docs/accuracy.md, eighth round: not on average)."""
+    from dataclasses import replace
+
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    from trajectory_start import rest_errors, trial_inputs
+    from trajectory_start import run_methods, trial_inputs
+
+    from imulog.process import trajectory_rest_model
+    from imulog.process.trajectory_opt import DEFAULT_PARAMS
 
     inputs = trial_inputs("default", 5, 6)
-    rms = {
-        mode: np.sqrt(np.nanmean(rest_errors(inputs, mode)["estimate"] ** 2, axis=(0, 1)))
-        for mode in ("trusted-xy-test", "trusted-xy-test-ramp")
-    }
-    before, after = rms["trusted-xy-test"], rms["trusted-xy-test-ramp"]
-    assert after[0] < before[0] and after[1] < before[1], rms
+    model = trajectory_rest_model.repetition_rests
+    seen, out = {}, {}
+    for mode in ("trusted-xy-test", "trusted-xy-test-ramp"):
+
+        def spy(t, z, *args, mode=mode, **kwargs):
+            seen[mode] = np.array(z, copy=True)
+            return model(t, z, *args, **kwargs)
+
+        monkeypatch.setattr(trajectory_rest_model, "repetition_rests", spy)
+        params = replace(DEFAULT_PARAMS, optimized=replace(DEFAULT_PARAMS.optimized, rest_model=mode))
+        out[mode] = run_methods(inputs, params)[3]["optimized"]
+    plain, ramped = seen["trusted-xy-test"], seen["trusted-xy-test-ramp"]
+    assert np.nanmax(np.abs(ramped[:, :2] - plain[:, :2])) > 0.001
+    np.testing.assert_array_equal(ramped[:, 2], plain[:, 2])
+    np.testing.assert_allclose(out["trusted-xy-test-ramp"][:, 2], out["trusted-xy-test"][:, 2], atol=1e-9)
 
 
 def test_the_ramp_rule_is_parsed():
