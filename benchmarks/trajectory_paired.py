@@ -26,7 +26,10 @@ compensation in x and y blended by the rests, ``OptimizationParams.start_blend =
 ``rest-blend-xyz`` in z too), ``rest-chain`` (the defaults / each repetition's reference moved by where the hand
 started and ended it, ``OptimizationParams.rest_chain``, an option), ``rest-model-NAME`` (the defaults / each
 repetition's reference at its own rests estimated from the IMU, ``OptimizationParams.rest_model = NAME``, an option;
-the names in :data:`REST_RULES`, ``trajectory_rest_model.RestRule``), ``issue31-session3`` (the code before this round's
+the names in :data:`REST_RULES`, ``trajectory_rest_model.RestRule``; ``rest-model-trusted-xy-test-ramp``: the rests from
+displacements with each movement's offset ramped between its two rests), ``rest-ramp-xy`` (the defaults / that ramp
+on the optimisation's start itself in x and y, ``OptimizationParams.rest_ramp``, an option; ``rest-ramp-xyz`` in z
+too; ``rest-ramp-xy-rest-model``: with ``rest_model = "trusted-xy-test"``), ``issue31-session3`` (the code before this round's
 default changes, ``bias-uncertainty`` and ``rest-run-mean``, / the defaults), ``issue31-options`` (the same
 before / the defaults with the heading through rests and the z-only return), ``heading-restart`` (options 3 and 4
 with the heading chained through the whole recording, ``AnchorParams.restart = False``, / restarted at every rest
