@@ -311,6 +311,7 @@ def refused_companion(src: Path, tmp_path: Path) -> None:
     line = r.output.strip()
     assert "\n" not in line and "Traceback" not in line
     assert "NilsPod" in line and "_data.csv" in line
+    assert "holds the session's settings, not its samples" in line  # two apostrophes are not a quoted value
 
 
 def ref_opensense_sto(trial: TrialReader, src: Path) -> None:
