@@ -219,6 +219,40 @@ def test_counts_equal_agcounts_on_the_axivity_sample(tmp_path):
     assert np.abs(ours[: len(ref)] - ref).max() <= 1.0
 
 
+@pytest.mark.parametrize(
+    "name, imu, declared",
+    [("axivity_cwa/ax6_sample.cwa", "ax6_6011802", 100.0), ("axivity_cwa/ax3_sample.cwa", "ax3_51888", 200.0)],
+)
+def test_epochs_of_a_real_cwa_count_at_its_declared_rate(tmp_path, name, imu, declared):
+    """The shared .cwa files' stamps run 1.6 % (AX6: 98.4 Hz) and 1.4 % (AX3: 197.2 Hz) off the declared rate, so
+    the converter keeps the declaration as ``declared_rate_hz``; ``imulog process epochs`` counts at it (it
+    stopped with "not a whole number of samples at 98.4135 Hz"). The AX6's 10-s counts from the command equal
+    agcounts' (ActiGraph's reference, run at 100 Hz) within 1 count."""
+    from click.testing import CliRunner
+
+    from imulog.archive import TrialReader
+    from imulog.cli import cli as main
+
+    src = Path(__file__).parent.parent / ".." / "shared" / "data" / "devices" / name
+    if not src.exists():
+        pytest.skip(f"{src} not available")
+    trial = tmp_path / "t.mcap"
+    _convert(src, trial)
+    r = CliRunner().invoke(main, ["process", "epochs", str(trial), "--epoch-s", "10"])
+    assert r.exit_code == 0, r.output
+    with TrialReader(trial) as t:
+        assert json.loads(t.channel(f"/imu/{imu}").metadata["meta"])["declared_rate_hz"] == declared
+        assert t.metadata["imulog.epochs"]["rate_hz"] == declared
+        epochs = t.read(f"/derived/epochs/10s/{imu}")
+        t_imu = t.read(f"/imu/{imu}").t_ns
+    # an epoch is 10 s of samples at the declared rate, stamped at its first sample's own time (docs/epochs.md)
+    np.testing.assert_array_equal(epochs.t_ns, t_imu[:: int(10 * declared)])
+    ours = epochs.values[:, [epochs.columns.index(c) for c in ("counts_x", "counts_y", "counts_z")]]
+    _, ref = _shared_counts(name, f"/imu/{imu}", int(declared), tmp_path / "ref")
+    if len(ref):
+        assert np.abs(ours[: len(ref)] - ref).max() <= 1.0
+
+
 def _synthetic_reference() -> dict[int, np.ndarray]:
     import csv
 
