@@ -173,6 +173,29 @@ def test_epoch_not_whole_samples_is_one_line(half_day):
     assert r.exit_code != 0 and "whole number of samples" in r.output and len(r.output.strip().splitlines()) == 1
 
 
+def test_a_geneactiv_at_85_7_hz_is_told_which_epochs_fit(tmp_path):
+    """85.7 Hz holds no whole number of samples in 5 s: the one error line names the epochs that do (10 s
+    multiples), and the command it gives runs on the real GENEActiv file."""
+    from click.testing import CliRunner
+
+    from imulog.cli import cli as main
+
+    src = (
+        Path(__file__).parent.parent / ".." / "shared" / "data" / "devices" / "geneactiv_bin" / "GENEActiv_testfile.bin"
+    )
+    if not src.exists():
+        pytest.skip(f"{src} not available")
+    trial = tmp_path / "g.mcap"
+    _convert(src, trial)
+    r = CliRunner().invoke(main, ["process", "epochs", str(trial)])
+    assert r.exit_code != 0 and len(r.output.strip().splitlines()) == 1
+    assert r.output.strip().endswith(
+        "at 85.7 Hz (at this rate use epochs of 10 s multiples: --epoch-s 10 --epoch-s 60)"
+    )
+    r = CliRunner().invoke(main, ["process", "epochs", str(trial), "--epoch-s", "10", "--epoch-s", "60"])
+    assert r.exit_code == 0, r.output
+
+
 def test_simulated_removals_are_still():
     from datetime import datetime
 

@@ -52,8 +52,16 @@ class EpochParams:
 def _samples(seconds: float, rate: float, what: str) -> int:
     n = seconds * rate
     if abs(n - round(n)) > 1e-6 or round(n) < 1:
-        raise ValueError(f"epochs: {what} of {seconds:g} s is not a whole number of samples at {rate:g} Hz")
+        step = whole_seconds(rate)
+        hint = f" (at this rate use epochs of {step} s multiples: --epoch-s {step} --epoch-s 60)" if step else ""
+        raise ValueError(f"epochs: {what} of {seconds:g} s is not a whole number of samples at {rate:g} Hz{hint}")
     return int(round(n))
+
+
+def whole_seconds(rate: float) -> int | None:
+    """The shortest of 1, 2, 5, 10 s that holds a whole number of samples at ``rate`` Hz (a GENEActiv's 85.7 Hz:
+    10 s), or None. Dividing 10 s, it also divides the 10-s calibration epoch and the 15-min non-wear block."""
+    return next((k for k in (1, 2, 5, 10) if abs(k * rate - round(k * rate)) <= 1e-6), None)
 
 
 DECLARED_RATE_TOLERANCE = 0.05  # a .cwa's block clock runs a few percent off its declared rate (docs/epochs.md)
