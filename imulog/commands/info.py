@@ -95,13 +95,15 @@ def trial_summary(trial: TrialReader) -> dict[str, Any]:
 
 
 def _fmt_units(units: str) -> str:
-    """A short form of a channel's units: ``V x38`` for many equal units, else the list, cut at 40 chars."""
+    """A short form of a channel's units: ``V x38`` for many equal units, else the list, cut at 40 chars; a unit
+    the source did not state (an XDF stream without ``<unit>``) shows as ``?``."""
     try:
         values = json.loads(units)
     except ValueError:
         return units
     if not isinstance(values, list):
         return str(values)
+    values = [str(v).strip() or "?" for v in values]
     if len(values) > 1 and len(set(values)) == 1:
         return f"{values[0]} x{len(values)}"
     text = ",".join(str(v) for v in values)
