@@ -242,3 +242,15 @@ def test_recordings_that_share_a_name_get_a_trial_each(tmp_path, shared_data):
         with TrialReader(p) as t:
             kinds[p.name] = sorted(c.topic.split("/")[1] for c in t.channels if not c.topic.startswith("/derived"))
     assert kinds["trial.c3d.mcap"] == ["markers"] and kinds["trial.csv.mcap"] == ["imu"]
+
+
+def test_two_folders_of_one_name_keep_a_trial_each(tmp_path, shared_data):
+    """``imulog convert a/data b/data -o out``: both folders' trials go under out/data/; a recording named ``t`` in
+    each is two trials (``t.csv``, ``t.csv_2``), not one refused or overwritten."""
+    for folder, src in (("a", "imu_text/fusion_sensor_data.csv"), ("b", "imu_text/shimmer_consensys_export.csv")):
+        (tmp_path / folder / "data").mkdir(parents=True)
+        (tmp_path / folder / "data" / "t.csv").write_bytes((shared_data / src).read_bytes())
+    out = tmp_path / "out"
+    r = CliRunner().invoke(cli, ["convert", str(tmp_path / "a" / "data"), str(tmp_path / "b" / "data"), "-o", str(out)])
+    assert r.exit_code == 0 and "wrote 2 trial(s)" in r.output, r.output
+    assert sorted(p.name for p in (out / "data").iterdir()) == ["t.csv.mcap", "t.csv_2.mcap"]

@@ -184,13 +184,14 @@ def _convert_directories(
     overwrite: bool,
     as_json: bool = False,
 ) -> None:
-    jobs: list[tuple[Path, list[Path]]] = []
+    named: list[tuple[str, list[Path]]] = []
     skipped: list[tuple[Path, str]] = []
     detected: Detected = {}  # each file's format is detected once, while grouping; everything below reuses it
     for d in dirs:
-        for name, files in unique_names(sessions(group_directory(d, skipped, detected), detected)):
-            prefix = d.name if len(dirs) > 1 else ""
-            jobs.append((out_dir / prefix / f"{name}.mcap", files))
+        for name, files in sessions(group_directory(d, skipped, detected), detected):
+            named.append((f"{d.name}/{name}" if len(dirs) > 1 else name, files))
+    # unique over every folder given (two folders named data/ share the prefix)
+    jobs = [(out_dir / f"{name}.mcap", files) for name, files in unique_names(named)]
     if not jobs:
         reasons = "".join(f"; {p.name}: {why}" for p, why in skipped[:3])
         raise click.ClickException(f"no convertible files under {', '.join(map(str, dirs))}{reasons}")
