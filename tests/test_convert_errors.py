@@ -242,6 +242,9 @@ def test_binary_garbage_and_unknown_formats(tmp_path):
     junk.write_bytes(bytes(range(256)) * 4)
     with pytest.raises(UnknownFormatError, match=r"junk\.csv: unknown format"):
         convert_file(junk)
+    # a text file no reader knows may be a table of anything (SOURCES.tsv): the mapping hint is a condition
+    with pytest.raises(UnknownFormatError, match=r"; if it is IMU text whose header carries no units .* give a map"):
+        convert_file(junk)
     for fmt in ("delimited", "xsens", "adc", "vicon-csv", "gaitmap", "c3d", "broad-hdf5"):
         with pytest.raises(ConversionError, match=r"junk\.csv: "):
             convert_file(junk, fmt)
