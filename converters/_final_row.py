@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 # ------------------------------------------------------------------------------------ a cut final row
 TAIL_BYTES = 64 * 1024  # enough for the last row and the rows above it that it is compared with
 
@@ -52,6 +54,8 @@ def final_row_cut(block: bytes, delimiter: str, *, at_eof: bool) -> tuple[int, s
         if len(column) < len(rows) or not all(column):
             continue  # a column with empty cells (gaps, padding) says nothing about the length of its numbers
         c = cell.strip().strip(b'"')
+        if continues_steps(column, c):
+            continue  # a time printed %g-style ends on a whole number (681.99, 682): the next step, not a cut
         for mark, what in ((b".", "decimal point"), (b"e", "exponent")):
             if all(mark in x.lower() for x in column) and mark not in c.lower():
                 return start, f"field {j + 1} {c.decode('latin-1')!r} has no {what} where every row above has one"
@@ -65,6 +69,20 @@ def final_row_cut(block: bytes, delimiter: str, *, at_eof: bool) -> tuple[int, s
             if decimals <= fewest - 2:
                 return start, f"field {j + 1} has {decimals} decimals where the rows above have at least {fewest}"
     return None
+
+
+def continues_steps(column: list[bytes], cell: bytes) -> bool:
+    """Do the cells above step by one constant (a time column) and does ``cell`` take exactly the next step?
+    (relative tolerance 1e-9 of the values; a cut number lost digits, so it cannot continue the steps)"""
+    try:
+        values = np.array([float(x) for x in column[-10:]] + [float(cell)])
+    except ValueError:
+        return False
+    if len(values) < 4:
+        return False
+    steps = np.diff(values)
+    tol = 1e-9 * float(np.max(np.abs(values))) + 1e-12
+    return bool(steps[0] != 0 and np.ptp(steps) <= tol)
 
 
 def drop_cut_final_row(

@@ -236,13 +236,17 @@ def iter_table(
     piece_bytes: int | None,
     required: tuple[int, ...] | list[int] = (),
     skip_columns: tuple[int, ...] | list[int] = (),
-    warnings: list[str] | None = None,
+    warnings: list[str] | None,
     ragged: bool = False,
     transform: Callable[[bytes], bytes] | None = None,
 ) -> Iterator[tuple[np.ndarray, int]]:
     """:func:`imulog.converters._lab.read_table` in pieces of about ``piece_bytes`` of text cut after whole rows
     (:func:`text_pieces`; None: the whole file at once): (values, line number of the piece's first row). Values,
     errors (their line numbers in the file) and a cut final row's warning are those of the whole file.
+    ``warnings`` has no default: with a list, a final row cut short is dropped and its warning appended
+    (:func:`hand_over` moves it to the piece's recording; a first pass that counts rows passes a list of its own,
+    so that it counts the rows the second pass reads); None reads such a row as it is (ragged tables, whose short
+    last rows are normal, are never checked).
     ``ragged``: as ``read_table``'s; ``transform``: applied to the text before parsing (the whole file's bytes, or
     each piece's), e.g. QTM's ``NULL`` cells to empty ones; it must keep the line breaks."""
     from imulog.converters._lab import read_table
@@ -272,6 +276,14 @@ def iter_table(
             raise ConversionError(path, e.problem, line=e.line + lines_before, column=e.column) from None
         yield values, lines_before + 1
         del piece, values  # not held while the next piece is read and parsed
+
+
+def hand_over(notes: list[str], rec: Any) -> Any:
+    """``rec`` (a :class:`~imulog.model.Recording`) with the warnings :func:`iter_table` appended to ``notes`` while
+    reading its piece (a cut final row comes with the last piece); ``notes`` emptied for the next piece."""
+    rec.warnings.extend(notes)
+    notes.clear()
+    return rec
 
 
 def _trimmed(data: bytes) -> bytes:

@@ -22,7 +22,7 @@ from imulog.converters._common import (
     unit_factor,
 )
 from imulog.converters._lab import ORIENTATION_TOPIC, orientation_stream, trial_start
-from imulog.converters._pieces import iter_table
+from imulog.converters._pieces import hand_over, iter_table
 from imulog.converters.errors import ConversionError
 
 from imulog.model import ImuStream, Recording, SignalStream
@@ -214,8 +214,9 @@ def iter_labelled_csv(
         common["test_name"] = info["Test Name"]
     t0: float | None = None
     clock = _Clock()
+    notes: list[str] = []
     for values, first_line in iter_table(
-        path, delimiter=",", skip_lines=n + 2, names=header, required=[0], piece_bytes=piece_bytes
+        path, delimiter=",", skip_lines=n + 2, names=header, required=[0], piece_bytes=piece_bytes, warnings=notes
     ):
         if factor is None:
             raise ConversionError(path, f"unknown time unit {tunit!r}", line=n + 2, column="Time")
@@ -224,7 +225,8 @@ def iter_labelled_csv(
             t0 = float(t[0])
         t_ns = (np.round((t - t0) * factor) + round(t0 * factor)).astype(np.int64) if len(t) else t.astype(np.int64)
         estimate = clock.add(path, t_ns, first_line)
-        yield _build(path, list(sensors.values()), t_ns, values, names, n + 1, {**common, "rate_hz": rate or estimate})
+        rec = _build(path, list(sensors.values()), t_ns, values, names, n + 1, {**common, "rate_hz": rate or estimate})
+        yield hand_over(notes, rec)
 
 
 class _Clock:
@@ -288,8 +290,9 @@ def iter_format7(path: Path, lines: list[str], names: dict[str, str], piece_byte
     clock = _Clock()
     quirk = False
     start = None
+    notes: list[str] = []
     for values, first_line in iter_table(
-        path, delimiter=",", skip_lines=3, names=header, required=[0], piece_bytes=piece_bytes
+        path, delimiter=",", skip_lines=3, names=header, required=[0], piece_bytes=piece_bytes, warnings=notes
     ):
         for j in baro:
             col = values[:, j]
@@ -323,4 +326,4 @@ def iter_format7(path: Path, lines: list[str], names: dict[str, str], piece_byte
             rec.metadata["imulog.trial"] = trial_start(
                 start, f"{path.name}: Time column (us since the Unix epoch, UTC)"
             )
-        yield rec
+        yield hand_over(notes, rec)

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 from imulog.converters import _pieces
 from imulog.converters._common import head_lines, sanitize_name, text_head_lines, unit_factor
-from imulog.converters._pieces import PIECE_BYTES, iter_table
+from imulog.converters._pieces import PIECE_BYTES, hand_over, iter_table
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
 
@@ -116,7 +116,8 @@ def iter_delsys(
     path = Path(path)
     header, hi, plans = _layout(path, names)
     carry: dict[str, _Carry] = {}
-    rows = iter_table(path, delimiter=",", skip_lines=hi + 1, names=header, piece_bytes=piece_bytes)
+    notes: list[str] = []
+    rows = iter_table(path, delimiter=",", skip_lines=hi + 1, names=header, piece_bytes=piece_bytes, warnings=notes)
     for k, (values, first_line) in enumerate(rows):
         column = partial(_column, path, values, first_line, carry)
         rec = Recording(sources=[str(path)])
@@ -127,7 +128,7 @@ def iter_delsys(
         if k:
             for kind in (rec.imus, rec.analogs, rec.signals):
                 kind[:] = [st for st in kind if len(st.t_ns)]
-        yield rec
+        yield hand_over(notes, rec)
 
 
 def _column(

@@ -8,7 +8,11 @@ from pathlib import Path
 EXCERPT_CHARS = 40  # a quoted cell, value or column name is cut to this many characters in error lines
 MAX_PROBLEM_CHARS = 300  # and the whole problem text to this many
 _REPEAT = "{%d,}" % (EXCERPT_CHARS + 1)  # noqa: UP031 - braces of a regex
-_QUOTED = re.compile(r"'(?:[^'\\]|\\.)" + _REPEAT + r"'|" + r'"(?:[^"\\]|\\.)' + _REPEAT + '"')
+# a quote opens where no letter or digit stands before it and closes where none follows: the apostrophes of
+# "NilsPodLib's" and "session's" are not a quoted value between them
+_QUOTED = re.compile(
+    r"(?<!\w)'(?:[^'\\]|\\.)" + _REPEAT + r"'(?!\w)|" + r'(?<!\w)"(?:[^"\\]|\\.)' + _REPEAT + r'"(?!\w)'
+)
 
 
 def excerpt(value: object, limit: int = EXCERPT_CHARS) -> str:

@@ -37,7 +37,7 @@ import numpy as np
 from imulog.converters import _pieces
 from imulog.converters._common import check_increasing, head_lines, sanitize_name, text_head_lines, to_ns
 from imulog.converters._lab import trial_start
-from imulog.converters._pieces import PIECE_BYTES, iter_table
+from imulog.converters._pieces import PIECE_BYTES, hand_over, iter_table
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
 
@@ -77,6 +77,7 @@ def iter_motive(path: Path, piece_bytes: int | None = PIECE_BYTES) -> Iterator[R
     before: int | None = None
     origin: float | None = None
     time_name = layout["axes"][1].strip()
+    notes: list[str] = []
     rows = iter_table(
         path,
         delimiter=",",
@@ -84,6 +85,7 @@ def iter_motive(path: Path, piece_bytes: int | None = PIECE_BYTES) -> Iterator[R
         names=layout["col_names"],
         required=[0, 1],
         piece_bytes=piece_bytes,
+        warnings=notes,
     )
     for k, (values, first_line) in enumerate(rows):
         if origin is None and len(values):
@@ -98,7 +100,7 @@ def iter_motive(path: Path, piece_bytes: int | None = PIECE_BYTES) -> Iterator[R
         rec = _piece(path, layout, values, t_ns)
         if k:  # the records are the first piece's
             rec.metadata.clear()
-        yield rec
+        yield hand_over(notes, rec)
 
 
 def _layout(path: Path) -> dict[str, Any]:

@@ -51,7 +51,7 @@ FIRST = ("PacketCounter", "SampleTimeFine")
 _START = re.compile(r"(\d{4})-(\d{2})-(\d{2})_(\d{2}):(\d{2}):(\d{2})_(\d{3})(?:\s*GMT([+-]\d{1,2})(?::?(\d{2}))?)?")
 DOT_ONLY = {"Euler_X", "Quat_W", "dq_W", "dv_X"}
 _DOT_NAME = re.compile(r"^[^_]+_[0-9A-Fa-f]{12}_\d{8}_\d{6}$")
-UNITS = {"FreeAcc": "m/s^2", "Mag": "a.u.", "dq": "1", "dv": "m/s", "Euler": "deg", "Quat": "1"}
+UNITS = {"FreeAcc": "m/s^2", "Mag": "a.u.", "dq": "1", "dv": "m/s", "Euler": "deg", "Quat": "1", "PacketCounter": "1"}
 
 
 def unwrap_sample_time_fine(raw: np.ndarray) -> np.ndarray:

@@ -343,7 +343,7 @@ def iter_csv(path: Path, options: ConvertOptions | None = None, piece_bytes: int
     """NilsPodLib's ``data_as_csv`` export (``t`` in s from the first sample, columns as its legends) and the
     ``_header.json`` it writes beside it (rate, ranges, start), in pieces of about ``piece_bytes`` of text (None:
     one piece); in pieces, a first pass over the ``t`` column gives the missing-sample count the first declares."""
-    from imulog.converters._pieces import iter_table
+    from imulog.converters._pieces import hand_over, iter_table
 
     path = Path(path)
     hj = header_json_for(path)
@@ -369,14 +369,16 @@ def iter_csv(path: Path, options: ConvertOptions | None = None, piece_bytes: int
         rows = [0]
 
         def times() -> Iterator[np.ndarray]:
-            for v, _ in iter_table(path, **table, skip_columns=others):
+            # counts the rows the second pass reads: a cut final row is dropped here too (its warning comes from there)
+            for v, _ in iter_table(path, **table, skip_columns=others, warnings=[]):
                 rows[0] += len(v)
                 yield np.round(v[:, 0] * rate).astype(np.int64)
 
         declared = _declare_counters(path, hdr, sensors, times())
         total = rows[0]
     carry = _Counter()
-    for k, (values_table, _) in enumerate(iter_table(path, **table)):
+    notes: list[str] = []
+    for k, (values_table, _) in enumerate(iter_table(path, **table, warnings=notes)):
         # no look-ahead to learn which piece is last (it held the next piece's table and text while this one was
         # built and written): the whole file is one piece, else the first pass counted the rows
         last = total is None or carry.seen + len(values_table) >= total
@@ -395,7 +397,7 @@ def iter_csv(path: Path, options: ConvertOptions | None = None, piece_bytes: int
             )
         if declared is not None and k == 0:
             rec.metadata[PIECES_RECORD] = declared
-        yield rec
+        yield hand_over(notes, rec)
         del rec, values, values_table  # not held while the next piece is read and parsed
 
 

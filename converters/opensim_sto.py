@@ -39,7 +39,7 @@ import numpy as np
 from imulog.converters import _pieces
 from imulog.converters._common import check_increasing, head_lines, sanitize_name, text_head_lines, to_ns
 from imulog.converters._lab import orientation_stream
-from imulog.converters._pieces import PIECE_BYTES, iter_table
+from imulog.converters._pieces import PIECE_BYTES, hand_over, iter_table
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.delimited_time import StepCounts
 from imulog.converters.errors import ConversionError
@@ -139,6 +139,7 @@ def iter_sto(path: Path, piece_bytes: int | None = PIECE_BYTES) -> Iterator[Reco
     origin: float | None = None
     before: int | None = None
     count = 0
+    notes: list[str] = []
     rows = iter_table(
         path,
         delimiter=",",
@@ -146,6 +147,7 @@ def iter_sto(path: Path, piece_bytes: int | None = PIECE_BYTES) -> Iterator[Reco
         names=names,
         required=[0],
         piece_bytes=piece_bytes,
+        warnings=notes,
         transform=_tabs_to_commas if delim == "\t" else None,
     )
     nxt = next(rows, None)
@@ -163,7 +165,8 @@ def iter_sto(path: Path, piece_bytes: int | None = PIECE_BYTES) -> Iterator[Reco
         if len(t_ns):
             before = int(t_ns[-1])
         count += len(t_ns)
-        rec = Recording(sources=[str(path)])
+        # a cut final row's warning: read with the last piece, which the look-ahead above has already read
+        rec = hand_over(notes, Recording(sources=[str(path)]))
         if width == 1:
             topic = f"/signals/{sanitize_name(title).lower()}" if title else "/signals/sto"
             rec.signals.append(SignalStream(topic, t_ns, cols[1:], units, values[:, 1:]))

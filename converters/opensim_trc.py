@@ -70,7 +70,8 @@ def iter_trc(
     for piece, _, _, _ in text_pieces(path, skip, piece_bytes or max(1, path.stat().st_size)):
         widest = max(widest, max(line.rstrip(b"\r").count(delim.encode()) + 1 for line in piece.split(b"\n")))
     use = min(len(cols), max(widest, 2))  # every row short (trailing markers never recorded): pad them
-    table: dict[str, Any] = dict(delimiter=delim, skip_lines=skip, names=cols[:use], ragged=True)
+    # ragged (short rows are padded), which read_table never checks for a cut final row
+    table: dict[str, Any] = dict(delimiter=delim, skip_lines=skip, names=cols[:use], ragged=True, warnings=None)
     try:
         rate = float(info.get("DataRate", "nan"))
     except ValueError:

@@ -39,7 +39,7 @@ import numpy as np
 from imulog.converters import _pieces
 from imulog.converters._common import check_increasing, head_lines, is_number, text_head_lines, to_ns
 from imulog.converters._lab import trial_start
-from imulog.converters._pieces import PIECE_BYTES, iter_table
+from imulog.converters._pieces import PIECE_BYTES, hand_over, iter_table
 from imulog.converters.base import Converter, ConvertOptions
 from imulog.converters.errors import ConversionError
 
@@ -81,12 +81,14 @@ def iter_qualisys(path: Path, piece_bytes: int | None = PIECE_BYTES) -> Iterator
     names, index, freq, n_frames = lay["names"], lay["index"], lay["freq"], lay["n_frames"]
     first_line = lay["skip"] + 1
     table: dict[str, Any] = dict(delimiter="\t", skip_lines=lay["skip"], names=names, transform=_no_null)
-    cached = next(iter_table(path, **table, piece_bytes=None)) if piece_bytes is None else None
+    notes: list[str] = []  # a cut final row: from the one parse, else from the pass that reads the markers
+    cached = next(iter_table(path, **table, piece_bytes=None, warnings=notes)) if piece_bytes is None else None
 
     def pieces(skip_columns: list[int]) -> Iterator[tuple[np.ndarray, int]]:
         if cached is not None:
             return iter([cached])
-        return iter_table(path, **table, piece_bytes=piece_bytes, skip_columns=skip_columns)
+        warnings = None if skip_columns else notes
+        return iter_table(path, **table, piece_bytes=piece_bytes, skip_columns=skip_columns, warnings=warnings)
 
     clocks = [c for c in ("Time", "Frame") if c in index]
     finite = dict.fromkeys(clocks, True)
@@ -131,7 +133,7 @@ def iter_qualisys(path: Path, piece_bytes: int | None = PIECE_BYTES) -> Iterator
         rec.metadata["imulog.device.qualisys"] = {**device, "missing_as_zero_samples": zeros_total}
         if k == 0 and lay["stamp"] is not None:
             rec.metadata["imulog.trial"] = trial_start(lay["stamp"], f"{path.name}: TIME_STAMP (QTM PC local time)")
-        yield rec
+        yield hand_over(notes, rec)
     if rows is None:
         _check_frames(path, done, n_frames, first_line)
 

@@ -132,8 +132,8 @@ def detect(path: Path) -> Converter:
         hint = ""
         if path.suffix.lower() in (".csv", ".tsv", ".txt"):
             hint = (
-                "; IMU text whose header carries no units (e.g. ax,ay,gx) needs a mapping file: --mapping FILE "
-                f"or {path.stem}.mapping.json beside it"
+                "; if it is IMU text whose header carries no units (e.g. ax,ay,gx), give a mapping file: --mapping "
+                f"FILE or {path.stem}.mapping.json beside it"
             )
         raise UnknownFormatError(path, f"unknown format (see `imulog convert --list-formats`, or pass --format){hint}")
     return best

@@ -58,8 +58,9 @@ from imulog.process import quaternion
 
 TICKS_PER_S = 10_000  # SampleTimeFine resolution
 DEFAULT_RATE_HZ = 100.0  # used (and recorded as assumed) when neither the header nor SampleTimeFine times a file
-SIGNAL_UNITS = {
+SIGNAL_UNITS = {  # by the column name's stem before "_" or "[": Quat_q0, Mat[1][1], Roll
     "quat": "1",
+    "mat": "1",
     "roll": "deg",
     "pitch": "deg",
     "yaw": "deg",
@@ -419,7 +420,7 @@ def _piece(path: Path, plan: dict[str, Any], seen: dict[str, int], values: np.nd
     rec.metadata.update({k: dict(v) for k, v in plan["records"].items()})
     extra = plan["extra"]
     if extra:
-        units = [SIGNAL_UNITS.get(c.split("_")[0].lower(), "") for c, _ in extra]
+        units = [SIGNAL_UNITS.get(re.split(r"[_\[]", c)[0].lower(), "") for c, _ in extra]
         rec.signals.insert(
             0,
             SignalStream(

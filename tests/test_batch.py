@@ -207,3 +207,15 @@ def test_phases_options_apply_onto_the_trials_own_protocol(tmp_path):
     assert len(phases) == 12 and phases.labels[:4] == ["reach", "lift", "return_bottle", "return_hand"]
     with TrialReader(other) as reader:
         assert set(reader.read("/derived/phases/wrist").labels) == {"movement"}
+
+
+def test_a_list_option_takes_the_type_of_its_default_items():
+    """``--set epochs.epochs_s=10,60`` gives the floats 10.0 and 60.0 (strings failed inside the step with
+    "Unknown format code 'g' for object of type 'str'"); a bad item is one error naming the option; lists of
+    names stay strings."""
+    _, params = resolve_options("epochs", {"epochs_s": "10, 60"})
+    assert params.epochs_s == (10.0, 60.0) and all(isinstance(e, float) for e in params.epochs_s)
+    with pytest.raises(ValueError, match=r"^step epochs epochs_s: could not convert string to float: 'x'$"):
+        resolve_options("epochs", {"epochs_s": "10,x"})
+    kwargs, _ = resolve_options("trajectory", {"methods": "zupt,kalman"})
+    assert kwargs["methods"] == ["zupt", "kalman"]

@@ -59,7 +59,11 @@ def test_trigno_export_matches_the_file(shared_data, name):
     "damage, message",
     [
         (lambda s: s.replace("Unit: g ", "Unit: furlong ", 1), r"ACC.X 10: unknown unit 'furlong'"),
-        (lambda s: s.rstrip()[: s.rstrip().rindex(",")], r"line 2537: truncated line: 27 fields, expected 28"),
+        # a short row above the last is an error; a cut last row is dropped with a warning (test_convert_validation)
+        (
+            lambda s: s.replace(s.splitlines()[-2], s.splitlines()[-2][: s.splitlines()[-2].rindex(",")]),
+            r"line 2536: truncated line: 27 fields, expected 28",
+        ),
         (lambda s: s.replace("0.0007941176,", "0.0007941176x,", 1), r"line 20, column 'X\[s\]': '0.0007941176x'"),
         (lambda s: s.replace("\n0.223147,-0.0003482872", "\n,-0.0003482872", 1), r"empty time cell before"),
         (lambda s: s.split("\nX[s]")[0], r"no 'X\[s\],<channel>,...' names row"),

@@ -227,10 +227,23 @@ def test_bad_input_gives_one_precise_line(tmp_path, key, damage, message):
     assert "\n" not in text and text.startswith(str(tmp_path))
 
 
+def test_apostrophes_are_not_quotes_but_long_quoted_values_are_cut():
+    """Only a quoted value is cut to an excerpt: the apostrophes of two possessives more than 40 characters apart
+    ("the device's ... the session's") stay as written; a long repr()-quoted cell is still cut, with its length."""
+    prose = "recognised as NilsPodLib's _header.json), but it holds the session's settings, not its samples"
+    assert ConversionError("x.json", prose).problem == prose
+    cell = "9" * 500
+    err = ConversionError("x.csv", f"value {cell!r} is not finite", line=4)
+    assert str(err) == f"x.csv: line 4: value '{cell[:36]}...' (502 chars) is not finite"
+
+
 def test_binary_garbage_and_unknown_formats(tmp_path):
     junk = tmp_path / "junk.csv"
     junk.write_bytes(bytes(range(256)) * 4)
     with pytest.raises(UnknownFormatError, match=r"junk\.csv: unknown format"):
+        convert_file(junk)
+    # a text file no reader knows may be a table of anything (SOURCES.tsv): the mapping hint is a condition
+    with pytest.raises(UnknownFormatError, match=r"; if it is IMU text whose header carries no units .* give a map"):
         convert_file(junk)
     for fmt in ("delimited", "xsens", "adc", "vicon-csv", "gaitmap", "c3d", "broad-hdf5"):
         with pytest.raises(ConversionError, match=r"junk\.csv: "):

@@ -103,7 +103,8 @@ def test_format_123_header_differences_and_millimetres(tmp_path):
     [
         (lambda s: s.replace("Rotation Type,Quaternion", "Rotation Type,XYZ"), r"Rotation Type XYZ: export again"),
         (lambda s: s.replace("Length Units,Millimeters", "Length Units,Furlongs"), r"unknown Length Units"),
-        (lambda s: s[: s.rindex(",")], r"line 47: truncated line"),
+        # a short row above the last is an error; a cut last row is dropped with a warning (test_convert_validation)
+        (lambda s: s.replace(s.split("\r\n")[-3], s.split("\r\n")[-3].rsplit(",", 1)[0]), "line 46: truncated line"),
         (
             lambda s: re.sub(r"\r\n20,[^,]*,", "\r\n20,0.0x,", s, count=1),
             r"line 28, column 'Time \(Seconds\)': '0.0x' is not",

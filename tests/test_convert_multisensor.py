@@ -215,3 +215,42 @@ def test_inputs_with_different_start_times_keep_the_first_and_say_so(shared_data
     # inputs without a start time (the two files of one old-header Xsens recording) say nothing about it
     quiet = convert_files(sorted((shared_data / XSENS).glob("MT46_01-000_*.txt")))
     assert "imulog.trial" not in quiet.metadata and not [w for w in quiet.warnings if "start time" in w]
+
+
+def test_recordings_that_share_a_name_get_a_trial_each(tmp_path, shared_data):
+    """``trial.csv`` (IMU) and ``trial.c3d`` (markers) beside a second IMU recording are not one session: two
+    trials that both took the name ``trial``, so the second was refused as existing (and with --overwrite would
+    have replaced the first). Each keeps its own: ``trial.csv.mcap``, ``trial.c3d.mcap``, ``other.mcap``."""
+    from imulog.archive import TrialReader
+
+    folder = tmp_path / "lab"
+    folder.mkdir()
+    for src, name in (
+        ("imu_text/fusion_sensor_data.csv", "trial.csv"),
+        ("c3d/ktk_sample_propulsion_upperlimb.c3d", "trial.c3d"),
+        ("imu_text/shimmer_consensys_export.csv", "other.csv"),
+    ):
+        (folder / name).write_bytes((shared_data / src).read_bytes())
+    out = tmp_path / "trials"
+    for extra in ([], ["--overwrite"]):
+        r = CliRunner().invoke(cli, ["convert", str(folder), "-o", str(out), *extra])
+        assert r.exit_code == 0, r.output
+        assert "wrote 3 trial(s)" in r.output
+    assert sorted(p.name for p in out.iterdir()) == ["other.mcap", "trial.c3d.mcap", "trial.csv.mcap"]
+    kinds = {}
+    for p in out.iterdir():
+        with TrialReader(p) as t:
+            kinds[p.name] = sorted(c.topic.split("/")[1] for c in t.channels if not c.topic.startswith("/derived"))
+    assert kinds["trial.c3d.mcap"] == ["markers"] and kinds["trial.csv.mcap"] == ["imu"]
+
+
+def test_two_folders_of_one_name_keep_a_trial_each(tmp_path, shared_data):
+    """``imulog convert a/data b/data -o out``: both folders' trials go under out/data/; a recording named ``t`` in
+    each is two trials (``t.csv``, ``t.csv_2``), not one refused or overwritten."""
+    for folder, src in (("a", "imu_text/fusion_sensor_data.csv"), ("b", "imu_text/shimmer_consensys_export.csv")):
+        (tmp_path / folder / "data").mkdir(parents=True)
+        (tmp_path / folder / "data" / "t.csv").write_bytes((shared_data / src).read_bytes())
+    out = tmp_path / "out"
+    r = CliRunner().invoke(cli, ["convert", str(tmp_path / "a" / "data"), str(tmp_path / "b" / "data"), "-o", str(out)])
+    assert r.exit_code == 0 and "wrote 2 trial(s)" in r.output, r.output
+    assert sorted(p.name for p in (out / "data").iterdir()) == ["t.csv.mcap", "t.csv_2.mcap"]

@@ -50,7 +50,8 @@ def test_orientation_file_matches_the_text(shared_data, name, n_imus, rows, t0):
     "damage, message",
     [
         (lambda s: s.replace("endheader", "endhead"), r"no 'endheader' line"),
-        (lambda s: s.rstrip()[: s.rstrip().rindex(",")], r"line 12: truncated line: 28 fields, expected 29"),
+        # a short row above the last is an error; a cut last row is dropped with a warning (test_convert_validation)
+        (lambda s: s.replace(s.splitlines()[-2], s.splitlines()[-2].rsplit(",", 1)[0]), r"line 11: truncated line"),
         (lambda s: s.replace("DataType=Quaternion", "DataType=Mat33"), r"DataType=Mat33 is not supported"),
         (lambda s: s.replace("\n0.01\t", "\n0\t", 1), r"line 8, column 'time': duplicated time stamp"),
     ],

@@ -76,8 +76,53 @@ def test_cut_final_row_of_a_real_export_is_dropped_with_a_warning(tmp_path, shar
     assert re.fullmatch(r"fusion\.csv: line 13515: last row cut short \(.*\): dropped", warning) and reason in warning
 
 
+def _sample_arrays(stream) -> dict[str, np.ndarray]:
+    """A stream's per-sample arrays (time, values), by attribute name."""
+    n = len(stream)
+    return {k: v for k, v in vars(stream).items() if isinstance(v, np.ndarray) and v.ndim and len(v) == n}
+
+
+@pytest.mark.parametrize(
+    "name, line",
+    [
+        ("devices/apdm_csv/imuData01.csv", 1028),  # 100.5734406 -> 1: stored as 1 kPa before
+        ("devices/apdm_csv/apdm_format7.csv", 6),  # -0.040588 -> -: refused as "'-' is not a number" before
+        ("devices/delsys_trigno/truncated_trigno_sample.csv", 2537),  # 16 of 28 fields: "truncated line" before
+        ("devices/optitrack_motive/sample_optitrack_take.csv", 257),
+        ("devices/nilspod/NilsPodX-6F13_20210109_162824_data.csv", 636),
+        ("devices/opensense_sto/MT_012005D6_009-quaternions_calibration_trial_Facing_negX.sto", 408),
+        ("devices/opensim_mot/inverse_kin.mot", 99),
+    ],
+)
+def test_every_table_converter_drops_a_cut_final_row(tmp_path, shared_data, name, line):
+    """The APDM, Delsys, Motive, NilsPod CSV and OpenSim storage readers check the final row as the delimited one
+    does: a real export cut one character into its last number (trailing empty cells removed) loses that row
+    with one warning naming the line; every other sample is the whole file's."""
+    src = shared_data / name
+    body = src.read_bytes().rstrip(b"\r\n,\t")
+    cut = tmp_path / src.name
+    cut.write_bytes(body[: max(body.rfind(b","), body.rfind(b"\t")) + 2])
+    for companion in src.parent.glob("*_header.json"):  # NilsPod's CSV reads the header beside it
+        (tmp_path / companion.name).write_bytes(companion.read_bytes())
+    full, rec = convert_file(src), convert_file(cut)
+    assert [w for w in rec.warnings if "cut short" in w] == [
+        next(w for w in rec.warnings if w.startswith(f"{src.name}: line {line}: last row cut short ("))
+    ]
+    shorter = 0
+    for a, b in zip(rec.streams(), full.streams(), strict=True):
+        assert len(b) - len(a) in (0, 1)
+        shorter += len(b) - len(a)
+        whole = _sample_arrays(b)
+        for key, values in _sample_arrays(a).items():
+            np.testing.assert_array_equal(values, whole[key][: len(a)], err_msg=f"{a.topic} {key}")
+    assert shorter >= 1
+
+
 def test_complete_files_without_a_final_line_break_keep_their_last_row(tmp_path, shared_data):
-    for name in (FUSION, "vicon_nexus/markers.csv"):
+    """Also the OpenSense .sto whose %g-printed time ends on a whole number (681.99, then 682): no decimal point,
+    but the next step of the time column, so not a cut."""
+    sto = "devices/opensense_sto/MT_012005D6_009-quaternions_calibration_trial_Facing_negX.sto"
+    for name in (FUSION, "vicon_nexus/markers.csv", sto):
         src = (shared_data / name).read_bytes()
         whole = tmp_path / Path(name).name
         whole.write_bytes(src.rstrip(b"\r\n"))

@@ -271,7 +271,17 @@ def _tmp_copy(data: bytes, suffix: str = ".bin") -> Path:
     return Path(f.name)
 
 
+def every_unit_given(trial: TrialReader) -> None:
+    """Every column of every channel names its unit: a rotation matrix's entries and a packet counter are "1",
+    never blank (``imulog info`` showed the Xsens matrix as " x9" and BIDS channels.tsv needs a unit)."""
+    for c in trial.channels:
+        text = c.metadata.get("units") or "[]"
+        units = json.loads(text) if text.startswith("[") else [text]  # events store one plain unit ("ns")
+        assert all(str(u).strip() for u in units), (c.topic, units)
+
+
 def ref_movella_dot(trial: TrialReader, src: Path) -> None:
+    every_unit_given(trial)
     df = pd.read_csv(src, skiprows=7)
     imu = one(trial, "/imu/")
     assert len(imu.t_ns) == len(df) == 1953
@@ -311,6 +321,7 @@ def refused_companion(src: Path, tmp_path: Path) -> None:
     line = r.output.strip()
     assert "\n" not in line and "Traceback" not in line
     assert "NilsPod" in line and "_data.csv" in line
+    assert "holds the session's settings, not its samples" in line  # two apostrophes are not a quoted value
 
 
 def ref_opensense_sto(trial: TrialReader, src: Path) -> None:
@@ -378,6 +389,7 @@ def ref_xdf(trial: TrialReader, src: Path) -> None:
 
 
 def ref_xsens(trial: TrialReader, src: Path) -> None:
+    every_unit_given(trial)
     osim = pytest.importorskip("opensim")
     stem = src.stem
     settings = osim.XsensDataReaderSettings()

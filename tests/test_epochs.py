@@ -173,6 +173,29 @@ def test_epoch_not_whole_samples_is_one_line(half_day):
     assert r.exit_code != 0 and "whole number of samples" in r.output and len(r.output.strip().splitlines()) == 1
 
 
+def test_a_geneactiv_at_85_7_hz_is_told_which_epochs_fit(tmp_path):
+    """85.7 Hz holds no whole number of samples in 5 s: the one error line names the epochs that do (10 s
+    multiples), and the command it gives runs on the real GENEActiv file."""
+    from click.testing import CliRunner
+
+    from imulog.cli import cli as main
+
+    src = (
+        Path(__file__).parent.parent / ".." / "shared" / "data" / "devices" / "geneactiv_bin" / "GENEActiv_testfile.bin"
+    )
+    if not src.exists():
+        pytest.skip(f"{src} not available")
+    trial = tmp_path / "g.mcap"
+    _convert(src, trial)
+    r = CliRunner().invoke(main, ["process", "epochs", str(trial)])
+    assert r.exit_code != 0 and len(r.output.strip().splitlines()) == 1
+    assert r.output.strip().endswith(
+        "at 85.7 Hz (at this rate use epochs of 10 s multiples: --epoch-s 10 --epoch-s 60)"
+    )
+    r = CliRunner().invoke(main, ["process", "epochs", str(trial), "--epoch-s", "10", "--epoch-s", "60"])
+    assert r.exit_code == 0, r.output
+
+
 def test_simulated_removals_are_still():
     from datetime import datetime
 
@@ -217,6 +240,40 @@ def test_counts_equal_agcounts_on_the_axivity_sample(tmp_path):
     ours, ref = _shared_counts("axivity_cwa/ax6_sample.cwa", "/imu/ax6_6011802", 100, tmp_path)
     assert len(ref) == 10 and len(ours) >= len(ref)
     assert np.abs(ours[: len(ref)] - ref).max() <= 1.0
+
+
+@pytest.mark.parametrize(
+    "name, imu, declared",
+    [("axivity_cwa/ax6_sample.cwa", "ax6_6011802", 100.0), ("axivity_cwa/ax3_sample.cwa", "ax3_51888", 200.0)],
+)
+def test_epochs_of_a_real_cwa_count_at_its_declared_rate(tmp_path, name, imu, declared):
+    """The shared .cwa files' stamps run 1.6 % (AX6: 98.4 Hz) and 1.4 % (AX3: 197.2 Hz) off the declared rate, so
+    the converter keeps the declaration as ``declared_rate_hz``; ``imulog process epochs`` counts at it (it
+    stopped with "not a whole number of samples at 98.4135 Hz"). The AX6's 10-s counts from the command equal
+    agcounts' (ActiGraph's reference, run at 100 Hz) within 1 count."""
+    from click.testing import CliRunner
+
+    from imulog.archive import TrialReader
+    from imulog.cli import cli as main
+
+    src = Path(__file__).parent.parent / ".." / "shared" / "data" / "devices" / name
+    if not src.exists():
+        pytest.skip(f"{src} not available")
+    trial = tmp_path / "t.mcap"
+    _convert(src, trial)
+    r = CliRunner().invoke(main, ["process", "epochs", str(trial), "--epoch-s", "10"])
+    assert r.exit_code == 0, r.output
+    with TrialReader(trial) as t:
+        assert json.loads(t.channel(f"/imu/{imu}").metadata["meta"])["declared_rate_hz"] == declared
+        assert t.metadata["imulog.epochs"]["rate_hz"] == declared
+        epochs = t.read(f"/derived/epochs/10s/{imu}")
+        t_imu = t.read(f"/imu/{imu}").t_ns
+    # an epoch is 10 s of samples at the declared rate, stamped at its first sample's own time (docs/epochs.md)
+    np.testing.assert_array_equal(epochs.t_ns, t_imu[:: int(10 * declared)])
+    ours = epochs.values[:, [epochs.columns.index(c) for c in ("counts_x", "counts_y", "counts_z")]]
+    _, ref = _shared_counts(name, f"/imu/{imu}", int(declared), tmp_path / "ref")
+    if len(ref):
+        assert np.abs(ours[: len(ref)] - ref).max() <= 1.0
 
 
 def _synthetic_reference() -> dict[int, np.ndarray]:

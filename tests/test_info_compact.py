@@ -75,3 +75,12 @@ def test_salvaged_trial_channel_lost_at_the_cut_is_empty(processed_r2g, tmp_path
         assert "[empty]" in row and " 0 " in row
     kept = [c for c in doc["channels"] if c["messages"] and c["topic"] == "/imu/wrist"]
     assert kept and kept[0]["samples"] > 0
+
+
+def test_a_unit_the_source_does_not_state_shows_as_a_question_mark(shared_data, tmp_path):
+    """LabRecorder's BioSemi test stream declares no unit for its 8 channels: the units column says ``? x8``, not
+    a blank `` x8`` that reads as a misaligned table."""
+    trial = tmp_path / "x.mcap"
+    run("convert", shared_data / "devices" / "xdf" / "clock_resets.xdf", "-o", trial)
+    (row,) = [line for line in run("info", trial).splitlines() if line.strip().startswith("/signals/biosemi")]
+    assert row.rstrip().endswith("  ? x8")

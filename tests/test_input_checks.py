@@ -7,6 +7,7 @@ import pytest
 
 from imulog.process.input_checks import (
     InputCheckParams,
+    SideCheck,
     apply_checks,
     side_checks,
     value_status,
@@ -125,6 +126,31 @@ def test_the_placement_side_is_checked_against_the_mouths_lateral_direction():
     assert [c.name for c in side_checks("right", "x", left_mouths, ("h2_m", 0.15)) if c.disagrees] == ["placement_side"]
     with pytest.raises(ValueError, match="left or right"):
         side_checks("both", "x", right_mouths)
+
+
+def test_every_check_record_says_what_its_check_did():
+    """Both kinds of check write records of one shape (the run record's ``input_checks``): the keys in a fixed
+    order, ending with ``disagrees`` and ``replaced``, each what the check itself says. A side check only warns,
+    so its ``replaced`` is always False and is not a field anyone can set to something else."""
+    bottles, mouths = repetitions([0.30, 0.15, 0.0], [0.09, 0.15, 0.35])
+    (h1, *_) = waypoint_checks({"h1_m": 0.40, "h2_m": 0.15, "status": "approximate"}, bottles, mouths, KEYS)
+    assert h1.replaced and h1.as_dict()["axis"] == "x"
+    assert list(h1.as_dict()) == [
+        "name", "waypoint", "axis", "given_m", "estimated_m", "uncertainty_m", "threshold_m", "status",
+        "disagrees", "replaced",
+    ]  # fmt: skip
+    sides = side_checks("left", "imulog.trial side", mouths, ("h2_m", 0.15))
+    assert [c.disagrees for c in sides] == [True, True]
+    for check in [h1, *sides]:
+        record = check.as_dict()
+        assert (record["disagrees"], record["replaced"]) == (check.disagrees, check.replaced)
+    assert list(sides[0].as_dict()) == [
+        "name", "side", "source", "value_m", "uncertainty_m", "threshold_m", "seen", "repetitions",
+        "disagrees", "replaced",
+    ]  # fmt: skip
+    assert not any(c.replaced for c in sides)
+    with pytest.raises(TypeError):
+        SideCheck("h2_m", "left", "x", 0.15, replaced=True)  # type: ignore[call-arg]
 
 
 def test_a_mouth_near_the_start_does_not_contradict_the_side():

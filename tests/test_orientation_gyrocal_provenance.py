@@ -67,6 +67,32 @@ def test_one_window_records_the_estimated_correction(trial, tmp_path):
     assert runs[max(runs, key=int)]["gyro_correction"] == run["gyro_correction"]
 
 
+def test_info_verbose_shows_the_correction(trial, tmp_path):
+    """``imulog info -v`` prints what the run recorded, readably: M row by row (to 5 decimals), each axis's
+    sensitivity error and the bias in deg/s, one block per window; without -v only the run line."""
+    path = tmp_path / "t.mcap"
+    path.write_bytes(trial.read_bytes())
+    run_orientation(path, params=_params("vqf_gyrocal"), windows=WindowParams(core_s=50.0, margin_s=10.0))
+    entries = _last_run(path)["gyro_correction"]
+    out = CliRunner().invoke(cli, ["info", str(path), "-v"])
+    assert out.exit_code == 0, out.output
+    heads = [line.strip() for line in out.output.splitlines() if "gyro correction over" in line]
+    assert heads == [
+        "gyro correction over samples {}-{} (core {}-{}): fitted".format(*e["samples"], *e["core"]) for e in entries
+    ]
+    shown = [line.split("M = [", 1)[1].split("]", 1)[0] for line in out.output.splitlines() if "M = [" in line]
+    assert len(shown) == len(entries)
+    for text, e in zip(shown, entries, strict=True):
+        m = np.array([[float(v) for v in row.split()] for row in text.split(";")])
+        np.testing.assert_allclose(m, e["matrix"], rtol=0, atol=5e-6)
+    (first,) = [line for line in out.output.splitlines() if "sensitivity x" in line][:1]
+    m0 = np.asarray(entries[0]["matrix"])
+    assert f"y {(m0[1, 1] - 1) * 100:+.2f} %" in first
+    assert f"{np.degrees(entries[0]['bias_rad_s'][1]):+.3f}" in first and first.endswith("deg/s")
+    plain = CliRunner().invoke(cli, ["info", str(path)])
+    assert plain.exit_code == 0 and "gyro correction" not in plain.output
+
+
 def test_other_backends_record_no_correction(trial, tmp_path):
     path = tmp_path / "t.mcap"
     path.write_bytes(trial.read_bytes())

@@ -234,6 +234,9 @@ def test_imus_that_lack_what_the_step_reads_are_left_out_by_default(shared_data,
     assert "left out /imu/tas1e31150129: no gyr" in stderr and "/derived/orientation/tas1e31150129_imu" in stdout
     code, _, stderr = run("process", "orientation", trial, "--imu", "tas1e31150129")
     assert code == 1 and "needs accelerometer and gyroscope" in stderr
+    # the one line says what is missing and what works without it
+    assert "/imu/tas1e31150129 has no gyroscope" in stderr and "`imulog process epochs`" in stderr
+    assert len(stderr.strip().splitlines()) == 1
     # the first IMU a step runs on keeps imulog.timing when the trial names no primary IMU
     assert run("process", "phases", trial)[0] == 0
     with TrialReader(trial) as reader:

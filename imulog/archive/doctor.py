@@ -303,7 +303,7 @@ def check_file(path: str | os.PathLike[str], *, decode: bool = True, progress: P
     ``progress(n)`` is called as work is done (bytes walked, then bytes of chunks decoded), adding up to
     about :func:`check_length`.
     """
-    from imulog.archive.reader import TrialReader
+    from imulog.archive.reader import SALVAGE_HINT, SALVAGE_MIN_BYTES, TrialReader
 
     path = Path(path)
     report = DoctorReport(path)
@@ -317,7 +317,8 @@ def check_file(path: str | os.PathLike[str], *, decode: bool = True, progress: P
         try:
             summary, view = journal.read_summary_view(f, size, path)
         except Exception as exc:  # McapFormatError, or anything a damaged summary provokes
-            report.fail(str(exc) if isinstance(exc, m.McapFormatError) else f"unreadable summary ({exc})")
+            reason = str(exc) if isinstance(exc, m.McapFormatError) else f"unreadable summary ({exc})"
+            report.fail(reason + (SALVAGE_HINT if size >= SALVAGE_MIN_BYTES else ""))
             return report
         report.checks.append("magic, footer and summary CRC ok")
         if view is not f:

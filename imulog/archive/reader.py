@@ -58,6 +58,10 @@ def _forget_pool() -> None:  # a forked child does not inherit the pool's thread
 os.register_at_fork(after_in_child=_forget_pool)
 
 
+SALVAGE_HINT = "; `imulog salvage` recovers its intact channels"  # a summary that cannot be read (cut, unfinished)
+SALVAGE_MIN_BYTES = 64  # smaller than an MCAP header and one record: nothing to salvage
+
+
 class TrialReader:
     """Open a trial file for reading: ``with TrialReader(path) as trial: trial.read("/imu/wrist")``."""
 
@@ -72,7 +76,8 @@ class TrialReader:
             self.summary = journal.read_summary(self._f, size, self.path)
         except m.McapFormatError as exc:
             self._f.close()
-            raise ArchiveCorruptError(f"{self.path}: {exc}") from exc
+            hint = SALVAGE_HINT if size >= SALVAGE_MIN_BYTES else ""
+            raise ArchiveCorruptError(f"{self.path}: {exc}{hint}") from exc
         self._metadata: dict[str, dict[str, Any]] | None = None
         self._by_topic = {c.topic: c for c in self.summary.channels.values()}
         try:  # channel metadata is parsed as JSON in many places: refuse hostile nesting once, here

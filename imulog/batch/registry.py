@@ -169,6 +169,11 @@ def _coerce(value: Any, default: Any, where: str, annotation: str = "") -> Any:
             return tuple(value)
         return value
     text = value.strip()
+    if isinstance(default, tuple):  # each item the type of the default's items (epochs_s=10,60: floats)
+        items = [x.strip() for x in text.split(",") if x.strip()]
+        if default and not isinstance(default[0], str):
+            return tuple(_coerce(x, default[0], where) for x in items)
+        return tuple(items)
     try:
         if isinstance(default, bool):
             if text.lower() in ("1", "true", "yes", "on"):
@@ -180,8 +185,7 @@ def _coerce(value: Any, default: Any, where: str, annotation: str = "") -> Any:
             return int(text)
         if isinstance(default, float):
             return float(text)
-        if isinstance(default, tuple):
-            return tuple(x.strip() for x in text.split(",") if x.strip())
+
         if default is None:
             value = json.loads(text)
             return tuple(value) if isinstance(value, list) and "tuple" in annotation else value

@@ -84,6 +84,27 @@ def sessions(groups: list[tuple[str, list[Path]]], detected: Detected | None = N
     return out
 
 
+def unique_names(groups: list[tuple[str, list[Path]]]) -> list[tuple[str, list[Path]]]:
+    """Each trial its own output name: trials that would share one (``s01.c3d`` and ``s01.h5`` in a folder with a
+    second IMU recording, both ``s01``) keep their first file's extension (``s01.c3d``, ``s01.h5``), then a counter
+    (``s01_2``); before, the second was refused as existing, or with --overwrite replaced the first."""
+    count: dict[str, int] = {}
+    for name, _ in groups:
+        count[name] = count.get(name, 0) + 1
+    taken: set[str] = set()
+    out = []
+    for name, files in groups:
+        if count[name] > 1 and files[0].suffix:
+            name += files[0].suffix.lower()
+        unique, k = name, 1
+        while unique in taken:
+            k += 1
+            unique = f"{name}_{k}"
+        taken.add(unique)
+        out.append((unique, files))
+    return out
+
+
 def _convert_folder_group(
     files: list[Path], fmt: str | None, options: ConvertOptions, names: list[str]
 ) -> tuple[Recording, dict[str, str], list[tuple[Path, str]]]:
@@ -163,13 +184,14 @@ def _convert_directories(
     overwrite: bool,
     as_json: bool = False,
 ) -> None:
-    jobs: list[tuple[Path, list[Path]]] = []
+    named: list[tuple[str, list[Path]]] = []
     skipped: list[tuple[Path, str]] = []
     detected: Detected = {}  # each file's format is detected once, while grouping; everything below reuses it
     for d in dirs:
         for name, files in sessions(group_directory(d, skipped, detected), detected):
-            prefix = d.name if len(dirs) > 1 else ""
-            jobs.append((out_dir / prefix / f"{name}.mcap", files))
+            named.append((f"{d.name}/{name}" if len(dirs) > 1 else name, files))
+    # unique over every folder given (two folders named data/ share the prefix)
+    jobs = [(out_dir / f"{name}.mcap", files) for name, files in unique_names(named)]
     if not jobs:
         reasons = "".join(f"; {p.name}: {why}" for p, why in skipped[:3])
         raise click.ClickException(f"no convertible files under {', '.join(map(str, dirs))}{reasons}")

@@ -95,13 +95,15 @@ def trial_summary(trial: TrialReader) -> dict[str, Any]:
 
 
 def _fmt_units(units: str) -> str:
-    """A short form of a channel's units: ``V x38`` for many equal units, else the list, cut at 40 chars."""
+    """A short form of a channel's units: ``V x38`` for many equal units, else the list, cut at 40 chars; a unit
+    the source did not state (an XDF stream without ``<unit>``) shows as ``?``."""
     try:
         values = json.loads(units)
     except ValueError:
         return units
     if not isinstance(values, list):
         return str(values)
+    values = [str(v).strip() or "?" for v in values]
     if len(values) > 1 and len(set(values)) == 1:
         return f"{values[0]} x{len(values)}"
     text = ",".join(str(v) for v in values)
@@ -219,6 +221,39 @@ def _echo_heading(record: dict, channels: list[dict[str, Any]]) -> None:
         click.echo(f"heading: one frame for {names}: {record.get('source')} ({record.get('frame')})")
 
 
+def gyro_correction_lines(entries: Any) -> list[str]:
+    """What ``--backend vqf_gyrocal`` recorded in a run (``gyro_correction``), for reading: per run of samples (and
+    window core) whether ``M`` was fitted, ``M`` itself (true rate = ``M @ (gyr - bias)``), the sensitivity error
+    of each axis and the largest cross-axis term (``M - I``, %), and the bias it turns about (deg/s)."""
+    import numpy as np
+
+    lines = []
+    for e in entries if isinstance(entries, list) else []:
+        if not isinstance(e, dict):
+            continue
+        where = "samples {}-{}".format(*e["samples"]) if len(e.get("samples") or []) == 2 else "the run"
+        if len(e.get("core") or []) == 2:
+            where += " (core {}-{})".format(*e["core"])
+        try:
+            m = np.asarray(e["matrix"], dtype=np.float64).reshape(3, 3)
+            bias = np.degrees(np.asarray(e["bias_rad_s"], dtype=np.float64).reshape(3))
+        except (KeyError, TypeError, ValueError):
+            lines.append(f"gyro correction over {where}: {json.dumps(e)}")
+            continue
+        fitted = "fitted" if e.get("fitted") else "not fitted (shorter than the fit needs): M is the identity"
+        lines.append(f"gyro correction over {where}: {fitted}")
+        rows = "; ".join(" ".join(f"{v:+.5f}" for v in row) for row in m)
+        lines.append(f"  M = [{rows}] (true rate = M (gyr - bias))")
+        scale = ", ".join(f"{a} {(m[i, i] - 1) * 100:+.2f} %" for i, a in enumerate("xyz"))
+        cross = np.abs(m - np.diag(np.diag(m))).max() * 100
+        lines.append(
+            f"  sensitivity {scale}; largest cross-axis term {cross:.2f} %; bias "
+            + ", ".join(f"{v:+.3f}" for v in bias)
+            + " deg/s"
+        )
+    return lines
+
+
 def _echo_wrapped(text: str, width: int | None) -> None:
     """``text`` on lines of at most ``width`` characters (continuations indented); as is when None."""
     import textwrap
@@ -331,6 +366,9 @@ def info(file: str, verbose: bool, as_json: bool) -> None:
             params = f" params={json.dumps(r.get('params', {}))}" if verbose else ""
             line = f"  #{n} {r.get('step', '')}: {r.get('algorithm', '')}{params} -> {out} ({r.get('time', '')})"
             click.echo(_cut(line, None if verbose else 160))
+            if verbose:
+                for extra in gyro_correction_lines(r.get("gyro_correction")):
+                    click.echo(f"      {extra}")
     if data["out_of_date"] or data["out_of_date_steps"]:
         click.echo("out of date (inputs changed since they were computed):")
         by_step: dict[str, list[str]] = {}

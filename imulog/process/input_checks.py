@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -58,9 +58,36 @@ class InputCheckParams:
 DEFAULT_INPUT_CHECKS = InputCheckParams()
 
 
+class CheckRecord:
+    """The record both kinds of check write into the run record (``info["input_checks"]``).
+
+    ``RECORD`` names the keys in order; each holds the attribute of the same name, or the one ``RENAMED`` maps
+    it to. Every record ends with ``disagrees`` (the value contradicts the IMU) and ``replaced`` (the IMU's
+    estimate was used instead of the given value).
+    """
+
+    RECORD: ClassVar[tuple[str, ...]] = ()
+    RENAMED: ClassVar[Mapping[str, str]] = {}
+
+    @property
+    def disagrees(self) -> bool:
+        raise NotImplementedError
+
+    @property
+    def replaced(self) -> bool:
+        raise NotImplementedError
+
+    def as_dict(self) -> dict[str, Any]:
+        """The record: ``RECORD``'s keys, then ``disagrees`` and ``replaced``."""
+        return {key: getattr(self, self.RENAMED.get(key, key)) for key in (*self.RECORD, "disagrees", "replaced")}
+
+
 @dataclass(frozen=True)
-class InputCheck:
+class InputCheck(CheckRecord):
     """One given value against the IMU's estimate of the same coordinate (m, task frame)."""
+
+    RECORD = ("name", "waypoint", "axis", "given_m", "estimated_m", "uncertainty_m", "threshold_m", "status")
+    RENAMED = {"axis": "axis_name"}
 
     name: str  # the anthropometrics key as given, e.g. "h2_m"
     waypoint: str  # "bottle" or "mouth"
@@ -74,6 +101,11 @@ class InputCheck:
     label: str = ""  # how the line names the value when it is not the key alone
 
     @property
+    def axis_name(self) -> str:
+        """``x``, ``y`` or ``z``."""
+        return "xyz"[self.axis]
+
+    @property
     def disagrees(self) -> bool:
         return abs(self.given_m - self.estimated_m) > self.threshold_m
 
@@ -84,7 +116,6 @@ class InputCheck:
 
     def line(self) -> str:
         """One line for the terminal: the value, both figures, and what was done."""
-        axis = "xyz"[self.axis]
         what = (
             "the IMU's estimate is used (the value is marked approximate)"
             if self.replaced
@@ -92,24 +123,10 @@ class InputCheck:
             "to use the IMU's estimate, or correct it)"
         )
         return (
-            f"{self.label or self.name} = {self.given_m * 100:.1f} cm, but the IMU puts the {self.waypoint}'s {axis} at "
+            f"{self.label or self.name} = {self.given_m * 100:.1f} cm, but the IMU puts the {self.waypoint}'s {self.axis_name} at "
             f"{self.estimated_m * 100:.1f} ± {self.uncertainty_m * 100:.1f} cm over {self.repetitions} repetitions: "
             f"{what}"
         )
-
-    def as_dict(self) -> dict[str, Any]:
-        return {
-            "name": self.name,
-            "waypoint": self.waypoint,
-            "axis": "xyz"[self.axis],
-            "given_m": self.given_m,
-            "estimated_m": self.estimated_m,
-            "uncertainty_m": self.uncertainty_m,
-            "threshold_m": self.threshold_m,
-            "status": self.status,
-            "disagrees": self.disagrees,
-            "replaced": self.replaced,
-        }
 
 
 def value_status(anthro: Mapping[str, Any], key: str) -> str:
@@ -235,13 +252,16 @@ SIDE_SIGN = {"right": 1.0, "left": -1.0}  # the sign of the midline's y from the
 
 
 @dataclass(frozen=True)
-class SideCheck:
+class SideCheck(CheckRecord):
     """The placement's side against the lateral direction of the drink (task frame, y to the subject's left).
 
     Towards the midline is +y for a right hand and -y for a left one. ``name`` is ``placement_side`` for the
     IMU's mouth y (median over repetitions), or the given key (``h2_m``, ``mouth_m[1]``) whose sign is checked.
     A contradiction is a value on the other side of the start by more than ``threshold_m`` (0 for a given value).
+    The check only warns: the placement and the given value are never changed, so ``replaced`` is False.
     """
+
+    RECORD = ("name", "side", "source", "value_m", "uncertainty_m", "threshold_m", "seen", "repetitions")
 
     name: str
     side: str  # "left" or "right", as the placement metadata says
@@ -250,12 +270,15 @@ class SideCheck:
     uncertainty_m: float = 0.0  # standard error of the IMU's estimate (m); 0 for a given value
     threshold_m: float = 0.0
     repetitions: int = 0  # 0 for a given value
-    status: str = "measured"  # the metadata is never changed
-    replaced: bool = False
 
     @property
     def disagrees(self) -> bool:
         return SIDE_SIGN[self.side] * self.value_m < -self.threshold_m
+
+    @property
+    def replaced(self) -> bool:
+        """Never: a side check changes neither the placement nor the given value."""
+        return False
 
     @property
     def seen(self) -> str:
@@ -277,20 +300,6 @@ class SideCheck:
             f"{self.name} = {self.value_m * 100:.1f} cm puts the mouth on a {self.seen} hand's side, but the "
             f"placement says {self.side} ({self.source}): kept (h2 is +y for a right hand, -y for a left one)"
         )
-
-    def as_dict(self) -> dict[str, Any]:
-        return {
-            "name": self.name,
-            "side": self.side,
-            "source": self.source,
-            "value_m": self.value_m,
-            "uncertainty_m": self.uncertainty_m,
-            "threshold_m": self.threshold_m,
-            "seen": self.seen,
-            "repetitions": self.repetitions,
-            "disagrees": self.disagrees,
-            "replaced": False,
-        }
 
 
 def side_checks(

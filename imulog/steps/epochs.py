@@ -52,20 +52,34 @@ class EpochParams:
 def _samples(seconds: float, rate: float, what: str) -> int:
     n = seconds * rate
     if abs(n - round(n)) > 1e-6 or round(n) < 1:
-        raise ValueError(f"epochs: {what} of {seconds:g} s is not a whole number of samples at {rate:g} Hz")
+        step = whole_seconds(rate)
+        hint = f" (at this rate use epochs of {step} s multiples: --epoch-s {step} --epoch-s 60)" if step else ""
+        raise ValueError(f"epochs: {what} of {seconds:g} s is not a whole number of samples at {rate:g} Hz{hint}")
     return int(round(n))
 
 
+def whole_seconds(rate: float) -> int | None:
+    """The shortest of 1, 2, 5, 10 s that holds a whole number of samples at ``rate`` Hz (a GENEActiv's 85.7 Hz:
+    10 s), or None. Dividing 10 s, it also divides the 10-s calibration epoch and the 15-min non-wear block."""
+    return next((k for k in (1, 2, 5, 10) if abs(k * rate - round(k * rate)) <= 1e-6), None)
+
+
+DECLARED_RATE_TOLERANCE = 0.05  # a .cwa's block clock runs a few percent off its declared rate (docs/epochs.md)
+
+
 def epoch_rate_hz(channel_meta: dict[str, str], measured_hz: float) -> float:
-    """The rate epochs are counted at: the device's declared rate (``meta.rate_hz``, e.g. a .cwa's 100 Hz) when
-    it is within 0.5 % of the measured one, else the measured rate snapped to 1/8 Hz when within 0.05 %."""
+    """The rate epochs are counted at: the device's declared rate (``meta.declared_rate_hz``, which the converter
+    keeps when the time stamps are more than 1 % off it, else ``meta.rate_hz``; e.g. a .cwa's 100 Hz over stamps
+    of 98.4 Hz) when it is within :data:`DECLARED_RATE_TOLERANCE` of the measured one, else the measured rate
+    snapped to 1/8 Hz when within 0.05 %."""
     import json
 
     try:
-        declared = float(json.loads(channel_meta.get("meta", "{}")).get("rate_hz") or 0)
+        meta = json.loads(channel_meta.get("meta", "{}"))
+        declared = float(meta.get("declared_rate_hz") or meta.get("rate_hz") or 0)
     except (ValueError, TypeError, AttributeError):
         declared = 0.0
-    if declared > 0 and abs(declared - measured_hz) <= 0.005 * declared:
+    if declared > 0 and abs(declared - measured_hz) <= DECLARED_RATE_TOLERANCE * declared:
         return declared
     snapped = round(measured_hz * 8) / 8
     return snapped if snapped > 0 and abs(snapped - measured_hz) <= 5e-4 * snapped else measured_hz

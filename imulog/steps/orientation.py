@@ -63,7 +63,9 @@ def imu_arrays(stream: Any, topic: str) -> tuple[np.ndarray, np.ndarray, np.ndar
     """``(t_ns, acc, gyr, mag)`` of a raw ImuStream or a calibrated SignalStream (or a piece of either)."""
     if topic.startswith("/imu/"):
         if stream.acc is None or stream.gyr is None:
-            raise ValueError(f"{topic} needs accelerometer and gyroscope columns")
+            lacks = "no gyroscope (an accelerometer-only device?)" if stream.gyr is None else "no accelerometer"
+            hint = "; `imulog process epochs` works from acceleration alone" if stream.acc is not None else ""
+            raise ValueError(f"{topic} has {lacks}: orientation needs accelerometer and gyroscope columns{hint}")
         return stream.t_ns, stream.acc, stream.gyr, stream.mag
     cols = {c: i for i, c in enumerate(stream.columns)}
     need = ["ax", "ay", "az", "gx", "gy", "gz"]
