@@ -53,7 +53,12 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
    rest window of step 2 (a window inside a steadily decelerating last part passes as a rest), starts after the
    onset, covers the offset, stands out of the velocity's noise, lies before the search's last block and explains
    the phase's own last part (its residual there at most ``profile_residual_ratio`` x the rest's), the offset
-   moves to it (on by default since issue 31's seventh round; ``profile_rest_s = 0`` turns it off).
+   moves to it (on by default since issue 31's seventh round; ``profile_rest_s = 0`` turns it off; the phases step
+   runs it on the drinking task only, :func:`~imulog.process.segmentation.pipeline.hand_params`);
+10. with ``gyro_floor`` (an option, off): an onset (offset) that no step moved, the gyroscope's own, loses the
+    samples at it that are at the gyroscope's noise floor in the rest window, up to the filtered noise's
+    correlation time and as far as the phase's own flank of step 7 agrees
+    (:mod:`~imulog.process.segmentation.noise_floor`).
 
 Pure numpy/scipy; intervals are half-open sample ranges ``[start, end)``.
 """

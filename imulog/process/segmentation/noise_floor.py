@@ -1,13 +1,15 @@
 """Gyroscope boundaries that the hand did not move, trimmed to the gyroscope's noise floor (issue 31 point 1).
 
-The gyroscope refinement (:mod:`~imulog.process.segmentation.boundaries`, step 3) walks a boundary outward past
-its level crossing while ``r = |omega - b|`` keeps falling ("descend"). Below the rest's own noise a fall is
-noise, not the movement's flank, and the walk ends a sample or two into the rest (at 50 Hz 0.02-0.04 s at each
-end: on the grid's ``rate-50hz`` condition every phase outside 0.1 s had both ends within 0.1 s, the onset early
-and the offset late, all from the gyroscope). Where the accelerometer (:mod:`~imulog.process.segmentation.hand`)
-found the hand moving beyond the gyroscope's boundary, its boundary stands; where it left the gyroscope's
-boundary as it was, the samples at that boundary whose ``r`` is at or under the median ``r`` of the adjacent
-rest window (what the noise alone gives half the time) are not motion and the boundary moves inward past them.
+Step 10 of :mod:`~imulog.process.segmentation.hand`, an option (``HandParams.gyro_floor``, off by default). The
+gyroscope refinement (:mod:`~imulog.process.segmentation.boundaries`, step 3) walks a boundary outward past its
+level crossing while ``r = |omega - b|`` keeps falling ("descend"); below the rest's own noise a fall is noise,
+not the movement's flank. At 50 Hz the walk ends about a sample into the rest at each end (on the grid's
+``rate-50hz`` condition 23 of the 24 phases outside 0.1 s had both ends within 0.1 s, the onset early and the
+offset late, most of them the gyroscope's own boundaries). Where the accelerometer found the hand moving beyond
+the gyroscope's boundary, its boundary stands; where it left the gyroscope's boundary as it was, the samples at
+that boundary whose ``r`` is at or under the median ``r`` of the adjacent rest window (what the noise alone gives
+half the time) are not motion, and the boundary moves inward past them when they are at most ``most`` samples
+(the hand step bounds the trim by its own flank too). docs/accuracy.md (ninth round) has the figures.
 Pure numpy; indices are sample indices, intervals half-open.
 """
 
