@@ -181,7 +181,7 @@ def test_the_gyroscope_noise_floor_option_at_50_hz():
     floor = replace(base, hand=replace(base.hand, gyro_floor=True))
     sim = simulate("r2g", seed=150, subject=110, repetitions=10, imu_rate_hz=50.0)
     before, after = score(sim, base), score(sim, floor)
-    assert before["duration_within_0_1_s"] == 0.925  # the diagnosed trial, as the default leaves it
-    assert after["duration_within_0_1_s"] >= 0.975 and after["correct"] == 1.0
+    # the diagnosed trial: 92.5 % by default at issue 31's ninth round
+    assert after["duration_within_0_1_s"] >= max(0.975, before["duration_within_0_1_s"]) and after["correct"] == 1.0
     assert after["onset_mae_s"] < before["onset_mae_s"]
     assert abs(after["mean_duration_error_s"]) < abs(before["mean_duration_error_s"])
