@@ -72,7 +72,7 @@ import numpy as np
 from imulog.process.segmentation.arrival import gravity_free, slow_tail_end
 from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
 from imulog.process.segmentation.flanks import flank_zero, speed_flank_zero
-from imulog.process.segmentation.noise_floor import trim_offset, trim_onset
+from imulog.process.segmentation.noise_floor import trim_unmoved
 from imulog.process.segmentation.speed_profile import profile_end
 
 
@@ -508,11 +508,6 @@ def refine_with_accelerometer(
             )
             out_e[k] = max(int(out_e[k]), end)
     if params.gyro_floor:  # step 10: the gyroscope's boundaries that no step moved, trimmed to its noise floor
-        most = int(np.ceil(rate_hz / (2.0 * gyr_cut)))  # samples: the filtered noise's correlation time
-        for k, (pre, post, hand_s, hand_e) in enumerate(rests):  # as far as the hand's own flank agrees
-            if pre is not None and hand_s is not None and hand_s > out_s[k] == ss[k] and pre[1] <= out_s[k]:
-                out_s[k] = min(trim_onset(gyr, int(out_s[k]), int(out_e[k]), pre, most), hand_s)
-            if post is not None and hand_e is not None and hand_e < out_e[k] == ee[k] and post[0] >= out_e[k]:
-                out_e[k] = max(trim_offset(gyr, int(out_s[k]), int(out_e[k]), post, most), hand_e)
+        trim_unmoved(gyr, int(np.ceil(rate_hz / (2.0 * gyr_cut))), ss, ee, out_s, out_e, rests)
     s[order], e[order] = out_s, out_e
     return s, e

@@ -46,3 +46,15 @@ def trim_offset(gyr: np.ndarray, start: int, end: int, window: tuple[int, int], 
     while j - 1 > start and np.linalg.norm(gyr[j - 1] - bias) <= floor:
         j -= 1
     return j if end - j <= most else int(end)
+
+
+def trim_unmoved(gyr: np.ndarray, most: int, gyro_s, gyro_e, out_s: np.ndarray, out_e: np.ndarray, rests) -> None:
+    """Step 10 in place on ``out_s``/``out_e`` (time-ordered phases, sample indices): an onset (offset) still at the
+    gyroscope's ``gyro_s`` (``gyro_e``) is trimmed (:func:`trim_onset`, :func:`trim_offset`, at most ``most``
+    samples; ``most``: the filtered noise's correlation time) as far as the phase's own flank agrees. ``rests``:
+    per phase (rest window before, rest window after, the flank's own onset, its own offset), None where missing."""
+    for k, (pre, post, hand_s, hand_e) in enumerate(rests):
+        if pre is not None and hand_s is not None and hand_s > out_s[k] == gyro_s[k] and pre[1] <= out_s[k]:
+            out_s[k] = min(trim_onset(gyr, int(out_s[k]), int(out_e[k]), pre, most), hand_s)
+        if post is not None and hand_e is not None and hand_e < out_e[k] == gyro_e[k] and post[0] >= out_e[k]:
+            out_e[k] = max(trim_offset(gyr, int(out_s[k]), int(out_e[k]), post, most), hand_e)
