@@ -129,6 +129,7 @@ def table(trials, methods, variants) -> None:
 GRID_METHODS = {
     "hand (default)": PhaseParams(),
     "hand without step 9": PhaseParams(hand=HandParams(profile_rest_s=0.0)),  # the default until issue 31's 7th round
+    "hand + gyroscope floor (step 10)": PhaseParams(hand=HandParams(gyro_floor=True)),  # issue 31's 9th round, off
     "gyroscope only": PhaseParams(hand=HandParams(enabled=False)),
     "published (--no-refine)": PhaseParams(
         dynamos=DynamosParams(refine_boundaries=False), boundaries=BoundaryParams(enabled=False)

@@ -134,3 +134,38 @@ def test_an_arrival_at_the_limit_of_the_search_is_no_arrival():
     wanted it later), and moved a right offset 1.0 s late. An arrival at the search's limit is not used."""
     errors = _offset_errors("stroke-slow", 112, 81, HandParams())
     assert abs(errors[(10, "return_hand")]) < 0.1
+
+
+def test_step_9_runs_on_the_drinking_task_only():
+    """Step 9 was validated on the drinking task; on daily-life movements (protocol ``movements``) it changed 1-2
+    of 180 minutes of moving time a simulated recording, not for the better (benchmarks/home_phases_accuracy.py),
+    so the phases step runs it for ``r2g`` only (issue 31, ninth round). Three 6-s reaches whose rest window lies
+    inside the last part: step 9 moves their offsets when asked, and ``process phases``' computation of a
+    ``movements`` trial gives the phases without it."""
+    from test_segmentation_flanks import _slow_reaches
+
+    from imulog.process.segmentation.boundaries import refine_phase_boundaries
+    from imulog.process.segmentation.hand import refine_with_accelerometer
+    from imulog.process.segmentation.pipeline import PhaseParams, hand_params
+    from imulog.steps.phases import compute_phases
+
+    assert hand_params(PhaseParams(protocol="r2g")).profile_rest_s == 1.0
+    assert hand_params(PhaseParams(protocol="movements")).profile_rest_s == 0.0
+    t, acc, gyr, truth = _slow_reaches(6.0, 0.25, np.random.default_rng(4))
+    s = np.round((truth[:, 0] + 0.2) * RATE).astype(int)
+    e = np.round((truth[:, 0] + 2.0 - 0.2) * RATE).astype(int)
+    gs, ge = refine_phase_boundaries(gyr, RATE, s, e)
+    assert not np.array_equal(
+        refine_with_accelerometer(acc, gyr, RATE, gs, ge, ON)[1],
+        refine_with_accelerometer(acc, gyr, RATE, gs, ge, OFF)[1],
+    )  # step 9 acts here
+    t_ns = np.round(t * 1e9).astype(np.int64)
+    phases = {}
+    for label, params in (
+        ("default", PhaseParams(protocol="movements")),
+        ("off", PhaseParams(protocol="movements", hand=OFF)),
+    ):
+        streams, _ = compute_phases(t_ns, gyr, "wrist", params, acc=acc)
+        phases[label] = next(x for x in streams if x.topic == "/derived/phases/wrist")
+    assert len(phases["default"].start_ns) == 3
+    assert np.array_equal(phases["default"].end_ns, phases["off"].end_ns)

@@ -134,7 +134,13 @@ def phase_pieces(
         fill_gaps,
         refine_with_accelerometer,
     )
-    from imulog.process.segmentation.pipeline import METHODS, PROTOCOLS, movements_as_phases, template_movements
+    from imulog.process.segmentation.pipeline import (
+        METHODS,
+        PROTOCOLS,
+        hand_params,
+        movements_as_phases,
+        template_movements,
+    )
     from imulog.process.segmentation.repetitions import segment_repetitions
     from imulog.process.segmentation.zero_velocity import gyro_norm_static, mask_from_intervals
 
@@ -159,6 +165,7 @@ def phase_pieces(
     ctx = total if single else max(1, int(round(c.context_s * rate)))
     refine = p.boundaries.enabled and (p.method != "dynamos" or dp.refine_boundaries)
     use_hand = refine and p.hand.enabled
+    hp = hand_params(p)  # step 9 on the drinking task only
     norm = NormMemory() if single else NormFile(temp_dir)
     try:
         # pass 1: the filtered norm, the white-noise summaries, the gap counts
@@ -242,7 +249,7 @@ def phase_pieces(
             _, g, a, _ = rd.get(w0, w1)
             if hand:
                 rs, re_ = refine_with_accelerometer(
-                    a, g, rate, starts[sl] - w0, ends[sl] - w0, p.hand, cutoff_hz=acc_cut, bounds=(lo - w0, hi - w0)
+                    a, g, rate, starts[sl] - w0, ends[sl] - w0, hp, cutoff_hz=acc_cut, bounds=(lo - w0, hi - w0)
                 )
             else:
                 rs, re_ = refine_phase_boundaries(

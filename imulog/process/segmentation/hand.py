@@ -53,7 +53,12 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
    rest window of step 2 (a window inside a steadily decelerating last part passes as a rest), starts after the
    onset, covers the offset, stands out of the velocity's noise, lies before the search's last block and explains
    the phase's own last part (its residual there at most ``profile_residual_ratio`` x the rest's), the offset
-   moves to it (on by default since issue 31's seventh round; ``profile_rest_s = 0`` turns it off).
+   moves to it (on by default since issue 31's seventh round; ``profile_rest_s = 0`` turns it off; the phases step
+   runs it on the drinking task only, :func:`~imulog.process.segmentation.pipeline.hand_params`);
+10. with ``gyro_floor`` (an option, off): an onset (offset) that no step moved, the gyroscope's own, loses the
+    samples at it that are at the gyroscope's noise floor in the rest window, up to the filtered noise's
+    correlation time and as far as the phase's own flank of step 7 agrees
+    (:mod:`~imulog.process.segmentation.noise_floor`).
 
 Pure numpy/scipy; intervals are half-open sample ranges ``[start, end)``.
 """
@@ -67,6 +72,7 @@ import numpy as np
 from imulog.process.segmentation.arrival import gravity_free, slow_tail_end
 from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
 from imulog.process.segmentation.flanks import flank_zero, speed_flank_zero
+from imulog.process.segmentation.noise_floor import trim_unmoved
 from imulog.process.segmentation.speed_profile import profile_end
 
 
@@ -123,6 +129,8 @@ class HandParams:
         point 1: stroke-curved last submovements of 9-11 cm/s at 2-3 levels; a rest's 1-2 cm/s drift stays under).
     settled_beyond_shift: a continuation that settles before the rest window extends the phase even when it ends
         more than ``max_shift_s`` after the gyroscope's offset (the bound stays on step 5's walk).
+    gyro_floor: a gyroscope boundary that no step moved loses its samples at the rest window's gyroscope noise
+        floor (step 10, :mod:`~imulog.process.segmentation.noise_floor`, issue 31 ninth round).
     rest_check_s: a slow last part of a phase at ``velocity_level_mps`` or more with next to no acceleration
         extends the offset when the velocity relative to the rest window stays under half that speed for this
         long (s) after the window (the window is a rest, not a hand cruising or drifting); 0: off.
@@ -158,6 +166,7 @@ class HandParams:
     profile_residual_ratio: float = 2.0
     resume_cruise: bool = True
     settled_beyond_shift: bool = True
+    gyro_floor: bool = False
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:
@@ -296,13 +305,21 @@ def _extend_offset(
 
 
 def _extrapolated(
-    a: np.ndarray, v: np.ndarray, first: int, inner: int, level: float, params: HandParams, rate_hz: float
+    a: np.ndarray,
+    v: np.ndarray,
+    first: int,
+    inner: int,
+    level: float,
+    params: HandParams,
+    rate_hz: float,
+    flank: list | None = None,
 ) -> int:
     """Onset (local index into ``a`` and ``v``, time order from the rest) at the start of its acceleration flank
     (:func:`~imulog.process.segmentation.flanks.flank_zero`, searched from ``first``, the onset the level gave)
     or, for a movement too slow for its acceleration to clear the noise, of its speed
     (:func:`~imulog.process.segmentation.flanks.speed_flank_zero`), or at ``inner`` (the gyroscope's onset) if
-    that is earlier; ``first`` when there is no such flank. Never before the array's start (the rest window)."""
+    that is earlier; ``first`` when there is no such flank. Never before the array's start (the rest window).
+    ``flank``: a list that gets the flank's own start (first sample after ``t0``, not bounded by ``inner``)."""
     if params.flank_top_n_level <= 0:
         return first
     span = int(round(params.flank_search_s * rate_hz))
@@ -314,14 +331,19 @@ def _extrapolated(
         z = speed_flank_zero(v, first, params.velocity_level_mps, fit)
     if z is None:
         return first
+    if flank is not None:
+        flank.append(max(int(np.ceil(z)), 0))
     return int(min(inner, max(int(np.ceil(z)), 0)))  # the first sample after t0
 
 
-def _offset(acc, gyr, dt, post, lo: int, b0: int, stop: int, params: HandParams, rate_hz: float, raw=None) -> int:
+def _offset(
+    acc, gyr, dt, post, lo: int, b0: int, stop: int, params: HandParams, rate_hz: float, raw=None, flank=None
+) -> int:
     """Offset (exclusive sample index) of the phase whose gyroscope offset is ``b0``, with the rest window ``post``
     after it (steps 5-8 of the module docstring); ``b0`` without a usable window. ``lo``: where the velocity
     integration may start (inside the phase); ``stop``: the next phase's guard; ``raw``: the unfiltered
-    (accelerometer, gyroscope) for the velocity's noise of step 8."""
+    (accelerometer, gyroscope) for the velocity's noise of step 8; ``flank``: a list that gets the exclusive end
+    (sample index) where the offset's own flank reaches rest, not bounded by the gyroscope's offset."""
     length = post[1] - post[0] if post is not None else 0
     quiet = max(1, int(round(params.quiet_s * rate_hz)))
     min_run = max(1, int(round(params.min_run_s * rate_hz)))
@@ -361,7 +383,10 @@ def _offset(acc, gyr, dt, post, lo: int, b0: int, stop: int, params: HandParams,
     if 0 < j <= shift or (params.settled_beyond_shift and walked <= shift < j):
         end = b0 + j
     m = len(a_all)  # the offset's flank, time reversed: from the rest into the phase
-    end = lo + m - _extrapolated(a_all[::-1], v_all[::-1], m - (end - lo), m - (b0 - lo), level, params, rate_hz)
+    own: list[int] = []
+    end = lo + m - _extrapolated(a_all[::-1], v_all[::-1], m - (end - lo), m - (b0 - lo), level, params, rate_hz, own)
+    if flank is not None:
+        flank.extend(lo + m - z for z in own)
     return slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw)
 
 
@@ -409,7 +434,8 @@ def refine_with_accelerometer(
     cut = accelerometer_cutoff_hz(raw, rate_hz, params) if cutoff_hz is None else cutoff_hz
     acc = lowpass_axes(raw, rate_hz, cut)
     gyr_raw = fill_gaps(gyr_rad_s)
-    gyr = lowpass_axes(gyr_raw, rate_hz, min(25.0, 0.45 * rate_hz))
+    gyr_cut = min(25.0, 0.45 * rate_hz)
+    gyr = lowpass_axes(gyr_raw, rate_hz, gyr_cut)
     dt = 1.0 / rate_hz
     first, n = bounds if bounds is not None else (0, len(acc))
     length = max(3, int(round(params.rest_window_s * rate_hz)))
@@ -423,6 +449,7 @@ def refine_with_accelerometer(
     ss, ee = s[order].copy(), e[order].copy()
     out_s, out_e = ss.copy(), ee.copy()
     fits = []  # per phase: where step 9's fit starts and step 2's rest window after it
+    rests = []  # per phase: step 2's rest windows before and after it
     for k in range(len(ss)):
         a0, b0 = int(ss[k]), int(ee[k])
         prev_end = int(out_e[k - 1]) if k > 0 else first
@@ -432,7 +459,9 @@ def refine_with_accelerometer(
         inside = int(round(params.flank_search_s * rate_hz))  # the flank can lie inside the gyroscope's phase
         lo = max(a0, b0 - inside)
         stop = min(next_start, n) - guard
-        out_e[k] = _offset(acc, gyr, dt, post, lo, b0, stop, params, rate_hz, (raw, gyr_raw))
+        flank_end: list[int] = []
+        flank_start: list[int] = []
+        out_e[k] = _offset(acc, gyr, dt, post, lo, b0, stop, params, rate_hz, (raw, gyr_raw), flank_end)
         reach_in = int(round(params.speed_reach_s * rate_hz))  # a slow start reaches the speed level late
         hi = max(a0, min(int(out_e[k]), a0 + max(inside, reach_in)))
         for _ in range(3):  # likewise before the onset
@@ -464,8 +493,13 @@ def refine_with_accelerometer(
             )
             if 0 < i <= shift:
                 out_s[k] = a0 - i
-            out_s[k] = pre[1] + _extrapolated(a_all, v_all, int(out_s[k]) - pre[1], a0 - pre[1], level, params, rate_hz)
+            own: list[int] = []
+            out_s[k] = pre[1] + _extrapolated(
+                a_all, v_all, int(out_s[k]) - pre[1], a0 - pre[1], level, params, rate_hz, own
+            )
+            flank_start = [pre[1] + z for z in own]
         fits.append((lo, post[0] if post is not None else None))
+        rests.append((pre, post, flank_start[-1] if flank_start else None, flank_end[-1] if flank_end else None))
     for k, (lo, window) in enumerate(fits):  # step 9, once every onset is known: the next phase's bounds the rest
         stop = (int(out_s[k + 1]) if k + 1 < len(ss) else n) - guard
         if window is not None and out_e[k] < window < stop:
@@ -473,5 +507,7 @@ def refine_with_accelerometer(
                 acc, gyr, dt, lo, int(out_s[k]), int(out_e[k]), window, stop, params, rate_hz, (raw, gyr_raw)
             )
             out_e[k] = max(int(out_e[k]), end)
+    if params.gyro_floor:  # step 10: the gyroscope's boundaries that no step moved, trimmed to its noise floor
+        trim_unmoved(gyr, int(np.ceil(rate_hz / (2.0 * gyr_cut))), ss, ee, out_s, out_e, rests)
     s[order], e[order] = out_s, out_e
     return s, e

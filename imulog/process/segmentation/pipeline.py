@@ -80,6 +80,16 @@ class PhaseResult:
     norm: np.ndarray
 
 
+def hand_params(params: PhaseParams) -> HandParams:
+    """The accelerometer step's parameters for ``params.protocol``: step 9 (the speed profile,
+    ``HandParams.profile_rest_s``) runs on the drinking task (``r2g``) only, where it was validated (issue 31); on
+    daily-life movements it changed 1-2 of 180 minutes of moving time a recording, not for the better on average,
+    at +15 % of the step's CPU (``benchmarks/home_phases_accuracy.py``, docs/long_recordings.md)."""
+    if params.protocol == "r2g" or params.hand.profile_rest_s <= 0:
+        return params.hand
+    return replace(params.hand, profile_rest_s=0.0)
+
+
 def template_movements(gyr, rate_hz, norm, params: PhaseParams):
     """Movements of method ``template``: DynAMoS repetitions averaged into a template, matched over ``norm``."""
     seg = dynamos(gyr, rate_hz, params.dynamos)
@@ -142,7 +152,7 @@ def segment_phases(
     if refine and len(phases):  # onsets/offsets where the gyroscope leaves/reaches its static noise
         ps, pe = refine_phase_boundaries(gyr, rate_hz, phases.start, phases.end, params.boundaries)
         if acc_mps2 is not None and params.hand.enabled:  # ... and where the hand leaves/reaches its rest
-            ps, pe = refine_with_accelerometer(acc_mps2, gyr, rate_hz, ps, pe, params.hand)
+            ps, pe = refine_with_accelerometer(acc_mps2, gyr, rate_hz, ps, pe, hand_params(params))
         phases = replace(phases, start=ps, end=pe)
     if params.static == "movements":
         static = static_from_movements(len(gyr), start, end, rate_hz, params.static_margin_s)
