@@ -13,7 +13,8 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
 1. the accelerometer is low-passed per axis (zero-phase, 2nd order, ``cutoff_hz``, lowered for a noisy
    sensor like the gyroscope's, :func:`~imulog.process.segmentation.boundaries.adaptive_cutoff_hz`);
 2. a rest window of ``rest_window_s`` in the adjacent gap (at its middle, or ``rest_distance_s`` from the phase
-   in a long rest; moved further out when it is not still, :func:`_still_window`) gives the static
+   in a long rest; moved further out when it is not still,
+   :func:`~imulog.process.segmentation.rest_window.still_window`) gives the static
    specific force ``f_rest`` (mean, the sensor's gravity reading and bias) and the noise
    (per-axis 1.4826 MAD, rms over the axes);
 3. between the boundary and the rest window the specific force is rotated into the rest window's sensor
@@ -73,6 +74,7 @@ from imulog.process.segmentation.arrival import gravity_free, slow_tail_end
 from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
 from imulog.process.segmentation.flanks import flank_zero, speed_flank_zero
 from imulog.process.segmentation.noise_floor import trim_unmoved
+from imulog.process.segmentation.rest_window import still_window
 from imulog.process.segmentation.speed_profile import profile_end
 
 
@@ -177,63 +179,6 @@ def fill_gaps(x: np.ndarray) -> np.ndarray:
         if bad.any() and not bad.all():
             x[bad, j] = np.interp(np.flatnonzero(bad), np.flatnonzero(~bad), x[~bad, j])
     return x
-
-
-def _rest_window(lo: int, hi: int, length: int, reach: int, from_end: bool):
-    """``[a, a + length)`` in the gap ``[lo, hi)``: centred at the gap's middle or, in a longer gap, ``reach``
-    samples from the phase (``lo`` side; the ``hi`` side when ``from_end``); None below 3 samples.
-    The middle of a rest is farthest from both phases (the hand is most surely still there); a nearer window
-    in a long rest keeps the velocity integrated from it accurate."""
-    lo, hi = max(0, int(lo)), int(hi)
-    length = min(int(length), hi - lo)
-    if length < 3:
-        return None
-    centre = (lo + hi) // 2
-    if hi - lo > 2 * reach:
-        centre = hi - reach if from_end else lo + reach
-    a = int(np.clip(centre - length // 2, lo, hi - length))
-    return a, a + length
-
-
-def _still_window(acc: np.ndarray, lo: int, hi: int, length: int, reach: int, from_end: bool, n_sigma: float = 2.5):
-    """:func:`_rest_window`, moved away from the phase (up to the gap's middle) when it is not still.
-
-    The window ``reach`` from the phase's gyroscope boundary lies in the rest only if that boundary is right;
-    a slow last submovement (the wrist no longer turning) can still be under way there. Of the windows between
-    the default position and the gap's middle, the quietest (smallest acceleration variance, summed over the
-    axes) is the surest rest (the middle itself can lie in a calibration wave); the one nearest the phase is
-    taken whose mean specific force (m/s^2) is within ``n_sigma`` x the quietest's noise (per-axis robust sd,
-    rms over the axes; half the motion level) of the quietest's mean (a hand still decelerating into it is not
-    still; a rest drifting at 1-2 cm/s, whose acceleration stays under 0.04 m/s^2, is left as it is) and whose
-    variance is at most twice the smallest: the default position whenever it is as still as the quietest; else
-    half a window beyond the first such window (the quietest when none is)."""
-    w = _rest_window(lo, hi, length, reach, from_end)
-    if w is None or hi - lo <= 2 * reach:
-        return w
-    length = w[1] - w[0]
-    mid = (lo + hi) // 2 - length // 2
-    first, last = (mid, w[0]) if from_end else (w[0], mid)
-    if last <= first:
-        return w
-    seg = np.asarray(acc[first : last + length], dtype=float)
-    c1 = np.concatenate([np.zeros((1, 3)), np.cumsum(seg, axis=0)])
-    c2 = np.concatenate([np.zeros((1, 3)), np.cumsum(seg**2, axis=0)])
-    s1, s2 = c1[length:] - c1[:-length], c2[length:] - c2[:-length]
-    var = (s2 - s1**2 / length).sum(axis=1) / length
-    quiet = first + int(np.argmin(var))  # the surest rest: the quietest window of the range
-    ref = np.asarray(acc[quiet : quiet + length], dtype=float)
-    centre = np.median(ref, axis=0)
-    noise = float(np.sqrt(np.mean((1.4826 * np.median(np.abs(ref - centre), axis=0)) ** 2)))
-    shift = np.linalg.norm(s1 / length - ref.mean(axis=0), axis=1)
-    ok = np.flatnonzero((var <= 2.0 * var.min()) & (shift <= n_sigma * noise))
-    if len(ok) == 0:
-        return quiet, quiet + length
-    a = first + int(ok[-1] if from_end else ok[0])
-    if a == w[0]:  # the default position is still
-        return w
-    # half a window further: the test averages over the window, so its near edge may still see a tail's end
-    a = max(a - length // 2, mid) if from_end else min(a + length // 2, mid)
-    return a, a + length
 
 
 def sustained(mask: np.ndarray, min_run: int) -> np.ndarray:
@@ -356,7 +301,7 @@ def _offset(
         an, vn = np.linalg.norm(a, axis=1), np.linalg.norm(v, axis=1)
         if not sustained(an > level, min_run)[-quiet:].any():
             break
-        later = _still_window(acc, post[1], stop, length, length, False, 0.5 * params.n_sigma)
+        later = still_window(acc, post[1], stop, length, length, False, 0.5 * params.n_sigma)
         if later is None or later[0] <= post[0]:
             break
         post = later
@@ -454,8 +399,8 @@ def refine_with_accelerometer(
         a0, b0 = int(ss[k]), int(ee[k])
         prev_end = int(out_e[k - 1]) if k > 0 else first
         next_start = int(ss[k + 1]) if k + 1 < len(ss) else n
-        post = _still_window(acc, b0 + guard, min(next_start, n) - guard, length, reach, False, 0.5 * params.n_sigma)
-        pre = _still_window(acc, prev_end + guard, a0 - guard, length, reach, True, 0.5 * params.n_sigma)
+        post = still_window(acc, b0 + guard, min(next_start, n) - guard, length, reach, False, 0.5 * params.n_sigma)
+        pre = still_window(acc, prev_end + guard, a0 - guard, length, reach, True, 0.5 * params.n_sigma)
         inside = int(round(params.flank_search_s * rate_hz))  # the flank can lie inside the gyroscope's phase
         lo = max(a0, b0 - inside)
         stop = min(next_start, n) - guard
@@ -473,7 +418,7 @@ def refine_with_accelerometer(
             an, vn = np.linalg.norm(a, axis=1)[::-1], np.linalg.norm(v, axis=1)[::-1]
             if not sustained(an > level, min_run)[-quiet:].any():
                 break
-            earlier = _still_window(acc, prev_end + guard, pre[0], length, length, True, 0.5 * params.n_sigma)
+            earlier = still_window(acc, prev_end + guard, pre[0], length, length, True, 0.5 * params.n_sigma)
             if earlier is None or earlier[1] >= pre[1]:
                 break
             pre = earlier
