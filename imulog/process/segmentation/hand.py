@@ -169,6 +169,7 @@ class HandParams:
     resume_cruise: bool = True
     settled_beyond_shift: bool = True
     gyro_floor: bool = False
+    profile_alone: bool = True
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:

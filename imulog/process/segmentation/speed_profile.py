@@ -212,7 +212,7 @@ def profile_end(
     # beyond the rest window's start, the offset inside the fitted movement's main deceleration (at half its peak
     # speed or more: a window there takes the deceleration for a bias); the fit's own spread (0.1-0.3 s) is larger
     # than the last 0.1-0.3 s a sensor cannot resolve, which it does not extend (see docs/accuracy.md)
-    if t_end <= max(end, window) or not params.profile_min_s <= s_end < 1.0 or dur > t_hi * rate_hz:
+    if t_end <= max(end, end if params.profile_alone else window) or not params.profile_min_s <= s_end < 1.0 or dur > t_hi * rate_hz:
         return end
     # an arrival in the search's last block is the search's limit, not an arrival: the fit wanted it in the far
     # window, which is then no rest (the next movement starting early)
@@ -229,7 +229,8 @@ def profile_end(
     w0, w1 = rest
     acc_sd = max(white_noise(raw[0], w0, w1), params.min_level_mps2 / params.n_sigma)  # a quantised sensor
     gyr_sd = white_noise(raw[1], w0, w1)
-    speed = float(np.linalg.norm(k)) * dur * dt * speed_left(s_end)  # at the offset, extrapolated from the rest
+    s_peak = min(s_end, 0.5) if params.profile_alone else s_end
+    speed = float(np.linalg.norm(k)) * dur * dt * speed_left(s_peak)  # at the offset, extrapolated from the rest
     sd = velocity_noise_mps(np.array([(t_end - end) * dt]), dt, (w1 - t_end) * dt, acc_sd, gyr_sd)[0]
     if speed < params.n_sigma * sd:
         return end
