@@ -50,9 +50,11 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
    a drift fails the check); a slower last part, under that speed, where its speed stands ``n_sigma`` sd out of
    the velocity's own noise (:func:`~imulog.process.segmentation.arrival.slow_tail_end`);
 9. the phase's last movement is fitted as one minimum-jerk deceleration from inside the phase to a rest window
-   near the gap's end (:mod:`~imulog.process.segmentation.speed_profile`): when its arrival lies beyond the
-   rest window of step 2 (a window inside a steadily decelerating last part passes as a rest), starts after the
-   onset, covers the offset, stands out of the velocity's noise, lies before the search's last block and explains
+   near the gap's end (:mod:`~imulog.process.segmentation.speed_profile`): when its arrival lies after the offset
+   (with ``profile_alone``, the default since issue 31's tenth round; else beyond the rest window of step 2, since a
+   window inside a steadily decelerating last part passes as a rest), starts after the
+   onset, covers the offset, stands out of the velocity's noise (its peak speed after the offset; else its speed
+   at the offset), lies before the search's last block and explains
    the phase's own last part (its residual there at most ``profile_residual_ratio`` x the rest's), the offset
    moves to it (on by default since issue 31's seventh round; ``profile_rest_s = 0`` turns it off; the phases step
    runs it on the drinking task only, :func:`~imulog.process.segmentation.pipeline.hand_params`);
@@ -131,6 +133,10 @@ class HandParams:
         point 1: stroke-curved last submovements of 9-11 cm/s at 2-3 levels; a rest's 1-2 cm/s drift stays under).
     settled_beyond_shift: a continuation that settles before the rest window extends the phase even when it ends
         more than ``max_shift_s`` after the gyroscope's offset (the bound stays on step 5's walk).
+    profile_alone: step 9 judges the fitted last movement on its own: its arrival anywhere after the offset (also
+        before step 2's window, which can be a real rest after a slow last submovement that steps 5-8 missed) and
+        its peak speed after the offset (not its speed at the offset, which is small at a dip between
+        submovements) against the velocity's noise (issue 31 tenth round; off: tied to step 2's window as before).
     gyro_floor: a gyroscope boundary that no step moved loses its samples at the rest window's gyroscope noise
         floor (step 10, :mod:`~imulog.process.segmentation.noise_floor`, issue 31 ninth round).
     rest_check_s: a slow last part of a phase at ``velocity_level_mps`` or more with next to no acceleration

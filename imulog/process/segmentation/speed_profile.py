@@ -18,7 +18,10 @@ and ``T``. (A free line ``b t`` as well, for the tilt of a gyroscope bias error,
 deceleration stand for a sharp stop: offsets went 1-2.6 s into plain rests.) The fitted arrival is kept when
 it lies beyond the phase's first rest window (that window lay inside the movement), the fitted movement starts
 after the phase's onset and the offset lies in its main deceleration (``profile_min_s`` of ``T`` or more before
-the arrival), it decelerates along the phase's motion, its speed at the offset, ``|K| T int_0^s g``, stands
+the arrival), it decelerates along the phase's motion, its speed at the offset, ``|K| T int_0^s g`` (with
+``profile_alone``, the default since issue 31's tenth round: its peak speed after the offset, ``s`` at most 1/2,
+and the arrival need only lie after the offset: step 2's window can be a real rest after a slow last submovement
+that steps 5-8 missed, and an offset at a dip between two submovements has little speed of the fitted one), stands
 ``n_sigma`` sd out of the velocity's noise (:func:`~imulog.process.segmentation.arrival.velocity_noise_mps`,
 measured at the far window) over the time from the offset to the arrival, with the rest from the arrival to
 the window's end as the rest window, and the profile integrated back from the far window stays within
