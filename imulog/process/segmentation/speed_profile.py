@@ -215,7 +215,11 @@ def profile_end(
     # beyond the rest window's start, the offset inside the fitted movement's main deceleration (at half its peak
     # speed or more: a window there takes the deceleration for a bias); the fit's own spread (0.1-0.3 s) is larger
     # than the last 0.1-0.3 s a sensor cannot resolve, which it does not extend (see docs/accuracy.md)
-    if t_end <= max(end, end if params.profile_alone else window) or not params.profile_min_s <= s_end < 1.0 or dur > t_hi * rate_hz:
+    if (
+        t_end <= max(end, end if params.profile_alone else window)
+        or not params.profile_min_s <= s_end < 1.0
+        or dur > t_hi * rate_hz
+    ):
         return end
     # an arrival in the search's last block is the search's limit, not an arrival: the fit wanted it in the far
     # window, which is then no rest (the next movement starting early)
