@@ -43,6 +43,9 @@ from imulog.process.segmentation.arrival import gravity_free, velocity_noise_mps
 from imulog.process.segmentation.boundaries import quietest_window
 
 _MAX_CELLS = 1 << 21  # candidate x sample cells per block (16 MB of float64)
+# the speed (in sd per axis of the velocity's noise) that a still hand's 3-axis velocity noise stays under 95 % of
+# the time: sqrt of the chi-square 95 % quantile with 3 degrees of freedom (issue 31, tenth round)
+STILL_SPEED_SD = 2.795
 
 
 def decel_shape(s: np.ndarray) -> np.ndarray:
@@ -212,7 +215,7 @@ def profile_end(
     i_end, dur, k = fit
     t_end = lo + int(np.ceil(i_end))
     s_end = (t_end - end) / dur
-    # beyond the rest window's start, the offset inside the fitted movement's main deceleration (at half its peak
+    # after the offset (tied to step 2's window: beyond its start), the offset inside the fitted movement's main deceleration (at half its peak
     # speed or more: a window there takes the deceleration for a bias); the fit's own spread (0.1-0.3 s) is larger
     # than the last 0.1-0.3 s a sensor cannot resolve, which it does not extend (see docs/accuracy.md)
     if (
@@ -237,7 +240,8 @@ def profile_end(
     acc_sd = max(white_noise(raw[0], w0, w1), params.min_level_mps2 / params.n_sigma)  # a quantised sensor
     gyr_sd = white_noise(raw[1], w0, w1)
     s_peak = min(s_end, 0.5) if params.profile_alone else s_end
-    speed = float(np.linalg.norm(k)) * dur * dt * speed_left(s_peak)  # at the offset, extrapolated from the rest
+    # at the offset, extrapolated from the rest (judged alone: the fitted movement's peak after the offset)
+    speed = float(np.linalg.norm(k)) * dur * dt * speed_left(s_peak)
     sd = velocity_noise_mps(np.array([(t_end - end) * dt]), dt, (w1 - t_end) * dt, acc_sd, gyr_sd)[0]
     if speed < params.n_sigma * sd:
         return end
@@ -247,4 +251,21 @@ def profile_end(
     miss = velocity_misfit(a, v, i_end, dur, dt)[end - lo :]
     if np.any(miss > params.n_sigma * sd_v):
         return end
+    if params.profile_alone and t_end <= window and still_from_window(acc, gyr, dt, raw, end, window, params, rate_hz):
+        return end
     return t_end
+
+
+def still_from_window(acc, gyr, dt, raw, end: int, window: int, params, rate_hz: float) -> bool:
+    """Whether the hand is still at the offset ``end`` as seen from step 2's rest window starting at ``window``: the
+    velocity integrated back from that window (m/s) within :data:`STILL_SPEED_SD` sd of its noise there. A movement fitted
+    (from the far window) across a phase that stopped at its offset, with step 2's window in the rest after it,
+    is not the phase's; a slow last submovement that steps 5-8 missed moves at several sd from that window too."""
+    near = (window, window + max(3, int(round(params.rest_window_s * rate_hz))))
+    if near[0] <= end:
+        return False
+    v2 = gravity_free(acc, gyr, dt, near, end, near[0])[1][0]
+    acc_sd = max(white_noise(raw[0], *near), params.min_level_mps2 / params.n_sigma)
+    tau = np.array([(near[0] - end) * dt])
+    sd = velocity_noise_mps(tau, dt, (near[1] - near[0]) * dt, acc_sd, white_noise(raw[1], *near))[0]
+    return bool(np.linalg.norm(v2) <= STILL_SPEED_SD * sd)
