@@ -134,7 +134,8 @@ class HandParams:
     settled_beyond_shift: a continuation that settles before the rest window extends the phase even when it ends
         more than ``max_shift_s`` after the gyroscope's offset (the bound stays on step 5's walk).
     profile_alone: step 9 judges the fitted last movement on its own: its arrival anywhere after the offset (also
-        before step 2's window, which can be a real rest after a slow last submovement that steps 5-8 missed) and
+        before step 2's window, which can be a real rest after a slow last submovement that steps 5-8 missed, when
+        the hand moves at the offset as seen from that window too) and
         its peak speed after the offset (not its speed at the offset, which is small at a dip between
         submovements) against the velocity's noise (issue 31 tenth round; off: tied to step 2's window as before).
     gyro_floor: a gyroscope boundary that no step moved loses its samples at the rest window's gyroscope noise

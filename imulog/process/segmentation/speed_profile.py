@@ -21,7 +21,8 @@ after the phase's onset and the offset lies in its main deceleration (``profile_
 the arrival), it decelerates along the phase's motion, its speed at the offset, ``|K| T int_0^s g`` (with
 ``profile_alone``, the default since issue 31's tenth round: its peak speed after the offset, ``s`` at most 1/2,
 and the arrival need only lie after the offset: step 2's window can be a real rest after a slow last submovement
-that steps 5-8 missed, and an offset at a dip between two submovements has little speed of the fitted one), stands
+that steps 5-8 missed, when the hand moves at the offset as seen from that window too (:func:`still_from_window`),
+and an offset at a dip between two submovements has little speed of the fitted one), stands
 ``n_sigma`` sd out of the velocity's noise (:func:`~imulog.process.segmentation.arrival.velocity_noise_mps`,
 measured at the far window) over the time from the offset to the arrival, with the rest from the arrival to
 the window's end as the rest window, and the profile integrated back from the far window stays within
