@@ -13,7 +13,8 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
 1. the accelerometer is low-passed per axis (zero-phase, 2nd order, ``cutoff_hz``, lowered for a noisy
    sensor like the gyroscope's, :func:`~imulog.process.segmentation.boundaries.adaptive_cutoff_hz`);
 2. a rest window of ``rest_window_s`` in the adjacent gap (at its middle, or ``rest_distance_s`` from the phase
-   in a long rest; moved further out when it is not still, :func:`_still_window`) gives the static
+   in a long rest; moved further out when it is not still,
+   :func:`~imulog.process.segmentation.rest_window.still_window`) gives the static
    specific force ``f_rest`` (mean, the sensor's gravity reading and bias) and the noise
    (per-axis 1.4826 MAD, rms over the axes);
 3. between the boundary and the rest window the specific force is rotated into the rest window's sensor
@@ -49,9 +50,11 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
    a drift fails the check); a slower last part, under that speed, where its speed stands ``n_sigma`` sd out of
    the velocity's own noise (:func:`~imulog.process.segmentation.arrival.slow_tail_end`);
 9. the phase's last movement is fitted as one minimum-jerk deceleration from inside the phase to a rest window
-   near the gap's end (:mod:`~imulog.process.segmentation.speed_profile`): when its arrival lies beyond the
-   rest window of step 2 (a window inside a steadily decelerating last part passes as a rest), starts after the
-   onset, covers the offset, stands out of the velocity's noise, lies before the search's last block and explains
+   near the gap's end (:mod:`~imulog.process.segmentation.speed_profile`): when its arrival lies after the offset
+   (with ``profile_alone``, the default since issue 31's tenth round; else beyond the rest window of step 2, since a
+   window inside a steadily decelerating last part passes as a rest), starts after the
+   onset, covers the offset, stands out of the velocity's noise (its peak speed after the offset; else its speed
+   at the offset), lies before the search's last block and explains
    the phase's own last part (its residual there at most ``profile_residual_ratio`` x the rest's), the offset
    moves to it (on by default since issue 31's seventh round; ``profile_rest_s = 0`` turns it off; the phases step
    runs it on the drinking task only, :func:`~imulog.process.segmentation.pipeline.hand_params`);
@@ -73,6 +76,7 @@ from imulog.process.segmentation.arrival import gravity_free, slow_tail_end
 from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
 from imulog.process.segmentation.flanks import flank_zero, speed_flank_zero
 from imulog.process.segmentation.noise_floor import trim_unmoved
+from imulog.process.segmentation.rest_window import still_window
 from imulog.process.segmentation.speed_profile import profile_end
 
 
@@ -129,6 +133,11 @@ class HandParams:
         point 1: stroke-curved last submovements of 9-11 cm/s at 2-3 levels; a rest's 1-2 cm/s drift stays under).
     settled_beyond_shift: a continuation that settles before the rest window extends the phase even when it ends
         more than ``max_shift_s`` after the gyroscope's offset (the bound stays on step 5's walk).
+    profile_alone: step 9 judges the fitted last movement on its own: its arrival anywhere after the offset (also
+        before step 2's window, which can be a real rest after a slow last submovement that steps 5-8 missed, when
+        the hand moves at the offset as seen from that window too) and
+        its peak speed after the offset (not its speed at the offset, which is small at a dip between
+        submovements) against the velocity's noise (issue 31 tenth round; off: tied to step 2's window as before).
     gyro_floor: a gyroscope boundary that no step moved loses its samples at the rest window's gyroscope noise
         floor (step 10, :mod:`~imulog.process.segmentation.noise_floor`, issue 31 ninth round).
     rest_check_s: a slow last part of a phase at ``velocity_level_mps`` or more with next to no acceleration
@@ -167,6 +176,7 @@ class HandParams:
     resume_cruise: bool = True
     settled_beyond_shift: bool = True
     gyro_floor: bool = False
+    profile_alone: bool = True
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:
@@ -177,63 +187,6 @@ def fill_gaps(x: np.ndarray) -> np.ndarray:
         if bad.any() and not bad.all():
             x[bad, j] = np.interp(np.flatnonzero(bad), np.flatnonzero(~bad), x[~bad, j])
     return x
-
-
-def _rest_window(lo: int, hi: int, length: int, reach: int, from_end: bool):
-    """``[a, a + length)`` in the gap ``[lo, hi)``: centred at the gap's middle or, in a longer gap, ``reach``
-    samples from the phase (``lo`` side; the ``hi`` side when ``from_end``); None below 3 samples.
-    The middle of a rest is farthest from both phases (the hand is most surely still there); a nearer window
-    in a long rest keeps the velocity integrated from it accurate."""
-    lo, hi = max(0, int(lo)), int(hi)
-    length = min(int(length), hi - lo)
-    if length < 3:
-        return None
-    centre = (lo + hi) // 2
-    if hi - lo > 2 * reach:
-        centre = hi - reach if from_end else lo + reach
-    a = int(np.clip(centre - length // 2, lo, hi - length))
-    return a, a + length
-
-
-def _still_window(acc: np.ndarray, lo: int, hi: int, length: int, reach: int, from_end: bool, n_sigma: float = 2.5):
-    """:func:`_rest_window`, moved away from the phase (up to the gap's middle) when it is not still.
-
-    The window ``reach`` from the phase's gyroscope boundary lies in the rest only if that boundary is right;
-    a slow last submovement (the wrist no longer turning) can still be under way there. Of the windows between
-    the default position and the gap's middle, the quietest (smallest acceleration variance, summed over the
-    axes) is the surest rest (the middle itself can lie in a calibration wave); the one nearest the phase is
-    taken whose mean specific force (m/s^2) is within ``n_sigma`` x the quietest's noise (per-axis robust sd,
-    rms over the axes; half the motion level) of the quietest's mean (a hand still decelerating into it is not
-    still; a rest drifting at 1-2 cm/s, whose acceleration stays under 0.04 m/s^2, is left as it is) and whose
-    variance is at most twice the smallest: the default position whenever it is as still as the quietest; else
-    half a window beyond the first such window (the quietest when none is)."""
-    w = _rest_window(lo, hi, length, reach, from_end)
-    if w is None or hi - lo <= 2 * reach:
-        return w
-    length = w[1] - w[0]
-    mid = (lo + hi) // 2 - length // 2
-    first, last = (mid, w[0]) if from_end else (w[0], mid)
-    if last <= first:
-        return w
-    seg = np.asarray(acc[first : last + length], dtype=float)
-    c1 = np.concatenate([np.zeros((1, 3)), np.cumsum(seg, axis=0)])
-    c2 = np.concatenate([np.zeros((1, 3)), np.cumsum(seg**2, axis=0)])
-    s1, s2 = c1[length:] - c1[:-length], c2[length:] - c2[:-length]
-    var = (s2 - s1**2 / length).sum(axis=1) / length
-    quiet = first + int(np.argmin(var))  # the surest rest: the quietest window of the range
-    ref = np.asarray(acc[quiet : quiet + length], dtype=float)
-    centre = np.median(ref, axis=0)
-    noise = float(np.sqrt(np.mean((1.4826 * np.median(np.abs(ref - centre), axis=0)) ** 2)))
-    shift = np.linalg.norm(s1 / length - ref.mean(axis=0), axis=1)
-    ok = np.flatnonzero((var <= 2.0 * var.min()) & (shift <= n_sigma * noise))
-    if len(ok) == 0:
-        return quiet, quiet + length
-    a = first + int(ok[-1] if from_end else ok[0])
-    if a == w[0]:  # the default position is still
-        return w
-    # half a window further: the test averages over the window, so its near edge may still see a tail's end
-    a = max(a - length // 2, mid) if from_end else min(a + length // 2, mid)
-    return a, a + length
 
 
 def sustained(mask: np.ndarray, min_run: int) -> np.ndarray:
@@ -356,7 +309,7 @@ def _offset(
         an, vn = np.linalg.norm(a, axis=1), np.linalg.norm(v, axis=1)
         if not sustained(an > level, min_run)[-quiet:].any():
             break
-        later = _still_window(acc, post[1], stop, length, length, False, 0.5 * params.n_sigma)
+        later = still_window(acc, post[1], stop, length, length, False, 0.5 * params.n_sigma)
         if later is None or later[0] <= post[0]:
             break
         post = later
@@ -454,8 +407,8 @@ def refine_with_accelerometer(
         a0, b0 = int(ss[k]), int(ee[k])
         prev_end = int(out_e[k - 1]) if k > 0 else first
         next_start = int(ss[k + 1]) if k + 1 < len(ss) else n
-        post = _still_window(acc, b0 + guard, min(next_start, n) - guard, length, reach, False, 0.5 * params.n_sigma)
-        pre = _still_window(acc, prev_end + guard, a0 - guard, length, reach, True, 0.5 * params.n_sigma)
+        post = still_window(acc, b0 + guard, min(next_start, n) - guard, length, reach, False, 0.5 * params.n_sigma)
+        pre = still_window(acc, prev_end + guard, a0 - guard, length, reach, True, 0.5 * params.n_sigma)
         inside = int(round(params.flank_search_s * rate_hz))  # the flank can lie inside the gyroscope's phase
         lo = max(a0, b0 - inside)
         stop = min(next_start, n) - guard
@@ -473,7 +426,7 @@ def refine_with_accelerometer(
             an, vn = np.linalg.norm(a, axis=1)[::-1], np.linalg.norm(v, axis=1)[::-1]
             if not sustained(an > level, min_run)[-quiet:].any():
                 break
-            earlier = _still_window(acc, prev_end + guard, pre[0], length, length, True, 0.5 * params.n_sigma)
+            earlier = still_window(acc, prev_end + guard, pre[0], length, length, True, 0.5 * params.n_sigma)
             if earlier is None or earlier[1] >= pre[1]:
                 break
             pre = earlier

@@ -18,7 +18,11 @@ and ``T``. (A free line ``b t`` as well, for the tilt of a gyroscope bias error,
 deceleration stand for a sharp stop: offsets went 1-2.6 s into plain rests.) The fitted arrival is kept when
 it lies beyond the phase's first rest window (that window lay inside the movement), the fitted movement starts
 after the phase's onset and the offset lies in its main deceleration (``profile_min_s`` of ``T`` or more before
-the arrival), it decelerates along the phase's motion, its speed at the offset, ``|K| T int_0^s g``, stands
+the arrival), it decelerates along the phase's motion, its speed at the offset, ``|K| T int_0^s g`` (with
+``profile_alone``, the default since issue 31's tenth round: its peak speed after the offset, ``s`` at most 1/2,
+and the arrival need only lie after the offset: step 2's window can be a real rest after a slow last submovement
+that steps 5-8 missed, when the hand moves at the offset as seen from that window too (:func:`still_from_window`),
+and an offset at a dip between two submovements has little speed of the fitted one), stands
 ``n_sigma`` sd out of the velocity's noise (:func:`~imulog.process.segmentation.arrival.velocity_noise_mps`,
 measured at the far window) over the time from the offset to the arrival, with the rest from the arrival to
 the window's end as the rest window, and the profile integrated back from the far window stays within
@@ -40,6 +44,9 @@ from imulog.process.segmentation.arrival import gravity_free, velocity_noise_mps
 from imulog.process.segmentation.boundaries import quietest_window
 
 _MAX_CELLS = 1 << 21  # candidate x sample cells per block (16 MB of float64)
+# the speed (in sd per axis of the velocity's noise) that a still hand's 3-axis velocity noise stays under 95 % of
+# the time: sqrt of the chi-square 95 % quantile with 3 degrees of freedom (issue 31, tenth round)
+STILL_SPEED_SD = 2.795
 
 
 def decel_shape(s: np.ndarray) -> np.ndarray:
@@ -209,10 +216,14 @@ def profile_end(
     i_end, dur, k = fit
     t_end = lo + int(np.ceil(i_end))
     s_end = (t_end - end) / dur
-    # beyond the rest window's start, the offset inside the fitted movement's main deceleration (at half its peak
+    # after the offset (tied to step 2's window: beyond its start), the offset inside the fitted movement's main deceleration (at half its peak
     # speed or more: a window there takes the deceleration for a bias); the fit's own spread (0.1-0.3 s) is larger
     # than the last 0.1-0.3 s a sensor cannot resolve, which it does not extend (see docs/accuracy.md)
-    if t_end <= max(end, window) or not params.profile_min_s <= s_end < 1.0 or dur > t_hi * rate_hz:
+    if (
+        t_end <= max(end, end if params.profile_alone else window)
+        or not params.profile_min_s <= s_end < 1.0
+        or dur > t_hi * rate_hz
+    ):
         return end
     # an arrival in the search's last block is the search's limit, not an arrival: the fit wanted it in the far
     # window, which is then no rest (the next movement starting early)
@@ -229,7 +240,9 @@ def profile_end(
     w0, w1 = rest
     acc_sd = max(white_noise(raw[0], w0, w1), params.min_level_mps2 / params.n_sigma)  # a quantised sensor
     gyr_sd = white_noise(raw[1], w0, w1)
-    speed = float(np.linalg.norm(k)) * dur * dt * speed_left(s_end)  # at the offset, extrapolated from the rest
+    s_peak = min(s_end, 0.5) if params.profile_alone else s_end
+    # at the offset, extrapolated from the rest (judged alone: the fitted movement's peak after the offset)
+    speed = float(np.linalg.norm(k)) * dur * dt * speed_left(s_peak)
     sd = velocity_noise_mps(np.array([(t_end - end) * dt]), dt, (w1 - t_end) * dt, acc_sd, gyr_sd)[0]
     if speed < params.n_sigma * sd:
         return end
@@ -239,4 +252,21 @@ def profile_end(
     miss = velocity_misfit(a, v, i_end, dur, dt)[end - lo :]
     if np.any(miss > params.n_sigma * sd_v):
         return end
+    if params.profile_alone and t_end <= window and still_from_window(acc, gyr, dt, raw, end, window, params, rate_hz):
+        return end
     return t_end
+
+
+def still_from_window(acc, gyr, dt, raw, end: int, window: int, params, rate_hz: float) -> bool:
+    """Whether the hand is still at the offset ``end`` as seen from step 2's rest window starting at ``window``: the
+    velocity integrated back from that window (m/s) within :data:`STILL_SPEED_SD` sd of its noise there. A movement fitted
+    (from the far window) across a phase that stopped at its offset, with step 2's window in the rest after it,
+    is not the phase's; a slow last submovement that steps 5-8 missed moves at several sd from that window too."""
+    near = (window, window + max(3, int(round(params.rest_window_s * rate_hz))))
+    if near[0] <= end:
+        return False
+    v2 = gravity_free(acc, gyr, dt, near, end, near[0])[1][0]
+    acc_sd = max(white_noise(raw[0], *near), params.min_level_mps2 / params.n_sigma)
+    tau = np.array([(near[0] - end) * dt])
+    sd = velocity_noise_mps(tau, dt, (near[1] - near[0]) * dt, acc_sd, white_noise(raw[1], *near))[0]
+    return bool(np.linalg.norm(v2) <= STILL_SPEED_SD * sd)
