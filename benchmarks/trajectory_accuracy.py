@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import sys
 import time
 from typing import Any
@@ -48,6 +49,19 @@ from imulog.process.trajectory_opt import (
     repetition_windows,
 )
 
+
+class RunCost:
+    """Wall and CPU (user+sys) time since it was made, for a benchmark's closing line (the machine is shared, so
+    both are printed)."""
+
+    def __init__(self) -> None:
+        self.t0, self.r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
+
+    def line(self) -> str:
+        """``"<wall> s wall, <cpu> s CPU (user+sys)"`` since construction (s, rounded)."""
+        r1 = resource.getrusage(resource.RUSAGE_SELF)
+        cpu = (r1.ru_utime - self.r0.ru_utime) + (r1.ru_stime - self.r0.ru_stime)
+        return f"{time.perf_counter() - self.t0:.0f} s wall, {cpu:.0f} s CPU (user+sys)"
 
 def _phase_params(repetitions: int, static: str = "movements"):
     """The phases step's parameters for a trial of ``repetitions``; ``static``: its zero-velocity mask

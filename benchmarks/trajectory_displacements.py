@@ -36,9 +36,7 @@ from __future__ import annotations
 
 import argparse
 import itertools
-import resource
 import sys
-import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -46,7 +44,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from trajectory_accuracy import simulated_inputs  # noqa: E402
+from trajectory_accuracy import RunCost, simulated_inputs  # noqa: E402
 
 from imulog.process import quaternion as quat  # noqa: E402
 from imulog.process import trajectory_opt, trajectory_rest_model  # noqa: E402
@@ -285,7 +283,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = ap.parse_args(argv)
     names = list(CONDITIONS) if args.grid == ["all"] else args.grid
-    t0, r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
+    cost = RunCost()
     if args.tilt:
         print("| condition | rests | tilt error at a rest, median / 90th pct (deg) | change to the next rest (deg) |")
         print("|---|---:|---|---|")
@@ -301,10 +299,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"{np.median(c):.2f} / {np.percentile(c, 90):.2f} |",
                 flush=True,
             )
-        r1 = resource.getrusage(resource.RUSAGE_SELF)
-        print(
-            f"\n{time.perf_counter() - t0:.0f} s wall, {(r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime):.0f} s CPU"
-        )
+        print(f"\n{cost.line()}")
         return 0
     errs: dict[str, dict[str, list]] = {n: {k: [] for k in (*VARIANTS, *EXTRA)} for n in names}
     print("| condition | " + " | ".join((*VARIANTS, *EXTRA)) + " |")
@@ -346,9 +341,7 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"| {group} | {n} | {100 * np.sqrt(base):.2f} | " + " | ".join(shares) + f" | {100 * np.sqrt(every):.2f} |"
         )
-    r1 = resource.getrusage(resource.RUSAGE_SELF)
-    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
-    print(f"\n{time.perf_counter() - t0:.0f} s wall, {cpu:.0f} s CPU (user+sys)")
+    print(f"\n{cost.line()}")
     return 0
 
 

@@ -41,9 +41,7 @@ defaults since).
 from __future__ import annotations
 
 import argparse
-import resource
 import sys
-import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -52,7 +50,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from rest_gate_paired import bootstrap_ci  # noqa: E402
-from trajectory_accuracy import evaluate_trial, simulated_inputs  # noqa: E402
+from trajectory_accuracy import RunCost, evaluate_trial, simulated_inputs  # noqa: E402
 
 from imulog.process.trajectory_opt import DEFAULT_PARAMS, TrajectoryParams  # noqa: E402
 
@@ -200,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
     conditions = list(CONDITIONS) if args.grid == ["all"] else args.grid
     f = lambda v: " / ".join(f"{x:.2f}" for x in v)  # noqa: E731
     g = lambda v: " / ".join(f"{x:+.2f}" for x in v)  # noqa: E731
-    t0, r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
+    cost = RunCost()
     table = [
         "| condition | pairs | before x/y/z (cm) | after x/y/z (cm) | mean after - before (cm) | 95 % CI (cm) | "
         "worse / better by > 0.5 cm | zupt before / after x/y/z (cm) |",
@@ -254,9 +252,7 @@ def main(argv: list[str] | None = None) -> int:
     n = len(conditions) * args.subjects
     for label, (y1, any1, zupt) in counts.items():
         print(f"{label}: y > 1 cm on {y1} of {n} trials, some axis > 1 cm on {any1}, some axis >= ZUPT on {zupt}")
-    r1 = resource.getrusage(resource.RUSAGE_SELF)
-    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
-    print(f"\n{time.perf_counter() - t0:.0f} s wall, {cpu:.0f} s CPU (user+sys)")
+    print(f"\n{cost.line()}")
     return 0
 
 

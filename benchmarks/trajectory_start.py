@@ -41,9 +41,7 @@ the median movement's: the fit's residuals).
 from __future__ import annotations
 
 import argparse
-import resource
 import sys
-import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -51,7 +49,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from trajectory_accuracy import evaluate_trial, simulated_inputs  # noqa: E402
+from trajectory_accuracy import RunCost, evaluate_trial, simulated_inputs  # noqa: E402
 
 from imulog.process import trajectory_methods, trajectory_opt, trajectory_rest_model  # noqa: E402
 from imulog.process.integration import shrinkage_weight  # noqa: E402
@@ -376,7 +374,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = ap.parse_args(argv)
     names = list(CONDITIONS) if args.grid == ["all"] else args.grid
-    t0, r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
+    cost = RunCost()
     if args.rest_model:
         print("| condition | rest | reference x/y/z | start x/y/z | estimate x/y/z | estimate's sd x/y/z |")
         print("|---|---|---|---|---|---|")
@@ -388,10 +386,8 @@ def main(argv: list[str] | None = None) -> int:
                 errs.append(rest_errors(inputs, args.rest_model))
             better += print_rest_errors(name, errs)
             cells += 12
-        r1 = resource.getrusage(resource.RUSAGE_SELF)
-        cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
         print(f"\nthe estimate below both the reference and the start on {better} of {cells} (rest, axis) cells")
-        print(f"{time.perf_counter() - t0:.0f} s wall, {cpu:.0f} s CPU (user+sys)")
+        print(cost.line())
         return 0
     print(
         "| trial | ZUPT x/y/z | zupt_bias x/y/z | optimized x/y/z | trust x/y/z (mm) | closure x 0.5 (mm) "
@@ -466,9 +462,7 @@ def main(argv: list[str] | None = None) -> int:
             f"brings {fixed} within both targets"
         )
     print("both targets met: " + ", ".join(f"{k} {v} of {trials}" for k, v in met.items()))
-    r1 = resource.getrusage(resource.RUSAGE_SELF)
-    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
-    print(f"{time.perf_counter() - t0:.0f} s wall, {cpu:.0f} s CPU (user+sys)")
+    print(cost.line())
     return 0
 
 
