@@ -63,6 +63,22 @@ class RunCost:
         cpu = (r1.ru_utime - self.r0.ru_utime) + (r1.ru_stime - self.r0.ru_stime)
         return f"{time.perf_counter() - self.t0:.0f} s wall, {cpu:.0f} s CPU (user+sys)"
 
+def add_trial_arguments(ap: argparse.ArgumentParser, *, grid: str = "default", first_subject: int = 40) -> None:
+    """The simulated trials a trajectory benchmark runs on: ``--grid`` (condition names or ``all``), ``--subjects``,
+    ``--first-subject`` (subject k simulated with seed k) and ``--repetitions``; :func:`grid_names` reads ``--grid``."""
+    ap.add_argument("--grid", nargs="+", default=[grid], help="accuracy-grid conditions (names or 'all')")
+    ap.add_argument("--subjects", type=int, default=6)
+    ap.add_argument("--first-subject", type=int, default=first_subject)
+    ap.add_argument("--repetitions", type=int, default=10)
+
+
+def grid_names(grid: list[str]) -> list[str]:
+    """The condition names ``--grid`` asks for (``all``: every condition of :mod:`imulog.simulate.grid`)."""
+    from imulog.simulate.grid import CONDITIONS
+
+    return list(CONDITIONS) if grid == ["all"] else list(grid)
+
+
 def _phase_params(repetitions: int, static: str = "movements"):
     """The phases step's parameters for a trial of ``repetitions``; ``static``: its zero-velocity mask
     (``"movements"``, the default, or ``"gyro-norm"``: the angular rate alone)."""

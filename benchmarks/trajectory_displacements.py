@@ -44,7 +44,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from trajectory_accuracy import RunCost, simulated_inputs  # noqa: E402
+from trajectory_accuracy import RunCost, add_trial_arguments, grid_names, simulated_inputs  # noqa: E402
 
 from imulog.process import quaternion as quat  # noqa: E402
 from imulog.process import trajectory_opt, trajectory_rest_model  # noqa: E402
@@ -269,20 +269,15 @@ EXTRA = (*RERUN, "rest-ramp", "spread-none")
 
 
 def main(argv: list[str] | None = None) -> int:
-    from imulog.simulate.grid import CONDITIONS
-
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--grid", nargs="+", default=["default"])
-    ap.add_argument("--subjects", type=int, default=6)
-    ap.add_argument("--first-subject", type=int, default=40)
-    ap.add_argument("--repetitions", type=int, default=10)
+    add_trial_arguments(ap)
     ap.add_argument(
         "--tilt",
         action="store_true",
         help="only the estimated orientation's tilt error at the rests and its change from rest to rest (deg)",
     )
     args = ap.parse_args(argv)
-    names = list(CONDITIONS) if args.grid == ["all"] else args.grid
+    names = grid_names(args.grid)
     cost = RunCost()
     if args.tilt:
         print("| condition | rests | tilt error at a rest, median / 90th pct (deg) | change to the next rest (deg) |")

@@ -50,7 +50,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from rest_gate_paired import bootstrap_ci  # noqa: E402
-from trajectory_accuracy import RunCost, evaluate_trial, simulated_inputs  # noqa: E402
+from trajectory_accuracy import RunCost, add_trial_arguments, evaluate_trial, grid_names, simulated_inputs  # noqa: E402
 
 from imulog.process.trajectory_opt import DEFAULT_PARAMS, TrajectoryParams  # noqa: E402
 
@@ -178,10 +178,7 @@ def trial_errors(
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--change", choices=list(CHANGES), default="heading-drift")
-    ap.add_argument("--grid", nargs="+", default=["all"])
-    ap.add_argument("--subjects", type=int, default=6)
-    ap.add_argument("--first-subject", type=int, default=20)
-    ap.add_argument("--repetitions", type=int, default=10)
+    add_trial_arguments(ap, grid="all", first_subject=20)
     ap.add_argument("--per-trial", action="store_true")
     ap.add_argument(
         "--chain-rest-s",
@@ -193,9 +190,8 @@ def main(argv: list[str] | None = None) -> int:
         from imulog.steps.trajectory_windows import TrajectoryWindows
 
         TrajectoryWindows.chain_rest_s = args.chain_rest_s
-    from imulog.simulate.grid import CONDITIONS
 
-    conditions = list(CONDITIONS) if args.grid == ["all"] else args.grid
+    conditions = grid_names(args.grid)
     f = lambda v: " / ".join(f"{x:.2f}" for x in v)  # noqa: E731
     g = lambda v: " / ".join(f"{x:+.2f}" for x in v)  # noqa: E731
     cost = RunCost()

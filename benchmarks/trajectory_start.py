@@ -49,7 +49,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from trajectory_accuracy import RunCost, evaluate_trial, simulated_inputs  # noqa: E402
+from trajectory_accuracy import RunCost, add_trial_arguments, evaluate_trial, grid_names, simulated_inputs  # noqa: E402
 
 from imulog.process import trajectory_methods, trajectory_opt, trajectory_rest_model  # noqa: E402
 from imulog.process.integration import shrinkage_weight  # noqa: E402
@@ -343,13 +343,8 @@ def trial_inputs(name: str, subject: int, repetitions: int) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from imulog.simulate.grid import CONDITIONS
-
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--grid", nargs="+", default=["default"])
-    ap.add_argument("--subjects", type=int, default=6)
-    ap.add_argument("--first-subject", type=int, default=40)
-    ap.add_argument("--repetitions", type=int, default=10)
+    add_trial_arguments(ap)
     ap.add_argument(
         "--start-variants",
         nargs="*",
@@ -373,7 +368,7 @@ def main(argv: list[str] | None = None) -> int:
         "default trusted-xy-test) against the truth",
     )
     args = ap.parse_args(argv)
-    names = list(CONDITIONS) if args.grid == ["all"] else args.grid
+    names = grid_names(args.grid)
     cost = RunCost()
     if args.rest_model:
         print("| condition | rest | reference x/y/z | start x/y/z | estimate x/y/z | estimate's sd x/y/z |")
