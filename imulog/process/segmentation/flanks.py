@@ -16,7 +16,12 @@ _MAX_CELLS = 1 << 21  # candidate x sample cells per block of hinge_fit (16 MB o
 
 
 def hinge_fit(
-    x: np.ndarray, y: np.ndarray, power: int = 1, drift: bool = False, curvature: bool = False
+    x: np.ndarray,
+    y: np.ndarray,
+    power: int = 1,
+    drift: bool = False,
+    curvature: bool = False,
+    spread: list | None = None,
 ) -> float | None:
     """``t0`` (in units of ``x``, sub-sample) of the least-squares fit ``y = c + k max(x - t0, 0)^power``, ``k > 0``
     (with ``drift``: ``+ b x``; with ``curvature``: ``+ k2 max(x - t0, 0)^(power + 1)``, ``k2 <= 0``).
@@ -27,7 +32,9 @@ def hinge_fit(
     the flank's bending towards its peak (the speed of a movement from rest is ``k t^2 + k2 t^3 + ...``;
     minimum jerk: ``30 D / T^3 (t^2 - 2 t^3 / T + ...)``, so a pure square fitted up to a few cm/s puts a slow
     phase's ``t0`` 0.1-0.3 s early; a free ``k2 > 0`` lets a slow rise of noise and drift pass for a late,
-    steepening flank). None without a rising fit."""
+    steepening flank). None without a rising fit. ``spread``: a list that gets the standard deviation of ``t0``
+    (units of ``x``) over the candidates, weighted by the likelihood ``exp(-(sse - min) / (2 s^2))``, ``s^2`` the
+    best fit's residual variance (:func:`t0_spread`)."""
     n_cand = max(len(x) - 2, 0)
     if n_cand == 0:
         return None
@@ -50,10 +57,31 @@ def hinge_fit(
                 fit = (g22 * r1**2 - 2 * g12 * r1 * r2 + g11 * r2**2) / det
                 out = np.where((det > 1e-12 * g11 * g22) & (k > 0) & (k2 < 0), float(yc @ yc) - fit, out)
         sse[lo : lo + len(d)] = out
+    t0 = _vertex(x, sse)
+    if spread is not None and t0 is not None:
+        spread.append(t0_spread(x[:n_cand], sse, len(x) - len(basis) - 1 - int(curvature)))
+    return t0
+
+
+def t0_spread(t0: np.ndarray, sse: np.ndarray, dof: int) -> float:
+    """Standard deviation (units of ``t0``) of the candidate onsets ``t0`` weighted by the likelihood of their fits,
+    ``exp(-(sse - min) / (2 s^2))`` with ``s^2 = min / dof`` (white residuals): how far the data let ``t0`` move. A
+    shallow flank in noise has a wide, flat error profile; a steep one a narrow one."""
+    ok = np.isfinite(sse)
+    best = float(np.min(sse[ok]))
+    s2 = max(best / max(dof, 1), 1e-300)
+    w = np.exp(-(sse[ok] - best) / (2.0 * s2))
+    mean = float(np.sum(w * t0[ok]) / np.sum(w))
+    return float(np.sqrt(np.sum(w * (t0[ok] - mean) ** 2) / np.sum(w)))
+
+
+def _vertex(x: np.ndarray, sse: np.ndarray) -> float | None:
+    """``x`` at the least of the errors ``sse`` (one per candidate ``x[i]``), refined to the vertex of the parabola
+    through the neighbouring errors (the onset between two samples); None when no candidate fitted."""
     if not np.isfinite(sse).any():
         return None
     i = int(np.argmin(sse))
-    frac = 0.0  # the vertex of the parabola through the neighbouring errors: the onset between two samples
+    frac = 0.0
     if 0 < i < len(sse) - 1 and np.isfinite(sse[i - 1]) and np.isfinite(sse[i + 1]):
         curv = sse[i - 1] - 2 * sse[i] + sse[i + 1]
         if curv > 0:
@@ -83,6 +111,7 @@ def flank_zero(
     span: int,
     back: int,
     smooth: int = 5,
+    spread: list | None = None,
 ) -> float | None:
     """Where the acceleration flank leaving a rest starts (local sample index), by a hinge fit.
 
@@ -94,7 +123,8 @@ def flank_zero(
     direction at the flank's top (signed, so the noise does not bias it), over the samples from ``back``
     before ``first`` to the flank's top: the first sample at ``min(top, half the flank's peak)`` (a
     curved flank near its peak would tilt the line); the peak is the largest ``|a|`` within ``span`` samples
-    of ``first`` and must reach twice the ``level``. Returns ``t0``, or None without such a flank."""
+    of ``first`` and must reach twice the ``level``. Returns ``t0``, or None without such a flank;
+    ``spread`` gets the line fit's spread of ``t0`` (:func:`hinge_fit`)."""
     n = len(a)
     first = max(int(first), 0)
     if n == 0 or first >= n:
@@ -116,10 +146,12 @@ def flank_zero(
         return None
     y = a[lo : p + 1] @ (a[p] / an[p])
     x = np.arange(lo, p + 1, dtype=float)
-    return hinge_fit(x, y, 1)
+    return hinge_fit(x, y, 1, spread=spread)
 
 
-def speed_flank_zero(v: np.ndarray, first: int, height: float, max_fit: int | None = None) -> float | None:
+def speed_flank_zero(
+    v: np.ndarray, first: int, height: float, max_fit: int | None = None, spread: list | None = None
+) -> float | None:
     """Where the speed leaving a rest starts to rise (local sample index), for movements too slow for their
     acceleration to clear the noise.
 
@@ -131,7 +163,8 @@ def speed_flank_zero(v: np.ndarray, first: int, height: float, max_fit: int | No
     after it is fitted to the component of ``v`` along its direction where
     the speed first reaches ``height`` (m/s) at or after ``first``, over the samples from the rest to there
     (at most the last ``max_fit`` of them: a rest hours long in daily life adds nothing to the fit but time).
-    None when the speed does not reach ``height`` within twice the stretch already walked."""
+    None when the speed does not reach ``height`` within twice the stretch already walked; ``spread`` gets the
+    fit's spread of ``t0`` (:func:`hinge_fit`)."""
     n = len(v)
     first = max(int(first), 0)
     if n < 4 or first >= n:
@@ -140,7 +173,20 @@ def speed_flank_zero(v: np.ndarray, first: int, height: float, max_fit: int | No
     hit = np.flatnonzero(vn[first : min(n, 2 * first + 4)] >= height)
     if len(hit) == 0:
         return None
-    return _speed_fit(v, first + int(hit[0]), max_fit)
+    return _speed_fit(v, first + int(hit[0]), max_fit, spread=spread)
+
+
+def combined_t0(z: float, zs: float | None, spread: list[float], first: int, agree: int) -> float:
+    """The acceleration flank's ``t0`` ``z`` and the speed flank's ``zs`` (local samples, time order from the rest)
+    averaged with weights inverse to their variances (``spread``: their sd, samples), when both exist, lie within
+    ``agree`` samples of each other and ``zs`` is not after ``first`` (where the acceleration crossed its level:
+    the hand moved by then); else ``z``. Two estimates of one onset from partly different samples: the
+    acceleration up to half its first peak, and the acceleration summed over the speed's rise to
+    ``velocity_level_mps`` (issue 31 eleventh round)."""
+    if zs is None or len(spread) < 2 or abs(zs - z) >= agree or zs > first:
+        return z
+    wa, ws = 1.0 / max(spread[0], 1e-3) ** 2, 1.0 / max(spread[1], 1e-3) ** 2
+    return float((wa * z + ws * zs) / (wa + ws))
 
 
 def first_motion(
@@ -222,7 +268,7 @@ def _runs(mask: np.ndarray, min_run: int) -> np.ndarray:
     return out[(out[:, 1] - out[:, 0] >= min_run) | (out[:, 1] == len(mask))]
 
 
-def _speed_fit(v: np.ndarray, p: int, max_fit: int | None, start: int = 0) -> float | None:
+def _speed_fit(v: np.ndarray, p: int, max_fit: int | None, start: int = 0, spread: list | None = None) -> float | None:
     """``t0`` of ``v = c + b t + k max(t - t0, 0)^2 + k2 max(t - t0, 0)^3`` along ``v[p]``'s direction, fitted from
     the rest to ``p``: the model differentiated, ``dv = b + 2 k (t - t0) + 3 k2 (t - t0)^2`` (per sample), is
     fitted to the sample-to-sample differences of ``v`` (the acceleration, whose noise is white; ``v`` is its
@@ -235,4 +281,4 @@ def _speed_fit(v: np.ndarray, p: int, max_fit: int | None, start: int = 0) -> fl
     if p - lo < 4:
         return None
     dv = np.diff(v[lo : p + 1] @ (v[p] / speed))  # dv[i] spans samples lo + i .. lo + i + 1
-    return hinge_fit(np.arange(lo, p, dtype=float) + 0.5, dv, 1, curvature=True)
+    return hinge_fit(np.arange(lo, p, dtype=float) + 0.5, dv, 1, curvature=True, spread=spread)

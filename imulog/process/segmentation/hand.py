@@ -74,7 +74,7 @@ import numpy as np
 
 from imulog.process.segmentation.arrival import gravity_free, slow_tail_end
 from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
-from imulog.process.segmentation.flanks import flank_zero, speed_flank_zero
+from imulog.process.segmentation.flanks import combined_t0, flank_zero, speed_flank_zero
 from imulog.process.segmentation.noise_floor import trim_unmoved
 from imulog.process.segmentation.rest_window import still_window
 from imulog.process.segmentation.speed_profile import profile_end
@@ -140,6 +140,9 @@ class HandParams:
         submovements) against the velocity's noise (issue 31 tenth round; off: tied to step 2's window as before).
     gyro_floor: a gyroscope boundary that no step moved loses its samples at the rest window's gyroscope noise
         floor (step 10, :mod:`~imulog.process.segmentation.noise_floor`, issue 31 ninth round).
+    flank_combine: step 7's ``t0`` is the acceleration flank's and the speed flank's averaged with weights inverse
+        to their variances (:func:`~imulog.process.segmentation.flanks.combined_t0`; off: the speed flank only
+        when there is no acceleration flank; issue 31 eleventh round, an option).
     rest_check_s: a slow last part of a phase at ``velocity_level_mps`` or more with next to no acceleration
         extends the offset when the velocity relative to the rest window stays under half that speed for this
         long (s) after the window (the window is a rest, not a hand cruising or drifting); 0: off.
@@ -177,6 +180,7 @@ class HandParams:
     settled_beyond_shift: bool = True
     gyro_floor: bool = False
     profile_alone: bool = True
+    flank_combine: bool = False
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:
@@ -278,10 +282,12 @@ def _extrapolated(
     span = int(round(params.flank_search_s * rate_hz))
     back = int(round(params.max_extrapolation_s * rate_hz))
     smooth = max(1, int(round(0.05 * rate_hz)))
-    z = flank_zero(a, first, level, params.flank_top_n_level * level, span, back, smooth)
-    if z is None and params.velocity_level_mps > 0:
+    spread: list[float] | None = [] if params.flank_combine else None  # each fit's sd of t0, for combined_t0
+    z = flank_zero(a, first, level, params.flank_top_n_level * level, span, back, smooth, spread)
+    if (z is None or params.flank_combine) and params.velocity_level_mps > 0:
         fit = int(round(params.speed_fit_s * rate_hz))
-        z = speed_flank_zero(v, first, params.velocity_level_mps, fit)
+        zs = speed_flank_zero(v, first, params.velocity_level_mps, fit, spread)
+        z = zs if z is None or spread is None else combined_t0(z, zs, spread, first, back)
     if z is None:
         return first
     if flank is not None:
