@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 from dataclasses import dataclass
@@ -48,10 +49,8 @@ def pylsl() -> Any:
         _configured = True
         setter = getattr(module, "set_config_content", None)  # pylsl >= 1.17.7 with liblsl >= 1.17.7
         if setter is not None and not user_config_files():
-            try:
+            with contextlib.suppress(NotImplementedError):  # an older liblsl: its info line stays
                 setter(QUIET_CONFIG)
-            except NotImplementedError:  # an older liblsl: its info line stays
-                pass
     return module
 
 
