@@ -139,21 +139,34 @@ def compute_alignment(
     result is kept (the wide one records ``max_lag_s_used``).
     """
     args = (imu_name, t_imu_ns, gyr, marker_topic, t_vic_ns, labels, pos_m)
+    return with_wide_search(
+        lambda p: _compute(*args, p, orientation, acc_global, resample, acc),
+        t_imu_ns,
+        t_vic_ns,
+        params,
+        gyr is not None,
+    )
+
+
+def with_wide_search(compute, t_imu_ns: np.ndarray, t_ref_ns: np.ndarray, params: al.AlignmentParams, wide_ok: bool):
+    """``compute(params)`` (streams, record) within +-``params.max_lag_s`` of the recordings' starts; when that
+    fails or scores poorly (and ``wide_ok``), once more over every overlap of the two recordings, keeping the more
+    convincing result (the wide one records ``max_lag_s_used``)."""
     first, error = None, None
     try:
-        first = _compute(*args, params, orientation, acc_global, resample, acc)
+        first = compute(params)
     except ValueError as exc:
         error = exc
     if first is not None and _rank(first[1], params) >= 1.0:  # a correlation score that is not poor
         return first
-    t_i, t_v = np.asarray(t_imu_ns, dtype=np.int64), np.asarray(t_vic_ns, dtype=np.int64)
+    t_i, t_v = np.asarray(t_imu_ns, dtype=np.int64), np.asarray(t_ref_ns, dtype=np.int64)
     wide = float(np.ceil(((t_i[-1] - t_i[0]) + (t_v[-1] - t_v[0])) / al.NS)) if len(t_i) > 1 and len(t_v) > 1 else 0
-    if gyr is None or wide <= params.max_lag_s:
+    if not wide_ok or wide <= params.max_lag_s:
         if first is None:
             raise error
         return first
     try:
-        second = _compute(*args, dataclasses.replace(params, max_lag_s=wide), orientation, acc_global, resample, acc)
+        second = compute(dataclasses.replace(params, max_lag_s=wide))
     except ValueError:
         if first is None:
             raise error from None
