@@ -88,7 +88,10 @@ def compute_pose_alignment(
         q_s2g = q_o if np.array_equal(t_o, t_imu_ns) else resample_quaternions(t_o, q_o, t_imu_ns)
 
     def compute(p: al.AlignmentParams) -> tuple[list, dict]:
-        record = al.align(t_imu_ns, gyr, ck, p, q_imu_s2g=q_s2g)
+        try:
+            record = al.align(t_imu_ns, gyr, ck, p, q_imu_s2g=q_s2g)
+        except ValueError as exc:  # the clock fit's reason, naming the channel it was fitted against
+            raise ValueError(f"{pose_topic}: {exc}") from None
         score = float(record.get("score") or 0.0)
         if score < p.min_valid_score:
             raise ValueError(
