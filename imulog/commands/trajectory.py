@@ -328,16 +328,6 @@ def evaluate(
             imus=list(imus) or None,
             force=force,
         )
-        if record.get("kind") == "orientation":
-            from imulog.steps.evaluate_orientation import orientation_lines
-
-            if as_json:
-                click.echo(json.dumps(record, indent=1, default=float))
-                return
-            click.echo(f"{trial}: {record['imu']} orientation against {record['reference']}")
-            for line in orientation_lines(record):
-                click.echo(f"  {line}")
-            return
         if record.get("kind") == "strides":
             from imulog.steps.gait_evaluate import stride_table
 
@@ -353,6 +343,16 @@ def evaluate(
             return
     except (ArchiveError, ValueError, KeyError, OSError) as exc:
         raise click.ClickException(error_line(trial, exc)) from None
+    if record.get("kind") == "orientation":  # against a rigid body's poses (docs/alignment.md)
+        from imulog.steps.evaluate_orientation import orientation_lines
+
+        if as_json:
+            click.echo(json.dumps(record, indent=1, default=float))
+            return
+        click.echo(f"{trial}: {record['imu']} orientation against {record['reference']}")
+        for line in orientation_lines(record):
+            click.echo(f"  {line}")
+        return
     from imulog.archive import TrialReader
     from imulog.steps.common import record_of
     from imulog.steps.trajectory_topics import record_of_imu

@@ -45,7 +45,11 @@ def pick_markers(topics: list[str], markers: str | None) -> str:
     if "vicon" in names:
         return "vicon"
     if not names:
-        raise ValueError("no /markers/* channel in the trial: align needs optical markers (e.g. a Vicon export)")
+        raise ValueError(
+            "no /markers/* channel in the trial: align needs an optical reference recorded with the IMU, markers (a "
+            "Vicon, C3D, Motive export) or a rigid body's poses (/poses/*); convert it together with the IMU's "
+            "export: imulog convert IMU_FILE OPTICAL_FILE -o trial.mcap"
+        )
     raise ValueError(f"choose a marker channel with --markers among: {', '.join(names)}")
 
 

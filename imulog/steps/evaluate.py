@@ -195,10 +195,14 @@ def reference_source(trial, topics: list[str], imu: str | None = None) -> str:
             return f"{topic}:O"
     if not markers:
         poses = [t for t in topics if t.startswith("/poses/")]
-        unused = f" ({', '.join(poses)} is not used as a reference)" if poses else ""
+        unused = (
+            f" ({', '.join(poses)}: trajectories are evaluated against markers, an orientation against poses)"
+            if poses
+            else ""
+        )
         raise ValueError(
-            "no optical reference: evaluate needs Vicon markers (a /markers/* channel, aligned with "
-            f"`imulog process align`), and this trial has no marker channel{unused}"
+            "no optical reference: evaluate needs Vicon markers (a /markers/* channel) or a rigid body's poses "
+            f"(/poses/*), aligned with `imulog process align`, and this trial has neither{unused}"
         )
     raise ValueError(
         "no optical reference: neither /derived/vicon/cluster_pose (run `imulog process align`) nor a marker 'O' "
