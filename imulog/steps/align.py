@@ -216,10 +216,7 @@ def _compute(
         raise ValueError(f"/imu/{imu_name} has no gyroscope columns")
     labels = list(labels)
     vic_rate = mean_rate_hz(t_vic_ns)
-    q_s2g = None
-    if orientation is not None:
-        t_o, q_o = orientation
-        q_s2g = q_o if np.array_equal(t_o, t_imu_ns) else resample_quaternions(t_o, q_o, t_imu_ns)
+    q_s2g = orientation_at(orientation, t_imu_ns)
     ck = None
     try:
         if params.cluster == "auto" and not params.markers:
@@ -393,6 +390,26 @@ def imu_span(trial, imu_topic: str, marker_topic: str, max_lag_s: float) -> tupl
     return (None, None) if imu.end_ns < hi else (None, hi)
 
 
+def read_derived_pair(trial, topics: list[str], lo: int | None, hi: int | None) -> tuple:
+    """``(orientation, acc_global)`` as ``(t_ns, values)`` pairs (None when not in ``topics``) from an open trial,
+    read over ``[lo, hi)`` on the device clock: the inputs ``/derived/orientation/{imu}`` and
+    ``/derived/acc_global/{imu}`` an alignment uses when the orientation step ran first."""
+    out = []
+    for kind in ("/derived/orientation/", "/derived/acc_global/"):
+        topic = next((t for t in topics if t.startswith(kind)), None)
+        s = trial.read(topic, lo, hi) if topic else None
+        out.append(None if s is None else (s.t_ns, s.values))
+    return tuple(out)
+
+
+def orientation_at(orientation: tuple[np.ndarray, np.ndarray] | None, t_imu_ns: np.ndarray) -> np.ndarray | None:
+    """The orientation step's quaternions at the IMU's samples (resampled when its time stamps differ)."""
+    if orientation is None:
+        return None
+    t_o, q_o = orientation
+    return q_o if np.array_equal(t_o, t_imu_ns) else resample_quaternions(t_o, q_o, t_imu_ns)
+
+
 def run_align(
     path,
     *,
@@ -420,13 +437,7 @@ def run_align(
         lo, hi = imu_span(trial, imu_topic, marker_topic, params.max_lag_s)
         imu_stream = trial.read(imu_topic, lo, hi)
         mk = trial.read(marker_topic)
-        orientation = acc_global = None
-        if o_topic in inputs:
-            s = trial.read(o_topic, lo, hi)
-            orientation = (s.t_ns, s.values)
-        if a_topic in inputs:
-            s = trial.read(a_topic, lo, hi)
-            acc_global = (s.t_ns, s.values)
+        orientation, acc_global = read_derived_pair(trial, [t for t in (o_topic, a_topic) if t in inputs], lo, hi)
         streams, record = compute_alignment(
             name,
             imu_stream.t_ns,

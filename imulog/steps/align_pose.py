@@ -14,8 +14,15 @@ import numpy as np
 
 from imulog.process import alignment as al
 from imulog.process.alignment_cluster import pose_kinematics
-from imulog.process.resample import resample_quaternions
-from imulog.steps.align import _jsonable, alignment_streams, params_dict, with_wide_search
+from imulog.steps.align import (
+    _jsonable,
+    alignment_streams,
+    imu_span,
+    orientation_at,
+    params_dict,
+    read_derived_pair,
+    with_wide_search,
+)
 from imulog.steps.common import mean_rate_hz
 
 STEP = "align"
@@ -82,10 +89,7 @@ def compute_pose_alignment(
     t_pose = np.asarray(t_pose_ns, dtype=np.int64)
     rate = mean_rate_hz(t_pose)
     ck = pose_kinematics(t_pose, position_m, quat_b2w, rate, params, pose_topic)
-    q_s2g = None
-    if orientation is not None:
-        t_o, q_o = orientation
-        q_s2g = q_o if np.array_equal(t_o, t_imu_ns) else resample_quaternions(t_o, q_o, t_imu_ns)
+    q_s2g = orientation_at(orientation, t_imu_ns)
 
     def compute(p: al.AlignmentParams) -> tuple[list, dict]:
         try:
@@ -142,15 +146,10 @@ def run_align_pose(
     inputs = [imu_topic, pose_topic] + [t for t in (o_topic, a_topic) if t in topics]
 
     def compute(trial) -> StepResult:
-        imu_stream = trial.read(imu_topic)
+        lo, hi = imu_span(trial, imu_topic, pose_topic, params.max_lag_s)  # a week's IMU: the poses' span only
+        imu_stream = trial.read(imu_topic, lo, hi)
         pose = trial.read(pose_topic)
-        orientation = acc_global = None
-        if o_topic in inputs:
-            s = trial.read(o_topic)
-            orientation = (s.t_ns, s.values)
-        if a_topic in inputs:
-            s = trial.read(a_topic)
-            acc_global = (s.t_ns, s.values)
+        orientation, acc_global = read_derived_pair(trial, [t for t in (o_topic, a_topic) if t in inputs], lo, hi)
         streams, record = compute_pose_alignment(
             name,
             imu_stream.t_ns,
