@@ -129,3 +129,15 @@ def test_evaluate_reports_the_broad_errors_with_the_benchmarks_metric(processed,
         assert abs(record["heading_free_rmse_deg"] - ref["heading_free_rmse_deg"]) < 0.06
         assert abs(record["samples"] - ref["samples"]) <= 10
         assert record["inclination_rmse_deg"] < 1.0
+
+
+def test_batch_runs_the_same_steps_on_a_broad_trial(shared_data, tmp_path):
+    """`imulog batch --steps orientation,align,evaluate` takes the same path as the commands (the align step's
+    dispatch, imulog.steps.align_setup.run_align_trial, knows poses too)."""
+    path = tmp_path / "b05.mcap"
+    assert run("convert", shared_data / "broad" / f"{TRIALS[1]}.hdf5", "-o", path)[0] == 0
+    code, text = run("batch", path, "--steps", "orientation,align,evaluate", "--no-ledger")
+    assert code == 0 and "0 failed" in text, text
+    with TrialReader(path) as trial:
+        assert trial.metadata["imulog.alignment"]["reference"] == "/poses/optical"
+        assert trial.metadata["imulog.evaluation"]["kind"] == "orientation"

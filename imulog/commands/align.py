@@ -146,11 +146,9 @@ def process_align(
         with TrialReader(trial) as reader:
             topics = reader.topics()
         n_imus = sum(t.startswith("/imu/") for t in topics)
-        on_poses = poses is not None or (
-            markers is None
-            and not any(t.startswith("/markers/") for t in topics)
-            and any(t.startswith("/poses/") for t in topics)
-        )
+        from imulog.steps.align_pose import aligns_on_poses
+
+        on_poses = aligns_on_poses(topics, markers, poses)
         if on_poses:
             if len(imus) != 1 and n_imus > 1:
                 raise click.ClickException(

@@ -36,6 +36,13 @@ def pose_channels(topics: list[str]) -> list[str]:
     return [t for t in topics if t.startswith("/poses/")]
 
 
+def aligns_on_poses(topics: list[str], markers: str | None = None, poses: str | None = None) -> bool:
+    """True when the alignment is on a pose channel: one is named (``poses``), or the trial has poses and no
+    marker channel (and none is named)."""
+    has_markers = any(t.startswith("/markers/") for t in topics)
+    return poses is not None or (markers is None and not has_markers and bool(pose_channels(topics)))
+
+
 def pick_poses(topics: list[str], poses: str | None) -> str:
     """The pose channel to align on: ``/poses/{poses}`` when given, else the trial's only one."""
     names = [t.split("/", 2)[2] for t in pose_channels(topics)]
