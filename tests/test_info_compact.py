@@ -104,3 +104,9 @@ def test_rate_is_samples_per_second_with_the_declared_rate_beside(shared_data, t
     run("convert", shared_data / "broad/02_undisturbed_slow_rotation_B.hdf5", "-o", broad)
     row = next(line for line in run("info", broad).splitlines() if "/imu/imu" in line)
     assert "285.714 " in row and "declared" not in row
+    # a Delsys sensor's device record holds its fastest channel's rate (EMG, 1259 Hz); its IMU stream declares its
+    # own 148.148 Hz, which is the one compared
+    trigno = tmp_path / "trigno.mcap"
+    run("convert", shared_data / "devices/delsys_trigno/truncated_trigno_sample.csv", "-o", trigno)
+    rows = [line for line in run("info", trigno).splitlines() if "/imu/mini_sensor" in line]
+    assert len(rows) == 2 and all("148.148 " in r and "declared" not in r for r in rows), rows

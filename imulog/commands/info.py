@@ -64,7 +64,7 @@ def trial_summary(trial: TrialReader) -> dict[str, Any]:
                 "samples": c.sample_count,
                 "rate_hz": c.rate_hz,
                 "mean_rate_hz": mean_rate_hz(c.sample_count, c.duration_s) if c.rate_hz else None,
-                "declared_rate_hz": declared_rate_hz(c.topic, trial.metadata),
+                "declared_rate_hz": declared_rate_hz(c.topic, trial.metadata, md),
                 "start_ns": c.start_ns,
                 "end_ns": c.end_ns,
                 "duration_s": c.duration_s,
@@ -128,22 +128,29 @@ def mean_rate_hz(samples: int | None, duration_s: float | None) -> float | None:
     return (samples - 1) / duration_s
 
 
-def declared_rate_hz(topic: str, metadata: dict) -> float | None:
-    """The rate the device declares for ``/imu/NAME``, ``/markers/NAME`` or ``/poses/NAME`` (Hz): its
-    ``imulog.device.NAME`` record's ``declared_rate_hz``, else its ``rate_hz``; None without one."""
+def declared_rate_hz(topic: str, metadata: dict, channel_meta: dict | None = None) -> float | None:
+    """The rate declared for ``/imu/NAME``, ``/markers/NAME`` or ``/poses/NAME`` (Hz): the stream's own
+    ``declared_rate_hz``, else its ``rate_hz`` (the converter's ``meta``, kept in the channel's metadata), else the
+    same keys of its ``imulog.device.NAME`` record (a device's record may hold its fastest channel's rate: a
+    Delsys sensor's EMG 1259 Hz beside its IMU's 148 Hz); None without one."""
     kind, _, name = topic.lstrip("/").partition("/")
     if kind not in ("imu", "markers", "poses") or not name or "/" in name:
         return None
+    try:
+        stream = json.loads((channel_meta or {}).get("meta") or "{}")
+    except ValueError:
+        stream = {}
     device = metadata.get(f"imulog.device.{name}")
-    if not isinstance(device, dict):
-        return None
-    for key in ("declared_rate_hz", "rate_hz"):
-        try:
-            value = float(device.get(key))
-        except (TypeError, ValueError):
+    for record in (stream, device):
+        if not isinstance(record, dict):
             continue
-        if value > 0:
-            return value
+        for key in ("declared_rate_hz", "rate_hz"):
+            try:
+                value = float(record.get(key))
+            except (TypeError, ValueError):
+                continue
+            if value > 0:
+                return value
     return None
 
 
