@@ -36,3 +36,13 @@ def test_align_without_an_optical_reference_says_how_to_bring_one(shared_data, t
     assert code == 1 and "/poses/*" in text and "imulog convert IMU_FILE OPTICAL_FILE -o trial.mcap" in text, text
     code, text = run("evaluate", path)
     assert code == 1 and "/markers/*" in text and "/poses/*" in text, text
+
+
+def test_a_table_export_without_topic_lists_the_channels(shared_data, tmp_path):
+    """One NilsPod sensor: `imulog export trial -o x.csv` needs --topic; the error used to send the user to
+    `imulog info`, it now gives an example and the channels (the viewer twins left out)."""
+    path = tmp_path / "nilspod.mcap"
+    assert run("convert", shared_data / "devices/nilspod/NilsPodX-6F13_20210109_162824.bin", "-o", path)[0] == 0
+    code, text = run("export", path, "-o", tmp_path / "x.csv")
+    assert code == 2 and "e.g. --topic /imu/nilspod_6f13" in text and "/signals/nilspod_6f13" in text, text
+    assert "/derived/viewer" not in text and not (tmp_path / "x.csv").exists()
