@@ -141,3 +141,19 @@ def test_batch_runs_the_same_steps_on_a_broad_trial(shared_data, tmp_path):
     with TrialReader(path) as trial:
         assert trial.metadata["imulog.alignment"]["reference"] == "/poses/optical"
         assert trial.metadata["imulog.evaluation"]["kind"] == "orientation"
+
+
+def test_the_catalog_has_the_orientation_errors(processed, tmp_path):
+    import pandas as pd
+
+    paths = list(processed.values())
+    code, text = run("evaluate", paths[0])
+    assert code == 0, text
+    out = tmp_path / "catalog.parquet"
+    code, text = run("catalog", paths[0], "-o", out)
+    assert code == 0, text
+    row = pd.read_parquet(out).iloc[0]
+    with TrialReader(paths[0]) as trial:
+        record = trial.metadata["imulog.evaluation"]
+    assert row["eval_inclination_rmse_deg"] == pytest.approx(record["inclination_rmse_deg"])
+    assert row["eval_heading_free_rmse_deg"] == pytest.approx(record["heading_free_rmse_deg"])
