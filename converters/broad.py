@@ -5,7 +5,8 @@ Datasets: ``imu_acc`` m/s^2, ``imu_gyr`` rad/s, ``imu_mag`` uT, ``opt_pos`` m (N
 ``sampling_rate`` Hz (285.714). IMU and optical data are already synchronised and share one clock, sample ``i``
 at ``round(i / rate * 1e9)`` ns.
 
-Output: IMU ``/imu/imu``; optical pose ``PoseStream`` ``/poses/optical`` (NaN where lost); ``Intervals``
+Output: IMU ``/imu/imu``; optical pose ``PoseStream`` ``/poses/optical`` (NaN where lost; its device record
+``imulog.device.optical`` says ``imu_frame_aligned``: the optical body frame is the IMU's); ``Intervals``
 ``/events/movement`` (label ``movement``: the samples to evaluate).
 
 Memory: in pieces (:func:`iter_broad`, about 16 MiB of samples each; the whole file is the one-piece case). h5py
@@ -153,6 +154,9 @@ def iter_broad(path: Path, name: str = "imu", piece_bytes: int | None = PIECE_BY
             "rate_hz": rate,
             "units": {"position": "m", "orientation": "w,x,y,z"},
             "frame": "ENU",
+            # the files say so ("synchronized and aligned optical reference data"): the optical body frame is the
+            # IMU's, so an evaluation compares the orientations as they are (imulog.steps.evaluate_orientation)
+            "imu_frame_aligned": True,
             "source": path.name,
         }
     records["imulog.trial"] = {

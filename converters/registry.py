@@ -347,7 +347,11 @@ def group_directory(
     out = []
     for (parent, key), files in groups.items():
         rel = parent.relative_to(directory)
-        base = Path(key).stem if key.endswith((".c3d", ".hdf5", ".h5")) else key
+        # a recording named by its file (C3D, HDF5, .cwa, .gt3x, ...: one file, one recording) is named by the
+        # file's stem, like recordings grouped by their stems (s01_t02_imu.csv -> s01_t02): the output name never
+        # depends on the format; colliding names get their extensions back (unique_names in imulog convert)
+        by_name = {p.name: p for p in files}
+        base = by_name[key].stem if key in by_name else key
         name = base or (parent.name if parent != directory or not rel.parts else parent.name) or "trial"
         out.append((str(rel / name) if rel.parts else name, files))
     return out

@@ -10,7 +10,10 @@ from __future__ import annotations
 
 import os
 import sys
-from typing import Any, TextIO
+from collections.abc import Iterator, Sequence
+from typing import Any, TextIO, TypeVar
+
+T = TypeVar("T")
 
 
 def no_color() -> bool:
@@ -67,3 +70,20 @@ def progress_bar(total: int, desc: str, unit: str = "it", file: TextIO | None = 
 
         return tqdm(total=total, unit=unit, desc=desc, file=stream, dynamic_ncols=True)
     return LineProgress(total, desc, unit, stream)
+
+
+def window_progress(items: Sequence[T], desc: str, unit: str = "h", file: TextIO | None = None) -> Iterator[T]:
+    """Yield ``items`` (a step's windows, an hour of recording each); with more than one and stderr a terminal, a
+    live bar ticks once per item, so a week's ``imulog process orientation`` shows how far it is. In logs and pipes
+    nothing is printed (the step prints what it wrote when done), nor for a recording of one window."""
+    stream = file if file is not None else sys.stderr
+    if len(items) <= 1 or not stream.isatty():
+        yield from items
+        return
+    bar = progress_bar(len(items), desc, unit, stream)
+    try:
+        for item in items:
+            yield item
+            bar.update(1)
+    finally:
+        bar.close()

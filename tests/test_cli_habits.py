@@ -160,6 +160,41 @@ def test_progress_in_a_log_is_plain_lines():
     assert lines[-1] == "batch: 20/20 file (100 %) failed=0" and 9 <= len(lines) <= 11
 
 
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_a_long_recordings_step_shows_its_windows_on_a_terminal(tmp_path, monkeypatch):
+    """A recording of several windows (an hour each by default; here 60 s) shows a bar per step on a terminal,
+    one tick per window; in a log nothing is added (the step's own summary is its output)."""
+    import numpy as np
+
+    from imulog.archive import write_trial
+    from imulog.model import ImuStream, Recording
+    from imulog.steps.orientation import run_orientation
+    from imulog.steps.windows import WindowParams
+
+    t = np.arange(9000, dtype=np.int64) * 20_000_000  # 3 minutes at 50 Hz
+    rng = np.random.default_rng(0)
+    imu = ImuStream(
+        "wrist",
+        t,
+        acc=np.tile([0.0, 0.0, 9.81], (len(t), 1)) + rng.normal(0, 0.05, (len(t), 3)),
+        gyr=rng.normal(0, 0.01, (len(t), 3)),
+    )
+    path = write_trial(tmp_path / "long.mcap", Recording(imus=[imu]))
+    windows = WindowParams(core_s=60.0, margin_s=5.0)
+    log = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", log)
+    run_orientation(path, windows=windows)
+    assert log.getvalue() == ""
+    terminal = _Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    run_orientation(path, windows=windows, force=True)
+    assert "orientation wrist" in terminal.getvalue() and "3/3" in terminal.getvalue()
+
+
 def test_catalog_progress_goes_to_the_log_without_carriage_returns(processed_r2g, tmp_path):
     proc = subprocess.run(
         [*IMULOG, "catalog", str(processed_r2g), "-o", str(tmp_path / "c.parquet")],

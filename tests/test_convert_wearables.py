@@ -159,6 +159,25 @@ def test_movella_dot_app_export(devices):
     np.testing.assert_allclose(qcol0, col0, atol=1e-9)
 
 
+def test_movella_dot_rate_is_the_time_stamps(devices):
+    """The shared DOT file is described as 60 Hz in the shared data's notes; its stamps say 120 Hz and imulog reads
+    120 Hz: PacketCounter steps by 1 (no packet lost) and every SampleTimeFine step is 8333 us. docs/converters.md
+    says so, with the figures this file gives."""
+    path = devices / "movella_dot_csv/bei_D4CA6EF17860_20210830_170505.csv"
+    df = pd.read_csv(path, skiprows=7)
+    assert set(np.diff(df["PacketCounter"].to_numpy())) == {1}
+    assert set(np.diff(df["SampleTimeFine"].to_numpy(dtype=np.int64))) == {8333}
+    rec = convert_file(path)
+    (imu,) = rec.imus
+    span_s = (imu.t_ns[-1] - imu.t_ns[0]) / 1e9
+    rate = rec.metadata["imulog.device.bei"]["rate_hz"]
+    assert abs(rate - (len(imu) - 1) / span_s) < 1e-3 and round(rate, 3) == 120.005
+    docs = (Path(__file__).resolve().parents[1] / "docs" / "converters.md").read_text()
+    section = docs.split("### Movella DOT CSV", 1)[1].split("\n### ", 1)[0]
+    for figure in (f"{rate:.3f} Hz", f"{len(imu)} samples", f"{span_s:.3f} s", "exactly 8333 us", "60 Hz"):
+        assert figure in section, figure
+
+
 def _dot_log(tmp: Path, stf: np.ndarray, name: str = "log.csv") -> tuple[Path, np.ndarray]:
     n = len(stf)
     rng = np.random.default_rng(2)

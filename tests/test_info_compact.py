@@ -84,3 +84,29 @@ def test_a_unit_the_source_does_not_state_shows_as_a_question_mark(shared_data, 
     run("convert", shared_data / "devices" / "xdf" / "clock_resets.xdf", "-o", trial)
     (row,) = [line for line in run("info", trial).splitlines() if line.strip().startswith("/signals/biosemi")]
     assert row.rstrip().endswith("  ? x8")
+
+
+def test_rate_is_samples_per_second_with_the_declared_rate_beside(shared_data, tmp_path):
+    """The real AX6 .cwa (declared 100 Hz): its time stamps are quantised, so the median step said 97.56 Hz while
+    the recording holds 98.41 samples per second (what the conversion warns about); info shows the latter and the
+    declared rate beside it (they differ by more than 1 %). BROAD's 285.714 Hz equals its declared rate: no note."""
+    cwa = tmp_path / "ax6.mcap"
+    run("convert", shared_data / "devices/axivity_cwa/ax6_sample.cwa", "-o", cwa)
+    doc = json.loads(run("info", cwa, "--json"))
+    imu = next(c for c in doc["channels"] if c["topic"].startswith("/imu/"))
+    device = doc["metadata"][f"imulog.device.{imu['topic'][5:]}"]
+    assert abs(imu["mean_rate_hz"] - (imu["samples"] - 1) / imu["duration_s"]) < 1e-9
+    assert abs(imu["mean_rate_hz"] - device["rate_hz"]) < 1e-3  # the conversion's rate
+    assert imu["rate_hz"] < 97.6 and imu["declared_rate_hz"] == 100.0  # the median step's, kept in --json
+    row = next(line for line in run("info", cwa).splitlines() if imu["topic"] in line)
+    assert "98.4135 (declared 100)" in row and "97.56" not in row
+    broad = tmp_path / "broad.mcap"
+    run("convert", shared_data / "broad/02_undisturbed_slow_rotation_B.hdf5", "-o", broad)
+    row = next(line for line in run("info", broad).splitlines() if "/imu/imu" in line)
+    assert "285.714 " in row and "declared" not in row
+    # a Delsys sensor's device record holds its fastest channel's rate (EMG, 1259 Hz); its IMU stream declares its
+    # own 148.148 Hz, which is the one compared
+    trigno = tmp_path / "trigno.mcap"
+    run("convert", shared_data / "devices/delsys_trigno/truncated_trigno_sample.csv", "-o", trigno)
+    rows = [line for line in run("info", trigno).splitlines() if "/imu/mini_sensor" in line]
+    assert len(rows) == 2 and all("148.148 " in r and "declared" not in r for r in rows), rows

@@ -271,8 +271,9 @@ def test_anthropometrics_are_checked_against_the_imu(sim_trial, tmp_path):
 
 
 def test_evaluate_without_markers_says_what_is_missing(tmp_path):
-    """A BROAD-like trial (IMU + optical poses, no markers): the error used to suggest `imulog process align`,
-    which cannot run without markers; it now says the trial has no marker channel and names the pose channel."""
+    """A BROAD-like trial (IMU + optical poses, no markers): the poses are the reference (docs/alignment.md, "A
+    rigid body's poses"): evaluate names the step that is missing first (the orientation it evaluates), and align
+    on a body that never turns fails in one line naming the pose channel, writing nothing."""
     from imulog.model import ImuStream, PoseStream, Recording
 
     t = np.arange(200, dtype=np.int64) * 10_000_000
@@ -283,10 +284,13 @@ def test_evaluate_without_markers_says_what_is_missing(tmp_path):
     path = tmp_path / "broad_like.mcap"
     write_trial(path, rec)
     result = CliRunner().invoke(cli, ["evaluate", str(path)])
-    assert result.exit_code == 1 and "no marker channel" in result.output and "/poses/optical" in result.output
-    assert "process align" in result.output and "Traceback" not in result.output
+    assert result.exit_code == 1 and "imulog process orientation" in result.output
+    assert "Traceback" not in result.output
     result = CliRunner().invoke(cli, ["process", "align", str(path)])
-    assert result.exit_code == 1 and "no /markers/* channel in the trial" in result.output
+    assert result.exit_code == 1 and "/poses/optical" in result.output and "Traceback" not in result.output
+    assert len(result.output.strip().splitlines()) == 1
+    with TrialReader(path) as trial:
+        assert "imulog.alignment" not in trial.metadata
 
 
 def test_rerun_with_fewer_methods_removes_the_stale_trajectories(sim_trial, tmp_path):

@@ -54,6 +54,8 @@ FLOAT_COLUMNS = (
     "repetition_mean_s",
     "phases_confidence",
     "best_mae_cm",
+    "eval_inclination_rmse_deg",
+    "eval_heading_free_rmse_deg",
     "wear_h",
     "enmo_mean_mg",
 )
@@ -240,7 +242,10 @@ def trial_row(path: str | os.PathLike[str]) -> dict[str, Any]:
     row.update(_flag_columns(timing, _record(meta.get("imulog.trajectory"))))
     ev = _record(meta.get("imulog.evaluation"))
     others = {k.split(".", 2)[2]: _record(v) for k, v in meta.items() if k.startswith("imulog.evaluation.")}
-    if ev:
+    if ev.get("kind") == "orientation":  # an orientation against a rigid body's poses (BROAD): its two RMSEs, deg
+        row["eval_inclination_rmse_deg"] = ev.get("inclination_rmse_deg")
+        row["eval_heading_free_rmse_deg"] = ev.get("heading_free_rmse_deg")
+    elif ev:
         row["eval_methods"] = sorted((ev.get("methods") or {}).keys())
         row["best_mae_cm"] = _best_mae(ev)
     if ev or others:  # a setup evaluated per IMU: the primary IMU's record, the others under per_imu

@@ -23,6 +23,12 @@ _D = AlignmentParams()
     "rigid marker cluster.",
 )
 @click.option("--markers", default=None, help="Marker channel /markers/NAME; default: the only one, else 'vicon'.")
+@click.option(
+    "--poses",
+    default=None,
+    help="Align on the rigid body's poses /poses/NAME (OptiTrack rigid body, BROAD's optical quaternion) instead of "
+    "markers; default when the trial has poses and no markers.",
+)
 @click.option("--window", "window_s", type=float, default=_D.window_s, show_default=True, help="Lag window length, s.")
 @click.option(
     "--window-start",
@@ -76,6 +82,7 @@ def process_align(
     trial: Path,
     imus: tuple[str, ...],
     markers: str | None,
+    poses: str | None,
     window_s: float,
     window_start_s: float,
     max_lag_s: float,
@@ -103,6 +110,11 @@ def process_align(
     imulog.alignment, /derived/vicon/cluster_pose, /derived/vicon/angular_velocity and the resampled
     /derived/reference/... channels.
 
+    A trial with an optical rigid body's poses (/poses/NAME: an OptiTrack rigid body, BROAD's optical
+    quaternion) and no markers is aligned on the poses: the body's angular velocity comes from its
+    orientations (the body frame is the cluster frame), one IMU at a time (--imu with several); --poses
+    chooses the channel. Poses missing in more than half the samples are refused.
+
     \b
     Examples:
       imulog process align trial.mcap                  # every IMU
@@ -110,6 +122,7 @@ def process_align(
       imulog process align trial.mcap --window 60 --no-drift
       imulog process align trial.mcap --cluster-markers Subject:O,Subject:X,Subject:Y
       imulog process align trial.mcap --cluster-markers WRIST        # one marker: its acceleration
+      imulog process align broad_trial.mcap                          # BROAD: on /poses/optical
     """
     from imulog.archive.errors import ArchiveError
     from imulog.steps.align import alignment_summary, run_align
@@ -131,12 +144,29 @@ def process_align(
         from imulog.archive import TrialReader
 
         with TrialReader(trial) as reader:
-            n_imus = sum(t.startswith("/imu/") for t in reader.topics())
+            topics = reader.topics()
+        n_imus = sum(t.startswith("/imu/") for t in topics)
+        from imulog.steps.align_pose import aligns_on_poses
+
+        on_poses = aligns_on_poses(topics, markers, poses)
+        if on_poses:
+            if len(imus) != 1 and n_imus > 1:
+                raise click.ClickException(
+                    f"{trial}: aligning on a rigid body's poses takes one IMU: choose it with --imu (the trial has {n_imus})"
+                )
+            if names:
+                raise click.ClickException(f"{trial}: --cluster-markers names markers; this alignment is on poses")
         if names and len(imus) != 1 and n_imus > 1:
             raise click.ClickException(
                 f"{trial}: --cluster-markers names the markers of one IMU: choose it with --imu (the trial has {n_imus})"
             )
-        if len(imus) > 1 or (not imus and n_imus > 1):
+        if on_poses:
+            from imulog.steps.align_pose import run_align_pose
+
+            outcome = run_align_pose(
+                trial, imu=imus[0] if imus else None, poses=poses, params=params, resample=resample, force=force
+            )
+        elif len(imus) > 1 or (not imus and n_imus > 1):
             from imulog.steps.align_setup import run_align_setup
 
             outcome = run_align_setup(
@@ -147,7 +177,7 @@ def process_align(
                 trial, imu=imus[0] if imus else None, markers=markers, params=params, resample=resample, force=force
             )
         heading = None
-        if len(imus) != 1 and n_imus > 1:  # oriented IMUs: their common heading frame from the clusters now
+        if len(imus) != 1 and n_imus > 1 and not on_poses:  # oriented IMUs: a common heading frame from the clusters
             from imulog.steps.heading import refresh_heading
 
             try:
@@ -179,7 +209,8 @@ def process_align(
     lines = alignment_summary(rec)
     if q:
         angle_deg = math.degrees(2 * math.acos(min(1.0, abs(float(q[0])))))
-        lines.insert(1, f"IMU-to-cluster [{', '.join(f'{float(v):.5f}' for v in q)}] ({angle_deg:.2f} deg)")
+        what = "IMU-to-body" if (rec.get("cluster") or {}).get("pose") else "IMU-to-cluster"
+        lines.insert(1, f"{what} [{', '.join(f'{float(v):.5f}' for v in q)}] ({angle_deg:.2f} deg)")
     click.echo(f"{trial}: {prefix}{lines[0]}")
     for line in lines[1:]:
         click.echo(f"  {line}")

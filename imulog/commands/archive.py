@@ -177,7 +177,7 @@ def export(
             f"{end_ns} is not after --start-ns {start_ns} (the range is empty)", param_hint="--end-ns"
         )
     if target in ("parquet", "csv") and not topics:
-        raise click.UsageError(f"--to {target} exports one channel: give --topic (imulog info {file} lists them)")
+        raise click.UsageError(f"--to {target} exports one channel: give --topic, {_channel_choice(file)}")
     if topics and target not in ("parquet", "csv"):
         raise click.UsageError(f"--to {target} takes no --topic (it writes every channel it supports): {topics[0]}")
     if len(topics) > 1:
@@ -272,3 +272,18 @@ def salvage(file: str, output: str, overwrite: bool, as_json: bool) -> None:
         return
     for line in lines(report):
         click.echo(line)
+
+
+def _channel_choice(file) -> str:
+    """For a table export without --topic: an example and the trial's channels (the viewer twins left out), read
+    from the summary; the ``imulog info`` hint when the file cannot be read."""
+    try:
+        with open_trial(file) as trial:
+            channels = [t for t in trial.topics() if not t.startswith("/derived/viewer/")]
+    except (click.ClickException, OSError, ValueError):
+        channels = []
+    if not channels:
+        return f"e.g. --topic /imu/NAME (imulog info {file} lists them)"
+    most = 6
+    shown = ", ".join(channels[:most]) + (f", ... ({len(channels) - most} more)" if len(channels) > most else "")
+    return f"e.g. --topic {channels[0]} (the trial's channels: {shown})"

@@ -178,7 +178,9 @@ def convert(
       imulog convert --inspect odd_export.csv     # what would be made, nothing written
 
     In folder mode the files of one recording share a name stem apart from role words (s01_imu.csv +
-    s01_vicon.csv), and a s01_meta.json/.toml beside them adds that trial's metadata.
+    s01_vicon.csv), and a s01_meta.json/.toml beside them adds that trial's metadata. Each trial is named
+    by its recording's stem, whatever the format (s01.mcap, ax3_sample.mcap from ax3_sample.cwa); trials
+    whose stems collide all keep their file's extension (s01.csv.mcap and s01.c3d.mcap).
 
     Bad input stops with one line naming the file, line and column, and leaves no output file.
     """

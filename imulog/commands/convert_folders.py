@@ -85,9 +85,11 @@ def sessions(groups: list[tuple[str, list[Path]]], detected: Detected | None = N
 
 
 def unique_names(groups: list[tuple[str, list[Path]]]) -> list[tuple[str, list[Path]]]:
-    """Each trial its own output name: trials that would share one (``s01.c3d`` and ``s01.h5`` in a folder with a
-    second IMU recording, both ``s01``) keep their first file's extension (``s01.c3d``, ``s01.h5``), then a counter
-    (``s01_2``); before, the second was refused as existing, or with --overwrite replaced the first."""
+    """Each trial its own output name. The rule (docs/converters.md): a trial is named by its recording's stem
+    (``ax3_sample.cwa`` -> ``ax3_sample``, ``s01_t02_imu.csv`` + ``s01_t02_vicon.csv`` -> ``s01_t02``); every
+    trial of a stem shared by several (``s01.c3d`` and ``s01.h5`` in a folder with a second IMU recording, both
+    ``s01``) keeps its first file's extension (``s01.c3d``, ``s01.h5``), then a counter (``s01.csv_2``) when
+    even those collide; before, the second was refused as existing, or with --overwrite replaced the first."""
     count: dict[str, int] = {}
     for name, _ in groups:
         count[name] = count.get(name, 0) + 1

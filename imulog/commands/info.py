@@ -63,6 +63,8 @@ def trial_summary(trial: TrialReader) -> dict[str, Any]:
                 "messages": c.message_count,
                 "samples": c.sample_count,
                 "rate_hz": c.rate_hz,
+                "mean_rate_hz": mean_rate_hz(c.sample_count, c.duration_s) if c.rate_hz else None,
+                "declared_rate_hz": declared_rate_hz(c.topic, trial.metadata, md),
                 "start_ns": c.start_ns,
                 "end_ns": c.end_ns,
                 "duration_s": c.duration_s,
@@ -112,6 +114,57 @@ def _fmt_units(units: str) -> str:
 
 def _fmt_rate(rate: float | None) -> str:
     return "-" if not rate else f"{rate:.6g}"
+
+
+#: the declared rate is shown beside the measured one when they differ by more than this (relative)
+DECLARED_RATE_TOLERANCE = 0.01
+
+
+def mean_rate_hz(samples: int | None, duration_s: float | None) -> float | None:
+    """The channel's average rate, (samples - 1) / duration (Hz): what the recording holds per second, unlike the
+    median sample step, which quantised time stamps bias (a .cwa's 1/97.56 s step in a 98.41 Hz recording)."""
+    if not samples or samples < 2 or not duration_s or duration_s <= 0:
+        return None
+    return (samples - 1) / duration_s
+
+
+def declared_rate_hz(topic: str, metadata: dict, channel_meta: dict | None = None) -> float | None:
+    """The rate declared for ``/imu/NAME``, ``/markers/NAME`` or ``/poses/NAME`` (Hz): the stream's own
+    ``declared_rate_hz``, else its ``rate_hz`` (the converter's ``meta``, kept in the channel's metadata), else the
+    same keys of its ``imulog.device.NAME`` record (a device's record may hold its fastest channel's rate: a
+    Delsys sensor's EMG 1259 Hz beside its IMU's 148 Hz); None without one."""
+    kind, _, name = topic.lstrip("/").partition("/")
+    if kind not in ("imu", "markers", "poses") or not name or "/" in name:
+        return None
+    try:
+        stream = json.loads((channel_meta or {}).get("meta") or "{}")
+    except ValueError:
+        stream = {}
+    device = metadata.get(f"imulog.device.{name}")
+    for record in (stream, device):
+        if not isinstance(record, dict):
+            continue
+        for key in ("declared_rate_hz", "rate_hz"):
+            try:
+                value = float(record.get(key))
+            except (TypeError, ValueError):
+                continue
+            if value > 0:
+                return value
+    return None
+
+
+def shown_rate(channel: dict) -> str:
+    """The rate column: the average rate ((samples - 1) / duration) of a channel without time gaps, else the
+    median step's (the gaps' lengths are not in the summary); the declared rate beside it in parentheses when the
+    two differ by more than :data:`DECLARED_RATE_TOLERANCE`."""
+    gapless = not channel.get("time_gaps")
+    rate = channel.get("mean_rate_hz") if gapless and channel.get("mean_rate_hz") else channel.get("rate_hz")
+    text = _fmt_rate(rate)
+    declared = channel.get("declared_rate_hz")
+    if rate and declared and abs(rate - declared) > DECLARED_RATE_TOLERANCE * declared:
+        text += f" (declared {declared:.6g})"
+    return text
 
 
 def _echo_periods(metrics: dict) -> None:
@@ -282,7 +335,7 @@ def _channel_row(c: dict[str, Any]) -> tuple[str, ...]:
     return (
         topic,
         c["schema"],
-        _fmt_rate(c["rate_hz"]),
+        shown_rate(c),
         str(c["samples"]),
         dur,
         gaps,
@@ -298,8 +351,10 @@ def _channel_row(c: dict[str, Any]) -> tuple[str, ...]:
 def info(file: str, verbose: bool, as_json: bool) -> None:
     """Show a trial's channels, metadata, attachments and derived runs (compact; -v for everything).
 
-    For every channel: schema, rate (Hz), sample count, duration, gaps (time gaps longer than 1.5
-    sample periods / samples with NaN), stored (compressed) size, units and frame. A salvaged channel
+    For every channel: schema, rate (Hz: samples per second, (samples - 1) / duration, or with time gaps
+    1 / the median sample step; the device's declared rate beside it when they differ by more than 1 %),
+    sample count, duration, gaps (time gaps longer than 1.5 sample periods / samples with NaN), stored
+    (compressed) size, units and frame. A salvaged channel
     says [partial] (chunks were lost) and a channel with no samples [empty] (no rate, duration or
     gaps). Derived channels whose inputs (channels or metadata records such as imulog.alignment)
     changed since they were computed are marked out of date, with the command that recomputes them.

@@ -73,7 +73,9 @@ def record(
     /events/<stream>; the streams' XML headers, the clock offsets (time_correction) applied and the raw
     LSL stamps (/signals/<stream>_lsl_clock) are kept. Until it stops the file is OUTPUT.part, with every
     chunk flushed at least every second: after a kill, `imulog salvage OUTPUT.part -o OUTPUT` recovers all
-    but the last second. Then `imulog process ...` as for a converted trial.
+    but the last second. Then `imulog process ...` as for a converted trial. liblsl's info lines are left
+    out unless an LSL config file of yours sets its [log] level (docs/record.md); its warnings and
+    errors are shown.
 
     \b
     Examples:

@@ -81,7 +81,9 @@ def _methods(value: str) -> list[str]:
     show_default=True,
     help="Optimisation: trust in ZUPT velocity, m/s.",
 )
-@click.option("--no-return-to-start", is_flag=True, help="Optimisation: drop the return-to-start constraint (default: z only).")
+@click.option(
+    "--no-return-to-start", is_flag=True, help="Optimisation: drop the return-to-start constraint (default: z only)."
+)
 @click.option("--force", is_flag=True, help="Recompute even when the same parameters are already recorded.")
 def process_trajectory(
     trial: Path,
@@ -295,6 +297,11 @@ def evaluate(
     error exceeds the motion itself, and whether each method beats the dedrift baseline; warnings name the
     methods whose assumptions failed. The result is stored as the imulog.evaluation metadata record.
 
+    A trial with an optical rigid body's poses (/poses/NAME: BROAD, an OptiTrack rigid body) and no
+    trajectories, aligned on the poses (imulog process align), has its IMU orientation
+    (imulog process orientation) evaluated instead: inclination and heading-free RMSE in degrees, as in the
+    BROAD paper, over the /events/movement phases when the trial has them.
+
     A walking trial (task walk/gait in imulog.trial, or a gyroscope repeating at a stride's period) is
     evaluated per stride and per foot instead, like gaitmap: each foot IMU aligned with its cluster
     (imulog process align) gets a ZUPT trajectory between its zero-velocity intervals, compared stride by
@@ -306,6 +313,7 @@ def evaluate(
       imulog evaluate trial.mcap
       imulog evaluate trial.mcap --method zupt,optimized --json > errors.json
       imulog evaluate walk.mcap --strides --imu left_foot
+      imulog evaluate broad_trial.mcap                 # orientation vs /poses/optical (BROAD)
     """
     from imulog.archive.errors import ArchiveError
     from imulog.steps.common import error_line
@@ -335,6 +343,16 @@ def evaluate(
             return
     except (ArchiveError, ValueError, KeyError, OSError) as exc:
         raise click.ClickException(error_line(trial, exc)) from None
+    if record.get("kind") == "orientation":  # against a rigid body's poses (docs/alignment.md)
+        from imulog.steps.evaluate_orientation import orientation_lines
+
+        if as_json:
+            click.echo(json.dumps(record, indent=1, default=float))
+            return
+        click.echo(f"{trial}: {record['imu']} orientation against {record['reference']}")
+        for line in orientation_lines(record):
+            click.echo(f"  {line}")
+        return
     from imulog.archive import TrialReader
     from imulog.steps.common import record_of
     from imulog.steps.trajectory_topics import record_of_imu

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 FILTER_KEYS = ("name", "type", "source_id")
@@ -13,12 +16,41 @@ class LslError(RuntimeError):
     """LSL is missing or a stream cannot be resolved / opened (one line for the command)."""
 
 
+#: liblsl's configuration when the user has none: its defaults, logging warnings and errors only (liblsl's log
+#: levels: 0 info, -1 warning, -2 error, -3 fatal), so that its "Loaded default config" info line is not printed
+QUIET_CONFIG = "[log]\nlevel = -1\n"
+_configured = False
+
+
+def user_config_files(cwd: Path | None = None, home: Path | None = None) -> list[Path]:
+    """The liblsl configuration files the user has, in liblsl's order of search: ``$LSLAPICFG`` (when set, even
+    if missing: liblsl then reports it), ``lsl_api.cfg`` in the working directory, ``~/lsl_api/lsl_api.cfg``,
+    ``/etc/lsl_api/lsl_api.cfg``."""
+    cwd = Path.cwd() if cwd is None else cwd
+    home = Path.home() if home is None else home
+    found = [Path(os.environ["LSLAPICFG"])] if os.environ.get("LSLAPICFG") else []
+    candidates = (cwd / "lsl_api.cfg", home / "lsl_api" / "lsl_api.cfg", Path("/etc/lsl_api/lsl_api.cfg"))
+    return found + [p for p in candidates if p.is_file()]
+
+
 def pylsl() -> Any:
-    """The pylsl module (its wheels bundle liblsl); LslError naming the extra when it is not installed."""
+    """The pylsl module (its wheels bundle liblsl); LslError naming the extra when it is not installed.
+
+    Without a configuration file of the user's (:func:`user_config_files`), liblsl is given :data:`QUIET_CONFIG`
+    before its first use: its defaults, with its info lines ("Loaded default config" on every run) left out and
+    its warnings and errors kept. A user's own file (``LSLAPICFG`` or liblsl's usual places) is used as it is,
+    its ``[log] level`` included."""
+    global _configured
     try:
         import pylsl as module
     except (ImportError, RuntimeError) as exc:  # pylsl raises RuntimeError when liblsl cannot be loaded
         raise LslError(f"live capture needs pylsl with liblsl: pip install 'imulog[lsl]' ({exc})") from None
+    if not _configured:
+        _configured = True
+        setter = getattr(module, "set_config_content", None)  # pylsl >= 1.17.7 with liblsl >= 1.17.7
+        if setter is not None and not user_config_files():
+            with contextlib.suppress(NotImplementedError):  # an older liblsl: its info line stays
+                setter(QUIET_CONFIG)
     return module
 
 

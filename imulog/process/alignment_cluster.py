@@ -108,6 +108,50 @@ def kinematics_from_filtered(
     return ClusterKinematics(np.asarray(t_ns, dtype=np.int64), origin, q, omega, missing, tuple(names))
 
 
+#: a rigid body's frame as four virtual markers: its origin and the tips of its unit axes (body frame, m)
+AXIS_MARKERS = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+
+
+def pose_kinematics(
+    t_ns: np.ndarray,
+    position_m: np.ndarray,
+    quat_b2w: np.ndarray,
+    rate_hz: float,
+    params: AlignmentParams = AlignmentParams(),
+    name: str = "pose",
+) -> ClusterKinematics:
+    """The kinematics of an optical rigid body's poses (OptiTrack, BROAD's ``opt_quat``) as a marker cluster's:
+    the body frame is the cluster frame, so ``rotation_imu_to_cluster`` is the IMU-to-body rotation.
+
+    ``quat_b2w`` (N, 4) w,x,y,z body-to-world (NaN where tracking was lost), ``position_m`` (N, 3) m or None. The
+    orientation is low-passed like markers (``params.filter``: short gaps filled, long ones left missing) as four
+    virtual markers, the body origin and its unit axes' tips (:data:`AXIS_MARKERS`), then refitted to a rotation
+    (Kabsch, :func:`cluster_frame_svd`), so a pose and a marker cluster meet the gyroscope alike; the angular
+    velocity is :func:`angular_velocity_from_rotations`'s (body frame, rad/s)."""
+    q = np.asarray(quat_b2w, dtype=np.float64)
+    if q.ndim != 2 or q.shape[1] != 4:
+        raise ValueError(f"poses need (N, 4) quaternions, got shape {q.shape}")
+    ok = np.all(np.isfinite(q), axis=1)
+    r = np.full((len(q), 3, 3), np.nan)
+    if ok.any():
+        qn = q[ok] / np.linalg.norm(q[ok], axis=1, keepdims=True)
+        r[ok] = quat.to_rotation_matrix(qn)
+    virtual = np.concatenate([np.zeros((len(q), 1, 3)), r.transpose(0, 2, 1)], axis=1)  # axis tips = R's columns
+    virtual[~ok] = np.nan
+    filt, _ = lowpass_markers(virtual, rate_hz, params.filter)
+    r_f, _ = cluster_frame_svd(filt, AXIS_MARKERS)
+    missing = ~np.all(np.isfinite(r_f.reshape(len(r_f), 9)), axis=1)
+    q_f = np.full((len(q), 4), np.nan)
+    if (~missing).any():
+        q_f[~missing] = quat.from_rotation_matrix(r_f[~missing])
+    if position_m is None:
+        origin = np.full((len(q), 3), np.nan)
+    else:
+        origin, _ = lowpass_markers(np.asarray(position_m, dtype=np.float64), rate_hz, params.filter)
+    omega = angular_velocity_from_rotations(r_f, rate_hz)
+    return ClusterKinematics(np.asarray(t_ns, dtype=np.int64), origin, q_f, omega, missing, (name,))
+
+
 def _interp_rows(t_src: np.ndarray, x: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
     """Linear interpolation of the finite rows of ``x`` at ``t_dst``; NaN outside and across gaps longer
     than three median sample intervals (missing samples are not bridged)."""

@@ -45,7 +45,11 @@ def pick_markers(topics: list[str], markers: str | None) -> str:
     if "vicon" in names:
         return "vicon"
     if not names:
-        raise ValueError("no /markers/* channel in the trial: align needs optical markers (e.g. a Vicon export)")
+        raise ValueError(
+            "no /markers/* channel in the trial: align needs an optical reference recorded with the IMU, markers (a "
+            "Vicon, C3D, Motive export) or a rigid body's poses (/poses/*); convert it together with the IMU's "
+            "export: imulog convert IMU_FILE OPTICAL_FILE -o trial.mcap"
+        )
     raise ValueError(f"choose a marker channel with --markers among: {', '.join(names)}")
 
 
@@ -139,21 +143,34 @@ def compute_alignment(
     result is kept (the wide one records ``max_lag_s_used``).
     """
     args = (imu_name, t_imu_ns, gyr, marker_topic, t_vic_ns, labels, pos_m)
+    return with_wide_search(
+        lambda p: _compute(*args, p, orientation, acc_global, resample, acc),
+        t_imu_ns,
+        t_vic_ns,
+        params,
+        gyr is not None,
+    )
+
+
+def with_wide_search(compute, t_imu_ns: np.ndarray, t_ref_ns: np.ndarray, params: al.AlignmentParams, wide_ok: bool):
+    """``compute(params)`` (streams, record) within +-``params.max_lag_s`` of the recordings' starts; when that
+    fails or scores poorly (and ``wide_ok``), once more over every overlap of the two recordings, keeping the more
+    convincing result (the wide one records ``max_lag_s_used``)."""
     first, error = None, None
     try:
-        first = _compute(*args, params, orientation, acc_global, resample, acc)
+        first = compute(params)
     except ValueError as exc:
         error = exc
     if first is not None and _rank(first[1], params) >= 1.0:  # a correlation score that is not poor
         return first
-    t_i, t_v = np.asarray(t_imu_ns, dtype=np.int64), np.asarray(t_vic_ns, dtype=np.int64)
+    t_i, t_v = np.asarray(t_imu_ns, dtype=np.int64), np.asarray(t_ref_ns, dtype=np.int64)
     wide = float(np.ceil(((t_i[-1] - t_i[0]) + (t_v[-1] - t_v[0])) / al.NS)) if len(t_i) > 1 and len(t_v) > 1 else 0
-    if gyr is None or wide <= params.max_lag_s:
+    if not wide_ok or wide <= params.max_lag_s:
         if first is None:
             raise error
         return first
     try:
-        second = _compute(*args, dataclasses.replace(params, max_lag_s=wide), orientation, acc_global, resample, acc)
+        second = compute(dataclasses.replace(params, max_lag_s=wide))
     except ValueError:
         if first is None:
             raise error from None
@@ -199,10 +216,7 @@ def _compute(
         raise ValueError(f"/imu/{imu_name} has no gyroscope columns")
     labels = list(labels)
     vic_rate = mean_rate_hz(t_vic_ns)
-    q_s2g = None
-    if orientation is not None:
-        t_o, q_o = orientation
-        q_s2g = q_o if np.array_equal(t_o, t_imu_ns) else resample_quaternions(t_o, q_o, t_imu_ns)
+    q_s2g = orientation_at(orientation, t_imu_ns)
     ck = None
     try:
         if params.cluster == "auto" and not params.markers:
@@ -376,6 +390,26 @@ def imu_span(trial, imu_topic: str, marker_topic: str, max_lag_s: float) -> tupl
     return (None, None) if imu.end_ns < hi else (None, hi)
 
 
+def read_derived_pair(trial, topics: list[str], lo: int | None, hi: int | None) -> tuple:
+    """``(orientation, acc_global)`` as ``(t_ns, values)`` pairs (None when not in ``topics``) from an open trial,
+    read over ``[lo, hi)`` on the device clock: the inputs ``/derived/orientation/{imu}`` and
+    ``/derived/acc_global/{imu}`` an alignment uses when the orientation step ran first."""
+    out = []
+    for kind in ("/derived/orientation/", "/derived/acc_global/"):
+        topic = next((t for t in topics if t.startswith(kind)), None)
+        s = trial.read(topic, lo, hi) if topic else None
+        out.append(None if s is None else (s.t_ns, s.values))
+    return tuple(out)
+
+
+def orientation_at(orientation: tuple[np.ndarray, np.ndarray] | None, t_imu_ns: np.ndarray) -> np.ndarray | None:
+    """The orientation step's quaternions at the IMU's samples (resampled when its time stamps differ)."""
+    if orientation is None:
+        return None
+    t_o, q_o = orientation
+    return q_o if np.array_equal(t_o, t_imu_ns) else resample_quaternions(t_o, q_o, t_imu_ns)
+
+
 def run_align(
     path,
     *,
@@ -403,13 +437,7 @@ def run_align(
         lo, hi = imu_span(trial, imu_topic, marker_topic, params.max_lag_s)
         imu_stream = trial.read(imu_topic, lo, hi)
         mk = trial.read(marker_topic)
-        orientation = acc_global = None
-        if o_topic in inputs:
-            s = trial.read(o_topic, lo, hi)
-            orientation = (s.t_ns, s.values)
-        if a_topic in inputs:
-            s = trial.read(a_topic, lo, hi)
-            acc_global = (s.t_ns, s.values)
+        orientation, acc_global = read_derived_pair(trial, [t for t in (o_topic, a_topic) if t in inputs], lo, hi)
         streams, record = compute_alignment(
             name,
             imu_stream.t_ns,

@@ -264,14 +264,23 @@ def run_align_trial(
     params: al.AlignmentParams | None = None,
     resample: bool = True,
     force: bool = False,
+    poses: str | None = None,
 ):
-    """The align step as ``imulog process align`` runs it: one IMU when named or when the trial has one, else
-    every IMU (:func:`run_align_setup`). Keywords as :func:`imulog.steps.align.run_align`."""
+    """The align step as ``imulog process align`` runs it: on a rigid body's poses when the trial has poses and no
+    markers, or ``poses`` is named (:func:`imulog.steps.align_pose.run_align_pose`); else one IMU when named or
+    when the trial has one, else every IMU (:func:`run_align_setup`). Keywords as
+    :func:`imulog.steps.align.run_align`."""
     from imulog.archive import TrialReader
     from imulog.steps.align import run_align
+    from imulog.steps.align_pose import aligns_on_poses, run_align_pose
 
     with TrialReader(path) as trial:
-        n = sum(t.startswith("/imu/") for t in trial.topics())
+        topics = trial.topics()
+    n = sum(t.startswith("/imu/") for t in topics)
+    if aligns_on_poses(topics, markers, poses):  # a rigid body's poses (docs/alignment.md): one IMU
+        if imu is None and n > 1:
+            raise ValueError(f"aligning on a rigid body's poses takes one IMU: name it (the trial has {n})")
+        return run_align_pose(path, imu=imu, poses=poses, params=params, resample=resample, force=force)
     kw = {"markers": markers, "params": params, "resample": resample, "force": force}
     if imu is None and n > 1:
         return run_align_setup(path, **kw)

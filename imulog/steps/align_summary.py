@@ -19,6 +19,14 @@ def alignment_summary(record: dict) -> list[str]:
         f", signal {record.get('signal', 'angular-velocity-norm')}"
     )
     c = record.get("cluster") or {}
+    if c.get("pose"):
+        vm = c.get("vector_match")
+        frac = c.get("valid_fraction")
+        lines.append(
+            f"rigid body {c['pose']} (its orientations"
+            f"{f', {100 * frac:.1f} % valid' if frac is not None else ''}"
+            f"{f', vector match {vm:.3f}' if vm is not None else ''})"
+        )
     if c.get("markers"):
         vm, rig = c.get("vector_match"), c.get("rigidity_mm")
         lines.append(

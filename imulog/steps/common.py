@@ -27,8 +27,22 @@ def pick_imu(topics: list[str], imu: str | None, *, prefix: str = "/imu/", missi
     if "wrist" in names:
         return "wrist"
     if not names:
-        raise ValueError(f"no {prefix}* channel in the trial{hint}")
+        raise ValueError(f"no {prefix}* channel in the trial{hint or raw_channels_hint(topics, prefix)}")
     raise ValueError(f"choose an IMU with --imu among: {', '.join(names)}")
+
+
+def raw_channels_hint(topics: list[str], prefix: str, most: int = 4) -> str:
+    """For a trial without ``/imu/*`` channels: what it holds instead and how a stream becomes an IMU (an XDF or
+    delimited stream whose channels were not recognised as acc/gyro); empty for other prefixes."""
+    if prefix != "/imu/":
+        return ""
+    raw = [t for t in topics if not t.startswith("/derived/")]
+    shown = ", ".join(raw[:most]) + (f", ... ({len(raw) - most} more)" if len(raw) > most else "")
+    return (
+        f" (it has {shown or 'no channel'}): the processing steps need an IMU's accelerometer/gyroscope; a stream "
+        "becomes /imu/NAME when its columns or channel labels name them (acc_x.., gyro_x..; docs/converters.md), "
+        "or, for delimited text, with a mapping file (imulog convert --mapping)"
+    )
 
 
 def imu_names(topics: list[str], prefix: str = "/imu/") -> list[str]:

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from imulog.console import window_progress
 from imulog.model import SignalStream
 
 STEP = "epochs"
@@ -112,7 +113,7 @@ def epoch_pieces(
         # pass 1: summaries (window cores only; no margins needed)
         still, blocks = [], []
         buf = SampleWindow(((b.acc,) for b in trial.iter_blocks(imu_topic)), total)
-        for w in plan_windows(total, rate, core_s=core_s, margin_s=0.0):
+        for w in window_progress(plan_windows(total, rate, core_s=core_s, margin_s=0.0), "epochs (pass 1 of 2)"):
             (acc,) = buf.take(w.lo, w.hi)
             g = acc_to_g(acc)
             if p.calibrate:
@@ -138,7 +139,7 @@ def epoch_pieces(
         minute_starts: list[np.ndarray] = []
         dt_ns = 1e9 / rate
         buf = SampleWindow(((b.t_ns, b.acc) for b in trial.iter_blocks(imu_topic)), total)
-        for w in plan_windows(total, rate, core_s=core_s, margin_s=p.margin_s):
+        for w in window_progress(plan_windows(total, rate, core_s=core_s, margin_s=p.margin_s), "epochs (pass 2 of 2)"):
             t, acc = buf.take(w.lo, w.hi)
             g = cal.apply(acc_to_g(acc))
             core = g[w.core_slice]

@@ -75,9 +75,7 @@ def compute_evaluation(
     return evaluation_record(per_method, reference_topic, baseline)
 
 
-def error_rows(
-    t_ns: np.ndarray, pos: np.ndarray, ref: np.ndarray, spans: list[dict[str, Any]]
-) -> list[dict[str, Any]]:
+def error_rows(t_ns: np.ndarray, pos: np.ndarray, ref: np.ndarray, spans: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Errors of ``pos`` (N, 3) m against ``ref`` (N, 3) m (both at ``t_ns``) in each span (``start_ns``,
     ``end_ns`` inclusive, ``index``); spans with fewer than 2 samples or no valid reference are left out."""
     rows = []
@@ -197,10 +195,14 @@ def reference_source(trial, topics: list[str], imu: str | None = None) -> str:
             return f"{topic}:O"
     if not markers:
         poses = [t for t in topics if t.startswith("/poses/")]
-        unused = f" ({', '.join(poses)} is not used as a reference)" if poses else ""
+        unused = (
+            f" ({', '.join(poses)}: trajectories are evaluated against markers, an orientation against poses)"
+            if poses
+            else ""
+        )
         raise ValueError(
-            "no optical reference: evaluate needs Vicon markers (a /markers/* channel, aligned with "
-            f"`imulog process align`), and this trial has no marker channel{unused}"
+            "no optical reference: evaluate needs Vicon markers (a /markers/* channel) or a rigid body's poses "
+            f"(/poses/*), aligned with `imulog process align`, and this trial has neither{unused}"
         )
     raise ValueError(
         "no optical reference: neither /derived/vicon/cluster_pose (run `imulog process align`) nor a marker 'O' "
@@ -304,7 +306,9 @@ def run_evaluate(
     imus: list[str] | None = None,
     force: bool = False,
 ):
-    """Run the step on a trial file; returns ``(outcome, record)``. ``strides``: None evaluates a walking trial
+    """Run the step on a trial file; returns ``(outcome, record)``. A trial without trajectories whose alignment is
+    on a rigid body's poses (or whose only optical reference is poses) has its orientation evaluated against them
+    (:mod:`imulog.steps.evaluate_orientation`, ``kind`` = ``orientation``). ``strides``: None evaluates a walking trial
     (:func:`walking_of`) per stride and foot (:func:`imulog.steps.gait_evaluate.run_gait_evaluate`, on ``imus``)
     and any other over the trajectory step's windows; True or False forces either.
 
@@ -315,6 +319,18 @@ def run_evaluate(
     ``{"kind": "imus", "imus": {imu: record, or {"failed": why}}}``; a ValueError only when none could be."""
     from imulog.archive import TrialReader
 
+    if not strides:  # an orientation against a rigid body's poses (BROAD, OptiTrack), when no trajectory is there
+        from imulog.steps.evaluate_orientation import pose_reference, run_evaluate_orientation
+
+        with TrialReader(path) as trial:
+            topics, metadata = trial.topics(), trial.metadata
+        only_poses = any(t.startswith("/poses/") for t in topics) and not any(t.startswith("/markers/") for t in topics)
+        if not any(t.startswith("/derived/trajectory/") for t in topics) and (
+            pose_reference(metadata, imus[0] if imus else None) or only_poses
+        ):
+            if imus and len(imus) > 1:
+                raise ValueError("the orientation is evaluated against poses one IMU at a time: give one --imu")
+            return run_evaluate_orientation(path, imu=imus[0] if imus else None, force=force)
     walking = walking_of(path) if strides is None else ({"source": "asked"} if strides else None)
     if walking is not None:
         from imulog.steps.gait_evaluate import run_gait_evaluate

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from imulog.console import window_progress
 from imulog.model import PoseStream, SignalStream
 from imulog.process import quaternion as quat
 from imulog.process.kinematics.dh import JOINT_NAMES
@@ -183,7 +184,7 @@ def kinematics_pieces(
             if n
         }
         calibrated, warm = None, {}
-        for w in plan:
+        for w in window_progress(plan, "kinematics"):
             t, q_ua = ua_buf.take(w.lo, w.hi)
             t_fa, q_fa = others["fa"].get(int(t[0]) - margin_ns, int(t[-1]) + margin_ns)
             q_fa = resample_onto(t_fa, q_fa, t)

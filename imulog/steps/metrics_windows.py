@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from imulog.console import window_progress
 from imulog.model import Intervals, SignalStream
 from imulog.numeric import finite_rows
 
@@ -185,7 +186,7 @@ def metric_pieces(
     }
     buf = SampleWindow(blocks(), total)
     last_t = first_t
-    for w in plan:
+    for w in window_progress(plan, "metrics"):
         core_start, core_end, lo = w.core_lo, w.core_hi, w.lo
         t, acc = buf.take(w.lo, w.hi)
         raw_g = acc_to_g(acc)

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from imulog.console import window_progress
 from imulog.model import SignalStream
 from imulog.numeric import finite_rows
 from imulog.process.gaps import GapParams, GapReport, per_run, prepare
@@ -190,7 +191,7 @@ def orientation_windows(
 
     buf = SampleWindow(blocks, total)
     join: tuple[int, np.ndarray] | None = None  # (global sample, orientation there) the next window continues
-    for w in plan:
+    for w in window_progress(plan, f"orientation {imu}"):
         t, acc, gyr, mag = buf.take(w.lo, w.hi)
         found: list[dict[str, Any]] = []
         streams, report = orientation_with_gaps(t, acc, gyr, mag, imu, params, gaps, found)

@@ -1,0 +1,171 @@
+"""Reprocessing step ``evaluate`` of an IMU's orientation against an optical rigid body's poses (BROAD's
+``opt_quat``, an OptiTrack rigid body): the BROAD paper's errors, inclination and heading-free RMSE in degrees
+(:func:`imulog.process.orientation.orientation_errors`, the metric ``benchmarks/broad_orientation.py`` reports).
+
+Reads ``/derived/orientation/{imu}`` (sensor-to-global, device clock), the pose channel the alignment used
+(``imulog.alignment`` ``reference`` = ``/poses/NAME``) and, when present, ``/events/movement`` (BROAD's movement
+phases: the samples its authors evaluate). The estimate is put on the reference clock (the alignment's offset and
+drift) and resampled at the poses' time stamps. The optical body is turned into the IMU's frame by the
+alignment's ``rotation_imu_to_cluster``, unless the pose channel's device record declares the two frames aligned
+(``imu_frame_aligned``: BROAD's converter, as its files say), then by none. Writes ``imulog.evaluation`` with
+``kind`` = ``orientation``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from imulog.process import quaternion as quat
+from imulog.process.alignment_clock import device_to_reference
+from imulog.process.orientation import orientation_errors
+from imulog.process.resample import resample_quaternions
+
+STEP = "evaluate"
+MOVEMENT_TOPIC = "/events/movement"
+
+
+def pose_reference(metadata: dict[str, Any], imu: str | None = None) -> str | None:
+    """The pose channel (``/poses/NAME``) the IMU's alignment was made on, else None."""
+    from imulog.steps.common import alignment_for
+
+    record = (alignment_for(metadata, f"/imu/{imu}") if imu else None) or metadata.get("imulog.alignment") or {}
+    reference = str(record.get("reference") or "")
+    return reference if reference.startswith("/poses/") else None
+
+
+def in_intervals(t_ns: np.ndarray, start_ns: np.ndarray, end_ns: np.ndarray) -> np.ndarray:
+    """(N,) bool: ``t_ns`` inside any interval ``[start_ns, end_ns]`` (ends included)."""
+    t = np.asarray(t_ns, dtype=np.int64)
+    mask = np.zeros(len(t), dtype=bool)
+    for a, b in zip(np.asarray(start_ns, dtype=np.int64), np.asarray(end_ns, dtype=np.int64), strict=True):
+        mask |= (t >= a) & (t <= b)
+    return mask
+
+
+def orientation_evaluation(
+    t_est_ns: np.ndarray,
+    q_est_s2g: np.ndarray,
+    t_ref_ns: np.ndarray,
+    q_ref_b2w: np.ndarray,
+    alignment: dict[str, Any],
+    *,
+    imu_to_body: np.ndarray | None = None,
+    mask: np.ndarray | None = None,
+) -> dict[str, Any]:
+    """Errors (degrees) of an orientation estimate against a rigid body's orientations (pure, no I/O).
+
+    ``t_est_ns`` device clock, ``q_est_s2g`` (N, 4) sensor-to-global; ``t_ref_ns`` reference clock, ``q_ref_b2w``
+    (M, 4) body-to-world (NaN where tracking was lost); ``alignment``: the clock (``offset_ns``, ``drift_ppm``,
+    ``t0_ns``); ``imu_to_body`` (w,x,y,z) the IMU-to-body rotation (None: identity, the frames are one);
+    ``mask`` (M,) the reference samples to evaluate (None: all). The estimate is resampled at the reference's time
+    stamps; :func:`orientation_errors` does the rest (one implementation with the BROAD benchmark)."""
+    t_est_ref = device_to_reference(np.asarray(t_est_ns, dtype=np.int64), alignment)
+    q_est = resample_quaternions(t_est_ref, q_est_s2g, t_ref_ns)
+    q_ref = np.asarray(q_ref_b2w, dtype=np.float64)
+    if imu_to_body is not None:  # the IMU's orientation as the optical system sees it: body-to-world * IMU-to-body
+        q_ref = quat.multiply(q_ref, np.broadcast_to(np.asarray(imu_to_body, dtype=np.float64), q_ref.shape))
+    errors = orientation_errors(q_est, q_ref, mask)
+    if errors["samples"] < 2:
+        raise ValueError("no sample where the estimate and the optical orientation overlap (inside the mask)")
+    return errors
+
+
+def run_evaluate_orientation(path, imu: str | None = None, force: bool = False):
+    """Run the orientation evaluation on a trial whose alignment is on a pose channel; ``(outcome, record)``.
+    One-line ValueErrors naming the command to run when the orientation or the alignment is missing."""
+    from imulog.archive import TrialReader
+    from imulog.steps.align import require_alignment
+    from imulog.steps.base import StepResult, run_step
+    from imulog.steps.common import pick_imu
+    from imulog.steps.evaluate import alignment_note
+
+    with TrialReader(path) as trial:
+        topics = trial.topics()
+        metadata = trial.metadata
+    name = pick_imu(
+        topics, imu, prefix="/derived/orientation/", missing_hint=f"run `imulog process orientation {path}` first"
+    )
+    alignment = require_alignment(
+        metadata, path, f"/imu/{name}", needed_for="evaluate (the IMU's orientation against the optical poses)"
+    )
+    pose_topic = pose_reference(metadata, name)
+    if pose_topic is None or pose_topic not in topics:
+        raise ValueError(
+            f"the alignment of /imu/{name} is not on a pose channel (reference {alignment.get('reference')})"
+        )
+    o_topic = f"/derived/orientation/{name}"
+    device = metadata.get(f"imulog.device.{pose_topic.rsplit('/', 1)[-1]}") or {}
+    declared = bool(device.get("imu_frame_aligned"))
+    q_i2b = None if declared else alignment.get("rotation_imu_to_cluster")
+    movement = MOVEMENT_TOPIC in topics
+    inputs = [o_topic, pose_topic] + ([MOVEMENT_TOPIC] if movement else [])
+    holder: dict[str, Any] = {}
+
+    def compute(trial) -> StepResult:
+        est = trial.read(o_topic)
+        pose = trial.read(pose_topic)
+        mask = None
+        if movement:
+            ev = trial.read(MOVEMENT_TOPIC)
+            mask = in_intervals(pose.t_ns, ev.start_ns, ev.end_ns)
+        errors = orientation_evaluation(
+            est.t_ns,
+            est.values,
+            pose.t_ns,
+            pose.orientation,
+            alignment,
+            imu_to_body=None if q_i2b is None else np.asarray(q_i2b, dtype=np.float64),
+            mask=mask,
+        )
+        record = {
+            "kind": "orientation",
+            "reference": pose_topic,
+            "imu": f"/imu/{name}",
+            "orientation": o_topic,
+            "orientation_run": (trial.channel(o_topic).metadata or {}).get("algorithm", ""),
+            "over": "movement phases (/events/movement)" if movement else "all samples",
+            "imu_to_reference": (
+                "none: the source declares the IMU and optical body frames aligned"
+                if declared
+                else "the alignment's rotation_imu_to_cluster"
+            ),
+            **{k: round(float(v), 4) if isinstance(v, float) else v for k, v in errors.items()},
+            "units": {"inclination_rmse_deg": "deg", "heading_free_rmse_deg": "deg", "heading_offset_deg": "deg"},
+            "alignment": alignment_note(alignment),
+        }
+        holder["record"] = record
+        return StepResult(streams=[], metadata={"imulog.evaluation": record})
+
+    outcome = run_step(
+        path,
+        step=STEP,
+        algorithm="imulog.evaluation.orientation",
+        params={"imu": name, "reference": pose_topic, "imu_frame_aligned": declared},
+        inputs=inputs,
+        metadata_inputs=("imulog.alignment",),
+        compute=compute,
+        force=force,
+    )
+    if "record" not in holder:
+        with TrialReader(path) as trial:
+            holder["record"] = trial.metadata.get("imulog.evaluation", {})
+    return outcome, holder["record"]
+
+
+def orientation_lines(record: dict[str, Any]) -> list[str]:
+    """Human-readable lines of an orientation ``imulog.evaluation`` record."""
+    lines = [
+        f"inclination RMSE {record['inclination_rmse_deg']:.2f} deg, heading-free RMSE "
+        f"{record['heading_free_rmse_deg']:.2f} deg (global heading offset {record['heading_offset_deg']:.1f} deg "
+        f"removed), {record['samples']} samples",
+        f"over {record.get('over')}; IMU to optical body: {record.get('imu_to_reference')}",
+    ]
+    aligned = record.get("alignment") or {}
+    if "offset_ns" in aligned:
+        lines.append(
+            f"clock: offset {aligned['offset_ns'] / 1e6:.2f} ms, drift {float(aligned.get('drift_ppm') or 0):.1f} ppm "
+            f"(imulog process align), quality {aligned.get('quality', '?')}"
+        )
+    return lines
