@@ -123,6 +123,15 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
         D,
     ),
 }
+# the accelerometer's bias (and scale) from the trial's own rests before the orientation filter (AccRestParams)
+ACC_RESTS = replace(D.acc_rests, enabled=True)
+CHANGES.update(
+    {
+        "acc-rests": (D, replace(D, acc_rests=ACC_RESTS)),
+        "acc-rests-scale": (D, replace(D, acc_rests=replace(ACC_RESTS, model="scale"))),
+        "acc-rests-matrix": (D, replace(D, acc_rests=replace(ACC_RESTS, model="matrix"))),
+    }
+)
 # each rule of OptimizationParams.rest_model (trajectory_rest_model.RestRule) against the defaults: rest-model-NAME
 REST_RULES = (
     "waypoints",
@@ -156,7 +165,8 @@ def trial_errors(
 
     inputs = {}
     for label, params in (("before", BEFORE), ("after", AFTER)):  # the anchoring is part of the inputs
-        if label == "after" and AFTER.anchor == BEFORE.anchor and AFTER.rests == BEFORE.rests:
+        same = AFTER.anchor == BEFORE.anchor and AFTER.rests == BEFORE.rests and AFTER.acc_rests == BEFORE.acc_rests
+        if label == "after" and same:
             inputs[label] = inputs["before"]
             continue
         inputs[label] = simulated_inputs(
@@ -165,6 +175,7 @@ def trial_errors(
             repetitions=repetitions,
             rests=params.rests,
             anchor_params=params.anchor,
+            acc_rests=params.acc_rests,
             **condition(name),
         )
     out = {}
