@@ -33,7 +33,9 @@ too; ``rest-ramp-xy-rest-model``: with ``rest_model = "trusted-xy-test"``), ``is
 default changes, ``bias-uncertainty`` and ``rest-run-mean``, / the defaults), ``issue31-options`` (the same
 before / the defaults with the heading through rests and the z-only return), ``heading-restart`` (options 3 and 4
 with the heading chained through the whole recording, ``AnchorParams.restart = False``, / restarted at every rest
-where the trajectory step may cut a window), ``windowed-options`` (the filter's heading and the return to the start on every
+where the trajectory step may cut a window), ``acc-rests`` (the defaults / the accelerometer's bias and sensitivity matrix estimated from the trial's own rests
+before the orientation filter, ``TrajectoryParams.acc_rests``, an option; ``acc-rests-bias``: the bias alone,
+``acc-rests-scale``: the bias and a per-axis scale), ``windowed-options`` (the filter's heading and the return to the start on every
 axis, the defaults before 2026-12-07, / options 3 and 4 with the heading restarted where a window may be cut, the
 defaults since).
 """
@@ -123,13 +125,14 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
         D,
     ),
 }
-# the accelerometer's bias (and scale) from the trial's own rests before the orientation filter (AccRestParams)
+# the accelerometer's bias and sensitivity matrix from the trial's own rests before the orientation filter
+# (AccRestParams' defaults); -bias: the bias alone (identifiable below 0.05 m/s^2), -scale: with a per-axis scale
 ACC_RESTS = replace(D.acc_rests, enabled=True)
 CHANGES.update(
     {
         "acc-rests": (D, replace(D, acc_rests=ACC_RESTS)),
+        "acc-rests-bias": (D, replace(D, acc_rests=replace(ACC_RESTS, model="bias", max_bias_sd_mps2=0.05))),
         "acc-rests-scale": (D, replace(D, acc_rests=replace(ACC_RESTS, model="scale"))),
-        "acc-rests-matrix": (D, replace(D, acc_rests=replace(ACC_RESTS, model="matrix"))),
     }
 )
 # each rule of OptimizationParams.rest_model (trajectory_rest_model.RestRule) against the defaults: rest-model-NAME

@@ -46,7 +46,7 @@ DRINK = [(0.0, 0.0, 0.0), (20.0, -10.0, 60.0), (40.0, -50.0, 80.0), (20.0, -10.0
 def test_bias_recovered_from_rests_at_several_orientations():
     bias = np.array([0.25, -0.3, 0.15])
     acc, gyr, t, static = _rests_at(DRINK, bias, np.ones(3), gyr_bias=(0.02, -0.03, 0.01))
-    est = estimate(acc, gyr, t, static, AccRestParams(enabled=True))
+    est = estimate(acc, gyr, t, static, AccRestParams(enabled=True, model="bias", max_bias_sd_mps2=0.05))
     assert est.applied, est.reason
     assert est.rests == len(DRINK)
     assert np.linalg.norm(est.bias_mps2 - bias) < 0.02  # of a 0.42 m/s^2 bias
@@ -67,13 +67,13 @@ def test_bias_and_scale_recovered_with_the_scale():
     assert np.abs(np.diag(est.matrix) - scale).max() < 0.003
     assert np.linalg.norm(est.bias_mps2 - bias) < 0.03
     # without the scale, a bias alone cannot explain these readings as well
-    only_bias = estimate(acc, gyr, t, static, AccRestParams(enabled=True, max_bias_sd_mps2=0.1))
+    only_bias = estimate(acc, gyr, t, static, AccRestParams(enabled=True, model="bias", max_bias_sd_mps2=0.1))
     assert np.linalg.norm(only_bias.bias_mps2 - bias) > np.linalg.norm(est.bias_mps2 - bias)
 
 
 def test_not_identifiable_from_rests_at_one_orientation():
     acc, gyr, t, static = _rests_at([(0.0, -10.0, 60.0)] * 8, [0.3, 0.0, 0.0], np.ones(3))
-    est = estimate(acc, gyr, t, static, AccRestParams(enabled=True))
+    est = estimate(acc, gyr, t, static, AccRestParams(enabled=True, model="bias", max_bias_sd_mps2=0.05))
     assert not est.applied
     assert "spread" in est.reason and "deg" in est.reason
     assert np.array_equal(est.apply(acc), acc)  # nothing is corrected
@@ -82,11 +82,11 @@ def test_not_identifiable_from_rests_at_one_orientation():
 
 def test_too_few_rests_and_a_weak_estimate_are_refused():
     acc, gyr, t, static = _rests_at(DRINK[:3], [0.3, 0.0, 0.0], np.ones(3))
-    est = estimate(acc, gyr, t, static, AccRestParams(enabled=True))
+    est = estimate(acc, gyr, t, static, AccRestParams(enabled=True, model="bias", max_bias_sd_mps2=0.05))
     assert not est.applied and "fewer than 6" in est.reason
     # the same rests at several orientations but an uncertainty limit no estimate meets
     acc, gyr, t, static = _rests_at(DRINK, [0.3, 0.0, 0.0], np.ones(3))
-    est = estimate(acc, gyr, t, static, AccRestParams(enabled=True, max_bias_sd_mps2=1e-4))
+    est = estimate(acc, gyr, t, static, AccRestParams(enabled=True, model="bias", max_bias_sd_mps2=1e-4))
     assert not est.applied and "standard deviation" in est.reason
 
 
@@ -94,7 +94,7 @@ def test_a_moving_rest_is_left_out():
     acc, gyr, t, static = _rests_at(DRINK, [0.1, 0.1, 0.1], np.ones(3))
     first = np.flatnonzero(static)[:200]
     acc[first] += np.sin(np.arange(200) / 5.0)[:, None] * np.array([0.5, 0.0, 0.0])  # a hand that is not still
-    est = estimate(acc, gyr, t, static, AccRestParams(enabled=True))
+    est = estimate(acc, gyr, t, static, AccRestParams(enabled=True, model="bias", max_bias_sd_mps2=0.05))
     assert est.rests == len(DRINK) - 1
 
 
@@ -104,5 +104,41 @@ def test_fit_without_links_still_reads_the_magnitude():
     poses = [(0.0, p, r) for p, r in [(0, 0), (-10, 60), (-50, 80), (-10, 60), (0, 0), (-30, 30)]]
     up = np.array([0.0, 0.0, G])
     means = np.array([quat.rotate_inverse(quat.from_euler_zyx(*p), up) for p in poses]) + np.array([0.0, 0.0, 0.2])
-    est = fit(means, np.full(len(means), 0.005), [], AccRestParams(enabled=True, max_bias_sd_mps2=1.0))
+    est = fit(means, np.full(len(means), 0.005), [], AccRestParams(enabled=True, model="bias", max_bias_sd_mps2=1.0))
     assert est.bias_mps2[2] == pytest.approx(0.2, abs=0.08)
+
+
+def test_the_matrix_model_needs_poses_that_vary():
+    """A sensitivity matrix (2 % scale, 1 deg misalignment) and a bias. At three poses repeated exactly (home,
+    bottle, mouth) the default model (bias and matrix under their priors) cannot tell the bias from the matrix
+    (standard deviation above the 0.1 m/s^2 limit): not applied. At poses that vary between ten repetitions, as a
+    hand's do (10 deg per angle), it is applied, the bias's error is within three of its standard deviations, and
+    the corrected readings point nearer gravity than the raw ones on average over the rests."""
+    rng = np.random.default_rng(3)
+    off = np.radians(1.0) * rng.normal(size=(3, 3)) * ~np.eye(3, dtype=bool)
+    matrix = np.eye(3) + np.diag([0.02, -0.015, 0.01]) + off
+    bias = np.array([0.2, -0.25, 0.1])
+
+    def through_matrix(poses):
+        acc, gyr, t, static = _rests_at(poses, bias, np.ones(3))
+        return (acc - bias) @ matrix.T + bias, gyr, t, static
+
+    fixed_poses = estimate(*through_matrix(DRINK), AccRestParams(enabled=True))
+    assert not fixed_poses.applied and "bias standard deviation" in fixed_poses.reason
+    base = [(0.0, 0.0, 0.0), (20.0, -10.0, 60.0), (40.0, -50.0, 80.0), (20.0, -10.0, 60.0)]
+    poses = [tuple(np.add(p, rng.normal(0.0, 10.0, 3))) for _ in range(10) for p in base] + [(0.0, 0.0, 0.0)]
+    est = estimate(*through_matrix(poses), AccRestParams(enabled=True))
+    assert est.applied, est.reason
+    assert np.all(np.abs(est.bias_mps2 - bias) < 3 * est.bias_sd_mps2)
+    up = np.array([0.0, 0.0, 1.0])
+
+    def angle(v: np.ndarray, true_dir: np.ndarray) -> float:
+        return float(np.degrees(np.arccos(np.clip(v @ true_dir / np.linalg.norm(v), -1, 1))))
+
+    before, after = [], []
+    for pose in poses:
+        true_dir = quat.rotate_inverse(quat.from_euler_zyx(*pose), up)
+        raw = (G * true_dir) @ matrix.T + bias
+        before.append(angle(raw, true_dir))
+        after.append(angle(est.apply(raw[None, :])[0], true_dir))
+    assert np.mean(after) < 0.6 * np.mean(before), (np.mean(before), np.mean(after))
