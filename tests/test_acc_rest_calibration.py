@@ -62,7 +62,9 @@ def test_bias_and_scale_recovered_with_the_scale():
     scale = np.array([1.02, 0.985, 1.01])
     poses = [(0, 0, 0), (0, 90, 0), (0, 0, 90), (0, 180, 0), (0, 0, -90), (0, -90, 0), (0, 0, 0)]
     acc, gyr, t, static = _rests_at([tuple(map(float, p)) for p in poses], bias, scale)
-    est = estimate(acc, gyr, t, static, AccRestParams(enabled=True, model="scale", scale_prior=0.02, max_bias_sd_mps2=0.1))
+    est = estimate(
+        acc, gyr, t, static, AccRestParams(enabled=True, model="scale", scale_prior=0.02, max_bias_sd_mps2=0.1)
+    )
     assert est.applied, est.reason
     assert np.abs(np.diag(est.matrix) - scale).max() < 0.003
     assert np.linalg.norm(est.bias_mps2 - bias) < 0.03

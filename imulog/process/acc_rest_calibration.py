@@ -1,21 +1,22 @@
-"""The accelerometer's bias (and per-axis scale) from a trial's own rests (issue 31 point 2, ninth round).
+"""The accelerometer's bias and sensitivity from a trial's own rests (issue 31 point 2, ninth round).
 
-At rest k a still accelerometer reads ``f_k = diag(s) g u_k + b``: gravity (``g`` m/s^2) along the unit direction
-``u_k`` in the sensor frame, a per-axis scale ``s`` and a bias ``b`` (m/s^2). An orientation filter makes the
-biased reading vertical at every rest, so it cannot see ``b``; but between two rests the gyroscope gives the
-sensor's rotation ``D_k`` (sensor frame of rest k to that of rest k + 1, integrated over a few seconds with the
-bias of the rest before taken off: :func:`imulog.process.rest_runs.through_movement`), and gravity must follow it,
-``u_{k+1} = D_k^T u_k``. A bias does not turn with the sensor, so over rests at several wrist orientations
+At rest k a still accelerometer reads ``f_k = M g u_k + b``: gravity (``g`` m/s^2) along the unit direction ``u_k``
+in the sensor frame, a sensitivity matrix ``M`` (scale and misalignment) and a bias ``b`` (m/s^2). An orientation
+filter makes the biased reading vertical at every rest, so it cannot see ``b``; but between two rests the gyroscope
+gives the sensor's rotation ``D_k`` (sensor frame of rest k to that of rest k + 1, integrated over a few seconds with
+the bias of the rest before taken off: :func:`imulog.process.rest_runs.through_movement`), and gravity must follow
+it, ``u_{k+1} = D_k^T u_k``. A bias does not turn with the sensor, so over rests at several wrist orientations
 (home, bottle, mouth) it is told apart from gravity.
 
-The fit (:func:`estimate`): unknowns ``b``, optionally ``s`` or a whole sensitivity matrix
-(:attr:`AccRestParams.model`), and each rest's ``u_k`` (two angles about the
-reading's own direction); weighted least squares over the rests' readings (within the rest's own standard error,
-at least ``reading_sd_mps2``), the links between consecutive rests (within ``gyro_angle_sd_rad`` plus
-``gyro_scale_sd`` of the angle turned) and a prior toward zero bias (``bias_prior_mps2``) and the identity
-sensitivity (``scale_prior``, ``misalignment_prior_deg``). The posterior covariance is the inverse normal matrix, inflated by the reduced chi-square
-when it is above 1. The result is applied only when identifiable (:class:`AccRestCalibration.reason` says why
-not). Pure numpy / scipy; times in s, accelerations in m/s^2, rates in rad/s.
+The fit (:func:`estimate`): unknowns ``b``, ``M`` (the identity, a per-axis scale or a whole matrix:
+:attr:`AccRestParams.model`) and each rest's ``u_k`` (two angles about the reading's own direction); weighted least
+squares over the rests' readings (within the rest's own standard error, at least ``reading_sd_mps2``), the links
+between consecutive rests (within ``gyro_angle_sd_rad`` plus ``gyro_scale_sd`` of the angle turned) and priors
+toward zero bias (``bias_prior_mps2``) and the identity sensitivity (``scale_prior``, ``misalignment_prior_deg``).
+The posterior covariance is the inverse normal matrix, inflated by the reduced chi-square when it is above 1. The
+result is applied only when identifiable (:attr:`AccRestCalibration.reason` says why not). Without ``M`` the bias
+absorbs the sensor's scale error at the trial's poses and its standard deviation is far too small (docs/accuracy.md,
+ninth round). Pure numpy / scipy; times in s, accelerations in m/s^2, rates in rad/s.
 """
 
 from __future__ import annotations
@@ -189,7 +190,9 @@ def fit(
     u0 = f / np.linalg.norm(f, axis=1, keepdims=True)
     out.spread_deg = spread_deg(u0)
     if out.spread_deg < params.min_spread_deg:
-        out.reason = f"the rests' gravity directions spread {out.spread_deg:.1f} deg, less than {params.min_spread_deg:g}"
+        out.reason = (
+            f"the rests' gravity directions spread {out.spread_deg:.1f} deg, less than {params.min_spread_deg:g}"
+        )
         return out
     e1, e2 = _tangents(u0)
     if params.model not in MODELS:
