@@ -119,6 +119,7 @@ def simulated_inputs(
     rests: RestParams | None = DEFAULT_PARAMS.rests,
     static: str = "movements",
     anchor_params: Any = None,
+    acc_rests: Any = None,
     **overrides: Any,
 ) -> dict[str, Any]:
     """Simulate one R2G trial and build the trajectory inputs on the reference clock in the world frame.
@@ -128,6 +129,10 @@ def simulated_inputs(
     gated rests only (``acc_gate`` holds that acceleration for :func:`evaluate_trial`). ``static``: the phases
     step's zero-velocity mask (``"gyro-norm"``: the angular rate alone, many still-gyroscope translations).
     ``anchor_params``: :class:`imulog.process.integration.AnchorParams` of the anchoring (None: the default).
+    ``acc_rests``: :class:`imulog.process.acc_rest_calibration.AccRestParams` (None or not enabled: the raw
+    accelerometer); enabled, the accelerometer's bias (and scale) is estimated from the phases step's rests and the
+    corrected accelerometer feeds the orientation filter and the acceleration (the record under
+    ``"acc_rest_calibration"``).
     """
     from imulog.simulate.core import simulate
 
@@ -138,6 +143,7 @@ def simulated_inputs(
     t_s = (np.asarray(t_ref_ns, dtype=np.float64) - float(t_ref_ns[0])) / 1e9
     rate = (len(t_s) - 1) / t_s[-1]
     q_true = truth.imu_orientation
+    calibration_record: dict[str, Any] | None = None
     if orientation == "truth":
         q_world = q_true
         acc_world = quat.rotate(q_true, imu.acc)
@@ -146,19 +152,27 @@ def simulated_inputs(
     elif orientation == "estimated":
         from imulog.process.orientation import estimate_orientation, gravity_free_acceleration
 
-        est = estimate_orientation(imu.gyr, imu.acc, rate)
+        acc_imu = imu.acc
+        if anchor or (acc_rests is not None and acc_rests.enabled):
+            anchor_static, restart = _static_for_anchor(imu, rate, repetitions, static, t_s)
+        if acc_rests is not None and acc_rests.enabled:  # the accelerometer from the trial's own rests
+            from imulog.process.acc_rest_calibration import estimate as estimate_acc
+
+            acc_cal = estimate_acc(acc_imu, imu.gyr, t_s, anchor_static, acc_rests)
+            calibration_record = acc_cal.as_dict()
+            acc_imu = acc_cal.apply(acc_imu)
+        est = estimate_orientation(imu.gyr, acc_imu, rate)
         q_est = q_gate = est.quat
-        acc_gate = gravity_free_acceleration(q_est, imu.acc, est.static)
+        acc_gate = gravity_free_acceleration(q_est, acc_imu, est.static)
         if anchor:  # what the trajectory step does with the gyroscope (TrajectoryParams.anchor)
             from imulog.process.integration import AnchorParams, rest_anchored_orientation
 
-            anchor_static, restart = _static_for_anchor(imu, rate, repetitions, static, t_s)
             if rests is not None:  # the step anchors at true rests only
                 anchor_static = true_rests(anchor_static, acc_gate, rate, rests, orientation=q_gate)
             q_est = rest_anchored_orientation(
                 q_est, imu.gyr, t_s, anchor_static, anchor_params or AnchorParams(), restart
             )
-        acc_g = gravity_free_acceleration(q_est, imu.acc, est.static)
+        acc_g = gravity_free_acceleration(q_est, acc_imu, est.static)
         q_g2w = quat.average(quat.multiply(q_true, quat.conjugate(q_est)))
         acc_world = quat.rotate(q_g2w, acc_g)
         q_world = quat.multiply(q_g2w, q_est)
@@ -193,6 +207,7 @@ def simulated_inputs(
         "truth_pos": truth.imu_position,
         "anthropometrics": sim.recording.metadata.get("imulog.anthropometrics", {}),
         "subject": subject,
+        "acc_rest_calibration": calibration_record,
     }
 
 

@@ -45,6 +45,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from trajectory_accuracy import RunCost, add_trial_arguments, grid_names, simulated_inputs  # noqa: E402
+from trajectory_paired import CHANGES  # noqa: E402
 
 from imulog.process import quaternion as quat  # noqa: E402
 from imulog.process import trajectory_opt, trajectory_rest_model  # noqa: E402
@@ -77,11 +78,14 @@ class _Captured(Exception):
     """Raised by the spy once the start is known (the optimisation itself is not needed)."""
 
 
-def trial(name: str, subject: int, repetitions: int, calibrate: str = "", anchor=None) -> tuple[dict, object]:
+def trial(
+    name: str, subject: int, repetitions: int, calibrate: str = "", anchor=None, acc_rests=None
+) -> tuple[dict, object]:
     """One simulated trial of grid condition ``name`` as the trajectory step sees it, and its simulation;
     ``calibrate`` ``"acc"`` or ``"gyr"``: that sensor corrected by the device's true constant bias and scale /
     misalignment matrix before anything runs (the orientation filter, the anchoring and the segmentation too);
-    ``anchor``: the anchoring's :class:`imulog.process.integration.AnchorParams` (None: the default's)."""
+    ``anchor``: the anchoring's :class:`imulog.process.integration.AnchorParams` (None: the default's);
+    ``acc_rests``: :class:`imulog.process.acc_rest_calibration.AccRestParams` (None: the default's, off)."""
     from imulog.simulate import core
     from imulog.simulate.grid import condition
 
@@ -109,6 +113,7 @@ def trial(name: str, subject: int, repetitions: int, calibrate: str = "", anchor
             repetitions=repetitions,
             rests=d.rests,
             anchor_params=anchor or d.anchor,
+            acc_rests=acc_rests or d.acc_rests,
             **condition(name),
         )
     finally:
@@ -268,6 +273,56 @@ RERUN = ("acc-calibrated", "gyr-calibrated")
 EXTRA = (*RERUN, "rest-ramp", "spread-none")
 
 
+def acc_rests_table(names: list[str], args: argparse.Namespace, params) -> None:
+    """Per condition: the displacements' RMS error x / y / z (cm) with the pipeline's inputs, with the accelerometer
+    corrected by :mod:`imulog.process.acc_rest_calibration` and by the device's true bias and scale; the trials
+    where the estimate was applied; the RMS of the true constant bias and of the applied estimate's error, and
+    the estimate's mean posterior standard deviation (m/s^2, 3D); ``params``: the
+    :class:`imulog.process.acc_rest_calibration.AccRestParams`."""
+    print(
+        "| condition | base x/y/z (cm) | acc-rests x/y/z (cm) | acc-calibrated x/y/z (cm) | tilt at the rests, "
+        "median base / acc-rests / acc-calibrated (deg) | applied | true bias (m/s^2) | estimate's error (m/s^2) | "
+        "posterior sd (m/s^2) |"
+    )
+    print("|---|---|---|---|---|---:|---:|---:|---:|")
+    for name in names:
+        errs: dict[str, list] = {"base": [], "acc-rests": [], "acc-calibrated": []}
+        tilt: dict[str, list] = {k: [] for k in errs}
+        true_b, err_b, sd_b, applied = [], [], [], 0
+        for s in range(args.first_subject, args.first_subject + args.subjects):
+            inputs, sim = trial(name, s, args.repetitions)
+            fixed, sim_f = trial(name, s, args.repetitions, acc_rests=params)
+            cal, sim_c = trial(name, s, args.repetitions, calibrate="acc")
+            for k, (inp, sm) in {
+                "base": (inputs, sim),
+                "acc-rests": (fixed, sim_f),
+                "acc-calibrated": (cal, sim_c),
+            }.items():
+                errs[k].append(displacement_errors(inp, variant(inp, sm, set())))
+                tilt[k].append(rest_tilt_errors(inp, sm)[0])
+            rec = fixed["acc_rest_calibration"]
+            b = np.asarray(sim.truth.info["device_errors"]["acc_bias_mps2"])
+            true_b.append(np.linalg.norm(b))
+            if rec["applied"]:
+                applied += 1
+                err_b.append(np.linalg.norm(np.asarray(rec["bias_mps2"]) - b))
+                sd_b.append(np.linalg.norm(rec["bias_sd_mps2"]))
+
+        def rms(v: list) -> float:
+            return float(np.sqrt(np.mean(np.square(v)))) if v else float("nan")
+
+        cells = [
+            " / ".join(f"{100 * x:.2f}" for x in np.sqrt(np.nanmean(np.concatenate(errs[k]) ** 2, axis=0)))
+            for k in errs
+        ]
+        cells.append(" / ".join(f"{np.median(np.concatenate(tilt[k])):.2f}" for k in tilt))
+        print(
+            f"| {name} | " + " | ".join(cells) + f" | {applied} of {args.subjects} | {rms(true_b):.3f} | "
+            f"{rms(err_b):.3f} | {rms(sd_b):.3f} |",
+            flush=True,
+        )
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_trial_arguments(ap)
@@ -276,9 +331,21 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="only the estimated orientation's tilt error at the rests and its change from rest to rest (deg)",
     )
+    ap.add_argument(
+        "--acc-rests",
+        metavar="CHANGE",
+        choices=[k for k in CHANGES if k.startswith("acc-rests")],
+        help="only the displacements with the accelerometer's bias from the trial's own rests (the AccRestParams of "
+        "trajectory_paired.py's change CHANGE, e.g. acc-rests) against the pipeline's and the true calibration's, "
+        "and the estimated bias against the true one",
+    )
     args = ap.parse_args(argv)
     names = grid_names(args.grid)
     cost = RunCost()
+    if args.acc_rests:
+        acc_rests_table(names, args, CHANGES[args.acc_rests][1].acc_rests)
+        print(f"\n{cost.line()}")
+        return 0
     if args.tilt:
         print("| condition | rests | tilt error at a rest, median / 90th pct (deg) | change to the next rest (deg) |")
         print("|---|---:|---|---|")

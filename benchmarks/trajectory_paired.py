@@ -33,7 +33,10 @@ too; ``rest-ramp-xy-rest-model``: with ``rest_model = "trusted-xy-test"``), ``is
 default changes, ``bias-uncertainty`` and ``rest-run-mean``, / the defaults), ``issue31-options`` (the same
 before / the defaults with the heading through rests and the z-only return), ``heading-restart`` (options 3 and 4
 with the heading chained through the whole recording, ``AnchorParams.restart = False``, / restarted at every rest
-where the trajectory step may cut a window), ``windowed-options`` (the filter's heading and the return to the start on every
+where the trajectory step may cut a window), ``acc-rests`` (the defaults / the accelerometer's bias and sensitivity matrix estimated from the trial's own rests
+before the orientation filter, ``TrajectoryParams.acc_rests``, an option; ``acc-rests-bias``: the bias alone,
+``acc-rests-scale``: the bias and a per-axis scale; ``acc-rests-bias-compensation`` / ``acc-rests-no-compensation``:
+with the rotating-bias compensation fitting the bias only / not at all), ``windowed-options`` (the filter's heading and the return to the start on every
 axis, the defaults before 2026-12-07, / options 3 and 4 with the heading restarted where a window may be cut, the
 defaults since).
 """
@@ -123,6 +126,26 @@ CHANGES: dict[str, tuple[TrajectoryParams, TrajectoryParams]] = {
         D,
     ),
 }
+# the accelerometer's bias and sensitivity matrix from the trial's own rests before the orientation filter
+# (AccRestParams' defaults); -bias: the bias alone (identifiable below 0.05 m/s^2), -scale: with a per-axis scale
+ACC_RESTS = replace(D.acc_rests, enabled=True)
+CHANGES.update(
+    {
+        "acc-rests": (D, replace(D, acc_rests=ACC_RESTS)),
+        "acc-rests-bias": (D, replace(D, acc_rests=replace(ACC_RESTS, model="bias", max_bias_sd_mps2=0.05))),
+        "acc-rests-scale": (D, replace(D, acc_rests=replace(ACC_RESTS, model="scale"))),
+        # the optimisation's start on the corrected accelerometer: the rotating-bias compensation fits the bias only
+        # (3 unknowns), or not at all (min_movements above any trial's count)
+        "acc-rests-bias-compensation": (
+            D,
+            replace(D, acc_rests=ACC_RESTS, rotating_bias=replace(D.rotating_bias, gravity_coupled=False)),
+        ),
+        "acc-rests-no-compensation": (
+            D,
+            replace(D, acc_rests=ACC_RESTS, rotating_bias=replace(D.rotating_bias, min_movements=10**9)),
+        ),
+    }
+)
 # each rule of OptimizationParams.rest_model (trajectory_rest_model.RestRule) against the defaults: rest-model-NAME
 REST_RULES = (
     "waypoints",
@@ -156,7 +179,8 @@ def trial_errors(
 
     inputs = {}
     for label, params in (("before", BEFORE), ("after", AFTER)):  # the anchoring is part of the inputs
-        if label == "after" and AFTER.anchor == BEFORE.anchor and AFTER.rests == BEFORE.rests:
+        same = AFTER.anchor == BEFORE.anchor and AFTER.rests == BEFORE.rests and AFTER.acc_rests == BEFORE.acc_rests
+        if label == "after" and same:
             inputs[label] = inputs["before"]
             continue
         inputs[label] = simulated_inputs(
@@ -165,6 +189,7 @@ def trial_errors(
             repetitions=repetitions,
             rests=params.rests,
             anchor_params=params.anchor,
+            acc_rests=params.acc_rests,
             **condition(name),
         )
     out = {}

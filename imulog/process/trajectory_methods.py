@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imulog.process.acc_rest_calibration import AccRestParams
 from imulog.process.drift import HighpassParams, WaveletParams, highpass, wavelet_detrend
 from imulog.process.integration import AnchorParams, DdiParams, RotatingBiasParams, ZuptParams, double_integrate, zupt
 from imulog.process.kalman import KalmanParams, kalman_track
@@ -38,6 +39,7 @@ class TrajectoryParams:
     anchor: AnchorParams = AnchorParams()
     rests: RestParams = RestParams()
     checks: CheckParams = CheckParams()
+    acc_rests: AccRestParams = AccRestParams()
 
 
 def reconstruct(

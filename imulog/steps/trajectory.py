@@ -104,6 +104,11 @@ def compute_trajectories(
     """
     t_dev = np.asarray(acc_t_ns, dtype=np.int64)
     acc = np.asarray(acc_global, dtype=np.float64)
+    if params.acc_rests.enabled:  # it re-runs the orientation filter on the raw accelerometer: not in the step yet
+        raise ValueError(
+            "TrajectoryParams.acc_rests is measured in benchmarks/trajectory_paired.py only (issue 31 point 2, an "
+            "option that stays off); the trajectory step does not apply it"
+        )
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
         raise ValueError(f"unknown method(s) {', '.join(unknown)}; choose from {', '.join(METHODS)}")
