@@ -131,6 +131,7 @@ GRID_METHODS = {
     "hand without step 9": PhaseParams(hand=HandParams(profile_rest_s=0.0)),  # the default until issue 31's 7th round
     "hand + gyroscope floor (step 10)": PhaseParams(hand=HandParams(gyro_floor=True)),  # issue 31's 9th round, off
     "hand, step 9 tied to step 2's window": PhaseParams(hand=HandParams(profile_alone=False)),  # before issue 31's 10th
+    "hand + the rests' own drift (step 8)": PhaseParams(hand=HandParams(rest_drift=True)),  # issue 31's 11th round
     "gyroscope only": PhaseParams(hand=HandParams(enabled=False)),
     "published (--no-refine)": PhaseParams(
         dynamos=DynamosParams(refine_boundaries=False), boundaries=BoundaryParams(enabled=False)
