@@ -144,9 +144,9 @@ class HandParams:
     rest_check_s: a slow last part of a phase at ``velocity_level_mps`` or more with next to no acceleration
         extends the offset when the velocity relative to the rest window stays under half that speed for this
         long (s) after the window (the window is a rest, not a hand cruising or drifting); 0: off.
-    rest_drift: step 8's limit on that velocity is the trial's own: what its still rests read
-        (:mod:`~imulog.process.segmentation.rest_drift`, 95 % of them) instead of half ``velocity_level_mps``
-        (issue 31 eleventh round).
+    rest_drift: step 8's limit on that velocity is raised to the trial's own where its still rests read more than
+        half ``velocity_level_mps`` (:mod:`~imulog.process.segmentation.rest_drift`, 95 % of them; never lowered;
+        issue 31 eleventh round).
     """
 
     enabled: bool = True
@@ -412,7 +412,9 @@ def refine_with_accelerometer(
     if params.rest_drift:
         drift_params = RestDriftParams(params.rest_window_s, params.rest_check_s, params.guard_s)
         model = rest_drift(acc, gyr, rate_hz, ss, ee, (first, n), drift_params)
-        drift = model.limit_mps(drift_params.n_sd) if model is not None else None
+        # the trial's rests raise the fixed limit where a still hand reads more; they never lower it (a lower limit
+        # refused a real rest's window at 1.45 cm/s, docs/accuracy.md eleventh round)
+        drift = max(model.limit_mps(drift_params.n_sd), 0.5 * params.velocity_level_mps) if model is not None else None
     rests = []  # per phase: step 2's rest windows before and after it
     for k in range(len(ss)):
         a0, b0 = int(ss[k]), int(ee[k])
