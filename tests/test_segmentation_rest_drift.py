@@ -97,3 +97,27 @@ def test_the_trials_own_rest_drift_in_step_8_brings_an_offset_to_the_truth():
     assert missed[(3, "lift")] < -2.0
     now = {(r, lab) for r, lab, _, _ in after["outside"]}
     assert (3, "lift") not in now and now <= set(missed) and after["correct"] == 1.0
+
+
+def test_the_trials_own_rests_never_lower_step_8s_limit():
+    """Grid ``stroke`` seed 80 subject 51, the lift of repetition 10: step 2's window lies in a real rest that reads
+    1.45 cm/s within the check, under step 8's fixed 1.5 cm/s; the trial's own rests give 1.40 cm/s. Replacing the
+    fixed limit by the trial's refused the window and left the offset 1.14 s early (the eleventh round's first
+    development run); raised only, the offset stays within 0.1 s, as by default."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from segmentation_accuracy import score
+
+    from imulog.process.segmentation.pipeline import PhaseParams
+    from imulog.process.segmentation.repetitions import RepetitionParams
+    from imulog.simulate import simulate
+    from imulog.simulate.grid import condition
+
+    base = PhaseParams(repetitions=RepetitionParams(n_repetitions=10))
+    own = replace(base, hand=replace(base.hand, rest_drift=True))
+    sim = simulate("r2g", seed=80, subject=51, repetitions=10, **condition("stroke"))
+    before, after = score(sim, base), score(sim, own)
+    assert (10, "lift") not in {(r, lab) for r, lab, _, _ in after["outside"]}
+    assert after["duration_within_0_1_s"] >= before["duration_within_0_1_s"]
