@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 
 from imulog.process.segmentation.arrival import velocity_noise_mps
-from imulog.process.segmentation.rest_drift import RestDriftParams, rest_drift
+from imulog.process.segmentation.rest_drift import RestDriftParams, check_limit, rest_drift
 
 RATE = 100.0
 DT = 1.0 / RATE
@@ -47,7 +47,8 @@ def _expected_sd(jerk_sd: float, params: RestDriftParams) -> float:
 def test_the_drift_model_recovers_a_known_drift_of_the_rests():
     """60 rests drifting with a known jerk (0.02 m/s^3 per axis, 3 cm/s over the 1.5-s check): the model's sd is
     the known one within 20 % (without the chi-3 median's factor it would be 54 % high), and with no drift it is
-    the white-noise model's, about five times smaller."""
+    the white-noise model's, about five times smaller. Step 8's limit (:func:`check_limit`, with a fixed 2 cm/s here)
+    is the drifting trial's own (9.2 cm/s) and the fixed one for the still trial (its own 1.7 cm/s, under it)."""
     rng = np.random.default_rng(11)
     params = RestDriftParams()
     models = {}
@@ -57,6 +58,9 @@ def test_the_drift_model_recovers_a_known_drift_of_the_rests():
         assert model is not None and model.rests == 60
         assert 0.8 < model.sd_mps / _expected_sd(jerk_sd, params) < 1.2, (jerk_sd, model.sd_mps)
         models[jerk_sd] = model.limit_mps(params.n_sd)
+        # step 8's limit: the trial's where it is above a fixed 2 cm/s (the drifting rests), else the fixed one
+        limit = check_limit(acc, gyr, RATE, starts, ends, (0, len(acc)), params, 0.02)
+        assert limit == (models[jerk_sd] if jerk_sd else 0.02)
     assert models[0.02] > 4 * models[0.0]
 
 

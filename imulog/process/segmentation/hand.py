@@ -45,7 +45,9 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
    speed flank) extrapolates to rest (:mod:`~imulog.process.segmentation.flanks`, issue 31);
 8. a slow last part at ``velocity_level_mps`` or more with next to no acceleration (the wrist stopped turning,
    the hand still arriving: up to 3 s) extends the offset when the rest window is verified as a rest (the
-   velocity integrated forward from it stays under half that speed for ``rest_check_s``) and the hand never
+   velocity integrated forward from it stays under half that speed for ``rest_check_s``; with ``rest_drift``, an
+   option, under what the trial's own still rests read if more, :mod:`~imulog.process.segmentation.rest_drift`)
+   and the hand never
    slowed under half that speed between the offset and that part (a rest's drift follows a stop and a window in
    a drift fails the check); a slower last part, under that speed, where its speed stands ``n_sigma`` sd out of
    the velocity's own noise (:func:`~imulog.process.segmentation.arrival.slow_tail_end`);
@@ -76,7 +78,7 @@ from imulog.process.segmentation.arrival import gravity_free, slow_tail_end
 from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
 from imulog.process.segmentation.flanks import flank_zero, speed_flank_zero
 from imulog.process.segmentation.noise_floor import trim_unmoved
-from imulog.process.segmentation.rest_drift import RestDriftParams, rest_drift
+from imulog.process.segmentation.rest_drift import RestDriftParams, check_limit
 from imulog.process.segmentation.rest_window import still_window
 from imulog.process.segmentation.speed_profile import profile_end
 
@@ -411,10 +413,7 @@ def refine_with_accelerometer(
     drift = None  # step 8's rest check from the trial's own still rests
     if params.rest_drift:
         drift_params = RestDriftParams(params.rest_window_s, params.rest_check_s, params.guard_s)
-        model = rest_drift(acc, gyr, rate_hz, ss, ee, (first, n), drift_params)
-        # the trial's rests raise the fixed limit where a still hand reads more; they never lower it (a lower limit
-        # refused a real rest's window at 1.45 cm/s, docs/accuracy.md eleventh round)
-        drift = max(model.limit_mps(drift_params.n_sd), 0.5 * params.velocity_level_mps) if model is not None else None
+        drift = check_limit(acc, gyr, rate_hz, ss, ee, (first, n), drift_params, 0.5 * params.velocity_level_mps)
     rests = []  # per phase: step 2's rest windows before and after it
     for k in range(len(ss)):
         a0, b0 = int(ss[k]), int(ee[k])

@@ -114,3 +114,21 @@ def rest_drift(
     if len(speeds) < max(1, params.min_rests):
         return None
     return RestDrift(float(np.median(speeds)) / CHI3_MEDIAN, len(speeds), params.check_s)
+
+
+def check_limit(
+    acc: np.ndarray,
+    gyr: np.ndarray,
+    rate_hz: float,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    bounds: tuple[int, int],
+    params: RestDriftParams,
+    fixed_mps: float,
+) -> float | None:
+    """Step 8's rest-check limit (m/s): ``n_sd`` sd of the trial's :func:`rest_drift` where that is more than
+    ``fixed_mps`` (the fixed limit), else ``fixed_mps``; None without a model. The trial's rests raise the fixed
+    limit where a still hand reads more; they never lower it (a lower limit refused a real rest's window reading
+    1.45 cm/s on a development trial, docs/accuracy.md, issue 31 eleventh round)."""
+    model = rest_drift(acc, gyr, rate_hz, starts, ends, bounds, params)
+    return None if model is None else max(model.limit_mps(params.n_sd), float(fixed_mps))
