@@ -297,7 +297,8 @@ def _extrapolated(
 
 
 def _offset(
-    acc, gyr, dt, post, lo: int, b0: int, stop: int, params: HandParams, rate_hz: float, raw=None, flank=None, limit=None
+    acc, gyr, dt, post, lo: int, b0: int, stop: int, params: HandParams, rate_hz: float, raw=None, flank=None,
+    limit: float | None = None,
 ) -> int:
     """Offset (exclusive sample index) of the phase whose gyroscope offset is ``b0``, with the rest window ``post``
     after it (steps 5-8 of the module docstring); ``b0`` without a usable window. ``lo``: where the velocity
