@@ -74,7 +74,9 @@ def velocity_noise_mps(
     return np.sqrt(acc + tilt)
 
 
-def slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw=None) -> int:
+def slow_tail_end(
+    acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw=None, limit_mps: float | None = None
+) -> int:
     """Offset (exclusive sample index) at the end of a slow last part of the phase, or ``end`` (the current one).
 
     ``acc``/``gyr`` the low-passed accelerometer (m/s^2) and gyroscope (rad/s), ``raw`` the unfiltered ones (for
@@ -90,7 +92,8 @@ def slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw=None) 
     in a rest's drift sees the stop before the drift as a speed of several sd right from the window). Later
     windows are not tried: a window in a rest's drift fails the check, and one after the drift verifies and
     takes the drift for a slow last part (issue 31).
-    ``lo``: where the velocity integration may start (inside the phase)."""
+    ``lo``: where the velocity integration may start (inside the phase); ``limit_mps``: the check's limit (m/s)
+    instead of half ``velocity_level_mps`` (the trial's own rests, :mod:`~imulog.process.segmentation.rest_drift`)."""
     check = int(round(params.rest_check_s * rate_hz))
     vlevel = params.velocity_level_mps
     if check <= 0 or vlevel <= 0 or post[0] <= end:
@@ -103,7 +106,7 @@ def slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw=None) 
     fwd = np.linalg.norm(v_fwd, axis=1)
     m = post[0] - lo  # samples integrated back from the window
     v_back, z = None, None
-    if fwd.max() < 0.5 * vlevel:
+    if fwd.max() < (0.5 * vlevel if limit_mps is None else limit_mps):
         v_back = gravity_free(acc, gyr, dt, post, lo, post[0])[1][::-1]
         z = first_motion(v_back, vlevel, min_run, m - (end - lo), check, fit)
     if z is None and raw is not None:  # against the velocity's noise, measured at the window

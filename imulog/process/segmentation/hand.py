@@ -45,7 +45,9 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
    speed flank) extrapolates to rest (:mod:`~imulog.process.segmentation.flanks`, issue 31);
 8. a slow last part at ``velocity_level_mps`` or more with next to no acceleration (the wrist stopped turning,
    the hand still arriving: up to 3 s) extends the offset when the rest window is verified as a rest (the
-   velocity integrated forward from it stays under half that speed for ``rest_check_s``) and the hand never
+   velocity integrated forward from it stays under half that speed for ``rest_check_s``; with ``rest_drift``, an
+   option, under what the trial's own still rests read if more, :mod:`~imulog.process.segmentation.rest_drift`)
+   and the hand never
    slowed under half that speed between the offset and that part (a rest's drift follows a stop and a window in
    a drift fails the check); a slower last part, under that speed, where its speed stands ``n_sigma`` sd out of
    the velocity's own noise (:func:`~imulog.process.segmentation.arrival.slow_tail_end`);
@@ -76,6 +78,7 @@ from imulog.process.segmentation.arrival import gravity_free, slow_tail_end
 from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
 from imulog.process.segmentation.flanks import combined_t0, flank_zero, speed_flank_zero
 from imulog.process.segmentation.noise_floor import trim_unmoved
+from imulog.process.segmentation.rest_drift import RestDriftParams, check_limit
 from imulog.process.segmentation.rest_window import still_window
 from imulog.process.segmentation.speed_profile import profile_end
 
@@ -146,6 +149,9 @@ class HandParams:
     rest_check_s: a slow last part of a phase at ``velocity_level_mps`` or more with next to no acceleration
         extends the offset when the velocity relative to the rest window stays under half that speed for this
         long (s) after the window (the window is a rest, not a hand cruising or drifting); 0: off.
+    rest_drift: step 8's limit on that velocity is raised to the trial's own where its still rests read more than
+        half ``velocity_level_mps`` (:mod:`~imulog.process.segmentation.rest_drift`, 95 % of them; never lowered;
+        issue 31 eleventh round).
     """
 
     enabled: bool = True
@@ -181,6 +187,7 @@ class HandParams:
     gyro_floor: bool = False
     profile_alone: bool = True
     flank_combine: bool = False
+    rest_drift: bool = False
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:
@@ -296,13 +303,15 @@ def _extrapolated(
 
 
 def _offset(
-    acc, gyr, dt, post, lo: int, b0: int, stop: int, params: HandParams, rate_hz: float, raw=None, flank=None
+    acc, gyr, dt, post, lo: int, b0: int, stop: int, params: HandParams, rate_hz: float, raw=None, flank=None,
+    limit: float | None = None,
 ) -> int:
     """Offset (exclusive sample index) of the phase whose gyroscope offset is ``b0``, with the rest window ``post``
     after it (steps 5-8 of the module docstring); ``b0`` without a usable window. ``lo``: where the velocity
     integration may start (inside the phase); ``stop``: the next phase's guard; ``raw``: the unfiltered
     (accelerometer, gyroscope) for the velocity's noise of step 8; ``flank``: a list that gets the exclusive end
-    (sample index) where the offset's own flank reaches rest, not bounded by the gyroscope's offset."""
+    (sample index) where the offset's own flank reaches rest, not bounded by the gyroscope's offset; ``limit``: step
+    8's rest check (m/s, the trial's :mod:`~imulog.process.segmentation.rest_drift`; None: the fixed one)."""
     length = post[1] - post[0] if post is not None else 0
     quiet = max(1, int(round(params.quiet_s * rate_hz)))
     min_run = max(1, int(round(params.min_run_s * rate_hz)))
@@ -346,7 +355,7 @@ def _offset(
     end = lo + m - _extrapolated(a_all[::-1], v_all[::-1], m - (end - lo), m - (b0 - lo), level, params, rate_hz, own)
     if flank is not None:
         flank.extend(lo + m - z for z in own)
-    return slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw)
+    return slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw, limit)
 
 
 def cutoff_params(params: HandParams) -> BoundaryParams:
@@ -408,6 +417,10 @@ def refine_with_accelerometer(
     ss, ee = s[order].copy(), e[order].copy()
     out_s, out_e = ss.copy(), ee.copy()
     fits = []  # per phase: where step 9's fit starts and step 2's rest window after it
+    drift = None  # step 8's rest check from the trial's own still rests
+    if params.rest_drift:
+        drift_params = RestDriftParams(params.rest_window_s, params.rest_check_s, params.guard_s)
+        drift = check_limit(acc, gyr, rate_hz, ss, ee, (first, n), drift_params, 0.5 * params.velocity_level_mps)
     rests = []  # per phase: step 2's rest windows before and after it
     for k in range(len(ss)):
         a0, b0 = int(ss[k]), int(ee[k])
@@ -420,7 +433,7 @@ def refine_with_accelerometer(
         stop = min(next_start, n) - guard
         flank_end: list[int] = []
         flank_start: list[int] = []
-        out_e[k] = _offset(acc, gyr, dt, post, lo, b0, stop, params, rate_hz, (raw, gyr_raw), flank_end)
+        out_e[k] = _offset(acc, gyr, dt, post, lo, b0, stop, params, rate_hz, (raw, gyr_raw), flank_end, drift)
         reach_in = int(round(params.speed_reach_s * rate_hz))  # a slow start reaches the speed level late
         hi = max(a0, min(int(out_e[k]), a0 + max(inside, reach_in)))
         for _ in range(3):  # likewise before the onset

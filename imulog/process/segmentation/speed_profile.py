@@ -38,10 +38,15 @@ Pure numpy; indices are sample indices.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from imulog.process.segmentation.arrival import gravity_free, velocity_noise_mps, white_noise
 from imulog.process.segmentation.boundaries import quietest_window
+
+if TYPE_CHECKING:  # hand imports this module
+    from imulog.process.segmentation.hand import HandParams
 
 _MAX_CELLS = 1 << 21  # candidate x sample cells per block (16 MB of float64)
 # the speed (in sd per axis of the velocity's noise) that a still hand's 3-axis velocity noise stays under 95 % of
@@ -257,11 +262,22 @@ def profile_end(
     return t_end
 
 
-def still_from_window(acc, gyr, dt, raw, end: int, window: int, params, rate_hz: float) -> bool:
+def still_from_window(
+    acc: np.ndarray,
+    gyr: np.ndarray,
+    dt: float,
+    raw: tuple[np.ndarray, np.ndarray],
+    end: int,
+    window: int,
+    params: HandParams,
+    rate_hz: float,
+) -> bool:
     """Whether the hand is still at the offset ``end`` as seen from step 2's rest window starting at ``window``: the
     velocity integrated back from that window (m/s) within :data:`STILL_SPEED_SD` sd of its noise there. A movement fitted
     (from the far window) across a phase that stopped at its offset, with step 2's window in the rest after it,
-    is not the phase's; a slow last submovement that steps 5-8 missed moves at several sd from that window too."""
+    is not the phase's; a slow last submovement that steps 5-8 missed moves at several sd from that window too.
+    ``acc``/``gyr`` (N, 3) the low-passed accelerometer (m/s^2) and gyroscope (rad/s), ``raw`` the unfiltered ones,
+    ``dt`` the sample interval (s), ``end``/``window`` sample indices."""
     near = (window, window + max(3, int(round(params.rest_window_s * rate_hz))))
     if near[0] <= end:
         return False
