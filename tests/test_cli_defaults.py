@@ -20,7 +20,7 @@ from imulog.batch.registry import STEPS, _load, resolve_options
 from imulog.cli import cli
 
 # options that only steer the command line (what to print, which channel) or whose default is read from the trial
-CLI_ONLY = {"help", "force", "as_json", "quiet", "imu", "imus", "markers", "static_trial", "noise_statistic"}
+CLI_ONLY = {"help", "force", "as_json", "quiet", "imu", "imus", "markers", "poses", "static_trial", "noise_statistic"}
 FROM_TRIAL = {  # None on the command line = the trial's own value, as in the batch (StepSpec.trial_defaults)
     ("process", "phases"): {"repetitions", "protocol"},
     ("process", "kinematics"): {"upper_arm", "forearm", "trunk", "neutral_pose", "neutral_window"},

@@ -98,6 +98,12 @@ def cluster_pose_topic(name: str, topics: list[str], metadata: Mapping[str, Mapp
     return None
 
 
+def alignment_note(record: Mapping[str, Any]) -> dict[str, Any]:
+    """What the evaluation record keeps of the alignment: quality, reasons, score, offset, drift."""
+    keys = ("quality", "quality_reasons", "score", "offset_ns", "drift_ppm", "signal", "residual_spread_ns")
+    return {k: record[k] for k in keys if k in record}
+
+
 def alignment_for(metadata: Mapping[str, Mapping[str, Any]], imu_topic: str) -> dict[str, Any] | None:
     """The alignment record of ``imu_topic``: ``imulog.alignment`` if it concerns ``imu_topic`` (or names no
     IMU), else ``imulog.alignment.{imu}`` (written when several IMUs are aligned together), else None."""

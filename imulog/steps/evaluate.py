@@ -240,12 +240,6 @@ def check_clock(path, metadata: dict[str, Any], info: dict[str, Any] | None = No
     return record
 
 
-def alignment_note(record: dict[str, Any]) -> dict[str, Any]:
-    """What the evaluation record keeps of the alignment: quality, reasons, score, offset, drift."""
-    keys = ("quality", "quality_reasons", "score", "offset_ns", "drift_ppm", "signal", "residual_spread_ns")
-    return {k: record[k] for k in keys if k in record}
-
-
 WALK_SPAN_S = 3600.0  # a longer recording is judged on one hour: the reference's middle (bounded memory; issue 24)
 
 
@@ -387,7 +381,7 @@ def _evaluate_imu(path, imu, channels, baselines, record_name, step, methods, ma
     """Evaluate one IMU's trajectories (``channels``: method -> topic) into ``record_name``."""
     from imulog.archive import TrialReader
     from imulog.steps.base import StepResult, run_step
-    from imulog.steps.common import alignment_record
+    from imulog.steps.common import alignment_note, alignment_record
     from imulog.steps.trajectory_topics import record_name_of, record_of_imu
 
     with TrialReader(path) as trial:

@@ -78,8 +78,7 @@ def run_evaluate_orientation(path, imu: str | None = None, force: bool = False):
     from imulog.archive import TrialReader
     from imulog.steps.align import require_alignment
     from imulog.steps.base import StepResult, run_step
-    from imulog.steps.common import pick_imu
-    from imulog.steps.evaluate import alignment_note
+    from imulog.steps.common import alignment_note, pick_imu
 
     with TrialReader(path) as trial:
         topics = trial.topics()

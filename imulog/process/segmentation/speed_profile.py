@@ -38,15 +38,28 @@ Pure numpy; indices are sample indices.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
 from imulog.process.segmentation.arrival import gravity_free, velocity_noise_mps, white_noise
 from imulog.process.segmentation.boundaries import quietest_window
 
-if TYPE_CHECKING:  # hand imports this module
-    from imulog.process.segmentation.hand import HandParams
+
+class ProfileParams(Protocol):
+    """The fields of :class:`~imulog.process.segmentation.hand.HandParams` that step 9 reads (a protocol, since
+    ``hand`` imports this module): lengths in s, rates in Hz, levels in m/s^2."""
+
+    rest_window_s: float
+    n_sigma: float
+    min_level_mps2: float
+    quiet_s: float
+    profile_rest_s: float
+    profile_durations_s: tuple[float, float]
+    profile_grid_hz: float
+    profile_min_s: float
+    profile_residual_ratio: float
+    profile_alone: bool
 
 _MAX_CELLS = 1 << 21  # candidate x sample cells per block (16 MB of float64)
 # the speed (in sd per axis of the velocity's noise) that a still hand's 3-axis velocity noise stays under 95 % of
@@ -190,7 +203,7 @@ def residual_ratio(a: np.ndarray, i_end: float, dur: float, inside: int, arrival
 
 
 def profile_end(
-    acc, gyr, dt, lo: int, onset: int, end: int, window: int, stop: int, params, rate_hz: float, raw
+    acc, gyr, dt, lo: int, onset: int, end: int, window: int, stop: int, params: ProfileParams, rate_hz: float, raw
 ) -> int:
     """Offset (exclusive sample index) at the arrival of the phase's last movement fitted as one smooth profile,
     or ``end`` (the current offset) when the fit does not stand out of the noise (see the module docstring).
@@ -269,7 +282,7 @@ def still_from_window(
     raw: tuple[np.ndarray, np.ndarray],
     end: int,
     window: int,
-    params: HandParams,
+    params: ProfileParams,
     rate_hz: float,
 ) -> bool:
     """Whether the hand is still at the offset ``end`` as seen from step 2's rest window starting at ``window``: the
