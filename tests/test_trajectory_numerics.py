@@ -317,3 +317,48 @@ def test_rotating_bias_compensation_is_shrunk_by_its_own_noise():
         else:
             assert np.all(shrunk.axis_z < 3), shrunk.axis_z
             assert removed["shrunk"] < 0.5 * removed["plain"], (removed, shrunk.axis_z)
+
+
+def test_rotating_bias_prior_from_the_rest_calibration():
+    """``prior_sd`` (``RotatingBiasParams.calibration_prior``: the rest calibration's posterior): with no prior
+    (inf) the plain least squares; with a prior as tight as a good calibration's and nothing left to fit, most of
+    the noise the plain fit turns into a compensation is left out; with a broad prior real sensor errors are still
+    recovered as the plain fit recovers them."""
+    from imulog.process.integration import (
+        AccelerometerErrors,
+        RotatingBiasParams,
+        compensate_rotating_bias,
+        estimate_rotating_bias,
+    )
+
+    rng = np.random.default_rng(13)
+    t, acc, static, rot, f_sensor, g = _turning_drinking_trial(rng, 8)
+    noise = 0.05 * rng.standard_normal(acc.shape)  # m/s^2, white
+    moving = ~static
+    tight = np.concatenate([np.full(3, 0.005), np.full(9, 0.0005)])  # m/s^2, dimensionless
+    broad = np.concatenate([np.full(3, 0.3), np.full(9, 0.01)])
+    params = RotatingBiasParams()
+    for bias, scale, prior_sd, same in (
+        ([0.0] * 3, [0.0] * 3, tight, False),
+        ([0.06, -0.08, 0.05], [0.006, -0.004, 0.005], broad, True),
+    ):
+        measured = f_sensor + np.array(bias) + f_sensor @ np.diag(scale).T
+        acc_global = np.einsum("nij,nj->ni", rot, measured) - g + noise
+        plain = estimate_rotating_bias(acc_global, rot, t, static, params)
+        none = estimate_rotating_bias(acc_global, rot, t, static, params, np.full(12, np.inf))
+        assert np.allclose(none.bias_mps2, plain.bias_mps2) and np.allclose(none.matrix, plain.matrix)
+        prior = estimate_rotating_bias(acc_global, rot, t, static, params, prior_sd)
+        assert np.all(prior.bias_se_mps2 <= plain.bias_se_mps2 + 1e-12)
+        rests_only = compensate_rotating_bias(
+            acc_global, rot, t, static, AccelerometerErrors(np.zeros(3), np.zeros((3, 3)))
+        )
+        removed, error = {}, {}  # m/s^2 RMS during movements
+        for name, errors in (("plain", plain), ("prior", prior)):
+            fixed = compensate_rotating_bias(acc_global, rot, t, static, errors)
+            removed[name] = np.sqrt(np.mean((rests_only - fixed)[moving] ** 2))
+            error[name] = np.sqrt(np.mean((fixed - noise - acc)[moving] ** 2))
+        if same:
+            assert removed["prior"] == pytest.approx(removed["plain"], rel=0.1), removed
+            assert error["prior"] < 0.01, error
+        else:
+            assert removed["prior"] < 0.5 * removed["plain"], removed
