@@ -198,9 +198,9 @@ class RotatingBiasParams:
         x / y compensation is mostly noise and put the start above plain ZUPT.
     calibration_prior: when the accelerometer was already corrected from the trial's own rests
         (:mod:`imulog.process.acc_rest_calibration`, applied), fit the unknowns with a Gaussian prior at zero whose
-        standard deviations are that correction's posterior ones (bias m/s^2, matrix dimensionless), the closure
-        rows weighted by the plain fit's residual standard deviation (m/s): the compensation then fits only what
-        the correction may have left (issue 31 point 2, ninth round; an option).
+        covariance is that correction's joint posterior (bias m/s^2, matrix dimensionless, correlations kept), the
+        closure rows weighted by the plain fit's residual standard deviation (m/s): the compensation then fits only
+        what the correction may have left (issue 31 point 2, ninth round; an option).
     """
 
     rest_s: float = 0.5
@@ -257,12 +257,12 @@ def estimate_rotating_bias(
     t_s: np.ndarray,
     static_mask: np.ndarray,
     params: RotatingBiasParams = RotatingBiasParams(),
-    prior_sd: np.ndarray | None = None,
+    prior_cov: np.ndarray | None = None,
 ) -> AccelerometerErrors:
     """Sensor-frame accelerometer errors from gravity-free global acceleration (N, 3) m/s^2 and the
-    sensor-to-global rotation matrices (N, 3, 3) used to compute it. ``prior_sd`` (3 or 12,): standard deviations
-    of a zero-mean Gaussian prior on the unknowns (bias m/s^2, then the matrix row by row, dimensionless; inf: no
-    prior), :func:`prior_fit`; None: the plain least squares."""
+    sensor-to-global rotation matrices (N, 3, 3) used to compute it. ``prior_cov`` (12, 12): covariance of a zero-mean
+    Gaussian prior on the unknowns (bias m/s^2, then the matrix row by row, dimensionless; its first (3, 3) without
+    ``gravity_coupled``), :func:`prior_fit`; None: the plain least squares."""
     a = np.asarray(acc_mps2, dtype=np.float64)
     r = np.asarray(rot_sensor_to_global, dtype=np.float64)
     t = _check_time(t_s, len(a))
@@ -287,8 +287,8 @@ def estimate_rotating_bias(
     design, y = np.vstack([rows[i] for i in keep]), np.concatenate([rhs[i] for i in keep])
     x, *_ = np.linalg.lstsq(design, y, rcond=None)
     cov = _covariance(design, y - design @ x)
-    if prior_sd is not None:
-        x, cov = prior_fit(design, y, x, np.asarray(prior_sd, dtype=np.float64)[:k])
+    if prior_cov is not None:
+        x, cov = prior_fit(design, y, x, np.asarray(prior_cov, dtype=np.float64)[:k, :k])
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     matrix = x[3:].reshape(3, 3) if params.gravity_coupled else np.zeros((3, 3))
     matrix_se = se[3:].reshape(3, 3) if params.gravity_coupled else np.zeros((3, 3))
@@ -298,22 +298,20 @@ def estimate_rotating_bias(
 
 
 def prior_fit(
-    design: np.ndarray, y: np.ndarray, x_plain: np.ndarray, prior_sd: np.ndarray
+    design: np.ndarray, y: np.ndarray, x_plain: np.ndarray, prior_cov: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The unknowns and their covariance with a zero-mean Gaussian prior of standard deviations ``prior_sd`` (k,)
-    (inf: none): the closure rows ``design`` (n, k) m/s per unit, ``y`` (n,) m/s, weighted by the residual
-    standard deviation of the plain fit ``x_plain`` (m/s; no degrees of freedom: the plain fit is returned)."""
+    """The unknowns (k,) and their posterior covariance (k, k) under a zero-mean Gaussian prior of covariance
+    ``prior_cov`` (k, k): the closure rows ``design`` (n, k) m/s per unit and ``y`` (n,) m/s weighted by the
+    residual standard deviation of the plain fit ``x_plain`` (m/s; without degrees of freedom the plain fit is
+    returned)."""
     n, k = design.shape
     if n <= k:
         return x_plain, np.full((k, k), np.nan)
     resid = y - design @ x_plain
-    w = 1.0 / max(float(np.sqrt(resid @ resid / (n - k))), 1e-12)
-    with np.errstate(divide="ignore"):
-        p = np.where(np.isfinite(prior_sd), 1.0 / np.maximum(prior_sd, 1e-12), 0.0)
-    a = np.vstack([design * w, np.diag(p)])
-    b = np.concatenate([y * w, np.zeros(k)])
-    x, *_ = np.linalg.lstsq(a, b, rcond=None)
-    return x, np.linalg.pinv(a.T @ a)
+    w2 = 1.0 / max(float(resid @ resid / (n - k)), 1e-24)
+    normal = design.T @ design * w2 + np.linalg.pinv(prior_cov, hermitian=True)
+    cov = np.linalg.pinv(normal, hermitian=True)
+    return cov @ (design.T @ y) * w2, cov
 
 
 def axis_significance(rows: np.ndarray, x: np.ndarray, cov: np.ndarray) -> np.ndarray:

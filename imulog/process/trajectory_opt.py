@@ -141,7 +141,7 @@ def reconstruct_repetitions(
         rot = quat_to_matrix(orientation)
         prior = None
         if params.rotating_bias.calibration_prior and acc_calibration is not None and acc_calibration.applied:
-            prior = np.concatenate([acc_calibration.bias_sd_mps2, np.ravel(acc_calibration.matrix_sd)])
+            prior = acc_calibration.covariance
         errors = estimate_rotating_bias(a, rot, t, static, params.rotating_bias, prior)
         bias = bias_check(errors.as_dict(), params.checks)
         a_comp = compensate_rotating_bias(a, rot, t, static, errors, params.rotating_bias) if bias["ok"] else None
