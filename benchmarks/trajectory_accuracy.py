@@ -144,6 +144,7 @@ def simulated_inputs(
     rate = (len(t_s) - 1) / t_s[-1]
     q_true = truth.imu_orientation
     calibration_record: dict[str, Any] | None = None
+    acc_cal = None
     if orientation == "truth":
         q_world = q_true
         acc_world = quat.rotate(q_true, imu.acc)
@@ -208,6 +209,7 @@ def simulated_inputs(
         "anthropometrics": sim.recording.metadata.get("imulog.anthropometrics", {}),
         "subject": subject,
         "acc_rest_calibration": calibration_record,
+        "acc_calibration": acc_cal,
     }
 
 
@@ -233,6 +235,7 @@ def evaluate_trial(inputs: dict[str, Any], methods=METHODS, params: TrajectoryPa
                 anthropometrics=inputs["anthropometrics"],
                 orientation=inputs["q_world"],
                 params=params,
+                acc_calibration=inputs.get("acc_calibration"),
             )
         )
         seconds[m] = (time.perf_counter() - t0) / max(len(reps), 1)

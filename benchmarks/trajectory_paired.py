@@ -36,7 +36,9 @@ with the heading chained through the whole recording, ``AnchorParams.restart = F
 where the trajectory step may cut a window), ``acc-rests`` (the defaults / the accelerometer's bias and sensitivity matrix estimated from the trial's own rests
 before the orientation filter, ``TrajectoryParams.acc_rests``, an option; ``acc-rests-bias``: the bias alone,
 ``acc-rests-scale``: the bias and a per-axis scale; ``acc-rests-bias-compensation`` / ``acc-rests-no-compensation``:
-with the rotating-bias compensation fitting the bias only / not at all), ``windowed-options`` (the filter's heading and the return to the start on every
+with the rotating-bias compensation fitting the bias only / not at all; ``acc-rests-prior``: with it fitted under the
+correction's posterior as its prior, ``RotatingBiasParams.calibration_prior``; ``acc-rests-prior-robust``: and the
+movements it cannot close left out, ``outlier_factor = 3``), ``windowed-options`` (the filter's heading and the return to the start on every
 axis, the defaults before 2026-12-07, / options 3 and 4 with the heading restarted where a window may be cut, the
 defaults since).
 """
@@ -143,6 +145,20 @@ CHANGES.update(
         "acc-rests-no-compensation": (
             D,
             replace(D, acc_rests=ACC_RESTS, rotating_bias=replace(D.rotating_bias, min_movements=10**9)),
+        ),
+        # the compensation fitted with the rest calibration's posterior as its prior (second half of the round)
+        "acc-rests-prior": (
+            D,
+            replace(D, acc_rests=ACC_RESTS, rotating_bias=replace(D.rotating_bias, calibration_prior=True)),
+        ),
+        # with it, the movements the fit cannot close left out (outlier_factor 3; development sets only)
+        "acc-rests-prior-robust": (
+            D,
+            replace(
+                D,
+                acc_rests=ACC_RESTS,
+                rotating_bias=replace(D.rotating_bias, calibration_prior=True, outlier_factor=3.0),
+            ),
         ),
     }
 )

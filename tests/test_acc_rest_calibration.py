@@ -144,3 +144,31 @@ def test_the_matrix_model_needs_poses_that_vary():
         before.append(angle(raw, true_dir))
         after.append(angle(est.apply(raw[None, :])[0], true_dir))
     assert np.mean(after) < 0.6 * np.mean(before), (np.mean(before), np.mean(after))
+
+
+def test_the_joint_covariance_knows_the_error_along_gravity_best():
+    """``AccRestCalibration.covariance`` (the rotating-bias fit's prior with ``calibration_prior``): its bias block
+    is the reported bias standard deviations, the matrix's diagonal the reported ones, and the leftover error along
+    gravity at a rest the trial visited (``u^T (db + g dM u)``, m/s^2) is known several times better than the bias
+    along the same direction alone: the correlations the diagonal prior drops."""
+    rng = np.random.default_rng(3)
+    off = np.radians(1.0) * rng.normal(size=(3, 3)) * ~np.eye(3, dtype=bool)
+    matrix = np.eye(3) + np.diag([0.02, -0.015, 0.01]) + off
+    bias = np.array([0.2, -0.25, 0.1])
+    base = [(0.0, 0.0, 0.0), (20.0, -10.0, 60.0), (40.0, -50.0, 80.0), (20.0, -10.0, 60.0)]
+    poses = [tuple(np.add(p, rng.normal(0.0, 10.0, 3))) for _ in range(10) for p in base] + [(0.0, 0.0, 0.0)]
+    acc, gyr, t, static = _rests_at(poses, bias, np.ones(3))
+    est = estimate((acc - bias) @ matrix.T + bias, gyr, t, static, AccRestParams(enabled=True))
+    assert est.applied, est.reason
+    cov = est.covariance
+    assert cov.shape == (12, 12)
+    assert np.allclose(np.sqrt(np.diag(cov)[:3]), est.bias_sd_mps2)
+    assert np.allclose(np.sqrt(np.diag(cov)[3:].reshape(3, 3)), est.matrix_sd)
+    ratios = []
+    for pose in base[:3]:
+        u = quat.rotate_inverse(quat.from_euler_zyx(*pose), np.array([0.0, 0.0, 1.0]))
+        row = np.concatenate([u, G * np.outer(u, u).ravel()])  # d(u^T (b + g M u)) / d(b, M row by row)
+        ratios.append(np.sqrt(row @ cov @ row) / np.sqrt(u @ cov[:3, :3] @ u))
+    assert max(ratios) < 0.5, ratios
+    bias_only = estimate(acc, gyr, t, static, AccRestParams(enabled=True, model="bias"))
+    assert np.allclose(np.diag(bias_only.covariance)[3:].reshape(3, 3), bias_only.matrix_sd**2)

@@ -282,21 +282,29 @@ def test_rotating_bias_fit_leaves_out_a_movement_it_cannot_close():
     assert rms[3.0] < 0.01 < rms[None]  # m/s^2 on the movements the sensor model describes
 
 
+def _rotating_part_removed(acc_global, rot, t, static, errors) -> float:
+    """RMS (m/s^2) over the movements of what a compensation removes beyond each rest's mean (removed either way)."""
+    from imulog.process.integration import AccelerometerErrors, compensate_rotating_bias
+
+    rests_only = compensate_rotating_bias(
+        acc_global, rot, t, static, AccelerometerErrors(np.zeros(3), np.zeros((3, 3)))
+    )
+    fixed = compensate_rotating_bias(acc_global, rot, t, static, errors)
+    return float(np.sqrt(np.mean((rests_only - fixed)[~static] ** 2)))
+
+
 def test_rotating_bias_compensation_is_shrunk_by_its_own_noise():
     """``RotatingBiasParams.shrink``: per global axis, the compensation is applied as far as it stands out of its
     own uncertainty (James-Stein). Real sensor errors stand out (weight near 1, the same compensation); an
     estimate fitted to noise alone is about its own standard error and is mostly left out."""
     from imulog.process.integration import (
-        AccelerometerErrors,
         RotatingBiasParams,
-        compensate_rotating_bias,
         estimate_rotating_bias,
     )
 
     rng = np.random.default_rng(11)
     t, acc, static, rot, f_sensor, g = _turning_drinking_trial(rng, 8)
     noise = 0.05 * rng.standard_normal(acc.shape)  # m/s^2, white
-    moving = ~static
     cases = (([0.06, -0.08, 0.05], [0.006, -0.004, 0.005], True), ([0.0] * 3, [0.0] * 3, False))
     for bias, scale, expect_signal in cases:
         measured = f_sensor + np.array(bias) + f_sensor @ np.diag(scale).T
@@ -304,16 +312,57 @@ def test_rotating_bias_compensation_is_shrunk_by_its_own_noise():
         plain = estimate_rotating_bias(acc_global, rot, t, static, RotatingBiasParams())
         shrunk = estimate_rotating_bias(acc_global, rot, t, static, RotatingBiasParams(shrink=True))
         assert plain.axis_weight is None and np.allclose(plain.axis_z, shrunk.axis_z)
-        rests_only = compensate_rotating_bias(
-            acc_global, rot, t, static, AccelerometerErrors(np.zeros(3), np.zeros((3, 3)))
-        )
-        removed = {}  # m/s^2 RMS during movements: the rotating part only (each rest's mean is removed either way)
-        for name, errors in (("plain", plain), ("shrunk", shrunk)):
-            fixed = compensate_rotating_bias(acc_global, rot, t, static, errors)
-            removed[name] = np.sqrt(np.mean((rests_only - fixed)[moving] ** 2))
+        removed = {
+            name: _rotating_part_removed(acc_global, rot, t, static, errors)
+            for name, errors in (("plain", plain), ("shrunk", shrunk))
+        }
         if expect_signal:
             assert np.all(shrunk.axis_z > 3) and np.all(shrunk.axis_weight > 1 - 1 / 9), shrunk.axis_z
             assert removed["shrunk"] == pytest.approx(removed["plain"], rel=0.1)
         else:
             assert np.all(shrunk.axis_z < 3), shrunk.axis_z
             assert removed["shrunk"] < 0.5 * removed["plain"], (removed, shrunk.axis_z)
+
+
+def test_rotating_bias_prior_from_the_rest_calibration():
+    """``prior_cov`` (``RotatingBiasParams.calibration_prior``: the rest calibration's posterior): with a prior
+    a million times broader than the errors, the plain least squares' compensation; with a prior as tight as a good
+    calibration's and nothing left to fit, most of the noise the plain fit turns into a compensation is left out;
+    with a broad prior real sensor errors are still recovered as the plain fit recovers them."""
+    from imulog.process.integration import (
+        RotatingBiasParams,
+        compensate_rotating_bias,
+        estimate_rotating_bias,
+    )
+
+    rng = np.random.default_rng(13)
+    t, acc, static, rot, f_sensor, g = _turning_drinking_trial(rng, 8)
+    noise = 0.05 * rng.standard_normal(acc.shape)  # m/s^2, white
+    moving = ~static
+    tight = np.diag(np.concatenate([np.full(3, 0.005), np.full(9, 0.0005)]) ** 2)  # (m/s^2)^2, dimensionless
+    broad = np.diag(np.concatenate([np.full(3, 0.3), np.full(9, 0.01)]) ** 2)
+    params = RotatingBiasParams()
+    for bias, scale, prior_cov, same in (
+        ([0.0] * 3, [0.0] * 3, tight, False),
+        ([0.06, -0.08, 0.05], [0.006, -0.004, 0.005], broad, True),
+    ):
+        measured = f_sensor + np.array(bias) + f_sensor @ np.diag(scale).T
+        acc_global = np.einsum("nij,nj->ni", rot, measured) - g + noise
+        plain = estimate_rotating_bias(acc_global, rot, t, static, params)
+        none = estimate_rotating_bias(acc_global, rot, t, static, params, np.eye(12) * 1e6)
+        same_effect = compensate_rotating_bias(acc_global, rot, t, static, none) - compensate_rotating_bias(
+            acc_global, rot, t, static, plain
+        )
+        assert np.max(np.abs(same_effect)) < 1e-4  # m/s^2 (bias and matrix are not separable at three poses)
+        prior = estimate_rotating_bias(acc_global, rot, t, static, params, prior_cov)
+        assert np.all(prior.bias_se_mps2 <= plain.bias_se_mps2 + 1e-12)
+        removed, error = {}, {}  # m/s^2 RMS during movements
+        for name, errors in (("plain", plain), ("prior", prior)):
+            removed[name] = _rotating_part_removed(acc_global, rot, t, static, errors)
+            fixed = compensate_rotating_bias(acc_global, rot, t, static, errors)
+            error[name] = np.sqrt(np.mean((fixed - noise - acc)[moving] ** 2))
+        if same:
+            assert removed["prior"] == pytest.approx(removed["plain"], rel=0.1), removed
+            assert error["prior"] < 0.01, error
+        else:
+            assert removed["prior"] < 0.5 * removed["plain"], removed

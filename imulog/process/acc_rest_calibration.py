@@ -76,12 +76,16 @@ MODELS = {"bias": 0, "scale": 3, "matrix": 9}  # sensitivity unknowns besides th
 @dataclass
 class AccRestCalibration:
     """What :func:`estimate` found: bias (3,) m/s^2 and sensitivity matrix (3, 3) (the identity for the model
-    ``"bias"``) with the bias's posterior standard deviations; ``applied`` False with a one-line ``reason`` when
-    not identifiable."""
+    ``"bias"``) with their posterior standard deviations (m/s^2; dimensionless, an entry the model does not estimate
+    at its prior's) and their joint posterior ``covariance`` (correlations kept: a combination the rests determine, such
+    as the error along gravity at the trial's poses, is known far better than either part); ``applied`` False with a
+    one-line ``reason`` when not identifiable."""
 
     bias_mps2: np.ndarray = field(default_factory=lambda: np.zeros(3))
     matrix: np.ndarray = field(default_factory=lambda: np.eye(3))
     bias_sd_mps2: np.ndarray = field(default_factory=lambda: np.full(3, np.inf))
+    matrix_sd: np.ndarray = field(default_factory=lambda: np.full((3, 3), np.inf))
+    covariance: np.ndarray | None = None  # (12, 12): bias m/s^2, then the matrix's deviation from I row by row
     rests: int = 0
     spread_deg: float = 0.0
     applied: bool = False
@@ -105,6 +109,7 @@ class AccRestCalibration:
             "reason": self.reason,
             "bias_mps2": [round(float(x), 5) for x in self.bias_mps2],
             "bias_sd_mps2": [round(float(x), 5) for x in self.bias_sd_mps2],
+            "matrix_sd": [[round(float(x), 6) for x in row] for row in self.matrix_sd],
             "matrix": [[round(float(x), 6) for x in row] for row in self.matrix],
             "rests": self.rests,
             "spread_deg": round(float(self.spread_deg), 2),
@@ -230,11 +235,35 @@ def fit(
     b, m, _ = unpack(sol.x)
     out.bias_mps2, out.matrix = b, m
     out.bias_sd_mps2 = np.sqrt(np.maximum(np.diag(cov)[:3], 0.0))
+    out.matrix_sd = _matrix_sd(np.sqrt(np.maximum(np.diag(cov)[3 : 3 + ns], 0.0)), params)
+    out.covariance = _joint_covariance(cov[: 3 + ns, : 3 + ns], out.matrix_sd, ns)
     worst = float(out.bias_sd_mps2.max())
     if worst > params.max_bias_sd_mps2:
         out.reason = f"bias standard deviation {worst:.3f} m/s^2, above {params.max_bias_sd_mps2:g}"
         return out
     out.applied = True
+    return out
+
+
+def _matrix_sd(sd: np.ndarray, params: AccRestParams) -> np.ndarray:
+    """The sensitivity matrix's standard deviations (3, 3) from the fitted ones ``sd`` (0, 3 or 9 entries); an
+    entry the model does not fit keeps its prior's (``scale_prior``, ``misalignment_prior_deg`` in rad)."""
+    out = np.full((3, 3), np.radians(params.misalignment_prior_deg))
+    np.fill_diagonal(out, params.scale_prior)
+    if len(sd) == 3:
+        np.fill_diagonal(out, sd)
+    elif len(sd) == 9:
+        out = sd.reshape(3, 3).copy()
+    return out
+
+
+def _joint_covariance(cov: np.ndarray, matrix_sd: np.ndarray, ns: int) -> np.ndarray:
+    """The (12, 12) posterior covariance of the bias (m/s^2) and the matrix's deviation from the identity (row by
+    row) from the fit's ``cov`` (3 + ``ns`` unknowns); an entry the model does not fit is independent at its
+    prior's variance (``matrix_sd``)."""
+    out = np.diag(np.concatenate([np.zeros(3), np.ravel(matrix_sd) ** 2]))
+    idx = np.arange(3) if ns == 0 else np.r_[0:3, 3 + 4 * np.arange(3)] if ns == 3 else np.arange(12)
+    out[np.ix_(idx, idx)] = cov
     return out
 
 

@@ -196,6 +196,11 @@ class RotatingBiasParams:
         (:func:`axis_shrinkage`: per axis, the positive-part James-Stein / Wiener factor ``1 - noise / total``
         of the velocity it removes per movement; False: in full). Issue 31 point 2: on calibrated trials the
         x / y compensation is mostly noise and put the start above plain ZUPT.
+    calibration_prior: when the accelerometer was already corrected from the trial's own rests
+        (:mod:`imulog.process.acc_rest_calibration`, applied), fit the unknowns with a Gaussian prior at zero whose
+        covariance is that correction's joint posterior (bias m/s^2, matrix dimensionless, correlations kept), the
+        closure rows weighted by the plain fit's residual standard deviation (m/s): the compensation then fits only
+        what the correction may have left (issue 31 point 2, ninth round; an option).
     """
 
     rest_s: float = 0.5
@@ -205,6 +210,7 @@ class RotatingBiasParams:
     outlier_factor: float | None = None
     outlier_refits: int = 1
     shrink: bool = False
+    calibration_prior: bool = False
 
 
 @dataclass
@@ -251,9 +257,12 @@ def estimate_rotating_bias(
     t_s: np.ndarray,
     static_mask: np.ndarray,
     params: RotatingBiasParams = RotatingBiasParams(),
+    prior_cov: np.ndarray | None = None,
 ) -> AccelerometerErrors:
     """Sensor-frame accelerometer errors from gravity-free global acceleration (N, 3) m/s^2 and the
-    sensor-to-global rotation matrices (N, 3, 3) used to compute it."""
+    sensor-to-global rotation matrices (N, 3, 3) used to compute it. ``prior_cov`` (12, 12): covariance of a zero-mean
+    Gaussian prior on the unknowns (bias m/s^2, then the matrix row by row, dimensionless; its first (3, 3) without
+    ``gravity_coupled``), :func:`prior_fit`; None: the plain least squares."""
     a = np.asarray(acc_mps2, dtype=np.float64)
     r = np.asarray(rot_sensor_to_global, dtype=np.float64)
     t = _check_time(t_s, len(a))
@@ -278,12 +287,31 @@ def estimate_rotating_bias(
     design, y = np.vstack([rows[i] for i in keep]), np.concatenate([rhs[i] for i in keep])
     x, *_ = np.linalg.lstsq(design, y, rcond=None)
     cov = _covariance(design, y - design @ x)
+    if prior_cov is not None:
+        x, cov = prior_fit(design, y, x, np.asarray(prior_cov, dtype=np.float64)[:k, :k])
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     matrix = x[3:].reshape(3, 3) if params.gravity_coupled else np.zeros((3, 3))
     matrix_se = se[3:].reshape(3, 3) if params.gravity_coupled else np.zeros((3, 3))
     z = axis_significance(np.stack([rows[i] for i in keep]), x, cov)
     weight = shrinkage_weight(z) if params.shrink else None
     return AccelerometerErrors(x[:3], matrix, se[:3], matrix_se, axis_z=z, axis_weight=weight)
+
+
+def prior_fit(
+    design: np.ndarray, y: np.ndarray, x_plain: np.ndarray, prior_cov: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The unknowns (k,) and their posterior covariance (k, k) under a zero-mean Gaussian prior of covariance
+    ``prior_cov`` (k, k): the closure rows ``design`` (n, k) m/s per unit and ``y`` (n,) m/s weighted by the
+    residual standard deviation of the plain fit ``x_plain`` (m/s; without degrees of freedom the plain fit is
+    returned)."""
+    n, k = design.shape
+    if n <= k:
+        return x_plain, np.full((k, k), np.nan)
+    resid = y - design @ x_plain
+    w2 = 1.0 / max(float(resid @ resid / (n - k)), 1e-24)
+    normal = design.T @ design * w2 + np.linalg.pinv(prior_cov, hermitian=True)
+    cov = np.linalg.pinv(normal, hermitian=True)
+    return cov @ (design.T @ y) * w2, cov
 
 
 def axis_significance(rows: np.ndarray, x: np.ndarray, cov: np.ndarray) -> np.ndarray:

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from imulog.process.acc_rest_calibration import AccRestCalibration
 from imulog.process.drift import highpass, wavelet_detrend
 from imulog.process.input_checks import InputCheck, SideCheck
 from imulog.process.integration import compensate_rotating_bias, estimate_rotating_bias, rest_ramp, zupt
@@ -112,6 +113,7 @@ def reconstruct_repetitions(
     baseline: bool = False,
     side: tuple[str, str] | None = None,
     drift_candidates: bool = False,
+    acc_calibration: AccRestCalibration | None = None,
 ) -> dict[str, np.ndarray]:
     """Every method on every repetition: {method: (N, 3) m relative to each repetition's start, NaN outside}.
 
@@ -125,6 +127,8 @@ def reconstruct_repetitions(
     ``(left|right, source)``, checked with the given anthropometrics (``info["input_checks"]``).
     ``drift_candidates``: also ``info["closure_mps"]``, an unused candidate of the repetition flags' ``drift``
     reason (:mod:`imulog.process.repetition_flags`; only ``benchmarks/confidence_calibration.py`` asks for it).
+    ``acc_calibration``: the correction ``acc_mps2`` was computed with (``TrajectoryParams.acc_rests``); its
+    posterior is the rotating-bias fit's prior with ``RotatingBiasParams.calibration_prior``.
     """
     t = np.asarray(t_s, dtype=np.float64)
     a = np.asarray(acc_mps2, dtype=np.float64)
@@ -135,7 +139,10 @@ def reconstruct_repetitions(
     bias: dict[str, Any] | None = None
     if orientation is not None and any(m in ("zupt_bias", "optimized") for m in methods):
         rot = quat_to_matrix(orientation)
-        errors = estimate_rotating_bias(a, rot, t, static, params.rotating_bias)
+        prior = None
+        if params.rotating_bias.calibration_prior and acc_calibration is not None and acc_calibration.applied:
+            prior = acc_calibration.covariance
+        errors = estimate_rotating_bias(a, rot, t, static, params.rotating_bias, prior)
         bias = bias_check(errors.as_dict(), params.checks)
         a_comp = compensate_rotating_bias(a, rot, t, static, errors, params.rotating_bias) if bias["ok"] else None
         if info is not None:
