@@ -119,7 +119,9 @@ def main() -> int:
                 f"Nexus CSV {args.minutes_vicon:g} min 40 markers ({n_vic} rows, {nexus.stat().st_size / 1e6:.0f} MB)",
                 nexus,
                 lambda: pd.read_csv(nexus, skiprows=5, header=None),
-                lambda: pacsv.read_csv(nexus, read_options=pacsv.ReadOptions(skip_rows=5, autogenerate_column_names=True)),
+                lambda: pacsv.read_csv(
+                    nexus, read_options=pacsv.ReadOptions(skip_rows=5, autogenerate_column_names=True)
+                ),
                 VICON,
             ),
         ]

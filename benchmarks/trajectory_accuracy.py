@@ -63,6 +63,7 @@ class RunCost:
         cpu = (r1.ru_utime - self.r0.ru_utime) + (r1.ru_stime - self.r0.ru_stime)
         return f"{time.perf_counter() - self.t0:.0f} s wall, {cpu:.0f} s CPU (user+sys)"
 
+
 def add_trial_arguments(ap: argparse.ArgumentParser, *, grid: str = "default", first_subject: int = 40) -> None:
     """The simulated trials a trajectory benchmark runs on: ``--grid`` (condition names or ``all``), ``--subjects``,
     ``--first-subject`` (subject k simulated with seed k) and ``--repetitions``; :func:`grid_names` reads ``--grid``."""

@@ -141,7 +141,9 @@ def iter_chunks(path: Path, options: ConvertOptions | None = None) -> Iterator[R
             raise ConversionError(path, "empty file") from None
     with buf:
         if buf[:5] == b"GENEA":
-            raise ConversionError(path, "an older Genea .bin (GENEA header, binary pages): convert it as --format genea")
+            raise ConversionError(
+                path, "an older Genea .bin (GENEA header, binary pages): convert it as --format genea"
+            )
         first = buf.find(PAGE_MARK)
         if first < 0:
             raise ConversionError(path, "no 'Recorded Data' page: not a GENEActiv .bin, or the file holds no data")

@@ -353,7 +353,11 @@ def imu_warnings(
                 f"(1x expected in rad/s); {fix}"
             )
         elif not rad_ok and at_rest is not None and at_rest > GYRO_REST_MAX_RAD_S:
-            bias = " (the file declares it: a large gyroscope bias?)" if gyr_unit is not None else " (or a large gyroscope bias)"
+            bias = (
+                " (the file declares it: a large gyroscope bias?)"
+                if gyr_unit is not None
+                else " (or a large gyroscope bias)"
+            )
             out.append(
                 f"{topic}: while the accelerometer shows the sensor at rest the gyroscope reads {at_rest:.2g} rad/s "
                 f"about a horizontal axis (gravity would turn {at_rest / DEG:.0f} deg/s){bias}; {fix}"

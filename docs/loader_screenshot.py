@@ -157,7 +157,9 @@ def screenshot(
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("trial", type=Path, help="a processed trial, e.g. demo-output/trial.mcap (imulog demo), or an .rrd")
+    parser.add_argument(
+        "trial", type=Path, help="a processed trial, e.g. demo-output/trial.mcap (imulog demo), or an .rrd"
+    )
     parser.add_argument("-o", "--output", type=Path, default=Path("docs/rerun_mcap_loader.png"))
     parser.add_argument("--topics", default="^/derived/viewer/", help='regex of topics to import ("" for all)')
     parser.add_argument("--start", type=float, default=0.0, help="window start, s after the file's first message")

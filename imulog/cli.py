@@ -24,7 +24,10 @@ TOP_LEVEL_COMMANDS: dict[str, tuple[str, str]] = {
     "replay": ("imulog.commands.record:replay", "Publish a trial's raw channels as live LSL outlets."),
     "simulate": ("imulog.commands.simulate:simulate", "Simulate trials with ground truth in raw export formats."),
     "calibrate": ("imulog.commands.calibrate:calibrate", "Estimate an IMU calibration from static recordings."),
-    "evaluate": ("imulog.commands.trajectory:evaluate", "Compare IMU trajectories (or orientation) with the optical reference."),
+    "evaluate": (
+        "imulog.commands.trajectory:evaluate",
+        "Compare IMU trajectories (or orientation) with the optical reference.",
+    ),
     "view": ("imulog.commands.view:view", "Show trials in Rerun on one synchronized timeline."),
     "demo": ("imulog.commands.demo:demo", "Simulate, convert, process and view a trial in one command."),
     "batch": ("imulog.commands.batch:batch", "Run reprocessing steps over many trials (local or Dask)."),

@@ -41,8 +41,15 @@ def processed_r2g(tmp_path_factory) -> Path:
 
     sim = REPO_ROOT / "recordings" / "sim"
     out = tmp_path_factory.mktemp("processed_r2g") / "r2g.mcap"
-    args = ["convert", str(sim / "r2g_s00_t00_imu.csv"), str(sim / "r2g_s00_t00_vicon.csv"),
-            "--meta-file", str(sim / "r2g_s00_t00_meta.json"), "-o", str(out)]
+    args = [
+        "convert",
+        str(sim / "r2g_s00_t00_imu.csv"),
+        str(sim / "r2g_s00_t00_vicon.csv"),
+        "--meta-file",
+        str(sim / "r2g_s00_t00_meta.json"),
+        "-o",
+        str(out),
+    ]
     result = CliRunner().invoke(cli, args)
     assert result.exit_code == 0, result.output
     run_orientation(out)

@@ -242,7 +242,9 @@ def test_lag_configurable_window(trial):
 
 def test_missing_marker_is_a_clear_error(trial):
     with pytest.raises(ValueError, match="marker"):
-        al.cluster_kinematics(trial["t_vic"], ["P", "Q", "R", "S"], trial["pos"], 100.0, al.AlignmentParams(cluster="oxy"))
+        al.cluster_kinematics(
+            trial["t_vic"], ["P", "Q", "R", "S"], trial["pos"], 100.0, al.AlignmentParams(cluster="oxy")
+        )
 
 
 # --------------------------------------------------------------------------------------------

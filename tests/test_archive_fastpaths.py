@@ -91,7 +91,9 @@ def test_marker_and_axes_twin_rows_equal_protobuf():
     assert twin.payload_list() == want
 
     q = np.tile([1.0, 0, 0, 0], (n, 1))
-    axes = axes_twin(SignalStream("/derived/orientation/w", t, ["qw", "qx", "qy", "qz"], ["1"] * 4, q), IDENTITY, clock="w")
+    axes = axes_twin(
+        SignalStream("/derived/orientation/w", t, ["qw", "qx", "qy", "qz"], ["1"] * 4, q), IDENTITY, clock="w"
+    )
     got = axes.payload_list()
     for stamp, payload in zip(np.asarray(axes.log_times).tolist(), got, strict=True):
         cloud = PointCloud_pb2.PointCloud.FromString(payload)

@@ -59,9 +59,12 @@ def test_mcap_library_reads_it(cwa, tmp_path):
         reader = make_reader(f)
         summary = reader.get_summary()
         n = sum(1 for _ in reader.iter_messages(topics=["/imu/ax6_4321"]))
-    assert n == summary.statistics.channel_message_counts[
-        next(c.id for c in summary.channels.values() if c.topic == "/imu/ax6_4321")
-    ]
+    assert (
+        n
+        == summary.statistics.channel_message_counts[
+            next(c.id for c in summary.channels.values() if c.topic == "/imu/ax6_4321")
+        ]
+    )
 
 
 def test_failure_leaves_nothing(cwa, tmp_path):

@@ -45,8 +45,10 @@ def test_killed_batch_resumes_without_repeating_work(tmp_path):
         # ... and the next file has at least one step appended (so one file is killed half-processed)
         # (an append writes into the file in place: it is committed once its journal is gone, docs/archive.md)
         third = paths[2]
-        while proc.poll() is None and time.monotonic() < deadline and (
-            third.stat().st_mtime_ns == mtimes[2] or journal_path(third).exists()
+        while (
+            proc.poll() is None
+            and time.monotonic() < deadline
+            and (third.stat().st_mtime_ns == mtimes[2] or journal_path(third).exists())
         ):
             time.sleep(0.005)
         assert proc.poll() is None, proc.communicate()

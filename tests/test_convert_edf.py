@@ -238,7 +238,9 @@ def test_physical_dimension_spellings(tmp_path: Path, acc_dim, acc_to_g, gyr_dim
     (imu,) = rec.imus
     assert imu.gyr is not None, [a.units for a in rec.analogs]
     np.testing.assert_allclose(imu.acc / G0, np.column_stack(data[:3]) * acc_to_g, rtol=0, atol=1e-2 * acc_to_g)
-    np.testing.assert_allclose(np.degrees(imu.gyr), np.column_stack(data[3:6]) * gyr_to_deg, rtol=0, atol=0.01 * gyr_to_deg)
+    np.testing.assert_allclose(
+        np.degrees(imu.gyr), np.column_stack(data[3:6]) * gyr_to_deg, rtol=0, atol=0.01 * gyr_to_deg
+    )
     assert [a.channel_names for a in rec.analogs] == [["EMG RF"], ["Temp"]]
 
 

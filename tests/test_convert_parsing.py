@@ -186,9 +186,11 @@ NEXUS_CASES = {
     "short row inside (its cells are gaps)": lambda L: L[:40] + [",".join(L[40].split(",")[:6])] + L[41:],
     "'Nan' marker cell": lambda L: _damage(L, 40, 4, "Nan"),
     "padding comma on every row": lambda L: L[:5] + [x + "," for x in L[5:]],
-    "Devices section after a blank line": lambda L: L
-    + ["", "Devices,,", "1000,,", ",,Force", "Frame,Sub Frame,Fz", ",,N"]
-    + [f"{i // 10 + 1},{i % 10},{i * 0.5:.1f}" for i in range(1200)],
+    "Devices section after a blank line": lambda L: (
+        L
+        + ["", "Devices,,", "1000,,", ",,Force", "Frame,Sub Frame,Fz", ",,N"]
+        + [f"{i // 10 + 1},{i % 10},{i * 0.5:.1f}" for i in range(1200)]
+    ),
 }
 
 
@@ -323,7 +325,9 @@ def test_text_pieces_join_to_the_whole_file_conversion(piece_bytes, shared_data,
     )
     sim = REPO / "recordings/sim/r2g_s00_t00_imu.csv"  # no time column: a rate and a mapping file
     mapping = load_mapping(sim.with_name("r2g_s00_t00_imu.mapping.json"))
-    _assert_pieces_equal_whole(_pieces_or_error(sim, piece_bytes, mapping=mapping), _whole_or_error(sim, mapping=mapping))
+    _assert_pieces_equal_whole(
+        _pieces_or_error(sim, piece_bytes, mapping=mapping), _whole_or_error(sim, mapping=mapping)
+    )
     lines = _imu_text(8000)
     cut = tmp_path / "cut.csv"  # gaps, CRLF, a cut final row
     lines = _damage(_damage(lines, 700, 3, ""), 1500, 2, "NaN")

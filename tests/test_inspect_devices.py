@@ -28,7 +28,11 @@ def test_inspect_every_device_folder(shared_data: Path, tmp_path: Path):
     assert "Warning" not in out and "Traceback" not in out, out[-3000:]  # e.g. numpy's RuntimeWarning lines
     assert list(tmp_path.iterdir()) == []  # nothing written
     for f in sorted(p for d in folders for p in d.iterdir()):
-        if f.name.startswith(("LICENSE", "NOTICE", "README")) or f.suffix in NOT_DATA or f.name.endswith("_header.json"):
+        if (
+            f.name.startswith(("LICENSE", "NOTICE", "README"))
+            or f.suffix in NOT_DATA
+            or f.name.endswith("_header.json")
+        ):
             continue  # licences, reference decodes, NilsPodLib's header (read with its _data.csv)
         assert f"\n{f.name}: format " in "\n" + proc.stdout, f.name
     # the Trigno exports' ACC channels hold no data (EDF physical min == max): said so, not blamed on a unit

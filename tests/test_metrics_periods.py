@@ -87,7 +87,9 @@ def test_info_and_viewer_show_the_periods(tmp_path):
     assert out.exit_code == 0, out.output
     lines = out.output.splitlines()
     k = lines.index("daily life (per hour, from imulog.metrics):")
-    assert lines[k + 2].split()[0] == "2024-05-02T09:00:00+02:00" and lines[k + 3].split()[0].startswith("2024-05-02T10")
+    assert lines[k + 2].split()[0] == "2024-05-02T09:00:00+02:00" and lines[k + 3].split()[0].startswith(
+        "2024-05-02T10"
+    )
     with TrialReader(trial) as reader:
         record = reader.metadata["imulog.metrics"]
     assert len(record["by_hour"]) == 3

@@ -114,7 +114,6 @@ def test_a_slow_last_submovement_after_a_pause_stays_in_the_phase():
     assert np.all(np.abs(t[hs] - truth[:, 0]) < 0.05)
 
 
-
 def _paused_trial(seed: int, pause_s: float = 0.5, last_s: float = 2.6, weight: float = 0.7):
     """Three phases whose wrist turns with a 3-s primary submovement only; the hand stops for ``pause_s``, then a
     last submovement of ``last_s`` (weight ``weight`` against the primary's 1) carries it on. Returns the sample

@@ -80,7 +80,9 @@ def test_a_rest_whose_orientation_drifts_stays_a_rest_and_a_glide_stays_none():
     assert true_rests(gyro_static, acc_glide, RATE, orientation=q)[(t > 3) & (t < 7)].mean() < 0.1
     # without a valid orientation the gate is the gravity-free one
     no_q = np.full_like(q, np.nan)
-    np.testing.assert_array_equal(true_rests(gyro_static, acc, RATE, orientation=no_q), true_rests(gyro_static, acc, RATE))
+    np.testing.assert_array_equal(
+        true_rests(gyro_static, acc, RATE, orientation=no_q), true_rests(gyro_static, acc, RATE)
+    )
 
 
 def test_movements_without_a_true_rest_between_them_are_one_window():

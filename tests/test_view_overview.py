@@ -156,7 +156,9 @@ def test_thousands_of_movements_become_a_share_and_window_lanes(tmp_path):
     # each bucket (a row at its start) holds the % of it the movements cover: 25 % on average while they last
     width = int(np.diff(share.t_ns)[0])
     brute = [
-        100 * np.clip(np.minimum(movements.end_ns, a + width) - np.maximum(movements.start_ns, a), 0, None).sum() / width
+        100
+        * np.clip(np.minimum(movements.end_ns, a + width) - np.maximum(movements.start_ns, a), 0, None).sum()
+        / width
         for a in share.t_ns[:200]
     ]
     np.testing.assert_allclose(share.values[:200, 0], brute, atol=1e-9)

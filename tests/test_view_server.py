@@ -57,7 +57,19 @@ def test_killed_viewer_leaves_no_server(tmp_path):
 
     web, grpc = free_port(), free_port()
     proc = subprocess.Popen(
-        [sys.executable, "-m", "imulog", "view", "--sample", "2", "--web", "--port", str(web), "--grpc-port", str(grpc)],
+        [
+            sys.executable,
+            "-m",
+            "imulog",
+            "view",
+            "--sample",
+            "2",
+            "--web",
+            "--port",
+            str(web),
+            "--grpc-port",
+            str(grpc),
+        ],
         stdout=subprocess.PIPE,
         stderr=subprocess.DEVNULL,
         text=True,

@@ -39,5 +39,6 @@ BLOCK_SCHEMAS = (
     "imulog.PoseBlock",
 )
 
+
 class DecodeError(ValueError):
     """A message could not be decoded into the stream type its schema promises."""

@@ -208,7 +208,12 @@ def simulate(protocol: str, *, subject: int = 0, trial: int = 0, seed: int = 0, 
     # Vicon
     kin_v = plan.evaluate(t_vicon / 1e9)
     true_markers, marker_names = vicon_model.all_markers(
-        t_vicon / 1e9, kin_v.position, kin_v.orientation, q_imu_to_cluster, p["vicon"], _rng(seed, pid, subject, trial, 8)
+        t_vicon / 1e9,
+        kin_v.position,
+        kin_v.orientation,
+        q_imu_to_cluster,
+        p["vicon"],
+        _rng(seed, pid, subject, trial, 8),
     )
     measured = vicon_model.add_noise_and_gaps(true_markers, vrate, p["vicon"], vicon_rng, env.noise_free)
     subject_prefix = f"{p['vicon'].subject_name}:" if p["vicon"].subject_name else ""

@@ -67,6 +67,7 @@ def all_markers(
 ) -> tuple[np.ndarray, list[str]]:
     """True positions (N, M, 3) m and names of the cluster markers (``marker_names``) and of the markers on
     the ``extra_segments`` (:mod:`imulog.simulate.extra_markers`)."""
+
     def as_list(v) -> list[str]:  # "--set marker_names=WRIST" or "A,B,C" arrive as one string
         return [x.strip() for x in v.split(",") if x.strip()] if isinstance(v, str) else list(v)
 

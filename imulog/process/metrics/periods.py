@@ -121,7 +121,11 @@ class PeriodAccumulator:
             area = 0.0
             if counts is not None and counts.sum():
                 area = weighted_area(100.0 * counts / counts.sum(), self.centres, weight_start_cm)
-            label = "" if self.origin_time is None else (self.origin_time + timedelta(seconds=k * self.period_s)).isoformat()
+            label = (
+                ""
+                if self.origin_time is None
+                else (self.origin_time + timedelta(seconds=k * self.period_s)).isoformat()
+            )
             out.append(
                 PeriodSummary(
                     start_ns=self.origin_ns + k * self.period_ns,

@@ -74,9 +74,7 @@ def velocity_noise_mps(
     return np.sqrt(acc + tilt)
 
 
-def slow_tail_end(
-    acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw=None, limit_mps: float | None = None
-) -> int:
+def slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw=None, limit_mps: float | None = None) -> int:
     """Offset (exclusive sample index) at the end of a slow last part of the phase, or ``end`` (the current one).
 
     ``acc``/``gyr`` the low-passed accelerometer (m/s^2) and gyroscope (rad/s), ``raw`` the unfiltered ones (for

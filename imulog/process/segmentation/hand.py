@@ -303,7 +303,17 @@ def _extrapolated(
 
 
 def _offset(
-    acc, gyr, dt, post, lo: int, b0: int, stop: int, params: HandParams, rate_hz: float, raw=None, flank=None,
+    acc,
+    gyr,
+    dt,
+    post,
+    lo: int,
+    b0: int,
+    stop: int,
+    params: HandParams,
+    rate_hz: float,
+    raw=None,
+    flank=None,
     limit: float | None = None,
 ) -> int:
     """Offset (exclusive sample index) of the phase whose gyroscope offset is ``b0``, with the rest window ``post``

@@ -61,6 +61,7 @@ class ProfileParams(Protocol):
     profile_residual_ratio: float
     profile_alone: bool
 
+
 _MAX_CELLS = 1 << 21  # candidate x sample cells per block (16 MB of float64)
 # the speed (in sd per axis of the velocity's noise) that a still hand's 3-axis velocity noise stays under 95 % of
 # the time: sqrt of the chi-square 95 % quantile with 3 degrees of freedom (issue 31, tenth round)
