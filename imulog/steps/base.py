@@ -147,3 +147,26 @@ def _run_locked(
         n = max(trial.runs(), default=None)
     outputs = [t for s in result.streams for t in (s.topics if hasattr(s, "topics") else [s.topic])]
     return StepOutcome(path, step, False, n, outputs, hashes, "computed")
+
+
+def run_record_step(
+    path: str | os.PathLike[str],
+    *,
+    record_name: str,
+    compute_record: Callable[[TrialReader], dict[str, Any]],
+    **run_step_args: Any,
+) -> tuple[StepOutcome, dict[str, Any]]:
+    """:func:`run_step` for a step whose one output is the metadata record ``record_name`` (an evaluation, the
+    heading): ``compute_record`` returns the record; returns the outcome and the record, computed now or, when the
+    same run is already recorded, read back from the trial."""
+    holder: dict[str, dict[str, Any]] = {}
+
+    def compute(trial: TrialReader) -> StepResult:
+        holder["record"] = compute_record(trial)
+        return StepResult(streams=[], metadata={record_name: holder["record"]})
+
+    outcome = run_step(path, compute=compute, **run_step_args)
+    if "record" not in holder:
+        with TrialReader(path) as trial:
+            holder["record"] = trial.metadata.get(record_name, {})
+    return outcome, holder["record"]

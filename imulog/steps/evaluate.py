@@ -380,7 +380,7 @@ def run_evaluate(
 def _evaluate_imu(path, imu, channels, baselines, record_name, step, methods, max_gap_s, force):
     """Evaluate one IMU's trajectories (``channels``: method -> topic) into ``record_name``."""
     from imulog.archive import TrialReader
-    from imulog.steps.base import StepResult, run_step
+    from imulog.steps.base import run_record_step
     from imulog.steps.common import alignment_note, alignment_record
     from imulog.steps.trajectory_topics import record_name_of, record_of_imu
 
@@ -398,9 +398,8 @@ def _evaluate_imu(path, imu, channels, baselines, record_name, step, methods, ma
     baseline_topic = baselines.get(BASELINE, "")
     inputs = [channels[m] for m in chosen] + [ref_topic.split(":")[0]]
     inputs += [baseline_topic] if baseline_topic in topics else []
-    holder: dict[str, Any] = {}
 
-    def compute(trial) -> StepResult:
+    def compute(trial) -> dict[str, Any]:
         from imulog.steps.evaluate_windows import windowed_rows
 
         ref_name = ref_topic
@@ -421,22 +420,18 @@ def _evaluate_imu(path, imu, channels, baselines, record_name, step, methods, ma
         record["alignment"] = alignment_note(alignment)
         if imu:
             record["imu"] = f"/imu/{imu}"
-        holder["record"] = record
-        return StepResult(streams=[], metadata={record_name: record})
+        return record
 
     trajectory_record = record_name_of(imu, metadata) or "imulog.trajectory"
-    outcome = run_step(
+    return run_record_step(
         path,
+        record_name=record_name,
+        compute_record=compute,
         step=step,
         algorithm="imulog.evaluation",
         params={"methods": chosen, "max_gap_s": max_gap_s},
         inputs=inputs,
         metadata_inputs=(alignment_record(metadata, f"/imu/{imu}") if imu else "imulog.alignment",)
         + ((trajectory_record,) if step != STEP else ()),
-        compute=compute,
         force=force,
     )
-    if "record" not in holder:
-        with TrialReader(path) as trial:
-            holder["record"] = trial.metadata.get(record_name, {})
-    return outcome, holder["record"]

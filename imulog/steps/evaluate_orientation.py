@@ -77,7 +77,7 @@ def run_evaluate_orientation(path, imu: str | None = None, force: bool = False):
     One-line ValueErrors naming the command to run when the orientation or the alignment is missing."""
     from imulog.archive import TrialReader
     from imulog.steps.align import require_alignment
-    from imulog.steps.base import StepResult, run_step
+    from imulog.steps.base import run_record_step
     from imulog.steps.common import alignment_note, pick_imu
 
     with TrialReader(path) as trial:
@@ -100,9 +100,8 @@ def run_evaluate_orientation(path, imu: str | None = None, force: bool = False):
     q_i2b = None if declared else alignment.get("rotation_imu_to_cluster")
     movement = MOVEMENT_TOPIC in topics
     inputs = [o_topic, pose_topic] + ([MOVEMENT_TOPIC] if movement else [])
-    holder: dict[str, Any] = {}
 
-    def compute(trial) -> StepResult:
+    def compute(trial) -> dict[str, Any]:
         est = trial.read(o_topic)
         pose = trial.read(pose_topic)
         mask = None
@@ -134,23 +133,19 @@ def run_evaluate_orientation(path, imu: str | None = None, force: bool = False):
             "units": {"inclination_rmse_deg": "deg", "heading_free_rmse_deg": "deg", "heading_offset_deg": "deg"},
             "alignment": alignment_note(alignment),
         }
-        holder["record"] = record
-        return StepResult(streams=[], metadata={"imulog.evaluation": record})
+        return record
 
-    outcome = run_step(
+    return run_record_step(
         path,
+        record_name="imulog.evaluation",
+        compute_record=compute,
         step=STEP,
         algorithm="imulog.evaluation.orientation",
         params={"imu": name, "reference": pose_topic, "imu_frame_aligned": declared},
         inputs=inputs,
         metadata_inputs=("imulog.alignment",),
-        compute=compute,
         force=force,
     )
-    if "record" not in holder:
-        with TrialReader(path) as trial:
-            holder["record"] = trial.metadata.get("imulog.evaluation", {})
-    return outcome, holder["record"]
 
 
 def orientation_lines(record: dict[str, Any]) -> list[str]:

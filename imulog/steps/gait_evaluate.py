@@ -188,7 +188,7 @@ def stride_table(record: dict[str, Any]) -> str:
 def run_gait_evaluate(path, *, imus: list[str] | None = None, walking: dict | None = None, force: bool = False):
     """Evaluate a walking trial per stride; returns ``(outcome, record)``."""
     from imulog.archive import TrialReader
-    from imulog.steps.base import StepResult, run_step
+    from imulog.steps.base import run_record_step
 
     with TrialReader(path) as trial:
         topics = trial.topics()
@@ -205,24 +205,19 @@ def run_gait_evaluate(path, *, imus: list[str] | None = None, walking: dict | No
     inputs = [f"/imu/{n}" for n in names]
     inputs += [t for t in topics if t.startswith("/derived/vicon/cluster_pose")]
     inputs += [f"/derived/acc_global/{n}" for n in names if f"/derived/acc_global/{n}" in topics]
-    holder: dict[str, Any] = {}
 
-    def compute(trial) -> StepResult:
+    def compute(trial) -> dict[str, Any]:
         record = compute_gait_evaluation(trial, names, walking)
-        holder["record"] = record
-        return StepResult(streams=[], metadata={"imulog.evaluation": record})
+        return record
 
-    outcome = run_step(
+    return run_record_step(
         path,
+        record_name="imulog.evaluation",
+        compute_record=compute,
         step="evaluate",
         algorithm="imulog.evaluation.strides",
         params={"imus": names, "walking": walking},
         inputs=inputs,
         metadata_inputs=tuple(records),
-        compute=compute,
         force=force,
     )
-    if "record" not in holder:
-        with TrialReader(path) as trial:
-            holder["record"] = trial.metadata.get("imulog.evaluation", {})
-    return outcome, holder["record"]

@@ -189,7 +189,7 @@ def run_heading(
 ):
     """Run the step on a trial file; returns ``(outcome, record)``."""
     from imulog.archive import TrialReader
-    from imulog.steps.base import StepResult, run_step
+    from imulog.steps.base import run_record_step
     from imulog.steps.common import alignment_for, cluster_pose_topic
 
     with TrialReader(path) as trial:
@@ -208,9 +208,8 @@ def run_heading(
     inputs += [t for n in names if (t := cluster_pose_topic(n, topics, metadata)) is not None]
     inputs += [f"/orientation/{n}" for n in names if f"/orientation/{n}" in topics]
     meta_inputs = tuple(k for k in metadata if k == "imulog.alignment" or k.startswith("imulog.alignment."))
-    holder: dict[str, Any] = {}
 
-    def compute(trial) -> StepResult:
+    def compute(trial) -> dict[str, Any]:
         orientations, mags, aligns = {}, {}, {}
         # the orientations and magnetometers are read only for a source that uses them (the field, a declared
         # pose, the device's own orientations): the optical source and none need neither, so they are not read
@@ -249,23 +248,19 @@ def run_heading(
         record = compute_heading(orientations, mags, aligns, static_s, declared_deg, devices)
         if len(names) == 1:
             record["note"] = "one IMU: nothing to relate"
-        holder["record"] = record
-        return StepResult(streams=[], metadata={"imulog.heading": record})
+        return record
 
-    outcome = run_step(
+    return run_record_step(
         path,
+        record_name="imulog.heading",
+        compute_record=compute,
         step=STEP,
         algorithm="imulog.heading",
         params={"imus": names, "static_s": list(static_s) if static_s else None, "declared_deg": declared_deg},
         inputs=inputs,
         metadata_inputs=meta_inputs,
-        compute=compute,
         force=force,
     )
-    if "record" not in holder:
-        with TrialReader(path) as trial:
-            holder["record"] = trial.metadata.get("imulog.heading", {})
-    return outcome, holder["record"]
 
 
 def _has_mag(trial, name: str, topics: list[str]) -> bool:
