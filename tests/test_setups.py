@@ -237,6 +237,10 @@ def test_imus_that_lack_what_the_step_reads_are_left_out_by_default(shared_data,
     # the one line says what is missing and what works without it
     assert "/imu/tas1e31150129 has no gyroscope" in stderr and "`imulog process epochs`" in stderr
     assert len(stderr.strip().splitlines()) == 1
+    # the phases step says the same (it said only "has no gyroscope columns")
+    code, _, stderr = run("process", "phases", trial, "--imu", "tas1e31150129")
+    assert code == 1 and "/imu/tas1e31150129 has no gyroscope" in stderr and "angular velocity" in stderr
+    assert "`imulog process epochs`" in stderr and len(stderr.strip().splitlines()) == 1
     # the first IMU a step runs on keeps imulog.timing when the trial names no primary IMU
     assert run("process", "phases", trial)[0] == 0
     with TrialReader(trial) as reader:

@@ -23,7 +23,7 @@ from imulog.model import PoseStream, SignalStream
 from imulog.process import alignment as al
 from imulog.process.resample import resample_quaternions, resample_signal
 from imulog.steps.align_summary import alignment_summary  # noqa: F401  (imulog.steps.align API)
-from imulog.steps.common import mean_rate_hz, pick_imu
+from imulog.steps.common import mean_rate_hz, missing_gyroscope, pick_imu
 
 # the Vicon-derived and resampled channels are stored as float32 (issue 28; docs/schemas.md: 6e-8 relative, far
 # below the accuracy of a marker cluster or a resampled IMU signal); a copy per stream: attrs become metadata
@@ -213,7 +213,7 @@ def _compute(
     from imulog.process import alignment_search as search
 
     if gyr is None:
-        raise ValueError(f"/imu/{imu_name} has no gyroscope columns")
+        raise missing_gyroscope(f"/imu/{imu_name}", "aligning compares angular velocities")
     labels = list(labels)
     vic_rate = mean_rate_hz(t_vic_ns)
     q_s2g = orientation_at(orientation, t_imu_ns)

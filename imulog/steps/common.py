@@ -98,6 +98,15 @@ def cluster_pose_topic(name: str, topics: list[str], metadata: Mapping[str, Mapp
     return None
 
 
+def missing_gyroscope(topic: str, needs: str) -> ValueError:
+    """The one-line error of a step that reads the gyroscope of ``topic``, an accelerometer-only IMU: what it lacks,
+    what ``needs`` it, and the command that works without it."""
+    return ValueError(
+        f"{topic} has no gyroscope (an accelerometer-only device?): {needs}; "
+        "`imulog process epochs` works from acceleration alone"
+    )
+
+
 def alignment_note(record: Mapping[str, Any]) -> dict[str, Any]:
     """What the evaluation record keeps of the alignment: quality, reasons, score, offset, drift."""
     keys = ("quality", "quality_reasons", "score", "offset_ns", "drift_ppm", "signal", "residual_spread_ns")

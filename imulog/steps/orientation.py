@@ -25,7 +25,7 @@ from imulog.model import SignalStream
 from imulog.numeric import finite_rows
 from imulog.process.gaps import GapParams, GapReport, per_run, prepare
 from imulog.process.orientation import OrientationParams, estimate_orientation, gravity_free_acceleration
-from imulog.steps.common import mean_rate_hz, pick_imu
+from imulog.steps.common import mean_rate_hz, missing_gyroscope, pick_imu
 from imulog.steps.sample_window import SampleWindow
 from imulog.steps.windows import Window, WindowParams, channel_rate_hz
 
@@ -63,10 +63,10 @@ def read_imu_arrays(trial: Any, topic: str) -> tuple[np.ndarray, np.ndarray, np.
 def imu_arrays(stream: Any, topic: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
     """``(t_ns, acc, gyr, mag)`` of a raw ImuStream or a calibrated SignalStream (or a piece of either)."""
     if topic.startswith("/imu/"):
-        if stream.acc is None or stream.gyr is None:
-            lacks = "no gyroscope (an accelerometer-only device?)" if stream.gyr is None else "no accelerometer"
-            hint = "; `imulog process epochs` works from acceleration alone" if stream.acc is not None else ""
-            raise ValueError(f"{topic} has {lacks}: orientation needs accelerometer and gyroscope columns{hint}")
+        if stream.acc is None:
+            raise ValueError(f"{topic} has no accelerometer: orientation needs accelerometer and gyroscope columns")
+        if stream.gyr is None:
+            raise missing_gyroscope(topic, "orientation needs accelerometer and gyroscope columns")
         return stream.t_ns, stream.acc, stream.gyr, stream.mag
     cols = {c: i for i, c in enumerate(stream.columns)}
     need = ["ax", "ay", "az", "gx", "gy", "gz"]

@@ -27,7 +27,7 @@ import numpy as np
 from imulog.process.gaps import GapParams
 from imulog.process.segmentation.pipeline import PhaseParams
 from imulog.process.segmentation.repetitions import RepetitionParams
-from imulog.steps.common import mean_rate_hz, pick_imu, record_for
+from imulog.steps.common import mean_rate_hz, missing_gyroscope, pick_imu, record_for
 from imulog.steps.phases_record import LOW_CONFIDENCE
 from imulog.steps.phases_store import array_source, trial_source
 from imulog.steps.phases_windows import PhaseWindows, phase_pieces, unsupported
@@ -122,7 +122,7 @@ def compute_phases(
     if len(t_ns) < 10:
         raise ValueError(f"/imu/{imu} has only {len(t_ns)} samples")
     if gyr is None:
-        raise ValueError(f"/imu/{imu} has no gyroscope columns")
+        raise missing_gyroscope(f"/imu/{imu}", "phases are found on the angular velocity")
     rate_hz = mean_rate_hz(t_ns)
     record: dict[str, Any] = {}
     one = PhaseWindows(core_s=float("inf"))

@@ -41,6 +41,7 @@ from imulog.process.segmentation.reduce import (
     store_max,
     threshold_runs,
 )
+from imulog.steps.common import missing_gyroscope
 from imulog.steps.phases_record import PeriodCounts, phase_record
 from imulog.steps.phases_store import NormFile, NormMemory, Source, prepared
 from imulog.steps.windows import Window, plan_windows
@@ -177,7 +178,7 @@ def phase_pieces(
             for w in plan:
                 t, gyr, acc = buf.get(w.lo, w.hi)
                 if gyr is None:
-                    raise ValueError(f"/imu/{imu} has no gyroscope columns")
+                    raise missing_gyroscope(f"/imu/{imu}", "phases are found on the angular velocity")
                 k0, k1 = w.core_lo - w.lo, w.core_hi - w.lo
                 first_t = int(t[0]) if w.index == 0 else first_t
                 last_t = int(t[k1 - 1])
