@@ -74,7 +74,9 @@ def velocity_noise_mps(
     return np.sqrt(acc + tilt)
 
 
-def slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw=None, limit_mps: float | None = None) -> int:
+def slow_tail_end(
+    acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw=None, limit_mps: float | None = None, inside=None
+) -> int:
     """Offset (exclusive sample index) at the end of a slow last part of the phase, or ``end`` (the current one).
 
     ``acc``/``gyr`` the low-passed accelerometer (m/s^2) and gyroscope (rad/s), ``raw`` the unfiltered ones (for
@@ -91,7 +93,10 @@ def slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw=None, 
     windows are not tried: a window in a rest's drift fails the check, and one after the drift verifies and
     takes the drift for a slow last part (issue 31).
     ``lo``: where the velocity integration may start (inside the phase); ``limit_mps``: the check's limit (m/s)
-    instead of half ``velocity_level_mps`` (the trial's own rests, :mod:`~imulog.process.segmentation.rest_drift`)."""
+    instead of half ``velocity_level_mps`` (the trial's own rests, :mod:`~imulog.process.segmentation.rest_drift`);
+    ``inside``: a list that gets, with ``params.slow_inside``, the offset (exclusive sample index) at the end of a
+    slow last part that the offset lies inside of (:func:`inside_last_part`) and the window it was measured from,
+    for the caller to check and apply when step 9 does not move the offset (the offset returned is without it)."""
     check = int(round(params.rest_check_s * rate_hz))
     vlevel = params.velocity_level_mps
     if check <= 0 or vlevel <= 0 or post[0] <= end:
@@ -116,4 +121,40 @@ def slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw=None, 
             if v_back is None:
                 v_back = gravity_free(acc, gyr, dt, post, lo, post[0])[1][::-1]
             z = first_motion(v_back, params.n_sigma, min_run, m - (end - lo), check, fit, scale=sd[:m])
+            if z is None and params.slow_inside and inside is not None:
+                zi = inside_last_part(v_back, sd[:m], params.n_sigma, min_run, m - (end - lo), check, fit)
+                if zi is not None:
+                    inside.append((max(end, lo + m - int(np.ceil(zi))), post))
     return end if z is None else max(end, lo + m - int(np.ceil(z)))
+
+
+def inside_last_part(
+    v_back: np.ndarray,
+    sd: np.ndarray,
+    n_sigma: float,
+    min_run: int,
+    until: int,
+    near: int,
+    fit: int,
+    drop_sd: float = 2.795,
+) -> float | None:
+    """Where a slow last part that the offset lies *inside* reaches the rest (local sample index, time reversed:
+    from step 8's verified window back into the phase), or None.
+
+    ``v_back`` (m, 3) m/s the velocity integrated back from the window, ``sd`` (m,) m/s its noise per axis
+    (:func:`velocity_noise_mps`), ``until`` the offset. The hand moves at the offset at ``n_sigma`` sd or more (but
+    under step 8's fixed level, which found nothing), so the offset lies inside the last part, not after it: the
+    flank of :func:`~imulog.process.segmentation.flanks.first_motion` against the noise, its run allowed to hold the
+    offset. A rest's drift seen from a window moving with it is a constant speed from the stop to the drift's
+    start; a last part decelerates: from the offset to half-way to the flank's start the speed must have fallen by
+    ``drop_sd`` sd of the noise at half-way (default: 95 % of a still hand's 3-axis speed, as
+    :data:`~imulog.process.segmentation.speed_profile.STILL_SPEED_SD`). ``near``, ``fit``: as
+    :func:`~imulog.process.segmentation.flanks.first_motion`'s."""
+    z = first_motion(v_back, n_sigma, min_run, until, near, fit, scale=sd, late_only=False)
+    if z is None or z >= until:
+        return None
+    speed = np.linalg.norm(v_back, axis=1)
+    mid = int(round(0.5 * (z + until)))
+    if speed[until] - speed[mid] < drop_sd * sd[mid]:
+        return None
+    return z

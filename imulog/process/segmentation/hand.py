@@ -80,7 +80,7 @@ from imulog.process.segmentation.flanks import combined_t0, flank_zero, speed_fl
 from imulog.process.segmentation.noise_floor import trim_unmoved
 from imulog.process.segmentation.rest_drift import RestDriftParams, check_limit
 from imulog.process.segmentation.rest_window import still_window
-from imulog.process.segmentation.speed_profile import profile_end
+from imulog.process.segmentation.speed_profile import explains_last_part, profile_end
 
 
 @dataclass(frozen=True)
@@ -152,6 +152,10 @@ class HandParams:
     rest_drift: step 8's limit on that velocity is raised to the trial's own where its still rests read more than
         half ``velocity_level_mps`` (:mod:`~imulog.process.segmentation.rest_drift`, 95 % of them; never lowered;
         issue 31 eleventh round).
+    slow_inside: step 8 also follows a slow last part that the offset lies inside of (the hand moving at the offset at
+        ``n_sigma`` sd or more of the velocity's noise, under ``velocity_level_mps``, as seen from a verified rest
+        window), to where it decelerates into the rest (:func:`~imulog.process.segmentation.arrival.inside_last_part`;
+        issue 31 twelfth round).
     """
 
     enabled: bool = True
@@ -188,6 +192,7 @@ class HandParams:
     profile_alone: bool = True
     flank_combine: bool = False
     rest_drift: bool = False
+    slow_inside: bool = False
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:
@@ -315,13 +320,15 @@ def _offset(
     raw=None,
     flank=None,
     limit: float | None = None,
+    inside: list | None = None,
 ) -> int:
     """Offset (exclusive sample index) of the phase whose gyroscope offset is ``b0``, with the rest window ``post``
     after it (steps 5-8 of the module docstring); ``b0`` without a usable window. ``lo``: where the velocity
     integration may start (inside the phase); ``stop``: the next phase's guard; ``raw``: the unfiltered
     (accelerometer, gyroscope) for the velocity's noise of step 8; ``flank``: a list that gets the exclusive end
     (sample index) where the offset's own flank reaches rest, not bounded by the gyroscope's offset; ``limit``: step
-    8's rest check (m/s, the trial's :mod:`~imulog.process.segmentation.rest_drift`; None: the fixed one)."""
+    8's rest check (m/s, the trial's :mod:`~imulog.process.segmentation.rest_drift`; None: the fixed one); ``inside``:
+    a list that gets step 8's offset after a last part the offset lies inside of (``slow_inside``), not applied here."""
     length = post[1] - post[0] if post is not None else 0
     quiet = max(1, int(round(params.quiet_s * rate_hz)))
     min_run = max(1, int(round(params.min_run_s * rate_hz)))
@@ -365,7 +372,7 @@ def _offset(
     end = lo + m - _extrapolated(a_all[::-1], v_all[::-1], m - (end - lo), m - (b0 - lo), level, params, rate_hz, own)
     if flank is not None:
         flank.extend(lo + m - z for z in own)
-    return slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw, limit)
+    return slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw, limit, inside)
 
 
 def cutoff_params(params: HandParams) -> BoundaryParams:
@@ -443,7 +450,8 @@ def refine_with_accelerometer(
         stop = min(next_start, n) - guard
         flank_end: list[int] = []
         flank_start: list[int] = []
-        out_e[k] = _offset(acc, gyr, dt, post, lo, b0, stop, params, rate_hz, (raw, gyr_raw), flank_end, drift)
+        held: list = []  # step 8's offset after a last part the offset lies inside of, and its window (slow_inside)
+        out_e[k] = _offset(acc, gyr, dt, post, lo, b0, stop, params, rate_hz, (raw, gyr_raw), flank_end, drift, held)
         reach_in = int(round(params.speed_reach_s * rate_hz))  # a slow start reaches the speed level late
         hi = max(a0, min(int(out_e[k]), a0 + max(inside, reach_in)))
         for _ in range(3):  # likewise before the onset
@@ -480,15 +488,23 @@ def refine_with_accelerometer(
                 a_all, v_all, int(out_s[k]) - pre[1], a0 - pre[1], level, params, rate_hz, own
             )
             flank_start = [pre[1] + z for z in own]
-        fits.append((lo, post[0] if post is not None else None))
+        fits.append((lo, post[0] if post is not None else None, held[0] if held else (None, None)))
         rests.append((pre, post, flank_start[-1] if flank_start else None, flank_end[-1] if flank_end else None))
-    for k, (lo, window) in enumerate(fits):  # step 9, once every onset is known: the next phase's bounds the rest
+    # step 9, once every onset is known: the next phase's bounds the rest
+    for k, (lo, window, (last, near)) in enumerate(fits):
         stop = (int(out_s[k + 1]) if k + 1 < len(ss) else n) - guard
-        if window is not None and out_e[k] < window < stop:
-            end = profile_end(
-                acc, gyr, dt, lo, int(out_s[k]), int(out_e[k]), window, stop, params, rate_hz, (raw, gyr_raw)
-            )
-            out_e[k] = max(int(out_e[k]), end)
+        end = int(out_e[k])
+        if window is not None and end < window < stop:
+            end = profile_end(acc, gyr, dt, lo, int(out_s[k]), end, window, stop, params, rate_hz, (raw, gyr_raw))
+        # step 8's offset after a slow last part the offset lies inside of, when step 9 did not move the offset and
+        # one smooth deceleration to it explains the phase's last part
+        if (
+            end == out_e[k]
+            and last is not None
+            and explains_last_part(acc, gyr, dt, near, lo, int(out_s[k]), end, last, params, rate_hz)
+        ):
+            end = last
+        out_e[k] = max(int(out_e[k]), end)
     if params.gyro_floor:  # step 10: the gyroscope's boundaries that no step moved, trimmed to its noise floor
         trim_unmoved(gyr, int(np.ceil(rate_hz / (2.0 * gyr_cut))), ss, ee, out_s, out_e, rests)
     s[order], e[order] = out_s, out_e

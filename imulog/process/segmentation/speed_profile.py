@@ -300,3 +300,35 @@ def still_from_window(
     tau = np.array([(near[0] - end) * dt])
     sd = velocity_noise_mps(tau, dt, (near[1] - near[0]) * dt, acc_sd, white_noise(raw[1], *near))[0]
     return bool(np.linalg.norm(v2) <= STILL_SPEED_SD * sd)
+
+
+def explains_last_part(
+    acc: np.ndarray,
+    gyr: np.ndarray,
+    dt: float,
+    window: tuple[int, int],
+    lo: int,
+    onset: int,
+    end: int,
+    arrival: int,
+    params: ProfileParams,
+    rate_hz: float,
+) -> bool:
+    """Whether one minimum-jerk deceleration arriving at ``arrival`` (sample index, before the rest ``window``)
+    explains the phase's last part ``[lo, end)`` within the window's noise: the model of :func:`fit_arrival` with its
+    arrival fixed there (``T`` over ``profile_durations_s`` and from ``onset``), fitted to the gravity-free
+    acceleration relative to ``window`` over ``[lo, window[0])``, leaves a residual over ``[lo, end)`` whose rms is at
+    most ``profile_residual_ratio`` x the window's acceleration noise (m/s^2, :func:`gravity_free`'s). A phase that
+    stops sharply at ``end``, followed by a ramp of the window mean's error integrated back, is not one smooth
+    deceleration to ``arrival`` (issue 31 twelfth round). ``acc``/``gyr`` low-passed, (N, 3), m/s^2 and rad/s."""
+    lo = max(0, min(int(lo), end - 1))
+    a, _, noise = gravity_free(acc, gyr, dt, window, lo, window[0])
+    n = len(a)
+    t_lo, t_hi = params.profile_durations_s
+    durations = np.unique(np.round(np.geomspace(t_lo, t_hi, 24) * rate_hz))
+    i0 = min(max(int(arrival) - lo, 1), n - 1)
+    fit = fit_arrival(a, durations, i0, i0, onset - lo)
+    if fit is None or end <= lo:
+        return False
+    res = a[: end - lo] - profile_model(a, fit[0], fit[1])[: end - lo]
+    return float(np.sqrt(np.mean(res**2))) <= params.profile_residual_ratio * max(noise, 1e-12)
