@@ -50,7 +50,10 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
    and the hand never
    slowed under half that speed between the offset and that part (a rest's drift follows a stop and a window in
    a drift fails the check); a slower last part, under that speed, where its speed stands ``n_sigma`` sd out of
-   the velocity's own noise (:func:`~imulog.process.segmentation.arrival.slow_tail_end`);
+   the velocity's own noise (:func:`~imulog.process.segmentation.arrival.slow_tail_end`); with ``slow_inside`` (an
+   option) also one that the offset lies inside of, applied after step 9 when step 9 did not move the offset and
+   one smooth deceleration to it explains the phase's last part
+   (:func:`~imulog.process.segmentation.arrival.inside_last_part`);
 9. the phase's last movement is fitted as one minimum-jerk deceleration from inside the phase to a rest window
    near the gap's end (:mod:`~imulog.process.segmentation.speed_profile`): when its arrival lies after the offset
    (with ``profile_alone``, the default since issue 31's tenth round; else beyond the rest window of step 2, since a
