@@ -38,7 +38,10 @@ before the orientation filter, ``TrajectoryParams.acc_rests``, an option; ``acc-
 ``acc-rests-scale``: the bias and a per-axis scale; ``acc-rests-bias-compensation`` / ``acc-rests-no-compensation``:
 with the rotating-bias compensation fitting the bias only / not at all; ``acc-rests-prior``: with it fitted under the
 correction's posterior as its prior, ``RotatingBiasParams.calibration_prior``; ``acc-rests-prior-robust``: and the
-movements it cannot close left out, ``outlier_factor = 3``), ``windowed-options`` (the filter's heading and the return to the start on every
+movements it cannot close left out, ``outlier_factor = 3``; ``acc-rests-held-out``: with the prior, the compensation
+per global axis only as far as it predicts the closures of movements left out of its fit,
+``RotatingBiasParams.held_out``, and the start trusted as far as its own closure says, ``OptimizationParams.corrected_floor_m
+= 0.002``), ``windowed-options`` (the filter's heading and the return to the start on every
 axis, the defaults before 2026-12-07, / options 3 and 4 with the heading restarted where a window may be cut, the
 defaults since).
 """
@@ -158,6 +161,17 @@ CHANGES.update(
                 D,
                 acc_rests=ACC_RESTS,
                 rotating_bias=replace(D.rotating_bias, calibration_prior=True, outlier_factor=3.0),
+            ),
+        ),
+        # tenth round: the compensation per global axis as far as it predicts held-out movements' closures, and the
+        # start trusted as far as its own closure says (no 6-mm / 0.02-m/s floors) on the corrected accelerometer
+        "acc-rests-held-out": (
+            D,
+            replace(
+                D,
+                acc_rests=ACC_RESTS,
+                rotating_bias=replace(D.rotating_bias, calibration_prior=True, held_out=True),
+                optimized=replace(D.optimized, corrected_floor_m=0.002),
             ),
         ),
     }
