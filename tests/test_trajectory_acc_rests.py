@@ -72,3 +72,54 @@ def test_the_step_refuses_the_option():
     params = replace(DEFAULT_PARAMS, acc_rests=replace(DEFAULT_PARAMS.acc_rests, enabled=True))
     with pytest.raises(ValueError, match="acc_rests"):
         compute_trajectories(np.arange(n, dtype=np.int64) * 10_000_000, np.zeros((n, 3)), imu="wrist", params=params)
+
+
+def test_a_corrected_start_is_trusted_as_far_as_its_closure_says():
+    """``OptimizationParams.corrected_floor_m`` (issue 31 point 2, tenth round): with the accelerometer corrected from
+    the trial's own rests (applied), the start's static-position trust may go below the 6-mm floor and its velocity
+    trust below ``sigma_data_mps`` (0.02 m/s), both from the closure; the same trial without the calibration keeps
+    both floors. With ``RotatingBiasParams.held_out`` the compensation's per-axis weights are shares (0..1)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from trajectory_accuracy import simulated_inputs
+
+    from imulog.process.rests import true_rests
+    from imulog.process.trajectory_opt import merge_overlapping, reconstruct_repetitions, repetition_windows
+
+    d = DEFAULT_PARAMS
+    params = replace(
+        d,
+        acc_rests=replace(d.acc_rests, enabled=True),
+        rotating_bias=replace(d.rotating_bias, calibration_prior=True, held_out=True),
+        optimized=replace(d.optimized, corrected_floor_m=0.002),
+    )
+    inputs = simulated_inputs(
+        5, seed=5, repetitions=6, rests=d.rests, anchor_params=d.anchor, acc_rests=params.acc_rests
+    )
+    assert inputs["acc_calibration"].applied, inputs["acc_rest_calibration"]
+    t = inputs["t_s"]
+    static = true_rests(
+        inputs["static"], inputs["acc_gate"], (len(t) - 1) / t[-1], d.rests, orientation=inputs["q_gate"]
+    )
+    reps, _ = merge_overlapping(repetition_windows(t, inputs["phase_bounds"], static))
+    infos = {}
+    for label, calibration in (("corrected", inputs["acc_calibration"]), ("uncorrected", None)):
+        infos[label] = {}
+        reconstruct_repetitions(
+            t,
+            inputs["acc_world"],
+            static,
+            reps,
+            ("optimized",),
+            anthropometrics=inputs["anthropometrics"],
+            orientation=inputs["q_world"],
+            params=params,
+            info=infos[label],
+            acc_calibration=calibration,
+        )
+    corrected, uncorrected = infos["corrected"], infos["uncorrected"]
+    assert min(uncorrected["sigma_data_static_m"]) >= 0.006 and min(uncorrected["sigma_data_mps"]) >= 0.02
+    assert min(corrected["sigma_data_static_m"]) < 0.006, corrected["sigma_data_static_m"]
+    assert min(corrected["sigma_data_mps"]) < 0.02, corrected["sigma_data_mps"]
+    assert min(corrected["sigma_data_static_m"]) >= 0.002
+    weight = np.asarray(corrected["accelerometer_errors"]["axis_weight"])
+    assert weight.shape == (3,) and np.all((weight >= 0) & (weight <= 1))

@@ -366,3 +366,44 @@ def test_rotating_bias_prior_from_the_rest_calibration():
             assert error["prior"] < 0.01, error
         else:
             assert removed["prior"] < 0.5 * removed["plain"], removed
+
+
+def test_rotating_bias_held_out_weight_keeps_what_predicts_left_out_movements():
+    """``RotatingBiasParams.held_out`` (:func:`held_out_weight`): per global axis, the compensation is applied as far
+    as a fit without each movement predicts that movement's closure. Real sensor errors (a bias and scale turning
+    with the hand) are predicted on every axis and mostly kept; a closure error that is not the sensor's (each
+    movement's own vertical push, as a tilt or a velocity at the rests gives) is not predicted, and the compensation
+    the plain fit makes of it is mostly left out."""
+    from imulog.process.integration import RotatingBiasParams, estimate_rotating_bias
+    from imulog.process.rest_runs import movement_runs
+
+    rng = np.random.default_rng(13)
+    t, acc, static, rot, f_sensor, g = _turning_drinking_trial(rng, 8)
+    noise = 0.05 * rng.standard_normal(acc.shape)  # m/s^2, white
+    measured = f_sensor + np.array([0.06, -0.08, 0.05]) + f_sensor @ np.diag([0.006, -0.004, 0.005]).T
+    sensor = np.einsum("nij,nj->ni", rot, measured) - g + noise
+    world = acc + noise
+    for s, e in movement_runs(static):
+        world[s:e, 2] += rng.normal(0.0, 0.05)  # m/s^2 over the whole movement, not a sensor error
+    held = RotatingBiasParams(held_out=True)
+    for acc_global, kept in ((sensor, True), (world, False)):
+        errors = estimate_rotating_bias(acc_global, rot, t, static, held)
+        plain = estimate_rotating_bias(acc_global, rot, t, static, RotatingBiasParams())
+        assert errors.axis_weight is not None and np.all((errors.axis_weight >= 0) & (errors.axis_weight <= 1))
+        removed = _rotating_part_removed(acc_global, rot, t, static, errors)
+        removed_plain = _rotating_part_removed(acc_global, rot, t, static, plain)
+        if kept:
+            assert np.all(errors.axis_weight > 0.5), errors.axis_weight
+            assert removed == pytest.approx(removed_plain, rel=0.15)
+        else:
+            assert np.all(errors.axis_weight < 0.25), errors.axis_weight
+            assert removed < 0.3 * removed_plain, (removed, removed_plain)
+
+
+def test_held_out_weight_without_enough_movements_keeps_everything():
+    """Fewer movements than two per unknown (plus the one left out): nothing to judge, weight 1 on every axis."""
+    from imulog.process.integration import held_out_weight
+
+    rng = np.random.default_rng(3)
+    assert np.array_equal(held_out_weight(rng.normal(size=(8, 3, 12)), rng.normal(size=(8, 3))), np.ones(3))
+    assert np.all(held_out_weight(rng.normal(size=(40, 3, 12)), rng.normal(size=(40, 3))) < 0.5)

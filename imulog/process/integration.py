@@ -201,6 +201,11 @@ class RotatingBiasParams:
         covariance is that correction's joint posterior (bias m/s^2, matrix dimensionless, correlations kept), the
         closure rows weighted by the plain fit's residual standard deviation (m/s): the compensation then fits only
         what the correction may have left (issue 31 point 2, ninth round; an option).
+    held_out: apply the compensation on each global axis only as far as it predicts the closures of movements it
+        was not fitted on (:func:`held_out_weight`: leave one movement out, the share of that axis's closure
+        variance the fit predicts, 0..1; False: in full). Issue 31 point 2, tenth round: on a corrected
+        accelerometer the fit still closes errors that are not the sensor's (mostly in z), which cost the start
+        against plain ZUPT; an option.
     """
 
     rest_s: float = 0.5
@@ -211,6 +216,7 @@ class RotatingBiasParams:
     outlier_refits: int = 1
     shrink: bool = False
     calibration_prior: bool = False
+    held_out: bool = False
 
 
 @dataclass
@@ -294,6 +300,10 @@ def estimate_rotating_bias(
     matrix_se = se[3:].reshape(3, 3) if params.gravity_coupled else np.zeros((3, 3))
     z = axis_significance(np.stack([rows[i] for i in keep]), x, cov)
     weight = shrinkage_weight(z) if params.shrink else None
+    if params.held_out:
+        prior = None if prior_cov is None else np.asarray(prior_cov, dtype=np.float64)[:k, :k]
+        held = held_out_weight(np.stack([rows[i] for i in keep]), np.stack([rhs[i] for i in keep]), prior)
+        weight = held if weight is None else weight * held
     return AccelerometerErrors(x[:3], matrix, se[:3], matrix_se, axis_z=z, axis_weight=weight)
 
 
@@ -312,6 +322,34 @@ def prior_fit(
     normal = design.T @ design * w2 + np.linalg.pinv(prior_cov, hermitian=True)
     cov = np.linalg.pinv(normal, hermitian=True)
     return cov @ (design.T @ y) * w2, cov
+
+
+def held_out_weight(rows: np.ndarray, rhs: np.ndarray, prior_cov: np.ndarray | None = None) -> np.ndarray:
+    """Per global axis (3,), the share (0..1) of the movements' closure variance that the compensation predicts for
+    movements it was not fitted on: ``max(0, 1 - sum_m (v_mj - rows[m, j] x_(-m))^2 / sum_m v_mj^2)``, with
+    ``x_(-m)`` the fit (plain, or under the prior ``prior_cov`` (k, k), :func:`prior_fit`) without movement m.
+
+    rows (M, 3, k): each movement's closure velocity (m/s) per unit of the k unknowns; rhs (M, 3): the closure
+    velocities (m/s) to explain. 0 where predicting zero does as well (the fit closes what is not the sensor's:
+    noise, a tilt or a velocity at the rests), 1 where the held-out closures are predicted exactly; 1 on every axis
+    with too few movements to leave one out (fewer than two per unknown), where nothing can be judged."""
+    r = np.asarray(rows, dtype=np.float64)
+    v = np.asarray(rhs, dtype=np.float64)
+    m, _, k = r.shape
+    if m - 1 < max(2, k // 3 * 2):
+        return np.ones(3)
+    pred = np.zeros_like(v)
+    for i in range(m):
+        rest = np.arange(m) != i
+        design, y = r[rest].reshape(-1, k), v[rest].reshape(-1)
+        x, *_ = np.linalg.lstsq(design, y, rcond=None)
+        if prior_cov is not None:
+            x, _ = prior_fit(design, y, x, prior_cov)
+        pred[i] = r[i] @ x
+    total = np.sum(v**2, axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = 1.0 - np.sum((v - pred) ** 2, axis=0) / total
+    return np.clip(np.where(total > 0, share, 0.0), 0.0, 1.0)
 
 
 def axis_significance(rows: np.ndarray, x: np.ndarray, cov: np.ndarray) -> np.ndarray:

@@ -182,16 +182,17 @@ def reconstruct_repetitions(
             base, z = _blended_start(t, a, base, z, turn, static, repetitions, waypoints, anthropometrics, params, info)
         fallback = set(inconsistent_repetitions(reference_residuals(t, z, static, repetitions, waypoints)))
         if params.optimized.sigma_data_static_m == "auto":
+            floor_m, floor_mps = _trust_floors(params.optimized, acc_calibration)
             sig = estimate_data_sigma(t, z, static, repetitions, waypoints, params.optimized.sigma_ref_static_m)
             if params.optimized.closure_factor is not None:  # at most what the movements' closure allows
                 closure = closure_sigma(t, base, static, repetitions)
                 k = params.optimized.closure_factor
-                sig = tuple(max(0.006, min(s, k * c)) for s, c in zip(sig, closure, strict=True))
+                sig = tuple(max(floor_m, min(s, k * c)) for s, c in zip(sig, closure, strict=True))
             params = replace(params, optimized=replace(params.optimized, sigma_data_static_m=sig))
             if info is not None:
                 info["sigma_data_static_m"] = list(sig)
             if params.optimized.velocity_from_static:
-                vel = velocity_sigma(sig, repetitions, params.optimized.sigma_data_mps)
+                vel = velocity_sigma(sig, repetitions, floor_mps)
                 params = replace(params, optimized=replace(params.optimized, sigma_data_mps=vel))
                 if info is not None:
                     info["sigma_data_mps"] = list(vel)
@@ -236,6 +237,14 @@ def reconstruct_repetitions(
     if info is not None:
         info["checks"] = method_checks(t, a, a_comp, static, repetitions, out, params, bias)
     return out
+
+
+def _trust_floors(o: OptimizationParams, calibration: AccRestCalibration | None) -> tuple[float, Any]:
+    """The least static-position trust (m) and velocity trust (m/s) of the ``"auto"`` start: 6 mm and
+    ``sigma_data_mps``, or with ``o.corrected_floor_m`` and an applied rest calibration that floor and none."""
+    if o.corrected_floor_m is not None and calibration is not None and calibration.applied:
+        return float(o.corrected_floor_m), 0.0
+    return 0.006, o.sigma_data_mps
 
 
 def _chained_waypoints(

@@ -85,6 +85,13 @@ class OptimizationParams:
         a line from the rest before's mean to the rest after's (:func:`imulog.process.integration.rest_ramp`, over
         ``RotatingBiasParams.rest_s`` of each rest) before ZUPT's linear de-drift (issue 31 point 2, eighth
         round); ZUPT and ``zupt_bias`` themselves are unchanged.
+    corrected_floor_m: with the accelerometer corrected from the trial's own rests (``TrajectoryParams.acc_rests``,
+        applied), the ``"auto"`` static-position trust is bounded below by this (m) instead of 6 mm, and the
+        velocity trust follows it (:func:`imulog.process.trajectory_repetitions.velocity_sigma`) without
+        ``sigma_data_mps`` (0.02 m/s) as its floor: the start is then trusted as far as its own closure says
+        (issue 31 point 2, tenth round: on a corrected accelerometer both floors bind on most trials and hold the
+        optimisation away from a start better than they allow). None (the default): the floors as before; 2 mm is
+        a guard against a closure near zero (no floor at all gave the same counts on development trials).
     """
 
     sigma_data_mps: float | tuple[float, float, float] = 0.02
@@ -103,6 +110,7 @@ class OptimizationParams:
     rest_chain: bool = False
     rest_model: str | None = None
     rest_ramp: tuple[bool, bool, bool] = (False, False, False)
+    corrected_floor_m: float | None = None
 
 
 @dataclass
