@@ -70,6 +70,20 @@ class LazyGroup(click.Group):
             return getattr(importlib.import_module(module_name), attribute)
         return super().get_command(ctx, cmd_name)
 
+    def invoke(self, ctx: click.Context):
+        """Run the subcommand; a closed output pipe that a command reported as its own error goes back to click as
+        the ``BrokenPipeError`` it was, which click's main turns into a quiet exit (one mechanism for every
+        command's output: ``imulog.console.broken_pipe``)."""
+        try:
+            return super().invoke(ctx)
+        except click.ClickException as exc:
+            from imulog.console import broken_pipe
+
+            pipe = broken_pipe(exc)
+            if pipe is not None:
+                raise pipe from None
+            raise
+
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         rows = [(name, self.lazy_commands[name][1]) for name in sorted(self.lazy_commands)]
         rows += [

@@ -4,6 +4,8 @@
   passes ``color=False`` to click, so ``click.secho`` prints plain text).
 * Progress: a live bar (tqdm) on a terminal; on a log file or pipe, plain lines at every 10 % and at
   the end, never ``\\r`` redraws.
+* A closed pipe (``imulog evaluate trial.mcap | head -1``): :func:`broken_pipe` finds it behind the one-line error
+  a command made of an ``OSError``, and ``imulog.cli.LazyGroup`` hands it back to click, which exits quietly.
 """
 
 from __future__ import annotations
@@ -14,6 +16,20 @@ from collections.abc import Iterator, Sequence
 from typing import Any, TextIO, TypeVar
 
 T = TypeVar("T")
+
+
+def broken_pipe(exc: BaseException) -> BrokenPipeError | None:
+    """The ``BrokenPipeError`` behind ``exc`` (itself, or the error a command turned into a
+    ``click.ClickException``: its ``__cause__`` or ``__context__``), else None. A command's ``except OSError``
+    around its output catches the pipe its reader closed; this tells that apart from a real file error."""
+    seen: set[int] = set()
+    current: BaseException | None = exc
+    while current is not None and id(current) not in seen:
+        if isinstance(current, BrokenPipeError):
+            return current
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return None
 
 
 def no_color() -> bool:
