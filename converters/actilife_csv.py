@@ -274,6 +274,13 @@ class ActiLifeCsvConverter(Converter):
     def recording_key(self, path: Path) -> str | None:
         return Path(path).name
 
+    def export_of(self, path: Path) -> Path | None:
+        """``X.gt3x`` beside ActiLife's exports of it, ``XRAW.csv`` (raw accelerometer) and ``X-IMU.csv`` (the
+        IMU file), as ActiLife names them; else None."""
+        m = re.match(r"(.+?)(RAW|-IMU)$", Path(path).stem)
+        source = Path(path).with_name(f"{m.group(1)}.gt3x") if m else None
+        return source if source is not None and source.is_file() else None
+
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_actilife_csv(Path(path), options)
 

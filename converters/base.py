@@ -73,5 +73,11 @@ class Converter:
         one file per sensor); None lets the registry group by the file name without role words."""
         return None
 
+    def export_of(self, path: Path) -> Path | None:
+        """The device file beside ``path`` that ``path`` is the vendor software's documented export of (NilsPodLib's
+        ``X_data.csv`` of ``X.bin``), when that file exists; else None. ``imulog convert FOLDER`` converts the device
+        file and skips the export with one line (docs/converters.md, "One trial per recording")."""
+        return None
+
     def __repr__(self) -> str:
         return f"<converter {self.name}>"

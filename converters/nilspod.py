@@ -422,6 +422,12 @@ class NilsPodConverter(Converter):
     def recording_key(self, path: Path) -> str | None:
         return Path(path).stem  # the .bin and NilsPodLib's _data.csv of it are two decodes, never one trial
 
+    def export_of(self, path: Path) -> Path | None:
+        """``X.bin`` beside NilsPodLib's ``X_data.csv`` (its ``data_as_csv`` export names), else None."""
+        m = re.match(r"(.*)_data$", Path(path).stem) if Path(path).suffix.lower() == ".csv" else None
+        source = Path(path).with_name(f"{m.group(1)}.bin") if m else None
+        return source if source is not None and source.is_file() else None
+
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         if Path(path).suffix.lower() == ".csv":
             return read_csv(Path(path), options)
