@@ -128,8 +128,9 @@ STEPS: dict[str, StepSpec] = {
     "evaluate": StepSpec(
         "evaluate",
         "imulog.steps.evaluate:run_evaluate",
-        kwargs=("methods", "max_gap_s"),
-        help="trajectory errors against the optical reference (methods=..., max_gap_s=0.05)",
+        kwargs=("methods", "max_gap_s", "what"),
+        help="trajectory errors against the optical reference (methods=..., max_gap_s=0.05); what=orientation: the "
+        "orientation against a rigid body's poses (what=auto|orientation|trajectory, as imulog evaluate --what)",
     ),
     "kinematics": StepSpec(
         "kinematics",
