@@ -194,6 +194,15 @@ def test_a_trial_with_trajectories_keeps_both_evaluations(processed, tmp_path):
         assert trial.metadata["imulog.orientation_evaluation"] == orientation
     code, text = run("evaluate", path, "--what", "orientation", "--strides")
     assert code == 1 and "--strides" in text and "--what orientation" in text, text
+    rrd = tmp_path / "14.rrd"  # the viewer's evaluation panel shows both reports
+    assert run("view", path, "--save", rrd)[0] == 0
+    from rerun.chunk import RrdReader
+
+    from imulog.view import layout as L
+
+    chunk = next(c for c in RrdReader(rrd).stream().to_chunks() if c.entity_path == L.evaluation_entity())
+    panel = chunk.to_record_batch().column("TextDocument:text").to_pylist()[0][0]
+    assert "| zupt |" in panel and "inclination_rmse_deg" in panel, panel
     out = tmp_path / "catalog.parquet"
     assert run("catalog", path, "-o", out)[0] == 0
     row = pd.read_parquet(out).iloc[0]
