@@ -54,3 +54,26 @@ def test_the_epoch_table_says_which_device_each_row_comes_from(study):
     assert devices.loc["mt_00b421af"].tolist() == ["Xsens MT", "00B421AF"]
     assert devices.loc["tas1e31150129"].tolist() == ["ActiGraph Link", "TAS1E31150129"]
     assert table["device"].notna().all()
+
+
+def test_epochs_at_a_rate_no_epoch_fits_say_how_to_declare_the_nominal_one(shared_data, tmp_path):
+    """x-io's Fusion example CSV: time stamps at 99.2125 Hz on average and no declared rate; epochs said only 'the
+    calibration epoch of 10 s is not a whole number of samples at 99.2125 Hz'. Now the line says how to declare
+    the nominal rate, and the trial converted that way gives its epochs (the stamps unchanged)."""
+    from imulog.archive import TrialReader
+
+    csv = shared_data / "imu_text/fusion_sensor_data.csv"
+    plain, declared = tmp_path / "plain.mcap", tmp_path / "declared.mcap"
+    assert run("convert", csv, "-o", plain)[0] == 0
+    result = CliRunner().invoke(cli, ["process", "epochs", str(plain)])
+    assert result.exit_code == 1
+    line = result.output.strip()
+    assert len(line.splitlines()) == 1 and "at 99.2125 Hz" in line, line
+    assert "declare it when converting: imulog convert FILE --rate 99" in line, line
+    assert run("convert", csv, "--rate", "100", "-o", declared)[0] == 0
+    code, text, err = run("process", "epochs", declared)
+    assert code == 0, err
+    with TrialReader(plain) as a, TrialReader(declared) as b:
+        assert (a.read("/imu/imu").t_ns == b.read("/imu/imu").t_ns).all()
+        n = len(b.read("/imu/imu").t_ns)
+        assert len(b.read("/derived/epochs/5s/imu").t_ns) == -(-n // 500)  # 500 samples an epoch, the last partial
