@@ -77,3 +77,27 @@ def test_epochs_at_a_rate_no_epoch_fits_say_how_to_declare_the_nominal_one(share
         assert (a.read("/imu/imu").t_ns == b.read("/imu/imu").t_ns).all()
         n = len(b.read("/imu/imu").t_ns)
         assert len(b.read("/derived/epochs/5s/imu").t_ns) == -(-n // 500)  # 500 samples an epoch, the last partial
+
+
+def test_a_failed_step_does_not_stop_the_epochs_of_an_accelerometer_only_wrist(shared_data, tmp_path):
+    """The real GENEActiv file (85.7 Hz, accelerometer only) in a batch of orientation, phases and epochs:
+    orientation fails (no gyroscope) and, before, the file's epochs were not computed either, though they read
+    the raw acceleration only. Now epochs still run, phases (which reads the orientation step's output) does not,
+    and the file is still reported failed with the first failure and what still ran."""
+    from imulog.archive import TrialReader
+
+    trial = tmp_path / "geneactiv.mcap"
+    assert run("convert", shared_data / "devices/geneactiv_bin/GENEActiv_testfile.bin", "-o", trial)[0] == 0
+    result = CliRunner().invoke(
+        cli,
+        ["batch", str(trial), "--steps", "orientation,phases,epochs", "--set", "epochs.epochs_s=10,60", "--no-ledger"],
+    )
+    assert result.exit_code == 1
+    failed = [line for line in result.output.splitlines() if line.startswith("FAILED")]
+    assert len(failed) == 1 and ": orientation: ValueError:" in failed[0], result.output
+    assert failed[0].endswith("(still run: epochs, which does not need it)"), failed[0]
+    with TrialReader(trial) as reader:
+        topics = reader.topics()
+        steps = {r["step"] for r in reader.runs().values()}
+    assert "/derived/epochs/10s/geneactiv" in topics and "/derived/epochs/60s/geneactiv" in topics
+    assert steps == {"epochs:geneactiv"}  # phases did not run after the failed orientation
