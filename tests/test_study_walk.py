@@ -101,3 +101,18 @@ def test_a_failed_step_does_not_stop_the_epochs_of_an_accelerometer_only_wrist(s
         steps = {r["step"] for r in reader.runs().values()}
     assert "/derived/epochs/10s/geneactiv" in topics and "/derived/epochs/60s/geneactiv" in topics
     assert steps == {"epochs:geneactiv"}  # phases did not run after the failed orientation
+
+
+def test_the_batch_help_teaches_a_wearables_study_and_its_line_runs(study):
+    """imulog batch --help showed lab lines only (its default steps need an optical reference, so a wearables
+    archive failed every file at align); its home-monitoring line now runs as printed on the study's archive."""
+    import shlex
+
+    help_text = CliRunner().invoke(cli, ["batch", "--help"]).output
+    assert "epochs_s=5,60" in help_text  # the epochs step names its options, not only "EpochParams fields"
+    line = next(x for x in help_text.splitlines() if "# home monitoring" in x)
+    args = shlex.split(line.split("#")[0].strip())
+    assert args[:3] == ["imulog", "batch", "wearables/"]
+    result = CliRunner().invoke(cli, ["batch", str(study / "archive"), *args[3:], "--no-ledger"])
+    assert result.exit_code == 0, result.output
+    assert "3 processed" in result.output or "up to date" in result.output, result.output

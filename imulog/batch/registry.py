@@ -123,7 +123,8 @@ STEPS: dict[str, StepSpec] = {
         "imulog.steps.epochs:run_epochs",
         kwargs=("imu",),
         params_class="imulog.steps.epochs:EpochParams",
-        help="ENMO, MAD, ActiGraph counts, non-wear per epoch; hourly/daily totals (EpochParams fields)",
+        help="ENMO, MAD, ActiGraph counts, non-wear per epoch; hourly/daily totals (EpochParams: epochs_s=5,60, "
+        "calibrate, valid_day_hours, ...)",
     ),
     "evaluate": StepSpec(
         "evaluate",
