@@ -116,3 +116,27 @@ def test_the_batch_help_teaches_a_wearables_study_and_its_line_runs(study):
     result = CliRunner().invoke(cli, ["batch", str(study / "archive"), *args[3:], "--no-ledger"])
     assert result.exit_code == 0, result.output
     assert "3 processed" in result.output or "up to date" in result.output, result.output
+
+
+def test_view_refuses_its_outputs_before_reading_any_trial(tmp_path):
+    """`view a.mcap b.mcap --save study.rrd` (one file for two recordings) and a --save file that exists were
+    refused only after every trial had been read (a week's overview takes minutes); docs/cli.md promises outputs
+    are refused before reading anything. Files that cannot be read show it: the refusal comes first."""
+    a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
+    for f in (a, b):
+        f.write_bytes(b"\x89MCAP0\r\n" + b"not a trial" * 20)
+    result = CliRunner().invoke(cli, ["view", str(a), str(b), "--save", str(tmp_path / "study.rrd")])
+    assert result.exit_code == 1
+    assert "--save" in result.output and "2 trials make 2 recordings" in result.output, result.output
+    existing = tmp_path / "a.rrd"
+    existing.write_bytes(b"")
+    result = CliRunner().invoke(cli, ["view", str(a), "--save", str(existing)])
+    assert result.exit_code == 1 and "exists; add --overwrite" in result.output, result.output
+
+
+def test_info_on_the_study_folder_names_the_catalog(study):
+    """`imulog info archive/` said only "Invalid value for 'FILE': File 'archive' is a directory"."""
+    result = CliRunner().invoke(cli, ["info", str(study / "archive")])
+    assert result.exit_code == 2
+    assert "is a folder; info shows one trial" in result.output
+    assert f"imulog catalog {study / 'archive'} -o catalog.parquet" in result.output, result.output
