@@ -140,3 +140,16 @@ def test_info_on_the_study_folder_names_the_catalog(study):
     assert result.exit_code == 2
     assert "is a folder; info shows one trial" in result.output
     assert f"imulog catalog {study / 'archive'} -o catalog.parquet" in result.output, result.output
+
+
+def test_export_on_the_reference_clock_of_a_wearable_says_it_has_none(study, tmp_path):
+    """The real AX6 trial has no optical system: `export --clock reference` told the user to run
+    `imulog process align`, which can only fail on it (no markers or poses). Now it says there is no reference
+    clock and names --clock device; nothing is written."""
+    out = tmp_path / "ax6.csv"
+    trial = study / "archive" / "ax6_sample.mcap"
+    args = ["export", str(trial), "-t", "/imu/ax6_6011802", "-o", str(out), "--clock", "reference"]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 1 and len(result.output.strip().splitlines()) == 1, result.output
+    assert "no /markers/* or /poses/* channel" in result.output and "--clock device" in result.output
+    assert "process align" not in result.output and not out.exists()
