@@ -54,6 +54,10 @@ PROCESS_COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+#: click's words for a command given several trials or a folder where it takes one trial file
+_MANY_TRIALS = ("unexpected extra argument", "is a directory")
+
+
 class LazyGroup(click.Group):
     """A click group whose subcommands are imported only when used (or listed in --help)."""
 
@@ -76,6 +80,14 @@ class LazyGroup(click.Group):
         command's output: ``imulog.console.broken_pipe``)."""
         try:
             return super().invoke(ctx)
+        except click.UsageError as exc:  # `process STEP a.mcap b.mcap` or a folder: say which command takes many
+            step = exc.ctx.info_name if exc.ctx is not None and exc.ctx.parent is ctx else None
+            if self.name == "process" and step and any(k in exc.message for k in _MANY_TRIALS):
+                exc.message = exc.message.rstrip(".") + (
+                    f"; process {step} runs on one trial: for several trials or a folder, "
+                    f"imulog batch PATHS... --steps {step} (docs/batch.md)"
+                )
+            raise
         except click.ClickException as exc:
             from imulog.console import broken_pipe
 

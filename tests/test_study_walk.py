@@ -153,3 +153,17 @@ def test_export_on_the_reference_clock_of_a_wearable_says_it_has_none(study, tmp
     assert result.exit_code == 1 and len(result.output.strip().splitlines()) == 1, result.output
     assert "no /markers/* or /poses/* channel" in result.output and "--clock device" in result.output
     assert "process align" not in result.output and not out.exists()
+
+
+def test_a_process_step_given_several_trials_or_a_folder_names_imulog_batch(study):
+    """`imulog process epochs a.mcap b.mcap` or `... archive/` gave only click's words ('Got unexpected extra
+    argument', 'is a directory'); the line now says the step takes one trial and names imulog batch."""
+    archive = study / "archive"
+    trials = sorted(archive.glob("*.mcap"))
+    for args in (["process", "epochs", *trials[:2]], ["process", "orientation", archive]):
+        result = CliRunner().invoke(cli, [str(a) for a in args])
+        assert result.exit_code == 2
+        line = result.output.strip().splitlines()[-1]
+        assert f"process {args[1]} runs on one trial" in line and f"imulog batch PATHS... --steps {args[1]}" in line
+    result = CliRunner().invoke(cli, ["process", "epochs", "--bogus", str(trials[0])])
+    assert result.exit_code == 2 and "imulog batch" not in result.output  # other usage errors unchanged
