@@ -41,7 +41,7 @@ from imulog.converters.actilife_epoch import (
     iter_epoch_csv,
     strptime_format,
 )
-from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.base import Converter, ConvertOptions, export_source
 from imulog.converters.errors import ConversionError
 
 from imulog.model import ImuStream, Recording, SignalStream
@@ -277,9 +277,7 @@ class ActiLifeCsvConverter(Converter):
     def export_of(self, path: Path) -> Path | None:
         """``X.gt3x`` beside ActiLife's exports of it, ``XRAW.csv`` (raw accelerometer) and ``X-IMU.csv`` (the
         IMU file), as ActiLife names them; else None."""
-        m = re.match(r"(.+?)(RAW|-IMU)$", Path(path).stem)
-        source = Path(path).with_name(f"{m.group(1)}.gt3x") if m else None
-        return source if source is not None and source.is_file() else None
+        return export_source(path, r"(.+?)(?:RAW|-IMU)", ".gt3x")
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_actilife_csv(Path(path), options)

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 from imulog.converters._lab import trial_start
-from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.base import Converter, ConvertOptions, export_source
 from imulog.converters.errors import ConversionError
 
 from imulog.model import PIECES_RECORD, ImuStream, Recording, SignalStream
@@ -424,9 +424,7 @@ class NilsPodConverter(Converter):
 
     def export_of(self, path: Path) -> Path | None:
         """``X.bin`` beside NilsPodLib's ``X_data.csv`` (its ``data_as_csv`` export names), else None."""
-        m = re.match(r"(.*)_data$", Path(path).stem) if Path(path).suffix.lower() == ".csv" else None
-        source = Path(path).with_name(f"{m.group(1)}.bin") if m else None
-        return source if source is not None and source.is_file() else None
+        return export_source(path, r"(.*)_data", ".bin") if Path(path).suffix.lower() == ".csv" else None
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         if Path(path).suffix.lower() == ".csv":
