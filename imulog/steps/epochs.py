@@ -56,7 +56,8 @@ def _samples(seconds: float, rate: float, what: str) -> int:
         step = whole_seconds(rate)
         nominal = round(rate)
         hint = (
-            f" (at this rate use epochs of {step} s multiples: --epoch-s {step} --epoch-s 60)"
+            f" (at this rate use epochs of {step} s multiples: --epoch-s {step} --epoch-s 60; in imulog batch "
+            f"--set epochs.epochs_s={step},60)"
             if step
             else f" (no epoch of whole seconds fits it: when the device sampled at a nominal {nominal} Hz that its "
             f"time stamps drift from, declare it when converting: imulog convert FILE --rate {nominal})"
