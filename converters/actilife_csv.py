@@ -41,7 +41,7 @@ from imulog.converters.actilife_epoch import (
     iter_epoch_csv,
     strptime_format,
 )
-from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.base import Converter, ConvertOptions, export_source
 from imulog.converters.errors import ConversionError
 
 from imulog.model import ImuStream, Recording, SignalStream
@@ -273,6 +273,11 @@ class ActiLifeCsvConverter(Converter):
 
     def recording_key(self, path: Path) -> str | None:
         return Path(path).name
+
+    def export_of(self, path: Path) -> Path | None:
+        """``X.gt3x`` beside ActiLife's exports of it, ``XRAW.csv`` (raw accelerometer) and ``X-IMU.csv`` (the
+        IMU file), as ActiLife names them; else None."""
+        return export_source(path, r"(.+?)(?:RAW|-IMU)", ".gt3x")
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_actilife_csv(Path(path), options)

@@ -6,6 +6,7 @@ A lab adds its own device by writing a class like this and registering an instan
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,6 +27,14 @@ class ConvertOptions:
     mapping: Path | None = None
     rate_hz: float | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+
+
+def export_source(path: Path, stem_pattern: str, suffix: str) -> Path | None:
+    """The device file an export was named after: ``path``'s stem matched by ``stem_pattern`` (its first group
+    the device file's stem), with ``suffix``, when it exists beside ``path``; else None (:meth:`Converter.export_of`)."""
+    m = re.fullmatch(stem_pattern, Path(path).stem)
+    source = Path(path).with_name(f"{m.group(1)}{suffix}") if m else None
+    return source if source is not None and source.is_file() else None
 
 
 class Converter:
@@ -71,6 +80,12 @@ class Converter:
     def recording_key(self, path: Path) -> str | None:
         """The recording ``path`` belongs to when the format names it (e.g. Xsens ``MT_<master>_<trial>-000_<id>``:
         one file per sensor); None lets the registry group by the file name without role words."""
+        return None
+
+    def export_of(self, path: Path) -> Path | None:
+        """The device file beside ``path`` that ``path`` is the vendor software's documented export of (NilsPodLib's
+        ``X_data.csv`` of ``X.bin``), when that file exists; else None. ``imulog convert FOLDER`` converts the device
+        file and skips the export with one line (docs/converters.md, "One trial per recording")."""
         return None
 
     def __repr__(self) -> str:

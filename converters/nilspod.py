@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 from imulog.converters._lab import trial_start
-from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.base import Converter, ConvertOptions, export_source
 from imulog.converters.errors import ConversionError
 
 from imulog.model import PIECES_RECORD, ImuStream, Recording, SignalStream
@@ -421,6 +421,10 @@ class NilsPodConverter(Converter):
 
     def recording_key(self, path: Path) -> str | None:
         return Path(path).stem  # the .bin and NilsPodLib's _data.csv of it are two decodes, never one trial
+
+    def export_of(self, path: Path) -> Path | None:
+        """``X.bin`` beside NilsPodLib's ``X_data.csv`` (its ``data_as_csv`` export names), else None."""
+        return export_source(path, r"(.*)_data", ".bin") if Path(path).suffix.lower() == ".csv" else None
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         if Path(path).suffix.lower() == ".csv":

@@ -319,27 +319,53 @@ def recording_key(path: Path, conv: Converter | None = None) -> str:
     return "_".join(tokens)
 
 
+def _export_source(path: Path, conv: Converter, found: dict[Path, Converter]) -> Path | None:
+    """The convertible device file (in ``found``) that ``path`` is an export of (``conv.export_of``), else None."""
+    try:
+        source = conv.export_of(path)
+    except Exception:  # noqa: BLE001 - a plug-in's naming rule must not break grouping
+        return None
+    return source if source is not None and source in found and source != path else None
+
+
+def export_note(path: Path, source: Path, conv: Converter) -> str:
+    """The one line for an export skipped in a folder (its reason in ``imulog convert``'s ``skipped`` list)."""
+    return (
+        f"an export of {source.name} beside it ({conv.description.split(':')[0].split(' (')[0]}): one recording, "
+        f"converted from {source.name}; convert {path.name} by name to compare the two decodes"
+    )
+
+
 def group_directory(
     directory: Path, skipped: list[tuple[Path, str]] | None = None, detected: dict[Path, Converter] | None = None
 ) -> list[tuple[str, list[Path]]]:
     """Recordings under ``directory`` (recursively): (output name, files) per recording, convertible files only.
 
     A file is convertible when some converter recognises it; mapping files, licences and READMEs are skipped.
-    ``skipped``, when given, receives (file, reason) for each data file no converter recognises; ``detected``
-    receives each convertible file's converter (:func:`detect` ran once per file: callers need not run it again).
+    A vendor's export of a device file beside it (``conv.export_of``: NilsPodLib's ``X_data.csv`` of ``X.bin``,
+    ActiLife's ``XRAW.csv`` of ``X.gt3x``) is the same recording decoded twice: the device file is converted and
+    the export skipped. ``skipped``, when given, receives (file, reason) for each data file no converter recognises
+    and each export skipped; ``detected`` receives each convertible file's converter (:func:`detect` ran once per
+    file: callers need not run it again).
     """
     directory = Path(directory)
     groups: dict[tuple[Path, str], list[Path]] = {}
+    found: dict[Path, Converter] = {}
     for path in sorted(p for p in directory.rglob("*") if p.is_file()):
         if is_mapping_file(path) or path.suffix.lower() in _SKIP_SUFFIXES or path.name.startswith("."):
             continue
         try:
-            conv = detect(path)
+            found[path] = detect(path)
         except ConversionError as e:
             if path.name.upper().startswith(_DOC_NAMES):
                 continue
             if skipped is not None:
                 skipped.append((path, getattr(e, "problem", None) or str(e)))
+    for path, conv in found.items():
+        source = _export_source(path, conv, found)
+        if source is not None:
+            if skipped is not None:
+                skipped.append((path, export_note(path, source, conv)))
             continue
         if detected is not None:
             detected[path] = conv

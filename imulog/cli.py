@@ -54,6 +54,10 @@ PROCESS_COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+#: click's words for a command given several trials or a folder where it takes one trial file
+_MANY_TRIALS = ("unexpected extra argument", "is a directory")
+
+
 class LazyGroup(click.Group):
     """A click group whose subcommands are imported only when used (or listed in --help)."""
 
@@ -69,6 +73,28 @@ class LazyGroup(click.Group):
             module_name, attribute = self.lazy_commands[cmd_name][0].split(":")
             return getattr(importlib.import_module(module_name), attribute)
         return super().get_command(ctx, cmd_name)
+
+    def invoke(self, ctx: click.Context):
+        """Run the subcommand; a closed output pipe that a command reported as its own error goes back to click as
+        the ``BrokenPipeError`` it was, which click's main turns into a quiet exit (one mechanism for every
+        command's output: ``imulog.console.broken_pipe``)."""
+        try:
+            return super().invoke(ctx)
+        except click.UsageError as exc:  # `process STEP a.mcap b.mcap` or a folder: say which command takes many
+            step = exc.ctx.info_name if exc.ctx is not None and exc.ctx.parent is ctx else None
+            if self.name == "process" and step and any(k in exc.message for k in _MANY_TRIALS):
+                exc.message = exc.message.rstrip(".") + (
+                    f"; process {step} runs on one trial: for several trials or a folder, "
+                    f"imulog batch PATHS... --steps {step} (docs/batch.md)"
+                )
+            raise
+        except click.ClickException as exc:
+            from imulog.console import broken_pipe
+
+            pipe = broken_pipe(exc)
+            if pipe is not None:
+                raise pipe from None
+            raise
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         rows = [(name, self.lazy_commands[name][1]) for name in sorted(self.lazy_commands)]

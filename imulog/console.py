@@ -4,6 +4,8 @@
   passes ``color=False`` to click, so ``click.secho`` prints plain text).
 * Progress: a live bar (tqdm) on a terminal; on a log file or pipe, plain lines at every 10 % and at
   the end, never ``\\r`` redraws.
+* A closed pipe (``imulog evaluate trial.mcap | head -1``): :func:`broken_pipe` finds it behind the one-line error
+  a command made of an ``OSError``, and ``imulog.cli.LazyGroup`` hands it back to click, which exits quietly.
 """
 
 from __future__ import annotations
@@ -14,6 +16,20 @@ from collections.abc import Iterator, Sequence
 from typing import Any, TextIO, TypeVar
 
 T = TypeVar("T")
+
+
+def broken_pipe(exc: BaseException) -> BrokenPipeError | None:
+    """The ``BrokenPipeError`` behind ``exc`` (itself, or the error a command turned into a
+    ``click.ClickException``: its ``__cause__`` or ``__context__``), else None. A command's ``except OSError``
+    around its output catches the pipe its reader closed; this tells that apart from a real file error."""
+    seen: set[int] = set()
+    current: BaseException | None = exc
+    while current is not None and id(current) not in seen:
+        if isinstance(current, BrokenPipeError):
+            return current
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return None
 
 
 def no_color() -> bool:
@@ -41,11 +57,15 @@ class LineProgress:
         print(f"{self.desc}: {self.n}/{self.total} {self.unit} ({pct:.0f} %){extra}", file=self.file, flush=True)
 
     def update(self, n: int = 1) -> None:
+        """Count ``n`` more; one line when a 10 % mark was passed (one, however many marks this update passed: 4 of 8
+        files passes 40 % and 50 %)."""
         self.n += n
+        passed = False
         while self.total and self.n / self.total >= self._next - 1e-12 and self._next <= 1.0 + 1e-12:
-            if self.n < self.total:
-                self._line()
+            passed = True
             self._next += self.step
+        if passed and self.n < self.total:
+            self._line()
 
     def set_postfix(self, refresh: bool = True, **values: Any) -> None:
         self._postfix = " ".join(f"{k}={v}" for k, v in values.items())

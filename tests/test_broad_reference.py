@@ -117,7 +117,8 @@ def test_evaluate_reports_the_broad_errors_with_the_benchmarks_metric(processed,
         assert code == 0, text
         assert "inclination RMSE" in text and "movement phases" in text
         with TrialReader(path) as trial:
-            record = trial.metadata["imulog.evaluation"]
+            record = trial.metadata["imulog.orientation_evaluation"]
+            assert "imulog.evaluation" not in trial.metadata  # the trajectories' record stays theirs
         assert record["kind"] == "orientation" and record["reference"] == "/poses/optical"
         assert record["imu_to_reference"].startswith("none")  # BROAD declares its frames aligned
         expected = bench.evaluate(
@@ -140,7 +141,7 @@ def test_batch_runs_the_same_steps_on_a_broad_trial(shared_data, tmp_path):
     assert code == 0 and "0 failed" in text, text
     with TrialReader(path) as trial:
         assert trial.metadata["imulog.alignment"]["reference"] == "/poses/optical"
-        assert trial.metadata["imulog.evaluation"]["kind"] == "orientation"
+        assert trial.metadata["imulog.orientation_evaluation"]["kind"] == "orientation"
 
 
 def test_the_catalog_has_the_orientation_errors(processed, tmp_path):
@@ -154,6 +155,65 @@ def test_the_catalog_has_the_orientation_errors(processed, tmp_path):
     assert code == 0, text
     row = pd.read_parquet(out).iloc[0]
     with TrialReader(paths[0]) as trial:
-        record = trial.metadata["imulog.evaluation"]
+        record = trial.metadata["imulog.orientation_evaluation"]
     assert row["eval_inclination_rmse_deg"] == pytest.approx(record["inclination_rmse_deg"])
     assert row["eval_heading_free_rmse_deg"] == pytest.approx(record["heading_free_rmse_deg"])
+
+
+def test_a_trial_with_trajectories_keeps_both_evaluations(processed, tmp_path):
+    """BROAD's translation trial once it has trajectories too (process phases, trajectory): evaluate chooses the
+    trajectories by default, --what orientation the orientation against the poses; each has its own record and
+    step, so neither replaces the other (both wrote imulog.evaluation before, and the orientation had no option)."""
+    import json
+    import shutil
+
+    import pandas as pd
+
+    path = tmp_path / "14.mcap"
+    shutil.copy(processed[TRIALS[2]], path)
+    for step in ("phases", "trajectory"):
+        code, text = run("process", step, path)
+        assert code == 0, text
+    code, text = run("evaluate", path)  # auto: the trajectories
+    assert code == 0 and "errors against" in text, text
+    with TrialReader(path) as trial:
+        trajectories = trial.metadata["imulog.evaluation"]
+    assert "methods" in trajectories and trajectories.get("kind") != "orientation"
+    code, text = run("evaluate", path, "--what", "orientation", "--json")
+    assert code == 0, text
+    orientation = json.loads(text)
+    assert orientation["kind"] == "orientation" and orientation["inclination_rmse_deg"] < 1.0
+    with TrialReader(path) as trial:
+        assert trial.metadata["imulog.evaluation"] == trajectories  # untouched by the orientation's run
+        assert trial.metadata["imulog.orientation_evaluation"] == orientation
+        steps = [r["step"] for r in trial.runs().values()]
+    assert "evaluate" in steps and "evaluate_orientation" in steps
+    code, text = run("evaluate", path, "--what", "trajectory", "--json")  # up to date: read back, not recomputed
+    assert code == 0 and json.loads(text) == trajectories, text
+    with TrialReader(path) as trial:
+        assert trial.metadata["imulog.orientation_evaluation"] == orientation
+    code, text = run("evaluate", path, "--what", "orientation", "--strides")
+    assert code == 1 and "--strides" in text and "--what orientation" in text, text
+    rrd = tmp_path / "14.rrd"  # the viewer's evaluation panel shows both reports
+    assert run("view", path, "--save", rrd)[0] == 0
+    from rerun.chunk import RrdReader
+
+    from imulog.view import layout as L
+
+    chunk = next(c for c in RrdReader(rrd).stream().to_chunks() if c.entity_path == L.evaluation_entity())
+    panel = chunk.to_record_batch().column("TextDocument:text").to_pylist()[0][0]
+    assert "| zupt |" in panel and "inclination_rmse_deg" in panel, panel
+    out = tmp_path / "catalog.parquet"
+    assert run("catalog", path, "-o", out)[0] == 0
+    row = pd.read_parquet(out).iloc[0]
+    assert row["eval_inclination_rmse_deg"] == pytest.approx(orientation["inclination_rmse_deg"])
+    assert row["best_mae_cm"] > 0 and len(row["eval_methods"]) > 1
+    assert json.loads(row["orientation_evaluation_json"])["reference"] == "/poses/optical"
+
+
+def test_an_unknown_choice_is_refused_by_the_python_api(processed):
+    """The Python counterpart of --what names the choices (click refuses others itself)."""
+    from imulog.steps.evaluate import run_evaluate
+
+    with pytest.raises(ValueError, match="what='sideways'"):
+        run_evaluate(processed[TRIALS[0]], what="sideways")

@@ -126,7 +126,11 @@ DEFAULTS: dict[tuple[str, ...], tuple[str, dict[str, Any]]] = {
     ("process", "heading"): ("heading", {}),
     ("evaluate",): (
         "evaluate",
-        {"methods": lambda kw, p: kw["methods"], "max_gap": lambda kw, p: kw["max_gap_s"]},
+        {
+            "methods": lambda kw, p: kw["methods"],
+            "max_gap": lambda kw, p: kw["max_gap_s"],
+            "what": lambda kw, p: kw["what"],
+        },
     ),
 }
 

@@ -160,6 +160,19 @@ def test_progress_in_a_log_is_plain_lines():
     assert lines[-1] == "batch: 20/20 file (100 %) failed=0" and 9 <= len(lines) <= 11
 
 
+def test_progress_of_a_few_items_prints_each_count_once():
+    """8 files (the study walk's archive): 4 of 8 passes both 40 % and 50 %; `batch: 4/8 file (50 %)` was printed
+    twice, in imulog batch and imulog catalog alike."""
+    log = io.StringIO()
+    bar = progress_bar(8, "batch", unit="file", file=log)
+    for _ in range(8):
+        bar.update(1)
+    bar.close()
+    lines = log.getvalue().splitlines()
+    assert len(lines) == len(set(lines)) == 8, lines
+    assert lines[3] == "batch: 4/8 file (50 %)" and lines[-1] == "batch: 8/8 file (100 %)"
+
+
 class _Terminal(io.StringIO):
     def isatty(self) -> bool:
         return True

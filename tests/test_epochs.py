@@ -190,10 +190,14 @@ def test_a_geneactiv_at_85_7_hz_is_told_which_epochs_fit(tmp_path):
     r = CliRunner().invoke(main, ["process", "epochs", str(trial)])
     assert r.exit_code != 0 and len(r.output.strip().splitlines()) == 1
     assert r.output.strip().endswith(
-        "at 85.7 Hz (at this rate use epochs of 10 s multiples: --epoch-s 10 --epoch-s 60)"
+        "at 85.7 Hz (at this rate use epochs of 10 s multiples: --epoch-s 10 --epoch-s 60; in imulog batch "
+        "--set epochs.epochs_s=10,60)"
     )
     r = CliRunner().invoke(main, ["process", "epochs", str(trial), "--epoch-s", "10", "--epoch-s", "60"])
     assert r.exit_code == 0, r.output
+    # the batch's form of the same, as the line gives it (a study's batch printed the command line's only)
+    r = CliRunner().invoke(main, ["batch", str(trial), "--steps", "epochs", "--set", "epochs.epochs_s=10,60"])
+    assert r.exit_code == 0 and "0 failed" in r.output, r.output
 
 
 def test_simulated_removals_are_still():

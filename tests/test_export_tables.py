@@ -87,8 +87,14 @@ def test_reference_clock_puts_imu_and_phases_on_the_vicon_clock(processed_r2g, t
 def test_reference_clock_without_alignment_is_refused(tmp_path):
     path = tmp_path / "t.mcap"
     _small_trial(path, None)
-    with TrialReader(path) as trial, pytest.raises(ClockError, match=r"imulog process align"):
-        channel_table(trial, "/imu/wrist", clock="reference")
+    with TrialReader(path) as trial, pytest.raises(ClockError, match=r"no /markers/\* or /poses/\* channel"):
+        channel_table(trial, "/imu/wrist", clock="reference")  # IMU only: no reference clock to align on
+    from imulog.model import MarkerStream
+
+    with TrialReader(path) as trial:
+        imu = trial.read("/imu/wrist")
+    markers = MarkerStream("vicon", imu.t_ns[::2].copy(), ["m1"], np.zeros((100, 1, 3)))
+    write_trial(path, Recording(imus=[imu], markers=[markers]), overwrite=True)  # optical, not aligned yet
     out = tmp_path / "w.csv"
     result = CliRunner().invoke(cli, ["export", str(path), "-t", "/imu/wrist", "-o", str(out), "--clock", "reference"])
     assert result.exit_code == 1

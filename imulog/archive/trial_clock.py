@@ -98,6 +98,11 @@ class TrialClock:
             if src is None:
                 return t
             alignment = self.alignments.get(src)
+            if alignment is None and not any(t.startswith(("/markers/", "/poses/")) for t in self.channel_meta):
+                raise ClockError(  # nothing to align on: `process align` would only fail in turn
+                    f"{self.path}: --clock reference is an optical system's clock and the trial has none (no "
+                    f"/markers/* or /poses/* channel): {topic} has only its device clock; export --clock device"
+                )
             if alignment is None:
                 raise ClockError(
                     f"{self.path}: {topic} is on the device clock of IMU {src!r} and the trial has no "

@@ -66,7 +66,8 @@ def build_epoch_table(
 ) -> CatalogStats:
     """One study table of every trial's ``/derived/epochs/{epoch_s}s/{imu}`` rows (``imulog process epochs``).
 
-    Columns: ``path``, ``subject``, ``trial``, ``imu``, then the export's time columns (``time`` as UTC
+    Columns: ``path``, ``subject``, ``trial``, ``imu``, ``device`` (its model) and ``serial`` (from the trial's
+    ``imulog.device.IMU`` record: a study of several devices tells their epochs apart), then the export's time columns (``time`` as UTC
     instants, ``t[s]``, ``t_ns``; docs/export.md) and the epoch columns. Trials without the channel are skipped
     (counted in ``dropped``). Written trial by trial to a temporary file, then renamed (Parquet or CSV by suffix).
     """
@@ -106,11 +107,15 @@ def build_epoch_table(
                         table = table.set_column(0, "time", table.column("time").cast(pa.timestamp("ns", tz="UTC")))
                     else:
                         table = table.add_column(0, "time", pa.nulls(n, pa.timestamp("ns", tz="UTC")))
+                    imu = topic[len(prefix) :]
+                    device = _record(trial.metadata.get(f"imulog.device.{imu}"))
                     ident = {
                         "path": str(p.resolve()),
                         "subject": None if info.get("subject") is None else str(info["subject"]),
                         "trial": None if info.get("trial") is None else str(info["trial"]),
-                        "imu": topic[len(prefix) :],
+                        "imu": imu,
+                        "device": str(device.get("model") or "") or None,  # a study of several devices
+                        "serial": str(device.get("serial") or "") or None,
                     }
                     for k, (name, value) in enumerate(ident.items()):
                         table = table.add_column(k, name, pa.array([value] * n, pa.string()))

@@ -74,6 +74,7 @@ JSON_COLUMNS = (
     "alignment_json",
     "timing_json",
     "evaluation_json",
+    "orientation_evaluation_json",
     "metrics_json",
     "epochs_json",
     "anthropometrics_json",
@@ -240,12 +241,17 @@ def trial_row(path: str | os.PathLike[str]) -> dict[str, Any]:
             row["repetition_mean_s"] = sum(e - s for s, e in spans.values()) / len(spans)
         row["timing_json"] = _json(timing)
     row.update(_flag_columns(timing, _record(meta.get("imulog.trajectory"))))
+    from imulog.steps.evaluate_orientation import RECORD, orientation_record_of
+
     ev = _record(meta.get("imulog.evaluation"))
     others = {k.split(".", 2)[2]: _record(v) for k, v in meta.items() if k.startswith("imulog.evaluation.")}
-    if ev.get("kind") == "orientation":  # an orientation against a rigid body's poses (BROAD): its two RMSEs, deg
-        row["eval_inclination_rmse_deg"] = ev.get("inclination_rmse_deg")
-        row["eval_heading_free_rmse_deg"] = ev.get("heading_free_rmse_deg")
-    elif ev:
+    orient = _record(orientation_record_of(meta))
+    if orient:  # an orientation against a rigid body's poses (BROAD): its two RMSEs, deg
+        row["eval_inclination_rmse_deg"] = orient.get("inclination_rmse_deg")
+        row["eval_heading_free_rmse_deg"] = orient.get("heading_free_rmse_deg")
+        more = {k.split(".", 2)[2]: _record(v) for k, v in meta.items() if k.startswith(RECORD + ".")}
+        row["orientation_evaluation_json"] = _json({**orient, "per_imu": more} if more else orient)
+    if ev and ev.get("kind") != "orientation":  # the trajectories' (an older imulog kept orientations here too)
         row["eval_methods"] = sorted((ev.get("methods") or {}).keys())
         row["best_mae_cm"] = _best_mae(ev)
     if ev or others:  # a setup evaluated per IMU: the primary IMU's record, the others under per_imu

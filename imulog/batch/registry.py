@@ -123,13 +123,15 @@ STEPS: dict[str, StepSpec] = {
         "imulog.steps.epochs:run_epochs",
         kwargs=("imu",),
         params_class="imulog.steps.epochs:EpochParams",
-        help="ENMO, MAD, ActiGraph counts, non-wear per epoch; hourly/daily totals (EpochParams fields)",
+        help="ENMO, MAD, ActiGraph counts, non-wear per epoch; hourly/daily totals (EpochParams: epochs_s=5,60, "
+        "calibrate, valid_day_hours, ...)",
     ),
     "evaluate": StepSpec(
         "evaluate",
         "imulog.steps.evaluate:run_evaluate",
-        kwargs=("methods", "max_gap_s"),
-        help="trajectory errors against the optical reference (methods=..., max_gap_s=0.05)",
+        kwargs=("methods", "max_gap_s", "what"),
+        help="trajectory errors against the optical reference (methods=..., max_gap_s=0.05); what=orientation: the "
+        "orientation against a rigid body's poses (what=auto|orientation|trajectory, as imulog evaluate --what)",
     ),
     "kinematics": StepSpec(
         "kinematics",
@@ -354,27 +356,44 @@ def call_step(path: str | os.PathLike[str], step: str, options: dict[str, Any] |
     return out[0] if isinstance(out, tuple) else out  # run_evaluate returns (outcome, record)
 
 
+#: steps that read only the trial's raw IMU channels (and what the steps named here wrote): after another step
+#: failed on a file they still run (an accelerometer-only wrist in a study: orientation fails, its epochs do not
+#: need it); every other step stops at a file's first failure, since it may read what the failed step writes
+RAW_INPUT_STEPS: dict[str, tuple[str, ...]] = {"epochs": ("calibrate",)}
+
+
 def run_file(path: str, plan: list[tuple[str, dict[str, Any]]], force: bool = False) -> FileResult:
-    """Run ``plan`` (``[(step, options), ...]``) on one trial; never raises (errors go into the result).
+    """Run ``plan`` (``[(step, options), ...]``) on one trial; never raises (errors go into the result). After a
+    failure only the :data:`RAW_INPUT_STEPS` that do not read the failed step's output still run; ``error`` names
+    the first failure (and any later one), ``failed_step`` the first.
 
     Top-level and picklable: the entry point of worker processes and Dask tasks.
     """
     t0 = time.perf_counter()
     result = FileResult(path=str(path), status="up_to_date", worker=f"pid {os.getpid()}")
+    failed: list[str] = []
     for step, options in plan:
+        if failed and (step not in RAW_INPUT_STEPS or set(failed) & set(RAW_INPUT_STEPS[step])):
+            continue  # it may read what the failed step writes
         t = time.perf_counter()
         try:
             outcome = call_step(path, step, options, force=force)
         except Exception as exc:  # isolate the file: report, do not propagate
-            result.status = "failed"
-            result.failed_step = step
-            result.error = f"{step}: {type(exc).__name__}: {exc}"
-            result.traceback = traceback.format_exc(limit=8)
-            break
+            result.failed_step = result.failed_step or step
+            line = f"{step}: {type(exc).__name__}: {exc}"
+            result.error = f"{result.error}; {line}" if result.error else line
+            result.traceback = result.traceback or traceback.format_exc(limit=8)
+            failed.append(step)
+            continue
         result.steps.append(
             StepRecord(step, bool(outcome.skipped), outcome.run, time.perf_counter() - t, outcome.reason)
         )
-        if not outcome.skipped:
+        if not outcome.skipped and not failed:
             result.status = "processed"
+    if failed:
+        result.status = "failed"
+        ran = [s.step for s in result.steps if s.step in RAW_INPUT_STEPS]
+        if ran:
+            result.error += f" (still run: {', '.join(ran)}, which {'does' if len(ran) == 1 else 'do'} not need it)"
     result.seconds = time.perf_counter() - t0
     return result

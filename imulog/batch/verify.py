@@ -13,7 +13,14 @@ import os
 from collections.abc import Iterable
 from typing import Any
 
-RESULT_RECORDS = ("imulog.alignment", "imulog.timing", "imulog.trajectory", "imulog.evaluation", "imulog.metrics")
+RESULT_RECORDS = (
+    "imulog.alignment",
+    "imulog.timing",
+    "imulog.trajectory",
+    "imulog.evaluation",
+    "imulog.orientation_evaluation",
+    "imulog.metrics",
+)
 
 
 def check_archive(paths: Iterable[str | os.PathLike[str]]) -> dict[str, list[str]]:

@@ -101,9 +101,14 @@ def batch(
     options and inputs do no work (a ledger pre-check skips them without opening them; each step also skips
     itself), so an interrupted batch rerun finishes only what is left.
 
+    The default steps are a lab trial's (IMU and an optical reference: align and evaluate need markers or
+    poses); an archive of wearables alone takes the steps that need no reference, e.g. the home-monitoring
+    line below (epochs still run on a file whose orientation failed: an accelerometer-only wrist).
+
     \b
     Examples:
       imulog batch 'archive/**/*.mcap' --steps orientation,align,phases,trajectory,evaluate
+      imulog batch wearables/ --steps orientation,metrics,epochs --set epochs.epochs_s=10,60   # home monitoring
       imulog batch archive/ --repetitions 25 --workers 2
       imulog batch 'archive/**/*.mcap' --set trajectory.methods=zupt,optimized --set phases.threshold=otsu
       imulog batch 'archive/**/*.mcap' --dask-scheduler tcp://10.0.0.5:8786

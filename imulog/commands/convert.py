@@ -95,7 +95,12 @@ __all__ = [
     help="Column mapping file for delimited IMU text.",
 )
 @click.option(
-    "--rate", "rate_hz", type=float, metavar="HZ", help="Sampling rate for files without time stamps (raw ADC text)."
+    "--rate",
+    "rate_hz",
+    type=float,
+    metavar="HZ",
+    help="Sampling rate for files without time stamps (raw ADC text); for delimited text with a time column, the "
+    "device's nominal rate, declared beside the stamps (kept as they are; process epochs counts at it).",
 )
 @click.option("--adc-zero", type=float, default=512.0, show_default=True, help="ADC zero-g level, counts.")
 @click.option("--adc-counts-per-g", type=float, default=256.0, show_default=True, help="ADC sensitivity, counts per g.")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from typing import Any
 
 import click
@@ -345,7 +346,7 @@ def _channel_row(c: dict[str, Any]) -> tuple[str, ...]:
 
 
 @click.command()
-@click.argument("file", type=click.Path(exists=True, dir_okay=False))
+@click.argument("file", type=click.Path(exists=True))
 @click.option("-v", "--verbose", is_flag=True, help="also every run's parameters, the viewer twins, full metadata")
 @click.option("--json", "as_json", is_flag=True, help="print one JSON document (for scripts)")
 def info(file: str, verbose: bool, as_json: bool) -> None:
@@ -367,7 +368,13 @@ def info(file: str, verbose: bool, as_json: bool) -> None:
       imulog info trial.mcap
       imulog info trial.mcap -v          # every run's parameters, the viewer twins
       imulog info trial.mcap --json | python -c "import json,sys; print(json.load(sys.stdin)['channels'][0])"
+      imulog catalog archive/ -o catalog.parquet   # a folder of trials: one row each (docs/batch.md)
     """
+    if os.path.isdir(file):  # a study's folder: the catalog is the command for it
+        raise click.UsageError(
+            f"{file} is a folder; info shows one trial (imulog info {os.path.join(file, 'TRIAL.mcap')}); for "
+            f"every trial of a folder, one row each: imulog catalog {file} -o catalog.parquet"
+        )
     with open_trial(file) as trial:
         try:
             data = trial_summary(trial)

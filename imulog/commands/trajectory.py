@@ -278,7 +278,16 @@ def _trajectory_imus(trial: Path, imus: tuple[str, ...], methods: list[str]) -> 
     "the trajectory step's windows (default otherwise).",
 )
 @click.option("--imu", "imus", multiple=True, help="With --strides: the foot IMUs (repeatable; default: every one).")
-@click.option("--json", "as_json", is_flag=True, help="Print the imulog.evaluation record as JSON.")
+@click.option(
+    "--what",
+    type=click.Choice(["auto", "orientation", "trajectory"]),
+    default="auto",
+    show_default=True,
+    help="orientation: the IMU's orientation against the rigid body's poses it is aligned on (BROAD), stored as "
+    "imulog.orientation_evaluation; trajectory: the trajectories (or strides) against the optical reference, stored "
+    "as imulog.evaluation; auto: the orientation when the trial has poses and no trajectories, else the trajectories.",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the evaluation record as JSON.")
 @click.option("--force", is_flag=True, help="Recompute even when up to date.")
 def evaluate(
     trial: Path,
@@ -286,6 +295,7 @@ def evaluate(
     max_gap: float,
     strides: bool | None,
     imus: tuple[str, ...],
+    what: str,
     as_json: bool,
     force: bool,
 ) -> None:
@@ -300,7 +310,9 @@ def evaluate(
     A trial with an optical rigid body's poses (/poses/NAME: BROAD, an OptiTrack rigid body) and no
     trajectories, aligned on the poses (imulog process align), has its IMU orientation
     (imulog process orientation) evaluated instead: inclination and heading-free RMSE in degrees, as in the
-    BROAD paper, over the /events/movement phases when the trial has them.
+    BROAD paper, over the /events/movement phases when the trial has them. --what orientation asks for it
+    when the trial has trajectories too (--what trajectory for those); the two evaluations are stored apart
+    (imulog.orientation_evaluation, imulog.evaluation) and never replace each other.
 
     A walking trial (task walk/gait in imulog.trial, or a gyroscope repeating at a stride's period) is
     evaluated per stride and per foot instead, like gaitmap: each foot IMU aligned with its cluster
@@ -314,6 +326,7 @@ def evaluate(
       imulog evaluate trial.mcap --method zupt,optimized --json > errors.json
       imulog evaluate walk.mcap --strides --imu left_foot
       imulog evaluate broad_trial.mcap                 # orientation vs /poses/optical (BROAD)
+      imulog evaluate broad_trial.mcap --what orientation   # the same, also once it has trajectories
     """
     from imulog.archive.errors import ArchiveError
     from imulog.steps.common import error_line
@@ -326,6 +339,7 @@ def evaluate(
             max_gap_s=max_gap,
             strides=strides,
             imus=list(imus) or None,
+            what=what,
             force=force,
         )
         if record.get("kind") == "strides":

@@ -143,6 +143,22 @@ def view(
     if "spawn" in sinks and not has_display():
         raise click.ClickException("--spawn needs a display ($DISPLAY is not set); use --web or --save")
 
+    # the outputs are checked before any trial is read (a week's overview takes a while): docs/cli.md
+    n_groups = 1 if overlay else len(files) + (sample_s is not None)
+    paths: list[Path] = []
+    if "save" in sinks:
+        paths = _save_paths(list(files), save, overlay, n_groups)
+        if len(paths) < n_groups:  # --sample besides files
+            paths.append((paths[0].parent if paths else Path(".")) / "sample.rrd")
+        refuse_existing(paths, overwrite=overwrite)
+        if save is None:
+            click.echo(
+                "no display found and no --save/--web given: saving "
+                + ", ".join(str(p) for p in paths)
+                + " (open with `rerun FILE.rrd`, or use --web)",
+                err=True,
+            )
+
     trials: list[TrialData] = []
     with click.progressbar(list(files), label="reading trials", file=sys.stderr, hidden=not files) as bar:
         for f in bar:
@@ -172,21 +188,6 @@ def view(
         from imulog.view.sample import SampleTrialParams, sample_recording
 
         trials.append(from_recording(sample_recording(SampleTrialParams(duration_s=sample_s)), "sample"))
-
-    n_groups = 1 if overlay else len(trials)
-    paths: list[Path] = []
-    if "save" in sinks:
-        paths = _save_paths(list(files), save, overlay, n_groups)
-        if len(paths) < n_groups:  # --sample besides files
-            paths.append((paths[0].parent if paths else Path(".")) / "sample.rrd")
-        refuse_existing(paths, overwrite=overwrite)
-        if save is None:
-            click.echo(
-                "no display found and no --save/--web given: saving "
-                + ", ".join(str(p) for p in paths)
-                + " (open with `rerun FILE.rrd`, or use --web)",
-                err=True,
-            )
 
     from imulog.archive.errors import ArchiveError
     from imulog.view.server import PortInUseError

@@ -54,7 +54,14 @@ def _samples(seconds: float, rate: float, what: str) -> int:
     n = seconds * rate
     if abs(n - round(n)) > 1e-6 or round(n) < 1:
         step = whole_seconds(rate)
-        hint = f" (at this rate use epochs of {step} s multiples: --epoch-s {step} --epoch-s 60)" if step else ""
+        nominal = round(rate)
+        hint = (
+            f" (at this rate use epochs of {step} s multiples: --epoch-s {step} --epoch-s 60; in imulog batch "
+            f"--set epochs.epochs_s={step},60)"
+            if step
+            else f" (no epoch of whole seconds fits it: when the device sampled at a nominal {nominal} Hz that its "
+            f"time stamps drift from, declare it when converting: imulog convert FILE --rate {nominal})"
+        )
         raise ValueError(f"epochs: {what} of {seconds:g} s is not a whole number of samples at {rate:g} Hz{hint}")
     return int(round(n))
 

@@ -291,6 +291,9 @@ def judged_span(trial, imu_topic: str, span_s: float) -> tuple[int, int]:
     return mid - int(span_s * 5e8), mid + int(span_s * 5e8)
 
 
+WHAT = ("auto", "orientation", "trajectory")  # what `imulog evaluate --what` chooses (docs/alignment.md)
+
+
 def run_evaluate(
     path,
     *,
@@ -298,11 +301,15 @@ def run_evaluate(
     max_gap_s: float = 0.05,
     strides: bool | None = None,
     imus: list[str] | None = None,
+    what: str = "auto",
     force: bool = False,
 ):
-    """Run the step on a trial file; returns ``(outcome, record)``. A trial without trajectories whose alignment is
-    on a rigid body's poses (or whose only optical reference is poses) has its orientation evaluated against them
-    (:mod:`imulog.steps.evaluate_orientation`, ``kind`` = ``orientation``). ``strides``: None evaluates a walking trial
+    """Run the step on a trial file; returns ``(outcome, record)``. ``what``: ``orientation`` evaluates the IMU's
+    orientation against the rigid body's poses its alignment was made on (:mod:`imulog.steps.evaluate_orientation`,
+    ``kind`` = ``orientation``, record ``imulog.orientation_evaluation``), ``trajectory`` the trajectories (or the
+    strides) against the optical reference (record ``imulog.evaluation``); ``auto`` chooses the orientation for a
+    trial without trajectories whose alignment is on poses (or whose only optical reference is poses), else the
+    trajectories. The two records are separate: neither evaluation replaces the other. ``strides``: None evaluates a walking trial
     (:func:`walking_of`) per stride and foot (:func:`imulog.steps.gait_evaluate.run_gait_evaluate`, on ``imus``)
     and any other over the trajectory step's windows; True or False forces either.
 
@@ -313,14 +320,19 @@ def run_evaluate(
     ``{"kind": "imus", "imus": {imu: record, or {"failed": why}}}``; a ValueError only when none could be."""
     from imulog.archive import TrialReader
 
-    if not strides:  # an orientation against a rigid body's poses (BROAD, OptiTrack), when no trajectory is there
+    if what not in WHAT:
+        raise ValueError(f"what={what!r}: choose one of {', '.join(WHAT)}")
+    if what == "orientation" and strides:
+        raise ValueError("--strides evaluates trajectories per stride: it does not go with --what orientation")
+    if what != "trajectory" and not strides:  # an orientation against a rigid body's poses (BROAD, OptiTrack)
         from imulog.steps.evaluate_orientation import pose_reference, run_evaluate_orientation
 
         with TrialReader(path) as trial:
             topics, metadata = trial.topics(), trial.metadata
         only_poses = any(t.startswith("/poses/") for t in topics) and not any(t.startswith("/markers/") for t in topics)
-        if not any(t.startswith("/derived/trajectory/") for t in topics) and (
-            pose_reference(metadata, imus[0] if imus else None) or only_poses
+        if what == "orientation" or (
+            not any(t.startswith("/derived/trajectory/") for t in topics)
+            and (pose_reference(metadata, imus[0] if imus else None) or only_poses)
         ):
             if imus and len(imus) > 1:
                 raise ValueError("the orientation is evaluated against poses one IMU at a time: give one --imu")

@@ -7,8 +7,11 @@ Reads ``/derived/orientation/{imu}`` (sensor-to-global, device clock), the pose 
 phases: the samples its authors evaluate). The estimate is put on the reference clock (the alignment's offset and
 drift) and resampled at the poses' time stamps. The optical body is turned into the IMU's frame by the
 alignment's ``rotation_imu_to_cluster``, unless the pose channel's device record declares the two frames aligned
-(``imu_frame_aligned``: BROAD's converter, as its files say), then by none. Writes ``imulog.evaluation`` with
-``kind`` = ``orientation``.
+(``imu_frame_aligned``: BROAD's converter, as its files say), then by none. Writes ``imulog.orientation_evaluation``
+(``kind`` = ``orientation``; ``imulog.orientation_evaluation.IMU`` for an IMU other than the trial's primary one),
+its own record and step (``evaluate_orientation``): the trajectory evaluation of the same trial
+(``imulog.evaluation``) and this one never replace each other. Trials of an older imulog hold it in
+``imulog.evaluation`` (:func:`orientation_record_of` reads either).
 """
 
 from __future__ import annotations
@@ -22,8 +25,19 @@ from imulog.process.alignment_clock import device_to_reference
 from imulog.process.orientation import orientation_errors
 from imulog.process.resample import resample_quaternions
 
-STEP = "evaluate"
+STEP = "evaluate_orientation"
+RECORD = "imulog.orientation_evaluation"
 MOVEMENT_TOPIC = "/events/movement"
+
+
+def orientation_record_of(metadata: dict[str, Any]) -> dict[str, Any]:
+    """The trial's (primary IMU's) orientation evaluation: ``imulog.orientation_evaluation``, else the
+    ``imulog.evaluation`` of an older imulog when it is one (``kind`` = ``orientation``), else ``{}``."""
+    record = metadata.get(RECORD)
+    if isinstance(record, dict) and record:
+        return record
+    legacy = metadata.get("imulog.evaluation")
+    return legacy if isinstance(legacy, dict) and legacy.get("kind") == "orientation" else {}
 
 
 def pose_reference(metadata: dict[str, Any], imu: str | None = None) -> str | None:
@@ -78,7 +92,7 @@ def run_evaluate_orientation(path, imu: str | None = None, force: bool = False):
     from imulog.archive import TrialReader
     from imulog.steps.align import require_alignment
     from imulog.steps.base import run_record_step
-    from imulog.steps.common import alignment_note, pick_imu
+    from imulog.steps.common import alignment_note, pick_imu, record_for
 
     with TrialReader(path) as trial:
         topics = trial.topics()
@@ -91,8 +105,15 @@ def run_evaluate_orientation(path, imu: str | None = None, force: bool = False):
     )
     pose_topic = pose_reference(metadata, name)
     if pose_topic is None or pose_topic not in topics:
+        poses = [t for t in topics if t.startswith("/poses/")]
         raise ValueError(
-            f"the alignment of /imu/{name} is not on a pose channel (reference {alignment.get('reference')})"
+            f"the orientation is evaluated against a rigid body's poses, and the alignment of /imu/{name} is on "
+            f"{alignment.get('reference')} "
+            + (
+                f"(align on the poses: imulog process align {path} --poses {poses[0].rsplit('/', 1)[-1]})"
+                if poses
+                else "(the trial has no /poses/* channel)"
+            )
         )
     o_topic = f"/derived/orientation/{name}"
     device = metadata.get(f"imulog.device.{pose_topic.rsplit('/', 1)[-1]}") or {}
@@ -135,11 +156,12 @@ def run_evaluate_orientation(path, imu: str | None = None, force: bool = False):
         }
         return record
 
+    record_name = record_for(RECORD, name, topics, metadata)
     return run_record_step(
         path,
-        record_name="imulog.evaluation",
+        record_name=record_name,
         compute_record=compute,
-        step=STEP,
+        step=STEP if record_name == RECORD else f"{STEP}:{name}",
         algorithm="imulog.evaluation.orientation",
         params={"imu": name, "reference": pose_topic, "imu_frame_aligned": declared},
         inputs=inputs,

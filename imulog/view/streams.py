@@ -372,8 +372,9 @@ def log_streams(
     for stream in ordered:  # intervals, then the cluster pose (the trajectories' reference), then the rest
         logger.log(stream)
     _log_legend(recording, trial, prefix)
-    if "imulog.evaluation" in metadata:
-        report = evaluation_markdown(metadata["imulog.evaluation"])
+    evaluations = [metadata[n] for n in ("imulog.evaluation", "imulog.orientation_evaluation") if n in metadata]
+    if evaluations:  # the trajectories' and the orientation's (against poses): one report, both when both ran
+        report = "\n\n".join(evaluation_markdown(record) for record in evaluations)
         recording.log(
             L.evaluation_entity(prefix), rr.TextDocument(report, media_type=rr.MediaType.MARKDOWN), static=True
         )
