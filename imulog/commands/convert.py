@@ -282,9 +282,10 @@ def _inspect(
     )
     groups: list[list[Path]] = []
     detected: dict[Path, Any] = {}  # each file of a folder detected once, while grouping
+    skipped: list[tuple[Path, str]] = []  # a folder's exports of a device file beside them, unknown data files
     for p in inputs:
         if p.is_dir():
-            groups.extend(files for _, files in sessions(group_directory(p, None, detected), detected))
+            groups.extend(files for _, files in sessions(group_directory(p, skipped, detected), detected))
         else:
             groups.append([p])
     if all(not p.is_dir() for p in inputs):
@@ -300,13 +301,16 @@ def _inspect(
         except ConversionError as e:
             failures.append(str(e))
     if as_json:
-        click.echo(json.dumps({"inspect": reports, "errors": failures}, indent=2, default=str))
+        doc = {"inspect": reports, "errors": failures, "skipped": [{"path": str(p), "reason": r} for p, r in skipped]}
+        click.echo(json.dumps(doc, indent=2, default=str))
     else:
         for k, report in enumerate(reports):
             if k:
                 click.echo("")
             for line in render(report):
                 click.echo(line)
+        for path, reason in skipped:
+            click.echo(f"{path.name}: skipped: {reason}")
     if failures:
         if not as_json:
             for msg in failures[:-1]:
