@@ -39,7 +39,6 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.special import erf
 
-from imulog.simulate import minjerk
 from imulog.simulate.core import motion_plan
 from imulog.simulate.motion import MotionPlan, SubmovementLaw
 
@@ -147,9 +146,7 @@ def predict(theta: np.ndarray, ph: Phase, t: np.ndarray, noise: Noise, gyro: boo
     k = len(ph.onsets_s)
     D, on, du = theta[:3], theta[3 : 3 + k], theta[3 + k : 3 + 2 * k]
     w = np.r_[1.0 - np.sum(theta[3 + 2 * k : 2 + 3 * k]), theta[3 + 2 * k : 2 + 3 * k]]
-    sdd = np.zeros_like(t)
-    for t_i, T_i, w_i in zip(on, du, w, strict=True):
-        sdd += w_i * minjerk.profile((t - t_i) / T_i)[2] / T_i**2
+    sdd = SubmovementLaw(on, du, w)(t)[2]
     out = [(sdd[:, None] * D).ravel() / noise.acc_mps2]
     if gyro:
         j = 2 + 3 * k
@@ -161,7 +158,7 @@ def predict(theta: np.ndarray, ph: Phase, t: np.ndarray, noise: Noise, gyro: boo
         if not ph.rot_end_tied:
             t_end = theta[j]
         span = max(t_end - t_on, 1e-6)
-        ds = minjerk.profile((t - t_on) / span)[1] / span
+        ds = SubmovementLaw(np.array([t_on]), np.array([span]), np.ones(1))(t)[1]
         out.append((ds[:, None] * r).ravel() / noise.gyr_rads)
     return np.concatenate(out)
 
