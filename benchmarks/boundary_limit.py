@@ -287,14 +287,74 @@ def oracle_errors(ph: Phase, noise: Noise, gyro: bool, rng: np.random.Generator)
     return on - on0, off - off0, (off - on) - (off0 - on0)
 
 
+def _guess(a: float, b: float, k: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Onsets and durations (s) of ``k`` submovements spread over ``[a, b]``: the first starts at ``a``, the one that
+    ends last ends at ``b``, the others start in the first 60 % and last at least 0.2 s."""
+    span = max(b - a, 0.3)
+    on = np.r_[a, a + span * np.sort(rng.uniform(0.1, 0.6, k - 1))]
+    end = np.r_[a + span * rng.uniform(0.5, 0.9), a + span * rng.uniform(0.6, 1.0, k - 1)]
+    end[int(np.argmax(end))] = a + span
+    return on, np.maximum(end - on, 0.2)
+
+
+def fit_from(
+    ph: Phase, noise: Noise, gyro: bool, a: float, b: float, rng: np.random.Generator, ks=(1, 2, 3, 4), starts: int = 3
+) -> tuple[float, float, float, int]:
+    """The oracle's fit without its two gifts: started from boundaries ``a``, ``b`` (s from the true start, e.g. a
+    method's) instead of the truth, and the number of submovements chosen by BIC over ``ks`` (``starts`` random
+    spreads each, the amplitudes by linear least squares). Onset, offset and duration errors (s) and the chosen k.
+    The observation is the oracle's (the true model in white noise over the true phase and 1 s either side)."""
+    theta0 = pack(ph, gyro)
+    t = sample_times(ph, noise.rate_hz, float(rng.uniform()))
+    y = predict(theta0, ph, t, noise, gyro) + rng.normal(size=len(t) * (6 if gyro else 3))
+    acc_obs = y[: 3 * len(t)].reshape(-1, 3) * noise.acc_mps2
+    best: tuple[float, np.ndarray, Phase] | None = None
+    for k in ks:
+        for _ in range(starts):
+            on, du = _guess(a, b, k, rng)
+            G = np.column_stack([SubmovementLaw(on[i : i + 1], du[i : i + 1], np.ones(1))(t)[2] for i in range(k)])
+            c = np.linalg.lstsq(G, acc_obs, rcond=None)[0]  # (k, 3)
+            D = c.sum(axis=0)
+            w = c @ D / max(float(D @ D), 1e-12)
+            guess = replace(ph, onsets_s=on, durations_s=du, weights=w / w.sum(), dp_m=D * w.sum())
+            if gyro:
+                rot_end = b if ph.rot_end_tied else a + 0.85 * (b - a)
+                ds = SubmovementLaw(np.array([a]), np.array([max(rot_end - a, 0.2)]), np.ones(1))(t)[1]
+                gyr_obs = y[3 * len(t) :].reshape(-1, 3) * noise.gyr_rads
+                r = ds @ gyr_obs / max(float(ds @ ds), 1e-12)
+                guess = replace(guess, rotvec_rad=r, rot_onset_s=a, rot_end_s=rot_end)
+            th = pack(guess, gyro)
+            fit = least_squares(
+                lambda x, g=guess: predict(x, g, t, noise, gyro) - y,
+                th,
+                jac=lambda x, g=guess: jacobian(x, g, t, noise, gyro),
+                method="lm",
+                xtol=1e-6,
+                ftol=1e-6,
+                max_nfev=300,
+            )
+            if np.any(fit.x[3 + k : 3 + 2 * k] < MIN_DURATION_S):
+                continue
+            bic = float(2 * fit.cost + len(th) * np.log(len(y)))
+            if best is None or bic < best[0]:
+                best = (bic, fit.x, guess)
+    if best is None:
+        return np.inf, np.inf, np.inf, 0
+    k = len(best[2].onsets_s)
+    on, off = boundaries(best[1], k)
+    on0, off0 = boundaries(theta0, len(ph.onsets_s))
+    return on - on0, off - off0, (off - on) - (off0 - on0), k
+
+
 def within_expected(sd_s: np.ndarray, tol_s: float = 0.1) -> np.ndarray:
     """P(|error| < tol) for a zero-mean Gaussian error of sd ``sd_s``."""
     return erf(tol_s / (np.sqrt(2.0) * np.maximum(sd_s, 1e-12)))
 
 
-def hand_within(name: str, seed: int, subject: int, repetitions: int, options: dict, acc: float, gyr: float) -> float:
-    """``hand (default)``'s share of durations within 0.1 s on the trial, its IMU noise set to ``acc`` m/s^2 and
-    ``gyr`` deg/s per sample (the rest of the simulated IMU as the grid has it)."""
+def hand_score(seed: int, subject: int, repetitions: int, options: dict, acc: float, gyr: float) -> dict:
+    """``hand (default)`` on the trial scored as ``benchmarks/segmentation_accuracy.py`` does (its ``score``: the
+    share of durations within 0.1 s, the phases outside it with their onset / offset errors), the IMU noise set to
+    ``acc`` m/s^2 and ``gyr`` deg/s per sample (the rest of the simulated IMU as the grid has it)."""
     from segmentation_accuracy import score
 
     from imulog.process.segmentation.pipeline import PhaseParams
@@ -305,7 +365,14 @@ def hand_within(name: str, seed: int, subject: int, repetitions: int, options: d
         "r2g", seed=seed, subject=subject, repetitions=repetitions, acc_noise_mps2=acc, gyr_noise_dps=gyr, **options
     )
     params = replace(PhaseParams(), repetitions=RepetitionParams(n_repetitions=repetitions))
-    return float(score(sim, params)["duration_within_0_1_s"])
+    return score(sim, params)
+
+
+def end_speed_mps(ph: Phase, before_s: float) -> float:
+    """The hand's true speed (m/s) ``before_s`` seconds before the phase's end."""
+    law = SubmovementLaw(ph.onsets_s, ph.durations_s, ph.weights)
+    t = np.array([float(np.max(ph.onsets_s + ph.durations_s)) - before_s])
+    return float(np.linalg.norm(ph.dp_m) * abs(law(t)[1][0]))
 
 
 def conditions_options(names: list[str]) -> dict[str, dict]:
@@ -318,6 +385,67 @@ def conditions_options(names: list[str]) -> dict[str, dict]:
     return {n: dict(wider[n]) if n in wider else condition(n) for n in names}
 
 
+def print_outside(cond: str, nname: str, trials: list, scores: list[dict], noise: Noise) -> None:
+    """Each ``hand (default)`` phase outside 0.1 s: its onset / offset errors, the oracle's Cramer-Rao sd of that
+    phase's duration (accelerometer; with the gyroscope) and the hand's true speed 0.1 and 0.3 s before its end;
+    then how many of them the oracle would place within 0.1 s at least 95 % of the time (sd under 0.051 s)."""
+    print(f"\n{cond} / {nname}: hand (default)'s phases outside 0.1 s against the oracle's bound on the same phase")
+    sds = []
+    for (seed, subject, phases), sc in zip(trials, scores, strict=True):
+        by_key = {(rep, label): ph for rep, label, ph in phases}
+        for rep, label, on, off in sc["outside"]:
+            ph = by_key[(rep, label)]
+            sd_a, sd_g = cramer_rao(ph, noise, False)[2], cramer_rao(ph, noise, True)[2]
+            sds.append(sd_g)
+            print(
+                f"  seed {seed} subject {subject} repetition {rep} {label}: hand onset {on:+.3f} s, offset {off:+.3f} s; "
+                f"oracle duration sd {sd_a:.3f} s (acc), {sd_g:.3f} s (acc+gyr); the hand's speed 0.1 / 0.3 s before "
+                f"its end {100 * end_speed_mps(ph, 0.1):.2f} / {100 * end_speed_mps(ph, 0.3):.2f} cm/s"
+            )
+    sds = np.array(sds)
+    print(
+        f"  {len(sds)} phases outside 0.1 s; the oracle (acc+gyr) places {int(np.sum(sds < 0.051))} of them within 0.1 s "
+        f"at least 95 % of the time (median sd {np.median(sds) if len(sds) else float('nan'):.3f} s)"
+    )
+
+
+def print_from_hand(cond: str, nname: str, trials: list, scores: list[dict], noise: Noise, hand: np.ndarray) -> None:
+    """:func:`fit_from` on every phase, started from ``hand (default)``'s boundaries (a phase it missed counts as
+    outside): the share within 0.1 s per trial against the hand's, and the phases it moves in or out."""
+    shares, fixed, broken, ks, n_true_k = [], 0, 0, [], 0
+    for (seed, subject, phases), sc in zip(trials, scores, strict=True):
+        rng = np.random.default_rng([seed, subject, 32])
+        ends = {(r, lab): (on, off) for r, lab, on, off in sc["ends"]}
+        ok = []
+        for rep, label, ph in phases:
+            if (rep, label) not in ends:
+                ok.append(False)
+                continue
+            on, off = ends[(rep, label)]
+            _, _, dur_err, k = fit_from(ph, noise, True, on, ph.duration_s + off, rng)
+            ok.append(abs(dur_err) < 0.1)
+            ks.append(k)
+            n_true_k += k == len(ph.onsets_s)
+            hand_ok = abs(off - on) < 0.1
+            fixed += ok[-1] and not hand_ok
+            broken += hand_ok and not ok[-1]
+        shares.append(float(np.mean(ok)))
+    shares = np.array(shares)
+    print(
+        f"\n{cond} / {nname}: the oracle's fit from hand (default)'s boundaries, k by BIC (acc+gyr, one draw): "
+        f"{100 * shares.mean():.1f} % within 0.1 s (worst trial {100 * shares.min():.1f}), {int(np.sum(shares < 0.95))} "
+        f"of {len(shares)} trials under 95 %; hand (default) {100 * hand.mean():.1f} % ({100 * hand.min():.1f}), "
+        f"{int(np.sum(hand < 0.95))} under; phases brought within 0.1 s {fixed}, taken out {broken}; k chosen right on "
+        f"{n_true_k} of {len(ks)} phases"
+    )
+    print(
+        "  per trial (seed/subject: fit, hand): "
+        + ", ".join(
+            f"{t[0]}/{t[1]}: {100 * s_:.1f}, {100 * h:.1f}" for t, s_, h in zip(trials, shares, hand, strict=True)
+        )
+    )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--conditions", nargs="+", default=["stroke-slow"])
@@ -328,6 +456,14 @@ def main() -> None:
     ap.add_argument("--draws", type=int, default=10, help="Monte-Carlo noise draws per phase")
     ap.add_argument("--noise", nargs="+", default=list(NOISES), help="NAME=ACC_MPS2,GYR_DPS per sample")
     ap.add_argument("--no-hand", action="store_true", help="skip hand (default) on the same trials")
+    ap.add_argument(
+        "--from-hand",
+        action="store_true",
+        help="also the oracle's fit started from hand (default)'s boundaries with k chosen by BIC (acc+gyr, one draw)",
+    )
+    ap.add_argument(
+        "--outside", action="store_true", help="each hand phase outside 0.1 s with the oracle's bound on that phase"
+    )
     args = ap.parse_args()
 
     noises = {}
@@ -347,7 +483,8 @@ def main() -> None:
     t_start = time.process_time()
     print(
         "| condition | noise (acc m/s^2, gyr deg/s per sample) | observer | CRB sd onset / offset / duration s (median) "
-        "| oracle rms onset / offset / duration s | within 0.1 s %: CRB / oracle (worst trial) | trials under 95 %: "
+        "| oracle rms onset / offset / duration s | within 0.1 s %: CRB (worst trial, its seed/subject) / oracle (worst "
+        "trial) | trials under 95 %: "
         "CRB / oracle |"
     )
     print("|" + "---|" * 7)
@@ -371,27 +508,38 @@ def main() -> None:
                     c = np.array([cramer_rao(ph, noise, gyro) for _, _, ph in phases])
                     e = np.array(
                         [[oracle_errors(ph, noise, gyro, rng) for _ in range(args.draws)] for _, _, ph in phases]
-                    )
+                    ).reshape(len(phases), args.draws, 3)
                     crb.append(c)
                     err.append(e)
                     crb_trial.append(float(np.mean(within_expected(c[:, 2]))))
                     orc_trial.append(np.mean(np.abs(e[:, :, 2]) < 0.1, axis=0))  # per draw
                 c, e = np.concatenate(crb), np.concatenate(err)
                 orc = np.array(orc_trial)  # (trials, draws)
-                rms = np.sqrt(np.mean(e**2, axis=(0, 1)))
+                rms = np.sqrt(np.mean(e**2, axis=(0, 1))) if args.draws else np.full(3, np.nan)
+                orc_cells = ("-", f"- of {len(trials)}")
+                if args.draws:
+                    orc_cells = (
+                        f"{100 * orc.mean():.1f} ({100 * orc.mean(axis=1).min():.1f})",
+                        f"{int(np.sum(orc.mean(axis=1) < 0.95))} of {len(trials)} (draws under 95 %: "
+                        f"{100 * np.mean(orc < 0.95):.0f} %)",
+                    )
                 print(
                     f"| {cond} | {nname} ({acc:g}, {gyr_dps:g}) | {'acc+gyr' if gyro else 'acc'} | "
                     f"{np.median(c[:, 0]):.3f} / {np.median(c[:, 1]):.3f} / {np.median(c[:, 2]):.3f} | "
                     f"{rms[0]:.3f} / {rms[1]:.3f} / {rms[2]:.3f} | "
-                    f"{100 * np.mean(crb_trial):.1f} ({100 * np.min(crb_trial):.1f}) / "
-                    f"{100 * orc.mean():.1f} ({100 * orc.mean(axis=1).min():.1f}) | "
-                    f"{int(np.sum(np.array(crb_trial) < 0.95))} / {int(np.sum(orc.mean(axis=1) < 0.95))} of {len(trials)} "
-                    f"(draws under 95 %: {100 * np.mean(orc < 0.95):.0f} %) |",
+                    f"{100 * np.mean(crb_trial):.1f} ({100 * np.min(crb_trial):.1f}, "
+                    f"{'/'.join(map(str, pairs[int(np.argmin(crb_trial))]))}) / {orc_cells[0]} | "
+                    f"{int(np.sum(np.array(crb_trial) < 0.95))} / {orc_cells[1]} |",
                     flush=True,
                 )
             if not args.no_hand:
-                w = [hand_within(cond, s, b, args.repetitions, options, acc, gyr_dps) for s, b in pairs]
-                hand_rows.append((cond, nname, acc, gyr_dps, np.array(w)))
+                scores = [hand_score(sd, sb, args.repetitions, options, acc, gyr_dps) for sd, sb in pairs]
+                w = np.array([r["duration_within_0_1_s"] for r in scores])
+                hand_rows.append((cond, nname, acc, gyr_dps, w))
+                if args.outside:
+                    print_outside(cond, nname, trials, scores, noise)
+                if args.from_hand:
+                    print_from_hand(cond, nname, trials, scores, noise, w)
     if hand_rows:
         print(
             "\n| condition | noise (acc m/s^2, gyr deg/s per sample) | hand (default): within 0.1 s % (worst trial) | trials under 95 % |"

@@ -102,3 +102,15 @@ def test_the_oracles_phases_are_the_simulators_truth():
         assert (
             len(ph.onsets_s) >= 2 and ph.rot_onset_tied
         )  # stroke-slow: 2-4 submovements, the wrist starts with the hand
+
+
+def test_the_fit_from_a_methods_boundaries_finds_a_single_reach():
+    """The experiment without the oracle's gifts (a start from given boundaries, k by BIC): on one 4-s reach started
+    0.15 s early and 0.3 s early at its end, it picks one submovement and lands within 0.05 s."""
+    from boundary_limit import fit_from
+
+    ph = _phase([0.0], [4.0], [1.0])
+    noise = Noise(0.02, np.radians(0.1), 114.9)
+    on, off, dur, k = fit_from(ph, noise, True, -0.15, 3.7, np.random.default_rng(2))
+    assert k == 1
+    assert abs(on) < 0.05 and abs(off) < 0.05 and abs(dur) < 0.05
