@@ -409,9 +409,19 @@ def print_outside(cond: str, nname: str, trials: list, scores: list[dict], noise
     )
 
 
-def print_from_hand(cond: str, nname: str, trials: list, scores: list[dict], noise: Noise, hand: np.ndarray) -> None:
+def print_from_hand(
+    cond: str,
+    nname: str,
+    trials: list,
+    scores: list[dict],
+    noise: Noise,
+    hand: np.ndarray,
+    starts: int = 3,
+    k_known: bool = False,
+) -> None:
     """:func:`fit_from` on every phase, started from ``hand (default)``'s boundaries (a phase it missed counts as
-    outside): the share within 0.1 s per trial against the hand's, and the phases it moves in or out."""
+    outside) with ``starts`` random spreads per k (``k_known``: only the true k): the share within 0.1 s per trial
+    against the hand's, and the phases it moves in or out."""
     shares, fixed, broken, ks, n_true_k = [], 0, 0, [], 0
     for (seed, subject, phases), sc in zip(trials, scores, strict=True):
         rng = np.random.default_rng([seed, subject, 32])
@@ -422,7 +432,8 @@ def print_from_hand(cond: str, nname: str, trials: list, scores: list[dict], noi
                 ok.append(False)
                 continue
             on, off = ends[(rep, label)]
-            _, _, dur_err, k = fit_from(ph, noise, True, on, ph.duration_s + off, rng)
+            ks_try = (len(ph.onsets_s),) if k_known else (1, 2, 3, 4)
+            _, _, dur_err, k = fit_from(ph, noise, True, on, ph.duration_s + off, rng, ks_try, starts)
             ok.append(abs(dur_err) < 0.1)
             ks.append(k)
             n_true_k += k == len(ph.onsets_s)
@@ -432,7 +443,8 @@ def print_from_hand(cond: str, nname: str, trials: list, scores: list[dict], noi
         shares.append(float(np.mean(ok)))
     shares = np.array(shares)
     print(
-        f"\n{cond} / {nname}: the oracle's fit from hand (default)'s boundaries, k by BIC (acc+gyr, one draw): "
+        f"\n{cond} / {nname}: the oracle's fit from hand (default)'s boundaries, "
+        f"{'k known' if k_known else 'k by BIC'}, {starts} starts per k (acc+gyr, one draw): "
         f"{100 * shares.mean():.1f} % within 0.1 s (worst trial {100 * shares.min():.1f}), {int(np.sum(shares < 0.95))} "
         f"of {len(shares)} trials under 95 %; hand (default) {100 * hand.mean():.1f} % ({100 * hand.min():.1f}), "
         f"{int(np.sum(hand < 0.95))} under; phases brought within 0.1 s {fixed}, taken out {broken}; k chosen right on "
@@ -461,6 +473,8 @@ def main() -> None:
         action="store_true",
         help="also the oracle's fit started from hand (default)'s boundaries with k chosen by BIC (acc+gyr, one draw)",
     )
+    ap.add_argument("--fit-starts", type=int, default=3, help="--from-hand: random starts per number of submovements")
+    ap.add_argument("--fit-k-known", action="store_true", help="--from-hand: the true number of submovements only")
     ap.add_argument(
         "--outside", action="store_true", help="each hand phase outside 0.1 s with the oracle's bound on that phase"
     )
@@ -539,7 +553,7 @@ def main() -> None:
                 if args.outside:
                     print_outside(cond, nname, trials, scores, noise)
                 if args.from_hand:
-                    print_from_hand(cond, nname, trials, scores, noise, w)
+                    print_from_hand(cond, nname, trials, scores, noise, w, args.fit_starts, args.fit_k_known)
     if hand_rows:
         print(
             "\n| condition | noise (acc m/s^2, gyr deg/s per sample) | hand (default): within 0.1 s % (worst trial) | trials under 95 % |"
