@@ -25,6 +25,11 @@ scoring, the full simulated IMU with bias, quantisation, gravity) at the same no
 ``gyr_noise_dps``). Noise levels as ``NAME=ACC,GYR`` (m/s^2 and deg/s per sample): the eleventh round's quarter of
 the accelerometer's, the simulator's default, and the real devices' median 1-10 Hz density
 (``benchmarks/device_noise.py``) at the simulator's 114.9 Hz.
+
+``--outside``: each ``hand (default)`` phase outside 0.1 s with the oracle's bound on that phase. ``--from-hand``
+(an experiment, docs/accuracy.md): the oracle's fit without its two gifts, started from ``hand (default)``'s
+boundaries with the number of submovements chosen by BIC (``--fit-starts`` random spreads per number,
+``--fit-k-known`` for the true number only).
 """
 
 from __future__ import annotations
