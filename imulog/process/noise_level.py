@@ -5,7 +5,8 @@ A still period is found by a rule, not by hand: the recording is cut into non-ov
 *motion score* is the summed per-axis variance of the channel after removing a least-squares line (a slow drift or
 a slowly turning gravity is not noise), and a window is still when its score is at most ``max_ratio`` times the
 quietest window's (noise alone varies far less than that between windows of a few hundred samples; a hand that
-moves, or tremor, adds to it; a quantisation-limited device's floor is at least its quantisation's variance). The noise level in those windows is given two ways:
+moves, or tremor, adds to it; a quantisation-limited device's floor is at least its quantisation's variance).
+The noise level in those windows is given two ways:
 
 * the per-sample sd (per axis, detrended; the rms over the axes), and the density it implies if the noise were
   white up to the Nyquist frequency, ``sd / sqrt(rate / 2)``;
@@ -22,7 +23,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-G0 = 9.80665  # m/s^2 per g
+from imulog.process.calibration import GRAVITY_M_S2 as G0  # m/s^2 per g (re-exported for the reports)
+
+__all__ = [
+    "G0",
+    "NoiseLevel",
+    "StillParams",
+    "detrended",
+    "motion_scores",
+    "noise_level",
+    "smallest_step",
+    "still_windows",
+    "window_bounds",
+]
 
 
 @dataclass(frozen=True)
