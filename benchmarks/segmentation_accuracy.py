@@ -82,6 +82,8 @@ def score(sim, params: PhaseParams) -> dict:
     ]
     return {
         "outside": [(r, lab, float(on), float(off)) for r, lab, on, off in outside],
+        # every true phase's (repetition, label, onset error s, offset error s) where one was detected
+        "ends": [(r, lab, float(s - a * 1e-9), float(e - b * 1e-9)) for (r, lab), (s, e), a, b in _paired(ends, truth)],
         "n_phases": len(ph),
         "n_true": len(truth),
         "correct": correct / len(truth),
@@ -94,6 +96,15 @@ def score(sim, params: PhaseParams) -> dict:
         "n_corrected": ph.n_corrected,
         "n_movements": len(result.movement_start),
     }
+
+
+def _paired(ends: dict, truth) -> list:
+    """((repetition, label), (detected start, end) s, true start ns, true end ns) of the true phases detected."""
+    return [
+        ((int(r), str(lab)), ends[(int(r), lab)], a, b)
+        for r, lab, a, b in zip(truth.task_index, truth.labels, truth.start_ns, truth.end_ns, strict=True)
+        if (int(r), lab) in ends
+    ]
 
 
 SIM_OPTIONS = {"extra_submovement_probability": 0.2, "residual_velocity_mps": 0.01}

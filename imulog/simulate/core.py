@@ -13,6 +13,7 @@ import numpy as np
 from imulog.model import ImuStream, Intervals, MarkerStream, Recording
 from imulog.process import quaternion as quat
 from imulog.simulate import clocks, imu_model, protocols, vicon_model
+from imulog.simulate.motion import MotionPlan
 from imulog.simulate.truth import GroundTruth
 
 IMU_NAME = "wrist"
@@ -129,6 +130,19 @@ def _simulate_adc(
     }
 
 
+def _build(module, p: dict, protocol: str, subject: int, trial: int, seed: int):
+    """The protocol's motion plan and subject of one trial (its own random streams)."""
+    pid = zlib.crc32(protocol.encode())
+    return module.build(p["protocol"], _rng(seed, pid, subject, 1), _rng(seed, pid, subject, trial, 2), trial=trial)
+
+
+def motion_plan(protocol: str, *, subject: int = 0, trial: int = 0, seed: int = 0, **overrides: Any) -> MotionPlan:
+    """The motion plan :func:`simulate` evaluates for the same arguments (segments, time laws, true phases), for an
+    analysis that needs the model behind the truth (benchmarks/boundary_limit.py)."""
+    module = protocols.get(protocol)
+    return _build(module, _split_overrides(module, overrides), protocol, subject, trial, seed).plan
+
+
 def simulate(protocol: str, *, subject: int = 0, trial: int = 0, seed: int = 0, **overrides: Any) -> SimulatedTrial:
     """Simulate one trial of ``protocol`` (``r2g``, ``slide``, ``nhpt``, ``adl``).
 
@@ -142,15 +156,13 @@ def simulate(protocol: str, *, subject: int = 0, trial: int = 0, seed: int = 0, 
     p = _split_overrides(module, overrides)
     env: EnvironmentParams = p["environment"]
     pid = zlib.crc32(protocol.encode())
-    subject_rng = _rng(seed, pid, subject, 1)
-    motion_rng = _rng(seed, pid, subject, trial, 2)
     device_rng = _rng(seed, 3)  # one physical device and lab set-up per seed
     clock_rng = _rng(seed, pid, subject, trial, 4)
     noise_rng = _rng(seed, pid, subject, trial, 5)
     vicon_rng = _rng(seed, pid, subject, trial, 6)
     drop_rng = _rng(seed, pid, subject, trial, 7)
 
-    built = module.build(p["protocol"], subject_rng, motion_rng, trial=trial)
+    built = _build(module, p, protocol, subject, trial, seed)
     plan = built.plan
 
     # lab set-up and device (shared by every trial of a seed)

@@ -49,9 +49,33 @@ def skewed_bump(s: np.ndarray, peak: np.ndarray | float = 0.5) -> tuple[np.ndarr
     return c, dc, ddc
 
 
+@dataclass(frozen=True)
+class SubmovementLaw:
+    """Time law ``s(t) = sum_i w_i mj((t - t_i) / T_i)`` of overlapping minimum-jerk submovements: ``onsets_s``
+    t_i and ``durations_s`` T_i in seconds from the segment start, ``weights`` w_i summing to 1. Calling it at
+    ``t_rel`` (s from the segment start) gives ``(s, ds/dt, d2s/dt2)``; its fields let an analysis rebuild the
+    phase (benchmarks/boundary_limit.py)."""
+
+    onsets_s: np.ndarray
+    durations_s: np.ndarray
+    weights: np.ndarray
+
+    def __call__(self, t_rel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t_rel = np.asarray(t_rel, dtype=float)
+        s = np.zeros_like(t_rel)
+        ds = np.zeros_like(t_rel)
+        dds = np.zeros_like(t_rel)
+        for t_i, T_i, w in zip(self.onsets_s, self.durations_s, self.weights, strict=True):
+            a, b, c = minjerk.profile((t_rel - t_i) / T_i)
+            s += w * a
+            ds += w * b / T_i
+            dds += w * c / T_i**2
+        return s, ds, dds
+
+
 def submovement_law(
     duration_s: float, onsets: np.ndarray, durations: np.ndarray, weights: np.ndarray
-) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
+) -> SubmovementLaw:
     """Time law ``s(t) = sum_i w_i mj((t - t_i) / T_i)`` of overlapping minimum-jerk submovements (s).
 
     ``onsets`` t_i and ``durations`` T_i in seconds from the segment start, each ending by
@@ -63,20 +87,7 @@ def submovement_law(
     weights = np.asarray(weights, dtype=float) / float(np.sum(weights))
     if np.any(onsets < 0) or np.any(onsets + durations > duration_s + 1e-9) or np.any(durations <= 0):
         raise ValueError("submovements must lie inside the segment")
-
-    def law(t_rel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        t_rel = np.asarray(t_rel, dtype=float)
-        s = np.zeros_like(t_rel)
-        ds = np.zeros_like(t_rel)
-        dds = np.zeros_like(t_rel)
-        for t_i, T_i, w in zip(onsets, durations, weights, strict=True):
-            a, b, c = minjerk.profile((t_rel - t_i) / T_i)
-            s += w * a
-            ds += w * b / T_i
-            dds += w * c / T_i**2
-        return s, ds, dds
-
-    return law
+    return SubmovementLaw(onsets, durations, weights)
 
 
 @dataclass
