@@ -77,6 +77,7 @@ import numpy as np
 from imulog.process.segmentation.arrival import gravity_free, slow_tail_end
 from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
 from imulog.process.segmentation.flanks import combined_t0, flank_zero, speed_flank_zero
+from imulog.process.segmentation.gaps import gap_bounds
 from imulog.process.segmentation.noise_floor import trim_unmoved
 from imulog.process.segmentation.rest_drift import RestDriftParams, check_limit
 from imulog.process.segmentation.rest_window import still_window
@@ -152,6 +153,9 @@ class HandParams:
     rest_drift: step 8's limit on that velocity is raised to the trial's own where its still rests read more than
         half ``velocity_level_mps`` (:mod:`~imulog.process.segmentation.rest_drift`, 95 % of them; never lowered;
         issue 31 eleventh round).
+    movement_gaps: the rest next to a phase (step 2's gap) also ends at the nearest movement of the detector that
+        overlaps no phase (the calibration wave before the first reach; :mod:`~imulog.process.segmentation.gaps`,
+        issue 31 twelfth round), when :func:`refine_with_accelerometer` is given the movements.
     """
 
     enabled: bool = True
@@ -188,6 +192,7 @@ class HandParams:
     profile_alone: bool = True
     flank_combine: bool = False
     rest_drift: bool = False
+    movement_gaps: bool = True
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:
@@ -393,6 +398,7 @@ def refine_with_accelerometer(
     *,
     cutoff_hz: float | None = None,
     bounds: tuple[int, int] | None = None,
+    movements: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Onsets/offsets of time-ordered, non-overlapping phases moved outward while the hand still moves.
 
@@ -402,7 +408,9 @@ def refine_with_accelerometer(
 
     For a piece of a longer recording: ``cutoff_hz`` is the recording's accelerometer cut-off (Hz,
     :func:`accelerometer_cutoff_hz`) and ``bounds`` as in
-    :func:`~imulog.process.segmentation.boundaries.refine_phase_boundaries`.
+    :func:`~imulog.process.segmentation.boundaries.refine_phase_boundaries`. ``movements``: the detector's
+    movements that overlap no phase (starts, ends; :func:`~imulog.process.segmentation.gaps.unphased_movements`),
+    which end the rest next to a phase with ``params.movement_gaps``.
     """
     s = np.array(start, dtype=np.int64)
     e = np.array(end, dtype=np.int64)
@@ -436,6 +444,8 @@ def refine_with_accelerometer(
         a0, b0 = int(ss[k]), int(ee[k])
         prev_end = int(out_e[k - 1]) if k > 0 else first
         next_start = int(ss[k + 1]) if k + 1 < len(ss) else n
+        if params.movement_gaps:  # a movement that is no phase (the calibration wave) ends the rest too
+            prev_end, next_start = gap_bounds(prev_end, next_start, a0, b0, movements)
         post = still_window(acc, b0 + guard, min(next_start, n) - guard, length, reach, False, 0.5 * params.n_sigma)
         pre = still_window(acc, prev_end + guard, a0 - guard, length, reach, True, 0.5 * params.n_sigma)
         inside = int(round(params.flank_search_s * rate_hz))  # the flank can lie inside the gyroscope's phase
