@@ -134,6 +134,7 @@ GRID_METHODS = {
     "hand + both flanks (step 7)": PhaseParams(hand=HandParams(flank_combine=True)),  # issue 31's 11th round, off
     "hand + the rests' own drift (step 8)": PhaseParams(hand=HandParams(rest_drift=True)),  # issue 31's 11th round
     "hand, step 2's gap to the recording's edge": PhaseParams(hand=HandParams(movement_gaps=False)),  # before 12th
+    "hand, onset walk at fixed speeds (step 5)": PhaseParams(hand=HandParams(walk_noise=False)),  # before 12th round
     "gyroscope only": PhaseParams(hand=HandParams(enabled=False)),
     "published (--no-refine)": PhaseParams(
         dynamos=DynamosParams(refine_boundaries=False), boundaries=BoundaryParams(enabled=False)

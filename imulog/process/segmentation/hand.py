@@ -74,7 +74,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imulog.process.segmentation.arrival import gravity_free, slow_tail_end
+from imulog.process.segmentation.arrival import gravity_free, slow_tail_end, velocity_noise_mps, white_noise
 from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
 from imulog.process.segmentation.flanks import combined_t0, flank_zero, speed_flank_zero
 from imulog.process.segmentation.gaps import gap_bounds
@@ -156,6 +156,10 @@ class HandParams:
     movement_gaps: the rest next to a phase (step 2's gap) also ends at the nearest movement of the detector that
         overlaps no phase (the calibration wave before the first reach; :mod:`~imulog.process.segmentation.gaps`,
         issue 31 twelfth round), when :func:`refine_with_accelerometer` is given the movements.
+    walk_noise: step 5's speed criteria before an onset count only where the speed stands ``n_sigma`` sd out of the
+        velocity's own noise (:func:`~imulog.process.segmentation.arrival.velocity_noise_mps`, measured at the rest
+        window): far from the window the integrated velocity's drift reaches the fixed levels (issue 31 twelfth
+        round).
     """
 
     enabled: bool = True
@@ -193,6 +197,7 @@ class HandParams:
     flank_combine: bool = False
     rest_drift: bool = False
     movement_gaps: bool = True
+    walk_noise: bool = True
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:
@@ -373,6 +378,19 @@ def _offset(
     return slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw, limit)
 
 
+def speed_in_noise(v: np.ndarray, window: tuple[int, int], raw, dt: float, params: HandParams) -> np.ndarray:
+    """Speed (m/s) of the velocity ``v`` (N, 3) integrated forward from the rest ``window`` (sample ``i`` of ``v``
+    is ``(i + 1) dt`` s after it), scaled down where ``n_sigma`` sd of the velocity's noise there (measured at the
+    window in the unfiltered ``raw`` (accelerometer, gyroscope), :func:`velocity_noise_mps`) exceeds
+    ``velocity_level_mps``: compared with the fixed speed levels, it stands out of the noise as well."""
+    w0, w1 = window
+    acc_sd = max(white_noise(raw[0], w0, w1), params.min_level_mps2 / params.n_sigma)  # a quantised sensor
+    tau = (np.arange(len(v)) + 1) * dt
+    sd = velocity_noise_mps(tau, dt, (w1 - w0) * dt, acc_sd, white_noise(raw[1], w0, w1))
+    level = params.velocity_level_mps
+    return np.linalg.norm(v, axis=1) * (level / np.maximum(level, params.n_sigma * sd))
+
+
 def cutoff_params(params: HandParams) -> BoundaryParams:
     """The accelerometer's cut-off adaptation expressed as :class:`BoundaryParams` (levels in m/s^2)."""
     return BoundaryParams(
@@ -470,6 +488,8 @@ def refine_with_accelerometer(
                 break
             pre = earlier
         if pre is not None and pre[1] < a0:
+            if params.walk_noise and params.velocity_level_mps > 0:  # the speed out of its own noise
+                vn = speed_in_noise(v, pre, (raw, gyr_raw), dt, params)[::-1]
             i, _ = _extend_offset(
                 an,
                 vn,

@@ -1,0 +1,61 @@
+"""Where the rest next to a phase ends (imulog.process.segmentation.gaps, hand step 2, issue 31 twelfth round):
+a movement of the detector that is no phase (the calibration wave before the first reach) ends it too."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from imulog.process.segmentation.gaps import gap_bounds, unphased_movements
+from imulog.process.segmentation.hand import HandParams
+from imulog.process.segmentation.pipeline import PhaseParams, segment_phases
+from imulog.process.segmentation.repetitions import RepetitionParams
+from imulog.simulate import simulate
+from imulog.simulate.grid import condition
+
+
+def test_unphased_movements_are_the_ones_overlapping_no_phase():
+    ms = np.array([10, 30, 52, 95, 120])
+    me = np.array([20, 50, 60, 99, 130])
+    s, e = np.array([45, 100]), np.array([55, 125])  # phases [45, 55), [100, 125)
+    got = unphased_movements(ms, me, s, e)
+    # [30, 50) and [52, 60) overlap the phase [45, 55); [120, 130) overlaps [100, 125)
+    assert got[0].tolist() == [10, 95] and got[1].tolist() == [20, 99]
+    assert gap_bounds(0, 100, 45, 55, got) == (20, 95)
+    assert gap_bounds(25, 200, 45, 55, got) == (25, 95)  # the previous phase's end is nearer
+    assert gap_bounds(0, 100, 45, 55, None) == (0, 100)
+    empty = unphased_movements(ms[:0], me[:0], s, e)
+    assert gap_bounds(0, 100, 45, 55, empty) == (0, 100)
+
+
+def _first_onsets(cond: str, seed: int, subject: int):
+    """(truth, with the rule, without it) of every phase's onset (s) of a simulated 10-repetition trial."""
+    sim = simulate("r2g", seed=seed, subject=subject, repetitions=10, **condition(cond))
+    imu = sim.recording.imus[0]
+    t_ref = np.asarray(sim.truth.imu_t_ref_ns, dtype=np.int64) * 1e-9
+    rate = (len(imu.t_ns) - 1) / ((imu.t_ns[-1] - imu.t_ns[0]) * 1e-9)
+    p = PhaseParams(repetitions=RepetitionParams(n_repetitions=10))
+    new = segment_phases(imu.gyr, rate, p, imu.acc).phases
+    old = segment_phases(imu.gyr, rate, replace(p, hand=HandParams(movement_gaps=False)), imu.acc).phases
+    return sim.truth.phases.start_ns * 1e-9, new, old, t_ref
+
+
+def test_the_first_reach_of_a_50_hz_trial_starts_after_the_calibration_wave():
+    """rate-50hz seed 181 subject 125 (the eleventh round's held-out set, burned): the rest before the first reach
+    ran from the recording's start through the calibration wave, step 2's window moved 3.7 s away from the reach
+    and the velocity's drift from there made the onset 1.2 s early; with the wave ending the rest, within 0.1 s."""
+    truth, new, old, t = _first_onsets("rate-50hz", 181, 125)
+    assert new.labels[0] == "reach" and new.repetition[0] == 1
+    assert t[old.start[0]] - truth[0] < -1.0  # the old rule: more than a second early
+    assert abs(t[new.start[0]] - truth[0]) < 0.1
+    # only that phase's onset changed
+    assert np.array_equal(new.end, old.end) and np.array_equal(new.start[1:], old.start[1:])
+
+
+def test_a_trial_whose_first_rest_window_stays_put_is_unchanged():
+    """rate-50hz seed 0 subject 1: step 2's window before the first reach sits at its default position either way,
+    and every phase's boundaries are the same with and without the rule."""
+    _, new, old, _ = _first_onsets("rate-50hz", 0, 1)
+    assert len(new.start) == 40
+    assert np.array_equal(new.start, old.start) and np.array_equal(new.end, old.end)
