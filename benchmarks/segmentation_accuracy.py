@@ -133,7 +133,7 @@ GRID_METHODS = {
     "hand, step 9 tied to step 2's window": PhaseParams(hand=HandParams(profile_alone=False)),  # before issue 31's 10th
     "hand + both flanks (step 7)": PhaseParams(hand=HandParams(flank_combine=True)),  # issue 31's 11th round, off
     "hand + the rests' own drift (step 8)": PhaseParams(hand=HandParams(rest_drift=True)),  # issue 31's 11th round
-    "hand, step 2's gap to the recording's edge": PhaseParams(hand=HandParams(movement_gaps=False)),  # before 12th
+    "hand + step 2's gap ended by movements (gaps.py)": PhaseParams(hand=HandParams(movement_gaps=True)),  # 12th, off
     "hand, onset walk at fixed speeds (step 5)": PhaseParams(hand=HandParams(walk_noise=False)),  # before 12th round
     "gyroscope only": PhaseParams(hand=HandParams(enabled=False)),
     "published (--no-refine)": PhaseParams(

@@ -155,7 +155,8 @@ class HandParams:
         issue 31 eleventh round).
     movement_gaps: the rest next to a phase (step 2's gap) also ends at the nearest movement of the detector that
         overlaps no phase (the calibration wave before the first reach; :mod:`~imulog.process.segmentation.gaps`,
-        issue 31 twelfth round), when :func:`refine_with_accelerometer` is given the movements.
+        issue 31 twelfth round, an option: on `combined` development trials such a movement right after a phase is
+        often the phase's own last part), when :func:`refine_with_accelerometer` is given the movements.
     walk_noise: step 5's speed criteria before an onset count only where the speed stands ``n_sigma`` sd out of the
         velocity's own noise (:func:`~imulog.process.segmentation.arrival.velocity_noise_mps`, measured at the rest
         window): far from the window the integrated velocity's drift reaches the fixed levels (issue 31 twelfth
@@ -196,7 +197,7 @@ class HandParams:
     profile_alone: bool = True
     flank_combine: bool = False
     rest_drift: bool = False
-    movement_gaps: bool = True
+    movement_gaps: bool = False
     walk_noise: bool = True
 
 
