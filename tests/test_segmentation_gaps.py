@@ -1,5 +1,6 @@
-"""Where the rest next to a phase ends (imulog.process.segmentation.gaps, hand step 2, issue 31 twelfth round):
-a movement of the detector that is no phase (the calibration wave before the first reach) ends it too."""
+"""The first reach after the calibration wave (issue 31 twelfth round): step 2's gap ended by a movement of the
+detector that is no phase (imulog.process.segmentation.gaps, HandParams.movement_gaps, an option) and step 5's onset
+walk against the velocity's own noise (HandParams.walk_noise, the default)."""
 
 from __future__ import annotations
 
@@ -43,6 +44,7 @@ def _onsets(cond: str, seed: int, subject: int, *others: HandParams):
 
 
 NEITHER = HandParams(movement_gaps=False, walk_noise=False)  # before the twelfth round
+GAPS = HandParams(movement_gaps=True, walk_noise=False)  # the option alone
 
 
 def test_the_first_reach_of_a_50_hz_trial_starts_after_the_calibration_wave():
@@ -50,12 +52,10 @@ def test_the_first_reach_of_a_50_hz_trial_starts_after_the_calibration_wave():
     ran from the recording's start through the calibration wave, step 2's window moved 3.7 s away from the reach
     and the velocity's drift from there made the onset 1.2 s early. Either rule alone puts it within 0.1 s: the wave
     ending the rest, or the walk's speed measured against the velocity's noise."""
-    truth, new, (old, gaps, walk), t = _onsets(
-        "rate-50hz", 181, 125, NEITHER, HandParams(walk_noise=False), HandParams(movement_gaps=False)
-    )
+    truth, new, (old, gaps, both), t = _onsets("rate-50hz", 181, 125, NEITHER, GAPS, HandParams(movement_gaps=True))
     assert new.labels[0] == "reach" and new.repetition[0] == 1
     assert t[old.start[0]] - truth[0] < -1.0  # before: more than a second early
-    for ph in (new, gaps, walk):
+    for ph in (new, gaps, both):
         assert abs(t[ph.start[0]] - truth[0]) < 0.1
     # only that phase's onset changed
     assert np.array_equal(new.end, old.end) and np.array_equal(new.start[1:], old.start[1:])
@@ -66,7 +66,7 @@ def test_a_50_hz_first_reach_after_a_window_moved_within_its_rest():
     the reach (its variance twice the quietest's) and the velocity drifts to 6 cm/s at the onset over 2.8 s (about
     3 sd of its noise at 50 Hz): the fixed 3 cm/s level takes that for the hand (1.45 s early); measured against the
     velocity's noise the onset is within 0.1 s."""
-    truth, new, (old, gaps), t = _onsets("rate-50hz", 182, 125, NEITHER, HandParams(walk_noise=False))
+    truth, new, (old, gaps), t = _onsets("rate-50hz", 182, 125, NEITHER, GAPS)
     assert t[old.start[0]] - truth[0] < -1.0 and t[gaps.start[0]] - truth[0] < -1.0
     assert abs(t[new.start[0]] - truth[0]) < 0.1
     assert np.array_equal(new.end, old.end) and np.array_equal(new.start[1:], old.start[1:])
@@ -76,6 +76,7 @@ def test_a_trial_whose_first_rest_window_stays_put_is_unchanged():
     """rate-50hz seed 0 subject 1 and default seed 0 subject 1: step 2's window before the first reach sits at its
     default position, 1.3 s from it, and every phase's boundaries are the same with and without the two rules."""
     for cond in ("rate-50hz", "default"):
-        _, new, (old,), _ = _onsets(cond, 0, 1, NEITHER)
+        _, new, (old, both), _ = _onsets(cond, 0, 1, NEITHER, HandParams(movement_gaps=True))
         assert len(new.start) == 40
-        assert np.array_equal(new.start, old.start) and np.array_equal(new.end, old.end)
+        for ph in (old, both):
+            assert np.array_equal(new.start, ph.start) and np.array_equal(new.end, ph.end)
