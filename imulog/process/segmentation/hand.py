@@ -27,7 +27,10 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
    ``|v| > velocity_level_mps`` while ``|a|`` is above half that level (a slow tail still decelerating; a rest's
    slow drift, the thesis's residual velocity, barely accelerates and is not taken), or where
    ``|v| > cruise_velocity_mps`` (overlapping submovements of a slow phase cruise between them with next to
-   no acceleration: issue 31); runs shorter than ``min_run_s`` are noise; from the gyroscope
+   no acceleration: issue 31); before an onset both speed criteria count only where the speed also stands
+   ``n_sigma`` sd out of the velocity's own noise (``walk_noise``, :func:`speed_in_noise`: far from the window the
+   integrated velocity's drift reaches the fixed levels, issue 31 twelfth round); runs shorter than ``min_run_s``
+   are noise; from the gyroscope
    boundary the onset (offset) walks outward over moving samples and stops at the first run of
    ``quiet_s`` without motion; a move beyond ``max_shift_s`` is not trusted (the "rest" is not a rest) and
    the gyroscope boundary stays;
