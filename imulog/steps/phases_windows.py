@@ -129,6 +129,7 @@ def phase_pieces(
     from imulog.heap import reuse_heap
     from imulog.process.segmentation.boundaries import adaptive_cutoff_hz, refine_phase_boundaries
     from imulog.process.segmentation.dynamos import lowpass_norm, postprocess, refine_boundaries, threshold_value
+    from imulog.process.segmentation.gaps import unphased_movements
     from imulog.process.segmentation.hand import (
         accelerometer_cutoff_hz,
         cutoff_params,
@@ -250,7 +251,15 @@ def phase_pieces(
             _, g, a, _ = rd.get(w0, w1)
             if hand:
                 rs, re_ = refine_with_accelerometer(
-                    a, g, rate, starts[sl] - w0, ends[sl] - w0, hp, cutoff_hz=acc_cut, bounds=(lo - w0, hi - w0)
+                    a,
+                    g,
+                    rate,
+                    starts[sl] - w0,
+                    ends[sl] - w0,
+                    hp,
+                    cutoff_hz=acc_cut,
+                    bounds=(lo - w0, hi - w0),
+                    movements=(others[0] - w0, others[1] - w0),
                 )
             else:
                 rs, re_ = refine_phase_boundaries(
@@ -272,6 +281,7 @@ def phase_pieces(
                     rd.drop_before(ce - ctx - over)
             ps, pe = gs, ge
         # pass 4: hand-refined boundaries, the static mask (one core behind), the intervals' times, timing rows
+        others = unphased_movements(ms, me, ps, pe)  # motion that is no phase ends a phase's rest (the wave)
         fs, fe = ps.copy(), pe.copy()
         hand_ok = use_hand and has_acc
         last = total - 1

@@ -27,7 +27,10 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
    ``|v| > velocity_level_mps`` while ``|a|`` is above half that level (a slow tail still decelerating; a rest's
    slow drift, the thesis's residual velocity, barely accelerates and is not taken), or where
    ``|v| > cruise_velocity_mps`` (overlapping submovements of a slow phase cruise between them with next to
-   no acceleration: issue 31); runs shorter than ``min_run_s`` are noise; from the gyroscope
+   no acceleration: issue 31); before an onset both speed criteria count only where the speed also stands
+   ``n_sigma`` sd out of the velocity's own noise (``walk_noise``, :func:`speed_in_noise`: far from the window the
+   integrated velocity's drift reaches the fixed levels, issue 31 twelfth round); runs shorter than ``min_run_s``
+   are noise; from the gyroscope
    boundary the onset (offset) walks outward over moving samples and stops at the first run of
    ``quiet_s`` without motion; a move beyond ``max_shift_s`` is not trusted (the "rest" is not a rest) and
    the gyroscope boundary stays;
@@ -77,9 +80,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imulog.process.segmentation.arrival import gravity_free, slow_tail_end
+from imulog.process.segmentation.arrival import gravity_free, slow_tail_end, velocity_noise_mps, white_noise
 from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
 from imulog.process.segmentation.flanks import combined_t0, flank_zero, speed_flank_zero
+from imulog.process.segmentation.gaps import gap_bounds
 from imulog.process.segmentation.noise_floor import trim_unmoved
 from imulog.process.segmentation.rest_drift import RestDriftParams, check_limit
 from imulog.process.segmentation.rest_window import still_window
@@ -159,6 +163,14 @@ class HandParams:
         ``n_sigma`` sd or more of the velocity's noise, under ``velocity_level_mps``, as seen from a verified rest
         window), to where it decelerates into the rest (:func:`~imulog.process.segmentation.arrival.inside_last_part`;
         issue 31 twelfth round).
+    movement_gaps: the rest next to a phase (step 2's gap) also ends at the nearest movement of the detector that
+        overlaps no phase (the calibration wave before the first reach; :mod:`~imulog.process.segmentation.gaps`,
+        issue 31 twelfth round, an option: on `combined` development trials such a movement right after a phase is
+        often the phase's own last part), when :func:`refine_with_accelerometer` is given the movements.
+    walk_noise: step 5's speed criteria before an onset count only where the speed stands ``n_sigma`` sd out of the
+        velocity's own noise (:func:`~imulog.process.segmentation.arrival.velocity_noise_mps`, measured at the rest
+        window): far from the window the integrated velocity's drift reaches the fixed levels (issue 31 twelfth
+        round).
     """
 
     enabled: bool = True
@@ -196,6 +208,8 @@ class HandParams:
     flank_combine: bool = False
     rest_drift: bool = False
     slow_inside: bool = False
+    movement_gaps: bool = False
+    walk_noise: bool = True
 
 
 def fill_gaps(x: np.ndarray) -> np.ndarray:
@@ -378,6 +392,19 @@ def _offset(
     return slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw, limit, inside)
 
 
+def speed_in_noise(v: np.ndarray, window: tuple[int, int], raw, dt: float, params: HandParams) -> np.ndarray:
+    """Speed (m/s) of the velocity ``v`` (N, 3) integrated forward from the rest ``window`` (sample ``i`` of ``v``
+    is ``(i + 1) dt`` s after it), scaled down where ``n_sigma`` sd of the velocity's noise there (measured at the
+    window in the unfiltered ``raw`` (accelerometer, gyroscope), :func:`velocity_noise_mps`) exceeds
+    ``velocity_level_mps``: compared with the fixed speed levels, it stands out of the noise as well."""
+    w0, w1 = window
+    acc_sd = max(white_noise(raw[0], w0, w1), params.min_level_mps2 / params.n_sigma)  # a quantised sensor
+    tau = (np.arange(len(v)) + 1) * dt
+    sd = velocity_noise_mps(tau, dt, (w1 - w0) * dt, acc_sd, white_noise(raw[1], w0, w1))
+    level = params.velocity_level_mps
+    return np.linalg.norm(v, axis=1) * (level / np.maximum(level, params.n_sigma * sd))
+
+
 def cutoff_params(params: HandParams) -> BoundaryParams:
     """The accelerometer's cut-off adaptation expressed as :class:`BoundaryParams` (levels in m/s^2)."""
     return BoundaryParams(
@@ -403,6 +430,7 @@ def refine_with_accelerometer(
     *,
     cutoff_hz: float | None = None,
     bounds: tuple[int, int] | None = None,
+    movements: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Onsets/offsets of time-ordered, non-overlapping phases moved outward while the hand still moves.
 
@@ -412,7 +440,9 @@ def refine_with_accelerometer(
 
     For a piece of a longer recording: ``cutoff_hz`` is the recording's accelerometer cut-off (Hz,
     :func:`accelerometer_cutoff_hz`) and ``bounds`` as in
-    :func:`~imulog.process.segmentation.boundaries.refine_phase_boundaries`.
+    :func:`~imulog.process.segmentation.boundaries.refine_phase_boundaries`. ``movements``: the detector's
+    movements that overlap no phase (starts, ends; :func:`~imulog.process.segmentation.gaps.unphased_movements`),
+    which end the rest next to a phase with ``params.movement_gaps``.
     """
     s = np.array(start, dtype=np.int64)
     e = np.array(end, dtype=np.int64)
@@ -446,6 +476,8 @@ def refine_with_accelerometer(
         a0, b0 = int(ss[k]), int(ee[k])
         prev_end = int(out_e[k - 1]) if k > 0 else first
         next_start = int(ss[k + 1]) if k + 1 < len(ss) else n
+        if params.movement_gaps:  # a movement that is no phase (the calibration wave) ends the rest too
+            prev_end, next_start = gap_bounds(prev_end, next_start, a0, b0, movements)
         post = still_window(acc, b0 + guard, min(next_start, n) - guard, length, reach, False, 0.5 * params.n_sigma)
         pre = still_window(acc, prev_end + guard, a0 - guard, length, reach, True, 0.5 * params.n_sigma)
         inside = int(round(params.flank_search_s * rate_hz))  # the flank can lie inside the gyroscope's phase
@@ -471,6 +503,8 @@ def refine_with_accelerometer(
                 break
             pre = earlier
         if pre is not None and pre[1] < a0:
+            if params.walk_noise and params.velocity_level_mps > 0:  # the speed out of its own noise
+                vn = speed_in_noise(v, pre, (raw, gyr_raw), dt, params)[::-1]
             i, _ = _extend_offset(
                 an,
                 vn,

@@ -24,6 +24,7 @@ import numpy as np
 from imulog.process.segmentation.boundaries import BoundaryParams, refine_phase_boundaries
 from imulog.process.segmentation.double_threshold import DoubleThresholdParams, double_threshold
 from imulog.process.segmentation.dynamos import DynamosParams, dynamos, lowpass_norm
+from imulog.process.segmentation.gaps import unphased_movements
 from imulog.process.segmentation.hand import HandParams, refine_with_accelerometer
 from imulog.process.segmentation.repetitions import Phases, RepetitionParams, segment_repetitions
 from imulog.process.segmentation.template import TemplateParams, build_template, match_template
@@ -152,7 +153,8 @@ def segment_phases(
     if refine and len(phases):  # onsets/offsets where the gyroscope leaves/reaches its static noise
         ps, pe = refine_phase_boundaries(gyr, rate_hz, phases.start, phases.end, params.boundaries)
         if acc_mps2 is not None and params.hand.enabled:  # ... and where the hand leaves/reaches its rest
-            ps, pe = refine_with_accelerometer(acc_mps2, gyr, rate_hz, ps, pe, hand_params(params))
+            others = unphased_movements(start, end, ps, pe)  # the calibration wave: motion that is no phase
+            ps, pe = refine_with_accelerometer(acc_mps2, gyr, rate_hz, ps, pe, hand_params(params), movements=others)
         phases = replace(phases, start=ps, end=pe)
     if params.static == "movements":
         static = static_from_movements(len(gyr), start, end, rate_hz, params.static_margin_s)
