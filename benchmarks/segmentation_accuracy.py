@@ -19,6 +19,7 @@ one table row per condition and method, over ``--seeds`` x ``--subjects`` trials
     python benchmarks/segmentation_accuracy.py --grid all --seeds 3 --subjects 1 --repetitions 10
 
 ``--grid wider``: slower, more hesitant and slow curved stroke-like phases beyond the simulator's grid (issue 31).
+``--grid devices``: ``default``, ``stroke`` and ``stroke-slow`` at the median real device's sensor noise.
 ``--outside`` lists every phase whose duration is outside 0.1 s with its onset and offset errors, and counts them
 per condition by what is wrong (missing, offsets early or late, onsets early or late, both ends within 0.1 s).
 """
@@ -168,6 +169,24 @@ def _wider() -> dict[str, dict]:
     }
 
 
+# The median real wrist IMU's white noise per sample at 100 Hz (benchmarks/device_noise.py over the shared real
+# recordings, docs/simulate.md "The noise level against real devices"): the accelerometer 1.6x the simulator's
+# default (0.02 m/s^2), the gyroscope 0.6x (0.1 deg/s).
+DEVICE_NOISE = {"acc_noise_mps2": 0.033, "gyr_noise_dps": 0.062}
+
+
+def _devices() -> dict[str, dict]:
+    """``--grid devices``: the grid's ``default`` and ``stroke`` movements and the wider ``stroke-slow`` at the
+    median real device's sensor noise (:data:`DEVICE_NOISE`) instead of the simulator's quieter default."""
+    from imulog.simulate.grid import STROKE
+
+    return {
+        "device-noise": dict(DEVICE_NOISE),
+        "stroke-device-noise": {**STROKE, **DEVICE_NOISE},
+        "stroke-slow-device-noise": {**_wider()["stroke-slow"], **DEVICE_NOISE},
+    }
+
+
 def grid_rows(conditions, seeds, subjects, repetitions: int, methods=GRID_METHODS, pairs=None) -> list[dict]:
     """One record per (condition, method) with the means over the trials (see :func:`score`); a condition is
     one of :mod:`imulog.simulate.grid` or of :func:`_wider`. Trials: every seed x subject, or the (seed, subject)
@@ -177,7 +196,7 @@ def grid_rows(conditions, seeds, subjects, repetitions: int, methods=GRID_METHOD
     from imulog.process.segmentation.repetitions import RepetitionParams
     from imulog.simulate.grid import condition
 
-    wider = _wider()
+    wider = {**_wider(), **_devices()}
     pairs = list(pairs) if pairs is not None else [(seed, subject) for seed in seeds for subject in subjects]
     trials = [
         (name, seed, subject, dict(wider[name]) if name in wider else condition(name))
@@ -314,7 +333,10 @@ def main() -> None:
     ap.add_argument("--scenarios", nargs="+", default=list(SCENARIOS), choices=list(SCENARIOS))
     ap.add_argument("--methods", nargs="+", default=[*METHODS, "dynamos-otsu", "dynamos-no-boundaries", "dynamos-raw"])
     ap.add_argument(
-        "--grid", nargs="+", default=None, help="accuracy-grid conditions (names, 'all' or 'wider': see _wider)"
+        "--grid",
+        nargs="+",
+        default=None,
+        help="accuracy-grid conditions (names, 'all', 'wider' or 'devices': see _wider, _devices)",
     )
     ap.add_argument("--repetitions", type=int, default=10, help="repetitions per grid trial")
     ap.add_argument(
@@ -342,7 +364,7 @@ def main() -> None:
     if args.grid:
         from imulog.simulate.grid import CONDITIONS
 
-        named = {"all": list(CONDITIONS), "wider": list(_wider())}
+        named = {"all": list(CONDITIONS), "wider": list(_wider()), "devices": list(_devices())}
         conditions = [c for g in args.grid for c in named.get(g, [g])]
         t0 = time.perf_counter()
         firsts = (
