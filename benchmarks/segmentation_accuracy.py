@@ -169,9 +169,9 @@ def _wider() -> dict[str, dict]:
     }
 
 
-# The median real wrist IMU's white noise per sample at 100 Hz (benchmarks/device_noise.py over the shared real
-# recordings, docs/simulate.md "The noise level against real devices"): the accelerometer 1.6x the simulator's
-# default (0.02 m/s^2), the gyroscope 0.6x (0.1 deg/s).
+# The median real wrist IMU's white noise per sample at the simulator's 114.9 Hz (benchmarks/device_noise.py over
+# the shared real recordings, docs/simulate.md "The noise level against real devices"): the accelerometer 1.6x the
+# simulator's default (0.02 m/s^2), the gyroscope 0.6x (0.1 deg/s).
 DEVICE_NOISE = {"acc_noise_mps2": 0.033, "gyr_noise_dps": 0.062}
 
 
