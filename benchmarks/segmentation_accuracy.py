@@ -169,22 +169,13 @@ def _wider() -> dict[str, dict]:
     }
 
 
-# The median real wrist IMU's white noise per sample at the simulator's 114.9 Hz (benchmarks/device_noise.py over
-# the shared real recordings, docs/simulate.md "The noise level against real devices"): the accelerometer 1.6x the
-# simulator's default (0.02 m/s^2), the gyroscope 0.6x (0.1 deg/s).
-DEVICE_NOISE = {"acc_noise_mps2": 0.033, "gyr_noise_dps": 0.062}
-
-
 def _devices() -> dict[str, dict]:
-    """``--grid devices``: the grid's ``default`` and ``stroke`` movements and the wider ``stroke-slow`` at the
-    median real device's sensor noise (:data:`DEVICE_NOISE`) instead of the simulator's quieter default."""
-    from imulog.simulate.grid import STROKE
+    """``--grid devices``: the grid's ``device-noise`` and ``stroke-device-noise`` (:mod:`imulog.simulate.grid`,
+    the median real device's sensor noise instead of the simulator's quieter default) and the wider
+    ``stroke-slow`` at that noise."""
+    from imulog.simulate.grid import DEVICE_CONDITIONS, DEVICE_NOISE
 
-    return {
-        "device-noise": dict(DEVICE_NOISE),
-        "stroke-device-noise": {**STROKE, **DEVICE_NOISE},
-        "stroke-slow-device-noise": {**_wider()["stroke-slow"], **DEVICE_NOISE},
-    }
+    return {**DEVICE_CONDITIONS, "stroke-slow-device-noise": {**_wider()["stroke-slow"], **DEVICE_NOISE}}
 
 
 def grid_rows(conditions, seeds, subjects, repetitions: int, methods=GRID_METHODS, pairs=None) -> list[dict]:
