@@ -83,3 +83,22 @@ def test_device_noise_reads_real_files_through_the_converters(shared_data):
     # myon aktos-t at rest: about 5.5 mg and 0.095 deg/s per sample (benchmarks/device_noise.py)
     assert 3e-3 * imu_model.G0 < m["acc"].sd < 8e-3 * imu_model.G0
     assert 0.05 < np.degrees(m["gyr"].sd) < 0.2
+
+
+def test_the_grids_device_noise_conditions_read_as_the_median_device():
+    """``device-noise`` (imulog.simulate.grid.DEVICE_CONDITIONS) simulates the median real device's noise: the same
+    estimator reads 0.033 m/s^2 and 0.062 deg/s per sample from a still recording of it (1.6x / 0.6x the default)."""
+    from dataclasses import fields
+
+    from imulog.simulate.grid import DEVICE_CONDITIONS, condition
+
+    names = {f.name for f in fields(imu_model.ImuParams)}
+    for name in DEVICE_CONDITIONS:
+        overrides = {k: v for k, v in condition(name).items() if k in names}
+        assert set(overrides) == {"acc_noise_mps2", "gyr_noise_dps"}, name
+    acc, gyr = _still_imu(
+        60.0, imu_model.ImuParams(**{k: condition("device-noise")[k] for k in names & set(condition("device-noise"))})
+    )
+    windows = still_windows(gyr, RATE, PARAMS)
+    assert noise_level(acc, RATE, windows, PARAMS).sd == pytest.approx(0.033, rel=0.05)
+    assert np.degrees(noise_level(gyr, RATE, windows, PARAMS).sd) == pytest.approx(0.062, rel=0.05)
