@@ -21,6 +21,9 @@ from imulog.process import quaternion as quat
 from imulog.process.segmentation.flanks import first_motion
 
 GRAVITY_MPS2 = 9.81
+# the speed (in sd per axis of the velocity's noise) that a still hand's 3-axis velocity noise stays under 95 % of
+# the time: sqrt of the chi-square 95 % quantile with 3 degrees of freedom (issue 31, tenth round)
+STILL_SPEED_SD = 2.795
 
 
 def gravity_free(
@@ -136,7 +139,7 @@ def inside_last_part(
     until: int,
     near: int,
     fit: int,
-    drop_sd: float = 2.795,
+    drop_sd: float = STILL_SPEED_SD,
 ) -> float | None:
     """Where a slow last part that the offset lies *inside* reaches the rest (local sample index, time reversed:
     from step 8's verified window back into the phase), or None.
@@ -148,7 +151,7 @@ def inside_last_part(
     offset. A rest's drift seen from a window moving with it is a constant speed from the stop to the drift's
     start; a last part decelerates: from the offset to half-way to the flank's start the speed must have fallen by
     ``drop_sd`` sd of the noise at half-way (default: 95 % of a still hand's 3-axis speed, as
-    :data:`~imulog.process.segmentation.speed_profile.STILL_SPEED_SD`). ``near``, ``fit``: as
+    :data:`STILL_SPEED_SD`). ``near``, ``fit``: as
     :func:`~imulog.process.segmentation.flanks.first_motion`'s."""
     z = first_motion(v_back, n_sigma, min_run, until, near, fit, scale=sd, late_only=False)
     if z is None or z >= until:

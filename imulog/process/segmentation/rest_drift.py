@@ -13,7 +13,7 @@ the surest rest of the gap) and the largest speed (m/s) of the velocity integrat
 gap (forward, or backward where the gap has no room after the window). Over a still hand that speed is the norm of
 three axes' drift; its per-axis sd is the median over the gaps divided by :data:`CHI3_MEDIAN` (a median keeps the
 gaps whose "rest" still holds part of a slow phase from setting it, while they are fewer than half), and a rest
-reads under :data:`~imulog.process.segmentation.speed_profile.STILL_SPEED_SD` sd of it 95 % of the time.
+reads under :data:`~imulog.process.segmentation.arrival.STILL_SPEED_SD` sd of it 95 % of the time.
 Pure numpy; indices are sample indices, intervals half-open.
 """
 
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imulog.process.segmentation.arrival import gravity_free
+from imulog.process.segmentation.arrival import STILL_SPEED_SD, gravity_free
 from imulog.process.segmentation.boundaries import quietest_window
 
 # median of the norm of a 3-D standard normal vector (chi with 3 degrees of freedom): sd per axis = median / this
@@ -45,7 +45,7 @@ class RestDriftParams:
     check_s: float = 1.5
     guard_s: float = 0.05
     min_rests: int = 5
-    n_sd: float = 2.795
+    n_sd: float = STILL_SPEED_SD
 
 
 @dataclass(frozen=True)

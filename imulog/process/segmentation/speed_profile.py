@@ -42,7 +42,7 @@ from typing import Protocol
 
 import numpy as np
 
-from imulog.process.segmentation.arrival import gravity_free, velocity_noise_mps, white_noise
+from imulog.process.segmentation.arrival import STILL_SPEED_SD, gravity_free, velocity_noise_mps, white_noise
 from imulog.process.segmentation.boundaries import quietest_window
 
 
@@ -63,9 +63,6 @@ class ProfileParams(Protocol):
 
 
 _MAX_CELLS = 1 << 21  # candidate x sample cells per block (16 MB of float64)
-# the speed (in sd per axis of the velocity's noise) that a still hand's 3-axis velocity noise stays under 95 % of
-# the time: sqrt of the chi-square 95 % quantile with 3 degrees of freedom (issue 31, tenth round)
-STILL_SPEED_SD = 2.795
 
 
 def decel_shape(s: np.ndarray) -> np.ndarray:
