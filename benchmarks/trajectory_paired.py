@@ -178,6 +178,9 @@ CHANGES.update(
         ),
     }
 )
+# eleventh round: the trial-wide reference's static trust per axis no more than the hand's own scatter about it
+CHANGES["reference-scatter"] = (D, replace(D, optimized=replace(D.optimized, reference_scatter=(True, True, False))))
+CHANGES["reference-scatter-xyz"] = (D, replace(D, optimized=replace(D.optimized, reference_scatter=(True, True, True))))
 # each rule of OptimizationParams.rest_model (trajectory_rest_model.RestRule) against the defaults: rest-model-NAME
 REST_RULES = (
     "waypoints",

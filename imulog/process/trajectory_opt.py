@@ -65,7 +65,7 @@ from imulog.process.trajectory_repetitions import (
     trial_waypoints,
     velocity_sigma,
 )
-from imulog.process.trajectory_rest_model import RestRule, repetition_references
+from imulog.process.trajectory_rest_model import RestRule, reference_scatter, repetition_references
 from imulog.process.trajectory_rests import repetition_offsets, rest_blend_weight, shifted_waypoints
 
 __all__ = [
@@ -183,11 +183,17 @@ def reconstruct_repetitions(
         fallback = set(inconsistent_repetitions(reference_residuals(t, z, static, repetitions, waypoints)))
         if params.optimized.sigma_data_static_m == "auto":
             floor_m, floor_mps = _trust_floors(params.optimized, acc_calibration)
-            sig = estimate_data_sigma(t, z, static, repetitions, waypoints, params.optimized.sigma_ref_static_m)
-            if params.optimized.closure_factor is not None:  # at most what the movements' closure allows
-                closure = closure_sigma(t, base, static, repetitions)
-                k = params.optimized.closure_factor
-                sig = tuple(max(floor_m, min(s, k * c)) for s, c in zip(sig, closure, strict=True))
+            srs = params.optimized.sigma_ref_static_m
+            sig = _start_sigma(t, z, base, static, repetitions, waypoints, params.optimized, floor_m, srs)
+            if any(params.optimized.reference_scatter):  # the reference trusted no more than the hand's scatter says
+                least = [s / np.sqrt(2.0) for s in sig]  # a displacement is no better known than the start's rests
+                wide = reference_scatter(t, z, static, repetitions, waypoints, srs, least)
+                own = np.broadcast_to(np.asarray(srs, dtype=np.float64), (3,))
+                srs = tuple(float(v) for v in np.where(params.optimized.reference_scatter, wide, own))
+                sig = _start_sigma(t, z, base, static, repetitions, waypoints, params.optimized, floor_m, srs)
+                params = replace(params, optimized=replace(params.optimized, sigma_ref_static_m=srs))
+                if info is not None:
+                    info["sigma_ref_static_m"] = list(srs)
             params = replace(params, optimized=replace(params.optimized, sigma_data_static_m=sig))
             if info is not None:
                 info["sigma_data_static_m"] = list(sig)
@@ -237,6 +243,27 @@ def reconstruct_repetitions(
     if info is not None:
         info["checks"] = method_checks(t, a, a_comp, static, repetitions, out, params, bias)
     return out
+
+
+def _start_sigma(
+    t: np.ndarray,
+    z: np.ndarray,
+    acc: np.ndarray,
+    static: np.ndarray,
+    repetitions: Sequence[Repetition],
+    waypoints: R2GWaypoints,
+    o: OptimizationParams,
+    floor_m: float,
+    sigma_ref_m: Any,
+) -> tuple[float, float, float]:
+    """The ``"auto"`` static-position trust of the start ``z`` per axis (m): its variance component against a
+    reference off by ``sigma_ref_m`` (:func:`estimate_data_sigma`), at most ``o.closure_factor`` x what the
+    movements' closure on ``acc`` allows and at least ``floor_m``."""
+    sig = estimate_data_sigma(t, z, static, repetitions, waypoints, sigma_ref_m)
+    if o.closure_factor is not None:  # at most what the movements' closure allows
+        closure = closure_sigma(t, acc, static, repetitions)
+        sig = tuple(max(floor_m, min(s, o.closure_factor * c)) for s, c in zip(sig, closure, strict=True))
+    return sig
 
 
 def _trust_floors(o: OptimizationParams, calibration: AccRestCalibration | None) -> tuple[float, Any]:

@@ -92,6 +92,13 @@ class OptimizationParams:
         (issue 31 point 2, tenth round: on a corrected accelerometer both floors bind on most trials and hold the
         optimisation away from a start better than they allow). None (the default): the floors as before; 2 mm is
         a guard against a closure near zero (no floor at all gave the same counts on development trials).
+    reference_scatter: per global axis (x, y, z), trust the trial-wide reference's static positions no more than
+        the hand's own scatter about them allows: ``sigma_ref_static_m`` raised to ``sqrt(2) tau``, ``tau`` the
+        rests' scatter estimated from the start's rest-to-rest displacements, each displacement's error at least the
+        start's ``"auto"`` trust over sqrt 2 (:func:`imulog.process.trajectory_rest_model.reference_scatter`); the
+        start's ``"auto"`` trust is then split against that value (issue 31 point 2, eleventh round: on stroke-like
+        trials the reference's ends are 2.5-3 cm off per repetition and axis, not 1.5 cm). Needs
+        ``sigma_data_static_m="auto"``; an option (off).
     """
 
     sigma_data_mps: float | tuple[float, float, float] = 0.02
@@ -111,6 +118,7 @@ class OptimizationParams:
     rest_model: str | None = None
     rest_ramp: tuple[bool, bool, bool] = (False, False, False)
     corrected_floor_m: float | None = None
+    reference_scatter: tuple[bool, bool, bool] = (False, False, False)
 
 
 @dataclass

@@ -93,22 +93,23 @@ def estimate_data_sigma(
     static_mask: np.ndarray,
     repetitions: Sequence[Repetition],
     waypoints: R2GWaypoints,
-    sigma_ref_m: float,
+    sigma_ref_m: float | Sequence[float],
     floor_m: float = 0.006,
 ) -> tuple[float, float, float]:
     """Per-axis error (m) of the initial estimate's static positions, by variance components.
 
     Over the static samples of every complete repetition, the mean square of (initial - reference) is
-    the initial estimate's error variance plus the reference's (``sigma_ref_m``, assumed); the remainder
-    (at least ``floor_m``) is the estimate's.
+    the initial estimate's error variance plus the reference's (``sigma_ref_m``, assumed; one value or one per
+    axis); the remainder (at least ``floor_m``) is the estimate's.
     """
     resid = reference_residuals(t_s, initial_m, static_mask, repetitions, waypoints)
     bad = set(inconsistent_repetitions(resid))
     res = [r for i, r in resid.items() if i not in bad and len(r)]
+    ref = np.broadcast_to(np.asarray(sigma_ref_m, dtype=np.float64), (3,))
     if not res:
-        return (sigma_ref_m,) * 3
+        return tuple(float(v) for v in ref)
     ms = np.nanmean(np.vstack(res) ** 2, axis=0)
-    return tuple(float(np.sqrt(max(v - sigma_ref_m**2, floor_m**2))) for v in ms)
+    return tuple(float(np.sqrt(max(v - r**2, floor_m**2))) for v, r in zip(ms, ref, strict=True))
 
 
 def closure_sigma(

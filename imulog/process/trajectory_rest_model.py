@@ -313,3 +313,26 @@ def _variance_components(
     # positive-part James-Stein: only the share of each effect beyond its own noise
     keep = shrinkage_weight(np.abs(b) / np.sqrt(np.diag(cov)))
     return float(_GRID_M[i]), float(_GRID_M[j]), keep * b
+
+
+def reference_scatter(
+    t_s: np.ndarray,
+    initial_m: np.ndarray,
+    static_mask: np.ndarray,
+    repetitions: Sequence[Repetition],
+    waypoints: R2GWaypoints,
+    sigma_ref_m: float | Sequence[float],
+    sigma_min_m: Sequence[float] | None = None,
+) -> tuple[float, float, float]:
+    """The trial-wide reference's static error per axis (m): at least ``sigma_ref_m`` (the configured trust), and
+    at least what the hand's own scatter about the trial-wide waypoints says, ``sqrt(2) tau`` (a rest relative to
+    its repetition's start scatters by both places' ``tau``; ``tau`` by restricted maximum likelihood from the
+    start's rest-to-rest displacements, :func:`repetition_rests` with the significance-tested movement biases and
+    each displacement's error at least ``sigma_min_m`` per axis, so a poor start's errors are not read as the hand's
+    scatter). The configured value with fewer than two complete repetitions (issue 31 point 2, eleventh round)."""
+    ref = np.broadcast_to(np.asarray(sigma_ref_m, dtype=np.float64), (3,))
+    est = repetition_rests(t_s, initial_m, static_mask, repetitions, waypoints, sigma_min_m=sigma_min_m, alpha=0.001)
+    if est is None:
+        return tuple(float(v) for v in ref)
+    tau = np.where(np.isfinite(est.tau_m), est.tau_m, 0.0)
+    return tuple(float(v) for v in np.maximum(ref, np.sqrt(2.0) * tau))
