@@ -43,7 +43,9 @@ correction's posterior as its prior, ``RotatingBiasParams.calibration_prior``; `
 movements it cannot close left out, ``outlier_factor = 3``; ``acc-rests-held-out``: with the prior, the compensation
 per global axis only as far as it predicts the closures of movements left out of its fit,
 ``RotatingBiasParams.held_out``, and the start trusted as far as its own closure says, ``OptimizationParams.corrected_floor_m
-= 0.002``), ``windowed-options`` (the filter's heading and the return to the start on every
+= 0.002``), ``reference-scatter`` (the defaults / the trial-wide reference's static trust in x and y no more than the
+hand's own scatter about it, ``OptimizationParams.reference_scatter = (True, True, False)``, an option;
+``reference-scatter-xyz`` on z too), ``windowed-options`` (the filter's heading and the return to the start on every
 axis, the defaults before 2026-12-07, / options 3 and 4 with the heading restarted where a window may be cut, the
 defaults since).
 """
