@@ -20,7 +20,8 @@ _D = AlignmentParams()
     "imus",
     multiple=True,
     help="IMU name (channel /imu/NAME), repeatable; default: every IMU of the trial, each paired with its own "
-    "rigid marker cluster.",
+    "rigid marker cluster. On a rigid body's poses one IMU at a time: --imu NAME --poses BODY for each. Every IMU "
+    "keeps its own record (imulog.alignment.NAME); `imulog info` lists the IMUs.",
 )
 @click.option("--markers", default=None, help="Marker channel /markers/NAME; default: the only one, else 'vicon'.")
 @click.option(
@@ -76,7 +77,12 @@ _D = AlignmentParams()
     show_default=True,
     help="Write IMU-derived channels on the Vicon clock and rate under /derived/reference/.",
 )
-@click.option("--json", "as_json", is_flag=True, help="Print the imulog.alignment record as JSON.")
+@click.option(
+    "--json",
+    "as_json",
+    is_flag=True,
+    help="Print the alignment record as JSON (the IMU aligned; a whole setup: imulog.alignment).",
+)
 @click.option("--force", is_flag=True, help="Recompute even when the same parameters are already recorded.")
 def process_align(
     trial: Path,
@@ -115,6 +121,10 @@ def process_align(
     orientations (the body frame is the cluster frame), one IMU at a time (--imu with several); --poses
     chooses the channel. Poses missing in more than half the samples are refused.
 
+    In a trial with several IMUs each IMU's alignment is its own record, imulog.alignment.NAME (with
+    /derived/vicon/cluster_pose/NAME), whichever way it was aligned: aligning one IMU never replaces another's.
+    imulog.alignment stays the first IMU aligned (or the setup's primary IMU).
+
     \b
     Examples:
       imulog process align trial.mcap                  # every IMU
@@ -123,6 +133,7 @@ def process_align(
       imulog process align trial.mcap --cluster-markers Subject:O,Subject:X,Subject:Y
       imulog process align trial.mcap --cluster-markers WRIST        # one marker: its acceleration
       imulog process align broad_trial.mcap                          # BROAD: on /poses/optical
+      imulog process align trial.mcap --imu forearm --poses forearm_body    # several bodies: one IMU each
     """
     from imulog.archive.errors import ArchiveError
     from imulog.steps.align import alignment_summary, run_align
@@ -186,6 +197,11 @@ def process_align(
                 click.echo(f"heading: not related ({exc})", err=True)
         with TrialReader(trial) as reader:
             rec = reader.metadata.get("imulog.alignment", {})
+            if len(imus) == 1 or n_imus == 1 or on_poses:  # one IMU aligned: its own record, whichever is main
+                from imulog.steps.common import alignment_for, imu_names
+
+                one = imus[0] if imus else imu_names(topics)[0]
+                rec = alignment_for(reader.metadata, f"/imu/{one}") or rec
     except (ArchiveError, ValueError, KeyError, OSError) as exc:
         raise click.ClickException(error_line(trial, exc)) from exc
     if as_json:
@@ -211,6 +227,7 @@ def process_align(
         angle_deg = math.degrees(2 * math.acos(min(1.0, abs(float(q[0])))))
         what = "IMU-to-body" if (rec.get("cluster") or {}).get("pose") else "IMU-to-cluster"
         lines.insert(1, f"{what} [{', '.join(f'{float(v):.5f}' for v in q)}] ({angle_deg:.2f} deg)")
-    click.echo(f"{trial}: {prefix}{lines[0]}")
+    who = f" {str(rec.get('imu', '')).removeprefix('/imu/')}" if n_imus > 1 else ""  # which IMU, among several
+    click.echo(f"{trial}:{who} {prefix}{lines[0]}")
     for line in lines[1:]:
         click.echo(f"  {line}")

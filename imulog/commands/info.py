@@ -236,14 +236,21 @@ def _echo_phase_quality(timing: dict) -> None:
     )
 
 
-def _echo_alignment(record: dict) -> None:
-    """The IMU-to-Vicon alignment: offset and drift with uncertainty, markers, windows, quality flag."""
+def _echo_alignment(metadata: dict) -> None:
+    """The IMU-to-Vicon alignment: offset and drift with uncertainty, markers, windows, quality flag; with several
+    IMUs aligned (together or one at a time), one line per IMU from its own record."""
+    from imulog.steps.align_summary import alignment_summary, setup_lines, setup_summary
+    from imulog.steps.common import alignment_records
+
+    record = dict(metadata.get("imulog.alignment") or {})
+    per_imu = alignment_records(metadata)
+    if len(per_imu) > 1:  # each IMU's own record, current whichever way it was aligned
+        record["setup"] = setup_summary(per_imu)
     if not record:
         return
-    from imulog.steps.align_summary import alignment_summary, setup_lines
-
-    if record.get("setup"):  # several IMUs aligned together: one line per IMU, then the clocks
-        click.echo(f"alignment ({len(record['setup'])} IMUs on {record.get('reference', '?')}):")
+    if record.get("setup"):  # several IMUs aligned: one line per IMU, then the clocks
+        refs = sorted({str(r.get("reference", "?")) for r in per_imu.values()}) or [record.get("reference", "?")]
+        click.echo(f"alignment ({len(record['setup'])} IMUs on {', '.join(refs)}):")
         for line in setup_lines(record):
             click.echo(f"  {line}")
         return
@@ -404,7 +411,7 @@ def info(file: str, verbose: bool, as_json: bool) -> None:
         text = ", ".join(f"{k}={v}" if isinstance(v, str) else f"{k}={json.dumps(v)}" for k, v in values.items())
         click.echo(_cut(f"  {name}: {text}", width))
     _echo_periods(data["metadata"].get("imulog.metrics") or {})
-    _echo_alignment(data["metadata"].get("imulog.alignment") or {})
+    _echo_alignment(data["metadata"])
     _echo_heading(data["metadata"].get("imulog.heading") or {}, data["channels"])
     _echo_phase_quality(data["metadata"].get("imulog.timing") or {})
     _echo_flags(data["metadata"])

@@ -354,6 +354,28 @@ def alignment_streams(
     return streams
 
 
+CLUSTER_TOPICS = ("/derived/vicon/cluster_pose", "/derived/vicon/angular_velocity")
+
+
+def renamed(streams: list, suffix: str) -> list:
+    """The cluster channels of one IMU's alignment under their per-IMU topics (``/derived/vicon/cluster_pose`` +
+    ``suffix``, e.g. ``/left_foot``); the other streams, already per IMU, unchanged."""
+    for stream in streams:
+        if suffix and stream.topic in CLUSTER_TOPICS:
+            stream.topic = f"{stream.topic}{suffix}"
+    return streams
+
+
+def alignment_result(trial, name: str, streams: list, record: dict):
+    """The step's result for IMU ``name`` aligned alone (on markers or on a pose channel): the records and topics
+    of :func:`imulog.steps.common.alignment_writes`, the one rule of every alignment path."""
+    from imulog.steps.base import StepResult
+    from imulog.steps.common import alignment_writes
+
+    records, suffix = alignment_writes(trial.topics(), trial.metadata, name, record)
+    return StepResult(streams=renamed(streams, suffix), metadata=records)
+
+
 def _jsonable(value):
     """Numpy scalars and tuples in the record as plain JSON types; NaN as None."""
     if isinstance(value, dict):
@@ -452,7 +474,7 @@ def run_align(
             resample,
             acc=imu_stream.acc,
         )
-        return StepResult(streams=streams, metadata={"imulog.alignment": record})
+        return alignment_result(trial, name, streams, record)
 
     return run_step(
         path,

@@ -16,6 +16,7 @@ from imulog.process import alignment as al
 from imulog.process.alignment_cluster import pose_kinematics
 from imulog.steps.align import (
     _jsonable,
+    alignment_result,
     alignment_streams,
     imu_span,
     orientation_at,
@@ -170,7 +171,7 @@ def run_align_pose(
             acc_global,
             resample,
         )
-        return StepResult(streams=streams, metadata={"imulog.alignment": record})
+        return alignment_result(trial, name, streams, record)
 
     return run_step(
         path,

@@ -135,6 +135,38 @@ def alignment_record(metadata: Mapping[str, Mapping[str, Any]], imu_topic: str) 
     return "imulog.alignment"
 
 
+def alignment_writes(
+    topics: list[str], metadata: Mapping[str, Mapping[str, Any]], name: str, record: dict[str, Any]
+) -> tuple[dict[str, dict[str, Any]], str]:
+    """What an alignment of IMU ``name`` writes, whichever path made it (markers, a rigid body's poses, a whole
+    setup): ``(records, suffix)``. A trial with one IMU: ``imulog.alignment`` and no suffix (as always). A trial with
+    several: ``imulog.alignment.{name}``, plus ``imulog.alignment`` when it is absent, names no IMU or is this IMU's
+    (the trial's main record stays the first IMU aligned, or a setup's primary), and the suffix ``/{name}`` for the
+    cluster channels (``/derived/vicon/cluster_pose/{name}``), so aligning IMUs one at a time never replaces
+    another IMU's record or cluster."""
+    if len(imu_names(topics)) <= 1:
+        return {"imulog.alignment": record}, ""
+    records = {f"imulog.alignment.{name}": record}
+    if _owner(metadata.get("imulog.alignment")) in (None, name):
+        records["imulog.alignment"] = record
+    return records, f"/{name}"
+
+
+def alignment_records(metadata: Mapping[str, Mapping[str, Any]]) -> dict[str, dict[str, Any]]:
+    """IMU name -> its alignment record, for every IMU the trial's records align: ``imulog.alignment.{imu}``, and
+    ``imulog.alignment`` for the IMU it names when that one has no record of its own (a trial with one IMU, an
+    older archive)."""
+    out: dict[str, dict[str, Any]] = {}
+    for key, record in metadata.items():
+        if key.startswith("imulog.alignment.") and isinstance(record, Mapping) and "offset_ns" in record:
+            out[key[len("imulog.alignment.") :]] = dict(record)
+    main = metadata.get("imulog.alignment")
+    owner = _owner(main)
+    if main and "offset_ns" in main and owner not in out:
+        out[owner or "?"] = dict(main)
+    return out
+
+
 def error_line(path: Any, exc: BaseException) -> str:
     """``"PATH: message"`` for a step's error, without repeating the path when the message starts with it
     (archive errors already name their file)."""

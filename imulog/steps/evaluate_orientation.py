@@ -92,7 +92,7 @@ def run_evaluate_orientation(path, imu: str | None = None, force: bool = False):
     from imulog.archive import TrialReader
     from imulog.steps.align import require_alignment
     from imulog.steps.base import run_record_step
-    from imulog.steps.common import alignment_note, pick_imu, record_for
+    from imulog.steps.common import alignment_note, alignment_record, pick_imu, record_for
 
     with TrialReader(path) as trial:
         topics = trial.topics()
@@ -165,7 +165,7 @@ def run_evaluate_orientation(path, imu: str | None = None, force: bool = False):
         algorithm="imulog.evaluation.orientation",
         params={"imu": name, "reference": pose_topic, "imu_frame_aligned": declared},
         inputs=inputs,
-        metadata_inputs=("imulog.alignment",),
+        metadata_inputs=(alignment_record(metadata, f"/imu/{name}"),),  # this IMU's record, not the main one
         force=force,
     )
 
