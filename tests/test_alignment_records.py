@@ -144,3 +144,31 @@ def test_the_rule_for_one_imu_several_and_older_archives():
     assert alignment_for({**older, "imulog.alignment.b": rec_b}, "/imu/b") == rec_b
     # re-aligning the main IMU updates both of its records
     assert set(alignment_writes(three, older, "a", rec_a)[0]) == {"imulog.alignment.a", "imulog.alignment"}
+
+
+def _t_ns(path) -> np.ndarray:
+    import csv
+
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    return np.array([int(r[rows[0].index("t_ns")]) for r in rows[1:]], dtype=np.int64)
+
+
+def test_exports_put_each_imu_on_its_own_clock_and_name_the_command_for_the_others(bodies, tmp_path):
+    path, _ = bodies
+    run("process", "align", path, "--imu", "upper_arm", "--poses", "upper_arm_body")
+    run("process", "align", path, "--imu", "forearm", "--poses", "forearm_body")
+    run("export", path, "-t", "/imu/forearm", "-o", tmp_path / "ref.csv", "--clock", "reference")
+    run("export", path, "-t", "/imu/forearm", "-o", tmp_path / "dev.csv", "--clock", "device", "--imu", "forearm")
+    with TrialReader(path) as t:
+        t_dev = t.read("/imu/forearm").t_ns
+        own, other = t.metadata["imulog.alignment.forearm"], t.metadata["imulog.alignment"]
+    shift = _t_ns(tmp_path / "ref.csv") - _t_ns(tmp_path / "dev.csv")
+    assert np.max(np.abs(shift - (device_to_reference(t_dev, own) - t_dev))) <= 1  # the forearm's own clock
+    assert np.max(np.abs(shift - (device_to_reference(t_dev, other) - t_dev))) > 10_000  # not the upper arm's
+    # the trunk has no alignment: the error names the command that aligns it on a rigid body (one IMU at a time)
+    result = CliRunner().invoke(
+        cli, ["export", str(path), "-t", "/imu/trunk", "-o", str(tmp_path / "t.csv"), "--clock", "reference"]
+    )
+    assert result.exit_code == 1 and not (tmp_path / "t.csv").exists()
+    assert f"run `imulog process align {path} --imu trunk --poses BODY (one of " in result.output, result.output

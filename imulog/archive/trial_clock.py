@@ -106,7 +106,7 @@ class TrialClock:
             if alignment is None:
                 raise ClockError(
                     f"{self.path}: {topic} is on the device clock of IMU {src!r} and the trial has no "
-                    f"imulog.alignment for it: run `imulog process align {self.path}` first (or export --clock device)"
+                    f"imulog.alignment for it: run `{self._align_command(src)}` first (or export --clock device)"
                 )
             return device_to_reference(t, alignment)
         if src == self.imu:
@@ -125,6 +125,15 @@ class TrialClock:
             )
             return t
         return reference_to_device(t, target)
+
+    def _align_command(self, imu: str) -> str:
+        """The command that aligns ``imu``: the whole setup on markers; on a rigid body's poses (no markers) one IMU
+        at a time, so it names the IMU and the pose channel (BODY when there are several to choose from)."""
+        poses = [t.split("/", 2)[2] for t in self.channel_meta if t.startswith("/poses/")]
+        if not poses or any(t.startswith("/markers/") for t in self.channel_meta):
+            return f"imulog process align {self.path}"
+        body = poses[0] if len(poses) == 1 else f"BODY (one of {', '.join(poses)})"
+        return f"imulog process align {self.path} --imu {imu} --poses {body}"
 
     def record(self) -> dict[str, str]:
         """The clock's description, as string metadata for exported files."""

@@ -239,11 +239,11 @@ def _echo_phase_quality(timing: dict) -> None:
 def _echo_alignment(metadata: dict) -> None:
     """The IMU-to-Vicon alignment: offset and drift with uncertainty, markers, windows, quality flag; with several
     IMUs aligned (together or one at a time), one line per IMU from its own record."""
+    from imulog.archive.alignment_records import alignments_from_metadata
     from imulog.steps.align_summary import alignment_summary, setup_lines, setup_summary
-    from imulog.steps.common import alignment_records
 
     record = dict(metadata.get("imulog.alignment") or {})
-    per_imu = alignment_records(metadata)
+    per_imu = alignments_from_metadata(metadata)
     if len(per_imu) > 1:  # each IMU's own record, current whichever way it was aligned
         record["setup"] = setup_summary(per_imu)
     if not record:

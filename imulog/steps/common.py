@@ -152,21 +152,6 @@ def alignment_writes(
     return records, f"/{name}"
 
 
-def alignment_records(metadata: Mapping[str, Mapping[str, Any]]) -> dict[str, dict[str, Any]]:
-    """IMU name -> its alignment record, for every IMU the trial's records align: ``imulog.alignment.{imu}``, and
-    ``imulog.alignment`` for the IMU it names when that one has no record of its own (a trial with one IMU, an
-    older archive)."""
-    out: dict[str, dict[str, Any]] = {}
-    for key, record in metadata.items():
-        if key.startswith("imulog.alignment.") and isinstance(record, Mapping) and "offset_ns" in record:
-            out[key[len("imulog.alignment.") :]] = dict(record)
-    main = metadata.get("imulog.alignment")
-    owner = _owner(main)
-    if main and "offset_ns" in main and owner not in out:
-        out[owner or "?"] = dict(main)
-    return out
-
-
 def error_line(path: Any, exc: BaseException) -> str:
     """``"PATH: message"`` for a step's error, without repeating the path when the message starts with it
     (archive errors already name their file)."""
