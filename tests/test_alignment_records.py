@@ -172,3 +172,13 @@ def test_exports_put_each_imu_on_its_own_clock_and_name_the_command_for_the_othe
     )
     assert result.exit_code == 1 and not (tmp_path / "t.csv").exists()
     assert f"run `imulog process align {path} --imu trunk --poses BODY (one of " in result.output, result.output
+
+
+def test_aligning_on_poses_without_an_imu_says_how_to_run_it(bodies):
+    path, _ = bodies
+    result = CliRunner().invoke(cli, ["process", "align", str(path)])
+    assert result.exit_code == 1 and len(result.output.strip().splitlines()) == 1
+    assert "(the trial has 3: upper_arm, forearm, trunk; pose channels: upper_arm_body, forearm_body, trunk_body)" in (
+        result.output
+    )
+    assert f"run `imulog process align {path} --imu NAME --poses BODY` for each" in result.output

@@ -162,9 +162,9 @@ def process_align(
         on_poses = aligns_on_poses(topics, markers, poses)
         if on_poses:
             if len(imus) != 1 and n_imus > 1:
-                raise click.ClickException(
-                    f"{trial}: aligning on a rigid body's poses takes one IMU: choose it with --imu (the trial has {n_imus})"
-                )
+                from imulog.steps.align_pose import one_imu_at_a_time
+
+                raise click.ClickException(f"{trial}: {one_imu_at_a_time(topics).replace('TRIAL', str(trial))}")
             if names:
                 raise click.ClickException(f"{trial}: --cluster-markers names markers; this alignment is on poses")
         if names and len(imus) != 1 and n_imus > 1:
