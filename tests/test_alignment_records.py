@@ -83,7 +83,7 @@ def test_imus_aligned_one_at_a_time_on_poses_keep_their_own_records(bodies):
 
 
 def test_a_second_imus_orientation_evaluation_reads_and_hashes_its_own_record(bodies):
-    path, _ = bodies
+    path, sim = bodies
     run("process", "align", path, "--imu", "upper_arm", "--poses", "upper_arm_body")
     run("process", "align", path, "--imu", "forearm", "--poses", "forearm_body")
     run("process", "orientation", path, "--imu", "upper_arm")
@@ -99,6 +99,24 @@ def test_a_second_imus_orientation_evaluation_reads_and_hashes_its_own_record(bo
     assert meta["imulog.orientation_evaluation.forearm"]["alignment"]["offset_ns"] == own["offset_ns"]
     assert meta["imulog.orientation_evaluation.forearm"]["reference"] == "/poses/forearm_body"
     assert meta["imulog.orientation_evaluation.forearm"]["heading_free_rmse_deg"] < 5.0
+    # both bodies relate the two IMUs' headings (the trunk, which barely turns, has no body alignment): each
+    # corrected heading within 2 deg of the truth (median over the trial), on each IMU's own clock
+    out = run("process", "heading", path, "--imu", "upper_arm", "--imu", "forearm")
+    assert "one heading frame for upper_arm, forearm: optical" in out, out
+    with TrialReader(path) as t:
+        for name in ("upper_arm", "forearm"):
+            o = t.read(f"/derived/orientation/{name}")
+            corr = np.asarray(t.metadata["imulog.heading"]["imus"][name]["correction"], dtype=np.float64)
+            q = quat.multiply(np.broadcast_to(corr, o.values.shape), o.values)
+            t_ref = device_to_reference(o.t_ns, t.metadata[f"imulog.alignment.{name}"])
+            k = np.clip(np.searchsorted(sim.arm.truth.t_ns, t_ref), 0, len(sim.arm.truth.t_ns) - 1)
+            yaw = [
+                np.degrees(np.arctan2(x[:, 1], x[:, 0]))
+                for x in (
+                    quat.rotate(qq, np.array([1.0, 0.0, 0.0])) for qq in (q, sim.arm.truth.q_world_sensor[name][k])
+                )
+            ]
+            assert abs(np.median((yaw[0] - yaw[1] + 180) % 360 - 180)) < 2.0, name
     # re-aligning the forearm (offset only) puts its evaluation out of date, not the upper arm's
     run("process", "align", path, "--imu", "forearm", "--poses", "forearm_body", "--no-drift")
     assert new_runs(path, "evaluate", "--imu", "upper_arm") == []  # up to date: nothing written
