@@ -23,7 +23,7 @@ from imulog.model import PoseStream, SignalStream
 from imulog.process import alignment as al
 from imulog.process.resample import resample_quaternions, resample_signal
 from imulog.steps.align_summary import alignment_summary  # noqa: F401  (imulog.steps.align API)
-from imulog.steps.common import mean_rate_hz, missing_gyroscope, pick_imu
+from imulog.steps.common import alignment_result, mean_rate_hz, missing_gyroscope, pick_imu
 
 # the Vicon-derived and resampled channels are stored as float32 (issue 28; docs/schemas.md: 6e-8 relative, far
 # below the accuracy of a marker cluster or a resampled IMU signal); a copy per stream: attrs become metadata
@@ -352,28 +352,6 @@ def alignment_streams(
                 )
             )
     return streams
-
-
-CLUSTER_TOPICS = ("/derived/vicon/cluster_pose", "/derived/vicon/angular_velocity")
-
-
-def renamed(streams: list, suffix: str) -> list:
-    """The cluster channels of one IMU's alignment under their per-IMU topics (``/derived/vicon/cluster_pose`` +
-    ``suffix``, e.g. ``/left_foot``); the other streams, already per IMU, unchanged."""
-    for stream in streams:
-        if suffix and stream.topic in CLUSTER_TOPICS:
-            stream.topic = f"{stream.topic}{suffix}"
-    return streams
-
-
-def alignment_result(trial, name: str, streams: list, record: dict):
-    """The step's result for IMU ``name`` aligned alone (on markers or on a pose channel): the records and topics
-    of :func:`imulog.steps.common.alignment_writes`, the one rule of every alignment path."""
-    from imulog.steps.base import StepResult
-    from imulog.steps.common import alignment_writes
-
-    records, suffix = alignment_writes(trial.topics(), trial.metadata, name, record)
-    return StepResult(streams=renamed(streams, suffix), metadata=records)
 
 
 def _jsonable(value):

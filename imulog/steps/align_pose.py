@@ -16,7 +16,6 @@ from imulog.process import alignment as al
 from imulog.process.alignment_cluster import pose_kinematics
 from imulog.steps.align import (
     _jsonable,
-    alignment_result,
     alignment_streams,
     imu_span,
     orientation_at,
@@ -24,7 +23,7 @@ from imulog.steps.align import (
     read_derived_pair,
     with_wide_search,
 )
-from imulog.steps.common import mean_rate_hz
+from imulog.steps.common import alignment_result, mean_rate_hz
 
 STEP = "align"
 #: a pose channel with fewer valid (finite) orientations than this fraction is refused: tracking was lost most of

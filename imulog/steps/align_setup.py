@@ -26,10 +26,9 @@ from imulog.steps.align import (
     compute_alignment,
     imu_span,
     params_dict,
-    renamed,
 )
 from imulog.steps.align_summary import setup_summary
-from imulog.steps.common import mean_rate_hz
+from imulog.steps.common import mean_rate_hz, renamed
 
 CLOCK_KEYS = (
     "offset_ns",

@@ -152,6 +152,27 @@ def alignment_writes(
     return records, f"/{name}"
 
 
+CLUSTER_TOPICS = ("/derived/vicon/cluster_pose", "/derived/vicon/angular_velocity")
+
+
+def renamed(streams: list, suffix: str) -> list:
+    """The cluster channels of one IMU's alignment under their per-IMU topics (``/derived/vicon/cluster_pose`` +
+    ``suffix``, e.g. ``/left_foot``); the other streams, already per IMU, unchanged."""
+    for stream in streams:
+        if suffix and stream.topic in CLUSTER_TOPICS:
+            stream.topic = f"{stream.topic}{suffix}"
+    return streams
+
+
+def alignment_result(trial, name: str, streams: list, record: dict):
+    """The step's result for IMU ``name`` aligned alone (on markers or on a pose channel): the records and topics
+    of :func:`imulog.steps.common.alignment_writes`, the one rule of every alignment path."""
+    from imulog.steps.base import StepResult
+
+    records, suffix = alignment_writes(trial.topics(), trial.metadata, name, record)
+    return StepResult(streams=renamed(streams, suffix), metadata=records)
+
+
 def error_line(path: Any, exc: BaseException) -> str:
     """``"PATH: message"`` for a step's error, without repeating the path when the message starts with it
     (archive errors already name their file)."""
