@@ -192,11 +192,25 @@ def test_exports_put_each_imu_on_its_own_clock_and_name_the_command_for_the_othe
     assert f"run `imulog process align {path} --imu trunk --poses BODY (one of " in result.output, result.output
 
 
-def test_aligning_on_poses_without_an_imu_says_how_to_run_it(bodies):
-    path, _ = bodies
-    result = CliRunner().invoke(cli, ["process", "align", str(path)])
-    assert result.exit_code == 1 and len(result.output.strip().splitlines()) == 1
-    assert "(the trial has 3: upper_arm, forearm, trunk; pose channels: upper_arm_body, forearm_body, trunk_body)" in (
-        result.output
-    )
-    assert f"run `imulog process align {path} --imu NAME --poses BODY` for each" in result.output
+def test_several_imus_are_paired_with_their_bodies_by_the_data(tmp_path):
+    """``imulog process align`` on IMUs and rigid bodies whose names say nothing (body_1..3, shuffled): each IMU
+    with its own body, one to one; the trunk, which barely turns, with none, and the step says why."""
+    sim = simulate_setup(seed=0, duration_s=30.0, rigid_bodies=True)
+    names = {"upper_arm": "body_3", "forearm": "body_1", "trunk": "body_2"}
+    for pose, imu in zip(sim.recording.poses, ("upper_arm", "forearm", "trunk"), strict=True):
+        assert pose.topic == f"/poses/{imu}_body"
+        pose.topic = f"/poses/{names[imu]}"
+    path = write_trial(tmp_path / "bodies.mcap", sim.recording, attach_sources=False)
+    out = run("process", "align", path)
+    assert "2 IMUs aligned" in out and "trunk: not aligned (no body aligns with it, 3 tried" in out, out
+    with TrialReader(path) as t:
+        meta, topics = t.metadata, t.topics()
+    for imu in ("upper_arm", "forearm"):
+        rec = meta[f"imulog.alignment.{imu}"]
+        assert rec["reference"] == f"/poses/{names[imu]}" and lag_error_ns(rec, sim, imu) < 1 * MS
+        assert f"/derived/vicon/cluster_pose/{imu}" in topics
+    assert "imulog.alignment.trunk" not in meta and set(meta["imulog.alignment"]["unpaired"]) == {"trunk"}
+    assert meta["imulog.alignment"]["imu"] == "/imu/upper_arm"  # the first IMU paired is the main record
+    assert "unchanged" in run("process", "align", path)  # the same inputs: nothing recomputed
+    info = run("info", path)
+    assert "alignment (2 IMUs on /poses/body_1, /poses/body_3):" in info and "trunk: not aligned" in info

@@ -20,8 +20,8 @@ _D = AlignmentParams()
     "imus",
     multiple=True,
     help="IMU name (channel /imu/NAME), repeatable; default: every IMU of the trial, each paired with its own "
-    "rigid marker cluster. On a rigid body's poses one IMU at a time: --imu NAME --poses BODY for each. Every IMU "
-    "keeps its own record (imulog.alignment.NAME); `imulog info` lists the IMUs.",
+    "rigid marker cluster (on rigid bodies' poses: with its own body). --imu NAME --poses BODY: that IMU on that "
+    "body. Every IMU keeps its own record (imulog.alignment.NAME); `imulog info` lists them.",
 )
 @click.option("--markers", default=None, help="Marker channel /markers/NAME; default: the only one, else 'vicon'.")
 @click.option(
@@ -118,8 +118,10 @@ def process_align(
 
     A trial with an optical rigid body's poses (/poses/NAME: an OptiTrack rigid body, BROAD's optical
     quaternion) and no markers is aligned on the poses: the body's angular velocity comes from its
-    orientations (the body frame is the cluster frame), one IMU at a time (--imu with several); --poses
-    chooses the channel. Poses missing in more than half the samples are refused.
+    orientations (the body frame is the cluster frame). With several IMUs and bodies, every IMU is aligned with
+    every body and they are paired one to one by the data (the summed vector match), whatever their names; --imu
+    NAME --poses BODY aligns one IMU on the body you name. Poses missing in more than half the samples are
+    refused.
 
     In a trial with several IMUs each IMU's alignment is its own record, imulog.alignment.NAME (with
     /derived/vicon/cluster_pose/NAME), whichever way it was aligned: aligning one IMU never replaces another's.
@@ -133,7 +135,8 @@ def process_align(
       imulog process align trial.mcap --cluster-markers Subject:O,Subject:X,Subject:Y
       imulog process align trial.mcap --cluster-markers WRIST        # one marker: its acceleration
       imulog process align broad_trial.mcap                          # BROAD: on /poses/optical
-      imulog process align trial.mcap --imu forearm --poses forearm_body    # several bodies: one IMU each
+      imulog process align optitrack.mcap          # several IMUs and rigid bodies: paired by the data
+      imulog process align trial.mcap --imu forearm --poses forearm_body    # one IMU on the body named
     """
     from imulog.archive.errors import ArchiveError
     from imulog.steps.align import alignment_summary, run_align
@@ -160,18 +163,19 @@ def process_align(
         from imulog.steps.align_pose import aligns_on_poses
 
         on_poses = aligns_on_poses(topics, markers, poses)
-        if on_poses:
-            if len(imus) != 1 and n_imus > 1:
-                from imulog.steps.align_pose import one_imu_at_a_time
-
-                raise click.ClickException(f"{trial}: {one_imu_at_a_time(topics).replace('TRIAL', str(trial))}")
-            if names:
-                raise click.ClickException(f"{trial}: --cluster-markers names markers; this alignment is on poses")
+        if on_poses and names:
+            raise click.ClickException(f"{trial}: --cluster-markers names markers; this alignment is on poses")
         if names and len(imus) != 1 and n_imus > 1:
             raise click.ClickException(
                 f"{trial}: --cluster-markers names the markers of one IMU: choose it with --imu (the trial has {n_imus})"
             )
-        if on_poses:
+        if on_poses and len(imus) != 1 and n_imus > 1:  # several IMUs: each paired with its body by the data
+            from imulog.steps.align_pose_setup import run_align_pose_setup
+
+            outcome = run_align_pose_setup(
+                trial, imus=list(imus) or None, params=params, resample=resample, force=force
+            )
+        elif on_poses:
             from imulog.steps.align_pose import run_align_pose
 
             outcome = run_align_pose(
@@ -188,7 +192,7 @@ def process_align(
                 trial, imu=imus[0] if imus else None, markers=markers, params=params, resample=resample, force=force
             )
         heading = None
-        if len(imus) != 1 and n_imus > 1 and not on_poses:  # oriented IMUs: a common heading frame from the clusters
+        if len(imus) != 1 and n_imus > 1:  # oriented IMUs: a common heading frame from the clusters or bodies
             from imulog.steps.heading import refresh_heading
 
             try:
@@ -197,7 +201,7 @@ def process_align(
                 click.echo(f"heading: not related ({exc})", err=True)
         with TrialReader(trial) as reader:
             rec = reader.metadata.get("imulog.alignment", {})
-            if len(imus) == 1 or n_imus == 1 or on_poses:  # one IMU aligned: its own record, whichever is main
+            if len(imus) == 1 or n_imus == 1:  # one IMU aligned: its own record, whichever is main
                 from imulog.steps.common import alignment_for, imu_names
 
                 one = imus[0] if imus else imu_names(topics)[0]

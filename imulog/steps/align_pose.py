@@ -43,19 +43,6 @@ def aligns_on_poses(topics: list[str], markers: str | None = None, poses: str | 
     return poses is not None or (markers is None and not has_markers and bool(pose_channels(topics)))
 
 
-def one_imu_at_a_time(topics: list[str]) -> str:
-    """Why an alignment on poses with several IMUs and none named is refused, and how to run it: one IMU per run,
-    each with its body (the trial's IMUs and pose channels named)."""
-    imus = [t.split("/", 2)[2] for t in topics if t.startswith("/imu/")]
-    bodies = [t.split("/", 2)[2] for t in pose_channels(topics)]
-    body = bodies[0] if len(bodies) == 1 else "BODY"
-    return (
-        f"aligning on a rigid body's poses takes one IMU at a time (the trial has {len(imus)}: {', '.join(imus)}; "
-        f"pose channels: {', '.join(bodies)}): run `imulog process align TRIAL --imu NAME --poses {body}` for each; "
-        "each keeps its own record, imulog.alignment.NAME"
-    )
-
-
 def pick_poses(topics: list[str], poses: str | None) -> str:
     """The pose channel to align on: ``/poses/{poses}`` when given, else the trial's only one."""
     names = [t.split("/", 2)[2] for t in pose_channels(topics)]

@@ -251,14 +251,16 @@ def run_align_trial(
     :func:`imulog.steps.align.run_align`."""
     from imulog.archive import TrialReader
     from imulog.steps.align import run_align
-    from imulog.steps.align_pose import aligns_on_poses, one_imu_at_a_time, run_align_pose
+    from imulog.steps.align_pose import aligns_on_poses, run_align_pose
 
     with TrialReader(path) as trial:
         topics = trial.topics()
     n = sum(t.startswith("/imu/") for t in topics)
     if aligns_on_poses(topics, markers, poses):  # a rigid body's poses (docs/alignment.md): one IMU
-        if imu is None and n > 1:
-            raise ValueError(one_imu_at_a_time(topics))
+        if imu is None and n > 1:  # every IMU with its own body, paired by the data
+            from imulog.steps.align_pose_setup import run_align_pose_setup
+
+            return run_align_pose_setup(path, params=params, resample=resample, force=force)
         return run_align_pose(path, imu=imu, poses=poses, params=params, resample=resample, force=force)
     kw = {"markers": markers, "params": params, "resample": resample, "force": force}
     if imu is None and n > 1:

@@ -73,11 +73,9 @@ def setup_lines(record: dict) -> list[str]:
         markers = ",".join(r.get("markers") or []) or (f"rigid body {r['pose']}" if r.get("pose") else "no cluster")
         vm = r.get("vector_match")
         rej = r.get("rejected_markers")
-        # an IMU aligned on its own (--imu) has its own clock fit: its drift is on its line
+        # an IMU aligned on its own (--imu, a rigid body) has its own clock fit: its drift is on its line
         clock = (
-            f"{r['clock']} clock"
-            if r.get("clock")
-            else f"aligned alone, drift {float(r.get('drift_ppm') or 0):.1f} ppm"
+            f"{r['clock']} clock" if r.get("clock") else f"own clock, drift {float(r.get('drift_ppm') or 0):.1f} ppm"
         )
         lines.append(
             f"{name}: offset {'-' if off is None else f'{off:.2f} ms'} ({clock}"
@@ -86,7 +84,9 @@ def setup_lines(record: dict) -> list[str]:
             f"{(', dropped ' + ','.join(rej)) if rej else ''}"
             f"{', no frame alignment' if r.get('frame_alignment') is False else ''}, quality {r.get('quality')}"
         )
-    if not any(r.get("clock") for r in setup.values()):  # every IMU aligned alone: no shared clock to show
+    for name, why in (record.get("unpaired") or {}).items():  # rigid bodies: IMUs no body turns like
+        lines.append(f"{name}: not aligned ({why})")
+    if not any(r.get("clock") for r in setup.values()):  # every IMU on its own clock: no shared clock to show
         return lines
     drift = record.get("drift_ppm")
     unc = record.get("drift_uncertainty_ppm")
