@@ -212,5 +212,18 @@ def test_several_imus_are_paired_with_their_bodies_by_the_data(tmp_path):
     assert "imulog.alignment.trunk" not in meta and set(meta["imulog.alignment"]["unpaired"]) == {"trunk"}
     assert meta["imulog.alignment"]["imu"] == "/imu/upper_arm"  # the first IMU paired is the main record
     assert "unchanged" in run("process", "align", path)  # the same inputs: nothing recomputed
+    # evaluate, no --imu: every IMU aligned on a body has its orientation evaluated, each against its own body;
+    # the trunk, with no body, is named and skipped
+    run("process", "orientation", path)
+    out = run("evaluate", path)
+    assert f"{path}: /imu/upper_arm orientation against /poses/body_3" in out
+    assert f"{path}: /imu/forearm orientation against /poses/body_1" in out
+    assert f"{path}: trunk: not evaluated: no alignment on a rigid body's poses" in out
+    with TrialReader(path) as t:
+        evaluated = {k: v["reference"] for k, v in t.metadata.items() if k.startswith("imulog.orientation_evaluation")}
+    assert evaluated == {
+        "imulog.orientation_evaluation": "/poses/body_3",
+        "imulog.orientation_evaluation.forearm": "/poses/body_1",
+    }
     info = run("info", path)
     assert "alignment (2 IMUs on /poses/body_1, /poses/body_3):" in info and "trunk: not aligned" in info
