@@ -209,7 +209,9 @@ def test_several_imus_are_paired_with_their_bodies_by_the_data(tmp_path):
         rec = meta[f"imulog.alignment.{imu}"]
         assert rec["reference"] == f"/poses/{names[imu]}" and lag_error_ns(rec, sim, imu) < 1 * MS
         assert f"/derived/vicon/cluster_pose/{imu}" in topics
-    assert "imulog.alignment.trunk" not in meta and set(meta["imulog.alignment"]["unpaired"]) == {"trunk"}
+    trunk = meta["imulog.alignment.trunk"]  # no clock: a record that says why (replacing any older alignment)
+    assert trunk["quality"] == "failed" and "offset_ns" not in trunk and "no body aligns" in trunk["quality_reasons"][0]
+    assert set(meta["imulog.alignment"]["unpaired"]) == {"trunk"}
     assert meta["imulog.alignment"]["imu"] == "/imu/upper_arm"  # the first IMU paired is the main record
     assert "unchanged" in run("process", "align", path)  # the same inputs: nothing recomputed
     # evaluate, no --imu: every IMU aligned on a body has its orientation evaluated, each against its own body;
@@ -226,4 +228,18 @@ def test_several_imus_are_paired_with_their_bodies_by_the_data(tmp_path):
         "imulog.orientation_evaluation.forearm": "/poses/body_1",
     }
     info = run("info", path)
-    assert "alignment (2 IMUs on /poses/body_1, /poses/body_3):" in info and "trunk: not aligned" in info
+    assert "alignment (2 of 3 IMUs on /poses/body_1, /poses/body_3):" in info and "trunk: not aligned" in info
+
+
+def test_a_record_without_a_clock_puts_no_imu_on_the_reference_clock():
+    """A setup writes a record without ``offset_ns`` for an IMU it could not align (``quality: failed``); before,
+    the exports' clock map took it as an offset of 0 and put that IMU on the reference clock unaligned."""
+    from imulog.archive.alignment_records import alignments_from_metadata
+
+    meta = {
+        "imulog.alignment": {"imu": "/imu/a", "offset_ns": 5},
+        "imulog.alignment.a": {"imu": "/imu/a", "offset_ns": 5},
+        "imulog.alignment.b": {"imu": "/imu/b", "quality": "failed", "quality_reasons": ["no cluster"]},
+    }
+    assert set(alignments_from_metadata(meta)) == {"a"}
+    assert set(alignments_from_metadata(meta, failed=True)) == {"a", "b"}  # imulog info lists it, with why

@@ -243,14 +243,17 @@ def _echo_alignment(metadata: dict) -> None:
     from imulog.steps.align_summary import alignment_summary, setup_lines, setup_summary
 
     record = dict(metadata.get("imulog.alignment") or {})
-    per_imu = alignments_from_metadata(metadata)
+    per_imu = alignments_from_metadata(metadata, failed=True)
     if len(per_imu) > 1:  # each IMU's own record, current whichever way it was aligned
         record["setup"] = setup_summary(per_imu)
     if not record:
         return
     if record.get("setup"):  # several IMUs aligned: one line per IMU, then the clocks
-        refs = sorted({str(r.get("reference", "?")) for r in per_imu.values()}) or [record.get("reference", "?")]
-        click.echo(f"alignment ({len(record['setup'])} IMUs on {', '.join(refs)}):")
+        aligned = [r for r in per_imu.values() if "offset_ns" in r] or [record]
+        refs = sorted({str(r.get("reference", "?")) for r in aligned})
+        n = len(record["setup"])
+        count = f"{len(aligned)} of {n}" if per_imu and len(aligned) < n else str(n)
+        click.echo(f"alignment ({count} IMUs on {', '.join(refs)}):")
         for line in setup_lines(record):
             click.echo(f"  {line}")
         return

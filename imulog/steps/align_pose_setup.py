@@ -114,6 +114,12 @@ def run_align_pose_setup(
                 written, suffix = alignment_writes(topics, trial.metadata, n, records[n])
                 streams += renamed(candidates[n][pairs[n]][0], suffix)
                 metadata.update({k: v for k, v in written.items() if k != "imulog.alignment"})
+            else:  # no body: a record without a clock replaces any older one, so no stale alignment stays
+                metadata[f"imulog.alignment.{n}"] = {
+                    "imu": f"/imu/{n}",
+                    "quality": "failed",
+                    "quality_reasons": [why[n]],
+                }
         primary = next(n for n in names if n in pairs)
         owner = str((trial.metadata.get("imulog.alignment") or {}).get("imu") or "").removeprefix("/imu/")
         if owner in ("", *pairs) or owner not in all_imus:  # the main record: kept when another IMU owns it

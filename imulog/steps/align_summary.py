@@ -68,6 +68,9 @@ def setup_lines(record: dict) -> list[str]:
     setup = record.get("setup") or {}
     lines = []
     for name, r in setup.items():
+        if r.get("quality") == "failed":  # an IMU the setup could not align: why, and no clock
+            lines.append(f"{name}: not aligned ({r.get('why') or 'failed'})")
+            continue
         off = r.get("offset_ms")
         own = r.get("own_offset_ms")
         markers = ",".join(r.get("markers") or []) or (f"rigid body {r['pose']}" if r.get("pose") else "no cluster")
@@ -85,7 +88,8 @@ def setup_lines(record: dict) -> list[str]:
             f"{', no frame alignment' if r.get('frame_alignment') is False else ''}, quality {r.get('quality')}"
         )
     for name, why in (record.get("unpaired") or {}).items():  # rigid bodies: IMUs no body turns like
-        lines.append(f"{name}: not aligned ({why})")
+        if name not in setup:
+            lines.append(f"{name}: not aligned ({why})")
     if not any(r.get("clock") for r in setup.values()):  # every IMU on its own clock: no shared clock to show
         return lines
     drift = record.get("drift_ppm")
@@ -120,5 +124,6 @@ def setup_summary(records: dict[str, dict]) -> dict:
             "vector_match": c.get("vector_match"),
             "frame_alignment": r.get("frame_alignment"),
             "quality": r.get("quality"),
+            **({"why": "; ".join(r.get("quality_reasons") or [])} if r.get("quality") == "failed" else {}),
         }
     return out
