@@ -212,6 +212,10 @@ def test_several_imus_are_paired_with_their_bodies_by_the_data(tmp_path):
     trunk = meta["imulog.alignment.trunk"]  # no clock: a record that says why (replacing any older alignment)
     assert trunk["quality"] == "failed" and "offset_ns" not in trunk and "no body aligns" in trunk["quality_reasons"][0]
     assert set(meta["imulog.alignment"]["unpaired"]) == {"trunk"}
+    refused = CliRunner().invoke(
+        cli, ["export", str(path), "-t", "/imu/trunk", "-o", str(tmp_path / "t.csv"), "--clock", "reference"]
+    )
+    assert refused.exit_code == 1 and "which could not be aligned (no body aligns with it" in refused.output
     assert meta["imulog.alignment"]["imu"] == "/imu/upper_arm"  # the first IMU paired is the main record
     assert "unchanged" in run("process", "align", path)  # the same inputs: nothing recomputed
     # evaluate, no --imu: every IMU aligned on a body has its orientation evaluated, each against its own body;

@@ -81,6 +81,7 @@ class TrialClock:
     time_zone_label: str = ""  # imulog.trial["time_zone"] as recorded
     origin_ns: int = 0
     notes: list[str] = field(default_factory=list)
+    failed: dict[str, str] = field(default_factory=dict)  # IMU -> why its alignment failed (a record without a clock)
 
     def source_imu(self, topic: str) -> str | None:
         """IMU whose device clock ``topic`` was written on (None: the reference clock)."""
@@ -102,6 +103,11 @@ class TrialClock:
                 raise ClockError(  # nothing to align on: `process align` would only fail in turn
                     f"{self.path}: --clock reference is an optical system's clock and the trial has none (no "
                     f"/markers/* or /poses/* channel): {topic} has only its device clock; export --clock device"
+                )
+            if alignment is None and src in self.failed:
+                raise ClockError(
+                    f"{self.path}: {topic} is on the device clock of IMU {src!r}, which could not be aligned "
+                    f"({self.failed[src]}): export --clock device, or align it with its markers or body named"
                 )
             if alignment is None:
                 raise ClockError(
@@ -182,6 +188,11 @@ def trial_clock(trial, clock: str = "device", imu: str | None = None) -> TrialCl
         time_zone=tz_name(start) if start is not None else None,
     )
     tc.time_zone_label = str(trial_rec.get("time_zone") or "")
+    tc.failed = {
+        n: "; ".join(r.get("quality_reasons") or []) or "failed"
+        for n, r in alignments_from_metadata(metadata, failed=True).items()
+        if n not in alignments
+    }
     starts = []
     for c in channels:
         if c.derived or c.start_ns is None:
