@@ -215,7 +215,9 @@ def process_align(
     if rec.get("setup") and outcome.step == "align" and (len(imus) != 1):
         from imulog.steps.align_summary import setup_lines
 
-        click.echo(f"{trial}: {prefix}{len(rec['setup'])} IMUs aligned")
+        left = [n for n in rec.get("unpaired") or {} if n not in rec["setup"]]  # rigid bodies: IMUs without one
+        count = f"{len(rec['setup'])} of {len(rec['setup']) + len(left)}" if left else str(len(rec["setup"]))
+        click.echo(f"{trial}: {prefix}{count} IMUs aligned")
         for line in setup_lines(rec):
             click.echo(f"  {line}")
         if heading:
