@@ -241,7 +241,7 @@ def test_each_imu_of_an_arm_trial_finds_its_own_segment_and_a_still_one_fails(tm
         res = runner.invoke(cli, ["process", "align", str(path), "--imu", imu])
         assert res.exit_code == 0, res.output
         with TrialReader(path) as t:
-            rec = t.metadata["imulog.alignment"]
+            rec = t.metadata[f"imulog.alignment.{imu}"]  # each IMU's own record (three IMUs in the trial)
         assert all(m.startswith(f"{imu}_") for m in rec["cluster"]["markers"]) and len(rec["cluster"]["markers"]) == 4
         assert all(m.startswith(f"{other}_") for m in rec["cluster"]["runner_up"]["markers"])
         assert abs(rec["offset_ns"]) < 2 * MS  # one cable-synchronised station
@@ -249,7 +249,9 @@ def test_each_imu_of_an_arm_trial_finds_its_own_segment_and_a_still_one_fails(tm
     assert res.exit_code == 1 and "no marker moves like /imu/trunk" in res.output
     assert len(res.output.strip().splitlines()) == 1
     with TrialReader(path) as t:
-        assert t.metadata["imulog.alignment"]["imu"] == "/imu/upper_arm"  # the failed run wrote nothing
+        assert "imulog.alignment.trunk" not in t.metadata  # the failed run wrote nothing
+        assert t.metadata["imulog.alignment"]["imu"] == "/imu/forearm"  # the first IMU aligned stays the main one
+        assert t.metadata["imulog.alignment.upper_arm"]["imu"] == "/imu/upper_arm"
 
 
 def test_imu_started_minutes_before_the_vicon():

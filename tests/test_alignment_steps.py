@@ -95,7 +95,7 @@ def test_align_short_real_recording_with_foot_markers(shared_data, tmp_path):
     for imu, side, other in (("left_sensor", "L_", "R_"), ("right_sensor", "R_", "L_")):
         out = _ok(runner.invoke(cli, ["process", "align", str(path), "--imu", imu]))
         with TrialReader(path) as t:
-            rec = t.metadata["imulog.alignment"]
+            rec = t.metadata[f"imulog.alignment.{imu}"]  # each foot's own record (two IMUs in the trial)
         chosen = rec["cluster"]["markers"]
         assert len(chosen) >= 3 and all(m.startswith(side) for m in chosen), out
         assert all(m.startswith(other) for m in rec["cluster"]["runner_up"]["markers"])
@@ -111,7 +111,8 @@ def test_align_short_real_recording_with_foot_markers(shared_data, tmp_path):
     svd = ["--cluster-markers", "L_FCC,L_TOE,L_FM5"]
     _ok(runner.invoke(cli, ["process", "align", str(path), "--imu", "left_sensor", *svd]))
     with TrialReader(path) as t:
-        rec = t.metadata["imulog.alignment"]
+        rec = t.metadata["imulog.alignment.left_sensor"]
+        assert t.metadata["imulog.alignment"] == rec  # the first IMU aligned: the trial's main record too
     assert rec["cluster"]["selection"] == "given" and abs(rec["offset_ns"]) < 20_000_000
 
 

@@ -162,3 +162,31 @@ def test_interp_gapped_leaves_gaps_empty():
     out = interp_gapped(t, v, np.array([5, 40, 60, 65, 80]), period_ns=10)[:, 0]
     np.testing.assert_array_equal(np.isnan(out), [False, True, False, False, True])
     np.testing.assert_allclose(out[[0, 2, 3]], [0.5, 3.0, 3.5])
+
+
+def test_analog_channels_of_several_sensors_stay_apart(shared_data, tmp_path):
+    """The real Delsys Trigno export (devices/delsys_trigno, emgio, BSD-3-Clause): two Mini sensors whose EMG
+    channels are both called ``EMG``. Before, the C3D had two analogs labelled ``EMG`` and no descriptions, so a
+    reader could not tell which sensor each came from; now a shared label takes its sensor's name and every
+    analog's DESCRIPTIONS names its source channel. Both C3D readers see the same labels."""
+    trial = tmp_path / "trigno.mcap"
+    src = shared_data / "devices" / "delsys_trigno" / "truncated_trigno_sample.csv"
+    assert CliRunner().invoke(cli, ["convert", str(src), "-o", str(trial)]).exit_code == 0
+    out = tmp_path / "trigno.c3d"
+    result = CliRunner().invoke(
+        cli, ["export", str(trial), "-o", str(out), "--clock", "device", "--imu", "mini_sensor_10"]
+    )
+    assert result.exit_code == 0, result.output
+    analog = ezc3d.c3d(str(out))["parameters"]["ANALOG"]
+    labels = [str(x).strip() for x in analog["LABELS"]["value"]]
+    descriptions = [str(x).strip() for x in analog["DESCRIPTIONS"]["value"]]
+    assert len(set(labels)) == len(labels)
+    assert labels[:2] == ["mini_sensor_10_EMG", "mini_sensor_11_EMG"]
+    assert descriptions[:2] == ["/analog/mini_sensor_10 EMG", "/analog/mini_sensor_11 EMG"]
+    assert descriptions[labels.index("mini_sensor_11_gyr_z")] == "/imu/mini_sensor_11 gyr_z"
+    with open(out, "rb") as f:
+        assert [str(x).strip() for x in c3d.Reader(f).analog_labels] == labels
+    with TrialReader(trial) as t:  # the values under each label are that sensor's
+        emg_11 = t.read("/analog/mini_sensor_11").values[:, 0]
+    column = ezc3d.c3d(str(out))["data"]["analogs"][0, labels.index("mini_sensor_11_EMG")]
+    np.testing.assert_allclose(column[: len(emg_11)], emg_11, rtol=1e-6, atol=1e-9)

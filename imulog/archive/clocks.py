@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from imulog.archive.alignment_records import alignments_from_metadata, imu_name  # noqa: F401  (re-exported)
 from imulog.process.alignment import device_to_reference as _device_to_reference
 
 DEVICE_CLOCK_DERIVED = ("orientation", "acc_global", "static", "orientation_static", "movements", "phases")
@@ -37,25 +38,6 @@ STEP_CLOCK_RECORDS = {"phases": "imulog.timing", "movements": "imulog.timing", "
 def device_to_reference(t_dev_ns: np.ndarray, alignment: Mapping[str, Any]) -> np.ndarray:
     """Map IMU device time stamps (int64 ns) to the reference clock (int64 ns)."""
     return np.asarray(_device_to_reference(np.asarray(t_dev_ns, dtype=np.int64), dict(alignment)), np.int64)
-
-
-def imu_name(topic_or_name: str) -> str:
-    """``/imu/wrist`` or ``wrist`` -> ``wrist``."""
-    return topic_or_name.rsplit("/", 1)[-1] if topic_or_name.startswith("/imu/") else topic_or_name.strip("/")
-
-
-def alignments_from_metadata(metadata: Mapping[str, Mapping[str, Any]]) -> dict[str, dict[str, Any]]:
-    """IMU name -> alignment record, from ``imulog.alignment`` (and ``imulog.alignment.<imu>``) records."""
-    found: dict[str, dict[str, Any]] = {}
-    for key, record in metadata.items():
-        if key != "imulog.alignment" and not key.startswith("imulog.alignment."):
-            continue
-        record = dict(record)
-        name = record.get("imu") or (key.split(".", 2)[2] if key.count(".") >= 2 else "")
-        if not name:
-            continue
-        found[imu_name(str(name))] = record
-    return found
 
 
 def device_imu_of(

@@ -81,6 +81,7 @@ class TrialClock:
     time_zone_label: str = ""  # imulog.trial["time_zone"] as recorded
     origin_ns: int = 0
     notes: list[str] = field(default_factory=list)
+    failed: dict[str, str] = field(default_factory=dict)  # IMU -> why its alignment failed (a record without a clock)
 
     def source_imu(self, topic: str) -> str | None:
         """IMU whose device clock ``topic`` was written on (None: the reference clock)."""
@@ -103,10 +104,15 @@ class TrialClock:
                     f"{self.path}: --clock reference is an optical system's clock and the trial has none (no "
                     f"/markers/* or /poses/* channel): {topic} has only its device clock; export --clock device"
                 )
+            if alignment is None and src in self.failed:
+                raise ClockError(
+                    f"{self.path}: {topic} is on the device clock of IMU {src!r}, which could not be aligned "
+                    f"({self.failed[src]}): export --clock device, or align it with its markers or body named"
+                )
             if alignment is None:
                 raise ClockError(
                     f"{self.path}: {topic} is on the device clock of IMU {src!r} and the trial has no "
-                    f"imulog.alignment for it: run `imulog process align {self.path}` first (or export --clock device)"
+                    f"imulog.alignment for it: run `{self._align_command(src)}` first (or export --clock device)"
                 )
             return device_to_reference(t, alignment)
         if src == self.imu:
@@ -125,6 +131,15 @@ class TrialClock:
             )
             return t
         return reference_to_device(t, target)
+
+    def _align_command(self, imu: str) -> str:
+        """The command that aligns ``imu``: the whole setup on markers; on a rigid body's poses (no markers) one IMU
+        at a time, so it names the IMU and the pose channel (BODY when there are several to choose from)."""
+        poses = [t.split("/", 2)[2] for t in self.channel_meta if t.startswith("/poses/")]
+        if not poses or any(t.startswith("/markers/") for t in self.channel_meta):
+            return f"imulog process align {self.path}"
+        body = poses[0] if len(poses) == 1 else f"BODY (one of {', '.join(poses)})"
+        return f"imulog process align {self.path} --imu {imu} --poses {body}"
 
     def record(self) -> dict[str, str]:
         """The clock's description, as string metadata for exported files."""
@@ -173,6 +188,11 @@ def trial_clock(trial, clock: str = "device", imu: str | None = None) -> TrialCl
         time_zone=tz_name(start) if start is not None else None,
     )
     tc.time_zone_label = str(trial_rec.get("time_zone") or "")
+    tc.failed = {
+        n: "; ".join(r.get("quality_reasons") or []) or "failed"
+        for n, r in alignments_from_metadata(metadata, failed=True).items()
+        if n not in alignments
+    }
     starts = []
     for c in channels:
         if c.derived or c.start_ns is None:

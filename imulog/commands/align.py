@@ -20,7 +20,8 @@ _D = AlignmentParams()
     "imus",
     multiple=True,
     help="IMU name (channel /imu/NAME), repeatable; default: every IMU of the trial, each paired with its own "
-    "rigid marker cluster.",
+    "rigid marker cluster (on rigid bodies' poses: with its own body). --imu NAME --poses BODY: that IMU on that "
+    "body. Every IMU keeps its own record (imulog.alignment.NAME); `imulog info` lists them.",
 )
 @click.option("--markers", default=None, help="Marker channel /markers/NAME; default: the only one, else 'vicon'.")
 @click.option(
@@ -76,7 +77,12 @@ _D = AlignmentParams()
     show_default=True,
     help="Write IMU-derived channels on the Vicon clock and rate under /derived/reference/.",
 )
-@click.option("--json", "as_json", is_flag=True, help="Print the imulog.alignment record as JSON.")
+@click.option(
+    "--json",
+    "as_json",
+    is_flag=True,
+    help="Print the alignment record as JSON (the IMU aligned; a whole setup: imulog.alignment).",
+)
 @click.option("--force", is_flag=True, help="Recompute even when the same parameters are already recorded.")
 def process_align(
     trial: Path,
@@ -112,8 +118,14 @@ def process_align(
 
     A trial with an optical rigid body's poses (/poses/NAME: an OptiTrack rigid body, BROAD's optical
     quaternion) and no markers is aligned on the poses: the body's angular velocity comes from its
-    orientations (the body frame is the cluster frame), one IMU at a time (--imu with several); --poses
-    chooses the channel. Poses missing in more than half the samples are refused.
+    orientations (the body frame is the cluster frame). With several IMUs and bodies, every IMU is aligned with
+    every body and they are paired one to one by the data (the summed vector match), whatever their names; --imu
+    NAME --poses BODY aligns one IMU on the body you name. Poses missing in more than half the samples are
+    refused.
+
+    In a trial with several IMUs each IMU's alignment is its own record, imulog.alignment.NAME (with
+    /derived/vicon/cluster_pose/NAME), whichever way it was aligned: aligning one IMU never replaces another's.
+    imulog.alignment stays the first IMU aligned (or the setup's primary IMU).
 
     \b
     Examples:
@@ -123,6 +135,8 @@ def process_align(
       imulog process align trial.mcap --cluster-markers Subject:O,Subject:X,Subject:Y
       imulog process align trial.mcap --cluster-markers WRIST        # one marker: its acceleration
       imulog process align broad_trial.mcap                          # BROAD: on /poses/optical
+      imulog process align optitrack.mcap          # several IMUs and rigid bodies: paired by the data
+      imulog process align trial.mcap --imu forearm --poses forearm_body    # one IMU on the body named
     """
     from imulog.archive.errors import ArchiveError
     from imulog.steps.align import alignment_summary, run_align
@@ -149,18 +163,19 @@ def process_align(
         from imulog.steps.align_pose import aligns_on_poses
 
         on_poses = aligns_on_poses(topics, markers, poses)
-        if on_poses:
-            if len(imus) != 1 and n_imus > 1:
-                raise click.ClickException(
-                    f"{trial}: aligning on a rigid body's poses takes one IMU: choose it with --imu (the trial has {n_imus})"
-                )
-            if names:
-                raise click.ClickException(f"{trial}: --cluster-markers names markers; this alignment is on poses")
+        if on_poses and names:
+            raise click.ClickException(f"{trial}: --cluster-markers names markers; this alignment is on poses")
         if names and len(imus) != 1 and n_imus > 1:
             raise click.ClickException(
                 f"{trial}: --cluster-markers names the markers of one IMU: choose it with --imu (the trial has {n_imus})"
             )
-        if on_poses:
+        if on_poses and len(imus) != 1 and n_imus > 1:  # several IMUs: each paired with its body by the data
+            from imulog.steps.align_pose_setup import run_align_pose_setup
+
+            outcome = run_align_pose_setup(
+                trial, imus=list(imus) or None, params=params, resample=resample, force=force
+            )
+        elif on_poses:
             from imulog.steps.align_pose import run_align_pose
 
             outcome = run_align_pose(
@@ -177,7 +192,7 @@ def process_align(
                 trial, imu=imus[0] if imus else None, markers=markers, params=params, resample=resample, force=force
             )
         heading = None
-        if len(imus) != 1 and n_imus > 1 and not on_poses:  # oriented IMUs: a common heading frame from the clusters
+        if len(imus) != 1 and n_imus > 1:  # oriented IMUs: a common heading frame from the clusters or bodies
             from imulog.steps.heading import refresh_heading
 
             try:
@@ -186,6 +201,11 @@ def process_align(
                 click.echo(f"heading: not related ({exc})", err=True)
         with TrialReader(trial) as reader:
             rec = reader.metadata.get("imulog.alignment", {})
+            if len(imus) == 1 or n_imus == 1:  # one IMU aligned: its own record, whichever is main
+                from imulog.steps.common import alignment_for, imu_names
+
+                one = imus[0] if imus else imu_names(topics)[0]
+                rec = alignment_for(reader.metadata, f"/imu/{one}") or rec
     except (ArchiveError, ValueError, KeyError, OSError) as exc:
         raise click.ClickException(error_line(trial, exc)) from exc
     if as_json:
@@ -195,7 +215,9 @@ def process_align(
     if rec.get("setup") and outcome.step == "align" and (len(imus) != 1):
         from imulog.steps.align_summary import setup_lines
 
-        click.echo(f"{trial}: {prefix}{len(rec['setup'])} IMUs aligned")
+        left = [n for n in rec.get("unpaired") or {} if n not in rec["setup"]]  # rigid bodies: IMUs without one
+        count = f"{len(rec['setup'])} of {len(rec['setup']) + len(left)}" if left else str(len(rec["setup"]))
+        click.echo(f"{trial}: {prefix}{count} IMUs aligned")
         for line in setup_lines(rec):
             click.echo(f"  {line}")
         if heading:
@@ -211,6 +233,7 @@ def process_align(
         angle_deg = math.degrees(2 * math.acos(min(1.0, abs(float(q[0])))))
         what = "IMU-to-body" if (rec.get("cluster") or {}).get("pose") else "IMU-to-cluster"
         lines.insert(1, f"{what} [{', '.join(f'{float(v):.5f}' for v in q)}] ({angle_deg:.2f} deg)")
-    click.echo(f"{trial}: {prefix}{lines[0]}")
+    who = f" {str(rec.get('imu', '')).removeprefix('/imu/')}" if n_imus > 1 else ""  # which IMU, among several
+    click.echo(f"{trial}:{who} {prefix}{lines[0]}")
     for line in lines[1:]:
         click.echo(f"  {line}")

@@ -84,24 +84,32 @@ def doctor(file: str, verbose: bool, as_json: bool, original: str | None = None)
 @click.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False))
 @click.option(
-    "-o", "--output", required=True, type=click.Path(), help="OUT.parquet, .csv, .sto, .c3d, or a folder for --to bids"
+    "-o",
+    "--output",
+    required=True,
+    type=click.Path(),
+    help="OUT.parquet, .csv, .sto, .trc, .c3d, or a folder for --to bids",
 )
 @click.option(
     "--to",
     "target",
-    type=click.Choice(["parquet", "csv", "sto", "bids", "c3d"]),
+    type=click.Choice(["parquet", "csv", "sto", "trc", "bids", "c3d"]),
     default=None,
     help="what to write (default: from OUTPUT's suffix; no suffix means bids)",
 )
 @click.option(
-    "--topic", "-t", "topics", multiple=True, help="channel for parquet/csv, e.g. /imu/wrist (one per output file)"
+    "--topic",
+    "-t",
+    "topics",
+    multiple=True,
+    help="channel for parquet/csv, e.g. /imu/wrist (one per output file); trc: the marker channel (default: the only one)",
 )
 @click.option(
     "--clock",
     type=click.Choice(["device", "reference"]),
     default=None,
     help="device: every channel on the IMU's clock; reference: on the Vicon clock through imulog.alignment "
-    "(default: device; c3d: reference)",
+    "(default: device; c3d and trc: reference)",
 )
 @click.option("--imu", default=None, help="which IMU's device clock --clock device means (default: the only one)")
 @click.option("--start-ns", type=int, default=None, help="parquet/csv: first stored time stamp to include (ns)")
@@ -151,6 +159,7 @@ def export(
     sto          OpenSense orientation file, every IMU: /derived/orientation/* or the device's
                  own /orientation/* (w,x,y,z per IMU; says when headings are not shared)
     bids         a BIDS-motion folder: *_motion.tsv, *_channels.tsv, *_motion.json, *_events.tsv
+    trc          OpenSim marker file: one marker channel, mm, the trial's marker names
     c3d          markers (mm), IMU and analog channels as analogs, phases as events
 
     Every export puts all channels on one clock; --clock reference needs an alignment
@@ -165,11 +174,12 @@ def export(
       imulog export xsens.mcap -o xsens.sto --source device --name 00B421AF=pelvis_imu
       imulog export trial.mcap --to bids -o bids/
       imulog export trial.mcap -o trial.c3d
+      imulog export trial.mcap -o markers.trc                       # OpenSim's marker file
     """
     from imulog.export import ClockError, ExportError
 
     suffix = Path(output).suffix.lower().lstrip(".")
-    target = target or (suffix if suffix in ("parquet", "csv", "sto", "c3d") else "bids" if not suffix else None)
+    target = target or (suffix if suffix in ("parquet", "csv", "sto", "trc", "c3d") else "bids" if not suffix else None)
     if target is None:
         raise click.BadParameter(f"{output}: cannot tell the format from .{suffix}; give --to", param_hint="--to")
     if start_ns is not None and end_ns is not None and end_ns <= start_ns:
@@ -178,7 +188,7 @@ def export(
         )
     if target in ("parquet", "csv") and not topics:
         raise click.UsageError(f"--to {target} exports one channel: give --topic, {_channel_choice(file)}")
-    if topics and target not in ("parquet", "csv"):
+    if topics and target not in ("parquet", "csv", "trc"):
         raise click.UsageError(f"--to {target} takes no --topic (it writes every channel it supports): {topics[0]}")
     if len(topics) > 1:
         raise click.UsageError(
@@ -213,6 +223,10 @@ def export(
                     rate_hz=rate,
                     source=orientation_source,
                 )
+            elif target == "trc":
+                from imulog.export.trc import export_trc
+
+                result = export_trc(trial, output, topic=topic, clock=clock or "reference", imu=imu)
             elif target == "bids":
                 from imulog.export.bids import export_bids
 

@@ -277,7 +277,13 @@ def _trajectory_imus(trial: Path, imus: tuple[str, ...], methods: list[str]) -> 
     help="Per stride and foot (a walking trial; default when the task or the gyroscope says walking) or over "
     "the trajectory step's windows (default otherwise).",
 )
-@click.option("--imu", "imus", multiple=True, help="With --strides: the foot IMUs (repeatable; default: every one).")
+@click.option(
+    "--imu",
+    "imus",
+    multiple=True,
+    help="Which IMUs (repeatable; default: every one with what is evaluated: trajectories, strides of a foot, or an "
+    "orientation and an alignment on a rigid body's poses).",
+)
 @click.option(
     "--what",
     type=click.Choice(["auto", "orientation", "trajectory"]),
@@ -357,15 +363,27 @@ def evaluate(
             return
     except (ArchiveError, ValueError, KeyError, OSError) as exc:
         raise click.ClickException(error_line(trial, exc)) from None
-    if record.get("kind") == "orientation":  # against a rigid body's poses (docs/alignment.md)
+    if record.get("kind") in ("orientation", "orientations"):  # against rigid bodies' poses (docs/alignment.md)
         from imulog.steps.evaluate_orientation import orientation_lines
 
         if as_json:
             click.echo(json.dumps(record, indent=1, default=float))
             return
-        click.echo(f"{trial}: {record['imu']} orientation against {record['reference']}")
-        for line in orientation_lines(record):
-            click.echo(f"  {line}")
+        several = record["imus"] if record["kind"] == "orientations" else {"": record}
+        for rec in several.values():
+            if "failed" in rec:
+                continue
+            click.echo(f"{trial}: {rec['imu']} orientation against {rec['reference']}")
+            for line in orientation_lines(rec):
+                click.echo(f"  {line}")
+        for imu, why in (record.get("skipped") or {}).items():
+            click.echo(f"{trial}: {imu}: not evaluated: {why}")
+        failed = {imu: rec["failed"] for imu, rec in several.items() if "failed" in rec}
+        if failed:
+            raise click.ClickException(
+                f"{trial}: {len(failed)} of {len(several)} IMUs not evaluated: "
+                + "; ".join(f"{imu}: {why.removeprefix(f'{trial}: ')}" for imu, why in failed.items())
+            )
         return
     from imulog.archive import TrialReader
     from imulog.steps.common import record_of

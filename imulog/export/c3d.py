@@ -47,8 +47,22 @@ class C3dContent:
     analog_rate_hz: float = 0.0
     analog_labels: list[str] = field(default_factory=list)
     analog_units: list[str] = field(default_factory=list)
+    analog_descriptions: list[str] = field(default_factory=list)  # the source channel of each: "/imu/NAME acc_x"
     analogs: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (F * k, A)
     events: list[tuple[float, str, str]] = field(default_factory=list)  # (time s from frame 1, label, description)
+
+
+def unique_labels(labels: list[str], descriptions: list[str]) -> list[str]:
+    """Analog labels a reader can tell apart: a label several sensors share (two Delsys sensors' ``EMG``) gets its
+    source's name in front (``mini_sensor_10_EMG``, from the description ``/analog/mini_sensor_10 EMG``); unique
+    labels stay as the source named them."""
+    counts: dict[str, int] = {}
+    for label in labels:
+        counts[label] = counts.get(label, 0) + 1
+    return [
+        f"{d.split(' ', 1)[0].rsplit('/', 1)[-1]}_{label}" if counts[label] > 1 else label
+        for label, d in zip(labels, descriptions, strict=True)
+    ]
 
 
 def _ezc3d():
@@ -83,6 +97,8 @@ def build_c3d(content: C3dContent):
         analog["RATE"]["value"] = [content.analog_rate_hz]
         analog["LABELS"]["value"] = list(content.analog_labels)
         analog["UNITS"]["value"] = list(content.analog_units)
+        if content.analog_descriptions:
+            analog["DESCRIPTIONS"]["value"] = list(content.analog_descriptions)
         analog["SCALE"]["value"] = [1.0] * a
         analog["OFFSET"]["value"] = [0] * a
         analog["GEN_SCALE"]["value"] = [1.0]
@@ -230,6 +246,7 @@ def trial_c3d(trial, *, clock: str = "reference", imu: str | None = None, includ
             units = stream.units
             units = list(units) if isinstance(units, list | tuple) else [str(units)] * len(stream.channel_names)
             content.analog_labels += list(stream.channel_names)
+            content.analog_descriptions += [f"{topic} {c}" for c in stream.channel_names]
             content.analog_units += units
             columns.append(take(stream.values))
             continue
@@ -239,7 +256,9 @@ def trial_c3d(trial, *, clock: str = "reference", imu: str | None = None, includ
                 continue
             columns.append(take(arr))
             content.analog_labels += [f"{name}_{group}_{a}" for a in "xyz"]
+            content.analog_descriptions += [f"{topic} {group}_{a}" for a in "xyz"]
             content.analog_units += [unit] * 3
+    content.analog_labels = unique_labels(content.analog_labels, content.analog_descriptions)
     if columns:
         content.analogs = np.concatenate(columns, axis=1)
         content.analog_rate_hz = grid.analog_rate_hz

@@ -11,6 +11,10 @@ Built on the two-segment arm (:mod:`imulog.simulate.arm`, with the trunk IMU: ``
   (beside the joint, like a malleolus marker beside a foot cluster): its distances to the upper-arm markers
   change by a few mm only, but it turns with the forearm.
 
+With ``rigid_bodies``, an optical system that tracks rigid bodies instead (OptiTrack, Qualisys 6DOF): the markers
+are replaced by one pose channel per IMU, ``/poses/{imu}_body``, the body frame being the sensor's turned by a fixed
+rotation (``SetupTrial.imu_to_body``, w,x,y,z, 15-35 deg), its origin the IMU's position, on the reference clock.
+
 Truth: ``SetupTrial.alignment`` (offset_ns, drift_ppm, t0_ns of the station clock) and the arm truth
 (``rotation_imu_to_cluster`` per segment). Positions in m, times in int64 ns.
 """
@@ -21,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imulog.model import ImuStream, MarkerStream
+from imulog.model import ImuStream, MarkerStream, PoseStream
 from imulog.simulate.arm import ArmTrial, simulate_arm
 
 DISTRACTOR = "ELB_FA"
@@ -33,6 +37,7 @@ class SetupTrial:
 
     arm: ArmTrial
     alignment: dict
+    imu_to_body: dict[str, list[float]] | None = None  # with rigid_bodies: IMU-to-body rotation per IMU (w,x,y,z)
 
     @property
     def recording(self):
@@ -59,9 +64,11 @@ def simulate_setup(
     soft_tissue_mm: float = 1.0,
     distractor_mm: float = 12.0,
     frequency_hz: tuple[float, float] = (0.3, 1.2),
+    rigid_bodies: bool = False,
 ) -> SetupTrial:
     """Simulate the setup (see the module docstring); ``frequency_hz`` the range of the joints' movement
-    frequencies (livelier than the arm trial's default 0.05-0.25 Hz, so that 5-s windows hold a lag)."""
+    frequencies (livelier than the arm trial's default 0.05-0.25 Hz, so that 5-s windows hold a lag);
+    ``rigid_bodies``: one rigid body's poses per IMU instead of the markers."""
     arm = simulate_arm(seed=seed, duration_s=duration_s, trunk_imu=True, frequency_hz=frequency_hz)
     rec = arm.recording
     mk = rec.markers[0]
@@ -94,4 +101,14 @@ def simulate_setup(
     rec.imus = imus
     rec.markers = [markers]
     truth = {"offset_ns": off_ns, "drift_ppm": float(drift_ppm), "t0_ns": t0}
-    return SetupTrial(arm, truth)
+    if not rigid_bodies:
+        return SetupTrial(arm, truth)
+    rec.markers, rec.poses, turns = [], [], {}
+    for name, q_s2w in tr.q_world_sensor.items():
+        axis = rng.normal(size=3)
+        angle = np.radians(rng.uniform(15.0, 35.0))
+        q_s2b = np.array([np.cos(angle / 2), *(np.sin(angle / 2) * axis / np.linalg.norm(axis))])
+        q_b2w = quat.multiply(q_s2w, np.broadcast_to(quat.conjugate(q_s2b), q_s2w.shape))
+        rec.poses.append(PoseStream(f"/poses/{name}_body", tr.t_ns, tr.imu_position_m[name], q_b2w))
+        turns[name] = [float(v) for v in q_s2b]
+    return SetupTrial(arm, truth, turns)

@@ -23,7 +23,7 @@ from imulog.model import PoseStream, SignalStream
 from imulog.process import alignment as al
 from imulog.process.resample import resample_quaternions, resample_signal
 from imulog.steps.align_summary import alignment_summary  # noqa: F401  (imulog.steps.align API)
-from imulog.steps.common import mean_rate_hz, missing_gyroscope, pick_imu
+from imulog.steps.common import alignment_result, mean_rate_hz, missing_gyroscope, pick_imu
 
 # the Vicon-derived and resampled channels are stored as float32 (issue 28; docs/schemas.md: 6e-8 relative, far
 # below the accuracy of a marker cluster or a resampled IMU signal); a copy per stream: attrs become metadata
@@ -452,7 +452,7 @@ def run_align(
             resample,
             acc=imu_stream.acc,
         )
-        return StepResult(streams=streams, metadata={"imulog.alignment": record})
+        return alignment_result(trial, name, streams, record)
 
     return run_step(
         path,

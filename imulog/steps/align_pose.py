@@ -23,7 +23,7 @@ from imulog.steps.align import (
     read_derived_pair,
     with_wide_search,
 )
-from imulog.steps.common import mean_rate_hz
+from imulog.steps.common import alignment_result, mean_rate_hz
 
 STEP = "align"
 #: a pose channel with fewer valid (finite) orientations than this fraction is refused: tracking was lost most of
@@ -170,7 +170,7 @@ def run_align_pose(
             acc_global,
             resample,
         )
-        return StepResult(streams=streams, metadata={"imulog.alignment": record})
+        return alignment_result(trial, name, streams, record)
 
     return run_step(
         path,

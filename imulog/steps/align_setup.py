@@ -19,8 +19,16 @@ import numpy as np
 
 from imulog.process import alignment as al
 from imulog.process.resample import resample_quaternions
-from imulog.steps.align import STEP, _jsonable, alignment_streams, compute_alignment, imu_span, params_dict
-from imulog.steps.common import mean_rate_hz
+from imulog.steps.align import (
+    STEP,
+    _jsonable,
+    alignment_streams,
+    compute_alignment,
+    imu_span,
+    params_dict,
+)
+from imulog.steps.align_summary import setup_summary
+from imulog.steps.common import mean_rate_hz, renamed
 
 CLOCK_KEYS = (
     "offset_ns",
@@ -98,7 +106,7 @@ def compute_setup_alignment(
                     clock="own", clock_group=list(group), frame_alignment=rec.get("rotation_imu_to_cluster") is not None
                 )
                 records[name] = rec
-                streams += [_renamed(x, name) for x in s]
+                streams += renamed(s, f"/{name}")
                 continue
             clock_fields = {k: clock[k] for k in CLOCK_KEYS if k in clock}
             if name in matches:
@@ -152,35 +160,6 @@ def compute_setup_alignment(
                 suffix=f"/{name}",
             )
     return streams, records, summary
-
-
-def _renamed(stream, name: str):
-    """A single-IMU stream under the per-IMU topic (``/derived/vicon/cluster_pose`` -> ``.../{name}``)."""
-    if stream.topic in ("/derived/vicon/cluster_pose", "/derived/vicon/angular_velocity"):
-        stream.topic = f"{stream.topic}/{name}"
-    return stream
-
-
-def setup_summary(records: dict[str, dict]) -> dict:
-    """Per IMU: offset (ms), drift, clock, markers, vector match, quality: the ``setup`` table."""
-    out = {}
-    for name, r in records.items():
-        c = r.get("cluster") or {}
-        out[name] = {
-            "offset_ms": None if r.get("offset_ns") is None else round(int(r["offset_ns"]) / 1e6, 3),
-            "own_offset_ms": None
-            if not (r.get("own_clock") or {}).get("offset_ns")
-            else round(int(r["own_clock"]["offset_ns"]) / 1e6, 3),
-            "drift_ppm": r.get("drift_ppm"),
-            "drift_estimated": r.get("drift_estimated"),
-            "clock": r.get("clock"),
-            "markers": c.get("markers"),
-            "rejected_markers": c.get("rejected_markers"),
-            "vector_match": c.get("vector_match"),
-            "frame_alignment": r.get("frame_alignment"),
-            "quality": r.get("quality"),
-        }
-    return out
 
 
 def run_align_setup(
@@ -278,8 +257,10 @@ def run_align_trial(
         topics = trial.topics()
     n = sum(t.startswith("/imu/") for t in topics)
     if aligns_on_poses(topics, markers, poses):  # a rigid body's poses (docs/alignment.md): one IMU
-        if imu is None and n > 1:
-            raise ValueError(f"aligning on a rigid body's poses takes one IMU: name it (the trial has {n})")
+        if imu is None and n > 1:  # every IMU with its own body, paired by the data
+            from imulog.steps.align_pose_setup import run_align_pose_setup
+
+            return run_align_pose_setup(path, params=params, resample=resample, force=force)
         return run_align_pose(path, imu=imu, poses=poses, params=params, resample=resample, force=force)
     kw = {"markers": markers, "params": params, "resample": resample, "force": force}
     if imu is None and n > 1:

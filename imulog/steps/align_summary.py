@@ -68,18 +68,30 @@ def setup_lines(record: dict) -> list[str]:
     setup = record.get("setup") or {}
     lines = []
     for name, r in setup.items():
+        if r.get("quality") == "failed":  # an IMU the setup could not align: why, and no clock
+            lines.append(f"{name}: not aligned ({r.get('why') or 'failed'})")
+            continue
         off = r.get("offset_ms")
         own = r.get("own_offset_ms")
-        markers = ",".join(r.get("markers") or []) or "no cluster"
+        markers = ",".join(r.get("markers") or []) or (f"rigid body {r['pose']}" if r.get("pose") else "no cluster")
         vm = r.get("vector_match")
         rej = r.get("rejected_markers")
+        # an IMU aligned on its own (--imu, a rigid body) has its own clock fit: its drift is on its line
+        clock = (
+            f"{r['clock']} clock" if r.get("clock") else f"own clock, drift {float(r.get('drift_ppm') or 0):.1f} ppm"
+        )
         lines.append(
-            f"{name}: offset {'-' if off is None else f'{off:.2f} ms'} ({r.get('clock') or '-'} clock"
+            f"{name}: offset {'-' if off is None else f'{off:.2f} ms'} ({clock}"
             f"{'' if own is None else f', own windows {own:.2f} ms'}), {markers}"
             f"{'' if vm is None else f' (vector match {vm:.3f})'}"
             f"{(', dropped ' + ','.join(rej)) if rej else ''}"
-            f"{'' if r.get('frame_alignment') else ', no frame alignment'}, quality {r.get('quality')}"
+            f"{', no frame alignment' if r.get('frame_alignment') is False else ''}, quality {r.get('quality')}"
         )
+    for name, why in (record.get("unpaired") or {}).items():  # rigid bodies: IMUs no body turns like
+        if name not in setup:
+            lines.append(f"{name}: not aligned ({why})")
+    if not any(r.get("clock") for r in setup.values()):  # every IMU on its own clock: no shared clock to show
+        return lines
     drift = record.get("drift_ppm")
     unc = record.get("drift_uncertainty_ppm")
     note = record.get("drift_note")
@@ -91,3 +103,27 @@ def setup_lines(record: dict) -> list[str]:
     if groups:
         lines.append("recordings (one clock each): " + "; ".join(", ".join(g) for g in groups))
     return lines
+
+
+def setup_summary(records: dict[str, dict]) -> dict:
+    """Per IMU: offset (ms), drift, clock, markers, vector match, quality: the ``setup`` table."""
+    out = {}
+    for name, r in records.items():
+        c = r.get("cluster") or {}
+        out[name] = {
+            "offset_ms": None if r.get("offset_ns") is None else round(int(r["offset_ns"]) / 1e6, 3),
+            "own_offset_ms": None
+            if not (r.get("own_clock") or {}).get("offset_ns")
+            else round(int(r["own_clock"]["offset_ns"]) / 1e6, 3),
+            "drift_ppm": r.get("drift_ppm"),
+            "drift_estimated": r.get("drift_estimated"),
+            "clock": r.get("clock"),
+            "markers": c.get("markers"),
+            "pose": c.get("pose"),
+            "rejected_markers": c.get("rejected_markers"),
+            "vector_match": c.get("vector_match"),
+            "frame_alignment": r.get("frame_alignment"),
+            "quality": r.get("quality"),
+            **({"why": "; ".join(r.get("quality_reasons") or [])} if r.get("quality") == "failed" else {}),
+        }
+    return out

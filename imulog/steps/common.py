@@ -135,6 +135,44 @@ def alignment_record(metadata: Mapping[str, Mapping[str, Any]], imu_topic: str) 
     return "imulog.alignment"
 
 
+def alignment_writes(
+    topics: list[str], metadata: Mapping[str, Mapping[str, Any]], name: str, record: dict[str, Any]
+) -> tuple[dict[str, dict[str, Any]], str]:
+    """What an alignment of IMU ``name`` writes, whichever path made it (markers, a rigid body's poses, a whole
+    setup): ``(records, suffix)``. A trial with one IMU: ``imulog.alignment`` and no suffix (as always). A trial with
+    several: ``imulog.alignment.{name}``, plus ``imulog.alignment`` when it is absent, names no IMU or is this IMU's
+    (the trial's main record stays the first IMU aligned, or a setup's primary), and the suffix ``/{name}`` for the
+    cluster channels (``/derived/vicon/cluster_pose/{name}``), so aligning IMUs one at a time never replaces
+    another IMU's record or cluster."""
+    if len(imu_names(topics)) <= 1:
+        return {"imulog.alignment": record}, ""
+    records = {f"imulog.alignment.{name}": record}
+    if _owner(metadata.get("imulog.alignment")) in (None, name):
+        records["imulog.alignment"] = record
+    return records, f"/{name}"
+
+
+CLUSTER_TOPICS = ("/derived/vicon/cluster_pose", "/derived/vicon/angular_velocity")
+
+
+def renamed(streams: list, suffix: str) -> list:
+    """The cluster channels of one IMU's alignment under their per-IMU topics (``/derived/vicon/cluster_pose`` +
+    ``suffix``, e.g. ``/left_foot``); the other streams, already per IMU, unchanged."""
+    for stream in streams:
+        if suffix and stream.topic in CLUSTER_TOPICS:
+            stream.topic = f"{stream.topic}{suffix}"
+    return streams
+
+
+def alignment_result(trial, name: str, streams: list, record: dict):
+    """The step's result for IMU ``name`` aligned alone (on markers or on a pose channel): the records and topics
+    of :func:`imulog.steps.common.alignment_writes`, the one rule of every alignment path."""
+    from imulog.steps.base import StepResult
+
+    records, suffix = alignment_writes(trial.topics(), trial.metadata, name, record)
+    return StepResult(streams=renamed(streams, suffix), metadata=records)
+
+
 def error_line(path: Any, exc: BaseException) -> str:
     """``"PATH: message"`` for a step's error, without repeating the path when the message starts with it
     (archive errors already name their file)."""

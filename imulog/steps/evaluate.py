@@ -325,7 +325,7 @@ def run_evaluate(
     if what == "orientation" and strides:
         raise ValueError("--strides evaluates trajectories per stride: it does not go with --what orientation")
     if what != "trajectory" and not strides:  # an orientation against a rigid body's poses (BROAD, OptiTrack)
-        from imulog.steps.evaluate_orientation import pose_reference, run_evaluate_orientation
+        from imulog.steps.evaluate_orientation import pose_reference, run_evaluate_orientations
 
         with TrialReader(path) as trial:
             topics, metadata = trial.topics(), trial.metadata
@@ -334,9 +334,7 @@ def run_evaluate(
             not any(t.startswith("/derived/trajectory/") for t in topics)
             and (pose_reference(metadata, imus[0] if imus else None) or only_poses)
         ):
-            if imus and len(imus) > 1:
-                raise ValueError("the orientation is evaluated against poses one IMU at a time: give one --imu")
-            return run_evaluate_orientation(path, imu=imus[0] if imus else None, force=force)
+            return run_evaluate_orientations(path, imus=imus, force=force)
     walking = walking_of(path) if strides is None else ({"source": "asked"} if strides else None)
     if walking is not None:
         from imulog.steps.gait_evaluate import run_gait_evaluate

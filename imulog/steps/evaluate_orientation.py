@@ -40,11 +40,13 @@ def orientation_record_of(metadata: dict[str, Any]) -> dict[str, Any]:
     return legacy if isinstance(legacy, dict) and legacy.get("kind") == "orientation" else {}
 
 
-def pose_reference(metadata: dict[str, Any], imu: str | None = None) -> str | None:
-    """The pose channel (``/poses/NAME``) the IMU's alignment was made on, else None."""
+def pose_reference(metadata: dict[str, Any], imu: str | None = None, own_only: bool = False) -> str | None:
+    """The pose channel (``/poses/NAME``) the IMU's alignment was made on, else None (``own_only``: None when the
+    IMU has no alignment record of its own, instead of the trial's main record)."""
     from imulog.steps.common import alignment_for
 
-    record = (alignment_for(metadata, f"/imu/{imu}") if imu else None) or metadata.get("imulog.alignment") or {}
+    own = alignment_for(metadata, f"/imu/{imu}") if imu else None
+    record = own or ({} if own_only else metadata.get("imulog.alignment")) or {}
     reference = str(record.get("reference") or "")
     return reference if reference.startswith("/poses/") else None
 
@@ -92,7 +94,7 @@ def run_evaluate_orientation(path, imu: str | None = None, force: bool = False):
     from imulog.archive import TrialReader
     from imulog.steps.align import require_alignment
     from imulog.steps.base import run_record_step
-    from imulog.steps.common import alignment_note, pick_imu, record_for
+    from imulog.steps.common import alignment_note, alignment_record, pick_imu, record_for
 
     with TrialReader(path) as trial:
         topics = trial.topics()
@@ -165,9 +167,39 @@ def run_evaluate_orientation(path, imu: str | None = None, force: bool = False):
         algorithm="imulog.evaluation.orientation",
         params={"imu": name, "reference": pose_topic, "imu_frame_aligned": declared},
         inputs=inputs,
-        metadata_inputs=("imulog.alignment",),
+        metadata_inputs=(alignment_record(metadata, f"/imu/{name}"),),  # this IMU's record, not the main one
         force=force,
     )
+
+
+def run_evaluate_orientations(path, imus: list[str] | None = None, force: bool = False):
+    """The orientation evaluation of one IMU (``imus`` names one, or the trial has one) as
+    :func:`run_evaluate_orientation` does it; of several (named, or by default every oriented IMU whose alignment is
+    on a pose channel: rigid bodies aligned per IMU) one run and record each, returning the last outcome and
+    ``{"kind": "orientations", "imus": {imu: record, or {"failed": why}}, "skipped": {imu: why}}``: an oriented IMU
+    with no alignment on a rigid body (one that no body turns like) is skipped with why, not failed."""
+    from imulog.archive import TrialReader
+    from imulog.steps.common import imu_names
+
+    with TrialReader(path) as trial:
+        topics, metadata = trial.topics(), trial.metadata
+    oriented = imu_names(topics, "/derived/orientation/")
+    if imus and len(imus) == 1 or (not imus and len(oriented) <= 1):
+        return run_evaluate_orientation(path, imu=imus[0] if imus else None, force=force)
+    chosen = list(imus) if imus else [n for n in oriented if pose_reference(metadata, n, own_only=True)]
+    skipped = {n: "no alignment on a rigid body's poses" for n in oriented if not imus and n not in chosen}
+    if not chosen:
+        return run_evaluate_orientation(path, imu=None, force=force)  # its one-line error says what is missing
+    records: dict[str, Any] = {}
+    outcome = None
+    for name in chosen:
+        try:
+            outcome, records[name] = run_evaluate_orientation(path, imu=name, force=force)
+        except ValueError as exc:
+            records[name] = {"failed": str(exc)}
+    if outcome is None:
+        raise ValueError("; ".join(f"{n}: {r['failed']}" for n, r in records.items()))
+    return outcome, {"kind": "orientations", "imus": records, "skipped": skipped}
 
 
 def orientation_lines(record: dict[str, Any]) -> list[str]:

@@ -31,7 +31,7 @@ from imulog.process.metrics import (
     repetition_durations,
     smoothness,
 )
-from imulog.steps.common import alignment_for, nominal_rate_hz, pick_imu, record_for
+from imulog.steps.common import alignment_for, alignment_record, nominal_rate_hz, pick_imu, record_for
 from imulog.steps.metrics_windows import metric_pieces, metric_plan
 from imulog.steps.windows import WindowParams, channel_rate_hz
 
@@ -276,6 +276,7 @@ def run_metrics(
         topics = trial.topics()
         name = pick_imu(topics, imu)
         record_name = record_for(RECORD, name, topics, trial.metadata)
+        alignment_name = alignment_record(trial.metadata, imu_topic_of(name))  # this IMU's, in a setup
         traj_topic = pick_trajectory(topics, p.trajectory, name, trial.metadata)
         info = trial.channel(imu_topic_of(name))
         total = info.sample_count
@@ -321,7 +322,7 @@ def run_metrics(
         algorithm=ALGORITHM,
         params=step_params,
         inputs=inputs,
-        metadata_inputs=("imulog.alignment", "imulog.trial"),
+        metadata_inputs=(alignment_name, "imulog.trial"),
         compute=compute,
         force=force,
     )

@@ -154,13 +154,14 @@ def run_phases(
     from imulog.archive import TrialReader
     from imulog.archive.streaming import StreamPieces
     from imulog.steps.base import StepResult, run_step
-    from imulog.steps.common import alignment_for
+    from imulog.steps.common import alignment_for, alignment_record
     from imulog.steps.windows import channel_rate_hz
 
     windows = windows or PhaseWindows()
     with TrialReader(path) as trial:
         name = pick_imu(trial.topics(), imu)
         record_name = record_for("imulog.timing", name, trial.topics(), trial.metadata)
+        alignment_name = alignment_record(trial.metadata, f"/imu/{name}")  # this IMU's, in a setup
         params = params or params_for_trial(trial.metadata.get("imulog.trial", {}))
         channel = trial.channel(f"/imu/{name}")
         total = int(channel.sample_count or 0)
@@ -211,7 +212,7 @@ def run_phases(
         algorithm=algorithm_name(params),
         params=step_params,
         inputs=[topic],
-        metadata_inputs=("imulog.trial", "imulog.alignment"),
+        metadata_inputs=("imulog.trial", alignment_name),
         compute=compute,
         force=force,
     )

@@ -1,0 +1,138 @@
+"""Step ``align`` on several rigid bodies: every IMU of the trial against every pose channel (``/poses/*``), paired
+one to one by the data, whatever the names.
+
+Each IMU is aligned against each body (:func:`imulog.steps.align_pose.compute_pose_alignment`: the body's angular
+velocity from its orientations, the clock fit over windows, the IMU-to-body rotation); IMUs and bodies are then
+paired by the assignment that maximises the summed vector match (:func:`imulog.process.alignment_setup.pair_one_to_one`,
+pairs under ``params.search.min_vector_match`` not made), so two IMUs never share a body. Each paired IMU keeps the
+alignment on its body (its own clock: the windows of one body), written by the per-IMU rule of every alignment path
+(:func:`imulog.steps.common.alignment_writes`): ``imulog.alignment.{imu}``, ``/derived/vicon/cluster_pose/{imu}``...;
+an IMU no body turns like gets no record, and the step says why. Cost: one alignment per IMU and body.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from imulog.process import alignment as al
+from imulog.steps.align import STEP, imu_span, params_dict, read_derived_pair
+from imulog.steps.align_pose import compute_pose_alignment, pose_channels
+
+
+def pair_imus_with_bodies(
+    candidates: dict[str, dict[str, tuple[list, dict] | str]], min_vector_match: float
+) -> tuple[dict[str, str], dict[str, str]]:
+    """``candidates[imu][body]``: the (streams, record) of that pair's alignment, or why it failed. Returns (IMU ->
+    body paired one to one by the summed vector match, IMU -> why it has none)."""
+    from imulog.process.alignment_setup import pair_one_to_one
+
+    imus = list(candidates)
+    bodies = sorted({b for c in candidates.values() for b in c})
+    score = np.full((len(imus), len(bodies)), np.nan)
+    for i, imu in enumerate(imus):
+        for j, body in enumerate(bodies):
+            got = candidates[imu].get(body)
+            if isinstance(got, tuple):
+                score[i, j] = float(got[1].get("vector_match") or np.nan)
+    pairs = {imus[i]: bodies[j] for i, j in pair_one_to_one(score, min_vector_match)}
+    why = {}
+    for i, imu in enumerate(imus):
+        if imu in pairs:
+            continue
+        finite = np.isfinite(score[i])
+        if finite.any():
+            j = int(np.nanargmax(score[i]))
+            taken = [k for k, v in pairs.items() if v == bodies[j]]
+            why[imu] = f"best body {bodies[j]} (vector match {score[i, j]:.3f})" + (
+                f" is {taken[0]}'s" if taken else f" under {min_vector_match:g}"
+            )
+        else:  # every body failed (a still IMU, no gyroscope): one reason stands for all
+            reasons = [str(v) for v in candidates[imu].values()]
+            why[imu] = f"no body aligns with it, {len(reasons)} tried; first: {reasons[0]}" if reasons else "no body"
+    return pairs, why
+
+
+def run_align_pose_setup(
+    path,
+    *,
+    imus: list[str] | None = None,
+    params: al.AlignmentParams | None = None,
+    resample: bool = True,
+    force: bool = False,
+):
+    """Align every IMU of the trial (or those named) with the trial's rigid bodies, paired one to one; returns the
+    :func:`imulog.steps.base.run_step` outcome. The pairs and the IMUs left without a body are in the main record's
+    ``setup`` and ``unpaired``."""
+    from imulog.archive import TrialReader
+    from imulog.steps.align_summary import setup_summary
+    from imulog.steps.base import StepResult, run_step
+    from imulog.steps.common import alignment_writes, imu_names, renamed
+
+    params = params or al.AlignmentParams()
+    with TrialReader(path) as trial:
+        topics = trial.topics()
+    all_imus = imu_names(topics)
+    names = list(imus) if imus else all_imus
+    missing = [n for n in names if n not in all_imus]
+    if missing:
+        raise ValueError(f"no channel /imu/{missing[0]} in the trial (IMUs: {', '.join(all_imus) or 'none'})")
+    bodies = pose_channels(topics)
+    if not bodies:
+        raise ValueError("no /poses/* channel in the trial")
+    inputs = [f"/imu/{n}" for n in names] + bodies
+    inputs += [
+        f"/derived/{k}/{n}" for n in names for k in ("orientation", "acc_global") if f"/derived/{k}/{n}" in topics
+    ]
+
+    def compute(trial) -> StepResult:
+        poses = {b: trial.read(b) for b in bodies}
+        candidates: dict[str, dict[str, tuple[list, dict] | str]] = {}
+        for n in names:
+            lo, hi = imu_span(trial, f"/imu/{n}", bodies[0], params.max_lag_s)
+            s = trial.read(f"/imu/{n}", lo, hi)
+            derived = [t for t in (f"/derived/orientation/{n}", f"/derived/acc_global/{n}") if t in inputs]
+            orientation, acc_global = read_derived_pair(trial, derived, lo, hi)
+            candidates[n] = {}
+            for b, pose in poses.items():
+                try:
+                    candidates[n][b] = compute_pose_alignment(
+                        n, s.t_ns, s.gyr, b, pose.t_ns, pose.position, pose.orientation, params,
+                        orientation, acc_global, resample,
+                    )  # fmt: skip
+                except ValueError as exc:
+                    candidates[n][b] = str(exc)
+        pairs, why = pair_imus_with_bodies(candidates, params.search.min_vector_match)
+        if not pairs:
+            raise ValueError(
+                "no IMU turns like any rigid body (" + "; ".join(f"{n}: {w}" for n, w in why.items()) + ")"
+            )
+        records = {n: candidates[n][b][1] for n, b in pairs.items()}
+        streams: list = []
+        metadata: dict = {}
+        for n in names:
+            if n in pairs:
+                written, suffix = alignment_writes(topics, trial.metadata, n, records[n])
+                streams += renamed(candidates[n][pairs[n]][0], suffix)
+                metadata.update({k: v for k, v in written.items() if k != "imulog.alignment"})
+            else:  # no body: a record without a clock replaces any older one, so no stale alignment stays
+                metadata[f"imulog.alignment.{n}"] = {
+                    "imu": f"/imu/{n}",
+                    "quality": "failed",
+                    "quality_reasons": [why[n]],
+                }
+        primary = next(n for n in names if n in pairs)
+        owner = str((trial.metadata.get("imulog.alignment") or {}).get("imu") or "").removeprefix("/imu/")
+        if owner in ("", *pairs) or owner not in all_imus:  # the main record: kept when another IMU owns it
+            main = records[owner] if owner in pairs else records[primary]
+            metadata["imulog.alignment"] = {**main, "setup": setup_summary(records), "unpaired": why}
+        return StepResult(streams=streams, metadata=metadata)
+
+    return run_step(
+        path,
+        step=STEP,
+        algorithm="imulog.alignment.xcorr_wahba.pose_setup",
+        params={"imus": names, "poses": bodies, "resample": resample, **params_dict(params)},
+        inputs=inputs,
+        compute=compute,
+        force=force,
+    )
