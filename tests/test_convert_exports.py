@@ -132,3 +132,23 @@ def test_axivity_csvs_that_are_not_a_cwas_export_still_convert(shared_data, tmp_
     groups = group_directory(folder, skipped)
     assert [[p.name for p in files] for _, files in groups] == [["CWA-DATA.CWA"]]
     assert [p.name for p, _ in skipped] == ["CWA-DATA.csv"]
+
+
+def test_convert_and_inspect_name_a_skipped_file_with_the_same_line(shared_data, tmp_path):
+    """``convert FOLDER`` printed ``skipped X: reason`` on stderr and ``convert --inspect FOLDER`` ``X: skipped:
+    reason`` on stdout; both now print the one line (``convert_common.echo_skipped``), on stderr beside the
+    warnings, and their ``--json`` the same records (real NilsPod folder)."""
+    folder = shared_data / NILSPOD
+    code, _, converted = run("convert", folder, "-o", tmp_path / "out")
+    assert code == 0, converted
+    code, report, inspected = run("convert", "--inspect", folder)
+    assert code == 0, inspected
+    line = f"skipped {folder / (STEM + '_data.csv')}: an export of {STEM}.bin beside it (NilsPod"
+    for err in (converted, inspected):
+        assert [x for x in err.splitlines() if "skipped" in x][0].startswith(line), err
+    assert "skipped" not in report  # the report on stdout describes what converts
+    as_json = [
+        json.loads(run("convert", *args, folder, "--json")[1])["skipped"]
+        for args in (["-o", tmp_path / "json"], ["--inspect"])
+    ]
+    assert as_json[0] == as_json[1] and len(as_json[0]) == 1
