@@ -56,6 +56,41 @@ def test_the_epoch_table_says_which_device_each_row_comes_from(study):
     assert table["device"].notna().all()
 
 
+def test_the_epoch_table_times_every_row_and_says_which_clock_is_known(study):
+    """The real Xsens MT Manager trial has no start time (``// Start Time: Unknown``): its rows' ``time`` was empty
+    and nothing else said when an epoch was; the .cwa's and .gt3x's device clocks (local time, no zone) were
+    written as UTC instants. Now ``t[s]`` (seconds since the recording's start) is filled in every row,
+    ``local_time`` is the device's wall clock wherever a start time is known, and ``time`` (UTC) only where the
+    start has a zone (the .gt3x's info.txt gives -05:00; the .cwa has none)."""
+    from imulog.archive import TrialReader
+
+    out = study / "study_epochs_times.parquet"
+    code, text, err = run(
+        "catalog", study / "archive", "-o", study / "catalog_t.parquet", "--epochs", out, "--epoch-s", 5
+    )
+    assert code == 0, err
+    table = pd.read_parquet(out)
+    assert list(table.columns[6:10]) == ["time", "local_time", "t[s]", "t_ns"]
+    assert table["t[s]"].notna().all()
+    for (path, _imu), rows in table.groupby(["path", "imu"]):
+        with TrialReader(path) as trial:
+            start = trial.metadata.get("imulog.trial", {}).get("start_time")
+        assert rows["t[s]"].min() == 0 and rows["t[s]"].is_monotonic_increasing
+        if start is None:  # the Xsens pair
+            assert path.endswith("MT_012005D6_031.mcap") and rows["local_time"].isna().all()
+            assert len(rows) == 7  # 33.7 s in 5-s epochs
+            continue
+        begin = pd.Timestamp(start)
+        since = pd.to_timedelta(rows["t[s]"], unit="s")
+        local = begin.tz_localize(None) + since
+        assert (abs(rows["local_time"] - local) < pd.Timedelta("1us")).all(), path
+        if begin.tzinfo is None:  # the .cwa: a local clock without a zone is no instant
+            assert path.endswith("ax6_sample.mcap") and rows["time"].isna().all()
+        else:  # the .gt3x: 08:58 at -05:00 is 13:58 UTC
+            assert path.endswith("example.mcap") and str(begin.tzinfo) == "UTC-05:00"
+            assert (abs(rows["time"] - (begin.tz_convert("UTC") + since)) < pd.Timedelta("1us")).all()
+
+
 def test_epochs_at_a_rate_no_epoch_fits_say_how_to_declare_the_nominal_one(shared_data, tmp_path):
     """x-io's Fusion example CSV: time stamps at 99.2125 Hz on average and no declared rate; epochs said only 'the
     calibration epoch of 10 s is not a whole number of samples at 99.2125 Hz'. Now the line says how to declare
