@@ -22,7 +22,7 @@ from imulog.converters import _pieces
 from imulog.converters._binary import UNKNOWN_ZONE, iso_from_epoch_ns
 from imulog.converters._common import G0, TableSpec, check_increasing, estimate_rate_hz, text_head_lines
 from imulog.converters._pieces import NumericPiece, iter_numeric, text_column
-from imulog.converters.base import Converter, ConvertOptions
+from imulog.converters.base import Converter, ConvertOptions, export_source
 from imulog.converters.delimited_time import StepCounts
 from imulog.converters.errors import ConversionError
 
@@ -150,6 +150,11 @@ class AxivityCsvConverter(Converter):
 
     def recording_key(self, path: Path) -> str | None:
         return Path(path).name
+
+    def export_of(self, path: Path) -> Path | None:
+        """``X.cwa`` beside OMGUI's raw CSV export of it, ``X.csv`` (OMGUI names the export after the ``.cwa``:
+        same folder, same stem; ``CWA-DATA.CWA`` as the device writes it, too); else None."""
+        return export_source(path, r"(.+)", (".cwa", ".CWA"))
 
     def convert(self, path: Path, options: ConvertOptions | None = None) -> Recording:
         return read_axivity_csv(Path(path), options)

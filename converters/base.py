@@ -29,12 +29,16 @@ class ConvertOptions:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
-def export_source(path: Path, stem_pattern: str, suffix: str) -> Path | None:
+def export_source(path: Path, stem_pattern: str, suffix: str | tuple[str, ...]) -> Path | None:
     """The device file an export was named after: ``path``'s stem matched by ``stem_pattern`` (its first group
-    the device file's stem), with ``suffix``, when it exists beside ``path``; else None (:meth:`Converter.export_of`)."""
+    the device file's stem), with ``suffix`` (or the first of several that exists, e.g. ``(".cwa", ".CWA")``),
+    when it exists beside ``path``; else None (:meth:`Converter.export_of`)."""
     m = re.fullmatch(stem_pattern, Path(path).stem)
-    source = Path(path).with_name(f"{m.group(1)}{suffix}") if m else None
-    return source if source is not None and source.is_file() else None
+    for end in (suffix,) if isinstance(suffix, str) else suffix:
+        source = Path(path).with_name(f"{m.group(1)}{end}") if m else None
+        if source is not None and source != Path(path) and source.is_file():
+            return source
+    return None
 
 
 class Converter:

@@ -75,9 +75,9 @@ class LazyGroup(click.Group):
         return super().get_command(ctx, cmd_name)
 
     def invoke(self, ctx: click.Context):
-        """Run the subcommand; a closed output pipe that a command reported as its own error goes back to click as
-        the ``BrokenPipeError`` it was, which click's main turns into a quiet exit (one mechanism for every
-        command's output: ``imulog.console.broken_pipe``)."""
+        """Run the subcommand; a closed output pipe (raised, or reported by a command as its own error) ends the
+        process silently by SIGPIPE, status 141 in a shell, as ``ls`` and ``git`` do (one rule for every command's
+        output: ``imulog.console.broken_pipe``, ``imulog.console.exit_closed_pipe``; click alone exits 1)."""
         try:
             return super().invoke(ctx)
         except click.UsageError as exc:  # `process STEP a.mcap b.mcap` or a folder: say which command takes many
@@ -88,12 +88,11 @@ class LazyGroup(click.Group):
                     f"imulog batch PATHS... --steps {step} (docs/batch.md)"
                 )
             raise
-        except click.ClickException as exc:
-            from imulog.console import broken_pipe
+        except (click.ClickException, OSError) as exc:
+            from imulog.console import broken_pipe, exit_closed_pipe
 
-            pipe = broken_pipe(exc)
-            if pipe is not None:
-                raise pipe from None
+            if broken_pipe(exc) is not None:
+                exit_closed_pipe()
             raise
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:

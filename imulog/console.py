@@ -4,16 +4,18 @@
   passes ``color=False`` to click, so ``click.secho`` prints plain text).
 * Progress: a live bar (tqdm) on a terminal; on a log file or pipe, plain lines at every 10 % and at
   the end, never ``\\r`` redraws.
-* A closed pipe (``imulog evaluate trial.mcap | head -1``): :func:`broken_pipe` finds it behind the one-line error
-  a command made of an ``OSError``, and ``imulog.cli.LazyGroup`` hands it back to click, which exits quietly.
+* A closed pipe (``imulog evaluate trial.mcap | head -1``): :func:`broken_pipe` finds it (raised, or behind the
+  one-line error a command made of an ``OSError``), and ``imulog.cli.LazyGroup`` ends the process with
+  :func:`exit_closed_pipe`: silently, by SIGPIPE, as ``ls`` and ``git`` do (status 141 in a shell).
 """
 
 from __future__ import annotations
 
+import io
 import os
 import sys
 from collections.abc import Iterator, Sequence
-from typing import Any, TextIO, TypeVar
+from typing import Any, NoReturn, TextIO, TypeVar
 
 T = TypeVar("T")
 
@@ -30,6 +32,25 @@ def broken_pipe(exc: BaseException) -> BrokenPipeError | None:
         seen.add(id(current))
         current = current.__cause__ or current.__context__
     return None
+
+
+def exit_closed_pipe() -> NoReturn:
+    """End the process the way Unix tools do when the reader of their output has gone (``ls | head``): silently,
+    killed by SIGPIPE (exit status 141 in a shell; ``-13`` for ``subprocess``). Where there is no SIGPIPE
+    (Windows), or stdout is no file (click's test runner), exit status 1, silently. Stdout is pointed at the
+    null device first, so nothing left in its buffer is flushed into the closed pipe."""
+    import signal
+
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, sys.stdout.fileno())
+        real = True
+    except (OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        real = False
+    if real and hasattr(signal, "SIGPIPE"):
+        signal.signal(signal.SIGPIPE, signal.SIG_DFL)
+        os.kill(os.getpid(), signal.SIGPIPE)
+    sys.exit(1)
 
 
 def no_color() -> bool:

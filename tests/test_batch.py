@@ -125,7 +125,10 @@ def test_bad_files_are_reported_and_the_rest_completes(raw_archive, tmp_path):
     assert report.failed == 2 and report.up_to_date == 3 and report.steps_computed == 0
     by_name = {f.path.rsplit("/", 1)[1]: f for f in report.files}
     assert by_name["no_markers.mcap"].failed_step == "align"
-    assert [s.step for s in by_name["no_markers.mcap"].steps] == ["orientation"]  # done before the failure
+    steps = by_name["no_markers.mcap"].steps
+    assert [s.step for s in steps if not s.reason.startswith("not run")] == ["orientation"]  # before the failure
+    after = [(s.step, s.reason) for s in steps if s.reason.startswith("not run")]  # each reads the alignment
+    assert after == [(s, "not run: needs align, which failed") for s in ("phases", "trajectory", "evaluate")]
     # --fail-fast: the first file (S00/garbage.mcap) fails, the next one needing work is not started
     stopped = run(root, STEPS, options=OPTIONS, progress=False, continue_on_error=False)
     assert (stopped.failed, stopped.cancelled, stopped.up_to_date) == (1, 1, 3)

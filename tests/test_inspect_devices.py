@@ -34,12 +34,12 @@ def test_inspect_every_device_folder(shared_data: Path, tmp_path: Path):
             or f.name.endswith("_header.json")
         ):
             continue  # licences, reference decodes, NilsPodLib's header (read with its _data.csv)
-        # a vendor's export beside its device file is one recording with it: named as skipped, with the reason
-        named = (
-            f"\n{f.name}: format " in "\n" + proc.stdout or f"\n{f.name}: skipped: an export of " in "\n" + proc.stdout
-        )
+        # a vendor's export beside its device file is one recording with it: named as skipped, with the reason,
+        # in the line `imulog convert FOLDER` prints (stderr)
+        named = f"\n{f.name}: format " in "\n" + proc.stdout or f"\nskipped {f}: an export of " in "\n" + proc.stderr
         assert named, f.name
-    assert "\nexample-IMU.csv: skipped: an export of example.gt3x" in "\n" + proc.stdout
+    igu = devices / "actigraph_gt3x" / "example-IMU.csv"
+    assert f"\nskipped {igu}: an export of example.gt3x" in "\n" + proc.stderr
     # the Trigno exports' ACC channels hold no data (EDF physical min == max): said so, not blamed on a unit
     assert "/imu/mini_sensor_10: every acc value is 0 (the channel holds no data)" in proc.stdout
     assert "median |acc| is 0" not in proc.stdout

@@ -56,6 +56,41 @@ def test_the_epoch_table_says_which_device_each_row_comes_from(study):
     assert table["device"].notna().all()
 
 
+def test_the_epoch_table_times_every_row_and_says_which_clock_is_known(study):
+    """The real Xsens MT Manager trial has no start time (``// Start Time: Unknown``): its rows' ``time`` was empty
+    and nothing else said when an epoch was; the .cwa's and .gt3x's device clocks (local time, no zone) were
+    written as UTC instants. Now ``t[s]`` (seconds since the recording's start) is filled in every row,
+    ``local_time`` is the device's wall clock wherever a start time is known, and ``time`` (UTC) only where the
+    start has a zone (the .gt3x's info.txt gives -05:00; the .cwa has none)."""
+    from imulog.archive import TrialReader
+
+    out = study / "study_epochs_times.parquet"
+    code, text, err = run(
+        "catalog", study / "archive", "-o", study / "catalog_t.parquet", "--epochs", out, "--epoch-s", 5
+    )
+    assert code == 0, err
+    table = pd.read_parquet(out)
+    assert list(table.columns[6:10]) == ["time", "local_time", "t[s]", "t_ns"]
+    assert table["t[s]"].notna().all()
+    for (path, _imu), rows in table.groupby(["path", "imu"]):
+        with TrialReader(path) as trial:
+            start = trial.metadata.get("imulog.trial", {}).get("start_time")
+        assert rows["t[s]"].min() == 0 and rows["t[s]"].is_monotonic_increasing
+        if start is None:  # the Xsens pair
+            assert path.endswith("MT_012005D6_031.mcap") and rows["local_time"].isna().all()
+            assert len(rows) == 7  # 33.7 s in 5-s epochs
+            continue
+        begin = pd.Timestamp(start)
+        since = pd.to_timedelta(rows["t[s]"], unit="s")
+        local = begin.tz_localize(None) + since
+        assert (abs(rows["local_time"] - local) < pd.Timedelta("1us")).all(), path
+        if begin.tzinfo is None:  # the .cwa: a local clock without a zone is no instant
+            assert path.endswith("ax6_sample.mcap") and rows["time"].isna().all()
+        else:  # the .gt3x: 08:58 at -05:00 is 13:58 UTC
+            assert path.endswith("example.mcap") and str(begin.tzinfo) == "UTC-05:00"
+            assert (abs(rows["time"] - (begin.tz_convert("UTC") + since)) < pd.Timedelta("1us")).all()
+
+
 def test_epochs_at_a_rate_no_epoch_fits_say_how_to_declare_the_nominal_one(shared_data, tmp_path):
     """x-io's Fusion example CSV: time stamps at 99.2125 Hz on average and no declared rate; epochs said only 'the
     calibration epoch of 10 s is not a whole number of samples at 99.2125 Hz'. Now the line says how to declare
@@ -82,8 +117,8 @@ def test_epochs_at_a_rate_no_epoch_fits_say_how_to_declare_the_nominal_one(share
 def test_a_failed_step_does_not_stop_the_epochs_of_an_accelerometer_only_wrist(shared_data, tmp_path):
     """The real GENEActiv file (85.7 Hz, accelerometer only) in a batch of orientation, phases and epochs:
     orientation fails (no gyroscope) and, before, the file's epochs were not computed either, though they read
-    the raw acceleration only. Now epochs still run, phases (which reads the orientation step's output) does not,
-    and the file is still reported failed with the first failure and what still ran."""
+    the raw acceleration only. Now epochs still run; phases, which reads no orientation, runs too and fails on
+    its own (no gyroscope); the file is reported failed with both failures and what still ran."""
     from imulog.archive import TrialReader
 
     trial = tmp_path / "geneactiv.mcap"
@@ -95,12 +130,58 @@ def test_a_failed_step_does_not_stop_the_epochs_of_an_accelerometer_only_wrist(s
     assert result.exit_code == 1
     failed = [line for line in result.output.splitlines() if line.startswith("FAILED")]
     assert len(failed) == 1 and ": orientation: ValueError:" in failed[0], result.output
-    assert failed[0].endswith("(still run: epochs, which does not need it)"), failed[0]
+    assert "; phases: ValueError: /imu/geneactiv has no gyroscope" in failed[0], failed[0]
+    assert failed[0].endswith("(still run: epochs)"), failed[0]
     with TrialReader(trial) as reader:
         topics = reader.topics()
         steps = {r["step"] for r in reader.runs().values()}
     assert "/derived/epochs/10s/geneactiv" in topics and "/derived/epochs/60s/geneactiv" in topics
-    assert steps == {"epochs:geneactiv"}  # phases did not run after the failed orientation
+    assert steps == {"epochs:geneactiv"}
+
+
+def test_after_a_failed_step_a_step_runs_unless_it_reads_what_failed(shared_data, study, tmp_path):
+    """A folder of real wearables (the GENEActiv, accelerometer only, beside the AX6 trial) through the batch
+    help's home-monitoring steps: orientation fails on the GENEActiv and, before, its metrics (which read the raw
+    acceleration, and phases and trajectories when present) stopped there too; only epochs still ran. One rule
+    now (``StepSpec.reads``): a step runs unless a step it reads failed, else it is recorded not run with the
+    failed step named (trajectory reads orientation; metrics reads trajectory, so it waits for it)."""
+    from imulog.archive import TrialReader
+    from imulog.batch import run as batch_run
+
+    folder = tmp_path / "wearables"
+    folder.mkdir()
+    shutil.copy(study / "archive" / "ax6_sample.mcap", folder)
+    trial = folder / "geneactiv.mcap"
+    assert run("convert", shared_data / "devices/geneactiv_bin/GENEActiv_testfile.bin", "-o", trial)[0] == 0
+    args = ["batch", str(folder), "--steps", "orientation,metrics,epochs", "--set", "epochs.epochs_s=10,60"]
+    result = CliRunner().invoke(cli, [*args, "--no-ledger"])
+    assert result.exit_code == 1
+    failed = [line for line in result.output.splitlines() if line.startswith("FAILED")]
+    assert len(failed) == 1 and failed[0].startswith(f"FAILED {trial}: orientation: ValueError:"), result.output
+    assert failed[0].endswith("(still run: metrics, epochs)"), failed[0]
+    with TrialReader(trial) as reader:
+        assert {r["step"] for r in reader.runs().values()} == {"metrics:geneactiv", "epochs:geneactiv"}
+        assert reader.metadata["imulog.metrics"]["arm_usage.overall_percent"] >= 0
+    with TrialReader(folder / "ax6_sample.mcap") as reader:
+        assert {"orientation:ax6_6011802", "metrics:ax6_6011802"} <= {r["step"] for r in reader.runs().values()}
+
+    report = batch_run(
+        trial,
+        "orientation,trajectory,metrics,epochs",
+        options={"epochs": {"epochs_s": "10,60"}},
+        progress=False,
+        ledger=None,
+    )
+    (res,) = report.files
+    assert res.status == "failed" and res.failed_step == "orientation"
+    why = {s.step: (s.skipped, s.reason) for s in res.steps}
+    assert why["trajectory"] == (True, "not run: needs orientation, which failed")
+    assert why["metrics"] == (True, "not run: needs orientation, which failed")  # through the trajectory
+    assert why["epochs"][0]  # up to date from the first batch: it ran, and skipped itself
+    assert res.error.endswith(
+        "(still run: epochs; trajectory not run: needs orientation, which failed; "
+        "metrics not run: needs orientation, which failed)"
+    ), res.error
 
 
 def test_the_batch_help_teaches_a_wearables_study_and_its_line_runs(study):

@@ -58,6 +58,29 @@ __all__ = [
 BATCH_ROWS = 256
 
 
+def wall_clock_columns(wall: Any, start: Any, n: int) -> tuple[Any, Any]:
+    """``(time, local_time)`` Arrow arrays of the study epoch table from a stream table's ``time`` column
+    (``wall``; None when the trial has no start time), the trial's start (``TrialClock.start_time``) and the
+    number of rows ``n``.
+
+    ``time``: UTC instants, only when the start has a zone (a device clock in local time without one, as a
+    ``.cwa`` or ``.gt3x`` keeps, is no instant); ``local_time``: the wall-clock time the device kept (naive: local
+    time at the recording's place), whenever there is a start; both null without one (an Xsens MT Manager
+    export: ``// Start Time: Unknown``).
+    """
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    utc_type, local_type = pa.timestamp("ns", tz="UTC"), pa.timestamp("ns")
+    if wall is None:
+        return pa.nulls(n, utc_type), pa.nulls(n, local_type)
+    ns = pc.cast(wall, pa.int64())
+    if start is None or start.tzinfo is None:  # naive: the device's local wall clock, no instant
+        return pa.nulls(n, utc_type), ns.cast(local_type)
+    offset_ns = int(start.utcoffset().total_seconds() * 1e9)
+    return ns.cast(utc_type), pc.add(ns, offset_ns).cast(local_type)
+
+
 def build_epoch_table(
     root: str | os.PathLike[str] | Iterable[str | os.PathLike[str]],
     output: str | os.PathLike[str],
@@ -67,8 +90,9 @@ def build_epoch_table(
     """One study table of every trial's ``/derived/epochs/{epoch_s}s/{imu}`` rows (``imulog process epochs``).
 
     Columns: ``path``, ``subject``, ``trial``, ``imu``, ``device`` (its model) and ``serial`` (from the trial's
-    ``imulog.device.IMU`` record: a study of several devices tells their epochs apart), then the export's time columns (``time`` as UTC
-    instants, ``t[s]``, ``t_ns``; docs/export.md) and the epoch columns. Trials without the channel are skipped
+    ``imulog.device.IMU`` record: a study of several devices tells their epochs apart), then the times
+    (:func:`wall_clock_columns`: ``time`` UTC instants and ``local_time`` the device's wall clock where known;
+    ``t[s]`` seconds since the recording's start, always filled; ``t_ns`` the stored stamp) and the epoch columns. Trials without the channel are skipped
     (counted in ``dropped``). Written trial by trial to a temporary file, then renamed (Parquet or CSV by suffix).
     """
     import pyarrow as pa
@@ -103,10 +127,11 @@ def build_epoch_table(
                     table = stream_table(trial.read(topic), trial.channel(topic).metadata, topic, tc)
                     table = table.replace_schema_metadata(None)
                     n = table.num_rows
-                    if "time" in table.column_names:
-                        table = table.set_column(0, "time", table.column("time").cast(pa.timestamp("ns", tz="UTC")))
-                    else:
-                        table = table.add_column(0, "time", pa.nulls(n, pa.timestamp("ns", tz="UTC")))
+                    wall = table.column("time") if "time" in table.column_names else None
+                    if wall is not None:
+                        table = table.remove_column(0)
+                    utc, local = wall_clock_columns(wall, tc.start_time, n)
+                    table = table.add_column(0, "local_time", local).add_column(0, "time", utc)
                     imu = topic[len(prefix) :]
                     device = _record(trial.metadata.get(f"imulog.device.{imu}"))
                     ident = {

@@ -57,6 +57,9 @@ class StepSpec:
     # ``module:attr`` of a function ``imulog.trial record -> params``: the per-trial defaults that options
     # are applied onto (e.g. the phases step's protocol and repetition count come from the trial)
     trial_defaults: str | None = None
+    # the steps whose output this one reads, required or when present (the raw channels need no step): after a
+    # failure in a file, a step runs only when none of these failed or was left out for a failure (run_file)
+    reads: tuple[str, ...] = ()
 
 
 STEPS: dict[str, StepSpec] = {
@@ -70,6 +73,7 @@ STEPS: dict[str, StepSpec] = {
     "orientation": StepSpec(
         "orientation",
         "imulog.steps.orientation:run_orientation",
+        reads=("calibrate",),
         kwargs=("imu", "source"),
         params_class="imulog.process.orientation:OrientationParams",
         help="orientation + gravity-free acceleration (OrientationParams: backend, beta, use_mag, ...)",
@@ -77,6 +81,7 @@ STEPS: dict[str, StepSpec] = {
     "align": StepSpec(
         "align",
         "imulog.steps.align_setup:run_align_trial",
+        reads=("orientation",),
         kwargs=("imu", "markers", "resample"),
         params_class="imulog.process.alignment:AlignmentParams",
         help="IMU-to-Vicon clock and frame alignment (AlignmentParams: window_s, max_lag_s, drift, ...)",
@@ -84,12 +89,14 @@ STEPS: dict[str, StepSpec] = {
     "heading": StepSpec(
         "heading",
         "imulog.steps.heading:run_heading",
+        reads=("orientation", "align"),
         kwargs=("imus",),
         help="one heading frame for the oriented IMUs (imulog.heading: magnetometer, optical, or none)",
     ),
     "phases": StepSpec(
         "phases",
         "imulog.steps.phases:run_phases",
+        reads=("align",),
         kwargs=("imu",),
         params_class="imulog.process.segmentation.pipeline:PhaseParams",
         trial_defaults="imulog.steps.phases:params_for_trial",
@@ -107,6 +114,7 @@ STEPS: dict[str, StepSpec] = {
     "trajectory": StepSpec(
         "trajectory",
         "imulog.steps.trajectory:run_trajectory",
+        reads=("orientation", "align", "phases"),
         kwargs=("imu", "methods"),
         params_class="imulog.process.trajectory_opt:TrajectoryParams",
         help="wrist trajectories per method (methods=zupt,kalman,...; TrajectoryParams fields)",
@@ -114,6 +122,7 @@ STEPS: dict[str, StepSpec] = {
     "metrics": StepSpec(
         "metrics",
         "imulog.steps.metrics:run_metrics",
+        reads=("align", "phases", "trajectory"),
         kwargs=("imu",),
         params_class="imulog.steps.metrics:MetricsParams",
         help="clinical metrics (MetricsParams fields)",
@@ -129,6 +138,7 @@ STEPS: dict[str, StepSpec] = {
     "evaluate": StepSpec(
         "evaluate",
         "imulog.steps.evaluate:run_evaluate",
+        reads=("orientation", "align", "trajectory"),
         kwargs=("methods", "max_gap_s", "what"),
         help="trajectory errors against the optical reference (methods=..., max_gap_s=0.05); what=orientation: the "
         "orientation against a rigid body's poses (what=auto|orientation|trajectory, as imulog evaluate --what)",
@@ -136,6 +146,7 @@ STEPS: dict[str, StepSpec] = {
     "kinematics": StepSpec(
         "kinematics",
         "imulog.steps.kinematics:run_kinematics",
+        reads=("orientation", "align"),
         params_class="imulog.steps.kinematics:KinematicsOptions",
         params_kwarg="options",
         help="shoulder and elbow angles from two IMUs (KinematicsOptions: upper_arm, forearm, ...)",
@@ -356,25 +367,35 @@ def call_step(path: str | os.PathLike[str], step: str, options: dict[str, Any] |
     return out[0] if isinstance(out, tuple) else out  # run_evaluate returns (outcome, record)
 
 
-#: steps that read only the trial's raw IMU channels (and what the steps named here wrote): after another step
-#: failed on a file they still run (an accelerometer-only wrist in a study: orientation fails, its epochs do not
-#: need it); every other step stops at a file's first failure, since it may read what the failed step writes
-RAW_INPUT_STEPS: dict[str, tuple[str, ...]] = {"epochs": ("calibrate",)}
+def failed_inputs(step: str, lost: dict[str, tuple[str, ...]]) -> tuple[str, ...]:
+    """The failed steps ``step`` depends on: ``lost`` maps each step that failed to ``(itself,)`` and each step
+    left out for a failure to the failed steps behind it; a step reading none of them gives ``()`` (it runs)."""
+    roots: list[str] = []
+    for name in STEPS[step].reads:
+        roots.extend(r for r in lost.get(name, ()) if r not in roots)
+    return tuple(roots)
 
 
 def run_file(path: str, plan: list[tuple[str, dict[str, Any]]], force: bool = False) -> FileResult:
-    """Run ``plan`` (``[(step, options), ...]``) on one trial; never raises (errors go into the result). After a
-    failure only the :data:`RAW_INPUT_STEPS` that do not read the failed step's output still run; ``error`` names
-    the first failure (and any later one), ``failed_step`` the first.
+    """Run ``plan`` (``[(step, options), ...]``) on one trial; never raises (errors go into the result).
+
+    One rule after a failure: a step runs when no step it reads (:attr:`StepSpec.reads`) failed or was left out,
+    else it is recorded skipped with the reason naming the failed step(s). ``error`` names every failure, then
+    what still ran and what did not; ``failed_step`` is the first failure.
 
     Top-level and picklable: the entry point of worker processes and Dask tasks.
     """
     t0 = time.perf_counter()
     result = FileResult(path=str(path), status="up_to_date", worker=f"pid {os.getpid()}")
-    failed: list[str] = []
+    lost: dict[str, tuple[str, ...]] = {}
+    after: list[str] = []  # steps that ran after the first failure
     for step, options in plan:
-        if failed and (step not in RAW_INPUT_STEPS or set(failed) & set(RAW_INPUT_STEPS[step])):
-            continue  # it may read what the failed step writes
+        roots = failed_inputs(step, lost)
+        if roots:
+            lost[step] = roots
+            reason = f"not run: needs {', '.join(roots)}, which failed"
+            result.steps.append(StepRecord(step, True, None, 0.0, reason))
+            continue
         t = time.perf_counter()
         try:
             outcome = call_step(path, step, options, force=force)
@@ -383,17 +404,20 @@ def run_file(path: str, plan: list[tuple[str, dict[str, Any]]], force: bool = Fa
             line = f"{step}: {type(exc).__name__}: {exc}"
             result.error = f"{result.error}; {line}" if result.error else line
             result.traceback = result.traceback or traceback.format_exc(limit=8)
-            failed.append(step)
+            lost[step] = (step,)
             continue
         result.steps.append(
             StepRecord(step, bool(outcome.skipped), outcome.run, time.perf_counter() - t, outcome.reason)
         )
-        if not outcome.skipped and not failed:
+        if lost:
+            after.append(step)
+        elif not outcome.skipped:
             result.status = "processed"
-    if failed:
+    if lost:
         result.status = "failed"
-        ran = [s.step for s in result.steps if s.step in RAW_INPUT_STEPS]
-        if ran:
-            result.error += f" (still run: {', '.join(ran)}, which {'does' if len(ran) == 1 else 'do'} not need it)"
+        notes = [f"still run: {', '.join(after)}"] if after else []
+        notes += [f"{s.step} {s.reason}" for s in result.steps if s.step in lost]
+        if notes:
+            result.error += f" ({'; '.join(notes)})"
     result.seconds = time.perf_counter() - t0
     return result

@@ -103,7 +103,7 @@ def batch(
 
     The default steps are a lab trial's (IMU and an optical reference: align and evaluate need markers or
     poses); an archive of wearables alone takes the steps that need no reference, e.g. the home-monitoring
-    line below (epochs still run on a file whose orientation failed: an accelerometer-only wrist).
+    line below (metrics and epochs still run on a file whose orientation failed: an accelerometer-only wrist).
 
     \b
     Examples:

@@ -18,12 +18,14 @@ from imulog.commands.convert_common import (
     _write,
     conversion_record,
     conversion_warnings,
+    echo_skipped,
     finish_recording,
     load_meta_file,
     parse_meta,
     parse_value,
     record_name,
     sha256_of,
+    skipped_records,
     unit_warnings,
 )
 from imulog.commands.convert_folders import (
@@ -301,7 +303,7 @@ def _inspect(
         except ConversionError as e:
             failures.append(str(e))
     if as_json:
-        doc = {"inspect": reports, "errors": failures, "skipped": [{"path": str(p), "reason": r} for p, r in skipped]}
+        doc = {"inspect": reports, "errors": failures, "skipped": skipped_records(skipped)}
         click.echo(json.dumps(doc, indent=2, default=str))
     else:
         for k, report in enumerate(reports):
@@ -309,8 +311,7 @@ def _inspect(
                 click.echo("")
             for line in render(report):
                 click.echo(line)
-        for path, reason in skipped:
-            click.echo(f"{path.name}: skipped: {reason}")
+        echo_skipped(skipped)
     if failures:
         if not as_json:
             for msg in failures[:-1]:

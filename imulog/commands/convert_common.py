@@ -150,6 +150,18 @@ def _write(out: Path, rec: Recording, *, attach: str, overwrite: bool) -> Path:
         raise ConversionError(None, str(e)) from None
 
 
+def skipped_records(skipped: list[tuple[Path, str]]) -> list[dict[str, str]]:
+    """The files a folder's conversion left out, for ``--json``: ``{"path", "reason"}`` each."""
+    return [{"path": str(p), "reason": why} for p, why in skipped]
+
+
+def echo_skipped(skipped: list[tuple[Path, str]]) -> None:
+    """The files a folder's conversion left out, one line each on stderr (as warnings and errors):
+    ``skipped PATH: reason``; ``convert FOLDER`` and ``convert --inspect FOLDER`` both print them so."""
+    for path, why in skipped:
+        click.echo(f"skipped {path}: {why}", err=True)
+
+
 def _echo_json(
     trials: list[dict[str, Any]], failures: list[str], skipped: list[tuple[Path, str]] | None = None
 ) -> None:
@@ -158,7 +170,7 @@ def _echo_json(
 
     doc: dict[str, Any] = {"trials": trials, "failures": failures}
     if skipped:
-        doc["skipped"] = [{"path": str(p), "reason": why} for p, why in skipped]
+        doc["skipped"] = skipped_records(skipped)
     click.echo(json.dumps(doc, indent=2))
 
 

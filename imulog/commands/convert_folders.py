@@ -16,6 +16,7 @@ from imulog.commands.convert_common import (
     _format_name,
     _write,
     conversion_warnings,
+    echo_skipped,
     finish_recording,
     load_meta_file,
 )
@@ -260,8 +261,7 @@ def _convert_directories(
         )
     else:
         click.echo(f"wrote {written} trial(s) to {out_dir}")
-    for path, why in skipped:
-        click.echo(f"skipped {path}: {why}", err=True)
+    echo_skipped(skipped)
     for msg in warnings:
         click.echo(f"warning: {msg}", err=True)
     for msg in failures:

@@ -18,6 +18,9 @@ from __future__ import annotations
 
 import json
 import re
+import sys
+from collections.abc import Callable, Iterable, Iterator
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -59,14 +62,39 @@ MOTION_ROWS_PER_PIECE = 100_000
 
 def write_matrix_tsv(path: Path, columns: list[np.ndarray], rows_per_piece: int | None = None) -> None:
     """:func:`matrix_tsv` of ``columns`` written to ``path`` ``rows_per_piece`` rows at a time (the same bytes,
-    in bounded memory); on a terminal a bar ticks once per piece (:func:`imulog.console.window_progress`)."""
-    from imulog.console import window_progress
+    in bounded memory): :func:`write_pieces_tsv` of the columns as one piece."""
+    write_pieces_tsv(path, [columns], len(columns[0]) if columns else 0, rows_per_piece)
+
+
+def write_pieces_tsv(
+    path: Path, pieces: Iterable[list[np.ndarray]], total_rows: int, rows_per_piece: int | None = None
+) -> tuple[int, float, float]:
+    """The ``_motion.tsv`` of a channel read block by block: each piece's columns (the first: latency, s) as
+    :func:`matrix_tsv` text, ``rows_per_piece`` rows at a time, so the file is the bytes of the whole columns and
+    memory holds one block. On a terminal a bar ticks per ``rows_per_piece`` of ``total_rows``
+    (:func:`imulog.console.progress_bar`). Returns (rows, first latency, last latency) for the sidecar."""
+    from imulog.console import progress_bar
 
     rows_per_piece = rows_per_piece or MOTION_ROWS_PER_PIECE
-    n = len(columns[0]) if columns else 0
-    with open(path, "w", encoding="utf-8", newline="\n") as f:
-        for lo in window_progress(range(0, n, rows_per_piece), f"{path.name}", unit="piece"):
-            f.write(matrix_tsv([c[lo : lo + rows_per_piece] for c in columns]))
+    ticks = -(-total_rows // rows_per_piece)
+    bar = progress_bar(ticks, path.name, unit="piece") if ticks > 1 and sys.stderr.isatty() else None
+    rows, first, last, done = 0, float("nan"), float("nan"), 0
+    try:
+        with open(path, "w", encoding="utf-8", newline="\n") as f:
+            for columns in pieces:
+                n = len(columns[0]) if columns else 0
+                for lo in range(0, n, rows_per_piece):
+                    f.write(matrix_tsv([c[lo : lo + rows_per_piece] for c in columns]))
+                if n:
+                    first = float(columns[0][0]) if rows == 0 else first
+                    last, rows = float(columns[0][-1]), rows + n
+                    if bar is not None and rows // rows_per_piece > done:
+                        bar.update(rows // rows_per_piece - done)
+                        done = rows // rows_per_piece
+    finally:
+        if bar is not None:
+            bar.close()
+    return rows, first, last
 
 
 def matrix_tsv(columns: list[np.ndarray]) -> str:
@@ -82,18 +110,102 @@ def matrix_tsv(columns: list[np.ndarray]) -> str:
 def _system(
     name: str,
     kind: str,
-    t_s: np.ndarray,
-    chans: list[tuple[str, str, str, str, str, np.ndarray]],
+    chans: list[tuple[str, str, str, str, str]],
+    pieces: Callable[[], Iterator[list[np.ndarray]]],
+    total_rows: int,
     rate: float,
     meta: dict[str, Any],
     task: str,
 ) -> dict[str, Any]:
-    """One tracking system: channel rows (name, component, type, tracked_point, units) and columns."""
-    return {"name": name, "kind": kind, "t_s": t_s, "channels": chans, "rate": rate, "meta": meta, "task": task}
+    """One tracking system: channel rows (name, component, type, tracked_point, units) and ``pieces()``, its
+    columns block by block (latency first, then one per channel row)."""
+    return {
+        "name": name,
+        "kind": kind,
+        "channels": chans,
+        "pieces": pieces,
+        "total_rows": total_rows,
+        "rate": rate,
+        "meta": meta,
+        "task": task,
+    }
 
 
-def _effective_rate(t_s: np.ndarray) -> float | str:
-    return float((len(t_s) - 1) / (t_s[-1] - t_s[0])) if len(t_s) > 1 and t_s[-1] > t_s[0] else "n/a"
+def _effective_rate(rows: int, first: float, last: float) -> float | str:
+    return float((rows - 1) / (last - first)) if rows > 1 and last > first else "n/a"
+
+
+def _blocks(trial, topic: str) -> Iterator[Any]:
+    """``topic`` block by block (:meth:`TrialReader.iter_blocks`); an empty channel as its one empty stream."""
+    empty = True
+    for block in trial.iter_blocks(topic):
+        empty = False
+        yield block
+    if empty:
+        yield trial.read(topic)
+
+
+class _Rows:
+    """A channel's blocks handed out ``n`` rows at a time: another channel's rows lined up with these blocks."""
+
+    def __init__(self, blocks: Iterator[Any]) -> None:
+        self._blocks = blocks
+        self._t: list[np.ndarray] = []
+        self._v: list[np.ndarray] = []
+        self._n = 0
+
+    def take(self, n: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The next ``n`` rows as (``t_ns``, ``values``); None when the channel has fewer left."""
+        while self._n < n:
+            block = next(self._blocks, None)
+            if block is None:
+                return None
+            self._t.append(np.asarray(block.t_ns))
+            self._v.append(np.asarray(block.values))
+            self._n += len(block.t_ns)
+        t, v = np.concatenate(self._t), np.concatenate(self._v)
+        self._t, self._v, self._n = [t[n:]], [v[n:]], self._n - n
+        return t[:n], v[:n]
+
+    def exhausted(self) -> bool:
+        return self._n == 0 and all(len(b.t_ns) == 0 for b in self._blocks)
+
+
+def _same_stamps(trial, topic: str, other: str) -> bool:
+    """True when ``other`` has exactly ``topic``'s time stamps (the orientation step writes on the IMU's own),
+    compared block by block."""
+    rows = _Rows(trial.iter_blocks(other))
+    for block in trial.iter_blocks(topic):
+        got = rows.take(len(block.t_ns))
+        if got is None or not np.array_equal(got[0], block.t_ns):
+            return False
+    return rows.exhausted()
+
+
+def _imu_pieces(trial, tc, topic: str, groups: list[str], ori_topic: str | None) -> Iterator[list[np.ndarray]]:
+    """An IMU's motion columns block by block: latency (s), the x/y/z of each of ``groups``, then the
+    quaternion of ``ori_topic`` (lined up row for row) when given."""
+    quats = _Rows(trial.iter_blocks(ori_topic)) if ori_topic else None
+    for s in _blocks(trial, topic):
+        cols = [seconds_from(tc.times(topic, s.t_ns), tc.origin_ns)]
+        for group in groups:
+            arr = getattr(s, group)
+            cols += [arr[:, k] for k in range(len(_AXES))]
+        if quats is not None:
+            got = quats.take(len(s.t_ns))
+            if got is None:  # _same_stamps checked the row counts before anything was written
+                raise ExportError(f"{trial.path}: {ori_topic} ended before {topic}")
+            cols += [got[1][:, k] for k in range(4)]
+        yield cols
+
+
+def _marker_pieces(trial, tc, topic: str) -> Iterator[list[np.ndarray]]:
+    """A marker channel's motion columns block by block: latency (s), then x/y/z of each marker (NaN invalid)."""
+    for mk in _blocks(trial, topic):
+        pos = np.where(mk.valid[:, :, None], mk.pos, np.nan)
+        cols = [seconds_from(tc.times(topic, mk.t_ns), tc.origin_ns)]
+        cols += [pos[:, j, k] for j in range(pos.shape[1]) for k in range(len(_AXES))]
+        yield cols
 
 
 def export_bids(
@@ -112,28 +224,28 @@ def export_bids(
     systems: list[dict[str, Any]] = []
     for topic in [t for t in topics if t.startswith("/imu/") and t.count("/") == 2]:
         name = topic.rsplit("/", 1)[1]
-        s = trial.read(topic)
         info = trial.channel(topic)
-        t = tc.times(topic, s.t_ns)
-        chans = []
-        for group, typ, unit in _IMU_TYPES:
-            arr = getattr(s, group)
-            if arr is None:
-                continue
-            chans += [(f"{name}_{group}_{a}", a, typ, name, unit, arr[:, k]) for k, a in enumerate(_AXES)]
-        ori_topic = f"/derived/orientation/{name}"
-        if ori_topic in topics:
-            q = trial.read(ori_topic)
-            if len(q) == len(s) and np.array_equal(q.t_ns, s.t_ns):
-                for k, comp in enumerate(("quat_w", "quat_x", "quat_y", "quat_z")):
-                    chans.append((f"{name}_{comp}", comp, "ORNT", name, "n/a", q.values[:, k]))
+        first = next(_blocks(trial, topic))  # which quantities the IMU has
+        groups = [g for g, _, _ in _IMU_TYPES if getattr(first, g) is not None]
+        chans = [
+            (f"{name}_{group}_{a}", a, typ, name, unit)
+            for group, typ, unit in _IMU_TYPES
+            if group in groups
+            for a in _AXES
+        ]
+        ori_topic: str | None = f"/derived/orientation/{name}"
+        if ori_topic in topics and _same_stamps(trial, topic, ori_topic):
+            chans += [(f"{name}_{c}", c, "ORNT", name, "n/a") for c in ("quat_w", "quat_x", "quat_y", "quat_z")]
+        else:
+            ori_topic = None
         dev = md.get(f"imulog.device.{name}", {})
         systems.append(
             _system(
                 bids_label(name, "imu"),
                 "imu",
-                seconds_from(t, tc.origin_ns),
                 chans,
+                partial(_imu_pieces, trial, tc, topic, groups, ori_topic),
+                info.sample_count,
                 float(dev.get("rate_hz") or info.rate_hz or 0.0),
                 dev,
                 task,
@@ -141,22 +253,17 @@ def export_bids(
         )
     for topic in [t for t in topics if t.startswith("/markers/")]:
         name = topic.rsplit("/", 1)[1]
-        mk = trial.read(topic)
         info = trial.channel(topic)
-        t = tc.times(topic, mk.t_ns)
-        pos = np.where(mk.valid[:, :, None], mk.pos, np.nan)
-        chans = [
-            (f"{label}_{a}", a, "POS", label, "m", pos[:, j, k])
-            for j, label in enumerate(mk.labels)
-            for k, a in enumerate(_AXES)
-        ]
+        labels = next(_blocks(trial, topic)).labels
+        chans = [(f"{label}_{a}", a, "POS", label, "m") for label in labels for a in _AXES]
         dev = md.get(f"imulog.device.{name}", {})
         systems.append(
             _system(
                 bids_label(name, "markers"),
                 "markers",
-                seconds_from(t, tc.origin_ns),
                 chans,
+                partial(_marker_pieces, trial, tc, topic),
+                info.sample_count,
                 float(dev.get("rate_hz") or info.rate_hz or 0.0),
                 dev,
                 task,
@@ -189,9 +296,8 @@ def export_bids(
         folder.mkdir(parents=True)
         for sysd in systems:
             base = f"sub-{sub}_task-{task}_tracksys-{sysd['name']}{run_entity}"
-            latency = ("latency", "n/a", "LATENCY", "n/a", "s", sysd["t_s"])
-            chans = [latency, *sysd["channels"]]
-            write_matrix_tsv(folder / f"{base}_motion.tsv", [c[5] for c in chans])
+            chans = [("latency", "n/a", "LATENCY", "n/a", "s"), *sysd["channels"]]
+            n, first, last = write_pieces_tsv(folder / f"{base}_motion.tsv", sysd["pieces"](), sysd["total_rows"])
             ch_rows = [[c[0], c[1], c[2], c[3], c[4], sysd["rate"] or "n/a"] for c in chans]
             (folder / f"{base}_channels.tsv").write_text(
                 tsv(ch_rows, ["name", "component", "type", "tracked_point", "units", "sampling_frequency"])
@@ -199,14 +305,13 @@ def export_bids(
             counts: dict[str, int] = {}
             for c in chans:
                 counts[c[2]] = counts.get(c[2], 0) + 1
-            t_s = sysd["t_s"]
             dev = sysd["meta"]
             sidecar: dict[str, Any] = {
                 "TaskName": sysd["task"],
                 "TrackingSystemName": sysd["name"],
                 "SamplingFrequency": sysd["rate"] or "n/a",
-                "SamplingFrequencyEffective": _effective_rate(t_s),
-                "RecordingDuration": float(t_s[-1] - t_s[0]) if len(t_s) > 1 else 0.0,
+                "SamplingFrequencyEffective": _effective_rate(n, first, last),
+                "RecordingDuration": float(last - first) if n > 1 else 0.0,
                 "MotionChannelCount": len(chans),
                 "TrackedPointsCount": len({c[3] for c in sysd["channels"]}),
                 "MissingValues": "n/a",
@@ -220,7 +325,7 @@ def export_bids(
             sidecar["imulog"] = {"source": str(trial.path), **tc.record()}
             (folder / f"{base}_motion.json").write_text(json.dumps(sidecar, indent=2) + "\n")
             files += [f"{base}_motion.tsv", f"{base}_channels.tsv", f"{base}_motion.json"]
-            rows += len(t_s)
+            rows += n
         (folder / f"{stem}_events.tsv").write_text(
             tsv(events, ["onset", "duration", "trial_type", "repetition", "source"])
         )

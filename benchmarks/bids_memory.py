@@ -1,0 +1,90 @@
+"""Peak memory of ``imulog export --to bids`` on a long wrist recording (the export read each channel whole).
+
+    python benchmarks/bids_memory.py                              # a simulated day at 50 Hz (~10 min, 2 cores)
+    python benchmarks/bids_memory.py --days 0.25 --rate-hz 100
+    python benchmarks/bids_memory.py --trial home.mcap --compare before_bids/   # an existing trial; same bytes?
+
+Writes ``imulog simulate home --days D --set rate_hz=R`` and ``imulog convert`` of its ``.cwa`` (unless
+``--trial``), then runs ``/usr/bin/time -v imulog export TRIAL --to bids -o OUT/`` as a child and prints its
+"Maximum resident set size", wall time, the ``_motion.tsv`` sizes and whether ``bidsschematools`` matches every
+file name to a BIDS rule. ``--compare DIR``: whether every file equals the one of another export of the trial
+(e.g. one made by an earlier commit with ``imulog export home.mcap ...`` beside the trial: the sidecars record
+the trial's path as given, and the script gives its name), byte for byte. Run once per commit to compare; the machine's load is printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import filecmp
+import os
+import re
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+IMULOG = [sys.executable, "-m", "imulog"]
+
+
+def simulated_trial(folder: Path, days: float, rate_hz: float) -> Path:
+    """``imulog simulate home`` converted into ``folder/home.mcap``."""
+    sim = folder / "home"
+    subprocess.run(
+        [*IMULOG, "simulate", "home", "-o", sim, "--days", str(days), "--set", f"rate_hz={rate_hz:g}"], check=True
+    )
+    trial = folder / "home.mcap"
+    subprocess.run([*IMULOG, "convert", next(sim.glob("*.cwa")), "-o", trial], check=True)
+    return trial
+
+
+def measured_export(trial: Path, out: Path) -> dict[str, str]:
+    """The export under ``/usr/bin/time -v``: peak RSS (kB) and wall time as it prints them."""
+    done = subprocess.run(  # run beside the trial: the sidecars record its name, as `imulog export home.mcap`
+        ["/usr/bin/time", "-v", *IMULOG, "export", trial.name, "--to", "bids", "-o", out.resolve()],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=trial.resolve().parent,
+    )
+    fields = {}
+    for key in ("Maximum resident set size (kbytes)", "Elapsed (wall clock) time (h:mm:ss or m:ss)"):
+        m = re.search(re.escape(key) + r": (\S+)", done.stderr)
+        fields[key] = m.group(1) if m else "?"
+    return fields
+
+
+def same_files(a: Path, b: Path) -> bool:
+    """Every file of ``a`` and ``b`` present in both and equal byte for byte."""
+    names = sorted(str(p.relative_to(a)) for p in a.rglob("*") if p.is_file())
+    if names != sorted(str(p.relative_to(b)) for p in b.rglob("*") if p.is_file()):
+        return False
+    return all(filecmp.cmp(a / n, b / n, shallow=False) for n in names)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--days", type=float, default=1.0)
+    ap.add_argument("--rate-hz", type=float, default=50.0)
+    ap.add_argument("--trial", type=Path, help="an existing trial instead of a simulated one")
+    ap.add_argument("--compare", type=Path, help="another export of the same trial to compare byte for byte")
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory(prefix="bids_memory_") as tmp:
+        folder = Path(tmp)
+        trial = args.trial or simulated_trial(folder, args.days, args.rate_hz)
+        out = folder / "bids"
+        print(f"load average {os.getloadavg()[0]:.1f}; exporting {trial} ({trial.stat().st_size / 1e6:.0f} MB)")
+        fields = measured_export(trial, out)
+        for key, value in fields.items():
+            print(f"{key}: {value}")
+        for p in sorted(out.rglob("*_motion.tsv")):
+            print(f"{p.name}: {p.stat().st_size / 1e6:.0f} MB")
+        from bidsschematools import validator
+
+        unmatched = validator.validate_bids(str(out))["path_tracking"]
+        print(f"bidsschematools: {unmatched or 'every file name matches a BIDS rule'}")
+        if args.compare is not None:
+            print(f"same bytes as {args.compare}: {same_files(out, args.compare)}")
+
+
+if __name__ == "__main__":
+    main()
