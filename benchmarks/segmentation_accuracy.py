@@ -148,6 +148,10 @@ GRID_METHODS = {
     "hand + a slow last part inside the offset (step 8)": PhaseParams(hand=HandParams(slow_inside=True)),  # 12th round
     "hand + step 2's gap ended by movements (gaps.py)": PhaseParams(hand=HandParams(movement_gaps=True)),  # 12th, off
     "hand, onset walk at fixed speeds (step 5)": PhaseParams(hand=HandParams(walk_noise=False)),  # before 12th round
+    "hand + the rest's level in the flank fit (step 7)": PhaseParams(hand=HandParams(flank_rest_level=True)),  # 13th
+    "hand + both flanks with the rest's level (step 7)": PhaseParams(
+        hand=HandParams(flank_combine=True, flank_rest_level=True)
+    ),  # issue 31's 13th round, off
     "gyroscope only": PhaseParams(hand=HandParams(enabled=False)),
     "published (--no-refine)": PhaseParams(
         dynamos=DynamosParams(refine_boundaries=False), boundaries=BoundaryParams(enabled=False)

@@ -112,6 +112,7 @@ def flank_zero(
     back: int,
     smooth: int = 5,
     spread: list | None = None,
+    rest_samples: int = 0,
 ) -> float | None:
     """Where the acceleration flank leaving a rest starts (local sample index), by a hinge fit.
 
@@ -124,7 +125,13 @@ def flank_zero(
     before ``first`` to the flank's top: the first sample at ``min(top, half the flank's peak)`` (a
     curved flank near its peak would tilt the line); the peak is the largest ``|a|`` within ``span`` samples
     of ``first`` and must reach twice the ``level``. Returns ``t0``, or None without such a flank;
-    ``spread`` gets the line fit's spread of ``t0`` (:func:`hinge_fit`)."""
+    ``spread`` gets the line fit's spread of ``t0`` (:func:`hinge_fit`).
+
+    ``rest_samples`` > 0: the acceleration is relative to a rest window of that many samples, so the rest's level
+    before ``t0`` is zero to the precision of that window's mean: the fit gets as many zero samples before ``lo``
+    (a prior on the fit's constant with the window's weight; without it a dip or bump of the low-passed noise at
+    the flank's foot can pass for the rest's level and the flank's start, issue 31 thirteenth round); ``t0`` stays
+    within the samples fitted."""
     n = len(a)
     first = max(int(first), 0)
     if n == 0 or first >= n:
@@ -146,7 +153,11 @@ def flank_zero(
         return None
     y = a[lo : p + 1] @ (a[p] / an[p])
     x = np.arange(lo, p + 1, dtype=float)
-    return hinge_fit(x, y, 1, spread=spread)
+    if rest_samples <= 0:
+        return hinge_fit(x, y, 1, spread=spread)
+    n0 = int(rest_samples)  # the rest window's mean: zero, with the weight of its samples
+    t0 = hinge_fit(np.r_[np.arange(lo - n0, lo, dtype=float), x], np.r_[np.zeros(n0), y], 1, spread=spread)
+    return None if t0 is None else max(t0, float(lo))
 
 
 def speed_flank_zero(

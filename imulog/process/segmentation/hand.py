@@ -45,7 +45,8 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
    a rest's drift); a continuation that settles before the rest window extends the phase even beyond
    ``max_shift_s`` (``settled_beyond_shift``; the bound is on the walk of step 5, issue 31 point 1);
 7. the boundary moves on to where its acceleration flank (or, for a phase too slow for the accelerometer, its
-   speed flank) extrapolates to rest (:mod:`~imulog.process.segmentation.flanks`, issue 31);
+   speed flank) extrapolates to rest (:mod:`~imulog.process.segmentation.flanks`, issue 31); with
+   ``flank_rest_level`` (an option) the acceleration flank's rest level is zero to the rest window's precision;
 8. a slow last part at ``velocity_level_mps`` or more with next to no acceleration (the wrist stopped turning,
    the hand still arriving: up to 3 s) extends the offset when the rest window is verified as a rest (the
    velocity integrated forward from it stays under half that speed for ``rest_check_s``; with ``rest_drift``, an
@@ -189,7 +190,8 @@ def _extrapolated(
     back = int(round(params.max_extrapolation_s * rate_hz))
     smooth = max(1, int(round(0.05 * rate_hz)))
     spread: list[float] | None = [] if params.flank_combine else None  # each fit's sd of t0, for combined_t0
-    z = flank_zero(a, first, level, params.flank_top_n_level * level, span, back, smooth, spread)
+    prior = int(round(params.rest_window_s * rate_hz)) if params.flank_rest_level else 0  # the window's mean
+    z = flank_zero(a, first, level, params.flank_top_n_level * level, span, back, smooth, spread, prior)
     if (z is None or params.flank_combine) and params.velocity_level_mps > 0:
         fit = int(round(params.speed_fit_s * rate_hz))
         zs = speed_flank_zero(v, first, params.velocity_level_mps, fit, spread)

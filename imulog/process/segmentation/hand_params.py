@@ -71,6 +71,10 @@ class HandParams:
     flank_combine: step 7's ``t0`` is the acceleration flank's and the speed flank's averaged with weights inverse
         to their variances (:func:`~imulog.process.segmentation.flanks.combined_t0`; off: the speed flank only
         when there is no acceleration flank; issue 31 eleventh round, an option).
+    flank_rest_level: step 7's acceleration flank is fitted with its rest level known to be zero to the precision
+        of the rest window's mean (``rest_window_s`` of zero samples before the flank, :func:`flank_zero`'s
+        ``rest_samples``): a dip or bump of the low-passed noise at the flank's foot no longer passes for the
+        rest's level (issue 31 thirteenth round, the devices' noise; an option).
     rest_check_s: a slow last part of a phase at ``velocity_level_mps`` or more with next to no acceleration
         extends the offset when the velocity relative to the rest window stays under half that speed for this
         long (s) after the window (the window is a rest, not a hand cruising or drifting); 0: off.
@@ -128,3 +132,4 @@ class HandParams:
     slow_inside: bool = False
     movement_gaps: bool = False
     walk_noise: bool = True
+    flank_rest_level: bool = False
