@@ -49,6 +49,8 @@ from imulog.simulate.motion import MotionPlan, SubmovementLaw
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from phase_fit import mj_derivatives as _mj_derivatives  # noqa: E402  (the model's derivatives, one definition)
+
 MARGIN_S = 1.0  # s of rest observed before and after the phase
 MIN_DURATION_S = 0.05  # s: a submovement's shortest duration in the fit
 NOISES = ("quarter-acc=0.005,0.1", "simulator=0.02,0.1", "devices-median=0.0342,0.0623")
@@ -172,16 +174,6 @@ def sample_times(ph: Phase, rate_hz: float, phase_frac: float = 0.0) -> np.ndarr
     """Sample times (s from the phase's start) over the phase and ``MARGIN_S`` either side."""
     first = -MARGIN_S + phase_frac / rate_hz
     return first + np.arange(int((ph.duration_s + 2 * MARGIN_S) * rate_hz)) / rate_hz
-
-
-def _mj_derivatives(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """d/dtau, d2/dtau2 and d3/dtau3 of the minimum-jerk profile at ``tau`` (0 outside [0, 1])."""
-    inside = (tau > 0.0) & (tau < 1.0)
-    x = np.where(inside, tau, 0.0)
-    d1 = 30.0 * x**2 * (1.0 - x) ** 2
-    d2 = 60.0 * x - 180.0 * x**2 + 120.0 * x**3
-    d3 = np.where(inside, 60.0 - 360.0 * x + 360.0 * x**2, 0.0)
-    return d1, d2, d3
 
 
 def jacobian(theta: np.ndarray, ph: Phase, t: np.ndarray, noise: Noise, gyro: bool) -> np.ndarray:
