@@ -285,3 +285,16 @@ def test_a_record_without_a_clock_puts_no_imu_on_the_reference_clock():
     }
     assert set(alignments_from_metadata(meta)) == {"a"}
     assert set(alignments_from_metadata(meta, failed=True)) == {"a", "b"}  # imulog info lists it, with why
+
+
+def test_the_export_provenance_names_a_recording_clock():
+    """A BIDS sidecar's clock description (``TrialClock.record``) names an IMU on its recording's clock."""
+    from imulog.archive.trial_clock import TrialClock
+
+    shared = {"offset_ns": 5, "clock": "shared", "clock_of": ["upper_arm", "forearm"]}
+    tc = TrialClock("t.mcap", "reference", None, {"upper_arm": {"offset_ns": 5}, "trunk": shared}, {}, set(), {})
+    assert tc.record()["recording_clock"] == "trunk: clock of upper_arm, forearm"
+    assert (
+        "recording_clock"
+        not in TrialClock("t.mcap", "reference", None, {"a": {"offset_ns": 5}}, {}, set(), {}).record()
+    )

@@ -282,6 +282,7 @@ IMU_ALIGNMENT_KEYS = (
     "score",
     "quality",
     "clock",
+    "clock_of",
 )
 
 
