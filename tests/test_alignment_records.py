@@ -202,20 +202,34 @@ def test_several_imus_are_paired_with_their_bodies_by_the_data(tmp_path):
         pose.topic = f"/poses/{names[imu]}"
     path = write_trial(tmp_path / "bodies.mcap", sim.recording, attach_sources=False)
     out = run("process", "align", path)
-    assert "2 of 3 IMUs aligned" in out and "trunk: not aligned (no body aligns with it, 3 tried" in out, out
+    assert "3 IMUs aligned" in out and "trunk: offset" in out and "(shared clock of upper_arm, forearm)" in out, out
     with TrialReader(path) as t:
         meta, topics = t.metadata, t.topics()
+        t_trunk = t.read("/imu/trunk").t_ns
     for imu in ("upper_arm", "forearm"):
         rec = meta[f"imulog.alignment.{imu}"]
         assert rec["reference"] == f"/poses/{names[imu]}" and lag_error_ns(rec, sim, imu) < 1 * MS
         assert f"/derived/vicon/cluster_pose/{imu}" in topics
-    trunk = meta["imulog.alignment.trunk"]  # no clock: a record that says why (replacing any older alignment)
-    assert trunk["quality"] == "failed" and "offset_ns" not in trunk and "no body aligns" in trunk["quality_reasons"][0]
+    # the trunk, which no body turns like, shares the station clock with the two (one source file, one set of time
+    # stamps: imulog.process.alignment_setup.recording_groups): their clock, named as such, no frame, graded poor
+    trunk = meta["imulog.alignment.trunk"]
+    assert trunk["clock"] == "shared" and trunk["clock_of"] == ["upper_arm", "forearm"] and trunk["reference"] is None
+    assert trunk["signal"] == "clock of the recording" and trunk["rotation_imu_to_cluster"] is None
+    assert (
+        trunk["quality"] == "poor"
+        and "no rigid body turns like this IMU (no body aligns" in trunk["quality_reasons"][0]
+    )
+    assert lag_error_ns(trunk, sim, "trunk") < 1 * MS
+    assert "/derived/vicon/cluster_pose/trunk" not in topics
     assert set(meta["imulog.alignment"]["unpaired"]) == {"trunk"}
-    refused = CliRunner().invoke(
+    exported = CliRunner().invoke(
         cli, ["export", str(path), "-t", "/imu/trunk", "-o", str(tmp_path / "t.csv"), "--clock", "reference"]
     )
-    assert refused.exit_code == 1 and "which could not be aligned (no body aligns with it" in refused.output
+    assert exported.exit_code == 0, exported.output
+    assert "IMU 'trunk' has no alignment of its own; mapped with the clock of its recording (upper_arm, forearm)" in (
+        exported.stderr
+    )
+    assert np.array_equal(_t_ns(tmp_path / "t.csv"), device_to_reference(t_trunk, trunk))
     assert meta["imulog.alignment"]["imu"] == "/imu/upper_arm"  # the first IMU paired is the main record
     assert "unchanged" in run("process", "align", path)  # the same inputs: nothing recomputed
     # evaluate, no --imu: every IMU aligned on a body has its orientation evaluated, each against its own body;
@@ -232,7 +246,31 @@ def test_several_imus_are_paired_with_their_bodies_by_the_data(tmp_path):
         "imulog.orientation_evaluation.forearm": "/poses/body_1",
     }
     info = run("info", path)
-    assert "alignment (2 of 3 IMUs on /poses/body_1, /poses/body_3):" in info and "trunk: not aligned" in info
+    assert "alignment (3 IMUs on /poses/body_1, /poses/body_3):" in info
+    assert "trunk: offset" in info and "(shared clock of upper_arm, forearm), no cluster, no frame alignment" in info
+
+
+def test_an_imu_of_another_recording_takes_no_other_clock(tmp_path):
+    """The same setup with the trunk IMU from a file and clock of its own (another source, other time stamps): no
+    body aligns it and no clock is guessed for it (a record without a clock, the export refused)."""
+    sim = simulate_setup(seed=0, duration_s=30.0, rigid_bodies=True)
+    trunk = next(s for s in sim.recording.imus if s.name == "trunk")
+    sim.recording.metadata["imulog.device.trunk"]["source"] = trunk.meta["source"] = "trunk_imu.csv"
+    trunk.t_ns = trunk.t_ns + 3_000_000  # another device's clock: its samples 3 ms later than the station's
+    path = write_trial(tmp_path / "bodies.mcap", sim.recording, attach_sources=False)
+    out = run("process", "align", path)
+    assert "2 of 3 IMUs aligned" in out and "trunk: not aligned (no body aligns with it, 3 tried" in out, out
+    with TrialReader(path) as t:
+        rec = t.metadata["imulog.alignment.trunk"]  # no clock: a record that says why (replacing any older one)
+    assert rec["quality"] == "failed" and "offset_ns" not in rec and "no body aligns" in rec["quality_reasons"][0]
+    refused = CliRunner().invoke(
+        cli, ["export", str(path), "-t", "/imu/trunk", "-o", str(tmp_path / "t.csv"), "--clock", "reference"]
+    )
+    assert refused.exit_code == 1 and "which could not be aligned (no body aligns with it" in refused.output
+    assert not (tmp_path / "t.csv").exists()
+    info = run("info", path)
+    assert "alignment (2 of 3 IMUs on /poses/forearm_body, /poses/upper_arm_body):" in info
+    assert "trunk: not aligned" in info
 
 
 def test_a_record_without_a_clock_puts_no_imu_on_the_reference_clock():
@@ -247,3 +285,16 @@ def test_a_record_without_a_clock_puts_no_imu_on_the_reference_clock():
     }
     assert set(alignments_from_metadata(meta)) == {"a"}
     assert set(alignments_from_metadata(meta, failed=True)) == {"a", "b"}  # imulog info lists it, with why
+
+
+def test_the_export_provenance_names_a_recording_clock():
+    """A BIDS sidecar's clock description (``TrialClock.record``) names an IMU on its recording's clock."""
+    from imulog.archive.trial_clock import TrialClock
+
+    shared = {"offset_ns": 5, "clock": "shared", "clock_of": ["upper_arm", "forearm"]}
+    tc = TrialClock("t.mcap", "reference", None, {"upper_arm": {"offset_ns": 5}, "trunk": shared}, {}, set(), {})
+    assert tc.record()["recording_clock"] == "trunk: clock of upper_arm, forearm"
+    assert (
+        "recording_clock"
+        not in TrialClock("t.mcap", "reference", None, {"a": {"offset_ns": 5}}, {}, set(), {}).record()
+    )

@@ -61,6 +61,19 @@ def test_catalog_rows_and_readers(archive, tmp_path):
         assert json.loads(row.evaluation_json) == json.loads(json.dumps(ev))
         assert "arm_usage.overall_percent" in json.loads(row.metrics_json)
         assert row.best_mae_cm < 5.0
+        # one IMU: the alignment columns are its one record, as before; the per-IMU columns by the same rule
+        al = trial.metadata["imulog.alignment"]
+        assert (
+            json.loads(row.alignment_json) == json.loads(json.dumps(al)) and row.alignment_offset_ns == al["offset_ns"]
+        )
+        assert (row.n_imus, row.n_imus_aligned, row.n_imus_aligned_good) == (1, 1, int(al["quality"] == "good"))
+        wrist = json.loads(row.alignment_imus_json)["wrist"]
+        assert set(json.loads(row.alignment_imus_json)) == {"wrist"}
+        assert (wrist["offset_ns"], wrist["drift_ppm"], wrist["quality"]) == (
+            al["offset_ns"],
+            al["drift_ppm"],
+            al["quality"],
+        )
     duckdb = pytest.importorskip("duckdb")
     got = duckdb.sql(
         f"select subject, count(*) as n, max(n_repetitions) as reps, "
@@ -169,3 +182,46 @@ def test_report_keeps_each_imu_of_a_setup_apart():
     assert {r["method"] for r in repetition_errors(df)} == {"zupt (upper_arm)", "zupt (forearm)"}
     single = df.assign(evaluation_json=json.dumps({"imu": "/imu/wrist", "methods": {"zupt": method(2.0)}}))
     assert {r["method"] for r in accuracy_table(single)} == {"zupt"}  # one IMU: labels as before
+
+
+def test_catalog_gives_every_imu_of_a_setup_its_alignment(tmp_path):
+    """A setup aligned as a whole (upper arm, forearm, trunk on one station clock, markers): the catalog read only
+    ``imulog.alignment`` (the first IMU's), so the table had no clock nor grade for the other IMUs."""
+    from imulog.archive import write_trial
+    from imulog.process.alignment_clock import device_to_reference
+    from imulog.simulate.setup import simulate_setup
+
+    sim = simulate_setup(seed=0, duration_s=40.0)  # (on 30 s the two clusters' windows scatter 3.4 ms: poor)
+    path = write_trial(tmp_path / "setup.mcap", sim.recording, attach_sources=False)
+    aligned = CliRunner().invoke(cli, ["process", "align", str(path)])
+    assert aligned.exit_code == 0, aligned.output
+    out = tmp_path / "catalog.parquet"
+    build_catalog(tmp_path, out)
+    row = pd.read_parquet(out).iloc[0]
+    with TrialReader(path) as trial:
+        meta = trial.metadata
+    recs = {n: meta[f"imulog.alignment.{n}"] for n in ("upper_arm", "forearm", "trunk")}
+    assert (row.n_imus, row.n_imus_aligned) == (3, 3)
+    assert row.n_imus_aligned_good == sum(r["quality"] == "good" for r in recs.values()) >= 2
+    per_imu = json.loads(row.alignment_imus_json)
+    assert set(per_imu) == set(recs)
+    for name, rec in recs.items():
+        got = per_imu[name]
+        assert (got["offset_ns"], got["drift_ppm"], got["quality"]) == (
+            rec["offset_ns"],
+            rec["drift_ppm"],
+            rec["quality"],
+        )
+        t = next(s.t_ns for s in sim.recording.imus if s.name == name)
+        assert np.array_equal(device_to_reference(t, got), device_to_reference(t, rec))  # the whole clock
+        lag_error = np.max(np.abs(device_to_reference(t, got) - device_to_reference(t, sim.alignment)))
+        # each IMU's clock from the table within the grade's tolerance (3 ms) of the truth over the whole trial
+        print(f"{name}: catalog clock against the truth, max lag error {lag_error / 1e6:.3f} ms")
+        assert lag_error < 3_000_000, (name, lag_error)
+    # no cluster: the clock of the other two, said so
+    assert per_imu["trunk"]["quality"] == "poor" and per_imu["trunk"]["clock_of"] == ["upper_arm", "forearm"]
+    duckdb = pytest.importorskip("duckdb")
+    got = duckdb.sql(
+        f"select cast(json_extract(alignment_imus_json, '$.forearm.drift_ppm') as double) from '{out}'"
+    ).fetchall()[0][0]
+    assert got == pytest.approx(recs["forearm"]["drift_ppm"])

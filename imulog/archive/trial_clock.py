@@ -114,6 +114,7 @@ class TrialClock:
                     f"{self.path}: {topic} is on the device clock of IMU {src!r} and the trial has no "
                     f"imulog.alignment for it: run `{self._align_command(src)}` first (or export --clock device)"
                 )
+            self._note_shared(topic, src, alignment)
             return device_to_reference(t, alignment)
         if src == self.imu:
             return t
@@ -122,6 +123,7 @@ class TrialClock:
             if alignment is None:
                 self._note(f"{topic}: IMU {src!r} is not aligned; its time stamps are exported as recorded")
                 return t
+            self._note_shared(topic, src, alignment)
             t = device_to_reference(t, alignment)
         target = self.alignments.get(self.imu or "")
         if target is None:
@@ -131,6 +133,15 @@ class TrialClock:
             )
             return t
         return reference_to_device(t, target)
+
+    def _note_shared(self, topic: str, imu: str, alignment: dict[str, Any]) -> None:
+        """Say so when IMU ``imu`` is on the reference clock through its recording's clock (no cluster or body of its
+        own: :func:`imulog.steps.align_setup.recording_clock_record`), never silently."""
+        if alignment.get("clock_of"):
+            self._note(
+                f"{topic}: IMU {imu!r} has no alignment of its own; mapped with the clock of its recording "
+                f"({', '.join(map(str, alignment['clock_of']))})"
+            )
 
     def _align_command(self, imu: str) -> str:
         """The command that aligns ``imu``: the whole setup on markers; on a rigid body's poses (no markers) one IMU
@@ -146,6 +157,9 @@ class TrialClock:
         out = {"clock": self.clock, "origin_ns": str(self.origin_ns)}
         if self.imu:
             out["device_imu"] = self.imu
+        shared = {n: a["clock_of"] for n, a in sorted(self.alignments.items()) if a.get("clock_of")}
+        if shared:  # IMUs on their recording's clock, not aligned on their own
+            out["recording_clock"] = "; ".join(f"{n}: clock of {', '.join(map(str, c))}" for n, c in shared.items())
         if self.start_time is not None:
             out["start_time"] = self.start_time.isoformat()
             out["time_zone"] = self.time_zone_label or self.time_zone or "unknown (device local time)"

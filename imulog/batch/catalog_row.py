@@ -34,6 +34,9 @@ INT_COLUMNS = (
     "n_runs",
     "n_attachments",
     "alignment_offset_ns",
+    "n_imus",
+    "n_imus_aligned",
+    "n_imus_aligned_good",
     "n_repetitions",
     "n_phases",
     "n_forced_phases",
@@ -72,6 +75,7 @@ JSON_COLUMNS = (
     "channels_json",
     "runs_json",
     "alignment_json",
+    "alignment_imus_json",
     "timing_json",
     "evaluation_json",
     "orientation_evaluation_json",
@@ -167,6 +171,7 @@ def trial_row(path: str | os.PathLike[str]) -> dict[str, Any]:
     row["channels"] = [c.topic for c in raw_ch]
     row["derived_channels"] = [c.topic for c in derived]
     row["imus"] = [c.topic.split("/", 2)[2] for c in raw_ch if c.topic.startswith("/imu/")]
+    row["n_imus"] = len(row["imus"])
     row["markers"] = [c.topic.split("/", 2)[2] for c in raw_ch if c.topic.startswith("/markers/")]
     row["n_channels"] = len(channels)
     row["n_derived_channels"] = len(derived)
@@ -220,6 +225,7 @@ def trial_row(path: str | os.PathLike[str]) -> dict[str, Any]:
         row["alignment_score"] = _num(al.get("score"))
         row["alignment_method"] = None if al.get("method") is None else str(al.get("method"))
         row["alignment_json"] = _json(al)
+    row.update(_imu_alignment_columns(meta, row["imus"]))
     timing = _record(meta.get("imulog.timing"))
     if timing:
         row["n_repetitions"] = _num(timing.get("n_repetitions"), int)
@@ -261,6 +267,52 @@ def trial_row(path: str | os.PathLike[str]) -> dict[str, Any]:
         row["metrics_json"] = _json(mt)
     row.update(_epoch_columns(_record(meta.get("imulog.epochs"))))
     return row
+
+
+#: what ``alignment_imus_json`` keeps of each IMU's alignment record: the clock (``t_ref = t_dev + offset_ns +
+#: drift_ppm 1e-6 (t_dev - t0_ns)``, ns), its standard errors and its grade
+IMU_ALIGNMENT_KEYS = (
+    "reference",
+    "offset_ns",
+    "t0_ns",
+    "offset_uncertainty_ns",
+    "drift_ppm",
+    "drift_uncertainty_ppm",
+    "drift_estimated",
+    "score",
+    "quality",
+    "clock",
+    "clock_of",
+)
+
+
+def _imu_alignment_columns(meta: dict[str, Any], imus: list[str]) -> dict[str, Any]:
+    """``n_imus_aligned``, ``n_imus_aligned_good`` and ``alignment_imus_json`` of the trial's IMUs (``imus``, the raw
+    ``/imu/*`` channels): one rule for one IMU and several, from the records every alignment path writes
+    (``imulog.alignment`` and ``imulog.alignment.{imu}``, :func:`imulog.archive.alignment_records.alignments_from_metadata`).
+    Aligned: a record with a clock (``offset_ns``); an IMU a setup could not align is listed with ``quality``
+    ``failed`` and why. Nothing when the trial has no alignment record."""
+    from imulog.archive.alignment_records import alignments_from_metadata
+
+    records = {n: r for n, r in alignments_from_metadata(meta, failed=True).items() if n in imus}
+    if not records:
+        return {}
+    per_imu: dict[str, dict[str, Any]] = {}
+    for name in imus:
+        rec = records.get(name)
+        if rec is None:
+            continue
+        entry = {k: rec[k] for k in IMU_ALIGNMENT_KEYS if k in rec}
+        if "offset_ns" not in rec:
+            entry.setdefault("quality", "failed")
+            entry["why"] = "; ".join(str(r) for r in rec.get("quality_reasons") or [])
+        per_imu[name] = entry
+    aligned = [e for e in per_imu.values() if "offset_ns" in e]
+    return {
+        "n_imus_aligned": len(aligned),
+        "n_imus_aligned_good": sum(e.get("quality") == "good" for e in aligned),
+        "alignment_imus_json": _json(per_imu),
+    }
 
 
 def _flag_columns(timing: dict[str, Any], trajectory: dict[str, Any]) -> dict[str, Any]:

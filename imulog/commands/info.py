@@ -250,7 +250,7 @@ def _echo_alignment(metadata: dict) -> None:
         return
     if record.get("setup"):  # several IMUs aligned: one line per IMU, then the clocks
         aligned = [r for r in per_imu.values() if "offset_ns" in r] or [record]
-        refs = sorted({str(r.get("reference", "?")) for r in aligned})
+        refs = sorted({str(r["reference"]) for r in aligned if r.get("reference")})  # (a recording's clock: none)
         n = len(record["setup"])
         count = f"{len(aligned)} of {n}" if per_imu and len(aligned) < n else str(n)
         click.echo(f"alignment ({count} IMUs on {', '.join(refs)}):")

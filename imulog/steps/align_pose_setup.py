@@ -52,6 +52,39 @@ def pair_imus_with_bodies(
     return pairs, why
 
 
+def recording_clocks(
+    names: list[str],
+    pairs: dict[str, str],
+    records: dict[str, dict],
+    why: dict[str, str],
+    device_meta: dict[str, dict],
+    times: dict[str, np.ndarray],
+    params: al.AlignmentParams,
+) -> dict[str, dict]:
+    """IMU -> record for each IMU no body turns like (``why``) whose recording shares one clock with IMUs paired
+    with a body (:func:`imulog.process.alignment_setup.recording_groups`: the same ``recording``/``master`` or
+    ``source`` in their device records, or identical time stamps ``times``): the clock pooled over those IMUs' windows,
+    as the marker setup gives an IMU without a cluster (:func:`imulog.steps.align_setup.recording_clock_record`).
+    An IMU of a recording without a paired IMU gets nothing (no clock is guessed)."""
+    from imulog.process.alignment_setup import pooled_clock, recording_groups
+    from imulog.steps.align_setup import recording_clock_record
+
+    out: dict[str, dict] = {}
+    for group in recording_groups(names, device_meta, times):
+        paired = [n for n in group if n in pairs]
+        lone = [n for n in group if n not in pairs]
+        if not paired or not lone:
+            continue
+        try:
+            clock = pooled_clock([{**records[p], "imu": p} for p in paired], params)
+        except ValueError:  # no usable window in the paired IMUs' records: their clocks stay their own
+            continue
+        for n in lone:
+            base = {"reference": None, "imu": f"/imu/{n}", "clock_group": list(group)}
+            out[n] = recording_clock_record(base, clock, paired, f"no rigid body turns like this IMU ({why[n]})")
+    return out
+
+
 def run_align_pose_setup(
     path,
     *,
@@ -87,9 +120,11 @@ def run_align_pose_setup(
     def compute(trial) -> StepResult:
         poses = {b: trial.read(b) for b in bodies}
         candidates: dict[str, dict[str, tuple[list, dict] | str]] = {}
+        times: dict[str, np.ndarray] = {}
         for n in names:
             lo, hi = imu_span(trial, f"/imu/{n}", bodies[0], params.max_lag_s)
             s = trial.read(f"/imu/{n}", lo, hi)
+            times[n] = s.t_ns
             derived = [t for t in (f"/derived/orientation/{n}", f"/derived/acc_global/{n}") if t in inputs]
             orientation, acc_global = read_derived_pair(trial, derived, lo, hi)
             candidates[n] = {}
@@ -107,6 +142,8 @@ def run_align_pose_setup(
                 "no IMU turns like any rigid body (" + "; ".join(f"{n}: {w}" for n, w in why.items()) + ")"
             )
         records = {n: candidates[n][b][1] for n, b in pairs.items()}
+        device_meta = {n: dict(trial.metadata.get(f"imulog.device.{n}") or {}) for n in names}
+        records.update(recording_clocks(names, pairs, records, why, device_meta, times, params))
         streams: list = []
         metadata: dict = {}
         for n in names:
@@ -114,6 +151,8 @@ def run_align_pose_setup(
                 written, suffix = alignment_writes(topics, trial.metadata, n, records[n])
                 streams += renamed(candidates[n][pairs[n]][0], suffix)
                 metadata.update({k: v for k, v in written.items() if k != "imulog.alignment"})
+            elif n in records:  # no body, but the clock of its recording's aligned IMUs: named as such
+                metadata[f"imulog.alignment.{n}"] = records[n]
             else:  # no body: a record without a clock replaces any older one, so no stale alignment stays
                 metadata[f"imulog.alignment.{n}"] = {
                     "imu": f"/imu/{n}",

@@ -47,6 +47,28 @@ def _own_clock(record: dict) -> dict:
     return {k: record.get(k) for k in ("offset_ns", "drift_ppm", "offset_uncertainty_ns", "score") if k in record}
 
 
+def recording_clock_record(base: dict, clock: dict, paired: list[str], why: str) -> dict:
+    """The alignment record of an IMU that nothing optical turns like (``why``), in a recording whose IMUs ``paired``
+    are aligned: their pooled ``clock`` (:func:`imulog.process.alignment_setup.pooled_clock`; offset ns, drift ppm),
+    no frame alignment, graded poor, and named as such (``signal`` ``clock of the recording``, ``clock`` ``shared``,
+    ``clock_of`` the IMUs whose windows made it, ``method``): never an alignment of its own."""
+    return {
+        **base,
+        **{k: clock[k] for k in CLOCK_KEYS if k in clock},
+        "signal": "clock of the recording",
+        "clock": "shared",
+        "clock_of": list(paired),
+        "frame_alignment": False,
+        "rotation_imu_to_cluster": None,
+        "rotation_global_to_world": None,
+        "cluster": None,
+        "windows": [],
+        "method": f"clock shared with {', '.join(paired)}",
+        "quality": "poor",
+        "quality_reasons": [f"{why}: its clock is its recording's ({', '.join(paired)}), no frame alignment"],
+    }
+
+
 def compute_setup_alignment(
     imus: dict[str, dict],
     marker_topic: str,
@@ -123,28 +145,11 @@ def compute_setup_alignment(
                 rec["method"] = m.record.get("method", "") + ";setup"
                 ck = m.kinematics
             else:
-                rec = {
-                    **base,
-                    **clock_fields,
-                    "signal": "clock of the recording",
-                    "clock": "shared",
-                    "frame_alignment": False,
-                    "rotation_imu_to_cluster": None,
-                    "rotation_global_to_world": None,
-                    "cluster": None,
-                    "windows": [],
-                    "method": f"clock shared with {', '.join(paired)}",
-                }
+                rec = recording_clock_record(base, clock, paired, "no rigid marker cluster moves with this IMU")
                 ck = None
             rec = {**base, **rec}
             if ck is not None:
                 rec["quality"], rec["quality_reasons"] = al.assess_quality(rec, params)
-            else:
-                rec["quality"] = "poor"
-                rec["quality_reasons"] = [
-                    "no rigid marker cluster moves with this IMU: its clock is its recording's "
-                    f"({', '.join(paired)}), no frame alignment"
-                ]
             records[name] = _jsonable(rec)
             streams += alignment_streams(
                 name,

@@ -80,6 +80,8 @@ def setup_lines(record: dict) -> list[str]:
         clock = (
             f"{r['clock']} clock" if r.get("clock") else f"own clock, drift {float(r.get('drift_ppm') or 0):.1f} ppm"
         )
+        if r.get("clock_of"):  # no cluster or body of its own: whose clock it took
+            clock += f" of {', '.join(r['clock_of'])}"
         lines.append(
             f"{name}: offset {'-' if off is None else f'{off:.2f} ms'} ({clock}"
             f"{'' if own is None else f', own windows {own:.2f} ms'}), {markers}"
@@ -90,7 +92,7 @@ def setup_lines(record: dict) -> list[str]:
     for name, why in (record.get("unpaired") or {}).items():  # rigid bodies: IMUs no body turns like
         if name not in setup:
             lines.append(f"{name}: not aligned ({why})")
-    if not any(r.get("clock") for r in setup.values()):  # every IMU on its own clock: no shared clock to show
+    if not record.get("clock"):  # every aligned IMU on its own clock (rigid bodies): no setup clock to show
         return lines
     drift = record.get("drift_ppm")
     unc = record.get("drift_uncertainty_ppm")
@@ -118,6 +120,7 @@ def setup_summary(records: dict[str, dict]) -> dict:
             "drift_ppm": r.get("drift_ppm"),
             "drift_estimated": r.get("drift_estimated"),
             "clock": r.get("clock"),
+            **({"clock_of": r["clock_of"]} if r.get("clock_of") else {}),
             "markers": c.get("markers"),
             "pose": c.get("pose"),
             "rejected_markers": c.get("rejected_markers"),
