@@ -126,6 +126,41 @@ class Summary:
         lo, n = self._chunk_spans[2 * i], self._chunk_spans[2 * i + 1]
         return parse_chunk_index(memoryview(self._section)[lo : lo + n])
 
+    def _chunk_heads(self) -> Iterator[tuple[int, int, int, int, list[int]]]:
+        """(message start and end time in ns, chunk offset, chunk length in bytes, channel ids) of every ChunkIndex
+        in summary order: from the parsed list when built, else straight from the kept bytes (nothing kept)."""
+        if self._chunk_indexes is not None:
+            for ci in self._chunk_indexes:
+                ids = list(ci.message_index_offsets)
+                yield ci.message_start_time, ci.message_end_time, ci.chunk_start_offset, ci.chunk_length, ids
+            return
+        spans, section = self._chunk_spans, self._section
+        for i in range(0, len(spans), 2):
+            lo = spans[i]
+            start, end, offset, length, map_len = _CI_HEAD.unpack_from(section, lo)
+            entries = section[lo + _CI_HEAD.size : lo + _CI_HEAD.size + map_len]
+            yield start, end, offset, length, [cid for cid, _ in _CI_ENTRY.iter_unpack(entries)]
+
+    def channel_chunks(self, channel_id: int) -> tuple[array, array, array, array]:
+        """Chunk offsets, message start and end times (ns) and numbers (for :meth:`chunk_index_number`) of the
+        chunks holding ``channel_id``, in summary order, read without building ChunkIndex records (32 bytes a
+        chunk of the channel)."""
+        offsets, starts, ends, numbers = array("Q"), array("Q"), array("Q"), array("Q")
+        for k, (start, end, offset, _, ids) in enumerate(self._chunk_heads()):
+            if channel_id in ids:
+                offsets.append(offset)
+                starts.append(start)
+                ends.append(end)
+                numbers.append(k)
+        return offsets, starts, ends, numbers
+
+    def chunk_index_number(self, k: int) -> ChunkIndexRec:
+        """The ``k``-th ChunkIndex in summary order (duplicates dropped), parsed alone unless the list is parsed."""
+        if self._chunk_indexes is not None:
+            return self._chunk_indexes[k]
+        lo, n = self._chunk_spans[2 * k], self._chunk_spans[2 * k + 1]
+        return parse_chunk_index(memoryview(self._section)[lo : lo + n])
+
     @property
     def summary_records(self) -> list[tuple[int, int, int]]:
         """(opcode, file offset, total length) of every record of the summary section, in order."""
@@ -135,18 +170,8 @@ class Summary:
     def stored_bytes_by_channel(self) -> dict[int, int]:
         """Compressed chunk bytes per channel id (a chunk's length shared evenly among its channels), read
         straight from the ChunkIndex records without building them."""
-        if self._chunk_indexes is not None:
-            pairs = [(ci.chunk_length, list(ci.message_index_offsets)) for ci in self._chunk_indexes]
-        else:
-            pairs = []
-            spans, section = self._chunk_spans, self._section
-            for i in range(0, len(spans), 2):
-                lo = spans[i]
-                *_, length, map_len = _CI_HEAD.unpack_from(section, lo)
-                entries = section[lo + _CI_HEAD.size : lo + _CI_HEAD.size + map_len]
-                pairs.append((length, [cid for cid, _ in _CI_ENTRY.iter_unpack(entries)]))
         out: dict[int, int] = {}
-        for length, ids in pairs:
+        for *_, length, ids in self._chunk_heads():
             for cid in ids:
                 out[cid] = out.get(cid, 0) + length // len(ids)
         return out

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+from array import array
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -79,6 +80,7 @@ class TrialReader:
             hint = SALVAGE_HINT if size >= SALVAGE_MIN_BYTES else ""
             raise ArchiveCorruptError(f"{self.path}: {exc}{hint}") from exc
         self._metadata: dict[str, dict[str, Any]] | None = None
+        self._chunk_tables: dict[int, tuple[array, ...]] = {}  # by channel id: _chunk_table
         self._by_topic = {c.topic: c for c in self.summary.channels.values()}
         try:  # channel metadata is parsed as JSON in many places: refuse hostile nesting once, here
             for c in self.summary.channels.values():
@@ -251,28 +253,51 @@ class TrialReader:
             raise ArchiveError(f"{self.path}: no channel {topic!r} (channels: {known})")
         return rec
 
-    def _select_chunks(self, channel_id: int, start_ns: int | None, end_ns: int | None) -> list[m.ChunkIndexRec]:
-        """Chunk indexes holding ``channel_id`` that may overlap ``[start_ns, end_ns)``, in file order."""
-        # Chunks in file order = write order (kept as is, so even a non-monotonic clock round-trips).
-        idxs = [ci for ci in self.summary.chunk_indexes if channel_id in ci.message_index_offsets]
-        idxs.sort(key=lambda ci: ci.chunk_start_offset)
+    def _chunk_table(self, channel_id: int) -> tuple[array, ...]:
+        """Offsets, message start/end times (ns) and summary numbers of the chunks holding ``channel_id``, in file
+        order (= write order, kept as is so even a non-monotonic clock round-trips): 32 bytes a chunk of the
+        channel, kept per channel read. Parsed ChunkIndex records (about 600 bytes each with their offsets maps:
+        benchmarks/reader_memory.py) are built one at a time, when their chunk is read."""
+        table = self._chunk_tables.get(channel_id)
+        if table is None:
+            table = self.summary.channel_chunks(channel_id)
+            offsets = table[0]
+            if any(offsets[k] > offsets[k + 1] for k in range(len(offsets) - 1)):  # summary not in file order
+                order = sorted(range(len(offsets)), key=offsets.__getitem__)
+                table = tuple(array("Q", [column[i] for i in order]) for column in table)
+            self._chunk_tables[channel_id] = table
+        return table
+
+    def _selected_chunks(self, channel_id: int, start_ns: int | None, end_ns: int | None) -> array:
+        """Summary numbers of the chunks holding ``channel_id`` that may overlap ``[start_ns, end_ns)``, in file
+        order (:meth:`_chunk_index` parses one)."""
+        _, starts, ends, numbers = self._chunk_table(channel_id)
         meta = self.summary.channels[channel_id].metadata  # its log_time map: t_ns -> the trial's time axis
         lo = None if start_ns is None else _codec().channel_log_time(meta, start_ns)
         hi = None if end_ns is None else _codec().channel_log_time(meta, end_ns)
-        monotonic = all(a.message_end_time <= b.message_start_time for a, b in zip(idxs, idxs[1:], strict=False))
-        selected = []
-        for k, ci in enumerate(idxs):
-            if monotonic and hi is not None and ci.message_start_time > hi:
+        n = len(numbers)
+        monotonic = all(ends[k] <= starts[k + 1] for k in range(n - 1))
+        selected = array("Q")  # 8 bytes a chunk (a list: 36)
+        for k in range(n):
+            if monotonic and hi is not None and starts[k] > hi:
                 continue
             # Blocks start at their first sample: a chunk may hold samples up to the next chunk's start.
-            if monotonic and lo is not None and k + 1 < len(idxs) and idxs[k + 1].message_start_time < lo:
+            if monotonic and lo is not None and k + 1 < n and starts[k + 1] < lo:
                 continue
-            selected.append(ci)
+            selected.append(numbers[k])
         return selected
+
+    def _chunk_index(self, number: int) -> m.ChunkIndexRec:
+        """The ChunkIndex numbered ``number`` in the summary (one from :meth:`_selected_chunks`), parsed alone."""
+        return self.summary.chunk_index_number(number)
+
+    def _select_chunks(self, channel_id: int, start_ns: int | None, end_ns: int | None) -> list[m.ChunkIndexRec]:
+        """Chunk indexes holding ``channel_id`` that may overlap ``[start_ns, end_ns)``, in file order."""
+        return [self._chunk_index(o) for o in self._selected_chunks(channel_id, start_ns, end_ns)]
 
     def _where(self, ci: m.ChunkIndexRec, topic: str | None) -> str:
         """``PATH: TOPIC: chunk at byte N (t = a-b s)``: the chunk's place, time relative to the file's first."""
-        t0 = min((c.message_start_time for c in self.summary.chunk_indexes), default=0)
+        t0 = min((c.message_start_time for c in self.summary.iter_chunk_indexes()), default=0)
         span = f"{(ci.message_start_time - t0) / 1e9:.3f}-{(ci.message_end_time - t0) / 1e9:.3f} s"
         who = f"{topic}: " if topic else ""
         return f"{self.path}: {who}chunk at byte {ci.chunk_start_offset} (t = {span} into the file)"
@@ -322,26 +347,28 @@ class TrialReader:
     ) -> Iterator[list[memoryview]]:
         """The channel's raw messages one chunk at a time (each chunk read, CRC-checked, then dropped).
 
-        Memory is bounded by the largest chunk, not the channel; the next chunk is decompressed on a
-        second thread while the caller works on the current one.
+        Memory is bounded by the largest chunk, not the channel (of the channel's chunks only their offsets and
+        times are kept, 24 bytes each: :meth:`_chunk_table`); the next chunk is decompressed on a second thread
+        while the caller works on the current one.
         """
         rec = self._channel_rec(topic)
-        selected = self._select_chunks(rec.id, start_ns, end_ns)
+        selected = self._selected_chunks(rec.id, start_ns, end_ns)
         pending = None
+        ci = self._chunk_index(selected[0]) if selected else None
         for k in range(len(selected)):
             if pending is None:
-                ci = selected[k]
                 current = self._decompress(ci, self._chunk_record(ci, topic), topic)
             else:
                 current = pending.result()
             pending = None
+            here = ci
             if k + 1 < len(selected):
-                nxt = selected[k + 1]
-                pending = _pool().submit(self._decompress, nxt, self._chunk_record(nxt, topic), topic)
+                ci = self._chunk_index(selected[k + 1])
+                pending = _pool().submit(self._decompress, ci, self._chunk_record(ci, topic), topic)
             try:
                 payloads = [payload for _, _, payload in m.chunk_messages(current, rec.id)]
             except m.McapFormatError as exc:
-                raise ArchiveCorruptError(f"{self._where(selected[k], topic)}: {exc}") from None
+                raise ArchiveCorruptError(f"{self._where(here, topic)}: {exc}") from None
             yield payloads
 
     def iter_blocks(self, topic: str, start_ns: int | None = None, end_ns: int | None = None) -> Iterator[Stream]:
