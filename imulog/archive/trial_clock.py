@@ -136,7 +136,7 @@ class TrialClock:
 
     def _note_shared(self, topic: str, imu: str, alignment: dict[str, Any]) -> None:
         """Say so when IMU ``imu`` is on the reference clock through its recording's clock (no cluster or body of its
-        own: :func:`imulog.steps.align_setup.recording_clock_record`), never silently."""
+        own: :func:`imulog.steps.recording_clock.recording_clock_record`), never silently."""
         if alignment.get("clock_of"):
             self._note(
                 f"{topic}: IMU {imu!r} has no alignment of its own; mapped with the clock of its recording "

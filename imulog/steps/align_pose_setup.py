@@ -64,10 +64,10 @@ def recording_clocks(
     """IMU -> record for each IMU no body turns like (``why``) whose recording shares one clock with IMUs paired
     with a body (:func:`imulog.process.alignment_setup.recording_groups`: the same ``recording``/``master`` or
     ``source`` in their device records, or identical time stamps ``times``): the clock pooled over those IMUs' windows,
-    as the marker setup gives an IMU without a cluster (:func:`imulog.steps.align_setup.recording_clock_record`).
+    as the marker setup gives an IMU without a cluster (:func:`imulog.steps.recording_clock.recording_clock_record`).
     An IMU of a recording without a paired IMU gets nothing (no clock is guessed)."""
     from imulog.process.alignment_setup import pooled_clock, recording_groups
-    from imulog.steps.align_setup import recording_clock_record
+    from imulog.steps.recording_clock import recording_clock_record
 
     out: dict[str, dict] = {}
     for group in recording_groups(names, device_meta, times):

@@ -29,44 +29,11 @@ from imulog.steps.align import (
 )
 from imulog.steps.align_summary import setup_summary
 from imulog.steps.common import mean_rate_hz, renamed
-
-CLOCK_KEYS = (
-    "offset_ns",
-    "drift_ppm",
-    "t0_ns",
-    "offset_uncertainty_ns",
-    "drift_uncertainty_ppm",
-    "drift_estimated",
-    "drift_note",
-    "residual_spread_ns",
-    "score",
-)
+from imulog.steps.recording_clock import CLOCK_KEYS, recording_clock_record
 
 
 def _own_clock(record: dict) -> dict:
     return {k: record.get(k) for k in ("offset_ns", "drift_ppm", "offset_uncertainty_ns", "score") if k in record}
-
-
-def recording_clock_record(base: dict, clock: dict, paired: list[str], why: str) -> dict:
-    """The alignment record of an IMU that nothing optical turns like (``why``), in a recording whose IMUs ``paired``
-    are aligned: their pooled ``clock`` (:func:`imulog.process.alignment_setup.pooled_clock`; offset ns, drift ppm),
-    no frame alignment, graded poor, and named as such (``signal`` ``clock of the recording``, ``clock`` ``shared``,
-    ``clock_of`` the IMUs whose windows made it, ``method``): never an alignment of its own."""
-    return {
-        **base,
-        **{k: clock[k] for k in CLOCK_KEYS if k in clock},
-        "signal": "clock of the recording",
-        "clock": "shared",
-        "clock_of": list(paired),
-        "frame_alignment": False,
-        "rotation_imu_to_cluster": None,
-        "rotation_global_to_world": None,
-        "cluster": None,
-        "windows": [],
-        "method": f"clock shared with {', '.join(paired)}",
-        "quality": "poor",
-        "quality_reasons": [f"{why}: its clock is its recording's ({', '.join(paired)}), no frame alignment"],
-    }
 
 
 def compute_setup_alignment(
