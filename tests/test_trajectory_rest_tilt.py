@@ -90,3 +90,26 @@ def test_stroke_subject_44_gets_within_1_cm():
     assert np.all(mae["before"][:2] > 1.5), mae
     assert np.all(mae["after"][:2] <= 1.0), mae
     assert abs(mae["after"][2] - mae["before"][2]) < 0.2, mae
+
+
+def test_the_trajectory_step_passes_the_accelerometer_to_the_option(tmp_path):
+    """The step rebuilds the accelerometer from its gravity-free input: with the option it runs and its ZUPT
+    trajectory differs from the default's (a 4-repetition simulated trial, the step tests' inputs)."""
+    from test_trajectory_steps import _write_with_inputs
+
+    from imulog.archive import TrialReader
+    from imulog.simulate.core import simulate
+    from imulog.steps.trajectory import run_trajectory
+
+    sim = simulate("r2g", subject=2, seed=0, repetitions=4)
+    out = {}
+    for rest_tilt in ("filter", "accelerometer"):
+        path = tmp_path / f"{rest_tilt}.mcap"
+        _write_with_inputs(path, sim)
+        params = replace(DEFAULT_PARAMS, anchor=replace(DEFAULT_PARAMS.anchor, rest_tilt=rest_tilt))
+        assert not run_trajectory(path, methods=["zupt"], params=params).skipped
+        with TrialReader(path) as trial:
+            out[rest_tilt] = trial.read("/derived/trajectory/zupt").values
+    a, b = out["filter"], out["accelerometer"]
+    assert a.shape == b.shape and np.isfinite(b).sum() == np.isfinite(a).sum() > 0
+    assert np.nanmax(np.abs(a - b)) > 1e-3, np.nanmax(np.abs(a - b))  # m: the rests' tilt moved the trajectory
