@@ -172,7 +172,7 @@ def simulated_inputs(
             if rests is not None:  # the step anchors at true rests only
                 anchor_static = true_rests(anchor_static, acc_gate, rate, rests, orientation=q_gate)
             q_est = rest_anchored_orientation(
-                q_est, imu.gyr, t_s, anchor_static, anchor_params or AnchorParams(), restart
+                q_est, imu.gyr, t_s, anchor_static, anchor_params or AnchorParams(), restart, acc_imu
             )
         acc_g = gravity_free_acceleration(q_est, acc_imu, est.static)
         q_g2w = quat.average(quat.multiply(q_true, quat.conjugate(q_est)))

@@ -45,7 +45,9 @@ per global axis only as far as it predicts the closures of movements left out of
 ``RotatingBiasParams.held_out``, and the start trusted as far as its own closure says, ``OptimizationParams.corrected_floor_m
 = 0.002``), ``reference-scatter`` (the defaults / the trial-wide reference's static trust in x and y no more than the
 hand's own scatter about it, ``OptimizationParams.reference_scatter = (True, True, False)``, an option;
-``reference-scatter-xyz`` on z too), ``windowed-options`` (the filter's heading and the return to the start on every
+``reference-scatter-xyz`` on z too), ``rest-tilt-acc`` (the defaults / each rest's tilt in the orientation's anchoring
+from the direction the accelerometer measures over the rest, ``AnchorParams.rest_tilt = "accelerometer"``, an
+option), ``windowed-options`` (the filter's heading and the return to the start on every
 axis, the defaults before 2026-12-07, / options 3 and 4 with the heading restarted where a window may be cut, the
 defaults since).
 """
@@ -183,6 +185,8 @@ CHANGES.update(
 # eleventh round: the trial-wide reference's static trust per axis no more than the hand's own scatter about it
 CHANGES["reference-scatter"] = (D, replace(D, optimized=replace(D.optimized, reference_scatter=(True, True, False))))
 CHANGES["reference-scatter-xyz"] = (D, replace(D, optimized=replace(D.optimized, reference_scatter=(True, True, True))))
+# issue 31 point 2, subject 44: each rest's tilt from the accelerometer's direction instead of the filter's mean
+CHANGES["rest-tilt-acc"] = (D, replace(D, anchor=replace(D.anchor, rest_tilt="accelerometer")))
 # each rule of OptimizationParams.rest_model (trajectory_rest_model.RestRule) against the defaults: rest-model-NAME
 REST_RULES = (
     "waypoints",

@@ -50,14 +50,14 @@ def restart_rests(
     return out
 
 
-def _levelled(q_filter: np.ndarray, heading_from: np.ndarray) -> np.ndarray:
-    """One orientation (4,) with the tilt of ``q_filter`` (K, 4) averaged over its samples (the mean vertical
-    in the sensor frame) and the heading of ``heading_from`` (4,): ``heading_from`` turned by the least rotation
-    that maps its vertical onto that tilt's."""
+def _levelled(vertical: np.ndarray, heading_from: np.ndarray) -> np.ndarray:
+    """One orientation (4,) with the tilt of ``vertical`` (K, 3), the rest's vertical in the sensor frame per sample
+    (unit vectors; averaged over the samples), and the heading of ``heading_from`` (4,): ``heading_from`` turned by
+    the least rotation that maps its vertical onto that mean."""
     from imulog.process import quaternion as quat
 
-    up = np.nanmean(quat.rotate_inverse(q_filter, np.tile(Z_AXIS, (len(q_filter), 1))), axis=0)
-    if not np.all(np.isfinite(up)):  # no valid filter sample in the rest: keep the heading's own tilt
+    up = np.nanmean(vertical, axis=0)
+    if not np.all(np.isfinite(up)):  # no valid sample in the rest: keep the heading's own tilt
         return np.asarray(heading_from, dtype=np.float64)
     return quat.normalize(quat.multiply(quat.from_two_vectors(quat.rotate(heading_from, up), Z_AXIS), heading_from))
 
@@ -84,6 +84,19 @@ def _mean_angle(off: np.ndarray) -> float:
     return float(np.arctan2(np.mean(np.sin(off)), np.mean(np.cos(off)))) if len(off) else 0.0
 
 
+def rest_verticals(q: np.ndarray, acc: np.ndarray | None = None) -> np.ndarray:
+    """(N, 3) the vertical in the sensor frame per sample: the filter's (``q`` (N, 4) sensor-to-global), or with
+    ``acc`` (N, 3) m/s^2, the accelerometer's specific force in the sensor frame, the direction it measures (at a
+    rest, gravity's; ``AnchorParams.rest_tilt = "accelerometer"``)."""
+    from imulog.process import quaternion as quat
+
+    if acc is None:
+        return quat.rotate_inverse(q, np.tile(Z_AXIS, (len(q), 1)))
+    a = np.asarray(acc, dtype=np.float64)
+    norm = np.linalg.norm(a, axis=1, keepdims=True)
+    return a / np.where(norm > 0, norm, np.nan)
+
+
 def heading_through_rests(
     q: np.ndarray,
     gyr: np.ndarray,
@@ -91,6 +104,7 @@ def heading_through_rests(
     static: np.ndarray,
     params: Any,
     restart: np.ndarray | None = None,
+    acc: np.ndarray | None = None,
 ) -> np.ndarray:
     """Orientation (N, 4) with the heading carried through rests (``params``: ``AnchorParams``), the chain
     restarted at the rests that overlap ``restart`` (:func:`restart_rests`; None: one chain over the recording).
@@ -102,11 +116,15 @@ def heading_through_rests(
     ``bias_window_s`` with the heading carried (the rest's first half keeps it), the movement out of it starts at
     the filter's orientation at its last valid sample (the rest's second half keeps it; the recording's last rest
     stays with the chain before it). Each chain is then turned about the vertical onto the filter's mean
-    heading over its samples (restart rests excluded; the frame the align step fitted)."""
+    heading over its samples (restart rests excluded; the frame the align step fitted). ``acc`` (N, 3) m/s^2, the
+    accelerometer in the sensor frame: each rest's tilt is the direction it measures averaged over the rest instead
+    of the filter's (:func:`rest_verticals`)."""
     from imulog.process import quaternion as quat
     from imulog.process.rest_runs import rest_bias, spread_to, static_runs, through_movement
 
     out = q.copy()
+    up = rest_verticals(q, acc)
+    up[~np.all(np.isfinite(q), axis=1)] = np.nan  # a rest's tilt only where the filter is valid
     rests = [(int(a), int(b)) for a, b in static_runs(static)]
     rests = [r for r in rests if len(_finite_rows(q, *r))]
     if not rests:
@@ -119,12 +137,12 @@ def heading_through_rests(
         out[s0:e0] = cur = q[_finite_rows(q, s0, e0)[-1]]
         in_mean[s0:e0] = False
     else:
-        out[s0:e0] = cur = _levelled(q[s0:e0], q[_finite_rows(q, s0, e0)[0]])
+        out[s0:e0] = cur = _levelled(up[s0:e0], q[_finite_rows(q, s0, e0)[0]])
     chain = 0
     for k, ((_, a), (b, e2)) in enumerate(zip(rests[:-1], rests[1:], strict=True)):  # movement [a, b)
         to_restart = is_restart[k + 1]
         w = gyr[a - 1 : b + 1]
-        tilt = q[_near_start(t, b, e2, params.bias_window_s)] if to_restart else q[b:e2]  # (a window may cut it)
+        tilt = up[_near_start(t, b, e2, params.bias_window_s)] if to_restart else up[b:e2]  # (a window may cut it)
         if t[b] - t[a - 1] > params.max_movement_s or not np.all(np.isfinite(w)):
             off = heading_offset(cur, q[a - 1]) if np.all(np.isfinite(q[a - 1])) else 0.0
             turn = quat.from_axis_angle(Z_AXIS, float(off))

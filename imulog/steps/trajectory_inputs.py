@@ -79,8 +79,10 @@ def world_acceleration(
         bounds = phase_bounds_by_repetition(phases, int(t_ref[0])) if phases is not None and len(phases) else {}
         spans = [(float(b[:, 0].min()), float(b[:, 1].max())) for b in bounds.values()]
         restart = restart_rests(given_rest, t_s, chain_rest_s, spans)
-        q_anchored = rest_anchored_orientation(q_world, w, (t_dev - t_dev[0]) / 1e9, rest, params.anchor, restart)
         g_up = np.array([0.0, 0.0, 9.81])  # (any g: the correction rotations are small, its error ~1e-4 m/s^2)
+        acc_s = quat.rotate_inverse(q_world, acc + g_up)  # the accelerometer (sensor frame), for rest_tilt
+        t_s_dev = (t_dev - t_dev[0]) / 1e9
+        q_anchored = rest_anchored_orientation(q_world, w, t_s_dev, rest, params.anchor, restart, acc_s)
         acc = quat.rotate(quat.multiply(q_anchored, quat.conjugate(q_world)), acc + g_up) - g_up
         q_world, anchored = q_anchored, True
     if alignment is not None:
