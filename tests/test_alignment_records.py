@@ -247,7 +247,7 @@ def test_several_imus_are_paired_with_their_bodies_by_the_data(tmp_path):
     }
     info = run("info", path)
     assert "alignment (3 IMUs on /poses/body_1, /poses/body_3):" in info
-    assert "trunk: offset" in info and "(shared clock of upper_arm, forearm), no cluster, no frame alignment" in info
+    assert "trunk: offset" in info and "(shared clock of upper_arm, forearm), no rigid body, no frame alignment" in info
 
 
 def test_an_imu_of_another_recording_takes_no_other_clock(tmp_path):

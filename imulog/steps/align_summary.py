@@ -73,7 +73,10 @@ def setup_lines(record: dict) -> list[str]:
             continue
         off = r.get("offset_ms")
         own = r.get("own_offset_ms")
-        markers = ",".join(r.get("markers") or []) or (f"rigid body {r['pose']}" if r.get("pose") else "no cluster")
+        unpaired = name in (record.get("unpaired") or {})  # rigid bodies: no body turns like this IMU
+        markers = ",".join(r.get("markers") or []) or (
+            f"rigid body {r['pose']}" if r.get("pose") else ("no rigid body" if unpaired else "no cluster")
+        )
         vm = r.get("vector_match")
         rej = r.get("rejected_markers")
         # an IMU aligned on its own (--imu, a rigid body) has its own clock fit: its drift is on its line
