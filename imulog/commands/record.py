@@ -19,7 +19,9 @@ def _stop_on_signals(stop: threading.Event) -> None:
     def handler(signum, frame) -> None:  # noqa: ARG001
         if stop.is_set():  # a second Ctrl-C: the user insists
             raise KeyboardInterrupt
-        stop.set()
+        # Event.set takes the event's lock, which the interrupted main thread may hold (inside the loop's stop.wait):
+        # set from a helper thread that waits for the lock, never in the handler (where it could deadlock forever)
+        threading.Thread(target=stop.set, name="imulog-stop", daemon=True).start()
 
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
