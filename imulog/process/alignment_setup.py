@@ -28,6 +28,7 @@ import numpy as np
 __all__ = [
     "PruneParams",
     "SetupMatch",
+    "coarse_scores",
     "find_setup_clusters",
     "pair_one_to_one",
     "pooled_clock",
@@ -106,6 +107,30 @@ def pair_one_to_one(score: np.ndarray, min_score: float) -> list[tuple[int, int]
     cost = np.where(ok, -s, 1e6)
     rows, cols = linear_sum_assignment(cost)
     return [(int(r), int(c)) for r, c in zip(rows, cols, strict=True) if ok[r, c]]
+
+
+def coarse_scores(
+    t_dev_ns: np.ndarray, gyr_rad_s: np.ndarray, references: Sequence[tuple[np.ndarray, np.ndarray]], params
+) -> tuple[np.ndarray, dict[int, int]]:
+    """The cheap score that ranks an IMU's candidate references before any full alignment: the correlation of the
+    gyroscope's norm with each reference's angular-velocity norm (``references``: (t_ref_ns, norm rad/s) on a
+    coarse grid), one lag over the whole recording within ``params.max_lag_s``, on a ``params.search.coarse_hz``
+    grid (:func:`imulog.process.alignment.estimate_lag`). Returns (score per reference, -1 where none could be
+    computed; coarse offset ns by reference index). The norm needs no frame alignment, so it ranks before any."""
+    from imulog.process import alignment as al
+
+    wn_dev = np.linalg.norm(np.asarray(gyr_rad_s, dtype=np.float64), axis=1)
+    ncc = np.full(len(references), -1.0)
+    coarse: dict[int, int] = {}
+    for c, (t_c, wn) in enumerate(references):
+        try:
+            est = al.estimate_lag(
+                t_dev_ns, wn_dev, t_c, wn, window_s=1e12, max_lag_s=params.max_lag_s, grid_hz=params.search.coarse_hz
+            )
+        except ValueError:
+            continue
+        ncc[c], coarse[c] = est.score, est.offset_ns
+    return ncc, coarse
 
 
 def recording_groups(
@@ -215,17 +240,7 @@ def find_setup_clusters(
     records: dict[tuple[int, int], tuple[Any, dict]] = {}
     for r, name in enumerate(names):
         t_dev, gyr = imus[name]
-        wn_dev = np.linalg.norm(np.asarray(gyr, dtype=np.float64), axis=1)
-        ncc = np.full(len(triads), -1.0)
-        coarse = {}
-        for c, wn in enumerate(wn_tri):
-            try:
-                est = al.estimate_lag(
-                    t_dev, wn_dev, t_c, wn, window_s=1e12, max_lag_s=params.max_lag_s, grid_hz=sp.coarse_hz
-                )
-            except ValueError:
-                continue
-            ncc[c], coarse[c] = est.score, est.offset_ns
+        ncc, coarse = coarse_scores(t_dev, gyr, [(t_c, wn) for wn in wn_tri], params)
         for c in np.argsort(-ncc)[: max(1, sp.refine)]:
             if ncc[c] <= 0:
                 continue

@@ -10,10 +10,12 @@ cluster (docs/alignment.md).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from imulog.process import alignment as al
-from imulog.process.alignment_cluster import pose_kinematics
+from imulog.process.alignment_cluster import ClusterKinematics, pose_kinematics
 from imulog.steps.align import (
     _jsonable,
     alignment_streams,
@@ -72,6 +74,95 @@ def check_poses(topic: str, quat_b2w: np.ndarray, min_fraction: float) -> float:
     return fraction
 
 
+@dataclass(frozen=True)
+class PoseBody:
+    """One pose channel ready to align on: its kinematics (:func:`imulog.process.alignment_cluster.pose_kinematics`,
+    low-passed like markers, angular velocity rad/s in the body frame), its rate (Hz) and the fraction of valid
+    poses. Made once per body, whatever the number of IMUs aligned on it."""
+
+    topic: str
+    t_ns: np.ndarray
+    rate_hz: float
+    kinematics: ClusterKinematics
+    valid_fraction: float
+
+
+def pose_body(
+    pose_topic: str,
+    t_pose_ns: np.ndarray,
+    position_m: np.ndarray | None,
+    quat_b2w: np.ndarray,
+    params: al.AlignmentParams,
+    min_pose_fraction: float = MIN_POSE_FRACTION,
+) -> PoseBody:
+    """The :class:`PoseBody` of a pose channel; a one-line ValueError naming it when its poses are mostly missing
+    (:func:`check_poses`)."""
+    fraction = check_poses(pose_topic, quat_b2w, min_pose_fraction)
+    t_pose = np.asarray(t_pose_ns, dtype=np.int64)
+    rate = mean_rate_hz(t_pose)
+    ck = pose_kinematics(t_pose, position_m, quat_b2w, rate, params, pose_topic)
+    return PoseBody(pose_topic, t_pose, rate, ck, fraction)
+
+
+def align_on_body(
+    imu_name: str,
+    t_imu_ns: np.ndarray,
+    gyr: np.ndarray | None,
+    body: PoseBody,
+    params: al.AlignmentParams,
+    orientation: tuple[np.ndarray, np.ndarray] | None = None,
+) -> dict:
+    """The ``imulog.alignment`` record of one IMU on one body (no streams, no I/O). Raises a one-line ValueError
+    when the IMU has no gyroscope or the body does not turn like the IMU (correlation under
+    ``params.min_valid_score``)."""
+    if gyr is None:
+        raise ValueError(f"/imu/{imu_name} has no gyroscope columns: aligning on poses compares angular velocities")
+    pose_topic = body.topic
+    q_s2g = orientation_at(orientation, t_imu_ns)
+
+    def compute(p: al.AlignmentParams) -> tuple[list, dict]:
+        try:
+            record = al.align(t_imu_ns, gyr, body.kinematics, p, q_imu_s2g=q_s2g)
+        except ValueError as exc:  # the clock fit's reason, naming the channel it was fitted against
+            raise ValueError(f"{pose_topic}: {exc}") from None
+        score = float(record.get("score") or 0.0)
+        if score < p.min_valid_score:
+            raise ValueError(
+                f"{pose_topic}: the rigid body does not turn like /imu/{imu_name} (correlation {score:.2f} < "
+                f"{p.min_valid_score:g}); did the IMU move, and is it on this body?"
+            )
+        info = {
+            "markers": [],
+            "pose": pose_topic,
+            "selection": "pose",
+            "valid_fraction": round(body.valid_fraction, 4),
+            "vector_match": round(float(record["vector_match"]), 4),
+            "runner_up": None,
+        }
+        record = {"reference": pose_topic, "imu": f"/imu/{imu_name}", **record, "cluster": info}
+        record["method"] = str(record.get("method", "")).replace(f"cluster={p.cluster}", "pose")
+        record["quality"], record["quality_reasons"] = al.assess_quality(record, p)
+        return [], _jsonable(record)
+
+    return with_wide_search(compute, t_imu_ns, body.t_ns, params, True)[1]
+
+
+def pose_streams(
+    imu_name: str,
+    body: PoseBody,
+    record: dict,
+    t_imu_ns: np.ndarray,
+    gyr: np.ndarray,
+    orientation: tuple[np.ndarray, np.ndarray] | None = None,
+    acc_global: tuple[np.ndarray, np.ndarray] | None = None,
+    resample: bool = True,
+) -> list:
+    """The step's streams for one IMU aligned on ``body`` with ``record`` (:func:`imulog.steps.align.alignment_streams`)."""
+    return alignment_streams(
+        imu_name, body.kinematics, record, t_imu_ns, gyr, body.t_ns, body.rate_hz, orientation, acc_global, resample
+    )
+
+
 def compute_pose_alignment(
     imu_name: str,
     t_imu_ns: np.ndarray,
@@ -92,40 +183,9 @@ def compute_pose_alignment(
     :data:`MIN_POSE_FRACTION`."""
     if gyr is None:
         raise ValueError(f"/imu/{imu_name} has no gyroscope columns: aligning on poses compares angular velocities")
-    fraction = check_poses(pose_topic, quat_b2w, min_pose_fraction)
-    t_pose = np.asarray(t_pose_ns, dtype=np.int64)
-    rate = mean_rate_hz(t_pose)
-    ck = pose_kinematics(t_pose, position_m, quat_b2w, rate, params, pose_topic)
-    q_s2g = orientation_at(orientation, t_imu_ns)
-
-    def compute(p: al.AlignmentParams) -> tuple[list, dict]:
-        try:
-            record = al.align(t_imu_ns, gyr, ck, p, q_imu_s2g=q_s2g)
-        except ValueError as exc:  # the clock fit's reason, naming the channel it was fitted against
-            raise ValueError(f"{pose_topic}: {exc}") from None
-        score = float(record.get("score") or 0.0)
-        if score < p.min_valid_score:
-            raise ValueError(
-                f"{pose_topic}: the rigid body does not turn like /imu/{imu_name} (correlation {score:.2f} < "
-                f"{p.min_valid_score:g}); did the IMU move, and is it on this body?"
-            )
-        info = {
-            "markers": [],
-            "pose": pose_topic,
-            "selection": "pose",
-            "valid_fraction": round(fraction, 4),
-            "vector_match": round(float(record["vector_match"]), 4),
-            "runner_up": None,
-        }
-        record = {"reference": pose_topic, "imu": f"/imu/{imu_name}", **record, "cluster": info}
-        record["method"] = str(record.get("method", "")).replace(f"cluster={p.cluster}", "pose")
-        record["quality"], record["quality_reasons"] = al.assess_quality(record, p)
-        streams = alignment_streams(
-            imu_name, ck, record, t_imu_ns, gyr, t_pose, rate, orientation, acc_global, resample
-        )
-        return streams, _jsonable(record)
-
-    return with_wide_search(compute, t_imu_ns, t_pose, params, True)
+    body = pose_body(pose_topic, t_pose_ns, position_m, quat_b2w, params, min_pose_fraction)
+    record = align_on_body(imu_name, t_imu_ns, gyr, body, params, orientation)
+    return pose_streams(imu_name, body, record, t_imu_ns, gyr, orientation, acc_global, resample), record
 
 
 def run_align_pose(

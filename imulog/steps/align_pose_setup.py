@@ -1,13 +1,16 @@
-"""Step ``align`` on several rigid bodies: every IMU of the trial against every pose channel (``/poses/*``), paired
+"""Step ``align`` on several rigid bodies: every IMU of the trial against the pose channels (``/poses/*``), paired
 one to one by the data, whatever the names.
 
-Each IMU is aligned against each body (:func:`imulog.steps.align_pose.compute_pose_alignment`: the body's angular
-velocity from its orientations, the clock fit over windows, the IMU-to-body rotation); IMUs and bodies are then
-paired by the assignment that maximises the summed vector match (:func:`imulog.process.alignment_setup.pair_one_to_one`,
+The pairing (:func:`imulog.steps.align_pose_search.search_pose_setup`) ranks the bodies of each IMU by a cheap
+coarse score (the angular-velocity norms' correlation) and runs the full alignment
+(:func:`imulog.steps.align_pose.align_on_body`: the clock fit over windows, the IMU-to-body rotation) for each IMU's
+best ``params.search.refine`` bodies only (every body for an IMU left without one); IMUs and bodies are then paired
+by the assignment that maximises the summed vector match (:func:`imulog.process.alignment_setup.pair_one_to_one`,
 pairs under ``params.search.min_vector_match`` not made), so two IMUs never share a body. Each paired IMU keeps the
 alignment on its body (its own clock: the windows of one body), written by the per-IMU rule of every alignment path
 (:func:`imulog.steps.common.alignment_writes`): ``imulog.alignment.{imu}``, ``/derived/vicon/cluster_pose/{imu}``...;
-an IMU no body turns like gets no record, and the step says why. Cost: one alignment per IMU and body.
+an IMU no body turns like gets no record, and the step says why. Cost: one coarse score per IMU and body, one full
+alignment per IMU and each of its ``refine`` best bodies.
 """
 
 from __future__ import annotations
@@ -16,40 +19,8 @@ import numpy as np
 
 from imulog.process import alignment as al
 from imulog.steps.align import STEP, imu_span, params_dict, read_derived_pair
-from imulog.steps.align_pose import compute_pose_alignment, pose_channels
-
-
-def pair_imus_with_bodies(
-    candidates: dict[str, dict[str, tuple[list, dict] | str]], min_vector_match: float
-) -> tuple[dict[str, str], dict[str, str]]:
-    """``candidates[imu][body]``: the (streams, record) of that pair's alignment, or why it failed. Returns (IMU ->
-    body paired one to one by the summed vector match, IMU -> why it has none)."""
-    from imulog.process.alignment_setup import pair_one_to_one
-
-    imus = list(candidates)
-    bodies = sorted({b for c in candidates.values() for b in c})
-    score = np.full((len(imus), len(bodies)), np.nan)
-    for i, imu in enumerate(imus):
-        for j, body in enumerate(bodies):
-            got = candidates[imu].get(body)
-            if isinstance(got, tuple):
-                score[i, j] = float(got[1].get("vector_match") or np.nan)
-    pairs = {imus[i]: bodies[j] for i, j in pair_one_to_one(score, min_vector_match)}
-    why = {}
-    for i, imu in enumerate(imus):
-        if imu in pairs:
-            continue
-        finite = np.isfinite(score[i])
-        if finite.any():
-            j = int(np.nanargmax(score[i]))
-            taken = [k for k, v in pairs.items() if v == bodies[j]]
-            why[imu] = f"best body {bodies[j]} (vector match {score[i, j]:.3f})" + (
-                f" is {taken[0]}'s" if taken else f" under {min_vector_match:g}"
-            )
-        else:  # every body failed (a still IMU, no gyroscope): one reason stands for all
-            reasons = [str(v) for v in candidates[imu].values()]
-            why[imu] = f"no body aligns with it, {len(reasons)} tried; first: {reasons[0]}" if reasons else "no body"
-    return pairs, why
+from imulog.steps.align_pose import PoseBody, pose_body, pose_channels, pose_streams
+from imulog.steps.align_pose_search import ImuInput, search_pose_setup
 
 
 def recording_clocks(
@@ -118,30 +89,27 @@ def run_align_pose_setup(
     ]
 
     def compute(trial) -> StepResult:
-        poses = {b: trial.read(b) for b in bodies}
-        candidates: dict[str, dict[str, tuple[list, dict] | str]] = {}
-        times: dict[str, np.ndarray] = {}
+        found: dict[str, PoseBody | str] = {}
+        for b in bodies:
+            pose = trial.read(b)
+            try:
+                found[b] = pose_body(b, pose.t_ns, pose.position, pose.orientation, params)
+            except ValueError as exc:
+                found[b] = str(exc)
+        data: dict[str, ImuInput] = {}
         for n in names:
             lo, hi = imu_span(trial, f"/imu/{n}", bodies[0], params.max_lag_s)
             s = trial.read(f"/imu/{n}", lo, hi)
-            times[n] = s.t_ns
             derived = [t for t in (f"/derived/orientation/{n}", f"/derived/acc_global/{n}") if t in inputs]
-            orientation, acc_global = read_derived_pair(trial, derived, lo, hi)
-            candidates[n] = {}
-            for b, pose in poses.items():
-                try:
-                    candidates[n][b] = compute_pose_alignment(
-                        n, s.t_ns, s.gyr, b, pose.t_ns, pose.position, pose.orientation, params,
-                        orientation, acc_global, resample,
-                    )  # fmt: skip
-                except ValueError as exc:
-                    candidates[n][b] = str(exc)
-        pairs, why = pair_imus_with_bodies(candidates, params.search.min_vector_match)
+            data[n] = ImuInput(s.t_ns, s.gyr, *read_derived_pair(trial, derived, lo, hi))
+        times = {n: d.t_ns for n, d in data.items()}
+        pairs, why, search = search_pose_setup(data, found, params)
+        candidates = search.candidates
         if not pairs:
             raise ValueError(
                 "no IMU turns like any rigid body (" + "; ".join(f"{n}: {w}" for n, w in why.items()) + ")"
             )
-        records = {n: candidates[n][b][1] for n, b in pairs.items()}
+        records = {n: candidates[n][b] for n, b in pairs.items()}
         device_meta = {n: dict(trial.metadata.get(f"imulog.device.{n}") or {}) for n in names}
         records.update(recording_clocks(names, pairs, records, why, device_meta, times, params))
         streams: list = []
@@ -149,7 +117,11 @@ def run_align_pose_setup(
         for n in names:
             if n in pairs:
                 written, suffix = alignment_writes(topics, trial.metadata, n, records[n])
-                streams += renamed(candidates[n][pairs[n]][0], suffix)
+                d = data[n]
+                made = pose_streams(
+                    n, found[pairs[n]], records[n], d.t_ns, d.gyr, d.orientation, d.acc_global, resample
+                )
+                streams += renamed(made, suffix)
                 metadata.update({k: v for k, v in written.items() if k != "imulog.alignment"})
             elif n in records:  # no body, but the clock of its recording's aligned IMUs: named as such
                 metadata[f"imulog.alignment.{n}"] = records[n]
@@ -163,7 +135,12 @@ def run_align_pose_setup(
         owner = str((trial.metadata.get("imulog.alignment") or {}).get("imu") or "").removeprefix("/imu/")
         if owner in ("", *pairs) or owner not in all_imus:  # the main record: kept when another IMU owns it
             main = records[owner] if owner in pairs else records[primary]
-            metadata["imulog.alignment"] = {**main, "setup": setup_summary(records), "unpaired": why}
+            metadata["imulog.alignment"] = {
+                **main,
+                "setup": setup_summary(records),
+                "unpaired": why,
+                "search": search.summary(),
+            }
         return StepResult(streams=streams, metadata=metadata)
 
     return run_step(
