@@ -82,6 +82,8 @@ class TrialClock:
     origin_ns: int = 0
     notes: list[str] = field(default_factory=list)
     failed: dict[str, str] = field(default_factory=dict)  # IMU -> why its alignment failed (a record without a clock)
+    recordings: dict[str, str] = field(default_factory=dict)  # IMU -> its recording (device record), when known
+    unaligned: dict[str, list[str]] = field(default_factory=dict)  # IMU -> its topics exported unaligned, as recorded
 
     def source_imu(self, topic: str) -> str | None:
         """IMU whose device clock ``topic`` was written on (None: the reference clock)."""
@@ -120,8 +122,10 @@ class TrialClock:
             return t
         if src is not None:
             alignment = self.alignments.get(src)
-            if alignment is None:
-                self._note(f"{topic}: IMU {src!r} is not aligned; its time stamps are exported as recorded")
+            if alignment is None:  # said once per IMU by export_notes, with the recording it shares, if any
+                self.unaligned.setdefault(src, [])
+                if topic not in self.unaligned[src]:
+                    self.unaligned[src].append(topic)
                 return t
             self._note_shared(topic, src, alignment)
             t = device_to_reference(t, alignment)
@@ -133,6 +137,20 @@ class TrialClock:
             )
             return t
         return reference_to_device(t, target)
+
+    def export_notes(self) -> list[str]:
+        """The notes every exporter reports: the clock's notes, then one line per group of IMUs exported unaligned
+        (:func:`not_aligned_note`), grouped by the recording they share with the exported device clock's IMU."""
+        same, other = [], []
+        target = self.recordings.get(self.imu or "")
+        for imu in self.unaligned:
+            (same if target is not None and self.recordings.get(imu) == target else other).append(imu)
+        out = list(self.notes)
+        if same:
+            out.append(not_aligned_note(same, self.imu, target))
+        if other:
+            out.append(not_aligned_note(other, self.imu, None))
+        return out
 
     def _note_shared(self, topic: str, imu: str, alignment: dict[str, Any]) -> None:
         """Say so when IMU ``imu`` is on the reference clock through its recording's clock (no cluster or body of its
@@ -164,6 +182,30 @@ class TrialClock:
             out["start_time"] = self.start_time.isoformat()
             out["time_zone"] = self.time_zone_label or self.time_zone or "unknown (device local time)"
         return out
+
+
+def not_aligned_note(imus: list[str], target: str | None, recording: str | None) -> str:
+    """The one wording of every export for IMUs ``imus`` exported on the device clock of IMU ``target`` without an
+    alignment (their time stamps as recorded): ``recording`` the recording (device record's ``recording``,
+    ``master`` or ``source``) they share with ``target``, so its clock is theirs; None when they do not share one
+    or it is not known, so their clocks may differ."""
+    names = ", ".join(repr(i) for i in imus)
+    what = f"IMU {names} is" if len(imus) == 1 else f"IMUs {names} are"
+    if recording is not None:
+        return f"{what} not aligned: exported as recorded, on the clock of recording {recording!r}, {target!r}'s too"
+    return (
+        f"{what} not aligned: exported as recorded, on {'its' if len(imus) == 1 else 'their'} own device clock, "
+        f"which may differ from {target!r}'s (no shared recording in the device records)"
+    )
+
+
+def recording_of(device: dict[str, Any] | None) -> str | None:
+    """The recording an IMU's device record names (``recording``, else ``master``, else ``source``), or None."""
+    device = device or {}
+    for key in ("recording", "master", "source"):
+        if device.get(key):
+            return str(device[key])
+    return None
 
 
 def trial_clock(trial, clock: str = "device", imu: str | None = None) -> TrialClock:
@@ -216,5 +258,7 @@ def trial_clock(trial, clock: str = "device", imu: str | None = None) -> TrialCl
         except ClockError:
             continue
     tc.notes.clear()
+    tc.unaligned.clear()
+    tc.recordings = {n: r for n in imu_names if (r := recording_of(metadata.get(f"imulog.device.{n}"))) is not None}
     tc.origin_ns = min(starts) if starts else 0
     return tc

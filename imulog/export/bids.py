@@ -351,5 +351,5 @@ def export_bids(
         columns=[],
         topics=[],
         files=[f"sub-{sub}/motion/{f}" for f in files],
-        notes=list(tc.notes),
+        notes=tc.export_notes(),
     )

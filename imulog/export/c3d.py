@@ -270,7 +270,7 @@ def trial_c3d(trial, *, clock: str = "reference", imu: str | None = None, includ
             desc = f"repetition {int(task)}" if int(task) > 0 else topic
             content.events.append(((int(a) - grid.g0_ns) / 1e9, str(label), desc))
             content.events.append(((int(b) - grid.g0_ns) / 1e9, f"{label}_end", desc))
-    return content, notes + tc.notes
+    return content, notes + tc.export_notes()
 
 
 def export_c3d(

@@ -156,23 +156,6 @@ def resolve_names(trial, imus: Sequence[str], names: Mapping[str, str]) -> dict[
     return out
 
 
-def _clock_notes(trial, imus: Sequence[str], notes: list[str]) -> list[str]:
-    """The clock's notes, with "not aligned" notes of IMUs that share one recording's clock (one export file, or
-    one Xsens master) replaced by one line saying they share it."""
-
-    def recording(imu: str) -> str | None:
-        device = trial.metadata.get(f"imulog.device.{imu}") or {}
-        return str(device.get("master") or device.get("source") or "") or None
-
-    keys = {recording(i) for i in imus}
-    if len(imus) < 2 or len(keys) != 1 or None in keys:
-        return notes
-    kept = [n for n in notes if "is not aligned; its time stamps are exported as recorded" not in n]
-    if len(kept) < len(notes):
-        kept.append(f"the {len(imus)} IMUs share the clock of one recording ({keys.pop()}): exported as recorded")
-    return kept
-
-
 def export_sto(
     trial,
     out: str | Path,
@@ -243,7 +226,7 @@ def export_sto(
     text = format_sto(seconds_from(grid, tc.origin_ns), columns, quats, rate)
     with atomic_file(out) as tmp:
         tmp.write_text(text)
-    notes = _clock_notes(trial, chosen, list(tc.notes))
+    notes = tc.export_notes()
     for name, column in zip(chosen, columns, strict=True):
         kind = "imulog's" if available[name].startswith(ORIENTATION_PREFIX) else "the device's"
         notes.append(f"{column}: {available[name]} ({kind}; global frame {frames[name][0]})")

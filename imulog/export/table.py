@@ -103,7 +103,7 @@ def export_table(
         finally:
             if writer is not None:
                 writer.close()
-    result.notes = list(tc.notes)
+    result.notes = tc.export_notes()
     return result
 
 

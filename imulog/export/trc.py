@@ -101,5 +101,5 @@ def export_trc(
         columns=["Frame#", "Time", *mk.labels],
         topics=[chosen],
         files=[str(out)],
-        notes=list(tc.notes),
+        notes=tc.export_notes(),
     )
