@@ -47,7 +47,9 @@ from imulog.converters.c3d_streams import (
     MODEL_OUTPUT_GROUPS,
     C3dPlan,
     Tally,
+    device_records,
     first_piece_metadata,
+    imu_spans,
     piece,
     plan,
 )
@@ -200,19 +202,25 @@ def iter_c3d(
     step = lay.frames if piece_bytes is None else max(1, piece_bytes // max(lay.frame_bytes, 1))
     bounds = list(range(0, lay.frames, max(step, 1))) or [0]
     tally = Tally()
-    with open(path, "rb") as f:
-        for k, lo in enumerate(bounds):
+
+    def decoded(f):
+        for lo in bounds:
             hi = min(lo + step, lay.frames)
             try:
-                data = c3d_data.decode(c3d_data.read_frames(f, lay, proc, lo, hi), lay)
+                yield lo, c3d_data.decode(c3d_data.read_frames(f, lay, proc, lo, hi), lay)
             except (C3dLayoutError, ValueError) as e:
                 raise ConversionError(path, f"corrupt C3D ({PROCESSORS[proc]}): {e}") from None
+
+    with open(path, "rb") as f:
+        if p.imus and len(bounds) > 1:  # IMUs among the analogs: their spans for the first piece's declaration
+            p.imu_spans = imu_spans(p, decoded(f))
+        for k, (lo, data) in enumerate(decoded(f)):
             rec = piece(p, data, lo, tally)
             if k == 0:
-                rec.warnings.extend(warnings)
+                rec.warnings.extend(warnings + p.warnings)
                 first_piece_metadata(p, rec, pieces=len(bounds) > 1)
             else:
-                rec.metadata[f"imulog.device.{name}"] = dict(p.meta)
+                rec.metadata.update(device_records(p))
             if k == len(bounds) - 1:
                 rec.warnings.extend(tally.warnings(p))
             yield rec

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 from imulog.converters.c3d_data import Layout
+from imulog.converters.c3d_imus import C3dImu, find_imus, imu_meta, imu_streams, sample_rows
 from imulog.converters.errors import ConversionError
 
 from imulog.model import PIECES_RECORD, AnalogStream, Intervals, MarkerStream, Recording, SignalStream
@@ -117,6 +118,10 @@ class C3dPlan:
     a_words: tuple[np.ndarray, np.ndarray] | None  # (shift, scale) of the analog words
     events: Intervals | None
     meta: dict[str, Any]  # the device record
+    imus: list[C3dImu] = field(default_factory=list)  # IMUs among the analogs (imulog's naming and units)
+    analog_idx: list[int] = field(default_factory=list)  # the analog columns that stay /analog/NAME
+    imu_spans: dict[str, list[int]] = field(default_factory=dict)  # IMU -> [first, last] sample ns (whole file)
+    warnings: list[str] = field(default_factory=list)  # what the plan saw (IMU-like analogs in other units)
 
     def frame_times(self, lo: int, hi: int) -> np.ndarray:
         """ns of point frames ``[lo, hi)``."""
@@ -136,8 +141,14 @@ class C3dPlan:
     def analog_meta(self) -> dict[str, Any]:
         hint = {}
         if self.a_words is not None:
-            hint = {"resolution": {"values": {"shift": self.a_words[0].tolist(), "scale": self.a_words[1].tolist()}}}
+            k = self.analog_idx
+            hint = {
+                "resolution": {"values": {"shift": self.a_words[0][k].tolist(), "scale": self.a_words[1][k].tolist()}}
+            }
         return {"rate_hz": self.a_rate, "source": self.path.name, **hint}
+
+    def imu_meta(self, imu: C3dImu) -> dict[str, Any]:
+        return imu_meta(imu, {"rate_hz": self.a_rate, "source": self.path.name})
 
     def declaration(self) -> dict[str, Any]:
         """What the first piece declares (:data:`imulog.model.PIECES_RECORD`): each stream's first and last time and
@@ -153,10 +164,14 @@ class C3dPlan:
                 int(self.frame_times(0, 1)[0]),
                 int(self.frame_times(n - 1, n)[0]),
             ]
-        if n and self.a_labels:
+        if n and self.analog_idx:
             t = self.analog_times(0, 1)[:1].tolist() + self.analog_times(n - 1, n)[-1:].tolist()
             spans[f"/analog/{self.name}"] = t
             meta[f"/analog/{self.name}"] = self.analog_meta()
+        for imu in self.imus:
+            if imu.name in self.imu_spans:
+                spans[f"/imu/{imu.name}"] = list(self.imu_spans[imu.name])
+                meta[f"/imu/{imu.name}"] = self.imu_meta(imu)
         if self.events is not None:
             spans[self.events.topic] = [int(self.events.start_ns.min()), int(self.events.end_ns.max())]
         return {"spans": spans, "meta": meta}
@@ -199,6 +214,9 @@ def plan(path: Path, name: str, header: dict, params: dict, lay: Layout) -> C3dP
         a_units = [str(u).strip() for u in given[:n_ch]] + [""] * max(0, n_ch - len(given))
         a_words = _analog_words(params, n_ch, lay)
         meta.update(analog_rate_hz=a_rate, analog_channels=n_ch)
+    imus, analog_idx, imu_warnings = find_imus(path.name, a_labels, a_units)
+    if imus:
+        meta["imus"] = [imu.name for imu in imus]
     events = _events(params, name)
     if events is not None:
         meta["events"] = len(events)
@@ -220,6 +238,9 @@ def plan(path: Path, name: str, header: dict, params: dict, lay: Layout) -> C3dP
         a_words,
         events,
         meta,
+        imus,
+        analog_idx,
+        warnings=imu_warnings,
     )
 
 
@@ -309,23 +330,53 @@ def piece(p: C3dPlan, data: dict[str, Any], lo: int, tally: Tally) -> Recording:
         if p.a_words is not None:  # the file's words again (within a thousandth of a count), as the archive keeps them
             shift, scale = p.a_words
             values = (np.rint(values / scale - shift) + shift) * scale
-        rec.analogs.append(
-            AnalogStream(
-                name=p.name,
-                t_ns=p.analog_times(lo, lo + n),
-                channel_names=list(p.a_labels),
-                units=list(p.a_units),
-                values=values,
-                meta=p.analog_meta(),
+        t_analog = p.analog_times(lo, lo + n)
+        if p.analog_idx:
+            k = p.analog_idx
+            rec.analogs.append(
+                AnalogStream(
+                    name=p.name,
+                    t_ns=t_analog,
+                    channel_names=[p.a_labels[i] for i in k],
+                    units=[p.a_units[i] for i in k],
+                    values=values if len(k) == len(p.a_labels) else values[:, k],
+                    meta=p.analog_meta(),
+                )
             )
-        )
+        for imu in imu_streams(p.imus, t_analog, values, {"rate_hz": p.a_rate, "source": p.path.name}):
+            rec.imus.append(imu)
     if lo == 0 and p.events is not None:
         rec.events.append(p.events)
     return rec
 
 
+def device_records(p: C3dPlan) -> dict[str, dict[str, Any]]:
+    """The device records of every piece: the C3D's (``imulog.device.NAME``) and each IMU's found among its analogs."""
+    out = {f"imulog.device.{p.name}": dict(p.meta)}
+    for imu in p.imus:
+        out[f"imulog.device.{imu.name}"] = {"format": "c3d", **p.imu_meta(imu)}
+    return out
+
+
+def imu_spans(p: C3dPlan, decoded) -> dict[str, list[int]]:
+    """IMU -> [first, last] time (ns) of its samples over the whole file, from ``decoded`` ((first frame, data) of
+    every range of frames, in order): a piece's IMU streams leave out the rows without a sample, so the spans the
+    first piece declares come from the data, not the header."""
+    first: dict[str, int] = {}
+    last: dict[str, int] = {}
+    for lo, data in decoded:
+        values = data["analogs"][0].T
+        t = p.analog_times(lo, lo + data["points"].shape[2])
+        for imu in p.imus:
+            rows = np.flatnonzero(sample_rows(imu, values))
+            if len(rows):
+                first.setdefault(imu.name, int(t[rows[0]]))
+                last[imu.name] = int(t[rows[-1]])
+    return {n: [first[n], last[n]] for n in first}
+
+
 def first_piece_metadata(p: C3dPlan, rec: Recording, pieces: bool) -> None:
     """The device record (every piece), and for the first of several pieces the declaration."""
-    rec.metadata[f"imulog.device.{p.name}"] = dict(p.meta)
+    rec.metadata.update(device_records(p))
     if pieces:
         rec.metadata[PIECES_RECORD] = p.declaration()
