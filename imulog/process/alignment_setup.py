@@ -134,10 +134,15 @@ def coarse_scores(
 
 
 def recording_groups(
-    names: Sequence[str], device_meta: Mapping[str, Mapping[str, Any]], times: Mapping[str, np.ndarray]
+    names: Sequence[str],
+    device_meta: Mapping[str, Mapping[str, Any]],
+    times: Mapping[str, np.ndarray | tuple[int, int, int]],
 ) -> list[list[str]]:
     """IMUs that share one clock: the same ``recording`` (or ``master``) in their device records, the same
-    source file, or identical time stamps (sample-aligned files of one station). Groups in ``names`` order."""
+    source file, or identical time stamps (sample-aligned files of one station). ``times``: per IMU its whole
+    channel's time stamps (int64 ns), or their (count, first ns, last ns) from the archive's channel summary; not
+    the stretch read around the optical data, which two recordings time-stamped alike from their own starts share
+    however long each is. Groups in ``names`` order."""
     parent = {n: n for n in names}
 
     def find(n: str) -> str:
@@ -150,9 +155,14 @@ def recording_groups(
         keys = [("k", str(meta[k])) for k in ("recording", "master") if meta.get(k)]
         if meta.get("source"):
             keys.append(("source", str(meta["source"])))
-        t = np.asarray(times[n], dtype=np.int64)
-        if len(t):
-            keys.append(("time", len(t), int(t[0]), int(t[-1])))
+        span = times[n]
+        if isinstance(span, tuple):
+            if span[0]:
+                keys.append(("time", *map(int, span)))
+        else:
+            t = np.asarray(span, dtype=np.int64)
+            if len(t):
+                keys.append(("time", len(t), int(t[0]), int(t[-1])))
         return keys
 
     first: dict[tuple, str] = {}

@@ -29,12 +29,13 @@ def recording_clocks(
     records: dict[str, dict],
     why: dict[str, str],
     device_meta: dict[str, dict],
-    times: dict[str, np.ndarray],
+    times: dict[str, np.ndarray | tuple[int, int, int]],
     params: al.AlignmentParams,
 ) -> dict[str, dict]:
     """IMU -> record for each IMU no body turns like (``why``) whose recording shares one clock with IMUs paired
     with a body (:func:`imulog.process.alignment_setup.recording_groups`: the same ``recording``/``master`` or
-    ``source`` in their device records, or identical time stamps ``times``): the clock pooled over those IMUs' windows,
+    ``source`` in their device records, or identical time stamps ``times``: each whole channel's, or its (count,
+    first ns, last ns)): the clock pooled over those IMUs' windows,
     as the marker setup gives an IMU without a cluster (:func:`imulog.steps.recording_clock.recording_clock_record`).
     An IMU of a recording without a paired IMU gets nothing (no clock is guessed)."""
     from imulog.process.alignment_setup import pooled_clock, recording_groups
@@ -102,7 +103,9 @@ def run_align_pose_setup(
             s = trial.read(f"/imu/{n}", lo, hi)
             derived = [t for t in (f"/derived/orientation/{n}", f"/derived/acc_global/{n}") if t in inputs]
             data[n] = ImuInput(s.t_ns, s.gyr, *read_derived_pair(trial, derived, lo, hi))
-        times = {n: d.t_ns for n, d in data.items()}
+        from imulog.steps.recording_clock import channel_span
+
+        times = {n: channel_span(trial, f"/imu/{n}") for n in names}
         pairs, why, search = search_pose_setup(data, found, params)
         candidates = search.candidates
         if not pairs:

@@ -29,7 +29,7 @@ from imulog.steps.align import (
 )
 from imulog.steps.align_summary import setup_summary
 from imulog.steps.common import mean_rate_hz, renamed
-from imulog.steps.recording_clock import CLOCK_KEYS, recording_clock_record
+from imulog.steps.recording_clock import CLOCK_KEYS, channel_span, recording_clock_record
 
 
 def _own_clock(record: dict) -> dict:
@@ -45,9 +45,11 @@ def compute_setup_alignment(
     params: al.AlignmentParams,
     device_meta: dict[str, dict],
     resample: bool = True,
+    spans: dict[str, tuple[int, int, int]] | None = None,
 ) -> tuple[list, dict[str, dict], dict]:
     """Pure part: ``imus`` name -> {t_ns, gyr, acc, orientation, acc_global} (the last two (t_ns, values) or
-    None). Returns (streams, records by IMU name, search summary)."""
+    None); ``spans``: each IMU's whole channel (count, first ns, last ns) when ``t_ns`` is only a stretch of it
+    (:func:`imulog.steps.recording_clock.channel_span`). Returns (streams, records by IMU name, search summary)."""
     from imulog.process.alignment_setup import find_setup_clusters, pooled_clock, recording_groups
 
     vic_rate = mean_rate_hz(t_vic_ns)
@@ -55,7 +57,7 @@ def compute_setup_alignment(
     matches, summary = find_setup_clusters(
         {n: (d["t_ns"], d["gyr"]) for n, d in usable.items()}, t_vic_ns, labels, pos_m, vic_rate, params
     )
-    groups = recording_groups(list(imus), device_meta, {n: d["t_ns"] for n, d in imus.items()})
+    groups = recording_groups(list(imus), device_meta, spans or {n: d["t_ns"] for n, d in imus.items()})
     summary["recordings"] = groups
     records: dict[str, dict] = {}
     streams: list = []
@@ -180,8 +182,9 @@ def run_align_setup(
                     d[key] = (x.t_ns, x.values)
             data[n] = d
             device_meta[n] = dict(trial.metadata.get(f"imulog.device.{n}") or {})
+        spans = {n: channel_span(trial, f"/imu/{n}") for n in names}
         streams, records, summary = compute_setup_alignment(
-            data, marker_topic, mk.t_ns, mk.labels, mk.pos, params, device_meta, resample
+            data, marker_topic, mk.t_ns, mk.labels, mk.pos, params, device_meta, resample, spans
         )
         ok = [n for n in names if records[n].get("quality") != "failed"]
         if not ok:

@@ -1,5 +1,6 @@
 """The clock an IMU takes from its recording when nothing optical turns like it: one record for the marker setup
-(:mod:`imulog.steps.align_setup`) and the rigid-body setup (:mod:`imulog.steps.align_pose_setup`)."""
+(:mod:`imulog.steps.align_setup`) and the rigid-body setup (:mod:`imulog.steps.align_pose_setup`), and what tells
+which IMUs share a recording's time stamps (:func:`channel_span`)."""
 
 from __future__ import annotations
 
@@ -36,3 +37,10 @@ def recording_clock_record(base: dict, clock: dict, paired: list[str], why: str)
         "quality": "poor",
         "quality_reasons": [f"{why}: its clock is its recording's ({', '.join(paired)}), no frame alignment"],
     }
+
+
+def channel_span(trial, topic: str) -> tuple[int, int, int]:
+    """(sample count, first ns, last ns) of a whole channel from the archive's summary (no data read): what
+    :func:`imulog.process.alignment_setup.recording_groups` compares, not the stretch read around the optical data."""
+    c = trial.channel(topic)
+    return int(c.sample_count), int(c.start_ns or 0), int(c.end_ns or 0)
