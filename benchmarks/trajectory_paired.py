@@ -187,6 +187,16 @@ CHANGES["reference-scatter"] = (D, replace(D, optimized=replace(D.optimized, ref
 CHANGES["reference-scatter-xyz"] = (D, replace(D, optimized=replace(D.optimized, reference_scatter=(True, True, True))))
 # issue 31 point 2, subject 44: each rest's tilt from the accelerometer's direction instead of the filter's mean
 CHANGES["rest-tilt-acc"] = (D, replace(D, anchor=replace(D.anchor, rest_tilt="accelerometer")))
+# twelfth round: that tilt on the accelerometer corrected from the trial's rests (acc-rests-held-out), so a rest's
+# direction is gravity's; -scatter: and the reference trusted no more than the hand's scatter (reference-scatter)
+REST_TILT_ACC_RESTS = replace(CHANGES["acc-rests-held-out"][1], anchor=replace(D.anchor, rest_tilt="accelerometer"))
+CHANGES["rest-tilt-acc-rests"] = (D, REST_TILT_ACC_RESTS)
+CHANGES["rest-tilt-acc-rests-scatter"] = (
+    D,
+    replace(
+        REST_TILT_ACC_RESTS, optimized=replace(REST_TILT_ACC_RESTS.optimized, reference_scatter=(True, True, False))
+    ),
+)
 # each rule of OptimizationParams.rest_model (trajectory_rest_model.RestRule) against the defaults: rest-model-NAME
 REST_RULES = (
     "waypoints",
