@@ -24,8 +24,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from trajectory_accuracy import RunCost, add_trial_arguments, evaluate_trial, grid_names, simulated_inputs  # noqa: E402
-from trajectory_paired import CHANGES  # noqa: E402
+from trajectory_accuracy import RunCost, add_trial_arguments, evaluate_trial, grid_names  # noqa: E402
+from trajectory_paired import CHANGES, pipeline_inputs  # noqa: E402
 
 from imulog.process.trajectory_opt import TrajectoryParams  # noqa: E402
 
@@ -53,17 +53,7 @@ def _mae(records: list[dict]) -> np.ndarray:
 
 def trial_pull(name: str, subject: int, repetitions: int, params: TrajectoryParams) -> dict[str, np.ndarray]:
     """{"zupt" | "start" | "optimized" | TERMS' names: MAE x / y / z (cm)} of one trial."""
-    from imulog.simulate.grid import condition
-
-    inputs = simulated_inputs(
-        subject,
-        seed=subject,
-        repetitions=repetitions,
-        rests=params.rests,
-        anchor_params=params.anchor,
-        acc_rests=params.acc_rests,
-        **condition(name),
-    )
+    inputs = pipeline_inputs(name, subject, repetitions, params)
     records, _, _ = evaluate_trial(inputs, ("zupt", "zupt_bias", "optimized"), params)
     out = {"zupt": _mae(records["zupt"]), "start": _mae(records["zupt_bias"]), "optimized": _mae(records["optimized"])}
     for term, change in TERMS.items():

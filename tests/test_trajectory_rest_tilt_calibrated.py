@@ -16,7 +16,7 @@ from imulog.process.trajectory_opt import DEFAULT_PARAMS as D
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
 REST_TILT = replace(D, anchor=replace(D.anchor, rest_tilt="accelerometer"))
-CALIBRATED = replace(  # the twelfth round's combination (trajectory_paired.CHANGES["rest-tilt-acc-rests-scatter"])
+CALIBRATED = replace(  # the twelfth round's combination, spelled out (trajectory_paired's rest-tilt-acc-rests-scatter)
     REST_TILT,
     acc_rests=replace(D.acc_rests, enabled=True),
     rotating_bias=replace(D.rotating_bias, calibration_prior=True, held_out=True),
@@ -27,20 +27,10 @@ CALIBRATED = replace(  # the twelfth round's combination (trajectory_paired.CHAN
 def _errors(name: str, subject: int, params) -> dict[str, np.ndarray]:
     """{"zupt" | "optimized": (repetitions, 3) MAE x / y / z (cm)} of one simulated trial (subject and seed
     ``subject``, 10 repetitions, condition ``name``)."""
-    from trajectory_accuracy import evaluate_trial, simulated_inputs
+    from trajectory_accuracy import evaluate_trial
+    from trajectory_paired import pipeline_inputs
 
-    from imulog.simulate.grid import condition
-
-    inputs = simulated_inputs(
-        subject,
-        seed=subject,
-        repetitions=10,
-        rests=params.rests,
-        anchor_params=params.anchor,
-        acc_rests=params.acc_rests,
-        **condition(name),
-    )
-    records, _, _ = evaluate_trial(inputs, ("zupt", "optimized"), params)
+    records, _, _ = evaluate_trial(pipeline_inputs(name, subject, 10, params), ("zupt", "optimized"), params)
     return {m: np.array([[r[a]["mae_cm"] for a in "xyz"] for r in records[m]]) for m in records}
 
 
@@ -73,3 +63,10 @@ def test_a_good_start_is_left_where_it_is():
     assert np.all(cal["zupt"].mean(axis=0) < 0.2), cal["zupt"].mean(axis=0)
     excess = cal["optimized"].mean(axis=0) - cal["zupt"].mean(axis=0)
     assert np.all(np.abs(excess) < 0.05), excess
+
+
+def test_the_benchmarks_combination_is_the_one_tested():
+    """``trajectory_paired.CHANGES["rest-tilt-acc-rests-scatter"]`` is the defaults against :data:`CALIBRATED`."""
+    from trajectory_paired import CHANGES
+
+    assert CHANGES["rest-tilt-acc-rests-scatter"] == (D, CALIBRATED)
