@@ -47,7 +47,9 @@ per global axis only as far as it predicts the closures of movements left out of
 hand's own scatter about it, ``OptimizationParams.reference_scatter = (True, True, False)``, an option;
 ``reference-scatter-xyz`` on z too), ``rest-tilt-acc`` (the defaults / each rest's tilt in the orientation's anchoring
 from the direction the accelerometer measures over the rest, ``AnchorParams.rest_tilt = "accelerometer"``, an
-option), ``windowed-options`` (the filter's heading and the return to the start on every
+option), ``rest-tilt-acc-rests`` (the defaults / that tilt on the accelerometer corrected from the trial's rests, with
+``acc-rests-held-out``'s compensation and trust; ``rest-tilt-acc-rests-scatter``: and ``reference-scatter``; the
+twelfth round), ``windowed-options`` (the filter's heading and the return to the start on every
 axis, the defaults before 2026-12-07, / options 3 and 4 with the heading restarted where a window may be cut, the
 defaults since).
 """
@@ -187,6 +189,16 @@ CHANGES["reference-scatter"] = (D, replace(D, optimized=replace(D.optimized, ref
 CHANGES["reference-scatter-xyz"] = (D, replace(D, optimized=replace(D.optimized, reference_scatter=(True, True, True))))
 # issue 31 point 2, subject 44: each rest's tilt from the accelerometer's direction instead of the filter's mean
 CHANGES["rest-tilt-acc"] = (D, replace(D, anchor=replace(D.anchor, rest_tilt="accelerometer")))
+# twelfth round: that tilt on the accelerometer corrected from the trial's rests (acc-rests-held-out), so a rest's
+# direction is gravity's; -scatter: and the reference trusted no more than the hand's scatter (reference-scatter)
+REST_TILT_ACC_RESTS = replace(CHANGES["acc-rests-held-out"][1], anchor=replace(D.anchor, rest_tilt="accelerometer"))
+CHANGES["rest-tilt-acc-rests"] = (D, REST_TILT_ACC_RESTS)
+CHANGES["rest-tilt-acc-rests-scatter"] = (
+    D,
+    replace(
+        REST_TILT_ACC_RESTS, optimized=replace(REST_TILT_ACC_RESTS.optimized, reference_scatter=(True, True, False))
+    ),
+)
 # each rule of OptimizationParams.rest_model (trajectory_rest_model.RestRule) against the defaults: rest-model-NAME
 REST_RULES = (
     "waypoints",
@@ -209,6 +221,22 @@ CHANGES.update(
 )
 
 
+def pipeline_inputs(name: str, subject: int, repetitions: int, params: TrajectoryParams) -> dict:
+    """The trajectory inputs of the simulated trial of condition ``name`` (subject and seed ``subject``) as the
+    pipeline of ``params`` builds them (its rests gate, anchoring and accelerometer correction)."""
+    from imulog.simulate.grid import condition
+
+    return simulated_inputs(
+        subject,
+        seed=subject,
+        repetitions=repetitions,
+        rests=params.rests,
+        anchor_params=params.anchor,
+        acc_rests=params.acc_rests,
+        **condition(name),
+    )
+
+
 def trial_errors(
     name: str, subject: int, repetitions: int, change: str = "heading-drift"
 ) -> dict[str, dict[int, list[float]]]:
@@ -216,23 +244,13 @@ def trial_errors(
     ZUPT with the before parameters, against which the targets are checked; ``zupt_after``: with the after
     ones)."""
     BEFORE, AFTER = CHANGES[change]  # noqa: N806
-    from imulog.simulate.grid import condition
-
     inputs = {}
     for label, params in (("before", BEFORE), ("after", AFTER)):  # the anchoring is part of the inputs
         same = AFTER.anchor == BEFORE.anchor and AFTER.rests == BEFORE.rests and AFTER.acc_rests == BEFORE.acc_rests
         if label == "after" and same:
             inputs[label] = inputs["before"]
             continue
-        inputs[label] = simulated_inputs(
-            subject,
-            seed=subject,
-            repetitions=repetitions,
-            rests=params.rests,
-            anchor_params=params.anchor,
-            acc_rests=params.acc_rests,
-            **condition(name),
-        )
+        inputs[label] = pipeline_inputs(name, subject, repetitions, params)
     out = {}
     for label, params in (("before", BEFORE), ("after", AFTER)):
         records, _, _ = evaluate_trial(inputs[label], ("zupt", "optimized"), params)
