@@ -24,6 +24,9 @@ import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from lsl_session import config_text  # noqa: E402
+
 PUBLISH = """
 import sys, time, pylsl
 names = sys.argv[1].split(",") if sys.argv[1] else []
@@ -39,13 +42,10 @@ print(",".join(sorted(i.name() for i in pylsl.resolve_streams(2.0))))
 
 
 def config(folder: Path, session: str, port: int | None) -> Path:
-    """An LSL configuration file: this machine only, ``session``, liblsl's ports or ``port`` and the 32 after it."""
-    ports = f"MulticastPort = {port}\nBasePort = {port + 1}\nPortRange = 32\n" if port else ""
+    """An LSL configuration file (tests/lsl_session.py's): this machine only, ``session``, liblsl's default ports
+    or ``port`` and the ports after it."""
     cfg = folder / f"{session}.cfg"
-    cfg.write_text(
-        f"[ports]\n{ports}IPv6 = disable\n[multicast]\nResolveScope = machine\n"
-        f"[lab]\nSessionID = {session}\n[log]\nlevel = -3\n"
-    )
+    cfg.write_text(config_text(session, port))
     return cfg
 
 

@@ -67,12 +67,12 @@ def reserve_ports() -> int:
     raise RuntimeError(f"no free block of {BLOCK} ports in {FIRST_PORT}-{LAST_PORT} for an LSL session")
 
 
-def config_text(session_id: str, port: int) -> str:
+def config_text(session_id: str, port: int | None) -> str:
     """liblsl's configuration: this machine only, ``session_id``, the multicast port ``port`` and the service
-    ports after it, IPv6 off, only fatal log lines."""
+    ports after it (None: liblsl's default ports, shared by the machine), IPv6 off, only fatal log lines."""
+    ports = f"MulticastPort = {port}\nBasePort = {port + 1}\nPortRange = {PORT_RANGE}\n" if port else ""
     return (
-        f"[ports]\nMulticastPort = {port}\nBasePort = {port + 1}\nPortRange = {PORT_RANGE}\nIPv6 = disable\n"
-        "[multicast]\nResolveScope = machine\n"
+        f"[ports]\n{ports}IPv6 = disable\n[multicast]\nResolveScope = machine\n"
         f"[lab]\nSessionID = {session_id}\n[log]\nlevel = -3\n"
     )
 
