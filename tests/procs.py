@@ -5,7 +5,8 @@ its own; the autouse fixture :func:`kill_started` (in ``conftest.py``) then kill
 outcome (passed, failed assertion, ``TimeoutExpired``, interrupted), every process it started that is still
 there, with all their descendants: the process groups, and on Linux any descendant found in ``/proc`` (one
 that started a session of its own too). A test may stop its processes itself first (a clean Ctrl-C, its own
-kill); the fixture is what no exit path can skip.
+kill); the fixture is what no exit path can skip. :func:`run` is ``subprocess.run``'s counterpart, which
+cleans up after itself (for a thread that outlives a test, as the docs pages' runs do).
 """
 
 from __future__ import annotations
@@ -65,6 +66,21 @@ def kill(proc: subprocess.Popen) -> None:
         if pipe is not None:
             with contextlib.suppress(OSError):
                 pipe.close()
+
+
+def run(args, *, timeout: float, **kwargs) -> subprocess.CompletedProcess:
+    """``subprocess.run(args, timeout=timeout, **kwargs)`` (``capture_output``, ``text``, ...) in a session of its
+    own, whose group and descendants are killed when it returns, fails or times out: ``subprocess.run`` kills only
+    the child on a timeout, and a shell's background job (``imulog replay ... &`` in a docs page) outlived it.
+    Not left to :func:`kill_started` (it cleans up itself), so it may run on a thread that outlives a test."""
+    if kwargs.pop("capture_output", False):
+        kwargs.update(stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(args, start_new_session=True, **kwargs)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    finally:
+        kill(proc)
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
 
 
 def kill_all() -> None:

@@ -81,3 +81,20 @@ def test_a_test_that_times_out_leaves_no_process(tmp_path):
     started = [int(p) for p in pids.read_text().split()]
     assert len(started) == 2
     assert wait_dead(started) == [], f"left running: {started}"
+
+
+@pytest.mark.parametrize("timeout", [0.5, 30.0])
+def test_run_ends_a_shells_background_job(tmp_path, timeout):
+    """procs.run (the docs pages' runs): a shell's background job ends with the shell, whether the shell times out
+    or returns (subprocess.run killed the shell alone on a timeout, and nothing on a return)."""
+    from procs import run
+
+    pid_file = tmp_path / "job.pid"
+    # (a job that keeps the shell's output pipes open makes communicate wait for it: the timeout case then)
+    script = f"sleep 300 > /dev/null 2>&1 & echo $! > {pid_file}; " + ("sleep 300" if timeout < 1 else "true")
+    if timeout < 1:
+        with pytest.raises(subprocess.TimeoutExpired):
+            run(["bash", "-c", script], timeout=timeout, capture_output=True, text=True)
+    else:
+        assert run(["bash", "-c", script], timeout=timeout, capture_output=True, text=True).returncode == 0
+    assert wait_dead([int(pid_file.read_text())]) == []
