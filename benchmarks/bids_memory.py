@@ -13,11 +13,12 @@ file name to a BIDS rule. ``--compare DIR``: whether every file equals the one o
 (e.g. one made by an earlier commit with ``imulog export home.mcap ...`` beside the trial: the sidecars record
 the trial's path as given, and the script gives its name), byte for byte. Run once per commit to compare; the machine's load is printed.
 
-Measured (2026-12-07, 2 cores shared, load 11-18, one run each; figures in benchmarks/README.md): the day at 50 Hz
-with its orientation processed, ``--trial``: 438,764 kB peak with the quaternion line-up that concatenated each
-block (``e9131d5``), 446,296 kB with the one that holds at most two blocks, i.e. the same within the spread (the
-line-up's own traced peak: 12.9 MB at 400,000 rows and 14.0 MB at 1.6 M before, 10.7 MB at both after,
-tests/test_export_bids.py); ``--compare``: True; every file name matched by ``bidsschematools``.
+Measured (2026-12-07/08, 2 cores shared, load 10-18, two runs each; figures in benchmarks/README.md): the day at
+50 Hz with its orientation processed, ``--trial``: 438,764 / 436,204 kB peak with the quaternion line-up that
+concatenated each block (``e9131d5``), 446,296 / 431,504 kB with the one that holds at most two blocks, i.e. the
+same within the spread (the line-up's own traced peak: 12.9 MB at 400,000 rows and 14.0 MB at 1.6 M before,
+10.7 MB at both after, tests/test_export_bids.py); ``--compare``: True; every file name matched by
+``bidsschematools``.
 """
 
 from __future__ import annotations
