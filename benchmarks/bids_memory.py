@@ -3,13 +3,22 @@
     python benchmarks/bids_memory.py                              # a simulated day at 50 Hz (~10 min, 2 cores)
     python benchmarks/bids_memory.py --days 0.25 --rate-hz 100
     python benchmarks/bids_memory.py --trial home.mcap --compare before_bids/   # an existing trial; same bytes?
+    python benchmarks/bids_memory.py --orientation --keep day_bids/  # with its orientation (ORNT columns); kept
 
 Writes ``imulog simulate home --days D --set rate_hz=R`` and ``imulog convert`` of its ``.cwa`` (unless
-``--trial``), then runs ``/usr/bin/time -v imulog export TRIAL --to bids -o OUT/`` as a child and prints its
+``--trial``; with ``--orientation`` then ``imulog process orientation``, so that the export lines the quaternions
+up with the IMU's samples), then runs ``/usr/bin/time -v imulog export TRIAL --to bids -o OUT/`` as a child and prints its
 "Maximum resident set size", wall time, the ``_motion.tsv`` sizes and whether ``bidsschematools`` matches every
 file name to a BIDS rule. ``--compare DIR``: whether every file equals the one of another export of the trial
 (e.g. one made by an earlier commit with ``imulog export home.mcap ...`` beside the trial: the sidecars record
 the trial's path as given, and the script gives its name), byte for byte. Run once per commit to compare; the machine's load is printed.
+
+Measured (2026-12-07/08, 2 cores shared, load 10-18, two runs each; figures in benchmarks/README.md): the day at
+50 Hz with its orientation processed, ``--trial``: 438,764 / 436,204 kB peak with the quaternion line-up that
+concatenated each block (``e9131d5``), 446,296 / 431,504 kB with the one that holds at most two blocks, i.e. the
+same within the spread (the line-up's own traced peak: 12.9 MB at 400,000 rows and 14.0 MB at 1.6 M before,
+10.7 MB at both after, tests/test_export_bids.py); ``--compare``: True; every file name matched by
+``bidsschematools``.
 """
 
 from __future__ import annotations
@@ -18,6 +27,7 @@ import argparse
 import filecmp
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -26,14 +36,16 @@ from pathlib import Path
 IMULOG = [sys.executable, "-m", "imulog"]
 
 
-def simulated_trial(folder: Path, days: float, rate_hz: float) -> Path:
-    """``imulog simulate home`` converted into ``folder/home.mcap``."""
+def simulated_trial(folder: Path, days: float, rate_hz: float, orientation: bool = False) -> Path:
+    """``imulog simulate home`` converted into ``folder/home.mcap`` (and its orientation processed)."""
     sim = folder / "home"
     subprocess.run(
         [*IMULOG, "simulate", "home", "-o", sim, "--days", str(days), "--set", f"rate_hz={rate_hz:g}"], check=True
     )
     trial = folder / "home.mcap"
     subprocess.run([*IMULOG, "convert", next(sim.glob("*.cwa")), "-o", trial], check=True)
+    if orientation:
+        subprocess.run([*IMULOG, "process", "orientation", trial], check=True)
     return trial
 
 
@@ -67,10 +79,12 @@ def main() -> None:
     ap.add_argument("--rate-hz", type=float, default=50.0)
     ap.add_argument("--trial", type=Path, help="an existing trial instead of a simulated one")
     ap.add_argument("--compare", type=Path, help="another export of the same trial to compare byte for byte")
+    ap.add_argument("--orientation", action="store_true", help="process the simulated trial's orientation first")
+    ap.add_argument("--keep", type=Path, help="move the export to this folder (to --compare another commit's with)")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix="bids_memory_") as tmp:
         folder = Path(tmp)
-        trial = args.trial or simulated_trial(folder, args.days, args.rate_hz)
+        trial = args.trial or simulated_trial(folder, args.days, args.rate_hz, args.orientation)
         out = folder / "bids"
         print(f"load average {os.getloadavg()[0]:.1f}; exporting {trial} ({trial.stat().st_size / 1e6:.0f} MB)")
         fields = measured_export(trial, out)
@@ -84,6 +98,9 @@ def main() -> None:
         print(f"bidsschematools: {unmatched or 'every file name matches a BIDS rule'}")
         if args.compare is not None:
             print(f"same bytes as {args.compare}: {same_files(out, args.compare)}")
+        if args.keep is not None:
+            shutil.move(out, args.keep)
+            print(f"kept in {args.keep}")
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ import os
 from pathlib import Path
 
 import pytest
+from procs import kill_started  # noqa: F401  (autouse: the processes a test started die with it, tests/procs.py)
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = Path(os.environ.get("IMULOG_SHARED_DATA", REPO_ROOT.parent / "shared" / "data"))

@@ -11,6 +11,7 @@ import threading
 import time
 
 import pytest
+from procs import start
 
 from imulog.archive import TrialReader
 from imulog.archive.journal import journal_path
@@ -37,7 +38,7 @@ def test_killed_batch_resumes_without_repeating_work(tmp_path):
     mtimes = [p.stat().st_mtime_ns for p in paths]
     cmd = [sys.executable, "-c", "from imulog.cli import main; main()", "batch", f"{root}/**/*.mcap"]
     cmd += ["--steps", STEPS, "--repetitions", "3", "-q"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    proc = start(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # a session of its own (tests/procs.py)
     try:
         deadline = time.monotonic() + 120
         while _ledger_lines(ledger) < 2 and proc.poll() is None and time.monotonic() < deadline:

@@ -27,6 +27,7 @@ import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
+import procs
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
@@ -151,7 +152,7 @@ def run_page(page: str, workdir: Path, verbose: bool = False) -> list[str]:
             except BaseException:  # noqa: BLE001 - report any failure of the block
                 error = traceback.format_exc(limit=3).strip().splitlines()[-1]
         else:
-            proc = subprocess.run(
+            proc = procs.run(  # the block's background jobs (`imulog replay ... &`) end with it
                 ["bash", "-e", "-o", "pipefail", "-c", bounded_servers(block.code)],
                 cwd=workdir,
                 capture_output=True,
@@ -202,7 +203,7 @@ def page_runs(tmp_path_factory):
         root = tmp_path_factory.mktemp("docs_" + re.sub(r"\W", "_", page))
         workdir = make_workspace(root, None if makes_own_trial(page) else trial)
         cmd = [sys.executable, __file__, page, "--workdir", str(workdir)]
-        return subprocess.run(cmd, capture_output=True, text=True, env=page_env(), timeout=PAGE_TIMEOUT_S, cwd=workdir)
+        return procs.run(cmd, capture_output=True, text=True, env=page_env(), timeout=PAGE_TIMEOUT_S, cwd=workdir)
 
     if os.environ.get("PYTEST_XDIST_WORKER"):
         yield run

@@ -253,3 +253,46 @@ def test_each_channel_is_read_block_by_block(tmp_path, monkeypatch):
     # 9.4 MB more here, not from the file's length: the small trial's orientation is one chunk, read without the
     # next chunk decompressed ahead; beyond, each block's peak is bounded (benchmarks/reader_memory.py). Whole: 28.8 MB
     assert grown < whole / 2, (grown, whole)
+
+
+def test_the_orientation_line_up_holds_two_blocks_at_most():
+    """The quaternions are lined up with the IMU's blocks through bids._Rows. It concatenated what was left with
+    each new block and kept a view of the copy: up to about three blocks, and its traced peak grew with the
+    channel (12.9 MB at 400,000 rows, 14.0 MB at 1.6 M, for the orientation's 112,750-row blocks taken 42,500 at
+    a time, as an oriented trial at 50 Hz has them). Now: at most the two blocks the rows are in plus one take's
+    copy, whatever the length, and the rows handed out are the channel's, in order."""
+    import tracemalloc
+    from types import SimpleNamespace
+
+    from imulog.export.bids import _Rows
+
+    block, take = 112_750, 42_500
+    row_bytes = 8 + 4 * 8  # t_ns and a quaternion
+
+    def blocks(total: int):
+        for lo in range(0, total, block):
+            n = min(block, total - lo)
+            yield SimpleNamespace(t_ns=np.arange(lo, lo + n, dtype=np.int64), values=np.full((n, 4), lo / 1.0))
+
+    def run(total: int) -> None:
+        rows, done = _Rows(blocks(total)), 0
+        while done < total:
+            t, v = rows.take(min(take, total - done))
+            if not tracemalloc.is_tracing():  # the values once, untraced
+                np.testing.assert_array_equal(t, np.arange(done, done + len(t)))
+                np.testing.assert_array_equal(v[:, 0], (t // block * block).astype(float))
+            done += len(t)
+        assert rows.take(1) is None and rows.exhausted()
+
+    def peak(total: int) -> int:
+        tracemalloc.start()
+        try:
+            run(total)
+            return tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+
+    run(400_000)
+    short, long = peak(400_000), peak(1_600_000)
+    assert abs(long - short) < 100_000, (short, long)  # not with the length
+    assert long < 1.1 * (2 * block + take) * row_bytes, long  # two blocks and one take's copy (10.7 MB)

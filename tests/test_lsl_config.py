@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import uuid
 from pathlib import Path
 
 import pytest
@@ -13,15 +14,18 @@ import pytest
 pytest.importorskip("pylsl")
 
 ROOT = Path(__file__).resolve().parents[1]
+NOBODY = f"imulog-test-{uuid.uuid4().hex}"
 
 
 def record_list(tmp_path: Path, **env: str) -> subprocess.CompletedProcess:
-    """``imulog record --list`` with nothing on the network, run in ``tmp_path`` with ``tmp_path`` as home (no
-    configuration of the user's unless the test writes one there)."""
+    """``imulog record --list`` of a stream name no one publishes, run in ``tmp_path`` with ``tmp_path`` as home
+    (no configuration of the user's unless the test writes one there). The name is this run's own: without a
+    configuration the command is in liblsl's default session, where another LSL program of the machine may have
+    streams, which a plain ``--list`` would find."""
     base = {k: v for k, v in os.environ.items() if k != "LSLAPICFG"}
     base.update(HOME=str(tmp_path), PYTHONPATH=str(ROOT), NO_COLOR="1", **env)
     return subprocess.run(
-        [sys.executable, "-m", "imulog", "record", "--list", "--wait", "0.2"],
+        [sys.executable, "-m", "imulog", "record", "--list", "--wait", "0.2", "--stream", f"name={NOBODY}"],
         cwd=tmp_path,
         env=base,
         capture_output=True,
@@ -34,7 +38,7 @@ def record_list(tmp_path: Path, **env: str) -> subprocess.CompletedProcess:
 def test_no_loaded_default_config_line(tmp_path):
     run = record_list(tmp_path)
     assert run.returncode == 1  # nothing to list
-    assert "no LSL stream found" in run.stderr
+    assert f"no LSL stream matches name={NOBODY}" in run.stderr
     assert "Loaded default config" not in run.stderr
     assert "INFO|" not in run.stderr
 

@@ -5,7 +5,9 @@ The issue's 60 s run: ``IMULOG_RECORD_FULL=1 pytest -q tests/test_record.py`` (a
 A short simulated drinking trial (21 s, IMU 114.9 Hz + Vicon markers 100 Hz) is replayed as two outlets and
 recorded: every sample arrives with its values, the two streams keep the source's relative timing, and the
 recorded trial goes through orientation, align, phases, trajectory and evaluate like the converted one. Each test
-runs its own LSL session id, so other LSL users of this machine are neither seen nor disturbed.
+process runs an LSL session and ports of its own (tests/lsl_session.py), so other LSL users of this machine are
+neither seen nor disturbed, nor can they hide its streams; every process a test starts is killed with its children
+when the test ends, whatever the outcome (tests/procs.py).
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from lsl_session import session_config
+from procs import start
 
 pytest.importorskip("pylsl")
 
@@ -57,21 +61,19 @@ def trial(tmp_path_factory) -> dict[str, Path]:
 
 @pytest.fixture
 def lsl_env(tmp_path_factory, monkeypatch) -> dict[str, str]:
-    """Environment of an LSL session of this test process's own, on this machine only.
+    """Environment of an LSL session of this test process's own, on this machine only, with ports of its own
+    (tests/lsl_session.py: another LSL program on the machine can neither hide its streams nor see them).
 
-    One session id per process: liblsl reads its configuration once, so outlets made in the test process itself
+    One session per process: liblsl reads its configuration once, so outlets made in the test process itself
     must share the session of the commands it starts."""
-    cfg = tmp_path_factory.getbasetemp() / "lsl_api.cfg"
-    cfg.write_text(
-        "[ports]\nIPv6 = disable\n[multicast]\nResolveScope = machine\n"
-        f"[lab]\nSessionID = imulog-test-{os.getpid()}\n[log]\nlevel = -3\n"
-    )
+    cfg = session_config(tmp_path_factory.getbasetemp())
     monkeypatch.setenv("LSLAPICFG", str(cfg))
     return dict(os.environ, LSLAPICFG=str(cfg), PYTHONPATH=str(ROOT), NO_COLOR="1")
 
 
 def imulog(env: dict[str, str], *args: str, **kwargs) -> subprocess.Popen:
-    return subprocess.Popen(
+    """``python -m imulog ARGS`` with pipes (tests/procs.py: killed with its children when the test ends)."""
+    return start(
         [sys.executable, "-m", "imulog", *map(str, args)],
         env=env,
         cwd=ROOT,
@@ -110,13 +112,15 @@ def log_times(path: Path, topic: str) -> tuple[np.ndarray, object]:
 def test_replay_and_record_a_drinking_trial(trial, lsl_env, tmp_path):
     out = tmp_path / "live.mcap"
     rec = imulog(
-        lsl_env, "record", "-o", out, "--stream", "name=wrist", "--stream", "type=MoCap", "--wait", "15",
+        lsl_env, "record", "-o", out, "--stream", "name=wrist", "--stream", "type=MoCap", "--wait", "60",
         "--meta-file", trial["meta"], "--meta", "operator=test",
     )  # fmt: skip
     play = imulog(lsl_env, "replay", trial["mcap"], "--wait-consumers", "30")
     try:
         play_out, play_err = play.communicate(timeout=150)
-        assert play.returncode == 0, play_err
+        if play.returncode != 0:  # no recorder connected: say what the recorder said
+            rec.kill()
+            raise AssertionError(f"replay: {play_err}\nrecord: {rec.communicate(timeout=30)[1]}")
         time.sleep(1.0)
         rec.send_signal(signal.SIGINT)  # Ctrl-C: a clean stop with a summary
         rec_out, rec_err = rec.communicate(timeout=30)
@@ -211,6 +215,33 @@ def test_no_matching_stream_names_what_is_visible(lsl_env):
     bad = imulog(lsl_env, "record", "-o", "never.mcap", "--stream", "colour=red")
     _, err = bad.communicate(timeout=30)
     assert bad.returncode == 2 and "name=, type=, source_id=VALUE" in err
+
+
+def test_nothing_visible_names_the_lsl_configuration(lsl_env):
+    """Nothing in the test's session: the error says which configuration (session, scope, ports) was searched."""
+    rec = imulog(lsl_env, "record", "-o", "never.mcap", "--stream", "name=wrist", "--wait", "0.5")
+    _, err = rec.communicate(timeout=30)
+    cfg = Path(lsl_env["LSLAPICFG"]).read_text().splitlines()
+    session = next(ln.split("=")[1].strip() for ln in cfg if ln.startswith("SessionID"))
+    assert rec.returncode == 1
+    assert f"(visible: none; LSL configuration {lsl_env['LSLAPICFG']}: SessionID {session}, ResolveScope machine" in err
+
+
+def test_streams_sharing_a_name_are_listed_with_their_source_ids(lsl_env):
+    """Two programs' streams of one name: record warns, with each one's source_id, and source_id= picks one."""
+    import pylsl
+
+    outlets = [pylsl.StreamOutlet(pylsl.StreamInfo("wrist", "IMU", 3, 100, "float32", f"dev-{k}")) for k in "ab"]
+    listed = imulog(lsl_env, "record", "--list", "--wait", "1.5")
+    _, err = listed.communicate(timeout=30)
+    one = imulog(lsl_env, "record", "--list", "--stream", "source_id=dev-b", "--wait", "5")
+    _, err_one = one.communicate(timeout=30)
+    del outlets
+    assert listed.returncode == 0 and "found 2 stream(s)" in err, err
+    assert "warning: 2 streams are named wrist (source_id dev-" in err and "--stream source_id=..." in err
+    assert "source_id dev-a on host" in err and "source_id dev-b on host" in err
+    assert one.returncode == 0 and "found 1 stream(s)" in err_one and "source_id dev-b" in err_one
+    assert "warning" not in err_one
 
 
 def test_every_stream_events_and_signals_sigterm(lsl_env, tmp_path):

@@ -52,7 +52,9 @@ def test_sigkill_then_salvage(trial, lsl_env, tmp_path):
                 play = _replay(lsl_env, trial["mcap"])
                 replay_started = time.time()
             out = tmp_path / f"cut{k}.mcap"
-            rec = imulog(lsl_env, "record", "-o", out, "--stream", "name=wrist", "--stream", "name=vicon")
+            rec = imulog(
+                lsl_env, "record", "-o", out, "--stream", "name=wrist", "--stream", "name=vicon", "--wait", "30"
+            )
             wait_for_line(rec, "first samples written")  # the kill lands after the first fsync
             time.sleep(rng.uniform(0.8, 3.0))
             killed_at = time.time()

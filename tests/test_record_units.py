@@ -12,7 +12,7 @@ from click.testing import CliRunner
 from imulog.archive import TrialReader
 from imulog.archive.errors import ArchiveLockedError
 from imulog.cli import cli
-from imulog.live.lsl import StreamFilter
+from imulog.live.lsl import StreamFilter, config_summary, shared_names
 from imulog.live.mapping import chunk_to_recording, header_info, stream_names
 from imulog.live.writer import LiveTrialWriter, part_path
 from imulog.model import ImuStream, Recording
@@ -71,6 +71,43 @@ def test_names_and_filters():
             StreamFilter.parse(bad)
     with pytest.raises(ValueError, match="not valid XML"):
         header_info("<info><name>cut", 1)
+
+
+class _Info:
+    """The part of a pylsl StreamInfo that shared_names reads."""
+
+    def __init__(self, name: str, source_id: str, host: str = "lab") -> None:
+        self._n, self._s, self._h = name, source_id, host
+
+    def name(self) -> str:
+        return self._n
+
+    def source_id(self) -> str:
+        return self._s
+
+    def hostname(self) -> str:
+        return self._h
+
+
+def test_streams_of_one_name_are_told_apart_by_source_id():
+    infos = [_Info("wrist", "xio-1"), _Info("vicon", "vicon-1"), _Info("wrist", "replay:/imu/wrist", "vm")]
+    assert shared_names(infos) == [
+        "2 streams are named wrist (source_id xio-1 on host lab; source_id replay:/imu/wrist on host vm): all are "
+        "recorded; to record one, pick it with --stream source_id=..."
+    ]
+    assert shared_names(infos[:2]) == []
+
+
+def test_the_lsl_configuration_that_decides_what_is_visible(tmp_path):
+    """The error that finds no stream names the configuration in use: its session, scope and ports."""
+    cfg = tmp_path / "lsl_api.cfg"
+    cfg.write_text("[multicast]\nResolveScope = machine ; this computer\n[lab]\nSessionID = mine\n")
+    assert config_summary([tmp_path / "missing.cfg", cfg]) == (
+        f"LSL configuration {cfg}: SessionID mine, ResolveScope machine, MulticastPort 16571, BasePort 16572"
+    )
+    assert config_summary([]) == (
+        "LSL configuration liblsl defaults: SessionID default, ResolveScope site, MulticastPort 16571, BasePort 16572"
+    )
 
 
 def _piece(k: int, n: int = 50) -> Recording:

@@ -15,6 +15,7 @@ import pytest
 pytest.importorskip("pylsl")
 
 import test_record as base  # noqa: E402
+from procs import start  # noqa: E402
 
 from imulog.archive import TrialReader  # noqa: E402
 from imulog.view.rrd import read_scalars, summarize  # noqa: E402
@@ -29,7 +30,7 @@ def test_record_view_web_streams_to_the_viewer(trial, lsl_env, tmp_path):
     out, got = tmp_path / "viewed.mcap", tmp_path / "received.rrd"
     web, grpc = free_port(), free_port()
     rec = base.imulog(
-        lsl_env, "record", "-o", out, "--stream", "name=wrist", "--stream", "name=vicon", "--duration", "6",
+        lsl_env, "record", "-o", out, "--stream", "name=wrist", "--stream", "name=vicon", "--duration", "6", "--wait", "30",
         "--view", "--web", "--port", web, "--grpc-port", grpc,
     )  # fmt: skip
     play = base.imulog(lsl_env, "replay", trial["mcap"], "--duration", "8", "--wait-consumers", "30")
@@ -37,7 +38,7 @@ def test_record_view_web_streams_to_the_viewer(trial, lsl_env, tmp_path):
     try:
         lines = base.wait_for_line(rec, "recording into")
         assert any(f"http://127.0.0.1:{web}" in line for line in lines), lines
-        client = subprocess.Popen(
+        client = start(
             [str(rerun_executable()), f"rerun+http://127.0.0.1:{grpc}/proxy", "--save", str(got)]
             + ["--bind", "127.0.0.1", "--port", str(free_port())],
             stdout=subprocess.DEVNULL,
@@ -45,7 +46,9 @@ def test_record_view_web_streams_to_the_viewer(trial, lsl_env, tmp_path):
             env={**lsl_env, "RERUN_ANALYTICS": "0"},
         )
         base.wait_for_line(rec, "first samples written")
-        time.sleep(3.0)  # mid-recording: the client has been receiving
+        deadline = time.monotonic() + 30  # mid-recording (6 s of it): the client is receiving
+        while rec.poll() is None and not (got.exists() and got.stat().st_size > 0) and time.monotonic() < deadline:
+            time.sleep(0.05)
         assert rec.poll() is None and got.exists() and got.stat().st_size > 0, (
             "no data reached the viewer while recording"
         )

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from procs import start
 
 from imulog.view.layout import PHASE_COLORS
 from imulog.view.server import free_port
@@ -104,7 +105,7 @@ def _phase_colours_drawn(pixels: np.ndarray) -> int:
 def test_web_viewer_renders_trial(repo_root, tmp_path):
     chromium = _chromium()
     web_port, grpc_port, devtools_port = free_port(), free_port(), free_port()
-    server = subprocess.Popen(
+    server = start(
         [sys.executable, "-m", "imulog.cli", "view", "--sample", "30", "--web", "--port", str(web_port)]
         + ["--grpc-port", str(grpc_port), "--serve-seconds", "120"],
         stdout=subprocess.PIPE,
@@ -121,7 +122,7 @@ def test_web_viewer_renders_trial(repo_root, tmp_path):
             assert b"re_viewer" in response.read()
 
         profile = tempfile.mkdtemp(dir=tmp_path)
-        browser = subprocess.Popen(
+        browser = start(
             [chromium, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", f"--remote-debugging-port={devtools_port}", url],
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,

@@ -9,6 +9,7 @@ import urllib.request
 
 import pytest
 from click.testing import CliRunner
+from procs import start
 
 from imulog.cli import cli
 from imulog.view.server import PortInUseError, free_port, start_web_server
@@ -56,7 +57,7 @@ def test_killed_viewer_leaves_no_server(tmp_path):
     import time
 
     web, grpc = free_port(), free_port()
-    proc = subprocess.Popen(
+    proc = start(
         [
             sys.executable,
             "-m",

@@ -34,7 +34,8 @@ def _stop_on_signals(stop: threading.Event) -> None:
     "filters",
     multiple=True,
     metavar="KEY=VALUE",
-    help="Record the streams with this name=, type= or source_id= (repeatable; default: every visible stream).",
+    help="Record the streams with this name=, type= or source_id= (repeatable; default: every visible stream). "
+    "A name or type can be shared by other programs' streams: source_id= picks one device.",
 )
 @click.option(
     "--wait",
@@ -86,10 +87,11 @@ def record(
       imulog record -o trial.mcap --duration 60 --meta-file trial_meta.json
       imulog record -o trial.mcap --view --web                     # and watch it in the browser
       imulog record --list                                         # what is on the network
+      imulog record -o trial.mcap --stream source_id=xio-1234      # one device, whatever its name
       imulog replay trial.mcap                                     # (another terminal) a trial as outlets
     """
     from imulog.archive.errors import ArchiveError
-    from imulog.live.lsl import LslError, StreamFilter, describe, resolve
+    from imulog.live.lsl import LslError, StreamFilter, describe, resolve, shared_names
 
     if output is None and not list_only:
         raise click.UsageError("Missing option '-o' / '--output' (only --list needs none).")
@@ -114,6 +116,8 @@ def record(
     click.echo(f"found {len(infos)} stream(s):", err=True)
     for info in infos:
         click.echo(f"  {describe(info)}", err=True)
+    for line in shared_names(infos):
+        click.echo(f"warning: {line}", err=True)
     if list_only:
         return
     if web and not view:

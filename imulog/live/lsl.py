@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import configparser
 import contextlib
 import os
 import time
@@ -31,6 +32,32 @@ def user_config_files(cwd: Path | None = None, home: Path | None = None) -> list
     found = [Path(os.environ["LSLAPICFG"])] if os.environ.get("LSLAPICFG") else []
     candidates = (cwd / "lsl_api.cfg", home / "lsl_api" / "lsl_api.cfg", Path("/etc/lsl_api/lsl_api.cfg"))
     return found + [p for p in candidates if p.is_file()]
+
+
+#: the settings that decide which streams a resolver can see: (section, key, liblsl's default)
+SCOPE_SETTINGS = (
+    ("lab", "SessionID", "default"),
+    ("multicast", "ResolveScope", "site"),
+    ("ports", "MulticastPort", "16571"),
+    ("ports", "BasePort", "16572"),
+)
+
+
+def config_summary(files: list[Path] | None = None) -> str:
+    """Which LSL configuration applies and its settings that decide what is visible (session, scope, ports),
+    for an error that finds no stream: ``lsl_api.cfg: SessionID x, ResolveScope machine, ...`` or liblsl's
+    defaults. ``files``: :func:`user_config_files` (the first readable one is liblsl's)."""
+    files = user_config_files() if files is None else files
+    source = next((f for f in files if f.is_file()), None)
+    parser = configparser.ConfigParser(inline_comment_prefixes=(";", "#"), strict=False)
+    parser.optionxform = str  # liblsl's keys are case-sensitive
+    if source is not None:
+        try:
+            parser.read(source, encoding="utf-8")
+        except (configparser.Error, UnicodeDecodeError):
+            return f"LSL configuration {source} (not readable as INI)"
+    settings = ", ".join(f"{key} {parser.get(sec, key, fallback=default)}" for sec, key, default in SCOPE_SETTINGS)
+    return f"LSL configuration {source if source is not None else 'liblsl defaults'}: {settings}"
 
 
 def pylsl() -> Any:
@@ -103,7 +130,9 @@ def resolve(filters: list[StreamFilter], wait_s: float, poll_s: float = 0.25) ->
     if not filters:
         found = lsl.resolve_streams(max(wait_s, 0.5))
         if not found:
-            raise LslError(f"no LSL stream found within {wait_s:g} s (is the source running on this network?)")
+            raise LslError(
+                f"no LSL stream found within {wait_s:g} s (is the source running on this network? {config_summary()})"
+            )
         return _unique(found)
     resolver = lsl.ContinuousResolver(forget_after=max(wait_s, 5.0))
     try:
@@ -116,13 +145,28 @@ def resolve(filters: list[StreamFilter], wait_s: float, poll_s: float = 0.25) ->
                 return _unique(found)
             if time.monotonic() >= deadline:
                 seen = resolver.results()
-                listing = "; ".join(describe(i) for i in seen) or "none"
+                listing = "; ".join(describe(i) for i in seen) or f"none; {config_summary()}"
                 raise LslError(
                     f"no LSL stream matches {', '.join(map(str, missing))} within {wait_s:g} s (visible: {listing})"
                 )
             time.sleep(poll_s)
     finally:
         del resolver
+
+
+def shared_names(infos: list[Any]) -> list[str]:
+    """One line per stream name that several of ``infos`` have (other programs' streams, another device of the
+    same model): the streams with their source_id and host, and how to pick one."""
+    lines = []
+    names = [i.name() for i in infos]
+    for name in dict.fromkeys(n for n in names if names.count(n) > 1):
+        same = [i for i in infos if i.name() == name]
+        where = "; ".join(f"source_id {i.source_id() or '-'} on host {i.hostname() or '-'}" for i in same)
+        lines.append(
+            f"{len(same)} streams are named {name} ({where}): all are recorded; to record one, pick it with "
+            "--stream source_id=..."
+        )
+    return lines
 
 
 def _unique(infos: list[Any]) -> list[Any]:
