@@ -10,6 +10,9 @@ cluster (docs/alignment.md).
 
 from __future__ import annotations
 
+import os
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from imulog.process import alignment as al
@@ -24,6 +27,9 @@ from imulog.steps.align import (
     with_wide_search,
 )
 from imulog.steps.common import alignment_result, mean_rate_hz
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 STEP = "align"
 #: a pose channel with fewer valid (finite) orientations than this fraction is refused: tracking was lost most of
@@ -129,14 +135,14 @@ def compute_pose_alignment(
 
 
 def run_align_pose(
-    path,
+    path: str | os.PathLike[str],
     *,
     imu: str | None = None,
     poses: str | None = None,
     params: al.AlignmentParams | None = None,
     resample: bool = True,
     force: bool = False,
-):
+) -> StepOutcome:
     """Run the step for one IMU of a trial file against a pose channel; the :func:`imulog.steps.base.run_step`
     outcome."""
     from imulog.archive import TrialReader

@@ -12,11 +12,17 @@ an IMU no body turns like gets no record, and the step says why. Cost: one align
 
 from __future__ import annotations
 
+import os
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from imulog.process import alignment as al
 from imulog.steps.align import STEP, imu_span, params_dict, read_derived_pair
 from imulog.steps.align_pose import compute_pose_alignment, pose_channels
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 
 def pair_imus_with_bodies(
@@ -86,13 +92,13 @@ def recording_clocks(
 
 
 def run_align_pose_setup(
-    path,
+    path: str | os.PathLike[str],
     *,
     imus: list[str] | None = None,
     params: al.AlignmentParams | None = None,
     resample: bool = True,
     force: bool = False,
-):
+) -> StepOutcome:
     """Align every IMU of the trial (or those named) with the trial's rigid bodies, paired one to one; returns the
     :func:`imulog.steps.base.run_step` outcome. The pairs and the IMUs left without a body are in the main record's
     ``setup`` and ``unpaired``."""

@@ -10,7 +10,9 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,6 +20,9 @@ from imulog.model import SignalStream
 from imulog.process import calibration as cal
 from imulog.steps.common import mean_rate_hz, pick_imu
 from imulog.steps.windows import WindowParams, channel_rate_hz
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 STEP = "calibrate"
 
@@ -96,13 +101,13 @@ def calibrated_pieces(path, topic: str, imu: str, calibration: cal.Calibration) 
 
 
 def run_calibrate(
-    path,
+    path: str | os.PathLike[str],
     calibration: cal.Calibration,
     *,
     imu: str | None = None,
     force: bool = False,
     windows: WindowParams | None = None,
-):
+) -> StepOutcome:
     """Apply ``calibration`` to a trial (step ``calibrate``); returns the run_step outcome.
 
     A recording within one window (``windows``, default an hour) is calibrated at once; a longer one block by

@@ -10,15 +10,19 @@ stamped at its start) and the record ``imulog.epochs`` (calibration, non-wear pe
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from imulog.console import window_progress
 from imulog.model import SignalStream
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 STEP = "epochs"
 ALGORITHM = "enmo-mad-counts-vanhees2013"
@@ -260,7 +264,9 @@ def _rows(
     return out
 
 
-def run_epochs(path, *, imu: str | None = None, params: EpochParams | None = None, force: bool = False):
+def run_epochs(
+    path: str | os.PathLike[str], *, imu: str | None = None, params: EpochParams | None = None, force: bool = False
+) -> StepOutcome:
     """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome."""
     from imulog.archive import TrialReader
     from imulog.archive.streaming import StreamPieces

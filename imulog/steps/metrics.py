@@ -14,9 +14,10 @@ intervals) and ``/derived/trajectory/{method}`` (positions on the reference cloc
 from __future__ import annotations
 
 import dataclasses
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -34,6 +35,9 @@ from imulog.process.metrics import (
 from imulog.steps.common import alignment_for, alignment_record, nominal_rate_hz, pick_imu, record_for
 from imulog.steps.metrics_windows import metric_pieces, metric_plan
 from imulog.steps.windows import WindowParams, channel_rate_hz
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 STEP = "metrics"
 ALGORITHM = "imulog.metrics.doshi2011"
@@ -251,13 +255,13 @@ def phase_records(
 
 
 def run_metrics(
-    path,
+    path: str | os.PathLike[str],
     *,
     imu: str | None = None,
     params: MetricsParams | None = None,
     force: bool = False,
     windows: WindowParams | None = None,
-):
+) -> StepOutcome:
     """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
 
     One implementation at any length (:mod:`imulog.steps.metrics_windows`): ``windows`` (default an hour with

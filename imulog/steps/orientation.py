@@ -14,9 +14,10 @@ the IMU device clock (the raw channel's ``t_ns``):
 from __future__ import annotations
 
 import dataclasses
+import os
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -28,6 +29,9 @@ from imulog.process.orientation import OrientationParams, estimate_orientation, 
 from imulog.steps.common import mean_rate_hz, missing_gyroscope, pick_imu
 from imulog.steps.sample_window import SampleWindow
 from imulog.steps.windows import Window, WindowParams, channel_rate_hz
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 STEP = "orientation"
 CALIBRATED_TOPIC = "/derived/calibrated/{imu}"
@@ -282,7 +286,7 @@ def read_orientation_windows(
 
 
 def run_orientation(
-    path,
+    path: str | os.PathLike[str],
     *,
     imu: str | None = None,
     params: OrientationParams | None = None,
@@ -290,7 +294,7 @@ def run_orientation(
     force: bool = False,
     gaps: GapParams | None = None,
     windows: WindowParams | None = None,
-):
+) -> StepOutcome:
     """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
 
     ``windows``: core and margin of the windows (default :class:`~imulog.steps.windows.WindowParams`, an hour

@@ -20,7 +20,8 @@ Interval times (movements, phases, timing table) are on the reference clock when
 
 from __future__ import annotations
 
-from typing import Any
+import os
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -31,6 +32,9 @@ from imulog.steps.common import mean_rate_hz, missing_gyroscope, pick_imu, recor
 from imulog.steps.phases_record import LOW_CONFIDENCE
 from imulog.steps.phases_store import array_source, trial_source
 from imulog.steps.phases_windows import PhaseWindows, phase_pieces, unsupported
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 __all__ = ["LOW_CONFIDENCE", "PhaseWindows", "compute_phases", "params_for_trial", "pick_imu", "run_phases"]
 
@@ -134,14 +138,14 @@ def compute_phases(
 
 
 def run_phases(
-    path,
+    path: str | os.PathLike[str],
     *,
     imu: str | None = None,
     params: PhaseParams | None = None,
     force: bool = False,
     gaps: GapParams | None = None,
     windows: PhaseWindows | None = None,
-):
+) -> StepOutcome:
     """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
 
     Without ``params`` the trial's own protocol and repetition count are used (:func:`params_for_trial`);

@@ -24,7 +24,8 @@ frame, estimated rotating bias and the waypoints used.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+import os
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -51,6 +52,9 @@ from imulog.steps.trajectory_inputs import phase_bounds_by_repetition, sample_on
 from imulog.steps.trajectory_topics import RECORD, baseline_topic, per_imu_layout, split_topic, trajectory_topic
 from imulog.steps.trajectory_windows import F32, TrajectoryWindows, has_r2g, trajectory_pieces
 from imulog.steps.trajectory_windows import plan as window_plan
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 STEP = "trajectory"
 TRAJECTORY_TOPIC = "/derived/trajectory/{method}"
@@ -264,7 +268,7 @@ def params_dict(methods: list[str] | tuple[str, ...], params: TrajectoryParams, 
 
 
 def run_trajectory(
-    path,
+    path: str | os.PathLike[str],
     *,
     imu: str | None = None,
     methods: list[str] | tuple[str, ...] = METHODS,
@@ -272,7 +276,7 @@ def run_trajectory(
     reference_params: R2GReferenceParams = DEFAULT_REFERENCE,
     force: bool = False,
     windows: TrajectoryWindows | None = None,
-):
+) -> StepOutcome:
     """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
 
     A recording longer than one window (``windows``, default one-hour cores) is reconstructed window by window,
