@@ -5,6 +5,8 @@ writes atomically (temporary name, then rename). One module per target; ``imulog
 click layer over these functions (docs/export.md).
 """
 
+from typing import TYPE_CHECKING
+
 from imulog.archive.trial_clock import CLOCKS, ClockError, TrialClock, trial_clock
 from imulog.export._atomic import ExportError
 from imulog.export.table import ExportResult, channel_table, export_table
@@ -12,25 +14,29 @@ from imulog.export.table import ExportResult, channel_table, export_table
 TARGETS = ("parquet", "csv", "sto", "bids", "c3d")
 
 
-def export_sto(*args, **kwargs) -> ExportResult:
-    """See :func:`imulog.export.sto.export_sto`."""
-    from imulog.export.sto import export_sto as f
+if TYPE_CHECKING:  # a user's type checker sees the real signatures; at run time each imports its module when called
+    from imulog.export.bids import export_bids
+    from imulog.export.c3d import export_c3d
+    from imulog.export.sto import export_sto
+else:
 
-    return f(*args, **kwargs)
+    def export_sto(*args, **kwargs) -> ExportResult:
+        """See :func:`imulog.export.sto.export_sto`."""
+        from imulog.export.sto import export_sto as f
 
+        return f(*args, **kwargs)
 
-def export_bids(*args, **kwargs) -> ExportResult:
-    """See :func:`imulog.export.bids.export_bids`."""
-    from imulog.export.bids import export_bids as f
+    def export_bids(*args, **kwargs) -> ExportResult:
+        """See :func:`imulog.export.bids.export_bids`."""
+        from imulog.export.bids import export_bids as f
 
-    return f(*args, **kwargs)
+        return f(*args, **kwargs)
 
+    def export_c3d(*args, **kwargs) -> ExportResult:
+        """See :func:`imulog.export.c3d.export_c3d`."""
+        from imulog.export.c3d import export_c3d as f
 
-def export_c3d(*args, **kwargs) -> ExportResult:
-    """See :func:`imulog.export.c3d.export_c3d`."""
-    from imulog.export.c3d import export_c3d as f
-
-    return f(*args, **kwargs)
+        return f(*args, **kwargs)
 
 
 __all__ = [

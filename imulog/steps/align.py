@@ -25,7 +25,7 @@ from imulog.model import PoseStream, SignalStream
 from imulog.process import alignment as al
 from imulog.process.resample import resample_quaternions, resample_signal
 from imulog.steps.align_summary import alignment_summary  # noqa: F401  (imulog.steps.align API)
-from imulog.steps.common import alignment_result, mean_rate_hz, missing_gyroscope, pick_imu
+from imulog.steps.common import alignment_result, mean_rate_hz, missing_gyroscope, names_trial, pick_imu
 
 if TYPE_CHECKING:
     from imulog.steps.base import StepOutcome
@@ -415,6 +415,7 @@ def orientation_at(orientation: tuple[np.ndarray, np.ndarray] | None, t_imu_ns: 
     return q_o if np.array_equal(t_o, t_imu_ns) else resample_quaternions(t_o, q_o, t_imu_ns)
 
 
+@names_trial
 def run_align(
     path: str | os.PathLike[str],
     *,

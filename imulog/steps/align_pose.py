@@ -26,7 +26,7 @@ from imulog.steps.align import (
     read_derived_pair,
     with_wide_search,
 )
-from imulog.steps.common import alignment_result, mean_rate_hz
+from imulog.steps.common import alignment_result, mean_rate_hz, names_trial
 
 if TYPE_CHECKING:
     from imulog.steps.base import StepOutcome
@@ -134,6 +134,7 @@ def compute_pose_alignment(
     return with_wide_search(compute, t_imu_ns, t_pose, params, True)
 
 
+@names_trial
 def run_align_pose(
     path: str | os.PathLike[str],
     *,

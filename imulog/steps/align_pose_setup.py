@@ -20,6 +20,7 @@ import numpy as np
 from imulog.process import alignment as al
 from imulog.steps.align import STEP, imu_span, params_dict, read_derived_pair
 from imulog.steps.align_pose import compute_pose_alignment, pose_channels
+from imulog.steps.common import names_trial
 
 if TYPE_CHECKING:
     from imulog.steps.base import StepOutcome
@@ -91,6 +92,7 @@ def recording_clocks(
     return out
 
 
+@names_trial
 def run_align_pose_setup(
     path: str | os.PathLike[str],
     *,

@@ -31,7 +31,7 @@ from imulog.steps.align import (
     params_dict,
 )
 from imulog.steps.align_summary import setup_summary
-from imulog.steps.common import mean_rate_hz, renamed
+from imulog.steps.common import mean_rate_hz, names_trial, renamed
 from imulog.steps.recording_clock import CLOCK_KEYS, recording_clock_record
 
 if TYPE_CHECKING:
@@ -140,6 +140,7 @@ def compute_setup_alignment(
     return streams, records, summary
 
 
+@names_trial
 def run_align_setup(
     path: str | os.PathLike[str],
     *,
@@ -213,6 +214,7 @@ def run_align_setup(
     )
 
 
+@names_trial
 def run_align_trial(
     path: str | os.PathLike[str],
     *,

@@ -18,7 +18,7 @@ import numpy as np
 
 from imulog.model import SignalStream
 from imulog.process import calibration as cal
-from imulog.steps.common import mean_rate_hz, pick_imu
+from imulog.steps.common import mean_rate_hz, names_trial, pick_imu
 from imulog.steps.windows import WindowParams, channel_rate_hz
 
 if TYPE_CHECKING:
@@ -100,6 +100,7 @@ def calibrated_pieces(path, topic: str, imu: str, calibration: cal.Calibration) 
             yield compute_calibrated(s.t_ns, s.acc, s.gyr, s.mag, imu, calibration)
 
 
+@names_trial
 def run_calibrate(
     path: str | os.PathLike[str],
     calibration: cal.Calibration,

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
+import functools
+from collections.abc import Callable, Mapping
+from typing import Any, Concatenate, ParamSpec, TypeVar
 
 import numpy as np
 
@@ -178,6 +179,37 @@ def error_line(path: Any, exc: BaseException) -> str:
     (archive errors already name their file)."""
     message, name = str(exc), str(path)
     return message if message.startswith(name) else f"{name}: {message}"
+
+
+class StepError(ValueError):
+    """A step cannot run on a trial: ``str()`` is one line starting with the trial's path (what ``imulog process``
+    prints after ``Error:``); ``path`` is the trial, ``__cause__`` the original error."""
+
+    def __init__(self, message: str, path: Any) -> None:
+        super().__init__(message)
+        self.path = path
+
+
+_A = TypeVar("_A")
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
+
+
+def names_trial(run: Callable[Concatenate[_A, _P], _R]) -> Callable[Concatenate[_A, _P], _R]:
+    """Decorate a step's public ``run_*(path, ...)``: a plain ValueError raised for the trial (a missing channel, an
+    IMU without a gyroscope) becomes a :class:`StepError` whose message starts with the path, so a script looping
+    over an archive knows which file failed; more specific errors (archive, parameter, clock) pass unchanged."""
+
+    @functools.wraps(run)
+    def wrapper(path: _A, *args: _P.args, **kwargs: _P.kwargs) -> _R:
+        try:
+            return run(path, *args, **kwargs)
+        except ValueError as exc:
+            if type(exc) is not ValueError:
+                raise
+            raise StepError(error_line(path, exc), path) from exc
+
+    return wrapper
 
 
 def mean_rate_hz(t_ns: np.ndarray) -> float:

@@ -20,6 +20,7 @@ import numpy as np
 
 from imulog.console import window_progress
 from imulog.model import SignalStream
+from imulog.steps.common import names_trial
 
 if TYPE_CHECKING:
     from imulog.steps.base import StepOutcome
@@ -264,6 +265,7 @@ def _rows(
     return out
 
 
+@names_trial
 def run_epochs(
     path: str | os.PathLike[str], *, imu: str | None = None, params: EpochParams | None = None, force: bool = False
 ) -> StepOutcome:

@@ -27,6 +27,7 @@ from imulog.process.evaluation import (
     trajectory_errors,
 )
 from imulog.process.trajectory_opt import BASELINE, METHODS
+from imulog.steps.common import names_trial
 
 if TYPE_CHECKING:
     from imulog.steps.base import StepOutcome
@@ -298,6 +299,7 @@ def judged_span(trial, imu_topic: str, span_s: float) -> tuple[int, int]:
 WHAT = ("auto", "orientation", "trajectory")  # what `imulog evaluate --what` chooses (docs/alignment.md)
 
 
+@names_trial
 def run_evaluate(
     path: str | os.PathLike[str],
     *,

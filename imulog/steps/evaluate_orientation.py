@@ -25,6 +25,7 @@ from imulog.process import quaternion as quat
 from imulog.process.alignment_clock import device_to_reference
 from imulog.process.orientation import orientation_errors
 from imulog.process.resample import resample_quaternions
+from imulog.steps.common import names_trial
 
 if TYPE_CHECKING:
     from imulog.steps.base import StepOutcome
@@ -92,6 +93,7 @@ def orientation_evaluation(
     return errors
 
 
+@names_trial
 def run_evaluate_orientation(
     path: str | os.PathLike[str], imu: str | None = None, force: bool = False
 ) -> tuple[StepOutcome, dict[str, Any]]:
@@ -178,6 +180,7 @@ def run_evaluate_orientation(
     )
 
 
+@names_trial
 def run_evaluate_orientations(
     path: str | os.PathLike[str], imus: list[str] | None = None, force: bool = False
 ) -> tuple[StepOutcome, dict[str, Any]]:

@@ -25,6 +25,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from imulog.steps.common import names_trial
+
 if TYPE_CHECKING:
     from imulog.steps.base import StepOutcome
 
@@ -189,6 +191,7 @@ def stride_table(record: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+@names_trial
 def run_gait_evaluate(
     path: str | os.PathLike[str], *, imus: list[str] | None = None, walking: dict | None = None, force: bool = False
 ) -> tuple[StepOutcome, dict[str, Any]]:

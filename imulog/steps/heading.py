@@ -16,6 +16,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from imulog.steps.common import names_trial
+
 if TYPE_CHECKING:
     from imulog.steps.base import StepOutcome
 
@@ -183,6 +185,7 @@ def device_yaw(t_ns: np.ndarray, q_s2g: np.ndarray, t_dev_ns: np.ndarray, q_dev:
     return float(np.angle(z.mean())), sd
 
 
+@names_trial
 def run_heading(
     path: str | os.PathLike[str],
     *,

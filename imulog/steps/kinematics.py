@@ -33,6 +33,7 @@ from imulog.process.kinematics.errors import kinematics_errors
 from imulog.process.kinematics.pipeline import KinematicsConfig, estimate_kinematics
 from imulog.process.kinematics.solver import SolverParams, Workspace
 from imulog.process.orientation import OrientationParams
+from imulog.steps.common import names_trial
 from imulog.steps.kinematics_windows import PREFIX, calibration_record, kinematics_streams, resample_onto
 from imulog.steps.windows import WindowParams, channel_rate_hz
 
@@ -237,6 +238,7 @@ def compute_kinematics(
     return kinematics_streams(est, q_ref), meta
 
 
+@names_trial
 def run_kinematics(
     path: str | os.PathLike[str],
     *,

@@ -32,7 +32,7 @@ from imulog.process.metrics import (
     repetition_durations,
     smoothness,
 )
-from imulog.steps.common import alignment_for, alignment_record, nominal_rate_hz, pick_imu, record_for
+from imulog.steps.common import alignment_for, alignment_record, names_trial, nominal_rate_hz, pick_imu, record_for
 from imulog.steps.metrics_windows import metric_pieces, metric_plan
 from imulog.steps.windows import WindowParams, channel_rate_hz
 
@@ -254,6 +254,7 @@ def phase_records(
     return record
 
 
+@names_trial
 def run_metrics(
     path: str | os.PathLike[str],
     *,

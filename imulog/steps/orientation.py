@@ -26,7 +26,7 @@ from imulog.model import SignalStream
 from imulog.numeric import finite_rows
 from imulog.process.gaps import GapParams, GapReport, per_run, prepare
 from imulog.process.orientation import OrientationParams, estimate_orientation, gravity_free_acceleration
-from imulog.steps.common import mean_rate_hz, missing_gyroscope, pick_imu
+from imulog.steps.common import mean_rate_hz, missing_gyroscope, names_trial, pick_imu
 from imulog.steps.sample_window import SampleWindow
 from imulog.steps.windows import Window, WindowParams, channel_rate_hz
 
@@ -285,6 +285,7 @@ def read_orientation_windows(
         yield from orientation_windows(blocks, total, plan, imu, params, gaps, reports, estimates)
 
 
+@names_trial
 def run_orientation(
     path: str | os.PathLike[str],
     *,

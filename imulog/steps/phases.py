@@ -28,7 +28,7 @@ import numpy as np
 from imulog.process.gaps import GapParams
 from imulog.process.segmentation.pipeline import PhaseParams
 from imulog.process.segmentation.repetitions import RepetitionParams
-from imulog.steps.common import mean_rate_hz, missing_gyroscope, pick_imu, record_for
+from imulog.steps.common import mean_rate_hz, missing_gyroscope, names_trial, pick_imu, record_for
 from imulog.steps.phases_record import LOW_CONFIDENCE
 from imulog.steps.phases_store import array_source, trial_source
 from imulog.steps.phases_windows import PhaseWindows, phase_pieces, unsupported
@@ -137,6 +137,7 @@ def compute_phases(
     return streams, record
 
 
+@names_trial
 def run_phases(
     path: str | os.PathLike[str],
     *,

@@ -46,7 +46,7 @@ from imulog.process.trajectory_opt import (
     reconstruct_repetitions,
     repetition_windows,
 )
-from imulog.steps.common import alignment_for, alignment_record, pick_imu, record_for, record_of
+from imulog.steps.common import alignment_for, alignment_record, names_trial, pick_imu, record_for, record_of
 from imulog.steps.placements import placement_side
 from imulog.steps.trajectory_inputs import phase_bounds_by_repetition, sample_onto, to_reference, world_acceleration
 from imulog.steps.trajectory_topics import RECORD, baseline_topic, per_imu_layout, split_topic, trajectory_topic
@@ -267,6 +267,7 @@ def params_dict(methods: list[str] | tuple[str, ...], params: TrajectoryParams, 
     return {"methods": list(methods), **dataclasses.asdict(params), "reference": ref}
 
 
+@names_trial
 def run_trajectory(
     path: str | os.PathLike[str],
     *,
