@@ -30,6 +30,7 @@ UNIT_SUFFIXES = (
     ("_deg_s", "deg/s"),
     ("_mps2", "m/s^2"),
     ("_m_s2", "m/s^2"),
+    ("_hours", "h"),
     ("_hz", "Hz"),
     ("_ppm", "ppm"),
     ("_deg", "deg"),

@@ -19,6 +19,8 @@ from imulog.cli import PROCESS_COMMANDS, TOP_LEVEL_COMMANDS, cli
 from imulog.params import ParamError, params_from_dict, params_to_dict
 from imulog.process.orientation import OrientationParams, StaticParams
 from imulog.steps.common import StepError
+from imulog.steps.epochs import EpochParams
+from imulog.steps.metrics import MetricsParams
 from imulog.steps.orientation import run_orientation
 
 PAGE = Path(__file__).resolve().parents[1] / "docs" / "python.md"
@@ -73,6 +75,13 @@ def test_every_command_has_a_typed_python_entry_point():
         (lambda: StaticParams(threshold_rad_s=0.0), "StaticParams.threshold_rad_s: must be finite and > 0 (rad/s)"),
         (lambda: StaticParams(min_duration_s=-0.5), "StaticParams.min_duration_s: must be finite and >= 0 (s)"),
         (lambda: OrientationParams(static={"threshold_rad_s": 0.2}), "OrientationParams.static: must be StaticParams"),
+        (
+            lambda: EpochParams(epochs_s=(60.0, 0.0)),
+            "EpochParams.epochs_s: must be finite and > 0 (s), got (60.0, 0.0)",
+        ),
+        (lambda: EpochParams(valid_day_hours=-1.0), "EpochParams.valid_day_hours: must be finite and >= 0 (h)"),
+        (lambda: MetricsParams(acc_unit="m/s2"), "MetricsParams.acc_unit: must be one of g, m/s^2, got 'm/s2'"),
+        (lambda: MetricsParams(noise_level_g=-0.02), "MetricsParams.noise_level_g: must be finite and >= 0 (g)"),
     ],
 )
 def test_parameter_objects_refuse_bad_values_naming_field_and_unit(make, line):
@@ -88,6 +97,7 @@ def test_every_steps_parameter_object_goes_to_a_dict_and_back():
             continue
         cls = _load(spec.params_class)
         assert params_from_dict(cls, params_to_dict(cls())) == cls(), spec.name
+    assert EpochParams(epochs_s=[10, 60]).epochs_s == (10, 60)  # a list is taken as the tuple it stands for
     changed = params_from_dict(OrientationParams, {"backend": "madgwick", "static": {"threshold_rad_s": 0.2}})
     assert changed == OrientationParams(backend="madgwick", static=StaticParams(threshold_rad_s=0.2))
     with pytest.raises(ValueError, match="unknown option 'betta'.*fields: backend, beta"):
@@ -109,8 +119,10 @@ def test_the_cli_prints_the_parameter_objects_line(trial):
     for option, value, line in (
         ("--static-threshold", "-1", "StaticParams.threshold_rad_s: must be finite and > 0 (rad/s), got -1.0"),
         ("--beta", "0", "OrientationParams.beta: must be finite and > 0 (rad/s), got 0.0"),
+        ("--epoch-s", "0", "EpochParams.epochs_s: must be finite and > 0 (s), got (0.0,)"),
     ):
-        result = CliRunner().invoke(cli, ["process", "orientation", str(trial), option, value])
+        step = "epochs" if option == "--epoch-s" else "orientation"
+        result = CliRunner().invoke(cli, ["process", step, str(trial), option, value])
         assert result.exit_code == 1, result.output
         assert result.output.strip() == f"Error: {line}"
         assert result.exception is None or isinstance(result.exception, SystemExit)  # no traceback

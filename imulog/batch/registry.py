@@ -358,8 +358,11 @@ def run_file(path: str, plan: list[tuple[str, dict[str, Any]]], force: bool = Fa
         try:
             outcome = call_step(path, step, options, force=force)
         except Exception as exc:  # isolate the file: report, do not propagate
+            from imulog.steps.common import StepError
+
             result.failed_step = result.failed_step or step
-            line = f"{step}: {type(exc).__name__}: {exc}"
+            shown = exc.__cause__ if isinstance(exc, StepError) and exc.__cause__ is not None else exc  # the file
+            line = f"{step}: {type(shown).__name__}: {shown}"  # is named once, by the batch's line
             result.error = f"{result.error}; {line}" if result.error else line
             result.traceback = result.traceback or traceback.format_exc(limit=8)
             lost[step] = (step,)

@@ -296,7 +296,14 @@ def run_orientation(
     gaps: GapParams | None = None,
     windows: WindowParams | None = None,
 ) -> StepOutcome:
-    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
+    """Orientation of one IMU of the trial at ``path`` (``imu``: its name, e.g. ``wrist``; default the trial's one
+    IMU), appended as ``/derived/orientation/IMU`` (qw, qx, qy, qz: sensor to global, z up), ``/derived/acc_global/
+    IMU`` (m/s^2, gravity removed, global frame) and ``/derived/orientation_static/IMU`` (1 where the gyroscope norm
+    is static), all on the IMU's clock; ``imulog process orientation`` with ``params``. Returns the
+    :class:`~imulog.steps.base.StepOutcome` (``skipped`` when the same run is recorded); a trial it cannot run on
+    raises :class:`~imulog.steps.common.StepError` naming ``path``.
+
+    >>> run_orientation("trial.mcap", params=OrientationParams(backend="madgwick", beta=0.03))  # doctest: +SKIP
 
     ``windows``: core and margin of the windows (default :class:`~imulog.steps.windows.WindowParams`, an hour
     with a minute each side); a recording within one core is computed at once, and only longer ones record the

@@ -147,7 +147,10 @@ def run_phases(
     gaps: GapParams | None = None,
     windows: PhaseWindows | None = None,
 ) -> StepOutcome:
-    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
+    """Movements, phases and repetitions of one IMU (``imulog process phases``): appends ``/derived/movements/IMU``
+    and ``/derived/phases/IMU`` (intervals, ns on the clock the ``imulog.timing`` record names), ``/derived/static/IMU``
+    (1 where still) and the ``imulog.timing`` record (per-phase durations in s). Returns the
+    :class:`~imulog.steps.base.StepOutcome`; :class:`~imulog.steps.common.StepError` names ``path``.
 
     Without ``params`` the trial's own protocol and repetition count are used (:func:`params_for_trial`);
     ``gaps``: how missing IMU samples are treated (:mod:`imulog.process.gaps`). The recording is read in

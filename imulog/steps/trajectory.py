@@ -278,7 +278,10 @@ def run_trajectory(
     force: bool = False,
     windows: TrajectoryWindows | None = None,
 ) -> StepOutcome:
-    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
+    """Wrist trajectories by each of ``methods`` (``imulog process trajectory``): appends ``/derived/trajectory/
+    METHOD`` (x, y, z in m, the reference's world frame, per repetition) and the ``imulog.trajectory`` record; needs
+    the orientation and the phases. Returns the :class:`~imulog.steps.base.StepOutcome`;
+    :class:`~imulog.steps.common.StepError` names ``path``.
 
     A recording longer than one window (``windows``, default one-hour cores) is reconstructed window by window,
     each window the movements between two rests (:mod:`imulog.steps.trajectory_windows`), in bounded memory."""
