@@ -142,6 +142,7 @@ def test_a_recorded_run_gives_its_parameter_object_back(trial):
     rebuilt, rest = run_params(runs[outcome.run])
     assert rebuilt == params and rest["imu"] == "wrist" and "global_frame" in rest
     assert run_orientation(trial, imu=rest["imu"], params=rebuilt).skipped
+    assert run_orientation(trial, imu="/imu/wrist", params=rebuilt).skipped  # the topic names the IMU too
     rebuilt_phases, rest = run_params(runs[phases.run])
     assert isinstance(rebuilt_phases, PhaseParams) and rebuilt_phases.static_margin_s == 0.2
     assert run_phases(trial, imu=rest["imu"], params=rebuilt_phases).skipped  # the run, repeated exactly
@@ -156,5 +157,9 @@ def test_a_steps_error_names_the_trial_as_the_command_does(trial, tmp_path):
     assert isinstance(err.value, ValueError) and err.value.path == trial
     result = CliRunner().invoke(cli, ["process", "orientation", str(trial), "--imu", "ankle"])
     assert result.exit_code == 1 and result.output.strip() == f"Error: {err.value}"
+    with pytest.raises(
+        TypeError, match=r"run_orientation: params must be OrientationParams \(a parameter object\), got a dict; imulog"
+    ):
+        run_orientation(trial, params={"beta": 0.1})  # was: asdict() should be called on dataclass instances
     with pytest.raises(ArchiveError, match=re.escape(str(tmp_path / "none.mcap"))):  # archive errors: unchanged
         run_orientation(tmp_path / "none.mcap")

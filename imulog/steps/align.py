@@ -40,6 +40,7 @@ STEP = "align"
 def pick_markers(topics: list[str], markers: str | None) -> str:
     names = [t.split("/", 2)[2] for t in topics if t.startswith("/markers/")]
     if markers is not None:
+        markers = markers.removeprefix("/markers/")  # the channel's topic names it too
         if markers not in names:
             raise ValueError(
                 f"no channel /markers/{markers} in the trial (marker channels: {', '.join(names) or 'none'})"

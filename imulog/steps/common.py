@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import inspect
 from collections.abc import Callable, Mapping
 from typing import Any, Concatenate, ParamSpec, TypeVar
 
@@ -10,7 +11,8 @@ import numpy as np
 
 
 def pick_imu(topics: list[str], imu: str | None, *, prefix: str = "/imu/", missing_hint: str = "") -> str:
-    """The IMU name to process: ``imu`` if given (``{prefix}{imu}`` must exist), else the only one, else ``wrist``.
+    """The IMU name to process: ``imu`` if given (``wrist`` or ``/imu/wrist``; ``{prefix}{imu}`` must exist), else
+    the only one, else ``wrist``.
 
     ``prefix`` is the channel family that must exist for the step (``/imu/`` for raw signals,
     ``/derived/acc_global/`` for steps that need the orientation step first); ``missing_hint`` is
@@ -19,6 +21,7 @@ def pick_imu(topics: list[str], imu: str | None, *, prefix: str = "/imu/", missi
     names = [t[len(prefix) :] for t in topics if t.startswith(prefix)]
     hint = f": {missing_hint}" if missing_hint else ""
     if imu is not None:
+        imu = imu.removeprefix("/imu/")  # the channel as trial.topics() lists it names its IMU too
         if imu not in names:
             found = f" ({prefix}* channels: {', '.join(names)})" if names else hint
             raise ValueError(f"no channel {prefix}{imu} in the trial{found}")
@@ -202,6 +205,13 @@ def names_trial(run: Callable[Concatenate[_A, _P], _R]) -> Callable[Concatenate[
 
     @functools.wraps(run)
     def wrapper(path: _A, *args: _P.args, **kwargs: _P.kwargs) -> _R:
+        for key in ("params", "options"):
+            if isinstance(kwargs.get(key), Mapping):  # a dict where the parameter object goes: say how to make it
+                kind = str(inspect.signature(run).parameters[key].annotation).split(" |")[0].split(".")[-1]
+                raise TypeError(
+                    f"{run.__name__}: {key} must be {kind} (a parameter object), got a dict; "
+                    f"imulog.params.params_from_dict({kind}, {{...}}) makes one from it"
+                )
         try:
             return run(path, *args, **kwargs)
         except ValueError as exc:
