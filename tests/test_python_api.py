@@ -65,6 +65,16 @@ def test_every_command_has_a_typed_python_entry_point():
             assert sig.return_annotation is not inspect.Parameter.empty, f"{command}: {dotted} has no return type"
 
 
+def test_the_export_targets_are_the_commands():
+    import imulog.export
+    from imulog.commands.archive import export
+
+    choices = next(p.type.choices for p in export.params if p.name == "target")
+    assert set(imulog.export.TARGETS) == set(choices)
+    for target in set(choices) - {"parquet", "csv"}:  # one function each (parquet and csv: export_table)
+        assert callable(getattr(imulog.export, f"export_{target}"))
+
+
 @pytest.mark.parametrize(
     ("make", "line"),
     [
