@@ -17,6 +17,7 @@ from imulog.batch import run_params
 from imulog.batch.registry import STEPS, _load
 from imulog.cli import PROCESS_COMMANDS, TOP_LEVEL_COMMANDS, cli
 from imulog.params import ParamError, params_from_dict, params_to_dict
+from imulog.process.alignment_params import AlignmentParams
 from imulog.process.orientation import OrientationParams, StaticParams
 from imulog.steps.common import StepError
 from imulog.steps.epochs import EpochParams
@@ -90,6 +91,9 @@ def test_the_export_targets_are_the_commands():
             "EpochParams.epochs_s: must be finite and > 0 (s), got (60.0, 0.0)",
         ),
         (lambda: EpochParams(valid_day_hours=-1.0), "EpochParams.valid_day_hours: must be finite and >= 0 (h)"),
+        (lambda: AlignmentParams(window_s=0.0), "AlignmentParams.window_s: must be finite and > 0 (s), got 0.0"),
+        (lambda: AlignmentParams(max_lag_s=-1.0), "AlignmentParams.max_lag_s: must be finite and >= 0 (s)"),
+        (lambda: AlignmentParams(cluster="OXY"), "AlignmentParams.cluster: must be one of auto, oxy, svd, got 'OXY'"),
         (lambda: MetricsParams(acc_unit="m/s2"), "MetricsParams.acc_unit: must be one of g, m/s^2, got 'm/s2'"),
         (lambda: MetricsParams(noise_level_g=-0.02), "MetricsParams.noise_level_g: must be finite and >= 0 (g)"),
     ],
@@ -130,8 +134,9 @@ def test_the_cli_prints_the_parameter_objects_line(trial):
         ("--static-threshold", "-1", "StaticParams.threshold_rad_s: must be finite and > 0 (rad/s), got -1.0"),
         ("--beta", "0", "OrientationParams.beta: must be finite and > 0 (rad/s), got 0.0"),
         ("--epoch-s", "0", "EpochParams.epochs_s: must be finite and > 0 (s), got (0.0,)"),
+        ("--window", "0", "AlignmentParams.window_s: must be finite and > 0 (s), got 0.0"),
     ):
-        step = "epochs" if option == "--epoch-s" else "orientation"
+        step = {"--epoch-s": "epochs", "--window": "align"}.get(option, "orientation")
         result = CliRunner().invoke(cli, ["process", step, str(trial), option, value])
         assert result.exit_code == 1, result.output
         assert result.output.strip() == f"Error: {line}"
