@@ -32,7 +32,7 @@ def pick_imu(topics: list[str], imu: str | None, *, prefix: str = "/imu/", missi
         return "wrist"
     if not names:
         raise ValueError(f"no {prefix}* channel in the trial{hint or raw_channels_hint(topics, prefix)}")
-    raise ValueError(f"choose an IMU with --imu among: {', '.join(names)}")
+    raise ValueError(f"choose an IMU with --imu (imu=NAME in Python) among: {', '.join(names)}")
 
 
 def raw_channels_hint(topics: list[str], prefix: str, most: int = 4) -> str:
