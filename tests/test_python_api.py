@@ -118,6 +118,22 @@ def test_every_steps_parameter_object_goes_to_a_dict_and_back():
         params_from_dict(OrientationParams, {"betta": 0.1})
 
 
+def test_a_parameter_object_goes_into_the_batch_options_as_its_dict():
+    """``imulog.batch.run(options={step: params_to_dict(params)})`` runs with ``params``; before, phases' alias
+    ``repetitions`` (the count) took the nested RepetitionParams dict as the count itself, silently."""
+    from imulog.batch.registry import resolve_options
+    from imulog.process.segmentation.pipeline import PhaseParams
+
+    for spec in STEPS.values():
+        if spec.params_class is not None:
+            cls = _load(spec.params_class)
+            assert resolve_options(spec.name, params_to_dict(cls()))[1] == cls(), spec.name
+    phases = PhaseParams(static_margin_s=0.2)
+    assert resolve_options("phases", params_to_dict(phases))[1] == phases
+    assert resolve_options("phases", {"repetitions": {"n_repetitions": 5}})[1].repetitions.n_repetitions == 5
+    assert resolve_options("phases", {"repetitions": "7"})[1].repetitions.n_repetitions == 7  # the alias still
+
+
 @pytest.fixture(scope="module")
 def trial(tmp_path_factory) -> Path:
     from imulog.simulate import simulate

@@ -199,7 +199,10 @@ def resolve_options(step: str, options: dict[str, Any] | None, base: Any = None)
             continue
         if params is None:
             raise ValueError(f"step {step}: unknown option {key!r} (options: {', '.join(spec.kwargs) or 'none'})")
-        params = set_field(params, spec.aliases.get(key, key), value, f"step {step}")
+        nested = isinstance(value, dict) and key in {f.name for f in dataclasses.fields(params)}
+        # a dict for a nested parameter object sets its fields: a field's own name wins over a short alias
+        # (phases' ``repetitions``: the count as a number, the RepetitionParams as a dict)
+        params = set_field(params, key if nested else spec.aliases.get(key, key), value, f"step {step}")
     return kwargs, params
 
 
