@@ -12,6 +12,7 @@ import sys
 import click
 
 from imulog import __version__
+from imulog.params import ParamError
 
 # command name -> ("module:attribute" of a click.Command, one-line help shown by --help without importing it)
 TOP_LEVEL_COMMANDS: dict[str, tuple[str, str]] = {
@@ -88,6 +89,8 @@ class LazyGroup(click.Group):
                     f"imulog batch PATHS... --steps {step} (docs/batch.md)"
                 )
             raise
+        except ParamError as exc:  # a parameter object refused a value: the same line the Python API raises
+            raise click.ClickException(str(exc)) from None
         except (click.ClickException, OSError) as exc:
             from imulog.console import broken_pipe, exit_closed_pipe
 

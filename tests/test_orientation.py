@@ -238,8 +238,8 @@ def test_gravity_free_acceleration_recovers_world_acceleration():
 
 
 def test_unknown_backend_is_a_clear_error():
-    with pytest.raises(ValueError, match="unknown orientation backend"):
-        estimate_orientation(np.zeros((10, 3)), np.ones((10, 3)), 100.0, params=OrientationParams(backend="nope"))
+    with pytest.raises(ValueError, match="OrientationParams.backend: must be one of .*vqf_offline.*, got 'nope'"):
+        OrientationParams(backend="nope")  # refused when made, before any data is read
 
 
 def test_default_backend_registered():

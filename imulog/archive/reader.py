@@ -11,7 +11,7 @@ import os
 from array import array
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from imulog._lazy import LazyModule
 from imulog.archive import _mcap as m
@@ -28,6 +28,10 @@ from imulog.archive.metadata import (
 from imulog.archive.packing import is_packed, original_media_type, unpack
 from imulog.archive.tables import stream_columns
 from imulog.model import Stream
+
+if TYPE_CHECKING:
+    import pandas as pd
+    import pyarrow as pa
 
 np = LazyModule("numpy", __name__)  # imported on first use: imulog info never needs numpy
 
@@ -429,7 +433,7 @@ class TrialReader:
         """The channel as flat named columns (``t_ns`` first): numpy arrays, labels as lists."""
         return stream_columns(self.read(topic, start_ns, end_ns))
 
-    def read_arrow(self, topic: str, start_ns: int | None = None, end_ns: int | None = None):
+    def read_arrow(self, topic: str, start_ns: int | None = None, end_ns: int | None = None) -> pa.Table:
         """The channel as a ``pyarrow.Table`` (zero-copy from the numpy columns where possible)."""
         import pyarrow as pa
 
@@ -442,7 +446,7 @@ class TrialReader:
 
     def read_pandas(
         self, topic: str, start_ns: int | None = None, end_ns: int | None = None, *, clock: str | None = None
-    ):
+    ) -> pd.DataFrame:
         """The channel as a ``pandas.DataFrame`` with a ``t_ns`` column (or ``start_ns``/``end_ns``).
 
         ``clock="device"`` or ``"reference"``: indexed by time on that clock instead (wall-clock

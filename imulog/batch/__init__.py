@@ -9,8 +9,14 @@
 See docs/batch.md.
 """
 
-from imulog.batch.registry import STEP_ORDER, STEPS, FileResult, StepSpec, call_step, parse_steps, run_file
+from typing import TYPE_CHECKING
+
+from imulog.batch.registry import STEP_ORDER, STEPS, FileResult, StepSpec, call_step, parse_steps, run_file, run_params
 from imulog.batch.runner import BatchReport, expand_paths, run
+
+if TYPE_CHECKING:  # imported when first used (pyarrow, pandas): typed for a user's checker all the same
+    from imulog.batch.catalog import build_catalog
+    from imulog.batch.report import write_report
 
 __all__ = [
     "STEPS",
@@ -24,6 +30,7 @@ __all__ = [
     "parse_steps",
     "run",
     "run_file",
+    "run_params",
     "write_report",
 ]
 

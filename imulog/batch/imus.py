@@ -76,7 +76,7 @@ def run_every_imu(path: str | os.PathLike[str], step: str, call: Any, kwargs: di
         try:
             outcomes.append(call(imu=name, **kwargs))
         except (ValueError, KeyError, OSError, RuntimeError) as exc:
-            failed.append(f"{name}: {exc}")
+            failed.append(f"{name}: {str(exc).removeprefix(f'{path}: ')}")  # the file is named once, by the batch
     if failed:
         raise ValueError(f"{len(failed)} of {len(names)} IMUs failed: " + "; ".join(failed))
     skipped = all(o.skipped for o in outcomes)

@@ -22,9 +22,12 @@ import json
 import os
 import time
 import traceback
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from imulog.params import coerce, params_from_dict, set_field
 
 # Dependency order: a step may read what an earlier one wrote (align reads orientation, phases the alignment,
 # trajectory orientation + phases, evaluate and metrics the trajectories, kinematics the orientations).
@@ -171,70 +174,6 @@ def parse_steps(steps: str | list[str] | tuple[str, ...]) -> list[str]:
     return [s for s in STEP_ORDER if s in names]
 
 
-def _coerce(value: Any, default: Any, where: str, annotation: str = "") -> Any:
-    """Convert a command-line string to the type of ``default`` (other values pass through).
-
-    When the field's ``annotation`` admits ``str`` (e.g. ``float | str`` for a threshold that may be
-    ``"otsu"``), a string that does not convert is kept as it is.
-    """
-    if not isinstance(value, str) or isinstance(default, str):
-        if isinstance(default, tuple) and isinstance(value, list):
-            return tuple(value)
-        return value
-    text = value.strip()
-    if isinstance(default, tuple):  # each item the type of the default's items (epochs_s=10,60: floats)
-        items = [x.strip() for x in text.split(",") if x.strip()]
-        if default and not isinstance(default[0], str):
-            return tuple(_coerce(x, default[0], where) for x in items)
-        return tuple(items)
-    try:
-        if isinstance(default, bool):
-            if text.lower() in ("1", "true", "yes", "on"):
-                return True
-            if text.lower() in ("0", "false", "no", "off"):
-                return False
-            raise ValueError(f"expected true/false, got {value!r}")
-        if isinstance(default, int):
-            return int(text)
-        if isinstance(default, float):
-            return float(text)
-
-        if default is None:
-            value = json.loads(text)
-            return tuple(value) if isinstance(value, list) and "tuple" in annotation else value
-    except ValueError as exc:
-        if "str" in str(annotation):
-            return text
-        raise ValueError(f"{where}: {exc}") from None
-    # a union field (e.g. threshold: float | "otsu"): a number if it parses as one, else the string
-    try:
-        return float(text)
-    except ValueError:
-        return text
-
-
-def set_field(obj: Any, dotted: str, value: Any, where: str = "") -> Any:
-    """A copy of dataclass ``obj`` with field ``a.b.c`` replaced by ``value`` (coerced to the field's type)."""
-    head, _, rest = dotted.partition(".")
-    names = {f.name for f in dataclasses.fields(obj)}
-    if head not in names:
-        raise ValueError(
-            f"{where or type(obj).__name__}: unknown option {dotted!r} (fields: {', '.join(sorted(names))})"
-        )
-    current = getattr(obj, head)
-    if rest:
-        if not dataclasses.is_dataclass(current):
-            raise ValueError(f"{where}: {head!r} has no sub-fields")
-        return dataclasses.replace(obj, **{head: set_field(current, rest, value, where)})
-    if dataclasses.is_dataclass(current) and isinstance(value, dict):
-        sub = current
-        for k, v in value.items():
-            sub = set_field(sub, k, v, where)
-        return dataclasses.replace(obj, **{head: sub})
-    annotation = next(f.type for f in dataclasses.fields(obj) if f.name == head)
-    return dataclasses.replace(obj, **{head: _coerce(value, current, f"{where} {dotted}", str(annotation))})
-
-
 def resolve_options(step: str, options: dict[str, Any] | None, base: Any = None) -> tuple[dict[str, Any], Any]:
     """``(kwargs, params)`` for calling step ``step`` with the plain ``options`` dict.
 
@@ -253,14 +192,17 @@ def resolve_options(step: str, options: dict[str, Any] | None, base: Any = None)
             if key in _LIST_KWARGS and isinstance(value, str):
                 value = [m.strip() for m in value.split(",") if m.strip()]
             elif key == "resample" and isinstance(value, str):
-                value = _coerce(value, True, f"step {step} {key}")
+                value = coerce(value, True, f"step {step} {key}")
             elif key == "max_gap_s" and isinstance(value, str):
                 value = float(value)
             kwargs[key] = value
             continue
         if params is None:
             raise ValueError(f"step {step}: unknown option {key!r} (options: {', '.join(spec.kwargs) or 'none'})")
-        params = set_field(params, spec.aliases.get(key, key), value, f"step {step}")
+        nested = isinstance(value, dict) and key in {f.name for f in dataclasses.fields(params)}
+        # a dict for a nested parameter object sets its fields: a field's own name wins over a short alias
+        # (phases' ``repetitions``: the count as a number, the RepetitionParams as a dict)
+        params = set_field(params, key if nested else spec.aliases.get(key, key), value, f"step {step}")
     return kwargs, params
 
 
@@ -338,6 +280,25 @@ class FileResult:
         return dataclasses.asdict(self)
 
 
+def run_params(run: Mapping[str, Any]) -> tuple[Any, dict[str, Any]]:
+    """``(params, rest)`` of a recorded run (``trial.runs()[n]``, an ``imulog.run.<n>`` record): the step's
+    parameter object rebuilt from the ``params`` it recorded (``OrientationParams`` for ``orientation:wrist``;
+    None for a step without one), and the recorded keys that are not its fields (the step's keywords such as
+    ``imu`` or ``methods``, and what it derived, such as orientation's ``global_frame``). ValueError names a step
+    this registry does not know."""
+    name = str(run.get("step", "")).partition(":")[0]
+    spec = STEPS.get(name)
+    if spec is None:
+        raise ValueError(f"run of step {run.get('step')!r}: not a registered step ({', '.join(STEP_ORDER)})")
+    recorded = dict(run.get("params") or {})
+    if spec.params_class is None:
+        return None, recorded
+    cls = _load(spec.params_class)
+    fields = {f.name for f in dataclasses.fields(cls)}
+    params = params_from_dict(cls, {k: v for k, v in recorded.items() if k in fields})
+    return params, {k: v for k, v in recorded.items() if k not in fields}
+
+
 def call_step(path: str | os.PathLike[str], step: str, options: dict[str, Any] | None = None, *, force: bool = False):
     """Run one registered step on one trial; returns the step's ``StepOutcome``."""
     spec = STEPS[step]
@@ -400,8 +361,11 @@ def run_file(path: str, plan: list[tuple[str, dict[str, Any]]], force: bool = Fa
         try:
             outcome = call_step(path, step, options, force=force)
         except Exception as exc:  # isolate the file: report, do not propagate
+            from imulog.steps.common import StepError
+
             result.failed_step = result.failed_step or step
-            line = f"{step}: {type(exc).__name__}: {exc}"
+            shown = exc.__cause__ if isinstance(exc, StepError) and exc.__cause__ is not None else exc  # the file
+            line = f"{step}: {type(shown).__name__}: {shown}"  # is named once, by the batch's line
             result.error = f"{result.error}; {line}" if result.error else line
             result.traceback = result.traceback or traceback.format_exc(limit=8)
             lost[step] = (step,)

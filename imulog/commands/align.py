@@ -142,8 +142,6 @@ def process_align(
     from imulog.steps.align import alignment_summary, run_align
     from imulog.steps.common import error_line
 
-    if window_s <= 0 or max_lag_s < 0:
-        raise click.ClickException("--window must be positive and --max-lag non-negative")
     names = tuple(m.strip() for m in (cluster_markers or "").split(",") if m.strip())
     params = AlignmentParams(
         window_s=window_s,

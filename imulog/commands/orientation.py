@@ -79,9 +79,7 @@ def process_orientation(
     from imulog.commands.imus import choose_imus, run_per_imu
     from imulog.steps.orientation import global_frame, run_orientation
 
-    if beta <= 0:
-        raise click.ClickException(f"--beta must be positive, got {beta}")
-    params = replace(
+    params = replace(  # a bad value raises imulog.params.ParamError: one line from imulog.cli (field and unit)
         _D,
         backend=backend,
         beta=beta,

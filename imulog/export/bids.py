@@ -23,7 +23,7 @@ from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -31,6 +31,9 @@ from imulog import __version__
 from imulog.archive.trial_clock import seconds_from, trial_clock
 from imulog.export._atomic import ExportError, atomic_folder
 from imulog.export.table import ExportResult
+
+if TYPE_CHECKING:
+    from imulog.archive.reader import TrialReader
 
 BIDS_VERSION = "1.10.0"
 _AXES = ("x", "y", "z")
@@ -231,7 +234,7 @@ def _marker_pieces(trial, tc, topic: str) -> Iterator[list[np.ndarray]]:
 
 
 def export_bids(
-    trial, out: str | Path, *, clock: str = "device", imu: str | None = None, overwrite: bool = False
+    trial: TrialReader, out: str | Path, *, clock: str = "device", imu: str | None = None, overwrite: bool = False
 ) -> ExportResult:
     """Write the trial as a BIDS-motion dataset folder ``out`` (atomically: a temporary folder renamed)."""
     tc = trial_clock(trial, clock, imu)

@@ -22,6 +22,7 @@ from __future__ import annotations
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -29,6 +30,9 @@ from imulog.archive.trial_clock import trial_clock
 from imulog.export._atomic import ExportError, atomic_file
 from imulog.export.c3d_grid import Grid, interp_gapped, place_on_grid, placed, plan_grid, whole_multiple
 from imulog.export.table import ExportResult
+
+if TYPE_CHECKING:
+    from imulog.archive.reader import TrialReader
 
 MM_PER_M = 1000.0
 C3D_EXTRA = "C3D export needs ezc3d: pip install 'imulog[c3d]'"
@@ -274,7 +278,7 @@ def trial_c3d(trial, *, clock: str = "reference", imu: str | None = None, includ
 
 
 def export_c3d(
-    trial, out: str | Path, *, clock: str = "reference", imu: str | None = None, include_imu: bool = True
+    trial: TrialReader, out: str | Path, *, clock: str = "reference", imu: str | None = None, include_imu: bool = True
 ) -> ExportResult:
     """Write the trial as a C3D file (atomically)."""
     content, notes = trial_c3d(trial, clock=clock, imu=imu, include_imu=include_imu)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,6 +31,9 @@ from imulog.archive.trial_clock import seconds_from, trial_clock
 from imulog.export._atomic import ExportError, atomic_file
 from imulog.export.table import ExportResult
 from imulog.process import quaternion as quat
+
+if TYPE_CHECKING:
+    from imulog.archive.reader import TrialReader
 
 ORIENTATION_PREFIX = "/derived/orientation/"
 
@@ -157,7 +161,7 @@ def resolve_names(trial, imus: Sequence[str], names: Mapping[str, str]) -> dict[
 
 
 def export_sto(
-    trial,
+    trial: TrialReader,
     out: str | Path,
     *,
     clock: str = "device",

@@ -8,12 +8,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from imulog.archive.errors import ArchiveError
 from imulog.archive.tables import column_units, labelled, stream_table
 from imulog.archive.trial_clock import ClockError, trial_clock
 from imulog.export._atomic import ExportError, atomic_file
+
+if TYPE_CHECKING:
+    from imulog.archive.reader import TrialReader
 
 FORMATS = ("parquet", "csv")
 
@@ -59,7 +62,7 @@ def format_of(path: str | Path, fmt: str | None = None) -> str:
 
 
 def export_table(
-    trial,
+    trial: TrialReader,
     topic: str,
     out: str | Path,
     *,

@@ -21,12 +21,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from imulog.archive.trial_clock import seconds_from, trial_clock
 from imulog.export._atomic import ExportError, atomic_file
 from imulog.export.table import ExportResult
+
+if TYPE_CHECKING:
+    from imulog.archive.reader import TrialReader
 
 MM_PER_M = 1000.0
 
@@ -75,7 +79,7 @@ def marker_topic(trial, topic: str | None) -> str:
 
 
 def export_trc(
-    trial, out: str | Path, *, topic: str | None = None, clock: str = "reference", imu: str | None = None
+    trial: TrialReader, out: str | Path, *, topic: str | None = None, clock: str = "reference", imu: str | None = None
 ) -> ExportResult:
     """Write one marker channel of the trial as an OpenSim ``.trc`` file (see the module docstring)."""
     chosen = marker_topic(trial, topic)

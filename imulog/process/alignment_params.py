@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from imulog.params import check_params
 from imulog.process.alignment_frames import FilterParams
 from imulog.process.alignment_search import SearchParams
 
@@ -61,3 +62,13 @@ class AlignmentParams:
     short_windows: int = 6
     max_drift_uncertainty_ppm: float = 20.0
     gyro_lowpass: bool = False
+
+    def __post_init__(self) -> None:  # ParamError names the field and its unit; the CLI prints the same line
+        if isinstance(self.markers, list):
+            object.__setattr__(self, "markers", tuple(self.markers))
+        check_params(
+            self,
+            positive=("window_s", "grid_hz", "coarse_hz", "fine_lag_s", "short_window_s"),
+            non_negative=("max_lag_s", "drift_end_margin_s", "outlier_floor_s", "window_lag_sd_s", "bias_min_static_s"),
+            choices={"cluster": ("auto", "oxy", "svd")},
+        )

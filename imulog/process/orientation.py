@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from imulog.numeric import finite_rows, median_int
+from imulog.params import check_params
 from imulog.process import quaternion as quat
 
 __all__ = [
@@ -89,6 +90,9 @@ class StaticParams:
     threshold_rad_s: float = 0.1
     min_duration_s: float = 0.1
     smooth_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_params(self, positive=("threshold_rad_s",), non_negative=("min_duration_s", "smooth_s"))
 
 
 def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -176,6 +180,9 @@ def _first_static_mean(x: np.ndarray, static: np.ndarray) -> np.ndarray:
 # backends
 
 
+_UNITS = {"beta": "rad/s"}  # the field names that do not carry their unit
+
+
 @dataclass(frozen=True)
 class OrientationParams:
     """Orientation estimation settings.
@@ -185,7 +192,14 @@ class OrientationParams:
     ``use_mag``: fuse the magnetometer when the IMU has one (False: the thesis judged the field
     unreliable during motion; the heading is then arbitrary but consistent).
     ``static``: static-period detection (0.1 rad/s gyro-norm threshold).
-    ``imufusion_gain``: Fusion AHRS gain (0.5, its default).
+    ``imufusion_gain``: Fusion AHRS gain (0.5, its default; dimensionless).
+
+    >>> OrientationParams(backend="madgwick", beta=0.05).beta
+    0.05
+    >>> OrientationParams(beta=-1)
+    Traceback (most recent call last):
+    ...
+    imulog.params.ParamError: OrientationParams.beta: must be finite and > 0 (rad/s), got -1
     """
 
     backend: str = DEFAULT_BACKEND
@@ -193,6 +207,11 @@ class OrientationParams:
     use_mag: bool = False
     static: StaticParams = StaticParams()
     imufusion_gain: float = 0.5
+
+    def __post_init__(self) -> None:  # ParamError names the field and its unit; the CLI prints the same line
+        check_params(
+            self, positive=("beta",), non_negative=("imufusion_gain",), choices={"backend": BACKENDS}, units=_UNITS
+        )
 
 
 @dataclass

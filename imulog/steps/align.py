@@ -16,6 +16,8 @@ clock) and, when present, ``/derived/orientation/{imu}`` and ``/derived/acc_glob
 from __future__ import annotations
 
 import dataclasses
+import os
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,7 +25,10 @@ from imulog.model import PoseStream, SignalStream
 from imulog.process import alignment as al
 from imulog.process.resample import resample_quaternions, resample_signal
 from imulog.steps.align_summary import alignment_summary  # noqa: F401  (imulog.steps.align API)
-from imulog.steps.common import alignment_result, mean_rate_hz, missing_gyroscope, pick_imu
+from imulog.steps.common import alignment_result, mean_rate_hz, missing_gyroscope, names_trial, pick_imu
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 # the Vicon-derived and resampled channels are stored as float32 (issue 28; docs/schemas.md: 6e-8 relative, far
 # below the accuracy of a marker cluster or a resampled IMU signal); a copy per stream: attrs become metadata
@@ -35,6 +40,7 @@ STEP = "align"
 def pick_markers(topics: list[str], markers: str | None) -> str:
     names = [t.split("/", 2)[2] for t in topics if t.startswith("/markers/")]
     if markers is not None:
+        markers = markers.removeprefix("/markers/")  # the channel's topic names it too
         if markers not in names:
             raise ValueError(
                 f"no channel /markers/{markers} in the trial (marker channels: {', '.join(names) or 'none'})"
@@ -410,15 +416,16 @@ def orientation_at(orientation: tuple[np.ndarray, np.ndarray] | None, t_imu_ns: 
     return q_o if np.array_equal(t_o, t_imu_ns) else resample_quaternions(t_o, q_o, t_imu_ns)
 
 
+@names_trial
 def run_align(
-    path,
+    path: str | os.PathLike[str],
     *,
     imu: str | None = None,
     markers: str | None = None,
     params: al.AlignmentParams | None = None,
     resample: bool = True,
     force: bool = False,
-):
+) -> StepOutcome:
     """Run the step for one IMU of a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
     Every IMU of a trial at once: :func:`imulog.steps.align_setup.run_align_setup`."""
     params = params or al.AlignmentParams()

@@ -10,7 +10,9 @@ cluster (docs/alignment.md).
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -25,7 +27,10 @@ from imulog.steps.align import (
     read_derived_pair,
     with_wide_search,
 )
-from imulog.steps.common import alignment_result, mean_rate_hz
+from imulog.steps.common import alignment_result, mean_rate_hz, names_trial
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 STEP = "align"
 #: a pose channel with fewer valid (finite) orientations than this fraction is refused: tracking was lost most of
@@ -188,15 +193,16 @@ def compute_pose_alignment(
     return pose_streams(imu_name, body, record, t_imu_ns, gyr, orientation, acc_global, resample), record
 
 
+@names_trial
 def run_align_pose(
-    path,
+    path: str | os.PathLike[str],
     *,
     imu: str | None = None,
     poses: str | None = None,
     params: al.AlignmentParams | None = None,
     resample: bool = True,
     force: bool = False,
-):
+) -> StepOutcome:
     """Run the step for one IMU of a trial file against a pose channel; the :func:`imulog.steps.base.run_step`
     outcome."""
     from imulog.archive import TrialReader

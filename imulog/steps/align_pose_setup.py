@@ -15,12 +15,19 @@ alignment per IMU and each of its ``refine`` best bodies.
 
 from __future__ import annotations
 
+import os
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from imulog.process import alignment as al
 from imulog.steps.align import STEP, imu_span, params_dict, read_derived_pair
 from imulog.steps.align_pose import PoseBody, pose_body, pose_channels, pose_streams
 from imulog.steps.align_pose_search import ImuInput, search_pose_setup
+from imulog.steps.common import names_trial
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 
 def recording_clocks(
@@ -57,14 +64,15 @@ def recording_clocks(
     return out
 
 
+@names_trial
 def run_align_pose_setup(
-    path,
+    path: str | os.PathLike[str],
     *,
     imus: list[str] | None = None,
     params: al.AlignmentParams | None = None,
     resample: bool = True,
     force: bool = False,
-):
+) -> StepOutcome:
     """Align every IMU of the trial (or those named) with the trial's rigid bodies, paired one to one; returns the
     :func:`imulog.steps.base.run_step` outcome. The pairs and the IMUs left without a body are in the main record's
     ``setup`` and ``unpaired``."""

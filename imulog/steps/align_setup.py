@@ -15,6 +15,9 @@ gets its recording's clock and is flagged ``frame_alignment: false``. Writes
 
 from __future__ import annotations
 
+import os
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from imulog.process import alignment as al
@@ -28,8 +31,11 @@ from imulog.steps.align import (
     params_dict,
 )
 from imulog.steps.align_summary import setup_summary
-from imulog.steps.common import mean_rate_hz, renamed
+from imulog.steps.common import mean_rate_hz, names_trial, renamed
 from imulog.steps.recording_clock import CLOCK_KEYS, channel_span, recording_clock_record
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 
 def _own_clock(record: dict) -> dict:
@@ -136,15 +142,16 @@ def compute_setup_alignment(
     return streams, records, summary
 
 
+@names_trial
 def run_align_setup(
-    path,
+    path: str | os.PathLike[str],
     *,
     imus: list[str] | None = None,
     markers: str | None = None,
     params: al.AlignmentParams | None = None,
     resample: bool = True,
     force: bool = False,
-):
+) -> StepOutcome:
     """Align every IMU of the trial (or those named) with the markers; returns the run_step outcome."""
     params = params or al.AlignmentParams()
     from imulog.archive import TrialReader
@@ -210,8 +217,9 @@ def run_align_setup(
     )
 
 
+@names_trial
 def run_align_trial(
-    path,
+    path: str | os.PathLike[str],
     *,
     imu: str | None = None,
     markers: str | None = None,
@@ -219,7 +227,7 @@ def run_align_trial(
     resample: bool = True,
     force: bool = False,
     poses: str | None = None,
-):
+) -> StepOutcome:
     """The align step as ``imulog process align`` runs it: on a rigid body's poses when the trial has poses and no
     markers, or ``poses`` is named (:func:`imulog.steps.align_pose.run_align_pose`); else one IMU when named or
     when the trial has one, else every IMU (:func:`run_align_setup`). Keywords as

@@ -10,14 +10,19 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from imulog.model import SignalStream
 from imulog.process import calibration as cal
-from imulog.steps.common import mean_rate_hz, pick_imu
+from imulog.steps.common import mean_rate_hz, names_trial, pick_imu
 from imulog.steps.windows import WindowParams, channel_rate_hz
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 STEP = "calibrate"
 
@@ -95,14 +100,15 @@ def calibrated_pieces(path, topic: str, imu: str, calibration: cal.Calibration) 
             yield compute_calibrated(s.t_ns, s.acc, s.gyr, s.mag, imu, calibration)
 
 
+@names_trial
 def run_calibrate(
-    path,
+    path: str | os.PathLike[str],
     calibration: cal.Calibration,
     *,
     imu: str | None = None,
     force: bool = False,
     windows: WindowParams | None = None,
-):
+) -> StepOutcome:
     """Apply ``calibration`` to a trial (step ``calibrate``); returns the run_step outcome.
 
     A recording within one window (``windows``, default an hour) is calibrated at once; a longer one block by

@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
+import functools
+import inspect
+from collections.abc import Callable, Mapping
+from typing import Any, Concatenate, ParamSpec, TypeVar
 
 import numpy as np
 
 
 def pick_imu(topics: list[str], imu: str | None, *, prefix: str = "/imu/", missing_hint: str = "") -> str:
-    """The IMU name to process: ``imu`` if given (``{prefix}{imu}`` must exist), else the only one, else ``wrist``.
+    """The IMU name to process: ``imu`` if given (``wrist`` or ``/imu/wrist``; ``{prefix}{imu}`` must exist), else
+    the only one, else ``wrist``.
 
     ``prefix`` is the channel family that must exist for the step (``/imu/`` for raw signals,
     ``/derived/acc_global/`` for steps that need the orientation step first); ``missing_hint`` is
@@ -18,6 +21,7 @@ def pick_imu(topics: list[str], imu: str | None, *, prefix: str = "/imu/", missi
     names = [t[len(prefix) :] for t in topics if t.startswith(prefix)]
     hint = f": {missing_hint}" if missing_hint else ""
     if imu is not None:
+        imu = imu.removeprefix("/imu/")  # the channel as trial.topics() lists it names its IMU too
         if imu not in names:
             found = f" ({prefix}* channels: {', '.join(names)})" if names else hint
             raise ValueError(f"no channel {prefix}{imu} in the trial{found}")
@@ -28,7 +32,7 @@ def pick_imu(topics: list[str], imu: str | None, *, prefix: str = "/imu/", missi
         return "wrist"
     if not names:
         raise ValueError(f"no {prefix}* channel in the trial{hint or raw_channels_hint(topics, prefix)}")
-    raise ValueError(f"choose an IMU with --imu among: {', '.join(names)}")
+    raise ValueError(f"choose an IMU with --imu (imu=NAME in Python) among: {', '.join(names)}")
 
 
 def raw_channels_hint(topics: list[str], prefix: str, most: int = 4) -> str:
@@ -178,6 +182,44 @@ def error_line(path: Any, exc: BaseException) -> str:
     (archive errors already name their file)."""
     message, name = str(exc), str(path)
     return message if message.startswith(name) else f"{name}: {message}"
+
+
+class StepError(ValueError):
+    """A step cannot run on a trial: ``str()`` is one line starting with the trial's path (what ``imulog process``
+    prints after ``Error:``); ``path`` is the trial, ``__cause__`` the original error."""
+
+    def __init__(self, message: str, path: Any) -> None:
+        super().__init__(message)
+        self.path = path
+
+
+_A = TypeVar("_A")
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
+
+
+def names_trial(run: Callable[Concatenate[_A, _P], _R]) -> Callable[Concatenate[_A, _P], _R]:
+    """Decorate a step's public ``run_*(path, ...)``: a plain ValueError raised for the trial (a missing channel, an
+    IMU without a gyroscope) becomes a :class:`StepError` whose message starts with the path, so a script looping
+    over an archive knows which file failed; more specific errors (archive, parameter, clock) pass unchanged."""
+
+    @functools.wraps(run)
+    def wrapper(path: _A, *args: _P.args, **kwargs: _P.kwargs) -> _R:
+        for key in ("params", "options"):
+            if isinstance(kwargs.get(key), Mapping):  # a dict where the parameter object goes: say how to make it
+                kind = str(inspect.signature(run).parameters[key].annotation).split(" |")[0].split(".")[-1]
+                raise TypeError(
+                    f"{run.__name__}: {key} must be {kind} (a parameter object), got a dict; "
+                    f"imulog.params.params_from_dict({kind}, {{...}}) makes one from it"
+                )
+        try:
+            return run(path, *args, **kwargs)
+        except ValueError as exc:
+            if type(exc) is not ValueError:
+                raise
+            raise StepError(error_line(path, exc), path) from exc
+
+    return wrapper
 
 
 def mean_rate_hz(t_ns: np.ndarray) -> float:

@@ -10,15 +10,21 @@ stamped at its start) and the record ``imulog.epochs`` (calibration, non-wear pe
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from imulog.console import window_progress
 from imulog.model import SignalStream
+from imulog.params import check_params
+from imulog.steps.common import names_trial
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 STEP = "epochs"
 ALGORITHM = "enmo-mad-counts-vanhees2013"
@@ -43,6 +49,15 @@ class EpochParams:
     choi: bool = True  # also Choi et al. 2011 non-wear from the 60-s counts (vector magnitude), in the record
     core_s: float = 3600.0
     margin_s: float = 60.0
+
+    def __post_init__(self) -> None:  # ParamError names the field and its unit; the CLI prints the same line
+        if isinstance(self.epochs_s, list):
+            object.__setattr__(self, "epochs_s", tuple(self.epochs_s))
+        check_params(
+            self,
+            positive=("epochs_s", "calibration_epoch_s", "nonwear_block_s", "nonwear_window_s", "core_s"),
+            non_negative=("still_sd_g", "nonwear_sd_g", "nonwear_range_g", "valid_day_hours", "margin_s"),
+        )
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -260,8 +275,14 @@ def _rows(
     return out
 
 
-def run_epochs(path, *, imu: str | None = None, params: EpochParams | None = None, force: bool = False):
-    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome."""
+@names_trial
+def run_epochs(
+    path: str | os.PathLike[str], *, imu: str | None = None, params: EpochParams | None = None, force: bool = False
+) -> StepOutcome:
+    """Epochs of one IMU (``imulog process epochs``): appends ``/derived/epochs/{N}s/IMU`` for each epoch length in
+    ``params.epochs_s`` (ENMO and MAD in g, ActiGraph counts, wear) and the ``imulog.epochs`` record (hourly and
+    daily totals). Returns the :class:`~imulog.steps.base.StepOutcome`; :class:`~imulog.steps.common.StepError`
+    names ``path``."""
     from imulog.archive import TrialReader
     from imulog.archive.streaming import StreamPieces
     from imulog.steps.base import StepResult, run_step

@@ -12,7 +12,8 @@ reference topic, per method the per-repetition errors and the summary (mean, std
 from __future__ import annotations
 
 import json
-from typing import Any
+import os
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -26,6 +27,10 @@ from imulog.process.evaluation import (
     trajectory_errors,
 )
 from imulog.process.trajectory_opt import BASELINE, METHODS
+from imulog.steps.common import names_trial
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 STEP = "evaluate"
 WHOLE_NS = 2**62  # a window over a whole channel (from -WHOLE_NS to WHOLE_NS ns)
@@ -294,8 +299,9 @@ def judged_span(trial, imu_topic: str, span_s: float) -> tuple[int, int]:
 WHAT = ("auto", "orientation", "trajectory")  # what `imulog evaluate --what` chooses (docs/alignment.md)
 
 
+@names_trial
 def run_evaluate(
-    path,
+    path: str | os.PathLike[str],
     *,
     methods: list[str] | None = None,
     max_gap_s: float = 0.05,
@@ -303,7 +309,7 @@ def run_evaluate(
     imus: list[str] | None = None,
     what: str = "auto",
     force: bool = False,
-):
+) -> tuple[StepOutcome, dict[str, Any]]:
     """Run the step on a trial file; returns ``(outcome, record)``. ``what``: ``orientation`` evaluates the IMU's
     orientation against the rigid body's poses its alignment was made on (:mod:`imulog.steps.evaluate_orientation`,
     ``kind`` = ``orientation``, record ``imulog.orientation_evaluation``), ``trajectory`` the trajectories (or the

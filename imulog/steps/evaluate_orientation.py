@@ -16,7 +16,8 @@ its own record and step (``evaluate_orientation``): the trajectory evaluation of
 
 from __future__ import annotations
 
-from typing import Any
+import os
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -24,6 +25,10 @@ from imulog.process import quaternion as quat
 from imulog.process.alignment_clock import device_to_reference
 from imulog.process.orientation import orientation_errors
 from imulog.process.resample import resample_quaternions
+from imulog.steps.common import names_trial
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 STEP = "evaluate_orientation"
 RECORD = "imulog.orientation_evaluation"
@@ -88,7 +93,10 @@ def orientation_evaluation(
     return errors
 
 
-def run_evaluate_orientation(path, imu: str | None = None, force: bool = False):
+@names_trial
+def run_evaluate_orientation(
+    path: str | os.PathLike[str], imu: str | None = None, force: bool = False
+) -> tuple[StepOutcome, dict[str, Any]]:
     """Run the orientation evaluation on a trial whose alignment is on a pose channel; ``(outcome, record)``.
     One-line ValueErrors naming the command to run when the orientation or the alignment is missing."""
     from imulog.archive import TrialReader
@@ -172,7 +180,10 @@ def run_evaluate_orientation(path, imu: str | None = None, force: bool = False):
     )
 
 
-def run_evaluate_orientations(path, imus: list[str] | None = None, force: bool = False):
+@names_trial
+def run_evaluate_orientations(
+    path: str | os.PathLike[str], imus: list[str] | None = None, force: bool = False
+) -> tuple[StepOutcome, dict[str, Any]]:
     """The orientation evaluation of one IMU (``imus`` names one, or the trial has one) as
     :func:`run_evaluate_orientation` does it; of several (named, or by default every oriented IMU whose alignment is
     on a pose channel: rigid bodies aligned per IMU) one run and record each, returning the last outcome and

@@ -20,9 +20,15 @@ and strides, and ``skipped`` (IMUs not evaluated, and why).
 
 from __future__ import annotations
 
-from typing import Any
+import os
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from imulog.steps.common import names_trial
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 WALK_TASKS = ("walk", "walking", "gait", "treadmill")
 PERIODIC = 0.5  # autocorrelation at the stride period above which the gyroscope says "walking"
@@ -185,7 +191,10 @@ def stride_table(record: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def run_gait_evaluate(path, *, imus: list[str] | None = None, walking: dict | None = None, force: bool = False):
+@names_trial
+def run_gait_evaluate(
+    path: str | os.PathLike[str], *, imus: list[str] | None = None, walking: dict | None = None, force: bool = False
+) -> tuple[StepOutcome, dict[str, Any]]:
     """Evaluate a walking trial per stride; returns ``(outcome, record)``."""
     from imulog.archive import TrialReader
     from imulog.steps.base import run_record_step

@@ -10,10 +10,16 @@ nothing to relate and the step says so. :func:`common_heading` is what exports t
 
 from __future__ import annotations
 
+import os
 from types import SimpleNamespace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from imulog.steps.common import names_trial
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 STEP = "heading"
 
@@ -179,14 +185,15 @@ def device_yaw(t_ns: np.ndarray, q_s2g: np.ndarray, t_dev_ns: np.ndarray, q_dev:
     return float(np.angle(z.mean())), sd
 
 
+@names_trial
 def run_heading(
-    path,
+    path: str | os.PathLike[str],
     *,
     imus: list[str] | None = None,
     static_s: tuple[float, float] | None = None,
     declared_deg: dict[str, float] | None = None,
     force: bool = False,
-):
+) -> tuple[StepOutcome, dict[str, Any]]:
     """Run the step on a trial file; returns ``(outcome, record)``."""
     from imulog.archive import TrialReader
     from imulog.steps.base import run_record_step

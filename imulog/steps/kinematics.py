@@ -21,8 +21,9 @@ assumed still, as in the paper), the model geometry from ``imulog.anthropometric
 from __future__ import annotations
 
 import dataclasses
+import os
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -32,8 +33,12 @@ from imulog.process.kinematics.errors import kinematics_errors
 from imulog.process.kinematics.pipeline import KinematicsConfig, estimate_kinematics
 from imulog.process.kinematics.solver import SolverParams, Workspace
 from imulog.process.orientation import OrientationParams
+from imulog.steps.common import names_trial
 from imulog.steps.kinematics_windows import PREFIX, calibration_record, kinematics_streams, resample_onto
 from imulog.steps.windows import WindowParams, channel_rate_hz
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 STEP = "kinematics"
 ALGORITHM = "imulog.kinematics.caruso2024_dh"
@@ -233,9 +238,14 @@ def compute_kinematics(
     return kinematics_streams(est, q_ref), meta
 
 
+@names_trial
 def run_kinematics(
-    path, *, options: KinematicsOptions = KinematicsOptions(), force: bool = False, windows: WindowParams | None = None
-):
+    path: str | os.PathLike[str],
+    *,
+    options: KinematicsOptions = KinematicsOptions(),
+    force: bool = False,
+    windows: WindowParams | None = None,
+) -> StepOutcome:
     """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
 
     A recording longer than one window (``windows``, default half-hour cores) is solved window by window while

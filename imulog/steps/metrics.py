@@ -14,13 +14,15 @@ intervals) and ``/derived/trajectory/{method}`` (positions on the reference cloc
 from __future__ import annotations
 
 import dataclasses
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from imulog.model import ImuStream, Intervals, PoseStream, SignalStream
+from imulog.params import check_params
 from imulog.process.gaps import GapParams
 from imulog.process.metrics import (
     ActivityCountParams,
@@ -31,9 +33,12 @@ from imulog.process.metrics import (
     repetition_durations,
     smoothness,
 )
-from imulog.steps.common import alignment_for, alignment_record, nominal_rate_hz, pick_imu, record_for
+from imulog.steps.common import alignment_for, alignment_record, names_trial, nominal_rate_hz, pick_imu, record_for
 from imulog.steps.metrics_windows import metric_pieces, metric_plan
 from imulog.steps.windows import WindowParams, channel_rate_hz
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 STEP = "metrics"
 ALGORITHM = "imulog.metrics.doshi2011"
@@ -72,6 +77,14 @@ class MetricsParams:
     nhpt_pickup_movement: str = "to_container"
     nhpt_place_movement: str = "place"
     arm_usage_rate_hz: float = 10.0
+
+    def __post_init__(self) -> None:  # ParamError names the field and its unit; the CLI prints the same line
+        check_params(
+            self,
+            positive=("window_s", "max_distance_cm", "arm_usage_rate_hz"),
+            non_negative=("noise_level_g", "noise_floor_g", "m_s", "dead_s", "min_activity_s", "weight_start_cm"),
+            choices={"acc_unit": ("g", "m/s^2")},
+        )
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -250,15 +263,19 @@ def phase_records(
     return record
 
 
+@names_trial
 def run_metrics(
-    path,
+    path: str | os.PathLike[str],
     *,
     imu: str | None = None,
     params: MetricsParams | None = None,
     force: bool = False,
     windows: WindowParams | None = None,
-):
-    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
+) -> StepOutcome:
+    """Clinical metrics of one IMU (``imulog process metrics``): appends ``/derived/metrics/activity/IMU`` (active
+    intervals), ``/derived/metrics/distance/IMU`` (cm) and the ``imulog.metrics`` record (arm use %, activity
+    counts, smoothness). Returns the :class:`~imulog.steps.base.StepOutcome`; :class:`~imulog.steps.common.StepError`
+    names ``path``.
 
     One implementation at any length (:mod:`imulog.steps.metrics_windows`): ``windows`` (default an hour with
     10 s margins) cuts the accelerometer into cores. A recording within one core is computed at once with its

@@ -14,9 +14,10 @@ the IMU device clock (the raw channel's ``t_ns``):
 from __future__ import annotations
 
 import dataclasses
+import os
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -25,9 +26,12 @@ from imulog.model import SignalStream
 from imulog.numeric import finite_rows
 from imulog.process.gaps import GapParams, GapReport, per_run, prepare
 from imulog.process.orientation import OrientationParams, estimate_orientation, gravity_free_acceleration
-from imulog.steps.common import mean_rate_hz, missing_gyroscope, pick_imu
+from imulog.steps.common import mean_rate_hz, missing_gyroscope, names_trial, pick_imu
 from imulog.steps.sample_window import SampleWindow
 from imulog.steps.windows import Window, WindowParams, channel_rate_hz
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 STEP = "orientation"
 CALIBRATED_TOPIC = "/derived/calibrated/{imu}"
@@ -281,8 +285,9 @@ def read_orientation_windows(
         yield from orientation_windows(blocks, total, plan, imu, params, gaps, reports, estimates)
 
 
+@names_trial
 def run_orientation(
-    path,
+    path: str | os.PathLike[str],
     *,
     imu: str | None = None,
     params: OrientationParams | None = None,
@@ -290,8 +295,15 @@ def run_orientation(
     force: bool = False,
     gaps: GapParams | None = None,
     windows: WindowParams | None = None,
-):
-    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
+) -> StepOutcome:
+    """Orientation of one IMU of the trial at ``path`` (``imu``: its name, e.g. ``wrist``; default the trial's one
+    IMU), appended as ``/derived/orientation/IMU`` (qw, qx, qy, qz: sensor to global, z up), ``/derived/acc_global/
+    IMU`` (m/s^2, gravity removed, global frame) and ``/derived/orientation_static/IMU`` (1 where the gyroscope norm
+    is static), all on the IMU's clock; ``imulog process orientation`` with ``params``. Returns the
+    :class:`~imulog.steps.base.StepOutcome` (``skipped`` when the same run is recorded); a trial it cannot run on
+    raises :class:`~imulog.steps.common.StepError` naming ``path``.
+
+    >>> run_orientation("trial.mcap", params=OrientationParams(backend="madgwick", beta=0.03))  # doctest: +SKIP
 
     ``windows``: core and margin of the windows (default :class:`~imulog.steps.windows.WindowParams`, an hour
     with a minute each side); a recording within one core is computed at once, and only longer ones record the

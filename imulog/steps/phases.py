@@ -20,17 +20,21 @@ Interval times (movements, phases, timing table) are on the reference clock when
 
 from __future__ import annotations
 
-from typing import Any
+import os
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from imulog.process.gaps import GapParams
 from imulog.process.segmentation.pipeline import PhaseParams
 from imulog.process.segmentation.repetitions import RepetitionParams
-from imulog.steps.common import mean_rate_hz, missing_gyroscope, pick_imu, record_for
+from imulog.steps.common import mean_rate_hz, missing_gyroscope, names_trial, pick_imu, record_for
 from imulog.steps.phases_record import LOW_CONFIDENCE
 from imulog.steps.phases_store import array_source, trial_source
 from imulog.steps.phases_windows import PhaseWindows, phase_pieces, unsupported
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 __all__ = ["LOW_CONFIDENCE", "PhaseWindows", "compute_phases", "params_for_trial", "pick_imu", "run_phases"]
 
@@ -133,16 +137,20 @@ def compute_phases(
     return streams, record
 
 
+@names_trial
 def run_phases(
-    path,
+    path: str | os.PathLike[str],
     *,
     imu: str | None = None,
     params: PhaseParams | None = None,
     force: bool = False,
     gaps: GapParams | None = None,
     windows: PhaseWindows | None = None,
-):
-    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
+) -> StepOutcome:
+    """Movements, phases and repetitions of one IMU (``imulog process phases``): appends ``/derived/movements/IMU``
+    and ``/derived/phases/IMU`` (intervals, ns on the clock the ``imulog.timing`` record names), ``/derived/static/IMU``
+    (1 where still) and the ``imulog.timing`` record (per-phase durations in s). Returns the
+    :class:`~imulog.steps.base.StepOutcome`; :class:`~imulog.steps.common.StepError` names ``path``.
 
     Without ``params`` the trial's own protocol and repetition count are used (:func:`params_for_trial`);
     ``gaps``: how missing IMU samples are treated (:mod:`imulog.process.gaps`). The recording is read in

@@ -24,7 +24,8 @@ frame, estimated rotating bias and the waypoints used.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+import os
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -45,12 +46,15 @@ from imulog.process.trajectory_opt import (
     reconstruct_repetitions,
     repetition_windows,
 )
-from imulog.steps.common import alignment_for, alignment_record, pick_imu, record_for, record_of
+from imulog.steps.common import alignment_for, alignment_record, names_trial, pick_imu, record_for, record_of
 from imulog.steps.placements import placement_side
 from imulog.steps.trajectory_inputs import phase_bounds_by_repetition, sample_onto, to_reference, world_acceleration
 from imulog.steps.trajectory_topics import RECORD, baseline_topic, per_imu_layout, split_topic, trajectory_topic
 from imulog.steps.trajectory_windows import F32, TrajectoryWindows, has_r2g, trajectory_pieces
 from imulog.steps.trajectory_windows import plan as window_plan
+
+if TYPE_CHECKING:
+    from imulog.steps.base import StepOutcome
 
 STEP = "trajectory"
 TRAJECTORY_TOPIC = "/derived/trajectory/{method}"
@@ -263,8 +267,9 @@ def params_dict(methods: list[str] | tuple[str, ...], params: TrajectoryParams, 
     return {"methods": list(methods), **dataclasses.asdict(params), "reference": ref}
 
 
+@names_trial
 def run_trajectory(
-    path,
+    path: str | os.PathLike[str],
     *,
     imu: str | None = None,
     methods: list[str] | tuple[str, ...] = METHODS,
@@ -272,8 +277,11 @@ def run_trajectory(
     reference_params: R2GReferenceParams = DEFAULT_REFERENCE,
     force: bool = False,
     windows: TrajectoryWindows | None = None,
-):
-    """Run the step on a trial file; returns the :func:`imulog.steps.base.run_step` outcome.
+) -> StepOutcome:
+    """Wrist trajectories by each of ``methods`` (``imulog process trajectory``): appends ``/derived/trajectory/
+    METHOD`` (x, y, z in m, the reference's world frame, per repetition) and the ``imulog.trajectory`` record; needs
+    the orientation and the phases. Returns the :class:`~imulog.steps.base.StepOutcome`;
+    :class:`~imulog.steps.common.StepError` names ``path``.
 
     A recording longer than one window (``windows``, default one-hour cores) is reconstructed window by window,
     each window the movements between two rests (:mod:`imulog.steps.trajectory_windows`), in bounded memory."""
