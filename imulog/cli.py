@@ -19,7 +19,10 @@ TOP_LEVEL_COMMANDS: dict[str, tuple[str, str]] = {
     "convert": ("imulog.commands.convert:convert", "Convert device exports (IMU text, Vicon CSV, C3D...) to a trial."),
     "info": ("imulog.commands.info:info", "Show a trial's channels, rates, gaps, metadata and derived runs."),
     "doctor": ("imulog.commands.archive:doctor", "Check a trial's integrity: CRCs, summary, decoding, raw hash."),
-    "export": ("imulog.commands.archive:export", "Export to Parquet/CSV tables, OpenSense .sto, BIDS-motion or C3D."),
+    "export": (
+        "imulog.commands.archive:export",
+        "Export to Parquet/CSV tables, OpenSense .sto, OpenSim .trc, BIDS-motion or C3D.",
+    ),
     "salvage": ("imulog.commands.archive:salvage", "Recover the intact channels of a damaged or truncated trial."),
     "record": ("imulog.commands.record:record", "Record Lab Streaming Layer streams into a crash-safe trial."),
     "replay": ("imulog.commands.record:replay", "Publish a trial's raw channels as live LSL outlets."),
