@@ -21,7 +21,7 @@ TOP_LEVEL_COMMANDS: dict[str, tuple[str, str]] = {
     "doctor": ("imulog.commands.archive:doctor", "Check a trial's integrity: CRCs, summary, decoding, raw hash."),
     "export": (
         "imulog.commands.archive:export",
-        "Export to Parquet/CSV tables, OpenSense .sto, OpenSim .trc, BIDS-motion or C3D.",
+        "Export to Parquet/CSV, OpenSim .sto/.trc, BIDS-motion or C3D.",
     ),
     "salvage": ("imulog.commands.archive:salvage", "Recover the intact channels of a damaged or truncated trial."),
     "record": ("imulog.commands.record:record", "Record Lab Streaming Layer streams into a crash-safe trial."),
