@@ -125,7 +125,7 @@ def compute_trajectories(
     corrected = None  # the accelerometer from the trial's own rests, the filter re-run on it (issue 31 point 2)
     if params.acc_rests.enabled:
         t_cal = (t_ref - t_ref[0]) / 1e9  # s: the gyroscope integrated between rests on the reference clock
-        corrected = rest_calibrated(t_dev, t_cal, given, q_world, source, imu=imu, params=params.acc_rests, gaps=gaps)
+        corrected = rest_calibrated(t_dev, t_cal, given, q_world, source, imu=imu, params=params.acc_rests)
         acc, q_world = corrected.acc_global, corrected.quat
     if static is not None:  # velocity resets only at true rests: the accelerometer must agree (issue 32)
         rate = (len(t_dev) - 1) / max((t_dev[-1] - t_dev[0]) / 1e9, 1e-9)

@@ -23,7 +23,6 @@ import numpy as np
 
 from imulog.process import quaternion as quat
 from imulog.process.acc_rest_calibration import AccRestCalibration, AccRestParams, estimate
-from imulog.process.gaps import GapParams
 from imulog.process.orientation import OrientationParams, StaticParams
 from imulog.steps.orientation import orientation_with_gaps
 
@@ -84,13 +83,14 @@ def rest_calibrated(
     *,
     imu: str,
     params: AccRestParams,
-    gaps: GapParams | None = None,
 ) -> RestCalibrated:
     """The accelerometer corrected from the rests of ``given_rest`` (N,) bool (the phases step's zero-velocity
     mask) and the orientation filter re-run on it, on the samples ``t_ns`` (int64 ns, device clock; ``t_s`` (N,) s
     the times the gyroscope is integrated over, the reference clock when aligned). ``q_global`` (N, 4): the
-    orientation step's orientation; ``source``: its accelerometer, gyroscope and parameters, on the same samples. A one-line ValueError when an input is missing or the calibration is not
-    identifiable (too few or too similar rests: :attr:`AccRestCalibration.reason`)."""
+    orientation step's orientation; ``source``: its accelerometer, gyroscope and parameters, on the same samples;
+    missing samples as that step treats them (:mod:`imulog.process.gaps`' defaults). A one-line ValueError when an
+    input is missing or the calibration is not identifiable (too few or too similar rests:
+    :attr:`AccRestCalibration.reason`)."""
     option = "TrajectoryParams.acc_rests (--accelerometer rests)"
     if q_global is None:
         raise ValueError(f"{option} needs /derived/orientation/{imu}: run `imulog process orientation` first")
@@ -107,7 +107,7 @@ def rest_calibrated(
     if not calibration.applied:
         raise ValueError(f"{source.topic}: the accelerometer cannot be corrected from its rests: {calibration.reason}")
     corrected = calibration.apply(acc)
-    streams, _ = orientation_with_gaps(t_ns, corrected, gyr, None, imu, source.params, gaps)
+    streams, _ = orientation_with_gaps(t_ns, corrected, gyr, None, imu, source.params)
     q_new, lin = streams[0].values, streams[1].values
     both = np.all(np.isfinite(q_new), axis=1) & np.all(np.isfinite(q_global), axis=1)
     heading = quat.heading_offset(q_new[both], np.asarray(q_global, float)[both])  # re-run's frame -> channel's
