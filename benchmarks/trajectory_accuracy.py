@@ -121,6 +121,7 @@ def simulated_inputs(
     static: str = "movements",
     anchor_params: Any = None,
     acc_rests: Any = None,
+    step_orientation: bool = False,
     **overrides: Any,
 ) -> dict[str, Any]:
     """Simulate one R2G trial and build the trajectory inputs on the reference clock in the world frame.
@@ -133,7 +134,9 @@ def simulated_inputs(
     ``acc_rests``: :class:`imulog.process.acc_rest_calibration.AccRestParams` (None or not enabled: the raw
     accelerometer); enabled, the accelerometer's bias (and scale) is estimated from the phases step's rests and the
     corrected accelerometer feeds the orientation filter and the acceleration (the record under
-    ``"acc_rest_calibration"``).
+    ``"acc_rest_calibration"``). ``step_orientation``: the filter sees the IMU's time stamps as the orientation step
+    does (dropped samples: run on a uniform grid and interpolated back); off, the default and every published figure,
+    it takes every sample as one nominal period after the last.
     """
     from imulog.simulate.core import simulate
 
@@ -163,7 +166,7 @@ def simulated_inputs(
             acc_cal = estimate_acc(acc_imu, imu.gyr, t_s, anchor_static, acc_rests)
             calibration_record = acc_cal.as_dict()
             acc_imu = acc_cal.apply(acc_imu)
-        est = estimate_orientation(imu.gyr, acc_imu, rate)
+        est = estimate_orientation(imu.gyr, acc_imu, rate, t_ns=imu.t_ns if step_orientation else None)
         q_est = q_gate = est.quat
         acc_gate = gravity_free_acceleration(q_est, acc_imu, est.static)
         if anchor:  # what the trajectory step does with the gyroscope (TrajectoryParams.anchor)

@@ -221,9 +221,12 @@ CHANGES.update(
 )
 
 
-def pipeline_inputs(name: str, subject: int, repetitions: int, params: TrajectoryParams) -> dict:
+def pipeline_inputs(
+    name: str, subject: int, repetitions: int, params: TrajectoryParams, step_orientation: bool = False
+) -> dict:
     """The trajectory inputs of the simulated trial of condition ``name`` (subject and seed ``subject``) as the
-    pipeline of ``params`` builds them (its rests gate, anchoring and accelerometer correction)."""
+    pipeline of ``params`` builds them (its rests gate, anchoring and accelerometer correction); ``step_orientation``:
+    the filter over dropped samples as the orientation step runs it (``simulated_inputs``)."""
     from imulog.simulate.grid import condition
 
     return simulated_inputs(
@@ -233,12 +236,13 @@ def pipeline_inputs(name: str, subject: int, repetitions: int, params: Trajector
         rests=params.rests,
         anchor_params=params.anchor,
         acc_rests=params.acc_rests,
+        step_orientation=step_orientation,
         **condition(name),
     )
 
 
 def trial_errors(
-    name: str, subject: int, repetitions: int, change: str = "heading-drift"
+    name: str, subject: int, repetitions: int, change: str = "heading-drift", step_orientation: bool = False
 ) -> dict[str, dict[int, list[float]]]:
     """{"zupt" | "zupt_after" | "before" | "after": {repetition: [MAE x, y, z] cm}} of one trial (``zupt``:
     ZUPT with the before parameters, against which the targets are checked; ``zupt_after``: with the after
@@ -250,7 +254,7 @@ def trial_errors(
         if label == "after" and same:
             inputs[label] = inputs["before"]
             continue
-        inputs[label] = pipeline_inputs(name, subject, repetitions, params)
+        inputs[label] = pipeline_inputs(name, subject, repetitions, params, step_orientation)
     out = {}
     for label, params in (("before", BEFORE), ("after", AFTER)):
         records, _, _ = evaluate_trial(inputs[label], ("zupt", "optimized"), params)
@@ -268,6 +272,12 @@ def main(argv: list[str] | None = None) -> int:
         "--chain-rest-s",
         type=float,
         help="shortest rest (s) where the heading chain restarts (TrajectoryWindows.chain_rest_s, default 30)",
+    )
+    ap.add_argument(
+        "--step-orientation",
+        action="store_true",
+        help="the orientation filter over dropped samples as the orientation step runs it (a uniform grid); "
+        "default: every sample one nominal period after the last, as every published figure",
     )
     args = ap.parse_args(argv)
     if args.chain_rest_s is not None:  # read by trajectory_accuracy._static_for_anchor
@@ -294,7 +304,7 @@ def main(argv: list[str] | None = None) -> int:
     for name in conditions:
         a_all, b_all, z_all, y_all = [], [], [], []
         for s in range(args.first_subject, args.first_subject + args.subjects):
-            e = trial_errors(name, s, args.repetitions, args.change)
+            e = trial_errors(name, s, args.repetitions, args.change, args.step_orientation)
             keys = sorted(set(e["before"]) & set(e["after"]) & set(e["zupt"]) & set(e["zupt_after"]))
             a = np.array([e["before"][k] for k in keys])
             b = np.array([e["after"][k] for k in keys])

@@ -18,6 +18,7 @@ import pytest
 
 from imulog.batch.registry import STEPS, _load, resolve_options
 from imulog.cli import cli
+from imulog.process.trajectory_accelerometer import accelerometer_of
 
 # options that only steer the command line (what to print, which channel) or whose default is read from the trial
 CLI_ONLY = {"help", "force", "as_json", "quiet", "imu", "imus", "markers", "poses", "static_trial", "noise_statistic"}
@@ -88,6 +89,7 @@ DEFAULTS: dict[tuple[str, ...], tuple[str, dict[str, Any]]] = {
             "sigma_ref": lambda kw, p: p.optimized.sigma_ref_static_m,
             "sigma_data": lambda kw, p: p.optimized.sigma_data_mps,
             "no_return_to_start": lambda kw, p: not p.optimized.return_to_start,
+            "accelerometer": lambda kw, p: accelerometer_of(p),
         },
     ),
     ("process", "metrics"): (

@@ -7,10 +7,8 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from imulog.process.trajectory_opt import DEFAULT_PARAMS
-from imulog.steps.trajectory import compute_trajectories
 
 
 def _estimate_on(overrides: dict, acc_rests) -> tuple[dict, np.ndarray, np.ndarray]:
@@ -65,13 +63,6 @@ def test_with_the_sensors_scale_errors_the_matrix_model_knows_its_uncertainty():
     bias_only, _, _ = _estimate_on(condition("uncalibrated"), replace(d, enabled=True, model="bias"))
     error = np.linalg.norm(np.asarray(bias_only["bias_mps2"]) - true_bias)
     assert error > 3 * np.linalg.norm(bias_only["bias_sd_mps2"]), bias_only
-
-
-def test_the_step_refuses_the_option():
-    n = 200
-    params = replace(DEFAULT_PARAMS, acc_rests=replace(DEFAULT_PARAMS.acc_rests, enabled=True))
-    with pytest.raises(ValueError, match="acc_rests"):
-        compute_trajectories(np.arange(n, dtype=np.int64) * 10_000_000, np.zeros((n, 3)), imu="wrist", params=params)
 
 
 def test_a_corrected_start_is_trusted_as_far_as_its_closure_says():

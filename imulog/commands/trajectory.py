@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from imulog.process.trajectory_accelerometer import ACCELEROMETERS, accelerometer_of, with_accelerometer
 from imulog.process.trajectory_opt import METHODS, TrajectoryParams
 
 DEFAULT_METHODS = ",".join(METHODS)
@@ -84,6 +85,15 @@ def _methods(value: str) -> list[str]:
 @click.option(
     "--no-return-to-start", is_flag=True, help="Optimisation: drop the return-to-start constraint (default: z only)."
 )
+@click.option(
+    "--accelerometer",
+    type=click.Choice(ACCELEROMETERS),
+    default=accelerometer_of(_D),
+    show_default=True,
+    help="recorded: the orientation step's acceleration; rests: the accelerometer's bias and sensitivity from the "
+    "trial's own rests, the orientation filter re-run on it and the twelfth round's options with it (an option, "
+    "docs/trajectory.md; one window, at most 30 min).",
+)
 @click.option("--force", is_flag=True, help="Recompute even when the same parameters are already recorded.")
 def process_trajectory(
     trial: Path,
@@ -99,6 +109,7 @@ def process_trajectory(
     sigma_ref: float,
     sigma_data: float,
     no_return_to_start: bool,
+    accelerometer: str,
     force: bool,
 ) -> None:
     """Reconstruct the wrist trajectory with one or more methods; one /derived/trajectory/METHOD each.
@@ -131,6 +142,7 @@ def process_trajectory(
       imulog process phases trial.mcap
       imulog process trajectory trial.mcap --method ddi,zupt,optimized
       imulog process trajectory feet.mcap --imu left_foot --method zupt
+      imulog process trajectory trial.mcap --accelerometer rests
       imulog evaluate trial.mcap
     """
     from imulog.commands.imus import run_per_imu
@@ -152,6 +164,7 @@ def process_trajectory(
             sigma_data,
             no_return_to_start,
         )
+        params = with_accelerometer(params, accelerometer)
     except ValueError as exc:
         raise click.ClickException(f"{trial}: {exc}") from None
     names = _trajectory_imus(trial, imus, chosen)

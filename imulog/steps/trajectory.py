@@ -47,7 +47,9 @@ from imulog.process.trajectory_opt import (
     repetition_windows,
 )
 from imulog.steps.common import alignment_for, alignment_record, names_trial, pick_imu, record_for, record_of
+from imulog.steps.orientation import imu_arrays
 from imulog.steps.placements import placement_side
+from imulog.steps.trajectory_acc_rests import OrientationSource, acc_source, rest_calibrated
 from imulog.steps.trajectory_inputs import phase_bounds_by_repetition, sample_onto, to_reference, world_acceleration
 from imulog.steps.trajectory_topics import RECORD, baseline_topic, per_imu_layout, split_topic, trajectory_topic
 from imulog.steps.trajectory_windows import F32, TrajectoryWindows, has_r2g, trajectory_pieces
@@ -82,6 +84,7 @@ def compute_trajectories(
     per_imu: bool = False,
     chain_rest_s: float = TrajectoryWindows.chain_rest_s,
     side: tuple[str, str] | None = None,
+    source: OrientationSource | None = None,
 ) -> tuple[list[SignalStream], dict[str, Any]]:
     """Pure part of the step: trajectory streams and the ``imulog.trajectory`` record (no I/O).
 
@@ -104,15 +107,12 @@ def compute_trajectories(
     rests at least this long outside the repetitions, where the step's windows are cut
     (:class:`imulog.steps.trajectory_windows.TrajectoryWindows`), so windows equal the whole. ``side``: which
     wrist the placement metadata says (``(left|right, source)``, :func:`imulog.steps.placements.placement_side`), checked against the
-    IMU's lateral direction of the drink with the anthropometrics (issue 31).
+    IMU's lateral direction of the drink with the anthropometrics (issue 31). ``source``: the orientation step's
+    accelerometer and parameters, which ``params.acc_rests`` corrects from the rests and re-runs the filter on
+    (:mod:`imulog.steps.trajectory_acc_rests`; ``imulog.trajectory["accelerometer"]`` says what it found).
     """
     t_dev = np.asarray(acc_t_ns, dtype=np.int64)
     acc = np.asarray(acc_global, dtype=np.float64)
-    if params.acc_rests.enabled:  # it re-runs the orientation filter on the raw accelerometer: not in the step yet
-        raise ValueError(
-            "TrajectoryParams.acc_rests is measured in benchmarks/trajectory_paired.py only (issue 31 point 2, an "
-            "option that stays off); the trajectory step does not apply it"
-        )
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
         raise ValueError(f"unknown method(s) {', '.join(unknown)}; choose from {', '.join(METHODS)}")
@@ -124,8 +124,14 @@ def compute_trajectories(
     orientation_used = "filter" if q_world is not None else None
     rest_info: dict[str, Any] = {}
     given = None  # the phases step's static mask, before the accelerometer's check
-    if static is not None:  # velocity resets only at true rests: the accelerometer must agree (issue 32)
+    if static is not None:
         given = sample_onto(np.asarray(static[0], np.int64), np.asarray(static[1]).reshape(-1) > 0.5, t_dev)
+    corrected = None  # the accelerometer from the trial's own rests, the filter re-run on it (issue 31 point 2)
+    if params.acc_rests.enabled:
+        t_cal = (t_ref - t_ref[0]) / 1e9  # s: the gyroscope integrated between rests on the reference clock
+        corrected = rest_calibrated(t_dev, t_cal, given, q_world, source, imu=imu, params=params.acc_rests)
+        acc, q_world = corrected.acc_global, corrected.quat
+    if static is not None:  # velocity resets only at true rests: the accelerometer must agree (issue 32)
         rate = (len(t_dev) - 1) / max((t_dev[-1] - t_dev[0]) / 1e9, 1e-9)
         rest_mask = true_rests(given, acc, rate, params.rests, orientation=q_world)
         rest_info = rest_report(given, rest_mask, rate)
@@ -152,6 +158,7 @@ def compute_trajectories(
         alignment=alignment,
         params=params,
         chain_rest_s=chain_rest_s,
+        acc_sensor=None if corrected is None else corrected.acc_sensor,
     )
     orientation_used = "rest_anchored" if anchored else orientation_used
     (acc,), gap_report = prepare([acc], gaps)
@@ -214,6 +221,7 @@ def compute_trajectories(
         info=info,
         baseline=True,
         side=side,
+        acc_calibration=None if corrected is None else corrected.calibration,
     )
     if any(len(r.phase_bounds_s) for r in reps):  # repetitions to judge (issue 31): what to distrust, and why
         features = repetition_features(t_s, acc, mask, reps, recon, repetition_quality or (), trajectory_info=info)
@@ -247,6 +255,7 @@ def compute_trajectories(
         "frame": frame,
         "origin": "repetition_start",
         **({"orientation": orientation_used} if orientation_used else {}),
+        **({"accelerometer": corrected.record} if corrected is not None else {}),
         "repetitions": [
             {"index": r.index, "start_ns": int(t_ref[r.start]), "end_ns": int(t_ref[r.stop - 1])} for r in reps
         ],
@@ -302,6 +311,8 @@ def run_trajectory(
         record_name = record_for(RECORD, name, topics, trial.metadata) if per_imu else RECORD
         alignment_name = alignment_record(trial.metadata, f"/imu/{name}")
         ch = trial.channel(acc_topic)
+        orient = f"/derived/orientation/{name}"
+        orient_meta = trial.channel(orient).metadata if params.acc_rests.enabled and orient in topics else None
         total = int(ch.sample_count or 0)
         rate = channel_rate_hz(total, ch.start_ns, ch.end_ns, ch.rate_hz)
     one_window = total <= max(1, int(round(windows.core_s * rate)))
@@ -311,13 +322,15 @@ def run_trajectory(
     use_gyr = params.anchor.enabled and orient_topic in topics and imu_topic in topics
     inputs = [acc_topic] + [t for t in (static_topic, phases_topic, orient_topic) if t in topics]
     inputs += [imu_topic] if use_gyr else []
+    src_topic, src_params = acc_source(params.acc_rests, orient_topic, orient_meta, one_window, windows.core_s)
+    inputs += [src_topic] if src_topic and src_topic not in inputs else []
 
     def window_compute(trial, phases):
         timing = trial.metadata.get(timing_record, {})
         alignment = alignment_for(trial.metadata, f"/imu/{name}")
         phases_clock = str(timing.get("clock", "reference"))
 
-        def one(acc, static, orient, raw):
+        def one(acc, static, orient, raw, source=None):
             mine = phases
             if phases is not None and not one_window:  # the repetitions inside this window only
                 t = np.asarray(acc[0][[0, -1]], dtype=np.int64)
@@ -348,6 +361,7 @@ def run_trajectory(
                 per_imu=per_imu,
                 chain_rest_s=windows.chain_rest_s,
                 side=placement_side(name, trial.metadata),
+                source=source,
             )
 
         return one, alignment, str(timing.get("clock", "reference"))
@@ -360,11 +374,16 @@ def run_trajectory(
             static = trial.read(static_topic) if static_topic in topics else None
             orient = trial.read(orient_topic) if orient_topic in topics else None
             raw = trial.read(imu_topic) if use_gyr else None
+            source = None
+            if src_topic and src_topic in topics:  # the orientation's own input, for TrajectoryParams.acc_rests
+                t_src, acc_src, gyr_src, _ = imu_arrays(trial.read(src_topic), src_topic)
+                source = OrientationSource(t_src, acc_src, gyr_src, src_topic, src_params)
             streams, record = one(
                 (acc.t_ns, acc.values),
                 None if static is None else (static.t_ns, static.values),
                 None if orient is None else (orient.t_ns, orient.values),
                 None if raw is None else (raw.t_ns, raw.gyr),
+                source,
             )
             provenance = {"gaps": record["gaps"]} if "gaps" in record else {}
             return StepResult(streams=streams, metadata={record_name: record}, provenance=provenance)

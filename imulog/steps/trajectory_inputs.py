@@ -62,6 +62,7 @@ def world_acceleration(
     alignment: dict[str, Any] | None,
     params: TrajectoryParams,
     chain_rest_s: float,
+    acc_sensor: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None, bool, str, str]:
     """``(acc, q_world, anchored, frame, clock)``: ``acc`` (N, 3) m/s^2 gravity-free in the IMU global frame.
 
@@ -70,7 +71,8 @@ def world_acceleration(
     re-integrated through every movement and anchored at its rests (``params.anchor``; the heading chain restarts
     at rests of at least ``chain_rest_s`` s outside the repetitions) and ``acc`` rotated with it (``anchored``).
     With an alignment, ``acc`` and ``q_world`` are rotated into its ``world`` frame and the clock is
-    ``reference``; else the frame is ``{imu}_global`` on the ``device`` clock.
+    ``reference``; else the frame is ``{imu}_global`` on the ``device`` clock. ``acc_sensor`` (N, 3) m/s^2: the
+    accelerometer in the sensor frame for ``AnchorParams.rest_tilt``, when known (else rebuilt from ``acc``).
     """
     frame, clock, anchored = f"{imu}_global", "device", False
     if q_world is not None and gyr is not None and params.anchor.enabled and rest is not None:
@@ -80,7 +82,7 @@ def world_acceleration(
         spans = [(float(b[:, 0].min()), float(b[:, 1].max())) for b in bounds.values()]
         restart = restart_rests(given_rest, t_s, chain_rest_s, spans)
         g_up = np.array([0.0, 0.0, 9.81])  # (any g: the correction rotations are small, its error ~1e-4 m/s^2)
-        acc_s = quat.rotate_inverse(q_world, acc + g_up)  # the accelerometer (sensor frame), for rest_tilt
+        acc_s = quat.rotate_inverse(q_world, acc + g_up) if acc_sensor is None else acc_sensor  # for rest_tilt
         t_s_dev = (t_dev - t_dev[0]) / 1e9
         q_anchored = rest_anchored_orientation(q_world, w, t_s_dev, rest, params.anchor, restart, acc_s)
         acc = quat.rotate(quat.multiply(q_anchored, quat.conjugate(q_world)), acc + g_up) - g_up
