@@ -152,6 +152,12 @@ GRID_METHODS = {
     "hand + both flanks with the rest's level (step 7)": PhaseParams(
         hand=HandParams(flank_combine=True, flank_rest_level=True)
     ),  # issue 31's 13th round, off
+    "hand + the low-passed noise's correlation in the flank fit (step 7)": PhaseParams(
+        hand=HandParams(flank_noise=True)
+    ),  # issue 31's 14th round, off
+    "hand + the rest's level and the noise's correlation in the flank fit (step 7)": PhaseParams(
+        hand=HandParams(flank_noise=True, flank_rest_level=True)
+    ),  # issue 31's 14th round, off
     "gyroscope only": PhaseParams(hand=HandParams(enabled=False)),
     "published (--no-refine)": PhaseParams(
         dynamos=DynamosParams(refine_boundaries=False), boundaries=BoundaryParams(enabled=False)

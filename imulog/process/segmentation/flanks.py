@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from imulog.process.segmentation.flank_noise import FlankNoiseParams, impulse_response, whitener
+
 _MAX_CELLS = 1 << 21  # candidate x sample cells per block of hinge_fit (16 MB of float64)
 
 
@@ -22,6 +24,8 @@ def hinge_fit(
     drift: bool = False,
     curvature: bool = False,
     spread: list | None = None,
+    whiten: np.ndarray | None = None,
+    kernel: np.ndarray | None = None,
 ) -> float | None:
     """``t0`` (in units of ``x``, sub-sample) of the least-squares fit ``y = c + k max(x - t0, 0)^power``, ``k > 0``
     (with ``drift``: ``+ b x``; with ``curvature``: ``+ k2 max(x - t0, 0)^(power + 1)``, ``k2 <= 0``).
@@ -34,23 +38,28 @@ def hinge_fit(
     phase's ``t0`` 0.1-0.3 s early; a free ``k2 > 0`` lets a slow rise of noise and drift pass for a late,
     steepening flank). None without a rising fit. ``spread``: a list that gets the standard deviation of ``t0``
     (units of ``x``) over the candidates, weighted by the likelihood ``exp(-(sse - min) / (2 s^2))``, ``s^2`` the
-    best fit's residual variance (:func:`t0_spread`)."""
+    best fit's residual variance (:func:`t0_spread`). ``whiten`` (n, n): the residual is weighed as ``W r`` (a
+    generalised least-squares fit for noise of covariance ``(W^T W)^-1``, :mod:`~imulog.process.segmentation.flank_noise`);
+    ``kernel`` (odd length, symmetric): the hinge passed through this impulse response (the low-pass the data went
+    through; ``x`` evenly spaced), so the model's corner is as smooth as the data's.
+    """
     n_cand = max(len(x) - 2, 0)
     if n_cand == 0:
         return None
-    basis = _baseline(x, drift)
-    yc = _residual(y[None, :], basis)[0]
+    w = (lambda h: h) if whiten is None else (lambda h: h @ whiten.T)  # rows of samples, whitened
+    basis = _baseline(x, drift, whiten)
+    yc = _residual(w(y[None, :]), basis)[0]
     span = max(float(x[-1] - x[0]), 1e-12)  # powers of (x - t0) / span: a well-conditioned normal matrix
     sse = np.empty(n_cand)
     rows = max(1, _MAX_CELLS // max(len(x), 1))  # candidates per block: memory bounded whatever the length
     for lo in range(0, n_cand, rows):
-        d = np.maximum(x[None, :] - x[lo : min(lo + rows, n_cand), None], 0.0) / span  # one row per t0
-        h1 = _residual(d**power, basis)
+        d = _hinges(x, x[lo : min(lo + rows, n_cand)], span, power, kernel)  # one row per t0
+        h1 = _residual(w(d), basis)
         g11, r1 = np.einsum("ij,ij->i", h1, h1), h1 @ yc
         with np.errstate(divide="ignore", invalid="ignore"):  # least squares of y = c (+ b x) + k h (+ k2 h x)
             out = np.where((g11 > 0) & (r1 > 0), float(yc @ yc) - r1**2 / g11, np.inf)
             if curvature:  # k2 < 0 only (the flank bends towards its peak); else k2 = 0, the plain power
-                h2 = _residual(d ** (power + 1), basis)
+                h2 = _residual(w(_hinges(x, x[lo : min(lo + rows, n_cand)], span, power + 1, kernel)), basis)
                 g12, g22, r2 = np.einsum("ij,ij->i", h1, h2), np.einsum("ij,ij->i", h2, h2), h2 @ yc
                 det = g11 * g22 - g12**2
                 k, k2 = (g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det
@@ -75,6 +84,20 @@ def t0_spread(t0: np.ndarray, sse: np.ndarray, dof: int) -> float:
     return float(np.sqrt(np.sum(w * (t0[ok] - mean) ** 2) / np.sum(w)))
 
 
+def _hinges(x: np.ndarray, t0: np.ndarray, span: float, power: int, kernel: np.ndarray | None) -> np.ndarray:
+    """(len(t0), len(x)) rows ``(max(x - t0, 0) / span)^power``, each convolved with ``kernel`` if given (evaluated
+    on ``x`` extended by half the kernel on both sides, so that the rows are exact up to their ends)."""
+    if kernel is None:
+        return (np.maximum(x[None, :] - t0[:, None], 0.0) / span) ** power
+    from scipy.ndimage import convolve1d  # lazy, as scipy.signal
+
+    half = len(kernel) // 2
+    step = float(x[1] - x[0]) if len(x) > 1 else 1.0
+    xe = float(x[0]) + step * np.arange(-half, len(x) + half)
+    d = (np.maximum(xe[None, :] - t0[:, None], 0.0) / span) ** power
+    return convolve1d(d, kernel, axis=1, mode="nearest")[:, half : half + len(x)]
+
+
 def _vertex(x: np.ndarray, sse: np.ndarray) -> float | None:
     """``x`` at the least of the errors ``sse`` (one per candidate ``x[i]``), refined to the vertex of the parabola
     through the neighbouring errors (the onset between two samples); None when no candidate fitted."""
@@ -90,11 +113,14 @@ def _vertex(x: np.ndarray, sse: np.ndarray) -> float | None:
     return float(x[i] + frac * step)
 
 
-def _baseline(x: np.ndarray, drift: bool) -> np.ndarray:
-    """Orthonormal rows spanning the baseline of :func:`hinge_fit`: a constant, and a line with ``drift``."""
+def _baseline(x: np.ndarray, drift: bool, whiten: np.ndarray | None = None) -> np.ndarray:
+    """Orthonormal rows spanning the baseline of :func:`hinge_fit`: a constant, and a line with ``drift``
+    (whitened by ``whiten``, (n, n), if given)."""
     rows = [np.ones_like(x, dtype=float)]
     if drift and len(x) > 2:
         rows.append(np.asarray(x, dtype=float) - float(np.mean(x)))
+    if whiten is not None:
+        return np.linalg.qr((np.array(rows) @ whiten.T).T)[0].T
     return np.array([r / np.linalg.norm(r) for r in rows])
 
 
@@ -113,6 +139,7 @@ def flank_zero(
     smooth: int = 5,
     spread: list | None = None,
     rest_samples: int = 0,
+    noise: FlankNoiseParams | None = None,
 ) -> float | None:
     """Where the acceleration flank leaving a rest starts (local sample index), by a hinge fit.
 
@@ -131,7 +158,10 @@ def flank_zero(
     before ``t0`` is zero to the precision of that window's mean: the fit gets as many zero samples before ``lo``
     (a prior on the fit's constant with the window's weight; without it a dip or bump of the low-passed noise at
     the flank's foot can pass for the rest's level and the flank's start, issue 31 thirteenth round); ``t0`` stays
-    within the samples fitted."""
+    within the samples fitted.
+
+    ``noise``: the low-passed noise's model (:mod:`~imulog.process.segmentation.flank_noise`); the line is then a
+    generalised least-squares fit that weighs the filtered noise's correlation."""
     n = len(a)
     first = max(int(first), 0)
     if n == 0 or first >= n:
@@ -154,9 +184,13 @@ def flank_zero(
     y = a[lo : p + 1] @ (a[p] / an[p])
     x = np.arange(lo, p + 1, dtype=float)
     if rest_samples <= 0:
-        return hinge_fit(x, y, 1, spread=spread)
+        if noise is None:
+            return hinge_fit(x, y, 1, spread=spread)
+        return hinge_fit(x, y, 1, spread=spread, whiten=whitener(noise, len(x)), kernel=impulse_response(noise))
     n0 = int(rest_samples)  # the rest window's mean: zero, with the weight of its samples
-    t0 = hinge_fit(np.r_[np.arange(lo - n0, lo, dtype=float), x], np.r_[np.zeros(n0), y], 1, spread=spread)
+    w = None if noise is None else whitener(noise, len(x), apart=n0)  # the window lies elsewhere: independent
+    x, y = np.r_[np.arange(lo - n0, lo, dtype=float), x], np.r_[np.zeros(n0), y]
+    t0 = hinge_fit(x, y, 1, spread=spread, whiten=w, kernel=None if noise is None else impulse_response(noise))
     return None if t0 is None else max(t0, float(lo))
 
 

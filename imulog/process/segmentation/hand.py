@@ -47,6 +47,8 @@ After the gyroscope refinement, every onset (offset) is moved further out while 
 7. the boundary moves on to where its acceleration flank (or, for a phase too slow for the accelerometer, its
    speed flank) extrapolates to rest (:mod:`~imulog.process.segmentation.flanks`, issue 31); with
    ``flank_rest_level`` (an option) the acceleration flank's rest level is zero to the rest window's precision;
+   with ``flank_noise`` (an option) the line is a generalised least-squares fit that weighs the low-passed
+   noise's correlation (:mod:`~imulog.process.segmentation.flank_noise`);
 8. a slow last part at ``velocity_level_mps`` or more with next to no acceleration (the wrist stopped turning,
    the hand still arriving: up to 3 s) extends the offset when the rest window is verified as a rest (the
    velocity integrated forward from it stays under half that speed for ``rest_check_s``; with ``rest_drift``, an
@@ -81,6 +83,7 @@ import numpy as np
 
 from imulog.process.segmentation.arrival import gravity_free, slow_tail_end, velocity_noise_mps, white_noise
 from imulog.process.segmentation.boundaries import BoundaryParams, adaptive_cutoff_hz, lowpass_axes
+from imulog.process.segmentation.flank_noise import FlankNoiseParams
 from imulog.process.segmentation.flanks import combined_t0, flank_zero, speed_flank_zero
 from imulog.process.segmentation.gaps import gap_bounds
 from imulog.process.segmentation.hand_params import HandParams
@@ -177,13 +180,15 @@ def _extrapolated(
     params: HandParams,
     rate_hz: float,
     flank: list | None = None,
+    cutoff_hz: float | None = None,
 ) -> int:
     """Onset (local index into ``a`` and ``v``, time order from the rest) at the start of its acceleration flank
     (:func:`~imulog.process.segmentation.flanks.flank_zero`, searched from ``first``, the onset the level gave)
     or, for a movement too slow for its acceleration to clear the noise, of its speed
     (:func:`~imulog.process.segmentation.flanks.speed_flank_zero`), or at ``inner`` (the gyroscope's onset) if
     that is earlier; ``first`` when there is no such flank. Never before the array's start (the rest window).
-    ``flank``: a list that gets the flank's own start (first sample after ``t0``, not bounded by ``inner``)."""
+    ``flank``: a list that gets the flank's own start (first sample after ``t0``, not bounded by ``inner``);
+    ``cutoff_hz``: step 1's cut-off (Hz), for ``flank_noise`` (the low-passed noise's correlation)."""
     if params.flank_top_n_level <= 0:
         return first
     span = int(round(params.flank_search_s * rate_hz))
@@ -191,7 +196,10 @@ def _extrapolated(
     smooth = max(1, int(round(0.05 * rate_hz)))
     spread: list[float] | None = [] if params.flank_combine else None  # each fit's sd of t0, for combined_t0
     prior = int(round(params.rest_window_s * rate_hz)) if params.flank_rest_level else 0  # the window's mean
-    z = flank_zero(a, first, level, params.flank_top_n_level * level, span, back, smooth, spread, prior)
+    noise = (
+        FlankNoiseParams(cutoff_hz, rate_hz, params.flank_noise_band_hz) if params.flank_noise and cutoff_hz else None
+    )
+    z = flank_zero(a, first, level, params.flank_top_n_level * level, span, back, smooth, spread, prior, noise)
     if (z is None or params.flank_combine) and params.velocity_level_mps > 0:
         fit = int(round(params.speed_fit_s * rate_hz))
         zs = speed_flank_zero(v, first, params.velocity_level_mps, fit, spread)
@@ -217,6 +225,7 @@ def _offset(
     flank=None,
     limit: float | None = None,
     inside: list | None = None,
+    cutoff_hz: float | None = None,
 ) -> int:
     """Offset (exclusive sample index) of the phase whose gyroscope offset is ``b0``, with the rest window ``post``
     after it (steps 5-8 of the module docstring); ``b0`` without a usable window. ``lo``: where the velocity
@@ -224,7 +233,8 @@ def _offset(
     (accelerometer, gyroscope) for the velocity's noise of step 8; ``flank``: a list that gets the exclusive end
     (sample index) where the offset's own flank reaches rest, not bounded by the gyroscope's offset; ``limit``: step
     8's rest check (m/s, the trial's :mod:`~imulog.process.segmentation.rest_drift`; None: the fixed one); ``inside``:
-    a list that gets step 8's offset after a last part the offset lies inside of (``slow_inside``), not applied here."""
+    a list that gets step 8's offset after a last part the offset lies inside of (``slow_inside``), not applied here;
+    ``cutoff_hz``: step 1's cut-off (Hz, for ``flank_noise``)."""
     length = post[1] - post[0] if post is not None else 0
     quiet = max(1, int(round(params.quiet_s * rate_hz)))
     min_run = max(1, int(round(params.min_run_s * rate_hz)))
@@ -265,7 +275,11 @@ def _offset(
         end = b0 + j
     m = len(a_all)  # the offset's flank, time reversed: from the rest into the phase
     own: list[int] = []
-    end = lo + m - _extrapolated(a_all[::-1], v_all[::-1], m - (end - lo), m - (b0 - lo), level, params, rate_hz, own)
+    end = (
+        lo
+        + m
+        - _extrapolated(a_all[::-1], v_all[::-1], m - (end - lo), m - (b0 - lo), level, params, rate_hz, own, cutoff_hz)
+    )
     if flank is not None:
         flank.extend(lo + m - z for z in own)
     return slow_tail_end(acc, gyr, dt, post, lo, end, stop, params, rate_hz, raw, limit, inside)
@@ -365,7 +379,9 @@ def refine_with_accelerometer(
         flank_end: list[int] = []
         flank_start: list[int] = []
         held: list = []  # step 8's offset after a last part the offset lies inside of, and its window (slow_inside)
-        out_e[k] = _offset(acc, gyr, dt, post, lo, b0, stop, params, rate_hz, (raw, gyr_raw), flank_end, drift, held)
+        out_e[k] = _offset(
+            acc, gyr, dt, post, lo, b0, stop, params, rate_hz, (raw, gyr_raw), flank_end, drift, held, cut
+        )
         reach_in = int(round(params.speed_reach_s * rate_hz))  # a slow start reaches the speed level late
         hi = max(a0, min(int(out_e[k]), a0 + max(inside, reach_in)))
         for _ in range(3):  # likewise before the onset
@@ -401,7 +417,7 @@ def refine_with_accelerometer(
                 out_s[k] = a0 - i
             own: list[int] = []
             out_s[k] = pre[1] + _extrapolated(
-                a_all, v_all, int(out_s[k]) - pre[1], a0 - pre[1], level, params, rate_hz, own
+                a_all, v_all, int(out_s[k]) - pre[1], a0 - pre[1], level, params, rate_hz, own, cut
             )
             flank_start = [pre[1] + z for z in own]
         fits.append((lo, post[0] if post is not None else None, held[0] if held else (None, None)))

@@ -75,6 +75,11 @@ class HandParams:
         of the rest window's mean (``rest_window_s`` of zero samples before the flank, :func:`flank_zero`'s
         ``rest_samples``): a dip or bump of the low-passed noise at the flank's foot no longer passes for the
         rest's level (issue 31 thirteenth round, the devices' noise; an option).
+    flank_noise: step 7's acceleration flank is a generalised least-squares fit weighing the low-passed noise's
+        correlation, known from step 1's filter (:mod:`~imulog.process.segmentation.flank_noise`; issue 31
+        fourteenth round, an option).
+    flank_noise_band_hz: the highest frequency (Hz) that fit trusts (the noise model's white floor is the filtered
+        noise's spectral level there, :func:`~imulog.process.segmentation.flank_noise.floor`); ``cutoff_hz``'s 25 Hz.
     rest_check_s: a slow last part of a phase at ``velocity_level_mps`` or more with next to no acceleration
         extends the offset when the velocity relative to the rest window stays under half that speed for this
         long (s) after the window (the window is a rest, not a hand cruising or drifting); 0: off.
@@ -133,3 +138,5 @@ class HandParams:
     movement_gaps: bool = False
     walk_noise: bool = True
     flank_rest_level: bool = False
+    flank_noise: bool = False
+    flank_noise_band_hz: float = 25.0
