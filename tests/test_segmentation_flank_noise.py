@@ -4,19 +4,14 @@ option)."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
+from hand_options import simulated_phases
 
 from imulog.process.segmentation.boundaries import lowpass_axes
 from imulog.process.segmentation.flank_noise import FlankNoiseParams, filtered_correlation, floor
 from imulog.process.segmentation.flanks import flank_zero
 from imulog.process.segmentation.hand import HandParams
-from imulog.process.segmentation.pipeline import PhaseParams, segment_phases
-from imulog.process.segmentation.repetitions import RepetitionParams
-from imulog.simulate import simulate
-from imulog.simulate.grid import condition
 
 DEVICES = FlankNoiseParams(12.1, 114.0)  # step 1's cut-off at the median real device's noise
 OPTIONS = {"noise": HandParams(flank_noise=True), "both": HandParams(flank_noise=True, flank_rest_level=True)}
@@ -68,16 +63,7 @@ def test_a_clean_flank_keeps_its_start_and_the_noise_model_narrows_its_spread():
 
 
 def _phases(cond: str, seed: int, subject: int):
-    """Truth, the default's phases, each option's phases and the sample times (s) of a simulated 10-repetition
-    trial of grid condition ``cond``."""
-    sim = simulate("r2g", seed=seed, subject=subject, repetitions=10, **condition(cond))
-    imu = sim.recording.imus[0]
-    t = np.asarray(sim.truth.imu_t_ref_ns, dtype=np.int64) * 1e-9
-    rate = (len(imu.t_ns) - 1) / ((imu.t_ns[-1] - imu.t_ns[0]) * 1e-9)
-    p = PhaseParams(repetitions=RepetitionParams(n_repetitions=10))
-    default = segment_phases(imu.gyr, rate, p, imu.acc).phases
-    options = {k: segment_phases(imu.gyr, rate, replace(p, hand=h), imu.acc).phases for k, h in OPTIONS.items()}
-    return sim.truth.phases, default, options, t
+    return simulated_phases(cond, seed, subject, OPTIONS)
 
 
 def _index(phases, repetition: int, label: str) -> int:

@@ -4,17 +4,12 @@ option)."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
+from hand_options import simulated_phases
 
 from imulog.process.segmentation.flanks import flank_zero
 from imulog.process.segmentation.hand import HandParams
-from imulog.process.segmentation.pipeline import PhaseParams, segment_phases
-from imulog.process.segmentation.repetitions import RepetitionParams
-from imulog.simulate import simulate
-from imulog.simulate.grid import condition
 
 OPTION = HandParams(flank_rest_level=True)
 
@@ -43,16 +38,8 @@ def test_a_clean_flank_keeps_its_start_and_a_dip_at_its_foot_no_longer_moves_it_
 
 
 def _phases(cond: str, seed: int, subject: int):
-    """Truth (onsets, offsets s), the default's and the option's phases and the sample times (s) of a simulated
-    10-repetition trial of grid condition ``cond``."""
-    sim = simulate("r2g", seed=seed, subject=subject, repetitions=10, **condition(cond))
-    imu = sim.recording.imus[0]
-    t = np.asarray(sim.truth.imu_t_ref_ns, dtype=np.int64) * 1e-9
-    rate = (len(imu.t_ns) - 1) / ((imu.t_ns[-1] - imu.t_ns[0]) * 1e-9)
-    p = PhaseParams(repetitions=RepetitionParams(n_repetitions=10))
-    default = segment_phases(imu.gyr, rate, p, imu.acc).phases
-    option = segment_phases(imu.gyr, rate, replace(p, hand=OPTION), imu.acc).phases
-    return sim.truth.phases, default, option, t
+    truth, default, options, t = simulated_phases(cond, seed, subject, {"option": OPTION})
+    return truth, default, options["option"], t
 
 
 def _index(phases, repetition: int, label: str) -> int:
