@@ -28,7 +28,10 @@ T = TypeVar("T")
 UNIT_SUFFIXES = (
     ("_rad_s", "rad/s"),
     ("_deg_s", "deg/s"),
+    ("_m2ps4", "m^2/s^4"),
+    ("_m2ps2", "m^2/s^2"),
     ("_mps2", "m/s^2"),
+    ("_mps", "m/s"),
     ("_m_s2", "m/s^2"),
     ("_hours", "h"),
     ("_hz", "Hz"),
@@ -94,7 +97,7 @@ def check_params(
 ) -> None:
     """Raise :class:`ParamError` unless every field of dataclass ``obj`` has its annotation's type, the fields in
     ``positive`` are finite and > 0, those in ``non_negative`` finite and >= 0 (a tuple's items each), and those
-    in ``choices`` one of their choices."""
+    in ``choices`` one of their choices (a field that is None, where its annotation allows it, has no bounds)."""
     owner = type(obj).__name__
     hints = typing.get_type_hints(type(obj))
     for f in dataclasses.fields(obj):
@@ -107,7 +110,7 @@ def check_params(
             raise ParamError(owner, f.name, f"must be one of {', '.join(map(str, choices[f.name]))}", value)
         for names, low, word in ((positive, False, "> 0"), (non_negative, True, ">= 0")):
             if f.name in names:
-                items = value if isinstance(value, tuple) else (value,)
+                items = value if isinstance(value, tuple) else () if value is None else (value,)
                 if not all(
                     isinstance(x, numbers.Real) and math.isfinite(x) and (x >= 0 if low else x > 0) for x in items
                 ):
