@@ -53,9 +53,13 @@ class ParamError(ValueError):
     """A parameter object's field has a value it cannot take; ``str()`` names the class, the field and the unit."""
 
     def __init__(self, owner: str, name: str, problem: str, value: Any, unit: str = "") -> None:
-        self.owner, self.name, self.value, self.unit = owner, name, value, unit
-        where = f" ({unit})" if unit else ""
-        super().__init__(f"{owner}.{name}: {problem}{where}, got {value!r}")
+        self.owner, self.name, self.problem, self.value, self.unit = owner, name, problem, value, unit
+        super().__init__(self.line(f"{owner}.{name}"))
+
+    def line(self, where: str) -> str:
+        """The error's line with ``where`` in place of ``Class.field`` (the command line puts the option there)."""
+        unit = f" ({self.unit})" if self.unit else ""
+        return f"{where}: {self.problem}{unit}, got {self.value!r}"
 
 
 def unit_of(name: str, units: Mapping[str, str] | None = None) -> str:
