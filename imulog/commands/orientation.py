@@ -81,7 +81,7 @@ def process_orientation(
     from imulog.commands.imus import choose_imus, run_per_imu
     from imulog.steps.orientation import global_frame, run_orientation
 
-    params = replace(  # a bad value raises imulog.params.ParamError: one line from imulog.cli (field and unit)
+    params = replace(  # a bad value raises imulog.params.ParamError: one line from imulog.cli (the option and unit)
         _D,
         backend=backend,
         beta=beta,
