@@ -92,8 +92,12 @@ class LazyGroup(click.Group):
                     f"imulog batch PATHS... --steps {step} (docs/batch.md)"
                 )
             raise
-        except ParamError as exc:  # a parameter object refused a value: the same line the Python API raises
-            raise click.ClickException(str(exc)) from None
+        except ParamError as exc:  # a parameter object refused a value: the Python API's line, naming the option
+            from imulog.commands.option_fields import option_line
+
+            name = ctx.invoked_subcommand
+            command = self.get_command(ctx, name) if name else None
+            raise click.ClickException(option_line(exc, command)) from None
         except (click.ClickException, OSError) as exc:
             from imulog.console import broken_pipe, exit_closed_pipe
 

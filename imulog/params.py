@@ -28,7 +28,10 @@ T = TypeVar("T")
 UNIT_SUFFIXES = (
     ("_rad_s", "rad/s"),
     ("_deg_s", "deg/s"),
+    ("_m2ps4", "m^2/s^4"),
+    ("_m2ps2", "m^2/s^2"),
     ("_mps2", "m/s^2"),
+    ("_mps", "m/s"),
     ("_m_s2", "m/s^2"),
     ("_hours", "h"),
     ("_hz", "Hz"),
@@ -50,9 +53,13 @@ class ParamError(ValueError):
     """A parameter object's field has a value it cannot take; ``str()`` names the class, the field and the unit."""
 
     def __init__(self, owner: str, name: str, problem: str, value: Any, unit: str = "") -> None:
-        self.owner, self.name, self.value, self.unit = owner, name, value, unit
-        where = f" ({unit})" if unit else ""
-        super().__init__(f"{owner}.{name}: {problem}{where}, got {value!r}")
+        self.owner, self.name, self.problem, self.value, self.unit = owner, name, problem, value, unit
+        super().__init__(self.line(f"{owner}.{name}"))
+
+    def line(self, where: str) -> str:
+        """The error's line with ``where`` in place of ``Class.field`` (the command line puts the option there)."""
+        unit = f" ({self.unit})" if self.unit else ""
+        return f"{where}: {self.problem}{unit}, got {self.value!r}"
 
 
 def unit_of(name: str, units: Mapping[str, str] | None = None) -> str:
@@ -94,7 +101,7 @@ def check_params(
 ) -> None:
     """Raise :class:`ParamError` unless every field of dataclass ``obj`` has its annotation's type, the fields in
     ``positive`` are finite and > 0, those in ``non_negative`` finite and >= 0 (a tuple's items each), and those
-    in ``choices`` one of their choices."""
+    in ``choices`` one of their choices (a field that is None, where its annotation allows it, has no bounds)."""
     owner = type(obj).__name__
     hints = typing.get_type_hints(type(obj))
     for f in dataclasses.fields(obj):
@@ -107,7 +114,7 @@ def check_params(
             raise ParamError(owner, f.name, f"must be one of {', '.join(map(str, choices[f.name]))}", value)
         for names, low, word in ((positive, False, "> 0"), (non_negative, True, ">= 0")):
             if f.name in names:
-                items = value if isinstance(value, tuple) else (value,)
+                items = value if isinstance(value, tuple) else () if value is None else (value,)
                 if not all(
                     isinstance(x, numbers.Real) and math.isfinite(x) and (x >= 0 if low else x > 0) for x in items
                 ):

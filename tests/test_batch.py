@@ -222,3 +222,34 @@ def test_a_list_option_takes_the_type_of_its_default_items():
         resolve_options("epochs", {"epochs_s": "10,x"})
     kwargs, _ = resolve_options("trajectory", {"methods": "zupt,kalman"})
     assert kwargs["methods"] == ["zupt", "kalman"]
+
+
+def test_the_trajectory_accelerometer_preset_is_the_commands(serial, tmp_path):
+    """``--set trajectory.accelerometer=rests`` is ``imulog process trajectory --accelerometer rests``: the whole
+    combination (before, ``trajectory.acc_rests.enabled=true`` switched on only the correction), fields given with
+    it refine it, and the command finds the batch's run up to date (same parameters recorded)."""
+    from imulog.batch.registry import run_params
+    from imulog.process.trajectory_accelerometer import with_accelerometer
+    from imulog.process.trajectory_methods import TrajectoryParams
+
+    rests = with_accelerometer(TrajectoryParams(), "rests")
+    _, params = resolve_options("trajectory", {"accelerometer": "rests"})
+    assert params == rests and params != resolve_options("trajectory", {"acc_rests.enabled": "true"})[1]
+    assert resolve_options("trajectory", {"accelerometer": "recorded"})[1] == TrajectoryParams()
+    _, refined = resolve_options("trajectory", {"anchor.rest_tilt": "filter", "accelerometer": "rests"})
+    assert refined.anchor.rest_tilt == "filter" and refined.acc_rests.enabled  # the field wins, in any order
+    with pytest.raises(ValueError, match="step trajectory accelerometer: accelerometer must be one of recorded, rests"):
+        resolve_options("trajectory", {"accelerometer": "raw"})
+
+    trial = tmp_path / "one.mcap"
+    shutil.copy(sorted(serial[0].rglob("*.mcap"))[0], trial)
+    result = CliRunner().invoke(
+        cli, ["batch", str(trial), "--steps", "trajectory", "--set", "trajectory.accelerometer=rests", "-q"]
+    )
+    assert result.exit_code == 0, result.output
+    with TrialReader(trial) as t:
+        runs = [r for r in t.runs().values() if str(r.get("step", "")).startswith("trajectory")]
+    assert run_params(runs[-1])[0] == rests
+    command = CliRunner().invoke(cli, ["process", "trajectory", str(trial), "--accelerometer", "rests"])
+    assert command.exit_code == 0, command.output
+    assert "up to date" in command.output

@@ -9,6 +9,7 @@ import inspect
 import re
 from pathlib import Path
 
+import click
 import pytest
 from click.testing import CliRunner
 
@@ -143,16 +144,21 @@ def trial(tmp_path_factory) -> Path:
     return path
 
 
-def test_the_cli_prints_the_parameter_objects_line(trial):
+def test_the_cli_prints_the_parameter_objects_line_naming_the_option(trial):
+    """The command line names the option typed (declared where its name is not the field's, else click's
+    parameter name); the Python API names the field (test above)."""
     with TrialReader(trial) as t:
         runs_before = len(t.runs())
-    for option, value, line in (
-        ("--static-threshold", "-1", "StaticParams.threshold_rad_s: must be finite and > 0 (rad/s), got -1.0"),
-        ("--beta", "0", "OrientationParams.beta: must be finite and > 0 (rad/s), got 0.0"),
-        ("--epoch-s", "0", "EpochParams.epochs_s: must be finite and > 0 (s), got (0.0,)"),
-        ("--window", "0", "AlignmentParams.window_s: must be finite and > 0 (s), got 0.0"),
+    for step, option, value, line in (
+        ("orientation", "--static-threshold", "-1", "--static-threshold: must be finite and > 0 (rad/s), got -1.0"),
+        ("orientation", "--static-min-s", "-0.5", "--static-min-s: must be finite and >= 0 (s), got -0.5"),
+        ("orientation", "--beta", "0", "--beta: must be finite and > 0 (rad/s), got 0.0"),
+        ("epochs", "--epoch-s", "0", "--epoch-s: must be finite and > 0 (s), got (0.0,)"),
+        ("align", "--window", "0", "--window: must be finite and > 0 (s), got 0.0"),
+        ("phases", "--static-threshold", "0", "--static-threshold: must be finite and > 0 (rad/s), got 0.0"),
+        ("phases", "--repetitions", "-2", "--repetitions: must be finite and >= 0, got -2"),
+        ("trajectory", "--kalman-q", "0", "--kalman-q: must be finite and > 0 (m^2/s^4), got 0.0"),
     ):
-        step = {"--epoch-s": "epochs", "--window": "align"}.get(option, "orientation")
         result = CliRunner().invoke(cli, ["process", step, str(trial), option, value])
         assert result.exit_code == 1, result.output
         assert result.output.strip() == f"Error: {line}"
@@ -194,3 +200,22 @@ def test_a_steps_error_names_the_trial_as_the_command_does(trial, tmp_path):
         run_orientation(trial, params={"beta": 0.1})  # was: asdict() should be called on dataclass instances
     with pytest.raises(ArchiveError, match=re.escape(str(tmp_path / "none.mcap"))):  # archive errors: unchanged
         run_orientation(tmp_path / "none.mcap")
+
+
+def test_a_field_no_option_sets_keeps_its_name_on_the_command_line():
+    from imulog.commands.option_fields import option_fields, option_line
+
+    command = option_fields(threshold="StaticParams.threshold_rad_s")(
+        click.Command("x", params=[click.Option(["--threshold"]), click.Option(["--beta", "-b"])])
+    )
+    static = ParamError("StaticParams", "threshold_rad_s", "must be finite and > 0", -1.0, "rad/s")
+    assert option_line(static, command) == "--threshold: must be finite and > 0 (rad/s), got -1.0"
+    beta = ParamError("OrientationParams", "beta", "must be finite and > 0", 0.0, "rad/s")
+    assert option_line(beta, command) == "--beta: must be finite and > 0 (rad/s), got 0.0"
+    other = ParamError("StaticParams", "min_duration_s", "must be finite and >= 0", -1.0, "s")
+    assert (
+        option_line(other, command)
+        == str(other)
+        == "StaticParams.min_duration_s: must be finite and >= 0 (s), got -1.0"
+    )
+    assert option_line(other, None) == str(other)

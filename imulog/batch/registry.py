@@ -6,7 +6,8 @@ Options are plain JSON-able dicts (so they travel to worker processes and Dask w
 
 Each key is either a keyword of the step's ``run_*`` function (``imu``, ``markers``, ``methods``...) or a field
 of the step's parameter dataclass, dotted for nested ones (``dynamos.threshold``, ``static.threshold_rad_s``);
-a few short aliases exist (``repetitions`` -> ``repetitions.n_repetitions`` for ``phases``). Values given as
+a few short aliases exist (``repetitions`` -> ``repetitions.n_repetitions`` for ``phases``), and a preset names a
+combination of fields as the command's option does (``accelerometer=rests`` for ``trajectory``). Values given as
 strings (from the command line) are converted to the type of the field's default.
 
 :func:`run_file` runs a plan (steps in dependency order with their resolved options) on one trial and
@@ -55,6 +56,10 @@ class StepSpec:
     params_class: str | None = None
     params_kwarg: str = "params"
     aliases: dict[str, str] = field(default_factory=dict)
+    # option -> ``module:attr`` of a function ``(params, value) -> params`` that applies a named combination of
+    # fields (trajectory's ``accelerometer=rests``, as the command's ``--accelerometer rests``); presets are
+    # applied before the other options, so a field given with them refines the preset
+    presets: dict[str, str] = field(default_factory=dict)
     required: tuple[str, ...] = ()
     help: str = ""
     # ``module:attr`` of a function ``imulog.trial record -> params``: the per-trial defaults that options
@@ -120,7 +125,9 @@ STEPS: dict[str, StepSpec] = {
         reads=("orientation", "align", "phases"),
         kwargs=("imu", "methods"),
         params_class="imulog.process.trajectory_opt:TrajectoryParams",
-        help="wrist trajectories per method (methods=zupt,kalman,...; TrajectoryParams fields)",
+        presets={"accelerometer": "imulog.process.trajectory_accelerometer:with_accelerometer"},
+        help="wrist trajectories per method (methods=zupt,kalman,...; accelerometer=recorded|rests; "
+        "TrajectoryParams fields)",
     ),
     "metrics": StepSpec(
         "metrics",
@@ -186,6 +193,11 @@ def resolve_options(step: str, options: dict[str, Any] | None, base: Any = None)
         raise ValueError(f"step {step}: option(s) {', '.join(missing)} required ({spec.help})")
     kwargs: dict[str, Any] = {}
     params = base if base is not None else (_load(spec.params_class)() if spec.params_class else None)
+    for key in [k for k in spec.presets if k in options]:  # a named combination first, then single fields
+        try:
+            params = _load(spec.presets[key])(params, str(options.pop(key)))
+        except ValueError as exc:
+            raise ValueError(f"step {step} {key}: {exc}") from None
     for key, value in options.items():
         key = str(key)
         if key in spec.kwargs:

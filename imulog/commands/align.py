@@ -8,11 +8,13 @@ from pathlib import Path
 
 import click
 
+from imulog.commands.option_fields import option_fields
 from imulog.process.alignment import AlignmentParams, FilterParams
 
 _D = AlignmentParams()
 
 
+@option_fields(cluster_markers="AlignmentParams.markers")
 @click.command("align")
 @click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option(

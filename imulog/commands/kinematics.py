@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from imulog.commands.option_fields import option_fields
+
 
 def _floats(text: str | None, n: int, option: str) -> tuple[float, ...] | None:
     if text is None:
@@ -19,6 +21,7 @@ def _floats(text: str | None, n: int, option: str) -> tuple[float, ...] | None:
     return values
 
 
+@option_fields(neutral_window="KinematicsOptions.neutral_window_s", calibration="KinematicsOptions.calibration_mode")
 @click.command("kinematics")
 @click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option(

@@ -7,12 +7,14 @@ from pathlib import Path
 import click
 
 from imulog.commands.imus import imu_option
+from imulog.commands.option_fields import option_fields
 from imulog.process.orientation import OrientationParams
 
 BACKEND_CHOICES = ["vqf_offline", "vqf", "madgwick", "imufusion", "rts", "vqf_gyrocal"]
 _D = OrientationParams()  # the one source of defaults (tests/test_cli_defaults.py)
 
 
+@option_fields(static_threshold="StaticParams.threshold_rad_s", static_min_s="StaticParams.min_duration_s")
 @click.command("orientation")
 @click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @imu_option()
@@ -79,7 +81,7 @@ def process_orientation(
     from imulog.commands.imus import choose_imus, run_per_imu
     from imulog.steps.orientation import global_frame, run_orientation
 
-    params = replace(  # a bad value raises imulog.params.ParamError: one line from imulog.cli (field and unit)
+    params = replace(  # a bad value raises imulog.params.ParamError: one line from imulog.cli (the option and unit)
         _D,
         backend=backend,
         beta=beta,

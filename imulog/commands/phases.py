@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from imulog.commands.imus import imu_option, step_record
+from imulog.commands.option_fields import option_fields
 from imulog.process.segmentation.pipeline import METHODS, PROTOCOLS, PhaseParams
 
 _D = PhaseParams()  # the one source of defaults (tests/test_cli_defaults.py); protocol/repetitions: the trial's
@@ -121,6 +122,12 @@ def _protocol_from_trial(trial: Path) -> tuple[str, int]:
         raise click.ClickException(f"{trial}: {exc}") from None
 
 
+@option_fields(
+    repetitions="RepetitionParams.n_repetitions",
+    phases_per_repetition="RepetitionParams.n_phases",
+    static_method="PhaseParams.static",
+    static_threshold="GyroNormStaticParams.threshold_rad_s",
+)
 @click.command("phases")
 @click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @imu_option()

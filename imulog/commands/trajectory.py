@@ -8,6 +8,8 @@ from pathlib import Path
 
 import click
 
+from imulog.commands.option_fields import option_fields
+from imulog.params import ParamError
 from imulog.process.trajectory_accelerometer import ACCELEROMETERS, accelerometer_of, with_accelerometer
 from imulog.process.trajectory_opt import METHODS, TrajectoryParams
 
@@ -23,6 +25,14 @@ def _methods(value: str) -> list[str]:
     return names
 
 
+@option_fields(
+    highpass_hz="HighpassParams.cutoff_hz",
+    wavelet_level="WaveletParams.level",
+    kalman_alpha="KalmanParams.alpha",
+    kalman_q="KalmanParams.process_var_m2ps4",
+    sigma_ref="OptimizationParams.sigma_ref_static_m",
+    sigma_data="OptimizationParams.sigma_data_mps",
+)
 @click.command("trajectory")
 @click.argument("trial", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option(
@@ -165,6 +175,8 @@ def process_trajectory(
             no_return_to_start,
         )
         params = with_accelerometer(params, accelerometer)
+    except ParamError:  # a refused value: imulog.cli names the option
+        raise
     except ValueError as exc:
         raise click.ClickException(f"{trial}: {exc}") from None
     names = _trajectory_imus(trial, imus, chosen)

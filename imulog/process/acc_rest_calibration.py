@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from imulog.param_rules import check_rules
 from imulog.process.calibration import GRAVITY_M_S2, AxisCalibration
 from imulog.process.rest_runs import rest_bias, static_runs, through_movement
 
@@ -68,6 +69,7 @@ class AccRestParams:
     gyro_scale_sd: float = 0.01
     gyro_bias_window_s: float = 1.0
     max_bias_sd_mps2: float = 0.1
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 MODELS = {"bias": 0, "scale": 3, "matrix": 9}  # sensitivity unknowns besides the bias

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imulog.param_rules import check_rules
 from imulog.process import quaternion as quat
 
 # marker filtering with gap handling
@@ -23,6 +24,7 @@ class FilterParams:
     cutoff_hz: float = 6.0
     order: int = 2
     max_gap_s: float = 0.1
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -31,6 +31,8 @@ from itertools import combinations
 
 import numpy as np
 
+from imulog.param_rules import check_rules
+
 __all__ = [
     "Candidate",
     "SearchParams",
@@ -74,6 +76,7 @@ class SearchParams:
     min_vector_match: float = 0.7
     extend_sd_factor: float = 2.0
     extend_floor_m: float = 0.001
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 @dataclass

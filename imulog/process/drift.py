@@ -20,6 +20,8 @@ import numpy as np
 import pywt
 from scipy import signal
 
+from imulog.param_rules import check_rules
+
 
 @dataclass(frozen=True)
 class HighpassParams:
@@ -27,6 +29,7 @@ class HighpassParams:
 
     cutoff_hz: float = 0.3
     order: int = 2
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 def highpass(x: np.ndarray, rate_hz: float, params: HighpassParams = HighpassParams()) -> np.ndarray:
@@ -47,6 +50,7 @@ class WaveletParams:
     level: int = 9
     trend_details: int = 2  # D8 and D9 at level 9
     mode: str = "symmetric"
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 def wavelet_effective_level(n: int, params: WaveletParams = WaveletParams()) -> int:

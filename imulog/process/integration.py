@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imulog.param_rules import check_rules
 from imulog.process.rest_runs import movement_runs, rest_bias, static_runs, through_movement
 
 
@@ -54,14 +55,12 @@ def cumtrapz(y: np.ndarray, t_s: np.ndarray, initial: float | np.ndarray = 0.0) 
 
 @dataclass(frozen=True)
 class DdiParams:
-    """Direct double integration.
-
-    remove_mean: subtract the window's mean acceleration (m/s^2) before integrating, as the R2G
-        thesis does for gravity removal. Exact for a constant offset when the window starts and
-        ends at rest (the true acceleration then integrates to zero).
-    """
+    """Direct double integration. remove_mean: subtract the window's mean acceleration (m/s^2) before integrating,
+    as the R2G thesis does for gravity removal (exact for a constant offset when the window starts and ends at
+    rest: the true acceleration then integrates to zero)."""
 
     remove_mean: bool = True
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 def double_integrate(
@@ -82,13 +81,14 @@ def double_integrate(
 class ZuptParams:
     """Zero-velocity update with linear velocity de-drift (Bai et al. 2023).
 
-    dedrift: subtract, in each movement between two rests, the straight line that brings the
-        integrated velocity back to zero at the next rest (assumes a constant acceleration offset).
+    dedrift: subtract, in each movement between two rests, the straight line that brings the integrated velocity
+        back to zero at the next rest (assumes a constant acceleration offset).
     min_static_samples: static runs shorter than this many samples are ignored (treated as moving).
     """
 
     dedrift: bool = True
     min_static_samples: int = 1
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 def zupt_velocity(
@@ -217,6 +217,7 @@ class RotatingBiasParams:
     shrink: bool = False
     calibration_prior: bool = False
     held_out: bool = False
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 @dataclass
@@ -465,6 +466,7 @@ class AnchorParams:
     heading: str = "gyroscope"
     restart: bool = True
     rest_tilt: str = "filter"
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 def rest_anchored_orientation(

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from imulog.param_rules import check_rules
+
 
 @dataclass(frozen=True)
 class KalmanParams:
@@ -44,6 +46,7 @@ class KalmanParams:
     zero_velocity_var_m2ps2: float = 1e-6
     smoother: bool = False
     init_var: tuple[float, float, float] = (1e-8, 1e-8, 1.0)
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 @dataclass

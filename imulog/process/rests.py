@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from imulog.numeric import moving_mean
+from imulog.param_rules import check_rules
 from imulog.process.rest_runs import static_runs
 
 
@@ -70,6 +71,7 @@ class RestParams:
     long_dilate: bool = True
     run_mean: bool = True
     run_mean_max_s: float = 1.0
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 def white_noise_mps2(acc_mps2: np.ndarray) -> float:

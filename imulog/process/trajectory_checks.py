@@ -28,6 +28,8 @@ from typing import Any
 
 import numpy as np
 
+from imulog.param_rules import check_rules
+
 REST_METHODS = ("zupt", "kalman", "zupt_bias", "optimized", "dedrift")
 FILTER_METHODS = ("highpass", "wavelet")
 
@@ -54,6 +56,7 @@ class CheckParams:
     max_offset_mps2: float = 0.35
     max_removed_share: float = 0.10
     min_motion_m: float = 0.02
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 DEFAULT_CHECKS = CheckParams()

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imulog.param_rules import check_rules
 from imulog.process.acc_rest_calibration import AccRestParams
 from imulog.process.drift import HighpassParams, WaveletParams, highpass, wavelet_detrend
 from imulog.process.integration import AnchorParams, DdiParams, RotatingBiasParams, ZuptParams, double_integrate, zupt
@@ -40,6 +41,7 @@ class TrajectoryParams:
     rests: RestParams = RestParams()
     checks: CheckParams = CheckParams()
     acc_rests: AccRestParams = AccRestParams()
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 def reconstruct(

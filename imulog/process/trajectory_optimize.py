@@ -32,6 +32,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
+from imulog.param_rules import check_rules
+
 
 @dataclass(frozen=True)
 class OptimizationParams:
@@ -119,6 +121,7 @@ class OptimizationParams:
     rest_ramp: tuple[bool, bool, bool] = (False, False, False)
     corrected_floor_m: float | None = None
     reference_scatter: tuple[bool, bool, bool] = (False, False, False)
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 @dataclass

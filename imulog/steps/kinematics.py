@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from imulog.param_rules import check_rules
 from imulog.process.kinematics.calibration import NeutralCalibration
 from imulog.process.kinematics.dh import JOINT_NAMES, ArmModel, JointLimits
 from imulog.process.kinematics.errors import kinematics_errors
@@ -59,6 +60,7 @@ class KinematicsOptions:
     use_markers: bool = True
     solver: SolverParams = SolverParams()
     orientation: OrientationParams = OrientationParams()
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 def resolve_config(metadata: dict[str, dict[str, Any]], options: KinematicsOptions) -> tuple[KinematicsConfig, dict]:

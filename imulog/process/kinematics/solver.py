@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from imulog.param_rules import check_rules
 from imulog.process.kinematics.dh import N_FREE, ArmModel, JointLimits, forward_kinematics
 from imulog.process.kinematics.solver_core import solve_packed_sequence
 
@@ -117,6 +118,7 @@ class SolverParams:
     penalty: float = 1e4
     qp_sweeps: int = 200
     restarts: int = 8
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 @dataclass

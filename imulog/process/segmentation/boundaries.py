@@ -35,6 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imulog.param_rules import check_rules
+
 
 @dataclass(frozen=True)
 class BoundaryParams:
@@ -75,6 +77,7 @@ class BoundaryParams:
     max_shift_s: float = 0.3
     continuation_s: float = 1.0
     continuation_peak_fraction: float = 0.1
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 def lowpass_axes(gyr_rad_s: np.ndarray, rate_hz: float, cutoff_hz: float, order: int = 2) -> np.ndarray:

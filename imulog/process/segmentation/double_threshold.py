@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imulog.param_rules import check_rules
 from imulog.process.segmentation.dynamos import runs
 
 
@@ -44,6 +45,7 @@ class DoubleThresholdParams:
     zcr_extension_s: float = 0.25
     min_movement_s: float = 0.1
     min_rest_s: float = 0.0
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 def frame_features(gyr_rad_s: np.ndarray, rate_hz: float, frame_s: float, hop_s: float):

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imulog.param_rules import check_rules
+
 
 @dataclass(frozen=True)
 class DynamosParams:
@@ -60,6 +62,7 @@ class DynamosParams:
     continuation_level: float = 0.3
     continuation_peak_fraction: float = 0.15
     max_iterations: int = 1_000_000
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 @dataclass(frozen=True)

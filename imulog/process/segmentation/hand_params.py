@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from imulog.param_rules import check_rules
+
 
 @dataclass(frozen=True)
 class HandParams:
@@ -140,3 +142,4 @@ class HandParams:
     flank_rest_level: bool = False
     flank_noise: bool = False
     flank_noise_band_hz: float = 25.0
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES

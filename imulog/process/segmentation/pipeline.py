@@ -21,6 +21,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
+from imulog.param_rules import check_rules
 from imulog.process.segmentation.boundaries import BoundaryParams, refine_phase_boundaries
 from imulog.process.segmentation.double_threshold import DoubleThresholdParams, double_threshold
 from imulog.process.segmentation.dynamos import DynamosParams, dynamos, lowpass_norm
@@ -62,6 +63,7 @@ class PhaseParams:
     static_margin_s: float = 0.0
     gyro_norm: GyroNormStaticParams = field(default_factory=GyroNormStaticParams)
     template_pad_s: float = 0.5
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
     def to_dict(self) -> dict:
         """JSON-able form, for provenance."""

@@ -22,6 +22,7 @@ from itertools import combinations
 
 import numpy as np
 
+from imulog.param_rules import check_rules
 from imulog.process.segmentation.grouping import (
     assign_to_repetitions,
     burst_mask,
@@ -92,6 +93,7 @@ class RepetitionParams:
     turned_majors: bool = True
     tail_bump: bool = True
     labels: tuple[str, ...] = R2G_PHASES
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imulog.param_rules import check_rules
+
 
 @dataclass(frozen=True)
 class TemplateParams:
@@ -25,6 +27,7 @@ class TemplateParams:
     min_correlation: float = 0.6
     min_distance_fraction: float = 0.8
     n_matches: int = 0
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 def build_template(signal: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:

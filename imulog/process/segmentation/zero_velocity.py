@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from imulog.numeric import moving_mean
+from imulog.param_rules import check_rules
 from imulog.process.segmentation.dynamos import runs
 
 
@@ -33,6 +34,7 @@ class GyroNormStaticParams:
     window_s: float = 0.15
     metric: str = "mean"
     min_static_s: float = 0.2
+    __post_init__ = check_rules  # bounds and choices: imulog.param_rules.RULES
 
 
 def mask_from_intervals(n: int, start: np.ndarray, end: np.ndarray) -> np.ndarray:
