@@ -108,8 +108,7 @@ RULES: dict[str, Rule] = {
             "profile_rest_s",
             "profile_durations_s",
             "profile_min_s",
-            "profile_residual_ratio",
-        ),
+        ),  # not profile_residual_ratio: inf turns step 9's residual check off (a finite bound would refuse it)
     },
     "GyroNormStaticParams": {
         "positive": ("threshold_rad_s", "window_s"),
